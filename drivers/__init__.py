@@ -1,0 +1,1 @@
+"""Hardware drivers (import name ``gonio.drivers``): Dynamixel, Zaber ASCII, Modbus."""

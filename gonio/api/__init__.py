@@ -1,0 +1,1 @@
+"""REST API: a thin FastAPI layer over the service module."""

@@ -1,0 +1,1 @@
+"""Numerical core: pure functions over NumPy arrays. Imports nothing else from gonio."""

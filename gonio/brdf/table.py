@@ -1,0 +1,293 @@
+"""The tabulated anisotropic BRDF on gonio's 5 degree half/difference grid.
+
+File format (``.npz``, readable with ``numpy.load`` alone; see ``docs/file-formats.md``):
+
+=================  =================================  ==========================================
+key                shape / dtype                      meaning
+=================  =================================  ==========================================
+``format``         () str                             ``"gonio-brdf-table"``
+``version``        () int                             format version, currently 1
+``values``         (C, 72, 18, 18, 36) float32/64     ``f[c, i_ph, i_th, i_td, i_pd]`` in 1/sr,
+                                                      NaN at invalid cells
+``channels``       (C,) str                           channel names (``"R"``, ``"G"``, ...)
+``wavelengths_nm`` (C,) float                         NaN where a channel has no wavelength
+``name``           () str                             material name
+``provenance``     () str                             JSON object: where the values came from
+=================  =================================  ==========================================
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from gonio.brdf import geometry as geo
+
+FORMAT_NAME = "gonio-brdf-table"
+FORMAT_VERSION = 1
+
+
+class TableError(ValueError):
+    """A BRDF table or table file is malformed; the message says what and how to fix it."""
+
+
+@dataclass(frozen=True)
+class BRDFTable:
+    """Anisotropic BRDF tabulated on the grid of :mod:`gonio.brdf.geometry`.
+
+    Parameters
+    ----------
+    values : (C, 72, 18, 18, 36) array, 1/sr
+        ``f[c, i_ph, i_th, i_td, i_pd]``; invalid cells (see :func:`geometry.valid_mask`) are
+        set to NaN on construction.
+    channels : sequence of str, length C
+    name : str
+    wavelengths_nm : sequence of float, length C, optional
+    provenance : mapping, optional
+        JSON-serialisable description of the origin (model parameters, source file, ...).
+    """
+
+    values: NDArray[np.floating[Any]]
+    channels: tuple[str, ...]
+    name: str = "unnamed"
+    wavelengths_nm: tuple[float, ...] | None = None
+    provenance: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        v = np.asarray(self.values)
+        if v.dtype not in (np.float32, np.float64):
+            v = v.astype(np.float64)
+        if v.ndim != 5 or v.shape[1:] != geo.TABLE_SHAPE:
+            raise TableError(
+                f"table {self.name!r}: values have shape {v.shape}, expected "
+                f"(C, {', '.join(map(str, geo.TABLE_SHAPE))}) = (channels, ph, th, td, pd) "
+                "on the 5 degree grid"
+            )
+        channels = tuple(str(c) for c in self.channels)
+        if len(channels) != v.shape[0]:
+            raise TableError(
+                f"table {self.name!r}: {len(channels)} channel names for {v.shape[0]} channels"
+            )
+        if self.wavelengths_nm is not None and len(self.wavelengths_nm) != v.shape[0]:
+            raise TableError(
+                f"table {self.name!r}: {len(self.wavelengths_nm)} wavelengths for "
+                f"{v.shape[0]} channels"
+            )
+        mask = geo.valid_mask()
+        v = np.where(mask[None, None], v, np.nan).astype(v.dtype, copy=False)
+        valid = v[:, :, mask]
+        if not np.isfinite(valid).any():
+            raise TableError(f"table {self.name!r} has no finite value at any valid cell")
+        if np.isinf(valid).any():
+            raise TableError(f"table {self.name!r} holds infinite values; replace them first")
+        if (valid < 0).any():
+            raise TableError(
+                f"table {self.name!r} holds negative BRDF values (min {np.nanmin(valid):.3g}); "
+                "clamp them to 0 before building the table"
+            )
+        v.setflags(write=False)
+        object.__setattr__(self, "values", v)
+        object.__setattr__(self, "channels", channels)
+        if self.wavelengths_nm is not None:
+            object.__setattr__(self, "wavelengths_nm", tuple(float(w) for w in self.wavelengths_nm))
+        object.__setattr__(self, "provenance", dict(self.provenance))
+
+    # ------------------------------------------------------------------ shape helpers
+    @property
+    def n_channels(self) -> int:
+        return int(self.values.shape[0])
+
+    def columns(self) -> NDArray[np.floating[Any]]:
+        """Slices as basis columns: (C * 72, N_ROWS), rows flattened over ``(th, td, pd)``."""
+        return self.values.reshape(self.n_channels * geo.N_PH, geo.N_ROWS)
+
+    def rotated(self, angle: float) -> BRDFTable:
+        """The same material turned by ``angle`` radians about the normal.
+
+        Only whole multiples of the 5 degree step are exact (a roll of the ``ph`` axis);
+        other angles interpolate linearly along ``ph``.
+        """
+        steps = angle / geo.STEP
+        k = math.floor(steps)
+        t = steps - k
+        a = np.roll(self.values, k, axis=1)
+        out = a if t < 1e-12 else (1 - t) * a + t * np.roll(a, 1, axis=1)
+        return BRDFTable(
+            out, self.channels, self.name, self.wavelengths_nm,
+            {**self.provenance, "rotated_deg": float(np.rad2deg(angle))},
+        )
+
+    # ------------------------------------------------------------------ lookup
+    def eval_half_diff(
+        self, th: ArrayLike, ph: ArrayLike, td: ArrayLike, pd: ArrayLike
+    ) -> NDArray[np.float64]:
+        """Multilinear lookup at half/difference angles.
+
+        Periodic in ``ph`` (2 pi) and ``pd`` (pi), clamped in ``th`` and ``td`` (MATH 3).
+        Invalid (NaN) neighbours are left out and the remaining weights renormalised, so values
+        near the horizon come from the valid side only; a point with no valid neighbour is NaN.
+
+        Parameters
+        ----------
+        th, ph, td, pd : array_like, radians, broadcastable to shape S
+
+        Returns
+        -------
+        (*S, C) array, 1/sr
+        """
+        th_, ph_, td_, pd_ = np.broadcast_arrays(
+            *(np.asarray(a, dtype=float) for a in (th, ph, td, pd))
+        )
+        shape = th_.shape
+        coords = []
+        for a, n, periodic, period in (
+            (ph_, geo.N_PH, True, 2 * np.pi),
+            (th_, geo.N_TH, False, 0.0),
+            (td_, geo.N_TD, False, 0.0),
+            (pd_, geo.N_PD, True, np.pi),
+        ):
+            x = a.ravel()
+            if periodic:
+                u = np.mod(x, period) / geo.STEP
+                i0 = np.floor(u).astype(np.intp)
+                t = u - i0
+                coords.append((i0 % n, (i0 + 1) % n, t))
+            else:
+                u = np.clip(x / geo.STEP, 0.0, n - 1)
+                i0 = np.minimum(np.floor(u).astype(np.intp), n - 2)
+                t = u - i0
+                coords.append((i0, i0 + 1, t))
+        vals = self.values
+        acc = np.zeros((x.size, self.n_channels))
+        wsum = np.zeros(x.size)
+        for corner in range(16):
+            idx = []
+            w = np.ones(x.size)
+            for axis, (lo, hi, t) in enumerate(coords):
+                if (corner >> axis) & 1:
+                    idx.append(hi)
+                    w = w * t
+                else:
+                    idx.append(lo)
+                    w = w * (1 - t)
+            v = vals[:, idx[0], idx[1], idx[2], idx[3]].T  # (N, C)
+            ok = np.isfinite(v).all(axis=1) & (w > 0)
+            acc[ok] += w[ok, None] * v[ok]
+            wsum[ok] += w[ok]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            out = acc / wsum[:, None]
+        out[wsum <= 1e-12] = np.nan
+        return out.reshape(*shape, self.n_channels)
+
+    def eval(self, wi: ArrayLike, wo: ArrayLike) -> NDArray[np.float64]:
+        """BRDF at direction pairs in the specimen frame.
+
+        Parameters
+        ----------
+        wi, wo : (..., 3) array_like, unit vectors pointing away from the surface
+
+        Returns
+        -------
+        (..., C) array, 1/sr; 0 where either direction is below the horizon
+        """
+        i = np.asarray(wi, dtype=float)
+        o = np.asarray(wo, dtype=float)
+        out = self.eval_half_diff(*geo.directions_to_half_diff(i, o))
+        below = (i[..., 2] <= 0) | (o[..., 2] <= 0)
+        out[below] = 0.0
+        return out
+
+    # ------------------------------------------------------------------ files
+    def save(self, path: str | os.PathLike[str]) -> Path:
+        """Write the table as ``.npz`` (layout in the module docstring); returns the path."""
+        p = Path(path)
+        wl = (
+            np.array(self.wavelengths_nm, dtype=float)
+            if self.wavelengths_nm is not None
+            else np.full(self.n_channels, np.nan)
+        )
+        tmp = p.with_name(p.name + ".part")
+        with open(tmp, "wb") as fh:
+            np.savez_compressed(
+                fh,
+                format=np.array(FORMAT_NAME),
+                version=np.array(FORMAT_VERSION),
+                values=np.asarray(self.values),
+                channels=np.array(self.channels),
+                wavelengths_nm=wl,
+                name=np.array(self.name),
+                provenance=np.array(json.dumps(dict(self.provenance), default=str)),
+            )
+        os.replace(tmp, p)  # never leave a half-written table under the real name
+        return p
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str]) -> BRDFTable:
+        """Read a table written by :meth:`save`; clear :class:`TableError` on any problem."""
+        p = Path(path)
+        try:
+            with np.load(p, allow_pickle=False) as z:
+                data = {k: z[k] for k in z.files}
+        except FileNotFoundError:
+            raise TableError(f"{p}: no such table file") from None
+        except Exception as exc:  # zip/npy errors come in many types
+            raise TableError(f"{p}: not a readable gonio table file ({exc})") from None
+        if str(data.get("format", "")) != FORMAT_NAME:
+            raise TableError(f"{p}: not a gonio BRDF table (missing format={FORMAT_NAME!r})")
+        version = int(data.get("version", -1))
+        if version != FORMAT_VERSION:
+            raise TableError(
+                f"{p}: table format version {version}; this gonio reads version {FORMAT_VERSION}"
+            )
+        missing = {"values", "channels", "name"} - data.keys()
+        if missing:
+            raise TableError(f"{p}: missing fields {sorted(missing)}")
+        wl = data.get("wavelengths_nm")
+        wavelengths = None if wl is None or np.isnan(wl).all() else tuple(wl.tolist())
+        try:
+            prov = json.loads(str(data.get("provenance", "{}")))
+        except json.JSONDecodeError:
+            prov = {}
+        try:
+            return cls(
+                data["values"], tuple(data["channels"].tolist()), str(data["name"]),
+                wavelengths, {**prov, "file": str(p)},
+            )
+        except TableError as exc:
+            raise TableError(f"{p}: {exc}") from None
+
+
+def from_function(
+    fn: Any,
+    channels: Sequence[str],
+    name: str,
+    provenance: Mapping[str, Any] | None = None,
+    dtype: type = np.float64,
+) -> BRDFTable:
+    """Tabulate ``fn(wi, wo) -> (..., C)`` at every grid cell (cell centres).
+
+    Parameters
+    ----------
+    fn : callable
+        Maps (N, 3) light and view unit vectors (specimen frame) to (N, C) BRDF values in 1/sr.
+    channels : sequence of str
+    name : str
+    provenance : mapping, optional
+    dtype : numpy float type of the stored values
+    """
+    th, td, pd = geo.grid_angles()
+    mask = geo.valid_mask()
+    out = np.full((len(channels), *geo.TABLE_SHAPE), np.nan, dtype=dtype)
+    for k, ph in enumerate(geo.PH_GRID):
+        wi, wo = geo.half_diff_to_directions(th[mask], ph, td[mask], pd[mask])
+        vals = np.asarray(fn(wi, wo), dtype=float)
+        out[:, k][:, mask] = np.maximum(vals, 0.0).T
+    return BRDFTable(out, tuple(channels), name, None, dict(provenance or {}))
