@@ -1,0 +1,263 @@
+"""Device interfaces the engine sees: Stage, Light, Sensor and the Rig that holds them.
+
+Everything here is async. Drivers (``gonio.drivers``) implement these interfaces; blocking SDK
+calls run in a worker thread, never on the event loop. Angles at this boundary are degrees
+(they come straight from config files and API payloads); the numerical core converts.
+
+Errors a device can raise are :class:`DeviceFault` subclasses, so the engine can decide between
+suspending (a recoverable fault) and failing the job, without knowing which driver it runs.
+"""
+
+from __future__ import annotations
+
+import abc
+import math
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+
+# --------------------------------------------------------------------------- errors
+class DeviceFault(Exception):
+    """A device reported a fault or stopped answering.
+
+    Parameters
+    ----------
+    device : str
+        Name of the device in the rig config.
+    message : str
+        What happened and, where known, what to do.
+    code : str
+        Short machine-readable code (``"overload"``, ``"FS"``, ``"timeout"``, ...).
+    recoverable : bool
+        True when the condition may clear by itself or by a driver recovery (reboot, reconnect,
+        ``warnings clear``): the engine suspends the job and retries. False fails the job.
+    """
+
+    def __init__(self, device: str, message: str, code: str = "fault", recoverable: bool = True):
+        super().__init__(f"{device}: {message}")
+        self.device = device
+        self.code = code
+        self.recoverable = recoverable
+
+
+class StageFault(DeviceFault):
+    """The stage reported a hardware fault (overload, stall, encoder, driver disabled, ...)."""
+
+
+class DeviceUnavailable(DeviceFault):
+    """The device did not answer (timeout, lost connection, unparseable replies)."""
+
+
+class LampOutOfBand(DeviceFault):
+    """A light's monitored output is outside its allowed band."""
+
+
+# --------------------------------------------------------------------------- values
+@dataclass(frozen=True)
+class LabDirection:
+    """A fixed direction in the lab frame, degrees (theta from the stage normal, phi azimuth)."""
+
+    theta_deg: float
+    phi_deg: float
+
+    def vector(self) -> tuple[float, float, float]:
+        """Unit vector (x, y, z) in the lab frame."""
+        t, p = math.radians(self.theta_deg), math.radians(self.phi_deg)
+        return (math.sin(t) * math.cos(p), math.sin(t) * math.sin(p), math.cos(t))
+
+
+@dataclass(frozen=True)
+class TravelLimits:
+    """Allowed stage angles, degrees, inclusive."""
+
+    min_deg: float
+    max_deg: float
+
+    def contains(self, angle_deg: float) -> bool:
+        return self.min_deg - 1e-9 <= angle_deg <= self.max_deg + 1e-9
+
+
+@dataclass(frozen=True)
+class StageStatus:
+    position_deg: float
+    moving: bool
+    homed: bool
+    faults: tuple[str, ...] = ()
+    detail: Mapping[str, object] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class LightStatus:
+    on: bool
+    level: float
+    in_band: bool = True
+    faults: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class SensorReading:
+    """One sensor reading: per-channel values in the sensor's physical units (after scale).
+
+    ``saturated`` is True when any channel reached the configured saturation level in any of
+    the averaged exposures.
+    """
+
+    values: tuple[float, ...]
+    saturated: bool
+    exposure_s: float
+    averages: int
+    timestamp: float = field(default_factory=time.time)
+
+
+@dataclass(frozen=True)
+class SensorStatus:
+    ok: bool
+    faults: tuple[str, ...] = ()
+
+
+# --------------------------------------------------------------------------- devices
+class Device(abc.ABC):
+    """Anything with a name that can be connected and closed."""
+
+    name: str
+
+    @abc.abstractmethod
+    async def connect(self) -> None:
+        """Open the transport and check that the device answers."""
+
+    @abc.abstractmethod
+    async def close(self) -> None:
+        """Release the transport; safe to call twice."""
+
+
+class Stage(Device):
+    """A rotation stage under the specimen."""
+
+    limits: TravelLimits
+    speed_dps: float
+    """Configured travel speed, degrees per second (for duration estimates)."""
+    accel_dps2: float
+    """Configured acceleration, degrees per second squared (for duration estimates)."""
+    settle_s: float = 0.0
+    """Time to wait after a move before reading, seconds."""
+    resolution_deg: float = 0.01
+    """Smallest meaningful angular step of the stage, degrees."""
+
+    @abc.abstractmethod
+    async def home(self) -> None:
+        """Establish the reference position (0 degrees)."""
+
+    @abc.abstractmethod
+    async def move_to(self, angle_deg: float, timeout_s: float | None = None) -> float:
+        """Move to ``angle_deg`` and wait until the move has finished and settled.
+
+        Returns the actual position, degrees. Raises :class:`StageFault` on a device fault,
+        :class:`DeviceUnavailable` when it stops answering or the move times out, and
+        ``ValueError`` for an angle outside the travel limits.
+        """
+
+    @abc.abstractmethod
+    async def position(self) -> float:
+        """Present position, degrees."""
+
+    @abc.abstractmethod
+    async def stop(self) -> None:
+        """Stop any motion now (decelerate)."""
+
+    @abc.abstractmethod
+    async def status(self) -> StageStatus:
+        """Position, motion, homing and active faults."""
+
+    @abc.abstractmethod
+    async def clear_faults(self) -> None:
+        """Try to clear latched faults (reboot, ``warnings clear``); raise if they persist."""
+
+
+class Light(Device):
+    """A fixed light source."""
+
+    direction: LabDirection
+
+    @abc.abstractmethod
+    async def set_on(self, on: bool) -> None: ...
+
+    @abc.abstractmethod
+    async def set_level(self, level: float) -> None:
+        """Drive level as a fraction in [0, 1]."""
+
+    @abc.abstractmethod
+    async def status(self) -> LightStatus: ...
+
+
+class Sensor(Device):
+    """A fixed photodiode or multi-channel sensor."""
+
+    direction: LabDirection
+    channels: tuple[str, ...]
+    min_exposure_s: float = 1e-4
+    max_exposure_s: float = 10.0
+
+    @abc.abstractmethod
+    async def read(self, exposure_s: float, averages: int = 1) -> SensorReading:
+        """Integrate for ``exposure_s`` seconds ``averages`` times and return the mean."""
+
+    @abc.abstractmethod
+    async def status(self) -> SensorStatus: ...
+
+
+@dataclass(frozen=True)
+class Pair:
+    """A measured light/sensor pair, by device name."""
+
+    light: str
+    sensor: str
+
+
+@dataclass
+class Rig:
+    """One measurement rig: a stage, fixed lights and sensors, and the pairs that are measured."""
+
+    stage: Stage
+    lights: dict[str, Light]
+    sensors: dict[str, Sensor]
+    pairs: list[Pair]
+
+    def __post_init__(self) -> None:
+        for p in self.pairs:
+            if p.light not in self.lights:
+                raise ValueError(f"pair {p}: no light named {p.light!r} in the rig")
+            if p.sensor not in self.sensors:
+                raise ValueError(f"pair {p}: no sensor named {p.sensor!r} in the rig")
+
+    def devices(self) -> Sequence[Device]:
+        return [self.stage, *self.lights.values(), *self.sensors.values()]
+
+    async def connect(self) -> None:
+        """Connect every device; on failure, close the ones already connected and re-raise."""
+        done: list[Device] = []
+        try:
+            for d in self.devices():
+                await d.connect()
+                done.append(d)
+        except BaseException:
+            for d in reversed(done):
+                try:
+                    await d.close()
+                except Exception:  # closing is best effort; the original error matters
+                    pass
+            raise
+
+    async def close(self) -> None:
+        for d in reversed(self.devices()):
+            try:
+                await d.close()
+            except Exception:  # keep closing the rest
+                pass
+
+    async def __aenter__(self) -> Rig:
+        await self.connect()
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.close()

@@ -1,0 +1,32 @@
+"""Fixtures shared by every test area."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+PROJECT_ROOT = Path(__file__).resolve().parents[1]
+SHARED_DATA = PROJECT_ROOT.parent / "shared" / "data"
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _session_cache_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Point gonio's user cache at one temporary folder for the whole run.
+
+    The synthetic library and default basis are built once per test session there, so tests
+    never read or write the developer's real cache.
+    """
+    if "GONIO_CACHE_DIR" not in os.environ:
+        os.environ["GONIO_CACHE_DIR"] = str(tmp_path_factory.mktemp("gonio-cache"))
+    return Path(os.environ["GONIO_CACHE_DIR"])
+
+
+@pytest.fixture(scope="session")
+def rgl_dir() -> Path:
+    """Folder of the shared RGL measurements; skips the test when it is absent."""
+    d = SHARED_DATA / "rgl"
+    if not d.is_dir() or not any(d.glob("*.bsdf")):
+        pytest.skip(f"shared RGL data not found at ../shared/data/rgl (looked in {d})")
+    return d
