@@ -11,6 +11,7 @@ suspending (a recoverable fault) and failing the job, without knowing which driv
 from __future__ import annotations
 
 import abc
+import contextlib
 import math
 import time
 from collections.abc import Mapping, Sequence
@@ -242,18 +243,15 @@ class Rig:
                 done.append(d)
         except BaseException:
             for d in reversed(done):
-                try:
+                # Closing is best effort here: the original error is the one to report.
+                with contextlib.suppress(Exception):
                     await d.close()
-                except Exception:  # closing is best effort; the original error matters
-                    pass
             raise
 
     async def close(self) -> None:
         for d in reversed(self.devices()):
-            try:
+            with contextlib.suppress(Exception):  # one failing device must not keep others open
                 await d.close()
-            except Exception:  # keep closing the rest
-                pass
 
     async def __aenter__(self) -> Rig:
         await self.connect()

@@ -197,7 +197,7 @@ def volume_weight() -> FloatArray:
 
 
 def stage_shifted_ph(ph_lab: ArrayLike, stage_angle: ArrayLike) -> FloatArray:
-    """Specimen ``ph`` seen by a fixed lab pair at stage angle ``alpha``: ``ph_lab - alpha`` mod 2 pi."""
+    """Specimen ``ph`` of a fixed lab pair at stage angle ``alpha``: ``ph_lab - alpha`` mod 2 pi."""
     return np.mod(np.asarray(ph_lab, dtype=float) - np.asarray(stage_angle, dtype=float), 2 * np.pi)
 
 

@@ -285,7 +285,9 @@ def from_function(
     """
     th, td, pd = geo.grid_angles()
     mask = geo.valid_mask()
-    out = np.full((len(channels), *geo.TABLE_SHAPE), np.nan, dtype=dtype)
+    out: NDArray[np.floating[Any]] = np.full(
+        (len(channels), *geo.TABLE_SHAPE), np.nan, dtype=dtype
+    )
     for k, ph in enumerate(geo.PH_GRID):
         wi, wo = geo.half_diff_to_directions(th[mask], ph, td[mask], pd[mask])
         vals = np.asarray(fn(wi, wo), dtype=float)

@@ -1,0 +1,83 @@
+"""Project-level contracts: import directions, README commands, packaging layout."""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from tests.staging import stage_installed_layout
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _quick_start_commands() -> list[str]:
+    text = (ROOT / "README.md").read_text()
+    section = text.split("## Quick start", 1)[1]
+    block = re.search(r"```(?:bash|sh)?\n(.*?)```", section, re.S)
+    assert block, "README Quick start has no code block"
+    return [line for line in block.group(1).splitlines() if line.strip()]
+
+
+@pytest.fixture(scope="module")
+def staged(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return stage_installed_layout(tmp_path_factory.mktemp("staged"))
+
+
+def _tool(name: str) -> Path:
+    exe = Path(sys.executable).with_name(name)
+    if not exe.exists():
+        pytest.skip(f"{name} is not installed (pip install -e '.[test]')")
+    return exe
+
+
+def test_import_contracts_hold(staged: Path) -> None:
+    """import-linter enforces ARCHITECTURE.md's import directions (contracts in pyproject.toml)."""
+    proc = subprocess.run(
+        [str(_tool("lint-imports")), "--config", str(ROOT / "pyproject.toml")],
+        cwd=staged, capture_output=True, text=True, timeout=120,
+        env={**os.environ, "PYTHONPATH": str(staged)},
+    )
+    assert proc.returncode == 0, proc.stdout[-4000:] + proc.stderr[-2000:]
+
+
+def test_mypy_is_clean(staged: Path) -> None:
+    """Type-check the installed layout with the settings of pyproject.toml."""
+    proc = subprocess.run(
+        [str(_tool("mypy")), "--config-file", str(ROOT / "pyproject.toml"), "-p", "gonio"],
+        cwd=staged, capture_output=True, text=True, timeout=600,
+        env={**os.environ, "MYPYPATH": str(staged)},
+    )
+    assert proc.returncode == 0, proc.stdout[-6000:]
+
+
+def test_ruff_is_clean() -> None:
+    proc = subprocess.run(
+        [str(_tool("ruff")), "check", "gonio", "drivers", "sim", "tests", "bench"],
+        cwd=ROOT, capture_output=True, text=True, timeout=120,
+    )
+    assert proc.returncode == 0, proc.stdout[-6000:]
+
+
+def test_readme_has_exactly_two_setup_commands() -> None:
+    commands = _quick_start_commands()
+    assert len(commands) == 2, commands
+    assert all(c.startswith("python3 -m venv .venv") for c in commands)
+
+
+def test_ci_runs_the_readme_test_command() -> None:
+    test_command = _quick_start_commands()[1]
+    ci = (ROOT / ".ci" / "run").read_text()
+    assert test_command in ci, "the README's test command and .ci/run have drifted apart"
+
+
+def test_drivers_and_sim_map_into_the_gonio_namespace() -> None:
+    import gonio.drivers
+    import gonio.sim
+
+    assert Path(gonio.drivers.__file__).parent.name == "drivers"
+    assert Path(gonio.sim.__file__).parent.name == "sim"
