@@ -1,1 +1,1 @@
-"""Simulated devices (import name ``gonio.sim``) speaking the same wire protocols as the hardware."""
+"""Simulated devices (import name ``gonio.sim``) speaking the wire protocols of the hardware."""

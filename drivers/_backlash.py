@@ -1,0 +1,94 @@
+"""Approach-direction logic shared by the stage drivers (backlash compensation).
+
+Gears and lead screws have play: where a stage comes to rest depends on the side it came from.
+Approaching every target from the same side removes that error. When a move would arrive from
+the other side, the stage first overshoots the target by ``backlash_deg`` and then returns.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Literal
+
+from gonio.hal import TravelLimits
+
+Approach = Literal["positive", "negative", "none"]
+APPROACHES: tuple[str, ...] = ("positive", "negative", "none")
+
+# Below this distance a target counts as reached: no move, so no direction to correct.
+_SAME_POSITION_DEG = 1e-6
+
+
+def check_approach(device: str, approach: str, backlash_deg: float) -> None:
+    """Validate the approach settings of a stage config.
+
+    Raises
+    ------
+    ValueError
+        With a message naming the device and the allowed values.
+    """
+    if approach not in APPROACHES:
+        raise ValueError(
+            f"{device}: approach must be one of {', '.join(APPROACHES)}, got {approach!r}"
+        )
+    if not math.isfinite(backlash_deg) or backlash_deg < 0:
+        raise ValueError(f"{device}: backlash_deg must be a number >= 0, got {backlash_deg}")
+
+
+def approach_waypoints(
+    current_deg: float, target_deg: float, approach: str, backlash_deg: float
+) -> list[float]:
+    """Positions to visit in order so that the last move ends on the configured side.
+
+    Parameters
+    ----------
+    current_deg : float
+        Present stage position, degrees.
+    target_deg : float
+        Requested position, degrees.
+    approach : {"positive", "negative", "none"}
+        "positive": the final move runs in the increasing-angle direction; "negative": in the
+        decreasing direction; "none": go straight.
+    backlash_deg : float
+        Overshoot used when the direct move would arrive from the wrong side, degrees (>= 0).
+
+    Returns
+    -------
+    list of float
+        One waypoint (the target) or two (overshoot point, then the target), degrees.
+    """
+    if approach == "none" or backlash_deg <= 0:
+        return [target_deg]
+    delta = target_deg - current_deg
+    if abs(delta) < _SAME_POSITION_DEG:
+        return [target_deg]
+    if approach == "positive":
+        return [target_deg] if delta > 0 else [target_deg - backlash_deg, target_deg]
+    return [target_deg] if delta < 0 else [target_deg + backlash_deg, target_deg]
+
+
+def check_target(
+    device: str, limits: TravelLimits, target_deg: float, waypoints: list[float]
+) -> None:
+    """Refuse a target (or its overshoot point) outside the travel limits, before moving.
+
+    Raises
+    ------
+    ValueError
+        Saying which position is out of range and what the limits are.
+    """
+    if not math.isfinite(target_deg):
+        raise ValueError(f"{device}: target angle must be a finite number, got {target_deg}")
+    if not limits.contains(target_deg):
+        raise ValueError(
+            f"{device}: target {target_deg:g} deg is outside the travel limits "
+            f"[{limits.min_deg:g}, {limits.max_deg:g}] deg of the rig config"
+        )
+    for wp in waypoints:
+        if not limits.contains(wp):
+            raise ValueError(
+                f"{device}: reaching {target_deg:g} deg from the configured approach side needs "
+                f"an overshoot to {wp:g} deg, outside the travel limits "
+                f"[{limits.min_deg:g}, {limits.max_deg:g}] deg; widen the limits, reduce "
+                "backlash_deg or choose a target further from the limit"
+            )

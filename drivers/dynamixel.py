@@ -1,0 +1,484 @@
+"""Rotation stage on a Dynamixel X-series servo (Protocol 2.0) through ``dynamixel-sdk``.
+
+The servo runs in extended position mode (multi-turn) so the stage can pass 360 degrees, with
+Profile Velocity and Profile Acceleration derived from the configured stage speed and the gear
+ratio. The 0-degree reference lives in the servo's Homing Offset (EEPROM): :meth:`home` makes
+the present position 0 degrees.
+
+Every SDK call is blocking; it runs in a worker thread (``asyncio.to_thread``) while holding a
+lock per serial port, so two devices on one bus never interleave packets. A call that gets no
+reply or a corrupted one is retried; an exception from the port (unplugged adapter) triggers a
+reopen before the retry. A status packet with the alert bit set means Hardware Error Status is
+non-zero: the driver reads it and raises a typed :class:`~gonio.hal.StageFault`. Such faults
+latch until a REBOOT, which :meth:`clear_faults` sends.
+
+X-series units (ROBOTIS e-manual): 4096 counts per motor turn, Profile Velocity 0.229 rpm per
+unit, Profile Acceleration 214.577 rev/min^2 per unit.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import math
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+import dynamixel_sdk as sdk
+from gonio.drivers._backlash import approach_waypoints, check_approach, check_target
+
+from gonio.hal import DeviceUnavailable, StageFault, StageStatus, TravelLimits
+from gonio.hal import Stage as _Stage
+
+COUNTS_PER_TURN = 4096
+DPS_PER_VELOCITY_UNIT = 0.229 * 360.0 / 60.0  # motor degrees/s per Profile Velocity unit
+DPS2_PER_ACCEL_UNIT = 214.577 * 360.0 / 3600.0  # motor degrees/s^2 per Profile Acceleration unit
+PROFILE_MAX = 32767
+HOMING_OFFSET_LIMIT = 1_044_479
+
+ADDR_MODEL_NUMBER = 0
+ADDR_OPERATING_MODE = 11
+ADDR_HOMING_OFFSET = 20
+ADDR_TORQUE_ENABLE = 64
+ADDR_HARDWARE_ERROR = 70
+ADDR_PROFILE_ACCELERATION = 108
+ADDR_PROFILE_VELOCITY = 112
+ADDR_GOAL_POSITION = 116
+ADDR_MOVING = 122
+ADDR_PRESENT_POSITION = 132
+ADDR_PRESENT_TEMPERATURE = 146
+EXTENDED_POSITION_MODE = 4
+
+ALERT_BIT = 0x80
+# Hardware Error Status bits: (code, what it means, recoverable by a reboot)
+HARDWARE_ERRORS: dict[int, tuple[str, str, bool]] = {
+    0x01: ("input_voltage", "input voltage out of range; check the power supply", True),
+    0x04: ("overheating", "servo overheated; let it cool and reduce the load", True),
+    0x08: ("encoder", "motor encoder malfunction; the servo may need service", False),
+    0x10: ("electrical_shock", "electrical shock or damaged motor circuit", False),
+    0x20: ("overload", "persistent overload; check for a blocked or overloaded stage", True),
+}
+PROTOCOL_ERRORS = {
+    1: "result fail",
+    2: "instruction error",
+    3: "CRC error",
+    4: "data range error",
+    5: "data length error",
+    6: "data limit error",
+    7: "access error",
+}
+
+_PORT_LOCKS: dict[str, threading.Lock] = {}
+_PORT_LOCKS_GUARD = threading.Lock()
+
+
+def _port_lock(port: str) -> threading.Lock:
+    """One lock per serial port, shared by every driver instance on that bus."""
+    with _PORT_LOCKS_GUARD:
+        return _PORT_LOCKS.setdefault(port, threading.Lock())
+
+
+def _signed32(value: int) -> int:
+    return value - (1 << 32) if value & 0x80000000 else value
+
+
+class DynamixelStage(_Stage):
+    """A rotation stage driven by one Dynamixel X-series servo.
+
+    Parameters
+    ----------
+    name : str
+        Device name in the rig config (used in every error message).
+    port : str
+        Serial port of the USB adapter (U2D2), e.g. ``/dev/ttyUSB0``.
+    baudrate : int
+        Bus baud rate, must match the servo's Baud Rate item.
+    dxl_id : int
+        Servo ID, 0-252.
+    counts_per_degree : float
+        Encoder counts per degree of stage rotation: 4096/360 times the gear ratio.
+    limits : TravelLimits
+        Allowed stage angles, degrees.
+    speed_dps : float
+        Stage travel speed, degrees per second.
+    accel_dps2 : float
+        Stage acceleration, degrees per second squared.
+    settle_s : float
+        Wait after each move before returning, seconds.
+    approach : {"positive", "negative", "none"}
+        Side from which every target is approached (backlash compensation).
+    backlash_deg : float
+        Overshoot used to approach from the configured side, degrees.
+    move_timeout_s : float
+        Default limit for one move, seconds.
+    retries : int
+        Attempts per transaction on timeouts, corrupted replies and port errors.
+    position_tolerance_counts : int
+        A move has arrived when the servo stopped within this many counts of the goal.
+    poll_interval_s : float
+        Interval between Moving / Present Position polls during a move, seconds.
+    """
+
+    def __init__(
+        self,
+        name: str,
+        port: str,
+        *,
+        baudrate: int = 57600,
+        dxl_id: int = 1,
+        counts_per_degree: float,
+        limits: TravelLimits,
+        speed_dps: float,
+        accel_dps2: float,
+        settle_s: float = 0.0,
+        approach: str = "positive",
+        backlash_deg: float = 0.0,
+        move_timeout_s: float = 60.0,
+        retries: int = 3,
+        position_tolerance_counts: int = 3,
+        poll_interval_s: float = 0.02,
+    ) -> None:
+        self.name = name
+        self.port = port
+        self.baudrate = int(baudrate)
+        self.dxl_id = int(dxl_id)
+        if not 0 <= self.dxl_id <= 252:
+            raise ValueError(f"{name}: dxl_id must be 0-252, got {dxl_id}")
+        if not math.isfinite(counts_per_degree) or counts_per_degree <= 0:
+            raise ValueError(f"{name}: counts_per_degree must be > 0, got {counts_per_degree}")
+        if limits.min_deg >= limits.max_deg:
+            raise ValueError(f"{name}: travel limits need min_deg < max_deg, got {limits}")
+        check_approach(name, approach, backlash_deg)
+        if move_timeout_s <= 0 or retries < 1:
+            raise ValueError(f"{name}: move_timeout_s must be > 0 and retries >= 1")
+        self.cpd = float(counts_per_degree)
+        self.limits = limits
+        self.speed_dps = float(speed_dps)
+        self.accel_dps2 = float(accel_dps2)
+        self.settle_s = float(settle_s)
+        self.approach = approach
+        self.backlash_deg = float(backlash_deg)
+        self.move_timeout_s = float(move_timeout_s)
+        self.retries = int(retries)
+        self.tolerance_counts = int(position_tolerance_counts)
+        self.poll_interval_s = float(poll_interval_s)
+        self.resolution_deg = 1.0 / self.cpd
+        gear = self.cpd * 360.0 / COUNTS_PER_TURN
+        self.profile_velocity = self._profile_units(
+            "speed_dps", speed_dps, gear / DPS_PER_VELOCITY_UNIT
+        )
+        self.profile_acceleration = self._profile_units(
+            "accel_dps2", accel_dps2, gear / DPS2_PER_ACCEL_UNIT
+        )
+        self._ph: Any = None
+        self._pk: Any = sdk.PacketHandler(2.0)
+        self._lock = _port_lock(port)
+        self._op_lock = asyncio.Lock()
+        self._homed = False
+        self.model_number: int | None = None
+
+    def _profile_units(self, what: str, value: float, units_per_stage_unit: float) -> int:
+        if not math.isfinite(value) or value <= 0:
+            raise ValueError(f"{self.name}: {what} must be > 0, got {value}")
+        units = max(1, round(value * units_per_stage_unit))
+        if units > PROFILE_MAX:
+            raise ValueError(
+                f"{self.name}: {what}={value:g} needs profile value {units} at this gear "
+                f"ratio, above the servo maximum {PROFILE_MAX}; lower {what}"
+            )
+        return units
+
+    # ------------------------------------------------------------------ transport
+    def _open(self) -> None:
+        ph = sdk.PortHandler(self.port)
+        try:
+            ok = ph.setBaudRate(self.baudrate)
+        except Exception as exc:  # pyserial raises SerialException/OSError on a missing port
+            raise DeviceUnavailable(
+                self.name,
+                f"cannot open serial port {self.port!r}: {exc}; check the USB adapter and the "
+                "port name in the rig config",
+                code="port",
+            ) from exc
+        if not ok:
+            raise ValueError(f"{self.name}: baud rate {self.baudrate} is not supported by the SDK")
+        self._ph = ph
+
+    def _reopen(self) -> None:
+        if self._ph is not None:
+            with contextlib.suppress(Exception):
+                self._ph.closePort()
+        self._ph = None
+        self._open()
+
+    def _transact(self, what: str, fn: Callable[..., Any], *args: Any) -> tuple[Any, int]:
+        """Run one SDK transaction with retries; returns (value, status error byte).
+
+        Runs in a worker thread. Raises DeviceUnavailable when every attempt failed.
+        """
+        last = ""
+        with self._lock:
+            for attempt in range(self.retries):
+                try:
+                    if self._ph is None:
+                        self._open()
+                    self._ph.is_using = False  # a failed call may leave the SDK's flag set
+                    out = fn(self._ph, self.dxl_id, *args)
+                except DeviceUnavailable as exc:
+                    last = str(exc)
+                    time.sleep(0.05 * (attempt + 1))
+                    continue
+                except Exception as exc:  # lost port: pyserial raises from read/write
+                    last = f"port error {exc!r}"
+                    with contextlib.suppress(DeviceUnavailable):
+                        self._reopen()
+                    continue
+                value, result, error = out if len(out) == 3 else (None, *out)
+                if result == sdk.COMM_SUCCESS:
+                    return value, int(error)
+                last = self._pk.getTxRxResult(result)
+                self._ph.clearPort()
+        raise DeviceUnavailable(
+            self.name,
+            f"{what}: no valid reply from Dynamixel ID {self.dxl_id} on {self.port} after "
+            f"{self.retries} attempts ({last}); check power, cable, ID and baud rate "
+            f"({self.baudrate})",
+            code="timeout",
+        )
+
+    async def _call(self, what: str, fn: Callable[..., Any], *args: Any) -> tuple[Any, int]:
+        return await asyncio.to_thread(self._transact, what, fn, *args)
+
+    async def _read(self, what: str, address: int, size: int, *, check: bool = True) -> int:
+        fn = {1: self._pk.read1ByteTxRx, 4: self._pk.read4ByteTxRx}[size]
+        value, error = await self._call(what, fn, address)
+        if check:
+            await self._check(what, error)
+        return _signed32(int(value)) if size == 4 else int(value)
+
+    async def _write(self, what: str, address: int, size: int, value: int) -> None:
+        fn = {1: self._pk.write1ByteTxRx, 4: self._pk.write4ByteTxRx}[size]
+        _, error = await self._call(what, fn, address, value & 0xFFFFFFFF)
+        await self._check(what, error)
+
+    async def _check(self, what: str, error: int) -> None:
+        if error & ALERT_BIT:
+            await self._raise_hardware_error()
+        number = error & 0x7F
+        if number:
+            raise StageFault(
+                self.name,
+                f"{what}: servo refused the request ({PROTOCOL_ERRORS.get(number, number)}); "
+                "check the servo model and the rig config",
+                code="protocol",
+                recoverable=False,
+            )
+
+    async def _hardware_error(self) -> int:
+        return await self._read("read Hardware Error Status", ADDR_HARDWARE_ERROR, 1, check=False)
+
+    async def _raise_hardware_error(self) -> None:
+        bits = await self._hardware_error()
+        known = [v for b, v in HARDWARE_ERRORS.items() if bits & b]
+        if not known:
+            known = [(f"hardware_error_0x{bits:02x}", "unknown hardware error", True)]
+        codes = "+".join(k[0] for k in known)
+        reasons = "; ".join(k[1] for k in known)
+        raise StageFault(
+            self.name,
+            f"hardware error ({reasons}); torque is off until clear_faults() reboots the servo",
+            code=codes,
+            recoverable=all(k[2] for k in known),
+        )
+
+    # ------------------------------------------------------------------ Device
+    async def connect(self) -> None:
+        async with self._op_lock:
+            await asyncio.to_thread(self._open_locked)
+            try:
+                model, _ = await self._call("ping", self._pk.ping)
+            except DeviceUnavailable as exc:
+                await self.close()
+                raise DeviceUnavailable(
+                    self.name,
+                    f"Dynamixel ID {self.dxl_id} does not answer on {self.port} at "
+                    f"{self.baudrate} baud; check power, cable, ID and baud rate",
+                    code="no_answer",
+                ) from exc
+            self.model_number = int(model)
+            if await self._hardware_error() == 0:
+                await self._configure()
+
+    def _open_locked(self) -> None:
+        with self._lock:
+            self._open()
+
+    async def _configure(self) -> None:
+        """Extended position mode and motion profile; leaves torque on."""
+        mode = await self._read("read Operating Mode", ADDR_OPERATING_MODE, 1)
+        if mode != EXTENDED_POSITION_MODE:
+            # Operating Mode is in EEPROM: writable only with torque off.
+            await self._write("torque off", ADDR_TORQUE_ENABLE, 1, 0)
+            await self._write("set extended position mode", ADDR_OPERATING_MODE, 1,
+                              EXTENDED_POSITION_MODE)
+        await self._write("set Profile Acceleration", ADDR_PROFILE_ACCELERATION, 4,
+                          self.profile_acceleration)
+        await self._write("set Profile Velocity", ADDR_PROFILE_VELOCITY, 4, self.profile_velocity)
+        await self._write("torque on", ADDR_TORQUE_ENABLE, 1, 1)
+
+    async def close(self) -> None:
+        ph, self._ph = self._ph, None
+        if ph is not None:
+            def _close() -> None:
+                with self._lock, contextlib.suppress(Exception):
+                    ph.closePort()
+            await asyncio.to_thread(_close)
+
+    # ------------------------------------------------------------------ Stage
+    async def position(self) -> float:
+        # Reading works with a latched hardware error; moves and status() report the fault.
+        return await self._counts(check=False) / self.cpd
+
+    async def _counts(self, *, check: bool = True) -> int:
+        return await self._read("read Present Position", ADDR_PRESENT_POSITION, 4, check=check)
+
+    async def home(self) -> None:
+        """Make the present position the 0-degree reference (stored in Homing Offset)."""
+        async with self._op_lock:
+            await self._write("torque off", ADDR_TORQUE_ENABLE, 1, 0)
+            present = await self._counts()
+            offset = await self._read("read Homing Offset", ADDR_HOMING_OFFSET, 4)
+            new_offset = offset - present
+            if abs(new_offset) > HOMING_OFFSET_LIMIT:
+                raise StageFault(
+                    self.name,
+                    f"cannot zero here: the servo is {present - offset} counts from its power-up "
+                    f"turn, beyond the Homing Offset range +-{HOMING_OFFSET_LIMIT}; move the "
+                    "stage back towards 0 and home again",
+                    code="homing_range",
+                    recoverable=False,
+                )
+            await self._write("write Homing Offset", ADDR_HOMING_OFFSET, 4, new_offset)
+            await self._write("torque on", ADDR_TORQUE_ENABLE, 1, 1)
+            self._homed = True
+
+    async def move_to(self, angle_deg: float, timeout_s: float | None = None) -> float:
+        current = await self.position()
+        waypoints = approach_waypoints(current, angle_deg, self.approach, self.backlash_deg)
+        check_target(self.name, self.limits, angle_deg, waypoints)
+        limit = self.move_timeout_s if timeout_s is None else float(timeout_s)
+        deadline = time.monotonic() + limit
+        for wp in waypoints:
+            goal = round(wp * self.cpd)
+            await self._write("write Goal Position", ADDR_GOAL_POSITION, 4, goal)
+            await self._wait_arrival(goal, deadline, limit)
+        if self.settle_s > 0:
+            await asyncio.sleep(self.settle_s)
+        return await self.position()
+
+    async def _wait_arrival(self, goal: int, deadline: float, limit: float) -> None:
+        stopped_short = 0
+        while True:
+            moving = await self._read("read Moving", ADDR_MOVING, 1)
+            present = await self._counts()
+            if not moving:
+                if abs(present - goal) <= self.tolerance_counts:
+                    return
+                # Moving can lag a fresh goal by a control cycle: insist before calling it a stall.
+                stopped_short += 1
+                if stopped_short >= 3:
+                    raise StageFault(
+                        self.name,
+                        f"stage stopped at {present / self.cpd:.3f} deg, short of the target "
+                        f"{goal / self.cpd:.3f} deg; check for a mechanical obstruction",
+                        code="stall",
+                    )
+            else:
+                stopped_short = 0
+            if time.monotonic() > deadline:
+                with contextlib.suppress(Exception):
+                    await self.stop()
+                raise DeviceUnavailable(
+                    self.name,
+                    f"move to {goal / self.cpd:.3f} deg did not finish within {limit:g} s "
+                    f"(now at {present / self.cpd:.3f} deg); check speed settings and load",
+                    code="timeout",
+                )
+            await asyncio.sleep(self.poll_interval_s)
+
+    async def stop(self) -> None:
+        """Hold the present position: the servo's profile decelerates to it."""
+        await self._write("stop (goal = present)", ADDR_GOAL_POSITION, 4, await self._counts())
+
+    async def status(self) -> StageStatus:
+        bits = await self._hardware_error()
+        position = await self._read("read Present Position", ADDR_PRESENT_POSITION, 4, check=False)
+        moving = await self._read("read Moving", ADDR_MOVING, 1, check=False)
+        temperature = await self._read("read temperature", ADDR_PRESENT_TEMPERATURE, 1, check=False)
+        faults = tuple(v[0] for b, v in HARDWARE_ERRORS.items() if bits & b)
+        return StageStatus(
+            position_deg=position / self.cpd,
+            moving=bool(moving),
+            homed=self._homed,
+            faults=faults,
+            detail={
+                "hardware_error_status": bits,
+                "model_number": self.model_number,
+                "temperature_c": temperature,
+            },
+        )
+
+    async def clear_faults(self) -> None:
+        """Reboot the servo, keep its multi-turn reference, restore mode and profile."""
+        async with self._op_lock:
+            before: int | None
+            try:
+                before = await self._read("read Present Position", ADDR_PRESENT_POSITION, 4,
+                                          check=False)
+            except DeviceUnavailable:
+                before = None
+            await self._call("reboot", self._pk.reboot)
+            await self._wait_for_boot()
+            bits = await self._hardware_error()
+            if bits:
+                await self._raise_hardware_error_persisting(bits)
+            if before is not None:
+                await self._restore_turns(before)
+            await self._configure()
+
+    async def _wait_for_boot(self, limit_s: float = 3.0) -> None:
+        deadline = time.monotonic() + limit_s
+        while True:
+            try:
+                await self._call("ping after reboot", self._pk.ping)
+                return
+            except DeviceUnavailable:
+                if time.monotonic() > deadline:
+                    raise
+                await asyncio.sleep(0.05)
+
+    async def _raise_hardware_error_persisting(self, bits: int) -> None:
+        names = [v[0] for b, v in HARDWARE_ERRORS.items() if bits & b] or [f"0x{bits:02x}"]
+        raise StageFault(
+            self.name,
+            f"hardware error {'+'.join(names)} persists after a reboot; the servo needs "
+            "inspection",
+            code="+".join(names),
+            recoverable=False,
+        )
+
+    async def _restore_turns(self, before: int) -> None:
+        """A reboot forgets whole motor turns; put them back into the Homing Offset."""
+        after = await self._read("read Present Position", ADDR_PRESENT_POSITION, 4)
+        turns = round((before - after) / COUNTS_PER_TURN)
+        if turns == 0:
+            return
+        offset = await self._read("read Homing Offset", ADDR_HOMING_OFFSET, 4)
+        new_offset = offset + turns * COUNTS_PER_TURN
+        if abs(new_offset) > HOMING_OFFSET_LIMIT:
+            self._homed = False  # the reference cannot be kept: the engine must home again
+            return
+        # Torque is off after a reboot, so the EEPROM item is writable.
+        await self._write("restore Homing Offset", ADDR_HOMING_OFFSET, 4, new_offset)

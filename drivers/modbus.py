@@ -1,0 +1,480 @@
+"""Lights and sensors on Modbus TCP, driven from the register map in the rig config.
+
+Built on pymodbus' ``AsyncModbusTcpClient`` (3.10+ keyword ``device_id=``). Devices that sit
+behind the same gateway share one connection through a :class:`ModbusPool`; a Modbus TCP
+connection must not carry two requests at once, so every request holds the connection's
+``asyncio.Lock``. After any transport failure the connection is dropped and the next request
+reconnects, so a device that comes back is used again without restarting the daemon.
+
+Register values are decoded here (``physical = raw * scale``); the simulator in
+``gonio.sim.modbus_server`` has its own independent encoder so that each can catch the other's
+mistakes.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from collections.abc import Awaitable, Callable, Sequence
+from typing import Any, TypeVar
+
+from pymodbus.client import AsyncModbusTcpClient
+from pymodbus.exceptions import ModbusException
+
+from gonio.config import LightConfig, Register, SensorConfig
+from gonio.hal import (
+    DeviceFault,
+    DeviceUnavailable,
+    LabDirection,
+    LampOutOfBand,
+    Light,
+    LightStatus,
+    Sensor,
+    SensorReading,
+    SensorStatus,
+)
+
+__all__ = ["ModbusConnection", "ModbusLight", "ModbusPool", "ModbusSensor"]
+
+T = TypeVar("T")
+
+_DATATYPE = {
+    "u16": AsyncModbusTcpClient.DATATYPE.UINT16,
+    "s16": AsyncModbusTcpClient.DATATYPE.INT16,
+    "u32": AsyncModbusTcpClient.DATATYPE.UINT32,
+    "s32": AsyncModbusTcpClient.DATATYPE.INT32,
+    "f32": AsyncModbusTcpClient.DATATYPE.FLOAT32,
+}
+_RAW_RANGE = {
+    "u16": (0, 0xFFFF),
+    "s16": (-0x8000, 0x7FFF),
+    "u32": (0, 0xFFFFFFFF),
+    "s32": (-0x80000000, 0x7FFFFFFF),
+}
+# A Modbus read returns at most 125 registers; larger spans are read register by register.
+_MAX_SPAN = 125
+
+
+# --------------------------------------------------------------------------- codec
+def decode(reg: Register, words: Sequence[int]) -> float:
+    """Raw value of ``reg`` from its ``reg.width`` registers (before scale)."""
+    value = AsyncModbusTcpClient.convert_from_registers(
+        list(words), _DATATYPE[reg.type], word_order=reg.word_order
+    )
+    return float(value)  # type: ignore[arg-type]
+
+
+def encode(reg: Register, physical: float, what: str) -> list[int]:
+    """Registers holding ``physical / scale``; ``ValueError`` when it does not fit the type."""
+    raw: float = physical / reg.scale
+    if reg.type != "f32":
+        lo, hi = _RAW_RANGE[reg.type]
+        raw = round(raw)
+        if not lo <= raw <= hi:
+            raise ValueError(
+                f"{what}: {physical} is {raw} raw units at scale {reg.scale}, outside the "
+                f"{reg.type} range [{lo}, {hi}]; change the value or the register's scale"
+            )
+        return AsyncModbusTcpClient.convert_to_registers(
+            int(raw), _DATATYPE[reg.type], word_order=reg.word_order
+        )
+    return AsyncModbusTcpClient.convert_to_registers(
+        float(raw), _DATATYPE[reg.type], word_order=reg.word_order
+    )
+
+
+# --------------------------------------------------------------------------- transport
+class ModbusConnection:
+    """One Modbus TCP connection, used by one request at a time, reconnected on failure.
+
+    Parameters
+    ----------
+    host, port : where the device (or gateway) listens
+    timeout_s : float
+        Per-request time limit, seconds; a request that takes longer raises
+        :class:`DeviceUnavailable` and drops the connection.
+    """
+
+    def __init__(self, host: str, port: int, timeout_s: float) -> None:
+        self.host = host
+        self.port = port
+        self.timeout_s = timeout_s
+        self._client: AsyncModbusTcpClient | None = None
+        self._lock = asyncio.Lock()
+        self.users = 0
+
+    def _drop(self) -> None:
+        if self._client is not None:
+            self._client.close()
+            self._client = None
+
+    async def _connected(self, device: str) -> AsyncModbusTcpClient:
+        if self._client is not None and self._client.connected:
+            return self._client
+        self._drop()
+        # pymodbus' own reconnect loop is off (reconnect_delay=0): this class reconnects on
+        # the next request instead, so a dead device never keeps a background task busy.
+        client = AsyncModbusTcpClient(
+            self.host, port=self.port, timeout=self.timeout_s, retries=0, reconnect_delay=0
+        )
+        try:
+            ok = await asyncio.wait_for(client.connect(), self.timeout_s + 0.5)
+        except (TimeoutError, OSError, ModbusException):
+            ok = False
+        if not ok:
+            client.close()
+            raise DeviceUnavailable(
+                device,
+                f"no Modbus TCP connection to {self.host}:{self.port}; check that the device "
+                "is powered and the host/port in the rig config",
+                code="connect",
+            )
+        self._client = client
+        return client
+
+    async def request(
+        self, device: str, what: str, call: Callable[[AsyncModbusTcpClient], Awaitable[Any]]
+    ) -> Any:
+        """Run one request under the connection lock and check the reply.
+
+        Raises
+        ------
+        DeviceUnavailable
+            No connection, no reply within ``timeout_s`` or a broken reply (recoverable).
+        DeviceFault
+            The device answered with a Modbus exception (wrong address in the register map:
+            not recoverable).
+        """
+        async with self._lock:
+            client = await self._connected(device)
+            try:
+                reply = await asyncio.wait_for(call(client), self.timeout_s + 0.5)
+            except (TimeoutError, ModbusException, OSError) as exc:
+                self._drop()
+                raise DeviceUnavailable(
+                    device,
+                    f"{what}: no valid reply from {self.host}:{self.port} within "
+                    f"{self.timeout_s:g} s ({type(exc).__name__}: {exc})",
+                    code="timeout",
+                ) from None
+        if reply.isError():
+            raise DeviceFault(
+                device,
+                f"{what}: the device refused the request ({reply}); check this address in "
+                "the rig config's register map",
+                code="modbus_exception",
+                recoverable=False,
+            )
+        return reply
+
+    def close(self) -> None:
+        self._drop()
+
+
+class ModbusPool:
+    """Shares one :class:`ModbusConnection` per ``host:port`` among the devices of a rig."""
+
+    def __init__(self) -> None:
+        self._conns: dict[tuple[str, int], ModbusConnection] = {}
+
+    def acquire(self, host: str, port: int, timeout_s: float) -> ModbusConnection:
+        """The connection for ``host:port`` (its timeout is the largest asked for)."""
+        conn = self._conns.get((host, port))
+        if conn is None:
+            conn = self._conns[(host, port)] = ModbusConnection(host, port, timeout_s)
+        conn.timeout_s = max(conn.timeout_s, timeout_s)
+        conn.users += 1
+        return conn
+
+    def release(self, conn: ModbusConnection) -> None:
+        """One user is done; the last one closes the socket."""
+        conn.users -= 1
+        if conn.users <= 0:
+            conn.close()
+            self._conns.pop((conn.host, conn.port), None)
+
+
+class _ModbusDevice:
+    """Register access for one device id on a (possibly shared) connection."""
+
+    def __init__(
+        self,
+        name: str,
+        host: str,
+        port: int,
+        device_id: int,
+        timeout_s: float,
+        pool: ModbusPool | None,
+    ) -> None:
+        self.name = name
+        self._pool = pool if pool is not None else ModbusPool()
+        self._addr = (host, port, timeout_s)
+        self._device_id = device_id
+        self._conn: ModbusConnection | None = None
+
+    def _connection(self) -> ModbusConnection:
+        if self._conn is None:
+            self._conn = self._pool.acquire(*self._addr)
+        return self._conn
+
+    def release(self) -> None:
+        """Give the connection back to the pool (the last user closes it)."""
+        if self._conn is not None:
+            self._pool.release(self._conn)
+            self._conn = None
+
+    async def _read_words(self, table: str, address: int, count: int) -> list[int]:
+        dev = self._device_id
+
+        async def call(c: AsyncModbusTcpClient) -> Any:
+            if table == "input":
+                return await c.read_input_registers(address, count=count, device_id=dev)
+            return await c.read_holding_registers(address, count=count, device_id=dev)
+
+        what = f"read {table} registers {address}..{address + count - 1}"
+        reply = await self._connection().request(self.name, what, call)
+        words = list(reply.registers)
+        if len(words) < count:
+            raise DeviceUnavailable(self.name, f"{what}: short reply {words}", code="short")
+        return words[:count]
+
+    async def read_raw(self, reg: Register) -> float:
+        return decode(reg, await self._read_words(reg.table, reg.address, reg.width))
+
+    async def read_many_raw(self, regs: Sequence[Register]) -> list[float]:
+        """Raw values of several registers, one request per table when they are close."""
+        out: dict[int, float] = {}
+        for table in ("holding", "input"):
+            idx = [k for k, r in enumerate(regs) if r.table == table]
+            if not idx:
+                continue
+            lo = min(regs[k].address for k in idx)
+            hi = max(regs[k].address + regs[k].width for k in idx)
+            if hi - lo <= _MAX_SPAN:
+                words = await self._read_words(table, lo, hi - lo)
+                for k in idx:
+                    a = regs[k].address - lo
+                    out[k] = decode(regs[k], words[a : a + regs[k].width])
+            else:
+                for k in idx:
+                    out[k] = await self.read_raw(regs[k])
+        return [out[k] for k in range(len(regs))]
+
+    async def write(self, reg: Register, physical: float, what: str) -> None:
+        words = encode(reg, physical, f"{self.name}: {what}")
+        dev = self._device_id
+
+        async def call(c: AsyncModbusTcpClient) -> Any:
+            if len(words) == 1:
+                return await c.write_register(reg.address, words[0], device_id=dev)
+            return await c.write_registers(reg.address, words, device_id=dev)
+
+        await self._connection().request(self.name, f"write {what} at {reg.address}", call)
+
+    async def write_coil(self, address: int, value: bool) -> None:
+        dev = self._device_id
+
+        async def call(c: AsyncModbusTcpClient) -> Any:
+            return await c.write_coil(address, value, device_id=dev)
+
+        await self._connection().request(self.name, f"write coil {address}", call)
+
+    async def read_coil(self, address: int) -> bool:
+        dev = self._device_id
+
+        async def call(c: AsyncModbusTcpClient) -> Any:
+            return await c.read_coils(address, count=1, device_id=dev)
+
+        reply = await self._connection().request(self.name, f"read coil {address}", call)
+        return bool(reply.bits[0])
+
+
+# --------------------------------------------------------------------------- light
+class ModbusLight(Light):
+    """A light switched by a coil, optionally dimmed and monitored through registers.
+
+    Parameters
+    ----------
+    config : LightConfig
+        The ``[[lights]]`` entry.
+    pool : ModbusPool, optional
+        Shared connections of the rig; a private one when omitted.
+    """
+
+    def __init__(self, config: LightConfig, pool: ModbusPool | None = None) -> None:
+        self.name = config.name
+        self.direction = LabDirection(config.theta_deg, config.phi_deg)
+        self.config = config
+        m = config.modbus
+        self._io = _ModbusDevice(config.name, m.host, m.port, m.device_id, m.timeout_s, pool)
+        self._level = config.level
+        self._on = False
+        self._last_output = float("nan")  # last monitored output, fraction (for messages)
+
+    async def connect(self) -> None:
+        """Check the device answers and write the configured drive level."""
+        self._on = await self._io.read_coil(self.config.registers.on_coil)
+        if self.config.registers.level is not None:
+            await self._io.write(self.config.registers.level, self._level, "level")
+
+    async def close(self) -> None:
+        self._io.release()
+
+    async def set_on(self, on: bool) -> None:
+        """Switch the light; when switching on with a monitor, check the output band.
+
+        Raises
+        ------
+        LampOutOfBand
+            After ``warmup_s`` the monitored output differs from the level by more than
+            ``band`` (recoverable: a lamp may recover after a longer warm-up).
+        """
+        await self._io.write_coil(self.config.registers.on_coil, on)
+        self._on = on
+        if on and self.config.registers.monitor is not None:
+            if self.config.warmup_s > 0:
+                await asyncio.sleep(self.config.warmup_s)
+            st = await self.status()
+            if not st.in_band:
+                raise LampOutOfBand(
+                    self.name,
+                    f"output {self._last_output:.3f} is outside {self._level:.3f} +- "
+                    f"{self.config.registers.band:.3f}; check the lamp or lengthen warmup_s",
+                    code="out_of_band",
+                )
+
+    async def set_level(self, level: float) -> None:
+        """Drive level, fraction in [0, 1]; ``ValueError`` outside or without a level register."""
+        if not 0.0 <= level <= 1.0:
+            raise ValueError(f"{self.name}: level {level} is outside [0, 1]")
+        if self.config.registers.level is None:
+            raise ValueError(
+                f"{self.name}: this light has no level register in the rig config; it can "
+                "only be switched on and off"
+            )
+        await self._io.write(self.config.registers.level, level, "level")
+        self._level = level
+
+    async def status(self) -> LightStatus:
+        """Coil state, level and (with a monitor register) whether the output is in band."""
+        regs = self.config.registers
+        on = await self._io.read_coil(regs.on_coil)
+        self._on = on
+        in_band = True
+        if regs.monitor is not None:
+            self._last_output = await self._io.read_raw(regs.monitor) * regs.monitor.scale
+            expected = self._level if on else 0.0
+            in_band = abs(self._last_output - expected) <= regs.band
+        return LightStatus(
+            on=on,
+            level=self._level,
+            in_band=in_band,
+            faults=() if in_band else ("out_of_band",),
+        )
+
+
+# --------------------------------------------------------------------------- sensor
+class ModbusSensor(Sensor):
+    """A triggered multi-channel sensor (photodiode/ADC module) on Modbus.
+
+    One exposure: note the ``sequence`` register, write 1 to ``trigger``, wait the exposure
+    time, poll ``sequence`` until it changes, read the ``values`` registers.
+
+    Parameters
+    ----------
+    config : SensorConfig
+        The ``[[sensors]]`` entry.
+    pool : ModbusPool, optional
+        Shared connections of the rig; a private one when omitted.
+    poll_s : float
+        Interval between ``sequence`` polls once the exposure time has passed, seconds.
+    """
+
+    def __init__(
+        self, config: SensorConfig, pool: ModbusPool | None = None, poll_s: float = 0.002
+    ) -> None:
+        self.name = config.name
+        self.direction = LabDirection(config.theta_deg, config.phi_deg)
+        self.channels = tuple(config.channels)
+        self.min_exposure_s = config.min_exposure_s
+        self.max_exposure_s = config.max_exposure_s
+        self.config = config
+        m = config.modbus
+        self._io = _ModbusDevice(config.name, m.host, m.port, m.device_id, m.timeout_s, pool)
+        self._poll_s = poll_s
+        self._exposure_s: float | None = None
+
+    async def connect(self) -> None:
+        """Check the device answers and write the configured gain."""
+        await self._io.read_raw(self.config.registers.sequence)
+        if self.config.registers.gain is not None:
+            await self._io.write(self.config.registers.gain, self.config.gain, "gain")
+        self._exposure_s = None
+
+    async def close(self) -> None:
+        self._io.release()
+
+    async def _expose_once(self, exposure_s: float) -> list[float]:
+        regs = self.config.registers
+        before = await self._io.read_raw(regs.sequence)
+        await self._io.write(regs.trigger, 1 * regs.trigger.scale, "trigger")
+        t0 = time.monotonic()
+        await asyncio.sleep(exposure_s)
+        # A sensor that accepted the trigger but never finishes is as dead as one that does
+        # not answer: give it the exposure plus one request timeout, then give up.
+        deadline = t0 + exposure_s + self.config.modbus.timeout_s
+        while await self._io.read_raw(regs.sequence) == before:
+            if time.monotonic() > deadline:
+                raise DeviceUnavailable(
+                    self.name,
+                    f"no new reading {exposure_s + self.config.modbus.timeout_s:.3g} s after "
+                    "the trigger (the sequence register did not change); check the trigger "
+                    "and sequence addresses",
+                    code="no_data",
+                )
+            await asyncio.sleep(self._poll_s)
+        return await self._io.read_many_raw(regs.values)
+
+    async def read(self, exposure_s: float, averages: int = 1) -> SensorReading:
+        """Mean of ``averages`` exposures of ``exposure_s`` seconds, in physical units.
+
+        Raises
+        ------
+        ValueError
+            ``exposure_s`` outside ``[min_exposure_s, max_exposure_s]`` or ``averages < 1``.
+        DeviceUnavailable
+            The sensor stopped answering or never finished the exposure.
+        """
+        if not self.min_exposure_s <= exposure_s <= self.max_exposure_s:
+            raise ValueError(
+                f"{self.name}: exposure {exposure_s:g} s is outside this sensor's range "
+                f"[{self.min_exposure_s:g}, {self.max_exposure_s:g}] s (min_exposure_s / "
+                "max_exposure_s in the rig config)"
+            )
+        if averages < 1:
+            raise ValueError(f"{self.name}: averages must be at least 1, got {averages}")
+        regs = self.config.registers
+        if self._exposure_s != exposure_s:
+            await self._io.write(regs.exposure, exposure_s, "exposure")
+            self._exposure_s = exposure_s
+        sums = [0.0] * len(self.channels)
+        saturated = False
+        for _ in range(averages):
+            raw = await self._expose_once(exposure_s)
+            saturated |= any(r >= self.config.saturation_raw for r in raw)
+            for k, (r, reg) in enumerate(zip(raw, regs.values, strict=True)):
+                sums[k] += r * reg.scale
+        return SensorReading(
+            values=tuple(s / averages for s in sums),
+            saturated=saturated,
+            exposure_s=exposure_s,
+            averages=averages,
+        )
+
+    async def status(self) -> SensorStatus:
+        """``ok`` when the sensor answers; the fault code otherwise (never raises for that)."""
+        try:
+            await self._io.read_raw(self.config.registers.sequence)
+        except DeviceFault as exc:
+            return SensorStatus(ok=False, faults=(exc.code,))
+        return SensorStatus(ok=True)

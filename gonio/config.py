@@ -1,0 +1,522 @@
+"""The rig configuration: a TOML file describing the stage, lights, sensors and pairs.
+
+The file is read with :mod:`tomllib`, validated with pydantic and written back with ``tomli_w``.
+Every validation problem becomes one :class:`ConfigError` whose message names the file, the key
+path and what is allowed, e.g. ``rig.toml: stage.driver: 'dynamxel' is not one of 'dynamixel',
+'zaber'``. The full reference of keys is ``docs/rig-config.md``; ``deploy/rig.example.toml`` is a
+complete, loadable example.
+
+Angles are degrees (they are typed by people); Modbus addresses are the zero-based addresses
+sent on the wire (a vendor manual's "register 40001" is holding register 0).
+"""
+
+from __future__ import annotations
+
+import os
+import tomllib
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+import numpy as np
+import tomli_w
+from numpy.typing import NDArray
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from gonio.hal import LabDirection, Pair
+
+__all__ = [
+    "CalibrationConfig",
+    "ConfigError",
+    "DataType",
+    "LightConfig",
+    "LightRegisters",
+    "ModbusTransport",
+    "PairConfig",
+    "PairDirections",
+    "PairFactor",
+    "Register",
+    "RigConfig",
+    "SensorConfig",
+    "SensorRegisters",
+    "StageConfig",
+    "dump_rig_config",
+    "load_rig_config",
+    "parse_rig_config",
+    "register_width",
+]
+
+
+class ConfigError(ValueError):
+    """The rig configuration is unreadable or invalid; the message says where and what to do."""
+
+
+DataType = Literal["u16", "s16", "u32", "s32", "f32"]
+WordOrder = Literal["big", "little"]
+RegisterTable = Literal["holding", "input"]
+
+_WIDTH: dict[str, int] = {"u16": 1, "s16": 1, "u32": 2, "s32": 2, "f32": 2}
+
+
+def register_width(data_type: DataType) -> int:
+    """Number of 16-bit registers a value of ``data_type`` occupies (1 or 2)."""
+    return _WIDTH[data_type]
+
+
+class _Strict(BaseModel):
+    """Base of all config sections: unknown keys are errors (they are almost always typos)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, populate_by_name=True)
+
+
+# --------------------------------------------------------------------------- stage
+class DynamixelSettings(_Strict):
+    """``[stage.dynamixel]``: the servo on the bus."""
+
+    id: Annotated[int, Field(ge=0, le=252)] = 1
+
+
+class ZaberSettings(_Strict):
+    """``[stage.zaber]``: device number in the daisy chain and axis."""
+
+    device: Annotated[int, Field(ge=1, le=99)] = 1
+    axis: Annotated[int, Field(ge=1, le=9)] = 1
+
+
+class StageConfig(_Strict):
+    """``[stage]``: the rotation stage under the specimen.
+
+    ``gear_ratio`` is motor revolutions per stage revolution (1 for a direct drive).
+    ``counts_per_rev`` (Dynamixel) is encoder counts per motor revolution;
+    ``microsteps_per_degree`` (Zaber) is microsteps per degree of the motor axis.
+    """
+
+    driver: Literal["dynamixel", "zaber"]
+    port: Annotated[str, Field(min_length=1)]
+    baudrate: Annotated[int, Field(gt=0)] | None = None
+    gear_ratio: Annotated[float, Field(gt=0)] = 1.0
+    counts_per_rev: Annotated[int, Field(gt=0)] = 4096
+    microsteps_per_degree: Annotated[float, Field(gt=0)] | None = None
+    speed_dps: Annotated[float, Field(gt=0)] = 30.0
+    accel_dps2: Annotated[float, Field(gt=0)] = 60.0
+    settle_s: Annotated[float, Field(ge=0)] = 0.0
+    approach: Literal["positive", "negative", "none"] = "positive"
+    backlash_deg: Annotated[float, Field(ge=0, le=10)] = 0.0
+    min_deg: float = -360.0
+    max_deg: float = 360.0
+    move_timeout_s: Annotated[float, Field(gt=0)] = 60.0
+    dynamixel: DynamixelSettings | None = None
+    zaber: ZaberSettings | None = None
+
+    @model_validator(mode="after")
+    def _check(self) -> StageConfig:
+        if self.min_deg >= self.max_deg:
+            raise ValueError(f"min_deg ({self.min_deg}) must be below max_deg ({self.max_deg})")
+        if self.driver == "zaber" and self.microsteps_per_degree is None:
+            raise ValueError(
+                "the zaber driver needs microsteps_per_degree (from the stage's datasheet: "
+                "microsteps per degree of the motor axis)"
+            )
+        other = "zaber" if self.driver == "dynamixel" else "dynamixel"
+        if getattr(self, other) is not None:
+            raise ValueError(
+                f"[stage.{other}] is given but stage.driver is {self.driver!r}; remove the "
+                "table or change the driver"
+            )
+        return self
+
+    @property
+    def default_baudrate(self) -> int:
+        """The configured baud rate, or the vendor default for the driver."""
+        if self.baudrate is not None:
+            return self.baudrate
+        return 57600 if self.driver == "dynamixel" else 115200
+
+    @property
+    def counts_per_degree(self) -> float:
+        """Dynamixel encoder counts per degree of stage rotation."""
+        return self.counts_per_rev * self.gear_ratio / 360.0
+
+    @property
+    def microsteps_per_stage_degree(self) -> float:
+        """Zaber microsteps per degree of stage rotation (0 when the driver is not zaber)."""
+        return (self.microsteps_per_degree or 0.0) * self.gear_ratio
+
+
+# --------------------------------------------------------------------------- modbus
+class ModbusTransport(_Strict):
+    """``[lights.modbus]`` / ``[sensors.modbus]``: where a Modbus TCP device answers."""
+
+    host: Annotated[str, Field(min_length=1)]
+    port: Annotated[int, Field(ge=1, le=65535)] = 502
+    device_id: Annotated[int, Field(ge=0, le=247)] = 1
+    timeout_s: Annotated[float, Field(gt=0, le=60)] = 1.0
+
+
+class Register(_Strict):
+    """One value in a device's register map.
+
+    ``physical = raw * scale``. 32-bit types take two consecutive registers starting at
+    ``address``; ``word_order = "big"`` puts the most significant word first.
+    """
+
+    table: RegisterTable = "holding"
+    address: Annotated[int, Field(ge=0, le=65534)]
+    type: DataType = "u16"
+    word_order: WordOrder = "big"
+    scale: float = 1.0
+
+    @model_validator(mode="after")
+    def _check(self) -> Register:
+        if self.scale == 0:
+            raise ValueError("scale must not be 0 (physical = raw * scale)")
+        return self
+
+    @property
+    def width(self) -> int:
+        """Registers occupied (1 or 2)."""
+        return register_width(self.type)
+
+
+class LightRegisters(_Strict):
+    """``[lights.registers]``: how a light is switched, dimmed and monitored.
+
+    ``on_coil`` is the coil that switches the light. ``level`` (holding) takes the drive level
+    as a fraction in [0, 1] after scale. ``monitor`` (input, optional) reports the measured
+    output as a fraction of full output; the light is out of band when it differs from the
+    commanded level by more than ``band`` (absolute fraction).
+    """
+
+    on_coil: Annotated[int, Field(ge=0, le=65535)]
+    level: Register | None = None
+    monitor: Register | None = None
+    band: Annotated[float, Field(gt=0, le=1)] = 0.05
+
+    @model_validator(mode="after")
+    def _check(self) -> LightRegisters:
+        if self.level is not None and self.level.table != "holding":
+            raise ValueError("level must be a holding register (it is written)")
+        return self
+
+
+class SensorRegisters(_Strict):
+    """``[sensors.registers]``: how a sensor is exposed, triggered and read.
+
+    A reading is: write ``exposure`` (seconds after scale), note ``sequence``, write 1 to
+    ``trigger``, wait until ``sequence`` changes, then read ``values`` (one register per
+    channel, in the order of the sensor's ``channels``).
+    """
+
+    values: Annotated[list[Register], Field(min_length=1)]
+    exposure: Register
+    trigger: Register
+    sequence: Register
+    gain: Register | None = None
+
+    @model_validator(mode="after")
+    def _check(self) -> SensorRegisters:
+        for key in ("exposure", "trigger"):
+            if getattr(self, key).table != "holding":
+                raise ValueError(f"{key} must be a holding register (it is written)")
+        if self.gain is not None and self.gain.table != "holding":
+            raise ValueError("gain must be a holding register (it is written)")
+        return self
+
+
+class _Device(_Strict):
+    name: Annotated[str, Field(min_length=1, pattern=r"^[A-Za-z0-9_.-]+$")]
+    theta_deg: Annotated[float, Field(ge=0, lt=90)]
+    phi_deg: float
+    modbus: ModbusTransport
+
+    @property
+    def direction(self) -> LabDirection:
+        """Lab direction of the device as seen from the specimen centre."""
+        return LabDirection(self.theta_deg, self.phi_deg)
+
+
+class LightConfig(_Device):
+    """One ``[[lights]]`` entry."""
+
+    registers: LightRegisters
+    level: Annotated[float, Field(gt=0, le=1)] = 1.0
+    """Drive level written at connect, fraction."""
+    warmup_s: Annotated[float, Field(ge=0, le=600)] = 0.0
+    """Wait after switching on before the output is checked against its band, seconds."""
+
+
+class SensorConfig(_Device):
+    """One ``[[sensors]]`` entry.
+
+    ``saturation_raw`` is the raw register value at which a channel is saturated (for a 16-bit
+    ADC typically 65535). ``gain`` is written to the gain register at connect when one is mapped.
+    """
+
+    channels: Annotated[list[Annotated[str, Field(min_length=1)]], Field(min_length=1)]
+    registers: SensorRegisters
+    saturation_raw: Annotated[float, Field(gt=0)]
+    gain: Annotated[float, Field(gt=0)] = 1.0
+    min_exposure_s: Annotated[float, Field(gt=0)] = 1e-4
+    max_exposure_s: Annotated[float, Field(gt=0)] = 10.0
+
+    @model_validator(mode="after")
+    def _check(self) -> SensorConfig:
+        if len(self.registers.values) != len(self.channels):
+            raise ValueError(
+                f"registers.values has {len(self.registers.values)} entries for "
+                f"{len(self.channels)} channels {self.channels}; give one register per channel"
+            )
+        if len(set(self.channels)) != len(self.channels):
+            raise ValueError(f"channel names repeat: {self.channels}")
+        if self.min_exposure_s > self.max_exposure_s:
+            raise ValueError(
+                f"min_exposure_s ({self.min_exposure_s}) is above max_exposure_s "
+                f"({self.max_exposure_s})"
+            )
+        return self
+
+
+class PairConfig(_Strict):
+    """One ``[[pairs]]`` entry: a light and a sensor measured together, by name."""
+
+    light: str
+    sensor: str
+
+
+class PairFactor(_Strict):
+    """Per-pair calibration: BRDF (1/sr) per dark-subtracted sensor unit, one per channel."""
+
+    light: str
+    sensor: str
+    factor: Annotated[list[Annotated[float, Field(gt=0)]], Field(min_length=1)]
+
+
+class CalibrationConfig(_Strict):
+    """``[calibration]``: optional, known from a white-reference measurement.
+
+    ``white_albedo`` is the hemispherical reflectance of the white reference (e.g. 0.99 for
+    Spectralon). ``dark`` maps a sensor name to its per-channel dark level in sensor units.
+    """
+
+    white_albedo: Annotated[float, Field(gt=0, le=1)] = 0.99
+    factors: list[PairFactor] = Field(default_factory=list)
+    dark: dict[str, list[float]] = Field(default_factory=dict)
+
+
+class RigSection(_Strict):
+    """``[rig]``."""
+
+    name: Annotated[str, Field(min_length=1)]
+
+
+class RigConfig(_Strict):
+    """A whole rig configuration file, validated."""
+
+    rig: RigSection
+    stage: StageConfig
+    lights: Annotated[list[LightConfig], Field(min_length=1)]
+    sensors: Annotated[list[SensorConfig], Field(min_length=1)]
+    pairs: Literal["all"] | list[PairConfig] = "all"
+    calibration: CalibrationConfig | None = None
+
+    @model_validator(mode="after")
+    def _check(self) -> RigConfig:
+        errors: list[str] = []
+        light_names = [x.name for x in self.lights]
+        sensor_names = [x.name for x in self.sensors]
+        both = light_names + sensor_names
+        dup = sorted({n for n in both if both.count(n) > 1})
+        if dup:
+            errors.append(f"device names must be unique across lights and sensors; repeated: {dup}")
+        # Two devices answering on the same host:port:device_id would read each other's registers.
+        seen: dict[tuple[str, int, int], str] = {}
+        for dev in [*self.lights, *self.sensors]:
+            key = (dev.modbus.host, dev.modbus.port, dev.modbus.device_id)
+            if key in seen:
+                errors.append(
+                    f"{dev.name} and {seen[key]} share Modbus {key[0]}:{key[1]} device_id "
+                    f"{key[2]}; give each device its own device_id"
+                )
+            seen[key] = dev.name
+        if isinstance(self.pairs, list):
+            if not self.pairs:
+                errors.append('pairs: empty list; list at least one pair or use pairs = "all"')
+            for k, p in enumerate(self.pairs):
+                errors.extend(_check_pair_names(f"pairs[{k}]", p.light, p.sensor, self))
+        if self.calibration is not None:
+            for k, f in enumerate(self.calibration.factors):
+                where = f"calibration.factors[{k}]"
+                errors.extend(_check_pair_names(where, f.light, f.sensor, self))
+                sensor = self.sensor(f.sensor) if f.sensor in sensor_names else None
+                if sensor is not None and len(f.factor) != len(sensor.channels):
+                    errors.append(
+                        f"{where}.factor: {len(f.factor)} values for the "
+                        f"{len(sensor.channels)} channels of {f.sensor}"
+                    )
+            for name, levels in self.calibration.dark.items():
+                if name not in sensor_names:
+                    errors.append(
+                        f"calibration.dark.{name}: no sensor named {name!r}; sensors are "
+                        f"{_quoted(sensor_names)}"
+                    )
+                elif len(levels) != len(self.sensor(name).channels):
+                    errors.append(
+                        f"calibration.dark.{name}: {len(levels)} values for the "
+                        f"{len(self.sensor(name).channels)} channels of {name}"
+                    )
+        if errors:
+            raise ValueError("; ".join(errors))
+        return self
+
+    # ------------------------------------------------------------------ lookups
+    def light(self, name: str) -> LightConfig:
+        """The light called ``name``; ``KeyError`` when there is none."""
+        for x in self.lights:
+            if x.name == name:
+                return x
+        raise KeyError(name)
+
+    def sensor(self, name: str) -> SensorConfig:
+        """The sensor called ``name``; ``KeyError`` when there is none."""
+        for x in self.sensors:
+            if x.name == name:
+                return x
+        raise KeyError(name)
+
+    def pair_list(self) -> list[Pair]:
+        """The measured pairs in order (every light with every sensor for ``"all"``)."""
+        if self.pairs == "all":
+            return [Pair(li.name, s.name) for li in self.lights for s in self.sensors]
+        return [Pair(p.light, p.sensor) for p in self.pairs]
+
+    def pair_directions(self) -> list[PairDirections]:
+        """Each measured pair with its light and sensor lab-frame unit vectors."""
+        out = []
+        for p in self.pair_list():
+            wi = np.asarray(self.light(p.light).direction.vector(), dtype=float)
+            wo = np.asarray(self.sensor(p.sensor).direction.vector(), dtype=float)
+            out.append(PairDirections(p, wi, wo))
+        return out
+
+
+@dataclass(frozen=True)
+class PairDirections:
+    """A measured pair and its fixed lab-frame directions.
+
+    Attributes
+    ----------
+    pair : Pair
+    wi : (3,) array, unit vector from the specimen toward the light, lab frame
+    wo : (3,) array, unit vector from the specimen toward the sensor, lab frame
+    """
+
+    pair: Pair
+    wi: NDArray[np.float64]
+    wo: NDArray[np.float64]
+
+
+def _quoted(names: Sequence[str]) -> str:
+    return ", ".join(repr(n) for n in names) if names else "(none)"
+
+
+def _check_pair_names(where: str, light: str, sensor: str, cfg: RigConfig) -> list[str]:
+    errors = []
+    lights = [x.name for x in cfg.lights]
+    sensors = [x.name for x in cfg.sensors]
+    if light not in lights:
+        errors.append(f"{where}.light: no light named {light!r}; lights are {_quoted(lights)}")
+    if sensor not in sensors:
+        errors.append(f"{where}.sensor: no sensor named {sensor!r}; sensors are {_quoted(sensors)}")
+    return errors
+
+
+# --------------------------------------------------------------------------- files
+def _loc(loc: Sequence[int | str]) -> str:
+    out = ""
+    for part in loc:
+        if isinstance(part, int):
+            out += f"[{part}]"
+        else:
+            out += ("." if out else "") + part
+    return out
+
+
+def _describe(err: Any) -> str:
+    """One readable line for one pydantic error."""
+    # Union members add their type name to the location ("pairs.list[PairConfig]"); drop it.
+    loc = [p for p in err["loc"] if not (isinstance(p, str) and ("[" in p or p == "str"))]
+    where = _loc(loc)
+    kind = err["type"]
+    given = err.get("input")
+    if kind == "missing":
+        what = "required key is missing"
+    elif kind == "extra_forbidden":
+        what = f"unknown key {loc[-1]!r}; check the spelling against docs/rig-config.md"
+        where = _loc(loc[:-1]) or "(top level)"
+    elif kind == "literal_error":
+        expected = err.get("ctx", {}).get("expected", "")
+        what = f"{given!r} is not one of {expected.replace(' or ', ', ')}"
+    elif kind == "value_error":
+        what = str(err["msg"]).removeprefix("Value error, ")
+    else:
+        what = f"{err['msg']} (got {given!r})"
+    return f"{where}: {what}" if where else what
+
+
+def parse_rig_config(data: dict[str, Any], source: str = "rig config") -> RigConfig:
+    """Validate already-parsed TOML data.
+
+    Parameters
+    ----------
+    data : dict
+        The TOML document as a dict.
+    source : str
+        Name used at the start of error messages (usually the file name).
+
+    Raises
+    ------
+    ConfigError
+        One line per problem, each starting with ``source``.
+    """
+    try:
+        return RigConfig.model_validate(data)
+    except ValidationError as exc:
+        lines = []
+        for err in exc.errors():
+            line = f"{source}: {_describe(err)}"
+            if line not in lines:
+                lines.append(line)
+        raise ConfigError("\n".join(lines)) from None
+
+
+def load_rig_config(path: str | os.PathLike[str]) -> RigConfig:
+    """Read and validate a rig configuration file.
+
+    Raises
+    ------
+    ConfigError
+        The file is missing, not TOML, or invalid; the message names the file and the key.
+    """
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ConfigError(
+            f"{p}: no such rig config file; start from deploy/rig.example.toml"
+        ) from None
+    except OSError as exc:
+        raise ConfigError(f"{p}: cannot read the rig config: {exc.strerror}") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{p}: not valid TOML: {exc}") from None
+    return parse_rig_config(data, p.name)
+
+
+def dump_rig_config(cfg: RigConfig, path: str | os.PathLike[str]) -> Path:
+    """Write ``cfg`` as TOML (unset optional keys are left out); returns the path."""
+    p = Path(path)
+    data = cfg.model_dump(mode="json", exclude_none=True)
+    p.write_text(tomli_w.dumps(data), encoding="utf-8")
+    return p

@@ -1,0 +1,434 @@
+"""A whole simulated rig from one call: stage, lamps, sensors and the specimen between them.
+
+:func:`start_sim_rig` starts the stage physics (:class:`gonio.sim.motion.StageMotion`), a stage
+simulator speaking the real wire protocol (Dynamixel Protocol 2.0 on a pseudo-terminal, or
+Zaber ASCII on a pseudo-terminal or TCP), and one Modbus TCP server for every lamp and sensor
+(:mod:`gonio.sim.modbus_server`), then writes a :class:`gonio.config.RigConfig` that points at
+them. The daemon and the tests run the real drivers against that config, so everything below
+the :mod:`gonio.hal` interfaces is exercised as with hardware.
+
+Every simulator runs in its own thread, so a ``SimRig`` works from synchronous code and from
+inside a running event loop alike (:func:`start_sim_rig_async` only moves the start-up off the
+loop).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+from gonio.sim.faults import FaultPlan
+from gonio.sim.modbus_server import ModbusRigServer, SimLampSpec, SimSensorSpec
+from gonio.sim.motion import StageMotion
+from gonio.sim.specimen import BRDFLike, NoiseModel, Specimen
+
+from gonio.brdf import library
+from gonio.brdf.models import GGX, Lambert, LobeSum
+from gonio.brdf.table import BRDFTable
+from gonio.config import (
+    LightConfig,
+    LightRegisters,
+    ModbusTransport,
+    Register,
+    RigConfig,
+    RigSection,
+    SensorConfig,
+    SensorRegisters,
+    StageConfig,
+    dump_rig_config,
+)
+from gonio.hal import LabDirection
+
+__all__ = [
+    "DEFAULT_LIGHTS",
+    "DEFAULT_SENSORS",
+    "FAULT_HELP",
+    "SimRig",
+    "SimRigOptions",
+    "default_material",
+    "resolve_material",
+    "start_sim_rig",
+    "start_sim_rig_async",
+]
+
+# Three lamps and four sensors spread over the hemisphere (theta, phi) in degrees: the twelve
+# pairs cover half angles from near-normal to grazing, and no lamp shares a mount with a sensor.
+DEFAULT_LIGHTS: tuple[tuple[float, float], ...] = ((20.0, 0.0), (45.0, 130.0), (65.0, 250.0))
+DEFAULT_SENSORS: tuple[tuple[float, float], ...] = (
+    (30.0, 180.0),
+    (50.0, 300.0),
+    (15.0, 75.0),
+    (70.0, 40.0),
+)
+
+ADC_FULL_SCALE = float(2**20 - 1)
+"""Simulated sensors have a 20-bit ADC: values are u32 registers that saturate here."""
+
+FAULT_HELP = (
+    "silence:NAME[:SECONDS] (a lamp or sensor stops answering), lamp-drift:NAME:FACTOR "
+    "(a lamp's output is scaled by FACTOR), saturate:NAME (a sensor reads full scale), "
+    "stage-silent, stage-overload, stage-stall"
+)
+
+
+def default_material() -> BRDFLike:
+    """A brushed, slightly coloured dielectric: Lambert base plus an anisotropic GGX lobe."""
+    return LobeSum(
+        (Lambert((0.35, 0.25, 0.15)), GGX(alpha_x=0.15, alpha_y=0.45)), name="sim-brushed"
+    )
+
+
+def resolve_material(material: str | os.PathLike[str] | BRDFLike | None) -> BRDFLike:
+    """The specimen's BRDF from a model object, a table file (``.npz``) or a library name.
+
+    Raises
+    ------
+    ValueError
+        The file is not a BRDF table or the name is not in :mod:`gonio.brdf.library`.
+    """
+    if material is None:
+        return default_material()
+    if not isinstance(material, (str, os.PathLike)):
+        return material  # a model or table object: anything with eval(wi, wo)
+    text = os.fspath(material)
+    if text.endswith(".npz") or Path(text).is_file():
+        return BRDFTable.load(text)
+    # An unknown name raises the library's own ValueError, which suggests close names.
+    return library.get_material(text)
+
+
+@dataclass
+class SimRigOptions:
+    """What to simulate.
+
+    Attributes
+    ----------
+    stage : {"dynamixel", "zaber"}
+    zaber_transport : {"pty", "tcp"}
+    material : model object, ``.npz`` table path, library name, or None (default material)
+    noise : NoiseModel, or None for noiseless sensors (still quantised and clipped)
+    time_scale : float
+        Sim seconds per wall second for stage motion and exposures.
+    faults : sequence of str
+        Faults active from the start (see ``FAULT_HELP``).
+    lights, sensors : sequences of (theta_deg, phi_deg)
+        Lab directions of the lamps and sensors.
+    irradiance : float
+        Per lamp at full level, counts per (1/sr) per second at gain 1.
+    seed : int
+        Seeds the sensor noise.
+    speed_dps, accel_dps2, settle_s : stage physics
+    name : rig name in the config
+    config_path : where to write the rig config (None: not written)
+    """
+
+    stage: Literal["dynamixel", "zaber"] = "dynamixel"
+    zaber_transport: Literal["pty", "tcp"] = "pty"
+    material: Any = None
+    noise: NoiseModel | None = field(default_factory=lambda: NoiseModel(saturation=ADC_FULL_SCALE))
+    time_scale: float = 1.0
+    faults: Sequence[str] = ()
+    lights: Sequence[tuple[float, float]] = DEFAULT_LIGHTS
+    sensors: Sequence[tuple[float, float]] = DEFAULT_SENSORS
+    irradiance: float = 2.0e7
+    seed: int = 0
+    speed_dps: float = 60.0
+    accel_dps2: float = 240.0
+    settle_s: float = 0.02
+    name: str = "sim"
+    config_path: str | os.PathLike[str] | None = None
+
+    def check(self) -> None:
+        """``ValueError`` with a clear message for an impossible option."""
+        if self.stage not in ("dynamixel", "zaber"):
+            raise ValueError(f"stage {self.stage!r}: use 'dynamixel' or 'zaber'")
+        if self.zaber_transport not in ("pty", "tcp"):
+            raise ValueError(f"zaber transport {self.zaber_transport!r}: use 'pty' or 'tcp'")
+        if not self.time_scale > 0:
+            raise ValueError(f"time scale must be > 0, got {self.time_scale}")
+        if not self.irradiance > 0:
+            raise ValueError(f"irradiance must be > 0, got {self.irradiance}")
+        if not self.lights or not self.sensors:
+            raise ValueError("a simulated rig needs at least one light and one sensor")
+        for kind, dirs in (("light", self.lights), ("sensor", self.sensors)):
+            for theta, _phi in dirs:
+                if not 0.0 <= theta < 90.0:
+                    raise ValueError(
+                        f"{kind} at theta {theta} deg: must be in [0, 90) (above the specimen)"
+                    )
+        if len(self.lights) + len(self.sensors) > 247:
+            raise ValueError("at most 247 simulated Modbus devices (one device id each)")
+
+
+def _light_registers() -> LightRegisters:
+    return LightRegisters(
+        on_coil=0,
+        level=Register(table="holding", address=0, type="u16", scale=0.001),
+        monitor=Register(table="input", address=0, type="u16", scale=0.001),
+        band=0.05,
+    )
+
+
+def _sensor_registers(n_channels: int) -> SensorRegisters:
+    # 32-bit counts with the low word first, as on many ADC modules: exercises word order.
+    values = [
+        Register(table="input", address=2 * k, type="u32", word_order="little")
+        for k in range(n_channels)
+    ]
+    return SensorRegisters(
+        values=values,
+        exposure=Register(table="holding", address=0, type="u32", scale=1e-6),
+        gain=Register(table="holding", address=2, type="f32"),
+        trigger=Register(table="holding", address=4, type="u16"),
+        sequence=Register(table="input", address=100, type="u16"),
+    )
+
+
+class SimRig:
+    """A running simulated rig; build it with :func:`start_sim_rig`.
+
+    Attributes
+    ----------
+    config : RigConfig
+        Points at the simulators; give it to :func:`gonio.drivers.factory.build_rig`.
+    config_path : Path or None
+    motion : StageMotion
+    stage_faults : FaultPlan
+    modbus : ModbusRigServer
+    specimen : Specimen
+    noise : NoiseModel
+    irradiance : dict of light name -> irradiance at full level
+    """
+
+    def __init__(self, options: SimRigOptions) -> None:
+        options.check()
+        self.options = options
+        self.specimen = Specimen(resolve_material(options.material))
+        self.noise = options.noise or NoiseModel.noiseless(ADC_FULL_SCALE)
+        self.motion = StageMotion(
+            speed_dps=options.speed_dps,
+            accel_dps2=options.accel_dps2,
+            settle_s=options.settle_s,
+            time_scale=options.time_scale,
+        )
+        self.stage_faults = FaultPlan()
+        self.stage_handle: Any = None
+        self.modbus: ModbusRigServer | None = None
+        self.config_path: Path | None = None
+        channels = list(
+            getattr(self.specimen.brdf, "channels", None)
+            or [f"C{k}" for k in range(self.specimen.n_channels)]
+        )
+        self.light_names = [f"L{k + 1}" for k in range(len(options.lights))]
+        self.sensor_names = [f"S{k + 1}" for k in range(len(options.sensors))]
+        self.irradiance = dict.fromkeys(self.light_names, options.irradiance)
+        try:
+            self._start_stage()
+            self._start_modbus()
+            self.config = self._build_config(channels)
+            if options.config_path is not None:
+                self.config_path = dump_rig_config(self.config, options.config_path)
+            for spec in options.faults:
+                self.apply_fault(spec)
+        except BaseException:
+            self.close()
+            raise
+
+    # ------------------------------------------------------------------ start-up
+    def _start_stage(self) -> None:
+        if self.options.stage == "dynamixel":
+            from gonio.sim.dynamixel_device import start_dynamixel_sim
+
+            self.stage_handle = start_dynamixel_sim(
+                self.motion, dxl_id=1, counts_per_degree=4096 / 360.0, faults=self.stage_faults
+            )
+            self._stage_port = str(self.stage_handle.port)
+        else:
+            from gonio.sim.zaber_device import DEFAULT_MICROSTEPS_PER_DEGREE, start_zaber_sim
+
+            self._microsteps = DEFAULT_MICROSTEPS_PER_DEGREE
+            self.stage_handle = start_zaber_sim(
+                self.motion,
+                transport=self.options.zaber_transport,
+                microsteps_per_degree=self._microsteps,
+                device=1,
+                faults=self.stage_faults,
+            )
+            self._stage_port = str(self.stage_handle.url)
+
+    def _start_modbus(self) -> None:
+        o = self.options
+        lamps = [
+            SimLampSpec(
+                name, k + 1, _light_registers(), LabDirection(*d).vector(), self.irradiance[name]
+            )
+            for k, (name, d) in enumerate(zip(self.light_names, o.lights, strict=True))
+        ]
+        first = len(lamps) + 1
+        sensors = [
+            SimSensorSpec(
+                name,
+                first + k,
+                _sensor_registers(self.specimen.n_channels),
+                LabDirection(*d).vector(),
+                self.noise,
+            )
+            for k, (name, d) in enumerate(zip(self.sensor_names, o.sensors, strict=True))
+        ]
+        self.modbus = ModbusRigServer(
+            self.specimen, self.motion, lamps, sensors, time_scale=o.time_scale, seed=o.seed
+        ).start()
+
+    def _build_config(self, channels: list[str]) -> RigConfig:
+        o = self.options
+        assert self.modbus is not None
+
+        def transport(device_id: int) -> ModbusTransport:
+            return ModbusTransport(
+                host=self.modbus.host if self.modbus else "127.0.0.1",
+                port=self.modbus.port if self.modbus else 502,
+                device_id=device_id,
+                timeout_s=0.5,
+            )
+
+        if o.stage == "dynamixel":
+            stage = StageConfig(
+                driver="dynamixel",
+                port=self._stage_port,
+                baudrate=57600,
+                counts_per_rev=4096,
+                speed_dps=o.speed_dps,
+                accel_dps2=o.accel_dps2,
+                approach="none",
+                min_deg=-360.0,
+                max_deg=720.0,
+                move_timeout_s=60.0,
+            )
+        else:
+            stage = StageConfig(
+                driver="zaber",
+                port=self._stage_port,
+                baudrate=115200,
+                microsteps_per_degree=self._microsteps,
+                speed_dps=o.speed_dps,
+                accel_dps2=o.accel_dps2,
+                approach="none",
+                min_deg=-360.0,
+                max_deg=720.0,
+                move_timeout_s=60.0,
+            )
+        lights = [
+            LightConfig(
+                name=name,
+                theta_deg=d[0],
+                phi_deg=d[1],
+                modbus=transport(k + 1),
+                registers=_light_registers(),
+            )
+            for k, (name, d) in enumerate(zip(self.light_names, o.lights, strict=True))
+        ]
+        first = len(lights) + 1
+        sensors = [
+            SensorConfig(
+                name=name,
+                theta_deg=d[0],
+                phi_deg=d[1],
+                modbus=transport(first + k),
+                channels=channels,
+                registers=_sensor_registers(len(channels)),
+                saturation_raw=self.noise.saturation,
+                gain=1.0,
+                min_exposure_s=1e-4,
+                max_exposure_s=5.0,
+            )
+            for k, (name, d) in enumerate(zip(self.sensor_names, o.sensors, strict=True))
+        ]
+        return RigConfig(
+            rig=RigSection(name=o.name), stage=stage, lights=lights, sensors=sensors, pairs="all"
+        )
+
+    # ------------------------------------------------------------------ faults
+    def apply_fault(self, spec: str) -> None:
+        """Inject a fault given as text (see ``FAULT_HELP``), e.g. ``"silence:S2:1.5"``.
+
+        Raises
+        ------
+        ValueError
+            Unknown fault or device name, or a bad number.
+        """
+        assert self.modbus is not None
+        kind, _, rest = spec.partition(":")
+        args = rest.split(":") if rest else []
+        try:
+            if kind == "silence" and len(args) in (1, 2):
+                self.modbus.silence(args[0], float(args[1]) if len(args) == 2 else None)
+            elif kind == "lamp-drift" and len(args) == 2:
+                self.modbus.set_lamp_output(args[0], float(args[1]))
+            elif kind == "saturate" and len(args) == 1:
+                self.modbus.force_saturation(args[0])
+            elif kind == "stage-silent" and not args:
+                self.stage_faults.set(silent=True)
+            elif kind == "stage-overload" and not args:
+                self.stage_faults.set(overload_next_move=True)
+            elif kind == "stage-stall" and not args:
+                self.stage_faults.set(stall_next_move=True)
+            else:
+                raise ValueError(f"fault {spec!r} is not understood; faults are: {FAULT_HELP}")
+        except KeyError as exc:
+            raise ValueError(f"fault {spec!r}: {exc.args[0]}") from None
+        except ValueError as exc:
+            if "not understood" in str(exc):
+                raise
+            raise ValueError(f"fault {spec!r}: {exc}; faults are: {FAULT_HELP}") from None
+
+    def clear_faults(self) -> None:
+        """Healthy devices again (a tripped stage still needs the driver's recovery)."""
+        if self.modbus is not None:
+            self.modbus.clear_faults()
+        self.stage_faults.clear()
+
+    # ------------------------------------------------------------------ ground truth
+    def true_brdf(self, light: str, sensor: str, stage_deg: float) -> np.ndarray:
+        """The specimen's BRDF (C,) in 1/sr seen by a pair at a stage angle (for checks)."""
+        wi = np.asarray(self.config.light(light).direction.vector())
+        wo = np.asarray(self.config.sensor(sensor).direction.vector())
+        return self.specimen.brdf_lab(wi, wo, stage_deg)
+
+    def expected_counts_per_brdf(
+        self, light: str, sensor: str, exposure_s: float, level: float = 1.0, gain: float = 1.0
+    ) -> float:
+        """Dark-subtracted counts per unit BRDF for a pair: ``E level cos(ti) gain t``."""
+        theta = self.config.light(light).theta_deg
+        return self.irradiance[light] * level * math.cos(math.radians(theta)) * gain * exposure_s
+
+    # ------------------------------------------------------------------ lifecycle
+    def close(self) -> None:
+        """Stop every simulator; safe to call twice."""
+        if self.modbus is not None:
+            self.modbus.close()
+            self.modbus = None
+        if self.stage_handle is not None:
+            self.stage_handle.close()
+            self.stage_handle = None
+
+    def __enter__(self) -> SimRig:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def start_sim_rig(options: SimRigOptions | None = None) -> SimRig:
+    """Start a simulated rig (see :class:`SimRigOptions`); close it with ``SimRig.close()``."""
+    return SimRig(options or SimRigOptions())
+
+
+async def start_sim_rig_async(options: SimRigOptions | None = None) -> SimRig:
+    """:func:`start_sim_rig` without blocking the running event loop during start-up."""
+    return await asyncio.to_thread(start_sim_rig, options)

@@ -1,0 +1,195 @@
+"""DynamixelStage (real dynamixel-sdk) against the simulated servo on a pseudo-terminal."""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+from collections.abc import Awaitable, Callable, Iterator
+from contextlib import contextmanager
+from typing import Any
+
+import pytest
+from gonio.drivers.dynamixel import DynamixelStage
+from gonio.sim.dynamixel_device import DynamixelSimHandle, start_dynamixel_sim
+from gonio.sim.motion import StageMotion
+
+from gonio.hal import DeviceUnavailable, StageFault, TravelLimits
+
+pytestmark = [pytest.mark.system, pytest.mark.timeout(60)]
+
+GEAR = 2.0
+CPD = 4096 / 360 * GEAR
+TIME_SCALE = 40.0
+
+
+@contextmanager
+def rig(**driver_kw: Any) -> Iterator[tuple[DynamixelSimHandle, DynamixelStage]]:
+    motion = StageMotion(speed_dps=30.0, accel_dps2=60.0, settle_s=0.0, time_scale=TIME_SCALE)
+    sim = start_dynamixel_sim(motion, counts_per_degree=CPD)
+    kw: dict[str, Any] = {
+        "counts_per_degree": CPD, "limits": TravelLimits(-720.0, 720.0),
+        "speed_dps": 30.0, "accel_dps2": 60.0, **driver_kw,
+    }
+    stage = DynamixelStage("rot", sim.port, **kw)
+    try:
+        yield sim, stage
+    finally:
+        asyncio.run(stage.close())
+        sim.close()
+
+
+def run(fn: Callable[[], Awaitable[Any]]) -> Any:
+    return asyncio.run(fn())  # type: ignore[arg-type]
+
+
+class Track:
+    """Samples the simulated stage angle in a thread to see the path a move took."""
+
+    def __init__(self, motion: StageMotion) -> None:
+        self.motion, self.samples = motion, [motion.position_deg()]
+        self._stop = threading.Event()
+        self._t = threading.Thread(target=self._run, daemon=True)
+        self._t.start()
+
+    def _run(self) -> None:
+        while not self._stop.wait(0.001):
+            self.samples.append(self.motion.position_deg())
+
+    def stop(self) -> list[float]:
+        self._stop.set()
+        self._t.join()
+        return self.samples
+
+
+def test_connect_configures_extended_mode_and_profile() -> None:
+    with rig() as (sim, stage):
+        run(stage.connect)
+        table = sim.servo
+        assert table.read(11, 1) == b"\x04"
+        assert table.read(64, 1) == b"\x01"
+        velocity = int.from_bytes(table.read(112, 4), "little")
+        # 30 deg/s at the stage = 60 deg/s at the motor = 10 rpm = 44 units of 0.229 rpm.
+        assert velocity == round(30 * GEAR / (0.229 * 6))
+        assert stage.model_number == 1020
+
+
+def test_moves_past_one_turn_and_approaches_from_the_positive_side() -> None:
+    with rig(backlash_deg=2.0) as (sim, stage):
+        async def go() -> tuple[float, float, list[float]]:
+            await stage.connect()
+            far = await stage.move_to(400.0)
+            track = Track(sim.motion)
+            back = await stage.move_to(390.0)
+            return far, back, track.stop()
+
+        far, back, path = run(go)
+        assert far == pytest.approx(400.0, abs=1.5 / CPD)
+        assert back == pytest.approx(390.0, abs=1.5 / CPD)
+        assert sim.motion.position_deg() == pytest.approx(390.0, abs=1.5 / CPD)
+        assert min(path) == pytest.approx(388.0, abs=0.05)  # overshoot, then up to the target
+
+
+def test_travel_limits_are_refused_before_moving() -> None:
+    with rig(limits=TravelLimits(0.0, 90.0)) as (sim, stage):
+        run(stage.connect)
+        with pytest.raises(ValueError, match=r"outside the travel limits \[0, 90\]"):
+            run(lambda: stage.move_to(120.0))
+        assert not sim.motion.is_moving() and sim.motion.position_deg() == 0.0
+
+
+def test_corrupted_replies_are_retried() -> None:
+    with rig() as (sim, stage):
+        run(stage.connect)
+        sim.faults.set(corrupt_replies=2)
+        assert run(lambda: stage.move_to(5.0)) == pytest.approx(5.0, abs=1 / CPD)
+        assert sim.faults.corrupt_replies == 0
+
+
+def test_dropped_replies_retry_then_device_unavailable() -> None:
+    with rig(retries=3) as (sim, stage):
+        run(stage.connect)
+        sim.faults.set(drop_replies=2)
+        assert run(stage.position) == pytest.approx(0.0)
+        sim.faults.set(drop_replies=3)
+        with pytest.raises(DeviceUnavailable, match="after 3 attempts") as err:
+            run(stage.position)
+        assert err.value.code == "timeout"
+
+
+def test_stall_raises_stage_fault() -> None:
+    with rig() as (sim, stage):
+        run(stage.connect)
+        sim.faults.set(stall_next_move=True, stall_fraction=0.5)
+        with pytest.raises(StageFault, match="short of the target") as err:
+            run(lambda: stage.move_to(20.0))
+        assert err.value.code == "stall"
+        assert sim.motion.position_deg() == pytest.approx(10.0, abs=0.01)
+
+
+def test_overload_is_a_typed_fault_and_reboot_keeps_the_multiturn_reference() -> None:
+    with rig() as (sim, stage):
+        async def go() -> None:
+            await stage.connect()
+            await stage.move_to(400.0)  # beyond one motor turn
+            sim.faults.set(overload_next_move=True)
+            with pytest.raises(StageFault) as err:
+                await stage.move_to(420.0)
+            assert err.value.code == "overload" and err.value.recoverable
+            status = await stage.status()
+            assert status.faults == ("overload",)
+            tripped_at = await stage.position()
+            await stage.clear_faults()
+            assert (await stage.status()).faults == ()
+            assert await stage.position() == pytest.approx(tripped_at, abs=1 / CPD)
+            assert await stage.move_to(420.0) == pytest.approx(420.0, abs=1.5 / CPD)
+
+        run(go)
+        assert sim.motion.position_deg() == pytest.approx(420.0, abs=1.5 / CPD)
+
+
+def test_home_makes_the_present_position_zero() -> None:
+    with rig() as (sim, stage):
+        async def go() -> float:
+            await stage.connect()
+            await stage.move_to(33.0)
+            await stage.home()
+            assert (await stage.status()).homed
+            return await stage.position()
+
+        assert run(go) == pytest.approx(0.0, abs=1 / CPD)
+        assert sim.motion.position_deg() == pytest.approx(33.0, abs=1 / CPD)
+
+
+def test_move_timeout_stops_the_stage() -> None:
+    with rig() as (sim, stage):
+        run(stage.connect)
+        with pytest.raises(DeviceUnavailable, match=r"did not finish within 0\.05 s") as err:
+            run(lambda: stage.move_to(600.0, timeout_s=0.05))
+        assert err.value.code == "timeout"
+        run(lambda: asyncio.sleep(0.3))
+        assert not sim.motion.is_moving()
+        assert sim.motion.position_deg() < 600.0
+
+
+def test_reconnects_after_the_port_is_lost() -> None:
+    with rig() as (_sim, stage):
+        run(stage.connect)
+        stage._ph.ser.close()  # the adapter vanished under the SDK
+        assert run(lambda: stage.move_to(3.0)) == pytest.approx(3.0, abs=1 / CPD)
+
+
+def test_silent_device_gives_a_clear_device_unavailable() -> None:
+    with rig(retries=2) as (sim, stage):
+        sim.faults.set(silent=True)
+        with pytest.raises(DeviceUnavailable, match=r"ID 1 does not answer .* check power"):
+            run(stage.connect)
+
+
+def test_missing_port_and_bad_speed_are_user_errors(tmp_path: Any) -> None:
+    stage = DynamixelStage("rot", str(tmp_path / "ttyUSB9"), counts_per_degree=CPD,
+                           limits=TravelLimits(0, 90), speed_dps=10, accel_dps2=10)
+    with pytest.raises(DeviceUnavailable, match="cannot open serial port"):
+        run(stage.connect)
+    with pytest.raises(ValueError, match="above the servo maximum 32767; lower speed_dps"):
+        DynamixelStage("rot", "x", counts_per_degree=CPD, limits=TravelLimits(0, 90),
+                       speed_dps=50_000, accel_dps2=10)

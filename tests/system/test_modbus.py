@@ -1,0 +1,310 @@
+"""Modbus lights and sensors end to end: the real drivers against the real pymodbus server.
+
+The register map is checked through an independent raw pymodbus client as well, so an
+off-by-one in either the driver or the simulator shows up as a wrong address on the wire.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import time
+from collections.abc import Iterator
+from typing import Any
+
+import numpy as np
+import pytest
+from gonio.drivers.modbus import ModbusLight, ModbusPool, ModbusSensor, decode, encode
+from gonio.sim.modbus_server import (
+    ModbusRigServer,
+    SimLampSpec,
+    SimSensorSpec,
+    from_words,
+    to_words,
+)
+from gonio.sim.motion import StageMotion
+from gonio.sim.specimen import NoiseModel, Specimen
+from pymodbus.client import AsyncModbusTcpClient
+
+from gonio.brdf.models import Lambert
+from gonio.config import (
+    LightConfig,
+    LightRegisters,
+    ModbusTransport,
+    Register,
+    SensorConfig,
+    SensorRegisters,
+)
+from gonio.hal import DeviceFault, DeviceUnavailable, LabDirection, LampOutOfBand
+
+pytestmark = pytest.mark.system
+
+ALBEDO = (0.2, 0.5, 0.8)
+IRRADIANCE = 1.0e6
+FULL_SCALE = 1.0e5
+LIGHT_DIR = (30.0, 0.0)
+SENSOR_DIRS = ((40.0, 180.0), (60.0, 90.0))
+
+LIGHT_REGS = LightRegisters(
+    on_coil=5,  # deliberately not 0: a shifted coil address must fail the test
+    level=Register(table="holding", address=3, type="u16", scale=0.001),
+    monitor=Register(table="input", address=7, type="u16", scale=0.001),
+    band=0.05,
+)
+SENSOR_REGS = SensorRegisters(
+    values=[
+        Register(table="input", address=1, type="u32", word_order="little"),
+        Register(table="input", address=3, type="u32", word_order="big"),
+        Register(table="input", address=5, type="f32", word_order="big"),
+    ],
+    exposure=Register(table="holding", address=1, type="u32", scale=1e-6),
+    gain=Register(table="holding", address=3, type="f32"),
+    trigger=Register(table="holding", address=6, type="u16"),
+    sequence=Register(table="input", address=20, type="u16"),
+)
+
+
+class Bench:
+    """A server with one lamp and two sensors, and the configs that point at it."""
+
+    def __init__(self, noise: NoiseModel, timeout_s: float = 0.3) -> None:
+        self.motion = StageMotion(time_scale=50.0)
+        self.server = ModbusRigServer(
+            Specimen(Lambert(ALBEDO)),
+            self.motion,
+            [SimLampSpec("L1", 1, LIGHT_REGS, LabDirection(*LIGHT_DIR).vector(), IRRADIANCE)],
+            [
+                SimSensorSpec(f"S{k + 1}", 2 + k, SENSOR_REGS, LabDirection(*d).vector(), noise)
+                for k, d in enumerate(SENSOR_DIRS)
+            ],
+            seed=11,
+        ).start()
+        m = {
+            dev: ModbusTransport(
+                host="127.0.0.1", port=self.server.port, device_id=dev, timeout_s=timeout_s
+            )
+            for dev in (1, 2, 3)
+        }
+        self.light = LightConfig(
+            name="L1",
+            theta_deg=LIGHT_DIR[0],
+            phi_deg=LIGHT_DIR[1],
+            modbus=m[1],
+            registers=LIGHT_REGS,
+            level=0.8,
+        )
+        self.sensors = [
+            SensorConfig(
+                name=f"S{k + 1}",
+                theta_deg=d[0],
+                phi_deg=d[1],
+                modbus=m[2 + k],
+                channels=["R", "G", "B"],
+                registers=SENSOR_REGS,
+                saturation_raw=FULL_SCALE,
+                gain=2.0,
+                min_exposure_s=1e-3,
+                max_exposure_s=0.5,
+            )
+            for k, d in enumerate(SENSOR_DIRS)
+        ]
+
+    def expected_counts(self, exposure_s: float, level: float = 0.8, gain: float = 2.0) -> Any:
+        """Noise-free counts of a Lambertian specimen, written out from the physics."""
+        cos_i = math.cos(math.radians(LIGHT_DIR[0]))
+        return IRRADIANCE * level * np.array(ALBEDO) / math.pi * cos_i * gain * exposure_s
+
+
+@pytest.fixture()
+def bench() -> Iterator[Bench]:
+    b = Bench(NoiseModel.noiseless(saturation=FULL_SCALE))
+    yield b
+    b.server.close()
+
+
+def test_codecs_agree_for_every_type_and_word_order() -> None:
+    for type_ in ("u16", "s16", "u32", "s32", "f32"):
+        for order in ("big", "little"):
+            reg = Register(address=0, type=type_, word_order=order, scale=0.5)
+            value = -1234.5 if type_[0] in "sf" else 70000.5 if type_[1:] == "32" else 999.0
+            words = to_words(reg, value)
+            assert len(words) == reg.width
+            assert decode(reg, words) * reg.scale == pytest.approx(value, abs=0.5)
+            assert from_words(reg, encode(reg, value, "x")) == pytest.approx(value, abs=0.5)
+    big = to_words(Register(address=0, type="u32", word_order="big"), 0x00010002)
+    assert big == [0x0001, 0x0002]
+    assert to_words(Register(address=0, type="u32", word_order="little"), 0x00010002) == big[::-1]
+
+
+def test_encode_refuses_values_that_do_not_fit() -> None:
+    with pytest.raises(ValueError, match=r"outside the u16 range \[0, 65535\]"):
+        encode(Register(address=0, type="u16", scale=1e-6), 0.5, "exposure")
+
+
+def test_light_register_map_on_the_wire(bench: Bench) -> None:
+    async def run() -> tuple[list[bool], list[int], list[int]]:
+        light = ModbusLight(bench.light)
+        await light.connect()
+        await light.set_on(True)
+        status = await light.status()
+        assert status.on and status.in_band and status.level == pytest.approx(0.8)
+        raw = AsyncModbusTcpClient("127.0.0.1", port=bench.server.port)
+        await raw.connect()
+        try:
+            coils = (await raw.read_coils(0, count=8, device_id=1)).bits[:8]
+            holding = (await raw.read_holding_registers(0, count=4, device_id=1)).registers
+            inputs = (await raw.read_input_registers(0, count=8, device_id=1)).registers
+        finally:
+            raw.close()
+        await light.set_on(False)
+        assert not (await light.status()).on
+        await light.close()
+        return coils, holding, inputs
+
+    coils, holding, inputs = asyncio.run(run())
+    assert coils == [k == 5 for k in range(8)]
+    assert holding == [0, 0, 0, 800]  # level 0.8 at scale 0.001, at address 3 only
+    assert inputs == [0] * 7 + [800]  # the monitor at address 7 follows the output
+
+
+def test_sensor_reading_matches_the_physics(bench: Bench) -> None:
+    async def run() -> Any:
+        pool = ModbusPool()
+        light = ModbusLight(bench.light, pool)
+        sensor = ModbusSensor(bench.sensors[0], pool)
+        for dev in (light, sensor):
+            await dev.connect()
+        await light.set_on(True)
+        reading = await sensor.read(0.02, averages=3)
+        await light.set_on(False)
+        dark = await sensor.read(0.02)
+        for dev in (light, sensor):
+            await dev.close()
+        return reading, dark
+
+    reading, dark = asyncio.run(run())
+    assert reading.averages == 3 and reading.exposure_s == 0.02 and not reading.saturated
+    # u32 values are whole counts; the f32 channel is exact to float precision.
+    np.testing.assert_allclose(reading.values, bench.expected_counts(0.02), atol=0.51)
+    assert dark.values == (0.0, 0.0, 0.0)
+
+
+def test_all_sensors_read_concurrently_over_one_shared_connection(bench: Bench) -> None:
+    async def run() -> list[Any]:
+        pool = ModbusPool()
+        light = ModbusLight(bench.light, pool)
+        sensors = [ModbusSensor(c, pool) for c in bench.sensors]
+        for dev in (light, *sensors):
+            await dev.connect()
+        await light.set_on(True)
+        readings = await asyncio.gather(*(s.read(0.01, averages=2) for s in sensors))
+        for dev in (light, *sensors):
+            await dev.close()
+        return readings
+
+    readings = asyncio.run(run())
+    for r in readings:
+        np.testing.assert_allclose(r.values, bench.expected_counts(0.01), atol=0.51)
+
+
+def test_exposure_outside_the_sensor_range_is_refused(bench: Bench) -> None:
+    async def run() -> None:
+        sensor = ModbusSensor(bench.sensors[0])
+        await sensor.connect()
+        try:
+            with pytest.raises(ValueError, match=r"exposure 2 s is outside .*\[0.001, 0.5\] s"):
+                await sensor.read(2.0)
+            with pytest.raises(ValueError, match="averages must be at least 1"):
+                await sensor.read(0.01, averages=0)
+        finally:
+            await sensor.close()
+
+    asyncio.run(run())
+
+
+def test_silent_device_times_out_quickly_and_recovers(bench: Bench) -> None:
+    async def run() -> float:
+        sensor = ModbusSensor(bench.sensors[1])
+        await sensor.connect()
+        bench.server.silence("S2", None)
+        t0 = time.monotonic()
+        with pytest.raises(DeviceUnavailable) as info:
+            await sensor.read(0.005)
+        elapsed = time.monotonic() - t0
+        assert info.value.recoverable and info.value.device == "S2"
+        assert not (await sensor.status()).ok
+        bench.server.clear_faults()
+        reading = await sensor.read(0.005)  # reconnects by itself
+        assert len(reading.values) == 3
+        await sensor.close()
+        return elapsed
+
+    elapsed = asyncio.run(asyncio.wait_for(run(), 10))
+    assert elapsed < 0.3 + 1.0  # one request timeout (0.3 s) plus the driver's margin
+
+
+def test_unreachable_host_is_unavailable_not_a_hang(bench: Bench) -> None:
+    cfg = bench.sensors[0].model_copy(
+        update={"modbus": bench.sensors[0].modbus.model_copy(update={"port": 1})}
+    )
+
+    async def run() -> None:
+        with pytest.raises(DeviceUnavailable, match="no Modbus TCP connection"):
+            await ModbusSensor(cfg).connect()
+
+    asyncio.run(asyncio.wait_for(run(), 5))
+
+
+def test_saturation_is_flagged(bench: Bench) -> None:
+    async def run() -> Any:
+        light, sensor = ModbusLight(bench.light), ModbusSensor(bench.sensors[0])
+        for dev in (light, sensor):
+            await dev.connect()
+        await light.set_on(True)
+        ok = await sensor.read(0.01)
+        bench.server.force_saturation("S1")
+        bad = await sensor.read(0.01)
+        # A long exposure saturates by itself once counts pass full scale.
+        bench.server.clear_faults()
+        long = await sensor.read(0.5)
+        for dev in (light, sensor):
+            await dev.close()
+        return ok, bad, long
+
+    ok, bad, long = asyncio.run(run())
+    assert not ok.saturated
+    assert bad.saturated and bad.values[0] == FULL_SCALE
+    assert bench.expected_counts(0.5)[2] > FULL_SCALE  # the blue channel overflows
+    assert long.saturated and long.values[2] == FULL_SCALE
+
+
+def test_lamp_out_of_band_raises_on_switch_on(bench: Bench) -> None:
+    async def run() -> None:
+        light = ModbusLight(bench.light)
+        await light.connect()
+        bench.server.set_lamp_output("L1", 0.5)
+        with pytest.raises(LampOutOfBand, match=r"outside 0\.800"):
+            await light.set_on(True)
+        status = await light.status()
+        assert status.on and not status.in_band and status.faults == ("out_of_band",)
+        bench.server.clear_faults()
+        assert (await light.status()).in_band
+        await light.close()
+
+    asyncio.run(run())
+
+
+def test_wrong_address_in_the_map_is_a_permanent_fault(bench: Bench) -> None:
+    regs = SENSOR_REGS.model_copy(
+        update={"sequence": Register(table="input", address=400, type="u16")}
+    )
+    cfg = bench.sensors[0].model_copy(update={"registers": regs})
+
+    async def run() -> None:
+        sensor = ModbusSensor(cfg)
+        with pytest.raises(DeviceFault, match="check this address") as info:
+            await sensor.connect()
+        assert not info.value.recoverable
+        await sensor.close()
+
+    asyncio.run(run())

@@ -1,0 +1,176 @@
+"""ZaberStage (real pyserial) against the simulated Zaber stage, on a pty and on socket://."""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Awaitable, Callable, Iterator
+from contextlib import contextmanager
+from typing import Any
+
+import pytest
+from gonio.drivers.zaber import ZaberStage
+from gonio.sim.motion import StageMotion
+from gonio.sim.zaber_device import SPEED_FACTOR, ZaberSimHandle, start_zaber_sim
+
+from gonio.hal import DeviceUnavailable, StageFault, TravelLimits
+
+pytestmark = [pytest.mark.system, pytest.mark.timeout(60)]
+
+MPD = 1000.0
+TRANSPORTS = ["pty", "tcp"]
+
+
+@contextmanager
+def rig(transport: str, **driver_kw: Any) -> Iterator[tuple[ZaberSimHandle, ZaberStage]]:
+    motion = StageMotion(speed_dps=30.0, accel_dps2=60.0, settle_s=0.0, time_scale=40.0,
+                         initial_deg=7.0)
+    sim = start_zaber_sim(motion, transport=transport, microsteps_per_degree=MPD)
+    kw: dict[str, Any] = {
+        "microsteps_per_degree": MPD, "limits": TravelLimits(-720.0, 720.0),
+        "speed_dps": 20.0, "accel_dps2": 80.0, "reply_timeout_s": 0.2, **driver_kw,
+    }
+    stage = ZaberStage("rot", sim.url, **kw)
+    try:
+        yield sim, stage
+    finally:
+        asyncio.run(stage.close())
+        sim.close()
+
+
+def run(fn: Callable[[], Awaitable[Any]]) -> Any:
+    return asyncio.run(fn())  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("transport", TRANSPORTS)
+def test_connect_writes_speed_and_first_move_homes(transport: str) -> None:
+    with rig(transport) as (sim, stage):
+        async def go() -> tuple[bool, float]:
+            await stage.connect()
+            homed_before = (await stage.status()).homed
+            return homed_before, await stage.move_to(25.0)
+
+        homed_before, pos = run(go)
+        assert not homed_before
+        assert pos == pytest.approx(25.0)
+        assert sim.motion.position_deg() == pytest.approx(25.0)  # home sensor is physical 0
+        assert sim.axis.maxspeed == round(20.0 * MPD * SPEED_FACTOR)
+        assert sim.motion.speed_dps == pytest.approx(20.0, rel=1e-3)
+
+
+@pytest.mark.parametrize("transport", TRANSPORTS)
+def test_negative_approach_overshoots_then_returns(transport: str) -> None:
+    with rig(transport, approach="negative", backlash_deg=1.5) as (sim, stage):
+        async def go() -> tuple[float, float]:
+            await stage.connect()
+            await stage.home()
+            peak = 0.0
+
+            async def watch() -> None:
+                nonlocal peak
+                while True:
+                    peak = max(peak, sim.motion.position_deg())
+                    await asyncio.sleep(0.001)
+
+            watcher = asyncio.create_task(watch())
+            pos = await stage.move_to(10.0)
+            watcher.cancel()
+            return pos, peak
+
+        pos, peak = run(go)
+        assert pos == pytest.approx(10.0)
+        assert peak == pytest.approx(11.5, abs=0.05)  # overshoot, then down to the target
+    with rig(transport, approach="negative", backlash_deg=1.5,
+             limits=TravelLimits(-5.0, 10.5)) as (sim, stage):
+        run(stage.connect)
+        with pytest.raises(ValueError, match=r"needs an overshoot to 11\.5 deg"):
+            run(lambda: stage.move_to(10.0))
+        assert not sim.motion.is_moving()
+
+
+@pytest.mark.parametrize("transport", TRANSPORTS)
+def test_stall_fault_persists_until_warnings_clear(transport: str) -> None:
+    with rig(transport) as (sim, stage):
+        async def go() -> None:
+            await stage.connect()
+            await stage.home()
+            sim.faults.set(stall_next_move=True, stall_fraction=0.5)
+            with pytest.raises(StageFault, match="FS: stalled") as err:
+                await stage.move_to(40.0)
+            assert err.value.code == "FS" and err.value.recoverable
+            with pytest.raises(StageFault, match="persists until clear_faults"):
+                await stage.move_to(30.0)  # refused: the fault is latched
+            assert (await stage.status()).faults == ("FS",)
+            await stage.clear_faults()
+            assert await stage.move_to(30.0) == pytest.approx(30.0)
+
+        run(go)
+
+
+def test_overload_disables_the_driver_until_cleared() -> None:
+    with rig("pty") as (sim, stage):
+        async def go() -> None:
+            await stage.connect()
+            await stage.home()
+            sim.faults.set(overload_next_move=True)
+            with pytest.raises(StageFault, match="FD: driver disabled"):
+                await stage.move_to(20.0)
+            await stage.clear_faults()
+            assert await stage.move_to(20.0) == pytest.approx(20.0)
+
+        run(go)
+
+
+@pytest.mark.parametrize("transport", TRANSPORTS)
+def test_dropped_reply_is_retried_and_silence_is_device_unavailable(transport: str) -> None:
+    with rig(transport, retries=3) as (sim, stage):
+        run(stage.connect)
+        sim.faults.set(drop_replies=2)
+        assert run(stage.position) == pytest.approx(0.0)
+        sim.faults.set(silent=True)
+        with pytest.raises(DeviceUnavailable, match="did not answer after 3 attempts"):
+            run(stage.position)
+    with rig(transport, retries=2) as (sim, stage):
+        sim.faults.set(silent=True)
+        with pytest.raises(DeviceUnavailable, match="Zaber device 1 does not answer") as err:
+            run(stage.connect)
+        assert err.value.code == "no_answer"
+
+
+@pytest.mark.parametrize("transport", TRANSPORTS)
+def test_unparseable_reply_quotes_the_raw_line(transport: str) -> None:
+    with rig(transport) as (sim, stage):
+        run(stage.connect)
+        sim.faults.set(corrupt_replies=1)
+        with pytest.raises(DeviceUnavailable, match=r"unparseable reply b'@01 1 \d+ 0\?") as err:
+            run(stage.position)
+        assert err.value.code == "garbled"
+        assert run(stage.position) == pytest.approx(0.0)  # next exchange is clean
+
+
+def test_limits_and_timeout() -> None:
+    with rig("pty", limits=TravelLimits(0.0, 180.0)) as (sim, stage):
+        async def go() -> None:
+            await stage.connect()
+            await stage.home()
+            with pytest.raises(ValueError, match=r"outside the travel limits \[0, 180\]"):
+                await stage.move_to(-10.0)
+            with pytest.raises(DeviceUnavailable, match=r"did not finish within 0\.05 s"):
+                await stage.move_to(170.0, timeout_s=0.05)
+            await asyncio.sleep(0.2)
+
+        run(go)
+        assert not sim.motion.is_moving()
+        assert 0.0 < sim.motion.position_deg() < 170.0
+
+
+def test_config_errors_name_the_setting() -> None:
+    with pytest.raises(ValueError, match="Zaber device number must be 1-99"):
+        ZaberStage("rot", "loop://", device=0, microsteps_per_degree=MPD,
+                   limits=TravelLimits(0, 1), speed_dps=1, accel_dps2=1)
+    with pytest.raises(ValueError, match="approach must be one of"):
+        ZaberStage("rot", "loop://", microsteps_per_degree=MPD, limits=TravelLimits(0, 1),
+                   speed_dps=1, accel_dps2=1, approach="sideways")
+    stage = ZaberStage("rot", "nosuchscheme://x", microsteps_per_degree=MPD,
+                       limits=TravelLimits(0, 1), speed_dps=1, accel_dps2=1)
+    with pytest.raises(DeviceUnavailable, match="cannot open 'nosuchscheme://x'"):
+        run(stage.connect)

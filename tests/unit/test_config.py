@@ -1,0 +1,131 @@
+"""Rig configuration: the example loads, round-trips, and every user error names file and key."""
+
+from __future__ import annotations
+
+import copy
+import tomllib
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from gonio.config import ConfigError, dump_rig_config, load_rig_config, parse_rig_config
+from gonio.hal import Pair
+
+EXAMPLE = Path(__file__).resolve().parents[2] / "deploy" / "rig.example.toml"
+
+
+@pytest.fixture()
+def example() -> dict[str, Any]:
+    with EXAMPLE.open("rb") as f:
+        return tomllib.load(f)
+
+
+def _error(data: dict[str, Any]) -> str:
+    with pytest.raises(ConfigError) as info:
+        parse_rig_config(data, "rig.toml")
+    return str(info.value)
+
+
+def test_example_loads_and_lists_all_pairs() -> None:
+    cfg = load_rig_config(EXAMPLE)
+    lights = [x.name for x in cfg.lights]
+    sensors = [x.name for x in cfg.sensors]
+    assert cfg.pair_list() == [Pair(li, s) for li in lights for s in sensors]
+    assert cfg.stage.counts_per_degree == pytest.approx(4096 * 3.0 / 360)
+
+
+def test_round_trip_through_file(tmp_path: Path) -> None:
+    cfg = load_rig_config(EXAMPLE)
+    again = load_rig_config(dump_rig_config(cfg, tmp_path / "copy.toml"))
+    assert again == cfg
+
+
+def test_pair_directions_are_unit_vectors_at_the_configured_angles(example: dict) -> None:
+    example["pairs"] = [{"light": "L2", "sensor": "S1"}]
+    cfg = parse_rig_config(example)
+    (pd,) = cfg.pair_directions()
+    assert pd.pair == Pair("L2", "S1")
+    for vec, (theta, phi) in ((pd.wi, (60.0, 120.0)), (pd.wo, (45.0, 180.0))):
+        assert np.linalg.norm(vec) == pytest.approx(1.0)
+        assert np.degrees(np.arccos(vec[2])) == pytest.approx(theta)
+        assert np.degrees(np.arctan2(vec[1], vec[0])) % 360 == pytest.approx(phi)
+
+
+def test_unknown_driver_names_the_key_and_choices(example: dict) -> None:
+    example["stage"]["driver"] = "dynamxel"
+    msg = _error(example)
+    assert "rig.toml: stage.driver: 'dynamxel' is not one of 'dynamixel', 'zaber'" in msg
+
+
+def test_missing_key_is_reported_with_its_path(example: dict) -> None:
+    del example["sensors"][1]["channels"]
+    assert "rig.toml: sensors[1].channels: required key is missing" in _error(example)
+
+
+def test_wrong_type_shows_the_given_value(example: dict) -> None:
+    example["lights"][0]["theta_deg"] = "thirty"
+    msg = _error(example)
+    assert "lights[0].theta_deg" in msg and "'thirty'" in msg
+
+
+def test_misspelt_key_is_refused(example: dict) -> None:
+    example["stage"]["sped_dps"] = 10
+    assert "stage: unknown key 'sped_dps'" in _error(example)
+
+
+def test_unknown_pair_device_lists_the_known_names(example: dict) -> None:
+    example["pairs"] = [{"light": "L1", "sensor": "S1"}, {"light": "L1", "sensor": "S9"}]
+    msg = _error(example)
+    assert "pairs[1].sensor: no sensor named 'S9'; sensors are 'S1', 'S2'" in msg
+
+
+def test_zaber_needs_microsteps(example: dict) -> None:
+    example["stage"]["driver"] = "zaber"
+    del example["stage"]["dynamixel"]
+    assert "microsteps_per_degree" in _error(example)
+    example["stage"]["microsteps_per_degree"] = 1600.0
+    example["stage"]["zaber"] = {"device": 2, "axis": 1}
+    cfg = parse_rig_config(example)
+    assert cfg.stage.microsteps_per_stage_degree == pytest.approx(1600.0 * 3.0)
+    assert cfg.stage.default_baudrate == 57600  # the example sets it explicitly
+
+
+def test_subtable_of_the_other_driver_is_refused(example: dict) -> None:
+    example["stage"]["zaber"] = {"device": 1, "axis": 1}
+    assert "[stage.zaber] is given but stage.driver is 'dynamixel'" in _error(example)
+
+
+def test_value_registers_must_match_channels(example: dict) -> None:
+    example["sensors"][0]["channels"] = ["R", "G"]
+    assert "3 entries for 2 channels" in _error(example)
+
+
+def test_shared_modbus_address_is_refused(example: dict) -> None:
+    example["lights"][1]["modbus"] = copy.deepcopy(example["lights"][0]["modbus"])
+    assert "L2 and L1 share Modbus" in _error(example)
+
+
+def test_duplicate_names_and_bad_calibration(example: dict) -> None:
+    example["sensors"][1]["name"] = "L1"
+    example["calibration"]["dark"] = {"S1": [1.0, 2.0]}
+    msg = _error(example)
+    assert "repeated: ['L1']" in msg
+    assert "calibration.dark.S1: 2 values for the 3 channels of S1" in msg
+
+
+def test_literal_in_register_map(example: dict) -> None:
+    example["sensors"][0]["registers"]["exposure"]["type"] = "u64"
+    msg = _error(example)
+    assert "sensors[0].registers.exposure.type: 'u64' is not one of" in msg
+    assert "'f32'" in msg
+
+
+def test_file_errors_name_the_file(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match=r"nope\.toml: no such rig config file"):
+        load_rig_config(tmp_path / "nope.toml")
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[stage\n", encoding="utf-8")
+    with pytest.raises(ConfigError, match=r"bad\.toml: not valid TOML"):
+        load_rig_config(bad)
