@@ -1,0 +1,202 @@
+"""From sensor readings to BRDF values: per-pair factors from a white reference.
+
+A Lambertian reference of hemispherical albedo ``rho`` has the constant BRDF ``rho / pi``
+(1/sr). Measuring it with pair ``q`` gives dark-subtracted readings ``c_q`` (sensor units, per
+channel), so the pair's factor is ``k_q = (rho / pi) / c_q`` and a specimen reading ``c`` with
+the same pair and exposure is the BRDF value ``k_q c``. This folds lamp power, sensor gain,
+solid angle and the cosine foreshortening of each fixed pair into one number per channel,
+which is what :class:`gonio.config.PairFactor` stores.
+
+Calibrate at the exposure the scans use: sensors are not assumed to scale linearly with
+exposure time. Without any calibration the values stay in sensor units (factor 1), and the
+result file says so.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from pydantic import BaseModel, ConfigDict, Field
+
+from gonio.plans import PairSpec
+
+
+class CalibrationError(ValueError):
+    """A calibration measurement or file cannot be used; the message says why."""
+
+
+class PairCalibration(BaseModel):
+    """Factor from dark-subtracted sensor units to BRDF (1/sr) for one pair, per channel."""
+
+    model_config = ConfigDict(frozen=True)
+
+    light: str
+    sensor: str
+    factor: tuple[float, ...]
+
+
+class Calibration(BaseModel):
+    """A rig's calibration: one :class:`PairCalibration` per pair, and where it came from."""
+
+    model_config = ConfigDict(frozen=True)
+
+    pairs: tuple[PairCalibration, ...] = ()
+    reference_albedo: float | None = None
+    exposure_s: float | None = Field(default=None, description="exposure it was measured at")
+    source: str = "none"
+
+    def factor(self, light: str, sensor: str, n_channels: int) -> NDArray[np.float64]:
+        """(C,) factor of a pair; ones when the pair is uncalibrated."""
+        for p in self.pairs:
+            if p.light == light and p.sensor == sensor:
+                if len(p.factor) != n_channels:
+                    raise CalibrationError(
+                        f"calibration of pair {light}/{sensor} has {len(p.factor)} channels, "
+                        f"the readings have {n_channels}; recalibrate the rig"
+                    )
+                return np.asarray(p.factor, dtype=float)
+        return np.ones(n_channels)
+
+    def covers(self, pairs: Sequence[PairSpec]) -> bool:
+        have = {(p.light, p.sensor) for p in self.pairs}
+        return all((p.light, p.sensor) in have for p in pairs)
+
+
+def from_reference(
+    albedo: float,
+    counts: Mapping[tuple[str, str], NDArray[np.float64]],
+    exposure_s: float | None = None,
+    source: str = "white reference",
+) -> Calibration:
+    """Calibration from dark-subtracted readings of a white reference.
+
+    Parameters
+    ----------
+    albedo : float in (0, 1]
+        Hemispherical reflectance of the reference.
+    counts : mapping (light, sensor) -> (r, C) array
+        Dark-subtracted readings at r stage angles; averaged over angles (a rotating
+        reference evens out its own non-uniformity).
+    exposure_s : float, optional
+    source : str
+
+    Raises
+    ------
+    CalibrationError
+        If any pair read zero or less (light off, sensor blocked, wrong dark level).
+    """
+    if not 0 < albedo <= 1:
+        raise CalibrationError(f"reference albedo must be in (0, 1], got {albedo}")
+    f_ref = albedo / math.pi
+    out = []
+    for (light, sensor), c in counts.items():
+        mean = np.nanmean(np.atleast_2d(np.asarray(c, dtype=float)), axis=0)
+        if not np.all(np.isfinite(mean)) or np.any(mean <= 0):
+            raise CalibrationError(
+                f"pair {light}/{sensor} read {np.round(mean, 6).tolist()} on the white "
+                "reference (dark-subtracted); every channel must be positive. Check that the "
+                "light works and nothing blocks the sensor, then calibrate again"
+            )
+        out.append(PairCalibration(light=light, sensor=sensor,
+                                   factor=tuple(float(v) for v in f_ref / mean)))
+    return Calibration(pairs=tuple(out), reference_albedo=albedo, exposure_s=exposure_s,
+                       source=source)
+
+
+def from_config_factors(factors: Sequence[object], albedo: float | None = None) -> Calibration:
+    """Calibration from the rig config's ``[calibration]`` factors (objects with light, sensor,
+    factor attributes, as :class:`gonio.config.PairFactor`)."""
+    pairs = tuple(
+        PairCalibration(light=str(getattr(f, "light")), sensor=str(getattr(f, "sensor")),  # noqa: B009
+                        factor=tuple(float(v) for v in getattr(f, "factor")))  # noqa: B009
+        for f in factors
+    )
+    return Calibration(pairs=pairs, reference_albedo=albedo, source="rig config")
+
+
+def calibrated_samples(
+    readings: Sequence[Any],
+    pairs: Sequence[PairSpec],
+    light_dirs: NDArray[np.float64],
+    sensor_dirs: NDArray[np.float64],
+    channels: Sequence[str],
+    calibration: Calibration,
+) -> Samples:
+    """Arrange a job's readings as calibrated samples ``(n pairs, r angles, C)``.
+
+    Parameters
+    ----------
+    readings : ReadingRow-like objects (angle_index, commanded_deg, light, sensor, raw, dark)
+    pairs : the job's n pairs, in order
+    light_dirs, sensor_dirs : (n, 3) lab unit vectors of the pairs
+    channels : C channel names
+    calibration : factors applied to ``raw - dark``
+
+    Returns
+    -------
+    Samples
+        Stage angles are the distinct specimen rotations (``commanded_deg mod 360``), sorted.
+
+    Raises
+    ------
+    CalibrationError
+        When a pair has no reading at some angle (an incomplete job cannot be reconstructed).
+    """
+    angle_of: dict[int, float] = {}
+    for r in readings:
+        angle_of.setdefault(r.angle_index, float(r.commanded_deg) % 360.0)
+    order = sorted(angle_of, key=lambda k: angle_of[k])
+    col = {k: j for j, k in enumerate(order)}
+    row = {(p.light, p.sensor): q for q, p in enumerate(pairs)}
+    nch = len(channels)
+    vals = np.full((len(pairs), len(order), nch), np.nan)
+    for r in readings:
+        q = row.get((r.light, r.sensor))
+        if q is None:
+            continue
+        counts = np.asarray(r.raw, dtype=float) - np.asarray(r.dark, dtype=float)
+        vals[q, col[r.angle_index]] = counts * calibration.factor(r.light, r.sensor, nch)
+    missing = np.argwhere(np.isnan(vals).any(axis=2))
+    if missing.size:
+        q, j = missing[0]
+        raise CalibrationError(
+            f"pair {pairs[q].label()} has no reading at stage angle "
+            f"{angle_of[order[j]]:g} deg; the job's readings are incomplete"
+        )
+    return Samples(
+        pairs=[(p.light, p.sensor) for p in pairs],
+        light_dirs=np.asarray(light_dirs, dtype=float),
+        sensor_dirs=np.asarray(sensor_dirs, dtype=float),
+        stage_angles_deg=np.asarray([angle_of[k] for k in order]),
+        values=vals,
+        channels=tuple(channels),
+        calibration=calibration.model_dump(),
+    )
+
+
+@dataclass
+class Samples:
+    """Calibrated samples: ``values[q, j, c]`` of pair q at specimen rotation j.
+
+    Attributes
+    ----------
+    pairs : list of (light, sensor)
+    light_dirs, sensor_dirs : (n, 3) lab unit vectors
+    stage_angles_deg : (r,) degrees
+    values : (n, r, C) 1/sr (sensor units when uncalibrated)
+    channels : tuple of str
+    calibration : the calibration used, as a JSON-able dict
+    """
+
+    pairs: list[tuple[str, str]]
+    light_dirs: NDArray[np.float64]
+    sensor_dirs: NDArray[np.float64]
+    stage_angles_deg: NDArray[np.float64]
+    values: NDArray[np.float64]
+    channels: tuple[str, ...]
+    calibration: dict[str, Any] = field(default_factory=dict)

@@ -1,0 +1,213 @@
+"""``gonio scan`` (one job in the foreground) and ``gonio jobs`` (inspect a job store).
+
+``gonio scan`` keeps its job in a SQLite store (``--db``, default ``<output>.jobs.sqlite``). If
+that store holds an unfinished job (the previous run was killed), the scan resumes it from its
+last checkpoint instead of starting again.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import shutil
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from gonio.cli import UsageError
+
+
+def register(subparsers: Any) -> None:
+    p = subparsers.add_parser(
+        "scan", help="run one scan in the foreground and write its result file",
+        description="Measure a specimen with a uniform or adaptive plan on a real rig "
+        "(--rig) or the simulated rig (--sim), reconstruct it and write an HDF5 result.",
+    )
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--rig", type=Path, help="rig config TOML")
+    src.add_argument("--sim", action="store_true", help="start the simulated rig")
+    p.add_argument("--stage", choices=["dynamixel", "zaber"], default="dynamixel",
+                   help="simulated stage kind (with --sim)")
+    p.add_argument("--material", default=None, help="simulated material (with --sim)")
+    p.add_argument("--time-scale", type=float, default=1.0,
+                   help="simulated seconds per wall second (with --sim)")
+    p.add_argument("--seed", type=int, default=0, help="sensor noise seed (with --sim)")
+    p.add_argument("--rotations", type=int, default=8, help="stage angles r (uniform)")
+    p.add_argument("--start-deg", type=float, default=0.0, help="first stage angle, degrees")
+    p.add_argument("--adaptive", action="store_true", help="adaptive rotations (MATH 7)")
+    p.add_argument("--threshold", type=float, default=0.1, help="adaptive relative error e")
+    p.add_argument("--max-samples", type=int, default=None, help="adaptive sample budget")
+    p.add_argument("--exposure", type=float, default=0.01, help="seconds per exposure")
+    p.add_argument("--averages", type=int, default=1, help="exposures averaged per reading")
+    p.add_argument("--light-settle", type=float, default=0.05, help="seconds after lamp on")
+    p.add_argument("--specimen", default="specimen", help="specimen name")
+    p.add_argument("--calibration", type=Path, default=None,
+                   help="calibration JSON (from a calibration job) to apply")
+    p.add_argument("--db", type=Path, default=None, help="job store (SQLite)")
+    p.add_argument("--dry-run", action="store_true", help="print the plan's steps and duration")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("-o", "--output", type=Path, required=True, help="result file (.h5)")
+    p.set_defaults(func=_scan)
+
+    j = subparsers.add_parser("jobs", help="list or show jobs in a job store")
+    j.add_argument("action", nargs="?", choices=["list", "show"], default="list")
+    j.add_argument("job_id", nargs="?", type=int)
+    j.add_argument("--db", type=Path, required=True, help="job store (SQLite)")
+    j.add_argument("--json", action="store_true", help="machine-readable output")
+    j.set_defaults(func=_jobs)
+
+
+def _plan(args: argparse.Namespace) -> Any:
+    from gonio.plans import AdaptivePlan, ExposureSettings, UniformPlan
+
+    ex = ExposureSettings(exposure_s=args.exposure, averages=args.averages,
+                          light_settle_s=args.light_settle)
+    if args.adaptive:
+        return AdaptivePlan(specimen=args.specimen, exposure=ex, initial_rotations=args.rotations,
+                            threshold=args.threshold, max_samples=args.max_samples,
+                            start_deg=args.start_deg)
+    return UniformPlan(specimen=args.specimen, exposure=ex, rotations=args.rotations,
+                       start_deg=args.start_deg)
+
+
+def _scan(args: argparse.Namespace) -> int:
+    for name in ("exposure", "time_scale"):
+        if getattr(args, name) <= 0:
+            raise UsageError(f"--{name.replace('_', '-')} must be > 0")
+    if args.rig is not None and not args.rig.is_file():
+        raise UsageError(f"rig config {args.rig} does not exist")
+    plan = _plan(args)
+    sim = None
+    if args.sim:
+        from gonio.sim.rig import SimRigOptions, start_sim_rig
+
+        sim = start_sim_rig(SimRigOptions(stage=args.stage, material=args.material,
+                                          time_scale=args.time_scale, seed=args.seed))
+        config = sim.config
+    else:
+        from gonio.config import load_rig_config
+
+        config = load_rig_config(args.rig)
+    try:
+        return asyncio.run(_run_scan(args, plan, config))
+    finally:
+        if sim is not None:
+            sim.close()
+
+
+async def _run_scan(args: argparse.Namespace, plan: Any, config: Any) -> int:
+    from gonio.calibration import Calibration
+    from gonio.drivers.factory import build_rig
+    from gonio.jobstates import JobState
+    from gonio.plans import RigDescription, dry_run
+    from gonio.store import JobStore
+    from gonio.worker import Worker
+
+    rig = build_rig(config)
+    desc = RigDescription.from_rig(rig)
+    if args.dry_run:
+        print(dry_run(plan, desc).model_dump_json(indent=2))
+        return 0
+    dry_run(plan, desc)  # refuse a bad plan before connecting to anything
+    out: Path = args.output
+    db = args.db or out.with_name(out.name + ".jobs.sqlite")
+    store = JobStore(db)
+    cal = Calibration()
+    if args.calibration is not None:
+        if not args.calibration.is_file():
+            raise UsageError(f"calibration file {args.calibration} does not exist")
+        cal = Calibration.model_validate_json(args.calibration.read_text())
+    data_dir = out.parent / (out.stem + ".data")
+    connected = False
+
+    async def get_rig() -> Any:
+        nonlocal connected
+        if not connected:
+            await rig.connect()
+            connected = True
+        return rig
+
+    worker = Worker(store, get_rig, desc, data_dir, calibration=lambda: cal,
+                    provenance={"rig_config": config.model_dump_json()})
+    active = store.active_jobs()
+    if active:
+        job = active[0]
+        store.reconcile(lambda j: None)
+        print(f"resuming job {job.id} from its checkpoint ({job.done_angles} of "
+              f"{job.total_angles} angles done)", file=sys.stderr)
+    else:
+        job = store.create_job(kind=plan.kind, specimen=plan.specimen,
+                               plan=plan.model_dump(mode="json"),
+                               rig=desc.model_dump(mode="json"))
+    bar = _progress(store, job.id, disabled=args.no_progress)
+    try:
+        final = await worker.run_job(store.get_job(job.id))
+    finally:
+        bar.close()
+        if connected:
+            await rig.close()
+    row = store.get_job(job.id)
+    if final is not JobState.COMPLETED:
+        print(f"job {job.id} {final.value}: {row.reason}", file=sys.stderr)
+        return 1
+    assert row.result_path is not None
+    out.parent.mkdir(parents=True, exist_ok=True)
+    shutil.move(row.result_path, out)
+    summary = row.summary or {}
+    print(f"job {job.id} completed: {summary.get('n_samples', summary.get('readings'))} samples, "
+          f"estimated error {summary.get('estimated_error', float('nan')):.3f}; wrote {out}")
+    return 0
+
+
+def _progress(store: Any, job_id: int, disabled: bool) -> Any:
+    from tqdm import tqdm
+
+    bar = tqdm(total=None, unit="angle", desc=f"job {job_id}", disable=disabled, file=sys.stderr)
+
+    def on_event(ev: Any) -> None:
+        if ev.job_id != job_id:
+            return
+        if ev.type == "progress":
+            bar.total = ev.data["total"]
+            bar.n = ev.data["done"]
+            eta = ev.data.get("eta_s")
+            bar.set_postfix_str(f"eta {eta:.0f} s" if eta is not None else "")
+            bar.refresh()
+        elif ev.type == "state":
+            bar.set_description_str(f"job {job_id} {ev.data['state']}")
+
+    store.add_listener(on_event)
+    return bar
+
+
+def _jobs(args: argparse.Namespace) -> int:
+    from gonio.store import JobStore, NotFound
+
+    if not args.db.is_file():
+        raise UsageError(f"job store {args.db} does not exist")
+    store = JobStore(args.db, durable=False)
+    if args.action == "show":
+        if args.job_id is None:
+            raise UsageError("jobs show needs a job id, e.g. 'gonio jobs show 3 --db jobs.sqlite'")
+        try:
+            row = store.get_job(args.job_id)
+        except NotFound as exc:
+            raise UsageError(str(exc)) from None
+        d = {k: (v.value if hasattr(v, "value") else v) for k, v in vars(row).items()}
+        print(json.dumps(d, indent=2, default=str))
+        return 0
+    rows = store.list_jobs()
+    if args.json:
+        print(json.dumps([{"id": r.id, "state": r.state.value, "kind": r.kind,
+                           "specimen": r.specimen, "done": r.done_angles,
+                           "total": r.total_angles, "reason": r.reason} for r in rows]))
+        return 0
+    print(f"{'id':>4}  {'state':<14} {'kind':<11} {'angles':>9}  {'created':<19}  specimen")
+    for r in rows:
+        created = time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(r.created))
+        print(f"{r.id:>4}  {r.state.value:<14} {r.kind:<11} "
+              f"{r.done_angles:>4}/{r.total_angles:<4}  {created}  {r.specimen}"
+              + (f"  ({r.reason})" if r.reason else ""))
+    return 0

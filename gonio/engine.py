@@ -1,0 +1,541 @@
+"""Runs one job's measurement on a :class:`gonio.hal.Rig`: steps, checkpoints, control, faults.
+
+Per stage angle (ARCHITECTURE.md, "Data flow"): move the stage (always approaching from below,
+so backlash cancels); optionally read the dark signal with every light off; then for each
+light: on, settle, read all of that light's sensors in parallel (``asyncio.gather``), off.
+The angle's readings are committed to the store (:meth:`gonio.store.JobStore.commit_angle`)
+before the next move: that is the checkpoint.
+
+Control, requested from outside (the service) at any time:
+
+* pause: at the next checkpoint, or immediately (the angle in progress is dropped and
+  repeated on resume);
+* resume;
+* abort: stop now, clean up, state ``aborted``;
+* halt: stop now and send nothing more to the devices (no cleanup), state ``halted``.
+
+Faults: a recoverable :class:`gonio.hal.DeviceFault` (stage fault, lost device, lamp out of
+band, sensor saturation) suspends the job; the engine waits, tries the device's recovery
+(``clear_faults``, reconnect, lamp re-check), waits a settle delay and repeats the angle.
+More than ``max_retries`` consecutive failures at one angle, or an unrecoverable fault, fail
+the job with the reason. Cleanup (lights off, stage stopped) runs on every exit but a halt.
+
+The engine sees only :mod:`gonio.hal` (import-linter enforces it).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import time
+from collections.abc import Awaitable, Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from gonio import hal
+from gonio.jobstates import JobState
+from gonio.plans import (
+    AdaptivePlan,
+    AnyPlan,
+    PairSpec,
+    RigDescription,
+    adaptive_refinement,
+    estimate_angles,
+    initial_angles,
+    lights_in_order,
+    order_for_travel,
+    plan_pairs,
+)
+from gonio.store import JobStore, ReadingRow, StepRow
+
+
+class SensorSaturated(hal.DeviceFault):
+    """A reading reached the sensor's saturation level (recoverable: the engine retries)."""
+
+
+class JobFailed(Exception):
+    """The job cannot continue; ``str(exc)`` is the reason stored with the job."""
+
+
+class _Interrupted(Exception):
+    """The angle in progress was interrupted by a control request (pause, abort, halt)."""
+
+
+@dataclass(frozen=True)
+class Progress:
+    """Where a running job is: ``done`` of ``total`` stage angles and the estimated time left."""
+
+    done: int
+    total: int
+    eta_s: float | None
+    round: int = 0
+
+
+class ScanEngine:
+    """Measure one job's plan on a rig, checkpointing every stage angle to the store.
+
+    Parameters
+    ----------
+    rig : connected :class:`gonio.hal.Rig`
+    store : JobStore
+    job_id : int
+        The job (queued, or active after a restart: it resumes from its last checkpoint).
+    plan : the job's plan
+    rig_desc : RigDescription of ``rig`` (limits, speeds, pairs)
+    """
+
+    def __init__(
+        self,
+        rig: hal.Rig,
+        store: JobStore,
+        job_id: int,
+        plan: AnyPlan,
+        rig_desc: RigDescription,
+    ):
+        self.rig = rig
+        self.store = store
+        self.job_id = job_id
+        self.plan = plan
+        self.desc = rig_desc
+        self.pairs: list[PairSpec] = plan_pairs(plan, rig_desc)
+        self.lights: list[str] = lights_in_order(self.pairs)
+        self.sensors_of: dict[str, list[str]] = {
+            lt: [p.sensor for p in self.pairs if p.light == lt] for lt in self.lights
+        }
+        self.state = JobState(store.get_job(job_id).state)
+        self._pause = False
+        self._pause_immediate = False
+        self._abort = False
+        self._halt = False
+        self._wake = asyncio.Event()
+        self._angle_task: asyncio.Task[tuple[float, list[ReadingRow]]] | None = None
+        self._dark_once: dict[str, tuple[float, ...]] | None = None
+        self._angle_times: list[float] = []
+        self._per_angle_estimate = self._estimate_per_angle()
+        self.progress = Progress(0, 0, None)
+
+    # ------------------------------------------------------------------ control (any time)
+    def request_pause(self, immediate: bool = False) -> None:
+        """Pause at the next checkpoint, or now (the current angle is repeated on resume)."""
+        self._pause = True
+        self._pause_immediate = self._pause_immediate or immediate
+        if immediate:
+            self._interrupt()
+        self._wake.set()
+
+    def request_resume(self) -> None:
+        self._pause = False
+        self._pause_immediate = False
+        self._wake.set()
+
+    def request_abort(self) -> None:
+        self._abort = True
+        self._interrupt()
+        self._wake.set()
+
+    def request_halt(self) -> None:
+        """Emergency halt: stop at once and send nothing further to any device."""
+        self._halt = True
+        self._interrupt()
+        self._wake.set()
+
+    def _interrupt(self) -> None:
+        if self._angle_task is not None and not self._angle_task.done():
+            self._angle_task.cancel()
+
+    # ------------------------------------------------------------------ state helpers
+    def _set_state(self, new: JobState, reason: str | None = None, **data: object) -> None:
+        if new is self.state:
+            return
+        self.store.set_state(self.job_id, new, reason=reason, data=dict(data) or None)
+        self.state = new
+
+    def _estimate_per_angle(self) -> float:
+        """Physical time of one angle from the rig's settings (used for ETA before data)."""
+        step = 360.0 / max(len(initial_angles(self.plan, self.desc)), 1)
+        motion, settle, exposure = estimate_angles(
+            [step], 0.0, [], len(self.lights), self.plan, self.desc,
+            self.plan.exposure.dark == "every_angle",
+        )
+        return motion + settle + exposure
+
+    def _update_progress(self, steps: Sequence[StepRow]) -> Progress:
+        done = sum(s.done for s in steps)
+        total = len(steps)
+        recent = self._angle_times[-8:]
+        per = float(np.median(recent)) if recent else self._per_angle_estimate
+        rnd = max((s.round for s in steps), default=0)
+        self.progress = Progress(done, total, per * (total - done), rnd)
+        return self.progress
+
+    # ------------------------------------------------------------------ main loop
+    async def run(self) -> JobState:
+        """Measure until every planned angle is committed or the job ends.
+
+        Returns
+        -------
+        JobState
+            ``RUNNING`` when all angles are measured (the caller reconstructs next), otherwise
+            the terminal state reached (``FAILED``, ``ABORTED``, ``HALTED``).
+        """
+        if self.state is JobState.QUEUED:
+            self._set_state(JobState.RUNNING)
+        elif self.state is JobState.PAUSED:
+            self._pause = True  # restored after a restart: wait for an explicit resume
+        elif self.state is JobState.SUSPENDED:
+            self._set_state(JobState.RUNNING, note="resumed after restart")
+        try:
+            await self._measure_all()
+        except _Halt:
+            self._set_state(JobState.HALTED, reason="emergency halt")
+            return self.state
+        except _Abort:
+            await self._cleanup()
+            self._set_state(JobState.ABORTED, reason="aborted by request")
+            return self.state
+        except JobFailed as exc:
+            await self._cleanup()
+            self._set_state(JobState.FAILED, reason=str(exc))
+            return self.state
+        except asyncio.CancelledError:
+            # The worker itself is being cancelled (daemon shutdown): leave the rig safe and the
+            # job active, so startup reconciliation resumes it from its checkpoint.
+            await asyncio.shield(self._cleanup())
+            raise
+        except BaseException as exc:
+            await self._cleanup()
+            self._set_state(JobState.FAILED, reason=f"internal error: {exc!r}")
+            raise
+        await self._cleanup()
+        return self.state
+
+    async def _measure_all(self) -> None:
+        steps = self.store.steps(self.job_id)
+        if not steps:
+            here = await self.rig.stage.position()
+            route = order_for_travel(
+                initial_angles(self.plan, self.desc), here, self.desc, self.plan.backlash_deg
+            )
+            self.store.add_steps(
+                self.job_id,
+                [(k, 0, p % 360.0, p) for k, p in enumerate(route)],
+            )
+            steps = self.store.steps(self.job_id)
+        self._load_dark()
+        while True:
+            todo = [s for s in steps if not s.done]
+            if not todo:
+                if not await self._plan_next_round(steps):
+                    return
+                steps = self.store.steps(self.job_id)
+                continue
+            await self._measure_with_retries(todo[0], steps)
+            steps = self.store.steps(self.job_id)
+
+    def _load_dark(self) -> None:
+        if self.plan.exposure.dark == "once":
+            stored = self.store.darks(self.job_id)
+            if stored:
+                self._dark_once = stored[min(stored)]
+
+    async def _measure_with_retries(self, step: StepRow, steps: Sequence[StepRow]) -> None:
+        retries = 0
+        while True:
+            await self._gate()
+            t0 = time.monotonic()
+            self._angle_task = asyncio.create_task(self._measure_angle(step))
+            try:
+                actual, readings = await self._angle_task_result()
+            except _Interrupted:
+                continue  # the gate handles the request; the angle is repeated
+            except hal.DeviceFault as fault:
+                retries += 1
+                await self._suspend(fault, retries)
+                continue
+            self._angle_times.append(time.monotonic() - t0)
+            p = self._update_progress(
+                [s if s.angle_index != step.angle_index else replace(s, done=True) for s in steps]
+            )
+            self.store.commit_angle(
+                self.job_id, step.angle_index, actual, readings,
+                {"specimen_deg": step.specimen_deg, "position_deg": step.position_deg,
+                 "eta_s": p.eta_s, "round": p.round},
+            )
+            return
+
+    async def _angle_task_result(self) -> tuple[float, list[ReadingRow]]:
+        assert self._angle_task is not None
+        try:
+            await asyncio.wait({self._angle_task})
+        finally:
+            if not self._angle_task.done():  # the engine itself was cancelled
+                self._angle_task.cancel()
+                with contextlib.suppress(BaseException):
+                    await self._angle_task
+        if self._angle_task.cancelled():
+            raise _Interrupted()
+        exc = self._angle_task.exception()
+        if exc is not None:
+            raise exc
+        return self._angle_task.result()
+
+    # ------------------------------------------------------------------ control at checkpoints
+    async def _gate(self) -> None:
+        """Act on pending requests; return when the engine may measure the next angle."""
+        while True:
+            if self._halt:
+                raise _Halt()
+            if self._abort:
+                raise _Abort()
+            if not self._pause:
+                if self.state is not JobState.RUNNING:
+                    self._set_state(JobState.RUNNING)
+                return
+            if self.state is not JobState.PAUSED:
+                await self._cleanup()
+                self._set_state(
+                    JobState.PAUSED, immediate=self._pause_immediate, done=self.progress.done
+                )
+            self._wake.clear()
+            if self._pause and not (self._abort or self._halt):
+                await self._wake.wait()
+
+    async def _sleep(self, seconds: float) -> None:
+        """Sleep, waking early for a control request (which the caller's gate then handles)."""
+        self._wake.clear()
+        if self._halt or self._abort or self._pause:
+            return
+        with contextlib.suppress(TimeoutError):
+            await asyncio.wait_for(self._wake.wait(), timeout=seconds)
+
+    # ------------------------------------------------------------------ one angle
+    async def _measure_angle(self, step: StepRow) -> tuple[float, list[ReadingRow]]:
+        stage = self.rig.stage
+        here = await stage.position()
+        target = step.position_deg
+        if target < here - 1e-6 and self.plan.backlash_deg > 0:
+            # Coming from above: overshoot below so the final approach is positive again.
+            await stage.move_to(max(self.desc.stage_min_deg, target - self.plan.backlash_deg))
+        actual = await stage.move_to(target)
+        dark: dict[str, tuple[float, ...]] = {}
+        mode = self.plan.exposure.dark
+        if mode == "every_angle" or (mode == "once" and self._dark_once is None):
+            dark = await self._read_dark()
+            self.store.add_darks(self.job_id, step.angle_index, dark)
+            if mode == "once":
+                self._dark_once = dark
+        elif mode == "once" and self._dark_once is not None:
+            dark = self._dark_once
+        ex = self.plan.exposure
+        out: list[ReadingRow] = []
+        for lname in self.lights:
+            light = self.rig.lights[lname]
+            sensors = self.sensors_of[lname]
+            await light.set_on(True)
+            try:
+                if ex.light_settle_s > 0:
+                    await asyncio.sleep(ex.light_settle_s)
+                st = await light.status()
+                if not st.in_band:
+                    raise hal.LampOutOfBand(
+                        lname, f"output level {st.level:.3g} is outside its allowed band",
+                        code="out_of_band",
+                    )
+                results = await self._read_sensors(sensors)
+            finally:
+                await _quietly(light.set_on(False))
+            for sname, rd in zip(sensors, results, strict=True):
+                if rd.saturated and self.plan.faults.saturation == "suspend":
+                    raise SensorSaturated(
+                        sname,
+                        f"saturated with light {lname!r} at {ex.exposure_s:g} s exposure; "
+                        "lower the exposure or the lamp level if this persists",
+                        code="saturated",
+                    )
+                nch = len(rd.values)
+                out.append(ReadingRow(
+                    angle_index=step.angle_index,
+                    commanded_deg=target,
+                    actual_deg=actual,
+                    light=lname,
+                    sensor=sname,
+                    raw=tuple(float(v) for v in rd.values),
+                    dark=dark.get(sname, (0.0,) * nch),
+                    exposure_s=rd.exposure_s,
+                    averages=rd.averages,
+                    saturated=rd.saturated,
+                    t_read=rd.timestamp,
+                ))
+        return actual, out
+
+    async def _read_sensors(self, names: Sequence[str]) -> list[hal.SensorReading]:
+        """Read sensors in parallel; wait for all, then raise the first fault (no orphan reads)."""
+        ex = self.plan.exposure
+        results = await asyncio.gather(
+            *(self.rig.sensors[n].read(ex.exposure_s, ex.averages) for n in names),
+            return_exceptions=True,
+        )
+        for r in results:
+            if isinstance(r, BaseException):
+                raise r
+        return [r for r in results if isinstance(r, hal.SensorReading)]
+
+    async def _read_dark(self) -> dict[str, tuple[float, ...]]:
+        names = sorted({p.sensor for p in self.pairs})
+        readings = await self._read_sensors(names)
+        return {n: tuple(float(v) for v in r.values) for n, r in zip(names, readings, strict=True)}
+
+    # ------------------------------------------------------------------ faults
+    async def _suspend(self, fault: hal.DeviceFault, retries: int) -> None:
+        """Suspend on ``fault``, recover, and return when the angle may be retried."""
+        policy = self.plan.faults
+        if not fault.recoverable:
+            raise JobFailed(f"unrecoverable device fault: {fault}")
+        if retries > policy.max_retries:
+            raise JobFailed(
+                f"device fault persisted after {policy.max_retries} retries: {fault} "
+                f"(code {fault.code}); fix the device and submit the job again"
+            )
+        self._set_state(
+            JobState.SUSPENDED, reason=str(fault), device=fault.device, code=fault.code,
+            retry=retries,
+        )
+        await self._lights_off()
+        while True:
+            await self._sleep(policy.retry_delay_s)
+            await self._gate_in_suspension()
+            try:
+                await self._recover(fault)
+                break
+            except hal.DeviceFault as again:
+                retries += 1
+                self.store.append_event(self.job_id, "fault", {
+                    "device": again.device, "code": again.code, "message": str(again),
+                    "retry": retries})
+                if not again.recoverable or retries > policy.max_retries:
+                    raise JobFailed(
+                        f"device fault persisted after {policy.max_retries} retries: {again} "
+                        f"(code {again.code}); fix the device and submit the job again"
+                    ) from None
+                fault = again
+        await self._sleep(policy.resume_settle_s)
+        self.store.append_event(self.job_id, "recovered", {
+            "device": fault.device, "code": fault.code})
+
+    async def _gate_in_suspension(self) -> None:
+        if self._halt:
+            raise _Halt()
+        if self._abort:
+            raise _Abort()
+        if self._pause:
+            await self._gate()  # suspended -> paused; returns after resume (-> running)
+            self._set_state(JobState.SUSPENDED, reason="recovering after resume")
+
+    async def _recover(self, fault: hal.DeviceFault) -> None:
+        """Try the recovery that matches ``fault``; raise a DeviceFault if it did not clear."""
+        rig = self.rig
+        if isinstance(fault, SensorSaturated):
+            return  # transient glare or a lamp flash: simply measure again
+        if isinstance(fault, hal.LampOutOfBand) and fault.device in rig.lights:
+            light = rig.lights[fault.device]
+            await light.set_on(True)
+            try:
+                await asyncio.sleep(self.plan.exposure.light_settle_s)
+                st = await light.status()
+            finally:
+                await _quietly(light.set_on(False))
+            if not st.in_band:
+                raise hal.LampOutOfBand(fault.device, "output still outside its band",
+                                        code="out_of_band")
+            return
+        if isinstance(fault, hal.DeviceUnavailable):
+            dev = _device_named(rig, fault.device)
+            if dev is not None:
+                await _quietly(dev.close())
+                await dev.connect()
+            if dev is rig.stage or dev is None:
+                await rig.stage.clear_faults()
+            return
+        # Stage faults, and unknown faults from the stage: clear and confirm.
+        await rig.stage.clear_faults()
+        stage_st = await rig.stage.status()
+        if stage_st.faults:
+            raise hal.StageFault(fault.device, f"faults persist: {', '.join(stage_st.faults)}",
+                                 code=stage_st.faults[0])
+
+    # ------------------------------------------------------------------ adaptive rounds
+    async def _plan_next_round(self, steps: Sequence[StepRow]) -> bool:
+        plan = self.plan
+        if not isinstance(plan, AdaptivePlan):
+            return False
+        rnd = max(s.round for s in steps)
+        if rnd + 1 >= plan.max_rounds:
+            self.store.append_event(self.job_id, "adaptive_done", {"reason": "max_rounds"})
+            return False
+        angles, values = self.measured_values(steps)
+        budget = None
+        if plan.max_samples is not None:
+            budget = plan.max_samples // len(self.pairs) - len(steps)
+            if budget <= 0:
+                self.store.append_event(self.job_id, "adaptive_done", {"reason": "budget"})
+                return False
+        new = adaptive_refinement(
+            angles, values, plan.threshold, plan.min_step_deg or self.desc.resolution_deg, budget
+        )
+        if not new:
+            self.store.append_event(self.job_id, "adaptive_done", {"reason": "converged"})
+            return False
+        here = await self.rig.stage.position()
+        route = order_for_travel(new, here, self.desc, plan.backlash_deg)
+        k0 = max(s.angle_index for s in steps) + 1
+        self.store.add_steps(
+            self.job_id, [(k0 + j, rnd + 1, p % 360.0, p) for j, p in enumerate(route)]
+        )
+        return True
+
+    def measured_values(self, steps: Sequence[StepRow]) -> tuple[list[float], np.ndarray]:
+        """Specimen angles (deg) and dark-subtracted values (n_pairs, r, C) of done steps."""
+        done = [s for s in steps if s.done]
+        idx = {s.angle_index: j for j, s in enumerate(done)}
+        pos = {(p.light, p.sensor): q for q, p in enumerate(self.pairs)}
+        rows = self.store.readings(self.job_id)
+        nch = max((len(r.raw) for r in rows), default=1)
+        vals = np.full((len(self.pairs), len(done), nch), np.nan)
+        for r in rows:
+            q = pos.get((r.light, r.sensor))
+            j = idx.get(r.angle_index)
+            if q is not None and j is not None:
+                vals[q, j, : len(r.raw)] = np.subtract(r.raw, r.dark)
+        return [s.specimen_deg for s in done], vals
+
+    # ------------------------------------------------------------------ cleanup
+    async def _lights_off(self) -> None:
+        for light in self.rig.lights.values():
+            await _quietly(light.set_on(False))
+
+    async def _cleanup(self) -> None:
+        """Lights off and stage stopped; best effort, every step tried even if one fails."""
+        await self._lights_off()
+        await _quietly(self.rig.stage.stop())
+
+
+class _Halt(Exception):
+    pass
+
+
+class _Abort(Exception):
+    pass
+
+
+async def _quietly(aw: Awaitable[object]) -> None:
+    """Await a device call during cleanup, ignoring device faults (the rest must still run)."""
+    with contextlib.suppress(hal.DeviceFault, OSError, TimeoutError, ValueError):
+        await aw
+
+
+def _device_named(rig: hal.Rig, name: str) -> hal.Device | None:
+    for d in rig.devices():
+        if getattr(d, "name", None) == name:
+            return d
+    return None

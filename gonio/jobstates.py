@@ -1,0 +1,125 @@
+"""Job states and the one table of allowed transitions.
+
+Every state change of a job, whoever asks for it (the engine, the worker, a user through the
+API, startup reconciliation), goes through :func:`check_transition`, so the lifecycle in
+``docs/engine.md`` is enforced in exactly one place.
+
+Lifecycle (ARCHITECTURE.md, "Job lifecycle")::
+
+    queued -> running <-> paused
+    running -> suspended -> running           (a device fault with automatic resume)
+    running -> reconstructing -> completed
+    any active state -> failed | aborted | halted
+
+A job found ``running``, ``paused``, ``suspended`` or ``reconstructing`` at startup (the process
+died) keeps its state and is resumed from its last checkpoint, or moves to ``failed`` with the
+reason when it cannot be resumed (see :meth:`gonio.store.JobStore.reconcile`).
+"""
+
+from __future__ import annotations
+
+from enum import StrEnum
+
+
+class JobState(StrEnum):
+    """States of a scan job."""
+
+    QUEUED = "queued"
+    RUNNING = "running"
+    PAUSED = "paused"
+    SUSPENDED = "suspended"
+    RECONSTRUCTING = "reconstructing"
+    COMPLETED = "completed"
+    FAILED = "failed"
+    ABORTED = "aborted"
+    HALTED = "halted"
+
+
+Q, RUN, P, S, REC = (
+    JobState.QUEUED,
+    JobState.RUNNING,
+    JobState.PAUSED,
+    JobState.SUSPENDED,
+    JobState.RECONSTRUCTING,
+)
+DONE, FAIL, AB, HALT = JobState.COMPLETED, JobState.FAILED, JobState.ABORTED, JobState.HALTED
+
+TRANSITIONS: dict[JobState, frozenset[JobState]] = {
+    # A queued job is cancelled by moving it to aborted; it has touched no hardware.
+    Q: frozenset({RUN, AB}),
+    RUN: frozenset({P, S, REC, FAIL, AB, HALT}),
+    # A paused job keeps its checkpoint; it can only go back to running or end.
+    P: frozenset({RUN, FAIL, AB, HALT}),
+    # Pausing a suspended job holds it after the fault clears instead of resuming.
+    S: frozenset({RUN, P, FAIL, AB, HALT}),
+    # Reconstruction touches no hardware, so a halt is not meaningful here, but an abort is.
+    REC: frozenset({DONE, FAIL, AB}),
+    DONE: frozenset(),
+    FAIL: frozenset(),
+    AB: frozenset(),
+    HALT: frozenset(),
+}
+
+ACTIVE_STATES: frozenset[JobState] = frozenset({RUN, P, S, REC})
+"""States in which a job owns the rig (or its data is being turned into a result)."""
+
+FINISHED_STATES: frozenset[JobState] = frozenset({DONE, FAIL, AB, HALT})
+"""Terminal states: nothing leaves them."""
+
+# User actions and the states they are accepted in. The engine performs the actual transition
+# (a pause takes effect at the next checkpoint), so these say only when a request is legal.
+ACTIONS: dict[str, frozenset[JobState]] = {
+    "pause": frozenset({RUN, S}),
+    "resume": frozenset({P}),
+    "abort": frozenset({Q, RUN, P, S, REC}),
+    "cancel": frozenset({Q}),
+    "reorder": frozenset({Q}),
+    "remove": frozenset({Q}) | FINISHED_STATES,
+}
+
+
+class IllegalTransition(ValueError):
+    """A state change or user action that the lifecycle does not allow in the job's state."""
+
+    def __init__(self, message: str, *, job_id: int | None = None, state: str | None = None):
+        super().__init__(message)
+        self.job_id = job_id
+        self.state = state
+
+
+def _names(states: frozenset[JobState]) -> str:
+    return ", ".join(sorted(s.value for s in states)) or "no state"
+
+
+def check_transition(current: str, new: str, job_id: int | None = None) -> JobState:
+    """Return ``new`` as a :class:`JobState` if ``current -> new`` is allowed, else raise.
+
+    Raises
+    ------
+    IllegalTransition
+        With a message naming the job, both states and the states reachable from ``current``.
+    """
+    cur, nxt = JobState(current), JobState(new)
+    if nxt not in TRANSITIONS[cur]:
+        who = f"job {job_id}" if job_id is not None else "job"
+        raise IllegalTransition(
+            f"{who} cannot go from {cur.value} to {nxt.value}; from {cur.value} it can go to: "
+            f"{_names(TRANSITIONS[cur])}",
+            job_id=job_id,
+            state=cur.value,
+        )
+    return nxt
+
+
+def check_action(action: str, current: str, job_id: int | None = None) -> None:
+    """Raise :class:`IllegalTransition` unless the user action is allowed in ``current``."""
+    allowed = ACTIONS[action]
+    cur = JobState(current)
+    if cur not in allowed:
+        who = f"job {job_id}" if job_id is not None else "job"
+        raise IllegalTransition(
+            f"cannot {action} {who}: it is {cur.value}; {action} is allowed only when the job "
+            f"is {_names(allowed)}",
+            job_id=job_id,
+            state=cur.value,
+        )

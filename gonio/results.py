@@ -1,0 +1,223 @@
+"""The result file of a finished job: one HDF5 file (h5py) with a documented layout.
+
+Layout (also in ``docs/engine.md``; strings are UTF-8, JSON attributes are strings)::
+
+    /                         attrs: format="gonio-result", version=1, gonio_version, job_id,
+                                     specimen, kind, created (ISO 8601 UTC)
+    /raw                      one row per (stage angle, light, sensor) reading, m rows
+        angle_index (m,) i8   commanded_deg (m,) f8   actual_deg (m,) f8
+        light (m,) str        sensor (m,) str
+        raw (m, C) f8         dark (m, C) f8          sensor units
+        exposure_s (m,) f8    averages (m,) i8        saturated (m,) bool   t_read (m,) f8 (Unix s)
+    /samples                  calibrated samples the reconstruction used
+        channels (C,) str     pairs (n, 2) str (light, sensor)
+        light_dirs (n, 3) f8  sensor_dirs (n, 3) f8   lab-frame unit vectors
+        stage_angles_deg (r,) f8                      specimen rotation of each column
+        values (n, r, C) f8   BRDF, 1/sr (sensor units if uncalibrated, see calibration attr)
+        attrs: calibration (JSON)
+    /reconstruction           absent for calibration jobs
+        values (C, 72, 18, 18, 36) f4   f[c, i_ph, i_th, i_td, i_pd], 1/sr, NaN = invalid cell
+        channels (C,) str     coefficients (C, K, 72) f8
+        attrs: rel_sample_error, estimated_error (fractions), settings (JSON)
+    /metrics                  attrs: one float or string per metric
+    /provenance               attrs: plan, rig, rig_config, calibration (JSON),
+                                     basis_K, basis_materials (JSON list)
+
+Read back with :func:`read_result`.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+from numpy.typing import NDArray
+
+from gonio import __version__
+from gonio.brdf.table import BRDFTable
+from gonio.calibration import Samples
+from gonio.store import ReadingRow
+
+FORMAT_NAME = "gonio-result"
+FORMAT_VERSION = 1
+
+
+class ResultFileError(ValueError):
+    """A result file is missing, not a gonio result, or of an unknown version."""
+
+
+@dataclass
+class ResultFile:
+    """Everything in a result file, loaded."""
+
+    attrs: dict[str, Any]
+    readings: list[ReadingRow]
+    samples: Samples
+    table: BRDFTable | None
+    rel_sample_error: float | None
+    estimated_error: float | None
+    settings: dict[str, Any]
+    metrics: dict[str, Any]
+    provenance: dict[str, Any]
+
+
+_STR = h5py.string_dtype("utf-8")
+
+
+def _strs(values: Sequence[str]) -> NDArray[Any]:
+    return np.asarray(list(values), dtype=object)
+
+
+def write_result(
+    path: str | os.PathLike[str],
+    *,
+    job_id: int,
+    specimen: str,
+    kind: str,
+    readings: Sequence[ReadingRow],
+    samples: Samples,
+    table: BRDFTable | None = None,
+    coefficients: NDArray[np.float64] | None = None,
+    rel_sample_error: float | None = None,
+    estimated_error: float | None = None,
+    settings: Mapping[str, Any] | None = None,
+    metrics: Mapping[str, Any] | None = None,
+    provenance: Mapping[str, Any] | None = None,
+) -> Path:
+    """Write a result file atomically (to a temporary name, then renamed). Returns the path."""
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_name(out.name + ".part")
+    with h5py.File(tmp, "w") as f:
+        f.attrs.update({
+            "format": FORMAT_NAME, "version": FORMAT_VERSION, "gonio_version": __version__,
+            "job_id": job_id, "specimen": specimen, "kind": kind,
+            "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+        })
+        g = f.create_group("raw")
+        nch = max((len(r.raw) for r in readings), default=len(samples.channels))
+        g["angle_index"] = np.asarray([r.angle_index for r in readings], dtype=np.int64)
+        g["commanded_deg"] = np.asarray([r.commanded_deg for r in readings], dtype=float)
+        g["actual_deg"] = np.asarray([r.actual_deg for r in readings], dtype=float)
+        g.create_dataset("light", data=_strs([r.light for r in readings]), dtype=_STR)
+        g.create_dataset("sensor", data=_strs([r.sensor for r in readings]), dtype=_STR)
+        g["raw"] = np.asarray([r.raw for r in readings], dtype=float).reshape(-1, nch)
+        g["dark"] = np.asarray([r.dark for r in readings], dtype=float).reshape(-1, nch)
+        g["exposure_s"] = np.asarray([r.exposure_s for r in readings], dtype=float)
+        g["averages"] = np.asarray([r.averages for r in readings], dtype=np.int64)
+        g["saturated"] = np.asarray([r.saturated for r in readings], dtype=bool)
+        g["t_read"] = np.asarray([r.t_read for r in readings], dtype=float)
+
+        s = f.create_group("samples")
+        s.create_dataset("channels", data=_strs(samples.channels), dtype=_STR)
+        s.create_dataset("pairs", data=np.asarray(
+            [[a, b] for a, b in samples.pairs], dtype=object).reshape(-1, 2), dtype=_STR)
+        s["light_dirs"] = np.asarray(samples.light_dirs, dtype=float).reshape(-1, 3)
+        s["sensor_dirs"] = np.asarray(samples.sensor_dirs, dtype=float).reshape(-1, 3)
+        s["stage_angles_deg"] = np.asarray(samples.stage_angles_deg, dtype=float)
+        s["values"] = np.asarray(samples.values, dtype=float)
+        s.attrs["calibration"] = json.dumps(samples.calibration)
+
+        if table is not None:
+            r = f.create_group("reconstruction")
+            r.create_dataset("values", data=np.asarray(table.values, dtype=np.float32),
+                             compression="gzip", compression_opts=4, shuffle=True)
+            r.create_dataset("channels", data=_strs(table.channels), dtype=_STR)
+            if coefficients is not None:
+                r["coefficients"] = np.asarray(coefficients, dtype=float)
+            r.attrs["rel_sample_error"] = float(rel_sample_error or 0.0)
+            r.attrs["estimated_error"] = float(estimated_error or 0.0)
+            r.attrs["settings"] = json.dumps(dict(settings or {}), default=str)
+            r.attrs["name"] = table.name
+
+        m = f.create_group("metrics")
+        for k, v in (metrics or {}).items():
+            m.attrs[k] = v if isinstance(v, int | float | str) else json.dumps(v, default=str)
+        p = f.create_group("provenance")
+        for k, v in (provenance or {}).items():
+            p.attrs[k] = v if isinstance(v, int | float | str) else json.dumps(v, default=str)
+    os.replace(tmp, out)
+    return out
+
+
+def _decode(a: Any) -> list[str]:
+    return [x.decode() if isinstance(x, bytes) else str(x) for x in np.asarray(a).ravel()]
+
+
+def _attr_dict(attrs: h5py.AttributeManager) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for k, v in attrs.items():
+        if isinstance(v, bytes):
+            v = v.decode()
+        if isinstance(v, np.generic):
+            v = v.item()
+        out[k] = v
+    return out
+
+
+def read_result(path: str | os.PathLike[str]) -> ResultFile:
+    """Load a result file written by :func:`write_result`.
+
+    Raises
+    ------
+    ResultFileError
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise ResultFileError(f"result file {p} does not exist")
+    try:
+        f = h5py.File(p, "r")
+    except OSError as exc:
+        raise ResultFileError(f"{p} is not an HDF5 file ({exc})") from None
+    with f:
+        attrs = _attr_dict(f.attrs)
+        if attrs.get("format") != FORMAT_NAME:
+            raise ResultFileError(
+                f"{p} is not a gonio result file (format {attrs.get('format')!r})"
+            )
+        if int(attrs.get("version", -1)) != FORMAT_VERSION:
+            raise ResultFileError(
+                f"{p} is result format version {attrs.get('version')}, this gonio reads "
+                f"{FORMAT_VERSION}; use a matching gonio version"
+            )
+        g = f["raw"]
+        lights, sensors = _decode(g["light"][()]), _decode(g["sensor"][()])
+        readings = [
+            ReadingRow(int(g["angle_index"][i]), float(g["commanded_deg"][i]),
+                       float(g["actual_deg"][i]), lights[i], sensors[i],
+                       tuple(float(x) for x in g["raw"][i]), tuple(float(x) for x in g["dark"][i]),
+                       float(g["exposure_s"][i]), int(g["averages"][i]), bool(g["saturated"][i]),
+                       float(g["t_read"][i]))
+            for i in range(len(lights))
+        ]
+        s = f["samples"]
+        pair_names = _decode(s["pairs"][()])
+        samples = Samples(
+            pairs=[(pair_names[2 * i], pair_names[2 * i + 1]) for i in range(len(pair_names) // 2)],
+            light_dirs=s["light_dirs"][()],
+            sensor_dirs=s["sensor_dirs"][()],
+            stage_angles_deg=s["stage_angles_deg"][()],
+            values=s["values"][()],
+            channels=tuple(_decode(s["channels"][()])),
+            calibration=json.loads(_attr_dict(s.attrs).get("calibration", "{}")),
+        )
+        table = None
+        rel = est = None
+        settings: dict[str, Any] = {}
+        if "reconstruction" in f:
+            r = f["reconstruction"]
+            ra = _attr_dict(r.attrs)
+            table = BRDFTable(r["values"][()], tuple(_decode(r["channels"][()])),
+                              str(ra.get("name", attrs.get("specimen", "result"))))
+            rel, est = float(ra["rel_sample_error"]), float(ra["estimated_error"])
+            settings = json.loads(ra.get("settings", "{}"))
+        metrics = _attr_dict(f["metrics"].attrs)
+        provenance = _attr_dict(f["provenance"].attrs)
+    return ResultFile(attrs, readings, samples, table, rel, est, settings, metrics, provenance)

@@ -1,0 +1,453 @@
+"""The one module the REST layer sits on: jobs, control, events, results, rig status.
+
+Every request and response type is a pydantic model (they become the API schema). Errors are
+typed so the API can map them: :class:`NotFound` -> 404, :class:`Conflict` (including
+:class:`gonio.jobstates.IllegalTransition`) -> 409, :class:`gonio.plans.PlanError` -> 422.
+
+Typical use::
+
+    service = GonioService(JobStore(db), rig_factory, rig_config=cfg, data_dir=data)
+    await service.start()          # reconcile the store, start the worker
+    info = service.submit(JobRequest(plan=UniformPlan(rotations=8)))
+    async for ev in service.subscribe(since_seq=0): ...
+    await service.stop()
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+from collections.abc import AsyncIterator, Callable
+from pathlib import Path
+from typing import Any
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from gonio import hal
+from gonio.calibration import Calibration, from_config_factors
+from gonio.jobstates import ACTIVE_STATES, IllegalTransition, JobState, check_action
+from gonio.plans import AnyPlan, DryRun, Plan, PlanError, RigDescription, dry_run, parse_plan
+from gonio.store import EventRow, JobRow, JobStore
+from gonio.store import NotFound as StoreNotFound
+from gonio.worker import BasisProvider, Worker, default_basis_provider
+
+__all__ = [
+    "Conflict",
+    "Event",
+    "GonioService",
+    "IllegalTransition",
+    "JobDetail",
+    "JobInfo",
+    "JobRequest",
+    "NotFound",
+    "PlanError",
+    "ReorderRequest",
+    "RigStatus",
+]
+
+
+class NotFound(StoreNotFound):
+    """No such job, or the job has no result yet (API: 404)."""
+
+
+class Conflict(ValueError):
+    """The request conflicts with the job's or the service's state (API: 409)."""
+
+
+# --------------------------------------------------------------------------- schema
+class JobRequest(BaseModel):
+    """A scan request: the plan, and where it goes in the queue."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    plan: Plan
+    priority: int = Field(default=0, ge=-1000, le=1000, description="higher runs first")
+
+
+class ReorderRequest(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+    priority: int | None = Field(default=None, ge=-1000, le=1000)
+    position: int | None = Field(default=None, ge=0, description="0 = next to run")
+
+
+class JobInfo(BaseModel):
+    """One line of the job list."""
+
+    id: int
+    state: JobState
+    kind: str
+    specimen: str
+    priority: int
+    created: float
+    started: float | None
+    finished: float | None
+    done_angles: int
+    total_angles: int
+    reason: str | None
+
+    @classmethod
+    def from_row(cls, row: JobRow) -> JobInfo:
+        return cls(
+            id=row.id, state=row.state, kind=row.kind, specimen=row.specimen,
+            priority=row.priority, created=row.created, started=row.started,
+            finished=row.finished, done_angles=row.done_angles, total_angles=row.total_angles,
+            reason=row.reason,
+        )
+
+
+class JobDetail(JobInfo):
+    """Everything about one job in one call."""
+
+    plan: dict[str, Any]
+    eta_s: float | None = Field(description="estimated seconds to the end of measuring")
+    queue_position: int | None = Field(description="0 = next to run; null unless queued")
+    result_path: str | None
+    result: dict[str, Any] | None = Field(description="summary: metrics, readings, paths")
+    rig: dict[str, Any]
+
+
+class Event(BaseModel):
+    seq: int
+    type: str
+    job_id: int | None
+    time: float
+    data: dict[str, Any]
+
+    @classmethod
+    def from_row(cls, ev: EventRow) -> Event:
+        return cls(seq=ev.seq, type=ev.type, job_id=ev.job_id, time=ev.time, data=ev.data)
+
+
+class DeviceState(BaseModel):
+    name: str
+    ok: bool
+    detail: dict[str, Any] = Field(default_factory=dict)
+
+
+class RigStatus(BaseModel):
+    connected: bool
+    error: str | None = None
+    current_job: int | None = None
+    queue_held: str | None = None
+    devices: list[DeviceState] = Field(default_factory=list)
+
+
+# --------------------------------------------------------------------------- service
+class GonioService:
+    """Jobs, control and events over one rig.
+
+    Parameters
+    ----------
+    store : JobStore
+    rig : a :class:`gonio.hal.Rig`, or a callable building one (connected on first use)
+    rig_config : the :class:`gonio.config.RigConfig` (snapshot in results; its
+        ``[calibration]`` factors are used until a calibration job replaces them)
+    basis_provider : callable returning the reconstruction basis (default: ``default_basis``)
+    data_dir : folder for result files and the latest calibration
+    """
+
+    def __init__(
+        self,
+        store: JobStore,
+        rig: hal.Rig | Callable[[], hal.Rig],
+        rig_config: Any = None,
+        basis_provider: BasisProvider | None = None,
+        data_dir: str | Path = "gonio-data",
+    ):
+        self.store = store
+        self._rig: hal.Rig = rig if isinstance(rig, hal.Rig) else rig()
+        self.rig_config = rig_config
+        self.data_dir = Path(data_dir)
+        self.desc = RigDescription.from_rig(self._rig)
+        self._connected = False
+        self._connect_error: str | None = None
+        self._connect_lock = asyncio.Lock()
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._cond: asyncio.Condition | None = None
+        self._version = 0
+        self._task: asyncio.Task[None] | None = None
+        provenance: dict[str, Any] = {}
+        if rig_config is not None and hasattr(rig_config, "model_dump_json"):
+            provenance["rig_config"] = rig_config.model_dump_json()
+        self.worker = Worker(
+            store, self._get_rig, self.desc, self.data_dir,
+            basis_provider or default_basis_provider, self.calibration, provenance,
+        )
+        store.add_listener(self._on_event)
+
+    # ------------------------------------------------------------------ lifecycle
+    async def start(self) -> None:
+        """Reconcile jobs left active by a previous process and start the worker."""
+        self._loop = asyncio.get_running_loop()
+        self._cond = asyncio.Condition()
+        self.store.reconcile(self._can_resume)
+        self._task = asyncio.create_task(self.worker.run_forever(), name="gonio-worker")
+
+    async def stop(self) -> None:
+        """Stop the worker (an active job stays active and resumes at the next start)."""
+        if self._task is not None:
+            self._task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._task
+            self._task = None
+        await self.worker.stop()
+        if self._connected:
+            await self._rig.close()
+            self._connected = False
+        self.store.remove_listener(self._on_event)
+
+    def _can_resume(self, job: JobRow) -> str | None:
+        try:
+            plan = parse_plan(job.plan)
+        except PlanError as exc:
+            return f"interrupted by a restart and its plan no longer parses: {exc}"
+        snap = job.rig.get("pairs")
+        now = self.desc.model_dump(mode="json")["pairs"]
+        if snap is not None and snap != now:
+            return ("interrupted by a restart, and the rig's pairs changed since it started; "
+                    "its readings cannot be combined with new ones. Submit it again")
+        del plan
+        return None
+
+    async def _get_rig(self) -> hal.Rig:
+        async with self._connect_lock:
+            if not self._connected:
+                try:
+                    await self._rig.connect()
+                except Exception as exc:
+                    self._connect_error = str(exc)
+                    raise
+                self._connected = True
+                self._connect_error = None
+            return self._rig
+
+    def calibration(self) -> Calibration:
+        """The calibration applied to scans: the latest calibration job, else the rig config."""
+        path = self.data_dir / "calibration.json"
+        if path.is_file():
+            return Calibration.model_validate_json(path.read_text())
+        cal = getattr(self.rig_config, "calibration", None)
+        if cal is not None and getattr(cal, "factors", None):
+            return from_config_factors(cal.factors, cal.white_albedo)
+        return Calibration()
+
+    # ------------------------------------------------------------------ jobs
+    def submit(self, request: JobRequest | dict[str, Any]) -> JobInfo:
+        """Validate a request against the rig and queue it. Raises :class:`PlanError`."""
+        if not isinstance(request, JobRequest):
+            from pydantic import ValidationError
+
+            try:
+                request = JobRequest.model_validate(request)
+            except ValidationError as exc:
+                raise PlanError(f"invalid job request: {exc}") from None
+        plan: AnyPlan = request.plan
+        dry_run(plan, self.desc)  # every check that needs no hardware, before queueing
+        row = self.store.create_job(
+            kind=plan.kind, specimen=plan.specimen, plan=plan.model_dump(mode="json"),
+            rig=self.desc.model_dump(mode="json"), priority=request.priority,
+        )
+        self.worker.wake()
+        return JobInfo.from_row(row)
+
+    def list_jobs(self, state: str | None = None) -> list[JobInfo]:
+        return [JobInfo.from_row(r) for r in self.store.list_jobs([state] if state else None)]
+
+    def _row(self, job_id: int) -> JobRow:
+        try:
+            return self.store.get_job(job_id)
+        except StoreNotFound:
+            raise NotFound(f"no job with id {job_id}") from None
+
+    def get_job(self, job_id: int) -> JobDetail:
+        row = self._row(job_id)
+        eta = None
+        eng = self.worker.engine
+        if eng is not None and eng.job_id == job_id:
+            eta = eng.progress.eta_s
+        qpos = None
+        if row.state is JobState.QUEUED:
+            qpos = [j.id for j in self.store.queue()].index(job_id)
+        base = JobInfo.from_row(row).model_dump()
+        return JobDetail(**base, plan=row.plan, eta_s=eta, queue_position=qpos,
+                         result_path=row.result_path, result=row.summary, rig=row.rig)
+
+    def pause(self, job_id: int, immediate: bool = False) -> JobInfo:
+        """Pause at the next checkpoint (or now: the angle in progress is repeated)."""
+        row = self._row(job_id)
+        check_action("pause", row.state, job_id)
+        self._engine_for(job_id).request_pause(immediate)
+        return JobInfo.from_row(self._row(job_id))
+
+    def resume(self, job_id: int) -> JobInfo:
+        row = self._row(job_id)
+        check_action("resume", row.state, job_id)
+        eng = self.worker.engine
+        if eng is not None and eng.job_id == job_id:
+            eng.request_resume()
+        return JobInfo.from_row(self._row(job_id))
+
+    def abort(self, job_id: int) -> JobInfo:
+        row = self._row(job_id)
+        check_action("abort", row.state, job_id)
+        if row.state is JobState.QUEUED:
+            self.store.set_state(job_id, JobState.ABORTED, reason="aborted before it started")
+        elif row.state is JobState.RECONSTRUCTING:
+            if not self.worker.abort_reconstruction(job_id):
+                self.store.set_state(job_id, JobState.ABORTED, reason="aborted by request")
+        else:
+            eng = self.worker.engine
+            if eng is not None and eng.job_id == job_id:
+                eng.request_abort()
+            else:  # active in the store but not running here (e.g. paused before a restart)
+                self.store.set_state(job_id, JobState.ABORTED, reason="aborted by request")
+        return JobInfo.from_row(self._row(job_id))
+
+    def cancel(self, job_id: int) -> JobInfo:
+        """Take a queued job out of the queue (it becomes aborted; nothing was measured)."""
+        row = self._row(job_id)
+        check_action("cancel", row.state, job_id)
+        self.store.set_state(job_id, JobState.ABORTED, reason="cancelled before it started")
+        return JobInfo.from_row(self._row(job_id))
+
+    def reorder(self, job_id: int, request: ReorderRequest | None = None, *,
+                priority: int | None = None, position: int | None = None) -> JobInfo:
+        if request is not None:
+            priority, position = request.priority, request.position
+        if priority is None and position is None:
+            raise Conflict("reorder needs a priority or a position")
+        self._row(job_id)
+        return JobInfo.from_row(self.store.reorder(job_id, priority=priority, position=position))
+
+    def remove(self, job_id: int) -> None:
+        """Delete a queued or finished job and its readings (not its result file)."""
+        row = self._row(job_id)
+        check_action("remove", row.state, job_id)
+        self.store.delete_job(job_id)
+
+    def halt(self) -> None:
+        """Emergency halt: stop the running job at once, no cleanup; hold the queue."""
+        eng = self.worker.engine
+        if eng is not None:
+            eng.request_halt()
+        self.worker.hold("emergency halt")
+
+    def release_queue(self) -> None:
+        """Let the worker take queued jobs again after a halt or a stop-on-failure."""
+        self.worker.release()
+
+    def _engine_for(self, job_id: int) -> Any:
+        eng = self.worker.engine
+        if eng is None or eng.job_id != job_id:
+            raise Conflict(
+                f"job {job_id} is not being measured right now; it cannot be paused"
+            )
+        return eng
+
+    def dry_run(self, plan: AnyPlan | dict[str, Any]) -> DryRun:
+        p = plan if isinstance(plan, BaseModel) else parse_plan(plan)
+        return dry_run(p, self.desc)
+
+    # ------------------------------------------------------------------ events
+    @property
+    def seq(self) -> int:
+        """Sequence number of the latest event."""
+        return self.store.last_seq()
+
+    def _on_event(self, ev: EventRow) -> None:
+        loop = self._loop
+        if loop is None or loop.is_closed():
+            return
+        try:
+            running = asyncio.get_running_loop()
+        except RuntimeError:
+            running = None
+        if running is loop:
+            loop.create_task(self._bump())
+        else:
+            asyncio.run_coroutine_threadsafe(self._bump(), loop)
+
+    async def _bump(self) -> None:
+        assert self._cond is not None
+        async with self._cond:
+            self._version += 1
+            self._cond.notify_all()
+
+    async def subscribe(self, since_seq: int = 0, job_id: int | None = None
+                        ) -> AsyncIterator[Event]:
+        """Stored events after ``since_seq``, then live ones as they happen; none is lost.
+
+        Every event is committed to the store before subscribers are woken, and each wake-up
+        re-reads the store from the last delivered ``seq``, so a burst is never dropped.
+        """
+        if self._cond is None:
+            self._cond = asyncio.Condition()
+        last = since_seq
+        while True:
+            version = self._version
+            batch = self.store.events_after(last, 500, job_id=job_id)
+            for ev in batch:
+                last = ev.seq
+                yield Event.from_row(ev)
+            if batch:
+                continue
+            async with self._cond:
+                await self._cond.wait_for(lambda v=version: self._version != v)  # type: ignore[misc]
+
+    # ------------------------------------------------------------------ results
+    def result_path(self, job_id: int) -> Path:
+        row = self._row(job_id)
+        if not row.result_path:
+            raise NotFound(f"job {job_id} has no result yet (it is {row.state.value})")
+        return Path(row.result_path)
+
+    def metrics(self, job_id: int) -> dict[str, Any]:
+        row = self._row(job_id)
+        if row.summary is None:
+            raise NotFound(f"job {job_id} has no result yet (it is {row.state.value})")
+        return dict(row.summary)
+
+    def preview_png(self, job_id: int) -> bytes:
+        """PNG preview of the reconstructed table (:func:`gonio.brdf.preview.preview_image`)."""
+        from gonio.results import read_result
+
+        res = read_result(self.result_path(job_id))
+        if res.table is None:
+            raise NotFound(f"job {job_id} is a {res.attrs.get('kind')} job without a BRDF")
+        import io
+
+        from PIL import Image
+
+        from gonio.brdf.preview import preview_image
+
+        buf = io.BytesIO()
+        Image.fromarray(preview_image(res.table)).save(buf, format="PNG")
+        return buf.getvalue()
+
+    # ------------------------------------------------------------------ rig
+    async def rig_status(self) -> RigStatus:
+        devices: list[DeviceState] = []
+        if self._connected:
+            rig = self._rig
+            for name, call in [("stage", rig.stage.status),
+                               *((n, lt.status) for n, lt in rig.lights.items()),
+                               *((n, s.status) for n, s in rig.sensors.items())]:
+                try:
+                    st = await asyncio.wait_for(call(), timeout=2.0)
+                    faults = tuple(getattr(st, "faults", ()))
+                    ok = not faults and bool(getattr(st, "ok", True)) and bool(
+                        getattr(st, "in_band", True))
+                    detail = {k: v for k, v in vars(st).items()
+                              if isinstance(v, int | float | str | bool | tuple)}
+                    devices.append(DeviceState(name=name, ok=ok, detail=detail))
+                except Exception as exc:  # report, do not raise: this is a status page
+                    devices.append(DeviceState(name=name, ok=False, detail={"error": str(exc)}))
+        return RigStatus(
+            connected=self._connected, error=self._connect_error,
+            current_job=self.worker.current_job, queue_held=self.worker.held, devices=devices,
+        )
+
+    def active_job(self) -> JobInfo | None:
+        jobs = [r for r in self.store.list_jobs() if r.state in ACTIVE_STATES]
+        return JobInfo.from_row(jobs[0]) if jobs else None

@@ -1,0 +1,594 @@
+"""Durable job store: SQLite (stdlib ``sqlite3``) in WAL mode.
+
+Three kinds of record (schema in ``docs/engine.md``):
+
+* ``jobs``: one row per job: state, priority and queue position, timestamps, the plan and the
+  rig snapshot as JSON, progress, the reason of a failure, the result path and summary.
+* ``steps`` / ``readings`` / ``darks``: the planned stage angles of a job and every reading
+  taken at them. A stage angle is a checkpoint: its readings, its ``done`` mark, the job's
+  progress and a ``checkpoint`` event commit in one transaction (:meth:`JobStore.commit_angle`),
+  so after a crash an angle is either wholly stored or not at all. ``UNIQUE(job_id,
+  angle_index, light, sensor)`` makes a repeated angle unable to duplicate readings.
+* ``events``: an append-only log with a monotonic ``seq``; the API replays it to clients.
+
+Every state change goes through :func:`gonio.jobstates.check_transition`.
+
+Thread-safety: one connection guarded by a lock, so the worker's event loop, reconstruction
+threads and API handlers can share a store. WAL lets other processes (``gonio jobs`` while the
+daemon runs) read concurrently.
+"""
+
+from __future__ import annotations
+
+import json
+import sqlite3
+import threading
+import time
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from gonio.jobstates import ACTIVE_STATES, JobState, check_action, check_transition
+
+SCHEMA_VERSION = 1
+
+_SCHEMA = """
+CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
+CREATE TABLE IF NOT EXISTS jobs (
+    id            INTEGER PRIMARY KEY AUTOINCREMENT,
+    state         TEXT NOT NULL,
+    kind          TEXT NOT NULL,
+    specimen      TEXT NOT NULL,
+    priority      INTEGER NOT NULL DEFAULT 0,
+    position      REAL NOT NULL DEFAULT 0,
+    created       REAL NOT NULL,
+    started       REAL,
+    finished      REAL,
+    plan          TEXT NOT NULL,
+    rig           TEXT NOT NULL,
+    reason        TEXT,
+    result_path   TEXT,
+    summary       TEXT,
+    done_angles   INTEGER NOT NULL DEFAULT 0,
+    total_angles  INTEGER NOT NULL DEFAULT 0
+);
+CREATE INDEX IF NOT EXISTS jobs_queue ON jobs (state, priority, position);
+CREATE TABLE IF NOT EXISTS steps (
+    job_id        INTEGER NOT NULL REFERENCES jobs(id) ON DELETE CASCADE,
+    angle_index   INTEGER NOT NULL,
+    round         INTEGER NOT NULL,
+    specimen_deg  REAL NOT NULL,
+    position_deg  REAL NOT NULL,
+    done          INTEGER NOT NULL DEFAULT 0,
+    actual_deg    REAL,
+    PRIMARY KEY (job_id, angle_index)
+);
+CREATE TABLE IF NOT EXISTS readings (
+    job_id        INTEGER NOT NULL REFERENCES jobs(id) ON DELETE CASCADE,
+    angle_index   INTEGER NOT NULL,
+    commanded_deg REAL NOT NULL,
+    actual_deg    REAL NOT NULL,
+    light         TEXT NOT NULL,
+    sensor        TEXT NOT NULL,
+    raw           TEXT NOT NULL,
+    dark          TEXT NOT NULL,
+    exposure_s    REAL NOT NULL,
+    averages      INTEGER NOT NULL,
+    saturated     INTEGER NOT NULL,
+    t_read        REAL NOT NULL,
+    t_commit      REAL NOT NULL,
+    UNIQUE (job_id, angle_index, light, sensor)
+);
+CREATE TABLE IF NOT EXISTS darks (
+    job_id        INTEGER NOT NULL REFERENCES jobs(id) ON DELETE CASCADE,
+    angle_index   INTEGER NOT NULL,
+    sensor        TEXT NOT NULL,
+    values_json   TEXT NOT NULL,
+    t_read        REAL NOT NULL,
+    UNIQUE (job_id, angle_index, sensor)
+);
+CREATE TABLE IF NOT EXISTS events (
+    seq           INTEGER PRIMARY KEY AUTOINCREMENT,
+    job_id        INTEGER,
+    type          TEXT NOT NULL,
+    time          REAL NOT NULL,
+    data          TEXT NOT NULL
+);
+"""
+
+
+class NotFound(LookupError):
+    """No job with that id."""
+
+
+class StoreError(ValueError):
+    """The store file is not usable (wrong schema, not a gonio store)."""
+
+
+@dataclass(frozen=True)
+class JobRow:
+    """One job as stored."""
+
+    id: int
+    state: JobState
+    kind: str
+    specimen: str
+    priority: int
+    position: float
+    created: float
+    started: float | None
+    finished: float | None
+    plan: dict[str, Any]
+    rig: dict[str, Any]
+    reason: str | None
+    result_path: str | None
+    summary: dict[str, Any] | None
+    done_angles: int
+    total_angles: int
+
+
+@dataclass(frozen=True)
+class StepRow:
+    angle_index: int
+    round: int
+    specimen_deg: float
+    position_deg: float
+    done: bool
+    actual_deg: float | None
+
+
+@dataclass(frozen=True)
+class ReadingRow:
+    """One (angle, light, sensor) reading; ``raw`` and ``dark`` are per-channel values."""
+
+    angle_index: int
+    commanded_deg: float
+    actual_deg: float
+    light: str
+    sensor: str
+    raw: tuple[float, ...]
+    dark: tuple[float, ...]
+    exposure_s: float
+    averages: int
+    saturated: bool
+    t_read: float
+
+
+@dataclass(frozen=True)
+class EventRow:
+    seq: int
+    job_id: int | None
+    type: str
+    time: float
+    data: dict[str, Any]
+
+
+EventListener = Callable[[EventRow], None]
+
+
+class JobStore:
+    """The SQLite job store at ``path`` (created on first use).
+
+    Parameters
+    ----------
+    path : path of the database file, or ``":memory:"`` for a throw-away store
+    durable : bool
+        True: ``synchronous=FULL`` (each checkpoint survives a power cut). False:
+        ``synchronous=NORMAL`` (survives a process crash, the case the engine promises).
+    """
+
+    def __init__(self, path: str | Path, durable: bool = True):
+        self.path = str(path)
+        if self.path != ":memory:":
+            Path(self.path).parent.mkdir(parents=True, exist_ok=True)
+        self._lock = threading.RLock()
+        self._listeners: list[EventListener] = []
+        try:
+            self._db = sqlite3.connect(self.path, check_same_thread=False, isolation_level=None)
+            self._db.execute("PRAGMA journal_mode=WAL")
+            self._db.execute(f"PRAGMA synchronous={'FULL' if durable else 'NORMAL'}")
+            self._db.execute("PRAGMA foreign_keys=ON")
+            self._db.execute("PRAGMA busy_timeout=5000")
+            self._db.executescript(_SCHEMA)
+            row = self._db.execute("SELECT value FROM meta WHERE key='schema'").fetchone()
+        except sqlite3.DatabaseError as exc:
+            raise StoreError(
+                f"{self.path} is not a usable gonio job store ({exc}); point --db at a new file"
+            ) from None
+        if row is None:
+            self._db.execute(
+                "INSERT INTO meta (key, value) VALUES ('schema', ?)", (str(SCHEMA_VERSION),)
+            )
+        elif int(row[0]) != SCHEMA_VERSION:
+            raise StoreError(
+                f"{self.path} has store schema {row[0]}, this gonio reads {SCHEMA_VERSION}; "
+                "use a matching gonio version or a new database file"
+            )
+
+    # ------------------------------------------------------------------ plumbing
+    @contextmanager
+    def _tx(self) -> Iterator[sqlite3.Connection]:
+        """One write transaction (``BEGIN IMMEDIATE`` so writers never deadlock on upgrade)."""
+        with self._lock:
+            self._db.execute("BEGIN IMMEDIATE")
+            try:
+                yield self._db
+            except BaseException:
+                self._db.execute("ROLLBACK")
+                raise
+            self._db.execute("COMMIT")
+
+    def close(self) -> None:
+        with self._lock:
+            self._db.close()
+
+    def add_listener(self, fn: EventListener) -> None:
+        """Call ``fn(event)`` after every committed event (from the committing thread)."""
+        self._listeners.append(fn)
+
+    def remove_listener(self, fn: EventListener) -> None:
+        if fn in self._listeners:
+            self._listeners.remove(fn)
+
+    def _notify(self, events: Iterable[EventRow]) -> None:
+        for ev in events:
+            for fn in list(self._listeners):
+                fn(ev)
+
+    @staticmethod
+    def _insert_event(
+        c: sqlite3.Connection, job_id: int | None, type_: str, data: dict[str, Any]
+    ) -> EventRow:
+        t = time.time()
+        cur = c.execute(
+            "INSERT INTO events (job_id, type, time, data) VALUES (?, ?, ?, ?)",
+            (job_id, type_, t, json.dumps(data)),
+        )
+        assert cur.lastrowid is not None
+        return EventRow(cur.lastrowid, job_id, type_, t, data)
+
+    # ------------------------------------------------------------------ jobs
+    def create_job(
+        self,
+        *,
+        kind: str,
+        specimen: str,
+        plan: dict[str, Any],
+        rig: dict[str, Any],
+        priority: int = 0,
+    ) -> JobRow:
+        """Store a new queued job (FIFO within its priority) and a ``created`` event."""
+        with self._tx() as c:
+            pos = c.execute("SELECT COALESCE(MAX(position), 0) + 1 FROM jobs").fetchone()[0]
+            cur = c.execute(
+                "INSERT INTO jobs (state, kind, specimen, priority, position, created, plan, rig)"
+                " VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
+                (JobState.QUEUED.value, kind, specimen, priority, pos, time.time(),
+                 json.dumps(plan), json.dumps(rig)),
+            )
+            job_id = int(cur.lastrowid or 0)
+            ev = self._insert_event(
+                c, job_id, "created", {"state": "queued", "kind": kind, "priority": priority}
+            )
+        self._notify([ev])
+        return self.get_job(job_id)
+
+    def get_job(self, job_id: int) -> JobRow:
+        with self._lock:
+            row = self._db.execute("SELECT * FROM jobs WHERE id = ?", (job_id,)).fetchone()
+            cols = [d[0] for d in self._db.execute("SELECT * FROM jobs LIMIT 0").description]
+        if row is None:
+            raise NotFound(f"no job with id {job_id}")
+        return _job_row(dict(zip(cols, row, strict=True)))
+
+    def list_jobs(self, states: Iterable[str] | None = None) -> list[JobRow]:
+        """Jobs in queue order for queued ones, newest last otherwise (by id)."""
+        q = "SELECT * FROM jobs"
+        args: list[Any] = []
+        if states is not None:
+            st = [JobState(s).value for s in states]
+            q += f" WHERE state IN ({', '.join('?' * len(st))})"
+            args = st
+        q += " ORDER BY id"
+        with self._lock:
+            cur = self._db.execute(q, args)
+            cols = [d[0] for d in cur.description]
+            rows = cur.fetchall()
+        return [_job_row(dict(zip(cols, r, strict=True))) for r in rows]
+
+    def queue(self) -> list[JobRow]:
+        """Queued jobs in the order the worker takes them: priority (high first), then position."""
+        with self._lock:
+            cur = self._db.execute(
+                "SELECT * FROM jobs WHERE state = 'queued' ORDER BY priority DESC, position, id"
+            )
+            cols = [d[0] for d in cur.description]
+            rows = cur.fetchall()
+        return [_job_row(dict(zip(cols, r, strict=True))) for r in rows]
+
+    def set_state(
+        self,
+        job_id: int,
+        new_state: str,
+        *,
+        reason: str | None = None,
+        data: dict[str, Any] | None = None,
+    ) -> JobRow:
+        """Move a job to ``new_state`` if the transition table allows it; log a ``state`` event.
+
+        Raises
+        ------
+        NotFound, gonio.jobstates.IllegalTransition
+        """
+        with self._tx() as c:
+            row = c.execute("SELECT state FROM jobs WHERE id = ?", (job_id,)).fetchone()
+            if row is None:
+                raise NotFound(f"no job with id {job_id}")
+            old = row[0]
+            nxt = check_transition(old, new_state, job_id)
+            now = time.time()
+            sets = ["state = ?"]
+            args: list[Any] = [nxt.value]
+            if nxt is JobState.RUNNING:
+                sets.append("started = COALESCE(started, ?)")
+                args.append(now)
+            if nxt in (JobState.COMPLETED, JobState.FAILED, JobState.ABORTED, JobState.HALTED):
+                sets.append("finished = ?")
+                args.append(now)
+            if reason is not None or nxt is JobState.RUNNING:
+                # Running again means the earlier suspension or pause reason no longer applies.
+                sets.append("reason = ?")
+                args.append(reason)
+            c.execute(f"UPDATE jobs SET {', '.join(sets)} WHERE id = ?", (*args, job_id))
+            payload = {"from": old, "state": nxt.value, **({"reason": reason} if reason else {})}
+            ev = self._insert_event(c, job_id, "state", {**payload, **(data or {})})
+        self._notify([ev])
+        return self.get_job(job_id)
+
+    def set_result(self, job_id: int, result_path: str | None, summary: dict[str, Any]) -> None:
+        with self._tx() as c:
+            c.execute(
+                "UPDATE jobs SET result_path = ?, summary = ? WHERE id = ?",
+                (result_path, json.dumps(summary), job_id),
+            )
+
+    def reorder(self, job_id: int, *, priority: int | None = None,
+                position: int | None = None) -> JobRow:
+        """Change a queued job's priority and/or move it to index ``position`` of the queue.
+
+        The queue is ordered by priority, then position; a job moved to an index takes the
+        priority of the job it lands next to, so the stored order and the requested order agree.
+        """
+        with self._tx() as c:
+            row = c.execute("SELECT state FROM jobs WHERE id = ?", (job_id,)).fetchone()
+            if row is None:
+                raise NotFound(f"no job with id {job_id}")
+            check_action("reorder", row[0], job_id)
+            if priority is not None:
+                c.execute("UPDATE jobs SET priority = ? WHERE id = ?", (priority, job_id))
+            if position is not None:
+                order = [
+                    (r[0], r[1])
+                    for r in c.execute(
+                        "SELECT id, priority FROM jobs WHERE state = 'queued' AND id != ? "
+                        "ORDER BY priority DESC, position, id",
+                        (job_id,),
+                    )
+                ]
+                k = max(0, min(position, len(order)))
+                if order:
+                    neighbour = order[k][1] if k < len(order) else order[-1][1]
+                    if priority is None:
+                        c.execute(
+                            "UPDATE jobs SET priority = ? WHERE id = ?", (neighbour, job_id)
+                        )
+                ids = [i for i, _ in order]
+                ids.insert(k, job_id)
+                c.executemany(
+                    "UPDATE jobs SET position = ? WHERE id = ?",
+                    [(float(i + 1), jid) for i, jid in enumerate(ids)],
+                )
+            ev = self._insert_event(
+                c, job_id, "reordered", {"priority": priority, "position": position}
+            )
+        self._notify([ev])
+        return self.get_job(job_id)
+
+    def delete_job(self, job_id: int) -> None:
+        """Remove a job and its readings (state checks are the caller's)."""
+        with self._tx() as c:
+            cur = c.execute("DELETE FROM jobs WHERE id = ?", (job_id,))
+            if cur.rowcount == 0:
+                raise NotFound(f"no job with id {job_id}")
+            ev = self._insert_event(c, job_id, "removed", {})
+        self._notify([ev])
+
+    def active_jobs(self) -> list[JobRow]:
+        """Jobs in a state that owns the rig (running, paused, suspended, reconstructing)."""
+        return self.list_jobs(s.value for s in ACTIVE_STATES)
+
+    def reconcile(self, can_resume: Callable[[JobRow], str | None]) -> list[tuple[int, str]]:
+        """Startup reconciliation of jobs the previous process left active.
+
+        ``can_resume(job)`` returns None when the job can resume from its last checkpoint (it
+        keeps its state and gets a ``recovered`` event; the worker resumes it first), or the
+        reason it cannot (the job is marked failed with that reason). Never leaves a job stuck.
+
+        Returns
+        -------
+        list of (job id, "resumed" | "failed")
+        """
+        out: list[tuple[int, str]] = []
+        for job in self.active_jobs():
+            why = can_resume(job)
+            if why is None:
+                self.append_event(job.id, "recovered", {
+                    "state": job.state.value, "done_angles": job.done_angles})
+                out.append((job.id, "resumed"))
+            else:
+                self.set_state(job.id, JobState.FAILED, reason=why)
+                out.append((job.id, "failed"))
+        return out
+
+    # ------------------------------------------------------------------ steps and readings
+    def add_steps(self, job_id: int, steps: Sequence[tuple[int, int, float, float]]) -> None:
+        """Plan stage angles ``(angle_index, round, specimen_deg, position_deg)`` for a job."""
+        with self._tx() as c:
+            c.executemany(
+                "INSERT INTO steps (job_id, angle_index, round, specimen_deg, position_deg) "
+                "VALUES (?, ?, ?, ?, ?)",
+                [(job_id, *s) for s in steps],
+            )
+            total = c.execute(
+                "SELECT COUNT(*) FROM steps WHERE job_id = ?", (job_id,)
+            ).fetchone()[0]
+            c.execute("UPDATE jobs SET total_angles = ? WHERE id = ?", (total, job_id))
+            ev = self._insert_event(c, job_id, "planned", {
+                "round": steps[0][1] if steps else None, "new_angles": len(steps),
+                "total_angles": total})
+        self._notify([ev])
+
+    def steps(self, job_id: int) -> list[StepRow]:
+        with self._lock:
+            rows = self._db.execute(
+                "SELECT angle_index, round, specimen_deg, position_deg, done, actual_deg "
+                "FROM steps WHERE job_id = ? ORDER BY angle_index",
+                (job_id,),
+            ).fetchall()
+        return [StepRow(r[0], r[1], r[2], r[3], bool(r[4]), r[5]) for r in rows]
+
+    def add_darks(self, job_id: int, angle_index: int,
+                  darks: dict[str, tuple[float, ...]]) -> None:
+        """Store dark readings (sensor -> per-channel values) taken at ``angle_index``."""
+        t = time.time()
+        with self._tx() as c:
+            c.executemany(
+                "INSERT OR REPLACE INTO darks (job_id, angle_index, sensor, values_json, t_read) "
+                "VALUES (?, ?, ?, ?, ?)",
+                [(job_id, angle_index, s, json.dumps(list(v)), t) for s, v in darks.items()],
+            )
+
+    def darks(self, job_id: int) -> dict[int, dict[str, tuple[float, ...]]]:
+        """Stored darks: ``{angle_index: {sensor: values}}``."""
+        out: dict[int, dict[str, tuple[float, ...]]] = {}
+        with self._lock:
+            for a, s, v in self._db.execute(
+                "SELECT angle_index, sensor, values_json FROM darks WHERE job_id = ?", (job_id,)
+            ):
+                out.setdefault(a, {})[s] = tuple(json.loads(v))
+        return out
+
+    def commit_angle(
+        self,
+        job_id: int,
+        angle_index: int,
+        actual_deg: float,
+        readings: Sequence[ReadingRow],
+        event_data: dict[str, Any] | None = None,
+    ) -> EventRow:
+        """Checkpoint one stage angle: readings, step done, progress and event, atomically.
+
+        Raises
+        ------
+        sqlite3.IntegrityError
+            If readings of this angle were already committed (the engine never repeats a
+            committed angle; the constraint makes a bug loud instead of duplicating data).
+        """
+        t = time.time()
+        with self._tx() as c:
+            c.executemany(
+                "INSERT INTO readings (job_id, angle_index, commanded_deg, actual_deg, light, "
+                "sensor, raw, dark, exposure_s, averages, saturated, t_read, t_commit) "
+                "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                [
+                    (job_id, r.angle_index, r.commanded_deg, r.actual_deg, r.light, r.sensor,
+                     json.dumps(list(r.raw)), json.dumps(list(r.dark)), r.exposure_s,
+                     r.averages, int(r.saturated), r.t_read, t)
+                    for r in readings
+                ],
+            )
+            c.execute(
+                "UPDATE steps SET done = 1, actual_deg = ? WHERE job_id = ? AND angle_index = ?",
+                (actual_deg, job_id, angle_index),
+            )
+            done = c.execute(
+                "SELECT COUNT(*) FROM steps WHERE job_id = ? AND done = 1", (job_id,)
+            ).fetchone()[0]
+            total = c.execute(
+                "SELECT COUNT(*) FROM steps WHERE job_id = ?", (job_id,)
+            ).fetchone()[0]
+            c.execute(
+                "UPDATE jobs SET done_angles = ?, total_angles = ? WHERE id = ?",
+                (done, total, job_id),
+            )
+            ev = self._insert_event(c, job_id, "progress", {
+                "angle_index": angle_index, "done": done, "total": total,
+                "actual_deg": actual_deg, **(event_data or {})})
+        self._notify([ev])
+        return ev
+
+    def readings(self, job_id: int) -> list[ReadingRow]:
+        with self._lock:
+            rows = self._db.execute(
+                "SELECT angle_index, commanded_deg, actual_deg, light, sensor, raw, dark, "
+                "exposure_s, averages, saturated, t_read FROM readings WHERE job_id = ? "
+                "ORDER BY angle_index, light, sensor",
+                (job_id,),
+            ).fetchall()
+        return [
+            ReadingRow(r[0], r[1], r[2], r[3], r[4], tuple(json.loads(r[5])),
+                       tuple(json.loads(r[6])), r[7], r[8], bool(r[9]), r[10])
+            for r in rows
+        ]
+
+    def reading_count(self, job_id: int) -> int:
+        with self._lock:
+            return int(self._db.execute(
+                "SELECT COUNT(*) FROM readings WHERE job_id = ?", (job_id,)).fetchone()[0])
+
+    # ------------------------------------------------------------------ events
+    def append_event(self, job_id: int | None, type_: str, data: dict[str, Any]) -> EventRow:
+        with self._tx() as c:
+            ev = self._insert_event(c, job_id, type_, data)
+        self._notify([ev])
+        return ev
+
+    def events_after(self, seq: int, limit: int = 1000, job_id: int | None = None
+                     ) -> list[EventRow]:
+        q = "SELECT seq, job_id, type, time, data FROM events WHERE seq > ?"
+        args: list[Any] = [seq]
+        if job_id is not None:
+            q += " AND job_id = ?"
+            args.append(job_id)
+        q += " ORDER BY seq LIMIT ?"
+        args.append(limit)
+        with self._lock:
+            rows = self._db.execute(q, args).fetchall()
+        return [EventRow(r[0], r[1], r[2], r[3], json.loads(r[4])) for r in rows]
+
+    def last_seq(self) -> int:
+        with self._lock:
+            return int(self._db.execute("SELECT COALESCE(MAX(seq), 0) FROM events").fetchone()[0])
+
+
+def _job_row(d: dict[str, Any]) -> JobRow:
+    return JobRow(
+        id=d["id"],
+        state=JobState(d["state"]),
+        kind=d["kind"],
+        specimen=d["specimen"],
+        priority=d["priority"],
+        position=d["position"],
+        created=d["created"],
+        started=d["started"],
+        finished=d["finished"],
+        plan=json.loads(d["plan"]),
+        rig=json.loads(d["rig"]),
+        reason=d["reason"],
+        result_path=d["result_path"],
+        summary=json.loads(d["summary"]) if d["summary"] else None,
+        done_angles=d["done_angles"],
+        total_angles=d["total_angles"],
+    )

@@ -1,0 +1,280 @@
+"""Runs jobs one at a time: the measurement (engine), then the reconstruction and result file.
+
+Order: a job the previous process left active (resumed from its checkpoint) first, then queued
+jobs by priority (high first), then queue position (FIFO by default). A failed job does not
+stop the queue unless its plan sets ``stop_queue_on_failure``; an emergency halt holds the
+queue until :meth:`Worker.release`.
+
+Reconstruction and file writing run in a thread (``asyncio.to_thread``) so the event loop keeps
+serving the API and events while the numerics run.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import logging
+import time
+from collections.abc import Awaitable, Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gonio import hal
+from gonio.calibration import Calibration, calibrated_samples, from_reference
+from gonio.engine import ScanEngine
+from gonio.jobstates import JobState
+from gonio.plans import (
+    AnyPlan,
+    CalibrationPlan,
+    PlanError,
+    RigDescription,
+    parse_plan,
+    plan_pairs,
+    validate_plan,
+)
+from gonio.store import JobRow, JobStore
+
+log = logging.getLogger("gonio.worker")
+
+BasisProvider = Callable[[], Any]
+"""Returns the :class:`gonio.brdf.basis.Basis` to reconstruct with (may build it; slow)."""
+
+
+def default_basis_provider() -> Any:
+    from gonio.brdf.basis import default_basis
+
+    return default_basis()
+
+
+class Worker:
+    """The job queue's single consumer.
+
+    Parameters
+    ----------
+    store : JobStore
+    get_rig : async callable returning the connected rig (connects on first use)
+    rig_desc : RigDescription of that rig
+    data_dir : results go to ``data_dir/results/job-<id>.h5``; calibrations to
+        ``data_dir/calibration.json``
+    basis_provider : callable returning the reconstruction basis
+    calibration : callable returning the calibration to apply to scans
+    provenance : extra provenance stored in every result (e.g. the rig config)
+    """
+
+    def __init__(
+        self,
+        store: JobStore,
+        get_rig: Callable[[], Awaitable[hal.Rig]],
+        rig_desc: RigDescription,
+        data_dir: Path,
+        basis_provider: BasisProvider = default_basis_provider,
+        calibration: Callable[[], Calibration] = Calibration,
+        provenance: dict[str, Any] | None = None,
+    ):
+        self.store = store
+        self.get_rig = get_rig
+        self.desc = rig_desc
+        self.data_dir = Path(data_dir)
+        self.basis_provider = basis_provider
+        self.calibration = calibration
+        self.provenance = provenance or {}
+        self.engine: ScanEngine | None = None
+        self.current_job: int | None = None
+        self.held: str | None = None
+        self._wake = asyncio.Event()
+        self._recon_task: asyncio.Task[dict[str, Any]] | None = None
+        self._abort_recon = False
+        self._stopping = False
+
+    # ------------------------------------------------------------------ control
+    def wake(self) -> None:
+        """Look at the queue again (a job was submitted, resumed or released)."""
+        self._wake.set()
+
+    def hold(self, reason: str) -> None:
+        """Take no new job until :meth:`release`."""
+        self.held = reason
+        self.store.append_event(None, "queue_held", {"reason": reason})
+
+    def release(self) -> None:
+        self.held = None
+        self.store.append_event(None, "queue_released", {})
+        self.wake()
+
+    def abort_reconstruction(self, job_id: int) -> bool:
+        if self.current_job == job_id and self._recon_task is not None:
+            self._abort_recon = True
+            self._recon_task.cancel()
+            return True
+        return False
+
+    def next_job(self) -> JobRow | None:
+        active = self.store.active_jobs()
+        if active:
+            return active[0]
+        if self.held is not None:
+            return None
+        queue = self.store.queue()
+        return queue[0] if queue else None
+
+    # ------------------------------------------------------------------ loop
+    async def run_forever(self) -> None:
+        while not self._stopping:
+            job = self.next_job()
+            if job is None:
+                self._wake.clear()
+                await self._wake.wait()
+                continue
+            await self.run_job(job)
+
+    async def run_once(self) -> JobRow | None:
+        """Run the next job to its end (for the CLI and tests); None when the queue is empty."""
+        job = self.next_job()
+        if job is None:
+            return None
+        await self.run_job(job)
+        return self.store.get_job(job.id)
+
+    async def run_job(self, job: JobRow) -> JobState:
+        """Measure, reconstruct and write one job; returns its final state."""
+        self.current_job = job.id
+        try:
+            return await self._run_job(job)
+        finally:
+            self.current_job = None
+            self.engine = None
+            self._recon_task = None
+            self._abort_recon = False
+
+    async def _run_job(self, job: JobRow) -> JobState:
+        try:
+            plan = parse_plan(job.plan)
+            validate_plan(plan, self.desc)
+        except PlanError as exc:
+            return self._fail(job, f"plan no longer valid on this rig: {exc}")
+        if job.state is not JobState.RECONSTRUCTING:
+            try:
+                rig = await self.get_rig()
+            except (hal.DeviceFault, OSError) as exc:
+                return self._fail(job, f"rig not available: {exc}", plan)
+            self.engine = ScanEngine(rig, self.store, job.id, plan, self.desc)
+            final = await self.engine.run()
+            self.engine = None
+            if final is not JobState.RUNNING:
+                if final is JobState.FAILED and plan.stop_queue_on_failure:
+                    self.hold(f"job {job.id} failed and asked to stop the queue")
+                if final is JobState.HALTED:
+                    self.hold("emergency halt")
+                return final
+            self.store.set_state(job.id, JobState.RECONSTRUCTING)
+        self._recon_task = asyncio.create_task(asyncio.to_thread(self._finish, job.id, plan))
+        try:
+            summary = await self._recon_task
+        except asyncio.CancelledError:
+            if self._abort_recon:
+                self.store.set_state(job.id, JobState.ABORTED, reason="aborted by request")
+                return JobState.ABORTED
+            raise
+        except Exception as exc:  # a failed reconstruction fails the job, never the worker
+            log.exception("job %s: finishing failed", job.id)
+            return self._fail(job, f"reconstruction failed: {exc}", plan)
+        self.store.set_result(job.id, summary.get("result_path"), summary)
+        self.store.set_state(job.id, JobState.COMPLETED)
+        return JobState.COMPLETED
+
+    def _fail(self, job: JobRow, reason: str, plan: AnyPlan | None = None) -> JobState:
+        current = self.store.get_job(job.id).state
+        if current is JobState.QUEUED:
+            # A queued job that cannot start: record why without pretending it ran.
+            self.store.set_state(job.id, JobState.RUNNING)
+        self.store.set_state(job.id, JobState.FAILED, reason=reason)
+        if plan is not None and plan.stop_queue_on_failure:
+            self.hold(f"job {job.id} failed and asked to stop the queue")
+        return JobState.FAILED
+
+    # ------------------------------------------------------------------ finishing (thread)
+    def _finish(self, job_id: int, plan: AnyPlan) -> dict[str, Any]:
+        from gonio.results import write_result
+
+        t0 = time.perf_counter()
+        job = self.store.get_job(job_id)
+        pairs = plan_pairs(plan, self.desc)
+        light_dirs = np.asarray(
+            [hal.LabDirection(self.desc.light(p.light).theta_deg,
+                              self.desc.light(p.light).phi_deg).vector() for p in pairs])
+        sensor_dirs = np.asarray(
+            [hal.LabDirection(self.desc.sensor(p.sensor).theta_deg,
+                              self.desc.sensor(p.sensor).phi_deg).vector() for p in pairs])
+        channel_sets = {self.desc.sensor(p.sensor).channels for p in pairs}
+        if len(channel_sets) != 1:
+            raise PlanError(
+                f"the plan's sensors have different channels {sorted(channel_sets)}; measure "
+                "pairs whose sensors share one channel list"
+            )
+        channels = next(iter(channel_sets))
+        readings = self.store.readings(job_id)
+        is_cal = isinstance(plan, CalibrationPlan)
+        cal = Calibration() if is_cal else self.calibration()
+        samples = calibrated_samples(readings, pairs, light_dirs, sensor_dirs, channels, cal)
+        path = self.data_dir / "results" / f"job-{job_id}.h5"
+        provenance: dict[str, Any] = {
+            "plan": json.dumps(job.plan), "rig": json.dumps(job.rig),
+            "calibration": cal.model_dump_json(), **self.provenance,
+        }
+        summary: dict[str, Any] = {
+            "readings": len(readings), "angles": int(samples.stage_angles_deg.size),
+            "pairs": len(pairs), "calibrated": bool(cal.pairs) or is_cal,
+        }
+        if isinstance(plan, CalibrationPlan):
+            new_cal = from_reference(
+                plan.reference_albedo,
+                {(p.light, p.sensor): samples.values[q] for q, p in enumerate(pairs)},
+                exposure_s=plan.exposure.exposure_s,
+                source=f"job {job_id}: {plan.reference_name}",
+            )
+            cal_path = self.data_dir / "calibration.json"
+            cal_path.parent.mkdir(parents=True, exist_ok=True)
+            cal_path.write_text(new_cal.model_dump_json(indent=2))
+            provenance["new_calibration"] = new_cal.model_dump_json()
+            write_result(path, job_id=job_id, specimen=job.specimen, kind=job.kind,
+                         readings=readings, samples=samples, provenance=provenance,
+                         metrics={"seconds": time.perf_counter() - t0})
+            summary.update(result_path=str(path), calibration_path=str(cal_path))
+            return summary
+
+        from gonio.brdf.reconstruct import pair_cells, reconstruct
+
+        basis = self.basis_provider()
+        cells, ph_lab = pair_cells(light_dirs, sensor_dirs)
+        rec = reconstruct(
+            basis, cells, ph_lab, np.deg2rad(samples.stage_angles_deg),
+            np.maximum(samples.values, 0.0), channels=channels, name=job.specimen,
+        )
+        metrics = {
+            "rel_sample_error": rec.rel_sample_error,
+            "estimated_error": rec.estimated_error,
+            "n_pairs": len(pairs),
+            "n_angles": int(samples.stage_angles_deg.size),
+            "n_samples": len(pairs) * int(samples.stage_angles_deg.size),
+            "K": int(basis.K),
+            "seconds": time.perf_counter() - t0,
+        }
+        provenance.update(basis_K=int(basis.K), basis_materials=json.dumps(list(basis.materials)))
+        write_result(
+            path, job_id=job_id, specimen=job.specimen, kind=job.kind, readings=readings,
+            samples=samples, table=rec.table, coefficients=rec.coefficients,
+            rel_sample_error=rec.rel_sample_error, estimated_error=rec.estimated_error,
+            settings=rec.settings, metrics=metrics, provenance=provenance,
+        )
+        summary.update(result_path=str(path), **metrics)
+        return summary
+
+    async def stop(self) -> None:
+        self._stopping = True
+        self.wake()
+        if self._recon_task is not None:
+            with contextlib.suppress(BaseException):
+                await asyncio.shield(self._recon_task)

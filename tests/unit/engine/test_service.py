@@ -1,0 +1,115 @@
+"""GonioService on an in-memory rig: submit validation, control refusals, events, results."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+from pathlib import Path
+
+import pytest
+
+from gonio.jobstates import IllegalTransition, JobState
+from gonio.plans import CalibrationPlan, ExposureSettings, PlanError, UniformPlan
+from gonio.results import read_result
+from gonio.service import Conflict, GonioService, JobRequest, NotFound
+from gonio.store import JobStore
+from tests.unit.engine.memrig import MemRig
+
+FAST = ExposureSettings(exposure_s=0.002, light_settle_s=0.0)
+
+
+def _service(tmp_path: Path) -> tuple[MemRig, GonioService]:
+    rig = MemRig()
+    return rig, GonioService(JobStore(tmp_path / "jobs.sqlite"), rig, data_dir=tmp_path / "d")
+
+
+def test_bad_request_refused_before_queueing(tmp_path: Path) -> None:
+    rig, svc = _service(tmp_path)
+    with pytest.raises(PlanError, match="at least one stage angle"):
+        svc.submit(JobRequest(plan=UniformPlan(rotations=0)))
+    with pytest.raises(PlanError, match="invalid job request"):
+        svc.submit({"plan": {"kind": "uniform", "rotations": "many"}})
+    assert svc.list_jobs() == []
+    assert rig.mstage.moves == []
+
+
+def test_calibration_job_runs_to_completion_with_events(tmp_path: Path) -> None:
+    _rig, svc = _service(tmp_path)
+
+    async def go() -> list[str]:
+        await svc.start()
+        info = svc.submit(JobRequest(plan=CalibrationPlan(
+            reference_albedo=0.9, rotations=2, exposure=FAST)))
+        types: list[str] = []
+        async for ev in svc.subscribe(0):
+            types.append(ev.type)
+            if ev.type == "state" and ev.data["state"] in ("completed", "failed"):
+                break
+        await svc.stop()
+        assert svc.get_job(info.id).state is JobState.COMPLETED, svc.get_job(info.id).reason
+        return types
+
+    types = asyncio.run(go())
+    assert types[0] == "created" and types.count("progress") == 2
+    cal = json.loads((tmp_path / "d" / "calibration.json").read_text())
+    assert len(cal["pairs"]) == 3 and cal["reference_albedo"] == 0.9
+    res = read_result(svc.result_path(1))
+    assert res.table is None and len(res.readings) == 6
+    # factor * (raw - dark) of the reference is albedo / pi on average
+    f = cal["pairs"][0]["factor"][0]
+    vals = [(r.raw[0] - r.dark[0]) * f for r in res.readings
+            if (r.light, r.sensor) == (cal["pairs"][0]["light"], cal["pairs"][0]["sensor"])]
+    assert sum(vals) / len(vals) == pytest.approx(0.9 / 3.141592653589793)
+    assert svc.metrics(1)["readings"] == 6
+
+
+def test_actions_refused_with_clear_errors(tmp_path: Path) -> None:
+    _, svc = _service(tmp_path)
+    info = svc.submit(JobRequest(plan=UniformPlan(rotations=2, exposure=FAST)))
+    with pytest.raises(IllegalTransition, match="cannot pause job 1: it is queued"):
+        svc.pause(info.id)
+    with pytest.raises(IllegalTransition, match="cannot resume job 1: it is queued"):
+        svc.resume(info.id)
+    with pytest.raises(NotFound):
+        svc.get_job(42)
+    with pytest.raises(NotFound, match="no result yet"):
+        svc.result_path(info.id)
+    with pytest.raises(Conflict):
+        svc.reorder(info.id)
+    assert svc.get_job(info.id).queue_position == 0
+    svc.cancel(info.id)
+    assert svc.get_job(info.id).state is JobState.ABORTED
+    with pytest.raises(IllegalTransition, match="cannot cancel job 1: it is aborted"):
+        svc.cancel(info.id)
+    with pytest.raises(IllegalTransition, match="cannot abort"):
+        svc.abort(info.id)
+    svc.remove(info.id)
+    assert svc.list_jobs() == []
+
+
+def test_pause_resume_abort_through_the_service(tmp_path: Path) -> None:
+    rig, svc = _service(tmp_path)
+    plan = UniformPlan(rotations=20, exposure=ExposureSettings(exposure_s=0.01, light_settle_s=0))
+
+    async def go() -> None:
+        await svc.start()
+        info = svc.submit(JobRequest(plan=plan))
+        async for ev in svc.subscribe(0, job_id=info.id):
+            if ev.type == "progress":
+                break
+        svc.pause(info.id)
+        async for ev in svc.subscribe(svc.seq - 1, job_id=info.id):
+            if ev.data.get("state") == "paused":
+                break
+        with pytest.raises(IllegalTransition, match="cannot pause"):
+            svc.pause(info.id)
+        svc.resume(info.id)
+        svc.abort(info.id)
+        async for ev in svc.subscribe(0, job_id=info.id):
+            if ev.data.get("state") == "aborted":
+                break
+        await svc.stop()
+
+    asyncio.run(go())
+    assert svc.get_job(1).state is JobState.ABORTED
+    assert not rig.any_light_on()
