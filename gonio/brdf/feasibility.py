@@ -1,0 +1,507 @@
+"""What a rig can physically measure: candidate cells and collision-free lab placements.
+
+A light/sensor pair measures one half/difference cell ``(th, td, pd)`` for every stage angle
+(MATH 2). Which cells a rig can offer is limited by its mounts (MATH 6):
+
+* both devices at most ``max_elevation_deg`` from the normal (grazing readings are noisy and
+  low mounts shadow the specimen);
+* the light and the sensor of a pair at least ``min_separation_deg`` apart (``2 td``): they
+  cannot share a mount;
+* no device inside an excluded region of the lab: a cone around a lab direction (a camera,
+  the stage arm) or an elevation/azimuth box;
+* any two mounted devices at least ``min_device_distance_deg`` apart.
+
+The first two do not depend on where the pair sits in azimuth; exclusions and device distances
+do. A pair's lab half-vector azimuth ``ph`` is free (the stage sweeps it anyway and it does not
+change the condition number), so :func:`place_pairs` chooses it to keep devices apart.
+
+Angles are degrees in the public data classes (they come from users) and radians in the
+array functions, as everywhere in ``gonio.brdf``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from gonio.brdf import geometry as geo
+
+FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
+
+
+class FeasibilityError(ValueError):
+    """Constraints that rule out the design asked for; the message says what to relax."""
+
+
+@dataclass(frozen=True)
+class ConeExclusion:
+    """No device within ``radius_deg`` of the lab direction ``(theta_deg, phi_deg)``."""
+
+    theta_deg: float
+    phi_deg: float
+    radius_deg: float
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.theta_deg <= 180.0:
+            raise FeasibilityError(f"cone exclusion theta {self.theta_deg} deg is not in [0, 180]")
+        if not 0.0 < self.radius_deg < 180.0:
+            raise FeasibilityError(
+                f"cone exclusion radius {self.radius_deg} deg is not in (0, 180)"
+            )
+
+    def contains(self, dirs: ArrayLike) -> BoolArray:
+        """Whether lab directions ``dirs`` (..., 3) lie inside the cone."""
+        axis = geo.spherical_to_direction(np.deg2rad(self.theta_deg), np.deg2rad(self.phi_deg))
+        cos_r = math.cos(math.radians(self.radius_deg))
+        return np.asarray(np.asarray(dirs, dtype=float) @ axis > cos_r - 1e-12)
+
+    def describe(self) -> str:
+        return f"cone of {self.radius_deg:g} deg around ({self.theta_deg:g}, {self.phi_deg:g})"
+
+
+@dataclass(frozen=True)
+class BoxExclusion:
+    """No device with elevation in ``[theta_min, theta_max]`` and azimuth in ``[phi_min, phi_max]``.
+
+    Azimuths are taken mod 360; ``phi_min > phi_max`` wraps through 0 (``350..10``).
+    """
+
+    theta_min_deg: float
+    theta_max_deg: float
+    phi_min_deg: float
+    phi_max_deg: float
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.theta_min_deg <= self.theta_max_deg <= 90.0:
+            raise FeasibilityError(
+                f"box exclusion elevations {self.theta_min_deg}..{self.theta_max_deg} deg must "
+                "satisfy 0 <= min <= max <= 90"
+            )
+
+    def contains(self, dirs: ArrayLike) -> BoolArray:
+        """Whether lab directions ``dirs`` (..., 3) lie inside the box."""
+        theta, phi = geo.direction_to_spherical(dirs)
+        t = np.rad2deg(theta)
+        p = np.mod(np.rad2deg(phi), 360.0)
+        lo, hi = self.phi_min_deg % 360.0, self.phi_max_deg % 360.0
+        in_phi = (p >= lo) & (p <= hi) if lo <= hi else (p >= lo) | (p <= hi)
+        if self.phi_max_deg - self.phi_min_deg >= 360.0:
+            in_phi = np.ones_like(in_phi)
+        tol = 1e-9
+        in_theta = (t >= self.theta_min_deg - tol) & (t <= self.theta_max_deg + tol)
+        return np.asarray(in_theta & in_phi)
+
+    def describe(self) -> str:
+        return (
+            f"box theta {self.theta_min_deg:g}..{self.theta_max_deg:g}, "
+            f"phi {self.phi_min_deg:g}..{self.phi_max_deg:g} deg"
+        )
+
+
+Exclusion = ConeExclusion | BoxExclusion
+
+
+def parse_exclusion(text: str) -> Exclusion:
+    """Parse ``cone:THETA,PHI,RADIUS`` or ``box:THETA_MIN,THETA_MAX,PHI_MIN,PHI_MAX`` (degrees)."""
+    kind, _, rest = text.partition(":")
+    kind = kind.strip().lower()
+    try:
+        values = [float(v) for v in rest.split(",")] if rest.strip() else []
+    except ValueError:
+        values = []
+    if kind == "cone" and len(values) == 3:
+        return ConeExclusion(*values)
+    if kind == "box" and len(values) == 4:
+        return BoxExclusion(*values)
+    raise FeasibilityError(
+        f"cannot read exclusion {text!r}; write cone:THETA,PHI,RADIUS (e.g. cone:0,0,8 keeps "
+        "devices 8 deg away from the normal) or box:THETA_MIN,THETA_MAX,PHI_MIN,PHI_MAX "
+        "(e.g. box:60,90,80,100), all in degrees"
+    )
+
+
+@dataclass(frozen=True)
+class RigConstraints:
+    """Mounting limits of a rig (degrees).
+
+    Attributes
+    ----------
+    max_elevation_deg : float
+        Largest device angle from the surface normal, in (0, 90).
+    min_separation_deg : float
+        Smallest angle between the light and the sensor of a pair (``2 td``).
+    min_device_distance_deg : float
+        Smallest angle between any two mounted devices (also within a pair).
+    exclusions : tuple of ConeExclusion or BoxExclusion
+        Lab regions where no device may sit.
+    """
+
+    max_elevation_deg: float = 80.0
+    min_separation_deg: float = 10.0
+    min_device_distance_deg: float = 10.0
+    exclusions: tuple[Exclusion, ...] = field(default_factory=tuple)
+
+    def __post_init__(self) -> None:
+        if not 0.0 < self.max_elevation_deg < 90.0:
+            raise FeasibilityError(
+                f"max elevation {self.max_elevation_deg} deg must be in (0, 90): it is the largest "
+                "angle between a device and the specimen normal"
+            )
+        for name, v in (
+            ("min separation", self.min_separation_deg),
+            ("min device distance", self.min_device_distance_deg),
+        ):
+            if not 0.0 <= v < 180.0:
+                raise FeasibilityError(f"{name} {v} deg must be in [0, 180)")
+
+    @property
+    def pair_separation_deg(self) -> float:
+        """Smallest light-sensor angle of one pair: both limits apply to it."""
+        return max(self.min_separation_deg, self.min_device_distance_deg)
+
+
+def excluded(dirs: ArrayLike, exclusions: Sequence[Exclusion]) -> BoolArray:
+    """Whether lab directions (..., 3) fall in any of ``exclusions``."""
+    d = np.asarray(dirs, dtype=float)
+    out = np.zeros(d.shape[:-1], dtype=bool)
+    for ex in exclusions:
+        out |= ex.contains(d)
+    return out
+
+
+def device_ok(dirs: ArrayLike, constraints: RigConstraints) -> BoolArray:
+    """Whether single devices at lab directions (..., 3) respect elevation and exclusions."""
+    d = np.asarray(dirs, dtype=float)
+    cos_max = math.cos(math.radians(constraints.max_elevation_deg))
+    return np.asarray((d[..., 2] >= cos_max - 1e-12) & ~excluded(d, constraints.exclusions))
+
+
+def ph_options(step_deg: float = 5.0) -> FloatArray:
+    """Lab half-vector azimuths tried when placing a pair: ``0, step, ...`` below 360 (radians)."""
+    if not 0.0 < step_deg <= 90.0:
+        raise FeasibilityError(f"azimuth step {step_deg} deg must be in (0, 90]")
+    return np.deg2rad(np.arange(0.0, 360.0 - 1e-9, step_deg))
+
+
+def allowed_ph(cells: ArrayLike, constraints: RigConstraints, ph: ArrayLike) -> BoolArray:
+    """For each cell and lab azimuth, whether both devices avoid every exclusion.
+
+    Parameters
+    ----------
+    cells : (n, 3) array_like, radians
+        ``(th, td, pd)``.
+    ph : (P,) array_like, radians
+        Lab half-vector azimuths to test.
+
+    Returns
+    -------
+    (n, P) bool
+    """
+    c = np.asarray(cells, dtype=float).reshape(-1, 3)
+    p = np.asarray(ph, dtype=float)
+    if not constraints.exclusions:
+        return np.ones((c.shape[0], p.size), dtype=bool)
+    wi, wo = geo.half_diff_to_directions(
+        c[:, None, 0], p[None, :], c[:, None, 1], c[:, None, 2]
+    )
+    return ~excluded(wi, constraints.exclusions) & ~excluded(wo, constraints.exclusions)
+
+
+def feasible_mask(
+    constraints: RigConstraints, valid: ArrayLike | None = None, ph_step_deg: float = 5.0
+) -> BoolArray:
+    """(18, 18, 36) bool: grid cells a rig with ``constraints`` can measure.
+
+    A cell is feasible when it is valid (both devices above the horizon, and in ``valid`` if
+    given, e.g. a basis's mask), both elevations are within the limit, ``2 td`` meets the pair
+    separation, and at least one lab azimuth (tried every ``ph_step_deg``) keeps both devices
+    out of every exclusion.
+    """
+    th, td, pd = geo.grid_angles()
+    ci, co = geo.cell_cosines(th, td, pd)
+    cos_max = math.cos(math.radians(constraints.max_elevation_deg))
+    ok = geo.valid_mask() & (ci >= cos_max - 1e-12) & (co >= cos_max - 1e-12)
+    if valid is not None:
+        ok &= np.asarray(valid, dtype=bool).reshape(geo.SLICE_SHAPE)
+    ok &= 2.0 * np.rad2deg(td) >= constraints.pair_separation_deg - 1e-9
+    if constraints.exclusions and ok.any():
+        idx = np.flatnonzero(ok)
+        cells = np.stack([th.ravel()[idx], td.ravel()[idx], pd.ravel()[idx]], axis=1)
+        reachable = allowed_ph(cells, constraints, ph_options(ph_step_deg)).any(axis=1)
+        flat = ok.ravel().copy()
+        flat[idx[~reachable]] = False
+        ok = flat.reshape(geo.SLICE_SHAPE)
+    return ok
+
+
+def candidate_rows(
+    constraints: RigConstraints, valid: ArrayLike | None = None, ph_step_deg: float = 5.0
+) -> NDArray[np.intp]:
+    """Flat basis rows of the feasible cells; raises when there are none."""
+    rows = np.flatnonzero(feasible_mask(constraints, valid, ph_step_deg)).astype(np.intp)
+    if rows.size == 0:
+        raise FeasibilityError(
+            "no grid cell is feasible under these constraints "
+            f"(max elevation {constraints.max_elevation_deg:g} deg, pair separation "
+            f"{constraints.pair_separation_deg:g} deg, {len(constraints.exclusions)} exclusions); "
+            "raise --max-elevation or lower --min-separation / --min-device-distance"
+        )
+    return rows
+
+
+def rows_to_cells(rows: ArrayLike) -> FloatArray:
+    """(n, 3) ``(th, td, pd)`` radians of flat grid rows."""
+    i, j, k = np.unravel_index(np.asarray(rows, dtype=np.intp), geo.SLICE_SHAPE)
+    return np.stack([geo.TH_GRID[i], geo.TD_GRID[j], geo.PD_GRID[k]], axis=-1)
+
+
+def angular_distance(a: ArrayLike, b: ArrayLike) -> FloatArray:
+    """Angle (radians) between unit vectors ``a`` (..., 3) and ``b`` (..., 3), broadcast."""
+    # atan2 of cross and dot stays accurate for nearly parallel vectors, unlike acos.
+    a_ = np.asarray(a, dtype=float)
+    b_ = np.asarray(b, dtype=float)
+    cross = np.linalg.norm(np.cross(a_, b_), axis=-1)
+    return np.arctan2(cross, np.sum(a_ * b_, axis=-1))
+
+
+def min_pairwise_distance(dirs: ArrayLike) -> float:
+    """Smallest angle (radians) between any two of ``dirs`` (m, 3); inf for fewer than two."""
+    d = np.asarray(dirs, dtype=float).reshape(-1, 3)
+    if d.shape[0] < 2:
+        return math.inf
+    dist = angular_distance(d[:, None, :], d[None, :, :])
+    iu = np.triu_indices(d.shape[0], 1)
+    return float(dist[iu].min())
+
+
+@dataclass(frozen=True)
+class Placement:
+    """Lab placement of independent light/sensor pairs.
+
+    Attributes
+    ----------
+    cells : (n, 3) array, radians
+        ``(th, td, pd)`` of each pair.
+    ph_lab : (n,) array, radians
+        Lab half-vector azimuth chosen for each pair.
+    lab_deg : (n, 4) array, degrees
+        ``(theta_i, phi_i, theta_v, phi_v)``: light and sensor directions in the lab.
+    min_distance_deg : float
+        Smallest angle between any two mounted devices.
+    """
+
+    cells: FloatArray
+    ph_lab: FloatArray
+    lab_deg: FloatArray
+    min_distance_deg: float
+
+
+def lab_degrees(cells: ArrayLike, ph_lab: ArrayLike) -> FloatArray:
+    """(n, 4) ``(theta_i, phi_i, theta_v, phi_v)`` degrees of cells placed at lab ``ph``."""
+    c = np.asarray(cells, dtype=float).reshape(-1, 3)
+    wi, wo = geo.half_diff_to_directions(c[:, 0], np.asarray(ph_lab, dtype=float), c[:, 1], c[:, 2])
+    ti, pi = geo.direction_to_spherical(wi)
+    to, po = geo.direction_to_spherical(wo)
+    # Round-off can leave an azimuth a hair below 360; fold it to 0.
+    out = np.rad2deg(np.stack([ti, pi, to, po], axis=-1))
+    out[:, 1::2] = np.where(out[:, 1::2] > 360.0 - 1e-9, 0.0, out[:, 1::2])
+    return out
+
+
+def place_pairs(
+    cells: ArrayLike,
+    constraints: RigConstraints,
+    *,
+    ph_step_deg: float = 1.0,
+    orderings: int = 20,
+    seed: int = 0,
+) -> Placement:
+    """Choose each pair's lab azimuth so no two mounted devices come too close.
+
+    Greedy maximin: pairs are placed one after another (the most constrained first), each at
+    the allowed azimuth that keeps its two devices farthest from every device placed so far.
+    If some pair cannot keep ``min_device_distance_deg``, the placement is retried with
+    shuffled orders.
+
+    Parameters
+    ----------
+    cells : (n, 3) array_like, radians
+        ``(th, td, pd)`` of each pair.
+    constraints : RigConstraints
+    ph_step_deg : float
+        Azimuth resolution of the search, degrees.
+    orderings : int
+        Orders tried before giving up.
+    seed : int
+        Seed for the shuffled orders.
+
+    Returns
+    -------
+    Placement
+
+    Raises
+    ------
+    FeasibilityError
+        For zero pairs, a pair no azimuth can place (exclusions, elevation, separation), or
+        when no order keeps every two devices far enough apart.
+    """
+    c = np.asarray(cells, dtype=float).reshape(-1, 3)
+    n = c.shape[0]
+    if n == 0:
+        raise FeasibilityError("a design needs at least one pair; ask for --pairs 1 or more")
+    ph = ph_options(ph_step_deg)
+    wi, wo = geo.half_diff_to_directions(c[:, None, 0], ph[None, :], c[:, None, 1], c[:, None, 2])
+    allowed = device_ok(wi, constraints) & device_ok(wo, constraints)
+    own = np.rad2deg(angular_distance(wi[:, 0], wo[:, 0]))
+    for k in range(n):
+        where = (
+            f"pair {k} (th={np.rad2deg(c[k, 0]):.1f}, td={np.rad2deg(c[k, 1]):.1f}, "
+            f"pd={np.rad2deg(c[k, 2]):.1f} deg)"
+        )
+        if not allowed[k].any():
+            raise FeasibilityError(
+                f"{where} cannot be placed at any azimuth: a device is above the max elevation "
+                "or inside an excluded region; relax the constraints or drop the pair"
+            )
+        if own[k] < constraints.pair_separation_deg - 1e-6:
+            raise FeasibilityError(
+                f"{where}: its light and sensor are only {own[k]:.1f} deg apart, below the "
+                f"required {constraints.pair_separation_deg:g} deg; drop the pair or lower "
+                "--min-separation / --min-device-distance"
+            )
+    need = math.radians(constraints.min_device_distance_deg)
+    rng = np.random.default_rng(seed)
+    base = np.argsort(allowed.sum(axis=1), kind="stable")
+    best: tuple[float, NDArray[np.intp]] | None = None
+    for attempt in range(max(1, orderings)):
+        order = base if attempt == 0 else rng.permutation(n)
+        choice = _greedy(wi, wo, allowed, order)
+        worst = _repair(wi, wo, allowed, choice)
+        if best is None or worst > best[0]:
+            best = (worst, choice.copy())
+        if worst >= need - 1e-9:
+            break
+    assert best is not None
+    worst, choice = best
+    if worst < need - 1e-9:
+        raise FeasibilityError(
+            f"cannot mount {n} pairs with every two devices at least "
+            f"{constraints.min_device_distance_deg:g} deg apart (best found: "
+            f"{math.degrees(worst):.1f} deg after {orderings} orders); lower "
+            "--min-device-distance or ask for fewer pairs"
+        )
+    ph_lab = ph[choice]
+    all_dirs = np.concatenate([wi[np.arange(n), choice], wo[np.arange(n), choice]])
+    return Placement(
+        cells=c,
+        ph_lab=ph_lab,
+        lab_deg=lab_degrees(c, ph_lab),
+        min_distance_deg=math.degrees(min_pairwise_distance(all_dirs)),
+    )
+
+
+def _distances_to(wi: FloatArray, wo: FloatArray, k: int, dev: FloatArray) -> FloatArray:
+    """(P,) smallest angle from pair ``k``'s two devices, at each azimuth, to devices ``dev``."""
+    if dev.shape[0] == 0:
+        return np.full(wi.shape[1], math.inf)
+    return np.minimum(
+        angular_distance(wi[k][:, None, :], dev[None, :, :]).min(axis=1),
+        angular_distance(wo[k][:, None, :], dev[None, :, :]).min(axis=1),
+    )
+
+
+def _greedy(
+    wi: FloatArray, wo: FloatArray, allowed: BoolArray, order: NDArray[np.intp]
+) -> NDArray[np.intp]:
+    """Place pairs in ``order``, each at the allowed azimuth farthest from those placed."""
+    choice = np.zeros(wi.shape[0], dtype=np.intp)
+    placed: list[FloatArray] = []
+    for k in order:
+        dev = np.stack(placed) if placed else np.zeros((0, 3))
+        dist = np.where(allowed[k], _distances_to(wi, wo, int(k), dev), -math.inf)
+        choice[k] = int(np.argmax(dist))
+        placed.extend([wi[k, choice[k]], wo[k, choice[k]]])
+    return choice
+
+
+def _repair(
+    wi: FloatArray, wo: FloatArray, allowed: BoolArray, choice: NDArray[np.intp], rounds: int = 100
+) -> float:
+    """Coordinate ascent on the closest two devices; updates ``choice``, returns its min distance.
+
+    Greedy placement fixes early pairs before it knows the later ones; re-placing one pair of
+    the currently closest couple, with every other pair held, often opens the gap.
+    """
+    n = wi.shape[0]
+    idx = np.arange(n)
+
+    def devices() -> FloatArray:
+        return np.concatenate([wi[idx, choice], wo[idx, choice]])
+
+    def closest() -> tuple[float, tuple[int, int]]:
+        d = angular_distance(devices()[:, None, :], devices()[None, :, :])
+        np.fill_diagonal(d, math.inf)
+        a, b = np.unravel_index(int(np.argmin(d)), d.shape)
+        return float(d[a, b]), (int(a) % n, int(b) % n)
+
+    if n < 2:
+        return math.inf
+    worst, culprits = closest()
+    for _ in range(rounds):
+        improved = False
+        for k in culprits:
+            rest = idx != k
+            others = np.concatenate([wi[rest, choice[rest]], wo[rest, choice[rest]]])
+            own = angular_distance(wi[k], wo[k])  # the pair's own two devices, per azimuth
+            dist = np.minimum(_distances_to(wi, wo, k, others), own)
+            dist = np.where(allowed[k], dist, -math.inf)
+            j = int(np.argmax(dist))
+            old = choice[k]
+            choice[k] = j
+            new_worst, new_culprits = closest()
+            if new_worst > worst + 1e-12:
+                worst, culprits, improved = new_worst, new_culprits, True
+                break
+            choice[k] = old
+        if not improved:
+            break
+    return worst
+
+
+def check_devices(
+    lights: ArrayLike, sensors: ArrayLike, constraints: RigConstraints
+) -> list[str]:
+    """Constraint violations of a product rig's device directions (empty when feasible).
+
+    Parameters
+    ----------
+    lights : (L, 3) array_like
+        Light directions in the lab (unit vectors).
+    sensors : (S, 3) array_like
+        Sensor directions in the lab.
+    """
+    li = np.asarray(lights, dtype=float).reshape(-1, 3)
+    se = np.asarray(sensors, dtype=float).reshape(-1, 3)
+    problems: list[str] = []
+    for label, dirs in (("light", li), ("sensor", se)):
+        bad = ~device_ok(dirs, constraints)
+        problems += [
+            f"{label} {k} is above the max elevation or excluded" for k in np.flatnonzero(bad)
+        ]
+    sep = np.rad2deg(angular_distance(li[:, None, :], se[None, :, :]))
+    if sep.size and sep.min() < constraints.min_separation_deg - 1e-6:
+        problems.append(
+            f"a light and a sensor are {sep.min():.1f} deg apart "
+            f"(< {constraints.min_separation_deg:g})"
+        )
+    dmin = math.degrees(min_pairwise_distance(np.concatenate([li, se])))
+    if dmin < constraints.min_device_distance_deg - 1e-6:
+        problems.append(
+            f"two devices are {dmin:.1f} deg apart (< {constraints.min_device_distance_deg:g})"
+        )
+    return problems

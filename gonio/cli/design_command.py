@@ -1,0 +1,204 @@
+"""``gonio design``: choose light/sensor geometry for a rig, or evaluate a preset.
+
+Examples::
+
+    gonio design --pairs 10 --max-elevation 75 --min-device-distance 12 -o pairs.toml
+    gonio design --lights 3 --sensors 4 --exclude cone:0,0,10 -o product.toml
+    gonio design --preset MA98 --rotations 8
+
+The design is printed (cells and lab placements), with its condition number and the smallest
+roughness its plan can resolve at ``--rotations`` uniform stage angles, and can be written as a
+rig-config fragment (``[[lights]]``, ``[[sensors]]`` and the pairs) to merge into a rig config.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import Any, TextIO
+
+import numpy as np
+import tomli_w
+
+from gonio.brdf.design import (
+    BasisLike,
+    PairDesign,
+    design_pairs,
+    design_product_rig,
+    geometry_design,
+)
+from gonio.brdf.feasibility import RigConstraints, parse_exclusion
+from gonio.brdf.presets import get_preset, preset_names
+from gonio.brdf.roughness import RoughnessBound, roughness_bound
+from gonio.cli import UsageError
+
+
+def register(subparsers: Any) -> None:
+    p = subparsers.add_parser(
+        "design",
+        help="optimize light/sensor directions (or evaluate a preset) for a rig",
+        description=(
+            "Choose measurement geometry by minimizing the condition number of the basis rows "
+            "it samples (Vávra & Filip 2016, Sec. 3.3), under the rig's mounting limits."
+        ),
+    )
+    what = p.add_mutually_exclusive_group(required=True)
+    what.add_argument("--pairs", type=int, metavar="N", help="N independent light/sensor pairs")
+    what.add_argument("--lights", type=int, metavar="L",
+                      help="product rig: L lights, each measured with every sensor")
+    what.add_argument("--preset", metavar="NAME",
+                      help=f"evaluate an industrial geometry: {', '.join(preset_names())}")
+    p.add_argument("--sensors", type=int, metavar="S", help="product rig: S sensors")
+    p.add_argument("--max-elevation", type=float, default=80.0, metavar="DEG",
+                   help="largest device angle from the normal (default 80)")
+    p.add_argument("--min-separation", type=float, default=10.0, metavar="DEG",
+                   help="smallest light-sensor angle of a pair (default 10)")
+    p.add_argument("--min-device-distance", type=float, default=10.0, metavar="DEG",
+                   help="smallest angle between any two mounted devices (default 10)")
+    p.add_argument("--exclude", action="append", default=[], metavar="REGION",
+                   help="lab region without devices: cone:THETA,PHI,RADIUS or "
+                        "box:THETA_MIN,THETA_MAX,PHI_MIN,PHI_MAX (degrees); repeatable")
+    p.add_argument("--seed", type=int, default=0, help="random seed of the search (default 0)")
+    p.add_argument("--rotations", type=int, default=8, metavar="R",
+                   help="uniform stage angles for the roughness bound (default 8)")
+    p.add_argument("--starts", type=int, default=10, help="random starts (default 10)")
+    p.add_argument("--descents", type=int, default=10,
+                   help="descents per start for --pairs (default 10)")
+    p.add_argument("--neighbourhood", type=int, default=7, metavar="H",
+                   help="odd neighbourhood size of the search (default 7)")
+    p.add_argument("--time-limit", type=float, default=None, metavar="SECONDS",
+                   help="stop starting new descents after this long")
+    p.add_argument("--basis", type=Path, default=None, metavar="FILE",
+                   help="basis .npz (default: the default basis, built and cached on first use)")
+    p.add_argument("-o", "--output", type=Path, default=None, metavar="FILE",
+                   help="write the geometry as a rig-config TOML fragment")
+    p.set_defaults(func=run)
+
+
+def _constraints(args: argparse.Namespace) -> RigConstraints:
+    return RigConstraints(
+        max_elevation_deg=args.max_elevation,
+        min_separation_deg=args.min_separation,
+        min_device_distance_deg=args.min_device_distance,
+        exclusions=tuple(parse_exclusion(e) for e in args.exclude),
+    )
+
+
+def _load_basis(path: Path | None) -> BasisLike:
+    from gonio.brdf.basis import Basis, default_basis
+
+    if path is None:
+        return default_basis(progress=sys.stderr.isatty())
+    if not path.is_file():
+        raise UsageError(f"basis file {path} does not exist; give a .npz written by gonio")
+    return Basis.load(path)
+
+
+def _check_args(args: argparse.Namespace) -> None:
+    if args.pairs is not None and args.pairs < 1:
+        raise UsageError(f"--pairs must be at least 1, got {args.pairs}")
+    if args.lights is not None:
+        if args.sensors is None:
+            raise UsageError("--lights needs --sensors (a product rig measures every pair)")
+        if args.lights < 1 or args.sensors < 1:
+            raise UsageError("--lights and --sensors must both be at least 1")
+    elif args.sensors is not None:
+        raise UsageError("--sensors goes with --lights; for independent pairs use --pairs N")
+    if args.rotations < 1:
+        raise UsageError(f"--rotations must be at least 1, got {args.rotations}")
+    if args.neighbourhood < 1 or args.neighbourhood % 2 == 0:
+        raise UsageError(f"--neighbourhood must be an odd number >= 1, got {args.neighbourhood}")
+    if args.starts < 1 or args.descents < 1:
+        raise UsageError("--starts and --descents must be at least 1")
+
+
+def make_design(args: argparse.Namespace, basis: BasisLike) -> PairDesign:
+    """The design the arguments ask for (optimized pairs, product rig or preset)."""
+    if args.preset is not None:
+        preset = get_preset(args.preset)
+        wi, wo = preset.directions()
+        n = preset.n_pairs
+        return geometry_design(basis, preset.name, wi, wo, np.stack([np.arange(n)] * 2, axis=1))
+    constraints = _constraints(args)
+    if args.lights is not None:
+        return design_product_rig(
+            basis, args.lights, args.sensors, constraints, h=args.neighbourhood,
+            starts=args.starts, seed=args.seed, time_limit_s=args.time_limit,
+        )
+    return design_pairs(
+        basis, args.pairs, constraints, h=args.neighbourhood, starts=args.starts,
+        descents=args.descents, seed=args.seed, time_limit_s=args.time_limit,
+    )
+
+
+def fragment(design: PairDesign) -> dict[str, Any]:
+    """Rig-config fragment: ``lights``, ``sensors`` (name, theta_deg, phi_deg) and ``pairs``.
+
+    Independent pairs get one light and one sensor each (``L1``/``S1`` ...) and an explicit
+    ``[[pairs]]`` list; a product rig uses ``pairs = "all"``.
+    """
+    def devices(prefix: str, deg: np.ndarray) -> list[dict[str, Any]]:
+        return [
+            {"name": f"{prefix}{k + 1}", "theta_deg": round(float(t), 4),
+             "phi_deg": round(float(p) % 360.0, 4)}
+            for k, (t, p) in enumerate(deg)
+        ]
+
+    out: dict[str, Any] = {}
+    if design.name == "product":
+        out["pairs"] = "all"
+    else:
+        out["pairs"] = [
+            {"light": f"L{a + 1}", "sensor": f"S{b + 1}"} for a, b in design.pairs.tolist()
+        ]
+    out["lights"] = devices("L", design.lights_deg)
+    out["sensors"] = devices("S", design.sensors_deg)
+    return out
+
+
+def print_design(
+    design: PairDesign, bound: RoughnessBound, rotations: int, out: TextIO | None = None
+) -> None:
+    """Human-readable table of the design, its condition number and roughness bound."""
+    out = sys.stdout if out is None else out
+    print(f"design: {design.name}, {design.n_pairs} pairs", file=out)
+    print(
+        f"{'pair':>4} {'th':>6} {'td':>6} {'pd':>6} | {'theta_i':>7} {'phi_i':>6} "
+        f"{'theta_v':>7} {'phi_v':>6}   (degrees)",
+        file=out,
+    )
+    cells = np.rad2deg(design.cells)
+    for k, (c, lab) in enumerate(zip(cells, design.lab_deg, strict=True)):
+        print(
+            f"{k + 1:>4} {c[0]:6.1f} {c[1]:6.1f} {c[2]:6.1f} | {lab[0]:7.1f} {lab[1] % 360:6.1f} "
+            f"{lab[2]:7.1f} {lab[3] % 360:6.1f}",
+            file=out,
+        )
+    print(f"condition number: {design.kappa:.4g}", file=out)
+    print(f"closest two devices: {design.min_distance_deg:.1f} deg", file=out)
+    if design.search is not None:
+        s = design.search
+        print(f"search: {s.neighbourhoods} neighbourhoods, {s.evaluations} candidates, "
+              f"{s.seconds:.1f} s", file=out)
+    print(
+        f"roughness bound at {rotations} rotations: alpha' = {bound.alpha_min:.3g} "
+        f"(N = {bound.n_effective:.0f} effective samples within {bound.cap_deg:g} deg of the "
+        f"normal, l* = {bound.degree})",
+        file=out,
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    _check_args(args)
+    _constraints(args)  # refuse bad limits and --exclude text before the (slow) basis load
+    basis = _load_basis(args.basis)
+    design = make_design(args, basis)
+    angles = np.arange(args.rotations) * (2.0 * np.pi / args.rotations)
+    bound = roughness_bound(design.cells, design.ph_lab, angles)
+    print_design(design, bound, args.rotations)
+    if args.output is not None:
+        args.output.parent.mkdir(parents=True, exist_ok=True)
+        args.output.write_bytes(tomli_w.dumps(fragment(design)).encode())
+        print(f"wrote {args.output}")
+    return 0

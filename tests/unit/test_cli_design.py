@@ -1,0 +1,98 @@
+"""Tests of ``gonio design`` through the real CLI entry point, with a small saved basis."""
+
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gonio.brdf import geometry as geo
+from gonio.brdf.basis import Basis
+from gonio.brdf.design import condition_number
+from gonio.cli import main
+
+
+@pytest.fixture(scope="module")
+def basis_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    # Smooth random columns over the (th, td, pd) grid stand in for a trained basis: the CLI
+    # only needs rows to condition, and building the real default basis takes minutes.
+    rng = np.random.default_rng(0)
+    th, td, pd = (a.ravel() for a in geo.grid_angles())
+    K = 8
+    feats = np.stack([th, td, np.cos(2 * pd), np.sin(2 * pd)], axis=1)
+    Q = np.cos(feats @ rng.normal(size=(4, K)) * 2.0 + rng.uniform(0, 6, size=K))
+    basis = Basis(Q, np.linspace(2.0, 1.0, K), np.ones(geo.N_ROWS), np.zeros(geo.N_ROWS),
+                  geo.valid_mask().ravel())
+    return basis.save(tmp_path_factory.mktemp("basis") / "small.npz")
+
+
+FAST = ["--starts", "1", "--descents", "1", "--neighbourhood", "3"]
+
+
+def test_design_pairs_writes_a_rig_fragment(basis_file: Path, tmp_path: Path,
+                                            capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "frag.toml"
+    code = main(["design", "--pairs", "4", "--basis", str(basis_file), "--seed", "3",
+                 "--min-device-distance", "12", *FAST, "-o", str(out)])
+    assert code == 0
+    text = capsys.readouterr().out
+    assert "condition number:" in text and "roughness bound at 8 rotations" in text
+    frag = tomllib.loads(out.read_text())
+    assert [d["name"] for d in frag["lights"]] == ["L1", "L2", "L3", "L4"]
+    assert len(frag["sensors"]) == 4 and len(frag["pairs"]) == 4
+    assert frag["pairs"][2] == {"light": "L3", "sensor": "S3"}
+    # The written geometry really has the printed condition number.
+    basis = Basis.load(basis_file)
+    li = np.deg2rad([[d["theta_deg"], d["phi_deg"]] for d in frag["lights"]])
+    se = np.deg2rad([[d["theta_deg"], d["phi_deg"]] for d in frag["sensors"]])
+    th, _, td, pd = geo.directions_to_half_diff(geo.spherical_to_direction(li[:, 0], li[:, 1]),
+                                                geo.spherical_to_direction(se[:, 0], se[:, 1]))
+    kappa = condition_number(basis.rows_at(th, td, pd))
+    printed = float(text.split("condition number:")[1].split()[0])
+    assert kappa == pytest.approx(printed, rel=1e-3)
+    assert all(d["theta_deg"] <= 80.0 + 1e-6 for d in frag["lights"] + frag["sensors"])
+
+
+def test_design_product_rig(basis_file: Path, tmp_path: Path,
+                            capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "prod.toml"
+    code = main(["design", "--lights", "2", "--sensors", "3", "--basis", str(basis_file),
+                 "--exclude", "cone:0,0,10", *FAST, "-o", str(out)])
+    assert code == 0
+    assert "6 pairs" in capsys.readouterr().out
+    frag = tomllib.loads(out.read_text())
+    assert frag["pairs"] == "all"
+    assert len(frag["lights"]) == 2 and len(frag["sensors"]) == 3
+    assert all(d["theta_deg"] >= 10.0 - 1e-6 for d in frag["lights"] + frag["sensors"])
+
+
+def test_design_preset(basis_file: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["design", "--preset", "ma98", "--basis", str(basis_file)]) == 0
+    text = capsys.readouterr().out
+    assert "design: MA98, 19 pairs" in text
+
+
+@pytest.mark.parametrize(
+    ("argv", "match"),
+    [
+        (["--pairs", "0"], "--pairs must be at least 1"),
+        (["--lights", "2"], "--lights needs --sensors"),
+        (["--pairs", "2", "--sensors", "2"], "--sensors goes with --lights"),
+        (["--pairs", "2", "--exclude", "ring:1"], "cone:THETA,PHI,RADIUS"),
+        (["--pairs", "2", "--max-elevation", "120"], "max elevation"),
+        (["--pairs", "2", "--neighbourhood", "4"], "odd number"),
+        (["--preset", "XYZ"], "known presets are MA68, MA98, BYK-mac, MultiFX10"),
+        (["--pairs", "2", "--basis", "/nonexistent/basis.npz"], "does not exist"),
+        (["--pairs", "3", "--max-elevation", "5", "--min-separation", "30"],
+         "no grid cell is feasible"),
+    ],
+)
+def test_user_errors_are_one_clear_line(argv: list[str], match: str, basis_file: Path,
+                                        capsys: pytest.CaptureFixture[str]) -> None:
+    if "--basis" not in argv:
+        argv = [*argv, "--basis", str(basis_file)]
+    assert main(["design", *FAST, *argv]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("gonio design: error:") and match in err
