@@ -15,9 +15,10 @@ import asyncio
 import time
 
 from gonio.drivers.factory import build_rig
+from gonio.sim.rig import SimRigOptions, start_sim_rig
+
 from gonio.engine import ScanEngine
 from gonio.plans import ExposureSettings, RigDescription, UniformPlan, dry_run
-from gonio.sim.rig import SimRigOptions, start_sim_rig
 from gonio.store import JobStore
 
 

@@ -62,7 +62,7 @@ class BRDFModel(Protocol):
         """Channel names, one per output column of :meth:`eval`."""
         ...
 
-    def eval(self, wi: FloatArray, wo: FloatArray) -> NDArray[Any]:
+    def eval(self, wi: ArrayLike, wo: ArrayLike) -> NDArray[Any]:
         """BRDF values, (N, 3) + (N, 3) unit vectors -> (N, C) in 1/sr (0 below the horizon)."""
         ...
 

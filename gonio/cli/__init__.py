@@ -16,6 +16,10 @@ from gonio import __version__
 
 COMMAND_MODULES: tuple[str, ...] = (
     "gonio.cli.brdf_commands",
+    "gonio.cli.scan_commands",
+    "gonio.cli.sim_command",
+    "gonio.cli.serve_command",
+    "gonio.cli.design_command",
 )
 
 

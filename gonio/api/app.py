@@ -1,0 +1,136 @@
+"""The FastAPI application: a thin HTTP layer over one :class:`gonio.service.GonioService`.
+
+:func:`create_app` wires routes, guards (keys, maintenance lock, body limit), error mapping and
+the lab page. The service's typed errors become HTTP statuses in one place here:
+
+==========================================  ======
+:class:`gonio.service.NotFound` (store's)   404
+:class:`gonio.service.Conflict`             409
+:class:`gonio.jobstates.IllegalTransition`  409
+:class:`gonio.plans.PlanError`              422
+==========================================  ======
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import AsyncIterator, Awaitable, Callable
+from contextlib import asynccontextmanager
+from pathlib import Path
+
+from fastapi import FastAPI, Request
+from fastapi.responses import FileResponse, JSONResponse
+from fastapi.staticfiles import StaticFiles
+
+from gonio import __version__
+from gonio.api import routes_jobs, routes_results, routes_rig, routes_system
+from gonio.api.events import HEARTBEAT_S
+from gonio.api.settings import ApiSettings, install
+from gonio.calibration import CalibrationError
+from gonio.jobstates import IllegalTransition
+from gonio.plans import PlanError
+from gonio.results import ResultFileError
+from gonio.service import Conflict, GonioService
+from gonio.store import NotFound
+
+log = logging.getLogger("gonio.api")
+
+STATIC_DIR = Path(__file__).with_name("static")
+
+DESCRIPTION = """\
+REST API of the gonio acquisition daemon. Changes need an API key in the `X-API-Key` header;
+reads are open unless the daemon is configured otherwise. Live events: `GET /api/v1/events`
+(server-sent events; resume with `Last-Event-ID` or `?since=`). See docs/api.md.
+"""
+
+
+def _error(status: int, exc: Exception) -> JSONResponse:
+    return JSONResponse({"detail": str(exc)}, status_code=status)
+
+
+def _mapped(status: int) -> Callable[[Request, Exception], Awaitable[JSONResponse]]:
+    """An exception handler answering ``status`` with the exception's (user-facing) message."""
+
+    async def handler(_request: Request, exc: Exception) -> JSONResponse:
+        return _error(status, exc)
+
+    return handler
+
+
+def create_app(
+    service: GonioService,
+    settings: ApiSettings | None = None,
+    *,
+    manage_service: bool = True,
+    sse_heartbeat_s: float = HEARTBEAT_S,
+) -> FastAPI:
+    """Build the HTTP app over ``service``.
+
+    Parameters
+    ----------
+    service : GonioService
+    settings : ApiSettings, optional
+        Keys, data directory (maintenance lock), body limit. Default: no keys (read-only).
+    manage_service : bool
+        Start the service with the app's lifespan and stop it on shutdown. False when the
+        caller runs the service itself.
+    sse_heartbeat_s : float
+        Seconds between keep-alive comments on idle event streams.
+    """
+    settings = settings or ApiSettings()
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        if manage_service:
+            await service.start()
+        try:
+            yield
+        finally:
+            if manage_service:
+                await service.stop()
+
+    app = FastAPI(
+        title="gonio",
+        version=__version__,
+        description=DESCRIPTION,
+        lifespan=lifespan,
+        docs_url="/api/docs",
+        redoc_url=None,
+        openapi_url="/api/openapi.json",
+    )
+    app.state.service = service
+    app.state.started_at = time.monotonic()
+    app.state.sse_subscribers = 0
+    app.state.sse_heartbeat_s = sse_heartbeat_s
+    install(app, settings)
+
+    for exc_type, status in (
+        (NotFound, 404),
+        (Conflict, 409),
+        (IllegalTransition, 409),
+        (CalibrationError, 409),
+        (PlanError, 422),
+    ):
+        app.add_exception_handler(exc_type, _mapped(status))
+
+    async def result_file_error(request: Request, exc: Exception) -> JSONResponse:
+        # A job's result file that cannot be read is a server-side problem worth a log line,
+        # but the client gets a message, not a stack trace.
+        log.error("%s %s: %s", request.method, request.url.path, exc)
+        return _error(500, exc)
+
+    app.add_exception_handler(ResultFileError, result_file_error)
+
+    app.include_router(routes_system.router)
+    app.include_router(routes_rig.router)
+    app.include_router(routes_jobs.router)
+    app.include_router(routes_results.router)
+
+    app.mount("/static", StaticFiles(directory=STATIC_DIR), name="static")
+
+    @app.get("/", include_in_schema=False)
+    def index() -> FileResponse:
+        return FileResponse(STATIC_DIR / "index.html", headers={"Cache-Control": "no-cache"})
+
+    return app

@@ -1,0 +1,163 @@
+"""API keys: who may change the rig, and who may look at it.
+
+Every mutating endpoint needs a valid key in the ``X-API-Key`` header. Read-only endpoints are
+open unless the daemon is configured with ``read_requires_key``. A missing key is answered with
+401, a wrong one with 403.
+
+Keys are held only as SHA-256 digests and compared with :func:`hmac.compare_digest` against
+*every* configured digest without stopping at the first match, so the time a check takes does not
+tell an attacker how many characters were right, nor which key matched. A key is known to the
+rest of the daemon (logs, events) only by its name, never by its value.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import hmac
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+from fastapi import Depends, HTTPException, Request, status
+from fastapi.security import APIKeyHeader
+
+API_KEY_HEADER = "X-API-Key"
+MIN_KEY_LENGTH = 16
+"""Shorter keys are refused at start-up: a lab network is not a trusted network."""
+
+# auto_error=False: we answer 401 ourselves with a message that says what to do.
+_api_key_scheme = APIKeyHeader(
+    name=API_KEY_HEADER,
+    auto_error=False,
+    description="API key of the daemon (see docs/api.md, 'Keys'). Required for every change.",
+)
+
+
+class KeyringError(ValueError):
+    """A configured API key is unusable; the message names it and says how to fix it."""
+
+
+def _digest(key: str) -> bytes:
+    return hashlib.sha256(key.encode("utf-8")).digest()
+
+
+class ApiKeyring:
+    """The set of accepted API keys, by name.
+
+    Parameters
+    ----------
+    keys : mapping of str to str
+        Key name (shown in logs and events, e.g. ``"alice"``) to key value.
+
+    Raises
+    ------
+    KeyringError
+        A key is shorter than :data:`MIN_KEY_LENGTH` characters or contains whitespace.
+    """
+
+    def __init__(self, keys: Mapping[str, str]) -> None:
+        digests: list[tuple[str, bytes]] = []
+        for name, key in keys.items():
+            if len(key) < MIN_KEY_LENGTH:
+                raise KeyringError(
+                    f"API key {name!r} is {len(key)} characters long; use at least "
+                    f"{MIN_KEY_LENGTH} (generate one with: python -c "
+                    "'import secrets; print(secrets.token_urlsafe(32))')"
+                )
+            if any(c.isspace() for c in key):
+                raise KeyringError(f"API key {name!r} contains whitespace; keys are single tokens")
+            digests.append((name, _digest(key)))
+        self._digests = tuple(digests)
+
+    def __len__(self) -> int:
+        return len(self._digests)
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(n for n, _ in self._digests)
+
+    def identify(self, presented: str | None) -> str | None:
+        """Name of the key ``presented`` matches, or None.
+
+        Runs the same comparisons whatever the input, so timing does not leak which key (or how
+        much of one) matched.
+        """
+        if presented is None:
+            return None
+        candidate = _digest(presented)
+        found: str | None = None
+        for name, digest in self._digests:
+            if hmac.compare_digest(candidate, digest) and found is None:
+                found = name
+        return found
+
+
+@dataclass(frozen=True)
+class AccessPolicy:
+    """Which requests need a key.
+
+    Parameters
+    ----------
+    keyring : ApiKeyring
+        Accepted keys. With no keys every mutation is refused (the daemon is read-only).
+    read_requires_key : bool
+        When True, read-only endpoints need a key too.
+    """
+
+    keyring: ApiKeyring = field(default_factory=lambda: ApiKeyring({}))
+    read_requires_key: bool = False
+
+
+@dataclass(frozen=True)
+class Caller:
+    """Who made a request: the key's name, or None for an anonymous read."""
+
+    key_name: str | None
+
+
+def _policy(request: Request) -> AccessPolicy:
+    policy: AccessPolicy = request.app.state.access_policy
+    return policy
+
+
+def _check(request: Request, presented: str | None, required: bool) -> Caller:
+    policy = _policy(request)
+    if presented is None or presented == "":
+        if not required:
+            return Caller(None)
+        if len(policy.keyring) == 0:
+            # Say plainly that no key can work, instead of sending the user hunting for one.
+            raise HTTPException(
+                status.HTTP_403_FORBIDDEN,
+                "this daemon has no API keys configured, so it is read-only; add a key to its "
+                "keys file (see docs/install.md) and restart it",
+            )
+        raise HTTPException(
+            status.HTTP_401_UNAUTHORIZED,
+            f"this request needs an API key in the {API_KEY_HEADER} header",
+        )
+    name = policy.keyring.identify(presented)
+    if name is None:
+        raise HTTPException(
+            status.HTTP_403_FORBIDDEN,
+            f"the API key in the {API_KEY_HEADER} header is not valid for this daemon",
+        )
+    request.state.key_name = name
+    return Caller(name)
+
+
+async def require_write_key(
+    request: Request, presented: str | None = Depends(_api_key_scheme)
+) -> Caller:
+    """FastAPI dependency for mutating endpoints: a valid key, always."""
+    return _check(request, presented, required=True)
+
+
+async def require_read_access(
+    request: Request, presented: str | None = Depends(_api_key_scheme)
+) -> Caller:
+    """FastAPI dependency for read-only endpoints: a valid key only when configured so.
+
+    A key that is present but wrong is refused even where none is needed, so a client with a
+    typo in its key learns about it on its first read rather than on its first write.
+    """
+    return _check(request, presented, required=_policy(request).read_requires_key)

@@ -1,0 +1,29 @@
+"""Shared FastAPI dependencies: the service, path parameters, and the guard sets of routes."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+from fastapi import Depends, Path, Request
+
+from gonio.api.auth import require_read_access, require_write_key
+from gonio.api.maintenance import refuse_while_locked
+from gonio.service import GonioService
+
+
+def get_service(request: Request) -> GonioService:
+    service: GonioService = request.app.state.service
+    return service
+
+
+Service = Annotated[GonioService, Depends(get_service)]
+
+# Job ids are positive integers: anything else (a path, "../x", a huge number) is a 422 before
+# any handler runs, which is what makes "result by job id only" traversal-proof.
+JobId = Annotated[int, Path(ge=1, le=2**62, description="job id, as returned when it was created")]
+
+READ = [Depends(require_read_access)]
+"""Read-only routes: open, or keyed when the daemon is configured so."""
+
+WRITE = [Depends(require_write_key), Depends(refuse_while_locked)]
+"""Mutating routes: a valid key, and no maintenance lock (checked in that order: 401/403, 423)."""

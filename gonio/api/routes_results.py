@@ -1,0 +1,158 @@
+"""Result routes: the HDF5 file, a preview image, metrics and one slice of the reconstruction.
+
+Files are found by job id only: the path comes from the job's record, never from the request,
+so no request can name a file of its choosing (``JobId`` is an integer path parameter).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+from collections import OrderedDict
+from pathlib import Path
+from threading import Lock
+from typing import Any
+
+from fastapi import APIRouter, Query, Response
+from fastapi.responses import FileResponse
+from pydantic import BaseModel, Field
+
+from gonio.api.deps import READ, JobId, Service
+from gonio.api.preview import preview_png
+from gonio.brdf import geometry as geo
+from gonio.brdf.table import BRDFTable
+from gonio.results import read_result
+from gonio.service import NotFound
+
+router = APIRouter(prefix="/api/v1/jobs", tags=["results"])
+
+_NO_RESULT: dict[int | str, dict[str, Any]] = {
+    404: {"description": "no such job, or it has no result yet"}
+}
+_GRID_STEP_DEG = 5
+
+
+class Slice(BaseModel):
+    """The reconstructed BRDF along phi_h at one (theta_h, theta_d, phi_d) grid cell."""
+
+    theta_h_deg: float
+    theta_d_deg: float
+    phi_d_deg: float
+    phi_h_deg: list[float] = Field(description="72 azimuths of the half vector, degrees")
+    values: dict[str, list[float | None]] = Field(
+        description="channel -> 72 BRDF values, 1/sr; null where the cell is invalid"
+    )
+
+
+class _TableCache:
+    """The last few reconstructed tables (5 MB each), so moving a slice is not a file read."""
+
+    def __init__(self, size: int = 2) -> None:
+        self.size = size
+        self._lock = Lock()
+        self._tables: OrderedDict[Path, BRDFTable] = OrderedDict()
+
+    def get(self, path: Path) -> BRDFTable | None:
+        with self._lock:
+            if path in self._tables:
+                self._tables.move_to_end(path)
+                return self._tables[path]
+        res = read_result(path)
+        if res.table is None:
+            return None
+        with self._lock:
+            self._tables[path] = res.table
+            while len(self._tables) > self.size:
+                self._tables.popitem(last=False)
+        return res.table
+
+
+_tables = _TableCache()
+
+
+@router.get(
+    "/{job_id}/result",
+    dependencies=READ,
+    responses={**_NO_RESULT, 200: {"content": {"application/x-hdf5": {}}}},
+    response_class=FileResponse,
+    summary="Download the job's HDF5 result file (layout: docs/api.md)",
+)
+def result_file(job_id: JobId, service: Service) -> FileResponse:
+    path = service.result_path(job_id)
+    if not path.is_file():
+        raise NotFound(
+            f"job {job_id}'s result file is missing from the data directory ({path.name})"
+        )
+    return FileResponse(path, media_type="application/x-hdf5", filename=f"gonio-job-{job_id}.h5")
+
+
+@router.get(
+    "/{job_id}/metrics",
+    dependencies=READ,
+    responses=_NO_RESULT,
+    summary="Result summary and error metrics (self-estimated error, samples, timing)",
+)
+def metrics(job_id: JobId, service: Service) -> dict[str, Any]:
+    return service.metrics(job_id)
+
+
+@router.get(
+    "/{job_id}/preview.png",
+    dependencies=READ,
+    responses={**_NO_RESULT, 200: {"content": {"image/png": {}}}},
+    response_class=Response,
+    summary="PNG preview of the reconstructed BRDF",
+)
+async def preview(job_id: JobId, service: Service) -> Response:
+    path = service.result_path(job_id)
+    table = await asyncio.to_thread(_tables.get, path)
+    if table is None:
+        raise NotFound(f"job {job_id} has no reconstructed BRDF (a calibration job has none)")
+    png = await asyncio.to_thread(preview_png, table)
+    return Response(png, media_type="image/png", headers={"Cache-Control": "max-age=3600"})
+
+
+def _grid(value: float, name: str, upper: int) -> int:
+    from gonio.plans import PlanError
+
+    if value % _GRID_STEP_DEG != 0 or not 0 <= value <= upper:
+        raise PlanError(
+            f"{name} = {value:g} deg is not on the 5 degree grid; use a multiple of 5 in "
+            f"[0, {upper}]"
+        )
+    return int(value) // _GRID_STEP_DEG
+
+
+@router.get(
+    "/{job_id}/slice",
+    dependencies=READ,
+    responses={**_NO_RESULT, 422: {"description": "angle not on the 5 degree grid"}},
+    summary="The reconstructed BRDF against phi_h at one (theta_h, theta_d, phi_d) cell",
+)
+async def slice_(
+    job_id: JobId,
+    service: Service,
+    theta_h: float = Query(30, ge=0, le=85, description="degrees, multiple of 5"),
+    theta_d: float = Query(30, ge=0, le=85, description="degrees, multiple of 5"),
+    phi_d: float = Query(90, ge=0, le=175, description="degrees, multiple of 5"),
+) -> Slice:
+    i_th, i_td, i_pd = (
+        _grid(theta_h, "theta_h", 85),
+        _grid(theta_d, "theta_d", 85),
+        _grid(phi_d, "phi_d", 175),
+    )
+    path = service.result_path(job_id)
+    table = await asyncio.to_thread(_tables.get, path)
+    if table is None:
+        raise NotFound(f"job {job_id} has no reconstructed BRDF (a calibration job has none)")
+    column = table.values[:, :, i_th, i_td, i_pd]  # (C, 72)
+    return Slice(
+        theta_h_deg=theta_h,
+        theta_d_deg=theta_d,
+        phi_d_deg=phi_d,
+        phi_h_deg=[float(math.degrees(p)) for p in geo.PH_GRID],
+        values={
+            ch: [None if not math.isfinite(float(v)) else float(v) for v in column[c]]
+            for c, ch in enumerate(table.channels)
+        },
+    )

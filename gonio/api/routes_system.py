@@ -1,0 +1,105 @@
+"""Health, Prometheus metrics and the live event stream."""
+
+from __future__ import annotations
+
+import time
+from collections import Counter
+
+from fastapi import APIRouter, Header, Query, Request
+from fastapi.responses import PlainTextResponse, StreamingResponse
+from pydantic import BaseModel
+
+from gonio import __version__
+from gonio.api.deps import READ, Service
+from gonio.api.events import sse_stream
+from gonio.api.prometheus import CONTENT_TYPE, Sample, render
+from gonio.jobstates import JobState
+
+router = APIRouter(tags=["system"])
+
+
+class Health(BaseModel):
+    status: str
+    version: str
+    seq: int
+    uptime_s: float
+
+
+@router.get("/health", summary="Liveness: the daemon answers and its store is readable")
+def health(service: Service, request: Request) -> Health:
+    return Health(
+        status="ok",
+        version=__version__,
+        seq=service.seq,
+        uptime_s=time.monotonic() - request.app.state.started_at,
+    )
+
+
+@router.get(
+    "/metrics",
+    dependencies=READ,
+    response_class=PlainTextResponse,
+    responses={200: {"content": {CONTENT_TYPE: {}}}},
+    summary="Prometheus metrics (text exposition format 0.0.4)",
+)
+def metrics(service: Service, request: Request) -> PlainTextResponse:
+    counts = Counter(j.state for j in service.list_jobs())
+    samples = [
+        Sample("gonio_jobs", "Jobs in the store, by state.", counts.get(s, 0), {"state": s.value})
+        for s in JobState
+    ]
+    samples.append(Sample("gonio_events_seq", "Sequence number of the latest event.", service.seq))
+    samples.append(Sample("gonio_sse_subscribers", "Open event streams.",
+                          request.app.state.sse_subscribers))
+    samples.append(Sample("gonio_maintenance_locked", "1 while the maintenance lock is set.",
+                          float(request.app.state.maintenance.state().locked)))
+    samples.append(Sample("gonio_queue_held", "1 while the queue is held (halt, failure).",
+                          float(service.worker.held is not None)))
+    eng = service.worker.engine
+    if eng is not None:
+        p = eng.progress
+        labels = {"job": str(eng.job_id)}
+        samples.append(Sample("gonio_job_angles_done", "Stage angles measured in the running job.",
+                              float(getattr(p, "done", 0)), labels))
+        samples.append(Sample("gonio_job_angles_total", "Stage angles planned in the running job.",
+                              float(getattr(p, "total", 0)), labels))
+    return PlainTextResponse(render(samples, request.app.state.request_stats),
+                             media_type=CONTENT_TYPE)
+
+
+@router.get(
+    "/api/v1/events",
+    dependencies=READ,
+    response_class=StreamingResponse,
+    responses={200: {"content": {"text/event-stream": {}}}},
+    summary="Live events (server-sent events); resume with Last-Event-ID or ?since=",
+)
+async def events(
+    service: Service,
+    request: Request,
+    since: int | None = Query(None, ge=0, description="replay events after this seq"),
+    job_id: int | None = Query(None, ge=1, description="only this job's events"),
+    last_event_id: str | None = Header(None, description="set by EventSource on reconnect"),
+) -> StreamingResponse:
+    start = since
+    if start is None and last_event_id is not None and last_event_id.strip().isdigit():
+        start = int(last_event_id)
+    if start is None:
+        start = service.seq  # a fresh client wants what happens from now on
+    app_state = request.app.state
+
+    async def counted():  # type: ignore[no-untyped-def]
+        app_state.sse_subscribers += 1
+        try:
+            async for chunk in sse_stream(service.subscribe(start, job_id=job_id),
+                                          app_state.sse_heartbeat_s):
+                yield chunk
+        finally:
+            app_state.sse_subscribers -= 1
+
+    return StreamingResponse(
+        counted(),
+        media_type="text/event-stream",
+        # no-transform / X-Accel-Buffering: proxies must not buffer or compress the stream.
+        headers={"Cache-Control": "no-cache, no-transform", "X-Accel-Buffering": "no"},
+    )

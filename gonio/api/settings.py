@@ -1,0 +1,78 @@
+"""What the API layer needs to know from the daemon config, and how it is installed on an app."""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from fastapi import FastAPI
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
+
+from gonio.api.auth import AccessPolicy
+from gonio.api.limits import DEFAULT_MAX_BODY_BYTES, BodySizeLimit
+from gonio.api.maintenance import LOCK_FILE_NAME, MaintenanceLock
+from gonio.api.prometheus import RequestStats
+
+log = logging.getLogger("gonio.api")
+
+
+@dataclass(frozen=True)
+class ApiSettings:
+    """Settings of the HTTP layer.
+
+    Parameters
+    ----------
+    access : AccessPolicy
+        API keys and whether reads need one.
+    data_dir : Path
+        The daemon's data directory; holds the maintenance lock file.
+    max_body_bytes : int
+        Largest accepted request body, bytes (larger gets 413).
+    """
+
+    access: AccessPolicy = field(default_factory=AccessPolicy)
+    data_dir: Path = Path("gonio-data")
+    max_body_bytes: int = DEFAULT_MAX_BODY_BYTES
+
+
+class RequestTimer:
+    """ASGI middleware recording count and latency per route template for ``/metrics``.
+
+    The route *template* (``/api/v1/jobs/{job_id}``), not the raw path, is the label, so the
+    number of series stays bounded whatever clients send.
+    """
+
+    def __init__(self, app: ASGIApp, stats: RequestStats) -> None:
+        self.app = app
+        self.stats = stats
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        t0 = time.perf_counter()
+        status = 500
+
+        async def timed_send(message: Message) -> None:
+            nonlocal status
+            if message["type"] == "http.response.start":
+                status = int(message["status"])
+                route = scope.get("route")
+                template = getattr(route, "path", None) or "(unmatched)"
+                self.stats.observe(scope["method"], template, status, time.perf_counter() - t0)
+            await send(message)
+
+        await self.app(scope, receive, timed_send)
+
+
+def install(app: FastAPI, settings: ApiSettings) -> None:
+    """Attach the access policy, maintenance lock, body limit and request timing to ``app``."""
+    app.state.access_policy = settings.access
+    app.state.maintenance = MaintenanceLock(settings.data_dir / LOCK_FILE_NAME)
+    app.state.request_stats = RequestStats()
+    # The middleware added last is the outermost: the timer wraps the body limit, so 413s are
+    # counted too.
+    app.add_middleware(BodySizeLimit, max_bytes=settings.max_body_bytes)
+    app.add_middleware(RequestTimer, stats=app.state.request_stats)

@@ -1,0 +1,98 @@
+// The daemon's REST API and its event stream, as used by the lab page.
+// The key lives in sessionStorage: it survives reloads of this tab, not closing it.
+
+const KEY_STORAGE = "gonio.apiKey";
+export const API = "/api/v1";
+
+export function getKey() { return sessionStorage.getItem(KEY_STORAGE) ?? ""; }
+export function setKey(key) {
+  if (key) sessionStorage.setItem(KEY_STORAGE, key); else sessionStorage.removeItem(KEY_STORAGE);
+}
+
+function headers(extra = {}) {
+  const h = { ...extra };
+  const key = getKey();
+  if (key) h["X-API-Key"] = key;
+  return h;
+}
+
+export class ApiError extends Error {
+  constructor(status, detail) {
+    super(typeof detail === "string" ? detail : JSON.stringify(detail));
+    this.status = status;
+  }
+}
+
+async function check(resp) {
+  if (resp.ok) return resp;
+  let detail = resp.statusText;
+  try {
+    const body = await resp.json();
+    detail = body.detail ?? body;
+    // Validation errors arrive as a list of {loc, msg}: show them as one readable line.
+    if (Array.isArray(detail)) detail = detail.map((d) => `${(d.loc ?? []).slice(1).join(".")}: ${d.msg}`).join("; ");
+  } catch { /* not JSON: keep the status text */ }
+  throw new ApiError(resp.status, detail);
+}
+
+export async function getJSON(path) {
+  return (await check(await fetch(API + path, { headers: headers() }))).json();
+}
+
+export async function send(method, path, body = undefined) {
+  const init = { method, headers: headers(body === undefined ? {} : { "Content-Type": "application/json" }) };
+  if (body !== undefined) init.body = JSON.stringify(body);
+  const resp = await check(await fetch(API + path, init));
+  return resp.status === 204 ? null : resp.json();
+}
+
+export async function getBlob(path) {
+  return (await check(await fetch(API + path, { headers: headers() }))).blob();
+}
+
+/**
+ * Follow the server-sent event stream, resuming after the last seen seq on every reconnect.
+ * EventSource cannot send the X-API-Key header, so this reads the stream with fetch.
+ * @param {(ev: {seq: number, type: string, job_id: number|null, data: object}) => void} onEvent
+ * @param {(live: boolean) => void} onState
+ * @returns {() => void} stop function
+ */
+export function followEvents(onEvent, onState, since = null) {
+  let stopped = false, last = since, controller = null;
+  async function once() {
+    controller = new AbortController();
+    const q = last === null ? "" : `?since=${last}`;
+    const resp = await check(await fetch(`${API}/events${q}`, { headers: headers(), signal: controller.signal }));
+    onState(true);
+    const reader = resp.body.pipeThrough(new TextDecoderStream()).getReader();
+    let buf = "";
+    for (;;) {
+      const { value, done } = await reader.read();
+      if (done) return;
+      buf += value;
+      let cut;
+      while ((cut = buf.indexOf("\n\n")) >= 0) {
+        const block = buf.slice(0, cut); buf = buf.slice(cut + 2);
+        let id = null, data = "";
+        for (const line of block.split("\n")) {
+          if (line.startsWith("id:")) id = Number(line.slice(3).trim());
+          else if (line.startsWith("data:")) data += line.slice(5).trim();
+        }
+        if (!data) continue; // keep-alive comment
+        const ev = JSON.parse(data);
+        if (id !== null) last = id;
+        onEvent(ev);
+      }
+    }
+  }
+  (async () => {
+    let delay = 500;
+    while (!stopped) {
+      try { await once(); delay = 500; } catch (e) { if (stopped) return; }
+      onState(false);
+      await new Promise((r) => setTimeout(r, delay));
+      delay = Math.min(delay * 2, 10000);
+    }
+  })();
+  return () => { stopped = true; controller?.abort(); };
+}

@@ -1,0 +1,360 @@
+"""Science commands: ``gonio basis build``, ``simulate-scan``, ``reconstruct`` and ``demo``.
+
+Angles on the command line and in pair files are degrees; the numerical core works in radians
+and the conversion happens here, at the edge.
+
+Pair files (``--pairs``) list one light/sensor pair per row, either as lab directions
+``theta_i, phi_i, theta_v, phi_v`` (degrees, both vectors pointing away from the surface) or
+as half/difference cells ``th, td, pd, ph`` (degrees, ``ph`` the lab half-vector azimuth).
+Three spellings are read:
+
+* CSV with a header row naming the four columns;
+* JSON: ``{"pairs": [{"theta_i": 45, "phi_i": 0, "theta_v": 30, "phi_v": 180}, ...]}`` or the
+  bare list;
+* TOML: ``[[pairs]]`` tables with the same keys.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import time
+import tomllib
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from gonio.cli import UsageError
+
+FloatArray = NDArray[np.float64]
+LAB_KEYS = ("theta_i", "phi_i", "theta_v", "phi_v")
+CELL_KEYS = ("th", "td", "pd", "ph")
+DEMO_MATERIAL = "brushed-metal-003"
+
+
+# ---------------------------------------------------------------------------- pair files
+def _rows_from_file(path: Path) -> list[Mapping[str, Any]]:
+    if not path.is_file():
+        raise UsageError(f"pairs file {path} does not exist")
+    suffix = path.suffix.lower()
+    try:
+        if suffix == ".csv":
+            with open(path, newline="") as fh:
+                return [
+                    {k.strip(): v for k, v in row.items() if k is not None}
+                    for row in csv.DictReader(fh)
+                ]
+        if suffix == ".json":
+            data: Any = json.loads(path.read_text())
+        elif suffix == ".toml":
+            data = tomllib.loads(path.read_text())
+        else:
+            raise UsageError(
+                f"pairs file {path}: unknown type {suffix!r}; use .csv, .json or .toml"
+            )
+    except (json.JSONDecodeError, tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise UsageError(f"pairs file {path} cannot be parsed: {exc}") from None
+    if isinstance(data, Mapping):
+        data = data.get("pairs")
+    if not isinstance(data, list) or not all(isinstance(r, Mapping) for r in data):
+        raise UsageError(
+            f"pairs file {path}: expected a list of pairs (a top-level \"pairs\" list of tables "
+            f"with keys {', '.join(LAB_KEYS)} or {', '.join(CELL_KEYS)})"
+        )
+    return list(data)
+
+
+def read_pairs(path: str | Path) -> tuple[FloatArray, FloatArray]:
+    """Cells (n, 3) and lab azimuths (n,), radians, from a pairs file (module docstring)."""
+    from gonio.brdf.reconstruct import ReconstructionError, pair_cells
+
+    p = Path(path)
+    rows = _rows_from_file(p)
+    if not rows:
+        raise UsageError(f"pairs file {p} lists no pairs")
+    keys = set(rows[0])
+    kind = LAB_KEYS if set(LAB_KEYS) <= keys else CELL_KEYS if set(CELL_KEYS) <= keys else None
+    if kind is None:
+        raise UsageError(
+            f"pairs file {p}: columns {sorted(keys)}; give either {', '.join(LAB_KEYS)} "
+            f"(lab directions) or {', '.join(CELL_KEYS)} (cells), in degrees"
+        )
+    try:
+        deg = np.array([[float(r[k]) for k in kind] for r in rows])
+    except (KeyError, TypeError, ValueError) as exc:
+        raise UsageError(
+            f"pairs file {p}: every pair needs numeric {', '.join(kind)} ({exc})"
+        ) from None
+    if not np.isfinite(deg).all():
+        raise UsageError(f"pairs file {p}: angles must be finite numbers")
+    rad = np.deg2rad(deg)
+    if kind == CELL_KEYS:
+        return rad[:, :3], rad[:, 3]
+    if (deg[:, [0, 2]] >= 90).any() or (deg[:, [0, 2]] < 0).any():
+        raise UsageError(f"pairs file {p}: theta_i and theta_v must be in [0, 90) degrees")
+    from gonio.brdf import geometry as geo
+
+    try:
+        return pair_cells(
+            geo.spherical_to_direction(rad[:, 0], rad[:, 1]),
+            geo.spherical_to_direction(rad[:, 2], rad[:, 3]),
+        )
+    except ReconstructionError as exc:
+        raise UsageError(f"pairs file {p}: {exc}") from None
+
+
+def simple_pairs(n: int) -> tuple[FloatArray, FloatArray]:
+    """A deterministic fallback design of ``n`` pairs on the 5 degree grid.
+
+    Used by the demo when no optimized design is available: ``th`` sweeps 0-50 deg, ``td``
+    5-35 deg (so ``th + td <= 85`` deg and every cell is above the horizon whatever ``pd``)
+    and ``pd`` follows a golden-ratio sequence over [0, 180) deg, so the pairs cover the
+    specular peak, the off-specular ridge and a spread of separations; the lab azimuths are
+    spread the same way so the pairs see different slices at each stage angle.
+    """
+    from gonio.brdf import geometry as geo
+
+    k = np.arange(n)
+    th = np.rint((k + 0.5) / n * 10) * geo.STEP  # 0..50 deg
+    td = np.rint(1 + ((k * 7) % n) / max(n - 1, 1) * 6) * geo.STEP  # 5..35 deg
+    pd = np.rint(np.mod(k * 0.6180339887, 1.0) * geo.N_PD) % geo.N_PD * geo.STEP
+    ph = np.rint(np.mod(k * 0.381966, 1.0) * geo.N_PH) % geo.N_PH * geo.STEP
+    return np.stack([th, td, pd], axis=1), ph
+
+
+# ---------------------------------------------------------------------------- commands
+def _cmd_basis_build(args: argparse.Namespace) -> int:
+    from gonio.brdf import library
+    from gonio.brdf.basis import build_basis
+
+    if args.components < 1:
+        raise UsageError(f"--components must be at least 1, got {args.components}")
+    t0 = time.perf_counter()
+    tables = library.default_library(extra_dirs=args.extra, progress=True)
+    basis = build_basis(tables, args.components, progress=True)
+    if args.output is not None:
+        out = Path(args.output)
+    elif args.extra:
+        raise UsageError(
+            "a basis with --extra tables is not the default basis; say where to write it with -o"
+        )
+    else:  # the default basis: put it where default_basis() will find it
+        out = (library.cache_root() / "basis"
+               / f"default-K{args.components}-{library.library_key()[:16]}.npz")
+        out.parent.mkdir(parents=True, exist_ok=True)
+    basis.save(out)
+    print(
+        f"basis: K={basis.K} from {len(basis.materials)} materials "
+        f"({basis.provenance['n_columns']} columns) in {time.perf_counter() - t0:.1f} s -> {out}"
+    )
+    return 0
+
+
+def _load_specimen(args: argparse.Namespace) -> tuple[Any, str]:
+    if args.table is not None:
+        from gonio.brdf.table import BRDFTable
+
+        t = BRDFTable.load(args.table)
+        return t, t.name
+    from gonio.brdf.library import get_material
+
+    return get_material(args.material), args.material
+
+
+def _cmd_simulate_scan(args: argparse.Namespace) -> int:
+    from gonio.brdf.samples import NoiseModel, Samples, simulate_samples, uniform_stage_angles
+
+    if args.rotations < 1:
+        raise UsageError(f"--rotations must be at least 1, got {args.rotations}")
+    specimen, name = _load_specimen(args)
+    if args.pairs is not None:
+        cells, ph = read_pairs(args.pairs)
+        source = str(args.pairs)
+    else:
+        from gonio.brdf.presets import get_preset
+
+        cells, ph = get_preset(args.design_preset).cells()
+        source = f"preset {args.design_preset}"
+    alpha = uniform_stage_angles(args.rotations, np.deg2rad(args.start))
+    noise = NoiseModel(args.noise, args.abs_noise, args.seed)
+    vals = simulate_samples(specimen, cells, ph, alpha, noise=noise)
+    channels = tuple(getattr(specimen, "channels", ("R", "G", "B")))
+    prov = {"simulated_from": name, "pairs": source, "noise_relative": args.noise,
+            "noise_absolute": args.abs_noise, "seed": args.seed}
+    out = Samples(cells, ph, alpha, vals, channels, prov).save(args.output)
+    print(f"simulated {cells.shape[0]} pairs x {alpha.size} rotations of {name} -> {out}")
+    return 0
+
+
+def _load_basis(path: str | None, progress: bool = True) -> Any:
+    from gonio.brdf.basis import Basis, default_basis
+
+    return Basis.load(path) if path is not None else default_basis(progress=progress)
+
+
+def _cmd_reconstruct(args: argparse.Namespace) -> int:
+    from gonio.brdf.reconstruct import reconstruct
+    from gonio.brdf.samples import Samples
+
+    samples = Samples.load(args.samples)
+    basis = _load_basis(args.basis)
+    name = args.name or Path(args.output).stem
+    rec = reconstruct(
+        basis, samples.cells, samples.ph_lab, samples.stage_angles, samples.values,
+        channels=samples.channels, eta=args.eta, lam=args.lam, n_components=args.components,
+        solver=args.solver, name=name,
+    )
+    rec.table.save(args.output)
+    s = rec.settings
+    print(f"reconstructed {name}: K={s['K']} n={s['n']} r={s['r']} solver={s['solver']}")
+    print(f"  sample error {100 * rec.rel_sample_error:.2f} %, "
+          f"self-estimated BRDF error {100 * rec.estimated_error:.2f} %, "
+          f"time {s['seconds']:.3f} s -> {args.output}")
+    if args.preview is not None:
+        from gonio.brdf.preview import save_preview
+
+        print(f"  preview -> {save_preview(rec.table, args.preview)}")
+    return 0
+
+
+def loo_basis(material: str, k: int) -> Any:
+    """Leave-one-out basis of the default library without ``material``, cached on disk."""
+    from gonio.brdf import library
+    from gonio.brdf.basis import Basis, BasisError, build_basis
+
+    folder = library.cache_root() / "basis"
+    path = folder / f"loo-{material}-K{k}-{library.library_key()[:16]}.npz"
+    if path.is_file():
+        try:
+            return Basis.load(path)
+        except BasisError:
+            pass  # damaged cache entry: rebuild
+    tables = library.default_library(progress=True)
+    kept = [t for t in tables if t.name != material]
+    if len(kept) == len(tables):
+        raise UsageError(f"{material!r} is not a library material")
+    basis = build_basis(kept, k, progress=True)
+    folder.mkdir(parents=True, exist_ok=True)
+    basis.save(path)
+    return basis
+
+
+def _library_table(material: str) -> Any:
+    """The cached library table of ``material`` (reading one file, not the whole library)."""
+    from gonio.brdf import library
+    from gonio.brdf.table import BRDFTable
+
+    for path in library.build_library():
+        if path.stem == material:
+            return BRDFTable.load(path)
+    raise UsageError(f"{material!r} is not a library material")
+
+
+def _demo_pairs(basis: Any, n: int) -> tuple[FloatArray, FloatArray, str]:
+    """Optimized pairs when the design module works, else :func:`simple_pairs`."""
+    try:
+        from gonio.brdf.design import design_pairs
+        from gonio.brdf.feasibility import RigConstraints
+
+        # A simulated rig has no mounts to collide, so devices may sit close together.
+        rig = RigConstraints(min_device_distance_deg=0.0)
+        d = design_pairs(basis, n, rig, starts=2, descents=3, time_limit_s=10.0)
+        return np.asarray(d.cells), np.asarray(d.ph_lab), f"optimized, kappa {d.kappa:.3g}"
+    except (ImportError, ValueError) as exc:
+        cells, ph = simple_pairs(n)
+        return cells, ph, f"deterministic grid rule; no optimized design ({exc})"
+
+
+def _cmd_demo(args: argparse.Namespace) -> int:
+    from gonio.brdf import metrics
+    from gonio.brdf.library import get_material
+    from gonio.brdf.preview import save_preview
+    from gonio.brdf.reconstruct import reconstruct
+    from gonio.brdf.samples import NoiseModel, simulate_samples, uniform_stage_angles
+
+    if args.pairs < 1 or args.rotations < 1:
+        raise UsageError("--pairs and --rotations must be at least 1")
+    t0 = time.perf_counter()
+    model = get_material(args.material)  # clear error for an unknown name before any work
+    basis = loo_basis(args.material, args.components)
+    t_basis = time.perf_counter() - t0
+    cells, ph, how = _demo_pairs(basis, args.pairs)
+    alpha = uniform_stage_angles(args.rotations)
+    vals = simulate_samples(model, cells, ph, alpha, noise=NoiseModel(args.noise, seed=args.seed))
+    rec = reconstruct(basis, cells, ph, alpha, vals, name=f"{args.material}-reconstructed")
+    reference = _library_table(args.material)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    rec.table.save(out / "reconstruction.npz")
+    save_preview(rec.table, out / "reconstruction.png")
+    save_preview(reference, out / "reference.png")
+    print(f"demo: {args.material}, held out of a K={basis.K} basis of "
+          f"{len(basis.materials)} materials (ready in {t_basis:.1f} s)")
+    print(f"  pairs: {cells.shape[0]} ({how}), rotations: {alpha.size}, "
+          f"noise {100 * args.noise:.1f} %")
+    print(f"  log_rmse {metrics.log_rmse(rec.table, reference):.4f}   "
+          f"log_psnr {metrics.log_psnr(rec.table, reference):.2f} dB   "
+          f"self-estimated error {100 * rec.estimated_error:.2f} %")
+    print(f"  reconstruction {rec.settings['seconds']:.3f} s, total "
+          f"{time.perf_counter() - t0:.1f} s; wrote {out}/reconstruction.npz, "
+          "reconstruction.png, reference.png")
+    return 0
+
+
+# ---------------------------------------------------------------------------- parsers
+def register(subparsers: Any) -> None:
+    """Add ``basis``, ``simulate-scan``, ``reconstruct`` and ``demo`` to the ``gonio`` command."""
+    from gonio.brdf.basis import DEFAULT_COMPONENTS
+
+    p = subparsers.add_parser("basis", help="build the linear BRDF basis")
+    sub = p.add_subparsers(dest="basis_command", metavar="ACTION", required=True)
+    b = sub.add_parser("build", help="learn a basis from the synthetic library (+ your tables)")
+    b.add_argument("--components", "-k", type=int, default=DEFAULT_COMPONENTS,
+                   help=f"number of components K (default {DEFAULT_COMPONENTS})")
+    b.add_argument("--extra", action="append", default=[], metavar="DIR",
+                   help="folder of extra gonio table .npz files to train on (repeatable)")
+    b.add_argument("-o", "--output", help="basis file (default: the cached default basis)")
+    b.set_defaults(func=_cmd_basis_build)
+
+    s = subparsers.add_parser("simulate-scan", help="simulate a sparse scan of a known BRDF")
+    what = s.add_mutually_exclusive_group(required=True)
+    what.add_argument("--material", help="library material name, e.g. brushed-metal-003")
+    what.add_argument("--table", help="gonio table .npz file")
+    geom = s.add_mutually_exclusive_group(required=True)
+    geom.add_argument("--pairs", help="pairs file (.csv, .json or .toml; degrees)")
+    geom.add_argument("--design-preset", help="industrial geometry: MA68, MA98, BYK-mac, MultiFX10")
+    s.add_argument("--rotations", "-r", type=int, required=True, help="stage angles, evenly spaced")
+    s.add_argument("--start", type=float, default=0.0, help="first stage angle, degrees")
+    s.add_argument("--noise", type=float, default=0.01, help="relative noise (0.01 = 1 %%)")
+    s.add_argument("--abs-noise", type=float, default=0.0, help="additive noise, 1/sr")
+    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("-o", "--output", required=True, help="samples file to write (.npz)")
+    s.set_defaults(func=_cmd_simulate_scan)
+
+    r = subparsers.add_parser("reconstruct", help="reconstruct a full BRDF from a samples file")
+    r.add_argument("samples", help="samples .npz (from a scan or simulate-scan)")
+    r.add_argument("--basis", help="basis file (default: the cached default basis)")
+    r.add_argument("--components", "-k", type=int, help="use only the first K components")
+    r.add_argument("--eta", type=float, default=40.0, help="coefficient regularisation (V&F: 40)")
+    r.add_argument("--lam", type=float, default=0.1, help="th=0 consistency weight (V&F: 0.1)")
+    r.add_argument("--solver", choices=("closed", "iterative"), default="closed")
+    r.add_argument("--name", help="material name stored in the table (default: file stem)")
+    r.add_argument("--preview", help="also write a PNG preview here")
+    r.add_argument("-o", "--output", required=True, help="table file to write (.npz)")
+    r.set_defaults(func=_cmd_reconstruct)
+
+    d = subparsers.add_parser(
+        "demo", help="the whole path on a library material held out of the basis"
+    )
+    d.add_argument("--material", default=DEMO_MATERIAL, help=f"default {DEMO_MATERIAL}")
+    d.add_argument("--pairs", "-n", type=int, default=20)
+    d.add_argument("--rotations", "-r", type=int, default=12)
+    d.add_argument("--components", "-k", type=int, default=DEFAULT_COMPONENTS)
+    d.add_argument("--noise", type=float, default=0.01, help="relative noise (0.01 = 1 %%)")
+    d.add_argument("--seed", type=int, default=0)
+    d.add_argument("--out", default="gonio-demo", help="output folder (default ./gonio-demo)")
+    d.set_defaults(func=_cmd_demo)

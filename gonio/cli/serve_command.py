@@ -1,0 +1,213 @@
+"""``gonio serve``: run the daemon (REST API, live events, lab page) on a rig.
+
+Two ways to run it:
+
+* ``gonio serve --config daemon.toml [--rig rig.toml]``: the lab PC (see docs/install.md);
+* ``gonio serve --sim``: a simulated rig started in this process, and the daemon on it. Prints
+  the address to open, with a one-off API key in the address's ``#fragment`` (browsers never
+  send the fragment to the server, so the key does not reach any log). ``--demo-scan`` also
+  runs one scan through the HTTP API, prints its progress and result, and exits (smoke test).
+"""
+
+from __future__ import annotations
+
+import argparse
+import secrets
+import sys
+import tempfile
+import threading
+from pathlib import Path
+from typing import Any
+
+from gonio.cli import UsageError
+
+DEMO_ROTATIONS = 8
+
+
+def register(subparsers: Any) -> None:
+    """Add the ``serve`` sub-command."""
+    p = subparsers.add_parser(
+        "serve",
+        help="run the daemon: REST API, live events and the lab web page",
+        description=(
+            "Run the gonio daemon on a rig. With --sim, start a simulated rig in this process "
+            "and serve it; open the printed address and start a scan from the page."
+        ),
+    )
+    p.add_argument("--config", type=Path, default=None, metavar="DAEMON_TOML",
+                   help="daemon config (see deploy/daemon.example.toml); default: built-in "
+                   "defaults (127.0.0.1:8600, no keys)")
+    p.add_argument("--rig", type=Path, default=None, metavar="RIG_TOML",
+                   help="rig config; overrides [paths] rig_config of the daemon config")
+    p.add_argument("--host", default=None, help="address to bind (default 127.0.0.1)")
+    p.add_argument("--port", type=int, default=None, help="port (default 8600; 0 = any free)")
+    p.add_argument("--data-dir", type=Path, default=None,
+                   help="jobs database and results (with --sim: a temporary folder)")
+    sim = p.add_argument_group("simulated rig (--sim)")
+    sim.add_argument("--sim", action="store_true",
+                     help="start a simulated rig in this process and serve it")
+    sim.add_argument("--stage", choices=("dynamixel", "zaber"), default="dynamixel",
+                     help="simulated stage protocol (default dynamixel)")
+    sim.add_argument("--material", default=None,
+                     help="library material name or .npz BRDF table for the specimen")
+    sim.add_argument("--time-scale", type=float, default=1.0,
+                     help="sim seconds per wall second for motion and exposures")
+    sim.add_argument("--demo-scan", action="store_true",
+                     help=f"run one {DEMO_ROTATIONS}-angle scan through the API, print the result "
+                     "and exit (exit code 0 when it completed)")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from gonio.daemon import (
+        DaemonConfigError,
+        build_app,
+        load_daemon_config,
+        load_keyring,
+        serve,
+        warn_if_exposed,
+    )
+
+    if args.port is not None and not 0 <= args.port <= 65535:
+        raise UsageError(f"--port {args.port}: use 0 to 65535")
+    if not args.sim and (args.demo_scan or args.material is not None):
+        raise UsageError("--demo-scan and --material need --sim (they drive the simulated rig)")
+    try:
+        cfg = load_daemon_config(args.config)
+        cfg = cfg.with_overrides(
+            server__host=args.host, server__port=args.port,
+            paths__data_dir=str(args.data_dir) if args.data_dir is not None else None,
+            paths__rig_config=str(args.rig) if args.rig is not None else None,
+        )
+        keyring = load_keyring(cfg)
+    except DaemonConfigError as exc:
+        raise UsageError(str(exc)) from None
+    _configure_logging(cfg.server.log_level)
+
+    if not args.sim:
+        from gonio.config import load_rig_config
+
+        if cfg.paths.rig_config is None:
+            raise UsageError(
+                "no rig config: give --rig rig.toml or set [paths] rig_config in the daemon "
+                "config (start from deploy/rig.example.toml), or try --sim"
+            )
+        rig_config = load_rig_config(cfg.paths.rig_config)
+        warn_if_exposed(cfg, keyring)
+        app = build_app(cfg, rig_config, keyring)
+        serve(app, cfg, on_started=lambda url, _stop: print(f"gonio serving on {url}", flush=True))
+        return 0
+    return _run_sim(args, cfg, keyring)
+
+
+def _configure_logging(level: str) -> None:
+    import logging
+
+    logging.basicConfig(
+        level=level.upper(), format="%(asctime)s %(levelname)s %(name)s: %(message)s"
+    )
+
+
+def _run_sim(args: argparse.Namespace, cfg: Any, keyring: Any) -> int:
+    from gonio.api.auth import ApiKeyring
+    from gonio.daemon import build_app, serve
+    from gonio.sim.rig import SimRigOptions, start_sim_rig
+
+    if not args.time_scale > 0:
+        raise UsageError(f"--time-scale must be > 0, got {args.time_scale}")
+    # A newcomer's sim session gets its own key unless keys are configured.
+    session_key = None
+    if len(keyring) == 0:
+        session_key = secrets.token_urlsafe(24)
+        keyring = ApiKeyring({"sim-session": session_key})
+    with tempfile.TemporaryDirectory(prefix="gonio-serve-") as tmp:
+        if args.data_dir is None:
+            cfg = cfg.with_overrides(paths__data_dir=str(Path(tmp) / "data"))
+        try:
+            sim = start_sim_rig(SimRigOptions(
+                stage=args.stage, material=args.material, time_scale=args.time_scale,
+                config_path=Path(tmp) / "rig.toml",
+            ))
+        except ValueError as exc:
+            raise UsageError(f"cannot start the simulated rig: {exc}") from None
+        with sim:
+            app = build_app(cfg, sim.config, keyring)
+            result: dict[str, int] = {}
+
+            def started(url: str, stop: Any) -> None:
+                fragment = f"#key={session_key}" if session_key else ""
+                print(f"simulated rig {sim.config.rig.name!r}: {len(sim.config.lights)} lights, "
+                      f"{len(sim.config.sensors)} sensors; rig config {sim.config_path}")
+                print(f"gonio serving on {url}")
+                print(f"open {url}{fragment} and start a scan (Ctrl-C stops)", flush=True)
+                if args.demo_scan:
+                    key = session_key or _first_key_hint()
+                    threading.Thread(target=_demo_scan, args=(url, key, result, stop),
+                                     daemon=True).start()
+
+            serve(app, cfg, on_started=started)
+            if args.demo_scan:
+                return result.get("code", 1)
+    return 0
+
+
+def _first_key_hint() -> str:
+    import os
+
+    from gonio.daemon import KEYS_ENV, parse_keys_env
+
+    keys = parse_keys_env(os.environ.get(KEYS_ENV, ""))
+    if not keys:
+        raise UsageError(f"--demo-scan with configured keys needs one in {KEYS_ENV}")
+    return next(iter(keys.values()))
+
+
+def _demo_scan(url: str, key: str | None, result: dict[str, int], stop: Any) -> None:
+    """Submit one scan over HTTP, print its progress from the event stream, then stop."""
+    import json
+
+    import httpx
+
+    headers = {"X-API-Key": key} if key else {}
+    code = 1
+    try:
+        with httpx.Client(base_url=url, headers=headers, timeout=httpx.Timeout(10, read=None)) as c:
+            seq = c.get("/health").json()["seq"]
+            plan = {"kind": "uniform", "specimen": "demo", "rotations": DEMO_ROTATIONS}
+            r = c.post("/api/v1/jobs", json={"plan": plan})
+            if r.status_code != 201:
+                print(f"demo scan refused: {r.status_code} {r.text}", file=sys.stderr)
+                return
+            job_id = r.json()["id"]
+            print(f"demo scan: job {job_id} queued", flush=True)
+            with c.stream("GET", "/api/v1/events", params={"since": seq, "job_id": job_id}) as s:
+                for line in s.iter_lines():
+                    if not line.startswith("data:"):
+                        continue
+                    ev = json.loads(line[5:])
+                    if ev["type"] == "progress":
+                        d = ev["data"]
+                        print(f"  angle {d['done']}/{d['total']} at {d['actual_deg']:.2f} deg",
+                              flush=True)
+                    elif ev["type"] == "state":
+                        state = ev["data"]["state"]
+                        print(f"  job {job_id}: {state}"
+                              + (f" ({ev['data']['reason']})" if ev["data"].get("reason") else ""),
+                              flush=True)
+                        if state == "reconstructing":
+                            print("  reconstructing (the first run also builds the default "
+                                  "basis; later runs reuse it)", flush=True)
+                        if state in ("completed", "failed", "aborted", "halted"):
+                            break
+            job = c.get(f"/api/v1/jobs/{job_id}").json()
+            if job["state"] == "completed":
+                m = c.get(f"/api/v1/jobs/{job_id}/metrics").json()
+                print(f"demo scan completed: {m.get('n_samples')} samples, self-estimated "
+                      f"error {100 * float(m.get('estimated_error', float('nan'))):.1f} %; "
+                      f"result {url}api/v1/jobs/{job_id}/result", flush=True)
+                code = 0
+    except Exception as exc:  # reported, and the exit code says it failed
+        print(f"demo scan failed: {exc}", file=sys.stderr)
+    finally:
+        result["code"] = code
+        stop()

@@ -1,0 +1,367 @@
+"""Daemon configuration: where to listen, who may change things, where data lives.
+
+A daemon config is a small TOML file (``deploy/daemon.example.toml`` is a complete example)::
+
+    [server]
+    host = "127.0.0.1"      # loopback only unless you mean it
+    port = 8600
+    [auth]
+    keys_file = "api-keys"  # one "name key" per line; relative paths are relative to this file
+    read_requires_key = false
+    [limits]
+    max_body_bytes = 1048576
+    [paths]
+    data_dir = "/var/lib/gonio"
+    rig_config = "/etc/gonio/rig.toml"
+
+API keys come from the keys file and from the environment variable ``GONIO_API_KEYS``
+(``name:key`` entries separated by commas), so a systemd ``EnvironmentFile=`` or a container
+secret can supply them without a file in the config directory. Key values are never logged;
+only their names are.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import stat
+import tomllib
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Annotated, Any
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from gonio.api.auth import ApiKeyring, KeyringError
+
+log = logging.getLogger("gonio.daemon")
+
+DEFAULT_HOST = "127.0.0.1"
+DEFAULT_PORT = 8600
+KEYS_ENV = "GONIO_API_KEYS"
+
+
+class DaemonConfigError(ValueError):
+    """The daemon configuration or keys file is invalid; the message says where and what to do."""
+
+
+class _Section(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class ServerSection(_Section):
+    """``[server]``: the listening socket."""
+
+    host: Annotated[str, Field(min_length=1)] = DEFAULT_HOST
+    port: Annotated[int, Field(ge=0, le=65535)] = DEFAULT_PORT
+    log_level: Annotated[str, Field(pattern="^(critical|error|warning|info|debug)$")] = "info"
+
+
+class AuthSection(_Section):
+    """``[auth]``: API keys and whether reads need one."""
+
+    keys_file: Path | None = None
+    read_requires_key: bool = False
+
+
+class LimitsSection(_Section):
+    """``[limits]``."""
+
+    max_body_bytes: Annotated[int, Field(ge=1024, le=64 << 20)] = 1 << 20
+
+
+class PathsSection(_Section):
+    """``[paths]``: the data directory (jobs database, result files) and the rig config."""
+
+    data_dir: Path = Path("gonio-data")
+    rig_config: Path | None = None
+
+
+class DaemonConfig(_Section):
+    """A whole daemon config file, validated; paths are absolute after loading."""
+
+    server: ServerSection = ServerSection()
+    auth: AuthSection = AuthSection()
+    limits: LimitsSection = LimitsSection()
+    paths: PathsSection = PathsSection()
+
+    def with_overrides(self, **changes: Any) -> DaemonConfig:
+        """A copy with ``section__key=value`` overrides (CLI flags), re-validated.
+
+        ``None`` values are ignored, so unset flags keep the file's value.
+        """
+        data = self.model_dump()
+        for dotted, value in changes.items():
+            if value is None:
+                continue
+            section, key = dotted.split("__", 1)
+            data[section][key] = value
+        return _validate(data, "command line")
+
+
+def _describe(err: Mapping[str, Any]) -> str:
+    loc = ".".join(str(p) for p in err["loc"])
+    if err["type"] == "extra_forbidden":
+        return f"unknown key {loc!r}; the keys are described in deploy/daemon.example.toml"
+    if err["type"] == "missing":
+        return f"{loc}: required key is missing"
+    return f"{loc}: {err['msg']} (got {err.get('input')!r})"
+
+
+def _validate(data: Mapping[str, Any], source: str) -> DaemonConfig:
+    try:
+        return DaemonConfig.model_validate(data)
+    except ValidationError as exc:
+        lines = [f"{source}: {_describe(e)}" for e in exc.errors()]
+        raise DaemonConfigError("\n".join(lines)) from None
+
+
+def load_daemon_config(path: str | os.PathLike[str] | None) -> DaemonConfig:
+    """Read a daemon config file (or the defaults when ``path`` is None).
+
+    Relative paths inside the file are resolved against the file's directory, so a config and
+    its keys file can be moved together; without a file they are relative to the working
+    directory.
+
+    Raises
+    ------
+    DaemonConfigError
+        The file is missing, not TOML, or has unknown keys or bad values.
+    """
+    if path is None:
+        cfg = DaemonConfig()
+        base = Path.cwd()
+    else:
+        p = Path(path)
+        try:
+            data = tomllib.loads(p.read_text(encoding="utf-8"))
+        except FileNotFoundError:
+            raise DaemonConfigError(
+                f"{p}: no such daemon config file; start from deploy/daemon.example.toml"
+            ) from None
+        except OSError as exc:
+            raise DaemonConfigError(f"{p}: cannot read the daemon config: {exc.strerror}") from None
+        except tomllib.TOMLDecodeError as exc:
+            raise DaemonConfigError(f"{p}: not valid TOML: {exc}") from None
+        cfg = _validate(data, p.name)
+        base = p.resolve().parent
+
+    def absolute(q: Path | None) -> Path | None:
+        return None if q is None else (q if q.is_absolute() else base / q)
+
+    return cfg.model_copy(
+        update={
+            "auth": cfg.auth.model_copy(update={"keys_file": absolute(cfg.auth.keys_file)}),
+            "paths": cfg.paths.model_copy(
+                update={
+                    "data_dir": absolute(cfg.paths.data_dir),
+                    "rig_config": absolute(cfg.paths.rig_config),
+                }
+            ),
+        }
+    )
+
+
+def parse_keys_file(text: str, source: str) -> dict[str, str]:
+    """Parse a keys file: one ``name key`` per line; blank lines and ``#`` comments ignored.
+
+    Raises
+    ------
+    DaemonConfigError
+        A line does not have exactly two fields, or a name repeats. The message gives the line
+        number but never the key itself.
+    """
+    keys: dict[str, str] = {}
+    for n, raw in enumerate(text.splitlines(), start=1):
+        line = raw.split("#", 1)[0].strip()
+        if not line:
+            continue
+        fields = line.split()
+        if len(fields) != 2:
+            raise DaemonConfigError(
+                f"{source}, line {n}: expected 'name key' (two fields separated by spaces), "
+                f"found {len(fields)} field(s)"
+            )
+        name, key = fields
+        if name in keys:
+            raise DaemonConfigError(f"{source}, line {n}: key name {name!r} is used twice")
+        keys[name] = key
+    return keys
+
+
+def parse_keys_env(value: str) -> dict[str, str]:
+    """Parse ``GONIO_API_KEYS``: comma-separated ``name:key`` entries (a bare key is ``env-N``)."""
+    keys: dict[str, str] = {}
+    for n, entry in enumerate((e.strip() for e in value.split(",")), start=1):
+        if not entry:
+            continue
+        name, sep, key = entry.partition(":")
+        if not sep:
+            name, key = f"env-{n}", entry
+        if name in keys:
+            raise DaemonConfigError(f"{KEYS_ENV}: key name {name!r} is used twice")
+        keys[name] = key
+    return keys
+
+
+def load_keyring(cfg: DaemonConfig, environ: Mapping[str, str] | None = None) -> ApiKeyring:
+    """All API keys of the daemon: the keys file plus ``GONIO_API_KEYS``.
+
+    A keys file readable by other users is accepted with a warning (a lab PC is often shared;
+    refusing to start would be worse than telling).
+
+    Raises
+    ------
+    DaemonConfigError
+        The keys file is missing or malformed, a name repeats, or a key is too short.
+    """
+    env = os.environ if environ is None else environ
+    keys: dict[str, str] = {}
+    path = cfg.auth.keys_file
+    if path is not None:
+        try:
+            text = path.read_text(encoding="utf-8")
+        except FileNotFoundError:
+            raise DaemonConfigError(
+                f"{path}: API keys file not found; create it with one 'name key' line per user "
+                "(see docs/install.md) or remove [auth] keys_file from the daemon config"
+            ) from None
+        except OSError as exc:
+            raise DaemonConfigError(
+                f"{path}: cannot read the API keys file: {exc.strerror}"
+            ) from None
+        if path.stat().st_mode & (stat.S_IRGRP | stat.S_IROTH):
+            log.warning("API keys file %s is readable by other users; chmod 600 it", path)
+        keys.update(parse_keys_file(text, str(path)))
+    for name, key in parse_keys_env(env.get(KEYS_ENV, "")).items():
+        if name in keys:
+            raise DaemonConfigError(
+                f"{KEYS_ENV}: key name {name!r} is also in the keys file; use distinct names"
+            )
+        keys[name] = key
+    try:
+        return ApiKeyring(keys)
+    except KeyringError as exc:
+        raise DaemonConfigError(str(exc)) from None
+
+
+# --------------------------------------------------------------------------- wiring
+STORE_FILE = "gonio.sqlite"
+
+
+def api_settings(cfg: DaemonConfig, keyring: ApiKeyring) -> Any:
+    """The HTTP layer's settings for ``cfg`` (imported lazily: FastAPI is not needed to parse)."""
+    from gonio.api.auth import AccessPolicy
+    from gonio.api.settings import ApiSettings
+
+    return ApiSettings(
+        access=AccessPolicy(keyring, read_requires_key=cfg.auth.read_requires_key),
+        data_dir=cfg.paths.data_dir,
+        max_body_bytes=cfg.limits.max_body_bytes,
+    )
+
+
+def build_app(
+    cfg: DaemonConfig,
+    rig_config: Any,
+    keyring: ApiKeyring,
+    *,
+    basis_provider: Any = None,
+    rig: Any = None,
+) -> Any:
+    """The daemon's ASGI app: store in ``data_dir``, real drivers for ``rig_config``.
+
+    Parameters
+    ----------
+    cfg : DaemonConfig
+    rig_config : gonio.config.RigConfig
+    keyring : ApiKeyring
+    basis_provider : callable returning the reconstruction basis (default: the cached default)
+    rig : gonio.hal.Rig, optional
+        Use this rig instead of building drivers from ``rig_config`` (tests, custom rigs).
+
+    Returns
+    -------
+    FastAPI app whose lifespan starts and stops the service (worker, devices).
+    """
+    from gonio.api.app import create_app
+    from gonio.drivers.factory import build_rig
+    from gonio.service import GonioService
+    from gonio.store import JobStore
+
+    data_dir = cfg.paths.data_dir
+    data_dir.mkdir(parents=True, exist_ok=True)
+    store = JobStore(data_dir / STORE_FILE)
+    service = GonioService(
+        store,
+        rig if rig is not None else (lambda: build_rig(rig_config)),
+        rig_config=rig_config,
+        basis_provider=basis_provider,
+        data_dir=data_dir,
+    )
+    return create_app(service, api_settings(cfg, keyring))
+
+
+def warn_if_exposed(cfg: DaemonConfig, keyring: ApiKeyring) -> None:
+    """Log what a non-loopback bind means, so an exposed daemon is a decision, not an accident."""
+    loopback = cfg.server.host in ("127.0.0.1", "::1", "localhost")
+    if not loopback:
+        log.warning(
+            "listening on %s: every machine that can reach this address can read the rig "
+            "status%s", cfg.server.host,
+            "" if cfg.auth.read_requires_key else " and results (set [auth] read_requires_key)",
+        )
+    if len(keyring) == 0:
+        log.warning("no API keys configured: the daemon is read-only (see docs/install.md)")
+    else:
+        log.info("API keys loaded: %s", ", ".join(keyring.names))
+
+
+def serve(app: Any, cfg: DaemonConfig, on_started: Any = None) -> None:
+    """Run ``app`` with uvicorn on ``cfg.server`` until interrupted (SIGINT/SIGTERM).
+
+    ``on_started(url, stop)`` is called once the socket listens (the CLI prints the address
+    there); calling ``stop()`` from any thread shuts the server down gracefully. Ctrl-C does the
+    same and returns normally.
+    """
+    import uvicorn
+
+    config = uvicorn.Config(
+        app,
+        host=cfg.server.host,
+        port=cfg.server.port,
+        log_level=cfg.server.log_level,
+        # Event streams never end by themselves: give them 3 s to close on shutdown.
+        timeout_graceful_shutdown=3,
+        # Keys travel in headers, which uvicorn never logs; query strings are logged, which is
+        # why the API does not accept keys there.
+        access_log=cfg.server.log_level in ("info", "debug"),
+    )
+    server = uvicorn.Server(config)
+    if on_started is not None:
+        original = server.startup
+
+        async def startup(sockets: Any = None) -> None:
+            await original(sockets=sockets)
+            if server.started:
+                for s in server.servers:
+                    for sock in s.sockets:
+                        host, port = sock.getsockname()[:2]
+                        on_started(f"http://{_url_host(host)}:{port}/", stop)
+                        return
+
+        server.startup = startup  # type: ignore[method-assign]
+
+    def stop() -> None:
+        server.should_exit = True
+
+    # uvicorn re-raises Ctrl-C after its graceful shutdown; by then everything is closed.
+    with contextlib.suppress(KeyboardInterrupt):
+        server.run()
+
+
+def _url_host(host: str) -> str:
+    if host in ("0.0.0.0", "::"):
+        return "127.0.0.1"
+    return f"[{host}]" if ":" in host else host

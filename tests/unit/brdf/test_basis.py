@@ -1,0 +1,296 @@
+"""Tests of the linear basis: building, off-grid rows, truncation, files, leave-one-out."""
+
+from __future__ import annotations
+
+import functools
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from gonio.brdf import basis as basis_mod
+from gonio.brdf import geometry as geo
+from gonio.brdf.basis import Basis, BasisError, build_basis, inverse_remap, leave_one_out, remap
+from gonio.brdf.table import BRDFTable, from_function
+
+# ---------------------------------------------------------------------------- shared helpers
+# test_reconstruct.py imports these; they are plain cached functions, not fixtures, so each
+# small table set is built once per test session.
+
+
+def ward_like(
+    kd: tuple[float, float, float], ks: float, ax: float, ay: float, angle: float = 0.0
+) -> object:
+    """An anisotropic Gaussian lobe over the half vector plus a Lambert term, ``(N, 3)`` out.
+
+    Written here (not taken from gonio.brdf.models) so these tests only depend on the table
+    contract.
+    """
+
+    def fn(wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+        h = wi + wo
+        h = h / np.linalg.norm(h, axis=-1, keepdims=True)
+        c, s = np.cos(angle), np.sin(angle)
+        hx = c * h[:, 0] + s * h[:, 1]
+        hy = -s * h[:, 0] + c * h[:, 1]
+        hz = np.maximum(h[:, 2], 1e-6)
+        ci = np.maximum(wi[:, 2], 1e-6)
+        co = np.maximum(wo[:, 2], 1e-6)
+        lobe = ks * np.exp(-((hx / ax) ** 2 + (hy / ay) ** 2) / hz**2)
+        lobe = lobe / (4 * np.pi * ax * ay * np.sqrt(ci * co))
+        return np.asarray(kd)[None, :] / np.pi + lobe[:, None]
+
+    return fn
+
+
+@functools.cache
+def small_library(n: int = 12) -> tuple[BRDFTable, ...]:
+    """``n`` deterministic anisotropic RGB tables with varied colour, gloss and orientation."""
+    rng = np.random.default_rng(1234)
+    out = []
+    for i in range(n):
+        kd = tuple(float(x) for x in rng.uniform(0.02, 0.8, 3))
+        ax, ay = (float(x) for x in rng.uniform(0.08, 0.5, 2))
+        ks = float(rng.uniform(0.05, 0.6))
+        angle = float(rng.uniform(0, np.pi))
+        out.append(
+            from_function(ward_like(kd, ks, ax, ay, angle), ("R", "G", "B"), f"ward-{i:02d}")
+        )
+    return tuple(out)
+
+
+@functools.cache
+def small_basis(k: int = 16) -> Basis:
+    """Basis of all but the first table of :func:`small_library` (the first is held out)."""
+    return build_basis(small_library()[1:], k)
+
+
+def _remapped_training(tables: tuple[BRDFTable, ...], eps: float = 1e-3) -> np.ndarray:
+    """Reference: the remapped, centred training matrix (valid rows x columns), float64."""
+    valid = geo.valid_mask().ravel()
+    A = np.concatenate([t.columns()[:, valid] for t in tables]).T.astype(float)
+    f_med = np.median(A, axis=1)
+    w = geo.remap_weight(eps).ravel()[valid]
+    X = np.log((A * w[:, None] + eps) / (f_med[:, None] * w[:, None] + eps))
+    return np.asarray(X - X.mean(axis=1, keepdims=True))
+
+
+# ---------------------------------------------------------------------------- remap
+@settings(max_examples=60, deadline=None)
+@given(
+    a=st.floats(0.0, 1e4),
+    f=st.floats(1e-6, 1e3),
+    w=st.floats(1e-3, 1.0),
+)
+def test_remap_inverse_round_trip(a: float, f: float, w: float) -> None:
+    x = remap(a, f, w)
+    assert inverse_remap(x, f, w) == pytest.approx(a, rel=1e-9, abs=1e-9)
+
+
+def test_remap_of_the_median_is_zero() -> None:
+    assert remap(0.3, 0.3, 0.5) == pytest.approx(0.0, abs=1e-15)
+
+
+# ---------------------------------------------------------------------------- building
+def test_build_matches_exact_svd_of_the_remapped_matrix() -> None:
+    tables = small_library()[:5]
+    k = 8
+    b = build_basis(tables, k)
+    Y = _remapped_training(tables)
+    # The exact singular values via the small column-side Gram matrix (360 x 360).
+    evals = np.linalg.eigvalsh(Y.T @ Y)[::-1]
+    s_exact = np.sqrt(np.maximum(evals[:k], 0))
+    np.testing.assert_allclose(b.S, s_exact, rtol=1e-4)
+    valid = b.valid
+    # Q = U S: the columns are orthogonal with squared norms S^2 ...
+    np.testing.assert_allclose(b.Q.T @ b.Q, np.diag(b.S**2), atol=1e-6 * b.S[0] ** 2)
+    # ... and span the leading left singular subspace: projecting Y captures its top energy.
+    U = b.Q[valid] / b.S
+    captured = np.linalg.norm(U.T @ Y) ** 2
+    assert captured == pytest.approx(float(np.sum(s_exact**2)), rel=1e-4)
+
+
+def test_build_fields_and_invalid_rows() -> None:
+    b = small_basis()
+    valid = geo.valid_mask().ravel()
+    assert b.K == 16
+    assert b.Q.shape == (geo.N_ROWS, 16)
+    assert np.all(b.Q[~valid] == 0)
+    assert np.all(np.diff(b.S) <= 0)
+    assert b.materials == tuple(t.name for t in small_library()[1:])
+    # f_med is the per-row median of the training columns.
+    row = int(np.flatnonzero(valid)[1234])
+    col = np.concatenate([t.columns()[:, row] for t in small_library()[1:]])
+    assert b.f_med[row] == pytest.approx(float(np.median(col)), rel=1e-6)
+    assert np.all(b.f_med[~valid] == 0) and np.all(b.mu[~valid] == 0)
+
+
+def test_build_is_deterministic() -> None:
+    a = build_basis(small_library()[:3], 4)
+    b = build_basis(small_library()[:3], 4)
+    np.testing.assert_array_equal(a.Q, b.Q)
+
+
+def test_build_rejects_bad_inputs() -> None:
+    with pytest.raises(BasisError, match="zero materials"):
+        build_basis([], 4)
+    t = small_library()[0]
+    with pytest.raises(BasisError, match="distinct names"):
+        build_basis([t, t], 4)
+    with pytest.raises(BasisError, match="n_components"):
+        build_basis([t], 0)
+    with pytest.raises(BasisError, match="n_components"):
+        build_basis([t], 3 * 72 + 1)
+
+
+def test_build_treats_nan_at_valid_cells_as_the_median() -> None:
+    tables = list(small_library()[:3])
+    v = np.array(tables[0].values, dtype=float)
+    v[:, :, 5, 5, 5] = np.nan  # an unmeasured cell of one material
+    tables[0] = BRDFTable(v, tables[0].channels, "holey")
+    b = build_basis(tables, 4)
+    assert np.isfinite(b.Q).all()
+
+
+# ---------------------------------------------------------------------------- rows
+def test_rows_at_grid_cells_are_the_grid_rows() -> None:
+    b = small_basis()
+    i = (np.array([3, 10, 0]), np.array([4, 2, 7]), np.array([0, 20, 35]))
+    rows = geo.flat_row(*i)
+    got = b.rows_at(geo.TH_GRID[i[0]], geo.TD_GRID[i[1]], geo.PD_GRID[i[2]])
+    np.testing.assert_allclose(got, b.Q[rows], atol=1e-12)
+
+
+def test_rows_at_blends_neighbours_and_wraps_pd() -> None:
+    b = small_basis()
+    th, td = geo.TH_GRID[5], geo.TD_GRID[6]
+    mid = b.rows_at([th], [td], [geo.PD_GRID[3] + geo.STEP / 2])[0]
+    r3, r4 = geo.flat_row(5, 6, 3), geo.flat_row(5, 6, 4)
+    np.testing.assert_allclose(mid, 0.5 * (b.Q[r3] + b.Q[r4]), atol=1e-12)
+    # pd is periodic with period pi: 178.75 deg lies between 175 deg (last) and 180 = 0 deg.
+    wrap = b.rows_at([th], [td], [np.pi - geo.STEP / 4])[0]
+    r_last, r_first = geo.flat_row(5, 6, 35), geo.flat_row(5, 6, 0)
+    np.testing.assert_allclose(wrap, 0.25 * b.Q[r_last] + 0.75 * b.Q[r_first], atol=1e-12)
+    # th and td clamp at the grid ends: 89 deg uses the 85 deg row.
+    clamp = b.rows_at([np.deg2rad(89.0)], [0.0], [0.0])[0]
+    np.testing.assert_allclose(clamp, b.Q[geo.flat_row(17, 0, 0)], atol=1e-12)
+    # blend() applies the same weights to per-row quantities such as f_med.
+    f = b.blend(b.f_med, [th], [td], [geo.PD_GRID[3] + geo.STEP / 2])
+    assert f[0] == pytest.approx(0.5 * (b.f_med[r3] + b.f_med[r4]))
+
+
+def test_rows_at_leaves_out_invalid_neighbours() -> None:
+    b = small_basis()
+    valid = geo.valid_mask()
+    # Find a valid cell whose +th neighbour is invalid (next to the horizon).
+    i_th, i_td, i_pd = next(
+        (a, c, d)
+        for a in range(geo.N_TH - 1)
+        for c in range(geo.N_TD)
+        for d in range(geo.N_PD)
+        if valid[a, c, d] and not valid[a + 1, c, d]
+    )
+    got = b.rows_at([geo.TH_GRID[i_th] + geo.STEP / 2], [geo.TD_GRID[i_td]], [geo.PD_GRID[i_pd]])
+    np.testing.assert_allclose(got[0], b.Q[geo.flat_row(i_th, i_td, i_pd)], atol=1e-12)
+
+
+def test_rows_at_below_the_horizon_is_an_error() -> None:
+    b = small_basis()
+    with pytest.raises(BasisError, match="no valid grid neighbour"):
+        b.rows_at([np.deg2rad(85.0)], [np.deg2rad(85.0)], [0.0])
+
+
+def test_truncated() -> None:
+    b = small_basis()
+    t = b.truncated(5)
+    assert t.K == 5
+    np.testing.assert_array_equal(t.Q, b.Q[:, :5])
+    assert b.truncated(b.K) is b
+    with pytest.raises(BasisError, match="cannot keep"):
+        b.truncated(b.K + 1)
+    with pytest.raises(BasisError, match="cannot keep"):
+        b.truncated(0)
+
+
+# ---------------------------------------------------------------------------- files
+def test_save_load_round_trip(tmp_path: Path) -> None:
+    b = small_basis()
+    p = b.save(tmp_path / "b.npz")
+    c = Basis.load(p)
+    np.testing.assert_array_equal(c.Q, b.Q)
+    np.testing.assert_array_equal(c.S, b.S)
+    np.testing.assert_array_equal(c.f_med, b.f_med)
+    np.testing.assert_array_equal(c.mu, b.mu)
+    assert c.materials == b.materials and c.eps == b.eps
+    assert c.provenance["n_materials"] == b.provenance["n_materials"]
+
+
+def _rewrite(src: Path, dst: Path, **changes: object) -> Path:
+    with np.load(src) as z:
+        data = {k: z[k] for k in z.files}
+    data.update({k: np.asarray(v) for k, v in changes.items()})
+    np.savez(dst, **data)  # type: ignore[arg-type]
+    return dst
+
+
+def test_load_refuses_a_basis_from_another_grid(tmp_path: Path) -> None:
+    p = small_basis().save(tmp_path / "b.npz")
+    bad = _rewrite(p, tmp_path / "grid.npz", grid_deg=[2.5, 36, 36, 72])
+    with pytest.raises(BasisError, match="another grid"):
+        Basis.load(bad)
+
+
+def test_load_errors(tmp_path: Path) -> None:
+    with pytest.raises(BasisError, match="no such basis file"):
+        Basis.load(tmp_path / "missing.npz")
+    junk = tmp_path / "junk.npz"
+    junk.write_text("not a zip")
+    with pytest.raises(BasisError, match="not a readable"):
+        Basis.load(junk)
+    p = small_basis().save(tmp_path / "b.npz")
+    with pytest.raises(BasisError, match="not a gonio basis"):
+        Basis.load(_rewrite(p, tmp_path / "fmt.npz", format="something-else"))
+    with pytest.raises(BasisError, match="version 7"):
+        Basis.load(_rewrite(p, tmp_path / "ver.npz", version=7))
+    with pytest.raises(BasisError, match=r"\(11664, K\)"):
+        Basis.load(_rewrite(p, tmp_path / "rows.npz", Q=np.zeros((100, 3))))
+
+
+def test_constructor_checks_shapes() -> None:
+    b = small_basis()
+    with pytest.raises(BasisError, match="S has shape"):
+        Basis(b.Q, b.S[:3], b.f_med, b.mu, b.valid)
+    with pytest.raises(BasisError, match="NaN"):
+        Basis(np.full_like(b.Q, np.nan), b.S, b.f_med, b.mu, b.valid)
+
+
+# ---------------------------------------------------------------------------- leave-one-out
+def test_leave_one_out_excludes_the_material() -> None:
+    tables = small_library()[:4]
+    b = leave_one_out(tables, 2, 4)
+    assert tables[2].name not in b.materials
+    assert len(b.materials) == 3
+    assert b.provenance["held_out"] == tables[2].name
+    ref = build_basis([tables[0], tables[1], tables[3]], 4)
+    np.testing.assert_allclose(b.Q, ref.Q)
+    with pytest.raises(BasisError, match="outside"):
+        leave_one_out(tables, 4, 4)
+
+
+# ---------------------------------------------------------------------------- default basis
+def test_default_basis_is_cached(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    library = pytest.importorskip("gonio.brdf.library")
+    tables = small_library()[:3]
+    monkeypatch.setenv("GONIO_CACHE_DIR", str(tmp_path))
+    # The real library takes minutes to build; the caching logic is what is under test here.
+    monkeypatch.setattr(library, "default_library", lambda progress=False: list(tables))
+    b = basis_mod.default_basis(5)
+    files = list((tmp_path / "basis").glob("default-K5-*.npz"))
+    assert len(files) == 1
+    monkeypatch.setattr(library, "default_library", lambda: pytest.fail("rebuilt"))
+    again = basis_mod.default_basis(5)
+    np.testing.assert_array_equal(again.Q, b.Q)
+    assert json.loads(json.dumps(again.provenance, default=str))["file"] == str(files[0])

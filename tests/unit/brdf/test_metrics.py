@@ -1,0 +1,96 @@
+"""Tests of the error metrics (MATH.md 8) and the preview image."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gonio.brdf import geometry as geo
+from gonio.brdf import metrics
+from gonio.brdf.preview import preview_image, save_preview
+from gonio.brdf.table import BRDFTable
+
+
+def constant(value: float, channels: int = 3) -> BRDFTable:
+    v = np.full((channels, *geo.TABLE_SHAPE), value)
+    return BRDFTable(v, tuple("RGB"[:channels]))
+
+
+def test_identical_tables() -> None:
+    t = constant(0.3)
+    assert metrics.log_rmse(t, t) == 0.0
+    assert metrics.log_psnr(t, t) == float("inf")
+    assert metrics.rel_mse(t, t) == 0.0
+    assert metrics.mape(t, t) == 0.0
+    assert metrics.psnr(t, t) == float("inf")
+
+
+def test_constant_ratio_has_known_errors() -> None:
+    ref, hat = constant(0.2), constant(0.22)  # 10 % too bright everywhere
+    assert metrics.mape(hat, ref) == pytest.approx(0.1)
+    assert metrics.rel_mse(hat, ref) == pytest.approx(0.01)
+    assert metrics.psnr(hat, ref) == pytest.approx(20 * np.log10(0.2 / 0.02))
+    # log_rmse: volume-weighted RMS of ln(1 + f cos ti) differences, computed independently.
+    ci, _ = geo.cell_cosines(*geo.grid_angles())
+    m = geo.valid_mask()
+    wv = geo.volume_weight()[m]
+    d = np.log1p(0.22 * ci[m]) - np.log1p(0.2 * ci[m])
+    assert metrics.log_rmse(hat, ref) == pytest.approx(np.sqrt(np.sum(wv * d**2) / np.sum(wv)))
+
+
+def test_log_psnr_uses_the_reference_dynamic_range() -> None:
+    rng = np.random.default_rng(0)
+    ref_v = rng.uniform(0.01, 10.0, (3, *geo.TABLE_SHAPE))
+    ref = BRDFTable(ref_v, ("R", "G", "B"))
+    hat = BRDFTable(ref_v * np.e**0.1, ("R", "G", "B"))  # log error exactly 0.1 everywhere
+    m = geo.valid_mask()
+    lv = np.log(ref_v[:, :, m])
+    expect = 20 * np.log10((lv.max() - lv.min()) / 0.1)
+    assert metrics.log_psnr(hat, ref) == pytest.approx(expect, rel=1e-9)
+    # Worse reconstructions score lower.
+    worse = BRDFTable(ref_v * np.e**0.3, ("R", "G", "B"))
+    assert metrics.log_psnr(worse, ref) < metrics.log_psnr(hat, ref)
+    assert metrics.log_rmse(worse, ref) > metrics.log_rmse(hat, ref)
+
+
+def test_volume_weight_emphasises_large_th() -> None:
+    """An error confined to the th = 0 row costs less than the same error at th = 45 deg."""
+    ref = constant(0.5)
+    v0 = np.array(ref.values)
+    v0[:, :, 0] *= 2
+    v9 = np.array(ref.values)
+    v9[:, :, 9] *= 2
+    assert metrics.log_rmse(v0, ref) < metrics.log_rmse(v9, ref)
+
+
+def test_arrays_and_nan_cells_accepted() -> None:
+    ref = constant(0.2)
+    hat = np.array(constant(0.25).values)
+    hat[:, 3, 4, 4, 4] = np.nan  # an unmeasured cell is left out, not an error
+    assert np.isfinite(metrics.log_rmse(hat, ref))
+    assert metrics.all_metrics(hat, ref)["mape"] == pytest.approx(0.25)
+
+
+def test_mismatched_inputs_are_clear_errors() -> None:
+    with pytest.raises(metrics.MetricError, match="channels"):
+        metrics.log_rmse(constant(0.2, 3), constant(0.2, 1))
+    with pytest.raises(metrics.MetricError, match="expected"):
+        metrics.psnr(np.zeros((3, 10)), constant(0.2))
+
+
+def test_preview_png(tmp_path: Path) -> None:
+    t = constant(0.2)
+    img = preview_image(t, scale=2, gap=1)
+    assert img.dtype == np.uint8 and img.shape == (2 * 36 + 3, 4 * 36 + 5, 3)
+    # Constant table: every valid cell shows the maximum level. At pd = 90 deg (first row)
+    # every cell is valid; at pd = 0 (second row) large th + td fall below the horizon.
+    first = img[1 : 1 + 36, 1 : 1 + 36]
+    assert (first == 255).all()
+    second = img[38 : 38 + 36, 1 : 1 + 36]
+    assert (second == 255).all(axis=-1).any() and (second == 40).all(axis=-1).any()
+    p = save_preview(t, tmp_path / "p.png", scale=2)
+    assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    with pytest.raises(ValueError, match="scale"):
+        preview_image(t, scale=0)

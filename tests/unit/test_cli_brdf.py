@@ -1,0 +1,201 @@
+"""Tests of the science commands: basis build, simulate-scan, reconstruct, demo."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gonio.brdf import geometry as geo
+from gonio.brdf.basis import Basis
+from gonio.brdf.samples import Samples
+from gonio.brdf.table import BRDFTable
+from gonio.cli import UsageError, main
+from gonio.cli.brdf_commands import read_pairs, simple_pairs
+from tests.unit.brdf.test_basis import small_basis, small_library
+
+LAB_ROWS = [(45, 0, 45, 180), (45, 0, 20, 180), (30, 90, 60, 200), (15, 10, 50, 300),
+            (60, 0, 30, 0), (20, 45, 70, 100), (50, 270, 10, 60), (35, 135, 35, 315)]
+
+
+@pytest.fixture()
+def files(tmp_path: Path) -> dict[str, Path]:
+    basis = small_basis().save(tmp_path / "basis.npz")
+    table = small_library()[0].save(tmp_path / "ward.npz")
+    csv_path = tmp_path / "pairs.csv"
+    csv_path.write_text(
+        "theta_i,phi_i,theta_v,phi_v\n" + "\n".join(",".join(map(str, r)) for r in LAB_ROWS)
+    )
+    return {"basis": basis, "table": table, "csv": csv_path, "dir": tmp_path}
+
+
+def test_read_pairs_three_spellings_agree(files: dict[str, Path]) -> None:
+    d = files["dir"]
+    keys = ("theta_i", "phi_i", "theta_v", "phi_v")
+    (d / "p.json").write_text(json.dumps({"pairs": [dict(zip(keys, r, strict=True))
+                                                    for r in LAB_ROWS]}))
+    (d / "p.toml").write_text("".join(
+        "[[pairs]]\n" + "".join(f"{k} = {v}\n" for k, v in zip(keys, r, strict=True))
+        for r in LAB_ROWS
+    ))
+    cells, ph = read_pairs(files["csv"])
+    for other in ("p.json", "p.toml"):
+        c2, p2 = read_pairs(d / other)
+        np.testing.assert_allclose(c2, cells)
+        np.testing.assert_allclose(p2, ph)
+    # The specular pair (45, 0) -> (45, 180) has th = 0 and td = 45 deg.
+    assert cells[0, 0] == pytest.approx(0.0, abs=1e-9)
+    assert cells[0, 1] == pytest.approx(np.deg2rad(45.0))
+
+
+def test_read_pairs_as_cells(tmp_path: Path) -> None:
+    p = tmp_path / "cells.csv"
+    p.write_text("th,td,pd,ph\n10,20,30,40\n0,45,90,0\n")
+    cells, ph = read_pairs(p)
+    np.testing.assert_allclose(cells, np.deg2rad([[10, 20, 30], [0, 45, 90]]))
+    np.testing.assert_allclose(ph, np.deg2rad([40, 0]))
+
+
+@pytest.mark.parametrize(
+    ("name", "text", "match"),
+    [
+        ("p.csv", "a,b\n1,2\n", "give either"),
+        ("p.csv", "theta_i,phi_i,theta_v,phi_v\n95,0,30,0\n", r"\[0, 90\)"),
+        ("p.csv", "theta_i,phi_i,theta_v,phi_v\nx,0,30,0\n", "numeric"),
+        ("p.csv", "theta_i,phi_i,theta_v,phi_v\n", "no pairs"),
+        ("p.json", "{not json", "cannot be parsed"),
+        ("p.json", '{"pairs": 3}', "expected a list"),
+        ("p.toml", "pairs = [", "cannot be parsed"),
+        ("p.yaml", "pairs: []", "unknown type"),
+    ],
+)
+def test_bad_pairs_files(tmp_path: Path, name: str, text: str, match: str) -> None:
+    p = tmp_path / name
+    p.write_text(text)
+    with pytest.raises(UsageError, match=match):
+        read_pairs(p)
+
+
+def test_simulate_then_reconstruct(
+    files: dict[str, Path], capsys: pytest.CaptureFixture[str]
+) -> None:
+    d = files["dir"]
+    samples = d / "s.npz"
+    assert main(["simulate-scan", "--table", str(files["table"]), "--pairs", str(files["csv"]),
+                 "--rotations", "12", "--start", "5", "--noise", "0.02", "--seed", "3",
+                 "-o", str(samples)]) == 0
+    s = Samples.load(samples)
+    assert s.values.shape == (len(LAB_ROWS), 12, 3)
+    assert s.stage_angles[0] == pytest.approx(np.deg2rad(5.0))
+    assert s.provenance["simulated_from"] == small_library()[0].name
+    out = d / "rec.npz"
+    png = d / "rec.png"
+    assert main(["reconstruct", str(samples), "--basis", str(files["basis"]), "-k", "8",
+                 "--preview", str(png), "-o", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "K=8 n=8 r=12" in text and "self-estimated BRDF error" in text
+    t = BRDFTable.load(out)
+    assert t.name == "rec" and t.values.shape == (3, *geo.TABLE_SHAPE)
+    assert png.read_bytes()[:4] == b"\x89PNG"
+
+
+def test_simulate_with_a_preset(files: dict[str, Path]) -> None:
+    pytest.importorskip("gonio.brdf.presets")
+    out = files["dir"] / "p.npz"
+    assert main(["simulate-scan", "--table", str(files["table"]), "--design-preset", "MA68",
+                 "-r", "8", "-o", str(out)]) == 0
+    assert Samples.load(out).values.shape[1] == 8
+
+
+@pytest.mark.parametrize(
+    ("argv", "match"),
+    [
+        (["reconstruct", "{dir}/missing.npz", "--basis", "{basis}", "-o", "{dir}/o.npz"],
+         "no such samples file"),
+        (["reconstruct", "{samples}", "--basis", "{dir}/nobasis.npz", "-o", "{dir}/o.npz"],
+         "no such basis file"),
+        (["reconstruct", "{samples}", "--basis", "{basis}", "-k", "99", "-o", "{dir}/o.npz"],
+         "cannot keep 99"),
+        (["simulate-scan", "--table", "{dir}/none.npz", "--pairs", "{csv}", "-r", "4",
+          "-o", "{dir}/x.npz"], "no such table file"),
+        (["simulate-scan", "--table", "{table}", "--pairs", "{dir}/none.csv", "-r", "4",
+          "-o", "{dir}/x.npz"], "does not exist"),
+        (["simulate-scan", "--table", "{table}", "--pairs", "{csv}", "-r", "0",
+          "-o", "{dir}/x.npz"], "at least 1"),
+        (["simulate-scan", "--table", "{table}", "--pairs", "{csv}", "-r", "4", "--noise", "-1",
+          "-o", "{dir}/x.npz"], ">= 0"),
+    ],
+)
+def test_user_errors_exit_2_with_a_message(
+    files: dict[str, Path], argv: list[str], match: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    samples = files["dir"] / "s.npz"
+    Samples(np.deg2rad([[10.0, 20.0, 30.0]]), np.zeros(1), np.zeros(1), np.ones((1, 1, 3)),
+            ("R", "G", "B")).save(samples)
+    subs = {k: str(v) for k, v in files.items()} | {"samples": str(samples)}
+    assert main([a.format(**subs) for a in argv]) == 2
+    err = capsys.readouterr().err
+    assert "error:" in err and match in err
+
+
+def test_basis_build_with_extra_tables(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    library = pytest.importorskip("gonio.brdf.library")
+    extra = tmp_path / "extra"
+    extra.mkdir()
+    small_library()[0].save(extra / "a.npz")
+    synthetic = list(small_library()[1:4])
+
+    def fake_library(extra_dirs: tuple[str, ...] = (), progress: bool = False) -> list:
+        # The synthetic part is replaced by a few small tables (building the real library
+        # takes minutes and is the library's own test); the extra folder is read for real.
+        return synthetic + [t for d in extra_dirs for t in library.load_table_folder(d)]
+
+    monkeypatch.setattr(library, "default_library", fake_library)
+    out = tmp_path / "b.npz"
+    assert main(["basis", "build", "-k", "3", "--extra", str(extra), "-o", str(out)]) == 0
+    b = Basis.load(out)
+    assert b.K == 3
+    assert b.materials == (*(t.name for t in synthetic), small_library()[0].name)
+    assert main(["basis", "build", "-k", "3", "--extra", str(extra)]) == 2
+    assert "-o" in capsys.readouterr().err
+
+
+def test_demo_on_a_small_library(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    library = pytest.importorskip("gonio.brdf.library")
+    monkeypatch.setenv("GONIO_CACHE_DIR", str(tmp_path / "cache"))
+    tables = list(small_library())
+    by_name = {t.name: t for t in tables}
+    # A small stand-in library (the real one takes minutes to tabulate); the demo path itself
+    # (leave-one-out basis, simulation, reconstruction, metrics, previews) runs for real.
+    monkeypatch.setattr(library, "default_library", lambda *a, **k: list(tables))
+    monkeypatch.setattr(library, "get_material", lambda name, seed=0: by_name[name])
+    folder = tmp_path / "lib"
+    folder.mkdir()
+    paths = [t.save(folder / f"{t.name}.npz") for t in tables]
+    monkeypatch.setattr(library, "build_library", lambda *a, **k: paths)
+    out = tmp_path / "demo"
+    argv = ["demo", "--material", tables[0].name, "-n", "12", "-r", "8", "-k", "8",
+            "--out", str(out)]
+    assert main(argv) == 0
+    text = capsys.readouterr().out
+    assert "log_rmse" in text and "log_psnr" in text and "self-estimated" in text
+    for f in ("reconstruction.npz", "reconstruction.png", "reference.png"):
+        assert (out / f).is_file()
+    cached = list((tmp_path / "cache" / "basis").glob(f"loo-{tables[0].name}-K8-*.npz"))
+    assert len(cached) == 1
+    assert tables[0].name not in Basis.load(cached[0]).materials
+
+
+@pytest.mark.parametrize("n", [5, 10, 20, 40])
+def test_simple_pairs_are_distinct_valid_cells(n: int) -> None:
+    cells, ph = simple_pairs(n)
+    assert cells.shape == (n, 3) and ph.shape == (n,)
+    idx = np.rint(cells / geo.STEP).astype(int)
+    assert len({tuple(r) for r in idx}) == n
+    assert geo.valid_mask()[idx[:, 0], idx[:, 1], idx[:, 2]].all()
