@@ -30,6 +30,8 @@ from numpy.typing import ArrayLike, NDArray
 from gonio.brdf import geometry as geo
 from gonio.brdf.feasibility import (
     FeasibilityError,
+    MountPlanner,
+    Mounting,
     RigConstraints,
     angular_distance,
     candidate_rows,
@@ -50,6 +52,8 @@ KappaMethod = Literal["fast", "svd"]
 SINGULAR_RTOL = 1e-13
 _NEWTON_RTOL = 1e-13  # a few hundred ulps: iterates can dither by several ulps near a pole
 _MAX_ITER = 200
+# Random collision-free starts tried before a collision-aware search gives up.
+_START_TRIES = 20
 
 
 class DesignError(ValueError):
@@ -194,11 +198,13 @@ def _smallest_root(d: FloatArray, z2: FloatArray, rho: FloatArray) -> FloatArray
     live = c0 > 0.0
     if d2 <= 0.0 or not live.any():
         return d[0] + tau
-    c0, w = c0[live], rho[live, None] * z2[live, 1:]
+    # Working arrays hold only the candidates still iterating: converged ones are dropped, so
+    # a few slow candidates do not make every iteration cost a whole neighbourhood.
+    idx = np.flatnonzero(live)
+    c0, w = c0[idx], rho[idx, None] * z2[idx, 1:]
     t = np.zeros(c0.shape)
     lo = np.zeros(c0.shape)
     hi = np.minimum(d2, c0)  # c0 / tau = 1 + phi(tau) >= 1 bounds tau by c0
-    C = c0 * d2
     for _ in range(_MAX_ITER):
         inv = 1.0 / (delta - t[:, None])
         winv = w * inv
@@ -208,6 +214,7 @@ def _smallest_root(d: FloatArray, z2: FloatArray, rho: FloatArray) -> FloatArray
         b = dphi * g * g
         A = 1.0 + phi - b / g
         B = A * d2 + c0 + b
+        C = c0 * d2
         new = 2.0 * C / (B + np.sqrt(np.maximum(B * B - 4.0 * A * C, 0.0)))
         # f = 1 + phi - c0 / t increases on the bracket: its sign moves one end (t = 0 is the
         # pole at -inf, so it only ever raises lo there).
@@ -217,25 +224,30 @@ def _smallest_root(d: FloatArray, z2: FloatArray, rho: FloatArray) -> FloatArray
         done = np.abs(new - t) <= _NEWTON_RTOL * new
         inside = (new >= lo) & (new <= hi)
         t = np.where(inside | done, new, 0.5 * (lo + hi))
-        if done.all():
-            break
-    tau[live] = t
+        if done.any():
+            tau[idx[done]] = t[done]
+            going = ~done
+            if not going.any():
+                break
+            idx, c0, w, t, lo, hi = idx[going], c0[going], w[going], t[going], lo[going], hi[going]
+    else:
+        tau[idx] = t
     return d[0] + tau
 
 
 def _largest_root(d: FloatArray, z2: FloatArray, rho: FloatArray) -> FloatArray:
     # tau = x - d_m solves G(tau) = tau - rho sum_j z_j^2 tau / (gamma_j + tau) = 0 with
     # gamma_j = d_m - d_j >= 0 (G is f times tau). G is convex with G(0) <= 0 <= G(rho), so
-    # Newton from the right descends monotonically onto the largest root. The start is the
-    # smaller of rho and the bound from the two largest poles alone, both right of the root.
+    # Newton from the right descends monotonically onto the largest root, started at rho.
     gamma = d[-1] - d
     live = rho > 0.0
     tau = np.zeros(rho.shape)
     if not live.any():
         return d[-1] + tau
-    w = rho[live, None] * z2[live]
+    idx = np.flatnonzero(live)  # candidates still iterating, as in _smallest_root
+    w = rho[idx, None] * z2[idx]
     wg = w * gamma
-    t = rho[live].astype(float)
+    t = rho[idx].astype(float)
     for _ in range(_MAX_ITER):
         inv = 1.0 / (gamma + t[:, None])
         G = t - t * (w * inv).sum(axis=1)
@@ -244,9 +256,14 @@ def _largest_root(d: FloatArray, z2: FloatArray, rho: FloatArray) -> FloatArray:
         new = np.clip(t - step, 0.0, t)
         done = (t - new <= _NEWTON_RTOL * (d[-1] + t)) | (G <= 0.0)
         t = np.where(G <= 0.0, t, new)
-        if done.all():
-            break
-    tau[live] = t
+        if done.any():
+            tau[idx[done]] = t[done]
+            going = ~done
+            if not going.any():
+                break
+            idx, w, wg, t = idx[going], w[going], wg[going], t[going]
+    else:
+        tau[idx] = t
     return d[-1] + tau
 
 
@@ -266,9 +283,10 @@ def condition_numbers_fast(
         Rows to try as the ``n``-th row.
     cutoff : float
         Candidates whose ``kappa`` provably reaches ``cutoff`` are not solved for and get
-        ``inf``. The interlacing brackets give ``lambda_max >= max(d_m + rho z_m^2, rho)`` and
-        ``lambda_min <= min(d_2, d_1 + rho z_1^2)``, a cheap lower bound on ``kappa``; a search
-        that only wants improvements on its current ``kappa`` skips most candidates this way.
+        ``inf``. Interlacing on the trailing 2 x 2 block bounds ``lambda_max`` from below;
+        one evaluation of the secular function at ``lambda_max_bound / cutoff^2`` then tells
+        whether ``lambda_min`` is below that point (:func:`_may_beat`). A search that only
+        wants improvements on its current ``kappa`` skips nearly every candidate this way.
 
     Returns
     -------
@@ -284,32 +302,62 @@ def condition_numbers_fast(
     out = np.full(q.shape[0], np.inf)
     d = spec.d
     if np.isfinite(cutoff) and d.size > 1:
-        keep = _kappa_lower_bound(d, z * z, z[:, 0] * z[:, 1], z[:, -2] * z[:, -1], rho) < cutoff
+        z2 = z * z
+        hi_lb = _largest_lower_bound(d, z2, z[:, -2] * z[:, -1], rho)
+        keep = np.flatnonzero(_may_beat(d, z2, rho, hi_lb, cutoff))
     else:
-        keep = np.ones(q.shape[0], dtype=bool)
-    if keep.any():
+        keep = np.arange(q.shape[0])
+    if keep.size:
         lo, hi = secular_extremes(d, z[keep], rho[keep])
         out[keep] = _kappa_from_extremes(lo, hi)
     return out
 
 
-def _kappa_lower_bound(
-    d: FloatArray, z2: FloatArray, z12: FloatArray, zmm: FloatArray, rho: FloatArray
+def _largest_lower_bound(
+    d: FloatArray, z2: FloatArray, zmm: FloatArray, rho: FloatArray
 ) -> FloatArray:
-    """Cheap lower bound on ``kappa`` of ``diag(d) + rho z z^T`` for each candidate.
+    """Lower bound on the largest eigenvalue of ``diag(d) + rho z z^T``, per candidate.
 
-    By Cauchy interlacing, the smallest eigenvalue is at most that of the leading 2 x 2 block
-    and the largest at least that of the trailing 2 x 2 block (both in closed form). A small
-    margin keeps round-off in the bound from screening out a true improvement.
+    By Cauchy interlacing the largest eigenvalue is at least that of the trailing 2 x 2 block
+    (``zmm = z_{m-1} z_m``), which has a closed form.
     """
+    a, b, c = d[-2] + rho * z2[:, -2], d[-1] + rho * z2[:, -1], rho * zmm
+    return 0.5 * (a + b) + np.hypot(0.5 * (a - b), c)
 
-    def eig2(a: FloatArray, b: FloatArray, c: FloatArray, sign: float) -> FloatArray:
-        return 0.5 * (a + b) + sign * np.hypot(0.5 * (a - b), c)
 
-    lo_ub = eig2(d[0] + rho * z2[:, 0], d[1] + rho * z2[:, 1], rho * z12, -1.0)
-    hi_lb = eig2(d[-2] + rho * z2[:, -2], d[-1] + rho * z2[:, -1], rho * zmm, 1.0)
-    lo_ub = np.maximum(lo_ub, 0.0) * (1.0 + 1e-9) + 1e-300
-    return np.sqrt(hi_lb / lo_ub) * (1.0 - 1e-9)
+# Relative slack of the screening tests: they only discard a candidate when it fails to beat
+# the cutoff by more than round-off could explain, so the search (which wants a gain of
+# _MIN_GAIN) never loses a true improvement to screening.
+_SCREEN_SLACK = 1e-11
+# Smallest relative drop of kappa the search accepts as a move: far above the screening slack
+# and the solver's accuracy, so the fast and the SVD objective accept the same moves.
+_MIN_GAIN = 1e-9
+
+
+def _may_beat(
+    d: FloatArray, z2: FloatArray, rho: FloatArray, hi_lb: FloatArray, cutoff: float
+) -> NDArray[np.bool_]:
+    """Which candidates may have ``kappa < cutoff``; the others provably do not.
+
+    ``kappa^2 = hi / lo >= hi_lb / lo``, so a candidate cannot beat ``cutoff`` when its
+    smallest eigenvalue ``lo`` is at most ``x* = hi_lb / cutoff^2``. ``lo`` is the root of the
+    secular function ``f``, which increases on ``(d_1, d_2)``: ``lo <= x*`` exactly when
+    ``x* >= d_2`` or ``f(x*) >= 0``. One evaluation of ``f`` per candidate (the cost of one
+    solver iteration) thus settles most of a neighbourhood without solving for any root.
+    """
+    x = hi_lb * (1.0 - _SCREEN_SLACK) / cutoff**2
+    tau = x - d[0]  # shift from the d_1 pole, as in _smallest_root, for relative accuracy
+    delta = d[1:] - d[0]
+    keep = tau > 0.0  # x* <= d_1 < lo (or lo = d_1 = x* only when singular): cannot decide
+    beyond = tau >= delta[0]
+    test = np.flatnonzero(keep & ~beyond)
+    keep &= ~beyond
+    if test.size:
+        w = rho[test, None] * z2[test]
+        t = tau[test]
+        f = 1.0 - w[:, 0] / t + (w[:, 1:] / (delta - t[:, None])).sum(axis=1)
+        keep[test] = f < 0.0
+    return keep
 
 
 def _svd_with_cutoff(kept: ArrayLike, candidates: ArrayLike, cutoff: float = np.inf) -> FloatArray:
@@ -358,6 +406,11 @@ class SearchResult:
         Neighbourhoods searched (one secular or SVD batch each).
     seconds : float
         Wall time of the search.
+    history : list of float
+        Final ``kappa`` of every descent, in order.
+    ph_lab : (n,) array, radians, or None
+        Collision-free lab azimuth of each row (in the order of ``rows``) when the search
+        was given a :class:`~gonio.brdf.feasibility.MountPlanner`; None otherwise.
     """
 
     rows: IntArray
@@ -366,6 +419,7 @@ class SearchResult:
     neighbourhoods: int
     seconds: float
     history: list[float] = field(default_factory=list)
+    ph_lab: FloatArray | None = None
 
 
 def optimize_rows(
@@ -380,6 +434,7 @@ def optimize_rows(
     method: KappaMethod = "fast",
     grid_shape: tuple[int, int, int] = SLICE_SHAPE,
     time_limit_s: float | None = None,
+    mounts: MountPlanner | None = None,
 ) -> SearchResult:
     """V&F neighbourhood search for ``n`` rows of ``Q`` with the lowest condition number.
 
@@ -408,10 +463,23 @@ def optimize_rows(
         Shape of the ``(th, td, pd)`` grid behind the flat indices.
     time_limit_s : float, optional
         Stop starting new descents after this many seconds (the best design so far is kept).
+    mounts : MountPlanner, optional
+        Make the search collision-aware (standard grid only): every start is a random
+        collision-free design, each row carries a lab azimuth, and a move is taken only when
+        the new cell can be mounted beside the other pairs as they stand. When the best cell
+        of a neighbourhood collides, the next best improving one is tried. Every design the
+        search visits, and so the one it returns, is mountable.
 
     Returns
     -------
     SearchResult
+
+    Raises
+    ------
+    DesignError
+        For bad arguments.
+    FeasibilityError
+        When ``mounts`` is given and no random start of ``n`` pairs can be mounted.
     """
     Qa = np.asarray(Q, dtype=float)
     cand = np.unique(np.asarray(candidates, dtype=np.intp).ravel())
@@ -446,20 +514,41 @@ def optimize_rows(
             near_cache[flat] = got
         return got
 
+    if mounts is not None and grid_shape != SLICE_SHAPE:
+        raise DesignError("a collision-aware search (mounts) needs the standard (18, 18, 36) grid")
+
     rng = np.random.default_rng(seed)
     t0 = time.perf_counter()
-    best_rows = np.sort(rng.choice(cand, size=n, replace=False))
+
+    def random_start() -> tuple[IntArray, Mounting | None]:
+        if mounts is None:
+            return rng.choice(cand, size=n, replace=False), None
+        for _ in range(_START_TRIES):
+            got = mounts.start(rng, cand, n)
+            if got is not None:
+                return got
+        c = mounts.constraints
+        raise FeasibilityError(
+            f"cannot mount {n} pairs with every two devices at least "
+            f"{c.min_device_distance_deg:g} deg apart: {_START_TRIES} random designs all ran out "
+            "of room; lower --min-device-distance, raise --max-elevation or ask for fewer pairs"
+        )
+
+    start, start_mount = random_start()
+    best_rows, best_mount = start.copy(), start_mount
     best_kappa = condition_number(A[best_rows])
     evaluations = 0
     searched = 0
     history: list[float] = []
     taken = np.zeros(Qa.shape[0], dtype=bool)
-    for _ in range(starts):
-        start = rng.choice(cand, size=n, replace=False)
+    for first in range(starts):
+        if first > 0:
+            start, start_mount = random_start()
         for _ in range(descents):
             if time_limit_s is not None and time.perf_counter() - t0 > time_limit_s:
                 break
             sel = start.copy()
+            mount = None if start_mount is None else start_mount.copy()
             taken[:] = False
             taken[sel] = True
             kappa = condition_number(A[sel])
@@ -472,27 +561,40 @@ def optimize_rows(
                     current = int(sel[slot])
                     others = np.delete(sel, slot)
                     near = near_of(current)
-                    near = near[~taken[near] | (near == current)]
+                    # The current cell is left out: its kappa is the current one, and
+                    # screening cannot rule it out (it does not beat itself by round-off).
+                    near = near[~taken[near]]
+                    if near.size == 0:
+                        continue
                     values = kappas(A[others], A[near], kappa)
                     evaluations += near.size
                     searched += 1
-                    k = int(np.argmin(values))
-                    if values[k] < kappa * (1.0 - 1e-12):
+                    better = np.flatnonzero(values < kappa * (1.0 - _MIN_GAIN))
+                    # Best first; with mounts, a cell that collides gives way to the next.
+                    for k in better[np.argsort(values[better], kind="stable")]:
+                        if mount is not None and not mounts.move(mount, int(slot), int(near[k])):
+                            continue
                         taken[current] = False
                         taken[near[k]] = True
                         sel[slot] = near[k]
                         kappa = float(values[k])
                         improved = True
+                        break
             history.append(kappa)
             if kappa < best_kappa:
-                best_kappa, best_rows = kappa, np.sort(sel)
+                best_kappa, best_rows, best_mount = kappa, sel.copy(), mount
+    order = np.argsort(best_rows)
+    ph_lab = None
+    if best_mount is not None and mounts is not None:
+        ph_lab = mounts.ph[best_mount.az[order]]
     return SearchResult(
-        rows=best_rows,
+        rows=best_rows[order],
         kappa=condition_number(A[best_rows]),
         evaluations=evaluations,
         neighbourhoods=searched,
         seconds=time.perf_counter() - t0,
         history=history,
+        ph_lab=ph_lab,
     )
 
 

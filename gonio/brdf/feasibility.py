@@ -320,13 +320,16 @@ def place_pairs(
     ph_step_deg: float = 1.0,
     orderings: int = 20,
     seed: int = 0,
+    initial_ph: ArrayLike | None = None,
 ) -> Placement:
     """Choose each pair's lab azimuth so no two mounted devices come too close.
 
     Greedy maximin: pairs are placed one after another (the most constrained first), each at
     the allowed azimuth that keeps its two devices farthest from every device placed so far.
     If some pair cannot keep ``min_device_distance_deg``, the placement is retried with
-    shuffled orders.
+    shuffled orders. A known placement (``initial_ph``, e.g. from a collision-aware search)
+    is tried first; every candidate placement is then spread by re-placing one of the closest
+    two devices' pairs at a time while that widens the gap.
 
     Parameters
     ----------
@@ -339,6 +342,10 @@ def place_pairs(
         Orders tried before giving up.
     seed : int
         Seed for the shuffled orders.
+    initial_ph : (n,) array_like, radians, optional
+        Lab azimuth of each pair in a placement to start from; snapped to the
+        ``ph_step_deg`` grid. When it (after spreading) keeps every device distance, the greedy
+        orders are not needed.
 
     Returns
     -------
@@ -378,14 +385,22 @@ def place_pairs(
     rng = np.random.default_rng(seed)
     base = np.argsort(allowed.sum(axis=1), kind="stable")
     best: tuple[float, NDArray[np.intp]] | None = None
+    if initial_ph is not None:
+        start = np.asarray(initial_ph, dtype=float).ravel()
+        if start.shape != (n,):
+            raise FeasibilityError(f"initial_ph needs one azimuth per pair ({n}), got {start.size}")
+        step = math.radians(ph_step_deg)
+        choice = np.mod(np.rint(np.mod(start, 2.0 * math.pi) / step), ph.size).astype(np.intp)
+        if allowed[np.arange(n), choice].all():
+            best = (_repair(wi, wo, allowed, choice), choice.copy())
     for attempt in range(max(1, orderings)):
+        if best is not None and best[0] >= need - 1e-9:
+            break
         order = base if attempt == 0 else rng.permutation(n)
         choice = _greedy(wi, wo, allowed, order)
         worst = _repair(wi, wo, allowed, choice)
         if best is None or worst > best[0]:
             best = (worst, choice.copy())
-        if worst >= need - 1e-9:
-            break
     assert best is not None
     worst, choice = best
     if worst < need - 1e-9:
@@ -505,3 +520,141 @@ def check_devices(
             f"two devices are {dmin:.1f} deg apart (< {constraints.min_device_distance_deg:g})"
         )
     return problems
+
+
+# ------------------------------------------------------------------ placement during a search
+@dataclass
+class Mounting:
+    """Lab placement of the pairs a search currently holds (mutable search state).
+
+    Attributes
+    ----------
+    az : (n,) int array
+        Index into :attr:`MountPlanner.ph` of each pair's lab half-vector azimuth.
+    devices : (n, 2, 3) array
+        Light and sensor direction of each pair at that azimuth (lab, unit vectors).
+    """
+
+    az: NDArray[np.intp]
+    devices: FloatArray
+
+    def copy(self) -> Mounting:
+        return Mounting(self.az.copy(), self.devices.copy())
+
+
+class MountPlanner:
+    """Incremental, collision-free placement of pairs for a search over grid cells.
+
+    A pair's lab azimuth ``ph`` is free (it does not change ``kappa``), so a cell can join a
+    design when some azimuth keeps both its devices out of every exclusion and at least
+    ``min_device_distance_deg`` from every device already mounted. Rotating ``ph`` rotates both
+    devices about the lab normal, so every azimuth of a cell comes from one pair of directions
+    and a table of sines and cosines. Among the azimuths that fit, the one whose closest device
+    is farthest away is taken (maximin), leaving room for later moves.
+
+    Parameters
+    ----------
+    constraints : RigConstraints
+    ph_step_deg : float
+        Azimuth resolution, degrees (the same grid :func:`place_pairs` uses by default).
+
+    Rows are flat indices of the standard ``(th, td, pd)`` grid (:func:`rows_to_cells`).
+    """
+
+    def __init__(self, constraints: RigConstraints, ph_step_deg: float = 1.0) -> None:
+        self.constraints = constraints
+        self.ph = ph_options(ph_step_deg)
+        self._cos_ph = np.cos(self.ph)
+        self._sin_ph = np.sin(self.ph)
+        # Two devices collide when their angle is below the limit, i.e. their cosine above
+        # cos(limit); the slack matches place_pairs' 1e-9 rad tolerance.
+        need = math.radians(constraints.min_device_distance_deg)
+        self._cos_need = math.cos(max(need - 1e-9, 0.0)) if need > 0.0 else math.inf
+
+    def _rotated(self, v: FloatArray) -> FloatArray:
+        """(P, 3): ``v`` rotated about the lab normal by every azimuth of :attr:`ph`."""
+        x = self._cos_ph * v[0] - self._sin_ph * v[1]
+        y = self._sin_ph * v[0] + self._cos_ph * v[1]
+        return np.stack([x, y, np.full_like(x, v[2])], axis=-1)
+
+    def azimuth_options(self, row: int) -> tuple[FloatArray, FloatArray, BoolArray]:
+        """Devices of flat grid ``row`` at every azimuth, and where both are allowed.
+
+        Returns
+        -------
+        wi, wo : (P, 3) arrays
+            Light and sensor directions at each azimuth of :attr:`ph`.
+        allowed : (P,) bool
+            Both devices within the elevation limit and outside every exclusion.
+        """
+        th, td, pd = rows_to_cells(np.array([row]))[0]
+        wi0, wo0 = geo.half_diff_to_directions(th, 0.0, td, pd)
+        wi, wo = self._rotated(wi0), self._rotated(wo0)
+        allowed = device_ok(wi, self.constraints) & device_ok(wo, self.constraints)
+        return wi, wo, allowed
+
+    def best_azimuth(self, row: int, others: ArrayLike) -> tuple[int, FloatArray]:
+        """Maximin azimuth for ``row`` among the devices ``others`` (D, 3).
+
+        Returns
+        -------
+        index : int
+            Index into :attr:`ph`, or -1 when no allowed azimuth keeps both devices far enough
+            from every device in ``others``.
+        devices : (2, 3) array
+            Light and sensor direction at that azimuth (meaningless when ``index`` is -1).
+        """
+        wi, wo, allowed = self.azimuth_options(row)
+        dev = np.asarray(others, dtype=float).reshape(-1, 3)
+        if dev.shape[0]:
+            # Largest cosine = closest device; one matrix product per device of the pair.
+            closest = np.maximum((wi @ dev.T).max(axis=1), (wo @ dev.T).max(axis=1))
+        else:
+            closest = np.full(self.ph.size, -1.0)
+        fits = allowed & (closest <= self._cos_need)
+        if not fits.any():
+            return -1, np.zeros((2, 3))
+        j = int(np.argmin(np.where(fits, closest, np.inf)))
+        return j, np.stack([wi[j], wo[j]])
+
+    def start(
+        self, rng: np.random.Generator, candidates: ArrayLike, n: int
+    ) -> tuple[NDArray[np.intp], Mounting] | None:
+        """A random collision-free design: ``n`` candidate rows added in random order.
+
+        Rows that do not fit beside those already mounted are skipped; None when the
+        candidates run out before ``n`` fit.
+
+        Returns
+        -------
+        rows : (n,) int array
+        mounting : Mounting
+        """
+        rows: list[int] = []
+        az: list[int] = []
+        devices: list[FloatArray] = []
+        for r in rng.permutation(np.asarray(candidates, dtype=np.intp)):
+            placed = np.concatenate(devices) if devices else np.zeros((0, 3))
+            j, dev = self.best_azimuth(int(r), placed)
+            if j < 0:
+                continue
+            rows.append(int(r))
+            az.append(j)
+            devices.append(dev)
+            if len(rows) == n:
+                return (np.array(rows, dtype=np.intp),
+                        Mounting(np.array(az, dtype=np.intp), np.stack(devices)))
+        return None
+
+    def move(self, mounting: Mounting, slot: int, row: int) -> bool:
+        """Mount ``row`` in place of pair ``slot``, every other pair held; False if it collides.
+
+        ``mounting`` is updated only on success.
+        """
+        others = np.delete(mounting.devices, slot, axis=0).reshape(-1, 3)
+        j, dev = self.best_azimuth(row, others)
+        if j < 0:
+            return False
+        mounting.az[slot] = j
+        mounting.devices[slot] = dev
+        return True
