@@ -1,0 +1,188 @@
+"""API load benchmark: job-status latency and event delivery while a scan runs.
+
+Starts ``gonio serve --sim`` in a subprocess (its own interpreter, so client load does not share
+the server's GIL), then measures one scan twice: alone, and under load from N clients polling
+the job's status in a loop plus M server-sent-event subscribers. Reports the status latency
+(p50/p99/max), events lost per subscriber (expected 0: every seq of the scan must arrive, in
+order), and the scan overhead (measuring phase, loaded vs alone). The reconstruction is not
+part of the measurement: the job is aborted when it reaches ``reconstructing``.
+
+    .venv/bin/python bench/bench_api.py [--pollers 50] [--subscribers 10] [--rotations 24]
+                                        [--interval 0.5]
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import os
+import secrets
+import socket
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from typing import Any
+
+import httpx
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def start_daemon(port: int, key: str, data_dir: str) -> subprocess.Popen[bytes]:
+    env = {**os.environ, "GONIO_API_KEYS": f"bench:{key}"}
+    cmd = [sys.executable, "-c", "from gonio.cli import main; raise SystemExit(main())",
+           "serve", "--sim", "--port", str(port), "--data-dir", data_dir]
+    return subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+
+
+async def wait_up(url: str, timeout: float = 60) -> None:
+    deadline = time.monotonic() + timeout
+    async with httpx.AsyncClient() as c:
+        while time.monotonic() < deadline:
+            try:
+                if (await c.get(f"{url}/health")).status_code == 200:
+                    return
+            except httpx.TransportError:
+                pass
+            await asyncio.sleep(0.2)
+    raise TimeoutError("daemon did not come up")
+
+
+async def subscriber(url: str, since: int, job_id_box: dict[str, int], got: list[int],
+                     done: asyncio.Event) -> None:
+    async with httpx.AsyncClient(timeout=httpx.Timeout(10, read=None)) as c, \
+            c.stream("GET", f"{url}/api/v1/events", params={"since": since}) as r:
+        async for line in r.aiter_lines():
+            if not line.startswith("data:"):
+                continue
+            ev = json.loads(line[5:])
+            got.append(ev["seq"])
+            if (ev["type"] == "state" and ev["job_id"] == job_id_box.get("id")
+                    and ev["data"]["state"] in ("aborted", "failed", "completed")):
+                done.set()
+                return
+
+
+async def poller(url: str, job_id: int, stop: asyncio.Event, lat: list[float],
+                 interval: float) -> None:
+    async with httpx.AsyncClient(timeout=30) as c:
+        while not stop.is_set():
+            t0 = time.perf_counter()
+            r = await c.get(f"{url}/api/v1/jobs/{job_id}")
+            dt = time.perf_counter() - t0
+            lat.append(dt)
+            r.raise_for_status()
+            await asyncio.sleep(max(0.0, interval - dt))
+
+
+async def one_scan(url: str, key: str, rotations: int, pollers: int, subs: int,
+                   interval: float = 0.0) -> dict[str, Any]:
+    h = {"X-API-Key": key}
+    async with httpx.AsyncClient(base_url=url, headers=h, timeout=30) as c:
+        seq0 = (await c.get("/health")).json()["seq"]
+        box: dict[str, int] = {}
+        received: list[list[int]] = [[] for _ in range(subs)]
+        finished = [asyncio.Event() for _ in range(subs)]
+        sub_tasks = [asyncio.create_task(subscriber(url, seq0, box, received[i], finished[i]))
+                     for i in range(subs)]
+        await asyncio.sleep(0.5)  # subscribers connected before the job exists
+        plan = {"kind": "uniform", "specimen": "bench", "rotations": rotations,
+                "exposure": {"exposure_s": 0.01, "light_settle_s": 0.0}}
+        job_id = (await c.post("/api/v1/jobs", json={"plan": plan})).json()["id"]
+        box["id"] = job_id
+        stop = asyncio.Event()
+        lat: list[float] = []
+        poll_tasks = [asyncio.create_task(poller(url, job_id, stop, lat, interval))
+                      for _ in range(pollers)]
+        while (await c.get(f"/api/v1/jobs/{job_id}")).json()["state"] in ("queued", "running"):
+            await asyncio.sleep(0.1)
+        await c.post(f"/api/v1/jobs/{job_id}/abort")
+        stop.set()
+        await asyncio.gather(*poll_tasks)
+        await asyncio.wait_for(asyncio.gather(*(e.wait() for e in finished)), 60)
+        for t in sub_tasks:
+            t.cancel()
+        # Events of the scan, as stored: running -> ... -> reconstructing gives the timing.
+        events = []
+        async with c.stream("GET", "/api/v1/events", params={"since": seq0}) as r:
+            async for line in r.aiter_lines():
+                if line.startswith("data:"):
+                    ev = json.loads(line[5:])
+                    events.append(ev)
+                    if (ev["type"] == "state" and ev["job_id"] == job_id
+                            and ev["data"]["state"] == "aborted"):
+                        break
+    times = {ev["data"]["state"]: ev["time"] for ev in events
+             if ev["type"] == "state" and ev["job_id"] == job_id}
+    expected = [ev["seq"] for ev in events]
+    lost = [len(set(expected) - set(got)) for got in received]
+    in_order = all(got[: len(expected)] == expected for got in received)
+    return {
+        "measuring_s": times["reconstructing"] - times["running"],
+        "lat": lat,
+        "lost": lost,
+        "in_order": in_order,
+        "events": len(expected),
+    }
+
+
+def pct(xs: list[float], q: float) -> float:
+    return statistics.quantiles(xs, n=1000)[int(q * 10) - 1] if len(xs) > 1 else float("nan")
+
+
+async def main_async(args: argparse.Namespace) -> int:
+    key = secrets.token_urlsafe(24)
+    port = free_port()
+    url = f"http://127.0.0.1:{port}"
+    with tempfile.TemporaryDirectory(prefix="gonio-bench-") as tmp:
+        proc = start_daemon(port, key, tmp)
+        try:
+            await wait_up(url)
+            alone = await one_scan(url, key, args.rotations, 0, 1)
+            loaded = await one_scan(url, key, args.rotations, args.pollers, args.subscribers,
+                                    args.interval)
+        finally:
+            proc.terminate()
+            proc.wait(30)
+    lat_ms = [x * 1000 for x in loaded["lat"]]
+    overhead = loaded["measuring_s"] / alone["measuring_s"] - 1
+    print(f"command: {' '.join([os.path.basename(sys.executable), *sys.argv])}")
+    print(f"scan: uniform, {args.rotations} stage angles, simulated rig (12 pairs)")
+    every = f"every {args.interval:g} s" if args.interval > 0 else "back to back"
+    print(f"load: {args.pollers} clients polling GET /api/v1/jobs/{{id}} {every} each, "
+          f"{args.subscribers} SSE subscribers; clients and daemon share this machine's CPUs")
+    print()
+    print("| quantity | value |")
+    print("|---|---|")
+    print(f"| status requests answered | {len(lat_ms)} |")
+    print(f"| status latency p50 | {pct(lat_ms, 50):.1f} ms |")
+    print(f"| status latency p99 (target < 100 ms) | {pct(lat_ms, 99):.1f} ms |")
+    print(f"| status latency max | {max(lat_ms):.1f} ms |")
+    print(f"| events in the scan | {loaded['events']} |")
+    print(f"| events lost per subscriber (target 0) | {max(loaded['lost'])} "
+          f"(in order: {loaded['in_order']}) |")
+    print(f"| measuring phase alone | {alone['measuring_s']:.2f} s |")
+    print(f"| measuring phase under load | {loaded['measuring_s']:.2f} s |")
+    print(f"| scan overhead under load | {100 * overhead:+.1f} % |")
+    return 0
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    p.add_argument("--pollers", type=int, default=50)
+    p.add_argument("--subscribers", type=int, default=10)
+    p.add_argument("--rotations", type=int, default=24)
+    p.add_argument("--interval", type=float, default=0.5,
+                   help="seconds between one client's polls (0: back to back, a stress test)")
+    return asyncio.run(asyncio.wait_for(main_async(p.parse_args()), timeout=600))
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

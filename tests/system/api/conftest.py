@@ -1,0 +1,77 @@
+"""A running gonio daemon on a simulated rig, shared by the API tests of one module.
+
+The daemon is the real thing end to end: the simulated rig speaks the real wire protocols, the
+real drivers talk to it, the service runs the engine, and uvicorn serves the app on loopback.
+Only the reconstruction basis is small (a few library materials, K = 8), so building it takes
+seconds instead of the minutes the default basis needs; it is cached in the session's cache dir.
+"""
+
+from __future__ import annotations
+
+import os
+import secrets
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import httpx
+import pytest
+
+from gonio.api.auth import ApiKeyring
+from gonio.daemon import DaemonConfig, build_app
+from tests.system.api.live_server import live_server
+
+SMALL_K = 8
+N_MATERIALS = 6
+
+
+def small_basis() -> Any:
+    """A K=8 basis from 6 library materials, built once per test session (cached on disk)."""
+    from gonio.brdf import models as bm
+    from gonio.brdf.basis import Basis, build_basis
+    from gonio.brdf.library import library_specs
+
+    path = Path(os.environ["GONIO_CACHE_DIR"]) / f"api-test-basis-K{SMALL_K}.npz"
+    if path.is_file():
+        return Basis.load(path)
+    specs = library_specs()
+    picked = specs[:: len(specs) // N_MATERIALS][:N_MATERIALS]
+    basis = build_basis([bm.tabulate(s.model) for s in picked], SMALL_K)
+    basis.save(path)
+    return basis
+
+
+@dataclass
+class Daemon:
+    url: str
+    key: str
+    app: Any
+    sim: Any
+    data_dir: Path
+
+    def client(self, key: str | None = "default") -> httpx.Client:
+        headers = {} if key is None else {"X-API-Key": self.key if key == "default" else key}
+        return httpx.Client(base_url=self.url, headers=headers, timeout=30)
+
+
+@pytest.fixture(scope="session")
+def basis() -> Any:
+    return small_basis()
+
+
+@pytest.fixture(scope="module")
+def daemon(tmp_path_factory: pytest.TempPathFactory, basis: Any) -> Iterator[Daemon]:
+    from gonio.sim.rig import SimRigOptions, start_sim_rig
+
+    data_dir = tmp_path_factory.mktemp("gonio-data")
+    # Fast stage physics and short settle times keep a full 8-angle scan to a few seconds.
+    sim = start_sim_rig(SimRigOptions(time_scale=10.0, settle_s=0.0))
+    key = secrets.token_urlsafe(24)
+    cfg = DaemonConfig().with_overrides(paths__data_dir=str(data_dir))
+    app = build_app(cfg, sim.config, ApiKeyring({"tester": key}), basis_provider=lambda: basis)
+    try:
+        with live_server(app) as url:
+            yield Daemon(url, key, app, sim, data_dir)
+    finally:
+        sim.close()
