@@ -10,6 +10,7 @@ A daemon config is a small TOML file (``deploy/daemon.example.toml`` is a comple
     read_requires_key = false
     [limits]
     max_body_bytes = 1048576
+    design_time_limit_s = 60   # longest sampling-design search a request may ask for
     [paths]
     data_dir = "/var/lib/gonio"
     rig_config = "/etc/gonio/rig.toml"
@@ -69,6 +70,8 @@ class LimitsSection(_Section):
     """``[limits]``."""
 
     max_body_bytes: Annotated[int, Field(ge=1024, le=64 << 20)] = 1 << 20
+    # A design request occupies a CPU core for up to this long; one runs at a time.
+    design_time_limit_s: Annotated[float, Field(gt=0, le=600)] = 60.0
 
 
 class PathsSection(_Section):
@@ -259,6 +262,7 @@ def api_settings(cfg: DaemonConfig, keyring: ApiKeyring) -> Any:
         access=AccessPolicy(keyring, read_requires_key=cfg.auth.read_requires_key),
         data_dir=cfg.paths.data_dir,
         max_body_bytes=cfg.limits.max_body_bytes,
+        design_time_limit_s=cfg.limits.design_time_limit_s,
     )
 
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import threading
 from collections.abc import AsyncIterator, Callable
 from pathlib import Path
 from typing import Any
@@ -27,7 +28,7 @@ from gonio import hal
 from gonio.calibration import Calibration, from_config_factors
 from gonio.jobstates import ACTIVE_STATES, IllegalTransition, JobState, check_action
 from gonio.plans import AnyPlan, DryRun, Plan, PlanError, RigDescription, dry_run, parse_plan
-from gonio.store import EventRow, JobRow, JobStore
+from gonio.store import EventRow, JobRow, JobStore, ReadingRow
 from gonio.store import NotFound as StoreNotFound
 from gonio.worker import BasisProvider, Worker, default_basis_provider
 
@@ -43,6 +44,8 @@ __all__ = [
     "PlanError",
     "ReorderRequest",
     "RigStatus",
+    "RunningJob",
+    "ServiceStatus",
 ]
 
 
@@ -125,12 +128,33 @@ class DeviceState(BaseModel):
     detail: dict[str, Any] = Field(default_factory=dict)
 
 
+class RunningJob(BaseModel):
+    """Progress of the job being measured now."""
+
+    id: int
+    done_angles: int = Field(description="stage angles measured so far")
+    total_angles: int = Field(description="stage angles planned so far (adaptive plans grow)")
+    eta_s: float | None = Field(description="estimated seconds to the end of measuring")
+
+
+class ServiceStatus(BaseModel):
+    """What the worker is doing, from memory (no store read, no device call)."""
+
+    current_job: int | None = Field(description="job being measured or reconstructed")
+    queue_held: str | None = Field(description="why the queue takes no new job; null if it runs")
+    running: RunningJob | None = Field(description="progress while a job is measuring")
+
+
 class RigStatus(BaseModel):
     connected: bool
     error: str | None = None
     current_job: int | None = None
     queue_held: str | None = None
     devices: list[DeviceState] = Field(default_factory=list)
+
+
+_PREVIEW_CACHE = 8
+"""Preview PNGs kept in memory (a few tens of kB each)."""
 
 
 # --------------------------------------------------------------------------- service
@@ -167,6 +191,10 @@ class GonioService:
         self._cond: asyncio.Condition | None = None
         self._version = 0
         self._task: asyncio.Task[None] | None = None
+        self._preview_lock = threading.Lock()
+        self._previews: dict[tuple[str, int], bytes] = {}
+        self._basis_lock = threading.Lock()
+        self._basis: Any = None
         provenance: dict[str, Any] = {}
         if rig_config is not None and hasattr(rig_config, "model_dump_json"):
             provenance["rig_config"] = rig_config.model_dump_json()
@@ -222,6 +250,17 @@ class GonioService:
                 self._connect_error = None
             return self._rig
 
+    def design_basis(self) -> Any:
+        """The basis sampling designs are computed against: the one scans reconstruct with.
+
+        Blocking: the first call loads (or builds) it through the basis provider; it is kept
+        for later designs.
+        """
+        with self._basis_lock:
+            if self._basis is None:
+                self._basis = self.worker.basis_provider()
+            return self._basis
+
     def calibration(self) -> Calibration:
         """The calibration applied to scans: the latest calibration job, else the rig config."""
         path = self.data_dir / "calibration.json"
@@ -261,17 +300,31 @@ class GonioService:
             raise NotFound(f"no job with id {job_id}") from None
 
     def get_job(self, job_id: int) -> JobDetail:
+        """One job's full status: one row read, plus the queue position if it is queued.
+
+        Cheap enough to serve many polling clients: no plan is re-parsed, the ETA is the
+        engine's last estimate (updated at each checkpoint), not recomputed.
+        """
         row = self._row(job_id)
         eta = None
         eng = self.worker.engine
         if eng is not None and eng.job_id == job_id:
             eta = eng.progress.eta_s
-        qpos = None
-        if row.state is JobState.QUEUED:
-            qpos = [j.id for j in self.store.queue()].index(job_id)
+        qpos = self.store.queue_position(job_id) if row.state is JobState.QUEUED else None
         base = JobInfo.from_row(row).model_dump()
         return JobDetail(**base, plan=row.plan, eta_s=eta, queue_position=qpos,
                          result_path=row.result_path, result=row.summary, rig=row.rig)
+
+    def readings(self, job_id: int, after_angle: int = -1) -> list[ReadingRow]:
+        """The readings stored so far for a job (angles with index > ``after_angle``).
+
+        Raises
+        ------
+        NotFound
+            For an unknown job (rather than an empty list).
+        """
+        self._row(job_id)
+        return [r for r in self.store.readings(job_id) if r.angle_index > after_angle]
 
     def pause(self, job_id: int, immediate: bool = False) -> JobInfo:
         """Pause at the next checkpoint (or now: the angle in progress is repeated)."""
@@ -337,6 +390,21 @@ class GonioService:
         """Let the worker take queued jobs again after a halt or a stop-on-failure."""
         self.worker.release()
 
+    def status(self) -> ServiceStatus:
+        """What the worker is doing right now (for /metrics and status pages)."""
+        eng = self.worker.engine
+        running = None
+        if eng is not None:
+            p = eng.progress
+            running = RunningJob(id=eng.job_id, done_angles=p.done, total_angles=p.total,
+                                 eta_s=p.eta_s)
+        return ServiceStatus(current_job=self.worker.current_job, queue_held=self.worker.held,
+                             running=running)
+
+    def record_event(self, type_: str, data: dict[str, Any], job_id: int | None = None) -> Event:
+        """Log an event of the daemon (e.g. the maintenance lock) for every subscriber."""
+        return Event.from_row(self.store.append_event(job_id, type_, data))
+
     def _engine_for(self, job_id: int) -> Any:
         eng = self.worker.engine
         if eng is None or eng.job_id != job_id:
@@ -367,6 +435,21 @@ class GonioService:
             loop.create_task(self._bump())
         else:
             asyncio.run_coroutine_threadsafe(self._bump(), loop)
+
+    def add_event_listener(self, fn: Callable[[Event], None]) -> Callable[[EventRow], None]:
+        """Call ``fn(event)`` right after each event is stored, in the committing thread.
+
+        Runs before the code that caused the event continues (e.g. before the worker takes the
+        next job), so keep ``fn`` short. Returns the handle for :meth:`remove_event_listener`.
+        """
+        def listener(ev: EventRow) -> None:
+            fn(Event.from_row(ev))
+
+        self.store.add_listener(listener)
+        return listener
+
+    def remove_event_listener(self, handle: Callable[[EventRow], None]) -> None:
+        self.store.remove_listener(handle)
 
     async def _bump(self) -> None:
         assert self._cond is not None
@@ -409,10 +492,25 @@ class GonioService:
         return dict(row.summary)
 
     def preview_png(self, job_id: int) -> bytes:
-        """PNG preview of the reconstructed table (:func:`gonio.brdf.preview.preview_image`)."""
+        """PNG preview of the reconstructed table (:func:`gonio.brdf.preview.preview_image`).
+
+        Blocking (reads the result file, renders): call it from a thread in async code. The
+        PNG of the last few results is kept, since a finished result file never changes.
+
+        Raises
+        ------
+        NotFound
+            The job has no result yet, or it is a calibration job (no BRDF).
+        """
+        path = self.result_path(job_id)
+        key = (str(path), path.stat().st_mtime_ns if path.is_file() else 0)
+        with self._preview_lock:
+            cached = self._previews.get(key)
+        if cached is not None:
+            return cached
         from gonio.results import read_result
 
-        res = read_result(self.result_path(job_id))
+        res = read_result(path)
         if res.table is None:
             raise NotFound(f"job {job_id} is a {res.attrs.get('kind')} job without a BRDF")
         import io
@@ -423,7 +521,12 @@ class GonioService:
 
         buf = io.BytesIO()
         Image.fromarray(preview_image(res.table)).save(buf, format="PNG")
-        return buf.getvalue()
+        png = buf.getvalue()
+        with self._preview_lock:
+            self._previews[key] = png
+            while len(self._previews) > _PREVIEW_CACHE:
+                self._previews.pop(next(iter(self._previews)))
+        return png
 
     # ------------------------------------------------------------------ rig
     async def rig_status(self) -> RigStatus:
@@ -443,9 +546,10 @@ class GonioService:
                     devices.append(DeviceState(name=name, ok=ok, detail=detail))
                 except Exception as exc:  # report, do not raise: this is a status page
                     devices.append(DeviceState(name=name, ok=False, detail={"error": str(exc)}))
+        st = self.status()
         return RigStatus(
             connected=self._connected, error=self._connect_error,
-            current_job=self.worker.current_job, queue_held=self.worker.held, devices=devices,
+            current_job=st.current_job, queue_held=st.queue_held, devices=devices,
         )
 
     def active_job(self) -> JobInfo | None:

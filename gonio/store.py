@@ -13,9 +13,12 @@ Three kinds of record (schema in ``docs/engine.md``):
 
 Every state change goes through :func:`gonio.jobstates.check_transition`.
 
-Thread-safety: one connection guarded by a lock, so the worker's event loop, reconstruction
-threads and API handlers can share a store. WAL lets other processes (``gonio jobs`` while the
-daemon runs) read concurrently.
+Thread-safety and concurrency: writes go through one connection guarded by a lock (SQLite has
+one writer at a time anyway). Reads never take that lock: each thread reads through its own
+connection, which WAL lets run concurrently with the writer and with each other, so a status
+request never waits behind a checkpoint's commit (or its fsync). Other processes (``gonio jobs``
+while the daemon runs) read the same way. A ``":memory:"`` store has no WAL and no second
+connection can see it, so there reads share the writer's connection under the lock.
 """
 
 from __future__ import annotations
@@ -185,6 +188,12 @@ class JobStore:
             Path(self.path).parent.mkdir(parents=True, exist_ok=True)
         self._lock = threading.RLock()
         self._listeners: list[EventListener] = []
+        self._shared_reads = self.path == ":memory:"
+        # Reader connections by thread; the thread object tells when one can be closed.
+        self._readers: dict[int, tuple[threading.Thread, sqlite3.Connection]] = {}
+        self._readers_lock = threading.Lock()
+        self._local = threading.local()
+        self._closed = False
         try:
             self._db = sqlite3.connect(self.path, check_same_thread=False, isolation_level=None)
             self._db.execute("PRAGMA journal_mode=WAL")
@@ -193,6 +202,9 @@ class JobStore:
             self._db.execute("PRAGMA busy_timeout=5000")
             self._db.executescript(_SCHEMA)
             row = self._db.execute("SELECT value FROM meta WHERE key='schema'").fetchone()
+            self._job_cols = tuple(
+                d[0] for d in self._db.execute("SELECT * FROM jobs LIMIT 0").description
+            )
         except sqlite3.DatabaseError as exc:
             raise StoreError(
                 f"{self.path} is not a usable gonio job store ({exc}); point --db at a new file"
@@ -220,9 +232,49 @@ class JobStore:
                 raise
             self._db.execute("COMMIT")
 
+    @contextmanager
+    def _read(self) -> Iterator[sqlite3.Connection]:
+        """A connection for reading from this thread, without the writer's lock (see module doc).
+
+        Autocommit mode: every statement sees the latest committed state, including this
+        thread's own writes through the writer connection.
+        """
+        if self._shared_reads:
+            with self._lock:
+                yield self._db
+            return
+        conn: sqlite3.Connection | None = getattr(self._local, "conn", None)
+        if conn is None:
+            conn = self._open_reader()
+        yield conn
+
+    def _open_reader(self) -> sqlite3.Connection:
+        if self._closed:
+            raise sqlite3.ProgrammingError("the job store is closed")
+        # check_same_thread=False only so close() can close it from another thread; it is used
+        # by its own thread alone.
+        conn = sqlite3.connect(self.path, check_same_thread=False, isolation_level=None)
+        conn.execute("PRAGMA busy_timeout=5000")
+        conn.execute("PRAGMA query_only=ON")
+        me = threading.current_thread()
+        with self._readers_lock:
+            # Threads come and go (thread pools resize): close what dead threads left behind.
+            for ident, (thread, old) in list(self._readers.items()):
+                if not thread.is_alive():
+                    old.close()
+                    del self._readers[ident]
+            self._readers[me.ident or 0] = (me, conn)
+        self._local.conn = conn
+        return conn
+
     def close(self) -> None:
         with self._lock:
+            self._closed = True
             self._db.close()
+        with self._readers_lock:
+            for _thread, conn in self._readers.values():
+                conn.close()
+            self._readers.clear()
 
     def add_listener(self, fn: EventListener) -> None:
         """Call ``fn(event)`` after every committed event (from the committing thread)."""
@@ -276,12 +328,14 @@ class JobStore:
         return self.get_job(job_id)
 
     def get_job(self, job_id: int) -> JobRow:
-        with self._lock:
-            row = self._db.execute("SELECT * FROM jobs WHERE id = ?", (job_id,)).fetchone()
-            cols = [d[0] for d in self._db.execute("SELECT * FROM jobs LIMIT 0").description]
+        with self._read() as db:
+            row = db.execute("SELECT * FROM jobs WHERE id = ?", (job_id,)).fetchone()
         if row is None:
             raise NotFound(f"no job with id {job_id}")
-        return _job_row(dict(zip(cols, row, strict=True)))
+        return self._job_from(row)
+
+    def _job_from(self, row: Sequence[Any]) -> JobRow:
+        return _job_row(dict(zip(self._job_cols, row, strict=True)))
 
     def list_jobs(self, states: Iterable[str] | None = None) -> list[JobRow]:
         """Jobs in queue order for queued ones, newest last otherwise (by id)."""
@@ -292,21 +346,35 @@ class JobStore:
             q += f" WHERE state IN ({', '.join('?' * len(st))})"
             args = st
         q += " ORDER BY id"
-        with self._lock:
-            cur = self._db.execute(q, args)
-            cols = [d[0] for d in cur.description]
-            rows = cur.fetchall()
-        return [_job_row(dict(zip(cols, r, strict=True))) for r in rows]
+        with self._read() as db:
+            rows = db.execute(q, args).fetchall()
+        return [self._job_from(r) for r in rows]
 
     def queue(self) -> list[JobRow]:
         """Queued jobs in the order the worker takes them: priority (high first), then position."""
-        with self._lock:
-            cur = self._db.execute(
+        with self._read() as db:
+            rows = db.execute(
                 "SELECT * FROM jobs WHERE state = 'queued' ORDER BY priority DESC, position, id"
-            )
-            cols = [d[0] for d in cur.description]
-            rows = cur.fetchall()
-        return [_job_row(dict(zip(cols, r, strict=True))) for r in rows]
+            ).fetchall()
+        return [self._job_from(r) for r in rows]
+
+    def queue_position(self, job_id: int) -> int | None:
+        """0 for the job the worker takes next; None unless the job is queued.
+
+        Counted in SQL, so a status request does not decode every queued job's plan.
+        """
+        with self._read() as db:
+            row = db.execute(
+                "SELECT state, priority, position FROM jobs WHERE id = ?", (job_id,)
+            ).fetchone()
+            if row is None or row[0] != JobState.QUEUED.value:
+                return None
+            ahead = db.execute(
+                "SELECT COUNT(*) FROM jobs WHERE state = 'queued' AND (priority > ? OR "
+                "(priority = ? AND (position < ? OR (position = ? AND id < ?))))",
+                (row[1], row[1], row[2], row[2], job_id),
+            ).fetchone()[0]
+        return int(ahead)
 
     def set_state(
         self,
@@ -451,8 +519,8 @@ class JobStore:
         self._notify([ev])
 
     def steps(self, job_id: int) -> list[StepRow]:
-        with self._lock:
-            rows = self._db.execute(
+        with self._read() as db:
+            rows = db.execute(
                 "SELECT angle_index, round, specimen_deg, position_deg, done, actual_deg "
                 "FROM steps WHERE job_id = ? ORDER BY angle_index",
                 (job_id,),
@@ -473,8 +541,8 @@ class JobStore:
     def darks(self, job_id: int) -> dict[int, dict[str, tuple[float, ...]]]:
         """Stored darks: ``{angle_index: {sensor: values}}``."""
         out: dict[int, dict[str, tuple[float, ...]]] = {}
-        with self._lock:
-            for a, s, v in self._db.execute(
+        with self._read() as db:
+            for a, s, v in db.execute(
                 "SELECT angle_index, sensor, values_json FROM darks WHERE job_id = ?", (job_id,)
             ):
                 out.setdefault(a, {})[s] = tuple(json.loads(v))
@@ -530,8 +598,8 @@ class JobStore:
         return ev
 
     def readings(self, job_id: int) -> list[ReadingRow]:
-        with self._lock:
-            rows = self._db.execute(
+        with self._read() as db:
+            rows = db.execute(
                 "SELECT angle_index, commanded_deg, actual_deg, light, sensor, raw, dark, "
                 "exposure_s, averages, saturated, t_read FROM readings WHERE job_id = ? "
                 "ORDER BY angle_index, light, sensor",
@@ -544,8 +612,8 @@ class JobStore:
         ]
 
     def reading_count(self, job_id: int) -> int:
-        with self._lock:
-            return int(self._db.execute(
+        with self._read() as db:
+            return int(db.execute(
                 "SELECT COUNT(*) FROM readings WHERE job_id = ?", (job_id,)).fetchone()[0])
 
     # ------------------------------------------------------------------ events
@@ -564,13 +632,13 @@ class JobStore:
             args.append(job_id)
         q += " ORDER BY seq LIMIT ?"
         args.append(limit)
-        with self._lock:
-            rows = self._db.execute(q, args).fetchall()
+        with self._read() as db:
+            rows = db.execute(q, args).fetchall()
         return [EventRow(r[0], r[1], r[2], r[3], json.loads(r[4])) for r in rows]
 
     def last_seq(self) -> int:
-        with self._lock:
-            return int(self._db.execute("SELECT COALESCE(MAX(seq), 0) FROM events").fetchone()[0])
+        with self._read() as db:
+            return int(db.execute("SELECT COALESCE(MAX(seq), 0) FROM events").fetchone()[0])
 
 
 def _job_row(d: dict[str, Any]) -> JobRow:

@@ -15,6 +15,7 @@ import asyncio
 import contextlib
 import json
 import logging
+import math
 import time
 from collections.abc import Awaitable, Callable
 from pathlib import Path
@@ -228,6 +229,10 @@ class Worker:
             "readings": len(readings), "angles": int(samples.stage_angles_deg.size),
             "pairs": len(pairs), "calibrated": bool(cal.pairs) or is_cal,
         }
+        warning = _exposure_mismatch(cal, readings)
+        if warning is not None:
+            summary["calibration_warning"] = warning
+            provenance["calibration_warning"] = warning
         if isinstance(plan, CalibrationPlan):
             new_cal = from_reference(
                 plan.reference_albedo,
@@ -278,3 +283,19 @@ class Worker:
         if self._recon_task is not None:
             with contextlib.suppress(BaseException):
                 await asyncio.shield(self._recon_task)
+
+
+def _exposure_mismatch(cal: Calibration, readings: list[Any]) -> str | None:
+    """Why the calibration may not fit these readings, or None.
+
+    Factors are not rescaled between exposure times (sensors need not be linear in exposure),
+    so a scan at another exposure than its calibration is flagged rather than silently trusted.
+    """
+    if not cal.pairs or cal.exposure_s is None or not readings:
+        return None
+    used = sorted({float(r.exposure_s) for r in readings})
+    if all(math.isclose(t, cal.exposure_s, rel_tol=1e-6) for t in used):
+        return None
+    return (f"the calibration was measured at exposure {cal.exposure_s:g} s, this scan at "
+            f"{', '.join(f'{t:g}' for t in used)} s; its values are off by about the ratio. "
+            "Calibrate at the scan's exposure")

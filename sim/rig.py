@@ -17,6 +17,7 @@ from __future__ import annotations
 import asyncio
 import math
 import os
+import threading
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -49,12 +50,14 @@ __all__ = [
     "DEFAULT_LIGHTS",
     "DEFAULT_SENSORS",
     "FAULT_HELP",
+    "WHITE_REFERENCE_ALBEDO",
     "SimRig",
     "SimRigOptions",
     "default_material",
     "resolve_material",
     "start_sim_rig",
     "start_sim_rig_async",
+    "white_reference",
 ]
 
 # Three lamps and four sensors spread over the hemisphere (theta, phi) in degrees: the twelve
@@ -75,6 +78,18 @@ FAULT_HELP = (
     "(a lamp's output is scaled by FACTOR), saturate:NAME (a sensor reads full scale), "
     "stage-silent, stage-overload, stage-stall"
 )
+
+
+WHITE_REFERENCE_ALBEDO = 0.99
+"""Hemispherical albedo of the simulated white reference (a sintered-PTFE-like target)."""
+
+
+def white_reference(albedo: float = WHITE_REFERENCE_ALBEDO,
+                    channels: Sequence[str] = ("R", "G", "B")) -> Lambert:
+    """A Lambertian white reference: ``f = albedo / pi`` (1/sr) in every channel."""
+    if not 0.0 < albedo <= 1.0:
+        raise ValueError(f"white reference albedo must be in (0, 1], got {albedo}")
+    return Lambert((albedo,) * len(channels), channels=tuple(channels), name="white-reference")
 
 
 def default_material() -> BRDFLike:
@@ -209,6 +224,7 @@ class SimRig:
     def __init__(self, options: SimRigOptions) -> None:
         options.check()
         self.options = options
+        self._specimen_lock = threading.Lock()
         self.specimen = Specimen(resolve_material(options.material))
         self.noise = options.noise or NoiseModel.noiseless(ADC_FULL_SCALE)
         self.motion = StageMotion(
@@ -392,6 +408,55 @@ class SimRig:
         if self.modbus is not None:
             self.modbus.clear_faults()
         self.stage_faults.clear()
+
+    # ------------------------------------------------------------------ specimen
+    def place_specimen(self, material: str | os.PathLike[str] | BRDFLike | None) -> Specimen:
+        """Put another specimen on the stage, while the rig runs (thread-safe).
+
+        Readings triggered after this call see the new BRDF; a reading in progress keeps the
+        one it started with (each exposure evaluates the specimen once).
+
+        Parameters
+        ----------
+        material : as :attr:`SimRigOptions.material` (model, ``.npz`` table, library name,
+            None for the default material)
+
+        Returns
+        -------
+        Specimen
+            The specimen that was on the stage before (give its ``brdf`` back to restore it).
+
+        Raises
+        ------
+        ValueError
+            The material is unknown, or has a different number of channels than the rig's
+            sensors report.
+        """
+        new = Specimen(resolve_material(material))
+        with self._specimen_lock:
+            old = self.specimen
+            if new.n_channels != old.n_channels:
+                raise ValueError(
+                    f"the new specimen has {new.n_channels} channels, the simulated sensors "
+                    f"report {old.n_channels}; use a material with {old.n_channels} channels"
+                )
+            # One attribute assignment each: the Modbus thread sees the old or the new specimen,
+            # never a mix.
+            self.specimen = new
+            if self.modbus is not None:
+                self.modbus.specimen = new
+        return old
+
+    def place_white_reference(self, albedo: float = WHITE_REFERENCE_ALBEDO) -> Specimen:
+        """Put a Lambertian white reference of ``albedo`` on the stage (for calibration).
+
+        Returns the specimen that was on the stage before, as :meth:`place_specimen`.
+        """
+        channels = list(
+            getattr(self.specimen.brdf, "channels", None)
+            or [f"C{k}" for k in range(self.specimen.n_channels)]
+        )
+        return self.place_specimen(white_reference(albedo, channels))
 
     # ------------------------------------------------------------------ ground truth
     def true_brdf(self, light: str, sensor: str, stage_deg: float) -> np.ndarray:

@@ -3,12 +3,15 @@
 :func:`create_app` wires routes, guards (keys, maintenance lock, body limit), error mapping and
 the lab page. The service's typed errors become HTTP statuses in one place here:
 
-==========================================  ======
-:class:`gonio.service.NotFound` (store's)   404
-:class:`gonio.service.Conflict`             409
-:class:`gonio.jobstates.IllegalTransition`  409
-:class:`gonio.plans.PlanError`              422
-==========================================  ======
+================================================  ======
+:class:`gonio.service.NotFound` (store's)         404
+:class:`gonio.brdf.presets.UnknownPresetError`    404
+:class:`gonio.service.Conflict`                   409
+:class:`gonio.jobstates.IllegalTransition`        409
+:class:`gonio.plans.PlanError`                    422
+:class:`gonio.brdf.design.DesignError`            422
+:class:`gonio.brdf.feasibility.FeasibilityError`  422
+================================================  ======
 """
 
 from __future__ import annotations
@@ -24,9 +27,12 @@ from fastapi.responses import FileResponse, JSONResponse
 from fastapi.staticfiles import StaticFiles
 
 from gonio import __version__
-from gonio.api import routes_jobs, routes_results, routes_rig, routes_system
+from gonio.api import routes_design, routes_jobs, routes_results, routes_rig, routes_system
 from gonio.api.events import HEARTBEAT_S
 from gonio.api.settings import ApiSettings, install
+from gonio.brdf.design import DesignError
+from gonio.brdf.feasibility import FeasibilityError
+from gonio.brdf.presets import UnknownPresetError
 from gonio.calibration import CalibrationError
 from gonio.jobstates import IllegalTransition
 from gonio.plans import PlanError
@@ -111,6 +117,9 @@ def create_app(
         (IllegalTransition, 409),
         (CalibrationError, 409),
         (PlanError, 422),
+        (DesignError, 422),
+        (FeasibilityError, 422),
+        (UnknownPresetError, 404),
     ):
         app.add_exception_handler(exc_type, _mapped(status))
 
@@ -126,6 +135,7 @@ def create_app(
     app.include_router(routes_rig.router)
     app.include_router(routes_jobs.router)
     app.include_router(routes_results.router)
+    app.include_router(routes_design.router)
 
     app.mount("/static", StaticFiles(directory=STATIC_DIR), name="static")
 

@@ -68,7 +68,10 @@ def dry_run(request: DryRunRequest, service: Service) -> DryRun:
     summary="Everything about one job: state, progress, ETA, plan, reason, result summary",
     responses={404: {"description": "no such job"}},
 )
-def get_job(job_id: JobId, service: Service) -> JobDetail:
+async def get_job(job_id: JobId, service: Service) -> JobDetail:
+    # The hot path of every polling client: one primary-key read on this thread's own store
+    # connection (never blocked by the writer), so it runs on the event loop instead of paying
+    # a thread-pool hop per request.
     return service.get_job(job_id)
 
 
@@ -83,7 +86,6 @@ def readings(
     service: Service,
     after_angle: int = Query(-1, ge=-1, description="only angles with a larger index"),
 ) -> list[Reading]:
-    service.get_job(job_id)  # 404 for an unknown job rather than an empty list
     return [
         Reading(
             angle_index=r.angle_index,
@@ -95,8 +97,7 @@ def readings(
             saturated=r.saturated,
             t_read=r.t_read,
         )
-        for r in service.store.readings(job_id)
-        if r.angle_index > after_angle
+        for r in service.readings(job_id, after_angle)
     ]
 
 

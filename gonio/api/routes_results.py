@@ -18,7 +18,6 @@ from fastapi.responses import FileResponse
 from pydantic import BaseModel, Field
 
 from gonio.api.deps import READ, JobId, Service
-from gonio.api.preview import preview_png
 from gonio.brdf import geometry as geo
 from gonio.brdf.table import BRDFTable
 from gonio.results import read_result
@@ -101,14 +100,10 @@ def metrics(job_id: JobId, service: Service) -> dict[str, Any]:
     dependencies=READ,
     responses={**_NO_RESULT, 200: {"content": {"image/png": {}}}},
     response_class=Response,
-    summary="PNG preview of the reconstructed BRDF",
+    summary="PNG preview of the reconstructed BRDF (half/difference slices, log scale)",
 )
 async def preview(job_id: JobId, service: Service) -> Response:
-    path = service.result_path(job_id)
-    table = await asyncio.to_thread(_tables.get, path)
-    if table is None:
-        raise NotFound(f"job {job_id} has no reconstructed BRDF (a calibration job has none)")
-    png = await asyncio.to_thread(preview_png, table)
+    png = await asyncio.to_thread(service.preview_png, job_id)
     return Response(png, media_type="image/png", headers={"Cache-Control": "max-age=3600"})
 
 

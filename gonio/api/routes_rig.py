@@ -13,7 +13,7 @@ from gonio.api.deps import READ, WRITE, Service
 from gonio.api.maintenance import LockState, MaintenanceLock
 from gonio.calibration import Calibration
 from gonio.plans import RigDescription
-from gonio.service import RigStatus
+from gonio.service import GonioService, RigStatus
 
 router = APIRouter(prefix="/api/v1", tags=["rig"])
 
@@ -94,10 +94,10 @@ def maintenance(request: Request) -> MaintenanceState:
 def lock_maintenance(
     body: LockRequest, request: Request, caller: Annotated[Caller, Depends(require_write_key)]
 ) -> MaintenanceState:
-    service = request.app.state.service
+    service: GonioService = request.app.state.service
     st = _lock(request).lock(body.reason, by=caller.key_name)
-    service.store.append_event(None, "maintenance", {"locked": True, "reason": body.reason,
-                                                     "by": caller.key_name})
+    service.record_event("maintenance", {"locked": True, "reason": body.reason,
+                                         "by": caller.key_name})
     return _state(st)
 
 
@@ -105,7 +105,7 @@ def lock_maintenance(
 def unlock_maintenance(
     request: Request, caller: Annotated[Caller, Depends(require_write_key)]
 ) -> MaintenanceState:
-    service = request.app.state.service
+    service: GonioService = request.app.state.service
     st = _lock(request).unlock()
-    service.store.append_event(None, "maintenance", {"locked": False, "by": caller.key_name})
+    service.record_event("maintenance", {"locked": False, "by": caller.key_name})
     return _state(st)

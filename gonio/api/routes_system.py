@@ -26,7 +26,7 @@ class Health(BaseModel):
 
 
 @router.get("/health", summary="Liveness: the daemon answers and its store is readable")
-def health(service: Service, request: Request) -> Health:
+async def health(service: Service, request: Request) -> Health:
     return Health(
         status="ok",
         version=__version__,
@@ -53,16 +53,15 @@ def metrics(service: Service, request: Request) -> PlainTextResponse:
                           request.app.state.sse_subscribers))
     samples.append(Sample("gonio_maintenance_locked", "1 while the maintenance lock is set.",
                           float(request.app.state.maintenance.state().locked)))
+    st = service.status()
     samples.append(Sample("gonio_queue_held", "1 while the queue is held (halt, failure).",
-                          float(service.worker.held is not None)))
-    eng = service.worker.engine
-    if eng is not None:
-        p = eng.progress
-        labels = {"job": str(eng.job_id)}
+                          float(st.queue_held is not None)))
+    if st.running is not None:
+        labels = {"job": str(st.running.id)}
         samples.append(Sample("gonio_job_angles_done", "Stage angles measured in the running job.",
-                              float(getattr(p, "done", 0)), labels))
+                              float(st.running.done_angles), labels))
         samples.append(Sample("gonio_job_angles_total", "Stage angles planned in the running job.",
-                              float(getattr(p, "total", 0)), labels))
+                              float(st.running.total_angles), labels))
     return PlainTextResponse(render(samples, request.app.state.request_stats),
                              media_type=CONTENT_TYPE)
 

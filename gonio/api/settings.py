@@ -17,6 +17,8 @@ from gonio.api.prometheus import RequestStats
 
 log = logging.getLogger("gonio.api")
 
+DEFAULT_DESIGN_TIME_LIMIT_S = 60.0
+
 
 @dataclass(frozen=True)
 class ApiSettings:
@@ -30,11 +32,14 @@ class ApiSettings:
         The daemon's data directory; holds the maintenance lock file.
     max_body_bytes : int
         Largest accepted request body, bytes (larger gets 413).
+    design_time_limit_s : float
+        Longest search a design request may ask for, seconds (longer gets 422).
     """
 
     access: AccessPolicy = field(default_factory=AccessPolicy)
     data_dir: Path = Path("gonio-data")
     max_body_bytes: int = DEFAULT_MAX_BODY_BYTES
+    design_time_limit_s: float = DEFAULT_DESIGN_TIME_LIMIT_S
 
 
 class RequestTimer:
@@ -72,6 +77,7 @@ def install(app: FastAPI, settings: ApiSettings) -> None:
     app.state.access_policy = settings.access
     app.state.maintenance = MaintenanceLock(settings.data_dir / LOCK_FILE_NAME)
     app.state.request_stats = RequestStats()
+    app.state.design_time_limit_s = settings.design_time_limit_s
     # The middleware added last is the outermost: the timer wraps the body limit, so 413s are
     # counted too.
     app.add_middleware(BodySizeLimit, max_bytes=settings.max_body_bytes)

@@ -7,6 +7,11 @@ Two ways to run it:
   the address to open, with a one-off API key in the address's ``#fragment`` (browsers never
   send the fragment to the server, so the key does not reach any log). ``--demo-scan`` also
   runs one scan through the HTTP API, prints its progress and result, and exits (smoke test).
+
+The simulated rig is calibrated at start-up the way a real one is: a white reference of albedo
+0.99 goes on the stage, a calibration job runs through the service (first in the queue), and
+the specimen goes back on the stage the moment that job's measuring ends, before the worker
+can take another job. Every scan started afterwards is in 1/sr.
 """
 
 from __future__ import annotations
@@ -111,7 +116,7 @@ def _configure_logging(level: str) -> None:
 def _run_sim(args: argparse.Namespace, cfg: Any, keyring: Any) -> int:
     from gonio.api.auth import ApiKeyring
     from gonio.daemon import build_app, serve
-    from gonio.sim.rig import SimRigOptions, start_sim_rig
+    from gonio.sim.rig import WHITE_REFERENCE_ALBEDO, SimRigOptions, start_sim_rig
 
     if not args.time_scale > 0:
         raise UsageError(f"--time-scale must be > 0, got {args.time_scale}")
@@ -140,6 +145,11 @@ def _run_sim(args: argparse.Namespace, cfg: Any, keyring: Any) -> int:
                       f"{len(sim.config.sensors)} sensors; rig config {sim.config_path}")
                 print(f"gonio serving on {url}")
                 print(f"open {url}{fragment} and start a scan (Ctrl-C stops)", flush=True)
+                # Called on the server's event loop, once it listens: the service runs.
+                job_id = start_sim_calibration(app.state.service, sim, report=_print_calibration)
+                print(f"calibrating the simulated rig: job {job_id} measures a white reference "
+                      f"(albedo {WHITE_REFERENCE_ALBEDO:g}), then the specimen goes back",
+                      flush=True)
                 if args.demo_scan:
                     key = session_key or _first_key_hint()
                     threading.Thread(target=_demo_scan, args=(url, key, result, stop),
@@ -149,6 +159,69 @@ def _run_sim(args: argparse.Namespace, cfg: Any, keyring: Any) -> int:
             if args.demo_scan:
                 return result.get("code", 1)
     return 0
+
+
+_MEASURING_OVER = ("reconstructing", "completed", "failed", "aborted", "halted")
+
+
+def start_sim_calibration(
+    service: Any, sim: Any, albedo: float | None = None, report: Any = None
+) -> int:
+    """Queue a white-reference calibration of a simulated rig, first in line; returns its job id.
+
+    Call on the service's event loop. The white reference goes on the stage now; the previous
+    specimen goes back from a store listener the moment the job leaves ``running`` (its state
+    change is committed before the worker moves on), so no other job ever measures the
+    reference. When the job completes its factors are the calibration of every later scan.
+
+    Parameters
+    ----------
+    service : gonio.service.GonioService (started)
+    sim : gonio.sim.rig.SimRig serving the rig the service drives
+    albedo : float, optional
+        Of the simulated reference (default :data:`gonio.sim.rig.WHITE_REFERENCE_ALBEDO`).
+    report : callable, optional
+        ``report(job_id, state, reason)`` when the job ends (completed, failed, ...).
+    """
+    from gonio.plans import CalibrationPlan
+    from gonio.service import Event, JobRequest
+    from gonio.sim.rig import WHITE_REFERENCE_ALBEDO
+
+    albedo = WHITE_REFERENCE_ALBEDO if albedo is None else albedo
+    specimen = sim.place_white_reference(albedo).brdf
+    job: dict[str, Any] = {"id": None, "restored": False}
+
+    def watch(ev: Event) -> None:
+        if ev.job_id != job["id"] or ev.type != "state":
+            return
+        state = ev.data.get("state")
+        if state in _MEASURING_OVER and not job["restored"]:
+            sim.place_specimen(specimen)
+            job["restored"] = True
+        if state in ("completed", "failed", "aborted", "halted"):
+            service.remove_event_listener(handle)
+            if report is not None:
+                report(job["id"], state, ev.data.get("reason"))
+
+    handle = service.add_event_listener(watch)
+    try:
+        plan = CalibrationPlan(reference_albedo=albedo,
+                               reference_name=f"simulated white reference, albedo {albedo:g}")
+        job["id"] = service.submit(JobRequest(plan=plan, priority=1000)).id
+    except BaseException:
+        service.remove_event_listener(handle)
+        sim.place_specimen(specimen)
+        raise
+    return int(job["id"])
+
+
+def _print_calibration(job_id: int, state: str, reason: str | None) -> None:
+    if state == "completed":
+        print(f"calibration job {job_id} completed: scans are now in 1/sr", flush=True)
+    else:
+        print(f"calibration job {job_id} {state}" + (f" ({reason})" if reason else "")
+              + ": scans stay in sensor counts until a calibration completes", file=sys.stderr,
+              flush=True)
 
 
 def _first_key_hint() -> str:
@@ -202,8 +275,10 @@ def _demo_scan(url: str, key: str | None, result: dict[str, int], stop: Any) -> 
             job = c.get(f"/api/v1/jobs/{job_id}").json()
             if job["state"] == "completed":
                 m = c.get(f"/api/v1/jobs/{job_id}/metrics").json()
-                print(f"demo scan completed: {m.get('n_samples')} samples, self-estimated "
-                      f"error {100 * float(m.get('estimated_error', float('nan'))):.1f} %; "
+                units = "1/sr (calibrated)" if m.get("calibrated") else "sensor counts"
+                print(f"demo scan completed: {m.get('n_samples')} samples in {units}, "
+                      f"self-estimated error "
+                      f"{100 * float(m.get('estimated_error', float('nan'))):.1f} %; "
                       f"result {url}api/v1/jobs/{job_id}/result", flush=True)
                 code = 0
     except Exception as exc:  # reported, and the exit code says it failed

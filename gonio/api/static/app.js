@@ -183,7 +183,8 @@ async function showResult(job) {
   const blob = await getBlob(`/jobs/${job.id}/preview.png`);
   img.src = URL.createObjectURL(blob);
   img.hidden = false;
-  $("#preview-caption").textContent = `${job.specimen}: reconstructed BRDF`;
+  $("#preview-caption").textContent = `${job.specimen}: reconstructed BRDF, log scale. ` +
+    "Columns: phi_h 0, 45, 90, 135 deg; rows: phi_d 90, 0 deg; in each panel theta_h runs down, theta_d right.";
   const metrics = await getJSON(`/jobs/${job.id}/metrics`);
   const tbody = $("#metrics tbody");
   tbody.replaceChildren();

@@ -24,6 +24,7 @@ from tests.system.api.live_server import live_server
 
 SMALL_K = 8
 N_MATERIALS = 6
+DESIGN_LIMIT_S = 5.0
 
 
 def small_basis() -> Any:
@@ -68,7 +69,9 @@ def daemon(tmp_path_factory: pytest.TempPathFactory, basis: Any) -> Iterator[Dae
     # Fast stage physics and short settle times keep a full 8-angle scan to a few seconds.
     sim = start_sim_rig(SimRigOptions(time_scale=10.0, settle_s=0.0))
     key = secrets.token_urlsafe(24)
-    cfg = DaemonConfig().with_overrides(paths__data_dir=str(data_dir))
+    # A short design limit keeps design requests (tests and fuzzing) to a few seconds each.
+    cfg = DaemonConfig().with_overrides(paths__data_dir=str(data_dir),
+                                        limits__design_time_limit_s=DESIGN_LIMIT_S)
     app = build_app(cfg, sim.config, ApiKeyring({"tester": key}), basis_provider=lambda: basis)
     try:
         with live_server(app) as url:

@@ -50,6 +50,8 @@ def test_relative_paths_resolve_against_the_config_file(tmp_path: Path) -> None:
         ("[server]\nport = 70000\n", "server.port"),
         ("[server\n", "not valid TOML"),
         ("[limits]\nmax_body_bytes = 10\n", "limits.max_body_bytes"),
+        ("[limits]\ndesign_time_limit_s = 0\n", "limits.design_time_limit_s"),
+        ("[limits]\ndesign_time_limit_s = 3600\n", "limits.design_time_limit_s"),
     ],
 )
 def test_bad_config_names_the_key(tmp_path: Path, text: str, message: str) -> None:

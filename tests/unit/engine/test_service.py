@@ -113,3 +113,61 @@ def test_pause_resume_abort_through_the_service(tmp_path: Path) -> None:
     asyncio.run(go())
     assert svc.get_job(1).state is JobState.ABORTED
     assert not rig.any_light_on()
+
+
+def test_status_snapshot_and_readings_while_measuring(tmp_path: Path) -> None:
+    rig, svc = _service(tmp_path)
+    plan = UniformPlan(rotations=20, exposure=ExposureSettings(exposure_s=0.01, light_settle_s=0))
+    n_pairs = len(rig.pairs)
+
+    async def go() -> None:
+        idle = svc.status()
+        assert idle.current_job is None and idle.running is None and idle.queue_held is None
+        await svc.start()
+        info = svc.submit(JobRequest(plan=plan))
+        async for ev in svc.subscribe(0, job_id=info.id):
+            if ev.type == "progress" and ev.data["done"] >= 2:
+                break
+        st = svc.status()
+        assert st.current_job == info.id and st.running is not None
+        assert st.running.id == info.id and st.running.total_angles == 20
+        assert 2 <= st.running.done_angles < 20
+        rows = svc.readings(info.id)
+        assert len(rows) >= 2 * n_pairs and len(rows) % n_pairs == 0
+        first = min(r.angle_index for r in rows)
+        assert all(r.angle_index > first for r in svc.readings(info.id, after_angle=first))
+        svc.halt()
+        assert svc.status().queue_held == "emergency halt"
+        await svc.stop()
+
+    asyncio.run(go())
+    with pytest.raises(NotFound, match="no job with id 7"):
+        svc.readings(7)
+
+
+def test_scan_at_another_exposure_than_its_calibration_is_flagged(tmp_path: Path) -> None:
+    from dataclasses import replace
+
+    from gonio.calibration import Calibration
+    from gonio.worker import _exposure_mismatch
+
+    _rig, svc = _service(tmp_path)
+
+    async def go() -> None:
+        await svc.start()
+        svc.submit(JobRequest(plan=CalibrationPlan(reference_albedo=0.9, rotations=2,
+                                                   exposure=FAST)))
+        async for ev in svc.subscribe(0, job_id=1):
+            if ev.type == "state" and ev.data["state"] in ("completed", "failed"):
+                break
+        await svc.stop()
+
+    asyncio.run(go())
+    cal = Calibration.model_validate_json((tmp_path / "d" / "calibration.json").read_text())
+    assert cal.exposure_s == FAST.exposure_s
+    same = svc.readings(1)
+    assert _exposure_mismatch(cal, same) is None
+    longer = [replace(r, exposure_s=0.004) for r in same]
+    msg = _exposure_mismatch(cal, longer)
+    assert msg is not None and "0.002 s" in msg and "0.004 s" in msg
+    assert _exposure_mismatch(Calibration(), longer) is None  # uncalibrated: nothing to flag

@@ -104,3 +104,70 @@ def test_not_a_store(tmp_path: Path) -> None:
     bad.write_bytes(b"this is not sqlite at all" * 100)
     with pytest.raises(StoreError, match="not a usable gonio job store"):
         JobStore(bad)
+
+
+def test_reads_do_not_wait_for_an_open_write(tmp_path: Path) -> None:
+    """A status read returns at once while another thread is inside a write transaction.
+
+    White-box on purpose: the writer holds the store's lock across its commit (and fsync); a
+    reader that took the same lock would wait here for the full two seconds.
+    """
+    import threading
+    import time
+
+    store = JobStore(tmp_path / "jobs.sqlite")
+    jid = _job(store)
+    inside, release = threading.Event(), threading.Event()
+
+    def writer() -> None:
+        with store._tx() as c:
+            c.execute("UPDATE jobs SET specimen = 'changed' WHERE id = ?", (jid,))
+            inside.set()
+            release.wait(2.0)
+
+    t = threading.Thread(target=writer)
+    t.start()
+    try:
+        assert inside.wait(5)
+        t0 = time.perf_counter()
+        row = store.get_job(jid)
+        events = store.events_after(0)
+        elapsed = time.perf_counter() - t0
+    finally:
+        release.set()
+        t.join()
+    assert elapsed < 0.5
+    assert row.specimen == "s"  # the open transaction is not visible
+    assert [e.type for e in events] == ["created"]
+    assert store.get_job(jid).specimen == "changed"  # and its commit is, on the same thread
+
+
+def test_reader_connections_of_finished_threads_are_closed(tmp_path: Path) -> None:
+    import threading
+
+    store = JobStore(tmp_path / "jobs.sqlite")
+    jid = _job(store)
+    seen: list[str] = []
+    for _ in range(5):
+        t = threading.Thread(target=lambda: seen.append(store.get_job(jid).specimen))
+        t.start()
+        t.join()
+    assert seen == ["s"] * 5
+    # Each new reader prunes the connections of threads that have ended.
+    assert len(store._readers) <= 2
+    store.close()
+    assert store._readers == {}
+    with pytest.raises(sqlite3.ProgrammingError):
+        store.get_job(jid)
+
+
+@pytest.mark.parametrize("path", [":memory:", "file"])
+def test_queue_position_matches_queue_order(tmp_path: Path, path: str) -> None:
+    store = JobStore(":memory:" if path == ":memory:" else tmp_path / "q.sqlite")
+    ids = [_job(store), _job(store), _job(store, priority=3), _job(store), _job(store, 3)]
+    store.reorder(ids[3], position=0)
+    store.set_state(ids[1], JobState.RUNNING)
+    order = [j.id for j in store.queue()]
+    assert [store.queue_position(j) for j in order] == list(range(len(order)))
+    assert store.queue_position(ids[1]) is None  # running, not queued
+    assert store.queue_position(999) is None

@@ -1,0 +1,93 @@
+"""Design routes: optimise a rig's light/sensor geometry, list and evaluate industrial presets.
+
+A design runs in a worker thread against the basis the daemon reconstructs with, one at a time
+(it uses a whole CPU core for up to its time limit); a second request while one runs gets 409.
+Optimising needs a key (it is expensive); evaluating a preset is a cheap read.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from typing import Annotated, Any
+
+from fastapi import APIRouter, Depends, Path, Query, Request
+
+from gonio.api.auth import require_write_key
+from gonio.api.deps import READ, Service
+from gonio.api.design import (
+    DEFAULT_TIME_LIMIT_S,
+    DesignRequest,
+    DesignResult,
+    PresetInfo,
+    evaluate_preset,
+    run_design,
+)
+from gonio.brdf.presets import get_preset, preset_names
+from gonio.plans import PlanError
+from gonio.service import Conflict
+
+router = APIRouter(prefix="/api/v1/design", tags=["design"])
+
+_ERRORS: dict[int | str, dict[str, Any]] = {
+    409: {"description": "another design is running; try again when it has finished"},
+    422: {"description": "invalid request, or constraints no design can satisfy"},
+}
+
+PresetName = Annotated[str, Path(min_length=1, max_length=64,
+                                 description="preset name (case, spaces and dashes ignored)")]
+
+
+def _gate(request: Request) -> asyncio.Semaphore:
+    gate: asyncio.Semaphore | None = getattr(request.app.state, "design_gate", None)
+    if gate is None:  # created lazily, on the app's own event loop
+        gate = request.app.state.design_gate = asyncio.Semaphore(1)
+    return gate
+
+
+@router.post("", dependencies=[Depends(require_write_key)], responses=_ERRORS,
+             summary="Optimise light/sensor directions for the daemon's basis (blocks up to the "
+                     "time limit)")
+async def design(body: DesignRequest, service: Service, request: Request) -> DesignResult:
+    limit = float(request.app.state.design_time_limit_s)
+    if body.time_limit_s is None:
+        body = body.model_copy(update={"time_limit_s": min(DEFAULT_TIME_LIMIT_S, limit)})
+    elif body.time_limit_s > limit:
+        raise PlanError(
+            f"time_limit_s = {body.time_limit_s:g} s is more than this daemon allows "
+            f"({limit:g} s); ask for at most {limit:g} s or raise [limits] design_time_limit_s "
+            "in the daemon config"
+        )
+    gate = _gate(request)
+    if gate.locked():
+        raise Conflict("another design is running on this daemon; try again when it has "
+                       "finished (at most its time limit)")
+    async with gate:
+        return await asyncio.to_thread(_design, service, body)
+
+
+def _design(service: Any, body: DesignRequest) -> DesignResult:
+    return run_design(service.design_basis(), body)
+
+
+@router.get("/presets", dependencies=READ,
+            summary="Industrial multi-angle geometries (V&F Table 1)")
+def presets() -> list[PresetInfo]:
+    out = []
+    for name in preset_names():
+        p = get_preset(name)
+        out.append(PresetInfo(name=p.name, description=p.description, n_pairs=p.n_pairs))
+    return out
+
+
+@router.get("/presets/{name}", dependencies=READ,
+            responses={404: {"description": "no preset of that name"}},
+            summary="Evaluate a preset like an optimised design: condition number, roughness "
+                    "bound, rig-config fragment")
+async def preset(
+    name: PresetName,
+    service: Service,
+    rotations: int = Query(8, ge=1, le=360, description="uniform stage angles for the "
+                                                        "roughness bound"),
+) -> DesignResult:
+    p = get_preset(name)  # UnknownPresetError -> 404 listing the known names
+    return await asyncio.to_thread(lambda: evaluate_preset(service.design_basis(), p, rotations))
