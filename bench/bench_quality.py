@@ -18,8 +18,9 @@ Protocol
   deterministic grid rule. Rotations: ``r`` uniform stage angles. Noise: 1 % relative, seed 0.
 * Reconstruction: closed form, eta = 40, lam = 0.1, the basis truncated to each K.
 * Reported: mean log_rmse (lower is better) and mean log_psnr in dB (higher is better) over the
-  test materials, and the mean ratio estimated_error / mape (how well V&F's self-estimate
-  tracks the true error).
+  test materials, and the ratios estimated_error / mape (V&F's self-estimate) and
+  predicted_error / mape (gonio's leave-one-pair-out estimate; the calibration study is
+  ``bench/bench_error_estimate.py``).
 """
 
 from __future__ import annotations
@@ -39,6 +40,9 @@ from gonio.brdf.reconstruct import reconstruct
 from gonio.brdf.samples import NoiseModel, simulate_samples, uniform_stage_angles
 from gonio.brdf.table import BRDFTable
 from gonio.cli.brdf_commands import simple_pairs
+
+#: Per (n, r, K): one (log_rmse, log_psnr, V&F ratio, CV ratio) tuple per test material.
+Results = dict[tuple[int, int, int], list[tuple[float, float, float, float]]]
 
 RGL_DIR = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "rgl"
 
@@ -73,11 +77,11 @@ def rgl_tables() -> list[BRDFTable]:
 
 def evaluate(
     basis: Basis, tests: list[BRDFTable], ns: list[int], rs: list[int], ks: list[int]
-) -> dict[tuple[int, int, int], list[tuple[float, float, float]]]:
+) -> Results:
     designs = {n: pairs_for(basis, n) for n in ns}
     for n, (_, _, how) in designs.items():
         print(f"pairs n={n}: {how}")
-    out: dict[tuple[int, int, int], list[tuple[float, float, float]]] = defaultdict(list)
+    out: Results = defaultdict(list)
     for t in tests:
         for n in ns:
             cells, ph, _ = designs[n]
@@ -86,14 +90,15 @@ def evaluate(
                 vals = simulate_samples(t, cells, ph, alpha, noise=NoiseModel(0.01, seed=0))
                 for k in ks:
                     rec = reconstruct(basis, cells, ph, alpha, vals, n_components=k)
-                    ratio = rec.estimated_error / max(metrics.mape(rec.table, t), 1e-12)
+                    true = max(metrics.mape(rec.table, t), 1e-12)
                     out[(n, r, k)].append(
-                        (metrics.log_rmse(rec.table, t), metrics.log_psnr(rec.table, t), ratio)
+                        (metrics.log_rmse(rec.table, t), metrics.log_psnr(rec.table, t),
+                         rec.estimated_error / true, rec.predicted_error / true)
                     )
     return out
 
 
-def print_table(title: str, res: dict[tuple[int, int, int], list[tuple[float, float, float]]],
+def print_table(title: str, res: Results,
                 ns: list[int], rs: list[int], ks: list[int]) -> None:
     print(f"\n{title}")
     head = " ".join(f"{'K=' + str(k):>15}" for k in ks)
@@ -105,9 +110,10 @@ def print_table(title: str, res: dict[tuple[int, int, int], list[tuple[float, fl
                 a = np.array(res[(n, r, k)])
                 cells.append(f"{a[:, 0].mean():7.4f}/{a[:, 1].mean():5.1f}")
             print(f"{n:>3} {r:>3} {n * r:>5} {' '.join(f'{c:>15}' for c in cells)}")
-    ratios = np.array([v[2] for vals in res.values() for v in vals])
-    print(f"estimated_error / MAPE: median {np.median(ratios):.2f}, "
-          f"IQR {np.percentile(ratios, 25):.2f}-{np.percentile(ratios, 75):.2f}")
+    for i, label in ((2, "estimated_error (V&F)"), (3, "predicted_error (CV)")):
+        ratios = np.array([v[i] for vals in res.values() for v in vals])
+        print(f"{label} / MAPE: median {np.median(ratios):.2f}, "
+              f"IQR {np.percentile(ratios, 25):.2f}-{np.percentile(ratios, 75):.2f}")
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -19,14 +19,29 @@ angle ``alpha`` sees slice ``ph = ph_lab[q] - alpha``.
    ``C = cbar 1^T + Cp`` (``solver="closed"``, the default). ``solver="iterative"`` runs the
    paper's quasi-Newton search (L-BFGS from the Eq. 4 solution) as a reference.
 4. ``X = Q C + mu`` is mapped back to BRDF values and clamped at 0.
-5. The mean relative error at the measured samples, times 0.8, estimates the error over the
-   whole BRDF (V&F Sec. 5).
+5. Self-estimated error. V&F Sec. 5 scale the mean relative error at the measured samples by
+   0.8 (``rel_sample_error``, ``estimated_error``). With K > n the regularised fit nearly
+   interpolates the samples, so that number says little about the error elsewhere. gonio
+   therefore also runs leave-one-pair-out cross-validation: each pair is predicted from a
+   refit without it (exact, from the hat-matrix diagonals of the two ridge systems, no
+   refits), and the mean relative error of those predictions at the pair's samples
+   (``cv_sample_error``) times a factor calibrated per number of pairs
+   (:func:`cv_error_scale`) is the reported estimate of the whole-BRDF MAPE
+   (``predicted_error``).
+
+Speed: the table of step 4 (C x 72 x 11,664 values) dominates the call, so it is computed at
+the valid rows only, with the remap's per-row constants folded into one scale and one offset,
+and handed to :meth:`BRDFTable.trusted` without a re-validation pass. BLAS runs on one thread
+during the call (:func:`one_blas_thread`): the products are small, and on a shared machine
+OpenBLAS' spinning worker threads cost far more than they save.
 """
 
 from __future__ import annotations
 
+import contextlib
+import functools
 import time
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -38,7 +53,7 @@ from scipy.interpolate import PchipInterpolator
 
 from gonio.brdf import geometry as geo
 from gonio.brdf.basis import Basis, BasisError, inverse_remap, remap, row_weight
-from gonio.brdf.table import BRDFTable
+from gonio.brdf.table import VALID_MASK, BRDFTable
 
 FloatArray = NDArray[np.float64]
 Solver = Literal["closed", "iterative"]
@@ -48,6 +63,25 @@ ERROR_SCALE = 0.8
 #: Samples darker than this fraction of the mean sample value are compared against that floor
 #: in the relative sample error, so near-black readings cannot dominate the mean.
 REL_ERROR_FLOOR = 0.01
+#: ``predicted_error = s(n) * cv_sample_error`` with ``s`` from these ``(n_pairs, s)`` points,
+#: interpolated linearly in ``log n`` and held constant outside them (:func:`cv_error_scale`).
+#: The whole-BRDF MAPE differs from the leave-one-pair-out error at the samples because most of
+#: the BRDF (grazing cells above all) is far from every pair, and by how much depends on how
+#: densely the pairs cover the domain. Each ``s`` is the geometric median of
+#: ``MAPE / cv_sample_error`` over 14 library materials held out of the basis, pooled over
+#: two pair layouts (the demo's grid rule and ``design_pairs``), 1 % noise, r = 4-24
+#: (``bench/bench_error_estimate.py``; validation in ``docs/science.md``: expect the truth
+#: within a factor of 2 in about 40 % of scans, and far above the estimate for materials the
+#: basis cannot represent).
+CV_ERROR_SCALES: tuple[tuple[int, float], ...] = ((5, 0.325), (10, 0.757), (20, 1.239))
+
+_VALID_FLAT = VALID_MASK.ravel()
+_VALID_ROWS = np.flatnonzero(_VALID_FLAT)
+_INVALID_ROWS = np.flatnonzero(~_VALID_FLAT)
+# Valid th = 0 rows: the slices must agree there (Qs of Eq. 5).
+_TH0_ROWS = _VALID_ROWS[_VALID_ROWS < geo.N_TD * geo.N_PD]
+for _a in (_VALID_FLAT, _VALID_ROWS, _INVALID_ROWS, _TH0_ROWS):
+    _a.setflags(write=False)
 
 
 class ReconstructionError(ValueError):
@@ -68,8 +102,17 @@ class Reconstruction:
         Mean relative error of the reconstruction at the measured samples (a fraction).
     estimated_error : float
         ``0.8 * rel_sample_error``: V&F's estimate of the mean relative error over the BRDF.
+        Kept for comparison; it underestimates the whole-BRDF error many times over when
+        K > n (``docs/science.md``). Prefer ``predicted_error``.
     settings : dict
         Solver settings and sizes (K, n, r, eta, lam, solver, seconds).
+    cv_sample_error : float
+        Leave-one-pair-out error: mean relative error at each pair's samples of the
+        reconstruction fitted without that pair (a fraction). NaN when it is undefined (a
+        pair that the others cannot predict at all, e.g. ``eta = 0`` with ``n <= K``).
+    predicted_error : float
+        ``cv_error_scale(n) * cv_sample_error``: the calibrated estimate of the volume-weighted
+        MAPE over the whole BRDF (a fraction); the number to report.
     """
 
     table: BRDFTable
@@ -77,6 +120,8 @@ class Reconstruction:
     rel_sample_error: float
     estimated_error: float
     settings: dict[str, Any] = field(default_factory=dict)
+    cv_sample_error: float = float("nan")
+    predicted_error: float = float("nan")
 
 
 # ---------------------------------------------------------------------------- geometry helper
@@ -113,18 +158,55 @@ def pair_cells(light_dirs: ArrayLike, sensor_dirs: ArrayLike) -> tuple[FloatArra
     return np.stack([th, td, pd], axis=1), np.asarray(ph, dtype=float)
 
 
+# ---------------------------------------------------------------------------- BLAS threads
+@functools.cache
+def _blas_controller() -> Any:
+    """The process' threadpoolctl controller (scanning the loaded libraries takes ~10 ms)."""
+    from threadpoolctl import ThreadpoolController
+
+    return ThreadpoolController()
+
+
+@contextlib.contextmanager
+def one_blas_thread() -> Iterator[None]:
+    """Run the block with BLAS limited to one thread.
+
+    Reconstruction's products are a few MFLOP; with several OpenBLAS threads on a shared
+    2-core machine the threads' spin-waiting made a 0.7 ms solve take 65 ms. The limit is
+    process-wide while the block runs (threadpoolctl sets the library's global thread count).
+    """
+    with _blas_controller().limit(limits=1, user_api="blas"):
+        yield
+
+
 # ---------------------------------------------------------------------------- step 1
-def _periodic_pchip(
-    x: FloatArray, y: FloatArray, xq: FloatArray
-) -> FloatArray:
-    """Periodic (2 pi) PCHIP of ``y`` (r, ...) sampled at sorted ``x`` (r,), evaluated at ``xq``."""
-    if x.size == 1:
-        return np.broadcast_to(y[0], (*xq.shape, *y.shape[1:])).copy()
-    # Padding with whole shifted copies makes the slopes at the ends see their wrapped
-    # neighbours, which is what a periodic interpolant needs.
+def _periodic_pchip_per_row(x: FloatArray, y: FloatArray, xq: FloatArray) -> FloatArray:
+    """Periodic PCHIP of many rows that share their nodes, each row at its own query points.
+
+    Parameters
+    ----------
+    x : (r,) sorted nodes in [0, 2 pi), radians
+    y : (n, r, C) values of row ``q`` at the nodes
+    xq : (n, m) query points of row ``q``, radians (any range)
+
+    Returns
+    -------
+    (n, m, C)
+        Row ``q`` interpolated at ``xq[q]``. One interpolant is built for all rows (the
+        nodes are shared) and evaluated piece by piece, instead of one scipy object per row.
+    """
+    n, r, C = y.shape
+    if r == 1:
+        return np.broadcast_to(y[:, :1, :], (n, xq.shape[1], C)).copy()
     xp = np.concatenate([x - 2 * np.pi, x, x + 2 * np.pi])
-    yp = np.concatenate([y, y, y], axis=0)
-    return np.asarray(PchipInterpolator(xp, yp, axis=0)(np.mod(xq, 2 * np.pi)))
+    yp = np.tile(np.moveaxis(y, 1, 0).reshape(r, n * C), (3, 1))  # (3r, n C)
+    pp = PchipInterpolator(xp, yp, axis=0)
+    coef = pp.c.reshape(4, 3 * r - 1, n, C)  # highest power first
+    u = np.mod(xq, 2 * np.pi)
+    piece = np.clip(np.searchsorted(xp, u, side="right") - 1, 0, 3 * r - 2)  # (n, m)
+    c = coef[:, piece, np.arange(n)[:, None], :]  # (4, n, m, C)
+    dx = (u - xp[piece])[..., None]
+    return np.asarray(((c[0] * dx + c[1]) * dx + c[2]) * dx + c[3])
 
 
 def resample_to_slices(
@@ -146,11 +228,30 @@ def resample_to_slices(
     """
     a = np.mod(stage_angles, 2 * np.pi)
     order = np.argsort(a)
-    a = a[order]
-    out = np.empty((values.shape[0], geo.N_PH, values.shape[2]))
-    for q in range(values.shape[0]):
-        out[q] = _periodic_pchip(a, values[q, order], ph_lab[q] - geo.PH_GRID)
-    return out
+    return _periodic_pchip_per_row(
+        a[order], values[:, order], np.asarray(ph_lab)[:, None] - geo.PH_GRID[None, :]
+    )
+
+
+def slices_at_stage_angles(
+    ph_lab: FloatArray, stage_angles: FloatArray, slices: FloatArray
+) -> FloatArray:
+    """Inverse of :func:`resample_to_slices`: slice values back at the sampled stage angles.
+
+    Parameters
+    ----------
+    ph_lab : (n,) radians
+    stage_angles : (r,) radians
+    slices : (n, 72, C) values of each pair on the 72 grid slices
+
+    Returns
+    -------
+    (n, r, C)
+        Periodic PCHIP over the slices at ``ph = ph_lab[q] - stage_angles``.
+    """
+    return _periodic_pchip_per_row(
+        geo.PH_GRID, slices, np.asarray(ph_lab)[:, None] - np.asarray(stage_angles)[None, :]
+    )
 
 
 # ---------------------------------------------------------------------------- step 3
@@ -239,6 +340,56 @@ def solve_iterative(
     return np.asarray(res.x.reshape(K, S))
 
 
+# ---------------------------------------------------------------------------- step 5
+def loo_predictions(
+    Y: FloatArray, Qt: FloatArray, Qs: FloatArray, eta: float, lam: float
+) -> FloatArray:
+    """Leave-one-pair-out predictions of the Eq. 5 fit (exact, without refitting).
+
+    Both halves of the closed form (module notes) are ridge problems ``(Q~^T Q~ + R) c =
+    Q~^T y`` over the same pair rows with a data-independent ``R`` (``eta I``, and
+    ``eta I + lam Qs^T Qs``). Dropping row ``q`` of such a problem changes its prediction at
+    ``q`` from ``y^_q`` to ``y_q - (y_q - y^_q) / (1 - h_q)``, with ``h_q`` the ``q``-th
+    diagonal entry of the hat matrix ``Q~ (Q~^T Q~ + R)^-1 Q~^T`` (Sherman-Morrison). The
+    mean/remainder split of ``Y~`` is row by row, so a pair's absence leaves the other rows'
+    split unchanged and the two corrections simply add.
+
+    Parameters
+    ----------
+    Y : (n, S, ...) remapped samples on S slices (trailing axes are channels)
+    Qt : (n, K) basis rows at the pairs
+    Qs : (s, K) basis rows constrained to agree across slices
+    eta, lam : float
+
+    Returns
+    -------
+    (n, S, ...)
+        Row ``q``: the remapped values at pair ``q`` predicted by the fit to the other
+        ``n - 1`` pairs. All NaN when some pair cannot be left out (``h_q = 1``: the others
+        leave its coefficients undetermined, e.g. ``eta = 0`` with ``n <= K``).
+    """
+    n, K = Qt.shape
+    A1 = Qt.T @ Qt + eta * np.eye(K)
+    A2 = A1 + lam * (Qs.T @ Qs)
+    ybar = Y.mean(axis=1)  # (n, ...)
+    Yp = Y - ybar[:, None]
+    trailing = (1,) * (Y.ndim - 1)
+    loo = Y.copy()
+    for A, data, shape in ((A1, ybar, (n, *trailing[1:])), (A2, Yp, (n, *trailing))):
+        try:
+            cho = scipy.linalg.cho_factor(A)
+        except np.linalg.LinAlgError:
+            return np.full_like(Y, np.nan)
+        h = np.einsum("nk,kn->n", Qt, scipy.linalg.cho_solve(cho, Qt.T))
+        if (1.0 - h).min() <= 1e-10:
+            return np.full_like(Y, np.nan)
+        coef = scipy.linalg.cho_solve(cho, np.tensordot(Qt.T, data, axes=1).reshape(K, -1))
+        resid = data - (Qt @ coef).reshape(data.shape)
+        corr = resid / (1.0 - h).reshape(shape)
+        loo -= corr[:, None] if data.ndim < Y.ndim else corr
+    return loo
+
+
 # ---------------------------------------------------------------------------- validation
 def _check_inputs(
     basis: Basis,
@@ -248,9 +399,7 @@ def _check_inputs(
     values: FloatArray,
     channels: Sequence[str],
 ) -> None:
-    if basis.Q.shape[0] != geo.N_ROWS or not np.array_equal(
-        basis.valid, geo.valid_mask().ravel()
-    ):
+    if basis.Q.shape[0] != geo.N_ROWS or not np.array_equal(basis.valid, _VALID_FLAT):
         raise ReconstructionError(
             "the basis was built on another grid than this gonio's; rebuild it with "
             "`gonio basis build`"
@@ -343,6 +492,28 @@ def reconstruct(
     -------
     Reconstruction
     """
+    with one_blas_thread():
+        return _reconstruct(
+            basis, cells, ph_lab, stage_angles, values, channels=channels, eta=eta, lam=lam,
+            n_components=n_components, solver=solver, name=name,
+        )
+
+
+def _reconstruct(
+    basis: Basis,
+    cells: ArrayLike,
+    ph_lab: ArrayLike,
+    stage_angles: ArrayLike,
+    values: ArrayLike,
+    *,
+    channels: Sequence[str],
+    eta: float,
+    lam: float,
+    n_components: int | None,
+    solver: Solver,
+    name: str,
+) -> Reconstruction:
+    """:func:`reconstruct` without the BLAS thread limit (same parameters)."""
     t0 = time.perf_counter()
     cells_ = np.asarray(cells, dtype=float)
     ph_ = np.asarray(ph_lab, dtype=float)
@@ -365,20 +536,16 @@ def reconstruct(
     except BasisError as exc:
         raise ReconstructionError(str(exc)) from None
     Qt = np.einsum("nj,njk->nk", weights, basis.Q[rows])
-    fmed_t = (weights * basis.f_med[rows]).sum(axis=1)
-    mu_t = (weights * basis.mu[rows]).sum(axis=1)
+    fmed_t = (weights * basis.f_med[rows]).sum(axis=1)[:, None, None]
+    mu_t = (weights * basis.mu[rows]).sum(axis=1)[:, None, None]
     ci, co = geo.cell_cosines(th, td, pd)
-    w_t = np.maximum(ci * co, basis.eps)  # the exact weight of each pair, not a blend
+    w_t = np.maximum(ci * co, basis.eps)[:, None, None]  # each pair's exact weight, not a blend
 
     # Steps 1-2: slices, then the remap (n, 72, C).
-    slices = resample_to_slices(ph_, alpha, vals)
-    Y = remap(slices, fmed_t[:, None, None], w_t[:, None, None], basis.eps) - mu_t[:, None, None]
+    Y = remap(resample_to_slices(ph_, alpha, vals), fmed_t, w_t, basis.eps) - mu_t
 
     # Step 3.
-    i_th0 = np.zeros(geo.N_TD * geo.N_PD, dtype=np.intp)
-    td_idx, pd_idx = np.meshgrid(np.arange(geo.N_TD), np.arange(geo.N_PD), indexing="ij")
-    rows_s = geo.flat_row(i_th0, td_idx.ravel(), pd_idx.ravel())
-    Qs = basis.Q[rows_s[basis.valid[rows_s]]]
+    Qs = basis.Q[_TH0_ROWS]
     if solver == "closed":
         coef = np.moveaxis(solve_closed(Y, Qt, Qs, eta, lam), -1, 0)  # (C, K, 72)
     else:
@@ -387,27 +554,27 @@ def reconstruct(
         )
 
     # Step 4: the full table.
-    valid = basis.valid
-    w_all = row_weight(basis.eps)[valid]
-    Qv = basis.Q[valid]
-    out = np.full((len(channels), geo.N_PH, geo.N_ROWS), np.nan)
-    for c in range(len(channels)):
-        X = (Qv @ coef[c]).T + basis.mu[valid]  # (72, p_valid)
-        out[c][:, valid] = np.maximum(inverse_remap(X, basis.f_med[valid], w_all, basis.eps), 0.0)
-    table = BRDFTable(
-        out.reshape(len(channels), *geo.TABLE_SHAPE), channels, name, None,
+    table = BRDFTable.trusted(
+        _expand_table(basis, coef), channels, name, None,
         {"reconstruction": {"K": basis.K, "n": int(cells_.shape[0]), "r": int(alpha.size),
                             "eta": eta, "lam": lam, "solver": solver,
                             "basis_materials": len(basis.materials)}},
     )
 
-    # Step 5: the reconstruction at the pairs themselves, back at the sampled stage angles.
-    fit = np.stack([Qt @ coef[c] for c in range(len(channels))], axis=-1) + mu_t[:, None, None]
-    fit_a = np.maximum(inverse_remap(fit, fmed_t[:, None, None], w_t[:, None, None], basis.eps), 0)
-    at_samples = np.empty_like(vals)
-    for q in range(vals.shape[0]):
-        at_samples[q] = _periodic_pchip(geo.PH_GRID, fit_a[q], ph_[q] - alpha)
-    rel = _relative_sample_error(at_samples, vals)
+    # Step 5: the fit and the leave-one-pair-out predictions at the pairs, taken back to BRDF
+    # values at the sampled stage angles in one interpolation (channels side by side).
+    n_ch = len(channels)
+    fit = np.einsum("nk,cks->nsc", Qt, coef)
+    loo = loo_predictions(Y, Qt, Qs, eta, lam)
+    has_cv = bool(np.isfinite(loo).all())
+    remapped = np.concatenate([fit, loo], axis=2) if has_cv else fit
+    # A wild left-out prediction must give a huge error, not an overflow: e^300 is far beyond
+    # any reading yet leaves room for the remap's factors.
+    remapped = np.minimum(remapped + mu_t, 300.0)
+    both = np.maximum(inverse_remap(remapped, fmed_t, w_t, basis.eps), 0.0)
+    at_samples = slices_at_stage_angles(ph_, alpha, both)
+    rel = _relative_sample_error(at_samples[..., :n_ch], vals)
+    cv = _relative_sample_error(at_samples[..., n_ch:], vals) if has_cv else float("nan")
     seconds = time.perf_counter() - t0
     return Reconstruction(
         table=table,
@@ -419,7 +586,72 @@ def reconstruct(
             "lam": float(lam), "solver": solver, "channels": list(channels),
             "seconds": round(seconds, 4),
         },
+        cv_sample_error=cv,
+        predicted_error=cv_error_scale(int(cells_.shape[0])) * cv,
     )
+
+
+def cv_error_scale(n_pairs: int) -> float:
+    """Calibrated factor from ``cv_sample_error`` to the whole-BRDF MAPE for ``n_pairs`` pairs.
+
+    Linear in ``log n`` between the points of :data:`CV_ERROR_SCALES` (in ``log s``),
+    constant outside them.
+    """
+    ns = np.log([p for p, _ in CV_ERROR_SCALES])
+    ss = np.log([s for _, s in CV_ERROR_SCALES])
+    return float(np.exp(np.interp(np.log(max(n_pairs, 1)), ns, ss)))
+
+
+@functools.lru_cache(maxsize=4)
+def _valid_row_weight(eps: float) -> FloatArray:
+    """(p_valid,) remap weight ``w`` of the valid rows (read-only; depends only on ``eps``)."""
+    w = row_weight(eps)[_VALID_ROWS]
+    w.setflags(write=False)
+    return w
+
+
+#: ``exp`` overflows float64 above about 709; a remapped value this large means a diverged fit.
+_MAX_EXPONENT = 700.0
+
+
+def _expand_table(basis: Basis, coef: FloatArray) -> FloatArray:
+    """Step 4: BRDF values of every slice from the coefficients.
+
+    Parameters
+    ----------
+    basis : Basis
+    coef : (C, K, 72) coefficients
+
+    Returns
+    -------
+    (C, 72, 18, 18, 36) float64, 1/sr
+        ``max((exp(Q C + mu) (f_med w + eps) - eps) / w, 0)`` at the valid cells, NaN at the
+        invalid ones. The per-row constants fold into ``exp(Q C) * scale - offset`` with
+        ``scale = exp(mu) (f_med w + eps) / w`` and ``offset = eps / w``, so the big array
+        sees one product, then ``exp``, multiply, subtract and clamp in place.
+    """
+    eps = basis.eps
+    w = _valid_row_weight(eps)
+    scale = np.exp(basis.mu[_VALID_ROWS]) * (basis.f_med[_VALID_ROWS] * w + eps) / w
+    offset = eps / w
+    n_ch, K, n_s = coef.shape
+    X = np.ascontiguousarray(np.swapaxes(coef, 1, 2)).reshape(n_ch * n_s, K) @ basis.Q[
+        _VALID_ROWS
+    ].T  # (C 72, p_valid)
+    top = float(X.max())
+    if not top < _MAX_EXPONENT:  # also catches NaN
+        raise ReconstructionError(
+            f"the fit diverged (remapped value {top:.3g}); the samples are far outside what "
+            "the basis can represent: check their units (1/sr) and the dark subtraction"
+        )
+    np.exp(X, out=X)
+    X *= scale
+    X -= offset
+    np.maximum(X, 0.0, out=X)
+    out = np.empty((n_ch * n_s, geo.N_ROWS))
+    out[:, _INVALID_ROWS] = np.nan
+    out[:, _VALID_ROWS] = X
+    return out.reshape(n_ch, *geo.TABLE_SHAPE)
 
 
 def _relative_sample_error(fit: FloatArray, measured: FloatArray) -> float:

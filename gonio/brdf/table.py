@@ -34,6 +34,13 @@ from gonio.brdf import geometry as geo
 FORMAT_NAME = "gonio-brdf-table"
 FORMAT_VERSION = 1
 
+#: (18, 18, 36) valid-cell mask, computed once: every table construction needs it and the
+#: trigonometry behind :func:`geometry.valid_mask` is a noticeable share of a reconstruction.
+VALID_MASK = geo.valid_mask()
+VALID_MASK.setflags(write=False)
+_INVALID_MASK = ~VALID_MASK
+_INVALID_MASK.setflags(write=False)
+
 
 class TableError(ValueError):
     """A BRDF table or table file is malformed; the message says what and how to fix it."""
@@ -65,40 +72,94 @@ class BRDFTable:
         v = np.asarray(self.values)
         if v.dtype not in (np.float32, np.float64):
             v = v.astype(np.float64)
+        channels = self._check_shapes(v, self.channels, self.name, self.wavelengths_nm)
+        # One private copy (the caller's array is neither changed nor frozen), NaN written at
+        # the invalid cells in place; the checks below then run on the whole array, where
+        # the invalid cells are NaN and cannot trip them.
+        v = np.array(v, copy=True)
+        v[:, :, _INVALID_MASK] = np.nan
+        if not np.isfinite(v).any():
+            raise TableError(f"table {self.name!r} has no finite value at any valid cell")
+        if np.isinf(v).any():
+            raise TableError(f"table {self.name!r} holds infinite values; replace them first")
+        if (v < 0).any():
+            raise TableError(
+                f"table {self.name!r} holds negative BRDF values (min {np.nanmin(v):.3g}); "
+                "clamp them to 0 before building the table"
+            )
+        self._freeze(v, channels)
+
+    @staticmethod
+    def _check_shapes(
+        v: NDArray[np.floating[Any]],
+        channels_in: Sequence[str],
+        name: str,
+        wavelengths_nm: Sequence[float] | None,
+    ) -> tuple[str, ...]:
+        """Shape, channel and wavelength-count checks; returns the channel names as strings."""
         if v.ndim != 5 or v.shape[1:] != geo.TABLE_SHAPE:
             raise TableError(
-                f"table {self.name!r}: values have shape {v.shape}, expected "
+                f"table {name!r}: values have shape {v.shape}, expected "
                 f"(C, {', '.join(map(str, geo.TABLE_SHAPE))}) = (channels, ph, th, td, pd) "
                 "on the 5 degree grid"
             )
-        channels = tuple(str(c) for c in self.channels)
+        channels = tuple(str(c) for c in channels_in)
         if len(channels) != v.shape[0]:
             raise TableError(
-                f"table {self.name!r}: {len(channels)} channel names for {v.shape[0]} channels"
+                f"table {name!r}: {len(channels)} channel names for {v.shape[0]} channels"
             )
-        if self.wavelengths_nm is not None and len(self.wavelengths_nm) != v.shape[0]:
+        if wavelengths_nm is not None and len(wavelengths_nm) != v.shape[0]:
             raise TableError(
-                f"table {self.name!r}: {len(self.wavelengths_nm)} wavelengths for "
-                f"{v.shape[0]} channels"
+                f"table {name!r}: {len(wavelengths_nm)} wavelengths for {v.shape[0]} channels"
             )
-        mask = geo.valid_mask()
-        v = np.where(mask[None, None], v, np.nan).astype(v.dtype, copy=False)
-        valid = v[:, :, mask]
-        if not np.isfinite(valid).any():
-            raise TableError(f"table {self.name!r} has no finite value at any valid cell")
-        if np.isinf(valid).any():
-            raise TableError(f"table {self.name!r} holds infinite values; replace them first")
-        if (valid < 0).any():
-            raise TableError(
-                f"table {self.name!r} holds negative BRDF values (min {np.nanmin(valid):.3g}); "
-                "clamp them to 0 before building the table"
-            )
+        return channels
+
+    def _freeze(self, v: NDArray[np.floating[Any]], channels: tuple[str, ...]) -> None:
         v.setflags(write=False)
         object.__setattr__(self, "values", v)
         object.__setattr__(self, "channels", channels)
         if self.wavelengths_nm is not None:
             object.__setattr__(self, "wavelengths_nm", tuple(float(w) for w in self.wavelengths_nm))
         object.__setattr__(self, "provenance", dict(self.provenance))
+
+    @classmethod
+    def trusted(
+        cls,
+        values: NDArray[np.floating[Any]],
+        channels: Sequence[str],
+        name: str = "unnamed",
+        wavelengths_nm: Sequence[float] | None = None,
+        provenance: Mapping[str, Any] | None = None,
+    ) -> BRDFTable:
+        """Wrap an array gonio itself produced, without the per-value validation pass.
+
+        For code that builds tables from already valid data (a reconstruction, a rotation of
+        a table): the full validation reads every one of the ``C x 933,120`` values several
+        times, which costs more than the reconstruction's own solve. Only the cheap shape and
+        channel checks run; user data must go through the normal constructor.
+
+        Parameters
+        ----------
+        values : (C, 72, 18, 18, 36) float32 or float64 array, 1/sr
+            Must already hold NaN at every invalid cell and finite non-negative values or NaN
+            elsewhere. Taken over without a copy and made read-only: the caller must not keep
+            a writable reference to it.
+        channels, name, wavelengths_nm, provenance
+            As for :class:`BRDFTable`.
+        """
+        if values.dtype not in (np.float32, np.float64):
+            raise TableError(
+                f"table {name!r}: trusted values must be float32 or float64, not {values.dtype}"
+            )
+        chans = cls._check_shapes(values, channels, name, wavelengths_nm)
+        self = object.__new__(cls)
+        object.__setattr__(self, "name", name)
+        object.__setattr__(
+            self, "wavelengths_nm", None if wavelengths_nm is None else tuple(wavelengths_nm)
+        )
+        object.__setattr__(self, "provenance", dict(provenance or {}))
+        self._freeze(values, chans)
+        return self
 
     # ------------------------------------------------------------------ shape helpers
     @property
@@ -120,8 +181,10 @@ class BRDFTable:
         t = steps - k
         a = np.roll(self.values, k, axis=1)
         out = a if t < 1e-12 else (1 - t) * a + t * np.roll(a, 1, axis=1)
-        return BRDFTable(
-            out, self.channels, self.name, self.wavelengths_nm,
+        # Rolling along ph keeps the NaN pattern (it does not depend on ph) and a convex blend
+        # of finite non-negative values stays so: the result needs no re-validation.
+        return BRDFTable.trusted(
+            np.ascontiguousarray(out), self.channels, self.name, self.wavelengths_nm,
             {**self.provenance, "rotated_deg": float(np.rad2deg(angle))},
         )
 
@@ -284,7 +347,7 @@ def from_function(
     dtype : numpy float type of the stored values
     """
     th, td, pd = geo.grid_angles()
-    mask = geo.valid_mask()
+    mask = VALID_MASK
     out: NDArray[np.floating[Any]] = np.full(
         (len(channels), *geo.TABLE_SHAPE), np.nan, dtype=dtype
     )

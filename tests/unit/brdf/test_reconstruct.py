@@ -4,16 +4,23 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy.interpolate import PchipInterpolator
+from threadpoolctl import threadpool_info
 
 from gonio.brdf import geometry as geo
 from gonio.brdf import metrics
 from gonio.brdf.basis import Basis, inverse_remap, row_weight
 from gonio.brdf.reconstruct import (
+    CV_ERROR_SCALES,
     ReconstructionError,
     _objective,
+    cv_error_scale,
+    loo_predictions,
+    one_blas_thread,
     pair_cells,
     reconstruct,
     resample_to_slices,
+    slices_at_stage_angles,
     solve_closed,
     solve_iterative,
 )
@@ -141,9 +148,128 @@ def test_periodic_resampling_reproduces_samples_and_wraps() -> None:
     assert np.all((between >= 1 - 1e-12) & (between <= 2 + 1e-12))
 
 
+def _reference_resample(ph: np.ndarray, alpha: np.ndarray, vals: np.ndarray) -> np.ndarray:
+    """Per-pair scipy PCHIP over three periods of the stage angle (the plain construction)."""
+    a = np.mod(alpha, 2 * np.pi)
+    o = np.argsort(a)
+    x = np.concatenate([a[o] - 2 * np.pi, a[o], a[o] + 2 * np.pi])
+    out = []
+    for q in range(ph.size):
+        f = PchipInterpolator(x, np.concatenate([vals[q, o]] * 3), axis=0)
+        out.append(f(np.mod(ph[q] - geo.PH_GRID, 2 * np.pi)))
+    return np.stack(out)
+
+
+def test_shared_node_resampling_matches_per_pair_interpolants() -> None:
+    rng = np.random.default_rng(4)
+    ph = rng.uniform(-1, 8, 9)
+    alpha = rng.uniform(-4, 10, 7)
+    vals = rng.uniform(0, 3, (9, 7, 2))
+    np.testing.assert_allclose(
+        resample_to_slices(ph, alpha, vals), _reference_resample(ph, alpha, vals), atol=1e-12
+    )
+
+
+def test_slices_back_at_grid_stage_angles_are_exact() -> None:
+    """Stage angles on the 5 degree grid hit slice nodes: the round trip returns the samples."""
+    rng = np.random.default_rng(5)
+    ph = geo.PH_GRID[rng.integers(0, 72, 6)]
+    alpha = geo.PH_GRID[rng.choice(72, 10, replace=False)] + 2 * np.pi * rng.integers(-1, 2, 10)
+    vals = rng.uniform(0, 1, (6, 10, 3))
+    back = slices_at_stage_angles(ph, alpha, resample_to_slices(ph, alpha, vals))
+    np.testing.assert_allclose(back, vals, atol=1e-12)
+
+
 def test_single_rotation_gives_constant_slices() -> None:
     out = resample_to_slices(np.array([0.3]), np.array([1.0]), np.array([[[0.7, 0.2]]]))
     np.testing.assert_allclose(out[0], np.tile([0.7, 0.2], (72, 1)))
+
+
+# ---------------------------------------------------------------------------- error estimate
+def test_loo_predictions_equal_refits_without_each_pair() -> None:
+    rng = np.random.default_rng(9)
+    n, k = 11, 5
+    Qt, Qs = rng.standard_normal((n, k)), rng.standard_normal((20, k))
+    Y = rng.standard_normal((n, geo.N_PH, 2))
+    eta, lam = 0.7, 0.3
+    loo = loo_predictions(Y, Qt, Qs, eta, lam)
+    for q in range(n):
+        keep = np.arange(n) != q
+        C = solve_closed(Y[keep], Qt[keep], Qs, eta, lam)  # (K, 72, 2)
+        np.testing.assert_allclose(loo[q], np.tensordot(Qt[q], C, axes=1), atol=1e-10)
+
+
+def test_loo_is_undefined_when_a_pair_determines_its_own_coefficients() -> None:
+    rng = np.random.default_rng(1)
+    Qt = rng.standard_normal((4, 4))  # n = K and eta = 0: each pair is fitted exactly
+    assert np.isnan(loo_predictions(rng.standard_normal((4, 72)), Qt, Qt, 0.0, 0.0)).all()
+
+
+def _in_span_scan(
+    b: Basis, n: int, seed: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Cells, ph_lab, stage angles (all 72 slices) and exact samples (n, 72, 1) of a BRDF in
+    the span of ``b``."""
+    rng = np.random.default_rng(seed)
+    truth = _table_from_coefficients(b, 0.05 * rng.standard_normal((b.K, geo.N_PH)))
+    cells, ph = grid_pairs(n, seed=seed)
+    rows = geo.flat_row(*(np.rint(cells / geo.STEP).astype(int).T))
+    alpha = geo.PH_GRID.copy()
+    k = np.rint(np.mod(ph[:, None] - alpha[None, :], 2 * np.pi) / geo.STEP).astype(int) % 72
+    vals = truth[k, rows[:, None]][..., None]
+    assert np.all(vals > 0), "test set-up: the synthetic BRDF must be positive"
+    return cells, ph, alpha, vals
+
+
+def test_cv_error_is_near_zero_for_data_in_the_span() -> None:
+    b = random_basis(6, seed=1)
+    cells, ph, alpha, vals = _in_span_scan(b, 20, seed=5)
+    rec = reconstruct(b, cells, ph, alpha, vals, channels=("Y",), eta=1e-12, lam=0.0)
+    assert rec.cv_sample_error < 1e-6
+    assert rec.predicted_error == pytest.approx(cv_error_scale(20) * rec.cv_sample_error)
+
+
+@pytest.mark.parametrize("sigma", [0.02, 0.08])
+def test_cv_error_tracks_the_noise_level(sigma: float) -> None:
+    """In-span data with relative noise sigma: a pair left out is predicted from the others
+    up to its own noise, so the CV error is about E|N| sigma = sqrt(2 / pi) sigma, while the
+    in-sample error is smaller (the fit absorbs part of each pair's noise)."""
+    b = random_basis(4, seed=3)
+    cells, ph, alpha, clean = _in_span_scan(b, 60, seed=6)
+    noise = np.random.default_rng(2).standard_normal(clean.shape)
+    vals = clean * (1 + sigma * noise)
+    rec = reconstruct(b, cells, ph, alpha, vals, channels=("Y",), eta=1e-9, lam=0.0)
+    expected = np.sqrt(2 / np.pi) * sigma
+    assert 0.85 * expected < rec.cv_sample_error < 1.25 * expected
+    assert rec.rel_sample_error < rec.cv_sample_error
+
+
+def test_cv_error_is_nan_when_undefined() -> None:
+    b = random_basis(6, seed=1)
+    cells, ph, alpha, vals = _in_span_scan(b, 6, seed=4)
+    rec = reconstruct(b, cells, ph, alpha, vals, channels=("Y",), eta=0.0, lam=0.0)
+    assert np.isnan(rec.cv_sample_error) and np.isnan(rec.predicted_error)
+    assert rec.rel_sample_error < 1e-6  # the fit itself is fine: n = K interpolates
+
+
+def test_cv_scale_interpolates_in_log_pairs_and_holds_at_the_ends() -> None:
+    (n0, s0), (n1, s1) = CV_ERROR_SCALES[0], CV_ERROR_SCALES[1]
+    assert cv_error_scale(n0) == pytest.approx(s0)
+    assert cv_error_scale(1) == pytest.approx(s0)
+    assert cv_error_scale(10_000) == pytest.approx(CV_ERROR_SCALES[-1][1])
+    mid = round(float(np.sqrt(n0 * n1)))
+    t = np.log(mid / n0) / np.log(n1 / n0)
+    assert cv_error_scale(mid) == pytest.approx(s0 ** (1 - t) * s1**t)
+
+
+def test_blas_runs_on_one_thread_inside_the_limit() -> None:
+    def blas_threads() -> list[int]:
+        return [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
+
+    before = blas_threads()
+    with one_blas_thread():
+        assert all(t == 1 for t in blas_threads())
+    assert blas_threads() == before
 
 
 # ---------------------------------------------------------------------------- quality
@@ -159,6 +285,9 @@ def test_held_out_material_is_reconstructed_well() -> None:
     assert np.nanmin(rec.table.values) >= 0
     assert rec.estimated_error == pytest.approx(0.8 * rec.rel_sample_error)
     assert 0 < rec.rel_sample_error < 0.2
+    # Predicting a pair without it is harder than fitting it.
+    assert rec.rel_sample_error < rec.cv_sample_error < 1.0
+    assert rec.predicted_error == pytest.approx(cv_error_scale(20) * rec.cv_sample_error)
     # Far better than the library median as a guess.
     med = np.broadcast_to(b.f_med.reshape(geo.SLICE_SHAPE), ref.values.shape)
     assert metrics.log_rmse(rec.table, ref) < 0.5 * metrics.log_rmse(med, ref)

@@ -199,3 +199,46 @@ def test_rotation_by_whole_steps_rolls_ph(aniso_table: BRDFTable) -> None:
 
 def test_provenance_is_json(aniso_table: BRDFTable) -> None:
     assert json.loads(json.dumps(aniso_table.provenance))["model"]["type"] == "Rotated"
+
+
+def test_caller_array_is_neither_changed_nor_frozen() -> None:
+    v = np.ones(SHAPE)
+    t = BRDFTable(v, ("R", "G", "B"))
+    assert v.flags.writeable and (v == 1).all()
+    assert np.isnan(t.values[:, :, ~geo.valid_mask()]).all()
+
+
+def test_trusted_path_takes_the_array_as_is() -> None:
+    v = np.where(geo.valid_mask(), 0.5, np.nan) * np.ones(SHAPE)
+    t = BRDFTable.trusted(v, ["R", "G", "B"], "fast", (600.0, 550, 450), {"k": 1})
+    assert t.values is v and not v.flags.writeable  # no copy, frozen
+    assert t.channels == ("R", "G", "B") and t.wavelengths_nm == (600.0, 550.0, 450.0)
+    assert t.provenance == {"k": 1} and t.name == "fast"
+    # Same object as the validating constructor builds from the same data.
+    ref = BRDFTable(v, ("R", "G", "B"), "fast", (600.0, 550.0, 450.0), {"k": 1})
+    np.testing.assert_array_equal(t.values, ref.values)
+    assert t.channels == ref.channels and t.wavelengths_nm == ref.wavelengths_nm
+
+
+@pytest.mark.parametrize(
+    ("values", "channels", "message"),
+    [
+        (np.ones((3, 72, 18, 18)), ("R", "G", "B"), r"expected \(C, 72, 18, 18, 36\)"),
+        (np.ones(SHAPE), ("R", "G"), r"2 channel names for 3 channels"),
+        (np.ones(SHAPE, dtype=np.int64), ("R", "G", "B"), r"float32 or float64"),
+    ],
+    ids=["shape", "channels", "dtype"],
+)
+def test_trusted_path_still_checks_shapes(
+    values: np.ndarray, channels: tuple[str, ...], message: str
+) -> None:
+    with pytest.raises(TableError, match=message):
+        BRDFTable.trusted(values, channels)
+
+
+def test_rotated_table_stays_valid(aniso_table: BRDFTable) -> None:
+    """Rotation takes the trusted path: its output must pass the full validation anyway."""
+    turned = aniso_table.rotated(7.3 * DEG)
+    checked = BRDFTable(turned.values, turned.channels, turned.name)
+    np.testing.assert_array_equal(checked.values, turned.values)
+    assert not turned.values.flags.writeable
