@@ -261,6 +261,10 @@ class Worker:
         metrics = {
             "rel_sample_error": rec.rel_sample_error,
             "estimated_error": rec.estimated_error,
+            # The reported error bar: calibrated leave-one-pair-out error (docs/science.md 4.1);
+            # V&F's estimated_error stays for comparison with the paper.
+            "predicted_error": _finite_or_none(rec.predicted_error),
+            "cv_sample_error": _finite_or_none(rec.cv_sample_error),
             "n_pairs": len(pairs),
             "n_angles": int(samples.stage_angles_deg.size),
             "n_samples": len(pairs) * int(samples.stage_angles_deg.size),
@@ -299,3 +303,8 @@ def _exposure_mismatch(cal: Calibration, readings: list[Any]) -> str | None:
     return (f"the calibration was measured at exposure {cal.exposure_s:g} s, this scan at "
             f"{', '.join(f'{t:g}' for t in used)} s; its values are off by about the ratio. "
             "Calibrate at the scan's exposure")
+
+
+def _finite_or_none(x: float) -> float | None:
+    """NaN (e.g. no pair could be left out) is stored as null: JSON has no NaN."""
+    return float(x) if math.isfinite(x) else None

@@ -212,7 +212,8 @@ def _cmd_reconstruct(args: argparse.Namespace) -> int:
     s = rec.settings
     print(f"reconstructed {name}: K={s['K']} n={s['n']} r={s['r']} solver={s['solver']}")
     print(f"  sample error {100 * rec.rel_sample_error:.2f} %, "
-          f"self-estimated BRDF error {100 * rec.estimated_error:.2f} %, "
+          f"self-estimated BRDF error {100 * rec.predicted_error:.1f} % "
+          f"(V&F estimate {100 * rec.estimated_error:.2f} %), "
           f"time {s['seconds']:.3f} s -> {args.output}")
     if args.preview is not None:
         from gonio.brdf.preview import save_preview
@@ -298,7 +299,8 @@ def _cmd_demo(args: argparse.Namespace) -> int:
           f"noise {100 * args.noise:.1f} %")
     print(f"  log_rmse {metrics.log_rmse(rec.table, reference):.4f}   "
           f"log_psnr {metrics.log_psnr(rec.table, reference):.2f} dB   "
-          f"self-estimated error {100 * rec.estimated_error:.2f} %")
+          f"self-estimated error {100 * rec.predicted_error:.1f} % "
+          f"(V&F estimate {100 * rec.estimated_error:.2f} %)")
     print(f"  reconstruction {rec.settings['seconds']:.3f} s, total "
           f"{time.perf_counter() - t0:.1f} s; wrote {out}/reconstruction.npz, "
           "reconstruction.png, reference.png")

@@ -157,7 +157,8 @@ async def _run_scan(args: argparse.Namespace, plan: Any, config: Any) -> int:
     shutil.move(row.result_path, out)
     summary = row.summary or {}
     print(f"job {job.id} completed: {summary.get('n_samples', summary.get('readings'))} samples, "
-          f"estimated error {summary.get('estimated_error', float('nan')):.3f}; wrote {out}")
+          f"self-estimated error {100 * (summary.get('predicted_error') or float('nan')):.1f} %; "
+          f"wrote {out}")
     return 0
 
 

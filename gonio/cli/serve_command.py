@@ -278,7 +278,7 @@ def _demo_scan(url: str, key: str | None, result: dict[str, int], stop: Any) -> 
                 units = "1/sr (calibrated)" if m.get("calibrated") else "sensor counts"
                 print(f"demo scan completed: {m.get('n_samples')} samples in {units}, "
                       f"self-estimated error "
-                      f"{100 * float(m.get('estimated_error', float('nan'))):.1f} %; "
+                      f"{100 * float(m.get('predicted_error') or float('nan')):.1f} %; "
                       f"result {url}api/v1/jobs/{job_id}/result", flush=True)
                 code = 0
     except Exception as exc:  # reported, and the exit code says it failed

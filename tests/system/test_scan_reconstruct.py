@@ -76,3 +76,7 @@ def test_job_reconstructs_the_simulated_specimen(
         assert svc.preview_png(1).startswith(b"\x89PNG")
         assert job.result is not None
         assert job.result["n_samples"] == s.values.shape[0] * s.values.shape[1]
+        # The reported error bar is the calibrated cross-validated one, stored with the result.
+        predicted = res.metrics["predicted_error"]
+        assert np.isfinite(predicted) and predicted > res.estimated_error
+        assert job.result["predicted_error"] == pytest.approx(predicted)
