@@ -51,7 +51,6 @@ key                shape / dtype           meaning
 from __future__ import annotations
 
 import hashlib
-import json
 import os
 import time
 from collections.abc import Mapping, Sequence
@@ -63,6 +62,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from gonio.brdf import geometry as geo
+from gonio.brdf.npzfile import read_npz, write_npz
 from gonio.brdf.table import BRDFTable
 
 FloatArray = NDArray[np.float64]
@@ -283,43 +283,22 @@ class Basis:
     # ------------------------------------------------------------------ files
     def save(self, path: str | os.PathLike[str]) -> Path:
         """Write the basis as ``.npz`` (layout in the module docstring); returns the path."""
-        p = Path(path)
-        tmp = p.with_name(p.name + ".part")
-        with open(tmp, "wb") as fh:
-            np.savez_compressed(
-                fh,
-                format=np.array(FORMAT_NAME),
-                version=np.array(FORMAT_VERSION),
-                Q=self.Q, S=self.S, f_med=self.f_med, mu=self.mu, valid=self.valid,
-                eps=np.array(self.eps),
-                materials=np.array(self.materials, dtype=str),
-                provenance=np.array(json.dumps(dict(self.provenance), default=str)),
-                grid_deg=_GRID_SIGNATURE,
-            )
-        os.replace(tmp, p)  # a crash never leaves a half-written basis under the real name
-        return p
+        return write_npz(
+            path, FORMAT_NAME, FORMAT_VERSION, self.provenance,
+            Q=self.Q, S=self.S, f_med=self.f_med, mu=self.mu, valid=self.valid,
+            eps=np.array(self.eps), materials=np.array(self.materials, dtype=str),
+            grid_deg=_GRID_SIGNATURE,
+        )
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> Basis:
         """Read a basis written by :meth:`save`; :class:`BasisError` with the reason otherwise."""
         p = Path(path)
-        try:
-            with np.load(p, allow_pickle=False) as z:
-                data = {k: z[k] for k in z.files}
-        except FileNotFoundError:
-            raise BasisError(f"{p}: no such basis file") from None
-        except Exception as exc:  # zip and npy errors come in many types
-            raise BasisError(f"{p}: not a readable gonio basis file ({exc})") from None
-        if str(data.get("format", "")) != FORMAT_NAME:
-            raise BasisError(f"{p}: not a gonio basis file (missing format={FORMAT_NAME!r})")
-        version = int(data.get("version", -1))
-        if version != FORMAT_VERSION:
-            raise BasisError(
-                f"{p}: basis format version {version}; this gonio reads version {FORMAT_VERSION}"
-            )
-        missing = {"Q", "S", "f_med", "mu", "valid", "eps", "grid_deg"} - data.keys()
-        if missing:
-            raise BasisError(f"{p}: missing fields {sorted(missing)}")
+        data, prov = read_npz(
+            p, format_name=FORMAT_NAME, version=FORMAT_VERSION,
+            required=("Q", "S", "f_med", "mu", "valid", "eps", "grid_deg"),
+            error=BasisError, kind="basis", how_to_make="build one with `gonio basis build`",
+        )
         grid = np.asarray(data["grid_deg"], dtype=float)
         if grid.shape != _GRID_SIGNATURE.shape or not np.allclose(grid, _GRID_SIGNATURE):
             raise BasisError(
@@ -328,14 +307,10 @@ class Basis:
                 "with `gonio basis build`"
             )
         try:
-            prov = json.loads(str(data.get("provenance", "{}")))
-        except json.JSONDecodeError:
-            prov = {}
-        try:
             return cls(
                 data["Q"], data["S"], data["f_med"], data["mu"], data["valid"],
                 float(data["eps"]), tuple(np.asarray(data.get("materials", [])).tolist()),
-                {**prov, "file": str(p)},
+                prov,
             )
         except BasisError as exc:
             raise BasisError(f"{p}: {exc}") from None

@@ -22,7 +22,6 @@ key                shape / dtype         meaning
 
 from __future__ import annotations
 
-import json
 import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -33,6 +32,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from gonio.brdf import geometry as geo
+from gonio.brdf.npzfile import read_npz, write_npz
 
 FloatArray = NDArray[np.float64]
 FORMAT_NAME = "gonio-samples"
@@ -180,56 +180,28 @@ class Samples:
 
     def save(self, path: str | os.PathLike[str]) -> Path:
         """Write the samples file (``.npz``); returns the path."""
-        p = Path(path)
-        tmp = p.with_name(p.name + ".part")
-        with open(tmp, "wb") as fh:
-            np.savez_compressed(
-                fh,
-                format=np.array(FORMAT_NAME),
-                version=np.array(FORMAT_VERSION),
-                cells=self.cells, ph_lab=self.ph_lab, stage_angles=self.stage_angles,
-                values=self.values, channels=np.array(self.channels, dtype=str),
-                provenance=np.array(json.dumps(dict(self.provenance), default=str)),
-            )
-        os.replace(tmp, p)
-        return p
+        return write_npz(
+            path, FORMAT_NAME, FORMAT_VERSION, self.provenance,
+            cells=self.cells, ph_lab=self.ph_lab, stage_angles=self.stage_angles,
+            values=self.values, channels=np.array(self.channels, dtype=str),
+        )
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> Samples:
         """Read a samples file; :class:`SamplesError` saying what is wrong otherwise."""
-        p = Path(path)
-        try:
-            with np.load(p, allow_pickle=False) as z:
-                data = {k: z[k] for k in z.files}
-        except FileNotFoundError:
-            raise SamplesError(f"{p}: no such samples file") from None
-        except Exception as exc:  # zip and npy errors come in many types
-            raise SamplesError(f"{p}: not a readable samples file ({exc})") from None
-        if str(data.get("format", "")) != FORMAT_NAME:
-            raise SamplesError(
-                f"{p}: not a gonio samples file (missing format={FORMAT_NAME!r}); create one "
-                "with `gonio simulate-scan` or gonio.brdf.samples.Samples.save"
-            )
-        version = int(data.get("version", -1))
-        if version != FORMAT_VERSION:
-            raise SamplesError(
-                f"{p}: samples format version {version}; this gonio reads {FORMAT_VERSION}"
-            )
-        missing = {"cells", "ph_lab", "stage_angles", "values", "channels"} - data.keys()
-        if missing:
-            raise SamplesError(f"{p}: missing fields {sorted(missing)}")
-        try:
-            prov = json.loads(str(data.get("provenance", "{}")))
-        except json.JSONDecodeError:
-            prov = {}
+        data, prov = read_npz(
+            path, format_name=FORMAT_NAME, version=FORMAT_VERSION,
+            required=("cells", "ph_lab", "stage_angles", "values", "channels"),
+            error=SamplesError, kind="samples",
+            how_to_make="create one with `gonio simulate-scan` or gonio.brdf.samples.Samples.save",
+        )
         try:
             return cls(
                 data["cells"], data["ph_lab"], data["stage_angles"], data["values"],
-                tuple(np.asarray(data["channels"]).tolist()), {**prov, "file": str(p)},
+                tuple(np.asarray(data["channels"]).tolist()), prov,
             )
         except SamplesError as exc:
-            raise SamplesError(f"{p}: {exc}") from None
-
+            raise SamplesError(f"{Path(path)}: {exc}") from None
 
 def uniform_stage_angles(r: int, start: float = 0.0) -> FloatArray:
     """``r`` evenly spaced stage angles (radians) from ``start``."""

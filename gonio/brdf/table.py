@@ -18,7 +18,6 @@ key                shape / dtype                      meaning
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from collections.abc import Mapping, Sequence
@@ -30,6 +29,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from gonio.brdf import geometry as geo
+from gonio.brdf.npzfile import read_npz, write_npz
 
 FORMAT_NAME = "gonio-brdf-table"
 FORMAT_VERSION = 1
@@ -271,62 +271,33 @@ class BRDFTable:
     # ------------------------------------------------------------------ files
     def save(self, path: str | os.PathLike[str]) -> Path:
         """Write the table as ``.npz`` (layout in the module docstring); returns the path."""
-        p = Path(path)
         wl = (
             np.array(self.wavelengths_nm, dtype=float)
             if self.wavelengths_nm is not None
             else np.full(self.n_channels, np.nan)
         )
-        tmp = p.with_name(p.name + ".part")
-        with open(tmp, "wb") as fh:
-            np.savez_compressed(
-                fh,
-                format=np.array(FORMAT_NAME),
-                version=np.array(FORMAT_VERSION),
-                values=np.asarray(self.values),
-                channels=np.array(self.channels),
-                wavelengths_nm=wl,
-                name=np.array(self.name),
-                provenance=np.array(json.dumps(dict(self.provenance), default=str)),
-            )
-        os.replace(tmp, p)  # never leave a half-written table under the real name
-        return p
+        return write_npz(
+            path, FORMAT_NAME, FORMAT_VERSION, self.provenance,
+            values=np.asarray(self.values), channels=np.array(self.channels),
+            wavelengths_nm=wl, name=np.array(self.name),
+        )
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> BRDFTable:
         """Read a table written by :meth:`save`; clear :class:`TableError` on any problem."""
-        p = Path(path)
-        try:
-            with np.load(p, allow_pickle=False) as z:
-                data = {k: z[k] for k in z.files}
-        except FileNotFoundError:
-            raise TableError(f"{p}: no such table file") from None
-        except Exception as exc:  # zip/npy errors come in many types
-            raise TableError(f"{p}: not a readable gonio table file ({exc})") from None
-        if str(data.get("format", "")) != FORMAT_NAME:
-            raise TableError(f"{p}: not a gonio BRDF table (missing format={FORMAT_NAME!r})")
-        version = int(data.get("version", -1))
-        if version != FORMAT_VERSION:
-            raise TableError(
-                f"{p}: table format version {version}; this gonio reads version {FORMAT_VERSION}"
-            )
-        missing = {"values", "channels", "name"} - data.keys()
-        if missing:
-            raise TableError(f"{p}: missing fields {sorted(missing)}")
+        data, prov = read_npz(
+            path, format_name=FORMAT_NAME, version=FORMAT_VERSION,
+            required=("values", "channels", "name"), error=TableError, kind="table",
+        )
         wl = data.get("wavelengths_nm")
         wavelengths = None if wl is None or np.isnan(wl).all() else tuple(wl.tolist())
         try:
-            prov = json.loads(str(data.get("provenance", "{}")))
-        except json.JSONDecodeError:
-            prov = {}
-        try:
             return cls(
                 data["values"], tuple(data["channels"].tolist()), str(data["name"]),
-                wavelengths, {**prov, "file": str(p)},
+                wavelengths, prov,
             )
         except TableError as exc:
-            raise TableError(f"{p}: {exc}") from None
-
+            raise TableError(f"{Path(path)}: {exc}") from None
 
 def from_function(
     fn: Any,

@@ -106,7 +106,7 @@ def test_load_errors(tmp_path: Path) -> None:
     with pytest.raises(TableError, match=r"corrupt\.npz: not a readable gonio table file"):
         BRDFTable.load(corrupt)
     other = _write_npz(tmp_path / "other.npz", x=np.ones(3))
-    with pytest.raises(TableError, match=f"not a gonio BRDF table .*{FORMAT_NAME}"):
+    with pytest.raises(TableError, match=f"not a gonio table file .*{FORMAT_NAME}"):
         BRDFTable.load(other)
     future = _write_npz(tmp_path / "future.npz", format=np.array(FORMAT_NAME), version=np.array(99))
     with pytest.raises(TableError, match=r"format version 99; this gonio reads version 1"):
