@@ -20,7 +20,7 @@ import contextlib
 import threading
 from collections.abc import AsyncIterator, Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -151,6 +151,29 @@ class RigStatus(BaseModel):
     current_job: int | None = None
     queue_held: str | None = None
     devices: list[DeviceState] = Field(default_factory=list)
+
+
+class StageRequest(BaseModel):
+    """A manual stage command: commissioning (set the zero at the holder's reference mark) and
+    loading specimens. Refused while a job is active; ``stop`` is always accepted."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    action: Literal["move", "home", "stop", "clear_faults"] = Field(
+        description="move to angle_deg; home = make the present position 0 deg; stop; "
+                    "clear_faults = reboot / clear latched faults")
+    angle_deg: float | None = Field(None, description="target of a move, degrees")
+
+
+class StageState(BaseModel):
+    position_deg: float
+    moving: bool
+    homed: bool
+    faults: list[str] = Field(default_factory=list)
+
+
+class DeviceError(RuntimeError):
+    """A device fault while serving a manual command (the API answers 503 with the reason)."""
 
 
 _PREVIEW_CACHE = 8
@@ -551,6 +574,57 @@ class GonioService:
             connected=self._connected, error=self._connect_error,
             current_job=st.current_job, queue_held=st.queue_held, devices=devices,
         )
+
+    async def stage_command(self, request: StageRequest) -> StageState:
+        """Run one manual stage command and return the stage state after it.
+
+        The queue is held for the duration so no job starts under a manual move.
+
+        Raises
+        ------
+        Conflict
+            A job is active (``stop`` excepted: stopping is always allowed).
+        PlanError
+            A move without ``angle_deg`` or outside the stage's travel limits.
+        DeviceError
+            The stage reported a fault or stopped answering.
+        """
+        if request.action == "move":
+            lo, hi = self.desc.stage_min_deg, self.desc.stage_max_deg
+            if request.angle_deg is None:
+                raise PlanError("a stage move needs angle_deg (degrees)")
+            if not lo <= request.angle_deg <= hi:
+                raise PlanError(f"angle_deg {request.angle_deg:g} is outside the stage's travel "
+                                f"limits [{lo:g}, {hi:g}] deg (min_deg/max_deg in the rig config)")
+        active = self.active_job()
+        if active is not None and request.action != "stop":
+            raise Conflict(f"job {active.id} is {active.state.value}: the stage is in use; wait "
+                           "for it, or pause or abort it, before moving the stage by hand")
+        was_held = self.worker.held is not None
+        if not was_held:
+            self.worker.hold(f"manual stage command: {request.action}")
+        try:
+            rig = await self._get_rig()
+            stage = rig.stage
+            if request.action == "move":
+                assert request.angle_deg is not None
+                await stage.move_to(request.angle_deg)
+            elif request.action == "home":
+                await stage.home()
+            elif request.action == "stop":
+                await stage.stop()
+            else:
+                await stage.clear_faults()
+            st = await stage.status()
+        except hal.DeviceFault as exc:
+            raise DeviceError(f"stage {request.action} failed: {exc}") from exc
+        finally:
+            if not was_held:
+                self.worker.release()
+        self.record_event("stage", {"action": request.action, "angle_deg": request.angle_deg,
+                                    "position_deg": st.position_deg})
+        return StageState(position_deg=st.position_deg, moving=st.moving, homed=st.homed,
+                          faults=list(st.faults))
 
     def active_job(self) -> JobInfo | None:
         jobs = [r for r in self.store.list_jobs() if r.state in ACTIVE_STATES]

@@ -37,7 +37,7 @@ from gonio.calibration import CalibrationError
 from gonio.jobstates import IllegalTransition
 from gonio.plans import PlanError
 from gonio.results import ResultFileError
-from gonio.service import Conflict, GonioService
+from gonio.service import Conflict, DeviceError, GonioService
 from gonio.store import NotFound
 
 log = logging.getLogger("gonio.api")
@@ -120,6 +120,7 @@ def create_app(
         (DesignError, 422),
         (FeasibilityError, 422),
         (UnknownPresetError, 404),
+        (DeviceError, 503),
     ):
         app.add_exception_handler(exc_type, _mapped(status))
 

@@ -13,7 +13,7 @@ from gonio.api.deps import READ, WRITE, Service
 from gonio.api.maintenance import LockState, MaintenanceLock
 from gonio.calibration import Calibration
 from gonio.plans import RigDescription
-from gonio.service import GonioService, RigStatus
+from gonio.service import GonioService, RigStatus, StageRequest, StageState
 
 router = APIRouter(prefix="/api/v1", tags=["rig"])
 
@@ -76,6 +76,12 @@ def halt(service: Service) -> RigOverview | dict[str, str]:
     # Not refused by the maintenance lock: stopping the rig must always be possible.
     service.halt()
     return {"status": "halted; release the queue with POST /api/v1/rig/release"}
+
+
+@router.post("/rig/stage", dependencies=WRITE,
+             summary="Manual stage command: move, home (set zero here), stop, clear faults")
+async def stage_command(body: StageRequest, service: Service) -> StageState:
+    return await service.stage_command(body)
 
 
 @router.post("/rig/release", dependencies=WRITE,

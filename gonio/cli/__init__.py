@@ -20,6 +20,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "gonio.cli.sim_command",
     "gonio.cli.serve_command",
     "gonio.cli.design_command",
+    "gonio.cli.stage_command",
 )
 
 
