@@ -1,29 +1,164 @@
-"""Simulated scan wall time against its physical lower bound.
+"""Simulated scan wall time against its physical lower bound, with a per-angle breakdown.
 
-The lower bound is the plan's dry-run estimate: trapezoidal stage moves at the rig's speed and
-acceleration, the stage settle time, and one exposure per light and angle (plus the dark). The
-overhead is everything else: protocol round trips, light switching, store commits.
+The lower bound is the plan's dry-run estimate (:func:`gonio.plans.dry_run`): trapezoidal stage
+moves at the rig's speed and acceleration, the configured stage settle time, and one exposure
+per light and angle (plus the dark). The overhead is everything else: protocol round trips,
+light switching, move-completion polling, store commits.
 
-Run: ``.venv/bin/python bench/bench_engine.py [--rotations 8] [--exposure 0.05]``
-Prints one table row per stage kind.
+The simulated stage also rings for ``SimRigOptions.settle_s`` (20 ms) after each move and
+reports itself busy meanwhile. That time is physical, but the rig config the simulator writes
+says ``settle_s = 0``, so the dry run does not know it: the table shows it in its own column and
+gives the overhead both against the dry run and against dry run + ringing.
+
+With ``--profile`` the scan is instrumented (device calls and store commits are timed by
+wrapping the rig's objects; the engine and drivers are unchanged) and one table per stage kind
+splits the mean wall time of an angle into stage, lights, exposures, store and the rest, each
+next to its physical part, plus the Modbus requests per angle counted by the simulator.
+
+Run: ``.venv/bin/python bench/bench_engine.py [--rotations 8] [--exposure 0.05] [--runs 3]
+[--profile]``. The machine load (1-minute load average) is printed with each run.
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
+import os
+import statistics
 import time
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass, field
+from typing import Any
 
 from gonio.drivers.factory import build_rig
 from gonio.sim.rig import SimRigOptions, start_sim_rig
 
+from gonio import hal
 from gonio.engine import ScanEngine
-from gonio.plans import ExposureSettings, RigDescription, UniformPlan, dry_run
+from gonio.plans import ExposureSettings, RigDescription, UniformPlan, dry_run, move_time
 from gonio.store import JobStore
 
+STAGES = ("dynamixel", "zaber")
 
-async def one(stage: str, rotations: int, exposure: float) -> tuple[float, float, int]:
-    with start_sim_rig(SimRigOptions(stage=stage, time_scale=1.0)) as sim:  # type: ignore[arg-type]
+
+@dataclass
+class Timeline:
+    """Wall time spent in each kind of call during one scan, seconds."""
+
+    spent: dict[str, float] = field(default_factory=dict)
+    calls: dict[str, int] = field(default_factory=dict)
+    moves_deg: list[float] = field(default_factory=list)
+    last_deg: float = 0.0  # where the stage was after the previous move, degrees
+    lit: int = 0  # lights currently on (exposures while 0 are darks)
+
+    def add(self, key: str, seconds: float) -> None:
+        self.spent[key] = self.spent.get(key, 0.0) + seconds
+        self.calls[key] = self.calls.get(key, 0) + 1
+
+
+def instrument(rig: hal.Rig, store: JobStore, tl: Timeline) -> None:
+    """Replace the rig's device methods and the store's commit with timed wrappers.
+
+    Light periods (switch on to switch off) are timed as one span, so sensor reads inside
+    them are not counted twice; darks are the sensor reads while every light is off.
+    """
+    stage = rig.stage
+    move, position = stage.move_to, stage.position
+    in_move = False
+
+    async def timed_move(angle_deg: float, timeout_s: float | None = None) -> float:
+        nonlocal in_move
+        t0 = time.perf_counter()
+        in_move = True
+        try:
+            actual = await move(angle_deg, timeout_s)
+        finally:
+            in_move = False
+        tl.add("stage move", time.perf_counter() - t0)
+        tl.moves_deg.append(abs(actual - tl.last_deg))
+        tl.last_deg = actual
+        return actual
+
+    async def timed_position() -> float:
+        if in_move:  # the driver's own read, already inside the move's time
+            return await position()
+        t0 = time.perf_counter()
+        try:
+            return await position()
+        finally:
+            tl.add("stage position", time.perf_counter() - t0)
+
+    stage.move_to = timed_move  # type: ignore[method-assign]
+    stage.position = timed_position  # type: ignore[method-assign]
+    for light in rig.lights.values():
+        light.set_on = _timed_switch(  # type: ignore[method-assign,assignment]
+            light.name, light.set_on, tl)
+    for sensor in rig.sensors.values():
+        sensor.read = _timed_dark_read(  # type: ignore[method-assign,assignment]
+            sensor.read, tl)
+    commit = store.commit_angle
+
+    def timed_commit(*args: Any, **kwargs: Any) -> Any:
+        t0 = time.perf_counter()
+        try:
+            return commit(*args, **kwargs)
+        finally:
+            tl.add("store commit", time.perf_counter() - t0)
+
+    store.commit_angle = timed_commit  # type: ignore[method-assign]
+
+
+def _timed_switch(name: str, set_on: Callable[[bool], Awaitable[None]],
+                  tl: Timeline) -> Callable[[bool], Awaitable[None]]:
+    """``set_on`` that times the span from switching ``name`` on to switching it off."""
+    since: list[float] = []
+
+    async def wrapper(on: bool) -> None:
+        if on:
+            since.append(time.perf_counter())
+            tl.lit += 1
+        try:
+            await set_on(on)
+        finally:
+            if not on and since:
+                tl.lit -= 1
+                tl.add("light period", time.perf_counter() - since.pop())
+
+    return wrapper
+
+
+def _timed_dark_read(read: Callable[..., Awaitable[hal.SensorReading]],
+                     tl: Timeline) -> Callable[..., Awaitable[hal.SensorReading]]:
+    """``read`` that times reads made while every light is off (darks read in parallel, so
+    the longest one is the dark's duration)."""
+
+    async def wrapper(exposure_s: float, averages: int = 1) -> hal.SensorReading:
+        dark = tl.lit == 0
+        t0 = time.perf_counter()
+        out = await read(exposure_s, averages)
+        if dark:
+            tl.spent["dark"] = max(tl.spent.get("dark", 0.0), time.perf_counter() - t0)
+        return out
+
+    return wrapper
+
+
+@dataclass
+class RunResult:
+    wall: float
+    bound: float
+    ringing: float
+    readings: int
+    angles: int
+    requests: int
+    timeline: Timeline | None
+    motion_s: float
+    exposure_s: float
+
+
+async def one(stage: str, rotations: int, exposure: float, profile: bool) -> RunResult:
+    options = SimRigOptions(stage=stage, time_scale=1.0)
+    with start_sim_rig(options) as sim:
         rig = build_rig(sim.config)
         desc = RigDescription.from_rig(rig)
         plan = UniformPlan(rotations=rotations, exposure=ExposureSettings(
@@ -33,22 +168,80 @@ async def one(stage: str, rotations: int, exposure: float) -> tuple[float, float
                                plan=plan.model_dump(mode="json"), rig=desc.model_dump(mode="json"))
         async with rig:
             here = await rig.stage.position()
-            bound = dry_run(plan, desc, current_deg=here).estimated_s
+            dr = dry_run(plan, desc, current_deg=here)
+            # The simulated stage rings after every move that goes somewhere.
+            here_now, moves = here, 0
+            for p in dr.positions_deg:
+                moves += abs(p - here_now) > 1e-9
+                here_now = p
+            ringing = moves * options.settle_s
+            tl = Timeline(last_deg=here) if profile else None
+            if tl is not None:
+                instrument(rig, store, tl)
+            assert sim.modbus is not None
+            req0 = sum(sim.modbus.request_counts().values())
             t0 = time.perf_counter()
             await ScanEngine(rig, store, job.id, plan, desc).run()
             wall = time.perf_counter() - t0
-        return wall, bound, store.reading_count(job.id)
+            requests = sum(sim.modbus.request_counts().values()) - req0
+        return RunResult(wall, dr.estimated_s, ringing, store.reading_count(job.id),
+                         len(dr.positions_deg), requests, tl, dr.motion_s, dr.exposure_s)
+
+
+def print_profile(stage: str, res: RunResult, rig_speed: tuple[float, float],
+                  n_lights: int, exposure: float) -> None:
+    tl = res.timeline
+    assert tl is not None
+    n = res.angles
+    physical_move = sum(move_time(d, *rig_speed) for d in tl.moves_deg)
+    rows = [
+        ("stage move", tl.spent.get("stage move", 0.0), physical_move + res.ringing,
+         f"trapezoid + {res.ringing * 1e3 / max(n, 1):.0f} ms/angle ringing"),
+        ("stage position (engine)", tl.spent.get("stage position", 0.0), 0.0, ""),
+        ("light periods", tl.spent.get("light period", 0.0), n * n_lights * exposure,
+         "on, settle, exposures, status, off"),
+        ("dark (once)", tl.spent.get("dark", 0.0), exposure, ""),
+        ("store commit", tl.spent.get("store commit", 0.0), 0.0, ""),
+    ]
+    accounted = sum(r[1] for r in rows)
+    rows.append(("rest (engine, loop)", res.wall - accounted, 0.0, ""))
+    print(f"\n{stage}: per angle (mean of {n}), ms; {res.requests / n:.1f} Modbus requests/angle")
+    print(f"  {'part':<24} {'wall':>8} {'physical':>9} {'overhead':>9}  note")
+    for name, wall, phys, note in rows:
+        print(f"  {name:<24} {1e3 * wall / n:>8.2f} {1e3 * phys / n:>9.2f} "
+              f"{1e3 * (wall - phys) / n:>9.2f}  {note}")
+    total_phys = sum(r[2] for r in rows)
+    print(f"  {'total':<24} {1e3 * res.wall / n:>8.2f} {1e3 * total_phys / n:>9.2f} "
+          f"{1e3 * (res.wall - total_phys) / n:>9.2f}")
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rotations", type=int, default=8)
     ap.add_argument("--exposure", type=float, default=0.05)
+    ap.add_argument("--runs", type=int, default=1, help="repeat the table this many times")
+    ap.add_argument("--profile", action="store_true", help="per-angle breakdown per stage")
     args = ap.parse_args()
-    print(f"{'stage':<10} {'readings':>8} {'bound s':>8} {'wall s':>8} {'overhead':>9}")
-    for stage in ("dynamixel", "zaber"):
-        wall, bound, n = asyncio.run(one(stage, args.rotations, args.exposure))
-        print(f"{stage:<10} {n:>8} {bound:>8.2f} {wall:>8.2f} {100 * (wall / bound - 1):>8.1f}%")
+    print(f"{'run':>3} {'load':>5} {'stage':<10} {'readings':>8} {'bound s':>8} {'ring s':>7} "
+          f"{'wall s':>7} {'vs bound':>9} {'vs b+ring':>9}")
+    overheads: dict[str, list[float]] = {s: [] for s in STAGES}
+    for run in range(1, args.runs + 1):
+        for stage in STAGES:
+            load = os.getloadavg()[0]
+            res = asyncio.run(one(stage, args.rotations, args.exposure, args.profile))
+            over = 100 * (res.wall / res.bound - 1)
+            over_ring = 100 * (res.wall / (res.bound + res.ringing) - 1)
+            overheads[stage].append(over)
+            print(f"{run:>3} {load:>5.2f} {stage:<10} {res.readings:>8} {res.bound:>8.2f} "
+                  f"{res.ringing:>7.2f} {res.wall:>7.2f} {over:>8.1f}% {over_ring:>8.1f}%")
+            if args.profile:
+                sim_opts = SimRigOptions()
+                print_profile(stage, res, (sim_opts.speed_dps, sim_opts.accel_dps2),
+                              len(sim_opts.lights), args.exposure)
+    if args.runs > 1:
+        for stage, values in overheads.items():
+            print(f"{stage}: overhead vs bound median {statistics.median(values):.1f}% "
+                  f"(min {min(values):.1f}%, max {max(values):.1f}%) over {len(values)} runs")
 
 
 if __name__ == "__main__":

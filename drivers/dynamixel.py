@@ -27,6 +27,7 @@ from collections.abc import Callable
 from typing import Any
 
 import dynamixel_sdk as sdk
+from gonio.drivers._arrival import poll_delay, trapezoid_s
 from gonio.drivers._backlash import approach_waypoints, check_approach, check_target
 
 from gonio.hal import DeviceUnavailable, StageFault, StageStatus, TravelLimits
@@ -49,6 +50,8 @@ ADDR_GOAL_POSITION = 116
 ADDR_MOVING = 122
 ADDR_PRESENT_POSITION = 132
 ADDR_PRESENT_TEMPERATURE = 146
+# Moving (122) through Present Position (132..135) in one READ: one transaction per poll.
+ARRIVAL_BLOCK = (ADDR_MOVING, ADDR_PRESENT_POSITION + 4 - ADDR_MOVING)
 EXTENDED_POSITION_MODE = 4
 
 ALERT_BIT = 0x80
@@ -118,7 +121,9 @@ class DynamixelStage(_Stage):
     position_tolerance_counts : int
         A move has arrived when the servo stopped within this many counts of the goal.
     poll_interval_s : float
-        Interval between Moving / Present Position polls during a move, seconds.
+        Interval between Moving / Present Position polls while a move is predicted to be
+        under way, seconds; from the predicted end (trapezoidal profile at ``speed_dps`` and
+        ``accel_dps2``) on, the driver polls every 2 ms (:mod:`gonio.drivers._arrival`).
     """
 
     def __init__(
@@ -153,6 +158,8 @@ class DynamixelStage(_Stage):
         check_approach(name, approach, backlash_deg)
         if move_timeout_s <= 0 or retries < 1:
             raise ValueError(f"{name}: move_timeout_s must be > 0 and retries >= 1")
+        if not poll_interval_s > 0:
+            raise ValueError(f"{name}: poll_interval_s must be > 0 seconds, got {poll_interval_s}")
         self.cpd = float(counts_per_degree)
         self.limits = limits
         self.speed_dps = float(speed_dps)
@@ -177,6 +184,9 @@ class DynamixelStage(_Stage):
         self._lock = _port_lock(port)
         self._op_lock = asyncio.Lock()
         self._homed = False
+        # Where the last move came to rest, degrees; None once anything else may have moved
+        # the servo (see move_to).
+        self._rest_deg: float | None = None
         self.model_number: int | None = None
 
     def _profile_units(self, what: str, value: float, units_per_stage_unit: float) -> int:
@@ -258,6 +268,15 @@ class DynamixelStage(_Stage):
             await self._check(what, error)
         return _signed32(int(value)) if size == 4 else int(value)
 
+    async def _read_block(self, what: str, address: int, length: int) -> bytes:
+        """``length`` bytes of the control table from ``address`` in one transaction."""
+        data, error = await self._call(what, self._pk.readTxRx, address, length)
+        await self._check(what, error)
+        block = bytes(data)
+        if len(block) != length:
+            raise DeviceUnavailable(self.name, f"{what}: short reply {block!r}", code="short")
+        return block
+
     async def _write(self, what: str, address: int, size: int, value: int) -> None:
         fn = {1: self._pk.write1ByteTxRx, 4: self._pk.write4ByteTxRx}[size]
         _, error = await self._call(what, fn, address, value & 0xFFFFFFFF)
@@ -295,6 +314,7 @@ class DynamixelStage(_Stage):
 
     # ------------------------------------------------------------------ Device
     async def connect(self) -> None:
+        self._rest_deg = None
         async with self._op_lock:
             await asyncio.to_thread(self._open_locked)
             try:
@@ -329,6 +349,7 @@ class DynamixelStage(_Stage):
         await self._write("torque on", ADDR_TORQUE_ENABLE, 1, 1)
 
     async def close(self) -> None:
+        self._rest_deg = None
         ph, self._ph = self._ph, None
         if ph is not None:
             def _close() -> None:
@@ -346,6 +367,7 @@ class DynamixelStage(_Stage):
 
     async def home(self) -> None:
         """Make the present position the 0-degree reference (stored in Homing Offset)."""
+        self._rest_deg = None
         async with self._op_lock:
             await self._write("torque off", ADDR_TORQUE_ENABLE, 1, 0)
             present = await self._counts()
@@ -365,30 +387,62 @@ class DynamixelStage(_Stage):
             self._homed = True
 
     async def move_to(self, angle_deg: float, timeout_s: float | None = None) -> float:
-        current = await self.position()
+        try:
+            actual = await self._move(angle_deg, timeout_s)
+        except BaseException:
+            self._rest_deg = None
+            raise
+        self._rest_deg = actual
+        return actual
+
+    async def _move(self, angle_deg: float, timeout_s: float | None) -> float:
+        if self._rest_deg is not None and (self.approach == "none" or self.backlash_deg <= 0):
+            # Without an approach side the start position only times the completion polls,
+            # so the rest position of the previous move saves a transaction; a wrong guess
+            # costs a few extra polls, never a wrong arrival (that compares Present Position
+            # with the goal).
+            current = self._rest_deg
+        else:
+            current = await self.position()
         waypoints = approach_waypoints(current, angle_deg, self.approach, self.backlash_deg)
         check_target(self.name, self.limits, angle_deg, waypoints)
         limit = self.move_timeout_s if timeout_s is None else float(timeout_s)
         deadline = time.monotonic() + limit
+        here = current
+        present = round(current * self.cpd)
         for wp in waypoints:
             goal = round(wp * self.cpd)
             await self._write("write Goal Position", ADDR_GOAL_POSITION, 4, goal)
-            await self._wait_arrival(goal, deadline, limit)
+            expected_end = time.monotonic() + trapezoid_s(wp - here, self.speed_dps,
+                                                          self.accel_dps2)
+            present = await self._wait_arrival(goal, deadline, limit, expected_end)
+            here = wp
         if self.settle_s > 0:
             await asyncio.sleep(self.settle_s)
-        return await self.position()
+            return await self.position()
+        return present / self.cpd  # read at rest by the poll that saw the arrival
 
-    async def _wait_arrival(self, goal: int, deadline: float, limit: float) -> None:
+    async def _wait_arrival(
+        self, goal: int, deadline: float, limit: float, expected_end: float | None = None
+    ) -> int:
+        """Poll until the servo rests within tolerance of ``goal``; returns Present Position."""
         stopped_short = 0
+        short_since = 0.0
         while True:
-            moving = await self._read("read Moving", ADDR_MOVING, 1)
-            present = await self._counts()
+            block = await self._read_block("read Moving and Present Position", *ARRIVAL_BLOCK)
+            moving = block[0]
+            at = ADDR_PRESENT_POSITION - ADDR_MOVING
+            present = _signed32(int.from_bytes(block[at : at + 4], "little"))
+            now = time.monotonic()
             if not moving:
                 if abs(present - goal) <= self.tolerance_counts:
-                    return
-                # Moving can lag a fresh goal by a control cycle: insist before calling it a stall.
+                    return present
+                # Moving can lag a fresh goal by a control cycle: insist (three polls spanning
+                # two coarse intervals, however fast the polls come) before calling it a stall.
                 stopped_short += 1
-                if stopped_short >= 3:
+                if stopped_short == 1:
+                    short_since = now
+                if stopped_short >= 3 and now - short_since >= 2 * self.poll_interval_s:
                     raise StageFault(
                         self.name,
                         f"stage stopped at {present / self.cpd:.3f} deg, short of the target "
@@ -397,7 +451,7 @@ class DynamixelStage(_Stage):
                     )
             else:
                 stopped_short = 0
-            if time.monotonic() > deadline:
+            if now > deadline:
                 with contextlib.suppress(Exception):
                     await self.stop()
                 raise DeviceUnavailable(
@@ -406,10 +460,11 @@ class DynamixelStage(_Stage):
                     f"(now at {present / self.cpd:.3f} deg); check speed settings and load",
                     code="timeout",
                 )
-            await asyncio.sleep(self.poll_interval_s)
+            await asyncio.sleep(poll_delay(now, expected_end, self.poll_interval_s))
 
     async def stop(self) -> None:
         """Hold the present position: the servo's profile decelerates to it."""
+        self._rest_deg = None
         await self._write("stop (goal = present)", ADDR_GOAL_POSITION, 4, await self._counts())
 
     async def status(self) -> StageStatus:
@@ -432,6 +487,7 @@ class DynamixelStage(_Stage):
 
     async def clear_faults(self) -> None:
         """Reboot the servo, keep its multi-turn reference, restore mode and profile."""
+        self._rest_deg = None
         async with self._op_lock:
             before: int | None
             try:

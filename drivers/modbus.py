@@ -34,7 +34,7 @@ from gonio.hal import (
     SensorStatus,
 )
 
-__all__ = ["ModbusConnection", "ModbusLight", "ModbusPool", "ModbusSensor"]
+__all__ = ["ModbusConnection", "ModbusLight", "ModbusPool", "ModbusSensor", "one_request"]
 
 T = TypeVar("T")
 
@@ -53,6 +53,15 @@ _RAW_RANGE = {
 }
 # A Modbus read returns at most 125 registers; larger spans are read register by register.
 _MAX_SPAN = 125
+
+
+def one_request(regs: Sequence[Register]) -> bool:
+    """True when :meth:`_ModbusDevice.read_many_raw` reads all of ``regs`` in one request."""
+    if not regs or len({r.table for r in regs}) != 1:
+        return False
+    lo = min(r.address for r in regs)
+    hi = max(r.address + r.width for r in regs)
+    return hi - lo <= _MAX_SPAN
 
 
 # --------------------------------------------------------------------------- codec
@@ -102,11 +111,16 @@ class ModbusConnection:
         self._client: AsyncModbusTcpClient | None = None
         self._lock = asyncio.Lock()
         self.users = 0
+        # Changes whenever the link is dropped or established: state a device kept for this
+        # link (a sensor's last sequence number) is only valid within the generation it was
+        # read in, since the device may have restarted in between.
+        self.generation = 0
 
     def _drop(self) -> None:
         if self._client is not None:
             self._client.close()
             self._client = None
+            self.generation += 1
 
     async def _connected(self, device: str) -> AsyncModbusTcpClient:
         if self._client is not None and self._client.connected:
@@ -130,6 +144,7 @@ class ModbusConnection:
                 code="connect",
             )
         self._client = client
+        self.generation += 1
         return client
 
     async def request(
@@ -148,7 +163,10 @@ class ModbusConnection:
         async with self._lock:
             client = await self._connected(device)
             try:
-                reply = await asyncio.wait_for(call(client), self.timeout_s + 0.5)
+                # asyncio.timeout, unlike wait_for, runs the call in this task: no extra task
+                # and loop turns per request, which a scan pays hundreds of times an angle set.
+                async with asyncio.timeout(self.timeout_s + 0.5):
+                    reply = await call(client)
             except (TimeoutError, ModbusException, OSError) as exc:
                 self._drop()
                 raise DeviceUnavailable(
@@ -216,6 +234,11 @@ class _ModbusDevice:
         if self._conn is None:
             self._conn = self._pool.acquire(*self._addr)
         return self._conn
+
+    @property
+    def generation(self) -> int:
+        """Changes whenever the underlying link drops or connects (0 before the first)."""
+        return self._conn.generation if self._conn is not None else 0
 
     def release(self) -> None:
         """Give the connection back to the pool (the last user closes it)."""
@@ -323,23 +346,27 @@ class ModbusLight(Light):
     async def set_on(self, on: bool) -> None:
         """Switch the light; when switching on with a monitor, check the output band.
 
+        The coil write is acknowledged by the device, so only the monitor is read back (one
+        request instead of a full :meth:`status`).
+
         Raises
         ------
         LampOutOfBand
             After ``warmup_s`` the monitored output differs from the level by more than
             ``band`` (recoverable: a lamp may recover after a longer warm-up).
         """
-        await self._io.write_coil(self.config.registers.on_coil, on)
+        regs = self.config.registers
+        await self._io.write_coil(regs.on_coil, on)
         self._on = on
-        if on and self.config.registers.monitor is not None:
+        if on and regs.monitor is not None:
             if self.config.warmup_s > 0:
                 await asyncio.sleep(self.config.warmup_s)
-            st = await self.status()
-            if not st.in_band:
+            self._last_output = await self._io.read_raw(regs.monitor) * regs.monitor.scale
+            if abs(self._last_output - self._level) > regs.band:
                 raise LampOutOfBand(
                     self.name,
                     f"output {self._last_output:.3f} is outside {self._level:.3f} +- "
-                    f"{self.config.registers.band:.3f}; check the lamp or lengthen warmup_s",
+                    f"{regs.band:.3f}; check the lamp or lengthen warmup_s",
                     code="out_of_band",
                 )
 
@@ -377,8 +404,20 @@ class ModbusLight(Light):
 class ModbusSensor(Sensor):
     """A triggered multi-channel sensor (photodiode/ADC module) on Modbus.
 
-    One exposure: note the ``sequence`` register, write 1 to ``trigger``, wait the exposure
-    time, poll ``sequence`` until it changes, read the ``values`` registers.
+    One exposure: write 1 to ``trigger``, wait the exposure time, then poll until the
+    ``sequence`` register differs from its value before the trigger, and take the ``values``.
+
+    Round trips are what a scan pays for on a shared link, so the driver keeps them few:
+
+    * the sequence number before the trigger is the one seen at the end of the previous
+      exposure (or at connect), not read again. It is forgotten after any error, cancellation
+      or reconnect, and then read afresh, so a reading is only accepted when the sequence moved
+      after this driver's own trigger. This assumes nothing else triggers the sensor while the
+      driver is connected (the daemon owns the rig);
+    * when ``sequence`` and ``values`` sit in one register table within one request's reach
+      (125 registers), each poll reads them together: the reply that shows the new sequence
+      number carries that exposure's values (a device publishes them as one snapshot: that is
+      what the sequence register is for). Otherwise the values are read after the poll.
 
     Parameters
     ----------
@@ -386,12 +425,14 @@ class ModbusSensor(Sensor):
         The ``[[sensors]]`` entry.
     pool : ModbusPool, optional
         Shared connections of the rig; a private one when omitted.
-    poll_s : float
-        Interval between ``sequence`` polls once the exposure time has passed, seconds.
+    poll_s : float, optional
+        Interval between polls once the exposure time has passed, seconds. By default 2 % of
+        the exposure, kept within [1 ms, 20 ms]: the first poll after the exposure nearly
+        always finds the result, and a late one costs little next to the exposure.
     """
 
     def __init__(
-        self, config: SensorConfig, pool: ModbusPool | None = None, poll_s: float = 0.002
+        self, config: SensorConfig, pool: ModbusPool | None = None, poll_s: float | None = None
     ) -> None:
         self.name = config.name
         self.direction = LabDirection(config.theta_deg, config.phi_deg)
@@ -401,39 +442,95 @@ class ModbusSensor(Sensor):
         self.config = config
         m = config.modbus
         self._io = _ModbusDevice(config.name, m.host, m.port, m.device_id, m.timeout_s, pool)
+        if poll_s is not None and not poll_s > 0:
+            raise ValueError(f"{config.name}: poll_s must be > 0 seconds, got {poll_s}")
         self._poll_s = poll_s
         self._exposure_s: float | None = None
+        regs = config.registers
+        self._poll_regs = [regs.sequence, *regs.values]
+        self._poll_carries_values = one_request(self._poll_regs)
+        # Last sequence number seen and the connection generation it was read in.
+        self._seq: float | None = None
+        self._seq_generation = -1
 
     async def connect(self) -> None:
-        """Check the device answers and write the configured gain."""
-        await self._io.read_raw(self.config.registers.sequence)
+        """Check the device answers, note its sequence number and write the configured gain."""
+        self._seq = None
+        await self._note_sequence()
         if self.config.registers.gain is not None:
             await self._io.write(self.config.registers.gain, self.config.gain, "gain")
         self._exposure_s = None
 
     async def close(self) -> None:
+        self._seq = None
         self._io.release()
+
+    async def _note_sequence(self) -> float:
+        seq = await self._io.read_raw(self.config.registers.sequence)
+        self._seq, self._seq_generation = seq, self._io.generation
+        return seq
+
+    def poll_interval(self, exposure_s: float) -> float:
+        """Seconds between result polls for an exposure of ``exposure_s`` seconds."""
+        if self._poll_s is not None:
+            return self._poll_s
+        return min(max(0.02 * exposure_s, 0.001), 0.02)
+
+    async def _poll(self, before: float) -> tuple[float, list[float] | None]:
+        """(sequence, values); values are None while the sequence has not moved."""
+        if self._poll_carries_values:
+            seq, *values = await self._io.read_many_raw(self._poll_regs)
+            return seq, (values if seq != before else None)
+        seq = await self._io.read_raw(self.config.registers.sequence)
+        if seq == before:
+            return seq, None
+        return seq, await self._io.read_many_raw(self.config.registers.values)
+
+    def _check_link(self) -> None:
+        """Refuse an exposure whose link dropped or reconnected after ``sequence`` was noted:
+        the device may have restarted, and its sequence number with it."""
+        if self._seq_generation != self._io.generation:
+            raise DeviceUnavailable(
+                self.name,
+                "the Modbus connection was re-established during the exposure; the reading "
+                "is discarded and taken again",
+                code="reconnected",
+            )
 
     async def _expose_once(self, exposure_s: float) -> list[float]:
         regs = self.config.registers
-        before = await self._io.read_raw(regs.sequence)
-        await self._io.write(regs.trigger, 1 * regs.trigger.scale, "trigger")
-        t0 = time.monotonic()
-        await asyncio.sleep(exposure_s)
-        # A sensor that accepted the trigger but never finishes is as dead as one that does
-        # not answer: give it the exposure plus one request timeout, then give up.
-        deadline = t0 + exposure_s + self.config.modbus.timeout_s
-        while await self._io.read_raw(regs.sequence) == before:
-            if time.monotonic() > deadline:
-                raise DeviceUnavailable(
-                    self.name,
-                    f"no new reading {exposure_s + self.config.modbus.timeout_s:.3g} s after "
-                    "the trigger (the sequence register did not change); check the trigger "
-                    "and sequence addresses",
-                    code="no_data",
-                )
-            await asyncio.sleep(self._poll_s)
-        return await self._io.read_many_raw(regs.values)
+        try:
+            if self._seq is None or self._seq_generation != self._io.generation:
+                await self._note_sequence()
+            before = self._seq
+            assert before is not None
+            await self._io.write(regs.trigger, 1 * regs.trigger.scale, "trigger")
+            t0 = time.monotonic()
+            await asyncio.sleep(exposure_s)
+            # A sensor that accepted the trigger but never finishes is as dead as one that
+            # does not answer: give it the exposure plus one request timeout, then give up.
+            deadline = t0 + exposure_s + self.config.modbus.timeout_s
+            interval = self.poll_interval(exposure_s)
+            while True:
+                seq, values = await self._poll(before)
+                self._check_link()
+                if values is not None:
+                    self._seq = seq
+                    return values
+                if time.monotonic() > deadline:
+                    raise DeviceUnavailable(
+                        self.name,
+                        f"no new reading {exposure_s + self.config.modbus.timeout_s:.3g} s "
+                        "after the trigger (the sequence register did not change); check the "
+                        "trigger and sequence addresses",
+                        code="no_data",
+                    )
+                await asyncio.sleep(interval)
+        except BaseException:
+            # An interrupted or failed exposure may still complete later and move the
+            # sequence: never judge the next exposure against a number from before it.
+            self._seq = None
+            raise
 
     async def read(self, exposure_s: float, averages: int = 1) -> SensorReading:
         """Mean of ``averages`` exposures of ``exposure_s`` seconds, in physical units.

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import serial
+from gonio.drivers._arrival import poll_delay, trapezoid_s
 from gonio.drivers._backlash import approach_waypoints, check_approach, check_target
 
 from gonio.hal import DeviceUnavailable, StageFault, StageStatus, TravelLimits
@@ -123,7 +124,9 @@ class ZaberStage(_Stage):
     retries : int
         Attempts per command when replies time out.
     poll_interval_s : float
-        Interval between status polls during a move, seconds.
+        Interval between status polls while a move is predicted to be under way, seconds;
+        from the predicted end (trapezoidal profile at ``speed_dps`` and ``accel_dps2``) on,
+        the driver polls every 2 ms (:mod:`gonio.drivers._arrival`).
     """
 
     def __init__(
@@ -165,6 +168,8 @@ class ZaberStage(_Stage):
         check_approach(name, approach, backlash_deg)
         if move_timeout_s <= 0 or reply_timeout_s <= 0 or retries < 1:
             raise ValueError(f"{name}: timeouts must be > 0 and retries >= 1")
+        if not poll_interval_s > 0:
+            raise ValueError(f"{name}: poll_interval_s must be > 0 seconds, got {poll_interval_s}")
         self.device = int(device)
         self.axis = int(axis)
         self.mpd = float(microsteps_per_degree)
@@ -360,28 +365,39 @@ class ZaberStage(_Stage):
         current = await self.position()
         waypoints = approach_waypoints(current, angle_deg, self.approach, self.backlash_deg)
         check_target(self.name, self.limits, angle_deg, waypoints)
+        here = current
         for wp in waypoints:
             await self._ok(f"move abs {round(wp * self.mpd)}")
-            await self._wait_idle(deadline, limit, f"move to {wp:g} deg")
-        self._raise_faults(await self._warnings())
+            expected_end = time.monotonic() + trapezoid_s(wp - here, self.speed_dps,
+                                                          self.accel_dps2)
+            idle = await self._wait_idle(deadline, limit, f"move to {wp:g} deg", expected_end)
+            here = wp
+        if idle.flag is not None:
+            # The reply flag is only the highest-priority warning: fetch them all. "--" means
+            # there are none, so the extra request is skipped then.
+            self._raise_faults(await self._warnings())
         if self.settle_s > 0:
             await asyncio.sleep(self.settle_s)
         return await self.position()
 
-    async def _wait_idle(self, deadline: float, limit: float, what: str) -> None:
+    async def _wait_idle(
+        self, deadline: float, limit: float, what: str, expected_end: float | None = None
+    ) -> Reply:
+        """Poll until the axis is idle; returns the idle reply (its flag is the top warning)."""
         while True:
             reply = await self._send("")
             if reply.flag in FAULT_FLAGS:
                 self._raise_faults([reply.flag])
             if not reply.busy:
-                return
-            if time.monotonic() > deadline:
+                return reply
+            now = time.monotonic()
+            if now > deadline:
                 with contextlib.suppress(Exception):
                     await self.stop()
                 raise DeviceUnavailable(
                     self.name, f"{what} did not finish within {limit:g} s", code="timeout"
                 )
-            await asyncio.sleep(self.poll_interval_s)
+            await asyncio.sleep(poll_delay(now, expected_end, self.poll_interval_s))
 
     async def stop(self) -> None:
         await self._send("stop")

@@ -2,9 +2,15 @@
 
 Per stage angle (ARCHITECTURE.md, "Data flow"): move the stage (always approaching from below,
 so backlash cancels); optionally read the dark signal with every light off; then for each
-light: on, settle, read all of that light's sensors in parallel (``asyncio.gather``), off.
-The angle's readings are committed to the store (:meth:`gonio.store.JobStore.commit_angle`)
-before the next move: that is the checkpoint.
+light: on, settle, read all of that light's sensors in parallel (``asyncio.gather``) while
+checking the lamp's status, off. The angle's readings are committed to the store
+(:meth:`gonio.store.JobStore.commit_angle`) before the next move: that is the checkpoint.
+
+Time that is not physical (moves, settling, exposures) is overhead, and most of it is device
+round trips on shared links, so the angle sends few of them: the stage position is read before a
+move only when a backlash overshoot may be needed, and the lamp check runs during the exposure,
+when the link is idle. The commit stays before the next move (it takes well under a
+millisecond; overlapping it with the move would break the checkpoint guarantee).
 
 Control, requested from outside (the service) at any time:
 
@@ -312,11 +318,12 @@ class ScanEngine:
     # ------------------------------------------------------------------ one angle
     async def _measure_angle(self, step: StepRow) -> tuple[float, list[ReadingRow]]:
         stage = self.rig.stage
-        here = await stage.position()
         target = step.position_deg
-        if target < here - 1e-6 and self.plan.backlash_deg > 0:
-            # Coming from above: overshoot below so the final approach is positive again.
-            await stage.move_to(max(self.desc.stage_min_deg, target - self.plan.backlash_deg))
+        if self.plan.backlash_deg > 0:
+            here = await stage.position()
+            if target < here - 1e-6:
+                # Coming from above: overshoot below so the final approach is positive again.
+                await stage.move_to(max(self.desc.stage_min_deg, target - self.plan.backlash_deg))
         actual = await stage.move_to(target)
         dark: dict[str, tuple[float, ...]] = {}
         mode = self.plan.exposure.dark
@@ -336,13 +343,7 @@ class ScanEngine:
             try:
                 if ex.light_settle_s > 0:
                     await asyncio.sleep(ex.light_settle_s)
-                st = await light.status()
-                if not st.in_band:
-                    raise hal.LampOutOfBand(
-                        lname, f"output level {st.level:.3g} is outside its allowed band",
-                        code="out_of_band",
-                    )
-                results = await self._read_sensors(sensors)
+                results = await self._read_sensors(sensors, lamp=lname)
             finally:
                 await _quietly(light.set_on(False))
             for sname, rd in zip(sensors, results, strict=True):
@@ -369,17 +370,41 @@ class ScanEngine:
                 ))
         return actual, out
 
-    async def _read_sensors(self, names: Sequence[str]) -> list[hal.SensorReading]:
-        """Read sensors in parallel; wait for all, then raise the first fault (no orphan reads)."""
+    async def _read_sensors(
+        self, names: Sequence[str], lamp: str | None = None
+    ) -> list[hal.SensorReading]:
+        """Read sensors in parallel; wait for all, then raise the first fault (no orphan reads).
+
+        With ``lamp``, that light's status is checked while its sensors integrate: devices on
+        a shared link are idle during the exposure, so the check adds no time, and the output
+        that matters is the one during the exposure. The status request is started after the
+        reads, so it queues behind their triggers. A lamp out of band wins over sensor faults:
+        its readings are discarded and the angle repeated after recovery.
+        """
         ex = self.plan.exposure
-        results = await asyncio.gather(
-            *(self.rig.sensors[n].read(ex.exposure_s, ex.averages) for n in names),
-            return_exceptions=True,
-        )
+        calls: list[Awaitable[object]] = [
+            self.rig.sensors[n].read(ex.exposure_s, ex.averages) for n in names
+        ]
+        if lamp is not None:
+            calls.append(self.rig.lights[lamp].status())
+        results = await asyncio.gather(*calls, return_exceptions=True)
+        if lamp is not None:
+            st = results.pop()
+            if isinstance(st, BaseException):
+                raise st
+            assert isinstance(st, hal.LightStatus)
+            if not st.in_band:
+                raise hal.LampOutOfBand(
+                    lamp, f"output level {st.level:.3g} is outside its allowed band",
+                    code="out_of_band",
+                )
+        readings: list[hal.SensorReading] = []
         for r in results:
             if isinstance(r, BaseException):
                 raise r
-        return [r for r in results if isinstance(r, hal.SensorReading)]
+            assert isinstance(r, hal.SensorReading)
+            readings.append(r)
+        return readings
 
     async def _read_dark(self) -> dict[str, tuple[float, ...]]:
         names = sorted({p.sensor for p in self.pairs})

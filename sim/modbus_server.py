@@ -12,7 +12,10 @@ hook sees every request, which is where the physics happens:
   computed from :mod:`gonio.sim.specimen` with the stage angle and the lamps on at that moment,
   and published (values updated, ``sequence`` incremented) once the exposure time, divided by
   ``time_scale``, has passed in wall time; the trigger register reads back 0 (self-clearing);
-* input registers (values, sequence, lamp monitor) are refreshed on every read.
+* input registers (values, sequence, lamp monitor) are refreshed on every read;
+* every answered request is counted per device (:meth:`ModbusRigServer.request_counts`) and
+  the latest are kept in order (:meth:`ModbusRigServer.recent_requests`), so tests and
+  benchmarks can see how many round trips an operation costs and in which order they went.
 
 Faults, settable from any thread: :meth:`ModbusRigServer.silence` (a device stops answering
 for a while; requests hang so the client times out), :meth:`ModbusRigServer.set_lamp_output`
@@ -25,6 +28,7 @@ Register values are encoded here with :mod:`struct`, independently of the driver
 from __future__ import annotations
 
 import asyncio
+import collections
 import contextlib
 import struct
 import threading
@@ -47,6 +51,9 @@ _FMT = {"u16": ">H", "s16": ">h", "u32": ">I", "s32": ">i", "f32": ">f"}
 _COIL_FC = (1, 5, 15)
 _HOLDING_WRITE_FC = (6, 16, 23)
 _INPUT_READ_FC = (4,)
+# pymodbus answers these writes by reading the written registers back through the same
+# action hook (values=None): that second call is part of the same request, not a new one.
+_ECHOED_WRITE_FC = (5, 6, 23)
 
 
 class AngleSource(Protocol):
@@ -189,6 +196,8 @@ class ModbusRigServer:
         self.port = port
         self._lock = threading.RLock()
         self._silent_until: dict[str, float] = {}
+        self._requests = dict.fromkeys([*self.lamps, *self.sensors], 0)
+        self._recent: collections.deque[tuple[str, int, int]] = collections.deque(maxlen=1000)
         self._loop: asyncio.AbstractEventLoop | None = None
         self._thread: threading.Thread | None = None
         self._server: ModbusTcpServer | None = None
@@ -320,6 +329,7 @@ class ModbusRigServer:
         ) -> ExcCodes | None:
             await self._wait_if_silent(lamp.name)
             with self._lock:
+                self._count(lamp.name, fc, address, values)
                 if fc in _COIL_FC and values is not None:
                     if address <= regs.on_coil < address + len(values):
                         lamp.on = bool(values[regs.on_coil - address])
@@ -363,6 +373,7 @@ class ModbusRigServer:
         ) -> ExcCodes | None:
             await self._wait_if_silent(sensor.name)
             with self._lock:
+                self._count(sensor.name, fc, address, values)
                 self._publish_if_ready(sensor)
                 if fc in _HOLDING_WRITE_FC and values is not None:
                     return self._sensor_write(sensor, start, address, registers, values)
@@ -473,7 +484,22 @@ class ModbusRigServer:
         a = reg.address - start
         registers[a : a + reg.width] = to_words(reg, physical)
 
+    def _count(self, name: str, fc: int, address: int, values: object) -> None:
+        if not (fc in _ECHOED_WRITE_FC and values is None):
+            self._requests[name] += 1
+            self._recent.append((name, fc, address))
+
     # ------------------------------------------------------------------ inspection
+    def request_counts(self) -> dict[str, int]:
+        """Requests answered per device since the server started (round trips on the wire)."""
+        with self._lock:
+            return dict(self._requests)
+
+    def recent_requests(self) -> list[tuple[str, int, int]]:
+        """The last 1000 requests in arrival order: (device name, function code, address)."""
+        with self._lock:
+            return list(self._recent)
+
     def snapshot(self) -> dict[str, Any]:
         """Current device states (for tests and the CLI's status line)."""
         with self._lock:

@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 import asyncio
+import statistics
 import threading
+import time
 from collections.abc import Awaitable, Callable, Iterator
 from contextlib import contextmanager
 from typing import Any
 
 import pytest
+from gonio.drivers._arrival import trapezoid_s
 from gonio.drivers.dynamixel import DynamixelStage
 from gonio.sim.dynamixel_device import DynamixelSimHandle, start_dynamixel_sim
 from gonio.sim.motion import StageMotion
@@ -23,8 +26,9 @@ TIME_SCALE = 40.0
 
 
 @contextmanager
-def rig(**driver_kw: Any) -> Iterator[tuple[DynamixelSimHandle, DynamixelStage]]:
-    motion = StageMotion(speed_dps=30.0, accel_dps2=60.0, settle_s=0.0, time_scale=TIME_SCALE)
+def rig(time_scale: float = TIME_SCALE,
+        **driver_kw: Any) -> Iterator[tuple[DynamixelSimHandle, DynamixelStage]]:
+    motion = StageMotion(speed_dps=30.0, accel_dps2=60.0, settle_s=0.0, time_scale=time_scale)
     sim = start_dynamixel_sim(motion, counts_per_degree=CPD)
     kw: dict[str, Any] = {
         "counts_per_degree": CPD, "limits": TravelLimits(-720.0, 720.0),
@@ -193,3 +197,50 @@ def test_missing_port_and_bad_speed_are_user_errors(tmp_path: Any) -> None:
     with pytest.raises(ValueError, match="above the servo maximum 32767; lower speed_dps"):
         DynamixelStage("rot", "x", counts_per_degree=CPD, limits=TravelLimits(0, 90),
                        speed_dps=50_000, accel_dps2=10)
+
+
+def test_arrival_is_seen_soon_after_the_move_ends_despite_a_slow_poll() -> None:
+    """In real time: the coarse poll (100 ms here) would find the end 50 ms late on average;
+    predicting the end from the profile and polling finely from there finds it within a few
+    milliseconds (the rest is the goal write and position reads)."""
+    speed, accel, step = 180.0, 1800.0, 9.0
+    with rig(time_scale=1.0, speed_dps=speed, accel_dps2=accel, poll_interval_s=0.1) as (
+            sim, stage):
+        async def go() -> list[float]:
+            await stage.connect()
+            late = []
+            for k in range(1, 6):
+                t0 = time.monotonic()
+                await stage.move_to(k * step)
+                late.append(time.monotonic() - t0 - trapezoid_s(step, speed, accel))
+            return late
+
+        late = run(go)
+        assert sim.motion.position_deg() == pytest.approx(5 * step, abs=1.5 / CPD)
+    assert statistics.median(late) < 0.012, late
+
+
+def test_poll_interval_must_be_positive() -> None:
+    with pytest.raises(ValueError, match="poll_interval_s must be > 0"):
+        DynamixelStage("rot", "/dev/null", counts_per_degree=CPD,
+                       limits=TravelLimits(0.0, 360.0), speed_dps=30.0, accel_dps2=60.0,
+                       poll_interval_s=-0.01)
+
+
+def test_a_stale_start_position_only_times_the_polls_never_the_arrival() -> None:
+    """Without an approach side the driver starts from where its last move came to rest
+    instead of reading it; if something else moved the servo meanwhile, the move must still
+    end on the target."""
+    with rig(approach="none") as (sim, stage):
+        async def go() -> tuple[float, float]:
+            await stage.connect()
+            first = await stage.move_to(10.0)
+            sim.motion.move_to(50.0)  # pushed elsewhere behind the driver's back
+            while sim.motion.is_moving():
+                await asyncio.sleep(0.005)
+            return first, await stage.move_to(20.0)
+
+        first, second = run(go)
+        assert first == pytest.approx(10.0, abs=1.5 / CPD)
+        assert second == pytest.approx(20.0, abs=1.5 / CPD)
+        assert sim.motion.position_deg() == pytest.approx(20.0, abs=1.5 / CPD)

@@ -159,7 +159,7 @@ def test_light_register_map_on_the_wire(bench: Bench) -> None:
         await light.set_on(False)
         assert not (await light.status()).on
         await light.close()
-        return coils, holding, inputs
+        return list(coils), list(holding), list(inputs)
 
     coils, holding, inputs = asyncio.run(run())
     assert coils == [k == 5 for k in range(8)]
@@ -308,3 +308,208 @@ def test_wrong_address_in_the_map_is_a_permanent_fault(bench: Bench) -> None:
         await sensor.close()
 
     asyncio.run(run())
+
+
+# --------------------------------------------------------------------------- round trips
+def _sensor_requests(bench: Bench, name: str = "S1") -> int:
+    return bench.server.request_counts()[name]
+
+
+def test_steady_state_exposure_costs_two_round_trips(bench: Bench) -> None:
+    """Trigger, then one poll that carries the values: no sequence read before the trigger."""
+
+    async def run() -> tuple[int, Any]:
+        pool = ModbusPool()
+        light, sensor = ModbusLight(bench.light, pool), ModbusSensor(bench.sensors[0], pool)
+        for dev in (light, sensor):
+            await dev.connect()
+        await light.set_on(True)
+        await sensor.read(0.01)  # writes the exposure once
+        n0 = _sensor_requests(bench)
+        reading = await sensor.read(0.01, averages=3)
+        used = _sensor_requests(bench) - n0
+        for dev in (light, sensor):
+            await dev.close()
+        return used, reading
+
+    used, reading = asyncio.run(run())
+    assert used == 3 * 2
+    np.testing.assert_allclose(reading.values, bench.expected_counts(0.01), atol=0.51)
+
+
+class SlowBench:
+    """A second server with one lamp and one sensor, for register maps or timing that differ
+    from :class:`Bench`; ``time_scale < 1`` makes an exposure take longer than its nominal time
+    (a sensor with conversion overhead)."""
+
+    def __init__(self, bench: Bench, regs: SensorRegisters, time_scale: float = 1.0) -> None:
+        spec = SimSensorSpec("S9", 9, regs, LabDirection(*SENSOR_DIRS[0]).vector(),
+                             NoiseModel.noiseless(saturation=FULL_SCALE))
+        lamp = SimLampSpec("L9", 8, LIGHT_REGS, LabDirection(*LIGHT_DIR).vector(), IRRADIANCE)
+        self.server = ModbusRigServer(
+            Specimen(Lambert(ALBEDO)), bench.motion, [lamp], [spec], time_scale=time_scale
+        ).start()
+        transport = bench.light.modbus.model_copy(update={"port": self.server.port})
+        self.light = bench.light.model_copy(
+            update={"modbus": transport.model_copy(update={"device_id": 8})})
+        self.sensor = bench.sensors[0].model_copy(update={
+            "name": "S9", "registers": regs,
+            "modbus": transport.model_copy(update={"device_id": 9})})
+
+
+def test_sequence_in_another_table_reads_values_after_the_poll(bench: Bench) -> None:
+    regs = SENSOR_REGS.model_copy(
+        update={"sequence": Register(table="holding", address=9, type="u16")}
+    )
+    other = SlowBench(bench, regs)
+
+    async def run() -> tuple[int, Any]:
+        pool = ModbusPool()
+        light, sensor = ModbusLight(other.light, pool), ModbusSensor(other.sensor, pool)
+        for dev in (light, sensor):
+            await dev.connect()
+        await light.set_on(True)
+        await sensor.read(0.01)
+        n0 = other.server.request_counts()["S9"]
+        reading = await sensor.read(0.01)
+        used = other.server.request_counts()["S9"] - n0
+        for dev in (light, sensor):
+            await dev.close()
+        return used, reading
+
+    try:
+        used, reading = asyncio.run(run())
+    finally:
+        other.server.close()
+    assert used == 3  # trigger, sequence poll, values
+    np.testing.assert_allclose(reading.values, bench.expected_counts(0.01), atol=0.51)
+
+
+def test_cancelled_exposure_is_never_taken_for_the_next_one(bench: Bench) -> None:
+    """An exposure cancelled mid-way completes in the device later and steps the sequence; the
+    next read must not take that step for its own (it would return a lit reading in the dark).
+    The device here needs 10x the nominal exposure, so the first poll comes before its result."""
+    other = SlowBench(bench, SENSOR_REGS, time_scale=0.1)
+    trigger = ("S9", 6, SENSOR_REGS.trigger.address)
+
+    async def run() -> Any:
+        pool = ModbusPool()
+        light, sensor = ModbusLight(other.light, pool), ModbusSensor(other.sensor, pool)
+        for dev in (light, sensor):
+            await dev.connect()
+        await light.set_on(True)
+        task = asyncio.create_task(sensor.read(0.05))  # 0.5 s in the device
+        while trigger not in other.server.recent_requests():
+            await asyncio.sleep(0.001)
+        task.cancel()  # triggered, still exposing
+        with pytest.raises(asyncio.CancelledError):
+            await task
+        await asyncio.sleep(0.55)  # the abandoned exposure is complete in the device now
+        await light.set_on(False)
+        dark = await sensor.read(0.01)
+        for dev in (light, sensor):
+            await dev.close()
+        return dark
+
+    try:
+        dark = asyncio.run(asyncio.wait_for(run(), 10))
+    finally:
+        other.server.close()
+    assert dark.values == (0.0, 0.0, 0.0)
+
+
+def test_switching_a_monitored_light_on_costs_two_round_trips(bench: Bench) -> None:
+    async def run() -> int:
+        light = ModbusLight(bench.light)
+        await light.connect()
+        n0 = bench.server.request_counts()["L1"]
+        await light.set_on(True)
+        used = bench.server.request_counts()["L1"] - n0
+        await light.set_on(False)
+        await light.close()
+        return used
+
+    assert asyncio.run(run()) == 2  # coil write, monitor read
+
+
+def test_poll_interval_follows_the_exposure(bench: Bench) -> None:
+    sensor = ModbusSensor(bench.sensors[0])
+    assert sensor.poll_interval(0.05) == pytest.approx(0.001)
+    assert sensor.poll_interval(0.5) == pytest.approx(0.01)
+    assert sensor.poll_interval(1e-4) == pytest.approx(0.001)  # floor
+    assert sensor.poll_interval(5.0) == pytest.approx(0.02)  # cap
+    assert ModbusSensor(bench.sensors[0], poll_s=0.004).poll_interval(1.0) == 0.004
+    with pytest.raises(ValueError, match="poll_s must be > 0"):
+        ModbusSensor(bench.sensors[0], poll_s=0.0)
+
+
+def test_simulator_counts_each_request_once(bench: Bench) -> None:
+    """Single writes are echoed through the action hook a second time: still one request."""
+
+    async def run() -> int:
+        n0 = bench.server.request_counts()["L1"]
+        raw = AsyncModbusTcpClient("127.0.0.1", port=bench.server.port)
+        await raw.connect()
+        try:
+            await raw.write_coil(5, True, device_id=1)  # fc 5, echoed
+            await raw.read_coils(5, count=1, device_id=1)  # fc 1
+            await raw.write_register(3, 500, device_id=1)  # fc 6, echoed
+            await raw.write_registers(3, [600], device_id=1)  # fc 16
+            await raw.read_input_registers(7, count=1, device_id=1)  # fc 4
+        finally:
+            raw.close()
+        return bench.server.request_counts()["L1"] - n0
+
+    assert asyncio.run(run()) == 5
+
+
+def test_parallel_reads_trigger_every_sensor_before_polling_any(bench: Bench) -> None:
+    """Sensors read together share one link: all triggers go out first, so the exposures
+    overlap and the light period is one exposure plus a few round trips."""
+
+    async def run() -> None:
+        pool = ModbusPool()
+        light = ModbusLight(bench.light, pool)
+        sensors = [ModbusSensor(c, pool) for c in bench.sensors]
+        for dev in (light, *sensors):
+            await dev.connect()
+        await light.set_on(True)
+        await asyncio.gather(*(s.read(0.01) for s in sensors))  # writes the exposures
+        n0 = len(bench.server.recent_requests())  # far below the log's 1000 entries
+        await asyncio.gather(*(s.read(0.02) for s in sensors))
+        log = [(name, fc, addr) for name, fc, addr in bench.server.recent_requests()[n0:]
+               if name in ("S1", "S2") and (fc, addr) != (16, SENSOR_REGS.exposure.address)]
+        for dev in (light, *sensors):
+            await dev.close()
+        trigger = (6, SENSOR_REGS.trigger.address)
+        assert sorted((n, (fc, a)) for n, fc, a in log[:2]) == [("S1", trigger), ("S2", trigger)]
+        assert [fc for _, fc, _ in log[2:]] == [4, 4]  # one combined poll each, no more
+
+    asyncio.run(run())
+
+
+def test_link_reconnected_during_an_exposure_discards_the_reading(bench: Bench) -> None:
+    """Another device on the shared link times out mid-exposure, so the link is dropped and
+    re-established: the device may have restarted, so the reading is refused, not trusted."""
+
+    async def run() -> tuple[DeviceUnavailable, Any]:
+        pool = ModbusPool()
+        light, sensor = ModbusLight(bench.light, pool), ModbusSensor(bench.sensors[0], pool)
+        for dev in (light, sensor):
+            await dev.connect()
+        await light.set_on(True)
+        bench.server.silence("L1", 0.4)
+        read = asyncio.create_task(sensor.read(0.5))
+        await asyncio.sleep(0.05)  # triggered; the status request now hangs and times out
+        with pytest.raises(DeviceUnavailable):
+            await light.status()
+        with pytest.raises(DeviceUnavailable) as info:
+            await read
+        again = await sensor.read(0.01)  # a fresh exposure on the new link is fine
+        for dev in (light, sensor):
+            await dev.close()
+        return info.value, again
+
+    err, again = asyncio.run(asyncio.wait_for(run(), 10))
+    assert err.code == "reconnected" and err.recoverable and err.device == "S1"
+    np.testing.assert_allclose(again.values, bench.expected_counts(0.01), atol=0.51)

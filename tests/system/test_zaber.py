@@ -3,11 +3,14 @@
 from __future__ import annotations
 
 import asyncio
+import statistics
+import time
 from collections.abc import Awaitable, Callable, Iterator
 from contextlib import contextmanager
 from typing import Any
 
 import pytest
+from gonio.drivers._arrival import trapezoid_s
 from gonio.drivers.zaber import ZaberStage
 from gonio.sim.motion import StageMotion
 from gonio.sim.zaber_device import SPEED_FACTOR, ZaberSimHandle, start_zaber_sim
@@ -21,8 +24,9 @@ TRANSPORTS = ["pty", "tcp"]
 
 
 @contextmanager
-def rig(transport: str, **driver_kw: Any) -> Iterator[tuple[ZaberSimHandle, ZaberStage]]:
-    motion = StageMotion(speed_dps=30.0, accel_dps2=60.0, settle_s=0.0, time_scale=40.0,
+def rig(transport: str, time_scale: float = 40.0,
+        **driver_kw: Any) -> Iterator[tuple[ZaberSimHandle, ZaberStage]]:
+    motion = StageMotion(speed_dps=30.0, accel_dps2=60.0, settle_s=0.0, time_scale=time_scale,
                          initial_deg=7.0)
     sim = start_zaber_sim(motion, transport=transport, microsteps_per_degree=MPD)
     kw: dict[str, Any] = {
@@ -174,3 +178,32 @@ def test_config_errors_name_the_setting() -> None:
                        limits=TravelLimits(0, 1), speed_dps=1, accel_dps2=1)
     with pytest.raises(DeviceUnavailable, match="cannot open 'nosuchscheme://x'"):
         run(stage.connect)
+
+
+def test_arrival_is_seen_soon_after_the_move_ends_despite_a_slow_poll() -> None:
+    """In real time: the coarse poll (100 ms here) would find the end 50 ms late on average;
+    predicting the end from the profile and polling finely from there finds it within a few
+    milliseconds (the rest is the warnings, position and move requests around it)."""
+    speed, accel, step = 180.0, 1800.0, 9.0
+    with rig("tcp", time_scale=1.0, speed_dps=speed, accel_dps2=accel,
+             poll_interval_s=0.1) as (sim, stage):
+        async def go() -> list[float]:
+            await stage.connect()
+            await stage.move_to(0.0)  # the first move homes
+            late = []
+            for k in range(1, 6):
+                t0 = time.monotonic()
+                await stage.move_to(k * step)
+                late.append(time.monotonic() - t0 - trapezoid_s(step, speed, accel))
+            return late
+
+        late = run(go)
+        assert sim.motion.position_deg() == pytest.approx(5 * step)
+    assert statistics.median(late) < 0.012, late
+
+
+def test_poll_interval_must_be_positive() -> None:
+    with pytest.raises(ValueError, match="poll_interval_s must be > 0"):
+        ZaberStage("rot", "loop://", microsteps_per_degree=MPD,
+                   limits=TravelLimits(0.0, 360.0), speed_dps=10.0, accel_dps2=10.0,
+                   poll_interval_s=0.0)

@@ -1,0 +1,70 @@
+"""When to poll a stage for the end of a move (shared by the stage drivers).
+
+A driver learns that a move has finished only by asking, so the time between the true end and
+the poll that sees it is pure overhead; at a fixed 20 ms interval it averages 10 ms a move.
+Polling fast for the whole move would load the bus and the worker threads for nothing. The
+drivers therefore predict the end from the configured trapezoidal profile, poll at the coarse
+interval while the move is surely under way (that still catches a stall or a fault early),
+sleep exactly up to the predicted end, and poll at a fine interval from there on. A stage that
+is slower than predicted costs a few more fine polls; one that is faster (a simulator running
+faster than real time) is seen at the next coarse poll, as without a prediction.
+"""
+
+from __future__ import annotations
+
+import math
+
+FINE_POLL_S = 0.002
+"""Poll interval once the predicted end of a move has passed, seconds."""
+
+
+def trapezoid_s(distance_deg: float, speed_dps: float, accel_dps2: float) -> float:
+    """Duration of a rest-to-rest move with a trapezoidal (or triangular) velocity profile.
+
+    Parameters
+    ----------
+    distance_deg : float
+        Length of the move, degrees (sign ignored).
+    speed_dps : float
+        Cruise speed, degrees per second (> 0).
+    accel_dps2 : float
+        Acceleration and deceleration, degrees per second squared (> 0).
+
+    Returns
+    -------
+    float
+        Seconds; a move too short to reach ``speed_dps`` is a triangle, ``2 sqrt(d / a)``.
+    """
+    d = abs(distance_deg)
+    if d == 0.0:
+        return 0.0
+    if d >= speed_dps * speed_dps / accel_dps2:
+        return d / speed_dps + speed_dps / accel_dps2
+    return 2.0 * math.sqrt(d / accel_dps2)
+
+
+def poll_delay(now: float, expected_end: float | None, coarse_s: float,
+               fine_s: float = FINE_POLL_S) -> float:
+    """Seconds to wait before the next completion poll.
+
+    Parameters
+    ----------
+    now : float
+        Present time, seconds (monotonic clock).
+    expected_end : float or None
+        Predicted end of the move on the same clock; None when unknown (homing), which
+        polls at ``coarse_s`` throughout.
+    coarse_s : float
+        Interval while the move is predicted to run, seconds.
+    fine_s : float
+        Interval after the predicted end, seconds (``<= coarse_s`` for a useful schedule).
+
+    Returns
+    -------
+    float
+        ``coarse_s`` well before the end, the time left when the end is nearer than that,
+        and ``fine_s`` once it has passed.
+    """
+    if expected_end is None:
+        return coarse_s
+    return min(coarse_s, max(fine_s, expected_end - now))
