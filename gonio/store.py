@@ -210,10 +210,14 @@ class JobStore:
                 f"{self.path} is not a usable gonio job store ({exc}); point --db at a new file"
             ) from None
         if row is None:
+            # Two processes may create the same new store at once: the first insert wins and
+            # the other must then read (and check) the version the first one wrote.
             self._db.execute(
-                "INSERT INTO meta (key, value) VALUES ('schema', ?)", (str(SCHEMA_VERSION),)
+                "INSERT OR IGNORE INTO meta (key, value) VALUES ('schema', ?)",
+                (str(SCHEMA_VERSION),),
             )
-        elif int(row[0]) != SCHEMA_VERSION:
+            row = self._db.execute("SELECT value FROM meta WHERE key='schema'").fetchone()
+        if int(row[0]) != SCHEMA_VERSION:
             raise StoreError(
                 f"{self.path} has store schema {row[0]}, this gonio reads {SCHEMA_VERSION}; "
                 "use a matching gonio version or a new database file"

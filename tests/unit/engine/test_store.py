@@ -171,3 +171,34 @@ def test_queue_position_matches_queue_order(tmp_path: Path, path: str) -> None:
     assert [store.queue_position(j) for j in order] == list(range(len(order)))
     assert store.queue_position(ids[1]) is None  # running, not queued
     assert store.queue_position(999) is None
+
+
+def test_many_openers_of_one_new_store_all_succeed(tmp_path: Path) -> None:
+    """Two processes (here: connections in threads) creating the same store race on its
+    schema row; every opener must succeed and see one schema version."""
+    import threading
+
+    path = tmp_path / "race.sqlite"
+    n = 8
+    barrier = threading.Barrier(n)
+    errors: list[BaseException] = []
+    stores: list[JobStore] = []
+
+    def open_store() -> None:
+        barrier.wait()
+        try:
+            stores.append(JobStore(path))
+        except BaseException as exc:
+            errors.append(exc)
+
+    threads = [threading.Thread(target=open_store) for _ in range(n)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(timeout=30)
+    assert not errors, errors
+    assert len(stores) == n
+    with sqlite3.connect(path) as db:
+        assert db.execute("SELECT COUNT(*) FROM meta WHERE key='schema'").fetchone() == (1,)
+    for s in stores:
+        s.close()
