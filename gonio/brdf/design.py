@@ -30,8 +30,8 @@ from numpy.typing import ArrayLike, NDArray
 from gonio.brdf import geometry as geo
 from gonio.brdf.feasibility import (
     FeasibilityError,
-    MountPlanner,
     Mounting,
+    MountPlanner,
     RigConstraints,
     angular_distance,
     candidate_rows,
@@ -50,7 +50,10 @@ KappaMethod = Literal["fast", "svd"]
 # singular: singular values that small carry no correct digits, so both the fast update and
 # the SVD reference report kappa = inf there instead of two different huge numbers.
 SINGULAR_RTOL = 1e-13
-_NEWTON_RTOL = 1e-13  # a few hundred ulps: iterates can dither by several ulps near a pole
+# Stop when a step moves the iterate by less than this (relative): both iterations converge
+# quadratically, so the value after such a step is already accurate to round-off (about
+# 1e-14 measured against the 1e-13 setting), and one confirming iteration is saved.
+_NEWTON_RTOL = 1e-9
 _MAX_ITER = 200
 # Random collision-free starts tried before a collision-aware search gives up.
 _START_TRIES = 20
@@ -202,9 +205,15 @@ def _smallest_root(d: FloatArray, z2: FloatArray, rho: FloatArray) -> FloatArray
     # a few slow candidates do not make every iteration cost a whole neighbourhood.
     idx = np.flatnonzero(live)
     c0, w = c0[idx], rho[idx, None] * z2[idx, 1:]
-    t = np.zeros(c0.shape)
     lo = np.zeros(c0.shape)
     hi = np.minimum(d2, c0)  # c0 / tau = 1 + phi(tau) >= 1 bounds tau by c0
+    # Start at the smallest eigenvalue of the leading 2 x 2 block: by interlacing it lies at
+    # or right of the root, and it is exact when only two poles matter.
+    w2 = w[:, 0]
+    a, b2 = c0, d2 + w2
+    t = 0.5 * (a + b2) - np.hypot(0.5 * (a - b2), np.sqrt(c0 * w2))
+    # It can land on an end of the bracket (e.g. on the pole d_2 when z_2 = 0); start inside.
+    t = np.where((t > 0.0) & (t < hi), t, 0.5 * hi)
     for _ in range(_MAX_ITER):
         inv = 1.0 / (delta - t[:, None])
         winv = w * inv
@@ -247,7 +256,21 @@ def _largest_root(d: FloatArray, z2: FloatArray, rho: FloatArray) -> FloatArray:
     idx = np.flatnonzero(live)  # candidates still iterating, as in _smallest_root
     w = rho[idx, None] * z2[idx]
     wg = w * gamma
-    t = rho[idx].astype(float)
+    # Start at the root of a lower bound of G: every pole but d_m moved onto the closest one
+    # (gamma_j >= gamma_{m-1} for j < m). That root lies right of the true one, so Newton still
+    # descends monotonically, and it is exact when d has two distinct values: a much closer
+    # start than tau = rho.
+    g1 = gamma[-2]
+    wm = w[:, -1]
+    r = rho[idx]
+    t = 0.5 * ((r - g1) + np.sqrt((g1 - r) ** 2 + 4.0 * wm * g1))
+    t = np.minimum(np.maximum(t, 0.0), r)
+    # A zero upper bound pins the root at tau = 0 (lambda_max = d_m); Newton would divide by
+    # gamma_m + 0 = 0 there.
+    going = t > 0.0
+    idx, w, wg, t = idx[going], w[going], wg[going], t[going]
+    if idx.size == 0:
+        return d[-1] + tau
     for _ in range(_MAX_ITER):
         inv = 1.0 / (gamma + t[:, None])
         G = t - t * (w * inv).sum(axis=1)
@@ -348,10 +371,10 @@ def _may_beat(
     x = hi_lb * (1.0 - _SCREEN_SLACK) / cutoff**2
     tau = x - d[0]  # shift from the d_1 pole, as in _smallest_root, for relative accuracy
     delta = d[1:] - d[0]
-    keep = tau > 0.0  # x* <= d_1 < lo (or lo = d_1 = x* only when singular): cannot decide
+    # x* <= d_1 <= lo: nothing to learn, keep. x* >= d_2 >= lo: reject. In between: test f.
     beyond = tau >= delta[0]
-    test = np.flatnonzero(keep & ~beyond)
-    keep &= ~beyond
+    keep = ~beyond
+    test = np.flatnonzero((tau > 0.0) & ~beyond)
     if test.size:
         w = rho[test, None] * z2[test]
         t = tau[test]
@@ -466,9 +489,10 @@ def optimize_rows(
     mounts : MountPlanner, optional
         Make the search collision-aware (standard grid only): every start is a random
         collision-free design, each row carries a lab azimuth, and a move is taken only when
-        the new cell can be mounted beside the other pairs as they stand. When the best cell
-        of a neighbourhood collides, the next best improving one is tried. Every design the
-        search visits, and so the one it returns, is mountable.
+        the new cell can be mounted beside the other pairs (one of which may turn to make
+        room, :meth:`~gonio.brdf.feasibility.MountPlanner.move`). When the best cell of a
+        neighbourhood cannot be mounted, the next best improving one is tried. Every design
+        the search visits, and so the one it returns, is mountable.
 
     Returns
     -------
@@ -534,16 +558,15 @@ def optimize_rows(
             "of room; lower --min-device-distance, raise --max-elevation or ask for fewer pairs"
         )
 
-    start, start_mount = random_start()
-    best_rows, best_mount = start.copy(), start_mount
+    # A random design to return if the time limit stops the search before any descent.
+    best_rows, best_mount = random_start()
     best_kappa = condition_number(A[best_rows])
     evaluations = 0
     searched = 0
     history: list[float] = []
     taken = np.zeros(Qa.shape[0], dtype=bool)
-    for first in range(starts):
-        if first > 0:
-            start, start_mount = random_start()
+    for _ in range(starts):
+        start, start_mount = random_start()
         for _ in range(descents):
             if time_limit_s is not None and time.perf_counter() - t0 > time_limit_s:
                 break
@@ -552,12 +575,19 @@ def optimize_rows(
             taken[:] = False
             taken[sel] = True
             kappa = condition_number(A[sel])
+            # settled[slot] = number of moves made when that slot last found no move; while
+            # no move happens after that, trying it again would give the same answer.
+            moves = 0
+            settled = np.full(n, -1)
             improved = True
             while improved:
                 # One sweep tries every row once in random order; a sweep with no accepted
                 # move means no single move helps: this descent has converged.
                 improved = False
                 for slot in rng.permutation(n):
+                    if settled[slot] == moves:
+                        continue
+                    settled[slot] = moves
                     current = int(sel[slot])
                     others = np.delete(sel, slot)
                     near = near_of(current)
@@ -572,13 +602,15 @@ def optimize_rows(
                     better = np.flatnonzero(values < kappa * (1.0 - _MIN_GAIN))
                     # Best first; with mounts, a cell that collides gives way to the next.
                     for k in better[np.argsort(values[better], kind="stable")]:
-                        if mount is not None and not mounts.move(mount, int(slot), int(near[k])):
+                        if (mount is not None and mounts is not None
+                                and not mounts.move(mount, int(slot), int(near[k]))):
                             continue
                         taken[current] = False
                         taken[near[k]] = True
                         sel[slot] = near[k]
                         kappa = float(values[k])
                         improved = True
+                        moves += 1
                         break
             history.append(kappa)
             if kappa < best_kappa:
@@ -713,38 +745,38 @@ def design_pairs(
     seed: int | None = 0,
     method: KappaMethod = "fast",
     time_limit_s: float | None = None,
-    placement_retries: int = 4,
 ) -> PairDesign:
     """Optimize ``n`` independent light/sensor pairs and place them in the lab.
 
     Candidates are the basis's valid cells that ``constraints`` allow
-    (:func:`gonio.brdf.feasibility.candidate_rows`); the search is :func:`optimize_rows`;
-    each pair's lab azimuth comes from :func:`gonio.brdf.feasibility.place_pairs`. When the
-    best design cannot be mounted with ``min_device_distance_deg`` between devices, the
-    search reruns with the next seed, up to ``placement_retries`` times.
+    (:func:`gonio.brdf.feasibility.candidate_rows`). The search is :func:`optimize_rows` with
+    a :class:`~gonio.brdf.feasibility.MountPlanner`, so every design it visits can be mounted
+    with ``min_device_distance_deg`` between any two devices and outside every exclusion. The
+    search's placement is then spread by :func:`gonio.brdf.feasibility.place_pairs` (it keeps
+    the limit and widens the closest gap where it can).
+
+    Raises
+    ------
+    DesignError
+        For ``n < 1`` or more pairs than feasible cells.
+    FeasibilityError
+        When no cell is feasible, or ``n`` pairs cannot be mounted under ``constraints``.
     """
     if n < 1:
         raise DesignError(f"the number of pairs must be at least 1, got {n}")
     cand = candidate_rows(constraints, basis.valid)
-    # The search scores cells only; mounts can still collide (e.g. two pairs crowding the
-    # zenith). Such designs are dropped and the search reruns with the next seed.
-    last_error: FeasibilityError | None = None
-    base_seed = 0 if seed is None else seed
-    for attempt in range(placement_retries + 1):
-        result = optimize_rows(
-            basis.Q, cand, n, h=h, starts=starts, descents=descents,
-            seed=None if seed is None else base_seed + attempt, method=method,
-            time_limit_s=time_limit_s,
-        )
-        try:
-            placement = place_pairs(rows_to_cells(result.rows), constraints, seed=base_seed)
-            break
-        except FeasibilityError as exc:
-            last_error = exc
-    else:
-        raise FeasibilityError(
-            f"{last_error} (the best designs of {placement_retries + 1} searches all collide)"
-        )
+    # The planner's azimuth grid is place_pairs' default, so the search's placement carries
+    # over exactly. Without a device-distance limit nothing can collide (every candidate cell
+    # has an allowed azimuth), and place_pairs alone spreads the devices.
+    planner = MountPlanner(constraints, ph_step_deg=1.0)
+    result = optimize_rows(
+        basis.Q, cand, n, h=h, starts=starts, descents=descents, seed=seed, method=method,
+        time_limit_s=time_limit_s, mounts=planner if planner.collisions_possible else None,
+    )
+    placement = place_pairs(
+        rows_to_cells(result.rows), constraints, ph_step_deg=1.0,
+        seed=0 if seed is None else seed, initial_ph=result.ph_lab,
+    )
     return PairDesign(
         name="optimized",
         cells=placement.cells,

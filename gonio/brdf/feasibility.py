@@ -188,8 +188,23 @@ def ph_options(step_deg: float = 5.0) -> FloatArray:
     return np.deg2rad(np.arange(0.0, 360.0 - 1e-9, step_deg))
 
 
+def on_axis_ph(cells: ArrayLike, ph: ArrayLike) -> BoolArray:
+    """(n, P) bool: ``False`` where a cell with ``th = 0`` would be turned away from ``ph = 0``.
+
+    At ``th = 0`` the half vector is the normal and turning the pair by ``ph`` is the same as
+    measuring the cell ``pd + ph`` instead: the lab directions cannot tell the two apart (the
+    inverse map reports ``ph = 0``). Such cells keep ``ph = 0`` so that a design's cells, its
+    lab directions and its condition number agree; turning is done by picking another ``pd``.
+    """
+    c = np.asarray(cells, dtype=float).reshape(-1, 3)
+    p = np.asarray(ph, dtype=float).ravel()
+    return (c[:, 0, None] > 1e-12) | (p[None, :] == 0.0)
+
+
 def allowed_ph(cells: ArrayLike, constraints: RigConstraints, ph: ArrayLike) -> BoolArray:
     """For each cell and lab azimuth, whether both devices avoid every exclusion.
+
+    ``th = 0`` cells only allow ``ph = 0`` (:func:`on_axis_ph`).
 
     Parameters
     ----------
@@ -204,12 +219,13 @@ def allowed_ph(cells: ArrayLike, constraints: RigConstraints, ph: ArrayLike) -> 
     """
     c = np.asarray(cells, dtype=float).reshape(-1, 3)
     p = np.asarray(ph, dtype=float)
+    ok = on_axis_ph(c, p)
     if not constraints.exclusions:
-        return np.ones((c.shape[0], p.size), dtype=bool)
+        return ok
     wi, wo = geo.half_diff_to_directions(
         c[:, None, 0], p[None, :], c[:, None, 1], c[:, None, 2]
     )
-    return ~excluded(wi, constraints.exclusions) & ~excluded(wo, constraints.exclusions)
+    return ok & ~excluded(wi, constraints.exclusions) & ~excluded(wo, constraints.exclusions)
 
 
 def feasible_mask(
@@ -363,7 +379,7 @@ def place_pairs(
         raise FeasibilityError("a design needs at least one pair; ask for --pairs 1 or more")
     ph = ph_options(ph_step_deg)
     wi, wo = geo.half_diff_to_directions(c[:, None, 0], ph[None, :], c[:, None, 1], c[:, None, 2])
-    allowed = device_ok(wi, constraints) & device_ok(wo, constraints)
+    allowed = device_ok(wi, constraints) & device_ok(wo, constraints) & on_axis_ph(c, ph)
     own = np.rad2deg(angular_distance(wi[:, 0], wo[:, 0]))
     for k in range(n):
         where = (
@@ -529,17 +545,20 @@ class Mounting:
 
     Attributes
     ----------
+    rows : (n,) int array
+        Flat grid row (cell) of each pair.
     az : (n,) int array
         Index into :attr:`MountPlanner.ph` of each pair's lab half-vector azimuth.
     devices : (n, 2, 3) array
         Light and sensor direction of each pair at that azimuth (lab, unit vectors).
     """
 
+    rows: NDArray[np.intp]
     az: NDArray[np.intp]
     devices: FloatArray
 
     def copy(self) -> Mounting:
-        return Mounting(self.az.copy(), self.devices.copy())
+        return Mounting(self.rows.copy(), self.az.copy(), self.devices.copy())
 
 
 class MountPlanner:
@@ -557,25 +576,59 @@ class MountPlanner:
     constraints : RigConstraints
     ph_step_deg : float
         Azimuth resolution, degrees (the same grid :func:`place_pairs` uses by default).
+    nudges : int
+        Azimuths tried when a move fits only if one neighbouring pair is re-placed (0: never
+        re-place a neighbour).
 
     Rows are flat indices of the standard ``(th, td, pd)`` grid (:func:`rows_to_cells`).
     """
 
-    def __init__(self, constraints: RigConstraints, ph_step_deg: float = 1.0) -> None:
+    def __init__(
+        self, constraints: RigConstraints, ph_step_deg: float = 1.0, nudges: int = 4
+    ) -> None:
         self.constraints = constraints
+        self._nudges = int(nudges)
         self.ph = ph_options(ph_step_deg)
         self._cos_ph = np.cos(self.ph)
         self._sin_ph = np.sin(self.ph)
+        # dot(Rz(ph) v, u) = cos ph (v_x u_x + v_y u_y) + sin ph (v_x u_y - v_y u_x) + v_z u_z,
+        # so the cosines between a turned device and fixed ones, at every azimuth, are one
+        # (P, 3) x (3, D) product with this table; nothing needs turning.
+        self._trig = np.stack([self._cos_ph, self._sin_ph, np.ones_like(self.ph)], axis=1)
         # Two devices collide when their angle is below the limit, i.e. their cosine above
         # cos(limit); the slack matches place_pairs' 1e-9 rad tolerance.
         need = math.radians(constraints.min_device_distance_deg)
         self._cos_need = math.cos(max(need - 1e-9, 0.0)) if need > 0.0 else math.inf
+        # Per row: its devices at ph = 0 and where both are allowed (a search revisits rows).
+        self._cache: dict[int, tuple[FloatArray, BoolArray]] = {}
+
+    @property
+    def collisions_possible(self) -> bool:
+        """Whether mounted pairs can get in each other's way (a device-distance limit is set).
+
+        Without one, any feasible cell fits at any of its allowed azimuths whatever else is
+        mounted, so a search need not track placements.
+        """
+        return self.constraints.min_device_distance_deg > 0.0
 
     def _rotated(self, v: FloatArray) -> FloatArray:
         """(P, 3): ``v`` rotated about the lab normal by every azimuth of :attr:`ph`."""
         x = self._cos_ph * v[0] - self._sin_ph * v[1]
         y = self._sin_ph * v[0] + self._cos_ph * v[1]
         return np.stack([x, y, np.full_like(x, v[2])], axis=-1)
+
+    def _row(self, row: int) -> tuple[FloatArray, BoolArray]:
+        """(2, 3) devices of ``row`` at ``ph = 0`` and its (P,) allowed azimuths, cached."""
+        got = self._cache.get(row)
+        if got is None:
+            th, td, pd = rows_to_cells(np.array([row]))[0]
+            wi0, wo0 = geo.half_diff_to_directions(th, 0.0, td, pd)
+            wi, wo = self._rotated(wi0), self._rotated(wo0)
+            allowed = device_ok(wi, self.constraints) & device_ok(wo, self.constraints)
+            allowed &= on_axis_ph(np.array([[th, td, pd]]), self.ph)[0]
+            got = (np.stack([wi0, wo0]), allowed)
+            self._cache[row] = got
+        return got
 
     def azimuth_options(self, row: int) -> tuple[FloatArray, FloatArray, BoolArray]:
         """Devices of flat grid ``row`` at every azimuth, and where both are allowed.
@@ -585,13 +638,30 @@ class MountPlanner:
         wi, wo : (P, 3) arrays
             Light and sensor directions at each azimuth of :attr:`ph`.
         allowed : (P,) bool
-            Both devices within the elevation limit and outside every exclusion.
+            Both devices within the elevation limit and outside every exclusion (and only
+            ``ph = 0`` for a ``th = 0`` cell, see :func:`on_axis_ph`).
         """
-        th, td, pd = rows_to_cells(np.array([row]))[0]
-        wi0, wo0 = geo.half_diff_to_directions(th, 0.0, td, pd)
-        wi, wo = self._rotated(wi0), self._rotated(wo0)
-        allowed = device_ok(wi, self.constraints) & device_ok(wo, self.constraints)
-        return wi, wo, allowed
+        dev0, allowed = self._row(row)
+        return self._rotated(dev0[0]), self._rotated(dev0[1]), allowed
+
+    def _cosines(self, dev0: FloatArray, others: FloatArray) -> FloatArray:
+        """(P, 2, D): cosine between each device of a pair turned to every azimuth and others.
+
+        ``dev0`` (2, 3) are the pair's devices at ``ph = 0``; ``others`` (D, 3).
+        """
+        v, u = dev0[:, None, :], others[None, :, :]
+        m = np.stack([
+            v[..., 0] * u[..., 0] + v[..., 1] * u[..., 1],
+            v[..., 0] * u[..., 1] - v[..., 1] * u[..., 0],
+            v[..., 2] * u[..., 2],
+        ])  # (3, 2, D)
+        return (self._trig @ m.reshape(3, -1)).reshape(self.ph.size, 2, -1)
+
+    def _turned(self, dev0: FloatArray, j: int) -> FloatArray:
+        """(2, 3): the pair's devices at azimuth index ``j``."""
+        c, s = self._cos_ph[j], self._sin_ph[j]
+        x, y = dev0[:, 0], dev0[:, 1]
+        return np.stack([c * x - s * y, s * x + c * y, dev0[:, 2]], axis=1)
 
     def best_azimuth(self, row: int, others: ArrayLike) -> tuple[int, FloatArray]:
         """Maximin azimuth for ``row`` among the devices ``others`` (D, 3).
@@ -604,18 +674,18 @@ class MountPlanner:
         devices : (2, 3) array
             Light and sensor direction at that azimuth (meaningless when ``index`` is -1).
         """
-        wi, wo, allowed = self.azimuth_options(row)
+        dev0, allowed = self._row(row)
         dev = np.asarray(others, dtype=float).reshape(-1, 3)
         if dev.shape[0]:
-            # Largest cosine = closest device; one matrix product per device of the pair.
-            closest = np.maximum((wi @ dev.T).max(axis=1), (wo @ dev.T).max(axis=1))
+            # Largest cosine = closest device.
+            closest = self._cosines(dev0, dev).reshape(self.ph.size, -1).max(axis=1)
         else:
             closest = np.full(self.ph.size, -1.0)
         fits = allowed & (closest <= self._cos_need)
         if not fits.any():
             return -1, np.zeros((2, 3))
         j = int(np.argmin(np.where(fits, closest, np.inf)))
-        return j, np.stack([wi[j], wo[j]])
+        return j, self._turned(dev0, j)
 
     def start(
         self, rng: np.random.Generator, candidates: ArrayLike, n: int
@@ -642,19 +712,59 @@ class MountPlanner:
             az.append(j)
             devices.append(dev)
             if len(rows) == n:
-                return (np.array(rows, dtype=np.intp),
-                        Mounting(np.array(az, dtype=np.intp), np.stack(devices)))
+                picked = np.array(rows, dtype=np.intp)
+                return picked, Mounting(picked.copy(), np.array(az, dtype=np.intp),
+                                        np.stack(devices))
         return None
 
     def move(self, mounting: Mounting, slot: int, row: int) -> bool:
-        """Mount ``row`` in place of pair ``slot``, every other pair held; False if it collides.
+        """Mount ``row`` in place of pair ``slot``; False if it cannot be made to fit.
 
-        ``mounting`` is updated only on success.
+        First with every other pair held. Failing that, a neighbour may step aside: at the
+        azimuths where the new devices are too close to exactly one other pair, that pair is
+        re-placed (maximin) around the rest, trying the most open such azimuths first. Only
+        one pair other than ``slot`` ever moves, and its cell stays the same, so ``kappa``
+        does not change. ``mounting`` is updated only on success.
         """
-        others = np.delete(mounting.devices, slot, axis=0).reshape(-1, 3)
-        j, dev = self.best_azimuth(row, others)
-        if j < 0:
+        keep = np.arange(mounting.az.size) != slot
+        others = mounting.devices[keep]  # (n - 1, 2, 3)
+        dev0, allowed = self._row(row)
+        # Closest approach (largest cosine) of the new pair to each other pair, per azimuth;
+        # elementwise maxima over strided views are much cheaper than a multi-axis reduce.
+        cos = self._cosines(dev0, others.reshape(-1, 3))  # (P, 2, 2 (n - 1))
+        either = np.maximum(cos[:, 0], cos[:, 1])
+        per_pair = np.maximum(either[:, 0::2], either[:, 1::2])  # (P, n - 1)
+        closest = per_pair.max(axis=1) if per_pair.shape[1] else np.full(self.ph.size, -1.0)
+        fits = allowed & (closest <= self._cos_need)
+        if fits.any():
+            j = int(np.argmin(np.where(fits, closest, np.inf)))
+            self._set(mounting, slot, row, j, self._turned(dev0, j))
+            return True
+        if others.shape[0] < 2 or self._nudges == 0:
             return False
-        mounting.az[slot] = j
+        blocking = per_pair > self._cos_need
+        one = allowed & (blocking.sum(axis=1) == 1)
+        if not one.any():
+            return False
+        rest_closest = np.where(blocking, -np.inf, per_pair).max(axis=1)
+        tries = np.flatnonzero(one)
+        tries = tries[np.argsort(rest_closest[tries], kind="stable")][: self._nudges]
+        pair_ids = np.flatnonzero(keep)
+        for jj in tries:
+            p = int(np.argmax(blocking[jj]))  # the one pair in the way, among the others
+            new_dev = self._turned(dev0, int(jj))
+            rest = np.delete(others, p, axis=0).reshape(-1, 3)
+            target = int(pair_ids[p])
+            jp, dev_p = self.best_azimuth(int(mounting.rows[target]),
+                                          np.concatenate([rest, new_dev]))
+            if jp >= 0:
+                self._set(mounting, slot, row, int(jj), new_dev)
+                self._set(mounting, target, int(mounting.rows[target]), jp, dev_p)
+                return True
+        return False
+
+    @staticmethod
+    def _set(mounting: Mounting, slot: int, row: int, az: int, dev: FloatArray) -> None:
+        mounting.rows[slot] = row
+        mounting.az[slot] = az
         mounting.devices[slot] = dev
-        return True

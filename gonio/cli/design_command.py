@@ -55,7 +55,8 @@ def register(subparsers: Any) -> None:
     p.add_argument("--min-separation", type=float, default=10.0, metavar="DEG",
                    help="smallest light-sensor angle of a pair (default 10)")
     p.add_argument("--min-device-distance", type=float, default=10.0, metavar="DEG",
-                   help="smallest angle between any two mounted devices (default 10)")
+                   help="smallest angle between any two mounted devices (default 10); the "
+                        "search only visits designs that can be mounted this way")
     p.add_argument("--exclude", action="append", default=[], metavar="REGION",
                    help="lab region without devices: cone:THETA,PHI,RADIUS or "
                         "box:THETA_MIN,THETA_MAX,PHI_MIN,PHI_MAX (degrees); repeatable")

@@ -11,6 +11,7 @@ import pytest
 from gonio.brdf import geometry as geo
 from gonio.brdf.basis import Basis
 from gonio.brdf.design import condition_number
+from gonio.brdf.feasibility import min_pairwise_distance
 from gonio.cli import main
 
 
@@ -53,6 +54,22 @@ def test_design_pairs_writes_a_rig_fragment(basis_file: Path, tmp_path: Path,
     printed = float(text.split("condition number:")[1].split()[0])
     assert kappa == pytest.approx(printed, rel=1e-3)
     assert all(d["theta_deg"] <= 80.0 + 1e-6 for d in frag["lights"] + frag["sensors"])
+
+
+def test_twenty_pairs_with_default_limits(basis_file: Path, tmp_path: Path,
+                                          capsys: pytest.CaptureFixture[str]) -> None:
+    # Default rig limits (10 deg between any two devices); a shorter search than the default.
+    out = tmp_path / "twenty.toml"
+    code = main(["design", "--pairs", "20", "--basis", str(basis_file), "--starts", "1",
+                 "--descents", "2", "-o", str(out)])
+    assert code == 0
+    assert "design: optimized, 20 pairs" in capsys.readouterr().out
+    frag = tomllib.loads(out.read_text())
+    dev = np.deg2rad([[d["theta_deg"], d["phi_deg"]] for d in frag["lights"] + frag["sensors"]])
+    dirs = geo.spherical_to_direction(dev[:, 0], dev[:, 1])
+    assert len(dirs) == 40
+    # From the written (rounded) angles: every two devices at least 10 deg apart.
+    assert np.degrees(min_pairwise_distance(dirs)) >= 10.0 - 1e-3
 
 
 def test_design_product_rig(basis_file: Path, tmp_path: Path,

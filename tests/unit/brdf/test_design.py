@@ -4,9 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
+from gonio.brdf.basis import Basis
 from gonio.brdf.design import (
     DesignError,
+    PairDesign,
     block_width,
     condition_number,
     condition_numbers_fast,
@@ -19,7 +23,9 @@ from gonio.brdf.design import (
 SMALL_GRID = (6, 5, 8)
 
 
-def _random_case(rng: np.random.Generator, n: int, K: int, rank_deficient: bool = False):
+def _random_case(
+    rng: np.random.Generator, n: int, K: int, rank_deficient: bool = False
+) -> tuple[np.ndarray, np.ndarray]:
     m = block_width(n, K)
     scales = np.exp(rng.normal(size=m))
     kept = rng.normal(size=(n - 1, m)) * scales
@@ -106,7 +112,7 @@ def test_neighbourhood_clips_th_td_and_wraps_pd() -> None:
         neighbourhood(flat, 4, SMALL_GRID)
 
 
-def _small_problem(seed: int = 0, K: int = 6):
+def _small_problem(seed: int = 0, K: int = 6) -> tuple[np.ndarray, np.ndarray]:
     rng = np.random.default_rng(seed)
     p = int(np.prod(SMALL_GRID))
     # Smooth-ish columns over the grid, like a real basis, plus a little noise.
@@ -168,9 +174,8 @@ def test_search_rejects_q_of_wrong_shape() -> None:
         optimize_rows(np.zeros((10, 3)), np.arange(5), 2, grid_shape=SMALL_GRID)
 
 
-def _grid_basis(K: int = 6):
+def _grid_basis(K: int = 6) -> Basis:
     from gonio.brdf import geometry as geo
-    from gonio.brdf.basis import Basis
 
     rng = np.random.default_rng(0)
     th, td, pd = (a.ravel() for a in geo.grid_angles())
@@ -229,3 +234,144 @@ def test_design_pairs_places_the_optimized_cells() -> None:
     assert d.search is not None and d.kappa == pytest.approx(d.search.kappa)
     assert d.min_distance_deg >= 10.0 - 1e-6
     assert d.lab_deg.shape == (4, 4)
+
+
+# ------------------------------------------------------------------ screening
+@pytest.mark.parametrize("seed", range(5))
+@pytest.mark.parametrize(("n", "K"), [(6, 12), (10, 10), (14, 6)])
+def test_screening_never_drops_an_improvement(seed: int, n: int, K: int) -> None:
+    # With a cutoff, candidates that provably cannot beat it are skipped (inf); every
+    # candidate that does beat it must come back with its exact kappa.
+    rng = np.random.default_rng(seed)
+    kept, cand = _random_case(rng, n, K)
+    ref = condition_numbers_svd(kept, cand)
+    for cutoff in np.quantile(ref[np.isfinite(ref)], [0.1, 0.5, 0.9]):
+        got = condition_numbers_fast(kept, cand, cutoff)
+        better = ref < cutoff * (1.0 - 1e-9)
+        np.testing.assert_allclose(got[better], ref[better], rtol=1e-8)
+        # Whatever is returned finite is exact, and skipped ones really do not improve.
+        finite = np.isfinite(got)
+        np.testing.assert_allclose(got[finite], ref[finite], rtol=1e-8)
+        assert (ref[~finite] >= cutoff * (1.0 - 1e-9)).all()
+        assert (~finite).sum() >= (ref >= cutoff).sum() // 2  # it does screen
+
+
+# ------------------------------------------------------------------ collision-aware search
+def _devices_of(design: PairDesign) -> np.ndarray:
+    from gonio.brdf import geometry as geo
+
+    lab = np.deg2rad(design.lab_deg)
+    wi = geo.spherical_to_direction(lab[:, 0], lab[:, 1])
+    wo = geo.spherical_to_direction(lab[:, 2], lab[:, 3])
+    return np.concatenate([wi, wo])
+
+
+@settings(max_examples=12, deadline=None)
+@given(seed=st.integers(0, 10_000), n=st.integers(2, 16),
+       limit=st.sampled_from([8.0, 12.0, 18.0]))
+def test_designs_under_a_device_distance_always_mount(seed: int, n: int, limit: float) -> None:
+    from gonio.brdf import geometry as geo
+    from gonio.brdf.design import design_pairs
+    from gonio.brdf.feasibility import RigConstraints, min_pairwise_distance
+
+    basis = _grid_basis(K=8)
+    c = RigConstraints(max_elevation_deg=70.0, min_device_distance_deg=limit)
+    d = design_pairs(basis, n, c, h=3, starts=1, descents=2, seed=seed)
+    dev = _devices_of(d)
+    # Checked from the written lab directions, not from the design's own report.
+    assert np.degrees(min_pairwise_distance(dev)) >= limit - 1e-6
+    assert d.min_distance_deg >= limit - 1e-6
+    assert (np.degrees(np.arccos(np.clip(dev[:, 2], -1, 1))) <= 70.0 + 1e-6).all()
+    # The lab directions measure exactly the optimized cells (pd is defined mod pi), so the
+    # geometry read back from them has the reported kappa.
+    th, _, td, pd = geo.directions_to_half_diff(dev[:n], dev[n:])
+    np.testing.assert_allclose(th, d.cells[:, 0], atol=1e-9)
+    np.testing.assert_allclose(td, d.cells[:, 1], atol=1e-9)
+    np.testing.assert_allclose(np.sin(2.0 * (pd - d.cells[:, 2])), 0.0, atol=1e-9)
+    assert d.kappa == pytest.approx(condition_number(basis.Q[_rows_of(d.cells)]))
+    assert d.kappa == pytest.approx(condition_number(basis.rows_at(th, td, pd)), rel=1e-6)
+
+
+def _rows_of(cells: np.ndarray) -> np.ndarray:
+    from gonio.brdf import geometry as geo
+
+    idx = [np.rint((cells[:, k] - g[0]) / (g[1] - g[0])).astype(int)
+           for k, g in enumerate((geo.TH_GRID, geo.TD_GRID, geo.PD_GRID))]
+    return np.ravel_multi_index(tuple(idx), geo.SLICE_SHAPE)
+
+
+def test_collision_aware_search_returns_its_placement() -> None:
+    from gonio.brdf import geometry as geo
+    from gonio.brdf.feasibility import (
+        MountPlanner,
+        RigConstraints,
+        candidate_rows,
+        min_pairwise_distance,
+        rows_to_cells,
+    )
+
+    basis = _grid_basis(K=8)
+    c = RigConstraints(min_device_distance_deg=15.0)
+    planner = MountPlanner(c)
+    res = optimize_rows(basis.Q, candidate_rows(c, basis.valid), 12, h=3, starts=2, descents=2,
+                        seed=4, mounts=planner)
+    assert res.ph_lab is not None and res.ph_lab.shape == (12,)
+    cells = rows_to_cells(res.rows)
+    wi, wo = geo.half_diff_to_directions(cells[:, 0], res.ph_lab, cells[:, 1], cells[:, 2])
+    assert np.degrees(min_pairwise_distance(np.concatenate([wi, wo]))) >= 15.0 - 1e-6
+    with pytest.raises(DesignError, match="standard"):
+        optimize_rows(basis.Q[:240], np.arange(10), 2, grid_shape=SMALL_GRID, mounts=planner)
+
+
+def test_design_that_cannot_be_mounted_is_a_clear_error() -> None:
+    from gonio.brdf.design import design_pairs
+    from gonio.brdf.feasibility import FeasibilityError, RigConstraints
+
+    crowded = RigConstraints(max_elevation_deg=20.0, min_device_distance_deg=15.0)
+    with pytest.raises(FeasibilityError, match=r"cannot mount 12 pairs.*--min-device-distance"):
+        design_pairs(_grid_basis(), 12, crowded, h=3, starts=1, descents=1)
+
+
+@pytest.fixture(scope="module")
+def library_basis() -> Basis:
+    """K = 16 basis of one library material per family (built in ~2 s)."""
+    from gonio.brdf import models as bm
+    from gonio.brdf.basis import build_basis
+    from gonio.brdf.library import library_specs
+
+    first: dict[str, bm.BRDFModel] = {}
+    for spec in library_specs():
+        first.setdefault(spec.family, spec.model)
+    return build_basis([bm.tabulate(m) for m in first.values()], 16)
+
+
+def test_twenty_pairs_mount_with_default_limits_on_a_library_basis(library_basis: Basis) -> None:
+    from gonio.brdf.design import design_pairs
+    from gonio.brdf.feasibility import (
+        FeasibilityError,
+        RigConstraints,
+        candidate_rows,
+        min_pairwise_distance,
+        place_pairs,
+        rows_to_cells,
+    )
+
+    c = RigConstraints()  # 80 deg elevation, 10 deg separation, 10 deg between devices
+    # The failure this guards against: a cells-only search crowds pairs near the zenith, so
+    # its designs mostly cannot be mounted (4 of seeds 0-4 when this was written).
+    cand = candidate_rows(c, library_basis.valid)
+    collided, blind_kappas = 0, []
+    for seed in (1, 2, 3):
+        blind = optimize_rows(library_basis.Q, cand, 20, starts=1, descents=2, seed=seed)
+        blind_kappas.append(blind.kappa)
+        try:
+            place_pairs(rows_to_cells(blind.rows), c, orderings=4)
+        except FeasibilityError as exc:
+            assert "cannot mount 20 pairs" in str(exc)
+            collided += 1
+    assert collided >= 1
+    d = design_pairs(library_basis, 20, c, starts=1, descents=2, seed=1)
+    assert d.n_pairs == 20 and np.isfinite(d.kappa)
+    assert np.degrees(min_pairwise_distance(_devices_of(d))) >= 10.0 - 1e-6
+    # Collision-awareness costs little conditioning against the blind search.
+    assert d.kappa < 2.0 * float(np.median(blind_kappas))
