@@ -111,6 +111,10 @@ def _configure_logging(level: str) -> None:
     logging.basicConfig(
         level=level.upper(), format="%(asctime)s %(levelname)s %(name)s: %(message)s"
     )
+    # At INFO, httpx logs every request of the --demo-scan client and pymodbus every server
+    # start: noise next to the daemon's own messages. Their warnings still show.
+    for noisy in ("httpx", "pymodbus"):
+        logging.getLogger(noisy).setLevel(max(logging.WARNING, logging.getLogger().level))
 
 
 def _run_sim(args: argparse.Namespace, cfg: Any, keyring: Any) -> int:
