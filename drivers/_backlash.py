@@ -1,4 +1,4 @@
-"""Approach-direction logic shared by the stage drivers (backlash compensation).
+"""Motion settings shared by the stage drivers: validation, and the approach direction.
 
 Gears and lead screws have play: where a stage comes to rest depends on the side it came from.
 Approaching every target from the same side removes that error. When a move would arrive from
@@ -17,6 +17,40 @@ APPROACHES: tuple[str, ...] = ("positive", "negative", "none")
 
 # Below this distance a target counts as reached: no move, so no direction to correct.
 _SAME_POSITION_DEG = 1e-6
+
+
+def check_motion_settings(
+    device: str,
+    *,
+    limits: TravelLimits,
+    speed_dps: float,
+    accel_dps2: float,
+    approach: str,
+    backlash_deg: float,
+    move_timeout_s: float,
+    retries: int,
+    poll_interval_s: float,
+) -> None:
+    """Validate the settings every stage driver takes alike.
+
+    Raises
+    ------
+    ValueError
+        Naming the device, the setting and the value.
+    """
+    for what, value in (("speed_dps", speed_dps), ("accel_dps2", accel_dps2)):
+        if not math.isfinite(value) or value <= 0:
+            raise ValueError(f"{device}: {what} must be > 0, got {value}")
+    if limits.min_deg >= limits.max_deg:
+        raise ValueError(f"{device}: travel limits need min_deg < max_deg, got {limits}")
+    check_approach(device, approach, backlash_deg)
+    if not move_timeout_s > 0 or retries < 1:
+        raise ValueError(
+            f"{device}: move_timeout_s must be > 0 and retries >= 1, got {move_timeout_s} and "
+            f"{retries}"
+        )
+    if not poll_interval_s > 0:
+        raise ValueError(f"{device}: poll_interval_s must be > 0 seconds, got {poll_interval_s}")
 
 
 def check_approach(device: str, approach: str, backlash_deg: float) -> None:

@@ -28,7 +28,7 @@ from typing import Any
 
 import dynamixel_sdk as sdk
 from gonio.drivers._arrival import poll_delay, trapezoid_s
-from gonio.drivers._backlash import approach_waypoints, check_approach, check_target
+from gonio.drivers._backlash import approach_waypoints, check_motion_settings, check_target
 
 from gonio.hal import DeviceUnavailable, StageFault, StageStatus, TravelLimits
 from gonio.hal import Stage as _Stage
@@ -153,13 +153,11 @@ class DynamixelStage(_Stage):
             raise ValueError(f"{name}: dxl_id must be 0-252, got {dxl_id}")
         if not math.isfinite(counts_per_degree) or counts_per_degree <= 0:
             raise ValueError(f"{name}: counts_per_degree must be > 0, got {counts_per_degree}")
-        if limits.min_deg >= limits.max_deg:
-            raise ValueError(f"{name}: travel limits need min_deg < max_deg, got {limits}")
-        check_approach(name, approach, backlash_deg)
-        if move_timeout_s <= 0 or retries < 1:
-            raise ValueError(f"{name}: move_timeout_s must be > 0 and retries >= 1")
-        if not poll_interval_s > 0:
-            raise ValueError(f"{name}: poll_interval_s must be > 0 seconds, got {poll_interval_s}")
+        check_motion_settings(
+            name, limits=limits, speed_dps=speed_dps, accel_dps2=accel_dps2, approach=approach,
+            backlash_deg=backlash_deg, move_timeout_s=move_timeout_s, retries=retries,
+            poll_interval_s=poll_interval_s,
+        )
         self.cpd = float(counts_per_degree)
         self.limits = limits
         self.speed_dps = float(speed_dps)

@@ -29,7 +29,7 @@ from typing import Any
 
 import serial
 from gonio.drivers._arrival import poll_delay, trapezoid_s
-from gonio.drivers._backlash import approach_waypoints, check_approach, check_target
+from gonio.drivers._backlash import approach_waypoints, check_motion_settings, check_target
 
 from gonio.hal import DeviceUnavailable, StageFault, StageStatus, TravelLimits
 from gonio.hal import Stage as _Stage
@@ -160,16 +160,13 @@ class ZaberStage(_Stage):
             raise ValueError(
                 f"{name}: microsteps_per_degree must be > 0, got {microsteps_per_degree}"
             )
-        for what, value in (("speed_dps", speed_dps), ("accel_dps2", accel_dps2)):
-            if not math.isfinite(value) or value <= 0:
-                raise ValueError(f"{name}: {what} must be > 0, got {value}")
-        if limits.min_deg >= limits.max_deg:
-            raise ValueError(f"{name}: travel limits need min_deg < max_deg, got {limits}")
-        check_approach(name, approach, backlash_deg)
-        if move_timeout_s <= 0 or reply_timeout_s <= 0 or retries < 1:
-            raise ValueError(f"{name}: timeouts must be > 0 and retries >= 1")
-        if not poll_interval_s > 0:
-            raise ValueError(f"{name}: poll_interval_s must be > 0 seconds, got {poll_interval_s}")
+        check_motion_settings(
+            name, limits=limits, speed_dps=speed_dps, accel_dps2=accel_dps2, approach=approach,
+            backlash_deg=backlash_deg, move_timeout_s=move_timeout_s, retries=retries,
+            poll_interval_s=poll_interval_s,
+        )
+        if not reply_timeout_s > 0:
+            raise ValueError(f"{name}: reply_timeout_s must be > 0, got {reply_timeout_s}")
         self.device = int(device)
         self.axis = int(axis)
         self.mpd = float(microsteps_per_degree)
