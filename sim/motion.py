@@ -69,7 +69,9 @@ def plan_phases(
         stop_d = v0 * v0 / (2.0 * amax)
         # Moving away from the target, unable to stop before it, or faster than the new limit:
         # brake to rest first, then plan from there.
-        if d * s < 0 or abs(d) < stop_d - _EPS or abs(v0) > vmax + _EPS:
+        # No tolerance on the stopping distance: a slow creep whose overshoot is tiny must
+        # still brake and come back, or the plan ends with the leftover speed.
+        if d * s < 0 or abs(d) < stop_d or abs(v0) > vmax + _EPS:
             brake = (abs(v0) / amax, -s * amax)
             return [brake, *plan_phases(p0 + s * stop_d, 0.0, target, vmax, amax)]
     s = math.copysign(1.0, d) if abs(d) > _EPS else math.copysign(1.0, v0)

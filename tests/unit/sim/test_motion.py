@@ -174,3 +174,15 @@ def test_overshoot_beyond_travel_limit_is_refused_before_moving() -> None:
         check_target("stage", limits, 200.0, [200.0])
     with pytest.raises(ValueError, match=r"needs an overshoot to -0\.5 deg"):
         check_target("stage", limits, 0.0, approach_waypoints(10.0, 0.0, "positive", 0.5))
+
+
+@pytest.mark.parametrize("v0", [1.7e-4, -3e-3, 2e-6])
+def test_a_slow_creep_onto_the_target_still_ends_at_rest(v0: float) -> None:
+    # Found by hypothesis: moving slowly with the target where the stage already is, the
+    # stopping distance is below any position tolerance, yet the speed must still reach zero.
+    p, v = 10.0, v0
+    for duration, a in plan_phases(10.0, v0, 10.0, 30.0, 60.0):
+        p += v * duration + 0.5 * a * duration**2
+        v += a * duration
+    assert v == pytest.approx(0.0, abs=1e-9)
+    assert p == pytest.approx(10.0, abs=1e-6)
