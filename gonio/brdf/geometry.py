@@ -59,7 +59,8 @@ def spherical_to_direction(theta: ArrayLike, phi: ArrayLike) -> FloatArray:
 def direction_to_spherical(w: ArrayLike) -> tuple[FloatArray, FloatArray]:
     """Polar angle and azimuth (in ``[0, 2 pi)``) of unit vectors ``w`` of shape (..., 3)."""
     v = np.asarray(w, dtype=float)
-    theta = np.arccos(np.clip(v[..., 2], -1.0, 1.0))
+    # atan2 keeps full precision near the poles, where arccos(z) loses half the digits.
+    theta = np.arctan2(np.hypot(v[..., 0], v[..., 1]), v[..., 2])
     phi = np.mod(np.arctan2(v[..., 1], v[..., 0]), 2 * np.pi)
     return theta, phi
 
@@ -136,14 +137,14 @@ def directions_to_half_diff(
     norm = np.linalg.norm(h, axis=-1, keepdims=True)
     # Exactly opposite directions have no half vector; use the normal so the result is defined.
     h = np.where(norm > 1e-12, h / np.where(norm > 1e-12, norm, 1.0), np.array([0.0, 0.0, 1.0]))
-    th = np.arccos(np.clip(h[..., 2], -1.0, 1.0))
+    th = np.arctan2(np.hypot(h[..., 0], h[..., 1]), h[..., 2])  # exact near th = 0, unlike acos
     on_axis = np.hypot(h[..., 0], h[..., 1]) < 1e-12
     ph = np.where(on_axis, 0.0, np.mod(np.arctan2(h[..., 1], h[..., 0]), 2 * np.pi))
     d = rotate_z(i, -ph)
     ct, st = np.cos(th), np.sin(th)
     dx = ct * d[..., 0] - st * d[..., 2]
     dz = st * d[..., 0] + ct * d[..., 2]
-    td = np.arccos(np.clip(dz, -1.0, 1.0))
+    td = np.arctan2(np.hypot(dx, d[..., 1]), dz)
     pd = np.mod(np.arctan2(d[..., 1], dx), np.pi)
     # Round-off can put pd a hair below pi; fold it onto 0 so it stays in [0, pi).
     pd = np.where(pd >= np.pi - 1e-12, 0.0, pd)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -149,3 +150,16 @@ def test_cell_cosines_match_directions() -> None:
     wi, wo = geo.half_diff_to_directions(th, 1.234, td, pd)
     np.testing.assert_allclose(ci, wi[..., 2], atol=1e-12)
     np.testing.assert_allclose(co, wo[..., 2], atol=1e-12)
+
+
+@pytest.mark.parametrize("theta", [1e-9, 3e-7, 1e-4])
+def test_angles_near_the_normal_keep_full_precision(theta: float) -> None:
+    # arccos(z) would lose about half the digits here (error ~ sqrt(eps) ~ 1e-8 rad); a design
+    # whose device sits near the zenith must read back the cell it was optimized for.
+    w = geo.spherical_to_direction(theta, 1.0)
+    t, _ = geo.direction_to_spherical(w)
+    assert t == pytest.approx(theta, rel=1e-12)
+    wi, wo = geo.half_diff_to_directions(theta, 0.5, 0.3, 1.0)
+    th, _, td, _ = geo.directions_to_half_diff(wi, wo)
+    assert th == pytest.approx(theta, rel=1e-9)
+    assert td == pytest.approx(0.3, rel=1e-12)
