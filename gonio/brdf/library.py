@@ -382,15 +382,33 @@ def iter_library(seed: int = DEFAULT_SEED, progress: bool = False) -> Iterator[B
 
         items = tqdm(list(items), desc="loading BRDF library", unit="material")
     for spec, path in items:
-        compact = _read_compact(path, key)
-        if compact is None:  # removed or damaged since the build: make it again
-            compact = bm.tabulate_valid(spec.model).astype(np.float32)
-            _write_compact(path, compact, key)
-        provenance = {
-            **bm.model_provenance(spec.model),
-            "library": {"family": spec.family, "seed": int(seed), "version": LIBRARY_VERSION},
-        }
-        yield BRDFTable(bm.expand_valid(compact), CHANNELS, spec.name, None, provenance)
+        yield _cached_table(spec, path, key, int(seed))
+
+
+def library_table(name: str, seed: int = DEFAULT_SEED) -> BRDFTable:
+    """One library material's table, read from the cache (built first if needed).
+
+    Reads one file instead of the whole library. Raises :class:`LibraryError` for an unknown
+    name, suggesting close ones (as :func:`get_material`).
+    """
+    get_material(name, seed)  # the clear error for an unknown name
+    paths = build_library(seed)
+    for spec, path in zip(_specs(int(seed)), paths, strict=True):
+        if spec.name == name:
+            return _cached_table(spec, path, library_key(seed), int(seed))
+    raise LibraryError(f"{name!r} is not in the library cache {library_cache_dir(seed)}")
+
+
+def _cached_table(spec: MaterialSpec, path: Path, key: str, seed: int) -> BRDFTable:
+    compact = _read_compact(path, key)
+    if compact is None:  # removed or damaged since the build: make it again
+        compact = bm.tabulate_valid(spec.model).astype(np.float32)
+        _write_compact(path, compact, key)
+    provenance = {
+        **bm.model_provenance(spec.model),
+        "library": {"family": spec.family, "seed": seed, "version": LIBRARY_VERSION},
+    }
+    return BRDFTable(bm.expand_valid(compact), CHANNELS, spec.name, None, provenance)
 
 
 def load_table_folder(folder: str | os.PathLike[str]) -> list[BRDFTable]:

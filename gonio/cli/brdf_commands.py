@@ -247,12 +247,8 @@ def loo_basis(material: str, k: int) -> Any:
 def _library_table(material: str) -> Any:
     """The cached library table of ``material`` (reading one file, not the whole library)."""
     from gonio.brdf import library
-    from gonio.brdf.table import BRDFTable
 
-    for path in library.build_library():
-        if path.stem == material:
-            return BRDFTable.load(path)
-    raise UsageError(f"{material!r} is not a library material")
+    return library.library_table(material)
 
 
 def _demo_pairs(basis: Any, n: int) -> tuple[FloatArray, FloatArray, str]:

@@ -175,10 +175,7 @@ def test_demo_on_a_small_library(
     # (leave-one-out basis, simulation, reconstruction, metrics, previews) runs for real.
     monkeypatch.setattr(library, "default_library", lambda *a, **k: list(tables))
     monkeypatch.setattr(library, "get_material", lambda name, seed=0: by_name[name])
-    folder = tmp_path / "lib"
-    folder.mkdir()
-    paths = [t.save(folder / f"{t.name}.npz") for t in tables]
-    monkeypatch.setattr(library, "build_library", lambda *a, **k: paths)
+    monkeypatch.setattr(library, "library_table", lambda name, seed=0: by_name[name])
     out = tmp_path / "demo"
     argv = ["demo", "--material", tables[0].name, "-n", "12", "-r", "8", "-k", "8",
             "--out", str(out)]

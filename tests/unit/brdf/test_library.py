@@ -180,3 +180,14 @@ def test_unwritable_cache_is_reported(monkeypatch: pytest.MonkeyPatch, tmp_path:
 def test_user_table_round_trip_is_valid_table(tmp_path: Path) -> None:
     path = _save_user_table(tmp_path, "check")
     assert BRDFTable.load(path).name == "check"
+
+
+def test_one_material_read_from_the_cache_matches_the_library(small_library: Path) -> None:
+    tables = lib.default_library()
+    name = tables[1].name
+    one = lib.library_table(name)
+    assert one.name == name
+    np.testing.assert_array_equal(one.values, tables[1].values)
+    assert one.provenance == tables[1].provenance
+    with pytest.raises(lib.LibraryError, match="no-such-material"):
+        lib.library_table("no-such-material")
