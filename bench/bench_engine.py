@@ -30,12 +30,11 @@ from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from gonio.drivers.factory import build_rig
-from gonio.sim.rig import SimRigOptions, start_sim_rig
-
 from gonio import hal
+from gonio.drivers.factory import build_rig
 from gonio.engine import ScanEngine
 from gonio.plans import ExposureSettings, RigDescription, UniformPlan, dry_run, move_time
+from gonio.sim.rig import SimRigOptions, start_sim_rig
 from gonio.store import JobStore
 
 STAGES = ("dynamixel", "zaber")

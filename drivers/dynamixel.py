@@ -27,9 +27,9 @@ from collections.abc import Callable
 from typing import Any
 
 import dynamixel_sdk as sdk
+
 from gonio.drivers._arrival import poll_delay, trapezoid_s
 from gonio.drivers._backlash import approach_waypoints, check_motion_settings, check_target
-
 from gonio.hal import DeviceUnavailable, StageFault, StageStatus, TravelLimits
 from gonio.hal import Stage as _Stage
 

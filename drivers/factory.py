@@ -9,9 +9,8 @@ from __future__ import annotations
 
 from typing import TypedDict
 
-from gonio.drivers.modbus import ModbusLight, ModbusPool, ModbusSensor
-
 from gonio.config import RigConfig, StageConfig
+from gonio.drivers.modbus import ModbusLight, ModbusPool, ModbusSensor
 from gonio.hal import Light, Rig, Sensor, Stage, TravelLimits
 
 __all__ = ["STAGE_NAME", "build_rig", "build_stage"]

@@ -28,9 +28,9 @@ from dataclasses import dataclass
 from typing import Any
 
 import serial
+
 from gonio.drivers._arrival import poll_delay, trapezoid_s
 from gonio.drivers._backlash import approach_waypoints, check_motion_settings, check_target
-
 from gonio.hal import DeviceUnavailable, StageFault, StageStatus, TravelLimits
 from gonio.hal import Stage as _Stage
 

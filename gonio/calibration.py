@@ -17,6 +17,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -117,6 +118,28 @@ def from_config_factors(factors: Sequence[object], albedo: float | None = None) 
         for f in factors
     )
     return Calibration(pairs=pairs, reference_albedo=albedo, source="rig config")
+
+
+CALIBRATION_FILE = "calibration.json"
+"""Name of the latest calibration job's factors inside a data directory."""
+
+
+def calibration_in_effect(data_dir: Path, rig_config: Any = None) -> Calibration:
+    """The calibration scans use: the latest calibration job's factors in ``data_dir``, else the
+    rig config's ``[calibration]`` factors, else none (values stay in sensor units).
+
+    Parameters
+    ----------
+    data_dir : folder where calibration jobs write :data:`CALIBRATION_FILE`
+    rig_config : gonio.config.RigConfig, optional
+    """
+    path = Path(data_dir) / CALIBRATION_FILE
+    if path.is_file():
+        return Calibration.model_validate_json(path.read_text())
+    cal = getattr(rig_config, "calibration", None)
+    if cal is not None and getattr(cal, "factors", None):
+        return from_config_factors(cal.factors, cal.white_albedo)
+    return Calibration()
 
 
 def calibrated_samples(

@@ -25,7 +25,7 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field
 
 from gonio import hal
-from gonio.calibration import Calibration, from_config_factors
+from gonio.calibration import Calibration, calibration_in_effect
 from gonio.jobstates import ACTIVE_STATES, IllegalTransition, JobState, check_action
 from gonio.plans import AnyPlan, DryRun, Plan, PlanError, RigDescription, dry_run, parse_plan
 from gonio.store import EventRow, JobRow, JobStore, ReadingRow
@@ -286,13 +286,7 @@ class GonioService:
 
     def calibration(self) -> Calibration:
         """The calibration applied to scans: the latest calibration job, else the rig config."""
-        path = self.data_dir / "calibration.json"
-        if path.is_file():
-            return Calibration.model_validate_json(path.read_text())
-        cal = getattr(self.rig_config, "calibration", None)
-        if cal is not None and getattr(cal, "factors", None):
-            return from_config_factors(cal.factors, cal.white_albedo)
-        return Calibration()
+        return calibration_in_effect(self.data_dir, self.rig_config)
 
     # ------------------------------------------------------------------ jobs
     def submit(self, request: JobRequest | dict[str, Any]) -> JobInfo:

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from gonio import hal
-from gonio.calibration import Calibration, calibrated_samples, from_reference
+from gonio.calibration import CALIBRATION_FILE, Calibration, calibrated_samples, from_reference
 from gonio.engine import ScanEngine
 from gonio.jobstates import JobState
 from gonio.plans import (
@@ -240,7 +240,7 @@ class Worker:
                 exposure_s=plan.exposure.exposure_s,
                 source=f"job {job_id}: {plan.reference_name}",
             )
-            cal_path = self.data_dir / "calibration.json"
+            cal_path = self.data_dir / CALIBRATION_FILE
             cal_path.parent.mkdir(parents=True, exist_ok=True)
             cal_path.write_text(new_cal.model_dump_json(indent=2))
             provenance["new_calibration"] = new_cal.model_dump_json()

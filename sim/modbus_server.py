@@ -38,12 +38,12 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 import numpy as np
-from gonio.sim.specimen import NoiseModel, Specimen, expected_counts, sample_counts
 from pymodbus.constants import ExcCodes
 from pymodbus.server import ModbusTcpServer
 from pymodbus.simulator import DataType, SimData, SimDevice
 
 from gonio.config import LightRegisters, Register, SensorRegisters
+from gonio.sim.specimen import NoiseModel, Specimen, expected_counts, sample_counts
 
 __all__ = ["AngleSource", "ModbusRigServer", "SimLampSpec", "SimSensorSpec"]
 

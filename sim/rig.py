@@ -24,10 +24,6 @@ from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
-from gonio.sim.faults import FaultPlan
-from gonio.sim.modbus_server import ModbusRigServer, SimLampSpec, SimSensorSpec
-from gonio.sim.motion import StageMotion
-from gonio.sim.specimen import BRDFLike, NoiseModel, Specimen
 
 from gonio.brdf import library
 from gonio.brdf.models import GGX, Lambert, LobeSum
@@ -45,6 +41,10 @@ from gonio.config import (
     dump_rig_config,
 )
 from gonio.hal import LabDirection
+from gonio.sim.faults import FaultPlan
+from gonio.sim.modbus_server import ModbusRigServer, SimLampSpec, SimSensorSpec
+from gonio.sim.motion import StageMotion
+from gonio.sim.specimen import BRDFLike, NoiseModel, Specimen
 
 __all__ = [
     "DEFAULT_LIGHTS",

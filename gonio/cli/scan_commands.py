@@ -59,6 +59,36 @@ def register(subparsers: Any) -> None:
     j.set_defaults(func=_jobs)
 
 
+async def _calibrate_sim(sim: Any, store: Any, worker: Any, desc: Any, data_dir: Path) -> Any:
+    """Measure the simulated white reference with a calibration job, then put the specimen back.
+
+    The simulated rig gets the same calibration a lab gives a real one, so ``--sim`` scans come
+    out in 1/sr.
+    """
+    from gonio.calibration import CALIBRATION_FILE, Calibration
+    from gonio.jobstates import JobState
+    from gonio.plans import CalibrationPlan
+    from gonio.sim.rig import WHITE_REFERENCE_ALBEDO
+
+    plan = CalibrationPlan(reference_albedo=WHITE_REFERENCE_ALBEDO,
+                           reference_name=f"simulated white reference, albedo "
+                                          f"{WHITE_REFERENCE_ALBEDO:g}")
+    specimen = sim.place_white_reference(WHITE_REFERENCE_ALBEDO).brdf
+    try:
+        job = store.create_job(kind=plan.kind, specimen=plan.reference_name,
+                               plan=plan.model_dump(mode="json"),
+                               rig=desc.model_dump(mode="json"))
+        print(f"calibrating the simulated rig on a white reference (job {job.id})",
+              file=sys.stderr)
+        final = await worker.run_job(store.get_job(job.id))
+    finally:
+        sim.place_specimen(specimen)
+    if final is not JobState.COMPLETED:
+        raise UsageError(f"calibration of the simulated rig {final.value}: "
+                         f"{store.get_job(job.id).reason}")
+    return Calibration.model_validate_json((data_dir / CALIBRATION_FILE).read_text())
+
+
 def _plan(args: argparse.Namespace) -> Any:
     from gonio.plans import AdaptivePlan, ExposureSettings, UniformPlan
 
@@ -91,14 +121,14 @@ def _scan(args: argparse.Namespace) -> int:
 
         config = load_rig_config(args.rig)
     try:
-        return asyncio.run(_run_scan(args, plan, config))
+        return asyncio.run(_run_scan(args, plan, config, sim))
     finally:
         if sim is not None:
             sim.close()
 
 
-async def _run_scan(args: argparse.Namespace, plan: Any, config: Any) -> int:
-    from gonio.calibration import Calibration
+async def _run_scan(args: argparse.Namespace, plan: Any, config: Any, sim: Any = None) -> int:
+    from gonio.calibration import Calibration, calibration_in_effect
     from gonio.drivers.factory import build_rig
     from gonio.jobstates import JobState
     from gonio.plans import RigDescription, dry_run
@@ -114,12 +144,14 @@ async def _run_scan(args: argparse.Namespace, plan: Any, config: Any) -> int:
     out: Path = args.output
     db = args.db or out.with_name(out.name + ".jobs.sqlite")
     store = JobStore(db)
-    cal = Calibration()
+    data_dir = out.parent / (out.stem + ".data")
+    # The same rule as the daemon: the latest calibration job here, else the rig config's
+    # [calibration] factors; --calibration overrides both.
+    cal = calibration_in_effect(data_dir, config)
     if args.calibration is not None:
         if not args.calibration.is_file():
             raise UsageError(f"calibration file {args.calibration} does not exist")
         cal = Calibration.model_validate_json(args.calibration.read_text())
-    data_dir = out.parent / (out.stem + ".data")
     connected = False
 
     async def get_rig() -> Any:
@@ -138,6 +170,8 @@ async def _run_scan(args: argparse.Namespace, plan: Any, config: Any) -> int:
         print(f"resuming job {job.id} from its checkpoint ({job.done_angles} of "
               f"{job.total_angles} angles done)", file=sys.stderr)
     else:
+        if sim is not None and args.calibration is None:
+            cal = await _calibrate_sim(sim, store, worker, desc, data_dir)
         job = store.create_job(kind=plan.kind, specimen=plan.specimen,
                                plan=plan.model_dump(mode="json"),
                                rig=desc.model_dump(mode="json"))
@@ -156,7 +190,9 @@ async def _run_scan(args: argparse.Namespace, plan: Any, config: Any) -> int:
     out.parent.mkdir(parents=True, exist_ok=True)
     shutil.move(row.result_path, out)
     summary = row.summary or {}
-    print(f"job {job.id} completed: {summary.get('n_samples', summary.get('readings'))} samples, "
+    units = "1/sr" if cal.pairs else "sensor units (uncalibrated)"
+    print(f"job {job.id} completed: {summary.get('n_samples', summary.get('readings'))} samples "
+          f"in {units}, "
           f"self-estimated error {100 * (summary.get('predicted_error') or float('nan')):.1f} %; "
           f"wrote {out}")
     return 0

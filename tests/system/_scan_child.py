@@ -10,10 +10,9 @@ import asyncio
 import sys
 
 from gonio.drivers.factory import build_rig
-from gonio.sim.rig import SimRigOptions, start_sim_rig
-
 from gonio.engine import ScanEngine
 from gonio.plans import ExposureSettings, RigDescription, UniformPlan, parse_plan
+from gonio.sim.rig import SimRigOptions, start_sim_rig
 from gonio.store import JobStore
 
 

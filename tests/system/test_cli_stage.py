@@ -6,9 +6,9 @@ import re
 from pathlib import Path
 
 import pytest
-from gonio.sim.rig import SimRigOptions, start_sim_rig
 
 from gonio.cli import main
+from gonio.sim.rig import SimRigOptions, start_sim_rig
 
 pytestmark = pytest.mark.timeout(120)
 

@@ -11,12 +11,12 @@ from contextlib import contextmanager
 from typing import Any
 
 import pytest
+
 from gonio.drivers._arrival import trapezoid_s
 from gonio.drivers.dynamixel import DynamixelStage
+from gonio.hal import DeviceUnavailable, StageFault, TravelLimits
 from gonio.sim.dynamixel_device import DynamixelSimHandle, start_dynamixel_sim
 from gonio.sim.motion import StageMotion
-
-from gonio.hal import DeviceUnavailable, StageFault, TravelLimits
 
 pytestmark = [pytest.mark.system, pytest.mark.timeout(60)]
 

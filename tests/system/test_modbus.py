@@ -14,16 +14,6 @@ from typing import Any
 
 import numpy as np
 import pytest
-from gonio.drivers.modbus import ModbusLight, ModbusPool, ModbusSensor, decode, encode
-from gonio.sim.modbus_server import (
-    ModbusRigServer,
-    SimLampSpec,
-    SimSensorSpec,
-    from_words,
-    to_words,
-)
-from gonio.sim.motion import StageMotion
-from gonio.sim.specimen import NoiseModel, Specimen
 from pymodbus.client import AsyncModbusTcpClient
 
 from gonio.brdf.models import Lambert
@@ -35,7 +25,17 @@ from gonio.config import (
     SensorConfig,
     SensorRegisters,
 )
+from gonio.drivers.modbus import ModbusLight, ModbusPool, ModbusSensor, decode, encode
 from gonio.hal import DeviceFault, DeviceUnavailable, LabDirection, LampOutOfBand
+from gonio.sim.modbus_server import (
+    ModbusRigServer,
+    SimLampSpec,
+    SimSensorSpec,
+    from_words,
+    to_words,
+)
+from gonio.sim.motion import StageMotion
+from gonio.sim.specimen import NoiseModel, Specimen
 
 pytestmark = pytest.mark.system
 

@@ -7,14 +7,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from gonio.drivers.factory import build_rig
-from gonio.sim.rig import SimRig, SimRigOptions, start_sim_rig
 
 from gonio.calibration import Calibration, PairCalibration
+from gonio.drivers.factory import build_rig
 from gonio.jobstates import JobState
 from gonio.plans import AdaptivePlan, ExposureSettings, UniformPlan
 from gonio.results import read_result
 from gonio.service import GonioService, JobRequest
+from gonio.sim.rig import SimRig, SimRigOptions, start_sim_rig
 from gonio.store import JobStore
 
 pytestmark = [pytest.mark.system, pytest.mark.slow]

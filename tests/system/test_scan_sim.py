@@ -12,10 +12,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from gonio.drivers.factory import build_rig
-from gonio.sim.rig import SimRig, SimRigOptions, start_sim_rig
 
 from gonio.calibration import Calibration, PairCalibration, calibrated_samples
+from gonio.drivers.factory import build_rig
 from gonio.engine import ScanEngine
 from gonio.jobstates import JobState
 from gonio.plans import (
@@ -29,6 +28,7 @@ from gonio.plans import (
     plan_pairs,
     validate_plan,
 )
+from gonio.sim.rig import SimRig, SimRigOptions, start_sim_rig
 from gonio.store import JobStore
 
 pytestmark = pytest.mark.system

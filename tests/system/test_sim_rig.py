@@ -10,12 +10,12 @@ from typing import Any
 
 import numpy as np
 import pytest
-from gonio.drivers.factory import build_rig
-from gonio.sim.rig import SimRigOptions, start_sim_rig
 
 from gonio.cli import COMMAND_MODULES, UsageError, sim_command
 from gonio.config import load_rig_config
+from gonio.drivers.factory import build_rig
 from gonio.hal import DeviceUnavailable
+from gonio.sim.rig import SimRigOptions, start_sim_rig
 
 pytestmark = pytest.mark.system
 

@@ -10,12 +10,12 @@ from contextlib import contextmanager
 from typing import Any
 
 import pytest
+
 from gonio.drivers._arrival import trapezoid_s
 from gonio.drivers.zaber import ZaberStage
+from gonio.hal import DeviceUnavailable, StageFault, TravelLimits
 from gonio.sim.motion import StageMotion
 from gonio.sim.zaber_device import SPEED_FACTOR, ZaberSimHandle, start_zaber_sim
-
-from gonio.hal import DeviceUnavailable, StageFault, TravelLimits
 
 pytestmark = [pytest.mark.system, pytest.mark.timeout(60)]
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import pytest
+
 from gonio.drivers._arrival import FINE_POLL_S, poll_delay, trapezoid_s
 
 

@@ -14,15 +14,15 @@ from typing import Any
 
 import numpy as np
 import pytest
-from gonio.drivers.factory import build_rig
-from gonio.sim.rig import WHITE_REFERENCE_ALBEDO, SimRigOptions, start_sim_rig
 
 from gonio.calibration import Calibration
 from gonio.cli.serve_command import start_sim_calibration
+from gonio.drivers.factory import build_rig
 from gonio.jobstates import JobState
 from gonio.plans import UniformPlan
 from gonio.results import read_result
 from gonio.service import GonioService, JobRequest
+from gonio.sim.rig import WHITE_REFERENCE_ALBEDO, SimRigOptions, start_sim_rig
 from gonio.store import JobStore
 
 pytestmark = pytest.mark.system

@@ -9,12 +9,13 @@ from __future__ import annotations
 
 import dynamixel_sdk as sdk
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
 from gonio.sim import dynamixel_protocol as dxl
 from gonio.sim.dynamixel_device import DynamixelAdapter, XSeriesServo
 from gonio.sim.faults import FaultPlan
 from gonio.sim.motion import StageMotion
-from hypothesis import given
-from hypothesis import strategies as st
 
 H = bytes.fromhex
 

@@ -5,12 +5,12 @@ from __future__ import annotations
 import math
 
 import pytest
-from gonio.drivers._backlash import approach_waypoints, check_approach, check_target
-from gonio.sim.motion import StageMotion, plan_phases
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from gonio.drivers._backlash import approach_waypoints, check_approach, check_target
 from gonio.hal import TravelLimits
+from gonio.sim.motion import StageMotion, plan_phases
 
 
 class FakeClock:

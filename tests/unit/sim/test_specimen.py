@@ -6,6 +6,10 @@ import math
 
 import numpy as np
 import pytest
+from numpy.typing import ArrayLike, NDArray
+
+from gonio.brdf.models import Lambert
+from gonio.hal import LabDirection
 from gonio.sim.specimen import (
     NoiseModel,
     Specimen,
@@ -13,10 +17,6 @@ from gonio.sim.specimen import (
     expected_counts,
     sample_counts,
 )
-from numpy.typing import ArrayLike, NDArray
-
-from gonio.brdf.models import Lambert
-from gonio.hal import LabDirection
 
 
 class _SpecimenX:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import pytest
+
 from gonio.drivers.zaber import Reply
 from gonio.sim.faults import FaultPlan
 from gonio.sim.motion import StageMotion
