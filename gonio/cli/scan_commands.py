@@ -45,6 +45,9 @@ def register(subparsers: Any) -> None:
     p.add_argument("--specimen", default="specimen", help="specimen name")
     p.add_argument("--calibration", type=Path, default=None,
                    help="calibration JSON (from a calibration job) to apply")
+    p.add_argument("--white-reference", type=float, default=None, metavar="ALBEDO",
+                   help="the stage holds a white reference of this albedo (e.g. 0.99): run a "
+                        "calibration job and write OUTPUT.calibration.json for later --calibration")
     p.add_argument("--db", type=Path, default=None, help="job store (SQLite)")
     p.add_argument("--dry-run", action="store_true", help="print the plan's steps and duration")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -90,10 +93,20 @@ async def _calibrate_sim(sim: Any, store: Any, worker: Any, desc: Any, data_dir:
 
 
 def _plan(args: argparse.Namespace) -> Any:
-    from gonio.plans import AdaptivePlan, ExposureSettings, UniformPlan
+    from gonio.plans import AdaptivePlan, CalibrationPlan, ExposureSettings, UniformPlan
 
     ex = ExposureSettings(exposure_s=args.exposure, averages=args.averages,
                           light_settle_s=args.light_settle)
+    if args.white_reference is not None:
+        if args.adaptive or args.calibration is not None:
+            raise UsageError("--white-reference runs a calibration: it takes no --adaptive or "
+                             "--calibration")
+        if not 0 < args.white_reference <= 1:
+            raise UsageError(f"--white-reference is the reference's albedo, in (0, 1]; got "
+                             f"{args.white_reference:g}")
+        return CalibrationPlan(reference_albedo=args.white_reference,
+                               reference_name=args.specimen, exposure=ex,
+                               rotations=args.rotations, start_deg=args.start_deg)
     if args.adaptive:
         return AdaptivePlan(specimen=args.specimen, exposure=ex, initial_rotations=args.rotations,
                             threshold=args.threshold, max_samples=args.max_samples,
@@ -170,7 +183,7 @@ async def _run_scan(args: argparse.Namespace, plan: Any, config: Any, sim: Any =
         print(f"resuming job {job.id} from its checkpoint ({job.done_angles} of "
               f"{job.total_angles} angles done)", file=sys.stderr)
     else:
-        if sim is not None and args.calibration is None:
+        if sim is not None and args.calibration is None and plan.kind != "calibration":
             cal = await _calibrate_sim(sim, store, worker, desc, data_dir)
         job = store.create_job(kind=plan.kind, specimen=plan.specimen,
                                plan=plan.model_dump(mode="json"),
@@ -190,6 +203,16 @@ async def _run_scan(args: argparse.Namespace, plan: Any, config: Any, sim: Any =
     out.parent.mkdir(parents=True, exist_ok=True)
     shutil.move(row.result_path, out)
     summary = row.summary or {}
+    if plan.kind == "calibration":
+        from gonio.calibration import CALIBRATION_FILE
+        from gonio.plans import plan_pairs
+
+        cal_out = out.with_name(out.stem + ".calibration.json")
+        shutil.copyfile(data_dir / CALIBRATION_FILE, cal_out)
+        n_pairs = len(plan_pairs(plan, desc))
+        print(f"job {job.id} completed: calibration of {n_pairs} pairs written to {cal_out}; "
+              f"apply it with --calibration {cal_out}")
+        return 0
     units = "1/sr" if cal.pairs else "sensor units (uncalibrated)"
     print(f"job {job.id} completed: {summary.get('n_samples', summary.get('readings'))} samples "
           f"in {units}, "

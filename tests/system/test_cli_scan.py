@@ -59,3 +59,44 @@ def test_rig_config_calibration_is_used_until_a_calibration_job_replaces_it(
     job_cal = Calibration(source="job 7: white reference")
     (data / CALIBRATION_FILE).write_text(job_cal.model_dump_json())
     assert calibration_in_effect(data, cfg).source == "job 7: white reference"
+
+
+def test_white_reference_calibration_then_a_calibrated_scan(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The lab workflow on a rig config: calibrate on the reference, then scan with it."""
+    from gonio.sim.rig import SimRigOptions, start_sim_rig
+
+    rig = tmp_path / "rig.toml"
+    with start_sim_rig(SimRigOptions(time_scale=10.0, settle_s=0.0, config_path=rig)) as sim:
+        sim.place_white_reference(0.99)
+        cal_h5 = tmp_path / "white.h5"
+        assert main(["scan", "--rig", str(rig), "--white-reference", "0.99", "--rotations", "2",
+                     "--no-progress", "-o", str(cal_h5)]) == 0
+        cal_json = tmp_path / "white.calibration.json"
+        assert f"--calibration {cal_json}" in capsys.readouterr().out
+        sim.place_specimen(default_material())
+        out = tmp_path / "scan.h5"
+        assert main(["scan", "--rig", str(rig), "--calibration", str(cal_json), "--rotations",
+                     "4", "--no-progress", "-o", str(out)]) == 0
+        assert "in 1/sr" in capsys.readouterr().out
+        s = read_result(out).samples
+        truth = np.stack([[sim.true_brdf(a, b, ang) for ang in s.stage_angles_deg]
+                          for a, b in s.pairs])
+        rel = np.abs(s.values - truth) / np.maximum(truth, 0.05 * truth.max())
+        assert float(np.median(rel)) < 0.05
+
+
+@pytest.mark.parametrize(
+    ("extra", "words"),
+    [
+        (["--white-reference", "1.5"], "albedo, in (0, 1]"),
+        (["--white-reference", "0.99", "--adaptive"], "takes no --adaptive"),
+    ],
+)
+def test_bad_white_reference_requests(
+    extra: list[str], words: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    argv = ["scan", "--rig", "deploy/rig.example.toml", *extra, "-o", "unused.h5"]
+    assert main(argv) == 2
+    assert words in capsys.readouterr().err
