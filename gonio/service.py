@@ -509,7 +509,7 @@ class GonioService:
         return dict(row.summary)
 
     def preview_png(self, job_id: int) -> bytes:
-        """PNG preview of the reconstructed table (:func:`gonio.brdf.preview.preview_image`).
+        """PNG preview of the reconstructed table (:func:`gonio.brdf.preview.preview_png`).
 
         Blocking (reads the result file, renders): call it from a thread in async code. The
         PNG of the last few results is kept, since a finished result file never changes.
@@ -530,15 +530,9 @@ class GonioService:
         res = read_result(path)
         if res.table is None:
             raise NotFound(f"job {job_id} is a {res.attrs.get('kind')} job without a BRDF")
-        import io
+        from gonio.brdf.preview import preview_png
 
-        from PIL import Image
-
-        from gonio.brdf.preview import preview_image
-
-        buf = io.BytesIO()
-        Image.fromarray(preview_image(res.table)).save(buf, format="PNG")
-        png = buf.getvalue()
+        png = preview_png(res.table, title=f"job {job_id}: {res.table.name}")
         with self._preview_lock:
             self._previews[key] = png
             while len(self._previews) > _PREVIEW_CACHE:

@@ -66,10 +66,49 @@ def preview_image(table: BRDFTable, scale: int = 10, gap: int = 4) -> NDArray[np
     return img
 
 
-def save_preview(table: BRDFTable, path: str | os.PathLike[str], scale: int = 10) -> Path:
-    """Write :func:`preview_image` of ``table`` as a PNG; returns the path."""
-    from PIL import Image
+def preview_png(table: BRDFTable, scale: int = 10, title: str | None = None) -> bytes:
+    """PNG bytes of :func:`preview_image` with its key drawn around it.
 
+    A heading names each column's ``ph`` and each row's ``pd``, and a footer states the axes
+    and the log scale, so the image reads on its own (lab page, demo output, result viewers).
+
+    Parameters
+    ----------
+    table : BRDFTable
+    scale : int
+        Pixels per grid cell.
+    title : str, optional
+        First line of the footer (default: the table's name).
+    """
+    import io
+
+    from PIL import Image, ImageDraw
+
+    gap = 4
+    mosaic = preview_image(table, scale, gap)
+    panel = geo.N_TH * scale
+    left, top, bottom = 64, 18, 34
+    canvas = Image.new("RGB", (mosaic.shape[1] + left, mosaic.shape[0] + top + bottom), _GAP_RGB)
+    canvas.paste(Image.fromarray(mosaic), (left, top))
+    draw = ImageDraw.Draw(canvas)
+    ink = (30, 30, 30)
+    for c, ph in enumerate(PH_DEG):
+        draw.text((left + gap + c * (panel + gap) + 2, 3), f"phi_h = {ph} deg", fill=ink)
+    for r, pd in enumerate(PD_DEG):
+        y = top + gap + r * (panel + gap) + panel // 2 - 12
+        draw.text((4, y), f"phi_d =\n{pd} deg", fill=ink)
+    y = top + mosaic.shape[0] + 3
+    name = table.name if title is None else title
+    draw.text((left, y), f"{name}: log10 BRDF (1/sr), top {LOG_SPAN:g} decades", fill=ink)
+    draw.text((left, y + 14), "each panel: theta_h 0-85 deg down, theta_d 0-85 deg right",
+              fill=ink)
+    buf = io.BytesIO()
+    canvas.save(buf, format="PNG")
+    return buf.getvalue()
+
+
+def save_preview(table: BRDFTable, path: str | os.PathLike[str], scale: int = 10) -> Path:
+    """Write :func:`preview_png` of ``table``; returns the path."""
     p = Path(path)
-    Image.fromarray(preview_image(table, scale)).save(p, format="PNG")
+    p.write_bytes(preview_png(table, scale))
     return p

@@ -94,3 +94,20 @@ def test_preview_png(tmp_path: Path) -> None:
     assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     with pytest.raises(ValueError, match="scale"):
         preview_image(t, scale=0)
+
+
+def test_preview_png_carries_its_key() -> None:
+    import io
+
+    from PIL import Image
+
+    from gonio.brdf.preview import preview_png
+
+    t = constant(0.2)
+    mosaic = preview_image(t, scale=3)
+    img = np.asarray(Image.open(io.BytesIO(preview_png(t, scale=3, title="felt"))))
+    # The mosaic sits inside a larger canvas whose margins hold text (dark pixels on white).
+    assert img.shape[0] > mosaic.shape[0] and img.shape[1] > mosaic.shape[1]
+    heading, footer, side = img[:15], img[-30:], img[:, :50]
+    for band in (heading, footer, side):
+        assert (band.sum(axis=-1) < 300).any()
