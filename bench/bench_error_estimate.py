@@ -40,9 +40,11 @@ import time
 from collections import defaultdict
 from collections.abc import Callable
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
+
+# Run as `python bench/bench_error_estimate.py`, so the sibling script is importable.
+from bench_quality import rgl_tables
 from scipy.stats import spearmanr
 
 from gonio.brdf import metrics
@@ -52,8 +54,6 @@ from gonio.brdf.reconstruct import CV_ERROR_SCALES, reconstruct
 from gonio.brdf.samples import NoiseModel, simulate_samples, uniform_stage_angles
 from gonio.brdf.table import BRDFTable
 from gonio.cli.brdf_commands import simple_pairs
-
-RGL_DIR = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "rgl"
 
 
 @dataclass(frozen=True)
@@ -91,19 +91,6 @@ def holdout_basis(train: list[BRDFTable], per_family: int, k: int) -> Basis:
     path.parent.mkdir(parents=True, exist_ok=True)
     basis.save(path)
     return basis
-
-
-def rgl_tables() -> list[BRDFTable]:
-    if not RGL_DIR.is_dir():
-        print(f"RGL data not found at {RGL_DIR}: skipped")
-        return []
-    try:
-        from gonio.brdf.rgl import read_rgl
-
-        return [read_rgl(p) for p in sorted(RGL_DIR.glob("*.bsdf"))]
-    except Exception as exc:  # missing mitsuba or a reader problem: report and go on
-        print(f"RGL materials skipped: {exc}")
-        return []
 
 
 PairsFn = Callable[[int], tuple[np.ndarray, np.ndarray]]

@@ -246,16 +246,7 @@ class Basis:
         axes.append((i0 % geo.N_PD, (i0 + 1) % geo.N_PD, t))
         rows = np.empty((th_.size, 8), dtype=np.intp)
         weights = np.empty((th_.size, 8))
-        for corner in range(8):
-            idx = []
-            w = np.ones(th_.size)
-            for axis, (lo, hi, frac) in enumerate(axes):
-                if (corner >> axis) & 1:
-                    idx.append(hi)
-                    w = w * frac
-                else:
-                    idx.append(lo)
-                    w = w * (1.0 - frac)
+        for corner, (idx, w) in enumerate(geo.lattice_corners(axes)):
             rows[:, corner] = geo.flat_row(*idx)
             weights[:, corner] = w
         weights = np.where(self.valid[rows], weights, 0.0)

@@ -15,6 +15,8 @@ Conventions (MATH.md sections 1-3, 9):
 
 from __future__ import annotations
 
+from collections.abc import Iterator, Sequence
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -207,3 +209,34 @@ def flat_row(i_th: ArrayLike, i_td: ArrayLike, i_pd: ArrayLike) -> NDArray[np.in
     return np.ravel_multi_index(
         (np.asarray(i_th), np.asarray(i_td), np.asarray(i_pd)), SLICE_SHAPE
     ).astype(np.intp)
+
+
+def lattice_corners(
+    axes: Sequence[tuple[NDArray[np.intp], NDArray[np.intp], FloatArray]],
+) -> Iterator[tuple[list[NDArray[np.intp]], FloatArray]]:
+    """The ``2**d`` corners of the grid cell around each of N points, for multilinear blends.
+
+    Parameters
+    ----------
+    axes : sequence of d ``(lo, hi, frac)`` triples of (N,) arrays
+        Lower and upper grid index along each axis and the fraction of the way from lo to hi.
+
+    Yields
+    ------
+    index : list of d (N,) int arrays
+        The corner's grid index along each axis.
+    weight : (N,) array
+        Its multilinear weight; the weights of all corners sum to 1.
+    """
+    n = axes[0][2].shape[0]
+    for corner in range(1 << len(axes)):
+        index = []
+        weight = np.ones(n)
+        for axis, (lo, hi, frac) in enumerate(axes):
+            if (corner >> axis) & 1:
+                index.append(hi)
+                weight = weight * frac
+            else:
+                index.append(lo)
+                weight = weight * (1.0 - frac)
+        yield index, weight

@@ -231,16 +231,7 @@ class BRDFTable:
         vals = self.values
         acc = np.zeros((x.size, self.n_channels))
         wsum = np.zeros(x.size)
-        for corner in range(16):
-            idx = []
-            w = np.ones(x.size)
-            for axis, (lo, hi, t) in enumerate(coords):
-                if (corner >> axis) & 1:
-                    idx.append(hi)
-                    w = w * t
-                else:
-                    idx.append(lo)
-                    w = w * (1 - t)
+        for idx, w in geo.lattice_corners(coords):
             v = vals[:, idx[0], idx[1], idx[2], idx[3]].T  # (N, C)
             ok = np.isfinite(v).all(axis=1) & (w > 0)
             acc[ok] += w[ok, None] * v[ok]
