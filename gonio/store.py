@@ -31,11 +31,15 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 from gonio.jobstates import ACTIVE_STATES, JobState, check_action, check_transition
 
 SCHEMA_VERSION = 1
+# How long a connection waits on a lock held by another writer, and how long opening a new
+# store keeps retrying while concurrent openers create it.
+_BUSY_TIMEOUT_MS = 5000
+_OPEN_RETRY_S = 30.0
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -194,21 +198,8 @@ class JobStore:
         self._readers_lock = threading.Lock()
         self._local = threading.local()
         self._closed = False
-        try:
-            self._db = sqlite3.connect(self.path, check_same_thread=False, isolation_level=None)
-            self._db.execute("PRAGMA journal_mode=WAL")
-            self._db.execute(f"PRAGMA synchronous={'FULL' if durable else 'NORMAL'}")
-            self._db.execute("PRAGMA foreign_keys=ON")
-            self._db.execute("PRAGMA busy_timeout=5000")
-            self._db.executescript(_SCHEMA)
-            row = self._db.execute("SELECT value FROM meta WHERE key='schema'").fetchone()
-            self._job_cols = tuple(
-                d[0] for d in self._db.execute("SELECT * FROM jobs LIMIT 0").description
-            )
-        except sqlite3.DatabaseError as exc:
-            raise StoreError(
-                f"{self.path} is not a usable gonio job store ({exc}); point --db at a new file"
-            ) from None
+        self._db = sqlite3.connect(self.path, check_same_thread=False, isolation_level=None)
+        row = self._initialise(durable)
         if row is None:
             # Two processes may create the same new store at once: the first insert wins and
             # the other must then read (and check) the version the first one wrote.
@@ -222,6 +213,47 @@ class JobStore:
                 f"{self.path} has store schema {row[0]}, this gonio reads {SCHEMA_VERSION}; "
                 "use a matching gonio version or a new database file"
             )
+
+    def _initialise(self, durable: bool) -> tuple[Any, ...] | None:
+        """Set the connection up and create the schema; return the stored schema-version row.
+
+        Concurrent openers of one new file can get SQLITE_BUSY from the switch to WAL or from
+        the schema script without the busy handler being consulted (SQLite returns it at once
+        where waiting could deadlock), so a *locked* database is retried for a while; any other
+        database error means the file is not a gonio store.
+        """
+        deadline = time.monotonic() + _OPEN_RETRY_S
+        delay = 0.01
+        while True:
+            try:
+                # busy_timeout first: the WAL switch and the schema script need it too.
+                self._db.execute(f"PRAGMA busy_timeout={_BUSY_TIMEOUT_MS}")
+                self._db.execute("PRAGMA journal_mode=WAL")
+                self._db.execute(f"PRAGMA synchronous={'FULL' if durable else 'NORMAL'}")
+                self._db.execute("PRAGMA foreign_keys=ON")
+                self._db.executescript(_SCHEMA)
+                row = self._db.execute("SELECT value FROM meta WHERE key='schema'").fetchone()
+                self._job_cols = tuple(
+                    d[0] for d in self._db.execute("SELECT * FROM jobs LIMIT 0").description
+                )
+                return cast("tuple[Any, ...] | None", row)
+            except sqlite3.OperationalError as exc:
+                busy = "locked" in str(exc) or "busy" in str(exc)
+                if busy and time.monotonic() < deadline:
+                    time.sleep(delay)
+                    delay = min(delay * 2, 0.5)
+                    continue
+                self._db.close()
+                raise StoreError(
+                    f"{self.path} is not a usable gonio job store ({exc}); "
+                    "point --db at a new file"
+                ) from None
+            except sqlite3.DatabaseError as exc:
+                self._db.close()
+                raise StoreError(
+                    f"{self.path} is not a usable gonio job store ({exc}); "
+                    "point --db at a new file"
+                ) from None
 
     # ------------------------------------------------------------------ plumbing
     @contextmanager
@@ -258,7 +290,7 @@ class JobStore:
         # check_same_thread=False only so close() can close it from another thread; it is used
         # by its own thread alone.
         conn = sqlite3.connect(self.path, check_same_thread=False, isolation_level=None)
-        conn.execute("PRAGMA busy_timeout=5000")
+        conn.execute(f"PRAGMA busy_timeout={_BUSY_TIMEOUT_MS}")
         conn.execute("PRAGMA query_only=ON")
         me = threading.current_thread()
         with self._readers_lock:
