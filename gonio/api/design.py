@@ -17,7 +17,6 @@ import math
 from typing import Any
 
 import numpy as np
-import tomli_w
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from gonio.brdf.design import (
@@ -171,6 +170,8 @@ def rig_fragment(design: PairDesign) -> dict[str, Any]:
 
 def describe(design: PairDesign, rotations: int) -> DesignResult:
     """The API view of a :class:`~gonio.brdf.design.PairDesign`."""
+    from gonio.rigdesign import dump_fragment
+
     angles = np.arange(rotations) * (2.0 * np.pi / rotations)
     bound = roughness_bound(design.cells, design.ph_lab, angles)
     frag = rig_fragment(design)
@@ -198,7 +199,7 @@ def describe(design: PairDesign, rotations: int) -> DesignResult:
         search=None if search is None else SearchInfo(
             neighbourhoods=search.neighbourhoods, evaluations=search.evaluations,
             seconds=search.seconds),
-        rig_config_toml=tomli_w.dumps(frag),
+        rig_config_toml=dump_fragment(frag),
     )
 
 

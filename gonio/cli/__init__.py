@@ -21,6 +21,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "gonio.cli.serve_command",
     "gonio.cli.design_command",
     "gonio.cli.stage_command",
+    "gonio.cli.rig_command",
 )
 
 

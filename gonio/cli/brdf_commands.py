@@ -11,7 +11,12 @@ Three spellings are read:
 * CSV with a header row naming the four columns;
 * JSON: ``{"pairs": [{"theta_i": 45, "phi_i": 0, "theta_v": 30, "phi_v": 180}, ...]}`` or the
   bare list;
-* TOML: ``[[pairs]]`` tables with the same keys.
+* TOML: ``[[pairs]]`` tables with the same keys;
+* TOML design fragment (``gonio design -o``) or rig config: ``[[lights]]`` and ``[[sensors]]``
+  with ``name``, ``theta_deg``, ``phi_deg``, and ``[[pairs]]`` of ``light``/``sensor`` names
+  (or ``pairs = "all"``).
+
+docs/file-formats.md ("Pairs file") has examples of each.
 """
 
 from __future__ import annotations
@@ -68,12 +73,36 @@ def _rows_from_file(path: Path) -> list[Mapping[str, Any]]:
     return list(data)
 
 
+def _design_rows(path: Path) -> list[Mapping[str, Any]] | None:
+    """Lab-direction rows of a design fragment or rig config (``[[lights]]``/``[[sensors]]``
+    tables and named pairs), or None when the TOML file is a plain pairs list."""
+    from gonio.rigdesign import parse_fragment
+
+    try:
+        data = tomllib.loads(path.read_text())
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise UsageError(f"pairs file {path} cannot be parsed: {exc}") from None
+    if "lights" not in data and "sensors" not in data:
+        return None
+    design = parse_fragment(data, path.name)  # ConfigError: one clear message
+    return [
+        {"theta_i": design.light(a).theta_deg, "phi_i": design.light(a).phi_deg,
+         "theta_v": design.sensor(b).theta_deg, "phi_v": design.sensor(b).phi_deg}
+        for a, b in design.pair_names()
+    ]
+
+
 def read_pairs(path: str | Path) -> tuple[FloatArray, FloatArray]:
     """Cells (n, 3) and lab azimuths (n,), radians, from a pairs file (module docstring)."""
     from gonio.brdf.reconstruct import ReconstructionError, pair_cells
 
     p = Path(path)
-    rows = _rows_from_file(p)
+    if p.suffix.lower() == ".toml" and p.is_file():
+        rows = _design_rows(p)
+        if rows is None:
+            rows = _rows_from_file(p)
+    else:
+        rows = _rows_from_file(p)
     if not rows:
         raise UsageError(f"pairs file {p} lists no pairs")
     keys = set(rows[0])
@@ -323,7 +352,9 @@ def register(subparsers: Any) -> None:
     what.add_argument("--material", help="library material name, e.g. brushed-metal-003")
     what.add_argument("--table", help="gonio table .npz file")
     geom = s.add_mutually_exclusive_group(required=True)
-    geom.add_argument("--pairs", help="pairs file (.csv, .json or .toml; degrees)")
+    geom.add_argument("--pairs", help="pairs file: .csv, .json or .toml of lab directions or "
+                      "cells (degrees), or a design fragment from gonio design -o "
+                      "(docs/file-formats.md)")
     geom.add_argument("--design-preset", help="industrial geometry: MA68, MA98, BYK-mac, MultiFX10")
     s.add_argument("--rotations", "-r", type=int, required=True, help="stage angles, evenly spaced")
     s.add_argument("--start", type=float, default=0.0, help="first stage angle, degrees")

@@ -19,7 +19,6 @@ from pathlib import Path
 from typing import Any, TextIO
 
 import numpy as np
-import tomli_w
 
 from gonio.brdf.design import (
     BasisLike,
@@ -158,6 +157,69 @@ def fragment(design: PairDesign) -> dict[str, Any]:
     return out
 
 
+SINGULAR_KAPPA = 1e6
+"""Above this condition number the design gets an explanation of what makes it singular."""
+
+
+def explain_condition(design: PairDesign, rotations: int) -> list[str]:
+    """Why a design's condition number is infinite (or huge), and what that means for a scan.
+
+    Pairs whose half/difference cells coincide sample the same basis row (the pair's lab
+    azimuth does not enter the row), so the rows are linearly dependent. Pairs at the same
+    ``(th, td)`` with ``pd`` and ``180 - pd`` are mirror images, which a basis learned from
+    materials that are nearly mirror-symmetric barely tells apart.
+
+    Returns
+    -------
+    list of str
+        Lines to print; empty when the condition number is below :data:`SINGULAR_KAPPA`.
+    """
+    if design.kappa < SINGULAR_KAPPA:
+        return []
+    deg = np.rad2deg(design.cells)
+    n = design.n_pairs
+    lines = []
+    same: list[tuple[int, int]] = []
+    mirror: list[tuple[int, int]] = []
+    for i in range(n):
+        for j in range(i + 1, n):
+            close_thd = np.allclose(deg[i, :2], deg[j, :2], atol=1e-6)
+            if close_thd and abs(deg[i, 2] - deg[j, 2]) < 1e-6:
+                same.append((i, j))
+            elif close_thd and abs(deg[i, 2] + deg[j, 2] - 180.0) < 1e-6:
+                mirror.append((i, j))
+    for i, j in same:
+        c = deg[i]
+        lines.append(f"  why: pairs {i + 1} and {j + 1} sample the same cell (th {c[0]:.1f}, "
+                     f"td {c[1]:.1f}, pd {c[2]:.1f} deg): their basis rows are equal, so the "
+                     "rows are linearly dependent and the smallest singular value is 0")
+    if mirror:
+        listed = ", ".join(f"{i + 1}/{j + 1}" for i, j in mirror)
+        lines.append(f"  also: pairs {listed} are mirror images (pd and 180 - pd at the same "
+                     "th, td), which the basis barely tells apart")
+    if not lines:
+        lines.append("  why: the pairs' basis rows are (nearly) linearly dependent: some pairs "
+                     "repeat what others measure")
+    distinct = n - len({j for _, j in same})
+    step = 360.0 / rotations
+    repeats = [
+        (i, j) for i, j in same
+        if min(d := float(np.rad2deg(design.ph_lab[i] - design.ph_lab[j])) % step,
+               step - d) < 1e-6
+    ]
+    lines.append(
+        f"  for a scan: the regularized solve still reconstructs a BRDF (regularization fills "
+        f"what the rows leave open), but these {n} pairs sample at most {distinct} distinct "
+        "cells; a pair in another's cell adds only the specimen azimuths its lab azimuth "
+        "reaches"
+    )
+    for i, j in repeats:
+        lines.append(f"  at {rotations} uniform rotations pairs {i + 1} and {j + 1} reach the "
+                     "same specimen azimuths: they repeat each other's readings (which only "
+                     "averages noise)")
+    return lines
+
+
 def print_design(
     design: PairDesign, bound: RoughnessBound, rotations: int, out: TextIO | None = None
 ) -> None:
@@ -177,6 +239,8 @@ def print_design(
             file=out,
         )
     print(f"condition number: {design.kappa:.4g}", file=out)
+    for line in explain_condition(design, rotations):
+        print(line, file=out)
     print(f"closest two devices: {design.min_distance_deg:.1f} deg", file=out)
     if design.search is not None:
         s = design.search
@@ -199,7 +263,13 @@ def run(args: argparse.Namespace) -> int:
     bound = roughness_bound(design.cells, design.ph_lab, angles)
     print_design(design, bound, args.rotations)
     if args.output is not None:
+        from gonio.rigdesign import dump_fragment
+
         args.output.parent.mkdir(parents=True, exist_ok=True)
-        args.output.write_bytes(tomli_w.dumps(fragment(design)).encode())
-        print(f"wrote {args.output}")
+        header = (f"gonio design fragment: {design.name}, {design.n_pairs} pairs, condition "
+                  f"number {design.kappa:.4g}.\nMerge it into a rig config with "
+                  f"'gonio rig apply-design {args.output.name} rig.toml' (docs/rig-config.md).")
+        args.output.write_text(dump_fragment(fragment(design), header), encoding="utf-8")
+        print(f"wrote {args.output}; merge it with 'gonio rig apply-design {args.output} "
+              "rig.toml'")
     return 0

@@ -113,3 +113,42 @@ def test_user_errors_are_one_clear_line(argv: list[str], match: str, basis_file:
     assert main(["design", *FAST, *argv]) == 2
     err = capsys.readouterr().err
     assert err.startswith("gonio design: error:") and match in err
+
+
+def test_preset_with_a_repeated_cell_explains_its_infinite_condition_number(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from gonio.brdf.presets import get_preset
+
+    # More components than MA98 has pairs (as the default basis, K = 64): the 19 x 19 block
+    # of a repeated cell is singular.
+    rng = np.random.default_rng(1)
+    th_, td_, pd_ = (a.ravel() for a in geo.grid_angles())
+    K = 24
+    feats = np.stack([th_, td_, np.cos(2 * pd_), np.sin(2 * pd_)], axis=1)
+    Q = np.cos(feats @ rng.normal(size=(4, K)) * 3.0 + rng.uniform(0, 6, size=K))
+    basis_file = Basis(Q, np.linspace(2.0, 1.0, K), np.ones(geo.N_ROWS), np.zeros(geo.N_ROWS),
+                       geo.valid_mask().ravel()).save(tmp_path / "k24.npz")
+
+    # Independently of the CLI: which MA98 pairs have the same half/difference cell.
+    wi, wo = get_preset("MA98").directions()
+    th, _, td, pd = geo.directions_to_half_diff(wi, wo)
+    cells = np.round(np.degrees(np.stack([th, td, np.mod(pd, np.pi)], axis=1)), 6)
+    dup = [(i + 1, j + 1) for i in range(len(cells)) for j in range(i + 1, len(cells))
+           if np.array_equal(cells[i], cells[j])]
+    assert dup  # MA98 measures one cell twice
+    assert main(["design", "--preset", "MA98", "--basis", str(basis_file)]) == 0
+    text = capsys.readouterr().out
+    assert "condition number: inf" in text
+    for i, j in dup:
+        assert f"pairs {i} and {j} sample the same cell" in text
+    assert "the regularized solve still reconstructs" in text
+    assert f"at most {19 - len(dup)} distinct cells" in text
+
+
+def test_a_well_conditioned_design_gets_no_explanation(
+    basis_file: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["design", "--pairs", "3", "--basis", str(basis_file), *FAST]) == 0
+    text = capsys.readouterr().out
+    assert "condition number: inf" not in text and "why:" not in text

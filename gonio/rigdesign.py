@@ -1,0 +1,283 @@
+"""Design fragments: where a design puts lights and sensors, and merging that into a rig config.
+
+``gonio design -o geometry.toml`` writes a *design fragment*, a TOML file with the same tables a
+rig config uses for geometry (docs/file-formats.md)::
+
+    pairs = "all"            # product rigs only; independent pairs use [[pairs]] tables below
+
+    [[lights]]
+    name = "L1"
+    theta_deg = 32.5
+    phi_deg = 110.0
+
+    [[sensors]]
+    name = "S1"
+    theta_deg = 47.5
+    phi_deg = 290.0
+
+    [[pairs]]
+    light = "L1"
+    sensor = "S1"
+
+It carries no hardware (Modbus addresses, register maps). :func:`apply_design` merges it into
+a rig config (``gonio rig apply-design``), ``gonio sim --geometry`` mounts simulated devices
+there, and ``gonio simulate-scan --pairs`` reads its pairs.
+"""
+
+from __future__ import annotations
+
+import copy
+import os
+import tomllib
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+import tomli_w
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from gonio.config import ConfigError, parse_rig_config
+
+__all__ = [
+    "DesignDevice",
+    "DesignFragment",
+    "apply_design",
+    "dump_fragment",
+    "load_fragment",
+    "parse_fragment",
+]
+
+
+class DesignDevice(BaseModel):
+    """One light or sensor of a design: a name and a lab direction (degrees)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    name: Annotated[str, Field(min_length=1, pattern=r"^[A-Za-z0-9_.-]+$")]
+    theta_deg: Annotated[float, Field(ge=0, lt=90)]
+    phi_deg: float
+
+
+class DesignPair(BaseModel):
+    """One measured pair of a design, by device names."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    light: str
+    sensor: str
+
+
+class DesignFragment(BaseModel):
+    """A design fragment, validated: devices with directions and the pairs to measure.
+
+    Keys a full rig config has besides these (``rig``, ``stage``, ``calibration``, a device's
+    ``modbus`` ...) are ignored when reading, so a rig config is also a valid fragment.
+    """
+
+    model_config = ConfigDict(extra="ignore", frozen=True)
+
+    lights: Annotated[list[DesignDevice], Field(min_length=1)]
+    sensors: Annotated[list[DesignDevice], Field(min_length=1)]
+    pairs: Literal["all"] | Annotated[list[DesignPair], Field(min_length=1)] = "all"
+
+    @model_validator(mode="after")
+    def _check(self) -> DesignFragment:
+        names = [d.name for d in self.lights] + [d.name for d in self.sensors]
+        dup = sorted({n for n in names if names.count(n) > 1})
+        if dup:
+            raise ValueError(f"device names repeat: {dup}")
+        if isinstance(self.pairs, list):
+            lights = {d.name for d in self.lights}
+            sensors = {d.name for d in self.sensors}
+            for k, p in enumerate(self.pairs):
+                if p.light not in lights:
+                    raise ValueError(f"pairs[{k}].light: no light named {p.light!r}")
+                if p.sensor not in sensors:
+                    raise ValueError(f"pairs[{k}].sensor: no sensor named {p.sensor!r}")
+        return self
+
+    def pair_names(self) -> list[tuple[str, str]]:
+        """(light, sensor) names of the measured pairs, in order."""
+        if self.pairs == "all":
+            return [(a.name, b.name) for a in self.lights for b in self.sensors]
+        return [(p.light, p.sensor) for p in self.pairs]
+
+    def light(self, name: str) -> DesignDevice:
+        return next(d for d in self.lights if d.name == name)
+
+    def sensor(self, name: str) -> DesignDevice:
+        return next(d for d in self.sensors if d.name == name)
+
+
+def _tables(data: dict[str, Any], keys: Sequence[str]) -> dict[str, Any]:
+    """Reduce each ``[[table]]`` entry to ``keys`` (for reading a rig config as a fragment)."""
+    out = dict(data)
+    for kind in ("lights", "sensors"):
+        if isinstance(out.get(kind), list):
+            out[kind] = [
+                {k: v for k, v in d.items() if k in keys} if isinstance(d, dict) else d
+                for d in out[kind]
+            ]
+    return out
+
+
+def parse_fragment(data: dict[str, Any], source: str = "design fragment") -> DesignFragment:
+    """Validate parsed TOML as a design fragment (or a rig config's geometry).
+
+    Raises
+    ------
+    ConfigError
+        One line per problem, starting with ``source``.
+    """
+    try:
+        return DesignFragment.model_validate(_tables(data, ("name", "theta_deg", "phi_deg")))
+    except ValidationError as exc:
+        lines = []
+        for err in exc.errors():
+            loc = ".".join(str(p) for p in err["loc"] if "[" not in str(p) and p != "str")
+            msg = str(err["msg"]).removeprefix("Value error, ")
+            lines.append(f"{source}: {loc + ': ' if loc else ''}{msg}")
+        raise ConfigError(
+            "\n".join(dict.fromkeys(lines))
+            + "\n(a design fragment has [[lights]] and [[sensors]] tables with name, theta_deg, "
+            "phi_deg, and [[pairs]] tables or pairs = \"all\"; see docs/file-formats.md)"
+        ) from None
+
+
+def load_fragment(path: str | os.PathLike[str]) -> DesignFragment:
+    """Read a design fragment file (``gonio design -o``); a rig config also reads as one.
+
+    Raises
+    ------
+    ConfigError
+        Missing file, not TOML, or not a fragment; the message names the file.
+    """
+    p = Path(path)
+    try:
+        data = tomllib.loads(p.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise ConfigError(f"{p}: no such design file; write one with 'gonio design -o'") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"{p}: cannot read the design file: {exc}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{p}: not valid TOML: {exc}") from None
+    return parse_fragment(data, p.name)
+
+
+def dump_fragment(fragment: dict[str, Any], header: str = "") -> str:
+    """TOML text of a fragment dict, with ``[[lights]]``/``[[sensors]]``/``[[pairs]]`` tables.
+
+    Arrays of tables are written as ``[[...]]`` sections (not inline arrays), so the text can
+    be appended to a rig config or merged with :func:`apply_design`.
+    """
+    lines = [f"# {line}".rstrip() for line in header.splitlines()]
+    if fragment.get("pairs") == "all":
+        lines.append('pairs = "all"')
+    for kind in ("lights", "sensors", "pairs"):
+        entries = fragment.get(kind)
+        if not isinstance(entries, list):
+            continue
+        for entry in entries:
+            lines += ["", f"[[{kind}]]", tomli_w.dumps(entry).rstrip()]
+    return "\n".join(lines).lstrip("\n") + "\n"
+
+
+def apply_design(
+    rig: dict[str, Any], design: DesignFragment, source: str = "rig config"
+) -> tuple[dict[str, Any], list[str]]:
+    """Merge a design into a rig config's TOML data; returns the new data and notes for the user.
+
+    Rules (docs/rig-config.md, "Applying a design"):
+
+    * a design device whose name the rig has keeps that entry's hardware (Modbus, registers,
+      channels ...) and takes the design's ``theta_deg`` / ``phi_deg``;
+    * a design device the rig lacks is added as a copy of the rig's last device of the same
+      kind, with the next free Modbus ``device_id`` on that host and port (a note says so:
+      check it against the wiring);
+    * rig devices the design does not name stay (a note lists them) but are in no pair;
+    * ``pairs`` becomes the design's;
+    * ``[[calibration.factors]]`` of pairs whose light or sensor moved, or that are no longer
+      measured, are dropped (a factor folds in the geometry it was measured with).
+
+    Raises
+    ------
+    ConfigError
+        The rig has no device of a kind to copy, or the merged config is invalid.
+    """
+    out = copy.deepcopy(rig)
+    notes: list[str] = []
+    moved: set[str] = set()
+    for kind, devices in (("lights", design.lights), ("sensors", design.sensors)):
+        entries = out.get(kind)
+        if not isinstance(entries, list) or not entries or not all(
+            isinstance(e, dict) for e in entries
+        ):
+            raise ConfigError(
+                f"{source}: has no [[{kind}]] entries to take hardware settings from; start "
+                "from deploy/rig.example.toml"
+            )
+        by_name = {str(e.get("name")): e for e in entries}
+        for dev in devices:
+            entry = by_name.get(dev.name)
+            if entry is None:
+                template = entries[-1]
+                entry = copy.deepcopy(template)
+                entry["name"] = dev.name
+                bus = entry.get("modbus")
+                if isinstance(bus, dict):
+                    used = {
+                        (str(e["modbus"].get("host")), int(e["modbus"].get("port", 502)),
+                         int(e["modbus"].get("device_id", 1)))
+                        for e in [*out["lights"], *out["sensors"]]
+                        if isinstance(e.get("modbus"), dict)
+                    }
+                    host, port = str(bus.get("host")), int(bus.get("port", 502))
+                    dev_id = int(bus.get("device_id", 1))
+                    while (host, port, dev_id) in used and dev_id < 247:
+                        dev_id += 1
+                    bus["device_id"] = dev_id
+                    where = f"device_id {dev_id} on {host}:{port}"
+                else:
+                    where = "its settings"
+                notes.append(
+                    f"{dev.name}: new {kind[:-1]}, hardware copied from {template.get('name')} "
+                    f"with {where}; check it against the wiring"
+                )
+                entries.append(entry)
+                by_name[dev.name] = entry
+            if (entry.get("theta_deg"), entry.get("phi_deg")) != (dev.theta_deg, dev.phi_deg):
+                moved.add(dev.name)
+            entry["theta_deg"] = dev.theta_deg
+            entry["phi_deg"] = dev.phi_deg
+        named = {d.name for d in devices}
+        extra = [n for n in by_name if n not in named]
+        if extra:
+            notes.append(
+                f"{', '.join(extra)}: {kind} the design does not use; kept, but in no pair "
+                "(remove them if they are not mounted)"
+            )
+    if design.pairs == "all":
+        out["pairs"] = "all"
+        if design.lights and (len(out["lights"]) > len(design.lights)
+                              or len(out["sensors"]) > len(design.sensors)):
+            # "all" would pull in the unused devices: list the design's pairs instead.
+            out["pairs"] = [{"light": a, "sensor": b} for a, b in design.pair_names()]
+    else:
+        out["pairs"] = [{"light": a, "sensor": b} for a, b in design.pair_names()]
+    cal = out.get("calibration")
+    if isinstance(cal, dict) and isinstance(cal.get("factors"), list):
+        keep_pairs = set(design.pair_names())
+        kept = [
+            f for f in cal["factors"]
+            if (f.get("light"), f.get("sensor")) in keep_pairs
+            and f.get("light") not in moved and f.get("sensor") not in moved
+        ]
+        dropped = len(cal["factors"]) - len(kept)
+        if dropped:
+            notes.append(
+                f"dropped {dropped} calibration factor(s) of pairs that moved or are no longer "
+                "measured; calibrate again on the white reference"
+            )
+        cal["factors"] = kept
+    parse_rig_config(out, source)  # the merged config must load
+    return out, notes
