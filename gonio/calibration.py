@@ -68,11 +68,88 @@ class Calibration(BaseModel):
         return all((p.light, p.sensor) in have for p in pairs)
 
 
+REFERENCE_TOLERANCE = 0.10
+"""How far a white reference's readings may depart from a diffuser's (relative, see
+:func:`check_white_reference`): generous against noise and a reference's few per cent of
+non-uniformity, far below what a specimen shows."""
+
+
+def check_white_reference(
+    counts: Mapping[tuple[str, str], NDArray[np.float64]],
+    tolerance: float = REFERENCE_TOLERANCE,
+) -> None:
+    """Refuse readings that cannot come from a white diffuser (a Lambertian reference).
+
+    Two checks that need no knowledge of the rig's gains:
+
+    1. *Rotation*: a diffuser's BRDF is the constant ``albedo / pi``, so a pair reads the same
+       at every stage angle. A pair whose readings over the angles spread by more than
+       ``tolerance`` of their mean (``(max - min) / mean``, per channel) is refused.
+    2. *Separability* (when lights share sensors): a diffuser's reading is
+       ``E_l cos(theta_l) x g_s``, one factor per light times one per sensor, so
+       ``log c[l, s]`` is ``a_l + b_s`` on every connected set of pairs. A pair whose log mean
+       reading departs from the least-squares fit ``a_l + b_s`` by more than
+       ``log(1 + tolerance)`` is refused. (Independent pairs, each light with one sensor,
+       cannot be checked this way.)
+
+    Parameters
+    ----------
+    counts : mapping (light, sensor) -> (r, C) dark-subtracted readings at r stage angles
+    tolerance : float, relative
+
+    Raises
+    ------
+    CalibrationError
+        Naming the worst pair, by how much it departs, and what to do.
+    """
+    advice = ("Is the white reference on the stage (and the specimen off it)? Put it there and "
+              "calibrate again (on a simulated rig: 'gonio sim-place white --rig rig.toml')")
+    means: dict[tuple[str, str], NDArray[np.float64]] = {}
+    worst: tuple[float, str] = (0.0, "")
+    for (light, sensor), c in counts.items():
+        a = np.atleast_2d(np.asarray(c, dtype=float))
+        mean = np.nanmean(a, axis=0)
+        means[(light, sensor)] = mean
+        if a.shape[0] < 2 or np.any(mean <= 0):
+            continue
+        spread = float(np.nanmax((np.nanmax(a, 0) - np.nanmin(a, 0)) / mean))
+        if spread > worst[0]:
+            worst = (spread, f"{light}/{sensor}")
+    if worst[0] > tolerance:
+        raise CalibrationError(
+            f"the reference does not read like a white diffuser: pair {worst[1]} changes by "
+            f"{100 * worst[0]:.0f} % as the stage turns (a diffuser reads the same at every "
+            f"angle; allowed {100 * tolerance:.0f} %). {advice}"
+        )
+    # Separability: least-squares fit of log c = a_l + b_s over the pairs.
+    pairs = [p for p, m in means.items() if np.all(m > 0) and np.all(np.isfinite(m))]
+    lights = sorted({p[0] for p in pairs})
+    sensors = sorted({p[1] for p in pairs})
+    if len(pairs) <= len(lights) + len(sensors) - 1:
+        return  # no redundancy (e.g. independent pairs): the fit is exact whatever the reading
+    design = np.zeros((len(pairs), len(lights) + len(sensors)))
+    for q, (li, se) in enumerate(pairs):
+        design[q, lights.index(li)] = 1.0
+        design[q, len(lights) + sensors.index(se)] = 1.0
+    logs = np.log(np.stack([means[p] for p in pairs]))  # (n, C)
+    fit, *_ = np.linalg.lstsq(design, logs, rcond=None)
+    resid = np.abs(logs - design @ fit).max(axis=1)
+    q = int(np.argmax(resid))
+    if resid[q] > np.log1p(tolerance):
+        li, se = pairs[q]
+        raise CalibrationError(
+            f"the reference does not read like a white diffuser: pair {li}/{se} reads "
+            f"{100 * np.expm1(resid[q]):.0f} % off the light-times-sensor pattern a diffuser "
+            f"gives (allowed {100 * tolerance:.0f} %). {advice}"
+        )
+
+
 def from_reference(
     albedo: float,
     counts: Mapping[tuple[str, str], NDArray[np.float64]],
     exposure_s: float | None = None,
     source: str = "white reference",
+    check: bool = True,
 ) -> Calibration:
     """Calibration from dark-subtracted readings of a white reference.
 
@@ -85,11 +162,14 @@ def from_reference(
         reference evens out its own non-uniformity).
     exposure_s : float, optional
     source : str
+    check : bool
+        Run :func:`check_white_reference` on the readings first (default).
 
     Raises
     ------
     CalibrationError
-        If any pair read zero or less (light off, sensor blocked, wrong dark level).
+        If any pair read zero or less (light off, sensor blocked, wrong dark level), or the
+        readings cannot come from a white diffuser.
     """
     if not 0 < albedo <= 1:
         raise CalibrationError(f"reference albedo must be in (0, 1], got {albedo}")
@@ -105,6 +185,8 @@ def from_reference(
             )
         out.append(PairCalibration(light=light, sensor=sensor,
                                    factor=tuple(float(v) for v in f_ref / mean)))
+    if check:
+        check_white_reference(counts)
     return Calibration(pairs=tuple(out), reference_albedo=albedo, exposure_s=exposure_s,
                        source=source)
 

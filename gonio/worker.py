@@ -24,7 +24,13 @@ from typing import Any
 import numpy as np
 
 from gonio import hal
-from gonio.calibration import CALIBRATION_FILE, Calibration, calibrated_samples, from_reference
+from gonio.calibration import (
+    CALIBRATION_FILE,
+    Calibration,
+    CalibrationError,
+    calibrated_samples,
+    from_reference,
+)
 from gonio.engine import ScanEngine
 from gonio.jobstates import JobState
 from gonio.plans import (
@@ -81,6 +87,7 @@ class Worker:
         self.data_dir = Path(data_dir)
         self.basis_provider = basis_provider
         self.calibration = calibration
+        self.on_job_start: Callable[[JobRow], None] | None = None
         self.provenance = provenance or {}
         self.engine: ScanEngine | None = None
         self.current_job: int | None = None
@@ -161,6 +168,10 @@ class Worker:
                 rig = await self.get_rig()
             except (hal.DeviceFault, OSError) as exc:
                 return self._fail(job, f"rig not available: {exc}", plan)
+            if self.on_job_start is not None:
+                # Before the first reading of a new or resumed job: e.g. a simulated rig puts
+                # the white reference or the job's specimen on the stage.
+                self.on_job_start(job)
             self.engine = ScanEngine(rig, self.store, job.id, plan, self.desc)
             final = await self.engine.run()
             self.engine = None
@@ -180,6 +191,10 @@ class Worker:
                 return JobState.ABORTED
             raise
         except Exception as exc:  # a failed reconstruction fails the job, never the worker
+            if isinstance(exc, CalibrationError) and isinstance(plan, CalibrationPlan):
+                # The reference's readings are unusable (not a white diffuser...): say why.
+                log.error("job %s: calibration refused: %s", job.id, exc)
+                return self._fail(job, f"calibration refused: {exc}", plan)
             log.exception("job %s: finishing failed", job.id)
             return self._fail(job, f"reconstruction failed: {exc}", plan)
         self.store.set_result(job.id, summary.get("result_path"), summary)

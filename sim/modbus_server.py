@@ -45,7 +45,7 @@ from pymodbus.simulator import DataType, SimData, SimDevice
 from gonio.config import LightRegisters, Register, SensorRegisters
 from gonio.sim.specimen import NoiseModel, Specimen, expected_counts, sample_counts
 
-__all__ = ["AngleSource", "ModbusRigServer", "SimLampSpec", "SimSensorSpec"]
+__all__ = ["AngleSource", "ModbusRigServer", "SimHolderSpec", "SimLampSpec", "SimSensorSpec"]
 
 _FMT = {"u16": ">H", "s16": ">h", "u32": ">I", "s32": ">i", "f32": ">f"}
 _COIL_FC = (1, 5, 15)
@@ -136,6 +136,27 @@ class SimSensorSpec:
     rng: np.random.Generator = field(default_factory=lambda: np.random.default_rng(0))
 
 
+@dataclass
+class SimHolderSpec:
+    """The simulated specimen holder: what is on the stage, switchable over Modbus.
+
+    Holding 0 (``u16``): 0 = the specimen, 1 = the white reference; holding 1 (``u16``): the
+    reference's albedo in per mille. A write of holding 0 calls ``load(code, albedo)`` (with the
+    albedo of holding 1 as written in the same request, else as stored); reads return
+    ``state()``.
+
+    Attributes
+    ----------
+    device_id : int
+    state : callable returning (code, albedo)
+    load : callable taking (code, albedo)
+    """
+
+    device_id: int
+    state: Any
+    load: Any
+
+
 def _span(regs: Sequence[Register], table: str) -> int:
     """Registers needed to cover every mapped address of ``table`` from 0 (at least 1)."""
     ends = [r.address + r.width for r in regs if r.table == table]
@@ -172,8 +193,10 @@ class ModbusRigServer:
         seed: int = 0,
         host: str = "127.0.0.1",
         port: int = 0,
+        holder: SimHolderSpec | None = None,
     ) -> None:
         ids = [d.device_id for d in lamps] + [d.device_id for d in sensors]
+        ids += [holder.device_id] if holder is not None else []
         if len(set(ids)) != len(ids) or 0 in ids:
             raise ValueError(f"simulated Modbus device ids must be unique and non-zero: {ids}")
         if time_scale <= 0:
@@ -191,6 +214,7 @@ class ModbusRigServer:
             s.rng = np.random.default_rng([seed, k])
             if not s.values:
                 s.values = [0.0] * len(s.registers.values)
+        self.holder = holder
         self.time_scale = time_scale
         self.host = host
         self.port = port
@@ -221,6 +245,8 @@ class ModbusRigServer:
     async def _serve(self) -> None:
         devices = [self._lamp_device(x) for x in self.lamps.values()]
         devices += [self._sensor_device(x) for x in self.sensors.values()]
+        if self.holder is not None:
+            devices.append(self._holder_device(self.holder))
         server = ModbusTcpServer(context=devices, address=(self.host, self.port))
         await server.serve_forever(background=True)
         sockets = getattr(server.transport, "sockets", None)
@@ -351,6 +377,46 @@ class ModbusRigServer:
                 [SimData(0, count=16, values=False, datatype=DataType.BITS)],
                 [SimData(0, count=holding, values=0, datatype=DataType.REGISTERS)],
                 [SimData(0, count=inputs, values=0, datatype=DataType.REGISTERS)],
+            ),
+            action=action,
+        )
+
+    # ------------------------------------------------------------------ specimen holder
+    def _holder_device(self, holder: SimHolderSpec) -> SimDevice:
+        code_reg = Register(table="holding", address=0, type="u16")
+        albedo_reg = Register(table="holding", address=1, type="u16", scale=0.001)
+
+        async def action(
+            fc: int,
+            start: int,
+            address: int,
+            count: int,
+            registers: list[int],
+            values: list[int] | list[bool] | None,
+        ) -> ExcCodes | None:
+            with self._lock:
+                if fc in _HOLDING_WRITE_FC and values is not None:
+                    image = self._merged(registers, start, address, values)
+                    code = int(self._read_image(code_reg, image, start))
+                    albedo = self._read_image(albedo_reg, image, start)
+                    if address > 0:  # only the albedo was written: nothing moves
+                        return None
+                    if code not in (0, 1) or (code == 1 and not 0 < albedo <= 1):
+                        return ExcCodes.ILLEGAL_VALUE
+                    holder.load(code, albedo)
+                elif fc == 3:
+                    code, albedo = holder.state()
+                    self._store(registers, start, code_reg, float(code))
+                    self._store(registers, start, albedo_reg, float(albedo))
+            return None
+
+        return SimDevice(
+            id=holder.device_id,
+            simdata=(
+                [SimData(0, count=16, values=False, datatype=DataType.BITS)],
+                [SimData(0, count=16, values=False, datatype=DataType.BITS)],
+                [SimData(0, count=2, values=[0, 990], datatype=DataType.REGISTERS)],
+                [SimData(0, count=1, values=0, datatype=DataType.REGISTERS)],
             ),
             action=action,
         )

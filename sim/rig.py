@@ -32,6 +32,7 @@ from gonio.config import (
     LightConfig,
     LightRegisters,
     ModbusTransport,
+    PairConfig,
     Register,
     RigConfig,
     RigSection,
@@ -42,7 +43,7 @@ from gonio.config import (
 )
 from gonio.hal import LabDirection
 from gonio.sim.faults import FaultPlan
-from gonio.sim.modbus_server import ModbusRigServer, SimLampSpec, SimSensorSpec
+from gonio.sim.modbus_server import ModbusRigServer, SimHolderSpec, SimLampSpec, SimSensorSpec
 from gonio.sim.motion import StageMotion
 from gonio.sim.specimen import BRDFLike, NoiseModel, Specimen
 
@@ -83,6 +84,15 @@ FAULT_HELP = (
 WHITE_REFERENCE_ALBEDO = 0.99
 """Hemispherical albedo of the simulated white reference (a sintered-PTFE-like target)."""
 
+HOLDER_DEVICE_ID = 247
+"""Modbus device id of the simulated specimen holder (what is on the stage; not in the rig
+config: a real rig has a person there). Holding 0 ``u16``: 0 = the specimen, 1 = the white
+reference; holding 1 ``u16``: the white reference's albedo in per mille. Writing holding 0
+swaps what is on the stage (``gonio sim-place``)."""
+
+ON_STAGE_SPECIMEN = "specimen"
+ON_STAGE_WHITE = "white reference"
+
 
 def white_reference(albedo: float = WHITE_REFERENCE_ALBEDO,
                     channels: Sequence[str] = ("R", "G", "B")) -> Lambert:
@@ -90,6 +100,18 @@ def white_reference(albedo: float = WHITE_REFERENCE_ALBEDO,
     if not 0.0 < albedo <= 1.0:
         raise ValueError(f"white reference albedo must be in (0, 1], got {albedo}")
     return Lambert((albedo,) * len(channels), channels=tuple(channels), name="white-reference")
+
+
+class _WhiteReference:
+    """A white reference on the simulated stage (marks it apart from a specimen)."""
+
+    def __init__(self, model: Lambert) -> None:
+        self.model = model
+        self.channels = model.channels
+        self.name = "white-reference"
+
+    def eval(self, wi: Any, wo: Any) -> Any:
+        return self.model.eval(wi, wo)
 
 
 def default_material() -> BRDFLike:
@@ -134,6 +156,10 @@ class SimRigOptions:
         Faults active from the start (see ``FAULT_HELP``).
     lights, sensors : sequences of (theta_deg, phi_deg)
         Lab directions of the lamps and sensors.
+    light_names, sensor_names : sequences of str, or None
+        Device names (default ``L1, L2, ...`` and ``S1, S2, ...``).
+    pairs : sequence of (light, sensor) names, or None
+        The measured pairs written to the rig config (None: ``pairs = "all"``).
     irradiance : float
         Per lamp at full level, counts per (1/sr) per second at gain 1.
     seed : int
@@ -151,6 +177,9 @@ class SimRigOptions:
     faults: Sequence[str] = ()
     lights: Sequence[tuple[float, float]] = DEFAULT_LIGHTS
     sensors: Sequence[tuple[float, float]] = DEFAULT_SENSORS
+    light_names: Sequence[str] | None = None
+    sensor_names: Sequence[str] | None = None
+    pairs: Sequence[tuple[str, str]] | None = None
     irradiance: float = 2.0e7
     seed: int = 0
     speed_dps: float = 60.0
@@ -177,8 +206,13 @@ class SimRigOptions:
                     raise ValueError(
                         f"{kind} at theta {theta} deg: must be in [0, 90) (above the specimen)"
                     )
-        if len(self.lights) + len(self.sensors) > 247:
-            raise ValueError("at most 247 simulated Modbus devices (one device id each)")
+        if len(self.lights) + len(self.sensors) > HOLDER_DEVICE_ID - 1:
+            raise ValueError(f"at most {HOLDER_DEVICE_ID - 1} simulated Modbus devices (one "
+                             "device id each)")
+        for kind, names, dirs in (("light", self.light_names, self.lights),
+                                  ("sensor", self.sensor_names, self.sensors)):
+            if names is not None and len(names) != len(dirs):
+                raise ValueError(f"{len(names)} {kind} names for {len(dirs)} {kind}s")
 
 
 def _light_registers() -> LightRegisters:
@@ -241,8 +275,15 @@ class SimRig:
             getattr(self.specimen.brdf, "channels", None)
             or [f"C{k}" for k in range(self.specimen.n_channels)]
         )
-        self.light_names = [f"L{k + 1}" for k in range(len(options.lights))]
-        self.sensor_names = [f"S{k + 1}" for k in range(len(options.sensors))]
+        self.light_names = list(options.light_names or
+                                [f"L{k + 1}" for k in range(len(options.lights))])
+        self.sensor_names = list(options.sensor_names or
+                                 [f"S{k + 1}" for k in range(len(options.sensors))])
+        # What is on the stage: the specimen, or the white reference for a calibration. The
+        # specimen's BRDF is kept while the reference is on, to put it back.
+        self.on_stage = ON_STAGE_SPECIMEN
+        self.reference_albedo = WHITE_REFERENCE_ALBEDO
+        self._specimen_brdf: BRDFLike = self.specimen.brdf
         self.irradiance = dict.fromkeys(self.light_names, options.irradiance)
         try:
             self._start_stage()
@@ -298,7 +339,8 @@ class SimRig:
             for k, (name, d) in enumerate(zip(self.sensor_names, o.sensors, strict=True))
         ]
         self.modbus = ModbusRigServer(
-            self.specimen, self.motion, lamps, sensors, time_scale=o.time_scale, seed=o.seed
+            self.specimen, self.motion, lamps, sensors, time_scale=o.time_scale, seed=o.seed,
+            holder=SimHolderSpec(HOLDER_DEVICE_ID, self._holder_state, self._holder_load),
         ).start()
 
     def _build_config(self, channels: list[str]) -> RigConfig:
@@ -365,8 +407,11 @@ class SimRig:
             )
             for k, (name, d) in enumerate(zip(self.sensor_names, o.sensors, strict=True))
         ]
+        pairs: Any = "all" if o.pairs is None else [
+            PairConfig(light=a, sensor=b) for a, b in o.pairs
+        ]
         return RigConfig(
-            rig=RigSection(name=o.name), stage=stage, lights=lights, sensors=sensors, pairs="all"
+            rig=RigSection(name=o.name), stage=stage, lights=lights, sensors=sensors, pairs=pairs
         )
 
     # ------------------------------------------------------------------ faults
@@ -445,6 +490,9 @@ class SimRig:
             self.specimen = new
             if self.modbus is not None:
                 self.modbus.specimen = new
+            if not isinstance(new.brdf, _WhiteReference):
+                self._specimen_brdf = new.brdf
+                self.on_stage = ON_STAGE_SPECIMEN
         return old
 
     def place_white_reference(self, albedo: float = WHITE_REFERENCE_ALBEDO) -> Specimen:
@@ -456,7 +504,43 @@ class SimRig:
             getattr(self.specimen.brdf, "channels", None)
             or [f"C{k}" for k in range(self.specimen.n_channels)]
         )
-        return self.place_specimen(white_reference(albedo, channels))
+        old = self.place_specimen(_WhiteReference(white_reference(albedo, channels)))
+        self.on_stage = ON_STAGE_WHITE
+        self.reference_albedo = albedo
+        return old
+
+    def load(self, what: str, albedo: float = WHITE_REFERENCE_ALBEDO) -> str:
+        """Put the white reference (``what = "white"``) or the rig's specimen back
+        (``"specimen"``) on the stage; returns a sentence saying what is there now.
+
+        The specimen is the last one placed with :meth:`place_specimen` (or the rig's
+        material), kept while the reference is on the stage.
+
+        Raises
+        ------
+        ValueError
+            Unknown ``what`` or an albedo outside (0, 1].
+        """
+        if what in ("white", "white-reference", ON_STAGE_WHITE):
+            self.place_white_reference(albedo)
+        elif what == ON_STAGE_SPECIMEN:
+            self.place_specimen(self._specimen_brdf)
+        else:
+            raise ValueError(f"cannot put {what!r} on the stage; use 'white' or 'specimen'")
+        return self.describe_stage()
+
+    def describe_stage(self) -> str:
+        """What the simulated stage holds, as a sentence."""
+        if self.on_stage == ON_STAGE_WHITE:
+            return f"the white reference (albedo {self.reference_albedo:g})"
+        name = getattr(self._specimen_brdf, "name", None) or "the specimen"
+        return f"the specimen ({name})"
+
+    def _holder_state(self) -> tuple[int, float]:
+        return (1 if self.on_stage == ON_STAGE_WHITE else 0), self.reference_albedo
+
+    def _holder_load(self, code: int, albedo: float) -> None:
+        self.load("white" if code == 1 else ON_STAGE_SPECIMEN, albedo)
 
     # ------------------------------------------------------------------ ground truth
     def true_brdf(self, light: str, sensor: str, stage_deg: float) -> np.ndarray:

@@ -1,7 +1,12 @@
 """``gonio sim``: run a whole simulated rig and print the rig config that points at it.
 
 The simulators run until Ctrl-C (or ``--duration`` seconds); meanwhile the daemon, a script or
-the tests use the printed config as if it were a real rig.
+the tests use the printed config as if it were a real rig. ``--geometry geometry.toml`` mounts
+the simulated lights and sensors where a design fragment (``gonio design -o``) puts them.
+
+``gonio sim-place white|specimen --rig rig.toml`` does what a person does at a real rig before
+a calibration and after it: it puts the white reference on the simulated stage, or the
+specimen back (over Modbus, device id 247 of the simulator; see docs/rig-config.md).
 """
 
 from __future__ import annotations
@@ -68,6 +73,14 @@ def register(subparsers: Any) -> None:
     )
     p.add_argument("--seed", type=int, default=0, help="seed of the sensor noise")
     p.add_argument(
+        "--geometry",
+        type=Path,
+        default=None,
+        metavar="TOML",
+        help="mount the lights and sensors as in this design fragment (gonio design -o) and "
+        "measure its pairs (default: 3 lights, 4 sensors, all 12 pairs)",
+    )
+    p.add_argument(
         "-o",
         "--output",
         type=Path,
@@ -84,6 +97,19 @@ def register(subparsers: Any) -> None:
 
     p.epilog = f"faults: {FAULT_HELP}"
     p.set_defaults(func=run)
+
+    q = subparsers.add_parser(
+        "sim-place",
+        help="put the white reference or the specimen on a simulated rig's stage",
+        description="Change what is on the stage of a running 'gonio sim' (what a person does "
+        "at a real rig): 'white' before a white-reference calibration, 'specimen' after it, "
+        "'show' to ask.",
+    )
+    q.add_argument("what", choices=("white", "specimen", "show"))
+    q.add_argument("--rig", type=Path, required=True, help="rig config written by gonio sim -o")
+    q.add_argument("--albedo", type=float, default=None,
+                   help="albedo of the white reference (default 0.99)")
+    q.set_defaults(func=place)
 
 
 def parse_noise(text: str) -> Any:
@@ -121,7 +147,20 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"--duration must be >= 0, got {args.duration}")
     with tempfile.TemporaryDirectory(prefix="gonio-sim-") as tmp:
         out = args.output if args.output is not None else Path(tmp) / "rig.toml"
+        geometry: dict[str, Any] = {}
+        if args.geometry is not None:
+            from gonio.rigdesign import load_fragment
+
+            design = load_fragment(args.geometry)  # ConfigError: one clear line
+            geometry = {
+                "lights": [(d.theta_deg, d.phi_deg) for d in design.lights],
+                "light_names": [d.name for d in design.lights],
+                "sensors": [(d.theta_deg, d.phi_deg) for d in design.sensors],
+                "sensor_names": [d.name for d in design.sensors],
+                "pairs": None if design.pairs == "all" else design.pair_names(),
+            }
         options = SimRigOptions(
+            **geometry,
             stage=args.stage,
             zaber_transport=args.zaber_transport,
             material=args.material,
@@ -141,10 +180,53 @@ def run(args: argparse.Namespace) -> int:
             )
             print(f"stage: {args.stage} at {sim.config.stage.port}", flush=True)
             print(f"lights: {lights}\nsensors: {sensors}", flush=True)
+            print(f"on the stage: {sim.describe_stage()} (change it with 'gonio sim-place "
+                  f"white|specimen --rig {sim.config_path}')", flush=True)
             deadline = None if args.duration is None else time.monotonic() + args.duration
             try:
                 while deadline is None or time.monotonic() < deadline:
                     time.sleep(0.05 if deadline is not None else 0.5)
             except KeyboardInterrupt:
                 print("stopping the simulated rig", flush=True)
+    return 0
+
+
+def place(args: argparse.Namespace) -> int:
+    """``gonio sim-place``: write the simulated specimen holder's register over Modbus."""
+    from pymodbus.client import ModbusTcpClient
+    from pymodbus.exceptions import ModbusException
+
+    from gonio.config import load_rig_config
+    from gonio.sim.rig import HOLDER_DEVICE_ID, WHITE_REFERENCE_ALBEDO
+
+    albedo = WHITE_REFERENCE_ALBEDO if args.albedo is None else args.albedo
+    if not 0 < albedo <= 1:
+        raise UsageError(f"--albedo is the white reference's albedo, in (0, 1]; got {albedo:g}")
+    if args.albedo is not None and args.what != "white":
+        raise UsageError("--albedo goes with 'white'")
+    cfg = load_rig_config(args.rig)
+    bus = cfg.lights[0].modbus
+    client = ModbusTcpClient(bus.host, port=bus.port, timeout=2, retries=0)
+    not_sim = (f"no simulated rig answers at {bus.host}:{bus.port} (device id "
+               f"{HOLDER_DEVICE_ID}); is 'gonio sim -o {args.rig}' running? On a real rig, put "
+               "the reference or specimen on the stage by hand")
+    try:
+        if not client.connect():
+            raise UsageError(not_sim)
+        if args.what != "show":
+            words = [1, round(albedo * 1000)] if args.what == "white" else [0]
+            reply = client.write_registers(0, words, device_id=HOLDER_DEVICE_ID)
+            if reply.isError():
+                raise UsageError(f"the simulated rig refused: {reply}")
+        state = client.read_holding_registers(0, count=2, device_id=HOLDER_DEVICE_ID)
+        if state.isError():
+            raise UsageError(not_sim)
+    except ModbusException as exc:
+        raise UsageError(f"{not_sim} ({exc})") from None
+    finally:
+        client.close()
+    code, per_mille = state.registers
+    held = (f"the white reference (albedo {per_mille / 1000:g})" if code == 1
+            else "the specimen")
+    print(f"the simulated stage holds {held}")
     return 0

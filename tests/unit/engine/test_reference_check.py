@@ -1,0 +1,75 @@
+"""A calibration refuses readings that cannot come from a white diffuser."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from gonio.calibration import CalibrationError, check_white_reference, from_reference
+from gonio.hal import LabDirection
+from gonio.sim.rig import DEFAULT_LIGHTS, DEFAULT_SENSORS, default_material, white_reference
+from gonio.sim.specimen import Specimen
+
+ANGLES = np.arange(8) * 45.0
+GAIN_L = {"L1": 1.0, "L2": 0.7, "L3": 1.3}  # unequal lamps and sensors, as on a real rig
+GAIN_S = {"S1": 2.0, "S2": 0.5, "S3": 1.0, "S4": 1.5}
+
+
+def _readings(brdf: object, noise: float = 0.0, seed: int = 0) -> dict[tuple[str, str],
+                                                                        np.ndarray]:
+    """Readings E_l cos(theta_l) f g_s of the default simulated geometry, from the model."""
+    rng = np.random.default_rng(seed)
+    spec = Specimen(brdf)  # type: ignore[arg-type]
+    out = {}
+    for k, ld in enumerate(DEFAULT_LIGHTS):
+        wi = np.asarray(LabDirection(*ld).vector())
+        for m, sd in enumerate(DEFAULT_SENSORS):
+            wo = np.asarray(LabDirection(*sd).vector())
+            light, sensor = f"L{k + 1}", f"S{m + 1}"
+            c = np.stack([spec.brdf_lab(wi, wo, a) for a in ANGLES]) * wi[2] * 1e4
+            c = c * GAIN_L[light] * GAIN_S[sensor]
+            out[(light, sensor)] = c * (1 + noise * rng.standard_normal(c.shape))
+    return out
+
+
+def test_a_white_diffuser_with_noise_passes_and_calibrates_to_albedo_over_pi() -> None:
+    counts = _readings(white_reference(0.99), noise=0.01)
+    cal = from_reference(0.99, counts)
+    for (light, sensor), c in counts.items():
+        f = cal.factor(light, sensor, 3) * c.mean(axis=0)
+        np.testing.assert_allclose(f, 0.99 / math.pi, rtol=1e-9)
+
+
+def test_a_specimen_on_the_stage_is_refused_naming_a_pair() -> None:
+    counts = _readings(default_material())
+    with pytest.raises(CalibrationError, match="does not read like a white diffuser") as exc:
+        from_reference(0.99, counts)
+    assert "as the stage turns" in str(exc.value)
+    assert "sim-place white" in str(exc.value)
+
+
+def test_an_isotropic_non_white_specimen_is_caught_by_separability() -> None:
+    from gonio.brdf.models import GGX, Lambert, LobeSum
+
+    glossy = LobeSum((Lambert((0.2, 0.2, 0.2)), GGX(alpha_x=0.3, alpha_y=0.3)), name="iso")
+    counts = _readings(glossy)
+    # Isotropic: every pair reads the same at every stage angle ...
+    for c in counts.values():
+        assert np.ptp(c, axis=0).max() <= 1e-9 * c.max()
+    # ... but light x sensor factors cannot explain the readings.
+    with pytest.raises(CalibrationError, match="light-times-sensor pattern"):
+        check_white_reference(counts)
+
+
+def test_independent_pairs_of_a_diffuser_pass_and_a_turning_specimen_fails() -> None:
+    # Each light with one sensor: no separability check, the rotation check still works.
+    white = _readings(white_reference(0.5))
+    spec = _readings(default_material())
+    keep = [("L1", "S1"), ("L2", "S2"), ("L3", "S4")]
+    check_white_reference({k: white[k] for k in keep})
+    with pytest.raises(CalibrationError, match="as the stage turns"):
+        check_white_reference({k: spec[k] for k in keep})
+    # Without the check (a caller that knows better), the factors are still computed.
+    assert len(from_reference(0.5, {k: spec[k] for k in keep}, check=False).pairs) == 3
