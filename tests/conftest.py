@@ -23,6 +23,15 @@ def _session_cache_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return Path(os.environ["GONIO_CACHE_DIR"])
 
 
+@pytest.fixture(scope="session", autouse=True)
+def _session_data_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Point gonio's user data folder (``gonio scan``, ``gonio serve --sim``) at a temporary one,
+    so tests never read or write the developer's jobs and results."""
+    if "GONIO_DATA_DIR" not in os.environ:
+        os.environ["GONIO_DATA_DIR"] = str(tmp_path_factory.mktemp("gonio-data"))
+    return Path(os.environ["GONIO_DATA_DIR"])
+
+
 @pytest.fixture(scope="session")
 def rgl_dir() -> Path:
     """Folder of the shared RGL measurements; skips the test when it is absent."""

@@ -1,8 +1,12 @@
 """``gonio scan`` (one job in the foreground) and ``gonio jobs`` (inspect a job store).
 
-``gonio scan`` keeps its job in a SQLite store (``--db``, default ``<output>.jobs.sqlite``). If
-that store holds an unfinished job (the previous run was killed), the scan resumes it from its
-last checkpoint instead of starting again.
+``gonio scan`` keeps its job in a data directory with the daemon's layout (``--data-dir``,
+default one per rig geometry under the user data folder, :func:`gonio.paths.scan_data_dir`):
+the job store ``gonio.sqlite`` (``--db`` overrides), ``results/job-<id>.h5`` and the latest
+``calibration.json``. The only file written beside ``-o OUT.h5`` is ``OUT.h5`` itself (and, for
+``--white-reference``, ``OUT.calibration.json``). If the store holds an unfinished job with the
+same plan on the same rig (the previous run was killed), the scan resumes it from its last
+checkpoint instead of starting again.
 """
 
 from __future__ import annotations
@@ -48,8 +52,14 @@ def register(subparsers: Any) -> None:
     p.add_argument("--white-reference", type=float, default=None, metavar="ALBEDO",
                    help="the stage holds a white reference of this albedo (e.g. 0.99): run a "
                         "calibration job and write OUTPUT.calibration.json for later --calibration")
-    p.add_argument("--db", type=Path, default=None, help="job store (SQLite)")
-    p.add_argument("--dry-run", action="store_true", help="print the plan's steps and duration")
+    p.add_argument("--data-dir", type=Path, default=None,
+                   help="job store, results and calibration (default: one folder per rig "
+                        "geometry in the user data folder, printed by the scan)")
+    p.add_argument("--db", type=Path, default=None,
+                   help="job store (SQLite; default DATA_DIR/gonio.sqlite)")
+    p.add_argument("--dry-run", action="store_true",
+                   help="print the plan's angles, readings and duration; nothing moves")
+    p.add_argument("--json", action="store_true", help="with --dry-run: the full plan as JSON")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("-o", "--output", type=Path, required=True, help="result file (.h5)")
     p.set_defaults(func=_scan)
@@ -57,7 +67,8 @@ def register(subparsers: Any) -> None:
     j = subparsers.add_parser("jobs", help="list or show jobs in a job store")
     j.add_argument("action", nargs="?", choices=["list", "show"], default="list")
     j.add_argument("job_id", nargs="?", type=int)
-    j.add_argument("--db", type=Path, required=True, help="job store (SQLite)")
+    j.add_argument("--db", type=Path, required=True,
+                   help="job store (SQLite), e.g. the one 'gonio scan' prints")
     j.add_argument("--json", action="store_true", help="machine-readable output")
     j.set_defaults(func=_jobs)
 
@@ -66,7 +77,7 @@ async def _calibrate_sim(sim: Any, store: Any, worker: Any, desc: Any, data_dir:
     """Measure the simulated white reference with a calibration job, then put the specimen back.
 
     The simulated rig gets the same calibration a lab gives a real one, so ``--sim`` scans come
-    out in 1/sr.
+    out in 1/sr. Runs only when no calibration is in effect in ``data_dir``.
     """
     from gonio.calibration import CALIBRATION_FILE, Calibration
     from gonio.jobstates import JobState
@@ -151,13 +162,22 @@ async def _run_scan(args: argparse.Namespace, plan: Any, config: Any, sim: Any =
     rig = build_rig(config)
     desc = RigDescription.from_rig(rig)
     if args.dry_run:
-        print(dry_run(plan, desc).model_dump_json(indent=2))
+        dr = dry_run(plan, desc)
+        print(dr.model_dump_json(indent=2) if args.json
+              else dry_run_summary(dr, plan, config.rig.name))
         return 0
+    if args.json:
+        raise UsageError("--json goes with --dry-run")
     dry_run(plan, desc)  # refuse a bad plan before connecting to anything
     out: Path = args.output
-    db = args.db or out.with_name(out.name + ".jobs.sqlite")
+    from gonio.daemon import STORE_FILE
+    from gonio.paths import scan_data_dir
+
+    data_dir = args.data_dir or scan_data_dir(config)
+    data_dir.mkdir(parents=True, exist_ok=True)
+    db = args.db or data_dir / STORE_FILE
     store = JobStore(db)
-    data_dir = out.parent / (out.stem + ".data")
+    print(f"data directory {data_dir} (job store {db})", file=sys.stderr)
     # The same rule as the daemon: the latest calibration job here, else the rig config's
     # [calibration] factors; --calibration overrides both.
     cal = calibration_in_effect(data_dir, config)
@@ -176,14 +196,17 @@ async def _run_scan(args: argparse.Namespace, plan: Any, config: Any, sim: Any =
 
     worker = Worker(store, get_rig, desc, data_dir, calibration=lambda: cal,
                     provenance={"rig_config": config.model_dump_json()})
-    active = store.active_jobs()
-    if active:
-        job = active[0]
-        store.reconcile(lambda j: None)
+    store.reconcile(lambda j: None)
+    # Resume an interrupted job only when it is this scan: the same plan on the same rig.
+    same = [j for j in store.active_jobs()
+            if j.plan == plan.model_dump(mode="json") and j.rig == desc.model_dump(mode="json")]
+    if same:
+        job = same[0]
         print(f"resuming job {job.id} from its checkpoint ({job.done_angles} of "
               f"{job.total_angles} angles done)", file=sys.stderr)
     else:
-        if sim is not None and args.calibration is None and plan.kind != "calibration":
+        if (sim is not None and args.calibration is None and plan.kind != "calibration"
+                and not cal.pairs):
             cal = await _calibrate_sim(sim, store, worker, desc, data_dir)
         job = store.create_job(kind=plan.kind, specimen=plan.specimen,
                                plan=plan.model_dump(mode="json"),
@@ -201,7 +224,8 @@ async def _run_scan(args: argparse.Namespace, plan: Any, config: Any, sim: Any =
         return 1
     assert row.result_path is not None
     out.parent.mkdir(parents=True, exist_ok=True)
-    shutil.move(row.result_path, out)
+    # A copy: the data directory keeps its result (what 'gonio jobs show' reports stays true).
+    shutil.copyfile(row.result_path, out)
     summary = row.summary or {}
     if plan.kind == "calibration":
         from gonio.calibration import CALIBRATION_FILE
@@ -213,12 +237,53 @@ async def _run_scan(args: argparse.Namespace, plan: Any, config: Any, sim: Any =
         print(f"job {job.id} completed: calibration of {n_pairs} pairs written to {cal_out}; "
               f"apply it with --calibration {cal_out}")
         return 0
+    if sim is None and cal.pairs:
+        print(f"calibration: {cal.source}", file=sys.stderr)
     units = "1/sr" if cal.pairs else "sensor units (uncalibrated)"
     print(f"job {job.id} completed: {summary.get('n_samples', summary.get('readings'))} samples "
           f"in {units}, "
           f"self-estimated error {100 * (summary.get('predicted_error') or float('nan')):.1f} %; "
           f"wrote {out}")
     return 0
+
+
+def _angles_text(angles: list[float], most: int = 8) -> str:
+    shown = [f"{a:g}" for a in angles]
+    if len(shown) > most:
+        shown = [*shown[: most - 2], "...", shown[-1]]
+    return ", ".join(shown) + " deg"
+
+
+def _duration_text(seconds: float) -> str:
+    if seconds < 90:
+        return f"{seconds:.0f} s"
+    if seconds < 5400:
+        return f"{seconds / 60:.1f} min"
+    return f"{seconds / 3600:.1f} h"
+
+
+def dry_run_summary(dr: Any, plan: Any, rig_name: str) -> str:
+    """A few lines a person reads: angles, readings, duration (``--json`` has everything)."""
+    n_pairs = len(dr.pairs)
+    angles = list(dr.angles_deg)
+    ex = plan.exposure
+    first = " in the first round" if plan.kind == "adaptive" else ""
+    lines = [
+        f"dry run of the {plan.kind} plan on rig {rig_name!r}; nothing moves",
+        f"  stage angles: {len(angles)}{first} ({_angles_text(angles)})",
+        f"  pairs: {n_pairs} ({len(dr.lights)} lights)",
+        f"  readings: {dr.readings}{first} ({n_pairs} pairs x {len(angles)} angles), "
+        f"exposure {ex.exposure_s:g} s x {ex.averages}",
+        f"  duration: about {_duration_text(dr.estimated_s)} (moves {dr.motion_s:.1f} s, "
+        f"settling {dr.settle_s:.1f} s, exposures {dr.exposure_s:.1f} s)",
+    ]
+    bound = getattr(dr, "max_estimated_s", None)
+    if plan.kind == "adaptive":
+        lines.append("  later rounds add angles where the readings change fastest; "
+                     + (f"at most {_duration_text(bound)} in all" if bound is not None
+                        else "no --max-samples, so no bound on the total"))
+    lines.append("  (--json prints the whole plan: every position in visiting order)")
+    return "\n".join(lines)
 
 
 def _progress(store: Any, job_id: int, disabled: bool) -> Any:

@@ -8,10 +8,15 @@ Two ways to run it:
   send the fragment to the server, so the key does not reach any log). ``--demo-scan`` also
   runs one scan through the HTTP API, prints its progress and result, and exits (smoke test).
 
-The simulated rig is calibrated at start-up the way a real one is: a white reference of albedo
-0.99 goes on the stage, a calibration job runs through the service (first in the queue), and
-the specimen goes back on the stage the moment that job's measuring ends, before the worker
-can take another job. Every scan started afterwards is in 1/sr.
+What is on the simulated stage is part of the rig's state and follows the jobs, as a person
+at a real rig would: before a job measures (new or resumed after a restart), a calibration job
+gets the white reference and any other job the specimen. At start-up, when no calibration is
+in effect (none in the data directory, none queued or unfinished there), a calibration job is
+queued first; every scan afterwards is in 1/sr. A restart on the same data directory resumes
+an interrupted scan on its specimen and calibrates nothing again.
+
+Data live in the user data folder (:func:`gonio.paths.sim_daemon_data_dir`, printed at start)
+unless ``--data-dir`` names one; ``--throwaway`` uses a temporary folder deleted at exit.
 """
 
 from __future__ import annotations
@@ -47,7 +52,8 @@ def register(subparsers: Any) -> None:
     p.add_argument("--host", default=None, help="address to bind (default 127.0.0.1)")
     p.add_argument("--port", type=int, default=None, help="port (default 8600; 0 = any free)")
     p.add_argument("--data-dir", type=Path, default=None,
-                   help="jobs database and results (with --sim: a temporary folder)")
+                   help="jobs database and results (with --sim, default: the user data "
+                   "folder's serve-sim/, printed at start)")
     sim = p.add_argument_group("simulated rig (--sim)")
     sim.add_argument("--sim", action="store_true",
                      help="start a simulated rig in this process and serve it")
@@ -57,6 +63,8 @@ def register(subparsers: Any) -> None:
                      help="library material name or .npz BRDF table for the specimen")
     sim.add_argument("--time-scale", type=float, default=1.0,
                      help="sim seconds per wall second for motion and exposures")
+    sim.add_argument("--throwaway", action="store_true",
+                     help="keep jobs and results in a temporary folder deleted at exit")
     sim.add_argument("--demo-scan", action="store_true",
                      help=f"run one {DEMO_ROTATIONS}-angle scan through the API, print the result "
                      "and exit (exit code 0 when it completed)")
@@ -75,8 +83,12 @@ def run(args: argparse.Namespace) -> int:
 
     if args.port is not None and not 0 <= args.port <= 65535:
         raise UsageError(f"--port {args.port}: use 0 to 65535")
-    if not args.sim and (args.demo_scan or args.material is not None):
-        raise UsageError("--demo-scan and --material need --sim (they drive the simulated rig)")
+    if not args.sim and (args.demo_scan or args.material is not None or args.throwaway):
+        raise UsageError("--demo-scan, --material and --throwaway need --sim (they drive the "
+                         "simulated rig)")
+    if args.throwaway and args.data_dir is not None:
+        raise UsageError("--throwaway and --data-dir exclude each other: a throwaway run keeps "
+                         "nothing")
     try:
         cfg = load_daemon_config(args.config)
         cfg = cfg.with_overrides(
@@ -130,8 +142,13 @@ def _run_sim(args: argparse.Namespace, cfg: Any, keyring: Any) -> int:
         session_key = secrets.token_urlsafe(24)
         keyring = ApiKeyring({"sim-session": session_key})
     with tempfile.TemporaryDirectory(prefix="gonio-serve-") as tmp:
-        if args.data_dir is None:
+        if args.throwaway:
             cfg = cfg.with_overrides(paths__data_dir=str(Path(tmp) / "data"))
+        elif args.data_dir is None and args.config is None:
+            from gonio.paths import sim_daemon_data_dir
+
+            cfg = cfg.with_overrides(paths__data_dir=str(sim_daemon_data_dir()))
+        data_dir = cfg.paths.data_dir
         try:
             sim = start_sim_rig(SimRigOptions(
                 stage=args.stage, material=args.material, time_scale=args.time_scale,
@@ -143,17 +160,27 @@ def _run_sim(args: argparse.Namespace, cfg: Any, keyring: Any) -> int:
             app = build_app(cfg, sim.config, keyring)
             result: dict[str, int] = {}
 
+            follow_jobs_with_holder(app.state.service, sim)
+
             def started(url: str, stop: Any) -> None:
                 fragment = f"#key={session_key}" if session_key else ""
                 print(f"simulated rig {sim.config.rig.name!r}: {len(sim.config.lights)} lights, "
                       f"{len(sim.config.sensors)} sensors; rig config {sim.config_path}")
+                kept = ("a temporary folder, deleted at exit" if args.throwaway
+                        else "kept across restarts")
+                print(f"data directory {data_dir} ({kept})")
                 print(f"gonio serving on {url}")
                 print(f"open {url}{fragment} and start a scan (Ctrl-C stops)", flush=True)
                 # Called on the server's event loop, once it listens: the service runs.
-                job_id = start_sim_calibration(app.state.service, sim, report=_print_calibration)
-                print(f"calibrating the simulated rig: job {job_id} measures a white reference "
-                      f"(albedo {WHITE_REFERENCE_ALBEDO:g}), then the specimen goes back",
-                      flush=True)
+                service = app.state.service
+                why_not = calibration_not_needed(service)
+                if why_not is not None:
+                    print(f"calibration: {why_not}", flush=True)
+                else:
+                    job_id = start_sim_calibration(service, sim, report=_print_calibration)
+                    print(f"calibrating the simulated rig: job {job_id} measures a white "
+                          f"reference (albedo {WHITE_REFERENCE_ALBEDO:g}), then the specimen "
+                          "goes back", flush=True)
                 if args.demo_scan:
                     key = session_key or _first_key_hint()
                     threading.Thread(target=_demo_scan, args=(url, key, result, stop),
@@ -161,8 +188,42 @@ def _run_sim(args: argparse.Namespace, cfg: Any, keyring: Any) -> int:
 
             serve(app, cfg, on_started=started)
             if args.demo_scan:
+                job_id = result.get("job_id")
+                if job_id is not None and result.get("code") == 0:
+                    print(f"demo scan result file: {data_dir / 'results' / f'job-{job_id}.h5'}"
+                          + (" (deleted now: --throwaway)" if args.throwaway else ""),
+                          flush=True)
                 return result.get("code", 1)
     return 0
+
+
+def follow_jobs_with_holder(service: Any, sim: Any) -> None:
+    """Make the simulated stage hold what each job needs, as a person at the rig would.
+
+    Before a job measures (started or resumed after a restart), a calibration job gets the
+    white reference of its plan's albedo and every other job the rig's specimen.
+    """
+    def prepare(job: Any) -> None:
+        if job.kind == "calibration":
+            sim.place_white_reference(float(job.plan.get("reference_albedo")))
+        else:
+            sim.load("specimen")
+
+    service.worker.on_job_start = prepare
+
+
+def calibration_not_needed(service: Any) -> str | None:
+    """Why no start-up calibration is queued (one is in effect, or one is pending), or None."""
+    pending = [j for j in service.store.list_jobs()
+               if j.kind == "calibration" and j.state.value in (
+                   "queued", "running", "paused", "suspended", "reconstructing")]
+    if pending:
+        return (f"job {pending[0].id} (a calibration, {pending[0].state.value}) is still to "
+                "finish; it runs on the white reference")
+    cal = service.calibration()
+    if cal.pairs and cal.covers(service.desc.pairs):
+        return f"in effect ({cal.source}); scans are in 1/sr"
+    return None
 
 
 _MEASURING_OVER = ("reconstructing", "completed", "failed", "aborted", "halted")
@@ -173,10 +234,11 @@ def start_sim_calibration(
 ) -> int:
     """Queue a white-reference calibration of a simulated rig, first in line; returns its job id.
 
-    Call on the service's event loop. The white reference goes on the stage now; the previous
-    specimen goes back from a store listener the moment the job leaves ``running`` (its state
-    change is committed before the worker moves on), so no other job ever measures the
-    reference. When the job completes its factors are the calibration of every later scan.
+    Call on the service's event loop. The white reference goes on the stage when the job starts
+    measuring (:func:`follow_jobs_with_holder`, installed here if it is not yet), so a job
+    resumed ahead of it still measures its own specimen; the specimen goes back from a store
+    listener the moment the calibration leaves ``running``. When the job completes its factors
+    are the calibration of every later scan.
 
     Parameters
     ----------
@@ -192,7 +254,8 @@ def start_sim_calibration(
     from gonio.sim.rig import WHITE_REFERENCE_ALBEDO
 
     albedo = WHITE_REFERENCE_ALBEDO if albedo is None else albedo
-    specimen = sim.place_white_reference(albedo).brdf
+    if service.worker.on_job_start is None:
+        follow_jobs_with_holder(service, sim)
     job: dict[str, Any] = {"id": None, "restored": False}
 
     def watch(ev: Event) -> None:
@@ -200,7 +263,7 @@ def start_sim_calibration(
             return
         state = ev.data.get("state")
         if state in _MEASURING_OVER and not job["restored"]:
-            sim.place_specimen(specimen)
+            sim.load("specimen")
             job["restored"] = True
         if state in ("completed", "failed", "aborted", "halted"):
             service.remove_event_listener(handle)
@@ -214,7 +277,6 @@ def start_sim_calibration(
         job["id"] = service.submit(JobRequest(plan=plan, priority=1000)).id
     except BaseException:
         service.remove_event_listener(handle)
-        sim.place_specimen(specimen)
         raise
     return int(job["id"])
 
@@ -240,7 +302,11 @@ def _first_key_hint() -> str:
 
 
 def _demo_scan(url: str, key: str | None, result: dict[str, int], stop: Any) -> None:
-    """Submit one scan over HTTP, print its progress from the event stream, then stop."""
+    """Submit one scan over HTTP, print its progress from the event stream, then stop.
+
+    The server stops after the scan, so no URL is printed for the result: the caller prints
+    the result file's path once the server is down (a throwaway run keeps none).
+    """
     import json
 
     import httpx
@@ -256,6 +322,7 @@ def _demo_scan(url: str, key: str | None, result: dict[str, int], stop: Any) -> 
                 print(f"demo scan refused: {r.status_code} {r.text}", file=sys.stderr)
                 return
             job_id = r.json()["id"]
+            result["job_id"] = job_id
             print(f"demo scan: job {job_id} queued", flush=True)
             with c.stream("GET", "/api/v1/events", params={"since": seq, "job_id": job_id}) as s:
                 for line in s.iter_lines():
@@ -282,8 +349,8 @@ def _demo_scan(url: str, key: str | None, result: dict[str, int], stop: Any) -> 
                 units = "1/sr (calibrated)" if m.get("calibrated") else "sensor counts"
                 print(f"demo scan completed: {m.get('n_samples')} samples in {units}, "
                       f"self-estimated error "
-                      f"{100 * float(m.get('predicted_error') or float('nan')):.1f} %; "
-                      f"result {url}api/v1/jobs/{job_id}/result", flush=True)
+                      f"{100 * float(m.get('predicted_error') or float('nan')):.1f} %",
+                      flush=True)
                 code = 0
     except Exception as exc:  # reported, and the exit code says it failed
         print(f"demo scan failed: {exc}", file=sys.stderr)

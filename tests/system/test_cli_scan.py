@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -20,7 +21,7 @@ def test_sim_scan_is_calibrated_and_matches_the_material(
 ) -> None:
     out = tmp_path / "scan.h5"
     argv = ["scan", "--sim", "--rotations", "4", "--time-scale", "10", "--no-progress",
-            "-o", str(out)]
+            "--data-dir", str(tmp_path / "data"), "-o", str(out)]
     assert main(argv) == 0
     captured = capsys.readouterr()
     assert "calibrating the simulated rig" in captured.err
@@ -71,14 +72,15 @@ def test_white_reference_calibration_then_a_calibrated_scan(
     with start_sim_rig(SimRigOptions(time_scale=10.0, settle_s=0.0, config_path=rig)) as sim:
         sim.place_white_reference(0.99)
         cal_h5 = tmp_path / "white.h5"
-        assert main(["scan", "--rig", str(rig), "--white-reference", "0.99", "--rotations", "2",
-                     "--no-progress", "-o", str(cal_h5)]) == 0
+        data = ["--data-dir", str(tmp_path / "data")]
+        assert main(["scan", "--rig", str(rig), "--white-reference", "0.99", "--rotations", "4",
+                     *data, "--no-progress", "-o", str(cal_h5)]) == 0
         cal_json = tmp_path / "white.calibration.json"
         assert f"--calibration {cal_json}" in capsys.readouterr().out
         sim.place_specimen(default_material())
         out = tmp_path / "scan.h5"
         assert main(["scan", "--rig", str(rig), "--calibration", str(cal_json), "--rotations",
-                     "4", "--no-progress", "-o", str(out)]) == 0
+                     "4", *data, "--no-progress", "-o", str(out)]) == 0
         assert "in 1/sr" in capsys.readouterr().out
         s = read_result(out).samples
         truth = np.stack([[sim.true_brdf(a, b, ang) for ang in s.stage_angles_deg]
@@ -100,3 +102,64 @@ def test_bad_white_reference_requests(
     argv = ["scan", "--rig", "deploy/rig.example.toml", *extra, "-o", "unused.h5"]
     assert main(argv) == 2
     assert words in capsys.readouterr().err
+
+
+def test_scan_leaves_only_its_output_and_the_store_keeps_a_real_result_path(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """-o OUT.h5 writes OUT.h5 (and nothing else there); the job store lives in the data
+    directory, named on stderr, and its result_path exists after the scan."""
+    import json
+
+    from gonio.paths import scan_data_dir
+    from gonio.sim.rig import SimRigOptions, start_sim_rig
+
+    rig = tmp_path / "rig" / "rig.toml"
+    rig.parent.mkdir()
+    outdir = tmp_path / "out"
+    outdir.mkdir()
+    with start_sim_rig(SimRigOptions(time_scale=10.0, settle_s=0.0, config_path=rig)) as sim:
+        sim.place_white_reference(0.99)
+        assert main(["scan", "--rig", str(rig), "--white-reference", "0.99", "--rotations", "4",
+                     "--no-progress", "-o", str(outdir / "white.h5")]) == 0
+        sim.load("specimen")
+        assert main(["scan", "--rig", str(rig), "--rotations", "3", "--no-progress",
+                     "-o", str(outdir / "felt.h5")]) == 0
+        captured = capsys.readouterr()
+        # The default data directory: one per rig geometry in the (test) user data folder.
+        data = scan_data_dir(sim.config)
+        assert data.parent.parent == Path(os.environ["GONIO_DATA_DIR"])
+        assert f"data directory {data}" in captured.err
+        # The calibration job's factors are in effect for the next scan on this rig.
+        assert "in 1/sr" in captured.out
+    assert sorted(p.name for p in outdir.iterdir()) == [
+        "felt.h5", "white.calibration.json", "white.h5"]
+    assert sorted(p.name for p in rig.parent.iterdir()) == ["rig.toml"]
+    assert main(["jobs", "--db", str(data / "gonio.sqlite"), "show", "2"]) == 0
+    row = json.loads(capsys.readouterr().out)
+    assert row["state"] == "completed"
+    assert Path(row["result_path"]).is_file()
+    assert read_result(row["result_path"]).samples.values.shape == (12, 3, 3)
+
+
+def test_dry_run_prints_a_short_summary_and_json_on_request(
+    capsys: pytest.CaptureFixture[str]
+) -> None:
+    import json
+
+    argv = ["scan", "--rig", "deploy/rig.example.toml", "--dry-run", "--rotations", "6",
+            "-o", "/dev/null"]
+    assert main(argv) == 0
+    text = capsys.readouterr().out
+    lines = text.strip().splitlines()
+    assert len(lines) <= 8
+    # The example rig: 2 lights x 2 sensors, all pairs; 6 angles 60 deg apart.
+    assert "stage angles: 6 (0, 60, 120, 180, 240, 300 deg)" in text
+    assert "readings: 24 (4 pairs x 6 angles), exposure 0.01 s x 1" in text
+    assert "duration: about" in text
+    assert main([*argv, "--json"]) == 0
+    full = json.loads(capsys.readouterr().out)
+    assert full["readings"] == 24 and len(full["positions_deg"]) == 6
+    # --json alone is a mistake worth a clear line.
+    assert main(["scan", "--rig", "deploy/rig.example.toml", "--json", "-o", "x.h5"]) == 2
+    assert "--json goes with --dry-run" in capsys.readouterr().err

@@ -42,9 +42,13 @@ def test_calibrated_sim_scan_is_in_one_per_sr(tmp_path: Path, basis: Any) -> Non
         async def go() -> tuple[int, int]:
             await svc.start()
             try:
+                def on_progress(ev: Any) -> None:
+                    if ev.type == "progress" and ev.job_id == cal_id:
+                        placed["during"] = sim.specimen.brdf
+
+                svc.add_event_listener(on_progress)
                 cal_id = start_sim_calibration(
                     svc, sim, report=lambda j, st, _r: reports.append((j, st)))
-                placed["during"] = sim.specimen.brdf
                 # Queued after the calibration, as a user's first scan would be.
                 scan_id = svc.submit(JobRequest(plan=UniformPlan(specimen="sim", rotations=6))).id
                 async for ev in svc.subscribe(0, job_id=scan_id):
