@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+import re
 from pathlib import Path
 
 import pytest
@@ -17,6 +19,9 @@ from gonio.cli import main
         (["serve", "--sim", "--port", "70000"], "--port 70000"),
         (["serve", "--rig", "missing-rig.toml", "--port", "0"], "no such rig config file"),
         (["serve", "--sim", "--time-scale", "0", "--port", "0"], "--time-scale must be > 0"),
+        (["serve", "--throwaway", "--port", "0"], "need --sim"),
+        (["serve", "--sim", "--throwaway", "--data-dir", "d", "--port", "0"],
+         "--throwaway and --data-dir exclude each other"),
     ],
 )
 def test_serve_user_errors(argv: list[str], message: str, capsys: pytest.CaptureFixture[str],
@@ -35,3 +40,25 @@ def test_serve_reports_bad_daemon_config(
     cfg.write_text("[server]\nprot = 1\n")
     assert main(["serve", "--config", str(cfg), "--sim"]) == 2
     assert "unknown key 'server.prot'" in capsys.readouterr().err
+
+
+@pytest.mark.timeout(400)
+def test_sim_demo_scan_keeps_its_data_and_prints_the_result_file(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Default data directory: the user data folder's serve-sim/ (the session's temporary
+    GONIO_DATA_DIR here); the demo prints a result file that is still there after exit."""
+    monkeypatch.delenv("GONIO_API_KEYS", raising=False)
+    assert main(["serve", "--sim", "--demo-scan", "--port", "0", "--time-scale", "10"]) == 0
+    out = capsys.readouterr().out
+    data = Path(os.environ["GONIO_DATA_DIR"]) / "serve-sim"
+    assert f"data directory {data} (kept across restarts)" in out
+    m = re.search(r"demo scan result file: (\S+)", out)
+    assert m is not None, out
+    result = Path(m.group(1))
+    assert result.parent == data / "results" and result.is_file()
+    assert "api/v1/jobs" not in out.split("demo scan completed")[1]  # no dead URL
+    # Run again on the same folder: the calibration is still in effect, none is queued.
+    assert main(["serve", "--sim", "--demo-scan", "--port", "0", "--time-scale", "10"]) == 0
+    again = capsys.readouterr().out
+    assert "calibration: in effect" in again and "calibrating the simulated rig" not in again
