@@ -133,3 +133,20 @@ def test_pairs_file_reads_a_design_fragment_and_a_rig_config(tmp_path: Path) -> 
     assert cells_rig.shape == (4, 3)
     assert load_fragment(EXAMPLE).pair_names() == [("L1", "S1"), ("L1", "S2"), ("L2", "S1"),
                                                    ("L2", "S2")]
+
+
+def test_simulate_scan_takes_the_file_gonio_design_writes(tmp_path: Path,
+                                                          capsys: pytest.CaptureFixture[str]
+                                                          ) -> None:
+    from gonio.brdf.models import Lambert, tabulate
+    from gonio.brdf.samples import Samples
+
+    table = tabulate(Lambert((0.3,), channels=("Y",), name="grey")).save(tmp_path / "grey.npz")
+    geometry = tmp_path / "geometry.toml"
+    geometry.write_text(dump_fragment(FRAGMENT, "from gonio design"))
+    out = tmp_path / "samples.npz"
+    assert main(["simulate-scan", "--table", str(table), "--pairs", str(geometry), "-r", "4",
+                 "--noise", "0", "-o", str(out)]) == 0
+    s = Samples.load(out)
+    assert s.values.shape == (2, 4, 1)
+    np.testing.assert_allclose(s.values, 0.3 / np.pi, rtol=1e-3)  # a Lambertian everywhere
