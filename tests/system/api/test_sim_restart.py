@@ -127,11 +127,12 @@ def test_killed_sim_daemon_resumes_its_specimen_scan_without_recalibrating(
     with daemon(data) as first:
         assert f"data directory {data} (kept across restarts)" in first.output()
         job_id = _calibrated_and_submitted(first)
-        at_kill = first.wait_job(job_id, lambda j: j["state"] == "running"
-                                 and 2 <= j["done_angles"] <= 5)
+        at_kill = first.wait_job(job_id, lambda j: j["done_angles"] >= 2
+                                 or j["state"] in MEASURED)
         first.proc.kill()  # SIGKILL: no clean-up of any kind
         first.proc.wait(timeout=30)
-    assert at_kill["done_angles"] < 8
+    # Each angle takes about half a second here, so the kill lands mid-scan.
+    assert at_kill["state"] == "running" and at_kill["done_angles"] < 8, at_kill
 
     # 2. Restart on the same data directory: the scan resumes on its specimen, no new
     #    calibration job is queued.
