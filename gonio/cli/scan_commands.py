@@ -211,11 +211,16 @@ async def _run_scan(args: argparse.Namespace, plan: Any, config: Any, sim: Any =
         job = store.create_job(kind=plan.kind, specimen=plan.specimen,
                                plan=plan.model_dump(mode="json"),
                                rig=desc.model_dump(mode="json"))
+    if sim is not None and plan.kind == "calibration":
+        # --sim --white-reference: this process is the hand that puts the reference on.
+        sim.place_white_reference(plan.reference_albedo)
     bar = _progress(store, job.id, disabled=args.no_progress)
     try:
         final = await worker.run_job(store.get_job(job.id))
     finally:
         bar.close()
+        if sim is not None:
+            sim.load("specimen")
         if connected:
             await rig.close()
     row = store.get_job(job.id)

@@ -62,3 +62,19 @@ def test_calibration_on_the_specimen_fails_and_writes_no_factors(
     assert "gonio sim-place white" in err
     assert not (data / "calibration.json").exists()
     assert not (tmp_path / "w.calibration.json").exists() and not (tmp_path / "w.h5").exists()
+
+
+def test_sim_scan_with_white_reference_puts_the_reference_on_itself(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from gonio.calibration import Calibration
+    from gonio.results import read_result
+
+    out = tmp_path / "w.h5"
+    assert main(["scan", "--sim", "--white-reference", "0.9", "--rotations", "4",
+                 "--time-scale", "10", "--data-dir", str(tmp_path / "d"), "--no-progress",
+                 "-o", str(out)]) == 0
+    cal = Calibration.model_validate_json((tmp_path / "w.calibration.json").read_text())
+    for r in read_result(out).readings:
+        value = cal.factor(r.light, r.sensor, 3) * np.subtract(r.raw, r.dark)
+        np.testing.assert_allclose(value, 0.9 / math.pi, rtol=0.05)
