@@ -149,9 +149,10 @@ def _run_sim(args: argparse.Namespace, cfg: Any, keyring: Any) -> int:
 
             cfg = cfg.with_overrides(paths__data_dir=str(sim_daemon_data_dir()))
         data_dir = cfg.paths.data_dir
+        material = _sim_material(data_dir, args.material)
         try:
             sim = start_sim_rig(SimRigOptions(
-                stage=args.stage, material=args.material, time_scale=args.time_scale,
+                stage=args.stage, material=material, time_scale=args.time_scale,
                 config_path=Path(tmp) / "rig.toml",
             ))
         except ValueError as exc:
@@ -195,6 +196,42 @@ def _run_sim(args: argparse.Namespace, cfg: Any, keyring: Any) -> int:
                           flush=True)
                 return result.get("code", 1)
     return 0
+
+
+SIM_STATE_FILE = "sim-specimen.json"
+"""In a ``serve --sim`` data directory: the simulated specimen's material (``--material``)."""
+
+
+def _sim_material(data_dir: Path, requested: str | None) -> str | None:
+    """The material to simulate: ``requested``, unless an interrupted job in ``data_dir`` was
+    measuring another one (then that one, so the job resumes on its own specimen).
+
+    Records the choice in :data:`SIM_STATE_FILE`.
+    """
+    import json
+
+    from gonio.daemon import STORE_FILE
+    from gonio.store import JobStore
+
+    state = data_dir / SIM_STATE_FILE
+    material = requested
+    if state.is_file() and (data_dir / STORE_FILE).is_file():
+        try:
+            recorded = json.loads(state.read_text()).get("material")
+        except (ValueError, AttributeError):
+            recorded = requested
+        store = JobStore(data_dir / STORE_FILE, durable=False)
+        active = [j for j in store.active_jobs() if j.kind != "calibration"]
+        store.close()
+        if active and recorded != requested:
+            print(f"job {active[0].id} was interrupted while measuring material "
+                  f"{recorded or 'default'!r}: it stays on the stage until the job ends "
+                  f"(--material {requested or 'default'!r} applies to the next start)",
+                  file=sys.stderr, flush=True)
+            material = recorded
+    data_dir.mkdir(parents=True, exist_ok=True)
+    state.write_text(json.dumps({"material": material}))
+    return material
 
 
 def follow_jobs_with_holder(service: Any, sim: Any) -> None:

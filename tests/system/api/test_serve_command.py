@@ -62,3 +62,26 @@ def test_sim_demo_scan_keeps_its_data_and_prints_the_result_file(
     assert main(["serve", "--sim", "--demo-scan", "--port", "0", "--time-scale", "10"]) == 0
     again = capsys.readouterr().out
     assert "calibration: in effect" in again and "calibrating the simulated rig" not in again
+
+
+def test_an_interrupted_scan_keeps_its_simulated_material_across_restarts(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from gonio.cli.serve_command import _sim_material
+    from gonio.jobstates import JobState
+    from gonio.store import JobStore
+
+    data = tmp_path / "data"
+    assert _sim_material(data, "felt-001") == "felt-001"  # first start: as asked, recorded
+    store = JobStore(data / "gonio.sqlite")
+    job = store.create_job(kind="uniform", specimen="felt", plan={"kind": "uniform"}, rig={})
+    store.set_state(job.id, JobState.RUNNING)
+    store.close()
+    # Restarted with another material while the job is unfinished: the job's stays.
+    assert _sim_material(data, "paint-002") == "felt-001"
+    assert f"job {job.id} was interrupted while measuring material 'felt-001'" in \
+        capsys.readouterr().err
+    store = JobStore(data / "gonio.sqlite")
+    store.set_state(job.id, JobState.ABORTED, reason="test")
+    store.close()
+    assert _sim_material(data, "paint-002") == "paint-002"  # nothing to resume: as asked
