@@ -206,7 +206,7 @@ async def _run_scan(args: argparse.Namespace, plan: Any, config: Any, sim: Any =
               f"{job.total_angles} angles done)", file=sys.stderr)
     else:
         if (sim is not None and args.calibration is None and plan.kind != "calibration"
-                and not cal.pairs):
+                and not (cal.pairs and cal.covers(desc.pairs))):
             cal = await _calibrate_sim(sim, store, worker, desc, data_dir)
         job = store.create_job(kind=plan.kind, specimen=plan.specimen,
                                plan=plan.model_dump(mode="json"),
