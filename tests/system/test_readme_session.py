@@ -6,7 +6,8 @@ in a fresh folder, with only the substitutions the README itself documents below
 
 * the line copying ``deploy/rig.example.toml`` to the rig config starts
   ``gonio sim --geometry geometry.toml -o <that rig config>`` instead (in the background, for
-  the rest of the session): a simulated rig with the designed devices;
+  the rest of the session; with ``--time-scale 5`` so the simulated motion and exposures take
+  a fifth of the time): a simulated rig with the designed devices;
 * before a line whose comment says something goes "on the stage", ``gonio sim-place white``
   (the comment names the white reference) or ``gonio sim-place specimen`` does what hands do;
 * a line running ``gonio serve`` starts in the background with ``--port 0`` appended (tests
