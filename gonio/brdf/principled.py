@@ -1,0 +1,287 @@
+"""Principled (Disney-style) parameters fitted to a tabulated BRDF (004 App. A.3, MATH.md 10).
+
+The parameters renderers take: base colour, metallic, specular, roughness, anisotropy strength
+and direction. They describe, as in :func:`gonio.brdf.models.principled` and 004 App. A.3,
+
+* a Lambert term ``(1 - metallic) base / pi``;
+* an anisotropic GGX lobe with separable Smith masking and Schlick Fresnel of ``wi.h`` with
+  ``F0 = mix(0.08 specular, base, metallic)`` per channel (``specular = 0.5`` gives the
+  dielectric ``F0 = 0.04`` of 004 Eq. 9; Burley 2012 scales it so);
+* roughnesses ``alpha_t`` along the tangent and ``alpha_b`` across it, with the tangent at
+  azimuth ``direction`` in the specimen frame (from the holder mark, counter-clockwise).
+
+Roughness and anisotropy follow Burley 2012: ``alpha_t = r^2 / aspect``,
+``alpha_b = r^2 aspect``, ``aspect = sqrt(1 - 0.9 anisotropy)``; so ``r^2 = sqrt(alpha_t
+alpha_b)`` and the tangent is the *rougher* axis (the highlight stretches along it). The
+direction is defined modulo 180 degrees and reported in ``[0, 180)``. Each export format maps
+``(alpha_t, alpha_b, direction)`` to its own convention (:mod:`gonio.export`).
+
+Fit: nonlinear least squares (``scipy.optimize.least_squares``) of all parameters at once on a
+fixed random subset of the table's valid cells, residuals the cosine-weighted log error of
+:func:`gonio.brdf.metrics.log_rmse` times ``sqrt(wV)``, started from a GGX fit to the table's
+``td = 0`` slice (there ``i = o = h``, so that slice is the NDF up to ``G^2 / cos^2``).
+The reported error compares the fitted model's full table with the input table.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from gonio.brdf import geometry as geo
+from gonio.brdf import models as bm
+from gonio.brdf.factored import fit_metrics
+from gonio.brdf.table import VALID_MASK, BRDFTable
+
+FloatArray = NDArray[np.float64]
+#: Burley's aspect ratio bound: anisotropy 1 means alpha_t / alpha_b = 10.
+MAX_RATIO = 10.0
+ALPHA_MIN, ALPHA_MAX = 1e-3, 2.0
+
+
+class PrincipledError(ValueError):
+    """Principled parameters out of range, or a table that cannot be fitted."""
+
+
+@dataclass(frozen=True)
+class Principled:
+    """Principled BRDF parameters (module docstring for their meaning).
+
+    Parameters
+    ----------
+    base_color : (C,) floats in [0, 1]
+    metallic, specular : float in [0, 1]
+    alpha_t, alpha_b : float in [1e-3, 2], ``alpha_t >= alpha_b``
+        GGX roughness along and across the tangent.
+    direction_deg : float in [0, 180)
+        Azimuth of the tangent (the rougher axis) in the specimen frame, degrees.
+    channels : tuple of str
+    metrics : mapping
+        Fit error against the fitted table and fit timing.
+    """
+
+    base_color: tuple[float, ...]
+    metallic: float
+    specular: float
+    alpha_t: float
+    alpha_b: float
+    direction_deg: float
+    channels: tuple[str, ...] = bm.RGB
+    metrics: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        base = tuple(float(b) for b in self.base_color)
+        if len(base) != len(self.channels):
+            raise PrincipledError(
+                f"{len(base)} base colour values for {len(self.channels)} channels"
+            )
+        for what, vals, lo, hi in (
+            ("base_color", base, 0.0, 1.0), ("metallic", (self.metallic,), 0.0, 1.0),
+            ("specular", (self.specular,), 0.0, 1.0),
+            ("alpha_t", (self.alpha_t,), ALPHA_MIN, ALPHA_MAX),
+            ("alpha_b", (self.alpha_b,), ALPHA_MIN, ALPHA_MAX),
+        ):
+            for v in vals:
+                if not lo <= v <= hi:
+                    raise PrincipledError(f"{what} = {v} is outside [{lo}, {hi}]")
+        if self.alpha_b > self.alpha_t:
+            raise PrincipledError(
+                f"alpha_b = {self.alpha_b} > alpha_t = {self.alpha_t}: the tangent is the "
+                "rougher axis; swap them and turn the direction by 90 degrees"
+            )
+        object.__setattr__(self, "base_color", base)
+        object.__setattr__(self, "direction_deg", float(self.direction_deg) % 180.0)
+        object.__setattr__(self, "metrics", dict(self.metrics))
+
+    @property
+    def roughness(self) -> float:
+        """Burley roughness ``r = (alpha_t alpha_b)^(1/4)``."""
+        return float((self.alpha_t * self.alpha_b) ** 0.25)
+
+    @property
+    def anisotropy(self) -> float:
+        """Burley anisotropy in [0, 1]: ``(1 - alpha_b / alpha_t) / 0.9``, capped at 1."""
+        return float(min(1.0, (1.0 - self.alpha_b / self.alpha_t) / 0.9))
+
+    @property
+    def f0(self) -> tuple[float, ...]:
+        """Normal-incidence specular reflectance per channel."""
+        s = 0.08 * self.specular
+        return tuple(s + (b - s) * self.metallic for b in self.base_color)
+
+    def model(self, name: str = "principled") -> bm.LobeSum:
+        """The analytic model these parameters describe."""
+        spec = bm.GGX(self.alpha_t, self.alpha_b, bm.SchlickFresnel(self.f0), "separable",
+                      channels=self.channels, name=f"{name}/spec")
+        diffuse = bm.Lambert(tuple((1.0 - self.metallic) * b for b in self.base_color),
+                             channels=self.channels, name=f"{name}/diffuse")
+        return bm.LobeSum(
+            (diffuse, bm.Rotated(spec, math.radians(self.direction_deg))),
+            channels=self.channels, name=name,
+        )
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON-ready parameters, derived renderer values included (angles in degrees)."""
+        return {
+            "base_color": list(self.base_color), "metallic": self.metallic,
+            "specular": self.specular, "roughness": self.roughness,
+            "anisotropy": self.anisotropy, "direction_deg": self.direction_deg,
+            "alpha_t": self.alpha_t, "alpha_b": self.alpha_b, "f0": list(self.f0),
+            "channels": list(self.channels), "metrics": dict(self.metrics),
+        }
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> Principled:
+        """Inverse of :meth:`as_dict` (derived values are recomputed, not read)."""
+        try:
+            return cls(
+                tuple(d["base_color"]), float(d["metallic"]), float(d["specular"]),
+                float(d["alpha_t"]), float(d["alpha_b"]), float(d["direction_deg"]),
+                tuple(d.get("channels", bm.RGB)), d.get("metrics", {}),
+            )
+        except (KeyError, TypeError) as exc:
+            raise PrincipledError(f"malformed principled parameters ({exc})") from None
+
+
+# ---------------------------------------------------------------------------- fitting
+def _lobe_init(table: BRDFTable) -> tuple[float, float, float]:
+    """``(alpha_x, alpha_y, angle)`` of a GGX NDF fitted to the table's ``td = 0`` slice.
+
+    At ``td = 0`` light and view coincide with the half vector, so
+    ``f - diffuse = D(h) F(0) G1(h)^2 / (4 cos^2 th)``; near the normal ``G1 ~ 1`` and
+    ``f cos^2 th`` follows the NDF. Fitted in the log domain over ``th <= 60`` deg, from four
+    starting directions.
+    """
+    from scipy.optimize import least_squares
+
+    t0 = np.nanmean(np.asarray(table.values, dtype=float)[:, :, :, 0, 0], axis=0)  # (72, 18)
+    lobe = t0 - np.nanmin(t0)
+    th, ph = np.meshgrid(geo.TH_GRID, geo.PH_GRID, indexing="xy")  # (72, 18)
+    keep = (th <= np.deg2rad(60)) & np.isfinite(lobe) & (lobe > 1e-3 * np.nanmax(lobe))
+    if keep.sum() < 8:
+        return 0.5, 0.5, 0.0  # no visible lobe: a rough, isotropic start
+    target = np.log(lobe[keep] * np.cos(th[keep]) ** 2)
+    h = geo.spherical_to_direction(th[keep], ph[keep])
+
+    def resid(p: FloatArray) -> FloatArray:
+        ax, ay = np.exp(p[1]), np.exp(p[2])
+        d = bm.ggx_ndf(geo.rotate_z(h, -p[3]), ax, ay)
+        return np.asarray(p[0] + np.log(d) - target, dtype=float)
+
+    best: Any = None
+    for start in (0.0, 0.25 * np.pi, 0.5 * np.pi, 0.75 * np.pi):
+        p0 = np.array([0.0, math.log(0.2), math.log(0.3), start])
+        p0[0] = float(np.mean(target - (resid(p0) - p0[0] + target)))
+        r = least_squares(resid, p0, bounds=(
+            [-np.inf, math.log(ALPHA_MIN), math.log(ALPHA_MIN), -np.inf],
+            [np.inf, math.log(ALPHA_MAX), math.log(ALPHA_MAX), np.inf]))
+        if best is None or r.cost < best.cost:
+            best = r
+    return float(np.exp(best.x[1])), float(np.exp(best.x[2])), float(best.x[3])
+
+
+def _sample_cells(n: int, seed: int) -> tuple[FloatArray, FloatArray, NDArray[np.intp],
+                                                 NDArray[np.intp], FloatArray]:
+    """A fixed random subset of (ph slice, valid cell): directions, indices, weights."""
+    rng = np.random.default_rng(seed)
+    th, td, pd = geo.grid_angles()
+    nv = int(VALID_MASK.sum())
+    flat = rng.choice(geo.N_PH * nv, size=min(n, geo.N_PH * nv), replace=False)
+    k, v = np.divmod(flat, nv)
+    wi, wo = geo.half_diff_to_directions(
+        th[VALID_MASK][v], geo.PH_GRID[k], td[VALID_MASK][v], pd[VALID_MASK][v])
+    return wi, wo, k.astype(np.intp), v.astype(np.intp), geo.volume_weight()[VALID_MASK][v]
+
+
+def fit_principled(table: BRDFTable, *, n_cells: int = 12000, seed: int = 0) -> Principled:
+    """Fit principled parameters to a table (module docstring for the method).
+
+    Parameters
+    ----------
+    table : BRDFTable, 1/sr
+    n_cells : int
+        Size of the random subset of (slice, cell) pairs the residuals use.
+    seed : int
+        Seed of that subset (the fit is deterministic for a given seed).
+
+    Returns
+    -------
+    Principled
+        With ``metrics``: ``rel_mse``, ``mape``, ``psnr``, ``log_rmse`` of the principled
+        model's table against ``table``, ``cost`` (final mean squared log residual) and
+        ``seconds``.
+
+    Raises
+    ------
+    PrincipledError
+        The table has no positive finite value.
+    """
+    from scipy.optimize import least_squares
+
+    t_start = time.perf_counter()
+    vals = np.asarray(table.values, dtype=float)
+    if not (np.isfinite(vals) & (vals > 0)).any():
+        raise PrincipledError(f"table {table.name!r} has no positive finite value to fit")
+    nc = table.n_channels
+    wi, wo, k, v, wv = _sample_cells(n_cells, seed)
+    y = vals[:, :, VALID_MASK][:, k, v].T  # (N, C)
+    ok = np.isfinite(y)
+    y = np.where(ok, y, 0.0)
+    cos_i = wi[:, 2:3]
+    target = np.log1p(y * cos_i)
+    sw = np.sqrt(wv / wv.sum())[:, None] * ok
+
+    ax, ay, ang = _lobe_init(table)
+    diffuse0 = np.clip(np.pi * np.nanquantile(y, 0.05, axis=0), 0.0, 1.0)
+    # p = [base (C), metallic, specular, log alpha_x, log alpha_y, angle]
+    p0 = np.concatenate([np.maximum(diffuse0, 0.05), [0.5, 0.5, math.log(ax), math.log(ay), ang]])
+    lo = np.concatenate([np.zeros(nc), [0.0, 0.0, math.log(ALPHA_MIN), math.log(ALPHA_MIN),
+                                        -np.inf]])
+    hi = np.concatenate([np.ones(nc), [1.0, 1.0, math.log(ALPHA_MAX), math.log(ALPHA_MAX),
+                                       np.inf]])
+    p0 = np.clip(p0, lo + 1e-9, np.where(np.isfinite(hi), hi - 1e-9, hi))
+
+    def predict(p: FloatArray) -> FloatArray:
+        base, m, s = p[:nc], p[nc], p[nc + 1]
+        alpha_x, alpha_y, a = math.exp(p[nc + 2]), math.exp(p[nc + 3]), p[nc + 4]
+        f0 = 0.08 * s * (1 - m) + base * m
+        i = geo.rotate_z(wi, -a)
+        o = geo.rotate_z(wo, -a)
+        h = i + o
+        h /= np.linalg.norm(h, axis=1, keepdims=True)
+        d = bm.ggx_ndf(h, alpha_x, alpha_y)
+        g = 1.0 / ((1.0 + bm.ggx_lambda(i, alpha_x, alpha_y))
+                   * (1.0 + bm.ggx_lambda(o, alpha_x, alpha_y)))
+        c = np.clip(np.sum(i * h, axis=1), 0.0, 1.0)[:, None]
+        fres = f0[None, :] + (1.0 - f0[None, :]) * (1.0 - c) ** 5
+        spec = (d * g / (4.0 * i[:, 2] * o[:, 2]))[:, None] * fres
+        return np.asarray((1 - m) * base[None, :] / np.pi + spec, dtype=float)
+
+    def resid(p: FloatArray) -> FloatArray:
+        return np.asarray((sw * (np.log1p(predict(p) * cos_i) - target)).ravel(), dtype=float)
+
+    r = least_squares(resid, p0, bounds=(lo, hi), x_scale="jac", max_nfev=400)
+    p = r.x
+    base, m, s = p[:nc], float(p[nc]), float(p[nc + 1])
+    alpha_x, alpha_y = math.exp(p[nc + 2]), math.exp(p[nc + 3])
+    direction = math.degrees(p[nc + 4])
+    if alpha_y > alpha_x:  # the tangent is the rougher axis
+        alpha_x, alpha_y, direction = alpha_y, alpha_x, direction + 90.0
+    params = Principled(
+        tuple(float(b) for b in np.clip(base, 0.0, 1.0)), float(np.clip(m, 0, 1)),
+        float(np.clip(s, 0, 1)), float(np.clip(alpha_x, ALPHA_MIN, ALPHA_MAX)),
+        float(np.clip(alpha_y, ALPHA_MIN, ALPHA_MAX)), direction, table.channels,
+    )
+    quality: dict[str, Any] = dict(fit_metrics(bm.tabulate(params.model(), np.float64), table))
+    quality.update(cost=float(2 * r.cost / max(int(ok.sum()), 1)),
+                   seconds=round(time.perf_counter() - t_start, 3))
+    return Principled(
+        params.base_color, params.metallic, params.specular, params.alpha_t, params.alpha_b,
+        params.direction_deg, params.channels, quality,
+    )

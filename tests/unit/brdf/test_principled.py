@@ -1,0 +1,60 @@
+"""Principled parameters fitted to tables: library materials with known parameters."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from gonio.brdf import library
+from gonio.brdf import models as bm
+from gonio.brdf import principled as pr
+
+
+def _known(name: str) -> tuple[float, float]:
+    """Burley roughness and rough-axis direction (deg, mod 180) of a library GGX material,
+    from its recipe: r = (ax ay)^(1/4); the rough axis is x turned by the material's angle,
+    or y when alpha_y is the larger."""
+    mat = library.get_material(name)
+    assert isinstance(mat, bm.Rotated) and isinstance(mat.model, bm.GGX)
+    ax, ay = mat.model.alpha_x, mat.model.alpha_y
+    return (ax * ay) ** 0.25, (math.degrees(mat.angle) + (90.0 if ay > ax else 0.0)) % 180.0
+
+
+@pytest.mark.parametrize("name", ["brushed-metal-003", "metal-007", "brushed-metal-012"])
+def test_library_roughness_and_direction(name: str) -> None:
+    r_true, dir_true = _known(name)
+    fit = pr.fit_principled(bm.tabulate(library.get_material(name), dtype=np.float64))
+    assert fit.roughness == pytest.approx(r_true, rel=0.10)
+    diff = (fit.direction_deg - dir_true + 90.0) % 180.0 - 90.0
+    assert abs(diff) <= 5.0
+    assert fit.metallic > 0.9  # conductors
+    assert {"rel_mse", "mape", "psnr", "log_rmse", "seconds"} <= set(fit.metrics)
+
+
+def test_recovers_its_own_model() -> None:
+    truth = pr.Principled((0.6, 0.3, 0.1), 0.0, 0.5, 0.30, 0.12, 40.0)
+    fit = pr.fit_principled(bm.tabulate(truth.model(), dtype=np.float64))
+    np.testing.assert_allclose(fit.base_color, truth.base_color, atol=0.03)
+    assert fit.metallic == pytest.approx(0.0, abs=0.05)
+    assert fit.alpha_t == pytest.approx(0.30, rel=0.05)
+    assert fit.alpha_b == pytest.approx(0.12, rel=0.05)
+    assert abs((fit.direction_deg - 40.0 + 90) % 180 - 90) < 2.0
+    assert fit.metrics["log_rmse"] < 0.01
+
+
+def test_parameters_and_round_trip() -> None:
+    p = pr.Principled((0.5, 0.5, 0.5), 1.0, 0.5, 0.4, 0.1, 200.0)
+    assert p.direction_deg == pytest.approx(20.0)
+    assert p.roughness == pytest.approx((0.4 * 0.1) ** 0.25)
+    # Burley: alpha_b / alpha_t = aspect^2 = 1 - 0.9 anisotropy
+    assert p.anisotropy == pytest.approx((1 - 0.25) / 0.9)
+    assert p.f0 == pytest.approx((0.5, 0.5, 0.5))
+    assert pr.Principled.from_dict(p.as_dict()) == p
+    with pytest.raises(pr.PrincipledError, match="rougher axis"):
+        pr.Principled((0.5, 0.5, 0.5), 0.0, 0.5, 0.1, 0.4, 0.0)
+    with pytest.raises(pr.PrincipledError, match="metallic"):
+        pr.Principled((0.5, 0.5, 0.5), 1.5, 0.5, 0.4, 0.1, 0.0)
+    with pytest.raises(pr.PrincipledError, match="malformed"):
+        pr.Principled.from_dict({"base_color": [0.5]})
