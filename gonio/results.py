@@ -19,6 +19,11 @@ Layout (also in ``docs/engine.md``; strings are UTF-8, JSON attributes are strin
         values (C, 72, 18, 18, 36) f4   f[c, i_ph, i_th, i_td, i_pd], 1/sr, NaN = invalid cell
         channels (C,) str     coefficients (C, K, 72) f8
         attrs: rel_sample_error, estimated_error (fractions), settings (JSON)
+    /factored                 the factored fit of the reconstruction (000; gonio.brdf.factored)
+        rho_d (C,) rho_s (C,) D (18, 72) F (C, 18) G (19, 72) f8, channels (C,) str,
+        D_theta_h_deg, D_phi_h_deg, F_theta_d_deg, G_theta_deg, G_phi_deg (grids)
+        attrs: metrics (JSON: rel_mse, mape, psnr, log_rmse, iterations, seconds)
+    /principled               attrs: params (JSON, gonio.brdf.principled.Principled.as_dict)
     /metrics                  attrs: one float or string per metric
     /provenance               attrs: plan, rig, rig_config, calibration (JSON),
                                      basis_K, basis_materials (JSON list)
@@ -41,6 +46,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from gonio import __version__
+from gonio.brdf.factored import FactoredBRDF
+from gonio.brdf.principled import Principled
 from gonio.brdf.table import BRDFTable
 from gonio.calibration import Samples
 from gonio.store import ReadingRow
@@ -66,6 +73,8 @@ class ResultFile:
     settings: dict[str, Any]
     metrics: dict[str, Any]
     provenance: dict[str, Any]
+    factored: FactoredBRDF | None = None
+    principled: Principled | None = None
 
 
 _STR = h5py.string_dtype("utf-8")
@@ -90,6 +99,8 @@ def write_result(
     settings: Mapping[str, Any] | None = None,
     metrics: Mapping[str, Any] | None = None,
     provenance: Mapping[str, Any] | None = None,
+    factored: FactoredBRDF | None = None,
+    principled: Principled | None = None,
 ) -> Path:
     """Write a result file atomically (to a temporary name, then renamed). Returns the path."""
     out = Path(path)
@@ -137,6 +148,10 @@ def write_result(
             r.attrs["settings"] = json.dumps(dict(settings or {}), default=str)
             r.attrs["name"] = table.name
 
+        if factored is not None:
+            write_factored_group(f, factored)
+        if principled is not None:
+            f.create_group("principled").attrs["params"] = json.dumps(principled.as_dict())
         m = f.create_group("metrics")
         for k, v in (metrics or {}).items():
             m.attrs[k] = v if isinstance(v, int | float | str) else json.dumps(v, default=str)
@@ -145,6 +160,32 @@ def write_result(
             p.attrs[k] = v if isinstance(v, int | float | str) else json.dumps(v, default=str)
     os.replace(tmp, out)
     return out
+
+
+def write_factored_group(f: h5py.File, model: FactoredBRDF) -> None:
+    """The ``/factored`` group of the layout above."""
+    g = f.create_group("factored")
+    for key, arr in model.arrays().items():
+        if key == "channels":
+            g.create_dataset(key, data=_strs(model.channels), dtype=_STR)
+        else:
+            g[key] = np.asarray(arr, dtype=float)
+    g.attrs["metrics"] = json.dumps(dict(model.metrics), default=str)
+    g.attrs["name"] = model.name
+
+
+def _read_fits(f: h5py.File) -> tuple[FactoredBRDF | None, Principled | None]:
+    factored = principled = None
+    if "factored" in f:
+        g = f["factored"]
+        ga = _attr_dict(g.attrs)
+        data = {k: g[k][()] for k in g}
+        data["channels"] = np.asarray(_decode(g["channels"][()]))
+        factored = FactoredBRDF.from_arrays(
+            data, str(ga.get("name", "")), json.loads(ga.get("metrics", "{}")))
+    if "principled" in f:
+        principled = Principled.from_dict(json.loads(_attr_dict(f["principled"].attrs)["params"]))
+    return factored, principled
 
 
 def _decode(a: Any) -> list[str]:
@@ -220,4 +261,6 @@ def read_result(path: str | os.PathLike[str]) -> ResultFile:
             settings = json.loads(ra.get("settings", "{}"))
         metrics = _attr_dict(f["metrics"].attrs)
         provenance = _attr_dict(f["provenance"].attrs)
-    return ResultFile(attrs, readings, samples, table, rel, est, settings, metrics, provenance)
+        factored, principled = _read_fits(f)
+    return ResultFile(attrs, readings, samples, table, rel, est, settings, metrics, provenance,
+                      factored, principled)

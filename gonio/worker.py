@@ -69,6 +69,8 @@ class Worker:
     basis_provider : callable returning the reconstruction basis
     calibration : callable returning the calibration to apply to scans
     provenance : extra provenance stored in every result (e.g. the rig config)
+    fit_exports : store the factored and principled fits in every scan's result (a few
+        seconds each; exports then need no refit)
     """
 
     def __init__(
@@ -80,6 +82,7 @@ class Worker:
         basis_provider: BasisProvider = default_basis_provider,
         calibration: Callable[[], Calibration] = Calibration,
         provenance: dict[str, Any] | None = None,
+        fit_exports: bool = True,
     ):
         self.store = store
         self.get_rig = get_rig
@@ -89,6 +92,7 @@ class Worker:
         self.calibration = calibration
         self.on_job_start: Callable[[JobRow], None] | None = None
         self.provenance = provenance or {}
+        self.fit_exports = fit_exports
         self.engine: ScanEngine | None = None
         self.current_job: int | None = None
         self.held: str | None = None
@@ -287,14 +291,42 @@ class Worker:
             "seconds": time.perf_counter() - t0,
         }
         provenance.update(basis_K=int(basis.K), basis_materials=json.dumps(list(basis.materials)))
+        fits = self._fits(job_id, rec.table)
+        if fits is not None:
+            metrics.update(
+                factored_rel_mse=fits.factored.metrics["rel_mse"],
+                factored_psnr=fits.factored.metrics["psnr"],
+                principled_roughness=fits.principled.roughness,
+                principled_log_rmse=fits.principled.metrics["log_rmse"],
+            )
+        metrics["seconds"] = time.perf_counter() - t0
         write_result(
             path, job_id=job_id, specimen=job.specimen, kind=job.kind, readings=readings,
             samples=samples, table=rec.table, coefficients=rec.coefficients,
             rel_sample_error=rec.rel_sample_error, estimated_error=rec.estimated_error,
             settings=rec.settings, metrics=metrics, provenance=provenance,
+            factored=fits.factored if fits else None,
+            principled=fits.principled if fits else None,
         )
         summary.update(result_path=str(path), **metrics)
         return summary
+
+    def _fits(self, job_id: int, table: Any) -> Any:
+        """The export fits (factored, principled) of a reconstruction, or None.
+
+        They make the result file exportable without refitting; a fit that fails must not
+        cost the user the measurement, so the failure is logged and the result kept.
+        """
+        if not self.fit_exports:
+            return None
+        from gonio.export import fit_all
+
+        try:
+            return fit_all(table)
+        except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
+            log.warning("job %d: export fits failed (%s); the result is kept without them",
+                        job_id, exc)
+            return None
 
     async def stop(self) -> None:
         self._stopping = True

@@ -22,6 +22,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "gonio.cli.design_command",
     "gonio.cli.stage_command",
     "gonio.cli.rig_command",
+    "gonio.cli.export_command",
 )
 
 

@@ -1,0 +1,128 @@
+"""The MERL ``.binary`` BRDF layout (Matusik et al. 2003): writer and reader.
+
+Layout, as the MERL database's published reader expects it:
+
+* three little-endian ``int32``: the dimensions ``90, 90, 180`` (theta_h, theta_d, phi_d);
+* then ``3 x 90 x 90 x 180`` little-endian ``float64``: the red block, the green block, the
+  blue block, each in C order over ``(i_theta_h, i_theta_d, i_phi_d)``;
+* a stored number times the channel's scale (red ``1/1500``, green ``1.15/1500``, blue
+  ``1.66/1500``) is the BRDF in 1/sr; negative numbers mark cells below the horizon.
+
+Bins: ``i_theta_d = floor(theta_d / 1 deg)`` and ``i_phi_d = floor(phi_d / 1 deg)`` with
+``phi_d`` in ``[0, 180)`` deg (reciprocity); ``theta_h`` is binned non-linearly,
+``i_theta_h = floor(90 sqrt(theta_h / 90 deg))``, so bin ``i`` covers
+``theta_h in [90 (i/90)^2, 90 ((i+1)/90)^2)`` deg, fine near the specular peak. gonio writes each
+bin's value at its centre in index space (``theta_h = 90 ((i + 0.5)/90)^2`` deg,
+``theta_d = i + 0.5`` deg, ``phi_d = i + 0.5`` deg).
+
+MERL is isotropic: the writer averages a gonio table over ``phi_h`` first. The format has no
+room for metadata; provenance travels in a sidecar only if the caller writes one.
+"""
+
+from __future__ import annotations
+
+import os
+import warnings
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from gonio.brdf import geometry as geo
+from gonio.brdf.table import BRDFTable
+
+N_THETA_H, N_THETA_D, N_PHI_D = 90, 90, 180
+SHAPE = (N_THETA_H, N_THETA_D, N_PHI_D)
+#: Published per-channel scale factors: stored number x scale = BRDF (1/sr).
+SCALES = (1.0 / 1500.0, 1.15 / 1500.0, 1.66 / 1500.0)
+#: Stored for bins whose light or view is below the horizon (or that hold no value).
+BELOW_HORIZON = -1.0
+_HEADER = np.dtype("<i4")
+_DATA = np.dtype("<f8")
+
+
+class MerlError(ValueError):
+    """A table cannot be written as MERL, or a file is not a MERL binary."""
+
+
+def bin_centres() -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """``theta_h``, ``theta_d``, ``phi_d`` (radians) at which each MERL bin is written."""
+    u = (np.arange(N_THETA_H) + 0.5) / N_THETA_H
+    theta_h = u * u * (np.pi / 2)
+    theta_d = np.deg2rad(np.arange(N_THETA_D) + 0.5)
+    phi_d = np.deg2rad(np.arange(N_PHI_D) + 0.5)
+    return theta_h, theta_d, phi_d
+
+
+def merl_values(table: BRDFTable) -> NDArray[np.float64]:
+    """(3, 90, 90, 180) BRDF in 1/sr on MERL's bins, from a gonio table averaged over ``ph``.
+
+    Cells below the horizon hold NaN. Values between gonio's 5 degree nodes are multilinear
+    (:meth:`BRDFTable.eval_half_diff`), clamped at 85 deg in ``th`` and ``td``.
+
+    Raises
+    ------
+    MerlError
+        The table does not have exactly three (R, G, B) channels.
+    """
+    if table.n_channels != 3:
+        raise MerlError(
+            f"MERL files hold three channels (R, G, B); table {table.name!r} has "
+            f"{table.n_channels} ({', '.join(table.channels)})"
+        )
+    with warnings.catch_warnings():  # an all-NaN column (an invalid cell) stays NaN
+        warnings.simplefilter("ignore", RuntimeWarning)
+        iso = np.nanmean(np.asarray(table.values, dtype=float), axis=1, keepdims=True)
+    averaged = BRDFTable.trusted(
+        np.ascontiguousarray(np.broadcast_to(iso, table.values.shape)), table.channels,
+        table.name,
+    )
+    th, td, pd = np.meshgrid(*bin_centres(), indexing="ij")
+    out = averaged.eval_half_diff(th, 0.0, td, pd)  # (90, 90, 180, 3)
+    ci, co = geo.cell_cosines(th, td, pd)
+    out[(ci <= 0) | (co <= 0)] = np.nan
+    return np.moveaxis(out, -1, 0)
+
+
+def write_merl(table: BRDFTable, path: str | os.PathLike[str]) -> Path:
+    """Write a table as a MERL ``.binary`` file (atomically); returns the path."""
+    vals = merl_values(table)
+    stored = np.empty(vals.shape)
+    for c, scale in enumerate(SCALES):
+        stored[c] = np.where(np.isfinite(vals[c]), vals[c] / scale, BELOW_HORIZON)
+    p = Path(path)
+    tmp = p.with_name(p.name + ".part")
+    with open(tmp, "wb") as fh:
+        fh.write(np.asarray(SHAPE, dtype=_HEADER).tobytes())
+        fh.write(np.ascontiguousarray(stored, dtype=_DATA).tobytes())
+    os.replace(tmp, p)
+    return p
+
+
+def read_merl(path: str | os.PathLike[str]) -> NDArray[np.float64]:
+    """Read a MERL ``.binary`` file: (3, 90, 90, 180) BRDF in 1/sr, NaN below the horizon.
+
+    Raises
+    ------
+    MerlError
+        Missing file, wrong dimensions or wrong size, with what was found.
+    """
+    p = Path(path)
+    try:
+        raw = p.read_bytes()
+    except OSError as exc:
+        raise MerlError(f"{p}: cannot be read ({exc.strerror})") from None
+    if len(raw) < 12:
+        raise MerlError(f"{p}: {len(raw)} bytes is too short for a MERL header")
+    dims = tuple(int(d) for d in np.frombuffer(raw[:12], dtype=_HEADER))
+    n = int(np.prod(dims))
+    if dims != SHAPE:
+        raise MerlError(f"{p}: dimensions {dims}, expected {SHAPE} (theta_h, theta_d, phi_d)")
+    want = 12 + 3 * n * _DATA.itemsize
+    if len(raw) != want:
+        raise MerlError(f"{p}: {len(raw)} bytes, a MERL file of {dims} has {want}")
+    data: Any = np.frombuffer(raw[12:], dtype=_DATA).reshape(3, *SHAPE)
+    out = np.array(data, dtype=float) * np.asarray(SCALES)[:, None, None, None]
+    out[data < 0] = np.nan
+    return out

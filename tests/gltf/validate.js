@@ -1,0 +1,10 @@
+// Validate one .gltf file with the Khronos glTF validator; print its report as JSON.
+// Used by tests/unit/export/test_gltf.py (npm install in this folder first).
+const fs = require("fs");
+const validator = require("gltf-validator");
+
+const path = process.argv[2];
+validator
+  .validateBytes(new Uint8Array(fs.readFileSync(path)), { uri: path, format: "gltf" })
+  .then((report) => { console.log(JSON.stringify(report)); })
+  .catch((err) => { console.error(String(err)); process.exit(2); });

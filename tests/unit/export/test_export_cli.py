@@ -1,0 +1,89 @@
+"""'gonio export' on result files: every format, stored fits, provenance, bad input."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gonio.brdf import library
+from gonio.brdf import models as bm
+from gonio.brdf.factored import FactoredBRDF
+from gonio.calibration import Samples
+from gonio.cli import main
+from gonio.export import fit_all
+from gonio.results import read_result, write_result
+
+
+def _samples() -> Samples:
+    return Samples(pairs=[("L1", "S1")], light_dirs=np.array([[0.0, 0.0, 1.0]]),
+                   sensor_dirs=np.array([[0.0, 0.0, 1.0]]), stage_angles_deg=np.array([0.0]),
+                   values=np.ones((1, 1, 3)), channels=("R", "G", "B"))
+
+
+@pytest.fixture(scope="module")
+def result(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A result file of a library brushed metal with its fits stored, as the daemon writes."""
+    table = bm.tabulate(library.get_material("brushed-metal-003"))
+    fits = fit_all(table)
+    return write_result(
+        tmp_path_factory.mktemp("res") / "job-5.h5", job_id=5, specimen="brushed",
+        kind="uniform", readings=[], samples=_samples(), table=table,
+        metrics={"predicted_error": 0.03}, factored=fits.factored, principled=fits.principled,
+    )
+
+
+def test_fits_are_stored_in_the_result(result: Path) -> None:
+    res = read_result(result)
+    assert res.factored is not None and res.principled is not None
+    assert res.factored.D.shape == (18, 72) and res.factored.metrics["rel_mse"] > 0
+    assert res.principled.roughness == pytest.approx(
+        (0.10277148177302968 * 0.37092948532791287) ** 0.25, rel=0.1)
+
+
+@pytest.mark.parametrize("fmt", ["factored", "mtlx", "gltf", "merl", "table"])
+def test_every_format(result: Path, tmp_path: Path, fmt: str,
+                      capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / f"x.{fmt}"
+    assert main(["export", str(result), "--format", fmt, "-o", str(out)]) == 0
+    assert "wrote" in capsys.readouterr().out and out.stat().st_size > 0
+    if fmt == "factored":
+        f = FactoredBRDF.load(out)
+        with np.load(out) as z:
+            prov = json.loads(str(z["provenance"]))
+        assert f.D.shape == (18, 72) and prov["job_id"] == 5 and prov["specimen"] == "brushed"
+    elif fmt == "gltf":
+        assert json.loads(out.read_text())["asset"]["extras"]["job_id"] == 5
+    elif fmt == "mtlx":
+        assert "&quot;job_id&quot;: 5" in out.read_text()
+    elif fmt == "table":
+        from gonio.brdf.table import BRDFTable
+
+        assert BRDFTable.load(out).provenance["job_id"] == 5
+    else:
+        from gonio.export.merl import read_merl
+
+        assert read_merl(out).shape == (3, 90, 90, 180)
+
+
+def test_bad_input(result: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["export", str(tmp_path / "none.h5"), "-f", "gltf"]) == 2
+    assert "does not exist" in capsys.readouterr().err
+    assert main(["export", str(result), "-f", "gltf", "-o", str(tmp_path / "no/dir/x")]) == 2
+    assert "does not exist" in capsys.readouterr().err
+    assert main(["export", str(result), "-f", "table", "-o", str(result)]) == 2
+    assert "result file itself" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["export", str(result), "-f", "obj"])
+    calib = write_result(tmp_path / "cal.h5", job_id=6, specimen="white", kind="calibration",
+                         readings=[], samples=_samples())
+    assert main(["export", str(calib), "-f", "gltf", "-o", str(tmp_path / "c.gltf")]) == 2
+    assert "without a reconstructed BRDF" in capsys.readouterr().err
+    before = calib.read_bytes()
+    assert calib.read_bytes() == before  # nothing stored was touched
+    not_h5 = tmp_path / "n.h5"
+    not_h5.write_text("hello")
+    assert main(["export", str(not_h5), "-f", "gltf", "-o", str(tmp_path / "n.gltf")]) == 2
+    assert "not an HDF5 file" in capsys.readouterr().err
