@@ -539,6 +539,35 @@ class GonioService:
                 self._previews.pop(next(iter(self._previews)))
         return png
 
+    def export(self, job_id: int, fmt: str) -> tuple[Path, str]:
+        """A job's result exported as ``fmt`` (:mod:`gonio.export`): file path and file name.
+
+        Blocking (may fit and resample for seconds): call it from a thread in async code.
+        Exports are kept under ``data_dir/exports`` and reused while the result file is
+        unchanged.
+
+        Raises
+        ------
+        NotFound
+            The job has no result yet, or its result has no BRDF (a calibration job).
+        """
+        from gonio.export import FORMATS, ExportError, check_format, export_result
+
+        check_format(fmt)
+        path = self.result_path(job_id)
+        if not path.is_file():
+            raise NotFound(f"job {job_id}'s result file is missing from the data directory")
+        name = f"gonio-job-{job_id}-{fmt}{FORMATS[fmt]}"
+        out = self.data_dir / "exports" / name
+        if out.is_file() and out.stat().st_mtime_ns >= path.stat().st_mtime_ns:
+            return out, name
+        out.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            export_result(path, fmt, out)
+        except ExportError as exc:
+            raise NotFound(f"job {job_id}: {exc}") from None
+        return out, name
+
     # ------------------------------------------------------------------ rig
     async def rig_status(self) -> RigStatus:
         devices: list[DeviceState] = []

@@ -11,7 +11,7 @@ import math
 from collections import OrderedDict
 from pathlib import Path
 from threading import Lock
-from typing import Any
+from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Query, Response
 from fastapi.responses import FileResponse
@@ -151,3 +151,25 @@ async def slice_(
             for c, ch in enumerate(table.channels)
         },
     )
+
+
+ExportFormat = Literal["factored", "mtlx", "gltf", "merl", "table"]
+
+
+@router.get(
+    "/{job_id}/export",
+    dependencies=READ,
+    responses={**_NO_RESULT, 200: {"content": {"application/octet-stream": {}}}},
+    response_class=FileResponse,
+    summary="The result as a renderer format: factored, mtlx, gltf, merl or table "
+            "(docs/file-formats.md)",
+)
+async def export(
+    job_id: JobId,
+    service: Service,
+    format: Annotated[ExportFormat, Query(description="factored | mtlx | gltf | merl | table")],
+) -> FileResponse:
+    from gonio.export import MEDIA_TYPES
+
+    path, name = await asyncio.to_thread(service.export, job_id, format)
+    return FileResponse(path, media_type=MEDIA_TYPES[format], filename=name)

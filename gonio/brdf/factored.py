@@ -508,7 +508,9 @@ def fit_factored(
                        for c in range(nc)])
         df = np.stack([np.bincount(cells.td_index, (wb[c] * b).sum(0), minlength=geo.N_TD)
                        for c in range(nc)])
-        F = np.where(df > 0, nf / np.where(df > 0, df, 1.0) / rho_s[:, None], F)
+        # A channel with no specular part (rho_s = 0) keeps its F: nothing constrains it.
+        use = (df > 0) & (rho_s[:, None] > 0)
+        F = np.where(use, nf / np.where(use, df, 1.0) / np.where(use, rho_s[:, None], 1.0), F)
         for c in range(nc):
             F[c], s = _dr_clamp(F[c])
             rho_s[c] *= s

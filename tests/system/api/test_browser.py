@@ -92,6 +92,13 @@ def test_start_a_scan_from_the_page_and_see_the_result(daemon: Daemon, browser: 
     assert "rel_sample_error" in metrics
     assert browser.find_element(By.ID, "download").is_displayed()
     assert browser.find_element(By.ID, "message").get_attribute("hidden") is not None
+    # Export from the page: the control appears with the result and fetches the file.
+    wait.until(lambda d: d.find_element(By.ID, "export").is_displayed())
+    Select(browser.find_element(By.ID, "export-format")).select_by_value("gltf")
+    browser.find_element(By.ID, "export-button").click()
+    wait.until(lambda d: d.find_element(By.ID, "export-state").text.startswith(
+        ("saved", "export failed")))
+    assert browser.find_element(By.ID, "export-state").text == f"saved gonio-job-{job_id}-gltf.gltf"
     # No script errors on the way (network 404s would show here too).
     assert [e for e in browser.get_log("browser") if e["level"] == "SEVERE"] == []
 

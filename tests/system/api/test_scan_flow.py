@@ -104,6 +104,18 @@ def test_full_scan_with_live_progress_and_results(daemon: Daemon) -> None:
         path.write_bytes(h5.content)
         with h5py.File(path) as f:
             assert f["reconstruction/values"].shape[1:] == (72, 18, 18, 36)
+            assert f["factored/D"].shape == (18, 72) and "params" in f["principled"].attrs
+
+        # Exports through the service layer, from the fits the worker stored.
+        gl = c.get(f"/api/v1/jobs/{job_id}/export", params={"format": "gltf"})
+        assert gl.status_code == 200, gl.text
+        doc = gl.json()
+        assert doc["asset"]["version"] == "2.0" and doc["asset"]["extras"]["job_id"] == job_id
+        assert f"gonio-job-{job_id}-gltf.gltf" in gl.headers["content-disposition"]
+        mt = c.get(f"/api/v1/jobs/{job_id}/export", params={"format": "mtlx"})
+        assert mt.status_code == 200 and b"standard_surface" in mt.content
+        bad = c.get(f"/api/v1/jobs/{job_id}/export", params={"format": "obj"})
+        assert bad.status_code == 422 and "factored" in bad.text
 
 
 def test_sse_resync_replays_missed_events(daemon: Daemon) -> None:
@@ -177,6 +189,8 @@ def test_user_errors_get_clear_statuses(daemon: Daemon) -> None:
         q = c.post("/api/v1/jobs", json=scan("pending", rotations=4)).json()["id"]
         c.post(f"/api/v1/jobs/{q}/cancel")
         r = c.get(f"/api/v1/jobs/{q}/result")
+        assert r.status_code == 404 and "no result" in r.json()["detail"]
+        r = c.get(f"/api/v1/jobs/{q}/export", params={"format": "gltf"})
         assert r.status_code == 404 and "no result" in r.json()["detail"]
 
 

@@ -1,0 +1,46 @@
+// The result panel's export control: GET /api/v1/jobs/{id}/export?format=... as a download.
+// It follows the job shown in the result panel ("job N (completed)") and needs no other state.
+import { ApiError, getKey } from "./api.js";
+
+const $ = (sel) => document.querySelector(sel);
+
+function shownJob() {
+  const m = ($("#result-job").textContent || "").match(/^job (\d+) \(completed\)/);
+  return m ? Number(m[1]) : null;
+}
+
+function sync() {
+  $("#export").hidden = shownJob() === null;
+}
+
+async function exportShown() {
+  const id = shownJob();
+  if (id === null) return;
+  const fmt = $("#export-format").value;
+  const state = $("#export-state");
+  state.textContent = "exporting…";
+  try {
+    const headers = getKey() ? { "X-API-Key": getKey() } : {};
+    const resp = await fetch(`/api/v1/jobs/${id}/export?format=${encodeURIComponent(fmt)}`, { headers });
+    if (!resp.ok) {
+      let detail = resp.statusText;
+      try { detail = (await resp.json()).detail ?? detail; } catch { /* not JSON */ }
+      throw new ApiError(resp.status, detail);
+    }
+    const name = (resp.headers.get("content-disposition") || "").match(/filename="?([^";]+)"?/)?.[1]
+      ?? `gonio-job-${id}-${fmt}`;
+    const a = document.createElement("a");
+    a.href = URL.createObjectURL(await resp.blob());
+    a.download = name;
+    a.click();
+    state.textContent = `saved ${name}`;
+  } catch (e) {
+    state.textContent = `export failed: ${e.message}`;
+  }
+}
+
+window.addEventListener("DOMContentLoaded", () => {
+  $("#export-button").addEventListener("click", exportShown);
+  new MutationObserver(sync).observe($("#result-job"), { childList: true, characterData: true, subtree: true });
+  sync();
+});
