@@ -63,8 +63,10 @@ N_G_PHI = geo.N_PH
 G_THETA_GRID: FloatArray = np.deg2rad(np.arange(N_G_THETA) * geo.STEP_DEG)
 #: Floor of the relative weight, 1/sr: the same as the reported relMSE's (metrics.REL_FLOOR).
 REL_FLOOR = bmetrics.REL_FLOOR
-#: Start of the diffuse level: this quantile of each channel times pi (a dark, off-lobe value).
-_INIT_DIFFUSE_QUANTILE = 0.05
+#: ... or this fraction of the table's median value, whichever is larger (fit weights only).
+REL_FLOOR_FRACTION = 0.1
+#: Start of the diffuse level: this quantile of each channel's off-specular cells, times pi.
+_INIT_DIFFUSE_QUANTILE = 0.25
 
 
 class FactoredError(ValueError):
@@ -461,12 +463,19 @@ def fit_factored(
     y = np.where(ok, y, 0.0)
     W = np.where(ok, cells.wv[None, None, :], 0.0)
     if weighting == "relative":
-        W = W / np.maximum(y, REL_FLOOR) ** 2
+        # A cell at exactly 0 is a clamped measurement (noise below zero), not a value whose
+        # relative error means anything: at the floor's weight a handful of them would pull
+        # the whole fit toward 0. They are left out, like NaN cells.
+        # The floor scales with the material: measured tables hold many noisy near-zero
+        # cells at grazing angles, and at a fixed 1e-3 floor those few cells (weights 1e4
+        # times a typical cell's) would decide the whole fit.
+        floor = max(REL_FLOOR, REL_FLOOR_FRACTION * float(np.median(y[ok & (y > 0)])))
+        W = np.where(y > 0, W / np.maximum(y, floor) ** 2, 0.0)
     W /= W.sum()
     nc = y.shape[0]
 
     # Start: diffuse from a dark quantile, flat factors; the first D step finds the lobe.
-    rho_d = np.array([np.pi * np.quantile(y[c][ok[c]], _INIT_DIFFUSE_QUANTILE) for c in range(nc)])
+    rho_d = _initial_diffuse(y, ok & (y > 0), cells)
     rho_s = np.ones(nc)
     D = np.ones((geo.N_TH, geo.N_PH))
     F = np.ones((nc, geo.N_TD))
@@ -531,7 +540,7 @@ def fit_factored(
         for c in range(nc):
             rho_d[c], rho_s[c] = _nonneg_pair(W[c], y[c], F[c, cells.td_index][None] * spec)
         e = objective()
-        if math.isfinite(last) and last - e <= tol * last:
+        if math.isfinite(last) and 0.0 <= last - e <= tol * last:
             break
         last = e
 
@@ -540,6 +549,28 @@ def fit_factored(
     quality.update(iterations=done, seconds=round(time.perf_counter() - t0, 3),
                    weighting=weighting)
     return FactoredBRDF(rho_d, rho_s, D, F, G, table.channels, table.name, quality)
+
+
+def _initial_diffuse(y: FloatArray, ok: NDArray[np.bool_], cells: _Cells) -> FloatArray:
+    """A first diffuse albedo per channel: pi times a low quantile of off-specular cells.
+
+    Off-specular means ``th >= 30`` deg with both elevations within 60 deg of the normal:
+    far from a glossy peak and from the noisy, often clamped grazing cells of measured data.
+    The start matters: a specular term with ``G ~ cos theta`` can mimic a Lambert term, so a
+    start with no diffuse lets the specular factors absorb it and the fit ends with a tiny
+    ``rho_d``, a huge ``rho_s`` and a poor model.
+    """
+    th, td, pd = geo.grid_angles()
+    ci, co = geo.cell_cosines(th, td, pd)
+    off = ((th >= np.deg2rad(30)) & (np.minimum(ci, co) >= 0.5))[VALID_MASK]
+    out = np.zeros(y.shape[0])
+    for c in range(y.shape[0]):
+        sel = ok[c][:, off]
+        vals = y[c][:, off][sel]
+        if vals.size == 0:
+            vals = y[c][ok[c]]
+        out[c] = np.pi * float(np.quantile(vals, _INIT_DIFFUSE_QUANTILE)) if vals.size else 0.0
+    return out
 
 
 def _channel_sums(
