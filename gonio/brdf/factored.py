@@ -27,8 +27,10 @@ and clamps its minimum to 1e-6.
 
 Weights: each cell carries the volume-form weight ``wV = 4 cos td sin td sin th`` (000 Eq. 10,
 :func:`geometry.volume_weight`). The supplement calls ``wV`` a *sub*-weight and does not give
-the rest; gonio multiplies it by ``1 / max(f, floor)^2`` (``weighting="relative"``, default), so
-the fit minimises the volume-weighted relative squared error, which is the relMSE it reports.
+the rest; gonio multiplies it by ``1 / max(f, floor)^2`` with ``floor = max(1e-3, 0.1 median
+f)`` (``weighting="relative"``, default), so the fit minimises a volume-weighted relative
+squared error like the relMSE it reports; cells at exactly 0 (clamped measurements) are left
+out.
 ``weighting="volume"`` uses ``wV`` alone (absolute errors, dominated by the specular peak).
 """
 
