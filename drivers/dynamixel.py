@@ -27,10 +27,12 @@ from collections.abc import Callable
 from typing import Any
 
 import dynamixel_sdk as sdk
+import serial
 
 from gonio.drivers._arrival import poll_delay, trapezoid_s
 from gonio.drivers._backlash import approach_waypoints, check_motion_settings, check_target
-from gonio.hal import DeviceUnavailable, StageFault, StageStatus, TravelLimits
+from gonio.drivers._ownership import claim
+from gonio.hal import DeviceInUse, DeviceUnavailable, StageFault, StageStatus, TravelLimits
 from gonio.hal import Stage as _Stage
 
 COUNTS_PER_TURN = 4096
@@ -81,6 +83,21 @@ def _port_lock(port: str) -> threading.Lock:
     """One lock per serial port, shared by every driver instance on that bus."""
     with _PORT_LOCKS_GUARD:
         return _PORT_LOCKS.setdefault(port, threading.Lock())
+
+
+class _ExclusivePortHandler(sdk.PortHandler):
+    """The SDK's port handler, opening the port with ``exclusive=True`` (a ``flock`` on the
+    device): another program that asks for the port exclusively is refused while we hold it."""
+
+    def setupPort(self, cflag_baud: int) -> bool:
+        if bool(getattr(self, "is_open", False)):
+            self.closePort()
+        self.ser = serial.Serial(port=self.port_name, baudrate=self.baudrate,
+                                 bytesize=serial.EIGHTBITS, timeout=0, exclusive=True)
+        self.is_open = True
+        self.ser.reset_input_buffer()
+        self.tx_time_per_byte = (1000.0 / self.baudrate) * 10.0  # ms per byte, as the SDK
+        return True
 
 
 def _signed32(value: int) -> int:
@@ -178,6 +195,7 @@ class DynamixelStage(_Stage):
             "accel_dps2", accel_dps2, gear / DPS2_PER_ACCEL_UNIT
         )
         self._ph: Any = None
+        self._claim: Any = None  # this process's lock on the port (gonio.locks)
         self._pk: Any = sdk.PacketHandler(2.0)
         self._lock = _port_lock(port)
         self._op_lock = asyncio.Lock()
@@ -200,10 +218,15 @@ class DynamixelStage(_Stage):
 
     # ------------------------------------------------------------------ transport
     def _open(self) -> None:
-        ph = sdk.PortHandler(self.port)
+        ph = _ExclusivePortHandler(self.port)
         try:
             ok = ph.setBaudRate(self.baudrate)
         except Exception as exc:  # pyserial raises SerialException/OSError on a missing port
+            if "exclusively lock" in str(exc):
+                raise DeviceInUse(
+                    self.name, f"serial port {self.port!r} is held by another program "
+                    f"({exc}); close it (a terminal program, another gonio) and retry"
+                ) from exc
             raise DeviceUnavailable(
                 self.name,
                 f"cannot open serial port {self.port!r}: {exc}; check the USB adapter and the "
@@ -234,6 +257,8 @@ class DynamixelStage(_Stage):
                         self._open()
                     self._ph.is_using = False  # a failed call may leave the SDK's flag set
                     out = fn(self._ph, self.dxl_id, *args)
+                except DeviceInUse:
+                    raise  # retrying cannot take the port from its owner
                 except DeviceUnavailable as exc:
                     last = str(exc)
                     time.sleep(0.05 * (attempt + 1))
@@ -313,12 +338,20 @@ class DynamixelStage(_Stage):
     # ------------------------------------------------------------------ Device
     async def connect(self) -> None:
         self._rest_deg = None
+        if self._claim is None:
+            self._claim = claim(self.name, self.port)
+        try:
+            await self._connect()
+        except BaseException:
+            await self.close()
+            raise
+
+    async def _connect(self) -> None:
         async with self._op_lock:
             await asyncio.to_thread(self._open_locked)
             try:
                 model, _ = await self._call("ping", self._pk.ping)
             except DeviceUnavailable as exc:
-                await self.close()
                 raise DeviceUnavailable(
                     self.name,
                     f"Dynamixel ID {self.dxl_id} does not answer on {self.port} at "
@@ -354,6 +387,9 @@ class DynamixelStage(_Stage):
                 with self._lock, contextlib.suppress(Exception):
                     ph.closePort()
             await asyncio.to_thread(_close)
+        owned, self._claim = self._claim, None
+        if owned is not None:
+            owned.release()
 
     # ------------------------------------------------------------------ Stage
     async def position(self) -> float:

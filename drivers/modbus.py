@@ -22,6 +22,7 @@ from pymodbus.client import AsyncModbusTcpClient
 from pymodbus.exceptions import ModbusException
 
 from gonio.config import LightConfig, Register, SensorConfig
+from gonio.drivers._ownership import claim
 from gonio.hal import (
     DeviceFault,
     DeviceUnavailable,
@@ -109,6 +110,7 @@ class ModbusConnection:
         self.port = port
         self.timeout_s = timeout_s
         self._client: AsyncModbusTcpClient | None = None
+        self._claim: Any = None  # this process's lock on the endpoint, from first use to close
         self._lock = asyncio.Lock()
         self.users = 0
         # Changes whenever the link is dropped or established: state a device kept for this
@@ -125,6 +127,10 @@ class ModbusConnection:
     async def _connected(self, device: str) -> AsyncModbusTcpClient:
         if self._client is not None and self._client.connected:
             return self._client
+        if self._claim is None:
+            # Before any byte goes out: a second program on this endpoint would interleave its
+            # requests with ours (sensor triggers, lamp coils) and corrupt both programs' data.
+            self._claim = claim(device, f"tcp://{self.host}:{self.port}")
         self._drop()
         # pymodbus' own reconnect loop is off (reconnect_delay=0): this class reconnects on
         # the next request instead, so a dead device never keeps a background task busy.
@@ -187,6 +193,9 @@ class ModbusConnection:
 
     def close(self) -> None:
         self._drop()
+        owned, self._claim = self._claim, None
+        if owned is not None:
+            owned.release()
 
 
 class ModbusPool:

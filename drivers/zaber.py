@@ -31,7 +31,8 @@ import serial
 
 from gonio.drivers._arrival import poll_delay, trapezoid_s
 from gonio.drivers._backlash import approach_waypoints, check_motion_settings, check_target
-from gonio.hal import DeviceUnavailable, StageFault, StageStatus, TravelLimits
+from gonio.drivers._ownership import claim
+from gonio.hal import DeviceInUse, DeviceUnavailable, StageFault, StageStatus, TravelLimits
 from gonio.hal import Stage as _Stage
 
 SPEED_FACTOR = 1.6384
@@ -184,17 +185,25 @@ class ZaberStage(_Stage):
         self.maxspeed = max(1, round(self.speed_dps * self.mpd * SPEED_FACTOR))
         self.accel = max(1, round(self.accel_dps2 * self.mpd * ACCEL_FACTOR))
         self._port: Any = None
+        self._claim: Any = None  # this process's lock on the port or URL (gonio.locks)
         self._lock = _port_lock(url)
         self._ids = itertools.cycle(range(100))
         self._op_lock = asyncio.Lock()
 
     # ------------------------------------------------------------------ transport
     def _open(self) -> None:
+        # A local serial device is opened exclusively (flock); URLs have no such flag.
+        extra = {} if "://" in self.url else {"exclusive": True}
         try:
             self._port = serial.serial_for_url(
-                self.url, baudrate=self.baudrate, timeout=self.reply_timeout_s
+                self.url, baudrate=self.baudrate, timeout=self.reply_timeout_s, **extra
             )
         except (serial.SerialException, OSError, ValueError) as exc:
+            if "exclusively lock" in str(exc):
+                raise DeviceInUse(
+                    self.name, f"serial port {self.url!r} is held by another program ({exc}); "
+                    "close it (a terminal program, another gonio) and retry"
+                ) from exc
             raise DeviceUnavailable(
                 self.name,
                 f"cannot open {self.url!r}: {exc}; check the cable or network and the url in "
@@ -216,7 +225,7 @@ class ZaberStage(_Stage):
                     self._port.write(line.encode("ascii"))
                     reply = self._read_reply(msg_id)
                 except DeviceUnavailable as exc:
-                    if exc.code in ("garbled", "port"):
+                    if exc.code in ("garbled", "port", "in_use"):
                         raise  # retrying cannot fix a wrong url or a foreign protocol
                     last = str(exc)
                     continue
@@ -302,12 +311,20 @@ class ZaberStage(_Stage):
 
     # ------------------------------------------------------------------ Device
     async def connect(self) -> None:
+        if self._claim is None:
+            self._claim = claim(self.name, self.url)
+        try:
+            await self._connect()
+        except BaseException:
+            await self.close()
+            raise
+
+    async def _connect(self) -> None:
         async with self._op_lock:
             try:
                 await self._send("")
             except DeviceUnavailable as exc:
-                await self.close()
-                if exc.code in ("garbled", "port"):
+                if exc.code in ("garbled", "port", "in_use"):
                     raise
                 raise DeviceUnavailable(
                     self.name,
@@ -324,6 +341,9 @@ class ZaberStage(_Stage):
                 self._drop_port()
 
         await asyncio.to_thread(_close)
+        owned, self._claim = self._claim, None
+        if owned is not None:
+            owned.release()
 
     # ------------------------------------------------------------------ Stage
     async def position(self) -> float:

@@ -384,6 +384,14 @@ class RigConfig(_Strict):
                 return x
         raise KeyError(name)
 
+    def endpoints(self) -> list[str]:
+        """Every device endpoint of the rig, once each: the stage port (serial device or
+        pyserial URL) and each Modbus TCP ``tcp://host:port`` (devices behind one gateway share
+        it). These are what one program at a time may own (:mod:`gonio.locks`)."""
+        eps = [self.stage.port]
+        eps += [f"tcp://{d.modbus.host}:{d.modbus.port}" for d in [*self.lights, *self.sensors]]
+        return list(dict.fromkeys(eps))
+
     def pair_list(self) -> list[Pair]:
         """The measured pairs in order (every light with every sensor for ``"all"``)."""
         if self.pairs == "all":

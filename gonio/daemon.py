@@ -291,19 +291,32 @@ def build_app(
     """
     from gonio.api.app import create_app
     from gonio.drivers.factory import build_rig
+    from gonio.locks import claim_endpoints, claim_store
     from gonio.service import GonioService
     from gonio.store import JobStore
 
     data_dir = cfg.paths.data_dir
     data_dir.mkdir(parents=True, exist_ok=True)
-    store = JobStore(data_dir / STORE_FILE)
-    service = GonioService(
-        store,
-        rig if rig is not None else (lambda: build_rig(rig_config)),
-        rig_config=rig_config,
-        basis_provider=basis_provider,
-        data_dir=data_dir,
-    )
+    # One daemon per data directory and one owner per rig, for this process's life: refused
+    # here (LockBusy naming the holder) before anything is opened or served.
+    owned: list[Any] = [claim_store(data_dir / STORE_FILE, f"data directory {data_dir}")]
+    try:
+        endpoints = getattr(rig_config, "endpoints", None)
+        if endpoints is not None:
+            owned.append(claim_endpoints(endpoints()))
+        store = JobStore(data_dir / STORE_FILE)
+        service = GonioService(
+            store,
+            rig if rig is not None else (lambda: build_rig(rig_config)),
+            rig_config=rig_config,
+            basis_provider=basis_provider,
+            data_dir=data_dir,
+        )
+    except BaseException:
+        for lock in reversed(owned):
+            lock.release()
+        raise
+    service.owned = owned
     return create_app(service, api_settings(cfg, keyring))
 
 
@@ -322,12 +335,18 @@ def warn_if_exposed(cfg: DaemonConfig, keyring: ApiKeyring) -> None:
         log.info("API keys loaded: %s", ", ".join(keyring.names))
 
 
-def serve(app: Any, cfg: DaemonConfig, on_started: Any = None) -> None:
+def serve(app: Any, cfg: DaemonConfig, on_started: Any = None) -> int:
     """Run ``app`` with uvicorn on ``cfg.server`` until interrupted (SIGINT/SIGTERM).
 
     ``on_started(url, stop)`` is called once the socket listens (the CLI prints the address
     there); calling ``stop()`` from any thread shuts the server down gracefully. Ctrl-C does the
     same and returns normally.
+
+    Returns
+    -------
+    int
+        The process exit status: 0 after a requested stop, 1 when the daemon stopped because
+        its job worker died (so a supervisor restarts it).
     """
     import uvicorn
 
@@ -360,9 +379,16 @@ def serve(app: Any, cfg: DaemonConfig, on_started: Any = None) -> None:
     def stop() -> None:
         server.should_exit = True
 
+    service = getattr(app.state, "service", None) if hasattr(app, "state") else None
+    if service is not None:
+        service.on_fatal = stop
     # uvicorn re-raises Ctrl-C after its graceful shutdown; by then everything is closed.
     with contextlib.suppress(KeyboardInterrupt):
         server.run()
+    if service is not None and service.worker_failure is not None:
+        log.critical("exiting with status 1: the job worker died (%s)", service.worker_failure)
+        return 1
+    return 0
 
 
 def _url_host(host: str) -> str:

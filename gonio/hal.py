@@ -50,6 +50,14 @@ class DeviceUnavailable(DeviceFault):
     """The device did not answer (timeout, lost connection, unparseable replies)."""
 
 
+class DeviceInUse(DeviceUnavailable):
+    """Another program owns the device's port or endpoint (:mod:`gonio.locks`); not recoverable
+    by retrying: that program must stop, or be asked through its API."""
+
+    def __init__(self, device: str, message: str) -> None:
+        super().__init__(device, message, code="in_use", recoverable=False)
+
+
 class LampOutOfBand(DeviceFault):
     """A light's monitored output is outside its allowed band."""
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import logging
 import threading
 from collections.abc import AsyncIterator, Callable
 from pathlib import Path
@@ -31,6 +32,8 @@ from gonio.plans import AnyPlan, DryRun, Plan, PlanError, RigDescription, dry_ru
 from gonio.store import EventRow, JobRow, JobStore, ReadingRow
 from gonio.store import NotFound as StoreNotFound
 from gonio.worker import BasisProvider, Worker, default_basis_provider
+
+log = logging.getLogger("gonio.service")
 
 __all__ = [
     "Conflict",
@@ -218,6 +221,12 @@ class GonioService:
         self._previews: dict[tuple[str, int], bytes] = {}
         self._basis_lock = threading.Lock()
         self._basis: Any = None
+        # OS locks this service owns for its life (data directory, rig endpoints: see
+        # gonio.daemon.build_app); released by stop().
+        self.owned: list[Any] = []
+        # Why the worker died, once it has: /health then fails and the daemon exits non-zero.
+        self.worker_failure: str | None = None
+        self.on_fatal: Callable[[], None] | None = None
         provenance: dict[str, Any] = {}
         if rig_config is not None and hasattr(rig_config, "model_dump_json"):
             provenance["rig_config"] = rig_config.model_dump_json()
@@ -233,7 +242,28 @@ class GonioService:
         self._loop = asyncio.get_running_loop()
         self._cond = asyncio.Condition()
         self.store.reconcile(self._can_resume)
-        self._task = asyncio.create_task(self.worker.run_forever(), name="gonio-worker")
+        self._task = asyncio.create_task(self._run_worker(), name="gonio-worker")
+
+    async def _run_worker(self) -> None:
+        """The worker's loop; if it ever raises, the daemon is broken and must say so.
+
+        A worker that died silently left the API accepting jobs nobody would run; instead the
+        failure is recorded (``/health`` answers 503 with it) and ``on_fatal`` asks the server
+        to exit, with a non-zero status, so a supervisor (systemd) restarts the daemon. The job
+        it was measuring stays active in the store and resumes from its checkpoint then.
+        """
+        try:
+            await self.worker.run_forever()
+        except asyncio.CancelledError:
+            raise
+        except BaseException as exc:
+            self.worker_failure = f"{type(exc).__name__}: {exc}"
+            log.critical("the job worker died (%s); the daemon stops so it can be restarted",
+                         self.worker_failure, exc_info=exc)
+            with contextlib.suppress(Exception):  # the store may be what failed
+                self.store.append_event(None, "worker_failed", {"error": self.worker_failure})
+            if self.on_fatal is not None:
+                self.on_fatal()
 
     async def stop(self) -> None:
         """Stop the worker (an active job stays active and resumes at the next start)."""
@@ -247,6 +277,9 @@ class GonioService:
             await self._rig.close()
             self._connected = False
         self.store.remove_listener(self._on_event)
+        for lock in reversed(self.owned):
+            lock.release()
+        self.owned.clear()
 
     def _can_resume(self, job: JobRow) -> str | None:
         try:

@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import time
 from collections import Counter
+from typing import Any
 
 from fastapi import APIRouter, Header, Query, Request
-from fastapi.responses import PlainTextResponse, StreamingResponse
+from fastapi.responses import JSONResponse, PlainTextResponse, StreamingResponse
 from pydantic import BaseModel
 
 from gonio import __version__
@@ -23,16 +24,26 @@ class Health(BaseModel):
     version: str
     seq: int
     uptime_s: float
+    error: str | None = None
 
 
-@router.get("/health", summary="Liveness: the daemon answers and its store is readable")
-async def health(service: Service, request: Request) -> Health:
-    return Health(
+@router.get("/health", summary="Liveness: the daemon answers, its store is readable and its job "
+                               "worker runs (503 when the worker died)",
+            response_model=Health,
+            responses={503: {"model": Health, "description": "the job worker died; the daemon "
+                             "is stopping so its supervisor can restart it"}})
+async def health(service: Service, request: Request) -> Any:
+    out = Health(
         status="ok",
         version=__version__,
         seq=service.seq,
         uptime_s=time.monotonic() - request.app.state.started_at,
     )
+    if service.worker_failure is not None:
+        failed = out.model_copy(update={"status": "failed",
+                                        "error": f"job worker died: {service.worker_failure}"})
+        return JSONResponse(failed.model_dump(), status_code=503)
+    return out
 
 
 @router.get(

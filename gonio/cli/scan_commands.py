@@ -152,12 +152,8 @@ def _scan(args: argparse.Namespace) -> int:
 
 
 async def _run_scan(args: argparse.Namespace, plan: Any, config: Any, sim: Any = None) -> int:
-    from gonio.calibration import Calibration, calibration_in_effect
     from gonio.drivers.factory import build_rig
-    from gonio.jobstates import JobState
     from gonio.plans import RigDescription, dry_run
-    from gonio.store import JobStore
-    from gonio.worker import Worker
 
     rig = build_rig(config)
     desc = RigDescription.from_rig(rig)
@@ -169,13 +165,41 @@ async def _run_scan(args: argparse.Namespace, plan: Any, config: Any, sim: Any =
     if args.json:
         raise UsageError("--json goes with --dry-run")
     dry_run(plan, desc)  # refuse a bad plan before connecting to anything
-    out: Path = args.output
     from gonio.daemon import STORE_FILE
     from gonio.paths import scan_data_dir
 
     data_dir = args.data_dir or scan_data_dir(config)
     data_dir.mkdir(parents=True, exist_ok=True)
     db = args.db or data_dir / STORE_FILE
+    # Own the data directory, the job store and the rig for the whole run, or refuse naming who
+    # does (a daemon on the same data directory or rig, another gonio scan).
+    from gonio.locks import LockBusy, claim_endpoints, claim_store
+
+    owned: list[Any] = []
+    try:
+        owned.append(claim_store(data_dir / STORE_FILE, f"data directory {data_dir}"))
+        if Path(db).resolve() != (data_dir / STORE_FILE).resolve():
+            owned.append(claim_store(db))
+        owned.append(claim_endpoints(config.endpoints()))
+    except LockBusy as exc:
+        for lock in reversed(owned):
+            lock.release()
+        raise UsageError(str(exc)) from None
+    try:
+        return await _run_owned(args, plan, config, sim, rig, desc, db, data_dir)
+    finally:
+        for lock in reversed(owned):
+            lock.release()
+
+
+async def _run_owned(args: argparse.Namespace, plan: Any, config: Any, sim: Any, rig: Any,
+                     desc: Any, db: Path, data_dir: Path) -> int:
+    from gonio.calibration import Calibration, calibration_in_effect
+    from gonio.jobstates import JobState
+    from gonio.store import JobStore
+    from gonio.worker import Worker
+
+    out: Path = args.output
     store = JobStore(db)
     print(f"data directory {data_dir} (job store {db})", file=sys.stderr)
     # The same rule as the daemon: the latest calibration job here, else the rig config's

@@ -111,10 +111,33 @@ def run(args: argparse.Namespace) -> int:
             )
         rig_config = load_rig_config(cfg.paths.rig_config)
         warn_if_exposed(cfg, keyring)
-        app = build_app(cfg, rig_config, keyring)
-        serve(app, cfg, on_started=lambda url, _stop: print(f"gonio serving on {url}", flush=True))
-        return 0
+        app = _build(build_app, cfg, rig_config, keyring)
+        return serve(app, cfg,
+                     on_started=lambda url, _stop: print(f"gonio serving on {url}", flush=True))
     return _run_sim(args, cfg, keyring)
+
+
+def _claim_data_dir(data_dir: Path) -> Any:
+    """This process's lock on a daemon data directory (:func:`gonio.locks.claim_store`), or a
+    one-line refusal naming the process that has it."""
+    from gonio.daemon import STORE_FILE
+    from gonio.locks import LockBusy, claim_store
+
+    try:
+        return claim_store(Path(data_dir) / STORE_FILE, f"data directory {data_dir}")
+    except LockBusy as exc:
+        raise UsageError(f"cannot start: {exc}") from None
+
+
+def _build(build_app: Any, *args: Any) -> Any:
+    """``build_app(*args)``, with a data directory or rig owned by another process reported
+    as one line naming that process (exit status 2) rather than a traceback."""
+    from gonio.locks import LockBusy
+
+    try:
+        return build_app(*args)
+    except LockBusy as exc:
+        raise UsageError(f"cannot start: {exc}") from None
 
 
 def _configure_logging(level: str) -> None:
@@ -149,6 +172,9 @@ def _run_sim(args: argparse.Namespace, cfg: Any, keyring: Any) -> int:
 
             cfg = cfg.with_overrides(paths__data_dir=str(sim_daemon_data_dir()))
         data_dir = cfg.paths.data_dir
+        # Own the data directory before reading or writing anything in it (a second daemon on
+        # it is refused here, naming the first); build_app takes the same lock again.
+        owned = _claim_data_dir(data_dir)
         material = _sim_material(data_dir, args.material)
         try:
             sim = start_sim_rig(SimRigOptions(
@@ -156,9 +182,10 @@ def _run_sim(args: argparse.Namespace, cfg: Any, keyring: Any) -> int:
                 config_path=Path(tmp) / "rig.toml",
             ))
         except ValueError as exc:
+            owned.release()
             raise UsageError(f"cannot start the simulated rig: {exc}") from None
-        with sim:
-            app = build_app(cfg, sim.config, keyring)
+        with owned, sim:
+            app = _build(build_app, cfg, sim.config, keyring)
             result: dict[str, int] = {}
 
             follow_jobs_with_holder(app.state.service, sim)
@@ -187,15 +214,15 @@ def _run_sim(args: argparse.Namespace, cfg: Any, keyring: Any) -> int:
                     threading.Thread(target=_demo_scan, args=(url, key, result, stop),
                                      daemon=True).start()
 
-            serve(app, cfg, on_started=started)
-            if args.demo_scan:
+            code = serve(app, cfg, on_started=started)
+            if args.demo_scan and code == 0:
                 job_id = result.get("job_id")
                 if job_id is not None and result.get("code") == 0:
                     print(f"demo scan result file: {data_dir / 'results' / f'job-{job_id}.h5'}"
                           + (" (deleted now: --throwaway)" if args.throwaway else ""),
                           flush=True)
                 return result.get("code", 1)
-    return 0
+    return code
 
 
 SIM_STATE_FILE = "sim-specimen.json"

@@ -1,0 +1,94 @@
+"""gonio.locks: exclusive ownership by flock, naming the holder, never blocked by stale files."""
+
+from __future__ import annotations
+
+import fcntl
+import json
+import os
+from pathlib import Path
+
+import pytest
+
+from gonio.locks import FileLock, LockBusy, claim_endpoints, claim_store, endpoint_key
+
+
+def _foreign_holder(path: Path, record: dict[str, object]) -> int:
+    """Hold ``path`` the way another process would: its own open file and flock."""
+    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    os.write(fd, json.dumps(record).encode())
+    return fd
+
+
+def test_a_held_lock_is_refused_naming_the_holder(tmp_path: Path) -> None:
+    path = tmp_path / "gonio.sqlite.lock"
+    fd = _foreign_holder(path, {"pid": 4242, "host": "labpc", "program": "gonio serve",
+                                "since": 0.0})
+    try:
+        with pytest.raises(LockBusy) as info:
+            claim_store(tmp_path / "gonio.sqlite", "data directory /x")
+        msg = str(info.value)
+        assert "data directory /x is in use by gonio serve (pid 4242 on labpc, since " \
+               "1970-01-01 00:00:00 UTC)" in msg
+        assert info.value.holder["pid"] == 4242
+    finally:
+        os.close(fd)  # the holder goes away...
+    lock = claim_store(tmp_path / "gonio.sqlite")  # ...and the lock is free at once
+    try:
+        record = json.loads(path.read_text())
+        assert record["pid"] == os.getpid()
+    finally:
+        lock.release()
+    assert path.read_text() == ""  # released: the file no longer names this process
+
+
+def test_a_stale_lock_file_does_not_block(tmp_path: Path) -> None:
+    # A lock file left by a process that died (kill -9): it names a holder, but nobody holds
+    # the flock, so it must not matter.
+    path = tmp_path / "db.sqlite.lock"
+    path.write_text(json.dumps({"pid": 999999, "host": "gone", "program": "gonio scan"}))
+    lock = claim_store(tmp_path / "db.sqlite")
+    assert lock.held
+    lock.release()
+    assert not lock.held
+
+
+def test_locks_are_reentrant_within_a_process(tmp_path: Path) -> None:
+    a = FileLock(tmp_path / "x.lock", "x").acquire()
+    b = FileLock(tmp_path / "x.lock", "x").acquire()  # the same process: counted, not refused
+    a.release()
+    fd = os.open(tmp_path / "x.lock", os.O_RDONLY)
+    try:
+        with pytest.raises(BlockingIOError):  # still held for b
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        b.release()
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)  # now free
+    finally:
+        os.close(fd)
+
+
+def test_endpoint_keys_name_one_device_once(tmp_path: Path) -> None:
+    target = tmp_path / "ttyUSB0"
+    target.write_text("")
+    link = tmp_path / "gonio-zaber"
+    link.symlink_to(target)
+    assert endpoint_key(str(link)) == endpoint_key(str(target))
+    assert endpoint_key("socket://10.0.0.5:55550") == endpoint_key("tcp://10.0.0.5:55550")
+    assert endpoint_key("tcp://10.0.0.5:502") != endpoint_key("tcp://10.0.0.5:503")
+    assert "/" not in endpoint_key("/dev/pts/7")
+
+
+def test_claiming_a_rig_is_all_or_nothing(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("GONIO_LOCK_DIR", str(tmp_path))
+    busy = tmp_path / f"gonio-{endpoint_key('tcp://127.0.0.1:1502')}.lock"
+    fd = _foreign_holder(busy, {"pid": 7, "host": "h", "program": "gonio scan", "since": 0})
+    try:
+        with pytest.raises(LockBusy, match=r"tcp://127.0.0.1:1502 is in use by gonio scan"):
+            claim_endpoints(["/dev/pts/99", "tcp://127.0.0.1:1502"])
+        # The first endpoint was given back when the second was refused: another process
+        # (played by a foreign flock) can take it.
+        first = tmp_path / f"gonio-{endpoint_key('/dev/pts/99')}.lock"
+        fd2 = _foreign_holder(first, {})
+        os.close(fd2)
+    finally:
+        os.close(fd)
