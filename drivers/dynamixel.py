@@ -45,6 +45,7 @@ ADDR_MODEL_NUMBER = 0
 ADDR_OPERATING_MODE = 11
 ADDR_HOMING_OFFSET = 20
 ADDR_TORQUE_ENABLE = 64
+ADDR_LED = 65
 ADDR_HARDWARE_ERROR = 70
 ADDR_PROFILE_ACCELERATION = 108
 ADDR_PROFILE_VELOCITY = 112
@@ -418,6 +419,7 @@ class DynamixelStage(_Stage):
                 )
             await self._write("write Homing Offset", ADDR_HOMING_OFFSET, 4, new_offset)
             await self._write("torque on", ADDR_TORQUE_ENABLE, 1, 1)
+            await self._write("LED on: zero set", ADDR_LED, 1, 1)
             self._homed = True
 
     async def move_to(self, angle_deg: float, timeout_s: float | None = None) -> float:
@@ -506,11 +508,16 @@ class DynamixelStage(_Stage):
         position = await self._read("read Present Position", ADDR_PRESENT_POSITION, 4, check=False)
         moving = await self._read("read Moving", ADDR_MOVING, 1, check=False)
         temperature = await self._read("read temperature", ADDR_PRESENT_TEMPERATURE, 1, check=False)
+        led = await self._read("read LED", ADDR_LED, 1, check=False)
         faults = tuple(v[0] for b, v in HARDWARE_ERRORS.items() if bits & b)
         return StageStatus(
             position_deg=position / self.cpd,
             moving=bool(moving),
-            homed=self._homed,
+            # home() lights the LED (RAM: out after a power-up or reboot, when whole motor turns
+            # of the zero may be lost), so any program connecting later sees that the zero was
+            # set since the servo powered up. The Homing Offset alone cannot tell: 0 is both the
+            # factory value and a zero set at the power-up position.
+            homed=bool(led),
             faults=faults,
             detail={
                 "hardware_error_status": bits,
@@ -527,16 +534,19 @@ class DynamixelStage(_Stage):
             try:
                 before = await self._read("read Present Position", ADDR_PRESENT_POSITION, 4,
                                           check=False)
+                led_before = await self._read("read LED", ADDR_LED, 1, check=False)
             except DeviceUnavailable:
-                before = None
+                before, led_before = None, 0
             await self._call("reboot", self._pk.reboot)
             await self._wait_for_boot()
             bits = await self._hardware_error()
             if bits:
                 await self._raise_hardware_error_persisting(bits)
-            if before is not None:
-                await self._restore_turns(before)
+            kept = before is not None and await self._restore_turns(before)
             await self._configure()
+            if kept and led_before:
+                # The reboot put the LED out; the zero survived it, so say so again.
+                await self._write("LED on: zero set", ADDR_LED, 1, 1)
 
     async def _wait_for_boot(self, limit_s: float = 3.0) -> None:
         deadline = time.monotonic() + limit_s
@@ -559,16 +569,20 @@ class DynamixelStage(_Stage):
             recoverable=False,
         )
 
-    async def _restore_turns(self, before: int) -> None:
-        """A reboot forgets whole motor turns; put them back into the Homing Offset."""
+    async def _restore_turns(self, before: int) -> bool:
+        """A reboot forgets whole motor turns; put them back into the Homing Offset.
+
+        Returns False when the reference could not be kept (the stage must be homed again).
+        """
         after = await self._read("read Present Position", ADDR_PRESENT_POSITION, 4)
         turns = round((before - after) / COUNTS_PER_TURN)
         if turns == 0:
-            return
+            return True
         offset = await self._read("read Homing Offset", ADDR_HOMING_OFFSET, 4)
         new_offset = offset + turns * COUNTS_PER_TURN
         if abs(new_offset) > HOMING_OFFSET_LIMIT:
             self._homed = False  # the reference cannot be kept: the engine must home again
-            return
+            return False
         # Torque is off after a reboot, so the EEPROM item is writable.
         await self._write("restore Homing Offset", ADDR_HOMING_OFFSET, 4, new_offset)
+        return True

@@ -11,6 +11,7 @@ suspending (a recoverable fault) and failing the job, without knowing which driv
 from __future__ import annotations
 
 import abc
+import asyncio
 import contextlib
 import math
 import time
@@ -181,6 +182,23 @@ class Stage(Device):
     @abc.abstractmethod
     async def clear_faults(self) -> None:
         """Try to clear latched faults (reboot, ``warnings clear``); raise if they persist."""
+
+
+async def status_at_rest(stage: Stage, timeout_s: float = 10.0, poll_s: float = 0.02
+                         ) -> StageStatus:
+    """The stage's status once it has come to rest, for reporting after a manual command.
+
+    A stop decelerates, and even a zero-length move (stop or home at rest, torque back on after
+    a reboot) rings for a moment, during which a stage truthfully reports "moving"; what the
+    operator asked is where the stage ends up. Returns the last status read if it still moves
+    after ``timeout_s`` seconds (then it *is* moving, and says so).
+    """
+    deadline = time.monotonic() + timeout_s
+    while True:
+        st = await stage.status()
+        if not st.moving or time.monotonic() >= deadline:
+            return st
+        await asyncio.sleep(poll_s)
 
 
 class Light(Device):

@@ -665,7 +665,7 @@ class GonioService:
                 await stage.stop()
             else:
                 await stage.clear_faults()
-            st = await stage.status()
+            st = await hal.status_at_rest(stage)
         except hal.DeviceFault as exc:
             raise DeviceError(f"stage {request.action} failed: {exc}") from exc
         finally:
@@ -673,6 +673,22 @@ class GonioService:
                 self.worker.release()
         self.record_event("stage", {"action": request.action, "angle_deg": request.angle_deg,
                                     "position_deg": st.position_deg})
+        return StageState(position_deg=st.position_deg, moving=st.moving, homed=st.homed,
+                          faults=list(st.faults))
+
+    async def stage_status(self) -> StageState:
+        """Where the stage is, whether it moves, is homed, has faults (connects if needed).
+
+        Raises
+        ------
+        DeviceError
+            The stage does not answer or the rig cannot be connected.
+        """
+        try:
+            rig = await self._get_rig()
+            st = await rig.stage.status()
+        except (hal.DeviceFault, OSError) as exc:
+            raise DeviceError(f"stage status failed: {exc}") from exc
         return StageState(position_deg=st.position_deg, moving=st.moving, homed=st.homed,
                           faults=list(st.faults))
 

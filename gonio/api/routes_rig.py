@@ -78,6 +78,12 @@ def halt(service: Service) -> RigOverview | dict[str, str]:
     return {"status": "halted; release the queue with POST /api/v1/rig/release"}
 
 
+@router.get("/rig/stage", dependencies=READ, responses={503: {"description": "stage fault"}},
+            summary="Stage state: position, moving, homed (zero set), faults")
+async def stage_state(service: Service) -> StageState:
+    return await service.stage_status()
+
+
 @router.post("/rig/stage", dependencies=WRITE,
              summary="Manual stage command: move, home (set zero here), stop, clear faults")
 async def stage_command(body: StageRequest, service: Service) -> StageState:

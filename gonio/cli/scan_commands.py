@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from gonio.cli import UsageError
+from gonio.cli.daemon_client import DaemonClient, add_daemon_options
 
 
 def register(subparsers: Any) -> None:
@@ -32,6 +33,10 @@ def register(subparsers: Any) -> None:
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--rig", type=Path, help="rig config TOML")
     src.add_argument("--sim", action="store_true", help="start the simulated rig")
+    src.add_argument("--daemon", metavar="URL",
+                     help="submit the scan to a running daemon (it owns the rig) and wait for "
+                          "its result, e.g. http://127.0.0.1:8600")
+    add_daemon_options(p)
     p.add_argument("--stage", choices=["dynamixel", "zaber"], default="dynamixel",
                    help="simulated stage kind (with --sim)")
     p.add_argument("--material", default=None, help="simulated material (with --sim)")
@@ -133,6 +138,8 @@ def _scan(args: argparse.Namespace) -> int:
     if args.rig is not None and not args.rig.is_file():
         raise UsageError(f"rig config {args.rig} does not exist")
     plan = _plan(args)
+    if args.daemon:
+        return _scan_through_daemon(args, plan)
     sim = None
     if args.sim:
         from gonio.sim.rig import SimRigOptions, start_sim_rig
@@ -313,6 +320,86 @@ def dry_run_summary(dr: Any, plan: Any, rig_name: str) -> str:
                         else "no --max-samples, so no bound on the total"))
     lines.append("  (--json prints the whole plan: every position in visiting order)")
     return "\n".join(lines)
+
+
+_FINAL = ("completed", "failed", "aborted", "halted")
+
+
+def _scan_through_daemon(args: argparse.Namespace, plan: Any) -> int:
+    """Queue ``plan`` on a daemon, follow it to its end, fetch its result file.
+
+    The daemon owns the rig, its job store and its calibration: the job runs in its queue like
+    any other (visible on the lab page), with the calibration in effect there. Ctrl-C stops
+    following, not the job.
+    """
+    for flag, given in (("--db", args.db), ("--data-dir", args.data_dir),
+                        ("--calibration", args.calibration)):
+        if given is not None:
+            raise UsageError(
+                f"{flag} does not apply with --daemon: the daemon keeps its own data directory "
+                "and job store and applies its own calibration (calibrate it with "
+                "--white-reference ALBEDO)")
+    body = {"plan": plan.model_dump(mode="json")}
+    with DaemonClient(args.daemon, args.api_key) as client:
+        if args.dry_run:
+            from gonio.plans import DryRun
+
+            answer = client.request("POST", "/api/v1/jobs/dry-run", json=body)
+            rig = client.request("GET", "/api/v1/rig")
+            print(json.dumps(answer, indent=2) if args.json else dry_run_summary(
+                DryRun.model_validate(answer), plan, str(rig.get("name", "rig"))))
+            return 0
+        if args.json:
+            raise UsageError("--json goes with --dry-run")
+        job = client.request("POST", "/api/v1/jobs", json=body)
+        job_id = int(job["id"])
+        print(f"job {job_id} queued on {client.url}", file=sys.stderr)
+        try:
+            row = _follow(client, job_id, disabled=args.no_progress)
+        except KeyboardInterrupt:
+            print(f"stopped following; job {job_id} goes on in the daemon "
+                  f"({client.url}/api/v1/jobs/{job_id})", file=sys.stderr)
+            return 130
+        if row["state"] != "completed":
+            print(f"job {job_id} {row['state']}: {row.get('reason')}", file=sys.stderr)
+            return 1
+        out: Path = args.output
+        out.parent.mkdir(parents=True, exist_ok=True)
+        result = client.request("GET", f"/api/v1/jobs/{job_id}/result")
+        out.write_bytes(result.content)
+        summary = row.get("result") or {}
+        if plan.kind == "calibration":
+            cal_out = out.with_name(out.stem + ".calibration.json")
+            cal = client.request("GET", "/api/v1/calibration")
+            cal_out.write_text(json.dumps(cal, indent=2))
+            print(f"job {job_id} completed: the daemon now applies this calibration to its "
+                  f"scans; a copy is in {cal_out}")
+            return 0
+    units = "1/sr" if summary.get("calibrated") else "sensor units (uncalibrated)"
+    error = summary.get("predicted_error")
+    print(f"job {job_id} completed: {summary.get('n_samples', summary.get('readings'))} samples "
+          f"in {units}, self-estimated error "
+          f"{100 * (error if error is not None else float('nan')):.1f} %; wrote {out}")
+    return 0
+
+
+def _follow(client: Any, job_id: int, disabled: bool, poll_s: float = 0.5) -> dict[str, Any]:
+    """Poll the job with a progress bar until it ends; returns its last detail."""
+    from tqdm import tqdm
+
+    bar = tqdm(total=None, unit="angle", desc=f"job {job_id}", disable=disabled, file=sys.stderr)
+    try:
+        while True:
+            row: dict[str, Any] = client.request("GET", f"/api/v1/jobs/{job_id}")
+            bar.total = row.get("total_angles") or None
+            bar.n = int(row.get("done_angles") or 0)
+            bar.set_description_str(f"job {job_id} {row['state']}")
+            bar.refresh()
+            if row["state"] in _FINAL:
+                return row
+            time.sleep(poll_s)
+    finally:
+        bar.close()
 
 
 def _progress(store: Any, job_id: int, disabled: bool) -> Any:

@@ -32,10 +32,32 @@ def test_move_and_zero_the_stage(
         assert main(["stage", "--rig", str(cfg), "home"]) == 0
         out = capsys.readouterr().out
         assert _reported_angle(out) == pytest.approx(0.0, abs=0.1) and " homed" in out
-        # The zero survives a new connection: it lives in the device, not in the process.
+        # The zero survives a new connection: it lives in the device, not in the process, and
+        # so does the fact that it was set.
         assert main(["stage", "--rig", str(cfg), "status"]) == 0
         out = capsys.readouterr().out
-        assert _reported_angle(out) == pytest.approx(0.0, abs=0.1) and "idle" in out
+        assert _reported_angle(out) == pytest.approx(0.0, abs=0.1)
+        assert "idle, homed" in out
+        # Stop and clear-faults on an idle stage leave it idle (and homed).
+        for action in ("stop", "clear-faults"):
+            assert main(["stage", "--rig", str(cfg), action]) == 0
+            assert "idle, homed, faults: none" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("stage", ["dynamixel", "zaber"])
+def test_a_fresh_stage_homed_at_power_up_position_says_homed(
+    stage: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    cfg = tmp_path / "rig.toml"
+    with start_sim_rig(SimRigOptions(stage=stage, time_scale=20.0, settle_s=0.0,  # type: ignore[arg-type]
+                                     config_path=cfg)):
+        assert main(["stage", "--rig", str(cfg), "status"]) == 0
+        assert "not homed" in capsys.readouterr().out
+        # Zeroed where it powered up (a Homing Offset of 0 on the Dynamixel): still homed.
+        assert main(["stage", "--rig", str(cfg), "home"]) == 0
+        capsys.readouterr()
+        assert main(["stage", "--rig", str(cfg), "status"]) == 0
+        assert "idle, homed" in capsys.readouterr().out
 
 
 @pytest.mark.parametrize(

@@ -115,6 +115,7 @@ def test_cli_on_a_rig_the_daemon_owns_is_refused_and_the_job_is_unharmed(
         assert "in use by" in refused.stderr and f"pid {daemon.pid}" in refused.stderr, (
             refused.stderr)
         assert "obstruction" not in refused.stderr
+        assert "--daemon" in refused.stderr  # and how to act on the rig instead
     assert not (tmp_path / "cli.h5").exists()
     assert final["state"] == "completed", final
     assert status in (0, -signal.SIGTERM)

@@ -70,3 +70,44 @@ def test_the_stage_is_not_moved_by_hand_under_a_running_job(daemon: Daemon) -> N
         # Once the job has ended, manual moves work again.
         r = c.post("/api/v1/rig/stage", json={"action": "move", "angle_deg": 10.0})
         assert r.status_code == 200, r.text
+
+
+def test_gonio_stage_through_the_daemon(
+    daemon: Daemon, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from gonio.cli import main
+
+    monkeypatch.delenv("GONIO_API_KEY", raising=False)
+    base = ["stage", "--daemon", daemon.url]
+    # A change without a key is refused, saying how to give one; nothing moved.
+    before = daemon.sim.motion.position_deg()
+    assert main([*base, "move", "25"]) == 2
+    err = capsys.readouterr().err
+    assert "needs an API key" in err and "--api-key" in err and "GONIO_API_KEY" in err
+    assert daemon.sim.motion.position_deg() == pytest.approx(before, abs=1e-6)
+
+    monkeypatch.setenv("GONIO_API_KEY", daemon.key)
+    assert main([*base, "move", "25"]) == 0
+    reported = float(capsys.readouterr().out.split()[2])
+    assert reported == pytest.approx(25.0, abs=0.2)  # the encoder reading (0.088 deg counts)
+    assert daemon.sim.motion.position_deg() == pytest.approx(25.0, abs=0.2)
+    assert main([*base, "home"]) == 0
+    assert main([*base, "status"]) == 0  # reads need no key here; the key is sent anyway
+    out = capsys.readouterr().out.splitlines()
+    assert out[-1].startswith("stage at 0.000 deg, idle, homed")
+    for action in ("stop", "clear-faults"):  # an idle stage stays idle, homed
+        assert main([*base, action]) == 0
+        assert "idle, homed, faults: none" in capsys.readouterr().out
+
+
+def test_gonio_stage_daemon_errors_are_one_line(
+    daemon: Daemon, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from gonio.cli import main
+
+    assert main(["stage", "--daemon", daemon.url, "--api-key", daemon.key, "move", "1e6"]) == 2
+    assert "outside the stage's travel limits" in capsys.readouterr().err
+    assert main(["stage", "--daemon", "http://127.0.0.1:9", "status"]) == 2
+    assert "cannot reach the daemon at http://127.0.0.1:9" in capsys.readouterr().err
+    assert main(["stage", "--daemon", "localhost:8600", "status"]) == 2
+    assert "give the daemon's address" in capsys.readouterr().err

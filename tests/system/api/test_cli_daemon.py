@@ -1,0 +1,71 @@
+"""``gonio scan --daemon URL``: a scan submitted to the daemon that owns the rig."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from gonio.cli import main
+from gonio.results import read_result
+from tests.system.api.conftest import Daemon
+
+pytestmark = pytest.mark.timeout(240)
+
+
+def test_scan_through_the_daemon_writes_its_result(
+    daemon: Daemon, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "felt.h5"
+    argv = ["scan", "--daemon", daemon.url, "--api-key", daemon.key, "--rotations", "4",
+            "--specimen", "felt", "--exposure", "0.02", "--light-settle", "0", "--no-progress",
+            "-o", str(out)]
+    assert main(argv) == 0
+    captured = capsys.readouterr()
+    assert "queued on" in captured.err and f"wrote {out}" in captured.out
+    res = read_result(out)
+    assert res.attrs["specimen"] == "felt"
+    assert res.samples.values.shape[:2] == (12, 4)  # 12 pairs x 4 stage angles
+    # The job is the daemon's: in its list, with the same readings as the file.
+    with daemon.client() as c:
+        job = c.get(f"/api/v1/jobs/{res.attrs['job_id']}").json()
+    assert job["state"] == "completed" and job["specimen"] == "felt"
+
+
+def test_scan_dry_run_through_the_daemon_moves_nothing(
+    daemon: Daemon, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    before = daemon.sim.motion.position_deg()
+    with daemon.client() as c:
+        n_jobs = len(c.get("/api/v1/jobs").json())
+    argv = ["scan", "--daemon", daemon.url, "--api-key", daemon.key, "--rotations", "6",
+            "--dry-run", "-o", str(tmp_path / "x.h5")]
+    assert main([*argv, "--json"]) == 0
+    plan = json.loads(capsys.readouterr().out)
+    assert len(plan["positions_deg"]) == 6
+    assert main(argv) == 0  # the short summary a person reads, as without --daemon
+    assert "stage angles: 6" in capsys.readouterr().out
+    assert daemon.sim.motion.position_deg() == pytest.approx(before, abs=1e-6)
+    with daemon.client() as c:
+        assert len(c.get("/api/v1/jobs").json()) == n_jobs
+
+
+@pytest.mark.parametrize(
+    ("extra", "words"),
+    [
+        (["--db", "x.sqlite"], "--db does not apply with --daemon"),
+        (["--data-dir", "d"], "--data-dir does not apply with --daemon"),
+        (["--calibration", "c.json"], "--calibration does not apply with --daemon"),
+        (["--rotations", "0"], "rotations"),
+    ],
+)
+def test_scan_through_the_daemon_refuses_bad_requests(
+    daemon: Daemon, tmp_path: Path, capsys: pytest.CaptureFixture[str],
+    extra: list[str], words: str,
+) -> None:
+    out = tmp_path / "x.h5"
+    assert main(["scan", "--daemon", daemon.url, "--api-key", daemon.key, *extra,
+                 "-o", str(out)]) == 2
+    assert words in capsys.readouterr().err
+    assert not out.exists()
