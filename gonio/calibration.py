@@ -14,7 +14,9 @@ result file says so.
 
 from __future__ import annotations
 
+import contextlib
 import math
+import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -204,6 +206,25 @@ def from_config_factors(factors: Sequence[object], albedo: float | None = None) 
 
 CALIBRATION_FILE = "calibration.json"
 """Name of the latest calibration job's factors inside a data directory."""
+
+
+def save_calibration(cal: Calibration, path: Path) -> None:
+    """Write ``cal`` to ``path`` so that a crash at any moment leaves the old file or the new
+    one, never a torn one: a temporary file, flushed to disk, then renamed over ``path``."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "w", encoding="utf-8") as f:
+        f.write(cal.model_dump_json(indent=2))
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, path)
+    with contextlib.suppress(OSError):  # the rename itself, on filesystems that allow it
+        fd = os.open(path.parent, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
 
 
 def calibration_in_effect(data_dir: Path, rig_config: Any = None) -> Calibration:

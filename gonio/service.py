@@ -28,6 +28,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from gonio import hal
 from gonio.calibration import Calibration, calibration_in_effect
 from gonio.jobstates import ACTIVE_STATES, IllegalTransition, JobState, check_action
+from gonio.maintenance import LOCK_FILE_NAME, MaintenanceLock
 from gonio.plans import AnyPlan, DryRun, Plan, PlanError, RigDescription, dry_run, parse_plan
 from gonio.store import EventRow, JobRow, JobStore, ReadingRow
 from gonio.store import NotFound as StoreNotFound
@@ -144,7 +145,8 @@ class ServiceStatus(BaseModel):
     """What the worker is doing, from memory (no store read, no device call)."""
 
     current_job: int | None = Field(description="job being measured or reconstructed")
-    queue_held: str | None = Field(description="why the queue takes no new job; null if it runs")
+    queue_held: str | None = Field(description="why the queue takes no new job (halt, a failed "
+                                   "job's stop, maintenance lock); null if it runs")
     running: RunningJob | None = Field(description="progress while a job is measuring")
 
 
@@ -234,6 +236,9 @@ class GonioService:
             store, self._get_rig, self.desc, self.data_dir,
             basis_provider or default_basis_provider, self.calibration, provenance,
         )
+        # While the maintenance lock (a file in the data directory) is set, no job starts.
+        self.maintenance = MaintenanceLock(self.data_dir / LOCK_FILE_NAME)
+        self.worker.gate = self.maintenance.reason
         store.add_listener(self._on_event)
 
     # ------------------------------------------------------------------ lifecycle
@@ -448,7 +453,8 @@ class GonioService:
             p = eng.progress
             running = RunningJob(id=eng.job_id, done_angles=p.done, total_angles=p.total,
                                  eta_s=p.eta_s)
-        return ServiceStatus(current_job=self.worker.current_job, queue_held=self.worker.held,
+        held = self.worker.held if self.worker.held is not None else self.worker.gate()
+        return ServiceStatus(current_job=self.worker.current_job, queue_held=held,
                              running=running)
 
     def record_event(self, type_: str, data: dict[str, Any], job_id: int | None = None) -> Event:
@@ -651,8 +657,10 @@ class GonioService:
             raise Conflict(f"job {active.id} is {active.state.value}: the stage is in use; wait "
                            "for it, or pause or abort it, before moving the stage by hand")
         was_held = self.worker.held is not None
+        manual = f"manual stage command: {request.action}"
         if not was_held:
-            self.worker.hold(f"manual stage command: {request.action}")
+            # Only for the command's duration: not a decision to outlive a crash.
+            self.worker.hold(manual, durable=False)
         try:
             rig = await self._get_rig()
             stage = rig.stage
@@ -669,7 +677,7 @@ class GonioService:
         except hal.DeviceFault as exc:
             raise DeviceError(f"stage {request.action} failed: {exc}") from exc
         finally:
-            if not was_held:
+            if not was_held and self.worker.held == manual:  # not a halt that came meanwhile
                 self.worker.release()
         self.record_event("stage", {"action": request.action, "angle_deg": request.angle_deg,
                                     "position_deg": st.position_deg})

@@ -10,6 +10,8 @@ Three kinds of record (schema in ``docs/engine.md``):
   so after a crash an angle is either wholly stored or not at all. ``UNIQUE(job_id,
   angle_index, light, sensor)`` makes a repeated angle unable to duplicate readings.
 * ``events``: an append-only log with a monotonic ``seq``; the API replays it to clients.
+* ``holds``: decisions that must outlive the process, e.g. the queue hold of an emergency halt
+  or of a job that stops the queue on failure (:meth:`JobStore.set_hold`).
 
 Every state change goes through :func:`gonio.jobstates.check_transition`.
 
@@ -95,6 +97,11 @@ CREATE TABLE IF NOT EXISTS darks (
     values_json   TEXT NOT NULL,
     t_read        REAL NOT NULL,
     UNIQUE (job_id, angle_index, sensor)
+);
+CREATE TABLE IF NOT EXISTS holds (
+    name          TEXT PRIMARY KEY,
+    reason        TEXT NOT NULL,
+    since         REAL NOT NULL
 );
 CREATE TABLE IF NOT EXISTS events (
     seq           INTEGER PRIMARY KEY AUTOINCREMENT,
@@ -651,6 +658,33 @@ class JobStore:
         with self._read() as db:
             return int(db.execute(
                 "SELECT COUNT(*) FROM readings WHERE job_id = ?", (job_id,)).fetchone()[0])
+
+    # ------------------------------------------------------------------ holds
+    def set_hold(self, name: str, reason: str, event: str | None = None,
+                 data: dict[str, Any] | None = None) -> None:
+        """Store hold ``name`` (replacing one of that name) and, in the same transaction, an
+        ``event``: a hold survives any crash exactly when its event does."""
+        with self._tx() as c:
+            c.execute("INSERT OR REPLACE INTO holds (name, reason, since) VALUES (?, ?, ?)",
+                      (name, reason, time.time()))
+            ev = self._insert_event(c, None, event, data or {}) if event else None
+        if ev is not None:
+            self._notify([ev])
+
+    def clear_hold(self, name: str, event: str | None = None,
+                   data: dict[str, Any] | None = None) -> None:
+        """Remove hold ``name`` (if set) and store ``event`` in the same transaction."""
+        with self._tx() as c:
+            c.execute("DELETE FROM holds WHERE name = ?", (name,))
+            ev = self._insert_event(c, None, event, data or {}) if event else None
+        if ev is not None:
+            self._notify([ev])
+
+    def hold(self, name: str) -> tuple[str, float] | None:
+        """``(reason, since)`` of hold ``name`` (Unix time, seconds), or None."""
+        with self._read() as db:
+            row = db.execute("SELECT reason, since FROM holds WHERE name = ?", (name,)).fetchone()
+        return None if row is None else (str(row[0]), float(row[1]))
 
     # ------------------------------------------------------------------ events
     def append_event(self, job_id: int | None, type_: str, data: dict[str, Any]) -> EventRow:

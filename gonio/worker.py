@@ -3,7 +3,9 @@
 Order: a job the previous process left active (resumed from its checkpoint) first, then queued
 jobs by priority (high first), then queue position (FIFO by default). A failed job does not
 stop the queue unless its plan sets ``stop_queue_on_failure``; an emergency halt holds the
-queue until :meth:`Worker.release`.
+queue until :meth:`Worker.release`. Those holds are stored (they survive a crash and a
+restart); while :attr:`Worker.gate` gives a reason (the maintenance lock) no job starts or
+resumes at all.
 
 Reconstruction and file writing run in a thread (``asyncio.to_thread``) so the event loop keeps
 serving the API and events while the numerics run.
@@ -30,6 +32,7 @@ from gonio.calibration import (
     CalibrationError,
     calibrated_samples,
     from_reference,
+    save_calibration,
 )
 from gonio.engine import ScanEngine
 from gonio.jobstates import JobState
@@ -45,6 +48,11 @@ from gonio.plans import (
 from gonio.store import JobRow, JobStore
 
 log = logging.getLogger("gonio.worker")
+
+QUEUE_HOLD = "queue"
+"""Name of the queue hold in the store's ``holds`` table."""
+GATE_POLL_S = 1.0
+"""How often a closed gate (maintenance lock) is looked at again, seconds."""
 
 BasisProvider = Callable[[], Any]
 """Returns the :class:`gonio.brdf.basis.Basis` to reconstruct with (may build it; slow)."""
@@ -95,7 +103,12 @@ class Worker:
         self.fit_exports = fit_exports
         self.engine: ScanEngine | None = None
         self.current_job: int | None = None
-        self.held: str | None = None
+        # The queue hold survives restarts: it is read back from the store.
+        stored = store.hold(QUEUE_HOLD)
+        self.held: str | None = stored[0] if stored is not None else None
+        # Why no job may start or resume now (None: they may); the service wires the
+        # maintenance lock here. Checked again at least every GATE_POLL_S while it blocks.
+        self.gate: Callable[[], str | None] = lambda: None
         self._wake = asyncio.Event()
         self._recon_task: asyncio.Task[dict[str, Any]] | None = None
         self._abort_recon = False
@@ -106,14 +119,18 @@ class Worker:
         """Look at the queue again (a job was submitted, resumed or released)."""
         self._wake.set()
 
-    def hold(self, reason: str) -> None:
-        """Take no new job until :meth:`release`."""
+    def hold(self, reason: str, durable: bool = True) -> None:
+        """Take no new job until :meth:`release`; ``durable`` holds survive restarts (a
+        short hold around a manual command need not)."""
         self.held = reason
-        self.store.append_event(None, "queue_held", {"reason": reason})
+        if durable:
+            self.store.set_hold(QUEUE_HOLD, reason, "queue_held", {"reason": reason})
+        else:
+            self.store.append_event(None, "queue_held", {"reason": reason})
 
     def release(self) -> None:
         self.held = None
-        self.store.append_event(None, "queue_released", {})
+        self.store.clear_hold(QUEUE_HOLD, "queue_released", {})
         self.wake()
 
     def abort_reconstruction(self, job_id: int) -> bool:
@@ -124,6 +141,8 @@ class Worker:
         return False
 
     def next_job(self) -> JobRow | None:
+        if self.gate() is not None:
+            return None  # not even a resumed job: someone is working on the rig
         active = self.store.active_jobs()
         if active:
             return active[0]
@@ -138,7 +157,11 @@ class Worker:
             job = self.next_job()
             if job is None:
                 self._wake.clear()
-                await self._wake.wait()
+                if self.gate() is None:
+                    await self._wake.wait()
+                else:  # the gate may open without a wake-up (a lock file removed by hand)
+                    with contextlib.suppress(TimeoutError):
+                        await asyncio.wait_for(self._wake.wait(), GATE_POLL_S)
                 continue
             await self.run_job(job)
 
@@ -260,8 +283,7 @@ class Worker:
                 source=f"job {job_id}: {plan.reference_name}",
             )
             cal_path = self.data_dir / CALIBRATION_FILE
-            cal_path.parent.mkdir(parents=True, exist_ok=True)
-            cal_path.write_text(new_cal.model_dump_json(indent=2))
+            save_calibration(new_cal, cal_path)
             provenance["new_calibration"] = new_cal.model_dump_json()
             write_result(path, job_id=job_id, specimen=job.specimen, kind=job.kind,
                          readings=readings, samples=samples, provenance=provenance,

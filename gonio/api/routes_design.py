@@ -10,10 +10,9 @@ from __future__ import annotations
 import asyncio
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Depends, Path, Query, Request
+from fastapi import APIRouter, Path, Query, Request
 
-from gonio.api.auth import require_write_key
-from gonio.api.deps import READ, Service
+from gonio.api.deps import READ, WRITE, Service
 from gonio.api.design import (
     DEFAULT_TIME_LIMIT_S,
     DesignRequest,
@@ -30,6 +29,7 @@ router = APIRouter(prefix="/api/v1/design", tags=["design"])
 
 _ERRORS: dict[int | str, dict[str, Any]] = {
     409: {"description": "another design is running; try again when it has finished"},
+    423: {"description": "the rig is locked for maintenance"},
     422: {"description": "invalid request, or constraints no design can satisfy"},
 }
 
@@ -44,7 +44,7 @@ def _gate(request: Request) -> asyncio.Semaphore:
     return gate
 
 
-@router.post("", dependencies=[Depends(require_write_key)], responses=_ERRORS,
+@router.post("", dependencies=WRITE, responses=_ERRORS,
              summary="Optimise light/sensor directions for the daemon's basis (blocks up to the "
                      "time limit)")
 async def design(body: DesignRequest, service: Service, request: Request) -> DesignResult:

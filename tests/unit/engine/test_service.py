@@ -171,3 +171,57 @@ def test_scan_at_another_exposure_than_its_calibration_is_flagged(tmp_path: Path
     msg = _exposure_mismatch(cal, longer)
     assert msg is not None and "0.002 s" in msg and "0.004 s" in msg
     assert _exposure_mismatch(Calibration(), longer) is None  # uncalibrated: nothing to flag
+
+
+def test_queue_holds_are_stored_and_outlive_the_service(tmp_path: Path) -> None:
+    _rig, svc = _service(tmp_path)
+    svc.halt()  # nothing running: only the hold
+    assert svc.status().queue_held == "emergency halt"
+    job = svc.submit(JobRequest(plan=UniformPlan(rotations=2, exposure=FAST))).id
+    # A new process on the same store (what a restart after kill -9 sees).
+    _rig2, again = _service(tmp_path)
+    assert again.status().queue_held == "emergency halt"
+    assert again.worker.next_job() is None
+    again.release_queue()
+    assert again.worker.next_job() is not None and again.worker.next_job().id == job  # type: ignore[union-attr]
+    _rig3, third = _service(tmp_path)
+    assert third.status().queue_held is None  # the release was stored too
+
+
+def test_a_failed_job_that_stops_the_queue_holds_it_across_restarts(tmp_path: Path) -> None:
+    rig, svc = _service(tmp_path)
+    rig.mstage.fault_next_moves = [hal_fault()]
+
+    async def go() -> None:
+        await svc.start()
+        info = svc.submit(JobRequest(plan=UniformPlan(rotations=2, start_deg=30, exposure=FAST,
+                                                      stop_queue_on_failure=True)))
+        async for ev in svc.subscribe(0):
+            if ev.type == "state" and ev.data["state"] == "failed" and ev.job_id == info.id:
+                break
+        await svc.stop()
+
+    asyncio.run(go())
+    _rig2, again = _service(tmp_path)
+    assert again.status().queue_held == "job 1 failed and asked to stop the queue"
+
+
+def hal_fault() -> Exception:
+    from gonio import hal
+
+    return hal.StageFault("stage", "encoder broken", code="encoder", recoverable=False)
+
+
+def test_the_maintenance_lock_stops_queued_and_resumed_jobs(tmp_path: Path) -> None:
+    _rig, svc = _service(tmp_path)
+    queued = svc.submit(JobRequest(plan=UniformPlan(rotations=2, exposure=FAST))).id
+    svc.maintenance.lock("replacing lamp L2", by="alice")
+    assert svc.worker.next_job() is None
+    assert svc.status().queue_held == "maintenance lock: replacing lamp L2"
+    # A job left running by a previous process does not resume under the lock either.
+    svc.store.set_state(queued, JobState.RUNNING)
+    _rig2, again = _service(tmp_path)  # the lock is a file: a restart sees it
+    assert again.worker.next_job() is None
+    (tmp_path / "d" / "MAINTENANCE").unlink()  # released from a shell
+    nxt = again.worker.next_job()
+    assert nxt is not None and nxt.id == queued
