@@ -14,6 +14,7 @@ mistakes.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import time
 from collections.abc import Awaitable, Callable, Sequence
 from typing import Any, TypeVar
@@ -342,15 +343,40 @@ class ModbusLight(Light):
         self._level = config.level
         self._on = False
         self._last_output = float("nan")  # last monitored output, fraction (for messages)
+        self._feeder: asyncio.Task[None] | None = None
 
     async def connect(self) -> None:
-        """Check the device answers and write the configured drive level."""
-        self._on = await self._io.read_coil(self.config.registers.on_coil)
-        if self.config.registers.level is not None:
-            await self._io.write(self.config.registers.level, self._level, "level")
+        """Check the device answers, write the configured drive level, arm the watchdog."""
+        regs = self.config.registers
+        self._on = await self._io.read_coil(regs.on_coil)
+        if regs.level is not None:
+            await self._io.write(regs.level, self._level, "level")
+        if regs.watchdog is not None:
+            await self._io.write(regs.watchdog, self.config.watchdog_s, "watchdog timeout")
 
     async def close(self) -> None:
+        self._feed(False)
         self._io.release()
+
+    def _feed(self, on: bool) -> None:
+        """While the light is on, make sure a request reaches its controller at least every
+        third of the watchdog timeout (a long exposure sends it nothing otherwise); when this
+        process dies the feeding stops and the controller switches the lamp off."""
+        if self.config.registers.watchdog is None:
+            return
+        if on and self._feeder is None:
+            self._feeder = asyncio.create_task(self._feed_loop(), name=f"{self.name}-watchdog")
+        elif not on and self._feeder is not None:
+            self._feeder.cancel()
+            self._feeder = None
+
+    async def _feed_loop(self) -> None:
+        period = self.config.watchdog_s / 3.0
+        coil = self.config.registers.on_coil
+        while True:
+            await asyncio.sleep(period)
+            with contextlib.suppress(DeviceFault):  # the engine sees a dead link by itself
+                await self._io.read_coil(coil)
 
     async def set_on(self, on: bool) -> None:
         """Switch the light; when switching on with a monitor, check the output band.
@@ -367,6 +393,7 @@ class ModbusLight(Light):
         regs = self.config.registers
         await self._io.write_coil(regs.on_coil, on)
         self._on = on
+        self._feed(on)
         if on and regs.monitor is not None:
             if self.config.warmup_s > 0:
                 await asyncio.sleep(self.config.warmup_s)

@@ -192,11 +192,18 @@ class LightRegisters(_Strict):
     level: Register | None = None
     monitor: Register | None = None
     band: Annotated[float, Field(gt=0, le=1)] = 0.05
+    watchdog: Register | None = None
+    """Holding register of the controller's communication watchdog: takes a timeout in seconds
+    after scale; the controller switches its outputs off when no request has reached it for
+    that long. The driver arms it at connect (with the light's ``watchdog_s``) and keeps it
+    fed while the light is on, so a lamp never outlives the program that switched it on."""
 
     @model_validator(mode="after")
     def _check(self) -> LightRegisters:
-        if self.level is not None and self.level.table != "holding":
-            raise ValueError("level must be a holding register (it is written)")
+        for key in ("level", "watchdog"):
+            reg = getattr(self, key)
+            if reg is not None and reg.table != "holding":
+                raise ValueError(f"{key} must be a holding register (it is written)")
         return self
 
 
@@ -244,6 +251,8 @@ class LightConfig(_Device):
     """Drive level written at connect, fraction."""
     warmup_s: Annotated[float, Field(ge=0, le=600)] = 0.0
     """Wait after switching on before the output is checked against its band, seconds."""
+    watchdog_s: Annotated[float, Field(gt=0, le=600)] = 2.0
+    """Communication watchdog timeout written to ``registers.watchdog`` (if mapped), seconds."""
 
 
 class SensorConfig(_Device):

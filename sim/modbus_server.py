@@ -13,6 +13,10 @@ hook sees every request, which is where the physics happens:
   and published (values updated, ``sequence`` incremented) once the exposure time, divided by
   ``time_scale``, has passed in wall time; the trigger register reads back 0 (self-clearing);
 * input registers (values, sequence, lamp monitor) are refreshed on every read;
+* a lamp controller with a ``watchdog`` register has a communication watchdog: writing a
+  timeout (seconds after scale, 0 = off) arms it, and when no request has reached that device
+  for longer, the lamp switches off by itself (``watchdog_trips`` counts it), as an I/O module
+  falls back to its safe state when its master goes silent;
 * every answered request is counted per device (:meth:`ModbusRigServer.request_counts`) and
   the latest are kept in order (:meth:`ModbusRigServer.recent_requests`), so tests and
   benchmarks can see how many round trips an operation costs and in which order they went.
@@ -107,6 +111,9 @@ class SimLampSpec:
     on: bool = False
     level: float = 1.0
     output_factor: float = 1.0  # 1 = healthy; fault injection changes it
+    watchdog_s: float = 0.0  # communication watchdog timeout (0 = not armed), wall seconds
+    last_request: float = 0.0  # time.monotonic() of the last request this device received
+    watchdog_trips: int = 0  # times the watchdog switched the lamp off
 
 
 @dataclass
@@ -225,6 +232,7 @@ class ModbusRigServer:
         self._loop: asyncio.AbstractEventLoop | None = None
         self._thread: threading.Thread | None = None
         self._server: ModbusTcpServer | None = None
+        self._watchdog_task: asyncio.Task[None] | None = None
 
     # ------------------------------------------------------------------ lifecycle
     def start(self) -> ModbusRigServer:
@@ -249,6 +257,7 @@ class ModbusRigServer:
             devices.append(self._holder_device(self.holder))
         server = ModbusTcpServer(context=devices, address=(self.host, self.port))
         await server.serve_forever(background=True)
+        self._watchdog_task = asyncio.create_task(self._watchdogs(), name="sim-lamp-watchdogs")
         sockets = getattr(server.transport, "sockets", None)
         if not sockets:
             raise RuntimeError(f"simulated Modbus server did not bind {self.host}:{self.port}")
@@ -338,9 +347,23 @@ class ModbusRigServer:
             await asyncio.sleep(0.01)
 
     # ------------------------------------------------------------------ lamps
+    WATCHDOG_TICK_S = 0.02
+    """How often armed lamp watchdogs are checked, wall seconds."""
+
+    async def _watchdogs(self) -> None:
+        while True:
+            await asyncio.sleep(self.WATCHDOG_TICK_S)
+            now = time.monotonic()
+            with self._lock:
+                for lamp in self.lamps.values():
+                    silent_s = now - lamp.last_request
+                    if lamp.watchdog_s > 0 and lamp.on and silent_s > lamp.watchdog_s:
+                        lamp.on = False
+                        lamp.watchdog_trips += 1
+
     def _lamp_device(self, lamp: SimLampSpec) -> SimDevice:
         regs = lamp.registers
-        mapped = [r for r in (regs.level, regs.monitor) if r is not None]
+        mapped = [r for r in (regs.level, regs.monitor, regs.watchdog) if r is not None]
         holding = _span(mapped, "holding")
         inputs = _span(mapped, "input")
         coils = (regs.on_coil // 16 + 1) * 16
@@ -356,15 +379,28 @@ class ModbusRigServer:
             await self._wait_if_silent(lamp.name)
             with self._lock:
                 self._count(lamp.name, fc, address, values)
+                lamp.last_request = time.monotonic()
                 if fc in _COIL_FC and values is not None:
                     if address <= regs.on_coil < address + len(values):
                         lamp.on = bool(values[regs.on_coil - address])
-                elif fc in _HOLDING_WRITE_FC and values is not None and regs.level is not None:
+                elif fc in _COIL_FC:
+                    # A read shows the lamp's real state (the watchdog may have cleared it).
+                    # Coils are bit-addressed: 16 to a word of the block's image.
+                    word, bit = regs.on_coil // 16 - start, regs.on_coil % 16
+                    registers[word] = (registers[word] & ~(1 << bit)) | (int(lamp.on) << bit)
+                elif fc in _HOLDING_WRITE_FC and values is not None:
                     image = self._merged(registers, start, address, values)
-                    level = self._read_image(regs.level, image, start)
-                    if not 0.0 <= level <= 1.0:
-                        return ExcCodes.ILLEGAL_VALUE
-                    lamp.level = level
+                    written = range(address, address + len(values))
+                    if regs.watchdog is not None and regs.watchdog.address in written:
+                        timeout = self._read_image(regs.watchdog, image, start)
+                        if timeout < 0:
+                            return ExcCodes.ILLEGAL_VALUE
+                        lamp.watchdog_s = timeout
+                    if regs.level is not None and regs.level.address in written:
+                        level = self._read_image(regs.level, image, start)
+                        if not 0.0 <= level <= 1.0:
+                            return ExcCodes.ILLEGAL_VALUE
+                        lamp.level = level
                 elif fc in _INPUT_READ_FC and regs.monitor is not None:
                     output = lamp.level * lamp.output_factor if lamp.on else 0.0
                     self._store(registers, start, regs.monitor, output)
@@ -571,5 +607,6 @@ class ModbusRigServer:
         with self._lock:
             return {
                 "lamps": {n: (x.on, x.level, x.output_factor) for n, x in self.lamps.items()},
+                "watchdogs": {n: (x.watchdog_s, x.watchdog_trips) for n, x in self.lamps.items()},
                 "sensors": {n: (x.sequence, list(x.values)) for n, x in self.sensors.items()},
             }

@@ -165,6 +165,10 @@ class SimRigOptions:
     seed : int
         Seeds the sensor noise.
     speed_dps, accel_dps2, settle_s : stage physics
+    lamp_watchdog_s : float or None
+        Communication watchdog timeout the rig config asks the lamp controllers for, wall
+        seconds (None: the config maps no watchdog, the lamps stay as the last request left
+        them, as on controllers without one).
     name : rig name in the config
     config_path : where to write the rig config (None: not written)
     """
@@ -185,6 +189,7 @@ class SimRigOptions:
     speed_dps: float = 60.0
     accel_dps2: float = 240.0
     settle_s: float = 0.02
+    lamp_watchdog_s: float | None = 2.0
     name: str = "sim"
     config_path: str | os.PathLike[str] | None = None
 
@@ -198,6 +203,9 @@ class SimRigOptions:
             raise ValueError(f"time scale must be > 0, got {self.time_scale}")
         if not self.irradiance > 0:
             raise ValueError(f"irradiance must be > 0, got {self.irradiance}")
+        if self.lamp_watchdog_s is not None and not 0.001 <= self.lamp_watchdog_s <= 65.0:
+            raise ValueError(f"lamp watchdog must be 0.001 to 65 s (a u16 of milliseconds), "
+                             f"got {self.lamp_watchdog_s}")
         if not self.lights or not self.sensors:
             raise ValueError("a simulated rig needs at least one light and one sensor")
         for kind, dirs in (("light", self.lights), ("sensor", self.sensors)):
@@ -215,12 +223,15 @@ class SimRigOptions:
                 raise ValueError(f"{len(names)} {kind} names for {len(dirs)} {kind}s")
 
 
-def _light_registers() -> LightRegisters:
+def _light_registers(watchdog: bool = True) -> LightRegisters:
     return LightRegisters(
         on_coil=0,
         level=Register(table="holding", address=0, type="u16", scale=0.001),
         monitor=Register(table="input", address=0, type="u16", scale=0.001),
         band=0.05,
+        # Communication watchdog timeout in milliseconds (0 = off).
+        watchdog=(Register(table="holding", address=1, type="u16", scale=0.001)
+                  if watchdog else None),
     )
 
 
@@ -387,7 +398,8 @@ class SimRig:
                 theta_deg=d[0],
                 phi_deg=d[1],
                 modbus=transport(k + 1),
-                registers=_light_registers(),
+                registers=_light_registers(watchdog=o.lamp_watchdog_s is not None),
+                watchdog_s=o.lamp_watchdog_s or 2.0,
             )
             for k, (name, d) in enumerate(zip(self.light_names, o.lights, strict=True))
         ]

@@ -1,4 +1,11 @@
-"""``gonio rig``: work on a rig config file.
+"""``gonio rig``: work on a rig config file, or on the rig it describes.
+
+``gonio rig lights-off --rig rig.toml`` (or ``--config daemon.toml``) switches every lamp of the
+rig off: the systemd unit runs it after the daemon exits for any reason (``ExecStopPost=``, see
+deploy/gonio.service), so a lamp that was on when the daemon stopped, crashed or was killed
+does not stay on until someone notices. It clears each light's ``on_coil`` and takes the rig's
+endpoint locks like any other program, so it is refused while a live daemon owns the rig (ask
+that daemon instead: ``POST /api/v1/rig/halt``, or stop it).
 
 ``gonio rig apply-design geometry.toml rig.toml`` merges a design fragment (from
 ``gonio design -o``) into a rig config: the design's lights and sensors take their places, its
@@ -10,7 +17,9 @@ unless ``-o`` names another file.
 from __future__ import annotations
 
 import argparse
+import asyncio
 import shutil
+import sys
 import tomllib
 from pathlib import Path
 from typing import Any
@@ -20,7 +29,8 @@ from gonio.cli import UsageError
 
 def register(subparsers: Any) -> None:
     """Add the ``rig`` sub-command."""
-    p = subparsers.add_parser("rig", help="edit a rig config: apply a design")
+    p = subparsers.add_parser("rig", help="edit a rig config (apply a design), or switch a "
+                              "rig's lamps off")
     sub = p.add_subparsers(dest="rig_command", metavar="ACTION", required=True)
     a = sub.add_parser(
         "apply-design",
@@ -35,6 +45,17 @@ def register(subparsers: Any) -> None:
     a.add_argument("-o", "--output", type=Path, default=None,
                    help="write the merged config here instead of rewriting RIG")
     a.set_defaults(func=_apply_design)
+    off = sub.add_parser(
+        "lights-off", help="switch every lamp of a rig off (the systemd unit's ExecStopPost)",
+        description="Clear every light's on-coil, one unreachable controller not stopping the "
+        "others; refused while a live daemon owns the rig. The systemd unit runs it after the "
+        "daemon exits for any reason.",
+    )
+    src = off.add_mutually_exclusive_group(required=True)
+    src.add_argument("--rig", type=Path, help="rig config TOML")
+    src.add_argument("--config", type=Path, metavar="DAEMON_TOML",
+                     help="daemon config: its [paths] rig_config names the rig")
+    off.set_defaults(func=_lights_off)
 
 
 def _apply_design(args: argparse.Namespace) -> int:
@@ -66,3 +87,66 @@ def _apply_design(args: argparse.Namespace) -> int:
     print(f"wrote {out}: {len(design.lights)} lights, {len(design.sensors)} sensors, {n} pairs "
           f"from {args.design}{saved}")
     return 0
+
+
+def _rig_config(args: argparse.Namespace) -> Any:
+    from gonio.config import load_rig_config
+
+    path = args.rig
+    if path is None:
+        from gonio.daemon import DaemonConfigError, load_daemon_config
+
+        try:
+            path = load_daemon_config(args.config).paths.rig_config
+        except DaemonConfigError as exc:
+            raise UsageError(str(exc)) from None
+        if path is None:
+            raise UsageError(f"{args.config} sets no [paths] rig_config; give --rig rig.toml")
+    return load_rig_config(path)
+
+
+async def lights_off(config: Any) -> dict[str, str | None]:
+    """Clear every light's coil; ``{light: None if off, else why not}``.
+
+    One unreachable controller does not stop the others from being switched off.
+
+    Raises
+    ------
+    gonio.hal.DeviceInUse
+        Another program owns one of the rig's Modbus endpoints.
+    """
+    from gonio.drivers.modbus import ModbusLight, ModbusPool
+    from gonio.hal import DeviceFault, DeviceInUse
+
+    pool = ModbusPool()
+    out: dict[str, str | None] = {}
+    for cfg in config.lights:
+        light = ModbusLight(cfg, pool)
+        try:
+            await light.set_on(False)
+            out[cfg.name] = None
+        except DeviceInUse:
+            raise
+        except DeviceFault as exc:
+            out[cfg.name] = str(exc)
+        finally:
+            await light.close()
+    return out
+
+
+def _lights_off(args: argparse.Namespace) -> int:
+    from gonio.hal import DeviceInUse
+
+    config = _rig_config(args)
+    try:
+        results = asyncio.run(lights_off(config))
+    except DeviceInUse as exc:
+        raise UsageError(f"{exc}; a live daemon switches its own lamps off (POST "
+                         "/api/v1/rig/halt stops a job, stopping the daemon ends it)") from None
+    failed = {n: why for n, why in results.items() if why is not None}
+    off = [n for n, why in results.items() if why is None]
+    if off:
+        print(f"lights off: {', '.join(off)}")
+    for name, why in failed.items():
+        print(f"gonio rig: {name} may still be on: {why}", file=sys.stderr)
+    return 1 if failed else 0
