@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import hashlib
 import hmac
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
@@ -36,8 +37,23 @@ class KeyringError(ValueError):
     """A configured API key is unusable; the message names it and says how to fix it."""
 
 
+DIGEST_PREFIX = "sha256:"
+"""A keys-file entry ``name sha256:<64 hex digits>`` is a key stored as its digest only."""
+_STORED_DIGEST = re.compile(r"^sha256:([0-9a-f]{64})$")
+
+
 def _digest(key: str) -> bytes:
     return hashlib.sha256(key.encode("utf-8")).digest()
+
+
+def stored_form(key: str) -> str:
+    """What a keys file keeps of ``key``: ``sha256:<hex digest>`` (all the daemon needs)."""
+    return DIGEST_PREFIX + _digest(key).hex()
+
+
+def is_stored_digest(value: str) -> bool:
+    """True when a keys-file value is a digest (:func:`stored_form`), not the key itself."""
+    return _STORED_DIGEST.match(value) is not None
 
 
 class ApiKeyring:
@@ -46,7 +62,8 @@ class ApiKeyring:
     Parameters
     ----------
     keys : mapping of str to str
-        Key name (shown in logs and events, e.g. ``"alice"``) to key value.
+        Key name (shown in logs and events, e.g. ``"alice"``) to key value, or to its stored
+        digest ``sha256:<64 hex digits>`` (:func:`stored_form`, what ``gonio keys new`` writes).
 
     Raises
     ------
@@ -57,6 +74,10 @@ class ApiKeyring:
     def __init__(self, keys: Mapping[str, str]) -> None:
         digests: list[tuple[str, bytes]] = []
         for name, key in keys.items():
+            stored = _STORED_DIGEST.match(key)
+            if stored is not None:
+                digests.append((name, bytes.fromhex(stored.group(1))))
+                continue
             if len(key) < MIN_KEY_LENGTH:
                 raise KeyringError(
                     f"API key {name!r} is {len(key)} characters long; use at least "

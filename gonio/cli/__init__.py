@@ -23,6 +23,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "gonio.cli.stage_command",
     "gonio.cli.rig_command",
     "gonio.cli.export_command",
+    "gonio.cli.keys_command",
 )
 
 

@@ -51,6 +51,8 @@ def register(subparsers: Any) -> None:
                    help="rig config; overrides [paths] rig_config of the daemon config")
     p.add_argument("--host", default=None, help="address to bind (default 127.0.0.1)")
     p.add_argument("--port", type=int, default=None, help="port (default 8600; 0 = any free)")
+    p.add_argument("--keys-file", type=Path, default=None, metavar="FILE",
+                   help="API keys file (from gonio keys new); overrides [auth] keys_file")
     p.add_argument("--data-dir", type=Path, default=None,
                    help="jobs database and results (with --sim, default: the user data "
                    "folder's serve-sim/, printed at start)")
@@ -95,6 +97,7 @@ def run(args: argparse.Namespace) -> int:
             server__host=args.host, server__port=args.port,
             paths__data_dir=str(args.data_dir) if args.data_dir is not None else None,
             paths__rig_config=str(args.rig) if args.rig is not None else None,
+            auth__keys_file=str(args.keys_file) if args.keys_file is not None else None,
         )
         keyring = load_keyring(cfg)
     except DaemonConfigError as exc:

@@ -172,3 +172,23 @@ def test_health_fails_while_the_worker_is_dead(tmp_path: Path) -> None:
                      what="/health to report the dead worker")
             body = c.get("/health").json()
             assert body["status"] == "failed" and "injected worker failure" in body["error"]
+
+
+def test_a_key_from_gonio_keys_new_opens_the_daemon(sim: SimRig, tmp_path: Path) -> None:
+    keys = tmp_path / "api-keys"
+    made = gonio(["keys", "new", "lab", "--keys-file", str(keys)])
+    assert made.returncode == 0, made.stderr
+    key = made.stdout.strip()
+    daemon = start_daemon(["--rig", str(sim.config_path), "--data-dir", str(tmp_path / "d"),
+                           "--keys-file", str(keys), "--port", "0"], GONIO_API_KEYS="")
+    try:
+        with httpx.Client(base_url=daemon.url, timeout=30) as c:
+            lock = {"reason": "key check"}
+            assert c.put("/api/v1/maintenance", json=lock).status_code == 401
+            assert c.put("/api/v1/maintenance", json=lock,
+                         headers={"X-API-Key": key + "x"}).status_code == 403
+            r = c.put("/api/v1/maintenance", json=lock, headers={"X-API-Key": key})
+            assert r.status_code == 200 and r.json()["by"] == "lab"
+    finally:
+        daemon.stop()
+    assert key not in daemon.text()  # logged by name only
