@@ -32,6 +32,19 @@ def _session_data_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return Path(os.environ["GONIO_DATA_DIR"])
 
 
+@pytest.fixture(scope="session", autouse=True)
+def _session_lock_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Rig ownership locks (gonio.locks) of this test run in one folder of its own.
+
+    Child processes (daemons, CLI commands) inherit it, so they see the test's locks; other
+    test runs on the same machine (whose simulators may get the same pseudo-terminal numbers
+    once ours are closed) never do.
+    """
+    if "GONIO_LOCK_DIR" not in os.environ:
+        os.environ["GONIO_LOCK_DIR"] = str(tmp_path_factory.mktemp("gonio-locks"))
+    return Path(os.environ["GONIO_LOCK_DIR"])
+
+
 @pytest.fixture(scope="session")
 def rgl_dir() -> Path:
     """Folder of the shared RGL measurements; skips the test when it is absent."""

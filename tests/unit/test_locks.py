@@ -92,3 +92,16 @@ def test_claiming_a_rig_is_all_or_nothing(tmp_path: Path, monkeypatch: pytest.Mo
         os.close(fd2)
     finally:
         os.close(fd)
+
+
+def test_the_lock_directory_is_shared_unless_overridden(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from gonio.locks import lock_dir
+
+    monkeypatch.setenv("GONIO_LOCK_DIR", str(tmp_path))
+    assert lock_dir() == tmp_path
+    monkeypatch.delenv("GONIO_LOCK_DIR")
+    run_lock = Path("/run/lock")
+    if run_lock.is_dir() and os.access(run_lock, os.W_OK):
+        assert lock_dir() == run_lock  # what every user's gonio agrees on
