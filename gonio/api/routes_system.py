@@ -65,7 +65,8 @@ def metrics(service: Service, request: Request) -> PlainTextResponse:
     samples.append(Sample("gonio_maintenance_locked", "1 while the maintenance lock is set.",
                           float(request.app.state.maintenance.state().locked)))
     st = service.status()
-    samples.append(Sample("gonio_queue_held", "1 while the queue is held (halt, failure).",
+    samples.append(Sample("gonio_queue_held",
+                          "1 while the queue is held (halt, failure, maintenance lock).",
                           float(st.queue_held is not None)))
     if st.running is not None:
         labels = {"job": str(st.running.id)}
