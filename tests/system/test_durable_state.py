@@ -33,6 +33,7 @@ load it can only miss a wrong start, never fail a correct daemon)."""
 def sim(tmp_path: Path) -> Iterator[SimRig]:
     with start_sim_rig(SimRigOptions(time_scale=10.0, settle_s=0.0,
                                      config_path=tmp_path / "rig.toml")) as s:
+        s.place_white_reference()  # for the calibration jobs (no basis needed)
         yield s
 
 

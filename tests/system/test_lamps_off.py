@@ -29,8 +29,10 @@ LONG_EXPOSURE_S = 1.5  # three watchdog periods with the lamp on: the driver mus
 def _sim(tmp_path: Path, watchdog: float | None) -> SimRig:
     # Real time (time_scale 1): exposures and the watchdog run on the same clock. Dim lamps:
     # second-long exposures of the default ones would saturate the 20-bit sensors.
-    return start_sim_rig(SimRigOptions(time_scale=1.0, settle_s=0.0, lamp_watchdog_s=watchdog,
-                                       irradiance=5e4, config_path=tmp_path / "rig.toml"))
+    sim = start_sim_rig(SimRigOptions(time_scale=1.0, settle_s=0.0, lamp_watchdog_s=watchdog,
+                                      irradiance=5e4, config_path=tmp_path / "rig.toml"))
+    sim.place_white_reference()  # the jobs here are calibrations (no basis needed)
+    return sim
 
 
 @pytest.fixture

@@ -30,6 +30,7 @@ EXPOSURE_S = 0.02
 def sim(tmp_path: Path) -> Iterator[SimRig]:
     with start_sim_rig(SimRigOptions(time_scale=10.0, settle_s=0.0,
                                      config_path=tmp_path / "rig.toml")) as s:
+        s.place_white_reference()  # the daemons here run calibration jobs (no basis needed)
         yield s
 
 
