@@ -20,6 +20,9 @@ def _session_cache_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """
     if "GONIO_CACHE_DIR" not in os.environ:
         os.environ["GONIO_CACHE_DIR"] = str(tmp_path_factory.mktemp("gonio-cache"))
+    # The user's imported tables (gonio library import) would change the default basis.
+    if "GONIO_LIBRARY_DIR" not in os.environ:
+        os.environ["GONIO_LIBRARY_DIR"] = str(tmp_path_factory.mktemp("gonio-library"))
     return Path(os.environ["GONIO_CACHE_DIR"])
 
 

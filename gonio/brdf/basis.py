@@ -45,7 +45,30 @@ key                shape / dtype           meaning
 ``provenance``     () str                  JSON object: how the basis was built
 ``grid_deg``       (4,) float              grid step and counts check: ``(step, n_th, n_td,
                                            n_pd)``; a basis from another grid is refused
+``ph_prior``       (37, K, K) float64      optional: covariance of the coefficients along
+                                           ``ph`` per harmonic ``m = 0..36`` (see below)
 =================  ======================  ==================================================
+
+Prior along ``ph`` (MATH 5a)
+----------------------------
+The joint reconstruction treats the coefficients of one material as a stationary periodic
+process along ``ph``: ``Cov(c(ph), c(ph')) = sum_m P_m cos(m (ph - ph'))``. ``P_m`` is learnt
+from the training columns themselves: each (material, channel) gives 72 coefficient vectors
+``c = S^-1 U^T x`` (one per slice), their discrete Fourier transform along ``ph`` gives
+``c^_m``, and ``P_m`` is the mean over (material, channel) of ``Re(c^_m c^_m^H)`` (doubled for
+``0 < m < 36``), times the number of columns. Isotropic materials contribute to ``P_0`` only.
+The scaling makes ``sum_m P_m`` the identity over the training set (``U^T Y Y^T U = S^2``), so
+the prior has V&F's ridge units: prior ``I / eta`` (isotropic limit) with unit noise.
+
+Measured materials (:func:`fold_in`)
+------------------------------------
+Adding a few tables to a basis does not need a new randomized SVD of the whole library: the
+centred training matrix is summarised by ``U S`` (its leading ``K0`` components), so the new
+basis is the leading part of the thin SVD of ``[U S, sqrt(N0) (mu0 - mu), sqrt(w) (x_j - mu)]``
+(Brand 2002's incremental SVD with a mean update): the old components, the shift of the mean,
+and the new columns with weight ``w`` each. This costs about a second instead of a minute, so
+leave-one-material-out studies and user imports rebuild cheaply. ``f_med`` is kept from the
+base basis (the remap's reference only has to be a typical value).
 """
 
 from __future__ import annotations
@@ -73,6 +96,8 @@ EPS = 1e-3
 #: Components kept by :func:`default_basis` when none are asked for; chosen from the quality
 #: table of ``bench/bench_quality.py`` (see ``docs/science.md``).
 DEFAULT_COMPONENTS = 64
+#: Harmonics 0..36 of a function sampled on the 72 ``ph`` slices.
+N_HARMONICS = geo.N_PH // 2 + 1
 _GRID_SIGNATURE = np.array([geo.STEP_DEG, geo.N_TH, geo.N_TD, geo.N_PD], dtype=float)
 
 
@@ -142,6 +167,9 @@ class Basis:
         Training material names.
     provenance : dict
         JSON-serialisable build record.
+    ph_prior : (37, K, K) float64, optional
+        Covariance of the coefficients along ``ph`` per harmonic (module notes); ``None`` for
+        a basis built without it (the joint fit then assumes an isotropic prior).
     """
 
     Q: FloatArray
@@ -152,6 +180,7 @@ class Basis:
     eps: float = EPS
     materials: tuple[str, ...] = ()
     provenance: Mapping[str, Any] = field(default_factory=dict)
+    ph_prior: FloatArray | None = None
 
     def __post_init__(self) -> None:
         Q = np.asarray(self.Q, dtype=np.float64)
@@ -181,6 +210,15 @@ class Basis:
             raise BasisError("basis holds NaN or infinite values; rebuild it")
         if not self.eps > 0:
             raise BasisError(f"basis eps must be positive, got {self.eps}")
+        if self.ph_prior is not None:
+            prior = np.asarray(self.ph_prior, dtype=np.float64)
+            if prior.shape != (N_HARMONICS, K, K) or not np.isfinite(prior).all():
+                raise BasisError(
+                    f"basis ph_prior has shape {prior.shape}, expected ({N_HARMONICS}, {K}, "
+                    f"{K}) finite values; rebuild the basis"
+                )
+            prior.setflags(write=False)
+            object.__setattr__(self, "ph_prior", prior)
         Q = np.where(valid[:, None], Q, 0.0)
         for arr in (Q, S, f_med, mu, valid):
             arr.setflags(write=False)
@@ -204,9 +242,10 @@ class Basis:
             raise BasisError(f"cannot keep {k} components of a basis with K = {self.K}")
         if k == self.K:
             return self
+        prior = None if self.ph_prior is None else self.ph_prior[:, :k, :k]
         return Basis(
             self.Q[:, :k], self.S[:k], self.f_med, self.mu, self.valid, self.eps,
-            self.materials, {**self.provenance, "truncated_from": self.K},
+            self.materials, {**self.provenance, "truncated_from": self.K}, prior,
         )
 
     # ------------------------------------------------------------------ off-grid rows
@@ -279,6 +318,7 @@ class Basis:
             Q=self.Q, S=self.S, f_med=self.f_med, mu=self.mu, valid=self.valid,
             eps=np.array(self.eps), materials=np.array(self.materials, dtype=str),
             grid_deg=_GRID_SIGNATURE,
+            **({} if self.ph_prior is None else {"ph_prior": self.ph_prior}),
         )
 
     @classmethod
@@ -301,7 +341,7 @@ class Basis:
             return cls(
                 data["Q"], data["S"], data["f_med"], data["mu"], data["valid"],
                 float(data["eps"]), tuple(np.asarray(data.get("materials", [])).tolist()),
-                prov,
+                prov, data.get("ph_prior"),
             )
         except BasisError as exc:
             raise BasisError(f"{p}: {exc}") from None
@@ -394,6 +434,7 @@ def build_basis(
     Y = A  # remapped and centred in place
 
     U, S = _randomized_svd(Y, n_components, oversample, power_iterations, seed)
+    prior = ph_prior_from_coefficients(_coefficients(Y, U, S), m)
     Q = np.zeros((geo.N_ROWS, n_components))
     Q[rows] = U * S
     f_full = np.zeros(geo.N_ROWS)
@@ -411,7 +452,146 @@ def build_basis(
         "build_seconds": round(time.perf_counter() - t0, 3),
         "materials_digest": _names_digest(names),
     }
-    return Basis(Q, S, f_full, mu_full, valid, eps, tuple(names), prov)
+    return Basis(Q, S, f_full, mu_full, valid, eps, tuple(names), prov, prior)
+
+
+def _coefficients(Y: NDArray[np.float32], U: FloatArray, S: FloatArray) -> FloatArray:
+    """Coefficients ``S^-1 U^T Y`` (K, m) of every training column, in column blocks."""
+    Ut = (U / np.where(S > 0, S, 1.0)).T.astype(np.float32)
+    out = np.empty((U.shape[1], Y.shape[1]))
+    for c0 in range(0, Y.shape[1], 8192):
+        out[:, c0 : c0 + 8192] = Ut @ Y[:, c0 : c0 + 8192]
+    return out
+
+
+def ph_prior_from_coefficients(coef: FloatArray, n_columns: float) -> FloatArray:
+    """Per-harmonic covariance of coefficients along ``ph`` (module notes, "Prior along ph").
+
+    Parameters
+    ----------
+    coef : (K, G * 72) float64
+        Coefficients of G groups of 72 consecutive columns (one group = one material channel,
+        slices in ``ph`` order).
+    n_columns : float
+        Number of training columns the covariances are scaled by.
+
+    Returns
+    -------
+    (37, K, K) float64
+        ``P_m`` for ``m = 0..36``.
+    """
+    K = coef.shape[0]
+    groups = coef.reshape(K, -1, geo.N_PH)
+    F = np.fft.rfft(groups, axis=2) / geo.N_PH  # (K, G, 37)
+    double = np.full(N_HARMONICS, 2.0)
+    double[0] = double[-1] = 1.0
+    P = np.einsum("kgm,lgm->mkl", F, F.conj()).real * (double / groups.shape[1])[:, None, None]
+    return np.asarray(P * n_columns)
+
+
+def fold_in(
+    base: Basis,
+    tables: Sequence[BRDFTable],
+    weight: float,
+    n_components: int | None = None,
+) -> Basis:
+    """Add measured tables to a basis by an incremental SVD (module notes, "Measured materials").
+
+    Parameters
+    ----------
+    base : Basis
+        A basis built by :func:`build_basis` (its ``provenance["n_columns"]`` says how many
+        columns it summarises); the more components it keeps, the less of it is lost.
+    tables : sequence of BRDFTable
+        The added materials (R, G, B). Identical ``ph`` slices (isotropic tables) are
+        counted once with 72 times the weight.
+    weight : float
+        How many synthetic materials one added material counts as (>= 0; 0 returns the base
+        truncated to ``n_components``).
+    n_components : int, optional
+        K of the result; default ``base.K``.
+
+    Returns
+    -------
+    Basis
+        Its ``ph_prior`` is the base's, carried into the new components, plus the added
+        materials' own (isotropic or not).
+    """
+    k = base.K if n_components is None else int(n_components)
+    if not 1 <= k <= base.K:
+        raise BasisError(f"cannot keep {k} components when folding into a basis with K = {base.K}")
+    if weight < 0 or not np.isfinite(weight):
+        raise BasisError(f"the weight of added materials must be >= 0, got {weight}")
+    if weight == 0 or not tables:
+        return base.truncated(k)
+    n0 = float(base.provenance.get("n_columns", 0)) or float(len(base.materials) * 3 * geo.N_PH)
+    rows = np.flatnonzero(base.valid)
+    w_rows = row_weight(base.eps)[rows]
+    cols: list[FloatArray] = []
+    col_w: list[float] = []
+    groups: list[tuple[int, int, float]] = []  # (first column, count, weight of each column)
+    for t in tables:
+        v = np.asarray(t.values, dtype=np.float64).reshape(
+            t.n_channels, geo.N_PH, geo.N_ROWS)[:, :, rows]
+        iso = bool(np.allclose(v, v[:, :1], equal_nan=True))
+        for c in range(t.n_channels):
+            x = remap(v[c], base.f_med[rows], w_rows, base.eps)
+            x = np.nan_to_num(x, nan=0.0)  # unmeasured cells count as the median (as build)
+            if iso:
+                groups.append((len(cols), 1, weight * geo.N_PH))
+                cols.append(x[0])
+                col_w.append(weight * geo.N_PH)
+            else:
+                groups.append((len(cols), geo.N_PH, weight))
+                cols.extend(x)
+                col_w.extend([weight] * geo.N_PH)
+    X = np.stack(cols, axis=1)  # (p, J)
+    cw = np.asarray(col_w)
+    n_total = n0 + cw.sum()
+    mu0 = base.mu[rows]
+    mu = (n0 * mu0 + X @ cw) / n_total
+    M = np.concatenate(
+        [base.Q[rows], np.sqrt(n0) * (mu0 - mu)[:, None], (X - mu[:, None]) * np.sqrt(cw)],
+        axis=1,
+    )
+    U, S, _ = np.linalg.svd(M, full_matrices=False)
+    U, S = U[:, :k], S[:k]
+    flip = np.sign(U[np.abs(U).argmax(axis=0), np.arange(k)])
+    flip[flip == 0] = 1.0
+    U = U * flip
+    Q = np.zeros((geo.N_ROWS, k))
+    Q[rows] = U * S
+    mu_full = np.zeros(geo.N_ROWS)
+    mu_full[rows] = mu
+    prior = None
+    if base.ph_prior is not None:
+        pinv = (U / S).T  # (k, p): coefficients of a centred column in the new basis
+        T = pinv @ base.Q[rows]  # (k, K0)
+        d = pinv @ (mu0 - mu)
+        # Priors are sums over the training columns (sum_m P_m ~ I): carry the base's into the
+        # new coordinates (c_new = T c_old + d), then add the shift of the mean and the new
+        # columns.
+        prior = np.einsum("ka,mab,lb->mkl", T, base.ph_prior, T)
+        prior[0] += n0 * np.outer(d, d)
+        C = pinv @ (X - mu[:, None])  # (k, J)
+        for first, count, wcol in groups:
+            sub = C[:, first : first + count]
+            if count == 1:
+                prior[0] += wcol * np.outer(sub[:, 0], sub[:, 0])
+            else:
+                prior += wcol * geo.N_PH * ph_prior_from_coefficients(sub, 1.0)
+    names = (*base.materials, *(t.name for t in tables))
+    dupes = sorted({n for n in names if names.count(n) > 1})
+    if dupes:
+        raise BasisError(f"training materials must have distinct names; repeated: {dupes}")
+    prov = {
+        **base.provenance,
+        "n_columns": n_total,
+        "folded_in": {"materials": [t.name for t in tables], "weight": float(weight),
+                      "base_K": base.K},
+        "materials_digest": _names_digest(names),
+    }
+    return Basis(Q, S, base.f_med, mu_full, base.valid, base.eps, names, prov, prior)
 
 
 def _randomized_svd(
@@ -471,8 +651,46 @@ def leave_one_out(tables: Sequence[BRDFTable], index: int, n_components: int) ->
 
 
 # ---------------------------------------------------------------------------- default basis
-def default_basis(n_components: int | None = None, progress: bool = False) -> Basis:
-    """The basis of the default synthetic library, built once and cached.
+#: How many synthetic materials one shipped measured material counts as in the default basis
+#: (chosen by the leave-one-measured-material-out study of ``bench/bench_unseen.py``).
+MEASURED_WEIGHT = 1.0
+#: The synthetic part is built with this many extra components, so folding the measured
+#: tables in (:func:`fold_in`) loses little of it.
+_FOLD_EXTRA = 32
+
+
+def synthetic_basis(n_components: int, progress: bool = False) -> Basis:
+    """The basis of the synthetic library alone, built once and cached.
+
+    ``<cache>/basis/synthetic-K<K>-<key>.npz``, ``<cache>`` and ``<key>`` the library's
+    (:func:`gonio.brdf.library.cache_root`, :func:`~gonio.brdf.library.library_key`).
+    """
+    from gonio.brdf import library  # the library depends on models; import it only when needed
+
+    path = (library.cache_root() / "basis"
+            / f"synthetic-K{n_components}-{library.library_key()[:16]}.npz")
+    if path.is_file():
+        try:
+            return Basis.load(path)
+        except BasisError:
+            pass  # a stale or damaged cache entry is rebuilt below
+    tables = library.default_library(progress=progress)
+    k = min(n_components, sum(t.n_channels * geo.N_PH for t in tables))
+    basis = build_basis(tables, k, progress=progress)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    basis.save(path)
+    return basis
+
+
+def default_basis(
+    n_components: int | None = None,
+    progress: bool = False,
+    *,
+    exclude: Sequence[str] = (),
+    measured_weight: float | None = None,
+    user_library: bool = True,
+) -> Basis:
+    """The default basis: synthetic library + shipped measured materials + the user's tables.
 
     Parameters
     ----------
@@ -480,24 +698,43 @@ def default_basis(n_components: int | None = None, progress: bool = False) -> Ba
         K; :data:`DEFAULT_COMPONENTS` when omitted.
     progress : bool
         Show progress bars while building the library and the basis.
+    exclude : sequence of str
+        Shipped measured materials to leave out (held-out studies).
+    measured_weight : float, optional
+        How many synthetic materials each measured or user table counts as; default
+        :data:`MEASURED_WEIGHT`. 0 gives the synthetic basis alone.
+    user_library : bool
+        Include the tables of :func:`gonio.brdf.measured.user_library_dir`
+        (``gonio library import``).
 
     Returns
     -------
     Basis
-        Loaded from ``<cache>/basis/default-K<K>-<key>.npz`` when present. ``<cache>`` and
-        ``<key>`` are the library's (:func:`gonio.brdf.library.cache_root`,
-        :func:`~gonio.brdf.library.library_key`), so a changed library recipe gives a new file.
+        The synthetic basis (:func:`synthetic_basis`, K + 32 components) with the measured
+        tables folded in (:func:`fold_in`), cached as
+        ``<cache>/basis/default-K<K>-<key>.npz``; the key covers the library, the shipped
+        data, the user tables, the weight and ``exclude``.
     """
-    from gonio.brdf import library  # the library depends on models; import it only when needed
+    from gonio.brdf import library, measured
 
     k = DEFAULT_COMPONENTS if n_components is None else int(n_components)
-    path = library.cache_root() / "basis" / f"default-K{k}-{library.library_key()[:16]}.npz"
+    weight = MEASURED_WEIGHT if measured_weight is None else float(measured_weight)
+    key = hashlib.sha256("\n".join([
+        library.library_key(), measured.measured_digest(),
+        measured.user_library_digest() if user_library else "-", repr(weight),
+        ",".join(sorted(exclude)),
+    ]).encode()).hexdigest()[:16]
+    path = library.cache_root() / "basis" / f"default-K{k}-{key}.npz"
     if path.is_file():
         try:
             return Basis.load(path)
         except BasisError:
             pass  # a stale or damaged cache entry is rebuilt below
-    basis = build_basis(library.default_library(progress=progress), k, progress=progress)
+    base = synthetic_basis(k + _FOLD_EXTRA, progress=progress)
+    extra = measured.measured_tables(exclude) + (measured.user_tables() if user_library else [])
+    basis = fold_in(base, extra, weight, min(k, base.K))
+    basis = Basis(basis.Q, basis.S, basis.f_med, basis.mu, basis.valid, basis.eps,
+                  basis.materials, {**basis.provenance, "default_key": key}, basis.ph_prior)
     path.parent.mkdir(parents=True, exist_ok=True)
     basis.save(path)
     return basis

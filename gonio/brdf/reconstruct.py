@@ -52,11 +52,12 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.interpolate import PchipInterpolator
 
 from gonio.brdf import geometry as geo
-from gonio.brdf.basis import Basis, BasisError, inverse_remap, remap, row_weight
+from gonio.brdf.basis import N_HARMONICS, Basis, BasisError, inverse_remap, remap, row_weight
 from gonio.brdf.table import VALID_MASK, BRDFTable
 
 FloatArray = NDArray[np.float64]
 Solver = Literal["closed", "iterative"]
+Method = Literal["joint", "vf"]
 
 #: V&F Sec. 5: the whole-BRDF error is about 0.8 x the mean relative error at the samples.
 ERROR_SCALE = 0.8
@@ -112,7 +113,14 @@ class Reconstruction:
         pair that the others cannot predict at all, e.g. ``eta = 0`` with ``n <= K``).
     predicted_error : float
         ``cv_error_scale(n) * cv_sample_error``: the calibrated estimate of the volume-weighted
-        MAPE over the whole BRDF (a fraction); the number to report.
+        MAPE over the whole BRDF (a fraction).
+    cv_log_error : float
+        Leave-one-pair-out error in the units of ``log_rmse``: root mean square over the
+        readings of ``ln(1 + f_loo cos ti) - ln(1 + f cos ti)``. NaN when undefined.
+    predicted_log_rmse : float
+        The estimated ``metrics.log_rmse`` of the whole reconstruction against the true
+        BRDF (:func:`predict_log_rmse`, calibrated on materials held out of the basis); the
+        number to report.
     """
 
     table: BRDFTable
@@ -122,6 +130,8 @@ class Reconstruction:
     settings: dict[str, Any] = field(default_factory=dict)
     cv_sample_error: float = float("nan")
     predicted_error: float = float("nan")
+    cv_log_error: float = float("nan")
+    predicted_log_rmse: float = float("nan")
 
 
 # ---------------------------------------------------------------------------- geometry helper
@@ -390,6 +400,141 @@ def loo_predictions(
     return loo
 
 
+
+# ---------------------------------------------------------------------------- joint fit
+#: Noise-to-prior ratio of one reading in the joint fit (the prior sums to the identity over
+#: the harmonics, so this is V&F's ``eta`` per reading); chosen on held-out library materials
+#: (``bench/bench_unseen.py --tune``).
+JOINT_ETA = 40.0
+#: Weight of Eq. 5's specular (th = 0) condition in the joint fit, in V&F's units.
+JOINT_LAM = 0.1
+
+_PRIOR_CACHE: dict[tuple[int, float], tuple[Any, FloatArray]] = {}
+
+
+def joint_prior(basis: Basis, lam_over_eta: float) -> FloatArray:
+    """The prior of the joint fit: per-harmonic covariances ``P'_m`` (37, K, K).
+
+    ``P_m`` is the basis' learnt prior along ``ph`` (:attr:`Basis.ph_prior`; an isotropic
+    prior, ``P_0 = I``, for a basis without one). Eq. 5's specular condition penalises
+    ``lam ||Qs (c(ph) - cbar)||^2``: only the varying part, so it adds ``lam / eta Qs^T Qs``
+    to the precision of every harmonic ``m > 0``: ``P'_m = (P_m^-1 + a H)^-1 =
+    (I + a P_m H)^-1 P_m`` (the second form needs no inverse of a singular ``P_m``).
+    Cached per basis object.
+    """
+    import weakref
+
+    key = (id(basis.Q), float(lam_over_eta))
+    hit = _PRIOR_CACHE.get(key)
+    if hit is not None and hit[0]() is basis.Q:
+        return hit[1]
+    K = basis.K
+    if basis.ph_prior is None:
+        P = np.zeros((N_HARMONICS, K, K))
+        P[0] = np.eye(K)
+    else:
+        P = np.array(basis.ph_prior, dtype=float)
+    if lam_over_eta > 0:
+        Qs = basis.Q[_TH0_ROWS]
+        H = Qs.T @ Qs
+        eye = np.eye(K)
+        for m in range(1, N_HARMONICS):
+            if np.any(P[m]):
+                X = np.linalg.solve(eye + lam_over_eta * P[m] @ H, P[m])
+                P[m] = 0.5 * (X + X.T)
+    P.setflags(write=False)
+    if len(_PRIOR_CACHE) > 16:
+        _PRIOR_CACHE.clear()
+    _PRIOR_CACHE[key] = (weakref.ref(basis.Q), P)
+    return P
+
+
+@dataclass(frozen=True)
+class JointFit:
+    """Result of :func:`solve_joint` (remapped, centred values; C channels).
+
+    Attributes
+    ----------
+    coef : (K, 72, C) coefficients of the grid slices (posterior mean)
+    fit : (n, r, C) posterior mean at the readings
+    loo : (n, r, C) leave-one-pair-out predictions at the readings (NaN when undefined)
+    """
+
+    coef: FloatArray
+    fit: FloatArray
+    loo: FloatArray
+
+
+def solve_joint(
+    Y: FloatArray, Qt: FloatArray, ph_read: FloatArray, P: FloatArray, eta: float,
+    ph_out: FloatArray = geo.PH_GRID,
+) -> JointFit:
+    """Posterior mean of the coefficients given every reading at its own ``ph`` (MATH 5a).
+
+    Model: ``x(row, ph) = Q_row c(ph)``, ``Cov(c(ph), c(ph')) = sum_m P_m cos(m (ph - ph'))``,
+    each reading ``y_a = Q_q(a) c(ph_a) + e_a`` with noise variance ``eta``. With
+    ``G_ab = sum_m (Qt P_m Qt^T)_{q(a) q(b)} cos(m (ph_a - ph_b)) + eta delta_ab`` (one
+    ``(n r) x (n r)`` matrix for all channels), ``beta = G^-1 y`` and
+    ``c(ph) = sum_m P_m sum_a Qt_q(a)^T beta_a cos(m (ph - ph_a))``. With ``P_0 = I`` and no
+    other harmonic this is V&F's ridge (Eq. 4) over all readings.
+
+    Parameters
+    ----------
+    Y : (n, r, C) remapped, centred readings
+    Qt : (n, K) basis rows at the pairs
+    ph_read : (n, r) radians, ``ph`` of each reading (``ph_lab - alpha``)
+    P : (M, K, K) per-harmonic prior covariances
+    eta : float, > 0
+    ph_out : (S,) radians, where to return coefficients (default the 72 grid slices)
+
+    Returns
+    -------
+    JointFit
+        ``loo`` row ``q``: the fit to the other pairs' readings predicting pair ``q``'s, from
+        the blocks of ``G^-1`` (``y_I - (G^-1)_II^-1 beta_I``), no refits.
+    """
+    n, r, C = Y.shape
+    M = P.shape[0]
+    harm = np.arange(M, dtype=float)
+    A = np.einsum("qk,mkl,pl->mqp", Qt, P, Qt, optimize=True)  # (M, n, n)
+    phase = harm[:, None, None] * ph_read[None]  # (M, n, r)
+    Fc, Fs = np.cos(phase), np.sin(phase)
+    # G[q j, p i] = sum_m A[m, q, p] (cos cos + sin sin) of the two readings' phases.
+    G = (np.einsum("mqp,mqj,mpi->qjpi", A, Fc, Fc, optimize=True)
+         + np.einsum("mqp,mqj,mpi->qjpi", A, Fs, Fs, optimize=True)).reshape(n * r, n * r)
+    G[np.diag_indices_from(G)] += eta
+    y = Y.reshape(n * r, C)
+    try:
+        cho = scipy.linalg.cho_factor(G)
+    except np.linalg.LinAlgError:
+        raise ReconstructionError(
+            "the joint system is singular; use eta > 0"
+        ) from None
+    beta = scipy.linalg.cho_solve(cho, y).reshape(n, r, C)
+    # Back to coefficients at the requested slices.
+    Bc = np.einsum("mqj,qk,qjc->mkc", Fc, Qt, beta, optimize=True)
+    Bs = np.einsum("mqj,qk,qjc->mkc", Fs, Qt, beta, optimize=True)
+    Zc = np.einsum("mkl,mlc->mkc", P, Bc)
+    Zs = np.einsum("mkl,mlc->mkc", P, Bs)
+    out_phase = harm[:, None] * np.asarray(ph_out)[None, :]  # (M, S)
+    coef = np.einsum("ms,mkc->ksc", np.cos(out_phase), Zc) + np.einsum(
+        "ms,mkc->ksc", np.sin(out_phase), Zs
+    )
+    fit = Y - eta * beta
+    loo = np.full_like(Y, np.nan)
+    if n > 1:
+        Ginv = scipy.linalg.cho_solve(cho, np.eye(n * r)).reshape(n, r, n, r)
+        ok = True
+        for q in range(n):
+            try:
+                loo[q] = Y[q] - np.linalg.solve(Ginv[q, :, q, :], beta[q])
+            except np.linalg.LinAlgError:
+                ok = False
+                break
+        if not ok:
+            loo[:] = np.nan
+    return JointFit(coef=coef, fit=fit, loo=loo)
+
 # ---------------------------------------------------------------------------- validation
 def _check_inputs(
     basis: Basis,
@@ -458,11 +603,12 @@ def reconstruct(
     values: ArrayLike,
     *,
     channels: Sequence[str] = ("R", "G", "B"),
-    eta: float = 40.0,
-    lam: float = 0.1,
+    eta: float | None = None,
+    lam: float | None = None,
     n_components: int | None = None,
     solver: Solver = "closed",
     name: str = "reconstruction",
+    method: Method = "joint",
 ) -> Reconstruction:
     """Reconstruct the full anisotropic BRDF from ``n`` pairs read at ``r`` stage angles.
 
@@ -479,14 +625,20 @@ def reconstruct(
     values : (n, r, C) array_like, 1/sr
         Measured BRDF values, non-negative, no NaN.
     channels : sequence of str, length C
-    eta, lam : float
-        Regularisation weights of Eq. 5 (V&F defaults 40 and 0.1).
+    eta, lam : float, optional
+        Regularisation weights of Eq. 5: noise-to-prior ratio and the specular (th = 0)
+        condition. Defaults: V&F's 40 and 0.1 for ``method="vf"``, :data:`JOINT_ETA` and
+        :data:`JOINT_LAM` for the joint fit.
     n_components : int, optional
         Use only the first K components (default: all of ``basis``).
     solver : {"closed", "iterative"}
-        Closed-form minimiser (default) or the L-BFGS reference.
+        For ``method="vf"``: closed-form minimiser (default) or the L-BFGS reference.
     name : str
         Name of the output table.
+    method : {"joint", "vf"}
+        ``"joint"`` (default): every reading at its own ``ph`` with the learnt prior along
+        ``ph`` (MATH 5a, :func:`solve_joint`). ``"vf"``: V&F's path, per-pair periodic PCHIP
+        onto the 72 slices, then Eq. 5 (steps 1-3 of the module notes).
 
     Returns
     -------
@@ -495,7 +647,7 @@ def reconstruct(
     with one_blas_thread():
         return _reconstruct(
             basis, cells, ph_lab, stage_angles, values, channels=channels, eta=eta, lam=lam,
-            n_components=n_components, solver=solver, name=name,
+            n_components=n_components, solver=solver, name=name, method=method,
         )
 
 
@@ -507,11 +659,12 @@ def _reconstruct(
     values: ArrayLike,
     *,
     channels: Sequence[str],
-    eta: float,
-    lam: float,
+    eta: float | None,
+    lam: float | None,
     n_components: int | None,
     solver: Solver,
     name: str,
+    method: Method,
 ) -> Reconstruction:
     """:func:`reconstruct` without the BLAS thread limit (same parameters)."""
     t0 = time.perf_counter()
@@ -523,6 +676,14 @@ def _reconstruct(
     _check_inputs(basis, cells_, ph_, alpha, vals, channels)
     if solver not in ("closed", "iterative"):
         raise ReconstructionError(f"solver must be 'closed' or 'iterative', not {solver!r}")
+    if method not in ("joint", "vf"):
+        raise ReconstructionError(f"method must be 'joint' or 'vf', not {method!r}")
+    if eta is None:
+        eta = JOINT_ETA if method == "joint" else 40.0
+    if lam is None:
+        lam = JOINT_LAM if method == "joint" else 0.1
+    if method == "joint" and not eta > 0:
+        raise ReconstructionError(f"the joint fit needs eta > 0 (reading noise), got {eta}")
     if not (eta >= 0 and lam >= 0):
         raise ReconstructionError(f"eta and lam must be >= 0, got eta={eta}, lam={lam}")
     if n_components is not None:
@@ -541,6 +702,65 @@ def _reconstruct(
     ci, co = geo.cell_cosines(th, td, pd)
     w_t = np.maximum(ci * co, basis.eps)[:, None, None]  # each pair's exact weight, not a blend
 
+    n_ch = len(channels)
+    if method == "joint":
+        Yr = remap(vals, fmed_t, w_t, basis.eps) - mu_t  # (n, r, C), each reading where taken
+        jf = solve_joint(Yr, Qt, ph_[:, None] - alpha[None, :], joint_prior(basis, lam / eta),
+                         eta)
+        coef = np.moveaxis(jf.coef, -1, 0)  # (C, K, 72)
+        has_cv = bool(np.isfinite(jf.loo).all())
+        remapped = np.concatenate([jf.fit, jf.loo], axis=2) if has_cv else jf.fit
+        remapped = np.minimum(remapped + mu_t, 300.0)
+        at_samples = np.maximum(inverse_remap(remapped, fmed_t, w_t, basis.eps), 0.0)
+        solver_name = "joint"
+    else:
+        coef, at_samples, has_cv = _vf_path(
+            basis, Qt, fmed_t, mu_t, w_t, ph_, alpha, vals, eta, lam, solver, n_ch
+        )
+        solver_name = solver
+    table = BRDFTable.trusted(
+        _expand_table(basis, coef), channels, name, None,
+        {"reconstruction": {"K": basis.K, "n": int(cells_.shape[0]), "r": int(alpha.size),
+                            "eta": eta, "lam": lam, "method": method, "solver": solver_name,
+                            "basis_materials": len(basis.materials)}},
+    )
+    rel = _relative_sample_error(at_samples[..., :n_ch], vals)
+    cv = _relative_sample_error(at_samples[..., n_ch:], vals) if has_cv else float("nan")
+    cv_log = (_log_sample_error(at_samples[..., n_ch:], vals, ci) if has_cv
+              else float("nan"))
+    n = int(cells_.shape[0])
+    seconds = time.perf_counter() - t0
+    return Reconstruction(
+        table=table,
+        coefficients=coef,
+        rel_sample_error=rel,
+        estimated_error=ERROR_SCALE * rel,
+        settings={
+            "K": basis.K, "n": n, "r": int(alpha.size), "eta": float(eta),
+            "lam": float(lam), "method": method, "solver": solver_name,
+            "channels": list(channels), "seconds": round(seconds, 4),
+        },
+        cv_sample_error=cv,
+        predicted_error=cv_error_scale(n) * cv,
+        cv_log_error=cv_log,
+        predicted_log_rmse=predict_log_rmse(cv_log, n, int(alpha.size)),
+    )
+
+
+def _vf_path(
+    basis: Basis, Qt: FloatArray, fmed_t: FloatArray, mu_t: FloatArray, w_t: FloatArray,
+    ph_: FloatArray, alpha: FloatArray, vals: FloatArray, eta: float, lam: float,
+    solver: Solver, n_ch: int,
+) -> tuple[FloatArray, FloatArray, bool]:
+    """V&F's steps 1-3 and the fit/leave-one-pair-out values back at the readings.
+
+    Returns
+    -------
+    coef : (C, K, 72)
+    at_samples : (n, r, C) or (n, r, 2 C)
+        The fit at the readings, then (when defined) the leave-one-pair-out predictions.
+    has_cv : bool
+    """
     # Steps 1-2: slices, then the remap (n, 72, C).
     Y = remap(resample_to_slices(ph_, alpha, vals), fmed_t, w_t, basis.eps) - mu_t
 
@@ -550,20 +770,11 @@ def _reconstruct(
         coef = np.moveaxis(solve_closed(Y, Qt, Qs, eta, lam), -1, 0)  # (C, K, 72)
     else:
         coef = np.stack(
-            [solve_iterative(Y[:, :, c], Qt, Qs, eta, lam) for c in range(len(channels))]
+            [solve_iterative(Y[:, :, c], Qt, Qs, eta, lam) for c in range(n_ch)]
         )
-
-    # Step 4: the full table.
-    table = BRDFTable.trusted(
-        _expand_table(basis, coef), channels, name, None,
-        {"reconstruction": {"K": basis.K, "n": int(cells_.shape[0]), "r": int(alpha.size),
-                            "eta": eta, "lam": lam, "solver": solver,
-                            "basis_materials": len(basis.materials)}},
-    )
 
     # Step 5: the fit and the leave-one-pair-out predictions at the pairs, taken back to BRDF
     # values at the sampled stage angles in one interpolation (channels side by side).
-    n_ch = len(channels)
     fit = np.einsum("nk,cks->nsc", Qt, coef)
     loo = loo_predictions(Y, Qt, Qs, eta, lam)
     has_cv = bool(np.isfinite(loo).all())
@@ -572,23 +783,41 @@ def _reconstruct(
     # any reading yet leaves room for the remap's factors.
     remapped = np.minimum(remapped + mu_t, 300.0)
     both = np.maximum(inverse_remap(remapped, fmed_t, w_t, basis.eps), 0.0)
-    at_samples = slices_at_stage_angles(ph_, alpha, both)
-    rel = _relative_sample_error(at_samples[..., :n_ch], vals)
-    cv = _relative_sample_error(at_samples[..., n_ch:], vals) if has_cv else float("nan")
-    seconds = time.perf_counter() - t0
-    return Reconstruction(
-        table=table,
-        coefficients=coef,
-        rel_sample_error=rel,
-        estimated_error=ERROR_SCALE * rel,
-        settings={
-            "K": basis.K, "n": int(cells_.shape[0]), "r": int(alpha.size), "eta": float(eta),
-            "lam": float(lam), "solver": solver, "channels": list(channels),
-            "seconds": round(seconds, 4),
-        },
-        cv_sample_error=cv,
-        predicted_error=cv_error_scale(int(cells_.shape[0])) * cv,
-    )
+    return coef, slices_at_stage_angles(ph_, alpha, both), has_cv
+
+
+#: ``predicted_log_rmse = exp(a) cv_log_error^b (n r)^c`` with these ``(a, b, c)``: a
+#: least-squares fit in logs over held-out materials (``bench/bench_unseen.py --calibrate``;
+#: validation in ``docs/science.md``).
+LOG_RMSE_MODEL: tuple[float, float, float] = (0.0, 1.0, 0.0)
+
+
+def predict_log_rmse(cv_log_error: float, n_pairs: int, n_rotations: int) -> float:
+    """Calibrated estimate of the whole-BRDF ``log_rmse`` from the leave-one-pair-out error.
+
+    Parameters
+    ----------
+    cv_log_error : float
+        :attr:`Reconstruction.cv_log_error`.
+    n_pairs, n_rotations : int
+
+    Returns
+    -------
+    float
+        NaN when ``cv_log_error`` is NaN.
+    """
+    if not np.isfinite(cv_log_error):
+        return float("nan")
+    a, b, c = LOG_RMSE_MODEL
+    x = max(float(cv_log_error), 1e-6)
+    return float(np.exp(a) * x**b * float(max(n_pairs * n_rotations, 1)) ** c)
+
+
+def _log_sample_error(pred: FloatArray, measured: FloatArray, cos_i: FloatArray) -> float:
+    """RMS of ``ln(1 + pred cos ti) - ln(1 + measured cos ti)`` over all readings."""
+    ci = np.asarray(cos_i, dtype=float)[:, None, None]
+    d = np.log1p(np.maximum(pred, 0.0) * ci) - np.log1p(measured * ci)
+    return float(np.sqrt(np.mean(d**2)))
 
 
 def cv_error_scale(n_pairs: int) -> float:

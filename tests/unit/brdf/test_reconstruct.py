@@ -82,8 +82,8 @@ def test_reconstruct_solvers_agree_end_to_end() -> None:
     cells, ph = grid_pairs(10, seed=3)
     alpha = uniform_stage_angles(8)
     vals = simulate_samples(small_library()[0], cells, ph, alpha)
-    a = reconstruct(b, cells, ph, alpha, vals)
-    c = reconstruct(b, cells, ph, alpha, vals, solver="iterative")
+    a = reconstruct(b, cells, ph, alpha, vals, method="vf")
+    c = reconstruct(b, cells, ph, alpha, vals, method="vf", solver="iterative")
     scale = np.abs(a.coefficients).max()
     np.testing.assert_allclose(c.coefficients, a.coefficients, atol=1e-5 * scale)
     assert a.settings["solver"] == "closed" and c.settings["solver"] == "iterative"
@@ -110,7 +110,8 @@ def test_exact_recovery_in_the_span_all_slices_measured() -> None:
     k = np.rint(np.mod(ph[:, None] - alpha[None, :], 2 * np.pi) / geo.STEP).astype(int) % 72
     vals = truth[k, rows[:, None]][..., None]
     assert np.all(vals > 0), "test set-up: the synthetic BRDF must be positive"
-    rec = reconstruct(b, cells, ph, alpha, vals, channels=("Y",), eta=1e-12, lam=0.0)
+    rec = reconstruct(b, cells, ph, alpha, vals, channels=("Y",), eta=1e-12, lam=0.0,
+                      method="vf")
     np.testing.assert_allclose(rec.coefficients[0], C_true, atol=1e-7)
     got = rec.table.values[0].reshape(geo.N_PH, geo.N_ROWS)[:, b.valid]
     # The random basis dips below 0 at a few unsampled cells; the output is clamped there.
@@ -128,7 +129,8 @@ def test_exact_recovery_of_an_isotropic_material_from_few_rotations() -> None:
     rows = geo.flat_row(*(np.rint(cells / geo.STEP).astype(int).T))
     alpha = np.deg2rad([0.0, 50.0, 110.0, 250.0])  # irregular, any order
     vals = np.repeat(truth[0, rows][:, None, None], alpha.size, axis=1)
-    rec = reconstruct(b, cells, ph, alpha, vals, channels=("Y",), eta=1e-12, lam=5.0)
+    rec = reconstruct(b, cells, ph, alpha, vals, channels=("Y",), eta=1e-12, lam=5.0,
+                      method="vf")
     np.testing.assert_allclose(rec.coefficients[0], c[:, None] * np.ones(72), atol=1e-7)
 
 
@@ -224,7 +226,8 @@ def _in_span_scan(
 def test_cv_error_is_near_zero_for_data_in_the_span() -> None:
     b = random_basis(6, seed=1)
     cells, ph, alpha, vals = _in_span_scan(b, 20, seed=5)
-    rec = reconstruct(b, cells, ph, alpha, vals, channels=("Y",), eta=1e-12, lam=0.0)
+    rec = reconstruct(b, cells, ph, alpha, vals, channels=("Y",), eta=1e-12, lam=0.0,
+                      method="vf")
     assert rec.cv_sample_error < 1e-6
     assert rec.predicted_error == pytest.approx(cv_error_scale(20) * rec.cv_sample_error)
 
@@ -238,7 +241,8 @@ def test_cv_error_tracks_the_noise_level(sigma: float) -> None:
     cells, ph, alpha, clean = _in_span_scan(b, 60, seed=6)
     noise = np.random.default_rng(2).standard_normal(clean.shape)
     vals = clean * (1 + sigma * noise)
-    rec = reconstruct(b, cells, ph, alpha, vals, channels=("Y",), eta=1e-9, lam=0.0)
+    rec = reconstruct(b, cells, ph, alpha, vals, channels=("Y",), eta=1e-9, lam=0.0,
+                      method="vf")
     expected = np.sqrt(2 / np.pi) * sigma
     assert 0.85 * expected < rec.cv_sample_error < 1.25 * expected
     assert rec.rel_sample_error < rec.cv_sample_error
@@ -247,7 +251,8 @@ def test_cv_error_tracks_the_noise_level(sigma: float) -> None:
 def test_cv_error_is_nan_when_undefined() -> None:
     b = random_basis(6, seed=1)
     cells, ph, alpha, vals = _in_span_scan(b, 6, seed=4)
-    rec = reconstruct(b, cells, ph, alpha, vals, channels=("Y",), eta=0.0, lam=0.0)
+    rec = reconstruct(b, cells, ph, alpha, vals, channels=("Y",), eta=0.0, lam=0.0,
+                      method="vf")
     assert np.isnan(rec.cv_sample_error) and np.isnan(rec.predicted_error)
     assert rec.rel_sample_error < 1e-6  # the fit itself is fine: n = K interpolates
 
@@ -364,7 +369,8 @@ def test_bad_settings_are_clear_errors() -> None:
     with pytest.raises(ReconstructionError, match="eta"):
         reconstruct(b, cells, ph, alpha, vals, eta=-1.0)
     with pytest.raises(ReconstructionError, match="singular"):
-        reconstruct(b, cells[:2], ph[:2], alpha, vals[:2], eta=0.0, lam=0.0)
+        reconstruct(b, cells[:2], ph[:2], alpha, vals[:2], eta=0.0, lam=0.0,
+                      method="vf")
 
 
 def test_basis_on_another_grid_is_refused() -> None:
