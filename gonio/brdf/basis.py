@@ -571,7 +571,7 @@ def fold_in(
         # Priors are sums over the training columns (sum_m P_m ~ I): carry the base's into the
         # new coordinates (c_new = T c_old + d), then add the shift of the mean and the new
         # columns.
-        prior = np.einsum("ka,mab,lb->mkl", T, base.ph_prior, T)
+        prior = T @ base.ph_prior @ T.T
         prior[0] += n0 * np.outer(d, d)
         C = pinv @ (X - mu[:, None])  # (k, J)
         for first, count, wcol in groups:

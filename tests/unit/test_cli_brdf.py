@@ -95,7 +95,7 @@ def test_simulate_then_reconstruct(
     assert main(["reconstruct", str(samples), "--basis", str(files["basis"]), "-k", "8",
                  "--preview", str(png), "-o", str(out)]) == 0
     text = capsys.readouterr().out
-    assert "K=8 n=8 r=12" in text and "self-estimated BRDF error" in text
+    assert "K=8 n=8 r=12" in text and "predicted log_rmse" in text
     t = BRDFTable.load(out)
     assert t.name == "rec" and t.values.shape == (3, *geo.TABLE_SHAPE)
     assert png.read_bytes()[:4] == b"\x89PNG"

@@ -1,0 +1,152 @@
+"""Tests of the shipped measured tables and ``gonio library import``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gonio.brdf import geometry as geo
+from gonio.brdf import measured
+from gonio.brdf.imports import MERL_SCALE, TableImportError, import_files, read_any, read_merl
+from gonio.brdf.table import BRDFTable
+from gonio.cli import main
+
+
+@pytest.fixture()
+def libdir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    d = tmp_path / "library"
+    monkeypatch.setenv("GONIO_LIBRARY_DIR", str(d))
+    return d
+
+
+def write_merl(path: Path, dims: tuple[int, int, int], fn) -> None:  # type: ignore[no-untyped-def]
+    """A MERL .binary file from its documented layout: value = fn(th, td, pd) / scale."""
+    n_th, n_td, n_pd = dims
+    i_th, i_td, i_pd = np.meshgrid(np.arange(n_th), np.arange(n_td), np.arange(n_pd),
+                                   indexing="ij")
+    th = (i_th / n_th) ** 2 * (np.pi / 2)  # the database's non-linear half-angle axis
+    td = i_td / n_td * (np.pi / 2)
+    pd = i_pd / n_pd * np.pi
+    data = np.stack([fn(th, td, pd) * (c + 1) / MERL_SCALE[c] for c in range(3)])
+    with open(path, "wb") as fh:
+        fh.write(np.array(dims, dtype="<i4").tobytes())
+        fh.write(data.astype("<f8").tobytes())
+
+
+def test_shipped_measured_tables_are_isotropic_rgb_and_credited() -> None:
+    tables = measured.measured_tables()
+    assert len(tables) == 11 and len({t.name for t in tables}) == 11
+    t = tables[0]
+    assert t.values.shape == (3, *geo.TABLE_SHAPE) and t.channels == ("R", "G", "B")
+    v = t.values[:, :, geo.valid_mask()]
+    assert np.all(v >= 0) and np.all(v == v[:, :1])  # one slice copied to all 72
+    assert "CC0" in t.provenance["credit"]
+    kept = measured.measured_tables(exclude=["chm_mint"])
+    assert len(kept) == 10 and "rgl-chm_mint" not in {k.name for k in kept}
+
+
+def test_merl_file_is_read_at_the_documented_indices(tmp_path: Path) -> None:
+    """A function linear in the index-space coordinates is reproduced exactly by the
+    trilinear read, so the test checks the layout, the axes' mappings and the scales."""
+    f = tmp_path / "lin.binary"
+    # Linear in sqrt(th) (the th index), td and pd.
+    write_merl(f, (12, 10, 20), lambda th, td, pd: 0.1 + np.sqrt(th / (np.pi / 2)) + td + 0.1 * pd)
+    t = read_merl(f)
+    th, td, pd = geo.grid_angles()
+    m = geo.valid_mask()
+    # Clamped at the last sample of each axis, as the reader documents.
+    sq = np.minimum(np.sqrt(th / (np.pi / 2)) * 12, 11) / 12
+    tdc = np.minimum(td / (np.pi / 2) * 10, 9) / 10 * (np.pi / 2)
+    pdc = np.minimum(pd / np.pi * 20, 19) / 20 * np.pi
+    want = 0.1 + sq + tdc + 0.1 * pdc
+    for c in range(3):
+        np.testing.assert_allclose(t.values[c, 5][m], (c + 1) * want[m], rtol=1e-5)
+    assert t.provenance["source"] == "merl"
+
+
+def test_merl_negative_values_are_unmeasured(tmp_path: Path) -> None:
+    f = tmp_path / "holes.binary"
+    write_merl(f, (6, 6, 12), lambda th, td, pd: np.where(td > 1.2, -1.0, 0.5))
+    t = read_merl(f)
+    _, td, _ = geo.grid_angles()
+    m = geo.valid_mask()
+    assert np.isnan(t.values[0, 0][m & (td > np.deg2rad(80))]).all()
+    assert np.isfinite(t.values[0, 0][m & (td < np.deg2rad(40))]).all()
+
+
+@pytest.mark.parametrize(
+    ("content", "match"),
+    [(b"abc", "too short"), (np.array([90, 90, 180], "<i4").tobytes() + b"\0" * 80, "truncated"),
+     (np.array([0, 5, 5], "<i4").tobytes(), "not a MERL table")],
+)
+def test_bad_merl_files_are_clear_errors(tmp_path: Path, content: bytes, match: str) -> None:
+    f = tmp_path / "bad.binary"
+    f.write_bytes(content)
+    with pytest.raises(TableImportError, match=match):
+        read_merl(f)
+
+
+def test_import_round_trips_a_gonio_table(tmp_path: Path, libdir: Path) -> None:
+    rng = np.random.default_rng(0)
+    vals = rng.uniform(0.01, 2.0, (3, *geo.TABLE_SHAPE)).astype(np.float32)
+    vals[:, :, ~geo.valid_mask()] = np.nan
+    src = BRDFTable(vals, ("R", "G", "B"), "my paint").save(tmp_path / "paint.npz")
+    assert main(["library", "import", str(src)]) == 0
+    files = measured.user_table_files()
+    assert [f.name for f in files] == ["my_paint.npz"]
+    back = BRDFTable.load(files[0])
+    np.testing.assert_array_equal(back.values, vals)
+    assert back.name == "my_paint"
+    assert measured.user_tables()[0].name == "my_paint"
+    # A second import of the same name needs --replace; nothing is overwritten meanwhile.
+    before = files[0].read_bytes()
+    assert main(["library", "import", str(src)]) == 2
+    assert files[0].read_bytes() == before
+    assert main(["library", "import", "--replace", str(src)]) == 0
+
+
+def test_import_of_a_merl_file_and_the_basis_key(tmp_path: Path, libdir: Path) -> None:
+    f = tmp_path / "gold.binary"
+    write_merl(f, (8, 8, 16), lambda th, td, pd: 0.2 + 0.0 * th)
+    before = measured.user_library_digest()
+    import_files([f])
+    assert (libdir / "gold.npz").is_file()
+    # Every later default-basis build sees the table: its cache key changes.
+    assert measured.user_library_digest() != before
+
+
+def test_import_refuses_bad_files_and_writes_nothing(tmp_path: Path, libdir: Path,
+                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    good = tmp_path / "ok.binary"
+    write_merl(good, (6, 6, 12), lambda th, td, pd: 0.3 + 0.0 * th)
+    bad = tmp_path / "notes.txt"
+    bad.write_text("hello")
+    assert main(["library", "import", str(good), str(bad)]) == 2
+    assert "unknown kind of file" in capsys.readouterr().err
+    assert measured.user_table_files() == []
+    with pytest.raises(TableImportError, match="no such file"):
+        read_any(tmp_path / "missing.bsdf")
+    with pytest.raises(TableImportError, match="shipped"):
+        import_files([BRDFTable(np.where(geo.valid_mask(), 0.5, np.nan)[None, None].repeat(
+            3, 0).repeat(72, 1).astype(np.float32), ("R", "G", "B"), "rgl-x").save(
+            tmp_path / "x.npz")])
+
+
+def test_rgl_import_without_mitsuba_says_how_to_get_it(tmp_path: Path, libdir: Path,
+                                                       monkeypatch: pytest.MonkeyPatch,
+                                                       rgl_dir: Path) -> None:
+    import builtins
+
+    real_import = builtins.__import__
+
+    def no_mitsuba(name: str, *a, **k):  # type: ignore[no-untyped-def]
+        if name == "mitsuba":
+            raise ImportError("no mitsuba")
+        return real_import(name, *a, **k)
+
+    monkeypatch.setattr(builtins, "__import__", no_mitsuba)
+    with pytest.raises(ValueError, match="pip install"):
+        import_files([next(iter(sorted(rgl_dir.glob("*.bsdf"))))])
+    assert measured.user_table_files() == []
