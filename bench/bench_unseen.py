@@ -225,38 +225,81 @@ class Score:
     log_psnr: float
     predicted: float = float("nan")
     readings: int = 0
+    cv_log: float = float("nan")
+    n: int = 0
+    r: int = 0
 
 
-def score(rec_table: BRDFTable, truth: BRDFTable, pred: float = float("nan"),
-          readings: int = 0) -> Score:
-    return Score(metrics.log_rmse(rec_table, truth), metrics.log_psnr(rec_table, truth), pred,
-                 readings)
+def score(rec_table: BRDFTable, truth: BRDFTable, rec: Any = None, readings: int = 0) -> Score:
+    s = Score(metrics.log_rmse(rec_table, truth), metrics.log_psnr(rec_table, truth))
+    if rec is not None:
+        s.predicted, s.cv_log = rec.predicted_log_rmse, rec.cv_log_error
+        s.n, s.r = rec.settings["n"], rec.settings["r"]
+        s.readings = readings
+    return s
+
+
+def calibrate(rows: dict[str, dict[str, Score]], mats: list[Material]) -> None:
+    """Fit ``ln(log_rmse) = a + b ln(cv_log_error) + c ln(n r)`` on half the materials
+    (alternate positions within each kind) and validate on the other half."""
+    from gonio.brdf.reconstruct import LOG_RMSE_MODEL
+
+    order = {m.name: i for i, m in enumerate([m for m in mats if m.kind == "measured"])}
+    order.update({m.name: i for i, m in enumerate([m for m in mats if m.kind == "aniso"])})
+    data = [(order[name] % 2, s) for row, per in rows.items() if not row.startswith("basis")
+            for name, s in per.items() if np.isfinite(s.cv_log) and s.cv_log > 0]
+    fit = [s for half, s in data if half == 0]
+    X = np.array([[1.0, np.log(s.cv_log), np.log(s.n * s.r)] for s in fit])
+    y = np.log([s.log_rmse for s in fit])
+    coef = np.linalg.lstsq(X, y, rcond=None)[0]
+    print(f"\ncalibration (even positions, {len(fit)} scans): LOG_RMSE_MODEL = "
+          f"({coef[0]:.3f}, {coef[1]:.3f}, {coef[2]:.3f}); module has {LOG_RMSE_MODEL}")
+    for half, label in ((0, "calibration half"), (1, "validation half")):
+        ss = [s for h, s in data if h == half]
+        pred = np.exp(coef[0]) * np.array([s.cv_log for s in ss]) ** coef[1] * np.array(
+            [s.n * s.r for s in ss], dtype=float) ** coef[2]
+        ratio = pred / np.array([s.log_rmse for s in ss])
+        print(f"  {label}: {len(ss)} scans, ratio median {np.median(ratio):.2f}, "
+              f"within x2 {np.mean((ratio >= 0.5) & (ratio <= 2)):.0%}")
+
+
+ETA: dict[str, float | None] = {"eta": None}
 
 
 def run_scan(b: Basis, m: Material, cells: np.ndarray, ph: np.ndarray, r: int, seed: int,
              method: str) -> Score:
     alpha = uniform_stage_angles(r)
     vals = read(m, cells, ph, alpha, seed)
-    rec = reconstruct(b, cells, ph, alpha, vals, method=method)  # type: ignore[arg-type]
-    return score(rec.table, m.truth, rec.predicted_log_rmse, vals.shape[0] * r)
+    rec = reconstruct(b, cells, ph, alpha, vals, method=method,  # type: ignore[arg-type]
+                      eta=ETA["eta"] if method == "joint" else None)
+    return score(rec.table, m.truth, rec, vals.shape[0] * r)
 
 
 def run_adaptive(b: Basis, m: Material, cells: np.ndarray, ph: np.ndarray, seed: int,
-                 method: str, r0: int = 8, budget: int = 16) -> Score:
-    """V&F Sec. 6: start with r0 rotations, refine where PCHIP mispredicts (e = 0.1)."""
+                 method: str, r0: int = 8, budget: int = 16, joint_e: float | None = None
+                 ) -> Score:
+    """V&F Sec. 6: start with r0 rotations, refine where PCHIP mispredicts (e = 0.1); with
+    ``joint_e``, refine where the joint fit's leave-one-angle-out log error exceeds it."""
+    from gonio.brdf.reconstruct import refine_angles
     from gonio.plans import adaptive_refinement
 
     angles = list(np.rad2deg(uniform_stage_angles(r0)))
     vals = read(m, cells, ph, np.deg2rad(angles), seed)
     for rnd in range(6):
-        new = adaptive_refinement(angles, vals, 0.1, 1.0, budget - len(angles))
+        if joint_e is None:
+            new = adaptive_refinement(angles, vals, 0.1, 1.0, budget - len(angles))
+        else:
+            rec = reconstruct(b, cells, ph, np.deg2rad(angles), vals)
+            assert rec.angle_log_errors is not None
+            new = refine_angles(angles, rec.angle_log_errors, joint_e, 1.0,
+                                budget - len(angles))
         if not new:
             break
         extra = read(m, cells, ph, np.deg2rad(new), seed + 1000 * (rnd + 1))
         angles += list(new)
         vals = np.concatenate([vals, extra], axis=1)
     rec = reconstruct(b, cells, ph, np.deg2rad(angles), vals, method=method)  # type: ignore[arg-type]
-    return score(rec.table, m.truth, rec.predicted_log_rmse, vals.shape[0] * len(angles))
+    return score(rec.table, m.truth, rec, vals.shape[0] * len(angles))
 
 
 # ---------------------------------------------------------------------------- main
@@ -269,6 +312,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--full", action="store_true",
                     help="also the n = 5 / 20, r = 4 / 16 and adaptive rows")
     ap.add_argument("--only", choices=["measured", "aniso"], default=None)
+    ap.add_argument("--fixed-design", action="store_true",
+                    help="design the pairs once on the synthetic basis (for weight studies)")
+    ap.add_argument("--eta", type=float, default=None, help="override the method's eta")
+    ap.add_argument("--adaptive-e", type=float, nargs="*", default=[0.01],
+                    help="thresholds of the joint adaptive rows (log_rmse units)")
+    ap.add_argument("--calibrate", action="store_true",
+                    help="fit predicted_log_rmse's model on half the materials, check the rest")
     args = ap.parse_args(argv)
     print(f"$ {' '.join(['python', *sys.argv])}")
     t0 = time.perf_counter()
@@ -286,22 +336,27 @@ def main(argv: list[str] | None = None) -> int:
         rows.setdefault(row, {})[m.name] = s
 
     presets = {p: get_preset(p).cells() for p in preset_names()}
+    ETA["eta"] = args.eta
+    fixed = default_basis(measured_weight=0.0) if args.fixed_design else None
     other = "vf" if args.method == "joint" else "joint"
     for i, m in enumerate(mats):
         b = default_basis(exclude=m.exclude, measured_weight=args.measured_weight)
         seed = 100 + i
-        cells, ph = design(b, 10)
+        cells, ph = design(fixed or b, 10)
         put(f"gonio ({args.method}) n=10 r=8", m, run_scan(b, m, cells, ph, 8, seed, args.method))
         put(f"{other} path n=10 r=8", m, run_scan(b, m, cells, ph, 8, seed, other))
         for p, (pc, pph) in presets.items():
             put(f"{p} ({len(pc)} pairs) r=8", m, run_scan(b, m, pc, pph, 8, seed, args.method))
         if args.full:
             for n in (5, 20):
-                c2, p2 = design(b, n)
+                c2, p2 = design(fixed or b, n)
                 put(f"gonio n={n} r=8", m, run_scan(b, m, c2, p2, 8, seed, args.method))
             for r in (4, 16):
                 put(f"gonio n=10 r={r}", m, run_scan(b, m, cells, ph, r, seed, args.method))
             put("adaptive V&F e=0.1, 8->16", m, run_adaptive(b, m, cells, ph, seed, args.method))
+            for e in args.adaptive_e:
+                put(f"adaptive joint e={e}, 8->16", m,
+                    run_adaptive(b, m, cells, ph, seed, args.method, joint_e=e))
         put("basis ceiling (every cell)", m, score(ceiling(b, m.truth), m.truth))
         print(f"  {m.name}: {rows[f'gonio ({args.method}) n=10 r=8'][m.name].log_rmse:.4f} "
               f"({time.perf_counter() - t0:.0f} s)", flush=True)
@@ -337,6 +392,8 @@ def main(argv: list[str] | None = None) -> int:
               f"{rows['basis ceiling (every cell)'][m.name].log_rmse:.4f} |")
     print(f"\ngonio beats the best preset on {wins} of {len(mats)}; "
           f"predicted_log_rmse within x2 on {within} of {len(mats)}")
+    if args.calibrate:
+        calibrate(rows, mats)
     print(f"total {time.perf_counter() - t0:.0f} s")
     return 0
 

@@ -306,6 +306,11 @@ class Worker:
             # V&F's estimated_error stays for comparison with the paper.
             "predicted_error": _finite_or_none(rec.predicted_error),
             "cv_sample_error": _finite_or_none(rec.cv_sample_error),
+            # The headline self-estimate: expected log_rmse (cosine-weighted log error, what a
+            # rendering sees) against the true BRDF, calibrated on held-out materials
+            # including measured ones (docs/science.md).
+            "predicted_log_rmse": _finite_or_none(rec.predicted_log_rmse),
+            "cv_log_error": _finite_or_none(rec.cv_log_error),
             "n_pairs": len(pairs),
             "n_angles": int(samples.stage_angles_deg.size),
             "n_samples": len(pairs) * int(samples.stage_angles_deg.size),

@@ -121,6 +121,11 @@ class Reconstruction:
         The estimated ``metrics.log_rmse`` of the whole reconstruction against the true
         BRDF (:func:`predict_log_rmse`, calibrated on materials held out of the basis); the
         number to report.
+    angle_log_errors : (r,) float64 or None
+        Joint fit only: per stage angle (in the order given), the RMS log error (units of
+        ``log_rmse``) of that angle's readings predicted from all the other angles. Where it
+        is large the material changes faster along ``ph`` than the scan resolves: the basis
+        of adaptive refinement (:func:`refine_angles`).
     """
 
     table: BRDFTable
@@ -132,6 +137,7 @@ class Reconstruction:
     predicted_error: float = float("nan")
     cv_log_error: float = float("nan")
     predicted_log_rmse: float = float("nan")
+    angle_log_errors: FloatArray | None = None
 
 
 # ---------------------------------------------------------------------------- geometry helper
@@ -458,11 +464,14 @@ class JointFit:
     coef : (K, 72, C) coefficients of the grid slices (posterior mean)
     fit : (n, r, C) posterior mean at the readings
     loo : (n, r, C) leave-one-pair-out predictions at the readings (NaN when undefined)
+    loo_angle : (n, r, C) leave-one-stage-angle-out predictions: column ``j`` predicted from
+        the readings at every other stage angle (NaN when undefined)
     """
 
     coef: FloatArray
     fit: FloatArray
     loo: FloatArray
+    loo_angle: FloatArray
 
 
 def solve_joint(
@@ -522,8 +531,8 @@ def solve_joint(
     )
     fit = Y - eta * beta
     loo = np.full_like(Y, np.nan)
+    Ginv = scipy.linalg.cho_solve(cho, np.eye(n * r)).reshape(n, r, n, r)
     if n > 1:
-        Ginv = scipy.linalg.cho_solve(cho, np.eye(n * r)).reshape(n, r, n, r)
         ok = True
         for q in range(n):
             try:
@@ -533,7 +542,14 @@ def solve_joint(
                 break
         if not ok:
             loo[:] = np.nan
-    return JointFit(coef=coef, fit=fit, loo=loo)
+    loo_angle = np.full_like(Y, np.nan)
+    if r > 1:
+        try:
+            for j in range(r):
+                loo_angle[:, j] = Y[:, j] - np.linalg.solve(Ginv[:, j, :, j], beta[:, j])
+        except np.linalg.LinAlgError:
+            loo_angle[:] = np.nan
+    return JointFit(coef=coef, fit=fit, loo=loo, loo_angle=loo_angle)
 
 # ---------------------------------------------------------------------------- validation
 def _check_inputs(
@@ -713,11 +729,19 @@ def _reconstruct(
         remapped = np.minimum(remapped + mu_t, 300.0)
         at_samples = np.maximum(inverse_remap(remapped, fmed_t, w_t, basis.eps), 0.0)
         solver_name = "joint"
+        if np.isfinite(jf.loo_angle).all():
+            la = np.maximum(inverse_remap(np.minimum(jf.loo_angle + mu_t, 300.0), fmed_t, w_t,
+                                          basis.eps), 0.0)
+            d = np.log1p(la * ci[:, None, None]) - np.log1p(vals * ci[:, None, None])
+            angle_err: FloatArray | None = np.sqrt(np.mean(d**2, axis=(0, 2)))
+        else:
+            angle_err = None
     else:
         coef, at_samples, has_cv = _vf_path(
             basis, Qt, fmed_t, mu_t, w_t, ph_, alpha, vals, eta, lam, solver, n_ch
         )
         solver_name = solver
+        angle_err = None
     table = BRDFTable.trusted(
         _expand_table(basis, coef), channels, name, None,
         {"reconstruction": {"K": basis.K, "n": int(cells_.shape[0]), "r": int(alpha.size),
@@ -744,6 +768,7 @@ def _reconstruct(
         predicted_error=cv_error_scale(n) * cv,
         cv_log_error=cv_log,
         predicted_log_rmse=predict_log_rmse(cv_log, n, int(alpha.size)),
+        angle_log_errors=angle_err,
     )
 
 
@@ -811,6 +836,60 @@ def predict_log_rmse(cv_log_error: float, n_pairs: int, n_rotations: int) -> flo
     a, b, c = LOG_RMSE_MODEL
     x = max(float(cv_log_error), 1e-6)
     return float(np.exp(a) * x**b * float(max(n_pairs * n_rotations, 1)) ** c)
+
+
+def refine_angles(
+    stage_angles_deg: ArrayLike,
+    angle_log_errors: ArrayLike,
+    threshold: float,
+    min_step_deg: float,
+    budget_angles: int | None,
+) -> list[float]:
+    """New stage angles for adaptive refinement from the joint fit (MATH 7, gonio's variant).
+
+    V&F refine where per-pair PCHIP mispredicts a reading. Here the prediction is the joint
+    fit's: each stage angle's readings predicted from every other angle of every pair
+    (:attr:`Reconstruction.angle_log_errors`, log_rmse units). Where that error exceeds
+    ``threshold`` the two midpoints to the neighbouring angles are planned, worst first.
+
+    Parameters
+    ----------
+    stage_angles_deg : (r,) measured angles, degrees
+    angle_log_errors : (r,) leave-one-angle-out log errors, same order
+    threshold : float
+        In log_rmse units (0.02 is about 2 % of a bright value).
+    min_step_deg : float
+        Midpoints closer than this to a measured angle are not planned.
+    budget_angles : int or None
+        How many angles may be added.
+
+    Returns
+    -------
+    list of float
+        New angles in [0, 360), sorted.
+    """
+    a = np.mod(np.asarray(stage_angles_deg, dtype=float), 360.0)
+    err = np.asarray(angle_log_errors, dtype=float)
+    if a.size < 2 or err.shape != a.shape:
+        return []
+    order = np.argsort(a)
+    a, err = a[order], err[order]
+    r = a.size
+    chosen: dict[float, float] = {}
+    for j in np.argsort(-err):
+        if not err[j] > threshold:
+            break
+        for gap_to in (1, -1):
+            nb = (j + gap_to) % r
+            gap = (a[nb] - a[j]) % 360.0 if gap_to == 1 else (a[j] - a[nb]) % 360.0
+            if gap / 2.0 < min_step_deg:
+                continue
+            mid = round(float((a[j] + gap_to * gap / 2.0) % 360.0), 6)
+            chosen.setdefault(mid, float(err[j]))
+    ranked = sorted(chosen, key=lambda k: -chosen[k])
+    if budget_angles is not None:
+        ranked = ranked[: max(int(budget_angles), 0)]
+    return sorted(ranked)
 
 
 def _log_sample_error(pred: FloatArray, measured: FloatArray, cos_i: FloatArray) -> float:

@@ -278,6 +278,8 @@ async def _run_owned(args: argparse.Namespace, plan: Any, config: Any, sim: Any,
     units = "1/sr" if cal.pairs else "sensor units (uncalibrated)"
     print(f"job {job.id} completed: {summary.get('n_samples', summary.get('readings'))} samples "
           f"in {units}, "
+          f"predicted log_rmse {summary.get('predicted_log_rmse') or float('nan'):.3f} "
+          "(expected cosine-weighted log error of the reconstruction), "
           f"self-estimated error {100 * (summary.get('predicted_error') or float('nan')):.1f} %; "
           f"wrote {out}")
     return 0

@@ -80,3 +80,7 @@ def test_job_reconstructs_the_simulated_specimen(
         predicted = res.metrics["predicted_error"]
         assert np.isfinite(predicted) and predicted > res.estimated_error
         assert job.result["predicted_error"] == pytest.approx(predicted)
+        # The headline self-estimate (expected log_rmse) is in the file and the job's JSON.
+        plr = res.metrics["predicted_log_rmse"]
+        assert np.isfinite(plr) and plr > 0
+        assert job.result["predicted_log_rmse"] == pytest.approx(plr)

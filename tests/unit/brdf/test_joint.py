@@ -128,3 +128,34 @@ def test_joint_fit_rejects_zero_noise_and_unknown_methods() -> None:
         reconstruct(b, cells, ph, alpha, vals, channels=("Y",), eta=0.0)
     with pytest.raises(ReconstructionError, match="method"):
         reconstruct(b, cells, ph, alpha, vals, channels=("Y",), method="pchip")  # type: ignore[arg-type]
+
+
+def test_leave_one_angle_out_equals_refits() -> None:
+    rng = np.random.default_rng(2)
+    n, r, K = 5, 6, 3
+    Qt = rng.standard_normal((n, K))
+    Y = rng.standard_normal((n, r, 1))
+    alpha = np.sort(rng.uniform(0, 2 * np.pi, r))
+    ph = rng.uniform(0, 2 * np.pi, n)
+    phr = ph[:, None] - alpha[None, :]
+    P = np.zeros((N_HARMONICS, K, K))
+    P[0], P[2] = np.eye(K), 0.8 * np.eye(K)
+    jf = solve_joint(Y, Qt, phr, P, 0.5)
+    for j in range(r):
+        keep = np.arange(r) != j
+        sub = solve_joint(Y[:, keep], Qt, phr[:, keep], P, 0.5, ph_out=phr[:, j])
+        pred = np.einsum("qk,kq->q", Qt, sub.coef[:, :, 0])
+        np.testing.assert_allclose(jf.loo_angle[:, j, 0], pred, atol=1e-10)
+
+
+def test_refine_angles_plans_midpoints_around_bad_angles_worst_first() -> None:
+    from gonio.brdf.reconstruct import refine_angles
+
+    angles = [0.0, 90.0, 180.0, 270.0]
+    errs = [0.001, 0.05, 0.002, 0.03]
+    assert refine_angles(angles, errs, 0.01, 1.0, None) == [45.0, 135.0, 225.0, 315.0]
+    # Budget: the midpoints of the worst angle (90 deg) come first.
+    assert refine_angles(angles, errs, 0.01, 1.0, 2) == [45.0, 135.0]
+    assert refine_angles(angles, errs, 0.1, 1.0, None) == []
+    # A gap finer than twice the minimum step is not split; the wide gap round 360 is.
+    assert refine_angles([0.0, 1.5], [0.5, 0.5], 0.01, 1.0, None) == [180.75]
