@@ -505,12 +505,13 @@ def solve_joint(
     n, r, C = Y.shape
     M = P.shape[0]
     harm = np.arange(M, dtype=float)
-    A = np.einsum("qk,mkl,pl->mqp", Qt, P, Qt, optimize=True)  # (M, n, n)
-    phase = harm[:, None, None] * ph_read[None]  # (M, n, r)
-    Fc, Fs = np.cos(phase), np.sin(phase)
-    # G[q j, p i] = sum_m A[m, q, p] (cos cos + sin sin) of the two readings' phases.
-    G = (np.einsum("mqp,mqj,mpi->qjpi", A, Fc, Fc, optimize=True)
-         + np.einsum("mqp,mqj,mpi->qjpi", A, Fs, Fs, optimize=True)).reshape(n * r, n * r)
+    A = np.matmul(np.matmul(Qt[None], P), Qt.T[None])  # (M, n, n)
+    # cos(m (a - b)) = Re(e^{-i m a} conj(e^{-i m b})): per pair of pairs (q, p) the block
+    # G_qp[j, i] = sum_m Z[q, j, m] A[m, q, p] conj(Z[p, i, m]), one batched product.
+    Z = np.exp(-1j * ph_read[:, :, None] * harm[None, None, :])  # (n, r, M)
+    left = Z[:, None, :, :] * np.moveaxis(A, 0, -1)[:, :, None, :]  # (n, n, r, M)
+    G4 = np.matmul(left, np.conj(Z).transpose(0, 2, 1)[None]).real  # (n, n, r, r)
+    G = np.ascontiguousarray(G4.transpose(0, 2, 1, 3)).reshape(n * r, n * r)
     G[np.diag_indices_from(G)] += eta
     y = Y.reshape(n * r, C)
     try:
@@ -520,15 +521,14 @@ def solve_joint(
             "the joint system is singular; use eta > 0"
         ) from None
     beta = scipy.linalg.cho_solve(cho, y).reshape(n, r, C)
-    # Back to coefficients at the requested slices.
-    Bc = np.einsum("mqj,qk,qjc->mkc", Fc, Qt, beta, optimize=True)
-    Bs = np.einsum("mqj,qk,qjc->mkc", Fs, Qt, beta, optimize=True)
-    Zc = np.einsum("mkl,mlc->mkc", P, Bc)
-    Zs = np.einsum("mkl,mlc->mkc", P, Bs)
-    out_phase = harm[:, None] * np.asarray(ph_out)[None, :]  # (M, S)
-    coef = np.einsum("ms,mkc->ksc", np.cos(out_phase), Zc) + np.einsum(
-        "ms,mkc->ksc", np.sin(out_phase), Zs
-    )
+    # Back to coefficients: B_m = sum_a Qt_q(a)^T beta_a e^{-i m ph_a} (cos and -sin parts),
+    # c(ph) = Re(sum_m e^{i m ph} P_m B_m).
+    U = np.matmul(Z.transpose(0, 2, 1), beta)  # (n, M, C)
+    B = np.matmul(Qt.T[None], U.transpose(1, 0, 2))  # (M, K, C)
+    PB = np.matmul(P, B)  # (M, K, C)
+    E = np.exp(1j * np.asarray(ph_out)[:, None] * harm[None, :])  # (S, M)
+    K = Qt.shape[1]
+    coef = (E @ PB.reshape(M, K * C)).real.reshape(-1, K, C).transpose(1, 0, 2)  # (K, S, C)
     fit = Y - eta * beta
     loo = np.full_like(Y, np.nan)
     Ginv = scipy.linalg.cho_solve(cho, np.eye(n * r)).reshape(n, r, n, r)
