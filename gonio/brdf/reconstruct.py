@@ -126,6 +126,9 @@ class Reconstruction:
         ``log_rmse``) of that angle's readings predicted from all the other angles. Where it
         is large the material changes faster along ``ph`` than the scan resolves: the basis
         of adaptive refinement (:func:`refine_angles`).
+    pair_log_errors : (n,) float64 or None
+        Per pair, the RMS log error of its readings predicted without it (the terms of
+        ``cv_log_error``); a pair far above the others sits where the basis extrapolates.
     """
 
     table: BRDFTable
@@ -138,6 +141,7 @@ class Reconstruction:
     cv_log_error: float = float("nan")
     predicted_log_rmse: float = float("nan")
     angle_log_errors: FloatArray | None = None
+    pair_log_errors: FloatArray | None = None
 
 
 # ---------------------------------------------------------------------------- geometry helper
@@ -750,8 +754,8 @@ def _reconstruct(
     )
     rel = _relative_sample_error(at_samples[..., :n_ch], vals)
     cv = _relative_sample_error(at_samples[..., n_ch:], vals) if has_cv else float("nan")
-    cv_log = (_log_sample_error(at_samples[..., n_ch:], vals, ci) if has_cv
-              else float("nan"))
+    pair_err = _pair_log_errors(at_samples[..., n_ch:], vals, ci) if has_cv else None
+    cv_log = float(np.sqrt(np.mean(pair_err**2))) if pair_err is not None else float("nan")
     n = int(cells_.shape[0])
     seconds = time.perf_counter() - t0
     return Reconstruction(
@@ -769,6 +773,7 @@ def _reconstruct(
         cv_log_error=cv_log,
         predicted_log_rmse=predict_log_rmse(cv_log, n, int(alpha.size)),
         angle_log_errors=angle_err,
+        pair_log_errors=pair_err,
     )
 
 
@@ -892,11 +897,11 @@ def refine_angles(
     return sorted(ranked)
 
 
-def _log_sample_error(pred: FloatArray, measured: FloatArray, cos_i: FloatArray) -> float:
-    """RMS of ``ln(1 + pred cos ti) - ln(1 + measured cos ti)`` over all readings."""
+def _pair_log_errors(pred: FloatArray, measured: FloatArray, cos_i: FloatArray) -> FloatArray:
+    """(n,) RMS over each pair's readings of ``ln(1 + pred cos ti) - ln(1 + measured cos ti)``."""
     ci = np.asarray(cos_i, dtype=float)[:, None, None]
     d = np.log1p(np.maximum(pred, 0.0) * ci) - np.log1p(measured * ci)
-    return float(np.sqrt(np.mean(d**2)))
+    return np.asarray(np.sqrt(np.mean(d**2, axis=(1, 2))))
 
 
 def cv_error_scale(n_pairs: int) -> float:

@@ -69,6 +69,11 @@ def register(subparsers: Any) -> None:
                    help="odd neighbourhood size of the search (default 7)")
     p.add_argument("--time-limit", type=float, default=None, metavar="SECONDS",
                    help="stop starting new descents after this long")
+    p.add_argument("--candidates", type=int, default=1, metavar="K",
+                   help="for --pairs: search from K seeds and keep the design with the lowest "
+                        "expected error on held-out materials (default 1)")
+    p.add_argument("--no-expected-error", action="store_true",
+                   help="skip the held-out error estimate (it needs the default basis)")
     p.add_argument("--basis", type=Path, default=None, metavar="FILE",
                    help="basis .npz (default: the default basis, built and cached on first use)")
     p.add_argument("-o", "--output", type=Path, default=None, metavar="FILE",
@@ -111,6 +116,12 @@ def _check_args(args: argparse.Namespace) -> None:
         raise UsageError(f"--neighbourhood must be an odd number >= 1, got {args.neighbourhood}")
     if args.starts < 1 or args.descents < 1:
         raise UsageError("--starts and --descents must be at least 1")
+    if args.candidates < 1:
+        raise UsageError(f"--candidates must be at least 1, got {args.candidates}")
+    if args.candidates > 1 and (args.pairs is None or args.basis is not None
+                                or args.no_expected_error):
+        raise UsageError("--candidates chooses among --pairs designs by their expected error on "
+                         "held-out materials: it needs --pairs and the default basis")
 
 
 def make_design(args: argparse.Namespace, basis: BasisLike) -> PairDesign:
@@ -258,10 +269,35 @@ def run(args: argparse.Namespace) -> int:
     _check_args(args)
     _constraints(args)  # refuse bad limits and --exclude text before the (slow) basis load
     basis = _load_basis(args.basis)
-    design = make_design(args, basis)
+    expected = None
+    if args.candidates > 1:
+        from gonio.brdf.heldout import choose_design
+
+        constraints = _constraints(args)
+
+        def make(seed: int) -> PairDesign:
+            return design_pairs(
+                basis, args.pairs, constraints, h=args.neighbourhood, starts=args.starts,
+                descents=args.descents, seed=args.seed + seed, time_limit_s=args.time_limit,
+            )
+
+        design, expected, table = choose_design(make, range(args.candidates), args.rotations)
+        print(f"{len(table)} candidate designs (seed, kappa, expected log_rmse):")
+        for seed, kappa, err in table:
+            print(f"  seed {args.seed + seed}: kappa {kappa:.4g}, expected log_rmse {err:.4f}")
+    else:
+        design = make_design(args, basis)
     angles = np.arange(args.rotations) * (2.0 * np.pi / args.rotations)
     bound = roughness_bound(design.cells, design.ph_lab, angles)
     print_design(design, bound, args.rotations)
+    if args.basis is None and not args.no_expected_error and args.lights is None:
+        if expected is None:
+            from gonio.brdf.heldout import expected_log_rmse
+
+            expected = expected_log_rmse(design.cells, design.ph_lab, args.rotations)
+        print(f"expected log_rmse on held-out materials at {args.rotations} rotations: "
+              f"{expected.log_rmse:.4f} (measured {expected.measured:.4f}, synthetic "
+              f"{expected.synthetic:.4f}; lower is better, next to kappa {design.kappa:.4g})")
     if args.output is not None:
         from gonio.rigdesign import dump_fragment
 
