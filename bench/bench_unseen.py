@@ -225,7 +225,7 @@ class Score:
     log_psnr: float
     predicted: float = float("nan")
     readings: int = 0
-    cv_log: float = float("nan")
+    cv_rel: float = float("nan")
     n: int = 0
     r: int = 0
 
@@ -233,30 +233,30 @@ class Score:
 def score(rec_table: BRDFTable, truth: BRDFTable, rec: Any = None, readings: int = 0) -> Score:
     s = Score(metrics.log_rmse(rec_table, truth), metrics.log_psnr(rec_table, truth))
     if rec is not None:
-        s.predicted, s.cv_log = rec.predicted_log_rmse, rec.cv_log_error
+        s.predicted, s.cv_rel = rec.predicted_log_rmse, rec.cv_sample_error
         s.n, s.r = rec.settings["n"], rec.settings["r"]
         s.readings = readings
     return s
 
 
 def calibrate(rows: dict[str, dict[str, Score]], mats: list[Material]) -> None:
-    """Fit ``ln(log_rmse) = a + b ln(cv_log_error) + c ln(n r)`` on half the materials
+    """Fit ``ln(log_rmse) = a + b ln(cv_sample_error) + c ln(n r)`` on half the materials
     (alternate positions within each kind) and validate on the other half."""
     from gonio.brdf.reconstruct import LOG_RMSE_MODEL
 
     order = {m.name: i for i, m in enumerate([m for m in mats if m.kind == "measured"])}
     order.update({m.name: i for i, m in enumerate([m for m in mats if m.kind == "aniso"])})
     data = [(order[name] % 2, s) for row, per in rows.items() if not row.startswith("basis")
-            for name, s in per.items() if np.isfinite(s.cv_log) and s.cv_log > 0]
+            for name, s in per.items() if np.isfinite(s.cv_rel) and s.cv_rel > 0]
     fit = [s for half, s in data if half == 0]
-    X = np.array([[1.0, np.log(s.cv_log), np.log(s.n * s.r)] for s in fit])
+    X = np.array([[1.0, np.log(s.cv_rel), np.log(s.n * s.r)] for s in fit])
     y = np.log([s.log_rmse for s in fit])
     coef = np.linalg.lstsq(X, y, rcond=None)[0]
     print(f"\ncalibration (even positions, {len(fit)} scans): LOG_RMSE_MODEL = "
           f"({coef[0]:.3f}, {coef[1]:.3f}, {coef[2]:.3f}); module has {LOG_RMSE_MODEL}")
     for half, label in ((0, "calibration half"), (1, "validation half")):
         ss = [s for h, s in data if h == half]
-        pred = np.exp(coef[0]) * np.array([s.cv_log for s in ss]) ** coef[1] * np.array(
+        pred = np.exp(coef[0]) * np.array([s.cv_rel for s in ss]) ** coef[1] * np.array(
             [s.n * s.r for s in ss], dtype=float) ** coef[2]
         ratio = pred / np.array([s.log_rmse for s in ss])
         print(f"  {label}: {len(ss)} scans, ratio median {np.median(ratio):.2f}, "
