@@ -263,7 +263,7 @@ def calibrate(rows: dict[str, dict[str, Score]], mats: list[Material]) -> None:
               f"within x2 {np.mean((ratio >= 0.5) & (ratio <= 2)):.0%}")
 
 
-ETA: dict[str, float | None] = {"eta": None}
+ETA: dict[str, float | None] = {"eta": None, "lam": None}
 
 
 def run_scan(b: Basis, m: Material, cells: np.ndarray, ph: np.ndarray, r: int, seed: int,
@@ -271,7 +271,8 @@ def run_scan(b: Basis, m: Material, cells: np.ndarray, ph: np.ndarray, r: int, s
     alpha = uniform_stage_angles(r)
     vals = read(m, cells, ph, alpha, seed)
     rec = reconstruct(b, cells, ph, alpha, vals, method=method,  # type: ignore[arg-type]
-                      eta=ETA["eta"] if method == "joint" else None)
+                      eta=ETA["eta"] if method == "joint" else None,
+                      lam=ETA["lam"] if method == "joint" else None)
     return score(rec.table, m.truth, rec, vals.shape[0] * r)
 
 
@@ -314,7 +315,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--only", choices=["measured", "aniso"], default=None)
     ap.add_argument("--fixed-design", action="store_true",
                     help="design the pairs once on the synthetic basis (for weight studies)")
-    ap.add_argument("--eta", type=float, default=None, help="override the method's eta")
+    ap.add_argument("--eta", type=float, default=None, help="override the joint fit's eta")
+    ap.add_argument("--lam", type=float, default=None, help="override the joint fit's lam")
     ap.add_argument("--adaptive-e", type=float, nargs="*", default=[0.01],
                     help="thresholds of the joint adaptive rows (log_rmse units)")
     ap.add_argument("--calibrate", action="store_true",
@@ -336,7 +338,7 @@ def main(argv: list[str] | None = None) -> int:
         rows.setdefault(row, {})[m.name] = s
 
     presets = {p: get_preset(p).cells() for p in preset_names()}
-    ETA["eta"] = args.eta
+    ETA["eta"], ETA["lam"] = args.eta, args.lam
     fixed = default_basis(measured_weight=0.0) if args.fixed_design else None
     other = "vf" if args.method == "joint" else "joint"
     for i, m in enumerate(mats):
