@@ -277,8 +277,8 @@ def run_scan(b: Basis, m: Material, cells: np.ndarray, ph: np.ndarray, r: int, s
 
 
 def run_adaptive(b: Basis, m: Material, cells: np.ndarray, ph: np.ndarray, seed: int,
-                 method: str, r0: int = 8, budget: int = 16, joint_e: float | None = None
-                 ) -> Score:
+                 method: str, r0: int = 8, budget: int = 16, joint_e: float | None = None,
+                 everywhere: bool = False) -> Score:
     """V&F Sec. 6: start with r0 rotations, refine where PCHIP mispredicts (e = 0.1); with
     ``joint_e``, refine where the joint fit's leave-one-angle-out log error exceeds it."""
     from gonio.brdf.reconstruct import refine_angles
@@ -293,7 +293,7 @@ def run_adaptive(b: Basis, m: Material, cells: np.ndarray, ph: np.ndarray, seed:
             rec = reconstruct(b, cells, ph, np.deg2rad(angles), vals)
             assert rec.angle_log_errors is not None
             new = refine_angles(angles, rec.angle_log_errors, joint_e, 1.0,
-                                budget - len(angles))
+                                budget - len(angles), everywhere=everywhere)
         if not new:
             break
         extra = read(m, cells, ph, np.deg2rad(new), seed + 1000 * (rnd + 1))
@@ -359,6 +359,8 @@ def main(argv: list[str] | None = None) -> int:
             for e in args.adaptive_e:
                 put(f"adaptive joint e={e}, 8->16", m,
                     run_adaptive(b, m, cells, ph, seed, args.method, joint_e=e))
+                put(f"adaptive joint e={e} everywhere, 8->16", m,
+                    run_adaptive(b, m, cells, ph, seed, args.method, joint_e=e, everywhere=True))
         put("basis ceiling (every cell)", m, score(ceiling(b, m.truth), m.truth))
         print(f"  {m.name}: {rows[f'gonio ({args.method}) n=10 r=8'][m.name].log_rmse:.4f} "
               f"({time.perf_counter() - t0:.0f} s)", flush=True)

@@ -854,6 +854,7 @@ def refine_angles(
     threshold: float,
     min_step_deg: float,
     budget_angles: int | None,
+    everywhere: bool = False,
 ) -> list[float]:
     """New stage angles for adaptive refinement from the joint fit (MATH 7, gonio's variant).
 
@@ -872,6 +873,10 @@ def refine_angles(
         Midpoints closer than this to a measured angle are not planned.
     budget_angles : int or None
         How many angles may be added.
+    everywhere : bool
+        When any angle exceeds ``threshold``, plan the midpoints of *every* gap (worst-error
+        gaps first within the budget): anisotropy shows along the whole ``ph`` circle, so a
+        material that needs more rotations needs them all round.
 
     Returns
     -------
@@ -886,6 +891,8 @@ def refine_angles(
     a, err = a[order], err[order]
     r = a.size
     chosen: dict[float, float] = {}
+    if everywhere and err.max() > threshold:
+        err = err + threshold  # every angle now counts as exceeding it
     for j in np.argsort(-err):
         if not err[j] > threshold:
             break
