@@ -182,15 +182,26 @@ def basis_id(b: Basis) -> str:
     return hashlib.sha256(np.ascontiguousarray(b.Q).tobytes()).hexdigest()[:16]
 
 
+CHOOSE = {"k": 1}
+
+
 def design(b: Basis, n: int) -> tuple[np.ndarray, np.ndarray]:
     from gonio.brdf.design import design_pairs
     from gonio.brdf.feasibility import RigConstraints
 
-    path = CACHE / f"design-{basis_id(b)}-n{n}.npz"
+    k = CHOOSE["k"]
+    path = CACHE / f"design-{basis_id(b)}-n{n}{f'-choose{k}' if k > 1 else ''}.npz"
     if path.is_file():
         with np.load(path) as z:
             return z["cells"], z["ph_lab"]
-    d = design_pairs(b, n, RigConstraints())
+    if k > 1:
+        from gonio.brdf.heldout import choose_design
+
+        d, _err, table = choose_design(
+            lambda seed: design_pairs(b, n, RigConstraints(), seed=seed), range(k))
+        print(f"  n={n}: candidates (seed, kappa, expected log_rmse) {table}", flush=True)
+    else:
+        d = design_pairs(b, n, RigConstraints())
     path.parent.mkdir(parents=True, exist_ok=True)
     np.savez(path, cells=d.cells, ph_lab=d.ph_lab)
     return np.asarray(d.cells), np.asarray(d.ph_lab)
@@ -319,6 +330,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--lam", type=float, default=None, help="override the joint fit's lam")
     ap.add_argument("--adaptive-e", type=float, nargs="*", default=[0.01],
                     help="thresholds of the joint adaptive rows (log_rmse units)")
+    ap.add_argument("--choose", type=int, default=1, metavar="K",
+                    help="pick each design among K seeds by expected held-out error "
+                         "(gonio.brdf.heldout; its panel contains the measured materials, so "
+                         "use with --only aniso for a clean test)")
     ap.add_argument("--calibrate", action="store_true",
                     help="fit predicted_log_rmse's model on half the materials, check the rest")
     args = ap.parse_args(argv)
@@ -339,6 +354,7 @@ def main(argv: list[str] | None = None) -> int:
 
     presets = {p: get_preset(p).cells() for p in preset_names()}
     ETA["eta"], ETA["lam"] = args.eta, args.lam
+    CHOOSE["k"] = args.choose
     fixed = default_basis(measured_weight=0.0) if args.fixed_design else None
     other = "vf" if args.method == "joint" else "joint"
     for i, m in enumerate(mats):
