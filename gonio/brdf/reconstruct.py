@@ -4,6 +4,12 @@ Input: ``n`` fixed light/sensor pairs, each one cell ``(th, td, pd)`` of the iso
 with its lab half-vector azimuth ``ph_lab``, read at ``r`` stage angles. Pair ``q`` at stage
 angle ``alpha`` sees slice ``ph = ph_lab[q] - alpha``.
 
+Two methods. The default, ``method="joint"`` (MATH 5a, :func:`solve_joint`), keeps every
+reading at its own ``ph`` and couples the slices through a prior along ``ph`` learnt from the
+training library (:attr:`Basis.ph_prior`): one ``(n r) x (n r)`` solve for all channels, with
+Eq. 5's specular condition in the prior of the varying part. ``method="vf"`` is V&F's path,
+steps 1-5 below, kept for comparison.
+
 1. Each pair's ``r`` values are resampled onto the 72 grid ``ph`` by periodic PCHIP (the samples
    are padded with copies shifted by +-2 pi, since scipy's periodic extrapolation only wraps
    the query point).
