@@ -682,6 +682,30 @@ def synthetic_basis(n_components: int, progress: bool = False) -> Basis:
     return basis
 
 
+def default_basis_path(
+    n_components: int | None = None,
+    *,
+    exclude: Sequence[str] = (),
+    measured_weight: float | None = None,
+    user_library: bool = True,
+) -> Path:
+    """Cache file of :func:`default_basis` for these arguments (it may not exist yet).
+
+    ``<cache>/basis/default-K<K>-<key>.npz``; the key hashes the library, the shipped
+    measured data, the user library's tables, the weight and ``exclude``.
+    """
+    from gonio.brdf import library, measured
+
+    k = DEFAULT_COMPONENTS if n_components is None else int(n_components)
+    weight = MEASURED_WEIGHT if measured_weight is None else float(measured_weight)
+    key = hashlib.sha256("\n".join([
+        library.library_key(), measured.measured_digest(),
+        measured.user_library_digest() if user_library else "-", repr(weight),
+        ",".join(sorted(exclude)),
+    ]).encode()).hexdigest()[:16]
+    return library.cache_root() / "basis" / f"default-K{k}-{key}.npz"
+
+
 def default_basis(
     n_components: int | None = None,
     progress: bool = False,
@@ -715,16 +739,13 @@ def default_basis(
         ``<cache>/basis/default-K<K>-<key>.npz``; the key covers the library, the shipped
         data, the user tables, the weight and ``exclude``.
     """
-    from gonio.brdf import library, measured
+    from gonio.brdf import measured
 
     k = DEFAULT_COMPONENTS if n_components is None else int(n_components)
     weight = MEASURED_WEIGHT if measured_weight is None else float(measured_weight)
-    key = hashlib.sha256("\n".join([
-        library.library_key(), measured.measured_digest(),
-        measured.user_library_digest() if user_library else "-", repr(weight),
-        ",".join(sorted(exclude)),
-    ]).encode()).hexdigest()[:16]
-    path = library.cache_root() / "basis" / f"default-K{k}-{key}.npz"
+    path = default_basis_path(k, exclude=exclude, measured_weight=weight,
+                              user_library=user_library)
+    key = path.stem.rsplit("-", 1)[-1]
     if path.is_file():
         try:
             return Basis.load(path)

@@ -163,19 +163,24 @@ def _cmd_basis_build(args: argparse.Namespace) -> int:
     if args.components < 1:
         raise UsageError(f"--components must be at least 1, got {args.components}")
     t0 = time.perf_counter()
-    tables = library.default_library(extra_dirs=args.extra, progress=True)
-    basis = build_basis(tables, args.components, progress=True)
-    if args.output is not None:
-        out = Path(args.output)
-    elif args.extra:
+    if args.output is None and args.extra:
         raise UsageError(
-            "a basis with --extra tables is not the default basis; say where to write it with -o"
+            "a basis with --extra tables is not the default basis; say where to write it with "
+            "-o, or add the tables to the default basis with `gonio library import`"
         )
-    else:  # the default basis: put it where default_basis() will find it
-        out = (library.cache_root() / "basis"
-               / f"default-K{args.components}-{library.library_key()[:16]}.npz")
-        out.parent.mkdir(parents=True, exist_ok=True)
-    basis.save(out)
+    if args.output is None:
+        # The default basis (synthetic + shipped measured + imported tables), rebuilt where
+        # default_basis() finds it.
+        from gonio.brdf.basis import default_basis, default_basis_path
+
+        out = default_basis_path(args.components)
+        out.unlink(missing_ok=True)
+        basis = default_basis(args.components, progress=True)
+    else:
+        tables = library.default_library(extra_dirs=args.extra, progress=True)
+        basis = build_basis(tables, args.components, progress=True)
+        out = Path(args.output)
+        basis.save(out)
     print(
         f"basis: K={basis.K} from {len(basis.materials)} materials "
         f"({basis.provenance['n_columns']} columns) in {time.perf_counter() - t0:.1f} s -> {out}"

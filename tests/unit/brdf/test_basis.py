@@ -294,3 +294,23 @@ def test_default_basis_is_cached(monkeypatch: pytest.MonkeyPatch, tmp_path: Path
     again = basis_mod.default_basis(5)
     np.testing.assert_array_equal(again.Q, b.Q)
     assert json.loads(json.dumps(again.provenance, default=str))["file"] == str(files[0])
+
+
+def test_cli_basis_build_rebuilds_the_default_basis_where_it_is_found(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    from gonio.cli import main
+
+    library = pytest.importorskip("gonio.brdf.library")
+    tables = small_library()[:3]
+    monkeypatch.setenv("GONIO_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(library, "default_library", lambda progress=False: list(tables))
+    assert main(["basis", "build", "-k", "5"]) == 0
+    path = basis_mod.default_basis_path(5)
+    assert path.is_file()
+    monkeypatch.setattr(library, "default_library", lambda progress=False: pytest.fail("rebuilt"))
+    b = basis_mod.default_basis(5)
+    # The default basis holds the synthetic tables and the shipped measured materials.
+    assert {t.name for t in tables} <= set(b.materials)
+    assert any(m.startswith("rgl-") for m in b.materials)
+    assert b.ph_prior is not None and b.ph_prior.shape == (37, 5, 5)
