@@ -73,7 +73,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"basis K={basis.K}, specimen {args.material}, median of {args.repeats} runs")
     print(f"{'n':>3} {'r':>3} {'solver':>9} {'solve s':>9} {'total s':>9} "
           f"{'coef diff':>10} {'obj diff':>10}")
-    for n, r in ((20, 12), (10, 8), (20, 24)):
+    for n, r in ((20, 12), (20, 72), (10, 8)):
         cells, ph = simple_pairs(n)
         alpha = uniform_stage_angles(r)
         vals = simulate_samples(model, cells, ph, alpha, noise=NoiseModel(0.01))
