@@ -13,7 +13,10 @@ Accepted files
     ``i_pd = pd / pi n_pd`` (``pd`` in ``[0, pi)`` by reciprocity). Values are scaled by
     ``1 / 1500``, ``1.15 / 1500``, ``1.66 / 1500`` per channel to give 1/sr; negative values
     mark unmeasured cells (NaN here, which the basis build treats as the median).
-    Grid cells are read by trilinear interpolation in index space.
+    Stored value ``i`` is a bin (the database's reader floors the index), so it sits at the bin
+    centre ``i + 0.5``; grid cells are read by trilinear interpolation in that index space,
+    clamped at the first and last centres, over the measured neighbours only (weights
+    renormalised); a cell with no measured neighbour is NaN.
 ``.npz``
     gonio table files (:meth:`BRDFTable.save`), validated and copied.
 
@@ -77,16 +80,20 @@ def read_merl(path: str | os.PathLike[str], name: str | None = None) -> BRDFTabl
         np.sqrt(np.clip(th[mask] / (np.pi / 2), 0, 1)) * n_th,
         td[mask] / (np.pi / 2) * n_td,
         np.mod(pd[mask], np.pi) / np.pi * n_pd,
-    ])
-    # Index space is clamped at the top (grazing cells beyond the last sample).
+    ]) - 0.5  # value i is the bin [i, i + 1), i.e. its centre i + 0.5
+    # Clamped at the first and last bin centres.
     for axis, n in enumerate((n_th, n_td, n_pd)):
         coords[axis] = np.clip(coords[axis], 0, n - 1)
     out = np.full((3, *geo.SLICE_SHAPE), np.nan, dtype=np.float32)
     for c in range(3):
         vals = data[c] * MERL_SCALE[c]
-        ok = map_coordinates((vals >= 0).astype(float), coords, order=1, mode="nearest")
-        v = map_coordinates(np.maximum(vals, 0.0), coords, order=1, mode="nearest")
-        out[c][mask] = np.where(ok > 0.999, v, np.nan)
+        measured = vals >= 0
+        # Unmeasured bins (negative) get weight 0 and the measured neighbours are
+        # renormalised, so a cell next to the horizon still reads its measured neighbours.
+        w = map_coordinates(measured.astype(float), coords, order=1, mode="nearest")
+        v = map_coordinates(np.where(measured, vals, 0.0), coords, order=1, mode="nearest")
+        with np.errstate(invalid="ignore", divide="ignore"):
+            out[c][mask] = np.where(w > 1e-6, v / w, np.nan)
     if not np.isfinite(out[:, mask]).any():
         raise TableImportError(f"{p}: holds no measured (non-negative) value")
     full = np.ascontiguousarray(np.broadcast_to(out[:, None], (3, *geo.TABLE_SHAPE)))

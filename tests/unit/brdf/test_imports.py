@@ -26,9 +26,10 @@ def write_merl(path: Path, dims: tuple[int, int, int], fn) -> None:  # type: ign
     n_th, n_td, n_pd = dims
     i_th, i_td, i_pd = np.meshgrid(np.arange(n_th), np.arange(n_td), np.arange(n_pd),
                                    indexing="ij")
-    th = (i_th / n_th) ** 2 * (np.pi / 2)  # the database's non-linear half-angle axis
-    td = i_td / n_td * (np.pi / 2)
-    pd = i_pd / n_pd * np.pi
+    # Each stored value is a bin, sampled at its centre; th on the non-linear axis.
+    th = ((i_th + 0.5) / n_th) ** 2 * (np.pi / 2)
+    td = (i_td + 0.5) / n_td * (np.pi / 2)
+    pd = (i_pd + 0.5) / n_pd * np.pi
     data = np.stack([fn(th, td, pd) * (c + 1) / MERL_SCALE[c] for c in range(3)])
     with open(path, "wb") as fh:
         fh.write(np.array(dims, dtype="<i4").tobytes())
@@ -56,10 +57,10 @@ def test_merl_file_is_read_at_the_documented_indices(tmp_path: Path) -> None:
     t = read_merl(f)
     th, td, pd = geo.grid_angles()
     m = geo.valid_mask()
-    # Clamped at the last sample of each axis, as the reader documents.
-    sq = np.minimum(np.sqrt(th / (np.pi / 2)) * 12, 11) / 12
-    tdc = np.minimum(td / (np.pi / 2) * 10, 9) / 10 * (np.pi / 2)
-    pdc = np.minimum(pd / np.pi * 20, 19) / 20 * np.pi
+    # Clamped at the first and last bin centres of each axis, as the reader documents.
+    sq = np.clip(np.sqrt(th / (np.pi / 2)) * 12, 0.5, 11.5) / 12
+    tdc = np.clip(td / (np.pi / 2) * 10, 0.5, 9.5) / 10 * (np.pi / 2)
+    pdc = np.clip(pd / np.pi * 20, 0.5, 19.5) / 20 * np.pi
     want = 0.1 + sq + tdc + 0.1 * pdc
     for c in range(3):
         np.testing.assert_allclose(t.values[c, 5][m], (c + 1) * want[m], rtol=1e-5)
@@ -68,12 +69,17 @@ def test_merl_file_is_read_at_the_documented_indices(tmp_path: Path) -> None:
 
 def test_merl_negative_values_are_unmeasured(tmp_path: Path) -> None:
     f = tmp_path / "holes.binary"
-    write_merl(f, (6, 6, 12), lambda th, td, pd: np.where(td > 1.2, -1.0, 0.5))
+    # Bins with td > 60 deg unmeasured; the rest hold 0.5 (R).
+    write_merl(f, (6, 6, 12), lambda th, td, pd: np.where(td > np.deg2rad(60), -1.0, 0.5))
     t = read_merl(f)
     _, td, _ = geo.grid_angles()
     m = geo.valid_mask()
-    assert np.isnan(t.values[0, 0][m & (td > np.deg2rad(80))]).all()
-    assert np.isfinite(t.values[0, 0][m & (td < np.deg2rad(40))]).all()
+    # Beyond the last measured bin centre (52.5 deg) only unmeasured neighbours: NaN ...
+    assert np.isnan(t.values[0, 0][m & (td > np.deg2rad(67.5))]).all()
+    # ... and cells between measured and unmeasured centres read the measured value alone.
+    near = m & (td > np.deg2rad(55)) & (td < np.deg2rad(65))
+    np.testing.assert_allclose(t.values[0, 0][near], 0.5, rtol=1e-6)
+    np.testing.assert_allclose(t.values[0, 0][m & (td < np.deg2rad(40))], 0.5, rtol=1e-6)
 
 
 @pytest.mark.parametrize(
@@ -150,3 +156,20 @@ def test_rgl_import_without_mitsuba_says_how_to_get_it(tmp_path: Path, libdir: P
     with pytest.raises(ValueError, match="pip install"):
         import_files([next(iter(sorted(rgl_dir.glob("*.bsdf"))))])
     assert measured.user_table_files() == []
+
+
+def test_a_table_written_by_gonio_export_merl_imports_back(tmp_path: Path) -> None:
+    """Cross-check with the independent MERL writer of gonio.export (full 90 x 90 x 180)."""
+    merl = pytest.importorskip("gonio.export.merl")
+    th, td, pd = geo.grid_angles()
+    m = geo.valid_mask()
+    # A smooth isotropic BRDF: the two resamplings (grid -> MERL bins -> grid) stay close.
+    slice_ = np.where(m, 0.2 + 0.3 * np.cos(th) ** 2 + 0.1 * np.sin(td) * np.cos(2 * pd),
+                      np.nan)
+    vals = np.stack([slice_ * (c + 1) for c in range(3)])[:, None].repeat(72, 1)
+    src = BRDFTable(vals.astype(np.float32), ("R", "G", "B"), "smooth")
+    path = merl.write_merl(src, tmp_path / "smooth.binary")
+    back = read_merl(path)
+    inner = m & (th < np.deg2rad(60)) & (td < np.deg2rad(60))
+    np.testing.assert_allclose(back.values[:, 3][:, inner], src.values[:, 3][:, inner],
+                               rtol=0.02)
