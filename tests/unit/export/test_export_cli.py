@@ -87,3 +87,18 @@ def test_bad_input(result: Path, tmp_path: Path, capsys: pytest.CaptureFixture[s
     not_h5.write_text("hello")
     assert main(["export", str(not_h5), "-f", "gltf", "-o", str(tmp_path / "n.gltf")]) == 2
     assert "not an HDF5 file" in capsys.readouterr().err
+
+
+def test_default_names_do_not_collide(result: Path, tmp_path: Path,
+                                      capsys: pytest.CaptureFixture[str]) -> None:
+    """Without -o every format gets its own file: factored and table are both .npz."""
+    res = tmp_path / result.name
+    res.write_bytes(result.read_bytes())
+    for fmt in ("factored", "table", "gltf"):
+        assert main(["export", str(res), "--format", fmt]) == 0
+    names = sorted(p.name for p in tmp_path.iterdir())
+    assert names == ["job-5.factored.npz", "job-5.gltf", "job-5.h5", "job-5.table.npz"]
+    FactoredBRDF.load(tmp_path / "job-5.factored.npz")  # not overwritten by the table
+    from gonio.brdf.table import BRDFTable
+
+    assert BRDFTable.load(tmp_path / "job-5.table.npz").provenance["job_id"] == 5
