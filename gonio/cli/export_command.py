@@ -45,7 +45,7 @@ def default_output(result: Path, fmt: str) -> Path:
 
 
 def run(args: argparse.Namespace) -> int:
-    from gonio.export import FORMATS, export_result
+    from gonio.export import export_result
 
     result: Path = args.result
     if not result.is_file():
