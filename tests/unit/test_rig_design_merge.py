@@ -11,7 +11,7 @@ import pytest
 from gonio.brdf import geometry as geo
 from gonio.cli import main
 from gonio.cli.brdf_commands import read_pairs
-from gonio.config import load_rig_config
+from gonio.config import ConfigError, load_rig_config
 from gonio.rigdesign import dump_fragment, load_fragment
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "deploy" / "rig.example.toml"
@@ -112,6 +112,25 @@ def test_apply_design_needs_a_rig_with_devices(tmp_path: Path,
     geometry.write_text(dump_fragment(FRAGMENT))
     assert main(["rig", "apply-design", str(geometry), str(rig)]) == 2
     assert "has no [[lights]] entries" in capsys.readouterr().err
+
+
+def test_a_design_fragment_given_as_the_rig_config_says_so_in_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Swapped apply-design arguments, or --rig geometry.toml: say what the file is."""
+    rig = tmp_path / "rig.toml"
+    rig.write_text(EXAMPLE.read_text())
+    geometry = tmp_path / "geometry.toml"
+    geometry.write_text(dump_fragment(FRAGMENT))
+    before = geometry.read_text()
+    assert main(["rig", "apply-design", str(rig), str(geometry)]) == 2
+    err = capsys.readouterr().err
+    assert "geometry.toml: a design fragment" in err and "gonio rig apply-design" in err
+    assert "required key is missing" not in err and len(err.splitlines()) <= 3
+    assert geometry.read_text() == before and not (tmp_path / "geometry.toml.bak").exists()
+    with pytest.raises(ConfigError, match=r"not a rig config: it has no \[rig\] or \[stage\]"):
+        load_rig_config(geometry)
+    load_rig_config(rig)  # a real rig config still loads
 
 
 def test_pairs_file_reads_a_design_fragment_and_a_rig_config(tmp_path: Path) -> None:
