@@ -339,7 +339,8 @@ def start_sim_calibration(
 
     handle = service.add_event_listener(watch)
     try:
-        plan = CalibrationPlan(reference_albedo=albedo,
+        # The job list shows ``specimen``: name the reference there too, not "specimen".
+        plan = CalibrationPlan(reference_albedo=albedo, specimen="white reference",
                                reference_name=f"simulated white reference, albedo {albedo:g}")
         job["id"] = service.submit(JobRequest(plan=plan, priority=1000)).id
     except BaseException:
