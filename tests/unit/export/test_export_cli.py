@@ -102,3 +102,21 @@ def test_default_names_do_not_collide(result: Path, tmp_path: Path,
     from gonio.brdf.table import BRDFTable
 
     assert BRDFTable.load(tmp_path / "job-5.table.npz").provenance["job_id"] == 5
+
+
+@pytest.mark.parametrize("fmt", ["merl", "mtlx", "gltf"])
+def test_a_table_that_is_not_rgb_gives_an_export_error(tmp_path: Path, fmt: str) -> None:
+    """The daemon maps ExportError to a 404 with the reason; other errors would be a 500."""
+    from gonio.brdf.principled import Principled
+    from gonio.brdf.table import BRDFTable
+    from gonio.export import ExportError, Fits, write_export
+
+    rgb = bm.tabulate(library.get_material("brushed-metal-003"))
+    grey = BRDFTable.trusted(rgb.values[:1].copy(), ("Y",), "grey")
+    factored = FactoredBRDF(np.array([0.2]), np.array([1.0]), np.ones((18, 72)),
+                            np.ones((1, 18)), np.ones((19, 72)), ("Y",), "grey")
+    principled = Principled((0.5,), 0.0, 0.5, 0.2, 0.1, 30.0, ("Y",))
+    out = tmp_path / f"grey.{fmt}"
+    with pytest.raises(ExportError, match=r"three channels.*'table' and 'factored'"):
+        write_export(Fits(grey, factored, principled), fmt, out, {})
+    assert not out.exists() and list(tmp_path.iterdir()) == []  # no partial file left
