@@ -65,6 +65,20 @@ def test_apply_design_moves_known_devices_and_adds_new_ones(
     assert again.read_text() == before
 
 
+def test_apply_design_keeps_a_backup_when_o_names_the_rig_config_itself(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """'-o' spelled differently (absolute path) but the same file is still an in-place edit."""
+    monkeypatch.chdir(tmp_path)
+    Path("rig.toml").write_text(EXAMPLE.read_text())
+    Path("geometry.toml").write_text(dump_fragment(FRAGMENT))
+    assert main(["rig", "apply-design", "geometry.toml", "rig.toml",
+                 "-o", str(tmp_path / "rig.toml")]) == 0
+    assert "previous version in rig.toml.bak" in capsys.readouterr().out
+    assert Path("rig.toml.bak").read_text() == EXAMPLE.read_text()
+    assert load_rig_config("rig.toml").light("L1").theta_deg == 35.0
+
+
 def test_apply_design_drops_calibration_factors_of_moved_pairs(tmp_path: Path,
                                                                capsys: pytest.CaptureFixture[str]
                                                                ) -> None:
