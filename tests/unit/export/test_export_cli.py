@@ -120,3 +120,29 @@ def test_a_table_that_is_not_rgb_gives_an_export_error(tmp_path: Path, fmt: str)
     with pytest.raises(ExportError, match=r"three channels.*'table' and 'factored'"):
         write_export(Fits(grey, factored, principled), fmt, out, {})
     assert not out.exists() and list(tmp_path.iterdir()) == []  # no partial file left
+
+
+@pytest.mark.parametrize("fmt", ["gltf", "mtlx", "factored", "table"])
+def test_two_writers_of_one_path_do_not_collide(result: Path, tmp_path: Path,
+                                                monkeypatch: pytest.MonkeyPatch, fmt: str) -> None:
+    """The daemon may export one job twice at once (a double click): a second complete write
+    running while the first is about to rename its temporary file must not break the first."""
+    import os
+
+    from gonio.export import result_fits, write_export
+
+    fits, prov = result_fits(result)
+    out = tmp_path / f"x.{fmt}"
+    real_replace = os.replace
+    nested = {"done": False}
+
+    def replace_after_a_second_writer(src: object, dst: object) -> None:
+        if not nested["done"]:
+            nested["done"] = True
+            write_export(fits, fmt, out, prov)  # the other request, start to finish
+        real_replace(src, dst)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(os, "replace", replace_after_a_second_writer)
+    write_export(fits, fmt, out, prov)
+    assert nested["done"] and out.stat().st_size > 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == [out.name]  # no .part left over
