@@ -146,3 +146,27 @@ def test_two_writers_of_one_path_do_not_collide(result: Path, tmp_path: Path,
     write_export(fits, fmt, out, prov)
     assert nested["done"] and out.stat().st_size > 0
     assert sorted(p.name for p in tmp_path.iterdir()) == [out.name]  # no .part left over
+
+
+def test_a_damaged_stored_fit_is_fitted_again(result: Path, tmp_path: Path,
+                                              caplog: pytest.LogCaptureFixture) -> None:
+    """A result whose /principled group lost its parameters still exports (refitted from the
+    reconstruction), with a warning, instead of a KeyError traceback."""
+    import h5py
+
+    broken = tmp_path / "broken.h5"
+    broken.write_bytes(result.read_bytes())
+    with h5py.File(broken, "a") as f:
+        del f["principled"]
+        f.create_group("principled")  # no "params" attribute
+    with caplog.at_level("WARNING", logger="gonio.results"):
+        res = read_result(broken)
+    assert res.principled is None and res.factored is not None and res.table is not None
+    assert "/principled is damaged" in caplog.text
+    out = tmp_path / "b.gltf"
+    assert main(["export", str(broken), "-f", "gltf", "-o", str(out)]) == 0
+    material = json.loads(out.read_text())["materials"][0]
+    # Refitted: the library material's roughness, as the stored fit had it (test above).
+    alpha_b = material["pbrMetallicRoughness"]["roughnessFactor"] ** 2
+    stored = read_result(result).principled
+    assert stored is not None and alpha_b == pytest.approx(stored.alpha_b, rel=0.05)
