@@ -496,6 +496,15 @@ def parse_rig_config(data: dict[str, Any], source: str = "rig config") -> RigCon
     ConfigError
         One line per problem, each starting with ``source``.
     """
+    if "rig" not in data and "stage" not in data and isinstance(data.get("lights"), list):
+        # A design fragment (gonio design -o) passed where a rig config belongs: one line
+        # that says so beats a "required key is missing" for every device.
+        raise ConfigError(
+            f"{source}: a design fragment (directions, no hardware), not a rig config: it has "
+            "no [rig] or [stage] table. Merge it into a rig config with 'gonio rig "
+            f"apply-design {source} rig.toml', or simulate a rig with it: 'gonio sim "
+            f"--geometry {source} -o rig.toml'"
+        )
     try:
         return RigConfig.model_validate(data)
     except ValidationError as exc:

@@ -34,6 +34,7 @@ Read back with :func:`read_result`.
 from __future__ import annotations
 
 import json
+import logging
 import os
 import time
 from collections.abc import Mapping, Sequence
@@ -54,6 +55,8 @@ from gonio.store import ReadingRow
 
 FORMAT_NAME = "gonio-result"
 FORMAT_VERSION = 1
+
+_log = logging.getLogger(__name__)
 
 
 class ResultFileError(ValueError):
@@ -175,16 +178,25 @@ def write_factored_group(f: h5py.File, model: FactoredBRDF) -> None:
 
 
 def _read_fits(f: h5py.File) -> tuple[FactoredBRDF | None, Principled | None]:
+    """The stored fits; a damaged fit group reads as absent (with a warning), since the fits
+    can be made again from the reconstruction and must not make the whole result unreadable."""
     factored = principled = None
     if "factored" in f:
-        g = f["factored"]
-        ga = _attr_dict(g.attrs)
-        data = {k: g[k][()] for k in g}
-        data["channels"] = np.asarray(_decode(g["channels"][()]))
-        factored = FactoredBRDF.from_arrays(
-            data, str(ga.get("name", "")), json.loads(ga.get("metrics", "{}")))
+        try:
+            g = f["factored"]
+            ga = _attr_dict(g.attrs)
+            data = {k: g[k][()] for k in g}
+            data["channels"] = np.asarray(_decode(g["channels"][()]))
+            factored = FactoredBRDF.from_arrays(
+                data, str(ga.get("name", "")), json.loads(ga.get("metrics", "{}")))
+        except (KeyError, TypeError, ValueError, AttributeError) as exc:
+            _log.warning("%s: /factored is damaged (%r); ignoring it", f.filename, exc)
     if "principled" in f:
-        principled = Principled.from_dict(json.loads(_attr_dict(f["principled"].attrs)["params"]))
+        try:
+            principled = Principled.from_dict(
+                json.loads(_attr_dict(f["principled"].attrs)["params"]))
+        except (KeyError, TypeError, ValueError, AttributeError) as exc:
+            _log.warning("%s: /principled is damaged (%r); ignoring it", f.filename, exc)
     return factored, principled
 
 

@@ -261,7 +261,7 @@ def get_material(name: str, seed: int = DEFAULT_SEED) -> bm.BRDFModel:
     by_name = {s.name: s.model for s in _specs(int(seed))}
     if name not in by_name:
         close = difflib.get_close_matches(name, by_name, n=3)
-        hint = f"; did you mean {', '.join(close)}?" if close else ""
+        hint = f"; did you mean {', '.join(close)}?" if close else "."
         raise LibraryError(
             f"no library material named {name!r}{hint} Names are <family>-<NNN> with families "
             f"{', '.join(FAMILY_COUNTS)} (see gonio.brdf.library.library_specs())"

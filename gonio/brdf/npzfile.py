@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+import uuid
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
@@ -39,16 +40,21 @@ def write_npz(
         ``path``.
     """
     p = Path(path)
-    tmp = p.with_name(p.name + ".part")
-    with open(tmp, "wb") as fh:
-        np.savez_compressed(
-            fh,
-            format=np.array(format_name),
-            version=np.array(version),
-            provenance=np.array(json.dumps(dict(provenance), default=str)),
-            **arrays,
-        )
-    os.replace(tmp, p)
+    # A temporary name of its own: two writers of one path (the daemon exporting the same job
+    # twice at once) must not write into, or rename away, each other's temporary file.
+    tmp = p.with_name(f"{p.name}.{uuid.uuid4().hex[:12]}.part")
+    try:
+        with open(tmp, "wb") as fh:
+            np.savez_compressed(
+                fh,
+                format=np.array(format_name),
+                version=np.array(version),
+                provenance=np.array(json.dumps(dict(provenance), default=str)),
+                **arrays,
+            )
+        os.replace(tmp, p)
+    finally:
+        tmp.unlink(missing_ok=True)
     return p
 
 

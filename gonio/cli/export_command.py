@@ -25,17 +25,32 @@ def register(sub: Any) -> None:
     p.add_argument("--format", "-f", required=True, dest="fmt",
                    choices=["factored", "mtlx", "gltf", "merl", "table"])
     p.add_argument("-o", "--output", type=Path, default=None,
-                   help="file to write (default: the result's name with the format's suffix)")
+                   help="file to write (default: the result's name with the format's suffix, "
+                   "RESULT.factored.npz / RESULT.table.npz for the two .npz formats)")
     p.set_defaults(func=run)
 
 
+def default_output(result: Path, fmt: str) -> Path:
+    """Where an export goes without ``-o``: the result's name with the format's suffix.
+
+    ``factored`` and ``table`` are both ``.npz``; they get ``.factored.npz`` / ``.table.npz`` so
+    exporting one result in every format does not overwrite one with the other.
+    """
+    from gonio.export import FORMATS
+
+    suffix = FORMATS[fmt]
+    if list(FORMATS.values()).count(suffix) > 1:
+        suffix = f".{fmt}{suffix}"
+    return result.with_suffix(suffix)
+
+
 def run(args: argparse.Namespace) -> int:
-    from gonio.export import FORMATS, export_result
+    from gonio.export import export_result
 
     result: Path = args.result
     if not result.is_file():
         raise UsageError(f"result file {result} does not exist")
-    out: Path = args.output or result.with_suffix(FORMATS[args.fmt])
+    out: Path = args.output or default_output(result, args.fmt)
     if out.resolve() == result.resolve():
         raise UsageError(f"-o {out} is the result file itself; choose another output name")
     if not out.parent.is_dir():

@@ -77,13 +77,14 @@ def _apply_design(args: argparse.Namespace) -> int:
     import tomli_w
 
     out = args.output or args.rig
-    if out == args.rig:
+    in_place = out.resolve() == args.rig.resolve()  # also "-o ./rig.toml" or an absolute path
+    if in_place:
         shutil.copyfile(args.rig, args.rig.with_name(args.rig.name + ".bak"))
     out.write_text(tomli_w.dumps(merged), encoding="utf-8")
     for note in notes:
         print(f"note: {note}")
     n = len(design.pair_names())
-    saved = f" (previous version in {args.rig.name}.bak)" if out == args.rig else ""
+    saved = f" (previous version in {args.rig.name}.bak)" if in_place else ""
     print(f"wrote {out}: {len(design.lights)} lights, {len(design.sensors)} sensors, {n} pairs "
           f"from {args.design}{saved}")
     return 0

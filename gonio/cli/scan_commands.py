@@ -51,7 +51,9 @@ def register(subparsers: Any) -> None:
     p.add_argument("--exposure", type=float, default=0.01, help="seconds per exposure")
     p.add_argument("--averages", type=int, default=1, help="exposures averaged per reading")
     p.add_argument("--light-settle", type=float, default=0.05, help="seconds after lamp on")
-    p.add_argument("--specimen", default="specimen", help="specimen name")
+    p.add_argument("--specimen", default=None,
+                   help="specimen name (default 'specimen'; with --white-reference, the "
+                        "reference's name, default 'white reference')")
     p.add_argument("--calibration", type=Path, default=None,
                    help="calibration JSON (from a calibration job) to apply")
     p.add_argument("--white-reference", type=float, default=None, metavar="ALBEDO",
@@ -121,13 +123,14 @@ def _plan(args: argparse.Namespace) -> Any:
             raise UsageError(f"--white-reference is the reference's albedo, in (0, 1]; got "
                              f"{args.white_reference:g}")
         return CalibrationPlan(reference_albedo=args.white_reference,
-                               reference_name=args.specimen, exposure=ex,
+                               reference_name=args.specimen or "white reference", exposure=ex,
                                rotations=args.rotations, start_deg=args.start_deg)
     if args.adaptive:
-        return AdaptivePlan(specimen=args.specimen, exposure=ex, initial_rotations=args.rotations,
+        return AdaptivePlan(specimen=args.specimen or "specimen", exposure=ex,
+                            initial_rotations=args.rotations,
                             threshold=args.threshold, max_samples=args.max_samples,
                             start_deg=args.start_deg)
-    return UniformPlan(specimen=args.specimen, exposure=ex, rotations=args.rotations,
+    return UniformPlan(specimen=args.specimen or "specimen", exposure=ex, rotations=args.rotations,
                        start_deg=args.start_deg)
 
 

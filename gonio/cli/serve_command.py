@@ -115,8 +115,14 @@ def run(args: argparse.Namespace) -> int:
         rig_config = load_rig_config(cfg.paths.rig_config)
         warn_if_exposed(cfg, keyring)
         app = _build(build_app, cfg, rig_config, keyring)
-        return serve(app, cfg,
-                     on_started=lambda url, _stop: print(f"gonio serving on {url}", flush=True))
+
+        def started(url: str, _stop: Any) -> None:
+            # Say where jobs and results go: without [paths] data_dir it is ./gonio-data.
+            print(f"data directory {Path(cfg.paths.data_dir).resolve()} (job store, results, "
+                  "calibration)")
+            print(f"gonio serving on {url}", flush=True)
+
+        return serve(app, cfg, on_started=started)
     return _run_sim(args, cfg, keyring)
 
 
@@ -339,7 +345,8 @@ def start_sim_calibration(
 
     handle = service.add_event_listener(watch)
     try:
-        plan = CalibrationPlan(reference_albedo=albedo,
+        # The job list shows ``specimen``: name the reference there too, not "specimen".
+        plan = CalibrationPlan(reference_albedo=albedo, specimen="white reference",
                                reference_name=f"simulated white reference, albedo {albedo:g}")
         job["id"] = service.submit(JobRequest(plan=plan, priority=1000)).id
     except BaseException:

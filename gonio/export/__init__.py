@@ -99,7 +99,22 @@ def provenance(attrs: dict[str, Any], fits: Fits, metrics: dict[str, Any]) -> di
 def write_export(fits: Fits, fmt: str, out: str | os.PathLike[str],
                  prov: dict[str, Any]) -> Path:
     """Write one format from fits already in hand; returns the path."""
+    from gonio.export.gltf import GltfError
+    from gonio.export.merl import MerlError
+    from gonio.export.mtlx import MtlxError
+
     check_format(fmt)
+    try:
+        return _write(fits, fmt, out, prov)
+    except (MerlError, MtlxError, GltfError) as exc:
+        # MerlError, MtlxError, GltfError (e.g. a table that is not R, G, B): the caller (the
+        # daemon turns ExportError into a 404 with the reason) gets one error type to handle.
+        raise ExportError(
+            f"cannot write {fmt}: {exc}; the 'table' and 'factored' formats keep any channels"
+        ) from None
+
+
+def _write(fits: Fits, fmt: str, out: str | os.PathLike[str], prov: dict[str, Any]) -> Path:
     name = str(prov.get("specimen") or fits.table.name)
     if fmt == "table":
         table = BRDFTable.trusted(

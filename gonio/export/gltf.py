@@ -20,6 +20,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import uuid
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -88,7 +89,10 @@ def write_gltf(
     """Write the ``.gltf`` JSON (atomically); returns the path."""
     doc = gltf_document(p, name, json.loads(json.dumps(dict(provenance), default=str)))
     out = Path(path)
-    tmp = out.with_name(out.name + ".part")
-    tmp.write_text(json.dumps(doc, indent=2))
-    os.replace(tmp, out)
+    tmp = out.with_name(f"{out.name}.{uuid.uuid4().hex[:12]}.part")  # one per writer
+    try:
+        tmp.write_text(json.dumps(doc, indent=2))
+        os.replace(tmp, out)
+    finally:
+        tmp.unlink(missing_ok=True)
     return out

@@ -22,6 +22,7 @@ room for metadata; provenance travels in a sidecar only if the caller writes one
 from __future__ import annotations
 
 import os
+import uuid
 import warnings
 from pathlib import Path
 from typing import Any
@@ -92,11 +93,14 @@ def write_merl(table: BRDFTable, path: str | os.PathLike[str]) -> Path:
     for c, scale in enumerate(SCALES):
         stored[c] = np.where(np.isfinite(vals[c]), vals[c] / scale, BELOW_HORIZON)
     p = Path(path)
-    tmp = p.with_name(p.name + ".part")
-    with open(tmp, "wb") as fh:
-        fh.write(np.asarray(SHAPE, dtype=_HEADER).tobytes())
-        fh.write(np.ascontiguousarray(stored, dtype=_DATA).tobytes())
-    os.replace(tmp, p)
+    tmp = p.with_name(f"{p.name}.{uuid.uuid4().hex[:12]}.part")  # one per writer
+    try:
+        with open(tmp, "wb") as fh:
+            fh.write(np.asarray(SHAPE, dtype=_HEADER).tobytes())
+            fh.write(np.ascontiguousarray(stored, dtype=_DATA).tobytes())
+        os.replace(tmp, p)
+    finally:
+        tmp.unlink(missing_ok=True)
     return p
 
 

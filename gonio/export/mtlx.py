@@ -27,6 +27,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import uuid
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -108,7 +109,10 @@ def write_mtlx(
 
     doc = mtlx_document(p, name, provenance)
     out = Path(path)
-    tmp = out.with_name(out.name + ".part")
-    tmp.write_text(MaterialX.writeToXmlString(doc))
-    os.replace(tmp, out)
+    tmp = out.with_name(f"{out.name}.{uuid.uuid4().hex[:12]}.part")  # one per writer
+    try:
+        tmp.write_text(MaterialX.writeToXmlString(doc))
+        os.replace(tmp, out)
+    finally:
+        tmp.unlink(missing_ok=True)
     return out

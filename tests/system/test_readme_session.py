@@ -138,6 +138,8 @@ def test_readme_rig_session_runs_verbatim_against_gonio_sim(tmp_path: Path) -> N
                 # clean shutdown.
                 out = "\n".join(daemon.lines)
                 assert "Traceback" not in out and "Application shutdown complete" in out, out
+                # It says where its jobs and results go (no data_dir configured: ./gonio-data).
+                assert f"data directory {(tmp_path / 'gonio-data').resolve()}" in out, out
                 served = True
                 continue
             run(command)

@@ -11,7 +11,7 @@ import pytest
 from gonio.brdf import geometry as geo
 from gonio.cli import main
 from gonio.cli.brdf_commands import read_pairs
-from gonio.config import load_rig_config
+from gonio.config import ConfigError, load_rig_config
 from gonio.rigdesign import dump_fragment, load_fragment
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "deploy" / "rig.example.toml"
@@ -65,6 +65,20 @@ def test_apply_design_moves_known_devices_and_adds_new_ones(
     assert again.read_text() == before
 
 
+def test_apply_design_keeps_a_backup_when_o_names_the_rig_config_itself(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """'-o' spelled differently (absolute path) but the same file is still an in-place edit."""
+    monkeypatch.chdir(tmp_path)
+    Path("rig.toml").write_text(EXAMPLE.read_text())
+    Path("geometry.toml").write_text(dump_fragment(FRAGMENT))
+    assert main(["rig", "apply-design", "geometry.toml", "rig.toml",
+                 "-o", str(tmp_path / "rig.toml")]) == 0
+    assert "previous version in rig.toml.bak" in capsys.readouterr().out
+    assert Path("rig.toml.bak").read_text() == EXAMPLE.read_text()
+    assert load_rig_config("rig.toml").light("L1").theta_deg == 35.0
+
+
 def test_apply_design_drops_calibration_factors_of_moved_pairs(tmp_path: Path,
                                                                capsys: pytest.CaptureFixture[str]
                                                                ) -> None:
@@ -112,6 +126,25 @@ def test_apply_design_needs_a_rig_with_devices(tmp_path: Path,
     geometry.write_text(dump_fragment(FRAGMENT))
     assert main(["rig", "apply-design", str(geometry), str(rig)]) == 2
     assert "has no [[lights]] entries" in capsys.readouterr().err
+
+
+def test_a_design_fragment_given_as_the_rig_config_says_so_in_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Swapped apply-design arguments, or --rig geometry.toml: say what the file is."""
+    rig = tmp_path / "rig.toml"
+    rig.write_text(EXAMPLE.read_text())
+    geometry = tmp_path / "geometry.toml"
+    geometry.write_text(dump_fragment(FRAGMENT))
+    before = geometry.read_text()
+    assert main(["rig", "apply-design", str(rig), str(geometry)]) == 2
+    err = capsys.readouterr().err
+    assert "geometry.toml: a design fragment" in err and "gonio rig apply-design" in err
+    assert "required key is missing" not in err and len(err.splitlines()) <= 3
+    assert geometry.read_text() == before and not (tmp_path / "geometry.toml.bak").exists()
+    with pytest.raises(ConfigError, match=r"not a rig config: it has no \[rig\] or \[stage\]"):
+        load_rig_config(geometry)
+    load_rig_config(rig)  # a real rig config still loads
 
 
 def test_pairs_file_reads_a_design_fragment_and_a_rig_config(tmp_path: Path) -> None:

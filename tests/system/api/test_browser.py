@@ -90,6 +90,10 @@ def test_start_a_scan_from_the_page_and_see_the_result(daemon: Daemon, browser: 
     wait.until(lambda d: len(d.find_elements(By.CSS_SELECTOR, "#polar-plot polygon")) > 0)
     metrics = browser.find_element(By.ID, "metrics").text
     assert "rel_sample_error" in metrics
+    # Long values (result_path) wrap inside the result panel: no sideways scrolling.
+    assert browser.execute_script(
+        "const e = document.documentElement; return e.scrollWidth <= e.clientWidth"), \
+        browser.execute_script("return [document.documentElement.scrollWidth, innerWidth]")
     assert browser.find_element(By.ID, "download").is_displayed()
     assert browser.find_element(By.ID, "message").get_attribute("hidden") is not None
     # Export from the page: the control appears with the result and fetches the file.

@@ -67,6 +67,7 @@ def test_calibrated_sim_scan_is_in_one_per_sr(tmp_path: Path, basis: Any) -> Non
         assert scan_job.state is JobState.COMPLETED, scan_job.reason
         assert scan_job.started is not None and cal_job.finished is not None
         assert scan_job.result is not None and scan_job.result["calibrated"] is True
+        assert cal_job.specimen == "white reference"  # what the job list shows for it
 
         # The calibration job's own readings were of the white reference: each pair's factor
         # turns them into albedo / pi.

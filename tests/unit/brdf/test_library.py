@@ -191,3 +191,13 @@ def test_one_material_read_from_the_cache_matches_the_library(small_library: Pat
     assert one.provenance == tables[1].provenance
     with pytest.raises(lib.LibraryError, match="no-such-material"):
         lib.library_table("no-such-material")
+
+
+def test_unknown_material_message_reads_as_sentences() -> None:
+    from gonio.brdf.library import LibraryError, get_material
+
+    with pytest.raises(LibraryError) as far:
+        get_material("nosuch")
+    assert "no library material named 'nosuch'. Names are <family>-<NNN>" in str(far.value)
+    with pytest.raises(LibraryError, match=r"did you mean .*brushed-metal-003\? Names are"):
+        get_material("brushed-metal-03")

@@ -87,3 +87,86 @@ def test_bad_input(result: Path, tmp_path: Path, capsys: pytest.CaptureFixture[s
     not_h5.write_text("hello")
     assert main(["export", str(not_h5), "-f", "gltf", "-o", str(tmp_path / "n.gltf")]) == 2
     assert "not an HDF5 file" in capsys.readouterr().err
+
+
+def test_default_names_do_not_collide(result: Path, tmp_path: Path,
+                                      capsys: pytest.CaptureFixture[str]) -> None:
+    """Without -o every format gets its own file: factored and table are both .npz."""
+    res = tmp_path / result.name
+    res.write_bytes(result.read_bytes())
+    for fmt in ("factored", "table", "gltf"):
+        assert main(["export", str(res), "--format", fmt]) == 0
+    names = sorted(p.name for p in tmp_path.iterdir())
+    assert names == ["job-5.factored.npz", "job-5.gltf", "job-5.h5", "job-5.table.npz"]
+    FactoredBRDF.load(tmp_path / "job-5.factored.npz")  # not overwritten by the table
+    from gonio.brdf.table import BRDFTable
+
+    assert BRDFTable.load(tmp_path / "job-5.table.npz").provenance["job_id"] == 5
+
+
+@pytest.mark.parametrize("fmt", ["merl", "mtlx", "gltf"])
+def test_a_table_that_is_not_rgb_gives_an_export_error(tmp_path: Path, fmt: str) -> None:
+    """The daemon maps ExportError to a 404 with the reason; other errors would be a 500."""
+    from gonio.brdf.principled import Principled
+    from gonio.brdf.table import BRDFTable
+    from gonio.export import ExportError, Fits, write_export
+
+    rgb = bm.tabulate(library.get_material("brushed-metal-003"))
+    grey = BRDFTable.trusted(rgb.values[:1].copy(), ("Y",), "grey")
+    factored = FactoredBRDF(np.array([0.2]), np.array([1.0]), np.ones((18, 72)),
+                            np.ones((1, 18)), np.ones((19, 72)), ("Y",), "grey")
+    principled = Principled((0.5,), 0.0, 0.5, 0.2, 0.1, 30.0, ("Y",))
+    out = tmp_path / f"grey.{fmt}"
+    with pytest.raises(ExportError, match=r"three channels.*'table' and 'factored'"):
+        write_export(Fits(grey, factored, principled), fmt, out, {})
+    assert not out.exists() and list(tmp_path.iterdir()) == []  # no partial file left
+
+
+@pytest.mark.parametrize("fmt", ["gltf", "mtlx", "factored", "table"])
+def test_two_writers_of_one_path_do_not_collide(result: Path, tmp_path: Path,
+                                                monkeypatch: pytest.MonkeyPatch, fmt: str) -> None:
+    """The daemon may export one job twice at once (a double click): a second complete write
+    running while the first is about to rename its temporary file must not break the first."""
+    import os
+
+    from gonio.export import result_fits, write_export
+
+    fits, prov = result_fits(result)
+    out = tmp_path / f"x.{fmt}"
+    real_replace = os.replace
+    nested = {"done": False}
+
+    def replace_after_a_second_writer(src: object, dst: object) -> None:
+        if not nested["done"]:
+            nested["done"] = True
+            write_export(fits, fmt, out, prov)  # the other request, start to finish
+        real_replace(src, dst)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(os, "replace", replace_after_a_second_writer)
+    write_export(fits, fmt, out, prov)
+    assert nested["done"] and out.stat().st_size > 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == [out.name]  # no .part left over
+
+
+def test_a_damaged_stored_fit_is_fitted_again(result: Path, tmp_path: Path,
+                                              caplog: pytest.LogCaptureFixture) -> None:
+    """A result whose /principled group lost its parameters still exports (refitted from the
+    reconstruction), with a warning, instead of a KeyError traceback."""
+    import h5py
+
+    broken = tmp_path / "broken.h5"
+    broken.write_bytes(result.read_bytes())
+    with h5py.File(broken, "a") as f:
+        del f["principled"]
+        f.create_group("principled")  # no "params" attribute
+    with caplog.at_level("WARNING", logger="gonio.results"):
+        res = read_result(broken)
+    assert res.principled is None and res.factored is not None and res.table is not None
+    assert "/principled is damaged" in caplog.text
+    out = tmp_path / "b.gltf"
+    assert main(["export", str(broken), "-f", "gltf", "-o", str(out)]) == 0
+    material = json.loads(out.read_text())["materials"][0]
+    # Refitted: the library material's roughness, as the stored fit had it (test above).
+    alpha_b = material["pbrMetallicRoughness"]["roughnessFactor"] ** 2
+    stored = read_result(result).principled
+    assert stored is not None and alpha_b == pytest.approx(stored.alpha_b, rel=0.05)
