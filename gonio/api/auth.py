@@ -82,7 +82,7 @@ class ApiKeyring:
                 raise KeyringError(
                     f"API key {name!r} is {len(key)} characters long; use at least "
                     f"{MIN_KEY_LENGTH} (generate one with: python -c "
-                    "'import secrets; print(secrets.token_urlsafe(32))')"
+                    "'import secrets; print(secrets.token_hex(32))')"
                 )
             if any(c.isspace() for c in key):
                 raise KeyringError(f"API key {name!r} contains whitespace; keys are single tokens")

@@ -82,7 +82,9 @@ def _new(args: argparse.Namespace) -> int:
     if args.name in _read(path):
         raise UsageError(f"{path} already has a key named {args.name!r}; choose another name, "
                          "or delete its line first to replace it")
-    key = secrets.token_urlsafe(32)
+    # Hex, never URL-safe base64: a key that starts with '-' is read as an option when it is
+    # pasted after --api-key on a command line.
+    key = secrets.token_hex(32)
     path.parent.mkdir(parents=True, exist_ok=True)
     # O_APPEND: an existing file keeps every line it had; a new one is private from the start.
     fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o600)

@@ -171,7 +171,7 @@ def _run_sim(args: argparse.Namespace, cfg: Any, keyring: Any) -> int:
     # A newcomer's sim session gets its own key unless keys are configured.
     session_key = None
     if len(keyring) == 0:
-        session_key = secrets.token_urlsafe(24)
+        session_key = secrets.token_hex(24)  # hex: never starts with '-' (argparse)
         keyring = ApiKeyring({"sim-session": session_key})
     with tempfile.TemporaryDirectory(prefix="gonio-serve-") as tmp:
         if args.throwaway:

@@ -89,3 +89,19 @@ def test_keys_file_from_the_daemon_config(tmp_path: Path,
     assert "sets no [auth] keys_file" in capsys.readouterr().err
     assert main(["keys", "list", "--keys-file", str(tmp_path / "none")]) == 2
     assert "gonio keys new NAME" in capsys.readouterr().err
+
+
+def test_new_keys_can_follow_api_key_on_a_command_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A printed key is pasted after ``--api-key``: argparse reads a leading '-' as an option,
+    so no generated key may start with one (URL-safe base64 did, 1 time in 32)."""
+    import argparse
+
+    keys = tmp_path / "api-keys"
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--api-key")
+    for i in range(64):
+        assert main(["keys", "new", f"k{i}", "--keys-file", str(keys)]) == 0
+        key = capsys.readouterr().out.strip()
+        assert parser.parse_args(["--api-key", key]).api_key == key

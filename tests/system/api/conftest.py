@@ -68,7 +68,7 @@ def daemon(tmp_path_factory: pytest.TempPathFactory, basis: Any) -> Iterator[Dae
     data_dir = tmp_path_factory.mktemp("gonio-data")
     # Fast stage physics and short settle times keep a full 8-angle scan to a few seconds.
     sim = start_sim_rig(SimRigOptions(time_scale=10.0, settle_s=0.0))
-    key = secrets.token_urlsafe(24)
+    key = secrets.token_hex(24)  # a key starting with '-' reads as an option on a CLI
     # A short design limit keeps design requests (tests and fuzzing) to a few seconds each.
     cfg = DaemonConfig().with_overrides(paths__data_dir=str(data_dir),
                                         limits__design_time_limit_s=DESIGN_LIMIT_S)
