@@ -522,6 +522,11 @@ def load_rig_config(path: str | os.PathLike[str]) -> RigConfig:
         raise ConfigError(
             f"{p}: no such rig config file; start from deploy/rig.example.toml"
         ) from None
+    except UnicodeDecodeError as exc:
+        raise ConfigError(
+            f"{p}: not a text file (byte {exc.start} is not UTF-8); a rig config is TOML text, "
+            "see deploy/rig.example.toml"
+        ) from None
     except OSError as exc:
         raise ConfigError(f"{p}: cannot read the rig config: {exc.strerror}") from None
     try:

@@ -143,6 +143,11 @@ def load_daemon_config(path: str | os.PathLike[str] | None) -> DaemonConfig:
             raise DaemonConfigError(
                 f"{p}: no such daemon config file; start from deploy/daemon.example.toml"
             ) from None
+        except UnicodeDecodeError as exc:
+            raise DaemonConfigError(
+                f"{p}: not a text file (byte {exc.start} is not UTF-8); a daemon config is "
+                "TOML text, see deploy/daemon.example.toml"
+            ) from None
         except OSError as exc:
             raise DaemonConfigError(f"{p}: cannot read the daemon config: {exc.strerror}") from None
         except tomllib.TOMLDecodeError as exc:

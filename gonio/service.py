@@ -23,13 +23,23 @@ from collections.abc import AsyncIterator, Callable
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, Field
 
 from gonio import hal
 from gonio.calibration import Calibration, calibration_in_effect
 from gonio.jobstates import ACTIVE_STATES, IllegalTransition, JobState, check_action
 from gonio.maintenance import LOCK_FILE_NAME, MaintenanceLock
-from gonio.plans import AnyPlan, DryRun, Plan, PlanError, RigDescription, dry_run, parse_plan
+from gonio.plans import (
+    FINITE,
+    AnyPlan,
+    Count,
+    DryRun,
+    Plan,
+    PlanError,
+    RigDescription,
+    dry_run,
+    parse_plan,
+)
 from gonio.store import EventRow, JobRow, JobStore, ReadingRow
 from gonio.store import NotFound as StoreNotFound
 from gonio.worker import BasisProvider, Worker, default_basis_provider
@@ -65,17 +75,17 @@ class Conflict(ValueError):
 class JobRequest(BaseModel):
     """A scan request: the plan, and where it goes in the queue."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = FINITE
 
     plan: Plan
-    priority: int = Field(default=0, ge=-1000, le=1000, description="higher runs first")
+    priority: Count = Field(default=0, ge=-1000, le=1000, description="higher runs first")
 
 
 class ReorderRequest(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    model_config = FINITE
 
-    priority: int | None = Field(default=None, ge=-1000, le=1000)
-    position: int | None = Field(default=None, ge=0, description="0 = next to run")
+    priority: Count | None = Field(default=None, ge=-1000, le=1000)
+    position: Count | None = Field(default=None, ge=0, le=2**31, description="0 = next to run")
 
 
 class JobInfo(BaseModel):
@@ -162,7 +172,7 @@ class StageRequest(BaseModel):
     """A manual stage command: commissioning (set the zero at the holder's reference mark) and
     loading specimens. Refused while a job is active; ``stop`` is always accepted."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = FINITE
 
     action: Literal["move", "home", "stop", "clear_faults"] = Field(
         description="move to angle_deg; home = make the present position 0 deg; stop; "

@@ -20,7 +20,10 @@ Service = Annotated[GonioService, Depends(get_service)]
 
 # Job ids are positive integers: anything else (a path, "../x", a huge number) is a 422 before
 # any handler runs, which is what makes "result by job id only" traversal-proof.
-JobId = Annotated[int, Path(ge=1, le=2**62, description="job id, as returned when it was created")]
+MAX_ID = 2**62
+"""Largest job id or event seq a request may name (SQLite integers are 64-bit signed)."""
+
+JobId = Annotated[int, Path(ge=1, le=MAX_ID, description="job id, as returned when it was created")]
 
 READ = [Depends(require_read_access)]
 """Read-only routes: open, or keyed when the daemon is configured so."""

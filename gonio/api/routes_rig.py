@@ -12,7 +12,7 @@ from gonio.api.auth import Caller, require_write_key
 from gonio.api.deps import READ, WRITE, Service
 from gonio.api.maintenance import LockState, MaintenanceLock
 from gonio.calibration import Calibration
-from gonio.plans import RigDescription
+from gonio.plans import FINITE, RigDescription, Text
 from gonio.service import GonioService, RigStatus, StageRequest, StageState
 
 router = APIRouter(prefix="/api/v1", tags=["rig"])
@@ -33,7 +33,9 @@ class MaintenanceState(BaseModel):
 
 
 class LockRequest(BaseModel):
-    reason: str = Field(min_length=1, max_length=500, description="shown to every client")
+    model_config = FINITE
+
+    reason: Text = Field(min_length=1, max_length=500, description="shown to every client")
 
 
 def _state(st: LockState) -> MaintenanceState:
