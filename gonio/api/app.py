@@ -33,7 +33,8 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from gonio import __version__
 from gonio.api import routes_design, routes_jobs, routes_results, routes_rig, routes_system
-from gonio.api.events import HEARTBEAT_S
+from gonio.api.errors import document_errors
+from gonio.api.events import HEARTBEAT_S, StreamCloser
 from gonio.api.settings import ApiSettings, install
 from gonio.brdf.design import DesignError
 from gonio.brdf.feasibility import FeasibilityError
@@ -148,6 +149,7 @@ def create_app(
         try:
             yield
         finally:
+            app.state.stream_closer.close()
             if manage_service:
                 await service.stop()
 
@@ -164,6 +166,7 @@ def create_app(
     app.state.started_at = time.monotonic()
     app.state.sse_subscribers = 0
     app.state.sse_heartbeat_s = sse_heartbeat_s
+    app.state.stream_closer = StreamCloser()
     install(app, settings)
 
     app.add_exception_handler(RequestValidationError, _validation_error)
@@ -189,11 +192,9 @@ def create_app(
 
     app.add_exception_handler(ResultFileError, result_file_error)
 
-    app.include_router(routes_system.router)
-    app.include_router(routes_rig.router)
-    app.include_router(routes_jobs.router)
-    app.include_router(routes_results.router)
-    app.include_router(routes_design.router)
+    for module in (routes_system, routes_rig, routes_jobs, routes_results, routes_design):
+        document_errors(module.router.routes)
+        app.include_router(module.router)
 
     app.mount("/static", StaticFiles(directory=STATIC_DIR), name="static")
 

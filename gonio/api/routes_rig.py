@@ -87,6 +87,8 @@ async def stage_state(service: Service) -> StageState:
 
 
 @router.post("/rig/stage", dependencies=WRITE,
+             responses={409: {"description": "a job is active: the stage is in use"},
+                        503: {"description": "the stage reported a fault or did not answer"}},
              summary="Manual stage command: move, home (set zero here), stop, clear faults")
 async def stage_command(body: StageRequest, service: Service) -> StageState:
     return await service.stage_command(body)

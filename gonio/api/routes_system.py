@@ -106,7 +106,8 @@ async def events(
         app_state.sse_subscribers += 1
         try:
             async for chunk in sse_stream(service.subscribe(start, job_id=job_id),
-                                          app_state.sse_heartbeat_s):
+                                          app_state.sse_heartbeat_s,
+                                          app_state.stream_closer.event()):
                 yield chunk
         finally:
             app_state.sse_subscribers -= 1
