@@ -75,6 +75,9 @@ class DynamixelSettings(_Strict):
     """``[stage.dynamixel]``: the servo on the bus."""
 
     id: Annotated[int, Field(ge=0, le=252)] = 1
+    # Longest wait for a status packet, seconds; None = the SDK's (about 35 ms). Raise it for a
+    # slow adapter, a long bus, or a simulator on a busy machine.
+    reply_timeout_s: Annotated[float, Field(gt=0, le=10, allow_inf_nan=False)] | None = None
 
 
 class ZaberSettings(_Strict):

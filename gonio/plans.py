@@ -193,13 +193,23 @@ class FaultPolicy(BaseModel):
 
     After a fault the engine waits ``retry_delay_s``, tries the device's recovery (clear
     faults, reconnect, re-check the lamp), waits ``resume_settle_s`` and repeats the
-    interrupted angle. More than ``max_retries`` consecutive failures at one angle fail the job.
+    interrupted angle. More than ``max_retries`` consecutive failures at one angle fail the job,
+    except for a device that does not answer at all: the job then stays suspended and the
+    device is tried every ``retry_delay_s`` until it answers (then the angle is repeated from
+    the checkpoint) or ``wait_for_device_s`` have passed since the first fault.
     """
 
     model_config = FINITE
 
     max_retries: Count = Field(default=5, ge=0, le=100)
     retry_delay_s: float = Field(default=1.0, ge=0, le=3600)
+    wait_for_device_s: float = Field(
+        default=600.0, ge=0, le=86400,
+        description="when a device stops answering (unplugged cable, power cut) and the "
+                    "retries are spent, keep the job suspended and try the device every "
+                    "retry_delay_s until it answers again, up to this many seconds from the "
+                    "first fault; then the job fails. 0: fail after max_retries",
+    )
     resume_settle_s: float = Field(default=0.5, ge=0, le=3600)
     saturation: Literal["suspend", "record"] = Field(
         default="suspend",
