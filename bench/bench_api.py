@@ -8,7 +8,12 @@ order), and the scan overhead (measuring phase, loaded vs alone). The reconstruc
 part of the measurement: the job is aborted when it reaches ``reconstructing``.
 
     .venv/bin/python bench/bench_api.py [--pollers 50] [--subscribers 10] [--rotations 24]
-                                        [--interval 0.5]
+                                        [--interval 0.5] [--dry-runners 0]
+
+The worst load a client can make: ``--interval 0`` (every poller back to back) plus
+``--dry-runners 4`` (clients asking for a dry run of a large plan back to back, with the key).
+The daemon runs the engine on its own loop and thread (gonio/engine_loop.py) so that the scan's
+timing does not depend on this load beyond the CPU time it takes from the machine.
 """
 
 from __future__ import annotations
@@ -89,8 +94,17 @@ async def poller(c: httpx.AsyncClient, job_id: int, stop: asyncio.Event, lat: li
         await asyncio.sleep(max(0.0, interval - dt))
 
 
+async def dry_runner(c: httpx.AsyncClient, stop: asyncio.Event, count: list[int]) -> None:
+    """Ask for a dry run of a 360-angle plan back to back (keyed: anonymous ones get 401)."""
+    plan = {"kind": "uniform", "rotations": 360}
+    while not stop.is_set():
+        r = await c.post("/api/v1/jobs/dry-run", json={"plan": plan})
+        r.raise_for_status()
+        count[0] += 1
+
+
 async def one_scan(url: str, key: str, rotations: int, pollers: int, subs: int,
-                   interval: float = 0.0) -> dict[str, Any]:
+                   interval: float = 0.0, dry_runners: int = 0) -> dict[str, Any]:
     h = {"X-API-Key": key}
     async with httpx.AsyncClient(base_url=url, headers=h, timeout=30) as c:
         seq0 = (await c.get("/health")).json()["seq"]
@@ -110,6 +124,9 @@ async def one_scan(url: str, key: str, rotations: int, pollers: int, subs: int,
         poll_tasks = [asyncio.create_task(poller(pc, job_id, stop, lat, interval,
                                                  k * interval / max(pollers, 1)))
                       for k, pc in enumerate(poll_clients)]
+        dry_count = [0]
+        poll_tasks += [asyncio.create_task(dry_runner(c, stop, dry_count))
+                       for _ in range(dry_runners)]
         while (await c.get(f"/api/v1/jobs/{job_id}")).json()["state"] in ("queued", "running"):
             await asyncio.sleep(0.1)
         await c.post(f"/api/v1/jobs/{job_id}/abort")
@@ -141,6 +158,7 @@ async def one_scan(url: str, key: str, rotations: int, pollers: int, subs: int,
         "lost": lost,
         "in_order": in_order,
         "events": len(expected),
+        "dry_runs": dry_count[0],
     }
 
 
@@ -158,7 +176,7 @@ async def main_async(args: argparse.Namespace) -> int:
             await wait_up(url)
             alone = await one_scan(url, key, args.rotations, 0, 1)
             loaded = await one_scan(url, key, args.rotations, args.pollers, args.subscribers,
-                                    args.interval)
+                                    args.interval, args.dry_runners)
         finally:
             proc.terminate()
             proc.wait(30)
@@ -168,11 +186,13 @@ async def main_async(args: argparse.Namespace) -> int:
     print(f"scan: uniform, {args.rotations} stage angles, simulated rig (12 pairs)")
     every = f"every {args.interval:g} s" if args.interval > 0 else "back to back"
     print(f"load: {args.pollers} clients polling GET /api/v1/jobs/{{id}} {every} each, "
-          f"{args.subscribers} SSE subscribers; clients and daemon share this machine's CPUs")
+          f"{args.subscribers} SSE subscribers, {args.dry_runners} dry-run clients; clients and "
+          "daemon share this machine's CPUs")
     print()
     print("| quantity | value |")
     print("|---|---|")
     print(f"| status requests answered | {len(lat_ms)} |")
+    print(f"| dry runs answered | {loaded['dry_runs']} |")
     print(f"| status latency p50 | {pct(lat_ms, 50):.1f} ms |")
     print(f"| status latency p99 (target < 100 ms) | {pct(lat_ms, 99):.1f} ms |")
     print(f"| status latency max | {max(lat_ms):.1f} ms |")
@@ -192,6 +212,8 @@ def main() -> int:
     p.add_argument("--rotations", type=int, default=24)
     p.add_argument("--interval", type=float, default=0.5,
                    help="seconds between one client's polls (0: back to back, a stress test)")
+    p.add_argument("--dry-runners", type=int, default=0,
+                   help="clients asking for dry runs back to back during the loaded scan")
     return asyncio.run(asyncio.wait_for(main_async(p.parse_args()), timeout=600))
 
 

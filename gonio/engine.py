@@ -115,6 +115,7 @@ class ScanEngine:
         self._abort = False
         self._halt = False
         self._wake = asyncio.Event()
+        self._loop: asyncio.AbstractEventLoop | None = None  # the loop run() runs on
         self._angle_task: asyncio.Task[tuple[float, list[ReadingRow]]] | None = None
         self._dark_once: dict[str, tuple[float, ...]] | None = None
         self._angle_times: list[float] = []
@@ -122,28 +123,39 @@ class ScanEngine:
         self.progress = Progress(0, 0, None)
 
     # ------------------------------------------------------------------ control (any time)
+    # The requests may come from another thread (the API's loop, when the engine runs on its
+    # own, gonio.engine_loop): flags are set at once, the wake-up and the cancellation of the
+    # angle in progress go through the engine's loop.
     def request_pause(self, immediate: bool = False) -> None:
         """Pause at the next checkpoint, or now (the current angle is repeated on resume)."""
         self._pause = True
         self._pause_immediate = self._pause_immediate or immediate
-        if immediate:
-            self._interrupt()
-        self._wake.set()
+        self._signal(interrupt=immediate)
 
     def request_resume(self) -> None:
         self._pause = False
         self._pause_immediate = False
-        self._wake.set()
+        self._signal(interrupt=False)
 
     def request_abort(self) -> None:
         self._abort = True
-        self._interrupt()
-        self._wake.set()
+        self._signal(interrupt=True)
 
     def request_halt(self) -> None:
         """Emergency halt: stop at once and send nothing further to any device."""
         self._halt = True
-        self._interrupt()
+        self._signal(interrupt=True)
+
+    def _signal(self, interrupt: bool) -> None:
+        loop = self._loop
+        if loop is not None and not _running_in(loop):
+            loop.call_soon_threadsafe(self._signal_here, interrupt)
+        else:
+            self._signal_here(interrupt)
+
+    def _signal_here(self, interrupt: bool) -> None:
+        if interrupt:
+            self._interrupt()
         self._wake.set()
 
     def _interrupt(self) -> None:
@@ -185,6 +197,7 @@ class ScanEngine:
             ``RUNNING`` when all angles are measured (the caller reconstructs next), otherwise
             the terminal state reached (``FAILED``, ``ABORTED``, ``HALTED``).
         """
+        self._loop = asyncio.get_running_loop()
         if self.state is JobState.QUEUED:
             self._set_state(JobState.RUNNING)
         elif self.state is JobState.PAUSED:
@@ -607,6 +620,14 @@ class _Trouble:
         if str(self.first) == str(last):
             return ""
         return f"; it began as: {self.first} (code {self.first.code})"
+
+
+def _running_in(loop: asyncio.AbstractEventLoop) -> bool:
+    """True when the caller runs on ``loop`` (its thread, inside it)."""
+    try:
+        return asyncio.get_running_loop() is loop
+    except RuntimeError:
+        return False
 
 
 def _primary(errors: Sequence[BaseException]) -> BaseException:

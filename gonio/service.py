@@ -19,14 +19,15 @@ import asyncio
 import contextlib
 import logging
 import threading
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncIterator, Callable, Coroutine
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, TypeVar
 
 from pydantic import BaseModel, Field
 
 from gonio import hal
 from gonio.calibration import Calibration, calibration_in_effect
+from gonio.engine_loop import EngineLoop
 from gonio.jobstates import ACTIVE_STATES, IllegalTransition, JobState, check_action
 from gonio.maintenance import LOCK_FILE_NAME, MaintenanceLock
 from gonio.plans import (
@@ -191,6 +192,8 @@ class DeviceError(RuntimeError):
     """A device fault while serving a manual command (the API answers 503 with the reason)."""
 
 
+T = TypeVar("T")
+
 _PREVIEW_CACHE = 8
 """Preview PNGs kept in memory (a few tens of kB each)."""
 
@@ -228,7 +231,10 @@ class GonioService:
         self._loop: asyncio.AbstractEventLoop | None = None
         self._cond: asyncio.Condition | None = None
         self._version = 0
-        self._task: asyncio.Task[None] | None = None
+        self._task: asyncio.Task[None] | None = None  # the worker, on the engine loop
+        # The worker, the engine and every device call run on their own loop and thread, so
+        # request handling on the API's loop cannot delay a scan (gonio/engine_loop.py).
+        self._engine = EngineLoop()
         self._preview_lock = threading.Lock()
         self._previews: dict[tuple[str, int], bytes] = {}
         self._basis_lock = threading.Lock()
@@ -253,10 +259,18 @@ class GonioService:
 
     # ------------------------------------------------------------------ lifecycle
     async def start(self) -> None:
-        """Reconcile jobs left active by a previous process and start the worker."""
+        """Reconcile jobs left active by a previous process and start the worker.
+
+        The worker runs on the service's engine loop, a thread of its own
+        (:class:`gonio.engine_loop.EngineLoop`); this loop serves requests and events.
+        """
         self._loop = asyncio.get_running_loop()
         self._cond = asyncio.Condition()
         self.store.reconcile(self._can_resume)
+        self._engine.start()
+        await self._engine.run(self._start_worker())
+
+    async def _start_worker(self) -> None:
         self._task = asyncio.create_task(self._run_worker(), name="gonio-worker")
 
     async def _run_worker(self) -> None:
@@ -282,6 +296,17 @@ class GonioService:
 
     async def stop(self) -> None:
         """Stop the worker (an active job stays active and resumes at the next start)."""
+        if self._engine.running:
+            await self._engine.run(self._stop_worker())
+            await asyncio.to_thread(self._engine.close)
+        else:
+            await self._stop_worker()
+        self.store.remove_listener(self._on_event)
+        for lock in reversed(self.owned):
+            lock.release()
+        self.owned.clear()
+
+    async def _stop_worker(self) -> None:
         if self._task is not None:
             self._task.cancel()
             with contextlib.suppress(asyncio.CancelledError):
@@ -291,10 +316,12 @@ class GonioService:
         if self._connected:
             await self._rig.close()
             self._connected = False
-        self.store.remove_listener(self._on_event)
-        for lock in reversed(self.owned):
-            lock.release()
-        self.owned.clear()
+
+    async def _on_engine(self, coro: Coroutine[Any, Any, T]) -> T:
+        """Run ``coro`` where the devices live: the engine loop once started, else here."""
+        if self._engine.running:
+            return await self._engine.run(coro)
+        return await coro
 
     def _can_resume(self, job: JobRow) -> str | None:
         try:
@@ -619,6 +646,14 @@ class GonioService:
 
     # ------------------------------------------------------------------ rig
     async def rig_status(self) -> RigStatus:
+        devices = await self._on_engine(self._device_states())
+        st = self.status()
+        return RigStatus(
+            connected=self._connected, error=self._connect_error,
+            current_job=st.current_job, queue_held=st.queue_held, devices=devices,
+        )
+
+    async def _device_states(self) -> list[DeviceState]:
         devices: list[DeviceState] = []
         if self._connected:
             rig = self._rig
@@ -635,13 +670,14 @@ class GonioService:
                     devices.append(DeviceState(name=name, ok=ok, detail=detail))
                 except Exception as exc:  # report, do not raise: this is a status page
                     devices.append(DeviceState(name=name, ok=False, detail={"error": str(exc)}))
-        st = self.status()
-        return RigStatus(
-            connected=self._connected, error=self._connect_error,
-            current_job=st.current_job, queue_held=st.queue_held, devices=devices,
-        )
+        return devices
 
     async def stage_command(self, request: StageRequest) -> StageState:
+        """Run one manual stage command and return the stage state after it (see
+        :meth:`_stage_command`); it runs on the engine loop, where the devices live."""
+        return await self._on_engine(self._stage_command(request))
+
+    async def _stage_command(self, request: StageRequest) -> StageState:
         """Run one manual stage command and return the stage state after it.
 
         The queue is held for the duration so no job starts under a manual move.
