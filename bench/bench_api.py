@@ -40,11 +40,26 @@ def free_port() -> int:
         return int(s.getsockname()[1])
 
 
-def start_daemon(port: int, key: str, data_dir: str) -> subprocess.Popen[bytes]:
+GONIO = [sys.executable, "-c", "from gonio.cli import main; raise SystemExit(main())"]
+
+
+def start_daemon(port: int, key: str, data_dir: str, rig_toml: str | None = None
+                 ) -> subprocess.Popen[bytes]:
     env = {**os.environ, "GONIO_API_KEYS": f"bench:{key}"}
-    cmd = [sys.executable, "-c", "from gonio.cli import main; raise SystemExit(main())",
-           "serve", "--sim", "--port", str(port), "--data-dir", data_dir]
+    rig = ["--sim"] if rig_toml is None else ["--rig", rig_toml]
+    cmd = [*GONIO, "serve", *rig, "--port", str(port), "--data-dir", data_dir]
     return subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+
+
+def start_sim_process(rig_toml: str) -> subprocess.Popen[bytes]:
+    """``gonio sim`` in its own process, as devices are outside the daemon in a lab."""
+    proc = subprocess.Popen([*GONIO, "sim", "-o", rig_toml], stdout=subprocess.PIPE,
+                            stderr=subprocess.DEVNULL)
+    assert proc.stdout is not None
+    for line in proc.stdout:
+        if line.startswith(b"simulated rig running"):
+            return proc
+    raise RuntimeError("gonio sim did not start")
 
 
 async def wait_up(url: str, timeout: float = 60) -> None:
@@ -171,7 +186,12 @@ async def main_async(args: argparse.Namespace) -> int:
     port = free_port()
     url = f"http://127.0.0.1:{port}"
     with tempfile.TemporaryDirectory(prefix="gonio-bench-") as tmp:
-        proc = start_daemon(port, key, tmp)
+        sim = None
+        rig_toml = None
+        if args.sim_process:
+            rig_toml = os.path.join(tmp, "rig.toml")
+            sim = start_sim_process(rig_toml)
+        proc = start_daemon(port, key, os.path.join(tmp, "data"), rig_toml)
         try:
             await wait_up(url)
             alone = await one_scan(url, key, args.rotations, 0, 1)
@@ -180,10 +200,15 @@ async def main_async(args: argparse.Namespace) -> int:
         finally:
             proc.terminate()
             proc.wait(30)
+            if sim is not None:
+                sim.terminate()
+                sim.wait(30)
     lat_ms = [x * 1000 for x in loaded["lat"]]
     overhead = loaded["measuring_s"] / alone["measuring_s"] - 1
     print(f"command: {' '.join([os.path.basename(sys.executable), *sys.argv])}")
-    print(f"scan: uniform, {args.rotations} stage angles, simulated rig (12 pairs)")
+    where = ("in its own process (gonio sim)" if args.sim_process
+             else "inside the daemon (serve --sim)")
+    print(f"scan: uniform, {args.rotations} stage angles, simulated rig (12 pairs) {where}")
     every = f"every {args.interval:g} s" if args.interval > 0 else "back to back"
     print(f"load: {args.pollers} clients polling GET /api/v1/jobs/{{id}} {every} each, "
           f"{args.subscribers} SSE subscribers, {args.dry_runners} dry-run clients; clients and "
@@ -212,6 +237,9 @@ def main() -> int:
     p.add_argument("--rotations", type=int, default=24)
     p.add_argument("--interval", type=float, default=0.5,
                    help="seconds between one client's polls (0: back to back, a stress test)")
+    p.add_argument("--sim-process", action="store_true",
+                   help="run the simulated rig in its own process (gonio sim), not inside the "
+                        "daemon: the devices then do not share the daemon's interpreter")
     p.add_argument("--dry-runners", type=int, default=0,
                    help="clients asking for dry runs back to back during the loaded scan")
     return asyncio.run(asyncio.wait_for(main_async(p.parse_args()), timeout=600))
