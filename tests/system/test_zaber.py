@@ -31,7 +31,7 @@ def rig(transport: str, time_scale: float = 40.0,
     sim = start_zaber_sim(motion, transport=transport, microsteps_per_degree=MPD)
     kw: dict[str, Any] = {
         "microsteps_per_degree": MPD, "limits": TravelLimits(-720.0, 720.0),
-        "speed_dps": 20.0, "accel_dps2": 80.0, "reply_timeout_s": 0.2, **driver_kw,
+        "speed_dps": 20.0, "accel_dps2": 80.0, "reply_timeout_s": 1.0, **driver_kw,
     }
     stage = ZaberStage("rot", sim.url, **kw)
     try:
