@@ -738,9 +738,12 @@ class GonioService:
         DeviceError
             The stage does not answer or the rig cannot be connected.
         """
-        try:
+        async def read() -> hal.StageStatus:
             rig = await self._get_rig()
-            st = await rig.stage.status()
+            return await rig.stage.status()
+
+        try:
+            st = await self._on_engine(read())  # where the drivers' connections live
         except (hal.DeviceFault, OSError) as exc:
             raise DeviceError(f"stage status failed: {exc}") from exc
         return StageState(position_deg=st.position_deg, moving=st.moving, homed=st.homed,

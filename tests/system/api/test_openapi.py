@@ -57,6 +57,8 @@ def test_every_operation_documents_the_errors_it_can_answer_with() -> None:
                 if int(status) < 400:
                     continue
                 body = resp["content"]["application/json"]["schema"]["$ref"]
+                if status not in ("401", "403", "404", "413", "422", "423"):
+                    continue  # a route's own answer (e.g. /health's 503 is a Health body)
                 want = "ValidationErrorBody" if status == "422" else "ErrorBody"
                 assert body == f"#/components/schemas/{want}", (where, status, body)
     dry = schema["paths"]["/api/v1/jobs/dry-run"]["post"]
