@@ -8,7 +8,12 @@ order), and the scan overhead (measuring phase, loaded vs alone). The reconstruc
 part of the measurement: the job is aborted when it reaches ``reconstructing``.
 
     .venv/bin/python bench/bench_api.py [--pollers 50] [--subscribers 10] [--rotations 24]
-                                        [--interval 0.5]
+                                        [--interval 0.5] [--dry-runners 0]
+
+The worst load a client can make: ``--interval 0`` (every poller back to back) plus
+``--dry-runners 4`` (clients asking for a dry run of a large plan back to back, with the key).
+The daemon runs the engine on its own loop and thread (gonio/engine_loop.py) so that the scan's
+timing does not depend on this load beyond the CPU time it takes from the machine.
 """
 
 from __future__ import annotations
@@ -35,11 +40,26 @@ def free_port() -> int:
         return int(s.getsockname()[1])
 
 
-def start_daemon(port: int, key: str, data_dir: str) -> subprocess.Popen[bytes]:
+GONIO = [sys.executable, "-c", "from gonio.cli import main; raise SystemExit(main())"]
+
+
+def start_daemon(port: int, key: str, data_dir: str, rig_toml: str | None = None
+                 ) -> subprocess.Popen[bytes]:
     env = {**os.environ, "GONIO_API_KEYS": f"bench:{key}"}
-    cmd = [sys.executable, "-c", "from gonio.cli import main; raise SystemExit(main())",
-           "serve", "--sim", "--port", str(port), "--data-dir", data_dir]
+    rig = ["--sim"] if rig_toml is None else ["--rig", rig_toml]
+    cmd = [*GONIO, "serve", *rig, "--port", str(port), "--data-dir", data_dir]
     return subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+
+
+def start_sim_process(rig_toml: str) -> subprocess.Popen[bytes]:
+    """``gonio sim`` in its own process, as devices are outside the daemon in a lab."""
+    proc = subprocess.Popen([*GONIO, "sim", "-o", rig_toml], stdout=subprocess.PIPE,
+                            stderr=subprocess.DEVNULL)
+    assert proc.stdout is not None
+    for line in proc.stdout:
+        if line.startswith(b"simulated rig running"):
+            return proc
+    raise RuntimeError("gonio sim did not start")
 
 
 async def wait_up(url: str, timeout: float = 60) -> None:
@@ -89,8 +109,17 @@ async def poller(c: httpx.AsyncClient, job_id: int, stop: asyncio.Event, lat: li
         await asyncio.sleep(max(0.0, interval - dt))
 
 
+async def dry_runner(c: httpx.AsyncClient, stop: asyncio.Event, count: list[int]) -> None:
+    """Ask for a dry run of a 360-angle plan back to back (keyed: anonymous ones get 401)."""
+    plan = {"kind": "uniform", "rotations": 360}
+    while not stop.is_set():
+        r = await c.post("/api/v1/jobs/dry-run", json={"plan": plan})
+        r.raise_for_status()
+        count[0] += 1
+
+
 async def one_scan(url: str, key: str, rotations: int, pollers: int, subs: int,
-                   interval: float = 0.0) -> dict[str, Any]:
+                   interval: float = 0.0, dry_runners: int = 0) -> dict[str, Any]:
     h = {"X-API-Key": key}
     async with httpx.AsyncClient(base_url=url, headers=h, timeout=30) as c:
         seq0 = (await c.get("/health")).json()["seq"]
@@ -110,6 +139,9 @@ async def one_scan(url: str, key: str, rotations: int, pollers: int, subs: int,
         poll_tasks = [asyncio.create_task(poller(pc, job_id, stop, lat, interval,
                                                  k * interval / max(pollers, 1)))
                       for k, pc in enumerate(poll_clients)]
+        dry_count = [0]
+        poll_tasks += [asyncio.create_task(dry_runner(c, stop, dry_count))
+                       for _ in range(dry_runners)]
         while (await c.get(f"/api/v1/jobs/{job_id}")).json()["state"] in ("queued", "running"):
             await asyncio.sleep(0.1)
         await c.post(f"/api/v1/jobs/{job_id}/abort")
@@ -141,6 +173,7 @@ async def one_scan(url: str, key: str, rotations: int, pollers: int, subs: int,
         "lost": lost,
         "in_order": in_order,
         "events": len(expected),
+        "dry_runs": dry_count[0],
     }
 
 
@@ -153,26 +186,38 @@ async def main_async(args: argparse.Namespace) -> int:
     port = free_port()
     url = f"http://127.0.0.1:{port}"
     with tempfile.TemporaryDirectory(prefix="gonio-bench-") as tmp:
-        proc = start_daemon(port, key, tmp)
+        sim = None
+        rig_toml = None
+        if args.sim_process:
+            rig_toml = os.path.join(tmp, "rig.toml")
+            sim = start_sim_process(rig_toml)
+        proc = start_daemon(port, key, os.path.join(tmp, "data"), rig_toml)
         try:
             await wait_up(url)
             alone = await one_scan(url, key, args.rotations, 0, 1)
             loaded = await one_scan(url, key, args.rotations, args.pollers, args.subscribers,
-                                    args.interval)
+                                    args.interval, args.dry_runners)
         finally:
             proc.terminate()
             proc.wait(30)
+            if sim is not None:
+                sim.terminate()
+                sim.wait(30)
     lat_ms = [x * 1000 for x in loaded["lat"]]
     overhead = loaded["measuring_s"] / alone["measuring_s"] - 1
     print(f"command: {' '.join([os.path.basename(sys.executable), *sys.argv])}")
-    print(f"scan: uniform, {args.rotations} stage angles, simulated rig (12 pairs)")
+    where = ("in its own process (gonio sim)" if args.sim_process
+             else "inside the daemon (serve --sim)")
+    print(f"scan: uniform, {args.rotations} stage angles, simulated rig (12 pairs) {where}")
     every = f"every {args.interval:g} s" if args.interval > 0 else "back to back"
     print(f"load: {args.pollers} clients polling GET /api/v1/jobs/{{id}} {every} each, "
-          f"{args.subscribers} SSE subscribers; clients and daemon share this machine's CPUs")
+          f"{args.subscribers} SSE subscribers, {args.dry_runners} dry-run clients; clients and "
+          "daemon share this machine's CPUs")
     print()
     print("| quantity | value |")
     print("|---|---|")
     print(f"| status requests answered | {len(lat_ms)} |")
+    print(f"| dry runs answered | {loaded['dry_runs']} |")
     print(f"| status latency p50 | {pct(lat_ms, 50):.1f} ms |")
     print(f"| status latency p99 (target < 100 ms) | {pct(lat_ms, 99):.1f} ms |")
     print(f"| status latency max | {max(lat_ms):.1f} ms |")
@@ -192,6 +237,11 @@ def main() -> int:
     p.add_argument("--rotations", type=int, default=24)
     p.add_argument("--interval", type=float, default=0.5,
                    help="seconds between one client's polls (0: back to back, a stress test)")
+    p.add_argument("--sim-process", action="store_true",
+                   help="run the simulated rig in its own process (gonio sim), not inside the "
+                        "daemon: the devices then do not share the daemon's interpreter")
+    p.add_argument("--dry-runners", type=int, default=0,
+                   help="clients asking for dry runs back to back during the loaded scan")
     return asyncio.run(asyncio.wait_for(main_async(p.parse_args()), timeout=600))
 
 

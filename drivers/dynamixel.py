@@ -105,6 +105,24 @@ def _signed32(value: int) -> int:
     return value - (1 << 32) if value & 0x80000000 else value
 
 
+class _PortHandler(_ExclusivePortHandler):
+    """The exclusive port with a floor under the SDK's reply timeout.
+
+    The SDK waits (bytes on the wire) + 2 x 16 ms latency timer + 2 ms for a status packet,
+    about 35 ms: right for a USB adapter on an idle PC. A simulator on a pseudo-terminal (or a
+    PC whose cores are saturated) may answer later, and the wire protocol allows waiting
+    longer (a status packet is only ever sent in reply to one instruction); the cost is paid
+    only when a reply really is missing.
+    """
+
+    min_timeout_ms = 0.0
+
+    def setPacketTimeout(self, packet_length: int) -> None:
+        super().setPacketTimeout(packet_length)
+        base = float(getattr(self, "packet_timeout", 0.0))
+        self.packet_timeout: float = max(base, self.min_timeout_ms)
+
+
 class DynamixelStage(_Stage):
     """A rotation stage driven by one Dynamixel X-series servo.
 
@@ -162,8 +180,14 @@ class DynamixelStage(_Stage):
         retries: int = 3,
         position_tolerance_counts: int = 3,
         poll_interval_s: float = 0.02,
+        reply_timeout_s: float | None = None,
     ) -> None:
         self.name = name
+        if reply_timeout_s is not None and not (
+                math.isfinite(reply_timeout_s) and 0 < reply_timeout_s <= 10):
+            raise ValueError(f"{name}: reply_timeout_s must be in (0, 10] seconds, got "
+                             f"{reply_timeout_s}")
+        self.reply_timeout_s = reply_timeout_s
         self.port = port
         self.baudrate = int(baudrate)
         self.dxl_id = int(dxl_id)
@@ -198,6 +222,8 @@ class DynamixelStage(_Stage):
         self._ph: Any = None
         self._claim: Any = None  # this process's lock on the port (gonio.locks)
         self._pk: Any = sdk.PacketHandler(2.0)
+        # SDK result of the last failed attempt: tells "no answer" from "corrupted answers".
+        self.last_comm_result: int = sdk.COMM_RX_TIMEOUT
         self._lock = _port_lock(port)
         self._op_lock = asyncio.Lock()
         self._homed = False
@@ -219,7 +245,9 @@ class DynamixelStage(_Stage):
 
     # ------------------------------------------------------------------ transport
     def _open(self) -> None:
-        ph = _ExclusivePortHandler(self.port)
+        ph = _PortHandler(self.port)
+        if self.reply_timeout_s is not None:
+            ph.min_timeout_ms = 1000.0 * self.reply_timeout_s
         try:
             ok = ph.setBaudRate(self.baudrate)
         except Exception as exc:  # pyserial raises SerialException/OSError on a missing port
@@ -251,6 +279,7 @@ class DynamixelStage(_Stage):
         Runs in a worker thread. Raises DeviceUnavailable when every attempt failed.
         """
         last = ""
+        self.last_comm_result = sdk.COMM_RX_TIMEOUT
         with self._lock:
             for attempt in range(self.retries):
                 try:
@@ -273,6 +302,7 @@ class DynamixelStage(_Stage):
                 if result == sdk.COMM_SUCCESS:
                     return value, int(error)
                 last = self._pk.getTxRxResult(result)
+                self.last_comm_result = result
                 self._ph.clearPort()
         raise DeviceUnavailable(
             self.name,
@@ -353,6 +383,17 @@ class DynamixelStage(_Stage):
             try:
                 model, _ = await self._call("ping", self._pk.ping)
             except DeviceUnavailable as exc:
+                if self.last_comm_result == sdk.COMM_RX_CORRUPT:
+                    # It answers, but with broken packets: say that, not "no answer", so the
+                    # lab looks at the cable's noise and connectors rather than the power.
+                    raise DeviceUnavailable(
+                        self.name,
+                        f"Dynamixel ID {self.dxl_id} on {self.port} answers with corrupted "
+                        f"status packets ({self._pk.getTxRxResult(sdk.COMM_RX_CORRUPT)}); "
+                        "check the cable and connectors for noise or a loose contact, and the "
+                        f"baud rate ({self.baudrate})",
+                        code="corrupt_reply",
+                    ) from exc
                 raise DeviceUnavailable(
                     self.name,
                     f"Dynamixel ID {self.dxl_id} does not answer on {self.port} at "

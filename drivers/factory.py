@@ -54,6 +54,7 @@ def build_stage(cfg: StageConfig) -> Stage:
             cfg.port,
             baudrate=cfg.default_baudrate,
             dxl_id=dxl_id,
+            reply_timeout_s=cfg.dynamixel.reply_timeout_s if cfg.dynamixel is not None else None,
             counts_per_degree=cfg.counts_per_degree,
             **common,
         )

@@ -531,6 +531,9 @@ class ModbusSensor(Sensor):
                 "the Modbus connection was re-established during the exposure; the reading "
                 "is discarded and taken again",
                 code="reconnected",
+                # The link dropped because of some request's failure, often another device's
+                # on the same gateway: that device's fault is the one to report.
+                secondary=True,
             )
 
     async def _expose_once(self, exposure_s: float) -> list[float]:

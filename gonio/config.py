@@ -75,6 +75,9 @@ class DynamixelSettings(_Strict):
     """``[stage.dynamixel]``: the servo on the bus."""
 
     id: Annotated[int, Field(ge=0, le=252)] = 1
+    # Longest wait for a status packet, seconds; None = the SDK's (about 35 ms). Raise it for a
+    # slow adapter, a long bus, or a simulator on a busy machine.
+    reply_timeout_s: Annotated[float, Field(gt=0, le=10, allow_inf_nan=False)] | None = None
 
 
 class ZaberSettings(_Strict):
@@ -530,6 +533,11 @@ def load_rig_config(path: str | os.PathLike[str]) -> RigConfig:
     except FileNotFoundError:
         raise ConfigError(
             f"{p}: no such rig config file; start from deploy/rig.example.toml"
+        ) from None
+    except UnicodeDecodeError as exc:
+        raise ConfigError(
+            f"{p}: not a text file (byte {exc.start} is not UTF-8); a rig config is TOML text, "
+            "see deploy/rig.example.toml"
         ) from None
     except OSError as exc:
         raise ConfigError(f"{p}: cannot read the rig config: {exc.strerror}") from None

@@ -143,6 +143,11 @@ def load_daemon_config(path: str | os.PathLike[str] | None) -> DaemonConfig:
             raise DaemonConfigError(
                 f"{p}: no such daemon config file; start from deploy/daemon.example.toml"
             ) from None
+        except UnicodeDecodeError as exc:
+            raise DaemonConfigError(
+                f"{p}: not a text file (byte {exc.start} is not UTF-8); a daemon config is "
+                "TOML text, see deploy/daemon.example.toml"
+            ) from None
         except OSError as exc:
             raise DaemonConfigError(f"{p}: cannot read the daemon config: {exc.strerror}") from None
         except tomllib.TOMLDecodeError as exc:
@@ -362,6 +367,22 @@ def serve(app: Any, cfg: DaemonConfig, on_started: Any = None) -> int:
         access_log=cfg.server.log_level in ("info", "debug"),
     )
     server = uvicorn.Server(config)
+    # After uvicorn has configured its loggers: keys in query strings never reach the access
+    # log, and pymodbus' raw frame dumps are not errors of the daemon.
+    from gonio import logfilters
+
+    logfilters.install()
+    closer = getattr(getattr(app, "state", None), "stream_closer", None)
+    original_handle_exit = server.handle_exit
+
+    def handle_exit(sig: int, frame: Any) -> None:
+        # Ctrl-C / SIGTERM: end the event streams first, so the graceful shutdown has no open
+        # response to wait for (it would wait its whole timeout, then cancel them).
+        if closer is not None:
+            closer.close()
+        original_handle_exit(sig, frame)
+
+    server.handle_exit = handle_exit  # type: ignore[method-assign]
     if on_started is not None:
         original = server.startup
 
@@ -377,6 +398,8 @@ def serve(app: Any, cfg: DaemonConfig, on_started: Any = None) -> int:
         server.startup = startup  # type: ignore[method-assign]
 
     def stop() -> None:
+        if closer is not None:
+            closer.close()
         server.should_exit = True
 
     service = getattr(app.state, "service", None) if hasattr(app, "state") else None

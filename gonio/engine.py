@@ -115,6 +115,7 @@ class ScanEngine:
         self._abort = False
         self._halt = False
         self._wake = asyncio.Event()
+        self._loop: asyncio.AbstractEventLoop | None = None  # the loop run() runs on
         self._angle_task: asyncio.Task[tuple[float, list[ReadingRow]]] | None = None
         self._dark_once: dict[str, tuple[float, ...]] | None = None
         self._angle_times: list[float] = []
@@ -122,28 +123,39 @@ class ScanEngine:
         self.progress = Progress(0, 0, None)
 
     # ------------------------------------------------------------------ control (any time)
+    # The requests may come from another thread (the API's loop, when the engine runs on its
+    # own, gonio.engine_loop): flags are set at once, the wake-up and the cancellation of the
+    # angle in progress go through the engine's loop.
     def request_pause(self, immediate: bool = False) -> None:
         """Pause at the next checkpoint, or now (the current angle is repeated on resume)."""
         self._pause = True
         self._pause_immediate = self._pause_immediate or immediate
-        if immediate:
-            self._interrupt()
-        self._wake.set()
+        self._signal(interrupt=immediate)
 
     def request_resume(self) -> None:
         self._pause = False
         self._pause_immediate = False
-        self._wake.set()
+        self._signal(interrupt=False)
 
     def request_abort(self) -> None:
         self._abort = True
-        self._interrupt()
-        self._wake.set()
+        self._signal(interrupt=True)
 
     def request_halt(self) -> None:
         """Emergency halt: stop at once and send nothing further to any device."""
         self._halt = True
-        self._interrupt()
+        self._signal(interrupt=True)
+
+    def _signal(self, interrupt: bool) -> None:
+        loop = self._loop
+        if loop is not None and not _running_in(loop):
+            loop.call_soon_threadsafe(self._signal_here, interrupt)
+        else:
+            self._signal_here(interrupt)
+
+    def _signal_here(self, interrupt: bool) -> None:
+        if interrupt:
+            self._interrupt()
         self._wake.set()
 
     def _interrupt(self) -> None:
@@ -185,6 +197,7 @@ class ScanEngine:
             ``RUNNING`` when all angles are measured (the caller reconstructs next), otherwise
             the terminal state reached (``FAILED``, ``ABORTED``, ``HALTED``).
         """
+        self._loop = asyncio.get_running_loop()
         if self.state is JobState.QUEUED:
             self._set_state(JobState.RUNNING)
         elif self.state is JobState.PAUSED:
@@ -219,7 +232,7 @@ class ScanEngine:
     async def _measure_all(self) -> None:
         steps = self.store.steps(self.job_id)
         if not steps:
-            here = await self.rig.stage.position()
+            here = await self._stage_position()
             route = order_for_travel(
                 initial_angles(self.plan, self.desc), here, self.desc, self.plan.backlash_deg
             )
@@ -239,6 +252,20 @@ class ScanEngine:
             await self._measure_with_retries(todo[0], steps)
             steps = self.store.steps(self.job_id)
 
+    async def _stage_position(self) -> float:
+        """The stage position for planning a route, with the same fault handling as an angle."""
+        retries = 0
+        trouble: _Trouble | None = None
+        while True:
+            await self._gate()
+            try:
+                return await self.rig.stage.position()
+            except hal.DeviceFault as fault:
+                retries += 1
+                if trouble is None:
+                    trouble = _Trouble(fault, time.monotonic())
+                await self._suspend(fault, retries, trouble)
+
     def _load_dark(self) -> None:
         if self.plan.exposure.dark == "once":
             stored = self.store.darks(self.job_id)
@@ -247,6 +274,7 @@ class ScanEngine:
 
     async def _measure_with_retries(self, step: StepRow, steps: Sequence[StepRow]) -> None:
         retries = 0
+        trouble: _Trouble | None = None  # the first fault at this angle, and when it came
         while True:
             await self._gate()
             t0 = time.monotonic()
@@ -257,7 +285,9 @@ class ScanEngine:
                 continue  # the gate handles the request; the angle is repeated
             except hal.DeviceFault as fault:
                 retries += 1
-                await self._suspend(fault, retries)
+                if trouble is None:
+                    trouble = _Trouble(fault, time.monotonic())
+                await self._suspend(fault, retries, trouble)
                 continue
             self._angle_times.append(time.monotonic() - t0)
             p = self._update_progress(
@@ -391,17 +421,18 @@ class ScanEngine:
         if lamp is not None:
             st = results.pop()
             if isinstance(st, BaseException):
-                raise st
+                raise _primary([st, *(r for r in results if isinstance(r, BaseException))])
             assert isinstance(st, hal.LightStatus)
             if not st.in_band:
                 raise hal.LampOutOfBand(
                     lamp, f"output level {st.level:.3g} is outside its allowed band",
                     code="out_of_band",
                 )
+        errors = [r for r in results if isinstance(r, BaseException)]
+        if errors:
+            raise _primary(errors)
         readings: list[hal.SensorReading] = []
         for r in results:
-            if isinstance(r, BaseException):
-                raise r
             assert isinstance(r, hal.SensorReading)
             readings.append(r)
         return readings
@@ -412,21 +443,26 @@ class ScanEngine:
         return {n: tuple(float(v) for v in r.values) for n, r in zip(names, readings, strict=True)}
 
     # ------------------------------------------------------------------ faults
-    async def _suspend(self, fault: hal.DeviceFault, retries: int) -> None:
-        """Suspend on ``fault``, recover, and return when the angle may be retried."""
+    async def _suspend(self, fault: hal.DeviceFault, retries: int, trouble: _Trouble) -> None:
+        """Suspend on ``fault``, recover, and return when the angle may be retried.
+
+        ``retries`` counts the consecutive failures at this angle; ``trouble`` is the first of
+        them (reported with the last one when they differ, so a reason never loses the cause
+        that started it). A device that does not answer at all is waited for, up to
+        ``wait_for_device_s`` from the first fault, once the retries are spent.
+        """
         policy = self.plan.faults
         if not fault.recoverable:
-            raise JobFailed(f"unrecoverable device fault: {fault}")
-        if retries > policy.max_retries:
-            raise JobFailed(
-                f"device fault persisted after {policy.max_retries} retries: {fault} "
-                f"(code {fault.code}); fix the device and submit the job again"
-            )
+            raise JobFailed(f"unrecoverable device fault: {fault}"
+                            + trouble.began_as(fault))
+        if retries > policy.max_retries and not self._may_wait(fault, trouble):
+            raise JobFailed(self._failure(fault, trouble, retries - 1))
         self._set_state(
             JobState.SUSPENDED, reason=str(fault), device=fault.device, code=fault.code,
             retry=retries,
         )
         await self._lights_off()
+        waiting_announced = False
         while True:
             await self._sleep(policy.retry_delay_s)
             await self._gate_in_suspension()
@@ -435,18 +471,45 @@ class ScanEngine:
                 break
             except hal.DeviceFault as again:
                 retries += 1
-                self.store.append_event(self.job_id, "fault", {
-                    "device": again.device, "code": again.code, "message": str(again),
-                    "retry": retries})
-                if not again.recoverable or retries > policy.max_retries:
-                    raise JobFailed(
-                        f"device fault persisted after {policy.max_retries} retries: {again} "
-                        f"(code {again.code}); fix the device and submit the job again"
-                    ) from None
+                if not again.recoverable:
+                    raise JobFailed(f"unrecoverable device fault: {again}"
+                                    + trouble.began_as(again)) from None
+                if retries <= policy.max_retries:
+                    self.store.append_event(self.job_id, "fault", {
+                        "device": again.device, "code": again.code, "message": str(again),
+                        "retry": retries})
+                elif not self._may_wait(again, trouble):
+                    raise JobFailed(self._failure(again, trouble, retries - 1)) from None
+                elif not waiting_announced or str(again) != str(fault):
+                    # One event when the waiting starts (and when the cause changes), not one
+                    # per probe: a lab may leave a job waiting for many minutes.
+                    waiting_announced = True
+                    left = policy.wait_for_device_s - (time.monotonic() - trouble.since)
+                    self.store.append_event(self.job_id, "fault", {
+                        "device": again.device, "code": again.code, "message": str(again),
+                        "retry": retries, "waiting_s": round(max(left, 0.0), 1),
+                        "note": f"{again.device} does not answer; waiting up to "
+                                f"{max(left, 0.0):.0f} s more for it (check its power and "
+                                "cable); the job resumes from its checkpoint when it answers"})
                 fault = again
         await self._sleep(policy.resume_settle_s)
         self.store.append_event(self.job_id, "recovered", {
             "device": fault.device, "code": fault.code})
+
+    def _may_wait(self, fault: hal.DeviceFault, trouble: _Trouble) -> bool:
+        """True while a silent device may still be waited for (see ``wait_for_device_s``)."""
+        limit = self.plan.faults.wait_for_device_s
+        return (isinstance(fault, hal.DeviceUnavailable) and limit > 0
+                and time.monotonic() - trouble.since < limit)
+
+    def _failure(self, fault: hal.DeviceFault, trouble: _Trouble, retries: int) -> str:
+        waited = time.monotonic() - trouble.since
+        limit = self.plan.faults.wait_for_device_s
+        how = f"{retries} retries"
+        if isinstance(fault, hal.DeviceUnavailable) and limit > 0:
+            how += f" and {waited:.0f} s (wait_for_device_s {limit:g})"
+        return (f"device fault persisted after {how}: {fault} (code {fault.code})"
+                + trouble.began_as(fault) + "; fix the device and submit the job again")
 
     async def _gate_in_suspension(self) -> None:
         if self._halt:
@@ -511,7 +574,7 @@ class ScanEngine:
         if not new:
             self.store.append_event(self.job_id, "adaptive_done", {"reason": "converged"})
             return False
-        here = await self.rig.stage.position()
+        here = await self._stage_position()
         route = order_for_travel(new, here, self.desc, plan.backlash_deg)
         k0 = max(s.angle_index for s in steps) + 1
         self.store.add_steps(
@@ -543,6 +606,43 @@ class ScanEngine:
         """Lights off and stage stopped; best effort, every step tried even if one fails."""
         await self._lights_off()
         await _quietly(self.rig.stage.stop())
+
+
+@dataclass(frozen=True)
+class _Trouble:
+    """The first fault at an angle and when it happened (monotonic seconds)."""
+
+    first: hal.DeviceFault
+    since: float
+
+    def began_as(self, last: hal.DeviceFault) -> str:
+        """``"; it began as: ..."`` when the first fault says something else than ``last``."""
+        if str(self.first) == str(last):
+            return ""
+        return f"; it began as: {self.first} (code {self.first.code})"
+
+
+def _running_in(loop: asyncio.AbstractEventLoop) -> bool:
+    """True when the caller runs on ``loop`` (its thread, inside it)."""
+    try:
+        return asyncio.get_running_loop() is loop
+    except RuntimeError:
+        return False
+
+
+def _primary(errors: Sequence[BaseException]) -> BaseException:
+    """The error to report when several calls failed together.
+
+    Anything but a device fault (a bug, a cancellation) first; then a fault that is a cause
+    rather than a consequence of another device's fault (``secondary``); then the first.
+    """
+    for e in errors:
+        if not isinstance(e, hal.DeviceFault):
+            return e
+    for e in errors:
+        if not getattr(e, "secondary", False):
+            return e
+    return errors[0]
 
 
 class _Halt(Exception):

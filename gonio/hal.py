@@ -34,13 +34,19 @@ class DeviceFault(Exception):
     recoverable : bool
         True when the condition may clear by itself or by a driver recovery (reboot, reconnect,
         ``warnings clear``): the engine suspends the job and retries. False fails the job.
+    secondary : bool
+        True when this fault is only a consequence of another device's fault (e.g. a reading
+        discarded because a shared link was re-established after another device on it went
+        silent). When several devices fail at once, the engine reports a primary fault.
     """
 
-    def __init__(self, device: str, message: str, code: str = "fault", recoverable: bool = True):
+    def __init__(self, device: str, message: str, code: str = "fault", recoverable: bool = True,
+                 secondary: bool = False):
         super().__init__(f"{device}: {message}")
         self.device = device
         self.code = code
         self.recoverable = recoverable
+        self.secondary = secondary
 
 
 class StageFault(DeviceFault):

@@ -27,18 +27,52 @@ Every check a plan can fail raises :class:`PlanError` before anything moves.
 from __future__ import annotations
 
 import math
+import unicodedata
 from collections.abc import Sequence
 from typing import Annotated, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field
 
 from gonio import hal
 
 
 class PlanError(ValueError):
     """A plan that cannot run on this rig; the message says what is wrong and what to do."""
+
+
+# --------------------------------------------------------------------------- input types
+def check_text(value: str) -> str:
+    """Refuse text that cannot be stored, written to HDF5 or shown: control characters
+    (NUL included) and lone surrogates. Returns ``value`` unchanged.
+
+    Names travel into SQLite, HDF5 attributes (which cannot hold NUL), file names of exports
+    and log lines; refusing them at the door means a scan is never measured and then lost.
+    """
+    for i, ch in enumerate(value):
+        cat = unicodedata.category(ch)
+        if cat == "Cc":
+            raise ValueError(
+                f"contains the control character U+{ord(ch):04X} at position {i}; "
+                "use printable text only"
+            )
+        if cat == "Cs":
+            raise ValueError(
+                f"contains a lone surrogate U+{ord(ch):04X} at position {i} (not valid "
+                "Unicode text); send the name as valid UTF-8"
+            )
+    return value
+
+
+Text = Annotated[str, AfterValidator(check_text)]
+"""A user-supplied name or label: printable Unicode, no control characters."""
+
+Count = Annotated[int, Field(strict=True)]
+"""An integer that must be sent as one: JSON ``true`` or ``8.0`` is not a count."""
+
+FINITE = ConfigDict(extra="forbid", allow_inf_nan=False)
+"""Config of every request model: unknown keys and NaN / Infinity (JSON 1e999) refused."""
 
 
 # --------------------------------------------------------------------------- rig description
@@ -68,8 +102,8 @@ class PairSpec(BaseModel):
 
     model_config = ConfigDict(frozen=True)
 
-    light: str
-    sensor: str
+    light: Text
+    sensor: Text
 
     def label(self) -> str:
         return f"{self.light}/{self.sensor}"
@@ -146,10 +180,10 @@ class ExposureSettings(BaseModel):
     never (the sensors subtract their own dark).
     """
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = FINITE
 
     exposure_s: float = Field(default=0.01, gt=0, description="seconds per exposure")
-    averages: int = Field(default=1, ge=1, le=1000)
+    averages: Count = Field(default=1, ge=1, le=1000)
     light_settle_s: float = Field(default=0.05, ge=0, le=60)
     dark: Literal["every_angle", "once", "none"] = "once"
 
@@ -159,13 +193,23 @@ class FaultPolicy(BaseModel):
 
     After a fault the engine waits ``retry_delay_s``, tries the device's recovery (clear
     faults, reconnect, re-check the lamp), waits ``resume_settle_s`` and repeats the
-    interrupted angle. More than ``max_retries`` consecutive failures at one angle fail the job.
+    interrupted angle. More than ``max_retries`` consecutive failures at one angle fail the job,
+    except for a device that does not answer at all: the job then stays suspended and the
+    device is tried every ``retry_delay_s`` until it answers (then the angle is repeated from
+    the checkpoint) or ``wait_for_device_s`` have passed since the first fault.
     """
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = FINITE
 
-    max_retries: int = Field(default=5, ge=0, le=100)
+    max_retries: Count = Field(default=5, ge=0, le=100)
     retry_delay_s: float = Field(default=1.0, ge=0, le=3600)
+    wait_for_device_s: float = Field(
+        default=600.0, ge=0, le=86400,
+        description="when a device stops answering (unplugged cable, power cut) and the "
+                    "retries are spent, keep the job suspended and try the device every "
+                    "retry_delay_s until it answers again, up to this many seconds from the "
+                    "first fault; then the job fails. 0: fail after max_retries",
+    )
     resume_settle_s: float = Field(default=0.5, ge=0, le=3600)
     saturation: Literal["suspend", "record"] = Field(
         default="suspend",
@@ -174,10 +218,27 @@ class FaultPolicy(BaseModel):
     )
 
 
-class _PlanBase(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+def _check_start(value: float) -> float:
+    if not 0.0 <= value < 360.0:
+        raise ValueError(
+            f"start_deg is a specimen angle in [0, 360) degrees; {value:g} is outside (it is "
+            f"not wrapped silently). For the same angle write {value % 360.0:g}"
+        )
+    return value
 
-    specimen: str = Field(default="specimen", min_length=1, max_length=200)
+
+StartDeg = Annotated[
+    float,
+    AfterValidator(_check_start),
+    Field(description="first specimen angle, degrees in [0, 360); values outside are refused, "
+                      "not wrapped"),
+]
+
+
+class _PlanBase(BaseModel):
+    model_config = FINITE
+
+    specimen: Text = Field(default="specimen", min_length=1, max_length=200)
     pairs: list[PairSpec] | None = Field(
         default=None, description="pairs to measure; null means every pair of the rig"
     )
@@ -197,24 +258,25 @@ class UniformPlan(_PlanBase):
     """n pairs x r uniformly spaced stage angles."""
 
     kind: Literal["uniform"] = "uniform"
-    rotations: int = Field(default=8, description="number of stage angles r")
-    start_deg: float = 0.0
+    rotations: Count = Field(default=8, description="number of stage angles r")
+    start_deg: StartDeg = 0.0
 
 
 class AdaptivePlan(_PlanBase):
     """Uniform start, then refinement where PCHIP mispredicts (MATH 7)."""
 
     kind: Literal["adaptive"] = "adaptive"
-    initial_rotations: int = Field(default=8, description="r0 uniform angles of the first round")
+    initial_rotations: Count = Field(default=8,
+                                     description="r0 uniform angles of the first round")
     threshold: float = Field(default=0.1, gt=0, description="relative error e (0.1 = 10 %)")
-    max_samples: int | None = Field(
+    max_samples: Count | None = Field(
         default=None, gt=0, description="budget of pair readings (pairs x angles); null = none"
     )
     min_step_deg: float | None = Field(
         default=None, gt=0, description="finest angular step; null = the stage resolution"
     )
-    max_rounds: int = Field(default=6, ge=1, le=20)
-    start_deg: float = 0.0
+    max_rounds: Count = Field(default=6, ge=1, le=20)
+    start_deg: StartDeg = 0.0
 
 
 class CalibrationPlan(_PlanBase):
@@ -222,9 +284,9 @@ class CalibrationPlan(_PlanBase):
 
     kind: Literal["calibration"] = "calibration"
     reference_albedo: float = Field(gt=0, le=1, description="hemispherical albedo of the reference")
-    reference_name: str = "white reference"
-    rotations: int = Field(default=4, description="angles averaged to even out the reference")
-    start_deg: float = 0.0
+    reference_name: Text = Field(default="white reference", min_length=1, max_length=200)
+    rotations: Count = Field(default=4, description="angles averaged to even out the reference")
+    start_deg: StartDeg = 0.0
 
 
 Plan = Annotated[UniformPlan | AdaptivePlan | CalibrationPlan, Field(discriminator="kind")]

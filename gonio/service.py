@@ -19,17 +19,28 @@ import asyncio
 import contextlib
 import logging
 import threading
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncIterator, Callable, Coroutine
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, TypeVar
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, Field
 
 from gonio import hal
 from gonio.calibration import Calibration, calibration_in_effect
+from gonio.engine_loop import EngineLoop
 from gonio.jobstates import ACTIVE_STATES, IllegalTransition, JobState, check_action
 from gonio.maintenance import LOCK_FILE_NAME, MaintenanceLock
-from gonio.plans import AnyPlan, DryRun, Plan, PlanError, RigDescription, dry_run, parse_plan
+from gonio.plans import (
+    FINITE,
+    AnyPlan,
+    Count,
+    DryRun,
+    Plan,
+    PlanError,
+    RigDescription,
+    dry_run,
+    parse_plan,
+)
 from gonio.store import EventRow, JobRow, JobStore, ReadingRow
 from gonio.store import NotFound as StoreNotFound
 from gonio.worker import BasisProvider, Worker, default_basis_provider
@@ -65,17 +76,17 @@ class Conflict(ValueError):
 class JobRequest(BaseModel):
     """A scan request: the plan, and where it goes in the queue."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = FINITE
 
     plan: Plan
-    priority: int = Field(default=0, ge=-1000, le=1000, description="higher runs first")
+    priority: Count = Field(default=0, ge=-1000, le=1000, description="higher runs first")
 
 
 class ReorderRequest(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    model_config = FINITE
 
-    priority: int | None = Field(default=None, ge=-1000, le=1000)
-    position: int | None = Field(default=None, ge=0, description="0 = next to run")
+    priority: Count | None = Field(default=None, ge=-1000, le=1000)
+    position: Count | None = Field(default=None, ge=0, le=2**31, description="0 = next to run")
 
 
 class JobInfo(BaseModel):
@@ -162,7 +173,7 @@ class StageRequest(BaseModel):
     """A manual stage command: commissioning (set the zero at the holder's reference mark) and
     loading specimens. Refused while a job is active; ``stop`` is always accepted."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = FINITE
 
     action: Literal["move", "home", "stop", "clear_faults"] = Field(
         description="move to angle_deg; home = make the present position 0 deg; stop; "
@@ -180,6 +191,8 @@ class StageState(BaseModel):
 class DeviceError(RuntimeError):
     """A device fault while serving a manual command (the API answers 503 with the reason)."""
 
+
+T = TypeVar("T")
 
 _PREVIEW_CACHE = 8
 """Preview PNGs kept in memory (a few tens of kB each)."""
@@ -218,7 +231,10 @@ class GonioService:
         self._loop: asyncio.AbstractEventLoop | None = None
         self._cond: asyncio.Condition | None = None
         self._version = 0
-        self._task: asyncio.Task[None] | None = None
+        self._task: asyncio.Task[None] | None = None  # the worker, on the engine loop
+        # The worker, the engine and every device call run on their own loop and thread, so
+        # request handling on the API's loop cannot delay a scan (gonio/engine_loop.py).
+        self._engine = EngineLoop()
         self._preview_lock = threading.Lock()
         self._previews: dict[tuple[str, int], bytes] = {}
         self._basis_lock = threading.Lock()
@@ -243,10 +259,18 @@ class GonioService:
 
     # ------------------------------------------------------------------ lifecycle
     async def start(self) -> None:
-        """Reconcile jobs left active by a previous process and start the worker."""
+        """Reconcile jobs left active by a previous process and start the worker.
+
+        The worker runs on the service's engine loop, a thread of its own
+        (:class:`gonio.engine_loop.EngineLoop`); this loop serves requests and events.
+        """
         self._loop = asyncio.get_running_loop()
         self._cond = asyncio.Condition()
         self.store.reconcile(self._can_resume)
+        self._engine.start()
+        await self._engine.run(self._start_worker())
+
+    async def _start_worker(self) -> None:
         self._task = asyncio.create_task(self._run_worker(), name="gonio-worker")
 
     async def _run_worker(self) -> None:
@@ -272,6 +296,17 @@ class GonioService:
 
     async def stop(self) -> None:
         """Stop the worker (an active job stays active and resumes at the next start)."""
+        if self._engine.running:
+            await self._engine.run(self._stop_worker())
+            await asyncio.to_thread(self._engine.close)
+        else:
+            await self._stop_worker()
+        self.store.remove_listener(self._on_event)
+        for lock in reversed(self.owned):
+            lock.release()
+        self.owned.clear()
+
+    async def _stop_worker(self) -> None:
         if self._task is not None:
             self._task.cancel()
             with contextlib.suppress(asyncio.CancelledError):
@@ -281,10 +316,12 @@ class GonioService:
         if self._connected:
             await self._rig.close()
             self._connected = False
-        self.store.remove_listener(self._on_event)
-        for lock in reversed(self.owned):
-            lock.release()
-        self.owned.clear()
+
+    async def _on_engine(self, coro: Coroutine[Any, Any, T]) -> T:
+        """Run ``coro`` where the devices live: the engine loop once started, else here."""
+        if self._engine.running:
+            return await self._engine.run(coro)
+        return await coro
 
     def _can_resume(self, job: JobRow) -> str | None:
         try:
@@ -609,6 +646,14 @@ class GonioService:
 
     # ------------------------------------------------------------------ rig
     async def rig_status(self) -> RigStatus:
+        devices = await self._on_engine(self._device_states())
+        st = self.status()
+        return RigStatus(
+            connected=self._connected, error=self._connect_error,
+            current_job=st.current_job, queue_held=st.queue_held, devices=devices,
+        )
+
+    async def _device_states(self) -> list[DeviceState]:
         devices: list[DeviceState] = []
         if self._connected:
             rig = self._rig
@@ -625,13 +670,14 @@ class GonioService:
                     devices.append(DeviceState(name=name, ok=ok, detail=detail))
                 except Exception as exc:  # report, do not raise: this is a status page
                     devices.append(DeviceState(name=name, ok=False, detail={"error": str(exc)}))
-        st = self.status()
-        return RigStatus(
-            connected=self._connected, error=self._connect_error,
-            current_job=st.current_job, queue_held=st.queue_held, devices=devices,
-        )
+        return devices
 
     async def stage_command(self, request: StageRequest) -> StageState:
+        """Run one manual stage command and return the stage state after it (see
+        :meth:`_stage_command`); it runs on the engine loop, where the devices live."""
+        return await self._on_engine(self._stage_command(request))
+
+    async def _stage_command(self, request: StageRequest) -> StageState:
         """Run one manual stage command and return the stage state after it.
 
         The queue is held for the duration so no job starts under a manual move.
@@ -692,9 +738,12 @@ class GonioService:
         DeviceError
             The stage does not answer or the rig cannot be connected.
         """
-        try:
+        async def read() -> hal.StageStatus:
             rig = await self._get_rig()
-            st = await rig.stage.status()
+            return await rig.stage.status()
+
+        try:
+            st = await self._on_engine(read())  # where the drivers' connections live
         except (hal.DeviceFault, OSError) as exc:
             raise DeviceError(f"stage status failed: {exc}") from exc
         return StageState(position_deg=st.position_deg, moving=st.moving, homed=st.homed,

@@ -110,14 +110,22 @@ class Worker:
         # maintenance lock here. Checked again at least every GATE_POLL_S while it blocks.
         self.gate: Callable[[], str | None] = lambda: None
         self._wake = asyncio.Event()
+        self._loop: asyncio.AbstractEventLoop | None = None  # where run_forever runs
         self._recon_task: asyncio.Task[dict[str, Any]] | None = None
         self._abort_recon = False
         self._stopping = False
 
     # ------------------------------------------------------------------ control
     def wake(self) -> None:
-        """Look at the queue again (a job was submitted, resumed or released)."""
-        self._wake.set()
+        """Look at the queue again (a job was submitted, resumed or released).
+
+        Callable from any thread: the worker may run on its own loop (gonio.engine_loop).
+        """
+        loop = self._loop
+        if loop is not None and not loop.is_closed() and not _running_in(loop):
+            loop.call_soon_threadsafe(self._wake.set)
+        else:
+            self._wake.set()
 
     def hold(self, reason: str, durable: bool = True) -> None:
         """Take no new job until :meth:`release`; ``durable`` holds survive restarts (a
@@ -134,9 +142,11 @@ class Worker:
         self.wake()
 
     def abort_reconstruction(self, job_id: int) -> bool:
-        if self.current_job == job_id and self._recon_task is not None:
+        """Cancel ``job_id``'s reconstruction if it is the one running (from any thread)."""
+        task = self._recon_task
+        if self.current_job == job_id and task is not None:
             self._abort_recon = True
-            self._recon_task.cancel()
+            task.get_loop().call_soon_threadsafe(task.cancel)
             return True
         return False
 
@@ -153,6 +163,7 @@ class Worker:
 
     # ------------------------------------------------------------------ loop
     async def run_forever(self) -> None:
+        self._loop = asyncio.get_running_loop()
         while not self._stopping:
             job = self.next_job()
             if job is None:
@@ -361,6 +372,13 @@ class Worker:
         if self._recon_task is not None:
             with contextlib.suppress(BaseException):
                 await asyncio.shield(self._recon_task)
+
+
+def _running_in(loop: asyncio.AbstractEventLoop) -> bool:
+    try:
+        return asyncio.get_running_loop() is loop
+    except RuntimeError:
+        return False
 
 
 def _exposure_mismatch(cal: Calibration, readings: list[Any]) -> str | None:

@@ -29,6 +29,7 @@ from gonio.brdf import library
 from gonio.brdf.models import GGX, Lambert, LobeSum
 from gonio.brdf.table import BRDFTable
 from gonio.config import (
+    DynamixelSettings,
     LightConfig,
     LightRegisters,
     ModbusTransport,
@@ -80,6 +81,9 @@ FAULT_HELP = (
     "stage-silent, stage-overload, stage-stall"
 )
 
+
+SIM_REPLY_TIMEOUT_S = 0.5
+"""Reply timeout of the simulated Dynamixel's driver: generous, for busy test machines."""
 
 WHITE_REFERENCE_ALBEDO = 0.99
 """Hemispherical albedo of the simulated white reference (a sintered-PTFE-like target)."""
@@ -371,6 +375,9 @@ class SimRig:
                 driver="dynamixel",
                 port=self._stage_port,
                 baudrate=57600,
+                # The simulator answers from a Python thread: on a saturated machine that can
+                # take longer than the SDK's 35 ms (SIM_REPLY_TIMEOUT_S).
+                dynamixel=DynamixelSettings(reply_timeout_s=SIM_REPLY_TIMEOUT_S),
                 counts_per_rev=4096,
                 speed_dps=o.speed_dps,
                 accel_dps2=o.accel_dps2,

@@ -16,19 +16,25 @@ the lab page. The service's typed errors become HTTP statuses in one place here:
 
 from __future__ import annotations
 
+import json
 import logging
+import math
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable
 from contextlib import asynccontextmanager
 from pathlib import Path
+from typing import Any
 
 from fastapi import FastAPI, Request
+from fastapi.exceptions import RequestValidationError
 from fastapi.responses import FileResponse, JSONResponse
 from fastapi.staticfiles import StaticFiles
+from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from gonio import __version__
 from gonio.api import routes_design, routes_jobs, routes_results, routes_rig, routes_system
-from gonio.api.events import HEARTBEAT_S
+from gonio.api.errors import document_errors
+from gonio.api.events import HEARTBEAT_S, StreamCloser
 from gonio.api.settings import ApiSettings, install
 from gonio.brdf.design import DesignError
 from gonio.brdf.feasibility import FeasibilityError
@@ -51,8 +57,58 @@ reads are open unless the daemon is configured otherwise. Live events: `GET /api
 """
 
 
-def _error(status: int, exc: Exception) -> JSONResponse:
-    return JSONResponse({"detail": str(exc)}, status_code=status)
+class SafeJSONResponse(JSONResponse):
+    """JSON that always renders: ASCII-escaped (a lone surrogate echoed from a request cannot
+    break the UTF-8 encoding) and non-finite floats as null (JSON has no NaN)."""
+
+    def render(self, content: Any) -> bytes:
+        try:
+            text = json.dumps(content, ensure_ascii=True, allow_nan=False, separators=(",", ":"))
+        except ValueError:
+            text = json.dumps(_finite(content), ensure_ascii=True, separators=(",", ":"))
+        return text.encode("ascii")
+
+
+def _finite(value: Any) -> Any:
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_finite(v) for v in value]
+    return value
+
+
+def _error(status: int, exc: Exception, headers: dict[str, str] | None = None) -> JSONResponse:
+    return SafeJSONResponse({"detail": str(exc)}, status_code=status, headers=headers)
+
+
+def _loc_item(part: Any) -> str | int:
+    return part if isinstance(part, int) else str(part)
+
+
+async def _validation_error(_request: Request, exc: Exception) -> JSONResponse:
+    """422 for a request that does not parse: ``{"detail": [{"loc", "msg", "type"}, ...]}``.
+
+    The offending input is not echoed back (FastAPI's default does): it may be NaN, huge or
+    not valid text, and echoing it is what used to make the error response itself fail.
+    """
+    assert isinstance(exc, RequestValidationError)
+    detail = [
+        {
+            "loc": [_loc_item(p) for p in err.get("loc", ())],
+            "msg": str(err.get("msg", "invalid value")),
+            "type": str(err.get("type", "value_error")),
+        }
+        for err in exc.errors()
+    ]
+    return SafeJSONResponse({"detail": detail}, status_code=422)
+
+
+async def _http_error(_request: Request, exc: Exception) -> JSONResponse:
+    assert isinstance(exc, StarletteHTTPException)
+    return SafeJSONResponse({"detail": str(exc.detail)}, status_code=exc.status_code,
+                            headers=exc.headers)
 
 
 def _mapped(status: int) -> Callable[[Request, Exception], Awaitable[JSONResponse]]:
@@ -93,6 +149,7 @@ def create_app(
         try:
             yield
         finally:
+            app.state.stream_closer.close()
             if manage_service:
                 await service.stop()
 
@@ -109,8 +166,11 @@ def create_app(
     app.state.started_at = time.monotonic()
     app.state.sse_subscribers = 0
     app.state.sse_heartbeat_s = sse_heartbeat_s
+    app.state.stream_closer = StreamCloser()
     install(app, settings)
 
+    app.add_exception_handler(RequestValidationError, _validation_error)
+    app.add_exception_handler(StarletteHTTPException, _http_error)
     for exc_type, status in (
         (NotFound, 404),
         (Conflict, 409),
@@ -132,11 +192,9 @@ def create_app(
 
     app.add_exception_handler(ResultFileError, result_file_error)
 
-    app.include_router(routes_system.router)
-    app.include_router(routes_rig.router)
-    app.include_router(routes_jobs.router)
-    app.include_router(routes_results.router)
-    app.include_router(routes_design.router)
+    for module in (routes_system, routes_rig, routes_jobs, routes_results, routes_design):
+        document_errors(module.router.routes)
+        app.include_router(module.router)
 
     app.mount("/static", StaticFiles(directory=STATIC_DIR), name="static")
 

@@ -182,3 +182,17 @@ async def require_read_access(
     typo in its key learns about it on its first read rather than on its first write.
     """
     return _check(request, presented, required=_policy(request).read_requires_key)
+
+
+async def require_key_when_configured(
+    request: Request, presented: str | None = Depends(_api_key_scheme)
+) -> Caller:
+    """FastAPI dependency for reads that cost the daemon real work (the dry run).
+
+    A dry run changes nothing, but it computes; an anonymous caller could repeat it to slow the
+    scan. So it needs a key whenever the daemon has keys. A read-only daemon (no keys at all)
+    keeps it open: there is nothing to protect a queue from that nobody can fill.
+    """
+    required = len(_policy(request).keyring) > 0 or _policy(request).read_requires_key
+    return _check(request, presented, required=required)
+

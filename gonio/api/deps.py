@@ -6,7 +6,7 @@ from typing import Annotated
 
 from fastapi import Depends, Path, Request
 
-from gonio.api.auth import require_read_access, require_write_key
+from gonio.api.auth import require_key_when_configured, require_read_access, require_write_key
 from gonio.api.maintenance import refuse_while_locked
 from gonio.service import GonioService
 
@@ -20,10 +20,16 @@ Service = Annotated[GonioService, Depends(get_service)]
 
 # Job ids are positive integers: anything else (a path, "../x", a huge number) is a 422 before
 # any handler runs, which is what makes "result by job id only" traversal-proof.
-JobId = Annotated[int, Path(ge=1, le=2**62, description="job id, as returned when it was created")]
+MAX_ID = 2**62
+"""Largest job id or event seq a request may name (SQLite integers are 64-bit signed)."""
+
+JobId = Annotated[int, Path(ge=1, le=MAX_ID, description="job id, as returned when it was created")]
 
 READ = [Depends(require_read_access)]
 """Read-only routes: open, or keyed when the daemon is configured so."""
+
+COMPUTE = [Depends(require_key_when_configured)]
+"""Reads that compute (dry run): keyed whenever the daemon has keys; not blocked by the lock."""
 
 WRITE = [Depends(require_write_key), Depends(refuse_while_locked)]
 """Mutating routes: a valid key, and no maintenance lock (checked in that order: 401/403, 423)."""

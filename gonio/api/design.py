@@ -17,7 +17,7 @@ import math
 from typing import Any
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, Field, model_validator
 
 from gonio.brdf.design import (
     BasisLike,
@@ -29,6 +29,7 @@ from gonio.brdf.design import (
 from gonio.brdf.feasibility import RigConstraints, parse_exclusion
 from gonio.brdf.presets import Preset
 from gonio.brdf.roughness import roughness_bound
+from gonio.plans import FINITE, Count, Text
 
 MAX_PAIRS = 40
 """More independent pairs than any rig mounts (V&F use up to 20)."""
@@ -42,33 +43,33 @@ DEFAULT_TIME_LIMIT_S = 10.0
 class DesignRequest(BaseModel):
     """What to optimise, under which mounting limits, for how long."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = FINITE
 
-    pairs: int | None = Field(None, ge=1, le=MAX_PAIRS,
+    pairs: Count | None = Field(None, ge=1, le=MAX_PAIRS,
                               description="number of independent light/sensor pairs")
-    lights: int | None = Field(None, ge=1, le=MAX_DEVICES,
+    lights: Count | None = Field(None, ge=1, le=MAX_DEVICES,
                                description="product rig: lights, each measured with every sensor")
-    sensors: int | None = Field(None, ge=1, le=MAX_DEVICES, description="product rig: sensors")
+    sensors: Count | None = Field(None, ge=1, le=MAX_DEVICES, description="product rig: sensors")
     max_elevation_deg: float = Field(80.0, gt=0, lt=90,
                                      description="largest device angle from the normal, degrees")
     min_separation_deg: float = Field(10.0, ge=0, lt=180,
                                       description="smallest light-sensor angle of a pair, degrees")
     min_device_distance_deg: float = Field(
         10.0, ge=0, lt=180, description="smallest angle between any two devices, degrees")
-    exclusions: list[str] = Field(
+    exclusions: list[Text] = Field(
         default_factory=list, max_length=32,
         description="lab regions without devices: 'cone:THETA,PHI,RADIUS' or "
                     "'box:THETA_MIN,THETA_MAX,PHI_MIN,PHI_MAX' (degrees)")
-    seed: int = Field(0, ge=0, le=2**31 - 1, description="random seed of the search")
+    seed: Count = Field(0, ge=0, le=2**31 - 1, description="random seed of the search")
     time_limit_s: float | None = Field(
         None, gt=0, le=MAX_TIME_LIMIT_S,
         description="stop starting new descents after this long, seconds; at most the daemon's "
                     f"design time limit (default: {DEFAULT_TIME_LIMIT_S:g} s or that limit, if "
                     "lower)")
-    starts: int = Field(10, ge=1, le=100, description="random starts")
-    descents: int = Field(10, ge=1, le=100, description="descents per start (pairs only)")
-    neighbourhood: int = Field(7, ge=1, le=15, description="odd neighbourhood size of the search")
-    rotations: int = Field(8, ge=1, le=360,
+    starts: Count = Field(10, ge=1, le=100, description="random starts")
+    descents: Count = Field(10, ge=1, le=100, description="descents per start (pairs only)")
+    neighbourhood: Count = Field(7, ge=1, le=15, description="odd neighbourhood size of the search")
+    rotations: Count = Field(8, ge=1, le=360,
                            description="uniform stage angles for the roughness bound")
 
     @model_validator(mode="after")

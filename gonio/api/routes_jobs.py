@@ -7,7 +7,7 @@ from typing import Any
 from fastapi import APIRouter, Query, Response, status
 from pydantic import BaseModel, Field
 
-from gonio.api.deps import READ, WRITE, JobId, Service
+from gonio.api.deps import COMPUTE, READ, WRITE, JobId, Service
 from gonio.jobstates import JobState
 from gonio.plans import DryRun, Plan
 from gonio.service import JobDetail, JobInfo, JobRequest, ReorderRequest
@@ -54,7 +54,7 @@ def create_job(request: JobRequest, service: Service, response: Response) -> Job
 
 @router.post(
     "/dry-run",
-    dependencies=READ,
+    dependencies=COMPUTE,
     summary="Check and time a plan without queueing it",
     responses={422: {"description": "the plan cannot run on this rig"}},
 )

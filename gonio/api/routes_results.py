@@ -26,7 +26,8 @@ from gonio.service import NotFound
 router = APIRouter(prefix="/api/v1/jobs", tags=["results"])
 
 _NO_RESULT: dict[int | str, dict[str, Any]] = {
-    404: {"description": "no such job, or it has no result yet"}
+    404: {"description": "no such job, or it has no result yet"},
+    500: {"description": "the job's result file exists but cannot be read"},
 }
 _GRID_STEP_DEG = 5
 

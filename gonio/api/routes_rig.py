@@ -12,7 +12,7 @@ from gonio.api.auth import Caller, require_write_key
 from gonio.api.deps import READ, WRITE, Service
 from gonio.api.maintenance import LockState, MaintenanceLock
 from gonio.calibration import Calibration
-from gonio.plans import RigDescription
+from gonio.plans import FINITE, RigDescription, Text
 from gonio.service import GonioService, RigStatus, StageRequest, StageState
 
 router = APIRouter(prefix="/api/v1", tags=["rig"])
@@ -33,7 +33,9 @@ class MaintenanceState(BaseModel):
 
 
 class LockRequest(BaseModel):
-    reason: str = Field(min_length=1, max_length=500, description="shown to every client")
+    model_config = FINITE
+
+    reason: Text = Field(min_length=1, max_length=500, description="shown to every client")
 
 
 def _state(st: LockState) -> MaintenanceState:
@@ -85,6 +87,8 @@ async def stage_state(service: Service) -> StageState:
 
 
 @router.post("/rig/stage", dependencies=WRITE,
+             responses={409: {"description": "a job is active: the stage is in use"},
+                        503: {"description": "the stage reported a fault or did not answer"}},
              summary="Manual stage command: move, home (set zero here), stop, clear faults")
 async def stage_command(body: StageRequest, service: Service) -> StageState:
     return await service.stage_command(body)

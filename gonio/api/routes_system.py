@@ -11,7 +11,7 @@ from fastapi.responses import JSONResponse, PlainTextResponse, StreamingResponse
 from pydantic import BaseModel
 
 from gonio import __version__
-from gonio.api.deps import READ, Service
+from gonio.api.deps import MAX_ID, READ, Service
 from gonio.api.events import sse_stream
 from gonio.api.prometheus import CONTENT_TYPE, Sample, render
 from gonio.jobstates import JobState
@@ -88,13 +88,16 @@ def metrics(service: Service, request: Request) -> PlainTextResponse:
 async def events(
     service: Service,
     request: Request,
-    since: int | None = Query(None, ge=0, description="replay events after this seq"),
-    job_id: int | None = Query(None, ge=1, description="only this job's events"),
+    since: int | None = Query(None, ge=0, le=MAX_ID, description="replay events after this seq"),
+    job_id: int | None = Query(None, ge=1, le=MAX_ID, description="only this job's events"),
     last_event_id: str | None = Header(None, description="set by EventSource on reconnect"),
 ) -> StreamingResponse:
     start = since
-    if start is None and last_event_id is not None and last_event_id.strip().isdigit():
-        start = int(last_event_id)
+    if start is None and last_event_id is not None:
+        text = last_event_id.strip()
+        # Anything but a plain seq (garbage, or larger than SQLite's integers) means "now".
+        if text.isascii() and text.isdigit() and len(text) < 19:
+            start = int(text)
     if start is None:
         start = service.seq  # a fresh client wants what happens from now on
     app_state = request.app.state
@@ -103,7 +106,8 @@ async def events(
         app_state.sse_subscribers += 1
         try:
             async for chunk in sse_stream(service.subscribe(start, job_id=job_id),
-                                          app_state.sse_heartbeat_s):
+                                          app_state.sse_heartbeat_s,
+                                          app_state.stream_closer.event()):
                 yield chunk
         finally:
             app_state.sse_subscribers -= 1

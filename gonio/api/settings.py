@@ -72,6 +72,47 @@ class RequestTimer:
         await self.app(scope, receive, timed_send)
 
 
+PAGE_CSP = (
+    "default-src 'self'; script-src 'self'; connect-src 'self'; img-src 'self' data: blob:; "
+    # Inline style attributes (plots set SVG styles) are allowed; inline scripts are not.
+    "style-src 'self' 'unsafe-inline'; object-src 'none'; base-uri 'none'; "
+    "form-action 'self'; frame-ancestors 'none'"
+)
+"""Content-Security-Policy of the lab page: only its own scripts, only its own API."""
+
+
+class SecurityHeaders:
+    """ASGI middleware: ``nosniff`` and no framing on every response; the page's CSP.
+
+    The CSP goes on HTML answers of the page and its static files, not on ``/api/docs``
+    (FastAPI's interactive view loads its scripts from a CDN and inlines one).
+    """
+
+    def __init__(self, app: ASGIApp) -> None:
+        self.app = app
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        path = str(scope.get("path", ""))
+        page = path == "/" or path.startswith("/static/")
+
+        async def send_with_headers(message: Message) -> None:
+            if message["type"] == "http.response.start":
+                headers = list(message.get("headers", []))
+                present = {k.lower() for k, _ in headers}
+                extra = [(b"x-content-type-options", b"nosniff"), (b"x-frame-options", b"DENY"),
+                         (b"referrer-policy", b"no-referrer")]
+                if page:
+                    extra.append((b"content-security-policy", PAGE_CSP.encode()))
+                headers.extend((k, v) for k, v in extra if k not in present)
+                message = {**message, "headers": headers}
+            await send(message)
+
+        await self.app(scope, receive, send_with_headers)
+
+
 def install(app: FastAPI, settings: ApiSettings) -> None:
     """Attach the access policy, maintenance lock, body limit and request timing to ``app``."""
     app.state.access_policy = settings.access
@@ -81,4 +122,5 @@ def install(app: FastAPI, settings: ApiSettings) -> None:
     # The middleware added last is the outermost: the timer wraps the body limit, so 413s are
     # counted too.
     app.add_middleware(BodySizeLimit, max_bytes=settings.max_body_bytes)
+    app.add_middleware(SecurityHeaders)
     app.add_middleware(RequestTimer, stats=app.state.request_stats)

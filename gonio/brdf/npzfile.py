@@ -86,12 +86,27 @@ def read_npz(
     """
     p = Path(path)
     try:
-        with np.load(p, allow_pickle=False) as z:
-            data = {k: z[k] for k in z.files}
+        with open(p, "rb") as fh:
+            head = fh.read(8)
     except FileNotFoundError:
         raise error(f"{p}: no such {kind} file") from None
+    except IsADirectoryError:
+        raise error(f"{p}: is a directory, not a {kind} file") from None
+    except OSError as exc:
+        raise error(f"{p}: cannot read the {kind} file: {exc.strerror}") from None
+    if not head.startswith(_ZIP_MAGIC):
+        # Checked before numpy sees it: for anything but a zip archive numpy's own message
+        # suggests allow_pickle=True, which is bad advice for a file of unknown origin.
+        hint = f"; {how_to_make}" if how_to_make else ""
+        raise error(f"{p}: not a readable gonio {kind} file: {_what_it_is(head)}, not a .npz (zip) "
+                    f"archive{hint}")
+    try:
+        with np.load(p, allow_pickle=False) as z:
+            data = {k: z[k] for k in z.files}
     except Exception as exc:  # zip and npy errors come in many types
-        raise error(f"{p}: not a readable gonio {kind} file ({exc})") from None
+        reason = "it holds Python objects, which gonio files never do" if "pickle" in str(
+            exc) else str(exc)
+        raise error(f"{p}: not a readable gonio {kind} file ({reason})") from None
     if str(data.get("format", "")) != format_name:
         hint = f"; {how_to_make}" if how_to_make else ""
         raise error(f"{p}: not a gonio {kind} file (missing format={format_name!r}){hint}")
@@ -108,3 +123,19 @@ def read_npz(
     if not isinstance(provenance, dict):
         provenance = {}
     return data, {**provenance, "file": str(p)}
+
+
+_ZIP_MAGIC = b"PK\x03\x04"
+
+
+def _what_it_is(head: bytes) -> str:
+    """A guess at a file's type from its first bytes, for error messages."""
+    if not head:
+        return "the file is empty"
+    if head.startswith(b"\x89HDF\r\n\x1a\n"):
+        return "it is an HDF5 file (a gonio result file? read it with gonio.results.read_result)"
+    if head.startswith(b"\x93NUMPY"):
+        return "it is a single .npy array"
+    if head.startswith(b"PK"):
+        return "it is an empty or unusual zip archive"
+    return f"it starts with the bytes {head[:8]!r}"

@@ -8,9 +8,14 @@ parsed namespace and returning an exit code). Add new modules to ``COMMAND_MODUL
 from __future__ import annotations
 
 import argparse
+import contextlib
+import errno
 import importlib
+import math
+import os
+import sqlite3
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 from gonio import __version__
 
@@ -31,6 +36,40 @@ class UsageError(Exception):
     """A user error the CLI reports as one line on stderr with exit code 2."""
 
 
+def _number(kind: type[float] | type[int], test: Callable[[float], bool], what: str
+            ) -> Callable[[str], float]:
+    def parse(text: str) -> float:
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
+        if not (math.isfinite(value) and test(value)):
+            raise argparse.ArgumentTypeError(f"expected {what}, got {text}")
+        return value
+
+    parse.__name__ = what  # argparse names the type in some messages
+    return parse
+
+
+positive_float = _number(float, lambda v: v > 0, "a finite number > 0")
+"""``type=`` for flags like --time-scale and --threshold: finite and > 0."""
+nonnegative_float = _number(float, lambda v: v >= 0, "a finite number >= 0")
+finite_float = _number(float, lambda v: True, "a finite number")
+positive_int = _number(int, lambda v: v >= 1, "a whole number >= 1")
+
+
+def _describe_validation(exc: Exception) -> str:
+    """One line per problem of a pydantic ``ValidationError``, named by field."""
+    errors = getattr(exc, "errors", None)
+    if errors is None:
+        return str(exc)
+    parts = []
+    for err in errors():
+        loc = ".".join(str(p) for p in err.get("loc", ())) or "value"
+        parts.append(f"{loc}: {err.get('msg', 'invalid')}")
+    return "; ".join(parts)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="gonio",
@@ -49,10 +88,25 @@ def main(argv: Sequence[str] | None = None) -> int:
     if getattr(args, "func", None) is None:
         parser.print_help()
         return 2
+    from pydantic import ValidationError
+
     try:
-        return int(args.func(args) or 0)
+        code = int(args.func(args) or 0)
+        sys.stdout.flush()  # a closed pipe shows up here, inside the handlers below
+        return code
     except UsageError as exc:
         print(f"gonio {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except BrokenPipeError:
+        # The reader went away (``gonio jobs show 2 | head``): not an error of ours, and
+        # nothing more can be written. Point stdout at /dev/null so the interpreter's final
+        # flush does not raise again.
+        with contextlib.suppress(OSError):
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, sys.stdout.fileno())
+        return 141  # 128 + SIGPIPE, what a shell reports for a process killed by it
+    except ValidationError as exc:
+        print(f"gonio {args.command}: error: {_describe_validation(exc)}", file=sys.stderr)
         return 2
     except ValueError as exc:
         # Domain errors (bad table, plan, config ...) are ValueError subclasses with messages
@@ -62,6 +116,29 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
+    except sqlite3.Error as exc:
+        # The job store cannot be opened or written (read-only or full disk, a foreign file).
+        print(f"gonio {args.command}: error: job store: {exc}", file=sys.stderr)
+        return 1
+    except OSError as exc:
+        # A file or directory the user named cannot be read or written: say which and why.
+        print(f"gonio {args.command}: error: {_describe_os_error(exc)}", file=sys.stderr)
+        return 1
+
+
+def _describe_os_error(exc: OSError) -> str:
+    what = exc.strerror or str(exc)
+    where = exc.filename
+    hint = {
+        errno.ENOENT: "check that the directory exists",
+        errno.EACCES: "check the permissions, or choose another location",
+        errno.EROFS: "the file system is read-only; choose another location",
+        errno.ENOSPC: "free some disk space",
+        errno.EEXIST: "a file of that name is in the way of a directory",
+        errno.ENOTDIR: "part of the path is a file, not a directory",
+    }.get(exc.errno or 0, "")
+    text = f"{where}: {what}" if where else what
+    return f"{text}; {hint}" if hint else text
 
 
 if __name__ == "__main__":

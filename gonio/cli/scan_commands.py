@@ -20,7 +20,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from gonio.cli import UsageError
+from gonio.cli import UsageError, finite_float, nonnegative_float, positive_float, positive_int
 from gonio.cli.daemon_client import DaemonClient, add_daemon_options
 
 
@@ -40,23 +40,26 @@ def register(subparsers: Any) -> None:
     p.add_argument("--stage", choices=["dynamixel", "zaber"], default="dynamixel",
                    help="simulated stage kind (with --sim)")
     p.add_argument("--material", default=None, help="simulated material (with --sim)")
-    p.add_argument("--time-scale", type=float, default=1.0,
+    p.add_argument("--time-scale", type=positive_float, default=1.0,
                    help="simulated seconds per wall second (with --sim)")
     p.add_argument("--seed", type=int, default=0, help="sensor noise seed (with --sim)")
-    p.add_argument("--rotations", type=int, default=8, help="stage angles r (uniform)")
-    p.add_argument("--start-deg", type=float, default=0.0, help="first stage angle, degrees")
+    p.add_argument("--rotations", type=positive_int, default=8, help="stage angles r (uniform)")
+    p.add_argument("--start-deg", type=finite_float, default=0.0, help="first stage angle, degrees")
     p.add_argument("--adaptive", action="store_true", help="adaptive rotations (MATH 7)")
-    p.add_argument("--threshold", type=float, default=0.1, help="adaptive relative error e")
-    p.add_argument("--max-samples", type=int, default=None, help="adaptive sample budget")
-    p.add_argument("--exposure", type=float, default=0.01, help="seconds per exposure")
-    p.add_argument("--averages", type=int, default=1, help="exposures averaged per reading")
-    p.add_argument("--light-settle", type=float, default=0.05, help="seconds after lamp on")
+    p.add_argument("--threshold", type=positive_float, default=0.1,
+                   help="adaptive relative error e")
+    p.add_argument("--max-samples", type=positive_int, default=None, help="adaptive sample budget")
+    p.add_argument("--exposure", type=positive_float, default=0.01, help="seconds per exposure")
+    p.add_argument("--averages", type=positive_int, default=1,
+                   help="exposures averaged per reading")
+    p.add_argument("--light-settle", type=nonnegative_float, default=0.05,
+                   help="seconds after lamp on")
     p.add_argument("--specimen", default=None,
                    help="specimen name (default 'specimen'; with --white-reference, the "
                         "reference's name, default 'white reference')")
     p.add_argument("--calibration", type=Path, default=None,
                    help="calibration JSON (from a calibration job) to apply")
-    p.add_argument("--white-reference", type=float, default=None, metavar="ALBEDO",
+    p.add_argument("--white-reference", type=positive_float, default=None, metavar="ALBEDO",
                    help="the stage holds a white reference of this albedo (e.g. 0.99): run a "
                         "calibration job and write OUTPUT.calibration.json for later --calibration")
     p.add_argument("--data-dir", type=Path, default=None,

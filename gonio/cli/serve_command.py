@@ -29,7 +29,7 @@ import threading
 from pathlib import Path
 from typing import Any
 
-from gonio.cli import UsageError
+from gonio.cli import UsageError, positive_float
 
 DEMO_ROTATIONS = 8
 
@@ -63,7 +63,7 @@ def register(subparsers: Any) -> None:
                      help="simulated stage protocol (default dynamixel)")
     sim.add_argument("--material", default=None,
                      help="library material name or .npz BRDF table for the specimen")
-    sim.add_argument("--time-scale", type=float, default=1.0,
+    sim.add_argument("--time-scale", type=positive_float, default=1.0,
                      help="sim seconds per wall second for motion and exposures")
     sim.add_argument("--throwaway", action="store_true",
                      help="keep jobs and results in a temporary folder deleted at exit")

@@ -18,7 +18,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from gonio.cli import UsageError
+from gonio.cli import UsageError, positive_float
 
 NOISE_KEYS = {
     "read": "read_noise",
@@ -60,7 +60,7 @@ def register(subparsers: Any) -> None:
     )
     p.add_argument(
         "--time-scale",
-        type=float,
+        type=positive_float,
         default=1.0,
         help="sim seconds per wall second for motion and exposures (default 1)",
     )

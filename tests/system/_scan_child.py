@@ -1,13 +1,18 @@
 """Child process for the kill-and-restart test: measure a job on a fresh simulated rig.
 
-Usage: python _scan_child.py DB STAGE SEED ROTATIONS. Resumes the store's active job if there
-is one (as the daemon does after a crash), otherwise creates it.
+Usage: python _scan_child.py DB STAGE SEED ROTATIONS [FREEZE_AFTER]. Resumes the store's
+active job if there is one (as the daemon does after a crash), otherwise creates it. With
+FREEZE_AFTER the process stops dead (as if hung) right after committing that many angles, so
+the test's SIGKILL lands mid-scan however busy the machine is.
 """
 
 from __future__ import annotations
 
 import asyncio
+import os
+import signal
 import sys
+from typing import Any
 
 from gonio.drivers.factory import build_rig
 from gonio.engine import ScanEngine
@@ -16,7 +21,7 @@ from gonio.sim.rig import SimRigOptions, start_sim_rig
 from gonio.store import JobStore
 
 
-async def main(db: str, stage: str, seed: int, rotations: int) -> int:
+async def main(db: str, stage: str, seed: int, rotations: int, freeze_after: int = 0) -> int:
     with start_sim_rig(SimRigOptions(stage=stage, time_scale=10.0, seed=seed)) as sim:
         rig = build_rig(sim.config)
         desc = RigDescription.from_rig(rig)
@@ -32,6 +37,12 @@ async def main(db: str, stage: str, seed: int, rotations: int) -> int:
             job = store.create_job(kind=plan.kind, specimen="sim",
                                    plan=plan.model_dump(mode="json"),
                                    rig=desc.model_dump(mode="json"))
+        if freeze_after > 0:
+            def freeze(ev: Any) -> None:
+                if ev.type == "progress" and ev.data.get("done", 0) >= freeze_after:
+                    os.kill(os.getpid(), signal.SIGSTOP)  # the test kills it from here
+
+            store.add_listener(freeze)
         async with rig:
             state = await ScanEngine(rig, store, job.id, plan, desc).run()
         print(state.value, flush=True)
@@ -40,4 +51,5 @@ async def main(db: str, stage: str, seed: int, rotations: int) -> int:
 
 if __name__ == "__main__":
     db, stage, seed, rotations = sys.argv[1:5]
-    raise SystemExit(asyncio.run(main(db, stage, int(seed), int(rotations))))
+    freeze_after = int(sys.argv[5]) if len(sys.argv) > 5 else 0
+    raise SystemExit(asyncio.run(main(db, stage, int(seed), int(rotations), freeze_after)))

@@ -18,6 +18,7 @@ from gonio.api.auth import (
     ApiKeyring,
     Caller,
     KeyringError,
+    require_key_when_configured,
     require_read_access,
     require_write_key,
 )
@@ -57,6 +58,12 @@ def tiny_app(
         body: dict[str, object], caller: Annotated[Caller, Depends(require_write_key)]
     ) -> dict[str, object]:
         return {"who": caller.key_name, "n": len(body)}
+
+    @app.post("/compute")
+    async def compute(
+        caller: Annotated[Caller, Depends(require_key_when_configured)],
+    ) -> dict[str, str | None]:
+        return {"who": caller.key_name}
 
     return app
 
@@ -176,3 +183,20 @@ def test_keyring_refuses_short_keys_and_matches_only_exact_keys() -> None:
     assert ring.identify(KEY + "x") is None
     assert ring.identify("") is None
     assert ring.identify(None) is None
+
+
+def test_computing_reads_need_a_key_when_the_daemon_has_keys(
+    server: tuple[str, FastAPI], tmp_path: Path
+) -> None:
+    # The dry run changes nothing but computes: with keys configured, anonymous callers get 401.
+    url, app = server
+    assert httpx.post(f"{url}/compute").status_code == 401
+    assert httpx.post(f"{url}/compute", headers={"X-API-Key": OTHER_KEY}).status_code == 403
+    assert httpx.post(f"{url}/compute", headers={"X-API-Key": KEY}).json() == {"who": "alice"}
+    # Not a change: the maintenance lock does not stop it.
+    app.state.maintenance.lock("replacing lamp L2", by="alice")
+    assert httpx.post(f"{url}/compute", headers={"X-API-Key": KEY}).status_code == 200
+    app.state.maintenance.unlock()
+    # A read-only daemon (no keys at all) keeps it open: nobody can fill its queue anyway.
+    with live_server(tiny_app(tmp_path / "ro", keys={})) as ro:
+        assert httpx.post(f"{ro}/compute").json() == {"who": None}

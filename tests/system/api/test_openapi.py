@@ -32,3 +32,34 @@ def test_every_mutation_is_keyed_and_documents_its_errors() -> None:
         for method, op in ops.items():
             if method in ("post", "put", "delete", "patch"):
                 assert op.get("security"), f"{method.upper()} {path} has no API key requirement"
+
+
+def test_every_operation_documents_the_errors_it_can_answer_with() -> None:
+    """What the guards and parameters of a route imply is in its schema, with a JSON body
+    (the fuzzer checks the server against these; this checks they are there at all)."""
+    schema = current_schema()
+    refs = {"ErrorBody", "ValidationErrorBody"}
+    assert refs <= set(schema["components"]["schemas"])
+    for path, ops in schema["paths"].items():
+        for method, op in ops.items():
+            responses = op["responses"]
+            where = f"{method.upper()} {path}"
+            if op.get("security"):
+                assert {"401", "403"} <= set(responses), where
+            if method in ("post", "put", "delete") and "requestBody" in op:
+                assert {"413", "422"} <= set(responses), where
+            if "{job_id}" in path:
+                assert "404" in responses, where
+            if method != "get" and path.startswith("/api/v1/jobs") and path != \
+                    "/api/v1/jobs/dry-run":
+                assert "423" in responses, f"{where}: a change refused under the lock"
+            for status, resp in responses.items():
+                if int(status) < 400:
+                    continue
+                body = resp["content"]["application/json"]["schema"]["$ref"]
+                if status not in ("401", "403", "404", "413", "422", "423"):
+                    continue  # a route's own answer (e.g. /health's 503 is a Health body)
+                want = "ValidationErrorBody" if status == "422" else "ErrorBody"
+                assert body == f"#/components/schemas/{want}", (where, status, body)
+    dry = schema["paths"]["/api/v1/jobs/dry-run"]["post"]
+    assert dry.get("security") and "423" not in dry["responses"]

@@ -123,7 +123,7 @@ def test_reads_do_not_wait_for_an_open_write(tmp_path: Path) -> None:
         with store._tx() as c:
             c.execute("UPDATE jobs SET specimen = 'changed' WHERE id = ?", (jid,))
             inside.set()
-            release.wait(2.0)
+            release.wait(60.0)
 
     t = threading.Thread(target=writer)
     t.start()
@@ -136,7 +136,9 @@ def test_reads_do_not_wait_for_an_open_write(tmp_path: Path) -> None:
     finally:
         release.set()
         t.join()
-    assert elapsed < 0.5
+    # Not blocked: had the reads waited for the writer, they would have returned only after
+    # its commit (the writer holds its transaction until released, below), and seen it.
+    print(f"reads beside an open write transaction took {1000 * elapsed:.1f} ms")
     assert row.specimen == "s"  # the open transaction is not visible
     assert [e.type for e in events] == ["created"]
     assert store.get_job(jid).specimen == "changed"  # and its commit is, on the same thread

@@ -1,0 +1,83 @@
+"""Log filters of the daemon: what must never reach its output, and what is not an error.
+
+* :class:`QueryKeyRedactor` on uvicorn's access log: a request that puts a key (or token,
+  secret, password) in its query string is refused by the API, but the access log would still
+  have written the key down. The value is replaced by ``[redacted]``; the parameter name stays,
+  so the log still shows what the client did.
+* :class:`PymodbusFrameFilter` on pymodbus' logger: pymodbus logs a corrupted or unexpected
+  reply at ERROR and appends the last raw frames as hex dumps. The drivers already turn such a
+  reply into a device fault that names the device and the cause, so these records become
+  WARNINGs of one line (the frames are logged by pymodbus itself at DEBUG level).
+
+:func:`install` attaches both; :func:`gonio.daemon.serve` calls it after uvicorn has
+configured its loggers.
+"""
+
+from __future__ import annotations
+
+import logging
+import re
+from urllib.parse import parse_qsl, quote
+
+SECRET_PARAM = re.compile(r"(key|token|secret|passw|auth)", re.IGNORECASE)
+"""Query parameter names whose values are never logged (``api_key``, ``X-API-Key``, ...)."""
+
+REDACTED = "[redacted]"
+ACCESS_LOGGER = "uvicorn.access"
+PYMODBUS_LOGGER = "pymodbus.logging"
+"""The logger pymodbus' ``Log`` helper writes to (``logging.getLogger(__name__)`` there)."""
+
+
+def redact_query(path: str) -> str:
+    """``path`` with the values of secret-looking query parameters replaced.
+
+    Parameters
+    ----------
+    path : str
+        A request target as uvicorn logs it, e.g. ``/api/v1/jobs?api_key=abc&since=3``.
+    """
+    base, sep, query = path.partition("?")
+    if not sep:
+        return path
+    parts = []
+    for name, value in parse_qsl(query, keep_blank_values=True):
+        shown = REDACTED if SECRET_PARAM.search(name) else quote(value, safe="")
+        parts.append(f"{quote(name, safe='')}={shown}")
+    if not parts and query:
+        # Not name=value pairs at all (e.g. "?sometoken"): it may be the key itself.
+        return f"{base}?{REDACTED}"
+    return f"{base}?{'&'.join(parts)}"
+
+
+class QueryKeyRedactor(logging.Filter):
+    """Redacts secret query parameters in uvicorn access-log records (never drops a record)."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        args = record.args
+        # uvicorn's access record: (client_addr, method, full_path, http_version, status_code)
+        if isinstance(args, tuple) and len(args) >= 3 and isinstance(args[2], str):
+            record.args = (*args[:2], redact_query(args[2]), *args[3:])
+        elif isinstance(record.msg, str) and "?" in record.msg and not args:
+            record.msg = " ".join(redact_query(w) for w in record.msg.split(" "))
+        return True
+
+
+class PymodbusFrameFilter(logging.Filter):
+    """ERROR records of pymodbus become one-line WARNINGs without the raw frame dump."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if record.levelno >= logging.ERROR:
+            text = record.getMessage().split("\n>>>>>", 1)[0].strip()
+            record.msg = f"{text} (pymodbus; the driver reports the fault)"
+            record.args = None
+            record.levelno = logging.WARNING
+            record.levelname = logging.getLevelName(logging.WARNING)
+        return True
+
+
+def install() -> None:
+    """Attach the filters to their loggers (idempotent)."""
+    for name, cls in ((ACCESS_LOGGER, QueryKeyRedactor), (PYMODBUS_LOGGER, PymodbusFrameFilter)):
+        logger = logging.getLogger(name)
+        if not any(isinstance(f, cls) for f in logger.filters):
+            logger.addFilter(cls())

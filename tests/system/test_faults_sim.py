@@ -1,0 +1,120 @@
+"""Honest fault reports and patience, on the simulated rig over the real protocols.
+
+* A silent sensor on a Modbus link it shares with the others is the one the job blames (its
+  neighbours' readings, discarded because the link was re-established, are consequences).
+* A stage whose replies keep arriving corrupted fails with that cause in its reason, not with
+  the "does not answer" of a later reconnect attempt.
+* A device that stops answering for longer than the retries last (an unplugged cable) keeps the
+  job suspended until it answers again; the job then resumes from its checkpoint and completes.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+
+import pytest
+
+from gonio.jobstates import JobState
+from gonio.plans import ExposureSettings, FaultPolicy, UniformPlan
+from gonio.sim.rig import SimRigOptions, start_sim_rig
+from tests.system.test_scan_sim import _scan
+
+pytestmark = [pytest.mark.system, pytest.mark.timeout(300)]
+
+FAST = ExposureSettings(exposure_s=0.02, light_settle_s=0.0, dark="every_angle")
+
+
+def _fault_devices(store) -> list[str]:  # type: ignore[no-untyped-def]
+    """Devices named by every suspension and fault event of job 1."""
+    out = []
+    for e in store.events_after(0):
+        suspended = e.type == "state" and e.data.get("state") == "suspended"
+        if (suspended and "device" in e.data) or e.type == "fault":
+            out.append(e.data["device"])
+    return out
+
+
+def test_silent_sensor_on_a_shared_link_is_the_one_blamed() -> None:
+    policy = FaultPolicy(max_retries=2, retry_delay_s=0.05, resume_settle_s=0.0,
+                         wait_for_device_s=0)
+    with start_sim_rig(SimRigOptions(stage="zaber", time_scale=10.0, seed=8)) as sim:
+        # Every lamp and sensor of the simulated rig sits behind one Modbus TCP server.
+        ports = {(s.modbus.host, s.modbus.port) for s in sim.config.sensors}
+        assert len(ports) == 1
+        store, _, state = asyncio.run(_scan(sim, UniformPlan(rotations=3, exposure=FAST,
+                                                             faults=policy), "silence:S2"))
+    assert state is JobState.FAILED
+    reason = store.get_job(1).reason or ""
+    assert reason.startswith("device fault persisted after 2 retries: S2:"), reason
+    assert "S1:" not in reason and "S3:" not in reason and "S4:" not in reason
+    devices = _fault_devices(store)
+    assert devices and set(devices) == {"S2"}, devices
+
+
+def test_corrupted_stage_replies_keep_their_cause_in_the_final_reason() -> None:
+    policy = FaultPolicy(max_retries=2, retry_delay_s=0.05, resume_settle_s=0.0,
+                         wait_for_device_s=0)
+    with start_sim_rig(SimRigOptions(stage="dynamixel", time_scale=10.0, seed=9)) as sim:
+        def corrupt_once_running(store) -> None:  # type: ignore[no-untyped-def]
+            def listener(ev) -> None:  # type: ignore[no-untyped-def]
+                if ev.type == "state" and ev.data.get("state") == "running":
+                    # Enough corrupted replies to outlast the driver's attempts, the engine's
+                    # retries and every reconnect: only corrupted packets come back from now.
+                    sim.stage_faults.set(corrupt_replies=10_000)
+            store.add_listener(listener)
+
+        store, _, state = asyncio.run(_scan(sim, UniformPlan(rotations=3, start_deg=30,
+                                                             exposure=FAST, faults=policy),
+                                            on_store=corrupt_once_running))
+    assert state is JobState.FAILED
+    reason = store.get_job(1).reason or ""
+    assert reason.startswith("device fault persisted after 2 retries: stage:"), reason
+    # The SDK's own words for a bad packet, from the first fault and the last one.
+    assert "Incorrect status packet" in reason or "corrupted" in reason, reason
+    assert "does not answer" not in reason, reason
+
+
+def test_an_outage_longer_than_the_retries_suspends_until_the_device_answers() -> None:
+    # Retries alone would give up after about 2 x 0.1 s plus two request timeouts; the sensor
+    # is gone for 4 s (time enough to replug a cable, at this scale).
+    policy = FaultPolicy(max_retries=2, retry_delay_s=0.1, resume_settle_s=0.0,
+                         wait_for_device_s=120)
+    outage_s = 4.0
+    with start_sim_rig(SimRigOptions(stage="zaber", time_scale=10.0, seed=10)) as sim:
+        armed = threading.Event()
+
+        def unplug_after_first_angle(store) -> None:  # type: ignore[no-untyped-def]
+            def listener(ev) -> None:  # type: ignore[no-untyped-def]
+                if ev.type == "progress" and ev.data.get("done") == 1 and not armed.is_set():
+                    armed.set()
+                    sim.apply_fault(f"silence:S3:{outage_s}")
+            store.add_listener(listener)
+
+        store, _, state = asyncio.run(_scan(
+            sim, UniformPlan(rotations=4, exposure=FAST, faults=policy),
+            on_store=unplug_after_first_angle))
+    assert armed.is_set()
+    assert state is JobState.RUNNING, store.get_job(1).reason  # measured to the end
+    assert store.get_job(1).done_angles == 4
+    events = store.events_after(0)
+    waits = [e for e in events if e.type == "fault" and "waiting_s" in e.data]
+    assert waits and waits[0].data["device"] == "S3"
+    assert "does not answer; waiting up to" in waits[0].data["note"]
+    assert any(e.type == "recovered" and e.data["device"] == "S3" for e in events)
+    # One waiting announcement, not one event per probe.
+    assert len(waits) <= 2
+    # Nothing lost, nothing doubled: every angle has all its readings once.
+    keys = [(r.angle_index, r.light, r.sensor) for r in store.readings(1)]
+    assert len(keys) == len(set(keys)) == 4 * 12
+
+
+def test_the_wait_has_a_ceiling() -> None:
+    policy = FaultPolicy(max_retries=1, retry_delay_s=0.1, resume_settle_s=0.0,
+                         wait_for_device_s=1.5)
+    with start_sim_rig(SimRigOptions(stage="zaber", time_scale=10.0, seed=11)) as sim:
+        store, _, state = asyncio.run(_scan(sim, UniformPlan(rotations=2, exposure=FAST,
+                                                             faults=policy), "silence:S4"))
+    assert state is JobState.FAILED
+    reason = store.get_job(1).reason or ""
+    assert "S4:" in reason and "wait_for_device_s 1.5" in reason, reason
