@@ -107,6 +107,25 @@ async def preview(job_id: JobId, service: Service) -> Response:
     return Response(png, media_type="image/png", headers={"Cache-Control": "max-age=3600"})
 
 
+@router.get(
+    "/{job_id}/render.png",
+    dependencies=READ,
+    responses={**_NO_RESULT, 200: {"content": {"image/png": {}}}},
+    response_class=Response,
+    summary="Rendering of the reconstruction: sphere and swatch under point lights and a "
+            "studio environment, the true material beside it on the simulated rig",
+)
+async def render_png(
+    job_id: JobId,
+    service: Service,
+    compare: int | None = Query(
+        None, ge=1, le=2**53, description="another job id: its reconstruction is shown "
+        "below this one for comparison"),
+) -> Response:
+    png = await asyncio.to_thread(service.render_png, job_id, compare)
+    return Response(png, media_type="image/png", headers={"Cache-Control": "max-age=3600"})
+
+
 def _grid(value: float, name: str, upper: int) -> int:
     from gonio.plans import PlanError
 
