@@ -144,3 +144,99 @@ def headline_error(metrics: dict[str, Any]) -> dict[str, Any] | None:
                        "training library can be much worse.",
         }
     return None
+
+
+# --------------------------------------------------------------------------- plot data
+def _units(res: ResultFile) -> str:
+    return "1/sr" if res.samples.calibration.get("pairs") else "sensor units (uncalibrated)"
+
+
+def _mean_or_none(v: Any) -> list[float | None]:
+    """Mean over channels of (N, C) values as JSON numbers (None where not finite)."""
+    import numpy as np
+
+    m = np.asarray(v, dtype=float).mean(axis=-1)
+    return [float(x) if np.isfinite(x) else None for x in m]
+
+
+def fit_curves(res: ResultFile, step_deg: float = 2.0) -> dict[str, Any]:
+    """Each pair's calibrated samples against stage angle and the reconstruction through them.
+
+    The curve evaluates the reconstructed table at the pair's fixed lab directions turned
+    into the specimen frame at each stage angle (:func:`gonio.brdf.geometry.lab_to_specimen`).
+    Values are the mean over channels.
+
+    Returns
+    -------
+    dict: ``units``, ``curve_deg`` (stage angles of the curves), ``pairs``: list of
+    ``{label, stage_deg, measured, curve}``.
+    """
+    import numpy as np
+
+    from gonio.brdf import geometry as geo
+
+    if res.table is None:
+        raise FigureError("this result has no reconstructed BRDF (a calibration job)")
+    s = res.samples
+    look = render.TableLookup(res.table)
+    curve_deg = np.arange(0.0, 360.0 + 1e-9, step_deg)
+    alphas = np.deg2rad(curve_deg)
+    pairs = []
+    order = np.argsort(np.mod(s.stage_angles_deg, 360.0))
+    stage = np.mod(s.stage_angles_deg, 360.0)[order]
+    for q, (light, sensor) in enumerate(s.pairs):
+        wi = geo.lab_to_specimen(np.broadcast_to(s.light_dirs[q], (alphas.size, 3)), alphas)
+        wo = geo.lab_to_specimen(np.broadcast_to(s.sensor_dirs[q], (alphas.size, 3)), alphas)
+        pairs.append({
+            "label": f"{light}/{sensor}",
+            "stage_deg": [float(a) for a in stage],
+            "measured": _mean_or_none(np.asarray(s.values[q])[order]),
+            "curve": _mean_or_none(look.eval(wi, wo)),
+        })
+    return {"units": _units(res), "channels": "mean of " + ", ".join(s.channels),
+            "curve_deg": [float(a) for a in curve_deg], "pairs": pairs}
+
+
+def polar_curves(res: ResultFile, theta_i_deg: float, phi_i_deg: float) -> dict[str, Any]:
+    """In-plane and cross-plane BRDF at one incidence, for the result and its truth if known.
+
+    In-plane: views in the plane of incidence, ``theta_o`` from -89 to 89 degrees, positive
+    on the specular side (azimuth ``phi_i + 180``). Cross-plane: views in the plane through
+    the mirror direction perpendicular to the plane of incidence, at ``-89 .. 89`` degrees
+    from the mirror direction. Angles are in the specimen frame (``phi_i`` from the holder
+    mark).
+    """
+    import numpy as np
+
+    if res.table is None:
+        raise FigureError("this result has no reconstructed BRDF (a calibration job)")
+    ti, pi_ = np.deg2rad(theta_i_deg), np.deg2rad(phi_i_deg)
+    wi = np.array([np.sin(ti) * np.cos(pi_), np.sin(ti) * np.sin(pi_), np.cos(ti)])
+    ang = np.arange(-89.0, 89.0 + 1e-9, 1.0)
+    a = np.deg2rad(ang)
+    # In-plane: the view turns in the incidence plane; +theta towards the specular side.
+    fwd = np.array([-np.cos(pi_), -np.sin(pi_), 0.0])  # horizontal, away from the light
+    in_plane = np.sin(a)[:, None] * fwd + np.cos(a)[:, None] * np.array([0.0, 0.0, 1.0])
+    mirror = np.array([-wi[0], -wi[1], wi[2]])
+    perp = np.array([-np.sin(pi_), np.cos(pi_), 0.0])
+    cross = np.cos(a)[:, None] * mirror + np.sin(a)[:, None] * perp
+    wis = np.broadcast_to(wi, in_plane.shape)
+
+    def curves(brdf: Any) -> dict[str, dict[str, list[float | None]]]:
+        f = render.evaluator(brdf)
+        chans = list(getattr(brdf, "channels", None) or res.table.channels)  # type: ignore[union-attr]
+        out = {}
+        for name, wo in (("in_plane", in_plane), ("cross_plane", cross)):
+            v = np.asarray(f(wis, wo))
+            out[name] = {ch: [float(x) if np.isfinite(x) else None for x in v[:, c]]
+                         for c, ch in enumerate(chans[: v.shape[1]])}
+        return out
+
+    truth = true_material(res)
+    return {
+        "theta_i_deg": float(theta_i_deg), "phi_i_deg": float(phi_i_deg),
+        "angle_deg": [float(x) for x in ang], "units": _units(res),
+        "reconstruction": curves(res.table),
+        "truth": curves(truth) if truth is not None else None,
+        "truth_name": getattr(truth, "name", None) if truth is not None else None,
+    }

@@ -575,7 +575,12 @@ class GonioService:
         row = self._row(job_id)
         if row.summary is None:
             raise NotFound(f"job {job_id} has no result yet (it is {row.state.value})")
-        return dict(row.summary)
+        from gonio.figures import headline_error
+
+        out = dict(row.summary)
+        # The one error number to show, with its meaning (the same words as `gonio scan`).
+        out["headline_error"] = headline_error(out)
+        return out
 
     def preview_png(self, job_id: int) -> bytes:
         """PNG preview of the reconstructed table (:func:`gonio.brdf.preview.preview_png`).
