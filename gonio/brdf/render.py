@@ -53,8 +53,8 @@ SWATCH_DISTANCE = 3.0
 """Camera and light distance from the swatch centre, in swatch half-widths."""
 DEFAULT_SIZE = 512
 """Pixels per view side."""
-ENV_SAMPLES = 64
-"""Sky directions of the environment (Fibonacci sphere), besides the softbox samples."""
+ENV_SAMPLES = 96
+"""Sky directions of :func:`studio_environment` (Fibonacci sphere), besides the softboxes."""
 
 
 # --------------------------------------------------------------------------- BRDF lookup
@@ -281,11 +281,13 @@ def studio_environment(n_sky: int = ENV_SAMPLES, box_steps: int = 16) -> Environ
     long reflections stay continuous.
     """
     k = np.arange(n_sky) + 0.5
+    if n_sky == 0:
+        k = np.zeros(0)
     z = 1.0 - 2.0 * k / n_sky
     phi = k * math.pi * (3.0 - math.sqrt(5.0))
     r = np.sqrt(1.0 - z * z)
-    sky_dirs = np.stack([r * np.cos(phi), z, r * np.sin(phi)], axis=1)  # y is "up"
-    sky_w = _studio_radiance(sky_dirs, boxes=False) * (4.0 * math.pi / n_sky)
+    sky_dirs = np.stack([r * np.cos(phi), z, r * np.sin(phi)], axis=1).reshape(-1, 3)  # y up
+    sky_w = _studio_radiance(sky_dirs, boxes=False) * (4.0 * math.pi / max(n_sky, 1))
     dirs = [sky_dirs]
     weights = [sky_w]
     for centre, axis, half_len, half_w, level in _BOXES:
@@ -365,9 +367,8 @@ def render_sphere_env(brdf: Any, env: Environment | None = None, size: int = DEF
     computed at ``work_size`` pixels and enlarged (bilinear) to ``size``; the table's 5 degree
     grid holds no detail that the smaller image would lose.
     """
-    env = env or studio_environment()
-    small = render_sphere(brdf, env, min(work_size, size), rotation_deg)
-    img = _resize(small, size)
+    img = _resize(render_sphere(brdf, env or studio_environment(), min(work_size, size),
+                                rotation_deg), size)
     mask, _ = sphere_normals(size)
     # The enlarged disc's rim is blurred: cut it with the full-size outline instead.
     return np.where(mask[..., None], np.nan_to_num(img), np.nan)
