@@ -19,6 +19,7 @@ from typing import Any
 
 from gonio.drivers.factory import build_rig
 from gonio.engine import ScanEngine
+from gonio.hal import DeviceUnavailable
 from gonio.plans import (
     AdaptivePlan,
     AnyPlan,
@@ -52,7 +53,11 @@ async def run_case(sim: Any, approach: str, park: float, plan: AnyPlan
     job = store.create_job(kind=plan.kind, specimen="bench", plan=plan.model_dump(mode="json"),
                            rig=desc.model_dump(mode="json"))
     async with rig:
-        here = await rig.stage.move_to(park)
+        try:
+            here = await rig.stage.move_to(park)
+        except DeviceUnavailable:  # a busy machine can starve the pty once: try again
+            await rig.stage.clear_faults()
+            here = await rig.stage.move_to(park)
         d = dry_run(plan, desc, here)
         t0 = time.perf_counter()
         await ScanEngine(rig, store, job.id, plan, desc).run()
