@@ -163,7 +163,7 @@ export function plotPolar(canvas, angleDeg, curves, opts) {
     plugins: [grid, { id: "square", afterLayout: (c) => queueMicrotask(() => square(c)) }],
     options: {
       animation: false, responsive: true, maintainAspectRatio: false, parsing: false,
-      layout: { padding: { top: 22, left: 8, right: 8, bottom: 8 } },
+      layout: { padding: { top: 34, left: 8, right: 8, bottom: 8 } },
       plugins: {
         title: { display: true, text: opts.title },
         subtitle: { display: true, text: `radius: BRDF in ${opts.units}${opts.log ? `, log scale over ${LOG_DECADES} decades` : ", linear"}` },
