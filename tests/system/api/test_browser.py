@@ -211,3 +211,32 @@ def test_page_without_key_shows_a_clear_error(daemon: Daemon, browser: Any) -> N
     wait.until(lambda d: d.find_element(By.ID, "message").is_displayed())
     text = browser.find_element(By.ID, "message").text
     assert "X-API-Key" in text and "enter a valid API key" in text, text
+
+
+def test_a_suspended_job_shows_why_and_the_reason_goes_when_it_recovers(
+        daemon: Daemon, browser: Any) -> None:
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    wait = WebDriverWait(browser, 120, poll_frequency=0.1)
+    browser.get(f"{daemon.url}/#key={daemon.key}")
+    wait.until(lambda d: d.find_element(By.ID, "live-chip").text == "live")
+    with daemon.client() as c:
+        job = c.post("/api/v1/jobs", json={"plan": {
+            "kind": "uniform", "specimen": "flaky", "rotations": 12,
+            "exposure": {"exposure_s": 0.005},
+            "faults": {"retry_delay_s": 0.5, "max_retries": 20}}}).json()["id"]
+        # Once it measures (the rig is connected), a sensor stops answering for 2.5 s.
+        wait.until(lambda _d: c.get(f"/api/v1/jobs/{job}").json()["done_angles"] >= 1)
+        daemon.sim.apply_fault("silence:S2:2.5")
+
+    def reason(d: Any) -> str:
+        return str(d.execute_script(
+            "const r = document.querySelector(`#jobs tr[data-id='${arguments[0]}']`);"
+            "return r ? [r.dataset.state, r.querySelector('.reason')?.textContent ?? ''] "
+            ".join('|') : '';", job))
+
+    # The row says suspended and why (the device and what happened), not only a tooltip.
+    wait.until(lambda d: reason(d).startswith("suspended|S"))
+    wait.until(lambda d: reason(d) == "completed|")  # recovered: no stale reason left
+    assert _severe(browser) == []
