@@ -219,6 +219,7 @@ def test_a_suspended_job_shows_why_and_the_reason_goes_when_it_recovers(
     from selenium.webdriver.support.ui import WebDriverWait
 
     wait = WebDriverWait(browser, 120, poll_frequency=0.1)
+    browser.get_log("browser")  # drop what earlier tests left (the keyless page's 401)
     browser.get(f"{daemon.url}/#key={daemon.key}")
     wait.until(lambda d: d.find_element(By.ID, "live-chip").text == "live")
     with daemon.client() as c:
