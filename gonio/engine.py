@@ -42,10 +42,12 @@ import numpy as np
 from gonio import hal
 from gonio.jobstates import JobState
 from gonio.plans import (
+    MAX_ROTATIONS,
     AdaptivePlan,
     AnyPlan,
     PairSpec,
     RigDescription,
+    adaptive_bound,
     adaptive_refinement,
     estimate_angles,
     initial_angles,
@@ -70,12 +72,27 @@ class _Interrupted(Exception):
 
 @dataclass(frozen=True)
 class Progress:
-    """Where a running job is: ``done`` of ``total`` stage angles and the estimated time left."""
+    """Where a running job is: ``done`` of ``total`` stage angles and the estimated time left.
+
+    ``eta_s`` is measured: the median time of the last few angles times the angles left, as of
+    ``at`` (Unix seconds, the last checkpoint). ``eta_max_s`` bounds it for adaptive plans,
+    whose later rounds are not planned yet (every gap refined, :func:`adaptive_bound`).
+    """
 
     done: int
     total: int
     eta_s: float | None
     round: int = 0
+    eta_max_s: float | None = None
+    at: float = 0.0
+    per_angle_s: float | None = None
+
+    def eta_now(self, now: float | None = None) -> float | None:
+        """``eta_s`` counted down since the last checkpoint (never below 0)."""
+        if self.eta_s is None:
+            return None
+        elapsed = max(0.0, (time.time() if now is None else now) - self.at) if self.at else 0.0
+        return max(0.0, self.eta_s - elapsed)
 
 
 class ScanEngine:
@@ -120,6 +137,7 @@ class ScanEngine:
         self._dark_once: dict[str, tuple[float, ...]] | None = None
         self._angle_times: list[float] = []
         self._per_angle_estimate = self._estimate_per_angle()
+        self._max_angles = self._bound_angles()
         self.progress = Progress(0, 0, None)
 
     # ------------------------------------------------------------------ control (any time)
@@ -173,18 +191,33 @@ class ScanEngine:
         """Physical time of one angle from the rig's settings (used for ETA before data)."""
         step = 360.0 / max(len(initial_angles(self.plan, self.desc)), 1)
         motion, settle, exposure = estimate_angles(
-            [step], 0.0, [], len(self.lights), self.plan, self.desc,
+            [step], 0.0, len(self.lights), self.plan, self.desc,
             self.plan.exposure.dark == "every_angle",
         )
         return motion + settle + exposure
 
+    def _bound_angles(self) -> int | None:
+        """Most stage angles an adaptive plan can reach (None for fixed plans)."""
+        if not isinstance(self.plan, AdaptivePlan):
+            return None
+        first = initial_angles(self.plan, self.desc)
+        extra, _ = adaptive_bound(self.plan, self.desc, len(self.pairs), len(self.lights),
+                                  first, 0.0)
+        return len(first) + extra
+
     def _update_progress(self, steps: Sequence[StepRow]) -> Progress:
         done = sum(s.done for s in steps)
         total = len(steps)
+        # Measured: the median of the last angles' wall times (a long first move or a retry
+        # does not skew it); the rig's physical estimate only until the first angle is done.
         recent = self._angle_times[-8:]
         per = float(np.median(recent)) if recent else self._per_angle_estimate
         rnd = max((s.round for s in steps), default=0)
-        self.progress = Progress(done, total, per * (total - done), rnd)
+        eta_max = None
+        if self._max_angles is not None:
+            eta_max = per * max(self._max_angles - done, total - done)
+        self.progress = Progress(done, total, per * (total - done), rnd, eta_max, time.time(),
+                                 per)
         return self.progress
 
     # ------------------------------------------------------------------ main loop
@@ -562,12 +595,15 @@ class ScanEngine:
             self.store.append_event(self.job_id, "adaptive_done", {"reason": "max_rounds"})
             return False
         angles, values = self.measured_values(steps)
-        budget = None
+        # The sample budget, and in any case the cap on stage angles per job (so the dry
+        # run's bound holds and a job cannot grow without end).
+        limit = MAX_ROTATIONS
         if plan.max_samples is not None:
-            budget = plan.max_samples // len(self.pairs) - len(steps)
-            if budget <= 0:
-                self.store.append_event(self.job_id, "adaptive_done", {"reason": "budget"})
-                return False
+            limit = min(limit, plan.max_samples // len(self.pairs))
+        budget = limit - len(steps)
+        if budget <= 0:
+            self.store.append_event(self.job_id, "adaptive_done", {"reason": "budget"})
+            return False
         new = adaptive_refinement(
             angles, values, plan.threshold, plan.min_step_deg or self.desc.resolution_deg, budget
         )

@@ -75,6 +75,11 @@ FINITE = ConfigDict(extra="forbid", allow_inf_nan=False)
 """Config of every request model: unknown keys and NaN / Infinity (JSON 1e999) refused."""
 
 
+MAX_ROTATIONS = 3600
+"""Most stage angles one job may measure (0.1 degree steps; V&F use 8 to 72). Caps the work
+a plan costs to check and time, and the readings an adaptive plan can grow to."""
+
+
 # --------------------------------------------------------------------------- rig description
 class SensorInfo(BaseModel):
     """What a plan needs to know about one sensor."""
@@ -124,6 +129,11 @@ class RigDescription(BaseModel):
     accel_dps2: float = Field(gt=0)
     settle_s: float = Field(default=0.0, ge=0)
     resolution_deg: float = Field(default=0.01, gt=0)
+    approach: Literal["positive", "negative", "none"] = Field(
+        default="none", description="side the stage driver approaches every target from")
+    approach_backlash_deg: float = Field(
+        default=0.0, ge=0, description="the driver's overshoot when a move arrives from the "
+        "other side, degrees")
     lights: tuple[LightInfo, ...]
     sensors: tuple[SensorInfo, ...]
     pairs: tuple[PairSpec, ...]
@@ -138,6 +148,8 @@ class RigDescription(BaseModel):
             accel_dps2=s.accel_dps2,
             settle_s=s.settle_s,
             resolution_deg=s.resolution_deg,
+            approach=getattr(s, "approach", "none"),
+            approach_backlash_deg=float(getattr(s, "backlash_deg", 0.0)),
             lights=tuple(
                 LightInfo(name=n, theta_deg=lt.direction.theta_deg, phi_deg=lt.direction.phi_deg)
                 for n, lt in rig.lights.items()
@@ -381,6 +393,11 @@ def validate_plan(plan: AnyPlan, rig: RigDescription) -> None:
             f"{rig.resolution_deg:g} deg, so several would land on the same position "
             "(duplicate angles); use fewer rotations"
         )
+    if r > MAX_ROTATIONS:
+        raise PlanError(
+            f"{name} is {r}; a job measures at most {MAX_ROTATIONS} stage angles (0.1 degree "
+            f"steps). The paper's scans use 8 to 72; use {MAX_ROTATIONS} or fewer"
+        )
     angles = _uniform(plan.start_deg, r)
     for a in angles:
         if not _representatives(a, rig, margin=0.0):
@@ -477,44 +494,37 @@ def order_for_travel(
     base = sorted({round(a % 360.0, 9) for a in angles_deg})
     if not base:
         return []
-    best: tuple[float, list[float]] | None = None
+    # Each candidate route is a cyclic shift s of the sorted angles starting at one stage
+    # position of base[s]; its last position is first + span(s), span(s) the forward distance
+    # from base[s] to base[s - 1]. So its cost is O(1) and the search is linear in the number
+    # of angles (plus the sort), not quadratic: only the winning route is built.
     n = len(base)
+    best: tuple[float, int, float] | None = None  # (cost, shift, first position)
     for s in range(n):
-        cyc = [base[(s + j) % n] for j in range(n)]
-        for first in _representatives(cyc[0], rig, margin=0.0):
+        span = (base[s - 1] - base[s]) % 360.0 if n > 1 else 0.0
+        for first in _representatives(base[s], rig, margin=0.0):
             if abs(first - current_deg) > 720.0 + backlash_deg:
                 continue  # far-away turns only add travel
-            route = [first]
-            for a in cyc[1:]:
-                nxt = route[-1] + ((a - route[-1]) % 360.0)
-                route.append(nxt)
-            if route[-1] > rig.stage_max_deg + 1e-9:
+            last = first + span
+            if last > rig.stage_max_deg + 1e-9:
                 continue
             if current_deg <= first:
-                cost = route[-1] - current_deg
+                cost = last - current_deg
             else:
                 pre = first - backlash_deg
                 if pre < rig.stage_min_deg - 1e-9:
                     pre = max(rig.stage_min_deg, pre)
-                cost = (current_deg - pre) + (route[-1] - pre)
+                cost = (current_deg - pre) + (last - pre)
             if best is None or cost < best[0] - 1e-9:
-                best = (cost, route)
+                best = (cost, s, first)
     if best is None:
         raise PlanError(
             f"the angles {', '.join(f'{a:g}' for a in base)} deg cannot all be visited in one "
             f"direction inside the stage travel [{rig.stage_min_deg:g}, {rig.stage_max_deg:g}] "
             "deg; use fewer or different angles, or widen the limits"
         )
-    return best[1]
-
-
-def approach_positions(route: Sequence[float], current_deg: float, rig: RigDescription,
-                       backlash_deg: float) -> list[float]:
-    """Moves before ``route`` starts: an overshoot below its first position if coming from above."""
-    if not route or current_deg <= route[0] or backlash_deg == 0:
-        return []
-    pre = max(rig.stage_min_deg, route[0] - backlash_deg)
-    return [pre] if pre < route[0] else []
+    _, shift, first = best
+    return [first + (base[(shift + j) % n] - base[shift]) % 360.0 for j in range(n)]
 
 
 # --------------------------------------------------------------------------- adaptive
@@ -608,8 +618,12 @@ def adaptive_refinement(
 class DryRun(BaseModel):
     """What a plan will do, without hardware: the first round's stage positions and timing.
 
-    For adaptive plans only the first round is known in advance; ``estimated_s`` covers it and
-    ``max_estimated_s`` bounds the whole job by the sample budget (if any).
+    The estimate is the physical time of every move the engine and the stage driver make
+    (from the stage's present position, with the engine's and the driver's backlash
+    approaches), settling and exposures. For adaptive plans only the first round is known in
+    advance; ``estimated_s`` covers it and ``max_estimated_s`` bounds the whole job: every
+    refinement round adding a midpoint in every gap, until ``max_rounds``, ``min_step_deg``,
+    ``max_samples`` or the cap of stage angles stops it.
     """
 
     kind: str
@@ -623,7 +637,14 @@ class DryRun(BaseModel):
     settle_s: float
     exposure_s: float
     estimated_s: float
-    max_estimated_s: float | None = None
+    max_estimated_s: float | None = Field(
+        default=None, description="adaptive plans: bound on the whole job's duration, seconds")
+    max_angles: int | None = Field(
+        default=None, description="adaptive plans: most stage angles the job can measure")
+    from_deg: float = Field(default=0.0, description="stage position the estimate starts from")
+    from_known: bool = Field(
+        default=False, description="false: the stage position is not known yet (no job or "
+        "manual move since the daemon started) and 0 deg was assumed")
 
 
 def lights_in_order(pairs: Sequence[PairSpec]) -> list[str]:
@@ -635,46 +656,143 @@ def lights_in_order(pairs: Sequence[PairSpec]) -> list[str]:
     return out
 
 
+def _driver_waypoints(here: float, target: float, rig: RigDescription) -> list[float]:
+    """Where the stage driver goes to reach ``target`` from ``here`` (its approach side).
+
+    The same rule as ``gonio.drivers._backlash.approach_waypoints`` (drivers are not imported
+    here): a move arriving from the wrong side first overshoots by the driver's backlash.
+    """
+    delta = target - here
+    b = rig.approach_backlash_deg
+    if rig.approach == "none" or b <= 0 or abs(delta) < 1e-6:
+        return [target]
+    if rig.approach == "positive":
+        return [target] if delta > 0 else [target - b, target]
+    return [target] if delta < 0 else [target + b, target]
+
+
+def travel(positions: Sequence[float], start_deg: float, rig: RigDescription,
+           backlash_deg: float) -> tuple[float, int, float]:
+    """Moves of the engine visiting ``positions`` in order from ``start_deg``.
+
+    Per position the engine overshoots below it by ``backlash_deg`` when coming from above
+    (one more ``move_to``), and the driver adds its own approach overshoot inside each
+    ``move_to``; each ``move_to`` waits the stage's settle time once.
+
+    Returns
+    -------
+    motion_s : float
+        Trapezoidal move time of every leg, seconds.
+    moves : int
+        ``move_to`` calls (each followed by the stage's settle time).
+    end_deg : float
+        Where the stage ends, degrees.
+    """
+    motion = 0.0
+    moves = 0
+    here = float(start_deg)
+    for target in positions:
+        legs = []
+        if backlash_deg > 0 and target < here - 1e-6:
+            legs.append(max(rig.stage_min_deg, target - backlash_deg))
+        legs.append(target)
+        for leg in legs:
+            moves += 1
+            for wp in _driver_waypoints(here, leg, rig):
+                motion += move_time(wp - here, rig.speed_dps, rig.accel_dps2)
+                here = wp
+    return motion, moves, here
+
+
 def estimate_angles(
-    positions: Sequence[float], start_deg: float, pre: Sequence[float], n_lights: int,
+    positions: Sequence[float], start_deg: float, n_lights: int,
     plan: AnyPlan, rig: RigDescription, first_dark: bool,
 ) -> tuple[float, float, float]:
     """(motion, settle, exposure) seconds to visit ``positions`` from ``start_deg``."""
     ex = plan.exposure
-    motion = 0.0
-    here = start_deg
-    for p in [*pre, *positions]:
-        motion += move_time(p - here, rig.speed_dps, rig.accel_dps2)
-        here = p
-    settle = len(positions) * rig.settle_s + len(positions) * n_lights * ex.light_settle_s
+    motion, moves, _ = travel(positions, start_deg, rig, plan.backlash_deg)
+    settle = moves * rig.settle_s + len(positions) * n_lights * ex.light_settle_s
     per_exposure = ex.exposure_s * ex.averages
     darks = len(positions) if ex.dark == "every_angle" else (1 if first_dark else 0)
     exposure = (len(positions) * n_lights + darks) * per_exposure
     return motion, settle, exposure
 
 
-def dry_run(plan: AnyPlan, rig: RigDescription, current_deg: float = 0.0) -> DryRun:
+def adaptive_bound(plan: AdaptivePlan, rig: RigDescription, n_pairs: int, n_lights: int,
+                   first_angles: Sequence[float], end_deg: float) -> tuple[int, float]:
+    """Most stage angles and seconds the refinement rounds after the first can add.
+
+    The worst case of MATH 7: every round plans the midpoint of every gap (each measured
+    angle's two neighbours), as long as half a gap is at least ``min_step_deg``, for
+    ``max_rounds - 1`` rounds, within the sample budget and :data:`MAX_ROTATIONS`. A subset
+    of those midpoints travels no further along the same increasing route (move time is
+    subadditive) and costs fewer settles and exposures, so the time is a bound too.
+
+    Returns
+    -------
+    (extra_angles, extra_seconds)
+    """
+    min_step = plan.min_step_deg or rig.resolution_deg
+    limit = MAX_ROTATIONS
+    if plan.max_samples is not None:
+        limit = min(limit, plan.max_samples // max(n_pairs, 1))
+    angles = sorted(a % 360.0 for a in first_angles)
+    here = end_deg
+    extra_angles = 0
+    extra_s = 0.0
+    ex = plan.exposure
+    for _round in range(plan.max_rounds - 1):
+        room = limit - len(angles)
+        if room <= 0:
+            break
+        gaps = [((angles[(j + 1) % len(angles)] - a) % 360.0 or 360.0, a)
+                for j, a in enumerate(angles)]
+        mids = [(a + g / 2.0) % 360.0 for g, a in gaps if g / 2.0 >= min_step]
+        if not mids:
+            break
+        route = order_for_travel(mids, here, rig, plan.backlash_deg)
+        motion, moves, here = travel(route, here, rig, plan.backlash_deg)
+        m = min(len(mids), room)
+        per_angle = n_lights * (ex.light_settle_s + ex.exposure_s * ex.averages) + (
+            ex.exposure_s * ex.averages if ex.dark == "every_angle" else 0.0)
+        extra_s += motion + moves * rig.settle_s + m * per_angle
+        extra_angles += m
+        angles = sorted(angles + mids)
+    return extra_angles, extra_s
+
+
+def dry_run(plan: AnyPlan, rig: RigDescription, current_deg: float | None = None) -> DryRun:
     """Expand ``plan`` on ``rig`` and estimate its duration; raises :class:`PlanError`.
 
-    The estimate is the physical time: trapezoidal stage moves at the rig's speed and
-    acceleration, the stage settle time after each move, each light's settle time, and one
-    ``exposure_s x averages`` per light and angle (all sensors of a light read in parallel),
-    plus dark exposures. Communication overhead is not included.
+    The estimate is the physical time (see :class:`DryRun`): trapezoidal stage moves at the
+    rig's speed and acceleration for every leg (from ``current_deg``, the engine's backlash
+    overshoot and the driver's approach), the stage settle time after each move, each
+    light's settle time, and one ``exposure_s x averages`` per light and angle (all sensors
+    of a light read in parallel), plus dark exposures. Communication overhead is not
+    included (a few percent: docs/engine.md).
+
+    Parameters
+    ----------
+    plan, rig
+    current_deg : float, optional
+        Present stage position, degrees; None when unknown (0 is assumed and the result says
+        so).
     """
     validate_plan(plan, rig)
     pairs = plan_pairs(plan, rig)
     lights = lights_in_order(pairs)
     angles = _uniform(plan.start_deg, _rotation_count(plan))
-    route = order_for_travel(angles, current_deg, rig, plan.backlash_deg)
-    pre = approach_positions(route, current_deg, rig, plan.backlash_deg)
+    start = 0.0 if current_deg is None else float(current_deg)
+    route = order_for_travel(angles, start, rig, plan.backlash_deg)
     motion, settle, exposure = estimate_angles(
-        route, current_deg, pre, len(lights), plan, rig, plan.exposure.dark != "none"
+        route, start, len(lights), plan, rig, plan.exposure.dark != "none"
     )
     total = motion + settle + exposure
-    max_total = None
-    if isinstance(plan, AdaptivePlan) and plan.max_samples is not None:
-        per_angle = total / len(route)
-        max_total = per_angle * plan.max_samples / len(pairs)
+    max_total = max_angles = None
+    if isinstance(plan, AdaptivePlan):
+        _, _, end = travel(route, start, rig, plan.backlash_deg)
+        extra_n, extra_s = adaptive_bound(plan, rig, len(pairs), len(lights), angles, end)
+        max_total, max_angles = total + extra_s, len(route) + extra_n
     darks = len(route) if plan.exposure.dark == "every_angle" else int(plan.exposure.dark == "once")
     return DryRun(
         kind=plan.kind,
@@ -689,4 +807,7 @@ def dry_run(plan: AnyPlan, rig: RigDescription, current_deg: float = 0.0) -> Dry
         exposure_s=exposure,
         estimated_s=total,
         max_estimated_s=max_total,
+        max_angles=max_angles,
+        from_deg=start,
+        from_known=current_deg is not None,
     )

@@ -118,7 +118,15 @@ class JobDetail(JobInfo):
     """Everything about one job in one call."""
 
     plan: dict[str, Any]
-    eta_s: float | None = Field(description="estimated seconds to the end of measuring")
+    eta_s: float | None = Field(description="estimated seconds to the end of measuring: the "
+                                "measured time per stage angle times the angles left, "
+                                "counted down since the last angle")
+    eta_max_s: float | None = Field(default=None, description="adaptive plans: bound on "
+                                    "eta_s if every refinement round runs in full")
+    activity: str | None = Field(default=None, description="what the job is doing or "
+                                 "waiting for beyond measuring (e.g. the first basis build)")
+    activity_fraction: float | None = Field(default=None, description="fraction of the "
+                                            "activity done, when known")
     queue_position: int | None = Field(description="0 = next to run; null unless queued")
     result_path: str | None
     result: dict[str, Any] | None = Field(description="summary: metrics, readings, paths")
@@ -196,6 +204,8 @@ T = TypeVar("T")
 
 _PREVIEW_CACHE = 8
 """Preview PNGs kept in memory (a few tens of kB each)."""
+_RENDER_CACHE = 6
+"""Rendered figures kept in memory (about 1-3 MB each)."""
 
 
 # --------------------------------------------------------------------------- service
@@ -237,6 +247,9 @@ class GonioService:
         self._engine = EngineLoop()
         self._preview_lock = threading.Lock()
         self._previews: dict[tuple[str, int], bytes] = {}
+        self._renders: dict[tuple[Any, ...], bytes] = {}
+        self.stage_deg: float | None = None
+        """Last known stage position, degrees (None until a job or a manual move reports it)."""
         self._basis_lock = threading.Lock()
         self._basis: Any = None
         # OS locks this service owns for its life (data directory, rig endpoints: see
@@ -398,13 +411,23 @@ class GonioService:
         engine's last estimate (updated at each checkpoint), not recomputed.
         """
         row = self._row(job_id)
-        eta = None
+        eta = eta_max = None
         eng = self.worker.engine
         if eng is not None and eng.job_id == job_id:
-            eta = eng.progress.eta_s
+            p = eng.progress
+            # Counted down while measuring; frozen while paused or suspended.
+            eta = p.eta_now() if row.state is JobState.RUNNING else p.eta_s
+            if p.eta_max_s is not None:
+                eta_max = max(p.eta_max_s - (p.eta_s or 0.0) + (eta or 0.0), eta or 0.0)
+        activity = fraction = None
+        if row.state is JobState.RECONSTRUCTING and self.worker.current_job == job_id:
+            report = self.worker.activity_report()
+            if report is not None:
+                activity, fraction = report
         qpos = self.store.queue_position(job_id) if row.state is JobState.QUEUED else None
         base = JobInfo.from_row(row).model_dump()
-        return JobDetail(**base, plan=row.plan, eta_s=eta, queue_position=qpos,
+        return JobDetail(**base, plan=row.plan, eta_s=eta, eta_max_s=eta_max,
+                         activity=activity, activity_fraction=fraction, queue_position=qpos,
                          result_path=row.result_path, result=row.summary, rig=row.rig)
 
     def readings(self, job_id: int, after_angle: int = -1) -> list[ReadingRow]:
@@ -507,8 +530,9 @@ class GonioService:
         return eng
 
     def dry_run(self, plan: AnyPlan | dict[str, Any]) -> DryRun:
+        """Check and time a plan from the stage's last known position (else 0 deg, said so)."""
         p = plan if isinstance(plan, BaseModel) else parse_plan(plan)
-        return dry_run(p, self.desc)
+        return dry_run(p, self.desc, self.stage_deg)
 
     # ------------------------------------------------------------------ events
     @property
@@ -517,6 +541,12 @@ class GonioService:
         return self.store.last_seq()
 
     def _on_event(self, ev: EventRow) -> None:
+        # The stage's last known position, for dry runs: every checkpoint and manual stage
+        # command reports it.
+        pos = ev.data.get("actual_deg") if ev.type == "progress" else (
+            ev.data.get("position_deg") if ev.type == "stage" else None)
+        if isinstance(pos, int | float):
+            self.stage_deg = float(pos)
         loop = self._loop
         if loop is None or loop.is_closed():
             return
@@ -582,7 +612,12 @@ class GonioService:
         row = self._row(job_id)
         if row.summary is None:
             raise NotFound(f"job {job_id} has no result yet (it is {row.state.value})")
-        return dict(row.summary)
+        from gonio.figures import headline_error
+
+        out = dict(row.summary)
+        # The one error number to show, with its meaning (the same words as `gonio scan`).
+        out["headline_error"] = headline_error(out)
+        return out
 
     def preview_png(self, job_id: int) -> bytes:
         """PNG preview of the reconstructed table (:func:`gonio.brdf.preview.preview_png`).
@@ -643,6 +678,43 @@ class GonioService:
         except ExportError as exc:
             raise NotFound(f"job {job_id}: {exc}") from None
         return out, name
+
+    def render_png(self, job_id: int, compare: int | None = None) -> bytes:
+        """Rendering of a job's reconstruction (:func:`gonio.figures.render_inputs`).
+
+        With ``compare``, that job's reconstruction is shown below for comparison; without,
+        the true material above it when the result records one (simulated rig). Blocking
+        (seconds: it renders six views per material): call it from a thread. The last few
+        PNGs are kept, since finished result files never change.
+
+        Raises
+        ------
+        NotFound
+            A job has no result yet, or it is a calibration job (no BRDF).
+        """
+        from gonio.figures import FigureError, render_inputs
+
+        paths = [self.result_path(job_id)]
+        if compare is not None:
+            paths.append(self.result_path(compare))
+        key = ("render", *((str(p), p.stat().st_mtime_ns if p.is_file() else 0) for p in paths))
+        with self._preview_lock:
+            cached = self._renders.get(key)
+        if cached is not None:
+            return cached
+        ids = [job_id] if compare is None else [job_id, compare]
+        for jid, p in zip(ids, paths, strict=True):
+            if not p.is_file():
+                raise NotFound(f"job {jid}'s result file is missing from the data directory")
+        try:
+            png = render_inputs(paths)
+        except FigureError as exc:
+            raise NotFound(str(exc).replace(str(paths[0]), f"job {job_id}")) from None
+        with self._preview_lock:
+            self._renders[key] = png
+            while len(self._renders) > _RENDER_CACHE:
+                self._renders.pop(next(iter(self._renders)))
+        return png
 
     # ------------------------------------------------------------------ rig
     async def rig_status(self) -> RigStatus:

@@ -114,6 +114,12 @@ class Worker:
         self._recon_task: asyncio.Task[dict[str, Any]] | None = None
         self._abort_recon = False
         self._stopping = False
+        self.activity: str | None = None
+        """What the current job waits for beyond measuring (e.g. the basis), or None."""
+        self._activity_since = 0.0
+        self.specimen_truth: Callable[[], dict[str, Any] | None] | None = None
+        """Set by simulated rigs: the recipe of the material on the stage, stored with each
+        reconstruction as ``provenance/true_material`` so renderings can show the truth."""
 
     # ------------------------------------------------------------------ control
     def wake(self) -> None:
@@ -191,6 +197,7 @@ class Worker:
             return await self._run_job(job)
         finally:
             self.current_job = None
+            self._set_activity(None)
             self.engine = None
             self._recon_task = None
             self._abort_recon = False
@@ -304,7 +311,11 @@ class Worker:
 
         from gonio.brdf.reconstruct import pair_cells, reconstruct
 
-        basis = self.basis_provider()
+        self._set_activity("basis")
+        try:
+            basis = self.basis_provider()
+        finally:
+            self._set_activity("reconstructing")
         cells, ph_lab = pair_cells(light_dirs, sensor_dirs)
         rec = reconstruct(
             basis, cells, ph_lab, np.deg2rad(samples.stage_angles_deg),
@@ -338,6 +349,9 @@ class Worker:
                 principled_log_rmse=fits.principled.metrics["log_rmse"],
             )
         metrics["seconds"] = time.perf_counter() - t0
+        truth = self.specimen_truth() if self.specimen_truth is not None else None
+        if truth is not None:
+            provenance["true_material"] = json.dumps(truth)
         write_result(
             path, job_id=job_id, specimen=job.specimen, kind=job.kind, readings=readings,
             samples=samples, table=rec.table, coefficients=rec.coefficients,
@@ -365,6 +379,33 @@ class Worker:
             log.warning("job %d: export fits failed (%s); the result is kept without them",
                         job_id, exc)
             return None
+    def _set_activity(self, what: str | None) -> None:
+        self.activity = what
+        self._activity_since = time.monotonic()
+
+    def activity_report(self) -> tuple[str, float | None] | None:
+        """What the current job waits for, in words, and the fraction done if known.
+
+        While the default basis is being obtained for more than a moment, it is being built
+        (the first scan on an install): the report counts the library materials tabulated so
+        far, then says the basis is being learned.
+        """
+        what = self.activity
+        if what is None:
+            return None
+        if what == "reconstructing":
+            return ("reconstructing the BRDF from the readings", None)
+        waited = time.monotonic() - self._activity_since
+        if self.basis_provider is not default_basis_provider or waited < 1.0:
+            return ("loading the reconstruction basis", None)
+        from gonio.brdf.library import build_progress
+
+        done, total = build_progress()
+        if done < total:
+            return (f"building the BRDF training library, {done} of {total} materials (first "
+                    "scan on this install; later scans reuse it)", done / total if total else None)
+        return ("learning the reconstruction basis from the library (first scan on this "
+                "install, about a minute; later scans reuse it)", None)
 
     async def stop(self) -> None:
         self._stopping = True

@@ -20,7 +20,7 @@ from pydantic import BaseModel, Field
 from gonio.api.deps import READ, JobId, Service
 from gonio.brdf import geometry as geo
 from gonio.brdf.table import BRDFTable
-from gonio.results import read_result
+from gonio.results import ResultFile, read_result
 from gonio.service import NotFound
 
 router = APIRouter(prefix="/api/v1/jobs", tags=["results"])
@@ -70,6 +70,33 @@ class _TableCache:
 _tables = _TableCache()
 
 
+class _ResultCache:
+    """The last few result files read whole (samples, table, provenance) for the plots."""
+
+    def __init__(self, size: int = 3) -> None:
+        self.size = size
+        self._lock = Lock()
+        self._items: OrderedDict[tuple[Path, int], ResultFile] = OrderedDict()
+
+    def get(self, path: Path) -> ResultFile:
+        key = (path, path.stat().st_mtime_ns if path.is_file() else 0)
+        with self._lock:
+            if key in self._items:
+                self._items.move_to_end(key)
+                return self._items[key]
+        if not path.is_file():
+            raise NotFound(f"the result file {path.name} is missing from the data directory")
+        res = read_result(path)
+        with self._lock:
+            self._items[key] = res
+            while len(self._items) > self.size:
+                self._items.popitem(last=False)
+        return res
+
+
+_results = _ResultCache()
+
+
 @router.get(
     "/{job_id}/result",
     dependencies=READ,
@@ -106,6 +133,67 @@ def metrics(job_id: JobId, service: Service) -> dict[str, Any]:
 async def preview(job_id: JobId, service: Service) -> Response:
     png = await asyncio.to_thread(service.preview_png, job_id)
     return Response(png, media_type="image/png", headers={"Cache-Control": "max-age=3600"})
+
+
+@router.get(
+    "/{job_id}/render.png",
+    dependencies=READ,
+    responses={**_NO_RESULT, 200: {"content": {"image/png": {}}}},
+    response_class=Response,
+    summary="Rendering of the reconstruction: sphere and swatch under point lights and a "
+            "studio environment, the true material beside it on the simulated rig",
+)
+async def render_png(
+    job_id: JobId,
+    service: Service,
+    compare: int | None = Query(
+        None, ge=1, le=2**53, description="another job id: its reconstruction is shown "
+        "below this one for comparison"),
+) -> Response:
+    png = await asyncio.to_thread(service.render_png, job_id, compare)
+    return Response(png, media_type="image/png", headers={"Cache-Control": "max-age=3600"})
+
+
+def _result(service: Any, job_id: int) -> ResultFile:
+    path = service.result_path(job_id)
+    res = _results.get(path)
+    if res.table is None:
+        raise NotFound(f"job {job_id} has no reconstructed BRDF (a calibration job has none)")
+    return res
+
+
+@router.get(
+    "/{job_id}/fit",
+    dependencies=READ,
+    responses=_NO_RESULT,
+    summary="Each pair's calibrated samples against stage angle and the reconstruction's "
+            "curve through them (mean over channels)",
+)
+async def fit(job_id: JobId, service: Service) -> dict[str, Any]:
+    from gonio.figures import fit_curves
+
+    res = await asyncio.to_thread(_result, service, job_id)
+    return await asyncio.to_thread(fit_curves, res)
+
+
+@router.get(
+    "/{job_id}/polar",
+    dependencies=READ,
+    responses={**_NO_RESULT, 422: {"description": "incidence out of range"}},
+    summary="In-plane and cross-plane BRDF at one incidence (reconstruction, and the true "
+            "material on the simulated rig)",
+)
+async def polar(
+    job_id: JobId,
+    service: Service,
+    theta_i: float = Query(30, ge=0, le=85, description="incidence from the normal, degrees"),
+    phi_i: float = Query(0, ge=-360, le=360, description="incidence azimuth from the holder "
+                         "mark (specimen x axis), degrees"),
+) -> dict[str, Any]:
+    from gonio.figures import polar_curves
+
+    res = await asyncio.to_thread(_result, service, job_id)
+    return await asyncio.to_thread(polar_curves, res, theta_i, phi_i)
 
 
 def _grid(value: float, name: str, upper: int) -> int:

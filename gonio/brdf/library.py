@@ -475,3 +475,14 @@ def default_library(
             seen[table.name] = source
             tables.append(table)
     return tables
+
+
+def build_progress(seed: int = DEFAULT_SEED) -> tuple[int, int]:
+    """(materials already tabulated in the cache, materials in the library).
+
+    Cheap (one ``stat`` per material): lets a daemon say how far the first library build has
+    come while a job waits for it.
+    """
+    folder = library_cache_dir(seed)
+    specs = _specs(int(seed))
+    return sum(_table_path(folder, s).is_file() for s in specs), len(specs)

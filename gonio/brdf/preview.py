@@ -8,7 +8,8 @@ the specular peak is the top-left corner and grazing retro/forward scattering th
 Values are shown on one shared logarithmic scale (``log10`` of the BRDF, 1/sr, from
 ``LOG_SPAN`` decades below the maximum up to the maximum), with the channels mapped to RGB
 (the first three channels; a one-channel table is shown in grey), so colour and relative
-brightness stay comparable between panels. Cells below the horizon are dark grey.
+brightness stay comparable between panels. Cells below the horizon are hatched grey. The PNG
+(:func:`preview_png`) has a colour bar with the BRDF value of each decade.
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ PH_DEG: tuple[int, ...] = (0, 45, 90, 135)
 PD_DEG: tuple[int, ...] = (90, 0)
 LOG_SPAN = 4.0  # decades of dynamic range shown
 _INVALID_RGB = (40, 40, 40)
+_HATCH_RGB = (150, 150, 150)
 _GAP_RGB = (255, 255, 255)
 
 
@@ -58,12 +60,28 @@ def preview_image(table: BRDFTable, scale: int = 10, gap: int = 4) -> NDArray[np
                 lg = (np.log10(np.maximum(sl, 1e-30)) - (top - LOG_SPAN)) / LOG_SPAN
             level = np.nan_to_num(np.clip(lg, 0.0, 1.0)) ** (1 / 2.2)  # display gamma
             tile = np.moveaxis((255 * level).astype(np.uint8), 0, -1)  # (th, td, 3)
-            tile[~np.isfinite(sl).all(axis=0)] = _INVALID_RGB
+            invalid = ~np.isfinite(sl).all(axis=0)
+            tile[invalid] = _INVALID_RGB
             tile = np.repeat(np.repeat(tile, scale, axis=0), scale, axis=1)
+            _hatch(tile, np.repeat(np.repeat(invalid, scale, axis=0), scale, axis=1))
             y0 = gap + r * (panel + gap)
             x0 = gap + c * (panel + gap)
             img[y0 : y0 + panel, x0 : x0 + panel] = tile
     return img
+
+
+def _hatch(tile: NDArray[np.uint8], invalid: NDArray[np.bool_]) -> None:
+    """Diagonal stripes over invalid cells, so they cannot be mistaken for low values."""
+    yy, xx = np.indices(invalid.shape)
+    stripe = ((xx + yy) // 3) % 2 == 0
+    tile[invalid & stripe] = _HATCH_RGB
+
+
+def _top_log10(table: BRDFTable) -> float:
+    v = np.asarray(table.values, dtype=float)
+    rgb = v[[0, 0, 0]] if v.shape[0] < 3 else v[:3]
+    finite = rgb[np.isfinite(rgb)]
+    return float(np.log10(max(float(finite.max()) if finite.size else 1.0, 1e-12)))
 
 
 def preview_png(table: BRDFTable, scale: int = 10, title: str | None = None) -> bytes:
@@ -87,11 +105,28 @@ def preview_png(table: BRDFTable, scale: int = 10, title: str | None = None) -> 
     gap = 4
     mosaic = preview_image(table, scale, gap)
     panel = geo.N_TH * scale
-    left, top, bottom = 64, 18, 34
-    canvas = Image.new("RGB", (mosaic.shape[1] + left, mosaic.shape[0] + top + bottom), _GAP_RGB)
+    left, top, bottom, right = 64, 18, 34, 150
+    canvas = Image.new("RGB", (mosaic.shape[1] + left + right, mosaic.shape[0] + top + bottom),
+                       _GAP_RGB)
     canvas.paste(Image.fromarray(mosaic), (left, top))
     draw = ImageDraw.Draw(canvas)
     ink = (30, 30, 30)
+    # Colour bar: the grey level of a cell whose channels are equal, one tick per decade.
+    x0, bar_w = left + mosaic.shape[1] + 12, 16
+    y0, bar_h = top + gap, mosaic.shape[0] - 2 * gap - 40
+    level = np.linspace(1.0, 0.0, bar_h) ** (1 / 2.2)
+    ramp = np.repeat((255 * level).astype(np.uint8)[:, None], bar_w, axis=1)
+    canvas.paste(Image.fromarray(np.stack([ramp] * 3, axis=-1)), (x0, y0))
+    draw.rectangle((x0 - 1, y0 - 1, x0 + bar_w, y0 + bar_h), outline=ink)
+    top_log = _top_log10(table)
+    for k in range(int(LOG_SPAN) + 1):
+        y = y0 + round(k / LOG_SPAN * (bar_h - 1))
+        draw.line((x0 + bar_w, y, x0 + bar_w + 4, y), fill=ink)
+        draw.text((x0 + bar_w + 7, y - 6), f"{10 ** (top_log - k):.3g} 1/sr", fill=ink)
+    sw = np.full((14, bar_w, 3), _INVALID_RGB, dtype=np.uint8)
+    _hatch(sw, np.ones((14, bar_w), dtype=bool))
+    canvas.paste(Image.fromarray(sw), (x0, y0 + bar_h + 14))
+    draw.text((x0 + bar_w + 7, y0 + bar_h + 10), "invalid:\nbelow horizon", fill=ink)
     for c, ph in enumerate(PH_DEG):
         draw.text((left + gap + c * (panel + gap) + 2, 3), f"phi_h = {ph} deg", fill=ink)
     for r, pd in enumerate(PD_DEG):

@@ -29,6 +29,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "gonio.cli.rig_command",
     "gonio.cli.export_command",
     "gonio.cli.keys_command",
+    "gonio.cli.render_command",
 )
 
 

@@ -233,6 +233,10 @@ async def _run_owned(args: argparse.Namespace, plan: Any, config: Any, sim: Any,
 
     worker = Worker(store, get_rig, desc, data_dir, calibration=lambda: cal,
                     provenance={"rig_config": config.model_dump_json()})
+    if sim is not None:
+        from gonio.figures import describe_material
+
+        worker.specimen_truth = lambda: describe_material(sim.specimen.brdf)
     store.reconcile(lambda j: None)
     # Resume an interrupted job only when it is this scan: the same plan on the same rig.
     same = [j for j in store.active_jobs()
@@ -281,13 +285,15 @@ async def _run_owned(args: argparse.Namespace, plan: Any, config: Any, sim: Any,
         return 0
     if sim is None and cal.pairs:
         print(f"calibration: {cal.source}", file=sys.stderr)
+    from gonio.figures import headline_error
+
     units = "1/sr" if cal.pairs else "sensor units (uncalibrated)"
+    err = headline_error(summary)
+    err_text = f"{err['key']} {err['text']}" if err else "no error estimate"
     print(f"job {job.id} completed: {summary.get('n_samples', summary.get('readings'))} samples "
-          f"in {units}, "
-          f"predicted log_rmse {summary.get('predicted_log_rmse') or float('nan'):.3f} "
-          "(expected cosine-weighted log error of the reconstruction), "
-          f"self-estimated error {100 * (summary.get('predicted_error') or float('nan')):.1f} %; "
-          f"wrote {out}")
+          f"in {units}, {err_text}; wrote {out}")
+    if err:
+        print(f"  {err['key']}: {err['meaning']}")
     return 0
 
 

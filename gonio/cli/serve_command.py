@@ -195,6 +195,12 @@ def _run_sim(args: argparse.Namespace, cfg: Any, keyring: Any) -> int:
             raise UsageError(f"cannot start the simulated rig: {exc}") from None
         with owned, sim:
             app = _build(build_app, cfg, sim.config, keyring)
+            from gonio.figures import describe_material
+
+            # Results of the simulated rig record the material on the stage, so renderings
+            # show the truth beside the reconstruction.
+            app.state.service.worker.specimen_truth = lambda: describe_material(
+                sim.specimen.brdf)
             result: dict[str, int] = {}
 
             follow_jobs_with_holder(app.state.service, sim)

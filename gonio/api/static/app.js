@@ -1,27 +1,35 @@
 // The lab page: queue, live readings, scan form, job controls, results.
 import { ApiError, followEvents, getBlob, getJSON, getKey, send, setKey } from "./api.js";
-import { plotPolar, plotReadings } from "./plots.js";
+import { plotPolar, plotRotation } from "./plots.js";
 
 const $ = (sel) => document.querySelector(sel);
 let selected = null;          // id of the job shown in the live/result panels
-let selectedEta = null;       // its estimated seconds left (only the job detail has it)
 let jobs = [];
 let refreshTimer = null;
 let readingsTimer = null;
 
-function showError(err) {
+let messageFrom = null;        // "user" (a refused action) or "background" (a failed refresh)
+
+function showError(err, from = "user") {
   const box = $("#message");
-  if (!err) { box.hidden = true; return; }
+  if (!err) { box.hidden = true; box.textContent = ""; messageFrom = null; return; }
   let text = err instanceof ApiError ? err.message : String(err);
   if (err instanceof ApiError && (err.status === 401 || err.status === 403)) text += " (enter a valid API key at the top right)";
   box.textContent = text;
   box.hidden = false;
+  messageFrom = from;
 }
 
-// User actions clear the previous message first; background refreshes leave it standing, so
-// a refusal stays readable until the user does something else.
+// User actions clear the previous message first, and their refusal stays readable until the
+// user does something else. A failed background refresh shows too, and clears itself as soon
+// as a later refresh works again (the message is no longer true).
 async function guarded(fn, userAction = false) {
-  try { if (userAction) showError(null); return await fn(); } catch (e) { showError(e); return undefined; }
+  try {
+    if (userAction) showError(null);
+    const out = await fn();
+    if (!userAction && messageFrom === "background") showError(null);
+    return out;
+  } catch (e) { showError(e, userAction ? "user" : "background"); return undefined; }
 }
 
 // ------------------------------------------------------------------ key
@@ -68,10 +76,26 @@ const ACTIONS = {
   completed: ["remove"], failed: ["remove"], aborted: ["remove"], halted: ["remove"],
 };
 
+const SHOW_REASON = new Set(["suspended", "failed", "aborted", "halted"]);
+
 function eta(s) {
   if (typeof s !== "number" || !Number.isFinite(s)) return "";
   if (s < 90) return `${Math.round(s)} s`;
   return s < 5400 ? `${Math.round(s / 60)} min` : `${(s / 3600).toFixed(1)} h`;
+}
+
+// The selected job's detail (ETA from measured angle times, activity while reconstructing).
+let selectedDetail = null;
+let selectedState = null;     // the selected job's state at the last list refresh
+
+function etaText() {
+  const d = selectedDetail;
+  if (!d || d.id !== selected) return "";
+  if (d.state === "reconstructing") return d.activity ?? "reconstructing";
+  if (!["running", "paused", "suspended"].includes(d.state)) return "";
+  let t = eta(d.eta_s);
+  if (d.eta_max_s != null && d.eta_max_s > (d.eta_s ?? 0) + 1) t += ` (≤ ${eta(d.eta_max_s)} if refined)`;
+  return t;
 }
 
 async function act(job, action) {
@@ -97,7 +121,7 @@ function renderJobs() {
     tr.dataset.state = job.state;
     if (job.id === selected) tr.classList.add("selected");
     const done = job.done_angles ?? 0, total = job.total_angles ?? 0;
-    const cells = [job.id, job.specimen, job.kind, job.state, null, job.id === selected ? eta(selectedEta) : ""];
+    const cells = [job.id, job.specimen, job.kind, job.state, null, job.id === selected ? etaText() : ""];
     cells.forEach((c, i) => {
       const td = document.createElement("td");
       if (i === 4) {
@@ -105,7 +129,16 @@ function renderJobs() {
         bar.max = Math.max(total, 1); bar.value = done;
         td.append(bar, ` ${done}/${total}`);
       } else td.textContent = c ?? "";
-      if (i === 3) { td.className = `state-${job.state}`; if (job.reason) td.title = job.reason; }
+      if (i === 3) {
+        td.className = `state-${job.state}`;
+        // Why a job stopped or waits, in the row itself (not only in a tooltip).
+        if (job.reason && SHOW_REASON.has(job.state)) {
+          const why = document.createElement("span");
+          why.className = "reason"; why.textContent = job.reason;
+          td.append(why);
+        }
+      }
+      if (i === 5) td.className = "eta";
       tr.append(td);
     });
     const td = document.createElement("td");
@@ -126,13 +159,31 @@ function renderJobs() {
 async function refreshJobs() {
   jobs = await getJSON("/jobs");
   if (selected !== null && jobs.some((j) => j.id === selected)) {
-    selectedEta = (await getJSON(`/jobs/${selected}`)).eta_s;
+    selectedDetail = await getJSON(`/jobs/${selected}`);
   }
+  clearStaleNotes();
+  // The selected job changed state (e.g. completed): its rotation plot changes kind.
+  const now = jobs.find((j) => j.id === selected)?.state;
+  if (now !== selectedState) { selectedState = now; scheduleReadings(); }
   renderJobs();
+  refreshCompareChoices();
   if (selected === null && jobs.length) {
     const active = jobs.find((j) => ["running", "paused", "suspended", "reconstructing"].includes(j.state));
     select((active ?? jobs[jobs.length - 1]).id);
   } else if (selected !== null) showResult(jobs.find((j) => j.id === selected));
+}
+
+// While the selected job measures or reconstructs, its detail is polled once a second: the
+// ETA counts down between checkpoints and a long first basis build shows its progress even
+// though no event arrives meanwhile.
+async function pollSelected() {
+  if (selected === null) return;
+  const j = jobs.find((x) => x.id === selected);
+  if (!j || !["running", "suspended", "reconstructing", "paused"].includes(j.state)) return;
+  selectedDetail = await getJSON(`/jobs/${selected}`);
+  const cell = document.querySelector(`#jobs tr[data-id="${selected}"] td.eta`);
+  if (cell) cell.textContent = etaText();
+  if (selectedDetail.state === "reconstructing") showResult(jobs.find((x) => x.id === selected));
 }
 
 function scheduleRefresh() {
@@ -142,11 +193,8 @@ function scheduleRefresh() {
 }
 
 // ------------------------------------------------------------------ live readings
-async function refreshReadings() {
-  if (selected === null) return;
-  const id = selected;
+async function readingsSeries(id) {
   const rows = await getJSON(`/jobs/${id}/readings`);
-  if (id !== selected) return;
   const series = new Map();
   for (const r of rows) {
     const label = `${r.light}/${r.sensor}`;
@@ -154,8 +202,43 @@ async function refreshReadings() {
     if (!series.has(label)) series.set(label, []);
     series.get(label).push([((r.specimen_deg % 360) + 360) % 360, v]);
   }
-  plotReadings($("#readings-plot"), series);
-  $("#live-job").textContent = `job ${id} · ${rows.length} readings`;
+  return { rows, pairs: [...series].map(([label, pts]) => ({ label, points: pts.sort((a, b) => a[0] - b[0]) })) };
+}
+
+// A completed scan shows its calibrated samples with the reconstruction's curve through
+// them; a running one its raw readings as they arrive.
+async function rotationData(job) {
+  if (job.state === "completed" && job.kind !== "calibration") {
+    const fit = await getJSON(`/jobs/${job.id}/fit`);
+    return {
+      pairs: fit.pairs.map((p) => ({
+        label: p.label,
+        points: p.stage_deg.map((a, i) => [a, p.measured[i]]).filter((q) => q[1] !== null),
+        curve: fit.curve_deg.map((a, i) => [a, p.curve[i]]).filter((q) => q[1] !== null),
+      })),
+      yTitle: `BRDF (${fit.units}), ${fit.channels}`,
+      caption: "Dots: the calibrated samples of each light/sensor pair; lines: the reconstructed BRDF at the same pair as the stage turns (the fit). Click a legend entry to hide a pair.",
+      count: fit.pairs.reduce((n, p) => n + p.measured.length, 0),
+    };
+  }
+  const { rows, pairs } = await readingsSeries(job.id);
+  return {
+    pairs, yTitle: "reading − dark (sensor counts), mean over channels",
+    caption: "Each colour is one light/sensor pair: dark-subtracted readings as they arrive. When the scan completes, the calibrated samples and the reconstruction's curve replace them.",
+    count: rows.length,
+  };
+}
+
+async function refreshReadings() {
+  if (selected === null) return;
+  const id = selected;
+  const job = jobs.find((j) => j.id === id);
+  if (!job) return;
+  const data = await rotationData(job);
+  if (id !== selected) return;
+  plotRotation($("#readings-plot"), data.pairs, data.yTitle);
+  $("#readings-caption").textContent = data.caption;
+  $("#live-job").textContent = `job ${id} · ${data.count} readings`;
 }
 
 function scheduleReadings() {
@@ -165,37 +248,44 @@ function scheduleReadings() {
 
 // ------------------------------------------------------------------ results
 let shownResult = null;
+let compareWith = null;       // id of a second completed job shown beside the selected one
+const objectUrls = {};
+
+function setImage(img, key, blob) {
+  if (objectUrls[key]) URL.revokeObjectURL(objectUrls[key]);
+  objectUrls[key] = URL.createObjectURL(blob);
+  img.src = objectUrls[key];
+  img.hidden = false;
+  return objectUrls[key];
+}
+
+function resultState(job) {
+  if (job.state === "completed") return job.kind === "calibration"
+    ? "Calibration completed: its factors now convert the readings of later scans to 1/sr. A calibration has no BRDF to show."
+    : "";
+  if (job.state === "reconstructing") return selectedDetail?.id === job.id && selectedDetail.activity
+    ? `Measuring done; ${selectedDetail.activity}.` : "Measuring done; reconstructing the BRDF.";
+  if (SHOW_REASON.has(job.state)) return `${job.state[0].toUpperCase()}${job.state.slice(1)}: ${job.reason ?? "no reason recorded"}`;
+  return "The result appears when the scan has completed.";
+}
+
 async function showResult(job) {
   if (!job) return;
   $("#result-job").textContent = `job ${job.id} (${job.state})`;
-  if (job.state !== "completed") {
-    $("#preview").hidden = true;
-    $("#preview-caption").textContent = job.state === "failed" ? `failed: ${job.reason ?? ""}` : "The result appears when the scan has completed.";
-    $("#download").hidden = true;
-    $("#metrics tbody").replaceChildren();
-    $("#polar-plot").replaceChildren();
+  const state = $("#result-state");
+  state.textContent = resultState(job);
+  state.hidden = state.textContent === "";
+  state.className = SHOW_REASON.has(job.state) ? `state-${job.state}` : "muted";
+  if (job.state !== "completed" || job.kind === "calibration") {
+    $("#result-body").hidden = true;
     shownResult = null;
     return;
   }
   if (shownResult === job.id) return;
   shownResult = job.id;
-  const img = $("#preview");
-  const blob = await getBlob(`/jobs/${job.id}/preview.png`);
-  img.src = URL.createObjectURL(blob);
-  img.hidden = false;
-  $("#preview-caption").textContent = `${job.specimen}: reconstructed BRDF, log scale. ` +
-    "Columns: phi_h 0, 45, 90, 135 deg; rows: phi_d 90, 0 deg; in each panel theta_h runs down, theta_d right.";
+  $("#result-body").hidden = false;
   const metrics = await getJSON(`/jobs/${job.id}/metrics`);
-  const tbody = $("#metrics tbody");
-  tbody.replaceChildren();
-  for (const [k, v] of Object.entries(metrics)) {
-    if (v === null || typeof v === "object") continue;
-    const tr = document.createElement("tr");
-    tr.innerHTML = "<th></th><td></td>";
-    tr.children[0].textContent = k;
-    tr.children[1].textContent = typeof v === "number" ? String(+v.toPrecision(4)) : String(v);
-    tbody.append(tr);
-  }
+  showMetrics(metrics);
   const link = $("#download");
   link.hidden = false;
   link.onclick = async (e) => {
@@ -206,21 +296,120 @@ async function showResult(job) {
       a.href = URL.createObjectURL(file); a.download = `gonio-job-${job.id}.h5`; a.click();
     });
   };
-  await refreshSlice();
+  const img = $("#preview");
+  setImage(img, "preview", await getBlob(`/jobs/${job.id}/preview.png`));
+  $("#preview-caption").textContent = `${job.specimen}: the reconstructed table itself, log scale with a colour bar; ` +
+    "columns φh = 0, 45, 90, 135°; rows φd = 90, 0°; in each panel θh runs down, θd right; hatched cells are below the horizon.";
+  await Promise.all([refreshRender(), refreshPolar()]);
 }
 
-async function refreshSlice() {
+function showMetrics(metrics) {
+  const head = $("#headline-error");
+  const h = metrics.headline_error;
+  head.replaceChildren();
+  if (h) {
+    const strong = document.createElement("strong");
+    strong.textContent = `${h.key.replaceAll("_", " ")}: ${h.text}`;
+    const p = document.createElement("p");
+    p.textContent = h.meaning;
+    head.append(strong, p);
+  } else head.textContent = "No error estimate for this result (no pair could be left out).";
+  const tbody = $("#metrics tbody");
+  tbody.replaceChildren();
+  for (const [k, v] of Object.entries(metrics)) {
+    if (v === null || typeof v === "object" || k === "result_path") continue;
+    const tr = document.createElement("tr");
+    const th = document.createElement("th"), td = document.createElement("td");
+    th.textContent = k;
+    td.textContent = typeof v === "number" ? String(+v.toPrecision(4)) : String(v);
+    tr.append(th, td);
+    tbody.append(tr);
+  }
+}
+
+async function refreshRender() {
   if (shownResult === null) return;
-  const q = `theta_h=${$("#slice-th").value}&theta_d=${$("#slice-td").value}&phi_d=${$("#slice-pd").value}`;
-  const s = await getJSON(`/jobs/${shownResult}/slice?${q}`);
-  plotPolar($("#polar-plot"), s.phi_h_deg, s.values);
+  const id = shownResult, other = compareWith;
+  const caption = $("#render-caption");
+  caption.textContent = "Rendering… (a few seconds the first time)";
+  const q = other !== null ? `?compare=${other}` : "";
+  const blob = await getBlob(`/jobs/${id}/render.png${q}`);
+  if (id !== shownResult || other !== compareWith) return;
+  const url = setImage($("#render"), "render", blob);
+  $("#render-link").href = url;
+  caption.textContent = other !== null
+    ? `Job ${id} (top) and job ${other} (bottom), same lights and exposure per column. Click to open full size.`
+    : "The reconstruction on a sphere under point lights, on a flat swatch under a flash, and in a studio environment; " +
+      "on the simulated rig the true material is in the top row. Click to open full size.";
+}
+
+async function polarCurves(id) {
+  const q = `theta_i=${$("#polar-ti").value}&phi_i=${$("#polar-pi").value}`;
+  return getJSON(`/jobs/${id}/polar?${q}`);
+}
+
+function meanCurve(channels) {
+  const arrays = Object.values(channels);
+  return arrays[0].map((_, i) => {
+    const vs = arrays.map((a) => a[i]);
+    return vs.some((v) => v === null) ? null : vs.reduce((a, b) => a + b, 0) / vs.length;
+  });
+}
+
+async function refreshPolar() {
+  if (shownResult === null) return;
+  const id = shownResult, other = compareWith;
+  const [mine, theirs] = await Promise.all([polarCurves(id), other !== null ? polarCurves(other) : null]);
+  if (id !== shownResult) return;
+  const log = $("#polar-log").checked;
+  for (const [plane, canvas, title, angleName] of [
+    ["in_plane", "#polar-in", "in-plane", "from the normal"],
+    ["cross_plane", "#polar-cross", "cross-plane", "from the mirror direction"],
+  ]) {
+    const curves = [{ label: `job ${id} reconstruction`, values: meanCurve(mine.reconstruction[plane]), color: "#0b63c5" }];
+    if (mine.truth) curves.push({ label: `truth: ${mine.truth_name}`, values: meanCurve(mine.truth[plane]), color: "#1d2329", dash: [6, 4] });
+    if (theirs) curves.push({ label: `job ${other} reconstruction`, values: meanCurve(theirs.reconstruction[plane]), color: "#e6194b" });
+    plotPolar($(canvas), mine.angle_deg, curves, {
+      log, units: mine.units, angleName,
+      title: `${title} BRDF at θi = ${mine.theta_i_deg}°, φi = ${mine.phi_i_deg}° (mean of channels)`,
+    });
+  }
+}
+
+// The compare choice lists the other completed scans.
+function refreshCompareChoices() {
+  const sel = $("#compare");
+  const options = jobs.filter((j) => j.state === "completed" && j.kind !== "calibration" && j.id !== selected);
+  const want = options.map((j) => `${j.id}`).join(",");
+  if (sel.dataset.ids === want) return;
+  sel.dataset.ids = want;
+  const keep = sel.value;
+  sel.replaceChildren(new Option("(no comparison)", ""));
+  for (const j of options) sel.append(new Option(`job ${j.id}: ${j.specimen}`, `${j.id}`));
+  sel.value = options.some((j) => `${j.id}` === keep) ? keep : "";
+  if (sel.value === "" && compareWith !== null) setCompare(null);
+}
+
+async function setCompare(id) {
+  compareWith = id;
+  const box = $("#compare-fit");
+  box.hidden = id === null;
+  if (id !== null) {
+    const job = jobs.find((j) => j.id === id);
+    const data = await rotationData(job);
+    $("#compare-fit-title").textContent = `Job ${id} (${job.specimen}), for comparison`;
+    plotRotation($("#compare-plot"), data.pairs, data.yTitle);
+  }
+  await Promise.all([refreshRender(), refreshPolar()]);
 }
 
 function select(id) {
+  if (selected !== id) selectedDetail = null;
   selected = id;
   renderJobs();
   guarded(refreshReadings);
-  showResult(jobs.find((j) => j.id === id))?.catch(showError);
+  refreshCompareChoices();
+  guarded(() => showResult(jobs.find((j) => j.id === id)));
 }
 
 // ------------------------------------------------------------------ scan form
@@ -240,6 +429,19 @@ function readPlan() {
   return plan;
 }
 
+// The note under the form: a dry run's estimate, or "Job N queued." which clears once that
+// job has left the queue (it is no longer true).
+const note = { job: null };
+function setNote(text, jobId) {
+  note.job = jobId;
+  $("#dry-run-result").textContent = text;
+}
+function clearStaleNotes() {
+  if (note.job === null) return;
+  const j = jobs.find((x) => x.id === note.job);
+  if (!j || j.state !== "queued") setNote("", null);
+}
+
 function initForm() {
   const form = $("#scan-form");
   const kindSel = form.elements.kind;
@@ -250,13 +452,19 @@ function initForm() {
   showKind();
   $("#dry-run").addEventListener("click", () => guarded(async () => {
     const r = await send("POST", "/jobs/dry-run", { plan: readPlan() });
-    $("#dry-run-result").textContent = `OK: ${r.readings} readings at ${r.angles_deg.length} stage angles, about ${eta(r.estimated_s)}.`;
+    const from = r.from_known ? `from the stage at ${r.from_deg.toFixed(1)}°` : "assuming the stage at 0° (position not known yet)";
+    let text = `OK: ${r.readings} readings at ${r.angles_deg.length} stage angles, about ${eta(r.estimated_s)} ${from}` +
+      ` (moves ${eta(r.motion_s)}, exposures ${eta(r.exposure_s)}).`;
+    if (r.max_estimated_s != null) text += ` Adaptive refinement can add up to ${r.max_angles - r.angles_deg.length} angles: at most ${eta(r.max_estimated_s)} in all.`;
+    setNote(text, null);
   }, true));
+  // A checked plan's estimate no longer holds once the form changes.
+  form.addEventListener("input", () => { if (note.job === null) setNote("", null); });
   form.addEventListener("submit", (e) => {
     e.preventDefault();
     guarded(async () => {
       const job = await send("POST", "/jobs", { plan: readPlan() });
-      $("#dry-run-result").textContent = `Job ${job.id} queued.`;
+      setNote(`Job ${job.id} queued.`, job.id);
       selected = job.id;
       await refreshJobs();
       select(job.id);
@@ -278,7 +486,9 @@ function onEvent(ev) {
 window.addEventListener("DOMContentLoaded", async () => {
   initKey();
   initForm();
-  for (const id of ["#slice-th", "#slice-td", "#slice-pd"]) $(id).addEventListener("change", () => guarded(refreshSlice));
+  for (const id of ["#polar-ti", "#polar-pi", "#polar-log"]) $(id).addEventListener("change", () => guarded(refreshPolar, true));
+  $("#compare").addEventListener("change", (e) => guarded(() => setCompare(e.target.value ? Number(e.target.value) : null), true));
+  setInterval(() => guarded(pollSelected), 1000);
   await refreshAll();
   followEvents(onEvent, (live) => {
     const chip = $("#live-chip");

@@ -1,106 +1,180 @@
-// Small SVG plots for the lab page: no libraries, no build step.
+// Plots of the lab page, drawn with the vendored Chart.js (window.Chart, static/vendor/).
+// Each function (re)draws one <canvas>; the Chart object is kept on the canvas
+// (Chart.getChart(canvas)), so the page and its tests can read what is shown.
 
-const SVG = "http://www.w3.org/2000/svg";
-const COLORS = ["#0b63c5", "#d1495b", "#2a9d8f", "#e9a03b", "#6f42c1", "#3d5a80", "#8c564b", "#17becf"];
+/* global Chart */
 
-function el(name, attrs = {}, text = null) {
-  const node = document.createElementNS(SVG, name);
-  for (const [k, v] of Object.entries(attrs)) node.setAttribute(k, String(v));
-  if (text !== null) node.textContent = text;
-  return node;
-}
+// 20 colours that stay distinct side by side (Kelly's contrast set without white, black and
+// the greys), so 20 light/sensor pairs each get their own.
+export const PALETTE = [
+  "#e6194b", "#3cb44b", "#4363d8", "#f58231", "#911eb4", "#42d4f4", "#f032e6", "#9a6324",
+  "#800000", "#469990", "#000075", "#bfef45", "#808000", "#dcbeff", "#ffd8b1", "#aaffc3",
+  "#fabed4", "#ffe119", "#a9a9a9", "#000000",
+];
 
-function niceTicks(lo, hi, count = 5) {
-  if (!(hi > lo)) { hi = lo + 1; }
-  const raw = (hi - lo) / count;
-  const mag = 10 ** Math.floor(Math.log10(raw));
-  const step = [1, 2, 5, 10].map((m) => m * mag).find((s) => s >= raw) ?? raw;
-  const out = [];
-  for (let v = Math.ceil(lo / step) * step; v <= hi + step * 1e-9; v += step) out.push(+v.toPrecision(12));
-  return out;
+function fresh(canvas, config) {
+  Chart.getChart(canvas)?.destroy();
+  return new Chart(canvas, config);
 }
 
 function fmt(v) {
   const a = Math.abs(v);
-  return a !== 0 && (a < 1e-3 || a >= 1e4) ? v.toExponential(1) : String(+v.toPrecision(4));
+  return a !== 0 && (a < 1e-3 || a >= 1e4) ? v.toExponential(2) : String(+v.toPrecision(4));
 }
 
 /**
- * Line plot of readings against stage angle, one series per light/sensor pair.
- * @param {HTMLElement} host  container; its content is replaced
- * @param {Map<string, Array<[number, number]>>} series  label -> [angle_deg, value] points
+ * Readings against stage angle, one colour per light/sensor pair; with curves, the
+ * reconstruction's curve through each pair's readings in the same colour.
+ * @param {HTMLCanvasElement} canvas
+ * @param {Array<{label: string, points: Array<[number, number]>, curve?: Array<[number, number]>}>} pairs
+ * @param {string} yTitle  axis title with units
+ * @param {string} [title]
  */
-export function plotReadings(host, series) {
-  const W = 720, H = 280, L = 60, R = 130, T = 10, B = 36;
-  const svg = el("svg", { viewBox: `0 0 ${W} ${H}`, role: "img" });
-  const all = [...series.values()].flat();
-  const ys = all.map((p) => p[1]).filter(Number.isFinite);
-  const yMin = Math.min(0, ...ys), yMax = ys.length ? Math.max(...ys) : 1;
-  const x = (a) => L + (a / 360) * (W - L - R);
-  const y = (v) => T + (1 - (v - yMin) / ((yMax - yMin) || 1)) * (H - T - B);
-  svg.append(el("rect", { x: L, y: T, width: W - L - R, height: H - T - B, fill: "none", stroke: "#d0d7de" }));
-  for (const a of [0, 45, 90, 135, 180, 225, 270, 315, 360]) {
-    svg.append(el("line", { x1: x(a), x2: x(a), y1: T, y2: H - B, stroke: "#eef1f4" }));
-    svg.append(el("text", { x: x(a), y: H - B + 14, "text-anchor": "middle", "font-size": 11 }, `${a}°`));
-  }
-  for (const v of niceTicks(yMin, yMax)) {
-    svg.append(el("line", { x1: L, x2: W - R, y1: y(v), y2: y(v), stroke: "#eef1f4" }));
-    svg.append(el("text", { x: L - 4, y: y(v) + 4, "text-anchor": "end", "font-size": 11 }, fmt(v)));
-  }
-  svg.append(el("text", { x: (L + W - R) / 2, y: H - 4, "text-anchor": "middle", "font-size": 12 }, "stage angle"));
-  let k = 0;
-  for (const [label, points] of series) {
-    const color = COLORS[k % COLORS.length];
-    const pts = [...points].sort((p, q) => p[0] - q[0]);
-    if (pts.length > 1) {
-      svg.append(el("polyline", {
-        points: pts.map(([a, v]) => `${x(a).toFixed(1)},${y(v).toFixed(1)}`).join(" "),
-        fill: "none", stroke: color, "stroke-width": 1.5,
-      }));
-    }
-    for (const [a, v] of pts) svg.append(el("circle", { cx: x(a), cy: y(v), r: 2.5, fill: color, class: "reading" }));
-    svg.append(el("text", { x: W - R + 8, y: T + 14 + 16 * k, "font-size": 11, fill: color }, label));
-    k += 1;
-  }
-  host.replaceChildren(svg);
-}
-
-/**
- * Polar plot of a BRDF slice: value against azimuth phi_h, one curve per channel.
- * @param {HTMLElement} host
- * @param {number[]} phiDeg  azimuths, degrees
- * @param {Object<string, number[]>} channels  channel name -> values (same length as phiDeg)
- */
-export function plotPolar(host, phiDeg, channels) {
-  const S = 320, C = S / 2, Rmax = S / 2 - 24;
-  const svg = el("svg", { viewBox: `0 0 ${S} ${S}`, role: "img" });
-  const vals = Object.values(channels).flat().filter(Number.isFinite);
-  const vMax = vals.length ? Math.max(...vals) : 1;
-  const ticks = niceTicks(0, vMax, 3).filter((v) => v > 0);
-  const top = Math.max(vMax, ticks.at(-1) ?? vMax) || 1;
-  for (const v of ticks) {
-    svg.append(el("circle", { cx: C, cy: C, r: (v / top) * Rmax, fill: "none", stroke: "#e1e5ea" }));
-    svg.append(el("text", { x: C + 3, y: C - (v / top) * Rmax - 2, "font-size": 10, fill: "#6a737d" }, fmt(v)));
-  }
-  for (let a = 0; a < 360; a += 45) {
-    const r = (a * Math.PI) / 180;
-    svg.append(el("line", { x1: C, y1: C, x2: C + Rmax * Math.cos(r), y2: C - Rmax * Math.sin(r), stroke: "#eef1f4" }));
-    svg.append(el("text", {
-      x: C + (Rmax + 12) * Math.cos(r), y: C - (Rmax + 12) * Math.sin(r) + 4,
-      "text-anchor": "middle", "font-size": 10,
-    }, `${a}°`));
-  }
-  const colors = { R: "#d1495b", G: "#2a9d8f", B: "#0b63c5" };
-  let k = 0;
-  for (const [name, values] of Object.entries(channels)) {
-    const pts = phiDeg.map((p, i) => {
-      const r = (Math.max(0, values[i]) / top) * Rmax, t = (p * Math.PI) / 180;
-      return `${(C + r * Math.cos(t)).toFixed(1)},${(C - r * Math.sin(t)).toFixed(1)}`;
+export function plotRotation(canvas, pairs, yTitle, title = "") {
+  const datasets = [];
+  pairs.forEach((p, k) => {
+    const color = PALETTE[k % PALETTE.length];
+    datasets.push({
+      label: p.label, type: "scatter", data: p.points.map(([x, y]) => ({ x, y })),
+      backgroundColor: color, borderColor: color, pointRadius: 3, showLine: !p.curve,
+      borderWidth: 1, order: 1,
     });
-    svg.append(el("polygon", {
-      points: pts.join(" "), fill: "none", stroke: colors[name] ?? COLORS[k % COLORS.length], "stroke-width": 1.5,
-    }));
-    k += 1;
+    if (p.curve) {
+      datasets.push({
+        label: `${p.label} reconstruction`, type: "line", data: p.curve.map(([x, y]) => ({ x, y })),
+        borderColor: color, backgroundColor: color, pointRadius: 0, borderWidth: 1.5, order: 2,
+        isCurve: true,
+      });
+    }
+  });
+  return fresh(canvas, {
+    type: "scatter",
+    data: { datasets },
+    options: {
+      animation: false, responsive: true, maintainAspectRatio: false, parsing: false,
+      plugins: {
+        title: { display: Boolean(title), text: title },
+        legend: {
+          position: "right",
+          labels: { boxWidth: 12, filter: (item, data) => !data.datasets[item.datasetIndex].isCurve },
+          // One legend entry per pair: toggling it hides the readings and their curve.
+          onClick: (e, item, legend) => {
+            const chart = legend.chart, label = chart.data.datasets[item.datasetIndex].label;
+            chart.data.datasets.forEach((d, i) => {
+              if (d.label === label || d.label === `${label} reconstruction`) {
+                chart.setDatasetVisibility(i, !chart.isDatasetVisible(i));
+              }
+            });
+            chart.update();
+          },
+        },
+        tooltip: { callbacks: { label: (c) => `${c.dataset.label}: ${fmt(c.parsed.y)} at ${c.parsed.x.toFixed(1)}°` } },
+      },
+      scales: {
+        x: { type: "linear", min: 0, max: 360, ticks: { stepSize: 45, callback: (v) => `${v}°` },
+             title: { display: true, text: "stage angle (degrees)" } },
+        y: { type: "linear", beginAtZero: true, grace: "8%", title: { display: true, text: yTitle } },
+      },
+    },
+  });
+}
+
+// ------------------------------------------------------------------ polar
+const LOG_DECADES = 3;
+
+function niceStep(span) {
+  const raw = span / 4, mag = 10 ** Math.floor(Math.log10(raw));
+  return [1, 2, 2.5, 5, 10].map((m) => m * mag).find((s) => s >= raw) ?? raw;
+}
+
+/**
+ * Polar plot of BRDF curves over a half plane: angle from "up", radius the BRDF.
+ * @param {HTMLCanvasElement} canvas
+ * @param {number[]} angleDeg  -89..89
+ * @param {Array<{label: string, values: Array<number|null>, color: string, dash?: number[]}>} curves
+ * @param {{log: boolean, units: string, title: string, angleName: string}} opts
+ */
+export function plotPolar(canvas, angleDeg, curves, opts) {
+  const all = curves.flatMap((c) => c.values).filter((v) => Number.isFinite(v) && v > 0);
+  const vmax = all.length ? Math.max(...all) : 1;
+  const vmin = vmax / 10 ** LOG_DECADES;
+  const radius = opts.log
+    ? (v) => Math.max(0, Math.log10(Math.max(v, vmin) / vmin))
+    : (v) => Math.max(0, v);
+  const rings = [];
+  if (opts.log) {
+    for (let k = Math.ceil(Math.log10(vmin)); k <= Math.floor(Math.log10(vmax)); k++) rings.push(10 ** k);
+  } else {
+    const step = niceStep(vmax);
+    for (let v = step; v <= vmax * 1.0001; v += step) rings.push(+v.toPrecision(10));
   }
-  host.replaceChildren(svg);
+  const rmax = Math.max(radius(vmax), ...rings.map(radius)) * 1.05 || 1;
+  const datasets = curves.map((c) => ({
+    label: c.label, borderColor: c.color, backgroundColor: c.color, borderDash: c.dash ?? [],
+    pointRadius: 0, borderWidth: 1.8, showLine: true,
+    data: angleDeg.map((a, i) => {
+      const v = c.values[i];
+      if (!Number.isFinite(v)) return { x: NaN, y: NaN, a, f: null };
+      const r = radius(v), t = (a * Math.PI) / 180;
+      return { x: r * Math.sin(t), y: r * Math.cos(t), a, f: v };
+    }),
+  }));
+  const grid = {
+    id: "polarGrid",
+    beforeDatasetsDraw(chart) {
+      const { ctx, scales: { x, y } } = chart;
+      const cx = x.getPixelForValue(0), cy = y.getPixelForValue(0);
+      const px = (r) => x.getPixelForValue(r) - cx;
+      ctx.save();
+      ctx.strokeStyle = "#dde2e8"; ctx.fillStyle = "#6a737d"; ctx.lineWidth = 1;
+      ctx.font = "11px system-ui, sans-serif";
+      for (const v of rings) {
+        const r = px(radius(v));
+        ctx.beginPath(); ctx.arc(cx, cy, r, Math.PI, 2 * Math.PI); ctx.stroke();
+        ctx.fillText(fmt(v), cx + 3, cy - r - 3);  // along the vertical, clear of the angles
+      }
+      const R = px(rmax);
+      for (let a = -90; a <= 90; a += 30) {
+        const t = (a * Math.PI) / 180;
+        ctx.beginPath(); ctx.moveTo(cx, cy); ctx.lineTo(cx + R * Math.sin(t), cy - R * Math.cos(t)); ctx.stroke();
+        ctx.textAlign = "center";
+        ctx.fillText(`${a}°`, cx + (R + 10) * Math.sin(t), cy - (R + 4) * Math.cos(t));
+      }
+      ctx.restore();
+    },
+  };
+  // Equal units per pixel on both axes, or circles would be ellipses: fit the ranges to the
+  // chart area once it is laid out (the axes are hidden, so this does not move the layout).
+  const square = (chart) => {
+    const a = chart.chartArea;
+    if (!a || a.right <= a.left || a.bottom <= a.top) return;
+    const w = a.right - a.left, h = a.bottom - a.top;
+    let xr = rmax, yr = rmax;
+    if (w / 2 > h) xr = (rmax * w) / (2 * h); else yr = (2 * rmax * h) / w;
+    const sx = chart.options.scales.x, sy = chart.options.scales.y;
+    if (Math.abs(sx.max - xr) > 1e-9 * rmax || Math.abs(sy.max - yr) > 1e-9 * rmax) {
+      sx.min = -xr; sx.max = xr; sy.max = yr;
+      chart.update("none");
+    }
+  };
+  const chart = fresh(canvas, {
+    type: "scatter",
+    data: { datasets },
+    plugins: [grid, { id: "square", afterLayout: (c) => queueMicrotask(() => square(c)) }],
+    options: {
+      animation: false, responsive: true, maintainAspectRatio: false, parsing: false,
+      layout: { padding: { top: 34, left: 8, right: 8, bottom: 8 } },
+      plugins: {
+        title: { display: true, text: opts.title },
+        subtitle: { display: true, text: `radius: BRDF in ${opts.units}${opts.log ? `, log scale over ${LOG_DECADES} decades` : ", linear"}` },
+        legend: { position: "bottom", labels: { boxWidth: 14 } },
+        tooltip: { callbacks: { label: (c) => `${c.dataset.label}: ${fmt(c.raw.f)} ${opts.units} at ${c.raw.a}° ${opts.angleName}` } },
+      },
+      scales: {
+        x: { type: "linear", min: -rmax, max: rmax, display: false },
+        y: { type: "linear", min: 0, max: rmax, display: false },
+      },
+    },
+  });
+  return chart;
 }

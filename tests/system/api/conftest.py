@@ -73,6 +73,10 @@ def daemon(tmp_path_factory: pytest.TempPathFactory, basis: Any) -> Iterator[Dae
     cfg = DaemonConfig().with_overrides(paths__data_dir=str(data_dir),
                                         limits__design_time_limit_s=DESIGN_LIMIT_S)
     app = build_app(cfg, sim.config, ApiKeyring({"tester": key}), basis_provider=lambda: basis)
+    from gonio.figures import describe_material
+
+    # As `gonio serve --sim` does: results record the simulated material (the truth).
+    app.state.service.worker.specimen_truth = lambda: describe_material(sim.specimen.brdf)
     try:
         with live_server(app) as url:
             yield Daemon(url, key, app, sim, data_dir)

@@ -44,12 +44,44 @@ def browser() -> Iterator[Any]:
         driver.quit()
 
 
+def _severe(browser: Any) -> list[Any]:
+    return [e for e in browser.get_log("browser") if e["level"] == "SEVERE"]
+
+
+def _calibrate(daemon: Daemon) -> int:
+    """A white-reference calibration, as `gonio serve --sim` runs first: later scans in 1/sr."""
+    import time
+
+    before = daemon.sim.place_white_reference()
+    try:
+        with daemon.client() as c:
+            job = c.post("/api/v1/jobs", json={"plan": {
+                "kind": "calibration", "reference_albedo": 0.99, "rotations": 2,
+                "exposure": {"exposure_s": 0.005}}}).json()
+            deadline = time.monotonic() + 120
+            while c.get(f"/api/v1/jobs/{job['id']}").json()["state"] != "completed":
+                assert time.monotonic() < deadline, "calibration did not complete"
+                time.sleep(0.2)
+    finally:
+        daemon.sim.place_specimen(before.brdf)
+    return int(job["id"])
+
+
+def _chart(browser: Any, canvas_id: str) -> Any:
+    """What a Chart.js chart shows: its dataset labels and point counts."""
+    return browser.execute_script(
+        "const c = Chart.getChart(document.getElementById(arguments[0]));"
+        "return c ? c.data.datasets.map(d => ({label: d.label, n: d.data.length,"
+        " curve: !!d.isCurve})) : null;", canvas_id)
+
+
 def test_start_a_scan_from_the_page_and_see_the_result(daemon: Daemon, browser: Any) -> None:
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support import expected_conditions as ec
     from selenium.webdriver.support.ui import Select, WebDriverWait
 
-    wait = WebDriverWait(browser, 120, poll_frequency=0.2)
+    wait = WebDriverWait(browser, 180, poll_frequency=0.2)
+    cal_id = _calibrate(daemon)
     # The key arrives in the #fragment, as `gonio serve --sim` prints it; the page moves it to
     # sessionStorage and clears it from the address bar.
     browser.get(f"{daemon.url}/#key={daemon.key}")
@@ -57,44 +89,107 @@ def test_start_a_scan_from_the_page_and_see_the_result(daemon: Daemon, browser: 
     assert "#key" not in browser.current_url
     assert browser.execute_script("return sessionStorage.getItem('gonio.apiKey')") == daemon.key
     assert "sim" in browser.find_element(By.ID, "rig-name").text
+    # The newest job is the completed calibration: it is selected and explained, and no error
+    # shows before the user has done anything (it used to: a calibration has no preview).
+    wait.until(lambda d: "Calibration completed" in d.find_element(By.ID, "result-state").text)
+    assert f"job {cal_id}" in browser.find_element(By.ID, "result-job").text
+    assert not browser.find_element(By.ID, "message").is_displayed(), \
+        browser.find_element(By.ID, "message").text
 
     form = browser.find_element(By.ID, "scan-form")
+    # Only the chosen plan kind's fields show.
+    kind = Select(form.find_element(By.NAME, "kind"))
+    shown = {
+        "uniform": {"rotations"}, "adaptive": {"initial_rotations", "threshold"},
+        "calibration": {"rotations", "reference_albedo"},
+    }
+    for value, visible in shown.items():
+        kind.select_by_value(value)
+        for name in ("rotations", "initial_rotations", "threshold", "reference_albedo"):
+            assert form.find_element(By.NAME, name).is_displayed() == (name in visible), \
+                (value, name)
+
     specimen = form.find_element(By.NAME, "specimen")
     specimen.clear()
     specimen.send_keys("browser sample")
-    Select(form.find_element(By.NAME, "kind")).select_by_value("uniform")
+    kind.select_by_value("uniform")
     for name, value in (("rotations", "6"), ("exposure_s", "0.005")):
         field = form.find_element(By.NAME, name)
         field.clear()
         field.send_keys(value)
     browser.find_element(By.ID, "dry-run").click()
     wait.until(lambda d: d.find_element(By.ID, "dry-run-result").text.startswith("OK"))
+    # The last calibration left the stage somewhere: the estimate says it starts from there.
+    assert "from the stage at" in browser.find_element(By.ID, "dry-run-result").text
     browser.find_element(By.ID, "start-scan").click()
-    wait.until(lambda d: "queued" in d.find_element(By.ID, "dry-run-result").text
+    new_row = "//tbody[@id='jobs']/tr[td[2][text()='browser sample']]"
+    wait.until(lambda d: d.find_elements(By.XPATH, new_row)
                or d.find_element(By.ID, "message").is_displayed())
     assert not browser.find_element(By.ID, "message").is_displayed(), \
         browser.find_element(By.ID, "message").text
-    job_id = int(browser.find_element(By.ID, "dry-run-result").text.split()[1])
+    # The table is redrawn on every event: read the id in one script call.
+    job_id = int(browser.execute_script(
+        "return [...document.querySelectorAll('#jobs tr')]"
+        ".find(r => r.children[1].textContent === 'browser sample').dataset.id"))
 
     row = f'#jobs tr[data-id="{job_id}"]'
     # Live progress: readings appear in the plot while the scan runs.
-    wait.until(lambda d: len(d.find_elements(By.CSS_SELECTOR, "#readings-plot circle.reading")) > 0)
+    wait.until(lambda d: (_chart(d, "readings-plot") or [{"n": 0}])[0]["n"] > 0)
     wait.until(ec.presence_of_element_located((By.CSS_SELECTOR, f'{row}[data-state="completed"]')))
+    # "Job N queued." is no longer true once the job has run: it is gone.
+    wait.until(lambda d: "queued" not in d.find_element(By.ID, "dry-run-result").text)
     n_pairs = len(daemon.sim.config.pair_list())
-    wait.until(lambda d: len(d.find_elements(By.CSS_SELECTOR, "#readings-plot circle.reading"))
-               == 6 * n_pairs)
-    # The result: preview image loaded, polar plot drawn, metrics listed, download offered.
+    # The rotation plot: each pair's 6 samples and the reconstruction's curve through them.
+    wait.until(lambda d: sum(1 for s in _chart(d, "readings-plot") or [] if s["curve"]) == n_pairs)
+    series = _chart(browser, "readings-plot")
+    assert sorted(s["n"] for s in series if not s["curve"]) == [6] * n_pairs
+    assert len({s["label"] for s in series}) == 2 * n_pairs
+    # The rendering: truth (the simulated material) above the reconstruction, 512 px views.
+    wait.until(lambda d: d.execute_script(
+        "const i = document.getElementById('render');"
+        "return !i.hidden && i.complete && i.naturalWidth > 0"))
+    w, h = browser.execute_script(
+        "const i = document.getElementById('render'); return [i.naturalWidth, i.naturalHeight]")
+    assert w >= 5 * 512 and h >= 2 * 512, (w, h)  # five views, two rows
+    # Polar plots with the reconstruction and the truth, units in the subtitle.
+    wait.until(lambda d: _chart(d, "polar-in") is not None and _chart(d, "polar-cross"))
+    labels = [s["label"] for s in _chart(browser, "polar-in")]
+    assert any(lab.startswith("truth") for lab in labels), labels
+    browser.find_element(By.ID, "polar-log").click()
+    wait.until(lambda d: d.execute_script(
+        "return Chart.getChart(document.getElementById('polar-in'))"
+        ".options.plugins.subtitle.text.includes('log scale')"))
+    # One error number, explained; the others behind "All metrics".
+    head = browser.find_element(By.ID, "headline-error").text
+    # predicted_log_rmse when the reconstruction reports it, else predicted_error; either way
+    # the number comes with what it means.
+    assert head.startswith("predicted") and ("lower is better" in head
+                                             or "expected to be off" in head), head
+    assert not browser.find_element(By.ID, "metrics").is_displayed()
+    browser.find_element(By.CSS_SELECTOR, "#metrics-details summary").click()
+    assert "rel_sample_error" in browser.find_element(By.ID, "metrics").text
     wait.until(lambda d: d.execute_script(
         "const i = document.getElementById('preview');"
         "return !i.hidden && i.complete && i.naturalWidth > 0"))
-    wait.until(lambda d: len(d.find_elements(By.CSS_SELECTOR, "#polar-plot polygon")) > 0)
-    metrics = browser.find_element(By.ID, "metrics").text
-    assert "rel_sample_error" in metrics
-    # Long values (result_path) wrap inside the result panel: no sideways scrolling.
-    assert browser.execute_script(
-        "const e = document.documentElement; return e.scrollWidth <= e.clientWidth"), \
-        browser.execute_script("return [document.documentElement.scrollWidth, innerWidth]")
     assert browser.find_element(By.ID, "download").is_displayed()
+
+    # A comparison: a second scan, chosen in "Compare with".
+    with daemon.client() as c:
+        other = c.post("/api/v1/jobs", json={"plan": {
+            "kind": "uniform", "specimen": "second", "rotations": 4,
+            "exposure": {"exposure_s": 0.005}}}).json()["id"]
+    wait.until(ec.presence_of_element_located(
+        (By.CSS_SELECTOR, f'#jobs tr[data-id="{other}"][data-state="completed"]')))
+    wait.until(lambda d: str(other) in [o.get_attribute("value") for o in
+                                        d.find_elements(By.CSS_SELECTOR, "#compare option")])
+    Select(browser.find_element(By.ID, "compare")).select_by_value(str(other))
+    wait.until(lambda d: f"job {other} (bottom)" in d.find_element(By.ID, "render-caption").text)
+    wait.until(lambda d: any(f"job {other}" in s["label"] for s in _chart(d, "polar-in")))
+    assert browser.find_element(By.ID, "compare-plot").is_displayed()
+    assert sum(1 for s in _chart(browser, "compare-plot") if s["curve"]) == n_pairs
+    # Nothing forces a horizontal scrollbar, no message is standing, no script errors.
+    assert browser.execute_script(
+        "return document.documentElement.scrollWidth <= window.innerWidth")
     assert browser.find_element(By.ID, "message").get_attribute("hidden") is not None
     # Export from the page: the control appears with the result and fetches the file.
     wait.until(lambda d: d.find_element(By.ID, "export").is_displayed())
@@ -103,8 +198,7 @@ def test_start_a_scan_from_the_page_and_see_the_result(daemon: Daemon, browser: 
     wait.until(lambda d: d.find_element(By.ID, "export-state").text.startswith(
         ("saved", "export failed")))
     assert browser.find_element(By.ID, "export-state").text == f"saved gonio-job-{job_id}-gltf.gltf"
-    # No script errors on the way (network 404s would show here too).
-    assert [e for e in browser.get_log("browser") if e["level"] == "SEVERE"] == []
+    assert _severe(browser) == []
 
 
 def test_page_without_key_shows_a_clear_error(daemon: Daemon, browser: Any) -> None:
@@ -120,3 +214,33 @@ def test_page_without_key_shows_a_clear_error(daemon: Daemon, browser: Any) -> N
     wait.until(lambda d: d.find_element(By.ID, "message").is_displayed())
     text = browser.find_element(By.ID, "message").text
     assert "X-API-Key" in text and "enter a valid API key" in text, text
+
+
+def test_a_suspended_job_shows_why_and_the_reason_goes_when_it_recovers(
+        daemon: Daemon, browser: Any) -> None:
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    wait = WebDriverWait(browser, 120, poll_frequency=0.1)
+    browser.get_log("browser")  # drop what earlier tests left (the keyless page's 401)
+    browser.get(f"{daemon.url}/#key={daemon.key}")
+    wait.until(lambda d: d.find_element(By.ID, "live-chip").text == "live")
+    with daemon.client() as c:
+        job = c.post("/api/v1/jobs", json={"plan": {
+            "kind": "uniform", "specimen": "flaky", "rotations": 12,
+            "exposure": {"exposure_s": 0.005},
+            "faults": {"retry_delay_s": 0.5, "max_retries": 20}}}).json()["id"]
+        # Once it measures (the rig is connected), a sensor stops answering for 2.5 s.
+        wait.until(lambda _d: c.get(f"/api/v1/jobs/{job}").json()["done_angles"] >= 1)
+        daemon.sim.apply_fault("silence:S2:2.5")
+
+    def reason(d: Any) -> str:
+        return str(d.execute_script(
+            "const r = document.querySelector(`#jobs tr[data-id='${arguments[0]}']`);"
+            "return r ? [r.dataset.state, r.querySelector('.reason')?.textContent ?? ''] "
+            ".join('|') : '';", job))
+
+    # The row says suspended and why (the device and what happened), not only a tooltip.
+    wait.until(lambda d: reason(d).startswith("suspended|S"))
+    wait.until(lambda d: reason(d) == "completed|")  # recovered: no stale reason left
+    assert _severe(browser) == []

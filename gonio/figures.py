@@ -1,0 +1,242 @@
+"""Renderings of result files: the reconstruction, the true material when it is known, and
+comparisons of several results (``gonio render``, ``GET /api/v1/jobs/{id}/render.png``).
+
+The pictures themselves come from :mod:`gonio.brdf.render`; this module knows where the BRDFs
+are in a result file. A result measured on the simulated rig carries the simulated material
+in its provenance (``true_material``, written by :func:`describe_material`), so its rendering
+shows the truth beside the reconstruction, as V&F's Fig. 9 shows reference and reconstruction.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from gonio.brdf import models as bm
+from gonio.brdf import render
+from gonio.brdf.table import BRDFTable
+from gonio.results import ResultFile, read_result
+
+TRUE_MATERIAL_KEY = "true_material"
+"""Provenance attribute of a result file: JSON of :func:`describe_material` (simulated rigs)."""
+
+
+class FigureError(ValueError):
+    """An input cannot be rendered; the message says which and why."""
+
+
+def describe_material(brdf: Any) -> dict[str, Any] | None:
+    """JSON-ready recipe of a simulated specimen, or None if it cannot be written down.
+
+    Analytic models are stored whole (:func:`gonio.brdf.models.to_dict`); a table is stored
+    by the file it came from, when its provenance names one.
+    """
+    if isinstance(brdf, BRDFTable):
+        src = brdf.provenance.get("file") or brdf.provenance.get("path")
+        return {"name": brdf.name, "table_file": str(src)} if src else None
+    try:
+        data = bm.to_dict(brdf)
+    except Exception:  # an object that is not a model dataclass: nothing to record
+        return None
+    if not isinstance(data, dict) or "type" not in data:
+        return None
+    return {"name": str(getattr(brdf, "name", data["type"])), "model": data}
+
+
+def material_from_description(desc: dict[str, Any]) -> Any:
+    """Rebuild what :func:`describe_material` wrote; raises :class:`FigureError`."""
+    try:
+        if "model" in desc:
+            return bm.from_dict(desc["model"])
+        if "table_file" in desc:
+            return BRDFTable.load(desc["table_file"])
+    except (ValueError, OSError) as exc:
+        raise FigureError(f"the true material {desc.get('name')!r} cannot be rebuilt: {exc}"
+                          ) from None
+    raise FigureError(f"true material description has neither a model nor a table: {desc}")
+
+
+def true_material(res: ResultFile) -> Any | None:
+    """The simulated material of a result, if recorded and the result is calibrated (1/sr)."""
+    text = res.provenance.get(TRUE_MATERIAL_KEY)
+    if not text:
+        return None
+    if not res.samples.calibration.get("pairs"):
+        return None  # sensor units: the truth (1/sr) would not be on the same scale
+    try:
+        return material_from_description(json.loads(text))
+    except (FigureError, json.JSONDecodeError):
+        return None
+
+
+def load_input(path: str | os.PathLike[str], label: str | None = None,
+               with_truth: bool = True) -> list[tuple[str, Any]]:
+    """Figure rows for one input: a result file (``.h5``) or a BRDF table (``.npz``).
+
+    A result gives its reconstruction and, with ``with_truth``, the true material before it
+    when known. Raises :class:`FigureError` for a file without a BRDF.
+    """
+    p = Path(path)
+    if p.suffix.lower() == ".npz":
+        table = BRDFTable.load(p)
+        return [(label or f"{p.name}: {table.name}", table)]
+    res = read_result(p)
+    if res.table is None:
+        raise FigureError(f"{p} holds no reconstructed BRDF (it is a {res.attrs.get('kind')} "
+                          "result); render a scan's result")
+    name = label or f"job {res.attrs.get('job_id')}: {res.attrs.get('specimen')}"
+    rows: list[tuple[str, Any]] = []
+    truth = true_material(res) if with_truth else None
+    if truth is not None:
+        rows.append((f"truth: {getattr(truth, 'name', 'simulated')}", truth))
+    rows.append((f"{name} (reconstruction)", res.table))
+    return rows
+
+
+def render_inputs(paths: Sequence[str | os.PathLike[str]], size: int = render.DEFAULT_SIZE,
+                  labels: Sequence[str | None] | None = None, title: str | None = None) -> bytes:
+    """PNG of one or more results/tables. One input shows truth (if known) and reconstruction;
+    several are compared row by row (each with its truth only when there is one input)."""
+    if not paths:
+        raise FigureError("nothing to render: give at least one result or table file")
+    labels = list(labels or [None] * len(paths))
+    rows: list[tuple[str, Any]] = []
+    for p, lab in zip(paths, labels, strict=True):
+        rows.extend(load_input(p, lab, with_truth=len(paths) == 1))
+    if title is None:
+        title = ("comparison: " if len(paths) > 1 else "") + ", ".join(r[0] for r in rows
+                                                                      if "truth" not in r[0])
+    return render.figure_png(rows, size=size, title=title)
+
+
+# --------------------------------------------------------------------------- the error number
+def headline_error(metrics: dict[str, Any]) -> dict[str, Any] | None:
+    """The one error number to show for a result, with what it means in plain words.
+
+    ``predicted_log_rmse`` when the result has it, else ``predicted_error`` (docs/science.md
+    4.1); None when neither is there (calibration jobs, or no pair could be left out).
+
+    Returns
+    -------
+    dict with ``key`` (metric name), ``value``, ``text`` (value as shown) and ``meaning``.
+    """
+    v = metrics.get("predicted_log_rmse")
+    if isinstance(v, int | float):
+        return {
+            "key": "predicted_log_rmse", "value": float(v), "text": f"{v:.3f}",
+            "meaning": "predicted log RMSE of the whole BRDF against the true material "
+                       "(cosine-weighted, Löw et al. 2012): 0 is a perfect match, lower is "
+                       "better; about 0.025 is typical of a good scan of a library-like "
+                       "material (10 pairs x 8 angles). Materials unlike the training "
+                       "library can be worse than predicted.",
+        }
+    v = metrics.get("predicted_error")
+    if isinstance(v, int | float):
+        return {
+            "key": "predicted_error", "value": float(v), "text": f"{100 * v:.1f} %",
+            "meaning": "predicted mean relative error of the whole reconstructed BRDF, from "
+                       "leaving each pair out in turn: on average the reconstruction is "
+                       "expected to be off by about this much. For half of the tested scans "
+                       "the true error was within a factor 2.5 of it; materials unlike the "
+                       "training library can be much worse.",
+        }
+    return None
+
+
+# --------------------------------------------------------------------------- plot data
+def _units(res: ResultFile) -> str:
+    return "1/sr" if res.samples.calibration.get("pairs") else "sensor units (uncalibrated)"
+
+
+def _mean_or_none(v: Any) -> list[float | None]:
+    """Mean over channels of (N, C) values as JSON numbers (None where not finite)."""
+    import numpy as np
+
+    m = np.asarray(v, dtype=float).mean(axis=-1)
+    return [float(x) if np.isfinite(x) else None for x in m]
+
+
+def fit_curves(res: ResultFile, step_deg: float = 2.0) -> dict[str, Any]:
+    """Each pair's calibrated samples against stage angle and the reconstruction through them.
+
+    The curve evaluates the reconstructed table at the pair's fixed lab directions turned
+    into the specimen frame at each stage angle (:func:`gonio.brdf.geometry.lab_to_specimen`).
+    Values are the mean over channels.
+
+    Returns
+    -------
+    dict: ``units``, ``curve_deg`` (stage angles of the curves), ``pairs``: list of
+    ``{label, stage_deg, measured, curve}``.
+    """
+    import numpy as np
+
+    from gonio.brdf import geometry as geo
+
+    if res.table is None:
+        raise FigureError("this result has no reconstructed BRDF (a calibration job)")
+    s = res.samples
+    look = render.TableLookup(res.table)
+    curve_deg = np.arange(0.0, 360.0 + 1e-9, step_deg)
+    alphas = np.deg2rad(curve_deg)
+    pairs = []
+    order = np.argsort(np.mod(s.stage_angles_deg, 360.0))
+    stage = np.mod(s.stage_angles_deg, 360.0)[order]
+    for q, (light, sensor) in enumerate(s.pairs):
+        wi = geo.lab_to_specimen(np.broadcast_to(s.light_dirs[q], (alphas.size, 3)), alphas)
+        wo = geo.lab_to_specimen(np.broadcast_to(s.sensor_dirs[q], (alphas.size, 3)), alphas)
+        pairs.append({
+            "label": f"{light}/{sensor}",
+            "stage_deg": [float(a) for a in stage],
+            "measured": _mean_or_none(np.asarray(s.values[q])[order]),
+            "curve": _mean_or_none(look.eval(wi, wo)),
+        })
+    return {"units": _units(res), "channels": "mean of " + ", ".join(s.channels),
+            "curve_deg": [float(a) for a in curve_deg], "pairs": pairs}
+
+
+def polar_curves(res: ResultFile, theta_i_deg: float, phi_i_deg: float) -> dict[str, Any]:
+    """In-plane and cross-plane BRDF at one incidence, for the result and its truth if known.
+
+    In-plane: views in the plane of incidence, ``theta_o`` from -89 to 89 degrees, positive
+    on the specular side (azimuth ``phi_i + 180``). Cross-plane: views in the plane through
+    the mirror direction perpendicular to the plane of incidence, at ``-89 .. 89`` degrees
+    from the mirror direction. Angles are in the specimen frame (``phi_i`` from the holder
+    mark).
+    """
+    import numpy as np
+
+    if res.table is None:
+        raise FigureError("this result has no reconstructed BRDF (a calibration job)")
+    ti, pi_ = np.deg2rad(theta_i_deg), np.deg2rad(phi_i_deg)
+    wi = np.array([np.sin(ti) * np.cos(pi_), np.sin(ti) * np.sin(pi_), np.cos(ti)])
+    ang = np.arange(-89.0, 89.0 + 1e-9, 1.0)
+    a = np.deg2rad(ang)
+    # In-plane: the view turns in the incidence plane; +theta towards the specular side.
+    fwd = np.array([-np.cos(pi_), -np.sin(pi_), 0.0])  # horizontal, away from the light
+    in_plane = np.sin(a)[:, None] * fwd + np.cos(a)[:, None] * np.array([0.0, 0.0, 1.0])
+    mirror = np.array([-wi[0], -wi[1], wi[2]])
+    perp = np.array([-np.sin(pi_), np.cos(pi_), 0.0])
+    cross = np.cos(a)[:, None] * mirror + np.sin(a)[:, None] * perp
+    wis = np.broadcast_to(wi, in_plane.shape)
+
+    def curves(brdf: Any) -> dict[str, dict[str, list[float | None]]]:
+        f = render.evaluator(brdf)
+        chans = list(getattr(brdf, "channels", None) or res.table.channels)  # type: ignore[union-attr]
+        out = {}
+        for name, wo in (("in_plane", in_plane), ("cross_plane", cross)):
+            v = np.asarray(f(wis, wo))
+            out[name] = {ch: [float(x) if np.isfinite(x) else None for x in v[:, c]]
+                         for c, ch in enumerate(chans[: v.shape[1]])}
+        return out
+
+    truth = true_material(res)
+    return {
+        "theta_i_deg": float(theta_i_deg), "phi_i_deg": float(phi_i_deg),
+        "angle_deg": [float(x) for x in ang], "units": _units(res),
+        "reconstruction": curves(res.table),
+        "truth": curves(truth) if truth is not None else None,
+        "truth_name": getattr(truth, "name", None) if truth is not None else None,
+    }

@@ -1,0 +1,152 @@
+"""The renderer against formulas: Lambert's cosine law, rotation of an anisotropic highlight,
+the table lookup against BRDFTable.eval, sRGB encoding, figure layout and the CLI."""
+
+from __future__ import annotations
+
+import io
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from gonio.brdf import models as bm
+from gonio.brdf import render as R  # noqa: N812 (short name for many calls)
+from gonio.cli import main as cli_main
+
+ALBEDO = (0.8, 0.5, 0.2)
+
+
+def _pixel_normals(size: int) -> tuple[np.ndarray, np.ndarray]:
+    """Normals of an orthographic unit sphere computed here from the documented convention:
+    pixel centres span [-1, 1] (plus one pixel of margin), x right, y up, z to the camera."""
+    c = ((np.arange(size) + 0.5) / size * 2.0 - 1.0) * (1.0 + 2.0 / size)
+    x, y = np.meshgrid(c, -c)
+    inside = x * x + y * y < 1.0
+    z = np.sqrt(np.clip(1.0 - x * x - y * y, 0.0, None))
+    return inside, np.stack([x, y, z], axis=-1)
+
+
+@pytest.mark.parametrize("tabulated", [False, True])
+def test_lambertian_sphere_follows_the_cosine_law(tabulated: bool) -> None:
+    lam = bm.Lambert(ALBEDO)
+    brdf = bm.tabulate(lam) if tabulated else lam
+    light = R.PointLight(40.0, 30.0)
+    t, p = math.radians(40.0), math.radians(30.0)
+    ldir = np.array([math.sin(t) * math.cos(p), math.sin(t) * math.sin(p), math.cos(t)])
+    img = R.render_sphere(brdf, light, size=96)
+    inside, n = _pixel_normals(96)
+    assert (np.isfinite(img[..., 0]) == inside).all()  # background is NaN, sphere is drawn
+    cos = np.clip(n @ ldir, 0.0, None)
+    expected = np.asarray(ALBEDO)[None, None, :] / math.pi * cos[..., None]
+    # The table has no valid cell at the very horizon: compare where light and view are
+    # both at least 6 degrees above it, and everywhere for the analytic model.
+    keep = inside & ((cos > math.sin(math.radians(6))) & (n[..., 2] > math.sin(math.radians(6)))
+                     if tabulated else inside)
+    np.testing.assert_allclose(img[keep], expected[keep], rtol=1e-6, atol=1e-9)
+    assert np.all(img[inside & (cos == 0.0)] == 0.0)  # the unlit side is black
+
+
+def _long_axis_deg(img: np.ndarray) -> float:
+    """Orientation (degrees in [0, 180), counter-clockwise from image right) of the bright
+    region's principal axis, from intensity-weighted second moments."""
+    lum = np.nan_to_num(img).sum(axis=-1)  # a sphere's background is NaN
+    w = np.clip(lum - 0.5 * lum.max(), 0.0, None)  # the highlight: above half its peak
+    size = img.shape[0]
+    c = np.arange(size) - (size - 1) / 2
+    x, y = np.meshgrid(c, -c)
+    m = w.sum()
+    mx, my = (w * x).sum() / m, (w * y).sum() / m
+    cxx = (w * (x - mx) ** 2).sum() / m
+    cyy = (w * (y - my) ** 2).sum() / m
+    cxy = (w * (x - mx) * (y - my)).sum() / m
+    return math.degrees(0.5 * math.atan2(2 * cxy, cxx - cyy)) % 180.0
+
+
+def _angle_diff(a: float, b: float) -> float:
+    return abs((a - b + 90.0) % 180.0 - 90.0)
+
+
+@pytest.mark.parametrize("beta", [0.0, 30.0, 75.0, 120.0])
+def test_rotated_anisotropic_highlight_turns_with_the_material(beta: float) -> None:
+    # Smooth along x, rough along y: the flash highlight is long along the material's y
+    # axis, i.e. at 90 deg + beta in the image once the specimen is turned by beta.
+    ggx = bm.GGX(alpha_x=0.08, alpha_y=0.35, fresnel=bm.SchlickFresnel((0.9, 0.9, 0.9)))
+    img = R.render_swatch(ggx, size=128, rotation_deg=beta)
+    assert _angle_diff(_long_axis_deg(img), 90.0 + beta) < 2.0
+    # Turning the model itself (an independent path: models.Rotated) gives the same picture.
+    turned = R.render_swatch(bm.Rotated(ggx, math.radians(beta)), size=128)
+    np.testing.assert_allclose(turned, img, rtol=1e-9, atol=1e-12)
+
+
+def test_rotated_table_highlight_turns_on_the_sphere_too() -> None:
+    ggx = bm.GGX(alpha_x=0.1, alpha_y=0.4, fresnel=bm.SchlickFresnel((0.9, 0.9, 0.9)))
+    table = bm.tabulate(ggx)
+    flat = R.render_swatch(table, size=96)
+    turned = R.render_swatch(table.rotated(math.radians(45.0)), size=96)
+    assert _angle_diff(_long_axis_deg(flat), 90.0) < 4.0
+    assert _angle_diff(_long_axis_deg(turned), 135.0) < 4.0
+    light = R.PointLight(0.0, 0.0)  # light at the view: highlight at the sphere's centre
+    a = _long_axis_deg(R.render_sphere(table, light, size=96))
+    b = _long_axis_deg(R.render_sphere(table, light, size=96, rotation_deg=45.0))
+    assert _angle_diff(a, 90.0) < 5.0 and _angle_diff(b, 135.0) < 5.0
+
+
+def test_table_lookup_matches_brdftable_eval() -> None:
+    table = bm.tabulate(bm.LobeSum((bm.Lambert(0.3), bm.GGX(alpha_x=0.1, alpha_y=0.3))))
+    rng = np.random.default_rng(3)
+
+    def dirs(n: int) -> np.ndarray:
+        v = rng.normal(size=(n, 3))
+        return v / np.linalg.norm(v, axis=1, keepdims=True)
+
+    wi, wo = dirs(4000), dirs(4000)  # half of them below the horizon
+    ref = np.nan_to_num(table.eval(wi, wo))
+    np.testing.assert_allclose(R.TableLookup(table).eval(wi, wo), ref, rtol=1e-5, atol=1e-6)
+
+
+def test_srgb_transfer_and_exposure() -> None:
+    # IEC 61966-2-1: linear 0.5 -> 0.7354 -> 188; 0.002 is on the linear toe (x 12.92).
+    img = np.array([[[0.0, 0.5, 1.0], [0.002, 2.0, np.nan]]])
+    out = R.to_srgb(img, exposure=1.0, background=(1, 2, 3))
+    assert out[0, 0].tolist() == [0, 188, 255]
+    assert out[0, 1].tolist() == [1, 2, 3]  # a NaN pixel is background
+    assert R.to_srgb(np.array([[[0.002, 0.0, 0.0]]]), 1.0)[0, 0, 0] == round(0.002 * 12.92 * 255)
+    assert R.exposure_for([np.array([[[1.0, 4.0, np.nan]]]), np.array([[[2.0, 0, 0]]])]) == 0.25
+
+
+def test_environment_lights_a_diffuse_sphere_evenly_bright_on_top() -> None:
+    img = R.render_sphere_env(bm.Lambert(0.5), size=64)
+    lum = np.nan_to_num(img.sum(axis=-1))
+    # The studio's sky and softboxes are above (image +y), its floor below.
+    assert lum[8:24, 24:40].mean() > 2 * lum[44:58, 24:40].mean()
+    assert np.isfinite(img[32, 32]).all() and np.isnan(img[0, 0]).all()
+
+
+def test_figure_has_full_size_views_and_one_row_per_material() -> None:
+    png = R.figure_png([("paper", bm.Lambert(0.7)), ("brushed", bm.GGX(0.1, 0.4))], size=96,
+                       title="t")
+    im = Image.open(io.BytesIO(png))
+    assert im.width >= len(R.DEFAULT_VIEWS) * 96 and im.height >= 2 * 96
+    with pytest.raises(ValueError, match="at least 64"):
+        R.figure_png([("paper", bm.Lambert(0.7))], size=10)
+
+
+def test_cli_render_table_and_bad_inputs(tmp_path: Path, capsys: pytest.CaptureFixture[str]
+                                         ) -> None:
+    table = bm.tabulate(bm.GGX(alpha_x=0.1, alpha_y=0.4, name="brushed"))
+    src = table.save(tmp_path / "brushed.npz")
+    out = tmp_path / "r.png"
+    assert cli_main(["render", str(src), "-o", str(out), "--size", "64"]) == 0
+    im = Image.open(out)
+    assert im.width >= len(R.DEFAULT_VIEWS) * 64
+    assert cli_main(["render", str(tmp_path / "none.h5"), "-o", str(out)]) == 2
+    assert "does not exist" in capsys.readouterr().err
+    assert cli_main(["render", str(src), "-o", str(tmp_path / "no" / "r.png")]) == 2
+    assert "folder" in capsys.readouterr().err
+    assert cli_main(["render", str(src), "-o", str(out), "--size", "5"]) == 2
+    assert "--size" in capsys.readouterr().err
+    bad = tmp_path / "bad.npz"
+    bad.write_bytes(b"not a table")
+    assert cli_main(["render", str(bad), "-o", str(out)]) == 2

@@ -1,0 +1,109 @@
+"""Live time: the ETA from measured angle times, its bound for adaptive plans, the service's
+last known stage position for dry runs, and what a reconstructing job waits for."""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from pathlib import Path
+
+import pytest
+
+from gonio.engine import Progress, ScanEngine
+from gonio.plans import AdaptivePlan, ExposureSettings, UniformPlan, dry_run
+from gonio.service import GonioService, JobRequest
+from gonio.store import JobStore, StepRow
+from gonio.worker import Worker, default_basis_provider
+from tests.unit.engine.memrig import MemRig
+
+FAST = ExposureSettings(exposure_s=0.002, light_settle_s=0.0)
+
+
+def test_eta_counts_down_from_the_last_checkpoint_and_never_below_zero() -> None:
+    p = Progress(done=2, total=8, eta_s=12.0, at=1000.0)
+    assert p.eta_now(1003.0) == pytest.approx(9.0)
+    assert p.eta_now(1020.0) == 0.0
+    assert Progress(0, 8, None).eta_now(5.0) is None
+
+
+def _engine(plan: UniformPlan | AdaptivePlan) -> ScanEngine:
+    from gonio.plans import RigDescription
+
+    rig = MemRig()
+    desc = RigDescription.from_rig(rig)
+    store = JobStore(":memory:")
+    job = store.create_job(kind=plan.kind, specimen="x", plan=plan.model_dump(mode="json"),
+                           rig=desc.model_dump(mode="json"))
+    return ScanEngine(rig, store, job.id, plan, desc)
+
+
+def _steps(n: int, done: int) -> list[StepRow]:
+    return [StepRow(k, 0, 45.0 * k, 45.0 * k, k < done, None) for k in range(n)]
+
+
+def test_eta_is_the_median_measured_angle_time_times_the_angles_left() -> None:
+    eng = _engine(UniformPlan(rotations=8, exposure=FAST))
+    # A slow first angle (the long move from where the stage was parked) does not dominate.
+    eng._angle_times = [9.0, 1.0, 1.2, 0.8]
+    p = eng._update_progress(_steps(8, 4))
+    assert p.eta_s == pytest.approx(1.1 * 4)  # median of the four, times four angles left
+    assert p.eta_max_s is None and p.at == pytest.approx(time.time(), abs=5)
+
+
+def test_adaptive_eta_has_a_bound_over_the_worst_case_angles() -> None:
+    plan = AdaptivePlan(initial_rotations=8, max_rounds=3, exposure=FAST)
+    eng = _engine(plan)
+    eng._angle_times = [2.0]
+    p = eng._update_progress(_steps(8, 8))
+    assert p.eta_s == 0.0  # the first round is done; nothing more is planned yet
+    # ... but up to 8 + 16 more angles may come (dry run: max_angles = 32).
+    assert dry_run(plan, eng.desc).max_angles == 32
+    assert p.eta_max_s == pytest.approx(2.0 * 24)
+
+
+def _no_basis() -> None:
+    raise RuntimeError("this test measures only; no reconstruction")
+
+
+def test_dry_run_starts_where_the_last_job_left_the_stage(tmp_path: Path) -> None:
+    rig = MemRig()
+    svc = GonioService(JobStore(tmp_path / "jobs.sqlite"), rig, data_dir=tmp_path / "d",
+                       basis_provider=_no_basis)
+    plan = UniformPlan(rotations=4, exposure=FAST)
+    before = svc.dry_run(plan)
+    assert not before.from_known and before.from_deg == 0.0
+
+    async def go() -> None:
+        await svc.start()
+        info = svc.submit(JobRequest(plan=UniformPlan(rotations=3, start_deg=100, exposure=FAST)))
+        async for ev in svc.subscribe(0):
+            if ev.type == "state" and ev.data["state"] in ("reconstructing", "failed"):
+                break
+        await svc.stop()
+        assert info.id == 1
+
+    asyncio.run(go())
+    after = svc.dry_run(plan)
+    assert after.from_known and after.from_deg == pytest.approx(rig.mstage.pos)
+    assert after.from_deg != 0.0
+
+
+def test_a_job_waiting_for_the_first_basis_build_says_so(tmp_path: Path,
+                                                         monkeypatch: pytest.MonkeyPatch) -> None:
+    from gonio.brdf import library
+
+    w = Worker(JobStore(":memory:"), lambda: None, None, tmp_path,  # type: ignore[arg-type]
+               basis_provider=default_basis_provider)
+    assert w.activity_report() is None
+    w._set_activity("basis")
+    assert w.activity_report() == ("loading the reconstruction basis", None)  # a moment only
+    w._activity_since -= 5.0
+    monkeypatch.setattr(library, "build_progress", lambda: (57, 175))
+    text, frac = w.activity_report()  # type: ignore[misc]
+    assert "57 of 175 materials" in text and "first scan" in text
+    assert frac == pytest.approx(57 / 175)
+    monkeypatch.setattr(library, "build_progress", lambda: (175, 175))
+    text, frac = w.activity_report()  # type: ignore[misc]
+    assert "learning the reconstruction basis" in text and frac is None
+    w._set_activity("reconstructing")
+    assert w.activity_report() == ("reconstructing the BRDF from the readings", None)
