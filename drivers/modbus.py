@@ -182,6 +182,12 @@ class ModbusConnection:
                     f"{self.timeout_s:g} s ({type(exc).__name__}: {exc})",
                     code="timeout",
                 ) from None
+        task = asyncio.current_task()
+        if task is not None and task.cancelling():
+            # pymodbus can complete a request whose task was cancelled while it waited for the
+            # reply, dropping the cancellation: honour it here, or a cancelled exposure would
+            # run on and be taken for the next one.
+            raise asyncio.CancelledError
         if reply.isError():
             raise DeviceFault(
                 device,
