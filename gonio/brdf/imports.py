@@ -35,10 +35,11 @@ from scipy.ndimage import map_coordinates
 
 from gonio.brdf import geometry as geo
 from gonio.brdf.measured import CHANNELS, PREFIX, user_library_dir
+from gonio.brdf.merl import SCALES, MerlError, read_merl_values
 from gonio.brdf.table import BRDFTable, TableError
 
 #: MERL's per-channel scale factors (R, G, B) to 1/sr.
-MERL_SCALE = (1.0 / 1500.0, 1.15 / 1500.0, 1.66 / 1500.0)
+MERL_SCALE = SCALES
 
 
 class TableImportError(ValueError):
@@ -55,25 +56,11 @@ def read_merl(path: str | os.PathLike[str], name: str | None = None) -> BRDFTabl
     """
     p = Path(path)
     try:
-        raw = p.read_bytes()
-    except OSError as exc:
-        raise TableImportError(f"{p}: cannot be read ({exc.strerror})") from None
-    if len(raw) < 12:
-        raise TableImportError(f"{p}: too short for a MERL .binary file (no 12-byte header)")
-    dims = np.frombuffer(raw[:12], dtype="<i4")
-    n_th, n_td, n_pd = (int(d) for d in dims)
-    if min(n_th, n_td, n_pd) < 2 or n_th * n_td * n_pd > 10_000_000:
-        raise TableImportError(
-            f"{p}: header dimensions {dims.tolist()} are not a MERL table (expected e.g. "
-            "90 90 180); is it a MERL .binary file?"
-        )
-    count = 3 * n_th * n_td * n_pd
-    if len(raw) != 12 + 8 * count:
-        raise TableImportError(
-            f"{p}: {len(raw)} bytes, but the header {dims.tolist()} needs {12 + 8 * count}; "
-            "the file is truncated or not a MERL .binary file"
-        )
-    data = np.frombuffer(raw[12:], dtype="<f8").reshape(3, n_th, n_td, n_pd)
+        values = read_merl_values(p, shape=None)
+    except MerlError as exc:
+        raise TableImportError(str(exc)) from None
+    n_th, n_td, n_pd = values.shape[1:]
+    dims = np.asarray(values.shape[1:])
     th, td, pd = geo.grid_angles()
     mask = geo.valid_mask()
     coords = np.stack([
@@ -86,8 +73,8 @@ def read_merl(path: str | os.PathLike[str], name: str | None = None) -> BRDFTabl
         coords[axis] = np.clip(coords[axis], 0, n - 1)
     out = np.full((3, *geo.SLICE_SHAPE), np.nan, dtype=np.float32)
     for c in range(3):
-        vals = data[c] * MERL_SCALE[c]
-        measured = vals >= 0
+        vals = values[c]
+        measured = np.isfinite(vals)
         # Unmeasured bins (negative) get weight 0 and the measured neighbours are
         # renormalised, so a cell next to the horizon still reads its measured neighbours.
         w = map_coordinates(measured.astype(float), coords, order=1, mode="nearest")

@@ -25,26 +25,26 @@ import os
 import uuid
 import warnings
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from gonio.brdf import geometry as geo
+from gonio.brdf.merl import (
+    DATA,
+    HEADER,
+    N_PHI_D,
+    N_THETA_D,
+    N_THETA_H,
+    SCALES,
+    SHAPE,
+    MerlError,
+    read_merl_values,
+)
 from gonio.brdf.table import BRDFTable
 
-N_THETA_H, N_THETA_D, N_PHI_D = 90, 90, 180
-SHAPE = (N_THETA_H, N_THETA_D, N_PHI_D)
-#: Published per-channel scale factors: stored number x scale = BRDF (1/sr).
-SCALES = (1.0 / 1500.0, 1.15 / 1500.0, 1.66 / 1500.0)
 #: Stored for bins whose light or view is below the horizon (or that hold no value).
 BELOW_HORIZON = -1.0
-_HEADER = np.dtype("<i4")
-_DATA = np.dtype("<f8")
-
-
-class MerlError(ValueError):
-    """A table cannot be written as MERL, or a file is not a MERL binary."""
 
 
 def bin_centres() -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
@@ -96,8 +96,8 @@ def write_merl(table: BRDFTable, path: str | os.PathLike[str]) -> Path:
     tmp = p.with_name(f"{p.name}.{uuid.uuid4().hex[:12]}.part")  # one per writer
     try:
         with open(tmp, "wb") as fh:
-            fh.write(np.asarray(SHAPE, dtype=_HEADER).tobytes())
-            fh.write(np.ascontiguousarray(stored, dtype=_DATA).tobytes())
+            fh.write(np.asarray(SHAPE, dtype=HEADER).tobytes())
+            fh.write(np.ascontiguousarray(stored, dtype=DATA).tobytes())
         os.replace(tmp, p)
     finally:
         tmp.unlink(missing_ok=True)
@@ -105,28 +105,12 @@ def write_merl(table: BRDFTable, path: str | os.PathLike[str]) -> Path:
 
 
 def read_merl(path: str | os.PathLike[str]) -> NDArray[np.float64]:
-    """Read a MERL ``.binary`` file: (3, 90, 90, 180) BRDF in 1/sr, NaN below the horizon.
+    """Read a MERL ``.binary`` file of the database's dimensions: (3, 90, 90, 180) BRDF in
+    1/sr, NaN below the horizon (:func:`gonio.brdf.merl.read_merl_values`).
 
     Raises
     ------
     MerlError
         Missing file, wrong dimensions or wrong size, with what was found.
     """
-    p = Path(path)
-    try:
-        raw = p.read_bytes()
-    except OSError as exc:
-        raise MerlError(f"{p}: cannot be read ({exc.strerror})") from None
-    if len(raw) < 12:
-        raise MerlError(f"{p}: {len(raw)} bytes is too short for a MERL header")
-    dims = tuple(int(d) for d in np.frombuffer(raw[:12], dtype=_HEADER))
-    n = int(np.prod(dims))
-    if dims != SHAPE:
-        raise MerlError(f"{p}: dimensions {dims}, expected {SHAPE} (theta_h, theta_d, phi_d)")
-    want = 12 + 3 * n * _DATA.itemsize
-    if len(raw) != want:
-        raise MerlError(f"{p}: {len(raw)} bytes, a MERL file of {dims} has {want}")
-    data: Any = np.frombuffer(raw[12:], dtype=_DATA).reshape(3, *SHAPE)
-    out = np.array(data, dtype=float) * np.asarray(SCALES)[:, None, None, None]
-    out[data < 0] = np.nan
-    return out
+    return read_merl_values(path, SHAPE)
