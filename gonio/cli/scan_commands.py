@@ -389,11 +389,13 @@ def _scan_through_daemon(args: argparse.Namespace, plan: Any) -> int:
             print(f"job {job_id} completed: the daemon now applies this calibration to its "
                   f"scans; a copy is in {cal_out}")
             return 0
+    from gonio.figures import headline_error
+
     units = "1/sr" if summary.get("calibrated") else "sensor units (uncalibrated)"
-    error = summary.get("predicted_error")
+    err = headline_error(summary)
+    err_text = f"{err['key']} {err['text']}" if err else "no error estimate"
     print(f"job {job_id} completed: {summary.get('n_samples', summary.get('readings'))} samples "
-          f"in {units}, self-estimated error "
-          f"{100 * (error if error is not None else float('nan')):.1f} %; wrote {out}")
+          f"in {units}, {err_text}; wrote {out}")
     return 0
 
 

@@ -427,10 +427,11 @@ def _demo_scan(url: str, key: str | None, result: dict[str, int], stop: Any) -> 
             if job["state"] == "completed":
                 m = c.get(f"/api/v1/jobs/{job_id}/metrics").json()
                 units = "1/sr (calibrated)" if m.get("calibrated") else "sensor counts"
+                # The one error number the page shows too (docs/api.md, headline_error).
+                err = m.get("headline_error")
+                err_text = f"{err['key']} {err['text']}" if err else "no error estimate"
                 print(f"demo scan completed: {m.get('n_samples')} samples in {units}, "
-                      f"self-estimated error "
-                      f"{100 * float(m.get('predicted_error') or float('nan')):.1f} %",
-                      flush=True)
+                      f"{err_text}", flush=True)
                 code = 0
     except Exception as exc:  # reported, and the exit code says it failed
         print(f"demo scan failed: {exc}", file=sys.stderr)
