@@ -6,9 +6,9 @@ Run from the project root::
     /usr/bin/time -v .venv/bin/python bench/bench_basis.py   # process peak RSS as well
 
 Builds (or reuses from the cache) the synthetic library first and reports that separately;
-the basis timing covers :func:`gonio.brdf.basis.build_basis` only. Peak memory is tracked with
-tracemalloc (NumPy reports its buffers to it), relative to the tables already in memory, and
-the process peak RSS is printed from ``resource``.
+the basis timing covers :func:`gonio.brdf.reconstruction.basis.build_basis` only. Peak memory is
+tracked with tracemalloc (NumPy reports its buffers to it), relative to the tables already in
+memory, and the process peak RSS is printed from ``resource``.
 """
 
 from __future__ import annotations
@@ -19,8 +19,8 @@ import sys
 import time
 import tracemalloc
 
-from gonio.brdf.basis import build_basis
-from gonio.brdf.library import default_library
+from gonio.brdf.materials.library import default_library
+from gonio.brdf.reconstruction.basis import build_basis
 
 
 def main(argv: list[str] | None = None) -> int:

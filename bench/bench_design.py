@@ -33,8 +33,7 @@ from collections import defaultdict
 
 import numpy as np
 
-from gonio.brdf.basis import Basis, build_basis, default_basis
-from gonio.brdf.design import (
+from gonio.brdf.design.design import (
     PairDesign,
     condition_numbers_fast,
     condition_numbers_svd,
@@ -43,8 +42,9 @@ from gonio.brdf.design import (
     geometry_design,
     neighbourhood,
 )
-from gonio.brdf.feasibility import RigConstraints, candidate_rows, place_pairs, rows_to_cells
-from gonio.brdf.presets import get_preset, preset_names
+from gonio.brdf.design.feasibility import RigConstraints, candidate_rows, place_pairs, rows_to_cells
+from gonio.brdf.design.presets import get_preset, preset_names
+from gonio.brdf.reconstruction.basis import Basis, build_basis, default_basis
 
 # gonio's default rig limits: elevation up to 80 deg, light-sensor separation 10 deg and
 # 10 deg between any two mounted devices (the search is collision-aware, so every design
@@ -111,7 +111,7 @@ def _random_design(basis: Basis, n: int, seed: int) -> PairDesign:
     rows = np.random.default_rng(seed).choice(candidate_rows(c, basis.valid), n, replace=False)
     p = place_pairs(rows_to_cells(rows), c, seed=seed)
     lab = np.deg2rad(p.lab_deg)
-    from gonio.brdf import geometry as geo
+    from gonio.brdf.tables import geometry as geo
 
     wi = geo.spherical_to_direction(lab[:, 0], lab[:, 1])
     wo = geo.spherical_to_direction(lab[:, 2], lab[:, 3])
@@ -119,10 +119,10 @@ def _random_design(basis: Basis, n: int, seed: int) -> PairDesign:
 
 
 def section_quality(per_family: int) -> None:
-    from gonio.brdf import metrics
-    from gonio.brdf.library import default_library, library_specs
-    from gonio.brdf.reconstruct import reconstruct
-    from gonio.brdf.samples import NoiseModel, simulate_samples, uniform_stage_angles
+    from gonio.brdf.materials.library import default_library, library_specs
+    from gonio.brdf.reconstruction.reconstruct import reconstruct
+    from gonio.brdf.reconstruction.samples import NoiseModel, simulate_samples, uniform_stage_angles
+    from gonio.brdf.tables import metrics
 
     specs = library_specs()
     counts: dict[str, int] = defaultdict(int)

@@ -15,16 +15,16 @@ Protocol
   harder validation set (real materials the synthetic basis represents poorly).
 * Scans: ``n`` pairs in two layouts, the deterministic grid rule of ``gonio demo``
   (:func:`gonio.cli.brdf_commands.simple_pairs`: cells clustered at th <= 50, td <= 35 deg)
-  and the pairs optimised by :func:`gonio.brdf.design.design_pairs` (spread over the
+  and the pairs optimised by :func:`gonio.brdf.design.design.design_pairs` (spread over the
   domain); ``r`` uniform stage angles, 1 % relative noise (seed 0), closed form with
   eta = 40, lam = 0.1; every (layout, n, r) of ``--pairs`` x ``--rotations``. ``--no-design``
   keeps the grid rule only.
-* Truth: the volume-weighted MAPE over the whole table (:func:`gonio.brdf.metrics.mape`).
+* Truth: the volume-weighted MAPE over the whole table (:func:`gonio.brdf.tables.metrics.mape`).
 * Estimators: V&F's ``estimated_error = 0.8 x rel_sample_error`` and gonio's
   ``predicted_error = s(n) x cv_sample_error`` (leave-one-pair-out). For each n the factor
   ``s`` is fitted here as the geometric median of ``mape / cv_sample_error`` over the
   calibration set (both layouts pooled) and printed next to the module's
-  :data:`gonio.brdf.reconstruct.CV_ERROR_SCALES`, which are set from it; the reported
+  :data:`gonio.brdf.reconstruction.reconstruct.CV_ERROR_SCALES`, which are set from it; the reported
   ``predicted_error`` is the module's.
 * Reported for each set and estimator: the ratio ``estimate / mape`` (median, IQR, the share
   within a factor of 2 of the truth) and the Spearman rank correlation of estimate and truth,
@@ -47,12 +47,12 @@ import numpy as np
 from bench_quality import rgl_tables
 from scipy.stats import spearmanr
 
-from gonio.brdf import metrics
-from gonio.brdf.basis import DEFAULT_COMPONENTS, Basis, build_basis
-from gonio.brdf.library import cache_root, default_library, library_key, library_specs
-from gonio.brdf.reconstruct import CV_ERROR_SCALES, reconstruct
-from gonio.brdf.samples import NoiseModel, simulate_samples, uniform_stage_angles
-from gonio.brdf.table import BRDFTable
+from gonio.brdf.materials.library import cache_root, default_library, library_key, library_specs
+from gonio.brdf.reconstruction.basis import DEFAULT_COMPONENTS, Basis, build_basis
+from gonio.brdf.reconstruction.reconstruct import CV_ERROR_SCALES, reconstruct
+from gonio.brdf.reconstruction.samples import NoiseModel, simulate_samples, uniform_stage_angles
+from gonio.brdf.tables import metrics
+from gonio.brdf.tables.table import BRDFTable
 from gonio.cli.brdf_commands import simple_pairs
 
 
@@ -101,8 +101,8 @@ def grid_rule(n: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def designed(basis: Basis) -> PairsFn:
-    from gonio.brdf.design import design_pairs
-    from gonio.brdf.feasibility import RigConstraints
+    from gonio.brdf.design.design import design_pairs
+    from gonio.brdf.design.feasibility import RigConstraints
 
     @functools.cache
     def pairs(n: int) -> tuple[np.ndarray, np.ndarray]:

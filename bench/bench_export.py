@@ -7,15 +7,15 @@ Run from the project root::
 Protocol
 --------
 * Materials: the measured RGL materials in ``../shared/data/rgl`` (tabulated with
-  :func:`gonio.brdf.rgl.read_rgl`, mitsuba ``scalar_rgb``; skipped when the data or mitsuba
-  are absent) and ``--analytic`` anisotropic library materials (brushed metals, metals,
+  :func:`gonio.brdf.materials.rgl.read_rgl`, mitsuba ``scalar_rgb``; skipped when the data or
+  mitsuba are absent) and ``--analytic`` anisotropic library materials (brushed metals, metals,
   fabrics), all on gonio's 5 degree grid.
 * Each table is fitted as the daemon fits a reconstruction (:func:`gonio.export.fit_all`:
   factored, 10 rounds; principled). Reported: relMSE, MAPE (%), PSNR (dB) and log_rmse of
   each fitted model's table against the input table, volume-weighted over the valid cells
-  (:func:`gonio.brdf.factored.fit_metrics`), and the fit times. The measured RGL data are
-  unreliable near grazing (see :mod:`gonio.brdf.rgl`), so the metrics are also given over the
-  cells where both light and view are within 80 degrees of the normal and the value is not a
+  (:func:`gonio.brdf.models.factored.fit_metrics`), and the fit times. The measured RGL data are
+  unreliable near grazing (see :mod:`gonio.brdf.materials.rgl`), so the metrics are also given over
+  the   cells where both light and view are within 80 degrees of the normal and the value is not a
   clamped negative.
 * 000's Table 1 is printed beside for scale. It is not like for like: 000 fits other RGL
   materials (brushed_aluminium_1, ...), per wavelength, and measures relMSE / MAPE / PSNR on
@@ -34,11 +34,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from gonio.brdf import geometry as geo
-from gonio.brdf import library
-from gonio.brdf import models as bm
-from gonio.brdf.factored import fit_metrics
-from gonio.brdf.table import BRDFTable
+from gonio.brdf.materials import library
+from gonio.brdf.models import analytic as bm
+from gonio.brdf.models.factored import fit_metrics
+from gonio.brdf.tables import geometry as geo
+from gonio.brdf.tables.table import BRDFTable
 from gonio.export import fit_all, provenance, write_export
 
 #: 000 Table 1: average relMSE, MAPE (%), PSNR (dB) over wavelengths, on renderings.
@@ -80,8 +80,9 @@ def trimmed(table: BRDFTable, max_deg: float = 80.0) -> BRDFTable:
     """The table with NaN where the light or the view is more than ``max_deg`` from the normal
     and where a value is 0 (RGL values that came back negative and were clamped).
 
-    The RGL data are unreliable there (noisy warps, clamped negatives; see gonio.brdf.rgl), and
-    a relative metric of a value near 0 explodes; the metrics skip NaN cells.
+    The RGL data are unreliable there (noisy warps, clamped negatives; see
+    gonio.brdf.materials.rgl), and a relative metric of a value near 0 explodes; the metrics skip
+    NaN cells.
     """
     ci, co = geo.cell_cosines(*geo.grid_angles())
     far = np.minimum(ci, co) < np.cos(np.deg2rad(max_deg))

@@ -11,10 +11,10 @@ Protocol
   is held out (a leave-subset-out protocol: stricter than leave-one-out, and it needs a single
   basis build instead of one per material).
 * The six measured RGL materials in ``../shared/data/rgl`` (read with
-  :func:`gonio.brdf.rgl.read_rgl`, needs mitsuba) are evaluated with the same basis; skipped
-  when the data or mitsuba are absent.
-* Pairs: ``n`` pairs from :func:`gonio.brdf.design.design_pairs` on the training basis when the
-  design module is available (one design per n, shared by all materials), else the demo's
+  :func:`gonio.brdf.materials.rgl.read_rgl`, needs mitsuba) are evaluated with the same basis;
+  skipped when the data or mitsuba are absent.
+* Pairs: ``n`` pairs from :func:`gonio.brdf.design.design.design_pairs` on the training basis when
+  the design module is available (one design per n, shared by all materials), else the demo's
   deterministic grid rule. Rotations: ``r`` uniform stage angles. Noise: 1 % relative, seed 0.
 * Reconstruction: closed form, eta = 40, lam = 0.1, the basis truncated to each K.
 * Reported: mean log_rmse (lower is better) and mean log_psnr in dB (higher is better) over the
@@ -33,12 +33,12 @@ from pathlib import Path
 
 import numpy as np
 
-from gonio.brdf import metrics
-from gonio.brdf.basis import Basis, build_basis
-from gonio.brdf.library import cache_root, default_library, library_key, library_specs
-from gonio.brdf.reconstruct import reconstruct
-from gonio.brdf.samples import NoiseModel, simulate_samples, uniform_stage_angles
-from gonio.brdf.table import BRDFTable
+from gonio.brdf.materials.library import cache_root, default_library, library_key, library_specs
+from gonio.brdf.reconstruction.basis import Basis, build_basis
+from gonio.brdf.reconstruction.reconstruct import reconstruct
+from gonio.brdf.reconstruction.samples import NoiseModel, simulate_samples, uniform_stage_angles
+from gonio.brdf.tables import metrics
+from gonio.brdf.tables.table import BRDFTable
 from gonio.cli.brdf_commands import simple_pairs
 
 #: Per (n, r, K): one (log_rmse, log_psnr, V&F ratio, CV ratio) tuple per test material.
@@ -49,8 +49,8 @@ RGL_DIR = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "rgl"
 
 def pairs_for(basis: Basis, n: int) -> tuple[np.ndarray, np.ndarray, str]:
     try:
-        from gonio.brdf.design import design_pairs
-        from gonio.brdf.feasibility import RigConstraints
+        from gonio.brdf.design.design import design_pairs
+        from gonio.brdf.design.feasibility import RigConstraints
 
         # Quality depends on the cells only; device collisions are a rig question, so the
         # mounting distance is not constrained here.
@@ -67,7 +67,7 @@ def rgl_tables() -> list[BRDFTable]:
         print(f"RGL data not found at {RGL_DIR}: skipped")
         return []
     try:
-        from gonio.brdf.rgl import read_rgl
+        from gonio.brdf.materials.rgl import read_rgl
 
         return [read_rgl(p) for p in sorted(RGL_DIR.glob("*.bsdf"))]
     except Exception as exc:  # missing mitsuba or a reader problem: report and go on

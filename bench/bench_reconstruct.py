@@ -8,9 +8,9 @@ Uses the cached default basis (built on first use) and a library material as the
 with the demo's deterministic grid pairs. For each (n, r) it reports the median wall time of
 
 * ``solve``: step 3 alone (the two K x K solves, or the L-BFGS search), all channels, with
-  BLAS on one thread as inside :func:`~gonio.brdf.reconstruct.reconstruct`;
-* ``total``: the whole :func:`gonio.brdf.reconstruct.reconstruct` call (resampling, remap,
-  solve, the full 3 x 72 x 11,664 table, the sample error and the leave-one-pair-out
+  BLAS on one thread as inside :func:`~gonio.brdf.reconstruction.reconstruct.reconstruct`;
+* ``total``: the whole :func:`gonio.brdf.reconstruction.reconstruct.reconstruct` call (resampling,
+  remap, solve, the full 3 x 72 x 11,664 table, the sample error and the leave-one-pair-out
   estimate);
 
 and the agreement of the two solvers (max coefficient difference relative to the largest
@@ -27,10 +27,9 @@ from functools import partial
 
 import numpy as np
 
-from gonio.brdf import geometry as geo
-from gonio.brdf.basis import default_basis, remap
-from gonio.brdf.library import get_material
-from gonio.brdf.reconstruct import (
+from gonio.brdf.materials.library import get_material
+from gonio.brdf.reconstruction.basis import default_basis, remap
+from gonio.brdf.reconstruction.reconstruct import (
     JOINT_ETA,
     JOINT_LAM,
     _objective,
@@ -42,7 +41,8 @@ from gonio.brdf.reconstruct import (
     solve_iterative,
     solve_joint,
 )
-from gonio.brdf.samples import NoiseModel, simulate_samples, uniform_stage_angles
+from gonio.brdf.reconstruction.samples import NoiseModel, simulate_samples, uniform_stage_angles
+from gonio.brdf.tables import geometry as geo
 from gonio.cli.brdf_commands import simple_pairs
 
 

@@ -11,7 +11,7 @@ Materials
   leave-one-measured-material-out: the basis is ``default_basis(exclude=[material])`` (the
   synthetic library plus every *other* shipped measured material), so neither file of the
   held-out material is ever trained on. The truth is the file evaluated with mitsuba
-  (:func:`gonio.brdf.rgl.read_rgl`); the test file is the standard (non-``fine``) one.
+  (:func:`gonio.brdf.materials.rgl.read_rgl`); the test file is the standard (non-``fine``) one.
 * **Anisotropic**: six specimens made with an independent renderer (mitsuba 3, variant
   ``scalar_rgb``): ``roughconductor`` with mitsuba's measured IORs and ``alpha_u != alpha_v``,
   ``principled`` with ``anisotropic``, and diffuse + brushed-conductor blends, each turned by an
@@ -44,14 +44,14 @@ from typing import Any
 
 import numpy as np
 
-from gonio.brdf import geometry as geo
-from gonio.brdf import metrics
-from gonio.brdf.basis import Basis, default_basis, remap, row_weight
-from gonio.brdf.library import cache_root
-from gonio.brdf.presets import get_preset, preset_names
-from gonio.brdf.reconstruct import _expand_table, reconstruct
-from gonio.brdf.samples import NoiseModel, pair_directions, uniform_stage_angles
-from gonio.brdf.table import BRDFTable
+from gonio.brdf.design.presets import get_preset, preset_names
+from gonio.brdf.materials.library import cache_root
+from gonio.brdf.reconstruction.basis import Basis, default_basis, remap, row_weight
+from gonio.brdf.reconstruction.reconstruct import _expand_table, reconstruct
+from gonio.brdf.reconstruction.samples import NoiseModel, pair_directions, uniform_stage_angles
+from gonio.brdf.tables import geometry as geo
+from gonio.brdf.tables import metrics
+from gonio.brdf.tables.table import BRDFTable
 
 ROOT = Path(__file__).resolve().parents[1]
 RGL_DIR = ROOT.parent / "shared" / "data" / "rgl"
@@ -143,7 +143,7 @@ class Material:
 
 
 def measured_materials() -> list[Material]:
-    from gonio.brdf.rgl import read_rgl
+    from gonio.brdf.materials.rgl import read_rgl
 
     files = sorted(RGL_DIR.glob("*.bsdf"))
     out = []
@@ -186,8 +186,8 @@ CHOOSE = {"k": 1}
 
 
 def design(b: Basis, n: int) -> tuple[np.ndarray, np.ndarray]:
-    from gonio.brdf.design import design_pairs
-    from gonio.brdf.feasibility import RigConstraints
+    from gonio.brdf.design.design import design_pairs
+    from gonio.brdf.design.feasibility import RigConstraints
 
     k = CHOOSE["k"]
     path = CACHE / f"design-{basis_id(b)}-n{n}{f'-choose{k}' if k > 1 else ''}.npz"
@@ -195,7 +195,7 @@ def design(b: Basis, n: int) -> tuple[np.ndarray, np.ndarray]:
         with np.load(path) as z:
             return z["cells"], z["ph_lab"]
     if k > 1:
-        from gonio.brdf.heldout import choose_design
+        from gonio.brdf.design.heldout import choose_design
 
         d, _err, table = choose_design(
             lambda seed: design_pairs(b, n, RigConstraints(), seed=seed), range(k))
@@ -253,7 +253,7 @@ def score(rec_table: BRDFTable, truth: BRDFTable, rec: Any = None, readings: int
 def calibrate(rows: dict[str, dict[str, Score]], mats: list[Material]) -> None:
     """Fit ``ln(log_rmse) = a + b ln(cv_sample_error) + c ln(n r)`` on half the materials
     (alternate positions within each kind) and validate on the other half."""
-    from gonio.brdf.reconstruct import LOG_RMSE_MODEL
+    from gonio.brdf.reconstruction.reconstruct import LOG_RMSE_MODEL
 
     order = {m.name: i for i, m in enumerate([m for m in mats if m.kind == "measured"])}
     order.update({m.name: i for i, m in enumerate([m for m in mats if m.kind == "aniso"])})
@@ -292,7 +292,7 @@ def run_adaptive(b: Basis, m: Material, cells: np.ndarray, ph: np.ndarray, seed:
                  everywhere: bool = False) -> Score:
     """V&F Sec. 6: start with r0 rotations, refine where PCHIP mispredicts (e = 0.1); with
     ``joint_e``, refine where the joint fit's leave-one-angle-out log error exceeds it."""
-    from gonio.brdf.reconstruct import refine_angles
+    from gonio.brdf.reconstruction.reconstruct import refine_angles
     from gonio.plans import adaptive_refinement
 
     angles = list(np.rad2deg(uniform_stage_angles(r0)))
@@ -332,8 +332,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="thresholds of the joint adaptive rows (log_rmse units)")
     ap.add_argument("--choose", type=int, default=1, metavar="K",
                     help="pick each design among K seeds by expected held-out error "
-                         "(gonio.brdf.heldout; its panel contains the measured materials, so "
-                         "use with --only aniso for a clean test)")
+                         "(gonio.brdf.design.heldout; its panel contains the measured materials, "
+                         "so use with --only aniso for a clean test)")
     ap.add_argument("--calibrate", action="store_true",
                     help="fit predicted_log_rmse's model on half the materials, check the rest")
     args = ap.parse_args(argv)

@@ -10,8 +10,8 @@ on the synthetic basis for n = 5, 10, 20, plus the MA68 and MA98 presets, each a
 uniform stage angles. Materials at even positions (within each kind) calibrate, odd ones
 validate. For each candidate model ``ln(log_rmse) = a + b ln(feature) [+ c ln(n r)]`` the script
 prints its coefficients and the share of scans whose truth lies within x2 of the estimate; the
-module's :data:`gonio.brdf.reconstruct.LOG_RMSE_MODEL` is the candidate with the lowest
-calibration-half residual.
+module's :data:`gonio.brdf.reconstruction.reconstruct.LOG_RMSE_MODEL` is the candidate with the
+lowest calibration-half residual.
 """
 
 from __future__ import annotations
@@ -20,11 +20,11 @@ from __future__ import annotations
 import bench_unseen as bu
 import numpy as np
 
-from gonio.brdf import metrics
-from gonio.brdf.basis import default_basis
-from gonio.brdf.presets import get_preset
-from gonio.brdf.reconstruct import LOG_RMSE_MODEL, reconstruct
-from gonio.brdf.samples import uniform_stage_angles
+from gonio.brdf.design.presets import get_preset
+from gonio.brdf.reconstruction.basis import default_basis
+from gonio.brdf.reconstruction.reconstruct import LOG_RMSE_MODEL, reconstruct
+from gonio.brdf.reconstruction.samples import uniform_stage_angles
+from gonio.brdf.tables import metrics
 
 
 def main() -> int:

@@ -1,4 +1,6 @@
-"""Make the measured-material tables shipped in the package (``gonio/brdf/data/measured.npz``).
+"""Make the measured-material tables shipped in the package.
+
+They go to ``gonio/brdf/materials/data/measured.npz``.
 
 Run from the project root (needs mitsuba, ``pip install 'gonio[rgl]'``)::
 
@@ -6,7 +8,7 @@ Run from the project root (needs mitsuba, ``pip install 'gonio[rgl]'``)::
 
 ``RGL_DIR`` defaults to ``../shared/data/rgl``: eleven isotropic materials of the RGL EPFL
 material database (Dupuy & Jakob 2018, CC0). Each ``.bsdf`` file is evaluated once with
-:func:`gonio.brdf.rgl.read_rgl` (mitsuba ``scalar_rgb``) on the valid cells of one ``ph``
+:func:`gonio.brdf.materials.rgl.read_rgl` (mitsuba ``scalar_rgb``) on the valid cells of one ``ph``
 slice; the tables are isotropic, so one slice is the whole material. Of the two
 ``irid_flake_paint1`` files (one swatch, two outgoing grids) only the standard one is shipped,
 so the shipped set holds each material once.
@@ -23,8 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
-from gonio.brdf import geometry as geo
-from gonio.brdf.rgl import read_rgl
+from gonio.brdf.materials.rgl import read_rgl
+from gonio.brdf.tables import geometry as geo
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "gonio" / "brdf" / "data" / "measured.npz"

@@ -1,8 +1,8 @@
 """Renderings of result files: the reconstruction, the true material when it is known, and
 comparisons of several results (``gonio render``, ``GET /api/v1/jobs/{id}/render.png``).
 
-The pictures themselves come from :mod:`gonio.brdf.render`; this module knows where the BRDFs
-are in a result file. A result measured on the simulated rig carries the simulated material
+The pictures themselves come from :mod:`gonio.brdf.pictures.render`; this module knows where the
+BRDFs are in a result file. A result measured on the simulated rig carries the simulated material
 in its provenance (``true_material``, written by :func:`describe_material`), so its rendering
 shows the truth beside the reconstruction, as V&F's Fig. 9 shows reference and reconstruction.
 """
@@ -15,9 +15,9 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from gonio.brdf import models as bm
-from gonio.brdf import render
-from gonio.brdf.table import BRDFTable
+from gonio.brdf.models import analytic as bm
+from gonio.brdf.pictures import render
+from gonio.brdf.tables.table import BRDFTable
 from gonio.results import ResultFile, read_result
 
 TRUE_MATERIAL_KEY = "true_material"
@@ -31,7 +31,7 @@ class FigureError(ValueError):
 def describe_material(brdf: Any) -> dict[str, Any] | None:
     """JSON-ready recipe of a simulated specimen, or None if it cannot be written down.
 
-    Analytic models are stored whole (:func:`gonio.brdf.models.to_dict`); a table is stored
+    Analytic models are stored whole (:func:`gonio.brdf.models.analytic.to_dict`); a table is stored
     by the file it came from, when its provenance names one.
     """
     if isinstance(brdf, BRDFTable):
@@ -163,7 +163,8 @@ def fit_curves(res: ResultFile, step_deg: float = 2.0) -> dict[str, Any]:
     """Each pair's calibrated samples against stage angle and the reconstruction through them.
 
     The curve evaluates the reconstructed table at the pair's fixed lab directions turned
-    into the specimen frame at each stage angle (:func:`gonio.brdf.geometry.lab_to_specimen`).
+    into the specimen frame at each stage angle
+    (:func:`gonio.brdf.tables.geometry.lab_to_specimen`).
     Values are the mean over channels.
 
     Returns
@@ -173,7 +174,7 @@ def fit_curves(res: ResultFile, step_deg: float = 2.0) -> dict[str, Any]:
     """
     import numpy as np
 
-    from gonio.brdf import geometry as geo
+    from gonio.brdf.tables import geometry as geo
 
     if res.table is None:
         raise FigureError("this result has no reconstructed BRDF (a calibration job)")

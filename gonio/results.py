@@ -19,11 +19,12 @@ Layout (also in ``docs/engine.md``; strings are UTF-8, JSON attributes are strin
         values (C, 72, 18, 18, 36) f4   f[c, i_ph, i_th, i_td, i_pd], 1/sr, NaN = invalid cell
         channels (C,) str     coefficients (C, K, 72) f8
         attrs: rel_sample_error, estimated_error (fractions), settings (JSON)
-    /factored                 the factored fit of the reconstruction (000; gonio.brdf.factored)
+    /factored                 the factored fit of the reconstruction
+                              (000; gonio.brdf.models.factored)
         rho_d (C,) rho_s (C,) D (18, 72) F (C, 18) G (19, 72) f8, channels (C,) str,
         D_theta_h_deg, D_phi_h_deg, F_theta_d_deg, G_theta_deg, G_phi_deg (grids)
         attrs: metrics (JSON: rel_mse, mape, psnr, log_rmse, iterations, seconds)
-    /principled               attrs: params (JSON, gonio.brdf.principled.Principled.as_dict)
+    /principled               attrs: params (JSON, gonio.brdf.models.principled.Principled.as_dict)
     /metrics                  attrs: one float or string per metric
     /provenance               attrs: plan, rig, rig_config, calibration (JSON),
                                      basis_K, basis_materials (JSON list)
@@ -47,9 +48,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from gonio import __version__
-from gonio.brdf.factored import FactoredBRDF
-from gonio.brdf.principled import Principled
-from gonio.brdf.table import BRDFTable
+from gonio.brdf.models.factored import FactoredBRDF
+from gonio.brdf.models.principled import Principled
+from gonio.brdf.tables.table import BRDFTable
 from gonio.calibration import Samples
 from gonio.store import ReadingRow
 

@@ -620,7 +620,7 @@ class GonioService:
         return out
 
     def preview_png(self, job_id: int) -> bytes:
-        """PNG preview of the reconstructed table (:func:`gonio.brdf.preview.preview_png`).
+        """PNG preview of the reconstructed table (:func:`gonio.brdf.pictures.preview.preview_png`).
 
         Blocking (reads the result file, renders): call it from a thread in async code. The
         PNG of the last few results is kept, since a finished result file never changes.
@@ -641,7 +641,7 @@ class GonioService:
         res = read_result(path)
         if res.table is None:
             raise NotFound(f"job {job_id} is a {res.attrs.get('kind')} job without a BRDF")
-        from gonio.brdf.preview import preview_png
+        from gonio.brdf.pictures.preview import preview_png
 
         png = preview_png(res.table, title=f"job {job_id}: {res.table.name}")
         with self._preview_lock:

@@ -55,11 +55,12 @@ GATE_POLL_S = 1.0
 """How often a closed gate (maintenance lock) is looked at again, seconds."""
 
 BasisProvider = Callable[[], Any]
-"""Returns the :class:`gonio.brdf.basis.Basis` to reconstruct with (may build it; slow)."""
+"""Returns the :class:`gonio.brdf.reconstruction.basis.Basis` to reconstruct with (may build it;
+slow)."""
 
 
 def default_basis_provider() -> Any:
-    from gonio.brdf.basis import default_basis
+    from gonio.brdf.reconstruction.basis import default_basis
 
     return default_basis()
 
@@ -309,7 +310,7 @@ class Worker:
             summary.update(result_path=str(path), calibration_path=str(cal_path))
             return summary
 
-        from gonio.brdf.reconstruct import pair_cells, reconstruct
+        from gonio.brdf.reconstruction.reconstruct import pair_cells, reconstruct
 
         self._set_activity("basis")
         try:
@@ -398,7 +399,7 @@ class Worker:
         waited = time.monotonic() - self._activity_since
         if self.basis_provider is not default_basis_provider or waited < 1.0:
             return ("loading the reconstruction basis", None)
-        from gonio.brdf.library import build_progress
+        from gonio.brdf.materials.library import build_progress
 
         done, total = build_progress()
         if done < total:

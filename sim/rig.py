@@ -25,9 +25,9 @@ from typing import Any, Literal
 
 import numpy as np
 
-from gonio.brdf import library
-from gonio.brdf.models import GGX, Lambert, LobeSum
-from gonio.brdf.table import BRDFTable
+from gonio.brdf.materials import library
+from gonio.brdf.models.analytic import GGX, Lambert, LobeSum
+from gonio.brdf.tables.table import BRDFTable
 from gonio.config import (
     DynamixelSettings,
     LightConfig,
@@ -131,7 +131,7 @@ def resolve_material(material: str | os.PathLike[str] | BRDFLike | None) -> BRDF
     Raises
     ------
     ValueError
-        The file is not a BRDF table or the name is not in :mod:`gonio.brdf.library`.
+        The file is not a BRDF table or the name is not in :mod:`gonio.brdf.materials.library`.
     """
     if material is None:
         return default_material()

@@ -8,7 +8,7 @@ turned to stage angle ``alpha`` records, per channel, in raw ADC counts::
     counts = clip(round(signal + dark + noise), 0, saturation)
 
 where ``wi', wo'`` are the lab directions expressed in the specimen frame
-(:func:`gonio.brdf.geometry.lab_to_specimen`), ``dark = dark_offset + dark_rate * t`` and the
+(:func:`gonio.brdf.tables.geometry.lab_to_specimen`), ``dark = dark_offset + dark_rate * t`` and the
 noise is Gaussian with variance ``shot_gain * (signal + dark_rate t) + read_noise**2`` (the
 Gaussian limit of photon shot noise plus read noise). ``E_l`` is in counts per (1/sr) per
 second at gain 1, so it folds the lamp power and the sensor's responsivity into one number;
@@ -24,7 +24,7 @@ from typing import Any, Protocol
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from gonio.brdf.geometry import lab_to_specimen
+from gonio.brdf.tables.geometry import lab_to_specimen
 
 __all__ = [
     "BRDFLike",

@@ -5,12 +5,12 @@ the lab page. The service's typed errors become HTTP statuses in one place here:
 
 ================================================  ======
 :class:`gonio.service.NotFound` (store's)         404
-:class:`gonio.brdf.presets.UnknownPresetError`    404
+:class:`gonio.brdf.design.presets.UnknownPresetError`    404
 :class:`gonio.service.Conflict`                   409
 :class:`gonio.jobstates.IllegalTransition`        409
 :class:`gonio.plans.PlanError`                    422
-:class:`gonio.brdf.design.DesignError`            422
-:class:`gonio.brdf.feasibility.FeasibilityError`  422
+:class:`gonio.brdf.design.design.DesignError`            422
+:class:`gonio.brdf.design.feasibility.FeasibilityError`  422
 ================================================  ======
 """
 
@@ -36,9 +36,9 @@ from gonio.api import routes_design, routes_jobs, routes_results, routes_rig, ro
 from gonio.api.errors import document_errors
 from gonio.api.events import HEARTBEAT_S, StreamCloser
 from gonio.api.settings import ApiSettings, install
-from gonio.brdf.design import DesignError
-from gonio.brdf.feasibility import FeasibilityError
-from gonio.brdf.presets import UnknownPresetError
+from gonio.brdf.design.design import DesignError
+from gonio.brdf.design.feasibility import FeasibilityError
+from gonio.brdf.design.presets import UnknownPresetError
 from gonio.calibration import CalibrationError
 from gonio.jobstates import IllegalTransition
 from gonio.plans import PlanError

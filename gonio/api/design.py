@@ -2,8 +2,8 @@
 
 A design request asks for ``pairs`` independent light/sensor pairs, or a product rig of
 ``lights`` x ``sensors``, under the rig's mounting constraints. The computation is the same as
-``gonio design`` (:mod:`gonio.brdf.design`, V&F 2016 Sec. 3.3): minimise the condition number of
-the basis rows the pairs sample. The result carries the cells, the lab placement of every
+``gonio design`` (:mod:`gonio.brdf.design.design`, V&F 2016 Sec. 3.3): minimise the condition
+number of the basis rows the pairs sample. The result carries the cells, the lab placement of every
 device, the condition number, the roughness bound of MATH 10 at ``rotations`` uniform stage
 angles, and the rig-config fragment (TOML) to paste into a rig config.
 
@@ -19,16 +19,16 @@ from typing import Any
 import numpy as np
 from pydantic import BaseModel, Field, model_validator
 
-from gonio.brdf.design import (
+from gonio.brdf.design.design import (
     BasisLike,
     PairDesign,
     design_pairs,
     design_product_rig,
     geometry_design,
 )
-from gonio.brdf.feasibility import RigConstraints, parse_exclusion
-from gonio.brdf.presets import Preset
-from gonio.brdf.roughness import roughness_bound
+from gonio.brdf.design.feasibility import RigConstraints, parse_exclusion
+from gonio.brdf.design.presets import Preset
+from gonio.brdf.design.roughness import roughness_bound
 from gonio.plans import FINITE, Count, Text
 
 MAX_PAIRS = 40
@@ -170,7 +170,7 @@ def rig_fragment(design: PairDesign) -> dict[str, Any]:
 
 
 def describe(design: PairDesign, rotations: int) -> DesignResult:
-    """The API view of a :class:`~gonio.brdf.design.PairDesign`."""
+    """The API view of a :class:`~gonio.brdf.design.design.PairDesign`."""
     from gonio.rigdesign import dump_fragment
 
     angles = np.arange(rotations) * (2.0 * np.pi / rotations)
@@ -209,7 +209,7 @@ def run_design(basis: BasisLike, request: DesignRequest) -> DesignResult:
 
     Raises
     ------
-    gonio.brdf.feasibility.FeasibilityError, gonio.brdf.design.DesignError
+    gonio.brdf.design.feasibility.FeasibilityError, gonio.brdf.design.design.DesignError
         Constraints that no design satisfies; the message says which to relax.
     """
     constraints = request.constraints()

@@ -21,7 +21,7 @@ from gonio.api.design import (
     evaluate_preset,
     run_design,
 )
-from gonio.brdf.presets import get_preset, preset_names
+from gonio.brdf.design.presets import get_preset, preset_names
 from gonio.plans import PlanError
 from gonio.service import Conflict
 

@@ -18,8 +18,8 @@ from fastapi.responses import FileResponse
 from pydantic import BaseModel, Field
 
 from gonio.api.deps import READ, JobId, Service
-from gonio.brdf import geometry as geo
-from gonio.brdf.table import BRDFTable
+from gonio.brdf.tables import geometry as geo
+from gonio.brdf.tables.table import BRDFTable
 from gonio.results import ResultFile, read_result
 from gonio.service import NotFound
 

@@ -94,7 +94,7 @@ def _design_rows(path: Path) -> list[Mapping[str, Any]] | None:
 
 def read_pairs(path: str | Path) -> tuple[FloatArray, FloatArray]:
     """Cells (n, 3) and lab azimuths (n,), radians, from a pairs file (module docstring)."""
-    from gonio.brdf.reconstruct import ReconstructionError, pair_cells
+    from gonio.brdf.reconstruction.reconstruct import ReconstructionError, pair_cells
 
     p = Path(path)
     if p.suffix.lower() == ".toml" and p.is_file():
@@ -125,7 +125,7 @@ def read_pairs(path: str | Path) -> tuple[FloatArray, FloatArray]:
         return rad[:, :3], rad[:, 3]
     if (deg[:, [0, 2]] >= 90).any() or (deg[:, [0, 2]] < 0).any():
         raise UsageError(f"pairs file {p}: theta_i and theta_v must be in [0, 90) degrees")
-    from gonio.brdf import geometry as geo
+    from gonio.brdf.tables import geometry as geo
 
     try:
         return pair_cells(
@@ -145,7 +145,7 @@ def simple_pairs(n: int) -> tuple[FloatArray, FloatArray]:
     specular peak, the off-specular ridge and a spread of separations; the lab azimuths are
     spread the same way so the pairs see different slices at each stage angle.
     """
-    from gonio.brdf import geometry as geo
+    from gonio.brdf.tables import geometry as geo
 
     k = np.arange(n)
     th = np.rint((k + 0.5) / n * 10) * geo.STEP  # 0..50 deg
@@ -157,8 +157,8 @@ def simple_pairs(n: int) -> tuple[FloatArray, FloatArray]:
 
 # ---------------------------------------------------------------------------- commands
 def _cmd_basis_build(args: argparse.Namespace) -> int:
-    from gonio.brdf import library
-    from gonio.brdf.basis import build_basis
+    from gonio.brdf.materials import library
+    from gonio.brdf.reconstruction.basis import build_basis
 
     if args.components < 1:
         raise UsageError(f"--components must be at least 1, got {args.components}")
@@ -171,7 +171,7 @@ def _cmd_basis_build(args: argparse.Namespace) -> int:
     if args.output is None:
         # The default basis (synthetic + shipped measured + imported tables), rebuilt where
         # default_basis() finds it.
-        from gonio.brdf.basis import default_basis, default_basis_path
+        from gonio.brdf.reconstruction.basis import default_basis, default_basis_path
 
         out = default_basis_path(args.components)
         out.unlink(missing_ok=True)
@@ -190,17 +190,22 @@ def _cmd_basis_build(args: argparse.Namespace) -> int:
 
 def _load_specimen(args: argparse.Namespace) -> tuple[Any, str]:
     if args.table is not None:
-        from gonio.brdf.table import BRDFTable
+        from gonio.brdf.tables.table import BRDFTable
 
         t = BRDFTable.load(args.table)
         return t, t.name
-    from gonio.brdf.library import get_material
+    from gonio.brdf.materials.library import get_material
 
     return get_material(args.material), args.material
 
 
 def _cmd_simulate_scan(args: argparse.Namespace) -> int:
-    from gonio.brdf.samples import NoiseModel, Samples, simulate_samples, uniform_stage_angles
+    from gonio.brdf.reconstruction.samples import (
+        NoiseModel,
+        Samples,
+        simulate_samples,
+        uniform_stage_angles,
+    )
 
     if args.rotations < 1:
         raise UsageError(f"--rotations must be at least 1, got {args.rotations}")
@@ -209,7 +214,7 @@ def _cmd_simulate_scan(args: argparse.Namespace) -> int:
         cells, ph = read_pairs(args.pairs)
         source = str(args.pairs)
     else:
-        from gonio.brdf.presets import get_preset
+        from gonio.brdf.design.presets import get_preset
 
         cells, ph = get_preset(args.design_preset).cells()
         source = f"preset {args.design_preset}"
@@ -225,14 +230,14 @@ def _cmd_simulate_scan(args: argparse.Namespace) -> int:
 
 
 def _load_basis(path: str | None, progress: bool = True) -> Any:
-    from gonio.brdf.basis import Basis, default_basis
+    from gonio.brdf.reconstruction.basis import Basis, default_basis
 
     return Basis.load(path) if path is not None else default_basis(progress=progress)
 
 
 def _cmd_reconstruct(args: argparse.Namespace) -> int:
-    from gonio.brdf.reconstruct import reconstruct
-    from gonio.brdf.samples import Samples
+    from gonio.brdf.reconstruction.reconstruct import reconstruct
+    from gonio.brdf.reconstruction.samples import Samples
 
     samples = Samples.load(args.samples)
     basis = _load_basis(args.basis)
@@ -252,7 +257,7 @@ def _cmd_reconstruct(args: argparse.Namespace) -> int:
           f"(V&F estimate {100 * rec.estimated_error:.2f} %), "
           f"time {s['seconds']:.3f} s -> {args.output}")
     if args.preview is not None:
-        from gonio.brdf.preview import save_preview
+        from gonio.brdf.pictures.preview import save_preview
 
         print(f"  preview -> {save_preview(rec.table, args.preview)}")
     return 0
@@ -260,8 +265,8 @@ def _cmd_reconstruct(args: argparse.Namespace) -> int:
 
 def loo_basis(material: str, k: int) -> Any:
     """Leave-one-out basis of the default library without ``material``, cached on disk."""
-    from gonio.brdf import library
-    from gonio.brdf.basis import Basis, BasisError, build_basis
+    from gonio.brdf.materials import library
+    from gonio.brdf.reconstruction.basis import Basis, BasisError, build_basis
 
     folder = library.cache_root() / "basis"
     path = folder / f"loo-{material}-K{k}-{library.library_key()[:16]}.npz"
@@ -282,7 +287,7 @@ def loo_basis(material: str, k: int) -> Any:
 
 def _library_table(material: str) -> Any:
     """The cached library table of ``material`` (reading one file, not the whole library)."""
-    from gonio.brdf import library
+    from gonio.brdf.materials import library
 
     return library.library_table(material)
 
@@ -290,8 +295,8 @@ def _library_table(material: str) -> Any:
 def _demo_pairs(basis: Any, n: int) -> tuple[FloatArray, FloatArray, str]:
     """Optimized pairs when the design module works, else :func:`simple_pairs`."""
     try:
-        from gonio.brdf.design import design_pairs
-        from gonio.brdf.feasibility import RigConstraints
+        from gonio.brdf.design.design import design_pairs
+        from gonio.brdf.design.feasibility import RigConstraints
 
         # A simulated rig has no mounts to collide, so devices may sit close together.
         rig = RigConstraints(min_device_distance_deg=0.0)
@@ -303,11 +308,11 @@ def _demo_pairs(basis: Any, n: int) -> tuple[FloatArray, FloatArray, str]:
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
-    from gonio.brdf import metrics
-    from gonio.brdf.library import get_material
-    from gonio.brdf.preview import save_preview
-    from gonio.brdf.reconstruct import reconstruct
-    from gonio.brdf.samples import NoiseModel, simulate_samples, uniform_stage_angles
+    from gonio.brdf.materials.library import get_material
+    from gonio.brdf.pictures.preview import save_preview
+    from gonio.brdf.reconstruction.reconstruct import reconstruct
+    from gonio.brdf.reconstruction.samples import NoiseModel, simulate_samples, uniform_stage_angles
+    from gonio.brdf.tables import metrics
 
     if args.pairs < 1 or args.rotations < 1:
         raise UsageError("--pairs and --rotations must be at least 1")
@@ -341,8 +346,8 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
 
 def _cmd_library_import(args: argparse.Namespace) -> int:
-    from gonio.brdf.imports import import_files
-    from gonio.brdf.measured import user_library_dir
+    from gonio.brdf.materials.imports import import_files
+    from gonio.brdf.materials.measured import user_library_dir
 
     written = import_files(args.files, replace=args.replace)
     for f in written:
@@ -353,7 +358,7 @@ def _cmd_library_import(args: argparse.Namespace) -> int:
 
 
 def _cmd_library_list(args: argparse.Namespace) -> int:
-    from gonio.brdf.measured import measured_names, user_library_dir, user_table_files
+    from gonio.brdf.materials.measured import measured_names, user_library_dir, user_table_files
 
     print(f"shipped measured materials ({len(measured_names())}, RGL, CC0): "
           + ", ".join(measured_names()))
@@ -366,7 +371,7 @@ def _cmd_library_list(args: argparse.Namespace) -> int:
 # ---------------------------------------------------------------------------- parsers
 def register(subparsers: Any) -> None:
     """Add ``basis``, ``simulate-scan``, ``reconstruct`` and ``demo`` to the ``gonio`` command."""
-    from gonio.brdf.basis import DEFAULT_COMPONENTS
+    from gonio.brdf.reconstruction.basis import DEFAULT_COMPONENTS
 
     p = subparsers.add_parser("basis", help="build the linear BRDF basis")
     sub = p.add_subparsers(dest="basis_command", metavar="ACTION", required=True)

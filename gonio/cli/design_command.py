@@ -20,16 +20,16 @@ from typing import Any, TextIO
 
 import numpy as np
 
-from gonio.brdf.design import (
+from gonio.brdf.design.design import (
     BasisLike,
     PairDesign,
     design_pairs,
     design_product_rig,
     geometry_design,
 )
-from gonio.brdf.feasibility import RigConstraints, parse_exclusion
-from gonio.brdf.presets import get_preset, preset_names
-from gonio.brdf.roughness import RoughnessBound, roughness_bound
+from gonio.brdf.design.feasibility import RigConstraints, parse_exclusion
+from gonio.brdf.design.presets import get_preset, preset_names
+from gonio.brdf.design.roughness import RoughnessBound, roughness_bound
 from gonio.cli import UsageError
 
 
@@ -91,7 +91,7 @@ def _constraints(args: argparse.Namespace) -> RigConstraints:
 
 
 def _load_basis(path: Path | None) -> BasisLike:
-    from gonio.brdf.basis import Basis, default_basis
+    from gonio.brdf.reconstruction.basis import Basis, default_basis
 
     if path is None:
         return default_basis(progress=sys.stderr.isatty())
@@ -271,7 +271,7 @@ def run(args: argparse.Namespace) -> int:
     basis = _load_basis(args.basis)
     expected = None
     if args.candidates > 1:
-        from gonio.brdf.heldout import choose_design
+        from gonio.brdf.design.heldout import choose_design
 
         constraints = _constraints(args)
 
@@ -292,7 +292,7 @@ def run(args: argparse.Namespace) -> int:
     print_design(design, bound, args.rotations)
     if args.basis is None and not args.no_expected_error and args.lights is None:
         if expected is None:
-            from gonio.brdf.heldout import expected_log_rmse
+            from gonio.brdf.design.heldout import expected_log_rmse
 
             expected = expected_log_rmse(design.cells, design.ph_lab, args.rotations)
         print(f"expected log_rmse on held-out materials at {args.rotations} rotations: "

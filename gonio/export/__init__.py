@@ -3,11 +3,11 @@
 ========== ========== ===================================================================
 format     suffix     what
 ========== ========== ===================================================================
-factored   ``.npz``   the factored fit of paper 000 (:mod:`gonio.brdf.factored`)
+factored   ``.npz``   the factored fit of paper 000 (:mod:`gonio.brdf.models.factored`)
 mtlx       ``.mtlx``  MaterialX ``standard_surface`` from the principled fit (:mod:`.mtlx`)
 gltf       ``.gltf``  glTF 2.0 material with ``KHR_materials_anisotropy`` (:mod:`.gltf`)
 merl       ``.binary`` MERL layout, azimuthally averaged (:mod:`.merl`)
-table      ``.npz``   gonio's own BRDF table (:class:`gonio.brdf.table.BRDFTable`)
+table      ``.npz``   gonio's own BRDF table (:class:`gonio.brdf.tables.table.BRDFTable`)
 ========== ========== ===================================================================
 
 The fits come from the result file (the daemon stores them when it reconstructs); a result
@@ -22,9 +22,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from gonio.brdf.factored import FactoredBRDF, fit_factored
-from gonio.brdf.principled import Principled, fit_principled
-from gonio.brdf.table import BRDFTable
+from gonio.brdf.models.factored import FactoredBRDF, fit_factored
+from gonio.brdf.models.principled import Principled, fit_principled
+from gonio.brdf.tables.table import BRDFTable
 
 FORMATS: dict[str, str] = {
     "factored": ".npz", "mtlx": ".mtlx", "gltf": ".gltf", "merl": ".binary", "table": ".npz",

@@ -26,7 +26,7 @@ from pathlib import Path
 from typing import Any
 
 from gonio import __version__
-from gonio.brdf.principled import Principled
+from gonio.brdf.models.principled import Principled
 
 
 class GltfError(ValueError):

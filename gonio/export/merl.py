@@ -29,8 +29,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from gonio.brdf import geometry as geo
-from gonio.brdf.merl import (
+from gonio.brdf.materials.merl import (
     DATA,
     HEADER,
     N_PHI_D,
@@ -41,7 +40,8 @@ from gonio.brdf.merl import (
     MerlError,
     read_merl_values,
 )
-from gonio.brdf.table import BRDFTable
+from gonio.brdf.tables import geometry as geo
+from gonio.brdf.tables.table import BRDFTable
 
 #: Stored for bins whose light or view is below the horizon (or that hold no value).
 BELOW_HORIZON = -1.0
@@ -106,7 +106,7 @@ def write_merl(table: BRDFTable, path: str | os.PathLike[str]) -> Path:
 
 def read_merl(path: str | os.PathLike[str]) -> NDArray[np.float64]:
     """Read a MERL ``.binary`` file of the database's dimensions: (3, 90, 90, 180) BRDF in
-    1/sr, NaN below the horizon (:func:`gonio.brdf.merl.read_merl_values`).
+    1/sr, NaN below the horizon (:func:`gonio.brdf.materials.merl.read_merl_values`).
 
     Raises
     ------

@@ -32,7 +32,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from gonio.brdf.principled import Principled
+from gonio.brdf.models.principled import Principled
 
 
 class MtlxError(ValueError):

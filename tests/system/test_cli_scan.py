@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gonio.brdf.geometry import lab_to_specimen
+from gonio.brdf.tables.geometry import lab_to_specimen
 from gonio.cli import main
 from gonio.results import read_result
 from gonio.sim.rig import default_material

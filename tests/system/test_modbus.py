@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from pymodbus.client import AsyncModbusTcpClient
 
-from gonio.brdf.models import Lambert
+from gonio.brdf.models.analytic import Lambert
 from gonio.config import (
     LightConfig,
     LightRegisters,

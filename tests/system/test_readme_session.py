@@ -32,7 +32,7 @@ import httpx
 import numpy as np
 import pytest
 
-from gonio.brdf.geometry import lab_to_specimen
+from gonio.brdf.tables.geometry import lab_to_specimen
 from gonio.calibration import Calibration
 from gonio.results import read_result
 from gonio.sim.rig import default_material

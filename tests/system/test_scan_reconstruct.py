@@ -66,7 +66,7 @@ def test_job_reconstructs_the_simulated_specimen(
         truth = np.stack([[sim.true_brdf(a, b, ang) for ang in s.stage_angles_deg]
                           for a, b in s.pairs])
         np.testing.assert_allclose(s.values, truth, rtol=0.1, atol=0.02 * truth.max())
-        from gonio.brdf.geometry import lab_to_specimen
+        from gonio.brdf.tables.geometry import lab_to_specimen
 
         wi = lab_to_specimen(s.light_dirs[:, None, :], np.deg2rad(s.stage_angles_deg)[None, :])
         wo = lab_to_specimen(s.sensor_dirs[:, None, :], np.deg2rad(s.stage_angles_deg)[None, :])

@@ -39,7 +39,7 @@ def test_sim_place_swaps_what_the_sensors_see(tmp_path: Path,
 
 
 def _specimen_dirs(sim: object, light: str, sensor: str, deg: float) -> tuple[np.ndarray, ...]:
-    from gonio.brdf.geometry import lab_to_specimen
+    from gonio.brdf.tables.geometry import lab_to_specimen
 
     cfg = sim.config  # type: ignore[attr-defined]
     wi = np.asarray(cfg.light(light).direction.vector())

@@ -156,8 +156,8 @@ def test_cli_refuses_bad_faults_and_noise() -> None:
 
 
 def test_material_by_library_name_and_a_clear_error_for_a_typo() -> None:
-    from gonio.brdf.library import get_material
-    from gonio.brdf.models import Lambert
+    from gonio.brdf.materials.library import get_material
+    from gonio.brdf.models.analytic import Lambert
 
     model = get_material("brushed-metal-004")
     with start_sim_rig(SimRigOptions(material="brushed-metal-004", noise=None)) as sim:

@@ -8,10 +8,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gonio.brdf import geometry as geo
-from gonio.brdf.basis import Basis
-from gonio.brdf.samples import Samples
-from gonio.brdf.table import BRDFTable
+from gonio.brdf.reconstruction.basis import Basis
+from gonio.brdf.reconstruction.samples import Samples
+from gonio.brdf.tables import geometry as geo
+from gonio.brdf.tables.table import BRDFTable
 from gonio.cli import UsageError, main
 from gonio.cli.brdf_commands import read_pairs, simple_pairs
 from tests.unit.brdf.test_basis import small_basis, small_library
@@ -102,7 +102,7 @@ def test_simulate_then_reconstruct(
 
 
 def test_simulate_with_a_preset(files: dict[str, Path]) -> None:
-    pytest.importorskip("gonio.brdf.presets")
+    pytest.importorskip("gonio.brdf.design.presets")
     out = files["dir"] / "p.npz"
     assert main(["simulate-scan", "--table", str(files["table"]), "--design-preset", "MA68",
                  "-r", "8", "-o", str(out)]) == 0
@@ -143,7 +143,7 @@ def test_user_errors_exit_2_with_a_message(
 def test_basis_build_with_extra_tables(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    library = pytest.importorskip("gonio.brdf.library")
+    library = pytest.importorskip("gonio.brdf.materials.library")
     extra = tmp_path / "extra"
     extra.mkdir()
     small_library()[0].save(extra / "a.npz")
@@ -167,7 +167,7 @@ def test_basis_build_with_extra_tables(
 def test_demo_on_a_small_library(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    library = pytest.importorskip("gonio.brdf.library")
+    library = pytest.importorskip("gonio.brdf.materials.library")
     monkeypatch.setenv("GONIO_CACHE_DIR", str(tmp_path / "cache"))
     tables = list(small_library())
     by_name = {t.name: t for t in tables}

@@ -8,10 +8,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gonio.brdf import geometry as geo
-from gonio.brdf.basis import Basis
-from gonio.brdf.design import condition_number
-from gonio.brdf.feasibility import min_pairwise_distance
+from gonio.brdf.design.design import condition_number
+from gonio.brdf.design.feasibility import min_pairwise_distance
+from gonio.brdf.reconstruction.basis import Basis
+from gonio.brdf.tables import geometry as geo
 from gonio.cli import main
 
 
@@ -118,7 +118,7 @@ def test_user_errors_are_one_clear_line(argv: list[str], match: str, basis_file:
 def test_preset_with_a_repeated_cell_explains_its_infinite_condition_number(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    from gonio.brdf.presets import get_preset
+    from gonio.brdf.design.presets import get_preset
 
     # More components than MA98 has pairs (as the default basis, K = 64): the 19 x 19 block
     # of a repeated cell is singular.

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gonio.brdf.samples import Samples
+from gonio.brdf.reconstruction.samples import Samples
 from gonio.cli import main
 from tests.unit.brdf.test_basis import small_basis
 

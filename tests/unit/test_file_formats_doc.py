@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gonio.brdf import geometry as geo
+from gonio.brdf.tables import geometry as geo
 
 DOC = Path(__file__).resolve().parents[2] / "docs" / "file-formats.md"
 
@@ -60,7 +60,7 @@ def _run(code: str) -> dict[str, object]:
 
 def test_table_read_snippet_reads_a_gonio_table(in_tmp: Path,
                                                 capsys: pytest.CaptureFixture[str]) -> None:
-    from gonio.brdf.models import Lambert, tabulate
+    from gonio.brdf.models.analytic import Lambert, tabulate
 
     tabulate(Lambert((0.2, 0.4, 0.6), name="felt")).save("felt.npz")
     _run(examples()["table-read"])
@@ -71,7 +71,7 @@ def test_table_read_snippet_reads_a_gonio_table(in_tmp: Path,
 
 def test_basis_read_snippet_reads_a_gonio_basis(in_tmp: Path,
                                                 capsys: pytest.CaptureFixture[str]) -> None:
-    from gonio.brdf.basis import Basis
+    from gonio.brdf.reconstruction.basis import Basis
 
     rng = np.random.default_rng(0)
     valid = geo.valid_mask().ravel()
@@ -85,7 +85,7 @@ def test_basis_read_snippet_reads_a_gonio_basis(in_tmp: Path,
 
 
 def test_samples_written_with_numpy_alone_load_in_gonio(in_tmp: Path) -> None:
-    from gonio.brdf.samples import Samples
+    from gonio.brdf.reconstruction.samples import Samples
 
     _run(examples()["samples-write"])
     s = Samples.load("samples.npz")

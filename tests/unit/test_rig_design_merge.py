@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gonio.brdf import geometry as geo
+from gonio.brdf.tables import geometry as geo
 from gonio.cli import main
 from gonio.cli.brdf_commands import read_pairs
 from gonio.config import ConfigError, load_rig_config
@@ -171,8 +171,8 @@ def test_pairs_file_reads_a_design_fragment_and_a_rig_config(tmp_path: Path) -> 
 def test_simulate_scan_takes_the_file_gonio_design_writes(tmp_path: Path,
                                                           capsys: pytest.CaptureFixture[str]
                                                           ) -> None:
-    from gonio.brdf.models import Lambert, tabulate
-    from gonio.brdf.samples import Samples
+    from gonio.brdf.models.analytic import Lambert, tabulate
+    from gonio.brdf.reconstruction.samples import Samples
 
     table = tabulate(Lambert((0.3,), channels=("Y",), name="grey")).save(tmp_path / "grey.npz")
     geometry = tmp_path / "geometry.toml"

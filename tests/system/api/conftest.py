@@ -29,9 +29,9 @@ DESIGN_LIMIT_S = 5.0
 
 def small_basis() -> Any:
     """A K=8 basis from 6 library materials, built once per test session (cached on disk)."""
-    from gonio.brdf import models as bm
-    from gonio.brdf.basis import Basis, build_basis
-    from gonio.brdf.library import library_specs
+    from gonio.brdf.materials.library import library_specs
+    from gonio.brdf.models import analytic as bm
+    from gonio.brdf.reconstruction.basis import Basis, build_basis
 
     path = Path(os.environ["GONIO_CACHE_DIR"]) / f"api-test-basis-K{SMALL_K}.npz"
     if path.is_file():

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from gonio.brdf import geometry as geo
+from gonio.brdf.tables import geometry as geo
 from tests.system.api.conftest import DESIGN_LIMIT_S, Daemon
 
 pytestmark = pytest.mark.system

@@ -98,7 +98,7 @@ def test_place_specimen_swaps_the_brdf_and_checks_channels() -> None:
         np.testing.assert_allclose(sim.true_brdf("L2", "S3", 123.0), 0.5 / math.pi)
         with pytest.raises(ValueError, match="albedo must be in"):
             sim.place_white_reference(1.5)
-        from gonio.brdf.models import Lambert
+        from gonio.brdf.models.analytic import Lambert
 
         with pytest.raises(ValueError, match="the simulated sensors report 3"):
             sim.place_specimen(Lambert((0.5,), channels=("Y",)))

@@ -11,10 +11,17 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from gonio.brdf import basis as basis_mod
-from gonio.brdf import geometry as geo
-from gonio.brdf.basis import Basis, BasisError, build_basis, inverse_remap, leave_one_out, remap
-from gonio.brdf.table import BRDFTable, from_function
+from gonio.brdf.reconstruction import basis as basis_mod
+from gonio.brdf.reconstruction.basis import (
+    Basis,
+    BasisError,
+    build_basis,
+    inverse_remap,
+    leave_one_out,
+    remap,
+)
+from gonio.brdf.tables import geometry as geo
+from gonio.brdf.tables.table import BRDFTable, from_function
 
 # ---------------------------------------------------------------------------- shared helpers
 # test_reconstruct.py imports these; they are plain cached functions, not fixtures, so each
@@ -26,7 +33,7 @@ def ward_like(
 ) -> object:
     """An anisotropic Gaussian lobe over the half vector plus a Lambert term, ``(N, 3)`` out.
 
-    Written here (not taken from gonio.brdf.models) so these tests only depend on the table
+    Written here (not taken from gonio.brdf.models.analytic) so these tests only depend on the table
     contract.
     """
 
@@ -282,7 +289,7 @@ def test_leave_one_out_excludes_the_material() -> None:
 
 # ---------------------------------------------------------------------------- default basis
 def test_default_basis_is_cached(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
-    library = pytest.importorskip("gonio.brdf.library")
+    library = pytest.importorskip("gonio.brdf.materials.library")
     tables = small_library()[:3]
     monkeypatch.setenv("GONIO_CACHE_DIR", str(tmp_path))
     # The real library takes minutes to build; the caching logic is what is under test here.
@@ -301,7 +308,7 @@ def test_cli_basis_build_rebuilds_the_default_basis_where_it_is_found(
 ) -> None:
     from gonio.cli import main
 
-    library = pytest.importorskip("gonio.brdf.library")
+    library = pytest.importorskip("gonio.brdf.materials.library")
     tables = small_library()[:3]
     monkeypatch.setenv("GONIO_CACHE_DIR", str(tmp_path))
     monkeypatch.setattr(library, "default_library", lambda progress=False: list(tables))

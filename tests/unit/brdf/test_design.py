@@ -7,8 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from gonio.brdf.basis import Basis
-from gonio.brdf.design import (
+from gonio.brdf.design.design import (
     DesignError,
     PairDesign,
     block_width,
@@ -19,6 +18,7 @@ from gonio.brdf.design import (
     optimize_rows,
     secular_extremes,
 )
+from gonio.brdf.reconstruction.basis import Basis
 
 SMALL_GRID = (6, 5, 8)
 
@@ -175,7 +175,7 @@ def test_search_rejects_q_of_wrong_shape() -> None:
 
 
 def _grid_basis(K: int = 6) -> Basis:
-    from gonio.brdf import geometry as geo
+    from gonio.brdf.tables import geometry as geo
 
     rng = np.random.default_rng(0)
     th, td, pd = (a.ravel() for a in geo.grid_angles())
@@ -186,9 +186,9 @@ def _grid_basis(K: int = 6) -> Basis:
 
 
 def test_product_rig_respects_constraints_and_reports_its_kappa() -> None:
-    from gonio.brdf import geometry as geo
-    from gonio.brdf.design import design_product_rig, geometry_design
-    from gonio.brdf.feasibility import ConeExclusion, RigConstraints, check_devices
+    from gonio.brdf.design.design import design_product_rig, geometry_design
+    from gonio.brdf.design.feasibility import ConeExclusion, RigConstraints, check_devices
+    from gonio.brdf.tables import geometry as geo
 
     basis = _grid_basis()
     c = RigConstraints(max_elevation_deg=70.0, min_device_distance_deg=15.0,
@@ -202,7 +202,7 @@ def test_product_rig_respects_constraints_and_reports_its_kappa() -> None:
     assert again.kappa == pytest.approx(d.kappa, rel=1e-9)
     # Better than where it started: random feasible rigs of the same size, on average.
     rng = np.random.default_rng(5)
-    from gonio.brdf.design import _random_rig, product_kappa
+    from gonio.brdf.design.design import _random_rig, product_kappa
 
     grid_t, grid_p = np.meshgrid(np.deg2rad(np.arange(15, 71, 5)), np.deg2rad(np.arange(0, 360, 5)))
     gdirs = geo.spherical_to_direction(grid_t.ravel(), grid_p.ravel())
@@ -214,8 +214,8 @@ def test_product_rig_respects_constraints_and_reports_its_kappa() -> None:
 
 
 def test_product_rig_errors() -> None:
-    from gonio.brdf.design import design_product_rig
-    from gonio.brdf.feasibility import FeasibilityError, RigConstraints
+    from gonio.brdf.design.design import design_product_rig
+    from gonio.brdf.design.feasibility import FeasibilityError, RigConstraints
 
     basis = _grid_basis()
     with pytest.raises(DesignError, match="at least one light and one sensor"):
@@ -226,8 +226,8 @@ def test_product_rig_errors() -> None:
 
 
 def test_design_pairs_places_the_optimized_cells() -> None:
-    from gonio.brdf.design import design_pairs
-    from gonio.brdf.feasibility import RigConstraints
+    from gonio.brdf.design.design import design_pairs
+    from gonio.brdf.design.feasibility import RigConstraints
 
     basis = _grid_basis()
     d = design_pairs(basis, 4, RigConstraints(), h=3, starts=1, descents=1, seed=2)
@@ -258,7 +258,7 @@ def test_screening_never_drops_an_improvement(seed: int, n: int, K: int) -> None
 
 # ------------------------------------------------------------------ collision-aware search
 def _devices_of(design: PairDesign) -> np.ndarray:
-    from gonio.brdf import geometry as geo
+    from gonio.brdf.tables import geometry as geo
 
     lab = np.deg2rad(design.lab_deg)
     wi = geo.spherical_to_direction(lab[:, 0], lab[:, 1])
@@ -270,9 +270,9 @@ def _devices_of(design: PairDesign) -> np.ndarray:
 @given(seed=st.integers(0, 10_000), n=st.integers(2, 16),
        limit=st.sampled_from([8.0, 12.0, 18.0]))
 def test_designs_under_a_device_distance_always_mount(seed: int, n: int, limit: float) -> None:
-    from gonio.brdf import geometry as geo
-    from gonio.brdf.design import design_pairs
-    from gonio.brdf.feasibility import RigConstraints, min_pairwise_distance
+    from gonio.brdf.design.design import design_pairs
+    from gonio.brdf.design.feasibility import RigConstraints, min_pairwise_distance
+    from gonio.brdf.tables import geometry as geo
 
     basis = _grid_basis(K=8)
     c = RigConstraints(max_elevation_deg=70.0, min_device_distance_deg=limit)
@@ -293,7 +293,7 @@ def test_designs_under_a_device_distance_always_mount(seed: int, n: int, limit: 
 
 
 def _rows_of(cells: np.ndarray) -> np.ndarray:
-    from gonio.brdf import geometry as geo
+    from gonio.brdf.tables import geometry as geo
 
     idx = [np.rint((cells[:, k] - g[0]) / (g[1] - g[0])).astype(int)
            for k, g in enumerate((geo.TH_GRID, geo.TD_GRID, geo.PD_GRID))]
@@ -301,14 +301,14 @@ def _rows_of(cells: np.ndarray) -> np.ndarray:
 
 
 def test_collision_aware_search_returns_its_placement() -> None:
-    from gonio.brdf import geometry as geo
-    from gonio.brdf.feasibility import (
+    from gonio.brdf.design.feasibility import (
         MountPlanner,
         RigConstraints,
         candidate_rows,
         min_pairwise_distance,
         rows_to_cells,
     )
+    from gonio.brdf.tables import geometry as geo
 
     basis = _grid_basis(K=8)
     c = RigConstraints(min_device_distance_deg=15.0)
@@ -324,8 +324,8 @@ def test_collision_aware_search_returns_its_placement() -> None:
 
 
 def test_design_that_cannot_be_mounted_is_a_clear_error() -> None:
-    from gonio.brdf.design import design_pairs
-    from gonio.brdf.feasibility import FeasibilityError, RigConstraints
+    from gonio.brdf.design.design import design_pairs
+    from gonio.brdf.design.feasibility import FeasibilityError, RigConstraints
 
     crowded = RigConstraints(max_elevation_deg=20.0, min_device_distance_deg=15.0)
     with pytest.raises(FeasibilityError, match=r"cannot mount 12 pairs.*--min-device-distance"):
@@ -335,9 +335,9 @@ def test_design_that_cannot_be_mounted_is_a_clear_error() -> None:
 @pytest.fixture(scope="module")
 def library_basis() -> Basis:
     """K = 16 basis of one library material per family (built in ~2 s)."""
-    from gonio.brdf import models as bm
-    from gonio.brdf.basis import build_basis
-    from gonio.brdf.library import library_specs
+    from gonio.brdf.materials.library import library_specs
+    from gonio.brdf.models import analytic as bm
+    from gonio.brdf.reconstruction.basis import build_basis
 
     first: dict[str, bm.BRDFModel] = {}
     for spec in library_specs():
@@ -346,8 +346,8 @@ def library_basis() -> Basis:
 
 
 def test_twenty_pairs_mount_with_default_limits_on_a_library_basis(library_basis: Basis) -> None:
-    from gonio.brdf.design import design_pairs
-    from gonio.brdf.feasibility import (
+    from gonio.brdf.design.design import design_pairs
+    from gonio.brdf.design.feasibility import (
         FeasibilityError,
         RigConstraints,
         candidate_rows,

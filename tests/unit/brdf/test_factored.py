@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gonio.brdf import factored as fa
-from gonio.brdf import geometry as geo
-from gonio.brdf import models as bm
-from gonio.brdf.table import BRDFTable
+from gonio.brdf.models import analytic as bm
+from gonio.brdf.models import factored as fa
+from gonio.brdf.tables import geometry as geo
+from gonio.brdf.tables.table import BRDFTable
 
 # A material the factored model can hold almost exactly: Lambert + GGX with separable Smith
 # masking (G(i) G(o)) and Schlick Fresnel of the light-microfacet angle (a function of td).
@@ -62,7 +62,7 @@ def test_fit_recovers_diffuse_and_reports_table1_metrics(
     assert {"rel_mse", "mape", "psnr", "log_rmse", "iterations", "seconds"} <= set(m)
     assert m["rel_mse"] < 0.05 and m["mape"] < 0.15 and m["psnr"] > 35
     # The reported numbers are the metrics of the model's own table against the input.
-    from gonio.brdf import metrics
+    from gonio.brdf.tables import metrics
 
     assert m["rel_mse"] == pytest.approx(metrics.rel_mse(fitted.to_table(), table))
     # Dynamic-range clamp: every factor's maximum is 1 and its minimum at least 1e-6.
@@ -110,7 +110,7 @@ def test_bad_input_is_refused_with_a_reason(table: BRDFTable, tmp_path) -> None:
 def test_d_peaks_where_the_ndf_does_on_a_library_metal() -> None:
     """A library brushed metal: correlated Smith masking and conductor Fresnel, which the
     factored model can only approximate; its D must still follow the GGX NDF."""
-    from gonio.brdf import library
+    from gonio.brdf.materials import library
 
     mat = library.get_material("brushed-metal-003")
     assert isinstance(mat, bm.Rotated) and isinstance(mat.model, bm.GGX)

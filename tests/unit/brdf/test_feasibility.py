@@ -7,8 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from gonio.brdf import geometry as geo
-from gonio.brdf.feasibility import (
+from gonio.brdf.design.feasibility import (
     BoxExclusion,
     ConeExclusion,
     FeasibilityError,
@@ -24,6 +23,7 @@ from gonio.brdf.feasibility import (
     place_pairs,
     rows_to_cells,
 )
+from gonio.brdf.tables import geometry as geo
 
 
 def _cell_elevations(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from gonio.brdf import geometry as geo
+from gonio.brdf.tables import geometry as geo
 
 DEG = np.pi / 180
 angle_th = st.floats(0.5 * DEG, 89.0 * DEG)

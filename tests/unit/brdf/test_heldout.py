@@ -1,4 +1,4 @@
-"""Tests of the held-out expected error of a design (gonio.brdf.heldout)."""
+"""Tests of the held-out expected error of a design (gonio.brdf.design.heldout)."""
 
 from __future__ import annotations
 
@@ -7,9 +7,10 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from gonio.brdf import heldout, metrics
-from gonio.brdf.reconstruct import reconstruct
-from gonio.brdf.samples import NoiseModel, simulate_samples, uniform_stage_angles
+from gonio.brdf.design import heldout
+from gonio.brdf.reconstruction.reconstruct import reconstruct
+from gonio.brdf.reconstruction.samples import NoiseModel, simulate_samples, uniform_stage_angles
+from gonio.brdf.tables import metrics
 from tests.unit.brdf.test_basis import small_basis, small_library
 from tests.unit.brdf.test_reconstruct import grid_pairs
 

@@ -7,10 +7,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gonio.brdf import geometry as geo
-from gonio.brdf import measured
-from gonio.brdf.imports import MERL_SCALE, TableImportError, import_files, read_any, read_merl
-from gonio.brdf.table import BRDFTable
+from gonio.brdf.materials import measured
+from gonio.brdf.materials.imports import (
+    MERL_SCALE,
+    TableImportError,
+    import_files,
+    read_any,
+    read_merl,
+)
+from gonio.brdf.tables import geometry as geo
+from gonio.brdf.tables.table import BRDFTable
 from gonio.cli import main
 
 

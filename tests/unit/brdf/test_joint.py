@@ -5,9 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gonio.brdf import geometry as geo
-from gonio.brdf.basis import N_HARMONICS, Basis, inverse_remap, row_weight
-from gonio.brdf.reconstruct import ReconstructionError, joint_prior, reconstruct, solve_joint
+from gonio.brdf.reconstruction.basis import N_HARMONICS, Basis, inverse_remap, row_weight
+from gonio.brdf.reconstruction.reconstruct import (
+    ReconstructionError,
+    joint_prior,
+    reconstruct,
+    solve_joint,
+)
+from gonio.brdf.tables import geometry as geo
 from tests.unit.brdf.test_reconstruct import grid_pairs, random_basis
 
 
@@ -149,7 +154,7 @@ def test_leave_one_angle_out_equals_refits() -> None:
 
 
 def test_refine_angles_plans_midpoints_around_bad_angles_worst_first() -> None:
-    from gonio.brdf.reconstruct import refine_angles
+    from gonio.brdf.reconstruction.reconstruct import refine_angles
 
     angles = [0.0, 90.0, 180.0, 270.0]
     errs = [0.001, 0.05, 0.002, 0.03]

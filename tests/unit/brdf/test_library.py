@@ -9,10 +9,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gonio.brdf import geometry as geo
-from gonio.brdf import library as lib
-from gonio.brdf import models as bm
-from gonio.brdf.table import BRDFTable, TableError
+from gonio.brdf.materials import library as lib
+from gonio.brdf.models import analytic as bm
+from gonio.brdf.tables import geometry as geo
+from gonio.brdf.tables.table import BRDFTable, TableError
 
 
 def walk(model: object) -> Iterator[object]:
@@ -194,7 +194,7 @@ def test_one_material_read_from_the_cache_matches_the_library(small_library: Pat
 
 
 def test_unknown_material_message_reads_as_sentences() -> None:
-    from gonio.brdf.library import LibraryError, get_material
+    from gonio.brdf.materials.library import LibraryError, get_material
 
     with pytest.raises(LibraryError) as far:
         get_material("nosuch")

@@ -7,10 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gonio.brdf import geometry as geo
-from gonio.brdf import metrics
-from gonio.brdf.preview import preview_image, save_preview
-from gonio.brdf.table import BRDFTable
+from gonio.brdf.pictures.preview import preview_image, save_preview
+from gonio.brdf.tables import geometry as geo
+from gonio.brdf.tables import metrics
+from gonio.brdf.tables.table import BRDFTable
 
 
 def constant(value: float, channels: int = 3) -> BRDFTable:
@@ -101,7 +101,7 @@ def test_preview_png_carries_its_key() -> None:
 
     from PIL import Image
 
-    from gonio.brdf.preview import preview_png
+    from gonio.brdf.pictures.preview import preview_png
 
     t = constant(0.2)
     mosaic = preview_image(t, scale=3)

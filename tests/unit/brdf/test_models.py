@@ -8,9 +8,9 @@ import math
 import numpy as np
 import pytest
 
-from gonio.brdf import geometry as geo
-from gonio.brdf import models as bm
-from gonio.brdf.table import from_function
+from gonio.brdf.models import analytic as bm
+from gonio.brdf.tables import geometry as geo
+from gonio.brdf.tables.table import from_function
 
 CONDUCTOR = bm.ConductorFresnel((0.2, 0.92, 1.1), (3.9, 2.45, 2.2))  # gold-like, per RGB channel
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gonio.brdf import geometry as geo
-from gonio.brdf.presets import UnknownPresetError, get_preset, preset_names
+from gonio.brdf.design.presets import UnknownPresetError, get_preset, preset_names
+from gonio.brdf.tables import geometry as geo
 
 
 @pytest.mark.parametrize(("name", "count"), [("MA68", 5), ("MA98", 19), ("BYK-mac", 6),

@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from gonio.brdf import library
-from gonio.brdf import models as bm
-from gonio.brdf import principled as pr
+from gonio.brdf.materials import library
+from gonio.brdf.models import analytic as bm
+from gonio.brdf.models import principled as pr
 
 
 def _known(name: str) -> tuple[float, float]:

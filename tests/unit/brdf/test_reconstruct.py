@@ -7,10 +7,8 @@ import pytest
 from scipy.interpolate import PchipInterpolator
 from threadpoolctl import threadpool_info
 
-from gonio.brdf import geometry as geo
-from gonio.brdf import metrics
-from gonio.brdf.basis import Basis, inverse_remap, row_weight
-from gonio.brdf.reconstruct import (
+from gonio.brdf.reconstruction.basis import Basis, inverse_remap, row_weight
+from gonio.brdf.reconstruction.reconstruct import (
     CV_ERROR_SCALES,
     ReconstructionError,
     _objective,
@@ -24,7 +22,9 @@ from gonio.brdf.reconstruct import (
     solve_closed,
     solve_iterative,
 )
-from gonio.brdf.samples import NoiseModel, simulate_samples, uniform_stage_angles
+from gonio.brdf.reconstruction.samples import NoiseModel, simulate_samples, uniform_stage_angles
+from gonio.brdf.tables import geometry as geo
+from gonio.brdf.tables import metrics
 from tests.unit.brdf.test_basis import small_basis, small_library
 
 

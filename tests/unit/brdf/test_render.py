@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from gonio.brdf import models as bm
-from gonio.brdf import render as R  # noqa: N812 (short name for many calls)
+from gonio.brdf.models import analytic as bm
+from gonio.brdf.pictures import render as R  # noqa: N812 (short name for many calls)
 from gonio.cli import main as cli_main
 
 ALBEDO = (0.8, 0.5, 0.2)

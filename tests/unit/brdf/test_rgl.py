@@ -8,10 +8,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gonio.brdf import geometry as geo
-from gonio.brdf import models as bm
-from gonio.brdf import rgl
-from gonio.brdf.table import BRDFTable, TableError
+from gonio.brdf.materials import rgl
+from gonio.brdf.models import analytic as bm
+from gonio.brdf.tables import geometry as geo
+from gonio.brdf.tables.table import BRDFTable, TableError
 
 MATTE = ("acrylic_felt_green_rgb", "colodur_napoli_4f_rgb", "ilm_l3_37_matte_rgb")
 GLOSSY = ("cc_ibiza_sunset_rgb", "chm_mint_rgb", "vch_golden_yellow_rgb")

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from gonio.brdf.roughness import (
+from gonio.brdf.design.roughness import (
     RoughnessError,
     below_bound_warning,
     effective_samples,

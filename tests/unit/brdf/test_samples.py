@@ -7,8 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gonio.brdf import geometry as geo
-from gonio.brdf.samples import (
+from gonio.brdf.reconstruction.samples import (
     NoiseModel,
     Samples,
     SamplesError,
@@ -16,6 +15,7 @@ from gonio.brdf.samples import (
     simulate_samples,
     uniform_stage_angles,
 )
+from gonio.brdf.tables import geometry as geo
 from tests.unit.brdf.test_basis import small_library, ward_like
 
 

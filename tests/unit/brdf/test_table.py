@@ -9,9 +9,9 @@ from typing import Any
 import numpy as np
 import pytest
 
-from gonio.brdf import geometry as geo
-from gonio.brdf import models as bm
-from gonio.brdf.table import FORMAT_NAME, BRDFTable, TableError
+from gonio.brdf.models import analytic as bm
+from gonio.brdf.tables import geometry as geo
+from gonio.brdf.tables.table import FORMAT_NAME, BRDFTable, TableError
 
 DEG = np.pi / 180
 SHAPE = (3, *geo.TABLE_SHAPE)

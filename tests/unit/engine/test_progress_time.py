@@ -90,7 +90,7 @@ def test_dry_run_starts_where_the_last_job_left_the_stage(tmp_path: Path) -> Non
 
 def test_a_job_waiting_for_the_first_basis_build_says_so(tmp_path: Path,
                                                          monkeypatch: pytest.MonkeyPatch) -> None:
-    from gonio.brdf import library
+    from gonio.brdf.materials import library
 
     w = Worker(JobStore(":memory:"), lambda: None, None, tmp_path,  # type: ignore[arg-type]
                basis_provider=default_basis_provider)

@@ -51,7 +51,7 @@ def test_a_specimen_on_the_stage_is_refused_naming_a_pair() -> None:
 
 
 def test_an_isotropic_non_white_specimen_is_caught_by_separability() -> None:
-    from gonio.brdf.models import GGX, Lambert, LobeSum
+    from gonio.brdf.models.analytic import GGX, Lambert, LobeSum
 
     glossy = LobeSum((Lambert((0.2, 0.2, 0.2)), GGX(alpha_x=0.3, alpha_y=0.3)), name="iso")
     counts = _readings(glossy)

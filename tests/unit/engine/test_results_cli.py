@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gonio.brdf import geometry as geo
-from gonio.brdf.table import BRDFTable
+from gonio.brdf.tables import geometry as geo
+from gonio.brdf.tables.table import BRDFTable
 from gonio.calibration import (
     Calibration,
     CalibrationError,

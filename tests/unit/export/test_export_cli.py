@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gonio.brdf import library
-from gonio.brdf import models as bm
-from gonio.brdf.factored import FactoredBRDF
+from gonio.brdf.materials import library
+from gonio.brdf.models import analytic as bm
+from gonio.brdf.models.factored import FactoredBRDF
 from gonio.calibration import Samples
 from gonio.cli import main
 from gonio.export import fit_all
@@ -59,7 +59,7 @@ def test_every_format(result: Path, tmp_path: Path, fmt: str,
     elif fmt == "mtlx":
         assert "&quot;job_id&quot;: 5" in out.read_text()
     elif fmt == "table":
-        from gonio.brdf.table import BRDFTable
+        from gonio.brdf.tables.table import BRDFTable
 
         assert BRDFTable.load(out).provenance["job_id"] == 5
     else:
@@ -99,7 +99,7 @@ def test_default_names_do_not_collide(result: Path, tmp_path: Path,
     names = sorted(p.name for p in tmp_path.iterdir())
     assert names == ["job-5.factored.npz", "job-5.gltf", "job-5.h5", "job-5.table.npz"]
     FactoredBRDF.load(tmp_path / "job-5.factored.npz")  # not overwritten by the table
-    from gonio.brdf.table import BRDFTable
+    from gonio.brdf.tables.table import BRDFTable
 
     assert BRDFTable.load(tmp_path / "job-5.table.npz").provenance["job_id"] == 5
 
@@ -107,8 +107,8 @@ def test_default_names_do_not_collide(result: Path, tmp_path: Path,
 @pytest.mark.parametrize("fmt", ["merl", "mtlx", "gltf"])
 def test_a_table_that_is_not_rgb_gives_an_export_error(tmp_path: Path, fmt: str) -> None:
     """The daemon maps ExportError to a 404 with the reason; other errors would be a 500."""
-    from gonio.brdf.principled import Principled
-    from gonio.brdf.table import BRDFTable
+    from gonio.brdf.models.principled import Principled
+    from gonio.brdf.tables.table import BRDFTable
     from gonio.export import ExportError, Fits, write_export
 
     rgb = bm.tabulate(library.get_material("brushed-metal-003"))

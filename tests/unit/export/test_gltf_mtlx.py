@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from gonio.brdf.principled import Principled
+from gonio.brdf.models.principled import Principled
 from gonio.export import gltf, mtlx
 
 GLTF_DIR = Path(__file__).resolve().parents[2] / "gltf"

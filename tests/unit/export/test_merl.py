@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gonio.brdf import models as bm
+from gonio.brdf.models import analytic as bm
 from gonio.export import merl
 
 
@@ -49,7 +49,7 @@ def test_round_trip_and_index_mapping(tmp_path: Path) -> None:
         pi_, po = rng.uniform(0, 2 * np.pi, 2)
         wi = np.array([math.sin(ti) * math.cos(pi_), math.sin(ti) * math.sin(pi_), math.cos(ti)])
         wo = np.array([math.sin(to) * math.cos(po), math.sin(to) * math.sin(po), math.cos(to)])
-        from gonio.brdf import geometry as geo
+        from gonio.brdf.tables import geometry as geo
 
         th, _, td, pd = (float(x) for x in geo.directions_to_half_diff(wi, wo))
         idx = _merl_index(th, td, pd)

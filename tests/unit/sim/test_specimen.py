@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from numpy.typing import ArrayLike, NDArray
 
-from gonio.brdf.models import Lambert
+from gonio.brdf.models.analytic import Lambert
 from gonio.hal import LabDirection
 from gonio.sim.specimen import (
     NoiseModel,

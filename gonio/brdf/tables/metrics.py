@@ -15,8 +15,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from gonio.brdf import geometry as geo
-from gonio.brdf.table import BRDFTable
+from gonio.brdf.tables import geometry as geo
+from gonio.brdf.tables.table import BRDFTable
 
 FloatArray = NDArray[np.float64]
 TableLike = BRDFTable | NDArray[Any]

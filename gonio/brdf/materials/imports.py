@@ -3,7 +3,7 @@
 Accepted files
 --------------
 ``.bsdf``
-    RGL EPFL tensor files (isotropic RGB), read with :func:`gonio.brdf.rgl.read_rgl`
+    RGL EPFL tensor files (isotropic RGB), read with :func:`gonio.brdf.materials.rgl.read_rgl`
     (needs the optional mitsuba package; a clear error says how to install it).
 ``.binary``
     MERL BRDF database files (Matusik et al. 2003), isotropic: a header of three int32
@@ -21,8 +21,8 @@ Accepted files
     gonio table files (:meth:`BRDFTable.save`), validated and copied.
 
 Every table is written as a gonio table ``<name>.npz`` in
-:func:`gonio.brdf.measured.user_library_dir`; :func:`gonio.brdf.basis.default_basis` trains
-on every table there from then on.
+:func:`gonio.brdf.materials.measured.user_library_dir`;
+:func:`gonio.brdf.reconstruction.basis.default_basis` trains on every table there from then on.
 """
 
 from __future__ import annotations
@@ -33,10 +33,10 @@ from pathlib import Path
 import numpy as np
 from scipy.ndimage import map_coordinates
 
-from gonio.brdf import geometry as geo
-from gonio.brdf.measured import CHANNELS, PREFIX, user_library_dir
-from gonio.brdf.merl import SCALES, MerlError, read_merl_values
-from gonio.brdf.table import BRDFTable, TableError
+from gonio.brdf.materials.measured import CHANNELS, PREFIX, user_library_dir
+from gonio.brdf.materials.merl import SCALES, MerlError, read_merl_values
+from gonio.brdf.tables import geometry as geo
+from gonio.brdf.tables.table import BRDFTable, TableError
 
 #: MERL's per-channel scale factors (R, G, B) to 1/sr.
 MERL_SCALE = SCALES
@@ -95,7 +95,7 @@ def read_any(path: str | os.PathLike[str], name: str | None = None) -> BRDFTable
         raise TableImportError(f"{p}: no such file")
     suffix = p.suffix.lower()
     if suffix == ".bsdf":
-        from gonio.brdf.rgl import read_rgl
+        from gonio.brdf.materials.rgl import read_rgl
 
         t = read_rgl(p, name)  # RGLError (a ValueError) says how to get mitsuba
     elif suffix == ".binary":

@@ -28,8 +28,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from gonio.brdf import geometry as geo
-from gonio.brdf.npzfile import read_npz, write_npz
+from gonio.brdf.tables import geometry as geo
+from gonio.brdf.tables.npzfile import read_npz, write_npz
 
 FORMAT_NAME = "gonio-brdf-table"
 FORMAT_VERSION = 1
@@ -48,7 +48,7 @@ class TableError(ValueError):
 
 @dataclass(frozen=True)
 class BRDFTable:
-    """Anisotropic BRDF tabulated on the grid of :mod:`gonio.brdf.geometry`.
+    """Anisotropic BRDF tabulated on the grid of :mod:`gonio.brdf.tables.geometry`.
 
     Parameters
     ----------

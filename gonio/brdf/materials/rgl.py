@@ -28,8 +28,8 @@ from typing import Any
 
 import numpy as np
 
-from gonio.brdf import geometry as geo
-from gonio.brdf.table import BRDFTable, TableError
+from gonio.brdf.tables import geometry as geo
+from gonio.brdf.tables.table import BRDFTable, TableError
 
 MAGIC = b"tensor_file"
 CHANNELS: tuple[str, ...] = ("R", "G", "B")

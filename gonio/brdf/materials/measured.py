@@ -3,12 +3,12 @@
 Shipped: eleven isotropic materials of the RGL EPFL material database (Dupuy & Jakob 2018,
 "An Adaptive Parameterization for Efficient Material Acquisition and Rendering", ACM TOG
 37(6); data licensed CC0), evaluated once on gonio's grid with Mitsuba 3 by
-``bench/make_measured_data.py`` and stored in ``gonio/brdf/data/measured.npz`` (one ``ph``
+``bench/make_measured_data.py`` and stored in ``gonio/brdf/materials/data/measured.npz`` (one ``ph``
 slice per material: they are isotropic). Users need no Mitsuba to train on them.
 
 User library: ``gonio library import FILE...`` converts a lab's own tables (RGL ``.bsdf``,
 MERL ``.binary``, gonio ``.npz``) into gonio table files in :func:`user_library_dir`;
-:func:`gonio.brdf.basis.default_basis` trains on every table found there.
+:func:`gonio.brdf.reconstruction.basis.default_basis` trains on every table found there.
 """
 
 from __future__ import annotations
@@ -23,8 +23,8 @@ import numpy as np
 import platformdirs
 from numpy.typing import NDArray
 
-from gonio.brdf import geometry as geo
-from gonio.brdf.table import BRDFTable, TableError
+from gonio.brdf.tables import geometry as geo
+from gonio.brdf.tables.table import BRDFTable, TableError
 
 DATA_FILE = Path(__file__).resolve().parent / "data" / "measured.npz"
 CHANNELS: tuple[str, ...] = ("R", "G", "B")

@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from gonio.brdf import geometry as geo
+from gonio.brdf.tables import geometry as geo
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]

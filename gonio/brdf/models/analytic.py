@@ -1,6 +1,6 @@
 """Analytic BRDF models: the building blocks of the synthetic training library and simulators.
 
-Every model follows the conventions of :mod:`gonio.brdf.geometry`:
+Every model follows the conventions of :mod:`gonio.brdf.tables.geometry`:
 
 * directions are in the specimen frame (z the normal, x the reference mark), unit vectors
   pointing away from the surface (``wi`` toward the light, ``wo`` toward the sensor);
@@ -34,8 +34,8 @@ from typing import Any, Literal, Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from gonio.brdf import geometry as geo
-from gonio.brdf.table import BRDFTable
+from gonio.brdf.tables import geometry as geo
+from gonio.brdf.tables.table import BRDFTable
 
 FloatArray = NDArray[np.float64]
 RGB: tuple[str, ...] = ("R", "G", "B")

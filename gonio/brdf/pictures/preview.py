@@ -20,8 +20,8 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from gonio.brdf import geometry as geo
-from gonio.brdf.table import BRDFTable
+from gonio.brdf.tables import geometry as geo
+from gonio.brdf.tables.table import BRDFTable
 
 PH_DEG: tuple[int, ...] = (0, 45, 90, 135)
 PD_DEG: tuple[int, ...] = (90, 0)

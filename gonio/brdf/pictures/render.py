@@ -28,7 +28,7 @@ for a calibrated result) per unit irradiance. :func:`to_srgb` maps it to display
 an exposure that puts the brightest pixel at 1.0, so no highlight is clipped.
 
 Tables are looked up with :class:`TableLookup`: the same multilinear interpolation as
-:meth:`gonio.brdf.table.BRDFTable.eval_half_diff` (invalid cells left out, weights
+:meth:`gonio.brdf.tables.table.BRDFTable.eval_half_diff` (invalid cells left out, weights
 renormalised), arranged for millions of lookups.
 """
 
@@ -42,8 +42,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from gonio.brdf import geometry as geo
-from gonio.brdf.table import BRDFTable
+from gonio.brdf.tables import geometry as geo
+from gonio.brdf.tables.table import BRDFTable
 
 FloatArray = NDArray[np.float64]
 Evaluator = Callable[[FloatArray, FloatArray], FloatArray]

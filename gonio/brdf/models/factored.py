@@ -47,10 +47,10 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from gonio.brdf import geometry as geo
-from gonio.brdf import metrics as bmetrics
-from gonio.brdf.npzfile import read_npz, write_npz
-from gonio.brdf.table import VALID_MASK, BRDFTable
+from gonio.brdf.tables import geometry as geo
+from gonio.brdf.tables import metrics as bmetrics
+from gonio.brdf.tables.npzfile import read_npz, write_npz
+from gonio.brdf.tables.table import VALID_MASK, BRDFTable
 
 FloatArray = NDArray[np.float64]
 Weighting = Literal["relative", "volume"]
@@ -445,7 +445,7 @@ def fit_factored(
     -------
     FactoredBRDF
         With ``metrics``: ``rel_mse``, ``mape``, ``psnr``, ``log_rmse`` of the model against
-        ``table`` (:mod:`gonio.brdf.metrics`), ``iterations``, ``seconds``, ``weighting``.
+        ``table`` (:mod:`gonio.brdf.tables.metrics`), ``iterations``, ``seconds``, ``weighting``.
 
     Raises
     ------
@@ -613,7 +613,7 @@ def _nonneg_pair(w: FloatArray, y: FloatArray, v: FloatArray) -> tuple[float, fl
 def fit_metrics(f_hat: BRDFTable, f_ref: BRDFTable) -> dict[str, float]:
     """The errors a fit is reported with: 000 Table 1's relMSE, MAPE, PSNR, plus log_rmse.
 
-    All volume-weighted over the valid cells of both tables (:mod:`gonio.brdf.metrics`;
+    All volume-weighted over the valid cells of both tables (:mod:`gonio.brdf.tables.metrics`;
     MAPE as a fraction). 000 evaluates its metrics on rendered images; these are on the BRDF
     itself, which is what a fit of a table can be held to without a renderer.
     """

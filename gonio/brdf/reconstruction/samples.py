@@ -31,8 +31,8 @@ from typing import Any, Protocol
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from gonio.brdf import geometry as geo
-from gonio.brdf.npzfile import read_npz, write_npz
+from gonio.brdf.tables import geometry as geo
+from gonio.brdf.tables.npzfile import read_npz, write_npz
 
 FloatArray = NDArray[np.float64]
 FORMAT_NAME = "gonio-samples"
@@ -193,7 +193,10 @@ class Samples:
             path, format_name=FORMAT_NAME, version=FORMAT_VERSION,
             required=("cells", "ph_lab", "stage_angles", "values", "channels"),
             error=SamplesError, kind="samples",
-            how_to_make="create one with `gonio simulate-scan` or gonio.brdf.samples.Samples.save",
+            how_to_make=(
+                "create one with `gonio simulate-scan` or "
+                "gonio.brdf.reconstruction.samples.Samples.save"
+            ),
         )
         try:
             return cls(

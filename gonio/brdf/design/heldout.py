@@ -24,8 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from gonio.brdf import metrics
-from gonio.brdf.basis import (
+from gonio.brdf.design.design import PairDesign
+from gonio.brdf.reconstruction.basis import (
     _FOLD_EXTRA,
     DEFAULT_COMPONENTS,
     MEASURED_WEIGHT,
@@ -34,10 +34,10 @@ from gonio.brdf.basis import (
     default_basis,
     fold_in,
 )
-from gonio.brdf.design import PairDesign
-from gonio.brdf.reconstruct import reconstruct
-from gonio.brdf.samples import NoiseModel, simulate_samples, uniform_stage_angles
-from gonio.brdf.table import BRDFTable
+from gonio.brdf.reconstruction.reconstruct import reconstruct
+from gonio.brdf.reconstruction.samples import NoiseModel, simulate_samples, uniform_stage_angles
+from gonio.brdf.tables import metrics
+from gonio.brdf.tables.table import BRDFTable
 
 FloatArray = NDArray[np.float64]
 
@@ -53,7 +53,7 @@ class ExpectedError:
 
 
 def _synthetic_panel_names() -> list[str]:
-    from gonio.brdf.library import library_specs
+    from gonio.brdf.materials.library import library_specs
 
     seen: set[str] = set()
     names = []
@@ -67,7 +67,7 @@ def _synthetic_panel_names() -> list[str]:
 @functools.cache
 def _panel() -> tuple[Basis, list[BRDFTable], list[tuple[BRDFTable, Basis]]]:
     """(panel basis, held-out synthetic tables, [(measured table, basis without it)])."""
-    from gonio.brdf import library, measured
+    from gonio.brdf.materials import library, measured
 
     held = _synthetic_panel_names()
     path = (library.cache_root() / "basis"
@@ -128,7 +128,7 @@ def choose_design(
 
     Parameters
     ----------
-    make : callable ``seed -> PairDesign`` (e.g. :func:`gonio.brdf.design.design_pairs` with
+    make : callable ``seed -> PairDesign`` (e.g. :func:`gonio.brdf.design.design.design_pairs` with
         its other arguments bound)
     seeds : the candidates' seeds
     rotations : stage angles of the simulated scans

@@ -57,9 +57,16 @@ import scipy.optimize
 from numpy.typing import ArrayLike, NDArray
 from scipy.interpolate import PchipInterpolator
 
-from gonio.brdf import geometry as geo
-from gonio.brdf.basis import N_HARMONICS, Basis, BasisError, inverse_remap, remap, row_weight
-from gonio.brdf.table import VALID_MASK, BRDFTable
+from gonio.brdf.reconstruction.basis import (
+    N_HARMONICS,
+    Basis,
+    BasisError,
+    inverse_remap,
+    remap,
+    row_weight,
+)
+from gonio.brdf.tables import geometry as geo
+from gonio.brdf.tables.table import VALID_MASK, BRDFTable
 
 FloatArray = NDArray[np.float64]
 Solver = Literal["closed", "iterative"]

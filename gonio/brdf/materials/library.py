@@ -5,7 +5,7 @@ a synthetic one so it works out of the box: :func:`library_specs` draws, from on
 fixed list of analytic materials across seven families
 
 ============== =========================================================================
-family          recipe (:mod:`gonio.brdf.models`)
+family          recipe (:mod:`gonio.brdf.models.analytic`)
 ============== =========================================================================
 diffuse         Lambert, half of them with a faint very rough dielectric GGX lobe
 plastic         Lambert + dielectric GGX (alpha 0.05-0.4), or Ashikhmin-Shirley, or Ward
@@ -44,9 +44,9 @@ import numpy as np
 import platformdirs
 from numpy.typing import NDArray
 
-from gonio.brdf import geometry as geo
-from gonio.brdf import models as bm
-from gonio.brdf.table import BRDFTable
+from gonio.brdf.models import analytic as bm
+from gonio.brdf.tables import geometry as geo
+from gonio.brdf.tables.table import BRDFTable
 
 #: Bump when a recipe changes in a way the parameter hash would not see (e.g. a model's maths).
 LIBRARY_VERSION = 1
@@ -264,7 +264,7 @@ def get_material(name: str, seed: int = DEFAULT_SEED) -> bm.BRDFModel:
         hint = f"; did you mean {', '.join(close)}?" if close else "."
         raise LibraryError(
             f"no library material named {name!r}{hint} Names are <family>-<NNN> with families "
-            f"{', '.join(FAMILY_COUNTS)} (see gonio.brdf.library.library_specs())"
+            f"{', '.join(FAMILY_COUNTS)} (see gonio.brdf.materials.library.library_specs())"
         )
     return by_name[name]
 

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from gonio.brdf import geometry as geo
+from gonio.brdf.tables import geometry as geo
 
 FloatArray = NDArray[np.float64]
 

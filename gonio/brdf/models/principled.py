@@ -1,7 +1,7 @@
 """Principled (Disney-style) parameters fitted to a tabulated BRDF (004 App. A.3, MATH.md 10).
 
 The parameters renderers take: base colour, metallic, specular, roughness, anisotropy strength
-and direction. They describe, as in :func:`gonio.brdf.models.principled` and 004 App. A.3,
+and direction. They describe, as in :func:`gonio.brdf.models.analytic.principled` and 004 App. A.3,
 
 * a Lambert term ``(1 - metallic) base / pi``;
 * an anisotropic GGX lobe with separable Smith masking and Schlick Fresnel of ``wi.h`` with
@@ -18,7 +18,7 @@ direction is defined modulo 180 degrees and reported in ``[0, 180)``. Each expor
 
 Fit: nonlinear least squares (``scipy.optimize.least_squares``) of all parameters at once on a
 fixed random subset of the table's valid cells, residuals the cosine-weighted log error of
-:func:`gonio.brdf.metrics.log_rmse` times ``sqrt(wV)``, started from a GGX fit to the table's
+:func:`gonio.brdf.tables.metrics.log_rmse` times ``sqrt(wV)``, started from a GGX fit to the table's
 ``td = 0`` slice (there ``i = o = h``, so that slice is the NDF up to ``G^2 / cos^2``).
 The reported error compares the fitted model's full table with the input table.
 """
@@ -34,10 +34,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from gonio.brdf import geometry as geo
-from gonio.brdf import models as bm
-from gonio.brdf.factored import fit_metrics
-from gonio.brdf.table import VALID_MASK, BRDFTable
+from gonio.brdf.models import analytic as bm
+from gonio.brdf.models.factored import fit_metrics
+from gonio.brdf.tables import geometry as geo
+from gonio.brdf.tables.table import VALID_MASK, BRDFTable
 
 FloatArray = NDArray[np.float64]
 #: Burley's aspect ratio bound: anisotropy 1 means alpha_t / alpha_b = 10.

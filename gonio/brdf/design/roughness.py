@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from gonio.brdf import geometry as geo
+from gonio.brdf.tables import geometry as geo
 
 DEFAULT_ATTENUATION = 0.5
 DEFAULT_CAP_DEG = 30.0

@@ -27,8 +27,7 @@ from typing import Literal, Protocol
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from gonio.brdf import geometry as geo
-from gonio.brdf.feasibility import (
+from gonio.brdf.design.feasibility import (
     FeasibilityError,
     Mounting,
     MountPlanner,
@@ -40,7 +39,8 @@ from gonio.brdf.feasibility import (
     place_pairs,
     rows_to_cells,
 )
-from gonio.brdf.geometry import SLICE_SHAPE
+from gonio.brdf.tables import geometry as geo
+from gonio.brdf.tables.geometry import SLICE_SHAPE
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
@@ -433,7 +433,7 @@ class SearchResult:
         Final ``kappa`` of every descent, in order.
     ph_lab : (n,) array, radians, or None
         Collision-free lab azimuth of each row (in the order of ``rows``) when the search
-        was given a :class:`~gonio.brdf.feasibility.MountPlanner`; None otherwise.
+        was given a :class:`~gonio.brdf.design.feasibility.MountPlanner`; None otherwise.
     """
 
     rows: IntArray
@@ -490,7 +490,7 @@ def optimize_rows(
         Make the search collision-aware (standard grid only): every start is a random
         collision-free design, each row carries a lab azimuth, and a move is taken only when
         the new cell can be mounted beside the other pairs (one of which may turn to make
-        room, :meth:`~gonio.brdf.feasibility.MountPlanner.move`). When the best cell of a
+        room, :meth:`~gonio.brdf.design.feasibility.MountPlanner.move`). When the best cell of a
         neighbourhood cannot be mounted, the next best improving one is tried. Every design
         the search visits, and so the one it returns, is mountable.
 
@@ -635,7 +635,7 @@ RowsAt = Callable[[FloatArray, FloatArray, FloatArray], FloatArray]
 
 
 class BasisLike(Protocol):
-    """What a design needs from a basis (:class:`gonio.brdf.basis.Basis` fits)."""
+    """What a design needs from a basis (:class:`gonio.brdf.reconstruction.basis.Basis` fits)."""
 
     @property
     def Q(self) -> FloatArray: ...
@@ -749,10 +749,10 @@ def design_pairs(
     """Optimize ``n`` independent light/sensor pairs and place them in the lab.
 
     Candidates are the basis's valid cells that ``constraints`` allow
-    (:func:`gonio.brdf.feasibility.candidate_rows`). The search is :func:`optimize_rows` with
-    a :class:`~gonio.brdf.feasibility.MountPlanner`, so every design it visits can be mounted
+    (:func:`gonio.brdf.design.feasibility.candidate_rows`). The search is :func:`optimize_rows` with
+    a :class:`~gonio.brdf.design.feasibility.MountPlanner`, so every design it visits can be mounted
     with ``min_device_distance_deg`` between any two devices and outside every exclusion. The
-    search's placement is then spread by :func:`gonio.brdf.feasibility.place_pairs` (it keeps
+    search's placement is then spread by :func:`gonio.brdf.design.feasibility.place_pairs` (it keeps
     the limit and widens the closest gap where it can).
 
     Raises

@@ -84,9 +84,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from gonio.brdf import geometry as geo
-from gonio.brdf.npzfile import read_npz, write_npz
-from gonio.brdf.table import BRDFTable
+from gonio.brdf.tables import geometry as geo
+from gonio.brdf.tables.npzfile import read_npz, write_npz
+from gonio.brdf.tables.table import BRDFTable
 
 FloatArray = NDArray[np.float64]
 
@@ -663,9 +663,11 @@ def synthetic_basis(n_components: int, progress: bool = False) -> Basis:
     """The basis of the synthetic library alone, built once and cached.
 
     ``<cache>/basis/synthetic-K<K>-<key>.npz``, ``<cache>`` and ``<key>`` the library's
-    (:func:`gonio.brdf.library.cache_root`, :func:`~gonio.brdf.library.library_key`).
+    (:func:`gonio.brdf.materials.library.cache_root`,
+    :func:`~gonio.brdf.materials.library.library_key`).
     """
-    from gonio.brdf import library  # the library depends on models; import it only when needed
+    # the library depends on models; import it only when needed
+    from gonio.brdf.materials import library
 
     path = (library.cache_root() / "basis"
             / f"synthetic-K{n_components}-{library.library_key()[:16]}.npz")
@@ -694,7 +696,7 @@ def default_basis_path(
     ``<cache>/basis/default-K<K>-<key>.npz``; the key hashes the library, the shipped
     measured data, the user library's tables, the weight and ``exclude``.
     """
-    from gonio.brdf import library, measured
+    from gonio.brdf.materials import library, measured
 
     k = DEFAULT_COMPONENTS if n_components is None else int(n_components)
     weight = MEASURED_WEIGHT if measured_weight is None else float(measured_weight)
@@ -728,7 +730,7 @@ def default_basis(
         How many synthetic materials each measured or user table counts as; default
         :data:`MEASURED_WEIGHT`. 0 gives the synthetic basis alone.
     user_library : bool
-        Include the tables of :func:`gonio.brdf.measured.user_library_dir`
+        Include the tables of :func:`gonio.brdf.materials.measured.user_library_dir`
         (``gonio library import``).
 
     Returns
@@ -739,7 +741,7 @@ def default_basis(
         ``<cache>/basis/default-K<K>-<key>.npz``; the key covers the library, the shipped
         data, the user tables, the weight and ``exclude``.
     """
-    from gonio.brdf import measured
+    from gonio.brdf.materials import measured
 
     k = DEFAULT_COMPONENTS if n_components is None else int(n_components)
     weight = MEASURED_WEIGHT if measured_weight is None else float(measured_weight)
