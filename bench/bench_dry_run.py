@@ -20,14 +20,9 @@ from typing import Any
 from gonio.drivers.factory import build_rig
 from gonio.engine import ScanEngine
 from gonio.hal import DeviceUnavailable
-from gonio.plans import (
-    AdaptivePlan,
-    AnyPlan,
-    ExposureSettings,
-    RigDescription,
-    UniformPlan,
-    dry_run,
-)
+from gonio.plans.dryrun import dry_run
+from gonio.plans.models import AdaptivePlan, AnyPlan, ExposureSettings, UniformPlan
+from gonio.rigdescription import RigDescription
 from gonio.sim.rig import SimRigOptions, start_sim_rig
 from gonio.store import JobStore
 

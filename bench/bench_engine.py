@@ -1,9 +1,9 @@
 """Simulated scan wall time against its physical lower bound, with a per-angle breakdown.
 
-The lower bound is the plan's dry-run estimate (:func:`gonio.plans.dry_run`): trapezoidal stage
-moves at the rig's speed and acceleration, the configured stage settle time, and one exposure
-per light and angle (plus the dark). The overhead is everything else: protocol round trips,
-light switching, move-completion polling, store commits.
+The lower bound is the plan's dry-run estimate (:func:`gonio.plans.dryrun.dry_run`):
+trapezoidal stage moves at the rig's speed and acceleration, the configured stage settle time,
+and one exposure per light and angle (plus the dark). The overhead is everything else: protocol
+round trips, light switching, move-completion polling, store commits.
 
 The simulated stage also rings for ``SimRigOptions.settle_s`` (20 ms) after each move and
 reports itself busy meanwhile. That time is physical, but the rig config the simulator writes
@@ -33,7 +33,10 @@ from typing import Any
 from gonio import hal
 from gonio.drivers.factory import build_rig
 from gonio.engine import ScanEngine
-from gonio.plans import ExposureSettings, RigDescription, UniformPlan, dry_run, move_time
+from gonio.plans.dryrun import dry_run
+from gonio.plans.models import ExposureSettings, UniformPlan
+from gonio.plans.timing import move_time
+from gonio.rigdescription import RigDescription
 from gonio.sim.rig import SimRigOptions, start_sim_rig
 from gonio.store import JobStore
 

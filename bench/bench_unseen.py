@@ -293,7 +293,7 @@ def run_adaptive(b: Basis, m: Material, cells: np.ndarray, ph: np.ndarray, seed:
     """V&F Sec. 6: start with r0 rotations, refine where PCHIP mispredicts (e = 0.1); with
     ``joint_e``, refine where the joint fit's leave-one-angle-out log error exceeds it."""
     from gonio.brdf.reconstruction.reconstruct import refine_angles
-    from gonio.plans import adaptive_refinement
+    from gonio.plans.adaptive import adaptive_refinement
 
     angles = list(np.rad2deg(uniform_stage_angles(r0)))
     vals = read(m, cells, ph, np.deg2rad(angles), seed)

@@ -26,7 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field
 
-from gonio.plans import PairSpec
+from gonio.hal import PairSpec
 
 
 class CalibrationError(ValueError):

@@ -40,21 +40,14 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from gonio import hal
+from gonio.hal import PairSpec
 from gonio.jobstates import JobState
-from gonio.plans import (
-    MAX_ROTATIONS,
-    AdaptivePlan,
-    AnyPlan,
-    PairSpec,
-    RigDescription,
-    adaptive_bound,
-    adaptive_refinement,
-    estimate_angles,
-    initial_angles,
-    lights_in_order,
-    order_for_travel,
-    plan_pairs,
-)
+from gonio.plans.adaptive import adaptive_refinement
+from gonio.plans.models import MAX_ROTATIONS, AdaptivePlan, AnyPlan
+from gonio.plans.route import order_for_travel
+from gonio.plans.timing import adaptive_bound, estimate_angles
+from gonio.plans.validation import initial_angles, lights_in_order, plan_pairs
+from gonio.rigdescription import RigDescription
 from gonio.store import JobStore, ReadingRow, StepRow
 
 

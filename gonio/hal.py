@@ -18,6 +18,10 @@ import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
+from pydantic import BaseModel, ConfigDict
+
+from gonio.fields import Text
+
 
 # --------------------------------------------------------------------------- errors
 class DeviceFault(Exception):
@@ -245,6 +249,18 @@ class Pair:
 
     light: str
     sensor: str
+
+
+class PairSpec(BaseModel):
+    """A light/sensor pair by device name."""
+
+    model_config = ConfigDict(frozen=True)
+
+    light: Text
+    sensor: Text
+
+    def label(self) -> str:
+        return f"{self.light}/{self.sensor}"
 
 
 @dataclass

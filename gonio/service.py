@@ -2,7 +2,7 @@
 
 Every request and response type is a pydantic model (they become the API schema). Errors are
 typed so the API can map them: :class:`NotFound` -> 404, :class:`Conflict` (including
-:class:`gonio.jobstates.IllegalTransition`) -> 409, :class:`gonio.plans.PlanError` -> 422.
+:class:`gonio.jobstates.IllegalTransition`) -> 409, :class:`gonio.plans.models.PlanError` -> 422.
 
 Typical use::
 
@@ -28,19 +28,12 @@ from pydantic import BaseModel, Field
 from gonio import hal
 from gonio.calibration import Calibration, calibration_in_effect
 from gonio.engine_loop import EngineLoop
+from gonio.fields import FINITE, Count
 from gonio.jobstates import ACTIVE_STATES, IllegalTransition, JobState, check_action
 from gonio.maintenance import LOCK_FILE_NAME, MaintenanceLock
-from gonio.plans import (
-    FINITE,
-    AnyPlan,
-    Count,
-    DryRun,
-    Plan,
-    PlanError,
-    RigDescription,
-    dry_run,
-    parse_plan,
-)
+from gonio.plans.dryrun import DryRun, dry_run
+from gonio.plans.models import AnyPlan, Plan, PlanError, parse_plan
+from gonio.rigdescription import RigDescription
 from gonio.store import EventRow, JobRow, JobStore, ReadingRow
 from gonio.store import NotFound as StoreNotFound
 from gonio.worker import BasisProvider, Worker, default_basis_provider

@@ -36,15 +36,9 @@ from gonio.calibration import (
 )
 from gonio.engine import ScanEngine
 from gonio.jobstates import JobState
-from gonio.plans import (
-    AnyPlan,
-    CalibrationPlan,
-    PlanError,
-    RigDescription,
-    parse_plan,
-    plan_pairs,
-    validate_plan,
-)
+from gonio.plans.models import AnyPlan, CalibrationPlan, PlanError, parse_plan
+from gonio.plans.validation import plan_pairs, validate_plan
+from gonio.rigdescription import RigDescription
 from gonio.store import JobRow, JobStore
 
 log = logging.getLogger("gonio.worker")

@@ -8,7 +8,7 @@ the lab page. The service's typed errors become HTTP statuses in one place here:
 :class:`gonio.brdf.design.presets.UnknownPresetError`    404
 :class:`gonio.service.Conflict`                   409
 :class:`gonio.jobstates.IllegalTransition`        409
-:class:`gonio.plans.PlanError`                    422
+:class:`gonio.plans.models.PlanError`             422
 :class:`gonio.brdf.design.design.DesignError`            422
 :class:`gonio.brdf.design.feasibility.FeasibilityError`  422
 ================================================  ======
@@ -41,7 +41,7 @@ from gonio.brdf.design.feasibility import FeasibilityError
 from gonio.brdf.design.presets import UnknownPresetError
 from gonio.calibration import CalibrationError
 from gonio.jobstates import IllegalTransition
-from gonio.plans import PlanError
+from gonio.plans.models import PlanError
 from gonio.results import ResultFileError
 from gonio.service import Conflict, DeviceError, GonioService
 from gonio.store import NotFound

@@ -29,7 +29,7 @@ from gonio.brdf.design.design import (
 from gonio.brdf.design.feasibility import RigConstraints, parse_exclusion
 from gonio.brdf.design.presets import Preset
 from gonio.brdf.design.roughness import roughness_bound
-from gonio.plans import FINITE, Count, Text
+from gonio.fields import FINITE, Count, Text
 
 MAX_PAIRS = 40
 """More independent pairs than any rig mounts (V&F use up to 20)."""

@@ -22,7 +22,7 @@ from gonio.api.design import (
     run_design,
 )
 from gonio.brdf.design.presets import get_preset, preset_names
-from gonio.plans import PlanError
+from gonio.plans.models import PlanError
 from gonio.service import Conflict
 
 router = APIRouter(prefix="/api/v1/design", tags=["design"])

@@ -9,7 +9,8 @@ from pydantic import BaseModel, Field
 
 from gonio.api.deps import COMPUTE, READ, WRITE, JobId, Service
 from gonio.jobstates import JobState
-from gonio.plans import DryRun, Plan
+from gonio.plans.dryrun import DryRun
+from gonio.plans.models import Plan
 from gonio.service import JobDetail, JobInfo, JobRequest, ReorderRequest
 
 router = APIRouter(prefix="/api/v1/jobs", tags=["jobs"])

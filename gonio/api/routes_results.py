@@ -197,7 +197,7 @@ async def polar(
 
 
 def _grid(value: float, name: str, upper: int) -> int:
-    from gonio.plans import PlanError
+    from gonio.plans.models import PlanError
 
     if value % _GRID_STEP_DEG != 0 or not 0 <= value <= upper:
         raise PlanError(

@@ -12,7 +12,8 @@ from gonio.api.auth import Caller, require_write_key
 from gonio.api.deps import READ, WRITE, Service
 from gonio.api.maintenance import LockState, MaintenanceLock
 from gonio.calibration import Calibration
-from gonio.plans import FINITE, RigDescription, Text
+from gonio.fields import FINITE, Text
+from gonio.rigdescription import RigDescription
 from gonio.service import GonioService, RigStatus, StageRequest, StageState
 
 router = APIRouter(prefix="/api/v1", tags=["rig"])

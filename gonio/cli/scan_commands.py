@@ -91,7 +91,7 @@ async def _calibrate_sim(sim: Any, store: Any, worker: Any, desc: Any, data_dir:
     """
     from gonio.calibration import CALIBRATION_FILE, Calibration
     from gonio.jobstates import JobState
-    from gonio.plans import CalibrationPlan
+    from gonio.plans.models import CalibrationPlan
     from gonio.sim.rig import WHITE_REFERENCE_ALBEDO
 
     plan = CalibrationPlan(reference_albedo=WHITE_REFERENCE_ALBEDO,
@@ -114,7 +114,7 @@ async def _calibrate_sim(sim: Any, store: Any, worker: Any, desc: Any, data_dir:
 
 
 def _plan(args: argparse.Namespace) -> Any:
-    from gonio.plans import AdaptivePlan, CalibrationPlan, ExposureSettings, UniformPlan
+    from gonio.plans.models import AdaptivePlan, CalibrationPlan, ExposureSettings, UniformPlan
 
     ex = ExposureSettings(exposure_s=args.exposure, averages=args.averages,
                           light_settle_s=args.light_settle)
@@ -166,7 +166,8 @@ def _scan(args: argparse.Namespace) -> int:
 
 async def _run_scan(args: argparse.Namespace, plan: Any, config: Any, sim: Any = None) -> int:
     from gonio.drivers.factory import build_rig
-    from gonio.plans import RigDescription, dry_run
+    from gonio.plans.dryrun import dry_run
+    from gonio.rigdescription import RigDescription
 
     rig = build_rig(config)
     desc = RigDescription.from_rig(rig)
@@ -275,7 +276,7 @@ async def _run_owned(args: argparse.Namespace, plan: Any, config: Any, sim: Any,
     summary = row.summary or {}
     if plan.kind == "calibration":
         from gonio.calibration import CALIBRATION_FILE
-        from gonio.plans import plan_pairs
+        from gonio.plans.validation import plan_pairs
 
         cal_out = out.with_name(out.stem + ".calibration.json")
         shutil.copyfile(data_dir / CALIBRATION_FILE, cal_out)
@@ -356,7 +357,7 @@ def _scan_through_daemon(args: argparse.Namespace, plan: Any) -> int:
     body = {"plan": plan.model_dump(mode="json")}
     with DaemonClient(args.daemon, args.api_key) as client:
         if args.dry_run:
-            from gonio.plans import DryRun
+            from gonio.plans.dryrun import DryRun
 
             answer = client.request("POST", "/api/v1/jobs/dry-run", json=body)
             rig = client.request("GET", "/api/v1/rig")

@@ -328,7 +328,7 @@ def start_sim_calibration(
     report : callable, optional
         ``report(job_id, state, reason)`` when the job ends (completed, failed, ...).
     """
-    from gonio.plans import CalibrationPlan
+    from gonio.plans.models import CalibrationPlan
     from gonio.service import Event, JobRequest
     from gonio.sim.rig import WHITE_REFERENCE_ALBEDO
 

@@ -16,7 +16,8 @@ from typing import Any
 
 from gonio.drivers.factory import build_rig
 from gonio.engine import ScanEngine
-from gonio.plans import ExposureSettings, RigDescription, UniformPlan, parse_plan
+from gonio.plans.models import ExposureSettings, UniformPlan, parse_plan
+from gonio.rigdescription import RigDescription
 from gonio.sim.rig import SimRigOptions, start_sim_rig
 from gonio.store import JobStore
 

@@ -11,7 +11,9 @@ import pytest
 from gonio.drivers.factory import build_rig
 from gonio.engine import ScanEngine
 from gonio.jobstates import JobState
-from gonio.plans import ExposureSettings, RigDescription, UniformPlan, dry_run
+from gonio.plans.dryrun import dry_run
+from gonio.plans.models import ExposureSettings, UniformPlan
+from gonio.rigdescription import RigDescription
 from gonio.sim.motion import plan_phases
 from gonio.sim.rig import SimRig, SimRigOptions, start_sim_rig
 from gonio.store import JobStore

@@ -16,7 +16,8 @@ from typing import Any
 import pytest
 
 from gonio.drivers.factory import build_rig
-from gonio.plans import CalibrationPlan, ExposureSettings, RigDescription
+from gonio.plans.models import CalibrationPlan, ExposureSettings
+from gonio.rigdescription import RigDescription
 from gonio.sim.rig import SimRig, SimRigOptions, start_sim_rig
 from gonio.store import JobStore
 from tests.system.daemon_proc import DaemonProcess, start_daemon, wait_for

@@ -16,7 +16,7 @@ import threading
 import pytest
 
 from gonio.jobstates import JobState
-from gonio.plans import ExposureSettings, FaultPolicy, UniformPlan
+from gonio.plans.models import ExposureSettings, FaultPolicy, UniformPlan
 from gonio.sim.rig import SimRigOptions, start_sim_rig
 from tests.system.test_scan_sim import _scan
 

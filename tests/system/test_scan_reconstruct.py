@@ -11,7 +11,7 @@ import pytest
 from gonio.calibration import Calibration, PairCalibration
 from gonio.drivers.factory import build_rig
 from gonio.jobstates import JobState
-from gonio.plans import AdaptivePlan, ExposureSettings, UniformPlan
+from gonio.plans.models import AdaptivePlan, ExposureSettings, UniformPlan
 from gonio.results import read_result
 from gonio.service import GonioService, JobRequest
 from gonio.sim.rig import SimRig, SimRigOptions, start_sim_rig

@@ -18,17 +18,16 @@ from gonio.calibration import Calibration, PairCalibration, calibrated_samples
 from gonio.drivers.factory import build_rig
 from gonio.engine import ScanEngine
 from gonio.jobstates import JobState
-from gonio.plans import (
+from gonio.plans.models import (
     AdaptivePlan,
     AnyPlan,
     ExposureSettings,
     FaultPolicy,
     PlanError,
-    RigDescription,
     UniformPlan,
-    plan_pairs,
-    validate_plan,
 )
+from gonio.plans.validation import plan_pairs, validate_plan
+from gonio.rigdescription import RigDescription
 from gonio.sim.rig import SimRig, SimRigOptions, start_sim_rig
 from gonio.store import JobStore
 

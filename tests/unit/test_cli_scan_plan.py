@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from gonio.cli import build_parser
 from gonio.cli.scan_commands import _plan
-from gonio.plans import CalibrationPlan, UniformPlan
+from gonio.plans.models import CalibrationPlan, UniformPlan
 
 
 def _parse(*argv: str) -> object:

@@ -169,7 +169,7 @@ def test_calibration_json() -> None:
 def test_result_read_snippet_reads_a_gonio_result(in_tmp: Path,
                                                   capsys: pytest.CaptureFixture[str]) -> None:
     from gonio.calibration import Calibration, calibrated_samples
-    from gonio.plans import PairSpec
+    from gonio.hal import PairSpec
     from gonio.results import write_result
     from gonio.store import ReadingRow
 

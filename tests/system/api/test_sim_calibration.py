@@ -19,7 +19,7 @@ from gonio.calibration import Calibration
 from gonio.cli.serve_command import start_sim_calibration
 from gonio.drivers.factory import build_rig
 from gonio.jobstates import JobState
-from gonio.plans import UniformPlan
+from gonio.plans.models import UniformPlan
 from gonio.results import read_result
 from gonio.service import GonioService, JobRequest
 from gonio.sim.rig import WHITE_REFERENCE_ALBEDO, SimRigOptions, start_sim_rig

@@ -7,7 +7,7 @@ import time
 
 import pytest
 
-from gonio.plans import MAX_ROTATIONS
+from gonio.plans.models import MAX_ROTATIONS
 from tests.system.api.conftest import Daemon
 
 pytestmark = pytest.mark.system

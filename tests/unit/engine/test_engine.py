@@ -10,14 +10,8 @@ import pytest
 from gonio import hal
 from gonio.engine import ScanEngine
 from gonio.jobstates import JobState
-from gonio.plans import (
-    AdaptivePlan,
-    AnyPlan,
-    ExposureSettings,
-    FaultPolicy,
-    RigDescription,
-    UniformPlan,
-)
+from gonio.plans.models import AdaptivePlan, AnyPlan, ExposureSettings, FaultPolicy, UniformPlan
+from gonio.rigdescription import RigDescription
 from gonio.store import JobStore
 from tests.unit.engine.memrig import MemRig
 

@@ -13,7 +13,8 @@ import asyncio
 from gonio import hal
 from gonio.engine import ScanEngine
 from gonio.jobstates import JobState
-from gonio.plans import ExposureSettings, FaultPolicy, RigDescription, UniformPlan
+from gonio.plans.models import ExposureSettings, FaultPolicy, UniformPlan
+from gonio.rigdescription import RigDescription
 from gonio.store import JobStore
 from tests.unit.engine.memrig import Log, MemLight, MemRig, MemStage
 

@@ -8,22 +8,22 @@ import math
 import numpy as np
 import pytest
 
-from gonio.plans import (
+from gonio.hal import PairSpec
+from gonio.plans.adaptive import adaptive_refinement
+from gonio.plans.dryrun import dry_run
+from gonio.plans.models import (
     MAX_ROTATIONS,
     AdaptivePlan,
     CalibrationPlan,
     ExposureSettings,
-    PairSpec,
     PlanError,
-    RigDescription,
     UniformPlan,
-    adaptive_refinement,
-    dry_run,
-    move_time,
-    order_for_travel,
     parse_plan,
-    validate_plan,
 )
+from gonio.plans.route import order_for_travel
+from gonio.plans.timing import move_time
+from gonio.plans.validation import validate_plan
+from gonio.rigdescription import RigDescription
 from tests.unit.engine.memrig import MemRig
 
 

@@ -10,7 +10,8 @@ from pathlib import Path
 import pytest
 
 from gonio.engine import Progress, ScanEngine
-from gonio.plans import AdaptivePlan, ExposureSettings, UniformPlan, dry_run
+from gonio.plans.dryrun import dry_run
+from gonio.plans.models import AdaptivePlan, ExposureSettings, UniformPlan
 from gonio.service import GonioService, JobRequest
 from gonio.store import JobStore, StepRow
 from gonio.worker import Worker, default_basis_provider
@@ -27,7 +28,7 @@ def test_eta_counts_down_from_the_last_checkpoint_and_never_below_zero() -> None
 
 
 def _engine(plan: UniformPlan | AdaptivePlan) -> ScanEngine:
-    from gonio.plans import RigDescription
+    from gonio.rigdescription import RigDescription
 
     rig = MemRig()
     desc = RigDescription.from_rig(rig)

@@ -18,7 +18,7 @@ from gonio.calibration import (
     from_reference,
 )
 from gonio.cli import UsageError, scan_commands
-from gonio.plans import PairSpec
+from gonio.hal import PairSpec
 from gonio.results import ResultFileError, read_result, write_result
 from gonio.store import JobStore, ReadingRow
 

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from gonio.jobstates import IllegalTransition, JobState
-from gonio.plans import CalibrationPlan, ExposureSettings, PlanError, UniformPlan
+from gonio.plans.models import CalibrationPlan, ExposureSettings, PlanError, UniformPlan
 from gonio.results import read_result
 from gonio.service import Conflict, GonioService, JobRequest, NotFound
 from gonio.store import JobStore

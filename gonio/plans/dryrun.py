@@ -1,0 +1,102 @@
+"""Dry run: what a plan will do on a rig, and how long it will take, without hardware."""
+
+from __future__ import annotations
+
+from pydantic import BaseModel, Field
+
+from gonio.hal import PairSpec
+from gonio.plans.models import AdaptivePlan, AnyPlan
+from gonio.plans.route import order_for_travel
+from gonio.plans.timing import adaptive_bound, estimate_angles, travel
+from gonio.plans.validation import (
+    lights_in_order,
+    plan_pairs,
+    rotation_count,
+    uniform_angles,
+    validate_plan,
+)
+from gonio.rigdescription import RigDescription
+
+
+class DryRun(BaseModel):
+    """What a plan will do, without hardware: the first round's stage positions and timing.
+
+    The estimate is the physical time of every move the engine and the stage driver make
+    (from the stage's present position, with the engine's and the driver's backlash
+    approaches), settling and exposures. For adaptive plans only the first round is known in
+    advance; ``estimated_s`` covers it and ``max_estimated_s`` bounds the whole job: every
+    refinement round adding a midpoint in every gap, until ``max_rounds``, ``min_step_deg``,
+    ``max_samples`` or the cap of stage angles stops it.
+    """
+
+    kind: str
+    pairs: list[PairSpec]
+    lights: list[str]
+    angles_deg: list[float] = Field(description="specimen angles of the first round")
+    positions_deg: list[float] = Field(description="stage positions in visiting order")
+    readings: int = Field(description="pair readings of the first round")
+    exposures: int = Field(description="sensor exposures per round, dark included")
+    motion_s: float
+    settle_s: float
+    exposure_s: float
+    estimated_s: float
+    max_estimated_s: float | None = Field(
+        default=None, description="adaptive plans: bound on the whole job's duration, seconds")
+    max_angles: int | None = Field(
+        default=None, description="adaptive plans: most stage angles the job can measure")
+    from_deg: float = Field(default=0.0, description="stage position the estimate starts from")
+    from_known: bool = Field(
+        default=False, description="false: the stage position is not known yet (no job or "
+        "manual move since the daemon started) and 0 deg was assumed")
+
+
+def dry_run(plan: AnyPlan, rig: RigDescription, current_deg: float | None = None) -> DryRun:
+    """Expand ``plan`` on ``rig`` and estimate its duration; raises :class:`PlanError`.
+
+    The estimate is the physical time (see :class:`DryRun`): trapezoidal stage moves at the
+    rig's speed and acceleration for every leg (from ``current_deg``, the engine's backlash
+    overshoot and the driver's approach), the stage settle time after each move, each
+    light's settle time, and one ``exposure_s x averages`` per light and angle (all sensors
+    of a light read in parallel), plus dark exposures. Communication overhead is not
+    included (a few percent: docs/engine.md).
+
+    Parameters
+    ----------
+    plan, rig
+    current_deg : float, optional
+        Present stage position, degrees; None when unknown (0 is assumed and the result says
+        so).
+    """
+    validate_plan(plan, rig)
+    pairs = plan_pairs(plan, rig)
+    lights = lights_in_order(pairs)
+    angles = uniform_angles(plan.start_deg, rotation_count(plan))
+    start = 0.0 if current_deg is None else float(current_deg)
+    route = order_for_travel(angles, start, rig, plan.backlash_deg)
+    motion, settle, exposure = estimate_angles(
+        route, start, len(lights), plan, rig, plan.exposure.dark != "none"
+    )
+    total = motion + settle + exposure
+    max_total = max_angles = None
+    if isinstance(plan, AdaptivePlan):
+        _, _, end = travel(route, start, rig, plan.backlash_deg)
+        extra_n, extra_s = adaptive_bound(plan, rig, len(pairs), len(lights), angles, end)
+        max_total, max_angles = total + extra_s, len(route) + extra_n
+    darks = len(route) if plan.exposure.dark == "every_angle" else int(plan.exposure.dark == "once")
+    return DryRun(
+        kind=plan.kind,
+        pairs=pairs,
+        lights=lights,
+        angles_deg=angles,
+        positions_deg=route,
+        readings=len(pairs) * len(route),
+        exposures=len(route) * len(lights) + darks,
+        motion_s=motion,
+        settle_s=settle,
+        exposure_s=exposure,
+        estimated_s=total,
+        max_estimated_s=max_total,
+        max_angles=max_angles,
+        from_deg=start,
+        from_known=current_deg is not None,
+    )

@@ -1,0 +1,188 @@
+"""Scan plans as serializable data: the three kinds, their settings, and parsing from JSON.
+
+A plan says *what* to measure (which pairs, at which stage angles, with which exposure); the
+engine (:mod:`gonio.engine`) says *how*. Plans are pydantic models, so they travel unchanged
+through the REST API, the job store (as JSON) and result files.
+
+Three kinds, told apart by ``kind``:
+
+``uniform``
+    The rig's pairs at ``rotations`` stage angles ``start_deg + k 360 / rotations``.
+``adaptive``
+    V&F Sec. 6 / MATH 7: start with ``initial_rotations`` uniform angles, then add the midpoints
+    around every angle where leave-one-out periodic PCHIP mispredicts a pair's value by more
+    than ``threshold``; repeat until nothing exceeds it, the sample budget is spent, or a new
+    step would be finer than ``min_step_deg`` (:mod:`gonio.plans.adaptive`).
+``calibration``
+    A white reference of known albedo (a Lambertian reference has ``f = albedo / pi``) at a few
+    angles; the result is each pair's factor from sensor counts to BRDF (:mod:`gonio.calibration`).
+
+Angles are degrees here (plans are user-facing). A plan's angles are specimen rotations in
+``[0, 360)``. Every check a plan can fail raises :class:`PlanError` before anything moves.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal
+
+from pydantic import AfterValidator, BaseModel, Field
+
+from gonio.fields import FINITE, Count, Text
+from gonio.hal import PairSpec
+
+
+class PlanError(ValueError):
+    """A plan that cannot run on this rig; the message says what is wrong and what to do."""
+
+
+MAX_ROTATIONS = 3600
+"""Most stage angles one job may measure (0.1 degree steps; V&F use 8 to 72). Caps the work
+a plan costs to check and time, and the readings an adaptive plan can grow to."""
+
+
+class ExposureSettings(BaseModel):
+    """How each reading is taken.
+
+    ``exposure_s`` is the integration time of one exposure, ``averages`` how many exposures are
+    averaged; ``light_settle_s`` is the wait after switching a light on (lamp warm-up and
+    stabilisation). ``dark`` chooses when sensors are read with every light off: at every stage
+    angle (tracks drifting dark signal, costs one exposure per angle), once at the start, or
+    never (the sensors subtract their own dark).
+    """
+
+    model_config = FINITE
+
+    exposure_s: float = Field(default=0.01, gt=0, description="seconds per exposure")
+    averages: Count = Field(default=1, ge=1, le=1000)
+    light_settle_s: float = Field(default=0.05, ge=0, le=60)
+    dark: Literal["every_angle", "once", "none"] = "once"
+
+
+class FaultPolicy(BaseModel):
+    """How the engine suspends and retries on recoverable device faults.
+
+    After a fault the engine waits ``retry_delay_s``, tries the device's recovery (clear
+    faults, reconnect, re-check the lamp), waits ``resume_settle_s`` and repeats the
+    interrupted angle. More than ``max_retries`` consecutive failures at one angle fail the job,
+    except for a device that does not answer at all: the job then stays suspended and the
+    device is tried every ``retry_delay_s`` until it answers (then the angle is repeated from
+    the checkpoint) or ``wait_for_device_s`` have passed since the first fault.
+    """
+
+    model_config = FINITE
+
+    max_retries: Count = Field(default=5, ge=0, le=100)
+    retry_delay_s: float = Field(default=1.0, ge=0, le=3600)
+    wait_for_device_s: float = Field(
+        default=600.0, ge=0, le=86400,
+        description="when a device stops answering (unplugged cable, power cut) and the "
+                    "retries are spent, keep the job suspended and try the device every "
+                    "retry_delay_s until it answers again, up to this many seconds from the "
+                    "first fault; then the job fails. 0: fail after max_retries",
+    )
+    resume_settle_s: float = Field(default=0.5, ge=0, le=3600)
+    saturation: Literal["suspend", "record"] = Field(
+        default="suspend",
+        description="'suspend': a saturated reading is a fault and the angle is retried; "
+        "'record': keep it, flagged saturated",
+    )
+
+
+def _check_start(value: float) -> float:
+    if not 0.0 <= value < 360.0:
+        raise ValueError(
+            f"start_deg is a specimen angle in [0, 360) degrees; {value:g} is outside (it is "
+            f"not wrapped silently). For the same angle write {value % 360.0:g}"
+        )
+    return value
+
+
+StartDeg = Annotated[
+    float,
+    AfterValidator(_check_start),
+    Field(description="first specimen angle, degrees in [0, 360); values outside are refused, "
+                      "not wrapped"),
+]
+
+
+class _PlanBase(BaseModel):
+    model_config = FINITE
+
+    specimen: Text = Field(default="specimen", min_length=1, max_length=200)
+    pairs: list[PairSpec] | None = Field(
+        default=None, description="pairs to measure; null means every pair of the rig"
+    )
+    exposure: ExposureSettings = Field(default_factory=ExposureSettings)
+    faults: FaultPolicy = Field(default_factory=FaultPolicy)
+    backlash_deg: float = Field(
+        default=0.0,
+        ge=0,
+        le=90,
+        description="extra overshoot below an angle approached from above (0: rely on the "
+        "stage driver's own approach setting)",
+    )
+    stop_queue_on_failure: bool = False
+
+
+class UniformPlan(_PlanBase):
+    """n pairs x r uniformly spaced stage angles."""
+
+    kind: Literal["uniform"] = "uniform"
+    rotations: Count = Field(default=8, description="number of stage angles r")
+    start_deg: StartDeg = 0.0
+
+
+class AdaptivePlan(_PlanBase):
+    """Uniform start, then refinement where PCHIP mispredicts (MATH 7)."""
+
+    kind: Literal["adaptive"] = "adaptive"
+    initial_rotations: Count = Field(default=8,
+                                     description="r0 uniform angles of the first round")
+    threshold: float = Field(default=0.1, gt=0, description="relative error e (0.1 = 10 %)")
+    max_samples: Count | None = Field(
+        default=None, gt=0, description="budget of pair readings (pairs x angles); null = none"
+    )
+    min_step_deg: float | None = Field(
+        default=None, gt=0, description="finest angular step; null = the stage resolution"
+    )
+    max_rounds: Count = Field(default=6, ge=1, le=20)
+    start_deg: StartDeg = 0.0
+
+
+class CalibrationPlan(_PlanBase):
+    """A white reference of known albedo measured at a few angles."""
+
+    kind: Literal["calibration"] = "calibration"
+    reference_albedo: float = Field(gt=0, le=1, description="hemispherical albedo of the reference")
+    reference_name: Text = Field(default="white reference", min_length=1, max_length=200)
+    rotations: Count = Field(default=4, description="angles averaged to even out the reference")
+    start_deg: StartDeg = 0.0
+
+
+Plan = Annotated[UniformPlan | AdaptivePlan | CalibrationPlan, Field(discriminator="kind")]
+
+
+class _PlanHolder(BaseModel):
+    plan: Plan
+
+
+def parse_plan(data: object) -> UniformPlan | AdaptivePlan | CalibrationPlan:
+    """Validate a plan from JSON-like data (``dict`` or JSON ``str``); raises :class:`PlanError`."""
+    from pydantic import ValidationError
+
+    try:
+        if isinstance(data, str | bytes):
+            return _PlanHolder.model_validate_json(b'{"plan": ' + _as_bytes(data) + b"}").plan
+        return _PlanHolder.model_validate({"plan": data}).plan
+    except ValidationError as exc:
+        problems = "; ".join(
+            f"{'.'.join(str(p) for p in e['loc'][1:]) or 'plan'}: {e['msg']}" for e in exc.errors()
+        )
+        raise PlanError(f"invalid plan: {problems}") from None
+
+
+def _as_bytes(s: str | bytes) -> bytes:
+    return s.encode() if isinstance(s, str) else s
+
+
+AnyPlan = UniformPlan | AdaptivePlan | CalibrationPlan

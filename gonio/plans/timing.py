@@ -1,0 +1,134 @@
+"""How long moving the stage takes: trapezoidal move times along a route, and time bounds.
+
+The engine's own backlash overshoot and the stage driver's approach overshoot are both
+replayed, so an estimate counts every leg the hardware will travel.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+from gonio.plans.models import MAX_ROTATIONS, AdaptivePlan, AnyPlan
+from gonio.plans.route import order_for_travel
+from gonio.rigdescription import RigDescription
+
+
+def move_time(distance_deg: float, speed_dps: float, accel_dps2: float) -> float:
+    """Duration of a trapezoidal (or triangular) move, seconds.
+
+    Accelerate at ``accel_dps2`` to ``speed_dps``, cruise, decelerate; a short move that
+    never reaches full speed is a triangle: ``2 sqrt(d / a)``.
+    """
+    d = abs(distance_deg)
+    if d == 0:
+        return 0.0
+    d_ramp = speed_dps**2 / accel_dps2  # accelerate + decelerate distance
+    if d >= d_ramp:
+        return d / speed_dps + speed_dps / accel_dps2
+    return 2.0 * math.sqrt(d / accel_dps2)
+
+
+def _driver_waypoints(here: float, target: float, rig: RigDescription) -> list[float]:
+    """Where the stage driver goes to reach ``target`` from ``here`` (its approach side).
+
+    The same rule as ``gonio.drivers._backlash.approach_waypoints`` (drivers are not imported
+    here): a move arriving from the wrong side first overshoots by the driver's backlash.
+    """
+    delta = target - here
+    b = rig.approach_backlash_deg
+    if rig.approach == "none" or b <= 0 or abs(delta) < 1e-6:
+        return [target]
+    if rig.approach == "positive":
+        return [target] if delta > 0 else [target - b, target]
+    return [target] if delta < 0 else [target + b, target]
+
+
+def travel(positions: Sequence[float], start_deg: float, rig: RigDescription,
+           backlash_deg: float) -> tuple[float, int, float]:
+    """Moves of the engine visiting ``positions`` in order from ``start_deg``.
+
+    Per position the engine overshoots below it by ``backlash_deg`` when coming from above
+    (one more ``move_to``), and the driver adds its own approach overshoot inside each
+    ``move_to``; each ``move_to`` waits the stage's settle time once.
+
+    Returns
+    -------
+    motion_s : float
+        Trapezoidal move time of every leg, seconds.
+    moves : int
+        ``move_to`` calls (each followed by the stage's settle time).
+    end_deg : float
+        Where the stage ends, degrees.
+    """
+    motion = 0.0
+    moves = 0
+    here = float(start_deg)
+    for target in positions:
+        legs = []
+        if backlash_deg > 0 and target < here - 1e-6:
+            legs.append(max(rig.stage_min_deg, target - backlash_deg))
+        legs.append(target)
+        for leg in legs:
+            moves += 1
+            for wp in _driver_waypoints(here, leg, rig):
+                motion += move_time(wp - here, rig.speed_dps, rig.accel_dps2)
+                here = wp
+    return motion, moves, here
+
+
+def estimate_angles(
+    positions: Sequence[float], start_deg: float, n_lights: int,
+    plan: AnyPlan, rig: RigDescription, first_dark: bool,
+) -> tuple[float, float, float]:
+    """(motion, settle, exposure) seconds to visit ``positions`` from ``start_deg``."""
+    ex = plan.exposure
+    motion, moves, _ = travel(positions, start_deg, rig, plan.backlash_deg)
+    settle = moves * rig.settle_s + len(positions) * n_lights * ex.light_settle_s
+    per_exposure = ex.exposure_s * ex.averages
+    darks = len(positions) if ex.dark == "every_angle" else (1 if first_dark else 0)
+    exposure = (len(positions) * n_lights + darks) * per_exposure
+    return motion, settle, exposure
+
+
+def adaptive_bound(plan: AdaptivePlan, rig: RigDescription, n_pairs: int, n_lights: int,
+                   first_angles: Sequence[float], end_deg: float) -> tuple[int, float]:
+    """Most stage angles and seconds the refinement rounds after the first can add.
+
+    The worst case of MATH 7: every round plans the midpoint of every gap (each measured
+    angle's two neighbours), as long as half a gap is at least ``min_step_deg``, for
+    ``max_rounds - 1`` rounds, within the sample budget and :data:`MAX_ROTATIONS`. A subset
+    of those midpoints travels no further along the same increasing route (move time is
+    subadditive) and costs fewer settles and exposures, so the time is a bound too.
+
+    Returns
+    -------
+    (extra_angles, extra_seconds)
+    """
+    min_step = plan.min_step_deg or rig.resolution_deg
+    limit = MAX_ROTATIONS
+    if plan.max_samples is not None:
+        limit = min(limit, plan.max_samples // max(n_pairs, 1))
+    angles = sorted(a % 360.0 for a in first_angles)
+    here = end_deg
+    extra_angles = 0
+    extra_s = 0.0
+    ex = plan.exposure
+    for _round in range(plan.max_rounds - 1):
+        room = limit - len(angles)
+        if room <= 0:
+            break
+        gaps = [((angles[(j + 1) % len(angles)] - a) % 360.0 or 360.0, a)
+                for j, a in enumerate(angles)]
+        mids = [(a + g / 2.0) % 360.0 for g, a in gaps if g / 2.0 >= min_step]
+        if not mids:
+            break
+        route = order_for_travel(mids, here, rig, plan.backlash_deg)
+        motion, moves, here = travel(route, here, rig, plan.backlash_deg)
+        m = min(len(mids), room)
+        per_angle = n_lights * (ex.light_settle_s + ex.exposure_s * ex.averages) + (
+            ex.exposure_s * ex.averages if ex.dark == "every_angle" else 0.0)
+        extra_s += motion + moves * rig.settle_s + m * per_angle
+        extra_angles += m
+        angles = sorted(angles + mids)
+    return extra_angles, extra_s

@@ -1,0 +1,127 @@
+"""Checking a plan against a rig before anything moves: its pairs, lights and first angles.
+
+Everything that can be checked without hardware is checked here and raises
+:class:`~gonio.plans.models.PlanError` with what is wrong and what to do.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from gonio.hal import PairSpec
+from gonio.plans.models import MAX_ROTATIONS, AdaptivePlan, AnyPlan, PlanError
+from gonio.plans.route import stage_positions
+from gonio.rigdescription import RigDescription
+
+
+def plan_pairs(plan: AnyPlan, rig: RigDescription) -> list[PairSpec]:
+    """The pairs a plan measures, checked against the rig. Raises :class:`PlanError`."""
+    pairs = list(rig.pairs) if plan.pairs is None else list(plan.pairs)
+    if not pairs:
+        raise PlanError(
+            "the plan measures no pairs: the rig config defines no light/sensor pairs and the "
+            "plan lists none; add pairs to the rig config or to the plan"
+        )
+    known = set(rig.pairs)
+    seen: set[PairSpec] = set()
+    for p in pairs:
+        if p not in known:
+            raise PlanError(
+                f"pair {p.label()} is not one of the rig's pairs "
+                f"({', '.join(q.label() for q in rig.pairs) or 'none'})"
+            )
+        if p in seen:
+            raise PlanError(f"pair {p.label()} is listed twice in the plan; list each pair once")
+        seen.add(p)
+    return pairs
+
+
+def rotation_count(plan: AnyPlan) -> int:
+    """Stage angles of the plan's first round (``initial_rotations`` for adaptive plans)."""
+    if isinstance(plan, AdaptivePlan):
+        return plan.initial_rotations
+    return plan.rotations
+
+
+def uniform_angles(start_deg: float, r: int) -> list[float]:
+    """``r`` specimen angles ``start_deg + k 360 / r``, degrees in [0, 360)."""
+    return [float((start_deg + k * 360.0 / r) % 360.0) for k in range(r)]
+
+
+def initial_angles(plan: AnyPlan, rig: RigDescription) -> list[float]:
+    """Specimen angles (degrees in [0, 360)) of the plan's first round, validated."""
+    validate_plan(plan, rig)
+    return uniform_angles(plan.start_deg, rotation_count(plan))
+
+
+def validate_plan(plan: AnyPlan, rig: RigDescription) -> None:
+    """Check everything that can be checked without hardware; raise :class:`PlanError`.
+
+    Checks: pairs exist and are unique; at least one rotation; no two angles closer than the
+    stage resolution (duplicates); every angle reachable inside the travel limits; exposure
+    inside every used sensor's range; adaptive settings consistent.
+    """
+    pairs = plan_pairs(plan, rig)
+    r = rotation_count(plan)
+    name = "initial_rotations" if isinstance(plan, AdaptivePlan) else "rotations"
+    if r < 1:
+        raise PlanError(f"{name} is {r}; a scan needs at least one stage angle (e.g. {name}=8)")
+    if isinstance(plan, AdaptivePlan) and r < 3:
+        raise PlanError(
+            f"initial_rotations is {r}; adaptive refinement predicts each angle from its "
+            "neighbours and needs at least 3 (the paper uses 8)"
+        )
+    step = 360.0 / r
+    if step < rig.resolution_deg:
+        raise PlanError(
+            f"{r} rotations are {step:.4g} deg apart, finer than the stage resolution "
+            f"{rig.resolution_deg:g} deg, so several would land on the same position "
+            "(duplicate angles); use fewer rotations"
+        )
+    if r > MAX_ROTATIONS:
+        raise PlanError(
+            f"{name} is {r}; a job measures at most {MAX_ROTATIONS} stage angles (0.1 degree "
+            f"steps). The paper's scans use 8 to 72; use {MAX_ROTATIONS} or fewer"
+        )
+    angles = uniform_angles(plan.start_deg, r)
+    for a in angles:
+        if not stage_positions(a, rig, margin=0.0):
+            raise PlanError(
+                f"stage angle {a:g} deg (start_deg {plan.start_deg:g} + multiples of "
+                f"{step:g} deg) is outside the stage travel [{rig.stage_min_deg:g}, "
+                f"{rig.stage_max_deg:g}] deg; choose a start angle or rotation count whose "
+                "angles fit the travel, or widen the limits in the rig config"
+            )
+    ex = plan.exposure
+    for sname in sorted({p.sensor for p in pairs}):
+        try:
+            s = rig.sensor(sname)
+        except KeyError:
+            raise PlanError(f"the rig has no sensor named {sname!r}") from None
+        if not s.min_exposure_s <= ex.exposure_s <= s.max_exposure_s:
+            raise PlanError(
+                f"exposure {ex.exposure_s:g} s is outside sensor {sname!r}'s range "
+                f"[{s.min_exposure_s:g}, {s.max_exposure_s:g}] s; choose an exposure in range"
+            )
+    if isinstance(plan, AdaptivePlan):
+        min_step = plan.min_step_deg or rig.resolution_deg
+        if min_step < rig.resolution_deg:
+            raise PlanError(
+                f"min_step_deg {min_step:g} is finer than the stage resolution "
+                f"{rig.resolution_deg:g} deg; use at least the resolution"
+            )
+        if plan.max_samples is not None and plan.max_samples < len(pairs) * r:
+            raise PlanError(
+                f"max_samples {plan.max_samples} is smaller than the first round alone "
+                f"({len(pairs)} pairs x {r} angles = {len(pairs) * r}); raise the budget or "
+                "lower initial_rotations"
+            )
+
+
+def lights_in_order(pairs: Sequence[PairSpec]) -> list[str]:
+    """Lights of the pairs in first-appearance order (one exposure per light and angle)."""
+    out: list[str] = []
+    for p in pairs:
+        if p.light not in out:
+            out.append(p.light)
+    return out
