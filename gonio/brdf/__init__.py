@@ -36,7 +36,7 @@ import importlib
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from gonio.brdf.design.design import design_pairs
+    from gonio.brdf.design.pairs import design_pairs
     from gonio.brdf.design.presets import get_preset
     from gonio.brdf.reconstruction.basis import default_basis
     from gonio.brdf.reconstruction.reconstruct import reconstruct
@@ -46,7 +46,7 @@ if TYPE_CHECKING:
 # entry point -> the module it lives in
 _HOMES = {
     "default_basis": "gonio.brdf.reconstruction.basis",
-    "design_pairs": "gonio.brdf.design.design",
+    "design_pairs": "gonio.brdf.design.pairs",
     "get_preset": "gonio.brdf.design.presets",
     "log_rmse": "gonio.brdf.tables.metrics",
     "reconstruct": "gonio.brdf.reconstruction.reconstruct",

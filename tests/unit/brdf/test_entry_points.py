@@ -8,7 +8,7 @@ import sys
 import pytest
 
 import gonio.brdf
-from gonio.brdf.design.design import design_pairs
+from gonio.brdf.design.pairs import design_pairs
 from gonio.brdf.design.presets import get_preset
 from gonio.brdf.reconstruction.basis import default_basis
 from gonio.brdf.reconstruction.reconstruct import reconstruct
