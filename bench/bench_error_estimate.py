@@ -101,7 +101,7 @@ def grid_rule(n: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def designed(basis: Basis) -> PairsFn:
-    from gonio.brdf.design.feasibility import RigConstraints
+    from gonio.brdf.design.constraints import RigConstraints
     from gonio.brdf.design.pairs import design_pairs
 
     @functools.cache

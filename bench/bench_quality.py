@@ -49,7 +49,7 @@ RGL_DIR = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "rgl"
 
 def pairs_for(basis: Basis, n: int) -> tuple[np.ndarray, np.ndarray, str]:
     try:
-        from gonio.brdf.design.feasibility import RigConstraints
+        from gonio.brdf.design.constraints import RigConstraints
         from gonio.brdf.design.pairs import design_pairs
 
         # Quality depends on the cells only; device collisions are a rig question, so the

@@ -186,7 +186,7 @@ CHOOSE = {"k": 1}
 
 
 def design(b: Basis, n: int) -> tuple[np.ndarray, np.ndarray]:
-    from gonio.brdf.design.feasibility import RigConstraints
+    from gonio.brdf.design.constraints import RigConstraints
     from gonio.brdf.design.pairs import design_pairs
 
     k = CHOOSE["k"]

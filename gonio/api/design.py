@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 from pydantic import BaseModel, Field, model_validator
 
-from gonio.brdf.design.feasibility import RigConstraints, parse_exclusion
+from gonio.brdf.design.constraints import RigConstraints, parse_exclusion
 from gonio.brdf.design.pairs import BasisLike, PairDesign, design_pairs, geometry_design
 from gonio.brdf.design.presets import Preset
 from gonio.brdf.design.product import design_product_rig
@@ -204,7 +204,7 @@ def run_design(basis: BasisLike, request: DesignRequest) -> DesignResult:
 
     Raises
     ------
-    gonio.brdf.design.feasibility.FeasibilityError, gonio.brdf.design.errors.DesignError
+    gonio.brdf.design.errors.FeasibilityError, gonio.brdf.design.errors.DesignError
         Constraints that no design satisfies; the message says which to relax.
     """
     constraints = request.constraints()

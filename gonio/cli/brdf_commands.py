@@ -295,7 +295,7 @@ def _library_table(material: str) -> Any:
 def _demo_pairs(basis: Any, n: int) -> tuple[FloatArray, FloatArray, str]:
     """Optimized pairs when the design module works, else :func:`simple_pairs`."""
     try:
-        from gonio.brdf.design.feasibility import RigConstraints
+        from gonio.brdf.design.constraints import RigConstraints
         from gonio.brdf.design.pairs import design_pairs
 
         # A simulated rig has no mounts to collide, so devices may sit close together.

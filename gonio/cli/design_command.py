@@ -20,7 +20,7 @@ from typing import Any, TextIO
 
 import numpy as np
 
-from gonio.brdf.design.feasibility import RigConstraints, parse_exclusion
+from gonio.brdf.design.constraints import RigConstraints, parse_exclusion
 from gonio.brdf.design.pairs import BasisLike, PairDesign, design_pairs, geometry_design
 from gonio.brdf.design.presets import get_preset, preset_names
 from gonio.brdf.design.product import design_product_rig

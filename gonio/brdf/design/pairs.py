@@ -15,15 +15,15 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from gonio.brdf.design.conditioning import KappaMethod, condition_number
-from gonio.brdf.design.errors import DesignError
-from gonio.brdf.design.feasibility import (
-    MountPlanner,
+from gonio.brdf.design.constraints import (
     RigConstraints,
     candidate_rows,
     min_pairwise_distance,
-    place_pairs,
     rows_to_cells,
 )
+from gonio.brdf.design.errors import DesignError
+from gonio.brdf.design.mounting import MountPlanner
+from gonio.brdf.design.placement import place_pairs
 from gonio.brdf.design.search import SearchResult, optimize_rows
 from gonio.brdf.tables import geometry as geo
 
@@ -145,10 +145,10 @@ def design_pairs(
     """Optimize ``n`` independent light/sensor pairs and place them in the lab.
 
     Candidates are the basis's valid cells that ``constraints`` allow
-    (:func:`gonio.brdf.design.feasibility.candidate_rows`). The search is :func:`optimize_rows` with
-    a :class:`~gonio.brdf.design.feasibility.MountPlanner`, so every design it visits can be mounted
+    (:func:`gonio.brdf.design.constraints.candidate_rows`). The search is :func:`optimize_rows` with
+    a :class:`~gonio.brdf.design.mounting.MountPlanner`, so every design it visits can be mounted
     with ``min_device_distance_deg`` between any two devices and outside every exclusion. The
-    search's placement is then spread by :func:`gonio.brdf.design.feasibility.place_pairs` (it keeps
+    search's placement is then spread by :func:`gonio.brdf.design.placement.place_pairs` (it keeps
     the limit and widens the closest gap where it can).
 
     Raises

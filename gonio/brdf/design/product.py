@@ -9,13 +9,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from gonio.brdf.design.conditioning import block_width, kappa_from_extremes
-from gonio.brdf.design.errors import DesignError
-from gonio.brdf.design.feasibility import (
-    FeasibilityError,
-    RigConstraints,
-    angular_distance,
-    device_ok,
-)
+from gonio.brdf.design.constraints import RigConstraints, angular_distance, device_ok
+from gonio.brdf.design.errors import DesignError, FeasibilityError
 from gonio.brdf.design.pairs import BasisLike, PairDesign, geometry_design
 from gonio.brdf.tables import geometry as geo
 

@@ -3,7 +3,7 @@
 From a random start, drop one row and try every candidate cell of its ``h x h x h``
 neighbourhood, keeping the best if it lowers ``kappa`` (:mod:`gonio.brdf.design.conditioning`
 scores a whole neighbourhood at once). With a
-:class:`~gonio.brdf.design.feasibility.MountPlanner` every design the search visits can be
+:class:`~gonio.brdf.design.mounting.MountPlanner` every design the search visits can be
 mounted.
 
 Everything here works on plain arrays (``Q`` and flat row indices); the grid shape is a
@@ -25,8 +25,8 @@ from gonio.brdf.design.conditioning import (
     block_width,
     condition_number,
 )
-from gonio.brdf.design.errors import DesignError
-from gonio.brdf.design.feasibility import FeasibilityError, Mounting, MountPlanner
+from gonio.brdf.design.errors import DesignError, FeasibilityError
+from gonio.brdf.design.mounting import Mounting, MountPlanner
 from gonio.brdf.tables.geometry import SLICE_SHAPE
 
 FloatArray = NDArray[np.float64]
@@ -75,7 +75,7 @@ class SearchResult:
         Final ``kappa`` of every descent, in order.
     ph_lab : (n,) array, radians, or None
         Collision-free lab azimuth of each row (in the order of ``rows``) when the search
-        was given a :class:`~gonio.brdf.design.feasibility.MountPlanner`; None otherwise.
+        was given a :class:`~gonio.brdf.design.mounting.MountPlanner`; None otherwise.
     """
 
     rows: IntArray
@@ -132,7 +132,7 @@ def optimize_rows(
         Make the search collision-aware (standard grid only): every start is a random
         collision-free design, each row carries a lab azimuth, and a move is taken only when
         the new cell can be mounted beside the other pairs (one of which may turn to make
-        room, :meth:`~gonio.brdf.design.feasibility.MountPlanner.move`). When the best cell of a
+        room, :meth:`~gonio.brdf.design.mounting.MountPlanner.move`). When the best cell of a
         neighbourhood cannot be mounted, the next best improving one is tried. Every design
         the search visits, and so the one it returns, is mountable.
 
