@@ -33,17 +33,13 @@ from collections import defaultdict
 
 import numpy as np
 
-from gonio.brdf.design.design import (
-    PairDesign,
-    condition_numbers_fast,
-    condition_numbers_svd,
-    design_pairs,
-    design_product_rig,
-    geometry_design,
-    neighbourhood,
-)
-from gonio.brdf.design.feasibility import RigConstraints, candidate_rows, place_pairs, rows_to_cells
+from gonio.brdf.design.conditioning import condition_numbers_fast, condition_numbers_svd
+from gonio.brdf.design.constraints import RigConstraints, candidate_rows, rows_to_cells
+from gonio.brdf.design.pairs import PairDesign, design_pairs, geometry_design
+from gonio.brdf.design.placement import place_pairs
 from gonio.brdf.design.presets import get_preset, preset_names
+from gonio.brdf.design.product import design_product_rig
+from gonio.brdf.design.search import neighbourhood
 from gonio.brdf.reconstruction.basis import Basis, build_basis, default_basis
 
 # gonio's default rig limits: elevation up to 80 deg, light-sensor separation 10 deg and

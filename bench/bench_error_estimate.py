@@ -15,7 +15,7 @@ Protocol
   harder validation set (real materials the synthetic basis represents poorly).
 * Scans: ``n`` pairs in two layouts, the deterministic grid rule of ``gonio demo``
   (:func:`gonio.cli.brdf_commands.simple_pairs`: cells clustered at th <= 50, td <= 35 deg)
-  and the pairs optimised by :func:`gonio.brdf.design.design.design_pairs` (spread over the
+  and the pairs optimised by :func:`gonio.brdf.design.pairs.design_pairs` (spread over the
   domain); ``r`` uniform stage angles, 1 % relative noise (seed 0), closed form with
   eta = 40, lam = 0.1; every (layout, n, r) of ``--pairs`` x ``--rotations``. ``--no-design``
   keeps the grid rule only.
@@ -101,8 +101,8 @@ def grid_rule(n: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def designed(basis: Basis) -> PairsFn:
-    from gonio.brdf.design.design import design_pairs
-    from gonio.brdf.design.feasibility import RigConstraints
+    from gonio.brdf.design.constraints import RigConstraints
+    from gonio.brdf.design.pairs import design_pairs
 
     @functools.cache
     def pairs(n: int) -> tuple[np.ndarray, np.ndarray]:

@@ -13,7 +13,7 @@ Protocol
 * The six measured RGL materials in ``../shared/data/rgl`` (read with
   :func:`gonio.brdf.materials.rgl.read_rgl`, needs mitsuba) are evaluated with the same basis;
   skipped when the data or mitsuba are absent.
-* Pairs: ``n`` pairs from :func:`gonio.brdf.design.design.design_pairs` on the training basis when
+* Pairs: ``n`` pairs from :func:`gonio.brdf.design.pairs.design_pairs` on the training basis when
   the design module is available (one design per n, shared by all materials), else the demo's
   deterministic grid rule. Rotations: ``r`` uniform stage angles. Noise: 1 % relative, seed 0.
 * Reconstruction: closed form, eta = 40, lam = 0.1, the basis truncated to each K.
@@ -49,8 +49,8 @@ RGL_DIR = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "rgl"
 
 def pairs_for(basis: Basis, n: int) -> tuple[np.ndarray, np.ndarray, str]:
     try:
-        from gonio.brdf.design.design import design_pairs
-        from gonio.brdf.design.feasibility import RigConstraints
+        from gonio.brdf.design.constraints import RigConstraints
+        from gonio.brdf.design.pairs import design_pairs
 
         # Quality depends on the cells only; device collisions are a rig question, so the
         # mounting distance is not constrained here.

@@ -186,8 +186,8 @@ CHOOSE = {"k": 1}
 
 
 def design(b: Basis, n: int) -> tuple[np.ndarray, np.ndarray]:
-    from gonio.brdf.design.design import design_pairs
-    from gonio.brdf.design.feasibility import RigConstraints
+    from gonio.brdf.design.constraints import RigConstraints
+    from gonio.brdf.design.pairs import design_pairs
 
     k = CHOOSE["k"]
     path = CACHE / f"design-{basis_id(b)}-n{n}{f'-choose{k}' if k > 1 else ''}.npz"

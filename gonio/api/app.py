@@ -9,8 +9,8 @@ the lab page. The service's typed errors become HTTP statuses in one place here:
 :class:`gonio.service.Conflict`                   409
 :class:`gonio.jobstates.IllegalTransition`        409
 :class:`gonio.plans.models.PlanError`             422
-:class:`gonio.brdf.design.design.DesignError`            422
-:class:`gonio.brdf.design.feasibility.FeasibilityError`  422
+:class:`gonio.brdf.design.errors.DesignError`      422
+:class:`gonio.brdf.design.errors.FeasibilityError` 422
 ================================================  ======
 """
 
@@ -36,8 +36,7 @@ from gonio.api import routes_design, routes_jobs, routes_results, routes_rig, ro
 from gonio.api.errors import document_errors
 from gonio.api.events import HEARTBEAT_S, StreamCloser
 from gonio.api.settings import ApiSettings, install
-from gonio.brdf.design.design import DesignError
-from gonio.brdf.design.feasibility import FeasibilityError
+from gonio.brdf.design.errors import DesignError, FeasibilityError
 from gonio.brdf.design.presets import UnknownPresetError
 from gonio.calibration import CalibrationError
 from gonio.jobstates import IllegalTransition

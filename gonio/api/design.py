@@ -2,7 +2,7 @@
 
 A design request asks for ``pairs`` independent light/sensor pairs, or a product rig of
 ``lights`` x ``sensors``, under the rig's mounting constraints. The computation is the same as
-``gonio design`` (:mod:`gonio.brdf.design.design`, V&F 2016 Sec. 3.3): minimise the condition
+``gonio design`` (:mod:`gonio.brdf.design`, V&F 2016 Sec. 3.3): minimise the condition
 number of the basis rows the pairs sample. The result carries the cells, the lab placement of every
 device, the condition number, the roughness bound of MATH 10 at ``rotations`` uniform stage
 angles, and the rig-config fragment (TOML) to paste into a rig config.
@@ -19,15 +19,10 @@ from typing import Any
 import numpy as np
 from pydantic import BaseModel, Field, model_validator
 
-from gonio.brdf.design.design import (
-    BasisLike,
-    PairDesign,
-    design_pairs,
-    design_product_rig,
-    geometry_design,
-)
-from gonio.brdf.design.feasibility import RigConstraints, parse_exclusion
+from gonio.brdf.design.constraints import RigConstraints, parse_exclusion
+from gonio.brdf.design.pairs import BasisLike, PairDesign, design_pairs, geometry_design
 from gonio.brdf.design.presets import Preset
+from gonio.brdf.design.product import design_product_rig
 from gonio.brdf.design.roughness import roughness_bound
 from gonio.fields import FINITE, Count, Text
 
@@ -170,7 +165,7 @@ def rig_fragment(design: PairDesign) -> dict[str, Any]:
 
 
 def describe(design: PairDesign, rotations: int) -> DesignResult:
-    """The API view of a :class:`~gonio.brdf.design.design.PairDesign`."""
+    """The API view of a :class:`~gonio.brdf.design.pairs.PairDesign`."""
     from gonio.rigdesign import dump_fragment
 
     angles = np.arange(rotations) * (2.0 * np.pi / rotations)
@@ -209,7 +204,7 @@ def run_design(basis: BasisLike, request: DesignRequest) -> DesignResult:
 
     Raises
     ------
-    gonio.brdf.design.feasibility.FeasibilityError, gonio.brdf.design.design.DesignError
+    gonio.brdf.design.errors.FeasibilityError, gonio.brdf.design.errors.DesignError
         Constraints that no design satisfies; the message says which to relax.
     """
     constraints = request.constraints()

@@ -295,8 +295,8 @@ def _library_table(material: str) -> Any:
 def _demo_pairs(basis: Any, n: int) -> tuple[FloatArray, FloatArray, str]:
     """Optimized pairs when the design module works, else :func:`simple_pairs`."""
     try:
-        from gonio.brdf.design.design import design_pairs
-        from gonio.brdf.design.feasibility import RigConstraints
+        from gonio.brdf.design.constraints import RigConstraints
+        from gonio.brdf.design.pairs import design_pairs
 
         # A simulated rig has no mounts to collide, so devices may sit close together.
         rig = RigConstraints(min_device_distance_deg=0.0)

@@ -20,15 +20,10 @@ from typing import Any, TextIO
 
 import numpy as np
 
-from gonio.brdf.design.design import (
-    BasisLike,
-    PairDesign,
-    design_pairs,
-    design_product_rig,
-    geometry_design,
-)
-from gonio.brdf.design.feasibility import RigConstraints, parse_exclusion
+from gonio.brdf.design.constraints import RigConstraints, parse_exclusion
+from gonio.brdf.design.pairs import BasisLike, PairDesign, design_pairs, geometry_design
 from gonio.brdf.design.presets import get_preset, preset_names
+from gonio.brdf.design.product import design_product_rig
 from gonio.brdf.design.roughness import RoughnessBound, roughness_bound
 from gonio.cli import UsageError
 

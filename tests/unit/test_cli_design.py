@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gonio.brdf.design.design import condition_number
-from gonio.brdf.design.feasibility import min_pairwise_distance
+from gonio.brdf.design.conditioning import condition_number
+from gonio.brdf.design.constraints import min_pairwise_distance
 from gonio.brdf.reconstruction.basis import Basis
 from gonio.brdf.tables import geometry as geo
 from gonio.cli import main

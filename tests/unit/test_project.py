@@ -6,7 +6,9 @@ import os
 import re
 import subprocess
 import sys
+import tomllib
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -81,3 +83,44 @@ def test_drivers_and_sim_map_into_the_gonio_namespace() -> None:
 
     assert Path(gonio.drivers.__file__).parent.name == "drivers"
     assert Path(gonio.sim.__file__).parent.name == "sim"
+
+
+def _setuptools_config() -> dict[str, Any]:
+    return dict(tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"])
+
+
+def _source_packages() -> dict[str, Path]:
+    """Installed package name -> source folder, found by walking the tree (as installed)."""
+    roots = {"gonio": ROOT / "gonio", "gonio.drivers": ROOT / "drivers", "gonio.sim": ROOT / "sim"}
+    found: dict[str, Path] = {}
+    for name, root in roots.items():
+        for init in root.rglob("__init__.py"):
+            rel = init.parent.relative_to(root).parts
+            found[".".join((name, *rel))] = init.parent
+    return found
+
+
+def test_pyproject_lists_every_package() -> None:
+    # The package list is explicit (package-dir maps drivers/ and sim/ into gonio, which
+    # setuptools' find cannot express); a subpackage missing from it imports from a checkout
+    # but is absent from a wheel.
+    listed = set(_setuptools_config()["packages"])
+    assert listed == set(_source_packages()), "pyproject [tool.setuptools] packages is stale"
+
+
+def test_pyproject_ships_every_data_file() -> None:
+    # Every non-Python file inside a package folder must match that package's package-data,
+    # or a non-editable install leaves it behind (the measured materials, the page, ...).
+    package_data: dict[str, list[str]] = _setuptools_config().get("package-data", {})
+    packages = _source_packages()
+    for name, folder in packages.items():
+        subpackages = [f for n, f in packages.items() if n != name and f.is_relative_to(folder)]
+        for path in folder.rglob("*"):
+            if (not path.is_file() or path.suffix in {".py", ".pyc"}
+                    or "__pycache__" in path.parts
+                    or any(path.is_relative_to(s) for s in subpackages)):
+                continue
+            rel = path.relative_to(folder)
+            assert any(rel.match(pattern) for pattern in package_data.get(name, [])), (
+                f"{path.relative_to(ROOT)} is not in package-data of {name}"
+            )

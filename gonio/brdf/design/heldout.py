@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from gonio.brdf.design.design import PairDesign
+from gonio.brdf.design.pairs import PairDesign
 from gonio.brdf.reconstruction.basis import (
     _FOLD_EXTRA,
     DEFAULT_COMPONENTS,
@@ -128,7 +128,7 @@ def choose_design(
 
     Parameters
     ----------
-    make : callable ``seed -> PairDesign`` (e.g. :func:`gonio.brdf.design.design.design_pairs` with
+    make : callable ``seed -> PairDesign`` (e.g. :func:`gonio.brdf.design.pairs.design_pairs` with
         its other arguments bound)
     seeds : the candidates' seeds
     rotations : stage angles of the simulated scans

@@ -7,17 +7,16 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from gonio.brdf.design.design import (
-    DesignError,
-    PairDesign,
+from gonio.brdf.design.conditioning import (
     block_width,
     condition_number,
     condition_numbers_fast,
     condition_numbers_svd,
-    neighbourhood,
-    optimize_rows,
     secular_extremes,
 )
+from gonio.brdf.design.errors import DesignError
+from gonio.brdf.design.pairs import PairDesign
+from gonio.brdf.design.search import neighbourhood, optimize_rows
 from gonio.brdf.reconstruction.basis import Basis
 
 SMALL_GRID = (6, 5, 8)
@@ -186,8 +185,10 @@ def _grid_basis(K: int = 6) -> Basis:
 
 
 def test_product_rig_respects_constraints_and_reports_its_kappa() -> None:
-    from gonio.brdf.design.design import design_product_rig, geometry_design
-    from gonio.brdf.design.feasibility import ConeExclusion, RigConstraints, check_devices
+    from gonio.brdf.design.constraints import ConeExclusion, RigConstraints
+    from gonio.brdf.design.pairs import geometry_design
+    from gonio.brdf.design.placement import check_devices
+    from gonio.brdf.design.product import design_product_rig
     from gonio.brdf.tables import geometry as geo
 
     basis = _grid_basis()
@@ -202,7 +203,7 @@ def test_product_rig_respects_constraints_and_reports_its_kappa() -> None:
     assert again.kappa == pytest.approx(d.kappa, rel=1e-9)
     # Better than where it started: random feasible rigs of the same size, on average.
     rng = np.random.default_rng(5)
-    from gonio.brdf.design.design import _random_rig, product_kappa
+    from gonio.brdf.design.product import _random_rig, product_kappa
 
     grid_t, grid_p = np.meshgrid(np.deg2rad(np.arange(15, 71, 5)), np.deg2rad(np.arange(0, 360, 5)))
     gdirs = geo.spherical_to_direction(grid_t.ravel(), grid_p.ravel())
@@ -214,8 +215,9 @@ def test_product_rig_respects_constraints_and_reports_its_kappa() -> None:
 
 
 def test_product_rig_errors() -> None:
-    from gonio.brdf.design.design import design_product_rig
-    from gonio.brdf.design.feasibility import FeasibilityError, RigConstraints
+    from gonio.brdf.design.constraints import RigConstraints
+    from gonio.brdf.design.errors import FeasibilityError
+    from gonio.brdf.design.product import design_product_rig
 
     basis = _grid_basis()
     with pytest.raises(DesignError, match="at least one light and one sensor"):
@@ -226,8 +228,8 @@ def test_product_rig_errors() -> None:
 
 
 def test_design_pairs_places_the_optimized_cells() -> None:
-    from gonio.brdf.design.design import design_pairs
-    from gonio.brdf.design.feasibility import RigConstraints
+    from gonio.brdf.design.constraints import RigConstraints
+    from gonio.brdf.design.pairs import design_pairs
 
     basis = _grid_basis()
     d = design_pairs(basis, 4, RigConstraints(), h=3, starts=1, descents=1, seed=2)
@@ -270,8 +272,8 @@ def _devices_of(design: PairDesign) -> np.ndarray:
 @given(seed=st.integers(0, 10_000), n=st.integers(2, 16),
        limit=st.sampled_from([8.0, 12.0, 18.0]))
 def test_designs_under_a_device_distance_always_mount(seed: int, n: int, limit: float) -> None:
-    from gonio.brdf.design.design import design_pairs
-    from gonio.brdf.design.feasibility import RigConstraints, min_pairwise_distance
+    from gonio.brdf.design.constraints import RigConstraints, min_pairwise_distance
+    from gonio.brdf.design.pairs import design_pairs
     from gonio.brdf.tables import geometry as geo
 
     basis = _grid_basis(K=8)
@@ -301,13 +303,13 @@ def _rows_of(cells: np.ndarray) -> np.ndarray:
 
 
 def test_collision_aware_search_returns_its_placement() -> None:
-    from gonio.brdf.design.feasibility import (
-        MountPlanner,
+    from gonio.brdf.design.constraints import (
         RigConstraints,
         candidate_rows,
         min_pairwise_distance,
         rows_to_cells,
     )
+    from gonio.brdf.design.mounting import MountPlanner
     from gonio.brdf.tables import geometry as geo
 
     basis = _grid_basis(K=8)
@@ -324,8 +326,9 @@ def test_collision_aware_search_returns_its_placement() -> None:
 
 
 def test_design_that_cannot_be_mounted_is_a_clear_error() -> None:
-    from gonio.brdf.design.design import design_pairs
-    from gonio.brdf.design.feasibility import FeasibilityError, RigConstraints
+    from gonio.brdf.design.constraints import RigConstraints
+    from gonio.brdf.design.errors import FeasibilityError
+    from gonio.brdf.design.pairs import design_pairs
 
     crowded = RigConstraints(max_elevation_deg=20.0, min_device_distance_deg=15.0)
     with pytest.raises(FeasibilityError, match=r"cannot mount 12 pairs.*--min-device-distance"):
@@ -346,15 +349,15 @@ def library_basis() -> Basis:
 
 
 def test_twenty_pairs_mount_with_default_limits_on_a_library_basis(library_basis: Basis) -> None:
-    from gonio.brdf.design.design import design_pairs
-    from gonio.brdf.design.feasibility import (
-        FeasibilityError,
+    from gonio.brdf.design.constraints import (
         RigConstraints,
         candidate_rows,
         min_pairwise_distance,
-        place_pairs,
         rows_to_cells,
     )
+    from gonio.brdf.design.errors import FeasibilityError
+    from gonio.brdf.design.pairs import design_pairs
+    from gonio.brdf.design.placement import place_pairs
 
     c = RigConstraints()  # 80 deg elevation, 10 deg separation, 10 deg between devices
     # The failure this guards against: a cells-only search crowds pairs near the zenith, so

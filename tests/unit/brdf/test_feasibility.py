@@ -7,22 +7,20 @@ import math
 import numpy as np
 import pytest
 
-from gonio.brdf.design.feasibility import (
+from gonio.brdf.design.constraints import (
     BoxExclusion,
     ConeExclusion,
-    FeasibilityError,
-    Mounting,
-    MountPlanner,
     RigConstraints,
     angular_distance,
     candidate_rows,
-    check_devices,
     feasible_mask,
     min_pairwise_distance,
     parse_exclusion,
-    place_pairs,
     rows_to_cells,
 )
+from gonio.brdf.design.errors import FeasibilityError
+from gonio.brdf.design.mounting import Mounting, MountPlanner
+from gonio.brdf.design.placement import check_devices, place_pairs
 from gonio.brdf.tables import geometry as geo
 
 
