@@ -405,9 +405,8 @@ class GonioService:
         """
         row = self._row(job_id)
         eta = eta_max = None
-        eng = self.worker.engine
-        if eng is not None and eng.job_id == job_id:
-            p = eng.progress
+        p = self.worker.progress(job_id)
+        if p is not None:
             # Counted down while measuring; frozen while paused or suspended.
             eta = p.eta_now() if row.state is JobState.RUNNING else p.eta_s
             if p.eta_max_s is not None:
@@ -438,15 +437,16 @@ class GonioService:
         """Pause at the next checkpoint (or now: the angle in progress is repeated)."""
         row = self._row(job_id)
         check_action("pause", row.state, job_id)
-        self._engine_for(job_id).request_pause(immediate)
+        if not self.worker.pause_measurement(job_id, immediate):
+            raise Conflict(
+                f"job {job_id} is not being measured right now; it cannot be paused"
+            )
         return JobInfo.from_row(self._row(job_id))
 
     def resume(self, job_id: int) -> JobInfo:
         row = self._row(job_id)
         check_action("resume", row.state, job_id)
-        eng = self.worker.engine
-        if eng is not None and eng.job_id == job_id:
-            eng.request_resume()
+        self.worker.resume_measurement(job_id)
         return JobInfo.from_row(self._row(job_id))
 
     def abort(self, job_id: int) -> JobInfo:
@@ -457,12 +457,9 @@ class GonioService:
         elif row.state is JobState.RECONSTRUCTING:
             if not self.worker.abort_reconstruction(job_id):
                 self.store.set_state(job_id, JobState.ABORTED, reason="aborted by request")
-        else:
-            eng = self.worker.engine
-            if eng is not None and eng.job_id == job_id:
-                eng.request_abort()
-            else:  # active in the store but not running here (e.g. paused before a restart)
-                self.store.set_state(job_id, JobState.ABORTED, reason="aborted by request")
+        elif not self.worker.abort_measurement(job_id):
+            # Active in the store but not running here (e.g. paused before a restart).
+            self.store.set_state(job_id, JobState.ABORTED, reason="aborted by request")
         return JobInfo.from_row(self._row(job_id))
 
     def cancel(self, job_id: int) -> JobInfo:
@@ -489,9 +486,7 @@ class GonioService:
 
     def halt(self) -> None:
         """Emergency halt: stop the running job at once, no cleanup; hold the queue."""
-        eng = self.worker.engine
-        if eng is not None:
-            eng.request_halt()
+        self.worker.halt_measurement()
         self.worker.hold("emergency halt")
 
     def release_queue(self) -> None:
@@ -500,11 +495,11 @@ class GonioService:
 
     def status(self) -> ServiceStatus:
         """What the worker is doing right now (for /metrics and status pages)."""
-        eng = self.worker.engine
+        job_id = self.worker.measuring()
+        p = self.worker.progress(job_id) if job_id is not None else None
         running = None
-        if eng is not None:
-            p = eng.progress
-            running = RunningJob(id=eng.job_id, done_angles=p.done, total_angles=p.total,
+        if job_id is not None and p is not None:
+            running = RunningJob(id=job_id, done_angles=p.done, total_angles=p.total,
                                  eta_s=p.eta_s)
         held = self.worker.held if self.worker.held is not None else self.worker.gate()
         return ServiceStatus(current_job=self.worker.current_job, queue_held=held,
@@ -513,14 +508,6 @@ class GonioService:
     def record_event(self, type_: str, data: dict[str, Any], job_id: int | None = None) -> Event:
         """Log an event of the daemon (e.g. the maintenance lock) for every subscriber."""
         return Event.from_row(self.store.append_event(job_id, type_, data))
-
-    def _engine_for(self, job_id: int) -> Any:
-        eng = self.worker.engine
-        if eng is None or eng.job_id != job_id:
-            raise Conflict(
-                f"job {job_id} is not being measured right now; it cannot be paused"
-            )
-        return eng
 
     def dry_run(self, plan: AnyPlan | dict[str, Any]) -> DryRun:
         """Check and time a plan from the stage's last known position (else 0 deg, said so)."""

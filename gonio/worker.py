@@ -34,7 +34,7 @@ from gonio.calibration import (
     from_reference,
     save_calibration,
 )
-from gonio.engine import ScanEngine
+from gonio.engine import Progress, ScanEngine
 from gonio.jobstates import JobState
 from gonio.plans.models import AnyPlan, CalibrationPlan, PlanError, parse_plan
 from gonio.plans.validation import plan_pairs, validate_plan
@@ -96,7 +96,7 @@ class Worker:
         self.on_job_start: Callable[[JobRow], None] | None = None
         self.provenance = provenance or {}
         self.fit_exports = fit_exports
-        self.engine: ScanEngine | None = None
+        self._engine: ScanEngine | None = None  # the job being measured; see "measurement"
         self.current_job: int | None = None
         # The queue hold survives restarts: it is read back from the store.
         stored = store.hold(QUEUE_HOLD)
@@ -151,6 +151,52 @@ class Worker:
             return True
         return False
 
+    # ------------------------------------------------------------------ measurement
+    # The one way into the job being measured (the service never holds the engine). Callable
+    # from any thread: the engine passes the requests to its own loop.
+    def measuring(self) -> int | None:
+        """Id of the job whose angles are being measured now, or None."""
+        eng = self._engine
+        return eng.job_id if eng is not None else None
+
+    def progress(self, job_id: int | None = None) -> Progress | None:
+        """Progress of the measurement in hand (of ``job_id`` only, when given), or None."""
+        eng = self._engine
+        if eng is None or (job_id is not None and eng.job_id != job_id):
+            return None
+        return eng.progress
+
+    def pause_measurement(self, job_id: int, immediate: bool = False) -> bool:
+        """Pause ``job_id`` at its next checkpoint (or now); False if it is not measuring."""
+        eng = self._engine_of(job_id)
+        if eng is not None:
+            eng.request_pause(immediate)
+        return eng is not None
+
+    def resume_measurement(self, job_id: int) -> bool:
+        """Resume ``job_id`` after a pause; False if it is not the job in hand."""
+        eng = self._engine_of(job_id)
+        if eng is not None:
+            eng.request_resume()
+        return eng is not None
+
+    def abort_measurement(self, job_id: int) -> bool:
+        """Abort ``job_id`` (lights off, stage stopped); False if it is not measuring here."""
+        eng = self._engine_of(job_id)
+        if eng is not None:
+            eng.request_abort()
+        return eng is not None
+
+    def halt_measurement(self) -> None:
+        """Emergency halt of whatever is measuring: stop at once, send nothing more."""
+        eng = self._engine
+        if eng is not None:
+            eng.request_halt()
+
+    def _engine_of(self, job_id: int) -> ScanEngine | None:
+        eng = self._engine
+        return eng if eng is not None and eng.job_id == job_id else None
+
     def next_job(self) -> JobRow | None:
         if self.gate() is not None:
             return None  # not even a resumed job: someone is working on the rig
@@ -193,7 +239,7 @@ class Worker:
         finally:
             self.current_job = None
             self._set_activity(None)
-            self.engine = None
+            self._engine = None
             self._recon_task = None
             self._abort_recon = False
 
@@ -212,9 +258,9 @@ class Worker:
                 # Before the first reading of a new or resumed job: e.g. a simulated rig puts
                 # the white reference or the job's specimen on the stage.
                 self.on_job_start(job)
-            self.engine = ScanEngine(rig, self.store, job.id, plan, self.desc)
-            final = await self.engine.run()
-            self.engine = None
+            self._engine = ScanEngine(rig, self.store, job.id, plan, self.desc)
+            final = await self._engine.run()
+            self._engine = None
             if final is not JobState.RUNNING:
                 if final is JobState.FAILED and plan.stop_queue_on_failure:
                     self.hold(f"job {job.id} failed and asked to stop the queue")
