@@ -37,7 +37,9 @@ from __future__ import annotations
 import json
 import logging
 import os
+import threading
 import time
+from collections import OrderedDict
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -277,3 +279,36 @@ def read_result(path: str | os.PathLike[str]) -> ResultFile:
         factored, principled = _read_fits(f)
     return ResultFile(attrs, readings, samples, table, rel, est, settings, metrics, provenance,
                       factored, principled)
+
+
+class ResultCache:
+    """The last few result files read whole (samples, table, provenance), thread-safe.
+
+    The one place result files are read for serving (previews, slices, plots): a finished
+    result never changes, so a file is read once while its modification time stays the same.
+
+    Parameters
+    ----------
+    size : int
+        Files kept (a reconstructed table is about 5 MB).
+    """
+
+    def __init__(self, size: int = 3) -> None:
+        self.size = size
+        self._lock = threading.Lock()
+        self._items: OrderedDict[tuple[Path, int], ResultFile] = OrderedDict()
+
+    def get(self, path: Path) -> ResultFile:
+        """The result file at ``path``; raises :class:`ResultFileError` like :func:`read_result`
+        (missing or unreadable)."""
+        key = (path, path.stat().st_mtime_ns if path.is_file() else 0)
+        with self._lock:
+            if key in self._items:
+                self._items.move_to_end(key)
+                return self._items[key]
+        res = read_result(path)
+        with self._lock:
+            self._items[key] = res
+            while len(self._items) > self.size:
+                self._items.popitem(last=False)
+        return res

@@ -31,12 +31,15 @@ import os
 import tomllib
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import TYPE_CHECKING, Annotated, Any, Literal
 
 import tomli_w
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from gonio.config import ConfigError, parse_rig_config
+
+if TYPE_CHECKING:
+    from gonio.brdf.design.pairs import PairDesign
 
 __all__ = [
     "DesignDevice",
@@ -162,6 +165,32 @@ def load_fragment(path: str | os.PathLike[str]) -> DesignFragment:
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{p}: not valid TOML: {exc}") from None
     return parse_fragment(data, p.name)
+
+
+def design_fragment(design: PairDesign) -> dict[str, Any]:
+    """Design fragment of a :class:`~gonio.brdf.design.pairs.PairDesign` (``gonio design -o``, the
+    design API): ``lights``, ``sensors`` (name, theta_deg, phi_deg) and ``pairs``.
+
+    Independent pairs get one light and one sensor each (``L1``/``S1`` ...) and an explicit
+    ``[[pairs]]`` list; a product rig uses ``pairs = "all"``.
+    """
+    def devices(prefix: str, deg: Any) -> list[dict[str, Any]]:
+        return [
+            {"name": f"{prefix}{k + 1}", "theta_deg": round(float(t), 4),
+             "phi_deg": round(float(p) % 360.0, 4)}
+            for k, (t, p) in enumerate(deg)
+        ]
+
+    out: dict[str, Any] = {}
+    if design.name == "product":
+        out["pairs"] = "all"
+    else:
+        out["pairs"] = [
+            {"light": f"L{a + 1}", "sensor": f"S{b + 1}"} for a, b in design.pairs.tolist()
+        ]
+    out["lights"] = devices("L", design.lights_deg)
+    out["sensors"] = devices("S", design.sensors_deg)
+    return out
 
 
 def dump_fragment(fragment: dict[str, Any], header: str = "") -> str:

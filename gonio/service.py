@@ -21,7 +21,7 @@ import logging
 import threading
 from collections.abc import AsyncIterator, Callable, Coroutine
 from pathlib import Path
-from typing import Any, Literal, TypeVar
+from typing import TYPE_CHECKING, Any, Literal, TypeVar
 
 from pydantic import BaseModel, Field
 
@@ -37,6 +37,10 @@ from gonio.rigdescription import RigDescription
 from gonio.store import EventRow, JobRow, JobStore, ReadingRow
 from gonio.store import NotFound as StoreNotFound
 from gonio.worker import BasisProvider, Worker, default_basis_provider
+
+if TYPE_CHECKING:  # the design numerics load on the first design, not with the service
+    from gonio.results import ResultCache, ResultFile
+    from gonio.sampling_design import DesignRequest, DesignResult
 
 log = logging.getLogger("gonio.service")
 
@@ -213,6 +217,8 @@ class GonioService:
         ``[calibration]`` factors are used until a calibration job replaces them)
     basis_provider : callable returning the reconstruction basis (default: ``default_basis``)
     data_dir : folder for result files and the latest calibration
+    calibration : applied to every scan instead of the one in effect (``gonio scan
+        --calibration``); default: :meth:`calibration`'s rule
     """
 
     def __init__(
@@ -222,8 +228,10 @@ class GonioService:
         rig_config: Any = None,
         basis_provider: BasisProvider | None = None,
         data_dir: str | Path = "gonio-data",
+        calibration: Calibration | None = None,
     ):
         self.store = store
+        self._calibration = calibration
         self._rig: hal.Rig = rig if isinstance(rig, hal.Rig) else rig()
         self.rig_config = rig_config
         self.data_dir = Path(data_dir)
@@ -241,9 +249,13 @@ class GonioService:
         self._preview_lock = threading.Lock()
         self._previews: dict[tuple[str, int], bytes] = {}
         self._renders: dict[tuple[Any, ...], bytes] = {}
+        # Every read of a result file for serving goes through one cache (made on first use:
+        # HDF5 loads with it).
+        self._result_cache: ResultCache | None = None
         self.stage_deg: float | None = None
         """Last known stage position, degrees (None until a job or a manual move reports it)."""
         self._basis_lock = threading.Lock()
+        self._design_lock = threading.Lock()  # one sampling design at a time (self.design)
         self._basis: Any = None
         # OS locks this service owns for its life (data directory, rig endpoints: see
         # gonio.daemon.build_app); released by stop().
@@ -365,9 +377,94 @@ class GonioService:
                 self._basis = self.worker.basis_provider()
             return self._basis
 
+    # ------------------------------------------------------------------ sampling design
+    def design(self, request: DesignRequest) -> DesignResult:
+        """Optimise the geometry ``request`` asks for against :meth:`design_basis`.
+
+        Blocking for up to the request's time limit (call it from a thread in async code).
+        One design at a time: a search uses a whole CPU core, and a second one would halve
+        the first's descents.
+
+        Raises
+        ------
+        Conflict
+            Another design is running.
+        gonio.brdf.design.errors.FeasibilityError, gonio.brdf.design.errors.DesignError
+            Constraints no design satisfies; the message says which to relax.
+        """
+        from gonio.sampling_design import run_design
+
+        if not self._design_lock.acquire(blocking=False):
+            raise Conflict("another design is running on this daemon; try again when it has "
+                           "finished (at most its time limit)")
+        try:
+            return run_design(self.design_basis(), request)
+        finally:
+            self._design_lock.release()
+
+    def evaluate_preset(self, name: str, rotations: int) -> DesignResult:
+        """An industrial geometry (V&F Table 1) evaluated like an optimised design (blocking:
+        the first call may load the basis). Raises ``UnknownPresetError`` naming the known
+        presets."""
+        from gonio.brdf.design.presets import get_preset
+        from gonio.sampling_design import evaluate_preset
+
+        preset = get_preset(name)
+        return evaluate_preset(self.design_basis(), preset, rotations)
+
     def calibration(self) -> Calibration:
-        """The calibration applied to scans: the latest calibration job, else the rig config."""
+        """The calibration applied to scans: the latest calibration job, else the rig config
+        (or the one given to the constructor, which overrides both)."""
+        if self._calibration is not None:
+            return self._calibration
         return calibration_in_effect(self.data_dir, self.rig_config)
+
+    @property
+    def on_job_start(self) -> Callable[[JobRow], None] | None:
+        """Called before a job's first reading, new or resumed (e.g. a simulated rig puts the
+        white reference or the job's specimen on the stage)."""
+        return self.worker.on_job_start
+
+    @on_job_start.setter
+    def on_job_start(self, fn: Callable[[JobRow], None] | None) -> None:
+        self.worker.on_job_start = fn
+
+    @property
+    def specimen_truth(self) -> Callable[[], dict[str, Any] | None] | None:
+        """Simulated rigs: the recipe of the material on the stage, stored with each
+        reconstruction (``provenance/true_material``) so renderings can show the truth."""
+        return self.worker.specimen_truth
+
+    @specimen_truth.setter
+    def specimen_truth(self, fn: Callable[[], dict[str, Any] | None] | None) -> None:
+        self.worker.specimen_truth = fn
+
+    # ------------------------------------------------------------------ foreground
+    # ``gonio scan`` drives one job to its end in its own process, through this service but
+    # without the queue worker (:meth:`start` is not called).
+    def unfinished_job(self, plan: AnyPlan) -> JobInfo | None:
+        """An unfinished job with exactly ``plan`` on this rig (a killed foreground scan), to
+        resume from its checkpoint rather than start again; None if there is none.
+
+        Every job left active keeps its state (a ``recovered`` event each): a foreground run
+        decides only about its own job; the daemon judges the others at its start.
+        """
+        self.store.reconcile(lambda job: None)
+        want, rig = plan.model_dump(mode="json"), self.desc.model_dump(mode="json")
+        same = [j for j in self.store.active_jobs() if j.plan == want and j.rig == rig]
+        return JobInfo.from_row(same[0]) if same else None
+
+    async def run_in_foreground(self, job_id: int) -> JobState:
+        """Measure, reconstruct and write job ``job_id`` now, on this loop; its final state.
+
+        Raises
+        ------
+        Conflict
+            The queue worker runs (:meth:`start`): submit the job instead.
+        """
+        if self._task is not None:
+            raise Conflict("this service's worker runs the queue; submit the job and let it run")
+        return await self.worker.run_job(self._row(job_id))
 
     # ------------------------------------------------------------------ jobs
     def submit(self, request: JobRequest | dict[str, Any]) -> JobInfo:
@@ -599,6 +696,44 @@ class GonioService:
         out["headline_error"] = headline_error(out)
         return out
 
+    def result(self, job_id: int) -> ResultFile:
+        """A job's result file, read whole; the last few are kept (:class:`ResultCache`).
+
+        Blocking (reads the file): call it from a thread in async code.
+
+        Raises
+        ------
+        NotFound
+            No such job, or it has no result yet.
+        gonio.results.ResultFileError
+            The file is missing or cannot be read.
+        """
+        return self._results().get(self.result_path(job_id))
+
+    def _results(self) -> ResultCache:
+        with self._preview_lock:
+            if self._result_cache is None:
+                from gonio.results import ResultCache
+
+                self._result_cache = ResultCache()
+            return self._result_cache
+
+    def reconstruction(self, job_id: int) -> ResultFile:
+        """A job's result file that holds a reconstructed BRDF (for the plots of the page).
+
+        Raises
+        ------
+        NotFound
+            No such job, no result yet, the file is missing, or it has no BRDF (calibration).
+        """
+        path = self.result_path(job_id)
+        if not path.is_file():
+            raise NotFound(f"the result file {path.name} is missing from the data directory")
+        res = self._results().get(path)
+        if res.table is None:
+            raise NotFound(f"job {job_id} has no reconstructed BRDF (a calibration job has none)")
+        return res
+
     def preview_png(self, job_id: int) -> bytes:
         """PNG preview of the reconstructed table (:func:`gonio.brdf.pictures.preview.preview_png`).
 
@@ -616,9 +751,7 @@ class GonioService:
             cached = self._previews.get(key)
         if cached is not None:
             return cached
-        from gonio.results import read_result
-
-        res = read_result(path)
+        res = self._results().get(path)
         if res.table is None:
             raise NotFound(f"job {job_id} is a {res.attrs.get('kind')} job without a BRDF")
         from gonio.brdf.pictures.preview import preview_png

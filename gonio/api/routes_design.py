@@ -1,7 +1,8 @@
 """Design routes: optimise a rig's light/sensor geometry, list and evaluate industrial presets.
 
 A design runs in a worker thread against the basis the daemon reconstructs with, one at a time
-(it uses a whole CPU core for up to its time limit); a second request while one runs gets 409.
+(:meth:`gonio.service.GonioService.design`: it uses a whole CPU core for up to its time limit);
+a second request while one runs gets 409.
 Optimising needs a key (it is expensive); evaluating a preset is a cheap read.
 """
 
@@ -13,17 +14,9 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Path, Query, Request
 
 from gonio.api.deps import READ, WRITE, Service
-from gonio.api.design import (
-    DEFAULT_TIME_LIMIT_S,
-    DesignRequest,
-    DesignResult,
-    PresetInfo,
-    evaluate_preset,
-    run_design,
-)
 from gonio.brdf.design.presets import get_preset, preset_names
 from gonio.plans.models import PlanError
-from gonio.service import Conflict
+from gonio.sampling_design import DEFAULT_TIME_LIMIT_S, DesignRequest, DesignResult, PresetInfo
 
 router = APIRouter(prefix="/api/v1/design", tags=["design"])
 
@@ -35,13 +28,6 @@ _ERRORS: dict[int | str, dict[str, Any]] = {
 
 PresetName = Annotated[str, Path(min_length=1, max_length=64,
                                  description="preset name (case, spaces and dashes ignored)")]
-
-
-def _gate(request: Request) -> asyncio.Semaphore:
-    gate: asyncio.Semaphore | None = getattr(request.app.state, "design_gate", None)
-    if gate is None:  # created lazily, on the app's own event loop
-        gate = request.app.state.design_gate = asyncio.Semaphore(1)
-    return gate
 
 
 @router.post("", dependencies=WRITE, responses=_ERRORS,
@@ -57,16 +43,8 @@ async def design(body: DesignRequest, service: Service, request: Request) -> Des
             f"({limit:g} s); ask for at most {limit:g} s or raise [limits] design_time_limit_s "
             "in the daemon config"
         )
-    gate = _gate(request)
-    if gate.locked():
-        raise Conflict("another design is running on this daemon; try again when it has "
-                       "finished (at most its time limit)")
-    async with gate:
-        return await asyncio.to_thread(_design, service, body)
-
-
-def _design(service: Any, body: DesignRequest) -> DesignResult:
-    return run_design(service.design_basis(), body)
+    # One design at a time: the service refuses a second one (409) while one runs.
+    return await asyncio.to_thread(service.design, body)
 
 
 @router.get("/presets", dependencies=READ,
@@ -89,5 +67,5 @@ async def preset(
     rotations: int = Query(8, ge=1, le=360, description="uniform stage angles for the "
                                                         "roughness bound"),
 ) -> DesignResult:
-    p = get_preset(name)  # UnknownPresetError -> 404 listing the known names
-    return await asyncio.to_thread(lambda: evaluate_preset(service.design_basis(), p, rotations))
+    get_preset(name)  # UnknownPresetError -> 404 listing the known names, before any basis load
+    return await asyncio.to_thread(service.evaluate_preset, name, rotations)

@@ -8,9 +8,6 @@ from __future__ import annotations
 
 import asyncio
 import math
-from collections import OrderedDict
-from pathlib import Path
-from threading import Lock
 from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Query, Response
@@ -19,8 +16,6 @@ from pydantic import BaseModel, Field
 
 from gonio.api.deps import READ, JobId, Service
 from gonio.brdf.tables import geometry as geo
-from gonio.brdf.tables.table import BRDFTable
-from gonio.results import ResultFile, read_result
 from gonio.service import NotFound
 
 router = APIRouter(prefix="/api/v1/jobs", tags=["results"])
@@ -42,59 +37,6 @@ class Slice(BaseModel):
     values: dict[str, list[float | None]] = Field(
         description="channel -> 72 BRDF values, 1/sr; null where the cell is invalid"
     )
-
-
-class _TableCache:
-    """The last few reconstructed tables (5 MB each), so moving a slice is not a file read."""
-
-    def __init__(self, size: int = 2) -> None:
-        self.size = size
-        self._lock = Lock()
-        self._tables: OrderedDict[Path, BRDFTable] = OrderedDict()
-
-    def get(self, path: Path) -> BRDFTable | None:
-        with self._lock:
-            if path in self._tables:
-                self._tables.move_to_end(path)
-                return self._tables[path]
-        res = read_result(path)
-        if res.table is None:
-            return None
-        with self._lock:
-            self._tables[path] = res.table
-            while len(self._tables) > self.size:
-                self._tables.popitem(last=False)
-        return res.table
-
-
-_tables = _TableCache()
-
-
-class _ResultCache:
-    """The last few result files read whole (samples, table, provenance) for the plots."""
-
-    def __init__(self, size: int = 3) -> None:
-        self.size = size
-        self._lock = Lock()
-        self._items: OrderedDict[tuple[Path, int], ResultFile] = OrderedDict()
-
-    def get(self, path: Path) -> ResultFile:
-        key = (path, path.stat().st_mtime_ns if path.is_file() else 0)
-        with self._lock:
-            if key in self._items:
-                self._items.move_to_end(key)
-                return self._items[key]
-        if not path.is_file():
-            raise NotFound(f"the result file {path.name} is missing from the data directory")
-        res = read_result(path)
-        with self._lock:
-            self._items[key] = res
-            while len(self._items) > self.size:
-                self._items.popitem(last=False)
-        return res
-
-
-_results = _ResultCache()
 
 
 @router.get(
@@ -154,14 +96,6 @@ async def render_png(
     return Response(png, media_type="image/png", headers={"Cache-Control": "max-age=3600"})
 
 
-def _result(service: Any, job_id: int) -> ResultFile:
-    path = service.result_path(job_id)
-    res = _results.get(path)
-    if res.table is None:
-        raise NotFound(f"job {job_id} has no reconstructed BRDF (a calibration job has none)")
-    return res
-
-
 @router.get(
     "/{job_id}/fit",
     dependencies=READ,
@@ -172,7 +106,7 @@ def _result(service: Any, job_id: int) -> ResultFile:
 async def fit(job_id: JobId, service: Service) -> dict[str, Any]:
     from gonio.figures import fit_curves
 
-    res = await asyncio.to_thread(_result, service, job_id)
+    res = await asyncio.to_thread(service.reconstruction, job_id)
     return await asyncio.to_thread(fit_curves, res)
 
 
@@ -192,7 +126,7 @@ async def polar(
 ) -> dict[str, Any]:
     from gonio.figures import polar_curves
 
-    res = await asyncio.to_thread(_result, service, job_id)
+    res = await asyncio.to_thread(service.reconstruction, job_id)
     return await asyncio.to_thread(polar_curves, res, theta_i, phi_i)
 
 
@@ -225,8 +159,7 @@ async def slice_(
         _grid(theta_d, "theta_d", 85),
         _grid(phi_d, "phi_d", 175),
     )
-    path = service.result_path(job_id)
-    table = await asyncio.to_thread(_tables.get, path)
+    table = (await asyncio.to_thread(service.result, job_id)).table
     if table is None:
         raise NotFound(f"job {job_id} has no reconstructed BRDF (a calibration job has none)")
     column = table.values[:, :, i_th, i_td, i_pd]  # (C, 72)

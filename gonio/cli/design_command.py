@@ -138,31 +138,6 @@ def make_design(args: argparse.Namespace, basis: BasisLike) -> PairDesign:
     )
 
 
-def fragment(design: PairDesign) -> dict[str, Any]:
-    """Rig-config fragment: ``lights``, ``sensors`` (name, theta_deg, phi_deg) and ``pairs``.
-
-    Independent pairs get one light and one sensor each (``L1``/``S1`` ...) and an explicit
-    ``[[pairs]]`` list; a product rig uses ``pairs = "all"``.
-    """
-    def devices(prefix: str, deg: np.ndarray) -> list[dict[str, Any]]:
-        return [
-            {"name": f"{prefix}{k + 1}", "theta_deg": round(float(t), 4),
-             "phi_deg": round(float(p) % 360.0, 4)}
-            for k, (t, p) in enumerate(deg)
-        ]
-
-    out: dict[str, Any] = {}
-    if design.name == "product":
-        out["pairs"] = "all"
-    else:
-        out["pairs"] = [
-            {"light": f"L{a + 1}", "sensor": f"S{b + 1}"} for a, b in design.pairs.tolist()
-        ]
-    out["lights"] = devices("L", design.lights_deg)
-    out["sensors"] = devices("S", design.sensors_deg)
-    return out
-
-
 SINGULAR_KAPPA = 1e6
 """Above this condition number the design gets an explanation of what makes it singular."""
 
@@ -294,13 +269,13 @@ def run(args: argparse.Namespace) -> int:
               f"{expected.log_rmse:.4f} (measured {expected.measured:.4f}, synthetic "
               f"{expected.synthetic:.4f}; lower is better, next to kappa {design.kappa:.4g})")
     if args.output is not None:
-        from gonio.rigdesign import dump_fragment
+        from gonio.rigdesign import design_fragment, dump_fragment
 
         args.output.parent.mkdir(parents=True, exist_ok=True)
         header = (f"gonio design fragment: {design.name}, {design.n_pairs} pairs, condition "
                   f"number {design.kappa:.4g}.\nMerge it into a rig config with "
                   f"'gonio rig apply-design {args.output.name} rig.toml' (docs/rig-config.md).")
-        args.output.write_text(dump_fragment(fragment(design), header), encoding="utf-8")
+        args.output.write_text(dump_fragment(design_fragment(design), header), encoding="utf-8")
         print(f"wrote {args.output}; merge it with 'gonio rig apply-design {args.output} "
               "rig.toml'")
     return 0

@@ -83,36 +83,6 @@ def register(subparsers: Any) -> None:
     j.set_defaults(func=_jobs)
 
 
-async def _calibrate_sim(sim: Any, store: Any, worker: Any, desc: Any, data_dir: Path) -> Any:
-    """Measure the simulated white reference with a calibration job, then put the specimen back.
-
-    The simulated rig gets the same calibration a lab gives a real one, so ``--sim`` scans come
-    out in 1/sr. Runs only when no calibration is in effect in ``data_dir``.
-    """
-    from gonio.calibration import CALIBRATION_FILE, Calibration
-    from gonio.jobstates import JobState
-    from gonio.plans.models import CalibrationPlan
-    from gonio.sim.rig import WHITE_REFERENCE_ALBEDO
-
-    plan = CalibrationPlan(reference_albedo=WHITE_REFERENCE_ALBEDO,
-                           reference_name=f"simulated white reference, albedo "
-                                          f"{WHITE_REFERENCE_ALBEDO:g}")
-    specimen = sim.place_white_reference(WHITE_REFERENCE_ALBEDO).brdf
-    try:
-        job = store.create_job(kind=plan.kind, specimen=plan.reference_name,
-                               plan=plan.model_dump(mode="json"),
-                               rig=desc.model_dump(mode="json"))
-        print(f"calibrating the simulated rig on a white reference (job {job.id})",
-              file=sys.stderr)
-        final = await worker.run_job(store.get_job(job.id))
-    finally:
-        sim.place_specimen(specimen)
-    if final is not JobState.COMPLETED:
-        raise UsageError(f"calibration of the simulated rig {final.value}: "
-                         f"{store.get_job(job.id).reason}")
-    return Calibration.model_validate_json((data_dir / CALIBRATION_FILE).read_text())
-
-
 def _plan(args: argparse.Namespace) -> Any:
     from gonio.plans.models import AdaptivePlan, CalibrationPlan, ExposureSettings, UniformPlan
 
@@ -208,64 +178,51 @@ async def _run_scan(args: argparse.Namespace, plan: Any, config: Any, sim: Any =
 
 async def _run_owned(args: argparse.Namespace, plan: Any, config: Any, sim: Any, rig: Any,
                      desc: Any, db: Path, data_dir: Path) -> int:
-    from gonio.calibration import Calibration, calibration_in_effect
+    """Run the scan through an in-process :class:`gonio.service.GonioService` (the same door
+    as the daemon's API, without its queue worker), then copy the result to ``-o``."""
+    from gonio.calibration import Calibration
+    from gonio.cli.sim_session import attach_sim, calibrate_in_foreground, calibration_covers_rig
     from gonio.jobstates import JobState
+    from gonio.service import GonioService, JobRequest
     from gonio.store import JobStore
-    from gonio.worker import Worker
 
     out: Path = args.output
     store = JobStore(db)
     print(f"data directory {data_dir} (job store {db})", file=sys.stderr)
     # The same rule as the daemon: the latest calibration job here, else the rig config's
     # [calibration] factors; --calibration overrides both.
-    cal = calibration_in_effect(data_dir, config)
+    override = None
     if args.calibration is not None:
         if not args.calibration.is_file():
             raise UsageError(f"calibration file {args.calibration} does not exist")
-        cal = Calibration.model_validate_json(args.calibration.read_text())
-    connected = False
-
-    async def get_rig() -> Any:
-        nonlocal connected
-        if not connected:
-            await rig.connect()
-            connected = True
-        return rig
-
-    worker = Worker(store, get_rig, desc, data_dir, calibration=lambda: cal,
-                    provenance={"rig_config": config.model_dump_json()})
-    if sim is not None:
-        from gonio.figures import describe_material
-
-        worker.specimen_truth = lambda: describe_material(sim.specimen.brdf)
-    store.reconcile(lambda j: None)
-    # Resume an interrupted job only when it is this scan: the same plan on the same rig.
-    same = [j for j in store.active_jobs()
-            if j.plan == plan.model_dump(mode="json") and j.rig == desc.model_dump(mode="json")]
-    if same:
-        job = same[0]
-        print(f"resuming job {job.id} from its checkpoint ({job.done_angles} of "
-              f"{job.total_angles} angles done)", file=sys.stderr)
-    else:
-        if (sim is not None and args.calibration is None and plan.kind != "calibration"
-                and not (cal.pairs and cal.covers(desc.pairs))):
-            cal = await _calibrate_sim(sim, store, worker, desc, data_dir)
-        job = store.create_job(kind=plan.kind, specimen=plan.specimen,
-                               plan=plan.model_dump(mode="json"),
-                               rig=desc.model_dump(mode="json"))
-    if sim is not None and plan.kind == "calibration":
-        # --sim --white-reference: this process is the hand that puts the reference on.
-        sim.place_white_reference(plan.reference_albedo)
-    bar = _progress(store, job.id, disabled=args.no_progress)
+        override = Calibration.model_validate_json(args.calibration.read_text())
+    service = GonioService(store, rig, rig_config=config, data_dir=data_dir,
+                           calibration=override)
     try:
-        final = await worker.run_job(store.get_job(job.id))
-    finally:
-        bar.close()
         if sim is not None:
-            sim.load("specimen")
-        if connected:
-            await rig.close()
-    row = store.get_job(job.id)
+            attach_sim(service, sim)
+        # Resume an interrupted job only when it is this scan: the same plan on the same rig.
+        job = service.unfinished_job(plan)
+        if job is not None:
+            print(f"resuming job {job.id} from its checkpoint ({job.done_angles} of "
+                  f"{job.total_angles} angles done)", file=sys.stderr)
+        else:
+            if (sim is not None and override is None and plan.kind != "calibration"
+                    and not calibration_covers_rig(service)):
+                why = await calibrate_in_foreground(service, sim)
+                if why is not None:
+                    raise UsageError(why)
+            job = service.submit(JobRequest(plan=plan))
+        bar = _progress(service, job.id, disabled=args.no_progress)
+        try:
+            final = await service.run_in_foreground(job.id)
+        finally:
+            bar.close()
+            if sim is not None:
+                sim.load("specimen")
+    finally:
+        await service.stop()
+    row = service.get_job(job.id)
     if final is not JobState.COMPLETED:
         print(f"job {job.id} {final.value}: {row.reason}", file=sys.stderr)
         return 1
@@ -273,7 +230,7 @@ async def _run_owned(args: argparse.Namespace, plan: Any, config: Any, sim: Any,
     out.parent.mkdir(parents=True, exist_ok=True)
     # A copy: the data directory keeps its result (what 'gonio jobs show' reports stays true).
     shutil.copyfile(row.result_path, out)
-    summary = row.summary or {}
+    summary = row.result or {}
     if plan.kind == "calibration":
         from gonio.calibration import CALIBRATION_FILE
         from gonio.plans.validation import plan_pairs
@@ -284,6 +241,7 @@ async def _run_owned(args: argparse.Namespace, plan: Any, config: Any, sim: Any,
         print(f"job {job.id} completed: calibration of {n_pairs} pairs written to {cal_out}; "
               f"apply it with --calibration {cal_out}")
         return 0
+    cal = service.calibration()
     if sim is None and cal.pairs:
         print(f"calibration: {cal.source}", file=sys.stderr)
     from gonio.figures import headline_error
@@ -419,7 +377,7 @@ def _follow(client: Any, job_id: int, disabled: bool, poll_s: float = 0.5) -> di
         bar.close()
 
 
-def _progress(store: Any, job_id: int, disabled: bool) -> Any:
+def _progress(service: Any, job_id: int, disabled: bool) -> Any:
     from tqdm import tqdm
 
     bar = tqdm(total=None, unit="angle", desc=f"job {job_id}", disable=disabled, file=sys.stderr)
@@ -436,7 +394,7 @@ def _progress(store: Any, job_id: int, disabled: bool) -> Any:
         elif ev.type == "state":
             bar.set_description_str(f"job {job_id} {ev.data['state']}")
 
-    store.add_listener(on_event)
+    service.add_event_listener(on_event)
     return bar
 
 

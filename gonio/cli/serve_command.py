@@ -163,6 +163,7 @@ def _configure_logging(level: str) -> None:
 
 def _run_sim(args: argparse.Namespace, cfg: Any, keyring: Any) -> int:
     from gonio.api.auth import ApiKeyring
+    from gonio.cli.sim_session import attach_sim, calibration_not_needed, start_sim_calibration
     from gonio.daemon import build_app, serve
     from gonio.sim.rig import WHITE_REFERENCE_ALBEDO, SimRigOptions, start_sim_rig
 
@@ -195,15 +196,10 @@ def _run_sim(args: argparse.Namespace, cfg: Any, keyring: Any) -> int:
             raise UsageError(f"cannot start the simulated rig: {exc}") from None
         with owned, sim:
             app = _build(build_app, cfg, sim.config, keyring)
-            from gonio.figures import describe_material
-
-            # Results of the simulated rig record the material on the stage, so renderings
-            # show the truth beside the reconstruction.
-            app.state.service.worker.specimen_truth = lambda: describe_material(
-                sim.specimen.brdf)
+            # The hand on the stage, and results that record the material on it (renderings
+            # show the truth beside the reconstruction).
+            attach_sim(app.state.service, sim)
             result: dict[str, int] = {}
-
-            follow_jobs_with_holder(app.state.service, sim)
 
             def started(url: str, stop: Any) -> None:
                 fragment = f"#key={session_key}" if session_key else ""
@@ -274,91 +270,6 @@ def _sim_material(data_dir: Path, requested: str | None) -> str | None:
     data_dir.mkdir(parents=True, exist_ok=True)
     state.write_text(json.dumps({"material": material}))
     return material
-
-
-def follow_jobs_with_holder(service: Any, sim: Any) -> None:
-    """Make the simulated stage hold what each job needs, as a person at the rig would.
-
-    Before a job measures (started or resumed after a restart), a calibration job gets the
-    white reference of its plan's albedo and every other job the rig's specimen.
-    """
-    def prepare(job: Any) -> None:
-        if job.kind == "calibration":
-            sim.place_white_reference(float(job.plan.get("reference_albedo")))
-        else:
-            sim.load("specimen")
-
-    service.worker.on_job_start = prepare
-
-
-def calibration_not_needed(service: Any) -> str | None:
-    """Why no start-up calibration is queued (one is in effect, or one is pending), or None."""
-    pending = [j for j in service.store.list_jobs()
-               if j.kind == "calibration" and j.state.value in (
-                   "queued", "running", "paused", "suspended", "reconstructing")]
-    if pending:
-        return (f"job {pending[0].id} (a calibration, {pending[0].state.value}) is still to "
-                "finish; it runs on the white reference")
-    cal = service.calibration()
-    if cal.pairs and cal.covers(service.desc.pairs):
-        return f"in effect ({cal.source}); scans are in 1/sr"
-    return None
-
-
-_MEASURING_OVER = ("reconstructing", "completed", "failed", "aborted", "halted")
-
-
-def start_sim_calibration(
-    service: Any, sim: Any, albedo: float | None = None, report: Any = None
-) -> int:
-    """Queue a white-reference calibration of a simulated rig, first in line; returns its job id.
-
-    Call on the service's event loop. The white reference goes on the stage when the job starts
-    measuring (:func:`follow_jobs_with_holder`, installed here if it is not yet), so a job
-    resumed ahead of it still measures its own specimen; the specimen goes back from a store
-    listener the moment the calibration leaves ``running``. When the job completes its factors
-    are the calibration of every later scan.
-
-    Parameters
-    ----------
-    service : gonio.service.GonioService (started)
-    sim : gonio.sim.rig.SimRig serving the rig the service drives
-    albedo : float, optional
-        Of the simulated reference (default :data:`gonio.sim.rig.WHITE_REFERENCE_ALBEDO`).
-    report : callable, optional
-        ``report(job_id, state, reason)`` when the job ends (completed, failed, ...).
-    """
-    from gonio.plans.models import CalibrationPlan
-    from gonio.service import Event, JobRequest
-    from gonio.sim.rig import WHITE_REFERENCE_ALBEDO
-
-    albedo = WHITE_REFERENCE_ALBEDO if albedo is None else albedo
-    if service.worker.on_job_start is None:
-        follow_jobs_with_holder(service, sim)
-    job: dict[str, Any] = {"id": None, "restored": False}
-
-    def watch(ev: Event) -> None:
-        if ev.job_id != job["id"] or ev.type != "state":
-            return
-        state = ev.data.get("state")
-        if state in _MEASURING_OVER and not job["restored"]:
-            sim.load("specimen")
-            job["restored"] = True
-        if state in ("completed", "failed", "aborted", "halted"):
-            service.remove_event_listener(handle)
-            if report is not None:
-                report(job["id"], state, ev.data.get("reason"))
-
-    handle = service.add_event_listener(watch)
-    try:
-        # The job list shows ``specimen``: name the reference there too, not "specimen".
-        plan = CalibrationPlan(reference_albedo=albedo, specimen="white reference",
-                               reference_name=f"simulated white reference, albedo {albedo:g}")
-        job["id"] = service.submit(JobRequest(plan=plan, priority=1000)).id
-    except BaseException:
-        service.remove_event_listener(handle)
-        raise
-    return int(job["id"])
 
 
 def _print_calibration(job_id: int, state: str, reason: str | None) -> None:

@@ -76,7 +76,7 @@ def daemon(tmp_path_factory: pytest.TempPathFactory, basis: Any) -> Iterator[Dae
     from gonio.figures import describe_material
 
     # As `gonio serve --sim` does: results record the simulated material (the truth).
-    app.state.service.worker.specimen_truth = lambda: describe_material(sim.specimen.brdf)
+    app.state.service.specimen_truth = lambda: describe_material(sim.specimen.brdf)
     try:
         with live_server(app) as url:
             yield Daemon(url, key, app, sim, data_dir)

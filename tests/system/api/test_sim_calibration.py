@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from gonio.calibration import Calibration
-from gonio.cli.serve_command import start_sim_calibration
+from gonio.cli.sim_session import start_sim_calibration
 from gonio.drivers.factory import build_rig
 from gonio.jobstates import JobState
 from gonio.plans.models import UniformPlan

@@ -1,4 +1,4 @@
-"""Sampling design over HTTP: request and result models, and the (blocking) computation.
+"""Sampling design as the service offers it: request and result models, the computation.
 
 A design request asks for ``pairs`` independent light/sensor pairs, or a product rig of
 ``lights`` x ``sensors``, under the rig's mounting constraints. The computation is the same as
@@ -7,14 +7,14 @@ number of the basis rows the pairs sample. The result carries the cells, the lab
 device, the condition number, the roughness bound of MATH 10 at ``rotations`` uniform stage
 angles, and the rig-config fragment (TOML) to paste into a rig config.
 
-:func:`run_design` and :func:`evaluate_preset` block for up to the request's time limit; the
-routes call them in a worker thread.
+:func:`run_design` and :func:`evaluate_preset` block for up to the request's time limit;
+:meth:`gonio.service.GonioService.design` runs one design at a time against the daemon's
+basis, and the API routes call it in a worker thread.
 """
 
 from __future__ import annotations
 
 import math
-from typing import Any
 
 import numpy as np
 from pydantic import BaseModel, Field, model_validator
@@ -152,25 +152,13 @@ def _finite(x: float) -> float | None:
     return float(x) if math.isfinite(x) else None
 
 
-def rig_fragment(design: PairDesign) -> dict[str, Any]:
-    """Rig-config fragment of a design: ``pairs``, ``lights``, ``sensors``.
-
-    Same layout as ``gonio design -o`` writes: independent pairs get their own light and sensor
-    and an explicit pair list; a product rig measures ``"all"`` pairs.
-    """
-    # One place defines the fragment layout; the CLI's function is reused, not copied.
-    from gonio.cli.design_command import fragment
-
-    return fragment(design)
-
-
 def describe(design: PairDesign, rotations: int) -> DesignResult:
     """The API view of a :class:`~gonio.brdf.design.pairs.PairDesign`."""
-    from gonio.rigdesign import dump_fragment
+    from gonio.rigdesign import design_fragment, dump_fragment
 
     angles = np.arange(rotations) * (2.0 * np.pi / rotations)
     bound = roughness_bound(design.cells, design.ph_lab, angles)
-    frag = rig_fragment(design)
+    frag = design_fragment(design)
     lights = [Device(**d) for d in frag["lights"]]
     sensors = [Device(**d) for d in frag["sensors"]]
     cells = np.rad2deg(design.cells)

@@ -1,0 +1,144 @@
+"""A simulated rig driven through :class:`gonio.service.GonioService` (``gonio serve --sim``,
+``gonio scan --sim``).
+
+Two things a person at a real rig does, done here for the simulated one, once for both commands:
+
+* the hand on the stage (:func:`attach_sim`): before a job measures, a calibration job gets the
+  white reference and every other job the rig's specimen; results record the true material;
+* the white-reference calibration (:func:`start_sim_calibration`): a calibration job queued
+  first, the specimen put back the moment it stops measuring, so later scans are in 1/sr.
+  The daemon queues it and goes on serving; ``gonio scan`` runs it in the foreground
+  (:func:`calibrate_in_foreground`).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+MEASURING_OVER = ("reconstructing", "completed", "failed", "aborted", "halted")
+"""Job states after which the stage is free (the specimen may go back)."""
+FINAL = ("completed", "failed", "aborted", "halted")
+
+
+def sim_calibration_plan(albedo: float | None = None) -> Any:
+    """The calibration plan of a simulated rig's white reference (default albedo
+    :data:`gonio.sim.rig.WHITE_REFERENCE_ALBEDO`)."""
+    from gonio.plans.models import CalibrationPlan
+    from gonio.sim.rig import WHITE_REFERENCE_ALBEDO
+
+    albedo = WHITE_REFERENCE_ALBEDO if albedo is None else albedo
+    # The job list shows ``specimen``: name the reference there too, not "specimen".
+    return CalibrationPlan(reference_albedo=albedo, specimen="white reference",
+                           reference_name=f"simulated white reference, albedo {albedo:g}")
+
+
+def attach_sim(service: Any, sim: Any) -> None:
+    """Make the simulated stage hold what each job needs, as a person at the rig would, and
+    record the material on the stage with each reconstruction (renderings show the truth).
+
+    Before a job measures (started or resumed after a restart), a calibration job gets the
+    white reference of its plan's albedo and every other job the rig's specimen.
+    """
+    from gonio.figures import describe_material
+
+    follow_jobs_with_holder(service, sim)
+    service.specimen_truth = lambda: describe_material(sim.specimen.brdf)
+
+
+def follow_jobs_with_holder(service: Any, sim: Any) -> None:
+    """The holder part of :func:`attach_sim` alone."""
+    def prepare(job: Any) -> None:
+        if job.kind == "calibration":
+            sim.place_white_reference(float(job.plan.get("reference_albedo")))
+        else:
+            sim.load("specimen")
+
+    service.on_job_start = prepare
+
+
+def calibration_covers_rig(service: Any) -> bool:
+    """Whether the calibration in effect has factors for every pair of the rig."""
+    cal = service.calibration()
+    return bool(cal.pairs) and bool(cal.covers(service.desc.pairs))
+
+
+def calibration_not_needed(service: Any) -> str | None:
+    """Why no start-up calibration is queued (one is in effect, or one is pending), or None."""
+    pending = [j for j in service.store.list_jobs()
+               if j.kind == "calibration" and j.state.value in (
+                   "queued", "running", "paused", "suspended", "reconstructing")]
+    if pending:
+        return (f"job {pending[0].id} (a calibration, {pending[0].state.value}) is still to "
+                "finish; it runs on the white reference")
+    if calibration_covers_rig(service):
+        return f"in effect ({service.calibration().source}); scans are in 1/sr"
+    return None
+
+
+def start_sim_calibration(
+    service: Any, sim: Any, albedo: float | None = None, report: Any = None
+) -> int:
+    """Queue a white-reference calibration of a simulated rig, first in line; returns its job id.
+
+    Call on the service's event loop. The white reference goes on the stage when the job starts
+    measuring (:func:`follow_jobs_with_holder`, installed here if it is not yet), so a job
+    resumed ahead of it still measures its own specimen; the specimen goes back from a store
+    listener the moment the calibration leaves ``running``. When the job completes its factors
+    are the calibration of every later scan.
+
+    Parameters
+    ----------
+    service : gonio.service.GonioService
+    sim : gonio.sim.rig.SimRig serving the rig the service drives
+    albedo : float, optional
+        Of the simulated reference (default :data:`gonio.sim.rig.WHITE_REFERENCE_ALBEDO`).
+    report : callable, optional
+        ``report(job_id, state, reason)`` when the job ends (completed, failed, ...).
+    """
+    from gonio.service import Event, JobRequest
+
+    if service.on_job_start is None:
+        follow_jobs_with_holder(service, sim)
+    job: dict[str, Any] = {"id": None, "restored": False}
+
+    def watch(ev: Event) -> None:
+        if ev.job_id != job["id"] or ev.type != "state":
+            return
+        state = ev.data.get("state")
+        if state in MEASURING_OVER and not job["restored"]:
+            sim.load("specimen")
+            job["restored"] = True
+        if state in FINAL:
+            service.remove_event_listener(handle)
+            if report is not None:
+                report(job["id"], state, ev.data.get("reason"))
+
+    handle = service.add_event_listener(watch)
+    try:
+        plan = sim_calibration_plan(albedo)
+        job["id"] = service.submit(JobRequest(plan=plan, priority=1000)).id
+    except BaseException:
+        service.remove_event_listener(handle)
+        raise
+    return int(job["id"])
+
+
+async def calibrate_in_foreground(service: Any, sim: Any) -> str | None:
+    """Run the white-reference calibration of :func:`start_sim_calibration` here and now
+    (``gonio scan --sim``); returns None when it completed, else why not.
+
+    Parameters
+    ----------
+    service : gonio.service.GonioService, not started (no queue worker)
+    sim : gonio.sim.rig.SimRig
+    """
+    import sys
+
+    from gonio.jobstates import JobState
+
+    job_id = start_sim_calibration(service, sim)
+    print(f"calibrating the simulated rig on a white reference (job {job_id})", file=sys.stderr)
+    final = await service.run_in_foreground(job_id)
+    if final is JobState.COMPLETED:
+        return None
+    return f"calibration of the simulated rig {final.value}: {service.get_job(job_id).reason}"
