@@ -245,6 +245,50 @@ def calibration_in_effect(data_dir: Path, rig_config: Any = None) -> Calibration
     return Calibration()
 
 
+def counts(reading: Any) -> NDArray[np.float64]:
+    """(C,) dark-subtracted values of one reading (``raw - dark``), sensor units."""
+    return np.subtract(np.asarray(reading.raw, dtype=float), np.asarray(reading.dark, dtype=float))
+
+
+def readings_array(
+    readings: Sequence[Any],
+    pairs: Sequence[PairSpec],
+    angle_indices: Sequence[int],
+    n_channels: int,
+    calibration: Calibration | None = None,
+) -> NDArray[np.float64]:
+    """A job's readings as one ``(n pairs, r angles, C)`` array: the one place they become one.
+
+    Parameters
+    ----------
+    readings : ReadingRow-like objects (angle_index, light, sensor, raw, dark)
+    pairs : the n pairs, in the order of the rows
+    angle_indices : the r angles (store ``angle_index``), in the order of the columns;
+        readings at other angles are left out
+    n_channels : C
+    calibration : factors applied to ``raw - dark`` (BRDF, 1/sr); None keeps sensor units
+
+    Returns
+    -------
+    (n, r, C) float64
+        ``raw - dark`` (times the pair's factor); NaN where a pair has no reading at an angle
+        (a reading with fewer channels fills only its own).
+    """
+    col = {k: j for j, k in enumerate(angle_indices)}
+    row = {(p.light, p.sensor): q for q, p in enumerate(pairs)}
+    vals = np.full((len(pairs), len(col), n_channels), np.nan)
+    for r in readings:
+        q = row.get((r.light, r.sensor))
+        j = col.get(r.angle_index)
+        if q is None or j is None:
+            continue
+        c = counts(r)
+        if calibration is not None:
+            c = c * calibration.factor(r.light, r.sensor, n_channels)
+        vals[q, j, : c.size] = c
+    return vals
+
+
 def calibrated_samples(
     readings: Sequence[Any],
     pairs: Sequence[PairSpec],
@@ -277,16 +321,7 @@ def calibrated_samples(
     for r in readings:
         angle_of.setdefault(r.angle_index, float(r.commanded_deg) % 360.0)
     order = sorted(angle_of, key=lambda k: angle_of[k])
-    col = {k: j for j, k in enumerate(order)}
-    row = {(p.light, p.sensor): q for q, p in enumerate(pairs)}
-    nch = len(channels)
-    vals = np.full((len(pairs), len(order), nch), np.nan)
-    for r in readings:
-        q = row.get((r.light, r.sensor))
-        if q is None:
-            continue
-        counts = np.asarray(r.raw, dtype=float) - np.asarray(r.dark, dtype=float)
-        vals[q, col[r.angle_index]] = counts * calibration.factor(r.light, r.sensor, nch)
+    vals = readings_array(readings, pairs, order, len(channels), calibration)
     missing = np.argwhere(np.isnan(vals).any(axis=2))
     if missing.size:
         q, j = missing[0]

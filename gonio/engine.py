@@ -40,6 +40,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from gonio import hal
+from gonio.calibration import readings_array
 from gonio.hal import PairSpec
 from gonio.jobstates import JobState
 from gonio.plans.adaptive import adaptive_refinement
@@ -614,16 +615,9 @@ class ScanEngine:
     def measured_values(self, steps: Sequence[StepRow]) -> tuple[list[float], np.ndarray]:
         """Specimen angles (deg) and dark-subtracted values (n_pairs, r, C) of done steps."""
         done = [s for s in steps if s.done]
-        idx = {s.angle_index: j for j, s in enumerate(done)}
-        pos = {(p.light, p.sensor): q for q, p in enumerate(self.pairs)}
         rows = self.store.readings(self.job_id)
         nch = max((len(r.raw) for r in rows), default=1)
-        vals = np.full((len(self.pairs), len(done), nch), np.nan)
-        for r in rows:
-            q = pos.get((r.light, r.sensor))
-            j = idx.get(r.angle_index)
-            if q is not None and j is not None:
-                vals[q, j, : len(r.raw)] = np.subtract(r.raw, r.dark)
+        vals = readings_array(rows, self.pairs, [s.angle_index for s in done], nch)
         return [s.specimen_deg for s in done], vals
 
     # ------------------------------------------------------------------ cleanup

@@ -7,7 +7,8 @@ queue until :meth:`Worker.release`. Those holds are stored (they survive a crash
 restart); while :attr:`Worker.gate` gives a reason (the maintenance lock) no job starts or
 resumes at all.
 
-Reconstruction and file writing run in a thread (``asyncio.to_thread``) so the event loop keeps
+Finishing a measured job (calibration or reconstruction, and the result file:
+:mod:`gonio.finishing`) runs in a thread (``asyncio.to_thread``) so the event loop keeps
 serving the API and events while the numerics run.
 """
 
@@ -15,29 +16,22 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import json
 import logging
-import math
 import time
 from collections.abc import Awaitable, Callable
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from gonio import hal
 from gonio.calibration import (
-    CALIBRATION_FILE,
     Calibration,
     CalibrationError,
-    calibrated_samples,
-    from_reference,
-    save_calibration,
 )
 from gonio.engine import Progress, ScanEngine
+from gonio.finishing import Finishing, finish_job
 from gonio.jobstates import JobState
 from gonio.plans.models import AnyPlan, CalibrationPlan, PlanError, parse_plan
-from gonio.plans.validation import plan_pairs, validate_plan
+from gonio.plans.validation import validate_plan
 from gonio.rigdescription import RigDescription
 from gonio.store import JobRow, JobStore
 
@@ -268,7 +262,8 @@ class Worker:
                     self.hold("emergency halt")
                 return final
             self.store.set_state(job.id, JobState.RECONSTRUCTING)
-        self._recon_task = asyncio.create_task(asyncio.to_thread(self._finish, job.id, plan))
+        self._recon_task = asyncio.create_task(
+            asyncio.to_thread(finish_job, job.id, plan, self._finishing()))
         try:
             summary = await self._recon_task
         except asyncio.CancelledError:
@@ -297,129 +292,16 @@ class Worker:
             self.hold(f"job {job.id} failed and asked to stop the queue")
         return JobState.FAILED
 
-    # ------------------------------------------------------------------ finishing (thread)
-    def _finish(self, job_id: int, plan: AnyPlan) -> dict[str, Any]:
-        from gonio.results import write_result
-
-        t0 = time.perf_counter()
-        job = self.store.get_job(job_id)
-        pairs = plan_pairs(plan, self.desc)
-        light_dirs = np.asarray(
-            [hal.LabDirection(self.desc.light(p.light).theta_deg,
-                              self.desc.light(p.light).phi_deg).vector() for p in pairs])
-        sensor_dirs = np.asarray(
-            [hal.LabDirection(self.desc.sensor(p.sensor).theta_deg,
-                              self.desc.sensor(p.sensor).phi_deg).vector() for p in pairs])
-        channel_sets = {self.desc.sensor(p.sensor).channels for p in pairs}
-        if len(channel_sets) != 1:
-            raise PlanError(
-                f"the plan's sensors have different channels {sorted(channel_sets)}; measure "
-                "pairs whose sensors share one channel list"
-            )
-        channels = next(iter(channel_sets))
-        readings = self.store.readings(job_id)
-        is_cal = isinstance(plan, CalibrationPlan)
-        cal = Calibration() if is_cal else self.calibration()
-        samples = calibrated_samples(readings, pairs, light_dirs, sensor_dirs, channels, cal)
-        path = self.data_dir / "results" / f"job-{job_id}.h5"
-        provenance: dict[str, Any] = {
-            "plan": json.dumps(job.plan), "rig": json.dumps(job.rig),
-            "calibration": cal.model_dump_json(), **self.provenance,
-        }
-        summary: dict[str, Any] = {
-            "readings": len(readings), "angles": int(samples.stage_angles_deg.size),
-            "pairs": len(pairs), "calibrated": bool(cal.pairs) or is_cal,
-        }
-        warning = _exposure_mismatch(cal, readings)
-        if warning is not None:
-            summary["calibration_warning"] = warning
-            provenance["calibration_warning"] = warning
-        if isinstance(plan, CalibrationPlan):
-            new_cal = from_reference(
-                plan.reference_albedo,
-                {(p.light, p.sensor): samples.values[q] for q, p in enumerate(pairs)},
-                exposure_s=plan.exposure.exposure_s,
-                source=f"job {job_id}: {plan.reference_name}",
-            )
-            cal_path = self.data_dir / CALIBRATION_FILE
-            save_calibration(new_cal, cal_path)
-            provenance["new_calibration"] = new_cal.model_dump_json()
-            write_result(path, job_id=job_id, specimen=job.specimen, kind=job.kind,
-                         readings=readings, samples=samples, provenance=provenance,
-                         metrics={"seconds": time.perf_counter() - t0})
-            summary.update(result_path=str(path), calibration_path=str(cal_path))
-            return summary
-
-        from gonio.brdf.reconstruction.reconstruct import pair_cells, reconstruct
-
-        self._set_activity("basis")
-        try:
-            basis = self.basis_provider()
-        finally:
-            self._set_activity("reconstructing")
-        cells, ph_lab = pair_cells(light_dirs, sensor_dirs)
-        rec = reconstruct(
-            basis, cells, ph_lab, np.deg2rad(samples.stage_angles_deg),
-            np.maximum(samples.values, 0.0), channels=channels, name=job.specimen,
+    # ------------------------------------------------------------------ finishing
+    def _finishing(self) -> Finishing:
+        """What :func:`gonio.finishing.finish_job` needs, from this worker's settings now."""
+        return Finishing(
+            store=self.store, desc=self.desc, data_dir=self.data_dir,
+            basis_provider=self.basis_provider, calibration=self.calibration,
+            provenance=self.provenance, fit_exports=self.fit_exports,
+            true_material=self.specimen_truth, on_activity=self._set_activity,
         )
-        metrics = {
-            "rel_sample_error": rec.rel_sample_error,
-            "estimated_error": rec.estimated_error,
-            # The reported error bar: calibrated leave-one-pair-out error (docs/science.md 4.1);
-            # V&F's estimated_error stays for comparison with the paper.
-            "predicted_error": _finite_or_none(rec.predicted_error),
-            "cv_sample_error": _finite_or_none(rec.cv_sample_error),
-            # The headline self-estimate: expected log_rmse (cosine-weighted log error, what a
-            # rendering sees) against the true BRDF, calibrated on held-out materials
-            # including measured ones (docs/science.md).
-            "predicted_log_rmse": _finite_or_none(rec.predicted_log_rmse),
-            "cv_log_error": _finite_or_none(rec.cv_log_error),
-            "n_pairs": len(pairs),
-            "n_angles": int(samples.stage_angles_deg.size),
-            "n_samples": len(pairs) * int(samples.stage_angles_deg.size),
-            "K": int(basis.K),
-            "seconds": time.perf_counter() - t0,
-        }
-        provenance.update(basis_K=int(basis.K), basis_materials=json.dumps(list(basis.materials)))
-        fits = self._fits(job_id, rec.table)
-        if fits is not None:
-            metrics.update(
-                factored_rel_mse=fits.factored.metrics["rel_mse"],
-                factored_psnr=fits.factored.metrics["psnr"],
-                principled_roughness=fits.principled.roughness,
-                principled_log_rmse=fits.principled.metrics["log_rmse"],
-            )
-        metrics["seconds"] = time.perf_counter() - t0
-        truth = self.specimen_truth() if self.specimen_truth is not None else None
-        if truth is not None:
-            provenance["true_material"] = json.dumps(truth)
-        write_result(
-            path, job_id=job_id, specimen=job.specimen, kind=job.kind, readings=readings,
-            samples=samples, table=rec.table, coefficients=rec.coefficients,
-            rel_sample_error=rec.rel_sample_error, estimated_error=rec.estimated_error,
-            settings=rec.settings, metrics=metrics, provenance=provenance,
-            factored=fits.factored if fits else None,
-            principled=fits.principled if fits else None,
-        )
-        summary.update(result_path=str(path), **metrics)
-        return summary
 
-    def _fits(self, job_id: int, table: Any) -> Any:
-        """The export fits (factored, principled) of a reconstruction, or None.
-
-        They make the result file exportable without refitting; a fit that fails must not
-        cost the user the measurement, so the failure is logged and the result kept.
-        """
-        if not self.fit_exports:
-            return None
-        from gonio.export import fit_all
-
-        try:
-            return fit_all(table)
-        except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
-            log.warning("job %d: export fits failed (%s); the result is kept without them",
-                        job_id, exc)
-            return None
     def _set_activity(self, what: str | None) -> None:
         self.activity = what
         self._activity_since = time.monotonic()
@@ -461,24 +343,3 @@ def _running_in(loop: asyncio.AbstractEventLoop) -> bool:
         return asyncio.get_running_loop() is loop
     except RuntimeError:
         return False
-
-
-def _exposure_mismatch(cal: Calibration, readings: list[Any]) -> str | None:
-    """Why the calibration may not fit these readings, or None.
-
-    Factors are not rescaled between exposure times (sensors need not be linear in exposure),
-    so a scan at another exposure than its calibration is flagged rather than silently trusted.
-    """
-    if not cal.pairs or cal.exposure_s is None or not readings:
-        return None
-    used = sorted({float(r.exposure_s) for r in readings})
-    if all(math.isclose(t, cal.exposure_s, rel_tol=1e-6) for t in used):
-        return None
-    return (f"the calibration was measured at exposure {cal.exposure_s:g} s, this scan at "
-            f"{', '.join(f'{t:g}' for t in used)} s; its values are off by about the ratio. "
-            "Calibrate at the scan's exposure")
-
-
-def _finite_or_none(x: float) -> float | None:
-    """NaN (e.g. no pair could be left out) is stored as null: JSON has no NaN."""
-    return float(x) if math.isfinite(x) else None

@@ -8,6 +8,7 @@ from fastapi import APIRouter, Query, Response, status
 from pydantic import BaseModel, Field
 
 from gonio.api.deps import COMPUTE, READ, WRITE, JobId, Service
+from gonio.calibration import counts
 from gonio.jobstates import JobState
 from gonio.plans.dryrun import DryRun
 from gonio.plans.models import Plan
@@ -94,7 +95,7 @@ def readings(
             actual_deg=r.actual_deg,
             light=r.light,
             sensor=r.sensor,
-            values=[a - b for a, b in zip(r.raw, r.dark, strict=False)],
+            values=counts(r).tolist(),
             saturated=r.saturated,
             t_read=r.t_read,
         )

@@ -149,7 +149,7 @@ def test_scan_at_another_exposure_than_its_calibration_is_flagged(tmp_path: Path
     from dataclasses import replace
 
     from gonio.calibration import Calibration
-    from gonio.worker import _exposure_mismatch
+    from gonio.finishing import exposure_mismatch
 
     _rig, svc = _service(tmp_path)
 
@@ -166,11 +166,11 @@ def test_scan_at_another_exposure_than_its_calibration_is_flagged(tmp_path: Path
     cal = Calibration.model_validate_json((tmp_path / "d" / "calibration.json").read_text())
     assert cal.exposure_s == FAST.exposure_s
     same = svc.readings(1)
-    assert _exposure_mismatch(cal, same) is None
+    assert exposure_mismatch(cal, same) is None
     longer = [replace(r, exposure_s=0.004) for r in same]
-    msg = _exposure_mismatch(cal, longer)
+    msg = exposure_mismatch(cal, longer)
     assert msg is not None and "0.002 s" in msg and "0.004 s" in msg
-    assert _exposure_mismatch(Calibration(), longer) is None  # uncalibrated: nothing to flag
+    assert exposure_mismatch(Calibration(), longer) is None  # uncalibrated: nothing to flag
 
 
 def test_queue_holds_are_stored_and_outlive_the_service(tmp_path: Path) -> None:
