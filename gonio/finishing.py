@@ -105,7 +105,7 @@ def finish_job(job_id: int, plan: AnyPlan, how: Finishing) -> dict[str, Any]:
         )
     channels = next(iter(channel_sets))
     readings = how.store.readings(job_id)
-    is_cal = isinstance(plan, CalibrationPlan)
+    is_cal = plan.finishing == "calibration"
     cal = Calibration() if is_cal else how.calibration()
     samples = calibrated_samples(readings, pairs, light_dirs, sensor_dirs, channels, cal)
     path = how.data_dir / "results" / f"job-{job_id}.h5"
@@ -121,7 +121,8 @@ def finish_job(job_id: int, plan: AnyPlan, how: Finishing) -> dict[str, Any]:
     if warning is not None:
         summary["calibration_warning"] = warning
         provenance["calibration_warning"] = warning
-    if isinstance(plan, CalibrationPlan):
+    if is_cal:
+        assert isinstance(plan, CalibrationPlan)  # the one kind that finishes so
         new_cal = from_reference(
             plan.reference_albedo,
             {(p.light, p.sensor): samples.values[q] for q, p in enumerate(pairs)},

@@ -30,7 +30,7 @@ from gonio.calibration import (
 from gonio.engine import Progress, ScanEngine
 from gonio.finishing import Finishing, finish_job
 from gonio.jobstates import JobState
-from gonio.plans.models import AnyPlan, CalibrationPlan, PlanError, parse_plan
+from gonio.plans.models import AnyPlan, PlanError, parse_plan
 from gonio.plans.validation import validate_plan
 from gonio.rigdescription import RigDescription
 from gonio.store import JobRow, JobStore
@@ -272,7 +272,7 @@ class Worker:
                 return JobState.ABORTED
             raise
         except Exception as exc:  # a failed reconstruction fails the job, never the worker
-            if isinstance(exc, CalibrationError) and isinstance(plan, CalibrationPlan):
+            if isinstance(exc, CalibrationError) and plan.finishing == "calibration":
                 # The reference's readings are unusable (not a white diffuser...): say why.
                 log.error("job %s: calibration refused: %s", job.id, exc)
                 return self._fail(job, f"calibration refused: {exc}", plan)

@@ -11,7 +11,6 @@ from gonio.plans.timing import adaptive_bound, estimate_angles, travel
 from gonio.plans.validation import (
     lights_in_order,
     plan_pairs,
-    rotation_count,
     uniform_angles,
     validate_plan,
 )
@@ -70,7 +69,7 @@ def dry_run(plan: AnyPlan, rig: RigDescription, current_deg: float | None = None
     validate_plan(plan, rig)
     pairs = plan_pairs(plan, rig)
     lights = lights_in_order(pairs)
-    angles = uniform_angles(plan.start_deg, rotation_count(plan))
+    angles = uniform_angles(plan.start_deg, plan.first_rotations())
     start = 0.0 if current_deg is None else float(current_deg)
     route = order_for_travel(angles, start, rig, plan.backlash_deg)
     motion, settle, exposure = estimate_angles(

@@ -23,7 +23,7 @@ Angles are degrees here (plans are user-facing). A plan's angles are specimen ro
 
 from __future__ import annotations
 
-from typing import Annotated, Literal
+from typing import Annotated, ClassVar, Literal
 
 from pydantic import AfterValidator, BaseModel, Field
 
@@ -123,6 +123,20 @@ class _PlanBase(BaseModel):
     )
     stop_queue_on_failure: bool = False
 
+    # The behaviour of each kind, asked of the plan rather than read off its class. Class
+    # attributes, not fields: a plan's JSON and the API schema hold its settings only.
+    finishing: ClassVar[Literal["reconstruction", "calibration"]] = "reconstruction"
+    """What finishing the measured job makes (:mod:`gonio.finishing`): a reconstructed BRDF,
+    or the rig's calibration factors."""
+    refines: ClassVar[bool] = False
+    """Whether the job adds stage angles after its first round (adaptive refinement)."""
+    rotations_field: ClassVar[str] = "rotations"
+    """The setting that gives the first round's number of stage angles (named in errors)."""
+
+    def first_rotations(self) -> int:
+        """Number of stage angles of the first round (``start_deg + k 360 / r``)."""
+        return int(getattr(self, self.rotations_field))
+
 
 class UniformPlan(_PlanBase):
     """n pairs x r uniformly spaced stage angles."""
@@ -136,6 +150,8 @@ class AdaptivePlan(_PlanBase):
     """Uniform start, then refinement where PCHIP mispredicts (MATH 7)."""
 
     kind: Literal["adaptive"] = "adaptive"
+    refines = True
+    rotations_field = "initial_rotations"
     initial_rotations: Count = Field(default=8,
                                      description="r0 uniform angles of the first round")
     threshold: float = Field(default=0.1, gt=0, description="relative error e (0.1 = 10 %)")
@@ -153,6 +169,7 @@ class CalibrationPlan(_PlanBase):
     """A white reference of known albedo measured at a few angles."""
 
     kind: Literal["calibration"] = "calibration"
+    finishing = "calibration"
     reference_albedo: float = Field(gt=0, le=1, description="hemispherical albedo of the reference")
     reference_name: Text = Field(default="white reference", min_length=1, max_length=200)
     rotations: Count = Field(default=4, description="angles averaged to even out the reference")

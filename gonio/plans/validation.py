@@ -36,13 +36,6 @@ def plan_pairs(plan: AnyPlan, rig: RigDescription) -> list[PairSpec]:
     return pairs
 
 
-def rotation_count(plan: AnyPlan) -> int:
-    """Stage angles of the plan's first round (``initial_rotations`` for adaptive plans)."""
-    if isinstance(plan, AdaptivePlan):
-        return plan.initial_rotations
-    return plan.rotations
-
-
 def uniform_angles(start_deg: float, r: int) -> list[float]:
     """``r`` specimen angles ``start_deg + k 360 / r``, degrees in [0, 360)."""
     return [float((start_deg + k * 360.0 / r) % 360.0) for k in range(r)]
@@ -51,7 +44,7 @@ def uniform_angles(start_deg: float, r: int) -> list[float]:
 def initial_angles(plan: AnyPlan, rig: RigDescription) -> list[float]:
     """Specimen angles (degrees in [0, 360)) of the plan's first round, validated."""
     validate_plan(plan, rig)
-    return uniform_angles(plan.start_deg, rotation_count(plan))
+    return uniform_angles(plan.start_deg, plan.first_rotations())
 
 
 def validate_plan(plan: AnyPlan, rig: RigDescription) -> None:
@@ -62,11 +55,11 @@ def validate_plan(plan: AnyPlan, rig: RigDescription) -> None:
     inside every used sensor's range; adaptive settings consistent.
     """
     pairs = plan_pairs(plan, rig)
-    r = rotation_count(plan)
-    name = "initial_rotations" if isinstance(plan, AdaptivePlan) else "rotations"
+    r = plan.first_rotations()
+    name = plan.rotations_field
     if r < 1:
         raise PlanError(f"{name} is {r}; a scan needs at least one stage angle (e.g. {name}=8)")
-    if isinstance(plan, AdaptivePlan) and r < 3:
+    if plan.refines and r < 3:
         raise PlanError(
             f"initial_rotations is {r}; adaptive refinement predicts each angle from its "
             "neighbours and needs at least 3 (the paper uses 8)"
