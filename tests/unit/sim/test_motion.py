@@ -8,8 +8,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from gonio.drivers._backlash import approach_waypoints, check_approach, check_target
+from gonio.drivers._stage_settings import check_approach, check_target
 from gonio.hal import TravelLimits
+from gonio.motion import approach_waypoints
 from gonio.sim.motion import StageMotion, plan_phases
 
 
