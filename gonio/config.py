@@ -25,6 +25,7 @@ from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from gonio.hal import LabDirection, PairSpec
+from gonio.motion import Approach
 
 __all__ = [
     "CalibrationConfig",
@@ -105,7 +106,7 @@ class StageConfig(_Strict):
     speed_dps: Annotated[float, Field(gt=0)] = 30.0
     accel_dps2: Annotated[float, Field(gt=0)] = 60.0
     settle_s: Annotated[float, Field(ge=0)] = 0.0
-    approach: Literal["positive", "negative", "none"] = "positive"
+    approach: Approach = "positive"
     backlash_deg: Annotated[float, Field(ge=0, le=10)] = 0.0
     min_deg: float = -360.0
     max_deg: float = 360.0

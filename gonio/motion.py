@@ -14,10 +14,11 @@ extra overshoot below angles it approaches from above, by the same rule with the
 from __future__ import annotations
 
 import math
-from typing import Literal
+from typing import Literal, get_args
 
 Approach = Literal["positive", "negative", "none"]
-APPROACHES: tuple[str, ...] = ("positive", "negative", "none")
+"""Side a stage arrives at every target from: increasing angle, decreasing, or either."""
+APPROACHES: tuple[str, ...] = get_args(Approach)
 
 # Below this distance a target counts as reached: no move, so no direction to correct.
 _SAME_POSITION_DEG = 1e-6
