@@ -20,6 +20,11 @@ Approach = Literal["positive", "negative", "none"]
 """Side a stage arrives at every target from: increasing angle, decreasing, or either."""
 APPROACHES: tuple[str, ...] = get_args(Approach)
 
+class StageMoveError(ValueError):
+    """A manual stage move that cannot be made: no target angle, or one outside the stage's
+    travel limits. Refused before anything moves; the message says what to send instead."""
+
+
 # Below this distance a target counts as reached: no move, so no direction to correct.
 _SAME_POSITION_DEG = 1e-6
 

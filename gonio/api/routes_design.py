@@ -21,8 +21,8 @@ from gonio.api.design import (
     evaluate_preset,
     run_design,
 )
+from gonio.api.limits import LimitExceeded
 from gonio.brdf.design.presets import get_preset, preset_names
-from gonio.plans.models import PlanError
 from gonio.service import Conflict
 
 router = APIRouter(prefix="/api/v1/design", tags=["design"])
@@ -52,7 +52,7 @@ async def design(body: DesignRequest, service: Service, request: Request) -> Des
     if body.time_limit_s is None:
         body = body.model_copy(update={"time_limit_s": min(DEFAULT_TIME_LIMIT_S, limit)})
     elif body.time_limit_s > limit:
-        raise PlanError(
+        raise LimitExceeded(
             f"time_limit_s = {body.time_limit_s:g} s is more than this daemon allows "
             f"({limit:g} s); ask for at most {limit:g} s or raise [limits] design_time_limit_s "
             "in the daemon config"
