@@ -33,9 +33,9 @@ from typing import Any
 from gonio import hal
 from gonio.drivers.factory import build_rig
 from gonio.engine import ScanEngine
+from gonio.motion import move_time
 from gonio.plans.dryrun import dry_run
 from gonio.plans.models import ExposureSettings, UniformPlan
-from gonio.plans.timing import move_time
 from gonio.rigdescription import RigDescription
 from gonio.sim.rig import SimRigOptions, start_sim_rig
 from gonio.store import JobStore

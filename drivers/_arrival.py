@@ -7,40 +7,14 @@ drivers therefore predict the end from the configured trapezoidal profile, poll 
 interval while the move is surely under way (that still catches a stall or a fault early),
 sleep exactly up to the predicted end, and poll at a fine interval from there on. A stage that
 is slower than predicted costs a few more fine polls; one that is faster (a simulator running
-faster than real time) is seen at the next coarse poll, as without a prediction.
+faster than real time) is seen at the next coarse poll, as without a prediction. The
+prediction is :func:`gonio.motion.move_time`, the formula the dry run times scans with.
 """
 
 from __future__ import annotations
 
-import math
-
 FINE_POLL_S = 0.002
 """Poll interval once the predicted end of a move has passed, seconds."""
-
-
-def trapezoid_s(distance_deg: float, speed_dps: float, accel_dps2: float) -> float:
-    """Duration of a rest-to-rest move with a trapezoidal (or triangular) velocity profile.
-
-    Parameters
-    ----------
-    distance_deg : float
-        Length of the move, degrees (sign ignored).
-    speed_dps : float
-        Cruise speed, degrees per second (> 0).
-    accel_dps2 : float
-        Acceleration and deceleration, degrees per second squared (> 0).
-
-    Returns
-    -------
-    float
-        Seconds; a move too short to reach ``speed_dps`` is a triangle, ``2 sqrt(d / a)``.
-    """
-    d = abs(distance_deg)
-    if d == 0.0:
-        return 0.0
-    if d >= speed_dps * speed_dps / accel_dps2:
-        return d / speed_dps + speed_dps / accel_dps2
-    return 2.0 * math.sqrt(d / accel_dps2)
 
 
 def poll_delay(now: float, expected_end: float | None, coarse_s: float,

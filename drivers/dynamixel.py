@@ -29,11 +29,12 @@ from typing import Any
 import dynamixel_sdk as sdk
 import serial
 
-from gonio.drivers._arrival import poll_delay, trapezoid_s
-from gonio.drivers._backlash import approach_waypoints, check_motion_settings, check_target
+from gonio.drivers._arrival import poll_delay
 from gonio.drivers._ownership import claim
+from gonio.drivers._stage_settings import check_motion_settings, check_target
 from gonio.hal import DeviceInUse, DeviceUnavailable, StageFault, StageStatus, TravelLimits
 from gonio.hal import Stage as _Stage
+from gonio.motion import approach_waypoints, move_time
 
 COUNTS_PER_TURN = 4096
 DPS_PER_VELOCITY_UNIT = 0.229 * 360.0 / 60.0  # motor degrees/s per Profile Velocity unit
@@ -490,8 +491,8 @@ class DynamixelStage(_Stage):
         for wp in waypoints:
             goal = round(wp * self.cpd)
             await self._write("write Goal Position", ADDR_GOAL_POSITION, 4, goal)
-            expected_end = time.monotonic() + trapezoid_s(wp - here, self.speed_dps,
-                                                          self.accel_dps2)
+            expected_end = time.monotonic() + move_time(wp - here, self.speed_dps,
+                                                        self.accel_dps2)
             present = await self._wait_arrival(goal, deadline, limit, expected_end)
             here = wp
         if self.settle_s > 0:

@@ -29,11 +29,12 @@ from typing import Any
 
 import serial
 
-from gonio.drivers._arrival import poll_delay, trapezoid_s
-from gonio.drivers._backlash import approach_waypoints, check_motion_settings, check_target
+from gonio.drivers._arrival import poll_delay
 from gonio.drivers._ownership import claim
+from gonio.drivers._stage_settings import check_motion_settings, check_target
 from gonio.hal import DeviceInUse, DeviceUnavailable, StageFault, StageStatus, TravelLimits
 from gonio.hal import Stage as _Stage
+from gonio.motion import approach_waypoints, move_time
 
 SPEED_FACTOR = 1.6384
 ACCEL_FACTOR = 1.6384 / 10_000
@@ -385,8 +386,8 @@ class ZaberStage(_Stage):
         here = current
         for wp in waypoints:
             await self._ok(f"move abs {round(wp * self.mpd)}")
-            expected_end = time.monotonic() + trapezoid_s(wp - here, self.speed_dps,
-                                                          self.accel_dps2)
+            expected_end = time.monotonic() + move_time(wp - here, self.speed_dps,
+                                                        self.accel_dps2)
             idle = await self._wait_idle(deadline, limit, f"move to {wp:g} deg", expected_end)
             here = wp
         if idle.flag is not None:

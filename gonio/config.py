@@ -24,7 +24,8 @@ import tomli_w
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from gonio.hal import LabDirection, Pair
+from gonio.hal import LabDirection, PairSpec
+from gonio.motion import Approach
 
 __all__ = [
     "CalibrationConfig",
@@ -44,6 +45,7 @@ __all__ = [
     "dump_rig_config",
     "load_rig_config",
     "parse_rig_config",
+    "read_toml",
     "register_width",
 ]
 
@@ -104,7 +106,7 @@ class StageConfig(_Strict):
     speed_dps: Annotated[float, Field(gt=0)] = 30.0
     accel_dps2: Annotated[float, Field(gt=0)] = 60.0
     settle_s: Annotated[float, Field(ge=0)] = 0.0
-    approach: Literal["positive", "negative", "none"] = "positive"
+    approach: Approach = "positive"
     backlash_deg: Annotated[float, Field(ge=0, le=10)] = 0.0
     min_deg: float = -360.0
     max_deg: float = 360.0
@@ -290,7 +292,11 @@ class SensorConfig(_Device):
 
 
 class PairConfig(_Strict):
-    """One ``[[pairs]]`` entry: a light and a sensor measured together, by name."""
+    """One ``[[pairs]]`` entry: a light and a sensor measured together, by name.
+
+    The file's form of a pair (unknown keys are refused, names are checked against the file's
+    devices); :meth:`RigConfig.pair_list` turns the entries into :class:`gonio.hal.PairSpec`.
+    """
 
     light: str
     sensor: str
@@ -404,11 +410,12 @@ class RigConfig(_Strict):
         eps += [f"tcp://{d.modbus.host}:{d.modbus.port}" for d in [*self.lights, *self.sensors]]
         return list(dict.fromkeys(eps))
 
-    def pair_list(self) -> list[Pair]:
+    def pair_list(self) -> list[PairSpec]:
         """The measured pairs in order (every light with every sensor for ``"all"``)."""
         if self.pairs == "all":
-            return [Pair(li.name, s.name) for li in self.lights for s in self.sensors]
-        return [Pair(p.light, p.sensor) for p in self.pairs]
+            return [PairSpec(light=li.name, sensor=s.name) for li in self.lights
+                    for s in self.sensors]
+        return [PairSpec(light=p.light, sensor=p.sensor) for p in self.pairs]
 
     def pair_directions(self) -> list[PairDirections]:
         """Each measured pair with its light and sensor lab-frame unit vectors."""
@@ -426,12 +433,12 @@ class PairDirections:
 
     Attributes
     ----------
-    pair : Pair
+    pair : PairSpec
     wi : (3,) array, unit vector from the specimen toward the light, lab frame
     wo : (3,) array, unit vector from the specimen toward the sensor, lab frame
     """
 
-    pair: Pair
+    pair: PairSpec
     wi: NDArray[np.float64]
     wo: NDArray[np.float64]
 
@@ -519,6 +526,47 @@ def parse_rig_config(data: dict[str, Any], source: str = "rig config") -> RigCon
         raise ConfigError("\n".join(lines)) from None
 
 
+def read_toml(
+    path: str | os.PathLike[str], *, noun: str, example: str, error: type[ValueError]
+) -> dict[str, Any]:
+    """Read a TOML file that people write (rig and daemon configs), with one-line errors.
+
+    Parameters
+    ----------
+    path : path of the file
+    noun : what the file is, for messages ("rig config")
+    example : the shipped example to start from, for messages
+    error : the exception type to raise (a ``ValueError`` subclass the caller's users catch)
+
+    Returns
+    -------
+    dict
+        The TOML document.
+
+    Raises
+    ------
+    error
+        The file is missing, unreadable, not UTF-8 text or not TOML; the message names the
+        file and what to do.
+    """
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise error(f"{p}: no such {noun} file; start from {example}") from None
+    except UnicodeDecodeError as exc:
+        raise error(
+            f"{p}: not a text file (byte {exc.start} is not UTF-8); a {noun} is TOML text, "
+            f"see {example}"
+        ) from None
+    except OSError as exc:
+        raise error(f"{p}: cannot read the {noun}: {exc.strerror}") from None
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise error(f"{p}: not valid TOML: {exc}") from None
+
+
 def load_rig_config(path: str | os.PathLike[str]) -> RigConfig:
     """Read and validate a rig configuration file.
 
@@ -527,25 +575,9 @@ def load_rig_config(path: str | os.PathLike[str]) -> RigConfig:
     ConfigError
         The file is missing, not TOML, or invalid; the message names the file and the key.
     """
-    p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ConfigError(
-            f"{p}: no such rig config file; start from deploy/rig.example.toml"
-        ) from None
-    except UnicodeDecodeError as exc:
-        raise ConfigError(
-            f"{p}: not a text file (byte {exc.start} is not UTF-8); a rig config is TOML text, "
-            "see deploy/rig.example.toml"
-        ) from None
-    except OSError as exc:
-        raise ConfigError(f"{p}: cannot read the rig config: {exc.strerror}") from None
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{p}: not valid TOML: {exc}") from None
-    return parse_rig_config(data, p.name)
+    data = read_toml(path, noun="rig config", example="deploy/rig.example.toml",
+                     error=ConfigError)
+    return parse_rig_config(data, Path(path).name)
 
 
 def dump_rig_config(cfg: RigConfig, path: str | os.PathLike[str]) -> Path:

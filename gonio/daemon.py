@@ -27,7 +27,6 @@ import contextlib
 import logging
 import os
 import stat
-import tomllib
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Annotated, Any
@@ -35,6 +34,7 @@ from typing import Annotated, Any
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from gonio.api.auth import ApiKeyring, KeyringError
+from gonio.config import read_toml
 
 log = logging.getLogger("gonio.daemon")
 
@@ -137,21 +137,8 @@ def load_daemon_config(path: str | os.PathLike[str] | None) -> DaemonConfig:
         base = Path.cwd()
     else:
         p = Path(path)
-        try:
-            data = tomllib.loads(p.read_text(encoding="utf-8"))
-        except FileNotFoundError:
-            raise DaemonConfigError(
-                f"{p}: no such daemon config file; start from deploy/daemon.example.toml"
-            ) from None
-        except UnicodeDecodeError as exc:
-            raise DaemonConfigError(
-                f"{p}: not a text file (byte {exc.start} is not UTF-8); a daemon config is "
-                "TOML text, see deploy/daemon.example.toml"
-            ) from None
-        except OSError as exc:
-            raise DaemonConfigError(f"{p}: cannot read the daemon config: {exc.strerror}") from None
-        except tomllib.TOMLDecodeError as exc:
-            raise DaemonConfigError(f"{p}: not valid TOML: {exc}") from None
+        data = read_toml(p, noun="daemon config", example="deploy/daemon.example.toml",
+                         error=DaemonConfigError)
         cfg = _validate(data, p.name)
         base = p.resolve().parent
 

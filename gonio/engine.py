@@ -43,6 +43,7 @@ from gonio import hal
 from gonio.calibration import readings_array
 from gonio.hal import PairSpec
 from gonio.jobstates import JobState
+from gonio.motion import plan_overshoot_legs
 from gonio.plans.adaptive import adaptive_refinement
 from gonio.plans.models import MAX_ROTATIONS, AdaptivePlan, AnyPlan
 from gonio.plans.route import order_for_travel
@@ -377,10 +378,11 @@ class ScanEngine:
         stage = self.rig.stage
         target = step.position_deg
         if self.plan.backlash_deg > 0:
+            # Coming from above: overshoot below so the final approach is positive again.
             here = await stage.position()
-            if target < here - 1e-6:
-                # Coming from above: overshoot below so the final approach is positive again.
-                await stage.move_to(max(self.desc.stage_min_deg, target - self.plan.backlash_deg))
+            for leg in plan_overshoot_legs(here, target, self.plan.backlash_deg,
+                                           self.desc.stage_min_deg)[:-1]:
+                await stage.move_to(leg)
         actual = await stage.move_to(target)
         dark: dict[str, tuple[float, ...]] = {}
         mode = self.plan.exposure.dark

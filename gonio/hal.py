@@ -243,14 +243,8 @@ class Sensor(Device):
     async def status(self) -> SensorStatus: ...
 
 
-@dataclass(frozen=True)
-class Pair:
-    """A measured light/sensor pair, by device name."""
-
-    light: str
-    sensor: str
-
-
+# The one pair type: a rig's pairs, a plan's pairs, calibration factors and result files all
+# name pairs with it. Its geometry is not here but in the light's and sensor's directions.
 class PairSpec(BaseModel):
     """A light/sensor pair by device name."""
 
@@ -270,14 +264,14 @@ class Rig:
     stage: Stage
     lights: dict[str, Light]
     sensors: dict[str, Sensor]
-    pairs: list[Pair]
+    pairs: list[PairSpec]
 
     def __post_init__(self) -> None:
         for p in self.pairs:
             if p.light not in self.lights:
-                raise ValueError(f"pair {p}: no light named {p.light!r} in the rig")
+                raise ValueError(f"pair {p.label()}: no light named {p.light!r} in the rig")
             if p.sensor not in self.sensors:
-                raise ValueError(f"pair {p}: no sensor named {p.sensor!r} in the rig")
+                raise ValueError(f"pair {p.label()}: no sensor named {p.sensor!r} in the rig")
 
     def devices(self) -> Sequence[Device]:
         return [self.stage, *self.lights.values(), *self.sensors.values()]

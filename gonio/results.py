@@ -66,6 +66,11 @@ class ResultFileError(ValueError):
     """A result file is missing, not a gonio result, or of an unknown version."""
 
 
+class OffGridAngle(ValueError):
+    """A query of a result at an angle that is not on the result's 5 degree grid; the message
+    says which angles are."""
+
+
 @dataclass
 class ResultFile:
     """Everything in a result file, loaded."""

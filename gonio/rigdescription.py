@@ -7,12 +7,11 @@ job as its rig snapshot, and ``GET /api/v1/rig`` returns it.
 
 from __future__ import annotations
 
-from typing import Literal
-
 from pydantic import BaseModel, ConfigDict, Field
 
 from gonio import hal
 from gonio.hal import PairSpec
+from gonio.motion import Approach
 
 
 class SensorInfo(BaseModel):
@@ -51,7 +50,7 @@ class RigDescription(BaseModel):
     accel_dps2: float = Field(gt=0)
     settle_s: float = Field(default=0.0, ge=0)
     resolution_deg: float = Field(default=0.01, gt=0)
-    approach: Literal["positive", "negative", "none"] = Field(
+    approach: Approach = Field(
         default="none", description="side the stage driver approaches every target from")
     approach_backlash_deg: float = Field(
         default=0.0, ge=0, description="the driver's overshoot when a move arrives from the "
@@ -87,7 +86,7 @@ class RigDescription(BaseModel):
                 )
                 for n, se in rig.sensors.items()
             ),
-            pairs=tuple(PairSpec(light=p.light, sensor=p.sensor) for p in rig.pairs),
+            pairs=tuple(rig.pairs),
         )
 
     def sensor(self, name: str) -> SensorInfo:

@@ -2,7 +2,8 @@
 
 Every request and response type is a pydantic model (they become the API schema). Errors are
 typed so the API can map them: :class:`NotFound` -> 404, :class:`Conflict` (including
-:class:`gonio.jobstates.IllegalTransition`) -> 409, :class:`gonio.plans.models.PlanError` -> 422.
+:class:`gonio.jobstates.IllegalTransition`) -> 409, :class:`gonio.plans.models.PlanError` and
+:class:`gonio.motion.StageMoveError` -> 422.
 
 Typical use::
 
@@ -31,6 +32,7 @@ from gonio.engine_loop import EngineLoop
 from gonio.fields import FINITE, Count
 from gonio.jobstates import ACTIVE_STATES, IllegalTransition, JobState, check_action
 from gonio.maintenance import LOCK_FILE_NAME, MaintenanceLock
+from gonio.motion import StageMoveError
 from gonio.plans.dryrun import DryRun, dry_run
 from gonio.plans.models import AnyPlan, Plan, PlanError, parse_plan
 from gonio.rigdescription import RigDescription
@@ -871,7 +873,7 @@ class GonioService:
         ------
         Conflict
             A job is active (``stop`` excepted: stopping is always allowed).
-        PlanError
+        StageMoveError
             A move without ``angle_deg`` or outside the stage's travel limits.
         DeviceError
             The stage reported a fault or stopped answering.
@@ -879,10 +881,11 @@ class GonioService:
         if request.action == "move":
             lo, hi = self.desc.stage_min_deg, self.desc.stage_max_deg
             if request.angle_deg is None:
-                raise PlanError("a stage move needs angle_deg (degrees)")
+                raise StageMoveError("a stage move needs angle_deg (degrees)")
             if not lo <= request.angle_deg <= hi:
-                raise PlanError(f"angle_deg {request.angle_deg:g} is outside the stage's travel "
-                                f"limits [{lo:g}, {hi:g}] deg (min_deg/max_deg in the rig config)")
+                raise StageMoveError(
+                    f"angle_deg {request.angle_deg:g} is outside the stage's travel limits "
+                    f"[{lo:g}, {hi:g}] deg (min_deg/max_deg in the rig config)")
         active = self.active_job()
         if active is not None and request.action != "stop":
             raise Conflict(f"job {active.id} is {active.state.value}: the stage is in use; wait "

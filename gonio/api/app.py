@@ -3,15 +3,21 @@
 :func:`create_app` wires routes, guards (keys, maintenance lock, body limit), error mapping and
 the lab page. The service's typed errors become HTTP statuses in one place here:
 
-================================================  ======
-:class:`gonio.service.NotFound` (store's)         404
-:class:`gonio.brdf.design.presets.UnknownPresetError`    404
-:class:`gonio.service.Conflict`                   409
-:class:`gonio.jobstates.IllegalTransition`        409
-:class:`gonio.plans.models.PlanError`             422
-:class:`gonio.brdf.design.errors.DesignError`      422
-:class:`gonio.brdf.design.errors.FeasibilityError` 422
-================================================  ======
+====================================================  ======
+:class:`gonio.service.NotFound` (store's)             404
+:class:`gonio.brdf.design.presets.UnknownPresetError` 404
+:class:`gonio.service.Conflict`                       409
+:class:`gonio.jobstates.IllegalTransition`            409
+:class:`gonio.calibration.CalibrationError`           409
+:class:`gonio.plans.models.PlanError`                 422
+:class:`gonio.motion.StageMoveError`                  422
+:class:`gonio.api.limits.LimitExceeded`               422
+:class:`gonio.results.OffGridAngle`                   422
+:class:`gonio.brdf.design.errors.DesignError`         422
+:class:`gonio.brdf.design.errors.FeasibilityError`    422
+:class:`gonio.service.DeviceError`                    503
+:class:`gonio.results.ResultFileError`                500
+====================================================  ======
 """
 
 from __future__ import annotations
@@ -35,13 +41,15 @@ from gonio import __version__
 from gonio.api import routes_design, routes_jobs, routes_results, routes_rig, routes_system
 from gonio.api.errors import document_errors
 from gonio.api.events import HEARTBEAT_S, StreamCloser
+from gonio.api.limits import LimitExceeded
 from gonio.api.settings import ApiSettings, install
 from gonio.brdf.design.errors import DesignError, FeasibilityError
 from gonio.brdf.design.presets import UnknownPresetError
 from gonio.calibration import CalibrationError
 from gonio.jobstates import IllegalTransition
+from gonio.motion import StageMoveError
 from gonio.plans.models import PlanError
-from gonio.results import ResultFileError
+from gonio.results import OffGridAngle, ResultFileError
 from gonio.service import Conflict, DeviceError, GonioService
 from gonio.store import NotFound
 
@@ -176,6 +184,9 @@ def create_app(
         (IllegalTransition, 409),
         (CalibrationError, 409),
         (PlanError, 422),
+        (StageMoveError, 422),
+        (LimitExceeded, 422),
+        (OffGridAngle, 422),
         (DesignError, 422),
         (FeasibilityError, 422),
         (UnknownPresetError, 404),

@@ -1,4 +1,4 @@
-"""Request body size limit, as plain ASGI middleware.
+"""The daemon's limits on requests: body size (plain ASGI middleware) and what a request may ask.
 
 Bodies are buffered here up to the limit, and a request whose body is larger is answered with 413
 before the application sees a byte of it. Checking only ``Content-Length`` is not enough: a
@@ -19,6 +19,11 @@ DRAIN_FACTOR = 8
 """An oversize body up to this many times the limit is read and discarded before the 413, so
 the client (still sending) receives the answer instead of a connection reset. Beyond that
 the 413 goes out at once and the connection is closed: reading more would be the attack."""
+
+
+class LimitExceeded(ValueError):
+    """A request asks for more than this daemon's ``[limits]`` allow (for example a design
+    time limit above ``design_time_limit_s``); the message names the limit and how to raise it."""
 
 
 class BodySizeLimit:

@@ -14,8 +14,8 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Path, Query, Request
 
 from gonio.api.deps import READ, WRITE, Service
+from gonio.api.limits import LimitExceeded
 from gonio.brdf.design.presets import get_preset, preset_names
-from gonio.plans.models import PlanError
 from gonio.sampling_design import DEFAULT_TIME_LIMIT_S, DesignRequest, DesignResult, PresetInfo
 
 router = APIRouter(prefix="/api/v1/design", tags=["design"])
@@ -38,7 +38,7 @@ async def design(body: DesignRequest, service: Service, request: Request) -> Des
     if body.time_limit_s is None:
         body = body.model_copy(update={"time_limit_s": min(DEFAULT_TIME_LIMIT_S, limit)})
     elif body.time_limit_s > limit:
-        raise PlanError(
+        raise LimitExceeded(
             f"time_limit_s = {body.time_limit_s:g} s is more than this daemon allows "
             f"({limit:g} s); ask for at most {limit:g} s or raise [limits] design_time_limit_s "
             "in the daemon config"

@@ -16,6 +16,7 @@ from pydantic import BaseModel, Field
 
 from gonio.api.deps import READ, JobId, Service
 from gonio.brdf.tables import geometry as geo
+from gonio.results import OffGridAngle
 from gonio.service import NotFound
 
 router = APIRouter(prefix="/api/v1/jobs", tags=["results"])
@@ -131,10 +132,8 @@ async def polar(
 
 
 def _grid(value: float, name: str, upper: int) -> int:
-    from gonio.plans.models import PlanError
-
     if value % _GRID_STEP_DEG != 0 or not 0 <= value <= upper:
-        raise PlanError(
+        raise OffGridAngle(
             f"{name} = {value:g} deg is not on the 5 degree grid; use a multiple of 5 in "
             f"[0, {upper}]"
         )

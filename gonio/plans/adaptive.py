@@ -1,35 +1,15 @@
-"""Adaptive refinement numerics (MATH 7, V&F Sec. 6): where to add stage angles next."""
+"""Adaptive refinement numerics (MATH 7, V&F Sec. 6): where to add stage angles next.
+
+The prediction is the reconstruction's own periodic PCHIP
+(:mod:`gonio.brdf.reconstruction.periodic`), in degrees.
+"""
 
 from __future__ import annotations
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
-
-def periodic_pchip(x_deg: NDArray[np.float64], y: NDArray[np.float64],
-                   xq_deg: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Periodic PCHIP through ``(x, y)`` with period 360 evaluated at ``xq``.
-
-    scipy's ``extrapolate='periodic'`` only wraps the query, so the samples are padded with
-    wrapped copies on both sides (MATH 5 step 1).
-
-    Parameters
-    ----------
-    x_deg : (m,) distinct angles, degrees in [0, 360)
-    y : (m, ...) values
-    xq_deg : (q,) query angles, degrees
-
-    Returns
-    -------
-    (q, ...) interpolated values
-    """
-    from scipy.interpolate import PchipInterpolator
-
-    order = np.argsort(x_deg)
-    x, yy = np.asarray(x_deg, float)[order], np.asarray(y, float)[order]
-    xp = np.concatenate([x - 360.0, x, x + 360.0])
-    yp = np.concatenate([yy, yy, yy], axis=0)
-    return np.asarray(PchipInterpolator(xp, yp, axis=0)(np.mod(xq_deg, 360.0)))
+from gonio.brdf.reconstruction.periodic import periodic_pchip_rows
 
 
 def adaptive_refinement(
@@ -70,9 +50,11 @@ def adaptive_refinement(
     # count as structure to refine.
     scale = np.maximum(np.abs(v), 1e-3 * np.max(np.abs(v), axis=1, keepdims=True) + 1e-300)
     err = np.zeros(r)
+    n = v.shape[0]
     for j in range(r):
         keep = np.arange(r) != j
-        pred = periodic_pchip(a[keep], np.moveaxis(v[:, keep, :], 1, 0), a[j : j + 1])[0]
+        pred = periodic_pchip_rows(a[keep], v[:, keep, :], np.full((n, 1), a[j]),
+                                   period=360.0)[:, 0, :]
         rel = np.abs(pred - v[:, j, :]) / scale[:, j, :]
         err[j] = float(np.max(rel))
     candidates: dict[float, float] = {}

@@ -1,47 +1,18 @@
-"""How long moving the stage takes: trapezoidal move times along a route, and time bounds.
+"""How long a plan takes: move times along a route, settles, exposures, adaptive bounds.
 
 The engine's own backlash overshoot and the stage driver's approach overshoot are both
-replayed, so an estimate counts every leg the hardware will travel.
+replayed with the rules of :mod:`gonio.motion`, so an estimate counts every leg the hardware
+will travel, timed with the profile the drivers poll by.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 
+from gonio.motion import approach_waypoints, move_time, plan_overshoot_legs
 from gonio.plans.models import MAX_ROTATIONS, AdaptivePlan, AnyPlan
 from gonio.plans.route import order_for_travel
 from gonio.rigdescription import RigDescription
-
-
-def move_time(distance_deg: float, speed_dps: float, accel_dps2: float) -> float:
-    """Duration of a trapezoidal (or triangular) move, seconds.
-
-    Accelerate at ``accel_dps2`` to ``speed_dps``, cruise, decelerate; a short move that
-    never reaches full speed is a triangle: ``2 sqrt(d / a)``.
-    """
-    d = abs(distance_deg)
-    if d == 0:
-        return 0.0
-    d_ramp = speed_dps**2 / accel_dps2  # accelerate + decelerate distance
-    if d >= d_ramp:
-        return d / speed_dps + speed_dps / accel_dps2
-    return 2.0 * math.sqrt(d / accel_dps2)
-
-
-def _driver_waypoints(here: float, target: float, rig: RigDescription) -> list[float]:
-    """Where the stage driver goes to reach ``target`` from ``here`` (its approach side).
-
-    The same rule as ``gonio.drivers._backlash.approach_waypoints`` (drivers are not imported
-    here): a move arriving from the wrong side first overshoots by the driver's backlash.
-    """
-    delta = target - here
-    b = rig.approach_backlash_deg
-    if rig.approach == "none" or b <= 0 or abs(delta) < 1e-6:
-        return [target]
-    if rig.approach == "positive":
-        return [target] if delta > 0 else [target - b, target]
-    return [target] if delta < 0 else [target + b, target]
 
 
 def travel(positions: Sequence[float], start_deg: float, rig: RigDescription,
@@ -65,13 +36,9 @@ def travel(positions: Sequence[float], start_deg: float, rig: RigDescription,
     moves = 0
     here = float(start_deg)
     for target in positions:
-        legs = []
-        if backlash_deg > 0 and target < here - 1e-6:
-            legs.append(max(rig.stage_min_deg, target - backlash_deg))
-        legs.append(target)
-        for leg in legs:
+        for leg in plan_overshoot_legs(here, target, backlash_deg, rig.stage_min_deg):
             moves += 1
-            for wp in _driver_waypoints(here, leg, rig):
+            for wp in approach_waypoints(here, leg, rig.approach, rig.approach_backlash_deg):
                 motion += move_time(wp - here, rig.speed_dps, rig.accel_dps2)
                 here = wp
     return motion, moves, here

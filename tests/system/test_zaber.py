@@ -11,9 +11,9 @@ from typing import Any
 
 import pytest
 
-from gonio.drivers._arrival import trapezoid_s
 from gonio.drivers.zaber import ZaberStage
 from gonio.hal import DeviceUnavailable, StageFault, TravelLimits
+from gonio.motion import move_time
 from gonio.sim.motion import StageMotion
 from gonio.sim.zaber_device import SPEED_FACTOR, ZaberSimHandle, start_zaber_sim
 
@@ -194,7 +194,7 @@ def test_arrival_is_seen_soon_after_the_move_ends_despite_a_slow_poll() -> None:
             for k in range(1, 6):
                 t0 = time.monotonic()
                 await stage.move_to(k * step)
-                late.append(time.monotonic() - t0 - trapezoid_s(step, speed, accel))
+                late.append(time.monotonic() - t0 - move_time(step, speed, accel))
             return late
 
         late = run(go)

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from gonio.config import ConfigError, dump_rig_config, load_rig_config, parse_rig_config
-from gonio.hal import Pair
+from gonio.hal import PairSpec
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "deploy" / "rig.example.toml"
 
@@ -32,7 +32,7 @@ def test_example_loads_and_lists_all_pairs() -> None:
     cfg = load_rig_config(EXAMPLE)
     lights = [x.name for x in cfg.lights]
     sensors = [x.name for x in cfg.sensors]
-    assert cfg.pair_list() == [Pair(li, s) for li in lights for s in sensors]
+    assert cfg.pair_list() == [PairSpec(light=li, sensor=s) for li in lights for s in sensors]
     assert cfg.stage.counts_per_degree == pytest.approx(4096 * 3.0 / 360)
 
 
@@ -46,7 +46,7 @@ def test_pair_directions_are_unit_vectors_at_the_configured_angles(example: dict
     example["pairs"] = [{"light": "L2", "sensor": "S1"}]
     cfg = parse_rig_config(example)
     (pd,) = cfg.pair_directions()
-    assert pd.pair == Pair("L2", "S1")
+    assert pd.pair == PairSpec(light="L2", sensor="S1")
     for vec, (theta, phi) in ((pd.wi, (60.0, 120.0)), (pd.wo, (45.0, 180.0))):
         assert np.linalg.norm(vec) == pytest.approx(1.0)
         assert np.degrees(np.arccos(vec[2])) == pytest.approx(theta)

@@ -55,7 +55,6 @@ import numpy as np
 import scipy.linalg
 import scipy.optimize
 from numpy.typing import ArrayLike, NDArray
-from scipy.interpolate import PchipInterpolator
 
 from gonio.brdf.reconstruction.basis import (
     N_HARMONICS,
@@ -65,6 +64,7 @@ from gonio.brdf.reconstruction.basis import (
     remap,
     row_weight,
 )
+from gonio.brdf.reconstruction.periodic import periodic_pchip_rows
 from gonio.brdf.tables import geometry as geo
 from gonio.brdf.tables.table import VALID_MASK, BRDFTable
 
@@ -213,35 +213,6 @@ def one_blas_thread() -> Iterator[None]:
 
 
 # ---------------------------------------------------------------------------- step 1
-def _periodic_pchip_per_row(x: FloatArray, y: FloatArray, xq: FloatArray) -> FloatArray:
-    """Periodic PCHIP of many rows that share their nodes, each row at its own query points.
-
-    Parameters
-    ----------
-    x : (r,) sorted nodes in [0, 2 pi), radians
-    y : (n, r, C) values of row ``q`` at the nodes
-    xq : (n, m) query points of row ``q``, radians (any range)
-
-    Returns
-    -------
-    (n, m, C)
-        Row ``q`` interpolated at ``xq[q]``. One interpolant is built for all rows (the
-        nodes are shared) and evaluated piece by piece, instead of one scipy object per row.
-    """
-    n, r, C = y.shape
-    if r == 1:
-        return np.broadcast_to(y[:, :1, :], (n, xq.shape[1], C)).copy()
-    xp = np.concatenate([x - 2 * np.pi, x, x + 2 * np.pi])
-    yp = np.tile(np.moveaxis(y, 1, 0).reshape(r, n * C), (3, 1))  # (3r, n C)
-    pp = PchipInterpolator(xp, yp, axis=0)
-    coef = pp.c.reshape(4, 3 * r - 1, n, C)  # highest power first
-    u = np.mod(xq, 2 * np.pi)
-    piece = np.clip(np.searchsorted(xp, u, side="right") - 1, 0, 3 * r - 2)  # (n, m)
-    c = coef[:, piece, np.arange(n)[:, None], :]  # (4, n, m, C)
-    dx = (u - xp[piece])[..., None]
-    return np.asarray(((c[0] * dx + c[1]) * dx + c[2]) * dx + c[3])
-
-
 def resample_to_slices(
     ph_lab: FloatArray, stage_angles: FloatArray, values: FloatArray
 ) -> FloatArray:
@@ -261,7 +232,7 @@ def resample_to_slices(
     """
     a = np.mod(stage_angles, 2 * np.pi)
     order = np.argsort(a)
-    return _periodic_pchip_per_row(
+    return periodic_pchip_rows(
         a[order], values[:, order], np.asarray(ph_lab)[:, None] - geo.PH_GRID[None, :]
     )
 
@@ -282,7 +253,7 @@ def slices_at_stage_angles(
     (n, r, C)
         Periodic PCHIP over the slices at ``ph = ph_lab[q] - stage_angles``.
     """
-    return _periodic_pchip_per_row(
+    return periodic_pchip_rows(
         geo.PH_GRID, slices, np.asarray(ph_lab)[:, None] - np.asarray(stage_angles)[None, :]
     )
 

@@ -94,7 +94,9 @@ def test_full_scan_with_live_progress_and_results(daemon: Daemon) -> None:
         sl = c.get(f"/api/v1/jobs/{job_id}/slice", params=cell).json()
         assert len(sl["phi_h_deg"]) == 72
         assert set(sl["values"]) == set(daemon.sim.config.sensors[0].channels)
-        assert c.get(f"/api/v1/jobs/{job_id}/slice", params={"theta_h": 31}).status_code == 422
+        off = c.get(f"/api/v1/jobs/{job_id}/slice", params={"theta_h": 31})
+        assert off.status_code == 422
+        assert "theta_h = 31 deg is not on the 5 degree grid" in off.json()["detail"]
 
         h5 = c.get(f"/api/v1/jobs/{job_id}/result")
         assert h5.status_code == 200

@@ -166,7 +166,8 @@ class MemRig(hal.Rig):
             "S1": MemSensor("S1", self.log, self, 45.0, 180.0),
             "S2": MemSensor("S2", self.log, self, 60.0, 200.0),
         }
-        pairs = [hal.Pair("L1", "S1"), hal.Pair("L1", "S2"), hal.Pair("L2", "S1")]
+        pairs = [hal.PairSpec(light="L1", sensor="S1"), hal.PairSpec(light="L1", sensor="S2"),
+                 hal.PairSpec(light="L2", sensor="S1")]
         super().__init__(stage=stage, lights=lights, sensors=sensors, pairs=pairs)
 
     @property

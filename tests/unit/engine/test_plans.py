@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from gonio.hal import PairSpec
+from gonio.motion import move_time
 from gonio.plans.adaptive import adaptive_refinement
 from gonio.plans.dryrun import dry_run
 from gonio.plans.models import (
@@ -21,7 +22,6 @@ from gonio.plans.models import (
     parse_plan,
 )
 from gonio.plans.route import order_for_travel
-from gonio.plans.timing import move_time
 from gonio.plans.validation import validate_plan
 from gonio.rigdescription import RigDescription
 from tests.unit.engine.memrig import MemRig

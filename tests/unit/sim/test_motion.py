@@ -8,8 +8,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from gonio.drivers._backlash import approach_waypoints, check_approach, check_target
+from gonio.drivers._stage_settings import check_approach, check_target
 from gonio.hal import TravelLimits
+from gonio.motion import approach_waypoints, plan_overshoot_legs
 from gonio.sim.motion import StageMotion, plan_phases
 
 
@@ -159,6 +160,21 @@ def test_targets_are_approached_from_the_configured_side(
     current: float, target: float, approach: str, expected: list[float]
 ) -> None:
     assert approach_waypoints(current, target, approach, 1.0) == expected
+
+
+@pytest.mark.parametrize(
+    ("current", "target", "backlash", "expected"),
+    [
+        (50.0, 10.0, 2.0, [8.0, 10.0]),  # from above: overshoot below, then up to the target
+        (0.0, 10.0, 2.0, [10.0]),  # from below: already the positive side
+        (50.0, 1.0, 2.0, [0.0, 1.0]),  # the overshoot stops at the lower limit (0 here)
+        (50.0, 10.0, 0.0, [10.0]),  # no plan backlash: straight there
+    ],
+)
+def test_plan_overshoot_goes_below_a_target_approached_from_above(
+    current: float, target: float, backlash: float, expected: list[float]
+) -> None:
+    assert plan_overshoot_legs(current, target, backlash, min_deg=0.0) == expected
 
 
 def test_approach_settings_are_validated_with_clear_messages() -> None:

@@ -1,22 +1,15 @@
-"""Motion settings shared by the stage drivers: validation, and the approach direction.
+"""Checks of the motion settings and targets every stage driver takes alike.
 
-Gears and lead screws have play: where a stage comes to rest depends on the side it came from.
-Approaching every target from the same side removes that error. When a move would arrive from
-the other side, the stage first overshoots the target by ``backlash_deg`` and then returns.
+The motion rules themselves (move time, approach side and backlash overshoot) are
+:mod:`gonio.motion`, shared with the plans that estimate a scan's duration.
 """
 
 from __future__ import annotations
 
 import math
-from typing import Literal
 
 from gonio.hal import TravelLimits
-
-Approach = Literal["positive", "negative", "none"]
-APPROACHES: tuple[str, ...] = ("positive", "negative", "none")
-
-# Below this distance a target counts as reached: no move, so no direction to correct.
-_SAME_POSITION_DEG = 1e-6
+from gonio.motion import APPROACHES
 
 
 def check_motion_settings(
@@ -67,38 +60,6 @@ def check_approach(device: str, approach: str, backlash_deg: float) -> None:
         )
     if not math.isfinite(backlash_deg) or backlash_deg < 0:
         raise ValueError(f"{device}: backlash_deg must be a number >= 0, got {backlash_deg}")
-
-
-def approach_waypoints(
-    current_deg: float, target_deg: float, approach: str, backlash_deg: float
-) -> list[float]:
-    """Positions to visit in order so that the last move ends on the configured side.
-
-    Parameters
-    ----------
-    current_deg : float
-        Present stage position, degrees.
-    target_deg : float
-        Requested position, degrees.
-    approach : {"positive", "negative", "none"}
-        "positive": the final move runs in the increasing-angle direction; "negative": in the
-        decreasing direction; "none": go straight.
-    backlash_deg : float
-        Overshoot used when the direct move would arrive from the wrong side, degrees (>= 0).
-
-    Returns
-    -------
-    list of float
-        One waypoint (the target) or two (overshoot point, then the target), degrees.
-    """
-    if approach == "none" or backlash_deg <= 0:
-        return [target_deg]
-    delta = target_deg - current_deg
-    if abs(delta) < _SAME_POSITION_DEG:
-        return [target_deg]
-    if approach == "positive":
-        return [target_deg] if delta > 0 else [target_deg - backlash_deg, target_deg]
-    return [target_deg] if delta < 0 else [target_deg + backlash_deg, target_deg]
 
 
 def check_target(
