@@ -18,6 +18,15 @@ import sys
 from collections.abc import Callable, Sequence
 
 from gonio import __version__
+from gonio.brdf.advice import AdvisedError
+
+# The flag of each core setting an error may advise changing (gonio.brdf.advice).
+CORE_SETTING_FLAGS = {
+    "max_elevation_deg": "--max-elevation",
+    "min_separation_deg": "--min-separation",
+    "min_device_distance_deg": "--min-device-distance",
+    "replace": "--replace",
+}
 
 COMMAND_MODULES: tuple[str, ...] = (
     "gonio.cli.brdf_commands",
@@ -111,8 +120,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     except ValueError as exc:
         # Domain errors (bad table, plan, config ...) are ValueError subclasses with messages
-        # written for the user; anything else is a bug and keeps its traceback.
-        print(f"gonio {args.command}: error: {exc}", file=sys.stderr)
+        # written for the user; anything else is a bug and keeps its traceback. Core errors
+        # that advise a setting name it as the core does; here it is the flag.
+        message = exc.advise(CORE_SETTING_FLAGS) if isinstance(exc, AdvisedError) else exc
+        print(f"gonio {args.command}: error: {message}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)

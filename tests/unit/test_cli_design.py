@@ -104,6 +104,9 @@ def test_design_preset(basis_file: Path, capsys: pytest.CaptureFixture[str]) -> 
         (["--pairs", "2", "--basis", "/nonexistent/basis.npz"], "does not exist"),
         (["--pairs", "3", "--max-elevation", "5", "--min-separation", "30"],
          "no grid cell is feasible"),
+        # the core names the settings to relax; the CLI words them as its flags
+        (["--pairs", "3", "--max-elevation", "5", "--min-separation", "30"],
+         "raise --max-elevation or lower --min-separation / --min-device-distance"),
     ],
 )
 def test_user_errors_are_one_clear_line(argv: list[str], match: str, basis_file: Path,

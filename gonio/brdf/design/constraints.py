@@ -262,8 +262,8 @@ def candidate_rows(
         raise FeasibilityError(
             "no grid cell is feasible under these constraints "
             f"(max elevation {constraints.max_elevation_deg:g} deg, pair separation "
-            f"{constraints.pair_separation_deg:g} deg, {len(constraints.exclusions)} exclusions); "
-            "raise --max-elevation or lower --min-separation / --min-device-distance"
+            f"{constraints.pair_separation_deg:g} deg, {len(constraints.exclusions)} exclusions)",
+            "raise {max_elevation_deg} or lower {min_separation_deg} / {min_device_distance_deg}",
         )
     return rows
 

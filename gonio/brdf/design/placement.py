@@ -110,7 +110,7 @@ def place_pairs(
     c = np.asarray(cells, dtype=float).reshape(-1, 3)
     n = c.shape[0]
     if n == 0:
-        raise FeasibilityError("a design needs at least one pair; ask for --pairs 1 or more")
+        raise FeasibilityError("a design needs at least one pair")
     ph = ph_options(ph_step_deg)
     wi, wo = geo.half_diff_to_directions(c[:, None, 0], ph[None, :], c[:, None, 1], c[:, None, 2])
     allowed = device_ok(wi, constraints) & device_ok(wo, constraints) & on_axis_ph(c, ph)
@@ -128,8 +128,8 @@ def place_pairs(
         if own[k] < constraints.pair_separation_deg - 1e-6:
             raise FeasibilityError(
                 f"{where}: its light and sensor are only {own[k]:.1f} deg apart, below the "
-                f"required {constraints.pair_separation_deg:g} deg; drop the pair or lower "
-                "--min-separation / --min-device-distance"
+                f"required {constraints.pair_separation_deg:g} deg",
+                "drop the pair or lower {min_separation_deg} / {min_device_distance_deg}",
             )
     need = math.radians(constraints.min_device_distance_deg)
     rng = np.random.default_rng(seed)
@@ -157,8 +157,8 @@ def place_pairs(
         raise FeasibilityError(
             f"cannot mount {n} pairs with every two devices at least "
             f"{constraints.min_device_distance_deg:g} deg apart (best found: "
-            f"{math.degrees(worst):.1f} deg after {orderings} orders); lower "
-            "--min-device-distance or ask for fewer pairs"
+            f"{math.degrees(worst):.1f} deg after {orderings} orders)",
+            "lower {min_device_distance_deg} or ask for fewer pairs",
         )
     ph_lab = ph[choice]
     all_dirs = np.concatenate([wi[np.arange(n), choice], wo[np.arange(n), choice]])

@@ -197,7 +197,8 @@ def optimize_rows(
         raise FeasibilityError(
             f"cannot mount {n} pairs with every two devices at least "
             f"{c.min_device_distance_deg:g} deg apart: {_START_TRIES} random designs all ran out "
-            "of room; lower --min-device-distance, raise --max-elevation or ask for fewer pairs"
+            "of room",
+            "lower {min_device_distance_deg}, raise {max_elevation_deg} or ask for fewer pairs",
         )
 
     # A random design to return if the time limit stops the search before any descent.

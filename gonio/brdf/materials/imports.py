@@ -33,6 +33,7 @@ from pathlib import Path
 import numpy as np
 from scipy.ndimage import map_coordinates
 
+from gonio.brdf.advice import AdvisedError
 from gonio.brdf.materials.measured import CHANNELS, PREFIX, user_library_dir
 from gonio.brdf.materials.merl import SCALES, MerlError, read_merl_values
 from gonio.brdf.tables import geometry as geo
@@ -42,7 +43,7 @@ from gonio.brdf.tables.table import BRDFTable, TableError
 MERL_SCALE = SCALES
 
 
-class TableImportError(ValueError):
+class TableImportError(AdvisedError):
     """A file cannot be imported; the message says why and what to do."""
 
 
@@ -145,8 +146,8 @@ def import_files(
                                f"rename {n!r}")
         if (folder / f"{n}.npz").exists() and not replace:
             raise TableImportError(
-                f"{n!r} is already in the library ({folder / (n + '.npz')}); pass --replace "
-                "to overwrite it"
+                f"{n!r} is already in the library ({folder / (n + '.npz')})",
+                "pass {replace} to overwrite it", words={"replace": "replace=True"},
             )
     try:
         folder.mkdir(parents=True, exist_ok=True)

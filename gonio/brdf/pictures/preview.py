@@ -23,6 +23,11 @@ from numpy.typing import NDArray
 from gonio.brdf.tables import geometry as geo
 from gonio.brdf.tables.table import BRDFTable
 
+
+class PreviewError(ValueError):
+    """A preview that cannot be drawn as asked (scale, gap)."""
+
+
 PH_DEG: tuple[int, ...] = (0, 45, 90, 135)
 PD_DEG: tuple[int, ...] = (90, 0)
 LOG_SPAN = 4.0  # decades of dynamic range shown
@@ -43,7 +48,7 @@ def preview_image(table: BRDFTable, scale: int = 10, gap: int = 4) -> NDArray[np
         Pixels between panels.
     """
     if scale < 1 or gap < 0:
-        raise ValueError(f"preview scale must be >= 1 and gap >= 0, got {scale}, {gap}")
+        raise PreviewError(f"preview scale must be >= 1 and gap >= 0, got {scale}, {gap}")
     v = np.asarray(table.values, dtype=float)
     rgb = v[[0, 0, 0]] if v.shape[0] < 3 else v[:3]
     finite = rgb[np.isfinite(rgb)]

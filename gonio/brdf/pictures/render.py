@@ -45,6 +45,11 @@ from numpy.typing import NDArray
 from gonio.brdf.tables import geometry as geo
 from gonio.brdf.tables.table import BRDFTable
 
+
+class RenderError(ValueError):
+    """A picture that cannot be drawn as asked (view kind, size, no material)."""
+
+
 FloatArray = NDArray[np.float64]
 Evaluator = Callable[[FloatArray, FloatArray], FloatArray]
 """``f(wi, wo)``: (N, 3) specimen-frame unit vectors -> (N, C) BRDF values, 0 below the horizon."""
@@ -490,7 +495,7 @@ def render_view(brdf: Any, view: View, size: int = DEFAULT_SIZE, rotation_deg: f
         return render_swatch(f, view.light or PointLight(0.0, 0.0), size, rotation_deg)
     if view.kind == "environment":
         return render_sphere_env(f, None, size, rotation_deg)
-    raise ValueError(f"unknown view kind {view.kind!r}; use sphere, swatch or environment")
+    raise RenderError(f"unknown view kind {view.kind!r}; use sphere, swatch or environment")
 
 
 def render_rows(rows: Sequence[tuple[str, Any]], views: Sequence[View] = DEFAULT_VIEWS,
@@ -525,9 +530,9 @@ def figure_png(rows: Sequence[tuple[str, Any]], views: Sequence[View] = DEFAULT_
     from PIL import Image, ImageDraw, ImageFont
 
     if size < 64:
-        raise ValueError(f"render size must be at least 64 pixels, got {size}")
+        raise RenderError(f"render size must be at least 64 pixels, got {size}")
     if not rows:
-        raise ValueError("a figure needs at least one material")
+        raise RenderError("a figure needs at least one material")
     imgs = render_rows(rows, views, size)
     fs, fs_small = max(12, size // 28), max(11, size // 36)
     font = ImageFont.load_default(size=fs)

@@ -331,7 +331,8 @@ def test_design_that_cannot_be_mounted_is_a_clear_error() -> None:
     from gonio.brdf.design.pairs import design_pairs
 
     crowded = RigConstraints(max_elevation_deg=20.0, min_device_distance_deg=15.0)
-    with pytest.raises(FeasibilityError, match=r"cannot mount 12 pairs.*--min-device-distance"):
+    with pytest.raises(FeasibilityError,
+                       match=r"cannot mount 12 pairs.*lower min_device_distance_deg"):
         design_pairs(_grid_basis(), 12, crowded, h=3, starts=1, descents=1)
 
 

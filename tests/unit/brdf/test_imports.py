@@ -100,7 +100,8 @@ def test_bad_merl_files_are_clear_errors(tmp_path: Path, content: bytes, match: 
         read_merl(f)
 
 
-def test_import_round_trips_a_gonio_table(tmp_path: Path, libdir: Path) -> None:
+def test_import_round_trips_a_gonio_table(tmp_path: Path, libdir: Path,
+                                          capsys: pytest.CaptureFixture[str]) -> None:
     rng = np.random.default_rng(0)
     vals = rng.uniform(0.01, 2.0, (3, *geo.TABLE_SHAPE)).astype(np.float32)
     vals[:, :, ~geo.valid_mask()] = np.nan
@@ -114,8 +115,12 @@ def test_import_round_trips_a_gonio_table(tmp_path: Path, libdir: Path) -> None:
     assert measured.user_tables()[0].name == "my_paint"
     # A second import of the same name needs --replace; nothing is overwritten meanwhile.
     before = files[0].read_bytes()
+    capsys.readouterr()
     assert main(["library", "import", str(src)]) == 2
     assert files[0].read_bytes() == before
+    assert capsys.readouterr().err.rstrip().endswith("pass --replace to overwrite it")
+    with pytest.raises(TableImportError, match=r"pass replace=True to overwrite it$"):
+        import_files([src])
     assert main(["library", "import", "--replace", str(src)]) == 0
 
 

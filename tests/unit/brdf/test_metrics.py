@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gonio.brdf.pictures.preview import preview_image, save_preview
+from gonio.brdf.pictures.preview import PreviewError, preview_image, save_preview
 from gonio.brdf.tables import geometry as geo
 from gonio.brdf.tables import metrics
 from gonio.brdf.tables.table import BRDFTable
@@ -92,7 +92,7 @@ def test_preview_png(tmp_path: Path) -> None:
     assert (second == 255).all(axis=-1).any() and (second == 40).all(axis=-1).any()
     p = save_preview(t, tmp_path / "p.png", scale=2)
     assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    with pytest.raises(ValueError, match="scale"):
+    with pytest.raises(PreviewError, match="scale"):
         preview_image(t, scale=0)
 
 

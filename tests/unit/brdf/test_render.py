@@ -129,8 +129,10 @@ def test_figure_has_full_size_views_and_one_row_per_material() -> None:
                        title="t")
     im = Image.open(io.BytesIO(png))
     assert im.width >= len(R.DEFAULT_VIEWS) * 96 and im.height >= 2 * 96
-    with pytest.raises(ValueError, match="at least 64"):
+    with pytest.raises(R.RenderError, match="at least 64"):
         R.figure_png([("paper", bm.Lambert(0.7))], size=10)
+    with pytest.raises(R.RenderError, match="at least one material"):
+        R.figure_png([], size=96)
 
 
 def test_cli_render_table_and_bad_inputs(tmp_path: Path, capsys: pytest.CaptureFixture[str]
