@@ -12,8 +12,8 @@ from gonio.engine import ScanEngine
 from gonio.jobstates import JobState
 from gonio.plans.models import AdaptivePlan, AnyPlan, ExposureSettings, FaultPolicy, UniformPlan
 from gonio.rigdescription import RigDescription
+from gonio.sim.memrig import MemRig
 from gonio.store import JobStore
-from tests.unit.engine.memrig import MemRig
 
 FAST = ExposureSettings(exposure_s=0.002, light_settle_s=0.0, dark="once")
 QUICK_FAULTS = FaultPolicy(max_retries=3, retry_delay_s=0.005, resume_settle_s=0.005)

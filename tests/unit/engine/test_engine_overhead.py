@@ -15,8 +15,8 @@ from gonio.engine import ScanEngine
 from gonio.jobstates import JobState
 from gonio.plans.models import ExposureSettings, FaultPolicy, UniformPlan
 from gonio.rigdescription import RigDescription
+from gonio.sim.memrig import Log, MemLight, MemRig, MemStage
 from gonio.store import JobStore
-from tests.unit.engine.memrig import Log, MemLight, MemRig, MemStage
 
 EXPOSURE = ExposureSettings(exposure_s=0.02, light_settle_s=0.0, dark="none")
 QUICK_FAULTS = FaultPolicy(max_retries=3, retry_delay_s=0.005, resume_settle_s=0.005)

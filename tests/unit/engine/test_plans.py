@@ -24,7 +24,7 @@ from gonio.plans.models import (
 from gonio.plans.route import order_for_travel
 from gonio.plans.validation import validate_plan
 from gonio.rigdescription import RigDescription
-from tests.unit.engine.memrig import MemRig
+from gonio.sim.memrig import MemRig
 
 
 @pytest.fixture

@@ -13,9 +13,9 @@ from gonio.engine import Progress, ScanEngine
 from gonio.plans.dryrun import dry_run
 from gonio.plans.models import AdaptivePlan, ExposureSettings, UniformPlan
 from gonio.service import GonioService, JobRequest
+from gonio.sim.memrig import MemRig
 from gonio.store import JobStore, StepRow
 from gonio.worker import Worker, default_basis_provider
-from tests.unit.engine.memrig import MemRig
 
 FAST = ExposureSettings(exposure_s=0.002, light_settle_s=0.0)
 

@@ -12,8 +12,8 @@ from gonio.jobstates import IllegalTransition, JobState
 from gonio.plans.models import CalibrationPlan, ExposureSettings, PlanError, UniformPlan
 from gonio.results import read_result
 from gonio.service import Conflict, GonioService, JobRequest, NotFound
+from gonio.sim.memrig import MemRig
 from gonio.store import JobStore
-from tests.unit.engine.memrig import MemRig
 
 FAST = ExposureSettings(exposure_s=0.002, light_settle_s=0.0)
 

@@ -1,9 +1,23 @@
-"""An in-memory rig implementing the :mod:`gonio.hal` interfaces, for engine unit tests.
+"""An in-memory rig implementing the :mod:`gonio.hal` interfaces, with no wire protocol.
 
-This is a simulated backend *below* the hal boundary (the engine cannot tell it from a driver):
-a stage that takes time to move, lights that switch, and sensors whose reading depends on the
-stage angle and which light is on, so tests can check what was measured where. Faults are armed
-per device with plain attributes.
+Use it where a whole rig is wanted fast and without ports, sockets or simulator processes: unit
+tests of the engine, worker and service, notebooks, and dry experiments with a plan. It sits
+*below* the hal boundary, so the engine cannot tell it from a driver: a stage that takes time to
+move, lights that switch, and sensors whose reading depends on the stage angle and on which
+lights are on, so a test can check what was measured where. Every device call is recorded in
+order in a :class:`Log`, and faults are armed per device with plain attributes.
+
+For the real wire protocols (Dynamixel, Zaber ASCII, Modbus) use :mod:`gonio.sim.rig` instead;
+the drivers talk to those simulators exactly as to the hardware.
+
+Examples
+--------
+>>> import asyncio
+>>> rig = MemRig()
+>>> asyncio.run(rig.stage.move_to(90.0))
+90.0
+>>> sorted(rig.lights), sorted(rig.sensors)
+(['L1', 'L2'], ['S1', 'S2'])
 """
 
 from __future__ import annotations
@@ -14,20 +28,47 @@ from dataclasses import dataclass, field
 
 from gonio import hal
 
+__all__ = ["Log", "MemLight", "MemRig", "MemSensor", "MemStage"]
+
 
 @dataclass
 class Log:
-    """Every device call in order, for assertions on sequencing."""
+    """Every device call in order, for assertions on sequencing.
+
+    Attributes
+    ----------
+    calls : list of (str, str, object)
+        ``(device name, what, argument)`` per call, oldest first; e.g. ``("stage", "move",
+        90.0)``, ``("L1", "on", None)``, ``("S1", "read", <stage angle, degrees>)``.
+    """
 
     calls: list[tuple[str, str, object]] = field(default_factory=list)
 
     def add(self, device: str, what: str, arg: object = None) -> None:
+        """Record one call."""
         self.calls.append((device, what, arg))
 
 
 class MemStage(hal.Stage):
+    """A rotation stage that moves at constant speed, in memory.
+
+    A move sleeps ``|distance| / speed_dps`` seconds (no ramps). Faults are armed with
+    attributes: ``faults`` (codes latched now: every move raises :class:`gonio.hal.StageFault`
+    until :meth:`clear_faults`), ``fault_next_moves`` (faults the next moves raise, in order; a
+    ``StageFault`` latches its code) and ``sticky_fault`` (:meth:`clear_faults` fails).
+
+    Parameters
+    ----------
+    log : Log
+        Where calls are recorded.
+    speed_dps : float
+        Travel speed, degrees per second (acceleration is taken as ten times that, per second).
+    limits : tuple of float
+        Travel limits ``(low, high)``, degrees.
+    """
+
     def __init__(self, log: Log, *, speed_dps: float = 3600.0, limits: tuple[float, float] = (
-            -720.0, 720.0)):
+            -720.0, 720.0)) -> None:
         self.name = "stage"
         self.log = log
         self.limits = hal.TravelLimits(*limits)
@@ -85,7 +126,22 @@ class MemStage(hal.Stage):
 
 
 class MemLight(hal.Light):
-    def __init__(self, name: str, log: Log, theta: float, phi: float):
+    """A light that switches on and off, in memory.
+
+    Set ``in_band = False`` to report its output out of band, and ``unavailable = n`` to make
+    the next ``n`` :meth:`set_on` calls raise :class:`gonio.hal.DeviceUnavailable`.
+
+    Parameters
+    ----------
+    name : str
+        Device name.
+    log : Log
+        Where calls are recorded.
+    theta, phi : float
+        Lab direction, degrees.
+    """
+
+    def __init__(self, name: str, log: Log, theta: float, phi: float) -> None:
         self.name = name
         self.log = log
         self.direction = hal.LabDirection(theta, phi)
@@ -114,9 +170,27 @@ class MemLight(hal.Light):
 
 
 class MemSensor(hal.Sensor):
-    """Reads ``base * (1 + 0.5 cos(2 (stage angle - light phi)))`` per channel, per light on."""
+    """An RGB sensor whose reading follows the stage angle and the lights that are on.
 
-    def __init__(self, name: str, log: Log, rig: MemRig, theta: float, phi: float):
+    Channel ``c`` reads ``dark_level + k_c * sum over lit lights of (1 + 0.5 cos(2 (alpha -
+    phi_l)))`` with ``k = (1.0, 0.8, 0.6)``, ``alpha`` the stage angle and ``phi_l`` the
+    light's azimuth: a known anisotropic signal, period 180 degrees. A read sleeps
+    ``exposure_s * averages`` seconds. Set ``saturate_next = n`` to flag the next ``n`` lit
+    readings saturated.
+
+    Parameters
+    ----------
+    name : str
+        Device name.
+    log : Log
+        Where calls are recorded.
+    rig : MemRig
+        The rig whose stage angle and lights the reading follows.
+    theta, phi : float
+        Lab direction, degrees.
+    """
+
+    def __init__(self, name: str, log: Log, rig: MemRig, theta: float, phi: float) -> None:
         self.name = name
         self.log = log
         self.rig = rig
@@ -153,7 +227,16 @@ class MemSensor(hal.Sensor):
 
 
 class MemRig(hal.Rig):
-    """Two lights, two sensors, three pairs."""
+    """Two lights, two sensors, three pairs, all in memory.
+
+    Lights ``L1`` (theta 45, phi 0 degrees) and ``L2`` (30, 90); sensors ``S1`` (45, 180) and
+    ``S2`` (60, 200); pairs ``L1/S1``, ``L1/S2``, ``L2/S1``.
+
+    Parameters
+    ----------
+    speed_dps : float
+        Stage speed, degrees per second; the default makes a full turn take 0.1 s.
+    """
 
     def __init__(self, speed_dps: float = 3600.0) -> None:
         self.log = Log()
@@ -172,18 +255,22 @@ class MemRig(hal.Rig):
 
     @property
     def mstage(self) -> MemStage:
+        """The stage, typed as :class:`MemStage` (to arm faults, read ``moves``)."""
         assert isinstance(self.stage, MemStage)
         return self.stage
 
     def light(self, name: str) -> MemLight:
+        """Light ``name``, typed as :class:`MemLight`."""
         lt = self.lights[name]
         assert isinstance(lt, MemLight)
         return lt
 
     def any_light_on(self) -> bool:
+        """True while any light is on."""
         return any(self.light(n).on for n in self.lights)
 
     def sensor(self, name: str) -> MemSensor:
+        """Sensor ``name``, typed as :class:`MemSensor`."""
         s = self.sensors[name]
         assert isinstance(s, MemSensor)
         return s
