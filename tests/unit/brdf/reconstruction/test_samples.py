@@ -16,7 +16,7 @@ from gonio.brdf.reconstruction.samples import (
     uniform_stage_angles,
 )
 from gonio.brdf.tables import geometry as geo
-from tests.unit.brdf.test_basis import small_library, ward_like
+from tests.unit.brdf.reconstruction.test_basis import small_library, ward_like
 
 
 class Analytic:

@@ -13,7 +13,7 @@ from gonio.brdf.reconstruction.reconstruct import (
     solve_joint,
 )
 from gonio.brdf.tables import geometry as geo
-from tests.unit.brdf.test_reconstruct import grid_pairs, random_basis
+from tests.unit.brdf.reconstruction.test_reconstruct import grid_pairs, random_basis
 
 
 def _with_prior(b: Basis, harmonics: dict[int, float]) -> Basis:

@@ -13,7 +13,7 @@ import pytest
 
 from gonio.brdf.reconstruction.samples import Samples
 from gonio.cli import main
-from tests.unit.brdf.test_basis import small_basis
+from tests.unit.brdf.reconstruction.test_basis import small_basis
 
 
 def _one_error_line(err: str) -> str:

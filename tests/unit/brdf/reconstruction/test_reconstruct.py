@@ -25,7 +25,7 @@ from gonio.brdf.reconstruction.reconstruct import (
 from gonio.brdf.reconstruction.samples import NoiseModel, simulate_samples, uniform_stage_angles
 from gonio.brdf.tables import geometry as geo
 from gonio.brdf.tables import metrics
-from tests.unit.brdf.test_basis import small_basis, small_library
+from tests.unit.brdf.reconstruction.test_basis import small_basis, small_library
 
 
 def grid_pairs(n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:

@@ -14,7 +14,7 @@ from gonio.brdf.tables import geometry as geo
 from gonio.brdf.tables.table import BRDFTable
 from gonio.cli import UsageError, main
 from gonio.cli.brdf_commands import read_pairs, simple_pairs
-from tests.unit.brdf.test_basis import small_basis, small_library
+from tests.unit.brdf.reconstruction.test_basis import small_basis, small_library
 
 LAB_ROWS = [(45, 0, 45, 180), (45, 0, 20, 180), (30, 90, 60, 200), (15, 10, 50, 300),
             (60, 0, 30, 0), (20, 45, 70, 100), (50, 270, 10, 60), (35, 135, 35, 315)]

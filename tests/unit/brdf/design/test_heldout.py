@@ -11,8 +11,8 @@ from gonio.brdf.design import heldout
 from gonio.brdf.reconstruction.reconstruct import reconstruct
 from gonio.brdf.reconstruction.samples import NoiseModel, simulate_samples, uniform_stage_angles
 from gonio.brdf.tables import metrics
-from tests.unit.brdf.test_basis import small_basis, small_library
-from tests.unit.brdf.test_reconstruct import grid_pairs
+from tests.unit.brdf.reconstruction.test_basis import small_basis, small_library
+from tests.unit.brdf.reconstruction.test_reconstruct import grid_pairs
 
 
 @pytest.fixture()
