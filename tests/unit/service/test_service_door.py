@@ -15,8 +15,8 @@ from gonio.hal import PairSpec
 from gonio.jobstates import JobState
 from gonio.plans.models import CalibrationPlan, ExposureSettings, UniformPlan
 from gonio.service import Conflict, GonioService, JobRequest
+from gonio.sim.memrig import MemRig
 from gonio.store import JobStore
-from tests.unit.engine.memrig import MemRig
 
 FAST = ExposureSettings(exposure_s=0.002, light_settle_s=0.0)
 
