@@ -47,6 +47,43 @@ def test_import_contracts_hold(staged: Path) -> None:
     assert proc.returncode == 0, proc.stdout[-4000:] + proc.stderr[-2000:]
 
 
+def _layers_contract() -> dict[str, Any]:
+    config = tomllib.loads((ROOT / "pyproject.toml").read_text())
+    for contract in config["tool"]["importlinter"]["contracts"]:
+        if contract["type"] == "layers" and contract.get("containers") == ["gonio"]:
+            return dict(contract)
+    raise AssertionError("pyproject.toml has no layers contract over the gonio package")
+
+
+def test_every_module_has_a_layer() -> None:
+    """A new top-level module or package must be given its place in the house's layers
+    (docs/architecture.md), or an upward import from it would go unchecked."""
+    named = {m.strip() for row in _layers_contract()["layers"] for m in row.split("|")}
+    top = {p.stem for p in (ROOT / "gonio").glob("*.py") if p.stem != "__init__"}
+    top |= {p.name for p in (ROOT / "gonio").iterdir()
+            if (p / "__init__.py").exists()}
+    top |= {"drivers", "sim"}  # installed as gonio.drivers and gonio.sim (package-dir)
+    assert top - named == set(), f"modules with no layer in pyproject.toml: {sorted(top - named)}"
+    assert named - top == set(), f"layers name modules that do not exist: {sorted(named - top)}"
+
+
+def test_an_upward_import_breaks_the_layers(staged: Path, tmp_path: Path) -> None:
+    """The contract is not vacuous: the engine importing the service (up three rows) fails."""
+    import shutil
+
+    copy = tmp_path / "staged"
+    shutil.copytree(staged, copy)
+    with (copy / "gonio" / "engine.py").open("a") as f:
+        f.write("\nimport gonio.service  # noqa: E402,F401\n")
+    proc = subprocess.run(
+        [str(_tool("lint-imports")), "--config", str(ROOT / "pyproject.toml")],
+        cwd=copy, capture_output=True, text=True, timeout=120,
+        env={**os.environ, "PYTHONPATH": str(copy)},
+    )
+    assert proc.returncode != 0
+    assert "Layers" in proc.stdout and "BROKEN" in proc.stdout
+
+
 def test_mypy_is_clean(staged: Path) -> None:
     """Type-check the installed layout with the settings of pyproject.toml."""
     proc = subprocess.run(
