@@ -20,13 +20,16 @@ import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field
 
 from gonio.hal import PairSpec
+
+if TYPE_CHECKING:
+    from gonio.brdf.reconstruction.samples import Samples as BrdfSamples
 
 
 class CalibrationError(ValueError):
@@ -296,7 +299,7 @@ def calibrated_samples(
     sensor_dirs: NDArray[np.float64],
     channels: Sequence[str],
     calibration: Calibration,
-) -> Samples:
+) -> CalibratedScan:
     """Arrange a job's readings as calibrated samples ``(n pairs, r angles, C)``.
 
     Parameters
@@ -309,7 +312,7 @@ def calibrated_samples(
 
     Returns
     -------
-    Samples
+    CalibratedScan
         Stage angles are the distinct specimen rotations (``commanded_deg mod 360``), sorted.
 
     Raises
@@ -329,7 +332,7 @@ def calibrated_samples(
             f"pair {pairs[q].label()} has no reading at stage angle "
             f"{angle_of[order[j]]:g} deg; the job's readings are incomplete"
         )
-    return Samples(
+    return CalibratedScan(
         pairs=[(p.light, p.sensor) for p in pairs],
         light_dirs=np.asarray(light_dirs, dtype=float),
         sensor_dirs=np.asarray(sensor_dirs, dtype=float),
@@ -341,8 +344,13 @@ def calibrated_samples(
 
 
 @dataclass
-class Samples:
-    """Calibrated samples: ``values[q, j, c]`` of pair q at specimen rotation j.
+class CalibratedScan:
+    """A scan's calibrated readings as the rig took them: ``values[q, j, c]`` of pair q (named
+    lab directions) at specimen rotation j (degrees, as stored in result files).
+
+    The reconstruction's view of the same numbers is :meth:`to_samples` (grid cells, lab
+    half-vector azimuths, radians): :class:`gonio.brdf.reconstruction.samples.Samples`, the one
+    samples type of the numerical core.
 
     Attributes
     ----------
@@ -361,3 +369,20 @@ class Samples:
     values: NDArray[np.float64]
     channels: tuple[str, ...]
     calibration: dict[str, Any] = field(default_factory=dict)
+
+    def to_samples(self, provenance: dict[str, Any] | None = None) -> BrdfSamples:
+        """The same readings as the numerical core's samples: each pair's slice cell and lab
+        half-vector azimuth (:func:`~gonio.brdf.reconstruction.reconstruct.pair_cells`), stage
+        angles in radians.
+
+        Raises
+        ------
+        gonio.brdf.reconstruction.reconstruct.ReconstructionError
+            When a pair's directions are not unit vectors above the specimen.
+        """
+        from gonio.brdf.reconstruction.reconstruct import pair_cells
+        from gonio.brdf.reconstruction.samples import Samples as BrdfSamples
+
+        cells, ph_lab = pair_cells(self.light_dirs, self.sensor_dirs)
+        return BrdfSamples(cells, ph_lab, np.deg2rad(self.stage_angles_deg), self.values,
+                           self.channels, dict(provenance or {}))

@@ -138,17 +138,17 @@ def finish_job(job_id: int, plan: AnyPlan, how: Finishing) -> dict[str, Any]:
         summary.update(result_path=str(path), calibration_path=str(cal_path))
         return summary
 
-    from gonio.brdf.reconstruction.reconstruct import pair_cells, reconstruct
+    from gonio.brdf.reconstruction.reconstruct import reconstruct
 
     how.on_activity("basis")
     try:
         basis = how.basis_provider()
     finally:
         how.on_activity("reconstructing")
-    cells, ph_lab = pair_cells(light_dirs, sensor_dirs)
+    grid = samples.to_samples()
     rec = reconstruct(
-        basis, cells, ph_lab, np.deg2rad(samples.stage_angles_deg),
-        np.maximum(samples.values, 0.0), channels=channels, name=job.specimen,
+        basis, grid.cells, grid.ph_lab, grid.stage_angles,
+        np.maximum(grid.values, 0.0), channels=channels, name=job.specimen,
     )
     metrics = {
         "rel_sample_error": rec.rel_sample_error,

@@ -53,7 +53,7 @@ from gonio import __version__
 from gonio.brdf.models.factored import FactoredBRDF
 from gonio.brdf.models.principled import Principled
 from gonio.brdf.tables.table import BRDFTable
-from gonio.calibration import Samples
+from gonio.calibration import CalibratedScan
 from gonio.store import ReadingRow
 
 FORMAT_NAME = "gonio-result"
@@ -77,7 +77,7 @@ class ResultFile:
 
     attrs: dict[str, Any]
     readings: list[ReadingRow]
-    samples: Samples
+    samples: CalibratedScan
     table: BRDFTable | None
     rel_sample_error: float | None
     estimated_error: float | None
@@ -102,7 +102,7 @@ def write_result(
     specimen: str,
     kind: str,
     readings: Sequence[ReadingRow],
-    samples: Samples,
+    samples: CalibratedScan,
     table: BRDFTable | None = None,
     coefficients: NDArray[np.float64] | None = None,
     rel_sample_error: float | None = None,
@@ -260,7 +260,7 @@ def read_result(path: str | os.PathLike[str]) -> ResultFile:
         ]
         s = f["samples"]
         pair_names = _decode(s["pairs"][()])
-        samples = Samples(
+        samples = CalibratedScan(
             pairs=[(pair_names[2 * i], pair_names[2 * i + 1]) for i in range(len(pair_names) // 2)],
             light_dirs=s["light_dirs"][()],
             sensor_dirs=s["sensor_dirs"][()],

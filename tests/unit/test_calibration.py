@@ -73,3 +73,23 @@ def test_independent_pairs_of_a_diffuser_pass_and_a_turning_specimen_fails() -> 
         check_white_reference({k: spec[k] for k in keep})
     # Without the check (a caller that knows better), the factors are still computed.
     assert len(from_reference(0.5, {k: spec[k] for k in keep}, check=False).pairs) == 3
+
+
+def test_calibrated_scan_as_core_samples() -> None:
+    """A mirror pair 30 deg either side of the normal has its half vector on the normal
+    (theta_h = 0) and theta_d = 30 deg; stage angles go from degrees to radians unchanged."""
+    from gonio.calibration import CalibratedScan
+
+    t = np.deg2rad(30.0)
+    light = np.array([[np.sin(t), 0.0, np.cos(t)]])
+    sensor = np.array([[-np.sin(t), 0.0, np.cos(t)]])
+    values = np.arange(3.0).reshape(1, 3, 1)
+    scan = CalibratedScan(pairs=[("L1", "S1")], light_dirs=light, sensor_dirs=sensor,
+                          stage_angles_deg=np.array([0.0, 120.0, 240.0]), values=values,
+                          channels=("Y",))
+    s = scan.to_samples({"specimen": "x"})
+    assert s.cells[0, 0] == pytest.approx(0.0, abs=1e-9)
+    assert s.cells[0, 1] == pytest.approx(t)
+    np.testing.assert_allclose(s.stage_angles, np.deg2rad([0.0, 120.0, 240.0]))
+    np.testing.assert_array_equal(s.values, values)
+    assert s.channels == ("Y",) and s.provenance == {"specimen": "x"}

@@ -11,14 +11,14 @@ import pytest
 from gonio.brdf.materials import library
 from gonio.brdf.models import analytic as bm
 from gonio.brdf.models.factored import FactoredBRDF
-from gonio.calibration import Samples
+from gonio.calibration import CalibratedScan
 from gonio.cli import main
 from gonio.export import fit_all
 from gonio.results import read_result, write_result
 
 
-def _samples() -> Samples:
-    return Samples(pairs=[("L1", "S1")], light_dirs=np.array([[0.0, 0.0, 1.0]]),
+def _samples() -> CalibratedScan:
+    return CalibratedScan(pairs=[("L1", "S1")], light_dirs=np.array([[0.0, 0.0, 1.0]]),
                    sensor_dirs=np.array([[0.0, 0.0, 1.0]]), stage_angles_deg=np.array([0.0]),
                    values=np.ones((1, 1, 3)), channels=("R", "G", "B"))
 
