@@ -27,12 +27,13 @@ Search: greedy, one pair at a time, each time the feasible cell that lowers
 ``sum_m tr(W Sigma_m)`` most (gain ``q^T Sigma_m W Sigma_m q / (q^T Sigma_m q + s_m)``, for
 every candidate at once). Exchange passes after the greedy start lowered the objective
 further but not the error on the unseen materials (``docs/science.md`` 7.2), so there are
-none. The choice does not plan mounts: :func:`~gonio.brdf.design.placement.place_pairs`
-places the chosen cells afterwards and fails on rigs too crowded for them.
+none. When devices can collide, each step takes the best cell with which the pairs chosen so
+far still mount (:func:`~gonio.brdf.design.placement.place_pairs`, a few orders tried).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -40,7 +41,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from gonio.brdf.design.conditioning import condition_number
 from gonio.brdf.design.constraints import RigConstraints, candidate_rows, rows_to_cells
-from gonio.brdf.design.errors import DesignError
+from gonio.brdf.design.errors import DesignError, FeasibilityError
 from gonio.brdf.design.pairs import PairDesign
 from gonio.brdf.design.placement import place_pairs
 from gonio.brdf.reconstruction.basis import Basis
@@ -133,7 +134,10 @@ def _posterior(P: FloatArray, Q: FloatArray, s: float) -> FloatArray:
     return np.asarray(P - A.T @ np.linalg.solve(G, A))
 
 
-def greedy_rows(model: PriorModel, Q: ArrayLike, candidates: ArrayLike, n: int) -> NDArray[np.intp]:
+def greedy_rows(
+    model: PriorModel, Q: ArrayLike, candidates: ArrayLike, n: int,
+    accept: Callable[[NDArray[np.intp]], bool] | None = None, tries: int = 64,
+) -> NDArray[np.intp]:
     """Pick ``n`` of ``candidates`` (flat rows of ``Q``) greedily by expected-error reduction.
 
     Parameters
@@ -142,10 +146,20 @@ def greedy_rows(model: PriorModel, Q: ArrayLike, candidates: ArrayLike, n: int) 
     Q : (N_rows, K) the basis rows
     candidates : (N,) int, flat rows allowed
     n : int, 1 <= n <= N
+    accept : callable, optional
+        ``accept(rows)`` says whether the chosen flat rows so far plus one more can be used
+        together (e.g. mounted); each step takes the best candidate it accepts.
+    tries : int
+        Candidates tried per step before giving up.
 
     Returns
     -------
     (n,) int, the chosen flat rows in the order chosen.
+
+    Raises
+    ------
+    FeasibilityError
+        When ``accept`` refuses the ``tries`` best candidates of a step.
     """
     cand = np.asarray(candidates, dtype=np.intp)
     if not 1 <= n <= cand.size:
@@ -159,7 +173,17 @@ def greedy_rows(model: PriorModel, Q: ArrayLike, candidates: ArrayLike, n: int) 
             A = S @ Qc.T  # (K, N): Sigma q for every candidate
             gain += np.sum((model.W @ A) * A, axis=0) / (np.sum(Qc.T * A, axis=0) + s)
         gain[chosen] = -np.inf  # a pair measured twice is a repeat, not a new pair
-        k = int(np.argmax(gain))
+        if accept is None:
+            k = int(np.argmax(gain))
+        else:
+            order = np.argsort(-gain)[: min(tries, cand.size - len(chosen))]
+            ok = [int(j) for j in order if accept(cand[np.asarray([*chosen, int(j)])])]
+            if not ok:
+                raise FeasibilityError(
+                    f"no mountable cell for pair {len(chosen) + 1} of {n} among the {tries} "
+                    "best; lower --min-device-distance or ask for fewer pairs"
+                )
+            k = ok[0]
         chosen.append(k)
         q = Qc[k]
         for i, (S, s) in enumerate(zip(Sig, model.noise, strict=True)):
@@ -211,7 +235,18 @@ def posterior_design(
     if n < 1:
         raise DesignError(f"the number of pairs must be at least 1, got {n}")
     model = prior_model(basis, rotations, eta, lam)
-    rows = greedy_rows(model, basis.Q, candidate_rows(constraints, basis.valid), n)
+    accept = None
+    if constraints.min_device_distance_deg > 0:
+        # Devices can collide: keep only choices that still mount (a quick placement check).
+        def accept(rows: NDArray[np.intp]) -> bool:
+            try:
+                place_pairs(rows_to_cells(rows), constraints, ph_step_deg=1.0, orderings=4,
+                            seed=seed)
+            except FeasibilityError:
+                return False
+            return True
+
+    rows = greedy_rows(model, basis.Q, candidate_rows(constraints, basis.valid), n, accept)
     placement = place_pairs(rows_to_cells(rows), constraints, ph_step_deg=1.0, seed=seed)
     return PairDesign(
         name="posterior",
