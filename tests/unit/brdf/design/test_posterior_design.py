@@ -21,8 +21,8 @@ from gonio.brdf.design.posterior import (
 from gonio.brdf.reconstruction.basis import N_HARMONICS, inverse_remap, row_weight
 from gonio.brdf.reconstruction.reconstruct import solve_joint
 from gonio.brdf.tables import geometry as geo
-from tests.unit.brdf.test_joint import _with_prior
-from tests.unit.brdf.test_reconstruct import random_basis
+from tests.unit.brdf.reconstruction.test_reconstruct import random_basis
+from tests.unit.brdf.reconstruction.test_reconstruct_joint import _with_prior
 
 
 def _spd(k: int, rng: np.random.Generator) -> np.ndarray:
