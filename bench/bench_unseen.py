@@ -18,9 +18,12 @@ Materials
   arbitrary holder angle. The readings are mitsuba evaluated at the exact pair directions
   (not a table lookup); the truth table is mitsuba on gonio's grid. Basis: ``default_basis()``.
 
-Every scan: 1 % relative noise (seed per material), pairs ``design_pairs(basis, n,
-RigConstraints())`` on the material's own training basis (cached per basis), ``r`` uniform
-stage angles. Converted tables and designs are cached under ``<gonio cache>/bench-unseen``.
+Every scan: 1 % relative noise (seed per material), pairs designed on the material's own
+training basis (cached per basis): by default ``design_pairs(basis, n, RigConstraints())``
+(V&F's condition number), with ``--design posterior`` ``design_pairs(...,
+objective="posterior")`` (the joint fit's expected error, :mod:`gonio.brdf.design.posterior`);
+``r`` uniform stage angles. Converted tables and designs are cached under
+``<gonio cache>/bench-unseen``.
 
 Rows: gonio default (n = 10, r = 8), V&F's path (``method="vf"``), each industrial preset
 with 8 rotations, n = 5 / 20, r = 4 / 16, V&F's adaptive plan (e = 0.1, start 8, budget 16
@@ -182,7 +185,7 @@ def basis_id(b: Basis) -> str:
     return hashlib.sha256(np.ascontiguousarray(b.Q).tobytes()).hexdigest()[:16]
 
 
-CHOOSE = {"k": 1}
+CHOOSE: dict[str, Any] = {"k": 1, "objective": "kappa"}
 
 
 def design(b: Basis, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -190,11 +193,15 @@ def design(b: Basis, n: int) -> tuple[np.ndarray, np.ndarray]:
     from gonio.brdf.design.pairs import design_pairs
 
     k = CHOOSE["k"]
-    path = CACHE / f"design-{basis_id(b)}-n{n}{f'-choose{k}' if k > 1 else ''}.npz"
+    obj = CHOOSE["objective"]
+    tag = f"{'' if obj == 'kappa' else '-' + obj}{f'-choose{k}' if k > 1 else ''}"
+    path = CACHE / f"design-{basis_id(b)}-n{n}{tag}.npz"
     if path.is_file():
         with np.load(path) as z:
             return z["cells"], z["ph_lab"]
-    if k > 1:
+    if obj == "posterior":
+        d = design_pairs(b, n, RigConstraints(), objective="posterior")
+    elif k > 1:
         from gonio.brdf.design.heldout import choose_design
 
         d, _err, table = choose_design(
@@ -334,6 +341,9 @@ def main(argv: list[str] | None = None) -> int:
                     help="pick each design among K seeds by expected held-out error "
                          "(gonio.brdf.design.heldout; its panel contains the measured materials, "
                          "so use with --only aniso for a clean test)")
+    ap.add_argument("--design", choices=["kappa", "posterior"], default="kappa",
+                    help="pair design: V&F's condition-number search (design_pairs' default) "
+                         "or the joint fit's expected error (gonio.brdf.design.posterior)")
     ap.add_argument("--calibrate", action="store_true",
                     help="fit predicted_log_rmse's model on half the materials, check the rest")
     args = ap.parse_args(argv)
@@ -355,6 +365,7 @@ def main(argv: list[str] | None = None) -> int:
     presets = {p: get_preset(p).cells() for p in preset_names()}
     ETA["eta"], ETA["lam"] = args.eta, args.lam
     CHOOSE["k"] = args.choose
+    CHOOSE["objective"] = args.design
     fixed = default_basis(measured_weight=0.0) if args.fixed_design else None
     other = "vf" if args.method == "joint" else "joint"
     for i, m in enumerate(mats):

@@ -9,7 +9,7 @@ rig config) the same way. Both return a :class:`PairDesign`, as product rigs do
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Literal, Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -28,6 +28,10 @@ from gonio.brdf.design.search import SearchResult, optimize_rows
 from gonio.brdf.tables import geometry as geo
 
 FloatArray = NDArray[np.float64]
+
+#: What :func:`design_pairs` minimises: the joint fit's expected error on the headline metric
+#: (:mod:`gonio.brdf.design.posterior`) or V&F's condition number (:func:`optimize_rows`).
+Objective = Literal["posterior", "kappa"]
 
 
 class BasisLike(Protocol):
@@ -141,8 +145,20 @@ def design_pairs(
     seed: int | None = 0,
     method: KappaMethod = "fast",
     time_limit_s: float | None = None,
+    objective: Objective = "kappa",
+    rotations: int = 8,
 ) -> PairDesign:
     """Optimize ``n`` independent light/sensor pairs and place them in the lab.
+
+    ``objective="kappa"`` (the default) is V&F's condition-number search, below.
+    ``objective="posterior"`` picks the pairs that minimise the joint fit's expected error
+    for a scan of ``rotations`` uniform stage angles
+    (:func:`gonio.brdf.design.posterior.posterior_design`; ``basis`` must then be a
+    :class:`~gonio.brdf.reconstruction.basis.Basis`; ``h``, ``starts``, ``descents``,
+    ``method`` and ``time_limit_s`` do not apply, and the choice does not plan mounts, so
+    crowded rigs may fail to place where the search succeeds). On measured materials held out
+    of the basis it gave a lower error than the search, on anisotropic ones not
+    (``docs/science.md`` 7.2).
 
     Candidates are the basis's valid cells that ``constraints`` allow
     (:func:`gonio.brdf.design.constraints.candidate_rows`). The search is :func:`optimize_rows` with
@@ -160,6 +176,19 @@ def design_pairs(
     """
     if n < 1:
         raise DesignError(f"the number of pairs must be at least 1, got {n}")
+    if objective == "posterior":
+        from gonio.brdf.design.posterior import posterior_design  # it builds on this module
+        from gonio.brdf.reconstruction.basis import Basis
+
+        if not isinstance(basis, Basis):
+            raise DesignError(
+                "objective='posterior' needs a gonio Basis (its medians and prior); "
+                "pass objective='kappa' for other row sources"
+            )
+        return posterior_design(basis, n, constraints, rotations=rotations,
+                                seed=0 if seed is None else seed)
+    if objective != "kappa":
+        raise DesignError(f"objective must be 'posterior' or 'kappa', not {objective!r}")
     cand = candidate_rows(constraints, basis.valid)
     # The planner's azimuth grid is place_pairs' default, so the search's placement carries
     # over exactly. Without a device-distance limit nothing can collide (every candidate cell

@@ -1,0 +1,260 @@
+"""Pair designs chosen by the expected error of the joint fit (issue 9, item 3).
+
+The condition number of the sampled basis rows (V&F Sec. 3.3,
+:mod:`gonio.brdf.design.search`) says how well the rows separate the components; it knows
+nothing of how likely each component is, of the rotations, or of the error a rendering sees.
+The joint fit (:func:`gonio.brdf.reconstruction.reconstruct.solve_joint`) has a Gaussian
+prior, so the expected error of a design can be written down before any material is
+measured, and a design can minimise it.
+
+Model (MATH 5a). Coefficients along ``ph``: ``c(ph) = a_0 + sum_m a_m cos(m ph) + b_m sin(m
+ph)`` with ``Cov(a_0) = P_0`` and ``Cov(a_m) = Cov(b_m) = P_m`` (``sum_m P_m cos(m (ph -
+ph'))`` is the prior's covariance; ``P_m`` the basis' learnt ``ph_prior`` with the specular
+condition, :func:`gonio.brdf.reconstruction.reconstruct.joint_prior`). A pair with basis row
+``q`` read at ``r`` uniform stage angles with noise variance ``eta`` measures ``q^T a_0``
+with variance ``eta / r`` and ``q^T a_m``, ``q^T b_m`` with variance ``2 eta / r`` each
+(``sum_j cos^2 = r / 2``), for the harmonics ``0 < m < r / 2`` that ``r`` angles resolve.
+The readings of different harmonics are orthogonal, so each harmonic's posterior is a ridge
+update of its own: ``Sigma_m <- Sigma_m - Sigma_m q q^T Sigma_m / (q^T Sigma_m q + s_m)``.
+
+Error a rendering sees. The headline metric compares ``ln(1 + f cos ti)`` (Löw et al.) with
+volume weights ``wV``; a change ``dx`` of the remapped value ``x = ln((f w + eps) / (f_med w +
+eps))`` at a row changes it by ``s dx`` with ``s = cos ti (f w + eps) / (w (1 + f cos ti))``,
+taken at ``f = f_med``. So the expected squared metric error, averaged over ``ph``, is
+``sum_m tr(W Sigma_m)`` with ``W = sum_rows wV s^2 Q_row Q_row^T`` (:func:`metric_gram`).
+
+Search: greedy, one pair at a time, each time the feasible cell that lowers
+``sum_m tr(W Sigma_m)`` most (gain ``q^T Sigma_m W Sigma_m q / (q^T Sigma_m q + s_m)``, for
+every candidate at once). Exchange passes after the greedy start lowered the objective
+further but not the error on the unseen materials (``docs/science.md`` 7.2), so there are
+none. When devices can collide, each step takes the best cell with which the pairs chosen so
+far still mount (:func:`~gonio.brdf.design.placement.place_pairs`, a few orders tried).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from gonio.brdf.design.conditioning import condition_number
+from gonio.brdf.design.constraints import RigConstraints, candidate_rows, rows_to_cells
+from gonio.brdf.design.errors import DesignError, FeasibilityError
+from gonio.brdf.design.pairs import PairDesign
+from gonio.brdf.design.placement import place_pairs
+from gonio.brdf.reconstruction.basis import Basis
+from gonio.brdf.reconstruction.reconstruct import JOINT_ETA, JOINT_LAM, joint_prior
+from gonio.brdf.tables import geometry as geo
+
+FloatArray = NDArray[np.float64]
+
+#: Stage angles the expected error assumes when none are given (the default scan).
+DEFAULT_ROTATIONS = 8
+
+
+def metric_gram(basis: Basis) -> FloatArray:
+    """(K, K) ``W``: the headline metric's weight on coefficient errors (module notes).
+
+    ``W = sum_rows wV s^2 Q_row^T Q_row`` over the valid grid rows, ``wV`` the volume weight
+    (MATH 9) and ``s = cos ti (f_med w + eps) / (w (1 + f_med cos ti))`` the slope of
+    ``ln(1 + f cos ti)`` with respect to the remapped value at the row's median.
+    """
+    rows = np.flatnonzero(basis.valid)
+    ci, co = geo.cell_cosines(*geo.grid_angles())
+    ci, co = ci.ravel()[rows], co.ravel()[rows]
+    w = np.maximum(ci * co, basis.eps)
+    f = np.asarray(basis.f_med, dtype=float)[rows]
+    s = ci * (f * w + basis.eps) / (w * (1.0 + f * ci))
+    wv = geo.volume_weight().ravel()[rows]
+    Qv = np.asarray(basis.Q, dtype=float)[rows]
+    return np.asarray((Qv * (wv * s**2)[:, None]).T @ Qv)
+
+
+@dataclass(frozen=True)
+class PriorModel:
+    """The per-harmonic priors and reading noise of a scan with ``r`` uniform angles.
+
+    Attributes
+    ----------
+    P : (H, K, K) prior covariances of the harmonics ``r`` resolves (only non-zero ones)
+    harmonics : (H,) int, their orders ``m``
+    noise : (H,) variance of one pair's measurement of one harmonic (``eta / r`` for m = 0,
+        ``2 eta / r`` otherwise)
+    W : (K, K) :func:`metric_gram`
+    """
+
+    P: FloatArray
+    harmonics: NDArray[np.intp]
+    noise: FloatArray
+    W: FloatArray
+
+
+def prior_model(basis: Basis, rotations: int = DEFAULT_ROTATIONS, eta: float = JOINT_ETA,
+                lam: float = JOINT_LAM) -> PriorModel:
+    """The prior the joint fit would use for a scan of ``rotations`` uniform stage angles."""
+    if rotations < 1:
+        raise DesignError(f"a scan needs at least one stage angle, got {rotations}")
+    if not eta > 0 or lam < 0:
+        raise DesignError(f"eta must be > 0 and lam >= 0, got eta={eta}, lam={lam}")
+    P = joint_prior(basis, lam / eta)
+    ms = np.array([m for m in range(P.shape[0]) if 2 * m < rotations and np.any(P[m])],
+                  dtype=np.intp)
+    noise = np.where(ms == 0, eta / rotations, 2.0 * eta / rotations)
+    return PriorModel(np.array(P[ms]), ms, noise, metric_gram(basis))
+
+
+def expected_error(model: PriorModel, rows: ArrayLike) -> float:
+    """Expected squared metric error ``sum_m tr(W Sigma_m)`` after reading ``rows`` (Q rows).
+
+    Parameters
+    ----------
+    model : PriorModel
+    rows : (n, K) basis rows of the pairs
+
+    Returns
+    -------
+    float
+        In the metric's units squared (an expected ``log_rmse^2`` up to the volume
+        normalisation), over the harmonics the scan resolves.
+    """
+    Q = np.atleast_2d(np.asarray(rows, dtype=float))
+    total = 0.0
+    for P, s in zip(model.P, model.noise, strict=True):
+        Sig = _posterior(P, Q, float(s))
+        total += float(np.sum(model.W * Sig))
+    return total
+
+
+def _posterior(P: FloatArray, Q: FloatArray, s: float) -> FloatArray:
+    """``P - P Q^T (Q P Q^T + s I)^-1 Q P`` (one harmonic's posterior covariance)."""
+    A = Q @ P
+    G = A @ Q.T + s * np.eye(Q.shape[0])
+    return np.asarray(P - A.T @ np.linalg.solve(G, A))
+
+
+def greedy_rows(
+    model: PriorModel, Q: ArrayLike, candidates: ArrayLike, n: int,
+    accept: Callable[[NDArray[np.intp]], bool] | None = None, tries: int = 64,
+) -> NDArray[np.intp]:
+    """Pick ``n`` of ``candidates`` (flat rows of ``Q``) greedily by expected-error reduction.
+
+    Parameters
+    ----------
+    model : PriorModel
+    Q : (N_rows, K) the basis rows
+    candidates : (N,) int, flat rows allowed
+    n : int, 1 <= n <= N
+    accept : callable, optional
+        ``accept(rows)`` says whether the chosen flat rows so far plus one more can be used
+        together (e.g. mounted); each step takes the best candidate it accepts.
+    tries : int
+        Candidates tried per step before giving up.
+
+    Returns
+    -------
+    (n,) int, the chosen flat rows in the order chosen.
+
+    Raises
+    ------
+    FeasibilityError
+        When ``accept`` refuses the ``tries`` best candidates of a step.
+    """
+    cand = np.asarray(candidates, dtype=np.intp)
+    if not 1 <= n <= cand.size:
+        raise DesignError(f"cannot choose {n} pairs from {cand.size} feasible cells")
+    Qc = np.asarray(Q, dtype=float)[cand]  # (N, K)
+    Sig = [np.array(P) for P in model.P]
+    chosen: list[int] = []
+    for _ in range(n):
+        gain = np.zeros(cand.size)
+        for S, s in zip(Sig, model.noise, strict=True):
+            A = S @ Qc.T  # (K, N): Sigma q for every candidate
+            gain += np.sum((model.W @ A) * A, axis=0) / (np.sum(Qc.T * A, axis=0) + s)
+        gain[chosen] = -np.inf  # a pair measured twice is a repeat, not a new pair
+        if accept is None:
+            k = int(np.argmax(gain))
+        else:
+            order = np.argsort(-gain)[: min(tries, cand.size - len(chosen))]
+            ok = [int(j) for j in order if accept(cand[np.asarray([*chosen, int(j)])])]
+            if not ok:
+                raise FeasibilityError(
+                    f"no mountable cell for pair {len(chosen) + 1} of {n} among the {tries} "
+                    "best; lower --min-device-distance or ask for fewer pairs"
+                )
+            k = ok[0]
+        chosen.append(k)
+        q = Qc[k]
+        for i, (S, s) in enumerate(zip(Sig, model.noise, strict=True)):
+            a = S @ q
+            Sig[i] = S - np.outer(a, a) / (q @ a + s)
+    return cand[np.asarray(chosen, dtype=np.intp)]
+
+
+def posterior_design(
+    basis: Basis,
+    n: int,
+    constraints: RigConstraints,
+    *,
+    rotations: int = DEFAULT_ROTATIONS,
+    eta: float = JOINT_ETA,
+    lam: float = JOINT_LAM,
+    seed: int = 0,
+) -> PairDesign:
+    """``n`` pairs that minimise the joint fit's expected metric error (module notes).
+
+    Parameters
+    ----------
+    basis : Basis
+        With a ``ph_prior`` for anisotropic priors (an isotropic ``P_0 = I`` otherwise).
+    n : int
+        Number of pairs.
+    constraints : RigConstraints
+        Candidates are the feasible cells (:func:`gonio.brdf.design.constraints.candidate_rows`);
+        lab azimuths come from :func:`gonio.brdf.design.placement.place_pairs`.
+    rotations : int
+        Uniform stage angles the scan will use (which harmonics it resolves).
+    eta, lam : float
+        The joint fit's settings (reading noise and specular condition).
+    seed : int
+        Seed of the placement's shuffled orders.
+
+    Returns
+    -------
+    PairDesign
+        ``name="posterior"``; ``kappa`` is the condition number of its rows, for comparison.
+
+    Raises
+    ------
+    DesignError
+        For ``n < 1``, more pairs than feasible cells, or bad ``rotations`` / ``eta`` / ``lam``.
+    FeasibilityError
+        When no cell is feasible or the chosen pairs cannot be mounted under ``constraints``.
+    """
+    if n < 1:
+        raise DesignError(f"the number of pairs must be at least 1, got {n}")
+    model = prior_model(basis, rotations, eta, lam)
+    accept = None
+    if constraints.min_device_distance_deg > 0:
+        # Devices can collide: keep only choices that still mount (a quick placement check).
+        def accept(rows: NDArray[np.intp]) -> bool:
+            try:
+                place_pairs(rows_to_cells(rows), constraints, ph_step_deg=1.0, orderings=4,
+                            seed=seed)
+            except FeasibilityError:
+                return False
+            return True
+
+    rows = greedy_rows(model, basis.Q, candidate_rows(constraints, basis.valid), n, accept)
+    placement = place_pairs(rows_to_cells(rows), constraints, ph_step_deg=1.0, seed=seed)
+    return PairDesign(
+        name="posterior",
+        cells=placement.cells,
+        ph_lab=placement.ph_lab,
+        lights_deg=placement.lab_deg[:, :2],
+        sensors_deg=placement.lab_deg[:, 2:],
+        pairs=np.stack([np.arange(n), np.arange(n)], axis=1).astype(np.intp),
+        kappa=condition_number(basis.Q[rows]),
+        min_distance_deg=placement.min_distance_deg,
+    )

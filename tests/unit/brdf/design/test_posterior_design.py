@@ -1,0 +1,155 @@
+"""Tests of the expected-error design (gonio.brdf.design.posterior)."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+
+from gonio.brdf.design.constraints import RigConstraints, feasible_mask
+from gonio.brdf.design.errors import DesignError
+from gonio.brdf.design.posterior import (
+    PriorModel,
+    _posterior,
+    expected_error,
+    greedy_rows,
+    metric_gram,
+    posterior_design,
+    prior_model,
+)
+from gonio.brdf.reconstruction.basis import N_HARMONICS, inverse_remap, row_weight
+from gonio.brdf.reconstruction.reconstruct import solve_joint
+from gonio.brdf.tables import geometry as geo
+from tests.unit.brdf.reconstruction.test_reconstruct import random_basis
+from tests.unit.brdf.reconstruction.test_reconstruct_joint import _with_prior
+
+
+def _spd(k: int, rng: np.random.Generator) -> np.ndarray:
+    A = rng.standard_normal((k, k))
+    return A @ A.T / k + 0.1 * np.eye(k)
+
+
+def test_posterior_equals_the_information_form() -> None:
+    """``P - P Q^T (Q P Q^T + s I)^-1 Q P`` is ``(P^-1 + Q^T Q / s)^-1`` (Woodbury)."""
+    rng = np.random.default_rng(0)
+    P, Q, s = _spd(6, rng), rng.standard_normal((4, 6)), 0.3
+    want = np.linalg.inv(np.linalg.inv(P) + Q.T @ Q / s)
+    np.testing.assert_allclose(_posterior(P, Q, s), want, rtol=1e-9, atol=1e-12)
+
+
+def test_expected_error_matches_monte_carlo_of_the_joint_fit() -> None:
+    """Draw coefficient functions from the prior (harmonics 0 and 2), read them at uniform
+    stage angles with noise ``eta``, fit with ``solve_joint``: the mean W-weighted squared
+    error over the 72 slices is the model's ``sum_m tr(W Sigma_m)``."""
+    rng = np.random.default_rng(1)
+    k, n, r, eta, draws = 5, 3, 8, 0.5, 4000
+    P0, P2 = _spd(k, rng), 0.5 * _spd(k, rng)
+    P = np.zeros((N_HARMONICS, k, k))
+    P[0], P[2] = P0, P2
+    W = _spd(k, rng)
+    Qt = rng.standard_normal((n, k))
+    ph_lab = rng.uniform(0, 2 * np.pi, n)
+    alpha = np.arange(r) * 2 * np.pi / r
+    phr = ph_lab[:, None] - alpha[None, :]  # (n, r)
+    L0, L2 = np.linalg.cholesky(P0), np.linalg.cholesky(P2)
+    a0 = L0 @ rng.standard_normal((k, draws))
+    a2, b2 = L2 @ rng.standard_normal((k, draws)), L2 @ rng.standard_normal((k, draws))
+
+    def c_at(ph: np.ndarray) -> np.ndarray:  # (..., k, draws)
+        return (a0 + np.cos(2 * ph)[..., None, None] * a2
+                + np.sin(2 * ph)[..., None, None] * b2)
+
+    Y = np.einsum("qk,qjkd->qjd", Qt, c_at(phr)) + np.sqrt(eta) * rng.standard_normal(
+        (n, r, draws))
+    fit = solve_joint(Y, Qt, phr, P, eta)  # coef (k, 72, draws)
+    err = fit.coef - np.moveaxis(c_at(geo.PH_GRID), 0, 1)  # (k, 72, draws)
+    mc = float(np.mean(np.einsum("ksd,kl,lsd->sd", err, W, err)))
+    model = PriorModel(np.stack([P0, P2]), np.array([0, 2]),
+                       np.array([eta / r, 2 * eta / r]), W)
+    assert expected_error(model, Qt) == pytest.approx(mc, rel=0.05)
+    # and the readings matter: without them the error is the prior's
+    assert expected_error(model, np.zeros((1, k))) > 1.5 * mc
+
+
+def test_greedy_first_pick_is_the_best_single_pair_and_each_step_lowers_the_error() -> None:
+    rng = np.random.default_rng(2)
+    k = 4
+    model = PriorModel(np.stack([_spd(k, rng), _spd(k, rng)]), np.array([0, 2]),
+                       np.array([0.2, 0.4]), _spd(k, rng))
+    Q = rng.standard_normal((30, k))
+    cand = np.arange(3, 30, 2)
+    rows = greedy_rows(model, Q, cand, 4)
+    single = [expected_error(model, Q[[c]]) for c in cand]
+    assert rows[0] == cand[int(np.argmin(single))]
+    errs = [expected_error(model, Q[rows[:i]]) for i in range(1, 5)]
+    assert all(b < a for a, b in itertools.pairwise(errs))
+    assert len(set(rows.tolist())) == 4 and set(rows.tolist()) <= set(cand.tolist())
+
+
+def test_metric_gram_is_the_weighted_sum_over_valid_rows() -> None:
+    """W from the slope of ln(1 + f cos ti) in the remapped value, taken by finite differences
+    through the basis' own inverse remap at every valid row."""
+    b = random_basis(3)
+    rows = np.flatnonzero(b.valid)
+    ci, _ = geo.cell_cosines(*geo.grid_angles())
+    c_i = ci.ravel()[rows]
+    w = row_weight(b.eps)[rows]
+    x0 = np.zeros(rows.size)  # remapped value of the median itself
+    h = 1e-6
+    f0 = inverse_remap(x0, b.f_med[rows], w, b.eps)
+    f1 = inverse_remap(x0 + h, b.f_med[rows], w, b.eps)
+    s = (np.log1p(f1 * c_i) - np.log1p(f0 * c_i)) / h
+    wv = geo.volume_weight().ravel()[rows]
+    want = np.einsum("r,rk,rl->kl", wv * s**2, b.Q[rows], b.Q[rows])
+    np.testing.assert_allclose(metric_gram(b), want, rtol=1e-4)
+    assert np.all(np.linalg.eigvalsh(metric_gram(b)) > 0)
+
+
+def test_posterior_design_gives_distinct_feasible_mountable_pairs() -> None:
+    b = _with_prior(random_basis(6), {0: 1.0, 2: 0.5})
+    cons = RigConstraints()
+    d = posterior_design(b, 5, cons)
+    assert d.name == "posterior" and d.cells.shape == (5, 3)
+    idx = np.rint(d.cells / geo.STEP).astype(int)
+    assert len({tuple(i) for i in idx}) == 5
+    assert feasible_mask(cons, b.valid)[tuple(idx.T)].all()
+    assert d.min_distance_deg >= cons.min_device_distance_deg - 1e-6
+    assert np.isfinite(d.kappa)
+    # r = 1 resolves only the mean: the prior keeps harmonic 0 alone
+    assert prior_model(b, 1).harmonics.tolist() == [0]
+    assert prior_model(b, 8).harmonics.tolist() == [0, 2]
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [({"n": 0}, "at least 1"), ({"n": 10**6}, "feasible cells"),
+     ({"n": 3, "rotations": 0}, "stage angle"), ({"n": 3, "eta": 0.0}, "eta must be")],
+)
+def test_posterior_design_rejects_bad_requests(kwargs: dict, match: str) -> None:
+    b = random_basis(4)
+    with pytest.raises(DesignError, match=match):
+        posterior_design(b, constraints=RigConstraints(), **kwargs)
+
+
+def test_design_pairs_objective_posterior_is_the_expected_error_design() -> None:
+    from gonio.brdf.design.pairs import design_pairs
+
+    b = _with_prior(random_basis(6), {0: 1.0, 2: 0.5})
+    via = design_pairs(b, 4, RigConstraints(), objective="posterior")
+    direct = posterior_design(b, 4, RigConstraints())
+    np.testing.assert_array_equal(via.cells, direct.cells)
+    assert via.name == "posterior"
+    with pytest.raises(DesignError, match="objective must be"):
+        design_pairs(b, 4, RigConstraints(), objective="nope")  # type: ignore[arg-type]
+
+
+def test_design_pairs_objective_posterior_needs_a_basis() -> None:
+    from gonio.brdf.design.pairs import design_pairs
+
+    class RowsOnly:
+        def __init__(self, b: object) -> None:
+            self.Q, self.valid, self.rows_at = b.Q, b.valid, b.rows_at  # type: ignore[attr-defined]
+
+    with pytest.raises(DesignError, match="needs a gonio Basis"):
+        design_pairs(RowsOnly(random_basis(4)), 3, RigConstraints(), objective="posterior")
