@@ -1,0 +1,74 @@
+"""Adaptive plans with the posterior rule, through the real engine on the in-memory rig."""
+
+from __future__ import annotations
+
+import asyncio
+
+import numpy as np
+
+from gonio.brdf.reconstruction.posterior import next_angles
+from gonio.engine import ScanEngine
+from gonio.jobstates import JobState
+from gonio.plans.models import AdaptivePlan, ExposureSettings
+from gonio.plans.validation import plan_pairs
+from gonio.refinement import PosteriorRefiner
+from gonio.rigdescription import RigDescription
+from gonio.store import JobStore
+from tests.unit.brdf.test_joint import _with_prior
+from tests.unit.brdf.test_reconstruct import random_basis
+from tests.unit.engine.memrig import MemRig
+
+FAST = ExposureSettings(exposure_s=0.002, light_settle_s=0.0, dark="once")
+BASIS = _with_prior(random_basis(6, seed=1), {0: 1.0, 2: 1.0})
+
+
+def _run(plan: AdaptivePlan, with_refiner: bool = True) -> tuple[JobStore, ScanEngine,
+                                                                   RigDescription]:
+    rig = MemRig()
+    desc = RigDescription.from_rig(rig)
+    store = JobStore(":memory:")
+    job = store.create_job(kind=plan.kind, specimen="s", plan=plan.model_dump(mode="json"),
+                           rig=desc.model_dump(mode="json"))
+    refiner = PosteriorRefiner(lambda: BASIS, desc, plan_pairs(plan, desc)) if with_refiner \
+        else None
+    eng = ScanEngine(rig, store, job.id, plan, desc, refiner=refiner)
+    assert asyncio.run(eng.run()) is JobState.RUNNING
+    return store, eng, desc
+
+
+def _events(store: JobStore, kind: str) -> list[dict[str, object]]:
+    return [dict(e.data or {}) for e in store.events_after(0) if e.type == kind]
+
+
+def test_the_engine_measures_the_angles_the_posterior_rule_plans() -> None:
+    """Round 1 holds exactly the angles next_angles plans from round 0's readings (the
+    MemRig's readings swing with cos 2 alpha, so the rule refines), within the budget."""
+    plan = AdaptivePlan(initial_rotations=8, exposure=FAST, min_gain=1e-9, max_rounds=2,
+                        max_samples=4 * 12)
+    store, eng, desc = _run(plan)
+    steps = store.steps(1)
+    first = [s for s in steps if s.round == 0]
+    later = sorted(round(s.specimen_deg % 360.0, 6) for s in steps if s.round == 1)
+    angles, values = eng.measured_values(first)
+    n_pairs = len(eng.pairs)
+    want = next_angles(BASIS, eng.refiner.cells, eng.refiner.ph_lab, angles,  # type: ignore[union-attr]
+                       np.maximum(values, 0.0), threshold=1e-9,
+                       min_step_deg=desc.resolution_deg,
+                       budget_angles=plan.max_samples // n_pairs - 8)  # type: ignore[operator]
+    assert later and later == [round(a, 6) for a in want.angles_deg]
+    assert len(steps) * n_pairs <= plan.max_samples  # type: ignore[operator]
+    assert _events(store, "adaptive_round")[0]["rule"] == "posterior"
+
+
+def test_the_plan_stops_when_the_rule_says() -> None:
+    plan = AdaptivePlan(initial_rotations=8, exposure=FAST, min_gain=1e3)
+    store, _eng, _ = _run(plan)
+    assert {s.round for s in store.steps(1)} == {0}
+    assert _events(store, "adaptive_done") == [{"reason": "converged", "rule": "posterior"}]
+
+
+def test_without_a_basis_the_engine_uses_the_vf_rule_and_says_so() -> None:
+    plan = AdaptivePlan(initial_rotations=8, exposure=FAST, threshold=0.01, max_rounds=2)
+    store, _eng, _ = _run(plan, with_refiner=False)
+    assert {s.round for s in store.steps(1)} == {0, 1}
+    assert _events(store, "adaptive_round")[0]["rule"] == "vf"
