@@ -17,7 +17,8 @@ Sets
   basis that leaves it out, and 6 mitsuba anisotropic specimens.
 
 Every scan: pairs ``design_pairs(basis, 10)`` on the material's own basis, start at 8 uniform
-stage angles, refine by :func:`next_angles` (rounds until it plans nothing) up to
+stage angles, refine by :func:`next_angles` (rounds until it plans nothing; at most one new
+angle per gap per round, as the engine runs it) up to
 ``--max-rotations``; then the default joint reconstruction of everything read. Rows: uniform 8
 and 16, each threshold. Columns: mean ``log_rmse`` per group and overall, mean readings.
 
@@ -83,7 +84,8 @@ def adaptive(c: Case, gain: float, r0: int, max_r: int) -> tuple[float, int]:
     for rnd in range(8):
         rec = reconstruct(c.basis, c.cells, c.ph, np.deg2rad(angles), vals)
         step = next_angles(c.basis, c.cells, c.ph, angles, vals, threshold=gain,
-                           budget_angles=max_r - len(angles), table=rec.table.values)
+                           budget_angles=max_r - len(angles), per_gap=1,
+                           table=rec.table.values)
         if not step.angles_deg:
             break
         extra = bu.read(c.mat, c.cells, c.ph, np.deg2rad(step.angles_deg),

@@ -5,7 +5,8 @@ worker hands it (``ScanEngine(refiner=...)``) so that ``AdaptivePlan(rule="poste
 ask :func:`gonio.brdf.reconstruction.posterior.next_angles` where the next angles go. It
 turns the pairs' lab directions into slice cells once, applies the rig's calibration to the
 ``raw - dark`` counts (the posterior weighs errors at BRDF values in 1/sr), and loads the basis
-on first use.
+on first use. A round adds at most one angle per gap (``per_gap=1``), so the dry run's
+bound on an adaptive job holds.
 """
 
 from __future__ import annotations
@@ -70,5 +71,5 @@ class PosteriorRefiner:
         v = np.maximum(v * factors[:, None, :], 0.0)  # small negative noise after the dark
         self.last = next_angles(self._basis, self.cells, self.ph_lab, list(angles_deg), v,
                                 threshold=min_gain, min_step_deg=min_step_deg,
-                                budget_angles=budget_angles)
+                                budget_angles=budget_angles, per_gap=1)
         return list(self.last.angles_deg)

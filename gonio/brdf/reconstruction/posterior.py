@@ -394,6 +394,7 @@ def next_angles(
     min_step_deg: float = 1.0,
     budget_angles: int | None = None,
     batch: int | None = None,
+    per_gap: int | None = None,
     table: ArrayLike | None = None,
 ) -> RefinementStep:
     """Plan the next stage angles where they lower the expected ``log_rmse`` most.
@@ -416,6 +417,10 @@ def next_angles(
         Most angles to add (None: no limit).
     batch : int, optional
         Most angles to plan in this round (None: as many as pass the threshold).
+    per_gap : int, optional
+        Most new angles inside each gap between the measured angles (None: no limit). With 1
+        a round adds at most one angle per gap, as V&F's midpoints do, so the dry run's bound
+        on an adaptive job (every gap halved each round) holds.
     table : optional, the reconstruction of these readings (computed when omitted)
 
     Returns
@@ -433,11 +438,16 @@ def next_angles(
         drops: list[float] = []
         reason = ""
         measured = list(np.mod(a_deg, 360.0))
+        edges = np.sort(np.mod(a_deg, 360.0))
+        used = np.zeros(edges.size, dtype=int)  # picks per original gap (gap k starts at edges[k])
         while True:
             if len(picked) >= limit:
                 reason = "budget" if not picked else ""
                 break
             cand = candidate_angles(measured, min_step_deg)
+            gap_of = (np.searchsorted(edges, cand, side="right") - 1) % max(edges.size, 1)
+            if per_gap is not None and edges.size:
+                cand, gap_of = cand[used[gap_of] < per_gap], gap_of[used[gap_of] < per_gap]
             if cand.size == 0:
                 reason = "min_step" if not picked else ""
                 break
@@ -447,6 +457,8 @@ def next_angles(
             if not drop >= threshold:
                 reason = "threshold" if not picked else ""
                 break
+            if edges.size:
+                used[gap_of[k]] += 1
             picked.append(float(cand[k]))
             drops.append(drop)
             measured.append(float(cand[k]))

@@ -133,3 +133,14 @@ def test_bad_readings_are_refused() -> None:
         ScanPosterior(b, cells, ph, alpha, -vals)
     with pytest.raises(ReconstructionError, match="expected"):
         ScanPosterior(b, cells, ph, alpha, vals[:, :3])
+
+
+def test_one_angle_per_gap_when_asked() -> None:
+    """per_gap=1: however many angles pass the threshold, each gap between the measured
+    angles gets at most one (the dry run's bound assumes midpoint-like rounds)."""
+    b, cells, ph, alpha, vals = _scan()
+    deg = np.rad2deg(alpha)  # gaps of 45, 45, 90, 90, 90 degrees
+    step = next_angles(b, cells, ph, deg, vals, threshold=0.0, budget_angles=20, per_gap=1)
+    edges = np.sort(np.mod(deg, 360.0))
+    gap = np.searchsorted(edges, step.angles_deg, side="right") - 1
+    assert len(step.angles_deg) == 5 and sorted(set(gap.tolist())) == [0, 1, 2, 3, 4]

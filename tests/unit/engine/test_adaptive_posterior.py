@@ -54,7 +54,8 @@ def test_the_engine_measures_the_angles_the_posterior_rule_plans() -> None:
     want = next_angles(BASIS, eng.refiner.cells, eng.refiner.ph_lab, angles,  # type: ignore[union-attr]
                        np.maximum(values, 0.0), threshold=1e-9,
                        min_step_deg=desc.resolution_deg,
-                       budget_angles=plan.max_samples // n_pairs - 8)  # type: ignore[operator]
+                       budget_angles=plan.max_samples // n_pairs - 8,  # type: ignore[operator]
+                       per_gap=1)
     assert later and later == [round(a, 6) for a in want.angles_deg]
     assert len(steps) * n_pairs <= plan.max_samples  # type: ignore[operator]
     assert _events(store, "adaptive_round")[0]["rule"] == "posterior"
