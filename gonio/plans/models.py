@@ -163,7 +163,7 @@ class AdaptivePlan(_PlanBase):
     threshold: float = Field(default=0.1, gt=0,
                              description="vf rule: relative error e (0.1 = 10 %)")
     min_gain: float = Field(
-        default=0.0009, gt=0,
+        default=0.0006, gt=0,
         description="posterior rule: least drop of the expected log_rmse one more stage "
                     "angle must buy (gonio.brdf.reconstruction.posterior.REFINE_GAIN)")
     max_samples: Count | None = Field(

@@ -57,7 +57,7 @@ FloatArray = NDArray[np.float64]
 RHO_GRID: tuple[float, ...] = tuple(float(v) for v in np.geomspace(1 / 64, 16.0, 11))
 #: Default stopping threshold of :func:`next_angles`: the least drop of the expected
 #: ``log_rmse`` one more stage angle must buy (``bench/bench_adaptive.py --calibrate``).
-REFINE_GAIN = 0.0009
+REFINE_GAIN = 0.0006
 
 
 @functools.cache

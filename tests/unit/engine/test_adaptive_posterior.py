@@ -73,3 +73,9 @@ def test_without_a_basis_the_engine_uses_the_vf_rule_and_says_so() -> None:
     store, _eng, _ = _run(plan, with_refiner=False)
     assert {s.round for s in store.steps(1)} == {0, 1}
     assert _events(store, "adaptive_round")[0]["rule"] == "vf"
+
+
+def test_the_plan_default_is_the_calibrated_threshold() -> None:
+    from gonio.brdf.reconstruction.posterior import REFINE_GAIN
+
+    assert AdaptivePlan().rule == "posterior" and AdaptivePlan().min_gain == REFINE_GAIN
