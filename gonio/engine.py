@@ -611,15 +611,22 @@ class ScanEngine:
             self.store.append_event(self.job_id, "adaptive_done", {"reason": "budget"})
             return False
         min_step = plan.min_step_deg or self.desc.resolution_deg
+        new: list[float] | None = None
+        rule = "vf"
         if plan.rule == "posterior" and self.refiner is not None and np.isfinite(values).all():
             # The joint fit's posterior (docs/science.md 7.3): CPU work of a second or so,
-            # off the event loop so pause/abort stay responsive.
-            new = await asyncio.to_thread(self.refiner, angles, values, budget, min_step,
-                                          plan.min_gain)
-            rule = "posterior"
-        else:
+            # off the event loop so pause/abort stay responsive. If it cannot run (no basis,
+            # unusable readings), the scan goes on with V&F's rule rather than failing.
+            try:
+                new = await asyncio.to_thread(self.refiner, angles, values, budget, min_step,
+                                              plan.min_gain)
+                rule = "posterior"
+            except (ValueError, OSError, RuntimeError) as exc:
+                self.store.append_event(self.job_id, "adaptive_round",
+                                        {"round": rnd + 1, "rule": "vf",
+                                         "posterior_failed": str(exc)[:300]})
+        if new is None:
             new = adaptive_refinement(angles, values, plan.threshold, min_step, budget)
-            rule = "vf"
         if not new:
             self.store.append_event(self.job_id, "adaptive_done",
                                     {"reason": "converged", "rule": rule})

@@ -79,3 +79,24 @@ def test_the_plan_default_is_the_calibrated_threshold() -> None:
     from gonio.brdf.reconstruction.posterior import REFINE_GAIN
 
     assert AdaptivePlan().rule == "posterior" and AdaptivePlan().min_gain == REFINE_GAIN
+
+
+def test_a_failing_posterior_rule_falls_back_to_vf_and_says_why() -> None:
+    """A basis that cannot be loaded must not fail the scan: the round uses V&F's rule and the
+    event log keeps the reason."""
+    plan = AdaptivePlan(initial_rotations=8, exposure=FAST, threshold=0.01, max_rounds=2)
+    rig = MemRig()
+    desc = RigDescription.from_rig(rig)
+    store = JobStore(":memory:")
+    job = store.create_job(kind=plan.kind, specimen="s", plan=plan.model_dump(mode="json"),
+                           rig=desc.model_dump(mode="json"))
+
+    def no_basis() -> object:
+        raise OSError("basis file unreadable")
+
+    refiner = PosteriorRefiner(no_basis, desc, plan_pairs(plan, desc))
+    eng = ScanEngine(rig, store, job.id, plan, desc, refiner=refiner)
+    assert asyncio.run(eng.run()) is JobState.RUNNING
+    assert {s.round for s in store.steps(job.id)} == {0, 1}
+    failed = [e for e in _events(store, "adaptive_round") if "posterior_failed" in e]
+    assert failed and "unreadable" in str(failed[0]["posterior_failed"])
