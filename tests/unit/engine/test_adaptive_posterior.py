@@ -13,10 +13,10 @@ from gonio.plans.models import AdaptivePlan, ExposureSettings
 from gonio.plans.validation import plan_pairs
 from gonio.refinement import PosteriorRefiner
 from gonio.rigdescription import RigDescription
+from gonio.sim.memrig import MemRig
 from gonio.store import JobStore
-from tests.unit.brdf.test_joint import _with_prior
-from tests.unit.brdf.test_reconstruct import random_basis
-from tests.unit.engine.memrig import MemRig
+from tests.unit.brdf.reconstruction.test_reconstruct import random_basis
+from tests.unit.brdf.reconstruction.test_reconstruct_joint import _with_prior
 
 FAST = ExposureSettings(exposure_s=0.002, light_settle_s=0.0, dark="once")
 BASIS = _with_prior(random_basis(6, seed=1), {0: 1.0, 2: 1.0})

@@ -13,8 +13,8 @@ from gonio.brdf.reconstruction.posterior import (
 )
 from gonio.brdf.reconstruction.reconstruct import ReconstructionError
 from gonio.brdf.tables import geometry as geo
-from tests.unit.brdf.test_joint import _with_prior
-from tests.unit.brdf.test_reconstruct import grid_pairs, random_basis
+from tests.unit.brdf.reconstruction.test_reconstruct import grid_pairs, random_basis
+from tests.unit.brdf.reconstruction.test_reconstruct_joint import _with_prior
 
 HARMONICS = {0: 1.0, 2: 1.0, 4: 0.5, 36: 0.2}
 
