@@ -34,7 +34,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import time
-from collections.abc import Awaitable, Sequence
+from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -51,6 +51,10 @@ from gonio.plans.timing import adaptive_bound, estimate_angles
 from gonio.plans.validation import initial_angles, lights_in_order, plan_pairs
 from gonio.rigdescription import RigDescription
 from gonio.store import JobStore, ReadingRow, StepRow
+
+#: The posterior rule of adaptive plans: ``(angles_deg, values (n, r, C) raw - dark,
+#: budget_angles, min_step_deg, min_gain) -> new angles in degrees`` (gonio.refinement).
+Refiner = Callable[[Sequence[float], np.ndarray, int, float, float], list[float]]
 
 
 class SensorSaturated(hal.DeviceFault):
@@ -101,6 +105,10 @@ class ScanEngine:
         The job (queued, or active after a restart: it resumes from its last checkpoint).
     plan : the job's plan
     rig_desc : RigDescription of ``rig`` (limits, speeds, pairs)
+    refiner : optional, the posterior rule of adaptive plans
+        (:class:`gonio.refinement.PosteriorRefiner`: ``(angles_deg, values, budget_angles,
+        min_step_deg, min_gain) -> new angles``). Without it ``rule="posterior"`` plans fall
+        back to V&F's rule (the ``adaptive_done`` / ``adaptive_round`` events name the rule).
     """
 
     def __init__(
@@ -110,8 +118,10 @@ class ScanEngine:
         job_id: int,
         plan: AnyPlan,
         rig_desc: RigDescription,
+        refiner: Refiner | None = None,
     ):
         self.rig = rig
+        self.refiner = refiner
         self.store = store
         self.job_id = job_id
         self.plan = plan
@@ -600,12 +610,29 @@ class ScanEngine:
         if budget <= 0:
             self.store.append_event(self.job_id, "adaptive_done", {"reason": "budget"})
             return False
-        new = adaptive_refinement(
-            angles, values, plan.threshold, plan.min_step_deg or self.desc.resolution_deg, budget
-        )
+        min_step = plan.min_step_deg or self.desc.resolution_deg
+        new: list[float] | None = None
+        rule = "vf"
+        if plan.rule == "posterior" and self.refiner is not None and np.isfinite(values).all():
+            # The joint fit's posterior (docs/science.md 7.3): CPU work of a second or so,
+            # off the event loop so pause/abort stay responsive. If it cannot run (no basis,
+            # unusable readings), the scan goes on with V&F's rule rather than failing.
+            try:
+                new = await asyncio.to_thread(self.refiner, angles, values, budget, min_step,
+                                              plan.min_gain)
+                rule = "posterior"
+            except (ValueError, OSError, RuntimeError) as exc:
+                self.store.append_event(self.job_id, "adaptive_round",
+                                        {"round": rnd + 1, "rule": "vf",
+                                         "posterior_failed": str(exc)[:300]})
+        if new is None:
+            new = adaptive_refinement(angles, values, plan.threshold, min_step, budget)
         if not new:
-            self.store.append_event(self.job_id, "adaptive_done", {"reason": "converged"})
+            self.store.append_event(self.job_id, "adaptive_done",
+                                    {"reason": "converged", "rule": rule})
             return False
+        self.store.append_event(self.job_id, "adaptive_round",
+                                {"round": rnd + 1, "rule": rule, "angles": len(new)})
         here = await self._stage_position()
         route = order_for_travel(new, here, self.desc, plan.backlash_deg)
         k0 = max(s.angle_index for s in steps) + 1

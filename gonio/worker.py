@@ -30,8 +30,8 @@ from gonio.calibration import (
 from gonio.engine import Progress, ScanEngine
 from gonio.finishing import Finishing, finish_job
 from gonio.jobstates import JobState
-from gonio.plans.models import AnyPlan, PlanError, parse_plan
-from gonio.plans.validation import validate_plan
+from gonio.plans.models import AdaptivePlan, AnyPlan, PlanError, parse_plan
+from gonio.plans.validation import plan_pairs, validate_plan
 from gonio.rigdescription import RigDescription
 from gonio.store import JobRow, JobStore
 
@@ -252,7 +252,8 @@ class Worker:
                 # Before the first reading of a new or resumed job: e.g. a simulated rig puts
                 # the white reference or the job's specimen on the stage.
                 self.on_job_start(job)
-            self._engine = ScanEngine(rig, self.store, job.id, plan, self.desc)
+            self._engine = ScanEngine(rig, self.store, job.id, plan, self.desc,
+                                      refiner=self._refiner(plan))
             final = await self._engine.run()
             self._engine = None
             if final is not JobState.RUNNING:
@@ -291,6 +292,15 @@ class Worker:
         if plan is not None and plan.stop_queue_on_failure:
             self.hold(f"job {job.id} failed and asked to stop the queue")
         return JobState.FAILED
+
+    def _refiner(self, plan: AnyPlan) -> Any:
+        """The posterior rule's bridge for adaptive plans that use it (docs/science.md 7.3)."""
+        if not (isinstance(plan, AdaptivePlan) and plan.rule == "posterior"):
+            return None
+        from gonio.refinement import PosteriorRefiner
+
+        return PosteriorRefiner(self.basis_provider, self.desc, plan_pairs(plan, self.desc),
+                                self.calibration())
 
     # ------------------------------------------------------------------ finishing
     def _finishing(self) -> Finishing:

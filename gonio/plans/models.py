@@ -147,14 +147,25 @@ class UniformPlan(_PlanBase):
 
 
 class AdaptivePlan(_PlanBase):
-    """Uniform start, then refinement where PCHIP mispredicts (MATH 7)."""
+    """Uniform start, then refinement rounds (MATH 7; docs/science.md 7.3)."""
 
     kind: Literal["adaptive"] = "adaptive"
     refines = True
     rotations_field = "initial_rotations"
     initial_rotations: Count = Field(default=8,
                                      description="r0 uniform angles of the first round")
-    threshold: float = Field(default=0.1, gt=0, description="relative error e (0.1 = 10 %)")
+    rule: Literal["posterior", "vf"] = Field(
+        default="posterior",
+        description="posterior: add the stage angles where the joint fit's expected log_rmse "
+                    "falls most, stop when the best falls by less than min_gain (needs the "
+                    "basis; an engine without one uses vf); vf: V&F Sec. 6, midpoints where "
+                    "PCHIP mispredicts a reading by more than threshold")
+    threshold: float = Field(default=0.1, gt=0,
+                             description="vf rule: relative error e (0.1 = 10 %)")
+    min_gain: float = Field(
+        default=0.0006, gt=0,
+        description="posterior rule: least drop of the expected log_rmse one more stage "
+                    "angle must buy (gonio.brdf.reconstruction.posterior.REFINE_GAIN)")
     max_samples: Count | None = Field(
         default=None, gt=0, description="budget of pair readings (pairs x angles); null = none"
     )

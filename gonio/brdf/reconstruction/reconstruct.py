@@ -132,8 +132,9 @@ class Reconstruction:
         readings of ``ln(1 + f_loo cos ti) - ln(1 + f cos ti)``. NaN when undefined.
     predicted_log_rmse : float
         The estimated ``metrics.log_rmse`` of the whole reconstruction against the true
-        BRDF (:func:`predict_log_rmse`, calibrated on materials held out of the basis); the
-        number to report.
+        BRDF, calibrated on materials held out of the basis; the number to report. Joint
+        fit: :func:`gonio.brdf.reconstruction.selfcheck.predict_log_rmse`; V&F path:
+        :func:`predict_log_rmse`.
     angle_log_errors : (r,) float64 or None
         Joint fit only: per stage angle (in the order given), the RMS log error (units of
         ``log_rmse``) of that angle's readings predicted from all the other angles. Where it
@@ -142,6 +143,12 @@ class Reconstruction:
     pair_log_errors : (n,) float64 or None
         Per pair, the RMS log error of its readings predicted without it (the terms of
         ``cv_log_error``); a pair far above the others sits where the basis extrapolates.
+    expected_log_rmse : float
+        Joint fit only (else NaN): the error the fit's own posterior expects over the whole
+        table, weighted as ``log_rmse`` weighs errors
+        (:attr:`gonio.brdf.reconstruction.posterior.ScanPosterior.expected_log_rmse`); one
+        input of ``predicted_log_rmse`` (:mod:`gonio.brdf.reconstruction.selfcheck`). It cannot
+        see what the basis cannot represent.
     """
 
     table: BRDFTable
@@ -155,6 +162,7 @@ class Reconstruction:
     predicted_log_rmse: float = float("nan")
     angle_log_errors: FloatArray | None = None
     pair_log_errors: FloatArray | None = None
+    expected_log_rmse: float = float("nan")
 
 
 # ---------------------------------------------------------------------------- geometry helper
@@ -748,6 +756,18 @@ def _reconstruct(
     pair_err = _pair_log_errors(at_samples[..., n_ch:], vals, ci) if has_cv else None
     cv_log = float(np.sqrt(np.mean(pair_err**2))) if pair_err is not None else float("nan")
     n = int(cells_.shape[0])
+    if method == "joint" and np.isfinite(cv):
+        # Self-estimate from the joint posterior (reconstruction.selfcheck); imported here
+        # because the posterior module builds on this one.
+        from gonio.brdf.reconstruction.posterior import ScanPosterior
+        from gonio.brdf.reconstruction.selfcheck import predict_log_rmse as predict_joint
+
+        expected = ScanPosterior(basis, cells_, ph_, alpha, vals, table=table.values, eta=eta,
+                                 lam=lam).expected_log_rmse
+        predicted = predict_joint(expected, cv)
+    else:
+        expected = float("nan")
+        predicted = predict_log_rmse(cv, n, int(alpha.size))
     seconds = time.perf_counter() - t0
     return Reconstruction(
         table=table,
@@ -762,7 +782,8 @@ def _reconstruct(
         cv_sample_error=cv,
         predicted_error=cv_error_scale(n) * cv,
         cv_log_error=cv_log,
-        predicted_log_rmse=predict_log_rmse(cv, n, int(alpha.size)),
+        predicted_log_rmse=predicted,
+        expected_log_rmse=expected,
         angle_log_errors=angle_err,
         pair_log_errors=pair_err,
     )

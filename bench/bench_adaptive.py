@@ -1,0 +1,145 @@
+"""Adaptive refinement on the joint fit's posterior, and the posterior's self-estimated error.
+
+Run from the project root (needs mitsuba and ``../shared/data/rgl``, like
+``bench/bench_unseen.py``, whose materials, readings and designs it reuses)::
+
+    nice -n 5 .venv/bin/python bench/bench_adaptive.py [--gains 0.0005 0.001 0.002]
+        [--max-rotations 16] [--set panel|unseen|both] [--only measured|aniso]
+
+Sets
+----
+* ``panel`` (calibration, held-out *training* materials): one synthetic material per library
+  family held out of the panel basis of :mod:`gonio.brdf.design.heldout` (built without
+  them), read from their tables with 1 % noise. The stopping threshold of
+  :func:`gonio.brdf.reconstruction.posterior.next_angles` is chosen here: the largest gain
+  threshold whose mean error is at most the uniform-16 mean error.
+* ``unseen`` (the benchmark of ``bench_unseen.py``): 11 measured RGL materials, each with a
+  basis that leaves it out, and 6 mitsuba anisotropic specimens.
+
+Every scan: pairs ``design_pairs(basis, 10)`` on the material's own basis, start at 8 uniform
+stage angles, refine by :func:`next_angles` (rounds until it plans nothing; at most one new
+angle per gap per round, as the engine runs it) up to
+``--max-rotations``; then the default joint reconstruction of everything read. Rows: uniform 8
+and 16, each threshold. Columns: mean ``log_rmse`` per group and overall, mean readings.
+
+The self-estimated error (``predicted_log_rmse``) is calibrated by ``calibrate_log_rmse.py``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from dataclasses import dataclass
+
+# Run as `python bench/bench_adaptive.py`, so the sibling script is importable.
+import bench_unseen as bu
+import numpy as np
+
+from gonio.brdf.reconstruction.basis import Basis, default_basis
+from gonio.brdf.reconstruction.posterior import next_angles
+from gonio.brdf.reconstruction.reconstruct import reconstruct
+from gonio.brdf.reconstruction.samples import uniform_stage_angles
+from gonio.brdf.tables import metrics
+
+
+@dataclass
+class Case:
+    mat: bu.Material
+    basis: Basis
+    cells: np.ndarray
+    ph: np.ndarray
+    seed: int
+
+
+def panel_cases() -> list[Case]:
+    from gonio.brdf.design.heldout import _panel
+
+    pb, synth, _meas = _panel()
+    cells, ph = bu.design(pb, 10)
+    return [Case(bu.Material(t.name, "panel", t, t, ()), pb, cells, ph, 500 + i)
+            for i, t in enumerate(synth)]
+
+
+def unseen_cases() -> list[Case]:
+    mats = bu.measured_materials() + bu.aniso_materials()
+    out = []
+    for i, m in enumerate(mats):
+        b = default_basis(exclude=m.exclude)
+        cells, ph = bu.design(b, 10)
+        out.append(Case(m, b, cells, ph, 100 + i))
+    return out
+
+
+def uniform(c: Case, r: int) -> tuple[float, int]:
+    alpha = uniform_stage_angles(r)
+    vals = bu.read(c.mat, c.cells, c.ph, alpha, c.seed)
+    rec = reconstruct(c.basis, c.cells, c.ph, alpha, vals)
+    return metrics.log_rmse(rec.table, c.mat.truth), vals.shape[0] * r
+
+
+def adaptive(c: Case, gain: float, r0: int, max_r: int) -> tuple[float, int]:
+    angles = list(np.rad2deg(uniform_stage_angles(r0)))
+    vals = bu.read(c.mat, c.cells, c.ph, np.deg2rad(angles), c.seed)
+    for rnd in range(8):
+        rec = reconstruct(c.basis, c.cells, c.ph, np.deg2rad(angles), vals)
+        step = next_angles(c.basis, c.cells, c.ph, angles, vals, threshold=gain,
+                           budget_angles=max_r - len(angles), per_gap=1,
+                           table=rec.table.values)
+        if not step.angles_deg:
+            break
+        extra = bu.read(c.mat, c.cells, c.ph, np.deg2rad(step.angles_deg),
+                        c.seed + 1000 * (rnd + 1))
+        angles += step.angles_deg
+        vals = np.concatenate([vals, extra], axis=1)
+    rec = reconstruct(c.basis, c.cells, c.ph, np.deg2rad(angles), vals)
+    return metrics.log_rmse(rec.table, c.mat.truth), vals.shape[0] * len(angles)
+
+
+def table(name: str, cases: list[Case], gains: list[float], max_r: int) -> dict[str, float]:
+    rows: dict[str, dict[str, tuple[float, int]]] = {}
+    t0 = time.perf_counter()
+    for c in cases:
+        rows.setdefault("uniform 8", {})[c.mat.name] = uniform(c, 8)
+        rows.setdefault("uniform 16", {})[c.mat.name] = uniform(c, 16)
+        for g in gains:
+            rows.setdefault(f"posterior gain>={g}, 8->{max_r}", {})[c.mat.name] = adaptive(
+                c, g, 8, max_r)
+        print(f"  {c.mat.name}: " + ", ".join(
+            f"{k.split(',')[0]} {v[c.mat.name][0]:.4f}/{v[c.mat.name][1]}"
+            for k, v in rows.items()) + f" ({time.perf_counter() - t0:.0f} s)", flush=True)
+    kinds = sorted({c.mat.kind for c in cases})
+    print(f"\n{name}:\n| row | " + " | ".join(f"{k} ({sum(c.mat.kind == k for c in cases)})"
+                                           for k in kinds)
+          + " | all | readings (mean) | share of uniform 16 |")
+    print("|---" * (len(kinds) + 4) + "|")
+    u16 = np.mean([v[1] for v in rows["uniform 16"].values()])
+    out = {}
+    for row, per in rows.items():
+        txt = " | ".join(f"{np.mean([per[c.mat.name][0] for c in cases if c.mat.kind == k]):.4f}"
+                         for k in kinds)
+        allm = float(np.mean([v[0] for v in per.values()]))
+        rd = float(np.mean([v[1] for v in per.values()]))
+        out[row] = allm
+        print(f"| {row} | {txt} | {allm:.4f} | {rd:.1f} | {rd / u16:.0%} |")
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--gains", type=float, nargs="*", default=[0.0005, 0.001, 0.002])
+    ap.add_argument("--max-rotations", type=int, default=16)
+    ap.add_argument("--set", choices=["panel", "unseen", "both"], default="both")
+    ap.add_argument("--only", choices=["measured", "aniso"], default=None)
+    args = ap.parse_args(argv)
+    print(f"$ {' '.join(['python', *sys.argv])}")
+    if args.set in ("panel", "both"):
+        table("panel (calibration)", panel_cases(), args.gains, args.max_rotations)
+    if args.set in ("unseen", "both"):
+        cases = [c for c in unseen_cases() if args.only in (None, c.mat.kind)]
+        table("unseen (benchmark)", cases, args.gains, args.max_rotations)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,467 @@
+"""The joint fit's posterior: expected error of a scan and where the next stage angle helps most.
+
+The joint fit (:func:`~gonio.brdf.reconstruction.reconstruct.solve_joint`, MATH 5a) is the
+posterior mean of a
+Gaussian process along ``ph``: ``x(row, ph) = Q_row c(ph)`` with
+``Cov(c(ph), c(ph')) = sum_m P_m cos(m (ph - ph'))`` and reading noise ``eta``. The same model
+gives the posterior *covariance*, and from it two things the mean cannot:
+
+* **the expected error of the whole table** (:attr:`ScanPosterior.expected_log_rmse`): the
+  posterior variance of ``x`` at every valid cell of the 72 slices, weighted as ``log_rmse``
+  weighs errors (volume weight ``wV`` times the squared derivative of ``ln(1 + f cos ti)``
+  with respect to the remapped value ``x``, at the reconstructed ``f``);
+* **the value of a new stage angle** (:meth:`ScanPosterior.angle_gains`): reading all ``n``
+  pairs at stage angle ``beta`` lowers that weighted variance by
+  ``sum_ph tr(W C(ph, R) S_R^-1 C(ph, R)^T)``, with ``C`` the posterior cross-covariance of the
+  slice coefficients and the new readings ``R`` and ``S_R`` their posterior covariance plus
+  noise. The gain depends on where the readings are and on the weights, not on the values
+  still to come, so it can be computed before moving the stage.
+
+Two numbers are taken from the data, so that the variance means something for *this*
+material (empirical Bayes): the scale ``s2`` of the whole prior, and a factor ``rho`` on the
+varying harmonics (``m > 0``) of the learnt prior, chosen from :data:`RHO_GRID` by marginal
+likelihood. An isotropic specimen drives ``rho`` down and with it the value of more rotations;
+a strongly anisotropic one drives it up. Both are profiled in closed form / on a grid
+(``s2 = y^T G^-1 y / N`` for each ``rho``).
+
+Adaptive refinement (:func:`next_angles`) picks candidate angles greedily by gain, conditioning
+on the angles already picked, and stops when the best remaining angle would lower the expected
+``log_rmse`` by less than a threshold (:data:`REFINE_GAIN`, calibrated on held-out training
+materials with ``bench/bench_adaptive.py``).
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+from numpy.typing import ArrayLike, NDArray
+
+from gonio.brdf.reconstruction.basis import Basis, BasisError, remap, row_weight
+from gonio.brdf.reconstruction.reconstruct import (
+    _VALID_ROWS,
+    JOINT_ETA,
+    JOINT_LAM,
+    ReconstructionError,
+    joint_prior,
+    one_blas_thread,
+)
+from gonio.brdf.tables import geometry as geo
+
+FloatArray = NDArray[np.float64]
+
+#: Factors on the varying (m > 0) harmonics of the learnt prior tried by marginal likelihood.
+RHO_GRID: tuple[float, ...] = tuple(float(v) for v in np.geomspace(1 / 64, 16.0, 11))
+#: Default stopping threshold of :func:`next_angles`: the least drop of the expected
+#: ``log_rmse`` one more stage angle must buy (``bench/bench_adaptive.py --calibrate``).
+REFINE_GAIN = 0.0006
+
+
+@functools.cache
+def _volume_weight_rows() -> FloatArray:
+    """(p_valid,) volume weight ``wV`` of the valid rows (MATH 9)."""
+    out = np.asarray(geo.volume_weight().ravel()[_VALID_ROWS], dtype=float)
+    out.setflags(write=False)
+    return out
+
+
+@functools.cache
+def _cos_ti_rows() -> FloatArray:
+    """(p_valid,) ``cos theta_i`` of the valid rows."""
+    ci, _ = geo.cell_cosines(*geo.grid_angles())
+    out = np.asarray(ci.ravel()[_VALID_ROWS], dtype=float)
+    out.setflags(write=False)
+    return out
+
+
+class ScanPosterior:
+    """Posterior of the joint fit for one scan (module notes).
+
+    Readings are kept as a grid, every pair at every stage angle, flattened pair-major
+    (reading ``(q, j)`` at ``q r + j``, as in
+    :func:`gonio.brdf.reconstruction.reconstruct.solve_joint`).
+    Every quantity is computed in the space of readings: with ``A_m = Qt P_m Qt^T`` the prior
+    covariance of two readings is ``sum_m A_m[q, p] cos(m (ph_a - ph_b))``, and with
+    ``B_m = Qt P_m W P_m Qt^T`` the sum over the 72 grid slices of ``tr(W k(ph, a) k(ph, b)^T)``
+    (``k`` the covariance of the slice coefficients and a reading) is the same kind of sum with
+    ``B_m`` and the weights of the discrete orthogonality of the harmonics on 72 points
+    (72 for ``m = 0``, 36 for ``0 < m < 36``; ``m = 36`` alternates in sign, see
+    :meth:`_weighted`). Nothing of size ``72 K`` is ever formed.
+
+    Parameters
+    ----------
+    basis : Basis
+    cells : (n, 3) array_like, radians
+        ``(th, td, pd)`` of each pair.
+    ph_lab : (n,) array_like, radians
+    stage_angles : (r,) array_like, radians
+    values : (n, r, C) array_like, 1/sr
+        The readings (non-negative).
+    table : (C, 72, 18, 18, 36) array_like, optional
+        The reconstruction (1/sr), for the ``log_rmse`` weights; default: the joint fit of the
+        readings (one call of :func:`gonio.brdf.reconstruction.reconstruct.reconstruct`).
+    eta, lam : float, optional
+        The joint fit's settings (defaults :data:`JOINT_ETA`, :data:`JOINT_LAM`).
+    rho : float, optional
+        Fix the factor on the varying harmonics instead of choosing it by marginal likelihood.
+    """
+
+    def __init__(
+        self,
+        basis: Basis,
+        cells: ArrayLike,
+        ph_lab: ArrayLike,
+        stage_angles: ArrayLike,
+        values: ArrayLike,
+        *,
+        table: ArrayLike | None = None,
+        eta: float | None = None,
+        lam: float | None = None,
+        rho: float | None = None,
+    ) -> None:
+        cells_ = np.asarray(cells, dtype=float)
+        self.ph_lab = np.asarray(ph_lab, dtype=float)
+        alpha = np.asarray(stage_angles, dtype=float)
+        vals = np.asarray(values, dtype=float)
+        n = cells_.shape[0]
+        if cells_.ndim != 2 or cells_.shape[1] != 3 or self.ph_lab.shape != (n,):
+            raise ReconstructionError("cells must be (n, 3) and ph_lab (n,), radians")
+        if vals.ndim != 3 or vals.shape[:2] != (n, alpha.size):
+            raise ReconstructionError(
+                f"values have shape {vals.shape}; expected ({n}, {alpha.size}, channels)")
+        if not np.isfinite(vals).all() or (vals < 0).any():
+            raise ReconstructionError("values must be finite and non-negative (1/sr)")
+        self.eta = float(JOINT_ETA if eta is None else eta)
+        lam_ = float(JOINT_LAM if lam is None else lam)
+        if not self.eta > 0:
+            raise ReconstructionError(f"eta must be > 0, got {self.eta}")
+        th, td, pd = cells_.T
+        try:
+            rows, weights = basis.neighbours(th, td, pd)
+        except BasisError as exc:
+            raise ReconstructionError(str(exc)) from None
+        self.Qt = np.einsum("nj,njk->nk", weights, basis.Q[rows])
+        fmed_t = (weights * basis.f_med[rows]).sum(axis=1)[:, None, None]
+        mu_t = (weights * basis.mu[rows]).sum(axis=1)[:, None, None]
+        ci, co = geo.cell_cosines(th, td, pd)
+        w_t = np.maximum(ci * co, basis.eps)[:, None, None]
+        y = remap(vals, fmed_t, w_t, basis.eps) - mu_t  # (n, r, C), as the joint fit sees them
+        self.n, self.C = vals.shape[0], vals.shape[2]
+        self.y = y.reshape(self.n * alpha.size, self.C)
+        self.P = joint_prior(basis, lam_ / self.eta)  # (M, K, K)
+        M = self.P.shape[0]
+        self.harm = np.arange(M, dtype=float)
+        if table is None:
+            from gonio.brdf.reconstruction.reconstruct import reconstruct
+
+            table = reconstruct(basis, cells_, self.ph_lab, alpha, vals, eta=eta, lam=lam,
+                                channels=[f"c{k}" for k in range(vals.shape[2])]).table.values
+        self._set_weights(basis, np.asarray(table, dtype=float))
+        self.alpha = alpha.copy()
+        iso = np.zeros(M)
+        iso[0] = 1.0
+        var = 1.0 - iso
+        self._G_iso = self._kernel(self._Am, iso, alpha, alpha)
+        self._G_var = self._kernel(self._Am, var, alpha, alpha)
+        self.rho = float(rho) if rho is not None else self._choose_rho()
+        self._rho_m = np.where(self.harm > 0, self.rho, 1.0)
+        G = self._G_iso + self.rho * self._G_var
+        G[np.diag_indices_from(G)] += self.eta
+        self._chol = scipy.linalg.cho_factor(G, lower=True)
+        self.s2 = float(np.sum(self.y * scipy.linalg.cho_solve(self._chol, self.y))) / self.y.size
+
+    # ------------------------------------------------------------------ set-up
+    def _set_weights(self, basis: Basis, table: FloatArray) -> None:
+        """``W = Q^T diag(wV g^2) Q`` over the valid rows, and ``A_m``, ``B_m``.
+
+        ``g = d ln(1 + f cos ti) / dx = cos ti (f + eps / w) / (1 + f cos ti)`` turns a remapped
+        error into a ``log_rmse`` error at the reconstructed ``f``; ``g^2`` is averaged over
+        channels and every third slice (the weights along ``ph`` are taken as constant).
+        """
+        f = table.reshape(table.shape[0], geo.N_PH, geo.N_ROWS)[:, ::3][:, :, _VALID_ROWS]
+        f = np.maximum(np.where(np.isfinite(f), f, 0.0), 0.0)
+        ci_v = _cos_ti_rows()
+        w = row_weight(basis.eps)[_VALID_ROWS]
+        g = ci_v * (f + basis.eps / w) / (1.0 + f * ci_v)
+        g2 = np.mean(g**2, axis=(0, 1))
+        wv = _volume_weight_rows()
+        Qv = basis.Q[_VALID_ROWS]
+        W = Qv.T @ (Qv * (wv * g2)[:, None])
+        self.W = W  # (K, K) log_rmse weights of the coefficients
+        self.norm = float(geo.N_PH * wv.sum())  # log_rmse's denominator per channel
+        PQ = np.matmul(self.P, self.Qt.T[None])  # (M, K, n)
+        self._Am = np.matmul(self.Qt[None], PQ)  # (M, n, n)
+        self._Bm = np.matmul(PQ.transpose(0, 2, 1), np.matmul(W[None], PQ))  # (M, n, n)
+        self._trWP = np.einsum("kl,mlk->m", W, self.P)  # tr(W P_m)
+
+    def _ph(self, alpha: FloatArray) -> FloatArray:
+        """(n, r) ``ph`` of every pair at every stage angle."""
+        return self.ph_lab[:, None] - np.asarray(alpha, dtype=float)[None, :]
+
+    def _kernel(self, mats: FloatArray, coef: FloatArray, alpha_a: FloatArray,
+                alpha_b: FloatArray) -> FloatArray:
+        """``sum_m coef_m mats_m[q, p] cos(m (ph_a - ph_b))`` for two reading grids.
+
+        Returns
+        -------
+        (n ra, n rb) float64, pair-major on both sides.
+        """
+        n = self.n
+        Za = np.exp(-1j * self._ph(alpha_a)[:, :, None] * self.harm)  # (n, ra, M)
+        Zb = np.exp(-1j * self._ph(alpha_b)[:, :, None] * self.harm)  # (n, rb, M)
+        Mc = np.moveaxis(mats * coef[:, None, None], 0, -1)  # (n, n, M)
+        left = Za[:, None, :, :] * Mc[:, :, None, :]  # (n, n, ra, M)
+        out = np.matmul(left, np.conj(Zb).transpose(0, 2, 1)[None]).real  # (n, n, ra, rb)
+        ra, rb = Za.shape[1], Zb.shape[1]
+        return np.ascontiguousarray(out.transpose(0, 2, 1, 3)).reshape(n * ra, n * rb)
+
+    def _cov(self, alpha_a: FloatArray, alpha_b: FloatArray) -> FloatArray:
+        """Prior covariance of two reading grids (prior units)."""
+        return self._kernel(self._Am, self._rho_m, alpha_a, alpha_b)
+
+    def _weighted(self, alpha_a: FloatArray, alpha_b: FloatArray) -> FloatArray:
+        """``sum_s tr(W k(ph_s, a) k(ph_s, b)^T)`` over the 72 grid slices, for two grids.
+
+        On 72 equally spaced ``ph`` the harmonics are orthogonal: ``sum_s cos(m ph_s +
+        x) cos(m' ph_s + y)`` is ``72 cos x cos y`` for ``m = m' = 0``, ``36 cos(x - y)`` for
+        ``m = m'`` in 1..35, 0 for ``m != m'``, and for ``m = m' = 36`` (``cos(36 ph_s) =
+        +-1``, ``sin = 0``) ``72 cos x cos y``.
+        """
+        M = self.harm.size
+        coef = self._rho_m**2 * np.where(self.harm == 0, float(geo.N_PH), geo.N_PH / 2.0)
+        last = M - 1  # the Nyquist harmonic, handled apart
+        coef[last] = 0.0
+        out = self._kernel(self._Bm, coef, alpha_a, alpha_b)
+        if 2 * last == geo.N_PH and np.any(self._Bm[last]):
+            ca = np.cos(last * self._ph(alpha_a)).ravel()
+            cb = np.cos(last * self._ph(alpha_b)).ravel()
+            na, nb = np.asarray(alpha_a).size, np.asarray(alpha_b).size
+            Bl = np.repeat(np.repeat(self._Bm[last], na, axis=0), nb, axis=1)
+            out += geo.N_PH * self._rho_m[last] ** 2 * Bl * np.outer(ca, cb)
+        return out
+
+    def _choose_rho(self) -> float:
+        """The factor of :data:`RHO_GRID` with the largest marginal likelihood."""
+        N, C = self.y.shape
+        best, best_ll = RHO_GRID[0], -np.inf
+        for rho in RHO_GRID:
+            G = self._G_iso + rho * self._G_var
+            G[np.diag_indices_from(G)] += self.eta
+            try:
+                cho = scipy.linalg.cho_factor(G, lower=True)
+            except np.linalg.LinAlgError:
+                continue
+            s2 = float(np.sum(self.y * scipy.linalg.cho_solve(cho, self.y))) / (N * C)
+            logdet = 2.0 * float(np.sum(np.log(np.diag(cho[0]))))
+            ll = -0.5 * N * C * np.log(max(s2, 1e-300)) - 0.5 * C * logdet
+            if ll > best_ll:
+                best, best_ll = rho, ll
+        return float(best)
+
+    # ------------------------------------------------------------------ results
+    def weighted_variance(self) -> float:
+        """``sum_ph tr(W Cov_post(c(ph)))`` in units of the prior (before the scale ``s2``)."""
+        prior = geo.N_PH * float(np.sum(self._rho_m * self._trWP))
+        Gw = self._weighted(self.alpha, self.alpha)
+        explained = float(np.sum(scipy.linalg.cho_solve(self._chol, Gw) * np.eye(len(Gw))))
+        return max(prior - explained, 0.0)
+
+    @property
+    def expected_log_rmse(self) -> float:
+        """Root of the posterior's expected weighted squared log error over the whole table.
+
+        The error the model itself expects (components of the basis only: what the basis
+        cannot represent is not in it).
+        """
+        return float(np.sqrt(self.s2 * self.weighted_variance() / self.norm))
+
+    def angle_gains(self, stage_angles: ArrayLike) -> FloatArray:
+        """Drop of the weighted posterior variance from reading every pair at each angle.
+
+        With the new readings ``R`` and the measured ``A``, the slice coefficients' posterior
+        covariance with ``R`` is ``k(ph, A u R) D``, ``D = [-G^-1 cov(A, R); I]``, so the drop
+        is ``tr(S_R^-1 D^T Gw D)`` with ``Gw`` from :meth:`_weighted` and
+        ``S_R = cov(R, R) - cov(R, A) G^-1 cov(A, R) + eta I``.
+
+        Parameters
+        ----------
+        stage_angles : (m,) array_like, radians
+            Candidate stage angles, each considered on its own.
+
+        Returns
+        -------
+        (m,) float64
+            The drop per candidate, prior units (multiply by ``s2`` for remapped units).
+        """
+        beta = np.atleast_1d(np.asarray(stage_angles, dtype=float))
+        if beta.size == 0:
+            return np.zeros(0)
+        m, n = beta.size, self.n
+        cAR = self._cov(self.alpha, beta)  # (N, n m), pair-major over (q, candidate)
+        H = scipy.linalg.cho_solve(self._chol, cAR)  # G^-1 cov(A, R)
+        GwAA = self._weighted(self.alpha, self.alpha)
+        GwAR = self._weighted(self.alpha, beta)
+        gains = np.zeros(m)
+        for j in range(m):
+            idx = np.arange(n) * m + j
+            Hj, cj = H[:, idx], cAR[:, idx]
+            GwRR = self._weighted(beta[j:j + 1], beta[j:j + 1])
+            S = self._cov(beta[j:j + 1], beta[j:j + 1]) - cj.T @ Hj
+            S[np.diag_indices_from(S)] += self.eta
+            T = GwRR - Hj.T @ GwAR[:, idx]
+            T = T + T.T - GwRR + Hj.T @ GwAA @ Hj
+            try:
+                gains[j] = float(np.trace(scipy.linalg.solve(S, T, assume_a="pos")))
+            except np.linalg.LinAlgError:
+                gains[j] = 0.0
+        return gains
+
+    def log_rmse_drop(self, gain: float) -> float:
+        """Drop of :attr:`expected_log_rmse` that a variance ``gain`` buys (log_rmse units)."""
+        v = self.weighted_variance()
+        e0 = np.sqrt(self.s2 * v / self.norm)
+        e1 = np.sqrt(self.s2 * max(v - gain, 0.0) / self.norm)
+        return float(e0 - e1)
+
+    def add_angles(self, stage_angles: ArrayLike) -> None:
+        """Condition on readings at these angles (values not needed: the variance does not
+        depend on them); ``s2`` and ``rho`` stay as estimated."""
+        beta = np.atleast_1d(np.asarray(stage_angles, dtype=float))
+        self.alpha = np.concatenate([self.alpha, beta])
+        G = self._cov(self.alpha, self.alpha)
+        G[np.diag_indices_from(G)] += self.eta
+        self._chol = scipy.linalg.cho_factor(G, lower=True)
+
+
+def candidate_angles(stage_angles_deg: ArrayLike, min_step_deg: float) -> FloatArray:
+    """Candidate new angles: the quarter, half and three-quarter points of every gap.
+
+    Parameters
+    ----------
+    stage_angles_deg : (r,) measured angles, degrees
+    min_step_deg : float
+        Candidates closer than this to a measured angle are left out.
+
+    Returns
+    -------
+    (m,) float64, degrees in [0, 360), sorted, rounded to 1e-6
+    """
+    a = np.sort(np.mod(np.asarray(stage_angles_deg, dtype=float), 360.0))
+    if a.size == 0:
+        return np.zeros(0)
+    gaps = np.diff(np.concatenate([a, [a[0] + 360.0]]))
+    out = set()
+    for start, gap in zip(a, gaps, strict=True):
+        for frac in (0.25, 0.5, 0.75):
+            step = min(frac, 1 - frac) * gap
+            if step >= min_step_deg - 1e-9:
+                out.add(round(float((start + frac * gap) % 360.0), 6))
+    return np.array(sorted(out))
+
+
+@dataclass(frozen=True)
+class RefinementStep:
+    """What :func:`next_angles` decided.
+
+    Attributes
+    ----------
+    angles_deg : new stage angles, degrees, sorted (empty: stop)
+    drops : expected ``log_rmse`` drop of each pick, in pick order
+    expected_log_rmse : the posterior's expected error before the new angles
+    rho : the anisotropy factor chosen by marginal likelihood
+    reason : ``"threshold"`` (no angle worth its readings), ``"budget"``, ``"min_step"``
+        (no candidate left) or ``""`` when angles were planned
+    """
+
+    angles_deg: list[float]
+    drops: list[float]
+    expected_log_rmse: float
+    rho: float
+    reason: str
+
+
+def next_angles(
+    basis: Basis,
+    cells: ArrayLike,
+    ph_lab: ArrayLike,
+    stage_angles_deg: Sequence[float] | ArrayLike,
+    values: ArrayLike,
+    *,
+    threshold: float = REFINE_GAIN,
+    min_step_deg: float = 1.0,
+    budget_angles: int | None = None,
+    batch: int | None = None,
+    per_gap: int | None = None,
+    table: ArrayLike | None = None,
+) -> RefinementStep:
+    """Plan the next stage angles where they lower the expected ``log_rmse`` most.
+
+    Greedy: the candidate (:func:`candidate_angles`) with the largest posterior-variance drop
+    is picked, the posterior is conditioned on it, and so on while the pick's expected
+    ``log_rmse`` drop (:meth:`ScanPosterior.log_rmse_drop`) is at least ``threshold`` and the
+    budget lasts.
+
+    Parameters
+    ----------
+    basis, cells, ph_lab : as for :func:`gonio.brdf.reconstruction.reconstruct.reconstruct`
+    stage_angles_deg : (r,) measured angles, degrees
+    values : (n, r, C) readings, 1/sr
+    threshold : float
+        Least expected ``log_rmse`` drop per new angle (log_rmse units).
+    min_step_deg : float
+        Stage resolution: no angle closer than this to another is planned.
+    budget_angles : int, optional
+        Most angles to add (None: no limit).
+    batch : int, optional
+        Most angles to plan in this round (None: as many as pass the threshold).
+    per_gap : int, optional
+        Most new angles inside each gap between the measured angles (None: no limit). With 1
+        a round adds at most one angle per gap, as V&F's midpoints do, so the dry run's bound
+        on an adaptive job (every gap halved each round) holds.
+    table : optional, the reconstruction of these readings (computed when omitted)
+
+    Returns
+    -------
+    RefinementStep
+    """
+    a_deg = np.asarray(stage_angles_deg, dtype=float)
+    with one_blas_thread():
+        post = ScanPosterior(basis, cells, ph_lab, np.deg2rad(a_deg), values, table=table)
+        e0 = post.expected_log_rmse
+        limit = budget_angles if budget_angles is not None else 10**9
+        if batch is not None:
+            limit = min(limit, batch)
+        picked: list[float] = []
+        drops: list[float] = []
+        reason = ""
+        measured = list(np.mod(a_deg, 360.0))
+        edges = np.sort(np.mod(a_deg, 360.0))
+        used = np.zeros(edges.size, dtype=int)  # picks per original gap (gap k starts at edges[k])
+        while True:
+            if len(picked) >= limit:
+                reason = "budget" if not picked else ""
+                break
+            cand = candidate_angles(measured, min_step_deg)
+            gap_of = (np.searchsorted(edges, cand, side="right") - 1) % max(edges.size, 1)
+            if per_gap is not None and edges.size:
+                cand, gap_of = cand[used[gap_of] < per_gap], gap_of[used[gap_of] < per_gap]
+            if cand.size == 0:
+                reason = "min_step" if not picked else ""
+                break
+            gains = post.angle_gains(np.deg2rad(cand))
+            k = int(np.argmax(gains))
+            drop = post.log_rmse_drop(float(gains[k]))
+            if not drop >= threshold:
+                reason = "threshold" if not picked else ""
+                break
+            if edges.size:
+                used[gap_of[k]] += 1
+            picked.append(float(cand[k]))
+            drops.append(drop)
+            measured.append(float(cand[k]))
+            post.add_angles(np.deg2rad([cand[k]]))
+    order = np.argsort(picked)
+    return RefinementStep([picked[i] for i in order], drops, e0, post.rho, reason)

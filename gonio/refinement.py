@@ -1,0 +1,75 @@
+"""The posterior rule of adaptive plans: a running job's readings to its next stage angles.
+
+The engine knows devices and steps, not the basis; :class:`PosteriorRefiner` is what the
+worker hands it (``ScanEngine(refiner=...)``) so that ``AdaptivePlan(rule="posterior")`` can
+ask :func:`gonio.brdf.reconstruction.posterior.next_angles` where the next angles go. It
+turns the pairs' lab directions into slice cells once, applies the rig's calibration to the
+``raw - dark`` counts (the posterior weighs errors at BRDF values in 1/sr), and loads the basis
+on first use. A round adds at most one angle per gap (``per_gap=1``), so the dry run's
+bound on an adaptive job holds.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from gonio import hal
+from gonio.calibration import Calibration
+from gonio.hal import PairSpec
+from gonio.rigdescription import RigDescription
+
+
+class PosteriorRefiner:
+    """Callable ``(angles_deg, values, budget_angles, min_step_deg, min_gain) -> new angles``.
+
+    Parameters
+    ----------
+    basis_provider : callable returning the reconstruction basis (called once, on first use)
+    rig : RigDescription
+    pairs : the job's pairs, in the order of the engine's value rows
+    calibration : factors applied to ``raw - dark`` (default: none)
+    """
+
+    def __init__(self, basis_provider: Callable[[], Any], rig: RigDescription,
+                 pairs: Sequence[PairSpec], calibration: Calibration | None = None) -> None:
+        from gonio.brdf.reconstruction.reconstruct import pair_cells
+
+        self._basis_provider = basis_provider
+        self._basis: Any = None
+        self.pairs = list(pairs)
+        light = np.asarray([hal.LabDirection(rig.light(p.light).theta_deg,
+                                             rig.light(p.light).phi_deg).vector()
+                            for p in self.pairs])
+        sensor = np.asarray([hal.LabDirection(rig.sensor(p.sensor).theta_deg,
+                                              rig.sensor(p.sensor).phi_deg).vector()
+                             for p in self.pairs])
+        self.cells, self.ph_lab = pair_cells(light, sensor)
+        self.calibration = calibration or Calibration()
+        self.last: Any = None  # the last RefinementStep, for the job's event log
+
+    def __call__(self, angles_deg: Sequence[float], values: NDArray[np.float64],
+                 budget_angles: int, min_step_deg: float, min_gain: float) -> list[float]:
+        """New stage angles (degrees, sorted); empty when the rule says stop.
+
+        Parameters
+        ----------
+        angles_deg : (r,) measured specimen angles, degrees
+        values : (n_pairs, r, C) ``raw - dark`` counts, rows in the order of ``pairs``
+        budget_angles, min_step_deg, min_gain : as for ``next_angles``
+        """
+        from gonio.brdf.reconstruction.posterior import next_angles
+
+        if self._basis is None:
+            self._basis = self._basis_provider()
+        v = np.asarray(values, dtype=float)
+        factors = np.stack([self.calibration.factor(p.light, p.sensor, v.shape[2])
+                            for p in self.pairs])
+        v = np.maximum(v * factors[:, None, :], 0.0)  # small negative noise after the dark
+        self.last = next_angles(self._basis, self.cells, self.ph_lab, list(angles_deg), v,
+                                threshold=min_gain, min_step_deg=min_step_deg,
+                                budget_angles=budget_angles, per_gap=1)
+        return list(self.last.angles_deg)

@@ -1,0 +1,102 @@
+"""Adaptive plans with the posterior rule, through the real engine on the in-memory rig."""
+
+from __future__ import annotations
+
+import asyncio
+
+import numpy as np
+
+from gonio.brdf.reconstruction.posterior import next_angles
+from gonio.engine import ScanEngine
+from gonio.jobstates import JobState
+from gonio.plans.models import AdaptivePlan, ExposureSettings
+from gonio.plans.validation import plan_pairs
+from gonio.refinement import PosteriorRefiner
+from gonio.rigdescription import RigDescription
+from gonio.sim.memrig import MemRig
+from gonio.store import JobStore
+from tests.unit.brdf.reconstruction.test_reconstruct import random_basis
+from tests.unit.brdf.reconstruction.test_reconstruct_joint import _with_prior
+
+FAST = ExposureSettings(exposure_s=0.002, light_settle_s=0.0, dark="once")
+BASIS = _with_prior(random_basis(6, seed=1), {0: 1.0, 2: 1.0})
+
+
+def _run(plan: AdaptivePlan, with_refiner: bool = True) -> tuple[JobStore, ScanEngine,
+                                                                   RigDescription]:
+    rig = MemRig()
+    desc = RigDescription.from_rig(rig)
+    store = JobStore(":memory:")
+    job = store.create_job(kind=plan.kind, specimen="s", plan=plan.model_dump(mode="json"),
+                           rig=desc.model_dump(mode="json"))
+    refiner = PosteriorRefiner(lambda: BASIS, desc, plan_pairs(plan, desc)) if with_refiner \
+        else None
+    eng = ScanEngine(rig, store, job.id, plan, desc, refiner=refiner)
+    assert asyncio.run(eng.run()) is JobState.RUNNING
+    return store, eng, desc
+
+
+def _events(store: JobStore, kind: str) -> list[dict[str, object]]:
+    return [dict(e.data or {}) for e in store.events_after(0) if e.type == kind]
+
+
+def test_the_engine_measures_the_angles_the_posterior_rule_plans() -> None:
+    """Round 1 holds exactly the angles next_angles plans from round 0's readings (the
+    MemRig's readings swing with cos 2 alpha, so the rule refines), within the budget."""
+    plan = AdaptivePlan(initial_rotations=8, exposure=FAST, min_gain=1e-9, max_rounds=2,
+                        max_samples=4 * 12)
+    store, eng, desc = _run(plan)
+    steps = store.steps(1)
+    first = [s for s in steps if s.round == 0]
+    later = sorted(round(s.specimen_deg % 360.0, 6) for s in steps if s.round == 1)
+    angles, values = eng.measured_values(first)
+    n_pairs = len(eng.pairs)
+    want = next_angles(BASIS, eng.refiner.cells, eng.refiner.ph_lab, angles,  # type: ignore[union-attr]
+                       np.maximum(values, 0.0), threshold=1e-9,
+                       min_step_deg=desc.resolution_deg,
+                       budget_angles=plan.max_samples // n_pairs - 8,  # type: ignore[operator]
+                       per_gap=1)
+    assert later and later == [round(a, 6) for a in want.angles_deg]
+    assert len(steps) * n_pairs <= plan.max_samples  # type: ignore[operator]
+    assert _events(store, "adaptive_round")[0]["rule"] == "posterior"
+
+
+def test_the_plan_stops_when_the_rule_says() -> None:
+    plan = AdaptivePlan(initial_rotations=8, exposure=FAST, min_gain=1e3)
+    store, _eng, _ = _run(plan)
+    assert {s.round for s in store.steps(1)} == {0}
+    assert _events(store, "adaptive_done") == [{"reason": "converged", "rule": "posterior"}]
+
+
+def test_without_a_basis_the_engine_uses_the_vf_rule_and_says_so() -> None:
+    plan = AdaptivePlan(initial_rotations=8, exposure=FAST, threshold=0.01, max_rounds=2)
+    store, _eng, _ = _run(plan, with_refiner=False)
+    assert {s.round for s in store.steps(1)} == {0, 1}
+    assert _events(store, "adaptive_round")[0]["rule"] == "vf"
+
+
+def test_the_plan_default_is_the_calibrated_threshold() -> None:
+    from gonio.brdf.reconstruction.posterior import REFINE_GAIN
+
+    assert AdaptivePlan().rule == "posterior" and AdaptivePlan().min_gain == REFINE_GAIN
+
+
+def test_a_failing_posterior_rule_falls_back_to_vf_and_says_why() -> None:
+    """A basis that cannot be loaded must not fail the scan: the round uses V&F's rule and the
+    event log keeps the reason."""
+    plan = AdaptivePlan(initial_rotations=8, exposure=FAST, threshold=0.01, max_rounds=2)
+    rig = MemRig()
+    desc = RigDescription.from_rig(rig)
+    store = JobStore(":memory:")
+    job = store.create_job(kind=plan.kind, specimen="s", plan=plan.model_dump(mode="json"),
+                           rig=desc.model_dump(mode="json"))
+
+    def no_basis() -> object:
+        raise OSError("basis file unreadable")
+
+    refiner = PosteriorRefiner(no_basis, desc, plan_pairs(plan, desc))
+    eng = ScanEngine(rig, store, job.id, plan, desc, refiner=refiner)
+    assert asyncio.run(eng.run()) is JobState.RUNNING
+    assert {s.round for s in store.steps(job.id)} == {0, 1}
+    failed = [e for e in _events(store, "adaptive_round") if "posterior_failed" in e]
+    assert failed and "unreadable" in str(failed[0]["posterior_failed"])
