@@ -1,4 +1,5 @@
-"""A calibration refuses readings that cannot come from a white diffuser."""
+"""Calibration (gonio.calibration): white-reference factors, readings arranged into samples, and
+the refusal of readings that cannot come from a white diffuser."""
 
 from __future__ import annotations
 
@@ -7,10 +8,17 @@ import math
 import numpy as np
 import pytest
 
-from gonio.calibration import CalibrationError, check_white_reference, from_reference
-from gonio.hal import LabDirection
+from gonio.calibration import (
+    Calibration,
+    CalibrationError,
+    calibrated_samples,
+    check_white_reference,
+    from_reference,
+)
+from gonio.hal import LabDirection, PairSpec
 from gonio.sim.rig import DEFAULT_LIGHTS, DEFAULT_SENSORS, default_material, white_reference
 from gonio.sim.specimen import Specimen
+from gonio.store import ReadingRow
 
 ANGLES = np.arange(8) * 45.0
 GAIN_L = {"L1": 1.0, "L2": 0.7, "L3": 1.3}  # unequal lamps and sensors, as on a real rig
@@ -73,6 +81,36 @@ def test_independent_pairs_of_a_diffuser_pass_and_a_turning_specimen_fails() -> 
         check_white_reference({k: spec[k] for k in keep})
     # Without the check (a caller that knows better), the factors are still computed.
     assert len(from_reference(0.5, {k: spec[k] for k in keep}, check=False).pairs) == 3
+
+
+def _reading_rows() -> list[ReadingRow]:
+    out = []
+    for k, ang in enumerate((0.0, 120.0, 240.0)):
+        for s in ("S1", "S2"):
+            out.append(ReadingRow(k, ang + 360.0, ang + 360.01, "L1", s, (10.0 + k, 20.0, 30.0),
+                                  (1.0, 1.0, 1.0), 0.01, 2, False, 1.0))
+    return out
+
+
+def test_white_reference_factor() -> None:
+    cal = from_reference(0.8, {("L1", "S1"): np.array([[2.0, 4.0], [2.0, 4.0]])})
+    assert cal.factor("L1", "S1", 2) == pytest.approx([0.4 / math.pi, 0.2 / math.pi])
+    assert cal.factor("L9", "S1", 2) == pytest.approx([1.0, 1.0])
+    with pytest.raises(CalibrationError, match="every channel must be positive"):
+        from_reference(0.8, {("L1", "S1"): np.array([[0.0, 4.0]])})
+    with pytest.raises(CalibrationError, match="has 2 channels"):
+        cal.factor("L1", "S1", 3)
+
+
+def test_samples_arrangement_and_incomplete_jobs() -> None:
+    pairs = [PairSpec(light="L1", sensor="S1"), PairSpec(light="L1", sensor="S2")]
+    z = np.zeros((2, 3))
+    s = calibrated_samples(_reading_rows(), pairs, z, z, ("R", "G", "B"), Calibration())
+    assert s.values.shape == (2, 3, 3)
+    assert s.stage_angles_deg.tolist() == [0.0, 120.0, 240.0]  # modulo 360
+    assert s.values[0, 1, 0] == pytest.approx(10.0)  # 11 - 1 at the second angle
+    with pytest.raises(CalibrationError, match="no reading at stage angle 240"):
+        calibrated_samples(_reading_rows()[:-1], pairs, z, z, ("R", "G", "B"), Calibration())
 
 
 def test_calibrated_scan_as_core_samples() -> None:

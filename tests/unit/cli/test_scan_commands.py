@@ -1,10 +1,17 @@
-"""The plan 'gonio scan' builds from its options (no rig needed)."""
+"""'gonio scan' and 'gonio jobs' (gonio.cli.scan_commands): the plan built from the options,
+user errors, the job list (no rig needed)."""
 
 from __future__ import annotations
 
-from gonio.cli import build_parser
+import argparse
+from pathlib import Path
+
+import pytest
+
+from gonio.cli import UsageError, build_parser, scan_commands
 from gonio.cli.scan_commands import _plan
 from gonio.plans.models import CalibrationPlan, UniformPlan
+from gonio.store import JobStore
 
 
 def _parse(*argv: str) -> object:
@@ -25,3 +32,35 @@ def test_scan_keeps_its_specimen_names() -> None:
     assert isinstance(plan, UniformPlan) and plan.specimen == "specimen"
     felt = _parse("--specimen", "felt")
     assert isinstance(felt, UniformPlan) and felt.specimen == "felt"
+
+
+def _args(argv: list[str]) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(prog="gonio")
+    scan_commands.register(parser.add_subparsers(dest="command"))
+    return parser.parse_args(argv)
+
+
+def test_cli_user_errors(tmp_path: Path) -> None:
+    args = _args(["scan", "--rig", str(tmp_path / "missing.toml"), "-o", str(tmp_path / "o.h5")])
+    with pytest.raises(UsageError, match="does not exist"):
+        args.func(args)
+    with pytest.raises(SystemExit):  # argparse: "--exposure: expected a finite number > 0"
+        _args(["scan", "--sim", "--exposure", "0", "-o", str(tmp_path / "o.h5")])
+    args = _args(["jobs", "--db", str(tmp_path / "none.sqlite")])
+    with pytest.raises(UsageError, match=r"job store .* does not exist"):
+        args.func(args)
+    JobStore(tmp_path / "j.sqlite").create_job(kind="uniform", specimen="x", plan={}, rig={})
+    args = _args(["jobs", "show", "--db", str(tmp_path / "j.sqlite")])
+    with pytest.raises(UsageError, match="needs a job id"):
+        args.func(args)
+    args = _args(["jobs", "show", "9", "--db", str(tmp_path / "j.sqlite")])
+    with pytest.raises(UsageError, match="no job with id 9"):
+        args.func(args)
+
+
+def test_cli_jobs_list(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    JobStore(tmp_path / "j.sqlite").create_job(kind="uniform", specimen="felt", plan={}, rig={})
+    args = _args(["jobs", "list", "--db", str(tmp_path / "j.sqlite")])
+    assert args.func(args) == 0
+    out = capsys.readouterr().out
+    assert "queued" in out and "felt" in out

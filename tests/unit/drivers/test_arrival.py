@@ -2,23 +2,9 @@
 
 from __future__ import annotations
 
-import math
-
 import pytest
 
 from gonio.drivers._arrival import FINE_POLL_S, poll_delay
-from gonio.motion import move_time
-
-
-def test_trapezoid_and_triangle_durations() -> None:
-    # 60 deg/s, 240 deg/s^2: ramps take 0.25 s and 7.5 deg each, so 45 deg cruises 30 deg.
-    assert move_time(45.0, 60.0, 240.0) == pytest.approx(0.25 + 0.5 + 0.25)
-    assert move_time(-45.0, 60.0, 240.0) == move_time(45.0, 60.0, 240.0)
-    # Too short to reach full speed: accelerate over half, brake over the other half.
-    assert move_time(6.0, 60.0, 240.0) == pytest.approx(2.0 * math.sqrt(3.0 / 120.0))
-    assert move_time(0.0, 60.0, 240.0) == 0.0
-    # Both formulas agree where the profile just reaches full speed (15 deg here).
-    assert move_time(15.0, 60.0, 240.0) == pytest.approx(2.0 * math.sqrt(15.0 / 240.0))
 
 
 def test_poll_delay_is_coarse_then_exact_then_fine() -> None:

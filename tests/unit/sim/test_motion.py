@@ -1,4 +1,5 @@
-"""Stage physics (trapezoidal profiles, faults) and the drivers' approach-direction planning."""
+"""Stage physics of the simulators: trapezoidal profiles, settling, retargeting, faults
+(gonio.sim.motion)."""
 
 from __future__ import annotations
 
@@ -8,9 +9,6 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from gonio.drivers._stage_settings import check_approach, check_target
-from gonio.hal import TravelLimits
-from gonio.motion import approach_waypoints, plan_overshoot_legs
 from gonio.sim.motion import StageMotion, plan_phases
 
 
@@ -142,54 +140,6 @@ def test_overload_trips_and_blocks_moves_until_reset() -> None:
 def test_invalid_motion_parameters_are_refused(bad: dict[str, float]) -> None:
     with pytest.raises(ValueError, match="must be > 0"):
         StageMotion(**bad)
-
-
-# --------------------------------------------------------------------------- approach planning
-@pytest.mark.parametrize(
-    ("current", "target", "approach", "expected"),
-    [
-        (0.0, 10.0, "positive", [10.0]),
-        (20.0, 10.0, "positive", [9.0, 10.0]),
-        (0.0, 10.0, "negative", [11.0, 10.0]),
-        (20.0, 10.0, "negative", [10.0]),
-        (20.0, 10.0, "none", [10.0]),
-        (10.0, 10.0, "positive", [10.0]),
-    ],
-)
-def test_targets_are_approached_from_the_configured_side(
-    current: float, target: float, approach: str, expected: list[float]
-) -> None:
-    assert approach_waypoints(current, target, approach, 1.0) == expected
-
-
-@pytest.mark.parametrize(
-    ("current", "target", "backlash", "expected"),
-    [
-        (50.0, 10.0, 2.0, [8.0, 10.0]),  # from above: overshoot below, then up to the target
-        (0.0, 10.0, 2.0, [10.0]),  # from below: already the positive side
-        (50.0, 1.0, 2.0, [0.0, 1.0]),  # the overshoot stops at the lower limit (0 here)
-        (50.0, 10.0, 0.0, [10.0]),  # no plan backlash: straight there
-    ],
-)
-def test_plan_overshoot_goes_below_a_target_approached_from_above(
-    current: float, target: float, backlash: float, expected: list[float]
-) -> None:
-    assert plan_overshoot_legs(current, target, backlash, min_deg=0.0) == expected
-
-
-def test_approach_settings_are_validated_with_clear_messages() -> None:
-    with pytest.raises(ValueError, match="approach must be one of positive, negative, none"):
-        check_approach("stage", "upwards", 0.5)
-    with pytest.raises(ValueError, match="backlash_deg must be a number >= 0"):
-        check_approach("stage", "positive", -1.0)
-
-
-def test_overshoot_beyond_travel_limit_is_refused_before_moving() -> None:
-    limits = TravelLimits(0.0, 180.0)
-    with pytest.raises(ValueError, match=r"outside the travel limits \[0, 180\]"):
-        check_target("stage", limits, 200.0, [200.0])
-    with pytest.raises(ValueError, match=r"needs an overshoot to -0\.5 deg"):
-        check_target("stage", limits, 0.0, approach_waypoints(10.0, 0.0, "positive", 0.5))
 
 
 @pytest.mark.parametrize("v0", [1.7e-4, -3e-3, 2e-6])

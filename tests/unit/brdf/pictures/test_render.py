@@ -1,11 +1,10 @@
 """The renderer against formulas: Lambert's cosine law, rotation of an anisotropic highlight,
-the table lookup against BRDFTable.eval, sRGB encoding, figure layout and the CLI."""
+the table lookup against BRDFTable.eval, sRGB encoding and figure layout."""
 
 from __future__ import annotations
 
 import io
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,7 +12,6 @@ from PIL import Image
 
 from gonio.brdf.models import analytic as bm
 from gonio.brdf.pictures import render as R  # noqa: N812 (short name for many calls)
-from gonio.cli import main as cli_main
 
 ALBEDO = (0.8, 0.5, 0.2)
 
@@ -133,22 +131,3 @@ def test_figure_has_full_size_views_and_one_row_per_material() -> None:
         R.figure_png([("paper", bm.Lambert(0.7))], size=10)
     with pytest.raises(R.RenderError, match="at least one material"):
         R.figure_png([], size=96)
-
-
-def test_cli_render_table_and_bad_inputs(tmp_path: Path, capsys: pytest.CaptureFixture[str]
-                                         ) -> None:
-    table = bm.tabulate(bm.GGX(alpha_x=0.1, alpha_y=0.4, name="brushed"))
-    src = table.save(tmp_path / "brushed.npz")
-    out = tmp_path / "r.png"
-    assert cli_main(["render", str(src), "-o", str(out), "--size", "64"]) == 0
-    im = Image.open(out)
-    assert im.width >= len(R.DEFAULT_VIEWS) * 64
-    assert cli_main(["render", str(tmp_path / "none.h5"), "-o", str(out)]) == 2
-    assert "does not exist" in capsys.readouterr().err
-    assert cli_main(["render", str(src), "-o", str(tmp_path / "no" / "r.png")]) == 2
-    assert "folder" in capsys.readouterr().err
-    assert cli_main(["render", str(src), "-o", str(out), "--size", "5"]) == 2
-    assert "--size" in capsys.readouterr().err
-    bad = tmp_path / "bad.npz"
-    bad.write_bytes(b"not a table")
-    assert cli_main(["render", str(bad), "-o", str(out)]) == 2

@@ -1,0 +1,81 @@
+"""Dry runs: counts and times of a plan before it runs, and the bound for adaptive plans
+(gonio.plans.dryrun)."""
+
+from __future__ import annotations
+
+import pytest
+
+from gonio.motion import move_time
+from gonio.plans.dryrun import dry_run
+from gonio.plans.models import (
+    AdaptivePlan,
+    ExposureSettings,
+    UniformPlan,
+)
+from gonio.rigdescription import RigDescription
+
+
+def _limited(desc: RigDescription, lo: float, hi: float) -> RigDescription:
+    return desc.model_copy(update={"stage_min_deg": lo, "stage_max_deg": hi})
+
+
+def test_uniform_dry_run_counts_and_times(desc: RigDescription) -> None:
+    plan = UniformPlan(rotations=6, exposure=ExposureSettings(exposure_s=0.1, averages=2,
+                                                              light_settle_s=0.05, dark="once"))
+    d = dry_run(plan, desc)
+    assert d.angles_deg == [0, 60, 120, 180, 240, 300]
+    assert d.readings == 3 * 6  # three pairs
+    assert d.lights == ["L1", "L2"]
+    assert d.exposures == 6 * 2 + 1  # one per light and angle, one dark
+    assert d.exposure_s == pytest.approx(13 * 0.2)
+    assert d.motion_s == pytest.approx(5 * move_time(60, 30.0, 300.0))
+    assert d.estimated_s == pytest.approx(d.motion_s + d.settle_s + d.exposure_s)
+
+
+def test_dry_run_counts_the_return_from_where_the_stage_is(desc: RigDescription) -> None:
+    rig = _limited(desc, -360.0, 720.0)
+    plan = UniformPlan(rotations=4, exposure=ExposureSettings(light_settle_s=0.0))
+    from_zero = dry_run(plan, rig)
+    assert not from_zero.from_known and from_zero.from_deg == 0.0
+    parked = dry_run(plan, rig, current_deg=700.0)
+    assert parked.from_known
+    # From 700 the stage cannot go on past 720: back down to 450 (250 deg), then 3 x 90 deg.
+    assert parked.positions_deg == pytest.approx([450.0, 540.0, 630.0, 720.0])
+    v, a = rig.speed_dps, rig.accel_dps2
+    assert parked.motion_s == pytest.approx(move_time(250, v, a) + 3 * move_time(90, v, a))
+    assert parked.estimated_s > from_zero.estimated_s
+
+
+def test_dry_run_counts_backlash_approaches(desc: RigDescription) -> None:
+    v, a = desc.speed_dps, desc.accel_dps2
+    plan = UniformPlan(rotations=4, backlash_deg=5.0, exposure=ExposureSettings(dark="none"))
+    # The engine's own overshoot: coming down from 100 to 90 it first goes to 85.
+    d = dry_run(plan, desc, current_deg=100.0)
+    assert d.positions_deg[0] == pytest.approx(90.0)
+    assert d.motion_s == pytest.approx(move_time(15, v, a) + move_time(5, v, a)
+                                       + 3 * move_time(90, v, a))
+    # A driver approaching from above overshoots every upward move by its backlash.
+    neg = desc.model_copy(update={"approach": "negative", "approach_backlash_deg": 2.0,
+                                  "settle_s": 0.1})
+    plan0 = UniformPlan(rotations=4, exposure=ExposureSettings(dark="none", light_settle_s=0))
+    d = dry_run(plan0, neg, current_deg=-10.0)
+    assert d.positions_deg == pytest.approx([0.0, 90.0, 180.0, 270.0])
+    assert d.motion_s == pytest.approx(move_time(12, v, a) + move_time(2, v, a)
+                                       + 3 * (move_time(92, v, a) + move_time(2, v, a)))
+    assert d.settle_s == pytest.approx(4 * 0.1)  # one settle per move_to call
+
+
+def test_adaptive_plans_get_a_bound(desc: RigDescription) -> None:
+    plan = AdaptivePlan(initial_rotations=8, max_rounds=3,
+                        exposure=ExposureSettings(exposure_s=0.1, light_settle_s=0.0,
+                                                  dark="none"))
+    d = dry_run(plan, desc)
+    # Worst case: every gap halved in each of the two refinement rounds: 8 + 8 + 16 angles.
+    assert d.max_angles == 32
+    assert d.max_estimated_s is not None
+    # At least the exposures of 32 angles (two lights each), and more than the first round.
+    assert d.max_estimated_s >= 32 * 2 * 0.1 and d.max_estimated_s > d.estimated_s
+    # A budget of 3 pairs x 12 angles stops after 4 more angles; a coarse min step sooner.
+    assert dry_run(plan.model_copy(update={"max_samples": 36}), desc).max_angles == 12
+    assert dry_run(plan.model_copy(update={"min_step_deg": 20.0}), desc).max_angles == 16
+    assert dry_run(UniformPlan(), desc).max_estimated_s is None
