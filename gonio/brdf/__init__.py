@@ -19,7 +19,10 @@ One subpackage per job; each module's docstring says what it holds.
 ==================  ===========================================================================
 
 The rooms depend one way: ``tables`` on nothing, ``models`` on ``tables``, ``materials`` on
-both, ``reconstruction`` on those, ``design`` on all of them, ``pictures`` on ``tables``.
+both, ``reconstruction`` on those, ``design`` on all of them, ``pictures`` on ``tables``
+(an import-linter ``layers`` contract in pyproject.toml checks it). Beside them,
+``advice`` holds :class:`~gonio.brdf.advice.AdvisedError`, the base of core errors that name a
+setting to change without using the CLI's words for it.
 
 The entry points other tools call can be imported from here as well as from their homes::
 
