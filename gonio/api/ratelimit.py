@@ -6,7 +6,9 @@ process: a few clients polling back to back would take time from the scan. A cli
 valid key (counted by its address) therefore gets a token bucket: ``rate_per_s`` requests per
 second on average, up to ``burst`` at once. Beyond it the answer is **429** with a
 ``Retry-After`` header (whole seconds, RFC 9110) and a message saying how to get more, before
-any routing, dependency or handler runs, so a refused request is cheap.
+any routing, dependency or handler runs, so a refused request is cheap; it is held back
+:data:`TARPIT_S` first, which slows a client that ignores ``Retry-After`` to one request a
+second per connection.
 
 Requests with a valid key are not limited: key holders are known by name and can already stop
 the rig. The emergency halt needs a key, so no limit ever stands between a user and the halt
@@ -18,6 +20,7 @@ default of 20 per second.
 
 from __future__ import annotations
 
+import asyncio
 import json
 import math
 import time
@@ -31,6 +34,8 @@ DEFAULT_RATE_PER_S = 20.0
 """Average requests per second one address may make without a key."""
 DEFAULT_BURST = 40
 """Requests one address may make at once without a key (the page's start-up burst is ~10)."""
+TARPIT_S = 1.0
+"""How long a 429 is held back before it is sent (see :meth:`AnonymousRateLimit.__call__`)."""
 MAX_CLIENTS = 4096
 """Buckets kept at most; beyond it full (idle) buckets are dropped, then the oldest."""
 
@@ -115,7 +120,12 @@ class AnonymousRateLimit:
         if wait_s <= 0:
             await self.app(scope, receive, send)
             return
-        retry = max(1, math.ceil(wait_s))
+        # Held back TARPIT_S before it is sent: HTTP/1.1 answers one request at a time per
+        # connection, so a client that ignores Retry-After and asks again at once still makes
+        # at most one request per TARPIT_S per connection. Waiting costs this loop nothing;
+        # answering a flood of 429s as fast as they come would cost the scan CPU time.
+        await asyncio.sleep(TARPIT_S)
+        retry = max(1, math.ceil(wait_s - TARPIT_S))
         detail = (
             f"too many requests from {who} without an API key (at most "
             f"{self.buckets.rate_per_s:g} per second, {self.buckets.burst} at once); retry "
