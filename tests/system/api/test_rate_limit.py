@@ -32,7 +32,9 @@ def tiny_app(tmp: Path, rate: float = RATE) -> FastAPI:
                              anonymous_rate_per_s=rate, anonymous_burst=BURST))
 
     @app.get("/read")
-    async def read(caller: Annotated[Caller, Depends(require_read_access)]) -> dict[str, str | None]:
+    async def read(
+        caller: Annotated[Caller, Depends(require_read_access)],
+    ) -> dict[str, str | None]:
         return {"who": caller.key_name}
 
     @app.post("/halt")
