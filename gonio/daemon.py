@@ -11,6 +11,8 @@ A daemon config is a small TOML file (``deploy/daemon.example.toml`` is a comple
     [limits]
     max_body_bytes = 1048576
     design_time_limit_s = 60   # longest sampling-design search a request may ask for
+    anonymous_requests_per_s = 20  # per address without a key; more get 429 (0 = no limit)
+    anonymous_burst = 40
     [paths]
     data_dir = "/var/lib/gonio"
     rig_config = "/etc/gonio/rig.toml"
@@ -72,6 +74,10 @@ class LimitsSection(_Section):
     max_body_bytes: Annotated[int, Field(ge=1024, le=64 << 20)] = 1 << 20
     # A design request occupies a CPU core for up to this long; one runs at a time.
     design_time_limit_s: Annotated[float, Field(gt=0, le=600)] = 60.0
+    # Clients without a key, per address: average requests per second (0 = no limit) and how
+    # many at once; beyond that 429 with Retry-After (gonio/api/ratelimit.py).
+    anonymous_requests_per_s: Annotated[float, Field(ge=0, le=100_000)] = 20.0
+    anonymous_burst: Annotated[int, Field(ge=1, le=1_000_000)] = 40
 
 
 class PathsSection(_Section):
@@ -255,6 +261,8 @@ def api_settings(cfg: DaemonConfig, keyring: ApiKeyring) -> Any:
         data_dir=cfg.paths.data_dir,
         max_body_bytes=cfg.limits.max_body_bytes,
         design_time_limit_s=cfg.limits.design_time_limit_s,
+        anonymous_rate_per_s=cfg.limits.anonymous_requests_per_s,
+        anonymous_burst=cfg.limits.anonymous_burst,
     )
 
 

@@ -14,9 +14,12 @@ from __future__ import annotations
 
 import hashlib
 import hmac
+import json
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import Any
+from urllib.parse import parse_qsl
 
 from fastapi import Depends, HTTPException, Request, status
 from fastapi.security import APIKeyHeader
@@ -196,3 +199,47 @@ async def require_key_when_configured(
     required = len(_policy(request).keyring) > 0 or _policy(request).read_requires_key
     return _check(request, presented, required=required)
 
+
+
+class RefuseKeysInUrl:
+    """ASGI middleware: **400** for any request with a key-like parameter in its query string.
+
+    Keys travel in the ``X-API-Key`` header only. A key in the URL ends up in access logs,
+    proxy logs and browser history, so such a request is refused on every route (open reads
+    included, where it used to be ignored), whether or not the value is a valid key, and the
+    message says where the key goes instead. The parameter names are those the access log
+    redacts (:data:`gonio.logfilters.SECRET_PARAM`: ``key``, ``token``, ``secret``, ``passw``,
+    ``auth``), so what is refused is also never written down.
+    """
+
+    def __init__(self, app: Any) -> None:
+        self.app = app
+
+    async def __call__(self, scope: Any, receive: Any, send: Any) -> None:
+        if scope["type"] == "http" and scope.get("query_string"):
+            name = _secret_query_param(scope["query_string"])
+            if name is not None:
+                detail = (
+                    f"API keys are not accepted in the URL (query parameter {name!r}): URLs end "
+                    f"up in logs. Send the key in the {API_KEY_HEADER} header instead, and "
+                    "treat a key that was sent in a URL as exposed (replace it: gonio keys new)"
+                )
+                payload = json.dumps({"detail": detail}).encode()
+                await send({"type": "http.response.start", "status": 400, "headers": [
+                    (b"content-type", b"application/json"),
+                    (b"content-length", str(len(payload)).encode()),
+                ]})
+                await send({"type": "http.response.body", "body": payload})
+                return
+        await self.app(scope, receive, send)
+
+
+def _secret_query_param(query: bytes) -> str | None:
+    """The first query parameter whose name looks like a key, or None."""
+    from gonio.logfilters import SECRET_PARAM
+
+    text = query.decode("latin-1")
+    for name, _value in parse_qsl(text, keep_blank_values=True):
+        if SECRET_PARAM.search(name):
+            return name[:40]
+    return None

@@ -11,7 +11,10 @@ from gonio.api.maintenance import refuse_while_locked
 from gonio.service import GonioService
 
 
-def get_service(request: Request) -> GonioService:
+async def get_service(request: Request) -> GonioService:
+    # async on purpose: FastAPI runs a plain ``def`` dependency in its thread pool, so every
+    # request (the status poll included) paid a thread hop, and under load dozens of pool
+    # threads queued for the interpreter lock in front of the engine's thread.
     service: GonioService = request.app.state.service
     return service
 

@@ -12,6 +12,10 @@ is refused under the maintenance lock        423
 takes a request body                         413
 takes parameters or a body                   422 (``detail``: a list, or a message)
 takes a job id                               404
+any route (a client without a valid key      429 (with ``Retry-After``)
+over its rate, :mod:`gonio.api.ratelimit`)
+any route (a key in the query string,        400
+:class:`gonio.api.auth.RefuseKeysInUrl`)
 ===========================================  ==========================================
 
 A route's own ``responses`` (409, 503, ...) keep their descriptions and get the error body.
@@ -52,6 +56,7 @@ class ValidationErrorBody(BaseModel):
 
 
 _DESCRIPTIONS: dict[int, str] = {
+    400: "an API key (or token, secret) in the query string: keys go in the X-API-Key header",
     401: "an API key is needed in the X-API-Key header",
     403: "the API key is wrong, or the daemon has no keys (read-only)",
     404: "no such job, or it has no result yet",
@@ -59,14 +64,24 @@ _DESCRIPTIONS: dict[int, str] = {
     413: "request body larger than [limits] max_body_bytes",
     422: "invalid request, or one this rig cannot run; the detail says why",
     423: "the rig is locked for maintenance; the detail gives the reason",
+    429: "too many requests from this address without an API key; retry after Retry-After "
+         "seconds",
     500: "a stored result file cannot be read",
     503: "a device did not do what was asked; the detail gives the fault",
 }
 
 
+_RETRY_AFTER = {"Retry-After": {
+    "description": "whole seconds until this address may make a request again",
+    "schema": {"type": "integer", "minimum": 1},
+}}
+
+
 def _response(status: int, given: dict[str, Any] | None, json_route: bool) -> dict[str, Any]:
     out = dict(given or {})
     out.setdefault("description", _DESCRIPTIONS.get(status, "error"))
+    if status == 429:
+        out.setdefault("headers", _RETRY_AFTER)
     if "model" not in out and "content" not in out:
         model = ValidationErrorBody if status == 422 else ErrorBody
         if json_route:
@@ -95,7 +110,8 @@ def document_errors(routes: Iterable[Any]) -> None:
             continue
         deps = list(_walk(route.dependant))
         calls = {d.call for d in deps}
-        statuses: set[int] = set()
+        # Answered before routing, on every route: a key in the URL, the rate limit.
+        statuses: set[int] = {400, 429}
         if calls & {require_write_key, require_key_when_configured, require_read_access}:
             statuses |= {401, 403}
         if refuse_while_locked in calls:

@@ -10,10 +10,11 @@ from pathlib import Path
 from fastapi import FastAPI
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from gonio.api.auth import AccessPolicy
+from gonio.api.auth import AccessPolicy, RefuseKeysInUrl
 from gonio.api.limits import DEFAULT_MAX_BODY_BYTES, BodySizeLimit
 from gonio.api.maintenance import LOCK_FILE_NAME, MaintenanceLock
 from gonio.api.prometheus import RequestStats
+from gonio.api.ratelimit import DEFAULT_BURST, DEFAULT_RATE_PER_S, AnonymousRateLimit
 
 log = logging.getLogger("gonio.api")
 
@@ -34,12 +35,19 @@ class ApiSettings:
         Largest accepted request body, bytes (larger gets 413).
     design_time_limit_s : float
         Longest search a design request may ask for, seconds (longer gets 422).
+    anonymous_rate_per_s : float
+        Requests per second one address may make without a valid key, on average (more get
+        429 with ``Retry-After``; :mod:`gonio.api.ratelimit`); 0 = no limit.
+    anonymous_burst : int
+        Requests one address may make at once without a key.
     """
 
     access: AccessPolicy = field(default_factory=AccessPolicy)
     data_dir: Path = Path("gonio-data")
     max_body_bytes: int = DEFAULT_MAX_BODY_BYTES
     design_time_limit_s: float = DEFAULT_DESIGN_TIME_LIMIT_S
+    anonymous_rate_per_s: float = DEFAULT_RATE_PER_S
+    anonymous_burst: int = DEFAULT_BURST
 
 
 class RequestTimer:
@@ -114,13 +122,17 @@ class SecurityHeaders:
 
 
 def install(app: FastAPI, settings: ApiSettings) -> None:
-    """Attach the access policy, maintenance lock, body limit and request timing to ``app``."""
+    """Attach the access policy, maintenance lock, body limit, rate limit and request timing to
+    ``app``."""
     app.state.access_policy = settings.access
     app.state.maintenance = MaintenanceLock(settings.data_dir / LOCK_FILE_NAME)
     app.state.request_stats = RequestStats()
     app.state.design_time_limit_s = settings.design_time_limit_s
     # The middleware added last is the outermost: the timer wraps the body limit, so 413s are
-    # counted too.
+    # counted too; the rate limit answers before a body is buffered, with the security headers.
     app.add_middleware(BodySizeLimit, max_bytes=settings.max_body_bytes)
+    app.add_middleware(AnonymousRateLimit, access=settings.access,
+                       rate_per_s=settings.anonymous_rate_per_s, burst=settings.anonymous_burst)
+    app.add_middleware(RefuseKeysInUrl)
     app.add_middleware(SecurityHeaders)
     app.add_middleware(RequestTimer, stats=app.state.request_stats)

@@ -114,7 +114,12 @@ def test_design_needs_a_key_and_runs_one_at_a_time(daemon: Daemon) -> None:
     t = threading.Thread(target=run_first)
     t0 = time.monotonic()
     t.start()
-    time.sleep(0.8)
+    # Until the first search holds the service's design lock (however slowly a busy machine
+    # gets there), not a fixed sleep that a saturated machine can outrun.
+    deadline = time.monotonic() + 120
+    while not daemon.app.state.service._design_lock.locked():
+        assert t.is_alive() and time.monotonic() < deadline, "the first design never started"
+        time.sleep(0.01)
     with daemon.client() as c:
         second = c.post("/api/v1/design", json={"pairs": 3, "time_limit_s": 1})
         # The event loop is not blocked by the running design: status reads still answer.

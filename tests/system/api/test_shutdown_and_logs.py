@@ -1,5 +1,6 @@
-"""`gonio serve` as a user runs it: Ctrl-C with an event stream open ends cleanly, the access log
-never shows a key sent in a query string, and the page carries its security headers."""
+"""`gonio serve` as a user runs it: Ctrl-C with an event stream open ends cleanly, a key sent in
+a query string is refused and the access log never shows it, and the page carries its security
+headers."""
 
 from __future__ import annotations
 
@@ -49,7 +50,10 @@ def test_ctrl_c_with_an_event_stream_open_exits_cleanly(tmp_path: Path) -> None:
             csp = page.headers["content-security-policy"]
             assert "script-src 'self'" in csp and "frame-ancestors 'none'" in csp
             assert c.get("/health").headers["x-content-type-options"] == "nosniff"
-            c.get(f"/api/v1/rig?api_key={SECRET}&other=1")
+            # A key in the URL is refused (400 saying where keys go), and not logged.
+            refused = c.get(f"/api/v1/rig?api_key={SECRET}&other=1")
+            assert refused.status_code == 400, refused.text
+            assert "X-API-Key header" in refused.json()["detail"]
         opened = threading.Event()
         ended: list[str] = []
 

@@ -240,9 +240,10 @@ def test_silent_device_times_out_quickly_and_recovers(bench: Bench) -> None:
         return elapsed
 
     elapsed = asyncio.run(asyncio.wait_for(run(), 60))
-    # One request timeout (0.3 s) plus the driver's margin (0.5 s) when idle; the bound is
-    # generous so a saturated machine does not fail it, and still tells a timeout from a hang.
-    assert elapsed < 0.3 + 0.5 + 5.0
+    # One request timeout (0.3 s) plus the driver's margin (0.5 s) when idle. Not a speed
+    # test: the bound only tells a timeout from a hang (a hang ends in the 60 s wait_for above),
+    # with room for a saturated machine.
+    assert elapsed < 30.0
 
 
 def test_unreachable_host_is_unavailable_not_a_hang(bench: Bench) -> None:
