@@ -181,7 +181,8 @@ def greedy_rows(
             if not ok:
                 raise FeasibilityError(
                     f"no mountable cell for pair {len(chosen) + 1} of {n} among the {tries} "
-                    "best; lower --min-device-distance or ask for fewer pairs"
+                    "best",
+                    "lower {min_device_distance_deg} or ask for fewer pairs",
                 )
             k = ok[0]
         chosen.append(k)
