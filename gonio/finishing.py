@@ -27,7 +27,6 @@ from typing import Any
 
 import numpy as np
 
-from gonio import hal
 from gonio.calibration import (
     CALIBRATION_FILE,
     Calibration,
@@ -91,12 +90,7 @@ def finish_job(job_id: int, plan: AnyPlan, how: Finishing) -> dict[str, Any]:
     desc = how.desc
     job = how.store.get_job(job_id)
     pairs = plan_pairs(plan, desc)
-    light_dirs = np.asarray(
-        [hal.LabDirection(desc.light(p.light).theta_deg,
-                          desc.light(p.light).phi_deg).vector() for p in pairs])
-    sensor_dirs = np.asarray(
-        [hal.LabDirection(desc.sensor(p.sensor).theta_deg,
-                          desc.sensor(p.sensor).phi_deg).vector() for p in pairs])
+    light_dirs, sensor_dirs = desc.pair_directions(pairs)
     channel_sets = {desc.sensor(p.sensor).channels for p in pairs}
     if len(channel_sets) != 1:
         raise PlanError(

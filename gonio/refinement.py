@@ -17,7 +17,6 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from gonio import hal
 from gonio.calibration import Calibration
 from gonio.hal import PairSpec
 from gonio.rigdescription import RigDescription
@@ -41,12 +40,7 @@ class PosteriorRefiner:
         self._basis_provider = basis_provider
         self._basis: Any = None
         self.pairs = list(pairs)
-        light = np.asarray([hal.LabDirection(rig.light(p.light).theta_deg,
-                                             rig.light(p.light).phi_deg).vector()
-                            for p in self.pairs])
-        sensor = np.asarray([hal.LabDirection(rig.sensor(p.sensor).theta_deg,
-                                              rig.sensor(p.sensor).phi_deg).vector()
-                             for p in self.pairs])
+        light, sensor = rig.pair_directions(self.pairs)
         self.cells, self.ph_lab = pair_cells(light, sensor)
         self.calibration = calibration or Calibration()
         self.last: Any = None  # the last RefinementStep, for the job's event log

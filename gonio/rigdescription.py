@@ -7,6 +7,10 @@ job as its rig snapshot, and ``GET /api/v1/rig`` returns it.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
+import numpy as np
+from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field
 
 from gonio import hal
@@ -102,3 +106,18 @@ class RigDescription(BaseModel):
             if lt.name == name:
                 return lt
         raise KeyError(name)
+
+    def pair_directions(
+        self, pairs: Sequence[PairSpec]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Lab unit vectors toward each pair's light and sensor at stage angle 0.
+
+        Returns
+        -------
+        light_dirs, sensor_dirs : (n, 3) float64, in the order of ``pairs``
+        """
+        def vec(info: LightInfo | SensorInfo) -> tuple[float, float, float]:
+            return hal.LabDirection(info.theta_deg, info.phi_deg).vector()
+
+        return (np.asarray([vec(self.light(p.light)) for p in pairs], dtype=float),
+                np.asarray([vec(self.sensor(p.sensor)) for p in pairs], dtype=float))

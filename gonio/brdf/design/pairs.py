@@ -23,7 +23,7 @@ from gonio.brdf.design.constraints import (
 )
 from gonio.brdf.design.errors import DesignError
 from gonio.brdf.design.mounting import MountPlanner
-from gonio.brdf.design.placement import place_pairs
+from gonio.brdf.design.placement import Placement, place_pairs
 from gonio.brdf.design.search import SearchResult, optimize_rows
 from gonio.brdf.tables import geometry as geo
 
@@ -79,6 +79,23 @@ class PairDesign:
     kappa: float
     min_distance_deg: float
     search: SearchResult | None = None
+
+    @classmethod
+    def independent(cls, name: str, placement: Placement, kappa: float,
+                    search: SearchResult | None = None) -> PairDesign:
+        """A design of independent pairs (each light with its own sensor) at ``placement``."""
+        n = placement.cells.shape[0]
+        return cls(
+            name=name,
+            cells=placement.cells,
+            ph_lab=placement.ph_lab,
+            lights_deg=placement.lab_deg[:, :2],
+            sensors_deg=placement.lab_deg[:, 2:],
+            pairs=np.stack([np.arange(n), np.arange(n)], axis=1).astype(np.intp),
+            kappa=kappa,
+            min_distance_deg=placement.min_distance_deg,
+            search=search,
+        )
 
     @property
     def n_pairs(self) -> int:
@@ -202,14 +219,4 @@ def design_pairs(
         rows_to_cells(result.rows), constraints, ph_step_deg=1.0,
         seed=0 if seed is None else seed, initial_ph=result.ph_lab,
     )
-    return PairDesign(
-        name="optimized",
-        cells=placement.cells,
-        ph_lab=placement.ph_lab,
-        lights_deg=placement.lab_deg[:, :2],
-        sensors_deg=placement.lab_deg[:, 2:],
-        pairs=np.stack([np.arange(n), np.arange(n)], axis=1).astype(np.intp),
-        kappa=result.kappa,
-        min_distance_deg=placement.min_distance_deg,
-        search=result,
-    )
+    return PairDesign.independent("optimized", placement, result.kappa, search=result)

@@ -249,13 +249,4 @@ def posterior_design(
 
     rows = greedy_rows(model, basis.Q, candidate_rows(constraints, basis.valid), n, accept)
     placement = place_pairs(rows_to_cells(rows), constraints, ph_step_deg=1.0, seed=seed)
-    return PairDesign(
-        name="posterior",
-        cells=placement.cells,
-        ph_lab=placement.ph_lab,
-        lights_deg=placement.lab_deg[:, :2],
-        sensors_deg=placement.lab_deg[:, 2:],
-        pairs=np.stack([np.arange(n), np.arange(n)], axis=1).astype(np.intp),
-        kappa=condition_number(basis.Q[rows]),
-        min_distance_deg=placement.min_distance_deg,
-    )
+    return PairDesign.independent("posterior", placement, condition_number(basis.Q[rows]))
