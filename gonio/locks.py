@@ -26,6 +26,7 @@ from __future__ import annotations
 import contextlib
 import errno
 import fcntl
+import ipaddress
 import json
 import os
 import re
@@ -99,16 +100,44 @@ def lock_dir() -> Path:
     return Path(tempfile.gettempdir())
 
 
+def canonical_host(host: str) -> str:
+    """One name per network host, so two spellings of one device server share a lock.
+
+    Every loopback spelling (``localhost``, ``127.0.0.1``, ``127.0.1.1``, ``::1``) becomes
+    ``loopback``; an IP address its compressed form; a host name the sorted first address it
+    resolves to (the drivers resolve the same name when they connect), or the name in lower case
+    when it does not resolve.
+    """
+    name = host.strip().strip("[]").lower()
+    if name == "localhost" or name.endswith(".localhost"):
+        return "loopback"
+    try:
+        address = ipaddress.ip_address(name)
+    except ValueError:
+        try:
+            infos = socket.getaddrinfo(name, None, proto=socket.IPPROTO_TCP)
+        except (OSError, UnicodeError):
+            return name
+        addresses = sorted({str(info[4][0]) for info in infos})
+        if not addresses:
+            return name
+        address = ipaddress.ip_address(addresses[0].split("%")[0])
+    if address.is_loopback:
+        return "loopback"
+    return address.compressed
+
+
 def endpoint_key(endpoint: str) -> str:
-    """A file-name-safe key for a device endpoint; two names of one serial device share it.
+    """A file-name-safe key for a device endpoint; two names of one device share it.
 
     ``/dev/gonio-zaber`` (a udev symlink) and ``/dev/ttyUSB0`` resolve to the same device;
-    ``socket://host:port`` and a Modbus ``tcp://host:port`` are the same TCP endpoint.
+    ``socket://host:port`` and a Modbus ``tcp://host:port`` are the same TCP endpoint, and so
+    are ``tcp://localhost:502`` and ``tcp://127.0.0.1:502`` (:func:`canonical_host`).
     """
     text = endpoint.strip()
-    m = re.match(r"^(?:socket|tcp|rfc2217)://([^/?#]+)", text)
+    m = re.match(r"^(?:socket|tcp|rfc2217)://(\[[^]]+\]|[^/?#:]*)(?::(\d+))?", text)
     if m:
-        text = "tcp-" + m.group(1)
+        text = f"tcp-{canonical_host(m.group(1))}-{m.group(2) or ''}"
     elif text.startswith("/"):
         text = os.path.realpath(text)
     return re.sub(r"[^A-Za-z0-9_.-]+", "-", text).strip("-") or "endpoint"

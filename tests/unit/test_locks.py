@@ -78,6 +78,29 @@ def test_endpoint_keys_name_one_device_once(tmp_path: Path) -> None:
     assert "/" not in endpoint_key("/dev/pts/7")
 
 
+@pytest.mark.parametrize("spelling", ["tcp://localhost:1502", "socket://LOCALHOST:1502",
+                                      "tcp://127.0.0.1:1502", "tcp://127.0.1.1:1502",
+                                      "tcp://[::1]:1502"])
+def test_every_loopback_spelling_is_one_endpoint(spelling: str) -> None:
+    # RFC 5735 / RFC 4291: 127.0.0.0/8 and ::1 are this host; "localhost" names it (RFC 6761).
+    assert endpoint_key(spelling) == endpoint_key("tcp://127.0.0.1:1502")
+    assert endpoint_key(spelling) != endpoint_key("tcp://127.0.0.1:1503")
+    assert endpoint_key(spelling) != endpoint_key("tcp://10.0.0.5:1502")
+
+
+def test_a_rig_claimed_as_localhost_is_refused_as_127_0_0_1(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv("GONIO_LOCK_DIR", str(tmp_path))
+    held = tmp_path / f"gonio-{endpoint_key('tcp://localhost:1502')}.lock"
+    fd = _foreign_holder(held, {"pid": 7, "host": "h", "program": "gonio serve", "since": 0})
+    try:
+        with pytest.raises(LockBusy, match=r"tcp://127.0.0.1:1502 is in use by gonio serve"):
+            claim_endpoints(["tcp://127.0.0.1:1502"])
+    finally:
+        os.close(fd)
+
+
 def test_claiming_a_rig_is_all_or_nothing(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("GONIO_LOCK_DIR", str(tmp_path))
     busy = tmp_path / f"gonio-{endpoint_key('tcp://127.0.0.1:1502')}.lock"
