@@ -19,6 +19,7 @@ from __future__ import annotations
 import json
 import logging
 import math
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -59,6 +60,8 @@ class Finishing:
     fit_exports : store the factored and principled fits (exports then need no refit)
     true_material : simulated rigs: the recipe of the material on the stage, or None
     on_activity : told what finishing waits for ("basis", "reconstructing")
+    stop : set (from any thread) to abort: finishing stops at its next step and writes
+        nothing (:class:`FinishingStopped`)
     """
 
     store: JobStore
@@ -70,6 +73,20 @@ class Finishing:
     fit_exports: bool = True
     true_material: Callable[[], dict[str, Any] | None] | None = None
     on_activity: Callable[[str], None] = lambda what: None
+    stop: threading.Event = field(default_factory=threading.Event)
+
+    def checkpoint(self, job_id: int, before: str) -> None:
+        """Raise :class:`FinishingStopped` if an abort was asked for.
+
+        Called between the steps (basis, reconstruction, fits) and right before anything is
+        written, so an aborted job leaves no result file and no calibration behind.
+        """
+        if self.stop.is_set():
+            raise FinishingStopped(f"job {job_id}: finishing aborted before {before}")
+
+
+class FinishingStopped(Exception):
+    """Finishing saw its :attr:`Finishing.stop` set and stopped without writing anything."""
 
 
 def finish_job(job_id: int, plan: AnyPlan, how: Finishing) -> dict[str, Any]:
@@ -117,6 +134,7 @@ def finish_job(job_id: int, plan: AnyPlan, how: Finishing) -> dict[str, Any]:
         provenance["calibration_warning"] = warning
     if is_cal:
         assert isinstance(plan, CalibrationPlan)  # the one kind that finishes so
+        how.checkpoint(job_id, "saving the calibration")
         new_cal = from_reference(
             plan.reference_albedo,
             {(p.light, p.sensor): samples.values[q] for q, p in enumerate(pairs)},
@@ -139,6 +157,7 @@ def finish_job(job_id: int, plan: AnyPlan, how: Finishing) -> dict[str, Any]:
         basis = how.basis_provider()
     finally:
         how.on_activity("reconstructing")
+    how.checkpoint(job_id, "reconstructing")
     grid = samples.to_samples()
     rec = reconstruct(
         basis, grid.cells, grid.ph_lab, grid.stage_angles,
@@ -163,6 +182,7 @@ def finish_job(job_id: int, plan: AnyPlan, how: Finishing) -> dict[str, Any]:
         "seconds": time.perf_counter() - t0,
     }
     provenance.update(basis_K=int(basis.K), basis_materials=json.dumps(list(basis.materials)))
+    how.checkpoint(job_id, "the export fits")
     fits = _fits(job_id, rec.table) if how.fit_exports else None
     if fits is not None:
         metrics.update(
@@ -175,6 +195,7 @@ def finish_job(job_id: int, plan: AnyPlan, how: Finishing) -> dict[str, Any]:
     truth = how.true_material() if how.true_material is not None else None
     if truth is not None:
         provenance["true_material"] = json.dumps(truth)
+    how.checkpoint(job_id, "writing the result")
     write_result(
         path, job_id=job_id, specimen=job.specimen, kind=job.kind, readings=readings,
         samples=samples, table=rec.table, coefficients=rec.coefficients,

@@ -17,6 +17,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import threading
 import time
 from collections.abc import Awaitable, Callable
 from pathlib import Path
@@ -28,7 +29,7 @@ from gonio.calibration import (
     CalibrationError,
 )
 from gonio.engine import Progress, ScanEngine
-from gonio.finishing import Finishing, finish_job
+from gonio.finishing import Finishing, FinishingStopped, finish_job
 from gonio.jobstates import JobState
 from gonio.plans.models import AdaptivePlan, AnyPlan, PlanError, parse_plan
 from gonio.plans.validation import plan_pairs, validate_plan
@@ -101,7 +102,8 @@ class Worker:
         self._wake = asyncio.Event()
         self._loop: asyncio.AbstractEventLoop | None = None  # where run_forever runs
         self._recon_task: asyncio.Task[dict[str, Any]] | None = None
-        self._abort_recon = False
+        # Set to abort the running finishing thread at its next step (it writes nothing then).
+        self._finish_stop: threading.Event | None = None
         self._stopping = False
         self.activity: str | None = None
         """What the current job waits for beyond measuring (e.g. the basis), or None."""
@@ -137,11 +139,15 @@ class Worker:
         self.wake()
 
     def abort_reconstruction(self, job_id: int) -> bool:
-        """Cancel ``job_id``'s reconstruction if it is the one running (from any thread)."""
-        task = self._recon_task
-        if self.current_job == job_id and task is not None:
-            self._abort_recon = True
-            task.get_loop().call_soon_threadsafe(task.cancel)
+        """Abort ``job_id``'s finishing if it is the one running (from any thread).
+
+        The finishing thread stops at its next step (after the basis, the reconstruction or
+        the fits) and writes nothing; the job becomes ``aborted`` then, and the next job
+        starts only after it. A finishing that completes before it looks again completes.
+        """
+        stop = self._finish_stop
+        if self.current_job == job_id and stop is not None:
+            stop.set()
             return True
         return False
 
@@ -235,7 +241,7 @@ class Worker:
             self._set_activity(None)
             self._engine = None
             self._recon_task = None
-            self._abort_recon = False
+            self._finish_stop = None
 
     async def _run_job(self, job: JobRow) -> JobState:
         try:
@@ -263,15 +269,20 @@ class Worker:
                     self.hold("emergency halt")
                 return final
             self.store.set_state(job.id, JobState.RECONSTRUCTING)
-        self._recon_task = asyncio.create_task(
-            asyncio.to_thread(finish_job, job.id, plan, self._finishing()))
+        how = self._finishing()
+        self._finish_stop = how.stop
+        self._recon_task = asyncio.create_task(asyncio.to_thread(finish_job, job.id, plan, how))
         try:
             summary = await self._recon_task
         except asyncio.CancelledError:
-            if self._abort_recon:
-                self.store.set_state(job.id, JobState.ABORTED, reason="aborted by request")
-                return JobState.ABORTED
+            # The worker is stopping: the job stays reconstructing and is finished again at
+            # the next start; the thread stops at its next step instead of writing meanwhile.
+            how.stop.set()
             raise
+        except FinishingStopped as exc:
+            log.info("%s", exc)
+            self.store.set_state(job.id, JobState.ABORTED, reason="aborted by request")
+            return JobState.ABORTED
         except Exception as exc:  # a failed reconstruction fails the job, never the worker
             if isinstance(exc, CalibrationError) and plan.finishing == "calibration":
                 # The reference's readings are unusable (not a white diffuser...): say why.
