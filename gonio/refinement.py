@@ -4,9 +4,10 @@ The engine knows devices and steps, not the basis; :class:`PosteriorRefiner` is 
 worker hands it (``ScanEngine(refiner=...)``) so that ``AdaptivePlan(rule="posterior")`` can
 ask :func:`gonio.brdf.reconstruction.posterior.next_angles` where the next angles go. It
 turns the pairs' lab directions into slice cells once, applies the rig's calibration to the
-``raw - dark`` counts (the posterior weighs errors at BRDF values in 1/sr), and loads the basis
-on first use. A round adds at most one angle per gap (``per_gap=1``), so the dry run's
-bound on an adaptive job holds.
+``raw - dark`` counts (the posterior weighs errors at BRDF values in 1/sr), and takes the basis
+from its provider on first use (the worker loads it before the job's first reading and hands
+it over loaded, so no round waits for a build). A round adds at most one angle per gap
+(``per_gap=1``), so the dry run's bound on an adaptive job holds.
 """
 
 from __future__ import annotations

@@ -511,7 +511,8 @@ class GonioService:
             if p.eta_max_s is not None:
                 eta_max = max(p.eta_max_s - (p.eta_s or 0.0) + (eta or 0.0), eta or 0.0)
         activity = fraction = None
-        if row.state is JobState.RECONSTRUCTING and self.worker.current_job == job_id:
+        if self.worker.current_job == job_id:
+            # Reconstructing, or an adaptive job loading its basis before the first reading.
             report = self.worker.activity_report()
             if report is not None:
                 activity, fraction = report
@@ -611,7 +612,8 @@ class GonioService:
     def dry_run(self, plan: AnyPlan | dict[str, Any]) -> DryRun:
         """Check and time a plan from the stage's last known position (else 0 deg, said so)."""
         p = plan if isinstance(plan, BaseModel) else parse_plan(plan)
-        return dry_run(p, self.desc, self.stage_deg)
+        return dry_run(p, self.desc, self.stage_deg,
+                       basis_ready=not self.worker.basis_build_needed())
 
     # ------------------------------------------------------------------ events
     @property

@@ -54,6 +54,26 @@ def default_basis_provider() -> Any:
     return default_basis()
 
 
+def basis_build_needed(provider: BasisProvider) -> bool:
+    """Whether calling ``provider`` will *build* the default basis (minutes), not load it.
+
+    Only :func:`default_basis_provider` is known to build: true when its cache file does
+    not exist yet (first scan on an install, or after ``gonio library import`` changed the
+    training set). Any other provider (a saved basis, tests) is taken to load quickly.
+    """
+    if provider is not default_basis_provider:
+        return False
+    from gonio.brdf.reconstruction.basis import default_basis_path
+
+    return not default_basis_path().is_file()
+
+
+def needs_basis_to_measure(plan: AnyPlan) -> bool:
+    """True for plans whose measurement itself uses the basis: adaptive plans with the
+    posterior rule plan their later rounds with it (docs/science.md 7.3)."""
+    return isinstance(plan, AdaptivePlan) and plan.rule == "posterior"
+
+
 class Worker:
     """The job queue's single consumer.
 
@@ -108,6 +128,10 @@ class Worker:
         self.activity: str | None = None
         """What the current job waits for beyond measuring (e.g. the basis), or None."""
         self._activity_since = 0.0
+        # One basis load at a time: the warm-up at start and a job's own load share it, so a
+        # build in progress is waited for, never started twice.
+        self._basis_lock = threading.Lock()
+        self._prewarm: threading.Thread | None = None
         self.specimen_truth: Callable[[], dict[str, Any] | None] | None = None
         """Set by simulated rigs: the recipe of the material on the stage, stored with each
         reconstruction as ``provenance/true_material`` so renderings can show the truth."""
@@ -211,6 +235,7 @@ class Worker:
     # ------------------------------------------------------------------ loop
     async def run_forever(self) -> None:
         self._loop = asyncio.get_running_loop()
+        self._start_prewarm()
         while not self._stopping:
             job = self.next_job()
             if job is None:
@@ -254,12 +279,21 @@ class Worker:
                 rig = await self.get_rig()
             except (hal.DeviceFault, OSError) as exc:
                 return self._fail(job, f"rig not available: {exc}", plan)
+            refiner = None
+            if needs_basis_to_measure(plan):
+                # The adaptive rule needs the basis after the first round: load (or build) it
+                # now, before anything moves, so the stage never waits mid-scan for it.
+                basis = await self._basis_before_measuring(job)
+                ready = self._still_to_run(job.id)
+                if ready is not None:
+                    return ready
+                refiner = self._refiner(plan, basis)
             if self.on_job_start is not None:
                 # Before the first reading of a new or resumed job: e.g. a simulated rig puts
                 # the white reference or the job's specimen on the stage.
                 self.on_job_start(job)
             self._engine = ScanEngine(rig, self.store, job.id, plan, self.desc,
-                                      refiner=self._refiner(plan))
+                                      refiner=refiner)
             final = await self._engine.run()
             self._engine = None
             if final is not JobState.RUNNING:
@@ -304,14 +338,98 @@ class Worker:
             self.hold(f"job {job.id} failed and asked to stop the queue")
         return JobState.FAILED
 
-    def _refiner(self, plan: AnyPlan) -> Any:
-        """The posterior rule's bridge for adaptive plans that use it (docs/science.md 7.3)."""
-        if not (isinstance(plan, AdaptivePlan) and plan.rule == "posterior"):
+    def _refiner(self, plan: AnyPlan, basis: Any) -> Any:
+        """The posterior rule's bridge for adaptive plans that use it (docs/science.md 7.3);
+        None without a basis (the engine then uses V&F's rule and says so)."""
+        if basis is None or not needs_basis_to_measure(plan):
             return None
         from gonio.refinement import PosteriorRefiner
 
-        return PosteriorRefiner(self.basis_provider, self.desc, plan_pairs(plan, self.desc),
+        return PosteriorRefiner(lambda: basis, self.desc, plan_pairs(plan, self.desc),
                                 self.calibration())
+
+    # ------------------------------------------------------------------ the basis, early
+    def _load_basis(self) -> Any:
+        """The basis from the provider, one caller at a time (blocking: call in a thread)."""
+        with self._basis_lock:
+            return self.basis_provider()
+
+    def basis_build_needed(self) -> bool:
+        """Whether the next basis load is a build (the dry run says so; see
+        :func:`basis_build_needed`)."""
+        return basis_build_needed(self.basis_provider)
+
+    def _start_prewarm(self) -> None:
+        """At start: when the queue (or a job left active) holds a plan that measures with the
+        basis and the basis must be built, build it now in a thread, while earlier jobs run."""
+        if self._prewarm is not None or not self.basis_build_needed():
+            return
+        jobs = [*self.store.active_jobs(), *self.store.queue()]
+        wanted = []
+        for row in jobs:
+            with contextlib.suppress(PlanError):
+                if needs_basis_to_measure(parse_plan(row.plan)):
+                    wanted.append(row.id)
+        if not wanted:
+            return
+        self.store.append_event(None, "basis_prewarm", {
+            "jobs": wanted, "message": "building the reconstruction basis for the queued "
+            "adaptive jobs (first use on this install)"})
+        log.info("building the default basis for queued adaptive jobs %s", wanted)
+
+        def build() -> None:
+            try:
+                self._load_basis()
+            except Exception:  # the job's own load reports it, with the job
+                log.exception("building the basis at start failed")
+
+        # A daemon thread, not the loop's executor: shutting down must not wait for a build.
+        self._prewarm = threading.Thread(target=build, name="gonio-basis-prewarm", daemon=True)
+        self._prewarm.start()
+
+    async def _basis_before_measuring(self, job: JobRow) -> Any:
+        """Load (or build) the basis before the job's first reading, off the event loop.
+
+        The job's events say what happens (``basis_loading`` then ``basis_ready`` or
+        ``basis_failed``) and its status shows the activity meanwhile. A basis that cannot
+        be had does not fail the job: the engine measures with V&F's rule and says so.
+        """
+        build = self.basis_build_needed()
+        self._set_activity("basis_before_measuring")
+        self.store.append_event(job.id, "basis_loading", {
+            "build": build,
+            "message": ("building the reconstruction basis (first use on this install)"
+                        if build else "loading the reconstruction basis")
+            + " before the first reading: the adaptive rule plans later rounds with it"})
+        t0 = time.monotonic()
+        try:
+            basis = await asyncio.to_thread(self._load_basis)
+        except Exception as exc:
+            log.exception("job %s: the basis could not be loaded", job.id)
+            self.store.append_event(job.id, "basis_failed", {
+                "message": f"{type(exc).__name__}: {exc}"[:300],
+                "note": "the adaptive rounds use V&F's rule (threshold) instead"})
+            return None
+        finally:
+            self._set_activity(None)
+        self.store.append_event(job.id, "basis_ready",
+                                {"seconds": round(time.monotonic() - t0, 2)})
+        return basis
+
+    def _still_to_run(self, job_id: int) -> JobState | None:
+        """None when ``job_id`` may still start after a wait; else the state to report.
+
+        While the basis loaded, the job may have been cancelled, the queue held or the
+        maintenance gate closed: then it is not started (a held or gated job stays queued).
+        """
+        row = self.store.get_job(job_id)
+        if row.state in (JobState.QUEUED,) and (self.held is not None
+                                                 or self.gate() is not None):
+            return row.state
+        if row.state in (JobState.COMPLETED, JobState.FAILED, JobState.ABORTED,
+                         JobState.HALTED):
+            return row.state
+        return None
 
     # ------------------------------------------------------------------ finishing
     def _finishing(self) -> Finishing:
@@ -339,16 +457,20 @@ class Worker:
             return None
         if what == "reconstructing":
             return ("reconstructing the BRDF from the readings", None)
+        # Before measuring, an adaptive job says why it waits for the basis.
+        why = (" before the first reading (the adaptive rule needs it)"
+               if what == "basis_before_measuring" else "")
         waited = time.monotonic() - self._activity_since
         if self.basis_provider is not default_basis_provider or waited < 1.0:
-            return ("loading the reconstruction basis", None)
+            return ("loading the reconstruction basis" + why, None)
         from gonio.brdf.materials.library import build_progress
 
         done, total = build_progress()
         if done < total:
-            return (f"building the BRDF training library, {done} of {total} materials (first "
-                    "scan on this install; later scans reuse it)", done / total if total else None)
-        return ("learning the reconstruction basis from the library (first scan on this "
+            return (f"building the BRDF training library{why}, {done} of {total} materials "
+                    "(first scan on this install; later scans reuse it)",
+                    done / total if total else None)
+        return (f"learning the reconstruction basis from the library{why} (first scan on this "
                 "install, about a minute; later scans reuse it)", None)
 
     async def stop(self) -> None:

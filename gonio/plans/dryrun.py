@@ -16,6 +16,12 @@ from gonio.plans.validation import (
 )
 from gonio.rigdescription import RigDescription
 
+BASIS_BUILD_S = 120.0
+"""Time to build the default basis on an install that has none yet (the synthetic training
+library, then the basis), seconds: about two minutes measured on a busy 2-core machine
+(README); slower machines take longer. An adaptive plan with the posterior rule waits for it
+before its first reading."""
+
 
 class DryRun(BaseModel):
     """What a plan will do, without hardware: the first round's stage positions and timing.
@@ -47,9 +53,15 @@ class DryRun(BaseModel):
     from_known: bool = Field(
         default=False, description="false: the stage position is not known yet (no job or "
         "manual move since the daemon started) and 0 deg was assumed")
+    basis_build_s: float | None = Field(
+        default=None, description="adaptive plans with the posterior rule on an install "
+        "without the default basis: the job builds it before its first reading, about this "
+        "many seconds (once; not in estimated_s, included in max_estimated_s); null: the "
+        "basis is ready or not needed while measuring")
 
 
-def dry_run(plan: AnyPlan, rig: RigDescription, current_deg: float | None = None) -> DryRun:
+def dry_run(plan: AnyPlan, rig: RigDescription, current_deg: float | None = None,
+            basis_ready: bool = True) -> DryRun:
     """Expand ``plan`` on ``rig`` and estimate its duration; raises :class:`PlanError`.
 
     The estimate is the physical time (see :class:`DryRun`): trapezoidal stage moves at the
@@ -65,6 +77,10 @@ def dry_run(plan: AnyPlan, rig: RigDescription, current_deg: float | None = None
     current_deg : float, optional
         Present stage position, degrees; None when unknown (0 is assumed and the result says
         so).
+    basis_ready : bool
+        False when the reconstruction basis would have to be built first (see
+        :func:`gonio.worker.basis_build_needed`); an adaptive plan with the posterior rule then
+        reports :data:`BASIS_BUILD_S` as ``basis_build_s``.
     """
     validate_plan(plan, rig)
     pairs = plan_pairs(plan, rig)
@@ -76,11 +92,13 @@ def dry_run(plan: AnyPlan, rig: RigDescription, current_deg: float | None = None
         route, start, len(lights), plan, rig, plan.exposure.dark != "none"
     )
     total = motion + settle + exposure
-    max_total = max_angles = None
+    max_total = max_angles = build = None
     if isinstance(plan, AdaptivePlan):
         _, _, end = travel(route, start, rig, plan.backlash_deg)
         extra_n, extra_s = adaptive_bound(plan, rig, len(pairs), len(lights), angles, end)
-        max_total, max_angles = total + extra_s, len(route) + extra_n
+        # The posterior rule waits for the basis before the first reading (gonio.worker).
+        build = BASIS_BUILD_S if plan.rule == "posterior" and not basis_ready else None
+        max_total, max_angles = total + extra_s + (build or 0.0), len(route) + extra_n
     darks = len(route) if plan.exposure.dark == "every_angle" else int(plan.exposure.dark == "once")
     return DryRun(
         kind=plan.kind,
@@ -98,4 +116,5 @@ def dry_run(plan: AnyPlan, rig: RigDescription, current_deg: float | None = None
         max_angles=max_angles,
         from_deg=start,
         from_known=current_deg is not None,
+        basis_build_s=build,
     )

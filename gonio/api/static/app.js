@@ -92,6 +92,8 @@ function etaText() {
   const d = selectedDetail;
   if (!d || d.id !== selected) return "";
   if (d.state === "reconstructing") return d.activity ?? "reconstructing";
+  // An adaptive job loads (or builds) its basis before the first reading.
+  if (d.state === "queued" && d.activity) return d.activity;
   if (!["running", "paused", "suspended"].includes(d.state)) return "";
   let t = eta(d.eta_s);
   if (d.eta_max_s != null && d.eta_max_s > (d.eta_s ?? 0) + 1) t += ` (≤ ${eta(d.eta_max_s)} if refined)`;
@@ -179,11 +181,13 @@ async function refreshJobs() {
 async function pollSelected() {
   if (selected === null) return;
   const j = jobs.find((x) => x.id === selected);
-  if (!j || !["running", "suspended", "reconstructing", "paused"].includes(j.state)) return;
+  // A queued job that is loading its basis before the first reading is polled too.
+  const starting = j?.state === "queued" && selectedDetail?.id === j.id && selectedDetail.activity;
+  if (!j || !(starting || ["running", "suspended", "reconstructing", "paused"].includes(j.state))) return;
   selectedDetail = await getJSON(`/jobs/${selected}`);
   const cell = document.querySelector(`#jobs tr[data-id="${selected}"] td.eta`);
   if (cell) cell.textContent = etaText();
-  if (selectedDetail.state === "reconstructing") showResult(jobs.find((x) => x.id === selected));
+  if (["reconstructing", "queued"].includes(selectedDetail.state)) showResult(jobs.find((x) => x.id === selected));
 }
 
 function scheduleRefresh() {
@@ -265,6 +269,8 @@ function resultState(job) {
     : "";
   if (job.state === "reconstructing") return selectedDetail?.id === job.id && selectedDetail.activity
     ? `Measuring done; ${selectedDetail.activity}.` : "Measuring done; reconstructing the BRDF.";
+  if (job.state === "queued" && selectedDetail?.id === job.id && selectedDetail.activity)
+    return `Starting: ${selectedDetail.activity}.`;
   if (SHOW_REASON.has(job.state)) return `${job.state[0].toUpperCase()}${job.state.slice(1)}: ${job.reason ?? "no reason recorded"}`;
   return "The result appears when the scan has completed.";
 }
@@ -456,6 +462,7 @@ function initForm() {
     let text = `OK: ${r.readings} readings at ${r.angles_deg.length} stage angles, about ${eta(r.estimated_s)} ${from}` +
       ` (moves ${eta(r.motion_s)}, exposures ${eta(r.exposure_s)}).`;
     if (r.max_estimated_s != null) text += ` Adaptive refinement can add up to ${r.max_angles - r.angles_deg.length} angles: at most ${eta(r.max_estimated_s)} in all.`;
+    if (r.basis_build_s != null) text += ` First, about ${eta(r.basis_build_s)} more: the reconstruction basis is not built on this install yet and the adaptive rule needs it, so the job builds it before its first reading (once).`;
     setNote(text, null);
   }, true));
   // A checked plan's estimate no longer holds once the form changes.

@@ -1,0 +1,216 @@
+"""The worker loads the basis of an adaptive job before its first reading, not mid-scan.
+
+Through the real worker and engine on the in-memory rig: what is asserted is the order of
+things (events in the store, what had been read when the basis was asked for), never times.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from gonio import worker as worker_mod
+from gonio.jobstates import JobState
+from gonio.plans.dryrun import BASIS_BUILD_S, dry_run
+from gonio.plans.models import AdaptivePlan, ExposureSettings, UniformPlan
+from gonio.rigdescription import RigDescription
+from gonio.service import GonioService, JobRequest
+from gonio.sim.memrig import MemRig
+from gonio.store import JobStore
+from gonio.worker import Worker
+from tests.unit.brdf.reconstruction.test_reconstruct import random_basis
+from tests.unit.brdf.reconstruction.test_reconstruct_joint import _with_prior
+
+FAST = ExposureSettings(exposure_s=0.002, light_settle_s=0.0, dark="once")
+BASIS = _with_prior(random_basis(6, seed=1), {0: 1.0, 2: 1.0})
+# min_gain tiny: the MemRig's readings swing with cos 2 alpha, so the posterior refines.
+PLAN = AdaptivePlan(initial_rotations=8, exposure=FAST, min_gain=1e-9, max_rounds=2)
+
+
+class Provider:
+    """A basis provider that records, at each call, how many readings the job had and on
+    which thread it ran; raises after ``serve`` calls (finishing is not under test)."""
+
+    def __init__(self, store: JobStore, serve: int = 1, fail: Exception | None = None) -> None:
+        self.store, self.serve, self.fail = store, serve, fail
+        self.calls: list[tuple[int, str]] = []
+
+    def __call__(self) -> Any:
+        self.calls.append((len(self.store.readings(1)), threading.current_thread().name))
+        if self.fail is not None:
+            raise self.fail
+        if len(self.calls) > self.serve:
+            raise RuntimeError("this test measures only; no reconstruction")
+        return BASIS
+
+
+def _worker(store: JobStore, provider: Provider) -> tuple[Worker, RigDescription]:
+    rig = MemRig()
+    desc = RigDescription.from_rig(rig)
+
+    async def get_rig() -> MemRig:
+        return rig
+
+    return Worker(store, get_rig, desc, Path("."), basis_provider=provider,
+                  fit_exports=False), desc
+
+
+def _submit(store: JobStore, desc: RigDescription, plan: AdaptivePlan | UniformPlan) -> int:
+    return store.create_job(kind=plan.kind, specimen="s", plan=plan.model_dump(mode="json"),
+                            rig=desc.model_dump(mode="json")).id
+
+
+def _types(store: JobStore, job_id: int) -> list[str]:
+    return [e.type for e in store.events_after(0) if e.job_id == job_id]
+
+
+def test_an_adaptive_job_loads_its_basis_before_the_first_reading() -> None:
+    store = JobStore(":memory:")
+    provider = Provider(store)
+    w, desc = _worker(store, provider)
+    job = _submit(store, desc, PLAN)
+    asyncio.run(w.run_once())
+    # First call: no reading taken yet, and not on the event loop's thread.
+    assert provider.calls[0][0] == 0
+    assert provider.calls[0][1] != threading.main_thread().name
+    types = _types(store, job)
+    first_reading = next(i for i, t in enumerate(types) if t == "progress")
+    assert types.index("basis_loading") < types.index("basis_ready") < first_reading
+    # The rounds used that basis: the posterior rule planned them, and no later call
+    # happened while measuring (the second call is finishing's, after every reading).
+    rounds = [e.data for e in store.events_after(0) if e.type == "adaptive_round"]
+    assert rounds and rounds[0]["rule"] == "posterior"
+    assert all(n == len(store.readings(job)) for n, _ in provider.calls[1:])
+    loading = next(e.data for e in store.events_after(0) if e.type == "basis_loading")
+    assert loading["build"] is False and "before the first reading" in str(loading["message"])
+
+
+def test_uniform_and_vf_jobs_do_not_wait_for_the_basis() -> None:
+    store = JobStore(":memory:")
+    provider = Provider(store, serve=0)
+    w, desc = _worker(store, provider)
+    for plan in (UniformPlan(rotations=4, exposure=FAST),
+                 AdaptivePlan(initial_rotations=4, exposure=FAST, rule="vf", max_rounds=1)):
+        job = _submit(store, desc, plan)
+        asyncio.run(w.run_once())
+        assert "basis_loading" not in _types(store, job)
+        # The only call is finishing's, after measuring.
+        assert provider.calls[-1][0] == len(store.readings(job)) > 0
+
+
+def test_a_basis_that_cannot_be_had_leaves_the_job_measuring_with_the_vf_rule() -> None:
+    store = JobStore(":memory:")
+    provider = Provider(store, fail=OSError("basis file unreadable"))
+    w, desc = _worker(store, provider)
+    plan = AdaptivePlan(initial_rotations=8, exposure=FAST, threshold=0.01, max_rounds=2)
+    job = _submit(store, desc, plan)
+    asyncio.run(w.run_once())
+    events = [e for e in store.events_after(0) if e.job_id == job]
+    failed = next(e.data for e in events if e.type == "basis_failed")
+    assert "unreadable" in str(failed["message"]) and "V&F" in str(failed["note"])
+    rounds = [e.data for e in events if e.type == "adaptive_round"]
+    assert rounds and rounds[0]["rule"] == "vf"
+    assert {s.round for s in store.steps(job)} == {0, 1}
+
+
+def test_a_job_cancelled_while_its_basis_loads_never_moves_the_stage(tmp_path: Path) -> None:
+    """The status says what the job waits for; a cancel during the wait is honoured."""
+    release = threading.Event()
+    entered = threading.Event()
+
+    def slow_basis() -> Any:
+        entered.set()
+        release.wait(60)
+        return BASIS
+
+    rig = MemRig()
+    svc = GonioService(JobStore(tmp_path / "jobs.sqlite"), rig, data_dir=tmp_path / "d",
+                       basis_provider=slow_basis)
+
+    async def go() -> tuple[str | None, JobState]:
+        await svc.start()
+        info = svc.submit(JobRequest(plan=PLAN))
+        await asyncio.to_thread(entered.wait, 60)
+        activity = svc.get_job(info.id).activity
+        svc.cancel(info.id)
+        release.set()
+        for _ in range(1200):  # until the worker has let go of the job (generous)
+            if svc.worker.current_job is None:
+                break
+            await asyncio.sleep(0.05)
+        state = svc.get_job(info.id).state
+        await svc.stop()
+        return activity, state
+
+    activity, state = asyncio.run(go())
+    assert activity is not None and "before the first reading" in activity
+    assert state is JobState.ABORTED
+    assert svc.readings(1) == []
+    assert svc.store.steps(1) == []
+
+
+def test_at_start_a_queue_with_an_adaptive_job_builds_the_basis_in_the_background(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    store = JobStore(":memory:")
+    provider = Provider(store, serve=2)
+    w, desc = _worker(store, provider)
+    monkeypatch.setattr(worker_mod, "basis_build_needed", lambda provider: True)
+    job = _submit(store, desc, PLAN)
+
+    async def go() -> None:
+        task = asyncio.create_task(w.run_forever())
+        while store.get_job(job).state not in (JobState.RECONSTRUCTING, JobState.FAILED,
+                                                JobState.COMPLETED):
+            await asyncio.sleep(0.05)
+        await w.stop()
+        task.cancel()
+
+    asyncio.run(go())
+    prewarm = [e for e in store.events_after(0) if e.type == "basis_prewarm"]
+    assert prewarm and prewarm[0].data["jobs"] == [job]
+    assert provider.calls[0] == (0, "gonio-basis-prewarm")
+    # The job's own load waited for that build (one at a time), still before any reading.
+    assert provider.calls[1][0] == 0
+    loading = next(e.data for e in store.events_after(0) if e.type == "basis_loading")
+    assert loading["build"] is True and "building" in str(loading["message"])
+
+
+def test_at_start_nothing_is_built_for_a_queue_without_adaptive_jobs(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    store = JobStore(":memory:")
+    provider = Provider(store, serve=0)
+    w, desc = _worker(store, provider)
+    monkeypatch.setattr(worker_mod, "basis_build_needed", lambda provider: True)
+    _submit(store, desc, UniformPlan(rotations=4, exposure=FAST))
+    w._loop = None
+    w._start_prewarm()
+    assert w._prewarm is None and provider.calls == []
+
+
+def test_the_dry_run_says_when_the_first_adaptive_job_builds_the_basis(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    svc = GonioService(JobStore(tmp_path / "jobs.sqlite"), MemRig(), data_dir=tmp_path / "d",
+                       basis_provider=lambda: BASIS)
+    assert svc.dry_run(PLAN).basis_build_s is None  # a provider that loads
+    monkeypatch.setattr(worker_mod, "basis_build_needed", lambda provider: True)
+    dr = svc.dry_run(PLAN)
+    plain = dry_run(PLAN, svc.desc, svc.stage_deg)
+    assert dr.basis_build_s == BASIS_BUILD_S
+    assert dr.estimated_s == plain.estimated_s  # the physical time is unchanged ...
+    assert dr.max_estimated_s == pytest.approx(plain.max_estimated_s + BASIS_BUILD_S)  # type: ignore[operator]
+    # ... and plans that do not measure with the basis are not delayed by it.
+    assert svc.dry_run(UniformPlan(rotations=8)).basis_build_s is None
+    assert svc.dry_run(AdaptivePlan(rule="vf")).basis_build_s is None
+
+
+def test_the_cli_dry_run_summary_names_the_build() -> None:
+    from gonio.cli.scan_commands import dry_run_summary
+
+    desc = RigDescription.from_rig(MemRig())
+    text = dry_run_summary(dry_run(PLAN, desc, basis_ready=False), PLAN, "mem")
+    assert "builds it before its first reading" in text and "2.0 min" in text
+    assert "builds it" not in dry_run_summary(dry_run(PLAN, desc), PLAN, "mem")
