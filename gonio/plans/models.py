@@ -25,7 +25,7 @@ from __future__ import annotations
 
 from typing import Annotated, ClassVar, Literal
 
-from pydantic import AfterValidator, BaseModel, Field
+from pydantic import AfterValidator, BaseModel, BeforeValidator, Field
 
 from gonio.fields import FINITE, Count, Text
 from gonio.hal import PairSpec
@@ -97,6 +97,53 @@ def _check_start(value: float) -> float:
     return value
 
 
+DEFAULT_MIN_GAIN = 0.0006
+"""Default ``min_gain`` of adaptive plans: ``gonio.brdf.reconstruction.posterior.REFINE_GAIN``
+(a test keeps the two equal; the plans do not import the numerical core for one number)."""
+RULES = ("posterior", "vf")
+"""The refinement rules of adaptive plans (docs/science.md 7.3)."""
+
+
+def _check_rule(value: object) -> object:
+    # Before the type check, so an unknown rule gets one sentence that names both rules.
+    if value not in RULES:
+        raise ValueError(
+            f"rule must be 'posterior' (add the stage angles where the joint fit's expected "
+            f"log_rmse falls most; the default) or 'vf' (V&F Sec. 6: midpoints where PCHIP "
+            f"mispredicts a reading by more than threshold); got {value!r}")
+    return value
+
+
+def _check_min_gain(value: float) -> float:
+    if not value > 0.0:
+        raise ValueError(
+            f"min_gain is the least drop of the expected log_rmse one more stage angle must "
+            f"buy, a number > 0; got {value:g}. The default {DEFAULT_MIN_GAIN:g} was "
+            f"chosen on held-out materials; larger stops refining sooner (fewer readings), "
+            f"smaller refines more")
+    return value
+
+
+Rule = Annotated[
+    Literal["posterior", "vf"],
+    BeforeValidator(_check_rule),
+    Field(description="posterior: add the stage angles where the joint fit's expected "
+                      "log_rmse falls most, stop when the best falls by less than min_gain "
+                      "(needs the basis; an engine without one uses vf); vf: V&F Sec. 6, "
+                      "midpoints where PCHIP mispredicts a reading by more than threshold"),
+]
+MinGain = Annotated[
+    float,
+    AfterValidator(_check_min_gain),
+    Field(description="posterior rule: least drop of the expected log_rmse one more stage "
+                      "angle must buy, > 0 "
+                      "(gonio.brdf.reconstruction.posterior.REFINE_GAIN)",
+          # The bounds in the schema for clients; the check itself is _check_min_gain's, so
+          # the message says what the number means and what to do.
+          json_schema_extra={"exclusiveMinimum": 0.0}),
+]
+
+
 StartDeg = Annotated[
     float,
     AfterValidator(_check_start),
@@ -154,18 +201,10 @@ class AdaptivePlan(_PlanBase):
     rotations_field = "initial_rotations"
     initial_rotations: Count = Field(default=8,
                                      description="r0 uniform angles of the first round")
-    rule: Literal["posterior", "vf"] = Field(
-        default="posterior",
-        description="posterior: add the stage angles where the joint fit's expected log_rmse "
-                    "falls most, stop when the best falls by less than min_gain (needs the "
-                    "basis; an engine without one uses vf); vf: V&F Sec. 6, midpoints where "
-                    "PCHIP mispredicts a reading by more than threshold")
+    rule: Rule = "posterior"
     threshold: float = Field(default=0.1, gt=0,
                              description="vf rule: relative error e (0.1 = 10 %)")
-    min_gain: float = Field(
-        default=0.0006, gt=0,
-        description="posterior rule: least drop of the expected log_rmse one more stage "
-                    "angle must buy (gonio.brdf.reconstruction.posterior.REFINE_GAIN)")
+    min_gain: MinGain = DEFAULT_MIN_GAIN
     max_samples: Count | None = Field(
         default=None, gt=0, description="budget of pair readings (pairs x angles); null = none"
     )

@@ -243,6 +243,17 @@ async function refreshReadings() {
   plotRotation($("#readings-plot"), data.pairs, data.yTitle);
   $("#readings-caption").textContent = data.caption;
   $("#live-job").textContent = `job ${id} · ${data.count} readings`;
+  $("#live-rule").textContent = ruleText(id);
+}
+
+// An adaptive job's rule and its setting, shown beside the readings it has used so far.
+function ruleText(id) {
+  const d = selectedDetail;
+  if (!d || d.id !== id || d.plan?.kind !== "adaptive") return "";
+  const p = d.plan;
+  const rule = p.rule ?? "posterior";
+  const setting = rule === "vf" ? `threshold e ${p.threshold ?? 0.1}` : `min gain ${p.min_gain ?? 0.0006}`;
+  return ` · adaptive, ${rule} rule, ${setting}, from ${p.initial_rotations} angles`;
 }
 
 function scheduleReadings() {
@@ -429,7 +440,9 @@ function readPlan() {
   };
   if (kind === "adaptive") {
     plan.initial_rotations = Number(f.get("initial_rotations"));
-    plan.threshold = Number(f.get("threshold"));
+    plan.rule = f.get("rule");
+    if (plan.rule === "vf") plan.threshold = Number(f.get("threshold"));
+    else plan.min_gain = Number(f.get("min_gain"));
   } else plan.rotations = Number(f.get("rotations"));
   if (kind === "calibration") plan.reference_albedo = Number(f.get("reference_albedo"));
   return plan;
@@ -451,10 +464,16 @@ function clearStaleNotes() {
 function initForm() {
   const form = $("#scan-form");
   const kindSel = form.elements.kind;
+  const ruleSel = form.elements.rule;
   const showKind = () => {
-    for (const l of form.querySelectorAll("label.kind")) l.hidden = !l.classList.contains(kindSel.value);
+    for (const l of form.querySelectorAll(".kind")) {
+      // An adaptive setting of the other rule is hidden (and not sent).
+      const otherRule = [...l.classList].some((c) => c.startsWith("rule-") && c !== `rule-${ruleSel.value}`);
+      l.hidden = !l.classList.contains(kindSel.value) || otherRule;
+    }
   };
   kindSel.addEventListener("change", showKind);
+  ruleSel.addEventListener("change", showKind);
   showKind();
   $("#dry-run").addEventListener("click", () => guarded(async () => {
     const r = await send("POST", "/jobs/dry-run", { plan: readPlan() });

@@ -115,6 +115,26 @@ def test_start_angle_outside_a_turn_says_the_equivalent(daemon: Daemon) -> None:
     assert "[0, 360)" in msg and "220" in msg
 
 
+@pytest.mark.parametrize(("setting", "words"), [
+    ('"rule": "bayes"', ["rule must be 'posterior'", "'vf'", "got 'bayes'"]),
+    ('"rule": null', ["rule must be", "got None"]),
+    ('"min_gain": -0.001', ["min_gain", "> 0", "got -0.001", "default 0.0006",
+                            "larger stops refining sooner"]),
+    ('"min_gain": 0', ["min_gain", "> 0", "got 0"]),
+    ('"min_gain": "much"', ["valid number"]),
+], ids=["unknown-rule", "null-rule", "negative-gain", "zero-gain", "text-gain"])
+@pytest.mark.parametrize("path", ["/api/v1/jobs", "/api/v1/jobs/dry-run"])
+def test_adaptive_rule_settings_are_checked_with_advice(
+        daemon: Daemon, path: str, setting: str, words: list[str]) -> None:
+    before = _jobs(daemon)
+    status, answer = _post(daemon, path, '{"plan": {"kind": "adaptive", ' + setting + "}}")
+    assert status == 422, answer
+    assert isinstance(answer, dict)
+    msgs = " ".join(str(d["msg"]) for d in answer["detail"])
+    assert all(w in msgs for w in words), msgs
+    assert _jobs(daemon) == before
+
+
 @pytest.mark.parametrize(
     "query", ["since=1e30", f"since={10**30}", f"job_id={10**30}", "job_id=1e30", "since=-1",
               "job_id=0"],

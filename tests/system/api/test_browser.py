@@ -100,12 +100,13 @@ def test_start_a_scan_from_the_page_and_see_the_result(daemon: Daemon, browser: 
     # Only the chosen plan kind's fields show.
     kind = Select(form.find_element(By.NAME, "kind"))
     shown = {
-        "uniform": {"rotations"}, "adaptive": {"initial_rotations", "threshold"},
+        "uniform": {"rotations"}, "adaptive": {"initial_rotations", "rule", "min_gain"},
         "calibration": {"rotations", "reference_albedo"},
     }
     for value, visible in shown.items():
         kind.select_by_value(value)
-        for name in ("rotations", "initial_rotations", "threshold", "reference_albedo"):
+        for name in ("rotations", "initial_rotations", "rule", "min_gain", "threshold",
+                     "reference_albedo"):
             assert form.find_element(By.NAME, name).is_displayed() == (name in visible), \
                 (value, name)
 
@@ -199,6 +200,68 @@ def test_start_a_scan_from_the_page_and_see_the_result(daemon: Daemon, browser: 
         ("saved", "export failed")))
     assert browser.find_element(By.ID, "export-state").text == f"saved gonio-job-{job_id}-gltf.gltf"
     assert _severe(browser) == []
+
+
+def test_an_adaptive_plan_from_the_page_sets_its_rule(daemon: Daemon, browser: Any) -> None:
+    """Rule and min gain on the form, explained, checked by the server, shown with the job."""
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support import expected_conditions as ec
+    from selenium.webdriver.support.ui import Select, WebDriverWait
+
+    wait = WebDriverWait(browser, 180, poll_frequency=0.2)
+    browser.get(f"{daemon.url}/#key={daemon.key}")
+    wait.until(lambda d: d.find_element(By.ID, "live-chip").text == "live")
+    form = browser.find_element(By.ID, "scan-form")
+    Select(form.find_element(By.NAME, "kind")).select_by_value("adaptive")
+    rule = Select(form.find_element(By.NAME, "rule"))
+    # Defaults shown: the posterior rule and the calibrated min gain, with what they mean.
+    assert rule.first_selected_option.get_attribute("value") == "posterior"
+    assert form.find_element(By.NAME, "min_gain").get_attribute("value") == "0.0006"
+    help_text = browser.find_element(By.ID, "rule-help").text
+    assert "min gain" in help_text and "threshold e" in help_text and "default" in help_text
+    # The setting of the rule not chosen is hidden.
+    rule.select_by_value("vf")
+    assert form.find_element(By.NAME, "threshold").is_displayed()
+    assert not form.find_element(By.NAME, "min_gain").is_displayed()
+    rule.select_by_value("posterior")
+    assert not form.find_element(By.NAME, "threshold").is_displayed()
+
+    def fill(name: str, value: str) -> None:
+        field = form.find_element(By.NAME, name)
+        field.clear()
+        field.send_keys(value)
+
+    # A bad value reaches the server, which says what is wrong and what to do.
+    fill("min_gain", "-1")
+    browser.find_element(By.ID, "dry-run").click()
+    wait.until(lambda d: d.find_element(By.ID, "message").is_displayed())
+    text = browser.find_element(By.ID, "message").text
+    assert "min_gain" in text and "> 0" in text and "got -1" in text, text
+
+    for name, value in (("specimen", "adaptive sample"), ("initial_rotations", "4"),
+                        ("min_gain", "0.002"), ("exposure_s", "0.005")):
+        fill(name, value)
+    browser.find_element(By.ID, "start-scan").click()
+    new_row = "//tbody[@id='jobs']/tr[td[2][text()='adaptive sample']]"
+    wait.until(lambda d: d.find_elements(By.XPATH, new_row))
+    job_id = int(browser.execute_script(
+        "return [...document.querySelectorAll('#jobs tr')]"
+        ".find(r => r.children[1].textContent === 'adaptive sample').dataset.id"))
+    with daemon.client() as c:
+        plan = c.get(f"/api/v1/jobs/{job_id}").json()["plan"]
+    assert plan["rule"] == "posterior" and plan["min_gain"] == 0.002
+    assert "threshold" not in plan or plan["threshold"] == 0.1  # the vf setting was not sent
+    wait.until(ec.presence_of_element_located(
+        (By.CSS_SELECTOR, f'#jobs tr[data-id="{job_id}"][data-state="completed"]')))
+    # The job view: the readings used, with the rule that chose them.
+    wait.until(lambda d: "posterior rule" in d.find_element(By.ID, "live-rule").text)
+    live = browser.find_element(By.ID, "live-job").text + browser.find_element(
+        By.ID, "live-rule").text
+    with daemon.client() as c:
+        used = len(c.get(f"/api/v1/jobs/{job_id}/readings").json())
+    assert f"{used} readings" in live and "min gain 0.002" in live and "from 4 angles" in live
+    # The only error logged is the refused check above (the browser logs every 422).
+    assert [e["message"] for e in _severe(browser) if "dry-run" not in e["message"]] == []
 
 
 def test_page_without_key_shows_a_clear_error(daemon: Daemon, browser: Any) -> None:
