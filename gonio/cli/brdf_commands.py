@@ -301,7 +301,8 @@ def _demo_pairs(basis: Any, n: int) -> tuple[FloatArray, FloatArray, str]:
         # A simulated rig has no mounts to collide, so devices may sit close together.
         rig = RigConstraints(min_device_distance_deg=0.0)
         d = design_pairs(basis, n, rig, starts=2, descents=3, time_limit_s=10.0)
-        return np.asarray(d.cells), np.asarray(d.ph_lab), f"optimized, kappa {d.kappa:.3g}"
+        return (np.asarray(d.cells), np.asarray(d.ph_lab),
+                f"optimized by {d.objective}, kappa {d.kappa:.3g}")
     except (ImportError, ValueError) as exc:
         cells, ph = simple_pairs(n)
         return cells, ph, f"deterministic grid rule; no optimized design ({exc})"

@@ -1,15 +1,24 @@
 """Pair designs: ``n`` independent light/sensor pairs from a basis, and their result type.
 
-:func:`design_pairs` optimizes the pairs' cells (:func:`~gonio.brdf.design.search.optimize_rows`)
-and places them in the lab; :func:`geometry_design` evaluates a given geometry (a preset or a
-rig config) the same way. Both return a :class:`PairDesign`, as product rigs do
-(:mod:`gonio.brdf.design.product`).
+:func:`design_pairs` chooses the pairs' cells by one of two objectives and places them in the
+lab: V&F's condition number (:func:`~gonio.brdf.design.search.optimize_rows`) or the joint
+fit's expected error (:func:`gonio.brdf.design.posterior.posterior_design`);
+:data:`DEFAULT_OBJECTIVE` is the one used when none is asked for. :func:`geometry_design`
+evaluates a given geometry (a preset or a rig config) the same way. All return a
+:class:`PairDesign`, as product rigs do (:mod:`gonio.brdf.design.product`).
+
+Every optimized design reports the objective that made it, ``kappa`` of its rows and, for a
+gonio :class:`~gonio.brdf.reconstruction.basis.Basis`, the joint fit's expected log_rmse
+(:func:`gonio.brdf.design.posterior.expected_log_rmse`), whichever objective chose it; only
+the statistics of the search that actually ran (:class:`SearchResult` or
+:class:`GreedyStats`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Literal, Protocol
+import logging
+from dataclasses import dataclass, replace
+from typing import Literal, Protocol, get_args
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -21,7 +30,7 @@ from gonio.brdf.design.constraints import (
     min_pairwise_distance,
     rows_to_cells,
 )
-from gonio.brdf.design.errors import DesignError
+from gonio.brdf.design.errors import DesignError, FeasibilityError
 from gonio.brdf.design.mounting import MountPlanner
 from gonio.brdf.design.placement import Placement, place_pairs
 from gonio.brdf.design.search import SearchResult, optimize_rows
@@ -29,9 +38,18 @@ from gonio.brdf.tables import geometry as geo
 
 FloatArray = NDArray[np.float64]
 
+log = logging.getLogger(__name__)
+
 #: What :func:`design_pairs` minimises: the joint fit's expected error on the headline metric
 #: (:mod:`gonio.brdf.design.posterior`) or V&F's condition number (:func:`optimize_rows`).
-Objective = Literal["posterior", "kappa"]
+Objective = Literal["kappa", "posterior"]
+#: Every objective, in the order the CLI and API list them.
+OBJECTIVES: tuple[Objective, ...] = get_args(Objective)
+#: The objective :func:`design_pairs` uses when none is given (and so ``gonio design``, the
+#: API and every caller of ``design_pairs(basis, n, constraints)``). The test suite passes
+#: with either value; which one is the default is decided by ``bench/bench_unseen.py``
+#: (``docs/science.md`` 7.2.1).
+DEFAULT_OBJECTIVE: Objective = "kappa"
 
 
 class BasisLike(Protocol):
@@ -44,6 +62,32 @@ class BasisLike(Protocol):
     def valid(self) -> NDArray[np.bool_]: ...
 
     def rows_at(self, th: ArrayLike, td: ArrayLike, pd: ArrayLike) -> FloatArray: ...
+
+
+@dataclass(frozen=True)
+class GreedyStats:
+    """What the expected-error design did (:func:`gonio.brdf.design.posterior.posterior_design`).
+
+    Attributes
+    ----------
+    candidates : int
+        Feasible cells scored at each step.
+    evaluations : int
+        Candidate scorings over all steps (``n x candidates``).
+    mount_checks : int
+        Placements tried to keep every choice mountable (0 when devices cannot collide).
+    first : int
+        Rank of the first pair among the single-pair gains (0: the best; a seed > 0 starts
+        from a lesser one, so several seeds give different candidate designs).
+    seconds : float
+        Wall time of the choice and placement.
+    """
+
+    candidates: int
+    evaluations: int
+    mount_checks: int
+    first: int
+    seconds: float
 
 
 @dataclass(frozen=True)
@@ -67,7 +111,22 @@ class PairDesign:
     min_distance_deg : float
         Smallest angle between two mounted devices.
     search : SearchResult or None
-        Search statistics for optimized pair designs.
+        Statistics of the condition-number search, for designs it made.
+    objective : {"kappa", "posterior"} or None
+        The objective that chose the cells (None for presets, rig configs and product rigs).
+    expected_log_rmse : float or None
+        The joint fit's expected log_rmse for a scan of ``rotations`` uniform stage angles,
+        under the basis' learnt prior (:func:`gonio.brdf.design.posterior.expected_log_rmse`:
+        the error the readings leave inside the basis; what the basis cannot represent is not
+        in it). None when the basis is not a gonio ``Basis``.
+    rotations : int or None
+        Stage angles ``expected_log_rmse`` assumes.
+    greedy : GreedyStats or None
+        Statistics of the expected-error choice, for designs it made.
+    fallback : str or None
+        Why the design was not made by the objective asked for (e.g. the expected-error
+        choice could not be mounted on a crowded rig and the condition-number search, which
+        plans mounts as it goes, made it instead); None when it was.
     """
 
     name: str
@@ -79,6 +138,11 @@ class PairDesign:
     kappa: float
     min_distance_deg: float
     search: SearchResult | None = None
+    objective: Objective | None = None
+    expected_log_rmse: float | None = None
+    rotations: int | None = None
+    greedy: GreedyStats | None = None
+    fallback: str | None = None
 
     @classmethod
     def independent(cls, name: str, placement: Placement, kappa: float,
@@ -162,50 +226,102 @@ def design_pairs(
     seed: int | None = 0,
     method: KappaMethod = "fast",
     time_limit_s: float | None = None,
-    objective: Objective = "kappa",
+    objective: Objective | None = None,
     rotations: int = 8,
 ) -> PairDesign:
-    """Optimize ``n`` independent light/sensor pairs and place them in the lab.
+    """Choose ``n`` independent light/sensor pairs and place them in the lab.
 
-    ``objective="kappa"`` (the default) is V&F's condition-number search, below.
-    ``objective="posterior"`` picks the pairs that minimise the joint fit's expected error
-    for a scan of ``rotations`` uniform stage angles
-    (:func:`gonio.brdf.design.posterior.posterior_design`; ``basis`` must then be a
-    :class:`~gonio.brdf.reconstruction.basis.Basis`; ``h``, ``starts``, ``descents``,
-    ``method`` and ``time_limit_s`` do not apply, and the choice does not plan mounts, so
-    crowded rigs may fail to place where the search succeeds). On measured materials held out
-    of the basis it gave a lower error than the search, on anisotropic ones not
-    (``docs/science.md`` 7.2).
+    ``objective`` (default :data:`DEFAULT_OBJECTIVE`, read at call time):
 
-    Candidates are the basis's valid cells that ``constraints`` allow
-    (:func:`gonio.brdf.design.constraints.candidate_rows`). The search is :func:`optimize_rows` with
-    a :class:`~gonio.brdf.design.mounting.MountPlanner`, so every design it visits can be mounted
-    with ``min_device_distance_deg`` between any two devices and outside every exclusion. The
-    search's placement is then spread by :func:`gonio.brdf.design.placement.place_pairs` (it keeps
-    the limit and widens the closest gap where it can).
+    * ``"kappa"``: V&F's condition-number search (:func:`optimize_rows`) with a
+      :class:`~gonio.brdf.design.mounting.MountPlanner`, so every design it visits can be
+      mounted with ``min_device_distance_deg`` between any two devices and outside every
+      exclusion; its placement is then spread by
+      :func:`gonio.brdf.design.placement.place_pairs` (it keeps the limit and widens the
+      closest gap where it can). ``h``, ``starts``, ``descents``, ``method`` and
+      ``time_limit_s`` are its settings.
+    * ``"posterior"``: the pairs that minimise the joint fit's expected error for a scan of
+      ``rotations`` uniform stage angles
+      (:func:`gonio.brdf.design.posterior.posterior_design`), each greedy step restricted to
+      cells that still mount beside the pairs chosen so far; ``seed`` picks which first pair
+      the greedy starts from (0: the best). It needs a gonio
+      :class:`~gonio.brdf.reconstruction.basis.Basis` (its medians and prior).
+
+    Either way the condition-number search's ability to plan mounts is kept: when the
+    expected-error choice cannot be mounted (a crowded rig, :class:`FeasibilityError`), or
+    when it is only the default and ``basis`` is not a gonio ``Basis``, the search makes the
+    design instead, the reason logged and kept in :attr:`PairDesign.fallback`. Candidates are
+    the basis's valid cells that ``constraints`` allow
+    (:func:`gonio.brdf.design.constraints.candidate_rows`).
+
+    Returns
+    -------
+    PairDesign
+        ``name="optimized"``, ``objective`` the one that chose the cells, ``kappa`` of its
+        rows, ``expected_log_rmse`` at ``rotations`` (for a gonio ``Basis``), and the
+        statistics of the search that ran (``search`` or ``greedy``).
 
     Raises
     ------
     DesignError
-        For ``n < 1`` or more pairs than feasible cells.
+        For ``n < 1``, more pairs than feasible cells, an unknown objective, or
+        ``objective="posterior"`` asked for explicitly with a basis that is not a gonio
+        ``Basis``.
     FeasibilityError
         When no cell is feasible, or ``n`` pairs cannot be mounted under ``constraints``.
     """
+    asked = DEFAULT_OBJECTIVE if objective is None else objective
+    if asked not in OBJECTIVES:
+        raise DesignError(f"objective must be one of {', '.join(OBJECTIVES)}, not {asked!r}")
     if n < 1:
         raise DesignError(f"the number of pairs must be at least 1, got {n}")
-    if objective == "posterior":
+    if rotations < 1:
+        raise DesignError(f"a scan needs at least one stage angle, got rotations={rotations}")
+    fallback = None
+    if asked == "posterior":
         from gonio.brdf.design.posterior import posterior_design  # it builds on this module
         from gonio.brdf.reconstruction.basis import Basis
 
-        if not isinstance(basis, Basis):
+        if isinstance(basis, Basis):
+            try:
+                return posterior_design(basis, n, constraints, rotations=rotations,
+                                        seed=0 if seed is None else seed)
+            except FeasibilityError as exc:
+                fallback = (f"the expected-error choice could not be mounted ({exc}); the "
+                            "condition-number search, which plans mounts as it goes, made "
+                            "the design")
+        elif objective is None:
+            fallback = ("the expected-error design needs a gonio Basis (its medians and "
+                        "prior); the condition-number search made the design")
+        else:
             raise DesignError(
                 "objective='posterior' needs a gonio Basis (its medians and prior); "
                 "pass objective='kappa' for other row sources"
             )
-        return posterior_design(basis, n, constraints, rotations=rotations,
-                                seed=0 if seed is None else seed)
-    if objective != "kappa":
-        raise DesignError(f"objective must be 'posterior' or 'kappa', not {objective!r}")
+        log.warning("design of %d pairs: %s", n, fallback)
+    design = _kappa_design(basis, n, constraints, h=h, starts=starts, descents=descents,
+                           seed=seed, method=method, time_limit_s=time_limit_s)
+    return replace(design, expected_log_rmse=_expected_log_rmse(basis, design, rotations),
+                   rotations=rotations, fallback=fallback)
+
+
+def _expected_log_rmse(basis: BasisLike, design: PairDesign, rotations: int) -> float | None:
+    """The joint fit's expected log_rmse of ``design``'s cells (None without a gonio Basis)."""
+    from gonio.brdf.reconstruction.basis import Basis
+
+    if not isinstance(basis, Basis):
+        return None
+    from gonio.brdf.design.posterior import expected_log_rmse, prior_model
+
+    rows = basis.rows_at(design.cells[:, 0], design.cells[:, 1], design.cells[:, 2])
+    return expected_log_rmse(prior_model(basis, rotations), rows)
+
+
+def _kappa_design(
+    basis: BasisLike, n: int, constraints: RigConstraints, *, h: int, starts: int,
+    descents: int, seed: int | None, method: KappaMethod, time_limit_s: float | None,
+) -> PairDesign:
+    """V&F's condition-number search, collision-aware, then spread by ``place_pairs``."""
     cand = candidate_rows(constraints, basis.valid)
     # The planner's azimuth grid is place_pairs' default, so the search's placement carries
     # over exactly. Without a device-distance limit nothing can collide (every candidate cell
@@ -219,4 +335,5 @@ def design_pairs(
         rows_to_cells(result.rows), constraints, ph_step_deg=1.0,
         seed=0 if seed is None else seed, initial_ph=result.ph_lab,
     )
-    return PairDesign.independent("optimized", placement, result.kappa, search=result)
+    return replace(PairDesign.independent("optimized", placement, result.kappa, search=result),
+                   objective="kappa")

@@ -28,13 +28,23 @@ Search: greedy, one pair at a time, each time the feasible cell that lowers
 every candidate at once). Exchange passes after the greedy start lowered the objective
 further but not the error on the unseen materials (``docs/science.md`` 7.2), so there are
 none. When devices can collide, each step takes the best cell with which the pairs chosen so
-far still mount (:func:`~gonio.brdf.design.placement.place_pairs`, a few orders tried).
+far still mount (:func:`~gonio.brdf.design.placement.place_pairs`, a few orders tried); when
+none of the best cells of a step mounts, :func:`~gonio.brdf.design.pairs.design_pairs` lets
+the condition-number search (which plans mounts as it goes) make the design instead.
+
+Expected log_rmse (:func:`expected_log_rmse`). ``ph_prior`` is the covariance of the training
+coefficients times the number of training columns (``Basis.provenance["n_columns"]``), so the
+prior of one material is ``P_m / n_columns``; with that scale the expected squared metric error
+divided by ``sum wV`` over the valid cells (``log_rmse``'s denominator per slice) is an
+expected ``log_rmse^2``: the error the readings leave inside the basis (what the basis cannot
+represent is not in it).
 """
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -42,7 +52,7 @@ from numpy.typing import ArrayLike, NDArray
 from gonio.brdf.design.conditioning import condition_number
 from gonio.brdf.design.constraints import RigConstraints, candidate_rows, rows_to_cells
 from gonio.brdf.design.errors import DesignError, FeasibilityError
-from gonio.brdf.design.pairs import PairDesign
+from gonio.brdf.design.pairs import GreedyStats, PairDesign
 from gonio.brdf.design.placement import place_pairs
 from gonio.brdf.reconstruction.basis import Basis
 from gonio.brdf.reconstruction.reconstruct import JOINT_ETA, JOINT_LAM, joint_prior
@@ -52,6 +62,8 @@ FloatArray = NDArray[np.float64]
 
 #: Stage angles the expected error assumes when none are given (the default scan).
 DEFAULT_ROTATIONS = 8
+#: Seeds pick the first pair among this many best single pairs (seed modulo this).
+FIRST_RANKS = 64
 
 
 def metric_gram(basis: Basis) -> FloatArray:
@@ -83,12 +95,19 @@ class PriorModel:
     noise : (H,) variance of one pair's measurement of one harmonic (``eta / r`` for m = 0,
         ``2 eta / r`` otherwise)
     W : (K, K) :func:`metric_gram`
+    scale : float
+        Variance of one material's coefficients per unit of ``P`` (``1 / n_columns`` for a
+        trained basis, 1 when the basis does not say).
+    norm : float
+        ``sum wV`` over the valid cells (``log_rmse``'s denominator per slice); 1 when unset.
     """
 
     P: FloatArray
     harmonics: NDArray[np.intp]
     noise: FloatArray
     W: FloatArray
+    scale: float = 1.0
+    norm: float = 1.0
 
 
 def prior_model(basis: Basis, rotations: int = DEFAULT_ROTATIONS, eta: float = JOINT_ETA,
@@ -102,7 +121,10 @@ def prior_model(basis: Basis, rotations: int = DEFAULT_ROTATIONS, eta: float = J
     ms = np.array([m for m in range(P.shape[0]) if 2 * m < rotations and np.any(P[m])],
                   dtype=np.intp)
     noise = np.where(ms == 0, eta / rotations, 2.0 * eta / rotations)
-    return PriorModel(np.array(P[ms]), ms, noise, metric_gram(basis))
+    cols = float(basis.provenance.get("n_columns", 0) or 0)
+    norm = float(geo.volume_weight()[geo.valid_mask()].sum())
+    return PriorModel(np.array(P[ms]), ms, noise, metric_gram(basis),
+                      scale=1.0 / cols if cols > 0 else 1.0, norm=norm)
 
 
 def expected_error(model: PriorModel, rows: ArrayLike) -> float:
@@ -127,6 +149,22 @@ def expected_error(model: PriorModel, rows: ArrayLike) -> float:
     return total
 
 
+def expected_log_rmse(model: PriorModel, rows: ArrayLike) -> float:
+    """The joint fit's expected ``log_rmse`` after reading ``rows`` (module notes).
+
+    ``sqrt(scale * expected_error(model, rows) / norm)``: in ``log_rmse`` units for a model
+    from :func:`prior_model` of a trained basis. It counts only what the readings leave
+    undetermined inside the basis, so it is below the error on a real material (compare
+    designs with it; ``gonio.brdf.design.heldout`` measures the whole error).
+
+    Parameters
+    ----------
+    model : PriorModel
+    rows : (n, K) basis rows of the pairs
+    """
+    return float(np.sqrt(model.scale * expected_error(model, rows) / model.norm))
+
+
 def _posterior(P: FloatArray, Q: FloatArray, s: float) -> FloatArray:
     """``P - P Q^T (Q P Q^T + s I)^-1 Q P`` (one harmonic's posterior covariance)."""
     A = Q @ P
@@ -137,6 +175,7 @@ def _posterior(P: FloatArray, Q: FloatArray, s: float) -> FloatArray:
 def greedy_rows(
     model: PriorModel, Q: ArrayLike, candidates: ArrayLike, n: int,
     accept: Callable[[NDArray[np.intp]], bool] | None = None, tries: int = 64,
+    first: int = 0,
 ) -> NDArray[np.intp]:
     """Pick ``n`` of ``candidates`` (flat rows of ``Q``) greedily by expected-error reduction.
 
@@ -151,6 +190,9 @@ def greedy_rows(
         together (e.g. mounted); each step takes the best candidate it accepts.
     tries : int
         Candidates tried per step before giving up.
+    first : int
+        Rank of the first pair among the (accepted) single-pair gains: 0 takes the best, a
+        larger value starts the greedy elsewhere (different candidate designs).
 
     Returns
     -------
@@ -164,6 +206,8 @@ def greedy_rows(
     cand = np.asarray(candidates, dtype=np.intp)
     if not 1 <= n <= cand.size:
         raise DesignError(f"cannot choose {n} pairs from {cand.size} feasible cells")
+    if not 0 <= first < cand.size:
+        raise DesignError(f"the first pair's rank must be in 0..{cand.size - 1}, got {first}")
     Qc = np.asarray(Q, dtype=float)[cand]  # (N, K)
     Sig = [np.array(P) for P in model.P]
     chosen: list[int] = []
@@ -173,11 +217,12 @@ def greedy_rows(
             A = S @ Qc.T  # (K, N): Sigma q for every candidate
             gain += np.sum((model.W @ A) * A, axis=0) / (np.sum(Qc.T * A, axis=0) + s)
         gain[chosen] = -np.inf  # a pair measured twice is a repeat, not a new pair
+        skip = first if not chosen else 0
         if accept is None:
-            k = int(np.argmax(gain))
+            k = int(np.argmax(gain)) if skip == 0 else int(np.argsort(-gain)[skip])
         else:
-            order = np.argsort(-gain)[: min(tries, cand.size - len(chosen))]
-            ok = [int(j) for j in order if accept(cand[np.asarray([*chosen, int(j)])])]
+            order = np.argsort(-gain)[: min(tries + skip, cand.size - len(chosen))]
+            ok = [int(j) for j in order if accept(cand[np.asarray([*chosen, int(j)])])][skip:]
             if not ok:
                 raise FeasibilityError(
                     f"no mountable cell for pair {len(chosen) + 1} of {n} among the {tries} "
@@ -218,13 +263,17 @@ def posterior_design(
         Uniform stage angles the scan will use (which harmonics it resolves).
     eta, lam : float
         The joint fit's settings (reading noise and specular condition).
-    seed : int
-        Seed of the placement's shuffled orders.
+    seed : int, >= 0
+        The rank of the first pair is ``seed`` modulo :data:`FIRST_RANKS` (``first`` of
+        :func:`greedy_rows`; 0: the best), so consecutive seeds give different candidate
+        designs; also the seed of the placement's shuffled orders.
 
     Returns
     -------
     PairDesign
-        ``name="posterior"``; ``kappa`` is the condition number of its rows, for comparison.
+        ``name="optimized"``, ``objective="posterior"``; ``kappa`` is the condition number of
+        its rows, for comparison, ``expected_log_rmse`` the objective's own value
+        (:func:`expected_log_rmse`), ``greedy`` what the choice did.
 
     Raises
     ------
@@ -235,11 +284,15 @@ def posterior_design(
     """
     if n < 1:
         raise DesignError(f"the number of pairs must be at least 1, got {n}")
+    t0 = time.perf_counter()
     model = prior_model(basis, rotations, eta, lam)
     accept = None
+    checks = 0
     if constraints.min_device_distance_deg > 0:
         # Devices can collide: keep only choices that still mount (a quick placement check).
         def accept(rows: NDArray[np.intp]) -> bool:
+            nonlocal checks
+            checks += 1
             try:
                 place_pairs(rows_to_cells(rows), constraints, ph_step_deg=1.0, orderings=4,
                             seed=seed)
@@ -247,6 +300,17 @@ def posterior_design(
                 return False
             return True
 
-    rows = greedy_rows(model, basis.Q, candidate_rows(constraints, basis.valid), n, accept)
+    cand = candidate_rows(constraints, basis.valid)
+    if seed < 0:
+        raise DesignError(f"the seed must be at least 0, got {seed}")
+    # Any seed is valid; only the best few first pairs are worth starting from.
+    first = seed % min(cand.size, FIRST_RANKS) if cand.size else 0
+    rows = greedy_rows(model, basis.Q, cand, n, accept, first=first)
     placement = place_pairs(rows_to_cells(rows), constraints, ph_step_deg=1.0, seed=seed)
-    return PairDesign.independent("posterior", placement, condition_number(basis.Q[rows]))
+    design = PairDesign.independent("optimized", placement, condition_number(basis.Q[rows]))
+    stats = GreedyStats(candidates=int(cand.size), evaluations=int(n * cand.size),
+                        mount_checks=checks, first=int(first),
+                        seconds=time.perf_counter() - t0)
+    return replace(design, objective="posterior",
+                   expected_log_rmse=expected_log_rmse(model, basis.Q[rows]),
+                   rotations=int(rotations), greedy=stats)

@@ -31,8 +31,12 @@ def test_design_pairs_places_the_optimized_cells() -> None:
     from gonio.brdf.design.pairs import design_pairs
 
     basis = _grid_basis()
-    d = design_pairs(basis, 4, RigConstraints(), h=3, starts=1, descents=1, seed=2)
+    d = design_pairs(basis, 4, RigConstraints(), h=3, starts=1, descents=1, seed=2,
+                     objective="kappa")
     assert d.search is not None and d.kappa == pytest.approx(d.search.kappa)
+    # The search's own statistics, none of the expected-error choice's.
+    assert d.objective == "kappa" and d.greedy is None and d.fallback is None
+    assert d.name == "optimized" and d.rotations == 8
     assert d.min_distance_deg >= 10.0 - 1e-6
     assert d.lab_deg.shape == (4, 4)
 
@@ -50,13 +54,37 @@ def _devices_of(design: PairDesign) -> np.ndarray:
 @given(seed=st.integers(0, 10_000), n=st.integers(2, 16),
        limit=st.sampled_from([8.0, 12.0, 18.0]))
 def test_designs_under_a_device_distance_always_mount(seed: int, n: int, limit: float) -> None:
-    from gonio.brdf.design.constraints import RigConstraints, min_pairwise_distance
+    from gonio.brdf.design.constraints import RigConstraints
     from gonio.brdf.design.pairs import design_pairs
-    from gonio.brdf.tables import geometry as geo
 
     basis = _grid_basis(K=8)
     c = RigConstraints(max_elevation_deg=70.0, min_device_distance_deg=limit)
-    d = design_pairs(basis, n, c, h=3, starts=1, descents=2, seed=seed)
+    d = design_pairs(basis, n, c, h=3, starts=1, descents=2, seed=seed, objective="kappa")
+    _assert_mounted_as_reported(d, basis, n, limit)
+
+
+@settings(max_examples=4, deadline=None)
+@given(seed=st.integers(0, 10_000), n=st.integers(2, 10),
+       limit=st.sampled_from([8.0, 12.0, 18.0]))
+def test_expected_error_designs_under_a_device_distance_always_mount(
+    seed: int, n: int, limit: float
+) -> None:
+    """The greedy choice mounts too, or hands over to the search (fewer, smaller examples:
+    each greedy step checks placements)."""
+    from gonio.brdf.design.constraints import RigConstraints
+    from gonio.brdf.design.pairs import design_pairs
+
+    basis = _grid_basis(K=8)
+    c = RigConstraints(max_elevation_deg=70.0, min_device_distance_deg=limit)
+    d = design_pairs(basis, n, c, h=3, starts=1, descents=2, seed=seed, objective="posterior")
+    assert d.objective == "posterior" or d.fallback is not None
+    _assert_mounted_as_reported(d, basis, n, limit)
+
+
+def _assert_mounted_as_reported(d: PairDesign, basis: Basis, n: int, limit: float) -> None:
+    from gonio.brdf.design.constraints import min_pairwise_distance
+    from gonio.brdf.tables import geometry as geo
+
     dev = _devices_of(d)
     # Checked from the written lab directions, not from the design's own report.
     assert np.degrees(min_pairwise_distance(dev)) >= limit - 1e-6
@@ -80,7 +108,8 @@ def _rows_of(cells: np.ndarray) -> np.ndarray:
     return np.ravel_multi_index(tuple(idx), geo.SLICE_SHAPE)
 
 
-def test_design_that_cannot_be_mounted_is_a_clear_error() -> None:
+@pytest.mark.parametrize("objective", ["kappa", "posterior"])
+def test_design_that_cannot_be_mounted_is_a_clear_error(objective: str) -> None:
     from gonio.brdf.design.constraints import RigConstraints
     from gonio.brdf.design.errors import FeasibilityError
     from gonio.brdf.design.pairs import design_pairs
@@ -88,7 +117,8 @@ def test_design_that_cannot_be_mounted_is_a_clear_error() -> None:
     crowded = RigConstraints(max_elevation_deg=20.0, min_device_distance_deg=15.0)
     with pytest.raises(FeasibilityError,
                        match=r"cannot mount 12 pairs.*lower min_device_distance_deg"):
-        design_pairs(_grid_basis(), 12, crowded, h=3, starts=1, descents=1)
+        design_pairs(_grid_basis(), 12, crowded, h=3, starts=1, descents=1,
+                     objective=objective)  # type: ignore[arg-type]
 
 
 @pytest.fixture(scope="module")
@@ -129,8 +159,80 @@ def test_twenty_pairs_mount_with_default_limits_on_a_library_basis(library_basis
             assert "cannot mount 20 pairs" in str(exc)
             collided += 1
     assert collided >= 1
-    d = design_pairs(library_basis, 20, c, starts=1, descents=2, seed=1)
+    d = design_pairs(library_basis, 20, c, starts=1, descents=2, seed=1, objective="kappa")
     assert d.n_pairs == 20 and np.isfinite(d.kappa)
     assert np.degrees(min_pairwise_distance(_devices_of(d))) >= 10.0 - 1e-6
     # Collision-awareness costs little conditioning against the blind search.
     assert d.kappa < 2.0 * float(np.median(blind_kappas))
+
+
+def test_a_crowded_rig_falls_back_to_the_search_that_plans_mounts(
+    library_basis: Basis, caplog: pytest.LogCaptureFixture
+) -> None:
+    """Six pairs within 50 deg of the normal, devices 25 deg apart: the expected-error greedy
+    paints itself into a corner (no mountable cell for pair 5), the kappa search mounts them."""
+    import logging
+
+    from gonio.brdf.design.constraints import RigConstraints, min_pairwise_distance
+    from gonio.brdf.design.errors import FeasibilityError
+    from gonio.brdf.design.pairs import design_pairs
+    from gonio.brdf.design.posterior import posterior_design
+
+    c = RigConstraints(max_elevation_deg=50.0, min_device_distance_deg=25.0)
+    with pytest.raises(FeasibilityError, match="no mountable cell"):
+        posterior_design(library_basis, 6, c)
+    with caplog.at_level(logging.WARNING, logger="gonio.brdf.design.pairs"):
+        d = design_pairs(library_basis, 6, c, starts=1, descents=2, objective="posterior")
+    assert d.objective == "kappa" and d.search is not None and d.greedy is None
+    assert d.fallback is not None and "could not be mounted" in d.fallback
+    assert "no mountable cell" in d.fallback and d.fallback in caplog.text
+    dev = _devices_of(d)
+    assert np.degrees(min_pairwise_distance(dev)) >= 25.0 - 1e-6
+    assert (np.degrees(np.arccos(np.clip(dev[:, 2], -1, 1))) <= 50.0 + 1e-6).all()
+    # The report stays complete: kappa of the rows and the expected error at 8 rotations.
+    assert d.kappa == pytest.approx(condition_number(library_basis.Q[_rows_of(d.cells)]))
+    assert d.expected_log_rmse is not None and d.expected_log_rmse > 0
+
+
+@pytest.mark.parametrize("default", ["kappa", "posterior"])
+def test_design_pairs_uses_the_module_default_objective(
+    default: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from gonio.brdf.design import pairs
+    from gonio.brdf.design.constraints import RigConstraints
+    from gonio.brdf.design.posterior import expected_log_rmse, prior_model
+
+    monkeypatch.setattr(pairs, "DEFAULT_OBJECTIVE", default)
+    basis = _grid_basis()
+    d = pairs.design_pairs(basis, 5, RigConstraints(), h=3, starts=1, descents=1)
+    assert d.objective == default and d.fallback is None
+    assert (d.search is not None) == (default == "kappa")
+    assert (d.greedy is not None) == (default == "posterior")
+    # Whichever objective chose the rows, the report carries both numbers for them.
+    rows = basis.Q[_rows_of(d.cells)]
+    assert d.kappa == pytest.approx(condition_number(rows))
+    assert d.expected_log_rmse == pytest.approx(expected_log_rmse(prior_model(basis, 8), rows))
+
+
+def test_a_default_posterior_objective_falls_back_for_rows_without_a_basis(
+    monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``design_pairs(basis, n, constraints)`` keeps working for any row source; only an
+    explicit ``objective="posterior"`` insists on a gonio Basis."""
+    from gonio.brdf.design import pairs
+    from gonio.brdf.design.constraints import RigConstraints
+    from gonio.brdf.design.errors import DesignError
+
+    class RowsOnly:
+        def __init__(self, b: Basis) -> None:
+            self.Q, self.valid, self.rows_at = b.Q, b.valid, b.rows_at
+
+    rows_only = RowsOnly(_grid_basis())
+    monkeypatch.setattr(pairs, "DEFAULT_OBJECTIVE", "posterior")
+    d = pairs.design_pairs(rows_only, 3, RigConstraints(), h=3, starts=1, descents=1)
+    assert d.objective == "kappa" and d.expected_log_rmse is None
+    assert d.fallback is not None and "needs a gonio Basis" in d.fallback
+    with pytest.raises(DesignError, match="needs a gonio Basis"):
+        pairs.design_pairs(rows_only, 3, RigConstraints(), objective="posterior")
+    with pytest.raises(DesignError, match="rotations=0"):
+        pairs.design_pairs(rows_only, 3, RigConstraints(), rotations=0)

@@ -110,7 +110,13 @@ def test_posterior_design_gives_distinct_feasible_mountable_pairs() -> None:
     b = _with_prior(random_basis(6), {0: 1.0, 2: 0.5})
     cons = RigConstraints()
     d = posterior_design(b, 5, cons)
-    assert d.name == "posterior" and d.cells.shape == (5, 3)
+    assert d.name == "optimized" and d.objective == "posterior" and d.cells.shape == (5, 3)
+    # Its own statistics, none of the condition-number search's.
+    assert d.search is None and d.greedy is not None and d.fallback is None
+    n_feasible = int(feasible_mask(cons, b.valid).sum())
+    assert d.greedy.candidates == n_feasible and d.greedy.evaluations == 5 * n_feasible
+    assert d.greedy.mount_checks >= 5 and d.greedy.first == 0
+    assert d.rotations == 8
     idx = np.rint(d.cells / geo.STEP).astype(int)
     assert len({tuple(i) for i in idx}) == 5
     assert feasible_mask(cons, b.valid)[tuple(idx.T)].all()
@@ -139,8 +145,8 @@ def test_design_pairs_objective_posterior_is_the_expected_error_design() -> None
     via = design_pairs(b, 4, RigConstraints(), objective="posterior")
     direct = posterior_design(b, 4, RigConstraints())
     np.testing.assert_array_equal(via.cells, direct.cells)
-    assert via.name == "posterior"
-    with pytest.raises(DesignError, match="objective must be"):
+    assert via.objective == "posterior" and via.expected_log_rmse == direct.expected_log_rmse
+    with pytest.raises(DesignError, match="objective must be one of kappa, posterior"):
         design_pairs(b, 4, RigConstraints(), objective="nope")  # type: ignore[arg-type]
 
 
@@ -153,3 +159,40 @@ def test_design_pairs_objective_posterior_needs_a_basis() -> None:
 
     with pytest.raises(DesignError, match="needs a gonio Basis"):
         design_pairs(RowsOnly(random_basis(4)), 3, RigConstraints(), objective="posterior")
+
+
+def test_expected_log_rmse_is_the_root_of_the_scaled_error_over_the_volume() -> None:
+    """In log_rmse units: the prior of one material is ``P / n_columns`` and log_rmse divides
+    by the volume weights of the valid cells (``tables.metrics.log_rmse``)."""
+    from gonio.brdf.design.posterior import expected_log_rmse
+
+    b = _with_prior(random_basis(5), {0: 1.0, 2: 0.5})
+    trained = type(b)(b.Q, b.S, b.f_med, b.mu, b.valid, b.eps, b.materials,
+                      {"n_columns": 400}, b.ph_prior)
+    rows = b.Q[[100, 2000, 3000]]
+    wv = float(np.sum(geo.volume_weight()[geo.valid_mask()]))
+    raw = expected_error(prior_model(b, 8), rows)
+    assert expected_log_rmse(prior_model(b, 8), rows) == pytest.approx(np.sqrt(raw / wv))
+    assert expected_log_rmse(prior_model(trained, 8), rows) == pytest.approx(
+        np.sqrt(raw / 400 / wv))
+
+
+def test_a_seed_starts_the_greedy_from_a_lesser_first_pair() -> None:
+    """Seed k takes the k-th best single pair first (several seeds: different candidates)."""
+    b = _with_prior(random_basis(6), {0: 1.0, 2: 0.5})
+    cons = RigConstraints(min_device_distance_deg=0.0)
+    model = prior_model(b, 8)
+    cand = np.flatnonzero(feasible_mask(cons, b.valid).ravel())
+    single = np.array([expected_error(model, b.Q[[c]]) for c in cand])
+    ranked = cand[np.argsort(single)]
+    for seed in (0, 2):
+        d = posterior_design(b, 3, cons, seed=seed)
+        first = np.ravel_multi_index(tuple(np.rint(d.cells[0] / geo.STEP).astype(int)),
+                                     geo.SLICE_SHAPE)
+        assert first == ranked[seed] and d.greedy is not None and d.greedy.first == seed
+        assert d.greedy.mount_checks == 0  # nothing can collide without a distance limit
+    # Any seed works: it wraps around the 64 best first pairs.
+    d = posterior_design(b, 3, cons, seed=64 * 1000 + 2)
+    assert d.greedy is not None and d.greedy.first == 2
+    with pytest.raises(DesignError, match="seed must be at least 0"):
+        posterior_design(b, 3, cons, seed=-1)
