@@ -2,10 +2,14 @@
 
 A design request asks for ``pairs`` independent light/sensor pairs, or a product rig of
 ``lights`` x ``sensors``, under the rig's mounting constraints. The computation is the same as
-``gonio design`` (:mod:`gonio.brdf.design`, V&F 2016 Sec. 3.3): minimise the condition
-number of the basis rows the pairs sample. The result carries the cells, the lab placement of every
-device, the condition number, the roughness bound of MATH 10 at ``rotations`` uniform stage
-angles, and the rig-config fragment (TOML) to paste into a rig config.
+``gonio design`` (:mod:`gonio.brdf.design`): independent pairs by the request's ``objective``,
+V&F's condition number (2016 Sec. 3.3) or the joint fit's expected error
+(``docs/science.md`` 7.2.1), :data:`~gonio.brdf.design.pairs.DEFAULT_OBJECTIVE` when none is
+given; product rigs by the condition number. The result carries the cells, the lab placement
+of every device, the objective that chose them, the condition number and the joint fit's
+expected log_rmse, the roughness bound of MATH 10 at ``rotations`` uniform stage angles, the
+statistics of the search that ran, and the rig-config fragment (TOML) to paste into a rig
+config.
 
 :func:`run_design` and :func:`evaluate_preset` block for up to the request's time limit;
 :meth:`gonio.service.GonioService.design` runs one design at a time against the daemon's
@@ -15,6 +19,7 @@ basis, and the API routes call it in a worker thread.
 from __future__ import annotations
 
 import math
+from typing import Literal
 
 import numpy as np
 from pydantic import BaseModel, Field, model_validator
@@ -55,7 +60,16 @@ class DesignRequest(BaseModel):
         default_factory=list, max_length=32,
         description="lab regions without devices: 'cone:THETA,PHI,RADIUS' or "
                     "'box:THETA_MIN,THETA_MAX,PHI_MIN,PHI_MAX' (degrees)")
-    seed: Count = Field(0, ge=0, le=2**31 - 1, description="random seed of the search")
+    objective: Literal["kappa", "posterior"] | None = Field(
+        None, description="what chooses independent pairs: 'kappa' (V&F's condition-number "
+                          "search) or 'posterior' (the joint fit's expected error at "
+                          "'rotations' stage angles); default: gonio's default objective "
+                          "(gonio.brdf.design.pairs.DEFAULT_OBJECTIVE). Product rigs always "
+                          "use the condition number")
+    seed: Count = Field(0, ge=0, le=2**31 - 1,
+                        description="random seed of the kappa search; for 'posterior' it picks "
+                                    "the first pair the greedy choice starts from (0: the best "
+                                    "single pair, k: the k-th best, modulo 64)")
     time_limit_s: float | None = Field(
         None, gt=0, le=MAX_TIME_LIMIT_S,
         description="stop starting new descents after this long, seconds; at most the daemon's "
@@ -65,7 +79,9 @@ class DesignRequest(BaseModel):
     descents: Count = Field(10, ge=1, le=100, description="descents per start (pairs only)")
     neighbourhood: Count = Field(7, ge=1, le=15, description="odd neighbourhood size of the search")
     rotations: Count = Field(8, ge=1, le=360,
-                           description="uniform stage angles for the roughness bound")
+                           description="uniform stage angles of the scan: for the roughness "
+                                       "bound, the expected log_rmse and the 'posterior' "
+                                       "objective")
 
     @model_validator(mode="after")
     def _one_kind(self) -> DesignRequest:
@@ -77,6 +93,10 @@ class DesignRequest(BaseModel):
                              "'sensors' (a product rig)")
         if product and (self.lights is None or self.sensors is None):
             raise ValueError("a product rig needs both 'lights' and 'sensors'")
+        if product and self.objective is not None:
+            raise ValueError("'objective' chooses independent pairs; a product rig is always "
+                             "designed by the condition number: drop 'objective' or ask for "
+                             "'pairs'")
         if self.neighbourhood % 2 == 0:
             raise ValueError(f"'neighbourhood' must be odd, got {self.neighbourhood}")
         return self
@@ -119,8 +139,21 @@ class RoughnessInfo(BaseModel):
 
 
 class SearchInfo(BaseModel):
+    """What the condition-number search did."""
+
     neighbourhoods: int
     evaluations: int
+    seconds: float
+
+
+class GreedyInfo(BaseModel):
+    """What the expected-error choice did."""
+
+    candidates: int = Field(description="feasible cells scored at each step")
+    evaluations: int = Field(description="candidate scorings over all steps")
+    mount_checks: int = Field(description="placements tried to keep every choice mountable")
+    first: int = Field(description="rank of the first pair among single-pair gains (the seed "
+                                          "modulo 64; 0: the best)")
     seconds: float
 
 
@@ -131,12 +164,25 @@ class DesignResult(BaseModel):
     n_pairs: int
     condition_number: float | None = Field(
         description="of the pairs' basis rows (lower is better); null if singular")
+    objective: Literal["kappa", "posterior"] | None = Field(
+        None, description="the objective that chose the pairs (null for presets and product "
+                          "rigs); differs from the one asked for only with 'fallback'")
+    expected_log_rmse: float | None = Field(
+        None, description="the joint fit's expected log_rmse at 'roughness.rotations' stage "
+                          "angles under the basis' prior: the error the readings leave inside "
+                          "the basis (what it cannot represent is not in it; lower is better)")
+    fallback: str | None = Field(
+        None, description="why the objective asked for did not make the design (e.g. its "
+                          "choice could not be mounted); null when it did")
     min_device_distance_deg: float = Field(description="closest two devices, degrees")
     lights: list[Device]
     sensors: list[Device]
     pairs: list[DesignPair]
     roughness: RoughnessInfo
-    search: SearchInfo | None = Field(None, description="search statistics (optimized pairs)")
+    search: SearchInfo | None = Field(
+        None, description="condition-number search statistics (designs it made)")
+    greedy: GreedyInfo | None = Field(
+        None, description="expected-error choice statistics (designs it made)")
     rig_config_toml: str = Field(
         description="[[lights]], [[sensors]] and pairs, to merge into a rig config (each device "
                     "still needs its driver settings)")
@@ -168,11 +214,15 @@ def describe(design: PairDesign, rotations: int) -> DesignResult:
                    theta_d_deg=float(c[1]), phi_d_deg=float(c[2]), phi_h_lab_deg=float(p))
         for (a, b), c, p in zip(design.pairs.tolist(), cells, ph, strict=True)
     ]
-    search = design.search
+    search, greedy = design.search, design.greedy
+    expected = design.expected_log_rmse
     return DesignResult(
         name=design.name,
         n_pairs=design.n_pairs,
         condition_number=_finite(design.kappa),
+        objective=design.objective,
+        expected_log_rmse=None if expected is None else _finite(expected),
+        fallback=design.fallback,
         min_device_distance_deg=float(design.min_distance_deg),
         lights=lights,
         sensors=sensors,
@@ -183,6 +233,9 @@ def describe(design: PairDesign, rotations: int) -> DesignResult:
         search=None if search is None else SearchInfo(
             neighbourhoods=search.neighbourhoods, evaluations=search.evaluations,
             seconds=search.seconds),
+        greedy=None if greedy is None else GreedyInfo(
+            candidates=greedy.candidates, evaluations=greedy.evaluations,
+            mount_checks=greedy.mount_checks, first=greedy.first, seconds=greedy.seconds),
         rig_config_toml=dump_fragment(frag),
     )
 
@@ -200,6 +253,7 @@ def run_design(basis: BasisLike, request: DesignRequest) -> DesignResult:
         design = design_pairs(
             basis, request.pairs, constraints, h=request.neighbourhood, starts=request.starts,
             descents=request.descents, seed=request.seed, time_limit_s=request.time_limit_s,
+            objective=request.objective, rotations=request.rotations,
         )
     else:
         assert request.lights is not None and request.sensors is not None

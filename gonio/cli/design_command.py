@@ -3,12 +3,16 @@
 Examples::
 
     gonio design --pairs 10 --max-elevation 75 --min-device-distance 12 -o pairs.toml
+    gonio design --pairs 10 --objective posterior --candidates 4
     gonio design --lights 3 --sensors 4 --exclude cone:0,0,10 -o product.toml
     gonio design --preset MA98 --rotations 8
 
-The design is printed (cells and lab placements), with its condition number and the smallest
-roughness its plan can resolve at ``--rotations`` uniform stage angles, and can be written as a
-rig-config fragment (``[[lights]]``, ``[[sensors]]`` and the pairs) to merge into a rig config.
+The design is printed (cells and lab placements), with the objective that chose it
+(``--objective``: V&F's condition number or the joint fit's expected error; default
+:data:`gonio.brdf.design.pairs.DEFAULT_OBJECTIVE`), its condition number, the joint fit's
+expected log_rmse and the smallest roughness its plan can resolve at ``--rotations`` uniform
+stage angles, and can be written as a rig-config fragment (``[[lights]]``, ``[[sensors]]`` and
+the pairs) to merge into a rig config.
 """
 
 from __future__ import annotations
@@ -21,7 +25,14 @@ from typing import Any, TextIO
 import numpy as np
 
 from gonio.brdf.design.constraints import RigConstraints, parse_exclusion
-from gonio.brdf.design.pairs import BasisLike, PairDesign, design_pairs, geometry_design
+from gonio.brdf.design.pairs import (
+    DEFAULT_OBJECTIVE,
+    OBJECTIVES,
+    BasisLike,
+    PairDesign,
+    design_pairs,
+    geometry_design,
+)
 from gonio.brdf.design.presets import get_preset, preset_names
 from gonio.brdf.design.product import design_product_rig
 from gonio.brdf.design.roughness import RoughnessBound, roughness_bound
@@ -33,8 +44,10 @@ def register(subparsers: Any) -> None:
         "design",
         help="optimize light/sensor directions (or evaluate a preset) for a rig",
         description=(
-            "Choose measurement geometry by minimizing the condition number of the basis rows "
-            "it samples (Vávra & Filip 2016, Sec. 3.3), under the rig's mounting limits."
+            "Choose measurement geometry under the rig's mounting limits: independent pairs by "
+            "the condition number of the basis rows they sample (Vávra & Filip 2016, Sec. 3.3) "
+            "or by the joint fit's expected error (--objective), product rigs by the condition "
+            "number."
         ),
     )
     what = p.add_mutually_exclusive_group(required=True)
@@ -54,9 +67,18 @@ def register(subparsers: Any) -> None:
     p.add_argument("--exclude", action="append", default=[], metavar="REGION",
                    help="lab region without devices: cone:THETA,PHI,RADIUS or "
                         "box:THETA_MIN,THETA_MAX,PHI_MIN,PHI_MAX (degrees); repeatable")
-    p.add_argument("--seed", type=int, default=0, help="random seed of the search (default 0)")
+    p.add_argument("--objective", choices=OBJECTIVES, default=None,
+                   help="what chooses --pairs: kappa (the condition-number search) or "
+                        "posterior (the joint fit's expected error at --rotations; falls back "
+                        "to the search when its choice cannot be mounted) (default "
+                        f"{DEFAULT_OBJECTIVE})")
+    p.add_argument("--seed", type=int, default=0,
+                   help="random seed of the kappa search; for --objective posterior it picks "
+                        "the first pair the greedy choice starts from (0: the best single "
+                        "pair, k: the k-th best, modulo 64) (default 0)")
     p.add_argument("--rotations", type=int, default=8, metavar="R",
-                   help="uniform stage angles for the roughness bound (default 8)")
+                   help="uniform stage angles of the scan: for the roughness bound, the "
+                        "expected log_rmse and --objective posterior (default 8)")
     p.add_argument("--starts", type=int, default=10, help="random starts (default 10)")
     p.add_argument("--descents", type=int, default=10,
                    help="descents per start for --pairs (default 10)")
@@ -65,8 +87,9 @@ def register(subparsers: Any) -> None:
     p.add_argument("--time-limit", type=float, default=None, metavar="SECONDS",
                    help="stop starting new descents after this long")
     p.add_argument("--candidates", type=int, default=1, metavar="K",
-                   help="for --pairs: search from K seeds and keep the design with the lowest "
-                        "expected error on held-out materials (default 1)")
+                   help="for --pairs: make K designs (seeds --seed .. --seed + K - 1; for "
+                        "the posterior objective K different first pairs) and keep the one "
+                        "with the lowest expected error on held-out materials (default 1)")
     p.add_argument("--no-expected-error", action="store_true",
                    help="skip the held-out error estimate (it needs the default basis)")
     p.add_argument("--basis", type=Path, default=None, metavar="FILE",
@@ -105,6 +128,11 @@ def _check_args(args: argparse.Namespace) -> None:
             raise UsageError("--lights and --sensors must both be at least 1")
     elif args.sensors is not None:
         raise UsageError("--sensors goes with --lights; for independent pairs use --pairs N")
+    if args.objective is not None and args.pairs is None:
+        raise UsageError("--objective chooses --pairs designs; product rigs use the condition "
+                         "number and presets are fixed geometries")
+    if args.seed < 0:
+        raise UsageError(f"--seed must be at least 0, got {args.seed}")
     if args.rotations < 1:
         raise UsageError(f"--rotations must be at least 1, got {args.rotations}")
     if args.neighbourhood < 1 or args.neighbourhood % 2 == 0:
@@ -135,6 +163,7 @@ def make_design(args: argparse.Namespace, basis: BasisLike) -> PairDesign:
     return design_pairs(
         basis, args.pairs, constraints, h=args.neighbourhood, starts=args.starts,
         descents=args.descents, seed=args.seed, time_limit_s=args.time_limit,
+        objective=args.objective, rotations=args.rotations,
     )
 
 
@@ -219,7 +248,17 @@ def print_design(
             f"{lab[2]:7.1f} {lab[3] % 360:6.1f}",
             file=out,
         )
-    print(f"condition number: {design.kappa:.4g}", file=out)
+    if design.objective is not None:
+        print(f"objective: {design.objective} ("
+              + ("condition-number search" if design.objective == "kappa"
+                 else "joint fit's expected error") + ")", file=out)
+    if design.fallback is not None:
+        print(f"  note: {design.fallback}", file=out)
+    expected = ""
+    if design.expected_log_rmse is not None:
+        expected = (f", expected log_rmse {design.expected_log_rmse:.4f} at "
+                    f"{design.rotations} rotations (inside the basis)")
+    print(f"condition number: {design.kappa:.4g}{expected}", file=out)
     for line in explain_condition(design, rotations):
         print(line, file=out)
     print(f"closest two devices: {design.min_distance_deg:.1f} deg", file=out)
@@ -227,6 +266,11 @@ def print_design(
         s = design.search
         print(f"search: {s.neighbourhoods} neighbourhoods, {s.evaluations} candidates, "
               f"{s.seconds:.1f} s", file=out)
+    if design.greedy is not None:
+        g = design.greedy
+        print(f"greedy choice: {g.candidates} cells scored per pair ({g.evaluations} in all), "
+              f"{g.mount_checks} mount checks, first pair rank {g.first}, {g.seconds:.1f} s",
+              file=out)
     print(
         f"roughness bound at {rotations} rotations: alpha' = {bound.alpha_min:.3g} "
         f"(N = {bound.n_effective:.0f} effective samples within {bound.cap_deg:g} deg of the "
@@ -249,10 +293,12 @@ def run(args: argparse.Namespace) -> int:
             return design_pairs(
                 basis, args.pairs, constraints, h=args.neighbourhood, starts=args.starts,
                 descents=args.descents, seed=args.seed + seed, time_limit_s=args.time_limit,
+                objective=args.objective, rotations=args.rotations,
             )
 
         design, expected, table = choose_design(make, range(args.candidates), args.rotations)
-        print(f"{len(table)} candidate designs (seed, kappa, expected log_rmse):")
+        print(f"{len(table)} candidate designs (seed, kappa, expected log_rmse on held-out "
+              "materials):")
         for seed, kappa, err in table:
             print(f"  seed {args.seed + seed}: kappa {kappa:.4g}, expected log_rmse {err:.4f}")
     else:

@@ -37,24 +37,46 @@ def _angle_deg(a: dict[str, Any], b: dict[str, Any]) -> float:
     return float(np.degrees(np.arccos(np.clip(np.dot(va, vb), -1.0, 1.0))))
 
 
+def _expected_log_rmse(basis: Any, pairs: list[dict[str, Any]], rotations: int) -> float:
+    """The joint fit's expected log_rmse of the returned cells (gonio.brdf.design.posterior)."""
+    from gonio.brdf.design.posterior import expected_log_rmse, prior_model
+
+    deg = np.array([[p["theta_h_deg"], p["theta_d_deg"], p["phi_d_deg"]] for p in pairs])
+    th, td, pd = np.deg2rad(deg).T
+    return expected_log_rmse(prior_model(basis, rotations), basis.rows_at(th, td, pd))
+
+
+@pytest.mark.parametrize("objective", ["kappa", "posterior", None])
 def test_optimised_pairs_respect_constraints_and_match_the_basis(
-    daemon: Daemon, basis: Any
+    daemon: Daemon, basis: Any, objective: str | None
 ) -> None:
+    from gonio.brdf.design.pairs import DEFAULT_OBJECTIVE
+
     body = {"pairs": 6, "max_elevation_deg": 70, "min_device_distance_deg": 12,
-            "time_limit_s": 2, "starts": 3, "descents": 3, "rotations": 12, "seed": 3}
+            "time_limit_s": 2, "starts": 3, "descents": 3, "rotations": 12, "seed": 3,
+            **({} if objective is None else {"objective": objective})}
     with daemon.client() as c:
         r = c.post("/api/v1/design", json=body)
     assert r.status_code == 200, r.text
     d = r.json()
+    made_by = DEFAULT_OBJECTIVE if objective is None else objective
+    assert d["objective"] == made_by and d["fallback"] is None
     assert d["name"] == "optimized" and d["n_pairs"] == 6 and len(d["pairs"]) == 6
     assert d["condition_number"] == pytest.approx(_kappa(basis, d["pairs"]), rel=1e-3)
+    assert d["expected_log_rmse"] == pytest.approx(_expected_log_rmse(basis, d["pairs"], 12),
+                                                   rel=1e-3)
+    # Only the statistics of the search that ran.
+    if made_by == "kappa":
+        assert d["search"]["evaluations"] > 0 and d["greedy"] is None
+    else:
+        assert d["search"] is None and d["greedy"]["first"] == 3
+        assert d["greedy"]["evaluations"] == 6 * d["greedy"]["candidates"] > 0
     devices = d["lights"] + d["sensors"]
     assert all(0 <= dev["theta_deg"] <= 70 + 1e-6 for dev in devices)
     closest = min(_angle_deg(a, b) for i, a in enumerate(devices) for b in devices[i + 1:])
     assert closest >= 12 - 1e-3
     assert d["min_device_distance_deg"] == pytest.approx(closest, abs=1e-2)
     assert d["roughness"]["rotations"] == 12 and d["roughness"]["n_effective"] > 0
-    assert d["search"]["evaluations"] > 0
     frag = tomllib.loads(d["rig_config_toml"])
     assert [p["light"] for p in frag["pairs"]] == [p["light"] for p in d["pairs"]]
     assert frag["lights"] == d["lights"] and frag["sensors"] == d["sensors"]
@@ -88,6 +110,9 @@ def test_product_rig_measures_every_pair(daemon: Daemon, basis: Any) -> None:
         ({"pairs": 4, "exclusions": ["sphere:1,2"]}, "cannot read exclusion"),
         ({"pairs": 4, "max_elevation_deg": 95}, "less than 90"),
         ({"pairs": 4, "colour": "red"}, "Extra inputs are not permitted"),
+        ({"pairs": 4, "objective": "entropy"}, "Input should be 'kappa' or 'posterior'"),
+        ({"lights": 2, "sensors": 2, "objective": "posterior"},
+         "a product rig is always designed by the condition number"),
         ({"pairs": 12, "max_elevation_deg": 10, "min_device_distance_deg": 30,
           "time_limit_s": 1}, ""),
     ],
@@ -104,7 +129,9 @@ def test_design_requests_with_mistakes_get_422(
 def test_design_needs_a_key_and_runs_one_at_a_time(daemon: Daemon) -> None:
     with daemon.client(key=None) as anon:
         assert anon.post("/api/v1/design", json={"pairs": 3}).status_code == 401
-    slow = {"pairs": 10, "starts": 100, "descents": 100, "time_limit_s": 2.5}
+    # The condition-number search: it runs for its whole time limit.
+    slow = {"pairs": 10, "starts": 100, "descents": 100, "time_limit_s": 2.5,
+            "objective": "kappa"}
     first: dict[str, Any] = {}
 
     def run_first() -> None:
@@ -141,6 +168,7 @@ def test_presets_list_and_evaluate(daemon: Daemon, basis: Any) -> None:
         assert r.status_code == 200, r.text
         d = r.json()
         assert d["name"] == "MA98" and d["n_pairs"] == 19 and d["search"] is None
+        assert d["objective"] is None and d["greedy"] is None
         assert d["roughness"]["rotations"] == 16
         # Light 1 of MA98 is at 45 deg in the plane of incidence.
         assert d["lights"][0]["theta_deg"] == pytest.approx(45.0)

@@ -51,7 +51,7 @@ def test_design_pairs_writes_a_rig_fragment(basis_file: Path, tmp_path: Path,
     th, _, td, pd = geo.directions_to_half_diff(geo.spherical_to_direction(li[:, 0], li[:, 1]),
                                                 geo.spherical_to_direction(se[:, 0], se[:, 1]))
     kappa = condition_number(basis.rows_at(th, td, pd))
-    printed = float(text.split("condition number:")[1].split()[0])
+    printed = float(text.split("condition number:")[1].split()[0].rstrip(","))
     assert kappa == pytest.approx(printed, rel=1e-3)
     assert all(d["theta_deg"] <= 80.0 + 1e-6 for d in frag["lights"] + frag["sensors"])
 
@@ -95,6 +95,9 @@ def test_design_preset(basis_file: Path, capsys: pytest.CaptureFixture[str]) -> 
     ("argv", "match"),
     [
         (["--pairs", "0"], "--pairs must be at least 1"),
+        (["--lights", "2", "--sensors", "2", "--objective", "posterior"],
+         "--objective chooses --pairs designs"),
+        (["--pairs", "2", "--seed", "-1"], "--seed must be at least 0"),
         (["--lights", "2"], "--lights needs --sensors"),
         (["--pairs", "2", "--sensors", "2"], "--sensors goes with --lights"),
         (["--pairs", "2", "--exclude", "ring:1"], "cone:THETA,PHI,RADIUS"),
@@ -155,3 +158,51 @@ def test_a_well_conditioned_design_gets_no_explanation(
     assert main(["design", "--pairs", "3", "--basis", str(basis_file), *FAST]) == 0
     text = capsys.readouterr().out
     assert "condition number: inf" not in text and "why:" not in text
+
+
+@pytest.mark.parametrize("objective", ["kappa", "posterior"])
+def test_the_objective_is_chosen_and_reported(objective: str, basis_file: Path, tmp_path: Path,
+                                              capsys: pytest.CaptureFixture[str]) -> None:
+    from gonio.brdf.design.constraints import RigConstraints
+    from gonio.brdf.design.posterior import expected_log_rmse, posterior_design, prior_model
+
+    out = tmp_path / "frag.toml"
+    assert main(["design", "--pairs", "5", "--basis", str(basis_file), "--objective",
+                 objective, "--rotations", "12", *FAST, "-o", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "design: optimized, 5 pairs" in text
+    assert f"objective: {objective} (" in text and "note:" not in text
+    # Only the statistics of the search that ran.
+    assert ("search:" in text) == (objective == "kappa")
+    assert ("greedy choice:" in text) == (objective == "posterior")
+    # The printed expected log_rmse is the joint fit's for the written geometry at 12 angles.
+    basis = Basis.load(basis_file)
+    frag = tomllib.loads(out.read_text())
+    li = np.deg2rad([[d["theta_deg"], d["phi_deg"]] for d in frag["lights"]])
+    se = np.deg2rad([[d["theta_deg"], d["phi_deg"]] for d in frag["sensors"]])
+    th, _, td, pd = geo.directions_to_half_diff(geo.spherical_to_direction(li[:, 0], li[:, 1]),
+                                                geo.spherical_to_direction(se[:, 0], se[:, 1]))
+    rows = basis.rows_at(th, td, pd)
+    line = text.split("condition number:")[1].splitlines()[0]
+    assert float(line.split()[0].rstrip(",")) == pytest.approx(condition_number(rows), rel=1e-3)
+    printed = float(line.split("expected log_rmse")[1].split()[0])
+    assert "at 12 rotations" in line
+    want = expected_log_rmse(prior_model(basis, 12), rows)
+    assert printed == pytest.approx(want, rel=1e-3, abs=1e-4)
+    if objective == "posterior":
+        # The cells are the expected-error design's (checked against the core directly).
+        direct = posterior_design(basis, 5, RigConstraints(), rotations=12)
+        written = np.stack([th, td, np.mod(pd, np.pi)], axis=1)
+        for c in direct.cells:  # (the fragment holds angles rounded to 0.001 deg or so)
+            gap = np.abs(written - c)
+            gap[:, 2] = np.minimum(gap[:, 2], np.pi - gap[:, 2])
+            assert gap.max(axis=1).min() < np.deg2rad(0.01)
+
+
+def test_an_unknown_objective_names_the_choices(basis_file: Path,
+                                                capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as exc:
+        main(["design", "--pairs", "2", "--objective", "nope", "--basis", str(basis_file)])
+    assert exc.value.code == 2
+    assert ("argument --objective: invalid choice: 'nope' (choose from 'kappa', 'posterior')"
+            in capsys.readouterr().err)
