@@ -25,7 +25,13 @@ import numpy as np
 from pydantic import BaseModel, Field, model_validator
 
 from gonio.brdf.design.constraints import RigConstraints, parse_exclusion
-from gonio.brdf.design.pairs import BasisLike, PairDesign, design_pairs, geometry_design
+from gonio.brdf.design.pairs import (
+    BasisLike,
+    PairDesign,
+    design_pairs,
+    geometry_design,
+    with_expected_error,
+)
 from gonio.brdf.design.presets import Preset
 from gonio.brdf.design.product import design_product_rig
 from gonio.brdf.design.roughness import roughness_bound
@@ -257,10 +263,10 @@ def run_design(basis: BasisLike, request: DesignRequest) -> DesignResult:
         )
     else:
         assert request.lights is not None and request.sensors is not None
-        design = design_product_rig(
+        design = with_expected_error(basis, design_product_rig(
             basis, request.lights, request.sensors, constraints, h=request.neighbourhood,
             starts=request.starts, seed=request.seed, time_limit_s=request.time_limit_s,
-        )
+        ), request.rotations)
     return describe(design, request.rotations)
 
 
@@ -269,4 +275,4 @@ def evaluate_preset(basis: BasisLike, preset: Preset, rotations: int) -> DesignR
     wi, wo = preset.directions()
     n = preset.n_pairs
     design = geometry_design(basis, preset.name, wi, wo, np.stack([np.arange(n)] * 2, axis=1))
-    return describe(design, rotations)
+    return describe(with_expected_error(basis, design, rotations), rotations)

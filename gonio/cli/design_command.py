@@ -32,6 +32,7 @@ from gonio.brdf.design.pairs import (
     PairDesign,
     design_pairs,
     geometry_design,
+    with_expected_error,
 )
 from gonio.brdf.design.presets import get_preset, preset_names
 from gonio.brdf.design.product import design_product_rig
@@ -153,13 +154,14 @@ def make_design(args: argparse.Namespace, basis: BasisLike) -> PairDesign:
         preset = get_preset(args.preset)
         wi, wo = preset.directions()
         n = preset.n_pairs
-        return geometry_design(basis, preset.name, wi, wo, np.stack([np.arange(n)] * 2, axis=1))
+        fixed = geometry_design(basis, preset.name, wi, wo, np.stack([np.arange(n)] * 2, axis=1))
+        return with_expected_error(basis, fixed, args.rotations)
     constraints = _constraints(args)
     if args.lights is not None:
-        return design_product_rig(
+        return with_expected_error(basis, design_product_rig(
             basis, args.lights, args.sensors, constraints, h=args.neighbourhood,
             starts=args.starts, seed=args.seed, time_limit_s=args.time_limit,
-        )
+        ), args.rotations)
     return design_pairs(
         basis, args.pairs, constraints, h=args.neighbourhood, starts=args.starts,
         descents=args.descents, seed=args.seed, time_limit_s=args.time_limit,

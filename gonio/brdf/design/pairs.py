@@ -301,20 +301,26 @@ def design_pairs(
         log.warning("design of %d pairs: %s", n, fallback)
     design = _kappa_design(basis, n, constraints, h=h, starts=starts, descents=descents,
                            seed=seed, method=method, time_limit_s=time_limit_s)
-    return replace(design, expected_log_rmse=_expected_log_rmse(basis, design, rotations),
-                   rotations=rotations, fallback=fallback)
+    return replace(with_expected_error(basis, design, rotations), fallback=fallback)
 
 
-def _expected_log_rmse(basis: BasisLike, design: PairDesign, rotations: int) -> float | None:
-    """The joint fit's expected log_rmse of ``design``'s cells (None without a gonio Basis)."""
+def with_expected_error(basis: BasisLike, design: PairDesign, rotations: int) -> PairDesign:
+    """``design`` with the joint fit's expected log_rmse for ``rotations`` uniform stage angles.
+
+    For any geometry (an optimized design, a preset, a product rig): the expected error of its
+    cells' basis rows (:func:`gonio.brdf.design.posterior.expected_log_rmse`; off-grid cells
+    read the basis's interpolated rows). ``design`` unchanged when ``basis`` is not a gonio
+    :class:`~gonio.brdf.reconstruction.basis.Basis` (no prior to take the expectation under).
+    """
     from gonio.brdf.reconstruction.basis import Basis
 
     if not isinstance(basis, Basis):
-        return None
+        return design
     from gonio.brdf.design.posterior import expected_log_rmse, prior_model
 
     rows = basis.rows_at(design.cells[:, 0], design.cells[:, 1], design.cells[:, 2])
-    return expected_log_rmse(prior_model(basis, rotations), rows)
+    return replace(design, expected_log_rmse=expected_log_rmse(prior_model(basis, rotations), rows),
+                   rotations=int(rotations))
 
 
 def _kappa_design(

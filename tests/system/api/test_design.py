@@ -96,6 +96,9 @@ def test_product_rig_measures_every_pair(daemon: Daemon, basis: Any) -> None:
     # No device inside the excluded cone around the normal.
     assert all(dev["theta_deg"] >= 10 - 1e-6 for dev in d["lights"] + d["sensors"])
     assert d["condition_number"] == pytest.approx(_kappa(basis, d["pairs"]), rel=1e-3)
+    assert d["objective"] is None and d["search"] is None and d["greedy"] is None
+    assert d["expected_log_rmse"] == pytest.approx(_expected_log_rmse(basis, d["pairs"], 8),
+                                                   rel=1e-3)
 
 
 @pytest.mark.parametrize(
@@ -169,6 +172,9 @@ def test_presets_list_and_evaluate(daemon: Daemon, basis: Any) -> None:
         d = r.json()
         assert d["name"] == "MA98" and d["n_pairs"] == 19 and d["search"] is None
         assert d["objective"] is None and d["greedy"] is None
+        # Next to kappa, as for an optimized design: the joint fit's expected error.
+        assert d["expected_log_rmse"] == pytest.approx(
+            _expected_log_rmse(basis, d["pairs"], 16), rel=1e-3)
         assert d["roughness"]["rotations"] == 16
         # Light 1 of MA98 is at 45 deg in the plane of incidence.
         assert d["lights"][0]["theta_deg"] == pytest.approx(45.0)

@@ -89,6 +89,8 @@ def test_design_preset(basis_file: Path, capsys: pytest.CaptureFixture[str]) -> 
     assert main(["design", "--preset", "ma98", "--basis", str(basis_file)]) == 0
     text = capsys.readouterr().out
     assert "design: MA98, 19 pairs" in text
+    # A preset is compared with optimized designs by the same two numbers.
+    assert "objective:" not in text and "expected log_rmse" in text
 
 
 @pytest.mark.parametrize(
