@@ -10,6 +10,10 @@ class DesignError(ValueError):
     """A sampling design that cannot be computed as asked (bad n, too few candidates ...)."""
 
 
+class DesignTimeout(DesignError):
+    """A design that did not finish within its time limit (``time_limit_s``)."""
+
+
 class FeasibilityError(AdvisedError):
     """Constraints that rule out the design asked for; the advice says what to relax.
 

@@ -30,7 +30,7 @@ from gonio.brdf.design.constraints import (
     min_pairwise_distance,
     rows_to_cells,
 )
-from gonio.brdf.design.errors import DesignError, FeasibilityError
+from gonio.brdf.design.errors import DesignError, DesignTimeout, FeasibilityError
 from gonio.brdf.design.mounting import MountPlanner
 from gonio.brdf.design.placement import Placement, place_pairs
 from gonio.brdf.design.search import SearchResult, optimize_rows
@@ -244,13 +244,15 @@ def design_pairs(
       ``rotations`` uniform stage angles
       (:func:`gonio.brdf.design.posterior.posterior_design`), each greedy step restricted to
       cells that still mount beside the pairs chosen so far; ``seed`` picks which first pair
-      the greedy starts from (0: the best). It needs a gonio
-      :class:`~gonio.brdf.reconstruction.basis.Basis` (its medians and prior).
+      the greedy starts from (0: the best); ``time_limit_s`` bounds its mount checks. It
+      needs a gonio :class:`~gonio.brdf.reconstruction.basis.Basis` (its medians and prior).
 
     Either way the condition-number search's ability to plan mounts is kept: when the
-    expected-error choice cannot be mounted (a crowded rig, :class:`FeasibilityError`), or
-    when it is only the default and ``basis`` is not a gonio ``Basis``, the search makes the
-    design instead, the reason logged and kept in :attr:`PairDesign.fallback`. Candidates are
+    expected-error choice cannot be mounted (a crowded rig, :class:`FeasibilityError`), runs
+    past ``time_limit_s`` (its mount checks; the search then has ``time_limit_s`` of its own,
+    so a design takes at most about twice the limit), or when it is only the default and
+    ``basis`` is not a gonio ``Basis``, the search makes the design instead, the reason logged
+    and kept in :attr:`PairDesign.fallback`. Candidates are
     the basis's valid cells that ``constraints`` allow
     (:func:`gonio.brdf.design.constraints.candidate_rows`).
 
@@ -285,11 +287,16 @@ def design_pairs(
         if isinstance(basis, Basis):
             try:
                 return posterior_design(basis, n, constraints, rotations=rotations,
-                                        seed=0 if seed is None else seed)
+                                        seed=0 if seed is None else seed,
+                                        time_limit_s=time_limit_s)
             except FeasibilityError as exc:
                 fallback = (f"the expected-error choice could not be mounted ({exc}); the "
                             "condition-number search, which plans mounts as it goes, made "
                             "the design")
+            except DesignTimeout as exc:
+                fallback = (f"{exc}; the condition-number search made the design within a "
+                            "time limit of its own (raise the time limit or ask for fewer "
+                            "pairs to get the expected-error design)")
         elif objective is None:
             fallback = ("the expected-error design needs a gonio Basis (its medians and "
                         "prior); the condition-number search made the design")

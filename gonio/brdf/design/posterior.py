@@ -51,7 +51,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from gonio.brdf.design.conditioning import condition_number
 from gonio.brdf.design.constraints import RigConstraints, candidate_rows, rows_to_cells
-from gonio.brdf.design.errors import DesignError, FeasibilityError
+from gonio.brdf.design.errors import DesignError, DesignTimeout, FeasibilityError
 from gonio.brdf.design.pairs import GreedyStats, PairDesign
 from gonio.brdf.design.placement import place_pairs
 from gonio.brdf.reconstruction.basis import Basis
@@ -247,6 +247,7 @@ def posterior_design(
     eta: float = JOINT_ETA,
     lam: float = JOINT_LAM,
     seed: int = 0,
+    time_limit_s: float | None = None,
 ) -> PairDesign:
     """``n`` pairs that minimise the joint fit's expected metric error (module notes).
 
@@ -267,6 +268,10 @@ def posterior_design(
         The rank of the first pair is ``seed`` modulo :data:`FIRST_RANKS` (``first`` of
         :func:`greedy_rows`; 0: the best), so consecutive seeds give different candidate
         designs; also the seed of the placement's shuffled orders.
+    time_limit_s : float, optional
+        Give up (:class:`~gonio.brdf.design.errors.DesignTimeout`) when the mount checks of
+        the choice run past this many seconds (without a device-distance limit the choice
+        checks no mounts and is quick).
 
     Returns
     -------
@@ -281,6 +286,8 @@ def posterior_design(
         For ``n < 1``, more pairs than feasible cells, or bad ``rotations`` / ``eta`` / ``lam``.
     FeasibilityError
         When no cell is feasible or the chosen pairs cannot be mounted under ``constraints``.
+    DesignTimeout
+        When the choice runs past ``time_limit_s``.
     """
     if n < 1:
         raise DesignError(f"the number of pairs must be at least 1, got {n}")
@@ -292,6 +299,10 @@ def posterior_design(
         # Devices can collide: keep only choices that still mount (a quick placement check).
         def accept(rows: NDArray[np.intp]) -> bool:
             nonlocal checks
+            if time_limit_s is not None and time.perf_counter() - t0 > time_limit_s:
+                raise DesignTimeout(
+                    f"the expected-error choice did not finish within {time_limit_s:g} s "
+                    f"(at pair {rows.size} of {n}, {checks} mount checks)")
             checks += 1
             try:
                 place_pairs(rows_to_cells(rows), constraints, ph_step_deg=1.0, orderings=4,

@@ -236,3 +236,23 @@ def test_a_default_posterior_objective_falls_back_for_rows_without_a_basis(
         pairs.design_pairs(rows_only, 3, RigConstraints(), objective="posterior")
     with pytest.raises(DesignError, match="rotations=0"):
         pairs.design_pairs(rows_only, 3, RigConstraints(), rotations=0)
+
+
+def test_an_expected_error_choice_past_its_time_limit_hands_over_to_the_search(
+    library_basis: Basis,
+) -> None:
+    """The API's time limit holds for both objectives: a choice that cannot finish its mount
+    checks in time gives way to the search (with a time limit of its own), and says so."""
+    from gonio.brdf.design.constraints import RigConstraints, min_pairwise_distance
+    from gonio.brdf.design.errors import DesignTimeout
+    from gonio.brdf.design.pairs import design_pairs
+    from gonio.brdf.design.posterior import posterior_design
+
+    c = RigConstraints()
+    with pytest.raises(DesignTimeout, match=r"did not finish within 1e-06 s \(at pair 1 of 12"):
+        posterior_design(library_basis, 12, c, time_limit_s=1e-6)
+    d = design_pairs(library_basis, 12, c, starts=1, descents=1, objective="posterior",
+                     time_limit_s=1e-6)
+    assert d.objective == "kappa" and d.search is not None and d.greedy is None
+    assert d.fallback is not None and "did not finish within 1e-06 s" in d.fallback
+    assert np.degrees(min_pairwise_distance(_devices_of(d))) >= 10.0 - 1e-6
