@@ -52,14 +52,17 @@ def test_optimised_pairs_respect_constraints_and_match_the_basis(
 ) -> None:
     from gonio.brdf.design.pairs import DEFAULT_OBJECTIVE
 
+    made_by = DEFAULT_OBJECTIVE if objective is None else objective
+    # The greedy choice falls back to the kappa search past the time limit; on a saturated
+    # machine it needs more than the 2 s that bound the kappa search here.
     body = {"pairs": 6, "max_elevation_deg": 70, "min_device_distance_deg": 12,
-            "time_limit_s": 2, "starts": 3, "descents": 3, "rotations": 12, "seed": 3,
+            "time_limit_s": 2 if made_by == "kappa" else 120, "starts": 3, "descents": 3,
+            "rotations": 12, "seed": 3,
             **({} if objective is None else {"objective": objective})}
     with daemon.client() as c:
         r = c.post("/api/v1/design", json=body)
     assert r.status_code == 200, r.text
     d = r.json()
-    made_by = DEFAULT_OBJECTIVE if objective is None else objective
     assert d["objective"] == made_by and d["fallback"] is None
     assert d["name"] == "optimized" and d["n_pairs"] == 6 and len(d["pairs"]) == 6
     assert d["condition_number"] == pytest.approx(_kappa(basis, d["pairs"]), rel=1e-3)
