@@ -107,6 +107,24 @@ class ScanPosterior:
         The joint fit's settings (defaults :data:`JOINT_ETA`, :data:`JOINT_LAM`).
     rho : float, optional
         Fix the factor on the varying harmonics instead of choosing it by marginal likelihood.
+
+    Attributes
+    ----------
+    s2 : float
+        Scale of the prior chosen by marginal likelihood, ``y^T G^-1 y / (N C)`` (remapped
+        units squared; ``N`` readings, ``C`` channels).
+    rho : float
+        Factor on the varying harmonics (``m > 0``) chosen from :data:`RHO_GRID`.
+    mahalanobis : float
+        Squared Mahalanobis norm under the prior (before the scale ``s2``) of the fitted
+        readings, per pair and channel: ``f^T K^-1 f / (n C)`` with ``K`` the prior
+        covariance of the readings and ``f = K G^-1 y`` the fit at them (remapped units
+        squared). A material far from the training library needs components the prior
+        deems unlikely, so the norm is large; it witnesses the error the basis cannot
+        represent, which :attr:`expected_log_rmse` cannot see
+        (:mod:`gonio.brdf.reconstruction.selfcheck`). Per pair, not per reading: for an
+        isotropic specimen the norm of the whole scan hardly changes with the number of
+        stage angles (repeated readings of one pair add no new direction).
     """
 
     def __init__(
@@ -171,7 +189,12 @@ class ScanPosterior:
         G = self._G_iso + self.rho * self._G_var
         G[np.diag_indices_from(G)] += self.eta
         self._chol = scipy.linalg.cho_factor(G, lower=True)
-        self.s2 = float(np.sum(self.y * scipy.linalg.cho_solve(self._chol, self.y))) / self.y.size
+        beta = scipy.linalg.cho_solve(self._chol, self.y)
+        self.s2 = float(np.sum(self.y * beta)) / self.y.size
+        # y^T G^-1 y splits into the fit's prior norm and its residual over the noise:
+        # with K = G - eta I and the fitted readings f = K beta, f^T K^-1 f = beta^T K beta.
+        self.mahalanobis = (float(np.sum(self.y * beta) - self.eta * np.sum(beta**2))
+                            / (self.n * self.C))
 
     # ------------------------------------------------------------------ set-up
     def _set_weights(self, basis: Basis, table: FloatArray) -> None:

@@ -149,6 +149,12 @@ class Reconstruction:
         (:attr:`gonio.brdf.reconstruction.posterior.ScanPosterior.expected_log_rmse`); one
         input of ``predicted_log_rmse`` (:mod:`gonio.brdf.reconstruction.selfcheck`). It cannot
         see what the basis cannot represent.
+    mahalanobis : float
+        Joint fit only (else NaN): squared Mahalanobis norm of the fitted readings under the
+        fit's prior, per pair and channel
+        (:attr:`gonio.brdf.reconstruction.posterior.ScanPosterior.mahalanobis`). Large when the
+        material sits far from the training library; the witness of what the basis cannot
+        represent in ``predicted_log_rmse``.
     """
 
     table: BRDFTable
@@ -163,6 +169,7 @@ class Reconstruction:
     angle_log_errors: FloatArray | None = None
     pair_log_errors: FloatArray | None = None
     expected_log_rmse: float = float("nan")
+    mahalanobis: float = float("nan")
 
 
 # ---------------------------------------------------------------------------- geometry helper
@@ -762,11 +769,12 @@ def _reconstruct(
         from gonio.brdf.reconstruction.posterior import ScanPosterior
         from gonio.brdf.reconstruction.selfcheck import predict_log_rmse as predict_joint
 
-        expected = ScanPosterior(basis, cells_, ph_, alpha, vals, table=table.values, eta=eta,
-                                 lam=lam).expected_log_rmse
-        predicted = predict_joint(expected, cv)
+        post = ScanPosterior(basis, cells_, ph_, alpha, vals, table=table.values, eta=eta,
+                             lam=lam)
+        expected, mahal = post.expected_log_rmse, post.mahalanobis
+        predicted = predict_joint(expected, mahal, cv)
     else:
-        expected = float("nan")
+        expected = mahal = float("nan")
         predicted = predict_log_rmse(cv, n, int(alpha.size))
     seconds = time.perf_counter() - t0
     return Reconstruction(
@@ -784,6 +792,7 @@ def _reconstruct(
         cv_log_error=cv_log,
         predicted_log_rmse=predicted,
         expected_log_rmse=expected,
+        mahalanobis=mahal,
         angle_log_errors=angle_err,
         pair_log_errors=pair_err,
     )

@@ -5,48 +5,61 @@ own witness in the scan:
 
 * **what the readings leave undetermined** inside the basis: the joint fit's posterior
   variance, weighted as ``log_rmse`` weighs errors and scaled to the material by empirical
-  Bayes (:attr:`gonio.brdf.reconstruction.posterior.ScanPosterior.expected_log_rmse`, ``expected``);
-* **what the basis cannot represent**: invisible to the posterior, but it shows as
-  readings the fit to the *other* pairs mispredicts (``cv_sample_error``, the
-  leave-one-pair-out relative error; its log-unit twin ``cv_log_error`` predicted less well).
+  Bayes (:attr:`gonio.brdf.reconstruction.posterior.ScanPosterior.expected_log_rmse`,
+  ``expected``);
+* **what the basis cannot represent**: invisible to the posterior. Two witnesses carry it:
+  how far the fit had to go from the training library to pass through the readings (the
+  squared Mahalanobis norm of the fitted readings under the prior,
+  :attr:`~gonio.brdf.reconstruction.posterior.ScanPosterior.mahalanobis`), and how badly the
+  fit to the *other* pairs predicts each pair (``cv_sample_error``, leave-one-pair-out
+  relative error).
 
-The estimate is ``exp(a) expected^b cv_sample_error^c`` (:data:`LOG_RMSE_MODEL`), fitted in
-logs on held-out training materials (the synthetic panel of
-:mod:`gonio.brdf.design.heldout` and half of the measured materials) and checked on
-materials never calibrated on (the other measured half, mitsuba anisotropic specimens):
-``bench/calibrate_log_rmse.py``, table in
-``docs/science.md`` 7.1. The posterior term carries most of the information (exponent 0.74);
-the remaining spread is the unrepresentable part, which no sample-based witness measured
-well.
+The two parts add as variances:
+
+``predicted_log_rmse^2 = exp(a) expected^2 + exp(b) mahalanobis^c cv_sample_error^d``
+
+(:data:`LOG_RMSE_MODEL`), fitted by least squares in ``ln(log_rmse)`` on held-out training
+materials (the synthetic panel of :mod:`gonio.brdf.design.heldout` and half of the measured
+materials) and checked on materials never calibrated on (the other measured half, mitsuba
+anisotropic specimens): ``bench/calibrate_log_rmse.py``, table in ``docs/science.md`` 7.1.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-#: Features of :data:`LOG_RMSE_MODEL`, in order after the intercept.
-LOG_RMSE_FEATURES: tuple[str, ...] = ("expected", "cv_sample_error")
-#: ``ln(predicted_log_rmse) = a + b ln(expected) + c ln(cv_sample_error)``.
-LOG_RMSE_MODEL: tuple[float, float, float] = (0.109, 0.741, 0.176)
+#: Features of :data:`LOG_RMSE_MODEL`, in the order :func:`predict_log_rmse` takes them.
+LOG_RMSE_FEATURES: tuple[str, ...] = ("expected", "mahalanobis", "cv_sample_error")
+#: ``(a, b, c, d)`` of ``predicted^2 = exp(a) expected^2 + exp(b) mahalanobis^c cv^d``.
+LOG_RMSE_MODEL: tuple[float, float, float, float] = (0.721, 5.427, 1.242, 0.366)
+
+_FLOOR = 1e-12  # keeps the logarithms finite for exact (noise-free, in-span) data
 
 
-def predict_log_rmse(expected: float, cv_sample_error: float) -> float:
+def predict_log_rmse(expected: float, mahalanobis: float, cv_sample_error: float) -> float:
     """Calibrated estimate of the whole-table ``log_rmse`` of a joint reconstruction.
 
     Parameters
     ----------
     expected : float
         The posterior's expected ``log_rmse`` (dimensionless).
+    mahalanobis : float
+        Squared Mahalanobis norm of the fit per reading
+        (:attr:`gonio.brdf.reconstruction.reconstruct.Reconstruction.mahalanobis`; remapped
+        units squared).
     cv_sample_error : float
-        Leave-one-pair-out relative error (:attr:`Reconstruction.cv_sample_error`).
+        Leave-one-pair-out relative error (:attr:`Reconstruction.cv_sample_error`, a fraction).
 
     Returns
     -------
     float
-        NaN when either input is NaN.
+        The estimate (``log_rmse`` units); NaN when any input is NaN.
     """
-    if not (np.isfinite(expected) and np.isfinite(cv_sample_error)):
+    x = (float(expected), float(mahalanobis), float(cv_sample_error))
+    if not all(np.isfinite(v) for v in x):
         return float("nan")
-    a, b, c = LOG_RMSE_MODEL
-    return float(np.exp(a) * max(float(expected), 1e-6) ** b
-                 * max(float(cv_sample_error), 1e-6) ** c)
+    e, m, cv = (max(v, _FLOOR) for v in x)
+    a, b, c, d = LOG_RMSE_MODEL
+    # In logs, so tiny features do not underflow: ln(exp(a) e^2 + exp(b) m^c cv^d) / 2.
+    return float(np.exp(0.5 * np.logaddexp(a + 2.0 * np.log(e),
+                                           b + c * np.log(m) + d * np.log(cv))))

@@ -1,0 +1,100 @@
+"""Tests of the self-estimate ``predicted_log_rmse`` and its witnesses (issue 9 item 5)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from gonio.brdf.reconstruction.basis import inverse_remap
+from gonio.brdf.reconstruction.posterior import ScanPosterior
+from gonio.brdf.reconstruction.reconstruct import reconstruct
+from gonio.brdf.reconstruction.selfcheck import LOG_RMSE_MODEL, predict_log_rmse
+from gonio.brdf.tables import geometry as geo
+from tests.unit.brdf.reconstruction.test_posterior import _scan
+
+
+def _dense_mahalanobis(post: ScanPosterior, alpha: np.ndarray) -> float:
+    """``f^T K^-1 f / (n C)`` with the readings' prior covariance ``K`` written out element by
+    element and the fit ``f = K (K + eta I)^-1 y`` (no harmonic or Cholesky shortcuts)."""
+    P = np.asarray(post.P)
+    rho_m = np.where(np.arange(P.shape[0]) > 0, post.rho, 1.0)
+    Qt = post.Qt
+    ph_read = (post.ph_lab[:, None] - alpha[None, :]).ravel()
+    q = np.repeat(np.arange(Qt.shape[0]), alpha.size)
+    N = ph_read.size
+    K = np.empty((N, N))
+    for a in range(N):
+        for b in range(N):
+            d = ph_read[a] - ph_read[b]
+            prior = sum(rho_m[m] * P[m] * np.cos(m * d) for m in range(P.shape[0]))
+            K[a, b] = Qt[q[a]] @ prior @ Qt[q[b]]
+    total = 0.0
+    for c in range(post.y.shape[1]):
+        f = K @ np.linalg.solve(K + post.eta * np.eye(N), post.y[:, c])
+        total += float(f @ np.linalg.solve(K, f))
+    return total / (Qt.shape[0] * post.y.shape[1])
+
+
+def test_mahalanobis_equals_the_explicit_norm_of_the_fit() -> None:
+    b, cells, ph, alpha, vals = _scan()
+    post = ScanPosterior(b, cells, ph, alpha, vals, lam=0.0, rho=2.0)
+    assert post.mahalanobis > 0
+    assert post.mahalanobis == pytest.approx(_dense_mahalanobis(post, alpha), rel=1e-6)
+
+
+def test_mahalanobis_grows_with_the_distance_from_the_library_mean() -> None:
+    """Readings at the library's mean need no departure from the prior (norm 0); readings
+    t times as far from the mean (in remapped units) need t^2 times the norm."""
+    b, cells, ph, alpha, vals = _scan()
+    post = ScanPosterior(b, cells, ph, alpha, vals, lam=0.0, rho=2.0)
+    th, td, pd = np.asarray(cells).T
+    rows, weights = b.neighbours(th, td, pd)
+    fmed = (weights * b.f_med[rows]).sum(axis=1)[:, None, None]
+    mu = (weights * b.mu[rows]).sum(axis=1)[:, None, None]
+    ci, co = geo.cell_cosines(th, td, pd)
+    w = np.maximum(ci * co, b.eps)[:, None, None]
+    y0 = post.y.reshape(vals.shape)
+
+    def norm(t: float) -> float:
+        v = np.maximum(inverse_remap(mu + t * y0, fmed, w, b.eps), 0.0)
+        return ScanPosterior(b, cells, ph, alpha, v, lam=0.0, rho=2.0).mahalanobis
+
+    assert abs(norm(0.0)) < 1e-9 * post.mahalanobis
+    assert norm(0.5) == pytest.approx(0.25 * post.mahalanobis, rel=1e-6)
+    assert norm(1.0) == pytest.approx(post.mahalanobis, rel=1e-6)
+
+
+def test_prediction_is_the_two_term_formula() -> None:
+    """Evaluated by hand: predicted^2 = e^a expected^2 + e^b mahalanobis^c cv^d."""
+    a, b, c, d = LOG_RMSE_MODEL
+    for e, m, cv in ((0.02, 3e-5, 0.4), (0.005, 1e-6, 2.0), (0.1, 1e-3, 0.05)):
+        want = math.sqrt(math.exp(a) * e * e + math.exp(b) * m**c * cv**d)
+        assert predict_log_rmse(e, m, cv) == pytest.approx(want, rel=1e-12)
+
+
+def test_prediction_limits() -> None:
+    a = LOG_RMSE_MODEL[0]
+    # A fit at the library's mean (no discrepancy): the posterior term alone.
+    assert predict_log_rmse(0.03, 1e-300, 0.5) == pytest.approx(math.exp(a / 2) * 0.03,
+                                                               rel=1e-6)
+    # It never falls below the posterior term, and grows with either witness.
+    p0 = predict_log_rmse(0.03, 3e-5, 0.5)
+    assert p0 > math.exp(a / 2) * 0.03
+    assert predict_log_rmse(0.03, 3e-4, 0.5) > p0
+    assert predict_log_rmse(0.03, 3e-5, 2.0) > p0
+    for bad in ((float("nan"), 1e-5, 0.1), (0.01, float("nan"), 0.1), (0.01, 1e-5, float("nan"))):
+        assert math.isnan(predict_log_rmse(*bad))
+
+
+def test_reconstruction_reports_the_witnesses_it_predicts_from() -> None:
+    b, cells, ph, alpha, vals = _scan()
+    rec = reconstruct(b, cells, ph, alpha, vals, channels=["Y"])
+    post = ScanPosterior(b, cells, ph, alpha, vals, table=rec.table.values)
+    assert rec.mahalanobis == pytest.approx(post.mahalanobis, rel=1e-9)
+    assert rec.expected_log_rmse == pytest.approx(post.expected_log_rmse, rel=1e-9)
+    assert rec.predicted_log_rmse == pytest.approx(
+        predict_log_rmse(rec.expected_log_rmse, rec.mahalanobis, rec.cv_sample_error), rel=1e-9)
+    vf = reconstruct(b, cells, ph, alpha, vals, channels=["Y"], method="vf")
+    assert math.isnan(vf.mahalanobis) and math.isnan(vf.expected_log_rmse)
