@@ -280,6 +280,8 @@ def report(rows: list[dict[str, Any]], fit_rows: list[dict[str, Any]]) -> None:
               f"{ok[val & (kind == 'aniso')].mean():.0%} | {int(ok[default].sum())} of "
               f"{int(default.sum())} |")
 
+    med = float(np.median(yf[calf]))  # last round's baseline: the calibration median
+    line("constant (calibration median)", f"{np.exp(med):.4f}", "", med - y, np.zeros(0))
     for label, form, feats in CANDIDATES:
         model, k = (loglinear if form == "lin" else two_term)(feats)
         p = fit(model, k, Ff, yf, calf, form == "lin")

@@ -22,6 +22,10 @@ The two parts add as variances:
 materials (the synthetic panel of :mod:`gonio.brdf.design.heldout` and half of the measured
 materials) and checked on materials never calibrated on (the other measured half, mitsuba
 anisotropic specimens): ``bench/calibrate_log_rmse.py``, table in ``docs/science.md`` 7.1.
+The witnesses were chosen by a leave-one-material-out cross-validation within the
+calibration set, among error witnesses that enter with the sign of their mechanism. Within
+x2 of the truth on 77 % of the validation scans (last round's ``expected``-and-
+``cv_sample_error`` model: 72 %).
 """
 
 from __future__ import annotations
