@@ -129,9 +129,10 @@ def headline_error(metrics: dict[str, Any]) -> dict[str, Any] | None:
             "key": "predicted_log_rmse", "value": float(v), "text": f"{v:.3f}",
             "meaning": "predicted log RMSE of the whole BRDF against the true material "
                        "(cosine-weighted, Löw et al. 2012): 0 is a perfect match, lower is "
-                       "better; about 0.025 is typical of a good scan of a library-like "
-                       "material (10 pairs x 8 angles). Materials unlike the training "
-                       "library can be worse than predicted.",
+                       "better. It adds what the readings leave undetermined to how far the "
+                       "material sits from the training library; on materials held out of "
+                       "the library it was within a factor of 2 of the truth on about 3 "
+                       "scans in 4 (docs/science.md 7.1).",
         }
     v = metrics.get("predicted_error")
     if isinstance(v, int | float):
