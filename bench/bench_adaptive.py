@@ -3,7 +3,7 @@
 Run from the project root (needs mitsuba and ``../shared/data/rgl``, like
 ``bench/bench_unseen.py``, whose materials, readings and designs it reuses)::
 
-    nice -n 5 .venv/bin/python bench/bench_adaptive.py [--gains 0.0005 0.001 0.002]
+    nice -n 5 .venv/bin/python bench/bench_adaptive.py [--gains 0.0006] [--starts 8 4]
         [--max-rotations 16] [--set panel|unseen|both] [--only measured|aniso]
 
 Sets
@@ -16,11 +16,15 @@ Sets
 * ``unseen`` (the benchmark of ``bench_unseen.py``): 11 measured RGL materials, each with a
   basis that leaves it out, and 6 mitsuba anisotropic specimens.
 
-Every scan: pairs ``design_pairs(basis, 10)`` on the material's own basis, start at 8 uniform
-stage angles, refine by :func:`next_angles` (rounds until it plans nothing; at most one new
-angle per gap per round, as the engine runs it) up to
-``--max-rotations``; then the default joint reconstruction of everything read. Rows: uniform 8
-and 16, each threshold. Columns: mean ``log_rmse`` per group and overall, mean readings.
+Every scan: pairs ``design_pairs(basis, 10)`` on the material's own basis, start at ``r0``
+uniform stage angles (each of ``--starts``), refine by :func:`next_angles` (rounds until it
+plans nothing; at most one new angle per gap per round, as the engine runs it) up to
+``--max-rotations``; then two reconstructions of everything read: the default joint fit
+("plain fit"), and the one adaptive jobs finish with,
+:func:`~gonio.brdf.reconstruction.posterior.reconstruct_adaptive` (the joint fit with the
+scan's own ``rho`` when it is below 1: "scan rho"). Rows: uniform 4, 8 and 16 (plain fit and
+scan rho), each start and threshold. Columns: mean ``log_rmse`` per group and overall, mean
+readings, share of uniform 16's readings.
 
 The self-estimated error (``predicted_log_rmse``) is calibrated by ``calibrate_log_rmse.py``.
 """
@@ -37,7 +41,7 @@ import bench_unseen as bu
 import numpy as np
 
 from gonio.brdf.reconstruction.basis import Basis, default_basis
-from gonio.brdf.reconstruction.posterior import next_angles
+from gonio.brdf.reconstruction.posterior import next_angles, reconstruct_adaptive
 from gonio.brdf.reconstruction.reconstruct import reconstruct
 from gonio.brdf.reconstruction.samples import uniform_stage_angles
 from gonio.brdf.tables import metrics
@@ -71,14 +75,27 @@ def unseen_cases() -> list[Case]:
     return out
 
 
-def uniform(c: Case, r: int) -> tuple[float, int]:
-    alpha = uniform_stage_angles(r)
-    vals = bu.read(c.mat, c.cells, c.ph, alpha, c.seed)
-    rec = reconstruct(c.basis, c.cells, c.ph, alpha, vals)
-    return metrics.log_rmse(rec.table, c.mat.truth), vals.shape[0] * r
+Result = tuple[float, int]
+"""(log_rmse, readings) of one scan."""
 
 
-def adaptive(c: Case, gain: float, r0: int, max_r: int) -> tuple[float, int]:
+def finals(c: Case, angles_deg: list[float], vals: np.ndarray) -> tuple[Result, Result]:
+    """The plain joint fit and :func:`reconstruct_adaptive` of the same readings."""
+    alpha = np.deg2rad(angles_deg)
+    plain = reconstruct(c.basis, c.cells, c.ph, alpha, vals)
+    shrunk, _rho = reconstruct_adaptive(c.basis, c.cells, c.ph, alpha, vals)
+    n = vals.shape[0] * len(angles_deg)
+    return ((metrics.log_rmse(plain.table, c.mat.truth), n),
+            (metrics.log_rmse(shrunk.table, c.mat.truth), n))
+
+
+def uniform(c: Case, r: int) -> tuple[Result, Result]:
+    angles = list(np.rad2deg(uniform_stage_angles(r)))
+    vals = bu.read(c.mat, c.cells, c.ph, np.deg2rad(angles), c.seed)
+    return finals(c, angles, vals)
+
+
+def adaptive(c: Case, gain: float, r0: int, max_r: int) -> tuple[Result, Result]:
     angles = list(np.rad2deg(uniform_stage_angles(r0)))
     vals = bu.read(c.mat, c.cells, c.ph, np.deg2rad(angles), c.seed)
     for rnd in range(8):
@@ -92,28 +109,33 @@ def adaptive(c: Case, gain: float, r0: int, max_r: int) -> tuple[float, int]:
                         c.seed + 1000 * (rnd + 1))
         angles += step.angles_deg
         vals = np.concatenate([vals, extra], axis=1)
-    rec = reconstruct(c.basis, c.cells, c.ph, np.deg2rad(angles), vals)
-    return metrics.log_rmse(rec.table, c.mat.truth), vals.shape[0] * len(angles)
+    return finals(c, angles, vals)
 
 
-def table(name: str, cases: list[Case], gains: list[float], max_r: int) -> dict[str, float]:
-    rows: dict[str, dict[str, tuple[float, int]]] = {}
+def table(name: str, cases: list[Case], gains: list[float], starts: list[int],
+          max_r: int) -> dict[str, float]:
+    rows: dict[str, dict[str, Result]] = {}
     t0 = time.perf_counter()
+
+    def put(row: str, c: Case, both: tuple[Result, Result]) -> None:
+        rows.setdefault(f"{row}, plain fit", {})[c.mat.name] = both[0]
+        rows.setdefault(f"{row}, scan rho", {})[c.mat.name] = both[1]
+
     for c in cases:
-        rows.setdefault("uniform 8", {})[c.mat.name] = uniform(c, 8)
-        rows.setdefault("uniform 16", {})[c.mat.name] = uniform(c, 16)
-        for g in gains:
-            rows.setdefault(f"posterior gain>={g}, 8->{max_r}", {})[c.mat.name] = adaptive(
-                c, g, 8, max_r)
-        print(f"  {c.mat.name}: " + ", ".join(
-            f"{k.split(',')[0]} {v[c.mat.name][0]:.4f}/{v[c.mat.name][1]}"
+        for r in (4, 8, 16):
+            put(f"uniform {r}", c, uniform(c, r))
+        for r0 in starts:
+            for g in gains:
+                put(f"posterior {r0}->{max_r} gain>={g}", c, adaptive(c, g, r0, max_r))
+        print(f"  {c.mat.name}: " + "; ".join(
+            f"{k} {v[c.mat.name][0]:.4f}/{v[c.mat.name][1]}"
             for k, v in rows.items()) + f" ({time.perf_counter() - t0:.0f} s)", flush=True)
     kinds = sorted({c.mat.kind for c in cases})
     print(f"\n{name}:\n| row | " + " | ".join(f"{k} ({sum(c.mat.kind == k for c in cases)})"
                                            for k in kinds)
           + " | all | readings (mean) | share of uniform 16 |")
     print("|---" * (len(kinds) + 4) + "|")
-    u16 = np.mean([v[1] for v in rows["uniform 16"].values()])
+    u16 = np.mean([v[1] for v in rows["uniform 16, plain fit"].values()])
     out = {}
     for row, per in rows.items():
         txt = " | ".join(f"{np.mean([per[c.mat.name][0] for c in cases if c.mat.kind == k]):.4f}"
@@ -127,17 +149,20 @@ def table(name: str, cases: list[Case], gains: list[float], max_r: int) -> dict[
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--gains", type=float, nargs="*", default=[0.0005, 0.001, 0.002])
+    ap.add_argument("--gains", type=float, nargs="*", default=[0.0006])
+    ap.add_argument("--starts", type=int, nargs="*", default=[8, 4],
+                    help="initial uniform stage angles r0 of the adaptive scans")
     ap.add_argument("--max-rotations", type=int, default=16)
     ap.add_argument("--set", choices=["panel", "unseen", "both"], default="both")
     ap.add_argument("--only", choices=["measured", "aniso"], default=None)
     args = ap.parse_args(argv)
     print(f"$ {' '.join(['python', *sys.argv])}")
     if args.set in ("panel", "both"):
-        table("panel (calibration)", panel_cases(), args.gains, args.max_rotations)
+        table("panel (calibration)", panel_cases(), args.gains, args.starts,
+              args.max_rotations)
     if args.set in ("unseen", "both"):
         cases = [c for c in unseen_cases() if args.only in (None, c.mat.kind)]
-        table("unseen (benchmark)", cases, args.gains, args.max_rotations)
+        table("unseen (benchmark)", cases, args.gains, args.starts, args.max_rotations)
     return 0
 
 

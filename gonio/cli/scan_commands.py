@@ -43,11 +43,19 @@ def register(subparsers: Any) -> None:
     p.add_argument("--time-scale", type=positive_float, default=1.0,
                    help="simulated seconds per wall second (with --sim)")
     p.add_argument("--seed", type=int, default=0, help="sensor noise seed (with --sim)")
-    p.add_argument("--rotations", type=positive_int, default=8, help="stage angles r (uniform)")
+    p.add_argument("--rotations", type=positive_int, default=None,
+                   help="stage angles r (default 8); with --adaptive the first round's "
+                        "(default 4 with the posterior rule, 8 with --rule vf)")
     p.add_argument("--start-deg", type=finite_float, default=0.0, help="first stage angle, degrees")
     p.add_argument("--adaptive", action="store_true", help="adaptive rotations (MATH 7)")
+    p.add_argument("--rule", choices=["posterior", "vf"], default="posterior",
+                   help="adaptive refinement rule: posterior (where the joint fit expects the "
+                        "error to fall most) or vf (V&F's PCHIP midpoints)")
+    p.add_argument("--min-gain", type=positive_float, default=None,
+                   help="posterior rule: least expected log_rmse drop a new stage angle must "
+                        "buy (default 0.0006)")
     p.add_argument("--threshold", type=positive_float, default=0.1,
-                   help="adaptive relative error e")
+                   help="vf rule: relative error e")
     p.add_argument("--max-samples", type=positive_int, default=None, help="adaptive sample budget")
     p.add_argument("--exposure", type=positive_float, default=0.01, help="seconds per exposure")
     p.add_argument("--averages", type=positive_int, default=1,
@@ -97,14 +105,16 @@ def _plan(args: argparse.Namespace) -> Any:
                              f"{args.white_reference:g}")
         return CalibrationPlan(reference_albedo=args.white_reference,
                                reference_name=args.specimen or "white reference", exposure=ex,
-                               rotations=args.rotations, start_deg=args.start_deg)
+                               rotations=args.rotations or 8, start_deg=args.start_deg)
     if args.adaptive:
-        return AdaptivePlan(specimen=args.specimen or "specimen", exposure=ex,
-                            initial_rotations=args.rotations,
+        # Only what was given: the plan's defaults depend on the rule.
+        given = {k: v for k, v in (("initial_rotations", args.rotations),
+                                   ("min_gain", args.min_gain)) if v is not None}
+        return AdaptivePlan(specimen=args.specimen or "specimen", exposure=ex, rule=args.rule,
                             threshold=args.threshold, max_samples=args.max_samples,
-                            start_deg=args.start_deg)
-    return UniformPlan(specimen=args.specimen or "specimen", exposure=ex, rotations=args.rotations,
-                       start_deg=args.start_deg)
+                            start_deg=args.start_deg, **given)
+    return UniformPlan(specimen=args.specimen or "specimen", exposure=ex,
+                       rotations=args.rotations or 8, start_deg=args.start_deg)
 
 
 def _scan(args: argparse.Namespace) -> int:

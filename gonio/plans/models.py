@@ -9,10 +9,13 @@ Three kinds, told apart by ``kind``:
 ``uniform``
     The rig's pairs at ``rotations`` stage angles ``start_deg + k 360 / rotations``.
 ``adaptive``
-    V&F Sec. 6 / MATH 7: start with ``initial_rotations`` uniform angles, then add the midpoints
-    around every angle where leave-one-out periodic PCHIP mispredicts a pair's value by more
-    than ``threshold``; repeat until nothing exceeds it, the sample budget is spent, or a new
-    step would be finer than ``min_step_deg`` (:mod:`gonio.plans.adaptive`).
+    Start with ``initial_rotations`` uniform angles, then refine by ``rule``: ``posterior``
+    (default) adds the angles where the joint fit's posterior expects the error to fall most,
+    while that fall is at least ``min_gain`` (docs/science.md 7.3); ``vf`` (V&F Sec. 6 / MATH
+    7) adds the midpoints around every angle where leave-one-out periodic PCHIP mispredicts a
+    pair's value by more than ``threshold`` (:mod:`gonio.plans.adaptive`). Rounds repeat until
+    the rule stops, the sample budget is spent, or a new step would be finer than
+    ``min_step_deg``.
 ``calibration``
     A white reference of known albedo (a Lambertian reference has ``f = albedo / pi``) at a few
     angles; the result is each pair's factor from sensor counts to BRDF (:mod:`gonio.calibration`).
@@ -25,7 +28,7 @@ from __future__ import annotations
 
 from typing import Annotated, ClassVar, Literal
 
-from pydantic import AfterValidator, BaseModel, BeforeValidator, Field
+from pydantic import AfterValidator, BaseModel, BeforeValidator, Field, model_validator
 
 from gonio.fields import FINITE, Count, Text
 from gonio.hal import PairSpec
@@ -199,8 +202,10 @@ class AdaptivePlan(_PlanBase):
     kind: Literal["adaptive"] = "adaptive"
     refines = True
     rotations_field = "initial_rotations"
-    initial_rotations: Count = Field(default=8,
-                                     description="r0 uniform angles of the first round")
+    initial_rotations: Count = Field(
+        default=4, description="r0 uniform angles of the first round; default 4 with the "
+        "posterior rule (chosen on held-out materials, docs/science.md 7.3), 8 with vf "
+        "(V&F's start)")
     rule: Rule = "posterior"
     threshold: float = Field(default=0.1, gt=0,
                              description="vf rule: relative error e (0.1 = 10 %)")
@@ -213,6 +218,15 @@ class AdaptivePlan(_PlanBase):
     )
     max_rounds: Count = Field(default=6, ge=1, le=20)
     start_deg: StartDeg = 0.0
+
+    @model_validator(mode="before")
+    @classmethod
+    def _vf_starts_at_eight(cls, data: object) -> object:
+        # The default first round depends on the rule: the posterior rule refines from 4
+        # angles, V&F's from their 8 (an explicit initial_rotations is kept as given).
+        if isinstance(data, dict) and "initial_rotations" not in data and data.get("rule") == "vf":
+            return {**data, "initial_rotations": 8}
+        return data
 
 
 class CalibrationPlan(_PlanBase):

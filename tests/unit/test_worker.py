@@ -68,10 +68,11 @@ def _types(store: JobStore, job_id: int) -> list[str]:
     return [e.type for e in store.events_after(0) if e.job_id == job_id]
 
 
-def test_an_adaptive_job_loads_its_basis_before_the_first_reading() -> None:
+def test_an_adaptive_job_loads_its_basis_before_the_first_reading(tmp_path: Path) -> None:
     store = JobStore(":memory:")
-    provider = Provider(store)
+    provider = Provider(store, serve=2)
     w, desc = _worker(store, provider)
+    w.data_dir = tmp_path
     job = _submit(store, desc, PLAN)
     asyncio.run(w.run_once())
     # First call: no reading taken yet, and not on the event loop's thread.
@@ -87,6 +88,10 @@ def test_an_adaptive_job_loads_its_basis_before_the_first_reading() -> None:
     assert all(n == len(store.readings(job)) for n, _ in provider.calls[1:])
     loading = next(e.data for e in store.events_after(0) if e.type == "basis_loading")
     assert loading["build"] is False and "before the first reading" in str(loading["message"])
+    # Finished by the adaptive reconstruction, which records the prior factor it used.
+    row = store.get_job(job)
+    assert row.state is JobState.COMPLETED, row.reason
+    assert row.summary is not None and 0 < row.summary["prior_rho"] <= 1.0
 
 
 def test_uniform_and_vf_jobs_do_not_wait_for_the_basis() -> None:

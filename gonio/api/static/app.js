@@ -473,7 +473,13 @@ function initForm() {
     }
   };
   kindSel.addEventListener("change", showKind);
-  ruleSel.addEventListener("change", showKind);
+  // Each rule's default first round (posterior 4, vf 8), unless the user typed another.
+  const r0 = form.elements.initial_rotations;
+  const R0 = { posterior: "4", vf: "8" };
+  ruleSel.addEventListener("change", () => {
+    if (Object.values(R0).includes(r0.value)) r0.value = R0[ruleSel.value];
+    showKind();
+  });
   showKind();
   $("#dry-run").addEventListener("click", () => guarded(async () => {
     const r = await send("POST", "/jobs/dry-run", { plan: readPlan() });

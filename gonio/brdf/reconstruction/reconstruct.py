@@ -635,6 +635,7 @@ def reconstruct(
     solver: Solver = "closed",
     name: str = "reconstruction",
     method: Method = "joint",
+    rho: float | None = None,
 ) -> Reconstruction:
     """Reconstruct the full anisotropic BRDF from ``n`` pairs read at ``r`` stage angles.
 
@@ -665,6 +666,10 @@ def reconstruct(
         ``"joint"`` (default): every reading at its own ``ph`` with the learnt prior along
         ``ph`` (MATH 5a, :func:`solve_joint`). ``"vf"``: V&F's path, per-pair periodic PCHIP
         onto the 72 slices, then Eq. 5 (steps 1-3 of the module notes).
+    rho : float, optional
+        Joint fit only: a factor on the varying (``m > 0``) harmonics of the prior along
+        ``ph``, e.g. the scan's own :attr:`gonio.brdf.reconstruction.posterior.ScanPosterior.rho`
+        (adaptive scans, docs/science.md 7.3). Default: the learnt prior as it is.
 
     Returns
     -------
@@ -673,7 +678,7 @@ def reconstruct(
     with one_blas_thread():
         return _reconstruct(
             basis, cells, ph_lab, stage_angles, values, channels=channels, eta=eta, lam=lam,
-            n_components=n_components, solver=solver, name=name, method=method,
+            n_components=n_components, solver=solver, name=name, method=method, rho=rho,
         )
 
 
@@ -691,6 +696,7 @@ def _reconstruct(
     solver: Solver,
     name: str,
     method: Method,
+    rho: float | None = None,
 ) -> Reconstruction:
     """:func:`reconstruct` without the BLAS thread limit (same parameters)."""
     t0 = time.perf_counter()
@@ -712,6 +718,8 @@ def _reconstruct(
         raise ReconstructionError(f"the joint fit needs eta > 0 (reading noise), got {eta}")
     if not (eta >= 0 and lam >= 0):
         raise ReconstructionError(f"eta and lam must be >= 0, got eta={eta}, lam={lam}")
+    if rho is not None and not (np.isfinite(rho) and rho > 0):
+        raise ReconstructionError(f"rho must be a finite number > 0, got {rho}")
     if n_components is not None:
         try:
             basis = basis.truncated(int(n_components))
@@ -731,8 +739,10 @@ def _reconstruct(
     n_ch = len(channels)
     if method == "joint":
         Yr = remap(vals, fmed_t, w_t, basis.eps) - mu_t  # (n, r, C), each reading where taken
-        jf = solve_joint(Yr, Qt, ph_[:, None] - alpha[None, :], joint_prior(basis, lam / eta),
-                         eta)
+        P = joint_prior(basis, lam / eta)
+        if rho is not None and rho != 1.0:
+            P = P * np.where(np.arange(P.shape[0]) > 0, float(rho), 1.0)[:, None, None]
+        jf = solve_joint(Yr, Qt, ph_[:, None] - alpha[None, :], P, eta)
         coef = np.moveaxis(jf.coef, -1, 0)  # (C, K, 72)
         has_cv = bool(np.isfinite(jf.loo).all())
         remapped = np.concatenate([jf.fit, jf.loo], axis=2) if has_cv else jf.fit
@@ -756,6 +766,7 @@ def _reconstruct(
         _expand_table(basis, coef), channels, name, None,
         {"reconstruction": {"K": basis.K, "n": int(cells_.shape[0]), "r": int(alpha.size),
                             "eta": eta, "lam": lam, "method": method, "solver": solver_name,
+                            **({"rho": float(rho)} if rho is not None else {}),
                             "basis_materials": len(basis.materials)}},
     )
     rel = _relative_sample_error(at_samples[..., :n_ch], vals)

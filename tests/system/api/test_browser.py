@@ -219,12 +219,15 @@ def test_an_adaptive_plan_from_the_page_sets_its_rule(daemon: Daemon, browser: A
     assert form.find_element(By.NAME, "min_gain").get_attribute("value") == "0.0006"
     help_text = browser.find_element(By.ID, "rule-help").text
     assert "min gain" in help_text and "threshold e" in help_text and "default" in help_text
-    # The setting of the rule not chosen is hidden.
+    assert form.find_element(By.NAME, "initial_rotations").get_attribute("value") == "4"
+    # The setting of the rule not chosen is hidden; each rule's default first round shows.
     rule.select_by_value("vf")
     assert form.find_element(By.NAME, "threshold").is_displayed()
     assert not form.find_element(By.NAME, "min_gain").is_displayed()
+    assert form.find_element(By.NAME, "initial_rotations").get_attribute("value") == "8"
     rule.select_by_value("posterior")
     assert not form.find_element(By.NAME, "threshold").is_displayed()
+    assert form.find_element(By.NAME, "initial_rotations").get_attribute("value") == "4"
 
     def fill(name: str, value: str) -> None:
         field = form.find_element(By.NAME, name)

@@ -10,7 +10,7 @@ import pytest
 
 from gonio.cli import UsageError, build_parser, scan_commands
 from gonio.cli.scan_commands import _plan
-from gonio.plans.models import CalibrationPlan, UniformPlan
+from gonio.plans.models import AdaptivePlan, CalibrationPlan, UniformPlan
 from gonio.store import JobStore
 
 
@@ -32,6 +32,21 @@ def test_scan_keeps_its_specimen_names() -> None:
     assert isinstance(plan, UniformPlan) and plan.specimen == "specimen"
     felt = _parse("--specimen", "felt")
     assert isinstance(felt, UniformPlan) and felt.specimen == "felt"
+
+
+def test_adaptive_scans_take_the_rule_and_its_defaults() -> None:
+    plan = _parse("--adaptive")
+    assert isinstance(plan, AdaptivePlan)
+    assert (plan.rule, plan.initial_rotations, plan.min_gain) == ("posterior", 4, 0.0006)
+    vf = _parse("--adaptive", "--rule", "vf", "--threshold", "0.05")
+    assert isinstance(vf, AdaptivePlan)
+    assert (vf.rule, vf.initial_rotations, vf.threshold) == ("vf", 8, 0.05)
+    mine = _parse("--adaptive", "--rotations", "6", "--min-gain", "0.002")
+    assert isinstance(mine, AdaptivePlan)
+    assert (mine.initial_rotations, mine.min_gain) == (6, 0.002)
+    # Without --adaptive, --rotations keeps its default of 8.
+    uniform = _parse()
+    assert isinstance(uniform, UniformPlan) and uniform.rotations == 8
 
 
 def _args(argv: list[str]) -> argparse.Namespace:

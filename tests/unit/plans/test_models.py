@@ -19,3 +19,16 @@ def test_parse_plan_messages() -> None:
     p = parse_plan({"kind": "calibration", "reference_albedo": 0.99})
     assert isinstance(p, CalibrationPlan)
     assert parse_plan(p.model_dump_json()) == p
+
+
+def test_the_first_round_of_an_adaptive_plan_defaults_by_rule() -> None:
+    """4 angles for the posterior rule (docs/science.md 7.3), V&F's 8 for theirs, from JSON as
+    from Python; a number given is kept, and a stored plan keeps what it was stored with."""
+    from gonio.plans.models import AdaptivePlan
+
+    assert parse_plan('{"kind": "adaptive"}').first_rotations() == 4
+    assert parse_plan({"kind": "adaptive", "rule": "vf"}).first_rotations() == 8
+    assert parse_plan({"kind": "adaptive", "rule": "vf", "initial_rotations": 5}
+                      ).first_rotations() == 5
+    stored = AdaptivePlan(rule="vf").model_dump(mode="json")
+    assert parse_plan({**stored, "rule": "posterior"}).first_rotations() == 8

@@ -144,3 +144,50 @@ def test_one_angle_per_gap_when_asked() -> None:
     edges = np.sort(np.mod(deg, 360.0))
     gap = np.searchsorted(edges, step.angles_deg, side="right") - 1
     assert len(step.angles_deg) == 5 and sorted(set(gap.tolist())) == [0, 1, 2, 3, 4]
+
+
+def test_reconstruct_with_rho_is_the_fit_under_the_scaled_prior() -> None:
+    """``reconstruct(..., rho=r)`` is the joint fit under a prior whose varying harmonics are
+    r times the learnt ones: the same as a basis built with that prior (lam = 0, so the
+    specular condition does not touch the prior)."""
+    from gonio.brdf.reconstruction.reconstruct import reconstruct
+
+    b, cells, ph, alpha, vals = _scan()
+    scaled = _with_prior(random_basis(6, seed=1),
+                         {m: (v if m == 0 else 0.125 * v) for m, v in HARMONICS.items()})
+    got = reconstruct(b, cells, ph, alpha, vals, channels=("Y",), lam=0.0, rho=0.125)
+    want = reconstruct(scaled, cells, ph, alpha, vals, channels=("Y",), lam=0.0)
+    np.testing.assert_allclose(got.coefficients, want.coefficients, rtol=1e-9, atol=1e-12)
+    plain = reconstruct(b, cells, ph, alpha, vals, channels=("Y",))
+    same = reconstruct(b, cells, ph, alpha, vals, channels=("Y",), rho=1.0)
+    np.testing.assert_array_equal(plain.coefficients, same.coefficients)
+    for bad in (0.0, -1.0, float("nan")):
+        with pytest.raises(ReconstructionError, match="rho"):
+            reconstruct(b, cells, ph, alpha, vals, channels=("Y",), rho=bad)
+
+
+def test_an_adaptive_scan_takes_its_own_anisotropy_only_when_it_is_smaller() -> None:
+    """Readings constant along ph: the final fit uses the scan's (smallest) rho, so the slices
+    barely vary along ph; readings that swing with ph keep the learnt prior (factor 1)."""
+    from gonio.brdf.reconstruction.posterior import ADAPTIVE_RHO_MAX, reconstruct_adaptive
+    from gonio.brdf.reconstruction.reconstruct import reconstruct
+
+    b = _with_prior(random_basis(6, seed=1), HARMONICS)
+    cells, ph = grid_pairs(6, seed=4)
+    alpha = np.deg2rad(np.arange(0.0, 360.0, 90.0))
+    rng = np.random.default_rng(0)
+    iso = np.repeat(rng.uniform(0.5, 2.0, (6, 1, 1)), alpha.size, axis=1)
+    rec, rho = reconstruct_adaptive(b, cells, ph, alpha, iso, channels=("Y",))
+    assert rho == RHO_GRID[0] < ADAPTIVE_RHO_MAX
+    want = reconstruct(b, cells, ph, alpha, iso, channels=("Y",), rho=RHO_GRID[0])
+    np.testing.assert_array_equal(rec.coefficients, want.coefficients)
+    plain = reconstruct(b, cells, ph, alpha, iso, channels=("Y",))
+    spread = np.ptp(rec.coefficients[0], axis=1).max()
+    assert spread < 0.5 * np.ptp(plain.coefficients[0], axis=1).max()
+
+    phr = ph[:, None] - alpha[None, :]
+    aniso = iso * np.exp(1.5 * np.cos(2 * phr))[..., None]
+    rec, rho = reconstruct_adaptive(b, cells, ph, alpha, aniso, channels=("Y",))
+    assert rho == 1.0
+    np.testing.assert_array_equal(
+        rec.coefficients, reconstruct(b, cells, ph, alpha, aniso, channels=("Y",)).coefficients)
