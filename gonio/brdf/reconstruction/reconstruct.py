@@ -417,6 +417,12 @@ def loo_predictions(
 JOINT_ETA = 40.0
 #: Weight of Eq. 5's specular (th = 0) condition in the joint fit, in V&F's units.
 JOINT_LAM = 0.1
+#: ``reconstruct(..., rho="scan")`` adopts the scan's own factor on the prior's varying
+#: harmonics when it is below this: a specimen that varies less with the stage angle than the
+#: library expects (an isotropic one, most often) is fitted as such. Above it the learnt prior
+#: is kept: a larger factor in the fit made anisotropic held-out materials worse
+#: (docs/science.md 7.3).
+SCAN_RHO_MAX = 1.0
 
 _PRIOR_CACHE: dict[tuple[int, float], tuple[Any, FloatArray]] = {}
 
@@ -635,7 +641,7 @@ def reconstruct(
     solver: Solver = "closed",
     name: str = "reconstruction",
     method: Method = "joint",
-    rho: float | None = None,
+    rho: float | Literal["scan"] | None = "scan",
 ) -> Reconstruction:
     """Reconstruct the full anisotropic BRDF from ``n`` pairs read at ``r`` stage angles.
 
@@ -666,10 +672,13 @@ def reconstruct(
         ``"joint"`` (default): every reading at its own ``ph`` with the learnt prior along
         ``ph`` (MATH 5a, :func:`solve_joint`). ``"vf"``: V&F's path, per-pair periodic PCHIP
         onto the 72 slices, then Eq. 5 (steps 1-3 of the module notes).
-    rho : float, optional
+    rho : float or "scan" or None
         Joint fit only: a factor on the varying (``m > 0``) harmonics of the prior along
-        ``ph``, e.g. the scan's own :attr:`gonio.brdf.reconstruction.posterior.ScanPosterior.rho`
-        (adaptive scans, docs/science.md 7.3). Default: the learnt prior as it is.
+        ``ph``. ``"scan"`` (default): the scan's own factor, chosen by marginal likelihood
+        (:attr:`gonio.brdf.reconstruction.posterior.ScanPosterior.rho`), when it is below
+        :data:`SCAN_RHO_MAX`: the readings then say the specimen varies less with the stage
+        angle than the library's prior expects, and the fit believes them (docs/science.md
+        7.3). ``None``: the learnt prior as it is; a number: that factor.
 
     Returns
     -------
@@ -696,7 +705,7 @@ def _reconstruct(
     solver: Solver,
     name: str,
     method: Method,
-    rho: float | None = None,
+    rho: float | Literal["scan"] | None = "scan",
 ) -> Reconstruction:
     """:func:`reconstruct` without the BLAS thread limit (same parameters)."""
     t0 = time.perf_counter()
@@ -718,8 +727,9 @@ def _reconstruct(
         raise ReconstructionError(f"the joint fit needs eta > 0 (reading noise), got {eta}")
     if not (eta >= 0 and lam >= 0):
         raise ReconstructionError(f"eta and lam must be >= 0, got eta={eta}, lam={lam}")
-    if rho is not None and not (np.isfinite(rho) and rho > 0):
-        raise ReconstructionError(f"rho must be a finite number > 0, got {rho}")
+    if rho is not None and rho != "scan" and not (
+            isinstance(rho, int | float) and np.isfinite(rho) and rho > 0):
+        raise ReconstructionError(f"rho must be a finite number > 0, 'scan' or None, got {rho!r}")
     if n_components is not None:
         try:
             basis = basis.truncated(int(n_components))
@@ -737,51 +747,70 @@ def _reconstruct(
     w_t = np.maximum(ci * co, basis.eps)[:, None, None]  # each pair's exact weight, not a blend
 
     n_ch = len(channels)
+    prior_rho = 1.0
     if method == "joint":
         Yr = remap(vals, fmed_t, w_t, basis.eps) - mu_t  # (n, r, C), each reading where taken
         P = joint_prior(basis, lam / eta)
-        if rho is not None and rho != 1.0:
-            P = P * np.where(np.arange(P.shape[0]) > 0, float(rho), 1.0)[:, None, None]
-        jf = solve_joint(Yr, Qt, ph_[:, None] - alpha[None, :], P, eta)
-        coef = np.moveaxis(jf.coef, -1, 0)  # (C, K, 72)
-        has_cv = bool(np.isfinite(jf.loo).all())
-        remapped = np.concatenate([jf.fit, jf.loo], axis=2) if has_cv else jf.fit
-        remapped = np.minimum(remapped + mu_t, 300.0)
-        at_samples = np.maximum(inverse_remap(remapped, fmed_t, w_t, basis.eps), 0.0)
-        solver_name = "joint"
-        if np.isfinite(jf.loo_angle).all():
+
+        def joint(factor: float) -> tuple[FloatArray, FloatArray, bool, FloatArray | None]:
+            """The joint fit with the prior's varying harmonics scaled by ``factor``."""
+            Pf = P * np.where(np.arange(P.shape[0]) > 0, factor, 1.0)[:, None, None]
+            jf = solve_joint(Yr, Qt, ph_[:, None] - alpha[None, :], Pf, eta)
+            has = bool(np.isfinite(jf.loo).all())
+            remapped = np.concatenate([jf.fit, jf.loo], axis=2) if has else jf.fit
+            remapped = np.minimum(remapped + mu_t, 300.0)
+            at = np.maximum(inverse_remap(remapped, fmed_t, w_t, basis.eps), 0.0)
+            if not np.isfinite(jf.loo_angle).all():
+                return np.moveaxis(jf.coef, -1, 0), at, has, None
             la = np.maximum(inverse_remap(np.minimum(jf.loo_angle + mu_t, 300.0), fmed_t, w_t,
                                           basis.eps), 0.0)
             d = np.log1p(la * ci[:, None, None]) - np.log1p(vals * ci[:, None, None])
-            angle_err: FloatArray | None = np.sqrt(np.mean(d**2, axis=(0, 2)))
-        else:
-            angle_err = None
+            return np.moveaxis(jf.coef, -1, 0), at, has, np.sqrt(np.mean(d**2, axis=(0, 2)))
+
+        if isinstance(rho, int | float):
+            prior_rho = float(rho)
+        coef, at_samples, has_cv, angle_err = joint(prior_rho)  # coef (C, K, 72)
+        solver_name = "joint"
     else:
         coef, at_samples, has_cv = _vf_path(
             basis, Qt, fmed_t, mu_t, w_t, ph_, alpha, vals, eta, lam, solver, n_ch
         )
         solver_name = solver
         angle_err = None
-    table = BRDFTable.trusted(
-        _expand_table(basis, coef), channels, name, None,
-        {"reconstruction": {"K": basis.K, "n": int(cells_.shape[0]), "r": int(alpha.size),
-                            "eta": eta, "lam": lam, "method": method, "solver": solver_name,
-                            **({"rho": float(rho)} if rho is not None else {}),
-                            "basis_materials": len(basis.materials)}},
-    )
+
+    def as_table(coef: FloatArray, factor: float) -> BRDFTable:
+        settings = {"K": basis.K, "n": int(cells_.shape[0]), "r": int(alpha.size),
+                    "eta": eta, "lam": lam, "method": method, "solver": solver_name,
+                    "basis_materials": len(basis.materials)}
+        if method == "joint":
+            settings["prior_rho"] = factor
+        return BRDFTable.trusted(_expand_table(basis, coef), channels, name, None,
+                                 {"reconstruction": settings})
+
+    table = as_table(coef, prior_rho)
+    post = None
+    if method == "joint" and has_cv:
+        # The joint posterior (reconstruction.posterior; imported here because it builds on
+        # this module): the self-estimate's expected error, and the scan's own rho.
+        from gonio.brdf.reconstruction.posterior import ScanPosterior
+
+        post = ScanPosterior(basis, cells_, ph_, alpha, vals, table=table.values, eta=eta,
+                             lam=lam, rho=None if rho == "scan" else prior_rho)
+        if rho == "scan" and post.rho < SCAN_RHO_MAX:
+            # Refit under the scan's factor. The posterior already assumed it; its weights
+            # come from the first table, which the refit changes little (and a second
+            # posterior would cost as much as the fit).
+            prior_rho = post.rho
+            coef, at_samples, has_cv, angle_err = joint(prior_rho)
+            table = as_table(coef, prior_rho)
     rel = _relative_sample_error(at_samples[..., :n_ch], vals)
     cv = _relative_sample_error(at_samples[..., n_ch:], vals) if has_cv else float("nan")
     pair_err = _pair_log_errors(at_samples[..., n_ch:], vals, ci) if has_cv else None
     cv_log = float(np.sqrt(np.mean(pair_err**2))) if pair_err is not None else float("nan")
     n = int(cells_.shape[0])
-    if method == "joint" and np.isfinite(cv):
-        # Self-estimate from the joint posterior (reconstruction.selfcheck); imported here
-        # because the posterior module builds on this one.
-        from gonio.brdf.reconstruction.posterior import ScanPosterior
+    if post is not None and np.isfinite(cv):
         from gonio.brdf.reconstruction.selfcheck import predict_log_rmse as predict_joint
 
-        post = ScanPosterior(basis, cells_, ph_, alpha, vals, table=table.values, eta=eta,
-                             lam=lam)
         expected, mahal = post.expected_log_rmse, post.mahalanobis
         predicted = predict_joint(expected, mahal, cv)
     else:
@@ -797,6 +826,7 @@ def _reconstruct(
             "K": basis.K, "n": n, "r": int(alpha.size), "eta": float(eta),
             "lam": float(lam), "method": method, "solver": solver_name,
             "channels": list(channels), "seconds": round(seconds, 4),
+            **({"prior_rho": prior_rho} if method == "joint" else {}),
         },
         cv_sample_error=cv,
         predicted_error=cv_error_scale(n) * cv,

@@ -156,9 +156,9 @@ def test_reconstruct_with_rho_is_the_fit_under_the_scaled_prior() -> None:
     scaled = _with_prior(random_basis(6, seed=1),
                          {m: (v if m == 0 else 0.125 * v) for m, v in HARMONICS.items()})
     got = reconstruct(b, cells, ph, alpha, vals, channels=("Y",), lam=0.0, rho=0.125)
-    want = reconstruct(scaled, cells, ph, alpha, vals, channels=("Y",), lam=0.0)
+    want = reconstruct(scaled, cells, ph, alpha, vals, channels=("Y",), lam=0.0, rho=None)
     np.testing.assert_allclose(got.coefficients, want.coefficients, rtol=1e-9, atol=1e-12)
-    plain = reconstruct(b, cells, ph, alpha, vals, channels=("Y",))
+    plain = reconstruct(b, cells, ph, alpha, vals, channels=("Y",), rho=None)
     same = reconstruct(b, cells, ph, alpha, vals, channels=("Y",), rho=1.0)
     np.testing.assert_array_equal(plain.coefficients, same.coefficients)
     for bad in (0.0, -1.0, float("nan")):
@@ -181,7 +181,7 @@ def test_an_adaptive_scan_takes_its_own_anisotropy_only_when_it_is_smaller() -> 
     assert rho == RHO_GRID[0] < ADAPTIVE_RHO_MAX
     want = reconstruct(b, cells, ph, alpha, iso, channels=("Y",), rho=RHO_GRID[0])
     np.testing.assert_array_equal(rec.coefficients, want.coefficients)
-    plain = reconstruct(b, cells, ph, alpha, iso, channels=("Y",))
+    plain = reconstruct(b, cells, ph, alpha, iso, channels=("Y",), rho=None)
     spread = np.ptp(rec.coefficients[0], axis=1).max()
     assert spread < 0.5 * np.ptp(plain.coefficients[0], axis=1).max()
 
