@@ -19,12 +19,11 @@ Sets
 Every scan: pairs ``design_pairs(basis, 10)`` on the material's own basis, start at ``r0``
 uniform stage angles (each of ``--starts``), refine by :func:`next_angles` (rounds until it
 plans nothing; at most one new angle per gap per round, as the engine runs it) up to
-``--max-rotations``; then two reconstructions of everything read: the default joint fit
-("plain fit"), and the one adaptive jobs finish with,
-:func:`~gonio.brdf.reconstruction.posterior.reconstruct_adaptive` (the joint fit with the
-scan's own ``rho`` when it is below 1: "scan rho"). Rows: uniform 4, 8 and 16 (plain fit and
-scan rho), each start and threshold. Columns: mean ``log_rmse`` per group and overall, mean
-readings, share of uniform 16's readings.
+``--max-rotations``; then two reconstructions of everything read: the joint fit with the
+learnt prior as it is (``rho=None``: "plain fit"), and the default, which takes the scan's
+own ``rho`` when it is below 1 (``rho="scan"``: "scan rho"). Rows: uniform 4, 8 and 16
+(plain fit and scan rho), each start and threshold. Columns: mean ``log_rmse`` per group and
+overall, mean readings, share of uniform 16's readings.
 
 The self-estimated error (``predicted_log_rmse``) is calibrated by ``calibrate_log_rmse.py``.
 """
@@ -41,7 +40,7 @@ import bench_unseen as bu
 import numpy as np
 
 from gonio.brdf.reconstruction.basis import Basis, default_basis
-from gonio.brdf.reconstruction.posterior import next_angles, reconstruct_adaptive
+from gonio.brdf.reconstruction.posterior import next_angles
 from gonio.brdf.reconstruction.reconstruct import reconstruct
 from gonio.brdf.reconstruction.samples import uniform_stage_angles
 from gonio.brdf.tables import metrics
@@ -80,10 +79,10 @@ Result = tuple[float, int]
 
 
 def finals(c: Case, angles_deg: list[float], vals: np.ndarray) -> tuple[Result, Result]:
-    """The plain joint fit and :func:`reconstruct_adaptive` of the same readings."""
+    """The joint fit with the learnt prior and with the scan's own rho (the default)."""
     alpha = np.deg2rad(angles_deg)
-    plain = reconstruct(c.basis, c.cells, c.ph, alpha, vals)
-    shrunk, _rho = reconstruct_adaptive(c.basis, c.cells, c.ph, alpha, vals)
+    plain = reconstruct(c.basis, c.cells, c.ph, alpha, vals, rho=None)
+    shrunk = reconstruct(c.basis, c.cells, c.ph, alpha, vals)
     n = vals.shape[0] * len(angles_deg)
     return ((metrics.log_rmse(plain.table, c.mat.truth), n),
             (metrics.log_rmse(shrunk.table, c.mat.truth), n))
@@ -99,7 +98,7 @@ def adaptive(c: Case, gain: float, r0: int, max_r: int) -> tuple[Result, Result]
     angles = list(np.rad2deg(uniform_stage_angles(r0)))
     vals = bu.read(c.mat, c.cells, c.ph, np.deg2rad(angles), c.seed)
     for rnd in range(8):
-        rec = reconstruct(c.basis, c.cells, c.ph, np.deg2rad(angles), vals)
+        rec = reconstruct(c.basis, c.cells, c.ph, np.deg2rad(angles), vals)  # as the engine
         step = next_angles(c.basis, c.cells, c.ph, angles, vals, threshold=gain,
                            budget_angles=max_r - len(angles), per_gap=1,
                            table=rec.table.values)

@@ -35,7 +35,7 @@ from gonio.calibration import (
     from_reference,
     save_calibration,
 )
-from gonio.plans.models import AdaptivePlan, AnyPlan, CalibrationPlan, PlanError
+from gonio.plans.models import AnyPlan, CalibrationPlan, PlanError
 from gonio.plans.validation import plan_pairs
 from gonio.rigdescription import RigDescription
 from gonio.store import JobStore
@@ -159,19 +159,10 @@ def finish_job(job_id: int, plan: AnyPlan, how: Finishing) -> dict[str, Any]:
         how.on_activity("reconstructing")
     how.checkpoint(job_id, "reconstructing")
     grid = samples.to_samples()
-    values = np.maximum(grid.values, 0.0)
-    rho = None
-    if isinstance(plan, AdaptivePlan) and plan.rule == "posterior":
-        # The readings of an adaptive scan also say how much the specimen varies with the
-        # stage angle: the fit takes the scan's own anisotropy when it is less than the
-        # library prior's (docs/science.md 7.3).
-        from gonio.brdf.reconstruction.posterior import reconstruct_adaptive
-
-        rec, rho = reconstruct_adaptive(basis, grid.cells, grid.ph_lab, grid.stage_angles,
-                                        values, channels=channels, name=job.specimen)
-    else:
-        rec = reconstruct(basis, grid.cells, grid.ph_lab, grid.stage_angles, values,
-                          channels=channels, name=job.specimen)
+    # The joint fit takes the scan's own anisotropy when it is less than the library prior's
+    # (reconstruct's rho="scan", docs/science.md 7.3); settings["prior_rho"] says which.
+    rec = reconstruct(basis, grid.cells, grid.ph_lab, grid.stage_angles,
+                      np.maximum(grid.values, 0.0), channels=channels, name=job.specimen)
     metrics = {
         "rel_sample_error": rec.rel_sample_error,
         "estimated_error": rec.estimated_error,
@@ -190,8 +181,8 @@ def finish_job(job_id: int, plan: AnyPlan, how: Finishing) -> dict[str, Any]:
         "K": int(basis.K),
         "seconds": time.perf_counter() - t0,
     }
-    if rho is not None:
-        metrics["prior_rho"] = rho  # 1: the library prior as it is
+    if "prior_rho" in rec.settings:
+        metrics["prior_rho"] = rec.settings["prior_rho"]  # 1: the library prior as it is
     provenance.update(basis_K=int(basis.K), basis_materials=json.dumps(list(basis.materials)))
     how.checkpoint(job_id, "the export fits")
     fits = _fits(job_id, rec.table) if how.fit_exports else None

@@ -35,7 +35,6 @@ from __future__ import annotations
 import functools
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 import scipy.linalg
@@ -46,7 +45,6 @@ from gonio.brdf.reconstruction.reconstruct import (
     _VALID_ROWS,
     JOINT_ETA,
     JOINT_LAM,
-    Reconstruction,
     ReconstructionError,
     joint_prior,
     one_blas_thread,
@@ -490,53 +488,3 @@ def next_angles(
             post.add_angles(np.deg2rad([cand[k]]))
     order = np.argsort(picked)
     return RefinementStep([picked[i] for i in order], drops, e0, post.rho, reason)
-
-
-#: The final reconstruction of an adaptive scan adopts the scan's own ``rho`` when it is below
-#: this: the readings say the specimen varies less with the stage angle than the library's
-#: prior expects, so the prior's varying harmonics are shrunk by ``rho`` and every reading
-#: informs every slice. Above it the learnt prior is kept (a larger ``rho`` in the fit made the
-#: anisotropic panel materials worse). Chosen on the held-out synthetic panel
-#: (``bench/bench_adaptive.py --set panel``, docs/science.md 7.3).
-ADAPTIVE_RHO_MAX = 1.0
-
-
-def reconstruct_adaptive(
-    basis: Basis,
-    cells: ArrayLike,
-    ph_lab: ArrayLike,
-    stage_angles: ArrayLike,
-    values: ArrayLike,
-    **options: Any,
-) -> tuple[Reconstruction, float]:
-    """The final reconstruction of an adaptive scan: the joint fit with the scan's own anisotropy.
-
-    The joint fit of every reading (:func:`gonio.brdf.reconstruction.reconstruct.reconstruct`);
-    then the posterior's empirical-Bayes ``rho`` (:class:`ScanPosterior`) of those readings,
-    and, when it is below :data:`ADAPTIVE_RHO_MAX`, the fit again with the prior's varying
-    harmonics scaled by it (``reconstruct(..., rho=rho)``).
-
-    Parameters
-    ----------
-    basis, cells, ph_lab, stage_angles, values : as for ``reconstruct`` (radians, 1/sr)
-    **options : further keywords of ``reconstruct`` (``channels``, ``name``, ``eta``, ``lam``)
-
-    Returns
-    -------
-    (Reconstruction, float)
-        The reconstruction and the factor used (1.0: the learnt prior as it is).
-    """
-    from gonio.brdf.reconstruction.reconstruct import reconstruct
-
-    rec = reconstruct(basis, cells, ph_lab, stage_angles, values, **options)
-    try:
-        with one_blas_thread():
-            post = ScanPosterior(basis, cells, ph_lab, stage_angles, values,
-                                 table=rec.table.values, eta=options.get("eta"),
-                                 lam=options.get("lam"))
-    except (ReconstructionError, np.linalg.LinAlgError):
-        return rec, 1.0  # no posterior for these readings: the plain fit stands
-    if not post.rho < ADAPTIVE_RHO_MAX:
-        return rec, 1.0
-    return reconstruct(basis, cells, ph_lab, stage_angles, values, rho=post.rho,
-                       **options), post.rho

@@ -166,28 +166,31 @@ def test_reconstruct_with_rho_is_the_fit_under_the_scaled_prior() -> None:
             reconstruct(b, cells, ph, alpha, vals, channels=("Y",), rho=bad)
 
 
-def test_an_adaptive_scan_takes_its_own_anisotropy_only_when_it_is_smaller() -> None:
-    """Readings constant along ph: the final fit uses the scan's (smallest) rho, so the slices
-    barely vary along ph; readings that swing with ph keep the learnt prior (factor 1)."""
-    from gonio.brdf.reconstruction.posterior import ADAPTIVE_RHO_MAX, reconstruct_adaptive
-    from gonio.brdf.reconstruction.reconstruct import reconstruct
+def test_the_fit_takes_the_scans_own_anisotropy_only_when_it_is_smaller() -> None:
+    """Readings constant along ph: the marginal likelihood is largest for the smallest rho
+    (nothing varies with the stage angle), and the default fit uses it, so the slices barely
+    vary along ph; readings that swing with ph keep the learnt prior (factor 1)."""
+    from gonio.brdf.reconstruction.reconstruct import SCAN_RHO_MAX, reconstruct
 
     b = _with_prior(random_basis(6, seed=1), HARMONICS)
     cells, ph = grid_pairs(6, seed=4)
     alpha = np.deg2rad(np.arange(0.0, 360.0, 90.0))
     rng = np.random.default_rng(0)
     iso = np.repeat(rng.uniform(0.5, 2.0, (6, 1, 1)), alpha.size, axis=1)
-    rec, rho = reconstruct_adaptive(b, cells, ph, alpha, iso, channels=("Y",))
-    assert rho == RHO_GRID[0] < ADAPTIVE_RHO_MAX
+    rec = reconstruct(b, cells, ph, alpha, iso, channels=("Y",))
+    assert rec.settings["prior_rho"] == RHO_GRID[0] < SCAN_RHO_MAX
+    assert rec.table.provenance["reconstruction"]["prior_rho"] == RHO_GRID[0]
     want = reconstruct(b, cells, ph, alpha, iso, channels=("Y",), rho=RHO_GRID[0])
     np.testing.assert_array_equal(rec.coefficients, want.coefficients)
     plain = reconstruct(b, cells, ph, alpha, iso, channels=("Y",), rho=None)
+    assert plain.settings["prior_rho"] == 1.0
     spread = np.ptp(rec.coefficients[0], axis=1).max()
     assert spread < 0.5 * np.ptp(plain.coefficients[0], axis=1).max()
 
     phr = ph[:, None] - alpha[None, :]
     aniso = iso * np.exp(1.5 * np.cos(2 * phr))[..., None]
-    rec, rho = reconstruct_adaptive(b, cells, ph, alpha, aniso, channels=("Y",))
-    assert rho == 1.0
+    rec = reconstruct(b, cells, ph, alpha, aniso, channels=("Y",))
+    assert rec.settings["prior_rho"] == 1.0
     np.testing.assert_array_equal(
-        rec.coefficients, reconstruct(b, cells, ph, alpha, aniso, channels=("Y",)).coefficients)
+        rec.coefficients,
+        reconstruct(b, cells, ph, alpha, aniso, channels=("Y",), rho=None).coefficients)
