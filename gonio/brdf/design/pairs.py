@@ -244,13 +244,13 @@ def design_pairs(
       ``rotations`` uniform stage angles
       (:func:`gonio.brdf.design.posterior.posterior_design`), each greedy step restricted to
       cells that still mount beside the pairs chosen so far; ``seed`` picks which first pair
-      the greedy starts from (0: the best); ``time_limit_s`` bounds its mount checks. It
+      the greedy starts from (0: the best); ``time_limit_s`` bounds its mount checks' CPU time. It
       needs a gonio :class:`~gonio.brdf.reconstruction.basis.Basis` (its medians and prior).
 
     Either way the condition-number search's ability to plan mounts is kept: when the
     expected-error choice cannot be mounted (a crowded rig, :class:`FeasibilityError`), runs
-    past ``time_limit_s`` (its mount checks; the search then has ``time_limit_s`` of its own,
-    so a design takes at most about twice the limit), or when it is only the default and
+    past ``time_limit_s`` (the CPU time of its mount checks; the search then has
+    ``time_limit_s`` of its own), or when it is only the default and
     ``basis`` is not a gonio ``Basis``, the search makes the design instead, the reason logged
     and kept in :attr:`PairDesign.fallback`. Candidates are
     the basis's valid cells that ``constraints`` allow

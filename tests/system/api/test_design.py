@@ -53,8 +53,8 @@ def test_optimised_pairs_respect_constraints_and_match_the_basis(
     from gonio.brdf.design.pairs import DEFAULT_OBJECTIVE
 
     made_by = DEFAULT_OBJECTIVE if objective is None else objective
-    # The greedy choice falls back to the kappa search past the time limit, so it gets the
-    # most this daemon allows.
+    # The greedy choice falls back to the kappa search past its time limit (CPU time of its
+    # mount checks, about 2 s here), so it gets the most this daemon allows.
     body = {"pairs": 6, "max_elevation_deg": 70, "min_device_distance_deg": 12,
             "time_limit_s": 2 if made_by == "kappa" else DESIGN_LIMIT_S, "starts": 3,
             "descents": 3,
