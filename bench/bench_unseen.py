@@ -188,27 +188,39 @@ def basis_id(b: Basis) -> str:
 CHOOSE: dict[str, Any] = {"k": 1, "objective": "kappa"}
 
 
+#: ``--design`` names: the bench's cache tag and how the pairs are made.
+DESIGNS = {
+    "kappa": "",  # V&F's condition-number search
+    "posterior": "-posterior-spread-alias",  # the expected-error design as it is now
+    "posterior-median": "-posterior",  # its first version: median slope, no aliasing
+}
+
+
 def design(b: Basis, n: int) -> tuple[np.ndarray, np.ndarray]:
     from gonio.brdf.design.constraints import RigConstraints
     from gonio.brdf.design.pairs import design_pairs
+    from gonio.brdf.design.posterior import posterior_design
 
     k = CHOOSE["k"]
     obj = CHOOSE["objective"]
-    tag = f"{'' if obj == 'kappa' else '-' + obj}{f'-choose{k}' if k > 1 else ''}"
+    tag = f"{DESIGNS[obj]}{f'-choose{k}' if k > 1 else ''}"
     path = CACHE / f"design-{basis_id(b)}-n{n}{tag}.npz"
     if path.is_file():
         with np.load(path) as z:
             return z["cells"], z["ph_lab"]
     if obj == "posterior":
         d = design_pairs(b, n, RigConstraints(), objective="posterior")
+    elif obj == "posterior-median":
+        d = posterior_design(b, n, RigConstraints(), slope="median", aliasing=False)
     elif k > 1:
         from gonio.brdf.design.heldout import choose_design
 
         d, _err, table = choose_design(
-            lambda seed: design_pairs(b, n, RigConstraints(), seed=seed), range(k))
+            lambda seed: design_pairs(b, n, RigConstraints(), objective="kappa", seed=seed),
+            range(k))
         print(f"  n={n}: candidates (seed, kappa, expected log_rmse) {table}", flush=True)
     else:
-        d = design_pairs(b, n, RigConstraints())
+        d = design_pairs(b, n, RigConstraints(), objective="kappa")
     path.parent.mkdir(parents=True, exist_ok=True)
     np.savez(path, cells=d.cells, ph_lab=d.ph_lab)
     return np.asarray(d.cells), np.asarray(d.ph_lab)
@@ -341,9 +353,10 @@ def main(argv: list[str] | None = None) -> int:
                     help="pick each design among K seeds by expected held-out error "
                          "(gonio.brdf.design.heldout; its panel contains the measured materials, "
                          "so use with --only aniso for a clean test)")
-    ap.add_argument("--design", choices=["kappa", "posterior"], default="kappa",
-                    help="pair design: V&F's condition-number search (design_pairs' default) "
-                         "or the joint fit's expected error (gonio.brdf.design.posterior)")
+    ap.add_argument("--design", choices=list(DESIGNS), default="kappa",
+                    help="pair design: V&F's condition-number search, the joint fit's expected "
+                         "error (gonio.brdf.design.posterior), or that design's first version "
+                         "(slope at the median, no aliasing)")
     ap.add_argument("--calibrate", action="store_true",
                     help="fit predicted_log_rmse's model on half the materials, check the rest")
     args = ap.parse_args(argv)
