@@ -19,10 +19,11 @@ Materials
   (not a table lookup); the truth table is mitsuba on gonio's grid. Basis: ``default_basis()``.
 
 Every scan: 1 % relative noise (seed per material), pairs designed on the material's own
-training basis (cached per basis): by default ``design_pairs(basis, n, RigConstraints())``
-(V&F's condition number), with ``--design posterior`` ``design_pairs(...,
-objective="posterior")`` (the joint fit's expected error, :mod:`gonio.brdf.design.posterior`);
-``r`` uniform stage angles. Converted tables and designs are cached under
+training basis (cached per basis): by default V&F's condition-number search
+(``design_pairs(basis, n, RigConstraints(), objective="kappa")``), with ``--design posterior``
+``objective="posterior"`` (the joint fit's expected error, :mod:`gonio.brdf.design.posterior`),
+with ``--design posterior-median`` that design's first version (``slope="median",
+aliasing=False``); ``r`` uniform stage angles. Converted tables and designs are cached under
 ``<gonio cache>/bench-unseen``.
 
 Rows: gonio default (n = 10, r = 8), V&F's path (``method="vf"``), each industrial preset
