@@ -19,9 +19,10 @@ Materials
   (not a table lookup); the truth table is mitsuba on gonio's grid. Basis: ``default_basis()``.
 
 Every scan: 1 % relative noise (seed per material), pairs designed on the material's own
-training basis (cached per basis): by default V&F's condition-number search
-(``design_pairs(basis, n, RigConstraints(), objective="kappa")``), with ``--design posterior``
-``objective="posterior"`` (the joint fit's expected error, :mod:`gonio.brdf.design.posterior`),
+training basis (cached per basis): ``--design kappa`` is V&F's condition-number search
+(``design_pairs(basis, n, RigConstraints(), objective="kappa")``), ``--design posterior``
+``objective="posterior"`` (the joint fit's expected error, :mod:`gonio.brdf.design.posterior`;
+the default, as ``design_pairs``' ``DEFAULT_OBJECTIVE``),
 with ``--design posterior-median`` that design's first version (``slope="median",
 aliasing=False``); ``r`` uniform stage angles. Converted tables and designs are cached under
 ``<gonio cache>/bench-unseen``.
@@ -48,6 +49,7 @@ from typing import Any
 
 import numpy as np
 
+from gonio.brdf.design.pairs import DEFAULT_OBJECTIVE
 from gonio.brdf.design.presets import get_preset, preset_names
 from gonio.brdf.materials.library import cache_root
 from gonio.brdf.reconstruction.basis import Basis, default_basis, remap, row_weight
@@ -354,8 +356,9 @@ def main(argv: list[str] | None = None) -> int:
                     help="pick each design among K seeds by expected held-out error "
                          "(gonio.brdf.design.heldout; its panel contains the measured materials, "
                          "so use with --only aniso for a clean test)")
-    ap.add_argument("--design", choices=list(DESIGNS), default="kappa",
-                    help="pair design: V&F's condition-number search, the joint fit's expected "
+    ap.add_argument("--design", choices=list(DESIGNS), default=DEFAULT_OBJECTIVE,
+                    help="pair design (default: design_pairs' DEFAULT_OBJECTIVE): V&F's "
+                         "condition-number search, the joint fit's expected "
                          "error (gonio.brdf.design.posterior), or that design's first version "
                          "(slope at the median, no aliasing)")
     ap.add_argument("--calibrate", action="store_true",
