@@ -19,10 +19,12 @@ Materials
   (not a table lookup); the truth table is mitsuba on gonio's grid. Basis: ``default_basis()``.
 
 Every scan: 1 % relative noise (seed per material), pairs designed on the material's own
-training basis (cached per basis): by default ``design_pairs(basis, n, RigConstraints())``
-(V&F's condition number), with ``--design posterior`` ``design_pairs(...,
-objective="posterior")`` (the joint fit's expected error, :mod:`gonio.brdf.design.posterior`);
-``r`` uniform stage angles. Converted tables and designs are cached under
+training basis (cached per basis): ``--design kappa`` is V&F's condition-number search
+(``design_pairs(basis, n, RigConstraints(), objective="kappa")``), ``--design posterior``
+``objective="posterior"`` (the joint fit's expected error, :mod:`gonio.brdf.design.posterior`;
+the default, as ``design_pairs``' ``DEFAULT_OBJECTIVE``),
+with ``--design posterior-median`` that design's first version (``slope="median",
+aliasing=False``); ``r`` uniform stage angles. Converted tables and designs are cached under
 ``<gonio cache>/bench-unseen``.
 
 Rows: gonio default (n = 10, r = 8), V&F's path (``method="vf"``), each industrial preset
@@ -47,6 +49,7 @@ from typing import Any
 
 import numpy as np
 
+from gonio.brdf.design.pairs import DEFAULT_OBJECTIVE
 from gonio.brdf.design.presets import get_preset, preset_names
 from gonio.brdf.materials.library import cache_root
 from gonio.brdf.reconstruction.basis import Basis, default_basis, remap, row_weight
@@ -188,27 +191,39 @@ def basis_id(b: Basis) -> str:
 CHOOSE: dict[str, Any] = {"k": 1, "objective": "kappa"}
 
 
+#: ``--design`` names: the bench's cache tag and how the pairs are made.
+DESIGNS = {
+    "kappa": "",  # V&F's condition-number search
+    "posterior": "-posterior-spread-alias",  # the expected-error design as it is now
+    "posterior-median": "-posterior",  # its first version: median slope, no aliasing
+}
+
+
 def design(b: Basis, n: int) -> tuple[np.ndarray, np.ndarray]:
     from gonio.brdf.design.constraints import RigConstraints
     from gonio.brdf.design.pairs import design_pairs
+    from gonio.brdf.design.posterior import posterior_design
 
     k = CHOOSE["k"]
     obj = CHOOSE["objective"]
-    tag = f"{'' if obj == 'kappa' else '-' + obj}{f'-choose{k}' if k > 1 else ''}"
+    tag = f"{DESIGNS[obj]}{f'-choose{k}' if k > 1 else ''}"
     path = CACHE / f"design-{basis_id(b)}-n{n}{tag}.npz"
     if path.is_file():
         with np.load(path) as z:
             return z["cells"], z["ph_lab"]
     if obj == "posterior":
         d = design_pairs(b, n, RigConstraints(), objective="posterior")
+    elif obj == "posterior-median":
+        d = posterior_design(b, n, RigConstraints(), slope="median", aliasing=False)
     elif k > 1:
         from gonio.brdf.design.heldout import choose_design
 
         d, _err, table = choose_design(
-            lambda seed: design_pairs(b, n, RigConstraints(), seed=seed), range(k))
+            lambda seed: design_pairs(b, n, RigConstraints(), objective="kappa", seed=seed),
+            range(k))
         print(f"  n={n}: candidates (seed, kappa, expected log_rmse) {table}", flush=True)
     else:
-        d = design_pairs(b, n, RigConstraints())
+        d = design_pairs(b, n, RigConstraints(), objective="kappa")
     path.parent.mkdir(parents=True, exist_ok=True)
     np.savez(path, cells=d.cells, ph_lab=d.ph_lab)
     return np.asarray(d.cells), np.asarray(d.ph_lab)
@@ -341,9 +356,11 @@ def main(argv: list[str] | None = None) -> int:
                     help="pick each design among K seeds by expected held-out error "
                          "(gonio.brdf.design.heldout; its panel contains the measured materials, "
                          "so use with --only aniso for a clean test)")
-    ap.add_argument("--design", choices=["kappa", "posterior"], default="kappa",
-                    help="pair design: V&F's condition-number search (design_pairs' default) "
-                         "or the joint fit's expected error (gonio.brdf.design.posterior)")
+    ap.add_argument("--design", choices=list(DESIGNS), default=DEFAULT_OBJECTIVE,
+                    help="pair design (default: design_pairs' DEFAULT_OBJECTIVE): V&F's "
+                         "condition-number search, the joint fit's expected "
+                         "error (gonio.brdf.design.posterior), or that design's first version "
+                         "(slope at the median, no aliasing)")
     ap.add_argument("--calibrate", action="store_true",
                     help="fit predicted_log_rmse's model on half the materials, check the rest")
     args = ap.parse_args(argv)

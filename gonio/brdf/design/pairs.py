@@ -49,7 +49,7 @@ OBJECTIVES: tuple[Objective, ...] = get_args(Objective)
 #: API and every caller of ``design_pairs(basis, n, constraints)``). The test suite passes
 #: with either value; which one is the default is decided by ``bench/bench_unseen.py``
 #: (``docs/science.md`` 7.2.1).
-DEFAULT_OBJECTIVE: Objective = "kappa"
+DEFAULT_OBJECTIVE: Objective = "posterior"
 
 
 class BasisLike(Protocol):

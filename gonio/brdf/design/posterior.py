@@ -17,11 +17,29 @@ with variance ``eta / r`` and ``q^T a_m``, ``q^T b_m`` with variance ``2 eta / r
 The readings of different harmonics are orthogonal, so each harmonic's posterior is a ridge
 update of its own: ``Sigma_m <- Sigma_m - Sigma_m q q^T Sigma_m / (q^T Sigma_m q + s_m)``.
 
+Aliasing (``aliasing=True``, the default). ``r`` angles cannot tell harmonic ``m'`` from the
+one it folds onto, ``m = min(m' mod r, r - m' mod r)`` (``cos(m' (ph - 2 pi j / r))`` takes
+the same values at the ``r`` angles as a harmonic-``m`` wave of the same amplitude), so the
+harmonics ``r`` does not resolve add ``q^T A_m q`` to the noise of the pair's measurement of
+``a_m``, ``A_m = sum_{m' -> m} P_m'`` (the Nyquist harmonic ``r / 2`` folds onto none). A
+material whose value at the pair's cell turns fast with ``ph`` (a sharp anisotropic lobe)
+then gives a noisier measurement of its slow part, as it does in the fit. Different pairs
+see the folded part at different phases (their lab azimuths, placed after the choice), so it
+is counted as independent noise per pair; for one pair this is the fit's exact posterior.
+
 Error a rendering sees. The headline metric compares ``ln(1 + f cos ti)`` (Löw et al.) with
 volume weights ``wV``; a change ``dx`` of the remapped value ``x = ln((f w + eps) / (f_med w +
-eps))`` at a row changes it by ``s dx`` with ``s = cos ti (f w + eps) / (w (1 + f cos ti))``,
-taken at ``f = f_med``. So the expected squared metric error, averaged over ``ph``, is
-``sum_m tr(W Sigma_m)`` with ``W = sum_rows wV s^2 Q_row Q_row^T`` (:func:`metric_gram`).
+eps))`` at a row changes it by ``s dx`` with ``s = cos ti (f w + eps) / (w (1 + f cos ti))``.
+So the expected squared metric error, averaged over ``ph``, is ``sum_m tr(W Sigma_m)`` with
+``W = sum_rows wV E[s^2] Q_row Q_row^T`` (:func:`metric_gram`). ``s`` depends on the
+material's own value ``f`` at the row, so ``E[s^2]`` is its mean over the materials the basis
+describes (``slope="spread"``, the default): the basis says how the remapped values of its
+training materials spread at each row (``x ~ N(mu, Q_row C Q_row^T)``, ``C = sum_m P_m /
+n_columns`` the coefficients' covariance over the training columns), and a Gauss-Hermite rule
+averages ``s^2`` over it. The first version took ``s`` at the median (``slope="median"``); since
+``s`` grows with ``f`` up to 1 (a glossy material's peak counts fully, a matte one's hardly),
+that underrated the cells where some materials are bright, and its expected error ranked
+designs worse on held-out materials (``docs/science.md`` 7.2.1).
 
 Search: greedy, one pair at a time, each time the feasible cell that lowers
 ``sum_m tr(W Sigma_m)`` most (gain ``q^T Sigma_m W Sigma_m q / (q^T Sigma_m q + s_m)``, for
@@ -45,6 +63,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from typing import Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -54,7 +73,7 @@ from gonio.brdf.design.constraints import RigConstraints, candidate_rows, rows_t
 from gonio.brdf.design.errors import DesignError, DesignTimeout, FeasibilityError
 from gonio.brdf.design.pairs import GreedyStats, PairDesign
 from gonio.brdf.design.placement import place_pairs
-from gonio.brdf.reconstruction.basis import Basis
+from gonio.brdf.reconstruction.basis import Basis, inverse_remap
 from gonio.brdf.reconstruction.reconstruct import JOINT_ETA, JOINT_LAM, joint_prior
 from gonio.brdf.tables import geometry as geo
 
@@ -66,22 +85,57 @@ DEFAULT_ROTATIONS = 8
 FIRST_RANKS = 64
 
 
-def metric_gram(basis: Basis) -> FloatArray:
+#: Where the metric's slope ``s`` is taken at each row (module notes): averaged over the spread
+#: of the training materials' values (``"spread"``) or at their median (``"median"``).
+MetricSlope = Literal["spread", "median"]
+#: Gauss-Hermite nodes of the ``"spread"`` average (``s^2`` is smooth in ``x``; 20 nodes agree
+#: with 40 to well under 1 %).
+SLOPE_NODES = 20
+
+
+def metric_gram(basis: Basis, slope: MetricSlope = "spread") -> FloatArray:
     """(K, K) ``W``: the headline metric's weight on coefficient errors (module notes).
 
-    ``W = sum_rows wV s^2 Q_row^T Q_row`` over the valid grid rows, ``wV`` the volume weight
-    (MATH 9) and ``s = cos ti (f_med w + eps) / (w (1 + f_med cos ti))`` the slope of
-    ``ln(1 + f cos ti)`` with respect to the remapped value at the row's median.
+    ``W = sum_rows wV E[s^2] Q_row^T Q_row`` over the valid grid rows, ``wV`` the volume weight
+    (MATH 9) and ``s = cos ti (f w + eps) / (w (1 + f cos ti))`` the slope of ``ln(1 + f cos
+    ti)`` with respect to the remapped value.
+
+    Parameters
+    ----------
+    basis : Basis
+    slope : {"spread", "median"}
+        ``"spread"``: ``E[s^2]`` over the remapped values the basis' training materials take at
+        the row, ``x ~ N(mu, Q_row C Q_row^T)`` with ``C = sum_m P_m / n_columns``
+        (:attr:`Basis.ph_prior`, or ``I`` without one; ``n_columns`` from the provenance).
+        ``"median"``: ``s^2`` at ``f = f_med``. A basis whose provenance does not say how many
+        columns it summarises gets the median slope.
+
+    Returns
+    -------
+    (K, K) float64, symmetric positive semi-definite.
     """
+    if slope not in ("spread", "median"):
+        raise DesignError(f"slope must be 'spread' or 'median', not {slope!r}")
     rows = np.flatnonzero(basis.valid)
     ci, co = geo.cell_cosines(*geo.grid_angles())
     ci, co = ci.ravel()[rows], co.ravel()[rows]
     w = np.maximum(ci * co, basis.eps)
-    f = np.asarray(basis.f_med, dtype=float)[rows]
-    s = ci * (f * w + basis.eps) / (w * (1.0 + f * ci))
-    wv = geo.volume_weight().ravel()[rows]
+    f_med = np.asarray(basis.f_med, dtype=float)[rows]
     Qv = np.asarray(basis.Q, dtype=float)[rows]
-    return np.asarray((Qv * (wv * s**2)[:, None]).T @ Qv)
+    n_columns = float(basis.provenance.get("n_columns", 0.0) or 0.0)
+    if slope == "median" or n_columns <= 0:
+        s2 = (ci * (f_med * w + basis.eps) / (w * (1.0 + f_med * ci))) ** 2
+    else:
+        C = (np.eye(basis.K) if basis.ph_prior is None
+             else np.asarray(basis.ph_prior, dtype=float).sum(axis=0)) / n_columns
+        sd = np.sqrt(np.maximum(np.einsum("rk,kl,rl->r", Qv, C, Qv), 0.0))
+        t, wt = np.polynomial.hermite.hermgauss(SLOPE_NODES)
+        x = np.asarray(basis.mu, dtype=float)[rows, None] + np.sqrt(2.0) * sd[:, None] * t
+        f = np.maximum(inverse_remap(x, f_med[:, None], w[:, None], basis.eps), 0.0)
+        s = ci[:, None] * (f * w[:, None] + basis.eps) / (w[:, None] * (1.0 + f * ci[:, None]))
+        s2 = (s**2) @ wt / np.sqrt(np.pi)
+    wv = geo.volume_weight().ravel()[rows]
+    return np.asarray((Qv * (wv * s2)[:, None]).T @ Qv)
 
 
 @dataclass(frozen=True)
@@ -100,6 +154,10 @@ class PriorModel:
         trained basis, 1 when the basis does not say).
     norm : float
         ``sum wV`` over the valid cells (``log_rmse``'s denominator per slice); 1 when unset.
+    alias : (H, K, K) or None
+        ``A_m``, the summed prior of the harmonics that fold onto each (module notes); a pair
+        with row ``q`` measures harmonic ``m`` with noise ``noise_m + q^T A_m q``. None: no
+        aliasing.
     """
 
     P: FloatArray
@@ -108,11 +166,39 @@ class PriorModel:
     W: FloatArray
     scale: float = 1.0
     norm: float = 1.0
+    alias: FloatArray | None = None
+
+    def pair_noise(self, rows: FloatArray) -> FloatArray:
+        """(H, n) noise variance of each pair's measurement of each harmonic."""
+        Q = np.atleast_2d(rows)
+        base = np.repeat(np.asarray(self.noise, dtype=float)[:, None], Q.shape[0], axis=1)
+        if self.alias is None:
+            return base
+        return base + np.einsum("nk,hkl,nl->hn", Q, self.alias, Q)
+
+
+def folded_onto(m: int, rotations: int) -> int | None:
+    """The harmonic ``r = rotations`` uniform angles confuse harmonic ``m`` with, if resolved.
+
+    ``min(m mod r, r - m mod r)``; None for the Nyquist fold (``2 m' = r``), which no resolved
+    harmonic absorbs.
+    """
+    k = m % rotations
+    fold = min(k, rotations - k)
+    return fold if 2 * fold < rotations else None
+
+
 
 
 def prior_model(basis: Basis, rotations: int = DEFAULT_ROTATIONS, eta: float = JOINT_ETA,
-                lam: float = JOINT_LAM) -> PriorModel:
-    """The prior the joint fit would use for a scan of ``rotations`` uniform stage angles."""
+                lam: float = JOINT_LAM, slope: MetricSlope = "spread",
+                aliasing: bool = True) -> PriorModel:
+    """The prior the joint fit would use for a scan of ``rotations`` uniform stage angles.
+
+    ``slope`` chooses how :func:`metric_gram` weighs the rows (``"spread"`` or ``"median"``);
+    ``aliasing`` whether the harmonics the scan cannot resolve count as noise on the ones they
+    fold onto (module notes).
+    """
     if rotations < 1:
         raise DesignError(f"a scan needs at least one stage angle, got {rotations}")
     if not eta > 0 or lam < 0:
@@ -123,8 +209,16 @@ def prior_model(basis: Basis, rotations: int = DEFAULT_ROTATIONS, eta: float = J
     noise = np.where(ms == 0, eta / rotations, 2.0 * eta / rotations)
     cols = float(basis.provenance.get("n_columns", 0) or 0)
     norm = float(geo.volume_weight()[geo.valid_mask()].sum())
-    return PriorModel(np.array(P[ms]), ms, noise, metric_gram(basis),
-                      scale=1.0 / cols if cols > 0 else 1.0, norm=norm)
+    alias = None
+    if aliasing:
+        alias = np.zeros((ms.size, basis.K, basis.K))
+        where = {int(m): i for i, m in enumerate(ms)}
+        for m in range(P.shape[0]):
+            fold = folded_onto(m, rotations)
+            if 2 * m >= rotations and fold is not None and fold in where:
+                alias[where[fold]] += P[m]
+    return PriorModel(np.array(P[ms]), ms, noise, metric_gram(basis, slope),
+                      scale=1.0 / cols if cols > 0 else 1.0, norm=norm, alias=alias)
 
 
 def expected_error(model: PriorModel, rows: ArrayLike) -> float:
@@ -143,8 +237,8 @@ def expected_error(model: PriorModel, rows: ArrayLike) -> float:
     """
     Q = np.atleast_2d(np.asarray(rows, dtype=float))
     total = 0.0
-    for P, s in zip(model.P, model.noise, strict=True):
-        Sig = _posterior(P, Q, float(s))
+    for P, s in zip(model.P, model.pair_noise(Q), strict=True):
+        Sig = _posterior(P, Q, s)
         total += float(np.sum(model.W * Sig))
     return total
 
@@ -165,10 +259,13 @@ def expected_log_rmse(model: PriorModel, rows: ArrayLike) -> float:
     return float(np.sqrt(model.scale * expected_error(model, rows) / model.norm))
 
 
-def _posterior(P: FloatArray, Q: FloatArray, s: float) -> FloatArray:
-    """``P - P Q^T (Q P Q^T + s I)^-1 Q P`` (one harmonic's posterior covariance)."""
+def _posterior(P: FloatArray, Q: FloatArray, s: float | FloatArray) -> FloatArray:
+    """``P - P Q^T (Q P Q^T + diag(s))^-1 Q P`` (one harmonic's posterior covariance).
+
+    ``s``: the noise variance of every row, or (n,) one per row.
+    """
     A = Q @ P
-    G = A @ Q.T + s * np.eye(Q.shape[0])
+    G = A @ Q.T + np.diag(np.broadcast_to(np.asarray(s, dtype=float), (Q.shape[0],)))
     return np.asarray(P - A.T @ np.linalg.solve(G, A))
 
 
@@ -209,11 +306,12 @@ def greedy_rows(
     if not 0 <= first < cand.size:
         raise DesignError(f"the first pair's rank must be in 0..{cand.size - 1}, got {first}")
     Qc = np.asarray(Q, dtype=float)[cand]  # (N, K)
+    noise = model.pair_noise(Qc)  # (H, N)
     Sig = [np.array(P) for P in model.P]
     chosen: list[int] = []
     for _ in range(n):
         gain = np.zeros(cand.size)
-        for S, s in zip(Sig, model.noise, strict=True):
+        for S, s in zip(Sig, noise, strict=True):
             A = S @ Qc.T  # (K, N): Sigma q for every candidate
             gain += np.sum((model.W @ A) * A, axis=0) / (np.sum(Qc.T * A, axis=0) + s)
         gain[chosen] = -np.inf  # a pair measured twice is a repeat, not a new pair
@@ -232,9 +330,9 @@ def greedy_rows(
             k = ok[0]
         chosen.append(k)
         q = Qc[k]
-        for i, (S, s) in enumerate(zip(Sig, model.noise, strict=True)):
+        for i, (S, s) in enumerate(zip(Sig, noise, strict=True)):
             a = S @ q
-            Sig[i] = S - np.outer(a, a) / (q @ a + s)
+            Sig[i] = S - np.outer(a, a) / (q @ a + s[k])
     return cand[np.asarray(chosen, dtype=np.intp)]
 
 
@@ -248,6 +346,8 @@ def posterior_design(
     lam: float = JOINT_LAM,
     seed: int = 0,
     time_limit_s: float | None = None,
+    slope: MetricSlope = "spread",
+    aliasing: bool = True,
 ) -> PairDesign:
     """``n`` pairs that minimise the joint fit's expected metric error (module notes).
 
@@ -273,6 +373,11 @@ def posterior_design(
         the choice have used this many seconds of the calling thread's CPU time (CPU, not
         wall time, so that a loaded machine does not change the design; without a
         device-distance limit the choice checks no mounts and is quick).
+    slope : {"spread", "median"}
+        How the metric weighs the rows (:func:`metric_gram`).
+    aliasing : bool
+        Count the harmonics ``rotations`` cannot resolve as noise (module notes).
+        ``slope="median", aliasing=False`` is the first version of this design.
 
     Returns
     -------
@@ -284,7 +389,8 @@ def posterior_design(
     Raises
     ------
     DesignError
-        For ``n < 1``, more pairs than feasible cells, or bad ``rotations`` / ``eta`` / ``lam``.
+        For ``n < 1``, more pairs than feasible cells, or bad ``rotations`` / ``eta`` / ``lam``
+        / ``slope``.
     FeasibilityError
         When no cell is feasible or the chosen pairs cannot be mounted under ``constraints``.
     DesignTimeout
@@ -293,7 +399,7 @@ def posterior_design(
     if n < 1:
         raise DesignError(f"the number of pairs must be at least 1, got {n}")
     t0, cpu0 = time.perf_counter(), time.thread_time()
-    model = prior_model(basis, rotations, eta, lam)
+    model = prior_model(basis, rotations, eta, lam, slope, aliasing)
     accept = None
     checks = 0
     if constraints.min_device_distance_deg > 0:

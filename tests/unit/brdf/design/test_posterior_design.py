@@ -13,12 +13,13 @@ from gonio.brdf.design.posterior import (
     PriorModel,
     _posterior,
     expected_error,
+    folded_onto,
     greedy_rows,
     metric_gram,
     posterior_design,
     prior_model,
 )
-from gonio.brdf.reconstruction.basis import N_HARMONICS, inverse_remap, row_weight
+from gonio.brdf.reconstruction.basis import N_HARMONICS, Basis, inverse_remap, row_weight
 from gonio.brdf.reconstruction.reconstruct import solve_joint
 from gonio.brdf.tables import geometry as geo
 from tests.unit.brdf.reconstruction.test_reconstruct import random_basis
@@ -102,8 +103,43 @@ def test_metric_gram_is_the_weighted_sum_over_valid_rows() -> None:
     s = (np.log1p(f1 * c_i) - np.log1p(f0 * c_i)) / h
     wv = geo.volume_weight().ravel()[rows]
     want = np.einsum("r,rk,rl->kl", wv * s**2, b.Q[rows], b.Q[rows])
-    np.testing.assert_allclose(metric_gram(b), want, rtol=1e-4)
-    assert np.all(np.linalg.eigvalsh(metric_gram(b)) > 0)
+    np.testing.assert_allclose(metric_gram(b, "median"), want, rtol=1e-4)
+    assert np.all(np.linalg.eigvalsh(metric_gram(b, "median")) > 0)
+    # a basis that does not say how many columns it summarises gets the median slope
+    np.testing.assert_array_equal(metric_gram(b), metric_gram(b, "median"))
+
+
+def test_metric_gram_spread_matches_a_monte_carlo_over_the_basis_materials() -> None:
+    """``slope="spread"``: draw coefficient vectors with the training covariance ``sum_m P_m /
+    n_columns``, turn them into values through the basis' own inverse remap, take the metric's
+    slope by finite differences at each drawn value, and average ``s^2`` per row."""
+    base = _with_prior(random_basis(4, seed=5), {0: 0.7, 2: 0.3})
+    b = Basis(base.Q, base.S, base.f_med, base.mu, base.valid, base.eps, base.materials,
+              {"n_columns": 40.0}, base.ph_prior)
+    rows = np.flatnonzero(b.valid)
+    ci, _ = geo.cell_cosines(*geo.grid_angles())
+    c_i = ci.ravel()[rows]
+    w = row_weight(b.eps)[rows]
+    rng = np.random.default_rng(11)
+    draws, h = 3000, 1e-6
+    C = rng.standard_normal((b.K, draws)) / np.sqrt(40.0)  # sum_m P_m = I here
+    s2 = np.zeros(rows.size)
+    for lo in range(0, rows.size, 1000):
+        r = rows[lo : lo + 1000]
+        x = b.mu[r, None] + b.Q[r] @ C
+        args = (b.f_med[r, None], w[lo : lo + 1000, None], b.eps)
+        f0 = np.maximum(inverse_remap(x, *args), 0.0)
+        f1 = np.maximum(inverse_remap(x + h, *args), 0.0)
+        ci_r = c_i[lo : lo + 1000, None]
+        s2[lo : lo + 1000] = np.mean(((np.log1p(f1 * ci_r) - np.log1p(f0 * ci_r)) / h) ** 2, 1)
+    wv = geo.volume_weight().ravel()[rows]
+    want = np.einsum("r,rk,rl->kl", wv * s2, b.Q[rows], b.Q[rows])
+    got = metric_gram(b, "spread")
+    np.testing.assert_allclose(got, want, rtol=0.03, atol=0.03 * np.abs(want).max())
+    # and it is not the median slope: the spread of values weighs the rows differently
+    assert np.abs(metric_gram(b, "median") - want).max() > 0.1 * np.abs(want).max()
+    with pytest.raises(DesignError, match="slope must be"):
+        metric_gram(b, "mean")  # type: ignore[arg-type]
 
 
 def test_posterior_design_gives_distinct_feasible_mountable_pairs() -> None:
@@ -173,7 +209,8 @@ def test_expected_log_rmse_is_the_root_of_the_scaled_error_over_the_volume() -> 
     wv = float(np.sum(geo.volume_weight()[geo.valid_mask()]))
     raw = expected_error(prior_model(b, 8), rows)
     assert expected_log_rmse(prior_model(b, 8), rows) == pytest.approx(np.sqrt(raw / wv))
-    assert expected_log_rmse(prior_model(trained, 8), rows) == pytest.approx(
+    # the same weights for both (a trained basis would otherwise get the spread slope)
+    assert expected_log_rmse(prior_model(trained, 8, slope="median"), rows) == pytest.approx(
         np.sqrt(raw / 400 / wv))
 
 
@@ -196,3 +233,66 @@ def test_a_seed_starts_the_greedy_from_a_lesser_first_pair() -> None:
     assert d.greedy is not None and d.greedy.first == 2
     with pytest.raises(DesignError, match="seed must be at least 0"):
         posterior_design(b, 3, cons, seed=-1)
+
+
+def _harmonic_error(err: np.ndarray, keep: list[int]) -> np.ndarray:
+    """(k, 72, draws) error along ph -> the part in harmonics ``keep`` (inverse DFT)."""
+    F = np.fft.rfft(err, axis=1)
+    mask = np.zeros(F.shape[1], dtype=bool)
+    mask[keep] = True
+    return np.fft.irfft(np.where(mask[None, :, None], F, 0.0), n=err.shape[1], axis=1)
+
+
+@pytest.mark.parametrize(("n", "k"), [(1, 2), (3, 8)])
+def test_aliasing_noise_matches_monte_carlo_of_the_joint_fit(n: int, k: int) -> None:
+    """Harmonic 6 folds onto harmonic 2 at r = 8. Draw functions with harmonics 0, 2 and 6,
+    read them at 8 uniform angles, fit with ``solve_joint`` (which knows all three): the
+    W-weighted error of the fit's harmonics 0 and 2 is the model's with the folded prior as
+    extra noise (exact for one pair; different pairs see the fold at different phases, which
+    the model counts as independent noise), and clearly above the model without aliasing."""
+    rng = np.random.default_rng(3 + n)
+    r, eta, draws = 8, 0.05, 4000
+    P = np.zeros((N_HARMONICS, k, k))
+    P[0], P[2], P[6] = _spd(k, rng), _spd(k, rng), 0.5 * _spd(k, rng)
+    W = _spd(k, rng)
+    Qt = rng.standard_normal((n, k))
+    ph_lab = rng.uniform(0, 2 * np.pi, n)
+    alpha = np.arange(r) * 2 * np.pi / r
+    phr = ph_lab[:, None] - alpha[None, :]
+    L = {m: np.linalg.cholesky(P[m]) for m in (0, 2, 6)}
+    a = {m: L[m] @ rng.standard_normal((k, draws)) for m in (0, 2, 6)}
+    b = {m: L[m] @ rng.standard_normal((k, draws)) for m in (2, 6)}
+
+    def c_at(ph: np.ndarray) -> np.ndarray:  # (..., k, draws)
+        out = np.broadcast_to(a[0], (*ph.shape, k, draws)).copy()
+        for m in (2, 6):
+            out += (np.cos(m * ph)[..., None, None] * a[m]
+                    + np.sin(m * ph)[..., None, None] * b[m])
+        return out
+
+    Y = np.einsum("qk,qjkd->qjd", Qt, c_at(phr)) + np.sqrt(eta) * rng.standard_normal(
+        (n, r, draws))
+    fit = solve_joint(Y, Qt, phr, P, eta)
+    err = _harmonic_error(fit.coef - np.moveaxis(c_at(geo.PH_GRID), 0, 1), [0, 2])
+    mc = float(np.mean(np.einsum("ksd,kl,lsd->sd", err, W, err)))
+    noise = np.array([eta / r, 2 * eta / r])
+    aliased = PriorModel(np.stack([P[0], P[2]]), np.array([0, 2]), noise, W,
+                         alias=np.stack([np.zeros((k, k)), P[6]]))
+    plain = PriorModel(np.stack([P[0], P[2]]), np.array([0, 2]), noise, W)
+    assert expected_error(aliased, Qt) == pytest.approx(mc, rel=0.05 if n == 1 else 0.15)
+    assert expected_error(plain, Qt) < 0.9 * mc
+
+
+def test_prior_model_folds_the_unresolved_harmonics() -> None:
+    """r = 8 resolves 0..3; 5 -> 3, 6 -> 2, 7 -> 1, 8 -> 0, 9 -> 1, ...; 4 and 12 (Nyquist)
+    fold onto none."""
+    assert [folded_onto(m, 8) for m in range(13)] == [0, 1, 2, 3, None, 3, 2, 1, 0, 1, 2, 3,
+                                                      None]
+    assert [folded_onto(m, 5) for m in range(7)] == [0, 1, 2, 2, 1, 0, 1]
+    b = _with_prior(random_basis(3), {0: 1.0, 2: 0.5, 6: 0.25, 10: 0.125, 12: 2.0})
+    model = prior_model(b, 8, lam=0.0)
+    assert model.harmonics.tolist() == [0, 2]
+    assert model.alias is not None
+    np.testing.assert_allclose(model.alias[0], 0.0)
+    np.testing.assert_allclose(model.alias[1], (0.25 + 0.125) * np.eye(3))
+    assert prior_model(b, 8, aliasing=False).alias is None
