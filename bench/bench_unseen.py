@@ -23,8 +23,8 @@ training basis (cached per basis): ``--design kappa`` is V&F's condition-number 
 (``design_pairs(basis, n, RigConstraints(), objective="kappa")``), ``--design posterior``
 ``objective="posterior"`` (the joint fit's expected error, :mod:`gonio.brdf.design.posterior`;
 the default, as ``design_pairs``' ``DEFAULT_OBJECTIVE``),
-with ``--design posterior-median`` that design's first version (``slope="median",
-aliasing=False``); ``r`` uniform stage angles. Converted tables and designs are cached under
+with ``--design posterior-spread-alias`` that design with both corrections (``slope="spread",
+aliasing=True``); ``r`` uniform stage angles. Converted tables and designs are cached under
 ``<gonio cache>/bench-unseen``.
 
 Rows: gonio default (n = 10, r = 8), V&F's path (``method="vf"``), each industrial preset
@@ -194,8 +194,8 @@ CHOOSE: dict[str, Any] = {"k": 1, "objective": "kappa"}
 #: ``--design`` names: the bench's cache tag and how the pairs are made.
 DESIGNS = {
     "kappa": "",  # V&F's condition-number search
-    "posterior": "-posterior-spread-alias",  # the expected-error design as it is now
-    "posterior-median": "-posterior",  # its first version: median slope, no aliasing
+    "posterior": "-posterior",  # the expected-error design (median slope, no aliasing)
+    "posterior-spread-alias": "-posterior-spread-alias",  # with both corrections
 }
 
 
@@ -213,8 +213,8 @@ def design(b: Basis, n: int) -> tuple[np.ndarray, np.ndarray]:
             return z["cells"], z["ph_lab"]
     if obj == "posterior":
         d = design_pairs(b, n, RigConstraints(), objective="posterior")
-    elif obj == "posterior-median":
-        d = posterior_design(b, n, RigConstraints(), slope="median", aliasing=False)
+    elif obj == "posterior-spread-alias":
+        d = posterior_design(b, n, RigConstraints(), slope="spread", aliasing=True)
     elif k > 1:
         from gonio.brdf.design.heldout import choose_design
 
@@ -359,8 +359,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--design", choices=list(DESIGNS), default=DEFAULT_OBJECTIVE,
                     help="pair design (default: design_pairs' DEFAULT_OBJECTIVE): V&F's "
                          "condition-number search, the joint fit's expected "
-                         "error (gonio.brdf.design.posterior), or that design's first version "
-                         "(slope at the median, no aliasing)")
+                         "error (gonio.brdf.design.posterior), or that design with the slope "
+                         "averaged over the basis' spread and aliasing as noise")
     ap.add_argument("--calibrate", action="store_true",
                     help="fit predicted_log_rmse's model on half the materials, check the rest")
     args = ap.parse_args(argv)

@@ -17,7 +17,7 @@ with variance ``eta / r`` and ``q^T a_m``, ``q^T b_m`` with variance ``2 eta / r
 The readings of different harmonics are orthogonal, so each harmonic's posterior is a ridge
 update of its own: ``Sigma_m <- Sigma_m - Sigma_m q q^T Sigma_m / (q^T Sigma_m q + s_m)``.
 
-Aliasing (``aliasing=True``, the default). ``r`` angles cannot tell harmonic ``m'`` from the
+Aliasing (``aliasing=True``; off by default). ``r`` angles cannot tell harmonic ``m'`` from the
 one it folds onto, ``m = min(m' mod r, r - m' mod r)`` (``cos(m' (ph - 2 pi j / r))`` takes
 the same values at the ``r`` angles as a harmonic-``m`` wave of the same amplitude), so the
 harmonics ``r`` does not resolve add ``q^T A_m q`` to the noise of the pair's measurement of
@@ -31,15 +31,14 @@ Error a rendering sees. The headline metric compares ``ln(1 + f cos ti)`` (Löw 
 volume weights ``wV``; a change ``dx`` of the remapped value ``x = ln((f w + eps) / (f_med w +
 eps))`` at a row changes it by ``s dx`` with ``s = cos ti (f w + eps) / (w (1 + f cos ti))``.
 So the expected squared metric error, averaged over ``ph``, is ``sum_m tr(W Sigma_m)`` with
-``W = sum_rows wV E[s^2] Q_row Q_row^T`` (:func:`metric_gram`). ``s`` depends on the
-material's own value ``f`` at the row, so ``E[s^2]`` is its mean over the materials the basis
-describes (``slope="spread"``, the default): the basis says how the remapped values of its
-training materials spread at each row (``x ~ N(mu, Q_row C Q_row^T)``, ``C = sum_m P_m /
-n_columns`` the coefficients' covariance over the training columns), and a Gauss-Hermite rule
-averages ``s^2`` over it. The first version took ``s`` at the median (``slope="median"``); since
-``s`` grows with ``f`` up to 1 (a glossy material's peak counts fully, a matte one's hardly),
-that underrated the cells where some materials are bright, and its expected error ranked
-designs worse on held-out materials (``docs/science.md`` 7.2.1).
+``W = sum_rows wV s^2 Q_row Q_row^T`` (:func:`metric_gram`), ``s`` taken at the row's median
+``f_med`` (``slope="median"``, the default). ``s`` depends on the material's own value and
+grows with it towards 1 (a glossy material's peak counts fully, a matte one's hardly), so
+``slope="spread"`` replaces ``s^2`` by its mean ``E[s^2]`` over the values the basis' training
+materials take at the row: ``x ~ N(mu, Q_row C Q_row^T)``, ``C = sum_m P_m / n_columns`` the
+coefficients' covariance over the training columns, averaged with a Gauss-Hermite rule. Both
+corrections (this and aliasing) are options: on held-out materials they did not lower the
+error (``docs/science.md`` 7.2.1).
 
 Search: greedy, one pair at a time, each time the feasible cell that lowers
 ``sum_m tr(W Sigma_m)`` most (gain ``q^T Sigma_m W Sigma_m q / (q^T Sigma_m q + s_m)``, for
@@ -93,7 +92,7 @@ MetricSlope = Literal["spread", "median"]
 SLOPE_NODES = 20
 
 
-def metric_gram(basis: Basis, slope: MetricSlope = "spread") -> FloatArray:
+def metric_gram(basis: Basis, slope: MetricSlope = "median") -> FloatArray:
     """(K, K) ``W``: the headline metric's weight on coefficient errors (module notes).
 
     ``W = sum_rows wV E[s^2] Q_row^T Q_row`` over the valid grid rows, ``wV`` the volume weight
@@ -191,8 +190,8 @@ def folded_onto(m: int, rotations: int) -> int | None:
 
 
 def prior_model(basis: Basis, rotations: int = DEFAULT_ROTATIONS, eta: float = JOINT_ETA,
-                lam: float = JOINT_LAM, slope: MetricSlope = "spread",
-                aliasing: bool = True) -> PriorModel:
+                lam: float = JOINT_LAM, slope: MetricSlope = "median",
+                aliasing: bool = False) -> PriorModel:
     """The prior the joint fit would use for a scan of ``rotations`` uniform stage angles.
 
     ``slope`` chooses how :func:`metric_gram` weighs the rows (``"spread"`` or ``"median"``);
@@ -346,8 +345,8 @@ def posterior_design(
     lam: float = JOINT_LAM,
     seed: int = 0,
     time_limit_s: float | None = None,
-    slope: MetricSlope = "spread",
-    aliasing: bool = True,
+    slope: MetricSlope = "median",
+    aliasing: bool = False,
 ) -> PairDesign:
     """``n`` pairs that minimise the joint fit's expected metric error (module notes).
 
@@ -377,7 +376,8 @@ def posterior_design(
         How the metric weighs the rows (:func:`metric_gram`).
     aliasing : bool
         Count the harmonics ``rotations`` cannot resolve as noise (module notes).
-        ``slope="median", aliasing=False`` is the first version of this design.
+        The defaults (median slope, no aliasing) are the design as shipped: the two
+        corrections did not lower the error on the benchmark (``docs/science.md`` 7.2.1).
 
     Returns
     -------
