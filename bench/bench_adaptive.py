@@ -16,7 +16,8 @@ Sets
 * ``unseen`` (the benchmark of ``bench_unseen.py``): 11 measured RGL materials, each with a
   basis that leaves it out, and 6 mitsuba anisotropic specimens.
 
-Every scan: pairs ``design_pairs(basis, 10)`` on the material's own basis, start at ``r0``
+Every scan: pairs designed for n = 10 on the material's own basis (``--design``, default
+``design_pairs``' default objective), start at ``r0``
 uniform stage angles (each of ``--starts``), refine by :func:`next_angles` (rounds until it
 plans nothing; at most one new angle per gap per round, as the engine runs it) up to
 ``--max-rotations``; then two reconstructions of everything read: the joint fit with the
@@ -153,8 +154,12 @@ def main(argv: list[str] | None = None) -> int:
                     help="initial uniform stage angles r0 of the adaptive scans")
     ap.add_argument("--max-rotations", type=int, default=16)
     ap.add_argument("--set", choices=["panel", "unseen", "both"], default="both")
+    ap.add_argument("--design", choices=list(bu.DESIGNS), default=bu.DEFAULT_OBJECTIVE,
+                    help="pair design of every scan (bench_unseen.py's --design; default: "
+                         "design_pairs' default objective)")
     ap.add_argument("--only", choices=["measured", "aniso"], default=None)
     args = ap.parse_args(argv)
+    bu.CHOOSE["objective"] = args.design
     print(f"$ {' '.join(['python', *sys.argv])}")
     if args.set in ("panel", "both"):
         table("panel (calibration)", panel_cases(), args.gains, args.starts,
