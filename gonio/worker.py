@@ -274,6 +274,7 @@ class Worker:
             validate_plan(plan, self.desc)
         except PlanError as exc:
             return self._fail(job, f"plan no longer valid on this rig: {exc}")
+        basis: Any = None  # loaded before measuring when the plan needs it
         if job.state is not JobState.RECONSTRUCTING:
             try:
                 rig = await self.get_rig()
@@ -303,7 +304,8 @@ class Worker:
                     self.hold("emergency halt")
                 return final
             self.store.set_state(job.id, JobState.RECONSTRUCTING)
-        how = self._finishing()
+        # A basis loaded before measuring serves the finishing too (no second load from disk).
+        how = self._finishing(basis)
         self._finish_stop = how.stop
         self._recon_task = asyncio.create_task(asyncio.to_thread(finish_job, job.id, plan, how))
         try:
@@ -432,11 +434,13 @@ class Worker:
         return None
 
     # ------------------------------------------------------------------ finishing
-    def _finishing(self) -> Finishing:
-        """What :func:`gonio.finishing.finish_job` needs, from this worker's settings now."""
+    def _finishing(self, basis: Any = None) -> Finishing:
+        """What :func:`gonio.finishing.finish_job` needs, from this worker's settings now;
+        ``basis``, when the job already has one, instead of the provider's."""
         return Finishing(
             store=self.store, desc=self.desc, data_dir=self.data_dir,
-            basis_provider=self.basis_provider, calibration=self.calibration,
+            basis_provider=self.basis_provider if basis is None else lambda: basis,
+            calibration=self.calibration,
             provenance=self.provenance, fit_exports=self.fit_exports,
             true_material=self.specimen_truth, on_activity=self._set_activity,
         )
