@@ -10,7 +10,11 @@ import pytest
 from gonio.brdf.reconstruction.basis import inverse_remap
 from gonio.brdf.reconstruction.posterior import ScanPosterior
 from gonio.brdf.reconstruction.reconstruct import reconstruct
-from gonio.brdf.reconstruction.selfcheck import LOG_RMSE_MODEL, predict_log_rmse
+from gonio.brdf.reconstruction.selfcheck import (
+    LOG_RMSE_CAPS,
+    LOG_RMSE_MODEL,
+    predict_log_rmse,
+)
 from gonio.brdf.tables import geometry as geo
 from tests.unit.brdf.reconstruction.test_posterior import _scan
 
@@ -72,6 +76,20 @@ def test_prediction_is_the_two_term_formula() -> None:
     for e, m, cv in ((0.02, 3e-5, 0.4), (0.005, 1e-6, 2.0), (0.1, 1e-3, 0.05)):
         want = math.sqrt(math.exp(a) * e * e + math.exp(b) * m**c * cv**d)
         assert predict_log_rmse(e, m, cv) == pytest.approx(want, rel=1e-12)
+
+
+def test_witnesses_beyond_the_calibration_count_as_the_cap() -> None:
+    """Above LOG_RMSE_CAPS the discrepancy term stops growing: by hand, at the caps."""
+    a, b, c, d = LOG_RMSE_MODEL
+    m_cap, cv_cap = LOG_RMSE_CAPS
+    e = 0.02
+    at_caps = math.sqrt(math.exp(a) * e * e + math.exp(b) * m_cap**c * cv_cap**d)
+    for m, cv in ((10 * m_cap, 5 * cv_cap), (m_cap, 100 * cv_cap), (1e3 * m_cap, cv_cap)):
+        assert predict_log_rmse(e, m, cv) == pytest.approx(at_caps, rel=1e-12)
+    # Below the caps both witnesses still count in full.
+    half = math.sqrt(math.exp(a) * e * e + math.exp(b) * (m_cap / 2) ** c * cv_cap**d)
+    assert predict_log_rmse(e, m_cap / 2, 10 * cv_cap) == pytest.approx(half, rel=1e-12)
+    assert half < at_caps
 
 
 def test_prediction_limits() -> None:
