@@ -5,14 +5,15 @@ Run from the project root (needs mitsuba and ``../shared/data/rgl``)::
     nice -n 5 .venv/bin/python bench/calibrate_log_rmse.py [--rows FILE] [--fit-on ...]
 
 One command does everything: it scans, records every witness, fits every candidate and
-prints the table. Each scan's witnesses are cached under ``<gonio cache>/bench-unseen/
-calibrate-rows-<fingerprint>``, where the fingerprint is a digest of what the current joint
-fit reports on a fixed probe scan (:func:`fit_fingerprint`): a re-run with an unchanged fit
-only refits (seconds); after a change of the default joint fit every scan is redone
-(about 25 min on the loaded 2-core machine). Designs are cached per basis as
-``bench_unseen.py`` caches them (delete ``design-*-posterior*.npz`` there if the
-expected-error design itself changes). ``--rows FILE`` also writes (or, if present, reads)
-all rows as one JSON file; ``--only NAME...`` scans a subsample to debug.
+prints the table. Each scan's witnesses and the expected-error designs are cached under ``<gonio
+cache>/bench-unseen/calibrate-<fingerprint>``, where the fingerprint is a digest of what the
+current joint fit and the default design produce on a fixed probe (:func:`fit_fingerprint`):
+a re-run with both unchanged only refits (seconds); after a change of either every design
+and scan is redone (roughly 30 min on the loaded 2-core machine; two processes with
+``--only`` over halves of the materials share the cache). The condition-number designs are
+cached per basis as ``bench_unseen.py`` caches them. ``--rows FILE`` also writes (or, if
+present, reads: then nothing is checked against the fingerprint) all rows as one JSON file;
+``--only NAME...`` scans a subsample to debug.
 
 Materials and readings are those of ``bench/bench_unseen.py`` (measured materials each with
 a basis that leaves it out, mitsuba anisotropic specimens; 1 % noise), plus the held-out
@@ -80,6 +81,7 @@ from gonio.brdf.reconstruction.posterior import (
 from gonio.brdf.reconstruction.reconstruct import _VALID_ROWS, reconstruct
 from gonio.brdf.reconstruction.samples import uniform_stage_angles
 from gonio.brdf.reconstruction.selfcheck import (
+    LOG_RMSE_CAPS,
     LOG_RMSE_FEATURES,
     LOG_RMSE_MODEL,
     predict_log_rmse,
@@ -153,34 +155,37 @@ LAYOUTS: tuple[str, ...] = ("posterior", "presets", "kappa")
 ROTATIONS: tuple[int, ...] = (4, 8, 16)
 
 
-def _matched_design(b: Basis, n: int, r: int) -> tuple[np.ndarray, np.ndarray]:
-    """``design_pairs(b, n, objective="posterior", rotations=r)``, cached beside bench_unseen's."""
+def _posterior_design(b: Basis, n: int, r: int, cache: Path) -> tuple[np.ndarray, np.ndarray]:
+    """``design_pairs(b, n, objective="posterior", rotations=r)``, cached under the fingerprint.
+
+    The expected-error design depends on the joint fit's prior, so it is cached with the rows
+    (a changed fit redesigns), not in ``bench_unseen.py``'s per-basis cache.
+    """
     from gonio.brdf.design.constraints import RigConstraints
     from gonio.brdf.design.pairs import design_pairs
 
-    path = bu.CACHE / f"design-{bu.basis_id(b)}-n{n}-posterior-r{r}.npz"
+    path = cache / f"design-{bu.basis_id(b)}-n{n}-r{r}.npz"
     if path.is_file():
         with np.load(path) as z:
             return z["cells"], z["ph_lab"]
     d = design_pairs(b, n, RigConstraints(), objective="posterior", rotations=r)
-    path.parent.mkdir(parents=True, exist_ok=True)
     np.savez(path, cells=d.cells, ph_lab=d.ph_lab)
     return np.asarray(d.cells), np.asarray(d.ph_lab)
 
 
-def layouts(b: Basis, family: str) -> list[tuple[str, str, np.ndarray, np.ndarray, int]]:
+def layouts(b: Basis, family: str,
+            cache: Path) -> list[tuple[str, str, np.ndarray, np.ndarray, int]]:
     """``(design, geom, cells, ph_lab, r)`` of every scan of one layout family on basis ``b``."""
     out: list[tuple[str, str, np.ndarray, np.ndarray, int]] = []
     if family == "posterior":
-        bu.CHOOSE["objective"] = "posterior"
         for n in (5, 10, 20):
-            cells, ph = bu.design(b, n)
+            cells, ph = _posterior_design(b, n, 8, cache)
             out += [("posterior", f"posterior n={n}", cells, ph, r) for r in ROTATIONS]
         for r in ROTATIONS:
             if r != 8:
-                cells, ph = _matched_design(b, 10, r)
+                cells, ph = _posterior_design(b, 10, r, cache)
                 out.append(("posterior", f"posterior n=10 for r={r}", cells, ph, r))
-    elif family == "kappa":
+    elif family == "kappa":  # the condition number depends on the basis alone
         bu.CHOOSE["objective"] = "kappa"
         for n in (5, 10, 20):
             cells, ph = bu.design(b, n)
@@ -195,11 +200,15 @@ def layouts(b: Basis, family: str) -> list[tuple[str, str, np.ndarray, np.ndarra
 def fit_fingerprint() -> str:
     """A digest of what the current reconstruction reports on a fixed probe scan.
 
-    Cached rows are reused only while this is unchanged, so a change of the default joint fit
-    (its prior, empirical Bayes, witnesses) regenerates them without anyone remembering to.
-    The probe is a library material read with the MA68 preset at 8 angles on the default
-    basis; values are rounded to 6 significant digits so that BLAS-level jitter does not count.
+    Cached rows and expected-error designs are reused only while this is unchanged, so a
+    change of the default joint fit (its prior, empirical Bayes, witnesses) or of the default
+    design regenerates them without anyone remembering to. The probe is a library material
+    read with the MA68 preset at 8 angles on the default basis, plus the expected-error design
+    of 5 pairs for 4 angles on that basis; values are rounded to 6 significant digits so that
+    BLAS-level jitter does not count.
     """
+    from gonio.brdf.design.constraints import RigConstraints
+    from gonio.brdf.design.pairs import design_pairs
     from gonio.brdf.materials.library import get_material, library_specs
     from gonio.brdf.reconstruction.samples import NoiseModel, simulate_samples
 
@@ -209,8 +218,10 @@ def fit_fingerprint() -> str:
     model = get_material(library_specs()[0].name)
     vals = simulate_samples(model, cells, ph, alpha, noise=NoiseModel(0.01, seed=7))
     rec = reconstruct(b, cells, ph, alpha, vals)
+    d = design_pairs(b, 5, RigConstraints(), objective="posterior", rotations=4)
     probe = np.r_[np.asarray(rec.table.values, dtype=float)[:, ::7, ::97].ravel(),
-                  rec.expected_log_rmse, rec.mahalanobis, rec.cv_sample_error]
+                  rec.expected_log_rmse, rec.mahalanobis, rec.cv_sample_error,
+                  np.ravel(d.cells), np.ravel(d.ph_lab)]
     probe = np.nan_to_num(probe)
     text = ",".join(f"{v:.6g}" for v in probe)
     return hashlib.sha256(f"{bu.basis_id(b)}|{text}".encode()).hexdigest()[:12]
@@ -228,8 +239,8 @@ def scans(families: tuple[str, ...], only: tuple[str, ...] = ()) -> list[dict[st
     for kind in ("panel", "measured", "aniso"):
         pos.update({m.name: i for i, m in enumerate(m for m, _ in mats if m.kind == kind)})
     fp = fit_fingerprint()
-    cache = bu.CACHE / f"calibrate-rows-{fp}"
-    cache.mkdir(parents=True, exist_ok=True)
+    cache = bu.CACHE / f"calibrate-{fp}"
+    (cache / "rows").mkdir(parents=True, exist_ok=True)
     print(f"joint fit fingerprint {fp}; rows cached in {cache}", flush=True)
     rows: list[dict[str, Any]] = []
     t0 = time.perf_counter()
@@ -238,13 +249,13 @@ def scans(families: tuple[str, ...], only: tuple[str, ...] = ()) -> list[dict[st
         if only and m.name not in only:
             continue
         for family in families:
-            for design, gname, cells, ph, r in layouts(b, family):
+            for design, gname, cells, ph, r in layouts(b, family, cache):
                 alpha = uniform_stage_angles(r)
                 key = hashlib.sha256(
                     f"{m.name}|{bu.basis_id(b)}|{r}|{100 + i}".encode()
                     + np.ascontiguousarray(cells, dtype=float).tobytes()
                     + np.ascontiguousarray(ph, dtype=float).tobytes()).hexdigest()[:20]
-                path = cache / f"{key}.json"
+                path = cache / "rows" / f"{key}.json"
                 row: dict[str, Any] = {
                     "material": m.name, "kind": m.kind, "design": design, "geom": gname,
                     "cal": int(m.kind == "panel"
@@ -436,7 +447,8 @@ def report(rows: list[dict[str, Any]], fit_rows: list[dict[str, Any]]) -> None:
                 if capped else "")
         line(label, " + ".join(feats) or "constant", ", ".join(f"{v:.3f}" for v in p) + caps,
              model(p, Fc) - y, cvres)
-    line("**module**", " + ".join(LOG_RMSE_FEATURES), ", ".join(map(str, LOG_RMSE_MODEL)),
+    line("**module**", " + ".join(LOG_RMSE_FEATURES),
+         ", ".join(map(str, LOG_RMSE_MODEL)) + f" (caps {', '.join(map(str, LOG_RMSE_CAPS))})",
          np.log([float(r["predicted"]) for r in rows]) - y, np.zeros(0))
 
 
