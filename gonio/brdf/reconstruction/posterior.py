@@ -22,7 +22,10 @@ material (empirical Bayes): the scale ``s2`` of the whole prior, and a factor ``
 varying harmonics (``m > 0``) of the learnt prior, chosen from :data:`RHO_GRID` by marginal
 likelihood. An isotropic specimen drives ``rho`` down and with it the value of more rotations;
 a strongly anisotropic one drives it up. Both are profiled in closed form / on a grid
-(``s2 = y^T G^-1 y / N`` for each ``rho``).
+(``s2 = y^T G^-1 y / N`` for each ``rho``). With ``bands=True`` the shape of the spectrum
+along ``ph`` is taken from the data too: one factor on the low harmonics
+(``0 < m <= BAND_SPLIT``, the twofold symmetry of a brushed or woven specimen) and another on
+the higher ones (sharp highlights), both from :data:`RHO_GRID`.
 
 Adaptive refinement (:func:`next_angles`) picks candidate angles greedily by gain, conditioning
 on the angles already picked, and stops when the best remaining angle would lower the expected
@@ -55,6 +58,10 @@ FloatArray = NDArray[np.float64]
 
 #: Factors on the varying (m > 0) harmonics of the learnt prior tried by marginal likelihood.
 RHO_GRID: tuple[float, ...] = tuple(float(v) for v in np.geomspace(1 / 64, 16.0, 11))
+#: The two-band prior shape (``bands=True``): harmonics ``0 < m <= BAND_SPLIT`` take the low
+#: band's factor, ``m > BAND_SPLIT`` the high band's. On the learnt priors only even harmonics
+#: carry energy, so the low band is ``m = 2`` (docs/science.md 2.1).
+BAND_SPLIT = 2
 #: Default stopping threshold of :func:`next_angles`: the least drop of the expected
 #: ``log_rmse`` one more stage angle must buy (``bench/bench_adaptive.py --calibrate``).
 REFINE_GAIN = 0.0006
@@ -75,6 +82,13 @@ def _cos_ti_rows() -> FloatArray:
     out = np.asarray(ci.ravel()[_VALID_ROWS], dtype=float)
     out.setflags(write=False)
     return out
+
+
+def harmonic_scale(n_harmonics: int, low: float, high: float | None = None) -> FloatArray:
+    """(M,) factors on the prior's harmonics: 1 for ``m = 0``, ``low`` for
+    ``0 < m <= BAND_SPLIT``, ``high`` (default ``low``) above."""
+    m = np.arange(n_harmonics)
+    return np.where(m == 0, 1.0, np.where(m <= BAND_SPLIT, low, low if high is None else high))
 
 
 class ScanPosterior:
@@ -105,8 +119,13 @@ class ScanPosterior:
         readings (one call of :func:`gonio.brdf.reconstruction.reconstruct.reconstruct`).
     eta, lam : float, optional
         The joint fit's settings (defaults :data:`JOINT_ETA`, :data:`JOINT_LAM`).
-    rho : float, optional
-        Fix the factor on the varying harmonics instead of choosing it by marginal likelihood.
+    rho : float or (float, float), optional
+        Fix the factor on the varying harmonics instead of choosing it by marginal likelihood;
+        a pair fixes the low and the high band's factors (``0 < m <= BAND_SPLIT`` and
+        ``m > BAND_SPLIT``).
+    bands : bool
+        When ``rho`` is not given: choose the two bands' factors separately (every pair of
+        :data:`RHO_GRID`) instead of one factor for all varying harmonics.
 
     Attributes
     ----------
@@ -114,7 +133,10 @@ class ScanPosterior:
         Scale of the prior chosen by marginal likelihood, ``y^T G^-1 y / (N C)`` (remapped
         units squared; ``N`` readings, ``C`` channels).
     rho : float
-        Factor on the varying harmonics (``m > 0``) chosen from :data:`RHO_GRID`.
+        Factor on the varying harmonics (``m > 0``) chosen from :data:`RHO_GRID`; with two
+        bands, the low band's factor (``0 < m <= BAND_SPLIT``).
+    rho_high : float
+        The factor on the harmonics ``m > BAND_SPLIT`` (equal to ``rho`` for one factor).
     mahalanobis : float
         Squared Mahalanobis norm under the prior (before the scale ``s2``) of the fitted
         readings, per pair and channel: ``f^T K^-1 f / (n C)`` with ``K`` the prior
@@ -138,7 +160,8 @@ class ScanPosterior:
         table: ArrayLike | None = None,
         eta: float | None = None,
         lam: float | None = None,
-        rho: float | None = None,
+        rho: float | tuple[float, float] | None = None,
+        bands: bool = False,
     ) -> None:
         cells_ = np.asarray(cells, dtype=float)
         self.ph_lab = np.asarray(ph_lab, dtype=float)
@@ -179,14 +202,19 @@ class ScanPosterior:
                                 channels=[f"c{k}" for k in range(vals.shape[2])]).table.values
         self._set_weights(basis, np.asarray(table, dtype=float))
         self.alpha = alpha.copy()
-        iso = np.zeros(M)
-        iso[0] = 1.0
-        var = 1.0 - iso
-        self._G_iso = self._kernel(self._Am, iso, alpha, alpha)
-        self._G_var = self._kernel(self._Am, var, alpha, alpha)
-        self.rho = float(rho) if rho is not None else self._choose_rho()
-        self._rho_m = np.where(self.harm > 0, self.rho, 1.0)
-        G = self._G_iso + self.rho * self._G_var
+        low = (self.harm > 0) & (self.harm <= BAND_SPLIT)
+        self._G_iso = self._kernel(self._Am, (self.harm == 0).astype(float), alpha, alpha)
+        self._G_low = self._kernel(self._Am, low.astype(float), alpha, alpha)
+        self._G_high = self._kernel(self._Am, (self.harm > BAND_SPLIT).astype(float), alpha,
+                                    alpha)
+        if rho is None:
+            self.rho, self.rho_high = self._choose_bands() if bands else (self._choose_rho(),) * 2
+        elif isinstance(rho, tuple):
+            self.rho, self.rho_high = float(rho[0]), float(rho[1])
+        else:
+            self.rho = self.rho_high = float(rho)
+        self._rho_m = harmonic_scale(M, self.rho, self.rho_high)
+        G = self._prior_readings(self.rho, self.rho_high)
         G[np.diag_indices_from(G)] += self.eta
         self._chol = scipy.linalg.cho_factor(G, lower=True)
         beta = scipy.linalg.cho_solve(self._chol, self.y)
@@ -266,23 +294,41 @@ class ScanPosterior:
             out += geo.N_PH * self._rho_m[last] ** 2 * Bl * np.outer(ca, cb)
         return out
 
+    def _prior_readings(self, low: float, high: float) -> FloatArray:
+        """Prior covariance of the measured readings with the bands' factors (a new array)."""
+        return self._G_iso + low * self._G_low + high * self._G_high
+
+    def log_marginal(self, low: float, high: float | None = None) -> float:
+        """Log marginal likelihood of the readings, the prior's scale ``s2`` profiled out.
+
+        ``-N C / 2 ln s2 - C / 2 ln det G`` (constants dropped), ``G`` the readings' prior
+        covariance with the low band's factor ``low`` and the high band's ``high`` (default:
+        ``low``) plus ``eta I``, ``s2 = y^T G^-1 y / (N C)``. ``-inf`` when ``G`` is singular.
+        """
+        N, C = self.y.shape
+        G = self._prior_readings(low, low if high is None else high)
+        G[np.diag_indices_from(G)] += self.eta
+        try:
+            cho = scipy.linalg.cho_factor(G, lower=True)
+        except np.linalg.LinAlgError:
+            return -np.inf
+        s2 = float(np.sum(self.y * scipy.linalg.cho_solve(cho, self.y))) / (N * C)
+        logdet = 2.0 * float(np.sum(np.log(np.diag(cho[0]))))
+        return float(-0.5 * N * C * np.log(max(s2, 1e-300)) - 0.5 * C * logdet)
+
     def _choose_rho(self) -> float:
         """The factor of :data:`RHO_GRID` with the largest marginal likelihood."""
-        N, C = self.y.shape
-        best, best_ll = RHO_GRID[0], -np.inf
-        for rho in RHO_GRID:
-            G = self._G_iso + rho * self._G_var
-            G[np.diag_indices_from(G)] += self.eta
-            try:
-                cho = scipy.linalg.cho_factor(G, lower=True)
-            except np.linalg.LinAlgError:
-                continue
-            s2 = float(np.sum(self.y * scipy.linalg.cho_solve(cho, self.y))) / (N * C)
-            logdet = 2.0 * float(np.sum(np.log(np.diag(cho[0]))))
-            ll = -0.5 * N * C * np.log(max(s2, 1e-300)) - 0.5 * C * logdet
-            if ll > best_ll:
-                best, best_ll = rho, ll
-        return float(best)
+        lls = [self.log_marginal(r) for r in RHO_GRID]
+        return float(RHO_GRID[int(np.argmax(lls))])
+
+    def _choose_bands(self) -> tuple[float, float]:
+        """The low and high band's factors with the largest marginal likelihood.
+
+        Every pair of :data:`RHO_GRID` (121 Cholesky factorisations of the readings' size).
+        """
+        lls = np.array([[self.log_marginal(lo, hi) for hi in RHO_GRID] for lo in RHO_GRID])
+        i, j = np.unravel_index(int(np.argmax(lls)), lls.shape)
+        return float(RHO_GRID[i]), float(RHO_GRID[j])
 
     # ------------------------------------------------------------------ results
     def weighted_variance(self) -> float:

@@ -71,6 +71,9 @@ from gonio.brdf.tables.table import VALID_MASK, BRDFTable
 FloatArray = NDArray[np.float64]
 Solver = Literal["closed", "iterative"]
 Method = Literal["joint", "vf"]
+#: ``reconstruct``'s ``rho``: a factor on the prior's varying harmonics, a pair of factors
+#: (harmonics ``0 < m <= BAND_SPLIT`` and above), ``"scan"``, ``"scan-bands"`` or None.
+Rho = float | tuple[float, float] | Literal["scan", "scan-bands"] | None
 
 #: V&F Sec. 5: the whole-BRDF error is about 0.8 x the mean relative error at the samples.
 ERROR_SCALE = 0.8
@@ -641,7 +644,7 @@ def reconstruct(
     solver: Solver = "closed",
     name: str = "reconstruction",
     method: Method = "joint",
-    rho: float | Literal["scan"] | None = "scan",
+    rho: Rho = "scan",
 ) -> Reconstruction:
     """Reconstruct the full anisotropic BRDF from ``n`` pairs read at ``r`` stage angles.
 
@@ -678,7 +681,11 @@ def reconstruct(
         (:attr:`gonio.brdf.reconstruction.posterior.ScanPosterior.rho`), when it is below
         :data:`SCAN_RHO_MAX`: the readings then say the specimen varies less with the stage
         angle than the library's prior expects, and the fit believes them (docs/science.md
-        7.3). ``None``: the learnt prior as it is; a number: that factor.
+        7.3). ``"scan-bands"``: two factors chosen by marginal likelihood, one on the low
+        harmonics ``0 < m <= BAND_SPLIT`` (:data:`gonio.brdf.reconstruction.posterior.BAND_SPLIT`)
+        and one on the higher ones, used as chosen (docs/science.md 2.1: the spectrum's
+        shape). ``None``: the learnt prior as it is; a number: that factor; a pair
+        ``(low, high)``: those two factors.
 
     Returns
     -------
@@ -705,7 +712,7 @@ def _reconstruct(
     solver: Solver,
     name: str,
     method: Method,
-    rho: float | Literal["scan"] | None = "scan",
+    rho: Rho = "scan",
 ) -> Reconstruction:
     """:func:`reconstruct` without the BLAS thread limit (same parameters)."""
     t0 = time.perf_counter()
@@ -727,9 +734,14 @@ def _reconstruct(
         raise ReconstructionError(f"the joint fit needs eta > 0 (reading noise), got {eta}")
     if not (eta >= 0 and lam >= 0):
         raise ReconstructionError(f"eta and lam must be >= 0, got eta={eta}, lam={lam}")
-    if rho is not None and rho != "scan" and not (
-            isinstance(rho, int | float) and np.isfinite(rho) and rho > 0):
-        raise ReconstructionError(f"rho must be a finite number > 0, 'scan' or None, got {rho!r}")
+    factors = (rho if isinstance(rho, tuple) else (rho, rho)
+               if isinstance(rho, int | float) else ())
+    if rho not in (None, "scan", "scan-bands") and not (
+            len(factors) == 2 and all(isinstance(f, int | float) and np.isfinite(f) and f > 0
+                                      for f in factors)):
+        raise ReconstructionError(
+            f"rho must be a finite number > 0, a pair of them, 'scan', 'scan-bands' or None, "
+            f"got {rho!r}")
     if n_components is not None:
         try:
             basis = basis.truncated(int(n_components))
@@ -747,14 +759,18 @@ def _reconstruct(
     w_t = np.maximum(ci * co, basis.eps)[:, None, None]  # each pair's exact weight, not a blend
 
     n_ch = len(channels)
-    prior_rho = 1.0
+    prior_rho = (1.0, 1.0)  # factors on the low / high varying harmonics
     if method == "joint":
         Yr = remap(vals, fmed_t, w_t, basis.eps) - mu_t  # (n, r, C), each reading where taken
         P = joint_prior(basis, lam / eta)
 
-        def joint(factor: float) -> tuple[FloatArray, FloatArray, bool, FloatArray | None]:
-            """The joint fit with the prior's varying harmonics scaled by ``factor``."""
-            Pf = P * np.where(np.arange(P.shape[0]) > 0, factor, 1.0)[:, None, None]
+        def joint(factor: tuple[float, float]
+                  ) -> tuple[FloatArray, FloatArray, bool, FloatArray | None]:
+            """The joint fit with the prior's low / high varying harmonics scaled by
+            ``factor``."""
+            from gonio.brdf.reconstruction.posterior import harmonic_scale
+
+            Pf = P * harmonic_scale(P.shape[0], *factor)[:, None, None]
             jf = solve_joint(Yr, Qt, ph_[:, None] - alpha[None, :], Pf, eta)
             has = bool(np.isfinite(jf.loo).all())
             remapped = np.concatenate([jf.fit, jf.loo], axis=2) if has else jf.fit
@@ -767,8 +783,8 @@ def _reconstruct(
             d = np.log1p(la * ci[:, None, None]) - np.log1p(vals * ci[:, None, None])
             return np.moveaxis(jf.coef, -1, 0), at, has, np.sqrt(np.mean(d**2, axis=(0, 2)))
 
-        if isinstance(rho, int | float):
-            prior_rho = float(rho)
+        if factors:
+            prior_rho = (float(factors[0]), float(factors[1]))
         coef, at_samples, has_cv, angle_err = joint(prior_rho)  # coef (C, K, 72)
         solver_name = "joint"
     else:
@@ -778,12 +794,12 @@ def _reconstruct(
         solver_name = solver
         angle_err = None
 
-    def as_table(coef: FloatArray, factor: float) -> BRDFTable:
+    def as_table(coef: FloatArray, factor: tuple[float, float]) -> BRDFTable:
         settings = {"K": basis.K, "n": int(cells_.shape[0]), "r": int(alpha.size),
                     "eta": eta, "lam": lam, "method": method, "solver": solver_name,
                     "basis_materials": len(basis.materials)}
         if method == "joint":
-            settings["prior_rho"] = factor
+            settings.update(_rho_settings(factor))
         return BRDFTable.trusted(_expand_table(basis, coef), channels, name, None,
                                  {"reconstruction": settings})
 
@@ -794,13 +810,17 @@ def _reconstruct(
         # this module): the self-estimate's expected error, and the scan's own rho.
         from gonio.brdf.reconstruction.posterior import ScanPosterior
 
+        by_scan = rho in ("scan", "scan-bands")
         post = ScanPosterior(basis, cells_, ph_, alpha, vals, table=table.values, eta=eta,
-                             lam=lam, rho=None if rho == "scan" else prior_rho)
-        if rho == "scan" and post.rho < SCAN_RHO_MAX:
-            # Refit under the scan's factor. The posterior already assumed it; its weights
+                             lam=lam, rho=None if by_scan else prior_rho,
+                             bands=rho == "scan-bands")
+        chosen = (post.rho, post.rho_high)
+        if (rho == "scan" and post.rho < SCAN_RHO_MAX) or (
+                rho == "scan-bands" and chosen != prior_rho):
+            # Refit under the scan's factors. The posterior already assumed them; its weights
             # come from the first table, which the refit changes little (and a second
             # posterior would cost as much as the fit).
-            prior_rho = post.rho
+            prior_rho = chosen
             coef, at_samples, has_cv, angle_err = joint(prior_rho)
             table = as_table(coef, prior_rho)
     rel = _relative_sample_error(at_samples[..., :n_ch], vals)
@@ -826,7 +846,7 @@ def _reconstruct(
             "K": basis.K, "n": n, "r": int(alpha.size), "eta": float(eta),
             "lam": float(lam), "method": method, "solver": solver_name,
             "channels": list(channels), "seconds": round(seconds, 4),
-            **({"prior_rho": prior_rho} if method == "joint" else {}),
+            **(_rho_settings(prior_rho) if method == "joint" else {}),
         },
         cv_sample_error=cv,
         predicted_error=cv_error_scale(n) * cv,
@@ -837,6 +857,15 @@ def _reconstruct(
         angle_log_errors=angle_err,
         pair_log_errors=pair_err,
     )
+
+
+def _rho_settings(factor: tuple[float, float]) -> dict[str, float]:
+    """``prior_rho`` (the factor on the varying harmonics; with two bands the low band's)
+    and, when the bands differ, ``prior_rho_high``."""
+    out = {"prior_rho": factor[0]}
+    if factor[1] != factor[0]:
+        out["prior_rho_high"] = factor[1]
+    return out
 
 
 def _vf_path(

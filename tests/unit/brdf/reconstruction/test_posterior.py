@@ -194,3 +194,106 @@ def test_the_fit_takes_the_scans_own_anisotropy_only_when_it_is_smaller() -> Non
     np.testing.assert_array_equal(
         rec.coefficients,
         reconstruct(b, cells, ph, alpha, aniso, channels=("Y",), rho=None).coefficients)
+
+
+def _dense_prior_readings(post: ScanPosterior, alpha: np.ndarray, low: float,
+                          high: float) -> np.ndarray:
+    """The readings' prior covariance written out element by element (no harmonic tricks)."""
+    from gonio.brdf.reconstruction.posterior import BAND_SPLIT
+
+    P = np.asarray(post.P)
+    scale = [1.0 if m == 0 else low if m <= BAND_SPLIT else high for m in range(P.shape[0])]
+    ph_read = (post.ph_lab[:, None] - alpha[None, :]).ravel()
+    q = np.repeat(np.arange(post.Qt.shape[0]), alpha.size)
+    N = ph_read.size
+    G = np.empty((N, N))
+    for a in range(N):
+        for b_ in range(N):
+            d = ph_read[a] - ph_read[b_]
+            Pd = sum(scale[m] * P[m] * np.cos(m * d) for m in range(P.shape[0]))
+            G[a, b_] = post.Qt[q[a]] @ Pd @ post.Qt[q[b_]]
+    return G
+
+
+def test_log_marginal_is_the_gaussian_likelihood_with_the_scale_profiled() -> None:
+    """log_marginal(low, high) + const is the log density of the readings under
+    N(0, s2 (G + eta I)) at the maximising s2 = y^T (G + eta I)^-1 y / (N C), per channel
+    (scipy's multivariate normal on the covariance written out element by element)."""
+    from scipy.stats import multivariate_normal
+
+    b, cells, ph, alpha, _ = _scan()
+    vals = np.abs(np.random.default_rng(8).normal(1.0, 0.3, (5, 5, 2)))
+    post = ScanPosterior(b, cells, ph, alpha, vals, lam=0.0)
+    y = post.y
+    N, C = y.shape
+    for low, high in ((0.25, 4.0), (2.0, 0.125), (1.0, 1.0)):
+        G = _dense_prior_readings(post, alpha, low, high) + post.eta * np.eye(N)
+        s2 = float(np.sum(y * np.linalg.solve(G, y))) / (N * C)
+        want = sum(multivariate_normal(np.zeros(N), s2 * G).logpdf(y[:, c]) for c in range(C))
+        const = -0.5 * N * C * (1.0 + np.log(2 * np.pi))
+        assert post.log_marginal(low, high) + const == pytest.approx(want, rel=1e-9)
+
+
+def test_band_factors_recover_the_spectrum_the_readings_were_drawn_from() -> None:
+    """Many channels drawn from the joint fit's own model with the low band's factor 4 and
+    the high band's 1/16: the marginal likelihood over the grid picks those (one grid step
+    each way at most), where a single factor cannot. Isotropic readings take the bottom of
+    the grid in both bands."""
+    from gonio.brdf.reconstruction.posterior import BAND_SPLIT
+
+    b = _with_prior(random_basis(6, seed=1), {0: 1.0, 2: 1.0, 4: 1.0, 6: 1.0})
+    cells, ph = grid_pairs(6, seed=4)
+    alpha = np.deg2rad(np.arange(0.0, 360.0, 30.0))
+    template = np.ones((6, alpha.size, 1))
+    post = ScanPosterior(b, cells, ph, alpha, template, lam=0.0, rho=1.0)
+    assert BAND_SPLIT == 2
+    G = _dense_prior_readings(post, alpha, 4.0, 1 / 16) + post.eta * np.eye(6 * alpha.size)
+    rng = np.random.default_rng(5)
+    y = np.linalg.cholesky(G) @ rng.standard_normal((G.shape[0], 200))
+    # Readings whose remapped, centred values are y: undo the remap of each pair's row.
+    from gonio.brdf.reconstruction.basis import inverse_remap
+
+    th, td, pd = cells.T
+    rows, weights = b.neighbours(th, td, pd)
+    fmed = (weights * b.f_med[rows]).sum(axis=1)[:, None, None]
+    mu = (weights * b.mu[rows]).sum(axis=1)[:, None, None]
+    ci, co = geo.cell_cosines(th, td, pd)
+    w = np.maximum(ci * co, b.eps)[:, None, None]
+    vals = inverse_remap(0.05 * y.reshape(6, alpha.size, -1) + mu, fmed, w, b.eps)
+    banded = ScanPosterior(b, cells, ph, alpha, vals, lam=0.0, bands=True)
+    step = np.log(RHO_GRID[1] / RHO_GRID[0])
+    assert abs(np.log(banded.rho / 4.0)) <= step + 1e-9
+    assert abs(np.log(banded.rho_high * 16.0)) <= step + 1e-9
+    flat = ScanPosterior(b, cells, ph, alpha, vals, lam=0.0)
+    assert flat.rho == flat.rho_high
+    assert banded.log_marginal(banded.rho, banded.rho_high) > flat.log_marginal(flat.rho)
+
+    iso = np.repeat(np.random.default_rng(0).uniform(0.5, 2.0, (6, 1, 1)), alpha.size, axis=1)
+    both = ScanPosterior(b, cells, ph, alpha, iso, bands=True)
+    assert both.rho == both.rho_high == RHO_GRID[0]
+
+
+def test_reconstruct_with_two_factors_is_the_fit_under_the_rescaled_bands() -> None:
+    """``rho=(low, high)`` is the joint fit under a prior whose harmonic 2 is ``low`` times
+    and harmonics 4 and 36 are ``high`` times the learnt ones (a basis built with that
+    prior, lam = 0); ``"scan-bands"`` is the fit under the factors its posterior chose."""
+    from gonio.brdf.reconstruction.reconstruct import reconstruct
+
+    b, cells, ph, alpha, vals = _scan()
+    scaled = _with_prior(random_basis(6, seed=1), {0: 1.0, 2: 3.0 * 1.0, 4: 0.25 * 0.5,
+                                                   36: 0.25 * 0.2})
+    got = reconstruct(b, cells, ph, alpha, vals, channels=("Y",), lam=0.0, rho=(3.0, 0.25))
+    want = reconstruct(scaled, cells, ph, alpha, vals, channels=("Y",), lam=0.0, rho=None)
+    np.testing.assert_allclose(got.coefficients, want.coefficients, rtol=1e-9, atol=1e-12)
+    assert got.settings["prior_rho"] == 3.0 and got.settings["prior_rho_high"] == 0.25
+
+    rec = reconstruct(b, cells, ph, alpha, vals, channels=("Y",), rho="scan-bands")
+    post = ScanPosterior(b, cells, ph, alpha, vals, bands=True)
+    pair = (post.rho, post.rho_high)
+    assert (rec.settings["prior_rho"], rec.settings.get("prior_rho_high", pair[0])) == pair
+    np.testing.assert_array_equal(
+        rec.coefficients,
+        reconstruct(b, cells, ph, alpha, vals, channels=("Y",), rho=pair).coefficients)
+    for bad in ((1.0, 0.0), (1.0,), (1.0, float("inf")), "bands"):
+        with pytest.raises(ReconstructionError, match="rho"):
+            reconstruct(b, cells, ph, alpha, vals, channels=("Y",), rho=bad)  # type: ignore[arg-type]
