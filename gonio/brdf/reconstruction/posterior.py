@@ -321,14 +321,60 @@ class ScanPosterior:
         lls = [self.log_marginal(r) for r in RHO_GRID]
         return float(RHO_GRID[int(np.argmax(lls))])
 
+    def _low_band_factor(self) -> FloatArray:
+        """``U`` (N, k) with ``U U^T`` the low band's reading kernel (:attr:`_G_low`).
+
+        The band holds harmonics ``0 < m <= BAND_SPLIT``; harmonic ``m``'s kernel is
+        ``Re(z_a conj(z_b)) A_m[q(a), q(b)]``, ``z_a = e^{-i m ph_a}``, so with
+        ``A_m = L L^T`` it is ``Re(F F^H)``, ``F = diag(z) L[q]``: columns ``Re F`` and
+        ``Im F``. Rank at most ``2 n BAND_SPLIT``, whatever the number of stage angles.
+        """
+        ph = self._ph(self.alpha).ravel()
+        q = np.repeat(np.arange(self.n), self.alpha.size)
+        cols = []
+        for m in range(1, min(BAND_SPLIT, self.harm.size - 1) + 1):
+            lam, vec = np.linalg.eigh(self._Am[m])
+            keep = lam > 1e-12 * max(float(lam.max()), 0.0)
+            if not keep.any():
+                continue
+            F = np.exp(-1j * m * ph)[:, None] * (vec[:, keep] * np.sqrt(lam[keep]))[q]
+            cols += [F.real, F.imag]
+        return np.concatenate(cols, axis=1) if cols else np.zeros((ph.size, 0))
+
     def _choose_bands(self) -> tuple[float, float]:
         """The low and high band's factors with the largest marginal likelihood.
 
-        Every pair of :data:`RHO_GRID` (121 Cholesky factorisations of the readings' size).
+        Every pair of :data:`RHO_GRID`, but one Cholesky factorisation per high-band factor:
+        the low band's kernel is ``U U^T`` of low rank (:meth:`_low_band_factor`), so with
+        ``A = G_iso + high G_high + eta I = L L^T``, ``W = L^-1 U`` and ``W^T W = V diag(l)
+        V^T``, every low-band factor ``r`` has ``ln det G = ln det A + sum ln(1 + r l)`` and
+        ``y^T G^-1 y = |L^-1 y|^2 - sum r u^2 / (1 + r l)``, ``u = V^T W^T L^-1 y``
+        (Woodbury). Same values as :meth:`log_marginal` (tested), a tenth of the cost.
         """
-        lls = np.array([[self.log_marginal(lo, hi) for hi in RHO_GRID] for lo in RHO_GRID])
-        i, j = np.unravel_index(int(np.argmax(lls)), lls.shape)
-        return float(RHO_GRID[i]), float(RHO_GRID[j])
+        N, C = self.y.shape
+        U = self._low_band_factor()
+        lows = np.asarray(RHO_GRID)
+        best, best_ll = (RHO_GRID[0], RHO_GRID[0]), -np.inf
+        for high in RHO_GRID:
+            A = self._G_iso + high * self._G_high
+            A[np.diag_indices_from(A)] += self.eta
+            try:
+                L = scipy.linalg.cholesky(A, lower=True)
+            except np.linalg.LinAlgError:
+                continue
+            Ly = scipy.linalg.solve_triangular(L, self.y, lower=True)  # (N, C)
+            W = scipy.linalg.solve_triangular(L, U, lower=True)  # (N, k)
+            ell, V = np.linalg.eigh(W.T @ W)
+            ell = np.maximum(ell, 0.0)
+            u2 = np.sum((V.T @ (W.T @ Ly)) ** 2, axis=1)  # (k,), summed over channels
+            quad = float(np.sum(Ly**2)) - (lows[:, None] * u2 / (1 + lows[:, None] * ell)).sum(1)
+            logdet = 2.0 * float(np.sum(np.log(np.diag(L)))) + np.log1p(
+                lows[:, None] * ell).sum(1)
+            ll = -0.5 * N * C * np.log(np.maximum(quad / (N * C), 1e-300)) - 0.5 * C * logdet
+            i = int(np.argmax(ll))
+            if ll[i] > best_ll:
+                best, best_ll = (float(lows[i]), float(high)), float(ll[i])
+        return best
 
     # ------------------------------------------------------------------ results
     def weighted_variance(self) -> float:

@@ -297,3 +297,20 @@ def test_reconstruct_with_two_factors_is_the_fit_under_the_rescaled_bands() -> N
     for bad in ((1.0, 0.0), (1.0,), (1.0, float("inf")), "bands"):
         with pytest.raises(ReconstructionError, match="rho"):
             reconstruct(b, cells, ph, alpha, vals, channels=("Y",), rho=bad)  # type: ignore[arg-type]
+
+
+def test_the_band_search_finds_the_grid_maximum_of_the_marginal_likelihood() -> None:
+    """The low-rank search of the two bands' factors picks the pair of RHO_GRID where the
+    plain (one Cholesky per pair) log marginal likelihood is largest."""
+    b = _with_prior(random_basis(6, seed=1), {0: 1.0, 1: 0.3, 2: 1.0, 4: 0.5, 36: 0.2})
+    cells, ph = grid_pairs(5, seed=4)
+    alpha = np.deg2rad([0.0, 45.0, 90.0, 180.0, 270.0, 300.0])
+    phr = ph[:, None] - alpha[None, :]
+    for k, vals in enumerate((
+            np.abs(np.random.default_rng(3).normal(1.0, 0.2, (5, 6, 2))),
+            np.exp(0.8 * np.cos(2 * phr) + 0.3 * np.cos(4 * phr))[..., None] + 0.1,
+            np.exp(0.1 * np.cos(2 * phr) + 0.8 * np.cos(4 * phr + 1.0))[..., None] + 0.1)):
+        post = ScanPosterior(b, cells, ph, alpha, vals, lam=0.0, bands=True)
+        lls = np.array([[post.log_marginal(lo, hi) for hi in RHO_GRID] for lo in RHO_GRID])
+        i, j = np.unravel_index(int(np.argmax(lls)), lls.shape)
+        assert (post.rho, post.rho_high) == (RHO_GRID[i], RHO_GRID[j]), k

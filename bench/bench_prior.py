@@ -1,0 +1,402 @@
+"""The joint fit's prior along ph chosen per scan: which empirical-Bayes variant pays (issue 9).
+
+Run from the project root (needs mitsuba and ``../shared/data/rgl`` like ``bench_unseen.py``,
+whose readings, designs and caches it reuses)::
+
+    nice -n 5 .venv/bin/python bench/bench_prior.py [--sets fresh panel measured]
+        [--variants ...] [--r 8] [--seed-offset 0]
+
+Selection sets only by default (the project never tunes on its test set):
+
+* ``fresh``: materials drawn with the library's own recipes but another seed
+  (``library_specs(seed=7)``; 8 brushed metals, 6 fabrics, 4 metals: "fresh-aniso"; 6
+  isotropic ones: "fresh-iso"), in no basis; the default basis and its default n = 10 design;
+* ``panel``: the seven synthetic materials held out of the panel basis
+  (:mod:`gonio.brdf.design.heldout`), its default design;
+* ``measured``: the 11 measured materials, each with the basis that leaves it out (as
+  ``bench_unseen.py``).
+
+``--sets TEST`` runs the six mitsuba specimens (the benchmark's test set; look only after the
+choice is made). Every scan: 1 % noise, r uniform stage angles. Variants are factors on the
+harmonics of the learnt prior (``m = 0`` keeps 1), chosen per scan by marginal likelihood
+(``s2`` profiled) over a grid: ``lib scan`` / ``lib scan-bands`` call ``reconstruct`` with
+``rho="scan"`` (the default: one factor on ``m > 0``, kept at most 1) / ``rho="scan-bands"``
+(harmonics ``m <= 2`` and ``m > 2`` each with its own factor); the others are fitted here
+with :func:`solve_joint`: ``flat ext`` (one factor, grid to 256, no cap), ``bandB`` (factors
+for ``0 < m <= B`` and ``m > B``, grid 1/64..16; ``ext``: low band to 256, ``hicap1``: high
+band at most 1), ``band3 2|8`` (three bands), ``tilt`` (``rho (m / 2)^beta``),
+``eta`` (the noise-to-prior ratio chosen too, from 2.5..320; ``capped``: the factor kept at
+most 1). Output: per material, each variant's log_rmse with its factors (at m = 2, 8, 20)
+and eta; then the mean per set.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import bench_unseen as bu
+import numpy as np
+import scipy.linalg
+
+from gonio.brdf.materials import library
+from gonio.brdf.models import analytic as bm
+from gonio.brdf.reconstruction.basis import Basis, default_basis, remap
+from gonio.brdf.reconstruction.reconstruct import (
+    JOINT_ETA,
+    JOINT_LAM,
+    _expand_table,
+    joint_prior,
+    one_blas_thread,
+    solve_joint,
+)
+from gonio.brdf.reconstruction.samples import uniform_stage_angles
+from gonio.brdf.tables import geometry as geo
+from gonio.brdf.tables import metrics
+from gonio.brdf.tables.table import BRDFTable
+
+FRESH = {"brushed-metal": 8, "fabric": 6, "metal": 4, "plastic": 2, "paint": 2,
+         "diffuse": 1, "retro": 1}
+
+
+@dataclass
+class Case:
+    name: str
+    kind: str
+    truth: BRDFTable
+    specimen: Any
+    basis: Basis
+    cells: np.ndarray
+    ph: np.ndarray
+    seed: int
+
+
+def fresh_cases() -> list[Case]:
+    b = default_basis()
+    cells, ph = bu.design(b, 10)
+    out = []
+    count: dict[str, int] = {}
+    for i, s in enumerate(library.library_specs(seed=7)):
+        if count.get(s.family, 0) >= FRESH[s.family]:
+            continue
+        count[s.family] = count.get(s.family, 0) + 1
+        vals = bu._cached(f"fresh7-{s.name}", lambda s=s: np.asarray(
+            bm.tabulate_valid(s.model), dtype=np.float32))
+        if vals.shape[1] == 1:
+            vals = np.repeat(vals, geo.N_PH, axis=1)
+        kind = "fresh-aniso" if s.family in ("brushed-metal", "fabric", "metal") else "fresh-iso"
+        out.append(Case(f"f7-{s.name}", kind, bu._full_table(vals, s.name), s.model, b, cells,
+                        ph, 700 + i))
+    return out
+
+
+def panel_cases() -> list[Case]:
+    from gonio.brdf.design.heldout import _panel
+
+    pb, synth, _ = _panel()
+    cells, ph = bu.design(pb, 10)
+    return [Case(t.name, "panel", t, t, pb, cells, ph, 500 + i) for i, t in enumerate(synth)]
+
+
+def measured_cases() -> list[Case]:
+    out = []
+    for i, m in enumerate(bu.measured_materials()):
+        b = default_basis(exclude=m.exclude)
+        cells, ph = bu.design(b, 10)
+        out.append(Case(m.name, "measured", m.truth, m.specimen, b, cells, ph, 100 + i))
+    return out
+
+
+def aniso_cases() -> list[Case]:
+    b = default_basis()
+    cells, ph = bu.design(b, 10)
+    return [Case(m.name, "TEST-aniso", m.truth, m.specimen, b, cells, ph, 111 + i)
+            for i, m in enumerate(bu.aniso_materials())]
+
+
+# ---------------------------------------------------------------------------- fits
+class Scan:
+    """Remapped readings and per-harmonic reading kernels of one scan."""
+
+    def __init__(self, c: Case, alpha: np.ndarray, vals: np.ndarray, eta: float = JOINT_ETA):
+        b = c.basis
+        th, td, pd = c.cells.T
+        rows, weights = b.neighbours(th, td, pd)
+        self.Qt = np.einsum("nj,njk->nk", weights, b.Q[rows])
+        self.fmed = (weights * b.f_med[rows]).sum(axis=1)[:, None, None]
+        self.mu = (weights * b.mu[rows]).sum(axis=1)[:, None, None]
+        ci, co = geo.cell_cosines(th, td, pd)
+        self.w = np.maximum(ci * co, b.eps)[:, None, None]
+        self.b = b
+        self.Y = remap(vals, self.fmed, self.w, b.eps) - self.mu
+        self.ph_read = c.ph[:, None] - alpha[None, :]
+        self.P = joint_prior(b, JOINT_LAM / eta)
+        n, r = self.ph_read.shape
+        M = self.P.shape[0]
+        A = np.matmul(np.matmul(self.Qt[None], self.P), self.Qt.T[None])  # (M, n, n)
+        q = np.repeat(np.arange(n), r)
+        Z = np.exp(-1j * self.ph_read.ravel()[:, None] * np.arange(M))  # (N, M)
+        cosm = (Z[:, None, :] * np.conj(Z)[None, :, :]).real  # (N, N, M)
+        self.Gm = np.moveaxis(cosm, -1, 0) * A[:, q][:, :, q]  # (M, N, N)
+        self.y = self.Y.reshape(n * r, -1)
+        self.eta = eta
+        # A per-pair nugget: what the basis cannot represent at a pair's cell, the same at
+        # every stage angle (covariance 1 between two readings of one pair, 0 otherwise).
+        self.nug = np.kron(np.eye(n), np.ones((r, r)))
+        self.Z = Z.reshape(n, r, M)
+        self.tau = 0.0
+
+    def loglik(self, s: np.ndarray, eta: float) -> float:
+        N, C = self.y.shape
+        G = np.tensordot(s, self.Gm, axes=1) + self.tau * self.nug
+        G[np.diag_indices_from(G)] += eta
+        try:
+            cho = scipy.linalg.cho_factor(G, lower=True)
+        except np.linalg.LinAlgError:
+            return -np.inf
+        s2 = float(np.sum(self.y * scipy.linalg.cho_solve(cho, self.y))) / (N * C)
+        logdet = 2.0 * float(np.sum(np.log(np.diag(cho[0]))))
+        return -0.5 * N * C * np.log(max(s2, 1e-300)) - 0.5 * C * logdet
+
+    def table(self, s: np.ndarray, eta: float) -> np.ndarray:
+        if self.tau == 0.0:
+            jf = solve_joint(self.Y, self.Qt, self.ph_read, self.P * s[:, None, None], eta)
+            return _expand_table(self.b, np.moveaxis(jf.coef, -1, 0))
+        # The basis part of the posterior mean only (the nugget is not in the table).
+        G = np.tensordot(s, self.Gm, axes=1) + self.tau * self.nug
+        G[np.diag_indices_from(G)] += eta
+        n, r, C = self.Y.shape
+        beta = scipy.linalg.solve(G, self.y, assume_a="pos").reshape(n, r, C)
+        U = np.matmul(self.Z.transpose(0, 2, 1), beta)  # (n, M, C)
+        B = np.matmul(self.Qt.T[None], U.transpose(1, 0, 2))  # (M, K, C)
+        PB = np.matmul(self.P * s[:, None, None], B)
+        E = np.exp(1j * geo.PH_GRID[:, None] * HARM[None, :])
+        K = self.Qt.shape[1]
+        coef = (E @ PB.reshape(M, K * C)).real.reshape(-1, K, C).transpose(1, 0, 2)
+        return _expand_table(self.b, np.moveaxis(coef, -1, 0))
+
+
+M = 37
+HARM = np.arange(M)
+RHO = np.geomspace(1 / 64, 16.0, 11)
+
+
+def spec(rho: float, beta: float = 0.0, m0: float = 2.0) -> np.ndarray:
+    s = np.ones(M)
+    s[1:] = rho * (HARM[1:] / m0) ** beta
+    return s
+
+
+def band(lo: float, hi: float, mb: int) -> np.ndarray:
+    s = np.ones(M)
+    s[1:mb + 1] = lo
+    s[mb + 1:] = hi
+    return s
+
+
+def best(scan: Scan, cands: list[tuple[np.ndarray, float]]) -> tuple[np.ndarray, float]:
+    lls = [scan.loglik(s, e) for s, e in cands]
+    return cands[int(np.argmax(lls))]
+
+
+def v_base(scan: Scan) -> tuple[np.ndarray, float]:
+    s, e = best(scan, [(spec(r), JOINT_ETA) for r in RHO])
+    return (s if s[2] < 1.0 else spec(1.0)), e
+
+
+def v_plain(scan: Scan) -> tuple[np.ndarray, float]:
+    return spec(1.0), JOINT_ETA
+
+
+def mk_tilt(betas: tuple[float, ...], cap: bool) -> Callable[[Scan], tuple[np.ndarray, float]]:
+    def f(scan: Scan) -> tuple[np.ndarray, float]:
+        s, e = best(scan, [(spec(r, bb), JOINT_ETA) for r in RHO for bb in betas])
+        if cap:
+            # flat part as before: keep the learnt level when rho >= 1, but the tilt
+            r = s[2]
+            if r >= 1.0:
+                s = s / r
+        return s, e
+    return f
+
+
+def mk_band(mb: int, cap: bool) -> Callable[[Scan], tuple[np.ndarray, float]]:
+    def f(scan: Scan) -> tuple[np.ndarray, float]:
+        s, e = best(scan, [(band(lo, hi, mb), JOINT_ETA) for lo in RHO for hi in RHO])
+        if cap:
+            s = np.minimum(s, 1.0)
+        return s, e
+    return f
+
+
+def mk_eta(etas: tuple[float, ...], cap: bool) -> Callable[[Scan], tuple[np.ndarray, float]]:
+    def f(scan: Scan) -> tuple[np.ndarray, float]:
+        s, e = best(scan, [(spec(r), et) for r in RHO for et in etas])
+        if cap and s[2] >= 1.0:
+            s = spec(1.0)
+        return s, e
+    return f
+
+
+def mk_fixed(s_fn: Callable[[], np.ndarray]) -> Callable[[Scan], tuple[np.ndarray, float]]:
+    def f(scan: Scan) -> tuple[np.ndarray, float]:
+        return s_fn(), JOINT_ETA
+    return f
+
+
+RHO_EXT = np.geomspace(1 / 64, 256.0, 13)
+
+
+def mk_band2(mb: int, grid: np.ndarray, etas: tuple[float, ...] = (JOINT_ETA,),
+             cap_lo: bool = False) -> Callable[[Scan], tuple[np.ndarray, float]]:
+    def f(scan: Scan) -> tuple[np.ndarray, float]:
+        s, e = best(scan, [(band(lo, hi, mb), et) for lo in grid for hi in grid for et in etas])
+        return s, e
+    return f
+
+
+def mk_flat(grid: np.ndarray) -> Callable[[Scan], tuple[np.ndarray, float]]:
+    def f(scan: Scan) -> tuple[np.ndarray, float]:
+        return best(scan, [(spec(r), JOINT_ETA) for r in grid])
+    return f
+
+
+def mk_band_grid(mb: int, glo: np.ndarray, ghi: np.ndarray
+                 ) -> Callable[[Scan], tuple[np.ndarray, float]]:
+    def f(scan: Scan) -> tuple[np.ndarray, float]:
+        return best(scan, [(band(lo, hi, mb), JOINT_ETA) for lo in glo for hi in ghi])
+    return f
+
+
+def band3(a: float, b: float, c: float, m1: int, m2: int) -> np.ndarray:
+    s = np.ones(M)
+    s[1:m1 + 1] = a
+    s[m1 + 1:m2 + 1] = b
+    s[m2 + 1:] = c
+    return s
+
+
+def mk_band3(m1: int, m2: int, g: np.ndarray) -> Callable[[Scan], tuple[np.ndarray, float]]:
+    def f(scan: Scan) -> tuple[np.ndarray, float]:
+        return best(scan, [(band3(a, b, c, m1, m2), JOINT_ETA) for a in g for b in g for c in g])
+    return f
+
+
+RHO7 = np.geomspace(1 / 64, 16.0, 7)
+RHO_LO = np.geomspace(1 / 64, 256.0, 15)
+RHO_CAP1 = np.geomspace(1 / 64, 1.0, 7)
+#: Nugget variances, as fractions of the readings' mean prior variance (``diag G``, ``s = 1``).
+TAUS = (0.0, 0.01, 0.03, 0.1, 0.3, 1.0, 3.0)
+
+
+def mk_nugget(inner: Callable[[Scan], tuple[np.ndarray, float]]
+              ) -> Callable[[Scan], tuple[np.ndarray, float]]:
+    """``inner``'s factors, then the nugget's variance (prior units) by marginal likelihood;
+    the scan's ``tau`` is left set for the fit."""
+    def f(scan: Scan) -> tuple[np.ndarray, float]:
+        scan.tau = 0.0
+        s, e = inner(scan)
+        unit = float(np.mean(np.einsum("mii->i", scan.Gm)))
+        lls = []
+        for t in TAUS:
+            scan.tau = t * unit
+            lls.append(scan.loglik(s, e))
+        scan.tau = TAUS[int(np.argmax(lls))] * unit
+        return s, e
+    return f
+
+
+BETAS = (-1.0, -0.5, 0.0, 0.5, 1.0, 1.5, 2.0)
+VARIANTS: dict[str, Callable[[Scan], tuple[np.ndarray, float]]] = {
+    "plain": v_plain,
+    "base(scan rho)": v_base,
+    "tilt free": mk_tilt(BETAS, cap=False),
+    "tilt capped": mk_tilt(BETAS, cap=True),
+    "band4 free": mk_band(4, cap=False),
+    "band4 capped": mk_band(4, cap=True),
+    "band8 free": mk_band(8, cap=False),
+    "flat ext": mk_flat(RHO_EXT),
+    "band2 ext": mk_band2(2, RHO_EXT),
+    "band4 ext": mk_band2(4, RHO_EXT),
+    "band6 ext": mk_band2(6, RHO_EXT),
+    "band4 ext+eta": mk_band2(4, RHO_EXT, (5.0, 10.0, 20.0, 40.0, 80.0)),
+    "band2 free": mk_band2(2, RHO),
+    "band6 free": mk_band2(6, RHO),
+    "band4 free+eta": mk_band2(4, RHO, (10.0, 20.0, 40.0, 80.0)),
+    "band2 loext": mk_band_grid(2, RHO_LO, RHO),
+    "band2 hicap1": mk_band_grid(2, RHO, RHO_CAP1),
+    "band2 loext hicap1": mk_band_grid(2, RHO_LO, RHO_CAP1),
+    "band3 2|8": mk_band3(2, 8, RHO7),
+    "nugget": mk_nugget(v_base),
+    "band2+nugget": mk_nugget(mk_band2(2, RHO)),
+    "eta free": mk_eta((2.5, 5.0, 10.0, 20.0, 40.0, 80.0, 160.0, 320.0), cap=False),
+    "eta capped": mk_eta((2.5, 5.0, 10.0, 20.0, 40.0, 80.0, 160.0, 320.0), cap=True),
+}
+
+
+LIB = ("lib scan", "lib scan-bands")
+
+
+def run(cases: list[Case], variants: list[str], r: int, seed_offset: int = 0) -> None:
+    alpha = uniform_stage_angles(r)
+    res: dict[str, dict[str, float]] = {v: {} for v in variants}
+    t0 = time.perf_counter()
+    for c in cases:
+        m = bu.Material(c.name, c.kind, c.truth, c.specimen, ())
+        vals = bu.read(m, c.cells, c.ph, alpha, c.seed + seed_offset)
+        scan = Scan(c, alpha, vals)
+        line = []
+        for v in variants:
+            if v in LIB:
+                from gonio.brdf.reconstruction.reconstruct import reconstruct
+
+                rec = reconstruct(c.basis, c.cells, c.ph, alpha, vals, rho=v.split()[1])
+                t = rec.table.values
+                lo = rec.settings["prior_rho"]
+                s, e = spec(lo), JOINT_ETA
+                s[3:] = rec.settings.get("prior_rho_high", lo)
+            else:
+                scan.tau = 0.0
+                s, e = VARIANTS[v](scan)
+                t = scan.table(s, e)
+                if scan.tau:
+                    unit = float(np.mean(np.einsum("mii->i", scan.Gm)))
+                    e = -scan.tau / unit  # shown as eta=-tau (fraction of the prior variance)
+            err = metrics.log_rmse(t, c.truth)
+            res[v][c.name] = err
+            line.append(f"{v} {err:.4f} (s2={s[2]:.3g} s8={s[8]:.3g} s20={s[20]:.3g} eta={e:g})")
+        print(f"  {c.kind} {c.name}: " + "; ".join(line)
+              + f" ({time.perf_counter() - t0:.0f} s)", flush=True)
+    kinds = sorted({c.kind for c in cases})
+    print("\n| variant | " + " | ".join(f"{k} ({sum(c.kind == k for c in cases)})"
+                                      for k in kinds) + " |")
+    print("|---" * (len(kinds) + 1) + "|")
+    for v in variants:
+        print(f"| {v} | " + " | ".join(
+            f"{np.mean([res[v][c.name] for c in cases if c.kind == k]):.4f}" for k in kinds)
+            + " |")
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--sets", nargs="*", default=["fresh", "panel"])
+    ap.add_argument("--variants", nargs="*", default=list(VARIANTS))
+    ap.add_argument("--r", type=int, default=8)
+    ap.add_argument("--seed-offset", type=int, default=0)
+    args = ap.parse_args(argv)
+    bu.CHOOSE["objective"] = bu.DEFAULT_OBJECTIVE  # the default design, as bench_unseen
+    print(f"$ {' '.join(['python', *sys.argv])}")
+    make = {"fresh": fresh_cases, "panel": panel_cases, "measured": measured_cases,
+            "TEST": aniso_cases}
+    cases = [c for s in args.sets for c in make[s]()]
+    with one_blas_thread():
+        run(cases, args.variants, args.r, args.seed_offset)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
