@@ -149,6 +149,14 @@ class Scan:
         self.nug = np.kron(np.eye(n), np.ones((r, r)))
         self.Z = Z.reshape(n, r, M)
         self.tau = 0.0
+        # Mirror cells: a specimen symmetric about the axis at ph0 reads at (th, td, pd, ph)
+        # what it reads at (th, td, pi - pd, 2 ph0 - ph) (reflection plus reciprocity).
+        rows2, w2 = b.neighbours(th, td, np.mod(np.pi - pd, np.pi))
+        self.Qm = np.einsum("nj,njk->nk", w2, b.Q[rows2])
+        fm = (w2 * b.f_med[rows2]).sum(axis=1)[:, None, None]
+        mm = (w2 * b.mu[rows2]).sum(axis=1)[:, None, None]
+        self.Ym = remap(vals, fm, self.w, b.eps) - mm
+        self.ph0 = None
 
     def loglik(self, s: np.ndarray, eta: float) -> float:
         N, C = self.y.shape
@@ -162,7 +170,87 @@ class Scan:
         logdet = 2.0 * float(np.sum(np.log(np.diag(cho[0]))))
         return -0.5 * N * C * np.log(max(s2, 1e-300)) - 0.5 * C * logdet
 
+    def augmented(self, ph0: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Readings, rows and ph with the mirrored virtual readings about ``ph0``."""
+        return (np.concatenate([self.Y, self.Ym]), np.concatenate([self.Qt, self.Qm]),
+                np.concatenate([self.ph_read, 2 * ph0 - self.ph_read]))
+
+    def _aug_cov(self, s: np.ndarray, ph0: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Noise-free prior covariance of [x(q, ph_a); x(q', 2 ph0 - ph_a)], rows, ph."""
+        _, Qt, phr = self.augmented(ph0)
+        n2, r = phr.shape
+        A = np.matmul(np.matmul(Qt[None], self.P * s[:, None, None]), Qt.T[None])
+        q = np.repeat(np.arange(n2), r)
+        Z = np.exp(-1j * phr.ravel()[:, None] * np.arange(M))
+        G = np.einsum("am,bm,mab->ab", Z, np.conj(Z), A[:, q][:, :, q]).real
+        return G, Qt, phr
+
+    def cond_loglik(self, s: np.ndarray, eta: float, ph0: float, slack: float
+                    ) -> tuple[float, np.ndarray | None]:
+        """ln p(y | x' - x = delta) (s2 profiled) under the stationary prior, where the
+        mirror readings x' must equal the real ones up to the remap's offset delta (with
+        variance ``slack``), and the weights beta (2N, C) of the conditional posterior mean."""
+        G, _, _ = self._aug_cov(s, ph0)
+        N = self.y.shape[0]
+        C = self.y.shape[1]
+        T = np.block([[np.eye(N), np.zeros((N, N))], [-np.eye(N), np.eye(N)]])
+        cov = T @ G @ T.T
+        cov[np.diag_indices(2 * N)] += np.concatenate([np.full(N, eta), np.full(N, slack)])
+        delta = (self.Ym - self.Y).reshape(N, C)
+        obs = np.concatenate([self.y, delta])
+        try:
+            cf = scipy.linalg.cho_factor(cov, lower=True)
+            cz = scipy.linalg.cho_factor(cov[N:, N:], lower=True)
+        except np.linalg.LinAlgError:
+            return -np.inf, None
+        sol = scipy.linalg.cho_solve(cf, obs)
+        quad = float(np.sum(obs * sol)) - float(np.sum(delta * scipy.linalg.cho_solve(cz, delta)))
+        logdet = 2.0 * (float(np.sum(np.log(np.diag(cf[0]))))
+                        - float(np.sum(np.log(np.diag(cz[0])))))
+        ll = -0.5 * N * C * np.log(max(quad / (N * C), 1e-300)) - 0.5 * C * logdet
+        return ll, T.T @ sol
+
+    def cond_table(self, s: np.ndarray, beta: np.ndarray, ph0: float) -> np.ndarray:
+        _, Qt, phr = self._aug_cov(s, ph0)
+        n2, r = phr.shape
+        C = beta.shape[1]
+        Z = np.exp(-1j * phr[:, :, None] * HARM)  # (2n, r, M)
+        U = np.matmul(Z.transpose(0, 2, 1), beta.reshape(n2, r, C))  # (2n, M, C)
+        B = np.matmul(Qt.T[None], U.transpose(1, 0, 2))  # (M, K, C)
+        PB = np.matmul(self.P * s[:, None, None], B)
+        E = np.exp(1j * geo.PH_GRID[:, None] * HARM[None, :])
+        K = Qt.shape[1]
+        coef = (E @ PB.reshape(M, K * C)).real.reshape(-1, K, C).transpose(1, 0, 2)
+        return _expand_table(self.b, np.moveaxis(coef, -1, 0))
+
+    def loglik_aug(self, s: np.ndarray, eta: float, ph0: float) -> float:
+        Y, Qt, phr = self.augmented(ph0)
+        n2, r, C = Y.shape
+        A = np.matmul(np.matmul(Qt[None], self.P * s[:, None, None]), Qt.T[None])
+        q = np.repeat(np.arange(n2), r)
+        Z = np.exp(-1j * phr.ravel()[:, None] * np.arange(M))
+        G = np.einsum("am,bm,mab->ab", Z, np.conj(Z), A[:, q][:, :, q]).real
+        G[np.diag_indices_from(G)] += eta
+        y = Y.reshape(-1, C)
+        try:
+            cho = scipy.linalg.cho_factor(G, lower=True)
+        except np.linalg.LinAlgError:
+            return -np.inf
+        N = y.shape[0]
+        s2 = float(np.sum(y * scipy.linalg.cho_solve(cho, y))) / (N * C)
+        logdet = 2.0 * float(np.sum(np.log(np.diag(cho[0]))))
+        return -0.5 * N * C * np.log(max(s2, 1e-300)) - 0.5 * C * logdet
+
     def table(self, s: np.ndarray, eta: float) -> np.ndarray:
+        if getattr(self, "cond", None) is not None:
+            ph0, slack = self.cond
+            _, beta = self.cond_loglik(s, eta, ph0, slack)
+            assert beta is not None
+            return self.cond_table(s, beta, ph0)
+        if self.ph0 is not None:
+            Y, Qt, phr = self.augmented(self.ph0)
+            jf = solve_joint(Y, Qt, phr, self.P * s[:, None, None], eta)
+            return _expand_table(self.b, np.moveaxis(jf.coef, -1, 0))
         if self.tau == 0.0:
             jf = solve_joint(self.Y, self.Qt, self.ph_read, self.P * s[:, None, None], eta)
             return _expand_table(self.b, np.moveaxis(jf.coef, -1, 0))
@@ -310,6 +398,54 @@ def mk_nugget(inner: Callable[[Scan], tuple[np.ndarray, float]]
     return f
 
 
+PH0 = np.arange(36) * np.pi / 36
+
+
+def mk_mirror(inner: Callable[[Scan], tuple[np.ndarray, float]], fine: bool = False
+              ) -> Callable[[Scan], tuple[np.ndarray, float]]:
+    """``inner``'s factors, then the mirror axis by the likelihood of the augmented readings
+    (= how well the stationary prior predicts the mirrored readings from the real ones)."""
+    def f(scan: Scan) -> tuple[np.ndarray, float]:
+        scan.ph0 = None
+        s, e = inner(scan)
+        lls = [scan.loglik_aug(s, e, p0) for p0 in PH0]
+        scan.ph0 = float(PH0[int(np.argmax(lls))])
+        if fine:  # 1 degree steps around the best 5 degree axis
+            near = scan.ph0 + np.deg2rad(np.arange(-4.0, 5.0))
+            lls = [scan.loglik_aug(s, e, p0) for p0 in near]
+            scan.ph0 = float(near[int(np.argmax(lls))])
+        return s, e
+    return f
+
+
+SLACKS = (0.25, 1.0, 4.0)
+
+
+def mk_cond(inner: Callable[[Scan], tuple[np.ndarray, float]],
+            slacks: tuple[float, ...] = SLACKS, fine: bool = False
+            ) -> Callable[[Scan], tuple[np.ndarray, float]]:
+    """``inner``'s factors; then mirror symmetry about ph0 (5 degree grid) with a slack
+    (x eta), or none, whichever gives the readings the largest marginal likelihood."""
+    def f(scan: Scan) -> tuple[np.ndarray, float]:
+        scan.cond = None
+        s, e = inner(scan)
+        best_ll, best = scan.loglik(s, e), None
+        for p0 in PH0:
+            for sl in slacks:
+                ll, _ = scan.cond_loglik(s, e, float(p0), sl * e)
+                if ll > best_ll:
+                    best_ll, best = ll, (float(p0), sl * e)
+        if fine and best is not None:
+            for p0 in best[0] + np.deg2rad([-4.0, -3, -2, -1, 1, 2, 3, 4]):
+                for sl in slacks:
+                    ll, _ = scan.cond_loglik(s, e, float(p0), sl * e)
+                    if ll > best_ll:
+                        best_ll, best = ll, (float(p0), sl * e)
+        scan.cond = best
+        return s, e
+    return f
+
+
 BETAS = (-1.0, -0.5, 0.0, 0.5, 1.0, 1.5, 2.0)
 VARIANTS: dict[str, Callable[[Scan], tuple[np.ndarray, float]]] = {
     "plain": v_plain,
@@ -333,12 +469,20 @@ VARIANTS: dict[str, Callable[[Scan], tuple[np.ndarray, float]]] = {
     "band3 2|8": mk_band3(2, 8, RHO7),
     "nugget": mk_nugget(v_base),
     "band2+nugget": mk_nugget(mk_band2(2, RHO)),
+    "mirror": mk_mirror(v_base),
+    "mirror+bands": mk_mirror(mk_band2(2, RHO)),
+    "mirror fine": mk_mirror(v_base, fine=True),
+    "sym ML": mk_cond(v_base),
+    "sym ML+bands": mk_cond(mk_band2(2, RHO)),
+    "sym wide": mk_cond(v_base, (0.25, 1.0, 4.0, 16.0, 64.0)),
+    "sym wide fine": mk_cond(v_base, (0.25, 1.0, 4.0, 16.0, 64.0), fine=True),
+    "mirror fine+bands": mk_mirror(mk_band2(2, RHO), fine=True),
     "eta free": mk_eta((2.5, 5.0, 10.0, 20.0, 40.0, 80.0, 160.0, 320.0), cap=False),
     "eta capped": mk_eta((2.5, 5.0, 10.0, 20.0, 40.0, 80.0, 160.0, 320.0), cap=True),
 }
 
 
-LIB = ("lib scan", "lib scan-bands")
+LIB = ("lib scan", "lib scan-bands", "lib scan+mirror", "lib scan-bands+mirror")
 
 
 def run(cases: list[Case], variants: list[str], r: int, seed_offset: int = 0) -> None:
@@ -354,15 +498,25 @@ def run(cases: list[Case], variants: list[str], r: int, seed_offset: int = 0) ->
             if v in LIB:
                 from gonio.brdf.reconstruction.reconstruct import reconstruct
 
-                rec = reconstruct(c.basis, c.cells, c.ph, alpha, vals, rho=v.split()[1])
+                how = v.split()[1].split("+")
+                rec = reconstruct(c.basis, c.cells, c.ph, alpha, vals, rho=how[0],
+                                  symmetry="scan" if "mirror" in how else None)
                 t = rec.table.values
                 lo = rec.settings["prior_rho"]
                 s, e = spec(lo), JOINT_ETA
                 s[3:] = rec.settings.get("prior_rho_high", lo)
+                if rec.settings.get("mirror_axis_deg") is not None:
+                    e = rec.settings["mirror_axis_deg"] + rec.settings["mirror_slack"] / 1000
             else:
                 scan.tau = 0.0
+                scan.ph0 = None
+                scan.cond = None
                 s, e = VARIANTS[v](scan)
                 t = scan.table(s, e)
+                if scan.cond is not None:
+                    e = float(np.rad2deg(scan.cond[0])) + scan.cond[1] / 1000
+                if scan.ph0 is not None:
+                    e = float(np.rad2deg(scan.ph0))  # shown as eta=ph0 in degrees
                 if scan.tau:
                     unit = float(np.mean(np.einsum("mii->i", scan.Gm)))
                     e = -scan.tau / unit  # shown as eta=-tau (fraction of the prior variance)

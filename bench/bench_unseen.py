@@ -298,14 +298,14 @@ def calibrate(rows: dict[str, dict[str, Score]], mats: list[Material]) -> None:
 
 ETA: dict[str, float | None] = {"eta": None, "lam": None}
 #: The joint fit's ``rho`` (``--rho``; reconstruct's default when None).
-RHO: dict[str, str | None] = {"rho": None}
+RHO: dict[str, str | None] = {"rho": None, "symmetry": None}
 
 
 def run_scan(b: Basis, m: Material, cells: np.ndarray, ph: np.ndarray, r: int, seed: int,
              method: str) -> Score:
     alpha = uniform_stage_angles(r)
     vals = read(m, cells, ph, alpha, seed)
-    extra = {"rho": RHO["rho"]} if method == "joint" and RHO["rho"] is not None else {}
+    extra = ({k: v for k, v in RHO.items() if v is not None} if method == "joint" else {})
     rec = reconstruct(b, cells, ph, alpha, vals, method=method,  # type: ignore[arg-type]
                       eta=ETA["eta"] if method == "joint" else None,
                       lam=ETA["lam"] if method == "joint" else None, **extra)
@@ -367,6 +367,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--rho", choices=["scan", "scan-bands"], default=None,
                     help="the joint fit's prior along ph: one factor on the varying harmonics "
                          "('scan', reconstruct's default) or one per band ('scan-bands')")
+    ap.add_argument("--symmetry", choices=["scan"], default=None,
+                    help="the joint fit's mirror symmetry chosen per scan (reconstruct's "
+                         "symmetry='scan'; default: none)")
     ap.add_argument("--calibrate", action="store_true",
                     help="fit predicted_log_rmse's model on half the materials, check the rest")
     args = ap.parse_args(argv)
@@ -387,7 +390,7 @@ def main(argv: list[str] | None = None) -> int:
 
     presets = {p: get_preset(p).cells() for p in preset_names()}
     ETA["eta"], ETA["lam"] = args.eta, args.lam
-    RHO["rho"] = args.rho
+    RHO["rho"], RHO["symmetry"] = args.rho, args.symmetry
     CHOOSE["k"] = args.choose
     CHOOSE["objective"] = args.design
     fixed = default_basis(measured_weight=0.0) if args.fixed_design else None

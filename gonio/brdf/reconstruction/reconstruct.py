@@ -645,6 +645,7 @@ def reconstruct(
     name: str = "reconstruction",
     method: Method = "joint",
     rho: Rho = "scan",
+    symmetry: Literal["scan"] | None = None,
 ) -> Reconstruction:
     """Reconstruct the full anisotropic BRDF from ``n`` pairs read at ``r`` stage angles.
 
@@ -686,6 +687,14 @@ def reconstruct(
         and one on the higher ones, used as chosen (docs/science.md 2.1: the spectrum's
         shape). ``None``: the learnt prior as it is; a number: that factor; a pair
         ``(low, high)``: those two factors.
+    symmetry : {"scan", None}
+        Joint fit only. ``"scan"``: the scan decides by marginal likelihood whether the
+        specimen is mirror-symmetric about an axis in its plane, about which axis and how
+        strictly (:mod:`gonio.brdf.reconstruction.mirror`); when it is, every reading also
+        counts at its mirror cell and azimuth. The leave-one-out and sample errors stay
+        those of the fit without the symmetry. ``settings["mirror_axis_deg"]`` (None: no
+        symmetry) and ``settings["mirror_slack"]`` say what was chosen. None (default): no
+        symmetry assumed.
 
     Returns
     -------
@@ -695,6 +704,7 @@ def reconstruct(
         return _reconstruct(
             basis, cells, ph_lab, stage_angles, values, channels=channels, eta=eta, lam=lam,
             n_components=n_components, solver=solver, name=name, method=method, rho=rho,
+            symmetry=symmetry,
         )
 
 
@@ -713,6 +723,7 @@ def _reconstruct(
     name: str,
     method: Method,
     rho: Rho = "scan",
+    symmetry: Literal["scan"] | None = None,
 ) -> Reconstruction:
     """:func:`reconstruct` without the BLAS thread limit (same parameters)."""
     t0 = time.perf_counter()
@@ -742,6 +753,8 @@ def _reconstruct(
         raise ReconstructionError(
             f"rho must be a finite number > 0, a pair of them, 'scan', 'scan-bands' or None, "
             f"got {rho!r}")
+    if symmetry not in (None, "scan"):
+        raise ReconstructionError(f"symmetry must be 'scan' or None, got {symmetry!r}")
     if n_components is not None:
         try:
             basis = basis.truncated(int(n_components))
@@ -794,12 +807,15 @@ def _reconstruct(
         solver_name = solver
         angle_err = None
 
+    mirror_settings: dict[str, Any] = {}
+
     def as_table(coef: FloatArray, factor: tuple[float, float]) -> BRDFTable:
         settings = {"K": basis.K, "n": int(cells_.shape[0]), "r": int(alpha.size),
                     "eta": eta, "lam": lam, "method": method, "solver": solver_name,
                     "basis_materials": len(basis.materials)}
         if method == "joint":
             settings.update(_rho_settings(factor))
+            settings.update(mirror_settings)
         return BRDFTable.trusted(_expand_table(basis, coef), channels, name, None,
                                  {"reconstruction": settings})
 
@@ -823,6 +839,29 @@ def _reconstruct(
             prior_rho = chosen
             coef, at_samples, has_cv, angle_err = joint(prior_rho)
             table = as_table(coef, prior_rho)
+    if method == "joint" and symmetry == "scan":
+        from gonio.brdf.reconstruction.mirror import MirrorModel, mirror_cells
+
+        mth, mtd, mpd = mirror_cells(cells_).T
+        try:
+            mrows, mweights = basis.neighbours(mth, mtd, mpd)
+        except BasisError as exc:
+            raise ReconstructionError(str(exc)) from None
+        Qm = np.einsum("nj,njk->nk", mweights, basis.Q[mrows])
+        fmed_m = (mweights * basis.f_med[mrows]).sum(axis=1)[:, None, None]
+        mu_m = (mweights * basis.mu[mrows]).sum(axis=1)[:, None, None]
+        Ym = remap(vals, fmed_m, w_t, basis.eps) - mu_m  # same value, the mirror row's remap
+        Pf = joint_prior(basis, lam / eta)
+        from gonio.brdf.reconstruction.posterior import harmonic_scale
+
+        Pf = Pf * harmonic_scale(Pf.shape[0], *prior_rho)[:, None, None]
+        model = MirrorModel(Yr, Ym, Qt, Qm, ph_[:, None] - alpha[None, :], Pf, eta)
+        pick = model.choose()
+        mirror_settings = {"mirror_axis_deg": None if pick.axis is None else round(
+            float(np.rad2deg(pick.axis)), 6), "mirror_slack": pick.slack}
+        if pick.axis is not None:
+            coef = np.moveaxis(model.coefficients(pick.axis, pick.slack, geo.PH_GRID), -1, 0)
+        table = as_table(coef, prior_rho)
     rel = _relative_sample_error(at_samples[..., :n_ch], vals)
     cv = _relative_sample_error(at_samples[..., n_ch:], vals) if has_cv else float("nan")
     pair_err = _pair_log_errors(at_samples[..., n_ch:], vals, ci) if has_cv else None
@@ -847,6 +886,7 @@ def _reconstruct(
             "lam": float(lam), "method": method, "solver": solver_name,
             "channels": list(channels), "seconds": round(seconds, 4),
             **(_rho_settings(prior_rho) if method == "joint" else {}),
+            **mirror_settings,
         },
         cv_sample_error=cv,
         predicted_error=cv_error_scale(n) * cv,
