@@ -1,4 +1,4 @@
-"""Tests of the joint fit's mirror symmetry chosen per scan (``reconstruct(..., symmetry="scan")``)."""
+"""Tests of the joint fit's mirror symmetry chosen per scan (``symmetry="scan"``)."""
 
 from __future__ import annotations
 
