@@ -601,9 +601,9 @@ class ScanEngine:
             self.store.append_event(self.job_id, "adaptive_done", {"reason": "max_rounds"})
             return False
         angles, values = self.measured_values(steps)
-        # The sample budget, and in any case the cap on stage angles per job (so the dry
-        # run's bound holds and a job cannot grow without end).
-        limit = MAX_ROTATIONS
+        # The sample budget, the plan's cap on stage angles, and in any case the cap per job
+        # (so the dry run's bound holds and a job cannot grow without end).
+        limit = MAX_ROTATIONS if plan.max_rotations is None else plan.max_rotations
         if plan.max_samples is not None:
             limit = min(limit, plan.max_samples // len(self.pairs))
         budget = limit - len(steps)

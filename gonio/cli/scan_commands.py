@@ -54,6 +54,9 @@ def register(subparsers: Any) -> None:
     p.add_argument("--min-gain", type=positive_float, default=None,
                    help="posterior rule: least expected log_rmse drop a new stage angle must "
                         "buy (default 0.0006)")
+    p.add_argument("--max-rotations", type=positive_int, default=None,
+                   help="with --adaptive: most stage angles in all, the first round's included "
+                        "(default 16 with the posterior rule, no cap with --rule vf)")
     p.add_argument("--threshold", type=positive_float, default=0.1,
                    help="vf rule: relative error e")
     p.add_argument("--max-samples", type=positive_int, default=None, help="adaptive sample budget")
@@ -109,7 +112,8 @@ def _plan(args: argparse.Namespace) -> Any:
     if args.adaptive:
         # Only what was given: the plan's defaults depend on the rule.
         given = {k: v for k, v in (("initial_rotations", args.rotations),
-                                   ("min_gain", args.min_gain)) if v is not None}
+                                   ("min_gain", args.min_gain),
+                                   ("max_rotations", args.max_rotations)) if v is not None}
         return AdaptivePlan(specimen=args.specimen or "specimen", exposure=ex, rule=args.rule,
                             threshold=args.threshold, max_samples=args.max_samples,
                             start_deg=args.start_deg, **given)
@@ -301,8 +305,12 @@ def dry_run_summary(dr: Any, plan: Any, rig_name: str) -> str:
     ]
     bound = getattr(dr, "max_estimated_s", None)
     if plan.kind == "adaptive":
-        lines.append("  later rounds add angles where the readings change fastest; "
-                     + (f"at most {_duration_text(bound)} in all" if bound is not None
+        where = ("where the expected error falls most" if plan.rule == "posterior"
+                 else "where the readings change fastest")
+        most = getattr(dr, "max_angles", None)
+        lines.append(f"  later rounds add angles {where}; "
+                     + (f"at most {most} angles and {_duration_text(bound)} in all"
+                        if bound is not None and most is not None
                         else "no --max-samples, so no bound on the total"))
     build = getattr(dr, "basis_build_s", None)
     if build is not None:

@@ -103,6 +103,10 @@ def _check_start(value: float) -> float:
 DEFAULT_MIN_GAIN = 0.0006
 """Default ``min_gain`` of adaptive plans: ``gonio.brdf.reconstruction.posterior.REFINE_GAIN``
 (a test keeps the two equal; the plans do not import the numerical core for one number)."""
+DEFAULT_MAX_ROTATIONS = 16
+"""Default ``max_rotations`` of adaptive plans with the posterior rule: the rule was chosen and
+measured against uniform 16 rotations with at most 16 stage angles (docs/science.md 7.3), so
+a job stops there and the dry run's bound is what the rule can really do."""
 RULES = ("posterior", "vf")
 """The refinement rules of adaptive plans (docs/science.md 7.3)."""
 
@@ -210,6 +214,12 @@ class AdaptivePlan(_PlanBase):
     threshold: float = Field(default=0.1, gt=0,
                              description="vf rule: relative error e (0.1 = 10 %)")
     min_gain: MinGain = DEFAULT_MIN_GAIN
+    max_rotations: Count | None = Field(
+        default=DEFAULT_MAX_ROTATIONS, gt=0, le=MAX_ROTATIONS,
+        description="most stage angles the job measures, the first round's included; default "
+        f"{DEFAULT_MAX_ROTATIONS} with the posterior rule (the budget it was chosen for, "
+        "docs/science.md 7.3), none with vf (V&F: until the rule stops); null = no cap "
+        f"below {MAX_ROTATIONS}")
     max_samples: Count | None = Field(
         default=None, gt=0, description="budget of pair readings (pairs x angles); null = none"
     )
@@ -221,11 +231,13 @@ class AdaptivePlan(_PlanBase):
 
     @model_validator(mode="before")
     @classmethod
-    def _vf_starts_at_eight(cls, data: object) -> object:
-        # The default first round depends on the rule: the posterior rule refines from 4
-        # angles, V&F's from their 8 (an explicit initial_rotations is kept as given).
-        if isinstance(data, dict) and "initial_rotations" not in data and data.get("rule") == "vf":
-            return {**data, "initial_rotations": 8}
+    def _vf_defaults(cls, data: object) -> object:
+        # The defaults of the first round and the cap depend on the rule: the posterior rule
+        # refines from 4 angles up to 16, V&F's from their 8 until it stops (explicit
+        # settings are kept as given).
+        if isinstance(data, dict) and data.get("rule") == "vf":
+            vf = {"initial_rotations": 8, "max_rotations": None}
+            return {**{k: v for k, v in vf.items() if k not in data}, **data}
         return data
 
 

@@ -64,7 +64,8 @@ def adaptive_bound(plan: AdaptivePlan, rig: RigDescription, n_pairs: int, n_ligh
 
     The worst case of MATH 7: every round plans the midpoint of every gap (each measured
     angle's two neighbours), as long as half a gap is at least ``min_step_deg``, for
-    ``max_rounds - 1`` rounds, within the sample budget and :data:`MAX_ROTATIONS`. A subset
+    ``max_rounds - 1`` rounds, within the sample budget, the plan's ``max_rotations`` and
+    :data:`MAX_ROTATIONS`. A subset
     of those midpoints travels no further along the same increasing route (move time is
     subadditive) and costs fewer settles and exposures, so the time is a bound too.
 
@@ -73,7 +74,7 @@ def adaptive_bound(plan: AdaptivePlan, rig: RigDescription, n_pairs: int, n_ligh
     (extra_angles, extra_seconds)
     """
     min_step = plan.min_step_deg or rig.resolution_deg
-    limit = MAX_ROTATIONS
+    limit = MAX_ROTATIONS if plan.max_rotations is None else plan.max_rotations
     if plan.max_samples is not None:
         limit = min(limit, plan.max_samples // max(n_pairs, 1))
     angles = sorted(a % 360.0 for a in first_angles)

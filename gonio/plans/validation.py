@@ -103,6 +103,11 @@ def validate_plan(plan: AnyPlan, rig: RigDescription) -> None:
                 f"min_step_deg {min_step:g} is finer than the stage resolution "
                 f"{rig.resolution_deg:g} deg; use at least the resolution"
             )
+        if plan.max_rotations is not None and plan.max_rotations < r:
+            raise PlanError(
+                f"max_rotations {plan.max_rotations} is fewer than the first round's "
+                f"{r} angles (initial_rotations); raise max_rotations or lower "
+                "initial_rotations")
         if plan.max_samples is not None and plan.max_samples < len(pairs) * r:
             raise PlanError(
                 f"max_samples {plan.max_samples} is smaller than the first round alone "

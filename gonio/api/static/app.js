@@ -253,7 +253,8 @@ function ruleText(id) {
   const p = d.plan;
   const rule = p.rule ?? "posterior";
   const setting = rule === "vf" ? `threshold e ${p.threshold ?? 0.1}` : `min gain ${p.min_gain ?? 0.0006}`;
-  return ` · adaptive, ${rule} rule, ${setting}, from ${p.initial_rotations} angles`;
+  const cap = p.max_rotations == null ? "" : ` up to ${p.max_rotations}`;
+  return ` · adaptive, ${rule} rule, ${setting}, from ${p.initial_rotations} angles${cap}`;
 }
 
 function scheduleReadings() {
@@ -441,6 +442,8 @@ function readPlan() {
   if (kind === "adaptive") {
     plan.initial_rotations = Number(f.get("initial_rotations"));
     plan.rule = f.get("rule");
+    // Empty: no cap (null), the vf rule's default.
+    plan.max_rotations = f.get("max_rotations") === "" ? null : Number(f.get("max_rotations"));
     if (plan.rule === "vf") plan.threshold = Number(f.get("threshold"));
     else plan.min_gain = Number(f.get("min_gain"));
   } else plan.rotations = Number(f.get("rotations"));
@@ -473,11 +476,15 @@ function initForm() {
     }
   };
   kindSel.addEventListener("change", showKind);
-  // Each rule's default first round (posterior 4, vf 8), unless the user typed another.
+  // Each rule's default first round (posterior 4, vf 8) and cap (posterior 16, vf none),
+  // unless the user typed another.
   const r0 = form.elements.initial_rotations;
   const R0 = { posterior: "4", vf: "8" };
+  const cap = form.elements.max_rotations;
+  const CAP = { posterior: "16", vf: "" };
   ruleSel.addEventListener("change", () => {
     if (Object.values(R0).includes(r0.value)) r0.value = R0[ruleSel.value];
+    if (Object.values(CAP).includes(cap.value)) cap.value = CAP[ruleSel.value];
     showKind();
   });
   showKind();

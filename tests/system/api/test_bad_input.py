@@ -135,6 +135,27 @@ def test_adaptive_rule_settings_are_checked_with_advice(
     assert _jobs(daemon) == before
 
 
+@pytest.mark.parametrize(("setting", "words"), [
+    ('"max_rotations": 0', ["max_rotations", "greater than 0"]),
+    ('"max_rotations": 3601', ["max_rotations", "3600"]),
+    ('"max_rotations": 3', ["max_rotations 3 is fewer than the first round's 4 angles",
+                            "raise max_rotations or lower initial_rotations"]),
+    ('"initial_rotations": 8, "max_rotations": 6', ["max_rotations 6", "first round's 8"]),
+], ids=["zero", "above-cap", "below-default-start", "below-start"])
+@pytest.mark.parametrize("path", ["/api/v1/jobs", "/api/v1/jobs/dry-run"])
+def test_an_adaptive_cap_on_stage_angles_is_checked_with_advice(
+        daemon: Daemon, path: str, setting: str, words: list[str]) -> None:
+    before = _jobs(daemon)
+    status, answer = _post(daemon, path, '{"plan": {"kind": "adaptive", ' + setting + "}}")
+    assert status == 422, answer
+    assert isinstance(answer, dict)
+    detail = answer["detail"]
+    msgs = detail if isinstance(detail, str) else " ".join(
+        f"{d['loc']} {d['msg']}" for d in detail)
+    assert all(w in msgs for w in words), msgs
+    assert _jobs(daemon) == before
+
+
 @pytest.mark.parametrize(
     "query", ["since=1e30", f"since={10**30}", f"job_id={10**30}", "job_id=1e30", "since=-1",
               "job_id=0"],

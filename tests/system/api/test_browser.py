@@ -100,13 +100,14 @@ def test_start_a_scan_from_the_page_and_see_the_result(daemon: Daemon, browser: 
     # Only the chosen plan kind's fields show.
     kind = Select(form.find_element(By.NAME, "kind"))
     shown = {
-        "uniform": {"rotations"}, "adaptive": {"initial_rotations", "rule", "min_gain"},
+        "uniform": {"rotations"},
+        "adaptive": {"initial_rotations", "rule", "min_gain", "max_rotations"},
         "calibration": {"rotations", "reference_albedo"},
     }
     for value, visible in shown.items():
         kind.select_by_value(value)
         for name in ("rotations", "initial_rotations", "rule", "min_gain", "threshold",
-                     "reference_albedo"):
+                     "max_rotations", "reference_albedo"):
             assert form.find_element(By.NAME, name).is_displayed() == (name in visible), \
                 (value, name)
 
@@ -220,14 +221,23 @@ def test_an_adaptive_plan_from_the_page_sets_its_rule(daemon: Daemon, browser: A
     help_text = browser.find_element(By.ID, "rule-help").text
     assert "min gain" in help_text and "threshold e" in help_text and "default" in help_text
     assert form.find_element(By.NAME, "initial_rotations").get_attribute("value") == "4"
-    # The setting of the rule not chosen is hidden; each rule's default first round shows.
+    assert form.find_element(By.NAME, "max_rotations").get_attribute("value") == "16"
+    assert "max angles" in help_text
+    # The setting of the rule not chosen is hidden; each rule's default first round and cap
+    # show (vf: no cap, an empty field).
     rule.select_by_value("vf")
     assert form.find_element(By.NAME, "threshold").is_displayed()
     assert not form.find_element(By.NAME, "min_gain").is_displayed()
     assert form.find_element(By.NAME, "initial_rotations").get_attribute("value") == "8"
+    assert form.find_element(By.NAME, "max_rotations").get_attribute("value") == ""
     rule.select_by_value("posterior")
     assert not form.find_element(By.NAME, "threshold").is_displayed()
     assert form.find_element(By.NAME, "initial_rotations").get_attribute("value") == "4"
+    assert form.find_element(By.NAME, "max_rotations").get_attribute("value") == "16"
+    # The dry run's bound is the cap: 4 angles, then at most 12 more.
+    browser.find_element(By.ID, "dry-run").click()
+    wait.until(lambda d: d.find_element(By.ID, "dry-run-result").text.startswith("OK"))
+    assert "can add up to 12 angles" in browser.find_element(By.ID, "dry-run-result").text
 
     def fill(name: str, value: str) -> None:
         field = form.find_element(By.NAME, name)
@@ -241,8 +251,15 @@ def test_an_adaptive_plan_from_the_page_sets_its_rule(daemon: Daemon, browser: A
     text = browser.find_element(By.ID, "message").text
     assert "min_gain" in text and "> 0" in text and "got -1" in text, text
 
+    fill("min_gain", "0.002")
+    fill("max_rotations", "3")
+    browser.find_element(By.ID, "dry-run").click()
+    wait.until(lambda d: "max_rotations 3" in d.find_element(By.ID, "message").text)
+    assert "fewer than the first round's 4" in browser.find_element(By.ID, "message").text
+
     for name, value in (("specimen", "adaptive sample"), ("initial_rotations", "4"),
-                        ("min_gain", "0.002"), ("exposure_s", "0.005")):
+                        ("min_gain", "0.002"), ("max_rotations", "6"),
+                        ("exposure_s", "0.005")):
         fill(name, value)
     browser.find_element(By.ID, "start-scan").click()
     new_row = "//tbody[@id='jobs']/tr[td[2][text()='adaptive sample']]"
@@ -253,6 +270,7 @@ def test_an_adaptive_plan_from_the_page_sets_its_rule(daemon: Daemon, browser: A
     with daemon.client() as c:
         plan = c.get(f"/api/v1/jobs/{job_id}").json()["plan"]
     assert plan["rule"] == "posterior" and plan["min_gain"] == 0.002
+    assert plan["max_rotations"] == 6
     assert "threshold" not in plan or plan["threshold"] == 0.1  # the vf setting was not sent
     wait.until(ec.presence_of_element_located(
         (By.CSS_SELECTOR, f'#jobs tr[data-id="{job_id}"][data-state="completed"]')))
@@ -263,6 +281,7 @@ def test_an_adaptive_plan_from_the_page_sets_its_rule(daemon: Daemon, browser: A
     with daemon.client() as c:
         used = len(c.get(f"/api/v1/jobs/{job_id}/readings").json())
     assert f"{used} readings" in live and "min gain 0.002" in live and "from 4 angles" in live
+    assert "up to 6" in live
     # The only error logged is the refused check above (the browser logs every 422).
     assert [e["message"] for e in _severe(browser) if "dry-run" not in e["message"]] == []
 

@@ -165,3 +165,24 @@ def test_dry_run_prints_a_short_summary_and_json_on_request(
     # --json alone is a mistake worth a clear line.
     assert main(["scan", "--rig", "deploy/rig.example.toml", "--json", "-o", "x.h5"]) == 2
     assert "--json goes with --dry-run" in capsys.readouterr().err
+
+
+def test_an_adaptive_dry_run_states_its_cap_and_refuses_a_cap_below_the_start(
+    capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The posterior rule stops at --max-rotations (default 16): the summary's bound says so;
+    a cap below the first round is a clear error, not a plan that cannot run."""
+    argv = ["scan", "--rig", "deploy/rig.example.toml", "--dry-run", "--adaptive",
+            "-o", "/dev/null"]
+    assert main(argv) == 0
+    text = capsys.readouterr().out
+    assert "stage angles: 4 in the first round" in text
+    assert "at most 16 angles and" in text
+    assert main([*argv, "--max-rotations", "10"]) == 0
+    assert "at most 10 angles and" in capsys.readouterr().out
+    assert main([*argv, "--max-rotations", "3"]) == 2
+    err = capsys.readouterr().err
+    assert "max_rotations 3 is fewer than the first round's 4 angles" in err
+    with pytest.raises(SystemExit):  # argparse: a count > 0
+        main([*argv, "--max-rotations", "0"])
+    assert "--max-rotations" in capsys.readouterr().err

@@ -44,6 +44,9 @@ def test_adaptive_scans_take_the_rule_and_its_defaults() -> None:
     mine = _parse("--adaptive", "--rotations", "6", "--min-gain", "0.002")
     assert isinstance(mine, AdaptivePlan)
     assert (mine.initial_rotations, mine.min_gain) == (6, 0.002)
+    assert (plan.max_rotations, vf.max_rotations) == (16, None)
+    capped = _parse("--adaptive", "--max-rotations", "10")
+    assert isinstance(capped, AdaptivePlan) and capped.max_rotations == 10
     # Without --adaptive, --rotations keeps its default of 8.
     uniform = _parse()
     assert isinstance(uniform, UniformPlan) and uniform.rotations == 8

@@ -100,3 +100,14 @@ def test_a_failing_posterior_rule_falls_back_to_vf_and_says_why() -> None:
     assert {s.round for s in store.steps(job.id)} == {0, 1}
     failed = [e for e in _events(store, "adaptive_round") if "posterior_failed" in e]
     assert failed and "unreadable" in str(failed[0]["posterior_failed"])
+
+
+def test_the_job_stops_at_max_rotations() -> None:
+    """A rule that would refine on (min_gain tiny, six rounds allowed) stops at the plan's cap
+    on stage angles, and says why; the default cap is the dry run's bound (16)."""
+    plan = AdaptivePlan(initial_rotations=4, exposure=FAST, min_gain=1e-12, max_rotations=7)
+    store, _eng, _ = _run(plan)
+    steps = store.steps(1)
+    assert len(steps) == 7 and len({round(s.specimen_deg % 360.0, 6) for s in steps}) == 7
+    assert _events(store, "adaptive_done")[-1]["reason"] == "budget"
+    assert AdaptivePlan().max_rotations == 16

@@ -235,13 +235,15 @@ def test_restart_resumes_from_checkpoint() -> None:
 
 
 def test_adaptive_adds_rounds_until_converged() -> None:
-    plan = AdaptivePlan(initial_rotations=8, threshold=0.01, exposure=FAST, max_rounds=3)
+    plan = AdaptivePlan(rule="vf", initial_rotations=8, threshold=0.01, exposure=FAST,
+                        max_rounds=3)
     _, store, eng = _setup(plan)
     assert asyncio.run(eng.run()) is JobState.RUNNING
     steps = store.steps(1)
     assert {s.round for s in steps} == {0, 1, 2}
     assert len({round(s.specimen_deg, 6) for s in steps}) == len(steps)
-    budget = AdaptivePlan(initial_rotations=8, threshold=0.01, exposure=FAST, max_samples=36)
+    budget = AdaptivePlan(rule="vf", initial_rotations=8, threshold=0.01, exposure=FAST,
+                          max_samples=36)
     _rig, store, eng = _setup(budget)
     asyncio.run(eng.run())
     assert len(store.steps(1)) * 3 <= 36

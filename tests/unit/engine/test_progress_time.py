@@ -52,7 +52,7 @@ def test_eta_is_the_median_measured_angle_time_times_the_angles_left() -> None:
 
 
 def test_adaptive_eta_has_a_bound_over_the_worst_case_angles() -> None:
-    plan = AdaptivePlan(initial_rotations=8, max_rounds=3, exposure=FAST)
+    plan = AdaptivePlan(initial_rotations=8, max_rounds=3, max_rotations=None, exposure=FAST)
     eng = _engine(plan)
     eng._angle_times = [2.0]
     p = eng._update_progress(_steps(8, 8))
@@ -60,6 +60,11 @@ def test_adaptive_eta_has_a_bound_over_the_worst_case_angles() -> None:
     # ... but up to 8 + 16 more angles may come (dry run: max_angles = 32).
     assert dry_run(plan, eng.desc).max_angles == 32
     assert p.eta_max_s == pytest.approx(2.0 * 24)
+    # With the default cap of 16 angles, only 8 more.
+    capped = plan.model_copy(update={"max_rotations": 16})
+    eng = _engine(capped)
+    eng._angle_times = [2.0]
+    assert eng._update_progress(_steps(8, 8)).eta_max_s == pytest.approx(2.0 * 8)
 
 
 def _no_basis() -> None:

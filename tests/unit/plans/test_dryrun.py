@@ -66,7 +66,7 @@ def test_dry_run_counts_backlash_approaches(desc: RigDescription) -> None:
 
 
 def test_adaptive_plans_get_a_bound(desc: RigDescription) -> None:
-    plan = AdaptivePlan(initial_rotations=8, max_rounds=3,
+    plan = AdaptivePlan(initial_rotations=8, max_rounds=3, max_rotations=None,
                         exposure=ExposureSettings(exposure_s=0.1, light_settle_s=0.0,
                                                   dark="none"))
     d = dry_run(plan, desc)
@@ -79,3 +79,28 @@ def test_adaptive_plans_get_a_bound(desc: RigDescription) -> None:
     assert dry_run(plan.model_copy(update={"max_samples": 36}), desc).max_angles == 12
     assert dry_run(plan.model_copy(update={"min_step_deg": 20.0}), desc).max_angles == 16
     assert dry_run(UniformPlan(), desc).max_estimated_s is None
+
+
+def test_the_bound_of_a_default_adaptive_plan_is_its_cap(desc: RigDescription) -> None:
+    """The posterior rule stops at max_rotations (default 16): from 4 angles the bound is 16,
+    not the 4 x 2^5 = 128 of six uncapped rounds; the cap binds in the time bound too."""
+    ex = ExposureSettings(exposure_s=0.1, light_settle_s=0.0, dark="none")
+    d = dry_run(AdaptivePlan(exposure=ex), desc)
+    assert (len(d.angles_deg), d.max_angles) == (4, 16)
+    uncapped = dry_run(AdaptivePlan(exposure=ex, max_rotations=None), desc)
+    assert uncapped.max_angles == 4 * 2**5
+    assert d.max_estimated_s is not None and uncapped.max_estimated_s is not None
+    # 12 more angles of two lights' exposures at most (plus moves), far below 124 more.
+    assert d.max_estimated_s >= 16 * 2 * 0.1
+    assert d.max_estimated_s < uncapped.max_estimated_s - 100 * 2 * 0.1
+    # A cap that is not a doubling stops mid-round: 4 + 4 + 2.
+    assert dry_run(AdaptivePlan(exposure=ex, max_rotations=10), desc).max_angles == 10
+    # V&F's rule keeps its uncapped default: 8 angles doubled in each of 5 rounds.
+    assert dry_run(AdaptivePlan(exposure=ex, rule="vf"), desc).max_angles == 8 * 2**5
+
+
+def test_a_cap_below_the_first_round_is_refused(desc: RigDescription) -> None:
+    from gonio.plans.models import PlanError
+
+    with pytest.raises(PlanError, match="max_rotations 6 is fewer than the first round's 8"):
+        dry_run(AdaptivePlan(initial_rotations=8, max_rotations=6), desc)

@@ -32,3 +32,21 @@ def test_the_first_round_of_an_adaptive_plan_defaults_by_rule() -> None:
                       ).first_rotations() == 5
     stored = AdaptivePlan(rule="vf").model_dump(mode="json")
     assert parse_plan({**stored, "rule": "posterior"}).first_rotations() == 8
+
+
+def test_the_cap_on_stage_angles_defaults_by_rule() -> None:
+    """16 angles in all for the posterior rule (the budget it was chosen for, docs/science.md
+    7.3), no cap for V&F's; a number given (or null) is kept, as is a stored plan's."""
+    from gonio.plans.models import AdaptivePlan
+
+    assert parse_plan('{"kind": "adaptive"}').max_rotations == 16  # type: ignore[union-attr]
+    assert parse_plan({"kind": "adaptive", "rule": "vf"}).max_rotations is None  # type: ignore[union-attr]
+    assert parse_plan({"kind": "adaptive", "rule": "vf", "max_rotations": 24}
+                      ).max_rotations == 24  # type: ignore[union-attr]
+    assert parse_plan({"kind": "adaptive", "max_rotations": None}
+                      ).max_rotations is None  # type: ignore[union-attr]
+    stored = AdaptivePlan(rule="vf").model_dump(mode="json")
+    assert parse_plan({**stored, "rule": "posterior"}).max_rotations is None  # type: ignore[union-attr]
+    for bad in (0, -4, 3601, 2.5):
+        with pytest.raises(PlanError, match="max_rotations"):
+            parse_plan({"kind": "adaptive", "max_rotations": bad})
