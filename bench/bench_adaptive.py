@@ -3,7 +3,7 @@
 Run from the project root (needs mitsuba and ``../shared/data/rgl``, like
 ``bench/bench_unseen.py``, whose materials, readings and designs it reuses)::
 
-    nice -n 5 .venv/bin/python bench/bench_adaptive.py [--gains 0.0006] [--starts 8 4]
+    nice -n 5 .venv/bin/python bench/bench_adaptive.py [--gains 0.0003] [--starts 8 4]
         [--max-rotations 16] [--set panel|unseen|both] [--only measured|aniso]
 
 Sets
@@ -65,6 +65,52 @@ def panel_cases() -> list[Case]:
             for i, t in enumerate(synth)]
 
 
+#: Synthetic materials per library family held out of the wide panel's basis.
+WIDE_PER_FAMILY = 3
+
+
+def wide_panel_cases() -> list[Case]:
+    """The first :data:`WIDE_PER_FAMILY` materials of every library family (21), held out of
+    a basis built without them (the measured materials folded in as in the default basis),
+    built once and cached like the panel basis. Grouped as "iso" (families whose materials
+    do not vary with the stage angle) and "aniso" (fabric, brushed metal)."""
+    from gonio.brdf.materials import library, measured
+    from gonio.brdf.reconstruction.basis import (
+        _FOLD_EXTRA,
+        DEFAULT_COMPONENTS,
+        MEASURED_WEIGHT,
+        build_basis,
+        fold_in,
+    )
+
+    count: dict[str, int] = {}
+    held: list[tuple[str, str]] = []
+    for s in library.library_specs():
+        if count.get(s.family, 0) < WIDE_PER_FAMILY:
+            count[s.family] = count.get(s.family, 0) + 1
+            held.append((s.name, s.family))
+    names = {n for n, _ in held}
+    path = (library.cache_root() / "basis" / f"panel{WIDE_PER_FAMILY}-K"
+            f"{DEFAULT_COMPONENTS + _FOLD_EXTRA}-{library.library_key()[:16]}.npz")
+    if path.is_file():
+        base = Basis.load(path)
+    else:
+        t0 = time.perf_counter()
+        base = build_basis([t for t in library.default_library() if t.name not in names],
+                           DEFAULT_COMPONENTS + _FOLD_EXTRA)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        base.save(path)
+        print(f"  wide panel basis built in {time.perf_counter() - t0:.0f} s", flush=True)
+    pb = fold_in(base, measured.measured_tables(), MEASURED_WEIGHT, DEFAULT_COMPONENTS)
+    cells, ph = bu.design(pb, 10)
+    out = []
+    for i, (n, fam) in enumerate(held):
+        t = library.library_table(n)
+        kind = "aniso" if fam in ("fabric", "brushed-metal") else "iso"
+        out.append(Case(bu.Material(t.name, kind, t, t, ()), pb, cells, ph, 700 + i))
+    return out
+
+
 def unseen_cases() -> list[Case]:
     mats = bu.measured_materials() + bu.aniso_materials()
     out = []
@@ -74,6 +120,12 @@ def unseen_cases() -> list[Case]:
         out.append(Case(m, b, cells, ph, 100 + i))
     return out
 
+
+#: Candidate positions in each gap (``--midpoints``: the gaps' midpoints only).
+FRACTIONS: dict[str, tuple[float, ...]] = {"value": (0.25, 0.5, 0.75)}
+
+#: Added to every scan's noise seed (``--seed``).
+SEED = {"offset": 0}
 
 Result = tuple[float, int]
 """(log_rmse, readings) of one scan."""
@@ -91,29 +143,32 @@ def finals(c: Case, angles_deg: list[float], vals: np.ndarray) -> tuple[Result, 
 
 def uniform(c: Case, r: int) -> tuple[Result, Result]:
     angles = list(np.rad2deg(uniform_stage_angles(r)))
-    vals = bu.read(c.mat, c.cells, c.ph, np.deg2rad(angles), c.seed)
+    vals = bu.read(c.mat, c.cells, c.ph, np.deg2rad(angles), c.seed + SEED["offset"])
     return finals(c, angles, vals)
 
 
-def adaptive(c: Case, gain: float, r0: int, max_r: int) -> tuple[Result, Result]:
+def adaptive(c: Case, gain: float, r0: int, max_r: int,
+             rel: float = 0.0) -> tuple[Result, Result]:
+    fr = FRACTIONS["value"]
+    seed = c.seed + SEED["offset"]
     angles = list(np.rad2deg(uniform_stage_angles(r0)))
-    vals = bu.read(c.mat, c.cells, c.ph, np.deg2rad(angles), c.seed)
+    vals = bu.read(c.mat, c.cells, c.ph, np.deg2rad(angles), seed)
     for rnd in range(8):
         rec = reconstruct(c.basis, c.cells, c.ph, np.deg2rad(angles), vals)  # as the engine
         step = next_angles(c.basis, c.cells, c.ph, angles, vals, threshold=gain,
-                           budget_angles=max_r - len(angles), per_gap=1,
-                           table=rec.table.values)
+                           rel_threshold=rel, budget_angles=max_r - len(angles), per_gap=1,
+                           fractions=fr, table=rec.table.values)
         if not step.angles_deg:
             break
         extra = bu.read(c.mat, c.cells, c.ph, np.deg2rad(step.angles_deg),
-                        c.seed + 1000 * (rnd + 1))
+                        seed + 1000 * (rnd + 1))
         angles += step.angles_deg
         vals = np.concatenate([vals, extra], axis=1)
     return finals(c, angles, vals)
 
 
 def table(name: str, cases: list[Case], gains: list[float], starts: list[int],
-          max_r: int) -> dict[str, float]:
+          max_r: int, rels: list[float] | None = None) -> dict[str, float]:
     rows: dict[str, dict[str, Result]] = {}
     t0 = time.perf_counter()
 
@@ -127,6 +182,9 @@ def table(name: str, cases: list[Case], gains: list[float], starts: list[int],
         for r0 in starts:
             for g in gains:
                 put(f"posterior {r0}->{max_r} gain>={g}", c, adaptive(c, g, r0, max_r))
+            for f in rels or []:
+                put(f"posterior {r0}->{max_r} drop>={f}*expected", c,
+                    adaptive(c, 0.0, r0, max_r, rel=f))
         print(f"  {c.mat.name}: " + "; ".join(
             f"{k} {v[c.mat.name][0]:.4f}/{v[c.mat.name][1]}"
             for k, v in rows.items()) + f" ({time.perf_counter() - t0:.0f} s)", flush=True)
@@ -149,24 +207,40 @@ def table(name: str, cases: list[Case], gains: list[float], starts: list[int],
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--gains", type=float, nargs="*", default=[0.0006])
+    ap.add_argument("--gains", type=float, nargs="*", default=[0.0003])
+    ap.add_argument("--rel-gains", type=float, nargs="*", default=[],
+                    help="relative stopping rule: least drop per angle as a fraction of the "
+                         "posterior's expected log_rmse (threshold 0)")
     ap.add_argument("--starts", type=int, nargs="*", default=[8, 4],
                     help="initial uniform stage angles r0 of the adaptive scans")
     ap.add_argument("--max-rotations", type=int, default=16)
-    ap.add_argument("--set", choices=["panel", "unseen", "both"], default="both")
+    ap.add_argument("--set", choices=["panel", "wide", "unseen", "both"], default="both",
+                    help="panel: 7 held-out synthetic materials (one per family); wide: 21 "
+                         "(three per family, their own basis); both: panel and unseen")
     ap.add_argument("--design", choices=list(bu.DESIGNS), default=bu.DEFAULT_OBJECTIVE,
                     help="pair design of every scan (bench_unseen.py's --design; default: "
                          "design_pairs' default objective)")
     ap.add_argument("--only", choices=["measured", "aniso"], default=None)
+    ap.add_argument("--seed", type=int, default=0,
+                    help="added to every scan's noise seed (a second draw of the noise)")
+    ap.add_argument("--midpoints", action="store_true",
+                    help="candidates at the gaps' midpoints only (default: quarter points)")
     args = ap.parse_args(argv)
+    if args.midpoints:
+        FRACTIONS["value"] = (0.5,)
     bu.CHOOSE["objective"] = args.design
     print(f"$ {' '.join(['python', *sys.argv])}")
+    SEED["offset"] = args.seed
     if args.set in ("panel", "both"):
         table("panel (calibration)", panel_cases(), args.gains, args.starts,
-              args.max_rotations)
+              args.max_rotations, args.rel_gains)
+    if args.set == "wide":
+        table("wide panel (calibration)", wide_panel_cases(), args.gains, args.starts,
+              args.max_rotations, args.rel_gains)
     if args.set in ("unseen", "both"):
         cases = [c for c in unseen_cases() if args.only in (None, c.mat.kind)]
-        table("unseen (benchmark)", cases, args.gains, args.starts, args.max_rotations)
+        table("unseen (benchmark)", cases, args.gains, args.starts, args.max_rotations,
+              args.rel_gains)
     return 0
 
 

@@ -100,7 +100,7 @@ def _check_start(value: float) -> float:
     return value
 
 
-DEFAULT_MIN_GAIN = 0.0006
+DEFAULT_MIN_GAIN = 0.0003
 """Default ``min_gain`` of adaptive plans: ``gonio.brdf.reconstruction.posterior.REFINE_GAIN``
 (a test keeps the two equal; the plans do not import the numerical core for one number)."""
 DEFAULT_MAX_ROTATIONS = 16

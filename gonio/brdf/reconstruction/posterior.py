@@ -27,10 +27,10 @@ along ``ph`` is taken from the data too: one factor on the low harmonics
 (``0 < m <= BAND_SPLIT``, the twofold symmetry of a brushed or woven specimen) and another on
 the higher ones (sharp highlights), both from :data:`RHO_GRID`.
 
-Adaptive refinement (:func:`next_angles`) picks candidate angles greedily by gain, conditioning
-on the angles already picked, and stops when the best remaining angle would lower the expected
-``log_rmse`` by less than a threshold (:data:`REFINE_GAIN`, calibrated on held-out training
-materials with ``bench/bench_adaptive.py``).
+Adaptive refinement (:func:`next_angles`) picks candidate angles (the midpoints of the gaps)
+greedily by gain, conditioning on the angles already picked, and stops when the best
+remaining angle would lower the expected ``log_rmse`` by less than a threshold
+(:data:`REFINE_GAIN`, chosen on held-out training materials with ``bench/bench_adaptive.py``).
 """
 
 from __future__ import annotations
@@ -63,8 +63,9 @@ RHO_GRID: tuple[float, ...] = tuple(float(v) for v in np.geomspace(1 / 64, 16.0,
 #: carry energy, so the low band is ``m = 2`` (docs/science.md 2.1).
 BAND_SPLIT = 2
 #: Default stopping threshold of :func:`next_angles`: the least drop of the expected
-#: ``log_rmse`` one more stage angle must buy (``bench/bench_adaptive.py --calibrate``).
-REFINE_GAIN = 0.0006
+#: ``log_rmse`` one more stage angle must buy (chosen on the wide held-out panel,
+#: ``bench/bench_adaptive.py --set wide``; docs/science.md 7.3).
+REFINE_GAIN = 0.0003
 
 
 @functools.cache
@@ -451,14 +452,29 @@ class ScanPosterior:
         self._chol = scipy.linalg.cho_factor(G, lower=True)
 
 
-def candidate_angles(stage_angles_deg: ArrayLike, min_step_deg: float) -> FloatArray:
-    """Candidate new angles: the quarter, half and three-quarter points of every gap.
+#: Where in each gap :func:`candidate_angles` puts candidates, as fractions of the gap.
+MIDPOINTS: tuple[float, ...] = (0.5,)
+#: The quarter, half and three-quarter points (the candidates before this round).
+QUARTERS: tuple[float, ...] = (0.25, 0.5, 0.75)
+
+
+def candidate_angles(stage_angles_deg: ArrayLike, min_step_deg: float,
+                     fractions: Sequence[float] = MIDPOINTS) -> FloatArray:
+    """Candidate new angles: the midpoints of every gap (or other points of it).
+
+    Midpoints by default: fully refined, a scan started at ``r0`` uniform angles then reaches
+    the uniform ``2^k r0`` angles (the best spread for a stationary prior along ``ph``), and
+    every round is a subset of the dry run's worst case (every gap halved). On the wide
+    held-out panel they beat the quarter points (docs/science.md 7.3).
 
     Parameters
     ----------
     stage_angles_deg : (r,) measured angles, degrees
     min_step_deg : float
         Candidates closer than this to a measured angle are left out.
+    fractions : sequence of float in (0, 1)
+        Where in each gap (default :data:`MIDPOINTS`; :data:`QUARTERS` for the quarter,
+        half and three-quarter points).
 
     Returns
     -------
@@ -470,7 +486,7 @@ def candidate_angles(stage_angles_deg: ArrayLike, min_step_deg: float) -> FloatA
     gaps = np.diff(np.concatenate([a, [a[0] + 360.0]]))
     out = set()
     for start, gap in zip(a, gaps, strict=True):
-        for frac in (0.25, 0.5, 0.75):
+        for frac in fractions:
             step = min(frac, 1 - frac) * gap
             if step >= min_step_deg - 1e-9:
                 out.add(round(float((start + frac * gap) % 360.0), 6))
@@ -510,13 +526,16 @@ def next_angles(
     budget_angles: int | None = None,
     batch: int | None = None,
     per_gap: int | None = None,
+    rel_threshold: float = 0.0,
+    fractions: Sequence[float] = MIDPOINTS,
     table: ArrayLike | None = None,
 ) -> RefinementStep:
     """Plan the next stage angles where they lower the expected ``log_rmse`` most.
 
     Greedy: the candidate (:func:`candidate_angles`) with the largest posterior-variance drop
     is picked, the posterior is conditioned on it, and so on while the pick's expected
-    ``log_rmse`` drop (:meth:`ScanPosterior.log_rmse_drop`) is at least ``threshold`` and the
+    ``log_rmse`` drop (:meth:`ScanPosterior.log_rmse_drop`) is at least ``threshold`` (and at
+    least ``rel_threshold`` times the expected ``log_rmse`` left before the pick) and the
     budget lasts.
 
     Parameters
@@ -536,6 +555,12 @@ def next_angles(
         Most new angles inside each gap between the measured angles (None: no limit). With 1
         a round adds at most one angle per gap, as V&F's midpoints do, so the dry run's bound
         on an adaptive job (every gap halved each round) holds.
+    rel_threshold : float
+        Least drop per new angle as a fraction of the posterior's expected ``log_rmse`` left
+        (0: no such condition, the default; a relative rule was tried on the held-out panel
+        and did not pay, docs/science.md 7.3).
+    fractions : sequence of float
+        Candidate points of each gap (:func:`candidate_angles`; default the midpoints).
     table : optional, the reconstruction of these readings (computed when omitted)
 
     Returns
@@ -559,7 +584,7 @@ def next_angles(
             if len(picked) >= limit:
                 reason = "budget" if not picked else ""
                 break
-            cand = candidate_angles(measured, min_step_deg)
+            cand = candidate_angles(measured, min_step_deg, fractions)
             gap_of = (np.searchsorted(edges, cand, side="right") - 1) % max(edges.size, 1)
             if per_gap is not None and edges.size:
                 cand, gap_of = cand[used[gap_of] < per_gap], gap_of[used[gap_of] < per_gap]
@@ -569,7 +594,7 @@ def next_angles(
             gains = post.angle_gains(np.deg2rad(cand))
             k = int(np.argmax(gains))
             drop = post.log_rmse_drop(float(gains[k]))
-            if not drop >= threshold:
+            if not (drop >= threshold and drop >= rel_threshold * post.expected_log_rmse):
                 reason = "threshold" if not picked else ""
                 break
             if edges.size:

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from gonio.brdf.reconstruction.posterior import (
+    QUARTERS,
     RHO_GRID,
     ScanPosterior,
     candidate_angles,
@@ -75,14 +76,17 @@ def test_angle_gain_is_the_variance_drop_of_reading_there() -> None:
 
 def test_refinement_picks_the_angle_with_the_largest_posterior_variance() -> None:
     """Angles crowded in one quarter leave a 270 degree gap: one new angle goes where the
-    explicit posterior variance drops most, and that is inside the big gap."""
+    explicit posterior variance drops most, and that is inside the big gap (quarter points as
+    candidates: the midpoints here are 45 degrees apart modulo 180, which this prior's even
+    harmonics cannot tell apart)."""
     b, cells, ph, _, _ = _scan()
     alpha_deg = np.array([0.0, 30.0, 60.0, 90.0])
     vals = np.abs(np.random.default_rng(5).normal(1.0, 0.2, (5, 4, 1)))
-    step = next_angles(b, cells, ph, alpha_deg, vals, threshold=0.0, batch=1)
+    step = next_angles(b, cells, ph, alpha_deg, vals, threshold=0.0, batch=1,
+                       fractions=QUARTERS)
     assert len(step.angles_deg) == 1
     post = ScanPosterior(b, cells, ph, np.deg2rad(alpha_deg), vals, rho=step.rho)
-    cand = candidate_angles(alpha_deg, 1.0)
+    cand = candidate_angles(alpha_deg, 1.0, QUARTERS)
     before = _dense_weighted_variance(post, np.deg2rad(alpha_deg))
     drops = [before - _dense_weighted_variance(post, np.deg2rad(np.append(alpha_deg, c)))
              for c in cand]
@@ -119,12 +123,54 @@ def test_the_plan_stops_when_the_rule_says() -> None:
 
 
 def test_candidates_respect_the_stage_resolution() -> None:
-    """Quarter, half and three-quarter points of each gap (90 and 270 degrees here), minus
-    those closer than the stage resolution to a measured angle."""
-    np.testing.assert_allclose(candidate_angles([0.0, 90.0], 1.0),
+    """The midpoints of the gaps (90 and 270 degrees here) by default, or the quarter, half
+    and three-quarter points, minus those closer than the stage resolution to a measured
+    angle."""
+    np.testing.assert_allclose(candidate_angles([0.0, 90.0], 1.0), [45.0, 225.0])
+    np.testing.assert_allclose(candidate_angles([0.0, 90.0], 1.0, QUARTERS),
                                [22.5, 45.0, 67.5, 157.5, 225.0, 292.5])
-    np.testing.assert_allclose(candidate_angles([0.0, 90.0], 30.0), [45.0, 157.5, 225.0, 292.5])
+    np.testing.assert_allclose(candidate_angles([0.0, 90.0], 30.0, QUARTERS),
+                               [45.0, 157.5, 225.0, 292.5])
+    np.testing.assert_allclose(candidate_angles([0.0, 90.0], 50.0), [225.0])
     assert candidate_angles([0.0, 1.0], 200.0).size == 0
+
+
+def test_fully_refined_midpoints_are_the_uniform_grid() -> None:
+    """From 4 uniform angles, two rounds of one midpoint per gap give uniform 16 (what the
+    rule's goal is measured against, and the dry run's worst case)."""
+    b, cells, ph, _, _ = _scan()
+    deg = [0.0, 90.0, 180.0, 270.0]
+    vals = np.abs(np.random.default_rng(2).normal(1.0, 0.1, (5, 4, 1)))
+    for _ in range(2):
+        step = next_angles(b, cells, ph, deg, vals, threshold=0.0, per_gap=1)
+        deg = sorted(deg + step.angles_deg)
+        vals = np.abs(np.random.default_rng(len(deg)).normal(1.0, 0.1, (5, len(deg), 1)))
+    np.testing.assert_allclose(deg, np.arange(16) * 22.5)
+
+
+def test_the_rule_stops_at_the_gain_it_is_given() -> None:
+    """The expected drops of the greedy picks, from a run without a threshold, decide a run
+    with one: a threshold between the second and the first drop plans exactly one angle, at
+    the first drop itself too (at least), just above it none; likewise for the relative rule
+    against the expected error left before each pick."""
+    b, cells, ph, alpha, vals = _scan()
+    deg = np.rad2deg(alpha)
+    free = next_angles(b, cells, ph, deg, vals, threshold=0.0, budget_angles=3)
+    d = free.drops
+    assert len(d) == 3 and d[0] > d[1] > 0
+    first = next_angles(b, cells, ph, deg, vals, threshold=0.0, budget_angles=1)
+    one = next_angles(b, cells, ph, deg, vals, threshold=0.5 * (d[0] + d[1]))
+    assert len(first.angles_deg) == 1 and one.angles_deg == first.angles_deg
+    assert one.drops == pytest.approx([d[0]]) and one.reason == ""
+    assert len(next_angles(b, cells, ph, deg, vals, threshold=d[0]).angles_deg) == 1
+    none = next_angles(b, cells, ph, deg, vals, threshold=d[0] * (1 + 1e-9))
+    assert none.angles_deg == [] and none.reason == "threshold"
+    # Relative: the first pick's drop is d[0] / e0 of the expected error e0.
+    f0 = d[0] / free.expected_log_rmse
+    rel = next_angles(b, cells, ph, deg, vals, threshold=0.0, rel_threshold=f0 * (1 + 1e-9))
+    assert rel.angles_deg == [] and rel.reason == "threshold"
+    assert next_angles(b, cells, ph, deg, vals, threshold=0.0, rel_threshold=f0 * (1 - 1e-9),
+                       budget_angles=1).angles_deg == one.angles_deg
 
 
 def test_bad_readings_are_refused() -> None:
