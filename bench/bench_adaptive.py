@@ -4,15 +4,19 @@ Run from the project root (needs mitsuba and ``../shared/data/rgl``, like
 ``bench/bench_unseen.py``, whose materials, readings and designs it reuses)::
 
     nice -n 5 .venv/bin/python bench/bench_adaptive.py [--gains 0.0003] [--starts 8 4]
-        [--max-rotations 16] [--set panel|unseen|both] [--only measured|aniso]
+        [--max-rotations 16] [--set panel|wide|unseen|both] [--only measured|aniso]
+        [--rel-gains 0.02 ...] [--candidates midpoints|quarters] [--seed 0]
 
 Sets
 ----
 * ``panel`` (calibration, held-out *training* materials): one synthetic material per library
   family held out of the panel basis of :mod:`gonio.brdf.design.heldout` (built without
-  them), read from their tables with 1 % noise. The stopping threshold of
-  :func:`gonio.brdf.reconstruction.posterior.next_angles` is chosen here: the largest gain
-  threshold whose mean error is at most the uniform-16 mean error.
+  them), read from their tables with 1 % noise.
+* ``wide`` (calibration): three synthetic materials per family (21, six of them
+  anisotropic: fabric and brushed metal) held out of a basis built without them (cached
+  like the panel basis; about a minute to build once). The rule's settings of
+  :func:`gonio.brdf.reconstruction.posterior.next_angles` are chosen here (docs/science.md
+  7.3): the lowest mean error with at most 60 % of uniform 16's readings.
 * ``unseen`` (the benchmark of ``bench_unseen.py``): 11 measured RGL materials, each with a
   basis that leaves it out, and 6 mitsuba anisotropic specimens.
 
@@ -41,7 +45,7 @@ import bench_unseen as bu
 import numpy as np
 
 from gonio.brdf.reconstruction.basis import Basis, default_basis
-from gonio.brdf.reconstruction.posterior import next_angles
+from gonio.brdf.reconstruction.posterior import MIDPOINTS, QUARTERS, next_angles
 from gonio.brdf.reconstruction.reconstruct import reconstruct
 from gonio.brdf.reconstruction.samples import uniform_stage_angles
 from gonio.brdf.tables import metrics
@@ -121,8 +125,8 @@ def unseen_cases() -> list[Case]:
     return out
 
 
-#: Candidate positions in each gap (``--midpoints``: the gaps' midpoints only).
-FRACTIONS: dict[str, tuple[float, ...]] = {"value": (0.25, 0.5, 0.75)}
+#: Candidate positions in each gap (``--candidates``; default: next_angles' default).
+FRACTIONS: dict[str, tuple[float, ...]] = {"value": MIDPOINTS}
 
 #: Added to every scan's noise seed (``--seed``).
 SEED = {"offset": 0}
@@ -223,11 +227,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--only", choices=["measured", "aniso"], default=None)
     ap.add_argument("--seed", type=int, default=0,
                     help="added to every scan's noise seed (a second draw of the noise)")
-    ap.add_argument("--midpoints", action="store_true",
-                    help="candidates at the gaps' midpoints only (default: quarter points)")
+    ap.add_argument("--candidates", choices=["midpoints", "quarters"], default="midpoints",
+                    help="candidate angles of the posterior rule: the gaps' midpoints (the "
+                         "default of next_angles) or their quarter, half and three-quarter "
+                         "points (before this round)")
     args = ap.parse_args(argv)
-    if args.midpoints:
-        FRACTIONS["value"] = (0.5,)
+    FRACTIONS["value"] = MIDPOINTS if args.candidates == "midpoints" else QUARTERS
     bu.CHOOSE["objective"] = args.design
     print(f"$ {' '.join(['python', *sys.argv])}")
     SEED["offset"] = args.seed
