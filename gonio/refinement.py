@@ -6,8 +6,10 @@ ask :func:`gonio.brdf.reconstruction.posterior.next_angles` where the next angle
 turns the pairs' lab directions into slice cells once, applies the rig's calibration to the
 ``raw - dark`` counts (the posterior weighs errors at BRDF values in 1/sr), and takes the basis
 from its provider on first use (the worker loads it before the job's first reading and hands
-it over loaded, so no round waits for a build). A round adds at most one angle per gap
-(``per_gap=1``), so the dry run's bound on an adaptive job holds.
+it over loaded, so no round waits for a build). A round adds at most one angle per gap, a
+midpoint (``per_gap=1``, the default candidates of ``next_angles``), so the dry run's bound
+on an adaptive job holds; the plan's ``max_rotations`` reaches the rule as the engine's
+``budget_angles``.
 """
 
 from __future__ import annotations

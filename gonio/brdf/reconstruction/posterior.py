@@ -454,7 +454,8 @@ class ScanPosterior:
 
 #: Where in each gap :func:`candidate_angles` puts candidates, as fractions of the gap.
 MIDPOINTS: tuple[float, ...] = (0.5,)
-#: The quarter, half and three-quarter points (the candidates before this round).
+#: The quarter, half and three-quarter points (the rule's earlier candidates, kept for
+#: comparison: ``bench/bench_adaptive.py --candidates quarters``).
 QUARTERS: tuple[float, ...] = (0.25, 0.5, 0.75)
 
 
