@@ -218,8 +218,8 @@ class AdaptivePlan(_PlanBase):
         default=DEFAULT_MAX_ROTATIONS, gt=0, le=MAX_ROTATIONS,
         description="most stage angles the job measures, the first round's included; default "
         f"{DEFAULT_MAX_ROTATIONS} with the posterior rule (the budget it was chosen for, "
-        "docs/science.md 7.3), none with vf (V&F: until the rule stops); null = no cap "
-        f"below {MAX_ROTATIONS}")
+        "docs/science.md 7.3), none with vf (V&F: until the rule stops); null: only the "
+        f"per-job limit of {MAX_ROTATIONS}")
     max_samples: Count | None = Field(
         default=None, gt=0, description="budget of pair readings (pairs x angles); null = none"
     )
