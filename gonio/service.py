@@ -34,7 +34,7 @@ from gonio.jobstates import ACTIVE_STATES, IllegalTransition, JobState, check_ac
 from gonio.maintenance import LOCK_FILE_NAME, MaintenanceLock
 from gonio.motion import StageMoveError
 from gonio.plans.dryrun import DryRun, dry_run
-from gonio.plans.models import AnyPlan, Plan, PlanError, parse_plan
+from gonio.plans.models import AnyPlan, Plan, PlanError, parse_plan, parse_stored_plan
 from gonio.rigdescription import RigDescription
 from gonio.store import EventRow, JobRow, JobStore, ReadingRow
 from gonio.store import NotFound as StoreNotFound
@@ -345,7 +345,7 @@ class GonioService:
 
     def _can_resume(self, job: JobRow) -> str | None:
         try:
-            plan = parse_plan(job.plan)
+            plan = parse_stored_plan(job.plan)
         except PlanError as exc:
             return f"interrupted by a restart and its plan no longer parses: {exc}"
         snap = job.rig.get("pairs")

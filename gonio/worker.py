@@ -31,7 +31,7 @@ from gonio.calibration import (
 from gonio.engine import Progress, ScanEngine
 from gonio.finishing import Finishing, FinishingStopped, finish_job
 from gonio.jobstates import JobState
-from gonio.plans.models import AdaptivePlan, AnyPlan, PlanError, parse_plan
+from gonio.plans.models import AdaptivePlan, AnyPlan, PlanError, parse_stored_plan
 from gonio.plans.validation import plan_pairs, validate_plan
 from gonio.rigdescription import RigDescription
 from gonio.store import JobRow, JobStore
@@ -270,7 +270,7 @@ class Worker:
 
     async def _run_job(self, job: JobRow) -> JobState:
         try:
-            plan = parse_plan(job.plan)
+            plan = parse_stored_plan(job.plan)
             validate_plan(plan, self.desc)
         except PlanError as exc:
             return self._fail(job, f"plan no longer valid on this rig: {exc}")
@@ -370,7 +370,7 @@ class Worker:
         wanted = []
         for row in jobs:
             with contextlib.suppress(PlanError):
-                if needs_basis_to_measure(parse_plan(row.plan)):
+                if needs_basis_to_measure(parse_stored_plan(row.plan)):
                     wanted.append(row.id)
         if not wanted:
             return

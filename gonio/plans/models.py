@@ -26,7 +26,7 @@ Angles are degrees here (plans are user-facing). A plan's angles are specimen ro
 
 from __future__ import annotations
 
-from typing import Annotated, ClassVar, Literal
+from typing import Annotated, Any, ClassVar, Literal
 
 from pydantic import AfterValidator, BaseModel, BeforeValidator, Field, model_validator
 
@@ -272,6 +272,27 @@ def parse_plan(data: object) -> UniformPlan | AdaptivePlan | CalibrationPlan:
             f"{'.'.join(str(p) for p in e['loc'][1:]) or 'plan'}: {e['msg']}" for e in exc.errors()
         )
         raise PlanError(f"invalid plan: {problems}") from None
+
+
+#: Plan fields added after plans were first stored, each with the value that keeps an older
+#: stored plan's meaning: a job queued (or interrupted) before an upgrade runs as submitted.
+#: ``max_rotations`` arrived with a default of 16 for the posterior rule; before, such a job was
+#: bounded only by the per-job limit.
+_ADDED_SINCE_STORED: dict[str, dict[str, object]] = {"adaptive": {"max_rotations": None}}
+
+
+def parse_stored_plan(data: dict[str, Any]) -> UniformPlan | AdaptivePlan | CalibrationPlan:
+    """Validate a plan read back from the job store; raises :class:`PlanError`.
+
+    Stored plans are complete dumps (``model_dump``), so a field missing from one was added to
+    the model after it was stored; it takes the value that keeps the plan's meaning at
+    submission (:data:`_ADDED_SINCE_STORED`), not today's default. Requests use
+    :func:`parse_plan`.
+    """
+    if isinstance(data, dict):
+        added = _ADDED_SINCE_STORED.get(str(data.get("kind")), {})
+        data = {**{k: v for k, v in added.items() if k not in data}, **data}
+    return parse_plan(data)
 
 
 def _as_bytes(s: str | bytes) -> bytes:

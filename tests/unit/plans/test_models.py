@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
 from gonio.plans.models import (
@@ -50,3 +52,27 @@ def test_the_cap_on_stage_angles_defaults_by_rule() -> None:
     for bad in (0, -4, 3601, 2.5):
         with pytest.raises(PlanError, match="max_rotations"):
             parse_plan({"kind": "adaptive", "max_rotations": bad})
+
+
+def test_a_plan_stored_before_the_cap_existed_keeps_its_meaning(tmp_path: Path) -> None:
+    """A posterior-rule job queued by a version without ``max_rotations`` (its stored plan is a
+    full dump lacking the key) runs uncapped, as submitted, after an upgrade; a new request
+    gets today's default of 16; a stored plan with the key keeps its value."""
+    from gonio.plans.models import AdaptivePlan, parse_stored_plan
+    from gonio.store import JobStore
+
+    old = AdaptivePlan().model_dump(mode="json")
+    del old["max_rotations"]  # what the older version wrote
+    capped = {**old, "max_rotations": 12}
+    store = JobStore(tmp_path / "gonio.sqlite")
+    ids = [store.create_job(kind="adaptive", specimen="s", plan=p, rig={}).id
+           for p in (old, capped)]
+    store.close()
+    again = JobStore(tmp_path / "gonio.sqlite")  # the upgraded daemon's store
+    plans = [parse_stored_plan(again.get_job(i).plan) for i in ids]
+    again.close()
+    assert plans[0].max_rotations is None  # type: ignore[union-attr]
+    assert plans[1].max_rotations == 12  # type: ignore[union-attr]
+    assert parse_plan(old).max_rotations == 16  # type: ignore[union-attr]
+    with pytest.raises(PlanError, match="max_rotations"):
+        parse_stored_plan({**old, "max_rotations": 0})
