@@ -48,14 +48,17 @@ class Provider:
         return BASIS
 
 
-def _worker(store: JobStore, provider: Provider) -> tuple[Worker, RigDescription]:
+def _worker(store: JobStore, provider: Provider, data_dir: Path
+            ) -> tuple[Worker, RigDescription]:
+    """The worker on a MemRig; results go under ``data_dir`` (a test's tmp_path, never the
+    working directory)."""
     rig = MemRig()
     desc = RigDescription.from_rig(rig)
 
     async def get_rig() -> MemRig:
         return rig
 
-    return Worker(store, get_rig, desc, Path("."), basis_provider=provider,
+    return Worker(store, get_rig, desc, data_dir, basis_provider=provider,
                   fit_exports=False), desc
 
 
@@ -71,8 +74,7 @@ def _types(store: JobStore, job_id: int) -> list[str]:
 def test_an_adaptive_job_loads_its_basis_before_the_first_reading(tmp_path: Path) -> None:
     store = JobStore(":memory:")
     provider = Provider(store, serve=2)
-    w, desc = _worker(store, provider)
-    w.data_dir = tmp_path
+    w, desc = _worker(store, provider, tmp_path)
     job = _submit(store, desc, PLAN)
     asyncio.run(w.run_once())
     # First call: no reading taken yet, and not on the event loop's thread.
@@ -94,10 +96,10 @@ def test_an_adaptive_job_loads_its_basis_before_the_first_reading(tmp_path: Path
     assert row.summary is not None and 0 < row.summary["prior_rho"] <= 1.0
 
 
-def test_uniform_and_vf_jobs_do_not_wait_for_the_basis() -> None:
+def test_uniform_and_vf_jobs_do_not_wait_for_the_basis(tmp_path: Path) -> None:
     store = JobStore(":memory:")
     provider = Provider(store, serve=0)
-    w, desc = _worker(store, provider)
+    w, desc = _worker(store, provider, tmp_path)
     for plan in (UniformPlan(rotations=4, exposure=FAST),
                  AdaptivePlan(initial_rotations=4, exposure=FAST, rule="vf", max_rounds=1)):
         job = _submit(store, desc, plan)
@@ -107,10 +109,11 @@ def test_uniform_and_vf_jobs_do_not_wait_for_the_basis() -> None:
         assert provider.calls[-1][0] == len(store.readings(job)) > 0
 
 
-def test_a_basis_that_cannot_be_had_leaves_the_job_measuring_with_the_vf_rule() -> None:
+def test_a_basis_that_cannot_be_had_leaves_the_job_measuring_with_the_vf_rule(
+        tmp_path: Path) -> None:
     store = JobStore(":memory:")
     provider = Provider(store, fail=OSError("basis file unreadable"))
-    w, desc = _worker(store, provider)
+    w, desc = _worker(store, provider, tmp_path)
     plan = AdaptivePlan(initial_rotations=8, exposure=FAST, threshold=0.01, max_rounds=2)
     job = _submit(store, desc, plan)
     asyncio.run(w.run_once())
@@ -159,10 +162,10 @@ def test_a_job_cancelled_while_its_basis_loads_never_moves_the_stage(tmp_path: P
 
 
 def test_at_start_a_queue_with_an_adaptive_job_builds_the_basis_in_the_background(
-        monkeypatch: pytest.MonkeyPatch) -> None:
+        monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
     store = JobStore(":memory:")
     provider = Provider(store, serve=2)
-    w, desc = _worker(store, provider)
+    w, desc = _worker(store, provider, tmp_path)
     monkeypatch.setattr(worker_mod, "basis_build_needed", lambda provider: True)
     job = _submit(store, desc, PLAN)
 
@@ -185,10 +188,10 @@ def test_at_start_a_queue_with_an_adaptive_job_builds_the_basis_in_the_backgroun
 
 
 def test_at_start_nothing_is_built_for_a_queue_without_adaptive_jobs(
-        monkeypatch: pytest.MonkeyPatch) -> None:
+        monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
     store = JobStore(":memory:")
     provider = Provider(store, serve=0)
-    w, desc = _worker(store, provider)
+    w, desc = _worker(store, provider, tmp_path)
     monkeypatch.setattr(worker_mod, "basis_build_needed", lambda provider: True)
     _submit(store, desc, UniformPlan(rotations=4, exposure=FAST))
     w._loop = None
