@@ -29,16 +29,22 @@ pytestmark = [pytest.mark.system, pytest.mark.timeout(420)]
 
 MEASURED = ("reconstructing", "completed")
 PLAN = {"kind": "uniform", "specimen": "felt", "rotations": 8}
+SLOW = "2"
+"""Time scale of the run that is killed: each angle takes about half a second, so the kill
+lands mid-scan."""
+FAST = "10"
+"""Time scale of the resumed and the clean run (it changes only how long motion and exposures
+take in wall time, not the readings)."""
 
 
 class Daemon:
     """A ``gonio serve --sim`` child process; its stdout collected by a thread."""
 
-    def __init__(self, data_dir: Path, *extra: str) -> None:
+    def __init__(self, data_dir: Path, time_scale: str, *extra: str) -> None:
         code = "from gonio.cli import main; raise SystemExit(main())"
         self.proc = subprocess.Popen(
-            [sys.executable, "-c", code, "serve", "--sim", "--port", "0", "--time-scale", "2",
-             "--data-dir", str(data_dir), *extra],
+            [sys.executable, "-c", code, "serve", "--sim", "--port", "0", "--time-scale",
+             time_scale, "--data-dir", str(data_dir), *extra],
             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=dict(os.environ),
         )
         self.lines: list[str] = []
@@ -103,8 +109,8 @@ class Daemon:
 
 
 @contextmanager
-def daemon(data_dir: Path, *extra: str) -> Iterator[Daemon]:
-    d = Daemon(data_dir, *extra)
+def daemon(data_dir: Path, time_scale: str = FAST, *extra: str) -> Iterator[Daemon]:
+    d = Daemon(data_dir, time_scale, *extra)
     try:
         yield d
     finally:
@@ -124,7 +130,7 @@ def test_killed_sim_daemon_resumes_its_specimen_scan_without_recalibrating(
 ) -> None:
     data = tmp_path / "data"
     # 1. First run: calibrate, start a scan, kill -9 in the middle of it.
-    with daemon(data) as first:
+    with daemon(data, SLOW) as first:
         assert f"data directory {data} (kept across restarts)" in first.output()
         job_id = _calibrated_and_submitted(first)
         at_kill = first.wait_job(job_id, lambda j: j["done_angles"] >= 2
