@@ -82,3 +82,18 @@ def daemon(tmp_path_factory: pytest.TempPathFactory, basis: Any) -> Iterator[Dae
             yield Daemon(url, key, app, sim, data_dir)
     finally:
         sim.close()
+
+
+@pytest.fixture
+def no_export_fits(daemon: Daemon) -> Iterator[None]:
+    """For a test none of whose assertions looks at the export fits: while it runs, the shared
+    daemon's scans finish without them (``Worker.fit_exports``, the factored and principled fits
+    stored in each result: 3-6 s of CPU per scan here). The daemon's default stays on for every
+    other test; the stored fits are asserted by test_scan_flow's full scan."""
+    worker = daemon.app.state.service.worker
+    before = worker.fit_exports
+    worker.fit_exports = False
+    try:
+        yield
+    finally:
+        worker.fit_exports = before

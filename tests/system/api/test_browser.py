@@ -203,7 +203,8 @@ def test_start_a_scan_from_the_page_and_see_the_result(daemon: Daemon, browser: 
     assert _severe(browser) == []
 
 
-def test_an_adaptive_plan_from_the_page_sets_its_rule(daemon: Daemon, browser: Any) -> None:
+def test_an_adaptive_plan_from_the_page_sets_its_rule(daemon: Daemon, browser: Any,
+                                                      no_export_fits: None) -> None:
     """Rule and min gain on the form, explained, checked by the server, shown with the job."""
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support import expected_conditions as ec
@@ -302,7 +303,7 @@ def test_page_without_key_shows_a_clear_error(daemon: Daemon, browser: Any) -> N
 
 
 def test_a_suspended_job_shows_why_and_the_reason_goes_when_it_recovers(
-        daemon: Daemon, browser: Any) -> None:
+        daemon: Daemon, browser: Any, no_export_fits: None) -> None:
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support.ui import WebDriverWait
 

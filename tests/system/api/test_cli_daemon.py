@@ -15,7 +15,7 @@ pytestmark = pytest.mark.timeout(240)
 
 
 def test_scan_through_the_daemon_writes_its_result(
-    daemon: Daemon, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    daemon: Daemon, tmp_path: Path, capsys: pytest.CaptureFixture[str], no_export_fits: None
 ) -> None:
     out = tmp_path / "felt.h5"
     argv = ["scan", "--daemon", daemon.url, "--api-key", daemon.key, "--rotations", "4",

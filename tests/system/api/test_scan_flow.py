@@ -120,7 +120,7 @@ def test_full_scan_with_live_progress_and_results(daemon: Daemon) -> None:
         assert bad.status_code == 422 and "factored" in bad.text
 
 
-def test_sse_resync_replays_missed_events(daemon: Daemon) -> None:
+def test_sse_resync_replays_missed_events(daemon: Daemon, no_export_fits: None) -> None:
     """A client that reconnects with Last-Event-ID gets exactly the events after it."""
     with daemon.client() as c:
         r = c.post("/api/v1/jobs", json=scan("resync", rotations=4))
@@ -137,7 +137,8 @@ def test_sse_resync_replays_missed_events(daemon: Daemon) -> None:
         replay.close()
 
 
-def test_controls_pause_resume_cancel_reorder_remove(daemon: Daemon) -> None:
+def test_controls_pause_resume_cancel_reorder_remove(daemon: Daemon,
+                                                     no_export_fits: None) -> None:
     with daemon.client() as c:
         first = c.post("/api/v1/jobs", json=scan("long", rotations=36)).json()["id"]
         second = c.post("/api/v1/jobs", json=scan("queued-2", rotations=4)).json()["id"]

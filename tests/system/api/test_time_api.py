@@ -13,7 +13,7 @@ from tests.system.api.conftest import Daemon
 pytestmark = pytest.mark.system
 
 
-def test_dry_run_cap_bound_and_start(daemon: Daemon) -> None:
+def test_dry_run_cap_bound_and_start(daemon: Daemon, no_export_fits: None) -> None:
     with daemon.client() as c:
         r = c.post("/api/v1/jobs/dry-run", json={"plan": {"kind": "uniform",
                                                           "rotations": MAX_ROTATIONS + 1}})
