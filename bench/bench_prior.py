@@ -46,6 +46,7 @@ import scipy.linalg
 from gonio.brdf.materials import library
 from gonio.brdf.models import analytic as bm
 from gonio.brdf.reconstruction.basis import Basis, default_basis, remap
+from gonio.brdf.reconstruction.posterior import profiled_log_marginal
 from gonio.brdf.reconstruction.reconstruct import (
     JOINT_ETA,
     JOINT_LAM,
@@ -159,16 +160,9 @@ class Scan:
         self.ph0 = None
 
     def loglik(self, s: np.ndarray, eta: float) -> float:
-        N, C = self.y.shape
         G = np.tensordot(s, self.Gm, axes=1) + self.tau * self.nug
         G[np.diag_indices_from(G)] += eta
-        try:
-            cho = scipy.linalg.cho_factor(G, lower=True)
-        except np.linalg.LinAlgError:
-            return -np.inf
-        s2 = float(np.sum(self.y * scipy.linalg.cho_solve(cho, self.y))) / (N * C)
-        logdet = 2.0 * float(np.sum(np.log(np.diag(cho[0]))))
-        return -0.5 * N * C * np.log(max(s2, 1e-300)) - 0.5 * C * logdet
+        return profiled_log_marginal(G, self.y)
 
     def augmented(self, ph0: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Readings, rows and ph with the mirrored virtual readings about ``ph0``."""
@@ -231,15 +225,7 @@ class Scan:
         Z = np.exp(-1j * phr.ravel()[:, None] * np.arange(M))
         G = np.einsum("am,bm,mab->ab", Z, np.conj(Z), A[:, q][:, :, q]).real
         G[np.diag_indices_from(G)] += eta
-        y = Y.reshape(-1, C)
-        try:
-            cho = scipy.linalg.cho_factor(G, lower=True)
-        except np.linalg.LinAlgError:
-            return -np.inf
-        N = y.shape[0]
-        s2 = float(np.sum(y * scipy.linalg.cho_solve(cho, y))) / (N * C)
-        logdet = 2.0 * float(np.sum(np.log(np.diag(cho[0]))))
-        return -0.5 * N * C * np.log(max(s2, 1e-300)) - 0.5 * C * logdet
+        return profiled_log_marginal(G, Y.reshape(-1, C))
 
     def table(self, s: np.ndarray, eta: float) -> np.ndarray:
         if getattr(self, "cond", None) is not None:

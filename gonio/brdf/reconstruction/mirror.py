@@ -31,6 +31,8 @@ import numpy as np
 import scipy.linalg
 from numpy.typing import ArrayLike, NDArray
 
+from gonio.brdf.reconstruction.posterior import profiled_log_marginal
+
 FloatArray = NDArray[np.float64]
 
 #: Candidate axes ``ph0`` (degrees) of the first pass; the best is refined in 1 degree steps.
@@ -121,22 +123,11 @@ class MirrorModel:
         self.W = Z[:, None, :] * Z[None, :, :] * np.moveaxis(rows(Qt, Qm), 0, -1)  # (N, N, M')
         G = self.G_rr.copy()
         G[np.diag_indices_from(G)] += self.eta
-        self._plain = self._log_density(G, self.y)
+        self._plain = profiled_log_marginal(G, self.y)
 
     def cross(self, axis: float) -> FloatArray:
         """(N, N) ``cov(x_a, x'_b)`` for the axis ``ph0`` (radians)."""
         return np.asarray((self.W @ np.exp(2j * self.harm * axis)).real)
-
-    def _log_density(self, cov: FloatArray, obs: FloatArray) -> float:
-        """``-N C/2 ln s2 - C/2 ln det cov`` at the profiled scale (``-inf`` if singular)."""
-        try:
-            cho = scipy.linalg.cho_factor(cov, lower=True)
-        except np.linalg.LinAlgError:
-            return -np.inf
-        q = float(np.sum(obs * scipy.linalg.cho_solve(cho, obs)))
-        logdet = 2.0 * float(np.sum(np.log(np.diag(cho[0]))))
-        return float(-0.5 * self.N * self.C * np.log(max(q / (self.N * self.C), 1e-300))
-                     - 0.5 * self.C * logdet)
 
     def _joint(self, axis: float, slack: float) -> tuple[FloatArray, FloatArray]:
         """Covariance of ``[y; x' - x]`` (2N, 2N) and the observation ``[y; delta]``."""

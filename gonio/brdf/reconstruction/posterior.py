@@ -306,16 +306,9 @@ class ScanPosterior:
         covariance with the low band's factor ``low`` and the high band's ``high`` (default:
         ``low``) plus ``eta I``, ``s2 = y^T G^-1 y / (N C)``. ``-inf`` when ``G`` is singular.
         """
-        N, C = self.y.shape
         G = self._prior_readings(low, low if high is None else high)
         G[np.diag_indices_from(G)] += self.eta
-        try:
-            cho = scipy.linalg.cho_factor(G, lower=True)
-        except np.linalg.LinAlgError:
-            return -np.inf
-        s2 = float(np.sum(self.y * scipy.linalg.cho_solve(cho, self.y))) / (N * C)
-        logdet = 2.0 * float(np.sum(np.log(np.diag(cho[0]))))
-        return float(-0.5 * N * C * np.log(max(s2, 1e-300)) - 0.5 * C * logdet)
+        return profiled_log_marginal(G, self.y)
 
     def _choose_rho(self) -> float:
         """The factor of :data:`RHO_GRID` with the largest marginal likelihood."""
@@ -457,6 +450,32 @@ MIDPOINTS: tuple[float, ...] = (0.5,)
 #: The quarter, half and three-quarter points (the rule's earlier candidates, kept for
 #: comparison: ``bench/bench_adaptive.py --candidates quarters``).
 QUARTERS: tuple[float, ...] = (0.25, 0.5, 0.75)
+
+
+def profiled_log_marginal(cov: FloatArray, y: FloatArray) -> float:
+    """Log marginal likelihood of ``C`` columns of readings sharing one covariance shape.
+
+    Parameters
+    ----------
+    cov : (N, N) float
+        The readings' covariance up to a common scale ``s2`` (prior plus noise).
+    y : (N, C) float
+        Readings, one column per colour channel.
+
+    Returns
+    -------
+    float
+        ``-N C / 2 ln s2 - C / 2 ln det cov`` with ``s2 = y^T cov^-1 y / (N C)`` (the scale
+        profiled out, constants dropped); ``-inf`` when ``cov`` is not positive definite.
+    """
+    N, C = y.shape
+    try:
+        cho = scipy.linalg.cho_factor(cov, lower=True)
+    except np.linalg.LinAlgError:
+        return -np.inf
+    s2 = float(np.sum(y * scipy.linalg.cho_solve(cho, y))) / (N * C)
+    logdet = 2.0 * float(np.sum(np.log(np.diag(cho[0]))))
+    return float(-0.5 * N * C * np.log(max(s2, 1e-300)) - 0.5 * C * logdet)
 
 
 def candidate_angles(stage_angles_deg: ArrayLike, min_step_deg: float,
