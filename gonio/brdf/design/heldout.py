@@ -35,7 +35,13 @@ from gonio.brdf.reconstruction.basis import (
     fold_in,
 )
 from gonio.brdf.reconstruction.reconstruct import reconstruct
-from gonio.brdf.reconstruction.samples import NoiseModel, simulate_samples, uniform_stage_angles
+from gonio.brdf.reconstruction.samples import (
+    DEFAULT_SPAN_DEG,
+    NoiseModel,
+    simulate_samples,
+    span_periods,
+    uniform_stage_angles,
+)
 from gonio.brdf.tables import metrics
 from gonio.brdf.tables.table import BRDFTable
 
@@ -87,7 +93,7 @@ def _panel() -> tuple[Basis, list[BRDFTable], list[tuple[BRDFTable, Basis]]]:
 
 
 def expected_log_rmse(cells: ArrayLike, ph_lab: ArrayLike, rotations: int = 8,
-                      seed: int = 0) -> ExpectedError:
+                      seed: int = 0, span_deg: float = DEFAULT_SPAN_DEG) -> ExpectedError:
     """Mean log_rmse of the default reconstruction over the held-out panel (module notes).
 
     Parameters
@@ -98,9 +104,12 @@ def expected_log_rmse(cells: ArrayLike, ph_lab: ArrayLike, rotations: int = 8,
         Uniform stage angles of the simulated scans.
     seed : int
         Noise seed (1 % relative noise).
+    span_deg : {180, 360}
+        The arc those angles cover.
     """
+    span_periods(span_deg)  # a clear error for any other arc, before the panel is built
     panel_basis, synth, meas = _panel()
-    alpha = uniform_stage_angles(int(rotations))
+    alpha = uniform_stage_angles(int(rotations), span=np.deg2rad(span_deg))
     c = np.asarray(cells, dtype=float)
     p = np.asarray(ph_lab, dtype=float)
     per: dict[str, float] = {}
@@ -122,7 +131,8 @@ def expected_log_rmse(cells: ArrayLike, ph_lab: ArrayLike, rotations: int = 8,
 
 
 def choose_design(
-    make: Callable[[int], PairDesign], seeds: Sequence[int], rotations: int = 8
+    make: Callable[[int], PairDesign], seeds: Sequence[int], rotations: int = 8,
+    span_deg: float = DEFAULT_SPAN_DEG,
 ) -> tuple[PairDesign, ExpectedError, list[tuple[int, float, float]]]:
     """Run ``make(seed)`` for every seed and keep the design with the lowest expected error.
 
@@ -132,6 +142,7 @@ def choose_design(
         its other arguments bound)
     seeds : the candidates' seeds
     rotations : stage angles of the simulated scans
+    span_deg : the arc they cover (180 or 360 degrees)
 
     Returns
     -------
@@ -143,7 +154,7 @@ def choose_design(
     table = []
     for s in seeds:
         d = make(s)
-        err = expected_log_rmse(d.cells, d.ph_lab, rotations)
+        err = expected_log_rmse(d.cells, d.ph_lab, rotations, span_deg=span_deg)
         table.append((int(s), float(d.kappa), err.log_rmse))
         if best_err is None or err.log_rmse < best_err.log_rmse:
             best, best_err = d, err

@@ -34,6 +34,7 @@ from gonio.brdf.design.errors import DesignError, DesignTimeout, FeasibilityErro
 from gonio.brdf.design.mounting import MountPlanner
 from gonio.brdf.design.placement import Placement, place_pairs
 from gonio.brdf.design.search import SearchResult, optimize_rows
+from gonio.brdf.reconstruction.samples import DEFAULT_SPAN_DEG, SPANS_DEG
 from gonio.brdf.tables import geometry as geo
 
 FloatArray = NDArray[np.float64]
@@ -121,6 +122,8 @@ class PairDesign:
         in it). None when the basis is not a gonio ``Basis``.
     rotations : int or None
         Stage angles ``expected_log_rmse`` assumes.
+    span_deg : float or None
+        The arc (degrees, 180 or 360) those angles cover.
     greedy : GreedyStats or None
         Statistics of the expected-error choice, for designs it made.
     fallback : str or None
@@ -141,6 +144,7 @@ class PairDesign:
     objective: Objective | None = None
     expected_log_rmse: float | None = None
     rotations: int | None = None
+    span_deg: float | None = None
     greedy: GreedyStats | None = None
     fallback: str | None = None
 
@@ -228,6 +232,7 @@ def design_pairs(
     time_limit_s: float | None = None,
     objective: Objective | None = None,
     rotations: int = 8,
+    span_deg: float = DEFAULT_SPAN_DEG,
 ) -> PairDesign:
     """Choose ``n`` independent light/sensor pairs and place them in the lab.
 
@@ -241,7 +246,8 @@ def design_pairs(
       closest gap where it can). ``h``, ``starts``, ``descents``, ``method`` and
       ``time_limit_s`` are its settings.
     * ``"posterior"``: the pairs that minimise the joint fit's expected error for a scan of
-      ``rotations`` uniform stage angles
+      ``rotations`` uniform stage angles over ``span_deg`` (180 or 360 degrees; default
+      :data:`~gonio.brdf.reconstruction.samples.DEFAULT_SPAN_DEG`)
       (:func:`gonio.brdf.design.posterior.posterior_design`), each greedy step restricted to
       cells that still mount beside the pairs chosen so far; ``seed`` picks which first pair
       the greedy starts from (0: the best); ``time_limit_s`` bounds its mount checks' CPU time. It
@@ -279,6 +285,8 @@ def design_pairs(
         raise DesignError(f"the number of pairs must be at least 1, got {n}")
     if rotations < 1:
         raise DesignError(f"a scan needs at least one stage angle, got rotations={rotations}")
+    if span_deg not in SPANS_DEG:
+        raise DesignError(f"span_deg must be 180 or 360 (half or a full turn), got {span_deg:g}")
     fallback = None
     if asked == "posterior":
         from gonio.brdf.design.posterior import posterior_design  # it builds on this module
@@ -287,7 +295,7 @@ def design_pairs(
         if isinstance(basis, Basis):
             try:
                 return posterior_design(basis, n, constraints, rotations=rotations,
-                                        seed=0 if seed is None else seed,
+                                        span_deg=span_deg, seed=0 if seed is None else seed,
                                         time_limit_s=time_limit_s)
             except FeasibilityError as exc:
                 fallback = (f"the expected-error choice could not be mounted ({exc}); the "
@@ -308,11 +316,13 @@ def design_pairs(
         log.warning("design of %d pairs: %s", n, fallback)
     design = _kappa_design(basis, n, constraints, h=h, starts=starts, descents=descents,
                            seed=seed, method=method, time_limit_s=time_limit_s)
-    return replace(with_expected_error(basis, design, rotations), fallback=fallback)
+    return replace(with_expected_error(basis, design, rotations, span_deg), fallback=fallback)
 
 
-def with_expected_error(basis: BasisLike, design: PairDesign, rotations: int) -> PairDesign:
-    """``design`` with the joint fit's expected log_rmse for ``rotations`` uniform stage angles.
+def with_expected_error(basis: BasisLike, design: PairDesign, rotations: int,
+                        span_deg: float = DEFAULT_SPAN_DEG) -> PairDesign:
+    """``design`` with the joint fit's expected log_rmse for ``rotations`` uniform stage angles
+    over ``span_deg`` (180 or 360 degrees).
 
     For any geometry (an optimized design, a preset, a product rig): the expected error of its
     cells' basis rows (:func:`gonio.brdf.design.posterior.expected_log_rmse`; off-grid cells
@@ -326,8 +336,9 @@ def with_expected_error(basis: BasisLike, design: PairDesign, rotations: int) ->
     from gonio.brdf.design.posterior import expected_log_rmse, prior_model
 
     rows = basis.rows_at(design.cells[:, 0], design.cells[:, 1], design.cells[:, 2])
-    return replace(design, expected_log_rmse=expected_log_rmse(prior_model(basis, rotations), rows),
-                   rotations=int(rotations))
+    model = prior_model(basis, rotations, span_deg=span_deg)
+    return replace(design, expected_log_rmse=expected_log_rmse(model, rows),
+                   rotations=int(rotations), span_deg=float(span_deg))
 
 
 def _kappa_design(

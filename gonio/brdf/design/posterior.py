@@ -74,6 +74,7 @@ from gonio.brdf.design.pairs import GreedyStats, PairDesign
 from gonio.brdf.design.placement import place_pairs
 from gonio.brdf.reconstruction.basis import Basis, inverse_remap
 from gonio.brdf.reconstruction.reconstruct import JOINT_ETA, JOINT_LAM, joint_prior
+from gonio.brdf.reconstruction.samples import DEFAULT_SPAN_DEG, SamplesError, span_periods
 from gonio.brdf.tables import geometry as geo
 
 FloatArray = NDArray[np.float64]
@@ -191,19 +192,27 @@ def folded_onto(m: int, rotations: int) -> int | None:
 
 def prior_model(basis: Basis, rotations: int = DEFAULT_ROTATIONS, eta: float = JOINT_ETA,
                 lam: float = JOINT_LAM, slope: MetricSlope = "median",
-                aliasing: bool = False) -> PriorModel:
+                aliasing: bool = False, span_deg: float = DEFAULT_SPAN_DEG) -> PriorModel:
     """The prior the joint fit would use for a scan of ``rotations`` uniform stage angles.
 
     ``slope`` chooses how :func:`metric_gram` weighs the rows (``"spread"`` or ``"median"``);
     ``aliasing`` whether the harmonics the scan cannot resolve count as noise on the ones they
-    fold onto (module notes).
+    fold onto (module notes). ``span_deg`` is the arc the angles cover (180 or 360): over half
+    a turn, ``r`` angles see harmonic ``m = 2 j`` as a full turn's ``r`` angles see harmonic
+    ``j`` (``2 j alpha_k = j (2 pi k / r)``), so even ``m`` is resolved for ``j < r / 2``; the
+    odd harmonics, which the shipped priors do not hold, are left out.
     """
     if rotations < 1:
         raise DesignError(f"a scan needs at least one stage angle, got {rotations}")
     if not eta > 0 or lam < 0:
         raise DesignError(f"eta must be > 0 and lam >= 0, got eta={eta}, lam={lam}")
+    try:
+        per = span_periods(span_deg)
+    except SamplesError as exc:
+        raise DesignError(str(exc)) from None
     P = joint_prior(basis, lam / eta)
-    ms = np.array([m for m in range(P.shape[0]) if 2 * m < rotations and np.any(P[m])],
+    ms = np.array([m for m in range(P.shape[0])
+                   if m % per == 0 and 2 * (m // per) < rotations and np.any(P[m])],
                   dtype=np.intp)
     noise = np.where(ms == 0, eta / rotations, 2.0 * eta / rotations)
     cols = float(basis.provenance.get("n_columns", 0) or 0)
@@ -212,10 +221,10 @@ def prior_model(basis: Basis, rotations: int = DEFAULT_ROTATIONS, eta: float = J
     if aliasing:
         alias = np.zeros((ms.size, basis.K, basis.K))
         where = {int(m): i for i, m in enumerate(ms)}
-        for m in range(P.shape[0]):
-            fold = folded_onto(m, rotations)
-            if 2 * m >= rotations and fold is not None and fold in where:
-                alias[where[fold]] += P[m]
+        for m in range(0, P.shape[0], per):
+            fold = folded_onto(m // per, rotations)
+            if 2 * (m // per) >= rotations and fold is not None and fold * per in where:
+                alias[where[fold * per]] += P[m]
     return PriorModel(np.array(P[ms]), ms, noise, metric_gram(basis, slope),
                       scale=1.0 / cols if cols > 0 else 1.0, norm=norm, alias=alias)
 
@@ -347,6 +356,7 @@ def posterior_design(
     time_limit_s: float | None = None,
     slope: MetricSlope = "median",
     aliasing: bool = False,
+    span_deg: float = DEFAULT_SPAN_DEG,
 ) -> PairDesign:
     """``n`` pairs that minimise the joint fit's expected metric error (module notes).
 
@@ -361,6 +371,8 @@ def posterior_design(
         lab azimuths come from :func:`gonio.brdf.design.placement.place_pairs`.
     rotations : int
         Uniform stage angles the scan will use (which harmonics it resolves).
+    span_deg : {180, 360}
+        The arc those angles cover (:data:`~gonio.brdf.reconstruction.samples.DEFAULT_SPAN_DEG`).
     eta, lam : float
         The joint fit's settings (reading noise and specular condition).
     seed : int, >= 0
@@ -399,7 +411,7 @@ def posterior_design(
     if n < 1:
         raise DesignError(f"the number of pairs must be at least 1, got {n}")
     t0, cpu0 = time.perf_counter(), time.thread_time()
-    model = prior_model(basis, rotations, eta, lam, slope, aliasing)
+    model = prior_model(basis, rotations, eta, lam, slope, aliasing, span_deg)
     accept = None
     checks = 0
     if constraints.min_device_distance_deg > 0:
@@ -431,4 +443,4 @@ def posterior_design(
                         seconds=time.perf_counter() - t0)
     return replace(design, objective="posterior",
                    expected_log_rmse=expected_log_rmse(model, basis.Q[rows]),
-                   rotations=int(rotations), greedy=stats)
+                   rotations=int(rotations), span_deg=float(span_deg), greedy=stats)

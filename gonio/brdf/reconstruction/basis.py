@@ -98,6 +98,9 @@ EPS = 1e-3
 DEFAULT_COMPONENTS = 64
 #: Harmonics 0..36 of a function sampled on the 72 ``ph`` slices.
 N_HARMONICS = geo.N_PH // 2 + 1
+#: Largest share of the prior's trace in odd harmonics for :attr:`Basis.half_turn_periodic`
+#: (an imported material without twofold symmetry brings far more; round-off far less).
+ODD_SHARE_MAX = 1e-6
 _GRID_SIGNATURE = np.array([geo.STEP_DEG, geo.N_TH, geo.N_TD, geo.N_PD], dtype=float)
 
 
@@ -235,6 +238,20 @@ class Basis:
     def K(self) -> int:
         """Number of components."""
         return int(self.Q.shape[1])
+
+    @property
+    def half_turn_periodic(self) -> bool:
+        """Whether the prior says a specimen turned by half a turn reads the same.
+
+        True when the odd harmonics of :attr:`ph_prior` hold at most :data:`ODD_SHARE_MAX` of
+        its trace (the shipped library's hold none: every material is reciprocal and twofold
+        symmetric), or when there is no prior (isotropic). Scans of such a basis lose nothing
+        by covering half a turn (:data:`gonio.brdf.reconstruction.samples.DEFAULT_SPAN_DEG`).
+        """
+        if self.ph_prior is None:
+            return True
+        traces = np.abs(np.trace(self.ph_prior, axis1=1, axis2=2))
+        return bool(traces[1::2].sum() <= ODD_SHARE_MAX * max(traces.sum(), 1e-300))
 
     def truncated(self, k: int) -> Basis:
         """The first ``k`` components (1 <= k <= K)."""

@@ -232,15 +232,19 @@ def one_blas_thread() -> Iterator[None]:
 
 # ---------------------------------------------------------------------------- step 1
 def resample_to_slices(
-    ph_lab: FloatArray, stage_angles: FloatArray, values: FloatArray
+    ph_lab: FloatArray, stage_angles: FloatArray, values: FloatArray,
+    period: float = 2 * np.pi,
 ) -> FloatArray:
     """Resample each pair's rotation readings onto the 72 grid ``ph`` (MATH 5 step 1).
 
     Parameters
     ----------
     ph_lab : (n,) radians
-    stage_angles : (r,) radians, distinct modulo 2 pi
+    stage_angles : (r,) radians, distinct modulo ``period``
     values : (n, r, C)
+    period : float, radians
+        The readings' period along the rotation: a full turn, or half a turn for a specimen
+        that reads the same turned by half a turn (:func:`half_turn_scan`).
 
     Returns
     -------
@@ -248,11 +252,32 @@ def resample_to_slices(
         Value of slice ``PH_GRID[k]`` at each pair. The stage angle that puts slice ``ph``
         under pair ``q`` is ``ph_lab[q] - ph``, so interpolation runs over stage angle.
     """
-    a = np.mod(stage_angles, 2 * np.pi)
+    a = np.mod(stage_angles, period)
     order = np.argsort(a)
     return periodic_pchip_rows(
-        a[order], values[:, order], np.asarray(ph_lab)[:, None] - geo.PH_GRID[None, :]
+        a[order], values[:, order], np.asarray(ph_lab)[:, None] - geo.PH_GRID[None, :],
+        period=period,
     )
+
+
+def half_turn_scan(stage_angles: ArrayLike) -> bool:
+    """Whether the stage angles leave a gap of more than half a turn (a half-turn scan).
+
+    Parameters
+    ----------
+    stage_angles : (r,) radians
+
+    Returns
+    -------
+    bool
+        True when every angle lies within one half turn, e.g. ``k pi / r``: interpolation along
+        the rotation then has to use the half-turn period, or it would bridge the unseen half.
+    """
+    a = np.sort(np.mod(np.asarray(stage_angles, dtype=float), 2 * np.pi))
+    if a.size < 2:
+        return False
+    gaps = np.diff(np.concatenate([a, [a[0] + 2 * np.pi]]))
+    return bool(gaps.max() > np.pi + 1e-9)
 
 
 def slices_at_stage_angles(
@@ -922,8 +947,18 @@ def _vf_path(
         The fit at the readings, then (when defined) the leave-one-pair-out predictions.
     has_cv : bool
     """
-    # Steps 1-2: slices, then the remap (n, 72, C).
-    Y = remap(resample_to_slices(ph_, alpha, vals), fmed_t, w_t, basis.eps) - mu_t
+    # Steps 1-2: slices, then the remap (n, 72, C). A half-turn scan of a specimen the prior
+    # says reads the same turned by half a turn is interpolated with that period.
+    period = 2 * np.pi
+    if half_turn_scan(alpha):
+        if not basis.half_turn_periodic:
+            raise ReconstructionError(
+                "the stage angles cover only half a turn, and this basis' prior varies over a "
+                "full turn (a material without twofold symmetry is in its training set), so V&F's "
+                "interpolation along the rotation cannot fill the other half; use the joint fit "
+                "(method='joint') or scan a full turn (span 360 degrees)")
+        period = np.pi
+    Y = remap(resample_to_slices(ph_, alpha, vals, period), fmed_t, w_t, basis.eps) - mu_t
 
     # Step 3.
     Qs = basis.Q[_TH0_ROWS]

@@ -206,11 +206,51 @@ class Samples:
         except SamplesError as exc:
             raise SamplesError(f"{Path(path)}: {exc}") from None
 
-def uniform_stage_angles(r: int, start: float = 0.0) -> FloatArray:
-    """``r`` evenly spaced stage angles (radians) from ``start``."""
+#: Arc (degrees) the stage angles of a uniform scan cover by default: half a turn. The joint
+#: fit's learnt prior along ``ph`` holds only even harmonics (reciprocity and the twofold
+#: symmetry of brushed, woven and microfacet lobes, docs/science.md 2.1), so a specimen turned
+#: by half a turn gives the same readings: ``r`` angles over half a turn show each pair ``r``
+#: distinct azimuths, over a full turn only ``r / 2`` (each seen twice). A full turn is for
+#: specimens without that symmetry (a pile's lean, blazed or sawtooth structures).
+DEFAULT_SPAN_DEG = 180.0
+#: The arcs a uniform scan may cover (degrees): half a turn or a full turn.
+SPANS_DEG = (180.0, 360.0)
+
+
+def span_periods(span_deg: float) -> int:
+    """How many times ``span_deg`` fits in a full turn: 2 for half a turn, 1 for a full turn.
+
+    Raises
+    ------
+    SamplesError
+        For any other arc: uniform angles over, say, 90 degrees would leave the azimuths of the
+        other quarter turns unseen, which no shipped prior can fill in.
+    """
+    if span_deg not in SPANS_DEG:
+        raise SamplesError(
+            f"the stage angles cover half a turn or a full turn: span must be 180 or 360 "
+            f"degrees, got {span_deg:g}")
+    return round(360.0 / span_deg)
+
+
+def uniform_stage_angles(r: int, start: float = 0.0, span: float = 2 * np.pi) -> FloatArray:
+    """``r`` evenly spaced stage angles (radians) ``start + k span / r``.
+
+    Parameters
+    ----------
+    r : int, >= 1
+    start : float, radians
+    span : float, radians
+        The arc the angles cover (a full turn by default; scans use
+        :data:`DEFAULT_SPAN_DEG`).
+
+    Returns
+    -------
+    (r,) radians
+    """
     if r < 1:
         raise SamplesError(f"need at least one rotation, got {r}")
-    return np.asarray(start + 2 * np.pi * np.arange(r) / r)
+    return np.asarray(start + span * np.arange(r) / r)
 
 
 def channels_of(names: Sequence[str] | None, n: int) -> tuple[str, ...]:

@@ -9,7 +9,7 @@ import pytest
 
 from gonio.brdf.design import heldout
 from gonio.brdf.reconstruction.reconstruct import reconstruct
-from gonio.brdf.reconstruction.samples import NoiseModel, simulate_samples, uniform_stage_angles
+from gonio.brdf.reconstruction.samples import NoiseModel, simulate_samples
 from gonio.brdf.tables import metrics
 from tests.unit.brdf.reconstruction.test_basis import small_basis, small_library
 from tests.unit.brdf.reconstruction.test_reconstruct import grid_pairs
@@ -24,11 +24,13 @@ def tiny_panel(monkeypatch: pytest.MonkeyPatch) -> list:  # type: ignore[type-ar
     return [b, synth, meas]
 
 
-def test_expected_error_is_the_panel_mean_of_simulated_scans(tiny_panel: list) -> None:  # type: ignore[type-arg]
+@pytest.mark.parametrize("span_deg", [180.0, 360.0])
+def test_expected_error_is_the_panel_mean_of_simulated_scans(
+        tiny_panel: list, span_deg: float) -> None:  # type: ignore[type-arg]
     b, synth, meas = tiny_panel
     cells, ph = grid_pairs(8, seed=1)
-    got = heldout.expected_log_rmse(cells, ph, rotations=6, seed=4)
-    alpha = uniform_stage_angles(6)
+    got = heldout.expected_log_rmse(cells, ph, rotations=6, seed=4, span_deg=span_deg)
+    alpha = np.deg2rad(np.arange(6) * span_deg / 6)  # 6 uniform angles over the arc
     want = []
     for k, t in enumerate([*synth, meas[0][0]]):
         vals = simulate_samples(t, cells, ph, alpha, noise=NoiseModel(0.01, seed=4 + k))

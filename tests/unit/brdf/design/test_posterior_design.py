@@ -290,9 +290,60 @@ def test_prior_model_folds_the_unresolved_harmonics() -> None:
                                                       None]
     assert [folded_onto(m, 5) for m in range(7)] == [0, 1, 2, 2, 1, 0, 1]
     b = _with_prior(random_basis(3), {0: 1.0, 2: 0.5, 6: 0.25, 10: 0.125, 12: 2.0})
-    model = prior_model(b, 8, lam=0.0, aliasing=True)
+    model = prior_model(b, 8, lam=0.0, aliasing=True, span_deg=360.0)
     assert model.harmonics.tolist() == [0, 2]
     assert model.alias is not None
     np.testing.assert_allclose(model.alias[0], 0.0)
     np.testing.assert_allclose(model.alias[1], (0.25 + 0.125) * np.eye(3))
     assert prior_model(b, 8).alias is None  # off by default
+    # Over half a turn, 8 angles see harmonic 2 j as a full turn's 8 see j: 0, 2, 4, 6 are
+    # resolved (4 carries nothing here); 10 (j = 5) folds onto j = 3, i.e. 6; 12 (j = 6) onto
+    # j = 2, i.e. 4, which has no prior to absorb it.
+    half = prior_model(b, 8, lam=0.0, aliasing=True, span_deg=180.0)
+    assert half.harmonics.tolist() == [0, 2, 6]
+    eta = 40.0  # the joint fit's default
+    np.testing.assert_allclose(half.noise, [eta / 8, 2 * eta / 8, 2 * eta / 8])
+    assert half.alias is not None
+    np.testing.assert_allclose(half.alias[:2], 0.0)
+    np.testing.assert_allclose(half.alias[2], 0.125 * np.eye(3))
+
+
+def test_half_turn_noise_model_matches_monte_carlo_of_the_joint_fit() -> None:
+    """Harmonics 0, 2 and 6 read at 8 angles over half a turn: ``prior_model``'s noise per
+    harmonic (``eta / r``, ``2 eta / r``: over half a turn harmonic 6 is resolved, where a full
+    turn's 8 angles would alias it onto 2) gives the W-weighted error of ``solve_joint``."""
+    rng = np.random.default_rng(11)
+    k, n, r, eta, draws = 4, 3, 8, 0.5, 4000
+    b = _with_prior(random_basis(k), {0: 1.0, 2: 0.5, 6: 0.25})
+    model = prior_model(b, r, eta=eta, lam=0.0, span_deg=180.0)
+    assert model.harmonics.tolist() == [0, 2, 6]
+    P = np.asarray(b.ph_prior)
+    W = _spd(k, rng)
+    Qt = rng.standard_normal((n, k))
+    ph_lab = rng.uniform(0, 2 * np.pi, n)
+    alpha = np.arange(r) * np.pi / r
+    phr = ph_lab[:, None] - alpha[None, :]
+    L = {m: np.linalg.cholesky(P[m]) for m in (0, 2, 6)}
+    a = {m: L[m] @ rng.standard_normal((k, draws)) for m in (0, 2, 6)}
+    c = {m: L[m] @ rng.standard_normal((k, draws)) for m in (2, 6)}
+
+    def c_at(ph: np.ndarray) -> np.ndarray:  # (..., k, draws)
+        out = np.broadcast_to(a[0], (*ph.shape, k, draws)).copy()
+        for m in (2, 6):
+            out += (np.cos(m * ph)[..., None, None] * a[m]
+                    + np.sin(m * ph)[..., None, None] * c[m])
+        return out
+
+    Y = np.einsum("qk,qjkd->qjd", Qt, c_at(phr)) + np.sqrt(eta) * rng.standard_normal(
+        (n, r, draws))
+    fit = solve_joint(Y, Qt, phr, P, eta)
+    err = fit.coef - np.moveaxis(c_at(geo.PH_GRID), 0, 1)
+    mc = float(np.mean(np.einsum("ksd,kl,lsd->sd", err, W, err)))
+    same = PriorModel(model.P, model.harmonics, model.noise, W)
+    assert expected_error(same, Qt) == pytest.approx(mc, rel=0.05)
+
+
+def test_prior_model_refuses_other_arcs() -> None:
+    b = _with_prior(random_basis(3), {0: 1.0, 2: 0.5})
+    with pytest.raises(DesignError, match="180 or 360"):
+        prior_model(b, 8, span_deg=90.0)

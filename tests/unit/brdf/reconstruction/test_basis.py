@@ -321,3 +321,17 @@ def test_cli_basis_build_rebuilds_the_default_basis_where_it_is_found(
     assert {t.name for t in tables} <= set(b.materials)
     assert any(m.startswith("rgl-") for m in b.materials)
     assert b.ph_prior is not None and b.ph_prior.shape == (37, 5, 5)
+
+
+def test_half_turn_periodic_follows_the_odd_harmonics_of_the_prior() -> None:
+    from gonio.brdf.reconstruction.basis import N_HARMONICS, ODD_SHARE_MAX, Basis
+
+    b = small_basis()
+    k = b.K
+    P = np.zeros((N_HARMONICS, k, k))
+    P[0], P[2] = np.eye(k), 0.5 * np.eye(k)
+    even = Basis(b.Q, b.S, b.f_med, b.mu, b.valid, b.eps, ph_prior=P.copy())
+    assert even.half_turn_periodic
+    P[3] = 10 * ODD_SHARE_MAX * np.eye(k)  # a small but real odd share
+    assert not Basis(b.Q, b.S, b.f_med, b.mu, b.valid, b.eps, ph_prior=P).half_turn_periodic
+    assert Basis(b.Q, b.S, b.f_med, b.mu, b.valid, b.eps).half_turn_periodic  # no prior

@@ -13,6 +13,7 @@ from gonio.brdf.reconstruction.reconstruct import (
     ReconstructionError,
     _objective,
     cv_error_scale,
+    half_turn_scan,
     loo_predictions,
     one_blas_thread,
     pair_cells,
@@ -393,3 +394,41 @@ def test_pair_cells_rejects_bad_directions() -> None:
         pair_cells(2 * up, up)
     with pytest.raises(ReconstructionError, match="above the specimen"):
         pair_cells(-up, up)
+
+
+def test_half_turn_scan_is_recognised_by_its_largest_gap() -> None:
+    assert half_turn_scan(np.arange(8) * np.pi / 8)  # 0 .. 157.5 deg
+    assert half_turn_scan(np.deg2rad([350.0, 10.0, 100.0]))  # wraps through 0
+    assert not half_turn_scan(np.arange(8) * 2 * np.pi / 8)
+    assert not half_turn_scan(np.deg2rad([0.0, 180.0]))  # a gap of exactly half a turn
+    assert not half_turn_scan(np.array([0.3]))
+
+
+def test_vf_half_turn_scan_equals_the_full_turn_with_each_reading_repeated() -> None:
+    """A specimen that reads the same turned by half a turn: V&F's path on r angles over half
+    a turn must give what it gives on the 2 r angles of the full turn, the readings at
+    ``alpha + pi`` being copies (PCHIP is local: the same nodes at the same spacing)."""
+    b = random_basis(6)  # no ph prior: isotropic, so half-turn periodic
+    assert b.half_turn_periodic
+    cells, ph = grid_pairs(6, seed=3)
+    r = 5
+    half = np.arange(r) * np.pi / r
+    vals = np.random.default_rng(2).uniform(0.05, 2.0, (6, r, 3))
+    got = reconstruct(b, cells, ph, half, vals, method="vf")
+    full = np.concatenate([half, half + np.pi])
+    want = reconstruct(b, cells, ph, full, np.concatenate([vals, vals], axis=1), method="vf")
+    np.testing.assert_allclose(got.table.values, want.table.values, rtol=1e-10, atol=1e-12)
+
+
+def test_vf_half_turn_scan_of_a_full_turn_prior_is_refused() -> None:
+    from tests.unit.brdf.reconstruction.test_reconstruct_joint import _with_prior
+
+    b = _with_prior(random_basis(6), {0: 1.0, 1: 0.3, 2: 0.5})
+    assert not b.half_turn_periodic
+    cells, ph = grid_pairs(6, seed=3)
+    vals = np.random.default_rng(2).uniform(0.05, 2.0, (6, 4, 3))
+    with pytest.raises(ReconstructionError, match="only half a turn"):
+        reconstruct(b, cells, ph, np.arange(4) * np.pi / 4, vals, method="vf")
+    # the joint fit takes the same readings (its prior says what the other half may hold)
+    assert np.isfinite(reconstruct(b, cells, ph, np.arange(4) * np.pi / 4, vals).table.values
+                       ).any()

@@ -13,6 +13,7 @@ from gonio.brdf.reconstruction.samples import (
     SamplesError,
     pair_directions,
     simulate_samples,
+    span_periods,
     uniform_stage_angles,
 )
 from gonio.brdf.tables import geometry as geo
@@ -91,6 +92,15 @@ def test_bad_simulation_inputs() -> None:
         simulate_samples(spec, np.deg2rad([[80.0, 80.0, 0.0]]), [0.0], [0.0])
     with pytest.raises(SamplesError, match="at least one rotation"):
         uniform_stage_angles(0)
+
+
+def test_uniform_stage_angles_over_half_and_full_turns() -> None:
+    np.testing.assert_allclose(np.rad2deg(uniform_stage_angles(4)), [0, 90, 180, 270])
+    np.testing.assert_allclose(np.rad2deg(uniform_stage_angles(4, np.deg2rad(10), np.pi)),
+                               [10, 55, 100, 145])
+    assert span_periods(180.0) == 2 and span_periods(360.0) == 1
+    with pytest.raises(SamplesError, match="180 or 360"):
+        span_periods(90.0)
 
 
 def test_pair_directions_are_above_the_specimen() -> None:
