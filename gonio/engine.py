@@ -194,7 +194,7 @@ class ScanEngine:
 
     def _estimate_per_angle(self) -> float:
         """Physical time of one angle from the rig's settings (used for ETA before data)."""
-        step = 360.0 / max(len(initial_angles(self.plan, self.desc)), 1)
+        step = self.plan.first_span_deg() / max(len(initial_angles(self.plan, self.desc)), 1)
         motion, settle, exposure = estimate_angles(
             [step], 0.0, len(self.lights), self.plan, self.desc,
             self.plan.exposure.dark == "every_angle",

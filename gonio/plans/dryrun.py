@@ -85,7 +85,7 @@ def dry_run(plan: AnyPlan, rig: RigDescription, current_deg: float | None = None
     validate_plan(plan, rig)
     pairs = plan_pairs(plan, rig)
     lights = lights_in_order(pairs)
-    angles = uniform_angles(plan.start_deg, plan.first_rotations())
+    angles = uniform_angles(plan.start_deg, plan.first_rotations(), plan.first_span_deg())
     start = 0.0 if current_deg is None else float(current_deg)
     route = order_for_travel(angles, start, rig, plan.backlash_deg)
     motion, settle, exposure = estimate_angles(

@@ -7,21 +7,26 @@ through the REST API, the job store (as JSON) and result files.
 Three kinds, told apart by ``kind``:
 
 ``uniform``
-    The rig's pairs at ``rotations`` stage angles ``start_deg + k 360 / rotations``.
+    The rig's pairs at ``rotations`` stage angles ``start_deg + k span_deg / rotations``:
+    over half a turn by default (``span_deg = 180``; a twofold-symmetric specimen reads the
+    same turned by half a turn, so the angles show every pair twice as many distinct azimuths
+    as over a full turn, docs/science.md 7.4), or a full turn (360).
 ``adaptive``
-    Start with ``initial_rotations`` uniform angles, then refine by ``rule``: ``posterior``
-    (default) adds the angles where the joint fit's posterior expects the error to fall most,
-    while that fall is at least ``min_gain`` (docs/science.md 7.3); ``vf`` (V&F Sec. 6 / MATH
-    7) adds the midpoints around every angle where leave-one-out periodic PCHIP mispredicts a
-    pair's value by more than ``threshold`` (:mod:`gonio.plans.adaptive`). Rounds repeat until
-    the rule stops, the sample budget is spent, or a new step would be finer than
-    ``min_step_deg``.
+    Start with ``initial_rotations`` uniform angles over ``span_deg``, then refine by
+    ``rule``: ``posterior`` (default) adds the angles where the joint fit's posterior expects
+    the error to fall most, while that fall is at least ``min_gain`` (docs/science.md 7.3);
+    ``vf`` (V&F Sec. 6 / MATH 7) adds the midpoints around every angle where leave-one-out
+    periodic PCHIP mispredicts a pair's value by more than ``threshold``
+    (:mod:`gonio.plans.adaptive`). Rounds repeat until the rule stops, the sample budget is
+    spent, or a new step would be finer than ``min_step_deg``.
 ``calibration``
     A white reference of known albedo (a Lambertian reference has ``f = albedo / pi``) at a few
     angles; the result is each pair's factor from sensor counts to BRDF (:mod:`gonio.calibration`).
 
 Angles are degrees here (plans are user-facing). A plan's angles are specimen rotations in
-``[0, 360)``. Every check a plan can fail raises :class:`PlanError` before anything moves.
+``[0, 360)``. Plans stored before ``span_deg`` existed covered a full turn and are read so
+(:func:`parse_stored_plan`). Every check a plan can fail raises :class:`PlanError` before
+anything moves.
 """
 
 from __future__ import annotations
@@ -98,6 +103,35 @@ def _check_start(value: float) -> float:
             f"not wrapped silently). For the same angle write {value % 360.0:g}"
         )
     return value
+
+
+DEFAULT_SPAN_DEG = 180.0
+"""Default arc of a plan's uniform angles: ``gonio.brdf.reconstruction.samples.DEFAULT_SPAN_DEG``
+(a test keeps the two equal), half a turn."""
+SPANS_DEG = (180.0, 360.0)
+"""The arcs a plan's uniform angles may cover (degrees)."""
+
+
+def _check_span(value: object) -> object:
+    # Before the type check, so any wrong value (a string too) gets the sentence on both arcs.
+    if isinstance(value, bool) or value not in SPANS_DEG:
+        raise ValueError(
+            f"span_deg is the arc the uniform stage angles cover: 180 (half a turn, the "
+            f"default: a twofold-symmetric specimen, as brushed, woven and most coated ones are, "
+            f"reads the same turned by half a turn) or 360 (a full turn, for a specimen without "
+            f"that symmetry, e.g. a pile with a lean or a blazed structure); got {value!r}")
+    return value
+
+
+SpanDeg = Annotated[
+    float,
+    BeforeValidator(_check_span),
+    Field(description="arc of the uniform stage angles, degrees: 180 (half a turn; a "
+                      "twofold-symmetric specimen reads the same turned by half a turn, so the "
+                      "angles see twice as many distinct azimuths) or 360 (a full turn, for "
+                      "specimens without twofold symmetry)",
+          json_schema_extra={"enum": list(SPANS_DEG)}),
+]
 
 
 DEFAULT_MIN_GAIN = 0.0003
@@ -188,8 +222,13 @@ class _PlanBase(BaseModel):
     """The setting that gives the first round's number of stage angles (named in errors)."""
 
     def first_rotations(self) -> int:
-        """Number of stage angles of the first round (``start_deg + k 360 / r``)."""
+        """Number of stage angles of the first round (``start_deg + k span / r``)."""
         return int(getattr(self, self.rotations_field))
+
+    def first_span_deg(self) -> float:
+        """Arc (degrees) of the first round's uniform angles: the plan's ``span_deg``, or a
+        full turn for kinds without one (a calibration's white reference)."""
+        return float(getattr(self, "span_deg", 360.0))
 
 
 class UniformPlan(_PlanBase):
@@ -198,6 +237,7 @@ class UniformPlan(_PlanBase):
     kind: Literal["uniform"] = "uniform"
     rotations: Count = Field(default=8, description="number of stage angles r")
     start_deg: StartDeg = 0.0
+    span_deg: SpanDeg = DEFAULT_SPAN_DEG
 
 
 class AdaptivePlan(_PlanBase):
@@ -228,15 +268,19 @@ class AdaptivePlan(_PlanBase):
     )
     max_rounds: Count = Field(default=6, ge=1, le=20)
     start_deg: StartDeg = 0.0
+    span_deg: SpanDeg = Field(
+        default=DEFAULT_SPAN_DEG, description="arc of the first round's uniform angles and of "
+        "the refinement, degrees: 180 (default with the posterior rule) or 360 (default with "
+        "vf, V&F's full turn)")
 
     @model_validator(mode="before")
     @classmethod
     def _vf_defaults(cls, data: object) -> object:
-        # The defaults of the first round and the cap depend on the rule: the posterior rule
-        # refines from 4 angles up to 16, V&F's from their 8 until it stops (explicit
-        # settings are kept as given).
+        # The defaults of the first round, the cap and the arc depend on the rule: the
+        # posterior rule refines from 4 angles up to 16 over half a turn, V&F's from their 8
+        # over a full turn until it stops (explicit settings are kept as given).
         if isinstance(data, dict) and data.get("rule") == "vf":
-            vf = {"initial_rotations": 8, "max_rotations": None}
+            vf = {"initial_rotations": 8, "max_rotations": None, "span_deg": 360.0}
             return {**{k: v for k, v in vf.items() if k not in data}, **data}
         return data
 
@@ -277,8 +321,12 @@ def parse_plan(data: object) -> UniformPlan | AdaptivePlan | CalibrationPlan:
 #: Plan fields added after plans were first stored, each with the value that keeps an older
 #: stored plan's meaning: a job queued (or interrupted) before an upgrade runs as submitted.
 #: ``max_rotations`` arrived with a default of 16 for the posterior rule; before, such a job was
-#: bounded only by the per-job limit.
-_ADDED_SINCE_STORED: dict[str, dict[str, object]] = {"adaptive": {"max_rotations": None}}
+#: bounded only by the per-job limit. ``span_deg`` arrived with a default of half a turn; before,
+#: every plan's angles covered a full turn.
+_ADDED_SINCE_STORED: dict[str, dict[str, object]] = {
+    "adaptive": {"max_rotations": None, "span_deg": 360.0},
+    "uniform": {"span_deg": 360.0},
+}
 
 
 def parse_stored_plan(data: dict[str, Any]) -> UniformPlan | AdaptivePlan | CalibrationPlan:

@@ -36,15 +36,15 @@ def plan_pairs(plan: AnyPlan, rig: RigDescription) -> list[PairSpec]:
     return pairs
 
 
-def uniform_angles(start_deg: float, r: int) -> list[float]:
-    """``r`` specimen angles ``start_deg + k 360 / r``, degrees in [0, 360)."""
-    return [float((start_deg + k * 360.0 / r) % 360.0) for k in range(r)]
+def uniform_angles(start_deg: float, r: int, span_deg: float = 360.0) -> list[float]:
+    """``r`` specimen angles ``start_deg + k span_deg / r``, degrees in [0, 360)."""
+    return [float((start_deg + k * span_deg / r) % 360.0) for k in range(r)]
 
 
 def initial_angles(plan: AnyPlan, rig: RigDescription) -> list[float]:
     """Specimen angles (degrees in [0, 360)) of the plan's first round, validated."""
     validate_plan(plan, rig)
-    return uniform_angles(plan.start_deg, plan.first_rotations())
+    return uniform_angles(plan.start_deg, plan.first_rotations(), plan.first_span_deg())
 
 
 def validate_plan(plan: AnyPlan, rig: RigDescription) -> None:
@@ -64,7 +64,7 @@ def validate_plan(plan: AnyPlan, rig: RigDescription) -> None:
             f"initial_rotations is {r}; adaptive refinement predicts each angle from its "
             "neighbours and needs at least 3 (the paper uses 8)"
         )
-    step = 360.0 / r
+    step = plan.first_span_deg() / r
     if step < rig.resolution_deg:
         raise PlanError(
             f"{r} rotations are {step:.4g} deg apart, finer than the stage resolution "
@@ -76,7 +76,7 @@ def validate_plan(plan: AnyPlan, rig: RigDescription) -> None:
             f"{name} is {r}; a job measures at most {MAX_ROTATIONS} stage angles (0.1 degree "
             f"steps). The paper's scans use 8 to 72; use {MAX_ROTATIONS} or fewer"
         )
-    angles = uniform_angles(plan.start_deg, r)
+    angles = uniform_angles(plan.start_deg, r, plan.first_span_deg())
     for a in angles:
         if not stage_positions(a, rig, margin=0.0):
             raise PlanError(

@@ -58,7 +58,7 @@ def test_uniform_scan_sequence_and_checkpoints() -> None:
     # S1 is read for both lights (in parallel with S2 under L1), plus one dark.
     assert rig.sensor("S1").reads == 4 * 2 + 1
     assert rig.sensor("S2").reads == 4 + 1
-    assert rig.mstage.moves == [0.0, 90.0, 180.0, 270.0]
+    assert rig.mstage.moves == [0.0, 45.0, 90.0, 135.0]  # half a turn: k 180 / 4
     events = [e.type for e in store.events_after(0)]
     assert events.count("progress") == 4
     rows = store.readings(1)

@@ -19,22 +19,25 @@ def _limited(desc: RigDescription, lo: float, hi: float) -> RigDescription:
     return desc.model_copy(update={"stage_min_deg": lo, "stage_max_deg": hi})
 
 
-def test_uniform_dry_run_counts_and_times(desc: RigDescription) -> None:
-    plan = UniformPlan(rotations=6, exposure=ExposureSettings(exposure_s=0.1, averages=2,
-                                                              light_settle_s=0.05, dark="once"))
+@pytest.mark.parametrize("span", [360.0, 180.0])
+def test_uniform_dry_run_counts_and_times(desc: RigDescription, span: float) -> None:
+    plan = UniformPlan(rotations=6, span_deg=span,
+                       exposure=ExposureSettings(exposure_s=0.1, averages=2,
+                                                 light_settle_s=0.05, dark="once"))
     d = dry_run(plan, desc)
-    assert d.angles_deg == [0, 60, 120, 180, 240, 300]
+    step = span / 6
+    assert d.angles_deg == pytest.approx([k * step for k in range(6)])
     assert d.readings == 3 * 6  # three pairs
     assert d.lights == ["L1", "L2"]
     assert d.exposures == 6 * 2 + 1  # one per light and angle, one dark
     assert d.exposure_s == pytest.approx(13 * 0.2)
-    assert d.motion_s == pytest.approx(5 * move_time(60, 30.0, 300.0))
+    assert d.motion_s == pytest.approx(5 * move_time(step, 30.0, 300.0))
     assert d.estimated_s == pytest.approx(d.motion_s + d.settle_s + d.exposure_s)
 
 
 def test_dry_run_counts_the_return_from_where_the_stage_is(desc: RigDescription) -> None:
     rig = _limited(desc, -360.0, 720.0)
-    plan = UniformPlan(rotations=4, exposure=ExposureSettings(light_settle_s=0.0))
+    plan = UniformPlan(rotations=4, span_deg=360, exposure=ExposureSettings(light_settle_s=0.0))
     from_zero = dry_run(plan, rig)
     assert not from_zero.from_known and from_zero.from_deg == 0.0
     parked = dry_run(plan, rig, current_deg=700.0)
@@ -48,7 +51,8 @@ def test_dry_run_counts_the_return_from_where_the_stage_is(desc: RigDescription)
 
 def test_dry_run_counts_backlash_approaches(desc: RigDescription) -> None:
     v, a = desc.speed_dps, desc.accel_dps2
-    plan = UniformPlan(rotations=4, backlash_deg=5.0, exposure=ExposureSettings(dark="none"))
+    plan = UniformPlan(rotations=4, span_deg=360, backlash_deg=5.0,
+                       exposure=ExposureSettings(dark="none"))
     # The engine's own overshoot: coming down from 100 to 90 it first goes to 85.
     d = dry_run(plan, desc, current_deg=100.0)
     assert d.positions_deg[0] == pytest.approx(90.0)
@@ -57,7 +61,8 @@ def test_dry_run_counts_backlash_approaches(desc: RigDescription) -> None:
     # A driver approaching from above overshoots every upward move by its backlash.
     neg = desc.model_copy(update={"approach": "negative", "approach_backlash_deg": 2.0,
                                   "settle_s": 0.1})
-    plan0 = UniformPlan(rotations=4, exposure=ExposureSettings(dark="none", light_settle_s=0))
+    plan0 = UniformPlan(rotations=4, span_deg=360,
+                        exposure=ExposureSettings(dark="none", light_settle_s=0))
     d = dry_run(plan0, neg, current_deg=-10.0)
     assert d.positions_deg == pytest.approx([0.0, 90.0, 180.0, 270.0])
     assert d.motion_s == pytest.approx(move_time(12, v, a) + move_time(2, v, a)
@@ -66,7 +71,7 @@ def test_dry_run_counts_backlash_approaches(desc: RigDescription) -> None:
 
 
 def test_adaptive_plans_get_a_bound(desc: RigDescription) -> None:
-    plan = AdaptivePlan(initial_rotations=8, max_rounds=3, max_rotations=None,
+    plan = AdaptivePlan(initial_rotations=8, max_rounds=3, max_rotations=None, span_deg=360,
                         exposure=ExposureSettings(exposure_s=0.1, light_settle_s=0.0,
                                                   dark="none"))
     d = dry_run(plan, desc)

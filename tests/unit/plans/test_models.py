@@ -76,3 +76,42 @@ def test_a_plan_stored_before_the_cap_existed_keeps_its_meaning(tmp_path: Path) 
     assert parse_plan(old).max_rotations == 16  # type: ignore[union-attr]
     with pytest.raises(PlanError, match="max_rotations"):
         parse_stored_plan({**old, "max_rotations": 0})
+
+
+def test_the_arc_of_the_angles_defaults_to_half_a_turn() -> None:
+    """Uniform and posterior-rule plans cover half a turn unless told otherwise, V&F's rule a
+    full turn (its protocol); the plans' default is the numerical core's; other arcs are
+    refused with what the two arcs mean."""
+    from gonio.brdf.reconstruction.samples import DEFAULT_SPAN_DEG
+    from gonio.plans.models import DEFAULT_SPAN_DEG as PLAN_DEFAULT
+
+    assert PLAN_DEFAULT == DEFAULT_SPAN_DEG == 180.0
+    assert parse_plan('{"kind": "uniform"}').first_span_deg() == 180.0
+    assert parse_plan('{"kind": "adaptive"}').first_span_deg() == 180.0
+    assert parse_plan({"kind": "adaptive", "rule": "vf"}).first_span_deg() == 360.0
+    assert parse_plan({"kind": "uniform", "span_deg": 360}).first_span_deg() == 360.0
+    assert parse_plan({"kind": "calibration", "reference_albedo": 0.9}).first_span_deg() == 360.0
+    for bad in (90, 0, 720, "half"):
+        with pytest.raises(PlanError, match=r"span_deg.*180.*360"):
+            parse_plan({"kind": "uniform", "span_deg": bad})
+
+
+def test_a_plan_stored_before_the_arc_existed_keeps_its_full_turn(tmp_path: Path) -> None:
+    """Jobs queued by a version whose angles always covered a full turn (stored plans without
+    ``span_deg``) run over a full turn after an upgrade; new requests get half a turn."""
+    from gonio.plans.models import AdaptivePlan, UniformPlan, parse_stored_plan
+    from gonio.store import JobStore
+
+    olds = []
+    for plan in (UniformPlan(), AdaptivePlan()):
+        d = plan.model_dump(mode="json")
+        del d["span_deg"]  # what the older version wrote
+        olds.append(d)
+    store = JobStore(tmp_path / "gonio.sqlite")
+    ids = [store.create_job(kind=d["kind"], specimen="s", plan=d, rig={}).id for d in olds]
+    store.close()
+    again = JobStore(tmp_path / "gonio.sqlite")
+    plans = [parse_stored_plan(again.get_job(i).plan) for i in ids]
+    again.close()
+    assert [p.first_span_deg() for p in plans] == [360.0, 360.0]
+    assert [parse_plan(d).first_span_deg() for d in olds] == [180.0, 180.0]

@@ -43,7 +43,9 @@ def test_bad_plans_refused(desc: RigDescription, plan: object, match: str) -> No
 def test_angles_beyond_travel_refused(desc: RigDescription) -> None:
     small = _limited(desc, 0.0, 180.0)
     with pytest.raises(PlanError, match=r"outside the stage travel \[0, 180\]"):
-        validate_plan(UniformPlan(rotations=4), small)
+        validate_plan(UniformPlan(rotations=4, span_deg=360), small)
+    # Half a turn's angles 0, 45, 90, 135 fit this travel.
+    validate_plan(UniformPlan(rotations=4), small)
     validate_plan(UniformPlan(rotations=1, start_deg=90), small)
 
 
