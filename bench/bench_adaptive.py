@@ -5,7 +5,7 @@ Run from the project root (needs mitsuba and ``../shared/data/rgl``, like
 
     nice -n 5 .venv/bin/python bench/bench_adaptive.py [--gains 0.0003] [--starts 8 4]
         [--max-rotations 16] [--set panel|wide|unseen|both] [--only measured|aniso]
-        [--rel-gains 0.02 ...] [--candidates midpoints|quarters] [--seed 0]
+        [--rel-gains 0.02 ...] [--candidates midpoints|quarters] [--seed 0] [--span 180]
 
 Sets
 ----
@@ -22,12 +22,15 @@ Sets
 
 Every scan: pairs designed for n = 10 on the material's own basis (``--design``, default
 ``design_pairs``' default objective), start at ``r0``
-uniform stage angles (each of ``--starts``), refine by :func:`next_angles` (rounds until it
+uniform stage angles over ``--span`` degrees (each of ``--starts``; 180, half a turn, the
+plans' default, or 360), refine by :func:`next_angles` within that arc (rounds until it
 plans nothing; at most one new angle per gap per round, as the engine runs it) up to
 ``--max-rotations``; then two reconstructions of everything read: the joint fit with the
 learnt prior as it is (``rho=None``: "plain fit"), and the default, which takes the scan's
 own ``rho`` when it is below 1 (``rho="scan"``: "scan rho"). Rows: uniform 4, 8 and 16
-(plain fit and scan rho), each start and threshold. Columns: mean ``log_rmse`` per group and
+(plain fit and scan rho) over the same arc, and with ``--span 180`` uniform 8 and 16 over a
+full turn too (the reference before plans covered half a turn), each start and threshold.
+Columns: mean ``log_rmse`` per group and
 overall, mean readings, share of uniform 16's readings.
 
 The self-estimated error (``predicted_log_rmse``) is calibrated by ``calibrate_log_rmse.py``.
@@ -131,6 +134,9 @@ FRACTIONS: dict[str, tuple[float, ...]] = {"value": MIDPOINTS}
 #: Added to every scan's noise seed (``--seed``).
 SEED = {"offset": 0}
 
+#: Arc of the scans, degrees (``--span``): the uniform angles cover it, refinement stays in it.
+SPAN = {"deg": 180.0}
+
 Result = tuple[float, int]
 """(log_rmse, readings) of one scan."""
 
@@ -145,8 +151,10 @@ def finals(c: Case, angles_deg: list[float], vals: np.ndarray) -> tuple[Result, 
             (metrics.log_rmse(shrunk.table, c.mat.truth), n))
 
 
-def uniform(c: Case, r: int) -> tuple[Result, Result]:
-    angles = list(np.rad2deg(uniform_stage_angles(r)))
+def uniform(c: Case, r: int, span_deg: float | None = None) -> tuple[Result, Result]:
+    """Uniform ``r`` over ``span_deg`` (default: the run's ``--span``)."""
+    span = np.deg2rad(SPAN["deg"] if span_deg is None else span_deg)
+    angles = list(np.rad2deg(uniform_stage_angles(r, span=span)))
     vals = bu.read(c.mat, c.cells, c.ph, np.deg2rad(angles), c.seed + SEED["offset"])
     return finals(c, angles, vals)
 
@@ -155,13 +163,14 @@ def adaptive(c: Case, gain: float, r0: int, max_r: int,
              rel: float = 0.0) -> tuple[Result, Result]:
     fr = FRACTIONS["value"]
     seed = c.seed + SEED["offset"]
-    angles = list(np.rad2deg(uniform_stage_angles(r0)))
+    period = SPAN["deg"]
+    angles = list(np.rad2deg(uniform_stage_angles(r0, span=np.deg2rad(period))))
     vals = bu.read(c.mat, c.cells, c.ph, np.deg2rad(angles), seed)
     for rnd in range(8):
         rec = reconstruct(c.basis, c.cells, c.ph, np.deg2rad(angles), vals)  # as the engine
         step = next_angles(c.basis, c.cells, c.ph, angles, vals, threshold=gain,
                            rel_threshold=rel, budget_angles=max_r - len(angles), per_gap=1,
-                           fractions=fr, table=rec.table.values)
+                           fractions=fr, table=rec.table.values, period_deg=period)
         if not step.angles_deg:
             break
         extra = bu.read(c.mat, c.cells, c.ph, np.deg2rad(step.angles_deg),
@@ -183,6 +192,9 @@ def table(name: str, cases: list[Case], gains: list[float], starts: list[int],
     for c in cases:
         for r in (4, 8, 16):
             put(f"uniform {r}", c, uniform(c, r))
+        if SPAN["deg"] != 360.0:
+            for r in (8, 16):
+                put(f"uniform {r} over 360 deg", c, uniform(c, r, 360.0))
         for r0 in starts:
             for g in gains:
                 put(f"posterior {r0}->{max_r} gain>={g}", c, adaptive(c, g, r0, max_r))
@@ -193,8 +205,9 @@ def table(name: str, cases: list[Case], gains: list[float], starts: list[int],
             f"{k} {v[c.mat.name][0]:.4f}/{v[c.mat.name][1]}"
             for k, v in rows.items()) + f" ({time.perf_counter() - t0:.0f} s)", flush=True)
     kinds = sorted({c.mat.kind for c in cases})
-    print(f"\n{name}:\n| row | " + " | ".join(f"{k} ({sum(c.mat.kind == k for c in cases)})"
-                                           for k in kinds)
+    print(f"\n{name}, scans over {SPAN['deg']:g} deg:\n| row | "
+          + " | ".join(f"{k} ({sum(c.mat.kind == k for c in cases)})"
+                     for k in kinds)
           + " | all | readings (mean) | share of uniform 16 |")
     print("|---" * (len(kinds) + 4) + "|")
     u16 = np.mean([v[1] for v in rows["uniform 16, plain fit"].values()])
@@ -231,7 +244,11 @@ def main(argv: list[str] | None = None) -> int:
                     help="candidate angles of the posterior rule: the gaps' midpoints (the "
                          "default of next_angles) or their quarter, half and three-quarter "
                          "points (before this round)")
+    ap.add_argument("--span", type=float, choices=[180.0, 360.0], default=180.0,
+                    help="arc of every scan, degrees: 180 (half a turn, the plans' default) "
+                         "or 360 (a full turn, as before)")
     args = ap.parse_args(argv)
+    SPAN["deg"] = args.span
     FRACTIONS["value"] = MIDPOINTS if args.candidates == "midpoints" else QUARTERS
     bu.CHOOSE["objective"] = args.design
     print(f"$ {' '.join(['python', *sys.argv])}")

@@ -53,8 +53,10 @@ from gonio.rigdescription import RigDescription
 from gonio.store import JobStore, ReadingRow, StepRow
 
 #: The posterior rule of adaptive plans: ``(angles_deg, values (n, r, C) raw - dark,
-#: budget_angles, min_step_deg, min_gain) -> new angles in degrees`` (gonio.refinement).
-Refiner = Callable[[Sequence[float], np.ndarray, int, float, float], list[float]]
+#: budget_angles, min_step_deg, min_gain, arc_deg) -> new angles in degrees``, with
+#: ``arc_deg = (start_deg, span_deg)`` the plan's arc (gonio.refinement).
+Refiner = Callable[[Sequence[float], np.ndarray, int, float, float, tuple[float, float]],
+                   list[float]]
 
 
 class SensorSaturated(hal.DeviceFault):
@@ -107,8 +109,10 @@ class ScanEngine:
     rig_desc : RigDescription of ``rig`` (limits, speeds, pairs)
     refiner : optional, the posterior rule of adaptive plans
         (:class:`gonio.refinement.PosteriorRefiner`: ``(angles_deg, values, budget_angles,
-        min_step_deg, min_gain) -> new angles``). Without it ``rule="posterior"`` plans fall
-        back to V&F's rule (the ``adaptive_done`` / ``adaptive_round`` events name the rule).
+        min_step_deg, min_gain, arc_deg) -> new angles``, ``arc_deg`` the plan's ``(start_deg,
+        span_deg)``). Without it ``rule="posterior"`` plans fall back to V&F's rule (the
+        ``adaptive_done`` / ``adaptive_round`` events name the rule); either rule refines
+        within the plan's arc.
     """
 
     def __init__(
@@ -611,6 +615,9 @@ class ScanEngine:
             self.store.append_event(self.job_id, "adaptive_done", {"reason": "budget"})
             return False
         min_step = plan.min_step_deg or self.desc.resolution_deg
+        # Either rule refines within the plan's arc: over half a turn the gaps are those
+        # modulo 180 and new angles stay in [start, start + 180) (docs/science.md 7.3).
+        arc = (plan.start_deg, plan.first_span_deg())
         new: list[float] | None = None
         rule = "vf"
         if plan.rule == "posterior" and self.refiner is not None and np.isfinite(values).all():
@@ -619,14 +626,15 @@ class ScanEngine:
             # unusable readings), the scan goes on with V&F's rule rather than failing.
             try:
                 new = await asyncio.to_thread(self.refiner, angles, values, budget, min_step,
-                                              plan.min_gain)
+                                              plan.min_gain, arc)
                 rule = "posterior"
             except (ValueError, OSError, RuntimeError) as exc:
                 self.store.append_event(self.job_id, "adaptive_round",
                                         {"round": rnd + 1, "rule": "vf",
                                          "posterior_failed": str(exc)[:300]})
         if new is None:
-            new = adaptive_refinement(angles, values, plan.threshold, min_step, budget)
+            new = adaptive_refinement(angles, values, plan.threshold, min_step, budget,
+                                      period_deg=arc[1], start_deg=arc[0])
         if not new:
             self.store.append_event(self.job_id, "adaptive_done",
                                     {"reason": "converged", "rule": rule})

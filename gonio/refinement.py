@@ -7,9 +7,10 @@ turns the pairs' lab directions into slice cells once, applies the rig's calibra
 ``raw - dark`` counts (the posterior weighs errors at BRDF values in 1/sr), and takes the basis
 from its provider on first use (the worker loads it before the job's first reading and hands
 it over loaded, so no round waits for a build). A round adds at most one angle per gap, a
-midpoint (``per_gap=1``, the default candidates of ``next_angles``), so the dry run's bound
-on an adaptive job holds; the plan's ``max_rotations`` reaches the rule as the engine's
-``budget_angles``.
+midpoint (``per_gap=1``, the default candidates of ``next_angles``) of a gap within the
+plan's arc (``arc_deg``: over half a turn the gaps are those modulo 180 and the new angles stay
+in the half turn), so the dry run's bound on an adaptive job holds; the plan's
+``max_rotations`` reaches the rule as the engine's ``budget_angles``.
 """
 
 from __future__ import annotations
@@ -26,7 +27,8 @@ from gonio.rigdescription import RigDescription
 
 
 class PosteriorRefiner:
-    """Callable ``(angles_deg, values, budget_angles, min_step_deg, min_gain) -> new angles``.
+    """Callable ``(angles_deg, values, budget_angles, min_step_deg, min_gain, arc_deg) -> new
+    angles``.
 
     Parameters
     ----------
@@ -49,7 +51,8 @@ class PosteriorRefiner:
         self.last: Any = None  # the last RefinementStep, for the job's event log
 
     def __call__(self, angles_deg: Sequence[float], values: NDArray[np.float64],
-                 budget_angles: int, min_step_deg: float, min_gain: float) -> list[float]:
+                 budget_angles: int, min_step_deg: float, min_gain: float,
+                 arc_deg: tuple[float, float] = (0.0, 360.0)) -> list[float]:
         """New stage angles (degrees, sorted); empty when the rule says stop.
 
         Parameters
@@ -57,6 +60,8 @@ class PosteriorRefiner:
         angles_deg : (r,) measured specimen angles, degrees
         values : (n_pairs, r, C) ``raw - dark`` counts, rows in the order of ``pairs``
         budget_angles, min_step_deg, min_gain : as for ``next_angles``
+        arc_deg : (start_deg, span_deg) of the plan, degrees: new angles are gap midpoints
+            within the span (``next_angles``' ``arc_start_deg``, ``period_deg``)
         """
         from gonio.brdf.reconstruction.posterior import next_angles
 
@@ -68,5 +73,6 @@ class PosteriorRefiner:
         v = np.maximum(v * factors[:, None, :], 0.0)  # small negative noise after the dark
         self.last = next_angles(self._basis, self.cells, self.ph_lab, list(angles_deg), v,
                                 threshold=min_gain, min_step_deg=min_step_deg,
-                                budget_angles=budget_angles, per_gap=1)
+                                budget_angles=budget_angles, per_gap=1,
+                                period_deg=arc_deg[1], arc_start_deg=arc_deg[0])
         return list(self.last.angles_deg)

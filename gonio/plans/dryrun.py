@@ -30,8 +30,9 @@ class DryRun(BaseModel):
     (from the stage's present position, with the engine's and the driver's backlash
     approaches), settling and exposures. For adaptive plans only the first round is known in
     advance; ``estimated_s`` covers it and ``max_estimated_s`` bounds the whole job: every
-    refinement round adding a midpoint in every gap, until ``max_rounds``, ``min_step_deg``,
-    ``max_samples`` or the cap of stage angles stops it.
+    refinement round adding a midpoint in every gap of the plan's arc (over half a turn, the
+    gaps modulo 180), until ``max_rounds``, ``min_step_deg``, ``max_samples`` or the cap of
+    stage angles stops it.
     """
 
     kind: str

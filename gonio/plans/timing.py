@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+from gonio.brdf.reconstruction.periodic import arc_angle, arc_gaps
 from gonio.motion import approach_waypoints, move_time, plan_overshoot_legs
 from gonio.plans.models import MAX_ROTATIONS, AdaptivePlan, AnyPlan
 from gonio.plans.route import order_for_travel
@@ -63,7 +64,9 @@ def adaptive_bound(plan: AdaptivePlan, rig: RigDescription, n_pairs: int, n_ligh
     """Most stage angles and seconds the refinement rounds after the first can add.
 
     The worst case of MATH 7: every round plans the midpoint of every gap (each measured
-    angle's two neighbours), as long as half a gap is at least ``min_step_deg``, for
+    angle's two neighbours) within the plan's arc (``first_span_deg``: over half a turn the
+    last gap runs to the first angle plus 180 deg, and its midpoint stays in the arc, as the
+    refinement rules plan it), as long as half a gap is at least ``min_step_deg``, for
     ``max_rounds - 1`` rounds, within the sample budget, the plan's ``max_rotations`` and
     :data:`MAX_ROTATIONS`. A subset
     of those midpoints travels no further along the same increasing route (move time is
@@ -77,7 +80,8 @@ def adaptive_bound(plan: AdaptivePlan, rig: RigDescription, n_pairs: int, n_ligh
     limit = MAX_ROTATIONS if plan.max_rotations is None else plan.max_rotations
     if plan.max_samples is not None:
         limit = min(limit, plan.max_samples // max(n_pairs, 1))
-    angles = sorted(a % 360.0 for a in first_angles)
+    period, arc_start = plan.first_span_deg(), plan.start_deg
+    angles = [float(a) for a in first_angles]
     here = end_deg
     extra_angles = 0
     extra_s = 0.0
@@ -86,9 +90,9 @@ def adaptive_bound(plan: AdaptivePlan, rig: RigDescription, n_pairs: int, n_ligh
         room = limit - len(angles)
         if room <= 0:
             break
-        gaps = [((angles[(j + 1) % len(angles)] - a) % 360.0 or 360.0, a)
-                for j, a in enumerate(angles)]
-        mids = [(a + g / 2.0) % 360.0 for g, a in gaps if g / 2.0 >= min_step]
+        pos, gaps = arc_gaps(angles, period, arc_start)
+        mids = [float(m) for m in arc_angle(pos + gaps / 2.0, period, arc_start)[
+            gaps / 2.0 >= min_step]]
         if not mids:
             break
         route = order_for_travel(mids, here, rig, plan.backlash_deg)
@@ -98,5 +102,5 @@ def adaptive_bound(plan: AdaptivePlan, rig: RigDescription, n_pairs: int, n_ligh
             ex.exposure_s * ex.averages if ex.dark == "every_angle" else 0.0)
         extra_s += motion + moves * rig.settle_s + m * per_angle
         extra_angles += m
-        angles = sorted(angles + mids)
+        angles = angles + mids
     return extra_angles, extra_s

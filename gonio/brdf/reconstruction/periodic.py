@@ -10,7 +10,7 @@ the slices, and back) and by adaptive plans (leave-one-out prediction of a readi
 from __future__ import annotations
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 from scipy.interpolate import PchipInterpolator
 
 FloatArray = NDArray[np.float64]
@@ -48,3 +48,57 @@ def periodic_pchip_rows(
     c = coef[:, piece, np.arange(n)[:, None], :]  # (4, n, m, C)
     dx = (u - xp[piece])[..., None]
     return np.asarray(((c[0] * dx + c[1]) * dx + c[2]) * dx + c[3])
+
+
+def arc_gaps(angles_deg: ArrayLike, period_deg: float = 360.0,
+             start_deg: float = 0.0) -> tuple[FloatArray, FloatArray]:
+    """Measured stage angles as distinct points of one period, and the gap after each.
+
+    A scan over half a turn (``period_deg = 180``) of a twofold-symmetric specimen reads the
+    same at ``a`` and ``a + 180``, so its gaps are those of the angles taken modulo 180: the
+    last angle's gap runs to the first one plus half a turn, not round the full circle.
+
+    Parameters
+    ----------
+    angles_deg : (r,) stage (specimen) angles, degrees, any range
+    period_deg : float
+        The arc the scan covers, degrees in (0, 360]: 180 or 360.
+    start_deg : float
+        Where the arc starts, degrees (the plan's ``start_deg``): positions are measured
+        from it.
+
+    Returns
+    -------
+    positions : (k,) float64
+        Distinct positions ``(a - start_deg) mod period_deg``, sorted, in [0, period_deg),
+        degrees (angles a period apart count once).
+    gaps : (k,) float64
+        Gap from each position to the next (the last to the first plus a period), degrees;
+        a single position has a gap of one period.
+    """
+    if not 0.0 < period_deg <= 360.0:
+        raise ValueError(f"period_deg must be in (0, 360] degrees, got {period_deg:g}")
+    a = np.asarray(angles_deg, dtype=float).ravel()
+    # Rounded so that angles a period apart, up to float error, are one position.
+    pos = np.unique(np.mod(np.round(np.mod(a - start_deg, period_deg), 9), period_deg))
+    if pos.size == 0:
+        return pos, pos.copy()
+    return pos, np.diff(np.concatenate([pos, [pos[0] + period_deg]]))
+
+
+def arc_angle(positions: ArrayLike, period_deg: float = 360.0,
+              start_deg: float = 0.0) -> FloatArray:
+    """Stage angles in [0, 360) of positions on the arc ``[start_deg, start_deg + period_deg)``.
+
+    Parameters
+    ----------
+    positions : (m,) positions from the arc's start, degrees (any range: taken modulo
+        ``period_deg``)
+    period_deg, start_deg : as for :func:`arc_gaps`
+
+    Returns
+    -------
+    (m,) float64, degrees in [0, 360): ``(start_deg + positions mod period_deg) mod 360``
+    """
+    p = np.mod(np.asarray(positions, dtype=float), period_deg)
+    return np.asarray(np.mod(start_deg + p, 360.0))

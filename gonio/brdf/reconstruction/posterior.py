@@ -44,6 +44,7 @@ import scipy.linalg
 from numpy.typing import ArrayLike, NDArray
 
 from gonio.brdf.reconstruction.basis import Basis, BasisError, remap, row_weight
+from gonio.brdf.reconstruction.periodic import arc_angle, arc_gaps
 from gonio.brdf.reconstruction.reconstruct import (
     _VALID_ROWS,
     JOINT_ETA,
@@ -479,13 +480,21 @@ def profiled_log_marginal(cov: FloatArray, y: FloatArray) -> float:
 
 
 def candidate_angles(stage_angles_deg: ArrayLike, min_step_deg: float,
-                     fractions: Sequence[float] = MIDPOINTS) -> FloatArray:
-    """Candidate new angles: the midpoints of every gap (or other points of it).
+                     fractions: Sequence[float] = MIDPOINTS, *, period_deg: float = 360.0,
+                     arc_start_deg: float = 0.0) -> FloatArray:
+    """Candidate new angles: the midpoints of every gap (or other points of it) in the arc.
 
     Midpoints by default: fully refined, a scan started at ``r0`` uniform angles then reaches
     the uniform ``2^k r0`` angles (the best spread for a stationary prior along ``ph``), and
     every round is a subset of the dry run's worst case (every gap halved). On the wide
     held-out panel they beat the quarter points (docs/science.md 7.3).
+
+    The gaps are those of the angles within one period (:func:`~gonio.brdf.reconstruction.
+    periodic.arc_gaps`): over half a turn (``period_deg = 180``) the angles 0, 45, 90, 135 have
+    four gaps of 45 deg, the last one from 135 to 180, and the candidates stay in the arc
+    ``[arc_start_deg, arc_start_deg + period_deg)``. The posterior itself needs no period: the
+    readings are taken at their true angles, and a specimen read over half a turn is assumed
+    twofold symmetric (the learnt prior's harmonics are even, docs/science.md 2.1).
 
     Parameters
     ----------
@@ -495,21 +504,23 @@ def candidate_angles(stage_angles_deg: ArrayLike, min_step_deg: float,
     fractions : sequence of float in (0, 1)
         Where in each gap (default :data:`MIDPOINTS`; :data:`QUARTERS` for the quarter,
         half and three-quarter points).
+    period_deg : float
+        The arc the scan covers, degrees: 360 (a full turn, the default) or 180.
+    arc_start_deg : float
+        Where the arc starts, degrees (the plan's ``start_deg``).
 
     Returns
     -------
     (m,) float64, degrees in [0, 360), sorted, rounded to 1e-6
     """
-    a = np.sort(np.mod(np.asarray(stage_angles_deg, dtype=float), 360.0))
-    if a.size == 0:
-        return np.zeros(0)
-    gaps = np.diff(np.concatenate([a, [a[0] + 360.0]]))
+    pos, gaps = arc_gaps(stage_angles_deg, period_deg, arc_start_deg)
     out = set()
-    for start, gap in zip(a, gaps, strict=True):
+    for start, gap in zip(pos, gaps, strict=True):
         for frac in fractions:
             step = min(frac, 1 - frac) * gap
             if step >= min_step_deg - 1e-9:
-                out.add(round(float((start + frac * gap) % 360.0), 6))
+                angle = arc_angle([start + frac * gap], period_deg, arc_start_deg)[0]
+                out.add(round(float(angle), 6) % 360.0)
     return np.array(sorted(out))
 
 
@@ -549,6 +560,8 @@ def next_angles(
     rel_threshold: float = 0.0,
     fractions: Sequence[float] = MIDPOINTS,
     table: ArrayLike | None = None,
+    period_deg: float = 360.0,
+    arc_start_deg: float = 0.0,
 ) -> RefinementStep:
     """Plan the next stage angles where they lower the expected ``log_rmse`` most.
 
@@ -582,6 +595,10 @@ def next_angles(
     fractions : sequence of float
         Candidate points of each gap (:func:`candidate_angles`; default the midpoints).
     table : optional, the reconstruction of these readings (computed when omitted)
+    period_deg, arc_start_deg : float
+        The arc the scan covers, degrees (:func:`candidate_angles`): the gaps are those within
+        one period, and new angles lie in ``[arc_start_deg, arc_start_deg + period_deg)``
+        (modulo 360). Default: a full turn.
 
     Returns
     -------
@@ -598,14 +615,17 @@ def next_angles(
         drops: list[float] = []
         reason = ""
         measured = list(np.mod(a_deg, 360.0))
-        edges = np.sort(np.mod(a_deg, 360.0))
-        used = np.zeros(edges.size, dtype=int)  # picks per original gap (gap k starts at edges[k])
+        # The measured angles' positions in the arc; gap k starts at edges[k].
+        edges, _ = arc_gaps(a_deg, period_deg, arc_start_deg)
+        used = np.zeros(edges.size, dtype=int)  # picks per original gap
         while True:
             if len(picked) >= limit:
                 reason = "budget" if not picked else ""
                 break
-            cand = candidate_angles(measured, min_step_deg, fractions)
-            gap_of = (np.searchsorted(edges, cand, side="right") - 1) % max(edges.size, 1)
+            cand = candidate_angles(measured, min_step_deg, fractions, period_deg=period_deg,
+                                    arc_start_deg=arc_start_deg)
+            at = np.mod(cand - arc_start_deg, period_deg)
+            gap_of = (np.searchsorted(edges, at, side="right") - 1) % max(edges.size, 1)
             if per_gap is not None and edges.size:
                 cand, gap_of = cand[used[gap_of] < per_gap], gap_of[used[gap_of] < per_gap]
             if cand.size == 0:

@@ -41,8 +41,9 @@ def _events(store: JobStore, kind: str) -> list[dict[str, object]]:
 
 
 def test_the_engine_measures_the_angles_the_posterior_rule_plans() -> None:
-    """Round 1 holds exactly the angles next_angles plans from round 0's readings (the
-    MemRig's readings swing with cos 2 alpha, so the rule refines), within the budget."""
+    """Round 1 holds exactly the angles next_angles plans from round 0's readings over the
+    plan's half turn (the MemRig's readings swing with cos 2 alpha, so the rule refines),
+    within the budget."""
     plan = AdaptivePlan(initial_rotations=8, exposure=FAST, min_gain=1e-9, max_rounds=2,
                         max_samples=4 * 12)
     store, eng, desc = _run(plan)
@@ -55,7 +56,7 @@ def test_the_engine_measures_the_angles_the_posterior_rule_plans() -> None:
                        np.maximum(values, 0.0), threshold=1e-9,
                        min_step_deg=desc.resolution_deg,
                        budget_angles=plan.max_samples // n_pairs - 8,  # type: ignore[operator]
-                       per_gap=1)
+                       per_gap=1, period_deg=180.0)  # the plan's default arc, half a turn
     assert later and later == [round(a, 6) for a in want.angles_deg]
     assert len(steps) * n_pairs <= plan.max_samples  # type: ignore[operator]
     assert _events(store, "adaptive_round")[0]["rule"] == "posterior"
@@ -111,3 +112,31 @@ def test_the_job_stops_at_max_rotations() -> None:
     assert len(steps) == 7 and len({round(s.specimen_deg % 360.0, 6) for s in steps}) == 7
     assert _events(store, "adaptive_done")[-1]["reason"] == "budget"
     assert AdaptivePlan().max_rotations == 16
+
+
+def test_a_half_turn_job_refines_and_moves_only_within_its_half_turn() -> None:
+    """An adaptive job over half a turn from 300 deg (the arc [300, 480), i.e. 300..360 and
+    0..120), refined all the way (min_gain tiny) to its cap of 16 angles: every gap of the
+    half turn is halved each round (4 -> 8 -> 16), so it measures exactly the 16 uniform angles
+    300 + 11.25 k of the half turn, and the stage never goes to the other half."""
+    plan = AdaptivePlan(initial_rotations=4, exposure=FAST, min_gain=1e-12, start_deg=300.0)
+    assert plan.span_deg == 180.0
+    store, eng, _ = _run(plan)
+    steps = store.steps(1)
+    arc = {round((300.0 + 11.25 * k) % 360.0, 6) for k in range(16)}
+    assert sorted(s.round for s in steps) == [0] * 4 + [1] * 4 + [2] * 8
+    assert {round(s.specimen_deg % 360.0, 6) for s in steps} == arc
+    moves = eng.rig.mstage.moves  # type: ignore[attr-defined]
+    assert moves and all(not 120.0 < m % 360.0 < 300.0 for m in moves)
+    assert _events(store, "adaptive_done")[-1]["reason"] == "budget"
+
+
+def test_the_vf_rule_over_a_half_turn_moves_only_within_it() -> None:
+    """Without a basis the engine's V&F rule refines within the plan's half turn too."""
+    plan = AdaptivePlan(initial_rotations=8, exposure=FAST, threshold=1e-6, max_rounds=2,
+                        span_deg=180.0, rule="vf")
+    store, eng, _ = _run(plan, with_refiner=False)
+    later = sorted(round(s.specimen_deg % 360.0, 6) for s in store.steps(1) if s.round == 1)
+    assert later == [11.25 + 22.5 * k for k in range(8)]  # every midpoint of 0, 22.5, .., 157.5
+    moves = eng.rig.mstage.moves  # type: ignore[attr-defined]
+    assert moves and all(m % 360.0 < 180.0 for m in moves)

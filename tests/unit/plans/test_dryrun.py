@@ -86,6 +86,26 @@ def test_adaptive_plans_get_a_bound(desc: RigDescription) -> None:
     assert dry_run(UniformPlan(), desc).max_estimated_s is None
 
 
+def test_the_bound_of_a_half_turn_adaptive_plan_halves_the_half_turns_gaps(
+        desc: RigDescription) -> None:
+    """Counted by hand over half a turn: 0, 45, 90, 135 have four 45 deg gaps (the last from
+    135 to 180); round 1 adds 22.5, 67.5, 112.5, 157.5 (8 angles, gaps 22.5), round 2 the eight
+    odd multiples of 11.25 (16). With min_step_deg 15 round 2's half gaps (11.25) are too
+    small: 8 angles. (Halving modulo 360 would leave a 225 deg gap and, with min_step_deg 15,
+    count 10.)"""
+    ex = ExposureSettings(exposure_s=0.1, light_settle_s=0.0, dark="none")
+    plan = AdaptivePlan(initial_rotations=4, max_rounds=3, max_rotations=None, exposure=ex)
+    assert plan.span_deg == 180.0
+    d = dry_run(plan, desc)
+    assert d.angles_deg == pytest.approx([0.0, 45.0, 90.0, 135.0])
+    assert d.max_angles == 16
+    assert d.max_estimated_s is not None and d.max_estimated_s >= 16 * 2 * 0.1
+    assert dry_run(plan.model_copy(update={"min_step_deg": 15.0}), desc).max_angles == 8
+    # From 30 deg (the arc 30..210) the same count.
+    assert dry_run(plan.model_copy(update={"start_deg": 30.0, "min_step_deg": 15.0}),
+                   desc).max_angles == 8
+
+
 def test_the_bound_of_a_default_adaptive_plan_is_its_cap(desc: RigDescription) -> None:
     """The posterior rule stops at max_rotations (default 16): from 4 angles the bound is 16,
     not the 4 x 2^5 = 128 of six uncapped rounds; the cap binds in the time bound too."""

@@ -148,6 +148,38 @@ def test_fully_refined_midpoints_are_the_uniform_grid() -> None:
     np.testing.assert_allclose(deg, np.arange(16) * 22.5)
 
 
+def test_half_turn_candidates_halve_the_gaps_of_the_half_turn() -> None:
+    """Over half a turn the angles 0, 45, 90, 135 have four 45 degree gaps (the last one from
+    135 to 180, where the scan's first angle reads again): their midpoints are the odd
+    multiples of 22.5 in the half turn, not 247.5 in the full turn's 225 degree gap. An arc
+    that starts at 270 (270..360 and 0..90) keeps its candidates there."""
+    np.testing.assert_allclose(candidate_angles([0.0, 45.0, 90.0, 135.0], 1.0, period_deg=180.0),
+                               [22.5, 67.5, 112.5, 157.5])
+    np.testing.assert_allclose(
+        candidate_angles([270.0, 315.0, 0.0, 45.0], 1.0, period_deg=180.0, arc_start_deg=270.0),
+        [22.5, 67.5, 292.5, 337.5])
+    # A reading half a turn away is the same position: 0 and 180 are one angle of the arc.
+    np.testing.assert_allclose(candidate_angles([0.0, 180.0, 90.0], 1.0, period_deg=180.0),
+                               [45.0, 135.0])
+    # The stage resolution against the half turn's gaps (45: midpoints 22.5 away).
+    assert candidate_angles([0.0, 45.0, 90.0, 135.0], 23.0, period_deg=180.0).size == 0
+
+
+def test_half_turn_refinement_reaches_uniform_16_over_the_half_turn() -> None:
+    """From 4 uniform angles over half a turn, two rounds of one midpoint per gap give the 16
+    uniform angles 11.25 k of the half turn (uniform 16 over 180 degrees, the reference of
+    half-turn plans); every round's angles lie in [0, 180)."""
+    b, cells, ph, _, _ = _scan()
+    deg = [0.0, 45.0, 90.0, 135.0]
+    vals = np.abs(np.random.default_rng(2).normal(1.0, 0.1, (5, 4, 1)))
+    for _ in range(2):
+        step = next_angles(b, cells, ph, deg, vals, threshold=0.0, per_gap=1, period_deg=180.0)
+        assert len(step.angles_deg) == len(deg) and all(0 <= a < 180 for a in step.angles_deg)
+        deg = sorted(deg + step.angles_deg)
+        vals = np.abs(np.random.default_rng(len(deg)).normal(1.0, 0.1, (5, len(deg), 1)))
+    np.testing.assert_allclose(deg, np.arange(16) * 11.25)
+
+
 def test_the_rule_stops_at_the_gain_it_is_given() -> None:
     """The expected drops of the greedy picks, from a run without a threshold, decide a run
     with one: a threshold between the second and the first drop plans exactly one angle, at
