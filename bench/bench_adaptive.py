@@ -5,7 +5,8 @@ Run from the project root (needs mitsuba and ``../shared/data/rgl``, like
 
     nice -n 5 .venv/bin/python bench/bench_adaptive.py [--gains 0.0003] [--starts 8 4]
         [--max-rotations 16] [--set panel|wide|unseen|both] [--only measured|aniso]
-        [--rel-gains 0.02 ...] [--candidates midpoints|quarters] [--seed 0] [--span 180]
+        [--rel-gains 0.02 ...] [--candidates midpoints|quarters] [--seed 0]
+        [--span 180] [--digits 4]
 
 Sets
 ----
@@ -134,6 +135,9 @@ FRACTIONS: dict[str, tuple[float, ...]] = {"value": MIDPOINTS}
 #: Added to every scan's noise seed (``--seed``).
 SEED = {"offset": 0}
 
+#: Decimals of the table's mean errors (``--digits``).
+DIGITS = {"value": 4}
+
 #: Arc of the scans, degrees (``--span``): the uniform angles cover it, refinement stays in it.
 SPAN = {"deg": 180.0}
 
@@ -213,12 +217,13 @@ def table(name: str, cases: list[Case], gains: list[float], starts: list[int],
     u16 = np.mean([v[1] for v in rows["uniform 16, plain fit"].values()])
     out = {}
     for row, per in rows.items():
-        txt = " | ".join(f"{np.mean([per[c.mat.name][0] for c in cases if c.mat.kind == k]):.4f}"
+        d = DIGITS["value"]
+        txt = " | ".join(f"{np.mean([per[c.mat.name][0] for c in cases if c.mat.kind == k]):.{d}f}"
                          for k in kinds)
         allm = float(np.mean([v[0] for v in per.values()]))
         rd = float(np.mean([v[1] for v in per.values()]))
         out[row] = allm
-        print(f"| {row} | {txt} | {allm:.4f} | {rd:.1f} | {rd / u16:.0%} |")
+        print(f"| {row} | {txt} | {allm:.{d}f} | {rd:.1f} | {rd / u16:.0%} |")
     return out
 
 
@@ -244,11 +249,14 @@ def main(argv: list[str] | None = None) -> int:
                     help="candidate angles of the posterior rule: the gaps' midpoints (the "
                          "default of next_angles) or their quarter, half and three-quarter "
                          "points (before this round)")
+    ap.add_argument("--digits", type=int, default=4,
+                    help="decimals of the table's mean errors (5 to break ties)")
     ap.add_argument("--span", type=float, choices=[180.0, 360.0], default=180.0,
                     help="arc of every scan, degrees: 180 (half a turn, the plans' default) "
                          "or 360 (a full turn, as before)")
     args = ap.parse_args(argv)
     SPAN["deg"] = args.span
+    DIGITS["value"] = args.digits
     FRACTIONS["value"] = MIDPOINTS if args.candidates == "midpoints" else QUARTERS
     bu.CHOOSE["objective"] = args.design
     print(f"$ {' '.join(['python', *sys.argv])}")
