@@ -3,7 +3,7 @@
 Run from the project root (needs mitsuba and ``../shared/data/rgl``, like
 ``bench/bench_unseen.py``, whose materials, readings and designs it reuses)::
 
-    nice -n 5 .venv/bin/python bench/bench_adaptive.py [--gains 0.0003] [--starts 8 4]
+    nice -n 5 .venv/bin/python bench/bench_adaptive.py [--gains 2.5e-5] [--starts 8 4]
         [--max-rotations 16] [--set panel|wide|unseen|both] [--only measured|aniso]
         [--rel-gains 0.02 ...] [--candidates midpoints|quarters] [--seed 0]
         [--span 180] [--digits 4]
@@ -49,7 +49,7 @@ import bench_unseen as bu
 import numpy as np
 
 from gonio.brdf.reconstruction.basis import Basis, default_basis
-from gonio.brdf.reconstruction.posterior import MIDPOINTS, QUARTERS, next_angles
+from gonio.brdf.reconstruction.posterior import MIDPOINTS, QUARTERS, REFINE_GAIN, next_angles
 from gonio.brdf.reconstruction.reconstruct import reconstruct
 from gonio.brdf.reconstruction.samples import uniform_stage_angles
 from gonio.brdf.tables import metrics
@@ -229,7 +229,7 @@ def table(name: str, cases: list[Case], gains: list[float], starts: list[int],
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--gains", type=float, nargs="*", default=[0.0003])
+    ap.add_argument("--gains", type=float, nargs="*", default=[REFINE_GAIN])
     ap.add_argument("--rel-gains", type=float, nargs="*", default=[],
                     help="relative stopping rule: least drop per angle as a fraction of the "
                          "posterior's expected log_rmse (threshold 0)")

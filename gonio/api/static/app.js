@@ -252,7 +252,7 @@ function ruleText(id) {
   if (!d || d.id !== id || d.plan?.kind !== "adaptive") return "";
   const p = d.plan;
   const rule = p.rule ?? "posterior";
-  const setting = rule === "vf" ? `threshold e ${p.threshold ?? 0.1}` : `min gain ${p.min_gain ?? 0.0003}`;
+  const setting = rule === "vf" ? `threshold e ${p.threshold ?? 0.1}` : `min gain ${p.min_gain ?? 2.5e-5}`;
   const cap = p.max_rotations == null ? "" : ` up to ${p.max_rotations}`;
   return ` · adaptive, ${rule} rule, ${setting}, from ${p.initial_rotations} angles${cap}`;
 }

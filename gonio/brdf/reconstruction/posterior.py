@@ -64,9 +64,9 @@ RHO_GRID: tuple[float, ...] = tuple(float(v) for v in np.geomspace(1 / 64, 16.0,
 #: carry energy, so the low band is ``m = 2`` (docs/science.md 2.1).
 BAND_SPLIT = 2
 #: Default stopping threshold of :func:`next_angles`: the least drop of the expected
-#: ``log_rmse`` one more stage angle must buy (chosen on the wide held-out panel,
-#: ``bench/bench_adaptive.py --set wide``; docs/science.md 7.3).
-REFINE_GAIN = 0.0003
+#: ``log_rmse`` one more stage angle must buy (chosen on the wide held-out panel for scans over
+#: half a turn, ``bench/bench_adaptive.py --set wide --span 180``; docs/science.md 7.3).
+REFINE_GAIN = 2.5e-5
 
 
 @functools.cache
