@@ -19,7 +19,8 @@ Materials
   (not a table lookup); the truth table is mitsuba on gonio's grid. Basis: ``default_basis()``.
 
 Every scan: 1 % relative noise (seed per material), pairs designed on the material's own
-training basis (cached per basis): ``--design kappa`` is V&F's condition-number search
+training basis (cached per basis and :func:`fit_fingerprint`): ``--design kappa`` is V&F's
+condition-number search
 (``design_pairs(basis, n, RigConstraints(), objective="kappa")``), ``--design posterior``
 ``objective="posterior"`` (the joint fit's expected error, :mod:`gonio.brdf.design.posterior`;
 the default, as ``design_pairs``' ``DEFAULT_OBJECTIVE``),
@@ -39,6 +40,7 @@ self-estimate ``predicted_log_rmse`` is within x2 of the truth.
 from __future__ import annotations
 
 import argparse
+import functools
 import hashlib
 import sys
 import time
@@ -188,6 +190,38 @@ def basis_id(b: Basis) -> str:
     return hashlib.sha256(np.ascontiguousarray(b.Q).tobytes()).hexdigest()[:16]
 
 
+@functools.cache
+def fit_fingerprint() -> str:
+    """A digest of what the current reconstruction reports on a fixed probe scan.
+
+    Cached designs (:func:`design`) and ``calibrate_log_rmse.py``'s cached rows and designs
+    are reused only while this is unchanged, so a change of the default joint fit (its prior,
+    empirical Bayes, witnesses) or of the default design regenerates them without anyone
+    remembering to. The probe is a library material read with the MA68 preset at 8 angles on
+    the default basis, plus the expected-error design of 5 pairs for 4 angles on that basis;
+    values are rounded to 6 significant digits so that BLAS-level jitter does not count.
+    Computed once per process (a few seconds).
+    """
+    from gonio.brdf.design.constraints import RigConstraints
+    from gonio.brdf.design.pairs import design_pairs
+    from gonio.brdf.materials.library import get_material, library_specs
+    from gonio.brdf.reconstruction.samples import NoiseModel, simulate_samples
+
+    b = default_basis()
+    cells, ph = get_preset("MA68").cells()
+    alpha = uniform_stage_angles(8)
+    model = get_material(library_specs()[0].name)
+    vals = simulate_samples(model, cells, ph, alpha, noise=NoiseModel(0.01, seed=7))
+    rec = reconstruct(b, cells, ph, alpha, vals)
+    d = design_pairs(b, 5, RigConstraints(), objective="posterior", rotations=4)
+    probe = np.r_[np.asarray(rec.table.values, dtype=float)[:, ::7, ::97].ravel(),
+                  rec.expected_log_rmse, rec.mahalanobis, rec.cv_sample_error,
+                  np.ravel(d.cells), np.ravel(d.ph_lab)]
+    probe = np.nan_to_num(probe)
+    text = ",".join(f"{v:.6g}" for v in probe)
+    return hashlib.sha256(f"{basis_id(b)}|{text}".encode()).hexdigest()[:12]
+
+
 CHOOSE: dict[str, Any] = {"k": 1, "objective": "kappa"}
 
 
@@ -207,7 +241,10 @@ def design(b: Basis, n: int) -> tuple[np.ndarray, np.ndarray]:
     k = CHOOSE["k"]
     obj = CHOOSE["objective"]
     tag = f"{DESIGNS[obj]}{f'-choose{k}' if k > 1 else ''}"
-    path = CACHE / f"design-{basis_id(b)}-n{n}{tag}.npz"
+    # Keyed by the code's fingerprint too: the basis alone would reuse designs made by older
+    # design code. The probe runs the expected-error design (and so the placement every
+    # objective shares), not the condition-number search itself.
+    path = CACHE / f"design-{basis_id(b)}-n{n}{tag}-{fit_fingerprint()}.npz"
     if path.is_file():
         with np.load(path) as z:
             return z["cells"], z["ph_lab"]
