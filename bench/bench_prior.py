@@ -4,30 +4,34 @@ Run from the project root (needs mitsuba and ``../shared/data/rgl`` like ``bench
 whose readings, designs and caches it reuses)::
 
     nice -n 5 .venv/bin/python bench/bench_prior.py [--sets fresh panel measured]
-        [--variants ...] [--r 8] [--seed-offset 0]
+        [--variants ...] [--r 8] [--seed-offset 0] [--span 180|360] [--design-span 180|360]
 
 Selection sets only by default (the project never tunes on its test set):
 
 * ``fresh``: materials drawn with the library's own recipes but another seed
   (``library_specs(seed=7)``; 8 brushed metals, 6 fabrics, 4 metals: "fresh-aniso"; 6
   isotropic ones: "fresh-iso"), in no basis; the default basis and its default n = 10 design;
+* ``fresh12``: the same materials scanned with each of 12 designs (the default basis' and the
+  11 leave-one-measured-out bases', each fitted with its own basis), for design rules;
 * ``panel``: the seven synthetic materials held out of the panel basis
   (:mod:`gonio.brdf.design.heldout`), its default design;
 * ``measured``: the 11 measured materials, each with the basis that leaves it out (as
   ``bench_unseen.py``).
 
 ``--sets TEST`` runs the six mitsuba specimens (the benchmark's test set; look only after the
-choice is made). Every scan: 1 % noise, r uniform stage angles. Variants are factors on the
-harmonics of the learnt prior (``m = 0`` keeps 1), chosen per scan by marginal likelihood
-(``s2`` profiled) over a grid: ``lib scan`` / ``lib scan-bands`` call ``reconstruct`` with
-``rho="scan"`` (the default: one factor on ``m > 0``, kept at most 1) / ``rho="scan-bands"``
-(harmonics ``m <= 2`` and ``m > 2`` each with its own factor); the others are fitted here
-with :func:`solve_joint`: ``flat ext`` (one factor, grid to 256, no cap), ``bandB`` (factors
-for ``0 < m <= B`` and ``m > B``, grid 1/64..16; ``ext``: low band to 256, ``hicap1``: high
-band at most 1), ``band3 2|8`` (three bands), ``tilt`` (``rho (m / 2)^beta``),
-``eta`` (the noise-to-prior ratio chosen too, from 2.5..320; ``capped``: the factor kept at
-most 1). Output: per material, each variant's log_rmse with its factors (at m = 2, 8, 20)
-and eta; then the mean per set.
+choice is made). Every scan: 1 % noise, r uniform stage angles over ``--span`` degrees (default
+half a turn, as ``bench_unseen.py``), the pairs designed for 8 angles over ``--design-span``
+(default: ``--span``; the designs are ``bench_unseen``'s, cached with their arc). Variants are
+factors on the harmonics of the learnt prior (``m = 0`` keeps 1), chosen per scan by marginal
+likelihood (``s2`` profiled) over a grid: ``lib scan`` / ``lib scan-bands`` call ``reconstruct``
+with ``rho="scan"`` (the default: one factor on ``m > 0``, kept at most 1) /
+``rho="scan-bands"`` (harmonics ``m <= 2`` and ``m > 2`` each with its own factor); the others
+are fitted here with :func:`solve_joint`: ``flat ext`` (one factor, grid to 256, no cap),
+``bandB`` (factors for ``0 < m <= B`` and ``m > B``, grid 1/64..16; ``ext``: low band to 256,
+``hicap1``: high band at most 1), ``band3 2|8`` (three bands), ``tilt`` (``rho (m / 2)^beta``),
+``eta`` (the noise-to-prior ratio chosen too, from 2.5..320; ``capped``: the factor kept at most
+1). Output: per material, each variant's log_rmse with its factors (at m = 2, 8, 20) and eta;
+then the mean per set.
 """
 
 from __future__ import annotations
@@ -36,7 +40,7 @@ import argparse
 import sys
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import bench_unseen as bu
@@ -55,7 +59,7 @@ from gonio.brdf.reconstruction.reconstruct import (
     one_blas_thread,
     solve_joint,
 )
-from gonio.brdf.reconstruction.samples import uniform_stage_angles
+from gonio.brdf.reconstruction.samples import DEFAULT_SPAN_DEG
 from gonio.brdf.tables import geometry as geo
 from gonio.brdf.tables import metrics
 from gonio.brdf.tables.table import BRDFTable
@@ -92,6 +96,20 @@ def fresh_cases() -> list[Case]:
         kind = "fresh-aniso" if s.family in ("brushed-metal", "fabric", "metal") else "fresh-iso"
         out.append(Case(f"f7-{s.name}", kind, bu._full_table(vals, s.name), s.model, b, cells,
                         ph, 700 + i))
+    return out
+
+
+def fresh12_cases() -> list[Case]:
+    """The fresh materials scanned with each of 12 designs: the default basis' and the 11
+    leave-one-measured-out bases' (each fitted with its own basis; the fresh materials are in
+    none), so a design rule is judged over designs, not one draw (docs/science.md 7.2.1)."""
+    base = fresh_cases()
+    bases = [base[0].basis] + [default_basis(exclude=m.exclude) for m in bu.measured_materials()]
+    out = []
+    for j, b in enumerate(bases):
+        cells, ph = bu.design(b, 10)
+        out += [replace(c, name=f"{c.name}@{j}", kind=f"{c.kind} x12", basis=b, cells=cells,
+                        ph=ph) for c in base]
     return out
 
 
@@ -472,7 +490,7 @@ LIB = ("lib scan", "lib scan-bands", "lib scan+mirror", "lib scan-bands+mirror")
 
 
 def run(cases: list[Case], variants: list[str], r: int, seed_offset: int = 0) -> None:
-    alpha = uniform_stage_angles(r)
+    alpha = bu.scan_angles(r)
     res: dict[str, dict[str, float]] = {v: {} for v in variants}
     t0 = time.perf_counter()
     for c in cases:
@@ -527,11 +545,19 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--variants", nargs="*", default=list(VARIANTS))
     ap.add_argument("--r", type=int, default=8)
     ap.add_argument("--seed-offset", type=int, default=0)
+    ap.add_argument("--span", type=float, choices=[180.0, 360.0], default=DEFAULT_SPAN_DEG,
+                    help="arc (degrees) of the uniform stage angles")
+    ap.add_argument("--design-span", type=float, choices=[180.0, 360.0], default=None,
+                    help="arc (degrees) the pair design assumes (default: --span)")
     args = ap.parse_args(argv)
     bu.CHOOSE["objective"] = bu.DEFAULT_OBJECTIVE  # the default design, as bench_unseen
+    bu.SPAN["scan"] = args.span
+    bu.SPAN["design"] = args.span if args.design_span is None else args.design_span
     print(f"$ {' '.join(['python', *sys.argv])}")
-    make = {"fresh": fresh_cases, "panel": panel_cases, "measured": measured_cases,
-            "TEST": aniso_cases}
+    print(f"r = {args.r} stage angles over {bu.SPAN['scan']:g} deg, pairs designed for "
+          f"{bu.SPAN['design']:g} deg")
+    make = {"fresh": fresh_cases, "fresh12": fresh12_cases, "panel": panel_cases,
+            "measured": measured_cases, "TEST": aniso_cases}
     cases = [c for s in args.sets for c in make[s]()]
     with one_blas_thread():
         run(cases, args.variants, args.r, args.seed_offset)

@@ -19,18 +19,23 @@ Materials
   (not a table lookup); the truth table is mitsuba on gonio's grid. Basis: ``default_basis()``.
 
 Every scan: 1 % relative noise (seed per material), pairs designed on the material's own
-training basis (cached per basis): ``--design kappa`` is V&F's condition-number search
+training basis (cached per basis and :func:`fit_fingerprint`): ``--design kappa`` is V&F's
+condition-number search
 (``design_pairs(basis, n, RigConstraints(), objective="kappa")``), ``--design posterior``
 ``objective="posterior"`` (the joint fit's expected error, :mod:`gonio.brdf.design.posterior`;
 the default, as ``design_pairs``' ``DEFAULT_OBJECTIVE``),
 with ``--design posterior-spread-alias`` that design with both corrections (``slope="spread",
-aliasing=True``); ``r`` uniform stage angles. Converted tables and designs are cached under
-``<gonio cache>/bench-unseen``.
+aliasing=True``); ``r`` uniform stage angles ``k span / r`` over ``--span`` (180 or 360
+degrees; default :data:`~gonio.brdf.reconstruction.samples.DEFAULT_SPAN_DEG`, half a turn, which
+for a twofold-symmetric specimen shows each pair ``r`` distinct azimuths instead of ``r / 2``),
+the pairs designed for ``r = 8`` angles over ``--design-span`` (default: ``--span``). Converted
+tables and designs (named with the design's arc) are cached under ``<gonio cache>/bench-unseen``.
 
-Rows: gonio default (n = 10, r = 8), V&F's path (``method="vf"``), each industrial preset
-with 8 rotations, n = 5 / 20, r = 4 / 16, V&F's adaptive plan (e = 0.1, start 8, budget 16
-rotations; readings used), and the basis ceiling (the best the basis can do with every cell
-known: least squares of every slice on the basis). Columns: mean ``log_rmse`` (headline,
+Rows: gonio default (n = 10, r = 8), V&F's path (``method="vf"``), each industrial preset with 8
+rotations, n = 5 / 20, r = 4 / 16 (all over ``--span``), V&F's adaptive plan (e = 0.1, start 8,
+budget 16 rotations; readings used; the adaptive rows always scan a full turn, their midpoint
+rule is periodic over 360 degrees), and the basis ceiling (the best the basis can do with every
+cell known: least squares of every slice on the basis). Columns: mean ``log_rmse`` (headline,
 lower is better) and mean ``log_psnr`` (dB) over the measured and the anisotropic materials.
 Below: per-material log_rmse of the default row against the best preset, and how often the
 self-estimate ``predicted_log_rmse`` is within x2 of the truth.
@@ -39,6 +44,7 @@ self-estimate ``predicted_log_rmse`` is within x2 of the truth.
 from __future__ import annotations
 
 import argparse
+import functools
 import hashlib
 import sys
 import time
@@ -54,7 +60,12 @@ from gonio.brdf.design.presets import get_preset, preset_names
 from gonio.brdf.materials.library import cache_root
 from gonio.brdf.reconstruction.basis import Basis, default_basis, remap, row_weight
 from gonio.brdf.reconstruction.reconstruct import _expand_table, reconstruct
-from gonio.brdf.reconstruction.samples import NoiseModel, pair_directions, uniform_stage_angles
+from gonio.brdf.reconstruction.samples import (
+    DEFAULT_SPAN_DEG,
+    NoiseModel,
+    pair_directions,
+    uniform_stage_angles,
+)
 from gonio.brdf.tables import geometry as geo
 from gonio.brdf.tables import metrics
 from gonio.brdf.tables.table import BRDFTable
@@ -188,7 +199,42 @@ def basis_id(b: Basis) -> str:
     return hashlib.sha256(np.ascontiguousarray(b.Q).tobytes()).hexdigest()[:16]
 
 
+@functools.cache
+def fit_fingerprint() -> str:
+    """A digest of what the current reconstruction reports on a fixed probe scan.
+
+    Cached designs (:func:`design`) and ``calibrate_log_rmse.py``'s cached rows and designs
+    are reused only while this is unchanged, so a change of the default joint fit (its prior,
+    empirical Bayes, witnesses) or of the default design regenerates them without anyone
+    remembering to. The probe is a library material read with the MA68 preset at 8 angles on
+    the default basis, plus the expected-error design of 5 pairs for 4 angles on that basis;
+    values are rounded to 6 significant digits so that BLAS-level jitter does not count.
+    Computed once per process (a few seconds).
+    """
+    from gonio.brdf.design.constraints import RigConstraints
+    from gonio.brdf.design.pairs import design_pairs
+    from gonio.brdf.materials.library import get_material, library_specs
+    from gonio.brdf.reconstruction.samples import NoiseModel, simulate_samples
+
+    b = default_basis()
+    cells, ph = get_preset("MA68").cells()
+    alpha = uniform_stage_angles(8)
+    model = get_material(library_specs()[0].name)
+    vals = simulate_samples(model, cells, ph, alpha, noise=NoiseModel(0.01, seed=7))
+    rec = reconstruct(b, cells, ph, alpha, vals)
+    d = design_pairs(b, 5, RigConstraints(), objective="posterior", rotations=4)
+    probe = np.r_[np.asarray(rec.table.values, dtype=float)[:, ::7, ::97].ravel(),
+                  rec.expected_log_rmse, rec.mahalanobis, rec.cv_sample_error,
+                  np.ravel(d.cells), np.ravel(d.ph_lab)]
+    probe = np.nan_to_num(probe)
+    text = ",".join(f"{v:.6g}" for v in probe)
+    return hashlib.sha256(f"{basis_id(b)}|{text}".encode()).hexdigest()[:12]
+
+
 CHOOSE: dict[str, Any] = {"k": 1, "objective": "kappa"}
+#: Arcs (degrees) of the scans' uniform stage angles (``--span``) and of the ones the pair
+#: design assumes (``--design-span``).
+SPAN: dict[str, float] = {"scan": DEFAULT_SPAN_DEG, "design": DEFAULT_SPAN_DEG}
 
 
 #: ``--design`` names: the bench's cache tag and how the pairs are made.
@@ -206,24 +252,30 @@ def design(b: Basis, n: int) -> tuple[np.ndarray, np.ndarray]:
 
     k = CHOOSE["k"]
     obj = CHOOSE["objective"]
-    tag = f"{DESIGNS[obj]}{f'-choose{k}' if k > 1 else ''}"
-    path = CACHE / f"design-{basis_id(b)}-n{n}{tag}.npz"
+    span = SPAN["design"]
+    tag = f"{DESIGNS[obj]}{f'-choose{k}' if k > 1 else ''}-span{span:g}"
+    # Keyed by the code's fingerprint too: the basis alone would reuse designs made by older
+    # design code. The probe runs the expected-error design (and so the placement every
+    # objective shares), not the condition-number search itself.
+    path = CACHE / f"design-{basis_id(b)}-n{n}{tag}-{fit_fingerprint()}.npz"
     if path.is_file():
         with np.load(path) as z:
             return z["cells"], z["ph_lab"]
     if obj == "posterior":
-        d = design_pairs(b, n, RigConstraints(), objective="posterior")
+        d = design_pairs(b, n, RigConstraints(), objective="posterior", span_deg=span)
     elif obj == "posterior-spread-alias":
-        d = posterior_design(b, n, RigConstraints(), slope="spread", aliasing=True)
+        d = posterior_design(b, n, RigConstraints(), slope="spread", aliasing=True,
+                             span_deg=span)
     elif k > 1:
         from gonio.brdf.design.heldout import choose_design
 
         d, _err, table = choose_design(
-            lambda seed: design_pairs(b, n, RigConstraints(), objective="kappa", seed=seed),
-            range(k))
+            lambda seed: design_pairs(b, n, RigConstraints(), objective="kappa", seed=seed,
+                                      span_deg=span),
+            range(k), span_deg=span)
         print(f"  n={n}: candidates (seed, kappa, expected log_rmse) {table}", flush=True)
     else:
-        d = design_pairs(b, n, RigConstraints(), objective="kappa")
+        d = design_pairs(b, n, RigConstraints(), objective="kappa", span_deg=span)
     path.parent.mkdir(parents=True, exist_ok=True)
     np.savez(path, cells=d.cells, ph_lab=d.ph_lab)
     return np.asarray(d.cells), np.asarray(d.ph_lab)
@@ -301,9 +353,14 @@ ETA: dict[str, float | None] = {"eta": None, "lam": None}
 RHO: dict[str, str | None] = {"rho": None, "symmetry": None}
 
 
+def scan_angles(r: int) -> np.ndarray:
+    """``r`` uniform stage angles (radians) over the scans' arc (``SPAN["scan"]``)."""
+    return uniform_stage_angles(r, span=np.deg2rad(SPAN["scan"]))
+
+
 def run_scan(b: Basis, m: Material, cells: np.ndarray, ph: np.ndarray, r: int, seed: int,
              method: str) -> Score:
-    alpha = uniform_stage_angles(r)
+    alpha = scan_angles(r)
     vals = read(m, cells, ph, alpha, seed)
     extra = ({k: v for k, v in RHO.items() if v is not None} if method == "joint" else {})
     rec = reconstruct(b, cells, ph, alpha, vals, method=method,  # type: ignore[arg-type]
@@ -370,6 +427,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--symmetry", choices=["scan"], default=None,
                     help="the joint fit's mirror symmetry chosen per scan (reconstruct's "
                          "symmetry='scan'; default: none)")
+    ap.add_argument("--span", type=float, choices=[180.0, 360.0], default=DEFAULT_SPAN_DEG,
+                    help="arc (degrees) of every row's uniform stage angles (default: "
+                         "DEFAULT_SPAN_DEG; the adaptive rows always scan a full turn)")
+    ap.add_argument("--design-span", type=float, choices=[180.0, 360.0], default=None,
+                    help="arc (degrees) the pair design assumes (default: --span)")
     ap.add_argument("--calibrate", action="store_true",
                     help="fit predicted_log_rmse's model on half the materials, check the rest")
     args = ap.parse_args(argv)
@@ -393,6 +455,9 @@ def main(argv: list[str] | None = None) -> int:
     RHO["rho"], RHO["symmetry"] = args.rho, args.symmetry
     CHOOSE["k"] = args.choose
     CHOOSE["objective"] = args.design
+    SPAN["scan"] = args.span
+    SPAN["design"] = args.span if args.design_span is None else args.design_span
+    print(f"stage angles over {SPAN['scan']:g} deg, pairs designed for {SPAN['design']:g} deg")
     fixed = default_basis(measured_weight=0.0) if args.fixed_design else None
     other = "vf" if args.method == "joint" else "joint"
     for i, m in enumerate(mats):
@@ -409,11 +474,14 @@ def main(argv: list[str] | None = None) -> int:
                 put(f"gonio n={n} r=8", m, run_scan(b, m, c2, p2, 8, seed, args.method))
             for r in (4, 16):
                 put(f"gonio n=10 r={r}", m, run_scan(b, m, cells, ph, r, seed, args.method))
-            put("adaptive V&F e=0.1, 8->16", m, run_adaptive(b, m, cells, ph, seed, args.method))
+            # The adaptive plans insert midpoints on a full turn, whatever --span says.
+            turn = "" if SPAN["scan"] == 360 else ", full turn"
+            put(f"adaptive V&F e=0.1, 8->16{turn}", m,
+                run_adaptive(b, m, cells, ph, seed, args.method))
             for e in args.adaptive_e:
-                put(f"adaptive joint e={e}, 8->16", m,
+                put(f"adaptive joint e={e}, 8->16{turn}", m,
                     run_adaptive(b, m, cells, ph, seed, args.method, joint_e=e))
-                put(f"adaptive joint e={e} everywhere, 8->16", m,
+                put(f"adaptive joint e={e} everywhere, 8->16{turn}", m,
                     run_adaptive(b, m, cells, ph, seed, args.method, joint_e=e, everywhere=True))
         put("basis ceiling (every cell)", m, score(ceiling(b, m.truth), m.truth))
         print(f"  {m.name}: {rows[f'gonio ({args.method}) n=10 r=8'][m.name].log_rmse:.4f} "

@@ -7,13 +7,14 @@ Run from the project root (needs mitsuba and ``../shared/data/rgl``)::
 One command does everything: it scans, records every witness, fits every candidate and
 prints the table. Each scan's witnesses and the expected-error designs are cached under ``<gonio
 cache>/bench-unseen/calibrate-<fingerprint>``, where the fingerprint is a digest of what the
-current joint fit and the default design produce on a fixed probe (:func:`fit_fingerprint`):
+current joint fit and the default design produce on a fixed probe
+(``bench_unseen.fit_fingerprint``):
 a re-run with both unchanged only refits (seconds); after a change of either every design
 and scan is redone (roughly 30 min on the loaded 2-core machine; two processes with
 ``--only`` over halves of the materials share the cache). The condition-number designs are
-cached per basis as ``bench_unseen.py`` caches them. ``--rows FILE`` also writes (or, if
-present, reads: then nothing is checked against the fingerprint) all rows as one JSON file;
-``--only NAME...`` scans a subsample to debug.
+cached per basis and fingerprint, as ``bench_unseen.py`` caches them. ``--rows FILE`` also
+writes (or, if present, reads: then nothing is checked against the fingerprint) all rows as
+one JSON file; ``--only NAME...`` scans a subsample to debug.
 
 Materials and readings are those of ``bench/bench_unseen.py`` (measured materials each with
 a basis that leaves it out, mitsuba anisotropic specimens; 1 % noise), plus the held-out
@@ -197,36 +198,6 @@ def layouts(b: Basis, family: str,
     return out
 
 
-def fit_fingerprint() -> str:
-    """A digest of what the current reconstruction reports on a fixed probe scan.
-
-    Cached rows and expected-error designs are reused only while this is unchanged, so a
-    change of the default joint fit (its prior, empirical Bayes, witnesses) or of the default
-    design regenerates them without anyone remembering to. The probe is a library material
-    read with the MA68 preset at 8 angles on the default basis, plus the expected-error design
-    of 5 pairs for 4 angles on that basis; values are rounded to 6 significant digits so that
-    BLAS-level jitter does not count.
-    """
-    from gonio.brdf.design.constraints import RigConstraints
-    from gonio.brdf.design.pairs import design_pairs
-    from gonio.brdf.materials.library import get_material, library_specs
-    from gonio.brdf.reconstruction.samples import NoiseModel, simulate_samples
-
-    b = default_basis()
-    cells, ph = get_preset("MA68").cells()
-    alpha = uniform_stage_angles(8)
-    model = get_material(library_specs()[0].name)
-    vals = simulate_samples(model, cells, ph, alpha, noise=NoiseModel(0.01, seed=7))
-    rec = reconstruct(b, cells, ph, alpha, vals)
-    d = design_pairs(b, 5, RigConstraints(), objective="posterior", rotations=4)
-    probe = np.r_[np.asarray(rec.table.values, dtype=float)[:, ::7, ::97].ravel(),
-                  rec.expected_log_rmse, rec.mahalanobis, rec.cv_sample_error,
-                  np.ravel(d.cells), np.ravel(d.ph_lab)]
-    probe = np.nan_to_num(probe)
-    text = ",".join(f"{v:.6g}" for v in probe)
-    return hashlib.sha256(f"{bu.basis_id(b)}|{text}".encode()).hexdigest()[:12]
-
-
 def scans(families: tuple[str, ...], only: tuple[str, ...] = ()) -> list[dict[str, Any]]:
     """Witnesses of every scan of ``families`` (cached per scan under the fit's fingerprint)."""
     from gonio.brdf.design.heldout import _panel
@@ -238,7 +209,7 @@ def scans(families: tuple[str, ...], only: tuple[str, ...] = ()) -> list[dict[st
     pos: dict[str, int] = {}
     for kind in ("panel", "measured", "aniso"):
         pos.update({m.name: i for i, m in enumerate(m for m, _ in mats if m.kind == kind)})
-    fp = fit_fingerprint()
+    fp = bu.fit_fingerprint()
     cache = bu.CACHE / f"calibrate-{fp}"
     (cache / "rows").mkdir(parents=True, exist_ok=True)
     print(f"joint fit fingerprint {fp}; rows cached in {cache}", flush=True)

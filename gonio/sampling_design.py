@@ -34,8 +34,9 @@ from gonio.brdf.design.pairs import (
 )
 from gonio.brdf.design.presets import Preset
 from gonio.brdf.design.product import design_product_rig
-from gonio.brdf.design.roughness import roughness_bound
+from gonio.brdf.design.roughness import bound_angles, roughness_bound
 from gonio.fields import FINITE, Count, Text
+from gonio.plans.models import DEFAULT_SPAN_DEG, SpanDeg
 
 MAX_PAIRS = 40
 """More independent pairs than any rig mounts (V&F use up to 20)."""
@@ -88,6 +89,9 @@ class DesignRequest(BaseModel):
                            description="uniform stage angles of the scan: for the roughness "
                                        "bound, the expected log_rmse and the 'posterior' "
                                        "objective")
+    span_deg: SpanDeg = Field(DEFAULT_SPAN_DEG,
+                              description="arc those angles cover, degrees: 180 (half a turn, "
+                                          "the scans' default) or 360")
 
     @model_validator(mode="after")
     def _one_kind(self) -> DesignRequest:
@@ -138,6 +142,9 @@ class RoughnessInfo(BaseModel):
     """MATH 10: the smallest microfacet roughness the design resolves at ``rotations`` angles."""
 
     rotations: int
+    span_deg: float = Field(description="arc of the angles, degrees; over half a turn the "
+                                        "bound counts each angle also half a turn on (the "
+                                        "same reading for a twofold-symmetric specimen)")
     alpha_min: float | None = Field(description="alpha'; null when nothing is resolvable")
     n_effective: float = Field(description="effective samples near the specular direction")
     degree: int = Field(description="resolvable spherical-harmonic degree l*")
@@ -204,12 +211,12 @@ def _finite(x: float) -> float | None:
     return float(x) if math.isfinite(x) else None
 
 
-def describe(design: PairDesign, rotations: int) -> DesignResult:
+def describe(design: PairDesign, rotations: int,
+             span_deg: float = DEFAULT_SPAN_DEG) -> DesignResult:
     """The API view of a :class:`~gonio.brdf.design.pairs.PairDesign`."""
     from gonio.rigdesign import design_fragment, dump_fragment
 
-    angles = np.arange(rotations) * (2.0 * np.pi / rotations)
-    bound = roughness_bound(design.cells, design.ph_lab, angles)
+    bound = roughness_bound(design.cells, design.ph_lab, bound_angles(rotations, span_deg))
     frag = design_fragment(design)
     lights = [Device(**d) for d in frag["lights"]]
     sensors = [Device(**d) for d in frag["sensors"]]
@@ -233,7 +240,8 @@ def describe(design: PairDesign, rotations: int) -> DesignResult:
         lights=lights,
         sensors=sensors,
         pairs=pairs,
-        roughness=RoughnessInfo(rotations=rotations, alpha_min=_finite(bound.alpha_min),
+        roughness=RoughnessInfo(rotations=rotations, span_deg=span_deg,
+                                alpha_min=_finite(bound.alpha_min),
                                 n_effective=float(bound.n_effective), degree=int(bound.degree),
                                 cap_deg=float(bound.cap_deg)),
         search=None if search is None else SearchInfo(
@@ -260,19 +268,21 @@ def run_design(basis: BasisLike, request: DesignRequest) -> DesignResult:
             basis, request.pairs, constraints, h=request.neighbourhood, starts=request.starts,
             descents=request.descents, seed=request.seed, time_limit_s=request.time_limit_s,
             objective=request.objective, rotations=request.rotations,
+            span_deg=request.span_deg,
         )
     else:
         assert request.lights is not None and request.sensors is not None
         design = with_expected_error(basis, design_product_rig(
             basis, request.lights, request.sensors, constraints, h=request.neighbourhood,
             starts=request.starts, seed=request.seed, time_limit_s=request.time_limit_s,
-        ), request.rotations)
-    return describe(design, request.rotations)
+        ), request.rotations, request.span_deg)
+    return describe(design, request.rotations, request.span_deg)
 
 
-def evaluate_preset(basis: BasisLike, preset: Preset, rotations: int) -> DesignResult:
+def evaluate_preset(basis: BasisLike, preset: Preset, rotations: int,
+                    span_deg: float = DEFAULT_SPAN_DEG) -> DesignResult:
     """An industrial geometry evaluated like an optimised one (V&F Table 1)."""
     wi, wo = preset.directions()
     n = preset.n_pairs
     design = geometry_design(basis, preset.name, wi, wo, np.stack([np.arange(n)] * 2, axis=1))
-    return describe(with_expected_error(basis, design, rotations), rotations)
+    return describe(with_expected_error(basis, design, rotations, span_deg), rotations, span_deg)

@@ -34,7 +34,14 @@ from gonio.jobstates import ACTIVE_STATES, IllegalTransition, JobState, check_ac
 from gonio.maintenance import LOCK_FILE_NAME, MaintenanceLock
 from gonio.motion import StageMoveError
 from gonio.plans.dryrun import DryRun, dry_run
-from gonio.plans.models import AnyPlan, Plan, PlanError, parse_plan, parse_stored_plan
+from gonio.plans.models import (
+    DEFAULT_SPAN_DEG,
+    AnyPlan,
+    Plan,
+    PlanError,
+    parse_plan,
+    parse_stored_plan,
+)
 from gonio.rigdescription import RigDescription
 from gonio.store import EventRow, JobRow, JobStore, ReadingRow
 from gonio.store import NotFound as StoreNotFound
@@ -404,7 +411,8 @@ class GonioService:
         finally:
             self._design_lock.release()
 
-    def evaluate_preset(self, name: str, rotations: int) -> DesignResult:
+    def evaluate_preset(self, name: str, rotations: int,
+                        span_deg: float = DEFAULT_SPAN_DEG) -> DesignResult:
         """An industrial geometry (V&F Table 1) evaluated like an optimised design (blocking:
         the first call may load the basis). Raises ``UnknownPresetError`` naming the known
         presets."""
@@ -412,7 +420,7 @@ class GonioService:
         from gonio.sampling_design import evaluate_preset
 
         preset = get_preset(name)
-        return evaluate_preset(self.design_basis(), preset, rotations)
+        return evaluate_preset(self.design_basis(), preset, rotations, span_deg)
 
     def calibration(self) -> Calibration:
         """The calibration applied to scans: the latest calibration job, else the rig config

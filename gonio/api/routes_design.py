@@ -12,10 +12,12 @@ import asyncio
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Path, Query, Request
+from fastapi.exceptions import RequestValidationError
 
 from gonio.api.deps import READ, WRITE, Service
 from gonio.api.limits import LimitExceeded
 from gonio.brdf.design.presets import get_preset, preset_names
+from gonio.plans.models import SPANS_DEG
 from gonio.sampling_design import DEFAULT_TIME_LIMIT_S, DesignRequest, DesignResult, PresetInfo
 
 router = APIRouter(prefix="/api/v1/design", tags=["design"])
@@ -66,6 +68,13 @@ async def preset(
     service: Service,
     rotations: int = Query(8, ge=1, le=360, description="uniform stage angles for the "
                                                         "roughness bound"),
+    span_deg: float = Query(180.0, description="arc of those angles, degrees: 180 (half a "
+                                               "turn, the scans' default) or 360"),
 ) -> DesignResult:
     get_preset(name)  # UnknownPresetError -> 404 listing the known names, before any basis load
-    return await asyncio.to_thread(service.evaluate_preset, name, rotations)
+    if span_deg not in SPANS_DEG:
+        raise RequestValidationError([{
+            "type": "value_error", "loc": ("query", "span_deg"), "input": span_deg,
+            "msg": f"span_deg is the arc of the stage angles: 180 (half a turn) or 360 (a full "
+                   f"turn); got {span_deg:g}"}])
+    return await asyncio.to_thread(service.evaluate_preset, name, rotations, span_deg)

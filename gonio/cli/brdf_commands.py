@@ -218,14 +218,15 @@ def _cmd_simulate_scan(args: argparse.Namespace) -> int:
 
         cells, ph = get_preset(args.design_preset).cells()
         source = f"preset {args.design_preset}"
-    alpha = uniform_stage_angles(args.rotations, np.deg2rad(args.start))
+    alpha = uniform_stage_angles(args.rotations, np.deg2rad(args.start), np.deg2rad(args.span))
     noise = NoiseModel(args.noise, args.abs_noise, args.seed)
     vals = simulate_samples(specimen, cells, ph, alpha, noise=noise)
     channels = tuple(getattr(specimen, "channels", ("R", "G", "B")))
     prov = {"simulated_from": name, "pairs": source, "noise_relative": args.noise,
             "noise_absolute": args.abs_noise, "seed": args.seed}
     out = Samples(cells, ph, alpha, vals, channels, prov).save(args.output)
-    print(f"simulated {cells.shape[0]} pairs x {alpha.size} rotations of {name} -> {out}")
+    print(f"simulated {cells.shape[0]} pairs x {alpha.size} rotations over {args.span:g} deg of "
+          f"{name} -> {out}")
     return 0
 
 
@@ -322,7 +323,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     basis = loo_basis(args.material, args.components)
     t_basis = time.perf_counter() - t0
     cells, ph, how = _demo_pairs(basis, args.pairs)
-    alpha = uniform_stage_angles(args.rotations)
+    alpha = uniform_stage_angles(args.rotations, span=np.deg2rad(args.span))
     vals = simulate_samples(model, cells, ph, alpha, noise=NoiseModel(args.noise, seed=args.seed))
     rec = reconstruct(basis, cells, ph, alpha, vals, name=f"{args.material}-reconstructed")
     reference = _library_table(args.material)
@@ -333,7 +334,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     save_preview(reference, out / "reference.png")
     print(f"demo: {args.material}, held out of a K={basis.K} basis of "
           f"{len(basis.materials)} materials (ready in {t_basis:.1f} s)")
-    print(f"  pairs: {cells.shape[0]} ({how}), rotations: {alpha.size}, "
+    print(f"  pairs: {cells.shape[0]} ({how}), rotations: {alpha.size} over {args.span:g} deg, "
           f"noise {100 * args.noise:.1f} %")
     print(f"  log_rmse {metrics.log_rmse(rec.table, reference):.4f}   "
           f"log_psnr {metrics.log_psnr(rec.table, reference):.2f} dB   "
@@ -406,6 +407,8 @@ def register(subparsers: Any) -> None:
     geom.add_argument("--design-preset", help="industrial geometry: MA68, MA98, BYK-mac, MultiFX10")
     s.add_argument("--rotations", "-r", type=int, required=True, help="stage angles, evenly spaced")
     s.add_argument("--start", type=float, default=0.0, help="first stage angle, degrees")
+    s.add_argument("--span", type=float, choices=(180.0, 360.0), default=180.0, metavar="DEG",
+                   help="arc of the stage angles: 180 (half a turn, the scans' default) or 360")
     s.add_argument("--noise", type=float, default=0.01, help="relative noise (0.01 = 1 %%)")
     s.add_argument("--abs-noise", type=float, default=0.0, help="additive noise, 1/sr")
     s.add_argument("--seed", type=int, default=0)
@@ -434,6 +437,8 @@ def register(subparsers: Any) -> None:
     d.add_argument("--material", default=DEMO_MATERIAL, help=f"default {DEMO_MATERIAL}")
     d.add_argument("--pairs", "-n", type=int, default=20)
     d.add_argument("--rotations", "-r", type=int, default=12)
+    d.add_argument("--span", type=float, choices=(180.0, 360.0), default=180.0, metavar="DEG",
+                   help="arc of the stage angles: 180 (half a turn, the scans' default) or 360")
     d.add_argument("--components", "-k", type=int, default=DEFAULT_COMPONENTS)
     d.add_argument("--noise", type=float, default=0.01, help="relative noise (0.01 = 1 %%)")
     d.add_argument("--seed", type=int, default=0)

@@ -36,7 +36,7 @@ from gonio.brdf.design.pairs import (
 )
 from gonio.brdf.design.presets import get_preset, preset_names
 from gonio.brdf.design.product import design_product_rig
-from gonio.brdf.design.roughness import RoughnessBound, roughness_bound
+from gonio.brdf.design.roughness import RoughnessBound, bound_angles, roughness_bound
 from gonio.cli import UsageError
 
 
@@ -80,6 +80,9 @@ def register(subparsers: Any) -> None:
     p.add_argument("--rotations", type=int, default=8, metavar="R",
                    help="uniform stage angles of the scan: for the roughness bound, the "
                         "expected log_rmse and --objective posterior (default 8)")
+    p.add_argument("--span", type=float, choices=(180.0, 360.0), default=180.0, metavar="DEG",
+                   help="arc those angles cover: 180 (half a turn, the scans' default) or 360 "
+                        "(default 180)")
     p.add_argument("--starts", type=int, default=10, help="random starts (default 10)")
     p.add_argument("--descents", type=int, default=10,
                    help="descents per start for --pairs (default 10)")
@@ -155,17 +158,17 @@ def make_design(args: argparse.Namespace, basis: BasisLike) -> PairDesign:
         wi, wo = preset.directions()
         n = preset.n_pairs
         fixed = geometry_design(basis, preset.name, wi, wo, np.stack([np.arange(n)] * 2, axis=1))
-        return with_expected_error(basis, fixed, args.rotations)
+        return with_expected_error(basis, fixed, args.rotations, args.span)
     constraints = _constraints(args)
     if args.lights is not None:
         return with_expected_error(basis, design_product_rig(
             basis, args.lights, args.sensors, constraints, h=args.neighbourhood,
             starts=args.starts, seed=args.seed, time_limit_s=args.time_limit,
-        ), args.rotations)
+        ), args.rotations, args.span)
     return design_pairs(
         basis, args.pairs, constraints, h=args.neighbourhood, starts=args.starts,
         descents=args.descents, seed=args.seed, time_limit_s=args.time_limit,
-        objective=args.objective, rotations=args.rotations,
+        objective=args.objective, rotations=args.rotations, span_deg=args.span,
     )
 
 
@@ -173,7 +176,8 @@ SINGULAR_KAPPA = 1e6
 """Above this condition number the design gets an explanation of what makes it singular."""
 
 
-def explain_condition(design: PairDesign, rotations: int) -> list[str]:
+def explain_condition(design: PairDesign, rotations: int,
+                      span_deg: float = 360.0) -> list[str]:
     """Why a design's condition number is infinite (or huge), and what that means for a scan.
 
     Pairs whose half/difference cells coincide sample the same basis row (the pair's lab
@@ -213,7 +217,10 @@ def explain_condition(design: PairDesign, rotations: int) -> list[str]:
         lines.append("  why: the pairs' basis rows are (nearly) linearly dependent: some pairs "
                      "repeat what others measure")
     distinct = n - len({j for _, j in same})
-    step = 360.0 / rotations
+    # Uniform angles over the arc reach a pair's azimuths modulo the arc (a twofold-symmetric
+    # specimen reads the same half a turn on), so two pairs in one cell repeat each other when
+    # their lab azimuths differ by a multiple of the step.
+    step = span_deg / rotations
     repeats = [
         (i, j) for i, j in same
         if min(d := float(np.rad2deg(design.ph_lab[i] - design.ph_lab[j])) % step,
@@ -226,14 +233,16 @@ def explain_condition(design: PairDesign, rotations: int) -> list[str]:
         "reaches"
     )
     for i, j in repeats:
-        lines.append(f"  at {rotations} uniform rotations pairs {i + 1} and {j + 1} reach the "
+        lines.append(f"  at {rotations} uniform rotations over {span_deg:g} deg pairs {i + 1} "
+                     f"and {j + 1} reach the "
                      "same specimen azimuths: they repeat each other's readings (which only "
                      "averages noise)")
     return lines
 
 
 def print_design(
-    design: PairDesign, bound: RoughnessBound, rotations: int, out: TextIO | None = None
+    design: PairDesign, bound: RoughnessBound, rotations: int, out: TextIO | None = None,
+    span_deg: float = 180.0,
 ) -> None:
     """Human-readable table of the design, its condition number and roughness bound."""
     out = sys.stdout if out is None else out
@@ -258,10 +267,11 @@ def print_design(
         print(f"  note: {design.fallback}", file=out)
     expected = ""
     if design.expected_log_rmse is not None:
+        arc = "" if design.span_deg is None else f" over {design.span_deg:g} deg"
         expected = (f", expected log_rmse {design.expected_log_rmse:.4f} at "
-                    f"{design.rotations} rotations (inside the basis)")
+                    f"{design.rotations} rotations{arc} (inside the basis)")
     print(f"condition number: {design.kappa:.4g}{expected}", file=out)
-    for line in explain_condition(design, rotations):
+    for line in explain_condition(design, rotations, span_deg):
         print(line, file=out)
     print(f"closest two devices: {design.min_distance_deg:.1f} deg", file=out)
     if design.search is not None:
@@ -274,7 +284,8 @@ def print_design(
               f"{g.mount_checks} mount checks, first pair rank {g.first}, {g.seconds:.1f} s",
               file=out)
     print(
-        f"roughness bound at {rotations} rotations: alpha' = {bound.alpha_min:.3g} "
+        f"roughness bound at {rotations} rotations over {span_deg:g} deg: "
+        f"alpha' = {bound.alpha_min:.3g} "
         f"(N = {bound.n_effective:.0f} effective samples within {bound.cap_deg:g} deg of the "
         f"normal, l* = {bound.degree})",
         file=out,
@@ -295,25 +306,27 @@ def run(args: argparse.Namespace) -> int:
             return design_pairs(
                 basis, args.pairs, constraints, h=args.neighbourhood, starts=args.starts,
                 descents=args.descents, seed=args.seed + seed, time_limit_s=args.time_limit,
-                objective=args.objective, rotations=args.rotations,
+                objective=args.objective, rotations=args.rotations, span_deg=args.span,
             )
 
-        design, expected, table = choose_design(make, range(args.candidates), args.rotations)
+        design, expected, table = choose_design(make, range(args.candidates), args.rotations,
+                                                span_deg=args.span)
         print(f"{len(table)} candidate designs (seed, kappa, expected log_rmse on held-out "
               "materials):")
         for seed, kappa, err in table:
             print(f"  seed {args.seed + seed}: kappa {kappa:.4g}, expected log_rmse {err:.4f}")
     else:
         design = make_design(args, basis)
-    angles = np.arange(args.rotations) * (2.0 * np.pi / args.rotations)
-    bound = roughness_bound(design.cells, design.ph_lab, angles)
-    print_design(design, bound, args.rotations)
+    bound = roughness_bound(design.cells, design.ph_lab, bound_angles(args.rotations, args.span))
+    print_design(design, bound, args.rotations, span_deg=args.span)
     if args.basis is None and not args.no_expected_error and args.lights is None:
         if expected is None:
             from gonio.brdf.design.heldout import expected_log_rmse
 
-            expected = expected_log_rmse(design.cells, design.ph_lab, args.rotations)
-        print(f"expected log_rmse on held-out materials at {args.rotations} rotations: "
+            expected = expected_log_rmse(design.cells, design.ph_lab, args.rotations,
+                                         span_deg=args.span)
+        print(f"expected log_rmse on held-out materials at {args.rotations} rotations over "
+              f"{args.span:g} deg: "
               f"{expected.log_rmse:.4f} (measured {expected.measured:.4f}, synthetic "
               f"{expected.synthetic:.4f}; lower is better, next to kappa {design.kappa:.4g})")
     if args.output is not None:

@@ -47,6 +47,11 @@ def register(subparsers: Any) -> None:
                    help="stage angles r (default 8); with --adaptive the first round's "
                         "(default 4 with the posterior rule, 8 with --rule vf)")
     p.add_argument("--start-deg", type=finite_float, default=0.0, help="first stage angle, degrees")
+    p.add_argument("--span", type=float, choices=(180.0, 360.0), default=None, metavar="DEG",
+                   help="arc of the uniform stage angles: 180 (default; a twofold-symmetric "
+                        "specimen reads the same turned by half a turn, so the angles see twice "
+                        "as many distinct azimuths) or 360 (a full turn, for specimens without "
+                        "that symmetry; the default with --rule vf)")
     p.add_argument("--adaptive", action="store_true", help="adaptive rotations (MATH 7)")
     p.add_argument("--rule", choices=["posterior", "vf"], default="posterior",
                    help="adaptive refinement rule: posterior (where the joint fit expects the "
@@ -113,12 +118,14 @@ def _plan(args: argparse.Namespace) -> Any:
         # Only what was given: the plan's defaults depend on the rule.
         given = {k: v for k, v in (("initial_rotations", args.rotations),
                                    ("min_gain", args.min_gain),
-                                   ("max_rotations", args.max_rotations)) if v is not None}
+                                   ("max_rotations", args.max_rotations),
+                                   ("span_deg", args.span)) if v is not None}
         return AdaptivePlan(specimen=args.specimen or "specimen", exposure=ex, rule=args.rule,
                             threshold=args.threshold, max_samples=args.max_samples,
                             start_deg=args.start_deg, **given)
+    span = {"span_deg": args.span} if args.span is not None else {}
     return UniformPlan(specimen=args.specimen or "specimen", exposure=ex,
-                       rotations=args.rotations or 8, start_deg=args.start_deg)
+                       rotations=args.rotations or 8, start_deg=args.start_deg, **span)
 
 
 def _scan(args: argparse.Namespace) -> int:

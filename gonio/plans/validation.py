@@ -64,17 +64,17 @@ def validate_plan(plan: AnyPlan, rig: RigDescription) -> None:
             f"initial_rotations is {r}; adaptive refinement predicts each angle from its "
             "neighbours and needs at least 3 (the paper uses 8)"
         )
+    if r > MAX_ROTATIONS:
+        raise PlanError(
+            f"{name} is {r}; a job measures at most {MAX_ROTATIONS} stage angles (0.1 degree "
+            f"steps over a full turn). The paper's scans use 8 to 72; use {MAX_ROTATIONS} or fewer"
+        )
     step = plan.first_span_deg() / r
     if step < rig.resolution_deg:
         raise PlanError(
             f"{r} rotations are {step:.4g} deg apart, finer than the stage resolution "
             f"{rig.resolution_deg:g} deg, so several would land on the same position "
             "(duplicate angles); use fewer rotations"
-        )
-    if r > MAX_ROTATIONS:
-        raise PlanError(
-            f"{name} is {r}; a job measures at most {MAX_ROTATIONS} stage angles (0.1 degree "
-            f"steps). The paper's scans use 8 to 72; use {MAX_ROTATIONS} or fewer"
         )
     angles = uniform_angles(plan.start_deg, r, plan.first_span_deg())
     for a in angles:

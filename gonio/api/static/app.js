@@ -254,7 +254,8 @@ function ruleText(id) {
   const rule = p.rule ?? "posterior";
   const setting = rule === "vf" ? `threshold e ${p.threshold ?? 0.1}` : `min gain ${p.min_gain ?? 2.5e-5}`;
   const cap = p.max_rotations == null ? "" : ` up to ${p.max_rotations}`;
-  return ` · adaptive, ${rule} rule, ${setting}, from ${p.initial_rotations} angles${cap}`;
+  const arc = p.span_deg == null ? "" : ` over ${p.span_deg}°`;
+  return ` · adaptive, ${rule} rule, ${setting}, from ${p.initial_rotations} angles${arc}${cap}`;
 }
 
 function scheduleReadings() {
@@ -447,6 +448,7 @@ function readPlan() {
     if (plan.rule === "vf") plan.threshold = Number(f.get("threshold"));
     else plan.min_gain = Number(f.get("min_gain"));
   } else plan.rotations = Number(f.get("rotations"));
+  if (kind !== "calibration") plan.span_deg = Number(f.get("span_deg"));
   if (kind === "calibration") plan.reference_albedo = Number(f.get("reference_albedo"));
   return plan;
 }
@@ -482,9 +484,14 @@ function initForm() {
   const R0 = { posterior: "4", vf: "8" };
   const cap = form.elements.max_rotations;
   const CAP = { posterior: "16", vf: "" };
+  // And its arc: half a turn with posterior, V&F's full turn with vf (for an adaptive plan;
+  // a uniform plan keeps what is chosen).
+  const arc = form.elements.span_deg;
+  const ARC = { posterior: "180", vf: "360" };
   ruleSel.addEventListener("change", () => {
     if (Object.values(R0).includes(r0.value)) r0.value = R0[ruleSel.value];
     if (Object.values(CAP).includes(cap.value)) cap.value = CAP[ruleSel.value];
+    if (kindSel.value === "adaptive") arc.value = ARC[ruleSel.value];
     showKind();
   });
   showKind();

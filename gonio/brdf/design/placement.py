@@ -170,14 +170,53 @@ def place_pairs(
     )
 
 
+#: Dot-product margin within which a device still counts as a possible nearest one. For unit
+#: vectors the angle grows at least as fast as the dot product falls (|d cos(t)/dt| <= 1), and
+#: both the matrix product and ``angular_distance`` are off by a few 1e-16, so a device more
+#: than this below the largest dot product has a larger ``angular_distance`` than the device
+#: with the largest one, whatever the rounding. Candidates get ``angular_distance`` itself, so
+#: the minimum is the very float the full matrix holds.
+_NEAR_MARGIN = 1e-9
+
+
+def _nearest_angles(a: FloatArray, b: FloatArray) -> FloatArray:
+    """(m,) smallest angle (radians) from each of ``a`` (m, 3) to any of ``b`` (k >= 1, 3).
+
+    Bit for bit ``angular_distance(a[:, None], b[None]).min(axis=1)`` for finite unit vectors:
+    the nearest by angle is the one with the largest dot product, so one matrix product finds
+    the few devices within :data:`_NEAR_MARGIN` of it and only those get the exact angle.
+    """
+    dots = a @ b.T
+    rows, cols = np.nonzero(dots >= dots.max(axis=1, keepdims=True) - _NEAR_MARGIN)
+    angles = angular_distance(a[rows], b[cols])
+    # Every row keeps at least its own maximum, and nonzero lists the rows in order.
+    starts = np.flatnonzero(np.r_[True, rows[1:] != rows[:-1]])
+    return np.minimum.reduceat(angles, starts)
+
+
+def _closest_two(dirs: FloatArray) -> tuple[float, int, int]:
+    """Smallest angle (radians) between two of ``dirs`` (m >= 2, 3) and the indices ``(a, b)``.
+
+    Bit for bit the minimum and the first (row-major) argmin of the full
+    ``angular_distance`` matrix with an infinite diagonal, for finite unit vectors (see
+    :func:`_nearest_angles`): every entry that can reach the minimum is among the candidates,
+    which ``np.nonzero`` lists in row-major order.
+    """
+    dots = dirs @ dirs.T
+    np.fill_diagonal(dots, -math.inf)
+    rows, cols = np.nonzero(dots >= dots.max() - _NEAR_MARGIN)
+    angles = angular_distance(dirs[rows], dirs[cols])
+    i = int(np.argmin(angles))
+    return float(angles[i]), int(rows[i]), int(cols[i])
+
+
 def _distances_to(wi: FloatArray, wo: FloatArray, k: int, dev: FloatArray) -> FloatArray:
     """(P,) smallest angle from pair ``k``'s two devices, at each azimuth, to devices ``dev``."""
     if dev.shape[0] == 0:
         return np.full(wi.shape[1], math.inf)
-    return np.minimum(
-        angular_distance(wi[k][:, None, :], dev[None, :, :]).min(axis=1),
-        angular_distance(wo[k][:, None, :], dev[None, :, :]).min(axis=1),
-    )
+    p = wi.shape[1]
+    near = _nearest_angles(np.concatenate([wi[k], wo[k]]), dev)
+    return np.minimum(near[:p], near[p:])
 
 
 def _greedy(
@@ -209,10 +248,8 @@ def _repair(
         return np.concatenate([wi[idx, choice], wo[idx, choice]])
 
     def closest() -> tuple[float, tuple[int, int]]:
-        d = angular_distance(devices()[:, None, :], devices()[None, :, :])
-        np.fill_diagonal(d, math.inf)
-        a, b = np.unravel_index(int(np.argmin(d)), d.shape)
-        return float(d[a, b]), (int(a) % n, int(b) % n)
+        d, a, b = _closest_two(devices())
+        return d, (a % n, b % n)
 
     if n < 2:
         return math.inf

@@ -28,7 +28,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from gonio.brdf.tables import geometry as geo
 
@@ -172,3 +172,18 @@ def below_bound_warning(alpha_fit: float, bound: RoughnessBound) -> str | None:
         f"specular samples, l* = {bound.degree}); the lobe may be sharper than measured: add "
         "pairs near the specular direction or more stage angles"
     )
+
+
+def bound_angles(rotations: int, span_deg: float = 360.0) -> NDArray[np.float64]:
+    """The stage angles :func:`roughness_bound` counts for a scan of ``rotations`` uniform
+    angles over ``span_deg`` (180 or 360 degrees).
+
+    Returns
+    -------
+    (r,) or (2 r,) radians
+        ``k span / r``; over half a turn with each angle's half-turn copy, since a
+        twofold-symmetric specimen reads the same there (the scans' default assumption,
+        :data:`gonio.brdf.reconstruction.samples.DEFAULT_SPAN_DEG`).
+    """
+    angles = np.arange(rotations) * np.deg2rad(span_deg) / rotations
+    return angles if span_deg >= 360.0 else np.concatenate([angles, angles + np.pi])

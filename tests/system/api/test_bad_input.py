@@ -156,6 +156,21 @@ def test_an_adaptive_cap_on_stage_angles_is_checked_with_advice(
     assert _jobs(daemon) == before
 
 
+@pytest.mark.parametrize("plan", [
+    '{"kind": "uniform", "span_deg": 90}', '{"kind": "adaptive", "span_deg": 720}',
+    '{"kind": "uniform", "span_deg": "half"}'], ids=["quarter", "two-turns", "text"])
+@pytest.mark.parametrize("path", ["/api/v1/jobs", "/api/v1/jobs/dry-run"])
+def test_the_arc_of_the_angles_is_checked_with_advice(
+        daemon: Daemon, path: str, plan: str) -> None:
+    before = _jobs(daemon)
+    status, answer = _post(daemon, path, '{"plan": ' + plan + "}")
+    assert status == 422, answer
+    assert isinstance(answer, dict)
+    msgs = " ".join(str(d["msg"]) for d in answer["detail"])
+    assert "span_deg" in msgs and "180 (half a turn" in msgs and "360 (a full turn" in msgs, msgs
+    assert _jobs(daemon) == before
+
+
 @pytest.mark.parametrize(
     "query", ["since=1e30", f"since={10**30}", f"job_id={10**30}", "job_id=1e30", "since=-1",
               "job_id=0"],

@@ -100,14 +100,14 @@ def test_start_a_scan_from_the_page_and_see_the_result(daemon: Daemon, browser: 
     # Only the chosen plan kind's fields show.
     kind = Select(form.find_element(By.NAME, "kind"))
     shown = {
-        "uniform": {"rotations"},
-        "adaptive": {"initial_rotations", "rule", "min_gain", "max_rotations"},
+        "uniform": {"rotations", "span_deg"},
+        "adaptive": {"initial_rotations", "rule", "min_gain", "max_rotations", "span_deg"},
         "calibration": {"rotations", "reference_albedo"},
     }
     for value, visible in shown.items():
         kind.select_by_value(value)
         for name in ("rotations", "initial_rotations", "rule", "min_gain", "threshold",
-                     "max_rotations", "reference_albedo"):
+                     "max_rotations", "reference_albedo", "span_deg"):
             assert form.find_element(By.NAME, name).is_displayed() == (name in visible), \
                 (value, name)
 
@@ -231,10 +231,13 @@ def test_an_adaptive_plan_from_the_page_sets_its_rule(daemon: Daemon, browser: A
     assert not form.find_element(By.NAME, "min_gain").is_displayed()
     assert form.find_element(By.NAME, "initial_rotations").get_attribute("value") == "8"
     assert form.find_element(By.NAME, "max_rotations").get_attribute("value") == ""
+    arc = Select(form.find_element(By.NAME, "span_deg"))
+    assert arc.first_selected_option.get_attribute("value") == "360"  # V&F's full turn
     rule.select_by_value("posterior")
     assert not form.find_element(By.NAME, "threshold").is_displayed()
     assert form.find_element(By.NAME, "initial_rotations").get_attribute("value") == "4"
     assert form.find_element(By.NAME, "max_rotations").get_attribute("value") == "16"
+    assert arc.first_selected_option.get_attribute("value") == "180"
     # The dry run's bound is the cap: 4 angles, then at most 12 more.
     browser.find_element(By.ID, "dry-run").click()
     wait.until(lambda d: d.find_element(By.ID, "dry-run-result").text.startswith("OK"))
@@ -271,7 +274,7 @@ def test_an_adaptive_plan_from_the_page_sets_its_rule(daemon: Daemon, browser: A
     with daemon.client() as c:
         plan = c.get(f"/api/v1/jobs/{job_id}").json()["plan"]
     assert plan["rule"] == "posterior" and plan["min_gain"] == 0.002
-    assert plan["max_rotations"] == 6
+    assert plan["max_rotations"] == 6 and plan["span_deg"] == 180
     assert "threshold" not in plan or plan["threshold"] == 0.1  # the vf setting was not sent
     wait.until(ec.presence_of_element_located(
         (By.CSS_SELECTOR, f'#jobs tr[data-id="{job_id}"][data-state="completed"]')))

@@ -37,13 +37,16 @@ def _angle_deg(a: dict[str, Any], b: dict[str, Any]) -> float:
     return float(np.degrees(np.arccos(np.clip(np.dot(va, vb), -1.0, 1.0))))
 
 
-def _expected_log_rmse(basis: Any, pairs: list[dict[str, Any]], rotations: int) -> float:
-    """The joint fit's expected log_rmse of the returned cells (gonio.brdf.design.posterior)."""
+def _expected_log_rmse(basis: Any, pairs: list[dict[str, Any]], rotations: int,
+                       span_deg: float = 180.0) -> float:
+    """The joint fit's expected log_rmse of the returned cells (gonio.brdf.design.posterior)
+    for ``rotations`` angles over ``span_deg`` (half a turn: the scans' default)."""
     from gonio.brdf.design.posterior import expected_log_rmse, prior_model
 
     deg = np.array([[p["theta_h_deg"], p["theta_d_deg"], p["phi_d_deg"]] for p in pairs])
     th, td, pd = np.deg2rad(deg).T
-    return expected_log_rmse(prior_model(basis, rotations), basis.rows_at(th, td, pd))
+    return expected_log_rmse(prior_model(basis, rotations, span_deg=span_deg),
+                             basis.rows_at(th, td, pd))
 
 
 @pytest.mark.parametrize("objective", ["kappa", "posterior", None])
@@ -195,3 +198,12 @@ def test_presets_list_and_evaluate(daemon: Daemon, basis: Any) -> None:
         r = c.get("/api/v1/design/presets/MA99")
         assert r.status_code == 404 and "MA68" in r.json()["detail"]
         assert c.get("/api/v1/design/presets/MA68", params={"rotations": 0}).status_code == 422
+        # Over a full turn when asked: its own expected error; other arcs are refused.
+        full = c.get("/api/v1/design/presets/MA68", params={"rotations": 8, "span_deg": 360})
+        assert full.status_code == 200, full.text
+        f = full.json()
+        assert f["roughness"]["span_deg"] == 360 and f["roughness"]["rotations"] == 8
+        assert f["expected_log_rmse"] == pytest.approx(
+            _expected_log_rmse(basis, f["pairs"], 8, 360.0), rel=1e-3)
+        bad = c.get("/api/v1/design/presets/MA68", params={"span_deg": 90})
+        assert bad.status_code == 422 and "180 (half a turn) or 360" in bad.text, bad.text

@@ -155,8 +155,9 @@ def test_dry_run_prints_a_short_summary_and_json_on_request(
     text = capsys.readouterr().out
     lines = text.strip().splitlines()
     assert len(lines) <= 8
-    # The example rig: 2 lights x 2 sensors, all pairs; 6 angles 60 deg apart.
-    assert "stage angles: 6 (0, 60, 120, 180, 240, 300 deg)" in text
+    # The example rig: 2 lights x 2 sensors, all pairs; 6 angles over the default half turn,
+    # 180 / 6 = 30 deg apart.
+    assert "stage angles: 6 (0, 30, 60, 90, 120, 150 deg)" in text
     assert "readings: 24 (4 pairs x 6 angles), exposure 0.01 s x 1" in text
     assert "duration: about" in text
     assert main([*argv, "--json"]) == 0

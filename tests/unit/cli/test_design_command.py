@@ -94,6 +94,13 @@ def test_design_preset(basis_file: Path, capsys: pytest.CaptureFixture[str]) -> 
     assert "design: MA98, 19 pairs" in text
     # A preset is compared with optimized designs by the same two numbers.
     assert "objective:" not in text and "expected log_rmse" in text
+    # The scans' default arc, or a full turn when asked; any other arc is refused.
+    assert "at 8 rotations over 180 deg" in text
+    assert main(["design", "--preset", "ma98", "--basis", str(basis_file), "--span", "360"]) == 0
+    assert "at 8 rotations over 360 deg" in capsys.readouterr().out
+    with pytest.raises(SystemExit):
+        main(["design", "--preset", "ma98", "--basis", str(basis_file), "--span", "90"])
+    assert "invalid choice" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize(

@@ -52,6 +52,23 @@ def test_adaptive_scans_take_the_rule_and_its_defaults() -> None:
     assert isinstance(uniform, UniformPlan) and uniform.rotations == 8
 
 
+def test_scans_cover_half_a_turn_unless_told() -> None:
+    uniform, full = _parse(), _parse("--span", "360")
+    assert isinstance(uniform, UniformPlan) and uniform.span_deg == 180.0
+    assert isinstance(full, UniformPlan) and full.span_deg == 360.0
+    adaptive, vf = _parse("--adaptive"), _parse("--adaptive", "--rule", "vf")
+    assert isinstance(adaptive, AdaptivePlan) and adaptive.span_deg == 180.0
+    assert isinstance(vf, AdaptivePlan) and vf.span_deg == 360.0  # V&F's full turn
+    vf_half = _parse("--adaptive", "--rule", "vf", "--span", "180")
+    assert isinstance(vf_half, AdaptivePlan) and vf_half.span_deg == 180.0
+
+
+def test_other_arcs_are_refused(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit):
+        _parse("--span", "90")
+    assert "invalid choice" in capsys.readouterr().err
+
+
 def _args(argv: list[str]) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog="gonio")
     scan_commands.register(parser.add_subparsers(dest="command"))

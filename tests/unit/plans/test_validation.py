@@ -25,7 +25,7 @@ def _limited(desc: RigDescription, lo: float, hi: float) -> RigDescription:
     ("plan", "match"),
     [
         (UniformPlan(rotations=0), "at least one stage angle"),
-        (UniformPlan(rotations=100000), "duplicate angles"),
+        (UniformPlan(rotations=100000), "at most 3600 stage angles"),
         (UniformPlan(pairs=[]), "no pairs"),
         (UniformPlan(pairs=[PairSpec(light="L2", sensor="S2")]), "not one of the rig's pairs"),
         (UniformPlan(pairs=[PairSpec(light="L1", sensor="S1")] * 2), "listed twice"),
@@ -38,6 +38,14 @@ def _limited(desc: RigDescription, lo: float, hi: float) -> RigDescription:
 def test_bad_plans_refused(desc: RigDescription, plan: object, match: str) -> None:
     with pytest.raises(PlanError, match=match):
         validate_plan(plan, desc)  # type: ignore[arg-type]
+
+
+def test_angles_finer_than_the_stage_resolution_refused(desc: RigDescription) -> None:
+    coarse = desc.model_copy(update={"resolution_deg": 0.1})
+    # 3600 angles over half a turn are 0.05 deg apart; over a full turn 0.1 deg fits.
+    with pytest.raises(PlanError, match="duplicate angles"):
+        validate_plan(UniformPlan(rotations=3600), coarse)
+    validate_plan(UniformPlan(rotations=3600, span_deg=360), coarse)
 
 
 def test_angles_beyond_travel_refused(desc: RigDescription) -> None:

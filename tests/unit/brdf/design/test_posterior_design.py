@@ -243,6 +243,29 @@ def _harmonic_error(err: np.ndarray, keep: list[int]) -> np.ndarray:
     return np.fft.irfft(np.where(mask[None, :, None], F, 0.0), n=err.shape[1], axis=1)
 
 
+def _fit_errors(P: np.ndarray, harmonics: tuple[int, ...], Qt: np.ndarray, phr: np.ndarray,
+                eta: float, draws: int, rng: np.random.Generator) -> np.ndarray:
+    """(k, 72, draws) errors of ``solve_joint`` on functions drawn from the prior ``P``
+    (harmonics ``harmonics``, 0 first), read by pairs with rows ``Qt`` at ``phr`` (n, r) with
+    noise variance ``eta``."""
+    k = Qt.shape[1]
+    L = {m: np.linalg.cholesky(P[m]) for m in harmonics}
+    a = {m: L[m] @ rng.standard_normal((k, draws)) for m in harmonics}
+    b = {m: L[m] @ rng.standard_normal((k, draws)) for m in harmonics if m > 0}
+
+    def c_at(ph: np.ndarray) -> np.ndarray:  # (..., k, draws)
+        out = np.broadcast_to(a[0], (*ph.shape, k, draws)).copy()
+        for m in b:
+            out += (np.cos(m * ph)[..., None, None] * a[m]
+                    + np.sin(m * ph)[..., None, None] * b[m])
+        return out
+
+    Y = np.einsum("qk,qjkd->qjd", Qt, c_at(phr)) + np.sqrt(eta) * rng.standard_normal(
+        (*phr.shape, draws))
+    fit = solve_joint(Y, Qt, phr, P, eta)
+    return fit.coef - np.moveaxis(c_at(geo.PH_GRID), 0, 1)
+
+
 @pytest.mark.parametrize(("n", "k"), [(1, 2), (3, 8)])
 def test_aliasing_noise_matches_monte_carlo_of_the_joint_fit(n: int, k: int) -> None:
     """Harmonic 6 folds onto harmonic 2 at r = 8. Draw functions with harmonics 0, 2 and 6,
@@ -259,21 +282,7 @@ def test_aliasing_noise_matches_monte_carlo_of_the_joint_fit(n: int, k: int) -> 
     ph_lab = rng.uniform(0, 2 * np.pi, n)
     alpha = np.arange(r) * 2 * np.pi / r
     phr = ph_lab[:, None] - alpha[None, :]
-    L = {m: np.linalg.cholesky(P[m]) for m in (0, 2, 6)}
-    a = {m: L[m] @ rng.standard_normal((k, draws)) for m in (0, 2, 6)}
-    b = {m: L[m] @ rng.standard_normal((k, draws)) for m in (2, 6)}
-
-    def c_at(ph: np.ndarray) -> np.ndarray:  # (..., k, draws)
-        out = np.broadcast_to(a[0], (*ph.shape, k, draws)).copy()
-        for m in (2, 6):
-            out += (np.cos(m * ph)[..., None, None] * a[m]
-                    + np.sin(m * ph)[..., None, None] * b[m])
-        return out
-
-    Y = np.einsum("qk,qjkd->qjd", Qt, c_at(phr)) + np.sqrt(eta) * rng.standard_normal(
-        (n, r, draws))
-    fit = solve_joint(Y, Qt, phr, P, eta)
-    err = _harmonic_error(fit.coef - np.moveaxis(c_at(geo.PH_GRID), 0, 1), [0, 2])
+    err = _harmonic_error(_fit_errors(P, (0, 2, 6), Qt, phr, eta, draws, rng), [0, 2])
     mc = float(np.mean(np.einsum("ksd,kl,lsd->sd", err, W, err)))
     noise = np.array([eta / r, 2 * eta / r])
     aliased = PriorModel(np.stack([P[0], P[2]]), np.array([0, 2]), noise, W,
@@ -323,21 +332,7 @@ def test_half_turn_noise_model_matches_monte_carlo_of_the_joint_fit() -> None:
     ph_lab = rng.uniform(0, 2 * np.pi, n)
     alpha = np.arange(r) * np.pi / r
     phr = ph_lab[:, None] - alpha[None, :]
-    L = {m: np.linalg.cholesky(P[m]) for m in (0, 2, 6)}
-    a = {m: L[m] @ rng.standard_normal((k, draws)) for m in (0, 2, 6)}
-    c = {m: L[m] @ rng.standard_normal((k, draws)) for m in (2, 6)}
-
-    def c_at(ph: np.ndarray) -> np.ndarray:  # (..., k, draws)
-        out = np.broadcast_to(a[0], (*ph.shape, k, draws)).copy()
-        for m in (2, 6):
-            out += (np.cos(m * ph)[..., None, None] * a[m]
-                    + np.sin(m * ph)[..., None, None] * c[m])
-        return out
-
-    Y = np.einsum("qk,qjkd->qjd", Qt, c_at(phr)) + np.sqrt(eta) * rng.standard_normal(
-        (n, r, draws))
-    fit = solve_joint(Y, Qt, phr, P, eta)
-    err = fit.coef - np.moveaxis(c_at(geo.PH_GRID), 0, 1)
+    err = _fit_errors(P, (0, 2, 6), Qt, phr, eta, draws, rng)
     mc = float(np.mean(np.einsum("ksd,kl,lsd->sd", err, W, err)))
     same = PriorModel(model.P, model.harmonics, model.noise, W)
     assert expected_error(same, Qt) == pytest.approx(mc, rel=0.05)

@@ -10,11 +10,18 @@ import pytest
 from gonio.brdf.design.roughness import (
     RoughnessError,
     below_bound_warning,
+    bound_angles,
     effective_samples,
     resolvable_degree,
     roughness_bound,
     roughness_threshold,
 )
+
+
+def test_bound_angles_count_a_half_turn_with_its_copies() -> None:
+    np.testing.assert_allclose(np.rad2deg(bound_angles(4, 360.0)), [0, 90, 180, 270])
+    np.testing.assert_allclose(np.rad2deg(bound_angles(4, 180.0)),
+                               [0, 45, 90, 135, 180, 225, 270, 315])
 
 
 def test_degree_is_below_sqrt_n_and_fits_the_sh_unknowns() -> None:
