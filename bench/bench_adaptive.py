@@ -22,7 +22,8 @@ Sets
   basis that leaves it out, and 6 mitsuba anisotropic specimens.
 
 Every scan: pairs designed for n = 10 on the material's own basis (``--design``, default
-``design_pairs``' default objective), start at ``r0``
+``design_pairs``' default objective; for 8 angles over ``bench_unseen``'s design arc, half a
+turn, whatever ``--span``), start at ``r0``
 uniform stage angles over ``--span`` degrees (each of ``--starts``; 180, half a turn, the
 plans' default, or 360), refine by :func:`next_angles` within that arc (rounds until it
 plans nothing; at most one new angle per gap per round, as the engine runs it) up to
