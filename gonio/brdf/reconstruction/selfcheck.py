@@ -31,8 +31,8 @@ distinct azimuths per pair, the arc itself) lowered it by more than its noise. T
 largest witnesses of the calibration scans: a power law fitted up to there says nothing beyond
 (one measured material's leave-one-pair-out error reaches 66.5 with a condition-number design,
 nearly four times the calibration's largest, 17.9). Within x2 of the truth on 76 % of the 440
-validation scans and on 76 % of the 121 with the default half-turn design (a constant guess: 59
-% and 68 %); it under-estimates measured materials read with the presets (x0.37-0.39 typically)
+validation scans and on 76 % of the 121 with the default half-turn design (a constant guess:
+59 % and 68 %); it under-estimates measured materials read with the presets (x0.37-0.39 typically)
 and over-estimates the anisotropic specimens read over half a turn (x1.43 typically with the
 default design).
 """
