@@ -10,9 +10,10 @@ cache>/bench-unseen/calibrate-<fingerprint>``, where the fingerprint is a digest
 current joint fit and the default design produce on a fixed probe
 (``bench_unseen.fit_fingerprint``) and of the default and scanned arcs (:func:`fit_fingerprint`):
 a re-run with both unchanged only refits (seconds); after a change of either every design
-and scan is redone (roughly 30 min on the loaded 2-core machine; two processes with
-``--only`` over halves of the materials share the cache). The condition-number designs are
-cached per basis and fingerprint, as ``bench_unseen.py`` caches them. ``--rows FILE`` also
+and scan is redone (11 min wall as two processes with ``--only`` over halves of the
+materials, which share the cache, on the 2-core machine; 30 min under heavier load). The
+condition-number designs are cached per basis and fingerprint, as ``bench_unseen.py`` caches
+them. ``--rows FILE`` also
 writes (or, if present, reads: then nothing is checked against the fingerprint) all rows as
 one JSON file; ``--only NAME...`` scans a subsample to debug.
 
