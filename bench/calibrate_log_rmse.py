@@ -20,7 +20,9 @@ one JSON file; ``--only NAME...`` scans a subsample to debug.
 Materials and readings are those of ``bench/bench_unseen.py`` (measured materials each with
 a basis that leaves it out, mitsuba anisotropic specimens; 1 % noise), plus the held-out
 *training* panel of :mod:`gonio.brdf.design.heldout` (one synthetic material per library family,
-held out of the panel basis). Scans (:data:`LAYOUTS`, arcs :data:`SPANS`): the product's default
+held out of the panel basis), plus ``bench_prior.py``'s fresh synthetic materials
+(:func:`fresh_materials`: library recipes drawn with ``seed=7``, in no basis, read on the
+default basis and its designs; 18 anisotropic, 6 isotropic). Scans (:data:`LAYOUTS`, arcs :data:`SPANS`): the product's default
 layouts, pairs designed by the joint fit's expected error (``objective="posterior"``) for a
 scan over half a turn (``span_deg=180``, the default arc) for n = 5, 10, 20 at r = 8 and read
 over half a turn at r = 4, 8, 16, and n = 10 designed for r = 4 and 16 over half a turn; the
@@ -31,8 +33,8 @@ a turn and n = 10 over a full turn, each at r = 4, 8, 16. The arc is part of eac
 (``span_deg``) and of its cache key. ``--fit-on`` and ``--fit-arcs`` say which designs' and
 arcs' calibration scans the models are fitted on.
 
-Split: the **calibration** set is the synthetic panel and the measured materials at even
-positions; the **validation** set is the measured materials at odd positions and all six
+Split: the **calibration** set is the synthetic panel, the fresh synthetic materials and the
+measured materials at even positions; the **validation** set is the measured materials at odd positions and all six
 anisotropic mitsuba specimens (an independent renderer: never calibrated on). Every
 candidate model is fitted by least squares in ``ln(log_rmse)`` on the calibration set and
 scored by
@@ -227,6 +229,40 @@ def layouts(b: Basis, family: str, cache: Path) -> list[Layout]:
     return out
 
 
+#: Kinds of the fresh synthetic materials (:func:`fresh_materials`): calibration only.
+FRESH_KINDS: tuple[str, ...] = ("fresh-aniso", "fresh-iso")
+
+
+def fresh_materials() -> list[bu.Material]:
+    """``bench_prior.py``'s fresh materials, for calibration: in no basis, read on the default.
+
+    The library's own recipes drawn with another seed (``library_specs(seed=7)``), as many per
+    family as ``bench_prior.FRESH`` (8 brushed metals, 6 fabrics, 4 metals: ``fresh-aniso``;
+    6 isotropic ones: ``fresh-iso``), named ``f7-<name>``. Without them the calibration set
+    holds one clearly anisotropic material (the panel's brushed metal), so its
+    leave-one-material-out CV cannot see how anisotropic specimens behave.
+    """
+    from bench_prior import FRESH
+
+    from gonio.brdf.materials import library
+    from gonio.brdf.models import analytic as bm
+
+    out: list[bu.Material] = []
+    count: dict[str, int] = {}
+    for s in library.library_specs(seed=7):
+        if count.get(s.family, 0) >= FRESH[s.family]:
+            continue
+        count[s.family] = count.get(s.family, 0) + 1
+        vals = bu._cached(f"fresh7-{s.name}", lambda s=s: np.asarray(
+            bm.tabulate_valid(s.model), dtype=np.float32))
+        if vals.shape[1] == 1:  # isotropic: one slice broadcast to every ph
+            vals = np.repeat(vals, geo.N_PH, axis=1)
+        aniso = s.family in ("brushed-metal", "fabric", "metal")
+        kind = FRESH_KINDS[0] if aniso else FRESH_KINDS[1]
+        out.append(bu.Material(f"f7-{s.name}", kind, bu._full_table(vals, s.name), s.model, ()))
+    return out
+
+
 def fit_fingerprint() -> str:
     """``bench_unseen.fit_fingerprint`` combined with the arcs this script scans.
 
@@ -250,6 +286,8 @@ def scans(families: tuple[str, ...], only: tuple[str, ...] = ()) -> list[dict[st
     mats = [(bu.Material(t.name, "panel", t, t, ()), pb) for t in synth]
     mats += [(m, default_basis(exclude=m.exclude)) for m in bu.measured_materials()]
     mats += [(m, default_basis()) for m in bu.aniso_materials()]
+    # Appended last, so the seeds (100 + position) and cache keys of the others are unchanged.
+    mats += [(m, default_basis()) for m in fresh_materials()]
     pos: dict[str, int] = {}
     for kind in ("panel", "measured", "aniso"):
         pos.update({m.name: i for i, m in enumerate(m for m, _ in mats if m.kind == kind)})
@@ -274,7 +312,7 @@ def scans(families: tuple[str, ...], only: tuple[str, ...] = ()) -> list[dict[st
                 row: dict[str, Any] = {
                     "material": m.name, "kind": m.kind, "design": design, "geom": gname,
                     "span_deg": span,
-                    "cal": int(m.kind == "panel"
+                    "cal": int(m.kind in ("panel", *FRESH_KINDS)
                                or (m.kind == "measured" and pos[m.name] % 2 == 0)),
                 }
                 if path.is_file():
@@ -439,7 +477,7 @@ def report(rows: list[dict[str, Any]], fit_rows: list[dict[str, Any]]) -> None:
     # The product's default layouts: expected-error designs over the default arc.
     post = (design == "posterior") & half
     default = (np.array([r["geom"] == "posterior n=10" and r["r"] == 8 for r in rows])
-               & half & (kind != "panel"))
+               & half & np.isin(kind, ("measured", "aniso")))
     print(f"{cal.sum()} calibration scans of {len(set(mat[cal]))} materials, "
           f"{calf.sum()} fitted on (designs {sorted(set(design[calf]))}); "
           f"{val.sum()} validation scans of {len(set(mat[val]))} materials "
@@ -544,7 +582,7 @@ def misses(rows: list[dict[str, Any]]) -> None:
           "predicted_log_rmse (ratio) |")
     print("|---" * 7 + "|")
     for r in rows:
-        if (r["geom"] == "posterior n=10" and r["r"] == 8 and r["kind"] != "panel"
+        if (r["geom"] == "posterior n=10" and r["r"] == 8 and r["kind"] in ("measured", "aniso")
                 and r.get("span_deg") == DEFAULT_SPAN_DEG):
             print(f"| {r['material']} | {'calibration' if r['cal'] else 'validation'} | "
                   f"{r['truth']:.4f} | {r['expected']:.4f} | {r['mahalanobis']:.2e} | "
