@@ -17,33 +17,36 @@ them. ``--rows FILE`` also
 writes (or, if present, reads: then nothing is checked against the fingerprint) all rows as
 one JSON file; ``--only NAME...`` scans a subsample to debug.
 
-Materials and readings are those of ``bench/bench_unseen.py`` (measured materials each with
-a basis that leaves it out, mitsuba anisotropic specimens; 1 % noise), plus the held-out
-*training* panel of :mod:`gonio.brdf.design.heldout` (one synthetic material per library family,
-held out of the panel basis), plus ``bench_prior.py``'s fresh synthetic materials
+Materials and readings are those of ``bench/bench_unseen.py`` (measured materials each with a
+basis that leaves it out, mitsuba anisotropic specimens; 1 % noise), plus the held-out
+*training* panel of :mod:`gonio.brdf.design.heldout` (one synthetic material per library
+family, held out of the panel basis), plus ``bench_prior.py``'s fresh synthetic materials
 (:func:`fresh_materials`: library recipes drawn with ``seed=7``, in no basis, read on the
-default basis and its designs; 18 anisotropic, 6 isotropic). Scans (:data:`LAYOUTS`, arcs :data:`SPANS`): the product's default
-layouts, pairs designed by the joint fit's expected error (``objective="posterior"``) for a
-scan over half a turn (``span_deg=180``, the default arc) for n = 5, 10, 20 at r = 8 and read
-over half a turn at r = 4, 8, 16, and n = 10 designed for r = 4 and 16 over half a turn; the
-same n = 10 layouts designed for and read over a full turn (``span_deg=360``, a user's choice);
-the MA68 and MA98 presets at r = 4, 8, 16 over half and over a full turn; V&F's
-condition-number designs (``objective="kappa"``, the older default) for n = 5, 10, 20 over half
-a turn and n = 10 over a full turn, each at r = 4, 8, 16. The arc is part of each row
-(``span_deg``) and of its cache key. ``--fit-on`` and ``--fit-arcs`` say which designs' and
-arcs' calibration scans the models are fitted on.
+default basis and its designs; 18 anisotropic, 6 isotropic). Scans (:data:`LAYOUTS`, arcs
+:data:`SPANS`): the product's default layouts, pairs designed by the joint fit's expected error
+(``objective="posterior"``) for a scan over half a turn (``span_deg=180``, the default arc) for
+n = 5, 10, 20 at r = 8 and read over half a turn at r = 4, 8, 16, and n = 10 designed for r = 4
+and 16 over half a turn; the same n = 10 layouts designed for and read over a full turn
+(``span_deg=360``, a user's choice); the MA68 and MA98 presets at r = 4, 8, 16 over half and
+over a full turn; V&F's condition-number designs (``objective="kappa"``, the older default) for
+n = 5, 10, 20 over half a turn and n = 10 over a full turn, each at r = 4, 8, 16. The arc is
+part of each row (``span_deg``) and of its cache key. ``--fit-on`` and ``--fit-arcs`` say which
+designs' and arcs' calibration scans the models are fitted on.
 
 Split: the **calibration** set is the synthetic panel, the fresh synthetic materials and the
-measured materials at even positions; the **validation** set is the measured materials at odd positions and all six
-anisotropic mitsuba specimens (an independent renderer: never calibrated on). Every
-candidate model is fitted by least squares in ``ln(log_rmse)`` on the calibration set and
-scored by
+measured materials at even positions; the **validation** set is the measured materials at odd
+positions and all six anisotropic mitsuba specimens (an independent renderer: never calibrated
+on). Every candidate model is fitted by least squares in ``ln(log_rmse)`` on the calibration
+set and scored by
 
 * its calibration rms (ln units);
 * a leave-one-material-out cross-validation *within* the calibration set (rms and share
   within x2): the honest way to choose features, since the validation set is never used to
   choose;
 * the same CV on the calibration scans with the default (expected-error) design;
+* the same CV on the fresh synthetic materials alone, beside the module's (and the previous
+  module's) own residual there (:func:`fresh_check`): a module fitted without them is out of
+  sample on them, so this says whether a refit is preferred on the calibration side;
 * the share of validation scans whose truth lies within x2 of the estimate: overall; with the
   default design over half a turn (all, measured, anisotropic); with the presets; with the
   kappa designs; over a full turn (every design); and the count at the default scan
@@ -535,6 +538,8 @@ def report(rows: list[dict[str, Any]], fit_rows: list[dict[str, Any]]) -> None:
     line("previous module (full-turn layouts)", " + ".join(LOG_RMSE_FEATURES),
          f"{a}, {b}, {c}, {d} (caps {m_cap}, {v_cap})", previous - y, np.zeros(0))
     paired_cv(cvs, mat, cal, calf)
+    fresh_check(cvs, {"module": np.log([float(r["predicted"]) for r in rows]) - y,
+                      "previous module": previous - y}, kind, post, calf)
 
 
 def paired_cv(cvs: dict[str, np.ndarray], mat: np.ndarray, cal: np.ndarray,
@@ -555,6 +560,29 @@ def paired_cv(cvs: dict[str, np.ndarray], mat: np.ndarray, cal: np.ndarray,
         d = np.array([np.mean(res[calf & (mat == m)] ** 2) - np.mean(ref[calf & (mat == m)] ** 2)
                       for m in mats])
         print(f"  {key}: {d.mean():+.4f} +- {d.std(ddof=1) / np.sqrt(d.size):.4f}")
+
+
+def fresh_check(cvs: dict[str, np.ndarray], fixed: dict[str, np.ndarray], kind: np.ndarray,
+                post: np.ndarray, calf: np.ndarray) -> None:
+    """Residuals on the fresh synthetic materials: the candidates' CV, the fixed models' own.
+
+    A fixed model not fitted on the fresh materials (the module before they joined the
+    calibration set) is out of sample there, as each candidate's leave-one-material-out CV
+    is, so the two rms (ln units) and shares within x2 compare like with like: the
+    calibration-side test of whether a refit is preferred.
+    """
+    fresh = calf & np.isin(kind, FRESH_KINDS)
+    if not fresh.any():
+        return
+    print("\nOn the fresh calibration materials (candidates: leave-one-material-out CV; fixed "
+          "models: their own residual), rms (ln units) and within x2, all designs | default "
+          "design over half a turn | anisotropic | isotropic:")
+    groups = (fresh, fresh & post, fresh & (kind == FRESH_KINDS[0]),
+              fresh & (kind == FRESH_KINDS[1]))
+    for key, res in [*cvs.items(), *fixed.items()]:
+        cells = [f"{np.sqrt(np.mean(res[g] ** 2)):.3f}, {np.mean(np.abs(res[g]) <= LN2):.0%}"
+                 for g in groups]
+        print(f"  {key}: {' | '.join(cells)}")
 
 
 def misses(rows: list[dict[str, Any]]) -> None:
