@@ -540,6 +540,7 @@ def report(rows: list[dict[str, Any]], fit_rows: list[dict[str, Any]]) -> None:
     paired_cv(cvs, mat, cal, calf)
     fresh_check(cvs, {"module": np.log([float(r["predicted"]) for r in rows]) - y,
                       "previous module": previous - y}, kind, post, calf)
+    with_without_fresh(F, y, kind, mat, cal, calf, post)
 
 
 def paired_cv(cvs: dict[str, np.ndarray], mat: np.ndarray, cal: np.ndarray,
@@ -583,6 +584,53 @@ def fresh_check(cvs: dict[str, np.ndarray], fixed: dict[str, np.ndarray], kind: 
         cells = [f"{np.sqrt(np.mean(res[g] ** 2)):.3f}, {np.mean(np.abs(res[g]) <= LN2):.0%}"
                  for g in groups]
         print(f"  {key}: {' | '.join(cells)}")
+
+
+def with_without_fresh(F: dict[str, np.ndarray], y: np.ndarray, kind: np.ndarray,
+                       mat: np.ndarray, cal: np.ndarray, calf: np.ndarray,
+                       post: np.ndarray) -> None:
+    """The module's form fitted with and without the fresh materials, per calibration kind.
+
+    Both by leave-one-material-out CV over every calibration material (a fresh material is
+    out of sample for the fit without them either way), so the two compare like with like:
+    rms (ln units) and share within x2 of the CV residuals per kind, over every design and
+    over the default design on half a turn; then the per-material paired difference (mean
+    squared CV residual, with minus without; negative: the fit with them is better), mean +-
+    standard error over the materials of each group.
+    """
+    if not np.isin(kind[calf], FRESH_KINDS).any():
+        return
+    feats = LOG_RMSE_FEATURES[1:]
+    model, k = two_term(feats)
+    fresh = np.isin(kind, FRESH_KINDS)
+    res = {}
+    for label, train in (("without", calf & ~fresh), ("with", calf)):
+        r = np.full(y.shape, np.nan)
+        for m in np.unique(mat[cal]):
+            te, tr = cal & (mat == m), train & (mat != m)
+            Ft = cap(F, tr, feats)
+            r[te] = model(fit(model, k, Ft, y, tr, False), Ft)[te] - y[te]
+        res[label] = r
+    print(f"\nThe module's form ({' + '.join(feats)}, capped) fitted without / with the fresh "
+          "materials, leave-one-material-out CV: rms, within x2 (all designs; default design "
+          "over half a turn) | paired per-material difference with - without:")
+    groups = {"all calibration": calf, "panel": calf & (kind == "panel"),
+              "measured": calf & (kind == "measured"),
+              "fresh-aniso": calf & (kind == FRESH_KINDS[0]),
+              "fresh-iso": calf & (kind == FRESH_KINDS[1]), "panel + measured": calf & ~fresh}
+    for g, sel in groups.items():
+        cells = []
+        for label in ("without", "with"):
+            r = res[label]
+            cells.append("; ".join(f"{np.sqrt(np.mean(r[t] ** 2)):.3f}, "
+                                   f"{np.mean(np.abs(r[t]) <= LN2):.0%}"
+                                   for t in (sel, sel & post)))
+        mats = np.unique(mat[sel])
+        d = np.array([np.mean(res["with"][sel & (mat == m)] ** 2)
+                      - np.mean(res["without"][sel & (mat == m)] ** 2) for m in mats])
+        se = d.std(ddof=1) / np.sqrt(d.size) if d.size > 1 else float("nan")
+        print(f"  {g} ({mats.size}): without {cells[0]} | with {cells[1]} | "
+              f"{d.mean():+.4f} +- {se:.4f}")
 
 
 def misses(rows: list[dict[str, Any]]) -> None:
