@@ -33,6 +33,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from gonio.brdf.reconstruction.samples import DEFAULT_SPAN_DEG, SPANS_DEG
 from gonio.cli import UsageError
 
 FloatArray = NDArray[np.float64]
@@ -407,7 +408,8 @@ def register(subparsers: Any) -> None:
     geom.add_argument("--design-preset", help="industrial geometry: MA68, MA98, BYK-mac, MultiFX10")
     s.add_argument("--rotations", "-r", type=int, required=True, help="stage angles, evenly spaced")
     s.add_argument("--start", type=float, default=0.0, help="first stage angle, degrees")
-    s.add_argument("--span", type=float, choices=(180.0, 360.0), default=180.0, metavar="DEG",
+    s.add_argument("--span", type=float, choices=SPANS_DEG, default=DEFAULT_SPAN_DEG,
+                   metavar="DEG",
                    help="arc of the stage angles: 180 (half a turn, the scans' default) or 360")
     s.add_argument("--noise", type=float, default=0.01, help="relative noise (0.01 = 1 %%)")
     s.add_argument("--abs-noise", type=float, default=0.0, help="additive noise, 1/sr")
@@ -437,7 +439,8 @@ def register(subparsers: Any) -> None:
     d.add_argument("--material", default=DEMO_MATERIAL, help=f"default {DEMO_MATERIAL}")
     d.add_argument("--pairs", "-n", type=int, default=20)
     d.add_argument("--rotations", "-r", type=int, default=12)
-    d.add_argument("--span", type=float, choices=(180.0, 360.0), default=180.0, metavar="DEG",
+    d.add_argument("--span", type=float, choices=SPANS_DEG, default=DEFAULT_SPAN_DEG,
+                   metavar="DEG",
                    help="arc of the stage angles: 180 (half a turn, the scans' default) or 360")
     d.add_argument("--components", "-k", type=int, default=DEFAULT_COMPONENTS)
     d.add_argument("--noise", type=float, default=0.01, help="relative noise (0.01 = 1 %%)")

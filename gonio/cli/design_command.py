@@ -37,6 +37,7 @@ from gonio.brdf.design.pairs import (
 from gonio.brdf.design.presets import get_preset, preset_names
 from gonio.brdf.design.product import design_product_rig
 from gonio.brdf.design.roughness import RoughnessBound, bound_angles, roughness_bound
+from gonio.brdf.reconstruction.samples import DEFAULT_SPAN_DEG, SPANS_DEG
 from gonio.cli import UsageError
 
 
@@ -80,7 +81,7 @@ def register(subparsers: Any) -> None:
     p.add_argument("--rotations", type=int, default=8, metavar="R",
                    help="uniform stage angles of the scan: for the roughness bound, the "
                         "expected log_rmse and --objective posterior (default 8)")
-    p.add_argument("--span", type=float, choices=(180.0, 360.0), default=180.0, metavar="DEG",
+    p.add_argument("--span", type=float, choices=SPANS_DEG, default=DEFAULT_SPAN_DEG, metavar="DEG",
                    help="arc those angles cover: 180 (half a turn, the scans' default) or 360 "
                         "(default 180)")
     p.add_argument("--starts", type=int, default=10, help="random starts (default 10)")
@@ -242,7 +243,7 @@ def explain_condition(design: PairDesign, rotations: int,
 
 def print_design(
     design: PairDesign, bound: RoughnessBound, rotations: int, out: TextIO | None = None,
-    span_deg: float = 180.0,
+    span_deg: float = DEFAULT_SPAN_DEG,
 ) -> None:
     """Human-readable table of the design, its condition number and roughness bound."""
     out = sys.stdout if out is None else out

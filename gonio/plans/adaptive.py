@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
-from gonio.brdf.reconstruction.periodic import arc_angle, periodic_pchip_rows
+from gonio.brdf.reconstruction.periodic import arc_angle, arc_positions, periodic_pchip_rows
 
 
 def adaptive_refinement(
@@ -49,13 +49,9 @@ def adaptive_refinement(
     list of float
         New angles in [0, 360), sorted, none already measured (modulo ``period_deg``).
     """
-    if not 0.0 < period_deg <= 360.0:
-        raise ValueError(f"period_deg must be in (0, 360] degrees, got {period_deg:g}")
     # Positions along the arc; angles a period apart are the same reading of the specimen,
     # so a repeat (up to float error) keeps its first reading only.
-    pos_all = np.mod(np.round(np.mod(np.asarray(angles_deg, float) - start_deg, period_deg), 9),
-                     period_deg)
-    a, first = np.unique(pos_all, return_index=True)
+    a, first = arc_positions(angles_deg, period_deg, start_deg)
     r = a.size
     if r < 3:
         return []

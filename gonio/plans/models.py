@@ -35,6 +35,9 @@ from typing import Annotated, Any, ClassVar, Literal
 
 from pydantic import AfterValidator, BaseModel, BeforeValidator, Field, model_validator
 
+# The arcs a plan may cover and its default (half a turn) are the numerical core's: one
+# definition, which the design tools and the API share.
+from gonio.brdf.reconstruction.samples import DEFAULT_SPAN_DEG, SPANS_DEG
 from gonio.fields import FINITE, Count, Text
 from gonio.hal import PairSpec
 
@@ -105,11 +108,6 @@ def _check_start(value: float) -> float:
     return value
 
 
-DEFAULT_SPAN_DEG = 180.0
-"""Default arc of a plan's uniform angles: ``gonio.brdf.reconstruction.samples.DEFAULT_SPAN_DEG``
-(a test keeps the two equal), half a turn."""
-SPANS_DEG = (180.0, 360.0)
-"""The arcs a plan's uniform angles may cover (degrees)."""
 
 
 def _check_span(value: object) -> object:

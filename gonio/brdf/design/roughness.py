@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from gonio.brdf.reconstruction.samples import uniform_stage_angles
 from gonio.brdf.tables import geometry as geo
 
 DEFAULT_ATTENUATION = 0.5
@@ -185,5 +186,5 @@ def bound_angles(rotations: int, span_deg: float = 360.0) -> NDArray[np.float64]
         twofold-symmetric specimen reads the same there (the scans' default assumption,
         :data:`gonio.brdf.reconstruction.samples.DEFAULT_SPAN_DEG`).
     """
-    angles = np.arange(rotations) * np.deg2rad(span_deg) / rotations
+    angles = uniform_stage_angles(rotations, span=np.deg2rad(span_deg))
     return angles if span_deg >= 360.0 else np.concatenate([angles, angles + np.pi])

@@ -50,13 +50,12 @@ def periodic_pchip_rows(
     return np.asarray(((c[0] * dx + c[1]) * dx + c[2]) * dx + c[3])
 
 
-def arc_gaps(angles_deg: ArrayLike, period_deg: float = 360.0,
-             start_deg: float = 0.0) -> tuple[FloatArray, FloatArray]:
-    """Measured stage angles as distinct points of one period, and the gap after each.
+def arc_positions(angles_deg: ArrayLike, period_deg: float = 360.0,
+                  start_deg: float = 0.0) -> tuple[FloatArray, NDArray[np.intp]]:
+    """Measured stage angles as distinct points of one period of the plan's arc.
 
     A scan over half a turn (``period_deg = 180``) of a twofold-symmetric specimen reads the
-    same at ``a`` and ``a + 180``, so its gaps are those of the angles taken modulo 180: the
-    last angle's gap runs to the first one plus half a turn, not round the full circle.
+    same at ``a`` and ``a + 180``: both are one position.
 
     Parameters
     ----------
@@ -71,16 +70,39 @@ def arc_gaps(angles_deg: ArrayLike, period_deg: float = 360.0,
     -------
     positions : (k,) float64
         Distinct positions ``(a - start_deg) mod period_deg``, sorted, in [0, period_deg),
-        degrees (angles a period apart count once).
-    gaps : (k,) float64
-        Gap from each position to the next (the last to the first plus a period), degrees;
-        a single position has a gap of one period.
+        degrees (angles a period apart, up to float error, count once).
+    first : (k,) intp
+        Index in ``angles_deg`` of the first angle at each position.
     """
     if not 0.0 < period_deg <= 360.0:
         raise ValueError(f"period_deg must be in (0, 360] degrees, got {period_deg:g}")
     a = np.asarray(angles_deg, dtype=float).ravel()
     # Rounded so that angles a period apart, up to float error, are one position.
-    pos = np.unique(np.mod(np.round(np.mod(a - start_deg, period_deg), 9), period_deg))
+    pos, first = np.unique(np.mod(np.round(np.mod(a - start_deg, period_deg), 9), period_deg),
+                           return_index=True)
+    return pos, first
+
+
+def arc_gaps(angles_deg: ArrayLike, period_deg: float = 360.0,
+             start_deg: float = 0.0) -> tuple[FloatArray, FloatArray]:
+    """Measured stage angles as distinct points of one period, and the gap after each.
+
+    Over half a turn the last angle's gap runs to the first one plus half a turn, not round
+    the full circle (:func:`arc_positions`).
+
+    Parameters
+    ----------
+    angles_deg, period_deg, start_deg : as for :func:`arc_positions`
+
+    Returns
+    -------
+    positions : (k,) float64
+        :func:`arc_positions`' positions, degrees.
+    gaps : (k,) float64
+        Gap from each position to the next (the last to the first plus a period), degrees;
+        a single position has a gap of one period.
+    """
+    pos, _ = arc_positions(angles_deg, period_deg, start_deg)
     if pos.size == 0:
         return pos, pos.copy()
     return pos, np.diff(np.concatenate([pos, [pos[0] + period_deg]]))

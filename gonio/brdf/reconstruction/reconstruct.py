@@ -64,7 +64,7 @@ from gonio.brdf.reconstruction.basis import (
     remap,
     row_weight,
 )
-from gonio.brdf.reconstruction.periodic import periodic_pchip_rows
+from gonio.brdf.reconstruction.periodic import arc_gaps, periodic_pchip_rows
 from gonio.brdf.tables import geometry as geo
 from gonio.brdf.tables.table import VALID_MASK, BRDFTable
 
@@ -273,11 +273,11 @@ def half_turn_scan(stage_angles: ArrayLike) -> bool:
         True when every angle lies within one half turn, e.g. ``k pi / r``: interpolation along
         the rotation then has to use the half-turn period, or it would bridge the unseen half.
     """
-    a = np.sort(np.mod(np.asarray(stage_angles, dtype=float), 2 * np.pi))
+    a = np.asarray(stage_angles, dtype=float)
     if a.size < 2:
         return False
-    gaps = np.diff(np.concatenate([a, [a[0] + 2 * np.pi]]))
-    return bool(gaps.max() > np.pi + 1e-9)
+    _, gaps = arc_gaps(np.rad2deg(a))
+    return bool(gaps.max() > 180.0 + 1e-7)
 
 
 def slices_at_stage_angles(
