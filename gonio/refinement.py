@@ -2,7 +2,9 @@
 
 The engine knows devices and steps, not the basis; :class:`PosteriorRefiner` is what the
 worker hands it (``ScanEngine(refiner=...)``) so that ``AdaptivePlan(rule="posterior")`` can
-ask :func:`gonio.brdf.reconstruction.posterior.next_angles` where the next angles go. It
+ask :func:`gonio.brdf.reconstruction.posterior.next_angles` where the next angles go, with the
+drop of the self-estimated error as its measure (the job's readings are fitted as the job would
+finish, and the fit's leave-one-pair-out error passed as ``cv_sample_error``). It
 turns the pairs' lab directions into slice cells once, applies the rig's calibration to the
 ``raw - dark`` counts (the posterior weighs errors at BRDF values in 1/sr), and takes the basis
 from its provider on first use (the worker loads it before the job's first reading and hands
@@ -64,6 +66,7 @@ class PosteriorRefiner:
             within the span (``next_angles``' ``arc_start_deg``, ``period_deg``)
         """
         from gonio.brdf.reconstruction.posterior import next_angles
+        from gonio.brdf.reconstruction.reconstruct import reconstruct
 
         if self._basis is None:
             self._basis = self._basis_provider()
@@ -71,8 +74,15 @@ class PosteriorRefiner:
         factors = np.stack([self.calibration.factor(p.light, p.sensor, v.shape[2])
                             for p in self.pairs])
         v = np.maximum(v * factors[:, None, :], 0.0)  # small negative noise after the dark
+        # The fit the job would finish with now: its table is the posterior's mean and its
+        # leave-one-pair-out error tells the rule how much of the error the basis cannot
+        # represent (more angles do not lower that part; docs/science.md 7.3).
+        rec = reconstruct(self._basis, self.cells, self.ph_lab,
+                          np.deg2rad(np.asarray(angles_deg, dtype=float)), v)
+        cv = rec.cv_sample_error if np.isfinite(rec.cv_sample_error) else None
         self.last = next_angles(self._basis, self.cells, self.ph_lab, list(angles_deg), v,
                                 threshold=min_gain, min_step_deg=min_step_deg,
                                 budget_angles=budget_angles, per_gap=1,
-                                period_deg=arc_deg[1], arc_start_deg=arc_deg[0])
+                                table=rec.table.values, period_deg=arc_deg[1],
+                                arc_start_deg=arc_deg[0], cv_sample_error=cv)
         return list(self.last.angles_deg)

@@ -57,8 +57,8 @@ def register(subparsers: Any) -> None:
                    help="adaptive refinement rule: posterior (where the joint fit expects the "
                         "error to fall most) or vf (V&F's PCHIP midpoints)")
     p.add_argument("--min-gain", type=positive_float, default=None,
-                   help="posterior rule: least expected log_rmse drop a new stage angle must "
-                        "buy (default 0.000025)")
+                   help="posterior rule: least drop of the self-estimated log_rmse a new "
+                        "stage angle must buy (default 0.000032)")
     p.add_argument("--max-rotations", type=positive_int, default=None,
                    help="with --adaptive: most stage angles in all, the first round's included "
                         "(default 16 with the posterior rule, no cap with --rule vf)")

@@ -132,7 +132,7 @@ SpanDeg = Annotated[
 ]
 
 
-DEFAULT_MIN_GAIN = 2.5e-5
+DEFAULT_MIN_GAIN = 3.2e-5
 """Default ``min_gain`` of adaptive plans: ``gonio.brdf.reconstruction.posterior.REFINE_GAIN``
 (a test keeps the two equal; the plans do not import the numerical core for one number)."""
 DEFAULT_MAX_ROTATIONS = 16
@@ -156,8 +156,8 @@ def _check_rule(value: object) -> object:
 def _check_min_gain(value: float) -> float:
     if not value > 0.0:
         raise ValueError(
-            f"min_gain is the least drop of the expected log_rmse one more stage angle must "
-            f"buy, a number > 0; got {value:g}. The default {DEFAULT_MIN_GAIN:g} was "
+            f"min_gain is the least drop of the self-estimated log_rmse one more stage angle "
+            f"must buy, a number > 0; got {value:g}. The default {DEFAULT_MIN_GAIN:g} was "
             f"chosen on held-out materials; larger stops refining sooner (fewer readings), "
             f"smaller refines more")
     return value
@@ -167,15 +167,16 @@ Rule = Annotated[
     Literal["posterior", "vf"],
     BeforeValidator(_check_rule),
     Field(description="posterior: add the stage angles where the joint fit's expected "
-                      "log_rmse falls most, stop when the best falls by less than min_gain "
+                      "log_rmse falls most, stop when the best lowers the self-estimated "
+                      "log_rmse (predicted_log_rmse) by less than min_gain "
                       "(needs the basis; an engine without one uses vf); vf: V&F Sec. 6, "
                       "midpoints where PCHIP mispredicts a reading by more than threshold"),
 ]
 MinGain = Annotated[
     float,
     AfterValidator(_check_min_gain),
-    Field(description="posterior rule: least drop of the expected log_rmse one more stage "
-                      "angle must buy, > 0 "
+    Field(description="posterior rule: least drop of the self-estimated log_rmse "
+                      "(predicted_log_rmse) one more stage angle must buy, > 0 "
                       "(gonio.brdf.reconstruction.posterior.REFINE_GAIN)",
           # The bounds in the schema for clients; the check itself is _check_min_gain's, so
           # the message says what the number means and what to do.

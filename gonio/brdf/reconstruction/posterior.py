@@ -29,8 +29,10 @@ the higher ones (sharp highlights), both from :data:`RHO_GRID`.
 
 Adaptive refinement (:func:`next_angles`) picks candidate angles (the midpoints of the gaps)
 greedily by gain, conditioning on the angles already picked, and stops when the best
-remaining angle would lower the expected ``log_rmse`` by less than a threshold
-(:data:`REFINE_GAIN`, chosen on held-out training materials with ``bench/bench_adaptive.py``).
+remaining angle would lower the self-estimated ``log_rmse`` (the posterior's expected error
+joined, as variances add, with the part the basis cannot represent, which more angles do not
+lower) by less than a threshold (:data:`REFINE_GAIN`, chosen on held-out training materials
+with ``bench/bench_adaptive.py``).
 """
 
 from __future__ import annotations
@@ -53,6 +55,7 @@ from gonio.brdf.reconstruction.reconstruct import (
     joint_prior,
     one_blas_thread,
 )
+from gonio.brdf.reconstruction.selfcheck import predict_log_rmse
 from gonio.brdf.tables import geometry as geo
 
 FloatArray = NDArray[np.float64]
@@ -63,10 +66,11 @@ RHO_GRID: tuple[float, ...] = tuple(float(v) for v in np.geomspace(1 / 64, 16.0,
 #: band's factor, ``m > BAND_SPLIT`` the high band's. On the learnt priors only even harmonics
 #: carry energy, so the low band is ``m = 2`` (docs/science.md 2.1).
 BAND_SPLIT = 2
-#: Default stopping threshold of :func:`next_angles`: the least drop of the expected
-#: ``log_rmse`` one more stage angle must buy (chosen on the wide held-out panel for scans over
-#: half a turn, ``bench/bench_adaptive.py --set wide --span 180``; docs/science.md 7.3).
-REFINE_GAIN = 2.5e-5
+#: Default stopping threshold of adaptive plans: the least drop of the self-estimated
+#: ``log_rmse`` (:func:`next_angles` given the scan's ``cv_sample_error``, as the engine's
+#: refiner calls it) one more stage angle must buy (chosen on the wide held-out panel for scans
+#: over half a turn, ``bench/bench_adaptive.py --set wide --span 180``; docs/science.md 7.3).
+REFINE_GAIN = 3.2e-5
 
 
 @functools.cache
@@ -431,10 +435,13 @@ class ScanPosterior:
 
     def log_rmse_drop(self, gain: float) -> float:
         """Drop of :attr:`expected_log_rmse` that a variance ``gain`` buys (log_rmse units)."""
+        return self.expected_log_rmse - self.expected_after(gain)
+
+    def expected_after(self, gain: float) -> float:
+        """:attr:`expected_log_rmse` once the weighted variance has fallen by ``gain``
+        (prior units, as :meth:`angle_gains` gives it)."""
         v = self.weighted_variance()
-        e0 = np.sqrt(self.s2 * v / self.norm)
-        e1 = np.sqrt(self.s2 * max(v - gain, 0.0) / self.norm)
-        return float(e0 - e1)
+        return float(np.sqrt(self.s2 * max(v - gain, 0.0) / self.norm))
 
     def add_angles(self, stage_angles: ArrayLike) -> None:
         """Condition on readings at these angles (values not needed: the variance does not
@@ -562,6 +569,7 @@ def next_angles(
     table: ArrayLike | None = None,
     period_deg: float = 360.0,
     arc_start_deg: float = 0.0,
+    cv_sample_error: float | None = None,
 ) -> RefinementStep:
     """Plan the next stage angles where they lower the expected ``log_rmse`` most.
 
@@ -599,6 +607,15 @@ def next_angles(
         The arc the scan covers, degrees (:func:`candidate_angles`): the gaps are those within
         one period, and new angles lie in ``[arc_start_deg, arc_start_deg + period_deg)``
         (modulo 360). Default: a full turn.
+    cv_sample_error : float, optional
+        The scan's leave-one-pair-out relative error
+        (:attr:`gonio.brdf.reconstruction.reconstruct.Reconstruction.cv_sample_error`). When
+        given, a pick's drop is that of the self-estimate
+        (:func:`gonio.brdf.reconstruction.selfcheck.predict_log_rmse`, with the posterior's
+        ``mahalanobis``) rather than of the posterior's expected error alone: what the basis
+        cannot represent does not fall with more stage angles, and a large part of it shrinks
+        what a new angle buys in the whole error (errors add as variances). None: the
+        posterior's expected ``log_rmse`` only.
 
     Returns
     -------
@@ -633,7 +650,13 @@ def next_angles(
                 break
             gains = post.angle_gains(np.deg2rad(cand))
             k = int(np.argmax(gains))
-            drop = post.log_rmse_drop(float(gains[k]))
+            if cv_sample_error is None:
+                drop = post.log_rmse_drop(float(gains[k]))
+            else:
+                drop = (predict_log_rmse(post.expected_log_rmse, post.mahalanobis,
+                                         cv_sample_error)
+                        - predict_log_rmse(post.expected_after(float(gains[k])),
+                                           post.mahalanobis, cv_sample_error))
             if not (drop >= threshold and drop >= rel_threshold * post.expected_log_rmse):
                 reason = "threshold" if not picked else ""
                 break

@@ -7,6 +7,7 @@ import asyncio
 import numpy as np
 
 from gonio.brdf.reconstruction.posterior import next_angles
+from gonio.brdf.reconstruction.reconstruct import reconstruct
 from gonio.engine import ScanEngine
 from gonio.jobstates import JobState
 from gonio.plans.models import AdaptivePlan, ExposureSettings
@@ -52,11 +53,16 @@ def test_the_engine_measures_the_angles_the_posterior_rule_plans() -> None:
     later = sorted(round(s.specimen_deg % 360.0, 6) for s in steps if s.round == 1)
     angles, values = eng.measured_values(first)
     n_pairs = len(eng.pairs)
-    want = next_angles(BASIS, eng.refiner.cells, eng.refiner.ph_lab, angles,  # type: ignore[union-attr]
-                       np.maximum(values, 0.0), threshold=1e-9,
+    cells, ph = eng.refiner.cells, eng.refiner.ph_lab  # type: ignore[union-attr]
+    vals = np.maximum(values, 0.0)
+    # The rule's measure is the drop of the self-estimate: the fit's leave-one-pair-out error
+    # goes in with the readings.
+    cv = reconstruct(BASIS, cells, ph, np.deg2rad(angles), vals).cv_sample_error
+    want = next_angles(BASIS, cells, ph, angles, vals, threshold=1e-9,
                        min_step_deg=desc.resolution_deg,
                        budget_angles=plan.max_samples // n_pairs - 8,  # type: ignore[operator]
-                       per_gap=1, period_deg=180.0)  # the plan's default arc, half a turn
+                       per_gap=1, period_deg=180.0,  # the plan's default arc, half a turn
+                       cv_sample_error=cv)
     assert later and later == [round(a, 6) for a in want.angles_deg]
     assert len(steps) * n_pairs <= plan.max_samples  # type: ignore[operator]
     assert _events(store, "adaptive_round")[0]["rule"] == "posterior"

@@ -205,6 +205,42 @@ def test_the_rule_stops_at_the_gain_it_is_given() -> None:
                        budget_angles=1).angles_deg == one.angles_deg
 
 
+def test_with_the_scans_cv_the_drop_is_that_of_the_self_estimate() -> None:
+    """Given the leave-one-pair-out error, a pick's drop is the fall of the self-estimate
+    ``sqrt(exp(a) e^2 + exp(b) m^c cv^d)`` (the selfcheck module's formula, written out here)
+    as the posterior's expected error ``e`` falls by the pick's own drop: the same angle is
+    picked, the drop is smaller the more the basis cannot represent, and with nothing
+    unrepresented it is ``sqrt(exp(a))`` times the posterior's own."""
+    from gonio.brdf.reconstruction.selfcheck import LOG_RMSE_CAPS, LOG_RMSE_MODEL
+
+    b, cells, ph, alpha, vals = _scan()
+    deg = np.rad2deg(alpha)
+    plain = next_angles(b, cells, ph, deg, vals, threshold=0.0, budget_angles=1)
+    e0 = plain.expected_log_rmse
+    e1 = e0 - plain.drops[0]
+    mahal = ScanPosterior(b, cells, ph, alpha, vals).mahalanobis
+    a, bb, c, d = LOG_RMSE_MODEL
+
+    def self_estimate(e: float, cv: float) -> float:
+        m = min(mahal, LOG_RMSE_CAPS[0])
+        return float(np.sqrt(np.exp(a) * e**2 + np.exp(bb) * m**c * min(cv, LOG_RMSE_CAPS[1])**d))
+
+    drops = []
+    for cv in (1e-9, 0.05, 0.5):
+        step = next_angles(b, cells, ph, deg, vals, threshold=0.0, budget_angles=1,
+                           cv_sample_error=cv)
+        assert step.angles_deg == plain.angles_deg
+        assert step.drops[0] == pytest.approx(self_estimate(e0, cv) - self_estimate(e1, cv),
+                                              rel=1e-6)
+        drops.append(step.drops[0])
+    assert drops[0] == pytest.approx(np.sqrt(np.exp(a)) * plain.drops[0], rel=1e-3)
+    assert drops[0] > drops[1] > drops[2] > 0
+    # The threshold applies to that drop: just above it, no angle.
+    none = next_angles(b, cells, ph, deg, vals, threshold=drops[2] * (1 + 1e-9),
+                       cv_sample_error=0.5)
+    assert none.angles_deg == [] and none.reason == "threshold"
+
+
 def test_bad_readings_are_refused() -> None:
     b, cells, ph, alpha, vals = _scan()
     with pytest.raises(ReconstructionError, match="non-negative"):
