@@ -163,10 +163,11 @@ async def _run_scan(args: argparse.Namespace, plan: Any, config: Any, sim: Any =
     rig = build_rig(config)
     desc = RigDescription.from_rig(rig)
     if args.dry_run:
-        from gonio.worker import basis_build_needed, default_basis_provider
+        from gonio.worker import basis_build_needed, built_basis_symmetry, default_basis_provider
 
         # The in-process scan reconstructs with the default basis (built on first use).
-        dr = dry_run(plan, desc, basis_ready=not basis_build_needed(default_basis_provider))
+        dr = dry_run(plan, desc, basis_ready=not basis_build_needed(default_basis_provider),
+                     basis=built_basis_symmetry(default_basis_provider))
         print(dr.model_dump_json(indent=2) if args.json
               else dry_run_summary(dr, plan, config.rig.name))
         return 0
@@ -324,6 +325,7 @@ def dry_run_summary(dr: Any, plan: Any, rig_name: str) -> str:
         lines.append(f"  first, about {_duration_text(build)} more: the reconstruction basis is "
                      "not built on this install yet; the adaptive rule needs it, so the job "
                      "builds it before its first reading (once; later jobs reuse it)")
+    lines += [f"  warning: {w}" for w in getattr(dr, "warnings", [])]
     lines.append("  (--json prints the whole plan: every position in visiting order)")
     return "\n".join(lines)
 
