@@ -237,6 +237,10 @@ async def _run_owned(args: argparse.Namespace, plan: Any, config: Any, sim: Any,
                 why = await calibrate_in_foreground(service, sim)
                 if why is not None:
                     raise UsageError(why)
+            # What the submission records as the job's arc warning, said here too (a job whose
+            # basis is known only later says it through the progress bar's events).
+            for warning in service.dry_run(plan).warnings:
+                print(f"warning: {warning}", file=sys.stderr)
             job = service.submit(JobRequest(plan=plan))
         bar = _progress(service, job.id, disabled=args.no_progress)
         try:
@@ -428,6 +432,8 @@ def _progress(service: Any, job_id: int, disabled: bool) -> Any:
             bar.refresh()
         elif ev.type == "state":
             bar.set_description_str(f"job {job_id} {ev.data['state']}")
+        elif ev.type == "arc_warning":
+            bar.write(f"warning: {ev.data['message']}", file=sys.stderr)
 
     service.add_event_listener(on_event)
     return bar
