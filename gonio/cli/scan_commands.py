@@ -363,6 +363,11 @@ def _scan_through_daemon(args: argparse.Namespace, plan: Any) -> int:
             return 0
         if args.json:
             raise UsageError("--json goes with --dry-run")
+        # The plan's warnings (the daemon records them in the job's events, which this command
+        # does not follow), said before it is queued; a daemon without them sends none.
+        checked = client.request("POST", "/api/v1/jobs/dry-run", json=body)
+        for warning in checked.get("warnings", []) if isinstance(checked, dict) else []:
+            print(f"warning: {warning}", file=sys.stderr)
         job = client.request("POST", "/api/v1/jobs", json=body)
         job_id = int(job["id"])
         print(f"job {job_id} queued on {client.url}", file=sys.stderr)

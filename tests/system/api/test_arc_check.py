@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import time
+from pathlib import Path
 from typing import Any
 
 import httpx
@@ -70,3 +71,19 @@ def _events_since(c: httpx.Client, seq: int) -> list[dict[str, Any]]:
                 if out[-1]["seq"] >= last:
                     break
     return out
+
+
+def test_gonio_scan_through_the_daemon_says_it_before_queueing(
+        odd_daemon: Daemon, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from gonio.cli import main
+
+    out = tmp_path / "a.h5"
+    argv = ["scan", "--daemon", odd_daemon.url, "--api-key", odd_daemon.key, "--rotations", "3",
+            "--exposure", "0.005", "--light-settle", "0", "--no-progress", "-o", str(out)]
+    assert main(argv) == 0 and out.is_file()  # warned, not refused
+    err = capsys.readouterr().err
+    (line,) = [ln for ln in err.splitlines() if ln.startswith("warning:")]
+    says_what_and_what_to_do(line)
+    assert err.index("warning:") < err.index("queued on")
+    assert main([*argv, "--span", "360"]) == 0
+    assert "warning:" not in capsys.readouterr().err
