@@ -70,7 +70,8 @@ def basis_build_needed(provider: BasisProvider) -> bool:
 
 
 # The symmetry of the default basis' cache file, by path, with the file's (mtime, size) it was
-# read from: a dry run reads the file once, not at every request (about 0.1 s per read).
+# read from: a dry run reads the file once, not at every request (a few tenths of a second per
+# read for the default K = 64).
 _built_symmetry: dict[Path, tuple[tuple[int, int], BasisSymmetry]] = {}
 _built_symmetry_lock = threading.Lock()
 
@@ -333,7 +334,10 @@ class Worker:
                     return ready
                 refiner = self._refiner(plan, basis)
             # A half-turn plan and a basis without the twofold symmetry: said before the first
-            # reading whenever the basis is at hand (loaded above, or built).
+            # reading whenever the basis is at hand (loaded above, or built). Without an await:
+            # one here would let a cancel in before the engine starts (the posterior path
+            # above checks for that after its wait). The file is read once per version, mostly
+            # already by the submission's check, so this rarely costs more than a stat.
             self.note_arc(job.id, plan, BasisSymmetry.of(basis) if basis is not None
                           else self.basis_symmetry())
             if self.on_job_start is not None:
