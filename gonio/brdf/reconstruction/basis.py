@@ -42,7 +42,9 @@ key                shape / dtype           meaning
 ``valid``          (N_ROWS,) bool          valid-cell mask the basis was built with
 ``eps``            () float                remap constant
 ``materials``      (M,) str                names of the training materials
-``provenance``     () str                  JSON object: how the basis was built
+``provenance``     () str                  JSON object: how the basis was built; its
+                                           ``without_twofold_symmetry`` lists the materials
+                                           whose own prior has odd harmonics
 ``grid_deg``       (4,) float              grid step and counts check: ``(step, n_th, n_td,
                                            n_pd)``; a basis from another grid is refused
 ``ph_prior``       (37, K, K) float64      optional: covariance of the coefficients along
