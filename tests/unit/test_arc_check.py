@@ -182,3 +182,24 @@ def test_a_job_whose_basis_comes_only_at_finishing_records_it_then(tmp_path: Pat
     full = _queue(store, desc, FULL)
     asyncio.run(w.run_once())
     assert _arc_events(store, full) == []
+
+
+def test_gonio_scan_prints_a_warning_the_job_records_later(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """The in-process scan follows its job's events: an arc warning recorded only when the job
+    starts or finishes (its basis unknown at submission) is printed then, for that job only."""
+    from types import SimpleNamespace
+
+    from gonio.cli.scan_commands import _progress
+
+    class Service:
+        def add_event_listener(self, listener: Any) -> None:
+            self.listener = listener
+
+    svc = Service()
+    bar = _progress(svc, 3, disabled=True)
+    svc.listener(SimpleNamespace(job_id=3, type="arc_warning", data={"message": "mine"}))
+    svc.listener(SimpleNamespace(job_id=4, type="arc_warning", data={"message": "another's"}))
+    bar.close()
+    err = capsys.readouterr().err
+    assert "warning: mine" in err and "another's" not in err
