@@ -383,7 +383,8 @@ class GonioService:
         """
         with self._basis_lock:
             if self._basis is None:
-                self._basis = self.worker.basis_provider()
+                # The scans' basis: its symmetry serves the dry runs' arc check too.
+                self._basis = self.worker.remember_basis(self.worker.basis_provider())
             return self._basis
 
     # ------------------------------------------------------------------ sampling design
@@ -487,11 +488,17 @@ class GonioService:
             except ValidationError as exc:
                 raise PlanError(f"invalid job request: {exc}") from None
         plan: AnyPlan = request.plan
-        dry_run(plan, self.desc)  # every check that needs no hardware, before queueing
+        # Every check that needs no hardware, before queueing. A warning (a half-turn plan and
+        # a basis without the twofold symmetry) does not refuse the job: the joint fit still
+        # takes its readings, only the other half turn rests on the prior. It goes in the job's
+        # own events instead, so whoever looks at the job later sees it.
+        symmetry = self.worker.basis_symmetry()
+        dry_run(plan, self.desc, basis=symmetry)
         row = self.store.create_job(
             kind=plan.kind, specimen=plan.specimen, plan=plan.model_dump(mode="json"),
             rig=self.desc.model_dump(mode="json"), priority=request.priority,
         )
+        self.worker.note_arc(row.id, plan, symmetry)
         self.worker.wake()
         return JobInfo.from_row(row)
 
@@ -621,7 +628,8 @@ class GonioService:
         """Check and time a plan from the stage's last known position (else 0 deg, said so)."""
         p = plan if isinstance(plan, BaseModel) else parse_plan(plan)
         return dry_run(p, self.desc, self.stage_deg,
-                       basis_ready=not self.worker.basis_build_needed())
+                       basis_ready=not self.worker.basis_build_needed(),
+                       basis=self.worker.basis_symmetry())
 
     # ------------------------------------------------------------------ events
     @property

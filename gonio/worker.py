@@ -31,6 +31,7 @@ from gonio.calibration import (
 from gonio.engine import Progress, ScanEngine
 from gonio.finishing import Finishing, FinishingStopped, finish_job
 from gonio.jobstates import JobState
+from gonio.plans.dryrun import BasisSymmetry, arc_warning
 from gonio.plans.models import AdaptivePlan, AnyPlan, PlanError, parse_stored_plan
 from gonio.plans.validation import plan_pairs, validate_plan
 from gonio.rigdescription import RigDescription
@@ -66,6 +67,43 @@ def basis_build_needed(provider: BasisProvider) -> bool:
     from gonio.brdf.reconstruction.basis import default_basis_path
 
     return not default_basis_path().is_file()
+
+
+# The symmetry of the default basis' cache file, by path, with the file's (mtime, size) it was
+# read from: a dry run reads the file once, not at every request (a few tenths of a second per
+# read for the default K = 64).
+_built_symmetry: dict[Path, tuple[tuple[int, int], BasisSymmetry]] = {}
+_built_symmetry_lock = threading.Lock()
+
+
+def built_basis_symmetry(provider: BasisProvider) -> BasisSymmetry | None:
+    """What the basis ``provider`` gives says about half a turn, when it is built already.
+
+    Only :func:`default_basis_provider`'s cache file is read (never built: a dry run must stay
+    fast); None when it does not exist yet or cannot be read (the build or the job says why),
+    and for any other provider (calling it may block: :meth:`Worker.basis_symmetry` knows the
+    bases that worker has loaded).
+    """
+    if provider is not default_basis_provider:
+        return None
+    from gonio.brdf.reconstruction.basis import Basis, BasisError, default_basis_path
+
+    path = default_basis_path()
+    try:
+        st = path.stat()
+    except OSError:
+        return None
+    version = (st.st_mtime_ns, st.st_size)
+    with _built_symmetry_lock:
+        known = _built_symmetry.get(path)
+        if known is not None and known[0] == version:
+            return known[1]
+        try:
+            symmetry = BasisSymmetry.of(Basis.load(path))
+        except BasisError:
+            return None
+        _built_symmetry[path] = (version, symmetry)
+        return symmetry
 
 
 def needs_basis_to_measure(plan: AnyPlan) -> bool:
@@ -132,6 +170,12 @@ class Worker:
         # build in progress is waited for, never started twice.
         self._basis_lock = threading.Lock()
         self._prewarm: threading.Thread | None = None
+        # The symmetry of the last basis a provider gave this worker (a provider other than
+        # the default one is never called just to look: it may block) and the jobs whose
+        # arc warning is recorded already, in this process.
+        self._seen_symmetry: BasisSymmetry | None = None
+        self._arc_noted: set[int] = set()
+        self._arc_lock = threading.Lock()  # submission (API threads), the loop, finishing
         self.specimen_truth: Callable[[], dict[str, Any] | None] | None = None
         """Set by simulated rigs: the recipe of the material on the stage, stored with each
         reconstruction as ``provenance/true_material`` so renderings can show the truth."""
@@ -289,6 +333,13 @@ class Worker:
                 if ready is not None:
                     return ready
                 refiner = self._refiner(plan, basis)
+            # A half-turn plan and a basis without the twofold symmetry: said before the first
+            # reading whenever the basis is at hand (loaded above, or built). Without an await:
+            # one here would let a cancel in before the engine starts (the posterior path
+            # above checks for that after its wait). The file is read once per version, mostly
+            # already by the submission's check, so this rarely costs more than a stat.
+            self.note_arc(job.id, plan, BasisSymmetry.of(basis) if basis is not None
+                          else self.basis_symmetry())
             if self.on_job_start is not None:
                 # Before the first reading of a new or resumed job: e.g. a simulated rig puts
                 # the white reference or the job's specimen on the stage.
@@ -305,7 +356,7 @@ class Worker:
                 return final
             self.store.set_state(job.id, JobState.RECONSTRUCTING)
         # A basis loaded before measuring serves the finishing too (no second load from disk).
-        how = self._finishing(basis)
+        how = self._finishing(basis, job.id, plan)
         self._finish_stop = how.stop
         self._recon_task = asyncio.create_task(asyncio.to_thread(finish_job, job.id, plan, how))
         try:
@@ -354,7 +405,42 @@ class Worker:
     def _load_basis(self) -> Any:
         """The basis from the provider, one caller at a time (blocking: call in a thread)."""
         with self._basis_lock:
-            return self.basis_provider()
+            return self.remember_basis(self.basis_provider())
+
+    def remember_basis(self, basis: Any) -> Any:
+        """Note what ``basis`` (from this worker's provider) says about half a turn, for
+        :meth:`basis_symmetry`; returns ``basis``."""
+        if basis is not None:
+            self._seen_symmetry = BasisSymmetry.of(basis)
+        return basis
+
+    def basis_symmetry(self) -> BasisSymmetry | None:
+        """What the basis a job would reconstruct with says about half a turn, when it is at
+        hand without building or calling a provider that may block: the default basis' cache
+        file (:func:`built_basis_symmetry`), else the last basis this worker's provider gave;
+        None when neither is known."""
+        if self.basis_provider is default_basis_provider:
+            return built_basis_symmetry(self.basis_provider)
+        return self._seen_symmetry
+
+    def note_arc(self, job_id: int, plan: AnyPlan, basis: BasisSymmetry | None) -> None:
+        """Record the job's arc warning (:func:`gonio.plans.dryrun.arc_warning`) as its
+        ``arc_warning`` event, once per job in this process; nothing when there is none.
+
+        Called when the job is queued, when it starts and when its finishing has the basis:
+        whichever first knows the basis records it, so a job left to run unattended carries
+        the warning in its own record (the joint fit still takes the scan: no refusal).
+        """
+        message = arc_warning(plan, basis)
+        if message is None or basis is None:
+            return
+        with self._arc_lock:
+            if job_id in self._arc_noted:
+                return
+            self._arc_noted.add(job_id)
+        self.store.append_event(job_id, "arc_warning", {
+            "message": message, "span_deg": plan.first_span_deg(),
+            "materials": list(basis.without_twofold_symmetry)})
 
     def basis_build_needed(self) -> bool:
         """Whether the next basis load is a build (the dry run says so; see
@@ -434,12 +520,22 @@ class Worker:
         return None
 
     # ------------------------------------------------------------------ finishing
-    def _finishing(self, basis: Any = None) -> Finishing:
+    def _finishing(self, basis: Any = None, job_id: int | None = None,
+                   plan: AnyPlan | None = None) -> Finishing:
         """What :func:`gonio.finishing.finish_job` needs, from this worker's settings now;
-        ``basis``, when the job already has one, instead of the provider's."""
+        ``basis``, when the job already has one, instead of the provider's. With ``job_id``
+        and ``plan``, the basis the finishing gets is checked against the plan's arc
+        (:meth:`note_arc`: a job whose basis was built only now still gets its warning)."""
+
+        def provide() -> Any:
+            got = self.remember_basis(self.basis_provider()) if basis is None else basis
+            if job_id is not None and plan is not None and got is not None:
+                self.note_arc(job_id, plan, BasisSymmetry.of(got))
+            return got
+
         return Finishing(
             store=self.store, desc=self.desc, data_dir=self.data_dir,
-            basis_provider=self.basis_provider if basis is None else lambda: basis,
+            basis_provider=provide,
             calibration=self.calibration,
             provenance=self.provenance, fit_exports=self.fit_exports,
             true_material=self.specimen_truth, on_activity=self._set_activity,

@@ -163,10 +163,11 @@ async def _run_scan(args: argparse.Namespace, plan: Any, config: Any, sim: Any =
     rig = build_rig(config)
     desc = RigDescription.from_rig(rig)
     if args.dry_run:
-        from gonio.worker import basis_build_needed, default_basis_provider
+        from gonio.worker import basis_build_needed, built_basis_symmetry, default_basis_provider
 
         # The in-process scan reconstructs with the default basis (built on first use).
-        dr = dry_run(plan, desc, basis_ready=not basis_build_needed(default_basis_provider))
+        dr = dry_run(plan, desc, basis_ready=not basis_build_needed(default_basis_provider),
+                     basis=built_basis_symmetry(default_basis_provider))
         print(dr.model_dump_json(indent=2) if args.json
               else dry_run_summary(dr, plan, config.rig.name))
         return 0
@@ -236,6 +237,10 @@ async def _run_owned(args: argparse.Namespace, plan: Any, config: Any, sim: Any,
                 why = await calibrate_in_foreground(service, sim)
                 if why is not None:
                     raise UsageError(why)
+            # What the submission records as the job's arc warning, said here too (a job whose
+            # basis is known only later says it through the progress bar's events).
+            for warning in service.dry_run(plan).warnings:
+                print(f"warning: {warning}", file=sys.stderr)
             job = service.submit(JobRequest(plan=plan))
         bar = _progress(service, job.id, disabled=args.no_progress)
         try:
@@ -324,6 +329,7 @@ def dry_run_summary(dr: Any, plan: Any, rig_name: str) -> str:
         lines.append(f"  first, about {_duration_text(build)} more: the reconstruction basis is "
                      "not built on this install yet; the adaptive rule needs it, so the job "
                      "builds it before its first reading (once; later jobs reuse it)")
+    lines += [f"  warning: {w}" for w in getattr(dr, "warnings", [])]
     lines.append("  (--json prints the whole plan: every position in visiting order)")
     return "\n".join(lines)
 
@@ -357,6 +363,11 @@ def _scan_through_daemon(args: argparse.Namespace, plan: Any) -> int:
             return 0
         if args.json:
             raise UsageError("--json goes with --dry-run")
+        # The plan's warnings (the daemon records them in the job's events, which this command
+        # does not follow), said before it is queued; a daemon without them sends none.
+        checked = client.request("POST", "/api/v1/jobs/dry-run", json=body)
+        for warning in checked.get("warnings", []) if isinstance(checked, dict) else []:
+            print(f"warning: {warning}", file=sys.stderr)
         job = client.request("POST", "/api/v1/jobs", json=body)
         job_id = int(job["id"])
         print(f"job {job_id} queued on {client.url}", file=sys.stderr)
@@ -426,6 +437,8 @@ def _progress(service: Any, job_id: int, disabled: bool) -> Any:
             bar.refresh()
         elif ev.type == "state":
             bar.set_description_str(f"job {job_id} {ev.data['state']}")
+        elif ev.type == "arc_warning":
+            bar.write(f"warning: {ev.data['message']}", file=sys.stderr)
 
     service.add_event_listener(on_event)
     return bar

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from dataclasses import dataclass
+
 from pydantic import BaseModel, Field
 
 from gonio.hal import PairSpec
@@ -21,6 +24,62 @@ BASIS_BUILD_S = 120.0
 library, then the basis), seconds: about two minutes measured on a busy 2-core machine
 (README); slower machines take longer. An adaptive plan with the posterior rule waits for it
 before its first reading."""
+
+
+HALF_TURN_DEG = 180.0
+"""A plan's arc (``span_deg``) of half a turn."""
+
+
+@dataclass(frozen=True)
+class BasisSymmetry:
+    """What a reconstruction basis' prior says about a specimen turned by half a turn.
+
+    Parameters
+    ----------
+    half_turn_periodic : bool
+        :attr:`gonio.brdf.reconstruction.basis.Basis.half_turn_periodic`.
+    without_twofold_symmetry : tuple of str
+        The training materials known to lack the twofold symmetry
+        (:attr:`~gonio.brdf.reconstruction.basis.Basis.without_twofold_symmetry`; may be empty
+        when the basis does not record them).
+    """
+
+    half_turn_periodic: bool
+    without_twofold_symmetry: tuple[str, ...] = ()
+
+    @classmethod
+    def of(cls, basis: object) -> BasisSymmetry:
+        """From a :class:`~gonio.brdf.reconstruction.basis.Basis` (or anything with its two
+        attributes; a missing one reads as periodic, names unknown)."""
+        return cls(bool(getattr(basis, "half_turn_periodic", True)),
+                   tuple(getattr(basis, "without_twofold_symmetry", ())))
+
+
+def arc_warning(plan: AnyPlan, basis: BasisSymmetry | None) -> str | None:
+    """The warning for a half-turn plan reconstructed with a basis that is not half-turn
+    periodic (docs/science.md 7.4), or None.
+
+    None as well when nothing is known of the basis (``basis`` None: not built yet; the job
+    says it when it has the basis) and for plans that reconstruct nothing (calibrations).
+    The joint fit still takes such a scan, so this is a warning, not a refusal.
+    """
+    if (basis is None or basis.half_turn_periodic or plan.finishing != "reconstruction"
+            or plan.first_span_deg() != HALF_TURN_DEG):
+        return None
+    names = _names(basis.without_twofold_symmetry)
+    return (f"the plan reads the stage over half a turn (span_deg 180), but the reconstruction "
+            f"basis holds materials without twofold symmetry{names}, so readings over half a "
+            "turn leave the other half turn to its prior: set span_deg 360 (gonio scan --span "
+            "360) to measure a full turn")
+
+
+def _names(names: Sequence[str], most: int = 5) -> str:
+    """`` (a, b, c)`` or `` (a, b, c, d, e and 3 more)``; empty for no names."""
+    if not names:
+        return ""
+    shown = ", ".join(names[:most])
+    more = f" and {len(names) - most} more" if len(names) > most else ""
+    return f" ({shown}{more})"
 
 
 class DryRun(BaseModel):
@@ -59,10 +118,15 @@ class DryRun(BaseModel):
         "without the default basis: the job builds it before its first reading, about this "
         "many seconds (once; not in estimated_s, included in max_estimated_s); null: the "
         "basis is ready or not needed while measuring")
+    warnings: list[str] = Field(
+        default_factory=list, description="what may make the result poorer than the plan "
+        "suggests, and what to do; the plan runs as it is. E.g. a half-turn plan (span_deg "
+        "180) while the reconstruction basis holds materials without twofold symmetry (checked "
+        "only when the basis is built: a dry run never builds it)")
 
 
 def dry_run(plan: AnyPlan, rig: RigDescription, current_deg: float | None = None,
-            basis_ready: bool = True) -> DryRun:
+            basis_ready: bool = True, basis: BasisSymmetry | None = None) -> DryRun:
     """Expand ``plan`` on ``rig`` and estimate its duration; raises :class:`PlanError`.
 
     The estimate is the physical time (see :class:`DryRun`): trapezoidal stage moves at the
@@ -82,6 +146,10 @@ def dry_run(plan: AnyPlan, rig: RigDescription, current_deg: float | None = None
         False when the reconstruction basis would have to be built first (see
         :func:`gonio.worker.basis_build_needed`); an adaptive plan with the posterior rule then
         reports :data:`BASIS_BUILD_S` as ``basis_build_s``.
+    basis : BasisSymmetry, optional
+        What the basis the job would reconstruct with says about half a turn, when that basis
+        is at hand (built or loaded); None when it is not (nothing is said then). A half-turn
+        plan with a basis that is not half-turn periodic gets a warning (:func:`arc_warning`).
     """
     validate_plan(plan, rig)
     pairs = plan_pairs(plan, rig)
@@ -118,4 +186,5 @@ def dry_run(plan: AnyPlan, rig: RigDescription, current_deg: float | None = None
         from_deg=start,
         from_known=current_deg is not None,
         basis_build_s=build,
+        warnings=[w for w in (arc_warning(plan, basis),) if w is not None],
     )

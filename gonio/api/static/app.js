@@ -454,11 +454,19 @@ function readPlan() {
 }
 
 // The note under the form: a dry run's estimate, or "Job N queued." which clears once that
-// job has left the queue (it is no longer true).
+// job has left the queue (it is no longer true). The dry run's warnings (the plan runs, but
+// its result may be poorer than it suggests) are listed under it, and go with it.
 const note = { job: null };
-function setNote(text, jobId) {
+function setNote(text, jobId, warnings = []) {
   note.job = jobId;
   $("#dry-run-result").textContent = text;
+  const list = $("#dry-run-warnings");
+  list.replaceChildren(...warnings.map((w) => {
+    const li = document.createElement("li");
+    li.textContent = `Warning: ${w}.`;
+    return li;
+  }));
+  list.hidden = warnings.length === 0;
 }
 function clearStaleNotes() {
   if (note.job === null) return;
@@ -502,7 +510,7 @@ function initForm() {
       ` (moves ${eta(r.motion_s)}, exposures ${eta(r.exposure_s)}).`;
     if (r.max_estimated_s != null) text += ` Adaptive refinement can add up to ${r.max_angles - r.angles_deg.length} angles: at most ${eta(r.max_estimated_s)} in all.`;
     if (r.basis_build_s != null) text += ` First, about ${eta(r.basis_build_s)} more: the reconstruction basis is not built on this install yet and the adaptive rule needs it, so the job builds it before its first reading (once).`;
-    setNote(text, null);
+    setNote(text, null, r.warnings || []);
   }, true));
   // A checked plan's estimate no longer holds once the form changes.
   form.addEventListener("input", () => { if (note.job === null) setNote("", null); });

@@ -42,7 +42,9 @@ key                shape / dtype           meaning
 ``valid``          (N_ROWS,) bool          valid-cell mask the basis was built with
 ``eps``            () float                remap constant
 ``materials``      (M,) str                names of the training materials
-``provenance``     () str                  JSON object: how the basis was built
+``provenance``     () str                  JSON object: how the basis was built; its
+                                           ``without_twofold_symmetry`` lists the materials
+                                           whose own prior has odd harmonics
 ``grid_deg``       (4,) float              grid step and counts check: ``(step, n_th, n_td,
                                            n_pd)``; a basis from another grid is refused
 ``ph_prior``       (37, K, K) float64      optional: covariance of the coefficients along
@@ -248,10 +250,18 @@ class Basis:
         symmetric), or when there is no prior (isotropic). Scans of such a basis lose nothing
         by covering half a turn (:data:`gonio.brdf.reconstruction.samples.DEFAULT_SPAN_DEG`).
         """
-        if self.ph_prior is None:
-            return True
-        traces = np.abs(np.trace(self.ph_prior, axis1=1, axis2=2))
-        return bool(traces[1::2].sum() <= ODD_SHARE_MAX * max(traces.sum(), 1e-300))
+        return self.ph_prior is None or not _has_odd_harmonics(self.ph_prior)
+
+    @property
+    def without_twofold_symmetry(self) -> tuple[str, ...]:
+        """Training materials whose own prior holds odd harmonics (no twofold symmetry).
+
+        Recorded by :func:`build_basis` and :func:`fold_in` in the provenance (key
+        ``without_twofold_symmetry``); empty for a basis written before they recorded it, which
+        then says only, through :attr:`half_turn_periodic`, that some material lacks it.
+        """
+        names = self.provenance.get("without_twofold_symmetry", ())
+        return tuple(str(n) for n in names) if isinstance(names, list | tuple) else ()
 
     def truncated(self, k: int) -> Basis:
         """The first ``k`` components (1 <= k <= K)."""
@@ -451,7 +461,9 @@ def build_basis(
     Y = A  # remapped and centred in place
 
     U, S = _randomized_svd(Y, n_components, oversample, power_iterations, seed)
-    prior = ph_prior_from_coefficients(_coefficients(Y, U, S), m)
+    coef = _coefficients(Y, U, S)
+    prior = ph_prior_from_coefficients(coef, m)
+    odd = _odd_materials(names, coef, [t.n_channels * geo.N_PH for t in tables])
     Q = np.zeros((geo.N_ROWS, n_components))
     Q[rows] = U * S
     f_full = np.zeros(geo.N_ROWS)
@@ -468,8 +480,31 @@ def build_basis(
         "seed": seed,
         "build_seconds": round(time.perf_counter() - t0, 3),
         "materials_digest": _names_digest(names),
+        "without_twofold_symmetry": odd,
     }
     return Basis(Q, S, f_full, mu_full, valid, eps, tuple(names), prov, prior)
+
+
+def _has_odd_harmonics(prior: FloatArray) -> bool:
+    """Whether the odd harmonics of a (37, K, K) prior hold more than :data:`ODD_SHARE_MAX` of
+    its trace (see :attr:`Basis.half_turn_periodic`)."""
+    traces = np.abs(np.trace(prior, axis1=1, axis2=2))
+    return bool(traces[1::2].sum() > ODD_SHARE_MAX * max(traces.sum(), 1e-300))
+
+
+def _odd_materials(names: Sequence[str], coef: FloatArray, columns: Sequence[int]) -> list[str]:
+    """The materials among ``names`` whose own coefficients ((K, sum(columns)), ``columns[i]``
+    consecutive ones for material ``i``, groups of 72 ``ph`` slices) hold odd harmonics.
+
+    Recorded so a warning about a half-turn scan can name them: the whole prior only says that
+    some material lacks the twofold symmetry, not which.
+    """
+    out, j = [], 0
+    for name, n in zip(names, columns, strict=True):
+        if n >= geo.N_PH and _has_odd_harmonics(ph_prior_from_coefficients(coef[:, j:j + n], 1.0)):
+            out.append(name)
+        j += n
+    return out
 
 
 def _coefficients(Y: NDArray[np.float32], U: FloatArray, S: FloatArray) -> FloatArray:
@@ -547,10 +582,14 @@ def fold_in(
     cols: list[FloatArray] = []
     col_w: list[float] = []
     groups: list[tuple[int, int, float]] = []  # (first column, count, weight of each column)
+    # (name, first column, columns) of the tables that are not isotropic: 72 slices a channel
+    anisotropic: list[tuple[str, int, int]] = []
     for t in tables:
         v = np.asarray(t.values, dtype=np.float64).reshape(
             t.n_channels, geo.N_PH, geo.N_ROWS)[:, :, rows]
         iso = bool(np.allclose(v, v[:, :1], equal_nan=True))
+        if not iso:
+            anisotropic.append((t.name, len(cols), t.n_channels * geo.N_PH))
         for c in range(t.n_channels):
             x = remap(v[c], base.f_med[rows], w_rows, base.eps)
             x = np.nan_to_num(x, nan=0.0)  # unmeasured cells count as the median (as build)
@@ -580,9 +619,15 @@ def fold_in(
     Q[rows] = U * S
     mu_full = np.zeros(geo.N_ROWS)
     mu_full[rows] = mu
+    pinv = (U / S).T  # (k, p): coefficients of a centred column in the new basis
+    C = pinv @ (X - mu[:, None])  # (k, J)
+    # Which added materials lack the twofold symmetry (an isotropic table has it), so that a
+    # warning about a half-turn scan can name them.
+    odd = [*base.without_twofold_symmetry]
+    for name, first, n in anisotropic:
+        odd += _odd_materials([name], C[:, first:first + n], [n])
     prior = None
     if base.ph_prior is not None:
-        pinv = (U / S).T  # (k, p): coefficients of a centred column in the new basis
         T = pinv @ base.Q[rows]  # (k, K0)
         d = pinv @ (mu0 - mu)
         # Priors are sums over the training columns (sum_m P_m ~ I): carry the base's into the
@@ -590,7 +635,6 @@ def fold_in(
         # columns.
         prior = T @ base.ph_prior @ T.T
         prior[0] += n0 * np.outer(d, d)
-        C = pinv @ (X - mu[:, None])  # (k, J)
         for first, count, wcol in groups:
             sub = C[:, first : first + count]
             if count == 1:
@@ -607,6 +651,7 @@ def fold_in(
         "folded_in": {"materials": [t.name for t in tables], "weight": float(weight),
                       "base_K": base.K},
         "materials_digest": _names_digest(names),
+        "without_twofold_symmetry": odd,
     }
     return Basis(Q, S, base.f_med, mu_full, base.valid, base.eps, names, prov, prior)
 

@@ -97,3 +97,34 @@ def no_export_fits(daemon: Daemon) -> Iterator[None]:
         yield
     finally:
         worker.fit_exports = before
+
+
+@pytest.fixture(scope="module")
+def odd_daemon(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Daemon]:
+    """A daemon of its own with the default basis provider, whose built default basis (in a
+    cache folder of its own: the session's must not get it) has an odd harmonic in its prior:
+    a material without twofold symmetry, ``pile-lean``, as a lab's import would bring."""
+    from gonio.brdf.reconstruction.basis import Basis, default_basis_path
+    from gonio.sim.rig import SimRigOptions, start_sim_rig
+    from tests.unit.brdf.reconstruction.test_reconstruct import random_basis
+    from tests.unit.brdf.reconstruction.test_reconstruct_joint import _with_prior
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("GONIO_CACHE_DIR", str(tmp_path_factory.mktemp("odd-cache")))
+        b = _with_prior(random_basis(6, seed=1), {0: 1.0, 1: 0.3, 2: 0.5})
+        odd = Basis(b.Q, b.S, b.f_med, b.mu, b.valid, b.eps, b.materials,
+                    {"without_twofold_symmetry": ["pile-lean"]}, b.ph_prior)
+        path = default_basis_path()
+        path.parent.mkdir(parents=True, exist_ok=True)
+        odd.save(path)
+        data_dir = tmp_path_factory.mktemp("gonio-data")
+        sim = start_sim_rig(SimRigOptions(time_scale=10.0, settle_s=0.0))
+        key = secrets.token_hex(24)
+        cfg = DaemonConfig().with_overrides(paths__data_dir=str(data_dir))
+        app = build_app(cfg, sim.config, ApiKeyring({"tester": key}))
+        app.state.service.worker.fit_exports = False  # the result is not under test
+        try:
+            with live_server(app) as url:
+                yield Daemon(url, key, app, sim, data_dir)
+        finally:
+            sim.close()

@@ -335,3 +335,43 @@ def test_half_turn_periodic_follows_the_odd_harmonics_of_the_prior() -> None:
     P[3] = 10 * ODD_SHARE_MAX * np.eye(k)  # a small but real odd share
     assert not Basis(b.Q, b.S, b.f_med, b.mu, b.valid, b.eps, ph_prior=P).half_turn_periodic
     assert Basis(b.Q, b.S, b.f_med, b.mu, b.valid, b.eps).half_turn_periodic  # no prior
+
+
+def leaning(fn: object, lean: float = 0.8) -> object:
+    """``fn`` times ``1 + lean h_x``: brighter towards +x than -x, so the table reads differently
+    turned by half a turn (no twofold symmetry; still reciprocal)."""
+
+    def out(wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+        h = wi + wo
+        h = h / np.linalg.norm(h, axis=-1, keepdims=True)
+        return np.asarray(fn(wi, wo)) * (1.0 + lean * h[:, :1])  # type: ignore[operator]
+
+    return out
+
+
+@functools.cache
+def leaning_table() -> BRDFTable:
+    """One RGB table without twofold symmetry (a lobe leaning towards +x)."""
+    return from_function(leaning(ward_like((0.2, 0.3, 0.4), 0.4, 0.15, 0.3)), ("R", "G", "B"),
+                         "leaning-lobe")
+
+
+def test_bases_name_their_materials_without_twofold_symmetry(tmp_path: Path) -> None:
+    from gonio.brdf.reconstruction.basis import fold_in
+
+    base = small_basis()
+    # The training tables of small_library are lobes over the half vector: twofold symmetric.
+    assert base.half_turn_periodic and base.without_twofold_symmetry == ()
+    iso = from_function(lambda wi, wo: np.full((wi.shape[0], 3), 0.3), ("R", "G", "B"), "grey")
+    added = fold_in(base, [small_library()[0], iso], 4.0)
+    assert added.half_turn_periodic and added.without_twofold_symmetry == ()
+    leaned = fold_in(base, [small_library()[0], leaning_table(), iso], 4.0)
+    assert not leaned.half_turn_periodic
+    assert leaned.without_twofold_symmetry == ("leaning-lobe",)
+    # Kept through truncation and a file, and named by a basis built from scratch as well.
+    assert leaned.truncated(5).without_twofold_symmetry == ("leaning-lobe",)
+    assert Basis.load(leaned.save(tmp_path / "b.npz")).without_twofold_symmetry == (
+        "leaning-lobe",)
+    built = build_basis([*small_library()[1:4], leaning_table()], 8)
+    assert not built.half_turn_periodic
+    assert built.without_twofold_symmetry == ("leaning-lobe",)
