@@ -184,6 +184,15 @@ def finish_job(job_id: int, plan: AnyPlan, how: Finishing) -> dict[str, Any]:
     if "prior_rho" in rec.settings:
         metrics["prior_rho"] = rec.settings["prior_rho"]  # 1: the library prior as it is
     provenance.update(basis_K=int(basis.K), basis_materials=json.dumps(list(basis.materials)))
+    # A half-turn scan with a basis whose prior varies over a full turn: the result is valid
+    # but the other half turn rests on the prior; the result and the job's summary say so
+    # (docs/science.md 7.4), not only the job's event log.
+    from gonio.plans.dryrun import BasisSymmetry, arc_warning
+
+    arc = arc_warning(plan, BasisSymmetry.of(basis))
+    if arc is not None:
+        summary["arc_warning"] = arc
+        provenance["arc_warning"] = arc
     how.checkpoint(job_id, "the export fits")
     fits = _fits(job_id, rec.table) if how.fit_exports else None
     if fits is not None:

@@ -27,7 +27,8 @@ Layout (also in ``docs/engine.md``; strings are UTF-8, JSON attributes are strin
     /principled               attrs: params (JSON, gonio.brdf.models.principled.Principled.as_dict)
     /metrics                  attrs: one float or string per metric
     /provenance               attrs: plan, rig, rig_config, calibration (JSON),
-                                     basis_K, basis_materials (JSON list)
+                                     basis_K, basis_materials (JSON list), and when they
+                                     apply calibration_warning, arc_warning
 
 Read back with :func:`read_result`.
 """

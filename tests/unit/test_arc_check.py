@@ -20,6 +20,7 @@ from gonio.brdf.reconstruction.basis import Basis
 from gonio.jobstates import JobState
 from gonio.plans.dryrun import BasisSymmetry, dry_run
 from gonio.plans.models import AdaptivePlan, CalibrationPlan, ExposureSettings, UniformPlan
+from gonio.results import read_result
 from gonio.rigdescription import RigDescription
 from gonio.service import GonioService, JobRequest
 from gonio.sim.memrig import MemRig
@@ -179,9 +180,18 @@ def test_a_job_whose_basis_comes_only_at_finishing_records_it_then(tmp_path: Pat
     (event,) = _arc_events(store, job)
     _says_what_and_what_to_do(event["message"])
     assert w.basis_symmetry() == BasisSymmetry(False, ("pile-lean",))
+    # The lasting record: the job's summary and its result file carry the warning too.
+    row = store.get_job(job)
+    assert row.state is JobState.COMPLETED, row.reason
+    assert row.summary is not None
+    _says_what_and_what_to_do(row.summary["arc_warning"])
+    _says_what_and_what_to_do(read_result(row.summary["result_path"]).provenance["arc_warning"])
     full = _queue(store, desc, FULL)
     asyncio.run(w.run_once())
     assert _arc_events(store, full) == []
+    row = store.get_job(full)
+    assert row.summary is not None and "arc_warning" not in row.summary
+    assert "arc_warning" not in read_result(row.summary["result_path"]).provenance
 
 
 def test_gonio_scan_prints_a_warning_the_job_records_later(
