@@ -3,10 +3,11 @@
 Run from the project root (needs mitsuba and ``../shared/data/rgl``, like
 ``bench/bench_unseen.py``, whose materials, readings and designs it reuses)::
 
-    nice -n 5 .venv/bin/python bench/bench_adaptive.py [--gains 3.2e-5] [--starts 8 4]
+    nice -n 5 .venv/bin/python bench/bench_adaptive.py [--gains 3e-5] [--starts 8 4]
         [--max-rotations 16] [--set panel|wide|unseen|both] [--only measured|aniso]
         [--rel-gains 0.02 ...] [--candidates midpoints|quarters] [--seed 0]
         [--span 180] [--digits 4] [--drop predicted|expected]
+        [--offset scan|none]
 
 Sets
 ----
@@ -146,6 +147,9 @@ SPAN = {"deg": 180.0}
 #: self-estimate (``next_angles``' ``cv_sample_error``).
 DROP = {"of": "predicted"}
 
+#: The planning posterior's per-pair offset (``--offset``): 0 (none) or "scan".
+OFFSET: dict[str, float | str] = {"value": "scan"}
+
 Result = tuple[float, int]
 """(log_rmse, readings) of one scan."""
 
@@ -181,7 +185,8 @@ def adaptive(c: Case, gain: float, r0: int, max_r: int,
         step = next_angles(c.basis, c.cells, c.ph, angles, vals, threshold=gain,
                            rel_threshold=rel, budget_angles=max_r - len(angles), per_gap=1,
                            fractions=fr, table=rec.table.values, period_deg=period,
-                           cv_sample_error=cv)
+                           cv_sample_error=cv, offset=OFFSET["value"],
+                           mahalanobis=rec.mahalanobis)
         if not step.angles_deg:
             break
         extra = bu.read(c.mat, c.cells, c.ph, np.deg2rad(step.angles_deg),
@@ -269,7 +274,12 @@ def main(argv: list[str] | None = None) -> int:
                          "predicted_log_rmse, whose part the basis cannot represent does not "
                          "fall with more angles (the engine's, the default since session 7), "
                          "or the posterior's expected error alone (before)")
+    ap.add_argument("--offset", choices=["none", "scan"], default="scan",
+                    help="planning posterior: a per-pair offset, constant over the stage "
+                         "angle, sized by marginal likelihood (scan, the engine's and the "
+                         "default since session 7) or none (before)")
     args = ap.parse_args(argv)
+    OFFSET["value"] = "scan" if args.offset == "scan" else 0.0
     SPAN["deg"] = args.span
     DROP["of"] = args.drop
     DIGITS["value"] = args.digits

@@ -4,7 +4,8 @@ The engine knows devices and steps, not the basis; :class:`PosteriorRefiner` is 
 worker hands it (``ScanEngine(refiner=...)``) so that ``AdaptivePlan(rule="posterior")`` can
 ask :func:`gonio.brdf.reconstruction.posterior.next_angles` where the next angles go, with the
 drop of the self-estimated error as its measure (the job's readings are fitted as the job would
-finish, and the fit's leave-one-pair-out error passed as ``cv_sample_error``). It
+finish, and the fit's witnesses passed as ``cv_sample_error`` and ``mahalanobis``) and a
+per-pair offset in the planning posterior (``offset="scan"``). It
 turns the pairs' lab directions into slice cells once, applies the rig's calibration to the
 ``raw - dark`` counts (the posterior weighs errors at BRDF values in 1/sr), and takes the basis
 from its provider on first use (the worker loads it before the job's first reading and hands
@@ -65,7 +66,7 @@ class PosteriorRefiner:
         arc_deg : (start_deg, span_deg) of the plan, degrees: new angles are gap midpoints
             within the span (``next_angles``' ``arc_start_deg``, ``period_deg``)
         """
-        from gonio.brdf.reconstruction.posterior import next_angles
+        from gonio.brdf.reconstruction.posterior import REFINE_OFFSET, next_angles
         from gonio.brdf.reconstruction.reconstruct import reconstruct
 
         if self._basis is None:
@@ -74,9 +75,11 @@ class PosteriorRefiner:
         factors = np.stack([self.calibration.factor(p.light, p.sensor, v.shape[2])
                             for p in self.pairs])
         v = np.maximum(v * factors[:, None, :], 0.0)  # small negative noise after the dark
-        # The fit the job would finish with now: its table is the posterior's mean and its
-        # leave-one-pair-out error tells the rule how much of the error the basis cannot
-        # represent (more angles do not lower that part; docs/science.md 7.3).
+        # The fit the job would finish with now: its table is the posterior's mean, and its
+        # witnesses (leave-one-pair-out error, Mahalanobis norm) tell the rule how much of the
+        # error the basis cannot represent (more angles do not lower that part). The planning
+        # posterior also gives each pair an offset that stays the same at every stage angle,
+        # sized by the scan (docs/science.md 7.3).
         rec = reconstruct(self._basis, self.cells, self.ph_lab,
                           np.deg2rad(np.asarray(angles_deg, dtype=float)), v)
         cv = rec.cv_sample_error if np.isfinite(rec.cv_sample_error) else None
@@ -84,5 +87,6 @@ class PosteriorRefiner:
                                 threshold=min_gain, min_step_deg=min_step_deg,
                                 budget_angles=budget_angles, per_gap=1,
                                 table=rec.table.values, period_deg=arc_deg[1],
-                                arc_start_deg=arc_deg[0], cv_sample_error=cv)
+                                arc_start_deg=arc_deg[0], cv_sample_error=cv,
+                                mahalanobis=rec.mahalanobis, offset=REFINE_OFFSET)
         return list(self.last.angles_deg)

@@ -32,7 +32,9 @@ greedily by gain, conditioning on the angles already picked, and stops when the 
 remaining angle would lower the self-estimated ``log_rmse`` (the posterior's expected error
 joined, as variances add, with the part the basis cannot represent, which more angles do not
 lower) by less than a threshold (:data:`REFINE_GAIN`, chosen on held-out training materials
-with ``bench/bench_adaptive.py``).
+with ``bench/bench_adaptive.py``). Its posterior may give each pair an offset that reads the
+same at every stage angle (``offset``): what the basis cannot represent of an isotropic
+specimen does not average away with more angles, as noise does.
 """
 
 from __future__ import annotations
@@ -66,11 +68,18 @@ RHO_GRID: tuple[float, ...] = tuple(float(v) for v in np.geomspace(1 / 64, 16.0,
 #: band's factor, ``m > BAND_SPLIT`` the high band's. On the learnt priors only even harmonics
 #: carry energy, so the low band is ``m = 2`` (docs/science.md 2.1).
 BAND_SPLIT = 2
+#: Sizes of the per-pair offset (``offset="scan"``) tried by marginal likelihood, as fractions
+#: of the mean prior variance of one reading: 0 (no offset) and 1/64 .. 4.
+OFFSET_GRID: tuple[float, ...] = (0.0, *(float(v) for v in np.geomspace(1 / 64, 4.0, 5)))
 #: Default stopping threshold of adaptive plans: the least drop of the self-estimated
-#: ``log_rmse`` (:func:`next_angles` given the scan's ``cv_sample_error``, as the engine's
-#: refiner calls it) one more stage angle must buy (chosen on the wide held-out panel for scans
-#: over half a turn, ``bench/bench_adaptive.py --set wide --span 180``; docs/science.md 7.3).
-REFINE_GAIN = 3.2e-5
+#: ``log_rmse`` one more stage angle must buy, as the engine's refiner calls
+#: :func:`next_angles` (the reconstruction's witnesses, ``offset=REFINE_OFFSET``; chosen on
+#: the wide held-out panel for scans over half a turn, ``bench/bench_adaptive.py --set wide
+#: --span 180``; docs/science.md 7.3).
+REFINE_GAIN = 3e-5
+#: The planning posterior's per-pair offset in adaptive plans (:class:`ScanPosterior`'s
+#: ``offset``): sized by each scan's marginal likelihood.
+REFINE_OFFSET = "scan"
 
 
 @functools.cache
@@ -132,6 +141,15 @@ class ScanPosterior:
     bands : bool
         When ``rho`` is not given: choose the two bands' factors separately (every pair of
         :data:`RHO_GRID`) instead of one factor for all varying harmonics.
+    offset : float or "scan"
+        Variance of a per-pair offset, constant over the stage angle, added to the readings'
+        covariance (prior units, like ``eta``): what the basis cannot represent of an
+        isotropic specimen reads the same at every stage angle, so more stage angles do not
+        average it away as they do the noise. ``"scan"``: chosen with ``rho`` by marginal
+        likelihood from :data:`OFFSET_GRID` (fractions of the mean prior variance of one
+        reading). 0 (the default): no offset, the joint fit's own model. The slice
+        coefficients' posterior is that of the readings less their offsets (the offsets are
+        not part of the table).
 
     Attributes
     ----------
@@ -168,6 +186,7 @@ class ScanPosterior:
         lam: float | None = None,
         rho: float | tuple[float, float] | None = None,
         bands: bool = False,
+        offset: float | str = 0.0,
     ) -> None:
         cells_ = np.asarray(cells, dtype=float)
         self.ph_lab = np.asarray(ph_lab, dtype=float)
@@ -213,20 +232,36 @@ class ScanPosterior:
         self._G_low = self._kernel(self._Am, low.astype(float), alpha, alpha)
         self._G_high = self._kernel(self._Am, (self.harm > BAND_SPLIT).astype(float), alpha,
                                     alpha)
-        if rho is None:
-            self.rho, self.rho_high = self._choose_bands() if bands else (self._choose_rho(),) * 2
-        elif isinstance(rho, tuple):
-            self.rho, self.rho_high = float(rho[0]), float(rho[1])
+        self._B = self._same_pair(alpha.size, alpha.size)
+        self.tau = 0.0
+        if isinstance(offset, str):
+            if offset != "scan":
+                raise ReconstructionError(f"offset must be a number >= 0 or 'scan', got {offset!r}")
+            if rho is not None or bands:
+                raise ReconstructionError("offset='scan' is chosen with one rho; give neither "
+                                          "rho nor bands")
+            self.rho, self.tau = self._choose_rho_offset()
+            self.rho_high = self.rho
         else:
-            self.rho = self.rho_high = float(rho)
+            self.tau = float(offset)
+            if not self.tau >= 0:
+                raise ReconstructionError(f"offset must be >= 0, got {offset}")
+            if rho is None:
+                self.rho, self.rho_high = (self._choose_bands() if bands
+                                           else (self._choose_rho(),) * 2)
+            elif isinstance(rho, tuple):
+                self.rho, self.rho_high = float(rho[0]), float(rho[1])
+            else:
+                self.rho = self.rho_high = float(rho)
         self._rho_m = harmonic_scale(M, self.rho, self.rho_high)
-        G = self._prior_readings(self.rho, self.rho_high)
+        G = self._prior_readings(self.rho, self.rho_high) + self.tau * self._B
         G[np.diag_indices_from(G)] += self.eta
         self._chol = scipy.linalg.cho_factor(G, lower=True)
         beta = scipy.linalg.cho_solve(self._chol, self.y)
         self.s2 = float(np.sum(self.y * beta)) / self.y.size
         # y^T G^-1 y splits into the fit's prior norm and its residual over the noise:
-        # with K = G - eta I and the fitted readings f = K beta, f^T K^-1 f = beta^T K beta.
+        # with K = G - eta I and the fitted readings f = K beta, f^T K^-1 f = beta^T K beta
+        # (with an offset, K holds it too: the norm of the fit with its offsets).
         self.mahalanobis = (float(np.sum(self.y * beta) - self.eta * np.sum(beta**2))
                             / (self.n * self.C))
 
@@ -276,8 +311,21 @@ class ScanPosterior:
         return np.ascontiguousarray(out.transpose(0, 2, 1, 3)).reshape(n * ra, n * rb)
 
     def _cov(self, alpha_a: FloatArray, alpha_b: FloatArray) -> FloatArray:
-        """Prior covariance of two reading grids (prior units)."""
+        """Prior covariance of the slice values at two reading grids (prior units)."""
         return self._kernel(self._Am, self._rho_m, alpha_a, alpha_b)
+
+    def _same_pair(self, ra: int, rb: int) -> FloatArray:
+        """(n ra, n rb) ones where two readings (pair-major grids) are of the same pair."""
+        return np.asarray(np.kron(np.eye(self.n), np.ones((ra, rb))), dtype=np.float64)
+
+    def _cov_y(self, alpha_a: FloatArray, alpha_b: FloatArray) -> FloatArray:
+        """Prior covariance of two reading grids' readings, the pairs' offsets included
+        (prior units; noise not included)."""
+        out = self._cov(alpha_a, alpha_b)
+        if self.tau:
+            out = out + self.tau * self._same_pair(np.asarray(alpha_a).size,
+                                                   np.asarray(alpha_b).size)
+        return out
 
     def _weighted(self, alpha_a: FloatArray, alpha_b: FloatArray) -> FloatArray:
         """``sum_s tr(W k(ph_s, a) k(ph_s, b)^T)`` over the 72 grid slices, for two grids.
@@ -319,6 +367,21 @@ class ScanPosterior:
         """The factor of :data:`RHO_GRID` with the largest marginal likelihood."""
         lls = [self.log_marginal(r) for r in RHO_GRID]
         return float(RHO_GRID[int(np.argmax(lls))])
+
+    def _choose_rho_offset(self) -> tuple[float, float]:
+        """``(rho, tau)`` of :data:`RHO_GRID` x :data:`OFFSET_GRID` (scaled to the mean prior
+        variance of one reading, :attr:`_G_iso`'s diagonal) with the largest marginal
+        likelihood; ``tau`` in prior units."""
+        unit = float(np.mean(np.diag(self._G_iso)))
+        best, best_ll = (RHO_GRID[0], 0.0), -np.inf
+        for f in OFFSET_GRID:
+            for r in RHO_GRID:
+                G = self._prior_readings(r, r) + (f * unit) * self._B
+                G[np.diag_indices_from(G)] += self.eta
+                ll = profiled_log_marginal(G, self.y)
+                if ll > best_ll:
+                    best, best_ll = (float(r), f * unit), ll
+        return best
 
     def _low_band_factor(self) -> FloatArray:
         """``U`` (N, k) with ``U U^T`` the low band's reading kernel (:attr:`_G_low`).
@@ -414,7 +477,9 @@ class ScanPosterior:
         if beta.size == 0:
             return np.zeros(0)
         m, n = beta.size, self.n
-        cAR = self._cov(self.alpha, beta)  # (N, n m), pair-major over (q, candidate)
+        # The readings' covariances (offsets included: a new reading of a pair shares its
+        # offset with the pair's earlier ones); the weighted kernels are the coefficients'.
+        cAR = self._cov_y(self.alpha, beta)  # (N, n m), pair-major over (q, candidate)
         H = scipy.linalg.cho_solve(self._chol, cAR)  # G^-1 cov(A, R)
         GwAA = self._weighted(self.alpha, self.alpha)
         GwAR = self._weighted(self.alpha, beta)
@@ -423,7 +488,7 @@ class ScanPosterior:
             idx = np.arange(n) * m + j
             Hj, cj = H[:, idx], cAR[:, idx]
             GwRR = self._weighted(beta[j:j + 1], beta[j:j + 1])
-            S = self._cov(beta[j:j + 1], beta[j:j + 1]) - cj.T @ Hj
+            S = self._cov_y(beta[j:j + 1], beta[j:j + 1]) - cj.T @ Hj
             S[np.diag_indices_from(S)] += self.eta
             T = GwRR - Hj.T @ GwAR[:, idx]
             T = T + T.T - GwRR + Hj.T @ GwAA @ Hj
@@ -448,7 +513,7 @@ class ScanPosterior:
         depend on them); ``s2`` and ``rho`` stay as estimated."""
         beta = np.atleast_1d(np.asarray(stage_angles, dtype=float))
         self.alpha = np.concatenate([self.alpha, beta])
-        G = self._cov(self.alpha, self.alpha)
+        G = self._cov_y(self.alpha, self.alpha)
         G[np.diag_indices_from(G)] += self.eta
         self._chol = scipy.linalg.cho_factor(G, lower=True)
 
@@ -570,6 +635,8 @@ def next_angles(
     period_deg: float = 360.0,
     arc_start_deg: float = 0.0,
     cv_sample_error: float | None = None,
+    offset: float | str = 0.0,
+    mahalanobis: float | None = None,
 ) -> RefinementStep:
     """Plan the next stage angles where they lower the expected ``log_rmse`` most.
 
@@ -616,6 +683,14 @@ def next_angles(
         cannot represent does not fall with more stage angles, and a large part of it shrinks
         what a new angle buys in the whole error (errors add as variances). None: the
         posterior's expected ``log_rmse`` only.
+    offset : float or "scan"
+        The planning posterior's per-pair offset (:class:`ScanPosterior`); default none.
+    mahalanobis : float, optional
+        With ``cv_sample_error``: the self-estimate's Mahalanobis witness, as the
+        reconstruction reports it
+        (:attr:`gonio.brdf.reconstruction.reconstruct.Reconstruction.mahalanobis`, the joint
+        fit's own model, which the self-estimate was calibrated with). Default: the planning
+        posterior's, the same number when it has no offset.
 
     Returns
     -------
@@ -623,8 +698,10 @@ def next_angles(
     """
     a_deg = np.asarray(stage_angles_deg, dtype=float)
     with one_blas_thread():
-        post = ScanPosterior(basis, cells, ph_lab, np.deg2rad(a_deg), values, table=table)
+        post = ScanPosterior(basis, cells, ph_lab, np.deg2rad(a_deg), values, table=table,
+                             offset=offset)
         e0 = post.expected_log_rmse
+        mahal = post.mahalanobis if mahalanobis is None else float(mahalanobis)
         limit = budget_angles if budget_angles is not None else 10**9
         if batch is not None:
             limit = min(limit, batch)
@@ -653,10 +730,9 @@ def next_angles(
             if cv_sample_error is None:
                 drop = post.log_rmse_drop(float(gains[k]))
             else:
-                drop = (predict_log_rmse(post.expected_log_rmse, post.mahalanobis,
-                                         cv_sample_error)
-                        - predict_log_rmse(post.expected_after(float(gains[k])),
-                                           post.mahalanobis, cv_sample_error))
+                drop = (predict_log_rmse(post.expected_log_rmse, mahal, cv_sample_error)
+                        - predict_log_rmse(post.expected_after(float(gains[k])), mahal,
+                                           cv_sample_error))
             if not (drop >= threshold and drop >= rel_threshold * post.expected_log_rmse):
                 reason = "threshold" if not picked else ""
                 break

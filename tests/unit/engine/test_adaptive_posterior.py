@@ -55,14 +55,15 @@ def test_the_engine_measures_the_angles_the_posterior_rule_plans() -> None:
     n_pairs = len(eng.pairs)
     cells, ph = eng.refiner.cells, eng.refiner.ph_lab  # type: ignore[union-attr]
     vals = np.maximum(values, 0.0)
-    # The rule's measure is the drop of the self-estimate: the fit's leave-one-pair-out error
-    # goes in with the readings.
-    cv = reconstruct(BASIS, cells, ph, np.deg2rad(angles), vals).cv_sample_error
+    # The rule's measure is the drop of the self-estimate: the fit's witnesses go in with the
+    # readings; its posterior sizes a per-pair offset from the scan.
+    rec = reconstruct(BASIS, cells, ph, np.deg2rad(angles), vals)
     want = next_angles(BASIS, cells, ph, angles, vals, threshold=1e-9,
                        min_step_deg=desc.resolution_deg,
                        budget_angles=plan.max_samples // n_pairs - 8,  # type: ignore[operator]
                        per_gap=1, period_deg=180.0,  # the plan's default arc, half a turn
-                       cv_sample_error=cv)
+                       cv_sample_error=rec.cv_sample_error, mahalanobis=rec.mahalanobis,
+                       offset="scan")
     assert later and later == [round(a, 6) for a in want.angles_deg]
     assert len(steps) * n_pairs <= plan.max_samples  # type: ignore[operator]
     assert _events(store, "adaptive_round")[0]["rule"] == "posterior"

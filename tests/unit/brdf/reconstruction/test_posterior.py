@@ -28,9 +28,10 @@ def _scan(seed: int = 3) -> tuple[object, np.ndarray, np.ndarray, np.ndarray, np
     return b, cells, ph, alpha, vals
 
 
-def _dense_weighted_variance(post: ScanPosterior, alpha: np.ndarray) -> float:
+def _dense_weighted_variance(post: ScanPosterior, alpha: np.ndarray, tau: float = 0.0) -> float:
     """sum over the 72 slices of tr(W Cov_post(c(ph))), from the explicit Gaussian process
-    (every covariance written out per slice and per reading; no harmonic shortcuts)."""
+    (every covariance written out per slice and per reading; no harmonic shortcuts). ``tau``:
+    each pair's readings share an offset of that variance, independent of the coefficients."""
     P = np.asarray(post.P)
     rho_m = np.where(np.arange(P.shape[0]) > 0, post.rho, 1.0)
     Qt = post.Qt
@@ -45,6 +46,7 @@ def _dense_weighted_variance(post: ScanPosterior, alpha: np.ndarray) -> float:
     for a in range(N):
         for b in range(N):
             G[a, b] = Qt[q[a]] @ prior(ph_read[a] - ph_read[b]) @ Qt[q[b]]
+            G[a, b] += tau if q[a] == q[b] else 0.0
     G += post.eta * np.eye(N)
     total = 0.0
     for s in geo.PH_GRID:
@@ -72,6 +74,70 @@ def test_angle_gain_is_the_variance_drop_of_reading_there() -> None:
     for g, beta in zip(gains, cand, strict=True):
         after = _dense_weighted_variance(post, np.concatenate([alpha, [beta]]))
         assert g == pytest.approx(before - after, rel=1e-7)
+
+
+def test_with_a_per_pair_offset_the_variance_and_gains_are_the_explicit_posteriors() -> None:
+    """A per-pair offset of variance tau (shared by every reading of one pair, whatever the
+    stage angle, and no part of the table): the weighted variance and each candidate's gain
+    equal the explicit posterior's with tau added where two readings are of one pair."""
+    b, cells, ph, alpha, vals = _scan()
+    tau = 0.7
+    post = ScanPosterior(b, cells, ph, alpha, vals, lam=0.0, rho=2.0, offset=tau)
+    before = _dense_weighted_variance(post, alpha, tau)
+    assert post.weighted_variance() == pytest.approx(before, rel=1e-8)
+    cand = np.deg2rad([22.5, 135.0])
+    for g, beta in zip(post.angle_gains(cand), cand, strict=True):
+        after = _dense_weighted_variance(post, np.concatenate([alpha, [beta]]), tau)
+        assert g == pytest.approx(before - after, rel=1e-7)
+    post.add_angles(cand[:1])
+    assert post.weighted_variance() == pytest.approx(
+        _dense_weighted_variance(post, np.concatenate([alpha, cand[:1]]), tau), rel=1e-8)
+
+
+def test_an_offset_lowers_what_more_angles_buy_an_isotropic_scan() -> None:
+    """With an isotropic prior every stage angle reads the same slice values, so a new angle
+    only averages noise; an offset each pair keeps at every angle does not average away, so
+    the same angle buys less the larger the offset."""
+    b = _with_prior(random_basis(6, seed=1), {0: 1.0})
+    cells, ph = grid_pairs(5, seed=4)
+    alpha = np.deg2rad([0.0, 45.0, 90.0, 135.0])
+    vals = np.abs(np.random.default_rng(3).normal(1.0, 0.1, (5, 4, 1)))
+    gains = [float(ScanPosterior(b, cells, ph, alpha, vals, rho=1.0, offset=t)
+                   .angle_gains(np.deg2rad([22.5]))[0]) for t in (0.0, 0.1, 1.0)]
+    assert gains[0] > gains[1] > gains[2] > 0
+
+
+def test_the_scans_offset_is_the_likelihood_maximum() -> None:
+    """offset='scan' picks the (rho, tau) of RHO_GRID x OFFSET_GRID whose Gaussian likelihood
+    (scipy's multivariate normal on the covariance written out, the scale at its maximum) is
+    largest; readings drawn with large per-pair offsets get a tau > 0."""
+    from scipy.stats import multivariate_normal
+
+    from gonio.brdf.reconstruction.posterior import OFFSET_GRID
+
+    b, cells, ph, alpha, _ = _scan()
+    rng = np.random.default_rng(11)
+    base = np.abs(rng.normal(1.0, 0.05, (5, 1, 2)))
+    vals = base * np.exp(rng.normal(0.0, 0.5, (5, 1, 2))) * np.ones((5, alpha.size, 1))
+    vals *= np.exp(rng.normal(0.0, 0.01, vals.shape))
+    post = ScanPosterior(b, cells, ph, alpha, vals, lam=0.0, offset="scan")
+    y = post.y
+    N, C = y.shape
+    q = np.repeat(np.arange(5), alpha.size)
+    same = (q[:, None] == q[None, :]).astype(float)
+    # The offsets' unit: the mean prior variance of one reading (isotropic part).
+    unit = float(np.mean(np.diag(_dense_prior_readings(post, alpha, 0.0, 0.0))))
+    best, best_ll = None, -np.inf
+    for r in RHO_GRID:
+        K = _dense_prior_readings(post, alpha, r, r)
+        for f in OFFSET_GRID:
+            G = K + f * unit * same + post.eta * np.eye(N)
+            s2 = float(np.sum(y * np.linalg.solve(G, y))) / (N * C)
+            ll = sum(multivariate_normal(np.zeros(N), s2 * G).logpdf(y[:, c]) for c in range(C))
+            if ll > best_ll:
+                best, best_ll = (r, f * unit), ll
+    assert best is not None and best[1] > 0
+    assert (post.rho, post.tau) == pytest.approx(best, rel=1e-9)
 
 
 def test_refinement_picks_the_angle_with_the_largest_posterior_variance() -> None:
