@@ -81,7 +81,8 @@ class PosteriorRefiner:
         # posterior also gives each pair an offset that stays the same at every stage angle,
         # sized by the scan (docs/science.md 7.3).
         rec = reconstruct(self._basis, self.cells, self.ph_lab,
-                          np.deg2rad(np.asarray(angles_deg, dtype=float)), v)
+                          np.deg2rad(np.asarray(angles_deg, dtype=float)), v,
+                          channels=[f"c{k}" for k in range(v.shape[2])])  # any sensor's count
         cv = rec.cv_sample_error if np.isfinite(rec.cv_sample_error) else None
         self.last = next_angles(self._basis, self.cells, self.ph_lab, list(angles_deg), v,
                                 threshold=min_gain, min_step_deg=min_step_deg,

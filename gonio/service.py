@@ -33,7 +33,7 @@ from gonio.fields import FINITE, Count
 from gonio.jobstates import ACTIVE_STATES, IllegalTransition, JobState, check_action
 from gonio.maintenance import LOCK_FILE_NAME, MaintenanceLock
 from gonio.motion import StageMoveError
-from gonio.plans.dryrun import DryRun, dry_run
+from gonio.plans.dryrun import DryRun, arc_may_apply, dry_run
 from gonio.plans.models import (
     DEFAULT_SPAN_DEG,
     AnyPlan,
@@ -492,7 +492,7 @@ class GonioService:
         # a basis without the twofold symmetry) does not refuse the job: the joint fit still
         # takes its readings, only the other half turn rests on the prior. It goes in the job's
         # own events instead, so whoever looks at the job later sees it.
-        symmetry = self.worker.basis_symmetry()
+        symmetry = self.worker.basis_symmetry() if arc_may_apply(plan) else None
         dry_run(plan, self.desc, basis=symmetry)
         row = self.store.create_job(
             kind=plan.kind, specimen=plan.specimen, plan=plan.model_dump(mode="json"),
@@ -629,7 +629,7 @@ class GonioService:
         p = plan if isinstance(plan, BaseModel) else parse_plan(plan)
         return dry_run(p, self.desc, self.stage_deg,
                        basis_ready=not self.worker.basis_build_needed(),
-                       basis=self.worker.basis_symmetry())
+                       basis=self.worker.basis_symmetry() if arc_may_apply(p) else None)
 
     # ------------------------------------------------------------------ events
     @property

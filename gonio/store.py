@@ -693,6 +693,14 @@ class JobStore:
         self._notify([ev])
         return ev
 
+    def has_event(self, job_id: int, type_: str) -> bool:
+        """Whether the job has at least one event of this type (e.g. a warning recorded
+        before a restart)."""
+        with self._read() as db:
+            row = db.execute("SELECT 1 FROM events WHERE job_id = ? AND type = ? LIMIT 1",
+                             (job_id, type_)).fetchone()
+        return row is not None
+
     def events_after(self, seq: int, limit: int = 1000, job_id: int | None = None
                      ) -> list[EventRow]:
         q = "SELECT seq, job_id, type, time, data FROM events WHERE seq > ?"

@@ -31,7 +31,7 @@ from gonio.calibration import (
 from gonio.engine import Progress, ScanEngine
 from gonio.finishing import Finishing, FinishingStopped, finish_job
 from gonio.jobstates import JobState
-from gonio.plans.dryrun import BasisSymmetry, arc_warning
+from gonio.plans.dryrun import BasisSymmetry, arc_may_apply, arc_warning
 from gonio.plans.models import AdaptivePlan, AnyPlan, PlanError, parse_stored_plan
 from gonio.plans.validation import plan_pairs, validate_plan
 from gonio.rigdescription import RigDescription
@@ -338,8 +338,9 @@ class Worker:
             # one here would let a cancel in before the engine starts (the posterior path
             # above checks for that after its wait). The file is read once per version, mostly
             # already by the submission's check, so this rarely costs more than a stat.
-            self.note_arc(job.id, plan, BasisSymmetry.of(basis) if basis is not None
-                          else self.basis_symmetry())
+            if arc_may_apply(plan):  # only then is the basis file worth a look
+                self.note_arc(job.id, plan, BasisSymmetry.of(basis) if basis is not None
+                              else self.basis_symmetry())
             if self.on_job_start is not None:
                 # Before the first reading of a new or resumed job: e.g. a simulated rig puts
                 # the white reference or the job's specimen on the stage.
@@ -425,7 +426,8 @@ class Worker:
 
     def note_arc(self, job_id: int, plan: AnyPlan, basis: BasisSymmetry | None) -> None:
         """Record the job's arc warning (:func:`gonio.plans.dryrun.arc_warning`) as its
-        ``arc_warning`` event, once per job in this process; nothing when there is none.
+        ``arc_warning`` event, once per job (a job resumed after a restart has it already:
+        the store is asked once per process); nothing when there is none.
 
         Called when the job is queued, when it starts and when its finishing has the basis:
         whichever first knows the basis records it, so a job left to run unattended carries
@@ -438,6 +440,8 @@ class Worker:
             if job_id in self._arc_noted:
                 return
             self._arc_noted.add(job_id)
+        if self.store.has_event(job_id, "arc_warning"):
+            return
         self.store.append_event(job_id, "arc_warning", {
             "message": message, "span_deg": plan.first_span_deg(),
             "materials": list(basis.without_twofold_symmetry)})

@@ -55,6 +55,12 @@ class BasisSymmetry:
                    tuple(getattr(basis, "without_twofold_symmetry", ())))
 
 
+def arc_may_apply(plan: AnyPlan) -> bool:
+    """Whether :func:`arc_warning` can concern ``plan`` at all (a reconstruction over half a
+    turn): callers skip looking at the basis otherwise."""
+    return plan.finishing == "reconstruction" and plan.first_span_deg() == HALF_TURN_DEG
+
+
 def arc_warning(plan: AnyPlan, basis: BasisSymmetry | None) -> str | None:
     """The warning for a half-turn plan reconstructed with a basis that is not half-turn
     periodic (docs/science.md 7.4), or None.
@@ -63,8 +69,7 @@ def arc_warning(plan: AnyPlan, basis: BasisSymmetry | None) -> str | None:
     says it when it has the basis) and for plans that reconstruct nothing (calibrations).
     The joint fit still takes such a scan, so this is a warning, not a refusal.
     """
-    if (basis is None or basis.half_turn_periodic or plan.finishing != "reconstruction"
-            or plan.first_span_deg() != HALF_TURN_DEG):
+    if basis is None or basis.half_turn_periodic or not arc_may_apply(plan):
         return None
     names = _names(basis.without_twofold_symmetry)
     return (f"the plan reads the stage over half a turn (span_deg 180), but the reconstruction "

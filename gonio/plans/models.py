@@ -168,7 +168,7 @@ Rule = Annotated[
     BeforeValidator(_check_rule),
     Field(description="posterior: add the stage angles where the joint fit's expected "
                       "log_rmse falls most, stop when the best lowers the self-estimated "
-                      "log_rmse (predicted_log_rmse) by less than min_gain "
+                      "log_rmse by less than min_gain "
                       "(needs the basis; an engine without one uses vf); vf: V&F Sec. 6, "
                       "midpoints where PCHIP mispredicts a reading by more than threshold"),
 ]
@@ -176,7 +176,7 @@ MinGain = Annotated[
     float,
     AfterValidator(_check_min_gain),
     Field(description="posterior rule: least drop of the self-estimated log_rmse "
-                      "(predicted_log_rmse) one more stage angle must buy, > 0 "
+                      "one more stage angle must buy, > 0 "
                       "(gonio.brdf.reconstruction.posterior.REFINE_GAIN)",
           # The bounds in the schema for clients; the check itself is _check_min_gain's, so
           # the message says what the number means and what to do.

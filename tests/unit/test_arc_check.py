@@ -167,6 +167,10 @@ def test_a_job_records_the_warning_before_its_first_reading(
     assert types.count("arc_warning") == 1  # at the start, not again when finishing
     assert "progress" in types and types.index("arc_warning") < types.index("progress")
     _says_what_and_what_to_do(_arc_events(store, job)[0]["message"])
+    # A daemon restarted on the same store (a new worker) does not record it again.
+    again, _ = _worker(store, default_basis_provider, tmp_path)
+    again.note_arc(job, HALF, BasisSymmetry.of(ODD))
+    assert len(_arc_events(store, job)) == 1
 
 
 def test_a_job_whose_basis_comes_only_at_finishing_records_it_then(tmp_path: Path) -> None:

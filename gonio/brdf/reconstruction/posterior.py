@@ -69,7 +69,7 @@ RHO_GRID: tuple[float, ...] = tuple(float(v) for v in np.geomspace(1 / 64, 16.0,
 #: carry energy, so the low band is ``m = 2`` (docs/science.md 2.1).
 BAND_SPLIT = 2
 #: Sizes of the per-pair offset (``offset="scan"``) tried by marginal likelihood, as fractions
-#: of the mean prior variance of one reading: 0 (no offset) and 1/64 .. 4.
+#: of the mean isotropic (``m = 0``) prior variance of one reading: 0 (no offset), 1/64 .. 4.
 OFFSET_GRID: tuple[float, ...] = (0.0, *(float(v) for v in np.geomspace(1 / 64, 4.0, 5)))
 #: Default stopping threshold of adaptive plans: the least drop of the self-estimated
 #: ``log_rmse`` one more stage angle must buy, as the engine's refiner calls
@@ -146,8 +146,8 @@ class ScanPosterior:
         covariance (prior units, like ``eta``): what the basis cannot represent of an
         isotropic specimen reads the same at every stage angle, so more stage angles do not
         average it away as they do the noise. ``"scan"``: chosen with ``rho`` by marginal
-        likelihood from :data:`OFFSET_GRID` (fractions of the mean prior variance of one
-        reading). 0 (the default): no offset, the joint fit's own model. The slice
+        likelihood from :data:`OFFSET_GRID` (fractions of the mean isotropic prior
+        variance of one reading). 0 (the default): no offset, the joint fit's own model. The slice
         coefficients' posterior is that of the readings less their offsets (the offsets are
         not part of the table).
 
@@ -603,7 +603,8 @@ class RefinementStep:
     Attributes
     ----------
     angles_deg : new stage angles, degrees, sorted (empty: stop)
-    drops : expected ``log_rmse`` drop of each pick, in pick order
+    drops : drop of each pick, in pick order, in the measure the rule used (the posterior's
+        expected ``log_rmse``, or the self-estimate's with ``cv_sample_error``)
     expected_log_rmse : the posterior's expected error before the new angles
     rho : the anisotropy factor chosen by marginal likelihood
     reason : ``"threshold"`` (no angle worth its readings), ``"budget"``, ``"min_step"``
@@ -641,10 +642,11 @@ def next_angles(
     """Plan the next stage angles where they lower the expected ``log_rmse`` most.
 
     Greedy: the candidate (:func:`candidate_angles`) with the largest posterior-variance drop
-    is picked, the posterior is conditioned on it, and so on while the pick's expected
-    ``log_rmse`` drop (:meth:`ScanPosterior.log_rmse_drop`) is at least ``threshold`` (and at
-    least ``rel_threshold`` times the expected ``log_rmse`` left before the pick) and the
-    budget lasts.
+    is picked, the posterior is conditioned on it, and so on while the pick's drop is at least
+    ``threshold`` (and at least ``rel_threshold`` times the posterior's expected ``log_rmse``
+    left before the pick) and the budget lasts. The drop is the posterior's expected
+    ``log_rmse`` drop (:meth:`ScanPosterior.log_rmse_drop`), or with ``cv_sample_error`` the
+    self-estimate's.
 
     Parameters
     ----------
@@ -652,7 +654,10 @@ def next_angles(
     stage_angles_deg : (r,) measured angles, degrees
     values : (n, r, C) readings, 1/sr
     threshold : float
-        Least expected ``log_rmse`` drop per new angle (log_rmse units).
+        Least drop per new angle (log_rmse units), in the rule's measure (below). The default
+        :data:`REFINE_GAIN` was chosen for the adaptive plans' call (the reconstruction's
+        ``cv_sample_error`` and ``mahalanobis``, ``offset=REFINE_OFFSET``); a call without
+        them measures another drop against the same number.
     min_step_deg : float
         Stage resolution: no angle closer than this to another is planned.
     budget_angles : int, optional
@@ -681,8 +686,10 @@ def next_angles(
         (:func:`gonio.brdf.reconstruction.selfcheck.predict_log_rmse`, with the posterior's
         ``mahalanobis``) rather than of the posterior's expected error alone: what the basis
         cannot represent does not fall with more stage angles, and a large part of it shrinks
-        what a new angle buys in the whole error (errors add as variances). None: the
-        posterior's expected ``log_rmse`` only.
+        what a new angle buys in the whole error (errors add as variances). The self-estimate's
+        form with this posterior's expected error, which with an offset is not the number the
+        reconstruction reports. None or not finite (e.g. one pair, no leave-one-pair-out):
+        the posterior's expected ``log_rmse`` only.
     offset : float or "scan"
         The planning posterior's per-pair offset (:class:`ScanPosterior`); default none.
     mahalanobis : float, optional
@@ -702,6 +709,8 @@ def next_angles(
                              offset=offset)
         e0 = post.expected_log_rmse
         mahal = post.mahalanobis if mahalanobis is None else float(mahalanobis)
+        if cv_sample_error is not None and not np.isfinite(cv_sample_error):
+            cv_sample_error = None  # no leave-one-pair-out error: the posterior's own drop
         limit = budget_angles if budget_angles is not None else 10**9
         if batch is not None:
             limit = min(limit, batch)
