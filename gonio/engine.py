@@ -36,6 +36,7 @@ import contextlib
 import time
 from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
@@ -635,12 +636,16 @@ class ScanEngine:
         if new is None:
             new = adaptive_refinement(angles, values, plan.threshold, min_step, budget,
                                       period_deg=arc[1], start_deg=arc[0])
+        # What the posterior rule saw (its rho, offset and drops), so a lab can tell why it
+        # went on or stopped.
+        describe = getattr(self.refiner, "describe", None) if rule == "posterior" else None
+        seen: dict[str, Any] = describe() if callable(describe) else {}
         if not new:
             self.store.append_event(self.job_id, "adaptive_done",
-                                    {"reason": "converged", "rule": rule})
+                                    {"reason": "converged", "rule": rule, **seen})
             return False
         self.store.append_event(self.job_id, "adaptive_round",
-                                {"round": rnd + 1, "rule": rule, "angles": len(new)})
+                                {"round": rnd + 1, "rule": rule, "angles": len(new), **seen})
         here = await self._stage_position()
         route = order_for_travel(new, here, self.desc, plan.backlash_deg)
         k0 = max(s.angle_index for s in steps) + 1

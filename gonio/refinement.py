@@ -91,3 +91,16 @@ class PosteriorRefiner:
                                 arc_start_deg=arc_deg[0], cv_sample_error=cv,
                                 mahalanobis=rec.mahalanobis, offset=REFINE_OFFSET)
         return list(self.last.angles_deg)
+
+    def describe(self) -> dict[str, float]:
+        """What the last call saw, for the job's ``adaptive_round`` / ``adaptive_done``
+        events: the scan's anisotropy factor ``rho``, the per-pair offset (fraction of its
+        unit, 0: none), the posterior's expected ``log_rmse`` and the last candidate's drop
+        (the one that stopped the rule when nothing was planned); empty before any call."""
+        if self.last is None:
+            return {}
+        out = {"rho": float(self.last.rho), "offset": float(self.last.offset),
+               "expected_log_rmse": float(self.last.expected_log_rmse)}
+        if np.isfinite(self.last.best_drop):
+            out["best_drop"] = float(self.last.best_drop)
+        return {k: round(v, 8) for k, v in out.items()}

@@ -635,6 +635,10 @@ class RefinementStep:
     rho : the anisotropy factor chosen by marginal likelihood
     reason : ``"threshold"`` (no angle worth its readings), ``"budget"``, ``"min_step"``
         (no candidate left) or ``""`` when angles were planned
+    offset : the per-pair offset's variance as a fraction of its unit (:data:`OFFSET_GRID`;
+        0: none)
+    best_drop : the drop of the best candidate looked at last (the one that stopped the rule,
+        when ``reason`` is ``"threshold"``); NaN when none was looked at
     """
 
     angles_deg: list[float]
@@ -642,6 +646,8 @@ class RefinementStep:
     expected_log_rmse: float
     rho: float
     reason: str
+    offset: float = 0.0
+    best_drop: float = float("nan")
 
 
 def next_angles(
@@ -747,6 +753,7 @@ def next_angles(
         # The measured angles' positions in the arc; gap k starts at edges[k].
         edges, _ = arc_gaps(a_deg, period_deg, arc_start_deg)
         used = np.zeros(edges.size, dtype=int)  # picks per original gap
+        last_drop = float("nan")
         while True:
             if len(picked) >= limit:
                 reason = "budget" if not picked else ""
@@ -768,6 +775,7 @@ def next_angles(
                 drop = (predict_log_rmse(post.expected_log_rmse, mahal, cv_sample_error)
                         - predict_log_rmse(post.expected_after(float(gains[k])), mahal,
                                            cv_sample_error))
+            last_drop = float(drop)
             if not (drop >= threshold and drop >= rel_threshold * post.expected_log_rmse):
                 reason = "threshold" if not picked else ""
                 break
@@ -778,4 +786,6 @@ def next_angles(
             measured.append(float(cand[k]))
             post.add_angles(np.deg2rad([cand[k]]))
     order = np.argsort(picked)
-    return RefinementStep([picked[i] for i in order], drops, e0, post.rho, reason)
+    unit = float(np.mean(np.diag(post._G_iso)))
+    return RefinementStep([picked[i] for i in order], drops, e0, post.rho, reason,
+                          post.tau / unit if unit > 0 else 0.0, last_drop)

@@ -73,7 +73,11 @@ def test_the_plan_stops_when_the_rule_says() -> None:
     plan = AdaptivePlan(initial_rotations=8, exposure=FAST, min_gain=1e3)
     store, _eng, _ = _run(plan)
     assert {s.round for s in store.steps(1)} == {0}
-    assert _events(store, "adaptive_done") == [{"reason": "converged", "rule": "posterior"}]
+    (done,) = _events(store, "adaptive_done")
+    assert (done["reason"], done["rule"]) == ("converged", "posterior")
+    # What the rule saw is in the event: the drop that stopped it is below the plan's min_gain.
+    assert 0 <= float(done["best_drop"]) < plan.min_gain  # type: ignore[arg-type]
+    assert {"rho", "offset", "expected_log_rmse"} <= set(done)
 
 
 def test_without_a_basis_the_engine_uses_the_vf_rule_and_says_so() -> None:
