@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 from pydantic import BaseModel, Field
 
+from gonio.brdf.reconstruction.samples import HALF_TURN_DEG
 from gonio.hal import PairSpec
 from gonio.plans.models import AdaptivePlan, AnyPlan
 from gonio.plans.route import order_for_travel
@@ -24,10 +25,6 @@ BASIS_BUILD_S = 120.0
 library, then the basis), seconds: about two minutes measured on a busy 2-core machine
 (README); slower machines take longer. An adaptive plan with the posterior rule waits for it
 before its first reading."""
-
-
-HALF_TURN_DEG = 180.0
-"""A plan's arc (``span_deg``) of half a turn."""
 
 
 @dataclass(frozen=True)

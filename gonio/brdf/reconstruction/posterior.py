@@ -161,6 +161,10 @@ class ScanPosterior:
         bands, the low band's factor (``0 < m <= BAND_SPLIT``).
     rho_high : float
         The factor on the harmonics ``m > BAND_SPLIT`` (equal to ``rho`` for one factor).
+    tau : float
+        Variance of the per-pair offset (prior units; 0: none).
+    offset_unit : float
+        The unit of :data:`OFFSET_GRID`: the mean isotropic prior variance of one reading.
     mahalanobis : float
         Squared Mahalanobis norm under the prior (before the scale ``s2``) of the fitted
         readings, per pair and channel: ``f^T K^-1 f / (n C)`` with ``K`` the prior
@@ -233,6 +237,8 @@ class ScanPosterior:
         self._G_high = self._kernel(self._Am, (self.harm > BAND_SPLIT).astype(float), alpha,
                                     alpha)
         self._B = self._same_pair(alpha.size, alpha.size)
+        # The offsets' unit: the mean isotropic prior variance of one reading.
+        self.offset_unit = float(np.mean(np.diag(self._G_iso)))
         self.tau = 0.0
         if isinstance(offset, str):
             if offset != "scan":
@@ -380,7 +386,7 @@ class ScanPosterior:
         (Woodbury; n x n per offset). The test compares the choice with scipy's multivariate
         normal on the covariance written out.
         """
-        unit = float(np.mean(np.diag(self._G_iso)))
+        unit = self.offset_unit
         N, C = self.y.shape
         U = self._same_pair(self.alpha.size, 1)  # (N, n): reading a is of pair column q
         best, best_ll = (RHO_GRID[0], 0.0), -np.inf
@@ -786,6 +792,6 @@ def next_angles(
             measured.append(float(cand[k]))
             post.add_angles(np.deg2rad([cand[k]]))
     order = np.argsort(picked)
-    unit = float(np.mean(np.diag(post._G_iso)))
+    unit = post.offset_unit
     return RefinementStep([picked[i] for i in order], drops, e0, post.rho, reason,
                           post.tau / unit if unit > 0 else 0.0, last_drop)

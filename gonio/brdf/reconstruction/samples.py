@@ -213,8 +213,10 @@ class Samples:
 #: distinct azimuths, over a full turn only ``r / 2`` (each seen twice). A full turn is for
 #: specimens without that symmetry (a pile's lean, blazed or sawtooth structures).
 DEFAULT_SPAN_DEG = 180.0
+#: Half a turn, degrees: the arc that relies on the twofold symmetry.
+HALF_TURN_DEG = 180.0
 #: The arcs a uniform scan may cover (degrees): half a turn or a full turn.
-SPANS_DEG = (180.0, 360.0)
+SPANS_DEG = (HALF_TURN_DEG, 360.0)
 
 
 def span_periods(span_deg: float) -> int:

@@ -75,6 +75,18 @@ def _chart(browser: Any, canvas_id: str) -> Any:
         " curve: !!d.isCurve})) : null;", canvas_id)
 
 
+def open_live(browser: Any, daemon: Daemon, timeout_s: float, poll_s: float = 0.2) -> Any:
+    """Open the page with the daemon's key in the #fragment (as `gonio serve --sim` prints
+    it) and wait until its event stream is live; returns the WebDriverWait used."""
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    wait = WebDriverWait(browser, timeout_s, poll_frequency=poll_s)
+    browser.get(f"{daemon.url}/#key={daemon.key}")
+    wait.until(lambda d: d.find_element(By.ID, "live-chip").text == "live")
+    return wait
+
+
 def test_start_a_scan_from_the_page_and_see_the_result(daemon: Daemon, browser: Any) -> None:
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support import expected_conditions as ec
@@ -208,11 +220,9 @@ def test_an_adaptive_plan_from_the_page_sets_its_rule(daemon: Daemon, browser: A
     """Rule and min gain on the form, explained, checked by the server, shown with the job."""
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support import expected_conditions as ec
-    from selenium.webdriver.support.ui import Select, WebDriverWait
+    from selenium.webdriver.support.ui import Select
 
-    wait = WebDriverWait(browser, 180, poll_frequency=0.2)
-    browser.get(f"{daemon.url}/#key={daemon.key}")
-    wait.until(lambda d: d.find_element(By.ID, "live-chip").text == "live")
+    wait = open_live(browser, daemon, 180)
     form = browser.find_element(By.ID, "scan-form")
     Select(form.find_element(By.NAME, "kind")).select_by_value("adaptive")
     rule = Select(form.find_element(By.NAME, "rule"))
@@ -307,13 +317,9 @@ def test_page_without_key_shows_a_clear_error(daemon: Daemon, browser: Any) -> N
 
 def test_a_suspended_job_shows_why_and_the_reason_goes_when_it_recovers(
         daemon: Daemon, browser: Any, no_export_fits: None) -> None:
-    from selenium.webdriver.common.by import By
-    from selenium.webdriver.support.ui import WebDriverWait
 
-    wait = WebDriverWait(browser, 120, poll_frequency=0.1)
     browser.get_log("browser")  # drop what earlier tests left (the keyless page's 401)
-    browser.get(f"{daemon.url}/#key={daemon.key}")
-    wait.until(lambda d: d.find_element(By.ID, "live-chip").text == "live")
+    wait = open_live(browser, daemon, 120, poll_s=0.1)
     with daemon.client() as c:
         job = c.post("/api/v1/jobs", json={"plan": {
             "kind": "uniform", "specimen": "flaky", "rotations": 12,

@@ -10,7 +10,7 @@ import pytest
 
 from tests.system.api.conftest import Daemon
 from tests.system.api.test_arc_check import says_what_and_what_to_do
-from tests.system.api.test_browser import browser  # noqa: F401  (the fixture)
+from tests.system.api.test_browser import browser, open_live  # noqa: F401  (the fixture)
 
 pytestmark = pytest.mark.system
 
@@ -18,11 +18,9 @@ pytestmark = pytest.mark.system
 def test_the_page_shows_the_dry_runs_warning(odd_daemon: Daemon,
                                              browser: Any) -> None:  # noqa: F811
     from selenium.webdriver.common.by import By
-    from selenium.webdriver.support.ui import Select, WebDriverWait
+    from selenium.webdriver.support.ui import Select
 
-    wait = WebDriverWait(browser, 60, poll_frequency=0.2)
-    browser.get(f"{odd_daemon.url}/#key={odd_daemon.key}")
-    wait.until(lambda d: d.find_element(By.ID, "live-chip").text == "live")
+    wait = open_live(browser, odd_daemon, 60)
     form = browser.find_element(By.ID, "scan-form")
     Select(form.find_element(By.NAME, "kind")).select_by_value("uniform")
     arc = Select(form.find_element(By.NAME, "span_deg"))
