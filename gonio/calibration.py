@@ -8,8 +8,10 @@ solid angle and the cosine foreshortening of each fixed pair into one number per
 which is what :class:`gonio.config.PairFactor` stores.
 
 Calibrate at the exposure the scans use: sensors are not assumed to scale linearly with
-exposure time. Without any calibration the values stay in sensor units (factor 1), and the
-result file says so.
+exposure time. Readings a sensor took in a lower gain range (auto-ranging, docs/engine.md) are
+divided by that range's relative sensitivity first (:func:`counts`), so one factor serves every
+range. Without any calibration the values stay in sensor units (factor 1), and the result file
+says so.
 """
 
 from __future__ import annotations
@@ -249,8 +251,16 @@ def calibration_in_effect(data_dir: Path, rig_config: Any = None) -> Calibration
 
 
 def counts(reading: Any) -> NDArray[np.float64]:
-    """(C,) dark-subtracted values of one reading (``raw - dark``), sensor units."""
-    return np.subtract(np.asarray(reading.raw, dtype=float), np.asarray(reading.dark, dtype=float))
+    """(C,) dark-subtracted values of one reading in its sensor's nominal range, sensor units.
+
+    ``(raw - dark) / range_scale``: a reading taken in a lower range (auto-ranging, its dark
+    read in the same range) is scaled back by that range's sensitivity relative to range 0,
+    so calibration factors, measured in any range, apply to readings in every range. Readings
+    without ``range_scale`` (older records) were taken in range 0.
+    """
+    scale = float(getattr(reading, "range_scale", 1.0))
+    return np.subtract(np.asarray(reading.raw, dtype=float),
+                       np.asarray(reading.dark, dtype=float)) / scale
 
 
 def readings_array(
