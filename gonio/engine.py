@@ -21,8 +21,10 @@ Control, requested from outside (the service) at any time:
 * halt: stop now and send nothing more to the devices (no cleanup), state ``halted``.
 
 Faults: a recoverable :class:`gonio.hal.DeviceFault` (stage fault, lost device, lamp out of
-band, sensor saturation) suspends the job; the engine waits, tries the device's recovery
-(``clear_faults``, reconnect, lamp re-check), waits a settle delay and repeats the angle.
+band, sensor saturation in every range the sensor has: a saturated reading is first taken again
+in the sensor's lower gain ranges, docs/engine.md) suspends the job; the engine waits, tries
+the device's recovery (``clear_faults``, reconnect, lamp re-check), waits a settle delay and
+repeats the angle.
 More than ``max_retries`` consecutive failures at one angle, or an unrecoverable fault, fail
 the job with the reason. Cleanup (lights off, stage stopped) runs on every exit but a halt.
 
