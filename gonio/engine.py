@@ -1,10 +1,11 @@
 """Runs one job's measurement on a :class:`gonio.hal.Rig`: steps, checkpoints, control, faults.
 
-Per stage angle (ARCHITECTURE.md, "Data flow"): move the stage (always approaching from below,
-so backlash cancels); optionally read the dark signal with every light off; then for each
-light: on, settle, read all of that light's sensors in parallel (``asyncio.gather``) while
-checking the lamp's status, off. The angle's readings are committed to the store
-(:meth:`gonio.store.JobStore.commit_angle`) before the next move: that is the checkpoint.
+Per stage angle (docs/architecture.md, "One scan, one way"): move the stage (always
+approaching from below, so backlash cancels); optionally read the dark signal with every light
+off; then for each light: on, settle, read all of that light's sensors in parallel
+(``asyncio.gather``) while checking the lamp's status, off. The angle's readings are
+committed to the store (:meth:`gonio.store.JobStore.commit_angle`) before the next move: that
+is the checkpoint.
 
 Time that is not physical (moves, settling, exposures) is overhead, and most of it is device
 round trips on shared links, so the angle sends few of them: the stage position is read before a

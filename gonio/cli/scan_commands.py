@@ -52,7 +52,7 @@ def register(subparsers: Any) -> None:
                         "specimen reads the same turned by half a turn, so the angles see twice "
                         "as many distinct azimuths) or 360 (a full turn, for specimens without "
                         "that symmetry; the default with --rule vf)")
-    p.add_argument("--adaptive", action="store_true", help="adaptive rotations (MATH 7)")
+    p.add_argument("--adaptive", action="store_true", help="adaptive rotations (math.md 9)")
     p.add_argument("--rule", choices=["posterior", "vf"], default="posterior",
                    help="adaptive refinement rule: posterior (where the joint fit expects the "
                         "error to fall most) or vf (V&F's PCHIP midpoints)")

@@ -7,7 +7,7 @@ The joint fit (:func:`gonio.brdf.reconstruction.reconstruct.solve_joint`) has a 
 prior, so the expected error of a design can be written down before any material is
 measured, and a design can minimise it.
 
-Model (MATH 5a). Coefficients along ``ph``: ``c(ph) = a_0 + sum_m a_m cos(m ph) + b_m sin(m
+Model (math.md 6). Coefficients along ``ph``: ``c(ph) = a_0 + sum_m a_m cos(m ph) + b_m sin(m
 ph)`` with ``Cov(a_0) = P_0`` and ``Cov(a_m) = Cov(b_m) = P_m`` (``sum_m P_m cos(m (ph -
 ph'))`` is the prior's covariance; ``P_m`` the basis' learnt ``ph_prior`` with the specular
 condition, :func:`gonio.brdf.reconstruction.reconstruct.joint_prior`). A pair with basis row
@@ -97,7 +97,7 @@ def metric_gram(basis: Basis, slope: MetricSlope = "median") -> FloatArray:
     """(K, K) ``W``: the headline metric's weight on coefficient errors (module notes).
 
     ``W = sum_rows wV E[s^2] Q_row^T Q_row`` over the valid grid rows, ``wV`` the volume weight
-    (MATH 9) and ``s = cos ti (f w + eps) / (w (1 + f cos ti))`` the slope of ``ln(1 + f cos
+    (math.md 10) and ``s = cos ti (f w + eps) / (w (1 + f cos ti))`` the slope of ``ln(1 + f cos
     ti)`` with respect to the remapped value.
 
     Parameters

@@ -1,6 +1,6 @@
 """The joint fit's posterior: expected error of a scan and where the next stage angle helps most.
 
-The joint fit (:func:`~gonio.brdf.reconstruction.reconstruct.solve_joint`, MATH 5a) is the
+The joint fit (:func:`~gonio.brdf.reconstruction.reconstruct.solve_joint`, math.md 6) is the
 posterior mean of a
 Gaussian process along ``ph``: ``x(row, ph) = Q_row c(ph)`` with
 ``Cov(c(ph), c(ph')) = sum_m P_m cos(m (ph - ph'))`` and reading noise ``eta``. The same model
@@ -84,7 +84,7 @@ REFINE_OFFSET = "scan"
 
 @functools.cache
 def _volume_weight_rows() -> FloatArray:
-    """(p_valid,) volume weight ``wV`` of the valid rows (MATH 9)."""
+    """(p_valid,) volume weight ``wV`` of the valid rows (math.md 10)."""
     out = np.asarray(geo.volume_weight().ravel()[_VALID_ROWS], dtype=float)
     out.setflags(write=False)
     return out

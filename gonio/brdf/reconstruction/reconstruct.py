@@ -1,10 +1,10 @@
-"""Reconstruction of a full anisotropic BRDF from sparse rotation-stage samples (MATH.md 5).
+"""Reconstruction of a full anisotropic BRDF from sparse rotation-stage samples (math.md 5-6).
 
 Input: ``n`` fixed light/sensor pairs, each one cell ``(th, td, pd)`` of the isotropic slice
 with its lab half-vector azimuth ``ph_lab``, read at ``r`` stage angles. Pair ``q`` at stage
 angle ``alpha`` sees slice ``ph = ph_lab[q] - alpha``.
 
-Two methods. The default, ``method="joint"`` (MATH 5a, :func:`solve_joint`), keeps every
+Two methods. The default, ``method="joint"`` (math.md 6, :func:`solve_joint`), keeps every
 reading at its own ``ph`` and couples the slices through a prior along ``ph`` learnt from the
 training library (:attr:`Basis.ph_prior`): one ``(n r) x (n r)`` solve for all channels, with
 Eq. 5's specular condition in the prior of the varying part. ``method="vf"`` is V&F's path,
@@ -235,7 +235,7 @@ def resample_to_slices(
     ph_lab: FloatArray, stage_angles: FloatArray, values: FloatArray,
     period: float = 2 * np.pi,
 ) -> FloatArray:
-    """Resample each pair's rotation readings onto the 72 grid ``ph`` (MATH 5 step 1).
+    """Resample each pair's rotation readings onto the 72 grid ``ph`` (math.md 5 step 1).
 
     Parameters
     ----------
@@ -515,7 +515,7 @@ def solve_joint(
     Y: FloatArray, Qt: FloatArray, ph_read: FloatArray, P: FloatArray, eta: float,
     ph_out: FloatArray = geo.PH_GRID,
 ) -> JointFit:
-    """Posterior mean of the coefficients given every reading at its own ``ph`` (MATH 5a).
+    """Posterior mean of the coefficients given every reading at its own ``ph`` (math.md 6).
 
     Model: ``x(row, ph) = Q_row c(ph)``, ``Cov(c(ph), c(ph')) = sum_m P_m cos(m (ph - ph'))``,
     each reading ``y_a = Q_q(a) c(ph_a) + e_a`` with noise variance ``eta``. With
@@ -699,7 +699,7 @@ def reconstruct(
         Name of the output table.
     method : {"joint", "vf"}
         ``"joint"`` (default): every reading at its own ``ph`` with the learnt prior along
-        ``ph`` (MATH 5a, :func:`solve_joint`). ``"vf"``: V&F's path, per-pair periodic PCHIP
+        ``ph`` (math.md 6, :func:`solve_joint`). ``"vf"``: V&F's path, per-pair periodic PCHIP
         onto the 72 slices, then Eq. 5 (steps 1-3 of the module notes).
     rho : float or "scan" or None
         Joint fit only: a factor on the varying (``m > 0``) harmonics of the prior along
@@ -1022,7 +1022,7 @@ def refine_angles(
     budget_angles: int | None,
     everywhere: bool = False,
 ) -> list[float]:
-    """New stage angles for adaptive refinement from the joint fit (MATH 7, gonio's variant).
+    """New stage angles for adaptive refinement from the joint fit (math.md 9, gonio's variant).
 
     V&F refine where per-pair PCHIP mispredicts a reading. Here the prediction is the joint
     fit's: each stage angle's readings predicted from every other angle of every pair

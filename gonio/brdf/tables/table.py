@@ -194,7 +194,7 @@ class BRDFTable:
     ) -> NDArray[np.float64]:
         """Multilinear lookup at half/difference angles.
 
-        Periodic in ``ph`` (2 pi) and ``pd`` (pi), clamped in ``th`` and ``td`` (MATH 3).
+        Periodic in ``ph`` (2 pi) and ``pd`` (pi), clamped in ``th`` and ``td`` (math.md 3).
         Invalid (NaN) neighbours are left out and the remaining weights renormalised, so values
         near the horizon come from the valid side only; a point with no valid neighbour is NaN.
 
