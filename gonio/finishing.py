@@ -166,7 +166,7 @@ def finish_job(job_id: int, plan: AnyPlan, how: Finishing) -> dict[str, Any]:
     metrics = {
         "rel_sample_error": rec.rel_sample_error,
         "estimated_error": rec.estimated_error,
-        # The reported error bar: calibrated leave-one-pair-out error (docs/science.md 4.1);
+        # The reported error bar: calibrated leave-one-pair-out error (science notebook 4.1);
         # V&F's estimated_error stays for comparison with the paper.
         "predicted_error": _finite_or_none(rec.predicted_error),
         "cv_sample_error": _finite_or_none(rec.cv_sample_error),
