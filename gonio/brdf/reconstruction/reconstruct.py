@@ -137,7 +137,7 @@ class Reconstruction:
         The estimated ``metrics.log_rmse`` of the whole reconstruction against the true
         BRDF, calibrated on materials held out of the basis; the number to report. Joint
         fit: :func:`gonio.brdf.reconstruction.selfcheck.predict_log_rmse`; V&F path:
-        :func:`predict_log_rmse`.
+        :func:`predict_log_rmse_vf`.
     angle_log_errors : (r,) float64 or None
         Joint fit only: per stage angle (in the order given), the RMS log error (units of
         ``log_rmse``) of that angle's readings predicted from all the other angles. Where it
@@ -893,13 +893,13 @@ def _reconstruct(
     cv_log = float(np.sqrt(np.mean(pair_err**2))) if pair_err is not None else float("nan")
     n = int(cells_.shape[0])
     if post is not None and np.isfinite(cv):
-        from gonio.brdf.reconstruction.selfcheck import predict_log_rmse as predict_joint
+        from gonio.brdf.reconstruction.selfcheck import predict_log_rmse
 
         expected, mahal = post.expected_log_rmse, post.mahalanobis
-        predicted = predict_joint(expected, mahal, cv)
+        predicted = predict_log_rmse(expected, mahal, cv)
     else:
         expected = mahal = float("nan")
-        predicted = predict_log_rmse(cv, n, int(alpha.size))
+        predicted = predict_log_rmse_vf(cv, n, int(alpha.size))
     seconds = time.perf_counter() - t0
     return Reconstruction(
         table=table,
@@ -993,8 +993,10 @@ def _vf_path(
 LOG_RMSE_MODEL: tuple[float, float, float] = (-1.773, 0.070, -0.177)
 
 
-def predict_log_rmse(cv_sample_error: float, n_pairs: int, n_rotations: int) -> float:
-    """Calibrated estimate of the whole-BRDF ``log_rmse`` (:data:`LOG_RMSE_MODEL`).
+def predict_log_rmse_vf(cv_sample_error: float, n_pairs: int, n_rotations: int) -> float:
+    """Calibrated estimate of the whole-BRDF ``log_rmse`` on V&F's path (:data:`LOG_RMSE_MODEL`).
+
+    The joint fit's estimate is :func:`gonio.brdf.reconstruction.selfcheck.predict_log_rmse`.
 
     Parameters
     ----------
