@@ -377,7 +377,7 @@ class CalibratedScan:
 
         Raises
         ------
-        gonio.brdf.reconstruction.reconstruct.ReconstructionError
+        gonio.brdf.reconstruction.errors.ReconstructionError
             When a pair's directions are not unit vectors above the specimen.
         """
         from gonio.brdf.reconstruction.reconstruct import pair_cells

@@ -161,8 +161,8 @@ def load_fragment(path: str | os.PathLike[str]) -> DesignFragment:
 
 
 def design_fragment(design: PairDesign) -> dict[str, Any]:
-    """Design fragment of a :class:`~gonio.brdf.design.pairs.PairDesign` (``gonio design -o``, the
-    design API): ``lights``, ``sensors`` (name, theta_deg, phi_deg) and ``pairs``.
+    """Design fragment of a :class:`~gonio.brdf.design.pairdesign.PairDesign` (``gonio design
+    -o``, the design API): ``lights``, ``sensors`` (name, theta_deg, phi_deg) and ``pairs``.
 
     Independent pairs get one light and one sensor each (``L1``/``S1`` ...) and an explicit
     ``[[pairs]]`` list; a product rig uses ``pairs = "all"``.

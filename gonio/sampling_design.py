@@ -213,7 +213,7 @@ def _finite(x: float) -> float | None:
 
 def describe(design: PairDesign, rotations: int,
              span_deg: float = DEFAULT_SPAN_DEG) -> DesignResult:
-    """The API view of a :class:`~gonio.brdf.design.pairs.PairDesign`."""
+    """The API view of a :class:`~gonio.brdf.design.pairdesign.PairDesign`."""
     from gonio.rigdesign import design_fragment, dump_fragment
 
     bound = roughness_bound(design.cells, design.ph_lab, bound_angles(rotations, span_deg))
