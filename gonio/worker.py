@@ -318,6 +318,14 @@ class Worker:
             validate_plan(plan, self.desc)
         except PlanError as exc:
             return self._fail(job, f"plan no longer valid on this rig: {exc}")
+        if job.state is not JobState.RECONSTRUCTING and plan.finishing != "calibration":
+            # Checked at submission too; the calibration may have changed since (a new
+            # calibration job, a file edited by hand). A result calibrated in part, or with a
+            # damaged file, is refused before anything moves.
+            try:
+                self.calibration().check_covers(plan_pairs(plan, self.desc), f"job {job.id}")
+            except CalibrationError as exc:
+                return self._fail(job, f"not started: {exc}", plan)
         basis: Any = None  # loaded before measuring when the plan needs it
         if job.state is not JobState.RECONSTRUCTING:
             try:
