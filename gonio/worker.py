@@ -10,6 +10,12 @@ resumes at all.
 Finishing a measured job (calibration or reconstruction, and the result file:
 :mod:`gonio.finishing`) runs in a thread (``asyncio.to_thread``) so the event loop keeps
 serving the API and events while the numerics run.
+
+A job is the store's until the worker hands it to its engine (:meth:`Worker._hand_to_engine`),
+then the engine's until measuring ends; the service's abort, cancel, remove and halt decide
+under the same lock (:attr:`Worker.changes`), so a request at any point of a start-up either
+changes the stored job before the worker looks again or reaches the engine, which connects the
+rig under the plan's fault policy and stops before any stage move (docs/engine.md, "Start-up").
 """
 
 from __future__ import annotations
@@ -381,6 +387,10 @@ class Worker:
             engine = self._hand_to_engine(job, plan, refiner)
             if not isinstance(engine, ScanEngine):
                 return engine
+            if self.on_job_start is not None:
+                # Before the first reading of a new or resumed job: e.g. a simulated rig puts
+                # the white reference or the job's specimen on the stage (no rig command).
+                self.on_job_start(job)
             # The engine connects the rig (a silent device is waited for, as mid-scan), then
             # measures; an abort or halt asked meanwhile ends the job before any move.
             final = await engine.run()
@@ -593,10 +603,6 @@ class Worker:
             if row.state is JobState.QUEUED and (self.held is not None
                                                  or self.gate() is not None):
                 return row.state
-            if self.on_job_start is not None:
-                # Before the first reading of a new or resumed job: e.g. a simulated rig puts
-                # the white reference or the job's specimen on the stage.
-                self.on_job_start(row)
             self._engine = ScanEngine(None, self.store, job.id, plan, self.desc,
                                       refiner=refiner, connect=self.get_rig)
             return self._engine

@@ -193,3 +193,29 @@ def test_a_halt_before_the_worker_takes_the_job_keeps_it_queued(
         assert wait_until("the halt", lambda: _ended(c, first))["state"] == "halted"
         assert c.get(f"/api/v1/jobs/{second}").json()["state"] == "queued"
         assert service.store.reading_count(first) == 0
+
+
+def test_a_transition_the_worker_did_not_expect_is_logged_and_it_keeps_serving(
+        tmp_path: Path, basis: Any, caplog: pytest.LogCaptureFixture) -> None:
+    with fresh_daemon(tmp_path / "data", basis) as d, d.client() as c:
+        service: GonioService = d.app.state.service
+        store = service.store
+        changed = threading.Event()
+
+        def behind_its_back(ev: Event) -> None:
+            # A state change past the service's door (a bug's stand-in): the worker finds the
+            # job aborted when it wants to reconstruct it.
+            if ev.type == "planned" and ev.job_id is not None and not changed.is_set():
+                changed.set()
+                store.set_state(ev.job_id, "aborted", reason="changed behind the worker")
+
+        handle = service.add_event_listener(behind_its_back)
+        try:
+            job = _submit(c)
+            wait_until("the worker to meet the change", lambda: any(
+                "unexpected state change" in r.getMessage() for r in caplog.records))
+        finally:
+            service.remove_event_listener(handle)
+        assert changed.is_set()
+        assert c.get(f"/api/v1/jobs/{job}").json()["state"] == "aborted"
+        _keeps_serving(d, c)
