@@ -56,10 +56,14 @@ def test_the_first_connection_waits_out_a_silent_sensor(tmp_path: Path, basis: A
         _readings_once(c, job, PLAN["rotations"], len(service.desc.pairs))
 
 
+@pytest.mark.parametrize(("stage", "fault", "device"), [
+    ("dynamixel", "silence:S3", "S3"),  # a sensor's cable pulled
+    ("zaber", "stage-silent", "stage"),  # the stage's power lost
+])
 def test_a_restart_while_waiting_for_a_silent_device_keeps_the_job_waiting(
-        tmp_path: Path, basis: Any) -> None:
+        tmp_path: Path, basis: Any, stage: str, fault: str, device: str) -> None:
     data = tmp_path / "data"
-    with start_sim_rig(SimRigOptions(time_scale=10.0, settle_s=0.0)) as sim:
+    with start_sim_rig(SimRigOptions(stage=stage, time_scale=10.0, settle_s=0.0)) as sim:
         with fresh_daemon(data, basis, sim) as d, d.client() as c:
             service: GonioService = d.app.state.service
             unplugged = threading.Event()
@@ -67,16 +71,16 @@ def test_a_restart_while_waiting_for_a_silent_device_keeps_the_job_waiting(
             def unplug_after_first_angle(ev: Event) -> None:
                 if ev.type == "progress" and ev.data["done"] == 1 and not unplugged.is_set():
                     unplugged.set()
-                    sim.apply_fault("silence:S3")  # until cleared: a pulled cable
+                    sim.apply_fault(fault)  # until cleared
 
             service.add_event_listener(unplug_after_first_angle)
             job = int(c.post("/api/v1/jobs", json={"plan": PLAN}).json()["id"])
-            wait_until("the job waiting for S3", lambda: any(
+            wait_until(f"the job waiting for {device}", lambda: any(
                 e.type == "fault" and e.job_id == job and "waiting_s" in e.data
-                for e in service.store.events_after(0)))
+                and e.data["device"] == device for e in service.store.events_after(0)))
             done_before = c.get(f"/api/v1/jobs/{job}").json()["done_angles"]
             assert done_before >= 1
-        # The daemon stopped (its lifespan ends as on SIGTERM); S3 is still silent.
+        # The daemon stopped (its lifespan ends as on SIGTERM); the device is still silent.
         with fresh_daemon(data, basis, sim) as d, d.client() as c:
             service = d.app.state.service
             store = service.store
@@ -93,7 +97,7 @@ def test_a_restart_while_waiting_for_a_silent_device_keeps_the_job_waiting(
             outcome = wait_until("the resumed job waiting or failed", waiting_again_or_failed)
             assert outcome == "waiting", store.get_job(job).reason
             assert c.get(f"/api/v1/jobs/{job}").json()["done_angles"] == done_before
-            sim.clear_faults()  # the cable is back
+            sim.clear_faults()  # the device answers again
             wait_until("the job measured", lambda: _state(c, job) in (*MEASURED, "failed"))
             assert _state(c, job) in MEASURED, store.get_job(job).reason
             _readings_once(c, job, PLAN["rotations"], len(service.desc.pairs))
