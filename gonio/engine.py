@@ -25,6 +25,9 @@ band, sensor saturation) suspends the job; the engine waits, tries the device's 
 (``clear_faults``, reconnect, lamp re-check), waits a settle delay and repeats the angle.
 More than ``max_retries`` consecutive failures at one angle, or an unrecoverable fault, fail
 the job with the reason. Cleanup (lights off, stage stopped) runs on every exit but a halt.
+Given ``connect`` (the worker does), the engine first connects the rig under the same rules:
+a device silent at connection is waited for like one silent mid-scan, and an abort or halt
+asked before, during or after the connection ends the job before any stage move.
 
 The engine sees only :mod:`gonio.hal` (import-linter enforces it).
 """
