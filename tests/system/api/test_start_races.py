@@ -219,3 +219,26 @@ def test_a_transition_the_worker_did_not_expect_is_logged_and_it_keeps_serving(
         assert changed.is_set()
         assert c.get(f"/api/v1/jobs/{job}").json()["state"] == "aborted"
         _keeps_serving(d, c)
+
+
+@pytest.mark.parametrize("point", ["before_connect", "before_first_move"])
+@pytest.mark.parametrize("request_", ["abort", "halt"])
+def test_a_stop_in_steady_state_stops_before_anything_moves(
+        tmp_path: Path, basis: Any, point: str, request_: str) -> None:
+    """The same with the rig connected already (a job ran before): the connection step
+    returns at once, the request still lands before any move."""
+    with fresh_daemon(tmp_path / "data", basis) as d, d.client() as c:
+        store = d.app.state.service.store
+        # Its angles are not the next job's, so a move of the next job would show.
+        first = _submit(c, {**PLAN, "rotations": 2, "start_deg": 10.0})
+        wait_until("the first job completed",
+                   lambda: c.get(f"/api/v1/jobs/{first}").json()["state"] == "completed")
+        assert c.get("/api/v1/rig").json()["connected"]
+        rest_deg = d.sim.motion.target_deg()
+        job, status = _at_point(d, c, point, request_)
+        assert status == 200
+        end = wait_until(f"job {job} to end", lambda: _ended(c, job))
+        assert end["state"] == ("halted" if request_ == "halt" else "aborted"), end
+        assert store.reading_count(job) == 0
+        assert d.sim.motion.target_deg() == rest_deg
+        _keeps_serving(d, c)
