@@ -580,25 +580,41 @@ class GonioService:
         self.worker.resume_measurement(job_id)
         return JobInfo.from_row(self._row(job_id))
 
+    # Abort, cancel, remove and halt decide under the worker's lock (Worker.changes): a job
+    # the worker has handed to its engine is changed by asking the engine (which stops before
+    # any move when it has not moved yet), any other job in the store; never both.
     def abort(self, job_id: int) -> JobInfo:
-        row = self._row(job_id)
-        check_action("abort", row.state, job_id)
-        if row.state is JobState.QUEUED:
-            self.store.set_state(job_id, JobState.ABORTED, reason="aborted before it started")
-        elif row.state is JobState.RECONSTRUCTING:
-            if not self.worker.abort_reconstruction(job_id):
+        with self.worker.changes:
+            row = self._row(job_id)
+            check_action("abort", row.state, job_id)
+            if self.worker.stop_starting(job_id, "aborted before it started"):
+                pass  # taken from the queue, not moved yet: its engine ends it now
+            elif self.worker.abort_measurement(job_id):
+                pass  # its engine stops it: lights off, stage stopped
+            elif row.state is JobState.QUEUED:
+                self.store.set_state(job_id, JobState.ABORTED,
+                                     reason="aborted before it started")
+            elif row.state is JobState.RECONSTRUCTING:
+                if not self.worker.abort_reconstruction(job_id):
+                    self.store.set_state(job_id, JobState.ABORTED, reason="aborted by request")
+            else:
+                # Active in the store but not running here (e.g. paused before a restart).
                 self.store.set_state(job_id, JobState.ABORTED, reason="aborted by request")
-        elif not self.worker.abort_measurement(job_id):
-            # Active in the store but not running here (e.g. paused before a restart).
-            self.store.set_state(job_id, JobState.ABORTED, reason="aborted by request")
-        return JobInfo.from_row(self._row(job_id))
+            return JobInfo.from_row(self._row(job_id))
 
     def cancel(self, job_id: int) -> JobInfo:
-        """Take a queued job out of the queue (it becomes aborted; nothing was measured)."""
-        row = self._row(job_id)
-        check_action("cancel", row.state, job_id)
-        self.store.set_state(job_id, JobState.ABORTED, reason="cancelled before it started")
-        return JobInfo.from_row(self._row(job_id))
+        """Take a queued job out of the queue (it becomes aborted; nothing was measured).
+
+        A job the worker has just taken from the queue is cancelled too, as long as its
+        stage has not moved: its engine ends it before the first move.
+        """
+        with self.worker.changes:
+            row = self._row(job_id)
+            if not self.worker.stop_starting(job_id, "cancelled before it started"):
+                check_action("cancel", row.state, job_id)
+                self.store.set_state(job_id, JobState.ABORTED,
+                                     reason="cancelled before it started")
+            return JobInfo.from_row(self._row(job_id))
 
     def reorder(self, job_id: int, request: ReorderRequest | None = None, *,
                 priority: int | None = None, position: int | None = None) -> JobInfo:
@@ -610,15 +626,24 @@ class GonioService:
         return JobInfo.from_row(self.store.reorder(job_id, priority=priority, position=position))
 
     def remove(self, job_id: int) -> None:
-        """Delete a queued or finished job and its readings (not its result file)."""
-        row = self._row(job_id)
-        check_action("remove", row.state, job_id)
-        self.store.delete_job(job_id)
+        """Delete a queued or finished job and its readings (not its result file).
+
+        A job the worker has just taken from the queue, whose stage has not moved, is ended
+        before it moves and deleted as soon as its engine has stopped (a moment later).
+        """
+        with self.worker.changes:
+            row = self._row(job_id)
+            if self.worker.stop_starting(job_id, "removed before it started", remove=True):
+                return
+            check_action("remove", row.state, job_id)
+            self.store.delete_job(job_id)
 
     def halt(self) -> None:
-        """Emergency halt: stop the running job at once, no cleanup; hold the queue."""
-        self.worker.halt_measurement()
-        self.worker.hold("emergency halt")
+        """Emergency halt: stop the running job at once, no cleanup; hold the queue. A job
+        being started is halted too (or stays queued, when it had not left the queue)."""
+        with self.worker.changes:
+            self.worker.halt_measurement()
+            self.worker.hold("emergency halt")
 
     def release_queue(self) -> None:
         """Let the worker take queued jobs again after a halt or a stop-on-failure."""
