@@ -4,7 +4,7 @@ Every state change of a job, whoever asks for it (the engine, the worker, a user
 API, startup reconciliation), goes through :func:`check_transition`, so the lifecycle in
 ``docs/engine.md`` is enforced in exactly one place.
 
-Lifecycle (ARCHITECTURE.md, "Job lifecycle")::
+Lifecycle (docs/architecture.md, "Job lifecycle")::
 
     queued -> running <-> paused
     running -> suspended -> running           (a device fault with automatic resume)

@@ -67,3 +67,25 @@ def test_reading_ranges_round_trip_and_older_files_read_as_range_0(tmp_path: Pat
     old = read_result(path).readings
     assert all(r.range_index == 0 and r.range_scale == 1.0 for r in old)
     assert [r.raw for r in old] == [r.raw for r in rows]
+
+
+def test_a_truncated_result_is_damaged_for_the_check_and_the_reader(tmp_path: Path) -> None:
+    from gonio.results import check_result_file
+
+    pairs = [PairSpec(light="L1", sensor="S1"), PairSpec(light="L1", sensor="S2")]
+    dirs = np.tile([0.0, 0.0, 1.0], (2, 1))
+    s = calibrated_samples(_reading_rows(), pairs, dirs, dirs, ("R", "G", "B"), Calibration())
+    table = BRDFTable(np.full((3, *geo.TABLE_SHAPE), 0.25), ("R", "G", "B"), "spec")
+    path = write_result(tmp_path / "r.h5", job_id=3, specimen="spec", kind="uniform",
+                        readings=_reading_rows(), samples=s, table=table)
+    check_result_file(path)
+    whole = path.read_bytes()
+    for keep in (len(whole) // 2, len(whole) - 1, 100):
+        path.write_bytes(whole[:keep])
+        with pytest.raises(ResultFileError, match=str(path)):
+            check_result_file(path)
+        with pytest.raises(ResultFileError, match=str(path)):
+            read_result(path)
+    path.unlink()
+    with pytest.raises(ResultFileError, match="does not exist"):
+        check_result_file(path)
