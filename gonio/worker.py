@@ -464,9 +464,6 @@ class Worker:
                 log.info("job %s: not failed (%s): it is %s already", job.id, reason,
                          current.value)
                 return current
-            if current is JobState.QUEUED:
-                # A queued job that cannot start: record why without pretending it ran.
-                self.store.set_state(job.id, JobState.RUNNING)
             self.store.set_state(job.id, JobState.FAILED, reason=reason)
         if plan is not None and plan.stop_queue_on_failure:
             self.hold(f"job {job.id} failed and asked to stop the queue")
