@@ -98,12 +98,14 @@ def _module_path(name: str) -> Path:
     return Path(spec.origin)
 
 
-def code_tokens(source: str) -> list[str]:
-    """The tokens of Python ``source`` that decide what it computes.
+def code_text(source: str) -> str:
+    """The text of Python ``source`` that decides what it computes.
 
-    Comments, blank lines and docstrings (the leading string of a module, class or function)
-    are left out; everything else, names, literals and indentation, is kept. Tokens are stable
-    across Python versions, unlike an AST dump.
+    Comments (found by :mod:`tokenize`) and docstrings (the leading string of a module,
+    class or function, found by :mod:`ast`) are cut out by their positions, trailing
+    whitespace and blank lines dropped; everything else is kept as written. Working on the
+    text, not on token types or an AST dump, keeps the result the same on every Python
+    version, so an install on another Python still recognises the shipped basis as its own.
 
     Parameters
     ----------
@@ -112,28 +114,33 @@ def code_tokens(source: str) -> list[str]:
 
     Returns
     -------
-    list of str
-        ``"<token type>:<text>"`` for each kept token.
+    str
+        The remaining lines, newline-separated.
     """
-    docstrings: set[tuple[int, int]] = set()
+    lines = source.splitlines()
+
+    def char_col(line: int, byte_col: int) -> int:
+        # ast counts columns in UTF-8 bytes, tokenize in characters.
+        return len(lines[line - 1].encode()[:byte_col].decode(errors="ignore"))
+
+    # (first line, first column, last line, end column) of every span to cut; lines 1-based.
+    spans: list[tuple[int, int, int, int]] = []
     for node in ast.walk(ast.parse(source)):
         if isinstance(node, ast.Module | ast.ClassDef | ast.FunctionDef | ast.AsyncFunctionDef):
             body = node.body
-            if body and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant) \
-                    and isinstance(body[0].value.value, str):
-                docstrings.add((body[0].lineno, body[0].col_offset))
-    skip = {tokenize.COMMENT, tokenize.NL, tokenize.ENCODING}
-    out = []
-    after_docstring = False
+            doc = body[0] if body else None
+            if isinstance(doc, ast.Expr) and isinstance(doc.value, ast.Constant) \
+                    and isinstance(doc.value.value, str) and doc.end_lineno is not None \
+                    and doc.end_col_offset is not None:
+                spans.append((doc.lineno, char_col(doc.lineno, doc.col_offset),
+                              doc.end_lineno, char_col(doc.end_lineno, doc.end_col_offset)))
     for tok in tokenize.generate_tokens(io.StringIO(source).readline):
-        if tok.type == tokenize.STRING and tok.start in docstrings:
-            after_docstring = True  # its statement's NEWLINE goes with it
-            continue
-        if tok.type in skip or (after_docstring and tok.type == tokenize.NEWLINE):
-            continue
-        after_docstring = False
-        out.append(f"{tok.type}:{tok.string}")
-    return out
+        if tok.type == tokenize.COMMENT:
+            spans.append((*tok.start, *tok.end))
+    for l0, c0, l1, c1 in sorted(spans, reverse=True):
+        head, tail = lines[l0 - 1][:c0], lines[l1 - 1][c1:]
+        lines[l0 - 1:l1] = [head + tail]
+    return "\n".join(ln.rstrip() for ln in lines if ln.strip())
 
 
 @functools.cache
@@ -145,7 +152,7 @@ def fingerprint() -> str:
     h = hashlib.sha256(json.dumps(build_parameters(), sort_keys=True).encode())
     for name in SOURCE_MODULES:
         h.update(f"\0{name}\0".encode())
-        h.update("\n".join(code_tokens(_module_path(name).read_text(encoding="utf-8"))).encode())
+        h.update(code_text(_module_path(name).read_text(encoding="utf-8")).encode())
     return h.hexdigest()
 
 

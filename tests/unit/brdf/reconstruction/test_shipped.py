@@ -47,14 +47,19 @@ def test_the_shipped_file_is_small_float32_and_holds_the_library() -> None:
     assert shipped.shipped_basis(shipped.SHIPPED_COMPONENTS - 1) is None
 
 
-def test_the_code_tokens_ignore_comments_and_docstrings_only() -> None:
+def test_the_code_text_ignores_comments_and_docstrings_only() -> None:
     base = 'def f(x):\n    """Doc."""\n    return x + 1\n'
-    assert shipped.code_tokens(base) == shipped.code_tokens(
-        '# header\ndef f(x):\n    """Other words,\n    two lines."""\n\n    return x + 1  # why\n')
-    assert shipped.code_tokens(base) != shipped.code_tokens(base.replace("+ 1", "+ 2"))
-    # A string that is not a docstring is code.
-    assert shipped.code_tokens('x = "a"\n') != shipped.code_tokens('x = "b"\n')
-    assert shipped.code_tokens('"""Module doc."""\nx = 1\n') == shipped.code_tokens("x = 1\n")
+    assert shipped.code_text(base) == "def f(x):\n    return x + 1"
+    assert shipped.code_text(base) == shipped.code_text(
+        '# header\ndef f(x):\n    """Other words, Vávra,\n    two lines."""\n\n'
+        "    return x + 1  # why\n")
+    assert shipped.code_text(base) != shipped.code_text(base.replace("+ 1", "+ 2"))
+    # A string that is not a docstring is code, and so is a "#" inside a string.
+    assert shipped.code_text('x = "a"\n') != shipped.code_text('x = "b"\n')
+    assert shipped.code_text('x = "#1"  # note\n') == 'x = "#1"'
+    # Columns after non-ASCII text: ast counts bytes, the cut must count characters.
+    assert shipped.code_text('y = "é"; """not a docstring"""\n') == 'y = "é"; """not a docstring"""'
+    assert shipped.code_text('"""Modul é."""\nx = 1\n') == "x = 1"
 
 
 def test_a_stale_shipped_basis_is_not_used(monkeypatch: pytest.MonkeyPatch,
