@@ -187,7 +187,8 @@ def is_current() -> bool:
         return False
     try:
         return recorded().get("fingerprint") == fingerprint()
-    except ShippedBasisError:
+    except (ShippedBasisError, OSError, ValueError, SyntaxError):
+        # An install without readable module sources cannot vouch for the file: build instead.
         return False
 
 
