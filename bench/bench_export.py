@@ -194,7 +194,7 @@ def rendered_row(name: str, truth: BRDFTable, rec: BRDFTable, pred: float) -> fl
     ratio = p_true / e_rec if e_rec > 0 else float("nan")
     print(f"{name[:22]:22s} {pred:5.3f} | {e_rec:6.3f} | {p_rec:9.3f} {p_true:10.3f} "
           f"{ratio:5.2f} {log_fit:6.3f} | {f_rec:8.3f} {f_true:9.3f} | "
-          f"{rough_truth:6.3f} / {p.roughness:5.3f} {p.metallic:5.0f}")
+          f"{rough_truth:6.3f} / {p.roughness:5.3f} {p.metallic:5.2f}")
     return ratio
 
 
@@ -221,8 +221,9 @@ def rendered_section(preset: str, library_rows: bool, unseen_rows: bool) -> None
 
         import bench_unseen
 
-        # bench_unseen caches its mitsuba tables under the gonio cache; keep them private.
-        bench_unseen.CACHE = Path(tempfile.mkdtemp(prefix="bench-export-unseen-"))
+        # bench_unseen caches its mitsuba tables under the gonio cache, which may be shared
+        # read-only: this bench keeps its own copy in the system's temporary folder.
+        bench_unseen.CACHE = Path(tempfile.gettempdir()) / "gonio-bench-export-unseen"
         rendered_header("simulated scans of the unseen anisotropic specimens (mitsuba)", metric)
         unseen: list[float] = []
         for m in bench_unseen.aniso_materials():

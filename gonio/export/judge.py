@@ -18,12 +18,15 @@ its table error does not show it. So:
   ``sqrt(L_model / peak + eps) - sqrt(L_ref / peak + eps)`` per pixel and channel of
   :data:`FIT_VIEWS` (``peak`` the view's brightest reference pixel, ``eps = 1e-3``): the
   square root compresses like a display does, so the highlight's size, height and colour and
-  the diffuse colour all count. Metallic is fixed at 0 (dielectric: Lambert base, specular
-  with ``F0`` in [0.02, 0.08], index of refraction 1.33 to 1.79) and at 1 (metal: ``F0`` = base
-  colour, no diffuse); of the two, the one with the smaller rendered difference is kept.
-  A principled material is one or the other (Burley 2012 calls in-between values a blend for
-  transitions); a fractional metallic fitted to a reconstruction added a diffuse glow to black
-  metal and, with ``specular`` near 0, an index of refraction of 1.0003.
+  the diffuse colour all count. Three candidates are fitted: metallic fixed at 0 (dielectric:
+  Lambert base, specular with ``F0`` in [0.02, 0.08], index of refraction 1.33 to 1.79), fixed
+  at 1 (metal: ``F0`` = base colour, no diffuse), and fitted in [0, 1] (a blend, specular
+  bounded as for a dielectric). The better pure one is kept unless the blend's rendered
+  difference is below :data:`BLEND_MARGIN` times its own: a real surface is one or the other
+  (Burley 2012 keeps in-between values for blends, e.g. a metal under dirt or a diffuse
+  layer), and a fractional metallic that does not clearly render better is a fitting artefact:
+  fitted to a reconstruction of a brushed copper it was 0.97-0.998, which added a diffuse glow
+  where the truth is black, and, with ``specular`` near 0, an index of refraction of 1.0003.
 """
 
 from __future__ import annotations
@@ -181,11 +184,23 @@ def rendered_difference(reference: Any, model: Any,
 
 
 # --------------------------------------------------------------------------- the rendered fit
-def _params(x: FloatArray, metal: bool, nc: int, channels: tuple[str, ...],
-            specular: float) -> Principled:
+#: The rendered fit's candidates: metallic fixed at 0, fixed at 1, or fitted in [0, 1].
+MODES = ("dielectric", "metal", "blend")
+#: A blend is kept only when it renders this much better than the better pure candidate.
+BLEND_MARGIN = 0.8
+
+
+def _params(x: FloatArray, mode: str, nc: int, channels: tuple[str, ...]) -> Principled:
+    """Principled parameters from a candidate's vector ``[base (nc), (metallic), (specular),
+    log alpha_x, log alpha_y, angle]`` (metallic only for a blend, specular not for a metal)."""
     base = tuple(float(b) for b in np.clip(x[:nc], 0.0, 1.0))
     k = nc
-    if not metal:
+    metallic = {"dielectric": 0.0, "metal": 1.0}.get(mode)
+    if metallic is None:
+        metallic = float(np.clip(x[k], 0.0, 1.0))
+        k += 1
+    specular = 0.5  # unused by a pure metal; 0.5 is the dielectric default (F0 = 0.04)
+    if mode != "metal":
         specular = float(np.clip(x[k], SPECULAR_MIN, SPECULAR_MAX))
         k += 1
     ax = float(np.clip(math.exp(x[k]), ALPHA_MIN, ALPHA_MAX))
@@ -193,10 +208,10 @@ def _params(x: FloatArray, metal: bool, nc: int, channels: tuple[str, ...],
     direction = math.degrees(float(x[k + 2]))
     if ay > ax:  # the tangent is the rougher axis
         ax, ay, direction = ay, ax, direction + 90.0
-    return Principled(base, 1.0 if metal else 0.0, specular, ax, ay, direction, channels)
+    return Principled(base, metallic, specular, ax, ay, direction, channels)
 
 
-def _fit_candidate(start: Principled, metal: bool, ref: list[FloatArray],
+def _fit_candidate(start: Principled, mode: str, ref: list[FloatArray],
                    max_nfev: int) -> Principled:
     from scipy.optimize import least_squares
 
@@ -205,32 +220,37 @@ def _fit_candidate(start: Principled, metal: bool, ref: list[FloatArray],
     masks = [np.any(r > 0, axis=-1) for r in ref]
     target = np.concatenate([np.sqrt(r[m] / p + _EPS).ravel()
                              for r, m, p in zip(ref, masks, peaks, strict=True)])
-    f0 = np.asarray(start.f0)
-    base0 = np.clip(f0 if metal else np.asarray(start.base_color), 0.02, 0.98)
-    spec0 = float(np.clip(start.specular, SPECULAR_MIN + 1e-6, SPECULAR_MAX - 1e-6))
-    angle0 = math.radians(start.direction_deg)
-    ax0, ay0 = math.log(start.alpha_t), math.log(start.alpha_b)
+    base0 = np.asarray(start.f0) if mode == "metal" else np.asarray(start.base_color)
+    x0_parts: list[Any] = [np.clip(base0, 0.02, 0.98)]
+    lo_parts: list[Any] = [np.zeros(nc)]
+    hi_parts: list[Any] = [np.ones(nc)]
+    if mode == "blend":
+        x0_parts.append([float(np.clip(start.metallic, 0.05, 0.95))])
+        lo_parts.append([0.0])
+        hi_parts.append([1.0])
+    if mode != "metal":
+        x0_parts.append([float(np.clip(start.specular, SPECULAR_MIN + 1e-6,
+                                       SPECULAR_MAX - 1e-6))])
+        lo_parts.append([SPECULAR_MIN])
+        hi_parts.append([SPECULAR_MAX])
     lo_a, hi_a = math.log(ALPHA_MIN), math.log(ALPHA_MAX)
-    if metal:
-        x0 = np.concatenate([base0, [ax0, ay0, angle0]])
-        lo = np.concatenate([np.zeros(nc), [lo_a, lo_a, -np.inf]])
-        hi = np.concatenate([np.ones(nc), [hi_a, hi_a, np.inf]])
-    else:
-        x0 = np.concatenate([base0, [spec0, ax0, ay0, angle0]])
-        lo = np.concatenate([np.zeros(nc), [SPECULAR_MIN, lo_a, lo_a, -np.inf]])
-        hi = np.concatenate([np.ones(nc), [SPECULAR_MAX, hi_a, hi_a, np.inf]])
+    x0_parts.append([math.log(start.alpha_t), math.log(start.alpha_b),
+                     math.radians(start.direction_deg)])
+    lo_parts.append([lo_a, lo_a, -np.inf])
+    hi_parts.append([hi_a, hi_a, np.inf])
+    x0, lo, hi = (np.concatenate([np.asarray(v, dtype=float) for v in parts])
+                  for parts in (x0_parts, lo_parts, hi_parts))
     x0 = np.clip(x0, lo + 1e-9, np.where(np.isfinite(hi), hi - 1e-9, hi))
 
     def resid(x: FloatArray) -> FloatArray:
-        model = _params(x, metal, nc, start.channels, spec0).model()
-        imgs = render_views(model, FIT_VIEWS, FIT_SIZE)
+        imgs = render_views(_params(x, mode, nc, start.channels).model(), FIT_VIEWS, FIT_SIZE)
         pred = np.concatenate([np.sqrt(np.maximum(im[m], 0.0) / p + _EPS).ravel()
                                for im, m, p in zip(imgs, masks, peaks, strict=True)])
         return np.asarray(pred - target, dtype=float)
 
     r = least_squares(resid, x0, bounds=(lo, hi), x_scale="jac", max_nfev=max_nfev,
                       diff_step=1e-3)
-    return _params(r.x, metal, nc, start.channels, spec0)
+    return _params(r.x, mode, nc, start.channels)
 
 
 def fit_principled_rendered(table: BRDFTable, start: Principled, *, max_nfev: int = 60
@@ -249,7 +269,8 @@ def fit_principled_rendered(table: BRDFTable, start: Principled, *, max_nfev: in
     Returns
     -------
     (Principled, RenderedDifference)
-        The better of the dielectric and the metal candidate, with ``metrics``:
+        The better of the dielectric and the metal candidate, or the blend when it renders
+        clearly better (:data:`BLEND_MARGIN`), with ``metrics``:
         the table metrics of :func:`gonio.brdf.models.factored.fit_metrics`, ``seconds``,
         ``rendered`` (:meth:`RenderedDifference.as_dict`) and ``fit`` = "rendered".
     """
@@ -259,14 +280,13 @@ def fit_principled_rendered(table: BRDFTable, start: Principled, *, max_nfev: in
     if table.n_channels != 3:
         diff = rendered_difference(table, start.model(), ref_judge)
         return start, diff
-    best: tuple[Principled, RenderedDifference] | None = None
-    for metal in (False, True):
-        cand = _fit_candidate(start, metal, ref_fit, max_nfev)
-        diff = rendered_difference(table, cand.model(), ref_judge)
-        if best is None or diff.value < best[1].value:
-            best = (cand, diff)
-    assert best is not None
-    p, diff = best
+    judged = {}
+    for mode in MODES:
+        cand = _fit_candidate(start, mode, ref_fit, max_nfev)
+        judged[mode] = (cand, rendered_difference(table, cand.model(), ref_judge))
+    pure = min((judged["dielectric"], judged["metal"]), key=lambda c: c[1].value)
+    blend = judged["blend"]
+    p, diff = blend if blend[1].value < BLEND_MARGIN * pure[1].value else pure
     quality: dict[str, Any] = dict(fit_metrics(bm.tabulate(p.model(), np.float64), table))
     quality.update(seconds=round(time.perf_counter() - t0 + float(
         start.metrics.get("seconds", 0.0)), 3), rendered=diff.as_dict(), fit="rendered",
