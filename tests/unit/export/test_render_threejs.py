@@ -149,6 +149,9 @@ def test_three_js_streaks_the_gltf_like_gonio(browser: Any, server: tuple[str, P
     assert np.isfinite(img).all() and img.max() > 0, "three.js rendered nothing"
     ours = highlight(gonio_render(p, flash))
     theirs = highlight(img)
+    print(f"direction {direction:g}: gonio {ours.direction_deg:.2f}, three.js "
+          f"{theirs.direction_deg:.2f} deg; length {ours.major_px:.2f} / {theirs.major_px:.2f} "
+          f"px, width {ours.minor_px:.2f} / {theirs.minor_px:.2f} px")
     # gonio's own picture streaks along the direction (its frame is the image's at the centre)
     assert angle_between(ours.direction_deg, direction) < ANGLE_TOL_DEG, ours
     assert angle_between(theirs.direction_deg, ours.direction_deg) < ANGLE_TOL_DEG, (
@@ -173,6 +176,8 @@ def test_three_js_recovers_an_isotropic_roughness(browser: Any, server: tuple[st
         # The dim diffuse term is the same in both: take the highlight above it.
         theirs = highlight(img, level=0.3)
         ours = highlight(ref, level=0.3)
+        print(f"alpha {alpha:g}: highlight radius gonio {ours.major_px:.2f}, three.js "
+              f"{theirs.major_px:.2f} px")
         assert theirs.major_px == pytest.approx(ours.major_px, rel=WIDTH_TOL), (alpha, theirs,
                                                                                 ours)
         widths.append(theirs.major_px)
