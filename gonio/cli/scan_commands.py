@@ -137,7 +137,7 @@ def _scan(args: argparse.Namespace) -> int:
     if args.rig is not None and not args.rig.is_file():
         raise UsageError(f"rig config {args.rig} does not exist")
     plan = _plan(args)
-    if args.white_reference is None and not args.specimen:
+    if args.white_reference is None and not args.specimen and not args.dry_run:
         from gonio.export.metadata import UNNAMED
 
         print(f"note: no --specimen NAME given; the result and its exports call the specimen "
