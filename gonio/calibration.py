@@ -19,6 +19,7 @@ from __future__ import annotations
 import contextlib
 import math
 import os
+import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -74,6 +75,9 @@ class Calibration(BaseModel):
     reference_albedo: float | None = None
     exposure_s: float | None = Field(default=None, description="exposure it was measured at")
     source: str = "none"
+    created: str | None = Field(
+        default=None, description="when it was measured (ISO 8601 UTC); None before gonio "
+        "recorded it, or for factors from the rig config")
 
     def factor(self, light: str, sensor: str, n_channels: int) -> NDArray[np.float64]:
         """(C,) factor of a pair; ones when the pair is uncalibrated."""
@@ -245,7 +249,8 @@ def from_reference(
     if check:
         check_white_reference(counts)
     return Calibration(pairs=tuple(out), reference_albedo=albedo, exposure_s=exposure_s,
-                       source=source)
+                       source=source,
+                       created=time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()))
 
 
 def from_config_factors(factors: Sequence[object], albedo: float | None = None) -> Calibration:
