@@ -28,6 +28,7 @@ from pydantic import BaseModel, Field
 
 from gonio import hal
 from gonio.calibration import Calibration, calibration_in_effect
+from gonio.diskspace import DiskFull, disk_full_message, is_disk_full, low_space
 from gonio.engine_loop import EngineLoop
 from gonio.fields import FINITE, Count
 from gonio.jobstates import ACTIVE_STATES, IllegalTransition, JobState, check_action
@@ -293,7 +294,19 @@ class GonioService:
         """
         self._loop = asyncio.get_running_loop()
         self._cond = asyncio.Condition()
-        self.store.reconcile(self._can_resume)
+        try:
+            self.store.reconcile(self._can_resume)
+        except Exception as exc:
+            if not is_disk_full(exc):
+                raise
+            # Start anyway (``/health`` says why nothing runs): the jobs left active stay
+            # as they are and are reconciled once the disk has room.
+            self.worker.note_disk_full(
+                disk_full_message("the job store's start-up records", self.store.path),
+                lambda: self.store.reconcile(self._can_resume))
+        low = low_space(self.data_dir)
+        if low is not None:
+            self.worker.note_disk_full(low)
         self._engine.start()
         await self._engine.run(self._start_worker())
 
@@ -494,6 +507,10 @@ class GonioService:
         # own events instead, so whoever looks at the job later sees it.
         symmetry = self.worker.basis_symmetry() if arc_may_apply(plan) else None
         dry_run(plan, self.desc, basis=symmetry)
+        full = self.disk_full
+        if full is not None:
+            # Queued now, it would measure for minutes and then fail writing its result.
+            raise DiskFull(f"{full}; the job was not queued")
         row = self.store.create_job(
             kind=plan.kind, specimen=plan.specimen, plan=plan.model_dump(mode="json"),
             rig=self.desc.model_dump(mode="json"), priority=request.priority,
@@ -630,6 +647,12 @@ class GonioService:
         return dry_run(p, self.desc, self.stage_deg,
                        basis_ready=not self.worker.basis_build_needed(),
                        basis=self.worker.basis_symmetry() if arc_may_apply(p) else None)
+
+    @property
+    def disk_full(self) -> str | None:
+        """Why no job starts or is queued: the data directory's disk is full, or a write
+        to it failed for lack of space and it has not had room since (None: it has room)."""
+        return self.worker.disk_full or low_space(self.data_dir)
 
     # ------------------------------------------------------------------ events
     @property
