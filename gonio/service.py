@@ -211,8 +211,9 @@ T = TypeVar("T")
 
 _PREVIEW_CACHE = 8
 """Preview PNGs kept in memory (a few tens of kB each)."""
-_RENDER_CACHE = 6
-"""Rendered figures kept in memory (about 1-3 MB each)."""
+_RENDER_CACHE = 3
+"""Rendered figures kept in memory (about 1-3 MB each): the job on the page, the one it is
+compared with, one more. More kept the daemon growing for six scans (bench/bench_memory.py)."""
 
 
 # --------------------------------------------------------------------------- service
@@ -758,7 +759,8 @@ class GonioService:
             if self._result_cache is None:
                 from gonio.results import ResultCache
 
-                self._result_cache = ResultCache()
+                # Two: a job and the one it is compared with (a table is 5-10 MB in memory).
+                self._result_cache = ResultCache(size=2)
             return self._result_cache
 
     def reconstruction(self, job_id: int) -> ResultFile:

@@ -27,7 +27,7 @@ from collections.abc import Awaitable, Callable
 from pathlib import Path
 from typing import Any
 
-from gonio import hal
+from gonio import hal, heap
 from gonio.calibration import (
     Calibration,
     CalibrationError,
@@ -192,7 +192,7 @@ class Worker:
         self.disk_full: str | None = None
         """Why no job starts now: the disk filled (see :meth:`note_disk_full`), or None."""
         # What the store could not record while the disk was full, done once it has room.
-        self._on_space: list[Callable[[], None]] = []
+        self._on_space: list[Callable[[], object]] = []
         self.specimen_truth: Callable[[], dict[str, Any] | None] | None = None
         """Set by simulated rigs: the recipe of the material on the stage, stored with each
         reconstruction as ``provenance/true_material`` so renderings can show the truth."""
@@ -325,7 +325,7 @@ class Worker:
                     f"job {job.id}'s progress (the job store)", self.store.path), exc)
 
     # ------------------------------------------------------------------ a full disk
-    def note_disk_full(self, reason: str, then: Callable[[], None] | None = None) -> None:
+    def note_disk_full(self, reason: str, then: Callable[[], object] | None = None) -> None:
         """Take no job until the data directory has room again; then call ``then`` (what
         the store could not record meanwhile). Callable from any thread."""
         if self.disk_full is None:
@@ -392,6 +392,7 @@ class Worker:
             self._engine = None
             self._recon_task = None
             self._finish_stop = None
+            heap.trim()  # what the job's arrays left in the arenas (gonio/heap.py)
 
     async def _run_job(self, job: JobRow) -> JobState:
         try:

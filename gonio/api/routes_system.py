@@ -25,9 +25,9 @@ class Health(BaseModel):
     seq: int
     uptime_s: float
     error: str | None = None
-    disk_full: str | None = Field(None, description="why no job starts: the data directory's "
-                                  "disk is full (status 'disk_full'); jobs run again once it "
-                                  "has room")
+    disk_full: str | None = Field(
+        default=None, description="why no job starts: the data directory's disk is full "
+        "(status 'disk_full'); jobs run again once it has room")
 
 
 @router.get("/health", summary="Liveness: the daemon answers, its store is readable and its job "
