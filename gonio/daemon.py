@@ -368,9 +368,9 @@ def serve(app: Any, cfg: DaemonConfig, on_started: Any = None) -> int:
     """
     import uvicorn
 
-    from gonio.heap import fix_mmap_threshold
+    from gonio.heap import bound_heap
 
-    fix_mmap_threshold()  # the daemon's size levels off after its first scan (gonio/heap.py)
+    bound_heap()  # the daemon's size levels off after its first scan (gonio/heap.py)
     config = uvicorn.Config(
         app,
         host=cfg.server.host,

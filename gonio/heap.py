@@ -7,8 +7,9 @@ to the freed size (up to 32 MB): from then on arrays of that size come from the 
 threads' arenas, where freed memory stays mapped and fragments. Measured with
 ``bench/bench_memory.py``: the daemon grew from 605 MB after the first scan to 865 MB after
 the tenth. Fixing the threshold at glibc's own starting value stops the raising (``mallopt``
-with an explicit ``M_MMAP_THRESHOLD`` disables the adjustment), and a trim after each job
-hands back what the arenas still hold.
+with an explicit ``M_MMAP_THRESHOLD`` disables the adjustment), few arenas keep the threads
+from each holding a heap of their own, and a trim after each job hands back what the arenas
+still hold.
 
 Elsewhere than glibc (macOS, musl) both are no-ops.
 """
@@ -25,6 +26,11 @@ log = logging.getLogger("gonio.heap")
 
 M_MMAP_THRESHOLD = -3
 """``mallopt`` parameter number of the mmap threshold (glibc ``malloc.h``)."""
+M_ARENA_MAX = -8
+"""``mallopt`` parameter number of the most arenas (glibc ``malloc.h``)."""
+ARENA_MAX = 2
+"""Arenas the process may use: glibc's default (8 per core) lets every thread of the pools
+(finishing, request handlers) fill a heap of its own over the first scans."""
 MMAP_THRESHOLD_BYTES = 128 * 1024
 """Allocations from this size up are mapped on their own and unmapped when freed: glibc's
 initial threshold, kept fixed."""
@@ -47,14 +53,17 @@ def _glibc() -> Any:
     return _libc or None
 
 
-def fix_mmap_threshold() -> bool:
-    """Fix glibc's mmap threshold for this process (see module doc); True when done."""
+def bound_heap() -> bool:
+    """Fix glibc's mmap threshold and bound its arenas for this process (see module doc);
+    True when done. Call early, before threads allocate."""
     lib = _glibc()
     if lib is None:
         return False
-    ok = bool(lib.mallopt(ctypes.c_int(M_MMAP_THRESHOLD), ctypes.c_int(MMAP_THRESHOLD_BYTES)))
-    if not ok:
-        log.debug("mallopt(M_MMAP_THRESHOLD) refused; the heap may grow across scans")
+    ok = True
+    for param, value in ((M_MMAP_THRESHOLD, MMAP_THRESHOLD_BYTES), (M_ARENA_MAX, ARENA_MAX)):
+        if not lib.mallopt(ctypes.c_int(param), ctypes.c_int(value)):
+            log.debug("mallopt(%d, %d) refused; the heap may grow across scans", param, value)
+            ok = False
     return ok
 
 

@@ -74,6 +74,9 @@ def register(subparsers: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from gonio.heap import bound_heap
+
+    bound_heap()  # before the simulated rig's threads allocate (gonio/heap.py)
     from gonio.daemon import (
         DaemonConfigError,
         build_app,
