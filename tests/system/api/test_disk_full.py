@@ -155,7 +155,8 @@ def test_a_disk_filling_while_the_result_file_is_written_fails_the_job_only(
 ) -> None:
     """The reconstruction's HDF5 file meets the full disk part way through (its first bytes
     fit, its table does not): the case that crashed the daemon with SIGSEGV when HDF5 wrote
-    to the disk itself. The daemon runs in this process, with a small basis."""
+    to the disk itself. Then an export of an earlier job meets it too. The daemon runs in
+    this process, with a small basis."""
     import secrets
 
     from gonio.api.auth import ApiKeyring
@@ -168,27 +169,38 @@ def test_a_disk_filling_while_the_result_file_is_written_fails_the_job_only(
     with start_sim_rig(SimRigOptions(time_scale=10.0, settle_s=0.0)) as sim:
         cfg = DaemonConfig().with_overrides(paths__data_dir=str(data))
         app = build_app(cfg, sim.config, ApiKeyring({"t": key}), basis_provider=lambda: basis)
-        app.state.service.worker.fit_exports = False  # the fits are not under test
         with live_server(app) as url, httpx.Client(base_url=url, headers={"X-API-Key": key},
-                                                   timeout=30) as c:
-            r = c.post("/api/v1/jobs", json={"plan": {"kind": "uniform", "specimen": "x",
-                                                      "rotations": 8}})
-            assert r.status_code == 201, r.text
-            job = r.json()["id"]
+                                                   timeout=120) as c:
+            def submit() -> int:
+                r = c.post("/api/v1/jobs", json={"plan": {"kind": "uniform", "specimen": "x",
+                                                          "rotations": 8}})
+                assert r.status_code == 201, r.text
+                return int(r.json()["id"])
 
-            def state() -> str:
+            def state(job: int) -> str:
                 return str(c.get(f"/api/v1/jobs/{job}").json()["state"])
 
-            wait_for(lambda: state() == "reconstructing", 120, "the reconstruction")
+            done = submit()  # a result to export later, with its fits stored
+            wait_for(lambda: state(done) == "completed", 240, "the first scan")
+            job = submit()
+            wait_for(lambda: state(job) == "reconstructing", 120, "the reconstruction")
             # Leave 64 KiB: the file's header fits, the 72x18x18x36 table does not.
             filler = fill(small_disk)
             with open(filler, "r+b") as f:
                 f.truncate(filler.stat().st_size - 64 * 1024)
-            wait_for(lambda: state() == "failed", 120, "the job's failure")
+            wait_for(lambda: state(job) == "failed", 120, "the job's failure")
             detail = c.get(f"/api/v1/jobs/{job}").json()
             assert detail["reason"].startswith(f"disk full: the result file of job {job}")
             assert c.get("/health").json()["status"] == "disk_full"
             assert not list((data / "results").glob(f"job-{job}.h5*"))  # no torn file
+            # An export (a few MB: the whole table) has no room either.
+            export = c.get(f"/api/v1/jobs/{done}/export", params={"format": "table"})
+            assert export.status_code == 507, export.text
+            assert export.headers["content-type"] == "application/json"
+            assert export.json()["detail"].startswith("disk full")
+            assert not list((data / "exports").glob("*.part"))
+            assert state(done) == "completed"
             filler.unlink()
             wait_for(lambda: c.get("/health").json()["status"] == "ok", 60, "room again")
-            assert c.get("/api/v1/jobs").status_code == 200
+            export = c.get(f"/api/v1/jobs/{done}/export", params={"format": "table"})
+            assert export.status_code == 200 and len(export.content) > 0
