@@ -269,6 +269,7 @@ class DynamixelStage(_Stage):
         Runs in a worker thread. Raises DeviceUnavailable when every attempt failed.
         """
         last = ""
+        corrupt = 0  # attempts answered with a broken packet (bad CRC, malformed)
         self.last_comm_result = sdk.COMM_RX_TIMEOUT
         with self._lock:
             for attempt in range(self.retries):
@@ -293,7 +294,19 @@ class DynamixelStage(_Stage):
                     return value, int(error)
                 last = self._pk.getTxRxResult(result)
                 self.last_comm_result = result
+                corrupt += result == sdk.COMM_RX_CORRUPT
                 self._ph.clearPort()
+        if corrupt:
+            # The servo answers, but what arrives is broken: noise or a loose contact on the
+            # cable, not a missing servo (a timeout), so the lab looks at the wiring first.
+            raise DeviceUnavailable(
+                self.name,
+                f"{what}: corrupted status packets from Dynamixel ID {self.dxl_id} on "
+                f"{self.port} ({corrupt} of {self.retries} attempts; last: {last}); check the "
+                "cable and connectors for noise or a loose contact, and the baud rate "
+                f"({self.baudrate})",
+                code="corrupt_reply",
+            )
         raise DeviceUnavailable(
             self.name,
             f"{what}: no valid reply from Dynamixel ID {self.dxl_id} on {self.port} after "

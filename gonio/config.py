@@ -590,10 +590,77 @@ def read_toml(
         ) from None
     except OSError as exc:
         raise error(f"{p}: cannot read the {noun}: {exc.strerror}") from None
+    too_deep = error(
+        f"{p}: arrays or tables nested more than {MAX_TOML_DEPTH} levels deep; a {noun} needs "
+        f"a few levels at most, see {example}")
+    if _deepest_key(text) > MAX_TOML_DEPTH:
+        # tomllib's time and memory grow with the square of a dotted key's length: a
+        # 100,000-part key would take minutes and gigabytes before any error.
+        raise too_deep
     try:
-        return tomllib.loads(text)
+        doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise error(f"{p}: not valid TOML: {exc}") from None
+    except RecursionError:
+        # tomllib parses nested arrays and inline tables recursively.
+        raise too_deep from None
+    if _nesting_depth(doc) > MAX_TOML_DEPTH:
+        # Parsed (dotted keys nest without recursion), but whatever walks it next (validation,
+        # JSON) would recurse as deep.
+        raise too_deep
+    return doc
+
+
+MAX_TOML_DEPTH = 64
+"""Deepest nesting of tables and arrays :func:`read_toml` accepts; the configs use four."""
+
+
+def _deepest_key(text: str) -> int:
+    """The most parts of a dotted key or table header in TOML ``text`` (a cheap look at each
+    line's key before its ``=``, quotes and multi-line strings skipped; 0 when none)."""
+    deepest = 0
+    in_multiline = False
+    for line in text.splitlines():
+        if (line.count('"""') + line.count("'''")) % 2:
+            in_multiline = not in_multiline
+            continue
+        if in_multiline:
+            continue
+        key = line.lstrip()
+        if not key.startswith("["):
+            key = key.split("=", 1)[0] if "=" in key else ""
+        dots = 0
+        quote = ""
+        for ch in key:
+            if quote:
+                quote = "" if ch == quote else quote
+            elif ch in "\"'":
+                quote = ch
+            elif ch == ".":
+                dots += 1
+            elif ch == "#":
+                break
+        deepest = max(deepest, dots + 1 if key.strip() else 0)
+    return deepest
+
+
+def _nesting_depth(doc: Any) -> int:
+    """Levels of tables and arrays in ``doc`` (a plain value: 0), without recursion."""
+    deepest = 0
+    todo: list[tuple[Any, int]] = [(doc, 1)]
+    while todo:
+        node, depth = todo.pop()
+        if isinstance(node, dict):
+            children: Any = node.values()
+        elif isinstance(node, list):
+            children = node
+        else:
+            continue
+        deepest = max(deepest, depth)
+        if depth > MAX_TOML_DEPTH:
+            break
+        todo.extend((c, depth + 1) for c in children)
+    return deepest
 
 
 def load_rig_config(path: str | os.PathLike[str]) -> RigConfig:

@@ -26,9 +26,12 @@ only their names are.
 from __future__ import annotations
 
 import contextlib
+import ipaddress
 import logging
 import os
+import signal
 import stat
+import threading
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Annotated, Any
@@ -327,10 +330,25 @@ def build_app(
     return create_app(service, api_settings(cfg, keyring))
 
 
+def is_loopback_host(host: str) -> bool:
+    """Whether binding ``host`` keeps the daemon to this machine: ``localhost`` or a loopback
+    address (``127.0.0.0/8``, ``::1``, or either IPv4-mapped). Anything else may be reachable
+    by others: ``0.0.0.0``/``::`` (every interface), a LAN address, a host name (it may
+    resolve to any of these)."""
+    name = host.strip().strip("[]")
+    if name.lower() == "localhost":
+        return True
+    try:
+        addr = ipaddress.ip_address(name.split("%", 1)[0])  # an IPv6 zone (%eth0) is no address
+    except ValueError:
+        return False
+    mapped = getattr(addr, "ipv4_mapped", None)
+    return bool(addr.is_loopback or (mapped is not None and mapped.is_loopback))
+
+
 def warn_if_exposed(cfg: DaemonConfig, keyring: ApiKeyring) -> None:
     """Log what a non-loopback bind means, so an exposed daemon is a decision, not an accident."""
-    loopback = cfg.server.host in ("127.0.0.1", "::1", "localhost")
-    if not loopback:
+    if not is_loopback_host(cfg.server.host):
         log.warning(
             "listening on %s: every machine that can reach this address can read the rig "
             "status%s", cfg.server.host,
@@ -357,6 +375,9 @@ def serve(app: Any, cfg: DaemonConfig, on_started: Any = None) -> int:
     """
     import uvicorn
 
+    from gonio.heap import bound_heap
+
+    bound_heap()  # the daemon's size levels off after its first scan (gonio/heap.py)
     config = uvicorn.Config(
         app,
         host=cfg.server.host,
@@ -407,13 +428,37 @@ def serve(app: Any, cfg: DaemonConfig, on_started: Any = None) -> int:
     service = getattr(app.state, "service", None) if hasattr(app, "state") else None
     if service is not None:
         service.on_fatal = stop
-    # uvicorn re-raises Ctrl-C after its graceful shutdown; by then everything is closed.
-    with contextlib.suppress(KeyboardInterrupt):
-        server.run()
+    # uvicorn re-raises the signal that stopped it after its graceful shutdown; by then
+    # everything is closed. Ctrl-C arrives as KeyboardInterrupt; SIGTERM's default action
+    # would end the process on the spot, skipping every cleanup of the callers (`serve --sim`
+    # deletes its temporary rig folder on the way out), so it is raised as an exception too.
+    previous = _terminate_by_exception()
+    try:
+        with contextlib.suppress(KeyboardInterrupt, Terminated):
+            server.run()
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
     if service is not None and service.worker_failure is not None:
         log.critical("exiting with status 1: the job worker died (%s)", service.worker_failure)
         return 1
     return 0
+
+
+class Terminated(Exception):
+    """SIGTERM arrived: the process unwinds (running its cleanups) instead of dying."""
+
+
+def _raise_terminated(_sig: int, _frame: Any) -> None:
+    raise Terminated
+
+
+def _terminate_by_exception() -> Any:
+    """Make SIGTERM raise :class:`Terminated` in the main thread; returns the handler it
+    replaced (None off the main thread, where signals cannot be handled)."""
+    if threading.current_thread() is not threading.main_thread():
+        return None
+    return signal.signal(signal.SIGTERM, _raise_terminated)
 
 
 def _url_host(host: str) -> str:

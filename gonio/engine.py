@@ -49,6 +49,7 @@ import numpy as np
 
 from gonio import hal
 from gonio.calibration import readings_array
+from gonio.diskspace import disk_full_message, is_disk_full
 from gonio.hal import PairSpec
 from gonio.jobstates import FINISHED_STATES, JobState
 from gonio.motion import plan_overshoot_legs
@@ -321,7 +322,10 @@ class ScanEngine:
             raise
         except BaseException as exc:
             await self._cleanup()
-            self._set_state(JobState.FAILED, reason=f"internal error: {exc!r}")
+            reason = (disk_full_message(f"job {self.job_id}'s readings (the job store)",
+                                        self.store.path) if is_disk_full(exc)
+                      else f"internal error: {exc!r}")
+            self._set_state(JobState.FAILED, reason=reason)
             raise
         await self._cleanup()
         return self.state

@@ -34,7 +34,8 @@ class DeviceFault(Exception):
     message : str
         What happened and, where known, what to do.
     code : str
-        Short machine-readable code (``"overload"``, ``"FS"``, ``"timeout"``, ...).
+        Short machine-readable code (``"overload"``, ``"FS"``, ``"timeout"`` (no reply),
+        ``"corrupt_reply"`` (replies, all broken: check the cable), ...).
     recoverable : bool
         True when the condition may clear by itself or by a driver recovery (reboot, reconnect,
         ``warnings clear``): the engine suspends the job and retries. False fails the job.

@@ -38,6 +38,7 @@ Read back with :func:`read_result`.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import os
@@ -117,11 +118,63 @@ def write_result(
     factored: FactoredBRDF | None = None,
     principled: Principled | None = None,
 ) -> Path:
-    """Write a result file atomically (to a temporary name, then renamed). Returns the path."""
+    """Write a result file atomically (to a temporary name, then renamed). Returns the path.
+
+    The HDF5 file is built in memory and its bytes written with plain file I/O: HDF5 never
+    writes to the disk itself. A disk that fills during HDF5's own writes left an open file
+    the library could neither flush nor close, and the process crashed (SIGSEGV) when that
+    state was torn down; a failed plain write is an ``OSError`` and nothing else.
+
+    Raises
+    ------
+    OSError
+        The file could not be written (``errno`` ``ENOSPC`` for a full disk); no file and
+        no ``.part`` file is left behind.
+    """
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
+    image = _result_image(
+        job_id=job_id, specimen=specimen, kind=kind, readings=readings, samples=samples,
+        table=table, coefficients=coefficients, rel_sample_error=rel_sample_error,
+        estimated_error=estimated_error, settings=settings, metrics=metrics,
+        provenance=provenance, factored=factored, principled=principled)
     tmp = out.with_name(out.name + ".part")
-    with h5py.File(tmp, "w") as f:
+    try:
+        with open(tmp, "wb") as fh:
+            fh.write(image)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, out)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        raise
+    return out
+
+
+def _result_image(
+    *,
+    job_id: int,
+    specimen: str,
+    kind: str,
+    readings: Sequence[ReadingRow],
+    samples: CalibratedScan,
+    table: BRDFTable | None,
+    coefficients: NDArray[np.float64] | None,
+    rel_sample_error: float | None,
+    estimated_error: float | None,
+    settings: Mapping[str, Any] | None,
+    metrics: Mapping[str, Any] | None,
+    provenance: Mapping[str, Any] | None,
+    factored: FactoredBRDF | None,
+    principled: Principled | None,
+) -> bytes:
+    """The bytes of a result file (the layout above), built in memory by HDF5's core
+    driver without a backing store."""
+    # The name only labels the in-memory file; nothing is created under it.
+    f = h5py.File(f"gonio-result-{job_id}-{threading.get_ident()}.h5", "w", driver="core",
+                  backing_store=False)
+    with f:
         f.attrs.update({
             "format": FORMAT_NAME, "version": FORMAT_VERSION, "gonio_version": __version__,
             "job_id": job_id, "specimen": specimen, "kind": kind,
@@ -175,8 +228,8 @@ def write_result(
         p = f.create_group("provenance")
         for k, v in (provenance or {}).items():
             p.attrs[k] = v if isinstance(v, int | float | str) else json.dumps(v, default=str)
-    os.replace(tmp, out)
-    return out
+        f.flush()
+        return bytes(f.id.get_file_image())
 
 
 def write_factored_group(f: h5py.File, model: FactoredBRDF) -> None:

@@ -28,6 +28,7 @@ from pydantic import BaseModel, Field
 
 from gonio import hal
 from gonio.calibration import Calibration, calibration_in_effect
+from gonio.diskspace import DiskFull, disk_full_message, is_disk_full, low_space
 from gonio.engine_loop import EngineLoop
 from gonio.fields import FINITE, Count
 from gonio.jobstates import ACTIVE_STATES, IllegalTransition, JobState, check_action
@@ -210,8 +211,9 @@ T = TypeVar("T")
 
 _PREVIEW_CACHE = 8
 """Preview PNGs kept in memory (a few tens of kB each)."""
-_RENDER_CACHE = 6
-"""Rendered figures kept in memory (about 1-3 MB each)."""
+_RENDER_CACHE = 3
+"""Rendered figures kept in memory (about 1-3 MB each): the job on the page, the one it is
+compared with, one more. More kept the daemon growing for six scans (bench/bench_memory.py)."""
 
 
 # --------------------------------------------------------------------------- service
@@ -295,7 +297,19 @@ class GonioService:
         """
         self._loop = asyncio.get_running_loop()
         self._cond = asyncio.Condition()
-        self.store.reconcile(self._can_resume)
+        try:
+            self.store.reconcile(self._can_resume)
+        except Exception as exc:
+            if not is_disk_full(exc):
+                raise
+            # Start anyway (``/health`` says why nothing runs): the jobs left active stay
+            # as they are and are reconciled once the disk has room.
+            self.worker.note_disk_full(
+                disk_full_message("the job store's start-up records", self.store.path),
+                lambda: self.store.reconcile(self._can_resume))
+        low = low_space(self.data_dir)
+        if low is not None:
+            self.worker.note_disk_full(low)
         self._engine.start()
         await self._engine.run(self._start_worker())
 
@@ -498,6 +512,10 @@ class GonioService:
         dry_run(plan, self.desc, basis=symmetry)
         if plan.finishing != "calibration":
             self._check_calibration_covers(plan)
+        full = self.disk_full
+        if full is not None:
+            # Queued now, it would measure for minutes and then fail writing its result.
+            raise DiskFull(f"{full}; the job was not queued")
         row = self.store.create_job(
             kind=plan.kind, specimen=plan.specimen, plan=plan.model_dump(mode="json"),
             rig=self.desc.model_dump(mode="json"), priority=request.priority,
@@ -672,6 +690,12 @@ class GonioService:
                        basis_ready=not self.worker.basis_build_needed(),
                        basis=self.worker.basis_symmetry() if arc_may_apply(p) else None)
 
+    @property
+    def disk_full(self) -> str | None:
+        """Why no job starts or is queued: the data directory's disk is full, or a write
+        to it failed for lack of space and it has not had room since (None: it has room)."""
+        return self.worker.disk_full or low_space(self.data_dir)
+
     # ------------------------------------------------------------------ events
     @property
     def seq(self) -> int:
@@ -825,7 +849,8 @@ class GonioService:
             if self._result_cache is None:
                 from gonio.results import ResultCache
 
-                self._result_cache = ResultCache()
+                # Two: a job and the one it is compared with (a table is 5-10 MB in memory).
+                self._result_cache = ResultCache(size=2)
             return self._result_cache
 
     def reconstruction(self, job_id: int) -> ResultFile:

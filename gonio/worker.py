@@ -16,6 +16,10 @@ then the engine's until measuring ends; the service's abort, cancel, remove and 
 under the same lock (:attr:`Worker.changes`), so a request at any point of a start-up either
 changes the stored job before the worker looks again or reaches the engine, which connects the
 rig under the plan's fault policy and stops before any stage move (docs/engine.md, "Start-up").
+
+A full disk (:mod:`gonio.diskspace`) never stops the worker: the job in hand is marked
+``failed`` with "disk full" (once the store can record it), and no job starts until the data
+directory's file system has room again (:attr:`Worker.disk_full`).
 """
 
 from __future__ import annotations
@@ -29,10 +33,17 @@ from collections.abc import Awaitable, Callable
 from pathlib import Path
 from typing import Any
 
-from gonio import hal
+from gonio import hal, heap
 from gonio.calibration import (
     Calibration,
     CalibrationError,
+)
+from gonio.diskspace import (
+    FREE_MARGIN_BYTES,
+    disk_full_message,
+    free_bytes,
+    is_disk_full,
+    low_space,
 )
 from gonio.engine import Progress, ScanEngine
 from gonio.finishing import Finishing, FinishingStopped, finish_job
@@ -49,6 +60,8 @@ QUEUE_HOLD = "queue"
 """Name of the queue hold in the store's ``holds`` table."""
 GATE_POLL_S = 1.0
 """How often a closed gate (maintenance lock) is looked at again, seconds."""
+DISK_POLL_S = 1.0
+"""How often a full disk is looked at again, seconds."""
 
 BasisProvider = Callable[[], Any]
 """Returns the :class:`gonio.brdf.reconstruction.basis.Basis` to reconstruct with (may build it;
@@ -196,6 +209,10 @@ class Worker:
         self._seen_symmetry: BasisSymmetry | None = None
         self._arc_noted: set[int] = set()
         self._arc_lock = threading.Lock()  # submission (API threads), the loop, finishing
+        self.disk_full: str | None = None
+        """Why no job starts now: the disk filled (see :meth:`note_disk_full`), or None."""
+        # What the store could not record while the disk was full, done once it has room.
+        self._on_space: list[Callable[[], object]] = []
         self.specimen_truth: Callable[[], dict[str, Any] | None] | None = None
         """Set by simulated rigs: the recipe of the material on the stage, stored with each
         reconstruction as ``provenance/true_material`` so renderings can show the truth."""
@@ -302,7 +319,7 @@ class Worker:
         return eng if eng is not None and eng.job_id == job_id else None
 
     def next_job(self) -> JobRow | None:
-        if self.gate() is not None:
+        if self.gate() is not None or self.disk_full is not None:
             return None  # not even a resumed job: someone is working on the rig
         active = [j for j in self.store.active_jobs() if j.id not in self._skip]
         if active:
@@ -317,6 +334,9 @@ class Worker:
         self._loop = asyncio.get_running_loop()
         self._start_prewarm()
         while not self._stopping:
+            if self.disk_full is not None:
+                await self._wait_for_space()
+                continue
             job = self.next_job()
             if job is None:
                 self._wake.clear()
@@ -326,10 +346,21 @@ class Worker:
                     with contextlib.suppress(TimeoutError):
                         await asyncio.wait_for(self._wake.wait(), GATE_POLL_S)
                 continue
+            low = low_space(self.data_dir)
+            if low is not None:  # the job would fail writing its result: wait for room
+                self.note_disk_full(low)
+                continue
             try:
                 await self.run_job(job)
             except (IllegalTransition, NotFound) as exc:
                 self._unexpected(job.id, exc)
+            except Exception as exc:
+                if not is_disk_full(exc):
+                    raise
+                # A checkpoint or a state change the store could not write: the job fails
+                # with "disk full" once the store can say so.
+                self._disk_full_failure(job, disk_full_message(
+                    f"job {job.id}'s progress (the job store)", self.store.path), exc)
 
     def _unexpected(self, job_id: int, exc: Exception) -> None:
         """A state change the worker did not expect (a bug, or a race not yet closed): say
@@ -341,6 +372,55 @@ class Worker:
                 self._skip.add(job_id)  # not taken again by this process, whatever happens
                 self.store.set_state(job_id, JobState.FAILED,
                                      reason=f"internal error: {exc}")
+
+    # ------------------------------------------------------------------ a full disk
+    def note_disk_full(self, reason: str, then: Callable[[], object] | None = None) -> None:
+        """Take no job until the data directory has room again; then call ``then`` (what
+        the store could not record meanwhile). Callable from any thread."""
+        if self.disk_full is None:
+            log.error("%s; no job starts until there is room again", reason)
+        self.disk_full = reason
+        if then is not None:
+            self._on_space.append(then)
+        self.wake()
+
+    def _disk_full_failure(self, job: JobRow, reason: str, exc: BaseException) -> None:
+        """Fail ``job`` with ``reason`` now, or once the store has room to record it."""
+        log.error("job %s: %s (%s)", job.id, reason, exc)
+
+        def fail() -> None:
+            if self.store.get_job(job.id).state not in FINISHED_STATES:
+                self._fail(job, reason)
+
+        try:
+            fail()
+        except Exception as again:
+            if not is_disk_full(again):
+                raise
+            self.note_disk_full(reason, fail)
+            return
+        self.note_disk_full(reason)
+
+    async def _wait_for_space(self) -> None:
+        """Wait until the data directory's file system has :data:`FREE_MARGIN_BYTES` free and
+        what the store could not record is recorded; then jobs run again."""
+        while not self._stopping:
+            self._wake.clear()
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(self._wake.wait(), DISK_POLL_S)
+            if free_bytes(self.data_dir) < FREE_MARGIN_BYTES:
+                continue
+            try:
+                while self._on_space:
+                    self._on_space[0]()
+                    self._on_space.pop(0)
+            except Exception as exc:
+                if not is_disk_full(exc):
+                    raise
+                continue
+            log.info("the data directory has room again: jobs run again")
+            self.disk_full = None
+            return
 
     async def run_once(self) -> JobRow | None:
         """Run the next job to its end (for the CLI and tests); None when the queue is empty."""
@@ -366,6 +446,7 @@ class Worker:
                 self._finish_stop = None
             self._set_activity(None)
             self._recon_task = None
+            heap.trim()  # what the job's arrays left in the arenas (gonio/heap.py)
 
     async def _run_job(self, job: JobRow) -> JobState:
         try:
@@ -444,6 +525,11 @@ class Worker:
             self.store.set_state(job.id, JobState.ABORTED, reason="aborted by request")
             return JobState.ABORTED
         except Exception as exc:  # a failed reconstruction fails the job, never the worker
+            if is_disk_full(exc):
+                what = (f"the calibration of job {job.id}" if plan.finishing == "calibration"
+                        else f"the result file of job {job.id}")
+                self._disk_full_failure(job, disk_full_message(what, self.data_dir), exc)
+                return JobState.FAILED
             if isinstance(exc, CalibrationError) and plan.finishing == "calibration":
                 # The reference's readings are unusable (not a white diffuser...): say why.
                 log.error("job %s: calibration refused: %s", job.id, exc)

@@ -17,7 +17,11 @@ the lab page. The service's typed errors become HTTP statuses in one place here:
 :class:`gonio.brdf.design.errors.FeasibilityError`    422
 :class:`gonio.service.DeviceError`                    503
 :class:`gonio.results.ResultFileError`                500
+a full disk (:func:`gonio.diskspace.is_disk_full`)    507
+any other unexpected error                            500
 ====================================================  ======
+
+Every error, the unexpected ones too, answers with the JSON error body (``{"detail": ...}``).
 """
 
 from __future__ import annotations
@@ -25,6 +29,7 @@ from __future__ import annotations
 import json
 import logging
 import math
+import sqlite3
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable
 from contextlib import asynccontextmanager
@@ -46,6 +51,7 @@ from gonio.api.settings import ApiSettings, install
 from gonio.brdf.design.errors import DesignError, FeasibilityError
 from gonio.brdf.design.presets import UnknownPresetError
 from gonio.calibration import CalibrationError
+from gonio.diskspace import DiskFull, disk_full_message, is_disk_full
 from gonio.jobstates import IllegalTransition
 from gonio.motion import StageMoveError
 from gonio.plans.models import PlanError
@@ -201,6 +207,21 @@ def create_app(
         return _error(500, exc)
 
     app.add_exception_handler(ResultFileError, result_file_error)
+
+    async def unexpected_error(request: Request, exc: Exception) -> JSONResponse:
+        # A full disk (a write to the store, a result, an export) is the user's to fix:
+        # 507 with what to do. Anything else is a bug: logged with its traceback, and the
+        # client still gets the JSON error body, not a plain-text page.
+        if is_disk_full(exc):
+            log.error("%s %s: %s", request.method, request.url.path, exc)
+            return _error(507, DiskFull(disk_full_message(
+                "this request's data", service.data_dir)))
+        log.error("%s %s failed", request.method, request.url.path, exc_info=exc)
+        return SafeJSONResponse({"detail": f"internal error ({type(exc).__name__}); the "
+                                 "daemon's log has the details"}, status_code=500)
+
+    for unexpected in (OSError, sqlite3.Error, Exception):
+        app.add_exception_handler(unexpected, unexpected_error)
 
     for module in (routes_system, routes_rig, routes_jobs, routes_results, routes_design):
         document_errors(module.router.routes)

@@ -12,6 +12,7 @@ is refused under the maintenance lock        423
 takes a request body                         413
 takes parameters or a body                   422 (``detail``: a list, or a message)
 takes a job id                               404
+needs a write key (it writes to the store)   507 (the data directory's disk is full)
 any route (a client without a valid key      429 (with ``Retry-After``)
 over its rate, :mod:`gonio.api.ratelimit`)
 any route (a key in the query string,        400
@@ -68,6 +69,8 @@ _DESCRIPTIONS: dict[int, str] = {
          "seconds",
     500: "a stored result file cannot be read",
     503: "a device did not do what was asked; the detail gives the fault",
+    507: "the data directory's disk is full: nothing was written and nothing stored was lost; "
+         "free space and repeat the request",
 }
 
 
@@ -114,6 +117,8 @@ def document_errors(routes: Iterable[Any]) -> None:
         statuses: set[int] = {400, 429}
         if calls & {require_write_key, require_key_when_configured, require_read_access}:
             statuses |= {401, 403}
+        if require_write_key in calls:
+            statuses.add(507)  # a change writes to the store (or a file)
         if refuse_while_locked in calls:
             statuses.add(423)
         path_params = [p for d in deps for p in d.path_params]

@@ -179,7 +179,8 @@ ExportFormat = Literal["factored", "mtlx", "gltf", "merl", "table"]
 @router.get(
     "/{job_id}/export",
     dependencies=READ,
-    responses={**_NO_RESULT, 200: {"content": {"application/octet-stream": {}}}},
+    responses={**_NO_RESULT, 200: {"content": {"application/octet-stream": {}}},
+               507: {"description": "no room on the data directory's disk for the export"}},
     response_class=FileResponse,
     summary="The result as a renderer format: factored, mtlx, gltf, merl or table "
             "(docs/file-formats.md)",

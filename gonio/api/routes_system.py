@@ -8,7 +8,7 @@ from typing import Any
 
 from fastapi import APIRouter, Header, Query, Request
 from fastapi.responses import JSONResponse, PlainTextResponse, StreamingResponse
-from pydantic import BaseModel
+from pydantic import BaseModel, Field
 
 from gonio import __version__
 from gonio.api.deps import MAX_ID, READ, Service
@@ -25,10 +25,14 @@ class Health(BaseModel):
     seq: int
     uptime_s: float
     error: str | None = None
+    disk_full: str | None = Field(
+        default=None, description="why no job starts: the data directory's disk is full "
+        "(status 'disk_full'); jobs run again once it has room")
 
 
 @router.get("/health", summary="Liveness: the daemon answers, its store is readable and its job "
-                               "worker runs (503 when the worker died)",
+                               "worker runs (503 when the worker died; status 'disk_full' while "
+                               "the data directory's disk is full)",
             response_model=Health,
             responses={503: {"model": Health, "description": "the job worker died; the daemon "
                              "is stopping so its supervisor can restart it"}})
@@ -43,6 +47,10 @@ async def health(service: Service, request: Request) -> Any:
         failed = out.model_copy(update={"status": "failed",
                                         "error": f"job worker died: {service.worker_failure}"})
         return JSONResponse(failed.model_dump(), status_code=503)
+    full = service.disk_full
+    if full is not None:
+        # 200: the daemon is alive and answers; a restart would not free any space.
+        return out.model_copy(update={"status": "disk_full", "disk_full": full, "error": full})
     return out
 
 

@@ -74,6 +74,9 @@ def register(subparsers: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from gonio.heap import bound_heap
+
+    bound_heap()  # before the simulated rig's threads allocate (gonio/heap.py)
     from gonio.daemon import (
         DaemonConfigError,
         build_app,
@@ -164,7 +167,7 @@ def _configure_logging(level: str) -> None:
 def _run_sim(args: argparse.Namespace, cfg: Any, keyring: Any) -> int:
     from gonio.api.auth import ApiKeyring
     from gonio.cli.sim_session import attach_sim, calibration_not_needed, start_sim_calibration
-    from gonio.daemon import build_app, serve
+    from gonio.daemon import build_app, is_loopback_host, serve, warn_if_exposed
     from gonio.sim.rig import WHITE_REFERENCE_ALBEDO, SimRigOptions, start_sim_rig
 
     if not args.time_scale > 0:
@@ -174,6 +177,7 @@ def _run_sim(args: argparse.Namespace, cfg: Any, keyring: Any) -> int:
     if len(keyring) == 0:
         session_key = secrets.token_hex(24)  # hex: never starts with '-' (argparse)
         keyring = ApiKeyring({"sim-session": session_key})
+    warn_if_exposed(cfg, keyring)
     with tempfile.TemporaryDirectory(prefix="gonio-serve-") as tmp:
         if args.throwaway:
             cfg = cfg.with_overrides(paths__data_dir=str(Path(tmp) / "data"))
@@ -203,6 +207,12 @@ def _run_sim(args: argparse.Namespace, cfg: Any, keyring: Any) -> int:
 
             def started(url: str, stop: Any) -> None:
                 fragment = f"#key={session_key}" if session_key else ""
+                if fragment and not is_loopback_host(cfg.server.host):
+                    # The address works from other machines: whoever sees it (a shared
+                    # screen, a terminal log) can control the rig with the key in it.
+                    print(f"warning: --host {cfg.server.host} is reachable from other "
+                          "machines; the address below holds the session's API key: anyone "
+                          "who sees it can control the rig", file=sys.stderr, flush=True)
                 print(f"simulated rig {sim.config.rig.name!r}: {len(sim.config.lights)} lights, "
                       f"{len(sim.config.sensors)} sensors; rig config {sim.config_path}")
                 kept = ("a temporary folder, deleted at exit" if args.throwaway

@@ -152,3 +152,31 @@ def test_bad_gain_stages_are_refused_with_what_to_do(example: dict) -> None:
     sensor["gain_stages"] = [0.1]
     del sensor["registers"]["gain"]
     assert "gain_stages need a gain register" in _error(example)
+
+
+@pytest.mark.parametrize("text", [
+    "a = " + "[" * 100_000 + "]" * 100_000,             # arrays: tomllib recurses
+    "a = " + "{b=" * 100_000 + "1" + "}" * 100_000,      # inline tables: tomllib recurses
+    "a." * 100_000 + "b = 1",                           # a dotted key: no recursion, but
+    "[" + "t." * 100_000 + "u]\nx = 1",                 # quadratic time and memory
+], ids=["arrays", "inline-tables", "dotted-key", "table-header"])
+def test_a_deeply_nested_file_is_a_config_error_naming_the_file(
+    tmp_path: Path, text: str
+) -> None:
+    deep = tmp_path / "deep.toml"
+    deep.write_text(text, encoding="utf-8")
+    with pytest.raises(ConfigError, match=r"deep\.toml: arrays or tables nested more than 64 "
+                                          r"levels deep; a rig config needs"):
+        load_rig_config(deep)
+
+
+def test_nesting_within_the_limit_and_dots_in_strings_are_not_refused(tmp_path: Path) -> None:
+    # 64 levels parse (then fail as a rig config, for their content); dots inside quoted keys,
+    # values and multi-line strings are not key parts.
+    ok = tmp_path / "ok.toml"
+    ok.write_text("a = " + "[" * 63 + "1" + "]" * 63 + "\n"
+                  + '"x.y.z" = "' + "." * 200 + '"\n'
+                  + 'note = """\n' + "a." * 200 + "b = 1\n" + '"""\n', encoding="utf-8")
+    with pytest.raises(ConfigError) as err:
+        load_rig_config(ok)
+    assert "nested more than" not in str(err.value)

@@ -111,6 +111,19 @@ def test_corrupted_replies_are_retried() -> None:
         assert sim.faults.corrupt_replies == 0
 
 
+def test_corrupted_replies_past_the_retries_are_reported_as_corrupt_not_timeout() -> None:
+    # Every attempt answered, with a broken CRC: the fault says so, with its own code, so the
+    # lab checks the wiring rather than the servo's power (issue 24, item 8).
+    with rig(retries=3) as (sim, stage):
+        run(stage.connect)
+        sim.faults.set(corrupt_replies=3)
+        with pytest.raises(DeviceUnavailable, match="corrupted status packets") as err:
+            run(stage.position)
+        assert err.value.code == "corrupt_reply"
+        assert sim.faults.corrupt_replies == 0
+        assert run(stage.position) == pytest.approx(0.0)  # the next request is answered
+
+
 def test_dropped_replies_retry_then_device_unavailable() -> None:
     with rig(retries=3) as (sim, stage):
         run(stage.connect)
