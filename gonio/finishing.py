@@ -163,6 +163,7 @@ def finish_job(job_id: int, plan: AnyPlan, how: Finishing) -> dict[str, Any]:
     # (reconstruct's rho="scan", docs/science.md 7.3); settings["prior_rho"] says which.
     rec = reconstruct(basis, grid.cells, grid.ph_lab, grid.stage_angles,
                       np.maximum(grid.values, 0.0), channels=channels, name=job.specimen)
+    colour = _colour(rec, how, [p.sensor for p in pairs], bool(cal.pairs))
     metrics = {
         "rel_sample_error": rec.rel_sample_error,
         "estimated_error": rec.estimated_error,
@@ -213,10 +214,33 @@ def finish_job(job_id: int, plan: AnyPlan, how: Finishing) -> dict[str, Any]:
         rel_sample_error=rec.rel_sample_error, estimated_error=rec.estimated_error,
         settings=rec.settings, metrics=metrics, provenance=provenance,
         factored=fits.factored if fits else None,
-        principled=fits.principled if fits else None,
+        principled=fits.principled if fits else None, colour=colour,
     )
     summary.update(result_path=str(path), **metrics)
     return summary
+
+
+def _colour(rec: Any, how: Finishing, sensors: list[str], calibrated: bool) -> dict[str, Any]:
+    """The result's ``/colour`` group (docs/colour.md); a spectral sensor's band centres go on
+    the reconstructed table (``rec`` is changed in place: its table gains the wavelengths).
+
+    Colour is a by-product: anything wrong with it is stored as the group's ``error`` and the
+    measurement is kept.
+    """
+    from gonio.brdf.colour.errors import ColourError
+    from gonio.brdf.tables.table import BRDFTable
+    from gonio.result_colour import colour_group, colour_source
+
+    try:
+        source = colour_source(how.provenance.get("rig_config"), sensors)
+    except (ColourError, ValueError, KeyError, TypeError) as exc:
+        return {"source": {}, "error": f"the rig config's colour description is unusable: {exc}"}
+    centres = source.get("bands", {}).get("centres_nm")
+    if centres is not None and len(centres) == rec.table.n_channels:
+        t = rec.table
+        object.__setattr__(rec, "table", BRDFTable.trusted(
+            np.asarray(t.values), t.channels, t.name, centres, t.provenance))
+    return colour_group(rec.table, source, calibrated)
 
 
 def _fits(job_id: int, table: Any) -> Any:

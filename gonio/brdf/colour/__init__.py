@@ -17,5 +17,6 @@ those directions out of a reconstructed table (:mod:`~gonio.brdf.colour.report`)
 ``report``          the colour numbers of a reconstructed table at those geometries, flop
                     index, colour differences between two reports
 ``exportspace``     linear sRGB from XYZ, for exports that state their colour space
+``errors``          :class:`ColourError` (importable without loading colour-science)
 ==================  ===========================================================================
 """

@@ -141,9 +141,13 @@ class ColourMatrix:
             m = np.asarray(d["matrix"], dtype=float)
             conditions = ViewingConditions(str(d.get("illuminant", "D65")),
                                            str(d.get("observer", "10")))
-            out = cls(channels, m, conditions, float(d.get("residual_median_de00", "nan")),
-                      float(d.get("residual_max_de00", "nan")), int(d.get("n_patches", 0)),
-                      str(d.get("source", "")))
+            def num(key: str) -> float:
+                v = d.get(key)
+                return float("nan") if v is None else float(v)
+
+            out = cls(channels, m, conditions, num("residual_median_de00"),
+                      num("residual_max_de00"), int(d.get("n_patches") or 0),
+                      str(d.get("source") or ""))
         except (KeyError, TypeError, ValueError) as exc:
             raise ColourError(f"colour calibration is malformed ({exc}); fit it again") from None
         if m.shape != (3, len(channels)) or not np.isfinite(m).all():

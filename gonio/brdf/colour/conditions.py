@@ -18,12 +18,16 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from gonio.brdf.colour.errors import ColourError
+
 with warnings.catch_warnings():
     # colour-science warns at import that its plotting needs matplotlib; gonio plots no colour.
     warnings.simplefilter("ignore")
     import colour
 
 FloatArray = NDArray[np.float64]
+__all__ = ["ColourError", "ViewingConditions", "delta_e00", "resample", "sd_to_xyz",
+           "spectra_to_xyz", "xyz_to_lab"]
 
 #: The wavelength grid spectra are integrated on, nm: ASTM E308's 10 nm tables span 360-780.
 GRID_START_NM, GRID_END_NM, GRID_STEP_NM = 360.0, 780.0, 10.0
@@ -37,10 +41,6 @@ OBSERVERS: dict[str, str] = {
 }
 #: Illuminants offered (colour-science holds their spectra and white points).
 ILLUMINANTS: tuple[str, ...] = ("D65", "D50", "A", "C", "D55", "D75", "FL2", "FL11")
-
-
-class ColourError(ValueError):
-    """A colour computation cannot be done as asked; the message says why and what to do."""
 
 
 @dataclass(frozen=True)
