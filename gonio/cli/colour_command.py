@@ -1,4 +1,5 @@
-"""``gonio colour RESULT.h5 [--against STD]``: the colour numbers a colour lab reads.
+"""``gonio colour RESULT.h5 [--against STD]``: the colour numbers a colour lab reads; and
+``gonio colour-chart CHART.csv``: an RGB sensor's colour calibration from a chart.
 
 CIELAB at the aspecular geometries of multi-angle spectrophotometers, the flop index, and
 CIEDE2000 against a standard (another result file or a colour CSV written by this command),
@@ -53,6 +54,59 @@ def register(sub: Any) -> None:
                    help="specimen azimuths of the plane of incidence, degrees, comma separated "
                    "(default 0: along the holder mark); more than one shows anisotropy")
     p.set_defaults(func=run)
+
+    c = sub.add_parser(
+        "colour-chart", aliases=["color-chart"],
+        help="fit an RGB sensor's colour calibration from a chart of known reflectances",
+        description="Fit the 3 x C matrix taking a sensor's reflectance factors to CIE XYZ from "
+        "a chart file (CSV: patch, the sensor's channel readings, the patches' reference "
+        "reflectance per wavelength; docs/colour.md), print its residual CIEDE2000 on the "
+        "patches, and write the [sensors.colour_calibration] table for the rig config.",
+    )
+    c.add_argument("chart", type=Path, help="the chart file (CSV)")
+    c.add_argument("--channels", default=None, metavar="A,B,C",
+                   help="the sensor's channels in its order (default: the chart's columns)")
+    c.add_argument("--illuminant", default="D65", choices=list(ILLUMINANTS))
+    c.add_argument("--observer", default="10", choices=["10", "2"])
+    c.add_argument("-o", "--output", type=Path, default=None,
+                   help="write the TOML table to this file (default: print it)")
+    c.set_defaults(func=run_chart)
+
+
+def run_chart(args: argparse.Namespace) -> int:
+    import tomli_w
+
+    from gonio.brdf.colour.chart import fit_matrix, read_chart
+    from gonio.brdf.colour.conditions import ViewingConditions
+
+    if not args.chart.is_file():
+        raise UsageError(f"chart file {args.chart} does not exist")
+    if args.output is not None and not args.output.parent.is_dir():
+        raise UsageError(f"-o {args.output}: folder {args.output.parent} does not exist")
+    channels = None
+    if args.channels is not None:
+        channels = [x.strip() for x in args.channels.split(",") if x.strip()]
+        if not channels:
+            raise UsageError("--channels: give the channel names separated by commas")
+    m = fit_matrix(read_chart(args.chart), ViewingConditions(args.illuminant, args.observer),
+                   channels, source=args.chart.name)
+    table = {"matrix": [[round(float(x), 6) for x in row] for row in m.matrix],
+             "illuminant": m.conditions.illuminant, "observer": m.conditions.observer,
+             "residual_median_de00": round(m.residual_median_de00, 4),
+             "residual_max_de00": round(m.residual_max_de00, 4),
+             "n_patches": m.n_patches, "source": m.source}
+    text = ("# paste under the sensor's [[sensors]] entry (channels "
+            f"{', '.join(m.channels)}), docs/colour.md\n"
+            + tomli_w.dumps({"sensors": {"colour_calibration": table}}))
+    print(f"colour calibration of channels {', '.join(m.channels)} from {m.n_patches} patches "
+          f"({m.conditions.label}): residual median {m.residual_median_de00:.2f}, max "
+          f"{m.residual_max_de00:.2f} dE00")
+    if args.output is not None:
+        args.output.write_text(text, encoding="utf-8")
+        print(f"wrote {args.output}")
+    else:
+        print(text, end="")
+    return 0
 
 
 def _azimuths(text: str) -> list[float]:

@@ -13,8 +13,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from gonio.brdf.colour.conditions import ViewingConditions, delta_e00, spectra_to_xyz
-from gonio.brdf.colour.conditions import xyz_to_lab
+from gonio.brdf.colour.conditions import ViewingConditions, delta_e00, spectra_to_xyz, xyz_to_lab
 from gonio.brdf.colour.instruments import geometries
 from gonio.cli.sim_session import start_sim_calibration
 from gonio.drivers.factory import build_rig

@@ -153,3 +153,43 @@ def test_cli_names_match_the_core() -> None:
     assert colour_command.ILLUMINANTS == colour_conditions.ILLUMINANTS
     assert tuple(colour_instruments.INSTRUMENTS) == colour_command.INSTRUMENTS
     assert colour_command.DEFAULT_INSTRUMENTS == colour_instruments.DEFAULT_INSTRUMENTS
+
+
+def test_colour_chart_writes_a_rig_config_table(tmp_path: Path,
+                                                capsys: pytest.CaptureFixture[str]) -> None:
+    import tomllib
+
+    from gonio.brdf.colour.chart import Chart, format_chart
+    from gonio.brdf.colour.conditions import GRID_NM, resample
+    from gonio.config import parse_rig_config
+    from tests.unit.test_config import EXAMPLE
+
+    sds = colour.SDS_COLOURCHECKERS["ColorChecker N Ohta"]
+    names = tuple(sds)
+    wl = np.asarray(sds[names[0]].wavelengths, float)
+    refl = np.stack([np.asarray(sds[n].values, float) for n in names])
+    centres = np.array([[610.0], [540.0], [460.0]])
+    resp = np.exp(-0.5 * ((GRID_NM[None, :] - centres) / 25.0) ** 2)
+    read = resample(wl, refl) @ (resp / resp.sum(axis=1, keepdims=True)).T
+    chart = tmp_path / "chart.csv"
+    chart.write_text(format_chart(Chart(names, wl, refl, ("R", "G", "B"), read)))
+    out = tmp_path / "cal.toml"
+    assert main(["colour-chart", str(chart), "--channels", "R,G,B", "-o", str(out)]) == 0
+    said = capsys.readouterr().out
+    assert "from 24 patches (D65/10): residual median" in said
+    fragment = tomllib.loads(out.read_text())["sensors"]["colour_calibration"]
+    assert len(fragment["matrix"]) == 3 and fragment["n_patches"] == 24
+    with EXAMPLE.open("rb") as f:
+        rig = tomllib.load(f)
+    rig["sensors"][0]["colour_calibration"] = fragment
+    cfg = parse_rig_config(rig)
+    cal = cfg.sensors[0].colour_calibration
+    assert cal is not None and cal.source == "chart.csv"
+    # The matrix maps the chart's own readings near its reference XYZ (what fitting means).
+    ref = Chart(names, wl, refl, ("R", "G", "B"), read).reference_xyz(ViewingConditions())
+    fitted = read @ np.asarray(cal.matrix).T
+    assert np.median(np.abs(fitted - ref)) < 3.0
+    assert main(["colour-chart", str(tmp_path / "none.csv")]) == 2
+    assert "does not exist" in capsys.readouterr().err
+    assert main(["colour-chart", str(chart), "--channels", "R,IR"]) == 2
+    assert "no column for channels ['IR']" in capsys.readouterr().err
