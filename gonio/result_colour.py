@@ -28,7 +28,16 @@ import numpy as np
 from gonio.brdf.colour.chart import ColourMatrix
 from gonio.brdf.colour.conditions import ColourError, ViewingConditions
 from gonio.brdf.colour.instruments import DEFAULT_INSTRUMENTS, Geometry, canonical_instrument
-from gonio.brdf.colour.report import CIELAB, ColourDifference, ColourReport, ToXYZ, colour_report
+from gonio.brdf.colour.report import (
+    CIELAB,
+    ColourDifference,
+    ColourReport,
+    ToXYZ,
+    colour_report,
+)
+from gonio.brdf.colour.report import (
+    UNCALIBRATED as UNCALIBRATED_SPACE,
+)
 from gonio.brdf.colour.spectral import SpectralBands, bands_from_channels
 from gonio.brdf.tables.table import BRDFTable
 from gonio.results import ResultFile
@@ -224,3 +233,58 @@ def colour_source(rig_config_json: str | None, sensors: Sequence[str]) -> dict[s
                          "calibrations); one reconstruction mixes their channels, so measure "
                          "with sensors of one colour description"}
     return found[0]
+
+
+# ---------------------------------------------------------------------------- linear sRGB
+def linear_srgb(res: ResultFile) -> tuple[BRDFTable, dict[str, Any]] | None:
+    """A result's reconstruction in linear sRGB, and the record of the conversion; None when
+    its channels have no colour (uncalibrated sensor RGB) or it has no reconstruction.
+
+    The one function exports and renderings call to state their colour space (docs/colour.md):
+    a spectral or chart-calibrated result becomes ``R, G, B`` linear sRGB computed from XYZ
+    (D65/10 by default, Bradford-adapted to sRGB's D65); an uncalibrated result's values are
+    not a colour space and get None (write them labelled "uncalibrated sensor RGB").
+    """
+    from gonio.brdf.colour.exportspace import linear_srgb_table
+    from gonio.brdf.colour.report import conversion_label
+
+    if res.table is None:
+        return None
+    conv = conversion_of(res)
+    if conv is None:
+        return None
+    table = linear_srgb_table(res.table, conv, ViewingConditions(), conversion_label(conv))
+    return table, dict(table.provenance["colour_space"])
+
+
+def uncalibrated_record() -> dict[str, Any]:
+    """What an export states for a result without colour: its values' space."""
+    return {"space": UNCALIBRATED_SPACE,
+            "note": "the sensor's channels as measured, in 1/sr; no colour space "
+                    "(docs/colour.md: spectral bands or a chart calibration give one)"}
+
+
+def srgb_view(res: ResultFile, brdf: Any) -> Any:
+    """``brdf`` (the result's table or its simulated truth, channels as the result's) seen in
+    linear sRGB, for renderings; ``brdf`` itself when the result has no colour."""
+    from gonio.brdf.colour.exportspace import srgb_matrix
+
+    conv = conversion_of(res)
+    if conv is None or res.table is None:
+        return brdf
+    return _SrgbView(brdf, srgb_matrix(conv, res.table.n_channels, ViewingConditions()))
+
+
+class _SrgbView:
+    """A BRDF whose channels are mapped to linear sRGB by a (3, C) matrix, clamped at 0."""
+
+    channels = ("R", "G", "B")
+
+    def __init__(self, brdf: Any, matrix: np.ndarray) -> None:
+        self.brdf = brdf
+        self.matrix = matrix
+        self.name = getattr(brdf, "name", "brdf")
+
+    def eval(self, wi: Any, wo: Any) -> np.ndarray:
+        v = np.asarray(self.brdf.eval(wi, wo), dtype=float)
+        return np.maximum(np.nan_to_num(v) @ self.matrix.T, 0.0)

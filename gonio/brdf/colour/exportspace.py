@@ -9,12 +9,13 @@ colours stay visible as values below 0 or above 1 to whoever reads the file.
 from __future__ import annotations
 
 import warnings
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from gonio.brdf.colour.conditions import ViewingConditions, library_version
+from gonio.brdf.tables.table import BRDFTable
 
 with warnings.catch_warnings():
     warnings.simplefilter("ignore")
@@ -46,3 +47,40 @@ def conversion_record(conditions: ViewingConditions, how: str) -> dict[str, Any]
         "chromatic_adaptation": ADAPTATION,
         "library": f"colour-science {library_version()}",
     }
+
+
+class _ToXYZ(Protocol):
+    def to_xyz(self, values: ArrayLike, conditions: ViewingConditions) -> FloatArray: ...
+
+
+def srgb_matrix(conversion: _ToXYZ, n_channels: int,
+                conditions: ViewingConditions) -> FloatArray:
+    """(3, C) matrix from a sensor's reflectance factors to linear sRGB.
+
+    Every step (bands to spectrum, ASTM E308 weighting or a chart matrix, chromatic adaptation,
+    XYZ to sRGB) is linear, so the composition is one matrix: obtained by passing each unit
+    channel vector through colour-science's transforms.
+    """
+    xyz = conversion.to_xyz(np.eye(n_channels), conditions)  # (C, 3)
+    return np.ascontiguousarray(xyz_to_linear_srgb(xyz, conditions).T)
+
+
+def linear_srgb_table(table: BRDFTable, conversion: _ToXYZ,
+                      conditions: ViewingConditions | None = None,
+                      how: str = "") -> BRDFTable:
+    """The table's BRDF in linear sRGB channels ``R, G, B`` (1/sr), clamped at 0.
+
+    Out-of-gamut colours have negative components; BRDF tables hold none, so they are clamped
+    and the provenance says so (``colour_space``: :func:`conversion_record` plus
+    ``clamped_at_zero``).
+    """
+    cond = conditions or ViewingConditions()
+    m = srgb_matrix(conversion, table.n_channels, cond)
+    v = np.asarray(table.values, dtype=np.float64)
+    flat = v.reshape(table.n_channels, -1)
+    out = (m @ np.nan_to_num(flat)).reshape(3, *v.shape[1:])
+    np.maximum(out, 0.0, out=out)
+    out[:, np.isnan(v[0])] = np.nan
+    record = {**conversion_record(cond, how), "clamped_at_zero": True}
+    return BRDFTable.trusted(out.astype(np.float32), ("R", "G", "B"), table.name, None,
+                             {**table.provenance, "colour_space": record})
