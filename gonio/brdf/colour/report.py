@@ -8,6 +8,12 @@ sensors through a chart calibration (:class:`~gonio.brdf.colour.chart.ColourMatr
 with neither has no colour: its report holds the channel reflectance factors labelled
 ``"uncalibrated sensor RGB"`` and no CIELAB.
 
+The table is read between its 5 degree cells by multilinear interpolation of ``log(f + f0)``
+(:func:`log_lookup`), not of ``f``: gloss lobes fall off exponentially with angle, and near the
+specular direction (aspecular -15 and 15 degrees) linear interpolation of a clear coat's lobe
+overshoots by up to 10 ΔE00 where the logarithm's stays within about 4 (the true material
+tabulated on the grid, ``bench/bench_colour.py``); where the BRDF is flat both agree.
+
 Flop index (X-Rite): ``FI = 2.69 (L*15 - L*110)^1.11 / (L*45)^0.86`` from the 45 degree
 incidence readings at aspecular 15, 45 and 110 degrees; where ``L*15 <= L*110`` (no flop) it
 is 0.
@@ -34,6 +40,7 @@ from gonio.brdf.colour.conditions import (
 )
 from gonio.brdf.colour.instruments import DEFAULT_INSTRUMENTS, Geometry, geometries
 from gonio.brdf.colour.spectral import SpectralBands
+from gonio.brdf.tables import geometry as geo
 from gonio.brdf.tables.table import BRDFTable
 
 FloatArray = NDArray[np.float64]
@@ -48,6 +55,57 @@ class ToXYZ(Protocol):
     """Channels to XYZ: spectral bands or a chart calibration."""
 
     def to_xyz(self, values: ArrayLike, conditions: ViewingConditions) -> FloatArray: ...
+
+
+#: Offset of the logarithm in :func:`log_lookup`, 1/sr: far below any colour-relevant BRDF
+#: (a reflectance factor of 3e-4), so dark cells do not pull the interpolation to -inf.
+LOG_OFFSET = 1e-4
+
+
+def log_lookup(table: BRDFTable, wi: ArrayLike, wo: ArrayLike) -> FloatArray:
+    """BRDF of ``table`` at direction pairs, interpolated multilinearly in ``log(f + f0)``.
+
+    The same cells and weights as :meth:`BRDFTable.eval_half_diff` (periodic in ``ph`` and
+    ``pd``, clamped in ``th`` and ``td``, invalid neighbours left out), blended in the
+    logarithm (module docstring).
+
+    Parameters
+    ----------
+    table : BRDFTable, (C, 72, 18, 18, 36), 1/sr
+    wi, wo : (N, 3) unit vectors in the specimen frame
+
+    Returns
+    -------
+    (N, C) array, 1/sr; NaN where no neighbour is valid, 0 below the horizon
+    """
+    i = np.asarray(wi, dtype=float).reshape(-1, 3)
+    o = np.asarray(wo, dtype=float).reshape(-1, 3)
+    th, ph, td, pd = geo.directions_to_half_diff(i, o)
+    axes = []
+    for a, n, period in ((ph, geo.N_PH, 2 * np.pi), (th, geo.N_TH, 0.0),
+                         (td, geo.N_TD, 0.0), (pd, geo.N_PD, np.pi)):
+        x = np.asarray(a, dtype=float).ravel()
+        if period:
+            u = np.mod(x, period) / geo.STEP
+            i0 = np.floor(u).astype(np.intp)
+            axes.append((i0 % n, (i0 + 1) % n, u - i0))
+        else:
+            u = np.clip(x / geo.STEP, 0.0, n - 1)
+            i0 = np.minimum(np.floor(u).astype(np.intp), n - 2)
+            axes.append((i0, i0 + 1, u - i0))
+    acc = np.zeros((i.shape[0], table.n_channels))
+    wsum = np.zeros(i.shape[0])
+    for idx, w in geo.lattice_corners(axes):
+        v = np.asarray(table.values[:, idx[0], idx[1], idx[2], idx[3]], dtype=float).T
+        ok = np.isfinite(v).all(axis=1) & (w > 0)
+        acc[ok] += w[ok, None] * np.log(np.maximum(v[ok], 0.0) + LOG_OFFSET)
+        wsum[ok] += w[ok]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        out = np.exp(acc / wsum[:, None]) - LOG_OFFSET
+    out[wsum <= 1e-12] = np.nan
+    out = np.maximum(out, 0.0)
+    out[(i[:, 2] <= 0) | (o[:, 2] <= 0)] = 0.0
+    return out
 
 
 def flop_index(l15: ArrayLike, l45: ArrayLike, l110: ArrayLike) -> FloatArray:
@@ -196,7 +254,7 @@ def colour_report(
     geos = geometries(instruments, azimuths_deg)
     wi = np.stack([g.directions()[0] for g in geos])
     wo = np.stack([g.directions()[1] for g in geos])
-    refl = np.pi * table.eval(wi, wo)
+    refl = np.pi * log_lookup(table, wi, wo)
     if not np.isfinite(refl).all():
         finite = np.asarray(np.isfinite(refl).all(axis=1), dtype=bool)
         ok: list[bool] = [bool(finite[k]) for k in range(len(geos))]

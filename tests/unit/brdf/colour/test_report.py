@@ -130,3 +130,23 @@ def test_channel_mismatch_is_refused() -> None:
     rgb = from_function(lambda i, o: np.ones((i.shape[0], 3)), ["R", "G", "B"], "x")
     with pytest.raises(ColourError, match="3 values for 31 spectral bands"):
         colour_report(rgb, BANDS)
+
+
+def test_log_lookup_follows_exponential_lobes_and_flat_tables() -> None:
+    from gonio.brdf.colour.report import LOG_OFFSET, log_lookup
+    from gonio.brdf.tables import geometry as geo
+
+    # f = exp(-12 theta_h) - f0 is exactly log-linear in theta_h: the log blend between two
+    # 5 degree cells reproduces it wherever theta_h falls, where a linear blend overshoots.
+    def fn(wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+        th = geo.directions_to_half_diff(wi, wo)[0]
+        return (np.exp(-12.0 * th) - LOG_OFFSET)[:, None]
+    t = from_function(fn, ["x"], "lobe")
+    th_h = np.deg2rad([2.5, 7.0, 13.0])
+    wi, wo = geo.half_diff_to_directions(th_h, 0.3, np.deg2rad(20.0), np.deg2rad(40.0))
+    exact = np.exp(-12.0 * th_h) - LOG_OFFSET
+    assert log_lookup(t, wi, wo)[:, 0] == pytest.approx(exact, rel=1e-6)
+    assert (t.eval(wi, wo)[:, 0] > exact * 1.005).all()
+    flat = spectral_table(RED)
+    wi, wo = geo.half_diff_to_directions(th_h, 1.0, np.deg2rad(33.0), np.deg2rad(12.0))
+    assert log_lookup(flat, wi, wo) == pytest.approx(flat.eval(wi, wo), rel=1e-6)
