@@ -106,24 +106,48 @@ def colour_group(table: BRDFTable, source: Mapping[str, Any],
     if "error" in source:
         out["error"] = source["error"]
         return out
-    conv: ToXYZ | None
+    if not calibrated:
+        out["note"] = ("values in sensor units (no white reference calibration): no "
+                       "colour until the rig is calibrated")
     try:
-        if not calibrated:
-            out["note"] = ("values in sensor units (no white reference calibration): no "
-                           "colour until the rig is calibrated")
-            conv = None
-        elif "bands" in source:
-            conv = SpectralBands.from_dict(source["bands"])
-        elif (b := bands_from_channels(table.channels, table.wavelengths_nm)) is not None:
-            conv = b
-        elif "calibration" in source:
-            conv = ColourMatrix.from_dict(source["calibration"])
-        else:
-            conv = None
-        out["report"] = colour_report(table, conv).as_dict()
+        out["report"] = colour_report(table, _conversion(table, source, calibrated)).as_dict()
     except ColourError as exc:
         out["error"] = str(exc)
     return out
+
+
+def _conversion(table: BRDFTable, source: Mapping[str, Any],
+                calibrated: bool) -> ToXYZ | None:
+    """:func:`conversion_of` for a table and source not yet in a result file."""
+    if not calibrated or "error" in source:
+        return None
+    if "bands" in source:
+        return SpectralBands.from_dict(source["bands"])
+    if (b := bands_from_channels(table.channels, table.wavelengths_nm)) is not None:
+        return b
+    if "calibration" in source:
+        return ColourMatrix.from_dict(source["calibration"])
+    return None
+
+
+def table_for_fits(table: BRDFTable, source: Mapping[str, Any],
+                   calibrated: bool) -> BRDFTable:
+    """The table the export fits (factored, principled: what glTF and MaterialX are written
+    from) are made of: linear sRGB from XYZ when the channels have colour, else the table.
+
+    A spectral table's fits on its bands would give renderers the first three bands as R, G,
+    B (and cost ten times the time); a chart-calibrated sensor's raw channels are not sRGB.
+    """
+    from gonio.brdf.colour.exportspace import linear_srgb_table
+    from gonio.brdf.colour.report import conversion_label
+
+    try:
+        conv = _conversion(table, source, calibrated)
+        if conv is None:
+            return table
+        return linear_srgb_table(table, conv, ViewingConditions(), conversion_label(conv))
+    except ColourError:
+        return table
 
 
 # ---------------------------------------------------------------------------- stored standards

@@ -7,6 +7,7 @@ from __future__ import annotations
 import asyncio
 import csv
 import io
+import json
 from pathlib import Path
 from typing import Any
 
@@ -41,7 +42,6 @@ def test_spectral_sim_scan_gives_cielab(tmp_path: Path, basis: Any) -> None:
         specimen = sim.specimen.brdf
         svc = GonioService(JobStore(tmp_path / "jobs.sqlite"), build_rig(sim.config),
                            rig_config=sim.config, basis_provider=lambda: basis, data_dir=data)
-        svc.worker.fit_exports = False  # 31-channel fits are not under test
 
         async def go() -> int:
             await svc.start()
@@ -84,6 +84,19 @@ def test_spectral_sim_scan_gives_cielab(tmp_path: Path, basis: Any) -> None:
     # Read back through the result file's source, the same numbers.
     again = result_report(res, cond, ["MA98"])
     assert again.lab is not None and again.lab == pytest.approx(got, abs=1e-6)
+    # The export fits are made of the linear sRGB table (from XYZ), not of the first three
+    # bands: a glTF export is a yellow, the table export keeps the 31 bands.
+    assert res.factored is not None and res.factored.channels == ("R", "G", "B")
+    from gonio.export import export_result
+
+    gltf = export_result(svc.result_path(scan_id), "gltf", tmp_path / "y.gltf")
+    base = json.loads(gltf.read_text())["materials"][0]["pbrMetallicRoughness"][
+        "baseColorFactor"]
+    assert base[0] > base[2] * 2 and base[1] > base[2] * 1.5, base  # R, G well above B
+    table = export_result(svc.result_path(scan_id), "table", tmp_path / "y.npz")
+    from gonio.brdf.tables.table import BRDFTable
+
+    assert BRDFTable.load(table).wavelengths_nm == tuple(np.arange(400.0, 701.0, 10.0))
 
 
 def test_colour_route(daemon: Daemon, no_export_fits: None) -> None:
