@@ -23,7 +23,8 @@ function fmt(v, digits = 2) { return typeof v === "number" ? v.toFixed(digits) :
 async function refresh() {
   const id = shownJob();
   const box = $("#colour");
-  if (id === null) { box.hidden = true; shown = null; return; }
+  // A calibration job's result has no BRDF (the panel hides its body): no colour to ask for.
+  if (id === null || $("#result-body").hidden) { box.hidden = true; shown = null; return; }
   const instrument = $("#colour-instrument").value;
   const azimuth = Number($("#colour-azimuth").value) || 0;
   const against = $("#compare").value;
@@ -34,10 +35,18 @@ async function refresh() {
   const caption = $("#colour-caption");
   caption.textContent = "Computing colour…";
   const q = new URLSearchParams({ instrument, azimuth: String(azimuth) });
-  if (against) q.set("against", against);
   let body;
   try {
     body = await getJSON(`/jobs/${id}/colour?${q}`);
+    // A difference only between two results with CIELAB (the server refuses the others):
+    // the compared job's space is asked first, so no request is made that must fail.
+    if (against && body.colour.space === "CIELAB") {
+      const other = await getJSON(`/jobs/${against}/colour?${q}`);
+      if (other.colour.space === "CIELAB") {
+        q.set("against", against);
+        body = await getJSON(`/jobs/${id}/colour?${q}`);
+      }
+    }
   } catch (e) {
     if (key !== shown) return;
     $("#colour-table thead").replaceChildren();
