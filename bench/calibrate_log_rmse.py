@@ -91,7 +91,7 @@ from gonio.brdf.reconstruction.posterior import (
     _cos_ti_rows,
     _volume_weight_rows,
 )
-from gonio.brdf.reconstruction.reconstruct import _VALID_ROWS, reconstruct
+from gonio.brdf.reconstruction.reconstruct import reconstruct
 from gonio.brdf.reconstruction.samples import DEFAULT_SPAN_DEG, uniform_stage_angles
 from gonio.brdf.reconstruction.selfcheck import (
     LOG_RMSE_CAPS,
@@ -101,6 +101,7 @@ from gonio.brdf.reconstruction.selfcheck import (
 )
 from gonio.brdf.tables import geometry as geo
 from gonio.brdf.tables import metrics
+from gonio.brdf.tables.table import VALID_ROWS
 
 LN2 = float(np.log(2.0))
 #: The module's model before the half-turn layouts (calibrated on full-turn scans only):
@@ -128,7 +129,7 @@ def witnesses(b: Basis, cells: np.ndarray, ph: np.ndarray, alpha: np.ndarray,
     z_angle = (sum(float(np.sum(bq[:, j] * np.linalg.solve(Ginv[:, j, :, j], bq[:, j])))
                    for j in range(r)) / (N * C * post.s2)) if r > 1 else float("nan")
     f = np.asarray(rec.table.values, dtype=float).reshape(3, geo.N_PH, geo.N_ROWS)
-    f = np.maximum(np.nan_to_num(f[:, ::3][:, :, _VALID_ROWS]), 0.0)
+    f = np.maximum(np.nan_to_num(f[:, ::3][:, :, VALID_ROWS]), 0.0)
     ci, wv = _cos_ti_rows(), _volume_weight_rows()
     w = wv / wv.sum()
     level = np.log1p(f * ci).mean(axis=(0, 1))

@@ -21,7 +21,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import math
-import threading
 import time
 from collections.abc import Callable
 from typing import Any
@@ -30,7 +29,7 @@ import dynamixel_sdk as sdk
 import serial
 
 from gonio.drivers._arrival import poll_delay
-from gonio.drivers._ownership import claim
+from gonio.drivers._ownership import bus_lock, claim
 from gonio.drivers._stage_settings import check_motion_settings, check_target
 from gonio.hal import DeviceInUse, DeviceUnavailable, StageFault, StageStatus, TravelLimits
 from gonio.hal import Stage as _Stage
@@ -76,16 +75,6 @@ PROTOCOL_ERRORS = {
     6: "data limit error",
     7: "access error",
 }
-
-_PORT_LOCKS: dict[str, threading.Lock] = {}
-_PORT_LOCKS_GUARD = threading.Lock()
-
-
-def _port_lock(port: str) -> threading.Lock:
-    """One lock per serial port, shared by every driver instance on that bus."""
-    with _PORT_LOCKS_GUARD:
-        return _PORT_LOCKS.setdefault(port, threading.Lock())
-
 
 class _ExclusivePortHandler(sdk.PortHandler):
     """The SDK's port handler, opening the port with ``exclusive=True`` (a ``flock`` on the
@@ -225,7 +214,7 @@ class DynamixelStage(_Stage):
         self._pk: Any = sdk.PacketHandler(2.0)
         # SDK result of the last failed attempt: tells "no answer" from "corrupted answers".
         self.last_comm_result: int = sdk.COMM_RX_TIMEOUT
-        self._lock = _port_lock(port)
+        self._lock = bus_lock(port)
         self._op_lock = asyncio.Lock()
         self._homed = False
         # Where the last move came to rest, degrees; None once anything else may have moved

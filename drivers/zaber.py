@@ -22,7 +22,6 @@ import contextlib
 import itertools
 import math
 import re
-import threading
 import time
 from dataclasses import dataclass
 from typing import Any
@@ -30,7 +29,7 @@ from typing import Any
 import serial
 
 from gonio.drivers._arrival import poll_delay
-from gonio.drivers._ownership import claim
+from gonio.drivers._ownership import bus_lock, claim
 from gonio.drivers._stage_settings import check_motion_settings, check_target
 from gonio.hal import DeviceInUse, DeviceUnavailable, StageFault, StageStatus, TravelLimits
 from gonio.hal import Stage as _Stage
@@ -55,14 +54,6 @@ _REPLY = re.compile(
     r"^@(?P<device>\d{2}) (?P<axis>\d+) (?:(?P<id>\d{1,2}) )?(?P<verdict>OK|RJ) "
     r"(?P<state>BUSY|IDLE) (?P<flag>[A-Z]{2}|--)(?: (?P<data>.*))?$"
 )
-
-_PORT_LOCKS: dict[str, threading.Lock] = {}
-_PORT_LOCKS_GUARD = threading.Lock()
-
-
-def _port_lock(url: str) -> threading.Lock:
-    with _PORT_LOCKS_GUARD:
-        return _PORT_LOCKS.setdefault(url, threading.Lock())
 
 
 @dataclass(frozen=True)
@@ -187,7 +178,7 @@ class ZaberStage(_Stage):
         self.accel = max(1, round(self.accel_dps2 * self.mpd * ACCEL_FACTOR))
         self._port: Any = None
         self._claim: Any = None  # this process's lock on the port or URL (gonio.locks)
-        self._lock = _port_lock(url)
+        self._lock = bus_lock(url)
         self._ids = itertools.cycle(range(100))
         self._op_lock = asyncio.Lock()
 

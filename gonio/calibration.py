@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from gonio.hal import PairSpec
 
@@ -36,6 +36,11 @@ class CalibrationError(ValueError):
     """A calibration measurement or file cannot be used; the message says why."""
 
 
+class PartialCalibration(CalibrationError):
+    """A calibration has factors for some of a plan's pairs but not all
+    (:meth:`Calibration.check_covers`)."""
+
+
 class PairCalibration(BaseModel):
     """Factor from dark-subtracted sensor units to BRDF (1/sr) for one pair, per channel."""
 
@@ -44,6 +49,18 @@ class PairCalibration(BaseModel):
     light: str
     sensor: str
     factor: tuple[float, ...]
+
+    @field_validator("factor")
+    @classmethod
+    def _physical(cls, factor: tuple[float, ...]) -> tuple[float, ...]:
+        # A factor is (albedo / pi) / reading of a lit white reference: finite and positive.
+        # Zero, negative or NaN factors would turn every reading into nonsense in 1/sr.
+        if not factor:
+            raise ValueError("a pair's factor needs one value per channel, got none")
+        if not all(math.isfinite(v) and v > 0 for v in factor):
+            raise ValueError(f"factors must be finite and positive (1/sr per sensor unit), "
+                             f"got {list(factor)}")
+        return factor
 
 
 class Calibration(BaseModel):
@@ -68,9 +85,42 @@ class Calibration(BaseModel):
                 return np.asarray(p.factor, dtype=float)
         return np.ones(n_channels)
 
+    @model_validator(mode="after")
+    def _one_factor_per_pair(self) -> Calibration:
+        seen: set[tuple[str, str]] = set()
+        for p in self.pairs:
+            if (p.light, p.sensor) in seen:
+                raise ValueError(f"pair {p.light}/{p.sensor} has two factors; keep one")
+            seen.add((p.light, p.sensor))
+        return self
+
     def covers(self, pairs: Sequence[PairSpec]) -> bool:
+        return not self.missing(pairs)
+
+    def missing(self, pairs: Sequence[PairSpec]) -> list[PairSpec]:
+        """The pairs of ``pairs`` this calibration has no factor for, in order."""
         have = {(p.light, p.sensor) for p in self.pairs}
-        return all((p.light, p.sensor) in have for p in pairs)
+        return [p for p in pairs if (p.light, p.sensor) not in have]
+
+    def check_covers(self, pairs: Sequence[PairSpec], what: str = "the plan") -> None:
+        """Refuse to calibrate only some of ``pairs``: a result would mix sensor units and 1/sr.
+
+        An empty calibration (none at all) covers nothing and is accepted: every value then
+        stays in sensor units, and the result says so.
+
+        Raises
+        ------
+        PartialCalibration
+            Naming the pairs without a factor and what to do.
+        """
+        missing = self.missing(pairs)
+        if self.pairs and missing:
+            names = ", ".join(p.label() for p in missing)
+            raise PartialCalibration(
+                f"the calibration in effect ({self.source}) has no factors for {len(missing)} "
+                f"of the {len(pairs)} pairs of {what}: {names}. Run a calibration job that "
+                "measures them (a white reference on the stage), or measure only calibrated pairs"
+            )
 
 
 REFERENCE_TOLERANCE = 0.10
@@ -198,22 +248,129 @@ def from_reference(
 
 def from_config_factors(factors: Sequence[object], albedo: float | None = None) -> Calibration:
     """Calibration from the rig config's ``[calibration]`` factors (objects with light, sensor,
-    factor attributes, as :class:`gonio.config.PairFactor`)."""
-    pairs = tuple(
-        PairCalibration(light=str(getattr(f, "light")), sensor=str(getattr(f, "sensor")),  # noqa: B009
-                        factor=tuple(float(v) for v in getattr(f, "factor")))  # noqa: B009
-        for f in factors
-    )
-    return Calibration(pairs=pairs, reference_albedo=albedo, source="rig config")
+    factor attributes, as :class:`gonio.config.PairFactor`).
+
+    Raises
+    ------
+    CalibrationError
+        A factor is not finite and positive, or a pair repeats.
+    """
+    try:
+        pairs = tuple(
+            PairCalibration(light=str(getattr(f, "light")), sensor=str(getattr(f, "sensor")),  # noqa: B009
+                            factor=tuple(float(v) for v in getattr(f, "factor")))  # noqa: B009
+            for f in factors
+        )
+        return Calibration(pairs=pairs, reference_albedo=albedo, source="rig config")
+    except ValidationError as exc:
+        raise CalibrationError(
+            f"the rig config's [calibration] factors are not usable: {_first_error(exc)}; "
+            "correct them, or remove them and run a calibration job"
+        ) from None
+
+
+def _first_error(exc: ValidationError) -> str:
+    """One line for the first problem pydantic found, with where it is."""
+    err = exc.errors()[0]
+    loc = ".".join(str(p) for p in err.get("loc", ()))
+    msg = str(err.get("msg", "invalid value")).removeprefix("Value error, ")
+    return f"{loc}: {msg}" if loc else msg
 
 
 CALIBRATION_FILE = "calibration.json"
 """Name of the latest calibration job's factors inside a data directory."""
 
 
-def save_calibration(cal: Calibration, path: Path) -> None:
+MIN_REFERENCE_FRACTION = 1e-5
+"""Least reading of the white reference a factor may imply, as a fraction of the sensor's full
+scale (:func:`check_plausible`): a reference that read less than this was not lit or not seen,
+and its factors would multiply noise into 1/sr."""
+
+
+def sensor_full_scale(rig_config: Any) -> dict[str, NDArray[np.float64]]:
+    """Each sensor's full scale per channel in sensor units (``saturation_raw`` times the
+    value register's scale), from a :class:`gonio.config.RigConfig`; empty without one."""
+    out: dict[str, NDArray[np.float64]] = {}
+    for s in getattr(rig_config, "sensors", None) or ():
+        scales = [abs(float(r.scale)) for r in s.registers.values]
+        out[str(s.name)] = float(s.saturation_raw) * np.asarray(scales, dtype=float)
+    return out
+
+
+def check_plausible(cal: Calibration, full_scale: Mapping[str, NDArray[np.float64]],
+                    where: str) -> None:
+    """Refuse factors that no white reference on this rig can have produced.
+
+    A factor ``k`` says the reference read ``(albedo / pi) / k`` (dark-subtracted, sensor
+    units). That reading must lie between :data:`MIN_REFERENCE_FRACTION` of the sensor's full
+    scale and the full scale itself (a reading above it saturates). Sensors not in
+    ``full_scale`` are not checked.
+
+    Parameters
+    ----------
+    cal : the calibration
+    full_scale : sensor name -> (C,) full scale in sensor units (:func:`sensor_full_scale`)
+    where : the file or setting it came from, for the message
+
+    Raises
+    ------
+    CalibrationError
+        Naming the pair, the reading its factor implies and the sensor's range.
+    """
+    albedo = cal.reference_albedo if cal.reference_albedo is not None else 1.0
+    for p in cal.pairs:
+        top = full_scale.get(p.sensor)
+        if top is None or len(top) != len(p.factor):
+            continue
+        implied = (albedo / math.pi) / np.asarray(p.factor, dtype=float)
+        low = MIN_REFERENCE_FRACTION * top
+        if np.any(implied > top) or np.any(implied < low):
+            raise CalibrationError(
+                f"{where}: the factors of pair {p.light}/{p.sensor} {list(p.factor)} mean the "
+                f"white reference read {np.round(implied, 6).tolist()} sensor units, outside "
+                f"what sensor {p.sensor} can read ({np.round(low, 6).tolist()} to "
+                f"{np.round(top, 6).tolist()}); they cannot come from a calibration of this "
+                "rig. Run a calibration job again"
+            )
+
+
+def load_calibration(path: Path) -> Calibration:
+    """Read and validate a calibration file (:data:`CALIBRATION_FILE`, ``--calibration``).
+
+    Raises
+    ------
+    CalibrationError
+        The file cannot be read, is not JSON, or is not a valid calibration (factors not
+        finite and positive, a pair twice); the message names the file and what to do.
+    """
+    path = Path(path)
+    advice = ("Move it aside (keep it for inspection) and run a calibration job again, or "
+              "restore it from a backup")
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise CalibrationError(f"calibration file {path} cannot be read ({exc}). {advice}"
+                               ) from None
+    try:
+        return Calibration.model_validate_json(text)
+    except ValidationError as exc:
+        raise CalibrationError(
+            f"calibration file {path} is damaged or not a calibration ({_first_error(exc)}). "
+            f"{advice}"
+        ) from None
+
+
+def save_calibration(cal: Calibration, path: Path, full_scale: Mapping[str, Any] | None = None
+                     ) -> None:
     """Write ``cal`` to ``path`` so that a crash at any moment leaves the old file or the new
-    one, never a torn one: a temporary file, flushed to disk, then renamed over ``path``."""
+    one, never a torn one: a temporary file, flushed to disk, then renamed over ``path``.
+
+    ``cal`` is validated first (:class:`Calibration` checks its factors; with ``full_scale``,
+    :func:`check_plausible` too): a file this writes is one :func:`load_calibration` accepts.
+    """
+    cal = Calibration.model_validate(cal.model_dump())
+    if full_scale:
+        check_plausible(cal, full_scale, str(path))
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + ".tmp")
@@ -238,13 +395,24 @@ def calibration_in_effect(data_dir: Path, rig_config: Any = None) -> Calibration
     ----------
     data_dir : folder where calibration jobs write :data:`CALIBRATION_FILE`
     rig_config : gonio.config.RigConfig, optional
+
+    Raises
+    ------
+    CalibrationError
+        The file is damaged, or its factors (or the rig config's) are not finite and positive
+        or not plausible for the rig's sensors (:func:`check_plausible`): never applied.
     """
     path = Path(data_dir) / CALIBRATION_FILE
-    if path.is_file():
-        return Calibration.model_validate_json(path.read_text())
-    cal = getattr(rig_config, "calibration", None)
-    if cal is not None and getattr(cal, "factors", None):
-        return from_config_factors(cal.factors, cal.white_albedo)
+    full_scale = sensor_full_scale(rig_config)
+    if path.exists():
+        cal = load_calibration(path)
+        check_plausible(cal, full_scale, f"calibration file {path}")
+        return cal
+    conf = getattr(rig_config, "calibration", None)
+    if conf is not None and getattr(conf, "factors", None):
+        cal = from_config_factors(conf.factors, conf.white_albedo)
+        check_plausible(cal, full_scale, "the rig config's [calibration] factors")
+        return cal
     return Calibration()
 
 
@@ -377,7 +545,7 @@ class CalibratedScan:
 
         Raises
         ------
-        gonio.brdf.reconstruction.reconstruct.ReconstructionError
+        gonio.brdf.reconstruction.errors.ReconstructionError
             When a pair's directions are not unit vectors above the specimen.
         """
         from gonio.brdf.reconstruction.reconstruct import pair_cells

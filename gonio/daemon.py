@@ -295,7 +295,7 @@ def build_app(
     from gonio.service import GonioService
     from gonio.store import JobStore
 
-    data_dir = cfg.paths.data_dir
+    data_dir = cfg.paths.data_dir.absolute()
     data_dir.mkdir(parents=True, exist_ok=True)
     # One daemon per data directory and one owner per rig, for this process's life: refused
     # here (LockBusy naming the holder) before anything is opened or served.
@@ -312,6 +312,13 @@ def build_app(
             basis_provider=basis_provider,
             data_dir=data_dir,
         )
+        # State files are checked before anything is served (docs/engine.md, "State files
+        # at start"): the store by JobStore itself (quick_check), the calibration here (a
+        # damaged or implausible one refuses the start, naming the file); a damaged result
+        # file costs only its own job, so it is reported, and refused when asked for.
+        service.calibration()
+        for line in service.damaged_results():
+            log.warning("result file check: %s", line)
     except BaseException:
         for lock in reversed(owned):
             lock.release()

@@ -1,10 +1,11 @@
 """Runs one job's measurement on a :class:`gonio.hal.Rig`: steps, checkpoints, control, faults.
 
-Per stage angle (ARCHITECTURE.md, "Data flow"): move the stage (always approaching from below,
-so backlash cancels); optionally read the dark signal with every light off; then for each
-light: on, settle, read all of that light's sensors in parallel (``asyncio.gather``) while
-checking the lamp's status, off. The angle's readings are committed to the store
-(:meth:`gonio.store.JobStore.commit_angle`) before the next move: that is the checkpoint.
+Per stage angle (docs/architecture.md, "One scan, one way"): move the stage (always
+approaching from below, so backlash cancels); optionally read the dark signal with every light
+off; then for each light: on, settle, read all of that light's sensors in parallel
+(``asyncio.gather``) while checking the lamp's status, off. The angle's readings are
+committed to the store (:meth:`gonio.store.JobStore.commit_angle`) before the next move: that
+is the checkpoint.
 
 Time that is not physical (moves, settling, exposures) is overhead, and most of it is device
 round trips on shared links, so the angle sends few of them: the stage position is read before a
@@ -25,6 +26,9 @@ band, sensor saturation) suspends the job; the engine waits, tries the device's 
 (``clear_faults``, reconnect, lamp re-check), waits a settle delay and repeats the angle.
 More than ``max_retries`` consecutive failures at one angle, or an unrecoverable fault, fail
 the job with the reason. Cleanup (lights off, stage stopped) runs on every exit but a halt.
+Given ``connect`` (the worker does), the engine first connects the rig under the same rules:
+a device silent at connection is waited for like one silent mid-scan, and an abort or halt
+asked before, during or after the connection ends the job before any stage move.
 
 The engine sees only :mod:`gonio.hal` (import-linter enforces it).
 """
@@ -33,6 +37,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import threading
 import time
 from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass, replace
@@ -43,7 +48,7 @@ import numpy as np
 from gonio import hal
 from gonio.calibration import readings_array
 from gonio.hal import PairSpec
-from gonio.jobstates import JobState
+from gonio.jobstates import FINISHED_STATES, JobState
 from gonio.motion import plan_overshoot_legs
 from gonio.plans.adaptive import adaptive_refinement
 from gonio.plans.models import MAX_ROTATIONS, AdaptivePlan, AnyPlan
@@ -102,7 +107,7 @@ class ScanEngine:
 
     Parameters
     ----------
-    rig : connected :class:`gonio.hal.Rig`
+    rig : connected :class:`gonio.hal.Rig`, or None with ``connect``
     store : JobStore
     job_id : int
         The job (queued, or active after a restart: it resumes from its last checkpoint).
@@ -114,18 +119,26 @@ class ScanEngine:
         span_deg)``). Without it ``rule="posterior"`` plans fall back to V&F's rule (the
         ``adaptive_done`` / ``adaptive_round`` events name the rule); either rule refines
         within the plan's arc.
+    connect : optional, returns the connected rig (connects it if needed). The engine calls
+        it first, under the plan's fault policy like any other device call: a device silent
+        at connection suspends the job and is waited for (``wait_for_device_s``), and an
+        abort or halt requested meanwhile ends the job before anything moves.
     """
 
     def __init__(
         self,
-        rig: hal.Rig,
+        rig: hal.Rig | None,
         store: JobStore,
         job_id: int,
         plan: AnyPlan,
         rig_desc: RigDescription,
         refiner: Refiner | None = None,
+        connect: Callable[[], Awaitable[hal.Rig]] | None = None,
     ):
-        self.rig = rig
+        if rig is None and connect is None:
+            raise ValueError("ScanEngine needs a connected rig or a way to connect one")
+        self._rig = rig
+        self._connect = connect
         self.refiner = refiner
         self.store = store
         self.job_id = job_id
@@ -137,10 +150,19 @@ class ScanEngine:
             lt: [p.sensor for p in self.pairs if p.light == lt] for lt in self.lights
         }
         self.state = JobState(store.get_job(job_id).state)
+        self.from_queue = self.state is JobState.QUEUED
+        """True for a job that starts here (not one resumed after a restart)."""
         self._pause = False
         self._pause_immediate = False
         self._abort = False
+        self._abort_reason = "aborted by request"
         self._halt = False
+        # Held while the request flags are read or set together with ``moved`` (the API's
+        # threads ask, the engine's loop moves): a stop "before anything moves" is exact.
+        self._control = threading.Lock()
+        self.moved = False
+        """True once the engine has sent its first stage move (a job that has not moved can
+        still be taken back as if it had never started)."""
         self._wake = asyncio.Event()
         self._loop: asyncio.AbstractEventLoop | None = None  # the loop run() runs on
         self._angle_task: asyncio.Task[tuple[float, list[ReadingRow]]] | None = None
@@ -165,14 +187,41 @@ class ScanEngine:
         self._pause_immediate = False
         self._signal(interrupt=False)
 
-    def request_abort(self) -> None:
-        self._abort = True
+    def request_abort(self, reason: str = "aborted by request") -> None:
+        with self._control:
+            if not self._abort:
+                self._abort_reason = reason
+            self._abort = True
         self._signal(interrupt=True)
+
+    def abort_before_moving(self, reason: str) -> bool:
+        """Abort with ``reason`` if the stage has not moved yet; False (and nothing asked)
+        if it has. Atomic with the engine's first move (:meth:`_check_before_move`)."""
+        with self._control:
+            if self.moved:
+                return False
+            if not self._abort:
+                self._abort_reason = reason
+            self._abort = True
+        self._signal(interrupt=True)
+        return True
+
+    @property
+    def abort_requested(self) -> bool:
+        return self._abort
 
     def request_halt(self) -> None:
         """Emergency halt: stop at once and send nothing further to any device."""
-        self._halt = True
+        with self._control:
+            self._halt = True
         self._signal(interrupt=True)
+
+    @property
+    def rig(self) -> hal.Rig:
+        """The connected rig (only once :meth:`run` has connected it)."""
+        if self._rig is None:
+            raise RuntimeError(f"job {self.job_id}: the rig is not connected yet")
+        return self._rig
 
     def _signal(self, interrupt: bool) -> None:
         loop = self._loop
@@ -241,6 +290,8 @@ class ScanEngine:
             the terminal state reached (``FAILED``, ``ABORTED``, ``HALTED``).
         """
         self._loop = asyncio.get_running_loop()
+        if self.state in FINISHED_STATES:
+            return self.state  # ended before it started: nothing to measure, nothing to touch
         if self.state is JobState.QUEUED:
             self._set_state(JobState.RUNNING)
         elif self.state is JobState.PAUSED:
@@ -248,13 +299,14 @@ class ScanEngine:
         elif self.state is JobState.SUSPENDED:
             self._set_state(JobState.RUNNING, note="resumed after restart")
         try:
+            await self._connect_rig()
             await self._measure_all()
         except _Halt:
             self._set_state(JobState.HALTED, reason="emergency halt")
             return self.state
         except _Abort:
             await self._cleanup()
-            self._set_state(JobState.ABORTED, reason="aborted by request")
+            self._set_state(JobState.ABORTED, reason=self._abort_reason)
             return self.state
         except JobFailed as exc:
             await self._cleanup()
@@ -271,6 +323,32 @@ class ScanEngine:
             raise
         await self._cleanup()
         return self.state
+
+    async def _connect_rig(self) -> None:
+        """Connect the rig (when the engine was given ``connect``), with the same fault
+        handling as an angle: a silent device suspends the job and is waited for; a pending
+        abort or halt is acted on before the first attempt and after every one."""
+        if self._connect is None:
+            return
+        retries = 0
+        trouble: _Trouble | None = None
+        while True:
+            await self._gate()
+            try:
+                await self._connect_once()
+                return
+            except hal.DeviceFault as fault:
+                retries += 1
+                if trouble is None:
+                    trouble = _Trouble(fault, time.monotonic())
+                await self._suspend(fault, retries, trouble, recover=self._connect_once)
+
+    async def _connect_once(self) -> None:
+        assert self._connect is not None
+        try:
+            self._rig = await self._connect()
+        except OSError as exc:  # no such port, no route: waiting will not help
+            raise JobFailed(f"rig not available: {exc}") from None
 
     async def _measure_all(self) -> None:
         steps = self.store.steps(self.job_id)
@@ -389,8 +467,19 @@ class ScanEngine:
             await asyncio.wait_for(self._wake.wait(), timeout=seconds)
 
     # ------------------------------------------------------------------ one angle
+    def _check_before_move(self) -> None:
+        """Right before a stage move: act on a halt or abort asked since the last gate (the
+        request may come from another thread at any time), else note that the stage moves."""
+        with self._control:
+            if self._halt:
+                raise _Halt()
+            if self._abort:
+                raise _Abort()
+            self.moved = True
+
     async def _measure_angle(self, step: StepRow) -> tuple[float, list[ReadingRow]]:
         stage = self.rig.stage
+        self._check_before_move()
         target = step.position_deg
         if self.plan.backlash_deg > 0:
             # Coming from above: overshoot below so the final approach is positive again.
@@ -487,13 +576,16 @@ class ScanEngine:
         return {n: tuple(float(v) for v in r.values) for n, r in zip(names, readings, strict=True)}
 
     # ------------------------------------------------------------------ faults
-    async def _suspend(self, fault: hal.DeviceFault, retries: int, trouble: _Trouble) -> None:
+    async def _suspend(self, fault: hal.DeviceFault, retries: int, trouble: _Trouble,
+                       recover: Callable[[], Awaitable[None]] | None = None) -> None:
         """Suspend on ``fault``, recover, and return when the angle may be retried.
 
-        ``retries`` counts the consecutive failures at this angle; ``trouble`` is the first of
-        them (reported with the last one when they differ, so a reason never loses the cause
-        that started it). A device that does not answer at all is waited for, up to
-        ``wait_for_device_s`` from the first fault, once the retries are spent.
+        ``recover`` replaces the recovery that matches the fault (:meth:`_recover`): while
+        the rig is being connected, the recovery is connecting it. ``retries`` counts the
+        consecutive failures at this angle; ``trouble`` is the first of them (reported with
+        the last one when they differ, so a reason never loses the cause that started it).
+        A device that does not answer at all is waited for, up to ``wait_for_device_s`` from
+        the first fault, once the retries are spent.
         """
         policy = self.plan.faults
         if not fault.recoverable:
@@ -511,7 +603,7 @@ class ScanEngine:
             await self._sleep(policy.retry_delay_s)
             await self._gate_in_suspension()
             try:
-                await self._recover(fault)
+                await (self._recover(fault) if recover is None else recover())
                 break
             except hal.DeviceFault as again:
                 retries += 1
@@ -664,13 +756,16 @@ class ScanEngine:
 
     # ------------------------------------------------------------------ cleanup
     async def _lights_off(self) -> None:
-        for light in self.rig.lights.values():
+        if self._rig is None:
+            return  # never connected: no light was switched on
+        for light in self._rig.lights.values():
             await _quietly(light.set_on(False))
 
     async def _cleanup(self) -> None:
         """Lights off and stage stopped; best effort, every step tried even if one fails."""
         await self._lights_off()
-        await _quietly(self.rig.stage.stop())
+        if self._rig is not None:
+            await _quietly(self._rig.stage.stop())
 
 
 @dataclass(frozen=True)

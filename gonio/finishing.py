@@ -11,7 +11,13 @@ by the plan's finishing kind:
   (:func:`gonio.brdf.reconstruction.reconstruct.reconstruct`), the export fits, and a result
   file with the table, the error estimates and the fits.
 
-Returns the job's summary (what the store keeps and the API shows as ``result``).
+Returns the job's summary (what the store keeps and the API shows as ``result``). Paths in it
+are relative to the data directory (``results/job-<id>.h5``), so a data directory that is moved
+or restored from a backup still finds its own files.
+
+A specimen is calibrated with every pair of its plan or with none: a calibration that lacks some
+of the plan's pairs fails the job (:meth:`gonio.calibration.Calibration.check_covers`) rather
+than mixing sensor units and 1/sr in one result.
 """
 
 from __future__ import annotations
@@ -34,6 +40,7 @@ from gonio.calibration import (
     calibrated_samples,
     from_reference,
     save_calibration,
+    sensor_full_scale,
 )
 from gonio.plans.models import AnyPlan, CalibrationPlan, PlanError
 from gonio.plans.validation import plan_pairs
@@ -62,6 +69,9 @@ class Finishing:
     on_activity : told what finishing waits for ("basis", "reconstructing")
     stop : set (from any thread) to abort: finishing stops at its next step and writes
         nothing (:class:`FinishingStopped`)
+    save_calibration : a calibration job's factors become the data directory's calibration
+        in effect; False when a result is rebuilt (``gonio jobs rebuild``), which must not
+        replace a later calibration
     """
 
     store: JobStore
@@ -74,6 +84,7 @@ class Finishing:
     true_material: Callable[[], dict[str, Any] | None] | None = None
     on_activity: Callable[[str], None] = lambda what: None
     stop: threading.Event = field(default_factory=threading.Event)
+    save_calibration: bool = True
 
     def checkpoint(self, job_id: int, before: str) -> None:
         """Raise :class:`FinishingStopped` if an abort was asked for.
@@ -97,7 +108,8 @@ def finish_job(job_id: int, plan: AnyPlan, how: Finishing) -> dict[str, Any]:
     Raises
     ------
     gonio.calibration.CalibrationError
-        Incomplete readings, or a white reference that does not read like one.
+        Incomplete readings, a white reference that does not read like one, or a calibration
+        without factors for some of the plan's pairs.
     PlanError
         The plan's sensors do not share one channel list.
     """
@@ -118,15 +130,22 @@ def finish_job(job_id: int, plan: AnyPlan, how: Finishing) -> dict[str, Any]:
     readings = how.store.readings(job_id)
     is_cal = plan.finishing == "calibration"
     cal = Calibration() if is_cal else how.calibration()
+    cal.check_covers(pairs, f"job {job_id}")
     samples = calibrated_samples(readings, pairs, light_dirs, sensor_dirs, channels, cal)
-    path = how.data_dir / "results" / f"job-{job_id}.h5"
+    relative = result_relpath(job_id)
+    path = how.data_dir / relative
     provenance: dict[str, Any] = {
         "plan": json.dumps(job.plan), "rig": json.dumps(job.rig),
         "calibration": cal.model_dump_json(), **how.provenance,
     }
     summary: dict[str, Any] = {
         "readings": len(readings), "angles": int(samples.stage_angles_deg.size),
-        "pairs": len(pairs), "calibrated": bool(cal.pairs) or is_cal,
+        # Calibrated means every value of the result is in 1/sr (check_covers above); a
+        # calibration job's samples are the reference's sensor units.
+        "pairs": len(pairs), "calibrated": bool(cal.pairs),
+        # What the values were calibrated with, so the result can be rebuilt from the stored
+        # readings as it was made (gonio jobs rebuild), whatever is in effect by then.
+        "calibration": cal.model_dump(mode="json"),
     }
     warning = exposure_mismatch(cal, readings)
     if warning is not None:
@@ -141,13 +160,14 @@ def finish_job(job_id: int, plan: AnyPlan, how: Finishing) -> dict[str, Any]:
             exposure_s=plan.exposure.exposure_s,
             source=f"job {job_id}: {plan.reference_name}",
         )
-        cal_path = how.data_dir / CALIBRATION_FILE
-        save_calibration(new_cal, cal_path)
+        if how.save_calibration:
+            save_calibration(new_cal, how.data_dir / CALIBRATION_FILE,
+                             _full_scale(how.provenance))
         provenance["new_calibration"] = new_cal.model_dump_json()
         write_result(path, job_id=job_id, specimen=job.specimen, kind=job.kind,
                      readings=readings, samples=samples, provenance=provenance,
                      metrics={"seconds": time.perf_counter() - t0})
-        summary.update(result_path=str(path), calibration_path=str(cal_path))
+        summary.update(result_path=relative, calibration_path=CALIBRATION_FILE)
         return summary
 
     from gonio.brdf.reconstruction.reconstruct import reconstruct
@@ -167,7 +187,7 @@ def finish_job(job_id: int, plan: AnyPlan, how: Finishing) -> dict[str, Any]:
     metrics = {
         "rel_sample_error": rec.rel_sample_error,
         "estimated_error": rec.estimated_error,
-        # The reported error bar: calibrated leave-one-pair-out error (docs/science.md 4.1);
+        # The reported error bar: calibrated leave-one-pair-out error (science notebook 4.1);
         # V&F's estimated_error stays for comparison with the paper.
         "predicted_error": _finite_or_none(rec.predicted_error),
         "cv_sample_error": _finite_or_none(rec.cv_sample_error),
@@ -217,7 +237,7 @@ def finish_job(job_id: int, plan: AnyPlan, how: Finishing) -> dict[str, Any]:
         factored=fits.factored if fits else None,
         principled=fits.principled if fits else None, colour=colour,
     )
-    summary.update(result_path=str(path), **metrics)
+    summary.update(result_path=relative, **metrics)
     return summary
 
 
@@ -246,6 +266,26 @@ def _colour(rec: Any, how: Finishing, sensors: list[str], calibrated: bool) -> d
             np.asarray(t.values), t.channels, t.name, centres, t.provenance))
     return {**colour_group(rec.table, source, calibrated),
             "fit_table": table_for_fits(rec.table, source, calibrated)}
+
+
+def result_relpath(job_id: int) -> str:
+    """Where job ``job_id``'s result file lives, relative to the data directory (what the
+    store records: docs/engine.md)."""
+    return f"results/job-{job_id}.h5"
+
+
+def _full_scale(provenance: dict[str, Any]) -> dict[str, Any]:
+    """The sensors' full scales of the rig config recorded in ``provenance`` (empty without
+    one), so a new calibration is checked as it will be when loaded."""
+    text = provenance.get("rig_config")
+    if not isinstance(text, str):
+        return {}
+    from gonio.config import RigConfig
+
+    try:
+        return sensor_full_scale(RigConfig.model_validate_json(text))
+    except ValueError:
+        return {}
 
 
 def _fits(job_id: int, table: Any) -> Any:
@@ -283,3 +323,82 @@ def exposure_mismatch(cal: Calibration, readings: list[Any]) -> str | None:
 def _finite_or_none(x: float) -> float | None:
     """NaN (e.g. no pair could be left out) is stored as null: JSON has no NaN."""
     return float(x) if math.isfinite(x) else None
+
+
+class RebuildError(ValueError):
+    """A result cannot be rebuilt from the job store; the message says why and what to do."""
+
+
+def rebuild_result(store: JobStore, data_dir: Path, job_id: int,
+                   basis_provider: Callable[[], Any]) -> dict[str, Any]:
+    """Write job ``job_id``'s result file again from the readings the store holds
+    (``gonio jobs rebuild``): finishing re-run on them, with the calibration the job was
+    finished with (recorded in its summary), the rig snapshot and plan it ran with. The job's
+    summary is replaced by the new one; a calibration job's factors do not replace the
+    calibration in effect.
+
+    Blocking (reconstruction and fits take seconds).
+
+    Parameters
+    ----------
+    store : the job store holding the job and its readings
+    data_dir : the data directory the result goes to (``results/job-<id>.h5``)
+    job_id : a completed job
+    basis_provider : returns the reconstruction basis (specimen jobs)
+
+    Returns
+    -------
+    dict : the new summary
+
+    Raises
+    ------
+    RebuildError
+        The job is not completed, its plan or rig snapshot no longer parses, or its readings
+        are missing or incomplete.
+    """
+    from gonio.jobstates import JobState
+    from gonio.plans.models import parse_stored_plan
+
+    job = store.get_job(job_id)
+    if job.state is not JobState.COMPLETED:
+        raise RebuildError(f"job {job_id} is {job.state.value}: only a completed job's result "
+                           "is rebuilt (a job still to finish writes its own)")
+    try:
+        plan = parse_stored_plan(job.plan)
+        desc = RigDescription.model_validate(job.rig)
+    except (PlanError, ValueError) as exc:
+        raise RebuildError(f"cannot rebuild job {job_id}: its stored plan or rig snapshot no "
+                           f"longer reads ({exc})") from None
+    old = job.summary or {}
+    n = store.reading_count(job_id)
+    if n == 0:
+        raise RebuildError(f"cannot rebuild job {job_id}: the job store holds none of its "
+                           "readings; restore the store from a backup, or measure it again")
+    if isinstance(old.get("readings"), int) and n < old["readings"]:
+        raise RebuildError(f"cannot rebuild job {job_id}: the job store holds {n} of the "
+                           f"{old['readings']} readings it was finished with; restore the "
+                           "store from a backup, or measure it again")
+    if isinstance(old.get("calibration"), dict):
+        cal = Calibration.model_validate(old["calibration"])
+    elif old.get("calibrated"):
+        raise RebuildError(f"cannot rebuild job {job_id}: it was calibrated, and this store "
+                           "(from an older gonio) does not record with which factors; measure "
+                           "it again")
+    else:
+        cal = Calibration()
+    how = Finishing(
+        store=store, desc=desc, data_dir=Path(data_dir), basis_provider=basis_provider,
+        calibration=lambda: cal, save_calibration=False,
+        provenance={"rebuilt": "from the job store's readings (gonio jobs rebuild) on "
+                    + time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())},
+    )
+    from gonio.calibration import CalibrationError
+
+    try:
+        summary = finish_job(job_id, plan, how)
+    except CalibrationError as exc:
+        raise RebuildError(f"cannot rebuild job {job_id}: {exc}; restore the store from a "
+                           "backup, or measure it again") from None
+    store.set_result(job_id, summary.get("result_path"), summary)
+    store.append_event(job_id, "rebuilt", {"result_path": summary.get("result_path")})
+    return summary

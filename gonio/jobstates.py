@@ -4,12 +4,13 @@ Every state change of a job, whoever asks for it (the engine, the worker, a user
 API, startup reconciliation), goes through :func:`check_transition`, so the lifecycle in
 ``docs/engine.md`` is enforced in exactly one place.
 
-Lifecycle (ARCHITECTURE.md, "Job lifecycle")::
+Lifecycle (docs/architecture.md, "Job lifecycle")::
 
     queued -> running <-> paused
     running -> suspended -> running           (a device fault with automatic resume)
     running -> reconstructing -> completed
-    any active state -> failed | aborted | halted
+    queued | running | paused | suspended | reconstructing -> failed | aborted
+    running | paused | suspended -> halted    (emergency halt)
 
 A job found ``running``, ``paused``, ``suspended`` or ``reconstructing`` at startup (the process
 died) keeps its state and is resumed from its last checkpoint, or moves to ``failed`` with the
@@ -45,8 +46,10 @@ Q, RUN, P, S, REC = (
 DONE, FAIL, AB, HALT = JobState.COMPLETED, JobState.FAILED, JobState.ABORTED, JobState.HALTED
 
 TRANSITIONS: dict[JobState, frozenset[JobState]] = {
-    # A queued job is cancelled by moving it to aborted; it has touched no hardware.
-    Q: frozenset({RUN, AB}),
+    # A queued job is cancelled by moving it to aborted; it has touched no hardware. One that
+    # cannot start (its plan no longer fits the rig, the calibration no longer covers it)
+    # fails without having run.
+    Q: frozenset({RUN, FAIL, AB}),
     RUN: frozenset({P, S, REC, FAIL, AB, HALT}),
     # A paused job keeps its checkpoint; it can only go back to running or end.
     P: frozenset({RUN, FAIL, AB, HALT}),

@@ -254,54 +254,96 @@ def read_result(path: str | os.PathLike[str]) -> ResultFile:
     try:
         f = h5py.File(p, "r")
     except OSError as exc:
-        raise ResultFileError(f"{p} is not an HDF5 file ({exc})") from None
-    with f:
-        attrs = _attr_dict(f.attrs)
-        if attrs.get("format") != FORMAT_NAME:
-            raise ResultFileError(
-                f"{p} is not a gonio result file (format {attrs.get('format')!r})"
-            )
-        if int(attrs.get("version", -1)) != FORMAT_VERSION:
-            raise ResultFileError(
-                f"{p} is result format version {attrs.get('version')}, this gonio reads "
-                f"{FORMAT_VERSION}; use a matching gonio version"
-            )
-        g = f["raw"]
-        lights, sensors = _decode(g["light"][()]), _decode(g["sensor"][()])
-        readings = [
-            ReadingRow(int(g["angle_index"][i]), float(g["commanded_deg"][i]),
-                       float(g["actual_deg"][i]), lights[i], sensors[i],
-                       tuple(float(x) for x in g["raw"][i]), tuple(float(x) for x in g["dark"][i]),
-                       float(g["exposure_s"][i]), int(g["averages"][i]), bool(g["saturated"][i]),
-                       float(g["t_read"][i]))
-            for i in range(len(lights))
-        ]
-        s = f["samples"]
-        pair_names = _decode(s["pairs"][()])
-        samples = CalibratedScan(
-            pairs=[(pair_names[2 * i], pair_names[2 * i + 1]) for i in range(len(pair_names) // 2)],
-            light_dirs=s["light_dirs"][()],
-            sensor_dirs=s["sensor_dirs"][()],
-            stage_angles_deg=s["stage_angles_deg"][()],
-            values=s["values"][()],
-            channels=tuple(_decode(s["channels"][()])),
-            calibration=json.loads(_attr_dict(s.attrs).get("calibration", "{}")),
+        raise ResultFileError(f"{p} is not an HDF5 file or is damaged ({exc})") from None
+    try:
+        with f:
+            return _read_open(p, f)
+    except (OSError, KeyError, ValueError, TypeError, IndexError) as exc:
+        if isinstance(exc, ResultFileError):
+            raise
+        # A truncated or overwritten file can open and still fail on a dataset or attribute.
+        raise ResultFileError(f"{p} is damaged ({type(exc).__name__}: {exc})") from None
+
+
+def check_result_file(path: str | os.PathLike[str]) -> None:
+    """Whether ``path`` is a whole gonio result file, cheaply (no dataset is read whole).
+
+    HDF5 checks at open that the file is as long as its superblock says (a truncated file
+    fails there); then the format, version and the groups every result has are checked.
+
+    Raises
+    ------
+    ResultFileError
+        Missing, truncated, damaged or not a gonio result; the message says which.
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise ResultFileError(f"result file {p} does not exist")
+    try:
+        with h5py.File(p, "r") as f:
+            _check_format(p, _attr_dict(f.attrs))
+            for group in ("raw", "samples", "metrics", "provenance"):
+                if group not in f:
+                    raise ResultFileError(f"{p} is damaged: its /{group} group is missing")
+            f["samples"]["values"].shape  # noqa: B018 (reads the dataset's header)
+    except ResultFileError:
+        raise
+    except (OSError, KeyError, ValueError, TypeError) as exc:
+        raise ResultFileError(f"{p} is damaged or truncated ({exc})") from None
+
+
+def _check_format(p: Path, attrs: dict[str, Any]) -> None:
+    if attrs.get("format") != FORMAT_NAME:
+        raise ResultFileError(
+            f"{p} is not a gonio result file (format {attrs.get('format')!r})"
         )
-        table = None
-        rel = est = None
-        settings: dict[str, Any] = {}
-        if "reconstruction" in f:
-            r = f["reconstruction"]
-            ra = _attr_dict(r.attrs)
-            wl = r["wavelengths_nm"][()].tolist() if "wavelengths_nm" in r else None
-            table = BRDFTable(r["values"][()], tuple(_decode(r["channels"][()])),
-                              str(ra.get("name", attrs.get("specimen", "result"))), wl)
-            rel, est = float(ra["rel_sample_error"]), float(ra["estimated_error"])
-            settings = json.loads(ra.get("settings", "{}"))
-        metrics = _attr_dict(f["metrics"].attrs)
-        provenance = _attr_dict(f["provenance"].attrs)
-        factored, principled = _read_fits(f)
-        colour = _read_colour(f)
+    if int(attrs.get("version", -1)) != FORMAT_VERSION:
+        raise ResultFileError(
+            f"{p} is result format version {attrs.get('version')}, this gonio reads "
+            f"{FORMAT_VERSION}; use a matching gonio version"
+        )
+
+
+def _read_open(p: Path, f: h5py.File) -> ResultFile:
+    """The body of :func:`read_result` on the opened file."""
+    attrs = _attr_dict(f.attrs)
+    _check_format(p, attrs)
+    g = f["raw"]
+    lights, sensors = _decode(g["light"][()]), _decode(g["sensor"][()])
+    readings = [
+        ReadingRow(int(g["angle_index"][i]), float(g["commanded_deg"][i]),
+                   float(g["actual_deg"][i]), lights[i], sensors[i],
+                   tuple(float(x) for x in g["raw"][i]), tuple(float(x) for x in g["dark"][i]),
+                   float(g["exposure_s"][i]), int(g["averages"][i]), bool(g["saturated"][i]),
+                   float(g["t_read"][i]))
+        for i in range(len(lights))
+    ]
+    s = f["samples"]
+    pair_names = _decode(s["pairs"][()])
+    samples = CalibratedScan(
+        pairs=[(pair_names[2 * i], pair_names[2 * i + 1]) for i in range(len(pair_names) // 2)],
+        light_dirs=s["light_dirs"][()],
+        sensor_dirs=s["sensor_dirs"][()],
+        stage_angles_deg=s["stage_angles_deg"][()],
+        values=s["values"][()],
+        channels=tuple(_decode(s["channels"][()])),
+        calibration=json.loads(_attr_dict(s.attrs).get("calibration", "{}")),
+    )
+    table = None
+    rel = est = None
+    settings: dict[str, Any] = {}
+    if "reconstruction" in f:
+        r = f["reconstruction"]
+        ra = _attr_dict(r.attrs)
+        wl = r["wavelengths_nm"][()].tolist() if "wavelengths_nm" in r else None
+        table = BRDFTable(r["values"][()], tuple(_decode(r["channels"][()])),
+                          str(ra.get("name", attrs.get("specimen", "result"))), wl)
+        rel, est = float(ra["rel_sample_error"]), float(ra["estimated_error"])
+        settings = json.loads(ra.get("settings", "{}"))
+    metrics = _attr_dict(f["metrics"].attrs)
+    provenance = _attr_dict(f["provenance"].attrs)
+    factored, principled = _read_fits(f)
+    colour = _read_colour(f)
     return ResultFile(attrs, readings, samples, table, rel, est, settings, metrics, provenance,
                       factored, principled, colour)
 

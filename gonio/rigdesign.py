@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import copy
 import os
-import tomllib
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any, Literal
@@ -36,7 +35,7 @@ from typing import TYPE_CHECKING, Annotated, Any, Literal
 import tomli_w
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from gonio.config import ConfigError, parse_rig_config
+from gonio.config import ConfigError, parse_rig_config, read_toml
 
 if TYPE_CHECKING:
     from gonio.brdf.design.pairs import PairDesign
@@ -156,20 +155,14 @@ def load_fragment(path: str | os.PathLike[str]) -> DesignFragment:
         Missing file, not TOML, or not a fragment; the message names the file.
     """
     p = Path(path)
-    try:
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ConfigError(f"{p}: no such design file; write one with 'gonio design -o'") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"{p}: cannot read the design file: {exc}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{p}: not valid TOML: {exc}") from None
+    data = read_toml(p, noun="design", example="the file 'gonio design -o' writes",
+                     error=ConfigError)
     return parse_fragment(data, p.name)
 
 
 def design_fragment(design: PairDesign) -> dict[str, Any]:
-    """Design fragment of a :class:`~gonio.brdf.design.pairs.PairDesign` (``gonio design -o``, the
-    design API): ``lights``, ``sensors`` (name, theta_deg, phi_deg) and ``pairs``.
+    """Design fragment of a :class:`~gonio.brdf.design.pairdesign.PairDesign` (``gonio design
+    -o``, the design API): ``lights``, ``sensors`` (name, theta_deg, phi_deg) and ``pairs``.
 
     Independent pairs get one light and one sensor each (``L1``/``S1`` ...) and an explicit
     ``[[pairs]]`` list; a product rig uses ``pairs = "all"``.

@@ -7,7 +7,7 @@ V&F's condition number (2016 Sec. 3.3) or the joint fit's expected error
 (``docs/science.md`` 7.2.1), :data:`~gonio.brdf.design.pairs.DEFAULT_OBJECTIVE` when none is
 given; product rigs by the condition number. The result carries the cells, the lab placement
 of every device, the objective that chose them, the condition number and the joint fit's
-expected log_rmse, the roughness bound of MATH 10 at ``rotations`` uniform stage angles, the
+expected log_rmse, the roughness bound of math.md 11 at ``rotations`` uniform stage angles, the
 statistics of the search that ran, and the rig-config fragment (TOML) to paste into a rig
 config.
 
@@ -139,7 +139,7 @@ class DesignPair(BaseModel):
 
 
 class RoughnessInfo(BaseModel):
-    """MATH 10: the smallest microfacet roughness the design resolves at ``rotations`` angles."""
+    """math.md 11: the smallest microfacet roughness the design resolves at ``rotations`` angles."""
 
     rotations: int
     span_deg: float = Field(description="arc of the angles, degrees; over half a turn the "
@@ -213,7 +213,7 @@ def _finite(x: float) -> float | None:
 
 def describe(design: PairDesign, rotations: int,
              span_deg: float = DEFAULT_SPAN_DEG) -> DesignResult:
-    """The API view of a :class:`~gonio.brdf.design.pairs.PairDesign`."""
+    """The API view of a :class:`~gonio.brdf.design.pairdesign.PairDesign`."""
     from gonio.rigdesign import design_fragment, dump_fragment
 
     bound = roughness_bound(design.cells, design.ph_lab, bound_angles(rotations, span_deg))

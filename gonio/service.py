@@ -243,7 +243,9 @@ class GonioService:
         self._calibration = calibration
         self._rig: hal.Rig = rig if isinstance(rig, hal.Rig) else rig()
         self.rig_config = rig_config
-        self.data_dir = Path(data_dir)
+        # Absolute once: result paths in the store are relative to it, and must not follow
+        # the process's working directory.
+        self.data_dir = Path(data_dir).absolute()
         self.desc = RigDescription.from_rig(self._rig)
         self._connected = False
         self._connect_error: str | None = None
@@ -494,6 +496,8 @@ class GonioService:
         # own events instead, so whoever looks at the job later sees it.
         symmetry = self.worker.basis_symmetry() if arc_may_apply(plan) else None
         dry_run(plan, self.desc, basis=symmetry)
+        if plan.finishing != "calibration":
+            self._check_calibration_covers(plan)
         row = self.store.create_job(
             kind=plan.kind, specimen=plan.specimen, plan=plan.model_dump(mode="json"),
             rig=self.desc.model_dump(mode="json"), priority=request.priority,
@@ -501,6 +505,18 @@ class GonioService:
         self.worker.note_arc(row.id, plan, symmetry)
         self.worker.wake()
         return JobInfo.from_row(row)
+
+    def _check_calibration_covers(self, plan: AnyPlan) -> None:
+        """Refuse, before anything moves, a plan the calibration in effect covers only in part
+        (its result would mix sensor units and 1/sr). Raises :class:`PlanError` naming the
+        pairs, or :class:`gonio.calibration.CalibrationError` for a damaged calibration."""
+        from gonio.calibration import PartialCalibration
+        from gonio.plans.validation import plan_pairs
+
+        try:
+            self.calibration().check_covers(plan_pairs(plan, self.desc), "this plan")
+        except PartialCalibration as exc:
+            raise PlanError(str(exc)) from None
 
     def list_jobs(self, state: str | None = None) -> list[JobInfo]:
         return [JobInfo.from_row(r) for r in self.store.list_jobs([state] if state else None)]
@@ -564,25 +580,41 @@ class GonioService:
         self.worker.resume_measurement(job_id)
         return JobInfo.from_row(self._row(job_id))
 
+    # Abort, cancel, remove and halt decide under the worker's lock (Worker.changes): a job
+    # the worker has handed to its engine is changed by asking the engine (which stops before
+    # any move when it has not moved yet), any other job in the store; never both.
     def abort(self, job_id: int) -> JobInfo:
-        row = self._row(job_id)
-        check_action("abort", row.state, job_id)
-        if row.state is JobState.QUEUED:
-            self.store.set_state(job_id, JobState.ABORTED, reason="aborted before it started")
-        elif row.state is JobState.RECONSTRUCTING:
-            if not self.worker.abort_reconstruction(job_id):
+        with self.worker.changes:
+            row = self._row(job_id)
+            check_action("abort", row.state, job_id)
+            if self.worker.stop_starting(job_id, "aborted before it started"):
+                pass  # taken from the queue, not moved yet: its engine ends it now
+            elif self.worker.abort_measurement(job_id):
+                pass  # its engine stops it: lights off, stage stopped
+            elif row.state is JobState.QUEUED:
+                self.store.set_state(job_id, JobState.ABORTED,
+                                     reason="aborted before it started")
+            elif row.state is JobState.RECONSTRUCTING:
+                if not self.worker.abort_reconstruction(job_id):
+                    self.store.set_state(job_id, JobState.ABORTED, reason="aborted by request")
+            else:
+                # Active in the store but not running here (e.g. paused before a restart).
                 self.store.set_state(job_id, JobState.ABORTED, reason="aborted by request")
-        elif not self.worker.abort_measurement(job_id):
-            # Active in the store but not running here (e.g. paused before a restart).
-            self.store.set_state(job_id, JobState.ABORTED, reason="aborted by request")
-        return JobInfo.from_row(self._row(job_id))
+            return JobInfo.from_row(self._row(job_id))
 
     def cancel(self, job_id: int) -> JobInfo:
-        """Take a queued job out of the queue (it becomes aborted; nothing was measured)."""
-        row = self._row(job_id)
-        check_action("cancel", row.state, job_id)
-        self.store.set_state(job_id, JobState.ABORTED, reason="cancelled before it started")
-        return JobInfo.from_row(self._row(job_id))
+        """Take a queued job out of the queue (it becomes aborted; nothing was measured).
+
+        A job the worker has just taken from the queue is cancelled too, as long as its
+        stage has not moved: its engine ends it before the first move.
+        """
+        with self.worker.changes:
+            row = self._row(job_id)
+            if not self.worker.stop_starting(job_id, "cancelled before it started"):
+                check_action("cancel", row.state, job_id)
+                self.store.set_state(job_id, JobState.ABORTED,
+                                     reason="cancelled before it started")
+            return JobInfo.from_row(self._row(job_id))
 
     def reorder(self, job_id: int, request: ReorderRequest | None = None, *,
                 priority: int | None = None, position: int | None = None) -> JobInfo:
@@ -594,15 +626,24 @@ class GonioService:
         return JobInfo.from_row(self.store.reorder(job_id, priority=priority, position=position))
 
     def remove(self, job_id: int) -> None:
-        """Delete a queued or finished job and its readings (not its result file)."""
-        row = self._row(job_id)
-        check_action("remove", row.state, job_id)
-        self.store.delete_job(job_id)
+        """Delete a queued or finished job and its readings (not its result file).
+
+        A job the worker has just taken from the queue, whose stage has not moved, is ended
+        before it moves and deleted as soon as its engine has stopped (a moment later).
+        """
+        with self.worker.changes:
+            row = self._row(job_id)
+            if self.worker.stop_starting(job_id, "removed before it started", remove=True):
+                return
+            check_action("remove", row.state, job_id)
+            self.store.delete_job(job_id)
 
     def halt(self) -> None:
-        """Emergency halt: stop the running job at once, no cleanup; hold the queue."""
-        self.worker.halt_measurement()
-        self.worker.hold("emergency halt")
+        """Emergency halt: stop the running job at once, no cleanup; hold the queue. A job
+        being started is halted too (or stays queued, when it had not left the queue)."""
+        with self.worker.changes:
+            self.worker.halt_measurement()
+            self.worker.hold("emergency halt")
 
     def release_queue(self) -> None:
         """Let the worker take queued jobs again after a halt or a stop-on-failure."""
@@ -700,10 +741,48 @@ class GonioService:
 
     # ------------------------------------------------------------------ results
     def result_path(self, job_id: int) -> Path:
+        """Where job ``job_id``'s result file is: the store's path, relative to the data
+        directory (an absolute one, from a foreign store, is taken as it is)."""
         row = self._row(job_id)
         if not row.result_path:
             raise NotFound(f"job {job_id} has no result yet (it is {row.state.value})")
-        return Path(row.result_path)
+        return self.data_dir / row.result_path
+
+    def rebuild_hint(self, job_id: int) -> str:
+        """What to do about a job whose result file is missing or damaged."""
+        return (f"rebuild it from the readings the job store holds: gonio jobs rebuild "
+                f"{job_id} --db {self.store.path}")
+
+    def checked_result_path(self, job_id: int) -> Path:
+        """Job ``job_id``'s result file, once it has been read whole (and kept in the cache),
+        so a truncated or damaged file is never served as if it were good.
+
+        Blocking (reads the file): call it from a thread in async code.
+
+        Raises
+        ------
+        NotFound
+            No such job, no result yet, or the file is missing.
+        gonio.results.ResultFileError
+            The file is damaged; the message names the job and how to rebuild it.
+        """
+        self.result(job_id)
+        return self.result_path(job_id)
+
+    def damaged_results(self) -> list[str]:
+        """One line per completed job whose result file is missing or damaged
+        (:func:`gonio.results.check_result_file`, cheap: no dataset is read whole)."""
+        from gonio.results import ResultFileError, check_result_file
+
+        out = []
+        for row in self.store.list_jobs([JobState.COMPLETED.value]):
+            if not row.result_path:
+                continue
+            try:
+                check_result_file(self.data_dir / row.result_path)
+            except ResultFileError as exc:
+                out.append(f"job {row.id}: {exc}; {self.rebuild_hint(row.id)}")
+        return out
 
     def metrics(self, job_id: int) -> dict[str, Any]:
         row = self._row(job_id)
@@ -726,9 +805,20 @@ class GonioService:
         NotFound
             No such job, or it has no result yet.
         gonio.results.ResultFileError
-            The file is missing or cannot be read.
+            The file cannot be read (damaged, truncated); the message names the job and
+            how to rebuild it.
         """
-        return self._results().get(self.result_path(job_id))
+        from gonio.results import ResultFileError
+
+        path = self.result_path(job_id)
+        if not path.is_file():
+            raise NotFound(f"job {job_id}'s result file {path.name} is missing from the data "
+                           f"directory; {self.rebuild_hint(job_id)}")
+        try:
+            return self._results().get(path)
+        except ResultFileError as exc:
+            raise ResultFileError(f"job {job_id}'s result file is damaged: {exc}; "
+                                  f"{self.rebuild_hint(job_id)}") from None
 
     def _results(self) -> ResultCache:
         with self._preview_lock:
@@ -746,10 +836,7 @@ class GonioService:
         NotFound
             No such job, no result yet, the file is missing, or it has no BRDF (calibration).
         """
-        path = self.result_path(job_id)
-        if not path.is_file():
-            raise NotFound(f"the result file {path.name} is missing from the data directory")
-        res = self._results().get(path)
+        res = self.result(job_id)
         if res.table is None:
             raise NotFound(f"job {job_id} has no reconstructed BRDF (a calibration job has none)")
         return res
@@ -771,7 +858,7 @@ class GonioService:
             cached = self._previews.get(key)
         if cached is not None:
             return cached
-        res = self._results().get(path)
+        res = self.result(job_id)
         if res.table is None:
             raise NotFound(f"job {job_id} is a {res.attrs.get('kind')} job without a BRDF")
         from gonio.brdf.pictures.preview import preview_png
@@ -799,8 +886,7 @@ class GonioService:
 
         check_format(fmt)
         path = self.result_path(job_id)
-        if not path.is_file():
-            raise NotFound(f"job {job_id}'s result file is missing from the data directory")
+        self.result(job_id)  # missing or damaged: said with the way to rebuild it
         name = f"gonio-job-{job_id}-{fmt}{FORMATS[fmt]}"
         out = self.data_dir / "exports" / name
         if out.is_file() and out.stat().st_mtime_ns >= path.stat().st_mtime_ns:
@@ -836,9 +922,8 @@ class GonioService:
         if cached is not None:
             return cached
         ids = [job_id] if compare is None else [job_id, compare]
-        for jid, p in zip(ids, paths, strict=True):
-            if not p.is_file():
-                raise NotFound(f"job {jid}'s result file is missing from the data directory")
+        for jid in ids:
+            self.result(jid)  # missing or damaged: said with the way to rebuild it
         try:
             png = render_inputs(paths)
         except FigureError as exc:

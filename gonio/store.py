@@ -15,6 +15,12 @@ Three kinds of record (schema in ``docs/engine.md``):
 
 Every state change goes through :func:`gonio.jobstates.check_transition`.
 
+Opening a store file checks it (``PRAGMA quick_check``): a damaged file is refused with a
+:class:`StoreError` naming it and saying what to do, before anything reads or writes it. Result
+paths are stored relative to the data directory (``results/job-<id>.h5``); stores written by
+older versions, which stored them as given (absolute, or relative to the daemon's working
+directory), are rewritten on open (:func:`relative_result_path`).
+
 Thread-safety and concurrency: writes go through one connection guarded by a lock (SQLite has
 one writer at a time anyway). Reads never take that lock: each thread reads through its own
 connection, which WAL lets run concurrently with the writer and with each other, so a status
@@ -32,7 +38,7 @@ import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
-from pathlib import Path
+from pathlib import Path, PurePath
 from typing import Any, cast
 
 from gonio.jobstates import ACTIVE_STATES, JobState, check_action, check_transition
@@ -220,6 +226,54 @@ class JobStore:
                 f"{self.path} has store schema {row[0]}, this gonio reads {SCHEMA_VERSION}; "
                 "use a matching gonio version or a new database file"
             )
+        if self.path != ":memory:":
+            self._migrate_result_paths()
+
+    def _check_integrity(self) -> None:
+        """``PRAGMA quick_check`` (every page's structure, not every index entry: linear in
+        the file's size); a damaged file is refused before anything trusts it."""
+        try:
+            rows = self._db.execute("PRAGMA quick_check(5)").fetchall()
+        except sqlite3.OperationalError:
+            raise  # locked by a concurrent opener: _initialise retries
+        except sqlite3.DatabaseError as exc:
+            rows = [(str(exc),)]
+        problems = [str(r[0]) for r in rows if str(r[0]) != "ok"]
+        if problems:
+            self._db.close()
+            raise StoreError(
+                f"job store {self.path} is damaged (SQLite integrity check: "
+                f"{'; '.join(problems)[:300]}). Nothing was written to it. Stop everything "
+                "that uses it, copy it aside, then restore it from a backup or recover what it "
+                f"holds into a new file (sqlite3 {self.path} .recover | sqlite3 recovered.sqlite) "
+                "and start on that"
+            )
+
+    def _migrate_result_paths(self) -> None:
+        """Rewrite result paths of older stores relative to the data directory (see the module
+        doc); a no-op once done."""
+        with self._lock:
+            rows = self._db.execute(
+                "SELECT id, result_path, summary FROM jobs WHERE result_path IS NOT NULL"
+            ).fetchall()
+        changes: list[tuple[str, str | None, int]] = []
+        for job_id, path, summary in rows:
+            new_path = relative_result_path(job_id, path)
+            new_summary = summary
+            if summary:
+                d = json.loads(summary)
+                if isinstance(d, dict):
+                    if isinstance(d.get("result_path"), str):
+                        d["result_path"] = relative_result_path(job_id, d["result_path"])
+                    if isinstance(d.get("calibration_path"), str):
+                        d["calibration_path"] = relative_calibration_path(d["calibration_path"])
+                    new_summary = json.dumps(d)
+            if new_path != path or new_summary != summary:
+                changes.append((new_path, new_summary, job_id))
+        if changes:
+            with self._tx() as c:
+                c.executemany("UPDATE jobs SET result_path = ?, summary = ? WHERE id = ?",
+                              changes)
 
     def _initialise(self, durable: bool) -> tuple[Any, ...] | None:
         """Set the connection up and create the schema; return the stored schema-version row.
@@ -238,6 +292,7 @@ class JobStore:
                 self._db.execute("PRAGMA journal_mode=WAL")
                 self._db.execute(f"PRAGMA synchronous={'FULL' if durable else 'NORMAL'}")
                 self._db.execute("PRAGMA foreign_keys=ON")
+                self._check_integrity()
                 self._db.executescript(_SCHEMA)
                 row = self._db.execute("SELECT value FROM meta WHERE key='schema'").fetchone()
                 self._job_cols = tuple(
@@ -717,6 +772,23 @@ class JobStore:
     def last_seq(self) -> int:
         with self._read() as db:
             return int(db.execute("SELECT COALESCE(MAX(seq), 0) FROM events").fetchone()[0])
+
+
+def relative_result_path(job_id: int, path: str) -> str:
+    """A stored result path as the data directory's own relative path.
+
+    Finishing writes job N's result to ``results/job-N.h5`` in the data directory, and only
+    there, so a path ending in those two parts is that file, whatever absolute or
+    working-directory-relative prefix an older gonio stored it with. Other paths are kept.
+    """
+    parts = PurePath(path).parts
+    own = ("results", f"job-{job_id}.h5")
+    return "/".join(own) if tuple(parts[-2:]) == own else path
+
+
+def relative_calibration_path(path: str) -> str:
+    """A stored calibration path as the data directory's own (``calibration.json``)."""
+    return "calibration.json" if PurePath(path).name == "calibration.json" else path
 
 
 def _job_row(d: dict[str, Any]) -> JobRow:

@@ -10,6 +10,12 @@ resumes at all.
 Finishing a measured job (calibration or reconstruction, and the result file:
 :mod:`gonio.finishing`) runs in a thread (``asyncio.to_thread``) so the event loop keeps
 serving the API and events while the numerics run.
+
+A job is the store's until the worker hands it to its engine (:meth:`Worker._hand_to_engine`),
+then the engine's until measuring ends; the service's abort, cancel, remove and halt decide
+under the same lock (:attr:`Worker.changes`), so a request at any point of a start-up either
+changes the stored job before the worker looks again or reaches the engine, which connects the
+rig under the plan's fault policy and stops before any stage move (docs/engine.md, "Start-up").
 """
 
 from __future__ import annotations
@@ -30,12 +36,12 @@ from gonio.calibration import (
 )
 from gonio.engine import Progress, ScanEngine
 from gonio.finishing import Finishing, FinishingStopped, finish_job
-from gonio.jobstates import JobState
+from gonio.jobstates import FINISHED_STATES, IllegalTransition, JobState
 from gonio.plans.dryrun import BasisSymmetry, arc_may_apply, arc_warning
 from gonio.plans.models import AdaptivePlan, AnyPlan, PlanError, parse_stored_plan
 from gonio.plans.validation import plan_pairs, validate_plan
 from gonio.rigdescription import RigDescription
-from gonio.store import JobRow, JobStore
+from gonio.store import JobRow, JobStore, NotFound
 
 log = logging.getLogger("gonio.worker")
 
@@ -151,6 +157,17 @@ class Worker:
         self.fit_exports = fit_exports
         self._engine: ScanEngine | None = None  # the job being measured; see "measurement"
         self.current_job: int | None = None
+        self.changes = threading.RLock()
+        """Serialises the state changes the service makes for users (abort, cancel, remove,
+        halt) with the worker taking a job, handing it to an engine and taking it back: a job
+        is either the store's (the service changes it there) or the engine's (the service
+        asks the engine), never both. Held only for store calls, never across an await."""
+        # A halt that came while the current job was being started, before its engine.
+        self._halt_asked = False
+        # The job to delete once its engine has stopped (removed before it moved).
+        self._remove_when_stopped: int | None = None
+        # Jobs this process gave up on after a transition it did not expect (logged).
+        self._skip: set[int] = set()
         # The queue hold survives restarts: it is read back from the store.
         stored = store.hold(QUEUE_HOLD)
         self.held: str | None = stored[0] if stored is not None else None
@@ -256,10 +273,26 @@ class Worker:
         return eng is not None
 
     def halt_measurement(self) -> None:
-        """Emergency halt of whatever is measuring: stop at once, send nothing more."""
-        eng = self._engine
-        if eng is not None:
-            eng.request_halt()
+        """Emergency halt of whatever is measuring or being started: stop at once, send
+        nothing more (a job being started, not yet handed to its engine, is not started)."""
+        with self.changes:
+            eng = self._engine
+            if eng is not None:
+                eng.request_halt()
+            elif self.current_job is not None:
+                self._halt_asked = True
+
+    def stop_starting(self, job_id: int, reason: str, remove: bool = False) -> bool:
+        """Take back ``job_id`` if it was taken from the queue and its stage has not moved
+        yet: its engine aborts with ``reason`` before any move (and the job is deleted once
+        it has stopped, with ``remove``). False when that job is not starting here."""
+        with self.changes:
+            eng = self._engine_of(job_id)
+            if eng is None or not eng.from_queue or not eng.abort_before_moving(reason):
+                return False
+            if remove:
+                self._remove_when_stopped = job_id
+            return True
 
     def _engine_of(self, job_id: int) -> ScanEngine | None:
         eng = self._engine
@@ -268,12 +301,12 @@ class Worker:
     def next_job(self) -> JobRow | None:
         if self.gate() is not None:
             return None  # not even a resumed job: someone is working on the rig
-        active = self.store.active_jobs()
+        active = [j for j in self.store.active_jobs() if j.id not in self._skip]
         if active:
             return active[0]
         if self.held is not None:
             return None
-        queue = self.store.queue()
+        queue = [j for j in self.store.queue() if j.id not in self._skip]
         return queue[0] if queue else None
 
     # ------------------------------------------------------------------ loop
@@ -290,7 +323,21 @@ class Worker:
                     with contextlib.suppress(TimeoutError):
                         await asyncio.wait_for(self._wake.wait(), GATE_POLL_S)
                 continue
-            await self.run_job(job)
+            try:
+                await self.run_job(job)
+            except (IllegalTransition, NotFound) as exc:
+                self._unexpected(job.id, exc)
+
+    def _unexpected(self, job_id: int, exc: Exception) -> None:
+        """A state change the worker did not expect (a bug, or a race not yet closed): say
+        so and go on serving; the job is failed if it is still queued or active."""
+        log.error("job %s: unexpected state change (%s); the worker goes on", job_id, exc,
+                  exc_info=exc)
+        with self.changes, contextlib.suppress(IllegalTransition, NotFound):
+            if self.store.get_job(job_id).state not in FINISHED_STATES:
+                self._skip.add(job_id)  # not taken again by this process, whatever happens
+                self.store.set_state(job_id, JobState.FAILED,
+                                     reason=f"internal error: {exc}")
 
     async def run_once(self) -> JobRow | None:
         """Run the next job to its end (for the CLI and tests); None when the queue is empty."""
@@ -302,15 +349,20 @@ class Worker:
 
     async def run_job(self, job: JobRow) -> JobState:
         """Measure, reconstruct and write one job; returns its final state."""
-        self.current_job = job.id
+        with self.changes:
+            self.current_job = job.id
+            self._halt_asked = False
         try:
             return await self._run_job(job)
         finally:
-            self.current_job = None
+            with self.changes:
+                self.current_job = None
+                self._halt_asked = False
+                self._remove_when_stopped = None
+                self._engine = None
+                self._finish_stop = None
             self._set_activity(None)
-            self._engine = None
             self._recon_task = None
-            self._finish_stop = None
 
     async def _run_job(self, job: JobRow) -> JobState:
         try:
@@ -318,47 +370,64 @@ class Worker:
             validate_plan(plan, self.desc)
         except PlanError as exc:
             return self._fail(job, f"plan no longer valid on this rig: {exc}")
+        if job.state is not JobState.RECONSTRUCTING and plan.finishing != "calibration":
+            # Checked at submission too; the calibration may have changed since (a new
+            # calibration job, a file edited by hand). A result calibrated in part, or with a
+            # damaged file, is refused before anything moves.
+            try:
+                self.calibration().check_covers(plan_pairs(plan, self.desc), f"job {job.id}")
+            except CalibrationError as exc:
+                return self._fail(job, f"not started: {exc}", plan)
         basis: Any = None  # loaded before measuring when the plan needs it
         if job.state is not JobState.RECONSTRUCTING:
-            try:
-                rig = await self.get_rig()
-            except (hal.DeviceFault, OSError) as exc:
-                return self._fail(job, f"rig not available: {exc}", plan)
             refiner = None
             if needs_basis_to_measure(plan):
                 # The adaptive rule needs the basis after the first round: load (or build) it
                 # now, before anything moves, so the stage never waits mid-scan for it.
                 basis = await self._basis_before_measuring(job)
-                ready = self._still_to_run(job.id)
-                if ready is not None:
-                    return ready
                 refiner = self._refiner(plan, basis)
             # A half-turn plan and a basis without the twofold symmetry: said before the first
-            # reading whenever the basis is at hand (loaded above, or built). Without an await:
-            # one here would let a cancel in before the engine starts (the posterior path
-            # above checks for that after its wait). The file is read once per version, mostly
-            # already by the submission's check, so this rarely costs more than a stat.
+            # reading whenever the basis is at hand (loaded above, or built). The file is read
+            # once per version, mostly already by the submission's check.
             if arc_may_apply(plan):  # only then is the basis file worth a look
                 self.note_arc(job.id, plan, BasisSymmetry.of(basis) if basis is not None
                               else self.basis_symmetry())
+            engine = self._hand_to_engine(job, plan, refiner)
+            if not isinstance(engine, ScanEngine):
+                return engine
             if self.on_job_start is not None:
                 # Before the first reading of a new or resumed job: e.g. a simulated rig puts
-                # the white reference or the job's specimen on the stage.
+                # the white reference or the job's specimen on the stage (no rig command).
                 self.on_job_start(job)
-            self._engine = ScanEngine(rig, self.store, job.id, plan, self.desc,
-                                      refiner=refiner)
-            final = await self._engine.run()
-            self._engine = None
+            # The engine connects the rig (a silent device is waited for, as mid-scan), then
+            # measures; an abort or halt asked meanwhile ends the job before any move.
+            final = await engine.run()
+            with self.changes:  # the job goes back from the engine to the store
+                self._engine = None
+                if final is JobState.RUNNING and engine.abort_requested:
+                    # Asked as the last angle was committed: it is not reconstructed.
+                    self.store.set_state(job.id, JobState.ABORTED, reason="aborted by request")
+                    final = JobState.ABORTED
+                if self._remove_when_stopped == job.id and final is not JobState.RUNNING:
+                    self.store.delete_job(job.id)
+                    return final
             if final is not JobState.RUNNING:
                 if final is JobState.FAILED and plan.stop_queue_on_failure:
                     self.hold(f"job {job.id} failed and asked to stop the queue")
                 if final is JobState.HALTED:
                     self.hold("emergency halt")
                 return final
-            self.store.set_state(job.id, JobState.RECONSTRUCTING)
         # A basis loaded before measuring serves the finishing too (no second load from disk).
-        how = self._finishing(basis, job.id, plan)
-        self._finish_stop = how.stop
+        with self.changes:
+            if job.state is JobState.RECONSTRUCTING:  # resumed: it may have been aborted
+                current = self.store.get_job(job.id).state
+                if current is not JobState.RECONSTRUCTING:
+                    return current
+            else:
+                self.store.set_state(job.id, JobState.RECONSTRUCTING)
+            # From here an abort stops the finishing (:meth:`abort_reconstruction`).
+            how = self._finishing(basis, job.id, plan)
+            self._finish_stop = how.stop
         self._recon_task = asyncio.create_task(asyncio.to_thread(finish_job, job.id, plan, how))
         try:
             summary = await self._recon_task
@@ -383,11 +452,16 @@ class Worker:
         return JobState.COMPLETED
 
     def _fail(self, job: JobRow, reason: str, plan: AnyPlan | None = None) -> JobState:
-        current = self.store.get_job(job.id).state
-        if current is JobState.QUEUED:
-            # A queued job that cannot start: record why without pretending it ran.
-            self.store.set_state(job.id, JobState.RUNNING)
-        self.store.set_state(job.id, JobState.FAILED, reason=reason)
+        with self.changes:
+            try:
+                current = self.store.get_job(job.id).state
+            except NotFound:  # removed meanwhile
+                return JobState.ABORTED
+            if current in FINISHED_STATES:  # aborted or cancelled meanwhile: that stands
+                log.info("job %s: not failed (%s): it is %s already", job.id, reason,
+                         current.value)
+                return current
+            self.store.set_state(job.id, JobState.FAILED, reason=reason)
         if plan is not None and plan.stop_queue_on_failure:
             self.hold(f"job {job.id} failed and asked to stop the queue")
         return JobState.FAILED
@@ -508,20 +582,35 @@ class Worker:
                                 {"seconds": round(time.monotonic() - t0, 2)})
         return basis
 
-    def _still_to_run(self, job_id: int) -> JobState | None:
-        """None when ``job_id`` may still start after a wait; else the state to report.
+    def _hand_to_engine(self, job: JobRow, plan: AnyPlan, refiner: Any
+                        ) -> ScanEngine | JobState:
+        """The engine that will measure ``job``, or the state to report when the job is not
+        to be measured after all.
 
-        While the basis loaded, the job may have been cancelled, the queue held or the
-        maintenance gate closed: then it is not started (a held or gated job stays queued).
+        The job was picked before the waits of its start-up (the basis); since then it may
+        have been aborted, cancelled or removed, the queue held or the maintenance gate
+        closed (a held or gated job stays queued), or a halt asked (a queued job stays
+        queued, a resumed one is halted). All of this is decided under :attr:`changes`, and
+        the engine is registered there, so from then on every request goes to the engine.
         """
-        row = self.store.get_job(job_id)
-        if row.state in (JobState.QUEUED,) and (self.held is not None
+        with self.changes:
+            try:
+                row = self.store.get_job(job.id)
+            except NotFound:
+                return JobState.ABORTED  # removed: there is nothing left to report on
+            if row.state in FINISHED_STATES:
+                return row.state
+            if self._halt_asked:
+                if row.state is JobState.QUEUED:
+                    return row.state  # the halt holds the queue: it runs after the release
+                self.store.set_state(job.id, JobState.HALTED, reason="emergency halt")
+                return JobState.HALTED
+            if row.state is JobState.QUEUED and (self.held is not None
                                                  or self.gate() is not None):
-            return row.state
-        if row.state in (JobState.COMPLETED, JobState.FAILED, JobState.ABORTED,
-                         JobState.HALTED):
-            return row.state
-        return None
+                return row.state
+            self._engine = ScanEngine(None, self.store, job.id, plan, self.desc,
+                                      refiner=refiner, connect=self.get_rig)
+            return self._engine
 
     # ------------------------------------------------------------------ finishing
     def _finishing(self, basis: Any = None, job_id: int | None = None,

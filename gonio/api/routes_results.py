@@ -24,7 +24,8 @@ router = APIRouter(prefix="/api/v1/jobs", tags=["results"])
 
 _NO_RESULT: dict[int | str, dict[str, Any]] = {
     404: {"description": "no such job, or it has no result yet"},
-    500: {"description": "the job's result file exists but cannot be read"},
+    500: {"description": "the job's result file is damaged; the message says how to rebuild "
+                         "it from the stored readings (gonio jobs rebuild)"},
 }
 _GRID_STEP_DEG = 5
 
@@ -49,11 +50,9 @@ class Slice(BaseModel):
     summary="Download the job's HDF5 result file (layout: docs/api.md)",
 )
 def result_file(job_id: JobId, service: Service) -> FileResponse:
-    path = service.result_path(job_id)
-    if not path.is_file():
-        raise NotFound(
-            f"job {job_id}'s result file is missing from the data directory ({path.name})"
-        )
+    # Read whole first (and kept for the pictures): a truncated or damaged file is refused
+    # with the job and how to rebuild it, never sent as if it were good.
+    path = service.checked_result_path(job_id)
     return FileResponse(path, media_type="application/x-hdf5", filename=f"gonio-job-{job_id}.h5")
 
 

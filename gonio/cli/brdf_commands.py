@@ -25,7 +25,6 @@ import argparse
 import csv
 import json
 import time
-import tomllib
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -44,6 +43,8 @@ DEMO_MATERIAL = "brushed-metal-003"
 
 # ---------------------------------------------------------------------------- pair files
 def _rows_from_file(path: Path) -> list[Mapping[str, Any]]:
+    from gonio.config import ConfigError, read_toml
+
     if not path.is_file():
         raise UsageError(f"pairs file {path} does not exist")
     suffix = path.suffix.lower()
@@ -57,13 +58,16 @@ def _rows_from_file(path: Path) -> list[Mapping[str, Any]]:
         if suffix == ".json":
             data: Any = json.loads(path.read_text())
         elif suffix == ".toml":
-            data = tomllib.loads(path.read_text())
+            data = read_toml(path, noun="pairs file", example="docs/file-formats.md",
+                             error=ConfigError)
         else:
             raise UsageError(
                 f"pairs file {path}: unknown type {suffix!r}; use .csv, .json or .toml"
             )
-    except (json.JSONDecodeError, tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise UsageError(f"pairs file {path} cannot be parsed: {exc}") from None
+    except ConfigError as exc:  # read_toml's message names the file and what is wrong
+        raise UsageError(str(exc)) from None
     if isinstance(data, Mapping):
         data = data.get("pairs")
     if not isinstance(data, list) or not all(isinstance(r, Mapping) for r in data):
@@ -77,12 +81,14 @@ def _rows_from_file(path: Path) -> list[Mapping[str, Any]]:
 def _design_rows(path: Path) -> list[Mapping[str, Any]] | None:
     """Lab-direction rows of a design fragment or rig config (``[[lights]]``/``[[sensors]]``
     tables and named pairs), or None when the TOML file is a plain pairs list."""
+    from gonio.config import ConfigError, read_toml
     from gonio.rigdesign import parse_fragment
 
     try:
-        data = tomllib.loads(path.read_text())
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise UsageError(f"pairs file {path} cannot be parsed: {exc}") from None
+        data = read_toml(path, noun="pairs file", example="docs/file-formats.md",
+                         error=ConfigError)
+    except ConfigError as exc:  # read_toml's message names the file and what is wrong
+        raise UsageError(str(exc)) from None
     if "lights" not in data and "sensors" not in data:
         return None
     design = parse_fragment(data, path.name)  # ConfigError: one clear message

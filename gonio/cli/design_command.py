@@ -322,9 +322,9 @@ def run(args: argparse.Namespace) -> int:
     print_design(design, bound, args.rotations, span_deg=args.span)
     if args.basis is None and not args.no_expected_error and args.lights is None:
         if expected is None:
-            from gonio.brdf.design.heldout import expected_log_rmse
+            from gonio.brdf.design.heldout import heldout_log_rmse
 
-            expected = expected_log_rmse(design.cells, design.ph_lab, args.rotations,
+            expected = heldout_log_rmse(design.cells, design.ph_lab, args.rotations,
                                          span_deg=args.span)
         print(f"expected log_rmse on held-out materials at {args.rotations} rotations over "
               f"{args.span:g} deg: "

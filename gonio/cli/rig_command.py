@@ -20,7 +20,6 @@ import argparse
 import asyncio
 import shutil
 import sys
-import tomllib
 from pathlib import Path
 from typing import Any
 
@@ -59,17 +58,12 @@ def register(subparsers: Any) -> None:
 
 
 def _apply_design(args: argparse.Namespace) -> int:
-    from gonio.config import ConfigError
+    from gonio.config import ConfigError, read_toml
     from gonio.rigdesign import apply_design, load_fragment
 
     design = load_fragment(args.design)  # ConfigError is a ValueError: one clear line
-    try:
-        data = tomllib.loads(args.rig.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise UsageError(f"rig config {args.rig} does not exist; start from "
-                         "deploy/rig.example.toml") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise UsageError(f"{args.rig}: not valid TOML: {exc}") from None
+    data = read_toml(args.rig, noun="rig config", example="deploy/rig.example.toml",
+                     error=ConfigError)
     try:
         merged, notes = apply_design(data, design, args.rig.name)
     except ConfigError as exc:

@@ -52,7 +52,7 @@ def register(subparsers: Any) -> None:
                         "specimen reads the same turned by half a turn, so the angles see twice "
                         "as many distinct azimuths) or 360 (a full turn, for specimens without "
                         "that symmetry; the default with --rule vf)")
-    p.add_argument("--adaptive", action="store_true", help="adaptive rotations (MATH 7)")
+    p.add_argument("--adaptive", action="store_true", help="adaptive rotations (math.md 9)")
     p.add_argument("--rule", choices=["posterior", "vf"], default="posterior",
                    help="adaptive refinement rule: posterior (where the joint fit expects the "
                         "error to fall most) or vf (V&F's PCHIP midpoints)")
@@ -90,11 +90,19 @@ def register(subparsers: Any) -> None:
     p.add_argument("-o", "--output", type=Path, required=True, help="result file (.h5)")
     p.set_defaults(func=_scan)
 
-    j = subparsers.add_parser("jobs", help="list or show jobs in a job store")
-    j.add_argument("action", nargs="?", choices=["list", "show"], default="list")
+    j = subparsers.add_parser(
+        "jobs", help="list or show jobs in a job store, or rebuild a job's result file",
+        description="list: the jobs; show ID: one job as JSON; rebuild ID: write a completed "
+        "job's result file again from the readings the store holds (when the file is missing "
+        "or damaged), with the calibration the job was finished with.")
+    j.add_argument("action", nargs="?", choices=["list", "show", "rebuild"], default="list")
     j.add_argument("job_id", nargs="?", type=int)
     j.add_argument("--db", type=Path, required=True,
                    help="job store (SQLite), e.g. the one 'gonio scan' prints")
+    j.add_argument("--data-dir", type=Path, default=None,
+                   help="the data directory the store's result paths are relative to (show: "
+                        "result_file; rebuild: its results/ gets the file); default: the "
+                        "folder of --db")
     j.add_argument("--json", action="store_true", help="machine-readable output")
     j.set_defaults(func=_jobs)
 
@@ -205,7 +213,6 @@ async def _run_owned(args: argparse.Namespace, plan: Any, config: Any, sim: Any,
                      desc: Any, db: Path, data_dir: Path) -> int:
     """Run the scan through an in-process :class:`gonio.service.GonioService` (the same door
     as the daemon's API, without its queue worker), then copy the result to ``-o``."""
-    from gonio.calibration import Calibration
     from gonio.cli.sim_session import attach_sim, calibrate_in_foreground, calibration_covers_rig
     from gonio.jobstates import JobState
     from gonio.service import GonioService, JobRequest
@@ -218,9 +225,13 @@ async def _run_owned(args: argparse.Namespace, plan: Any, config: Any, sim: Any,
     # [calibration] factors; --calibration overrides both.
     override = None
     if args.calibration is not None:
+        from gonio.calibration import check_plausible, load_calibration, sensor_full_scale
+
         if not args.calibration.is_file():
             raise UsageError(f"calibration file {args.calibration} does not exist")
-        override = Calibration.model_validate_json(args.calibration.read_text())
+        override = load_calibration(args.calibration)
+        check_plausible(override, sensor_full_scale(config),
+                        f"calibration file {args.calibration}")
     service = GonioService(store, rig, rig_config=config, data_dir=data_dir,
                            calibration=override)
     try:
@@ -258,7 +269,7 @@ async def _run_owned(args: argparse.Namespace, plan: Any, config: Any, sim: Any,
     assert row.result_path is not None
     out.parent.mkdir(parents=True, exist_ok=True)
     # A copy: the data directory keeps its result (what 'gonio jobs show' reports stays true).
-    shutil.copyfile(row.result_path, out)
+    shutil.copyfile(service.result_path(job.id), out)
     summary = row.result or {}
     if plan.kind == "calibration":
         from gonio.calibration import CALIBRATION_FILE
@@ -450,6 +461,8 @@ def _jobs(args: argparse.Namespace) -> int:
     if not args.db.is_file():
         raise UsageError(f"job store {args.db} does not exist")
     store = JobStore(args.db, durable=False)
+    if args.action == "rebuild":
+        return _rebuild(args, store)
     if args.action == "show":
         if args.job_id is None:
             raise UsageError("jobs show needs a job id, e.g. 'gonio jobs show 3 --db jobs.sqlite'")
@@ -458,6 +471,10 @@ def _jobs(args: argparse.Namespace) -> int:
         except NotFound as exc:
             raise UsageError(str(exc)) from None
         d = {k: (v.value if hasattr(v, "value") else v) for k, v in vars(row).items()}
+        if row.result_path:
+            # The store's path is relative to the data directory (docs/engine.md).
+            data_dir = args.data_dir if args.data_dir is not None else args.db.resolve().parent
+            d["result_file"] = str((data_dir / row.result_path).resolve())
         print(json.dumps(d, indent=2, default=str))
         return 0
     rows = store.list_jobs()
@@ -472,4 +489,27 @@ def _jobs(args: argparse.Namespace) -> int:
         print(f"{r.id:>4}  {r.state.value:<14} {r.kind:<11} "
               f"{r.done_angles:>4}/{r.total_angles:<4}  {created}  {r.specimen}"
               + (f"  ({r.reason})" if r.reason else ""))
+    return 0
+
+
+def _rebuild(args: argparse.Namespace, store: Any) -> int:
+    """``gonio jobs rebuild ID``: :func:`gonio.finishing.rebuild_result`, reported."""
+    from gonio.finishing import rebuild_result
+    from gonio.store import NotFound
+    from gonio.worker import default_basis_provider
+
+    if args.job_id is None:
+        raise UsageError("jobs rebuild needs a job id, e.g. 'gonio jobs rebuild 3 --db "
+                         "DATA/gonio.sqlite'")
+    data_dir = args.data_dir if args.data_dir is not None else args.db.resolve().parent
+    try:
+        store.get_job(args.job_id)
+    except NotFound as exc:
+        raise UsageError(str(exc)) from None
+    print(f"rebuilding job {args.job_id}'s result from the job store's readings",
+          file=sys.stderr)
+    summary = rebuild_result(store, data_dir, args.job_id, default_basis_provider)
+    print(f"job {args.job_id}: wrote {data_dir / summary['result_path']} from "
+          f"{summary['readings']} stored readings"
+          + (" (calibrated, 1/sr)" if summary.get("calibrated") else " (sensor units)"))
     return 0

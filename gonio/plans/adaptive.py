@@ -1,4 +1,4 @@
-"""Adaptive refinement numerics (MATH 7, V&F Sec. 6): where to add stage angles next.
+"""Adaptive refinement numerics (math.md 9, V&F Sec. 6): where to add stage angles next.
 
 The prediction is the reconstruction's own periodic PCHIP
 (:mod:`gonio.brdf.reconstruction.periodic`), in degrees, with the period of the plan's arc: a
@@ -22,7 +22,7 @@ def adaptive_refinement(
     period_deg: float = 360.0,
     start_deg: float = 0.0,
 ) -> list[float]:
-    """New angles for the next adaptive round (MATH 7, V&F Sec. 6 steps 2-3).
+    """New angles for the next adaptive round (math.md 9, V&F Sec. 6 steps 2-3).
 
     For each pair and each measured angle, predict the value from the pair's *other* angles
     with periodic PCHIP; where ``|predicted - measured| / |measured|`` exceeds ``threshold``

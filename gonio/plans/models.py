@@ -15,7 +15,7 @@ Three kinds, told apart by ``kind``:
     Start with ``initial_rotations`` uniform angles over ``span_deg``, then refine by
     ``rule``: ``posterior`` (default) adds the angles where the joint fit's posterior expects
     the error to fall most, while that fall is at least ``min_gain`` (docs/science.md 7.3);
-    ``vf`` (V&F Sec. 6 / MATH 7) adds the midpoints around every angle where leave-one-out
+    ``vf`` (V&F Sec. 6 / math.md 9) adds the midpoints around every angle where leave-one-out
     periodic PCHIP mispredicts a pair's value by more than ``threshold``
     (:mod:`gonio.plans.adaptive`). Rounds repeat until the rule stops, the sample budget is
     spent, or a new step would be finer than ``min_step_deg``.
@@ -240,7 +240,7 @@ class UniformPlan(_PlanBase):
 
 
 class AdaptivePlan(_PlanBase):
-    """Uniform start, then refinement rounds (MATH 7; docs/science.md 7.3)."""
+    """Uniform start, then refinement rounds (math.md 9; docs/science.md 7.3)."""
 
     kind: Literal["adaptive"] = "adaptive"
     refines = True

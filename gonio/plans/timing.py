@@ -63,7 +63,7 @@ def adaptive_bound(plan: AdaptivePlan, rig: RigDescription, n_pairs: int, n_ligh
                    first_angles: Sequence[float], end_deg: float) -> tuple[int, float]:
     """Most stage angles and seconds the refinement rounds after the first can add.
 
-    The worst case of MATH 7: every round plans the midpoint of every gap (each measured
+    The worst case of math.md 9: every round plans the midpoint of every gap (each measured
     angle's two neighbours) within the plan's arc (``first_span_deg``: over half a turn the
     last gap runs to the first angle plus 180 deg, and its midpoint stays in the arc, as the
     refinement rules plan it), as long as half a gap is at least ``min_step_deg``, for

@@ -32,11 +32,12 @@ def child_env(**extra: str) -> dict[str, str]:
     return env
 
 
-def gonio(args: Sequence[str], timeout: float = 120.0, **env: str
+def gonio(args: Sequence[str], timeout: float = 120.0, cwd: Path | None = None, **env: str
           ) -> subprocess.CompletedProcess[str]:
-    """Run ``gonio ARGS`` to its end in a child process."""
-    return subprocess.run([*GONIO, *args], capture_output=True,
-                          text=True, timeout=timeout, env=child_env(**env), cwd=PROJECT_ROOT)
+    """Run ``gonio ARGS`` to its end in a child process, in ``cwd`` (default: the project
+    root)."""
+    return subprocess.run([*GONIO, *args], capture_output=True, text=True, timeout=timeout,
+                          env=child_env(**env), cwd=cwd or PROJECT_ROOT)
 
 
 @dataclass
@@ -73,8 +74,10 @@ class DaemonProcess:
 
 
 def start_daemon(args: Sequence[str], timeout: float = 120.0,
-                 command: Sequence[str] | None = None, **env: str) -> DaemonProcess:
-    """Start ``gonio serve ARGS`` (or ``COMMAND ARGS``) and wait until it prints its address.
+                 command: Sequence[str] | None = None, cwd: Path | None = None,
+                 **env: str) -> DaemonProcess:
+    """Start ``gonio serve ARGS`` (or ``COMMAND ARGS``) and wait until it prints its address;
+    in ``cwd`` (default: the project root).
 
     Raises
     ------
@@ -83,7 +86,7 @@ def start_daemon(args: Sequence[str], timeout: float = 120.0,
     """
     proc = subprocess.Popen([*(command or [*GONIO, "serve"]), *args],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env=child_env(**env), cwd=PROJECT_ROOT)
+                            env=child_env(**env), cwd=cwd or PROJECT_ROOT)
     d = DaemonProcess(proc)
     ready = threading.Event()
 

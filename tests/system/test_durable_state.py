@@ -142,7 +142,9 @@ def test_stop_on_failure_hold_survives_kill_9(sim: SimRig, tmp_path: Path) -> No
             sim.apply_fault("silence:S1")
             failing = _submit(c, {"kind": "uniform", "rotations": 2, "exposure": FAST,
                                   "stop_queue_on_failure": True,
-                                  "faults": {"max_retries": 0, "retry_delay_s": 0.1}})
+                                  # A silent device is waited for unless told not to.
+                                  "faults": {"max_retries": 0, "retry_delay_s": 0.1,
+                                             "wait_for_device_s": 0}})
             wait_for(lambda: _state(c, failing) == "failed", what="the failure")
             sim.clear_faults()
             held = f"job {failing} failed and asked to stop the queue"

@@ -189,13 +189,14 @@ def test_a_job_whose_basis_comes_only_at_finishing_records_it_then(tmp_path: Pat
     assert row.state is JobState.COMPLETED, row.reason
     assert row.summary is not None
     _says_what_and_what_to_do(row.summary["arc_warning"])
-    _says_what_and_what_to_do(read_result(row.summary["result_path"]).provenance["arc_warning"])
+    result = read_result(tmp_path / "d" / row.summary["result_path"])
+    _says_what_and_what_to_do(result.provenance["arc_warning"])
     full = _queue(store, desc, FULL)
     asyncio.run(w.run_once())
     assert _arc_events(store, full) == []
     row = store.get_job(full)
     assert row.summary is not None and "arc_warning" not in row.summary
-    assert "arc_warning" not in read_result(row.summary["result_path"]).provenance
+    assert "arc_warning" not in read_result(tmp_path / "d" / row.summary["result_path"]).provenance
 
 
 def test_gonio_scan_prints_a_warning_the_job_records_later(

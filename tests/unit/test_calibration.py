@@ -4,6 +4,7 @@ the refusal of readings that cannot come from a white diffuser."""
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -131,3 +132,104 @@ def test_calibrated_scan_as_core_samples() -> None:
     np.testing.assert_allclose(s.stage_angles, np.deg2rad([0.0, 120.0, 240.0]))
     np.testing.assert_array_equal(s.values, values)
     assert s.channels == ("Y",) and s.provenance == {"specimen": "x"}
+
+
+# --------------------------------------------------------------------------- files, checked
+def _cal(*factors: tuple[float, ...], albedo: float = 0.99) -> dict[str, object]:
+    """A calibration as its JSON file holds it, one pair L1/S<k> per factor tuple."""
+    return {"pairs": [{"light": "L1", "sensor": f"S{k + 1}", "factor": list(f)}
+                      for k, f in enumerate(factors)],
+            "reference_albedo": albedo, "source": "test"}
+
+
+@pytest.mark.parametrize("factor", [(-1e-5, 1e-5), (0.0, 1e-5), (math.nan, 1e-5),
+                                    (math.inf, 1e-5), ()])
+def test_factors_must_be_finite_and_positive(factor: tuple[float, ...]) -> None:
+    from pydantic import ValidationError
+
+    with pytest.raises(ValidationError, match="factor"):
+        Calibration.model_validate(_cal(factor))
+
+
+def test_a_pair_may_not_have_two_factors() -> None:
+    from pydantic import ValidationError
+
+    data = _cal((1e-5,))
+    data["pairs"] = data["pairs"] * 2  # type: ignore[operator]
+    with pytest.raises(ValidationError, match="L1/S1 has two factors"):
+        Calibration.model_validate(data)
+
+
+def test_load_calibration_names_the_file_of_every_kind_of_damage(tmp_path: Path) -> None:
+    import json
+
+    from gonio.calibration import load_calibration
+
+    path = tmp_path / "calibration.json"
+    good = json.dumps(_cal((1e-5, 2e-5)))
+    path.write_text(good)
+    assert load_calibration(path).pairs[0].factor == (1e-5, 2e-5)
+    for text in (good[:3], "[]", json.dumps(_cal((-1e-5,))), '{"pairs": 7}'):
+        path.write_text(text)
+        with pytest.raises(CalibrationError, match="run a calibration job again") as e:
+            load_calibration(path)
+        assert f"calibration file {path}" in str(e.value)
+    path.write_bytes(b"\xff\xfe")
+    with pytest.raises(CalibrationError, match=f"calibration file {path} cannot be read"):
+        load_calibration(path)
+
+
+def test_a_factor_is_plausible_when_its_reference_reading_is_within_the_sensor_range() -> None:
+    from gonio.calibration import MIN_REFERENCE_FRACTION, check_plausible
+
+    top = 1000.0
+    full = {"S1": np.array([top])}
+    albedo = 0.9
+    # k = (albedo / pi) / c for a reading c: at the full scale and at the least reading.
+    at_top = albedo / math.pi / top
+    at_floor = albedo / math.pi / (MIN_REFERENCE_FRACTION * top)
+    for k in (at_top * 1.0001, at_floor * 0.9999, albedo / math.pi / 500.0):
+        check_plausible(Calibration.model_validate(_cal((k,), albedo=albedo)), full, "here")
+    for k in (at_top * 0.99, at_floor * 1.01):
+        with pytest.raises(CalibrationError, match="here: the factors of pair L1/S1"):
+            check_plausible(Calibration.model_validate(_cal((k,), albedo=albedo)), full, "here")
+    # A sensor the rig does not describe is not judged.
+    check_plausible(Calibration.model_validate(_cal((1e-30,))), {}, "here")
+
+
+def test_check_covers_names_the_missing_pairs_and_accepts_no_calibration() -> None:
+    from gonio.calibration import PartialCalibration
+
+    pairs = [PairSpec(light="L1", sensor=f"S{k}") for k in (1, 2, 3)]
+    cal = Calibration.model_validate(_cal((1e-5,), (1e-5,)))
+    cal.check_covers(pairs[:2])
+    with pytest.raises(PartialCalibration, match=r"1 of the 3 pairs of the plan: L1/S3\."):
+        cal.check_covers(pairs)
+    Calibration().check_covers(pairs)  # none at all: sensor units, said so by the result
+
+
+def test_save_calibration_writes_only_what_load_accepts(tmp_path: Path) -> None:
+    from gonio.calibration import PairCalibration, load_calibration, save_calibration
+
+    path = tmp_path / "calibration.json"
+    bad = Calibration.model_construct(
+        pairs=(PairCalibration.model_construct(light="L1", sensor="S1", factor=(-1.0,)),),
+        reference_albedo=0.99, exposure_s=None, source="x")
+    with pytest.raises(ValueError, match="finite and positive"):
+        save_calibration(bad, path)
+    good = Calibration.model_validate(_cal((1e-5,)))
+    with pytest.raises(CalibrationError, match="outside what sensor S1 can read"):
+        save_calibration(good, path, {"S1": np.array([1.0])})  # would have read 31500 of 1
+    assert not path.exists()
+    save_calibration(good, path, {"S1": np.array([1e6])})
+    assert load_calibration(path) == good
+
+
+def test_rig_config_factors_are_checked_too() -> None:
+    from types import SimpleNamespace
+
+    from gonio.calibration import from_config_factors
+
+    bad = [SimpleNamespace(light="L1", sensor="S1", factor=[math.inf])]
+    with pytest.raises(CalibrationError, match=r"rig config's \[calibration\] factors"):
+        from_config_factors(bad)

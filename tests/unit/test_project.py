@@ -38,7 +38,7 @@ def _tool(name: str) -> Path:
 
 
 def test_import_contracts_hold(staged: Path) -> None:
-    """import-linter enforces ARCHITECTURE.md's import directions (contracts in pyproject.toml)."""
+    """import-linter enforces the import directions of docs/architecture.md (pyproject.toml)."""
     proc = subprocess.run(
         [str(_tool("lint-imports")), "--config", str(ROOT / "pyproject.toml")],
         cwd=staged, capture_output=True, text=True, timeout=120,

@@ -66,3 +66,25 @@ def test_result_errors(tmp_path: Path) -> None:
     bad.write_text("not hdf5")
     with pytest.raises(ResultFileError, match="not an HDF5 file"):
         read_result(bad)
+
+
+def test_a_truncated_result_is_damaged_for_the_check_and_the_reader(tmp_path: Path) -> None:
+    from gonio.results import check_result_file
+
+    pairs = [PairSpec(light="L1", sensor="S1"), PairSpec(light="L1", sensor="S2")]
+    dirs = np.tile([0.0, 0.0, 1.0], (2, 1))
+    s = calibrated_samples(_reading_rows(), pairs, dirs, dirs, ("R", "G", "B"), Calibration())
+    table = BRDFTable(np.full((3, *geo.TABLE_SHAPE), 0.25), ("R", "G", "B"), "spec")
+    path = write_result(tmp_path / "r.h5", job_id=3, specimen="spec", kind="uniform",
+                        readings=_reading_rows(), samples=s, table=table)
+    check_result_file(path)
+    whole = path.read_bytes()
+    for keep in (len(whole) // 2, len(whole) - 1, 100):
+        path.write_bytes(whole[:keep])
+        with pytest.raises(ResultFileError, match=str(path)):
+            check_result_file(path)
+        with pytest.raises(ResultFileError, match=str(path)):
+            read_result(path)
+    path.unlink()
+    with pytest.raises(ResultFileError, match="does not exist"):
+        check_result_file(path)

@@ -128,6 +128,33 @@ def test_apply_design_needs_a_rig_with_devices(tmp_path: Path,
     assert "has no [[lights]] entries" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize(
+    ("rig_text", "match"),
+    [
+        (None, "rig.toml: no such rig config file; start from deploy/rig.example.toml"),
+        ("[rig\nname = 3\n", "rig.toml: not valid TOML"),
+        (b"\xff\xfe[rig]", "rig.toml: not a text file"),
+    ],
+)
+def test_apply_design_names_an_unreadable_rig_config_and_writes_nothing(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], rig_text: str | bytes | None, match: str
+) -> None:
+    rig = tmp_path / "rig.toml"
+    if isinstance(rig_text, bytes):
+        rig.write_bytes(rig_text)
+    elif rig_text is not None:
+        rig.write_text(rig_text)
+    before = rig.read_bytes() if rig.exists() else None
+    geometry = tmp_path / "g.toml"
+    geometry.write_text(dump_fragment(FRAGMENT))
+    assert main(["rig", "apply-design", str(geometry), str(rig)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("gonio rig: error:") and match in err
+    assert "Traceback" not in err
+    assert (rig.read_bytes() if rig.exists() else None) == before
+    assert not (tmp_path / "rig.toml.bak").exists()
+
+
 def test_a_design_fragment_given_as_the_rig_config_says_so_in_one_line(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -183,3 +210,12 @@ def test_simulate_scan_takes_the_file_gonio_design_writes(tmp_path: Path,
     s = Samples.load(out)
     assert s.values.shape == (2, 4, 1)
     np.testing.assert_allclose(s.values, 0.3 / np.pi, rtol=1e-3)  # a Lambertian everywhere
+
+
+def test_a_missing_or_binary_design_file_is_named_with_what_to_do(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match=r"g\.toml: no such design file; start from the file "
+                                          r"'gonio design -o' writes"):
+        load_fragment(tmp_path / "g.toml")
+    (tmp_path / "g.toml").write_bytes(b"\x89PNG\r\n")
+    with pytest.raises(ConfigError, match=r"g\.toml: not a text file"):
+        load_fragment(tmp_path / "g.toml")

@@ -204,3 +204,62 @@ def test_many_openers_of_one_new_store_all_succeed(tmp_path: Path) -> None:
         assert db.execute("SELECT COUNT(*) FROM meta WHERE key='schema'").fetchone() == (1,)
     for s in stores:
         s.close()
+
+
+def test_a_damaged_page_is_refused_by_name_and_left_as_it_was(tmp_path: Path) -> None:
+    db = tmp_path / "jobs.sqlite"
+    store = JobStore(db)
+    for _ in range(40):
+        job = _job(store)
+        store.add_steps(job, [(k, 0, 10.0 * k, 10.0 * k) for k in range(4)])
+        for k in range(4):
+            store.commit_angle(job, k, 10.0 * k, [_reading(k, "L1", s) for s in ("S1", "S2")])
+    store.close()
+    with sqlite3.connect(db) as con:
+        con.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+        page = con.execute("PRAGMA page_size").fetchone()[0]
+    pages = db.stat().st_size // page
+    assert pages > 4
+    with open(db, "r+b") as f:
+        f.seek(pages // 2 * page)
+        f.write(b"\x5a" * page)
+    before = db.read_bytes()
+    with pytest.raises(StoreError, match=f"job store {db} is damaged") as e:
+        JobStore(db)
+    assert "restore it from a backup" in str(e.value) and ".recover" in str(e.value)
+    assert db.read_bytes() == before
+
+
+@pytest.mark.parametrize(("stored", "job", "expected"), [
+    ("/srv/lab/data/results/job-7.h5", 7, "results/job-7.h5"),  # absolute, moved since
+    ("data/results/job-7.h5", 7, "results/job-7.h5"),  # relative to an old working dir
+    ("results/job-7.h5", 7, "results/job-7.h5"),  # already as stored now
+    ("/srv/lab/data/results/job-8.h5", 7, "/srv/lab/data/results/job-8.h5"),  # not its own
+    ("/elsewhere/job-7.h5", 7, "/elsewhere/job-7.h5"),
+])
+def test_result_paths_become_relative_to_the_data_directory(stored: str, job: int,
+                                                            expected: str) -> None:
+    from gonio.store import relative_result_path
+
+    assert relative_result_path(job, stored) == expected
+
+
+def test_an_older_store_is_migrated_when_opened(tmp_path: Path) -> None:
+    import json
+
+    db = tmp_path / "jobs.sqlite"
+    store = JobStore(db)
+    job = _job(store)
+    store.set_result(job, f"/old/data/results/job-{job}.h5",
+                     {"result_path": f"/old/data/results/job-{job}.h5",
+                      "calibration_path": "/old/data/calibration.json", "readings": 3})
+    store.close()
+    store = JobStore(db)
+    row = store.get_job(job)
+    assert row.result_path == f"results/job-{job}.h5"
+    assert row.summary == {"result_path": f"results/job-{job}.h5",
+                           "calibration_path": "calibration.json", "readings": 3}
+    store.close()
+    with sqlite3.connect(db) as con:  # stored so, not only read so
+        assert con.execute("SELECT result_path FROM jobs").fetchone()[0] == row.result_path
+        assert json.loads(con.execute("SELECT summary FROM jobs").fetchone()[0]) == row.summary

@@ -222,3 +222,31 @@ def test_the_cli_dry_run_summary_names_the_build() -> None:
     text = dry_run_summary(dry_run(PLAN, desc, basis_ready=False), PLAN, "mem")
     assert "builds it before its first reading" in text and "2.0 min" in text
     assert "builds it" not in dry_run_summary(dry_run(PLAN, desc), PLAN, "mem")
+
+
+def test_a_job_the_calibration_in_effect_covers_in_part_fails_before_anything_moves(
+    tmp_path: Path,
+) -> None:
+    """Submission refuses such a plan; a calibration that changed after it (a new calibration
+    job, a file edited by hand) is caught again when the job starts."""
+    from gonio.calibration import Calibration, PairCalibration
+
+    rig = MemRig()
+    desc = RigDescription.from_rig(rig)
+    first = rig.pairs[0]
+    cal = Calibration(pairs=(PairCalibration(light=first.light, sensor=first.sensor,
+                                             factor=(1e-4,)),), source="edited by hand")
+
+    async def get_rig() -> MemRig:
+        return rig
+
+    store = JobStore(tmp_path / "jobs.sqlite")
+    w = Worker(store, get_rig, desc, tmp_path / "d", calibration=lambda: cal)
+    plan = UniformPlan(rotations=2, exposure=FAST)
+    job = store.create_job(kind=plan.kind, specimen="s", plan=plan.model_dump(mode="json"),
+                           rig=desc.model_dump(mode="json")).id
+    row = asyncio.run(w.run_once())
+    assert row is not None and row.id == job and row.state is JobState.FAILED
+    assert row.reason is not None and row.reason.startswith("not started: ")
+    assert "(edited by hand) has no factors for" in row.reason
+    assert rig.mstage.moves == [] and store.reading_count(job) == 0

@@ -1,4 +1,4 @@
-"""The design objective: the condition number of selected basis rows, and its fast update (MATH 6).
+"""Design objective: the condition number of selected basis rows and its fast update (math.md 8).
 
 A design is a set of ``n`` rows of the basis matrix ``Q`` (one row per grid cell
 ``(th, td, pd)``). Reconstruction solves for the basis coefficients from those rows, so the

@@ -1,7 +1,7 @@
 """What a rig can physically measure: its mounting constraints and the grid cells they leave.
 
 A light/sensor pair measures one half/difference cell ``(th, td, pd)`` for every stage angle
-(MATH 2). Which cells a rig can offer is limited by its mounts (MATH 6):
+(math.md 2). Which cells a rig can offer is limited by its mounts (math.md 8):
 
 * both devices at most ``max_elevation_deg`` from the normal (grazing readings are noisy and
   low mounts shadow the specimen);

@@ -1,7 +1,7 @@
 """Expected reconstruction error of a scan geometry on materials held out of the basis.
 
 The condition number of a design is a property of the basis alone; what a lab cares about is
-the error on a material the basis has not seen. :func:`expected_log_rmse` simulates the scan
+the error on a material the basis has not seen. :func:`heldout_log_rmse` simulates the scan
 (1 % noise, ``r`` uniform stage angles, the default joint reconstruction) on a fixed panel:
 
 * the shipped measured materials, each reconstructed with a basis that leaves it out
@@ -92,7 +92,7 @@ def _panel() -> tuple[Basis, list[BRDFTable], list[tuple[BRDFTable, Basis]]]:
     return panel_basis, synth, meas
 
 
-def expected_log_rmse(cells: ArrayLike, ph_lab: ArrayLike, rotations: int = 8,
+def heldout_log_rmse(cells: ArrayLike, ph_lab: ArrayLike, rotations: int = 8,
                       seed: int = 0, span_deg: float = DEFAULT_SPAN_DEG) -> ExpectedError:
     """Mean log_rmse of the default reconstruction over the held-out panel (module notes).
 
@@ -154,7 +154,7 @@ def choose_design(
     table = []
     for s in seeds:
         d = make(s)
-        err = expected_log_rmse(d.cells, d.ph_lab, rotations, span_deg=span_deg)
+        err = heldout_log_rmse(d.cells, d.ph_lab, rotations, span_deg=span_deg)
         table.append((int(s), float(d.kappa), err.log_rmse))
         if best_err is None or err.log_rmse < best_err.log_rmse:
             best, best_err = d, err

@@ -3,14 +3,14 @@
 The condition number of the sampled basis rows (V&F Sec. 3.3,
 :mod:`gonio.brdf.design.search`) says how well the rows separate the components; it knows
 nothing of how likely each component is, of the rotations, or of the error a rendering sees.
-The joint fit (:func:`gonio.brdf.reconstruction.reconstruct.solve_joint`) has a Gaussian
+The joint fit (:func:`gonio.brdf.reconstruction.joint.solve_joint`) has a Gaussian
 prior, so the expected error of a design can be written down before any material is
 measured, and a design can minimise it.
 
-Model (MATH 5a). Coefficients along ``ph``: ``c(ph) = a_0 + sum_m a_m cos(m ph) + b_m sin(m
+Model (math.md 6). Coefficients along ``ph``: ``c(ph) = a_0 + sum_m a_m cos(m ph) + b_m sin(m
 ph)`` with ``Cov(a_0) = P_0`` and ``Cov(a_m) = Cov(b_m) = P_m`` (``sum_m P_m cos(m (ph -
 ph'))`` is the prior's covariance; ``P_m`` the basis' learnt ``ph_prior`` with the specular
-condition, :func:`gonio.brdf.reconstruction.reconstruct.joint_prior`). A pair with basis row
+condition, :func:`gonio.brdf.reconstruction.joint.joint_prior`). A pair with basis row
 ``q`` read at ``r`` uniform stage angles with noise variance ``eta`` measures ``q^T a_0``
 with variance ``eta / r`` and ``q^T a_m``, ``q^T b_m`` with variance ``2 eta / r`` each
 (``sum_j cos^2 = r / 2``), for the harmonics ``0 < m < r / 2`` that ``r`` angles resolve.
@@ -70,10 +70,10 @@ from numpy.typing import ArrayLike, NDArray
 from gonio.brdf.design.conditioning import condition_number
 from gonio.brdf.design.constraints import RigConstraints, candidate_rows, rows_to_cells
 from gonio.brdf.design.errors import DesignError, DesignTimeout, FeasibilityError
-from gonio.brdf.design.pairs import GreedyStats, PairDesign
+from gonio.brdf.design.pairdesign import GreedyStats, PairDesign
 from gonio.brdf.design.placement import place_pairs
 from gonio.brdf.reconstruction.basis import Basis, inverse_remap
-from gonio.brdf.reconstruction.reconstruct import JOINT_ETA, JOINT_LAM, joint_prior
+from gonio.brdf.reconstruction.joint import JOINT_ETA, JOINT_LAM, joint_prior
 from gonio.brdf.reconstruction.samples import DEFAULT_SPAN_DEG, SamplesError, span_periods
 from gonio.brdf.tables import geometry as geo
 
@@ -97,7 +97,7 @@ def metric_gram(basis: Basis, slope: MetricSlope = "median") -> FloatArray:
     """(K, K) ``W``: the headline metric's weight on coefficient errors (module notes).
 
     ``W = sum_rows wV E[s^2] Q_row^T Q_row`` over the valid grid rows, ``wV`` the volume weight
-    (MATH 9) and ``s = cos ti (f w + eps) / (w (1 + f cos ti))`` the slope of ``ln(1 + f cos
+    (math.md 10) and ``s = cos ti (f w + eps) / (w (1 + f cos ti))`` the slope of ``ln(1 + f cos
     ti)`` with respect to the remapped value.
 
     Parameters

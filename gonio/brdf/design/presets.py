@@ -7,9 +7,9 @@ sensor directions, both pointing away from the surface, with azimuths in the sam
 DIN aspecular geometries; MA98 adds eight out-of-plane pairs.
 
 Each preset converts to half/difference cells ``(th, td, pd)`` and lab half-vector azimuths
-``ph`` with the same map as every other pair (MATH 2), so it can be evaluated and reconstructed
+``ph`` with the same map as every other pair (math.md 2), so it can be evaluated and reconstructed
 exactly like an optimized design. The cells are off the 5 degree grid; basis rows there are
-trilinear blends (MATH 3).
+trilinear blends (math.md 3).
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The smallest roughness a sampling plan can resolve (MATH 10, Wiersma et al. 2025 App. C).
+"""The smallest roughness a sampling plan can resolve (math.md 11, Wiersma et al. 2025 App. C).
 
 Sampling theory on the sphere: ``N`` well-spread samples recover spherical-harmonic degrees
 ``l* < sqrt(N)`` (a least-squares fit of degrees up to ``l*`` has ``(l* + 1)^2`` unknowns and
@@ -140,7 +140,7 @@ def roughness_bound(
     attenuation: float = DEFAULT_ATTENUATION,
     cap_deg: float = DEFAULT_CAP_DEG,
 ) -> RoughnessBound:
-    """MATH 10 bound for a design measured at ``stage_angles``.
+    """math.md 11 bound for a design measured at ``stage_angles``.
 
     Parameters
     ----------

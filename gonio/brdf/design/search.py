@@ -1,4 +1,4 @@
-"""The V&F neighbourhood search for the best-conditioned basis rows (Sec. 3.3, MATH 6).
+"""The V&F neighbourhood search for the best-conditioned basis rows (Sec. 3.3, math.md 8).
 
 From a random start, drop one row and try every candidate cell of its ``h x h x h``
 neighbourhood, keeping the best if it lowers ``kappa`` (:mod:`gonio.brdf.design.conditioning`

@@ -18,7 +18,7 @@ retro           Lambert + retro-reflective lobe, some with a surface glint
 
 Anisotropic materials are turned to a random orientation about the normal. Roughness never
 goes below ``alpha = 0.05`` so the mirror peaks stay within a range the log remap of the basis
-handles (MATH 4), and every reflectance stays below 1.
+handles (math.md 4), and every reflectance stays below 1.
 
 :func:`default_library` tabulates them (float32) on first use and caches one gonio table file
 per material under :func:`library_cache_dir`, a folder keyed by a hash of the library version,

@@ -1,11 +1,11 @@
-"""The non-parametric factored BRDF of ``000_d13a1931629fe3af`` (MATH.md 11) and its fit.
+"""The non-parametric factored BRDF of ``000_d13a1931629fe3af`` (math.md 12) and its fit.
 
 Model, per channel ``c`` (directions in the specimen frame, BRDF in 1/sr)::
 
     f_c(i, o) = rho_d[c] / pi
               + rho_s[c] D(th, ph) F[c](td) G(theta_i, phi_i) G(theta_o, phi_o) / (4 cos ti cos to)
 
-with ``(th, ph, td, pd)`` the half/difference angles of ``(i, o)`` (MATH 2). The three factors
+with ``(th, ph, td, pd)`` the half/difference angles of ``(i, o)`` (math.md 2). The three factors
 are tables:
 
 * ``D`` on gonio's half-vector grid, ``th`` 0..85 deg x ``ph`` 0..355 deg (18 x 72), shared by

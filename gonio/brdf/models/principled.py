@@ -1,4 +1,4 @@
-"""Principled (Disney-style) parameters fitted to a tabulated BRDF (004 App. A.3, MATH.md 10).
+"""Principled (Disney-style) parameters fitted to a tabulated BRDF (004 App. A.3, math.md 11-12).
 
 The parameters renderers take: base colour, metallic, specular, roughness, anisotropy strength
 and direction. They describe, as in :func:`gonio.brdf.models.analytic.principled` and 004 App. A.3,

@@ -1,4 +1,4 @@
-"""The linear basis of isotropic BRDF slices (Vávra & Filip 2016, Sec. 3.1; MATH.md section 4).
+"""The linear basis of isotropic BRDF slices (Vávra & Filip 2016, Sec. 3.1; docs/math.md section 4).
 
 Every training material contributes one column per (channel, ``ph`` slice): the slice
 ``f[c, i_ph]`` flattened over ``(th, td, pd)`` into ``N_ROWS`` rows. The columns are remapped
@@ -51,7 +51,7 @@ key                shape / dtype           meaning
                                            ``ph`` per harmonic ``m = 0..36`` (see below)
 =================  ======================  ==================================================
 
-Prior along ``ph`` (MATH 5a)
+Prior along ``ph`` (math.md 6)
 ----------------------------
 The joint reconstruction treats the coefficients of one material as a stationary periodic
 process along ``ph``: ``Cov(c(ph), c(ph')) = sum_m P_m cos(m (ph - ph'))``. ``P_m`` is learnt
@@ -393,7 +393,7 @@ def build_basis(
     power_iterations: int = 3,
     seed: int = 0,
 ) -> Basis:
-    """Learn the basis from training tables (MATH 4) with a randomized SVD.
+    """Learn the basis from training tables (math.md 4) with a randomized SVD.
 
     Parameters
     ----------

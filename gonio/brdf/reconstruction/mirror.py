@@ -10,7 +10,7 @@ also a reading of the *mirror cell* at the *mirror azimuth*: the scan holds twic
 distinct views as it has readings, if the specimen is symmetric and the axis is known.
 
 The joint fit is a Gaussian process along ``ph`` (:func:`~gonio.brdf.reconstruction.
-reconstruct.solve_joint`). With ``x`` the remapped value at a reading and ``x'`` the one at its
+joint.solve_joint`). With ``x`` the remapped value at a reading and ``x'`` the one at its
 mirror (same BRDF value, remapped with the mirror row's constants, so ``x' - x = delta``, a
 known offset per pair), symmetry is the linear condition ``x' - x = delta`` for every reading,
 held with a variance ``slack`` (the basis cannot follow a symmetric material exactly either).

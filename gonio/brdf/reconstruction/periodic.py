@@ -3,8 +3,8 @@
 Readings along the stage rotation are periodic, and shape-preserving cubic interpolation (PCHIP)
 neither overshoots between samples nor invents extrema. scipy's ``extrapolate='periodic'`` only
 wraps the query point, so the samples are padded with copies one period below and above before
-the interpolant is built (MATH 5 step 1). Used by the reconstruction (resampling each pair onto
-the slices, and back) and by adaptive plans (leave-one-out prediction of a reading, MATH 7).
+the interpolant is built (math.md 5 step 1). Used by the reconstruction (resampling each pair onto
+the slices, and back) and by adaptive plans (leave-one-out prediction of a reading, math.md 9).
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """The joint fit's posterior: expected error of a scan and where the next stage angle helps most.
 
-The joint fit (:func:`~gonio.brdf.reconstruction.reconstruct.solve_joint`, MATH 5a) is the
+The joint fit (:func:`~gonio.brdf.reconstruction.joint.solve_joint`, math.md 6) is the
 posterior mean of a
 Gaussian process along ``ph``: ``x(row, ph) = Q_row c(ph)`` with
 ``Cov(c(ph), c(ph')) = sum_m P_m cos(m (ph - ph'))`` and reading noise ``eta``. The same model
@@ -48,17 +48,14 @@ import scipy.linalg
 from numpy.typing import ArrayLike, NDArray
 
 from gonio.brdf.reconstruction.basis import Basis, BasisError, remap, row_weight
+from gonio.brdf.reconstruction.blas import one_blas_thread
+from gonio.brdf.reconstruction.errors import ReconstructionError
+from gonio.brdf.reconstruction.joint import JOINT_ETA, JOINT_LAM, joint_prior, solve_joint
 from gonio.brdf.reconstruction.periodic import arc_angle, arc_gaps
-from gonio.brdf.reconstruction.reconstruct import (
-    _VALID_ROWS,
-    JOINT_ETA,
-    JOINT_LAM,
-    ReconstructionError,
-    joint_prior,
-    one_blas_thread,
-)
 from gonio.brdf.reconstruction.selfcheck import predict_log_rmse
+from gonio.brdf.reconstruction.tabulate import expand_table
 from gonio.brdf.tables import geometry as geo
+from gonio.brdf.tables.table import VALID_ROWS
 
 FloatArray = NDArray[np.float64]
 
@@ -84,8 +81,8 @@ REFINE_OFFSET = "scan"
 
 @functools.cache
 def _volume_weight_rows() -> FloatArray:
-    """(p_valid,) volume weight ``wV`` of the valid rows (MATH 9)."""
-    out = np.asarray(geo.volume_weight().ravel()[_VALID_ROWS], dtype=float)
+    """(p_valid,) volume weight ``wV`` of the valid rows (math.md 10)."""
+    out = np.asarray(geo.volume_weight().ravel()[VALID_ROWS], dtype=float)
     out.setflags(write=False)
     return out
 
@@ -94,7 +91,7 @@ def _volume_weight_rows() -> FloatArray:
 def _cos_ti_rows() -> FloatArray:
     """(p_valid,) ``cos theta_i`` of the valid rows."""
     ci, _ = geo.cell_cosines(*geo.grid_angles())
-    out = np.asarray(ci.ravel()[_VALID_ROWS], dtype=float)
+    out = np.asarray(ci.ravel()[VALID_ROWS], dtype=float)
     out.setflags(write=False)
     return out
 
@@ -111,7 +108,7 @@ class ScanPosterior:
 
     Readings are kept as a grid, every pair at every stage angle, flattened pair-major
     (reading ``(q, j)`` at ``q r + j``, as in
-    :func:`gonio.brdf.reconstruction.reconstruct.solve_joint`).
+    :func:`gonio.brdf.reconstruction.joint.solve_joint`).
     Every quantity is computed in the space of readings: with ``A_m = Qt P_m Qt^T`` the prior
     covariance of two readings is ``sum_m A_m[q, p] cos(m (ph_a - ph_b))``, and with
     ``B_m = Qt P_m W P_m Qt^T`` the sum over the 72 grid slices of ``tr(W k(ph, a) k(ph, b)^T)``
@@ -131,7 +128,7 @@ class ScanPosterior:
         The readings (non-negative).
     table : (C, 72, 18, 18, 36) array_like, optional
         The reconstruction (1/sr), for the ``log_rmse`` weights; default: the joint fit of the
-        readings (one call of :func:`gonio.brdf.reconstruction.reconstruct.reconstruct`).
+        readings under the learnt prior (:func:`gonio.brdf.reconstruction.joint.solve_joint`).
     eta, lam : float, optional
         The joint fit's settings (defaults :data:`JOINT_ETA`, :data:`JOINT_LAM`).
     rho : float or (float, float), optional
@@ -225,10 +222,11 @@ class ScanPosterior:
         M = self.P.shape[0]
         self.harm = np.arange(M, dtype=float)
         if table is None:
-            from gonio.brdf.reconstruction.reconstruct import reconstruct
-
-            table = reconstruct(basis, cells_, self.ph_lab, alpha, vals, eta=eta, lam=lam,
-                                channels=[f"c{k}" for k in range(vals.shape[2])]).table.values
+            # The joint fit of these readings under the learnt prior (what reconstruct()
+            # computes before it weighs the scan's own anisotropy).
+            jf = solve_joint(y, self.Qt, self.ph_lab[:, None] - alpha[None, :], self.P,
+                             self.eta)
+            table = expand_table(basis, np.moveaxis(jf.coef, -1, 0))
         self._set_weights(basis, np.asarray(table, dtype=float))
         self.alpha = alpha.copy()
         low = (self.harm > 0) & (self.harm <= BAND_SPLIT)
@@ -279,14 +277,14 @@ class ScanPosterior:
         error into a ``log_rmse`` error at the reconstructed ``f``; ``g^2`` is averaged over
         channels and every third slice (the weights along ``ph`` are taken as constant).
         """
-        f = table.reshape(table.shape[0], geo.N_PH, geo.N_ROWS)[:, ::3][:, :, _VALID_ROWS]
+        f = table.reshape(table.shape[0], geo.N_PH, geo.N_ROWS)[:, ::3][:, :, VALID_ROWS]
         f = np.maximum(np.where(np.isfinite(f), f, 0.0), 0.0)
         ci_v = _cos_ti_rows()
-        w = row_weight(basis.eps)[_VALID_ROWS]
+        w = row_weight(basis.eps)[VALID_ROWS]
         g = ci_v * (f + basis.eps / w) / (1.0 + f * ci_v)
         g2 = np.mean(g**2, axis=(0, 1))
         wv = _volume_weight_rows()
-        Qv = basis.Q[_VALID_ROWS]
+        Qv = basis.Q[VALID_ROWS]
         W = Qv.T @ (Qv * (wv * g2)[:, None])
         self.W = W  # (K, K) log_rmse weights of the coefficients
         self.norm = float(geo.N_PH * wv.sum())  # log_rmse's denominator per channel

@@ -1,10 +1,10 @@
-"""Reconstruction of a full anisotropic BRDF from sparse rotation-stage samples (MATH.md 5).
+"""Reconstruction of a full anisotropic BRDF from sparse rotation-stage samples (math.md 5-6).
 
 Input: ``n`` fixed light/sensor pairs, each one cell ``(th, td, pd)`` of the isotropic slice
 with its lab half-vector azimuth ``ph_lab``, read at ``r`` stage angles. Pair ``q`` at stage
 angle ``alpha`` sees slice ``ph = ph_lab[q] - alpha``.
 
-Two methods. The default, ``method="joint"`` (MATH 5a, :func:`solve_joint`), keeps every
+Two methods. The default, ``method="joint"`` (math.md 6, :func:`solve_joint`), keeps every
 reading at its own ``ph`` and couples the slices through a prior along ``ph`` learnt from the
 training library (:attr:`Basis.ph_prior`): one ``(n r) x (n r)`` solve for all channels, with
 Eq. 5's specular condition in the prior of the varying part. ``method="vf"`` is V&F's path,
@@ -35,19 +35,23 @@ steps 1-5 below, kept for comparison.
    (:func:`cv_error_scale`) is the reported estimate of the whole-BRDF MAPE
    (``predicted_error``).
 
+The pieces live in modules of their own, below this one: the joint fit's prior and solve
+(:mod:`.joint`), its posterior and the scan's own anisotropy (:mod:`.posterior`), the
+mirror-symmetry option (:mod:`.mirror`), the self-estimate (:mod:`.selfcheck`) and step 4, the
+table from the coefficients (:mod:`.tabulate`). This module checks the inputs, runs V&F's path
+and puts the result together.
+
 Speed: the table of step 4 (C x 72 x 11,664 values) dominates the call, so it is computed at
-the valid rows only, with the remap's per-row constants folded into one scale and one offset,
-and handed to :meth:`BRDFTable.trusted` without a re-validation pass. BLAS runs on one thread
-during the call (:func:`one_blas_thread`): the products are small, and on a shared machine
-OpenBLAS' spinning worker threads cost far more than they save.
+the valid rows only (:func:`.tabulate.expand_table`) and handed to :meth:`BRDFTable.trusted`
+without a re-validation pass. BLAS runs on one thread during the call
+(:func:`.blas.one_blas_thread`): the products are small, and on a shared machine OpenBLAS'
+spinning worker threads cost far more than they save.
 """
 
 from __future__ import annotations
 
-import contextlib
-import functools
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -57,16 +61,27 @@ import scipy.optimize
 from numpy.typing import ArrayLike, NDArray
 
 from gonio.brdf.reconstruction.basis import (
-    N_HARMONICS,
     Basis,
     BasisError,
     inverse_remap,
     remap,
-    row_weight,
 )
+from gonio.brdf.reconstruction.blas import one_blas_thread
+from gonio.brdf.reconstruction.errors import ReconstructionError
+from gonio.brdf.reconstruction.joint import (
+    JOINT_ETA,
+    JOINT_LAM,
+    SCAN_RHO_MAX,
+    joint_prior,
+    solve_joint,
+)
+from gonio.brdf.reconstruction.mirror import MirrorModel, mirror_cells
 from gonio.brdf.reconstruction.periodic import arc_gaps, periodic_pchip_rows
+from gonio.brdf.reconstruction.posterior import ScanPosterior, harmonic_scale
+from gonio.brdf.reconstruction.selfcheck import predict_log_rmse
+from gonio.brdf.reconstruction.tabulate import expand_table
 from gonio.brdf.tables import geometry as geo
-from gonio.brdf.tables.table import VALID_MASK, BRDFTable
+from gonio.brdf.tables.table import TH0_ROWS, VALID_MASK, BRDFTable
 
 FloatArray = NDArray[np.float64]
 Solver = Literal["closed", "iterative"]
@@ -91,19 +106,6 @@ REL_ERROR_FLOOR = 0.01
 #: within a factor of 2 in about 40 % of scans, and far above the estimate for materials the
 #: basis cannot represent).
 CV_ERROR_SCALES: tuple[tuple[int, float], ...] = ((5, 0.325), (10, 0.757), (20, 1.239))
-
-_VALID_FLAT = VALID_MASK.ravel()
-_VALID_ROWS = np.flatnonzero(_VALID_FLAT)
-_INVALID_ROWS = np.flatnonzero(~_VALID_FLAT)
-# Valid th = 0 rows: the slices must agree there (Qs of Eq. 5).
-_TH0_ROWS = _VALID_ROWS[_VALID_ROWS < geo.N_TD * geo.N_PD]
-for _a in (_VALID_FLAT, _VALID_ROWS, _INVALID_ROWS, _TH0_ROWS):
-    _a.setflags(write=False)
-
-
-class ReconstructionError(ValueError):
-    """Reconstruction inputs are unusable; the message says what and what to do."""
-
 
 @dataclass(frozen=True)
 class Reconstruction:
@@ -137,7 +139,7 @@ class Reconstruction:
         The estimated ``metrics.log_rmse`` of the whole reconstruction against the true
         BRDF, calibrated on materials held out of the basis; the number to report. Joint
         fit: :func:`gonio.brdf.reconstruction.selfcheck.predict_log_rmse`; V&F path:
-        :func:`predict_log_rmse`.
+        :func:`predict_log_rmse_vf`.
     angle_log_errors : (r,) float64 or None
         Joint fit only: per stage angle (in the order given), the RMS log error (units of
         ``log_rmse``) of that angle's readings predicted from all the other angles. Where it
@@ -209,33 +211,12 @@ def pair_cells(light_dirs: ArrayLike, sensor_dirs: ArrayLike) -> tuple[FloatArra
     return np.stack([th, td, pd], axis=1), np.asarray(ph, dtype=float)
 
 
-# ---------------------------------------------------------------------------- BLAS threads
-@functools.cache
-def _blas_controller() -> Any:
-    """The process' threadpoolctl controller (scanning the loaded libraries takes ~10 ms)."""
-    from threadpoolctl import ThreadpoolController
-
-    return ThreadpoolController()
-
-
-@contextlib.contextmanager
-def one_blas_thread() -> Iterator[None]:
-    """Run the block with BLAS limited to one thread.
-
-    Reconstruction's products are a few MFLOP; with several OpenBLAS threads on a shared
-    2-core machine the threads' spin-waiting made a 0.7 ms solve take 65 ms. The limit is
-    process-wide while the block runs (threadpoolctl sets the library's global thread count).
-    """
-    with _blas_controller().limit(limits=1, user_api="blas"):
-        yield
-
-
 # ---------------------------------------------------------------------------- step 1
 def resample_to_slices(
     ph_lab: FloatArray, stage_angles: FloatArray, values: FloatArray,
     period: float = 2 * np.pi,
 ) -> FloatArray:
-    """Resample each pair's rotation readings onto the 72 grid ``ph`` (MATH 5 step 1).
+    """Resample each pair's rotation readings onto the 72 grid ``ph`` (math.md 5 step 1).
 
     Parameters
     ----------
@@ -438,163 +419,6 @@ def loo_predictions(
 
 
 
-# ---------------------------------------------------------------------------- joint fit
-#: Noise-to-prior ratio of one reading in the joint fit (the prior sums to the identity over
-#: the harmonics, so this is V&F's ``eta`` per reading); chosen on held-out library materials
-#: (``bench/bench_unseen.py --tune``).
-JOINT_ETA = 40.0
-#: Weight of Eq. 5's specular (th = 0) condition in the joint fit, in V&F's units.
-JOINT_LAM = 0.1
-#: ``reconstruct(..., rho="scan")`` adopts the scan's own factor on the prior's varying
-#: harmonics when it is below this: a specimen that varies less with the stage angle than the
-#: library expects (an isotropic one, most often) is fitted as such. Above it the learnt prior
-#: is kept: a larger factor in the fit made anisotropic held-out materials worse
-#: (docs/science.md 7.3).
-SCAN_RHO_MAX = 1.0
-
-_PRIOR_CACHE: dict[tuple[int, float], tuple[Any, FloatArray]] = {}
-
-
-def joint_prior(basis: Basis, lam_over_eta: float) -> FloatArray:
-    """The prior of the joint fit: per-harmonic covariances ``P'_m`` (37, K, K).
-
-    ``P_m`` is the basis' learnt prior along ``ph`` (:attr:`Basis.ph_prior`; an isotropic
-    prior, ``P_0 = I``, for a basis without one). Eq. 5's specular condition penalises
-    ``lam ||Qs (c(ph) - cbar)||^2``: only the varying part, so it adds ``lam / eta Qs^T Qs``
-    to the precision of every harmonic ``m > 0``: ``P'_m = (P_m^-1 + a H)^-1 =
-    (I + a P_m H)^-1 P_m`` (the second form needs no inverse of a singular ``P_m``).
-    Cached per basis object.
-    """
-    import weakref
-
-    key = (id(basis.Q), float(lam_over_eta))
-    hit = _PRIOR_CACHE.get(key)
-    if hit is not None and hit[0]() is basis.Q:
-        return hit[1]
-    K = basis.K
-    if basis.ph_prior is None:
-        P = np.zeros((N_HARMONICS, K, K))
-        P[0] = np.eye(K)
-    else:
-        P = np.array(basis.ph_prior, dtype=float)
-    if lam_over_eta > 0:
-        Qs = basis.Q[_TH0_ROWS]
-        H = Qs.T @ Qs
-        eye = np.eye(K)
-        for m in range(1, N_HARMONICS):
-            if np.any(P[m]):
-                X = np.linalg.solve(eye + lam_over_eta * P[m] @ H, P[m])
-                P[m] = 0.5 * (X + X.T)
-    P.setflags(write=False)
-    if len(_PRIOR_CACHE) > 16:
-        _PRIOR_CACHE.clear()
-    _PRIOR_CACHE[key] = (weakref.ref(basis.Q), P)
-    return P
-
-
-@dataclass(frozen=True)
-class JointFit:
-    """Result of :func:`solve_joint` (remapped, centred values; C channels).
-
-    Attributes
-    ----------
-    coef : (K, 72, C) coefficients of the grid slices (posterior mean)
-    fit : (n, r, C) posterior mean at the readings
-    loo : (n, r, C) leave-one-pair-out predictions at the readings (NaN when undefined)
-    loo_angle : (n, r, C) leave-one-stage-angle-out predictions: column ``j`` predicted from
-        the readings at every other stage angle (NaN when undefined)
-    """
-
-    coef: FloatArray
-    fit: FloatArray
-    loo: FloatArray
-    loo_angle: FloatArray
-
-
-def solve_joint(
-    Y: FloatArray, Qt: FloatArray, ph_read: FloatArray, P: FloatArray, eta: float,
-    ph_out: FloatArray = geo.PH_GRID,
-) -> JointFit:
-    """Posterior mean of the coefficients given every reading at its own ``ph`` (MATH 5a).
-
-    Model: ``x(row, ph) = Q_row c(ph)``, ``Cov(c(ph), c(ph')) = sum_m P_m cos(m (ph - ph'))``,
-    each reading ``y_a = Q_q(a) c(ph_a) + e_a`` with noise variance ``eta``. With
-    ``G_ab = sum_m (Qt P_m Qt^T)_{q(a) q(b)} cos(m (ph_a - ph_b)) + eta delta_ab`` (one
-    ``(n r) x (n r)`` matrix for all channels), ``beta = G^-1 y`` and
-    ``c(ph) = sum_m P_m sum_a Qt_q(a)^T beta_a cos(m (ph - ph_a))``. With ``P_0 = I`` and no
-    other harmonic this is V&F's ridge (Eq. 4) over all readings.
-
-    Parameters
-    ----------
-    Y : (n, r, C) remapped, centred readings
-    Qt : (n, K) basis rows at the pairs
-    ph_read : (n, r) radians, ``ph`` of each reading (``ph_lab - alpha``)
-    P : (M, K, K) per-harmonic prior covariances
-    eta : float, > 0
-    ph_out : (S,) radians, where to return coefficients (default the 72 grid slices)
-
-    Returns
-    -------
-    JointFit
-        ``loo`` row ``q``: the fit to the other pairs' readings predicting pair ``q``'s, from
-        the blocks of ``G^-1`` (``y_I - (G^-1)_II^-1 beta_I``), no refits.
-    """
-    n, r, C = Y.shape
-    M = P.shape[0]
-    harm = np.arange(M, dtype=float)
-    A = np.matmul(np.matmul(Qt[None], P), Qt.T[None])  # (M, n, n)
-    # cos(m (a - b)) = Re(e^{-i m a} conj(e^{-i m b})): per pair of pairs (q, p) the block
-    # G_qp[j, i] = sum_m Z[q, j, m] A[m, q, p] conj(Z[p, i, m]), one batched product.
-    Z = np.exp(-1j * ph_read[:, :, None] * harm[None, None, :])  # (n, r, M)
-    left = Z[:, None, :, :] * np.moveaxis(A, 0, -1)[:, :, None, :]  # (n, n, r, M)
-    G4 = np.matmul(left, np.conj(Z).transpose(0, 2, 1)[None]).real  # (n, n, r, r)
-    G = np.ascontiguousarray(G4.transpose(0, 2, 1, 3)).reshape(n * r, n * r)
-    G[np.diag_indices_from(G)] += eta
-    y = Y.reshape(n * r, C)
-    try:
-        cho = scipy.linalg.cho_factor(G)
-    except np.linalg.LinAlgError:
-        raise ReconstructionError(
-            "the joint system is singular; use eta > 0"
-        ) from None
-    beta = scipy.linalg.cho_solve(cho, y).reshape(n, r, C)
-    # Back to coefficients: B_m = sum_a Qt_q(a)^T beta_a e^{-i m ph_a} (cos and -sin parts),
-    # c(ph) = Re(sum_m e^{i m ph} P_m B_m).
-    U = np.matmul(Z.transpose(0, 2, 1), beta)  # (n, M, C)
-    B = np.matmul(Qt.T[None], U.transpose(1, 0, 2))  # (M, K, C)
-    PB = np.matmul(P, B)  # (M, K, C)
-    E = np.exp(1j * np.asarray(ph_out)[:, None] * harm[None, :])  # (S, M)
-    K = Qt.shape[1]
-    coef = (E @ PB.reshape(M, K * C)).real.reshape(-1, K, C).transpose(1, 0, 2)  # (K, S, C)
-    fit = Y - eta * beta
-    loo = np.full_like(Y, np.nan)
-    # The inverse from the Cholesky factor (LAPACK potri): a fifth of the cost of solving
-    # against the identity at n r = 1440; only its diagonal blocks are used.
-    inv, info = scipy.linalg.lapack.dpotri(cho[0], lower=cho[1])
-    if info != 0:
-        inv = scipy.linalg.cho_solve(cho, np.eye(n * r))
-    else:
-        inv = np.tril(inv) + np.tril(inv, -1).T if cho[1] else np.triu(inv) + np.triu(inv, 1).T
-    Ginv = inv.reshape(n, r, n, r)
-    if n > 1:
-        ok = True
-        for q in range(n):
-            try:
-                loo[q] = Y[q] - np.linalg.solve(Ginv[q, :, q, :], beta[q])
-            except np.linalg.LinAlgError:
-                ok = False
-                break
-        if not ok:
-            loo[:] = np.nan
-    loo_angle = np.full_like(Y, np.nan)
-    if r > 1:
-        try:
-            for j in range(r):
-                loo_angle[:, j] = Y[:, j] - np.linalg.solve(Ginv[:, j, :, j], beta[:, j])
-        except np.linalg.LinAlgError:
-            loo_angle[:] = np.nan
-    return JointFit(coef=coef, fit=fit, loo=loo, loo_angle=loo_angle)
-
 # ---------------------------------------------------------------------------- validation
 def _check_inputs(
     basis: Basis,
@@ -604,7 +428,7 @@ def _check_inputs(
     values: FloatArray,
     channels: Sequence[str],
 ) -> None:
-    if basis.Q.shape[0] != geo.N_ROWS or not np.array_equal(basis.valid, _VALID_FLAT):
+    if basis.Q.shape[0] != geo.N_ROWS or not np.array_equal(basis.valid, VALID_MASK.ravel()):
         raise ReconstructionError(
             "the basis was built on another grid than this gonio's; rebuild it with "
             "`gonio basis build`"
@@ -699,7 +523,7 @@ def reconstruct(
         Name of the output table.
     method : {"joint", "vf"}
         ``"joint"`` (default): every reading at its own ``ph`` with the learnt prior along
-        ``ph`` (MATH 5a, :func:`solve_joint`). ``"vf"``: V&F's path, per-pair periodic PCHIP
+        ``ph`` (math.md 6, :func:`solve_joint`). ``"vf"``: V&F's path, per-pair periodic PCHIP
         onto the 72 slices, then Eq. 5 (steps 1-3 of the module notes).
     rho : float or "scan" or None
         Joint fit only: a factor on the varying (``m > 0``) harmonics of the prior along
@@ -806,7 +630,6 @@ def _reconstruct(
                   ) -> tuple[FloatArray, FloatArray, bool, FloatArray | None]:
             """The joint fit with the prior's low / high varying harmonics scaled by
             ``factor``."""
-            from gonio.brdf.reconstruction.posterior import harmonic_scale
 
             Pf = P * harmonic_scale(P.shape[0], *factor)[:, None, None]
             jf = solve_joint(Yr, Qt, ph_[:, None] - alpha[None, :], Pf, eta)
@@ -841,7 +664,7 @@ def _reconstruct(
         if method == "joint":
             settings.update(_rho_settings(factor))
             settings.update(mirror_settings)
-        return BRDFTable.trusted(_expand_table(basis, coef), channels, name, None,
+        return BRDFTable.trusted(expand_table(basis, coef), channels, name, None,
                                  {"reconstruction": settings})
 
     table = as_table(coef, prior_rho)
@@ -849,7 +672,6 @@ def _reconstruct(
     if method == "joint" and has_cv:
         # The joint posterior (reconstruction.posterior; imported here because it builds on
         # this module): the self-estimate's expected error, and the scan's own rho.
-        from gonio.brdf.reconstruction.posterior import ScanPosterior
 
         by_scan = rho in ("scan", "scan-bands")
         post = ScanPosterior(basis, cells_, ph_, alpha, vals, table=table.values, eta=eta,
@@ -865,7 +687,6 @@ def _reconstruct(
             coef, at_samples, has_cv, angle_err = joint(prior_rho)
             table = as_table(coef, prior_rho)
     if method == "joint" and symmetry == "scan":
-        from gonio.brdf.reconstruction.mirror import MirrorModel, mirror_cells
 
         mth, mtd, mpd = mirror_cells(cells_).T
         try:
@@ -877,7 +698,6 @@ def _reconstruct(
         mu_m = (mweights * basis.mu[mrows]).sum(axis=1)[:, None, None]
         Ym = remap(vals, fmed_m, w_t, basis.eps) - mu_m  # same value, the mirror row's remap
         Pf = joint_prior(basis, lam / eta)
-        from gonio.brdf.reconstruction.posterior import harmonic_scale
 
         Pf = Pf * harmonic_scale(Pf.shape[0], *prior_rho)[:, None, None]
         model = MirrorModel(Yr, Ym, Qt, Qm, ph_[:, None] - alpha[None, :], Pf, eta)
@@ -893,13 +713,12 @@ def _reconstruct(
     cv_log = float(np.sqrt(np.mean(pair_err**2))) if pair_err is not None else float("nan")
     n = int(cells_.shape[0])
     if post is not None and np.isfinite(cv):
-        from gonio.brdf.reconstruction.selfcheck import predict_log_rmse as predict_joint
 
         expected, mahal = post.expected_log_rmse, post.mahalanobis
-        predicted = predict_joint(expected, mahal, cv)
+        predicted = predict_log_rmse(expected, mahal, cv)
     else:
         expected = mahal = float("nan")
-        predicted = predict_log_rmse(cv, n, int(alpha.size))
+        predicted = predict_log_rmse_vf(cv, n, int(alpha.size))
     seconds = time.perf_counter() - t0
     return Reconstruction(
         table=table,
@@ -961,7 +780,7 @@ def _vf_path(
     Y = remap(resample_to_slices(ph_, alpha, vals, period), fmed_t, w_t, basis.eps) - mu_t
 
     # Step 3.
-    Qs = basis.Q[_TH0_ROWS]
+    Qs = basis.Q[TH0_ROWS]
     if solver == "closed":
         coef = np.moveaxis(solve_closed(Y, Qt, Qs, eta, lam), -1, 0)  # (C, K, 72)
     else:
@@ -993,8 +812,10 @@ def _vf_path(
 LOG_RMSE_MODEL: tuple[float, float, float] = (-1.773, 0.070, -0.177)
 
 
-def predict_log_rmse(cv_sample_error: float, n_pairs: int, n_rotations: int) -> float:
-    """Calibrated estimate of the whole-BRDF ``log_rmse`` (:data:`LOG_RMSE_MODEL`).
+def predict_log_rmse_vf(cv_sample_error: float, n_pairs: int, n_rotations: int) -> float:
+    """Calibrated estimate of the whole-BRDF ``log_rmse`` on V&F's path (:data:`LOG_RMSE_MODEL`).
+
+    The joint fit's estimate is :func:`gonio.brdf.reconstruction.selfcheck.predict_log_rmse`.
 
     Parameters
     ----------
@@ -1022,7 +843,7 @@ def refine_angles(
     budget_angles: int | None,
     everywhere: bool = False,
 ) -> list[float]:
-    """New stage angles for adaptive refinement from the joint fit (MATH 7, gonio's variant).
+    """New stage angles for adaptive refinement from the joint fit (math.md 9, gonio's variant).
 
     V&F refine where per-pair PCHIP mispredicts a reading. Here the prediction is the joint
     fit's: each stage angle's readings predicted from every other angle of every pair
@@ -1091,62 +912,6 @@ def cv_error_scale(n_pairs: int) -> float:
     ns = np.log([p for p, _ in CV_ERROR_SCALES])
     ss = np.log([s for _, s in CV_ERROR_SCALES])
     return float(np.exp(np.interp(np.log(max(n_pairs, 1)), ns, ss)))
-
-
-@functools.lru_cache(maxsize=4)
-def _valid_row_weight(eps: float) -> FloatArray:
-    """(p_valid,) remap weight ``w`` of the valid rows (read-only; depends only on ``eps``)."""
-    w = row_weight(eps)[_VALID_ROWS]
-    w.setflags(write=False)
-    return w
-
-
-#: ``exp`` overflows float64 above about 709; a remapped value this large means a diverged fit.
-_MAX_EXPONENT = 700.0
-#: Tables of more channels than this (spectral sensors: 11, 18, 31 bands) are expanded in
-#: float32, the precision the result file stores them in: a 31-band float64 table is 230 MB
-#: and its expansion dominates the reconstruction. RGB tables keep float64.
-FLOAT32_ABOVE_CHANNELS = 4
-
-
-def _expand_table(basis: Basis, coef: FloatArray) -> FloatArray:
-    """Step 4: BRDF values of every slice from the coefficients.
-
-    Parameters
-    ----------
-    basis : Basis
-    coef : (C, K, 72) coefficients
-
-    Returns
-    -------
-    (C, 72, 18, 18, 36) float64 (float32 above :data:`FLOAT32_ABOVE_CHANNELS` channels), 1/sr
-        ``max((exp(Q C + mu) (f_med w + eps) - eps) / w, 0)`` at the valid cells, NaN at the
-        invalid ones. The per-row constants fold into ``exp(Q C) * scale - offset`` with
-        ``scale = exp(mu) (f_med w + eps) / w`` and ``offset = eps / w``, so the big array
-        sees one product, then ``exp``, multiply, subtract and clamp in place.
-    """
-    eps = basis.eps
-    w = _valid_row_weight(eps)
-    scale = np.exp(basis.mu[_VALID_ROWS]) * (basis.f_med[_VALID_ROWS] * w + eps) / w
-    offset = eps / w
-    n_ch, K, n_s = coef.shape
-    dtype = np.float32 if n_ch > FLOAT32_ABOVE_CHANNELS else np.float64
-    X = np.ascontiguousarray(np.swapaxes(coef, 1, 2), dtype=dtype).reshape(n_ch * n_s, K) @ (
-        basis.Q[_VALID_ROWS].T.astype(dtype, copy=False))  # (C 72, p_valid)
-    top = float(X.max())
-    if not top < _MAX_EXPONENT:  # also catches NaN
-        raise ReconstructionError(
-            f"the fit diverged (remapped value {top:.3g}); the samples are far outside what "
-            "the basis can represent: check their units (1/sr) and the dark subtraction"
-        )
-    np.exp(X, out=X)
-    X *= scale.astype(dtype, copy=False)
-    X -= offset.astype(dtype, copy=False)
-    np.maximum(X, 0.0, out=X)
-    out = np.empty((n_ch * n_s, geo.N_ROWS), dtype=dtype)
-    out[:, _INVALID_ROWS] = np.nan
-    out[:, _VALID_ROWS] = X
-    return out.reshape(n_ch, *geo.TABLE_SHAPE)
 
 
 def _relative_sample_error(fit: FloatArray, measured: FloatArray) -> float:

@@ -2,7 +2,7 @@
 
 A scan reads ``n`` fixed light/sensor pairs at ``r`` stage angles. Each pair is one cell
 ``(th, td, pd)`` of the isotropic slice plus its lab half-vector azimuth ``ph_lab``; at stage
-angle ``alpha`` it sees the specimen at ``(th, ph_lab - alpha, td, pd)`` (MATH.md 2).
+angle ``alpha`` it sees the specimen at ``(th, ph_lab - alpha, td, pd)`` (math.md 2).
 
 Samples file (``.npz``, readable with ``numpy.load`` alone)
 -----------------------------------------------------------

@@ -1,6 +1,6 @@
 """Directions, the Rusinkiewicz half/difference parameterization and the 5 degree grid.
 
-Conventions (MATH.md sections 1-3, 9):
+Conventions (docs/math.md sections 1-3, 10):
 
 * Specimen frame: z is the surface normal, x the reference mark on the holder.
 * Directions are unit vectors pointing away from the surface: ``wi`` toward the light,
@@ -89,7 +89,7 @@ def lab_to_specimen(w_lab: ArrayLike, stage_angle: ArrayLike) -> FloatArray:
 def half_diff_to_directions(
     th: ArrayLike, ph: ArrayLike, td: ArrayLike, pd: ArrayLike
 ) -> tuple[FloatArray, FloatArray]:
-    """Light and view directions from half/difference angles (MATH 2, forward map).
+    """Light and view directions from half/difference angles (math.md 2, forward map).
 
     ``d = (sin td cos pd, sin td sin pd, cos td)``, ``i = Rz(ph) Ry(th) d`` and
     ``o = Rz(ph) Ry(th) (-d_x, -d_y, d_z)``.
@@ -120,7 +120,7 @@ def half_diff_to_directions(
 def directions_to_half_diff(
     wi: ArrayLike, wo: ArrayLike
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-    """Half/difference angles of direction pairs (MATH 2, inverse map).
+    """Half/difference angles of direction pairs (math.md 2, inverse map).
 
     Parameters
     ----------
@@ -174,13 +174,13 @@ def valid_mask() -> NDArray[np.bool_]:
 
 
 def remap_weight(eps: float = 1e-3) -> FloatArray:
-    """(18, 18, 36) ``w = max(cos ti cos to, eps)`` of the basis remap (MATH 4)."""
+    """(18, 18, 36) ``w = max(cos ti cos to, eps)`` of the basis remap (math.md 4)."""
     ci, co = cell_cosines(*grid_angles())
     return np.maximum(ci * co, eps)
 
 
 def volume_weight() -> FloatArray:
-    """(18, 18, 36) volume weight of each grid cell (MATH 9, ``000_`` Eq. 10).
+    """(18, 18, 36) volume weight of each grid cell (math.md 10, ``000_`` Eq. 10).
 
     ``wV = 4 cos td sin td sin th`` integrated over each cell's extent (cell centres on the
     grid, half-width 2.5 deg, clipped to ``[0, 90]`` deg), so the ``th = 0`` row keeps a

@@ -1,8 +1,8 @@
-"""Error metrics between a reconstructed and a reference BRDF (MATH.md 8).
+"""Error metrics between a reconstructed and a reference BRDF (math.md 10).
 
 Every metric runs over the valid cells of all 72 ``ph`` slices and all channels, weighting each
 grid cell by its share of the 4-D half/difference volume ``wV = 4 cos td sin td sin th``
-(MATH 9, :func:`geometry.volume_weight`), so the densely gridded region near the pole does not
+(math.md 10, :func:`geometry.volume_weight`), so the densely gridded region near the pole does not
 dominate. Cells where either table is NaN (unmeasured) are left out.
 
 Inputs are :class:`BRDFTable` objects or arrays of shape ``(C, 72, 18, 18, 36)`` in 1/sr.

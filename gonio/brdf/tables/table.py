@@ -38,6 +38,13 @@ FORMAT_VERSION = 1
 #: trigonometry behind :func:`geometry.valid_mask` is a noticeable share of a reconstruction.
 VALID_MASK = geo.valid_mask()
 VALID_MASK.setflags(write=False)
+#: Flat indices (into one slice's 11,664 rows) of the valid cells, of the invalid ones, and of
+#: the valid cells with ``th = 0`` (where every slice must agree: ``Qs`` of V&F's Eq. 5).
+VALID_ROWS = np.flatnonzero(VALID_MASK.ravel())
+INVALID_ROWS = np.flatnonzero(~VALID_MASK.ravel())
+TH0_ROWS = VALID_ROWS[VALID_ROWS < geo.N_TD * geo.N_PD]
+for _rows in (VALID_ROWS, INVALID_ROWS, TH0_ROWS):
+    _rows.setflags(write=False)
 _INVALID_MASK = ~VALID_MASK
 _INVALID_MASK.setflags(write=False)
 
@@ -194,7 +201,7 @@ class BRDFTable:
     ) -> NDArray[np.float64]:
         """Multilinear lookup at half/difference angles.
 
-        Periodic in ``ph`` (2 pi) and ``pd`` (pi), clamped in ``th`` and ``td`` (MATH 3).
+        Periodic in ``ph`` (2 pi) and ``pd`` (pi), clamped in ``th`` and ``td`` (math.md 3).
         Invalid (NaN) neighbours are left out and the remaining weights renormalised, so values
         near the horizon come from the valid side only; a point with no valid neighbour is NaN.
 

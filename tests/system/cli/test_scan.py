@@ -140,8 +140,10 @@ def test_scan_leaves_only_its_output_and_the_store_keeps_a_real_result_path(
     assert main(["jobs", "--db", str(data / "gonio.sqlite"), "show", "2"]) == 0
     row = json.loads(capsys.readouterr().out)
     assert row["state"] == "completed"
-    assert Path(row["result_path"]).is_file()
-    assert read_result(row["result_path"]).samples.values.shape == (12, 3, 3)
+    # Stored relative to the data directory; `jobs show` says where that is.
+    assert row["result_path"] == "results/job-2.h5"
+    assert Path(row["result_file"]) == data / "results" / "job-2.h5"
+    assert read_result(row["result_file"]).samples.values.shape == (12, 3, 3)
 
 
 def test_dry_run_prints_a_short_summary_and_json_on_request(

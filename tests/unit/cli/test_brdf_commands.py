@@ -67,7 +67,7 @@ def test_read_pairs_as_cells(tmp_path: Path) -> None:
         ("p.csv", "theta_i,phi_i,theta_v,phi_v\n", "no pairs"),
         ("p.json", "{not json", "cannot be parsed"),
         ("p.json", '{"pairs": 3}', "expected a list"),
-        ("p.toml", "pairs = [", "cannot be parsed"),
+        ("p.toml", "pairs = [", r"p\.toml: not valid TOML"),
         ("p.yaml", "pairs: []", "unknown type"),
     ],
 )

@@ -225,3 +225,25 @@ def test_the_maintenance_lock_stops_queued_and_resumed_jobs(tmp_path: Path) -> N
     (tmp_path / "d" / "MAINTENANCE").unlink()  # released from a shell
     nxt = again.worker.next_job()
     assert nxt is not None and nxt.id == queued
+
+
+def test_a_plan_the_calibration_covers_in_part_is_refused_at_submission(tmp_path: Path
+                                                                        ) -> None:
+    from gonio.calibration import Calibration, PairCalibration
+    from gonio.hal import PairSpec
+
+    rig = MemRig()
+    pairs = list(rig.pairs)
+    cal = Calibration(pairs=(PairCalibration(light=pairs[0].light, sensor=pairs[0].sensor,
+                                             factor=(1e-4,)),), source="test")
+    svc = GonioService(JobStore(tmp_path / "jobs.sqlite"), rig, data_dir=tmp_path / "d",
+                       calibration=cal)
+    with pytest.raises(PlanError, match="no factors for") as e:
+        svc.submit(JobRequest(plan=UniformPlan(rotations=2, exposure=FAST)))
+    assert all(p.label() in str(e.value) for p in pairs[1:])
+    assert svc.list_jobs() == [] and rig.mstage.moves == []
+    # Only its calibrated pair: accepted. A calibration job needs none: accepted.
+    one = [PairSpec(light=pairs[0].light, sensor=pairs[0].sensor)]
+    svc.submit(JobRequest(plan=UniformPlan(rotations=2, exposure=FAST, pairs=one)))
+    svc.submit(JobRequest(plan=CalibrationPlan(reference_albedo=0.9, exposure=FAST)))
+    assert len(svc.list_jobs()) == 2

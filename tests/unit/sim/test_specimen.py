@@ -36,7 +36,7 @@ def test_stage_rotation_turns_lab_directions_into_the_specimen_frame() -> None:
     wo = _vec(30.0, 0.0)
     # At stage 0 the specimen x axis is lab x: the light has no x component.
     assert spec.brdf_lab(wi, wo, 0.0)[0] == pytest.approx(0.0, abs=1e-12)
-    # Turning the specimen by +90 deg brings its x axis under lab +y (MATH 1).
+    # Turning the specimen by +90 deg brings its x axis under lab +y (math.md 1).
     assert spec.brdf_lab(wi, wo, 90.0)[0] == pytest.approx(math.sin(math.radians(60.0)))
     # Negative probe values are clamped: a BRDF is never negative.
     assert spec.brdf_lab(wi, wo, 270.0)[0] == 0.0

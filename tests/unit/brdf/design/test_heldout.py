@@ -29,7 +29,7 @@ def test_expected_error_is_the_panel_mean_of_simulated_scans(
         tiny_panel: list, span_deg: float) -> None:  # type: ignore[type-arg]
     b, synth, meas = tiny_panel
     cells, ph = grid_pairs(8, seed=1)
-    got = heldout.expected_log_rmse(cells, ph, rotations=6, seed=4, span_deg=span_deg)
+    got = heldout.heldout_log_rmse(cells, ph, rotations=6, seed=4, span_deg=span_deg)
     alpha = np.deg2rad(np.arange(6) * span_deg / 6)  # 6 uniform angles over the arc
     want = []
     for k, t in enumerate([*synth, meas[0][0]]):

@@ -1,4 +1,4 @@
-"""Tests of the resolvable-roughness bound (MATH 10)."""
+"""Tests of the resolvable-roughness bound (math.md 11)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Tests of the sparse reconstruction (MATH.md 5)."""
+"""Tests of the sparse reconstruction (math.md 5)."""
 
 from __future__ import annotations
 

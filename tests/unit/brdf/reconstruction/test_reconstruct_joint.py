@@ -1,4 +1,4 @@
-"""Tests of the joint reconstruction (MATH.md 5a): every reading at its own ph."""
+"""Tests of the joint reconstruction (math.md 6): every reading at its own ph."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Tests of the error metrics (MATH.md 8)."""
+"""Tests of the error metrics (math.md 10)."""
 
 from __future__ import annotations
 

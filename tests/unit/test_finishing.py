@@ -1,0 +1,88 @@
+"""Finishing (gonio.finishing): a result rebuilt from the stored readings, and what it refuses.
+
+The whole path on a real daemon and a truncated file is tests/system/test_state_files.py; here
+the rules, on an in-memory rig.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import shutil
+import sqlite3
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gonio.finishing import RebuildError, rebuild_result
+from gonio.plans.models import CalibrationPlan, ExposureSettings, UniformPlan
+from gonio.results import read_result
+from gonio.service import GonioService, JobRequest
+from gonio.sim.memrig import MemRig
+from gonio.store import JobStore
+
+FAST = ExposureSettings(exposure_s=0.002, light_settle_s=0.0)
+
+
+def _no_basis() -> None:
+    raise AssertionError("a calibration job needs no basis")
+
+
+def _calibrated(tmp_path: Path) -> GonioService:
+    """A service on an in-memory rig after one completed calibration job (job 1)."""
+    svc = GonioService(JobStore(tmp_path / "d" / "gonio.sqlite"), MemRig(),
+                       data_dir=tmp_path / "d")
+
+    async def go() -> None:
+        await svc.start()
+        svc.submit(JobRequest(plan=CalibrationPlan(reference_albedo=0.9, rotations=2,
+                                                   exposure=FAST)))
+        async for ev in svc.subscribe(0, job_id=1):
+            if ev.type == "state" and ev.data["state"] in ("completed", "failed"):
+                break
+        await svc.stop()
+
+    asyncio.run(go())
+    assert svc.get_job(1).state.value == "completed", svc.get_job(1).reason
+    return svc
+
+
+def test_a_calibration_job_is_rebuilt_without_replacing_the_calibration_in_effect(
+    tmp_path: Path
+) -> None:
+    svc = _calibrated(tmp_path)
+    data = tmp_path / "d"
+    result = data / "results" / "job-1.h5"
+    original = Path(shutil.copyfile(result, tmp_path / "original.h5"))
+    # A later calibration is in effect by now: a rebuild of job 1 must not bring job 1's back.
+    later = (data / "calibration.json").read_text().replace('"job 1', '"job 9')
+    (data / "calibration.json").write_text(later)
+    result.unlink()
+    summary = rebuild_result(svc.store, data, 1, _no_basis)
+    assert summary["result_path"] == "results/job-1.h5" and summary["calibrated"] is False
+    assert (data / "calibration.json").read_text() == later
+    new, old = read_result(result), read_result(original)
+    np.testing.assert_array_equal(new.samples.values, old.samples.values)
+    assert new.provenance["new_calibration"] == old.provenance["new_calibration"]
+    assert "gonio jobs rebuild" in new.provenance["rebuilt"]
+    assert svc.store.get_job(1).summary == summary
+    assert [e.type for e in svc.store.events_after(0, job_id=1)][-1] == "rebuilt"
+
+
+def test_a_rebuild_refuses_jobs_not_completed_and_missing_readings(tmp_path: Path) -> None:
+    svc = _calibrated(tmp_path)
+    data = tmp_path / "d"
+    queued = svc.submit(JobRequest(plan=UniformPlan(rotations=2, exposure=FAST))).id
+    with pytest.raises(RebuildError, match=f"job {queued} is queued"):
+        rebuild_result(svc.store, data, queued, _no_basis)
+    n = svc.store.reading_count(1)
+    with sqlite3.connect(data / "gonio.sqlite") as con:
+        con.execute("DELETE FROM readings WHERE job_id = 1 AND angle_index = 0")
+    left = svc.store.reading_count(1)
+    assert 0 < left < n
+    with pytest.raises(RebuildError, match=f"holds {left} of the {n} readings"):
+        rebuild_result(svc.store, data, 1, _no_basis)
+    with sqlite3.connect(data / "gonio.sqlite") as con:
+        con.execute("DELETE FROM readings WHERE job_id = 1")
+    with pytest.raises(RebuildError, match="holds none of its readings"):
+        rebuild_result(svc.store, data, 1, _no_basis)
