@@ -481,6 +481,7 @@ class ModbusSensor(Sensor):
         self.channels = tuple(config.channels)
         self.min_exposure_s = config.min_exposure_s
         self.max_exposure_s = config.max_exposure_s
+        self.ranges = config.ranges
         self.config = config
         m = config.modbus
         self._io = _ModbusDevice(config.name, m.host, m.port, m.device_id, m.timeout_s, pool)
@@ -488,6 +489,10 @@ class ModbusSensor(Sensor):
             raise ValueError(f"{config.name}: poll_s must be > 0 seconds, got {poll_s}")
         self._poll_s = poll_s
         self._exposure_s: float | None = None
+        # Range whose gain the register holds, and the connection generation it was written
+        # in (a reconnect may mean a restarted device, back at its own default gain).
+        self._range: int | None = None
+        self._range_generation = -1
         regs = config.registers
         self._poll_regs = [regs.sequence, *regs.values]
         self._poll_carries_values = one_request(self._poll_regs)
@@ -498,9 +503,11 @@ class ModbusSensor(Sensor):
     async def connect(self) -> None:
         """Check the device answers, note its sequence number and write the configured gain."""
         self._seq = None
+        self._range = None
         await self._note_sequence()
         if self.config.registers.gain is not None:
             await self._io.write(self.config.registers.gain, self.config.gain, "gain")
+            self._range, self._range_generation = 0, self._io.generation
         self._exposure_s = None
 
     async def close(self) -> None:
@@ -587,6 +594,22 @@ class ModbusSensor(Sensor):
         DeviceUnavailable
             The sensor stopped answering or never finished the exposure.
         """
+        return await self.read_in_range(exposure_s, averages, 0)
+
+    async def read_in_range(self, exposure_s: float, averages: int,
+                            range_index: int) -> SensorReading:
+        """:meth:`read` at the gain of range ``range_index`` (``gain``, then ``gain_stages``).
+
+        The gain register is written only when the range changes, so a scan that needs no
+        ranging sends nothing more; after a failed request the register is written again.
+
+        Raises
+        ------
+        ValueError
+            As :meth:`read`, or ``range_index`` is not one of :attr:`ranges`.
+        DeviceUnavailable
+            The sensor stopped answering or never finished the exposure.
+        """
         if not self.min_exposure_s <= exposure_s <= self.max_exposure_s:
             raise ValueError(
                 f"{self.name}: exposure {exposure_s:g} s is outside this sensor's range "
@@ -595,7 +618,17 @@ class ModbusSensor(Sensor):
             )
         if averages < 1:
             raise ValueError(f"{self.name}: averages must be at least 1, got {averages}")
+        if not 0 <= range_index < len(self.ranges):
+            raise ValueError(
+                f"{self.name}: no range {range_index}; it has {len(self.ranges)} (gain and "
+                "gain_stages in the rig config)"
+            )
         regs = self.config.registers
+        if regs.gain is not None and (self._range != range_index
+                                      or self._range_generation != self._io.generation):
+            self._range = None  # unknown until the write is acknowledged
+            await self._io.write(regs.gain, self.config.range_gain(range_index), "gain")
+            self._range, self._range_generation = range_index, self._io.generation
         if self._exposure_s != exposure_s:
             await self._io.write(regs.exposure, exposure_s, "exposure")
             self._exposure_s = exposure_s
@@ -611,6 +644,8 @@ class ModbusSensor(Sensor):
             saturated=saturated,
             exposure_s=exposure_s,
             averages=averages,
+            range_index=range_index,
+            range_scale=self.ranges[range_index],
         )
 
     async def status(self) -> SensorStatus:

@@ -8,8 +8,10 @@ solid angle and the cosine foreshortening of each fixed pair into one number per
 which is what :class:`gonio.config.PairFactor` stores.
 
 Calibrate at the exposure the scans use: sensors are not assumed to scale linearly with
-exposure time. Without any calibration the values stay in sensor units (factor 1), and the
-result file says so.
+exposure time. Readings a sensor took in a lower gain range (auto-ranging, docs/engine.md) are
+divided by that range's relative sensitivity first (:func:`counts`), so one factor serves every
+range. Without any calibration the values stay in sensor units (factor 1), and the result file
+says so.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ from __future__ import annotations
 import contextlib
 import math
 import os
+import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -72,6 +75,9 @@ class Calibration(BaseModel):
     reference_albedo: float | None = None
     exposure_s: float | None = Field(default=None, description="exposure it was measured at")
     source: str = "none"
+    created: str | None = Field(
+        default=None, description="when it was measured (ISO 8601 UTC); None before gonio "
+        "recorded it, or for factors from the rig config")
 
     def factor(self, light: str, sensor: str, n_channels: int) -> NDArray[np.float64]:
         """(C,) factor of a pair; ones when the pair is uncalibrated."""
@@ -243,7 +249,8 @@ def from_reference(
     if check:
         check_white_reference(counts)
     return Calibration(pairs=tuple(out), reference_albedo=albedo, exposure_s=exposure_s,
-                       source=source)
+                       source=source,
+                       created=time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()))
 
 
 def from_config_factors(factors: Sequence[object], albedo: float | None = None) -> Calibration:
@@ -417,8 +424,16 @@ def calibration_in_effect(data_dir: Path, rig_config: Any = None) -> Calibration
 
 
 def counts(reading: Any) -> NDArray[np.float64]:
-    """(C,) dark-subtracted values of one reading (``raw - dark``), sensor units."""
-    return np.subtract(np.asarray(reading.raw, dtype=float), np.asarray(reading.dark, dtype=float))
+    """(C,) dark-subtracted values of one reading in its sensor's nominal range, sensor units.
+
+    ``(raw - dark) / range_scale``: a reading taken in a lower range (auto-ranging, its dark
+    read in the same range) is scaled back by that range's sensitivity relative to range 0,
+    so calibration factors, measured in any range, apply to readings in every range. Readings
+    without ``range_scale`` (older records) were taken in range 0.
+    """
+    scale = float(getattr(reading, "range_scale", 1.0))
+    return np.subtract(np.asarray(reading.raw, dtype=float),
+                       np.asarray(reading.dark, dtype=float)) / scale
 
 
 def readings_array(

@@ -12,6 +12,7 @@ sent on the wire (a vendor manual's "register 40001" is holding register 0).
 
 from __future__ import annotations
 
+import itertools
 import os
 import tomllib
 from collections.abc import Sequence
@@ -282,12 +283,18 @@ class SensorConfig(_Device):
 
     ``saturation_raw`` is the raw register value at which a channel is saturated (for a 16-bit
     ADC typically 65535). ``gain`` is written to the gain register at connect when one is mapped.
+    ``gain_stages`` are lower gains the sensor can be switched to (written to the same
+    register), in descending order: a reading that saturates at ``gain`` is taken again at the
+    next stage, and so on (auto-ranging, docs/engine.md). Give the stages' true gains (the
+    ratios to ``gain`` scale the readings back): nominal values when the amplifier's are
+    trimmed, measured ones otherwise.
     """
 
     channels: Annotated[list[Annotated[str, Field(min_length=1)]], Field(min_length=1)]
     registers: SensorRegisters
     saturation_raw: Annotated[float, Field(gt=0)]
     gain: Annotated[float, Field(gt=0)] = 1.0
+    gain_stages: list[Annotated[float, Field(gt=0)]] = Field(default_factory=list)
     min_exposure_s: Annotated[float, Field(gt=0)] = 1e-4
     max_exposure_s: Annotated[float, Field(gt=0)] = 10.0
     # Colour (docs/colour.md): a spectral sensor's bands, or an RGB sensor's chart calibration.
@@ -348,7 +355,29 @@ class SensorConfig(_Device):
                 f"min_exposure_s ({self.min_exposure_s}) is above max_exposure_s "
                 f"({self.max_exposure_s})"
             )
+        if self.gain_stages:
+            if self.registers.gain is None:
+                raise ValueError(
+                    "gain_stages need a gain register to switch to them: map "
+                    "registers.gain, or remove gain_stages"
+                )
+            gains = [self.gain, *self.gain_stages]
+            if any(b >= a for a, b in itertools.pairwise(gains)):
+                raise ValueError(
+                    f"gain_stages {self.gain_stages} must each be below the one before, "
+                    f"starting below gain ({self.gain}): list the lower gains in descending "
+                    "order"
+                )
         return self
+
+    @property
+    def ranges(self) -> tuple[float, ...]:
+        """Sensitivity of each range relative to range 0 (``gain``): 1, then each stage's."""
+        return (1.0, *(g / self.gain for g in self.gain_stages))
+
+    def range_gain(self, index: int) -> float:
+        """The gain written to the gain register for range ``index`` (0: ``gain``)."""
+        return self.gain if index == 0 else self.gain_stages[index - 1]
 
 
 class PairConfig(_Strict):

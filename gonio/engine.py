@@ -22,8 +22,10 @@ Control, requested from outside (the service) at any time:
 * halt: stop now and send nothing more to the devices (no cleanup), state ``halted``.
 
 Faults: a recoverable :class:`gonio.hal.DeviceFault` (stage fault, lost device, lamp out of
-band, sensor saturation) suspends the job; the engine waits, tries the device's recovery
-(``clear_faults``, reconnect, lamp re-check), waits a settle delay and repeats the angle.
+band, sensor saturation in every range the sensor has: a saturated reading is first taken again
+in the sensor's lower gain ranges, docs/engine.md) suspends the job; the engine waits, tries
+the device's recovery (``clear_faults``, reconnect, lamp re-check), waits a settle delay and
+repeats the angle.
 More than ``max_retries`` consecutive failures at one angle, or an unrecoverable fault, fail
 the job with the reason. Cleanup (lights off, stage stopped) runs on every exit but a halt.
 Given ``connect`` (the worker does), the engine first connects the rig under the same rules:
@@ -507,16 +509,15 @@ class ScanEngine:
                 if ex.light_settle_s > 0:
                     await asyncio.sleep(ex.light_settle_s)
                 results = await self._read_sensors(sensors, lamp=lname)
+                # Auto-ranging while the lamp is still on: a saturated reading is taken again
+                # in its sensor's next lower range, until one does not saturate.
+                results = await self._range_down(sensors, results)
             finally:
                 await _quietly(light.set_on(False))
             for sname, rd in zip(sensors, results, strict=True):
                 if rd.saturated and self.plan.faults.saturation == "suspend":
-                    raise SensorSaturated(
-                        sname,
-                        f"saturated with light {lname!r} at {ex.exposure_s:g} s exposure; "
-                        "lower the exposure or the lamp level if this persists",
-                        code="saturated",
-                    )
+                    raise SensorSaturated(sname, self._saturation_message(sname, lname),
+                                          code="saturated")
                 nch = len(rd.values)
                 out.append(ReadingRow(
                     angle_index=step.angle_index,
@@ -530,8 +531,80 @@ class ScanEngine:
                     averages=rd.averages,
                     saturated=rd.saturated,
                     t_read=rd.timestamp,
+                    range_index=rd.range_index,
+                    range_scale=rd.range_scale,
                 ))
+        # A reading taken in a lower range has its dark signal read in that range too (the
+        # range's offset would otherwise be divided by its small scale), with every lamp off.
+        ranged = sorted({(r.sensor, r.range_index) for r in out if r.range_index > 0})
+        if ranged:
+            darks = await self._read_range_darks(ranged)
+            out = [replace(r, dark=darks[(r.sensor, r.range_index)]) if r.range_index else r
+                   for r in out]
         return actual, out
+
+    def _saturation_message(self, sensor: str, light: str) -> str:
+        """Why a reading that saturated in every range the sensor has fails, and what to do."""
+        ranges = self.rig.sensors[sensor].ranges
+        ex = self.plan.exposure
+        if len(ranges) > 1:
+            where = (f"in every one of its {len(ranges)} ranges (down to {ranges[-1]:g} of the "
+                     "nominal gain)")
+            todo = "lower the exposure or the lamp level"
+        else:
+            where = "in its only range"
+            todo = ("lower the exposure or the lamp level, or give the sensor lower gain stages "
+                    "(gain_stages in the rig config)")
+        return (f"saturated {where} with light {light!r} at {ex.exposure_s:g} s exposure; "
+                f"{todo} if this persists")
+
+    async def _range_down(self, names: Sequence[str], readings: Sequence[hal.SensorReading]
+                          ) -> list[hal.SensorReading]:
+        """Each saturated reading taken again in its sensor's next lower range until it no
+        longer saturates or the sensor has no lower range (sensors in parallel)."""
+        ex = self.plan.exposure
+
+        async def settle(name: str, rd: hal.SensorReading) -> hal.SensorReading:
+            sensor = self.rig.sensors[name]
+            while rd.saturated and rd.range_index + 1 < len(sensor.ranges):
+                rd = await sensor.read_in_range(ex.exposure_s, ex.averages, rd.range_index + 1)
+            return rd
+
+        if not any(r.saturated for r in readings):
+            return list(readings)
+        results = await asyncio.gather(
+            *(settle(n, r) for n, r in zip(names, readings, strict=True)),
+            return_exceptions=True)
+        errors = [r for r in results if isinstance(r, BaseException)]
+        if errors:
+            raise _primary(errors)
+        return [r for r in results if isinstance(r, hal.SensorReading)]
+
+    async def _read_range_darks(self, wanted: Sequence[tuple[str, int]]
+                                ) -> dict[tuple[str, int], tuple[float, ...]]:
+        """Dark readings of (sensor, range) pairs with the lamps off (sensors in parallel)."""
+        ex = self.plan.exposure
+        by_sensor: dict[str, list[int]] = {}
+        for name, k in wanted:
+            by_sensor.setdefault(name, []).append(k)
+
+        async def one(name: str, ks: Sequence[int]) -> dict[tuple[str, int], tuple[float, ...]]:
+            got = {}
+            for k in ks:
+                rd = await self.rig.sensors[name].read_in_range(ex.exposure_s, ex.averages, k)
+                got[(name, k)] = tuple(float(v) for v in rd.values)
+            return got
+
+        results = await asyncio.gather(*(one(n, ks) for n, ks in by_sensor.items()),
+                                       return_exceptions=True)
+        errors = [r for r in results if isinstance(r, BaseException)]
+        if errors:
+            raise _primary(errors)
+        merged: dict[tuple[str, int], tuple[float, ...]] = {}
+        for r in results:
+            assert isinstance(r, dict)
+            merged.update(r)
+        return merged
 
     async def _read_sensors(
         self, names: Sequence[str], lamp: str | None = None

@@ -120,7 +120,10 @@ class SensorReading:
     """One sensor reading: per-channel values in the sensor's physical units (after scale).
 
     ``saturated`` is True when any channel reached the configured saturation level in any of
-    the averaged exposures.
+    the averaged exposures. ``range_index`` is the sensor range it was taken in (0: the
+    nominal one; :attr:`Sensor.ranges`) and ``range_scale`` that range's sensitivity relative
+    to range 0: ``values`` (less the dark signal read in the same range) divided by
+    ``range_scale`` are in range-0 units.
     """
 
     values: tuple[float, ...]
@@ -128,6 +131,8 @@ class SensorReading:
     exposure_s: float
     averages: int
     timestamp: float = field(default_factory=time.time)
+    range_index: int = 0
+    range_scale: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -228,16 +233,38 @@ class Light(Device):
 
 
 class Sensor(Device):
-    """A fixed photodiode or multi-channel sensor."""
+    """A fixed photodiode or multi-channel sensor.
+
+    ``ranges`` are the sensitivities of the sensor's ranges (gain stages) relative to the
+    nominal one, range 0 first (1.0), each lower than the one before: a reading that saturates
+    in range ``k`` may be taken again in range ``k + 1`` (auto-ranging, docs/engine.md). A
+    sensor with one range cannot do that.
+    """
 
     direction: LabDirection
     channels: tuple[str, ...]
     min_exposure_s: float = 1e-4
     max_exposure_s: float = 10.0
+    ranges: tuple[float, ...] = (1.0,)
 
     @abc.abstractmethod
     async def read(self, exposure_s: float, averages: int = 1) -> SensorReading:
         """Integrate for ``exposure_s`` seconds ``averages`` times and return the mean."""
+
+    async def read_in_range(self, exposure_s: float, averages: int,
+                            range_index: int) -> SensorReading:
+        """:meth:`read` in range ``range_index`` of :attr:`ranges` (0: the nominal range).
+
+        Sensors with several ranges override this; the base class has range 0 only.
+
+        Raises
+        ------
+        ValueError
+            ``range_index`` is not one of the sensor's ranges.
+        """
+        if range_index != 0:
+            raise ValueError(f"{self.name}: no range {range_index}; this sensor has one range")
+        return await self.read(exposure_s, averages)
 
     @abc.abstractmethod
     async def status(self) -> SensorStatus: ...

@@ -9,6 +9,9 @@ Layout (also in ``docs/engine.md``; strings are UTF-8, JSON attributes are strin
         light (m,) str        sensor (m,) str
         raw (m, C) f8         dark (m, C) f8          sensor units
         exposure_s (m,) f8    averages (m,) i8        saturated (m,) bool   t_read (m,) f8 (Unix s)
+        range_index (m,) i8   range_scale (m,) f8     sensor range of each reading (0: nominal)
+                              and its sensitivity relative to range 0; dark read in that range
+                              (absent in files written before auto-ranging: all range 0)
     /samples                  calibrated samples the reconstruction used
         channels (C,) str     pairs (n, 2) str (light, sensor)
         light_dirs (n, 3) f8  sensor_dirs (n, 3) f8   lab-frame unit vectors
@@ -148,6 +151,8 @@ def write_result(
         g["averages"] = np.asarray([r.averages for r in readings], dtype=np.int64)
         g["saturated"] = np.asarray([r.saturated for r in readings], dtype=bool)
         g["t_read"] = np.asarray([r.t_read for r in readings], dtype=float)
+        g["range_index"] = np.asarray([r.range_index for r in readings], dtype=np.int64)
+        g["range_scale"] = np.asarray([r.range_scale for r in readings], dtype=float)
 
         s = f.create_group("samples")
         s.create_dataset("channels", data=_strs(samples.channels), dtype=_STR)
@@ -310,12 +315,15 @@ def _read_open(p: Path, f: h5py.File) -> ResultFile:
     _check_format(p, attrs)
     g = f["raw"]
     lights, sensors = _decode(g["light"][()]), _decode(g["sensor"][()])
+    # Files from before auto-ranging have every reading in range 0.
+    range_index = g["range_index"][()] if "range_index" in g else np.zeros(len(lights), int)
+    range_scale = g["range_scale"][()] if "range_scale" in g else np.ones(len(lights))
     readings = [
         ReadingRow(int(g["angle_index"][i]), float(g["commanded_deg"][i]),
                    float(g["actual_deg"][i]), lights[i], sensors[i],
                    tuple(float(x) for x in g["raw"][i]), tuple(float(x) for x in g["dark"][i]),
                    float(g["exposure_s"][i]), int(g["averages"][i]), bool(g["saturated"][i]),
-                   float(g["t_read"][i]))
+                   float(g["t_read"][i]), int(range_index[i]), float(range_scale[i]))
         for i in range(len(lights))
     ]
     s = f["samples"]

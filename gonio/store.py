@@ -43,7 +43,15 @@ from typing import Any, cast
 
 from gonio.jobstates import ACTIVE_STATES, JobState, check_action, check_transition
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
+#: The statements that bring a store of schema ``k`` to ``k + 1``, run in one transaction when
+#: an older store is opened (the tables of a new store are created at the latest version).
+_MIGRATIONS: dict[int, tuple[str, ...]] = {
+    # 1 -> 2: the sensor range of each reading (auto-ranging); older readings were all taken
+    # in the nominal range.
+    1: ("ALTER TABLE readings ADD COLUMN range_index INTEGER NOT NULL DEFAULT 0",
+        "ALTER TABLE readings ADD COLUMN range_scale REAL NOT NULL DEFAULT 1.0"),
+}
 # How long a connection waits on a lock held by another writer, and how long opening a new
 # store keeps retrying while concurrent openers create it.
 _BUSY_TIMEOUT_MS = 5000
@@ -94,6 +102,8 @@ CREATE TABLE IF NOT EXISTS readings (
     saturated     INTEGER NOT NULL,
     t_read        REAL NOT NULL,
     t_commit      REAL NOT NULL,
+    range_index   INTEGER NOT NULL DEFAULT 0,
+    range_scale   REAL NOT NULL DEFAULT 1.0,
     UNIQUE (job_id, angle_index, light, sensor)
 );
 CREATE TABLE IF NOT EXISTS darks (
@@ -161,7 +171,12 @@ class StepRow:
 
 @dataclass(frozen=True)
 class ReadingRow:
-    """One (angle, light, sensor) reading; ``raw`` and ``dark`` are per-channel values."""
+    """One (angle, light, sensor) reading; ``raw`` and ``dark`` are per-channel values.
+
+    ``range_index`` is the sensor range it was taken in (0: nominal) and ``range_scale`` that
+    range's sensitivity relative to range 0; ``dark`` was read in the same range, so
+    ``(raw - dark) / range_scale`` is in range-0 units (:func:`gonio.calibration.counts`).
+    """
 
     angle_index: int
     commanded_deg: float
@@ -174,6 +189,8 @@ class ReadingRow:
     averages: int
     saturated: bool
     t_read: float
+    range_index: int = 0
+    range_scale: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -221,6 +238,8 @@ class JobStore:
                 (str(SCHEMA_VERSION),),
             )
             row = self._db.execute("SELECT value FROM meta WHERE key='schema'").fetchone()
+        if int(row[0]) < SCHEMA_VERSION:
+            row = (self._migrate(int(row[0])),)
         if int(row[0]) != SCHEMA_VERSION:
             raise StoreError(
                 f"{self.path} has store schema {row[0]}, this gonio reads {SCHEMA_VERSION}; "
@@ -274,6 +293,19 @@ class JobStore:
             with self._tx() as c:
                 c.executemany("UPDATE jobs SET result_path = ?, summary = ? WHERE id = ?",
                               changes)
+
+    def _migrate(self, version: int) -> int:
+        """Bring a store of schema ``version`` up to :data:`SCHEMA_VERSION`; returns the new
+        version. One transaction, re-reading the version inside it, so two processes opening
+        an old store at once migrate it once; nothing stored is lost."""
+        with self._tx() as c:
+            version = int(c.execute("SELECT value FROM meta WHERE key='schema'").fetchone()[0])
+            while version < SCHEMA_VERSION and version in _MIGRATIONS:
+                for statement in _MIGRATIONS[version]:
+                    c.execute(statement)
+                version += 1
+                c.execute("UPDATE meta SET value = ? WHERE key = 'schema'", (str(version),))
+        return version
 
     def _initialise(self, durable: bool) -> tuple[Any, ...] | None:
         """Set the connection up and create the schema; return the stored schema-version row.
@@ -666,12 +698,12 @@ class JobStore:
         with self._tx() as c:
             c.executemany(
                 "INSERT INTO readings (job_id, angle_index, commanded_deg, actual_deg, light, "
-                "sensor, raw, dark, exposure_s, averages, saturated, t_read, t_commit) "
-                "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                "sensor, raw, dark, exposure_s, averages, saturated, t_read, t_commit, "
+                "range_index, range_scale) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
                 [
                     (job_id, r.angle_index, r.commanded_deg, r.actual_deg, r.light, r.sensor,
                      json.dumps(list(r.raw)), json.dumps(list(r.dark)), r.exposure_s,
-                     r.averages, int(r.saturated), r.t_read, t)
+                     r.averages, int(r.saturated), r.t_read, t, r.range_index, r.range_scale)
                     for r in readings
                 ],
             )
@@ -699,13 +731,14 @@ class JobStore:
         with self._read() as db:
             rows = db.execute(
                 "SELECT angle_index, commanded_deg, actual_deg, light, sensor, raw, dark, "
-                "exposure_s, averages, saturated, t_read FROM readings WHERE job_id = ? "
-                "ORDER BY angle_index, light, sensor",
+                "exposure_s, averages, saturated, t_read, range_index, range_scale FROM readings "
+                "WHERE job_id = ? ORDER BY angle_index, light, sensor",
                 (job_id,),
             ).fetchall()
         return [
             ReadingRow(r[0], r[1], r[2], r[3], r[4], tuple(json.loads(r[5])),
-                       tuple(json.loads(r[6])), r[7], r[8], bool(r[9]), r[10])
+                       tuple(json.loads(r[6])), r[7], r[8], bool(r[9]), r[10], int(r[11]),
+                       float(r[12]))
             for r in rows
         ]
 

@@ -65,14 +65,17 @@ def basis_build_needed(provider: BasisProvider) -> bool:
     """Whether calling ``provider`` will *build* the default basis (minutes), not load it.
 
     Only :func:`default_basis_provider` is known to build: true when its cache file does
-    not exist yet (first scan on an install, or after ``gonio library import`` changed the
-    training set). Any other provider (a saved basis, tests) is taken to load quickly.
+    not exist yet and the shipped synthetic basis cannot serve (it is stale: the code that
+    builds it changed). With the shipped one, a first scan or a ``gonio library import``
+    costs a fold-in of seconds: a load. Any other provider (a saved basis, tests) is taken to
+    load quickly.
     """
     if provider is not default_basis_provider:
         return False
+    from gonio.brdf.reconstruction import shipped
     from gonio.brdf.reconstruction.basis import default_basis_path
 
-    return not default_basis_path().is_file()
+    return not default_basis_path().is_file() and not shipped.is_current()
 
 
 # The symmetry of the default basis' cache file, by path, with the file's (mtime, size) it was
@@ -641,9 +644,9 @@ class Worker:
     def activity_report(self) -> tuple[str, float | None] | None:
         """What the current job waits for, in words, and the fraction done if known.
 
-        While the default basis is being obtained for more than a moment, it is being built
-        (the first scan on an install): the report counts the library materials tabulated so
-        far, then says the basis is being learned.
+        While the default basis is being obtained for more than a moment and must be built
+        (the shipped synthetic basis is stale: :func:`basis_build_needed`), the report counts
+        the library materials tabulated so far, then says the basis is being learned.
         """
         what = self.activity
         if what is None:
@@ -654,7 +657,8 @@ class Worker:
         why = (" before the first reading (the adaptive rule needs it)"
                if what == "basis_before_measuring" else "")
         waited = time.monotonic() - self._activity_since
-        if self.basis_provider is not default_basis_provider or waited < 1.0:
+        if (self.basis_provider is not default_basis_provider or waited < 1.0
+                or not self.basis_build_needed()):
             return ("loading the reconstruction basis" + why, None)
         from gonio.brdf.materials.library import build_progress
 

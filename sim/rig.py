@@ -74,6 +74,10 @@ DEFAULT_SENSORS: tuple[tuple[float, float], ...] = (
 
 ADC_FULL_SCALE = float(2**20 - 1)
 """Simulated sensors have a 20-bit ADC: values are u32 registers that saturate here."""
+#: The simulated photodiodes' lower gain stages (their amplifier switches by decades): with the
+#: default irradiance and exposure, gain 1 saturates above about 5 1/sr, gain 0.001 above
+#: about 5000 1/sr, which covers the specular peaks of polished metals (auto-ranging).
+SENSOR_GAIN_STAGES = (0.1, 0.01, 0.001)
 
 FAULT_HELP = (
     "silence:NAME[:SECONDS] (a lamp or sensor stops answering), lamp-drift:NAME:FACTOR "
@@ -429,6 +433,7 @@ class SimRig:
                 registers=_sensor_registers(len(channels)),
                 saturation_raw=self.noise.saturation,
                 gain=1.0,
+                gain_stages=list(SENSOR_GAIN_STAGES),
                 min_exposure_s=1e-4,
                 max_exposure_s=5.0,
                 **spectral,

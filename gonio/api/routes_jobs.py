@@ -31,9 +31,12 @@ class Reading(BaseModel):
     actual_deg: float = Field(description="stage position the encoder reported, degrees")
     light: str
     sensor: str
-    values: list[float] = Field(description="raw - dark per channel, sensor units")
+    values: list[float] = Field(
+        description="(raw - dark) / range_scale per channel: sensor units of the nominal range")
     saturated: bool
     t_read: float = Field(description="Unix time, seconds")
+    range_index: int = Field(
+        default=0, description="sensor range it was taken in (0: nominal gain; auto-ranging)")
 
 
 @router.get("", dependencies=READ, summary="List jobs (oldest first)")
@@ -98,6 +101,7 @@ def readings(
             values=counts(r).tolist(),
             saturated=r.saturated,
             t_read=r.t_read,
+            range_index=r.range_index,
         )
         for r in service.readings(job_id, after_angle)
     ]

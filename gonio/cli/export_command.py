@@ -1,4 +1,6 @@
-"""``gonio export RESULT.h5 --format FORMAT -o FILE``: a result in a renderer's format."""
+"""``gonio export RESULT.h5 --format FORMAT -o FILE [--with-mesh]``: a result in a renderer's
+format, with a report of what the file is (specimen, simulated or measured, the fitted model's
+rendered difference from the reconstruction, warnings; docs/export.md)."""
 
 from __future__ import annotations
 
@@ -12,7 +14,7 @@ from gonio.cli import UsageError
 _FORMATS_HELP = (
     "factored: the factored fit of paper 000 (.npz); mtlx: MaterialX standard_surface; "
     "gltf: glTF 2.0 material with KHR_materials_anisotropy; merl: MERL .binary, azimuthally "
-    "averaged; table: gonio's BRDF table (.npz). Formats: docs/file-formats.md"
+    "averaged, with a .json sidecar; table: gonio's BRDF table (.npz). Formats: docs/export.md"
 )
 
 
@@ -27,6 +29,9 @@ def register(sub: Any) -> None:
     p.add_argument("-o", "--output", type=Path, default=None,
                    help="file to write (default: the result's name with the format's suffix, "
                    "RESULT.factored.npz / RESULT.table.npz for the two .npz formats)")
+    p.add_argument("--with-mesh", action="store_true",
+                   help="gltf: add a preview sphere (normals, UVs, tangents) so any viewer "
+                   "shows the material; without it the file is a material library")
     p.set_defaults(func=run)
 
 
@@ -45,7 +50,7 @@ def default_output(result: Path, fmt: str) -> Path:
 
 
 def run(args: argparse.Namespace) -> int:
-    from gonio.export import export_result
+    from gonio.export import result_fits, write_export
 
     result: Path = args.result
     if not result.is_file():
@@ -55,8 +60,45 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"-o {out} is the result file itself; choose another output name")
     if not out.parent.is_dir():
         raise UsageError(f"folder {out.parent} does not exist; create it or choose another -o")
+    if args.with_mesh and args.fmt != "gltf":
+        raise UsageError("--with-mesh applies to --format gltf only")
     t0 = time.perf_counter()
-    path = export_result(result, args.fmt, out)
+    fits, prov = result_fits(result)
+    path = write_export(fits, args.fmt, out, prov, with_mesh=args.with_mesh)
     print(f"wrote {path} ({args.fmt}, {path.stat().st_size:,} bytes, "
           f"{time.perf_counter() - t0:.1f} s)")
+    for line in report(args.fmt, path, prov):
+        print(line)
     return 0
+
+
+def report(fmt: str, path: Path, prov: dict[str, Any]) -> list[str]:
+    """What the written file is, in a few lines (the same facts as its provenance)."""
+    import json
+
+    lines = []
+    who = prov.get("specimen", "?")
+    if not prov.get("specimen_named"):
+        who += " (no specimen name was given at the scan: gonio scan --specimen NAME)"
+    lines.append(f"  specimen {who}, {prov.get('source', '?')}, job {prov.get('job_id')}")
+    err = (prov.get("reconstruction_error") or {}).get("predicted_log_rmse")
+    if err is not None:
+        lines.append(f"  reconstruction: predicted log_rmse {err:.3f} (expected cosine-weighted "
+                     "log error against the true BRDF)")
+    model = {"mtlx": "principled", "gltf": "principled", "factored": "factored"}.get(fmt)
+    rendered = ((prov.get("fits") or {}).get(model) or {}).get("rendered") if model else None
+    if isinstance(rendered, dict) and rendered.get("value") is not None:
+        lines.append(f"  {model} fit renders {rendered['metric']} {rendered['value']:.3f} "
+                     "from the reconstruction (sphere and swatch under point lights)")
+    warnings = list(prov.get("warnings") or [])
+    if fmt == "merl":
+        from gonio.export.merl import sidecar_path
+
+        side = sidecar_path(path)
+        sidecar = json.loads(side.read_text())
+        lines.append(f"  provenance in {side.name}; MERL is isotropic: the result was averaged "
+                     f"over azimuth (anisotropy lost: log RMSE "
+                     f"{sidecar['merl']['anisotropy_lost']:.3f})")
+        warnings = list(sidecar.get("warnings") or [])
+    lines.extend(f"  warning: {w}" for w in warnings if model or fmt == "merl")
+    return lines

@@ -71,7 +71,8 @@ def register(subparsers: Any) -> None:
     p.add_argument("--light-settle", type=nonnegative_float, default=0.05,
                    help="seconds after lamp on")
     p.add_argument("--specimen", default=None,
-                   help="specimen name (default 'specimen'; with --white-reference, the "
+                   help="specimen name, carried into the result and every export (without "
+                        "it the scan is 'unnamed' and says so; with --white-reference, the "
                         "reference's name, default 'white reference')")
     p.add_argument("--calibration", type=Path, default=None,
                    help="calibration JSON (from a calibration job) to apply")
@@ -108,6 +109,7 @@ def register(subparsers: Any) -> None:
 
 
 def _plan(args: argparse.Namespace) -> Any:
+    from gonio.export.metadata import UNNAMED
     from gonio.plans.models import AdaptivePlan, CalibrationPlan, ExposureSettings, UniformPlan
 
     ex = ExposureSettings(exposure_s=args.exposure, averages=args.averages,
@@ -128,11 +130,11 @@ def _plan(args: argparse.Namespace) -> Any:
                                    ("min_gain", args.min_gain),
                                    ("max_rotations", args.max_rotations),
                                    ("span_deg", args.span)) if v is not None}
-        return AdaptivePlan(specimen=args.specimen or "specimen", exposure=ex, rule=args.rule,
+        return AdaptivePlan(specimen=args.specimen or UNNAMED, exposure=ex, rule=args.rule,
                             threshold=args.threshold, max_samples=args.max_samples,
                             start_deg=args.start_deg, **given)
     span = {"span_deg": args.span} if args.span is not None else {}
-    return UniformPlan(specimen=args.specimen or "specimen", exposure=ex,
+    return UniformPlan(specimen=args.specimen or UNNAMED, exposure=ex,
                        rotations=args.rotations or 8, start_deg=args.start_deg, **span)
 
 
@@ -143,6 +145,11 @@ def _scan(args: argparse.Namespace) -> int:
     if args.rig is not None and not args.rig.is_file():
         raise UsageError(f"rig config {args.rig} does not exist")
     plan = _plan(args)
+    if args.white_reference is None and not args.specimen and not args.dry_run:
+        from gonio.export.metadata import UNNAMED
+
+        print(f"note: no --specimen NAME given; the result and its exports call the specimen "
+              f"{UNNAMED!r}", file=sys.stderr)
     if args.daemon:
         return _scan_through_daemon(args, plan)
     sim = None

@@ -6,19 +6,21 @@ format     suffix     what
 factored   ``.npz``   the factored fit of paper 000 (:mod:`gonio.brdf.models.factored`)
 mtlx       ``.mtlx``  MaterialX ``standard_surface`` from the principled fit (:mod:`.mtlx`)
 gltf       ``.gltf``  glTF 2.0 material with ``KHR_materials_anisotropy`` (:mod:`.gltf`)
-merl       ``.binary`` MERL layout, azimuthally averaged (:mod:`.merl`)
+merl       ``.binary`` MERL layout, azimuthally averaged, with a ``.json`` sidecar (:mod:`.merl`)
 table      ``.npz``   gonio's own BRDF table (:class:`gonio.brdf.tables.table.BRDFTable`)
 ========== ========== ===================================================================
 
 The fits come from the result file (the daemon stores them when it reconstructs); a result
-written before they existed is fitted here, which takes some seconds. Every format that has
-room for it carries the provenance of :func:`provenance`.
+written before they existed, or before the principled fit was judged by rendering
+(:mod:`.judge`), is fitted here, which takes some seconds. Every format carries the provenance
+of :mod:`.metadata` (MERL in a sidecar); each export reports its fitted model's rendered
+difference from the reconstruction and warns when it is large.
 """
 
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -52,8 +54,24 @@ class Fits:
 
 
 def fit_all(table: BRDFTable) -> Fits:
-    """Factored and principled fits of a reconstructed table (seconds of CPU)."""
-    return Fits(table, fit_factored(table, iterations=FIT_ITERATIONS), fit_principled(table))
+    """Factored and principled fits of a reconstructed table, judged by rendering (seconds of
+    CPU): the principled fit is refined on renderings (:func:`.judge.fit_principled_rendered`)
+    and each model's ``metrics["rendered"]`` is its rendered difference from ``table``."""
+    from gonio.export.judge import fit_principled_rendered
+
+    principled, _ = fit_principled_rendered(table, fit_principled(table))
+    return Fits(table, _judged_factored(table, fit_factored(table, iterations=FIT_ITERATIONS)),
+                principled)
+
+
+def _judged_factored(table: BRDFTable, factored: FactoredBRDF) -> FactoredBRDF:
+    """``factored`` with its rendered difference from ``table`` in ``metrics["rendered"]``."""
+    from gonio.export.judge import rendered_difference
+
+    if "rendered" in factored.metrics or table.n_channels != 3:
+        return factored
+    diff = rendered_difference(table, factored)
+    return replace(factored, metrics={**factored.metrics, "rendered": diff.as_dict()})
 
 
 def check_format(fmt: str) -> str:
@@ -76,36 +94,65 @@ def result_fits(result_path: str | os.PathLike[str]) -> tuple[Fits, dict[str, An
             f"{Path(result_path).name} is a {res.attrs.get('kind', '?')} job's result without a "
             "reconstructed BRDF; export a scan's result"
         )
-    factored = res.factored or fit_factored(res.table, iterations=FIT_ITERATIONS)
-    principled = res.principled or fit_principled(res.table)
+    from gonio.export.judge import fit_principled_rendered
+
+    factored = _judged_factored(
+        res.table, res.factored or fit_factored(res.table, iterations=FIT_ITERATIONS))
+    principled = res.principled
+    if principled is None or principled.metrics.get("fit") != "rendered":
+        # Missing, or fitted on the table alone by an older gonio (issue 26): fit again.
+        principled, _ = fit_principled_rendered(res.table, fit_principled(res.table))
     fits = Fits(res.table, factored, principled)
-    return fits, provenance(res.attrs, fits, res.metrics)
+    return fits, provenance(res.attrs, fits, res.metrics, res.provenance)
 
 
-def provenance(attrs: dict[str, Any], fits: Fits, metrics: dict[str, Any]) -> dict[str, Any]:
-    """What an exported file says about where it came from."""
-    return {
-        "generator": f"gonio {attrs.get('gonio_version', '')}".strip(),
-        "job_id": attrs.get("job_id"), "specimen": attrs.get("specimen"),
-        "measured": attrs.get("created"),
-        "reconstruction_predicted_error": metrics.get("predicted_error"),
-        "factored_fit": {k: fits.factored.metrics.get(k)
-                         for k in ("rel_mse", "mape", "psnr", "log_rmse")},
-        "principled_fit": {k: fits.principled.metrics.get(k)
-                           for k in ("rel_mse", "mape", "psnr", "log_rmse")},
-    }
+def fit_summary(fits: Fits) -> dict[str, Any]:
+    """Each model's fit errors against the reconstruction: table metrics and rendered."""
+    keys = ("rel_mse", "mape", "psnr", "log_rmse", "rendered")
+    return {"principled": {k: fits.principled.metrics.get(k) for k in keys},
+            "factored": {k: fits.factored.metrics.get(k) for k in keys}}
+
+
+def fit_warnings(fits: Fits) -> list[str]:
+    """A sentence for each model whose rendering differs much from the reconstruction's."""
+    from gonio.export.judge import WARN_FLIP, WARN_RELATIVE
+
+    out = []
+    for what, m in (("principled", fits.principled.metrics), ("factored", fits.factored.metrics)):
+        r = m.get("rendered")
+        if not isinstance(r, dict) or not isinstance(r.get("value"), int | float):
+            continue
+        limit = WARN_FLIP if r.get("flip") is not None else WARN_RELATIVE
+        if r["value"] > limit:
+            out.append(
+                f"the {what} fit renders visibly unlike the reconstruction ({r['metric']} "
+                f"{r['value']:.3f} > {limit:g}): this model does not represent the material "
+                "well; use the 'table' export where a renderer can take a table")
+    return out
+
+
+def provenance(attrs: dict[str, Any], fits: Fits, metrics: dict[str, Any],
+               result_provenance: dict[str, Any] | None = None) -> dict[str, Any]:
+    """What an exported file says about itself (:func:`.metadata.export_provenance`)."""
+    from gonio.export.metadata import export_provenance
+
+    return export_provenance(attrs, metrics, result_provenance or {}, fit_summary(fits),
+                             fit_warnings(fits))
 
 
 def write_export(fits: Fits, fmt: str, out: str | os.PathLike[str],
-                 prov: dict[str, Any]) -> Path:
-    """Write one format from fits already in hand; returns the path."""
+                 prov: dict[str, Any], *, with_mesh: bool = False) -> Path:
+    """Write one format from fits already in hand; returns the path.
+
+    ``with_mesh`` adds the glTF's preview sphere (:func:`.gltf.preview_sphere`).
+    """
     from gonio.export.gltf import GltfError
     from gonio.export.merl import MerlError
     from gonio.export.mtlx import MtlxError
 
     check_format(fmt)
     try:
-        return _write(fits, fmt, out, prov)
+        return _write(fits, fmt, out, prov, with_mesh)
     except (MerlError, MtlxError, GltfError) as exc:
         # MerlError, MtlxError, GltfError (e.g. a table that is not R, G, B): the caller (the
         # daemon turns ExportError into a 404 with the reason) gets one error type to handle.
@@ -114,8 +161,11 @@ def write_export(fits: Fits, fmt: str, out: str | os.PathLike[str],
         ) from None
 
 
-def _write(fits: Fits, fmt: str, out: str | os.PathLike[str], prov: dict[str, Any]) -> Path:
+def _write(fits: Fits, fmt: str, out: str | os.PathLike[str], prov: dict[str, Any],
+           with_mesh: bool) -> Path:
     name = str(prov.get("specimen") or fits.table.name)
+    if prov.get("job_id") is not None:
+        name = f"{name}_job{prov['job_id']}"  # unnamed scans stay apart in a scene
     if fmt == "table":
         table = BRDFTable.trusted(
             fits.table.values, fits.table.channels, fits.table.name, fits.table.wavelengths_nm,
@@ -131,15 +181,17 @@ def _write(fits: Fits, fmt: str, out: str | os.PathLike[str], prov: dict[str, An
     if fmt == "gltf":
         from gonio.export.gltf import write_gltf
 
-        return write_gltf(fits.principled, out, name, prov)
+        return write_gltf(fits.principled, out, name, prov, with_mesh)
     from gonio.export.merl import write_merl
 
-    return write_merl(fits.table, out)
+    return write_merl(fits.table, out, prov)
 
 
 def export_result(result_path: str | os.PathLike[str], fmt: str,
-                  out: str | os.PathLike[str]) -> Path:
+                  out: str | os.PathLike[str], *, with_mesh: bool = False) -> Path:
     """Export a job's result file to ``out`` in format ``fmt``; returns the path.
+
+    ``with_mesh``: the glTF gets a preview sphere (ignored by the other formats).
 
     Raises
     ------
@@ -148,4 +200,4 @@ def export_result(result_path: str | os.PathLike[str], fmt: str,
     """
     check_format(fmt)
     fits, prov = result_fits(result_path)
-    return write_export(fits, fmt, out, prov)
+    return write_export(fits, fmt, out, prov, with_mesh=with_mesh)

@@ -6,17 +6,27 @@
   along the rotated tangent to ``alpha_t = mix(alpha, 1, strength^2)`` with ``alpha`` the
   base roughness squared, so ``anisotropyStrength = sqrt((alpha_t - alpha_b) / (1 -
   alpha_b))`` (1 when ``alpha_t >= 1``), and ``anisotropyRotation`` = the direction in radians,
-  counter-clockwise from the tangent, which must be the specimen's x axis.
+  counter-clockwise from the tangent towards the bitangent (the extension's convention, the
+  same sense as gonio's), with the tangent on the specimen's x axis (the holder mark) and
+  bitangent = normal x tangent (``TANGENT.w = +1``). A mesh without tangents gets them from
+  its ``TEXCOORD_0`` (the glTF spec: MikkTSpace, tangent along increasing ``u``), so the
+  specimen's x must run along ``u`` there.
 * ``KHR_materials_specular`` (only when the dielectric ``F0 = 0.08 specular`` differs from
   glTF's 0.04 and the material is not fully metallic): ``specularColorFactor = F0 / 0.04``
   in every channel, ``specularFactor = 1``.
 
-Provenance (job, specimen, fit error) goes into ``asset.extras`` and the material's ``extras``.
-The file holds no mesh: it is a material library to reference or merge into a scene.
+The provenance (:mod:`gonio.export.metadata`) goes into ``asset.extras`` and the material's
+``extras``. By default the file holds no mesh: it is a material library to reference or merge
+into a scene. ``with_mesh=True`` (``gonio export --with-mesh``) adds a preview mesh so that any
+viewer shows the material: a UV sphere of radius 1 (:func:`preview_sphere`; Y up, the front
+facing +Z) with normals, ``TEXCOORD_0`` and tangents, the tangent along the lines of latitude
+(``+X`` at the front, ``u`` increasing with it), in one scene with one node; the binary data is
+a base64 ``data:`` URI, so the file stays one self-contained ``.gltf``.
 """
 
 from __future__ import annotations
 
+import base64
 import json
 import math
 import os
@@ -25,8 +35,16 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+from numpy.typing import NDArray
+
 from gonio import __version__
 from gonio.brdf.models.principled import Principled
+
+#: Rings (latitude) and segments (longitude) of the preview sphere.
+SPHERE_RINGS, SPHERE_SEGMENTS = 32, 64
+_FLOAT, _USHORT = 5126, 5123  # glTF componentType codes
+_ARRAY_BUFFER, _ELEMENT_ARRAY_BUFFER = 34962, 34963
 
 
 class GltfError(ValueError):
@@ -70,8 +88,85 @@ def gltf_material(p: Principled, name: str, extras: Mapping[str, Any]) -> tuple[
     return material, used
 
 
-def gltf_document(p: Principled, name: str, provenance: Mapping[str, Any]) -> dict[str, Any]:
-    """A whole glTF 2.0 JSON document holding one material."""
+def preview_sphere(rings: int = SPHERE_RINGS, segments: int = SPHERE_SEGMENTS) -> dict[
+    str, NDArray[Any]
+]:
+    """A UV sphere of radius 1: ``position``, ``normal`` (V, 3), ``tangent`` (V, 4),
+    ``texcoord`` (V, 2) float32 and ``indices`` (3T,) uint16, counter-clockwise from outside.
+
+    ``P = (sin t sin p, cos t, sin t cos p)`` for polar angle ``t`` from +Y and longitude ``p``
+    from +Z; ``u = 0.5 + p / 2 pi``, ``v = t / pi``; tangent ``dP/dp`` normalised,
+    ``(cos p, 0, -sin p, 1)``. The seam and the poles repeat vertices so that every vertex has
+    one UV; the pole rows use one triangle per segment (no degenerate triangles).
+    """
+    t = np.linspace(0.0, np.pi, rings + 1)
+    ph = np.linspace(-np.pi, np.pi, segments + 1)
+    tt, pp = np.meshgrid(t, ph, indexing="ij")  # (rings + 1, segments + 1)
+    pos = np.stack([np.sin(tt) * np.sin(pp), np.cos(tt), np.sin(tt) * np.cos(pp)], axis=-1)
+    tangent = np.stack([np.cos(pp), np.zeros_like(pp), -np.sin(pp), np.ones_like(pp)], axis=-1)
+    uv = np.stack([0.5 + pp / (2 * np.pi), tt / np.pi], axis=-1)
+    idx: list[tuple[int, int, int]] = []
+    w = segments + 1
+    for i in range(rings):
+        for j in range(segments):
+            a, b, c, d = i * w + j, i * w + j + 1, (i + 1) * w + j, (i + 1) * w + j + 1
+            if i > 0:
+                idx.append((a, c, b))
+            if i < rings - 1:
+                idx.append((b, c, d))
+    pos32 = pos.reshape(-1, 3).astype(np.float32)
+    # Normals of a unit sphere are the positions; normalised again in float32 so a validator
+    # sees unit length.
+    normal = pos32 / np.linalg.norm(pos32, axis=1, keepdims=True)
+    return {
+        "position": pos32, "normal": normal.astype(np.float32),
+        "tangent": tangent.reshape(-1, 4).astype(np.float32),
+        "texcoord": uv.reshape(-1, 2).astype(np.float32),
+        "indices": np.asarray(idx, dtype=np.uint16).ravel(),
+    }
+
+
+def _add_preview_mesh(doc: dict[str, Any]) -> None:
+    """Add :func:`preview_sphere` as buffer, views, accessors, mesh, node and scene."""
+    sphere = preview_sphere()
+    blob = bytearray()
+    views: list[dict[str, Any]] = []
+    accessors: list[dict[str, Any]] = []
+    for key, kind in (("position", "VEC3"), ("normal", "VEC3"), ("tangent", "VEC4"),
+                      ("texcoord", "VEC2"), ("indices", "SCALAR")):
+        arr = sphere[key]
+        while len(blob) % 4:
+            blob.append(0)
+        views.append({"buffer": 0, "byteOffset": len(blob), "byteLength": arr.nbytes,
+                      "target": _ELEMENT_ARRAY_BUFFER if key == "indices" else _ARRAY_BUFFER})
+        blob.extend(arr.tobytes())
+        acc: dict[str, Any] = {
+            "bufferView": len(views) - 1, "count": int(arr.shape[0]), "type": kind,
+            "componentType": _USHORT if key == "indices" else _FLOAT,
+        }
+        if key == "position":  # required for POSITION
+            acc.update(min=arr.min(axis=0).tolist(), max=arr.max(axis=0).tolist())
+        accessors.append(acc)
+    doc["buffers"] = [{"byteLength": len(blob), "uri": "data:application/octet-stream;base64,"
+                       + base64.b64encode(bytes(blob)).decode("ascii")}]
+    doc["bufferViews"] = views
+    doc["accessors"] = accessors
+    doc["meshes"] = [{
+        "name": "preview sphere",
+        "primitives": [{"attributes": {"POSITION": 0, "NORMAL": 1, "TANGENT": 2,
+                                       "TEXCOORD_0": 3}, "indices": 4, "material": 0}],
+        "extras": {"preview": "unit UV sphere; tangent along the latitude lines (+X at the "
+                              "front, facing +Z), i.e. the specimen's x (holder mark) runs "
+                              "horizontally across the front"},
+    }]
+    doc["nodes"] = [{"name": "preview", "mesh": 0}]
+    doc["scenes"] = [{"nodes": [0]}]
+    doc["scene"] = 0
+
+
+def gltf_document(p: Principled, name: str, provenance: Mapping[str, Any],
+                  with_mesh: bool = False) -> dict[str, Any]:
+    """A whole glTF 2.0 JSON document holding one material (and the preview mesh)."""
     material, used = gltf_material(p, name, provenance)
     doc: dict[str, Any] = {
         "asset": {"version": "2.0", "generator": f"gonio {__version__}",
@@ -80,14 +175,18 @@ def gltf_document(p: Principled, name: str, provenance: Mapping[str, Any]) -> di
     }
     if used:
         doc["extensionsUsed"] = used
+    if with_mesh:
+        _add_preview_mesh(doc)
     return doc
 
 
 def write_gltf(
-    p: Principled, path: str | os.PathLike[str], name: str, provenance: Mapping[str, Any]
+    p: Principled, path: str | os.PathLike[str], name: str, provenance: Mapping[str, Any],
+    with_mesh: bool = False,
 ) -> Path:
     """Write the ``.gltf`` JSON (atomically); returns the path."""
-    doc = gltf_document(p, name, json.loads(json.dumps(dict(provenance), default=str)))
+    doc = gltf_document(p, name, json.loads(json.dumps(dict(provenance), default=str)),
+                        with_mesh)
     out = Path(path)
     tmp = out.with_name(f"{out.name}.{uuid.uuid4().hex[:12]}.part")  # one per writer
     try:

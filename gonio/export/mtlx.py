@@ -2,7 +2,7 @@
 
 Parameter mapping (MaterialX 1.39 ``standard_surface`` and its ``roughness_anisotropy`` node:
 ``alpha_x = r^2 / sqrt(1 - a)`` along the tangent, ``alpha_y = r^2 sqrt(1 - a)``, the tangent
-turned by ``360 x specular_rotation`` degrees about the normal):
+turned by ``360 x specular_rotation`` degrees about the normal by a ``rotate3d`` node):
 
 =====================  ======================================================================
 input                  value
@@ -11,15 +11,27 @@ base, base_color       1, the fitted base colour
 metalness              metallic
 specular, _color       1, white
 specular_IOR           ``(1 + sqrt(F0)) / (1 - sqrt(F0))`` with the dielectric
-                       ``F0 = 0.08 specular``
+                       ``F0 = 0.08 specular`` (1.5 for a metal, where it is unused)
 specular_roughness     ``(alpha_t alpha_b)^(1/4)``
 specular_anisotropy    ``1 - alpha_b / alpha_t`` (MaterialX clamps it at 0.98)
-specular_rotation      ``direction_deg / 360``: the renderer's tangent must be the specimen's
-                       x axis (the reference mark on the holder)
+specular_rotation      ``((180 - direction_deg) mod 180) / 360``: MaterialX turns the tangent
+                       *clockwise* seen from the normal's tip (below); the renderer's tangent
+                       must be the specimen's x axis (the reference mark on the holder)
 =====================  ======================================================================
 
+**Rotation sense.** The MaterialX specification (Standard Nodes, ``rotate3d``) gives the
+amount in degrees but not its sense; the reference implementation shipped with MaterialX's
+standard library (``stdlib/genglsl/mx_rotate_vector3.glsl``, and its OSL twin) computes
+``v cos(a) + (v x axis) sin(a) + axis (axis . v)(1 - cos(a))``, i.e. Rodrigues' formula with
+the cross product reversed ("MaterialX follows v' = v * M"): the tangent ``x`` about the normal
+``z`` goes to ``(cos a, -sin a, 0)``, clockwise. gonio's direction is counter-clockwise, so it
+is written negated (issue 26: written un-negated, the streak came out mirrored).
+``tests/unit/export/test_mtlx_render.py`` renders the document's reading by that formula and
+checks the highlight's direction.
+
 The document is validated against MaterialX's standard library before it is written; the
-provenance (job, specimen, fit error) is the material's ``doc`` string, as JSON.
+provenance (:mod:`gonio.export.metadata`) is the material's ``doc`` string, as JSON, and the
+headline facts are also ``gonio_*`` attributes of the material (:data:`ATTRIBUTES`).
 """
 
 from __future__ import annotations
@@ -33,6 +45,17 @@ from pathlib import Path
 from typing import Any
 
 from gonio.brdf.models.principled import Principled
+
+#: Material attributes written from the provenance: attribute name -> provenance key.
+ATTRIBUTES: dict[str, str] = {
+    "gonio_specimen": "specimen", "gonio_source": "source", "gonio_job_id": "job_id",
+    "gonio_colour_space": "colour_space",
+}
+
+
+def rotation_from_direction(direction_deg: float) -> float:
+    """``specular_rotation`` for a counter-clockwise tangent direction (module docstring)."""
+    return ((180.0 - direction_deg) % 180.0) / 360.0
 
 
 class MtlxError(ValueError):
@@ -48,14 +71,14 @@ def standard_surface_inputs(p: Principled) -> dict[str, float | tuple[float, flo
         )
     f0 = 0.08 * p.specular
     s = math.sqrt(f0)
-    ior = (1.0 + s) / (1.0 - s)
+    ior = (1.0 + s) / (1.0 - s) if p.metallic < 1.0 else 1.5
     r, g, b = p.base_color
     return {
         "base": 1.0, "base_color": (r, g, b), "metalness": p.metallic,
         "specular": 1.0, "specular_color": (1.0, 1.0, 1.0), "specular_IOR": ior,
         "specular_roughness": math.sqrt(math.sqrt(p.alpha_t * p.alpha_b)),
         "specular_anisotropy": min(0.98, max(0.0, 1.0 - p.alpha_b / p.alpha_t)),
-        "specular_rotation": (p.direction_deg % 180.0) / 360.0,
+        "specular_rotation": rotation_from_direction(p.direction_deg),
     }
 
 
@@ -95,6 +118,16 @@ def mtlx_document(p: Principled, name: str, provenance: Mapping[str, Any]) -> An
         shader.setInputValue(key, MaterialX.Color3(*value) if isinstance(value, tuple) else value)
     material = doc.addMaterialNode(f"M_{base}", shader)
     material.setDocString(json.dumps(dict(provenance), default=str, sort_keys=True))
+    for attr, key in ATTRIBUTES.items():
+        if provenance.get(key) is not None:
+            material.setAttribute(attr, str(provenance[key]))
+    err = provenance.get("reconstruction_error")
+    if isinstance(err, Mapping) and err.get("predicted_log_rmse") is not None:
+        material.setAttribute("gonio_predicted_log_rmse", f"{err['predicted_log_rmse']:.6g}")
+    rendered = (provenance.get("fits") or {}).get("principled", {}).get("rendered")
+    if isinstance(rendered, Mapping) and rendered.get("value") is not None:
+        material.setAttribute("gonio_rendered_difference",
+                              f"{rendered['metric']} {rendered['value']:.4g}")
     ok, message = doc.validate()
     if not ok:
         raise MtlxError(f"the MaterialX document does not validate: {message.strip()}")

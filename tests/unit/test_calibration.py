@@ -134,6 +134,53 @@ def test_calibrated_scan_as_core_samples() -> None:
     assert s.channels == ("Y",) and s.provenance == {"specimen": "x"}
 
 
+def test_a_reading_in_a_lower_range_calibrates_to_the_same_brdf_within_noise() -> None:
+    """One specimen and pair read at gain 1 (range 0) and at gain 0.01 (range 2, scale 0.01).
+
+    The simulated counts are ``E cos(ti) f g t + dark + noise`` (gonio.sim.specimen), each
+    reading's dark read in its own range, and the white reference calibrated in range 0. After
+    ``(raw - dark) / scale`` both ranges must give the same BRDF: their difference within
+    5 sigma of the noise the model gives, ``sigma(c) = sqrt(shot (signal + dark_rate t) +
+    read^2)`` for the reading and for its dark, divided by the range scale.
+    """
+    from gonio.calibration import counts, readings_array
+    from gonio.sim.specimen import NoiseModel, expected_counts, sample_counts
+
+    noise = NoiseModel(saturation=1e12)  # no clipping: the two ranges see the same signal
+    rng = np.random.default_rng(7)
+    irradiance, t = 2.0e7, 0.01
+    wi = np.asarray(LabDirection(30.0, 0.0).vector())
+    wo = np.asarray(LabDirection(40.0, 170.0).vector())
+    pair = [PairSpec(light="L1", sensor="S1")]
+
+    def rows(specimen: Specimen, gain: float, k: int) -> list[ReadingRow]:
+        out = []
+        for j, a in enumerate(ANGLES):
+            signal = expected_counts(specimen, [(wi, irradiance)], wo, a, gain, t)
+            raw = sample_counts(signal, t, noise, rng)
+            dark = sample_counts(np.zeros_like(signal), t, noise, rng)
+            out.append(ReadingRow(j, a, a, "L1", "S1", tuple(raw), tuple(dark), t, 1, False,
+                                  0.0, range_index=k, range_scale=gain))
+        return out
+
+    white = rows(Specimen(white_reference(0.99)), 1.0, 0)
+    cal = from_reference(0.99, {("L1", "S1"): np.stack([counts(r) for r in white])})
+    spec = Specimen(default_material())
+    index = list(range(len(ANGLES)))
+    v0 = readings_array(rows(spec, 1.0, 0), pair, index, 3, cal)[0]
+    v2 = readings_array(rows(spec, 0.01, 2), pair, index, 3, cal)[0]
+    factor = cal.factor("L1", "S1", 3)
+    signal = np.stack([expected_counts(spec, [(wi, irradiance)], wo, a, 1.0, t) for a in ANGLES])
+    dark_sigma = noise.sigma(0.0, t)
+    sigma0 = factor * np.hypot(noise.sigma(signal, t), dark_sigma)
+    sigma2 = factor * np.hypot(noise.sigma(0.01 * signal, t), dark_sigma) / 0.01
+    assert np.all(np.abs(v0 - v2) < 5 * np.hypot(sigma0, sigma2))
+    # Both are the BRDF (the white reference's own noise is a fraction of a per cent).
+    truth = np.stack([spec.brdf_lab(wi, wo, a) for a in ANGLES])
+    np.testing.assert_allclose(v0, truth, rtol=0.01)
+    assert np.all(np.abs(v2 - truth) < 5 * sigma2 + 0.01 * truth)
+
+
 # --------------------------------------------------------------------------- files, checked
 def _cal(*factors: tuple[float, ...], albedo: float = 0.99) -> dict[str, object]:
     """A calibration as its JSON file holds it, one pair L1/S<k> per factor tuple."""

@@ -129,3 +129,26 @@ def test_file_errors_name_the_file(tmp_path: Path) -> None:
     bad.write_text("[stage\n", encoding="utf-8")
     with pytest.raises(ConfigError, match=r"bad\.toml: not valid TOML"):
         load_rig_config(bad)
+
+
+def test_gain_stages_give_the_sensor_ranges(example: dict) -> None:
+    example["sensors"][0]["gain"] = 2.0
+    example["sensors"][0]["gain_stages"] = [0.2, 0.02]
+    s = parse_rig_config(example, "rig.toml").sensors[0]
+    # Range k's sensitivity is its gain over the nominal one.
+    assert s.ranges == pytest.approx((1.0, 0.2 / 2.0, 0.02 / 2.0))
+    assert [s.range_gain(k) for k in range(3)] == [2.0, 0.2, 0.02]
+    assert parse_rig_config(example, "rig.toml").sensors[1].ranges == (1.0,)  # none given
+
+
+def test_bad_gain_stages_are_refused_with_what_to_do(example: dict) -> None:
+    sensor = example["sensors"][0]
+    sensor["gain_stages"] = [0.1, 0.5]
+    assert "descending order" in _error(example)
+    sensor["gain_stages"] = [1.0]  # not below gain = 1.0
+    assert "starting below gain (1.0)" in _error(example)
+    sensor["gain_stages"] = [0.0]
+    assert "gain_stages" in _error(example) and "greater than 0" in _error(example)
+    sensor["gain_stages"] = [0.1]
+    del sensor["registers"]["gain"]
+    assert "gain_stages need a gain register" in _error(example)

@@ -68,6 +68,27 @@ def test_result_errors(tmp_path: Path) -> None:
         read_result(bad)
 
 
+def test_reading_ranges_round_trip_and_older_files_read_as_range_0(tmp_path: Path) -> None:
+    import dataclasses
+
+    import h5py
+
+    pairs = [PairSpec(light="L1", sensor="S1"), PairSpec(light="L1", sensor="S2")]
+    dirs = np.tile([0.0, 0.0, 1.0], (2, 1))
+    rows = _reading_rows()
+    rows[1] = dataclasses.replace(rows[1], range_index=2, range_scale=0.01)
+    s = calibrated_samples(rows, pairs, dirs, dirs, ("R", "G", "B"), Calibration())
+    path = write_result(tmp_path / "r.h5", job_id=1, specimen="s", kind="uniform",
+                        readings=rows, samples=s, provenance={})
+    assert read_result(path).readings == rows
+    # A file written before auto-ranging has neither dataset: every reading was in range 0.
+    with h5py.File(path, "a") as f:
+        del f["raw/range_index"], f["raw/range_scale"]
+    old = read_result(path).readings
+    assert all(r.range_index == 0 and r.range_scale == 1.0 for r in old)
+    assert [r.raw for r in old] == [r.raw for r in rows]
+
+
 def test_a_truncated_result_is_damaged_for_the_check_and_the_reader(tmp_path: Path) -> None:
     from gonio.results import check_result_file
 

@@ -206,6 +206,66 @@ def test_many_openers_of_one_new_store_all_succeed(tmp_path: Path) -> None:
         s.close()
 
 
+# The schema-1 tables a store needs to hold a reading, as gonio wrote them before auto-ranging
+# (written out here: the migration must work on what old versions left on disk).
+_SCHEMA_1 = """
+CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
+INSERT INTO meta (key, value) VALUES ('schema', '1');
+CREATE TABLE jobs (
+    id INTEGER PRIMARY KEY AUTOINCREMENT, state TEXT NOT NULL, kind TEXT NOT NULL,
+    specimen TEXT NOT NULL, priority INTEGER NOT NULL DEFAULT 0,
+    position REAL NOT NULL DEFAULT 0, created REAL NOT NULL, started REAL, finished REAL,
+    plan TEXT NOT NULL, rig TEXT NOT NULL, reason TEXT, result_path TEXT, summary TEXT,
+    done_angles INTEGER NOT NULL DEFAULT 0, total_angles INTEGER NOT NULL DEFAULT 0);
+CREATE TABLE readings (
+    job_id INTEGER NOT NULL REFERENCES jobs(id) ON DELETE CASCADE,
+    angle_index INTEGER NOT NULL, commanded_deg REAL NOT NULL, actual_deg REAL NOT NULL,
+    light TEXT NOT NULL, sensor TEXT NOT NULL, raw TEXT NOT NULL, dark TEXT NOT NULL,
+    exposure_s REAL NOT NULL, averages INTEGER NOT NULL, saturated INTEGER NOT NULL,
+    t_read REAL NOT NULL, t_commit REAL NOT NULL,
+    UNIQUE (job_id, angle_index, light, sensor));
+INSERT INTO jobs (state, kind, specimen, created, plan, rig)
+    VALUES ('completed', 'uniform', 'felt', 1.0, '{}', '{}');
+INSERT INTO readings VALUES (1, 0, 0.0, 0.01, 'L1', 'S1', '[1000.0, 2000.0]', '[100.0, 100.0]',
+    0.01, 1, 0, 2.0, 3.0);
+"""
+
+
+def test_a_schema_1_store_is_migrated_and_keeps_its_readings(tmp_path: Path) -> None:
+    path = tmp_path / "old.sqlite"
+    with sqlite3.connect(path) as db:
+        db.executescript(_SCHEMA_1)
+    store = JobStore(path)
+    (old,) = store.readings(1)
+    # Readings from before auto-ranging were all taken in the nominal range.
+    assert old.raw == (1000.0, 2000.0) and old.dark == (100.0, 100.0)
+    assert old.range_index == 0 and old.range_scale == 1.0
+    assert store.get_job(1).specimen == "felt"
+    # New readings carry their range.
+    job = _job(store)
+    store.add_steps(job, [(0, 0, 0.0, 0.0)])
+    ranged = ReadingRow(0, 0.0, 0.0, "L1", "S1", (5.0e5,), (100.0,), 0.01, 1, False, 4.0,
+                        range_index=3, range_scale=0.001)
+    store.commit_angle(job, 0, 0.0, [ranged])
+    assert store.readings(job) == [ranged]
+    store.close()
+    with sqlite3.connect(path) as db:
+        assert db.execute("SELECT value FROM meta WHERE key='schema'").fetchone() == ("2",)
+    # Opening it again (already migrated) changes nothing.
+    again = JobStore(path)
+    assert again.readings(1) == [old] and again.readings(job) == [ranged]
+    again.close()
+
+
+def test_a_store_newer_than_this_gonio_is_refused(tmp_path: Path) -> None:
+    path = tmp_path / "new.sqlite"
+    JobStore(path).close()
+    with sqlite3.connect(path) as db:
+        db.execute("UPDATE meta SET value = '99' WHERE key = 'schema'")
+    with pytest.raises(StoreError, match="has store schema 99"):
+        JobStore(path)
+
+
 def test_a_damaged_page_is_refused_by_name_and_left_as_it_was(tmp_path: Path) -> None:
     db = tmp_path / "jobs.sqlite"
     store = JobStore(db)

@@ -34,7 +34,8 @@ key                shape / dtype           meaning
 =================  ======================  ==================================================
 ``format``         () str                  ``"gonio-brdf-basis"``
 ``version``        () int                  format version, currently 1
-``Q``              (N_ROWS, K) float64     ``U S``; rows of invalid cells are 0
+``Q``              (N_ROWS, K) float64     ``U S``; rows of invalid cells are 0 (float32 in
+                                           the shipped basis; read back as float64)
 ``S``              (K,) float64            singular values
 ``f_med``          (N_ROWS,) float64       per-row median of the training columns, 1/sr
                                            (0 at invalid cells)
@@ -48,7 +49,8 @@ key                shape / dtype           meaning
 ``grid_deg``       (4,) float              grid step and counts check: ``(step, n_th, n_td,
                                            n_pd)``; a basis from another grid is refused
 ``ph_prior``       (37, K, K) float64      optional: covariance of the coefficients along
-                                           ``ph`` per harmonic ``m = 0..36`` (see below)
+                                           ``ph`` per harmonic ``m = 0..36`` (see below;
+                                           float32 when ``Q`` is)
 =================  ======================  ==================================================
 
 Prior along ``ph`` (math.md 6)
@@ -338,14 +340,19 @@ class Basis:
         return np.asarray((weights * np.asarray(per_row, dtype=float)[rows]).sum(axis=1))
 
     # ------------------------------------------------------------------ files
-    def save(self, path: str | os.PathLike[str]) -> Path:
-        """Write the basis as ``.npz`` (layout in the module docstring); returns the path."""
+    def save(self, path: str | os.PathLike[str], dtype: type[np.floating[Any]] = np.float64,
+             ) -> Path:
+        """Write the basis as ``.npz`` (layout in the module docstring); returns the path.
+
+        ``dtype`` is that of the two large arrays, ``Q`` and ``ph_prior``: float32 halves the
+        file (the shipped basis) and :meth:`load` reads either back as float64.
+        """
         return write_npz(
             path, FORMAT_NAME, FORMAT_VERSION, self.provenance,
-            Q=self.Q, S=self.S, f_med=self.f_med, mu=self.mu, valid=self.valid,
+            Q=self.Q.astype(dtype), S=self.S, f_med=self.f_med, mu=self.mu, valid=self.valid,
             eps=np.array(self.eps), materials=np.array(self.materials, dtype=str),
             grid_deg=_GRID_SIGNATURE,
-            **({} if self.ph_prior is None else {"ph_prior": self.ph_prior}),
+            **({} if self.ph_prior is None else {"ph_prior": self.ph_prior.astype(dtype)}),
         )
 
     @classmethod
@@ -722,14 +729,21 @@ _FOLD_EXTRA = 32
 
 
 def synthetic_basis(n_components: int, progress: bool = False) -> Basis:
-    """The basis of the synthetic library alone, built once and cached.
+    """The basis of the synthetic library alone: shipped, or built once and cached.
 
-    ``<cache>/basis/synthetic-K<K>-<key>.npz``, ``<cache>`` and ``<key>`` the library's
-    (:func:`gonio.brdf.materials.library.cache_root`,
+    The one gonio ships (:mod:`gonio.brdf.reconstruction.shipped`, K = 96, the default
+    basis' base) is used when its fingerprint matches this code; any other K, or a stale
+    shipped file, is built and cached as ``<cache>/basis/synthetic-K<K>-<key>.npz``,
+    ``<cache>`` and ``<key>`` the library's (:func:`gonio.brdf.materials.library.cache_root`,
     :func:`~gonio.brdf.materials.library.library_key`).
     """
     # the library depends on models; import it only when needed
     from gonio.brdf.materials import library
+    from gonio.brdf.reconstruction import shipped
+
+    ready = shipped.shipped_basis(n_components)
+    if ready is not None:
+        return ready
 
     path = (library.cache_root() / "basis"
             / f"synthetic-K{n_components}-{library.library_key()[:16]}.npz")

@@ -113,6 +113,13 @@ def test_full_scan_with_live_progress_and_results(daemon: Daemon) -> None:
         assert gl.status_code == 200, gl.text
         doc = gl.json()
         assert doc["asset"]["version"] == "2.0" and doc["asset"]["extras"]["job_id"] == job_id
+        # What the file is (issue 26): a simulated rig's scan says so, with the headline
+        # self-estimate the daemon stored and the fit's rendered difference.
+        extras = doc["asset"]["extras"]
+        assert extras["source"] == "simulated" and extras["simulated_material"]
+        assert extras["reconstruction_error"]["predicted_log_rmse"] == pytest.approx(
+            c.get(f"/api/v1/jobs/{job_id}").json()["result"]["predicted_log_rmse"])
+        assert extras["fits"]["principled"]["rendered"]["value"] >= 0
         assert f"gonio-job-{job_id}-gltf.gltf" in gl.headers["content-disposition"]
         mt = c.get(f"/api/v1/jobs/{job_id}/export", params={"format": "mtlx"})
         assert mt.status_code == 200 and b"standard_surface" in mt.content

@@ -281,6 +281,41 @@ def test_saturation_is_flagged(bench: Bench) -> None:
     assert long.saturated and long.values[2] == FULL_SCALE
 
 
+def test_gain_stages_read_in_a_lower_range_on_the_wire(bench: Bench) -> None:
+    """A sensor with gain stages (gain 2, stages 0.2 and 0.02): a reading that saturates at
+    gain 2 is not saturated in range 1, whose gain register holds 0.2; its values are the
+    physics' counts at that gain, and range 0 writes gain 2 back."""
+    cfg = bench.sensors[0].model_copy(update={"gain_stages": [0.2, 0.02]})
+
+    async def run() -> Any:
+        light, sensor = ModbusLight(bench.light), ModbusSensor(cfg)
+        for dev in (light, sensor):
+            await dev.connect()
+        assert sensor.ranges == pytest.approx((1.0, 0.1, 0.01))
+        await light.set_on(True)
+        high = await sensor.read(0.5)
+        low = await sensor.read_in_range(0.5, 1, 1)
+        gain_in_range_1 = bench.server.sensors["S1"].gain
+        back = await sensor.read(0.01)
+        gain_back = bench.server.sensors["S1"].gain
+        with pytest.raises(ValueError, match="no range 3; it has 3"):
+            await sensor.read_in_range(0.01, 1, 3)
+        for dev in (light, sensor):
+            await dev.close()
+        return high, low, gain_in_range_1, back, gain_back
+
+    high, low, gain1, back, gain_back = asyncio.run(run())
+    assert bench.expected_counts(0.5, gain=2.0)[2] > FULL_SCALE  # gain 2 overflows blue
+    assert high.saturated and high.range_index == 0 and high.range_scale == 1.0
+    assert gain1 == pytest.approx(0.2)
+    assert not low.saturated and low.range_index == 1 and low.range_scale == pytest.approx(0.1)
+    np.testing.assert_allclose(low.values, bench.expected_counts(0.5, gain=0.2), atol=0.51)
+    # Scaled back by the range, the reading is what gain 2 would read without clipping.
+    np.testing.assert_allclose(np.asarray(low.values) / low.range_scale,
+                               bench.expected_counts(0.5, gain=2.0), atol=0.51 / 0.1)
+    assert gain_back == pytest.approx(2.0) and back.range_index == 0
+
+
 def test_lamp_out_of_band_raises_on_switch_on(bench: Bench) -> None:
     async def run() -> None:
         light = ModbusLight(bench.light)

@@ -170,3 +170,19 @@ def test_a_damaged_stored_fit_is_fitted_again(result: Path, tmp_path: Path,
     alpha_b = material["pbrMetallicRoughness"]["roughnessFactor"] ** 2
     stored = read_result(result).principled
     assert stored is not None and alpha_b == pytest.approx(stored.alpha_b, rel=0.05)
+
+
+def test_gltf_with_mesh_and_the_report(result: Path, tmp_path: Path,
+                                       capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "m.gltf"
+    assert main(["export", str(result), "-f", "gltf", "--with-mesh", "-o", str(out)]) == 0
+    doc = json.loads(out.read_text())
+    assert doc["scenes"][0]["nodes"] == [0] and "TANGENT" in (
+        doc["meshes"][0]["primitives"][0]["attributes"])
+    text = capsys.readouterr().out
+    assert "specimen brushed, measured, job 5" in text
+    assert "principled fit renders" in text and "from the reconstruction" in text
+    assert main(["export", str(result), "-f", "merl", "--with-mesh",
+                 "-o", str(tmp_path / "m.binary")]) == 2
+    assert "--with-mesh applies to --format gltf only" in capsys.readouterr().err
+    assert not (tmp_path / "m.binary").exists()

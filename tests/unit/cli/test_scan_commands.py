@@ -29,7 +29,8 @@ def test_white_reference_job_is_named_after_the_reference_not_the_specimen() -> 
 
 def test_scan_keeps_its_specimen_names() -> None:
     plan = _parse()
-    assert isinstance(plan, UniformPlan) and plan.specimen == "specimen"
+    # Issue 26: a scan without --specimen is "unnamed", and its exports say so.
+    assert isinstance(plan, UniformPlan) and plan.specimen == "unnamed"
     felt = _parse("--specimen", "felt")
     assert isinstance(felt, UniformPlan) and felt.specimen == "felt"
 

@@ -247,3 +247,12 @@ def test_adaptive_adds_rounds_until_converged() -> None:
     _rig, store, eng = _setup(budget)
     asyncio.run(eng.run())
     assert len(store.steps(1)) * 3 <= 36
+
+
+def test_saturation_in_a_sensors_only_range_fails_naming_gain_stages() -> None:
+    plan = UniformPlan(rotations=2, exposure=FAST, faults=QUICK_FAULTS)
+    rig, store, eng = _setup(plan)
+    rig.sensor("S2").saturate_next = 100  # every lit reading of S2, at every retry
+    assert asyncio.run(eng.run()) is JobState.FAILED
+    reason = store.get_job(1).reason or ""
+    assert "S2: saturated in its only range" in reason and "gain_stages" in reason

@@ -97,13 +97,19 @@ def test_dry_run_starts_where_the_last_job_left_the_stage(tmp_path: Path) -> Non
 def test_a_job_waiting_for_the_first_basis_build_says_so(tmp_path: Path,
                                                          monkeypatch: pytest.MonkeyPatch) -> None:
     from gonio.brdf.materials import library
+    from gonio.brdf.reconstruction import shipped
 
+    monkeypatch.setenv("GONIO_CACHE_DIR", str(tmp_path / "cache"))  # no default basis cached
     w = Worker(JobStore(":memory:"), lambda: None, None, tmp_path,  # type: ignore[arg-type]
                basis_provider=default_basis_provider)
     assert w.activity_report() is None
     w._set_activity("basis")
     assert w.activity_report() == ("loading the reconstruction basis", None)  # a moment only
     w._activity_since -= 5.0
+    # With the shipped synthetic basis current, the default one is a fold-in: a load.
+    assert shipped.is_current()
+    assert w.activity_report() == ("loading the reconstruction basis", None)
+    monkeypatch.setattr(shipped, "is_current", lambda: False)  # stale: the library is built
     monkeypatch.setattr(library, "build_progress", lambda: (57, 175))
     text, frac = w.activity_report()  # type: ignore[misc]
     assert "57 of 175 materials" in text and "first scan" in text

@@ -6,6 +6,7 @@ import json
 import math
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from gonio.brdf.models.principled import Principled
@@ -14,6 +15,16 @@ from gonio.export import mtlx
 BRUSHED = Principled((0.9, 0.8, 0.6), 1.0, 0.5, 0.40, 0.10, 30.0)
 PLASTIC = Principled((0.6, 0.2, 0.1), 0.0, 0.8, 0.09, 0.09, 0.0)
 PROV = {"job_id": 7, "specimen": "felt", "factored_fit": {"rel_mse": 0.02}}
+
+
+def mx_rotate(v: np.ndarray, amount_deg: float, axis: np.ndarray) -> np.ndarray:
+    """MaterialX's ``rotate3d`` as its reference implementation defines it (genglsl and genosl
+    ``mx_rotate_vector3``: Rodrigues' formula with the cross product reversed, "MaterialX
+    follows v' = v * M"), written here from that definition."""
+    a = math.radians(amount_deg)
+    axis = axis / np.linalg.norm(axis)
+    return np.asarray(v * math.cos(a) + np.cross(v, axis) * math.sin(a)
+                      + axis * np.dot(axis, v) * (1 - math.cos(a)))
 
 
 def test_mtlx_validates_and_maps_parameters(tmp_path: Path) -> None:
@@ -36,10 +47,15 @@ def test_mtlx_validates_and_maps_parameters(tmp_path: Path) -> None:
     r, a = value["specular_roughness"], value["specular_anisotropy"]
     assert r * r / math.sqrt(1 - a) == pytest.approx(0.40, rel=1e-5)  # stored as float32
     assert r * r * math.sqrt(1 - a) == pytest.approx(0.10, rel=1e-5)
-    assert value["specular_rotation"] * 360 == pytest.approx(30.0, rel=1e-5)
+    # MaterialX's rotate3d (stdlib mx_rotate_vector3): v c + (v x axis) s + axis (axis.v)(1-c),
+    # which turns the tangent x about the normal z clockwise; the result must sit at +30 deg.
+    t = mx_rotate(np.array([1.0, 0.0, 0.0]), 360 * value["specular_rotation"],
+                  np.array([0.0, 0.0, 1.0]))
+    assert math.degrees(math.atan2(t[1], t[0])) % 180 == pytest.approx(30.0, abs=1e-3)
     assert value["metalness"] == 1.0
     (material,) = [n for n in doc.getNodes() if n.getCategory() == "surfacematerial"]
     assert json.loads(material.getDocString())["job_id"] == 7
+    assert material.getAttribute("gonio_specimen") == "felt"
 
 
 def test_mtlx_dielectric_ior_from_specular() -> None:

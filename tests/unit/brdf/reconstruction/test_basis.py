@@ -375,3 +375,19 @@ def test_bases_name_their_materials_without_twofold_symmetry(tmp_path: Path) -> 
     built = build_basis([*small_library()[1:4], leaning_table()], 8)
     assert not built.half_turn_periodic
     assert built.without_twofold_symmetry == ("leaning-lobe",)
+
+
+def test_a_basis_saved_in_float32_reads_back_within_its_rounding(tmp_path: Path) -> None:
+    b = basis_mod.build_basis(small_library()[:3], 5)
+    path = b.save(tmp_path / "b32.npz", dtype=np.float32)
+    with np.load(path) as z:
+        assert z["Q"].dtype == np.float32 and z["S"].dtype == np.float64
+    back = Basis.load(path)
+    assert back.Q.dtype == np.float64
+    # float32 keeps 24 bits: a relative rounding of at most 2**-24 of each value, and an
+    # absolute one of half the subnormal spacing (2**-150) below its smallest normal value.
+    tiny = 2.0**-149
+    np.testing.assert_allclose(back.Q, b.Q, rtol=2.0**-24, atol=tiny)
+    assert back.ph_prior is not None and b.ph_prior is not None
+    np.testing.assert_allclose(back.ph_prior, b.ph_prior, rtol=2.0**-24, atol=tiny)
+    np.testing.assert_array_equal(back.S, b.S)

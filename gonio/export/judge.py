@@ -1,0 +1,295 @@
+"""Fits judged by what they render: the rendered difference of a model from a BRDF table, and a
+principled fit that minimises a rendered error.
+
+A fit's error on the BRDF table (``log_rmse`` and friends) weighs every cell of the hemispheres
+alike; a rendering is dominated by the specular highlight, which covers few cells. A principled
+fit that is good on the table can lose a plastic's gloss or a metal's brightness (issue 26), and
+its table error does not show it. So:
+
+* :func:`rendered_difference` renders the reference and the model, both as tables on gonio's
+  5 degree grid (:func:`on_grid`), in the same scenes with :mod:`gonio.brdf.pictures.render`
+  (:data:`JUDGE_VIEWS`: the sphere under three point lights and the flat swatch under a
+  flash, :data:`JUDGE_SIZE` pixels) and compares the images with
+  HDR-FLIP (Andersson et al. 2021, the ``flip-evaluator`` package; the mean over pixels and
+  views, 0 = identical, 1 = as different as can be) when it is installed, and always with the
+  relative image error ``sum |model - ref| / sum |ref|`` (L1 over all pixels and channels).
+  ``metric`` says which number is the headline.
+* :func:`fit_principled_rendered` refines a principled fit on renderings: the residuals are
+  ``sqrt(L_model / peak + eps) - sqrt(L_ref / peak + eps)`` per pixel and channel of
+  :data:`FIT_VIEWS` (``peak`` the view's brightest reference pixel, ``eps = 1e-3``): the
+  square root compresses like a display does, so the highlight's size, height and colour and
+  the diffuse colour all count. Three candidates are fitted: metallic fixed at 0 (dielectric:
+  Lambert base, specular with ``F0`` in [0.02, 0.08], index of refraction 1.33 to 1.79), fixed
+  at 1 (metal: ``F0`` = base colour, no diffuse), and fitted in [0, 1] (a blend, specular
+  bounded as for a dielectric). The better pure one is kept unless the blend's rendered
+  difference is below :data:`BLEND_MARGIN` times its own: a real surface is one or the other
+  (Burley 2012 keeps in-between values for blends, e.g. a metal under dirt or a diffuse
+  layer), and a fractional metallic that does not clearly render better is a fitting artefact:
+  fitted to a reconstruction of a brushed copper it was 0.97-0.998, which added a diffuse glow
+  where the truth is black, and, with ``specular`` near 0, an index of refraction of 1.0003.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from gonio.brdf.models import analytic as bm
+from gonio.brdf.models.factored import fit_metrics
+from gonio.brdf.models.principled import ALPHA_MAX, ALPHA_MIN, Principled
+from gonio.brdf.pictures import render
+from gonio.brdf.tables.table import BRDFTable
+
+FloatArray = NDArray[np.float64]
+
+JUDGE_VIEWS: tuple[render.View, ...] = (
+    *(render.View("sphere", lt) for lt in render.DEFAULT_SPHERE_LIGHTS),
+    render.View("swatch", render.PointLight(0.0, 0.0)),
+)
+"""Scenes of the rendered difference: the preview's point-light views (the environment view
+is left out: it costs a hundred lookups per pixel and shows the same lobes blurred)."""
+JUDGE_SIZE = 96
+"""Pixels per side of the judged images."""
+FIT_VIEWS = JUDGE_VIEWS
+FIT_SIZE = 48
+"""Pixels per side of the images the rendered fit compares (the 5 degree table holds no
+finer detail on a 48 pixel sphere)."""
+#: Rendered difference (the headline metric) above which an export warns. A good principled
+#: fit of a simulated brushed-metal scan differs from its reconstruction by HDR-FLIP 0.19 (the
+#: reconstruction's own noise and ringing, which the model rightly leaves out; it is closer to
+#: the truth than the reconstruction is); a fit that misses the lobe (brushed-metal-004) by
+#: 0.52 (bench/bench_export.py --rendered, docs/export.md).
+WARN_FLIP = 0.25
+WARN_RELATIVE = 0.5
+#: Dielectric specular bounds: F0 = 0.08 specular in [0.02, 0.08] (IOR 1.33 to 1.79).
+SPECULAR_MIN, SPECULAR_MAX = 0.25, 1.0
+_EPS = 1e-3
+
+
+def _flip() -> Any:
+    try:
+        import flip_evaluator
+    except ImportError:
+        return None
+    return flip_evaluator
+
+
+def flip_available() -> bool:
+    """Whether HDR-FLIP (the ``flip-evaluator`` package) is installed."""
+    return _flip() is not None
+
+
+def render_views(brdf: Any, views: tuple[render.View, ...] = JUDGE_VIEWS,
+                 size: int = JUDGE_SIZE) -> list[FloatArray]:
+    """Linear radiance images (size, size, 3) of ``brdf`` in ``views``, background 0."""
+    f = render.evaluator(brdf)
+    return [np.nan_to_num(render.render_view(f, v, size)) for v in views]
+
+
+@dataclass(frozen=True)
+class RenderedDifference:
+    """How different two BRDFs look in :data:`JUDGE_VIEWS`.
+
+    Attributes
+    ----------
+    metric : str
+        ``"HDR-FLIP"`` or ``"relative image error"``: which number ``value`` is.
+    value : float
+        The headline difference (``flip`` when available, else ``relative``).
+    flip : float or None
+        Mean HDR-FLIP over pixels and views, in [0, 1]; None without ``flip-evaluator``.
+    relative : float
+        ``sum |test - ref| / sum |ref|`` over all pixels, channels and views.
+    per_view : list of float
+        The headline metric per view, in the order of :data:`JUDGE_VIEWS`.
+    """
+
+    metric: str
+    value: float
+    flip: float | None
+    relative: float
+    per_view: list[float]
+
+    @property
+    def large(self) -> bool:
+        """Above the warning threshold (:data:`WARN_FLIP` or :data:`WARN_RELATIVE`)."""
+        return self.value > (WARN_FLIP if self.flip is not None else WARN_RELATIVE)
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "metric": self.metric, "value": self.value, "flip": self.flip,
+            "relative_image_error": self.relative, "per_view": self.per_view,
+            "views": [v.title() for v in JUDGE_VIEWS], "size_px": JUDGE_SIZE,
+            "meaning": "difference of renderings of the fitted model and of the reconstructed "
+                       "BRDF (sphere under three point lights, swatch under a flash): "
+                       "HDR-FLIP mean (0 identical, 1 maximal) when flip-evaluator is "
+                       "installed, else sum|model-ref|/sum|ref|",
+        }
+
+
+def difference_of_images(ref: list[FloatArray], test: list[FloatArray]) -> RenderedDifference:
+    """:class:`RenderedDifference` of two lists of linear images of the same views.
+
+    Both are scaled by one exposure, the reference's brightest pixel to 1, so HDR-FLIP sees
+    them as a viewer would see them side by side.
+    """
+    peak = max(float(np.max(r)) for r in ref) or 1.0
+    num = sum(float(np.abs(t - r).sum()) for r, t in zip(ref, test, strict=True))
+    den = sum(float(np.abs(r).sum()) for r in ref) or 1.0
+    rel_views = [float(np.abs(t - r).sum() / max(np.abs(r).sum(), 1e-30))
+                 for r, t in zip(ref, test, strict=True)]
+    flip = _flip()
+    if flip is None:
+        return RenderedDifference("relative image error", num / den, None, num / den, rel_views)
+    per: list[float] = []
+    for r, t in zip(ref, test, strict=True):
+        _, mean, _ = flip.evaluate(
+            np.ascontiguousarray(np.clip(r / peak, 0, None), dtype=np.float32),
+            np.ascontiguousarray(np.clip(t / peak, 0, None), dtype=np.float32),
+            "HDR", applyMagma=False)
+        per.append(float(mean))
+    value = float(np.mean(per))
+    return RenderedDifference("HDR-FLIP", value, value, num / den, per)
+
+
+def on_grid(model: Any) -> BRDFTable:
+    """``model`` as a table on gonio's 5 degree grid (a table stays as it is)."""
+    if isinstance(model, BRDFTable):
+        return model
+    if hasattr(model, "to_table"):  # FactoredBRDF
+        return model.to_table()
+    return bm.tabulate(model, np.float64)
+
+
+def rendered_difference(reference: Any, model: Any,
+                        ref_images: list[FloatArray] | None = None) -> RenderedDifference:
+    """Rendered difference of ``model`` from ``reference`` (module docstring).
+
+    Both are rendered from tables on gonio's 5 degree grid (:func:`on_grid`): a reconstruction
+    is such a table, and its rendering interpolates between the grid's nodes, which blurs and
+    facets a sharp highlight (an exact GGX model against its own table differs by HDR-FLIP
+    0.02 for a plastic of roughness 0.36 and 0.10 for a brushed copper with alphas 0.30 and
+    0.06); on
+    the same grid that is no difference, and what remains is the model's misfit.
+    ``ref_images`` (from :func:`render_views` of ``on_grid(reference)``) saves rendering the
+    reference again.
+    """
+    ref = ref_images if ref_images is not None else render_views(on_grid(reference))
+    return difference_of_images(ref, render_views(on_grid(model)))
+
+
+# --------------------------------------------------------------------------- the rendered fit
+#: The rendered fit's candidates: metallic fixed at 0, fixed at 1, or fitted in [0, 1].
+MODES = ("dielectric", "metal", "blend")
+#: A blend is kept only when it renders this much better than the better pure candidate.
+BLEND_MARGIN = 0.8
+
+
+def _params(x: FloatArray, mode: str, nc: int, channels: tuple[str, ...]) -> Principled:
+    """Principled parameters from a candidate's vector ``[base (nc), (metallic), (specular),
+    log alpha_x, log alpha_y, angle]`` (metallic only for a blend, specular not for a metal)."""
+    base = tuple(float(b) for b in np.clip(x[:nc], 0.0, 1.0))
+    k = nc
+    metallic = {"dielectric": 0.0, "metal": 1.0}.get(mode)
+    if metallic is None:
+        metallic = float(np.clip(x[k], 0.0, 1.0))
+        k += 1
+    specular = 0.5  # unused by a pure metal; 0.5 is the dielectric default (F0 = 0.04)
+    if mode != "metal":
+        specular = float(np.clip(x[k], SPECULAR_MIN, SPECULAR_MAX))
+        k += 1
+    ax = float(np.clip(math.exp(x[k]), ALPHA_MIN, ALPHA_MAX))
+    ay = float(np.clip(math.exp(x[k + 1]), ALPHA_MIN, ALPHA_MAX))
+    direction = math.degrees(float(x[k + 2]))
+    if ay > ax:  # the tangent is the rougher axis
+        ax, ay, direction = ay, ax, direction + 90.0
+    return Principled(base, metallic, specular, ax, ay, direction, channels)
+
+
+def _fit_candidate(start: Principled, mode: str, ref: list[FloatArray],
+                   max_nfev: int) -> Principled:
+    from scipy.optimize import least_squares
+
+    nc = len(start.base_color)
+    peaks = [max(float(np.max(r)), 1e-30) for r in ref]
+    masks = [np.any(r > 0, axis=-1) for r in ref]
+    target = np.concatenate([np.sqrt(r[m] / p + _EPS).ravel()
+                             for r, m, p in zip(ref, masks, peaks, strict=True)])
+    base0 = np.asarray(start.f0) if mode == "metal" else np.asarray(start.base_color)
+    x0_parts: list[Any] = [np.clip(base0, 0.02, 0.98)]
+    lo_parts: list[Any] = [np.zeros(nc)]
+    hi_parts: list[Any] = [np.ones(nc)]
+    if mode == "blend":
+        x0_parts.append([float(np.clip(start.metallic, 0.05, 0.95))])
+        lo_parts.append([0.0])
+        hi_parts.append([1.0])
+    if mode != "metal":
+        x0_parts.append([float(np.clip(start.specular, SPECULAR_MIN + 1e-6,
+                                       SPECULAR_MAX - 1e-6))])
+        lo_parts.append([SPECULAR_MIN])
+        hi_parts.append([SPECULAR_MAX])
+    lo_a, hi_a = math.log(ALPHA_MIN), math.log(ALPHA_MAX)
+    x0_parts.append([math.log(start.alpha_t), math.log(start.alpha_b),
+                     math.radians(start.direction_deg)])
+    lo_parts.append([lo_a, lo_a, -np.inf])
+    hi_parts.append([hi_a, hi_a, np.inf])
+    x0, lo, hi = (np.concatenate([np.asarray(v, dtype=float) for v in parts])
+                  for parts in (x0_parts, lo_parts, hi_parts))
+    x0 = np.clip(x0, lo + 1e-9, np.where(np.isfinite(hi), hi - 1e-9, hi))
+
+    def resid(x: FloatArray) -> FloatArray:
+        imgs = render_views(_params(x, mode, nc, start.channels).model(), FIT_VIEWS, FIT_SIZE)
+        pred = np.concatenate([np.sqrt(np.maximum(im[m], 0.0) / p + _EPS).ravel()
+                               for im, m, p in zip(imgs, masks, peaks, strict=True)])
+        return np.asarray(pred - target, dtype=float)
+
+    r = least_squares(resid, x0, bounds=(lo, hi), x_scale="jac", max_nfev=max_nfev,
+                      diff_step=1e-3)
+    return _params(r.x, mode, nc, start.channels)
+
+
+def fit_principled_rendered(table: BRDFTable, start: Principled, *, max_nfev: int = 60
+                            ) -> tuple[Principled, RenderedDifference]:
+    """Refine a principled fit so that it renders like ``table`` (module docstring).
+
+    Parameters
+    ----------
+    table : BRDFTable, 1/sr, three channels (other channel counts are rendered as grey and
+        are returned unchanged with their difference)
+    start : Principled
+        The table-space fit (:func:`gonio.brdf.models.principled.fit_principled`).
+    max_nfev : int
+        Residual evaluations per candidate (each renders :data:`FIT_VIEWS`).
+
+    Returns
+    -------
+    (Principled, RenderedDifference)
+        The better of the dielectric and the metal candidate, or the blend when it renders
+        clearly better (:data:`BLEND_MARGIN`), with ``metrics``:
+        the table metrics of :func:`gonio.brdf.models.factored.fit_metrics`, ``seconds``,
+        ``rendered`` (:meth:`RenderedDifference.as_dict`) and ``fit`` = "rendered".
+    """
+    t0 = time.perf_counter()
+    ref_fit = render_views(table, FIT_VIEWS, FIT_SIZE)
+    ref_judge = render_views(table)
+    if table.n_channels != 3:
+        diff = rendered_difference(table, start.model(), ref_judge)
+        return start, diff
+    judged = {}
+    for mode in MODES:
+        cand = _fit_candidate(start, mode, ref_fit, max_nfev)
+        judged[mode] = (cand, rendered_difference(table, cand.model(), ref_judge))
+    pure = min((judged["dielectric"], judged["metal"]), key=lambda c: c[1].value)
+    blend = judged["blend"]
+    p, diff = blend if blend[1].value < BLEND_MARGIN * pure[1].value else pure
+    quality: dict[str, Any] = dict(fit_metrics(bm.tabulate(p.model(), np.float64), table))
+    quality.update(seconds=round(time.perf_counter() - t0 + float(
+        start.metrics.get("seconds", 0.0)), 3), rendered=diff.as_dict(), fit="rendered",
+        table_fit_log_rmse=start.metrics.get("log_rmse"))
+    return Principled(p.base_color, p.metallic, p.specular, p.alpha_t, p.alpha_b,
+                      p.direction_deg, p.channels, quality), diff

@@ -1,0 +1,172 @@
+"""What an exported file says about itself: one JSON-ready record, the same in every format.
+
+Every export carries :func:`export_provenance`: in the glTF ``asset.extras`` and the material's
+``extras``, in the MaterialX material's ``doc`` string and as ``gonio_*`` attributes, in the
+``.npz`` formats' ``provenance`` entry, and in a ``.json`` sidecar beside a MERL file (whose
+layout has no room). Keys (docs/export.md lists them with examples):
+
+``gonio_provenance``
+    Version of this record (:data:`VERSION`).
+``specimen``, ``specimen_named``
+    The name given at the scan; ``"unnamed"`` and ``false`` when none was given (older gonio
+    versions wrote the placeholder ``specimen``, read as unnamed too).
+``source``
+    ``"simulated"`` (a simulated rig; ``simulated_material`` then holds the material's recipe)
+    or ``"measured"``.
+``reconstruction_error``
+    The headline self-estimate ``predicted_log_rmse`` with its meaning and unit.
+``rig``, ``plan``, ``calibration``
+    The rig's name and the pairs measured, the plan (design, rotations, arc), the calibration's
+    reference, albedo and date.
+``colour_space``
+    What the R, G, B numbers are (:data:`COLOUR_STATEMENT` unless the result states another).
+``orientation``
+    How the anisotropy direction is referred to the specimen and to a mesh (:data:`ORIENTATION`).
+``fits``
+    Each model's fit error against the reconstruction: table metrics and the rendered
+    difference (:mod:`gonio.export.judge`).
+``warnings``
+    Plain sentences: large rendered differences, an averaged-away anisotropy, ...
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping
+from typing import Any
+
+from gonio import __version__
+
+VERSION = 1
+#: The specimen name of a scan started without one.
+UNNAMED = "unnamed"
+#: The placeholder older gonio versions stored when no name was given.
+_OLD_PLACEHOLDER = "specimen"
+
+COLOUR_STATEMENT = (
+    "uncalibrated sensor RGB: the rig's sensors' R, G, B channels, each scaled to 1/sr by a "
+    "white reference, written unchanged as linear sRGB factors; no colour calibration maps "
+    "them to sRGB primaries or a white point"
+)
+"""What the colour channels of an export are today. A result whose provenance has a
+``colour_space`` entry (set by colour calibration) states that instead."""
+
+ORIENTATION: dict[str, str] = {
+    "specimen_frame": "x = the reference mark on the specimen holder (+u of the specimen), "
+                      "z = the surface normal, y = z cross x (right-handed)",
+    "direction": "the anisotropy direction is the azimuth of the rougher GGX axis (the one the "
+                 "highlight stretches along), counter-clockwise from x seen from above, in "
+                 "[0, 180) degrees",
+    "mesh": "put the material on a mesh whose tangent (glTF TANGENT.xyz, MaterialX Tworld) "
+            "runs along the specimen's x, with bitangent = normal cross tangent (glTF "
+            "TANGENT.w = +1); a mesh without tangents leaves the direction to the viewer's "
+            "choice of tangent (glTF: derived from the TEXCOORD_0 u direction)",
+}
+
+LOG_RMSE_MEANING = (
+    "predicted_log_rmse: the reconstruction's own estimate of its error against the true "
+    "material, the cosine-weighted RMS difference of log(1 + f cos theta_i) over the "
+    "hemispheres (Löw et al. 2012; f in 1/sr), dimensionless; 0 is a perfect match, 0.05 is "
+    "about a 5 % error where a rendering is bright. Calibrated on materials held out of the "
+    "basis; within a factor of 2 of the truth on about 3 scans in 4 (docs/science.md 7.1)"
+)
+
+
+def _json(value: Any) -> Any:
+    """A provenance attribute that may hold JSON text, decoded (text that is not JSON stays)."""
+    if isinstance(value, str):
+        try:
+            return json.loads(value)
+        except ValueError:
+            return value
+    return value
+
+
+def specimen_name(name: Any) -> tuple[str, bool]:
+    """``(name, named)``: the given name, or :data:`UNNAMED` and False when there is none."""
+    text = str(name or "").strip()
+    if not text or text in (_OLD_PLACEHOLDER, UNNAMED):
+        return UNNAMED, False
+    return text, True
+
+
+def _rig_summary(rig: Any) -> dict[str, Any] | None:
+    """The rig's lights, sensors, pair count and stage range (the whole rig snapshot stays in
+    the result file, :class:`gonio.rigdescription.RigDescription`)."""
+    rig = _json(rig)
+    if not isinstance(rig, Mapping):
+        return None
+    out: dict[str, Any] = {}
+    for part in ("lights", "sensors"):
+        items = rig.get(part)
+        if isinstance(items, list):
+            out[part] = [i.get("name") for i in items if isinstance(i, Mapping)]
+    if isinstance(rig.get("pairs"), list):
+        out["n_pairs"] = len(rig["pairs"])
+    if "stage_min_deg" in rig and "stage_max_deg" in rig:
+        out["stage_deg"] = [rig["stage_min_deg"], rig["stage_max_deg"]]
+    return out
+
+
+def _calibration_summary(cal: Any, warning: Any) -> dict[str, Any]:
+    cal = _json(cal)
+    out: dict[str, Any] = {"calibrated": False, "reference": None, "date": None}
+    if isinstance(cal, Mapping):
+        out.update(
+            calibrated=bool(cal.get("pairs")), reference=cal.get("source"),
+            reference_albedo=cal.get("reference_albedo"), exposure_s=cal.get("exposure_s"),
+            date=cal.get("created"),
+        )
+    if warning:
+        out["warning"] = warning
+    return out
+
+
+def export_provenance(attrs: Mapping[str, Any], metrics: Mapping[str, Any],
+                      provenance: Mapping[str, Any], fits: Mapping[str, Any],
+                      warnings: list[str] | None = None) -> dict[str, Any]:
+    """The record every export carries (module docstring for its keys).
+
+    Parameters
+    ----------
+    attrs, metrics, provenance : mappings
+        The result file's root attributes, ``/metrics`` and ``/provenance``
+        (:class:`gonio.results.ResultFile`).
+    fits : mapping
+        ``{"principled": {...}, "factored": {...}}``: each model's fit errors.
+    warnings : list of str, optional
+    """
+    name, named = specimen_name(attrs.get("specimen"))
+    truth = _json(provenance.get("true_material"))
+    v = metrics.get("predicted_log_rmse")
+    rec_error: dict[str, Any] = {
+        "predicted_log_rmse": float(v) if isinstance(v, int | float) else None,
+        "meaning": LOG_RMSE_MEANING,
+    }
+    if not isinstance(v, int | float):
+        rec_error["note"] = "this result has no predicted_log_rmse (an older result, or no " \
+                            "pair could be left out)"
+    plan = _json(provenance.get("plan"))
+    out: dict[str, Any] = {
+        "gonio_provenance": VERSION,
+        "generator": f"gonio {attrs.get('gonio_version') or __version__}",
+        "exported_by": f"gonio {__version__}",
+        "job_id": attrs.get("job_id"),
+        "specimen": name, "specimen_named": named,
+        "source": "simulated" if truth else "measured",
+        "measured_at": attrs.get("created"),
+        "reconstruction_error": rec_error,
+        "rig": _rig_summary(provenance.get("rig")),
+        "plan": plan if isinstance(plan, Mapping) else None,
+        "calibration": _calibration_summary(provenance.get("calibration"),
+                                            provenance.get("calibration_warning")),
+        "colour_space": str(provenance.get("colour_space") or COLOUR_STATEMENT),
+        "orientation": dict(ORIENTATION),
+        "fits": dict(fits),
+        "warnings": list(warnings or []),
+    }
+    if truth:
+        out["simulated_material"] = truth
+    if provenance.get("arc_warning"):
+        out["warnings"].append(str(provenance["arc_warning"]))
+    return out

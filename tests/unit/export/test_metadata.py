@@ -1,0 +1,137 @@
+"""What an export says about itself, read back from each format (issue 26 item 3)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from gonio.brdf.materials import library
+from gonio.brdf.models import analytic as bm
+from gonio.calibration import CalibratedScan
+from gonio.cli import main
+from gonio.export import export_result, fit_all, merl
+from gonio.export.metadata import COLOUR_STATEMENT, specimen_name
+from gonio.results import write_result
+
+PLAN = {"kind": "uniform", "specimen": "specimen", "rotations": 8, "span_deg": 180.0}
+RIG = {"stage_min_deg": -180.0, "stage_max_deg": 180.0, "lights": [{"name": "L1"}],
+       "sensors": [{"name": "S1"}], "pairs": [{"light": "L1", "sensor": "S1"}]}
+CAL = {"pairs": [{"light": "L1", "sensor": "S1", "factor": [1.0, 1.0, 1.0]}],
+       "reference_albedo": 0.99, "exposure_s": 0.01, "source": "job 3: spectralon-99",
+       "created": "2026-11-20T08:00:00Z"}
+
+
+def _samples() -> CalibratedScan:
+    return CalibratedScan(pairs=[("L1", "S1")], light_dirs=np.array([[0.0, 0.0, 1.0]]),
+                          sensor_dirs=np.array([[0.0, 0.0, 1.0]]),
+                          stage_angles_deg=np.array([0.0]), values=np.ones((1, 1, 3)),
+                          channels=("R", "G", "B"))
+
+
+def _result(path: Path, name: str, specimen: str, simulated: bool) -> Path:
+    table = bm.tabulate(library.get_material(name))
+    fits = fit_all(table)
+    prov: dict[str, Any] = {"plan": json.dumps(PLAN), "rig": json.dumps(RIG),
+                            "calibration": json.dumps(CAL)}
+    if simulated:
+        prov["true_material"] = json.dumps({"library": name})
+    return write_result(
+        path, job_id=9, specimen=specimen, kind="uniform", readings=[], samples=_samples(),
+        table=table, metrics={"predicted_error": 0.107, "predicted_log_rmse": 0.053},
+        provenance=prov, factored=fits.factored, principled=fits.principled)
+
+
+@pytest.fixture(scope="module")
+def brushed(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A simulated scan's result of a brushed metal, scanned without a specimen name (the
+    placeholder older gonio versions stored)."""
+    return _result(tmp_path_factory.mktemp("r") / "job-9.h5", "brushed-metal-003", "specimen",
+                   simulated=True)
+
+
+def _check(meta: dict[str, Any]) -> None:
+    assert meta["gonio_provenance"] == 1
+    assert meta["reconstruction_error"]["predicted_log_rmse"] == pytest.approx(0.053)
+    assert "cosine-weighted" in meta["reconstruction_error"]["meaning"]
+    assert meta["specimen"] == "unnamed" and meta["specimen_named"] is False
+    assert meta["source"] == "simulated" and meta["simulated_material"] == {
+        "library": "brushed-metal-003"}
+    assert meta["colour_space"] == COLOUR_STATEMENT
+    assert "holder" in meta["orientation"]["specimen_frame"]
+    assert "TANGENT.w = +1" in meta["orientation"]["mesh"]
+    assert meta["calibration"]["reference"] == "job 3: spectralon-99"
+    assert meta["calibration"]["date"] == "2026-11-20T08:00:00Z"
+    assert meta["rig"]["lights"] == ["L1"] and meta["rig"]["n_pairs"] == 1
+    assert meta["plan"]["rotations"] == 8
+    rendered = meta["fits"]["principled"]["rendered"]
+    assert rendered["metric"] in ("HDR-FLIP", "relative image error")
+    assert 0 <= rendered["value"] < 1
+    assert meta["fits"]["factored"]["rendered"]["value"] >= 0
+
+
+def test_gltf_carries_the_record(brushed: Path, tmp_path: Path) -> None:
+    doc = json.loads(export_result(brushed, "gltf", tmp_path / "x.gltf").read_text())
+    _check(doc["asset"]["extras"])
+    _check(doc["materials"][0]["extras"])
+    assert doc["materials"][0]["name"] == "unnamed_job9"
+
+
+def test_mtlx_carries_the_record(brushed: Path, tmp_path: Path) -> None:
+    import MaterialX
+
+    doc = MaterialX.createDocument()
+    MaterialX.readFromXmlFile(doc, str(export_result(brushed, "mtlx", tmp_path / "x.mtlx")))
+    (material,) = [n for n in doc.getNodes() if n.getCategory() == "surfacematerial"]
+    _check(json.loads(material.getDocString()))
+    assert material.getAttribute("gonio_source") == "simulated"
+    assert float(material.getAttribute("gonio_predicted_log_rmse")) == pytest.approx(0.053)
+    assert material.getAttribute("gonio_colour_space") == COLOUR_STATEMENT
+
+
+@pytest.mark.parametrize("fmt", ["factored", "table"])
+def test_npz_formats_carry_the_record(brushed: Path, tmp_path: Path, fmt: str) -> None:
+    path = export_result(brushed, fmt, tmp_path / f"x.{fmt}.npz")
+    with np.load(path) as z:
+        _check(json.loads(str(z["provenance"])))
+
+
+def test_merl_sidecar_carries_the_record_and_the_averaging(brushed: Path, tmp_path: Path,
+                                                           capsys: pytest.CaptureFixture[str]
+                                                           ) -> None:
+    out = tmp_path / "x.binary"
+    assert main(["export", str(brushed), "-f", "merl", "-o", str(out)]) == 0
+    side = json.loads(merl.sidecar_path(out).read_text())
+    _check(side)
+    assert side["merl"]["azimuthally_averaged"] is True
+    # The brushed metal is far from its azimuthal average; the sidecar and the CLI say so.
+    assert side["merl"]["anisotropy_lost"] > merl.ANISOTROPY_WARN
+    assert any("anisotropic" in w for w in side["warnings"])
+    text = capsys.readouterr().out
+    assert "averaged over azimuth" in text and "warning:" in text and "anisotropic" in text
+    assert "unnamed (no specimen name was given" in text
+
+
+def test_isotropic_tables_lose_nothing_to_merl() -> None:
+    table = bm.tabulate(bm.LobeSum((bm.Lambert((0.2, 0.3, 0.4)), bm.GGX(
+        0.2, 0.2, bm.SchlickFresnel(0.04), "separable"))), np.float64)
+    assert merl.anisotropy_lost(table) < 1e-6
+    assert "warnings" not in merl.merl_sidecar(table, {})
+
+
+def test_measured_and_named(tmp_path: Path) -> None:
+    path = _result(tmp_path / "job-9.h5", "plastic-003", "felt #2", simulated=False)
+    meta = json.loads(export_result(path, "gltf", tmp_path / "x.gltf").read_text())
+    extras = meta["asset"]["extras"]
+    assert extras["source"] == "measured" and "simulated_material" not in extras
+    assert extras["specimen"] == "felt #2" and extras["specimen_named"] is True
+
+
+def test_specimen_names() -> None:
+    assert specimen_name(None) == ("unnamed", False)
+    assert specimen_name("  ") == ("unnamed", False)
+    assert specimen_name("specimen") == ("unnamed", False)  # older gonio's silent placeholder
+    assert specimen_name("copper 3") == ("copper 3", True)
