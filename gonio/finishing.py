@@ -216,6 +216,12 @@ def finish_job(job_id: int, plan: AnyPlan, how: Finishing) -> dict[str, Any]:
         provenance["arc_warning"] = arc
     how.checkpoint(job_id, "the export fits")
     fit_table = colour.pop("fit_table")
+    if "colour_space" in fit_table.provenance:
+        # The export fits are linear sRGB from XYZ: every export says so (gonio.export.metadata
+        # reads this entry instead of its "uncalibrated sensor RGB" statement).
+        from gonio.result_colour import colour_statement
+
+        provenance["colour_space"] = colour_statement(fit_table.provenance["colour_space"])
     fits = _fits(job_id, fit_table) if how.fit_exports else None
     if fits is not None:
         metrics.update(

@@ -281,6 +281,16 @@ def linear_srgb(res: ResultFile) -> tuple[BRDFTable, dict[str, Any]] | None:
     return table, dict(table.provenance["colour_space"])
 
 
+def colour_statement(record: Mapping[str, Any]) -> str:
+    """One sentence for a result's ``colour_space`` provenance from a conversion record
+    (:func:`gonio.brdf.colour.exportspace.conversion_record`): what export readers see in
+    every exported file's ``colour_space`` (gonio.export.metadata)."""
+    return (f"{record['space']}, computed from CIE XYZ ({record['xyz_conditions']}) of "
+            f"{record['channels_to_xyz']} by {record['library']}, "
+            f"{record['chromatic_adaptation']} adaptation to D65"
+            + (", negative components clamped at 0" if record.get("clamped_at_zero") else ""))
+
+
 def uncalibrated_record() -> dict[str, Any]:
     """What an export states for a result without colour: its values' space."""
     return {"space": UNCALIBRATED_SPACE,

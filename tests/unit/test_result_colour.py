@@ -107,3 +107,14 @@ def test_stored_standard_errors(tmp_path: Path) -> None:
                  "D65,10,MA98,45,15,50,1,2\n")
     std = read_standard_csv(p)
     assert std.lab is not None and std.lab[0] == pytest.approx([50, 1, 2])
+
+
+def test_colour_statement_names_the_space_conditions_and_source() -> None:
+    from gonio.brdf.colour.exportspace import conversion_record
+    from gonio.result_colour import colour_statement
+
+    text = colour_statement({**conversion_record(ViewingConditions("D50", "2"),
+                                                 "spectral bands (31)"),
+                             "clamped_at_zero": True})
+    assert text.startswith("linear sRGB (Rec. 709 primaries, D65)")
+    assert "(D50/2)" in text and "spectral bands (31)" in text and "clamped at 0" in text

@@ -93,6 +93,8 @@ def test_spectral_sim_scan_gives_cielab(tmp_path: Path, basis: Any) -> None:
     base = json.loads(gltf.read_text())["materials"][0]["pbrMetallicRoughness"][
         "baseColorFactor"]
     assert base[0] > base[2] * 2 and base[1] > base[2] * 1.5, base  # R, G well above B
+    stated = json.loads(gltf.read_text())["asset"]["extras"]["colour_space"]
+    assert stated.startswith("linear sRGB") and "D65/10" in stated and "spectral bands" in stated
     table = export_result(svc.result_path(scan_id), "table", tmp_path / "y.npz")
     from gonio.brdf.tables.table import BRDFTable
 
