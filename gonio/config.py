@@ -261,6 +261,23 @@ class LightConfig(_Device):
     """Communication watchdog timeout written to ``registers.watchdog`` (if mapped), seconds."""
 
 
+class ColourCalibrationConfig(_Strict):
+    """``[sensors.colour_calibration]``: a chart colour calibration of a non-spectral sensor.
+
+    Written by ``gonio colour-chart CHART.csv`` (docs/colour.md): ``XYZ = matrix @ c`` for the
+    sensor's reflectance factors ``c`` (one matrix column per channel), fitted for one
+    illuminant and observer.
+    """
+
+    matrix: Annotated[list[list[float]], Field(min_length=3, max_length=3)]
+    illuminant: Literal["D65", "D50", "A", "C", "D55", "D75", "FL2", "FL11"] = "D65"
+    observer: Literal["10", "2"] = "10"
+    residual_median_de00: Annotated[float, Field(ge=0)] | None = None
+    residual_max_de00: Annotated[float, Field(ge=0)] | None = None
+    n_patches: Annotated[int, Field(ge=0)] = 0
+    source: str = ""
+
+
 class SensorConfig(_Device):
     """One ``[[sensors]]`` entry.
 
@@ -280,6 +297,49 @@ class SensorConfig(_Device):
     gain_stages: list[Annotated[float, Field(gt=0)]] = Field(default_factory=list)
     min_exposure_s: Annotated[float, Field(gt=0)] = 1e-4
     max_exposure_s: Annotated[float, Field(gt=0)] = 10.0
+    # Colour (docs/colour.md): a spectral sensor's bands, or an RGB sensor's chart calibration.
+    wavelengths_nm: list[Annotated[float, Field(gt=0, lt=5000)]] | None = None
+    """Band centre of each channel, nm (a spectral sensor)."""
+    bandwidths_nm: list[Annotated[float, Field(gt=0, lt=2000)]] | None = None
+    """Full width at half maximum of each band, nm (default: the spacing of the centres)."""
+    response_nm: list[Annotated[float, Field(gt=0, lt=5000)]] | None = None
+    """Wavelengths of a measured response table, nm, increasing (replaces the Gaussian bands)."""
+    responses: list[list[Annotated[float, Field(ge=0)]]] | None = None
+    """Relative response of each channel at ``response_nm``: one row per channel."""
+    colour_calibration: ColourCalibrationConfig | None = None
+
+    @model_validator(mode="after")
+    def _check_colour(self) -> SensorConfig:
+        n = len(self.channels)
+        for key in ("wavelengths_nm", "bandwidths_nm", "responses"):
+            v = getattr(self, key)
+            if v is not None and len(v) != n:
+                raise ValueError(f"{key} has {len(v)} entries for {n} channels {self.channels}; "
+                                 "give one per channel")
+        if (self.bandwidths_nm or self.responses is not None) and self.wavelengths_nm is None:
+            raise ValueError("bandwidths_nm and responses describe spectral bands: give "
+                             "wavelengths_nm (each channel's band centre) too")
+        if (self.responses is None) != (self.response_nm is None):
+            raise ValueError("a response table needs both response_nm and responses")
+        if self.response_nm is not None:
+            if any(b <= a for a, b in zip(self.response_nm, self.response_nm[1:], strict=False)):
+                raise ValueError("response_nm must increase")
+            for row in self.responses or []:
+                if len(row) != len(self.response_nm):
+                    raise ValueError(f"each responses row needs {len(self.response_nm)} values "
+                                     "(one per response_nm)")
+                if not any(x > 0 for x in row):
+                    raise ValueError("a responses row is all zero: every channel must respond "
+                                     "somewhere")
+        cal = self.colour_calibration
+        if cal is not None:
+            if self.wavelengths_nm is not None:
+                raise ValueError("a spectral sensor (wavelengths_nm) gets its colour from its "
+                                 "bands; drop colour_calibration or wavelengths_nm")
+            if any(len(row) != n for row in cal.matrix):
+                raise ValueError(f"colour_calibration.matrix needs 3 rows of {n} numbers (one "
+                                 f"per channel {self.channels}); fit it with gonio colour-chart")
+        return self
 
     @model_validator(mode="after")
     def _check(self) -> SensorConfig:

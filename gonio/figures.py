@@ -37,6 +37,9 @@ def describe_material(brdf: Any) -> dict[str, Any] | None:
     if isinstance(brdf, BRDFTable):
         src = brdf.provenance.get("file") or brdf.provenance.get("path")
         return {"name": brdf.name, "table_file": str(src)} if src else None
+    bands = getattr(brdf, "bands", None)
+    if bands is not None and hasattr(brdf, "spectral_eval"):  # gonio.sim.spectral
+        return {"name": str(brdf.name), "spectral": str(brdf.name), "bands": bands.as_dict()}
     try:
         data = bm.to_dict(brdf)
     except Exception:  # an object that is not a model dataclass: nothing to record
@@ -53,6 +56,11 @@ def material_from_description(desc: dict[str, Any]) -> Any:
             return bm.from_dict(desc["model"])
         if "table_file" in desc:
             return BRDFTable.load(desc["table_file"])
+        if "spectral" in desc:
+            from gonio.brdf.colour.spectral import SpectralBands
+            from gonio.sim.spectral import spectral_specimen
+
+            return spectral_specimen(desc["spectral"], SpectralBands.from_dict(desc["bands"]))
     except (ValueError, OSError) as exc:
         raise FigureError(f"the true material {desc.get('name')!r} cannot be rebuilt: {exc}"
                           ) from None
@@ -90,9 +98,15 @@ def load_input(path: str | os.PathLike[str], label: str | None = None,
     name = label or f"job {res.attrs.get('job_id')}: {res.attrs.get('specimen')}"
     rows: list[tuple[str, Any]] = []
     truth = true_material(res) if with_truth else None
+    # A result with colour (spectral bands, a chart calibration) is shown in linear sRGB
+    # computed from XYZ (docs/colour.md), not as its first three channels.
+    from gonio.result_colour import linear_srgb, srgb_view
+
+    srgb = linear_srgb(res)
     if truth is not None:
-        rows.append((f"truth: {getattr(truth, 'name', 'simulated')}", truth))
-    rows.append((f"{name} (reconstruction)", res.table))
+        rows.append((f"truth: {getattr(truth, 'name', 'simulated')}",
+                     truth if srgb is None else srgb_view(res, truth)))
+    rows.append((f"{name} (reconstruction)", res.table if srgb is None else srgb[0]))
     return rows
 
 

@@ -183,6 +183,7 @@ def finish_job(job_id: int, plan: AnyPlan, how: Finishing) -> dict[str, Any]:
     # (reconstruct's rho="scan", docs/science.md 7.3); settings["prior_rho"] says which.
     rec = reconstruct(basis, grid.cells, grid.ph_lab, grid.stage_angles,
                       np.maximum(grid.values, 0.0), channels=channels, name=job.specimen)
+    colour = _colour(rec, how, [p.sensor for p in pairs], bool(cal.pairs))
     metrics = {
         "rel_sample_error": rec.rel_sample_error,
         "estimated_error": rec.estimated_error,
@@ -214,7 +215,14 @@ def finish_job(job_id: int, plan: AnyPlan, how: Finishing) -> dict[str, Any]:
         summary["arc_warning"] = arc
         provenance["arc_warning"] = arc
     how.checkpoint(job_id, "the export fits")
-    fits = _fits(job_id, rec.table) if how.fit_exports else None
+    fit_table = colour.pop("fit_table")
+    if "colour_space" in fit_table.provenance:
+        # The export fits are linear sRGB from XYZ: every export says so (gonio.export.metadata
+        # reads this entry instead of its "uncalibrated sensor RGB" statement).
+        from gonio.result_colour import colour_statement
+
+        provenance["colour_space"] = colour_statement(fit_table.provenance["colour_space"])
+    fits = _fits(job_id, fit_table) if how.fit_exports else None
     if fits is not None:
         metrics.update(
             factored_rel_mse=fits.factored.metrics["rel_mse"],
@@ -233,10 +241,37 @@ def finish_job(job_id: int, plan: AnyPlan, how: Finishing) -> dict[str, Any]:
         rel_sample_error=rec.rel_sample_error, estimated_error=rec.estimated_error,
         settings=rec.settings, metrics=metrics, provenance=provenance,
         factored=fits.factored if fits else None,
-        principled=fits.principled if fits else None,
+        principled=fits.principled if fits else None, colour=colour,
     )
     summary.update(result_path=relative, **metrics)
     return summary
+
+
+def _colour(rec: Any, how: Finishing, sensors: list[str], calibrated: bool) -> dict[str, Any]:
+    """The result's ``/colour`` group (docs/colour.md); a spectral sensor's band centres go on
+    the reconstructed table (``rec`` is changed in place: its table gains the wavelengths).
+    Its ``fit_table`` entry (taken out before writing) is the table the export fits are made
+    of: linear sRGB when the channels have colour (``result_colour.table_for_fits``).
+
+    Colour is a by-product: anything wrong with it is stored as the group's ``error`` and the
+    measurement is kept.
+    """
+    from gonio.brdf.colour.errors import ColourError
+    from gonio.brdf.tables.table import BRDFTable
+    from gonio.result_colour import colour_group, colour_source, table_for_fits
+
+    try:
+        source = colour_source(how.provenance.get("rig_config"), sensors)
+    except (ColourError, ValueError, KeyError, TypeError) as exc:
+        return {"source": {}, "fit_table": rec.table,
+                "error": f"the rig config's colour description is unusable: {exc}"}
+    centres = source.get("bands", {}).get("centres_nm")
+    if centres is not None and len(centres) == rec.table.n_channels:
+        t = rec.table
+        object.__setattr__(rec, "table", BRDFTable.trusted(
+            np.asarray(t.values), t.channels, t.name, centres, t.provenance))
+    return {**colour_group(rec.table, source, calibrated),
+            "fit_table": table_for_fits(rec.table, source, calibrated)}
 
 
 def result_relpath(job_id: int) -> str:

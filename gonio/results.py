@@ -21,7 +21,12 @@ Layout (also in ``docs/engine.md``; strings are UTF-8, JSON attributes are strin
     /reconstruction           absent for calibration jobs
         values (C, 72, 18, 18, 36) f4   f[c, i_ph, i_th, i_td, i_pd], 1/sr, NaN = invalid cell
         channels (C,) str     coefficients (C, K, 72) f8
+        wavelengths_nm (C,) f8                        spectral sensors only: band centres
         attrs: rel_sample_error, estimated_error (fractions), settings (JSON)
+    /colour                   absent before colour existed; see docs/colour.md
+        attrs: source (JSON: how channels become XYZ: {"bands": ...}, {"calibration": ...}
+               or {} for uncalibrated sensor RGB), report (JSON: the colour report at the
+               default instruments under D65/10, written when the job finished)
     /factored                 the factored fit of the reconstruction
                               (000; gonio.brdf.models.factored)
         rho_d (C,) rho_s (C,) D (18, 72) F (C, 18) G (19, 72) f8, channels (C,) str,
@@ -91,6 +96,8 @@ class ResultFile:
     provenance: dict[str, Any]
     factored: FactoredBRDF | None = None
     principled: Principled | None = None
+    #: The ``/colour`` group's attributes, JSON decoded ({} when the file has none).
+    colour: dict[str, Any] | None = None
 
 
 _STR = h5py.string_dtype("utf-8")
@@ -117,8 +124,11 @@ def write_result(
     provenance: Mapping[str, Any] | None = None,
     factored: FactoredBRDF | None = None,
     principled: Principled | None = None,
+    colour: Mapping[str, Any] | None = None,
 ) -> Path:
     """Write a result file atomically (to a temporary name, then renamed). Returns the path.
+
+    ``colour`` holds the ``/colour`` group's attributes (each stored as JSON).
 
     The HDF5 file is built in memory and its bytes written with plain file I/O: HDF5 never
     writes to the disk itself. A disk that fills during HDF5's own writes left an open file
@@ -137,7 +147,7 @@ def write_result(
         job_id=job_id, specimen=specimen, kind=kind, readings=readings, samples=samples,
         table=table, coefficients=coefficients, rel_sample_error=rel_sample_error,
         estimated_error=estimated_error, settings=settings, metrics=metrics,
-        provenance=provenance, factored=factored, principled=principled)
+        provenance=provenance, factored=factored, principled=principled, colour=colour)
     tmp = out.with_name(out.name + ".part")
     try:
         with open(tmp, "wb") as fh:
@@ -168,6 +178,7 @@ def _result_image(
     provenance: Mapping[str, Any] | None,
     factored: FactoredBRDF | None,
     principled: Principled | None,
+    colour: Mapping[str, Any] | None = None,
 ) -> bytes:
     """The bytes of a result file (the layout above), built in memory by HDF5's core
     driver without a backing store."""
@@ -213,11 +224,17 @@ def _result_image(
             r.create_dataset("channels", data=_strs(table.channels), dtype=_STR)
             if coefficients is not None:
                 r["coefficients"] = np.asarray(coefficients, dtype=float)
+            if table.wavelengths_nm is not None:
+                r["wavelengths_nm"] = np.asarray(table.wavelengths_nm, dtype=float)
             r.attrs["rel_sample_error"] = float(rel_sample_error or 0.0)
             r.attrs["estimated_error"] = float(estimated_error or 0.0)
             r.attrs["settings"] = json.dumps(dict(settings or {}), default=str)
             r.attrs["name"] = table.name
 
+        if colour is not None:
+            c = f.create_group("colour")
+            for k, v in colour.items():
+                c.attrs[k] = json.dumps(v, default=str)
         if factored is not None:
             write_factored_group(f, factored)
         if principled is not None:
@@ -379,15 +396,29 @@ def _read_open(p: Path, f: h5py.File) -> ResultFile:
     if "reconstruction" in f:
         r = f["reconstruction"]
         ra = _attr_dict(r.attrs)
+        wl = r["wavelengths_nm"][()].tolist() if "wavelengths_nm" in r else None
         table = BRDFTable(r["values"][()], tuple(_decode(r["channels"][()])),
-                          str(ra.get("name", attrs.get("specimen", "result"))))
+                          str(ra.get("name", attrs.get("specimen", "result"))), wl)
         rel, est = float(ra["rel_sample_error"]), float(ra["estimated_error"])
         settings = json.loads(ra.get("settings", "{}"))
     metrics = _attr_dict(f["metrics"].attrs)
     provenance = _attr_dict(f["provenance"].attrs)
     factored, principled = _read_fits(f)
+    colour = _read_colour(f)
     return ResultFile(attrs, readings, samples, table, rel, est, settings, metrics, provenance,
-                      factored, principled)
+                      factored, principled, colour)
+
+
+def _read_colour(f: h5py.File) -> dict[str, Any]:
+    """The ``/colour`` group's attributes; a damaged group reads as absent (with a warning):
+    colour can be computed again from the reconstruction."""
+    if "colour" not in f:
+        return {}
+    try:
+        return {k: json.loads(v) for k, v in _attr_dict(f["colour"].attrs).items()}
+    except (TypeError, ValueError) as exc:
+        _log.warning("%s: /colour is damaged (%r); ignoring it", f.filename, exc)
+        return {}
 
 
 class ResultCache:

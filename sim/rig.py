@@ -144,6 +144,10 @@ def resolve_material(material: str | os.PathLike[str] | BRDFLike | None) -> BRDF
     text = os.fspath(material)
     if text.endswith(".npz") or Path(text).is_file():
         return BRDFTable.load(text)
+    from gonio.sim.spectral import SPECTRAL_MATERIALS, spectral_specimen
+
+    if text in SPECTRAL_MATERIALS:  # read by a 31-band spectrometer (docs/colour.md)
+        return spectral_specimen(text)
     # An unknown name raises the library's own ValueError, which suggests close names.
     return library.get_material(text)
 
@@ -415,6 +419,10 @@ class SimRig:
             for k, (name, d) in enumerate(zip(self.light_names, o.lights, strict=True))
         ]
         first = len(lights) + 1
+        # A spectral specimen is read by spectral sensors: their bands go in the config.
+        bands = getattr(self.specimen.brdf, "bands", None)
+        spectral: dict[str, Any] = {} if bands is None else {
+            "wavelengths_nm": list(bands.centres_nm), "bandwidths_nm": list(bands.widths_nm)}
         sensors = [
             SensorConfig(
                 name=name,
@@ -428,6 +436,7 @@ class SimRig:
                 gain_stages=list(SENSOR_GAIN_STAGES),
                 min_exposure_s=1e-4,
                 max_exposure_s=5.0,
+                **spectral,
             )
             for k, (name, d) in enumerate(zip(self.sensor_names, o.sensors, strict=True))
         ]

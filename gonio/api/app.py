@@ -48,6 +48,7 @@ from gonio.api.errors import document_errors
 from gonio.api.events import HEARTBEAT_S, StreamCloser
 from gonio.api.limits import LimitExceeded
 from gonio.api.settings import ApiSettings, install
+from gonio.brdf.colour.errors import ColourError
 from gonio.brdf.design.errors import DesignError, FeasibilityError
 from gonio.brdf.design.presets import UnknownPresetError
 from gonio.calibration import CalibrationError
@@ -196,6 +197,7 @@ def create_app(
         (DesignError, 422),
         (FeasibilityError, 422),
         (UnknownPresetError, 404),
+        (ColourError, 422),
         (DeviceError, 503),
     ):
         app.add_exception_handler(exc_type, _mapped(status))

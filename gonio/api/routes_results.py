@@ -15,6 +15,7 @@ from fastapi.responses import FileResponse
 from pydantic import BaseModel, Field
 
 from gonio.api.deps import READ, JobId, Service
+from gonio.brdf.colour.errors import ColourError
 from gonio.brdf.tables import geometry as geo
 from gonio.results import OffGridAngle
 from gonio.service import NotFound
@@ -194,3 +195,61 @@ async def export(
 
     path, name = await asyncio.to_thread(service.export, job_id, format)
     return FileResponse(path, media_type=MEDIA_TYPES[format], filename=name)
+
+
+ColourFormat = Literal["json", "csv"]
+
+
+@router.get(
+    "/{job_id}/colour",
+    dependencies=READ,
+    responses={**_NO_RESULT, 422: {"description": "colour cannot be computed as asked "
+                                                  "(conditions, instruments, standard)"},
+               200: {"content": {"application/json": {}, "text/csv": {}}}},
+    summary="CIELAB at instrument geometries, flop index, and CIEDE2000 against another job "
+            "(docs/colour.md)",
+)
+async def colour(
+    job_id: JobId,
+    service: Service,
+    illuminant: str = Query("D65", max_length=8, description="CIE illuminant: D65, D50, A, "
+                            "C, D55, D75, FL2, FL11"),
+    observer: Literal["10", "2"] = Query("10", description="CIE 1964 10 degree or CIE 1931 "
+                                         "2 degree observer"),
+    instrument: Annotated[list[str] | None, Query(
+        max_length=4, description="MA68, MA98, BYK-mac, MultiFX10 (repeat; default MA98 and "
+        "BYK-mac)")] = None,
+    azimuth: Annotated[list[float] | None, Query(
+        max_length=36, description="specimen azimuths of the plane of incidence, degrees "
+        "(repeat; default 0)")] = None,
+    against: int | None = Query(None, ge=1, le=2**53, description="a standard's job id: "
+                                "CIEDE2000 of this job against it per geometry"),
+    format: Annotated[ColourFormat, Query(description="json, or csv: the colour table (or "
+                                          "with against, the differences)")] = "json",
+) -> Any:
+    from gonio.brdf.colour.conditions import ViewingConditions
+    from gonio.brdf.colour.instruments import DEFAULT_INSTRUMENTS
+    from gonio.brdf.colour.report import compare
+    from gonio.result_colour import difference_csv, result_report
+
+    azimuths = azimuth or [0.0]
+    if not all(math.isfinite(a) and -360 <= a <= 360 for a in azimuths):
+        raise ColourError("azimuth must be within -360..360 degrees")
+    instruments = instrument or list(DEFAULT_INSTRUMENTS)
+    cond = ViewingConditions(illuminant, observer)
+    res = await asyncio.to_thread(service.reconstruction, job_id)
+    report = await asyncio.to_thread(result_report, res, cond, instruments, azimuths)
+    diff = None
+    if against is not None:
+        std = await asyncio.to_thread(service.reconstruction, against)
+        diff = compare(report, await asyncio.to_thread(
+            result_report, std, cond, instruments, azimuths))
+    if format == "csv":
+        text = difference_csv(diff) if diff is not None else report.csv()
+        return Response(text, media_type="text/csv",
+                        headers={"Content-Disposition":
+                                 f'attachment; filename="gonio-job-{job_id}-colour.csv"'})
+    out: dict[str, Any] = {"job_id": job_id, "colour": report.as_dict()}
+    if diff is not None:
+        out["difference"] = {"against": against, **diff.as_dict()}
+    return out

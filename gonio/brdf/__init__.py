@@ -16,10 +16,13 @@ One subpackage per job; each module's docstring says what it holds.
 ``design``          where to put the light/sensor pairs: rig constraints, the condition-number
                     search, pair and product designs, presets, the roughness bound, held-out error
 ``pictures``        rendered images (``render``) and slice previews (``preview``)
+``colour``          CIE XYZ, CIELAB, flop index and CIEDE2000 at instrument geometries through
+                    colour-science; spectral bands, chart calibration of RGB sensors
 ==================  ===========================================================================
 
 The rooms depend one way: ``tables`` on nothing, ``models`` on ``tables``, ``materials`` on
-both, ``reconstruction`` on those, ``design`` on all of them, ``pictures`` on ``tables``
+both, ``reconstruction`` on those, ``design`` on all of them, ``pictures`` and ``colour``
+on ``tables``
 (an import-linter ``layers`` contract in pyproject.toml checks it). Beside them,
 ``advice`` holds :class:`~gonio.brdf.advice.AdvisedError`, the base of core errors that name a
 setting to change without using the CLI's words for it.

@@ -39,6 +39,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "gonio.cli.export_command",
     "gonio.cli.keys_command",
     "gonio.cli.render_command",
+    "gonio.cli.colour_command",
 )
 
 

@@ -49,8 +49,9 @@ def register(subparsers: Any) -> None:
     p.add_argument(
         "--material",
         default=None,
-        help="library material name or .npz BRDF table (default: a brushed, "
-        "anisotropic dielectric)",
+        help="library material name, .npz BRDF table, or a spectral material read by 31-band "
+        "sensors (solid-red-paint, metallic-blue-paint, brushed-copper, ...: docs/colour.md) "
+        "(default: a brushed, anisotropic dielectric)",
     )
     p.add_argument(
         "--noise",

@@ -37,6 +37,26 @@ def test_result_round_trip(tmp_path: Path) -> None:
     assert res.estimated_error == pytest.approx(0.08) and res.settings == {"K": 4}
     assert res.metrics["n_samples"] == 6 and res.provenance["basis_K"] == 4
     assert not (tmp_path / "r.h5.part").exists()
+    assert res.table.wavelengths_nm is None and res.colour == {}
+
+
+def test_result_keeps_wavelengths_and_the_colour_group(tmp_path: Path) -> None:
+    pairs = [PairSpec(light="L1", sensor="S1"), PairSpec(light="L1", sensor="S2")]
+    dirs = np.tile([0.0, 0.0, 1.0], (2, 1))
+    s = calibrated_samples(_reading_rows(), pairs, dirs, dirs, ("R", "G", "B"), Calibration())
+    table = BRDFTable(np.full((3, *geo.TABLE_SHAPE), 0.25), ("b450", "b550", "b650"), "spec",
+                      (450.0, 550.0, 650.0))
+    colour = {"source": {"bands": {"centres_nm": [450, 550, 650]}}, "report": {"rows": []}}
+    path = write_result(tmp_path / "r.h5", job_id=3, specimen="spec", kind="uniform",
+                        readings=_reading_rows(), samples=s, table=table, colour=colour)
+    res = read_result(path)
+    assert res.table is not None and res.table.wavelengths_nm == (450.0, 550.0, 650.0)
+    assert res.colour == colour
+    import h5py
+
+    with h5py.File(path, "a") as f:
+        f["colour"].attrs["report"] = "{not json"
+    assert read_result(path).colour == {}  # damaged: read as absent, the rest stays readable
 
 
 def test_result_errors(tmp_path: Path) -> None:

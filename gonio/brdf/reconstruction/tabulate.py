@@ -31,6 +31,10 @@ def _valid_row_weight(eps: float) -> FloatArray:
 
 #: ``exp`` overflows float64 above about 709; a remapped value this large means a diverged fit.
 _MAX_EXPONENT = 700.0
+#: Tables of more channels than this (spectral sensors: 11, 18, 31 bands) are expanded in
+#: float32, the precision the result file stores them in: a 31-band float64 table is 230 MB
+#: and its expansion dominates the reconstruction. RGB tables keep float64.
+FLOAT32_ABOVE_CHANNELS = 4
 
 
 def expand_table(basis: Basis, coef: FloatArray) -> FloatArray:
@@ -43,7 +47,7 @@ def expand_table(basis: Basis, coef: FloatArray) -> FloatArray:
 
     Returns
     -------
-    (C, 72, 18, 18, 36) float64, 1/sr
+    (C, 72, 18, 18, 36) float64 (float32 above :data:`FLOAT32_ABOVE_CHANNELS` channels), 1/sr
         ``max((exp(Q C + mu) (f_med w + eps) - eps) / w, 0)`` at the valid cells, NaN at the
         invalid ones. The per-row constants fold into ``exp(Q C) * scale - offset`` with
         ``scale = exp(mu) (f_med w + eps) / w`` and ``offset = eps / w``, so the big array
@@ -54,9 +58,9 @@ def expand_table(basis: Basis, coef: FloatArray) -> FloatArray:
     scale = np.exp(basis.mu[VALID_ROWS]) * (basis.f_med[VALID_ROWS] * w + eps) / w
     offset = eps / w
     n_ch, K, n_s = coef.shape
-    X = np.ascontiguousarray(np.swapaxes(coef, 1, 2)).reshape(n_ch * n_s, K) @ basis.Q[
-        VALID_ROWS
-    ].T  # (C 72, p_valid)
+    dtype = np.float32 if n_ch > FLOAT32_ABOVE_CHANNELS else np.float64
+    X = np.ascontiguousarray(np.swapaxes(coef, 1, 2), dtype=dtype).reshape(n_ch * n_s, K) @ (
+        basis.Q[VALID_ROWS].T.astype(dtype, copy=False))  # (C 72, p_valid)
     top = float(X.max())
     if not top < _MAX_EXPONENT:  # also catches NaN
         raise ReconstructionError(
@@ -64,10 +68,10 @@ def expand_table(basis: Basis, coef: FloatArray) -> FloatArray:
             "the basis can represent: check their units (1/sr) and the dark subtraction"
         )
     np.exp(X, out=X)
-    X *= scale
-    X -= offset
+    X *= scale.astype(dtype, copy=False)
+    X -= offset.astype(dtype, copy=False)
     np.maximum(X, 0.0, out=X)
-    out = np.empty((n_ch * n_s, geo.N_ROWS))
+    out = np.empty((n_ch * n_s, geo.N_ROWS), dtype=dtype)
     out[:, INVALID_ROWS] = np.nan
     out[:, VALID_ROWS] = X
     return out.reshape(n_ch, *geo.TABLE_SHAPE)

@@ -1,0 +1,91 @@
+// The result panel's colour table: GET /api/v1/jobs/{id}/colour, beside the renderings.
+// CIELAB at the chosen instrument's aspecular geometries (D65/10), the flop index, and with a
+// comparison job chosen above, the CIEDE2000 against it. A result without colour (uncalibrated
+// sensor RGB) shows its channel values under that label, never as a colour space.
+import { getJSON } from "./api.js";
+
+const $ = (sel) => document.querySelector(sel);
+let shown = null;
+
+function shownJob() {
+  const m = ($("#result-job").textContent || "").match(/^job (\d+) \(completed\)/);
+  return m ? Number(m[1]) : null;
+}
+
+function cell(tr, text, tag = "td") {
+  const el = document.createElement(tag);
+  el.textContent = text;
+  tr.append(el);
+}
+
+function fmt(v, digits = 2) { return typeof v === "number" ? v.toFixed(digits) : "–"; }
+
+async function refresh() {
+  const id = shownJob();
+  const box = $("#colour");
+  // A calibration job's result has no BRDF (the panel hides its body): no colour to ask for.
+  if (id === null || $("#result-body").hidden) { box.hidden = true; shown = null; return; }
+  const instrument = $("#colour-instrument").value;
+  const azimuth = Number($("#colour-azimuth").value) || 0;
+  const against = $("#compare").value;
+  const key = `${id}/${instrument}/${azimuth}/${against}`;
+  if (key === shown) return;
+  shown = key;
+  box.hidden = false;
+  const caption = $("#colour-caption");
+  caption.textContent = "Computing colour…";
+  const q = new URLSearchParams({ instrument, azimuth: String(azimuth) });
+  let body;
+  try {
+    body = await getJSON(`/jobs/${id}/colour?${q}`);
+    // A difference only between two results with CIELAB (the server refuses the others):
+    // the compared job's space is asked first, so no request is made that must fail.
+    if (against && body.colour.space === "CIELAB") {
+      const other = await getJSON(`/jobs/${against}/colour?${q}`);
+      if (other.colour.space === "CIELAB") {
+        q.set("against", against);
+        body = await getJSON(`/jobs/${id}/colour?${q}`);
+      }
+    }
+  } catch (e) {
+    if (key !== shown) return;
+    $("#colour-table thead").replaceChildren();
+    $("#colour-table tbody").replaceChildren();
+    caption.textContent = `No colour: ${e.message}`;
+    return;
+  }
+  if (key !== shown) return;
+  const rep = body.colour, diff = body.difference;
+  const head = document.createElement("tr");
+  const lab = rep.space === "CIELAB";
+  const cols = lab ? ["geometry", "L*", "a*", "b*", "C*", "h°"]
+    : ["geometry", ...rep.channels.slice(0, 6).map((c) => `R ${c}`)];
+  if (diff) cols.push("ΔE00");
+  for (const c of cols) cell(head, c, "th");
+  $("#colour-table thead").replaceChildren(head);
+  const rows = rep.rows.map((r, i) => {
+    const tr = document.createElement("tr");
+    cell(tr, `${r.incidence_deg}as${r.aspecular_deg}`);
+    if (lab) for (const k of ["L", "a", "b", "C"]) cell(tr, fmt(r[k]));
+    if (lab) cell(tr, fmt(r.h_deg, 0));
+    else for (const c of rep.channels.slice(0, 6)) cell(tr, fmt(r[`R_${c}`], 3));
+    if (diff) cell(tr, fmt(diff.rows[i]?.dE00));
+    return tr;
+  });
+  $("#colour-table tbody").replaceChildren(...rows);
+  const flop = Object.values(rep.flop_index)[0];
+  const cond = `${rep.conditions.illuminant}/${rep.conditions.observer}°`;
+  caption.textContent = lab
+    ? `${rep.space}, ${cond}, ${instrument} geometries at azimuth ${azimuth}° (${rep.conversion})` +
+      (flop !== undefined ? `; flop index ${flop.toFixed(2)}` : "") +
+      (diff ? `; ΔE00 against job ${against}: max ${diff.max_dE00.toFixed(2)}` : "")
+    : `${rep.space}: reflectance factors per channel (${rep.channels.length} channels), no CIELAB. ` +
+      "Give the sensor spectral bands or a chart colour calibration (docs/colour.md).";
+}
+
+window.addEventListener("DOMContentLoaded", () => {
+  const go = () => { refresh().catch(() => {}); };
+  new MutationObserver(go).observe($("#result-job"), { childList: true, characterData: true, subtree: true });
+  for (const id of ["#colour-instrument", "#colour-azimuth", "#compare"]) $(id).addEventListener("change", go);
+  go();
+});

@@ -1,0 +1,275 @@
+"""Colour calibration of an RGB (or any non-spectral) sensor from a chart of known reflectances.
+
+A chart is a set of patches whose reflectance spectra are known (from the chart's maker or a
+reference spectrophotometer); the sensor reads each patch at one geometry. The calibration is
+the ``3 x C`` matrix ``M`` minimising ``sum_p ||M c_p - XYZ_p||^2`` over the patches, with
+``c_p`` the sensor's reflectance factors and ``XYZ_p`` the patch's tristimulus values under the
+stated illuminant and observer (computed by colour-science from its spectrum). Its quality is
+the CIEDE2000 difference between ``M c_p`` and ``XYZ_p`` on the patches themselves, reported as
+median and maximum: a matrix cannot undo a sensor whose channels are not a linear transform of
+the colour-matching functions (the Luther condition), and this residual says how far off it is.
+
+Chart file (CSV, UTF-8, one header row; documented in ``docs/colour.md``)::
+
+    patch,R,G,B,380,390,...,730
+    dark skin,0.121,0.083,0.062,0.055,0.058,...
+
+``patch`` names the patch; every column whose header is a number is the patch's reference
+reflectance factor at that wavelength (nm, increasing, at least 5); every other column is a
+sensor channel's reading of the patch as a reflectance factor (``pi f``, the value a white
+reference calibration gives). At least 6 patches; channels named as the sensor names them.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from gonio.brdf.colour.conditions import (
+    ColourError,
+    ViewingConditions,
+    delta_e00,
+    resample,
+    spectra_to_xyz,
+    xyz_to_lab,
+)
+
+FloatArray = NDArray[np.float64]
+
+#: Fewest patches a 3 x C least-squares fit is accepted from (an RGB sensor has 9 unknowns;
+#: fewer than twice as many equations leaves the residual meaningless).
+MIN_PATCHES = 6
+
+
+class ChartError(ColourError):
+    """A chart file or calibration input is unusable; the message says what to fix."""
+
+
+@dataclass(frozen=True)
+class Chart:
+    """A chart's patches: reference spectra and the sensor's readings.
+
+    Attributes
+    ----------
+    patches : tuple of str, length P
+    wavelengths_nm : (W,) array
+    reflectance : (P, W) array, reference reflectance factors
+    channels : tuple of str, length C
+    readings : (P, C) array, the sensor's reflectance factors of each patch
+    """
+
+    patches: tuple[str, ...]
+    wavelengths_nm: FloatArray
+    reflectance: FloatArray
+    channels: tuple[str, ...]
+    readings: FloatArray
+
+    def reference_xyz(self, conditions: ViewingConditions) -> FloatArray:
+        """(P, 3) XYZ of the patches (perfect diffuser Y = 100)."""
+        return spectra_to_xyz(resample(self.wavelengths_nm, self.reflectance), conditions)
+
+
+@dataclass(frozen=True)
+class ColourMatrix:
+    """A sensor's colour calibration: channels (reflectance factors) to XYZ.
+
+    Attributes
+    ----------
+    channels : tuple of str, length C
+    matrix : (3, C) array; XYZ = matrix @ c, perfect diffuser Y = 100
+    conditions : ViewingConditions the reference XYZ were computed for
+    residual_median_de00, residual_max_de00 : float
+        CIEDE2000 of the fit on the chart's patches.
+    n_patches : int
+    source : str
+        Where the calibration came from (the chart file's name).
+    """
+
+    channels: tuple[str, ...]
+    matrix: FloatArray
+    conditions: ViewingConditions
+    residual_median_de00: float
+    residual_max_de00: float
+    n_patches: int
+    source: str = ""
+
+    def to_xyz(self, values: ArrayLike, conditions: ViewingConditions) -> FloatArray:
+        """(..., 3) XYZ of reflectance factors (..., C).
+
+        Raises
+        ------
+        ColourError
+            When ``conditions`` differ from the ones the matrix was fitted for (a matrix holds
+            for one illuminant and observer).
+        """
+        if conditions != self.conditions:
+            raise ColourError(
+                f"the colour calibration was fitted for {self.conditions.label}, not "
+                f"{conditions.label}; fit it again from the chart for {conditions.label}"
+            )
+        v = np.asarray(values, dtype=float)
+        if v.shape[-1] != len(self.channels):
+            raise ColourError(
+                f"{v.shape[-1]} channels for a colour calibration of {len(self.channels)} "
+                f"({', '.join(self.channels)})"
+            )
+        return v @ self.matrix.T
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON form (the inverse of :meth:`from_dict`)."""
+        return {
+            "channels": list(self.channels), "matrix": self.matrix.tolist(),
+            "illuminant": self.conditions.illuminant, "observer": self.conditions.observer,
+            "residual_median_de00": self.residual_median_de00,
+            "residual_max_de00": self.residual_max_de00,
+            "n_patches": self.n_patches, "source": self.source,
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> ColourMatrix:
+        """A calibration from :meth:`as_dict`'s form (rig config, result provenance)."""
+        try:
+            channels = tuple(str(c) for c in d["channels"])
+            m = np.asarray(d["matrix"], dtype=float)
+            conditions = ViewingConditions(str(d.get("illuminant", "D65")),
+                                           str(d.get("observer", "10")))
+            def num(key: str) -> float:
+                v = d.get(key)
+                return float("nan") if v is None else float(v)
+
+            out = cls(channels, m, conditions, num("residual_median_de00"),
+                      num("residual_max_de00"), int(d.get("n_patches") or 0),
+                      str(d.get("source") or ""))
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ColourError(f"colour calibration is malformed ({exc}); fit it again") from None
+        if m.shape != (3, len(channels)) or not np.isfinite(m).all():
+            raise ColourError(
+                f"colour calibration matrix is {m.shape}; expected 3 x {len(channels)} finite "
+                "numbers (one column per channel)"
+            )
+        return out
+
+
+def read_chart(path: str | os.PathLike[str]) -> Chart:
+    """Read a chart file (format in the module docstring).
+
+    Raises
+    ------
+    ChartError
+        Naming the file, the row or column and what to change.
+    """
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8-sig")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ChartError(f"cannot read chart file {p}: {exc}") from None
+    try:
+        return parse_chart(text)
+    except ChartError as exc:
+        raise ChartError(f"{p}: {exc}") from None
+
+
+def _is_number(s: str) -> bool:
+    try:
+        float(s)
+    except ValueError:
+        return False
+    return True
+
+
+def parse_chart(text: str) -> Chart:
+    """A chart from the text of a chart file (see :func:`read_chart`)."""
+    rows = [r for r in csv.reader(io.StringIO(text)) if any(c.strip() for c in r)]
+    if not rows:
+        raise ChartError("the chart file is empty; see docs/colour.md for its columns")
+    header = [h.strip() for h in rows[0]]
+    if not header or header[0].lower() != "patch":
+        raise ChartError("the first column must be 'patch' (the patch names)")
+    wl_cols = [i for i, h in enumerate(header) if i > 0 and _is_number(h)]
+    ch_cols = [i for i, h in enumerate(header) if i > 0 and not _is_number(h)]
+    if len(wl_cols) < 5:
+        raise ChartError(
+            f"{len(wl_cols)} reference wavelength columns; give each patch's reflectance at "
+            "5 or more wavelengths (columns headed by the wavelength in nm)"
+        )
+    if not ch_cols:
+        raise ChartError("no sensor channel columns; add the sensor's reading of each patch "
+                         "under a column named after its channel (R, G, B, ...)")
+    wl = np.array([float(header[i]) for i in wl_cols])
+    if np.any(np.diff(wl) <= 0):
+        raise ChartError("reference wavelength columns must increase from left to right")
+    names: list[str] = []
+    refl, read = [], []
+    for n, row in enumerate(rows[1:], start=2):
+        if len(row) != len(header):
+            raise ChartError(f"row {n} has {len(row)} fields, the header {len(header)}")
+        try:
+            vals = [float(x) for x in row[1:]]
+        except ValueError as exc:
+            raise ChartError(f"row {n} ({row[0]!r}): {exc}") from None
+        values = np.array(vals)
+        if not np.isfinite(values).all():
+            raise ChartError(f"row {n} ({row[0]!r}) holds a value that is not finite")
+        names.append(row[0].strip())
+        refl.append([float(row[i]) for i in wl_cols])
+        read.append([float(row[i]) for i in ch_cols])
+    if len(names) < MIN_PATCHES:
+        raise ChartError(f"{len(names)} patches; a colour calibration needs at least "
+                         f"{MIN_PATCHES}")
+    return Chart(tuple(names), wl, np.array(refl), tuple(header[i] for i in ch_cols),
+                 np.array(read))
+
+
+def fit_matrix(chart: Chart, conditions: ViewingConditions | None = None,
+               channels: Sequence[str] | None = None, source: str = "") -> ColourMatrix:
+    """Least-squares colour calibration from a chart, with its CIEDE2000 residual.
+
+    Parameters
+    ----------
+    chart : Chart
+    conditions : ViewingConditions, default D65/10
+    channels : the sensor's channel order, optional
+        The chart's columns are reordered to it; a channel missing from the chart is an error.
+    source : str
+        Recorded with the matrix.
+    """
+    cond = conditions or ViewingConditions()
+    readings = chart.readings
+    names = chart.channels
+    if channels is not None:
+        missing = [c for c in channels if c not in chart.channels]
+        if missing:
+            raise ChartError(
+                f"the chart has no column for channels {missing} (it has "
+                f"{', '.join(chart.channels)}); name its columns as the sensor's channels"
+            )
+        idx = [chart.channels.index(c) for c in channels]
+        readings = readings[:, idx]
+        names = tuple(channels)
+    xyz = chart.reference_xyz(cond)
+    if np.linalg.matrix_rank(readings) < min(readings.shape[1], 3):
+        raise ChartError("the chart's readings are linearly dependent (all patches alike, or a "
+                         "channel that reads nothing); measure a chart of distinct colours")
+    sol, *_ = np.linalg.lstsq(readings, xyz, rcond=None)
+    m: FloatArray = np.asarray(sol.T, dtype=np.float64)
+    de = delta_e00(xyz_to_lab(readings @ m.T, cond), xyz_to_lab(xyz, cond))
+    return ColourMatrix(names, m, cond, float(np.median(de)), float(np.max(de)),
+                        len(chart.patches), source)
+
+
+def format_chart(chart: Chart) -> str:
+    """The text of a chart file holding ``chart`` (the inverse of :func:`parse_chart`)."""
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["patch", *chart.channels, *(f"{x:g}" for x in chart.wavelengths_nm)])
+    for name, read, refl in zip(chart.patches, chart.readings, chart.reflectance, strict=True):
+        w.writerow([name, *(f"{x:.6g}" for x in read), *(f"{x:.6g}" for x in refl)])
+    return buf.getvalue()

@@ -1,0 +1,349 @@
+"""The colour numbers a colour lab reads, from a reconstructed BRDF table.
+
+At each instrument geometry (:mod:`~gonio.brdf.colour.instruments`) the table's BRDF ``f``
+(1/sr, per channel) becomes the reflectance factor ``R = pi f`` (1 for the perfect diffuser,
+what multi-angle spectrophotometers report), then XYZ and CIELAB under the stated conditions:
+spectral channels through their bands (:class:`~gonio.brdf.colour.spectral.SpectralBands`), other
+sensors through a chart calibration (:class:`~gonio.brdf.colour.chart.ColourMatrix`). A sensor
+with neither has no colour: its report holds the channel reflectance factors labelled
+``"uncalibrated sensor RGB"`` and no CIELAB.
+
+The table is read between its 5 degree cells by multilinear interpolation of ``log(f + f0)``
+(:func:`log_lookup`), not of ``f``: gloss lobes fall off exponentially with angle, and near the
+specular direction (aspecular -15 and 15 degrees) linear interpolation of a clear coat's lobe
+overshoots by up to 10 ΔE00 where the logarithm's stays within about 4 (the true material
+tabulated on the grid, ``bench/bench_colour.py``); where the BRDF is flat both agree.
+
+Flop index (X-Rite): ``FI = 2.69 (L*15 - L*110)^1.11 / (L*45)^0.86`` from the 45 degree
+incidence readings at aspecular 15, 45 and 110 degrees; where ``L*15 <= L*110`` (no flop) it
+is 0.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from gonio.brdf.colour.chart import ColourMatrix
+from gonio.brdf.colour.conditions import (
+    ColourError,
+    ViewingConditions,
+    delta_e00,
+    describe,
+    xyz_to_lab,
+)
+from gonio.brdf.colour.instruments import DEFAULT_INSTRUMENTS, Geometry, geometries
+from gonio.brdf.colour.spectral import SpectralBands
+from gonio.brdf.tables import geometry as geo
+from gonio.brdf.tables.table import BRDFTable
+
+FloatArray = NDArray[np.float64]
+
+CIELAB = "CIELAB"
+UNCALIBRATED = "uncalibrated sensor RGB"
+#: X-Rite's flop index constants.
+FLOP_SCALE, FLOP_DIFF_EXP, FLOP_L45_EXP = 2.69, 1.11, 0.86
+
+
+class ToXYZ(Protocol):
+    """Channels to XYZ: spectral bands or a chart calibration."""
+
+    def to_xyz(self, values: ArrayLike, conditions: ViewingConditions) -> FloatArray: ...
+
+
+#: Offset of the logarithm in :func:`log_lookup`, 1/sr: far below any colour-relevant BRDF
+#: (a reflectance factor of 3e-4), so dark cells do not pull the interpolation to -inf.
+LOG_OFFSET = 1e-4
+
+
+def log_lookup(table: BRDFTable, wi: ArrayLike, wo: ArrayLike) -> FloatArray:
+    """BRDF of ``table`` at direction pairs, interpolated multilinearly in ``log(f + f0)``.
+
+    The same cells and weights as :meth:`BRDFTable.eval_half_diff` (periodic in ``ph`` and
+    ``pd``, clamped in ``th`` and ``td``, invalid neighbours left out), blended in the
+    logarithm (module docstring).
+
+    Parameters
+    ----------
+    table : BRDFTable, (C, 72, 18, 18, 36), 1/sr
+    wi, wo : (N, 3) unit vectors in the specimen frame
+
+    Returns
+    -------
+    (N, C) array, 1/sr; NaN where no neighbour is valid, 0 below the horizon
+    """
+    i = np.asarray(wi, dtype=float).reshape(-1, 3)
+    o = np.asarray(wo, dtype=float).reshape(-1, 3)
+    th, ph, td, pd = geo.directions_to_half_diff(i, o)
+    axes = []
+    for a, n, period in ((ph, geo.N_PH, 2 * np.pi), (th, geo.N_TH, 0.0),
+                         (td, geo.N_TD, 0.0), (pd, geo.N_PD, np.pi)):
+        x = np.asarray(a, dtype=float).ravel()
+        if period:
+            u = np.mod(x, period) / geo.STEP
+            i0 = np.floor(u).astype(np.intp)
+            axes.append((i0 % n, (i0 + 1) % n, u - i0))
+        else:
+            u = np.clip(x / geo.STEP, 0.0, n - 1)
+            i0 = np.minimum(np.floor(u).astype(np.intp), n - 2)
+            axes.append((i0, i0 + 1, u - i0))
+    acc = np.zeros((i.shape[0], table.n_channels))
+    wsum = np.zeros(i.shape[0])
+    for idx, w in geo.lattice_corners(axes):
+        v = np.asarray(table.values[:, idx[0], idx[1], idx[2], idx[3]], dtype=float).T
+        ok = np.isfinite(v).all(axis=1) & (w > 0)
+        acc[ok] += w[ok, None] * np.log(np.maximum(v[ok], 0.0) + LOG_OFFSET)
+        wsum[ok] += w[ok]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        out = np.exp(acc / wsum[:, None]) - LOG_OFFSET
+    out[wsum <= 1e-12] = np.nan
+    out = np.maximum(out, 0.0)
+    out[(i[:, 2] <= 0) | (o[:, 2] <= 0)] = 0.0
+    return out
+
+
+def flop_index(l15: ArrayLike, l45: ArrayLike, l110: ArrayLike) -> FloatArray:
+    """X-Rite flop index from L* at aspecular 15, 45 and 110 degrees (broadcastable)."""
+    a, b, c = (np.asarray(x, dtype=float) for x in (l15, l45, l110))
+    diff = np.maximum(a - c, 0.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.asarray(FLOP_SCALE * diff ** FLOP_DIFF_EXP / b ** FLOP_L45_EXP, dtype=float)
+
+
+def conversion_label(conversion: ToXYZ | None) -> str:
+    """How channels became colour, as reports state it."""
+    if isinstance(conversion, SpectralBands):
+        return f"spectral bands ({conversion.n_bands})"
+    if isinstance(conversion, ColourMatrix):
+        return (f"chart colour calibration ({conversion.n_patches} patches, residual median "
+                f"{conversion.residual_median_de00:.2f} dE00)")
+    if conversion is None:
+        return UNCALIBRATED
+    return type(conversion).__name__
+
+
+@dataclass(frozen=True)
+class ColourReport:
+    """Colour of one BRDF at instrument geometries.
+
+    Attributes
+    ----------
+    name : str
+    conditions : ViewingConditions
+    space : str
+        ``"CIELAB"`` or ``"uncalibrated sensor RGB"``.
+    conversion : str
+        How channels became XYZ (:func:`conversion_label`).
+    channels : tuple of str, length C
+    geometries : tuple of Geometry, length G
+    reflectance : (G, C) array, reflectance factors ``pi f``
+    xyz : (G, 3) array or None, perfect diffuser Y = 100
+    lab : (G, 3) array or None
+    flop : dict
+        ``"MA98@0"``-style key (instrument at azimuth) to flop index.
+    provenance : dict
+        Conditions, weighting, library version.
+    """
+
+    name: str
+    conditions: ViewingConditions
+    space: str
+    conversion: str
+    channels: tuple[str, ...]
+    geometries: tuple[Geometry, ...]
+    reflectance: FloatArray
+    xyz: FloatArray | None
+    lab: FloatArray | None
+    flop: dict[str, float] = field(default_factory=dict)
+    provenance: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def calibrated(self) -> bool:
+        return self.lab is not None
+
+    def rows(self) -> list[dict[str, Any]]:
+        """One dict per geometry: instrument, angles, then L*, a*, b*, C*, h (and X, Y, Z), or
+        the channel reflectance factors for an uncalibrated report."""
+        out = []
+        for k, g in enumerate(self.geometries):
+            row: dict[str, Any] = {
+                "instrument": g.instrument, "incidence_deg": g.incidence_deg,
+                "aspecular_deg": g.aspecular_deg, "azimuth_deg": g.azimuth_deg,
+            }
+            if self.lab is not None and self.xyz is not None:
+                lab = self.lab[k]
+                row.update({
+                    "L": float(lab[0]), "a": float(lab[1]), "b": float(lab[2]),
+                    "C": float(np.hypot(lab[1], lab[2])),
+                    "h_deg": float(np.degrees(np.arctan2(lab[2], lab[1])) % 360.0),
+                    "X": float(self.xyz[k, 0]), "Y": float(self.xyz[k, 1]),
+                    "Z": float(self.xyz[k, 2]),
+                })
+            else:
+                row.update({f"R_{c}": float(v)
+                            for c, v in zip(self.channels, self.reflectance[k], strict=True)})
+            out.append(row)
+        return out
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON form for the API and the result file."""
+        return {
+            "name": self.name, "space": self.space, "conversion": self.conversion,
+            "conditions": self.conditions.as_dict(), "channels": list(self.channels),
+            "rows": self.rows(), "flop_index": dict(self.flop), "provenance": self.provenance,
+        }
+
+    def csv(self) -> str:
+        """The rows as CSV text (header first), with the space and conditions in a comment-free
+        column so every line states them."""
+        rows = self.rows()
+        buf = io.StringIO()
+        fields = ["space", "illuminant", "observer", *rows[0].keys(), "flop_index"]
+        w = csv.DictWriter(buf, fieldnames=fields, lineterminator="\n")
+        w.writeheader()
+        for g, row in zip(self.geometries, rows, strict=True):
+            fi = self.flop.get(_flop_key(g.instrument, g.azimuth_deg))
+            w.writerow({"space": self.space, "illuminant": self.conditions.illuminant,
+                        "observer": self.conditions.observer, **_fmt(row),
+                        "flop_index": "" if fi is None else f"{fi:.4f}"})
+        return buf.getvalue()
+
+
+_ANGLES = ("incidence_deg", "aspecular_deg", "azimuth_deg")
+
+
+def _fmt(row: dict[str, Any]) -> dict[str, Any]:
+    return {k: f"{v:g}" if k in _ANGLES else f"{v:.4f}" if isinstance(v, float) else v
+            for k, v in row.items()}
+
+
+def _flop_key(instrument: str, azimuth_deg: float) -> str:
+    return f"{instrument}@{azimuth_deg:g}"
+
+
+def colour_report(
+    table: BRDFTable,
+    conversion: ToXYZ | None,
+    conditions: ViewingConditions | None = None,
+    instruments: Sequence[str] = DEFAULT_INSTRUMENTS,
+    azimuths_deg: Sequence[float] = (0.0,),
+) -> ColourReport:
+    """The colour of ``table`` at the instruments' geometries.
+
+    Parameters
+    ----------
+    table : BRDFTable, (C, 72, 18, 18, 36), 1/sr
+    conversion : SpectralBands, ColourMatrix or None
+        How the channels become XYZ; None reports uncalibrated channel values.
+    conditions : ViewingConditions, default D65 / CIE 1964 10 degree
+    instruments : names from :data:`~gonio.brdf.colour.instruments.INSTRUMENTS`
+    azimuths_deg : specimen azimuths of the plane of incidence, degrees
+
+    Raises
+    ------
+    ColourError
+        Channel count not matching the conversion, or a geometry the table has no value at.
+    """
+    cond = conditions or ViewingConditions()
+    geos = geometries(instruments, azimuths_deg)
+    wi = np.stack([g.directions()[0] for g in geos])
+    wo = np.stack([g.directions()[1] for g in geos])
+    refl = np.pi * log_lookup(table, wi, wo)
+    if not np.isfinite(refl).all():
+        finite = np.asarray(np.isfinite(refl).all(axis=1), dtype=bool)
+        ok: list[bool] = [bool(finite[k]) for k in range(len(geos))]
+        bad = sorted({g.name for g, good in zip(geos, ok, strict=True) if not good})
+        raise ColourError(f"table {table.name!r} has no value at geometries {bad}")
+    xyz = lab = None
+    space = UNCALIBRATED
+    if conversion is not None:
+        xyz = conversion.to_xyz(refl, cond)
+        lab = xyz_to_lab(xyz, cond)
+        space = CIELAB
+    flop: dict[str, float] = {}
+    if lab is not None:
+        for az in dict.fromkeys(g.azimuth_deg for g in geos):
+            for inst in dict.fromkeys(g.instrument for g in geos):
+                ls = {g.aspecular_deg: lab[k, 0] for k, g in enumerate(geos)
+                      if g.instrument == inst and g.azimuth_deg == az and g.incidence_deg == 45}
+                if {15.0, 45.0, 110.0} <= ls.keys():
+                    flop[_flop_key(inst, az)] = float(flop_index(ls[15.0], ls[45.0], ls[110.0]))
+    return ColourReport(
+        table.name, cond, space, conversion_label(conversion), table.channels, geos, refl,
+        xyz, lab, flop, {**describe(cond), "conversion": conversion_label(conversion)},
+    )
+
+
+@dataclass(frozen=True)
+class ColourDifference:
+    """CIEDE2000 between a sample's report and a standard's, geometry by geometry.
+
+    Attributes
+    ----------
+    geometries : tuple of Geometry, length G
+    sample, standard : (G, 3) CIELAB
+    de00 : (G,) array
+    """
+
+    sample_name: str
+    standard_name: str
+    conditions: ViewingConditions
+    geometries: tuple[Geometry, ...]
+    sample: FloatArray
+    standard: FloatArray
+    de00: FloatArray
+
+    def rows(self) -> list[dict[str, Any]]:
+        out = []
+        for k, g in enumerate(self.geometries):
+            d = self.sample[k] - self.standard[k]
+            out.append({
+                "instrument": g.instrument, "incidence_deg": g.incidence_deg,
+                "aspecular_deg": g.aspecular_deg, "azimuth_deg": g.azimuth_deg,
+                "dL": float(d[0]), "da": float(d[1]), "db": float(d[2]),
+                "dE00": float(self.de00[k]),
+            })
+        return out
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"sample": self.sample_name, "standard": self.standard_name,
+                "conditions": self.conditions.as_dict(), "rows": self.rows(),
+                "max_dE00": float(self.de00.max()), "mean_dE00": float(self.de00.mean())}
+
+
+def compare(sample: ColourReport, standard: ColourReport) -> ColourDifference:
+    """CIEDE2000 of ``sample`` against ``standard`` at the geometries both report.
+
+    Raises
+    ------
+    ColourError
+        When either report has no CIELAB (uncalibrated), the conditions differ, or they share
+        no geometry.
+    """
+    for r, what in ((sample, "sample"), (standard, "standard")):
+        if r.lab is None:
+            raise ColourError(
+                f"the {what} {r.name!r} has no CIELAB ({UNCALIBRATED}); give its sensor spectral "
+                "bands or a chart colour calibration first"
+            )
+    if sample.conditions != standard.conditions:
+        raise ColourError(
+            f"sample is {sample.conditions.label}, standard {standard.conditions.label}; "
+            "compare colours under the same illuminant and observer"
+        )
+    assert sample.lab is not None and standard.lab is not None
+    index = {g: k for k, g in enumerate(standard.geometries)}
+    shared = [(k, index[g]) for k, g in enumerate(sample.geometries) if g in index]
+    if not shared:
+        raise ColourError("the two reports share no geometry; use the same instruments and "
+                          "azimuths for both")
+    ks, js = (np.array(x) for x in zip(*shared, strict=True))
+    a, b = sample.lab[ks], standard.lab[js]
+    return ColourDifference(sample.name, standard.name, sample.conditions,
+                            tuple(sample.geometries[k] for k in ks), a, b, delta_e00(a, b))

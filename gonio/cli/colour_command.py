@@ -1,0 +1,201 @@
+"""``gonio colour RESULT.h5 [--against STD]``: the colour numbers a colour lab reads; and
+``gonio colour-chart CHART.csv``: an RGB sensor's colour calibration from a chart.
+
+CIELAB at the aspecular geometries of multi-angle spectrophotometers, the flop index, and
+CIEDE2000 against a standard (another result file or a colour CSV written by this command),
+under a stated illuminant and observer (docs/colour.md).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+from gonio.cli import UsageError
+
+#: The core's names (gonio.brdf.colour: conditions.ILLUMINANTS, instruments.INSTRUMENTS and
+#: DEFAULT_INSTRUMENTS), repeated so building the parser does not import colour-science; a
+#: test keeps them equal.
+ILLUMINANTS = ("D65", "D50", "A", "C", "D55", "D75", "FL2", "FL11")
+INSTRUMENTS = ("MA68", "MA98", "BYK-mac", "MultiFX10")
+DEFAULT_INSTRUMENTS = ("MA98", "BYK-mac")
+
+
+def register(sub: Any) -> None:
+    p = sub.add_parser(
+        "colour", aliases=["color"],
+        help="CIELAB, flop index and CIEDE2000 of a result at instrument geometries",
+        description="The colour of a result's reconstructed BRDF at the aspecular geometries "
+        "of multi-angle spectrophotometers (MA68, MA98, BYK-mac, MultiFX10): CIELAB (and XYZ) "
+        "under a stated illuminant and observer, the X-Rite flop index, and with --against the "
+        "CIEDE2000 difference from a standard. Spectral sensors give colour through their "
+        "bands, RGB sensors through a chart colour calibration; other sensors' values are "
+        "printed as 'uncalibrated sensor RGB'. See docs/colour.md.",
+    )
+    p.add_argument("result", type=Path, help="a gonio result file (HDF5)")
+    p.add_argument("--against", type=Path, default=None, metavar="STD",
+                   help="the standard: another result file (.h5) or a colour CSV written by "
+                   "'gonio colour --csv'; prints CIEDE2000 per geometry")
+    p.add_argument("--csv", type=Path, default=None, metavar="FILE",
+                   help="also write the numbers as CSV (the colour table, or with --against "
+                   "the differences); '-' writes CSV to standard output instead of the table")
+    p.add_argument("--json", action="store_true", help="print everything as JSON")
+    p.add_argument("--illuminant", default="D65", choices=list(ILLUMINANTS),
+                   help="CIE illuminant (default D65)")
+    p.add_argument("--observer", default="10", choices=["10", "2"],
+                   help="CIE 1964 10 degree (default) or CIE 1931 2 degree observer")
+    p.add_argument("--instrument", action="append", default=None, metavar="NAME",
+                   help=f"instrument geometries to report ({', '.join(INSTRUMENTS)}; repeat; "
+                   f"default {' and '.join(DEFAULT_INSTRUMENTS)})")
+    p.add_argument("--azimuth", default="0", metavar="DEG[,DEG...]",
+                   help="specimen azimuths of the plane of incidence, degrees, comma separated "
+                   "(default 0: along the holder mark); more than one shows anisotropy")
+    p.set_defaults(func=run)
+
+    c = sub.add_parser(
+        "colour-chart", aliases=["color-chart"],
+        help="fit an RGB sensor's colour calibration from a chart of known reflectances",
+        description="Fit the 3 x C matrix taking a sensor's reflectance factors to CIE XYZ from "
+        "a chart file (CSV: patch, the sensor's channel readings, the patches' reference "
+        "reflectance per wavelength; docs/colour.md), print its residual CIEDE2000 on the "
+        "patches, and write the [sensors.colour_calibration] table for the rig config.",
+    )
+    c.add_argument("chart", type=Path, help="the chart file (CSV)")
+    c.add_argument("--channels", default=None, metavar="A,B,C",
+                   help="the sensor's channels in its order (default: the chart's columns)")
+    c.add_argument("--illuminant", default="D65", choices=list(ILLUMINANTS))
+    c.add_argument("--observer", default="10", choices=["10", "2"])
+    c.add_argument("-o", "--output", type=Path, default=None,
+                   help="write the TOML table to this file (default: print it)")
+    c.set_defaults(func=run_chart)
+
+
+def run_chart(args: argparse.Namespace) -> int:
+    import tomli_w
+
+    from gonio.brdf.colour.chart import fit_matrix, read_chart
+    from gonio.brdf.colour.conditions import ViewingConditions
+
+    if not args.chart.is_file():
+        raise UsageError(f"chart file {args.chart} does not exist")
+    if args.output is not None and not args.output.parent.is_dir():
+        raise UsageError(f"-o {args.output}: folder {args.output.parent} does not exist")
+    channels = None
+    if args.channels is not None:
+        channels = [x.strip() for x in args.channels.split(",") if x.strip()]
+        if not channels:
+            raise UsageError("--channels: give the channel names separated by commas")
+    m = fit_matrix(read_chart(args.chart), ViewingConditions(args.illuminant, args.observer),
+                   channels, source=args.chart.name)
+    table = {"matrix": [[round(float(x), 6) for x in row] for row in m.matrix],
+             "illuminant": m.conditions.illuminant, "observer": m.conditions.observer,
+             "residual_median_de00": round(m.residual_median_de00, 4),
+             "residual_max_de00": round(m.residual_max_de00, 4),
+             "n_patches": m.n_patches, "source": m.source}
+    text = ("# paste under the sensor's [[sensors]] entry (channels "
+            f"{', '.join(m.channels)}), docs/colour.md\n"
+            + tomli_w.dumps({"sensors": {"colour_calibration": table}}))
+    print(f"colour calibration of channels {', '.join(m.channels)} from {m.n_patches} patches "
+          f"({m.conditions.label}): residual median {m.residual_median_de00:.2f}, max "
+          f"{m.residual_max_de00:.2f} dE00")
+    if args.output is not None:
+        args.output.write_text(text, encoding="utf-8")
+        print(f"wrote {args.output}")
+    else:
+        print(text, end="")
+    return 0
+
+
+def _azimuths(text: str) -> list[float]:
+    try:
+        out = [float(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise UsageError(f"--azimuth {text!r}: give degrees separated by commas, e.g. "
+                         "0,45,90") from None
+    if not out or len(out) > 36 or not all(-360 <= a <= 360 for a in out):
+        raise UsageError(f"--azimuth {text!r}: give 1 to 36 angles within -360..360 degrees")
+    return out
+
+
+def _standard(path: Path, conditions: Any, instruments: list[str], azimuths: list[float]) -> Any:
+    from gonio.result_colour import read_standard_csv, result_report
+    from gonio.results import read_result
+
+    if not path.is_file():
+        raise UsageError(f"standard {path} does not exist")
+    if path.suffix.lower() == ".csv":
+        return read_standard_csv(path)
+    return result_report(read_result(path), conditions, instruments, azimuths)
+
+
+def _table(report: Any) -> str:
+    """The colour table as a person reads it."""
+    lines = [f"{report.name}: {report.space}, {report.conditions.label} "
+             f"({report.conversion})"]
+    if report.lab is None:
+        head = "instrument  geometry  azimuth  " + "  ".join(f"{c:>8}" for c in report.channels)
+        lines.append(head)
+        for g, r in zip(report.geometries, report.reflectance, strict=True):
+            lines.append(f"{g.instrument:<10}  {g.name:<8}  {g.azimuth_deg:>7g}  "
+                         + "  ".join(f"{v:8.4f}" for v in r))
+        lines.append("reflectance factors per channel (pi f); no CIELAB without spectral bands "
+                     "or a chart colour calibration (docs/colour.md)")
+        return "\n".join(lines)
+    lines.append("instrument  geometry  azimuth        L*       a*       b*       C*      h")
+    for row, g in zip(report.rows(), report.geometries, strict=True):
+        lines.append(f"{g.instrument:<10}  {g.name:<8}  {g.azimuth_deg:>7g}  {row['L']:8.2f} "
+                     f"{row['a']:8.2f} {row['b']:8.2f} {row['C']:8.2f} {row['h_deg']:6.1f}")
+    for key, fi in report.flop.items():
+        lines.append(f"flop index {key.replace('@', ' at azimuth ')}: {fi:.2f}")
+    return "\n".join(lines)
+
+
+def _diff_table(diff: Any) -> str:
+    lines = [f"{diff.sample_name} against {diff.standard_name}: CIEDE2000, "
+             f"{diff.conditions.label}",
+             "instrument  geometry  azimuth       dL*      da*      db*     dE00"]
+    for row, g in zip(diff.rows(), diff.geometries, strict=True):
+        lines.append(f"{g.instrument:<10}  {g.name:<8}  {g.azimuth_deg:>7g}  {row['dL']:8.2f} "
+                     f"{row['da']:8.2f} {row['db']:8.2f} {row['dE00']:8.2f}")
+    lines.append(f"max dE00 {diff.de00.max():.2f}, mean {diff.de00.mean():.2f}")
+    return "\n".join(lines)
+
+
+def run(args: argparse.Namespace) -> int:
+    from gonio.brdf.colour.conditions import ViewingConditions
+    from gonio.brdf.colour.report import compare
+    from gonio.result_colour import difference_csv, result_report
+    from gonio.results import read_result
+
+    if not args.result.is_file():
+        raise UsageError(f"result file {args.result} does not exist")
+    if args.csv is not None and str(args.csv) != "-" and not args.csv.parent.is_dir():
+        raise UsageError(f"--csv {args.csv}: folder {args.csv.parent} does not exist")
+    azimuths = _azimuths(args.azimuth)
+    instruments = args.instrument or list(DEFAULT_INSTRUMENTS)
+    cond = ViewingConditions(args.illuminant, args.observer)
+    report = result_report(read_result(args.result), cond, instruments, azimuths)
+    diff = None
+    if args.against is not None:
+        diff = compare(report, _standard(args.against, cond, instruments, azimuths))
+    text_csv = difference_csv(diff) if diff is not None else report.csv()
+    if args.json:
+        out: dict[str, Any] = {"colour": report.as_dict()}
+        if diff is not None:
+            out["difference"] = diff.as_dict()
+        print(json.dumps(out, indent=2))
+    elif str(args.csv) == "-":
+        sys.stdout.write(text_csv)
+    else:
+        print(_table(report))
+        if diff is not None:
+            print()
+            print(_diff_table(diff))
+    if args.csv is not None and str(args.csv) != "-":
+        args.csv.write_text(text_csv, encoding="utf-8")
+        if not args.json:
+            print(f"wrote {args.csv}")
+    return 0

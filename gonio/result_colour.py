@@ -1,0 +1,324 @@
+"""The colour numbers of result files: which conversion a result's channels take, its colour
+report under asked conditions, the ``/colour`` group written when a job finishes, and a stored
+standard read back from a colour CSV (docs/colour.md).
+
+How a result's channels become XYZ, first match wins:
+
+1. ``/colour`` ``source`` ``{"bands": ...}``: the spectral sensor's bands as the rig config gave
+   them (centres and widths or response tables);
+2. the reconstruction's ``wavelengths_nm``: bands at those centres, widths from their spacing;
+3. ``/colour`` ``source`` ``{"calibration": ...}``: a chart colour calibration of the sensor;
+4. none: "uncalibrated sensor RGB".
+
+A result whose samples are in sensor units (its calibration lists no pair: no white reference
+was measured) has no colour whatever its sensor: its values are not reflectance factors.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import os
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gonio.brdf.colour.chart import ColourMatrix
+from gonio.brdf.colour.conditions import ColourError, ViewingConditions
+from gonio.brdf.colour.instruments import DEFAULT_INSTRUMENTS, Geometry, canonical_instrument
+from gonio.brdf.colour.report import (
+    CIELAB,
+    ColourDifference,
+    ColourReport,
+    ToXYZ,
+    colour_report,
+)
+from gonio.brdf.colour.report import (
+    UNCALIBRATED as UNCALIBRATED_SPACE,
+)
+from gonio.brdf.colour.spectral import SpectralBands, bands_from_channels
+from gonio.brdf.tables.table import BRDFTable
+from gonio.results import ResultFile
+
+
+def conversion_of(res: ResultFile) -> ToXYZ | None:
+    """How ``res``'s channels become XYZ (module docstring), or None (uncalibrated)."""
+    if not in_reflectance(res.samples.calibration):
+        return None
+    source = (res.colour or {}).get("source") or {}
+    if "bands" in source:
+        return SpectralBands.from_dict(source["bands"])
+    if res.table is not None:
+        bands = bands_from_channels(res.table.channels, res.table.wavelengths_nm)
+        if bands is not None:
+            return bands
+    if "calibration" in source:
+        return ColourMatrix.from_dict(source["calibration"])
+    return None
+
+
+def result_report(
+    res: ResultFile,
+    conditions: ViewingConditions | None = None,
+    instruments: Sequence[str] = DEFAULT_INSTRUMENTS,
+    azimuths_deg: Sequence[float] = (0.0,),
+) -> ColourReport:
+    """The colour report of a result's reconstruction.
+
+    Raises
+    ------
+    ColourError
+        The result has no reconstruction (a calibration job), or its colour cannot be computed
+        as asked.
+    """
+    if res.table is None:
+        raise ColourError(
+            f"result of job {res.attrs.get('job_id')} has no reconstructed BRDF (a "
+            f"{res.attrs.get('kind')} job); colour needs a specimen scan"
+        )
+    table = res.table
+    name = str(res.attrs.get("specimen") or table.name)
+    if name != table.name:
+        table = BRDFTable.trusted(np.asarray(table.values), table.channels, name,
+                                  table.wavelengths_nm, table.provenance)
+    return colour_report(table, conversion_of(res), conditions, instruments, azimuths_deg)
+
+
+def in_reflectance(calibration: Mapping[str, Any]) -> bool:
+    """False when a result's calibration (``/samples`` attribute) says its values are in sensor
+    units: a calibration that lists no pair. Files without the record are taken as calibrated."""
+    return "pairs" not in calibration or bool(calibration["pairs"])
+
+
+def colour_group(table: BRDFTable, source: Mapping[str, Any],
+                 calibrated: bool = True) -> dict[str, Any]:
+    """The ``/colour`` attributes of a new result: the source and the default report.
+
+    ``calibrated`` False (values in sensor units) gives a report in uncalibrated sensor units
+    with a note saying why.
+
+    A report that cannot be computed (bands outside the visible, a calibration for other
+    channels) is stored as its reason, so the measurement is kept and the reason is visible.
+    """
+    out: dict[str, Any] = {"source": dict(source)}
+    if "error" in source:
+        out["error"] = source["error"]
+        return out
+    if not calibrated:
+        out["note"] = ("values in sensor units (no white reference calibration): no "
+                       "colour until the rig is calibrated")
+    try:
+        out["report"] = colour_report(table, _conversion(table, source, calibrated)).as_dict()
+    except ColourError as exc:
+        out["error"] = str(exc)
+    return out
+
+
+def _conversion(table: BRDFTable, source: Mapping[str, Any],
+                calibrated: bool) -> ToXYZ | None:
+    """:func:`conversion_of` for a table and source not yet in a result file."""
+    if not calibrated or "error" in source:
+        return None
+    if "bands" in source:
+        return SpectralBands.from_dict(source["bands"])
+    if (b := bands_from_channels(table.channels, table.wavelengths_nm)) is not None:
+        return b
+    if "calibration" in source:
+        return ColourMatrix.from_dict(source["calibration"])
+    return None
+
+
+def table_for_fits(table: BRDFTable, source: Mapping[str, Any],
+                   calibrated: bool) -> BRDFTable:
+    """The table the export fits (factored, principled: what glTF and MaterialX are written
+    from) are made of: linear sRGB from XYZ when the channels have colour, else the table.
+
+    A spectral table's fits on its bands would give renderers the first three bands as R, G,
+    B (and cost ten times the time); a chart-calibrated sensor's raw channels are not sRGB.
+    """
+    from gonio.brdf.colour.exportspace import linear_srgb_table
+    from gonio.brdf.colour.report import conversion_label
+
+    try:
+        conv = _conversion(table, source, calibrated)
+        if conv is None:
+            return table
+        return linear_srgb_table(table, conv, ViewingConditions(), conversion_label(conv))
+    except ColourError:
+        return table
+
+
+# ---------------------------------------------------------------------------- stored standards
+def read_standard_csv(path: str | os.PathLike[str]) -> ColourReport:
+    """A standard's colour from a CSV written by ``gonio colour --csv`` (or by hand, same
+    columns: space, illuminant, observer, instrument, incidence_deg, aspecular_deg,
+    azimuth_deg, L, a, b).
+
+    Raises
+    ------
+    ColourError
+        Naming the file and what is missing or wrong.
+    """
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8-sig")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ColourError(f"cannot read standard {p}: {exc}") from None
+    rows = list(csv.DictReader(io.StringIO(text)))
+    need = ("illuminant", "observer", "instrument", "incidence_deg", "aspecular_deg", "L", "a",
+            "b")
+    if not rows:
+        raise ColourError(f"{p}: no rows; a standard is a colour CSV (gonio colour --csv)")
+    missing = [c for c in need if c not in rows[0]]
+    if missing:
+        raise ColourError(f"{p}: columns {missing} are missing; write the standard with "
+                          "'gonio colour RESULT.h5 --csv FILE'")
+    conds = {(r["illuminant"], r["observer"]) for r in rows}
+    if len(conds) != 1:
+        raise ColourError(f"{p}: rows under several conditions {sorted(conds)}; keep one")
+    if any(r.get("space", CIELAB) != CIELAB for r in rows):
+        raise ColourError(f"{p}: holds {rows[0].get('space')}, not CIELAB; a standard must be "
+                          "colour from a spectral or chart-calibrated sensor")
+    cond = ViewingConditions(*next(iter(conds)))
+    geos, lab = [], []
+    for n, r in enumerate(rows, start=2):
+        try:
+            geos.append(Geometry(canonical_instrument(r["instrument"]),
+                                 float(r["incidence_deg"]), float(r["aspecular_deg"]),
+                                 float(r.get("azimuth_deg") or 0.0)))
+            lab.append([float(r["L"]), float(r["a"]), float(r["b"])])
+        except (ValueError, TypeError) as exc:
+            raise ColourError(f"{p}: row {n}: {exc}") from None
+    lab_arr = np.asarray(lab, dtype=float)
+    if not np.isfinite(lab_arr).all():
+        raise ColourError(f"{p}: a CIELAB value is not a finite number")
+    return ColourReport(p.stem, cond, CIELAB, "stored standard", (), tuple(geos),
+                        np.zeros((len(geos), 0)), None, lab_arr)
+
+
+def difference_csv(diff: ColourDifference) -> str:
+    """CIEDE2000 rows as CSV text (header first), each stating the conditions."""
+    buf = io.StringIO()
+    rows = diff.rows()
+    w = csv.DictWriter(buf, fieldnames=["illuminant", "observer", *rows[0].keys()],
+                       lineterminator="\n")
+    w.writeheader()
+    for r in rows:
+        w.writerow({"illuminant": diff.conditions.illuminant,
+                    "observer": diff.conditions.observer,
+                    **{k: (f"{v:g}" if k.endswith("_deg") else f"{v:.4f}")
+                       if isinstance(v, float) else v for k, v in r.items()}})
+    return buf.getvalue()
+
+
+def colour_source(rig_config_json: str | None, sensors: Sequence[str]) -> dict[str, Any]:
+    """How the measuring sensors' channels become XYZ, from the rig config a job ran with.
+
+    Parameters
+    ----------
+    rig_config_json : the rig config as JSON (the result's ``rig_config`` provenance), or None
+    sensors : names of the sensors the job's pairs used
+
+    Returns
+    -------
+    dict
+        ``{"bands": SpectralBands dict}``, ``{"calibration": ColourMatrix dict}``, ``{}`` for
+        uncalibrated sensor RGB, or ``{"error": why}`` when the sensors disagree (one
+        reconstruction mixes their channels, so their colour must be one).
+    """
+    if not rig_config_json:
+        return {}
+    import json
+
+    cfg = json.loads(rig_config_json)
+    by_name = {s.get("name"): s for s in cfg.get("sensors", [])}
+    found = []
+    for name in dict.fromkeys(sensors):
+        s = by_name.get(name) or {}
+        if s.get("wavelengths_nm") is not None:
+            found.append({"bands": SpectralBands(
+                tuple(s["wavelengths_nm"]),
+                None if s.get("bandwidths_nm") is None else tuple(s["bandwidths_nm"]),
+                None if s.get("response_nm") is None else tuple(s["response_nm"]),
+                None if s.get("responses") is None
+                else tuple(tuple(r) for r in s["responses"])).as_dict()})
+        elif s.get("colour_calibration") is not None:
+            cal = s["colour_calibration"]
+            found.append({"calibration": ColourMatrix.from_dict(
+                {**cal, "channels": s.get("channels", [])}).as_dict()})
+        else:
+            found.append({})
+    if not found:
+        return {}
+    if any(f != found[0] for f in found[1:]):
+        return {"error": "the scan's sensors have different colour descriptions (bands or "
+                         "calibrations); one reconstruction mixes their channels, so measure "
+                         "with sensors of one colour description"}
+    return found[0]
+
+
+# ---------------------------------------------------------------------------- linear sRGB
+def linear_srgb(res: ResultFile) -> tuple[BRDFTable, dict[str, Any]] | None:
+    """A result's reconstruction in linear sRGB, and the record of the conversion; None when
+    its channels have no colour (uncalibrated sensor RGB) or it has no reconstruction.
+
+    The one function exports and renderings call to state their colour space (docs/colour.md):
+    a spectral or chart-calibrated result becomes ``R, G, B`` linear sRGB computed from XYZ
+    (D65/10 by default, Bradford-adapted to sRGB's D65); an uncalibrated result's values are
+    not a colour space and get None (write them labelled "uncalibrated sensor RGB").
+    """
+    from gonio.brdf.colour.exportspace import linear_srgb_table
+    from gonio.brdf.colour.report import conversion_label
+
+    if res.table is None:
+        return None
+    conv = conversion_of(res)
+    if conv is None:
+        return None
+    table = linear_srgb_table(res.table, conv, ViewingConditions(), conversion_label(conv))
+    return table, dict(table.provenance["colour_space"])
+
+
+def colour_statement(record: Mapping[str, Any]) -> str:
+    """One sentence for a result's ``colour_space`` provenance from a conversion record
+    (:func:`gonio.brdf.colour.exportspace.conversion_record`): what export readers see in
+    every exported file's ``colour_space`` (gonio.export.metadata)."""
+    return (f"{record['space']}, computed from CIE XYZ ({record['xyz_conditions']}) of "
+            f"{record['channels_to_xyz']} by {record['library']}, "
+            f"{record['chromatic_adaptation']} adaptation to D65"
+            + (", negative components clamped at 0" if record.get("clamped_at_zero") else ""))
+
+
+def uncalibrated_record() -> dict[str, Any]:
+    """What an export states for a result without colour: its values' space."""
+    return {"space": UNCALIBRATED_SPACE,
+            "note": "the sensor's channels as measured, in 1/sr; no colour space "
+                    "(docs/colour.md: spectral bands or a chart calibration give one)"}
+
+
+def srgb_view(res: ResultFile, brdf: Any) -> Any:
+    """``brdf`` (the result's table or its simulated truth, channels as the result's) seen in
+    linear sRGB, for renderings; ``brdf`` itself when the result has no colour."""
+    from gonio.brdf.colour.exportspace import srgb_matrix
+
+    conv = conversion_of(res)
+    if conv is None or res.table is None:
+        return brdf
+    return _SrgbView(brdf, srgb_matrix(conv, res.table.n_channels, ViewingConditions()))
+
+
+class _SrgbView:
+    """A BRDF whose channels are mapped to linear sRGB by a (3, C) matrix, clamped at 0."""
+
+    channels = ("R", "G", "B")
+
+    def __init__(self, brdf: Any, matrix: np.ndarray) -> None:
+        self.brdf = brdf
+        self.matrix = matrix
+        self.name = getattr(brdf, "name", "brdf")
+
+    def eval(self, wi: Any, wo: Any) -> np.ndarray:
+        v = np.asarray(self.brdf.eval(wi, wo), dtype=float)
+        return np.maximum(np.nan_to_num(v) @ self.matrix.T, 0.0)

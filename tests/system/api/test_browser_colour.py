@@ -1,0 +1,80 @@
+"""The lab page's colour table (headless Chromium): a spectral specimen scanned on the simulated
+rig shows CIELAB at the instrument geometries beside its rendering, the numbers the API gives;
+a comparison job adds CIEDE2000."""
+
+from __future__ import annotations
+
+import secrets
+from collections.abc import Iterator
+from typing import Any
+
+import pytest
+
+from gonio.api.auth import ApiKeyring
+from gonio.daemon import DaemonConfig, build_app
+from tests.system.api.conftest import Daemon
+from tests.system.api.live_server import live_server
+from tests.system.api.test_browser import _calibrate, _severe, browser, open_live  # noqa: F401
+from tests.system.api.test_scan_flow import scan, wait_state
+
+pytestmark = pytest.mark.system
+
+
+@pytest.fixture(scope="module")
+def spectral_daemon(tmp_path_factory: pytest.TempPathFactory, basis: Any) -> Iterator[Daemon]:
+    """A daemon of its own whose simulated rig holds a spectral specimen (31-band sensors)."""
+    from gonio.sim.rig import SimRigOptions, start_sim_rig
+
+    data_dir = tmp_path_factory.mktemp("gonio-data")
+    sim = start_sim_rig(SimRigOptions(material="metallic-blue-paint", time_scale=10.0,
+                                      settle_s=0.0))
+    key = secrets.token_hex(24)
+    cfg = DaemonConfig().with_overrides(paths__data_dir=str(data_dir))
+    app = build_app(cfg, sim.config, ApiKeyring({"tester": key}), basis_provider=lambda: basis)
+    app.state.service.worker.fit_exports = False  # 31-channel fits are not under test
+    try:
+        with live_server(app) as url:
+            yield Daemon(url, key, app, sim, data_dir)
+    finally:
+        sim.close()
+
+
+def test_colour_table_beside_the_rendering(spectral_daemon: Daemon,
+                                           browser: Any) -> None:  # noqa: F811
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support import expected_conditions as ec
+    from selenium.webdriver.support.ui import Select
+
+    d = spectral_daemon
+    _calibrate(d)
+    with d.client() as c:
+        ids = [c.post("/api/v1/jobs", json=scan(name, rotations=4)).json()["id"]
+               for name in ("blue panel", "blue panel, batch 2")]
+        for job_id in ids:
+            assert wait_state(c, job_id, {"completed", "failed"}, 240)["state"] == "completed"
+        api = c.get(f"/api/v1/jobs/{ids[0]}/colour", params={"instrument": "MA98"}).json()
+    assert api["colour"]["space"] == "CIELAB"
+    wait = open_live(browser, d, 240)
+    row = f'#jobs tr[data-id="{ids[0]}"]'
+    wait.until(ec.element_to_be_clickable((By.CSS_SELECTOR, row))).click()
+    wait.until(lambda b: b.find_element(By.ID, "colour").is_displayed()
+               and "CIELAB" in b.find_element(By.ID, "colour-caption").text)
+    caption = browser.find_element(By.ID, "colour-caption").text
+    assert "D65/10°" in caption and "MA98 geometries" in caption and "flop index" in caption
+    cells = [[td.text for td in tr.find_elements(By.TAG_NAME, "td")]
+             for tr in browser.find_elements(By.CSS_SELECTOR, "#colour-table tbody tr")]
+    assert len(cells) == 11 and cells[0][0] == "45as-15"
+    # The page shows the API's numbers.
+    first = api["colour"]["rows"][0]
+    assert cells[0][1:4] == [f"{first[k]:.2f}" for k in ("L", "a", "b")]
+    # Another instrument, then a comparison: ΔE00 appears as a column.
+    Select(browser.find_element(By.ID, "colour-instrument")).select_by_value("BYK-mac")
+    wait.until(lambda b: "BYK-mac geometries" in b.find_element(By.ID, "colour-caption").text)
+    assert len(browser.find_elements(By.CSS_SELECTOR, "#colour-table tbody tr")) == 6
+    wait.until(lambda b: str(ids[1]) in [o.get_attribute("value") for o in
+                                         b.find_elements(By.CSS_SELECTOR, "#compare option")])
+    Select(browser.find_element(By.ID, "compare")).select_by_value(str(ids[1]))
+    wait.until(lambda b: f"against job {ids[1]}" in b.find_element(By.ID, "colour-caption").text)
+    head = [th.text for th in browser.find_elements(By.CSS_SELECTOR, "#colour-table thead th")]
+    assert head[-1] == "ΔE00"
+    assert not _severe(browser)

@@ -1,0 +1,152 @@
+"""Colour reports of tables: CIELAB at instrument geometries, flop index, CIEDE2000."""
+
+from __future__ import annotations
+
+import csv
+import io
+import warnings
+
+import numpy as np
+import pytest
+
+from gonio.brdf.colour.conditions import ColourError, ViewingConditions
+from gonio.brdf.colour.report import CIELAB, UNCALIBRATED, colour_report, compare, flop_index
+from gonio.brdf.colour.spectral import SpectralBands
+from gonio.brdf.tables.table import BRDFTable, from_function
+
+with warnings.catch_warnings():
+    warnings.simplefilter("ignore")
+    import colour
+
+WL = np.arange(400.0, 701.0, 10.0)
+RED = 0.08 + 0.55 / (1 + np.exp(-(WL - 590.0) / 15.0))
+BANDS = SpectralBands(tuple(WL), tuple(np.full(WL.size, 1.0)))
+
+
+def spectral_table(diffuse: np.ndarray, gloss: float = 0.0, aniso: bool = False) -> BRDFTable:
+    """Lambertian ``diffuse / pi`` plus an optional white Phong-like lobe about the specular."""
+    def fn(wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+        h = wi + wo
+        h = h / np.linalg.norm(h, axis=-1, keepdims=True)
+        if aniso:  # a lobe sharper along x than along y (brushed along y)
+            lobe = np.exp(-(h[:, 0] ** 2 / 0.02 + h[:, 1] ** 2 / 0.2))
+        else:
+            lobe = np.exp(-(1 - h[:, 2] ** 2) / 0.05)
+        return diffuse[None, :] / np.pi + gloss * lobe[:, None]
+    return from_function(fn, [f"{w:g}nm" for w in WL], "spec")
+
+
+def reference_lab(spectrum: np.ndarray, cond: ViewingConditions) -> np.ndarray:
+    """colour-science's own path from a spectrum to CIELAB (white from the same weighting)."""
+    cmfs = colour.MSDS_CMFS[cond.observer_name]
+    ill = colour.SDS_ILLUMINANTS[cond.illuminant]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        xyz = colour.sd_to_XYZ(colour.SpectralDistribution(spectrum, WL), cmfs, ill,
+                               method="ASTM E308")
+        white = colour.sd_to_XYZ(colour.SpectralDistribution(np.ones_like(WL), WL), cmfs, ill,
+                                 method="ASTM E308")
+    return np.asarray(colour.XYZ_to_Lab(xyz / 100, colour.XYZ_to_xy(white / 100)))
+
+
+@pytest.mark.parametrize("cond", [ViewingConditions(), ViewingConditions("A", "2")])
+def test_lambertian_spectral_table_reads_its_spectrum_colour(cond: ViewingConditions) -> None:
+    report = colour_report(spectral_table(RED), BANDS, cond)
+    assert report.space == CIELAB and report.lab is not None
+    ref = reference_lab(RED, cond)
+    # Every geometry sees the same colour (the table's interpolation is exact for a
+    # constant); the band path's smoothing and colour-science's own extrapolation differ by a
+    # few hundredths of a unit.
+    de = colour.delta_E(report.lab, np.broadcast_to(ref, report.lab.shape), method="CIE 2000")
+    assert np.max(de) < 0.05
+    assert report.flop == {"MA98@0": pytest.approx(0.0), "BYK-mac@0": pytest.approx(0.0)}
+    assert report.reflectance[0] == pytest.approx(RED, rel=1e-4)
+
+
+def test_gloss_gives_flop_by_the_x_rite_formula() -> None:
+    report = colour_report(spectral_table(RED * 0.5, gloss=0.8), BANDS, instruments=["MA68"])
+    assert report.lab is not None
+    L = {g.aspecular_deg: report.lab[k, 0] for k, g in enumerate(report.geometries)}
+    assert L[15] > L[25] > L[45] > L[110]
+    expected = 2.69 * (L[15] - L[110]) ** 1.11 / L[45] ** 0.86
+    assert report.flop["MA68@0"] == pytest.approx(expected, rel=1e-9)
+    assert float(flop_index(40.0, 50.0, 60.0)) == 0.0
+
+
+def test_azimuth_reveals_anisotropy() -> None:
+    t = spectral_table(RED * 0.5, gloss=0.5, aniso=True)
+    report = colour_report(t, BANDS, instruments=["BYK-mac"], azimuths_deg=[0, 90])
+    assert report.lab is not None
+    at0, at90 = report.lab[:6], report.lab[6:]
+    assert np.abs(at0[:, 0] - at90[:, 0]).max() > 5.0
+    iso = colour_report(spectral_table(RED * 0.5, gloss=0.5), BANDS, instruments=["BYK-mac"],
+                        azimuths_deg=[0, 90])
+    assert iso.lab is not None
+    assert np.abs(iso.lab[:6] - iso.lab[6:]).max() < 0.5
+
+
+def test_uncalibrated_report_states_it_and_keeps_channel_values() -> None:
+    def fn(wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+        return np.tile([0.3, 0.2, 0.1], (wi.shape[0], 1))
+    t = from_function(fn, ["R", "G", "B"], "plain")
+    report = colour_report(t, None)
+    assert report.space == UNCALIBRATED and report.lab is None and not report.flop
+    row = report.rows()[0]
+    assert row["R_R"] == pytest.approx(0.3 * np.pi, rel=1e-6) and "L" not in row
+    text = report.csv()
+    parsed = list(csv.DictReader(io.StringIO(text)))
+    assert parsed[0]["space"] == UNCALIBRATED and parsed[0]["illuminant"] == "D65"
+    with pytest.raises(ColourError, match="uncalibrated sensor RGB"):
+        compare(report, report)
+
+
+def test_compare_gives_ciede2000_per_geometry() -> None:
+    a = colour_report(spectral_table(RED), BANDS)
+    b = colour_report(spectral_table(RED * 0.9), BANDS)
+    d = compare(a, b)
+    assert a.lab is not None and b.lab is not None
+    assert d.de00 == pytest.approx(colour.delta_E(a.lab, b.lab, method="CIE 2000"))
+    assert (d.de00 > 0.5).all()
+    assert d.as_dict()["rows"][0]["dL"] == pytest.approx(a.lab[0, 0] - b.lab[0, 0])
+    assert compare(a, a).de00 == pytest.approx(0.0)
+    other = colour_report(spectral_table(RED), BANDS, ViewingConditions("A"))
+    with pytest.raises(ColourError, match="same illuminant"):
+        compare(a, other)
+    ma68 = colour_report(spectral_table(RED), BANDS, instruments=["MA68"], azimuths_deg=[30])
+    with pytest.raises(ColourError, match="share no geometry"):
+        compare(a, ma68)
+
+
+def test_csv_rows_carry_space_conditions_and_numbers() -> None:
+    report = colour_report(spectral_table(RED), BANDS, instruments=["MA68"])
+    rows = list(csv.DictReader(io.StringIO(report.csv())))
+    assert len(rows) == 5 and rows[0]["space"] == "CIELAB" and rows[0]["observer"] == "10"
+    assert rows[0]["aspecular_deg"] == "15"
+    assert report.lab is not None
+    assert float(rows[2]["L"]) == pytest.approx(report.lab[2, 0], abs=1e-4)
+
+
+def test_channel_mismatch_is_refused() -> None:
+    rgb = from_function(lambda i, o: np.ones((i.shape[0], 3)), ["R", "G", "B"], "x")
+    with pytest.raises(ColourError, match="3 values for 31 spectral bands"):
+        colour_report(rgb, BANDS)
+
+
+def test_log_lookup_follows_exponential_lobes_and_flat_tables() -> None:
+    from gonio.brdf.colour.report import LOG_OFFSET, log_lookup
+    from gonio.brdf.tables import geometry as geo
+
+    # f = exp(-12 theta_h) - f0 is exactly log-linear in theta_h: the log blend between two
+    # 5 degree cells reproduces it wherever theta_h falls, where a linear blend overshoots.
+    def fn(wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+        th = geo.directions_to_half_diff(wi, wo)[0]
+        return (np.exp(-12.0 * th) - LOG_OFFSET)[:, None]
+    t = from_function(fn, ["x"], "lobe")
+    th_h = np.deg2rad([2.5, 7.0, 13.0])
+    wi, wo = geo.half_diff_to_directions(th_h, 0.3, np.deg2rad(20.0), np.deg2rad(40.0))
+    exact = np.exp(-12.0 * th_h) - LOG_OFFSET
+    assert log_lookup(t, wi, wo)[:, 0] == pytest.approx(exact, rel=1e-6)
+    assert (t.eval(wi, wo)[:, 0] > exact * 1.005).all()
+    flat = spectral_table(RED)
+    wi, wo = geo.half_diff_to_directions(th_h, 1.0, np.deg2rad(33.0), np.deg2rad(12.0))
+    assert log_lookup(flat, wi, wo) == pytest.approx(flat.eval(wi, wo), rel=1e-6)

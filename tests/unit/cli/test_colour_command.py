@@ -1,0 +1,195 @@
+"""'gonio colour' on result files: CIELAB tables, CSV, CIEDE2000 against a standard, errors."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gonio.brdf.colour import conditions as colour_conditions
+from gonio.brdf.colour import instruments as colour_instruments
+from gonio.brdf.colour.chart import ColourMatrix
+from gonio.brdf.colour.conditions import ViewingConditions
+from gonio.brdf.tables.table import BRDFTable, from_function
+from gonio.calibration import CalibratedScan
+from gonio.cli import colour_command, main
+from gonio.results import write_result
+
+with warnings.catch_warnings():
+    warnings.simplefilter("ignore")
+    import colour
+
+RGB = np.array([0.25, 0.15, 0.05])
+MATRIX = np.array([[41.2, 35.8, 18.0], [21.3, 71.5, 7.2], [1.9, 11.9, 95.0]])
+
+
+def _samples(channels: tuple[str, ...]) -> CalibratedScan:
+    return CalibratedScan(pairs=[("L1", "S1")], light_dirs=np.array([[0.0, 0.0, 1.0]]),
+                          sensor_dirs=np.array([[0.0, 0.0, 1.0]]),
+                          stage_angles_deg=np.array([0.0]),
+                          values=np.ones((1, 1, len(channels))), channels=channels)
+
+
+def _lambert(scale: float = 1.0) -> BRDFTable:
+    return from_function(lambda i, o: np.tile(RGB * scale, (i.shape[0], 1)), ["R", "G", "B"],
+                         "x", dtype=np.float32)
+
+
+def _write(path: Path, table: BRDFTable, source: dict[str, object] | None,
+           specimen: str = "panel") -> Path:
+    return write_result(path, job_id=7, specimen=specimen, kind="uniform", readings=[],
+                        samples=_samples(table.channels), table=table,
+                        colour=None if source is None else {"source": source})
+
+
+def _matrix() -> dict[str, object]:
+    return ColourMatrix(("R", "G", "B"), MATRIX, ViewingConditions(), 0.4, 1.1, 24,
+                        "chart.csv").as_dict()
+
+
+def _expected_lab(rgb: np.ndarray) -> np.ndarray:
+    """CIELAB of a matrix-calibrated reflectance, by colour-science directly."""
+    refl = np.pi * rgb
+    xyz = MATRIX @ refl
+    white = ViewingConditions().white_xyz
+    return np.asarray(colour.XYZ_to_Lab(xyz / 100, colour.XYZ_to_xy(white / 100)))
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    d = tmp_path_factory.mktemp("colour")
+    return {
+        "cal": _write(d / "cal.h5", _lambert(), {"calibration": _matrix()}),
+        "cal2": _write(d / "cal2.h5", _lambert(0.9), {"calibration": _matrix()}, "batch 2"),
+        "raw": _write(d / "raw.h5", _lambert(), None),
+    }
+
+
+def test_calibrated_result_prints_cielab(files: dict[str, Path],
+                                         capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["colour", str(files["cal"]), "--csv", "-"]) == 0
+    rows = list(csv.DictReader(io.StringIO(capsys.readouterr().out)))
+    assert len(rows) == 11 + 6 and rows[0]["space"] == "CIELAB"
+    assert rows[0]["illuminant"] == "D65" and rows[0]["observer"] == "10"
+    lab = _expected_lab(RGB)
+    for r in rows:
+        assert [float(r["L"]), float(r["a"]), float(r["b"])] == pytest.approx(lab, abs=2e-3)
+        assert float(r["flop_index"]) == pytest.approx(0.0)
+
+
+def test_table_json_and_csv_file(files: dict[str, Path], tmp_path: Path,
+                                 capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "c.csv"
+    assert main(["colour", str(files["cal"]), "--instrument", "MA68", "--azimuth", "0,90",
+                 "--csv", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "panel: CIELAB, D65/10 (chart colour calibration (24 patches" in text
+    assert "flop index MA68 at azimuth 90: 0.00" in text and f"wrote {out}" in text
+    assert len(list(csv.DictReader(out.open()))) == 10
+    assert main(["colour", str(files["cal"]), "--json", "--observer", "2"]) == 2
+    err = capsys.readouterr()
+    # A matrix fitted for D65/10 refuses other conditions with what to do.
+    assert "fit it again from the chart for D65/2" in err.err
+
+
+def test_uncalibrated_result_says_so(files: dict[str, Path],
+                                     capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["colour", str(files["raw"]), "--json"]) == 0
+    rep = json.loads(capsys.readouterr().out)["colour"]
+    assert rep["space"] == "uncalibrated sensor RGB"
+    assert rep["rows"][0]["R_R"] == pytest.approx(np.pi * RGB[0], rel=1e-5)
+    assert main(["colour", str(files["raw"])]) == 0
+    assert "no CIELAB without spectral bands" in capsys.readouterr().out
+    assert main(["colour", str(files["raw"]), "--against", str(files["cal"])]) == 2
+    assert "uncalibrated sensor RGB" in capsys.readouterr().err
+
+
+def test_against_a_result_and_a_stored_csv(files: dict[str, Path], tmp_path: Path,
+                                           capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["colour", str(files["cal2"]), "--against", str(files["cal"]), "--json"]) == 0
+    diff = json.loads(capsys.readouterr().out)["difference"]
+    expected = colour.delta_E(_expected_lab(RGB * 0.9), _expected_lab(RGB), method="CIE 2000")
+    assert diff["max_dE00"] == pytest.approx(expected, abs=1e-3)
+    assert diff["sample"] == "batch 2" and diff["standard"] == "panel"
+    std = tmp_path / "std.csv"
+    assert main(["colour", str(files["cal"]), "--csv", str(std)]) == 0
+    capsys.readouterr()
+    assert main(["colour", str(files["cal2"]), "--against", str(std), "--csv", "-"]) == 0
+    rows = list(csv.DictReader(io.StringIO(capsys.readouterr().out)))
+    assert float(rows[0]["dE00"]) == pytest.approx(expected, abs=1e-3)
+    assert main(["colour", str(files["cal"]), "--against", str(std), "--csv", "-"]) == 0
+    rows = list(csv.DictReader(io.StringIO(capsys.readouterr().out)))
+    assert max(float(r["dE00"]) for r in rows) < 1e-3
+
+
+def test_bad_input(files: dict[str, Path], tmp_path: Path,
+                   capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["colour", str(tmp_path / "none.h5")]) == 2
+    assert "does not exist" in capsys.readouterr().err
+    assert main(["colour", str(files["cal"]), "--azimuth", "north"]) == 2
+    assert "degrees separated by commas" in capsys.readouterr().err
+    assert main(["colour", str(files["cal"]), "--instrument", "MA99"]) == 2
+    assert "known instruments are MA68" in capsys.readouterr().err
+    assert main(["colour", str(files["cal"]), "--against", str(tmp_path / "x.h5")]) == 2
+    assert "standard" in capsys.readouterr().err
+    bad = tmp_path / "bad.csv"
+    bad.write_text("instrument,L\nMA98,50\n")
+    assert main(["colour", str(files["cal"]), "--against", str(bad)]) == 2
+    assert "are missing" in capsys.readouterr().err
+    calib = write_result(tmp_path / "white.h5", job_id=8, specimen="white",
+                         kind="calibration", readings=[], samples=_samples(("R", "G", "B")))
+    assert main(["colour", str(calib)]) == 2
+    assert "no reconstructed BRDF" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["colour", str(files["cal"]), "--illuminant", "D66"])
+
+
+def test_cli_names_match_the_core() -> None:
+    assert colour_command.ILLUMINANTS == colour_conditions.ILLUMINANTS
+    assert tuple(colour_instruments.INSTRUMENTS) == colour_command.INSTRUMENTS
+    assert colour_command.DEFAULT_INSTRUMENTS == colour_instruments.DEFAULT_INSTRUMENTS
+
+
+def test_colour_chart_writes_a_rig_config_table(tmp_path: Path,
+                                                capsys: pytest.CaptureFixture[str]) -> None:
+    import tomllib
+
+    from gonio.brdf.colour.chart import Chart, format_chart
+    from gonio.brdf.colour.conditions import GRID_NM, resample
+    from gonio.config import parse_rig_config
+    from tests.unit.test_config import EXAMPLE
+
+    sds = colour.SDS_COLOURCHECKERS["ColorChecker N Ohta"]
+    names = tuple(sds)
+    wl = np.asarray(sds[names[0]].wavelengths, float)
+    refl = np.stack([np.asarray(sds[n].values, float) for n in names])
+    centres = np.array([[610.0], [540.0], [460.0]])
+    resp = np.exp(-0.5 * ((GRID_NM[None, :] - centres) / 25.0) ** 2)
+    read = resample(wl, refl) @ (resp / resp.sum(axis=1, keepdims=True)).T
+    chart = tmp_path / "chart.csv"
+    chart.write_text(format_chart(Chart(names, wl, refl, ("R", "G", "B"), read)))
+    out = tmp_path / "cal.toml"
+    assert main(["colour-chart", str(chart), "--channels", "R,G,B", "-o", str(out)]) == 0
+    said = capsys.readouterr().out
+    assert "from 24 patches (D65/10): residual median" in said
+    fragment = tomllib.loads(out.read_text())["sensors"]["colour_calibration"]
+    assert len(fragment["matrix"]) == 3 and fragment["n_patches"] == 24
+    with EXAMPLE.open("rb") as f:
+        rig = tomllib.load(f)
+    rig["sensors"][0]["colour_calibration"] = fragment
+    cfg = parse_rig_config(rig)
+    cal = cfg.sensors[0].colour_calibration
+    assert cal is not None and cal.source == "chart.csv"
+    # The matrix maps the chart's own readings near its reference XYZ (what fitting means).
+    ref = Chart(names, wl, refl, ("R", "G", "B"), read).reference_xyz(ViewingConditions())
+    fitted = read @ np.asarray(cal.matrix).T
+    assert np.median(np.abs(fitted - ref)) < 3.0
+    assert main(["colour-chart", str(tmp_path / "none.csv")]) == 2
+    assert "does not exist" in capsys.readouterr().err
+    assert main(["colour-chart", str(chart), "--channels", "R,IR"]) == 2
+    assert "no column for channels ['IR']" in capsys.readouterr().err

@@ -1,0 +1,120 @@
+"""Colour of result files (gonio.result_colour): which conversion applies, the stored group,
+linear sRGB for renderings and exports, stored standards."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gonio.brdf.colour.chart import ColourMatrix
+from gonio.brdf.colour.conditions import ColourError, ViewingConditions
+from gonio.brdf.colour.spectral import SpectralBands
+from gonio.brdf.tables.table import BRDFTable, from_function
+from gonio.calibration import CalibratedScan
+from gonio.figures import load_input
+from gonio.result_colour import (
+    colour_group,
+    conversion_of,
+    linear_srgb,
+    read_standard_csv,
+    srgb_view,
+)
+from gonio.results import read_result, write_result
+
+WL = (450.0, 550.0, 650.0)
+
+
+def _table(wl: tuple[float, ...] | None) -> BRDFTable:
+    t = from_function(lambda i, o: np.tile([0.1, 0.2, 0.05], (i.shape[0], 1)),
+                      ["a", "b", "c"], "t", dtype=np.float32)
+    return BRDFTable.trusted(np.asarray(t.values), t.channels, "t", wl)
+
+
+def _write(tmp: Path, table: BRDFTable, colour: dict | None, calibrated: bool = True) -> Path:
+    cal = {"pairs": [{"light": "L1", "sensor": "S1", "factor": [1, 1, 1]}]} if calibrated \
+        else {"pairs": []}
+    s = CalibratedScan(pairs=[("L1", "S1")], light_dirs=np.array([[0.0, 0.0, 1.0]]),
+                       sensor_dirs=np.array([[0.0, 0.0, 1.0]]), stage_angles_deg=np.zeros(1),
+                       values=np.ones((1, 1, 3)), channels=table.channels, calibration=cal)
+    return write_result(tmp / f"r{np.random.randint(1e9)}.h5", job_id=1, specimen="s",
+                        kind="uniform", readings=[], samples=s, table=table, colour=colour)
+
+
+def test_which_conversion(tmp_path: Path) -> None:
+    bands = SpectralBands(WL, (40.0, 40.0, 40.0))
+    m = ColourMatrix(("a", "b", "c"), np.eye(3) * 90, ViewingConditions(), 1, 2, 24)
+    assert conversion_of(read_result(_write(tmp_path, _table(None), None))) is None
+    # The source's bands win over the table's bare centres (they carry the widths).
+    res = read_result(_write(tmp_path, _table(WL), {"source": {"bands": bands.as_dict()}}))
+    assert conversion_of(res) == bands
+    res = read_result(_write(tmp_path, _table(WL), None))
+    assert conversion_of(res) == SpectralBands(WL)
+    res = read_result(_write(tmp_path, _table(None), {"source": {"calibration": m.as_dict()}}))
+    assert isinstance(conversion_of(res), ColourMatrix)
+    # Sensor units (no white reference): no colour, whatever the sensor.
+    res = read_result(_write(tmp_path, _table(WL), None, calibrated=False))
+    assert conversion_of(res) is None and linear_srgb(res) is None
+
+
+def test_colour_group_records_why_there_is_no_colour() -> None:
+    g = colour_group(_table(WL), {}, calibrated=False)
+    assert g["report"]["space"] == "uncalibrated sensor RGB" and "sensor units" in g["note"]
+    g = colour_group(_table(WL), {"error": "sensors differ"})
+    assert g == {"source": {"error": "sensors differ"}, "error": "sensors differ"}
+    g = colour_group(_table(WL), {"bands": {"centres_nm": [2000.0, 2100.0, 2200.0],
+                                            "widths_nm": [10.0, 10.0, 10.0]}})
+    assert "respond nowhere" in g["error"]
+    assert colour_group(_table(WL), {})["report"]["space"] == "CIELAB"
+
+
+def test_renderings_of_a_spectral_result_are_linear_srgb(tmp_path: Path) -> None:
+    path = _write(tmp_path, _table(WL), None)
+    rows = load_input(path, with_truth=False)
+    table = rows[-1][1]
+    assert table.channels == ("R", "G", "B")
+    assert table.provenance["colour_space"]["space"].startswith("linear sRGB")
+    res = read_result(path)
+    srgb = linear_srgb(res)
+    assert srgb is not None
+    view = srgb_view(res, res.table)
+    wi = np.array([[0.3, 0.0, np.sqrt(1 - 0.09)]])
+    wo = np.array([[-0.3, 0.0, np.sqrt(1 - 0.09)]])
+    assert view.eval(wi, wo) == pytest.approx(srgb[0].eval(wi, wo), rel=1e-3, abs=1e-5)
+    plain = _write(tmp_path, _table(None), None)
+    assert load_input(plain, with_truth=False)[-1][1].channels == ("a", "b", "c")
+
+
+def test_stored_standard_errors(tmp_path: Path) -> None:
+    p = tmp_path / "std.csv"
+    p.write_text("illuminant,observer,instrument,incidence_deg,aspecular_deg,L,a,b\n"
+                 "D65,10,MA98,45,15,50,1,2\nD50,10,MA98,45,25,50,1,2\n")
+    with pytest.raises(ColourError, match="several conditions"):
+        read_standard_csv(p)
+    p.write_text("space,illuminant,observer,instrument,incidence_deg,aspecular_deg,L,a,b\n"
+                 "uncalibrated sensor RGB,D65,10,MA98,45,15,50,1,2\n")
+    with pytest.raises(ColourError, match="not CIELAB"):
+        read_standard_csv(p)
+    p.write_text("illuminant,observer,instrument,incidence_deg,aspecular_deg,L,a,b\n"
+                 "D65,10,MA98,45,x,50,1,2\n")
+    with pytest.raises(ColourError, match="row 2"):
+        read_standard_csv(p)
+    p.write_text("")
+    with pytest.raises(ColourError, match="no rows"):
+        read_standard_csv(p)
+    p.write_text("illuminant,observer,instrument,incidence_deg,aspecular_deg,L,a,b\n"
+                 "D65,10,MA98,45,15,50,1,2\n")
+    std = read_standard_csv(p)
+    assert std.lab is not None and std.lab[0] == pytest.approx([50, 1, 2])
+
+
+def test_colour_statement_names_the_space_conditions_and_source() -> None:
+    from gonio.brdf.colour.exportspace import conversion_record
+    from gonio.result_colour import colour_statement
+
+    text = colour_statement({**conversion_record(ViewingConditions("D50", "2"),
+                                                 "spectral bands (31)"),
+                             "clamped_at_zero": True})
+    assert text.startswith("linear sRGB (Rec. 709 primaries, D65)")
+    assert "(D50/2)" in text and "spectral bands (31)" in text and "clamped at 0" in text
