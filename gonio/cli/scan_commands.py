@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from gonio.cli import UsageError, finite_float, nonnegative_float, positive_float, positive_int
-from gonio.cli.daemon_client import DaemonClient, add_daemon_options
+from gonio.cli.daemon_client import DaemonClient, DaemonRefused, add_daemon_options
 
 
 def register(subparsers: Any) -> None:
@@ -75,6 +75,9 @@ def register(subparsers: Any) -> None:
                         "reference's name, default 'white reference')")
     p.add_argument("--calibration", type=Path, default=None,
                    help="calibration JSON (from a calibration job) to apply")
+    p.add_argument("--accept-uncalibrated", action="store_true",
+                   help="run a scan no calibration covers although this rig was calibrated "
+                        "(its own data directory holds a calibration): values in sensor units")
     p.add_argument("--white-reference", type=positive_float, default=None, metavar="ALBEDO",
                    help="the stage holds a white reference of this albedo (e.g. 0.99): run a "
                         "calibration job and write OUTPUT.calibration.json for later --calibration")
@@ -91,7 +94,9 @@ def register(subparsers: Any) -> None:
     p.set_defaults(func=_scan)
 
     j = subparsers.add_parser("jobs", help="list or show jobs in a job store")
-    j.add_argument("action", nargs="?", choices=["list", "show"], default="list")
+    j.add_argument("action", nargs="?", choices=["list", "show", "abort"], default="list",
+                   help="list the jobs, show one, or abort one left unfinished (e.g. a "
+                        "foreground scan interrupted by Ctrl-C)")
     j.add_argument("job_id", nargs="?", type=int)
     j.add_argument("--db", type=Path, required=True,
                    help="job store (SQLite), e.g. the one 'gonio scan' prints")
@@ -168,6 +173,9 @@ async def _run_scan(args: argparse.Namespace, plan: Any, config: Any, sim: Any =
         # The in-process scan reconstructs with the default basis (built on first use).
         dr = dry_run(plan, desc, basis_ready=not basis_build_needed(default_basis_provider),
                      basis=built_basis_symmetry(default_basis_provider))
+        warning = None if sim is not None else _calibration_warning(args, plan, config, desc)
+        if warning is not None:
+            dr = dr.model_copy(update={"warnings": [*dr.warnings, warning]})
         print(dr.model_dump_json(indent=2) if args.json
               else dry_run_summary(dr, plan, config.rig.name))
         return 0
@@ -205,7 +213,6 @@ async def _run_owned(args: argparse.Namespace, plan: Any, config: Any, sim: Any,
                      desc: Any, db: Path, data_dir: Path) -> int:
     """Run the scan through an in-process :class:`gonio.service.GonioService` (the same door
     as the daemon's API, without its queue worker), then copy the result to ``-o``."""
-    from gonio.calibration import Calibration
     from gonio.cli.sim_session import attach_sim, calibrate_in_foreground, calibration_covers_rig
     from gonio.jobstates import JobState
     from gonio.service import GonioService, JobRequest
@@ -220,7 +227,7 @@ async def _run_owned(args: argparse.Namespace, plan: Any, config: Any, sim: Any,
     if args.calibration is not None:
         if not args.calibration.is_file():
             raise UsageError(f"calibration file {args.calibration} does not exist")
-        override = Calibration.model_validate_json(args.calibration.read_text())
+        override = _read_calibration(args.calibration)
     service = GonioService(store, rig, rig_config=config, data_dir=data_dir,
                            calibration=override)
     try:
@@ -231,12 +238,19 @@ async def _run_owned(args: argparse.Namespace, plan: Any, config: Any, sim: Any,
         if job is not None:
             print(f"resuming job {job.id} from its checkpoint ({job.done_angles} of "
                   f"{job.total_angles} angles done)", file=sys.stderr)
+            if job.state is JobState.PAUSED:
+                # Left paused by Ctrl-C (or by a daemon): running this command again is the
+                # user's resume; the engine would otherwise wait for an API call that never
+                # comes in the foreground.
+                store.set_state(job.id, JobState.RUNNING)
         else:
             if (sim is not None and override is None and plan.kind != "calibration"
                     and not calibration_covers_rig(service)):
                 why = await calibrate_in_foreground(service, sim)
                 if why is not None:
                     raise UsageError(why)
+            if sim is None and plan.kind != "calibration":
+                _check_calibration(args, plan, config, desc, service.calibration(), data_dir)
             # What the submission records as the job's arc warning, said here too (a job whose
             # basis is known only later says it through the progress bar's events).
             for warning in service.dry_run(plan).warnings:
@@ -245,6 +259,13 @@ async def _run_owned(args: argparse.Namespace, plan: Any, config: Any, sim: Any,
         bar = _progress(service, job.id, disabled=args.no_progress)
         try:
             final = await service.run_in_foreground(job.id)
+        except asyncio.CancelledError:
+            # Ctrl-C (asyncio.run cancels this task, then raises KeyboardInterrupt): the
+            # engine has stopped measuring; leave the job paused at its checkpoint, not
+            # "running" for ever, and say how to go on.
+            bar.close()
+            _left_interrupted(store, job.id, db, args)
+            raise
         finally:
             bar.close()
             if sim is not None:
@@ -283,6 +304,84 @@ async def _run_owned(args: argparse.Namespace, plan: Any, config: Any, sim: Any,
     if err:
         print(f"  {err['key']}: {err['meaning']}")
     return 0
+
+
+def _calibration_warning(args: argparse.Namespace, plan: Any, config: Any,
+                         desc: Any) -> str | None:
+    """The dry run's ``uncalibrated: ...`` warning for ``plan`` on this rig, if any."""
+    from gonio.calibration import Calibration, calibration_in_effect, uncalibrated_warning
+    from gonio.paths import scan_data_dir
+    from gonio.plans.validation import plan_pairs
+
+    if plan.kind == "calibration":
+        return None
+    if args.calibration is not None and args.calibration.is_file():
+        cal = _read_calibration(args.calibration)
+    else:
+        cal = calibration_in_effect(args.data_dir or scan_data_dir(config), config)
+    return uncalibrated_warning(cal if isinstance(cal, Calibration) else Calibration(),
+                                plan_pairs(plan, desc))
+
+
+def _check_calibration(args: argparse.Namespace, plan: Any, config: Any, desc: Any,
+                       cal: Any, data_dir: Path) -> None:
+    """Warn of an uncalibrated scan; refuse one of a rig that was calibrated (its own data
+    directory holds a calibration, or one of other pairs is in effect) unless
+    ``--accept-uncalibrated``."""
+    from gonio.calibration import rig_was_calibrated, uncalibrated_warning
+    from gonio.paths import scan_data_dir
+    from gonio.plans.validation import plan_pairs
+
+    warning = uncalibrated_warning(cal, plan_pairs(plan, desc))
+    if warning is None:
+        return
+    own: Path | None = scan_data_dir(config)
+    if own is not None and own.resolve() == data_dir.resolve():
+        own = None
+    if rig_was_calibrated(cal, own) and not args.accept_uncalibrated:
+        where = (f"{own} holds this rig's calibration; leave out --data-dir/--db, or give "
+                 f"--calibration {own / 'calibration.json'}" if own is not None and not cal.pairs
+                 else f"the calibration in effect ({cal.source}) does not cover this plan's "
+                 "pairs; run a calibration (--white-reference ALBEDO)")
+        raise UsageError(f"this scan would be uncalibrated although the rig was calibrated: "
+                         f"{where}; or add --accept-uncalibrated to measure in sensor units")
+    print(f"warning: {warning}", file=sys.stderr)
+
+
+def _read_calibration(path: Path) -> Any:
+    """A calibration JSON file, or a usage error naming the file and what it should be."""
+    from pydantic import ValidationError
+
+    from gonio.calibration import Calibration
+
+    try:
+        return Calibration.model_validate_json(path.read_text(encoding="utf-8"))
+    except (ValidationError, UnicodeDecodeError) as exc:
+        hint = (" (that is a TOML file: --calibration takes the JSON a calibration job "
+                "writes, e.g. white.calibration.json from 'gonio scan --white-reference')"
+                if path.suffix == ".toml" else "")
+        first = exc.errors()[0]["msg"] if isinstance(exc, ValidationError) else str(exc)
+        raise UsageError(f"--calibration {path}: not a calibration file ({first}){hint}; "
+                         "expected the JSON written by a calibration job "
+                         "(OUTPUT.calibration.json of 'gonio scan --white-reference ALBEDO')"
+                         ) from None
+
+
+def _left_interrupted(store: Any, job_id: int, db: Path, args: argparse.Namespace) -> None:
+    """Mark a job whose foreground run was interrupted ``paused`` (a measuring one; one that
+    was reconstructing stays so and is finished at the next run) and print how to resume or
+    abort it."""
+    from gonio.jobstates import JobState
+
+    row = store.get_job(job_id)
+    if row.state in (JobState.RUNNING, JobState.SUSPENDED):
+        row = store.set_state(job_id, JobState.PAUSED, reason="interrupted (Ctrl-C in gonio scan)")
+    if row.state.value in _FINAL:
+        return
+    print(f"job {job_id} interrupted: {row.state.value} at its checkpoint, "
+          f"{row.done_angles} of {row.total_angles} angles measured. Run the same command "
+          f"again to resume it, or abort it with: gonio jobs abort {job_id} --db {db}",
+          file=sys.stderr, flush=True)
 
 
 def _angles_text(angles: list[float], most: int = 8) -> str:
@@ -368,7 +467,13 @@ def _scan_through_daemon(args: argparse.Namespace, plan: Any) -> int:
         checked = client.request("POST", "/api/v1/jobs/dry-run", json=body)
         for warning in checked.get("warnings", []) if isinstance(checked, dict) else []:
             print(f"warning: {warning}", file=sys.stderr)
-        job = client.request("POST", "/api/v1/jobs", json=body)
+        try:
+            job = client.request("POST", "/api/v1/jobs", json=body, params={
+                "accept_uncalibrated": "true"} if args.accept_uncalibrated else None)
+        except DaemonRefused as exc:
+            if exc.status == 409 and "accept_uncalibrated" in str(exc):
+                raise UsageError(f"{exc} (here: --accept-uncalibrated)") from None
+            raise
         job_id = int(job["id"])
         print(f"job {job_id} queued on {client.url}", file=sys.stderr)
         try:
@@ -449,6 +554,8 @@ def _jobs(args: argparse.Namespace) -> int:
 
     if not args.db.is_file():
         raise UsageError(f"job store {args.db} does not exist")
+    if args.action == "abort":
+        return _abort_job(args)
     store = JobStore(args.db, durable=False)
     if args.action == "show":
         if args.job_id is None:
@@ -472,4 +579,36 @@ def _jobs(args: argparse.Namespace) -> int:
         print(f"{r.id:>4}  {r.state.value:<14} {r.kind:<11} "
               f"{r.done_angles:>4}/{r.total_angles:<4}  {created}  {r.specimen}"
               + (f"  ({r.reason})" if r.reason else ""))
+    return 0
+
+
+def _abort_job(args: argparse.Namespace) -> int:
+    """``gonio jobs abort ID --db DB``: end an unfinished job in a store nobody runs now."""
+    from gonio.jobstates import IllegalTransition, JobState
+    from gonio.locks import LockBusy, claim_store
+    from gonio.store import JobStore, NotFound
+
+    if args.job_id is None:
+        raise UsageError("jobs abort needs a job id, e.g. 'gonio jobs abort 3 --db jobs.sqlite'")
+    try:
+        # A daemon or a gonio scan running jobs from this store would not see the change:
+        # act through it instead (its API, or Ctrl-C).
+        lock = claim_store(args.db)
+    except LockBusy as exc:
+        raise UsageError(str(exc)) from None
+    with lock:
+        store = JobStore(args.db)
+        try:
+            row = store.set_state(args.job_id, JobState.ABORTED, reason="aborted by request "
+                                  "(gonio jobs abort)")
+        except NotFound as exc:
+            raise UsageError(str(exc)) from None
+        except IllegalTransition:
+            state = store.get_job(args.job_id).state.value
+            raise UsageError(f"job {args.job_id} is {state}: only an unfinished job can be "
+                             "aborted") from None
+        finally:
+            store.close()
+    print(f"job {row.id} aborted ({row.done_angles} of {row.total_angles} angles had been "
+          "measured; its readings stay in the store)")
     return 0

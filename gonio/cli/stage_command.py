@@ -103,8 +103,12 @@ def run(args: argparse.Namespace) -> int:
     try:
         print(_through_daemon(args) if args.daemon else asyncio.run(_run(args)))
     except DeviceInUse as exc:
-        raise UsageError(f"{exc} (e.g. gonio stage --daemon http://127.0.0.1:8600 "
-                         f"{args.action})") from None
+        # The refusal names the daemon's address when it has one (gonio.locks.advertise_url).
+        text = str(exc)
+        if "--daemon http" not in text:
+            text += (f" (e.g. gonio stage --daemon URL {args.action}, URL being the address "
+                     "'gonio serve' printed)")
+        raise UsageError(text) from None
     except DeviceFault as exc:
         print(f"gonio stage: stage fault: {exc}", file=sys.stderr)
         return 1

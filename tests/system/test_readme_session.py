@@ -103,6 +103,7 @@ def test_readme_rig_session_runs_verbatim_against_gonio_sim(tmp_path: Path) -> N
     sim: Background | None = None
     served = False
     log: list[str] = []
+    scan_dirs: list[Path] = []  # the data directories `gonio scan` printed
 
     def run(command: str) -> str:
         done = subprocess.run(["bash", "-c", command], cwd=tmp_path, env=env, text=True,
@@ -132,17 +133,26 @@ def test_readme_rig_session_runs_verbatim_against_gonio_sim(tmp_path: Path) -> N
                     url = daemon.wait_for(r"gonio serving on (http://\S+)").group(1)
                     health = httpx.get(url + "health", timeout=30)
                     assert health.status_code == 200, health.text
+                    # The calibration made with `gonio scan --white-reference` in the morning
+                    # is the one the daemon applies: one data directory per rig.
+                    cal = httpx.get(url + "api/v1/calibration", timeout=30).json()
+                    assert "white reference" in cal["source"] and cal["pairs"], cal
                 finally:
                     daemon.stop()
                 # The signal also reaches the wrapping bash; what matters is the daemon's own
                 # clean shutdown.
                 out = "\n".join(daemon.lines)
                 assert "Traceback" not in out and "Application shutdown complete" in out, out
-                # It says where its jobs and results go (no data_dir configured: ./gonio-data).
-                assert f"data directory {(tmp_path / 'gonio-data').resolve()}" in out, out
+                # It says where its jobs and results go: with no data_dir configured, the
+                # rig's own, the one `gonio scan` printed; and that its scans are calibrated.
+                assert scan_dirs, "no gonio scan ran before the daemon"
+                assert f"data directory {scan_dirs[-1].resolve()}" in out, out
+                assert re.search(r"calibration: job \d+: white reference, 10 pairs", out), out
                 served = True
                 continue
-            run(command)
+            said = re.search(r"^data directory (\S+) \(job store", run(command), re.M)
+            if said:
+                scan_dirs.append(Path(said.group(1)))
     finally:
         if sim is not None:
             sim.stop()
