@@ -270,6 +270,7 @@ def api_settings(cfg: DaemonConfig, keyring: ApiKeyring) -> Any:
     from gonio.api.auth import AccessPolicy
     from gonio.api.settings import ApiSettings
 
+    assert cfg.paths.data_dir is not None, "settle the data directory first (for_rig)"
     return ApiSettings(
         access=AccessPolicy(keyring, read_requires_key=cfg.auth.read_requires_key),
         data_dir=cfg.paths.data_dir,
