@@ -71,8 +71,9 @@ def register(subparsers: Any) -> None:
     p.add_argument("--light-settle", type=nonnegative_float, default=0.05,
                    help="seconds after lamp on")
     p.add_argument("--specimen", default=None,
-                   help="specimen name (default 'specimen'; with --white-reference, the "
-                        "reference's name, default 'white reference')")
+                   help="specimen name, recorded in the job and its result (default: the "
+                        "output file's name without .h5, e.g. 'felt' for -o felt.h5; with "
+                        "--white-reference, the reference's name, default 'white reference')")
     p.add_argument("--calibration", type=Path, default=None,
                    help="calibration JSON (from a calibration job) to apply")
     p.add_argument("--accept-uncalibrated", action="store_true",
@@ -125,12 +126,22 @@ def _plan(args: argparse.Namespace) -> Any:
                                    ("min_gain", args.min_gain),
                                    ("max_rotations", args.max_rotations),
                                    ("span_deg", args.span)) if v is not None}
-        return AdaptivePlan(specimen=args.specimen or "specimen", exposure=ex, rule=args.rule,
+        return AdaptivePlan(specimen=_specimen(args), exposure=ex, rule=args.rule,
                             threshold=args.threshold, max_samples=args.max_samples,
                             start_deg=args.start_deg, **given)
     span = {"span_deg": args.span} if args.span is not None else {}
-    return UniformPlan(specimen=args.specimen or "specimen", exposure=ex,
+    return UniformPlan(specimen=_specimen(args), exposure=ex,
                        rotations=args.rotations or 8, start_deg=args.start_deg, **span)
+
+
+def _specimen(args: argparse.Namespace) -> str:
+    """The specimen's name: ``--specimen``, else the result file's stem (``-o felt.h5``:
+    "felt"), so jobs, results, exports and the page do not all say "specimen"."""
+    if args.specimen:
+        return str(args.specimen)
+    stem = Path(args.output).stem if args.output is not None else ""
+    generic = {"", "null", "result", "out", "output", "scan"}
+    return stem if stem.lower() not in generic else "specimen"
 
 
 def _scan(args: argparse.Namespace) -> int:
@@ -233,6 +244,14 @@ async def _run_owned(args: argparse.Namespace, plan: Any, config: Any, sim: Any,
     try:
         if sim is not None:
             attach_sim(service, sim)
+        elif args.rig is not None:
+            from gonio.cli.sim_session import sim_specimen_truth
+
+            # A rig `gonio sim` runs: results record the simulated material (the truth row
+            # of `gonio render`), as with --sim.
+            truth = sim_specimen_truth(args.rig, config)
+            if truth is not None:
+                service.specimen_truth = lambda: truth
         # Resume an interrupted job only when it is this scan: the same plan on the same rig.
         job = service.unfinished_job(plan)
         if job is not None:

@@ -171,6 +171,10 @@ def run(args: argparse.Namespace) -> int:
             config_path=out,
         )
         with start_sim_rig(options) as sim:
+            from gonio.cli.sim_session import write_sim_specimen
+
+            # Scans of this rig in other processes record the true material (renderings).
+            write_sim_specimen(sim)
             print(f"simulated rig running; rig config: {sim.config_path}", flush=True)
             lights = ", ".join(
                 f"{x.name} ({x.theta_deg:g}, {x.phi_deg:g})" for x in sim.config.lights

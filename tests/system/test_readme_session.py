@@ -19,6 +19,7 @@ computed here from the model (not from gonio's reading path).
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import signal
@@ -175,3 +176,18 @@ def test_readme_rig_session_runs_verbatim_against_gonio_sim(tmp_path: Path) -> N
     rel = np.abs(s.values - truth) / np.maximum(truth, 0.05 * truth.max())
     assert float(np.median(rel)) < 0.03, float(np.median(rel))
     assert float(np.quantile(rel, 0.9)) < 0.10
+    # The scan of the `gonio sim` rig records the simulated material (gonio render's truth
+    # row, as the README says of simulated scans): the very BRDF the simulator replays.
+    from gonio.figures import true_material
+
+    recorded = true_material(res)
+    assert recorded is not None, res.provenance
+    assert np.allclose(recorded.eval(wi.reshape(-1, 3), wo.reshape(-1, 3)).reshape(truth.shape),
+                       truth)
+    # The specimen is named after the result file (-o felt.h5), not "specimen".
+    jobs = subprocess.run(["gonio", "jobs", "list", "--json", "--db",
+                           str(scan_dirs[-1] / "gonio.sqlite")], env=env, text=True,
+                          capture_output=True, check=True)
+    specimens = [j["specimen"] for j in json.loads(jobs.stdout)]
+    stem = Path(scans[-1]).stem
+    assert specimens[-1] == stem, specimens

@@ -28,8 +28,9 @@ def test_white_reference_job_is_named_after_the_reference_not_the_specimen() -> 
 
 
 def test_scan_keeps_its_specimen_names() -> None:
+    # Unnamed: after the result file (-o x.h5), not "specimen" for every scan.
     plan = _parse()
-    assert isinstance(plan, UniformPlan) and plan.specimen == "specimen"
+    assert isinstance(plan, UniformPlan) and plan.specimen == "x"
     felt = _parse("--specimen", "felt")
     assert isinstance(felt, UniformPlan) and felt.specimen == "felt"
 
