@@ -43,6 +43,9 @@ def register(subparsers: Any) -> None:
     p.add_argument("--time-scale", type=positive_float, default=1.0,
                    help="simulated seconds per wall second (with --sim)")
     p.add_argument("--seed", type=int, default=0, help="sensor noise seed (with --sim)")
+    from gonio.cli.sim_command import add_modbus_port_option
+
+    add_modbus_port_option(p)
     p.add_argument("--rotations", type=positive_int, default=None,
                    help="stage angles r (default 8); with --adaptive the first round's "
                         "(default 4 with the posterior rule, 8 with --rule vf)")
@@ -155,10 +158,12 @@ def _scan(args: argparse.Namespace) -> int:
         return _scan_through_daemon(args, plan)
     sim = None
     if args.sim:
+        from gonio.cli.sim_command import start_sim_rig_or_say_why
         from gonio.sim.rig import SimRigOptions, start_sim_rig
 
-        sim = start_sim_rig(SimRigOptions(stage=args.stage, material=args.material,
-                                          time_scale=args.time_scale, seed=args.seed))
+        sim = start_sim_rig_or_say_why(start_sim_rig, SimRigOptions(
+            stage=args.stage, material=args.material, time_scale=args.time_scale,
+            seed=args.seed, modbus_port=args.modbus_port))
         config = sim.config
     else:
         from gonio.config import load_rig_config

@@ -65,6 +65,10 @@ def register(subparsers: Any) -> None:
                      help="library material name or .npz BRDF table for the specimen")
     sim.add_argument("--time-scale", type=positive_float, default=1.0,
                      help="sim seconds per wall second for motion and exposures")
+    sim.add_argument("--modbus-port", type=int, default=0, metavar="PORT",
+                     help="TCP port of the simulated Modbus lights and sensors on 127.0.0.1 "
+                     "(default 0: any free port; choose one where a firewall allows only "
+                     "known ports)")
     sim.add_argument("--throwaway", action="store_true",
                      help="keep jobs and results in a temporary folder deleted at exit")
     sim.add_argument("--demo-scan", action="store_true",
@@ -120,6 +124,12 @@ def run(args: argparse.Namespace) -> int:
         data_dir = cfg.paths.data_dir.resolve()
         warn_if_exposed(cfg, keyring)
         app = _build(build_app, cfg, rig_config, keyring)
+        from gonio.cli.sim_session import sim_specimen_truth
+
+        # A rig `gonio sim` runs: results record the simulated material (renderings' truth).
+        truth = sim_specimen_truth(Path(str(cfg.paths.rig_config)), rig_config)
+        if truth is not None:
+            app.state.service.specimen_truth = lambda: truth
 
         def started(url: str, _stop: Any) -> None:
             # Say where jobs and results go, and whether scans will be calibrated.
@@ -205,9 +215,9 @@ def _run_sim(args: argparse.Namespace, cfg: Any, keyring: Any) -> int:
         try:
             sim = start_sim_rig(SimRigOptions(
                 stage=args.stage, material=material, time_scale=args.time_scale,
-                config_path=Path(tmp) / "rig.toml",
+                config_path=Path(tmp) / "rig.toml", modbus_port=args.modbus_port,
             ))
-        except ValueError as exc:
+        except (ValueError, OSError) as exc:
             owned.release()
             raise UsageError(f"cannot start the simulated rig: {exc}") from None
         with owned, sim:

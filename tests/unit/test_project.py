@@ -217,3 +217,14 @@ def test_the_plain_install_brings_every_module_the_commands_import() -> None:
             if not owners & (main | guarded):
                 missing.append(f"{module} ({', '.join(sorted(owners))})")
     assert not missing, f"imported by gonio but only in the test extra or nowhere: {missing}"
+
+
+def test_readme_says_what_the_gltf_validator_tests_need() -> None:
+    # The glTF tests skip without `npm install` in tests/gltf: a reader of the README's test
+    # command must learn that from the README, not from a skip line.
+    gltf_test = (ROOT / "tests" / "unit" / "export" / "test_gltf.py").read_text()
+    assert "npm install" in gltf_test and "tests/gltf" in str(ROOT / "tests" / "gltf")
+    quick_start = (ROOT / "README.md").read_text().split("## Quick start", 1)[1]
+    quick_start = quick_start.split("\n## ", 1)[0]
+    assert "(cd tests/gltf &&\nnpm install)" in quick_start or \
+        "(cd tests/gltf && npm install)" in quick_start, "README: the glTF tests' npm install"
