@@ -45,8 +45,11 @@ def _check_args(args: argparse.Namespace) -> None:
 
 def describe(position_deg: float, moving: bool, homed: bool, faults: list[str] | tuple[str, ...]
              ) -> str:
-    """The one-line stage report both paths print."""
-    return (f"stage at {position_deg:.3f} deg, {'moving' if moving else 'idle'}, "
+    """The one-line stage report both paths print; a position beyond one turn also gives the
+    specimen's angle (position mod 360, what plans and plots use)."""
+    turned = ("" if 0 <= position_deg < 360
+              else f" (specimen at {position_deg % 360:.3f} deg)")
+    return (f"stage at {position_deg:.3f} deg{turned}, {'moving' if moving else 'idle'}, "
             f"{'homed' if homed else 'not homed'}, faults: {', '.join(faults) or 'none'}")
 
 

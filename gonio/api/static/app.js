@@ -104,8 +104,12 @@ async function refreshRig() {
   if (!rig.connected) chip.textContent = rig.error ? `rig not connected: ${rig.error}` : "rig connects at the first scan";
   else {
     const pos = stage?.detail?.position_deg;
+    // The specimen's angle (0-360°, what plans and plots use); the stage's own position can
+    // be several turns away (528.75° is the specimen at 168.75°): it is in the tooltip.
+    const specimen = typeof pos === "number" ? ((pos % 360) + 360) % 360 : null;
+    chip.title = typeof pos === "number" ? `stage position ${pos.toFixed(2)}° (specimen angle = position mod 360)` : "";
     chip.textContent = bad.length ? `fault: ${bad.join(", ")}`
-      : `stage ${typeof pos === "number" ? pos.toFixed(2) + "°" : "?"}${stage?.detail?.moving ? " moving" : ""}`;
+      : `specimen at ${specimen !== null ? specimen.toFixed(1) + "°" : "?"}${stage?.detail?.moving ? " moving" : ""}`;
   }
   chip.className = bad.length || rig.error ? "chip fault" : "chip";
   if (rig.queue_held) chip.textContent += ` · queue held: ${rig.queue_held}`;
@@ -379,6 +383,23 @@ async function showResult(job) {
   await Promise.all([refreshRender(), refreshPolar()]);
 }
 
+// What each metric means, in the words of docs/science.md (sections 4, 4.1, 7.3), shown beside
+// its key in "All metrics"; keys without an entry show as they are.
+const METRIC_MEANING = {
+  predicted_log_rmse: "predicted error of the whole BRDF (log RMSE, the number to report)",
+  predicted_error: "predicted relative error of the whole BRDF (MAPE), from leave-one-pair-out",
+  cv_log_error: "leave-one-pair-out error: each pair predicted by the fit to the other pairs (log)",
+  cv_sample_error: "leave-one-pair-out relative error of the readings",
+  rel_sample_error: "how far the fit is from its own readings (relative)",
+  estimated_error: "V&F's error estimate (0.8 × rel_sample_error), kept for comparison",
+  prior_rho: "weight of the library prior the fit used (1: the prior as learnt)",
+  n_samples: "readings used by the reconstruction",
+  n_pairs: "light/sensor pairs", n_angles: "stage angles", pairs: "light/sensor pairs",
+  angles: "stage angles", readings: "readings stored",
+  calibrated: "values in 1/sr (true) or sensor units (false)",
+  seconds: "reconstruction time, s",
+};
+
 function showMetrics(metrics) {
   const head = $("#headline-error");
   const h = metrics.headline_error;
@@ -405,6 +426,11 @@ function showMetrics(metrics) {
     const tr = document.createElement("tr");
     const th = document.createElement("th"), td = document.createElement("td");
     th.textContent = k;
+    if (METRIC_MEANING[k]) {
+      const why = document.createElement("span");
+      why.className = "meaning"; why.textContent = METRIC_MEANING[k];
+      th.append(why);
+    }
     td.textContent = typeof v === "number" ? String(+v.toPrecision(4)) : String(v);
     tr.append(th, td);
     tbody.append(tr);

@@ -25,6 +25,21 @@ def _row_ids(browser: Any) -> list[str]:  # noqa: F811 (the fixture's name)
         "return [...document.querySelectorAll('#jobs tr[data-id]')].map(r => r.dataset.id)"))
 
 
+def _a_finished_job(daemon: Daemon) -> int:
+    """Run one short scan to its end through the API; its id."""
+    import time
+
+    with daemon.client() as c:
+        job = int(c.post("/api/v1/jobs", params={"accept_uncalibrated": "true"},
+                         json={"plan": PLAN}).json()["id"])
+        deadline = time.monotonic() + 300
+        while c.get(f"/api/v1/jobs/{job}").json()["state"] not in (
+                "completed", "failed", "aborted"):
+            assert time.monotonic() < deadline, "the scan did not end"
+            time.sleep(0.2)
+    return job
+
+
 def test_a_stale_key_gets_a_prompt_and_the_new_address_in_the_same_tab_recovers(
     daemon: Daemon, browser: Any  # noqa: F811
 ) -> None:
@@ -32,11 +47,7 @@ def test_a_stale_key_gets_a_prompt_and_the_new_address_in_the_same_tab_recovers(
     from selenium.webdriver.support.ui import WebDriverWait
 
     wait = WebDriverWait(browser, 300, poll_frequency=0.2)
-    with daemon.client() as c:  # a job exists (run to its end): the queue is not empty
-        job = c.post("/api/v1/jobs", params={"accept_uncalibrated": "true"},
-                     json={"plan": PLAN}).json()["id"]
-        wait.until(lambda _d: c.get(f"/api/v1/jobs/{job}").json()["state"] in (
-            "completed", "failed", "aborted"))
+    job = _a_finished_job(daemon)  # the queue is not empty
     # The tab still holds the key of a daemon that has restarted since (a new key each start).
     browser.get(f"{daemon.url}/#key={'0' * 48}")
     wait.until(lambda d: d.find_element(By.ID, "key-prompt").is_displayed())
@@ -122,4 +133,42 @@ def test_an_uncalibrated_scan_is_warned_accepted_and_labelled_as_such(
     assert "the calibrated samples" not in browser.find_element(By.ID, "readings-caption").text
     wait.until(lambda d: "Uncalibrated" in d.find_element(By.ID, "render-caption").text)
     assert "Uncalibrated" in browser.find_element(By.ID, "preview-caption").text
+    # A half-turn scan's plot spans half a turn (its angles are 0, 45, 90, 135 degrees).
+    x = browser.execute_script(
+        "const s = Chart.getChart(document.getElementById('readings-plot')).options.scales.x;"
+        "return [s.min, s.max, s.title.text]")
+    assert x == [0, 180, "specimen angle (degrees)"], x
+    # The metrics say what they mean, not only their keys.
+    rows = browser.execute_script(
+        "return [...document.querySelectorAll('#metrics th')].map(t => t.textContent)")
+    cv = [r for r in rows if r.startswith("cv_log_error")]
+    assert cv and "leave-one-pair-out" in cv[0], rows
     assert [e for e in _severe(browser) if "409" not in e["message"]] == []
+
+
+def test_the_stage_chip_gives_the_specimen_angle_and_a_long_eta_keeps_the_buttons_in_view(
+    daemon: Daemon, browser: Any  # noqa: F811
+) -> None:
+    from selenium.webdriver.common.by import By
+
+    _a_finished_job(daemon)  # a row with its buttons
+    wait = open_live(browser, daemon, 120)
+    with daemon.client() as c:
+        # One and a half turns and a bit: the stage's position is not the specimen's angle.
+        r = c.post("/api/v1/rig/stage", json={"action": "move", "angle_deg": 528.75})
+        assert r.status_code == 200, r.text
+    # 528.75 - 360 = 168.75 degrees (shown to 0.1 degree).
+    wait.until(lambda d: d.find_element(By.ID, "stage-chip").text.startswith("specimen at 168.8°"))
+    assert "528.75" in browser.find_element(By.ID, "stage-chip").get_attribute("title")
+    # A first scan's activity is long ("building the BRDF training library ..."): it wraps in
+    # its cell; the row's buttons stay inside the queue's box.
+    wait.until(lambda d: d.execute_script("return document.querySelector('#jobs tr td.eta')"))
+    inside = browser.execute_script("""
+        const row = document.querySelector('#jobs tr[data-id]');
+        row.querySelector('td.eta').textContent =
+          'building the BRDF training library, 74 of 175 materials (about 2 min, once per install)';
+        const box = document.getElementById('queue').getBoundingClientRect();
+        const last = row.lastElementChild.getBoundingClientRect();
+        return [last.right <= box.right + 0.5, document.getElementById('queue').scrollWidth
+                <= document.getElementById('queue').clientWidth + 1];""")
+    assert inside == [True, True], inside
