@@ -4,6 +4,8 @@ writes it."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
 from gonio.brdf.materials.library import FAMILY_COUNTS, library_specs
@@ -46,3 +48,22 @@ def test_keys_list_without_a_file_says_which_file_it_wants(
     assert "one of the arguments" not in err
     assert main(["keys", "new", "lab"]) == 2
     assert "gonio keys new lab --keys-file api-keys" in capsys.readouterr().err
+
+
+def test_design_says_what_its_expected_error_assumes(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # Issue 27 item 5: a design promising 0.012 "inside the basis" beside a scan reporting
+    # 0.058 on an anisotropic material, with nothing to say which numbers compare.
+    frag = tmp_path / "geometry.toml"
+    assert main(["design", "--preset", "ma98", "-o", str(frag)]) == 0
+    out = capsys.readouterr().out
+    assert "(inside the basis: on the materials it was learnt from, a best case" in out, out
+    held = [ln for ln in out.splitlines() if ln.startswith("expected log_rmse on held-out")]
+    assert len(held) == 1, out
+    value = held[0].split(": ", 1)[1].split()[0]
+    assert "what it assumes: a calibrated scan (1/sr) with 1 % reading noise" in out
+    assert "set a scan's predicted_log_rmse" in out
+    # The fragment keeps the number to compare a scan with, and what it assumed.
+    header = frag.read_text().split("\n[", 1)[0]
+    assert f"held-out materials {value} at 8 uniform rotations over 180 deg" in header, header
