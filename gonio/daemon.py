@@ -349,11 +349,14 @@ def log_job_events(service: Any) -> None:
     def on_event(ev: Any) -> None:
         if ev.job_id is None or ev.type not in ("state", "recovered"):
             return
+        # Runs in the committing thread: a log line must never break the commit it reports.
         try:
             row = service.store.get_job(ev.job_id)
-        except Exception:  # removed meanwhile: nothing to say about it
+            level, line = job_event_line(ev.type, ev.data, row, service)
+        except Exception:  # e.g. removed meanwhile
+            JOB_LOG.debug("no log line for event %s of job %s", ev.type, ev.job_id,
+                          exc_info=True)
             return
-        level, line = job_event_line(ev.type, ev.data, row, service)
         if line:
             JOB_LOG.log(level, "%s", line)
 

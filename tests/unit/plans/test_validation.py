@@ -29,7 +29,7 @@ def _limited(desc: RigDescription, lo: float, hi: float) -> RigDescription:
         (UniformPlan(pairs=[]), "no pairs"),
         (UniformPlan(pairs=[PairSpec(light="L2", sensor="S2")]), "not one of the rig's pairs"),
         (UniformPlan(pairs=[PairSpec(light="L1", sensor="S1")] * 2), "listed twice"),
-        (UniformPlan(exposure=ExposureSettings(exposure_s=20.0)), "outside sensor"),
+        (UniformPlan(exposure=ExposureSettings(exposure_s=20.0)), "outside the exposure range of sensor"),
         (AdaptivePlan(initial_rotations=2), "at least 3"),
         (AdaptivePlan(max_samples=5), "smaller than the first round"),
         (AdaptivePlan(min_step_deg=0.001), "finer than the stage resolution"),
