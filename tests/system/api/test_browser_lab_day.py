@@ -25,6 +25,11 @@ def _row_ids(browser: Any) -> list[str]:  # noqa: F811 (the fixture's name)
         "return [...document.querySelectorAll('#jobs tr[data-id]')].map(r => r.dataset.id)"))
 
 
+def _text(browser: Any, element_id: str) -> str:  # noqa: F811 (the fixture's name)
+    return str(browser.execute_script(
+        "return document.getElementById(arguments[0])?.textContent ?? ''", element_id))
+
+
 def _a_finished_job(daemon: Daemon) -> int:
     """Run one short scan to its end through the API; its id."""
     import time
@@ -126,13 +131,14 @@ def test_an_uncalibrated_scan_is_warned_accepted_and_labelled_as_such(
     wait.until(lambda d: d.execute_script(
         "return document.querySelector(`#jobs tr[data-id='${arguments[0]}']`)?.dataset.state",
         job) == "completed")
-    # Every place that reads the numbers says they are not the material's.
-    wait.until(lambda d: d.find_element(By.ID, "headline-calibration").text != "")
-    assert browser.find_element(By.ID, "headline-calibration").text.startswith("Uncalibrated")
-    wait.until(lambda d: "Uncalibrated" in d.find_element(By.ID, "readings-caption").text)
-    assert "the calibrated samples" not in browser.find_element(By.ID, "readings-caption").text
-    wait.until(lambda d: "Uncalibrated" in d.find_element(By.ID, "render-caption").text)
-    assert "Uncalibrated" in browser.find_element(By.ID, "preview-caption").text
+    # Every place that reads the numbers says they are not the material's. (Read in one script
+    # call each: the result panel is redrawn as events arrive.)
+    wait.until(lambda d: _text(d, "headline-calibration") != "")
+    assert _text(browser, "headline-calibration").startswith("Uncalibrated")
+    wait.until(lambda d: "Uncalibrated" in _text(d, "readings-caption"))
+    assert "the calibrated samples" not in _text(browser, "readings-caption")
+    wait.until(lambda d: "Uncalibrated" in _text(d, "render-caption"))
+    assert "Uncalibrated" in _text(browser, "preview-caption")
     # A half-turn scan's plot spans half a turn (its angles are 0, 45, 90, 135 degrees).
     x = browser.execute_script(
         "const s = Chart.getChart(document.getElementById('readings-plot')).options.scales.x;"
