@@ -122,10 +122,11 @@ def add_modbus_port_option(parser: Any) -> None:
 
 
 def start_sim_rig_or_say_why(start: Any, options: Any) -> Any:
-    """``start(options)``, with a port that cannot be bound or a bad option said in one line."""
+    """``start(options)``, with a port that cannot be bound said in one line (a bad option is
+    a ValueError that says itself)."""
     try:
         return start(options)
-    except (OSError, ValueError) as exc:
+    except OSError as exc:
         raise UsageError(f"cannot start the simulated rig: {exc}") from None
 
 
