@@ -150,7 +150,9 @@ function etaText() {
   if (!["running", "paused", "suspended"].includes(d.state)) return "";
   let t = eta(d.eta_s);
   if (d.eta_max_s != null && d.eta_max_s > (d.eta_s ?? 0) + 1) t += ` (≤ ${eta(d.eta_max_s)} if refined)`;
-  return t;
+  // The estimate is the measuring's; reconstruction (and, on a fresh install, building the
+  // basis first) follows: said, so the time is not read as the whole job's.
+  return t ? `${t} measuring, then reconstruction` : "";
 }
 
 async function act(job, action) {

@@ -178,3 +178,38 @@ def test_the_stage_chip_gives_the_specimen_angle_and_a_long_eta_keeps_the_button
         return [last.right <= box.right + 0.5, document.getElementById('queue').scrollWidth
                 <= document.getElementById('queue').clientWidth + 1];""")
     assert inside == [True, True], inside
+
+
+def test_the_eta_says_it_is_the_measurings_and_reconstruction_follows(
+    daemon: Daemon, browser: Any  # noqa: F811
+) -> None:
+    import time
+
+    wait = open_live(browser, daemon, 300)
+    with daemon.client() as c:
+        # 20 averaged exposures per reading (1 s of sim time, 0.1 s here at time scale 10): a
+        # scan that measures for a while, so its ETA is on the page.
+        plan = {**PLAN, "rotations": 12, "exposure": {"exposure_s": 0.05, "averages": 20}}
+        job = c.post("/api/v1/jobs", params={"accept_uncalibrated": "true"},
+                     json={"plan": plan}).json()["id"]
+        try:
+            browser.execute_script(
+                "document.querySelector(`#jobs tr[data-id='${arguments[0]}']`)?.click()", job)
+
+            def eta_text(d: Any) -> str:
+                d.execute_script(
+                    "document.querySelector(`#jobs tr[data-id='${arguments[0]}']`)?.click()",
+                    job)
+                text = str(d.execute_script(
+                    "return document.querySelector(`#jobs tr[data-id='${arguments[0]}'] td.eta`)"
+                    "?.textContent ?? ''", job))
+                return text
+
+            wait.until(lambda d: "measuring, then reconstruction" in eta_text(d))
+        finally:
+            c.post(f"/api/v1/jobs/{job}/abort")
+            deadline = time.monotonic() + 120
+            while c.get(f"/api/v1/jobs/{job}").json()["state"] not in (
+                    "completed", "failed", "aborted"):
+                assert time.monotonic() < deadline
+                time.sleep(0.2)
