@@ -651,6 +651,7 @@ def _rebuild(args: argparse.Namespace, store: Any) -> int:
     print(f"job {args.job_id}: wrote {data_dir / summary['result_path']} from "
           f"{summary['readings']} stored readings"
           + (" (calibrated, 1/sr)" if summary.get("calibrated") else " (sensor units)"))
+    return 0
 
 
 def _abort_job(args: argparse.Namespace) -> int:
