@@ -169,4 +169,6 @@ def export_provenance(attrs: Mapping[str, Any], metrics: Mapping[str, Any],
         out["simulated_material"] = truth
     if provenance.get("arc_warning"):
         out["warnings"].append(str(provenance["arc_warning"]))
+    if provenance.get("physical_bounds"):
+        out["warnings"].append(str(provenance["physical_bounds"]))
     return out
