@@ -195,7 +195,8 @@ def fit_curves(res: ResultFile, step_deg: float = 2.0) -> dict[str, Any]:
 
     Returns
     -------
-    dict: ``units``, ``curve_deg`` (stage angles of the curves), ``pairs``: list of
+    dict: ``units``, ``calibrated`` (False: sensor units), ``curve_deg`` (stage angles of
+    the curves), ``pairs``: list of
     ``{label, stage_deg, measured, curve}``.
     """
     import numpy as np
@@ -220,7 +221,8 @@ def fit_curves(res: ResultFile, step_deg: float = 2.0) -> dict[str, Any]:
             "measured": _mean_or_none(np.asarray(s.values[q])[order]),
             "curve": _mean_or_none(look.eval(wi, wo)),
         })
-    return {"units": _units(res), "channels": "mean of " + ", ".join(s.channels),
+    return {"units": _units(res), "calibrated": bool(s.calibration.get("pairs")),
+            "channels": "mean of " + ", ".join(s.channels),
             "curve_deg": [float(a) for a in curve_deg], "pairs": pairs}
 
 
