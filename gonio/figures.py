@@ -137,6 +137,17 @@ def headline_error(metrics: dict[str, Any]) -> dict[str, Any] | None:
     -------
     dict with ``key`` (metric name), ``value``, ``text`` (value as shown) and ``meaning``.
     """
+    out = _headline(metrics)
+    bounds = metrics.get("physical_bounds")
+    if out is not None and isinstance(bounds, str):
+        # Out of physical bounds, the estimate is beside the point: the headline says so first.
+        out["text"] += " (OUTSIDE PHYSICAL BOUNDS)"
+        out["meaning"] = f"Warning: {bounds}. {out['meaning']}"
+        out["physical_bounds"] = bounds
+    return out
+
+
+def _headline(metrics: dict[str, Any]) -> dict[str, Any] | None:
     v = metrics.get("predicted_log_rmse")
     if isinstance(v, int | float):
         return {
