@@ -50,16 +50,11 @@ import scipy.linalg
 from gonio.brdf.materials import library
 from gonio.brdf.models import analytic as bm
 from gonio.brdf.reconstruction.basis import Basis, default_basis, remap
+from gonio.brdf.reconstruction.blas import one_blas_thread
+from gonio.brdf.reconstruction.joint import JOINT_ETA, JOINT_LAM, joint_prior, solve_joint
 from gonio.brdf.reconstruction.posterior import profiled_log_marginal
-from gonio.brdf.reconstruction.reconstruct import (
-    JOINT_ETA,
-    JOINT_LAM,
-    _expand_table,
-    joint_prior,
-    one_blas_thread,
-    solve_joint,
-)
 from gonio.brdf.reconstruction.samples import DEFAULT_SPAN_DEG
+from gonio.brdf.reconstruction.tabulate import expand_table
 from gonio.brdf.tables import geometry as geo
 from gonio.brdf.tables import metrics
 from gonio.brdf.tables.table import BRDFTable
@@ -233,7 +228,7 @@ class Scan:
         E = np.exp(1j * geo.PH_GRID[:, None] * HARM[None, :])
         K = Qt.shape[1]
         coef = (E @ PB.reshape(M, K * C)).real.reshape(-1, K, C).transpose(1, 0, 2)
-        return _expand_table(self.b, np.moveaxis(coef, -1, 0))
+        return expand_table(self.b, np.moveaxis(coef, -1, 0))
 
     def loglik_aug(self, s: np.ndarray, eta: float, ph0: float) -> float:
         Y, Qt, phr = self.augmented(ph0)
@@ -254,10 +249,10 @@ class Scan:
         if self.ph0 is not None:
             Y, Qt, phr = self.augmented(self.ph0)
             jf = solve_joint(Y, Qt, phr, self.P * s[:, None, None], eta)
-            return _expand_table(self.b, np.moveaxis(jf.coef, -1, 0))
+            return expand_table(self.b, np.moveaxis(jf.coef, -1, 0))
         if self.tau == 0.0:
             jf = solve_joint(self.Y, self.Qt, self.ph_read, self.P * s[:, None, None], eta)
-            return _expand_table(self.b, np.moveaxis(jf.coef, -1, 0))
+            return expand_table(self.b, np.moveaxis(jf.coef, -1, 0))
         # The basis part of the posterior mean only (the nugget is not in the table).
         G = np.tensordot(s, self.Gm, axes=1) + self.tau * self.nug
         G[np.diag_indices_from(G)] += eta
@@ -269,7 +264,7 @@ class Scan:
         E = np.exp(1j * geo.PH_GRID[:, None] * HARM[None, :])
         K = self.Qt.shape[1]
         coef = (E @ PB.reshape(M, K * C)).real.reshape(-1, K, C).transpose(1, 0, 2)
-        return _expand_table(self.b, np.moveaxis(coef, -1, 0))
+        return expand_table(self.b, np.moveaxis(coef, -1, 0))
 
 
 M = 37

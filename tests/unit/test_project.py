@@ -228,3 +228,23 @@ def test_readme_says_what_the_gltf_validator_tests_need() -> None:
     quick_start = quick_start.split("\n## ", 1)[0]
     assert "(cd tests/gltf &&\nnpm install)" in quick_start or \
         "(cd tests/gltf && npm install)" in quick_start, "README: the glTF tests' npm install"
+
+
+def test_every_bench_script_imports() -> None:
+    """The benches import the project's names as they are now (a module moved or renamed
+    without its bench following fails here, not on the next person to run the bench)."""
+    script = (
+        "import importlib.util, sys\n"
+        "sys.path.insert(0, 'bench')\n"
+        "for path in sys.argv[1:]:\n"
+        "    name = path.rsplit('/', 1)[-1][:-3]\n"
+        "    spec = importlib.util.spec_from_file_location(name, path)\n"
+        "    module = importlib.util.module_from_spec(spec)\n"
+        "    sys.modules[name] = module\n"
+        "    spec.loader.exec_module(module)\n"
+    )
+    benches = sorted(str(p.relative_to(ROOT)) for p in (ROOT / "bench").glob("*.py"))
+    assert benches
+    proc = subprocess.run([sys.executable, "-c", script, *benches], cwd=ROOT,
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
