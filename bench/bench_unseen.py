@@ -59,13 +59,14 @@ from gonio.brdf.design.pairs import DEFAULT_OBJECTIVE
 from gonio.brdf.design.presets import get_preset, preset_names
 from gonio.brdf.materials.library import cache_root
 from gonio.brdf.reconstruction.basis import Basis, default_basis, remap, row_weight
-from gonio.brdf.reconstruction.reconstruct import _expand_table, reconstruct
+from gonio.brdf.reconstruction.reconstruct import reconstruct
 from gonio.brdf.reconstruction.samples import (
     DEFAULT_SPAN_DEG,
     NoiseModel,
     pair_directions,
     uniform_stage_angles,
 )
+from gonio.brdf.reconstruction.tabulate import expand_table
 from gonio.brdf.tables import geometry as geo
 from gonio.brdf.tables import metrics
 from gonio.brdf.tables.table import BRDFTable
@@ -301,7 +302,7 @@ def ceiling(b: Basis, truth: BRDFTable) -> BRDFTable:
     Qv = b.Q[rows]
     coef = np.linalg.lstsq(Qv, y.reshape(-1, rows.size).T, rcond=None)[0]  # (K, 3*72)
     coef = coef.T.reshape(3, geo.N_PH, b.K).transpose(0, 2, 1)
-    return BRDFTable.trusted(_expand_table(b, coef), ("R", "G", "B"), "ceiling")
+    return BRDFTable.trusted(expand_table(b, coef), ("R", "G", "B"), "ceiling")
 
 
 @dataclass
