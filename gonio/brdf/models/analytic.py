@@ -615,20 +615,21 @@ class Rotated(_Analytic):
 class Tilted(_Analytic):
     """A model on facets whose normal leans ``tilt`` radians toward azimuth ``azimuth``.
 
-    A constant normal map: every facet of the surface has the normal
-    ``n' = (sin t cos p, sin t sin p, cos t)``. Directions are expressed in the facet's frame
-    (``w' = R^-1 w``, ``R`` the rotation about the axis ``z x n'`` that takes ``z`` to ``n'``)
-    and the macroscopic BRDF of a surface covered by such facets, with no masking between
-    them, is
+    A constant normal map made physical: a sawtooth (a blazed profile) whose facets all have
+    the normal ``n' = (sin t cos p, sin t sin p, cos t)``, joined by vertical risers that reflect
+    nothing. Directions are expressed in the facet's frame (``w' = R^-1 w``, ``R`` the rotation
+    about ``z x n'`` that takes ``z`` to ``n'``). The facets' projected area, seen from ``w``, is
+    ``g(w) = cos t' / (cos t cos t_w)`` times the surface's (``cos t'``, ``cos t_w`` the
+    cosines of ``w`` to the facet and surface normals); from the side the facets face it is
+    above 1 and the risers hide the excess, from the other side the risers mask the rest. With
+    shadowing and masking taken independent,
 
-    ``f(wi, wo) = f'(wi', wo') cos ti' cos to' / (cos t cos ti cos to)``
+    ``f(wi, wo) = cos t f'(wi', wo') G(wi) G(wo)``,  ``G(w) = min(1, g(w))``,
 
-    (the facets' area is ``1 / cos t`` of the surface's; they receive ``cos ti'`` and are
-    seen under ``cos to'``), 0 where either direction is below a facet's horizon. The factor is
-    symmetric in ``wi`` and ``wo``, so a reciprocal ``f'`` gives a reciprocal ``f``. Unlike
-    every other model here, ``f`` differs from the model turned by half a turn when ``t > 0``:
-    it has no twofold symmetry (pile leaning one way, blazed gratings, sawtooth structures;
-    science.md 7.4).
+    0 where either direction is below a facet's horizon: reciprocal when ``f'`` is, and never
+    brighter than ``f'``. Unlike every other model here, ``f`` differs from the model turned
+    by half a turn when ``t > 0``: it has no twofold symmetry (pile leaning one way, blazed
+    gratings, sawtooth structures; science.md 7.4).
 
     Parameters
     ----------
@@ -672,8 +673,10 @@ class Tilted(_Analytic):
     def _eval_above(self, wi: FloatArray, wo: FloatArray) -> FloatArray:
         fi, fo = self._to_facet(wi), self._to_facet(wo)
         f = np.asarray(self.model.eval(fi, fo), dtype=float)  # 0 below the facet's horizon
-        scale = (np.maximum(fi[:, 2], 0.0) * np.maximum(fo[:, 2], 0.0)
-                 / (math.cos(self.tilt) * wi[:, 2] * wo[:, 2]))
+        ct = math.cos(self.tilt)
+        gi = np.minimum(1.0, np.maximum(fi[:, 2], 0.0) / (ct * wi[:, 2]))
+        go = np.minimum(1.0, np.maximum(fo[:, 2], 0.0) / (ct * wo[:, 2]))
+        scale = ct * gi * go
         return np.asarray(f * scale[:, None], dtype=float)
 
 
