@@ -21,7 +21,8 @@ science.md 7.4) three more families have no twofold symmetry: their table at ``p
 ``ph + 180`` (:class:`~gonio.brdf.models.analytic.Tilted`, facets leaning one way)
 
 ============== =========================================================================
-tilted-facet    a plastic or metal GGX lobe on facets tilted 5-30 deg (blazed, faceted)
+tilted-facet    a plastic or metal GGX lobe on facets tilted 5-30 deg (blazed, faceted; half
+                as a renderer's constant normal map)
 pile            Lambert + Charlie sheen (+ a rough coat) on fibres leaning 10-40 deg
 sawtooth        Lambert + retro-reflective lobe (+ a glint) on facets tilted 10-35 deg
 ============== =========================================================================
@@ -76,7 +77,7 @@ FAMILY_COUNTS: dict[str, int] = {
 }
 #: Families without twofold symmetry, only with ``asymmetric=True`` (science.md 7.4).
 ASYMMETRIC_FAMILY_COUNTS: dict[str, int] = {
-    "tilted-facet": 20,
+    "tilted-facet": 40,
     "pile": 15,
     "sawtooth": 10,
 }
@@ -238,23 +239,26 @@ def _retro(rng: np.random.Generator, name: str) -> bm.BRDFModel:
 
 
 def _lean(model: bm.BRDFModel, rng: np.random.Generator, lo_deg: float,
-          hi_deg: float) -> bm.BRDFModel:
+          hi_deg: float, masking: str = "sawtooth") -> bm.BRDFModel:
     """Put ``model`` on facets tilted ``lo_deg``-``hi_deg`` toward a random azimuth.
 
     A dim diffuse floor (the risers and the ground between facets, albedo 0.01-0.04) keeps
     directions behind the facets from reading exactly 0, as no real specimen does.
     """
     tilted = bm.Tilted(model, math.radians(float(rng.uniform(lo_deg, hi_deg))),
-                       float(rng.uniform(0.0, 2 * np.pi)), name=model.name)
+                       float(rng.uniform(0.0, 2 * np.pi)), masking,  # type: ignore[arg-type]
+                       name=model.name)
     floor = bm.Lambert(_colour(rng, 0.01, 0.04), name="risers")
     return bm.LobeSum((tilted, floor), name=model.name)
 
 
 def _tilted_facet(rng: np.random.Generator, name: str) -> bm.BRDFModel:
     # A specular surface made of facets all leaning one way (blazed gratings, machined
-    # sawtooth, faceted coatings): half plastics, half metals with a slight stretch.
+    # sawtooth, faceted coatings): half plastics, half metals with a slight stretch; half of
+    # them as a renderer's constant normal map (no shadowing), the shape such specimens have
+    # when they come from a renderer.
     inner = _plastic(rng, name) if rng.random() < 0.5 else _metal(rng, name)
-    return _lean(inner, rng, 5.0, 30.0)
+    return _lean(inner, rng, 5.0, 30.0, "sawtooth" if rng.random() < 0.5 else "none")
 
 
 def _pile(rng: np.random.Generator, name: str) -> bm.BRDFModel:

@@ -627,7 +627,10 @@ class Tilted(_Analytic):
     ``f(wi, wo) = cos t f'(wi', wo') G(wi) G(wo)``,  ``G(w) = min(1, g(w))``,
 
     0 where either direction is below a facet's horizon: reciprocal when ``f'`` is, and never
-    brighter than ``f'``. Unlike every other model here, ``f`` differs from the model turned
+    brighter than ``f'``. With ``masking="none"`` it is instead the shading-normal map of
+    renderers (mitsuba's ``normalmap``): ``f = f'(wi', wo') cos to' / cos to``, no shadowing
+    or masking and not reciprocal (the light's cosine is taken about the facet normal).
+    Unlike every other model here, ``f`` differs from the model turned
     by half a turn when ``t > 0``: it has no twofold symmetry (pile leaning one way, blazed
     gratings, sawtooth structures; science.md 7.4).
 
@@ -639,11 +642,14 @@ class Tilted(_Analytic):
         How far the facet normal leans from the surface normal.
     azimuth : float, radians
         Direction it leans toward, in the specimen frame.
+    masking : {"sawtooth", "none"}
+        The sawtooth's shadowing and masking, or none (a renderer's normal map).
     """
 
     model: Any = None
     tilt: float = 0.0
     azimuth: float = 0.0
+    masking: Literal["sawtooth", "none"] = "sawtooth"
     name: str = field(default="", kw_only=True)
 
     def __post_init__(self) -> None:
@@ -652,6 +658,8 @@ class Tilted(_Analytic):
         _check_range([self.tilt], 0.0, 1.2, "Tilted.tilt")
         if not math.isfinite(self.azimuth):
             raise ModelError(f"Tilted.azimuth = {self.azimuth} must be a finite angle in radians")
+        if self.masking not in ("sawtooth", "none"):
+            raise ModelError(f"Tilted.masking = {self.masking!r}; use 'sawtooth' or 'none'")
         if not self.name:
             object.__setattr__(self, "name", self.model.name)
 
@@ -673,6 +681,8 @@ class Tilted(_Analytic):
     def _eval_above(self, wi: FloatArray, wo: FloatArray) -> FloatArray:
         fi, fo = self._to_facet(wi), self._to_facet(wo)
         f = np.asarray(self.model.eval(fi, fo), dtype=float)  # 0 below the facet's horizon
+        if self.masking == "none":
+            return np.asarray(f * (np.maximum(fo[:, 2], 0.0) / wo[:, 2])[:, None], dtype=float)
         ct = math.cos(self.tilt)
         gi = np.minimum(1.0, np.maximum(fi[:, 2], 0.0) / (ct * wi[:, 2]))
         go = np.minimum(1.0, np.maximum(fo[:, 2], 0.0) / (ct * wo[:, 2]))

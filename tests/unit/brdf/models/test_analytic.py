@@ -310,6 +310,8 @@ def test_serialisation_round_trip(name: str) -> None:
         (lambda: bm.Tilted(bm.Lambert(0.5), 1.5, 0.0), r"Tilted.tilt = 1.5 is outside"),
         (lambda: bm.Tilted(bm.Lambert(0.5), 0.2, math.nan), r"finite angle"),
         (lambda: bm.Tilted("lambert", 0.2), r"is not a BRDF model"),
+        (lambda: bm.Tilted(bm.Lambert(0.5), 0.2, 0.0, "bumps"),  # type: ignore[arg-type]
+         r"use 'sawtooth' or 'none'"),
         (lambda: bm.principled(0.5, 1.5, 0.5), r"principled.metallic = 1.5"),
         (lambda: bm.from_dict({"type": "Phong"}), r"unknown model type 'Phong'"),
         (lambda: bm.from_dict({"type": "Lambert", "colour": 0.5}), r"bad parameters for Lambert"),
@@ -349,3 +351,20 @@ def test_untilted_facets_are_the_inner_model_and_tilted_ones_lack_twofold_symmet
         assert np.allclose(turned, model.eval(wi, wo), rtol=1e-9) is same
     assert not bm.Tilted(bm.Lambert(0.5), 0.2).isotropic
     assert bm.Tilted(bm.Lambert(0.5), 0.0).isotropic
+
+
+def test_a_renderers_normal_map_weighs_the_view_by_its_facet_cosine() -> None:
+    """``masking="none"``: a Lambert facet seen through a constant normal map reads
+    ``rho / pi cos(to') / cos(to)``, ``to'`` the view's angle to the leaning normal, and 0 where
+    either direction is behind the facets; the sawtooth form of the same facets is never
+    brighter than ``rho / pi``."""
+    t, p = 0.4, -0.8
+    n = np.array([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)])
+    rng = np.random.default_rng(9)
+    wi, wo = random_upper(500, rng), random_upper(500, rng)
+    f = bm.Tilted(bm.Lambert(0.6), t, p, "none").eval(wi, wo)[:, 0]
+    front = (wi @ n > 0) & (wo @ n > 0)
+    expected = np.where(front, 0.6 / np.pi * (wo @ n) / wo[:, 2], 0.0)
+    np.testing.assert_allclose(f, expected, rtol=1e-12, atol=1e-15)
+    saw = bm.Tilted(bm.Lambert(0.6), t, p).eval(wi, wo)[:, 0]
+    assert (saw <= 0.6 / np.pi + 1e-12).all() and (saw[~front] == 0).all()
