@@ -35,10 +35,16 @@ Rows: gonio default (n = 10, r = 8), V&F's path (``method="vf"``), each industri
 rotations, n = 5 / 20, r = 4 / 16 (all over ``--span``), V&F's adaptive plan (e = 0.1, start 8,
 budget 16 rotations; readings used; the adaptive rows always scan a full turn, their midpoint
 rule is periodic over 360 degrees), and the basis ceiling (the best the basis can do with every
-cell known: least squares of every slice on the basis). Columns: mean ``log_rmse`` (headline,
-lower is better) and mean ``log_psnr`` (dB) over the measured and the anisotropic materials.
-Below: per-material log_rmse of the default row against the best preset, and how often the
-self-estimate ``predicted_log_rmse`` is within x2 of the truth.
+cell known: least squares of every slice on the basis), and the representation's own limit
+(the truth tabulated on gonio's grid, ``log_rmse`` 0). Columns: mean ``log_rmse`` (headline,
+lower is better), mean ``log_psnr`` (dB) and mean HDR-FLIP over the measured and the
+anisotropic materials. HDR-FLIP (:mod:`gonio.brdf.pictures.appearance`, ``--no-flip`` leaves
+it out): every table rendered through gonio's lookup in the standard renderings (a sphere under
+four lights) against the truth rendered from mitsuba at each pixel's exact directions (the
+anisotropic specimens' BSDFs; for the measured materials the RGL file through mitsuba's
+``measured`` plugin), cached per material. Below: HDR-FLIP per material and row with each
+set's mean, per-material log_rmse of the default row against the best preset, and how often
+the self-estimate ``predicted_log_rmse`` is within x2 of the truth.
 """
 
 from __future__ import annotations
@@ -159,6 +165,9 @@ class Material:
     truth: BRDFTable
     specimen: Any  # eval(wi, wo)
     exclude: tuple[str, ...]  # shipped measured materials to hold out of its basis
+    #: What the FLIP column's reference renderings evaluate (``eval(wi, wo)`` at each pixel's
+    #: exact directions); None: ``specimen``.
+    reference: Any = None
 
 
 def measured_materials() -> list[Material]:
@@ -173,7 +182,10 @@ def measured_materials() -> list[Material]:
         vals = _cached(f"rgl-{p.stem}", lambda p=p: np.asarray(
             read_rgl(p).values[:, :1][:, :, MASK], dtype=np.float32))
         t = _full_table(vals, group)
-        out.append(Material(group, "measured", t, t, (group,)))
+        # The file itself evaluated by mitsuba at every pixel's directions is the rendered
+        # truth (its own, finer parametrisation); the readings stay lookups in ``t``.
+        ref = MitsubaSpecimen({"type": "measured", "filename": str(p)}, 0.0)
+        out.append(Material(group, "measured", t, t, (group,), ref))
     return out
 
 
@@ -310,6 +322,7 @@ def ceiling(b: Basis, truth: BRDFTable) -> BRDFTable:
 class Score:
     log_rmse: float
     log_psnr: float
+    flip: float = float("nan")
     predicted: float = float("nan")
     readings: int = 0
     cv_rel: float = float("nan")
@@ -317,8 +330,39 @@ class Score:
     r: int = 0
 
 
-def score(rec_table: BRDFTable, truth: BRDFTable, rec: Any = None, readings: int = 0) -> Score:
+def truth_images(m: Material) -> list[np.ndarray]:
+    """The truth's standard renderings (:mod:`gonio.brdf.pictures.appearance`), cached.
+
+    Rendered from ``m.reference`` (or ``m.specimen``) evaluated at each pixel's exact
+    directions: mitsuba for every material here, not a lookup in the 5 degree table.
+    """
+    from gonio.brdf.pictures import appearance
+
+    if m.name not in _TRUTH_IMAGES:
+        src = m.reference if m.reference is not None else m.specimen
+        key = hashlib.sha256(repr((appearance.APPEARANCE_VIEWS, appearance.APPEARANCE_SIZE,
+                                   m.name, m.kind)).encode()).hexdigest()[:12]
+        arr = _cached(f"flipref-{m.name}-{key}",
+                      lambda: np.stack(appearance.render_appearance(src)))
+        _TRUTH_IMAGES[m.name] = list(arr)
+    return _TRUTH_IMAGES[m.name]
+
+
+_TRUTH_IMAGES: dict[str, list[np.ndarray]] = {}
+
+
+def flip_of(table: BRDFTable, m: Material) -> float:
+    """Mean HDR-FLIP of ``table`` (rendered through gonio's lookup) against the truth."""
+    from gonio.brdf.pictures import appearance
+
+    return appearance.rendered_flip(truth_images(m), appearance.render_appearance(table)).mean
+
+
+def score(rec_table: BRDFTable, truth: BRDFTable, rec: Any = None, readings: int = 0,
+          m: Material | None = None) -> Score:
     s = Score(metrics.log_rmse(rec_table, truth), metrics.log_psnr(rec_table, truth))
+    if m is not None and FLIP["on"]:
+        s.flip = flip_of(rec_table, m)
     if rec is not None:
         s.predicted, s.cv_rel = rec.predicted_log_rmse, rec.cv_sample_error
         s.n, s.r = rec.settings["n"], rec.settings["r"]
@@ -351,6 +395,11 @@ def calibrate(rows: dict[str, dict[str, Score]], mats: list[Material]) -> None:
 
 
 ETA: dict[str, float | None] = {"eta": None, "lam": None}
+#: Whether rows get the HDR-FLIP column (``--no-flip`` turns it off).
+FLIP: dict[str, bool] = {"on": True}
+#: The representation's own limit: the truth tabulated on gonio's grid, rendered through
+#: gonio's lookup, against the truth rendered from mitsuba (log_rmse 0 by definition).
+LIMIT_ROW = "truth on gonio's grid (representation limit)"
 #: The joint fit's ``rho`` (``--rho``; reconstruct's default when None).
 RHO: dict[str, str | None] = {"rho": None, "symmetry": None}
 
@@ -368,7 +417,7 @@ def run_scan(b: Basis, m: Material, cells: np.ndarray, ph: np.ndarray, r: int, s
     rec = reconstruct(b, cells, ph, alpha, vals, method=method,  # type: ignore[arg-type]
                       eta=ETA["eta"] if method == "joint" else None,
                       lam=ETA["lam"] if method == "joint" else None, **extra)
-    return score(rec.table, m.truth, rec, vals.shape[0] * r)
+    return score(rec.table, m.truth, rec, vals.shape[0] * r, m)
 
 
 def run_adaptive(b: Basis, m: Material, cells: np.ndarray, ph: np.ndarray, seed: int,
@@ -395,7 +444,25 @@ def run_adaptive(b: Basis, m: Material, cells: np.ndarray, ph: np.ndarray, seed:
         angles += list(new)
         vals = np.concatenate([vals, extra], axis=1)
     rec = reconstruct(b, cells, ph, np.deg2rad(angles), vals, method=method)  # type: ignore[arg-type]
-    return score(rec.table, m.truth, rec, vals.shape[0] * len(angles))
+    return score(rec.table, m.truth, rec, vals.shape[0] * len(angles), m)
+
+
+def flip_table(rows: dict[str, dict[str, Score]], mats: list[Material],
+               order: list[str]) -> None:
+    """Per-material HDR-FLIP of each row (columns), and each set's mean."""
+    short = [r.split(" (")[0].split(" n=")[0] if r != LIMIT_ROW else "grid limit"
+             for r in order]
+    print("\nHDR-FLIP against the truth rendered by mitsuba (lower is better)")
+    print("| material | " + " | ".join(short) + " |")
+    print("|---" * (1 + len(order)) + "|")
+    for m in mats:
+        print(f"| {m.name} | " + " | ".join(f"{rows[r][m.name].flip:.3f}" for r in order)
+              + " |")
+    for k in ("measured", "aniso"):
+        ks = [m for m in mats if m.kind == k]
+        if ks:
+            print(f"| **mean {k} ({len(ks)})** | " + " | ".join(
+                f"**{np.mean([rows[r][m.name].flip for m in ks]):.3f}**" for r in order) + " |")
 
 
 # ---------------------------------------------------------------------------- main
@@ -437,6 +504,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--asymmetric-library", action="store_true",
                     help="train the bases on the library's families without twofold symmetry "
                          "too (default_basis(asymmetric=True); science.md 7.4)")
+    ap.add_argument("--no-flip", action="store_true",
+                    help="leave out the HDR-FLIP columns (rendering costs about 1 s a row)")
     ap.add_argument("--calibrate", action="store_true",
                     help="fit predicted_log_rmse's model on half the materials, check the rest")
     args = ap.parse_args(argv)
@@ -457,6 +526,7 @@ def main(argv: list[str] | None = None) -> int:
 
     presets = {p: get_preset(p).cells() for p in preset_names()}
     ETA["eta"], ETA["lam"] = args.eta, args.lam
+    FLIP["on"] = not args.no_flip
     RHO["rho"], RHO["symmetry"] = args.rho, args.symmetry
     CHOOSE["k"] = args.choose
     CHOOSE["objective"] = args.design
@@ -493,13 +563,14 @@ def main(argv: list[str] | None = None) -> int:
                     run_adaptive(b, m, cells, ph, seed, args.method, joint_e=e))
                 put(f"adaptive joint e={e} everywhere, 8->16{turn}", m,
                     run_adaptive(b, m, cells, ph, seed, args.method, joint_e=e, everywhere=True))
-        put("basis ceiling (every cell)", m, score(ceiling(b, m.truth), m.truth))
+        put("basis ceiling (every cell)", m, score(ceiling(b, m.truth), m.truth, m=m))
+        put(LIMIT_ROW, m, score(m.truth, m.truth, m=m))
         print(f"  {m.name}: {rows[f'gonio ({args.method}) n=10 r=8'][m.name].log_rmse:.4f} "
               f"({time.perf_counter() - t0:.0f} s)", flush=True)
 
     kinds = [k for k in ("measured", "aniso") if any(m.kind == k for m in mats)]
     head = "".join(f" | {k} ({sum(m.kind == k for m in mats)}) log_rmse / log_psnr dB"
-                   for k in kinds)
+                   f"{' / HDR-FLIP' if FLIP['on'] else ''}" for k in kinds)
     print(f"\n| row{head} | readings |")
     print("|---" * (2 + len(kinds)) + "|")
     for row, per in rows.items():
@@ -508,11 +579,16 @@ def main(argv: list[str] | None = None) -> int:
             ss = [per[m.name] for m in mats if m.kind == k]
             cells_txt += (f" | {np.mean([s.log_rmse for s in ss]):.4f} / "
                           f"{np.mean([s.log_psnr for s in ss]):.1f}")
+            if FLIP["on"]:
+                cells_txt += f" / {np.mean([s.flip for s in ss]):.3f}"
         rd = np.mean([s.readings for s in per.values()])
         print(f"| {row}{cells_txt} | {rd:.0f} |" if rd else f"| {row}{cells_txt} | |")
 
     main_row = f"gonio ({args.method}) n=10 r=8"
     preset_rows = [r for r in rows if r.split(" ")[0] in preset_names()]
+    if FLIP["on"]:
+        flip_table(rows, mats, [main_row, f"{other} path n=10 r=8", *preset_rows,
+                                "basis ceiling (every cell)", LIMIT_ROW])
     print("\n| material | gonio log_rmse | best preset | predicted_log_rmse | ceiling |")
     print("|---|---|---|---|---|")
     wins = within = 0

@@ -576,3 +576,32 @@ class CalibratedScan:
         cells, ph_lab = pair_cells(self.light_dirs, self.sensor_dirs)
         return BrdfSamples(cells, ph_lab, np.deg2rad(self.stage_angles_deg), self.values,
                            self.channels, dict(provenance or {}))
+
+
+def uncalibrated_warning(cal: Calibration, pairs: Sequence[PairSpec]) -> str | None:
+    """What a scan of ``pairs`` under ``cal`` loses when ``cal`` does not cover every pair
+    (None when it does): said by every dry run (the page's Check plan, ``gonio scan
+    --dry-run``) so an uncalibrated scan is never a surprise."""
+    if cal.covers(pairs):
+        return None
+    if cal.pairs:
+        missing = sorted({f"{p.light}/{p.sensor}" for p in pairs}
+                         - {f"{p.light}/{p.sensor}" for p in cal.pairs})
+        what = (f"the calibration in effect ({cal.source}) does not cover pair(s) "
+                f"{', '.join(missing[:4])}{' ...' if len(missing) > 4 else ''}")
+    else:
+        what = "no calibration is in effect on this rig"
+    return (f"uncalibrated: {what}, so this scan's values stay in sensor units, not 1/sr; its "
+            "rendering, exports and error numbers are not those of the material (run a "
+            "calibration job with the white reference on the stage first)")
+
+
+def rig_was_calibrated(cal: Calibration, rig_data_dir: Path | None) -> bool:
+    """Whether a calibration exists for this rig although ``cal`` (the one in effect) may not
+    cover a scan: ``cal`` has factors (for other pairs: the geometry changed), or the rig's own
+    data directory (``gonio scan``'s, :func:`gonio.paths.scan_data_dir`) holds one. An
+    uncalibrated scan of such a rig is most likely a mistake (a daemon started on another data
+    directory), so it needs the user's explicit acceptance."""
+    if cal.pairs:
+        return True
+    return rig_data_dir is not None and (Path(rig_data_dir) / CALIBRATION_FILE).is_file()

@@ -84,9 +84,14 @@ class LimitsSection(_Section):
 
 
 class PathsSection(_Section):
-    """``[paths]``: the data directory (jobs database, result files) and the rig config."""
+    """``[paths]``: the data directory (jobs database, result files) and the rig config.
 
-    data_dir: Path = Path("gonio-data")
+    Without ``data_dir`` the daemon uses the rig's own data directory in the user data folder
+    (:func:`gonio.paths.scan_data_dir`), the one ``gonio scan`` uses on the same rig config: a
+    calibration measured with ``gonio scan --white-reference`` is the one the daemon applies.
+    """
+
+    data_dir: Path | None = None
     rig_config: Path | None = None
 
 
@@ -97,6 +102,15 @@ class DaemonConfig(_Section):
     auth: AuthSection = AuthSection()
     limits: LimitsSection = LimitsSection()
     paths: PathsSection = PathsSection()
+
+    def for_rig(self, rig_config: Any) -> DaemonConfig:
+        """This config with its data directory settled: ``[paths] data_dir`` if given, else the
+        rig's own data directory (:func:`gonio.paths.scan_data_dir`)."""
+        if self.paths.data_dir is not None:
+            return self
+        from gonio.paths import scan_data_dir
+
+        return self.with_overrides(paths__data_dir=str(scan_data_dir(rig_config)))
 
     def with_overrides(self, **changes: Any) -> DaemonConfig:
         """A copy with ``section__key=value`` overrides (CLI flags), re-validated.
@@ -259,6 +273,7 @@ def api_settings(cfg: DaemonConfig, keyring: ApiKeyring) -> Any:
     from gonio.api.auth import AccessPolicy
     from gonio.api.settings import ApiSettings
 
+    assert cfg.paths.data_dir is not None, "settle the data directory first (for_rig)"
     return ApiSettings(
         access=AccessPolicy(keyring, read_requires_key=cfg.auth.read_requires_key),
         data_dir=cfg.paths.data_dir,
@@ -298,6 +313,8 @@ def build_app(
     from gonio.service import GonioService
     from gonio.store import JobStore
 
+    cfg = cfg.for_rig(rig_config)
+    assert cfg.paths.data_dir is not None  # for_rig settled it
     data_dir = cfg.paths.data_dir.absolute()
     data_dir.mkdir(parents=True, exist_ok=True)
     # One daemon per data directory and one owner per rig, for this process's life: refused
@@ -327,6 +344,7 @@ def build_app(
             lock.release()
         raise
     service.owned = owned
+    log_job_events(service)
     return create_app(service, api_settings(cfg, keyring))
 
 
@@ -344,6 +362,79 @@ def is_loopback_host(host: str) -> bool:
         return False
     mapped = getattr(addr, "ipv4_mapped", None)
     return bool(addr.is_loopback or (mapped is not None and mapped.is_loopback))
+
+
+JOB_LOG = logging.getLogger("gonio.jobs")
+"""What happened to jobs, one line each, on the daemon's console (instead of every request)."""
+
+
+def log_job_events(service: Any) -> None:
+    """Log each job's start, pause, resumption, end and an applied calibration to
+    :data:`JOB_LOG`, from the job store's events (the same ones the API streams)."""
+
+    def on_event(ev: Any) -> None:
+        if ev.job_id is None or ev.type not in ("state", "recovered"):
+            return
+        # Runs in the committing thread: a log line must never break the commit it reports.
+        try:
+            row = service.store.get_job(ev.job_id)
+            level, line = job_event_line(ev.type, ev.data, row, service)
+        except Exception:  # e.g. removed meanwhile
+            JOB_LOG.debug("no log line for event %s of job %s", ev.type, ev.job_id,
+                          exc_info=True)
+            return
+        if line:
+            JOB_LOG.log(level, "%s", line)
+
+    service.add_event_listener(on_event)
+
+
+def job_event_line(type_: str, data: Mapping[str, Any], row: Any,
+                   service: Any) -> tuple[int, str | None]:
+    """(log level, line) for one job event; None for events not worth a line.
+
+    Parameters
+    ----------
+    type_ : the event type (``state`` or ``recovered``)
+    data : the event's data (``from``, ``state``, ``reason``, ``note`` ...)
+    row : the job's :class:`gonio.store.JobRow` after the event
+    """
+    job = f"job {row.id} ({row.kind}, {row.specimen!r})"
+    angles = f"{row.done_angles} of {row.total_angles} angles"
+    reason = f": {data['reason']}" if data.get("reason") else ""
+    if type_ == "recovered":
+        return logging.INFO, (f"{job} found {data.get('state')} at start ({angles}): "
+                              "resumes from its checkpoint")
+    state, before = data.get("state"), data.get("from")
+    if state == "running":
+        if before == "queued":
+            # The plan's stage angles (the job's own steps are laid out just after this).
+            n = row.total_angles or row.plan.get("rotations") or row.plan.get(
+                "initial_rotations")
+            return logging.INFO, f"{job} started" + (f": {n} stage angles" if n else "")
+        return logging.INFO, f"{job} resumed from {before} ({angles})"
+    if state in ("paused", "suspended"):
+        level = logging.WARNING if state == "suspended" else logging.INFO
+        return level, f"{job} {state} ({angles}){reason}"
+    if state == "reconstructing":
+        return logging.INFO, f"{job} measured {angles}; reconstructing"
+    if state == "completed":
+        if row.kind == "calibration":
+            cal = service.calibration()
+            return logging.INFO, (f"{job} completed: calibration applied ({cal.source}, "
+                                  f"{len(cal.pairs)} pairs): later scans are in 1/sr")
+        from gonio.figures import headline_error
+
+        summary = row.summary or {}
+        err = headline_error(summary)
+        units = "in 1/sr" if summary.get("calibrated") else "UNCALIBRATED (sensor units)"
+        return logging.INFO, (f"{job} completed, {units}: "
+                              + (f"{err['key']} {err['text']}" if err else "no error estimate")
+                              + (f"; result {row.result_path}" if row.result_path else ""))
+    if state in ("failed", "aborted", "halted"):
+        level = logging.INFO if state == "aborted" else logging.ERROR
+        return level, f"{job} {state} ({angles}){reason}"
+    return logging.DEBUG, None
 
 
 def warn_if_exposed(cfg: DaemonConfig, keyring: ApiKeyring) -> None:
@@ -394,7 +485,7 @@ def serve(app: Any, cfg: DaemonConfig, on_started: Any = None) -> int:
     # log, and pymodbus' raw frame dumps are not errors of the daemon.
     from gonio import logfilters
 
-    logfilters.install()
+    logfilters.install(quiet_reads=cfg.server.log_level != "debug")
     closer = getattr(getattr(app, "state", None), "stream_closer", None)
     original_handle_exit = server.handle_exit
 
@@ -415,7 +506,12 @@ def serve(app: Any, cfg: DaemonConfig, on_started: Any = None) -> int:
                 for s in server.servers:
                     for sock in s.sockets:
                         host, port = sock.getsockname()[:2]
-                        on_started(f"http://{_url_host(host)}:{port}/", stop)
+                        url = f"http://{_url_host(host)}:{port}/"
+                        from gonio.locks import advertise_url
+
+                        # A program refused by this daemon's locks is told this address.
+                        advertise_url(url)
+                        on_started(url, stop)
                         return
 
         server.startup = startup  # type: ignore[method-assign]

@@ -137,6 +137,17 @@ def headline_error(metrics: dict[str, Any]) -> dict[str, Any] | None:
     -------
     dict with ``key`` (metric name), ``value``, ``text`` (value as shown) and ``meaning``.
     """
+    out = _headline(metrics)
+    bounds = metrics.get("physical_bounds")
+    if out is not None and isinstance(bounds, str):
+        # Out of physical bounds, the estimate is beside the point: the headline says so first.
+        out["text"] += " (OUTSIDE PHYSICAL BOUNDS)"
+        out["meaning"] = f"Warning: {bounds}. {out['meaning']}"
+        out["physical_bounds"] = bounds
+    return out
+
+
+def _headline(metrics: dict[str, Any]) -> dict[str, Any] | None:
     v = metrics.get("predicted_log_rmse")
     if isinstance(v, int | float):
         return {
@@ -184,7 +195,8 @@ def fit_curves(res: ResultFile, step_deg: float = 2.0) -> dict[str, Any]:
 
     Returns
     -------
-    dict: ``units``, ``curve_deg`` (stage angles of the curves), ``pairs``: list of
+    dict: ``units``, ``calibrated`` (False: sensor units), ``curve_deg`` (stage angles of
+    the curves), ``pairs``: list of
     ``{label, stage_deg, measured, curve}``.
     """
     import numpy as np
@@ -209,7 +221,8 @@ def fit_curves(res: ResultFile, step_deg: float = 2.0) -> dict[str, Any]:
             "measured": _mean_or_none(np.asarray(s.values[q])[order]),
             "curve": _mean_or_none(look.eval(wi, wo)),
         })
-    return {"units": _units(res), "channels": "mean of " + ", ".join(s.channels),
+    return {"units": _units(res), "calibrated": bool(s.calibration.get("pairs")),
+            "channels": "mean of " + ", ".join(s.channels),
             "curve_deg": [float(a) for a in curve_deg], "pairs": pairs}
 
 

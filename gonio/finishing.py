@@ -204,6 +204,18 @@ def finish_job(job_id: int, plan: AnyPlan, how: Finishing) -> dict[str, Any]:
     }
     if "prior_rho" in rec.settings:
         metrics["prior_rho"] = rec.settings["prior_rho"]  # 1: the library prior as it is
+    # A reconstruction outside physical bounds (albedo far above 1, or orders of magnitude
+    # above every reading) completes with a warning rather than failing: the readings and the
+    # table where the pairs look are still the measurement, a rebuild with another basis can
+    # use them, and a failed job would hide both (docs/science.md 7.6).
+    physical = physical_bounds(rec.table, grid.values, bool(cal.pairs))
+    metrics.update(worst_directional_albedo=physical.as_dict()["worst_albedo"],
+                   peak_to_reading_ratio=physical.as_dict()["peak_ratio"])
+    bounds_message = physical.message()
+    if bounds_message is not None:
+        metrics["physical_bounds"] = bounds_message
+        provenance["physical_bounds"] = bounds_message
+        log.info("job %d: %s", job_id, bounds_message)  # the worker records the event
     provenance.update(basis_K=int(basis.K), basis_materials=json.dumps(list(basis.materials)))
     # A half-turn scan with a basis whose prior varies over a full turn: the result is valid
     # but the other half turn rests on the prior; the result and the job's summary say so
@@ -245,6 +257,14 @@ def finish_job(job_id: int, plan: AnyPlan, how: Finishing) -> dict[str, Any]:
     )
     summary.update(result_path=relative, **metrics)
     return summary
+
+
+def physical_bounds(table: Any, values: Any, calibrated: bool) -> Any:
+    """:func:`gonio.brdf.tables.bounds.bounds_check` of a reconstruction against the readings
+    it was fitted to (``values``, calibrated when ``calibrated``)."""
+    from gonio.brdf.tables.bounds import bounds_check
+
+    return bounds_check(table, values, calibrated=calibrated)
 
 
 def _colour(rec: Any, how: Finishing, sensors: list[str], calibrated: bool) -> dict[str, Any]:

@@ -70,6 +70,11 @@ class LockBusy(RuntimeError):
     def __init__(self, what: str, holder: dict[str, Any], advice: str) -> None:
         self.what = what
         self.holder = holder
+        # A daemon records the address it serves (:func:`advertise_url`): the advice names it
+        # instead of a placeholder, so the command it suggests works as printed.
+        url = holder.get("url")
+        if isinstance(url, str) and url:
+            advice = advice.replace("--daemon URL", f"--daemon {url.rstrip('/')}")
         super().__init__(f"{what} is in use by {describe_holder(holder)}; {advice}")
 
 
@@ -80,8 +85,10 @@ def describe_holder(holder: dict[str, Any]) -> str:
     since = holder.get("since")
     when = (time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime(float(since)))
             if isinstance(since, int | float) else "unknown time")
+    url = holder.get("url")
+    at = f", serving {url}" if isinstance(url, str) and url else ""
     return (f"{holder.get('program', 'a program')} (pid {holder.get('pid', '?')} on "
-            f"{holder.get('host', '?')}, since {when})")
+            f"{holder.get('host', '?')}, since {when}{at})")
 
 
 def lock_dir() -> Path:
@@ -156,6 +163,26 @@ def endpoint_lock(endpoint: str) -> FileLock:
 _HELD: dict[str, tuple[int, int]] = {}
 """Locks this process holds: real path -> (fd, count). Re-entrant within the process."""
 _HELD_GUARD = threading.Lock()
+_URL: str | None = None
+"""The address this process serves its API on, once it listens (:func:`advertise_url`)."""
+
+
+def advertise_url(url: str) -> None:
+    """Record ``url`` (this daemon's API address) in every lock this process holds and takes
+    from now on, so a program refused by one of them is told the real address to act through
+    (``gonio stage --daemon URL``), not a default port."""
+    global _URL
+    _URL = url
+    with _HELD_GUARD:
+        for fd, _count in _HELD.values():
+            record = _read_holder(fd)
+            if record.get("pid") != os.getpid():
+                continue  # opened read-only: not ours to rewrite
+            record["url"] = url
+            with contextlib.suppress(OSError):
+                data = json.dumps(record).encode("utf-8")
+                os.ftruncate(fd, 0)
+                os.pwrite(fd, data, 0)
 
 
 def _program() -> str:
@@ -248,6 +275,8 @@ class FileLock:
             if writable:
                 record = {"pid": os.getpid(), "host": socket.gethostname(),
                           "program": _program(), "since": time.time(), "what": self.what}
+                if _URL is not None:
+                    record["url"] = _URL
                 with contextlib.suppress(OSError):
                     os.ftruncate(fd, 0)
                     os.pwrite(fd, json.dumps(record).encode("utf-8"), 0)

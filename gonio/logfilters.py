@@ -4,12 +4,14 @@
   secret, password) in its query string is refused by the API, but the access log would still
   have written the key down. The value is replaced by ``[redacted]``; the parameter name stays,
   so the log still shows what the client did.
+* :class:`RoutineRequestFilter` on the access log: successful reads (the page's polls) are
+  not logged; changes and refusals are.
 * :class:`PymodbusFrameFilter` on pymodbus' logger: pymodbus logs a corrupted or unexpected
   reply at ERROR and appends the last raw frames as hex dumps. The drivers already turn such a
   reply into a device fault that names the device and the cause, so these records become
   WARNINGs of one line (the frames are logged by pymodbus itself at DEBUG level).
 
-:func:`install` attaches both; :func:`gonio.daemon.serve` calls it after uvicorn has
+:func:`install` attaches them; :func:`gonio.daemon.serve` calls it after uvicorn has
 configured its loggers.
 """
 
@@ -62,6 +64,23 @@ class QueryKeyRedactor(logging.Filter):
         return True
 
 
+class RoutineRequestFilter(logging.Filter):
+    """Drops successful reads (GET/HEAD answered below 400) from uvicorn's access log.
+
+    The lab page polls its job once a second and the rig every few seconds: logged, they bury
+    what happened (306 lines in six minutes of one scan). Changes (POST, DELETE ...) and every
+    refused or failed request stay; ``log_level = "debug"`` keeps the reads too.
+    """
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        args = record.args
+        if isinstance(args, tuple) and len(args) >= 5:
+            method, status = args[1], args[4]
+            if method in ("GET", "HEAD") and isinstance(status, int) and status < 400:
+                return False
+        return True
+
+
 class PymodbusFrameFilter(logging.Filter):
     """ERROR records of pymodbus become one-line WARNINGs without the raw frame dump."""
 
@@ -75,9 +94,14 @@ class PymodbusFrameFilter(logging.Filter):
         return True
 
 
-def install() -> None:
-    """Attach the filters to their loggers (idempotent)."""
-    for name, cls in ((ACCESS_LOGGER, QueryKeyRedactor), (PYMODBUS_LOGGER, PymodbusFrameFilter)):
+def install(quiet_reads: bool = True) -> None:
+    """Attach the filters to their loggers (idempotent); ``quiet_reads``: also
+    :class:`RoutineRequestFilter` (off at debug level)."""
+    pairs: list[tuple[str, type[logging.Filter]]] = [
+        (ACCESS_LOGGER, QueryKeyRedactor), (PYMODBUS_LOGGER, PymodbusFrameFilter)]
+    if quiet_reads:
+        pairs.append((ACCESS_LOGGER, RoutineRequestFilter))
+    for name, cls in pairs:
         logger = logging.getLogger(name)
         if not any(isinstance(f, cls) for f in logger.filters):
             logger.addFilter(cls())

@@ -537,6 +537,10 @@ class Worker:
             log.exception("job %s: finishing failed", job.id)
             return self._fail(job, f"reconstruction failed: {exc}", plan)
         self.store.set_result(job.id, summary.get("result_path"), summary)
+        if summary.get("physical_bounds"):
+            # Completed, but not plainly: the event log and its listeners (the CLI) say why.
+            self.store.append_event(job.id, "physical_bounds",
+                                    {"message": summary["physical_bounds"]})
         self.store.set_state(job.id, JobState.COMPLETED)
         return JobState.COMPLETED
 

@@ -256,11 +256,16 @@ class ModbusRigServer:
         if self.holder is not None:
             devices.append(self._holder_device(self.holder))
         server = ModbusTcpServer(context=devices, address=(self.host, self.port))
-        await server.serve_forever(background=True)
+        cannot = OSError(f"the simulated Modbus server cannot listen on {self.host}:{self.port} "
+                         "(is the port in use? choose another, or 0 for any free port)")
+        try:
+            await server.serve_forever(background=True)
+        except RuntimeError:  # pymodbus' "Could not start listen"
+            raise cannot from None
         self._watchdog_task = asyncio.create_task(self._watchdogs(), name="sim-lamp-watchdogs")
         sockets = getattr(server.transport, "sockets", None)
         if not sockets:
-            raise RuntimeError(f"simulated Modbus server did not bind {self.host}:{self.port}")
+            raise cannot
         self.port = int(sockets[0].getsockname()[1])
         self._server = server
 

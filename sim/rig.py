@@ -183,6 +183,8 @@ class SimRigOptions:
         them, as on controllers without one).
     name : rig name in the config
     config_path : where to write the rig config (None: not written)
+    modbus_port : TCP port of the simulated Modbus bus on 127.0.0.1 (0: any free one; choose
+        one on a shared lab machine whose firewall allows only known ports)
     """
 
     stage: Literal["dynamixel", "zaber"] = "dynamixel"
@@ -204,6 +206,7 @@ class SimRigOptions:
     lamp_watchdog_s: float | None = 2.0
     name: str = "sim"
     config_path: str | os.PathLike[str] | None = None
+    modbus_port: int = 0
 
     def check(self) -> None:
         """``ValueError`` with a clear message for an impossible option."""
@@ -213,6 +216,9 @@ class SimRigOptions:
             raise ValueError(f"zaber transport {self.zaber_transport!r}: use 'pty' or 'tcp'")
         if not self.time_scale > 0:
             raise ValueError(f"time scale must be > 0, got {self.time_scale}")
+        if not 0 <= self.modbus_port <= 65535:
+            raise ValueError(f"Modbus port {self.modbus_port}: use 1 to 65535, or 0 for any "
+                             "free port")
         if not self.irradiance > 0:
             raise ValueError(f"irradiance must be > 0, got {self.irradiance}")
         if self.lamp_watchdog_s is not None and not 0.001 <= self.lamp_watchdog_s <= 65.0:
@@ -364,6 +370,7 @@ class SimRig:
         self.modbus = ModbusRigServer(
             self.specimen, self.motion, lamps, sensors, time_scale=o.time_scale, seed=o.seed,
             holder=SimHolderSpec(HOLDER_DEVICE_ID, self._holder_state, self._holder_load),
+            port=o.modbus_port,
         ).start()
 
     def _build_config(self, channels: list[str]) -> RigConfig:

@@ -35,6 +35,18 @@ def _session_data_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return Path(os.environ["GONIO_DATA_DIR"])
 
 
+@pytest.fixture(autouse=True)
+def _test_data_dir(_session_data_dir: Path, tmp_path_factory: pytest.TempPathFactory,
+                   monkeypatch: pytest.MonkeyPatch) -> Path:
+    """Each test its own user data folder. A rig's data directory there (``gonio scan``'s, and
+    the daemon's without a configured one) keeps its calibration, and the simulated rigs of
+    different tests share one geometry: one test's white reference must not make another
+    test's rig "calibrated" (an uncalibrated scan of a calibrated rig needs acceptance)."""
+    path = tmp_path_factory.mktemp("user-data")
+    monkeypatch.setenv("GONIO_DATA_DIR", str(path))
+    return path
+
+
 @pytest.fixture(scope="session", autouse=True)
 def _session_lock_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """Rig ownership locks (gonio.locks) of this test run in one folder of its own.

@@ -2,17 +2,20 @@
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 from fastapi import APIRouter, Query, Response, status
 from pydantic import BaseModel, Field
 
 from gonio.api.deps import COMPUTE, READ, WRITE, JobId, Service
-from gonio.calibration import counts
+from gonio.calibration import counts, rig_was_calibrated, uncalibrated_warning
 from gonio.jobstates import JobState
+from gonio.paths import scan_data_dir
 from gonio.plans.dryrun import DryRun
 from gonio.plans.models import Plan
-from gonio.service import JobDetail, JobInfo, JobRequest, ReorderRequest
+from gonio.plans.validation import plan_pairs
+from gonio.service import Conflict, JobDetail, JobInfo, JobRequest, ReorderRequest
 
 router = APIRouter(prefix="/api/v1/jobs", tags=["jobs"])
 
@@ -49,9 +52,24 @@ def list_jobs(service: Service, state: JobState | None = None) -> list[JobInfo]:
     dependencies=WRITE,
     status_code=status.HTTP_201_CREATED,
     summary="Queue a scan (the plan is validated against the rig first)",
-    responses={422: {"description": "the plan cannot run on this rig; the detail says why"}},
+    responses={
+        422: {"description": "the plan cannot run on this rig; the detail says why"},
+        409: {"description": "the scan would be uncalibrated on a rig that has a calibration "
+                           "elsewhere; send accept_uncalibrated=true to run it all the same"},
+    },
 )
-def create_job(request: JobRequest, service: Service, response: Response) -> JobInfo:
+def create_job(
+    request: JobRequest,
+    service: Service,
+    response: Response,
+    accept_uncalibrated: bool = Query(
+        False, description="run a scan that no calibration covers on a rig that was calibrated "
+        "(otherwise 409: most likely the daemon runs on another data directory)"),
+) -> JobInfo:
+    if not accept_uncalibrated:
+        refusal = _uncalibrated_refusal(service, request.plan)
+        if refusal is not None:
+            raise Conflict(refusal)
     info = service.submit(request)
     response.headers["Location"] = f"/api/v1/jobs/{info.id}"
     return info
@@ -64,7 +82,41 @@ def create_job(request: JobRequest, service: Service, response: Response) -> Job
     responses={422: {"description": "the plan cannot run on this rig"}},
 )
 def dry_run(request: DryRunRequest, service: Service) -> DryRun:
-    return service.dry_run(request.plan)
+    result = service.dry_run(request.plan)
+    if request.plan.kind != "calibration":
+        warning = uncalibrated_warning(service.calibration(), result.pairs)
+        if warning is not None:
+            result = result.model_copy(update={"warnings": [*result.warnings, warning]})
+    return result
+
+
+def _uncalibrated_refusal(service: Any, plan: Any) -> str | None:
+    """Why a scan of ``plan`` needs the user's acceptance (None when it does not): no
+    calibration in effect covers its pairs, although this rig was calibrated."""
+    if plan.kind == "calibration":
+        return None
+    cal = service.calibration()
+    try:
+        pairs = plan_pairs(plan, service.desc)
+    except ValueError:
+        return None  # a plan that cannot run: submit says why
+    if cal.covers(pairs):
+        return None
+    try:
+        own: Path | None = scan_data_dir(service.rig_config)
+    except AttributeError:  # a rig without a rig config (tests, notebooks)
+        own = None
+    if own is not None and own.resolve() == service.data_dir.resolve():
+        own = None  # its calibration would be the one in effect
+    if not rig_was_calibrated(cal, own):
+        return None
+    where = (f"the calibration in {own} (gonio scan's data directory for this rig) is not this "
+             f"daemon's (data directory {service.data_dir})" if own is not None and
+             not cal.pairs else f"the calibration in effect ({cal.source}) does not cover "
+             "this plan's pairs (the geometry changed?)")
+    return (f"this scan would be uncalibrated although the rig was calibrated: {where}. Run a "
+            "calibration job first, or send accept_uncalibrated=true to measure in sensor "
+            "units all the same")
 
 
 @router.get(

@@ -5,7 +5,7 @@ One subpackage per job; each module's docstring says what it holds.
 ==================  ===========================================================================
 ``tables``          the 5 degree half/difference grid (``geometry``), the tabulated BRDF
                     (``table``), the ``.npz`` container (``npzfile``), errors between tables
-                    (``metrics``)
+                    (``metrics``), physical bounds of a table (``bounds``)
 ``models``          analytic BRDF models (``analytic``), the factored fit (``factored``), the
                     principled-parameter fit (``principled``)
 ``materials``       where BRDFs come from: synthetic training library (``library``), shipped
@@ -15,7 +15,8 @@ One subpackage per job; each module's docstring says what it holds.
                     (``reconstruct``), simulated scans and the samples file (``samples``)
 ``design``          where to put the light/sensor pairs: rig constraints, the condition-number
                     search, pair and product designs, presets, the roughness bound, held-out error
-``pictures``        rendered images (``render``) and slice previews (``preview``)
+``pictures``        rendered images (``render``), slice previews (``preview``), the standard
+                    renderings and their HDR-FLIP (``appearance``)
 ``colour``          CIE XYZ, CIELAB, flop index and CIEDE2000 at instrument geometries through
                     colour-science; spectral bands, chart calibration of RGB sensors
 ==================  ===========================================================================

@@ -367,8 +367,14 @@ def _cmd_library_import(args: argparse.Namespace) -> int:
 
 
 def _cmd_library_list(args: argparse.Namespace) -> int:
+    from gonio.brdf.materials.library import FAMILY_COUNTS
     from gonio.brdf.materials.measured import measured_names, user_library_dir, user_table_files
 
+    # The synthetic library: what `--material NAME` of the simulators and simulate-scan take.
+    print(f"synthetic library materials ({sum(FAMILY_COUNTS.values())}; --material NAME of "
+          "gonio sim, scan --sim, serve --sim, simulate-scan): "
+          + ", ".join(f"{family}-000 .. {family}-{n - 1:03d}"
+                      for family, n in FAMILY_COUNTS.items()))
     print(f"shipped measured materials ({len(measured_names())}, RGL, CC0): "
           + ", ".join(measured_names()))
     files = user_table_files()
@@ -400,7 +406,8 @@ def register(subparsers: Any) -> None:
     li.add_argument("files", nargs="+", metavar="FILE")
     li.add_argument("--replace", action="store_true", help="overwrite tables of the same name")
     li.set_defaults(func=_cmd_library_import)
-    ll = lsub.add_parser("list", help="list the shipped and imported measured materials")
+    ll = lsub.add_parser("list", help="list the synthetic library and the shipped and imported "
+                         "measured materials")
     ll.set_defaults(func=_cmd_library_list)
 
     s = subparsers.add_parser("simulate-scan", help="simulate a sparse scan of a known BRDF")

@@ -33,7 +33,9 @@ def register(subparsers: Any) -> None:
     new.add_argument("name", help="who or what uses it (shown in logs and events)")
     lst = sub.add_parser("list", help="names of the configured keys (never the keys)")
     for q in (new, lst):
-        src = q.add_mutually_exclusive_group(required=True)
+        # Not required by argparse: its "one of the arguments ... is required" does not say
+        # which file is meant; _keys_file does.
+        src = q.add_mutually_exclusive_group()
         src.add_argument("--keys-file", type=Path, metavar="FILE",
                          help="the keys file (e.g. /etc/gonio/api-keys)")
         src.add_argument("--config", type=Path, metavar="DAEMON_TOML",
@@ -45,6 +47,12 @@ def register(subparsers: Any) -> None:
 def _keys_file(args: argparse.Namespace) -> Path:
     if args.keys_file is not None:
         return Path(args.keys_file)
+    if args.config is None:
+        raise UsageError(f"which keys file? e.g. 'gonio keys {args.keys_command} "
+                         + (f"{args.name} " if args.keys_command == "new" else "")
+                         + "--keys-file api-keys' (the file 'gonio serve --keys-file' reads, "
+                         "/etc/gonio/api-keys as a service), or --config daemon.toml to use "
+                         "its [auth] keys_file")
     from gonio.daemon import DaemonConfigError, load_daemon_config
 
     try:

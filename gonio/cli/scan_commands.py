@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from gonio.cli import UsageError, finite_float, nonnegative_float, positive_float, positive_int
-from gonio.cli.daemon_client import DaemonClient, add_daemon_options
+from gonio.cli.daemon_client import DaemonClient, DaemonRefused, add_daemon_options
 
 
 def register(subparsers: Any) -> None:
@@ -43,6 +43,9 @@ def register(subparsers: Any) -> None:
     p.add_argument("--time-scale", type=positive_float, default=1.0,
                    help="simulated seconds per wall second (with --sim)")
     p.add_argument("--seed", type=int, default=0, help="sensor noise seed (with --sim)")
+    from gonio.cli.sim_command import add_modbus_port_option
+
+    add_modbus_port_option(p)
     p.add_argument("--rotations", type=positive_int, default=None,
                    help="stage angles r (default 8); with --adaptive the first round's "
                         "(default 4 with the posterior rule, 8 with --rule vf)")
@@ -71,11 +74,15 @@ def register(subparsers: Any) -> None:
     p.add_argument("--light-settle", type=nonnegative_float, default=0.05,
                    help="seconds after lamp on")
     p.add_argument("--specimen", default=None,
-                   help="specimen name, carried into the result and every export (without "
-                        "it the scan is 'unnamed' and says so; with --white-reference, the "
-                        "reference's name, default 'white reference')")
+                   help="specimen name, carried into the job, its result and every export "
+                        "(default: the output file's name without .h5, e.g. 'felt' for -o "
+                        "felt.h5, else 'unnamed'; with --white-reference, the reference's name, "
+                        "default 'white reference')")
     p.add_argument("--calibration", type=Path, default=None,
                    help="calibration JSON (from a calibration job) to apply")
+    p.add_argument("--accept-uncalibrated", action="store_true",
+                   help="run a scan no calibration covers although this rig was calibrated "
+                        "(its own data directory holds a calibration): values in sensor units")
     p.add_argument("--white-reference", type=positive_float, default=None, metavar="ALBEDO",
                    help="the stage holds a white reference of this albedo (e.g. 0.99): run a "
                         "calibration job and write OUTPUT.calibration.json for later --calibration")
@@ -92,11 +99,13 @@ def register(subparsers: Any) -> None:
     p.set_defaults(func=_scan)
 
     j = subparsers.add_parser(
-        "jobs", help="list or show jobs in a job store, or rebuild a job's result file",
-        description="list: the jobs; show ID: one job as JSON; rebuild ID: write a completed "
-        "job's result file again from the readings the store holds (when the file is missing "
-        "or damaged), with the calibration the job was finished with.")
-    j.add_argument("action", nargs="?", choices=["list", "show", "rebuild"], default="list")
+        "jobs", help="list, show or abort jobs in a job store, or rebuild a job's result file",
+        description="list: the jobs; show ID: one job as JSON; abort ID: end one left "
+        "unfinished (e.g. a foreground scan interrupted by Ctrl-C); rebuild ID: write a "
+        "completed job's result file again from the readings the store holds (when the file "
+        "is missing or damaged), with the calibration the job was finished with.")
+    j.add_argument("action", nargs="?", choices=["list", "show", "abort", "rebuild"],
+                   default="list")
     j.add_argument("job_id", nargs="?", type=int)
     j.add_argument("--db", type=Path, required=True,
                    help="job store (SQLite), e.g. the one 'gonio scan' prints")
@@ -109,7 +118,6 @@ def register(subparsers: Any) -> None:
 
 
 def _plan(args: argparse.Namespace) -> Any:
-    from gonio.export.metadata import UNNAMED
     from gonio.plans.models import AdaptivePlan, CalibrationPlan, ExposureSettings, UniformPlan
 
     ex = ExposureSettings(exposure_s=args.exposure, averages=args.averages,
@@ -130,12 +138,25 @@ def _plan(args: argparse.Namespace) -> Any:
                                    ("min_gain", args.min_gain),
                                    ("max_rotations", args.max_rotations),
                                    ("span_deg", args.span)) if v is not None}
-        return AdaptivePlan(specimen=args.specimen or UNNAMED, exposure=ex, rule=args.rule,
+        return AdaptivePlan(specimen=_specimen(args), exposure=ex, rule=args.rule,
                             threshold=args.threshold, max_samples=args.max_samples,
                             start_deg=args.start_deg, **given)
     span = {"span_deg": args.span} if args.span is not None else {}
-    return UniformPlan(specimen=args.specimen or UNNAMED, exposure=ex,
+    return UniformPlan(specimen=_specimen(args), exposure=ex,
                        rotations=args.rotations or 8, start_deg=args.start_deg, **span)
+
+
+def _specimen(args: argparse.Namespace) -> str:
+    """The specimen's name: ``--specimen``, else the result file's stem (``-o felt.h5``:
+    "felt"), else "unnamed", so jobs, results, exports and the page do not all say
+    "specimen"."""
+    from gonio.export.metadata import UNNAMED
+
+    if args.specimen:
+        return str(args.specimen)
+    stem = Path(args.output).stem if args.output is not None else ""
+    generic = {"", "null", "result", "out", "output", "scan"}
+    return stem if stem.lower() not in generic else UNNAMED
 
 
 def _scan(args: argparse.Namespace) -> int:
@@ -146,18 +167,18 @@ def _scan(args: argparse.Namespace) -> int:
         raise UsageError(f"rig config {args.rig} does not exist")
     plan = _plan(args)
     if args.white_reference is None and not args.specimen and not args.dry_run:
-        from gonio.export.metadata import UNNAMED
-
-        print(f"note: no --specimen NAME given; the result and its exports call the specimen "
-              f"{UNNAMED!r}", file=sys.stderr)
+        print(f"note: no --specimen NAME given; the job, its result and its exports call the "
+              f"specimen {_specimen(args)!r}", file=sys.stderr)
     if args.daemon:
         return _scan_through_daemon(args, plan)
     sim = None
     if args.sim:
+        from gonio.cli.sim_command import start_sim_rig_or_say_why
         from gonio.sim.rig import SimRigOptions, start_sim_rig
 
-        sim = start_sim_rig(SimRigOptions(stage=args.stage, material=args.material,
-                                          time_scale=args.time_scale, seed=args.seed))
+        sim = start_sim_rig_or_say_why(start_sim_rig, SimRigOptions(
+            stage=args.stage, material=args.material, time_scale=args.time_scale,
+            seed=args.seed, modbus_port=args.modbus_port))
         config = sim.config
     else:
         from gonio.config import load_rig_config
@@ -183,6 +204,9 @@ async def _run_scan(args: argparse.Namespace, plan: Any, config: Any, sim: Any =
         # The in-process scan reconstructs with the default basis (built on first use).
         dr = dry_run(plan, desc, basis_ready=not basis_build_needed(default_basis_provider),
                      basis=built_basis_symmetry(default_basis_provider))
+        warning = None if sim is not None else _calibration_warning(args, plan, config, desc)
+        if warning is not None:
+            dr = dr.model_copy(update={"warnings": [*dr.warnings, warning]})
         print(dr.model_dump_json(indent=2) if args.json
               else dry_run_summary(dr, plan, config.rig.name))
         return 0
@@ -232,11 +256,11 @@ async def _run_owned(args: argparse.Namespace, plan: Any, config: Any, sim: Any,
     # [calibration] factors; --calibration overrides both.
     override = None
     if args.calibration is not None:
-        from gonio.calibration import check_plausible, load_calibration, sensor_full_scale
+        from gonio.calibration import check_plausible, sensor_full_scale
 
         if not args.calibration.is_file():
             raise UsageError(f"calibration file {args.calibration} does not exist")
-        override = load_calibration(args.calibration)
+        override = _read_calibration(args.calibration)
         check_plausible(override, sensor_full_scale(config),
                         f"calibration file {args.calibration}")
     service = GonioService(store, rig, rig_config=config, data_dir=data_dir,
@@ -244,17 +268,32 @@ async def _run_owned(args: argparse.Namespace, plan: Any, config: Any, sim: Any,
     try:
         if sim is not None:
             attach_sim(service, sim)
+        elif args.rig is not None:
+            from gonio.cli.sim_session import sim_specimen_truth
+
+            # A rig `gonio sim` runs: results record the simulated material (the truth row
+            # of `gonio render`), as with --sim.
+            truth = sim_specimen_truth(args.rig, config)
+            if truth is not None:
+                service.specimen_truth = lambda: truth
         # Resume an interrupted job only when it is this scan: the same plan on the same rig.
         job = service.unfinished_job(plan)
         if job is not None:
             print(f"resuming job {job.id} from its checkpoint ({job.done_angles} of "
                   f"{job.total_angles} angles done)", file=sys.stderr)
+            if job.state is JobState.PAUSED:
+                # Left paused by Ctrl-C (or by a daemon): running this command again is the
+                # user's resume; the engine would otherwise wait for an API call that never
+                # comes in the foreground.
+                store.set_state(job.id, JobState.RUNNING)
         else:
             if (sim is not None and override is None and plan.kind != "calibration"
                     and not calibration_covers_rig(service)):
                 why = await calibrate_in_foreground(service, sim)
                 if why is not None:
                     raise UsageError(why)
+            if sim is None and plan.kind != "calibration":
+                _check_calibration(args, plan, config, desc, service.calibration(), data_dir)
             # What the submission records as the job's arc warning, said here too (a job whose
             # basis is known only later says it through the progress bar's events).
             for warning in service.dry_run(plan).warnings:
@@ -263,6 +302,13 @@ async def _run_owned(args: argparse.Namespace, plan: Any, config: Any, sim: Any,
         bar = _progress(service, job.id, disabled=args.no_progress)
         try:
             final = await service.run_in_foreground(job.id)
+        except asyncio.CancelledError:
+            # Ctrl-C (asyncio.run cancels this task, then raises KeyboardInterrupt): the
+            # engine has stopped measuring; leave the job paused at its checkpoint, not
+            # "running" for ever, and say how to go on.
+            bar.close()
+            _left_interrupted(store, job.id, db, args)
+            raise
         finally:
             bar.close()
             if sim is not None:
@@ -301,6 +347,84 @@ async def _run_owned(args: argparse.Namespace, plan: Any, config: Any, sim: Any,
     if err:
         print(f"  {err['key']}: {err['meaning']}")
     return 0
+
+
+def _calibration_warning(args: argparse.Namespace, plan: Any, config: Any,
+                         desc: Any) -> str | None:
+    """The dry run's ``uncalibrated: ...`` warning for ``plan`` on this rig, if any."""
+    from gonio.calibration import Calibration, calibration_in_effect, uncalibrated_warning
+    from gonio.paths import scan_data_dir
+    from gonio.plans.validation import plan_pairs
+
+    if plan.kind == "calibration":
+        return None
+    if args.calibration is not None and args.calibration.is_file():
+        cal = _read_calibration(args.calibration)
+    else:
+        cal = calibration_in_effect(args.data_dir or scan_data_dir(config), config)
+    return uncalibrated_warning(cal if isinstance(cal, Calibration) else Calibration(),
+                                plan_pairs(plan, desc))
+
+
+def _check_calibration(args: argparse.Namespace, plan: Any, config: Any, desc: Any,
+                       cal: Any, data_dir: Path) -> None:
+    """Warn of an uncalibrated scan; refuse one of a rig that was calibrated (its own data
+    directory holds a calibration, or one of other pairs is in effect) unless
+    ``--accept-uncalibrated``."""
+    from gonio.calibration import rig_was_calibrated, uncalibrated_warning
+    from gonio.paths import scan_data_dir
+    from gonio.plans.validation import plan_pairs
+
+    warning = uncalibrated_warning(cal, plan_pairs(plan, desc))
+    if warning is None:
+        return
+    own: Path | None = scan_data_dir(config)
+    if own is not None and own.resolve() == data_dir.resolve():
+        own = None
+    if rig_was_calibrated(cal, own) and not args.accept_uncalibrated:
+        where = (f"{own} holds this rig's calibration; leave out --data-dir/--db, or give "
+                 f"--calibration {own / 'calibration.json'}" if own is not None and not cal.pairs
+                 else f"the calibration in effect ({cal.source}) does not cover this plan's "
+                 "pairs; run a calibration (--white-reference ALBEDO)")
+        raise UsageError(f"this scan would be uncalibrated although the rig was calibrated: "
+                         f"{where}; or add --accept-uncalibrated to measure in sensor units")
+    print(f"warning: {warning}", file=sys.stderr)
+
+
+def _read_calibration(path: Path) -> Any:
+    """A calibration JSON file, or a usage error naming the file and what it should be."""
+    from pydantic import ValidationError
+
+    from gonio.calibration import Calibration
+
+    try:
+        return Calibration.model_validate_json(path.read_text(encoding="utf-8"))
+    except (ValidationError, UnicodeDecodeError) as exc:
+        hint = (" (that is a TOML file: --calibration takes the JSON a calibration job "
+                "writes, e.g. white.calibration.json from 'gonio scan --white-reference')"
+                if path.suffix == ".toml" else "")
+        first = exc.errors()[0]["msg"] if isinstance(exc, ValidationError) else str(exc)
+        raise UsageError(f"--calibration {path}: not a calibration file ({first}){hint}; "
+                         "expected the JSON written by a calibration job "
+                         "(OUTPUT.calibration.json of 'gonio scan --white-reference ALBEDO')"
+                         ) from None
+
+
+def _left_interrupted(store: Any, job_id: int, db: Path, args: argparse.Namespace) -> None:
+    """Mark a job whose foreground run was interrupted ``paused`` (a measuring one; one that
+    was reconstructing stays so and is finished at the next run) and print how to resume or
+    abort it."""
+    from gonio.jobstates import JobState
+
+    row = store.get_job(job_id)
+    if row.state in (JobState.RUNNING, JobState.SUSPENDED):
+        row = store.set_state(job_id, JobState.PAUSED, reason="interrupted (Ctrl-C in gonio scan)")
+    if row.state.value in _FINAL:
+        return
+    print(f"job {job_id} interrupted: {row.state.value} at its checkpoint, "
+          f"{row.done_angles} of {row.total_angles} angles measured. Run the same command "
+          f"again to resume it, or abort it with: gonio jobs abort {job_id} --db {db}",
+          file=sys.stderr, flush=True)
 
 
 def _angles_text(angles: list[float], most: int = 8) -> str:
@@ -386,7 +510,13 @@ def _scan_through_daemon(args: argparse.Namespace, plan: Any) -> int:
         checked = client.request("POST", "/api/v1/jobs/dry-run", json=body)
         for warning in checked.get("warnings", []) if isinstance(checked, dict) else []:
             print(f"warning: {warning}", file=sys.stderr)
-        job = client.request("POST", "/api/v1/jobs", json=body)
+        try:
+            job = client.request("POST", "/api/v1/jobs", json=body, params={
+                "accept_uncalibrated": "true"} if args.accept_uncalibrated else None)
+        except DaemonRefused as exc:
+            if exc.status == 409 and "accept_uncalibrated" in str(exc):
+                raise UsageError(f"{exc} (here: --accept-uncalibrated)") from None
+            raise
         job_id = int(job["id"])
         print(f"job {job_id} queued on {client.url}", file=sys.stderr)
         try:
@@ -455,7 +585,7 @@ def _progress(service: Any, job_id: int, disabled: bool) -> Any:
             bar.refresh()
         elif ev.type == "state":
             bar.set_description_str(f"job {job_id} {ev.data['state']}")
-        elif ev.type == "arc_warning":
+        elif ev.type in ("arc_warning", "physical_bounds"):
             bar.write(f"warning: {ev.data['message']}", file=sys.stderr)
 
     service.add_event_listener(on_event)
@@ -467,6 +597,8 @@ def _jobs(args: argparse.Namespace) -> int:
 
     if not args.db.is_file():
         raise UsageError(f"job store {args.db} does not exist")
+    if args.action == "abort":
+        return _abort_job(args)
     store = JobStore(args.db, durable=False)
     if args.action == "rebuild":
         return _rebuild(args, store)
@@ -519,4 +651,36 @@ def _rebuild(args: argparse.Namespace, store: Any) -> int:
     print(f"job {args.job_id}: wrote {data_dir / summary['result_path']} from "
           f"{summary['readings']} stored readings"
           + (" (calibrated, 1/sr)" if summary.get("calibrated") else " (sensor units)"))
+    return 0
+
+
+def _abort_job(args: argparse.Namespace) -> int:
+    """``gonio jobs abort ID --db DB``: end an unfinished job in a store nobody runs now."""
+    from gonio.jobstates import IllegalTransition, JobState
+    from gonio.locks import LockBusy, claim_store
+    from gonio.store import JobStore, NotFound
+
+    if args.job_id is None:
+        raise UsageError("jobs abort needs a job id, e.g. 'gonio jobs abort 3 --db jobs.sqlite'")
+    try:
+        # A daemon or a gonio scan running jobs from this store would not see the change:
+        # act through it instead (its API, or Ctrl-C).
+        lock = claim_store(args.db)
+    except LockBusy as exc:
+        raise UsageError(str(exc)) from None
+    with lock:
+        store = JobStore(args.db)
+        try:
+            row = store.set_state(args.job_id, JobState.ABORTED, reason="aborted by request "
+                                  "(gonio jobs abort)")
+        except NotFound as exc:
+            raise UsageError(str(exc)) from None
+        except IllegalTransition:
+            state = store.get_job(args.job_id).state.value
+            raise UsageError(f"job {args.job_id} is {state}: only an unfinished job can be "
+                             "aborted") from None
+        finally:
+            store.close()
+    print(f"job {row.id} aborted ({row.done_angles} of {row.total_angles} angles had been "
+          "measured; its readings stay in the store)")
     return 0

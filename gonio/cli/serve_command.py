@@ -65,6 +65,10 @@ def register(subparsers: Any) -> None:
                      help="library material name or .npz BRDF table for the specimen")
     sim.add_argument("--time-scale", type=positive_float, default=1.0,
                      help="sim seconds per wall second for motion and exposures")
+    sim.add_argument("--modbus-port", type=int, default=0, metavar="PORT",
+                     help="TCP port of the simulated Modbus lights and sensors on 127.0.0.1 "
+                     "(default 0: any free port; choose one where a firewall allows only "
+                     "known ports)")
     sim.add_argument("--throwaway", action="store_true",
                      help="keep jobs and results in a temporary folder deleted at exit")
     sim.add_argument("--demo-scan", action="store_true",
@@ -116,17 +120,38 @@ def run(args: argparse.Namespace) -> int:
                 "config (start from deploy/rig.example.toml), or try --sim"
             )
         rig_config = load_rig_config(cfg.paths.rig_config)
+        # The rig's own data directory unless one is configured: the one `gonio scan` on the
+        # same rig config uses, so its calibration is the daemon's too.
+        cfg = cfg.for_rig(rig_config)
+        assert cfg.paths.data_dir is not None
+        data_dir = cfg.paths.data_dir.resolve()
         warn_if_exposed(cfg, keyring)
         app = _build(build_app, cfg, rig_config, keyring)
+        from gonio.cli.sim_session import sim_specimen_truth
+
+        # A rig `gonio sim` runs: results record the simulated material (renderings' truth).
+        truth = sim_specimen_truth(Path(str(cfg.paths.rig_config)), rig_config)
+        if truth is not None:
+            app.state.service.specimen_truth = lambda: truth
 
         def started(url: str, _stop: Any) -> None:
-            # Say where jobs and results go: without [paths] data_dir it is ./gonio-data.
-            print(f"data directory {Path(cfg.paths.data_dir).resolve()} (job store, results, "
-                  "calibration)")
+            # Say where jobs and results go, and whether scans will be calibrated.
+            print(f"data directory {data_dir} (job store, results, calibration)")
+            print(f"calibration: {_calibration_line(app.state.service)}")
             print(f"gonio serving on {url}", flush=True)
 
         return serve(app, cfg, on_started=started)
     return _run_sim(args, cfg, keyring)
+
+
+def _calibration_line(service: Any) -> str:
+    """One line on the calibration the daemon applies (printed at start)."""
+    cal = service.calibration()
+    if cal.pairs:
+        return f"{cal.source}, {len(cal.pairs)} pairs: scans are in 1/sr"
+    return ("none: scans stay in sensor units until a calibration job completes (a white "
+            "reference on the stage: 'gonio scan --daemon URL --white-reference ALBEDO' or "
+            "the page's calibration kind)")
 
 
 def _claim_data_dir(data_dir: Path) -> Any:
@@ -181,11 +206,12 @@ def _run_sim(args: argparse.Namespace, cfg: Any, keyring: Any) -> int:
     with tempfile.TemporaryDirectory(prefix="gonio-serve-") as tmp:
         if args.throwaway:
             cfg = cfg.with_overrides(paths__data_dir=str(Path(tmp) / "data"))
-        elif args.data_dir is None and args.config is None:
+        elif cfg.paths.data_dir is None:
             from gonio.paths import sim_daemon_data_dir
 
             cfg = cfg.with_overrides(paths__data_dir=str(sim_daemon_data_dir()))
         data_dir = cfg.paths.data_dir
+        assert data_dir is not None  # settled just above
         # Own the data directory before reading or writing anything in it (a second daemon on
         # it is refused here, naming the first); build_app takes the same lock again.
         owned = _claim_data_dir(data_dir)
@@ -193,9 +219,9 @@ def _run_sim(args: argparse.Namespace, cfg: Any, keyring: Any) -> int:
         try:
             sim = start_sim_rig(SimRigOptions(
                 stage=args.stage, material=material, time_scale=args.time_scale,
-                config_path=Path(tmp) / "rig.toml",
+                config_path=Path(tmp) / "rig.toml", modbus_port=args.modbus_port,
             ))
-        except ValueError as exc:
+        except (ValueError, OSError) as exc:
             owned.release()
             raise UsageError(f"cannot start the simulated rig: {exc}") from None
         with owned, sim:

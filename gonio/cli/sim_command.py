@@ -73,6 +73,7 @@ def register(subparsers: Any) -> None:
         help="inject a fault from the start; repeatable (see 'faults' below)",
     )
     p.add_argument("--seed", type=int, default=0, help="seed of the sensor noise")
+    add_modbus_port_option(p)
     p.add_argument(
         "--geometry",
         type=Path,
@@ -111,6 +112,23 @@ def register(subparsers: Any) -> None:
     q.add_argument("--albedo", type=float, default=None,
                    help="albedo of the white reference (default 0.99)")
     q.set_defaults(func=place)
+
+
+def add_modbus_port_option(parser: Any) -> None:
+    """``--modbus-port N``: where the simulated lights and sensors listen."""
+    parser.add_argument(
+        "--modbus-port", type=int, default=0, metavar="PORT",
+        help="TCP port of the simulated Modbus lights and sensors on 127.0.0.1 (default 0: "
+        "any free port; choose one where a firewall allows only known ports)")
+
+
+def start_sim_rig_or_say_why(start: Any, options: Any) -> Any:
+    """``start(options)``, with a port that cannot be bound said in one line (a bad option is
+    a ValueError that says itself)."""
+    try:
+        return start(options)
+    except OSError as exc:
+        raise UsageError(f"cannot start the simulated rig: {exc}") from None
 
 
 def parse_noise(text: str) -> Any:
@@ -170,8 +188,13 @@ def run(args: argparse.Namespace) -> int:
             faults=args.fault,
             seed=args.seed,
             config_path=out,
+            modbus_port=args.modbus_port,
         )
-        with start_sim_rig(options) as sim:
+        with start_sim_rig_or_say_why(start_sim_rig, options) as sim:
+            from gonio.cli.sim_session import write_sim_specimen
+
+            # Scans of this rig in other processes record the true material (renderings).
+            write_sim_specimen(sim)
             print(f"simulated rig running; rig config: {sim.config_path}", flush=True)
             lights = ", ".join(
                 f"{x.name} ({x.theta_deg:g}, {x.phi_deg:g})" for x in sim.config.lights

@@ -13,6 +13,7 @@ Two things a person at a real rig does, done here for the simulated one, once fo
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 MEASURING_OVER = ("reconstructing", "completed", "failed", "aborted", "halted")
@@ -142,3 +143,63 @@ async def calibrate_in_foreground(service: Any, sim: Any) -> str | None:
     if final is JobState.COMPLETED:
         return None
     return f"calibration of the simulated rig {final.value}: {service.get_job(job_id).reason}"
+
+
+SIM_SPECIMEN_SUFFIX = ".sim-specimen.json"
+"""Beside a rig config written by ``gonio sim -o rig.toml``: ``rig.sim-specimen.json``, the
+recipe of the simulated specimen (:func:`gonio.figures.describe_material`), so a scan of that
+rig in another process (``gonio scan --rig``, ``gonio serve --rig``) records the truth and
+``gonio render`` shows it beside the reconstruction."""
+
+
+def sim_specimen_path(rig_config_path: Path) -> Path:
+    """Where ``gonio sim`` writes the specimen recipe for ``rig_config_path``."""
+    p = Path(rig_config_path)
+    return p.with_name(p.stem + SIM_SPECIMEN_SUFFIX)
+
+
+def write_sim_specimen(sim: Any) -> Path | None:
+    """Write the recipe of ``sim``'s specimen beside its rig config; the path, or None when
+    the specimen cannot be written down."""
+    import json
+
+    from gonio.figures import describe_material
+
+    recipe = describe_material(sim.specimen.brdf)
+    if recipe is None or sim.config_path is None:
+        return None
+    path = sim_specimen_path(sim.config_path)
+    path.write_text(json.dumps(recipe))
+    return path
+
+
+def sim_specimen_truth(rig_config_path: Path, rig_config: Any) -> dict[str, Any] | None:
+    """The simulated specimen's recipe for a rig config ``gonio sim`` wrote, when that
+    simulator is the one answering (its specimen holder, Modbus device
+    :data:`gonio.sim.rig.HOLDER_DEVICE_ID` on the lights' bus); None for a real rig (a recipe
+    left beside a config later pointed at real devices is not the truth of what they see)."""
+    import json
+
+    from pymodbus.client import ModbusTcpClient
+
+    from gonio.sim.rig import HOLDER_DEVICE_ID
+
+    path = sim_specimen_path(rig_config_path)
+    if not path.is_file() or not rig_config.lights:
+        return None
+    try:
+        recipe = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+    bus = rig_config.lights[0].modbus
+    client = ModbusTcpClient(bus.host, port=bus.port, timeout=2, retries=0)
+    try:
+        if not client.connect():
+            return None
+        reply = client.read_holding_registers(0, count=2, device_id=HOLDER_DEVICE_ID)
+        answered = not reply.isError()
+    except Exception:  # no simulator there: a real device, or nothing
+        answered = False
+    finally:
+        client.close()
+    return recipe if answered and isinstance(recipe, dict) else None

@@ -45,8 +45,11 @@ def _check_args(args: argparse.Namespace) -> None:
 
 def describe(position_deg: float, moving: bool, homed: bool, faults: list[str] | tuple[str, ...]
              ) -> str:
-    """The one-line stage report both paths print."""
-    return (f"stage at {position_deg:.3f} deg, {'moving' if moving else 'idle'}, "
+    """The one-line stage report both paths print; a position beyond one turn also gives the
+    specimen's angle (position mod 360, what plans and plots use)."""
+    turned = ("" if 0 <= position_deg < 360
+              else f" (specimen at {position_deg % 360:.3f} deg)")
+    return (f"stage at {position_deg:.3f} deg{turned}, {'moving' if moving else 'idle'}, "
             f"{'homed' if homed else 'not homed'}, faults: {', '.join(faults) or 'none'}")
 
 
@@ -103,8 +106,12 @@ def run(args: argparse.Namespace) -> int:
     try:
         print(_through_daemon(args) if args.daemon else asyncio.run(_run(args)))
     except DeviceInUse as exc:
-        raise UsageError(f"{exc} (e.g. gonio stage --daemon http://127.0.0.1:8600 "
-                         f"{args.action})") from None
+        # The refusal names the daemon's address when it has one (gonio.locks.advertise_url).
+        text = str(exc)
+        if "--daemon http" not in text:
+            text += (f" (e.g. gonio stage --daemon URL {args.action}, URL being the address "
+                     "'gonio serve' printed)")
+        raise UsageError(text) from None
     except DeviceFault as exc:
         print(f"gonio stage: stage fault: {exc}", file=sys.stderr)
         return 1

@@ -42,7 +42,7 @@ from numpy.typing import NDArray
 from gonio.brdf.models import analytic as bm
 from gonio.brdf.models.factored import fit_metrics
 from gonio.brdf.models.principled import ALPHA_MAX, ALPHA_MIN, Principled
-from gonio.brdf.pictures import render
+from gonio.brdf.pictures import appearance, render
 from gonio.brdf.tables.table import BRDFTable
 
 FloatArray = NDArray[np.float64]
@@ -71,24 +71,16 @@ SPECULAR_MIN, SPECULAR_MAX = 0.25, 1.0
 _EPS = 1e-3
 
 
-def _flip() -> Any:
-    try:
-        import flip_evaluator
-    except ImportError:
-        return None
-    return flip_evaluator
-
-
 def flip_available() -> bool:
     """Whether HDR-FLIP (the ``flip-evaluator`` package) is installed."""
-    return _flip() is not None
+    return appearance.flip_module() is not None
 
 
 def render_views(brdf: Any, views: tuple[render.View, ...] = JUDGE_VIEWS,
                  size: int = JUDGE_SIZE) -> list[FloatArray]:
-    """Linear radiance images (size, size, 3) of ``brdf`` in ``views``, background 0."""
-    f = render.evaluator(brdf)
-    return [np.nan_to_num(render.render_view(f, v, size)) for v in views]
+    """Linear radiance images (size, size, 3) of ``brdf`` in ``views``, background 0
+    (:func:`gonio.brdf.pictures.appearance.render_appearance`)."""
+    return appearance.render_appearance(brdf, views, size)
 
 
 @dataclass(frozen=True)
@@ -135,26 +127,18 @@ class RenderedDifference:
 def difference_of_images(ref: list[FloatArray], test: list[FloatArray]) -> RenderedDifference:
     """:class:`RenderedDifference` of two lists of linear images of the same views.
 
-    Both are scaled by one exposure, the reference's brightest pixel to 1, so HDR-FLIP sees
-    them as a viewer would see them side by side.
+    HDR-FLIP is :func:`gonio.brdf.pictures.appearance.rendered_flip`: both are scaled by one
+    exposure, the reference's brightest pixel to 1, so HDR-FLIP sees them as a viewer would see
+    them side by side.
     """
-    peak = max(float(np.max(r)) for r in ref) or 1.0
     num = sum(float(np.abs(t - r).sum()) for r, t in zip(ref, test, strict=True))
     den = sum(float(np.abs(r).sum()) for r in ref) or 1.0
     rel_views = [float(np.abs(t - r).sum() / max(np.abs(r).sum(), 1e-30))
                  for r, t in zip(ref, test, strict=True)]
-    flip = _flip()
-    if flip is None:
+    if not flip_available():
         return RenderedDifference("relative image error", num / den, None, num / den, rel_views)
-    per: list[float] = []
-    for r, t in zip(ref, test, strict=True):
-        _, mean, _ = flip.evaluate(
-            np.ascontiguousarray(np.clip(r / peak, 0, None), dtype=np.float32),
-            np.ascontiguousarray(np.clip(t / peak, 0, None), dtype=np.float32),
-            "HDR", applyMagma=False)
-        per.append(float(mean))
-    value = float(np.mean(per))
-    return RenderedDifference("HDR-FLIP", value, value, num / den, per)
+    flip = appearance.rendered_flip(ref, test)
+    return RenderedDifference("HDR-FLIP", flip.mean, flip.mean, num / den, flip.per_image)
 
 
 def on_grid(model: Any) -> BRDFTable:

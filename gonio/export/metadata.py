@@ -26,7 +26,8 @@ layout has no room). Keys (docs/export.md lists them with examples):
     Each model's fit error against the reconstruction: table metrics and the rendered
     difference (:mod:`gonio.export.judge`).
 ``warnings``
-    Plain sentences: large rendered differences, an averaged-away anisotropy, ...
+    Plain sentences: large rendered differences, an averaged-away anisotropy, a half-turn
+    scan's arc, a reconstruction outside physical bounds (docs/science.md 7.5), ...
 """
 
 from __future__ import annotations
@@ -169,4 +170,6 @@ def export_provenance(attrs: Mapping[str, Any], metrics: Mapping[str, Any],
         out["simulated_material"] = truth
     if provenance.get("arc_warning"):
         out["warnings"].append(str(provenance["arc_warning"]))
+    if provenance.get("physical_bounds"):
+        out["warnings"].append(str(provenance["physical_bounds"]))
     return out

@@ -93,8 +93,9 @@ def validate_plan(plan: AnyPlan, rig: RigDescription) -> None:
             raise PlanError(f"the rig has no sensor named {sname!r}") from None
         if not s.min_exposure_s <= ex.exposure_s <= s.max_exposure_s:
             raise PlanError(
-                f"exposure {ex.exposure_s:g} s is outside sensor {sname!r}'s range "
-                f"[{s.min_exposure_s:g}, {s.max_exposure_s:g}] s; choose an exposure in range"
+                f"exposure {ex.exposure_s:g} s is outside the exposure range of sensor "
+                f"{sname!r}, [{s.min_exposure_s:g}, {s.max_exposure_s:g}] s; choose an exposure "
+                "in range"
             )
     if isinstance(plan, AdaptivePlan):
         min_step = plan.min_step_deg or rig.resolution_deg

@@ -116,7 +116,8 @@ def test_cli_on_a_rig_the_daemon_owns_is_refused_and_the_job_is_unharmed(
         assert "in use by" in refused.stderr and f"pid {daemon.pid}" in refused.stderr, (
             refused.stderr)
         assert "obstruction" not in refused.stderr
-        assert "--daemon" in refused.stderr  # and how to act on the rig instead
+        # and how to act on the rig instead, at the daemon's real address (not a default port)
+        assert f"--daemon {daemon.url}" in refused.stderr, refused.stderr
     assert not (tmp_path / "cli.h5").exists()
     assert final["state"] == "completed", final
     assert status in (0, -signal.SIGTERM)

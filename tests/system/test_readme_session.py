@@ -19,6 +19,7 @@ computed here from the model (not from gonio's reading path).
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import signal
@@ -103,6 +104,7 @@ def test_readme_rig_session_runs_verbatim_against_gonio_sim(tmp_path: Path) -> N
     sim: Background | None = None
     served = False
     log: list[str] = []
+    scan_dirs: list[Path] = []  # the data directories `gonio scan` printed
 
     def run(command: str) -> str:
         done = subprocess.run(["bash", "-c", command], cwd=tmp_path, env=env, text=True,
@@ -132,17 +134,26 @@ def test_readme_rig_session_runs_verbatim_against_gonio_sim(tmp_path: Path) -> N
                     url = daemon.wait_for(r"gonio serving on (http://\S+)").group(1)
                     health = httpx.get(url + "health", timeout=30)
                     assert health.status_code == 200, health.text
+                    # The calibration made with `gonio scan --white-reference` in the morning
+                    # is the one the daemon applies: one data directory per rig.
+                    cal = httpx.get(url + "api/v1/calibration", timeout=30).json()
+                    assert "white reference" in cal["source"] and cal["pairs"], cal
                 finally:
                     daemon.stop()
                 # The signal also reaches the wrapping bash; what matters is the daemon's own
                 # clean shutdown.
                 out = "\n".join(daemon.lines)
                 assert "Traceback" not in out and "Application shutdown complete" in out, out
-                # It says where its jobs and results go (no data_dir configured: ./gonio-data).
-                assert f"data directory {(tmp_path / 'gonio-data').resolve()}" in out, out
+                # It says where its jobs and results go: with no data_dir configured, the
+                # rig's own, the one `gonio scan` printed; and that its scans are calibrated.
+                assert scan_dirs, "no gonio scan ran before the daemon"
+                assert f"data directory {scan_dirs[-1].resolve()}" in out, out
+                assert re.search(r"calibration: job \d+: white reference, 10 pairs", out), out
                 served = True
                 continue
-            run(command)
+            said = re.search(r"^data directory (\S+) \(job store", run(command), re.M)
+            if said:
+                scan_dirs.append(Path(said.group(1)))
     finally:
         if sim is not None:
             sim.stop()
@@ -165,3 +176,18 @@ def test_readme_rig_session_runs_verbatim_against_gonio_sim(tmp_path: Path) -> N
     rel = np.abs(s.values - truth) / np.maximum(truth, 0.05 * truth.max())
     assert float(np.median(rel)) < 0.03, float(np.median(rel))
     assert float(np.quantile(rel, 0.9)) < 0.10
+    # The scan of the `gonio sim` rig records the simulated material (gonio render's truth
+    # row, as the README says of simulated scans): the very BRDF the simulator replays.
+    from gonio.figures import true_material
+
+    recorded = true_material(res)
+    assert recorded is not None, res.provenance
+    assert np.allclose(recorded.eval(wi.reshape(-1, 3), wo.reshape(-1, 3)).reshape(truth.shape),
+                       truth)
+    # The specimen is named after the result file (-o felt.h5), not "specimen".
+    jobs = subprocess.run(["gonio", "jobs", "list", "--json", "--db",
+                           str(scan_dirs[-1] / "gonio.sqlite")], env=env, text=True,
+                          capture_output=True, check=True)
+    specimens = [j["specimen"] for j in json.loads(jobs.stdout)]
+    stem = Path(scans[-1]).stem
+    assert specimens[-1] == stem, specimens

@@ -161,3 +161,70 @@ def test_pyproject_ships_every_data_file() -> None:
             assert any(rel.match(pattern) for pattern in package_data.get(name, [])), (
                 f"{path.relative_to(ROOT)} is not in package-data of {name}"
             )
+
+
+def _imported_top_level_modules(folder: Path) -> set[str]:
+    """Top-level modules imported anywhere in ``folder``'s Python files (also lazily, inside
+    functions: a command's import at run time fails just the same)."""
+    import ast
+
+    names: set[str] = set()
+    for path in folder.rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Import):
+                names.update(a.name.split(".")[0] for a in node.names)
+            elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                names.add(node.module.split(".")[0])
+    return names
+
+
+def test_the_plain_install_brings_every_module_the_commands_import() -> None:
+    # The README's first command installs with `pip install -e .` and then runs the commands
+    # (gonio stage/scan --daemon among them): a third-party module they import that only the
+    # test extra brings crashes them with ModuleNotFoundError (httpx did). Modules behind an
+    # extra of their own (mitsuba: rgl) are imported under a guard that says so.
+    from importlib.metadata import packages_distributions
+
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+
+    def dist_name(requirement: str) -> str:
+        return re.split(r"[<>=!~; \[]", requirement, maxsplit=1)[0].lower().replace("_", "-")
+
+    from importlib.metadata import PackageNotFoundError, requires
+
+    # The main dependencies and what they bring themselves (starlette comes with fastapi).
+    main: set[str] = set()
+    todo = [dist_name(r) for r in project["dependencies"]]
+    while todo:
+        name = todo.pop()
+        if name in main:
+            continue
+        main.add(name)
+        try:
+            todo += [dist_name(r) for r in requires(name) or [] if "extra ==" not in r]
+        except PackageNotFoundError:
+            continue
+    guarded = {dist_name(r) for extra, reqs in project["optional-dependencies"].items()
+               if extra != "test" for r in reqs}
+    dists = packages_distributions()
+    missing = []
+    for root in (ROOT / "gonio", ROOT / "drivers", ROOT / "sim"):
+        for module in _imported_top_level_modules(root):
+            if module in sys.stdlib_module_names or module == "gonio":
+                continue
+            owners = {d.lower().replace("_", "-") for d in dists.get(module, [])}
+            assert owners, f"{module} (imported in {root.name}/) is not installed"
+            if not owners & (main | guarded):
+                missing.append(f"{module} ({', '.join(sorted(owners))})")
+    assert not missing, f"imported by gonio but only in the test extra or nowhere: {missing}"
+
+
+def test_readme_says_what_the_gltf_validator_tests_need() -> None:
+    # The glTF tests skip without `npm install` in tests/gltf: a reader of the README's test
+    # command must learn that from the README, not from a skip line.
+    gltf_test = (ROOT / "tests" / "unit" / "export" / "test_gltf.py").read_text()
+    assert "npm install" in gltf_test and "tests/gltf" in str(ROOT / "tests" / "gltf")
+    quick_start = (ROOT / "README.md").read_text().split("## Quick start", 1)[1]
+    quick_start = quick_start.split("\n## ", 1)[0]
+    assert "(cd tests/gltf &&\nnpm install)" in quick_start or \
+        "(cd tests/gltf && npm install)" in quick_start, "README: the glTF tests' npm install"

@@ -23,6 +23,11 @@ export class ApiError extends Error {
   }
 }
 
+// Every refusal of the key (401: none given where one is needed, 403: not valid here, e.g. a
+// key from before a `gonio serve --sim` restart) is announced to the page, whichever request
+// met it, so the page can ask for a key at once instead of showing an empty queue.
+export const AUTH_EVENT = "gonio:auth";
+
 async function check(resp) {
   if (resp.ok) return resp;
   let detail = resp.statusText;
@@ -32,7 +37,9 @@ async function check(resp) {
     // Validation errors arrive as a list of {loc, msg}: show them as one readable line.
     if (Array.isArray(detail)) detail = detail.map((d) => `${(d.loc ?? []).slice(1).join(".")}: ${d.msg}`).join("; ");
   } catch { /* not JSON: keep the status text */ }
-  throw new ApiError(resp.status, detail);
+  const err = new ApiError(resp.status, detail);
+  if (resp.status === 401 || resp.status === 403) window.dispatchEvent(new CustomEvent(AUTH_EVENT, { detail: err }));
+  throw err;
 }
 
 export async function getJSON(path) {

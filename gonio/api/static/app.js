@@ -1,5 +1,5 @@
 // The lab page: queue, live readings, scan form, job controls, results.
-import { ApiError, followEvents, getBlob, getJSON, getKey, send, setKey } from "./api.js";
+import { AUTH_EVENT, ApiError, followEvents, getBlob, getJSON, getKey, send, setKey } from "./api.js";
 import { plotPolar, plotRotation } from "./plots.js";
 
 const $ = (sel) => document.querySelector(sel);
@@ -33,16 +33,65 @@ async function guarded(fn, userAction = false) {
 }
 
 // ------------------------------------------------------------------ key
-function initKey() {
+let keyRefused = false;       // the daemon refused this tab's key (or wants one)
+
+function describeKey() {
+  $("#key-state").textContent = keyRefused ? "key refused by this daemon"
+    : getKey() ? "key set for this tab" : "no key: read only";
+  $("#key-state").className = keyRefused ? "refused" : "muted";
+}
+
+// The daemon refused the key: say so at once, in a prompt that stays until a key works, and
+// keep the queue from claiming there are no jobs (it could not read them).
+function keyRefusedBy(err) {
+  keyRefused = true;
+  const prompt = $("#key-prompt");
+  prompt.textContent = getKey()
+    ? `This daemon does not accept the API key of this tab (${err.message}). A restarted \`gonio serve --sim\` prints a new key: open the new address it printed (the page takes the key from it) or paste the key at the top right.`
+    : `This daemon needs an API key (${err.message}): paste one at the top right, or open the address \`gonio serve\` printed.`;
+  prompt.hidden = false;
+  $("#no-jobs").hidden = true;
+  describeKey();
+}
+
+function keyAccepted() {
+  if (!keyRefused) return;
+  keyRefused = false;
+  $("#key-prompt").hidden = true;
+  describeKey();
+}
+
+// A new key: from the form, or from a #key= address pasted into this same tab.
+function useKey(key) {
+  setKey(key);
+  $("#key-input").value = key;
+  keyRefused = false;
+  $("#key-prompt").hidden = true;
+  describeKey();
+  showError(null);
+  refreshAll();
+  restartEvents();
+}
+
+function keyFromAddress() {
   // `gonio serve --sim` prints the address with a one-off key in the #fragment (never sent to
   // the server); take it into sessionStorage and drop it from the address bar.
   const m = location.hash.match(/key=([^&]+)/);
-  if (m) { setKey(decodeURIComponent(m[1])); history.replaceState(null, "", location.pathname); }
+  if (!m) return null;
+  history.replaceState(null, "", location.pathname);
+  return decodeURIComponent(m[1]);
+}
+
+function initKey() {
+  const fromAddress = keyFromAddress();
+  if (fromAddress !== null) setKey(fromAddress);
   const input = $("#key-input");
   input.value = getKey();
-  const describe = () => { $("#key-state").textContent = getKey() ? "key set for this tab" : "no key: read only"; };
-  describe();
-  $("#key-form").addEventListener("submit", (e) => { e.preventDefault(); setKey(input.value.trim()); describe(); showError(null); refreshAll(); });
+  describeKey();
+  window.addEventListener(AUTH_EVENT, (e) => keyRefusedBy(e.detail));
+  // Pasting the new address into this tab changes only the fragment: no reload happens.
+  window.addEventListener("hashchange", () => { const key = keyFromAddress(); if (key !== null) useKey(key); });
+  $("#key-form").addEventListener("submit", (e) => { e.preventDefault(); useKey(input.value.trim()); });
 }
 
 // ------------------------------------------------------------------ rig and maintenance
@@ -55,8 +104,12 @@ async function refreshRig() {
   if (!rig.connected) chip.textContent = rig.error ? `rig not connected: ${rig.error}` : "rig connects at the first scan";
   else {
     const pos = stage?.detail?.position_deg;
+    // The specimen's angle (0-360°, what plans and plots use); the stage's own position can
+    // be several turns away (528.75° is the specimen at 168.75°): it is in the tooltip.
+    const specimen = typeof pos === "number" ? ((pos % 360) + 360) % 360 : null;
+    chip.title = typeof pos === "number" ? `stage position ${pos.toFixed(2)}° (specimen angle = position mod 360)` : "";
     chip.textContent = bad.length ? `fault: ${bad.join(", ")}`
-      : `stage ${typeof pos === "number" ? pos.toFixed(2) + "°" : "?"}${stage?.detail?.moving ? " moving" : ""}`;
+      : `specimen at ${specimen !== null ? specimen.toFixed(1) + "°" : "?"}${stage?.detail?.moving ? " moving" : ""}`;
   }
   chip.className = bad.length || rig.error ? "chip fault" : "chip";
   if (rig.queue_held) chip.textContent += ` · queue held: ${rig.queue_held}`;
@@ -97,7 +150,9 @@ function etaText() {
   if (!["running", "paused", "suspended"].includes(d.state)) return "";
   let t = eta(d.eta_s);
   if (d.eta_max_s != null && d.eta_max_s > (d.eta_s ?? 0) + 1) t += ` (≤ ${eta(d.eta_max_s)} if refined)`;
-  return t;
+  // The estimate is the measuring's; reconstruction (and, on a fresh install, building the
+  // basis first) follows: said, so the time is not read as the whole job's.
+  return t ? `${t} measuring, then reconstruction` : "";
 }
 
 async function act(job, action) {
@@ -116,7 +171,8 @@ async function act(job, action) {
 function renderJobs() {
   const body = $("#jobs");
   body.replaceChildren();
-  $("#no-jobs").hidden = jobs.length > 0;
+  // "No jobs yet" only when the list was read and is empty, never when it could not be read.
+  $("#no-jobs").hidden = jobs.length > 0 || keyRefused;
   for (const job of jobs) {
     const tr = document.createElement("tr");
     tr.dataset.id = job.id;
@@ -160,6 +216,7 @@ function renderJobs() {
 
 async function refreshJobs() {
   jobs = await getJSON("/jobs");
+  keyAccepted();
   if (selected !== null && jobs.some((j) => j.id === selected)) {
     selectedDetail = await getJSON(`/jobs/${selected}`);
   }
@@ -221,7 +278,10 @@ async function rotationData(job) {
         curve: fit.curve_deg.map((a, i) => [a, p.curve[i]]).filter((q) => q[1] !== null),
       })),
       yTitle: `BRDF (${fit.units}), ${fit.channels}`,
-      caption: "Dots: the calibrated samples of each light/sensor pair; lines: the reconstructed BRDF at the same pair as the stage turns (the fit). Click a legend entry to hide a pair.",
+      caption: (fit.calibrated === false || /uncalibrated/.test(fit.units)
+        ? "Uncalibrated: dots are the samples in sensor units (no calibration was in effect, so they are not BRDF values in 1/sr)"
+        : "Dots: the calibrated samples") +
+        " of each light/sensor pair; lines: the reconstructed BRDF at the same pair as the stage turns (the fit). Click a legend entry to hide a pair.",
       count: fit.pairs.reduce((n, p) => n + p.measured.length, 0),
     };
   }
@@ -265,6 +325,8 @@ function scheduleReadings() {
 
 // ------------------------------------------------------------------ results
 let shownResult = null;
+let shownUncalibrated = false; // the shown result's values are sensor units, not 1/sr
+const UNCALIBRATED_NOTE = " Uncalibrated: sensor units, not 1/sr, so brightness and contrast are not the material's.";
 let compareWith = null;       // id of a second completed job shown beside the selected one
 const objectUrls = {};
 
@@ -304,6 +366,7 @@ async function showResult(job) {
   shownResult = job.id;
   $("#result-body").hidden = false;
   const metrics = await getJSON(`/jobs/${job.id}/metrics`);
+  shownUncalibrated = !metrics.calibrated;
   showMetrics(metrics);
   const link = $("#download");
   link.hidden = false;
@@ -318,9 +381,26 @@ async function showResult(job) {
   const img = $("#preview");
   setImage(img, "preview", await getBlob(`/jobs/${job.id}/preview.png`));
   $("#preview-caption").textContent = `${job.specimen}: the reconstructed table itself, log scale with a colour bar; ` +
-    "columns φh = 0, 45, 90, 135°; rows φd = 90, 0°; in each panel θh runs down, θd right; hatched cells are below the horizon.";
+    "columns φh = 0, 45, 90, 135°; rows φd = 90, 0°; in each panel θh runs down, θd right; hatched cells are below the horizon." + (shownUncalibrated ? UNCALIBRATED_NOTE : "");
   await Promise.all([refreshRender(), refreshPolar()]);
 }
+
+// What each metric means, in the words of docs/science.md (sections 4, 4.1, 7.3), shown beside
+// its key in "All metrics"; keys without an entry show as they are.
+const METRIC_MEANING = {
+  predicted_log_rmse: "predicted error of the whole BRDF (log RMSE, the number to report)",
+  predicted_error: "predicted relative error of the whole BRDF (MAPE), from leave-one-pair-out",
+  cv_log_error: "leave-one-pair-out error: each pair predicted by the fit to the other pairs (log)",
+  cv_sample_error: "leave-one-pair-out relative error of the readings",
+  rel_sample_error: "how far the fit is from its own readings (relative)",
+  estimated_error: "V&F's error estimate (0.8 × rel_sample_error), kept for comparison",
+  prior_rho: "weight of the library prior the fit used (1: the prior as learnt)",
+  n_samples: "readings used by the reconstruction",
+  n_pairs: "light/sensor pairs", n_angles: "stage angles", pairs: "light/sensor pairs",
+  angles: "stage angles", readings: "readings stored",
+  calibrated: "values in 1/sr (true) or sensor units (false)",
+  seconds: "reconstruction time, s",
+};
 
 function showMetrics(metrics) {
   const head = $("#headline-error");
@@ -333,6 +413,14 @@ function showMetrics(metrics) {
     p.textContent = h.meaning;
     head.append(strong, p);
   } else head.textContent = "No error estimate for this result (no pair could be left out).";
+  // Every headline says whether the values are the material's (1/sr) or sensor units.
+  const cal = document.createElement("p");
+  cal.id = "headline-calibration";
+  cal.className = metrics.calibrated ? "muted" : "uncalibrated";
+  cal.textContent = metrics.calibrated
+    ? `Calibrated: values in 1/sr (${metrics.calibration_source ?? "white reference"}).`
+    : "Uncalibrated: no calibration was in effect, so the values are sensor units, not 1/sr; the rendering, exports and the error above are not those of the material. Calibrate the rig (a calibration job with the white reference) and scan again.";
+  head.append(cal);
   const tbody = $("#metrics tbody");
   tbody.replaceChildren();
   for (const [k, v] of Object.entries(metrics)) {
@@ -340,6 +428,11 @@ function showMetrics(metrics) {
     const tr = document.createElement("tr");
     const th = document.createElement("th"), td = document.createElement("td");
     th.textContent = k;
+    if (METRIC_MEANING[k]) {
+      const why = document.createElement("span");
+      why.className = "meaning"; why.textContent = METRIC_MEANING[k];
+      th.append(why);
+    }
     td.textContent = typeof v === "number" ? String(+v.toPrecision(4)) : String(v);
     tr.append(th, td);
     tbody.append(tr);
@@ -359,7 +452,7 @@ async function refreshRender() {
   caption.textContent = other !== null
     ? `Job ${id} (top) and job ${other} (bottom), same lights and exposure per column. Click to open full size.`
     : "The reconstruction on a sphere under point lights, on a flat swatch under a flash, and in a studio environment; " +
-      "on the simulated rig the true material is in the top row. Click to open full size.";
+      "on the simulated rig the true material is in the top row. Click to open full size." + (shownUncalibrated ? UNCALIBRATED_NOTE : "");
 }
 
 async function polarCurves(id) {
@@ -506,7 +599,7 @@ function initForm() {
   $("#dry-run").addEventListener("click", () => guarded(async () => {
     const r = await send("POST", "/jobs/dry-run", { plan: readPlan() });
     const from = r.from_known ? `from the stage at ${r.from_deg.toFixed(1)}°` : "assuming the stage at 0° (position not known yet)";
-    let text = `OK: ${r.readings} readings at ${r.angles_deg.length} stage angles, about ${eta(r.estimated_s)} ${from}` +
+    let text = `${(r.warnings || []).length ? "Runs, but read the warnings below" : "OK"}: ${r.readings} readings at ${r.angles_deg.length} stage angles, about ${eta(r.estimated_s)} ${from}` +
       ` (moves ${eta(r.motion_s)}, exposures ${eta(r.exposure_s)}).`;
     if (r.max_estimated_s != null) text += ` Adaptive refinement can add up to ${r.max_angles - r.angles_deg.length} angles: at most ${eta(r.max_estimated_s)} in all.`;
     if (r.basis_build_s != null) text += ` First, about ${eta(r.basis_build_s)} more: the reconstruction basis is not built on this install yet and the adaptive rule needs it, so the job builds it before its first reading (once).`;
@@ -517,7 +610,18 @@ function initForm() {
   form.addEventListener("submit", (e) => {
     e.preventDefault();
     guarded(async () => {
-      const job = await send("POST", "/jobs", { plan: readPlan() });
+      const plan = readPlan();
+      let job;
+      try { job = await send("POST", "/jobs", { plan }); } catch (e) {
+        // An uncalibrated scan of a rig that was calibrated is most likely a mistake (the
+        // daemon on another data directory): it runs only once the user has accepted it.
+        if (!(e instanceof ApiError && e.status === 409 && e.message.includes("accept_uncalibrated"))) throw e;
+        if (!window.confirm(`${e.message.replace(/, or send accept_uncalibrated=true to/, ". OK:")}?`)) {
+          setNote("Not started: the scan would be uncalibrated.", null);
+          return;
+        }
+        job = await send("POST", "/jobs?accept_uncalibrated=true", { plan });
+      }
       setNote(`Job ${job.id} queued.`, job.id);
       selected = job.id;
       await refreshJobs();
@@ -537,6 +641,19 @@ function onEvent(ev) {
   if (ev.type === "maintenance" || ev.type === "rig") guarded(refreshRig);
 }
 
+let stopEvents = null;
+// (Re)open the event stream, e.g. with a new key: a stream opened with a refused key keeps
+// retrying with that key.
+function restartEvents() {
+  if (stopEvents) stopEvents();
+  stopEvents = followEvents(onEvent, (live) => {
+    const chip = $("#live-chip");
+    chip.textContent = live ? "live" : keyRefused ? "no valid key" : "reconnecting";
+    chip.className = live ? "chip" : "chip off";
+    if (live) scheduleRefresh();
+  });
+}
+
 window.addEventListener("DOMContentLoaded", async () => {
   initKey();
   initForm();
@@ -544,12 +661,7 @@ window.addEventListener("DOMContentLoaded", async () => {
   $("#compare").addEventListener("change", (e) => guarded(() => setCompare(e.target.value ? Number(e.target.value) : null), true));
   setInterval(() => guarded(pollSelected), 1000);
   await refreshAll();
-  followEvents(onEvent, (live) => {
-    const chip = $("#live-chip");
-    chip.textContent = live ? "live" : "reconnecting";
-    chip.className = live ? "chip" : "chip off";
-    if (live) scheduleRefresh();
-  });
+  restartEvents();
   // Stage position changes without events while idle; a slow poll keeps the chip honest.
   setInterval(() => guarded(refreshRig), 5000);
 });

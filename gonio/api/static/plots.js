@@ -31,6 +31,10 @@ function fmt(v) {
  * @param {string} [title]
  */
 export function plotRotation(canvas, pairs, yTitle, title = "") {
+  // A half-turn scan's readings lie in [0, 180): its axis ends at 180°, not at 360°.
+  const xs = pairs.flatMap((p) => p.points.map(([x]) => x));
+  const xMax = xs.length && Math.max(...xs) < 180 ? 180 : 360;
+  pairs = pairs.map((p) => (p.curve ? { ...p, curve: p.curve.filter(([x]) => x <= xMax) } : p));
   const datasets = [];
   pairs.forEach((p, k) => {
     const color = PALETTE[k % PALETTE.length];
@@ -71,8 +75,8 @@ export function plotRotation(canvas, pairs, yTitle, title = "") {
         tooltip: { callbacks: { label: (c) => `${c.dataset.label}: ${fmt(c.parsed.y)} at ${c.parsed.x.toFixed(1)}°` } },
       },
       scales: {
-        x: { type: "linear", min: 0, max: 360, ticks: { stepSize: 45, callback: (v) => `${v}°` },
-             title: { display: true, text: "stage angle (degrees)" } },
+        x: { type: "linear", min: 0, max: xMax, ticks: { stepSize: xMax === 180 ? 30 : 45, callback: (v) => `${v}°` },
+             title: { display: true, text: "specimen angle (degrees)" } },
         y: { type: "linear", beginAtZero: true, grace: "8%", title: { display: true, text: yTitle } },
       },
     },

@@ -343,8 +343,8 @@ def get_material(name: str, seed: int = DEFAULT_SEED) -> bm.BRDFModel:
         hint = f"; did you mean {', '.join(close)}?" if close else "."
         raise LibraryError(
             f"no library material named {name!r}{hint} Names are <family>-<NNN> with families "
-            f"{', '.join([*FAMILY_COUNTS, *ASYMMETRIC_FAMILY_COUNTS])} (see "
-            "gonio.brdf.materials.library.library_specs())"
+            f"{', '.join([*FAMILY_COUNTS, *ASYMMETRIC_FAMILY_COUNTS])}, or a table file "
+            "(.npz); 'gonio library list' lists them all"
         )
     return by_name[name]
 

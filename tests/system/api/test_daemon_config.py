@@ -26,7 +26,18 @@ def test_defaults_bind_loopback() -> None:
     cfg = load_daemon_config(None)
     assert cfg.server.host == DEFAULT_HOST == "127.0.0.1"
     assert cfg.auth.keys_file is None
-    assert cfg.paths.data_dir.is_absolute()
+    # No data directory configured: the rig's own (gonio scan's), settled with the rig.
+    assert cfg.paths.data_dir is None
+
+
+def test_without_a_data_dir_the_daemon_uses_the_rigs_own(tmp_path: Path) -> None:
+    from gonio.config import load_rig_config
+    from gonio.paths import scan_data_dir
+
+    rig = load_rig_config(PROJECT / "deploy" / "rig.example.toml")
+    assert load_daemon_config(None).for_rig(rig).paths.data_dir == scan_data_dir(rig)
+    given = load_daemon_config(None).with_overrides(paths__data_dir=str(tmp_path))
+    assert given.for_rig(rig).paths.data_dir == tmp_path
 
 
 def test_example_config_loads() -> None:

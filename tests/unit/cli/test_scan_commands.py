@@ -28,11 +28,14 @@ def test_white_reference_job_is_named_after_the_reference_not_the_specimen() -> 
 
 
 def test_scan_keeps_its_specimen_names() -> None:
+    # Unnamed: after the result file (-o x.h5), not "specimen" for every scan.
     plan = _parse()
-    # Issue 26: a scan without --specimen is "unnamed", and its exports say so.
-    assert isinstance(plan, UniformPlan) and plan.specimen == "unnamed"
+    assert isinstance(plan, UniformPlan) and plan.specimen == "x"
     felt = _parse("--specimen", "felt")
     assert isinstance(felt, UniformPlan) and felt.specimen == "felt"
+    # A generic output name says nothing of the specimen: "unnamed", which exports state.
+    generic = _plan(build_parser().parse_args(["scan", "--sim", "-o", "out/result.h5"]))
+    assert isinstance(generic, UniformPlan) and generic.specimen == "unnamed"
 
 
 def test_adaptive_scans_take_the_rule_and_its_defaults() -> None:

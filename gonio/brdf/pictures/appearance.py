@@ -1,0 +1,163 @@
+"""How a BRDF looks: standard renderings and their HDR-FLIP difference (issue 23 item 1).
+
+``log_rmse`` (:mod:`gonio.brdf.tables.metrics`) weighs every cell of the hemispheres alike;
+a picture is dominated by the specular highlight, which covers few cells. A reconstruction that
+is good on the table can still lose a highlight's height or shape. This module is the one
+implementation of "what it looks like" that the benches and the exports share:
+
+* :data:`APPEARANCE_VIEWS`: the unit sphere seen orthographically along the normal at its
+  centre, the holder mark (specimen ``x``) running left-right over the front (the conventions
+  of :mod:`gonio.brdf.pictures.render`), under four directional lights at 20, 55, 55 and 70
+  degrees from the view. The azimuths (135, 0, 90, 45 degrees in the image) put the two 55
+  degree lights along and across the holder mark, so a brushed highlight stretches one way
+  under one and the other way under the other; the 70 degree light on the diagonal breaks the
+  mirror symmetry of an aligned specimen.
+* :func:`render_appearance`: linear radiance images of a BRDF in those views, a table looked
+  up with gonio's own multilinear lookup (:class:`~gonio.brdf.pictures.render.TableLookup`),
+  a model through its ``eval``.
+* :func:`rendered_flip`: HDR-FLIP (Andersson et al. 2021, the ``flip-evaluator`` package) of a
+  test against a reference, per image and mean: 0 = identical, 1 = as different as can be.
+
+Exposure: both images of a view are divided by the reference's brightest pixel over all views,
+so FLIP sees them as a viewer would side by side (one exposure for the whole set). HDR-FLIP is
+not symmetric: flip-evaluator's README and the paper (Sec. 5) take the range of exposures it
+tone-maps at from the *reference* image, and the exposure above is the reference's too, so
+``rendered_flip(a, b)`` and ``rendered_flip(b, a)`` differ in general; always pass the truth as
+the reference.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from gonio.brdf.pictures import render
+
+FloatArray = NDArray[np.float64]
+
+APPEARANCE_LIGHTS: tuple[render.PointLight, ...] = (
+    render.PointLight(20.0, 135.0),
+    render.PointLight(55.0, 0.0),
+    render.PointLight(55.0, 90.0),
+    render.PointLight(70.0, 45.0),
+)
+"""Directional lights of the standard renderings (polar angle from the view, image azimuth)."""
+APPEARANCE_VIEWS: tuple[render.View, ...] = tuple(
+    render.View("sphere", lt) for lt in APPEARANCE_LIGHTS)
+"""The standard renderings: the sphere under each of :data:`APPEARANCE_LIGHTS`."""
+APPEARANCE_SIZE = 96
+"""Pixels per side of a standard rendering: the sphere's 1 pixel spans about 1.2 degrees of
+normal at its centre, finer than the 5 degree table holds."""
+
+
+class AppearanceError(ValueError):
+    """Images that cannot be compared (different counts or shapes, no flip-evaluator)."""
+
+
+def flip_module() -> Any:
+    """The ``flip_evaluator`` module, or None when it is not installed."""
+    try:
+        import flip_evaluator
+    except ImportError:
+        return None
+    return flip_evaluator
+
+
+def render_appearance(brdf: Any, views: tuple[render.View, ...] = APPEARANCE_VIEWS,
+                      size: int = APPEARANCE_SIZE) -> list[FloatArray]:
+    """Linear radiance images of ``brdf`` in ``views``.
+
+    Parameters
+    ----------
+    brdf : BRDFTable (looked up multilinearly on its grid), anything with ``eval(wi, wo)``
+        returning (N, C) values in 1/sr, or a :func:`~gonio.brdf.pictures.render.evaluator`
+    views : tuple of View
+    size : int, pixels per side
+
+    Returns
+    -------
+    list of (size, size, 3) float arrays, ``sum f cos(theta_i) E`` per pixel for irradiance
+    ``E = 1`` (units of the BRDF, 1/sr for a calibrated one); 0 outside the sphere.
+    """
+    f = render.evaluator(brdf)
+    return [np.nan_to_num(render.render_view(f, v, size)) for v in views]
+
+
+@dataclass(frozen=True)
+class FlipResult:
+    """HDR-FLIP of a test set of images against a reference set.
+
+    Attributes
+    ----------
+    per_image : list of float
+        Mean HDR-FLIP over each image's pixels, in [0, 1], in the order of the views.
+    mean : float
+        Mean of ``per_image``.
+    """
+
+    per_image: list[float]
+    mean: float
+
+
+def _check_pairs(reference: list[FloatArray], test: list[FloatArray]) -> None:
+    if len(reference) != len(test) or not reference:
+        raise AppearanceError(
+            f"cannot compare {len(test)} test images with {len(reference)} reference images; "
+            "render both with the same views")
+    for k, (r, t) in enumerate(zip(reference, test, strict=True)):
+        if r.shape != t.shape or r.ndim != 3 or r.shape[-1] != 3:
+            raise AppearanceError(
+                f"image {k}: reference {r.shape} and test {t.shape} must both be (H, W, 3)")
+
+
+def reference_peak(reference: list[FloatArray]) -> float:
+    """The brightest reference pixel over all images (1 when all are black): the exposure."""
+    peak = max(float(np.max(r)) for r in reference)
+    return peak if peak > 0 and np.isfinite(peak) else 1.0
+
+
+def rendered_flip(reference: list[FloatArray], test: list[FloatArray]) -> FlipResult:
+    """Per-image and mean HDR-FLIP of ``test`` against ``reference`` (module docstring).
+
+    Parameters
+    ----------
+    reference, test : lists of (H, W, 3) linear radiance images of the same views (e.g. from
+        :func:`render_appearance`); negative values are clipped to 0.
+
+    Returns
+    -------
+    FlipResult
+
+    Raises
+    ------
+    AppearanceError
+        When the lists differ in length or shapes, or flip-evaluator is not installed.
+    """
+    _check_pairs(reference, test)
+    flip = flip_module()
+    if flip is None:
+        raise AppearanceError("HDR-FLIP needs the flip-evaluator package: "
+                              "pip install flip-evaluator")
+    peak = reference_peak(reference)
+    per: list[float] = []
+    for r, t in zip(reference, test, strict=True):
+        _, mean, _ = flip.evaluate(
+            np.ascontiguousarray(np.clip(np.nan_to_num(r) / peak, 0, None), dtype=np.float32),
+            np.ascontiguousarray(np.clip(np.nan_to_num(t) / peak, 0, None), dtype=np.float32),
+            "HDR", applyMagma=False)
+        per.append(float(mean))
+    return FlipResult(per, float(np.mean(per)))
+
+
+def appearance_flip(reference: Any, test: Any, ref_images: list[FloatArray] | None = None
+                    ) -> FlipResult:
+    """HDR-FLIP of two BRDFs in the standard renderings (:data:`APPEARANCE_VIEWS`).
+
+    ``ref_images`` (from :func:`render_appearance` of ``reference``) saves rendering the
+    reference again when many tests are compared with one truth.
+    """
+    ref = ref_images if ref_images is not None else render_appearance(reference)
+    return rendered_flip(ref, render_appearance(test))

@@ -1,0 +1,215 @@
+"""The lab page through a lab's day (issue 27): a stale API key, an uncalibrated scan, what the
+page says about calibration, time and angles. Headless Chromium against the real daemon on the
+simulated rig (tests/system/api/conftest.py), as tests/system/api/test_browser.py."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from typing import Any
+
+import pytest
+
+from gonio.calibration import CALIBRATION_FILE, Calibration, PairCalibration, save_calibration
+from gonio.paths import scan_data_dir
+from tests.system.api.conftest import Daemon
+from tests.system.api.test_browser import _severe, browser, open_live  # noqa: F401 (fixture)
+
+pytestmark = [pytest.mark.system, pytest.mark.timeout(600)]
+
+PLAN = {"kind": "uniform", "specimen": "felt", "rotations": 4,
+        "exposure": {"exposure_s": 0.005}}
+
+
+def _row_ids(browser: Any) -> list[str]:  # noqa: F811 (the fixture's name)
+    return list(browser.execute_script(
+        "return [...document.querySelectorAll('#jobs tr[data-id]')].map(r => r.dataset.id)"))
+
+
+def _text(browser: Any, element_id: str) -> str:  # noqa: F811 (the fixture's name)
+    return str(browser.execute_script(
+        "return document.getElementById(arguments[0])?.textContent ?? ''", element_id))
+
+
+def _a_finished_job(daemon: Daemon) -> int:
+    """Run one short scan to its end through the API; its id."""
+    import time
+
+    with daemon.client() as c:
+        job = int(c.post("/api/v1/jobs", params={"accept_uncalibrated": "true"},
+                         json={"plan": PLAN}).json()["id"])
+        deadline = time.monotonic() + 300
+        while c.get(f"/api/v1/jobs/{job}").json()["state"] not in (
+                "completed", "failed", "aborted"):
+            assert time.monotonic() < deadline, "the scan did not end"
+            time.sleep(0.2)
+    return job
+
+
+def test_a_stale_key_gets_a_prompt_and_the_new_address_in_the_same_tab_recovers(
+    daemon: Daemon, browser: Any  # noqa: F811
+) -> None:
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    wait = WebDriverWait(browser, 300, poll_frequency=0.2)
+    job = _a_finished_job(daemon)  # the queue is not empty
+    # The tab still holds the key of a daemon that has restarted since (a new key each start).
+    browser.get(f"{daemon.url}/#key={'0' * 48}")
+    wait.until(lambda d: d.find_element(By.ID, "key-prompt").is_displayed())
+    prompt = browser.find_element(By.ID, "key-prompt").text
+    assert "does not accept the API key of this tab" in prompt, prompt
+    assert "new address" in prompt
+    assert browser.find_element(By.ID, "key-state").text == "key refused by this daemon"
+    # It never claims there are no jobs: it could not read them.
+    assert not browser.find_element(By.ID, "no-jobs").is_displayed()
+    assert _row_ids(browser) == []
+    # The user pastes the new address (`#key=NEW`) into the same tab: only the fragment
+    # changes, no reload; the page takes the key and shows the queue.
+    browser.execute_script("location.hash = arguments[0]", f"#key={daemon.key}")
+    wait.until(lambda d: str(job) in _row_ids(d))
+    wait.until(lambda d: d.find_element(By.ID, "live-chip").text == "live")
+    assert not browser.find_element(By.ID, "key-prompt").is_displayed()
+    assert browser.execute_script("return sessionStorage.getItem('gonio.apiKey')") == daemon.key
+    assert "#key" not in browser.current_url
+
+
+@pytest.fixture
+def calibrated_elsewhere(daemon: Daemon) -> Iterator[None]:
+    """The rig's calibration in `gonio scan`'s data directory, not in this daemon's."""
+    cfg = daemon.sim.config
+    own = scan_data_dir(cfg)
+    own.mkdir(parents=True, exist_ok=True)
+    save_calibration(Calibration(
+        pairs=tuple(PairCalibration(light=p.light, sensor=p.sensor, factor=(1e-3,) * 3)
+                    for p in cfg.pair_list()),
+        reference_albedo=0.99, source="job 1: white reference"), own / CALIBRATION_FILE)
+    try:
+        yield
+    finally:
+        (own / CALIBRATION_FILE).unlink()
+
+
+def test_an_uncalibrated_scan_is_warned_accepted_and_labelled_as_such(
+    daemon: Daemon, browser: Any, calibrated_elsewhere: None,  # noqa: F811
+    no_export_fits: None,
+) -> None:
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support import expected_conditions as ec
+    from selenium.webdriver.support.ui import Select
+
+    browser.get_log("browser")  # drop what earlier tests left (a stale key's 403s)
+    wait = open_live(browser, daemon, 300)
+    with daemon.client() as c:
+        assert c.get("/api/v1/calibration").json()["source"] == "none"
+    form = browser.find_element(By.ID, "scan-form")
+    Select(form.find_element(By.NAME, "kind")).select_by_value("uniform")
+    rotations = form.find_element(By.NAME, "rotations")
+    rotations.clear()
+    rotations.send_keys("4")
+    exposure = form.find_element(By.NAME, "exposure_s")
+    exposure.clear()
+    exposure.send_keys("0.005")
+    # Check plan: not a bare "OK", and the warning says the values will be sensor units.
+    browser.find_element(By.ID, "dry-run").click()
+    wait.until(lambda d: d.find_element(By.ID, "dry-run-warnings").is_displayed())
+    assert not browser.find_element(By.ID, "dry-run-result").text.startswith("OK")
+    warnings = browser.find_element(By.ID, "dry-run-warnings").text
+    assert "uncalibrated" in warnings and "sensor units" in warnings, warnings
+    before = set(_row_ids(browser))
+    # Start: the daemon refuses an uncalibrated scan of a calibrated rig; the page asks.
+    browser.find_element(By.ID, "start-scan").click()
+    alert = wait.until(ec.alert_is_present())
+    assert "uncalibrated" in alert.text and str(scan_data_dir(daemon.sim.config)) in alert.text
+    alert.dismiss()
+    wait.until(lambda d: "Not started" in d.find_element(By.ID, "dry-run-result").text)
+    assert set(_row_ids(browser)) == before
+    browser.find_element(By.ID, "start-scan").click()
+    wait.until(ec.alert_is_present()).accept()
+    wait.until(lambda d: set(_row_ids(d)) - before)
+    (job,) = set(_row_ids(browser)) - before
+    # The table is redrawn on every event: read the row's state in one script call.
+    wait.until(lambda d: d.execute_script(
+        "return document.querySelector(`#jobs tr[data-id='${arguments[0]}']`)?.dataset.state",
+        job) == "completed")
+    # Every place that reads the numbers says they are not the material's. (Read in one script
+    # call each: the result panel is redrawn as events arrive.)
+    wait.until(lambda d: _text(d, "headline-calibration") != "")
+    assert _text(browser, "headline-calibration").startswith("Uncalibrated")
+    wait.until(lambda d: "Uncalibrated" in _text(d, "readings-caption"))
+    assert "the calibrated samples" not in _text(browser, "readings-caption")
+    wait.until(lambda d: "Uncalibrated" in _text(d, "render-caption"))
+    assert "Uncalibrated" in _text(browser, "preview-caption")
+    # A half-turn scan's plot spans half a turn (its angles are 0, 45, 90, 135 degrees).
+    x = browser.execute_script(
+        "const s = Chart.getChart(document.getElementById('readings-plot')).options.scales.x;"
+        "return [s.min, s.max, s.title.text]")
+    assert x == [0, 180, "specimen angle (degrees)"], x
+    # The metrics say what they mean, not only their keys.
+    rows = browser.execute_script(
+        "return [...document.querySelectorAll('#metrics th')].map(t => t.textContent)")
+    cv = [r for r in rows if r.startswith("cv_log_error")]
+    assert cv and "leave-one-pair-out" in cv[0], rows
+    assert [e for e in _severe(browser) if "409" not in e["message"]] == []
+
+
+def test_the_stage_chip_gives_the_specimen_angle_and_a_long_eta_keeps_the_buttons_in_view(
+    daemon: Daemon, browser: Any  # noqa: F811
+) -> None:
+    from selenium.webdriver.common.by import By
+
+    _a_finished_job(daemon)  # a row with its buttons
+    wait = open_live(browser, daemon, 120)
+    with daemon.client() as c:
+        # One and a half turns and a bit: the stage's position is not the specimen's angle.
+        r = c.post("/api/v1/rig/stage", json={"action": "move", "angle_deg": 528.75})
+        assert r.status_code == 200, r.text
+    # 528.75 - 360 = 168.75 degrees (shown to 0.1 degree).
+    wait.until(lambda d: d.find_element(By.ID, "stage-chip").text.startswith("specimen at 168.8°"))
+    assert "528.75" in browser.find_element(By.ID, "stage-chip").get_attribute("title")
+    # A first scan's activity is long ("building the BRDF training library ..."): it wraps in
+    # its cell; the row's buttons stay inside the queue's box.
+    wait.until(lambda d: d.execute_script("return document.querySelector('#jobs tr td.eta')"))
+    inside = browser.execute_script("""
+        const row = document.querySelector('#jobs tr[data-id]');
+        row.querySelector('td.eta').textContent =
+          'building the BRDF training library, 74 of 175 materials (about 2 min, once per install)';
+        const box = document.getElementById('queue').getBoundingClientRect();
+        const last = row.lastElementChild.getBoundingClientRect();
+        return [last.right <= box.right + 0.5, document.getElementById('queue').scrollWidth
+                <= document.getElementById('queue').clientWidth + 1];""")
+    assert inside == [True, True], inside
+
+
+def test_the_eta_says_it_is_the_measurings_and_reconstruction_follows(
+    daemon: Daemon, browser: Any  # noqa: F811
+) -> None:
+    import time
+
+    wait = open_live(browser, daemon, 300)
+    with daemon.client() as c:
+        # 20 averaged exposures per reading (1 s of sim time, 0.1 s here at time scale 10): a
+        # scan that measures for a while, so its ETA is on the page.
+        plan = {**PLAN, "rotations": 12, "exposure": {"exposure_s": 0.05, "averages": 20}}
+        job = c.post("/api/v1/jobs", params={"accept_uncalibrated": "true"},
+                     json={"plan": plan}).json()["id"]
+        try:
+            browser.execute_script(
+                "document.querySelector(`#jobs tr[data-id='${arguments[0]}']`)?.click()", job)
+
+            def eta_text(d: Any) -> str:
+                d.execute_script(
+                    "document.querySelector(`#jobs tr[data-id='${arguments[0]}']`)?.click()",
+                    job)
+                text = str(d.execute_script(
+                    "return document.querySelector(`#jobs tr[data-id='${arguments[0]}'] td.eta`)"
+                    "?.textContent ?? ''", job))
+                return text
+
+            wait.until(lambda d: "measuring, then reconstruction" in eta_text(d))
+        finally:
+            c.post(f"/api/v1/jobs/{job}/abort")
+            deadline = time.monotonic() + 120
+            while c.get(f"/api/v1/jobs/{job}").json()["state"] not in (
+                    "completed", "failed", "aborted"):
+                assert time.monotonic() < deadline
+                time.sleep(0.2)

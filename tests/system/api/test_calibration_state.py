@@ -1,0 +1,84 @@
+"""The state of calibration is said wherever a scan's numbers are read, and an uncalibrated
+scan of a rig that was calibrated is refused until the user accepts it (issue 27, item 1).
+
+A real daemon on the simulated rig (tests/system/api/conftest.py) on a data directory of its
+own, as `gonio serve --rig rig.toml --data-dir ELSEWHERE` would run: the rig's calibration is
+in `gonio scan`'s data directory for that rig, not in the daemon's.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+import pytest
+
+from gonio.calibration import CALIBRATION_FILE, Calibration, PairCalibration, save_calibration
+from gonio.paths import scan_data_dir
+from tests.system.api.conftest import Daemon
+
+pytestmark = pytest.mark.system
+
+PLAN = {"kind": "uniform", "specimen": "felt", "rotations": 4}
+
+
+@pytest.fixture
+def calibrated_elsewhere(daemon: Daemon) -> Iterator[Calibration]:
+    """A white-reference calibration of this rig in its own (gonio scan's) data directory."""
+    cfg = daemon.sim.config
+    cal = Calibration(
+        pairs=tuple(PairCalibration(light=p.light, sensor=p.sensor, factor=(1e-3, 1e-3, 1e-3))
+                    for p in cfg.pair_list()),
+        reference_albedo=0.99, source="white reference")
+    own = scan_data_dir(cfg)
+    assert own.resolve() != daemon.data_dir.resolve()
+    own.mkdir(parents=True, exist_ok=True)
+    save_calibration(cal, own / CALIBRATION_FILE)
+    try:
+        yield cal
+    finally:
+        (own / CALIBRATION_FILE).unlink()
+
+
+def test_check_plan_says_an_uncalibrated_scan_is_in_sensor_units(daemon: Daemon) -> None:
+    with daemon.client() as c:
+        assert c.get("/api/v1/calibration").json()["source"] == "none"
+        r = c.post("/api/v1/jobs/dry-run", json={"plan": PLAN})
+        assert r.status_code == 200, r.text
+        warnings = r.json()["warnings"]
+        assert any(w.startswith("uncalibrated") and "sensor units" in w for w in warnings), \
+            warnings
+        # A calibration job is what makes a calibration: it gets no such warning.
+        cal_plan = {"kind": "calibration", "reference_albedo": 0.99, "rotations": 4}
+        r = c.post("/api/v1/jobs/dry-run", json={"plan": cal_plan})
+        assert not any("uncalibrated" in w for w in r.json()["warnings"])
+
+
+def test_uncalibrated_scan_of_a_calibrated_rig_needs_acceptance(
+    daemon: Daemon, calibrated_elsewhere: Calibration
+) -> None:
+    with daemon.client() as c:
+        before = len(c.get("/api/v1/jobs").json())
+        r = c.post("/api/v1/jobs", json={"plan": PLAN})
+        assert r.status_code == 409, r.text
+        detail = r.json()["detail"]
+        # It says why (the rig's calibration is in another data directory, named) and what
+        # to do; nothing was queued.
+        assert str(scan_data_dir(daemon.sim.config)) in detail, detail
+        assert "accept_uncalibrated=true" in detail and "calibration job" in detail, detail
+        assert len(c.get("/api/v1/jobs").json()) == before
+        # Accepted: queued as asked (then cancelled: its readings are not under test).
+        r = c.post("/api/v1/jobs", params={"accept_uncalibrated": "true"}, json={"plan": PLAN})
+        assert r.status_code == 201, r.text
+        job = r.json()["id"]
+        c.post(f"/api/v1/jobs/{job}/abort")
+
+
+def test_an_uncalibrated_rig_needs_no_acceptance(daemon: Daemon) -> None:
+    # Never calibrated anywhere (a first session): no refusal, the Check plan's warning says it.
+    own = scan_data_dir(daemon.sim.config) / CALIBRATION_FILE
+    assert not own.exists()
+    with daemon.client() as c:
+        r = c.post("/api/v1/jobs", json={"plan": PLAN})
+        assert r.status_code == 201, r.text
+        job = r.json()["id"]
+        c.post(f"/api/v1/jobs/{job}/abort")

@@ -1,0 +1,52 @@
+"""A simulated scan whose reconstruction leaves physical bounds (issue 23 item 4) completes
+with the reason in the CLI's printout, the job's summary and event, and the result file."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gonio.brdf.models import analytic as bm
+from gonio.brdf.tables.bounds import ALBEDO_LIMIT, directional_albedo
+from gonio.cli import main
+from gonio.results import read_result
+from gonio.store import JobStore
+
+pytestmark = pytest.mark.system
+
+
+def test_a_scan_whose_reconstruction_blows_up_says_why(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # A polished brushed aluminium turned 35 degrees in its holder: eight rotations of the
+    # default plan leave its grazing lobe undetermined and the reconstruction reflects
+    # more light than falls on it at 75 degrees (measured: off-specular albedo 1.59).
+    model = bm.Rotated(bm.GGX(0.03, 0.3, fresnel=bm.SchlickFresnel((0.91, 0.92, 0.92))),
+                       math.radians(35.0), name="tilted brushed aluminium")
+    table = tmp_path / "tilted-al.npz"
+    bm.tabulate(model, np.float32).save(table)
+    truth = bm.tabulate(model, np.float64)
+    true_albedo = float(np.max(directional_albedo(truth)))
+    assert true_albedo < 1.0  # the material itself is physical: the blow-up is the fit's
+    out = tmp_path / "al.h5"
+    data = tmp_path / "data"
+    code = main(["scan", "--sim", "--material", str(table), "--rotations", "8",
+                 "--time-scale", "50", "--no-progress", "--specimen", "tilted-al",
+                 "--data-dir", str(data), "-o", str(out)])
+    err = capsys.readouterr()
+    assert code == 0, err.err
+    text = err.out + err.err
+    assert "warning: the reconstruction is outside physical bounds" in text
+    assert "OUTSIDE PHYSICAL BOUNDS" in text  # the headline line, not only a log line
+    res = read_result(out)
+    assert res.metrics["worst_directional_albedo"] > ALBEDO_LIMIT
+    assert "albedo (off the mirror direction) reaches" in str(res.metrics["physical_bounds"])
+    assert res.provenance["physical_bounds"] == res.metrics["physical_bounds"]
+    store = JobStore(data / "gonio.sqlite", durable=False)
+    job = store.get_job(2)  # job 1 is the simulated rig's white-reference calibration
+    assert job.state.value == "completed" and job.summary is not None
+    assert "outside physical bounds" in job.summary["physical_bounds"]
+    events = [e for e in store.events_after(0, job_id=2) if e.type == "physical_bounds"]
+    assert len(events) == 1 and "outside physical bounds" in events[0].data["message"]

@@ -1,0 +1,89 @@
+"""Ctrl-C in ``gonio scan`` leaves the job paused (not "running" for ever) and says how to
+resume or abort it; running the same command again resumes it (issue 27, item 4)."""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from gonio.cli import main
+from gonio.jobstates import JobState
+from gonio.sim.rig import SimRigOptions, start_sim_rig
+from gonio.store import JobStore
+from tests.system.daemon_proc import GONIO, PROJECT_ROOT, child_env, gonio, wait_for
+
+pytestmark = [pytest.mark.system, pytest.mark.timeout(900)]
+
+
+def _readings(db: Path) -> int:
+    if not db.is_file():
+        return 0
+    store = JobStore(db, durable=False)
+    try:
+        jobs = store.list_jobs()
+        return len(store.readings(jobs[0].id)) if jobs else 0
+    finally:
+        store.close()
+
+
+def test_ctrl_c_leaves_the_job_paused_and_the_same_command_resumes_it(tmp_path: Path) -> None:
+    rig = tmp_path / "rig.toml"
+    data = tmp_path / "data"
+    db = data / "gonio.sqlite"
+    # Real time and a long exposure: the scan lasts long enough to be interrupted mid-way.
+    with start_sim_rig(SimRigOptions(time_scale=1.0, settle_s=0.0, config_path=rig)):
+        argv = ["scan", "--rig", str(rig), "--rotations", "4", "--exposure", "0.3",
+                "--data-dir", str(data), "--no-progress", "-o", str(tmp_path / "felt.h5")]
+        proc = subprocess.Popen([*GONIO, *argv], stdout=subprocess.PIPE,
+                                stderr=subprocess.PIPE, text=True, env=child_env(),
+                                cwd=PROJECT_ROOT)
+        try:
+            wait_for(lambda: _readings(db) > 0 or proc.poll() is not None,
+                     what="the scan's first reading")
+            assert proc.poll() is None, proc.communicate()
+            proc.send_signal(signal.SIGINT)  # what Ctrl-C in the terminal sends
+            out, err = proc.communicate(timeout=120)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+        assert proc.returncode == 130, out + err
+        store = JobStore(db, durable=False)
+        (job,) = store.list_jobs()
+        store.close()
+        assert job.state is JobState.PAUSED, job
+        assert job.done_angles < job.total_angles
+        # The message says what happened and both ways on, with the real job and store.
+        assert f"job {job.id} interrupted: paused" in err, err
+        assert "Run the same command again to resume it" in err, err
+        assert f"gonio jobs abort {job.id} --db {db}" in err, err
+        listed = gonio(["jobs", "list", "--db", str(db)])
+        assert "paused" in listed.stdout and "running" not in listed.stdout, listed.stdout
+        # The same command again: resumed from its checkpoint, not started anew.
+        again = gonio(argv, timeout=600)
+        assert again.returncode == 0, again.stdout + again.stderr
+        assert f"resuming job {job.id} from its checkpoint" in again.stderr, again.stderr
+    store = JobStore(db, durable=False)
+    jobs = store.list_jobs()
+    store.close()
+    assert [j.state for j in jobs] == [JobState.COMPLETED]
+
+
+def test_jobs_abort_ends_an_unfinished_job_and_refuses_a_finished_one(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    db = tmp_path / "gonio.sqlite"
+    store = JobStore(db)
+    job = store.create_job(kind="uniform", specimen="felt", plan={}, rig={})
+    store.set_state(job.id, JobState.RUNNING)
+    store.set_state(job.id, JobState.PAUSED, reason="interrupted")
+    store.close()
+    assert main(["jobs", "abort", str(job.id), "--db", str(db)]) == 0
+    store = JobStore(db, durable=False)
+    assert store.get_job(job.id).state is JobState.ABORTED
+    store.close()
+    assert main(["jobs", "abort", str(job.id), "--db", str(db)]) == 2
+    assert "only an unfinished job can be aborted" in capsys.readouterr().err
+    assert main(["jobs", "abort", "99", "--db", str(db)]) == 2

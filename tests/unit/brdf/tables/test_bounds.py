@@ -1,0 +1,69 @@
+"""Physical bounds of a table (issue 23 item 4): directional albedo and peak ratio."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from gonio.brdf.models import analytic as bm
+from gonio.brdf.tables import bounds
+from gonio.brdf.tables.table import BRDFTable
+
+
+def _lambert(albedo: float) -> BRDFTable:
+    """A Lambertian table of any albedo (Lambert itself refuses albedo above 1)."""
+    t = bm.tabulate(bm.Lambert(0.5), np.float64)
+    return BRDFTable(np.asarray(t.values) * (albedo / 0.5), t.channels, f"lambert {albedo}")
+
+
+def test_a_lambertian_of_albedo_one_half_has_directional_albedo_one_half() -> None:
+    # integral of (a / pi) cos(theta_o) dw over the hemisphere is a, at every incidence.
+    alb = bounds.directional_albedo(_lambert(0.5), exclude_deg=0.0)
+    assert alb.shape == (len(bounds.INCIDENCE_DEG), len(bounds.INCIDENCE_AZIMUTH_DEG), 3)
+    np.testing.assert_allclose(alb, 0.5, rtol=2e-3)
+    # Default: the cone of half vectors within 7.5 degrees of the normal is left out; at normal
+    # incidence that is the cone of outgoing directions within 15 degrees, which holds
+    # sin^2(15 deg) of the cosine-weighted hemisphere.
+    off = bounds.directional_albedo(_lambert(0.5))
+    np.testing.assert_allclose(off[0], 0.5 * (1 - math.sin(math.radians(15)) ** 2), rtol=3e-3)
+    assert np.all(off <= 0.5 * (1 + 2e-3))
+    check = bounds.bounds_check(_lambert(0.5), readings=[0.5 / math.pi])
+    assert check.ok and check.message() is None
+    assert check.worst_albedo == pytest.approx(0.5, rel=0.02)
+    assert check.peak_ratio == pytest.approx(1.0, rel=1e-6)  # the table is flat at the reading
+
+
+def test_a_lambertian_scaled_above_one_is_out_of_bounds_and_says_why() -> None:
+    check = bounds.bounds_check(_lambert(2.0), readings=[2.0 / math.pi])
+    assert check.worst_albedo == pytest.approx(2.0, rel=0.02)
+    assert check.albedo_exceeded and not check.peak_exceeded and not check.ok
+    msg = check.message()
+    # 2 x 0.9944: at 75 degrees the mirror cone leaves out 0.56 % of a Lambertian.
+    assert msg is not None and "albedo (off the mirror direction) reaches 1.99" in msg
+    d = check.as_dict()
+    assert d["ok"] is False and d["albedo_limit"] == bounds.ALBEDO_LIMIT
+
+
+def test_a_narrow_mirror_lobe_tabulated_exactly_stays_in_bounds() -> None:
+    """A polished metal's true table is no reconstruction error: its lobe, narrower than the
+    grid, must not read as reflecting more than falls on it."""
+    ggx = bm.GGX(0.01, 0.01, fresnel=bm.SchlickFresnel((1.0, 1.0, 1.0)))
+    table = bm.tabulate(ggx, np.float64)
+    assert bounds.directional_albedo(table, exclude_deg=0.0).max() > 10  # the node artefact
+    check = bounds.bounds_check(table, readings=[float(np.nanmax(np.asarray(table.values)))])
+    assert check.ok
+
+
+def test_a_table_far_above_every_reading_is_out_of_bounds_even_in_sensor_units() -> None:
+    # One cell blown up to 1e13 while the readings stay below 0.75: the issue's case.
+    v = np.asarray(_lambert(0.5).values).copy()
+    v[:, 3, 4, 5, 6] = 2.3e13
+    table = BRDFTable(v, ("R", "G", "B"), "blown up")
+    check = bounds.bounds_check(table, readings=np.array([[0.1, 0.75], [np.nan, 0.2]]),
+                                calibrated=False)
+    assert math.isnan(check.worst_albedo)  # not compared with 1 in sensor units
+    assert check.peak_ratio == pytest.approx(2.3e13 / 0.75, rel=1e-6)
+    assert check.peak_exceeded and not check.ok
+    assert "times the largest reading" in (check.message() or "")
