@@ -134,7 +134,15 @@ def main(argv: list[str] | None = None) -> int:
                     help="noise seeds per symmetric specimen for the false-alarm count")
     ap.add_argument("--false-alarm", type=float, default=0.01,
                     help="the symmetry test's false-alarm rate")
+    ap.add_argument("--tilted-facets", type=int, default=None, metavar="N",
+                    help="train the asymmetric basis with N tilted-facet materials instead of "
+                         "the library's count (a study of how many the prior needs)")
     args = ap.parse_args(argv)
+    if args.tilted_facets is not None:
+        from gonio.brdf.materials import library
+
+        library.ASYMMETRIC_FAMILY_COUNTS["tilted-facet"] = args.tilted_facets
+        library._specs.cache_clear()
     print(f"$ {' '.join(['python', *sys.argv])}")
     t0 = time.perf_counter()
     mats = asym_materials()
