@@ -113,10 +113,10 @@ def asym_materials(tilted: bool = True) -> list[bu.Material]:
     return out
 
 
-def design(b: Basis, span: float) -> tuple[np.ndarray, np.ndarray]:
+def design(b: Basis, span: float, n: int = 10) -> tuple[np.ndarray, np.ndarray]:
     bu.CHOOSE["objective"] = "posterior"
     bu.SPAN["design"] = span
-    return bu.design(b, 10)
+    return bu.design(b, n)
 
 
 def scan(b: Basis, m: bu.Material, cells: np.ndarray, ph: np.ndarray, r: int, span: float,
@@ -137,6 +137,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--tilted-facets", type=int, default=None, metavar="N",
                     help="train the asymmetric basis with N tilted-facet materials instead of "
                          "the library's count (a study of how many the prior needs)")
+    ap.add_argument("--pairs", type=int, default=10,
+                    help="pairs of the asymmetric-basis rows (the goal is stated for 10)")
     args = ap.parse_args(argv)
     if args.tilted_facets is not None:
         from gonio.brdf.materials import library
@@ -148,11 +150,12 @@ def main(argv: list[str] | None = None) -> int:
     mats = asym_materials()
     plain = default_basis()
     asym = default_basis(asymmetric=True)
-    d_half, d_full, d_asym = design(plain, 180.0), design(plain, 360.0), design(asym, 360.0)
+    d_half, d_full = design(plain, 180.0), design(plain, 360.0)
+    d_asym = design(asym, 360.0, args.pairs)
     noise = NoiseModel(0.01)
     print(f"ready in {time.perf_counter() - t0:.0f} s")
-    cols = ["half r=8 (80)", "full r=8 (80)", "asym full r=8 (80)", "asym full r=12 (120)",
-            "ceiling default", "ceiling asym"]
+    cols = ["half r=8 (80)", "full r=8 (80)", f"asym full r=8 ({8 * args.pairs})",
+            f"asym full r=12 ({12 * args.pairs})", "ceiling default", "ceiling asym"]
     print("\n| specimen | " + " | ".join(cols) + " | twofold p (verdict, pairs flagged) |")
     print("|---" * (len(cols) + 2) + "|")
     rows = []
@@ -172,8 +175,9 @@ def main(argv: list[str] | None = None) -> int:
               f"{t.symmetric.size}) |", flush=True)
     mean = np.mean(rows, axis=0)
     print("| **mean** | " + " | ".join(f"{v:.4f}" for v in mean) + " | |")
-    goal = mean[3] <= 0.06
-    print(f"\ngoal asymmetric mean log_rmse <= 0.06 within 120 readings at 10 pairs: "
+    goal = mean[3] <= 0.06 and args.pairs == 10
+    print(f"\n(asymmetric rows with {args.pairs} pairs) goal asymmetric mean log_rmse <= 0.06 "
+          "within 120 readings at 10 pairs: "
           f"{'met' if goal else 'NOT met'} ({mean[3]:.4f})")
 
     # False alarms: symmetric specimens read over a full turn, several noise seeds each.
