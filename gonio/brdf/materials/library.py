@@ -16,6 +16,19 @@ brushed-metal   strongly anisotropic conductor GGX or Ward lobes
 retro           Lambert + retro-reflective lobe, some with a surface glint
 ============== =========================================================================
 
+Behind an option (``asymmetric=True``, not in the default library nor the shipped basis;
+science.md 7.4) three more families have no twofold symmetry: their table at ``ph`` differs from
+``ph + 180`` (:class:`~gonio.brdf.models.analytic.Tilted`, facets leaning one way)
+
+============== =========================================================================
+tilted-facet    a plastic or metal GGX lobe on facets tilted 5-30 deg (blazed, faceted; half
+                as a renderer's constant normal map)
+pile            Lambert + Charlie sheen (+ a rough coat) on fibres leaning 10-40 deg
+sawtooth        Lambert + retro-reflective lobe (+ a glint) on facets tilted 10-35 deg
+============== =========================================================================
+
+They live in their own cache folder, so the default library's cache is shared.
+
 Anisotropic materials are turned to a random orientation about the normal. Roughness never
 goes below ``alpha = 0.05`` so the mirror peaks stay within a range the log remap of the basis
 handles (math.md 4), and every reflectance stays below 1.
@@ -61,6 +74,12 @@ FAMILY_COUNTS: dict[str, int] = {
     "fabric": 30,
     "brushed-metal": 25,
     "retro": 15,
+}
+#: Families without twofold symmetry, only with ``asymmetric=True`` (science.md 7.4).
+ASYMMETRIC_FAMILY_COUNTS: dict[str, int] = {
+    "tilted-facet": 40,
+    "pile": 15,
+    "sawtooth": 10,
 }
 MIN_ALPHA = 0.05
 _MARKER = "complete.json"
@@ -219,6 +238,53 @@ def _retro(rng: np.random.Generator, name: str) -> bm.BRDFModel:
     return bm.LobeSum((bm.Lambert(colour), retro, glint), weights=(0.45, 0.45, 1.0), name=name)
 
 
+def _lean(model: bm.BRDFModel, rng: np.random.Generator, lo_deg: float,
+          hi_deg: float, masking: str = "sawtooth") -> bm.BRDFModel:
+    """Put ``model`` on facets tilted ``lo_deg``-``hi_deg`` toward a random azimuth.
+
+    A dim diffuse floor (the risers and the ground between facets, albedo 0.01-0.04) keeps
+    directions behind the facets from reading exactly 0, as no real specimen does.
+    """
+    tilted = bm.Tilted(model, math.radians(float(rng.uniform(lo_deg, hi_deg))),
+                       float(rng.uniform(0.0, 2 * np.pi)), masking,  # type: ignore[arg-type]
+                       name=model.name)
+    floor = bm.Lambert(_colour(rng, 0.01, 0.04), name="risers")
+    return bm.LobeSum((tilted, floor), name=model.name)
+
+
+def _tilted_facet(rng: np.random.Generator, name: str) -> bm.BRDFModel:
+    # A specular surface made of facets all leaning one way (blazed gratings, machined
+    # sawtooth, faceted coatings): half plastics, half metals with a slight stretch; half of
+    # them as a renderer's constant normal map (no shadowing), the shape such specimens have
+    # when they come from a renderer.
+    inner = _plastic(rng, name) if rng.random() < 0.5 else _metal(rng, name)
+    return _lean(inner, rng, 5.0, 30.0, "sawtooth" if rng.random() < 0.5 else "none")
+
+
+def _pile(rng: np.random.Generator, name: str) -> bm.BRDFModel:
+    # Velvet or pile whose fibres lean one way: the sheen rises when looking against the nap.
+    colour = _colour(rng, 0.05, 0.7)
+    sheen = bm.Sheen(tuple(min(1.0, 0.3 + c) for c in colour), float(rng.uniform(0.3, 1.0)))
+    lobes: tuple[bm.BRDFModel, ...] = (bm.Lambert(colour), sheen)
+    weights: tuple[float, ...] = (0.7, float(rng.uniform(0.3, 0.8)))
+    if rng.random() < 0.5:
+        a = _alpha(rng, 0.3, 0.7)
+        lobes += (bm.GGX(a, a, _dielectric(rng), name="fibre-coat"),)
+        weights += (float(rng.uniform(0.3, 1.0)),)
+    return _lean(bm.LobeSum(lobes, weights=weights, name=name), rng, 10.0, 40.0)
+
+
+def _sawtooth(rng: np.random.Generator, name: str) -> bm.BRDFModel:
+    # Retro-reflective sheeting or prisms on a sawtooth: the retro lobe is strong on one side.
+    return _lean(_retro(rng, name), rng, 10.0, 35.0)
+
+
+_ASYMMETRIC_RECIPES: dict[str, Callable[[np.random.Generator, str], bm.BRDFModel]] = {
+    "tilted-facet": _tilted_facet,
+    "pile": _pile,
+    "sawtooth": _sawtooth,
+}
+
 _RECIPES: dict[str, Callable[[np.random.Generator, str], bm.BRDFModel]] = {
     "diffuse": _diffuse,
     "plastic": _plastic,
@@ -231,58 +297,75 @@ _RECIPES: dict[str, Callable[[np.random.Generator, str], bm.BRDFModel]] = {
 
 
 @functools.lru_cache(maxsize=4)
-def _specs(seed: int) -> tuple[MaterialSpec, ...]:
+def _specs(seed: int, asymmetric: bool = False) -> tuple[MaterialSpec, ...]:
+    """The default families, or (``asymmetric``) only the families without twofold symmetry."""
+    counts = ASYMMETRIC_FAMILY_COUNTS if asymmetric else FAMILY_COUNTS
+    recipes = _ASYMMETRIC_RECIPES if asymmetric else _RECIPES
+    first = len(FAMILY_COUNTS) if asymmetric else 0
     out = []
-    for f_index, (family, count) in enumerate(FAMILY_COUNTS.items()):
+    for f_index, (family, count) in enumerate(counts.items(), start=first):
         # One stream per family: changing one family's count or recipe leaves the others alone.
         rng = np.random.default_rng([seed, f_index])
         for k in range(count):
             name = f"{family}-{k:03d}"
-            out.append(MaterialSpec(name, family, _RECIPES[family](rng, name)))
+            out.append(MaterialSpec(name, family, recipes[family](rng, name)))
     return tuple(out)
 
 
-def library_specs(seed: int = DEFAULT_SEED) -> list[MaterialSpec]:
+def library_specs(seed: int = DEFAULT_SEED, asymmetric: bool = False) -> list[MaterialSpec]:
     """The synthetic materials, deterministic for a given ``seed``.
+
+    Parameters
+    ----------
+    seed : int
+    asymmetric : bool
+        Also the families without twofold symmetry (:data:`ASYMMETRIC_FAMILY_COUNTS`).
 
     Returns
     -------
     list of MaterialSpec
-        :data:`FAMILY_COUNTS` materials per family, named ``"<family>-<NNN>"``.
+        :data:`FAMILY_COUNTS` materials per family, named ``"<family>-<NNN>"``, then (with
+        ``asymmetric``) the :data:`ASYMMETRIC_FAMILY_COUNTS` ones.
     """
-    return list(_specs(int(seed)))
+    out = list(_specs(int(seed)))
+    return out + list(_specs(int(seed), True)) if asymmetric else out
 
 
 def get_material(name: str, seed: int = DEFAULT_SEED) -> bm.BRDFModel:
     """The analytic model of library material ``name`` (e.g. ``"brushed-metal-004"``).
 
-    Simulators use this to replay a library material exactly, without its table.
+    Simulators use this to replay a library material exactly, without its table; the
+    families without twofold symmetry (``"pile-003"``) are found too.
     """
-    by_name = {s.name: s.model for s in _specs(int(seed))}
+    by_name = {s.name: s.model for s in library_specs(int(seed), asymmetric=True)}
     if name not in by_name:
         close = difflib.get_close_matches(name, by_name, n=3)
         hint = f"; did you mean {', '.join(close)}?" if close else "."
         raise LibraryError(
             f"no library material named {name!r}{hint} Names are <family>-<NNN> with families "
-            f"{', '.join(FAMILY_COUNTS)}, or a table file (.npz); 'gonio library list' lists "
-            "them all"
+            f"{', '.join([*FAMILY_COUNTS, *ASYMMETRIC_FAMILY_COUNTS])}, or a table file "
+            "(.npz); 'gonio library list' lists them all"
         )
     return by_name[name]
 
 
 # ---------------------------------------------------------------------------- cache
-def library_key(seed: int = DEFAULT_SEED) -> str:
+def library_key(seed: int = DEFAULT_SEED, asymmetric: bool = False) -> str:
     """Hex digest identifying the library's content (version, seed, grid, every recipe).
 
     Caches derived from the library (the default basis) should include it in their own key.
+    With ``asymmetric`` the digest of the families without twofold symmetry alone (their own
+    cache folder; the default library's key is unchanged by the option).
     """
-    payload = {
+    payload: dict[str, Any] = {
         "version": LIBRARY_VERSION,
         "seed": int(seed),
         "grid": list(geo.TABLE_SHAPE),
         "dtype": "float32",
-        "materials": [s.to_dict() for s in _specs(int(seed))],
+        "materials": [s.to_dict() for s in _specs(int(seed), asymmetric)],
     }
+    if asymmetric:
+        payload["part"] = "without twofold symmetry"
     return hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()
 
 
@@ -292,9 +375,11 @@ def cache_root() -> Path:
     return Path(env) if env else Path(platformdirs.user_cache_dir("gonio"))
 
 
-def library_cache_dir(seed: int = DEFAULT_SEED) -> Path:
-    """Folder holding the tabulated library for ``seed`` (not created here)."""
-    return cache_root() / "library" / f"v{LIBRARY_VERSION}-{library_key(seed)[:16]}"
+def library_cache_dir(seed: int = DEFAULT_SEED, asymmetric: bool = False) -> Path:
+    """Folder holding the tabulated library for ``seed`` (not created here); with
+    ``asymmetric``, the folder of the families without twofold symmetry."""
+    return (cache_root() / "library"
+            / f"v{LIBRARY_VERSION}-{library_key(seed, asymmetric)[:16]}")
 
 
 def _table_path(folder: Path, spec: MaterialSpec) -> Path:
@@ -325,7 +410,8 @@ def _read_compact(path: Path, key: str) -> NDArray[np.float32] | None:
     return out
 
 
-def build_library(seed: int = DEFAULT_SEED, progress: bool = False) -> list[Path]:
+def build_library(seed: int = DEFAULT_SEED, progress: bool = False,
+                  asymmetric: bool = False) -> list[Path]:
     """Tabulate every library material into :func:`library_cache_dir` (skipping cached ones).
 
     The cache holds, per material, an uncompressed ``.npz`` with ``values_valid``: the float32
@@ -335,14 +421,16 @@ def build_library(seed: int = DEFAULT_SEED, progress: bool = False) -> list[Path
     concurrent builders and interrupted builds never leave a half-written file under a real
     name, and a damaged file is rebuilt.
 
+    With ``asymmetric``, the families without twofold symmetry only, in their own folder.
+
     Returns
     -------
     list of Path
         One file per material, in :func:`library_specs` order.
     """
-    folder = library_cache_dir(seed)
-    key = library_key(seed)
-    specs = _specs(int(seed))
+    folder = library_cache_dir(seed, asymmetric)
+    key = library_key(seed, asymmetric)
+    specs = _specs(int(seed), asymmetric)
     marker = folder / _MARKER
     paths = [_table_path(folder, s) for s in specs]
     if marker.is_file() and all(p.is_file() for p in paths):
@@ -369,15 +457,17 @@ def build_library(seed: int = DEFAULT_SEED, progress: bool = False) -> list[Path
     return paths
 
 
-def iter_library(seed: int = DEFAULT_SEED, progress: bool = False) -> Iterator[BRDFTable]:
+def iter_library(seed: int = DEFAULT_SEED, progress: bool = False,
+                 asymmetric: bool = False) -> Iterator[BRDFTable]:
     """Yield the synthetic library's tables one at a time (builds the cache first if needed).
 
     Streaming keeps memory at one table (about 10 MB) for consumers that accumulate, such as
-    a Gram-matrix basis build.
+    a Gram-matrix basis build. With ``asymmetric``, the families without twofold symmetry only.
     """
-    paths = build_library(seed, progress)
-    key = library_key(seed)
-    items: Iterable[tuple[MaterialSpec, Path]] = zip(_specs(int(seed)), paths, strict=True)
+    paths = build_library(seed, progress, asymmetric)
+    key = library_key(seed, asymmetric)
+    items: Iterable[tuple[MaterialSpec, Path]] = zip(_specs(int(seed), asymmetric), paths,
+                                                     strict=True)
     if progress:
         from tqdm import tqdm
 
@@ -393,10 +483,11 @@ def library_table(name: str, seed: int = DEFAULT_SEED) -> BRDFTable:
     name, suggesting close ones (as :func:`get_material`).
     """
     get_material(name, seed)  # the clear error for an unknown name
-    paths = build_library(seed)
-    for spec, path in zip(_specs(int(seed)), paths, strict=True):
-        if spec.name == name:
-            return _cached_table(spec, path, library_key(seed), int(seed))
+    for asymmetric in (False, True):
+        paths = build_library(seed, asymmetric=asymmetric)
+        for spec, path in zip(_specs(int(seed), asymmetric), paths, strict=True):
+            if spec.name == name:
+                return _cached_table(spec, path, library_key(seed, asymmetric), int(seed))
     raise LibraryError(f"{name!r} is not in the library cache {library_cache_dir(seed)}")
 
 
@@ -439,6 +530,7 @@ def default_library(
     extra_dirs: Sequence[str | os.PathLike[str]] = (),
     progress: bool = False,
     seed: int = DEFAULT_SEED,
+    asymmetric: bool = False,
 ) -> list[BRDFTable]:
     """The training tables: the synthetic library (built and cached on first use) plus users'.
 
@@ -451,6 +543,9 @@ def default_library(
         Show a progress bar while building and loading.
     seed : int
         Library seed; the default reproduces the shipped library.
+    asymmetric : bool
+        Add the families without twofold symmetry (:data:`ASYMMETRIC_FAMILY_COUNTS`) after
+        the default ones; off by default (science.md 7.4 measures what they cost).
 
     Returns
     -------
@@ -459,6 +554,8 @@ def default_library(
         memory), then the extra tables in folder order.
     """
     tables = list(iter_library(seed, progress))
+    if asymmetric:
+        tables += list(iter_library(seed, progress, asymmetric=True))
     seen = {t.name: "the synthetic library" for t in tables}
     for folder in extra_dirs:
         for table in load_table_folder(folder):

@@ -728,31 +728,43 @@ MEASURED_WEIGHT = 1.0
 _FOLD_EXTRA = 32
 
 
-def synthetic_basis(n_components: int, progress: bool = False) -> Basis:
+def _library_tag(asymmetric: bool) -> str:
+    """Cache-name part identifying the synthetic library (and its asymmetric families)."""
+    from gonio.brdf.materials import library
+
+    tag = library.library_key()[:16]
+    return f"{tag}-asym{library.library_key(asymmetric=True)[:8]}" if asymmetric else tag
+
+
+def synthetic_basis(n_components: int, progress: bool = False, *,
+                    asymmetric: bool = False) -> Basis:
     """The basis of the synthetic library alone: shipped, or built once and cached.
 
     The one gonio ships (:mod:`gonio.brdf.reconstruction.shipped`, K = 96, the default
     basis' base) is used when its fingerprint matches this code; any other K, or a stale
     shipped file, is built and cached as ``<cache>/basis/synthetic-K<K>-<key>.npz``,
     ``<cache>`` and ``<key>`` the library's (:func:`gonio.brdf.materials.library.cache_root`,
-    :func:`~gonio.brdf.materials.library.library_key`).
+    :func:`~gonio.brdf.materials.library.library_key`). With ``asymmetric`` the library's
+    families without twofold symmetry are trained on too (never the shipped file; science.md
+    7.4), cached as ``synthetic-K<K>-<key>-asym<key>.npz``.
     """
     # the library depends on models; import it only when needed
     from gonio.brdf.materials import library
     from gonio.brdf.reconstruction import shipped
 
-    ready = shipped.shipped_basis(n_components)
+    ready = None if asymmetric else shipped.shipped_basis(n_components)
     if ready is not None:
         return ready
 
     path = (library.cache_root() / "basis"
-            / f"synthetic-K{n_components}-{library.library_key()[:16]}.npz")
+            / f"synthetic-K{n_components}-{_library_tag(asymmetric)}.npz")
     if path.is_file():
         try:
             return Basis.load(path)
         except BasisError:
             pass  # a stale or damaged cache entry is rebuilt below
-    tables = library.default_library(progress=progress)
+    tables = (library.default_library(progress=progress, asymmetric=True) if asymmetric
+              else library.default_library(progress=progress))
     k = min(n_components, sum(t.n_channels * geo.N_PH for t in tables))
     basis = build_basis(tables, k, progress=progress)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -766,6 +778,7 @@ def default_basis_path(
     exclude: Sequence[str] = (),
     measured_weight: float | None = None,
     user_library: bool = True,
+    asymmetric: bool = False,
 ) -> Path:
     """Cache file of :func:`default_basis` for these arguments (it may not exist yet).
 
@@ -777,7 +790,8 @@ def default_basis_path(
     k = DEFAULT_COMPONENTS if n_components is None else int(n_components)
     weight = MEASURED_WEIGHT if measured_weight is None else float(measured_weight)
     key = hashlib.sha256("\n".join([
-        library.library_key(), measured.measured_digest(),
+        _library_tag(asymmetric) if asymmetric else library.library_key(),
+        measured.measured_digest(),
         measured.user_library_digest() if user_library else "-", repr(weight),
         ",".join(sorted(exclude)),
     ]).encode()).hexdigest()[:16]
@@ -791,6 +805,7 @@ def default_basis(
     exclude: Sequence[str] = (),
     measured_weight: float | None = None,
     user_library: bool = True,
+    asymmetric: bool = False,
 ) -> Basis:
     """The default basis: synthetic library + shipped measured materials + the user's tables.
 
@@ -808,6 +823,9 @@ def default_basis(
     user_library : bool
         Include the tables of :func:`gonio.brdf.materials.measured.user_library_dir`
         (``gonio library import``).
+    asymmetric : bool
+        Train on the library's families without twofold symmetry too (off by default; the
+        shipped basis has none; science.md 7.4 measures what they cost).
 
     Returns
     -------
@@ -822,14 +840,14 @@ def default_basis(
     k = DEFAULT_COMPONENTS if n_components is None else int(n_components)
     weight = MEASURED_WEIGHT if measured_weight is None else float(measured_weight)
     path = default_basis_path(k, exclude=exclude, measured_weight=weight,
-                              user_library=user_library)
+                              user_library=user_library, asymmetric=asymmetric)
     key = path.stem.rsplit("-", 1)[-1]
     if path.is_file():
         try:
             return Basis.load(path)
         except BasisError:
             pass  # a stale or damaged cache entry is rebuilt below
-    base = synthetic_basis(k + _FOLD_EXTRA, progress=progress)
+    base = synthetic_basis(k + _FOLD_EXTRA, progress=progress, asymmetric=asymmetric)
     extra = measured.measured_tables(exclude) + (measured.user_tables() if user_library else [])
     basis = fold_in(base, extra, weight, min(k, base.K))
     basis = Basis(basis.Q, basis.S, basis.f_med, basis.mu, basis.valid, basis.eps,

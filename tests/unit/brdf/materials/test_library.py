@@ -201,3 +201,55 @@ def test_unknown_material_message_reads_as_sentences() -> None:
     assert "no library material named 'nosuch'. Names are <family>-<NNN>" in str(far.value)
     with pytest.raises(LibraryError, match=r"did you mean .*brushed-metal-003\? Names are"):
         get_material("brushed-metal-03")
+
+
+def _turned_by_half(model: bm.BRDFModel, n: int = 300, seed: int = 8) -> tuple[np.ndarray, ...]:
+    """The model's values at random direction pairs and at the same pairs turned by 180 deg."""
+    rng = np.random.default_rng(seed)
+    v = rng.normal(size=(2, n, 3))
+    v[..., 2] = np.abs(v[..., 2]) + 0.05
+    wi, wo = v / np.linalg.norm(v, axis=-1, keepdims=True)
+    return (model.eval(wi, wo),
+            model.eval(geo.rotate_z(wi, np.pi), geo.rotate_z(wo, np.pi)))
+
+
+def test_asymmetric_families_lack_twofold_symmetry_and_stay_out_of_the_default() -> None:
+    default = lib.library_specs()
+    extra = lib.library_specs(asymmetric=True)[len(default):]
+    assert lib.library_specs(asymmetric=True)[:len(default)] == default  # default untouched
+    assert {s.family for s in extra} == set(lib.ASYMMETRIC_FAMILY_COUNTS)
+    assert len(extra) == sum(lib.ASYMMETRIC_FAMILY_COUNTS.values())
+    assert not {s.name for s in extra} & {s.name for s in default}
+    for spec in default:  # every default material reads the same turned by half a turn
+        a, b = _turned_by_half(spec.model)
+        np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-12, err_msg=spec.name)
+    for spec in extra:  # no material of the new families does
+        a, b = _turned_by_half(spec.model)
+        assert np.max(np.abs(np.log((a + 1e-3) / (b + 1e-3)))) > 0.1, spec.name
+    # their key and cache folder are their own; the default library's do not move
+    assert lib.library_key(asymmetric=True) != lib.library_key()
+    assert lib.library_cache_dir(asymmetric=True) != lib.library_cache_dir()
+    assert lib.get_material(extra[3].name) == extra[3].model
+
+
+def test_asymmetric_families_conserve_energy() -> None:
+    for spec in lib.library_specs(asymmetric=True)[len(lib.library_specs()):]:
+        for theta in (0.0, np.deg2rad(60.0)):
+            wi = geo.spherical_to_direction(theta, 0.3)
+            albedo = bm.directional_albedo(spec.model, wi, n_theta=200, n_phi=96)
+            assert (albedo <= 1.0 + 1e-2).all(), (spec.name, albedo)
+            assert (albedo > 1e-3).all(), (spec.name, albedo)
+
+
+def test_asymmetric_option_adds_its_tables_from_their_own_cache(
+        small_library: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(lib, "ASYMMETRIC_FAMILY_COUNTS", {"pile": 1, "sawtooth": 1})
+    lib._specs.cache_clear()
+    plain = lib.default_library()
+    both = lib.default_library(asymmetric=True)
+    assert [t.name for t in both] == [t.name for t in plain] + ["pile-000", "sawtooth-000"]
+    assert (lib.library_cache_dir(asymmetric=True) / "pile-000.npz").is_file()
+    assert not (lib.library_cache_dir() / "pile-000.npz").exists()
+    expected = bm.tabulate(lib.get_material("sawtooth-000"))
+    np.testing.assert_array_equal(both[-1].values, expected.values)
+    np.testing.assert_array_equal(lib.library_table("pile-000").values, both[-2].values)

@@ -35,6 +35,9 @@ PHYSICAL: dict[str, bm.BRDFModel] = {
         (bm.Lambert((0.7, 0.2, 0.1)), bm.GGX(0.1, 0.1, bm.DielectricFresnel(1.5))),
         weights=((0.96,), (1.0,)),
     ),
+    "tilted-lambert": bm.Tilted(bm.Lambert(1.0), 0.5, 0.3),
+    "tilted-ggx": bm.Tilted(bm.GGX(0.1, 0.3, bm.SchlickFresnel(1.0)), 0.35, 2.0),
+    "tilted-sheen": bm.Tilted(bm.Sheen(1.0, 0.5), 0.6, -1.0),
 }
 
 ALL: dict[str, bm.BRDFModel] = {
@@ -304,6 +307,11 @@ def test_serialisation_round_trip(name: str) -> None:
         ),
         (lambda: bm.Rotated("lambert", 0.1), r"is not a BRDF model"),
         (lambda: bm.Rotated(bm.Lambert(0.5), math.inf), r"finite angle"),
+        (lambda: bm.Tilted(bm.Lambert(0.5), 1.5, 0.0), r"Tilted.tilt = 1.5 is outside"),
+        (lambda: bm.Tilted(bm.Lambert(0.5), 0.2, math.nan), r"finite angle"),
+        (lambda: bm.Tilted("lambert", 0.2), r"is not a BRDF model"),
+        (lambda: bm.Tilted(bm.Lambert(0.5), 0.2, 0.0, "bumps"),  # type: ignore[arg-type]
+         r"use 'sawtooth' or 'none'"),
         (lambda: bm.principled(0.5, 1.5, 0.5), r"principled.metallic = 1.5"),
         (lambda: bm.from_dict({"type": "Phong"}), r"unknown model type 'Phong'"),
         (lambda: bm.from_dict({"type": "Lambert", "colour": 0.5}), r"bad parameters for Lambert"),
@@ -312,3 +320,51 @@ def test_serialisation_round_trip(name: str) -> None:
 def test_bad_parameters_are_reported(build: object, message: str) -> None:
     with pytest.raises(bm.ModelError, match=message):
         build()  # type: ignore[operator]
+
+
+def test_tilted_facets_mirror_about_their_own_normal() -> None:
+    """A narrow lobe on facets leaning 20 deg toward azimuth 1 rad peaks where the mirror law
+    about the facet normal ``n' = (sin t cos p, sin t sin p, cos t)`` puts it."""
+    t, p = np.deg2rad(20.0), 1.0
+    model = bm.Tilted(bm.GGX(0.02, 0.02, bm.SchlickFresnel(1.0)), t, p)
+    n = np.array([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)])
+    wi = geo.spherical_to_direction(np.deg2rad(30.0), 2.5)
+    mirror = 2.0 * (wi @ n) * n - wi
+    tt, pp = np.meshgrid(np.deg2rad(np.arange(0.25, 90, 0.5)), np.deg2rad(np.arange(0, 360, 0.5)))
+    wo = geo.spherical_to_direction(tt.ravel(), pp.ravel())
+    f = model.eval(np.broadcast_to(wi, wo.shape), wo)[:, 0]
+    peak = wo[np.argmax(f)]
+    assert np.degrees(np.arccos(np.clip(peak @ mirror, -1, 1))) < 1.0
+    # and not at the mirror direction about the surface normal (the untilted lobe's peak)
+    surface_mirror = wi * np.array([-1.0, -1.0, 1.0])
+    assert np.degrees(np.arccos(np.clip(peak @ surface_mirror, -1, 1))) > 10.0
+
+
+def test_untilted_facets_are_the_inner_model_and_tilted_ones_lack_twofold_symmetry() -> None:
+    inner = bm.LobeSum((bm.Lambert(0.4), bm.GGX(0.1, 0.3, CONDUCTOR)))
+    rng = np.random.default_rng(6)
+    wi, wo = random_upper(400, rng), random_upper(400, rng)
+    np.testing.assert_allclose(bm.Tilted(inner, 0.0, 1.3).eval(wi, wo), inner.eval(wi, wo),
+                               rtol=1e-12)
+    for model, same in ((bm.Rotated(inner, 0.7), True), (bm.Tilted(inner, 0.3, 0.7), False)):
+        turned = model.eval(geo.rotate_z(wi, np.pi), geo.rotate_z(wo, np.pi))
+        assert np.allclose(turned, model.eval(wi, wo), rtol=1e-9) is same
+    assert not bm.Tilted(bm.Lambert(0.5), 0.2).isotropic
+    assert bm.Tilted(bm.Lambert(0.5), 0.0).isotropic
+
+
+def test_a_renderers_normal_map_weighs_the_view_by_its_facet_cosine() -> None:
+    """``masking="none"``: a Lambert facet seen through a constant normal map reads
+    ``rho / pi cos(to') / cos(to)``, ``to'`` the view's angle to the leaning normal, and 0 where
+    either direction is behind the facets; the sawtooth form of the same facets is never
+    brighter than ``rho / pi``."""
+    t, p = 0.4, -0.8
+    n = np.array([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)])
+    rng = np.random.default_rng(9)
+    wi, wo = random_upper(500, rng), random_upper(500, rng)
+    f = bm.Tilted(bm.Lambert(0.6), t, p, "none").eval(wi, wo)[:, 0]
+    front = (wi @ n > 0) & (wo @ n > 0)
+    expected = np.where(front, 0.6 / np.pi * (wo @ n) / wo[:, 2], 0.0)
+    np.testing.assert_allclose(f, expected, rtol=1e-12, atol=1e-15)
+    saw = bm.Tilted(bm.Lambert(0.6), t, p).eval(wi, wo)[:, 0]
+    assert (saw <= 0.6 / np.pi + 1e-12).all() and (saw[~front] == 0).all()

@@ -303,6 +303,25 @@ def test_default_basis_is_cached(monkeypatch: pytest.MonkeyPatch, tmp_path: Path
     assert json.loads(json.dumps(again.provenance, default=str))["file"] == str(files[0])
 
 
+def test_the_asymmetric_option_trains_on_tables_without_twofold_symmetry(
+        monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    library = pytest.importorskip("gonio.brdf.materials.library")
+    from gonio.brdf.models import analytic as bm
+
+    tables = list(small_library()[:3])
+    leaning = bm.tabulate(bm.Tilted(bm.GGX(0.1, 0.1, bm.DielectricFresnel(1.5)), 0.35, 0.5,
+                                    name="leaning"))
+    monkeypatch.setenv("GONIO_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(library, "default_library", lambda progress=False, asymmetric=False:
+                        [*tables, leaning] if asymmetric else list(tables))
+    plain = basis_mod.synthetic_basis(5)
+    asym = basis_mod.synthetic_basis(5, asymmetric=True)
+    assert plain.half_turn_periodic and not plain.without_twofold_symmetry
+    assert not asym.half_turn_periodic and asym.without_twofold_symmetry == ("leaning",)
+    assert len(list((tmp_path / "basis").glob("synthetic-K5-*.npz"))) == 2  # cached apart
+    assert basis_mod.default_basis_path(5, asymmetric=True) != basis_mod.default_basis_path(5)
+
+
 def test_cli_basis_build_rebuilds_the_default_basis_where_it_is_found(
     monkeypatch: pytest.MonkeyPatch, tmp_path: Path
 ) -> None:
