@@ -596,12 +596,29 @@ def uncalibrated_warning(cal: Calibration, pairs: Sequence[PairSpec]) -> str | N
             "calibration job with the white reference on the stage first)")
 
 
-def rig_was_calibrated(cal: Calibration, rig_data_dir: Path | None) -> bool:
-    """Whether a calibration exists for this rig although ``cal`` (the one in effect) may not
-    cover a scan: ``cal`` has factors (for other pairs: the geometry changed), or the rig's own
-    data directory (``gonio scan``'s, :func:`gonio.paths.scan_data_dir`) holds one. An
-    uncalibrated scan of such a rig is most likely a mistake (a daemon started on another data
-    directory), so it needs the user's explicit acceptance."""
-    if cal.pairs:
-        return True
-    return rig_data_dir is not None and (Path(rig_data_dir) / CALIBRATION_FILE).is_file()
+def uncalibrated_refusal(cal: Calibration, pairs: Sequence[PairSpec],
+                         rig_data_dir: Path | None, data_dir: Path) -> str | None:
+    """Why a scan of ``pairs`` needs the user's explicit acceptance, or None.
+
+    It does when no calibration is in effect (``cal`` has no factors) although the rig's own
+    data directory (``gonio scan``'s, :func:`gonio.paths.scan_data_dir`) holds one: most likely
+    a daemon or a scan started on another data directory, so the morning's calibration is not
+    applied. A calibration in effect that covers some of the pairs but not all is not a case
+    for acceptance: submission refuses it, naming the missing pairs (a result is calibrated
+    in full or not at all).
+
+    Parameters
+    ----------
+    cal : the calibration in effect
+    pairs : the scan's pairs
+    rig_data_dir : the rig's own data directory (None when unknown)
+    data_dir : the data directory the scan runs on
+    """
+    if cal.pairs or cal.covers(pairs) or rig_data_dir is None:
+        return None
+    own = Path(rig_data_dir)
+    if own.resolve() == Path(data_dir).resolve() or not (own / CALIBRATION_FILE).is_file():
+        return None
+    return (f"this scan would be uncalibrated although the rig was calibrated: "
+            f"{own / CALIBRATION_FILE} holds this rig's calibration, and it is not the one in "
+            f"effect here (data directory {data_dir})")

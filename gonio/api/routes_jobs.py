@@ -9,7 +9,7 @@ from fastapi import APIRouter, Query, Response, status
 from pydantic import BaseModel, Field
 
 from gonio.api.deps import COMPUTE, READ, WRITE, JobId, Service
-from gonio.calibration import counts, rig_was_calibrated, uncalibrated_warning
+from gonio.calibration import counts, uncalibrated_refusal, uncalibrated_warning
 from gonio.jobstates import JobState
 from gonio.paths import scan_data_dir
 from gonio.plans.dryrun import DryRun
@@ -91,32 +91,24 @@ def dry_run(request: DryRunRequest, service: Service) -> DryRun:
 
 
 def _uncalibrated_refusal(service: Any, plan: Any) -> str | None:
-    """Why a scan of ``plan`` needs the user's acceptance (None when it does not): no
-    calibration in effect covers its pairs, although this rig was calibrated."""
+    """Why a scan of ``plan`` needs the user's acceptance
+    (:func:`gonio.calibration.uncalibrated_refusal`), None when it does not."""
     if plan.kind == "calibration":
         return None
-    cal = service.calibration()
     try:
         pairs = plan_pairs(plan, service.desc)
     except ValueError:
         return None  # a plan that cannot run: submit says why
-    if cal.covers(pairs):
-        return None
     try:
         own: Path | None = scan_data_dir(service.rig_config)
     except AttributeError:  # a rig without a rig config (tests, notebooks)
         own = None
-    if own is not None and own.resolve() == service.data_dir.resolve():
-        own = None  # its calibration would be the one in effect
-    if not rig_was_calibrated(cal, own):
+    why = uncalibrated_refusal(service.calibration(), pairs, own, service.data_dir)
+    if why is None:
         return None
-    where = (f"the calibration in {own} (gonio scan's data directory for this rig) is not this "
-             f"daemon's (data directory {service.data_dir})" if own is not None and
-             not cal.pairs else f"the calibration in effect ({cal.source}) does not cover "
-             "this plan's pairs (the geometry changed?)")
-    return (f"this scan would be uncalibrated although the rig was calibrated: {where}. Run a "
-            "calibration job first, or send accept_uncalibrated=true to measure in sensor "
-            "units all the same")
+    return (f"{why}. Restart the daemon on that data directory (or without --data-dir), run a "
+            "calibration job, or send accept_uncalibrated=true to measure in sensor units all "
+            "the same")
 
 
 @router.get(

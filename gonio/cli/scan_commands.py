@@ -371,23 +371,21 @@ def _check_calibration(args: argparse.Namespace, plan: Any, config: Any, desc: A
     """Warn of an uncalibrated scan; refuse one of a rig that was calibrated (its own data
     directory holds a calibration, or one of other pairs is in effect) unless
     ``--accept-uncalibrated``."""
-    from gonio.calibration import rig_was_calibrated, uncalibrated_warning
+    from gonio.calibration import CALIBRATION_FILE, uncalibrated_refusal, uncalibrated_warning
     from gonio.paths import scan_data_dir
     from gonio.plans.validation import plan_pairs
 
-    warning = uncalibrated_warning(cal, plan_pairs(plan, desc))
+    pairs = plan_pairs(plan, desc)
+    warning = uncalibrated_warning(cal, pairs)
     if warning is None:
         return
     own: Path | None = scan_data_dir(config)
-    if own is not None and own.resolve() == data_dir.resolve():
-        own = None
-    if rig_was_calibrated(cal, own) and not args.accept_uncalibrated:
-        where = (f"{own} holds this rig's calibration; leave out --data-dir/--db, or give "
-                 f"--calibration {own / 'calibration.json'}" if own is not None and not cal.pairs
-                 else f"the calibration in effect ({cal.source}) does not cover this plan's "
-                 "pairs; run a calibration (--white-reference ALBEDO)")
-        raise UsageError(f"this scan would be uncalibrated although the rig was calibrated: "
-                         f"{where}; or add --accept-uncalibrated to measure in sensor units")
+    why = uncalibrated_refusal(cal, pairs, own, data_dir)
+    if why is not None and not args.accept_uncalibrated:
+        assert own is not None  # a refusal names the rig's own calibration
+        raise UsageError(f"{why}; leave out --data-dir/--db, give --calibration "
+                         f"{own / CALIBRATION_FILE}, or add --accept-uncalibrated to measure "
+                         "in sensor units")
     print(f"warning: {warning}", file=sys.stderr)
 
 
@@ -404,6 +402,7 @@ def _read_calibration(path: Path) -> Any:
                 "writes, e.g. white.calibration.json from 'gonio scan --white-reference')"
                 if path.suffix == ".toml" else "")
         first = exc.errors()[0]["msg"] if isinstance(exc, ValidationError) else str(exc)
+        first = first.removeprefix("Value error, ")
         raise UsageError(f"--calibration {path}: not a calibration file ({first}){hint}; "
                          "expected the JSON written by a calibration job "
                          "(OUTPUT.calibration.json of 'gonio scan --white-reference ALBEDO')"

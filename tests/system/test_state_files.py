@@ -183,7 +183,7 @@ def test_gonio_scan_refuses_bad_calibration_files(data: Path, rig: SimRig, tmp_p
     position = rig.motion.position_deg()
     for extra, words in (
         (["--calibration", str(negated), "--data-dir", str(tmp_path / "d1")],
-         [f"calibration file {negated}", "finite and positive"]),
+         [f"--calibration {negated}: not a calibration file", "finite and positive"]),
         (["--calibration", str(partial), "--data-dir", str(tmp_path / "d2")],
          [f"no factors for 1 of the {N_PAIRS} pairs", missing]),
         (["--data-dir", str(torn)],

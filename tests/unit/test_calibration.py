@@ -280,3 +280,30 @@ def test_rig_config_factors_are_checked_too() -> None:
     bad = [SimpleNamespace(light="L1", sensor="S1", factor=[math.inf])]
     with pytest.raises(CalibrationError, match=r"rig config's \[calibration\] factors"):
         from_config_factors(bad)
+
+
+def test_an_uncalibrated_scan_needs_acceptance_only_when_the_rigs_own_calibration_is_elsewhere(
+    tmp_path: Path,
+) -> None:
+    from gonio.calibration import CALIBRATION_FILE, uncalibrated_refusal
+
+    pairs = [PairSpec(light="L1", sensor="S1"), PairSpec(light="L1", sensor="S2")]
+    own, here = tmp_path / "rig-own", tmp_path / "elsewhere"
+    own.mkdir()
+    here.mkdir()
+    none = Calibration()
+    # Nothing calibrated anywhere: a plain uncalibrated scan (warned by the dry run, no more).
+    assert uncalibrated_refusal(none, pairs, own, here) is None
+    (own / CALIBRATION_FILE).write_text("{}")
+    # The rig's own folder holds a calibration this data directory does not apply.
+    why = uncalibrated_refusal(none, pairs, own, here)
+    assert why is not None and str(own / CALIBRATION_FILE) in why and str(here) in why
+    # On the rig's own data directory that file would be the one in effect.
+    assert uncalibrated_refusal(none, pairs, own, own) is None
+    assert uncalibrated_refusal(none, pairs, None, here) is None
+    # A calibration in effect covering only part of the plan is refused at submission instead
+    # (check_covers names the pairs): not a case for acceptance.
+    partial = Calibration.model_validate(_cal((1e-5, 1e-5, 1e-5)))
+    assert uncalibrated_refusal(partial, pairs, own, here) is None
+    with pytest.raises(CalibrationError, match="S2"):
+        partial.check_covers(pairs)
