@@ -16,9 +16,7 @@ says so.
 
 from __future__ import annotations
 
-import contextlib
 import math
-import os
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -29,6 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
+from gonio.atomicfile import write_atomically
 from gonio.hal import PairSpec
 
 if TYPE_CHECKING:
@@ -380,25 +379,9 @@ def save_calibration(cal: Calibration, path: Path, full_scale: Mapping[str, Any]
         check_plausible(cal, full_scale, str(path))
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    try:
-        with open(tmp, "w", encoding="utf-8") as f:
-            f.write(cal.model_dump_json(indent=2))
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        # A full disk: the calibration in effect stays the old one, and the torn temporary
-        # file does not keep the space the user is about to free.
-        with contextlib.suppress(OSError):
-            tmp.unlink()
-        raise
-    with contextlib.suppress(OSError):  # the rename itself, on filesystems that allow it
-        fd = os.open(path.parent, os.O_RDONLY)
-        try:
-            os.fsync(fd)
-        finally:
-            os.close(fd)
+    # A full disk leaves the calibration in effect the old one, and no torn temporary file
+    # keeps the space the user is about to free.
+    write_atomically(path, cal.model_dump_json(indent=2), sync_dir=True)
 
 
 def calibration_in_effect(data_dir: Path, rig_config: Any = None) -> Calibration:

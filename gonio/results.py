@@ -43,7 +43,6 @@ Read back with :func:`read_result`.
 
 from __future__ import annotations
 
-import contextlib
 import json
 import logging
 import os
@@ -60,6 +59,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from gonio import __version__
+from gonio.atomicfile import write_atomically
 from gonio.brdf.models.factored import FactoredBRDF
 from gonio.brdf.models.principled import Principled
 from gonio.brdf.tables.table import BRDFTable
@@ -148,18 +148,7 @@ def write_result(
         table=table, coefficients=coefficients, rel_sample_error=rel_sample_error,
         estimated_error=estimated_error, settings=settings, metrics=metrics,
         provenance=provenance, factored=factored, principled=principled, colour=colour)
-    tmp = out.with_name(out.name + ".part")
-    try:
-        with open(tmp, "wb") as fh:
-            fh.write(image)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, out)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            tmp.unlink()
-        raise
-    return out
+    return write_atomically(out, image)
 
 
 def _result_image(

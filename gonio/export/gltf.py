@@ -30,7 +30,6 @@ import base64
 import json
 import math
 import os
-import uuid
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -39,6 +38,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from gonio import __version__
+from gonio.atomicfile import write_atomically
 from gonio.brdf.models.principled import Principled
 
 #: Rings (latitude) and segments (longitude) of the preview sphere.
@@ -187,11 +187,4 @@ def write_gltf(
     """Write the ``.gltf`` JSON (atomically); returns the path."""
     doc = gltf_document(p, name, json.loads(json.dumps(dict(provenance), default=str)),
                         with_mesh)
-    out = Path(path)
-    tmp = out.with_name(f"{out.name}.{uuid.uuid4().hex[:12]}.part")  # one per writer
-    try:
-        tmp.write_text(json.dumps(doc, indent=2))
-        os.replace(tmp, out)
-    finally:
-        tmp.unlink(missing_ok=True)
-    return out
+    return write_atomically(path, json.dumps(doc, indent=2))

@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import json
 import os
-import uuid
 import warnings
 from collections.abc import Mapping
 from pathlib import Path
@@ -35,6 +34,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from gonio.atomicfile import write_atomically
 from gonio.brdf.materials.merl import (
     DATA,
     HEADER,
@@ -145,23 +145,10 @@ def write_merl(table: BRDFTable, path: str | os.PathLike[str],
     stored = np.empty(vals.shape)
     for c, scale in enumerate(SCALES):
         stored[c] = np.where(np.isfinite(vals[c]), vals[c] / scale, BELOW_HORIZON)
-    p = Path(path)
-    tmp = p.with_name(f"{p.name}.{uuid.uuid4().hex[:12]}.part")  # one per writer
-    try:
-        with open(tmp, "wb") as fh:
-            fh.write(np.asarray(SHAPE, dtype=HEADER).tobytes())
-            fh.write(np.ascontiguousarray(stored, dtype=DATA).tobytes())
-        os.replace(tmp, p)
-    finally:
-        tmp.unlink(missing_ok=True)
+    p = write_atomically(path, np.asarray(SHAPE, dtype=HEADER).tobytes()
+                         + np.ascontiguousarray(stored, dtype=DATA).tobytes())
     if provenance is not None:
-        side = sidecar_path(p)
-        tmp = side.with_name(f"{side.name}.{uuid.uuid4().hex[:12]}.part")
-        try:
-            tmp.write_text(json.dumps(merl_sidecar(table, provenance), indent=2))
-            os.replace(tmp, side)
-        finally:
-            tmp.unlink(missing_ok=True)
+        write_atomically(sidecar_path(p), json.dumps(merl_sidecar(table, provenance), indent=2))
     return p
 
 

@@ -39,11 +39,11 @@ from __future__ import annotations
 import json
 import math
 import os
-import uuid
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from gonio.atomicfile import write_atomically
 from gonio.brdf.models.principled import Principled
 
 #: Material attributes written from the provenance: attribute name -> provenance key.
@@ -141,11 +141,4 @@ def write_mtlx(
     import MaterialX
 
     doc = mtlx_document(p, name, provenance)
-    out = Path(path)
-    tmp = out.with_name(f"{out.name}.{uuid.uuid4().hex[:12]}.part")  # one per writer
-    try:
-        tmp.write_text(MaterialX.writeToXmlString(doc))
-        os.replace(tmp, out)
-    finally:
-        tmp.unlink(missing_ok=True)
-    return out
+    return write_atomically(path, MaterialX.writeToXmlString(doc))

@@ -49,17 +49,27 @@ def test_a_write_to_dev_full_is_a_full_disk_and_so_is_what_it_caused() -> None:
 
 
 @needs_dev_full
-def test_a_calibration_that_meets_a_full_disk_keeps_the_old_one(tmp_path: Path) -> None:
+def test_a_calibration_that_meets_a_full_disk_keeps_the_old_one(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     path = tmp_path / "calibration.json"
     old = Calibration(pairs=(PairCalibration(light="L1", sensor="S1", factor=(2.0,)),),
                       reference_albedo=0.99, source="old")
     save_calibration(old, path)
-    # The temporary file is the full device: the write fails as on a full disk.
-    os.symlink(DEV_FULL, tmp_path / "calibration.json.tmp")
+    # The temporary file is the full device: the write fails as on a full disk. (Its name is
+    # pinned so the device can sit there; the write itself is the real one.)
+    import uuid
+
+    import gonio.atomicfile
+
+    fixed = uuid.UUID(int=0)
+    monkeypatch.setattr(gonio.atomicfile.uuid, "uuid4", lambda: fixed)
+    tmp_name = f"calibration.json.{fixed.hex[:12]}.part"
+    os.symlink(DEV_FULL, tmp_path / tmp_name)
     new = Calibration(pairs=(PairCalibration(light="L1", sensor="S1", factor=(3.0,)),),
                       reference_albedo=0.99, source="new")
     with pytest.raises(OSError) as err:
         save_calibration(new, path)
     assert is_disk_full(err.value)
     assert Calibration.model_validate_json(path.read_text()) == old
-    assert not (tmp_path / "calibration.json.tmp").exists()
+    assert not (tmp_path / tmp_name).exists()

@@ -87,6 +87,31 @@ def open_live(browser: Any, daemon: Daemon, timeout_s: float, poll_s: float = 0.
     return wait
 
 
+def click_when_steady(wait: Any, css: str) -> None:
+    """Click what ``css`` selects once it is shown and enabled. The page redraws its tables as
+    events arrive, so an element found a moment ago may be replaced before the click (a stale
+    element, on a busy machine most of all): find it again and click again."""
+    from selenium.common.exceptions import (
+        ElementClickInterceptedException,
+        NoSuchElementException,
+        StaleElementReferenceException,
+    )
+    from selenium.webdriver.common.by import By
+
+    def attempt(browser: Any) -> bool:
+        try:
+            element = browser.find_element(By.CSS_SELECTOR, css)
+            if not (element.is_displayed() and element.is_enabled()):
+                return False
+            element.click()
+        except (StaleElementReferenceException, NoSuchElementException,
+                ElementClickInterceptedException):
+            return False
+        return True
+
+    wait.until(attempt)
+
+
 def test_start_a_scan_from_the_page_and_see_the_result(daemon: Daemon, browser: Any) -> None:
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support import expected_conditions as ec

@@ -14,7 +14,13 @@ from gonio.api.auth import ApiKeyring
 from gonio.daemon import DaemonConfig, build_app
 from tests.system.api.conftest import Daemon
 from tests.system.api.live_server import live_server
-from tests.system.api.test_browser import _calibrate, _severe, browser, open_live  # noqa: F401
+from tests.system.api.test_browser import (  # noqa: F401
+    _calibrate,
+    _severe,
+    browser,
+    click_when_steady,
+    open_live,
+)
 from tests.system.api.test_scan_flow import scan, wait_state
 
 pytestmark = pytest.mark.system
@@ -42,7 +48,6 @@ def spectral_daemon(tmp_path_factory: pytest.TempPathFactory, basis: Any) -> Ite
 def test_colour_table_beside_the_rendering(spectral_daemon: Daemon,
                                            browser: Any) -> None:  # noqa: F811
     from selenium.webdriver.common.by import By
-    from selenium.webdriver.support import expected_conditions as ec
     from selenium.webdriver.support.ui import Select
 
     d = spectral_daemon
@@ -56,7 +61,7 @@ def test_colour_table_beside_the_rendering(spectral_daemon: Daemon,
     assert api["colour"]["space"] == "CIELAB"
     wait = open_live(browser, d, 240)
     row = f'#jobs tr[data-id="{ids[0]}"]'
-    wait.until(ec.element_to_be_clickable((By.CSS_SELECTOR, row))).click()
+    click_when_steady(wait, row)
     wait.until(lambda b: b.find_element(By.ID, "colour").is_displayed()
                and "CIELAB" in b.find_element(By.ID, "colour-caption").text)
     caption = browser.find_element(By.ID, "colour-caption").text
