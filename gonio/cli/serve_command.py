@@ -358,8 +358,9 @@ def _demo_scan(url: str, key: str | None, result: dict[str, int], stop: Any) -> 
                     ev = json.loads(line[5:])
                     if ev["type"] == "progress":
                         d = ev["data"]
-                        print(f"  angle {d['done']}/{d['total']} at {d['actual_deg']:.2f} deg",
-                              flush=True)
+                        # The specimen's angle (0-360); the stage itself may be turns further.
+                        print(f"  angle {d['done']}/{d['total']}: specimen at "
+                              f"{d['actual_deg'] % 360:.2f} deg", flush=True)
                     elif ev["type"] == "state":
                         state = ev["data"]["state"]
                         print(f"  job {job_id}: {state}"

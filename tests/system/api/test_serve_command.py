@@ -65,6 +65,9 @@ def test_sim_demo_scan_keeps_its_data_and_prints_the_result_file(
     result = Path(m.group(1))
     assert result.parent == data / "results" and result.is_file()
     assert "api/v1/jobs" not in out.split("demo scan completed")[1]  # no dead URL
+    # Progress names the specimen's angle (0-360), not the multi-turn stage position.
+    angles = [float(a) for a in re.findall(r"specimen at (\S+) deg", out)]
+    assert len(angles) == 8 and all(0 <= a < 360 for a in angles), out
     # Run again on the same folder: the calibration is still in effect, none is queued.
     assert main(["serve", "--sim", "--demo-scan", "--port", "0", "--time-scale", "10"]) == 0
     again = capsys.readouterr().out
