@@ -178,30 +178,36 @@ class ResultViews:
                 self._previews.pop(next(iter(self._previews)))
         return png
 
-    def export(self, job_id: int, fmt: str) -> tuple[Path, str]:
+    def export(self, job_id: int, fmt: str, with_mesh: bool = False) -> tuple[Path, str]:
         """A job's result exported as ``fmt`` (:mod:`gonio.export`): file path and file name.
 
         Blocking (may fit and resample for seconds): call it from a thread in async code.
         Exports are kept under ``data_dir/exports`` and reused while the result file is
-        unchanged.
+        unchanged. ``with_mesh`` adds the glTF's preview sphere (``gonio export --with-mesh``),
+        a file of its own (``...-gltf-mesh.gltf``).
 
         Raises
         ------
         NotFound
             The job has no result yet, or its result has no BRDF (a calibration job).
+        ExportError
+            ``with_mesh`` for a format other than glTF.
         """
         from gonio.export import FORMATS, ExportError, check_format, export_result
 
         check_format(fmt)
+        if with_mesh and fmt != "gltf":
+            raise ExportError(f"with_mesh applies to format gltf only, not {fmt!r}; leave "
+                              "with_mesh out or ask for format=gltf")
         path = self.result_path(job_id)
         self.result(job_id)  # missing or damaged: said with the way to rebuild it
-        name = f"gonio-job-{job_id}-{fmt}{FORMATS[fmt]}"
+        name = f"gonio-job-{job_id}-{fmt}{'-mesh' if with_mesh else ''}{FORMATS[fmt]}"
         out = self.data_dir / "exports" / name
         if out.is_file() and out.stat().st_mtime_ns >= path.stat().st_mtime_ns:
             return out, name
         out.parent.mkdir(parents=True, exist_ok=True)
         try:
-            export_result(path, fmt, out)
+            export_result(path, fmt, out, with_mesh=with_mesh)
         except ExportError as exc:
             raise NotFound(f"job {job_id}: {exc}") from None
         return out, name

@@ -651,9 +651,9 @@ class GonioService:
         """PNG preview of a job's table (:meth:`ResultViews.preview_png`)."""
         return self.results.preview_png(job_id)
 
-    def export(self, job_id: int, fmt: str) -> tuple[Path, str]:
+    def export(self, job_id: int, fmt: str, with_mesh: bool = False) -> tuple[Path, str]:
         """A job's result exported as ``fmt`` (:meth:`ResultViews.export`)."""
-        return self.results.export(job_id, fmt)
+        return self.results.export(job_id, fmt, with_mesh)
 
     def render_png(self, job_id: int, compare: int | None = None) -> bytes:
         """Rendering of a job's reconstruction (:meth:`ResultViews.render_png`)."""
