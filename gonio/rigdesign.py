@@ -151,7 +151,8 @@ def parse_fragment(data: dict[str, Any], source: str = "design fragment") -> Des
         raise ConfigError(
             "\n".join(dict.fromkeys(lines))
             + "\n(a design fragment has [[lights]] and [[sensors]] tables with name, theta_deg, "
-            "phi_deg, and [[pairs]] tables or pairs = \"all\"; see docs/file-formats.md)"
+            "phi_deg, [[pairs]] tables or pairs = \"all\", and optionally the [design] table "
+            "gonio design writes; see docs/file-formats.md)"
         ) from None
 
 
