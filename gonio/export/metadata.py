@@ -27,7 +27,8 @@ layout has no room). Keys (docs/export.md lists them with examples):
     difference (:mod:`gonio.export.judge`).
 ``warnings``
     Plain sentences: large rendered differences, an averaged-away anisotropy, a half-turn
-    scan's arc, a reconstruction outside physical bounds (docs/science.md 7.5), ...
+    scan's arc, a reconstruction outside physical bounds (docs/science.md 7.5), a
+    self-estimate more than x2 from its design's expected error (7.1), ...
 """
 
 from __future__ import annotations

@@ -133,6 +133,14 @@ def test_the_headline_carries_the_gap() -> None:
     assert plain is not None and plain["text"] == "0.058"
 
 
+def test_every_export_lists_the_gap() -> None:
+    from gonio.export.metadata import export_provenance
+
+    why = "predicted_log_rmse 0.099 is 2.6 times the design's expected 0.0376 (...): ..."
+    assert why in export_provenance({"specimen": "x"}, {}, {"design_gap": why}, {})["warnings"]
+    assert export_provenance({"specimen": "x"}, {}, {}, {})["warnings"] == []
+
+
 def test_the_design_table_travels_from_the_fragment_into_the_rig_config(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     fragment = {
