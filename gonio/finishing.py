@@ -234,6 +234,10 @@ def finish_job(job_id: int, plan: AnyPlan, how: Finishing) -> dict[str, Any]:
         metrics["physical_bounds"] = bounds_message
         provenance["physical_bounds"] = bounds_message
         log.info("job %d: %s", job_id, bounds_message)  # the worker records the event
+    _compare_with_design(rec, readings, plan, samples, len(pairs), bool(cal.pairs),
+                         how.provenance, metrics, provenance)
+    if "design_gap" in metrics:
+        log.info("job %d: %s", job_id, metrics["design_gap"])  # the worker records the event
     provenance.update(basis_K=int(basis.K), basis_materials=json.dumps(list(basis.materials)))
     if arc is not None:
         summary["arc_warning"] = arc
@@ -269,6 +273,30 @@ def finish_job(job_id: int, plan: AnyPlan, how: Finishing) -> dict[str, Any]:
     )
     summary.update(result_path=relative, **metrics)
     return summary
+
+
+def _compare_with_design(rec: Any, readings: list[Any], plan: AnyPlan, samples: Any,
+                         n_pairs: int, calibrated: bool, extra: dict[str, Any],
+                         metrics: dict[str, Any], provenance: dict[str, Any]) -> None:
+    """The scan's ``predicted_log_rmse`` beside the expected error of the design its rig config
+    came from (its ``[design]`` table, :mod:`gonio.designgap`): ``metrics`` gain
+    ``design_expected_log_rmse`` and, for a gap above x2 either way, ``design_gap`` (why);
+    ``provenance`` the design and the gap. Nothing without a ``[design]`` table."""
+    from gonio.designgap import compare_with_design, design_expectation, scan_facts
+
+    design = design_expectation(extra.get("rig_config"))
+    if design is None:
+        return
+    metrics["design_expected_log_rmse"] = design.expected_log_rmse
+    provenance["design"] = design.model_dump_json()
+    span = getattr(plan, "first_span_deg", None)
+    facts = scan_facts(rec, readings, n_angles=int(samples.stage_angles_deg.size),
+                       span_deg=float(span()) if callable(span) else 360.0,
+                       n_pairs=n_pairs, calibrated=calibrated)
+    gap = compare_with_design(facts, design)
+    if gap is not None:
+        metrics["design_gap"] = gap.message()
+        provenance["design_gap"] = gap.message()
 
 
 def physical_bounds(table: Any, values: Any, calibrated: bool) -> Any:

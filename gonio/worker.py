@@ -476,6 +476,9 @@ class Worker:
             # Completed, but not plainly: the event log and its listeners (the CLI) say why.
             self.store.append_event(job.id, "physical_bounds",
                                     {"message": summary["physical_bounds"]})
+        if summary.get("design_gap"):
+            # The self-estimate is more than x2 from its design's expected error: why.
+            self.store.append_event(job.id, "design_gap", {"message": summary["design_gap"]})
         self.store.set_state(job.id, JobState.COMPLETED)
         return JobState.COMPLETED
 

@@ -587,7 +587,7 @@ def _progress(service: Any, job_id: int, disabled: bool) -> Any:
             bar.refresh()
         elif ev.type == "state":
             bar.set_description_str(f"job {job_id} {ev.data['state']}")
-        elif ev.type in ("arc_warning", "physical_bounds"):
+        elif ev.type in ("arc_warning", "physical_bounds", "design_gap"):
             bar.write(f"warning: {ev.data['message']}", file=sys.stderr)
 
     service.add_event_listener(on_event)

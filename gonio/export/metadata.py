@@ -33,7 +33,8 @@ layout has no room). Keys (docs/export.md lists them with examples):
     difference (:mod:`gonio.export.judge`).
 ``warnings``
     Plain sentences: large rendered differences, an averaged-away anisotropy, a half-turn
-    scan's arc, a reconstruction outside physical bounds (docs/science.md 7.5), ...
+    scan's arc, a reconstruction outside physical bounds (docs/science.md 7.5), a
+    self-estimate more than x2 from its design's expected error (7.1), ...
 """
 
 from __future__ import annotations
@@ -223,4 +224,6 @@ def export_provenance(attrs: Mapping[str, Any], metrics: Mapping[str, Any],
         out["warnings"].append(str(provenance["arc_warning"]))
     if provenance.get("physical_bounds"):
         out["warnings"].append(str(provenance["physical_bounds"]))
+    if provenance.get("design_gap"):
+        out["warnings"].append(str(provenance["design_gap"]))
     return out
