@@ -1,0 +1,174 @@
+"""Every source module with behaviour has a test module named after it (tests/README.md).
+
+A module's tests live at its mirrored path: ``gonio/a/b.py`` -> ``tests/unit/a/test_b.py`` (or a
+folder ``tests/unit/a/b/``), ``drivers/x.py`` -> ``tests/unit/drivers/test_x.py``, ``sim/x.py``
+-> ``tests/unit/sim/test_x.py`` (a leading ``_`` dropped). A module whose behaviour is only seen
+across a real boundary (a driver against its simulator, an API route on loopback) may have it
+at the same path under ``tests/system/`` instead. Every other module is listed below with the
+reason; a new module that is in none of the lists fails here, so it comes with its tests.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+
+# Modules with no behaviour of their own: exception classes, docstring-only package files,
+# re-exports and wiring that any test importing them exercises. Each says why.
+NO_BEHAVIOUR: dict[str, str] = {
+    "gonio/__init__.py": "the version string from the installed metadata",
+    "gonio/api/__init__.py": "package docstring",
+    "gonio/api/deps.py": "FastAPI dependency aliases (guards are gonio/api/auth.py's)",
+    "gonio/brdf/colour/__init__.py": "package docstring",
+    "gonio/brdf/colour/errors.py": "one exception class",
+    "gonio/brdf/design/__init__.py": "package docstring",
+    "gonio/brdf/design/errors.py": "exception classes",
+    "gonio/brdf/materials/__init__.py": "package docstring",
+    "gonio/brdf/models/__init__.py": "package docstring",
+    "gonio/brdf/pictures/__init__.py": "package docstring",
+    "gonio/brdf/reconstruction/__init__.py": "package docstring",
+    "gonio/brdf/reconstruction/errors.py": "one exception class",
+    "gonio/brdf/tables/__init__.py": "package docstring",
+    "gonio/plans/__init__.py": "package docstring",
+    "drivers/__init__.py": "package docstring",
+    "sim/__init__.py": "package docstring",
+}
+
+# Modules whose behaviour is pinned down by a test file of another name (written before this
+# rule, or named for a boundary it crosses). Each maps to the file(s) that test it; renaming
+# such a file to the mirrored name removes the entry.
+TESTED_IN: dict[str, tuple[str, ...]] = {
+    # A package's __init__ with entry points is tested in the package's folder (tests/README.md).
+    "gonio/brdf/__init__.py": ("tests/unit/brdf/test_entry_points.py",),
+    "gonio/cli/__init__.py": ("tests/unit/cli/test_errors.py",),
+    "gonio/export/__init__.py": ("tests/unit/export/test_metadata.py",),
+    "gonio/api/maintenance.py": ("tests/system/api/test_guards.py",),
+    "gonio/api/ratelimit.py": ("tests/system/api/test_rate_limit.py",),
+    "gonio/api/schema.py": ("tests/system/api/test_openapi.py",),
+    "gonio/brdf/design/posterior.py": ("tests/unit/brdf/design/test_posterior_design.py",),
+    "gonio/brdf/materials/measured.py": ("tests/unit/brdf/materials/test_imports.py",),
+    "gonio/brdf/reconstruction/joint.py": (
+        "tests/unit/brdf/reconstruction/test_reconstruct_joint.py",),
+    "gonio/brdf/reconstruction/periodic.py": (
+        "tests/unit/brdf/reconstruction/test_periodic_arc.py",),
+    "gonio/cli/serve_command.py": ("tests/system/api/test_serve_command.py",),
+    "gonio/cli/sim_command.py": ("tests/system/test_sim_rig.py",),
+    "gonio/cli/sim_session.py": ("tests/system/api/test_sim_calibration.py",),
+    "gonio/daemon.py": ("tests/system/api/test_daemon_config.py",),
+    "gonio/figures.py": ("tests/unit/test_physical_bounds_report.py",
+                         "tests/unit/test_result_colour.py"),
+    "sim/dynamixel_device.py": ("tests/unit/sim/test_dynamixel_protocol.py",),
+    "sim/modbus_server.py": ("tests/system/drivers/test_modbus.py",),
+    "sim/rig.py": ("tests/system/test_sim_rig.py",),
+}
+
+# Modules with behaviour and no test module yet (issue 29): the debt, listed so that it can
+# only shrink. Each is exercised where the reason says; its own unit test module is still owed.
+NOT_YET: dict[str, str] = {
+    "drivers/factory.py": "every scan on the simulated rig builds its rig here (tests/system/)",
+    "gonio/api/app.py": "HTTP API on loopback, tests/system/api/",
+    "gonio/api/auth.py": "HTTP API on loopback, tests/system/api/, test_guards.py",
+    "gonio/api/errors.py": "HTTP API on loopback, tests/system/api/, test_bad_input.py",
+    "gonio/api/events.py": "HTTP API on loopback, tests/system/api/",
+    "gonio/api/limits.py": "HTTP API on loopback, tests/system/api/, test_bad_input.py",
+    "gonio/api/prometheus.py": "HTTP API on loopback, tests/system/api/",
+    "gonio/api/routes_design.py": "HTTP API on loopback, tests/system/api/, test_design.py",
+    "gonio/api/routes_jobs.py": "HTTP API on loopback, tests/system/api/, test_scan_flow.py",
+    "gonio/api/routes_results.py": "HTTP API on loopback, tests/system/api/, test_scan_flow.py",
+    "gonio/api/routes_rig.py": "HTTP API on loopback, tests/system/api/, test_stage.py",
+    "gonio/api/routes_system.py": "HTTP API on loopback, tests/system/api/",
+    "gonio/api/settings.py": "HTTP API on loopback, tests/system/api/, test_daemon_config.py",
+    "gonio/brdf/design/pairdesign.py": "through gonio/brdf/design/pairs.py's tests",
+    "gonio/brdf/materials/merl.py": "through tests/unit/export/test_merl.py",
+    "gonio/brdf/reconstruction/blas.py": "every reconstruction test runs inside it",
+    "gonio/brdf/reconstruction/tabulate.py": "through the reconstruction tests",
+    "gonio/brdf/tables/npzfile.py": "through the table and library tests",
+    "gonio/cli/daemon_client.py": "tests/system/api/test_cli_daemon.py",
+    "gonio/cli/rig_command.py": "tests/system/cli/",
+    "gonio/cli/stage_command.py": "tests/system/cli/test_stage.py",
+    "gonio/engine_loop.py": "through the engine's tests (tests/unit/engine/)",
+    "gonio/fields.py": "through the plan models' tests",
+    "gonio/hal.py": "through MemRig and the drivers",
+    "gonio/paths.py": "tests/system/cli/test_scan.py",
+    "gonio/refinement.py": "tests/unit/engine/test_adaptive_posterior.py",
+    "gonio/rigdescription.py": "through the plans' tests",
+    "gonio/sampling_design.py": "through the design routes",
+    "sim/faults.py": "through the simulated devices' tests",
+    "sim/memrig.py": "the rig of every unit test of the engine",
+    "sim/pty.py": "every driver test over a pseudo-terminal (tests/system/drivers/)",
+}
+
+
+def _source_modules() -> list[str]:
+    return sorted(
+        p.relative_to(ROOT).as_posix()
+        for top in ("gonio", "drivers", "sim")
+        for p in (ROOT / top).rglob("*.py")
+    )
+
+
+def _mirrored(module: str) -> list[Path]:
+    """The paths where the module's own tests may live (tests/README.md)."""
+    parts = module.removesuffix(".py").split("/")
+    if parts[0] == "gonio":
+        parts = parts[1:]
+    *folder, name = parts
+    name = name.lstrip("_")
+    out = []
+    for kind in ("unit", "system"):
+        base = ROOT.joinpath("tests", kind, *folder)
+        out += [base / f"test_{name}.py", base / name]
+    return out
+
+
+def _has_own_tests(module: str) -> bool:
+    return any(p.exists() for p in _mirrored(module))
+
+
+def test_every_module_with_behaviour_has_its_test_module() -> None:
+    missing = [m for m in _source_modules()
+               if not _has_own_tests(m) and m not in NO_BEHAVIOUR and m not in TESTED_IN
+               and m not in NOT_YET]
+    assert not missing, (
+        "these modules have no test module at their mirrored path (tests/README.md, 'Where a "
+        "test goes'): " + ", ".join(missing)
+        + "; add tests/unit/.../test_<module>.py, or list the module in tests/unit/test_layout.py "
+        "with the reason"
+    )
+
+
+@pytest.mark.parametrize("listing", ["NO_BEHAVIOUR", "TESTED_IN", "NOT_YET"])
+def test_the_lists_name_only_modules_that_need_them(listing: str) -> None:
+    """An entry for a module that is gone, or that now has its own tests, is stale."""
+    entries = globals()[listing]
+    modules = set(_source_modules())
+    gone = sorted(set(entries) - modules)
+    assert not gone, f"{listing} names modules that do not exist: {gone}"
+    own = sorted(m for m in entries if _has_own_tests(m))
+    assert not own, f"{listing} names modules that have their own test module now: {own}"
+
+
+def test_the_files_named_as_testing_a_module_import_it() -> None:
+    for module, files in TESTED_IN.items():
+        dotted = module.removesuffix(".py").removesuffix("/__init__").replace("/", ".")
+        if not dotted.startswith("gonio."):
+            dotted = "gonio." + dotted
+        parent, _, name = dotted.rpartition(".")
+        for f in files:
+            text = (ROOT / f).read_text()
+            assert dotted in text or f"from {parent} import {name}" in text, (
+                f"{f} is listed as testing {module} but does not import it")
+
+
+def test_the_no_behaviour_modules_define_no_functions() -> None:
+    """A module listed as having no behaviour holds no function of its own (exception classes,
+    aliases and docstrings only); gonio/api/deps.py's one-line dependency is the exception."""
+    for module in NO_BEHAVIOUR:
+        if module == "gonio/api/deps.py":
+            continue
+        text = (ROOT / module).read_text()
+        assert "\ndef " not in text and "\nasync def " not in text and "    def " not in text, (
+            f"{module} defines a function: it has behaviour, so it needs its tests")
