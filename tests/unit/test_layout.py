@@ -87,12 +87,8 @@ NOT_YET: dict[str, str] = {
     "gonio/cli/daemon_client.py": "tests/system/api/test_cli_daemon.py",
     "gonio/cli/rig_command.py": "tests/system/cli/",
     "gonio/cli/stage_command.py": "tests/system/cli/test_stage.py",
-    "gonio/engine_loop.py": "through the engine's tests (tests/unit/engine/)",
     "gonio/hal.py": "through MemRig and the drivers",
-    "gonio/refinement.py": "tests/unit/engine/test_adaptive_posterior.py",
     "gonio/sampling_design.py": "through the design routes",
-    "sim/faults.py": "through the simulated devices' tests",
-    "sim/pty.py": "every driver test over a pseudo-terminal (tests/system/drivers/)",
 }
 
 
