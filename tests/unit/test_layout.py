@@ -46,7 +46,6 @@ TESTED_IN: dict[str, tuple[str, ...]] = {
     "gonio/cli/__init__.py": ("tests/unit/cli/test_errors.py",),
     "gonio/export/__init__.py": ("tests/unit/export/test_metadata.py",),
     "gonio/api/maintenance.py": ("tests/system/api/test_guards.py",),
-    "gonio/api/ratelimit.py": ("tests/system/api/test_rate_limit.py",),
     "gonio/api/schema.py": ("tests/system/api/test_openapi.py",),
     "gonio/brdf/design/posterior.py": ("tests/unit/brdf/design/test_posterior_design.py",),
     "gonio/brdf/materials/measured.py": ("tests/unit/brdf/materials/test_imports.py",),
@@ -70,7 +69,6 @@ TESTED_IN: dict[str, tuple[str, ...]] = {
 NOT_YET: dict[str, str] = {
     "drivers/factory.py": "every scan on the simulated rig builds its rig here (tests/system/)",
     "gonio/api/app.py": "HTTP API on loopback, tests/system/api/",
-    "gonio/api/auth.py": "HTTP API on loopback, tests/system/api/, test_guards.py",
     "gonio/api/events.py": "HTTP API on loopback, tests/system/api/",
     "gonio/api/prometheus.py": "HTTP API on loopback, tests/system/api/",
     "gonio/api/routes_design.py": "HTTP API on loopback, tests/system/api/, test_design.py",
