@@ -78,7 +78,6 @@ NOT_YET: dict[str, str] = {
     "gonio/cli/daemon_client.py": "tests/system/api/test_cli_daemon.py",
     "gonio/cli/rig_command.py": "tests/system/cli/",
     "gonio/cli/stage_command.py": "tests/system/cli/test_stage.py",
-    "gonio/sampling_design.py": "through the design routes",
 }
 
 
