@@ -76,7 +76,6 @@ NOT_YET: dict[str, str] = {
     "gonio/api/routes_results.py": "HTTP API on loopback, tests/system/api/, test_scan_flow.py",
     "gonio/api/routes_rig.py": "HTTP API on loopback, tests/system/api/, test_stage.py",
     "gonio/api/routes_system.py": "HTTP API on loopback, tests/system/api/",
-    "gonio/brdf/design/pairdesign.py": "through gonio/brdf/design/pairs.py's tests",
 }
 
 
