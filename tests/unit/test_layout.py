@@ -73,7 +73,6 @@ TESTED_IN: dict[str, tuple[str, ...]] = {
     "gonio/cli/serve_command.py": ("tests/system/api/test_serve_command.py",),
     "gonio/cli/sim_command.py": ("tests/system/test_sim_rig.py",),
     "gonio/cli/sim_session.py": ("tests/system/api/test_sim_calibration.py",),
-    "gonio/daemon.py": ("tests/system/api/test_daemon_config.py",),
     "sim/dynamixel_device.py": ("tests/unit/sim/test_dynamixel_protocol.py",),
     "sim/modbus_server.py": ("tests/system/drivers/test_modbus.py",),
     "sim/rig.py": ("tests/system/test_sim_rig.py",),
