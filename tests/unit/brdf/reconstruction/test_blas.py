@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import numpy  # noqa: F401  (the BLAS libraries reconstruction uses, loaded as it loads them)
 import pytest
+import scipy.linalg  # noqa: F401
 from threadpoolctl import threadpool_info
 
 from gonio.brdf.reconstruction.blas import one_blas_thread
