@@ -46,7 +46,6 @@ TESTED_IN: dict[str, tuple[str, ...]] = {
     "gonio/brdf/__init__.py": ("tests/unit/brdf/test_entry_points.py",),
     "gonio/cli/__init__.py": ("tests/unit/cli/test_errors.py",),
     "gonio/export/__init__.py": ("tests/unit/export/test_metadata.py",),
-    "gonio/api/schema.py": ("tests/system/api/test_openapi.py",),
     # The API's routes are thin (parse, call the service, answer); they are requested over
     # loopback by the tests of what they serve (checked: each file requests one of the
     # router's paths). Their wiring and errors: tests/unit/api/test_app.py, test_errors.py.
