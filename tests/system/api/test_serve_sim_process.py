@@ -43,8 +43,10 @@ def test_sigterm_removes_the_temporary_rig_folder_and_loopback_gives_no_warning(
 def test_a_reachable_address_with_the_key_in_it_comes_with_a_warning(tmp_path: Path) -> None:
     d = _sim(tmp_path, "--host", "0.0.0.0")
     try:
-        # stdout and stderr are read by two threads: wait for the warning's line.
-        wait_for(lambda: "holds the session's API key" in "".join(d.err), 60, "the warning")
+        # stdout and stderr are read by two threads: wait for the warning's line and for the
+        # address with the key (it may come after the warning).
+        wait_for(lambda: "holds the session's API key" in "".join(d.err)
+                 and "#key=" in "".join(d.out), 60, "the warning and the keyed address")
         out, err = "".join(d.out), "".join(d.err)
         assert "#key=" in out
         assert f"warning: --host 0.0.0.0 is {EXPOSED}" in err
