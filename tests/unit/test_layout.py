@@ -73,7 +73,6 @@ TESTED_IN: dict[str, tuple[str, ...]] = {
     "gonio/cli/sim_command.py": ("tests/system/test_sim_rig.py",),
     "gonio/cli/sim_session.py": ("tests/system/api/test_sim_calibration.py",),
     "sim/dynamixel_device.py": ("tests/unit/sim/test_dynamixel_protocol.py",),
-    "sim/modbus_server.py": ("tests/system/drivers/test_modbus.py",),
     "sim/rig.py": ("tests/system/test_sim_rig.py",),
 }
 
