@@ -71,7 +71,6 @@ TESTED_IN: dict[str, tuple[str, ...]] = {
                                    "tests/system/api/test_stage.py"),
     "gonio/cli/serve_command.py": ("tests/system/api/test_serve_command.py",),
     "gonio/cli/sim_command.py": ("tests/system/test_sim_rig.py",),
-    "gonio/cli/sim_session.py": ("tests/system/api/test_sim_calibration.py",),
     "sim/dynamixel_device.py": ("tests/unit/sim/test_dynamixel_protocol.py",),
     "sim/rig.py": ("tests/system/test_sim_rig.py",),
 }
