@@ -380,7 +380,7 @@ async function showResult(job) {
   };
   const img = $("#preview");
   setImage(img, "preview", await getBlob(`/jobs/${job.id}/preview.png`));
-  $("#preview-caption").textContent = `${job.specimen}: the reconstructed table itself, log scale with a colour bar; ` +
+  $("#preview-caption").textContent = `${job.specimen}: the reconstructed table itself, log scale; the colour bar gives the brightest channel's value in the material's typical tint; ` +
     "columns φh = 0, 45, 90, 135°; rows φd = 90, 0°; in each panel θh runs down, θd right; hatched cells are below the horizon." + (shownUncalibrated ? UNCALIBRATED_NOTE : "");
   await Promise.all([refreshRender(), refreshPolar()]);
 }
