@@ -4,13 +4,27 @@
 
 /* global Chart */
 
-// 20 colours that stay distinct side by side (Kelly's contrast set without white, black and
-// the greys), so 20 light/sensor pairs each get their own.
+// 20 colours that stay distinct side by side (a qualitative set without white and the light
+// greys), so 20 light/sensor pairs each get their own.
 export const PALETTE = [
   "#e6194b", "#3cb44b", "#4363d8", "#f58231", "#911eb4", "#42d4f4", "#f032e6", "#9a6324",
   "#800000", "#469990", "#000075", "#bfef45", "#808000", "#dcbeff", "#ffd8b1", "#aaffc3",
   "#fabed4", "#ffe119", "#a9a9a9", "#000000",
 ];
+// Colour alone does not tell 12 pairs apart for everyone: under a simulated red or green
+// deficiency several of the palette's colours nearly coincide (blue and magenta, red and
+// brown). Each pair also gets a marker for its readings and a dash for its curve, cycling
+// with period 5: pairs that share a marker and dash are 5 apart in the palette, and the 12
+// pairs of the default rig then differ by a CIEDE2000 of at least 17 with normal vision and
+// under each simulated deficiency (tests/system/api/test_browser_plots.py).
+export const POINT_STYLES = ["circle", "triangle", "rect", "rectRot", "star"];
+export const DASHES = [[], [8, 4], [2, 3], [10, 3, 2, 3], [4, 2]];
+
+/** The colour, marker and dash of the k-th light/sensor pair. */
+export function pairStyle(k) {
+  return { color: PALETTE[k % PALETTE.length], point: POINT_STYLES[k % POINT_STYLES.length],
+           dash: DASHES[k % DASHES.length] };
+}
 
 function fresh(canvas, config) {
   Chart.getChart(canvas)?.destroy();
@@ -37,17 +51,17 @@ export function plotRotation(canvas, pairs, yTitle, title = "") {
   pairs = pairs.map((p) => (p.curve ? { ...p, curve: p.curve.filter(([x]) => x <= xMax) } : p));
   const datasets = [];
   pairs.forEach((p, k) => {
-    const color = PALETTE[k % PALETTE.length];
+    const { color, point, dash } = pairStyle(k);
     datasets.push({
       label: p.label, type: "scatter", data: p.points.map(([x, y]) => ({ x, y })),
-      backgroundColor: color, borderColor: color, pointRadius: 3, showLine: !p.curve,
-      borderWidth: 1, order: 1,
+      backgroundColor: color, borderColor: color, pointRadius: 4, pointStyle: point,
+      showLine: !p.curve, borderDash: p.curve ? [] : dash, borderWidth: 1, order: 1,
     });
     if (p.curve) {
       datasets.push({
         label: `${p.label} reconstruction`, type: "line", data: p.curve.map(([x, y]) => ({ x, y })),
         borderColor: color, backgroundColor: color, pointRadius: 0, borderWidth: 1.5, order: 2,
-        isCurve: true,
+        borderDash: dash, isCurve: true,
       });
     }
   });
@@ -60,7 +74,8 @@ export function plotRotation(canvas, pairs, yTitle, title = "") {
         title: { display: Boolean(title), text: title },
         legend: {
           position: "right",
-          labels: { boxWidth: 12, filter: (item, data) => !data.datasets[item.datasetIndex].isCurve },
+          // The legend shows each pair's marker in its colour.
+          labels: { boxWidth: 12, usePointStyle: true, filter: (item, data) => !data.datasets[item.datasetIndex].isCurve },
           // One legend entry per pair: toggling it hides the readings and their curve.
           onClick: (e, item, legend) => {
             const chart = legend.chart, label = chart.data.datasets[item.datasetIndex].label;

@@ -79,3 +79,87 @@ def test_the_polar_plots_labels_cover_neither_each_other_nor_the_titles(
         for b in labels[i + 1:]:
             assert not _overlap(a, b), (a, b)
     assert _severe(browser) == []
+
+
+# Draws the rotation plot of a finished scan with ``n`` pairs (each with its samples and the
+# reconstruction's curve) as the page does; returns what each dataset is drawn with.
+_DRAW_ROTATION = """
+const [n, done] = arguments;
+import('/static/plots.js').then((plots) => {
+  const box = document.createElement('div');
+  box.style.cssText = 'position: relative; width: 900px; height: 340px';
+  const canvas = document.createElement('canvas');
+  box.append(canvas); document.body.append(box);
+  const pairs = [...Array(n).keys()].map((k) => ({
+    label: `L${1 + Math.floor(k / 4)}/S${1 + (k % 4)}`,
+    points: [0, 22.5, 45, 67.5, 90, 112.5, 135, 157.5].map((a) => [a, 1 + k + Math.sin(a / 30)]),
+    curve: [...Array(91).keys()].map((i) => [2 * i, 1 + k + Math.sin(2 * i / 30)]),
+  }));
+  const chart = plots.plotRotation(canvas, pairs, 'BRDF (1/sr), mean of R, G, B');
+  const out = chart.data.datasets.map((d) => ({label: d.label, curve: !!d.isCurve,
+    color: d.borderColor, point: d.pointStyle ?? 'circle', dash: d.borderDash ?? [],
+    legendPoint: chart.options.plugins.legend.labels.usePointStyle === true}));
+  box.remove();
+  done(out);
+});
+"""
+
+
+def _linear_rgb(hex_colour: str) -> Any:
+    import numpy as np
+
+    srgb = np.array([int(hex_colour[i:i + 2], 16) for i in (1, 3, 5)]) / 255.0
+    # IEC 61966-2-1 decoding.
+    return np.where(srgb <= 0.04045, srgb / 12.92, ((srgb + 0.055) / 1.055) ** 2.4)
+
+
+def _worst_delta_e(a: str, b: str) -> float:
+    """CIEDE2000 between two sRGB colours, the smallest of normal vision and the simulated
+    protan, deutan and tritan dichromat (Machado et al. 2009, severity 1)."""
+    import warnings
+
+    import numpy as np
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        import colour
+
+        def lab(rgb: Any) -> Any:
+            return colour.XYZ_to_Lab(colour.RGB_to_XYZ(
+                rgb, colour.RGB_COLOURSPACES["sRGB"], apply_cctf_decoding=False))
+
+        ra, rb = _linear_rgb(a), _linear_rgb(b)
+        out = [float(colour.delta_E(lab(ra), lab(rb), method="CIE 2000"))]
+        for kind in ("Protanomaly", "Deuteranomaly", "Tritanomaly"):
+            m = colour.matrix_cvd_Machado2009(kind, 1.0)
+            out.append(float(colour.delta_E(lab(np.clip(m @ ra, 0, 1)),
+                                            lab(np.clip(m @ rb, 0, 1)), method="CIE 2000")))
+    return min(out)
+
+
+def test_twelve_pairs_in_the_fit_plot_can_be_told_apart(
+    daemon: Daemon, browser: Any,  # noqa: F811
+) -> None:
+    """The default simulated rig has 3 lights x 4 sensors: 12 pairs in the fit plot. Any two
+    pairs' readings differ in marker or in a colour difference a viewer sees (CIEDE2000 of
+    10 or more, with normal vision and with a red, green or blue deficiency); so do any two
+    curves, in dash or colour. With colour alone, blue and magenta nearly coincide for a red
+    or green deficient viewer (CIEDE2000 under 4)."""
+    from itertools import combinations
+
+    open_live(browser, daemon, 60)
+    browser.set_script_timeout(30)
+    sets = browser.execute_async_script(_DRAW_ROTATION, 12)
+    dots = [d for d in sets if not d["curve"]]
+    curves = [d for d in sets if d["curve"]]
+    assert len(dots) == len(curves) == 12
+    for a, b in combinations(dots, 2):
+        assert a["point"] != b["point"] or _worst_delta_e(a["color"], b["color"]) >= 10, (a, b)
+    for a, b in combinations(curves, 2):
+        assert a["dash"] != b["dash"] or _worst_delta_e(a["color"], b["color"]) >= 10, (a, b)
+    # Each curve goes with its readings: same colour and label.
+    for d, c in zip(dots, curves, strict=True):
+        assert c["label"] == f"{d['label']} reconstruction" and c["color"] == d["color"]
+    # The legend shows the markers, not plain colour boxes.
+    assert all(d["legendPoint"] for d in sets)
+    assert _severe(browser) == []
