@@ -25,6 +25,7 @@ import asyncio
 import contextlib
 import logging
 import threading
+import time
 from collections.abc import AsyncIterator, Callable, Coroutine
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
@@ -40,7 +41,7 @@ from gonio.event_hub import EventHub
 from gonio.jobstates import ACTIVE_STATES, IllegalTransition, JobState, check_action
 from gonio.maintenance import LOCK_FILE_NAME, MaintenanceLock
 from gonio.paths import scan_data_dir
-from gonio.plans.dryrun import DryRun, arc_may_apply, dry_run
+from gonio.plans.dryrun import BASIS_BUILD_S, DryRun, arc_may_apply, dry_run
 from gonio.plans.models import (
     DEFAULT_SPAN_DEG,
     AnyPlan,
@@ -70,6 +71,7 @@ from gonio.service_models import (
 )
 from gonio.stage_control import StageControl
 from gonio.store import EventRow, JobRow, JobStore, ReadingRow
+from gonio.timeleft import FinishingEstimate, finishing_estimate, time_left
 from gonio.worker import Worker
 
 if TYPE_CHECKING:  # the design numerics load on the first design, not with the service
@@ -137,6 +139,8 @@ class GonioService:
         # the process's working directory.
         self.data_dir = Path(data_dir).absolute()
         self.desc = RigDescription.from_rig(self._rig)
+        self._max_angles_of: dict[int, int | None] = {}  # adaptive jobs' bound (_max_angles)
+        self._finishing_cache: tuple[float, FinishingEstimate] | None = None
         self._connected = False
         self._connect_error: str | None = None
         self._connect_lock = asyncio.Lock()
@@ -438,7 +442,30 @@ class GonioService:
             raise PlanError(str(exc)) from None
 
     def list_jobs(self, state: str | None = None) -> list[JobInfo]:
-        return [JobInfo.from_row(r) for r in self.store.list_jobs([state] if state else None)]
+        return [JobInfo.from_row(r, self._max_angles(r))
+                for r in self.store.list_jobs([state] if state else None)]
+
+    def _max_angles(self, row: JobRow) -> int | None:
+        """An adaptive job's most stage angles (the dry run's bound), once per job: its plan
+        and the rig do not change while the daemon runs."""
+        if row.kind != "adaptive":
+            return None
+        if row.id not in self._max_angles_of:
+            try:
+                bound = dry_run(parse_stored_plan(row.plan), self.desc).max_angles
+            except PlanError:
+                bound = None  # a plan this rig cannot run: its progress stays done/total
+            self._max_angles_of[row.id] = bound
+        return self._max_angles_of[row.id]
+
+    def _finishing_estimate(self) -> FinishingEstimate:
+        """:func:`gonio.timeleft.finishing_estimate` of this store, read at most every few
+        seconds (a polling page asks once a second)."""
+        now = time.monotonic()
+        if self._finishing_cache is None or now - self._finishing_cache[0] > 5.0:
+            est = finishing_estimate(self.store.list_jobs([JobState.COMPLETED.value]))
+            self._finishing_cache = (now, est)
+        return self._finishing_cache[1]
 
     def _row(self, job_id: int) -> JobRow:
         return job_row(self.store, job_id)
@@ -464,10 +491,25 @@ class GonioService:
             if report is not None:
                 activity, fraction = report
         qpos = self.store.queue_position(job_id) if row.state is JobState.QUEUED else None
-        base = JobInfo.from_row(row).model_dump()
+        base = JobInfo.from_row(row, self._max_angles(row)).model_dump()
+        times: dict[str, Any] = {}
+        measuring = row.state in (JobState.RUNNING, JobState.PAUSED, JobState.SUSPENDED)
+        if (measuring or row.state is JobState.RECONSTRUCTING) and row.kind != "calibration":
+            # The whole job's time, not only the measuring's (docs/api.md "Time").
+            est = self._finishing_estimate()
+            build = BASIS_BUILD_S if self.basis.build_needed() else None
+            finishing_for = None
+            if row.state is JobState.RECONSTRUCTING:
+                finishing_for = (self.worker.activity_seconds()
+                                 if self.worker.current_job == job_id else None) or 0.0
+            times = {"basis_build_s": build, "reconstruction_s": est.seconds,
+                     "reconstruction_estimate": est.source,
+                     "time_left_s": time_left(eta, build, est.seconds, finishing_for)}
         return JobDetail(**base, plan=row.plan, eta_s=eta, eta_max_s=eta_max,
-                         activity=activity, activity_fraction=fraction, queue_position=qpos,
-                         result_path=row.result_path, result=row.summary, rig=row.rig)
+                         activity=activity, activity_fraction=fraction,
+                         round=p.round if p is not None else None, **times,
+                         queue_position=qpos, result_path=row.result_path, result=row.summary,
+                         rig=row.rig)
 
     def readings(self, job_id: int, after_angle: int = -1) -> list[ReadingRow]:
         """The readings stored so far for a job (angles with index > ``after_angle``).

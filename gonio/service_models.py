@@ -74,15 +74,19 @@ class JobInfo(BaseModel):
     finished: float | None
     done_angles: int
     total_angles: int
+    max_angles: int | None = Field(
+        default=None, description="adaptive plans: most stage angles the job can measure (the "
+        "dry run's max_angles); total_angles grows round by round, so progress is done_angles "
+        "of max_angles, which only rises. Null for other plans (total_angles is fixed)")
     reason: str | None
 
     @classmethod
-    def from_row(cls, row: JobRow) -> JobInfo:
+    def from_row(cls, row: JobRow, max_angles: int | None = None) -> JobInfo:
         return cls(
             id=row.id, state=row.state, kind=row.kind, specimen=row.specimen,
             priority=row.priority, created=row.created, started=row.started,
             finished=row.finished, done_angles=row.done_angles, total_angles=row.total_angles,
-            reason=row.reason,
+            max_angles=max_angles, reason=row.reason,
         )
 
 
@@ -99,6 +103,23 @@ class JobDetail(JobInfo):
                                  "waiting for beyond measuring (e.g. the first basis build)")
     activity_fraction: float | None = Field(default=None, description="fraction of the "
                                             "activity done, when known")
+    round: int | None = Field(default=None, description="adaptive plans: the round being "
+                              "measured, 0 = the first angles (as the progress events' round)")
+    basis_build_s: float | None = Field(
+        default=None, description="active jobs whose finishing will build the default basis "
+        "first (the shipped one is stale): about this many seconds more (the dry run's "
+        "basis_build_s); null when the basis loads in seconds")
+    reconstruction_s: float | None = Field(
+        default=None, description="active jobs: estimated seconds of finishing (basis load, "
+        "reconstruction, export fits, the result file), the median measured 'seconds' of the "
+        "last 3 completed scans of this daemon, or 6 s (the default scan's, measured) before "
+        "any; see reconstruction_estimate")
+    reconstruction_estimate: str | None = Field(
+        default=None, description="what reconstruction_s rests on, in words")
+    time_left_s: float | None = Field(
+        default=None, description="active jobs: estimated seconds to the job's end, an "
+        "estimate: eta_s + basis_build_s + reconstruction_s while measuring; while "
+        "reconstructing, what is left of basis_build_s + reconstruction_s")
     queue_position: int | None = Field(description="0 = next to run; null unless queued")
     result_path: str | None
     result: dict[str, Any] | None = Field(description="summary: metrics, readings, paths")

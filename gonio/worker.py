@@ -603,6 +603,10 @@ class Worker:
         self.activity = what
         self._activity_since = time.monotonic()
 
+    def activity_seconds(self) -> float | None:
+        """How long the current activity (:attr:`activity`) has lasted, seconds; None if none."""
+        return None if self.activity is None else time.monotonic() - self._activity_since
+
     def activity_report(self) -> tuple[str, float | None] | None:
         """What the current job waits for, in words, and the fraction done if known.
 
