@@ -71,7 +71,7 @@ def test_bad_colour_keys_say_what_to_fix(example: dict[str, Any],  # noqa: F811
 def test_a_root_polynomial_calibration_reaches_the_result(example: dict[str, Any],  # noqa: F811
                                                           tmp_path: Path) -> None:
     s1 = example["sensors"][1]
-    rp = [row + [1.0, 2.0, 3.0] for row in MATRIX]
+    rp = [[*row, 1.0, 2.0, 3.0] for row in MATRIX]
     s1["colour_calibration"] = {"matrix": rp, "method": "root-polynomial"}
     cfg = load_rig_config(dump_rig_config(parse_rig_config(example), tmp_path / "rig.toml"))
     cal = colour_source(cfg.model_dump_json(), [s1["name"]])["calibration"]
