@@ -26,6 +26,10 @@ median ΔE00 <= 2.0. The calibration's form is chosen on the chart alone (``fit_
 default: the form whose patches are best predicted by fits without them); the linear 3 x 3
 matrix is reported beside it.
 
+``--add-pair INCIDENCE,ASPECULAR`` (repeatable) adds an in-plane pair at that instrument
+geometry (degrees, e.g. ``15,-5``) to the designed ones: what reading the specular peak near
+normal incidence does for the near-specular geometries (docs/colour.md).
+
 Reconstruction time: wall time of the 31-band call (the machine may be busy) and its CPU time
 (the process' own, which other users' load does not inflate).
 """
@@ -47,14 +51,14 @@ from gonio.brdf.colour.conditions import (
     spectra_to_xyz,
     xyz_to_lab,
 )
-from gonio.brdf.colour.instruments import geometries
+from gonio.brdf.colour.instruments import Geometry, geometries
 from gonio.brdf.colour.report import colour_report
 from gonio.brdf.colour.spectral import SpectralBands
 from gonio.brdf.design.constraints import RigConstraints
 from gonio.brdf.design.pairs import design_pairs
 from gonio.brdf.materials.library import cache_root
 from gonio.brdf.reconstruction.basis import default_basis
-from gonio.brdf.reconstruction.reconstruct import reconstruct
+from gonio.brdf.reconstruction.reconstruct import pair_cells, reconstruct
 from gonio.brdf.reconstruction.samples import (
     DEFAULT_SPAN_DEG,
     NoiseModel,
@@ -127,9 +131,18 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--materials", type=int, default=len(SPECTRAL_MATERIALS))
     ap.add_argument("--cache", type=Path, default=cache_root() / "bench-colour",
                     help="where the designed pairs are kept between runs")
+    ap.add_argument("--add-pair", action="append", default=[], metavar="INC,ASP",
+                    help="add an in-plane pair at this incidence and aspecular angle (deg)")
     args = ap.parse_args(argv)
     basis = default_basis()
     cells, ph = design(basis, args.cache)
+    for text in args.add_pair:
+        inc, asp = (float(x) for x in text.split(","))
+        light, view = Geometry("added", inc, asp).directions()
+        c, p = pair_cells(light[None], view[None])
+        cells, ph = np.concatenate([cells, c]), np.concatenate([ph, p])
+        print(f"added pair {inc:g}as{asp:g}: cell (th, td, pd) = "
+              f"{np.round(np.rad2deg(c[0]), 2).tolist()} deg")
     alpha = uniform_stage_angles(R, span=np.deg2rad(DEFAULT_SPAN_DEG))
     chart = rgb_chart()
     xyz = chart.reference_xyz(COND)
@@ -197,7 +210,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"RGB sensor with chart calibration ({matrix.method}), MA98: median dE00 "  # type: ignore[attr-defined]
           f"{np.median(r):.2f} (goal <= 2.0), worst {r.max():.2f}; with the linear matrix: "
           f"median {np.median(lin):.2f}, worst {lin.max():.2f}")
-    print(f"\n{'reconstruction, 31 bands, n=' + str(N_PAIRS) + ', r=' + str(R):<34} "
+    print(f"\n{'reconstruction, 31 bands, n=' + str(len(cells)) + ', r=' + str(R):<34} "
           f"{'median':>7} {'max':>7}")
     print(f"{'wall s (goal < 0.5)':<34} {np.median(seconds):7.3f} {max(seconds):7.3f}")
     print(f"{'cpu s':<34} {np.median(cpu):7.3f} {max(cpu):7.3f}")
