@@ -11,6 +11,7 @@ from gonio.brdf.reconstruction.reconstruct import reconstruct
 from gonio.engine import ScanEngine
 from gonio.jobstates import JobState
 from gonio.plans.models import AdaptivePlan, ExposureSettings
+from gonio.plans.rounds import RoundRequest
 from gonio.plans.validation import plan_pairs
 from gonio.refinement import PosteriorRefiner
 from gonio.rigdescription import RigDescription
@@ -178,7 +179,7 @@ def test_the_refiner_takes_sensors_of_any_channel_count() -> None:
     """A one-channel sensor (a photodiode) with calibration factors: the posterior rule plans
     (it must not fail into V&F's rule), within the plan's half turn, midpoints of its gaps."""
     refiner, angles, _iso, swing = _refiner_inputs(1)
-    got = refiner(angles, swing, 12, 1.0, 1e-9, (0.0, 180.0))
+    got = refiner.next_angles(RoundRequest(angles, swing, 12, 1.0, 1e-9, (0.0, 180.0)))
     assert refiner.last is not None
     assert got and set(got) <= {22.5, 67.5, 112.5, 157.5}
 
@@ -188,8 +189,8 @@ def test_a_new_angle_buys_more_where_the_readings_swing_with_it() -> None:
     the stage angle than of one whose readings do not (one channel and three)."""
     for channels in (1, 3):
         refiner, angles, iso, swing = _refiner_inputs(channels)
-        refiner(angles, iso, 12, 1.0, 1e-12, (0.0, 180.0))
+        refiner.next_angles(RoundRequest(angles, iso, 12, 1.0, 1e-12, (0.0, 180.0)))
         assert refiner.last is not None
         flat = refiner.last.drops[0]
-        refiner(angles, swing, 12, 1.0, 1e-12, (0.0, 180.0))
+        refiner.next_angles(RoundRequest(angles, swing, 12, 1.0, 1e-12, (0.0, 180.0)))
         assert refiner.last.drops[0] > 2 * flat
