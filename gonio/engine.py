@@ -41,6 +41,7 @@ The engine sees only :mod:`gonio.hal` (import-linter enforces it).
 from __future__ import annotations
 
 import asyncio
+import bisect
 import contextlib
 import threading
 import time
@@ -372,10 +373,14 @@ class ScanEngine:
         self._steps.extend(StepRow(k, r, a, p, False, None) for k, r, a, p in rows)
 
     def _step_at(self, angle_index: int) -> StepRow:
-        for s in self._steps:
-            if s.angle_index == angle_index:
-                return s
-        raise KeyError(angle_index)
+        return self._steps[self._where(angle_index)]
+
+    def _where(self, angle_index: int) -> int:
+        """Position of step ``angle_index`` in :attr:`_steps` (sorted by angle index)."""
+        i = bisect.bisect_left(self._steps, angle_index, key=lambda s: s.angle_index)
+        if i == len(self._steps) or self._steps[i].angle_index != angle_index:
+            raise KeyError(angle_index)
+        return i
 
     async def _stage_position(self) -> float:
         """The stage position for planning a route, with the same fault handling as an angle."""
@@ -425,8 +430,7 @@ class ScanEngine:
                  "eta_s": p.eta_s, "round": p.round},
             )
             # Committed: the store and the engine's copy now hold the same.
-            self._steps = [done if s.angle_index == step.angle_index else s
-                           for s in self._steps]
+            self._steps[self._where(step.angle_index)] = done
             self._readings[step.angle_index] = readings
             return
 
