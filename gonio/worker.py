@@ -59,6 +59,10 @@ if TYPE_CHECKING:
 
 log = logging.getLogger("gonio.worker")
 
+KEEP_CHECKED = 64
+"""Checked plans of submitted jobs the worker keeps before it drops those of jobs that are no
+longer queued (:meth:`Worker.take_checked`)."""
+
 QUEUE_HOLD = "queue"
 """Name of the queue hold in the store's ``holds`` table."""
 GATE_POLL_S = 1.0
@@ -455,9 +459,19 @@ class Worker:
 
     def take_checked(self, job_id: int, checked: CheckedPlan) -> None:
         """Keep the plan :meth:`gonio.service.GonioService.submit` checked for job
-        ``job_id``: the job's start uses it instead of checking the stored plan again."""
+        ``job_id``: the job's start uses it instead of checking the stored plan again.
+
+        Jobs cancelled or removed before they start leave theirs behind: past
+        :data:`KEEP_CHECKED` kept plans, those of jobs no longer queued are dropped.
+        """
         with self._arc_lock:
             self._checked[job_id] = checked
+            if len(self._checked) <= KEEP_CHECKED:
+                return
+        waiting = {row.id for row in self.store.queue()}
+        with self._arc_lock:
+            for k in [k for k in self._checked if k not in waiting and k != job_id]:
+                del self._checked[k]
 
     def _checked_plan(self, job: JobRow) -> CheckedPlan:
         """The job's plan, checked on this rig: as submitted in this process, else parsed
