@@ -43,6 +43,7 @@ from gonio.calibration import (
     save_calibration,
     sensor_full_scale,
 )
+from gonio.plans.checked import CheckedPlan
 from gonio.plans.dryrun import BasisSymmetry, arc_warning
 from gonio.plans.models import AnyPlan, CalibrationPlan, PlanError
 from gonio.plans.validation import plan_pairs
@@ -112,10 +113,12 @@ class FinishingStopped(Exception):
     """Finishing saw its :attr:`Finishing.stop` set and stopped without writing anything."""
 
 
-def finish_job(job_id: int, plan: AnyPlan, how: Finishing) -> dict[str, Any]:
+def finish_job(job_id: int, plan: AnyPlan | CheckedPlan, how: Finishing) -> dict[str, Any]:
     """Turn job ``job_id``'s readings into its result file; returns the job's summary.
 
-    Blocking (reconstruction and fits take seconds): the worker runs it in a thread.
+    Blocking (reconstruction and fits take seconds): the worker runs it in a thread. ``plan``
+    is the job's plan as the worker checked it (its pairs are not derived again), or the
+    stored plan as it is (a rebuild: its pairs are those of the rig it ran on).
 
     Raises
     ------
@@ -130,7 +133,10 @@ def finish_job(job_id: int, plan: AnyPlan, how: Finishing) -> dict[str, Any]:
     t0 = time.perf_counter()
     desc = how.desc
     job = how.store.get_job(job_id)
-    pairs = plan_pairs(plan, desc)
+    if isinstance(plan, CheckedPlan):
+        pairs, plan = list(plan.pairs), plan.plan
+    else:
+        pairs = plan_pairs(plan, desc)
     light_dirs, sensor_dirs = desc.pair_directions(pairs)
     channel_sets = {desc.sensor(p.sensor).channels for p in pairs}
     if len(channel_sets) != 1:

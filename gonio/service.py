@@ -41,6 +41,7 @@ from gonio.event_hub import EventHub
 from gonio.jobstates import ACTIVE_STATES, IllegalTransition, JobState, check_action
 from gonio.maintenance import LOCK_FILE_NAME, MaintenanceLock
 from gonio.paths import scan_data_dir
+from gonio.plans.checked import CheckedPlan, check_plan
 from gonio.plans.dryrun import BASIS_BUILD_S, DryRun, arc_may_apply, dry_run
 from gonio.plans.models import (
     DEFAULT_SPAN_DEG,
@@ -378,8 +379,13 @@ class GonioService:
         return await self.worker.run_job(self._row(job_id))
 
     # ------------------------------------------------------------------ jobs
-    def submit(self, request: JobRequest | dict[str, Any]) -> JobInfo:
-        """Validate a request against the rig and queue it. Raises :class:`PlanError`."""
+    def submit(self, request: JobRequest | dict[str, Any],
+               checked: CheckedPlan | None = None) -> JobInfo:
+        """Validate a request against the rig and queue it. Raises :class:`PlanError`.
+
+        ``checked``: the request's plan as the caller already checked it on this rig
+        (:meth:`check`), so it is not checked again; the worker starts the job with it.
+        """
         if not isinstance(request, JobRequest):
             from pydantic import ValidationError
 
@@ -393,9 +399,10 @@ class GonioService:
         # takes its readings, only the other half turn rests on the prior. It goes in the job's
         # own events instead, so whoever looks at the job later sees it.
         symmetry = self.basis.symmetry() if arc_may_apply(plan) else None
-        dry_run(plan, self.desc, basis=symmetry)
+        checked = check_plan(checked if checked is not None and checked.plan == plan else plan,
+                             self.desc)
         if plan.finishing != "calibration":
-            self._check_calibration_covers(plan)
+            self._check_calibration_covers(checked)
         full = self.disk_full
         if full is not None:
             # Queued now, it would measure for minutes and then fail writing its result.
@@ -404,6 +411,7 @@ class GonioService:
             kind=plan.kind, specimen=plan.specimen, plan=plan.model_dump(mode="json"),
             rig=self.desc.model_dump(mode="json"), priority=request.priority,
         )
+        self.worker.take_checked(row.id, checked)
         self.basis.note_arc(self.store, row.id, plan, symmetry)
         self.worker.wake()
         return JobInfo.from_row(row)
@@ -430,14 +438,14 @@ class GonioService:
                 "run a calibration job, or send accept_uncalibrated=true to measure in sensor "
                 "units all the same")
 
-    def _check_calibration_covers(self, plan: AnyPlan) -> None:
+    def _check_calibration_covers(self, checked: CheckedPlan) -> None:
         """Refuse, before anything moves, a plan the calibration in effect covers only in part
         (its result would mix sensor units and 1/sr). Raises :class:`PlanError` naming the
         pairs, or :class:`gonio.calibration.CalibrationError` for a damaged calibration."""
         from gonio.calibration import PartialCalibration
 
         try:
-            self.calibration().check_covers(plan_pairs(plan, self.desc), "this plan")
+            self.calibration().check_covers(checked.pairs, "this plan")
         except PartialCalibration as exc:
             raise PlanError(str(exc)) from None
 
@@ -623,12 +631,19 @@ class GonioService:
         """Log an event of the daemon (e.g. the maintenance lock) for every subscriber."""
         return self.events.record(type_, data, job_id)
 
-    def dry_run(self, plan: AnyPlan | dict[str, Any]) -> DryRun:
+    def check(self, plan: AnyPlan) -> CheckedPlan:
+        """``plan`` checked on this rig (what :meth:`submit` checks, minus the calibration
+        and the disk); hand the result to :meth:`dry_run` and :meth:`submit` so neither checks
+        it again. Raises :class:`PlanError`."""
+        return check_plan(plan, self.desc)
+
+    def dry_run(self, plan: AnyPlan | CheckedPlan | dict[str, Any]) -> DryRun:
         """Check and time a plan from the stage's last known position (else 0 deg, said so)."""
-        p = plan if isinstance(plan, BaseModel) else parse_plan(plan)
+        p = plan if isinstance(plan, BaseModel | CheckedPlan) else parse_plan(plan)
+        kind = p.plan if isinstance(p, CheckedPlan) else p
         return dry_run(p, self.desc, self.stage_deg,
                        basis_ready=not self.basis.build_needed(),
-                       basis=self.basis.symmetry() if arc_may_apply(p) else None)
+                       basis=self.basis.symmetry() if arc_may_apply(kind) else None)
 
     @property
     def disk_full(self) -> str | None:

@@ -49,16 +49,21 @@ from gonio.diskspace import (
 from gonio.engine import Progress, ScanEngine
 from gonio.finishing import Finishing, FinishingStopped, finish_job
 from gonio.jobstates import FINISHED_STATES, IllegalTransition, JobState
+from gonio.plans.checked import CheckedPlan, check_plan
 from gonio.plans.dryrun import BasisSymmetry, arc_may_apply
 from gonio.plans.models import AdaptivePlan, AnyPlan, PlanError, parse_stored_plan
-from gonio.plans.validation import plan_pairs, validate_plan
 from gonio.rigdescription import RigDescription
 from gonio.store import JobRow, JobStore, NotFound
 
 if TYPE_CHECKING:  # the numerics load with the first basis
     from gonio.brdf.reconstruction.basis import Basis
+    from gonio.refinement import PosteriorRefiner
 
 log = logging.getLogger("gonio.worker")
+
+KEEP_CHECKED = 64
+"""Checked plans of submitted jobs the worker keeps before it drops those of jobs that are no
+longer queued (:meth:`Worker.take_checked`)."""
 
 QUEUE_HOLD = "queue"
 """Name of the queue hold in the store's ``holds`` table."""
@@ -139,6 +144,9 @@ class Worker:
         self.activity: str | None = None
         """What the current job waits for beyond measuring (e.g. the basis), or None."""
         self._activity_since = 0.0
+        # Plans checked at their submission in this process, by job id (taken at the start).
+        self._checked: dict[int, CheckedPlan] = {}
+        self._checked_lock = threading.Lock()  # submission (API threads) and the loop
         self.disk_full: str | None = None
         """Why no job starts now: the disk filled (see :meth:`note_disk_full`), or None."""
         # What the store could not record while the disk was full, done once it has room.
@@ -383,18 +391,43 @@ class Worker:
             self._recon_task = None
             heap.trim()  # what the job's arrays left in the arenas (gonio/heap.py)
 
+    def take_checked(self, job_id: int, checked: CheckedPlan) -> None:
+        """Keep the plan :meth:`gonio.service.GonioService.submit` checked for job
+        ``job_id``: the job's start uses it instead of checking the stored plan again.
+
+        Jobs cancelled or removed before they start leave theirs behind: past
+        :data:`KEEP_CHECKED` kept plans, those of jobs no longer queued are dropped.
+        """
+        with self._checked_lock:
+            self._checked[job_id] = checked
+            if len(self._checked) <= KEEP_CHECKED:
+                return
+        waiting = {row.id for row in self.store.queue()}
+        with self._checked_lock:
+            for k in [k for k in self._checked if k not in waiting and k != job_id]:
+                del self._checked[k]
+
+    def _checked_plan(self, job: JobRow) -> CheckedPlan:
+        """The job's plan, checked on this rig: as submitted in this process, else parsed
+        from the store and checked (a restart, or a rig changed since). Raises PlanError."""
+        with self._checked_lock:
+            checked = self._checked.pop(job.id, None)
+        if checked is not None and checked.rig == self.desc:
+            return checked
+        return check_plan(parse_stored_plan(job.plan), self.desc)
+
     async def _run_job(self, job: JobRow) -> JobState:
         try:
-            plan = parse_stored_plan(job.plan)
-            validate_plan(plan, self.desc)
+            checked = self._checked_plan(job)
         except PlanError as exc:
             return self._fail(job, f"plan no longer valid on this rig: {exc}")
+        plan = checked.plan
         if job.state is not JobState.RECONSTRUCTING and plan.finishing != "calibration":
             # Checked at submission too; the calibration may have changed since (a new
             # calibration job, a file edited by hand). A result calibrated in part, or with a
             # damaged file, is refused before anything moves.
             try:
-                self.calibration().check_covers(plan_pairs(plan, self.desc), f"job {job.id}")
+                self.calibration().check_covers(checked.pairs, f"job {job.id}")
             except CalibrationError as exc:
                 return self._fail(job, f"not started: {exc}", plan)
         basis: Basis | None = None  # loaded before measuring when the plan needs it
@@ -404,14 +437,14 @@ class Worker:
                 # The adaptive rule needs the basis after the first round: load (or build) it
                 # now, before anything moves, so the stage never waits mid-scan for it.
                 basis = await self._basis_before_measuring(job)
-                refiner = self._refiner(plan, basis)
+                refiner = self._refiner(checked, basis)
             # A half-turn plan and a basis without the twofold symmetry: said before the first
             # reading whenever the basis is at hand (loaded above, or built). The file is read
             # once per version, mostly already by the submission's check.
             if arc_may_apply(plan):  # only then is the basis file worth a look
                 self.basis.note_arc(self.store, job.id, plan, BasisSymmetry.of(basis)
                                     if basis is not None else self.basis.symmetry())
-            engine = self._hand_to_engine(job, plan, refiner)
+            engine = self._hand_to_engine(job, checked, refiner)
             if not isinstance(engine, ScanEngine):
                 return engine
             if self.on_job_start is not None:
@@ -447,7 +480,8 @@ class Worker:
             # From here an abort stops the finishing (:meth:`abort_reconstruction`).
             how = self._finishing(basis)
             self._finish_stop = how.stop
-        self._recon_task = asyncio.create_task(asyncio.to_thread(finish_job, job.id, plan, how))
+        self._recon_task = asyncio.create_task(
+            asyncio.to_thread(finish_job, job.id, checked, how))
         try:
             summary = await self._recon_task
         except asyncio.CancelledError:
@@ -497,15 +531,14 @@ class Worker:
             self.hold(f"job {job.id} failed and asked to stop the queue")
         return JobState.FAILED
 
-    def _refiner(self, plan: AnyPlan, basis: Basis | None) -> Any:
+    def _refiner(self, checked: CheckedPlan, basis: Basis | None) -> PosteriorRefiner | None:
         """The posterior rule's bridge for adaptive plans that use it (docs/science.md 7.3);
         None without a basis (the engine then uses V&F's rule and says so)."""
-        if basis is None or not needs_basis_to_measure(plan):
+        if basis is None or not needs_basis_to_measure(checked.plan):
             return None
         from gonio.refinement import PosteriorRefiner
 
-        return PosteriorRefiner(lambda: basis, self.desc, plan_pairs(plan, self.desc),
-                                self.calibration())
+        return PosteriorRefiner(lambda: basis, self.desc, checked.pairs, self.calibration())
 
     # ------------------------------------------------------------------ the basis, early
     def _start_prewarm(self) -> None:
@@ -556,8 +589,8 @@ class Worker:
                                 {"seconds": round(time.monotonic() - t0, 2)})
         return basis
 
-    def _hand_to_engine(self, job: JobRow, plan: AnyPlan, refiner: Any
-                        ) -> ScanEngine | JobState:
+    def _hand_to_engine(self, job: JobRow, plan: CheckedPlan,
+                        refiner: PosteriorRefiner | None) -> ScanEngine | JobState:
         """The engine that will measure ``job``, or the state to report when the job is not
         to be measured after all.
 

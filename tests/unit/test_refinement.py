@@ -7,6 +7,7 @@ import numpy as np
 
 from gonio.calibration import Calibration, PairCalibration
 from gonio.plans.models import AdaptivePlan
+from gonio.plans.rounds import RoundRequest
 from gonio.plans.validation import plan_pairs
 from gonio.refinement import PosteriorRefiner
 from gonio.rigdescription import RigDescription
@@ -37,7 +38,7 @@ def test_the_refiner_takes_sensors_of_any_channel_count() -> None:
     """A one-channel sensor (a photodiode) with calibration factors: the posterior rule plans
     (it must not fail into V&F's rule), within the plan's half turn, midpoints of its gaps."""
     refiner, angles, _iso, swing = _refiner_inputs(1)
-    got = refiner(angles, swing, 12, 1.0, 1e-9, (0.0, 180.0))
+    got = refiner.next_angles(RoundRequest(angles, swing, 12, 1.0, 1e-9, (0.0, 180.0)))
     assert refiner.last is not None
     assert got and set(got) <= {22.5, 67.5, 112.5, 157.5}
 
@@ -47,10 +48,10 @@ def test_a_new_angle_buys_more_where_the_readings_swing_with_it() -> None:
     the stage angle than of one whose readings do not (one channel and three)."""
     for channels in (1, 3):
         refiner, angles, iso, swing = _refiner_inputs(channels)
-        refiner(angles, iso, 12, 1.0, 1e-12, (0.0, 180.0))
+        refiner.next_angles(RoundRequest(angles, iso, 12, 1.0, 1e-12, (0.0, 180.0)))
         assert refiner.last is not None
         flat = refiner.last.drops[0]
-        refiner(angles, swing, 12, 1.0, 1e-12, (0.0, 180.0))
+        refiner.next_angles(RoundRequest(angles, swing, 12, 1.0, 1e-12, (0.0, 180.0)))
         assert refiner.last.drops[0] > 2 * flat
 
 
@@ -66,8 +67,8 @@ def test_the_basis_is_asked_for_once_and_only_when_needed() -> None:
     refiner = PosteriorRefiner(provider, desc, pairs)
     assert calls == [] and refiner.describe() == {}
     _, angles, _, swing = _refiner_inputs(3)
-    refiner(angles, swing, 12, 1.0, 1e-9, (0.0, 180.0))
-    refiner(angles, swing, 12, 1.0, 1e-9, (0.0, 180.0))
+    refiner.next_angles(RoundRequest(angles, swing, 12, 1.0, 1e-9, (0.0, 180.0)))
+    refiner.next_angles(RoundRequest(angles, swing, 12, 1.0, 1e-9, (0.0, 180.0)))
     assert calls == [1]
     said = refiner.describe()
     assert {"rho", "offset", "expected_log_rmse"} <= set(said)
@@ -79,22 +80,32 @@ def test_the_calibration_factors_scale_the_counts_before_the_rule() -> None:
     calibrated, angles, _, swing = _refiner_inputs(3)
     desc = RigDescription.from_rig(MemRig())
     plain = PosteriorRefiner(lambda: BASIS, desc, calibrated.pairs)
-    got = calibrated(angles, swing, 12, 1.0, 1e-12, (0.0, 180.0))
-    assert plain(angles, 0.5 * swing, 12, 1.0, 1e-12, (0.0, 180.0)) == got
+    got = calibrated.next_angles(RoundRequest(angles, swing, 12, 1.0, 1e-12, (0.0, 180.0)))
+    halved = RoundRequest(angles, 0.5 * swing, 12, 1.0, 1e-12, (0.0, 180.0))
+    assert plain.next_angles(halved) == got
     assert plain.describe() == calibrated.describe()
-    assert plain(angles, swing, 12, 1.0, 1e-12, (0.0, 180.0)) != got or \
-        plain.describe() != calibrated.describe()
+    whole = RoundRequest(angles, swing, 12, 1.0, 1e-12, (0.0, 180.0))
+    assert plain.next_angles(whole) != got or plain.describe() != calibrated.describe()
 
 
 def test_no_more_angles_are_planned_than_the_budget_allows() -> None:
     """``budget_angles`` is the most angles to add (four gaps would take four)."""
     refiner, angles, _, swing = _refiner_inputs(1)
-    assert len(refiner(angles, swing, 2, 1.0, 1e-12, (0.0, 180.0))) == 2
-    assert refiner(angles, swing, 0, 1.0, 1e-12, (0.0, 180.0)) == []
+
+    def ask(budget: int, step: float = 1.0) -> list[float]:
+        return refiner.next_angles(RoundRequest(angles, swing, budget, step, 1e-12,
+                                                (0.0, 180.0)))
+
+    assert len(ask(2)) == 2
+    assert ask(0) == []
 
 
 def test_gaps_narrower_than_twice_the_minimum_step_are_not_split() -> None:
     """Gaps of 45 deg: with min_step_deg 30 no midpoint is 30 deg from its neighbours."""
     refiner, angles, _, swing = _refiner_inputs(1)
-    assert refiner(angles, swing, 12, 30.0, 1e-12, (0.0, 180.0)) == []
-    assert refiner(angles, swing, 12, 20.0, 1e-12, (0.0, 180.0))
+
+    def ask(step: float) -> list[float]:
+        return refiner.next_angles(RoundRequest(angles, swing, 12, step, 1e-12, (0.0, 180.0)))
+
+    assert ask(30.0) == []
+    assert ask(20.0)

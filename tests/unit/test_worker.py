@@ -251,3 +251,39 @@ def test_a_job_the_calibration_in_effect_covers_in_part_fails_before_anything_mo
     assert row.reason is not None and row.reason.startswith("not started: ")
     assert "(edited by hand) has no factors for" in row.reason
     assert rig.mstage.moves == [] and store.reading_count(job) == 0
+
+
+def test_checked_plans_of_jobs_that_never_start_are_dropped(tmp_path: Path) -> None:
+    """The worker keeps each submitted job's checked plan until the job starts; those of
+    jobs cancelled before they start are dropped once it keeps more than KEEP_CHECKED, and
+    a queued job's stays (it starts with it)."""
+    from gonio.plans.checked import check_plan
+    from gonio.plans.models import UniformPlan
+    from gonio.worker import KEEP_CHECKED
+
+    rig = MemRig()
+    desc = RigDescription.from_rig(rig)
+    store = JobStore(tmp_path / "jobs.sqlite")
+
+    async def get_rig() -> MemRig:
+        return rig
+
+    worker = Worker(store, get_rig, desc, data_dir=tmp_path)
+    checked = check_plan(UniformPlan(rotations=2), desc)
+    ids = []
+    for _ in range(KEEP_CHECKED + 1):
+        row = store.create_job(kind="uniform", specimen="s",
+                               plan=checked.plan.model_dump(mode="json"),
+                               rig=desc.model_dump(mode="json"))
+        worker.take_checked(row.id, checked)
+        ids.append(row.id)
+    kept = ids[-1]
+    for job_id in ids[:-2]:
+        store.set_state(job_id, JobState.ABORTED, reason="cancelled")  # as a cancel does
+    extra = store.create_job(kind="uniform", specimen="s",
+                             plan=checked.plan.model_dump(mode="json"),
+                             rig=desc.model_dump(mode="json"))
+    worker.take_checked(extra.id, checked)
+    assert set(worker._checked) == {ids[-2], kept, extra.id}
+    assert worker._checked_plan(store.get_job(kept)) is checked
+    assert kept not in worker._checked
