@@ -268,7 +268,7 @@ def test_checked_plans_of_jobs_that_never_start_are_dropped(tmp_path: Path) -> N
     async def get_rig() -> MemRig:
         return rig
 
-    worker = Worker(store, get_rig, desc, data_dir=tmp_path)
+    worker = Worker(store, get_rig, desc, data_dir=tmp_path, basis=BasisSupply(lambda: BASIS))
     checked = check_plan(UniformPlan(rotations=2), desc)
     ids = []
     for _ in range(KEEP_CHECKED + 1):
