@@ -144,6 +144,13 @@ def headline_error(metrics: dict[str, Any]) -> dict[str, Any] | None:
         out["text"] += " (OUTSIDE PHYSICAL BOUNDS)"
         out["meaning"] = f"Warning: {bounds}. {out['meaning']}"
         out["physical_bounds"] = bounds
+    misfit = metrics.get("basis_misfit")
+    if out is not None and isinstance(misfit, str):
+        # The readings carry structure the basis cannot hold: the estimate is a floor at best,
+        # and the headline says so before anyone trusts it.
+        out["text"] += " (BASIS MISFIT)"
+        out["meaning"] = f"Warning: {misfit}. {out['meaning']}"
+        out["basis_misfit"] = misfit
     return out
 
 

@@ -204,6 +204,17 @@ def finish_job(job_id: int, plan: AnyPlan, how: Finishing) -> dict[str, Any]:
     }
     if "prior_rho" in rec.settings:
         metrics["prior_rho"] = rec.settings["prior_rho"]  # 1: the library prior as it is
+    if rec.misfit is not None:
+        # How far the fit misses its own readings against their noise; when the basis cannot
+        # hold them, predicted_log_rmse was widened and the result says why (science.md 7.1).
+        metrics.update(rec.misfit.as_dict(),
+                       predicted_log_rmse_unwidened=_finite_or_none(
+                           rec.predicted_log_rmse_unwidened))
+    misfit_message = rec.misfit_warning
+    if misfit_message is not None:
+        metrics["basis_misfit"] = misfit_message
+        provenance["basis_misfit"] = misfit_message
+        log.info("job %d: %s", job_id, misfit_message)
     # A reconstruction outside physical bounds (albedo far above 1, or orders of magnitude
     # above every reading) completes with a warning rather than failing: the readings and the
     # table where the pairs look are still the measurement, a rebuild with another basis can

@@ -172,4 +172,6 @@ def export_provenance(attrs: Mapping[str, Any], metrics: Mapping[str, Any],
         out["warnings"].append(str(provenance["arc_warning"]))
     if provenance.get("physical_bounds"):
         out["warnings"].append(str(provenance["physical_bounds"]))
+    if provenance.get("basis_misfit"):
+        out["warnings"].append(str(provenance["basis_misfit"]))
     return out
