@@ -147,7 +147,8 @@ def table(rows: list[dict[str, Any]]) -> None:
     print("| plan | calibration | validation | validation measured | validation asymmetric "
           "| validation untilted | all |")
     print("|---" * 7 + "|")
-    groups = (("calibration", lambda r: r["cal"]), ("validation", lambda r: not r["cal"]),
+    groups: tuple[tuple[str, Any], ...] = (
+              ("calibration", lambda r: r["cal"]), ("validation", lambda r: not r["cal"]),
               ("val measured", lambda r: not r["cal"] and r["kind"] == "measured"),
               ("val asymmetric", lambda r: r["kind"] == "asymmetric"),
               ("val untilted", lambda r: r["kind"] == "untilted"), ("all", lambda r: True))
@@ -167,6 +168,20 @@ def table(rows: list[dict[str, Any]]) -> None:
 
             cells.append(f"{count('predicted')} -> {count('widened')}")
         print(f"| {label} | " + " | ".join(cells) + " |")
+    print("\nscans flagged basis_misfit (of the scans), per plan and set:\n")
+    print("| plan | " + " | ".join(g for g, _ in groups) + " |")
+    print("|---" * (1 + len(groups)) + "|")
+    for label in [p[0] for p in PLANS] + ["every plan"]:
+        sel = [r for r in rows if label == "every plan" or r["plan"] == label]
+        print(f"| {label} | " + " | ".join(
+            f"{sum(bool(r['reason']) for r in sel if g(r))}/{sum(1 for r in sel if g(r))}"
+            for _, g in groups) + " |")
+    low = [r for r in rows if r["widened"] / r["truth"] < 0.5]
+    print(f"\nmore than 2x too low after the widening: {len(low)} scans, "
+          f"{sum(bool(r['reason']) for r in low)} of them flagged; their misfit chi2 "
+          f"{min((r['misfit_chi2'] for r in low), default=float('nan')):.3g}-"
+          f"{max((r['misfit_chi2'] for r in low), default=float('nan')):.3g}; plans "
+          f"{sorted({r['plan'] for r in low})}")
 
 
 def main(argv: list[str] | None = None) -> int:
