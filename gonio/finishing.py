@@ -184,7 +184,7 @@ def finish_job(job_id: int, plan: AnyPlan, how: Finishing) -> dict[str, Any]:
     rec = reconstruct(basis, grid.cells, grid.ph_lab, grid.stage_angles,
                       np.maximum(grid.values, 0.0), channels=channels, name=job.specimen)
     colour = _colour(rec, how, [p.sensor for p in pairs], bool(cal.pairs))
-    metrics = {
+    metrics: dict[str, Any] = {
         "rel_sample_error": rec.rel_sample_error,
         "estimated_error": rec.estimated_error,
         # The reported error bar: calibrated leave-one-pair-out error (science notebook 4.1);
@@ -206,7 +206,7 @@ def finish_job(job_id: int, plan: AnyPlan, how: Finishing) -> dict[str, Any]:
         metrics["prior_rho"] = rec.settings["prior_rho"]  # 1: the library prior as it is
     if rec.misfit is not None:
         # How far the fit misses its own readings against their noise; when the basis cannot
-        # hold them, predicted_log_rmse was widened and the result says why (science.md 7.1).
+        # hold them, predicted_log_rmse was widened and the result says why (science.md 7.1.1).
         metrics.update(rec.misfit.as_dict(),
                        predicted_log_rmse_unwidened=_finite_or_none(
                            rec.predicted_log_rmse_unwidened))

@@ -38,6 +38,13 @@ validation scans and on 76 % of the 121 with the default half-turn design (a con
 59 % and 68 %); it under-estimates measured materials read with the presets (x0.37-0.39 typically)
 and over-estimates the anisotropic specimens read over half a turn (x1.43 typically with the
 default design).
+
+When the readings carry structure the basis cannot hold, the fit misses its own readings by
+more than their noise, the same way across the stage angles: :func:`basis_misfit` measures that
+against the 1 % noise model, and :func:`widen_log_rmse` keeps a flagged estimate at least as
+large as the error the table shows where the readings are; the reconstruction's
+``misfit_warning`` says why (issue 23 item 4, ``bench/bench_selfestimate.py``, docs/science.md
+7.1.1).
 """
 
 from __future__ import annotations
