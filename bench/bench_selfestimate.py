@@ -104,8 +104,10 @@ def library_asymmetric() -> list[bu.Material]:
     return out
 
 
-def scans() -> list[dict[str, Any]]:
-    """One row per material and plan: the truth and every input of the estimate."""
+def scans(witnesses: bool = False) -> list[dict[str, Any]]:
+    """One row per material and plan: the truth and every input of the estimate; with
+    ``witnesses``, also ``calibrate_log_rmse.witnesses``' standardised leave-one-pair-out
+    error ``z_loo_pair`` and the posterior's scale ``s2`` (one more fit per scan)."""
     bu.CHOOSE["objective"] = "posterior"
     bu.SPAN["scan"] = bu.SPAN["design"] = DEFAULT_SPAN_DEG
     rows = []
@@ -125,6 +127,11 @@ def scans() -> list[dict[str, Any]]:
                 "reason": rec.misfit_warning,
                 **(rec.misfit.as_dict() if rec.misfit is not None else {}),
             })
+            if witnesses:
+                from calibrate_log_rmse import witnesses as calibration_witnesses
+
+                w = calibration_witnesses(b, cells, ph, alpha, vals, m.truth)
+                rows[-1].update(z_loo_pair=w["z_loo_pair"], s2=w["s2"])
         print(f"  {m.name} ({time.perf_counter() - t0:.0f} s)", flush=True)
     return rows
 
@@ -182,19 +189,29 @@ def table(rows: list[dict[str, Any]]) -> None:
           f"{min((r['misfit_chi2'] for r in low), default=float('nan')):.3g}-"
           f"{max((r['misfit_chi2'] for r in low), default=float('nan')):.3g}; plans "
           f"{sorted({r['plan'] for r in low})}")
+    if low and "z_loo_pair" in low[0]:
+        # A standardised leave-one-pair-out error near 1 (or below) says the posterior predicts
+        # the error at the pairs as large as it is: what it misses lies where no pair looks.
+        z = np.array([r["z_loo_pair"] for r in low])
+        print(f"their standardised leave-one-pair-out error z_loo_pair: median {np.median(z):.2f}, "
+              f"range {z.min():.2f}-{z.max():.2f} (1: as the posterior expects)")
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     ap.add_argument("--rows", type=Path, default=None,
                     help="JSON file of the scans: read it if it exists, else write it")
+    ap.add_argument("--witnesses", action="store_true",
+                    help="also record the standardised leave-one-pair-out error and the "
+                         "posterior's scale (calibrate_log_rmse.witnesses) and print them for "
+                         "the scans more than 2x too low")
     args = ap.parse_args(argv)
     print(f"$ {' '.join(['python', *sys.argv])}")
     t0 = time.perf_counter()
     if args.rows is not None and args.rows.is_file():
         rows = json.loads(args.rows.read_text())
     else:
-        rows = scans()
+        rows = scans(args.witnesses)
         if args.rows is not None:
             args.rows.write_text(json.dumps(rows))
     table(rows)

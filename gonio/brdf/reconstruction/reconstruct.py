@@ -931,8 +931,7 @@ def refine_angles(
 
 def _pair_log_errors(pred: FloatArray, measured: FloatArray, cos_i: FloatArray) -> FloatArray:
     """(n,) RMS over each pair's readings of ``ln(1 + pred cos ti) - ln(1 + measured cos ti)``."""
-    ci = np.asarray(cos_i, dtype=float)[:, None, None]
-    d = np.log1p(np.maximum(pred, 0.0) * ci) - np.log1p(measured * ci)
+    d = _log_residuals(pred, measured, cos_i)
     return np.asarray(np.sqrt(np.mean(d**2, axis=(1, 2))))
 
 
