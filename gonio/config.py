@@ -23,7 +23,14 @@ from typing import Annotated, Any, Literal
 import numpy as np
 import tomli_w
 from numpy.typing import NDArray
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
 
 from gonio.hal import LabDirection, PairSpec
 from gonio.motion import Approach
@@ -32,6 +39,7 @@ __all__ = [
     "CalibrationConfig",
     "ConfigError",
     "DataType",
+    "DesignExpectation",
     "LightConfig",
     "LightRegisters",
     "ModbusTransport",
@@ -411,6 +419,51 @@ class CalibrationConfig(_Strict):
     dark: dict[str, list[float]] = Field(default_factory=dict)
 
 
+class DesignExpectation(_Strict):
+    """``[design]``: what the design this geometry came from expects of a scan.
+
+    Written by ``gonio design -o`` into its fragment and carried into the rig config by ``gonio
+    rig apply-design``; a finished scan compares its ``predicted_log_rmse`` with
+    ``expected_log_rmse`` (:mod:`gonio.designgap`, docs/science.md 7.1). The other keys say
+    what that number assumes.
+
+    Attributes
+    ----------
+    expected_log_rmse : the mean ``log_rmse`` of the design's simulated scans over materials
+        held out of the basis (the number a scan's ``predicted_log_rmse`` estimates)
+    expected_log_rmse_measured, expected_log_rmse_synthetic : the same mean over the panel's
+        measured and synthetic materials
+    inside_basis_log_rmse : the joint fit's expected error on the basis' own materials (a best
+        case, not comparable with a scan's estimate), when the design had it
+    rotations : uniform stage angles of the simulated scans
+    span_deg : the arc they covered, degrees (180 or 360)
+    noise : relative reading noise of the simulated scans (0.01: 1 %)
+    pairs : light/sensor pairs of the design
+    calibrated : the simulated scans were in 1/sr (a calibrated rig)
+    materials : which materials the mean is over, in words
+    """
+
+    expected_log_rmse: Annotated[float, Field(gt=0, allow_inf_nan=False)]
+    expected_log_rmse_measured: Annotated[float, Field(gt=0, allow_inf_nan=False)] | None = None
+    expected_log_rmse_synthetic: Annotated[float, Field(gt=0, allow_inf_nan=False)] | None = None
+    inside_basis_log_rmse: Annotated[float, Field(gt=0, allow_inf_nan=False)] | None = None
+    rotations: Annotated[int, Field(ge=1)]
+    span_deg: float = 180.0
+    noise: Annotated[float, Field(ge=0, lt=1, allow_inf_nan=False)] = 0.01
+    pairs: Annotated[int, Field(ge=1)]
+    calibrated: bool = True
+    materials: str = ("held out of the basis: the shipped measured materials and one synthetic "
+                      "of each library family")
+
+    @field_validator("span_deg")
+    @classmethod
+    def _span(cls, v: float) -> float:
+        if v not in (180.0, 360.0):
+            raise ValueError(f"span_deg is the arc of the design's stage angles: 180 or 360 "
+                             f"degrees, got {v:g}")
+        return v
+
+
 class RigSection(_Strict):
     """``[rig]``."""
 
@@ -426,6 +479,7 @@ class RigConfig(_Strict):
     sensors: Annotated[list[SensorConfig], Field(min_length=1)]
     pairs: Literal["all"] | list[PairConfig] = "all"
     calibration: CalibrationConfig | None = None
+    design: DesignExpectation | None = None
 
     @model_validator(mode="after")
     def _check(self) -> RigConfig:

@@ -30,10 +30,11 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from gonio.basis_supply import BasisSupply
 from gonio.calibration import (
     CALIBRATION_FILE,
     Calibration,
@@ -42,10 +43,14 @@ from gonio.calibration import (
     save_calibration,
     sensor_full_scale,
 )
+from gonio.plans.dryrun import BasisSymmetry, arc_warning
 from gonio.plans.models import AnyPlan, CalibrationPlan, PlanError
 from gonio.plans.validation import plan_pairs
 from gonio.rigdescription import RigDescription
 from gonio.store import JobStore
+
+if TYPE_CHECKING:  # the numerics load with the first reconstruction
+    from gonio.brdf.reconstruction.basis import Basis
 
 log = logging.getLogger("gonio.finishing")
 
@@ -60,7 +65,10 @@ class Finishing:
     desc : RigDescription of the rig the job ran on
     data_dir : results go to ``data_dir/results/job-<id>.h5``; calibrations to
         ``data_dir/calibration.json``
-    basis_provider : returns the reconstruction basis (may build it; slow)
+    basis : the process's reconstruction basis (:class:`gonio.basis_supply.BasisSupply`;
+        may build it, slow)
+    basis_at_hand : the basis the job measured with (loaded before an adaptive job's first
+        reading), used instead of asking ``basis`` again
     calibration : returns the calibration to apply to a specimen's readings (asked only when
         one is finished: the latest calibration job may have replaced it meanwhile)
     provenance : extra provenance stored in every result (e.g. the rig config)
@@ -72,12 +80,14 @@ class Finishing:
     save_calibration : a calibration job's factors become the data directory's calibration
         in effect; False when a result is rebuilt (``gonio jobs rebuild``), which must not
         replace a later calibration
+    note_arc : record the job's ``arc_warning`` event when it has one
+        (:meth:`gonio.basis_supply.BasisSupply.note_arc`); False when a result is rebuilt
     """
 
     store: JobStore
     desc: RigDescription
     data_dir: Path
-    basis_provider: Callable[[], Any]
+    basis: BasisSupply
     calibration: Callable[[], Calibration]
     provenance: dict[str, Any] = field(default_factory=dict)
     fit_exports: bool = True
@@ -85,6 +95,8 @@ class Finishing:
     on_activity: Callable[[str], None] = lambda what: None
     stop: threading.Event = field(default_factory=threading.Event)
     save_calibration: bool = True
+    basis_at_hand: Basis | None = None
+    note_arc: bool = True
 
     def checkpoint(self, job_id: int, before: str) -> None:
         """Raise :class:`FinishingStopped` if an abort was asked for.
@@ -174,9 +186,15 @@ def finish_job(job_id: int, plan: AnyPlan, how: Finishing) -> dict[str, Any]:
 
     how.on_activity("basis")
     try:
-        basis = how.basis_provider()
+        basis = how.basis_at_hand if how.basis_at_hand is not None else how.basis.get()
     finally:
         how.on_activity("reconstructing")
+    # A half-turn scan with a basis whose prior varies over a full turn: the result is valid
+    # but the other half turn rests on the prior; the job's events (once: the worker's start
+    # may have said it), its summary and its result say so (docs/science.md 7.4).
+    symmetry = BasisSymmetry.of(basis)
+    arc = (how.basis.note_arc(how.store, job_id, plan, symmetry) if how.note_arc
+           else arc_warning(plan, symmetry))
     how.checkpoint(job_id, "reconstructing")
     grid = samples.to_samples()
     # The joint fit takes the scan's own anisotropy when it is less than the library prior's
@@ -227,13 +245,11 @@ def finish_job(job_id: int, plan: AnyPlan, how: Finishing) -> dict[str, Any]:
         metrics["physical_bounds"] = bounds_message
         provenance["physical_bounds"] = bounds_message
         log.info("job %d: %s", job_id, bounds_message)  # the worker records the event
+    _compare_with_design(rec, readings, plan, samples, len(pairs), bool(cal.pairs),
+                         how.provenance, metrics, provenance)
+    if "design_gap" in metrics:
+        log.info("job %d: %s", job_id, metrics["design_gap"])  # the worker records the event
     provenance.update(basis_K=int(basis.K), basis_materials=json.dumps(list(basis.materials)))
-    # A half-turn scan with a basis whose prior varies over a full turn: the result is valid
-    # but the other half turn rests on the prior; the result and the job's summary say so
-    # (docs/science.md 7.4), not only the job's event log.
-    from gonio.plans.dryrun import BasisSymmetry, arc_warning
-
-    arc = arc_warning(plan, BasisSymmetry.of(basis))
     if arc is not None:
         summary["arc_warning"] = arc
         provenance["arc_warning"] = arc
@@ -268,6 +284,30 @@ def finish_job(job_id: int, plan: AnyPlan, how: Finishing) -> dict[str, Any]:
     )
     summary.update(result_path=relative, **metrics)
     return summary
+
+
+def _compare_with_design(rec: Any, readings: list[Any], plan: AnyPlan, samples: Any,
+                         n_pairs: int, calibrated: bool, extra: dict[str, Any],
+                         metrics: dict[str, Any], provenance: dict[str, Any]) -> None:
+    """The scan's ``predicted_log_rmse`` beside the expected error of the design its rig config
+    came from (its ``[design]`` table, :mod:`gonio.designgap`): ``metrics`` gain
+    ``design_expected_log_rmse`` and, for a gap above x2 either way, ``design_gap`` (why);
+    ``provenance`` the design and the gap. Nothing without a ``[design]`` table."""
+    from gonio.designgap import compare_with_design, design_expectation, scan_facts
+
+    design = design_expectation(extra.get("rig_config"))
+    if design is None:
+        return
+    metrics["design_expected_log_rmse"] = design.expected_log_rmse
+    provenance["design"] = design.model_dump_json()
+    span = getattr(plan, "first_span_deg", None)
+    facts = scan_facts(rec, readings, n_angles=int(samples.stage_angles_deg.size),
+                       span_deg=float(span()) if callable(span) else 360.0,
+                       n_pairs=n_pairs, calibrated=calibrated)
+    gap = compare_with_design(facts, design)
+    if gap is not None:
+        metrics["design_gap"] = gap.message()
+        provenance["design_gap"] = gap.message()
 
 
 def physical_bounds(table: Any, values: Any, calibrated: bool) -> Any:
@@ -367,7 +407,7 @@ class RebuildError(ValueError):
 
 
 def rebuild_result(store: JobStore, data_dir: Path, job_id: int,
-                   basis_provider: Callable[[], Any]) -> dict[str, Any]:
+                   basis: BasisSupply) -> dict[str, Any]:
     """Write job ``job_id``'s result file again from the readings the store holds
     (``gonio jobs rebuild``): finishing re-run on them, with the calibration the job was
     finished with (recorded in its summary), the rig snapshot and plan it ran with. The job's
@@ -381,7 +421,7 @@ def rebuild_result(store: JobStore, data_dir: Path, job_id: int,
     store : the job store holding the job and its readings
     data_dir : the data directory the result goes to (``results/job-<id>.h5``)
     job_id : a completed job
-    basis_provider : returns the reconstruction basis (specimen jobs)
+    basis : the reconstruction basis (specimen jobs)
 
     Returns
     -------
@@ -424,8 +464,8 @@ def rebuild_result(store: JobStore, data_dir: Path, job_id: int,
     else:
         cal = Calibration()
     how = Finishing(
-        store=store, desc=desc, data_dir=Path(data_dir), basis_provider=basis_provider,
-        calibration=lambda: cal, save_calibration=False,
+        store=store, desc=desc, data_dir=Path(data_dir), basis=basis,
+        calibration=lambda: cal, save_calibration=False, note_arc=False,
         provenance={"rebuilt": "from the job store's readings (gonio jobs rebuild) on "
                     + time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())},
     )

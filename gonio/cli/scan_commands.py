@@ -18,10 +18,13 @@ import shutil
 import sys
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from gonio.cli import UsageError, finite_float, nonnegative_float, positive_float, positive_int
 from gonio.cli.daemon_client import DaemonClient, DaemonRefused, add_daemon_options
+
+if TYPE_CHECKING:
+    from gonio.basis_supply import BasisSupply
 
 
 def register(subparsers: Any) -> None:
@@ -192,18 +195,18 @@ def _scan(args: argparse.Namespace) -> int:
 
 
 async def _run_scan(args: argparse.Namespace, plan: Any, config: Any, sim: Any = None) -> int:
+    from gonio.basis_supply import BasisSupply
     from gonio.drivers.factory import build_rig
     from gonio.plans.dryrun import dry_run
     from gonio.rigdescription import RigDescription
 
     rig = build_rig(config)
     desc = RigDescription.from_rig(rig)
+    # The in-process scan reconstructs with the default basis (built on first use), loaded
+    # once for this run by whoever needs it first.
+    basis = BasisSupply()
     if args.dry_run:
-        from gonio.worker import basis_build_needed, built_basis_symmetry, default_basis_provider
-
-        # The in-process scan reconstructs with the default basis (built on first use).
-        dr = dry_run(plan, desc, basis_ready=not basis_build_needed(default_basis_provider),
-                     basis=built_basis_symmetry(default_basis_provider))
+        dr = dry_run(plan, desc, basis_ready=not basis.build_needed(), basis=basis.symmetry())
         warning = None if sim is not None else _calibration_warning(args, plan, config, desc)
         if warning is not None:
             dr = dr.model_copy(update={"warnings": [*dr.warnings, warning]})
@@ -234,14 +237,14 @@ async def _run_scan(args: argparse.Namespace, plan: Any, config: Any, sim: Any =
             lock.release()
         raise UsageError(str(exc)) from None
     try:
-        return await _run_owned(args, plan, config, sim, rig, desc, db, data_dir)
+        return await _run_owned(args, plan, config, sim, rig, desc, db, data_dir, basis)
     finally:
         for lock in reversed(owned):
             lock.release()
 
 
 async def _run_owned(args: argparse.Namespace, plan: Any, config: Any, sim: Any, rig: Any,
-                     desc: Any, db: Path, data_dir: Path) -> int:
+                     desc: Any, db: Path, data_dir: Path, basis: BasisSupply) -> int:
     """Run the scan through an in-process :class:`gonio.service.GonioService` (the same door
     as the daemon's API, without its queue worker), then copy the result to ``-o``."""
     from gonio.cli.sim_session import attach_sim, calibrate_in_foreground, calibration_covers_rig
@@ -263,7 +266,7 @@ async def _run_owned(args: argparse.Namespace, plan: Any, config: Any, sim: Any,
         override = _read_calibration(args.calibration)
         check_plausible(override, sensor_full_scale(config),
                         f"calibration file {args.calibration}")
-    service = GonioService(store, rig, rig_config=config, data_dir=data_dir,
+    service = GonioService(store, rig, rig_config=config, basis=basis, data_dir=data_dir,
                            calibration=override)
     try:
         if sim is not None:
@@ -588,7 +591,7 @@ def _progress(service: Any, job_id: int, disabled: bool) -> Any:
             bar.refresh()
         elif ev.type == "state":
             bar.set_description_str(f"job {job_id} {ev.data['state']}")
-        elif ev.type in ("arc_warning", "physical_bounds"):
+        elif ev.type in ("arc_warning", "physical_bounds", "design_gap"):
             bar.write(f"warning: {ev.data['message']}", file=sys.stderr)
 
     service.add_event_listener(on_event)
@@ -636,9 +639,9 @@ def _jobs(args: argparse.Namespace) -> int:
 
 def _rebuild(args: argparse.Namespace, store: Any) -> int:
     """``gonio jobs rebuild ID``: :func:`gonio.finishing.rebuild_result`, reported."""
+    from gonio.basis_supply import BasisSupply
     from gonio.finishing import rebuild_result
     from gonio.store import NotFound
-    from gonio.worker import default_basis_provider
 
     if args.job_id is None:
         raise UsageError("jobs rebuild needs a job id, e.g. 'gonio jobs rebuild 3 --db "
@@ -650,7 +653,7 @@ def _rebuild(args: argparse.Namespace, store: Any) -> int:
         raise UsageError(str(exc)) from None
     print(f"rebuilding job {args.job_id}'s result from the job store's readings",
           file=sys.stderr)
-    summary = rebuild_result(store, data_dir, args.job_id, default_basis_provider)
+    summary = rebuild_result(store, data_dir, args.job_id, BasisSupply())
     print(f"job {args.job_id}: wrote {data_dir / summary['result_path']} from "
           f"{summary['readings']} stored readings"
           + (" (calibrated, 1/sr)" if summary.get("calibrated") else " (sensor units)"))

@@ -146,8 +146,8 @@ def dry_run(plan: AnyPlan, rig: RigDescription, current_deg: float | None = None
         so).
     basis_ready : bool
         False when the reconstruction basis would have to be built first (see
-        :func:`gonio.worker.basis_build_needed`); an adaptive plan with the posterior rule then
-        reports :data:`BASIS_BUILD_S` as ``basis_build_s``.
+        :meth:`gonio.basis_supply.BasisSupply.build_needed`); an adaptive plan with the
+        posterior rule then reports :data:`BASIS_BUILD_S` as ``basis_build_s``.
     basis : BasisSymmetry, optional
         What the basis the job would reconstruct with says about half a turn, when that basis
         is at hand (built or loaded); None when it is not (nothing is said then). A half-turn

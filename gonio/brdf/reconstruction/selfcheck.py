@@ -87,13 +87,39 @@ def predict_log_rmse(expected: float, mahalanobis: float, cv_sample_error: float
     x = (float(expected), float(mahalanobis), float(cv_sample_error))
     if not all(np.isfinite(v) for v in x):
         return float("nan")
-    e, m, cv = (max(v, _FLOOR) for v in x)
+    undetermined, outside = _log_terms(*x)
+    # In logs, so tiny features do not underflow: ln(exp(a) e^2 + exp(b) m^c cv^d) / 2.
+    return float(np.exp(0.5 * np.logaddexp(undetermined, outside)))
+
+
+def _log_terms(expected: float, mahalanobis: float, cv_sample_error: float
+               ) -> tuple[float, float]:
+    """ln of the two variance terms of :data:`LOG_RMSE_MODEL` (finite inputs)."""
+    e, m, cv = (max(v, _FLOOR) for v in (expected, mahalanobis, cv_sample_error))
     m, cv = min(m, LOG_RMSE_CAPS[0]), min(cv, LOG_RMSE_CAPS[1])
     a, b, c, d = LOG_RMSE_MODEL
-    # In logs, so tiny features do not underflow: ln(exp(a) e^2 + exp(b) m^c cv^d) / 2.
-    return float(np.exp(0.5 * np.logaddexp(a + 2.0 * np.log(e),
-                                           b + c * np.log(m) + d * np.log(cv))))
+    return a + 2.0 * np.log(e), b + c * np.log(m) + d * np.log(cv)
 
+
+def estimate_parts(expected: float, mahalanobis: float,
+                   cv_sample_error: float) -> tuple[float, float]:
+    """The two parts of :func:`predict_log_rmse`, each in ``log_rmse`` units.
+
+    ``(undetermined, outside)`` with ``undetermined^2 + outside^2 = predicted^2``: what the
+    readings leave undetermined inside the basis (``sqrt(exp(a)) expected``) and what the
+    basis cannot represent (``sqrt(exp(b) m^c cv^d)``). Which one dominates says why a scan's
+    estimate is what it is (:mod:`gonio.designgap`).
+
+    Returns
+    -------
+    (float, float)
+        NaN, NaN when any input is NaN.
+    """
+    x = (float(expected), float(mahalanobis), float(cv_sample_error))
+    if not all(np.isfinite(v) for v in x):
+        return float("nan"), float("nan")
+    undetermined, outside = _log_terms(*x)
+    return float(np.exp(0.5 * undetermined)), float(np.exp(0.5 * outside))
 
 
 # ---------------------------------------------------------------------------- basis misfit
