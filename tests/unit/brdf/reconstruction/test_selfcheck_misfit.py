@@ -74,6 +74,22 @@ def test_a_misfit_that_stays_across_the_angles_is_flagged_and_measured() -> None
     assert m.chi2 > MISFIT_CHI2_LIMIT and m.flagged
 
 
+def test_one_pair_off_at_every_angle_is_not_the_basis() -> None:
+    """One pair off by a constant factor (a per-pair calibration error does that) is
+    persistent, but the flag needs a quarter of the pairs, and two."""
+    values, cos_ti, sigma = _readings()
+    d = sigma * np.random.default_rng(2).standard_normal(sigma.shape)
+    d[0] += 0.2
+    m = basis_misfit(d, values, cos_ti)
+    assert m.persistent_pairs == 1
+    assert m.chi2 > MISFIT_CHI2_LIMIT and m.log_misfit > MISFIT_MIN_LOG
+    assert not m.flagged
+    d[1] += 0.2  # a second pair: 2 of 10 is still below a quarter
+    assert not basis_misfit(d, values, cos_ti).flagged
+    d[2] += 0.2  # 3 of 10
+    assert basis_misfit(d, values, cos_ti).flagged
+
+
 def test_a_misfit_that_alternates_along_the_angles_is_not_persistent() -> None:
     """Residuals far above the noise whose sign flips from angle to angle average away along
     each pair: not the basis' misfit of the material's shape, so not flagged."""
