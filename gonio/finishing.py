@@ -225,7 +225,9 @@ def finish_job(job_id: int, plan: AnyPlan, how: Finishing) -> dict[str, Any]:
     if rec.misfit is not None:
         # How far the fit misses its own readings against their noise; when the basis cannot
         # hold them, predicted_log_rmse was widened and the result says why (science.md 7.1.1).
-        metrics.update(rec.misfit.as_dict(),
+        metrics.update(misfit_chi2=_finite_or_none(rec.misfit.chi2),
+                       misfit_log=_finite_or_none(rec.misfit.log_misfit),
+                       misfit_persistent_pairs=rec.misfit.persistent_pairs,
                        predicted_log_rmse_unwidened=_finite_or_none(
                            rec.predicted_log_rmse_unwidened))
     misfit_message = rec.misfit_warning
