@@ -273,17 +273,20 @@ class ColourCalibrationConfig(_Strict):
     """``[sensors.colour_calibration]``: a chart colour calibration of a non-spectral sensor.
 
     Written by ``gonio colour-chart CHART.csv`` (docs/colour.md): ``XYZ = matrix @ c`` for the
-    sensor's reflectance factors ``c`` (one matrix column per channel), fitted for one
-    illuminant and observer.
+    sensor's reflectance factors ``c`` (one matrix column per channel; ``method =
+    "root-polynomial"``: one column per term of the readings' degree-2 root-polynomial
+    expansion, six for an RGB sensor), fitted for one illuminant and observer.
     """
 
     matrix: Annotated[list[list[float]], Field(min_length=3, max_length=3)]
+    method: Literal["linear", "root-polynomial"] = "linear"
     illuminant: Literal["D65", "D50", "A", "C", "D55", "D75", "FL2", "FL11"] = "D65"
     observer: Literal["10", "2"] = "10"
     residual_median_de00: Annotated[float, Field(ge=0)] | None = None
     residual_max_de00: Annotated[float, Field(ge=0)] | None = None
     n_patches: Annotated[int, Field(ge=0)] = 0
     source: str = ""
+    loo_median_de00: Annotated[float, Field(ge=0)] | None = None
 
 
 class SensorConfig(_Device):
@@ -344,7 +347,13 @@ class SensorConfig(_Device):
             if self.wavelengths_nm is not None:
                 raise ValueError("a spectral sensor (wavelengths_nm) gets its colour from its "
                                  "bands; drop colour_calibration or wavelengths_nm")
-            if any(len(row) != n for row in cal.matrix):
+            if cal.method == "root-polynomial":
+                if n != 3 or any(len(row) != 6 for row in cal.matrix):
+                    raise ValueError(
+                        "a root-polynomial colour_calibration needs a sensor of 3 channels and "
+                        f"3 rows of 6 numbers (one per term; sensor channels {self.channels}); "
+                        "fit it with gonio colour-chart")
+            elif any(len(row) != n for row in cal.matrix):
                 raise ValueError(f"colour_calibration.matrix needs 3 rows of {n} numbers (one "
                                  f"per channel {self.channels}); fit it with gonio colour-chart")
         return self

@@ -43,7 +43,11 @@ and puts the result together.
 
 Speed: the table of step 4 (C x 72 x 11,664 values) dominates the call, so it is computed at
 the valid rows only (:func:`.tabulate.expand_table`) and handed to :meth:`BRDFTable.trusted`
-without a re-validation pass. BLAS runs on one thread during the call
+without a re-validation pass, once per call: the scan's posterior, which chooses the prior
+factor before the final fit, reads only every third slice of the first fit's table, so only
+those are expanded for it (a spectral sensor's 31 bands made the two full expansions of
+earlier versions most of the call). All channels share one factorisation of the joint system.
+BLAS runs on one thread during the call
 (:func:`.blas.one_blas_thread`): the products are small, and on a shared machine OpenBLAS'
 spinning worker threads cost far more than they save.
 """
@@ -77,7 +81,11 @@ from gonio.brdf.reconstruction.joint import (
 )
 from gonio.brdf.reconstruction.mirror import MirrorModel, mirror_cells
 from gonio.brdf.reconstruction.periodic import arc_gaps, periodic_pchip_rows
-from gonio.brdf.reconstruction.posterior import ScanPosterior, harmonic_scale
+from gonio.brdf.reconstruction.posterior import (
+    WEIGHT_SLICE_STEP,
+    ScanPosterior,
+    harmonic_scale,
+)
 from gonio.brdf.reconstruction.selfcheck import (
     BasisMisfit,
     basis_misfit,
@@ -694,15 +702,18 @@ def _reconstruct(
         return BRDFTable.trusted(expand_table(basis, coef), channels, name, None,
                                  {"reconstruction": settings})
 
-    table = as_table(coef, prior_rho)
     post = None
     if method == "joint" and has_cv:
-        # The joint posterior (reconstruction.posterior; imported here because it builds on
-        # this module): the self-estimate's expected error, and the scan's own rho.
+        # The joint posterior (reconstruction.posterior): the self-estimate's expected error,
+        # and the scan's own rho. Its weights read only every third slice of the fit's table,
+        # so only those are expanded here; the whole table is expanded once, at the end, from
+        # the coefficients finally chosen (with many channels the expansion is most of the
+        # call's time).
 
         by_scan = rho in ("scan", "scan-bands")
-        post = ScanPosterior(basis, cells_, ph_, alpha, vals, table=table.values, eta=eta,
-                             lam=lam, rho=None if by_scan else prior_rho,
+        post = ScanPosterior(basis, cells_, ph_, alpha, vals,
+                             table=expand_table(basis, coef[:, :, ::WEIGHT_SLICE_STEP]),
+                             eta=eta, lam=lam, rho=None if by_scan else prior_rho,
                              bands=rho == "scan-bands")
         chosen = (post.rho, post.rho_high)
         if (rho == "scan" and post.rho < SCAN_RHO_MAX) or (
@@ -712,7 +723,6 @@ def _reconstruct(
             # posterior would cost as much as the fit).
             prior_rho = chosen
             coef, at_samples, has_cv, angle_err = joint(prior_rho)
-            table = as_table(coef, prior_rho)
     if method == "joint" and symmetry == "scan":
 
         mth, mtd, mpd = mirror_cells(cells_).T
@@ -733,7 +743,7 @@ def _reconstruct(
             float(np.rad2deg(pick.axis)), 6), "mirror_slack": pick.slack}
         if pick.axis is not None:
             coef = np.moveaxis(model.coefficients(pick.axis, pick.slack, geo.PH_GRID), -1, 0)
-        table = as_table(coef, prior_rho)
+    table = as_table(coef, prior_rho)
     rel = _relative_sample_error(at_samples[..., :n_ch], vals)
     cv = _relative_sample_error(at_samples[..., n_ch:], vals) if has_cv else float("nan")
     pair_err = _pair_log_errors(at_samples[..., n_ch:], vals, ci) if has_cv else None
