@@ -28,7 +28,10 @@ and all sixteen tilted / untilted normal-mapped mitsuba specimens.
 Printed: one table per plan (material, set, true ``log_rmse``, the estimate before the
 widening, its ratio, the estimate after it, its ratio, within x2, more than 2x too low, the
 misfit witness and whether the result carries the ``basis_misfit`` reason), then the shares
-within x2 and the counts more than 2x low per set and plan, before and after.
+within x2 and the counts more than 2x low per set and plan, before and after, the scans
+flagged per set and plan, and what the scans more than 2x low show (their misfit; with
+``--witnesses`` also their standardised leave-one-pair-out error). Results: docs/science.md
+7.1.1.
 """
 
 from __future__ import annotations
