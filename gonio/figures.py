@@ -157,6 +157,13 @@ def headline_error(metrics: dict[str, Any]) -> dict[str, Any] | None:
                         if isinstance(expected, int | float) else " (far from its design)")
         out["meaning"] = f"Warning: {gap}. {out['meaning']}"
         out["design_gap"] = gap
+    misfit = metrics.get("basis_misfit")
+    if out is not None and isinstance(misfit, str):
+        # The readings carry structure the basis cannot hold: the estimate is a floor at best,
+        # and the headline says so before anyone trusts it.
+        out["text"] += " (BASIS MISFIT)"
+        out["meaning"] = f"Warning: {misfit}. {out['meaning']}"
+        out["basis_misfit"] = misfit
     return out
 
 

@@ -208,7 +208,7 @@ def finish_job(job_id: int, plan: AnyPlan | CheckedPlan, how: Finishing) -> dict
     rec = reconstruct(basis, grid.cells, grid.ph_lab, grid.stage_angles,
                       np.maximum(grid.values, 0.0), channels=channels, name=job.specimen)
     colour = _colour(rec, how, [p.sensor for p in pairs], bool(cal.pairs))
-    metrics = {
+    metrics: dict[str, Any] = {
         "rel_sample_error": rec.rel_sample_error,
         "estimated_error": rec.estimated_error,
         # The reported error bar: calibrated leave-one-pair-out error (science notebook 4.1);
@@ -228,6 +228,19 @@ def finish_job(job_id: int, plan: AnyPlan | CheckedPlan, how: Finishing) -> dict
     }
     if "prior_rho" in rec.settings:
         metrics["prior_rho"] = rec.settings["prior_rho"]  # 1: the library prior as it is
+    if rec.misfit is not None:
+        # How far the fit misses its own readings against their noise; when the basis cannot
+        # hold them, predicted_log_rmse was widened and the result says why (science.md 7.1.1).
+        metrics.update(misfit_chi2=_finite_or_none(rec.misfit.chi2),
+                       misfit_log=_finite_or_none(rec.misfit.log_misfit),
+                       misfit_persistent_pairs=rec.misfit.persistent_pairs,
+                       predicted_log_rmse_unwidened=_finite_or_none(
+                           rec.predicted_log_rmse_unwidened))
+    misfit_message = rec.misfit_warning
+    if misfit_message is not None:
+        metrics["basis_misfit"] = misfit_message
+        provenance["basis_misfit"] = misfit_message
+        log.info("job %d: %s", job_id, misfit_message)
     # A reconstruction outside physical bounds (albedo far above 1, or orders of magnitude
     # above every reading) completes with a warning rather than failing: the readings and the
     # table where the pairs look are still the measurement, a rebuild with another basis can

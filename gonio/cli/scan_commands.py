@@ -356,6 +356,8 @@ async def _run_owned(args: argparse.Namespace, checked: Any, config: Any, sim: A
           f"in {units}, {err_text}; wrote {out}")
     if err:
         print(f"  {err['key']}: {err['meaning']}")
+    if summary.get("basis_misfit"):
+        print(f"warning: {summary['basis_misfit']}", file=sys.stderr)
     return 0
 
 
@@ -553,6 +555,8 @@ def _scan_through_daemon(args: argparse.Namespace, plan: Any) -> int:
     err_text = f"{err['key']} {err['text']}" if err else "no error estimate"
     print(f"job {job_id} completed: {summary.get('n_samples', summary.get('readings'))} samples "
           f"in {units}, {err_text}; wrote {out}")
+    if summary.get("basis_misfit"):
+        print(f"warning: {summary['basis_misfit']}", file=sys.stderr)
     return 0
 
 

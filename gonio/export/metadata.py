@@ -226,4 +226,6 @@ def export_provenance(attrs: Mapping[str, Any], metrics: Mapping[str, Any],
         out["warnings"].append(str(provenance["physical_bounds"]))
     if provenance.get("design_gap"):
         out["warnings"].append(str(provenance["design_gap"]))
+    if provenance.get("basis_misfit"):
+        out["warnings"].append(str(provenance["basis_misfit"]))
     return out

@@ -86,7 +86,12 @@ from gonio.brdf.reconstruction.posterior import (
     ScanPosterior,
     harmonic_scale,
 )
-from gonio.brdf.reconstruction.selfcheck import predict_log_rmse
+from gonio.brdf.reconstruction.selfcheck import (
+    BasisMisfit,
+    basis_misfit,
+    predict_log_rmse,
+    widen_log_rmse,
+)
 from gonio.brdf.reconstruction.tabulate import expand_table
 from gonio.brdf.tables import geometry as geo
 from gonio.brdf.tables.table import TH0_ROWS, VALID_MASK, BRDFTable
@@ -147,7 +152,8 @@ class Reconstruction:
         The estimated ``metrics.log_rmse`` of the whole reconstruction against the true
         BRDF, calibrated on materials held out of the basis; the number to report. Joint
         fit: :func:`gonio.brdf.reconstruction.selfcheck.predict_log_rmse`; V&F path:
-        :func:`predict_log_rmse_vf`.
+        :func:`predict_log_rmse_vf`; either widened when the readings show a misfit the
+        basis cannot hold (``misfit``).
     angle_log_errors : (r,) float64 or None
         Joint fit only: per stage angle (in the order given), the RMS log error (units of
         ``log_rmse``) of that angle's readings predicted from all the other angles. Where it
@@ -168,6 +174,16 @@ class Reconstruction:
         (:attr:`gonio.brdf.reconstruction.posterior.ScanPosterior.mahalanobis`). Large when the
         material sits far from the training library; the witness of what the basis cannot
         represent in ``predicted_log_rmse``.
+    misfit : BasisMisfit or None
+        How far the fit misses its own readings against their noise, and whether that misfit
+        stays across the stage angles
+        (:func:`gonio.brdf.reconstruction.selfcheck.basis_misfit`). When it is flagged
+        (``misfit.flagged``) the basis cannot hold the material and ``predicted_log_rmse`` has
+        been widened (:func:`gonio.brdf.reconstruction.selfcheck.widen_log_rmse`);
+        ``misfit.message(...)`` says why.
+    predicted_log_rmse_unwidened : float
+        The estimate before that widening (equal to ``predicted_log_rmse`` unless the misfit
+        is flagged).
     """
 
     table: BRDFTable
@@ -183,6 +199,17 @@ class Reconstruction:
     pair_log_errors: FloatArray | None = None
     expected_log_rmse: float = float("nan")
     mahalanobis: float = float("nan")
+    misfit: BasisMisfit | None = None
+    predicted_log_rmse_unwidened: float = float("nan")
+
+    @property
+    def misfit_warning(self) -> str | None:
+        """Why ``predicted_log_rmse`` was widened (None when it was not): the readings carry
+        structure the basis cannot hold (:class:`gonio.brdf.reconstruction.selfcheck.BasisMisfit`,
+        :meth:`~gonio.brdf.reconstruction.selfcheck.BasisMisfit.message`)."""
+        if self.misfit is None:
+            return None
+        return self.misfit.message(self.predicted_log_rmse_unwidened, self.predicted_log_rmse)
 
 
 # ---------------------------------------------------------------------------- geometry helper
@@ -721,6 +748,7 @@ def _reconstruct(
     cv = _relative_sample_error(at_samples[..., n_ch:], vals) if has_cv else float("nan")
     pair_err = _pair_log_errors(at_samples[..., n_ch:], vals, ci) if has_cv else None
     cv_log = float(np.sqrt(np.mean(pair_err**2))) if pair_err is not None else float("nan")
+    misfit = basis_misfit(_log_residuals(at_samples[..., :n_ch], vals, ci), vals, ci)
     n = int(cells_.shape[0])
     if post is not None and np.isfinite(cv):
 
@@ -729,6 +757,9 @@ def _reconstruct(
     else:
         expected = mahal = float("nan")
         predicted = predict_log_rmse_vf(cv, n, int(alpha.size))
+    # Residuals well above the noise that stay across the angles: the basis cannot hold the
+    # material, and the estimate never drops below the error the readings themselves show.
+    widened = widen_log_rmse(predicted, misfit)
     seconds = time.perf_counter() - t0
     return Reconstruction(
         table=table,
@@ -745,11 +776,13 @@ def _reconstruct(
         cv_sample_error=cv,
         predicted_error=cv_error_scale(n) * cv,
         cv_log_error=cv_log,
-        predicted_log_rmse=predicted,
+        predicted_log_rmse=widened,
+        predicted_log_rmse_unwidened=predicted,
         expected_log_rmse=expected,
         mahalanobis=mahal,
         angle_log_errors=angle_err,
         pair_log_errors=pair_err,
+        misfit=misfit,
     )
 
 
@@ -908,9 +941,14 @@ def refine_angles(
 
 def _pair_log_errors(pred: FloatArray, measured: FloatArray, cos_i: FloatArray) -> FloatArray:
     """(n,) RMS over each pair's readings of ``ln(1 + pred cos ti) - ln(1 + measured cos ti)``."""
-    ci = np.asarray(cos_i, dtype=float)[:, None, None]
-    d = np.log1p(np.maximum(pred, 0.0) * ci) - np.log1p(measured * ci)
+    d = _log_residuals(pred, measured, cos_i)
     return np.asarray(np.sqrt(np.mean(d**2, axis=(1, 2))))
+
+
+def _log_residuals(pred: FloatArray, measured: FloatArray, cos_i: FloatArray) -> FloatArray:
+    """(n, r, C) ``ln(1 + pred cos ti) - ln(1 + measured cos ti)`` per reading."""
+    ci = np.asarray(cos_i, dtype=float)[:, None, None]
+    return np.asarray(np.log1p(np.maximum(pred, 0.0) * ci) - np.log1p(measured * ci))
 
 
 def cv_error_scale(n_pairs: int) -> float:
