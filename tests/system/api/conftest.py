@@ -89,8 +89,8 @@ def daemon(tmp_path_factory: pytest.TempPathFactory, basis: Any) -> Iterator[Dae
 def export_fits_off(daemon: Daemon) -> Iterator[None]:
     """While in the block, ``daemon``'s scans finish without the export fits
     (``Worker.fit_exports``, the factored and principled fits stored in each result, with
-    their rendered check: 3-6 s of CPU per scan on idle cores, the largest part of a short
-    scan's cost). For the scans of a test that asserts nothing about their fits."""
+    their rendered check: several seconds of CPU per scan, far more than a short scan's
+    reconstruction). For the scans of a test that asserts nothing about their fits."""
     worker = daemon.app.state.service.worker
     before = worker.fit_exports
     worker.fit_exports = False
