@@ -99,6 +99,26 @@ class Calibration(BaseModel):
             seen.add((p.light, p.sensor))
         return self
 
+    def apply(self, values: NDArray[np.float64], pairs: Sequence[PairSpec]
+              ) -> NDArray[np.float64]:
+        """``values`` in 1/sr: the one place the factors multiply readings.
+
+        Parameters
+        ----------
+        values : (n, r, C) ``raw - dark`` counts, rows in the order of ``pairs``
+        pairs : the n pairs
+
+        Returns
+        -------
+        (n, r, C) float64
+            Each pair's row times its factor (ones for an uncalibrated pair).
+        """
+        v = np.asarray(values, dtype=float)
+        if not pairs:
+            return v
+        factors = np.stack([self.factor(p.light, p.sensor, v.shape[2]) for p in pairs])
+        return v * factors[:, None, :]
+
     def covers(self, pairs: Sequence[PairSpec]) -> bool:
         return not self.missing(pairs)
 
@@ -459,10 +479,8 @@ def readings_array(
         if q is None or j is None:
             continue
         c = counts(r)
-        if calibration is not None:
-            c = c * calibration.factor(r.light, r.sensor, n_channels)
         vals[q, j, : c.size] = c
-    return vals
+    return vals if calibration is None else calibration.apply(vals, pairs)
 
 
 def calibrated_samples(

@@ -23,7 +23,14 @@ from typing import Annotated, Any, Literal
 import numpy as np
 import tomli_w
 from numpy.typing import NDArray
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
 
 from gonio.hal import LabDirection, PairSpec
 from gonio.motion import Approach
@@ -32,6 +39,7 @@ __all__ = [
     "CalibrationConfig",
     "ConfigError",
     "DataType",
+    "DesignExpectation",
     "LightConfig",
     "LightRegisters",
     "ModbusTransport",
@@ -265,17 +273,20 @@ class ColourCalibrationConfig(_Strict):
     """``[sensors.colour_calibration]``: a chart colour calibration of a non-spectral sensor.
 
     Written by ``gonio colour-chart CHART.csv`` (docs/colour.md): ``XYZ = matrix @ c`` for the
-    sensor's reflectance factors ``c`` (one matrix column per channel), fitted for one
-    illuminant and observer.
+    sensor's reflectance factors ``c`` (one matrix column per channel; ``method =
+    "root-polynomial"``: one column per term of the readings' degree-2 root-polynomial
+    expansion, six for an RGB sensor), fitted for one illuminant and observer.
     """
 
     matrix: Annotated[list[list[float]], Field(min_length=3, max_length=3)]
+    method: Literal["linear", "root-polynomial"] = "linear"
     illuminant: Literal["D65", "D50", "A", "C", "D55", "D75", "FL2", "FL11"] = "D65"
     observer: Literal["10", "2"] = "10"
     residual_median_de00: Annotated[float, Field(ge=0)] | None = None
     residual_max_de00: Annotated[float, Field(ge=0)] | None = None
     n_patches: Annotated[int, Field(ge=0)] = 0
     source: str = ""
+    loo_median_de00: Annotated[float, Field(ge=0)] | None = None
 
 
 class SensorConfig(_Device):
@@ -336,7 +347,13 @@ class SensorConfig(_Device):
             if self.wavelengths_nm is not None:
                 raise ValueError("a spectral sensor (wavelengths_nm) gets its colour from its "
                                  "bands; drop colour_calibration or wavelengths_nm")
-            if any(len(row) != n for row in cal.matrix):
+            if cal.method == "root-polynomial":
+                if n != 3 or any(len(row) != 6 for row in cal.matrix):
+                    raise ValueError(
+                        "a root-polynomial colour_calibration needs a sensor of 3 channels and "
+                        f"3 rows of 6 numbers (one per term; sensor channels {self.channels}); "
+                        "fit it with gonio colour-chart")
+            elif any(len(row) != n for row in cal.matrix):
                 raise ValueError(f"colour_calibration.matrix needs 3 rows of {n} numbers (one "
                                  f"per channel {self.channels}); fit it with gonio colour-chart")
         return self
@@ -411,6 +428,51 @@ class CalibrationConfig(_Strict):
     dark: dict[str, list[float]] = Field(default_factory=dict)
 
 
+class DesignExpectation(_Strict):
+    """``[design]``: what the design this geometry came from expects of a scan.
+
+    Written by ``gonio design -o`` into its fragment and carried into the rig config by ``gonio
+    rig apply-design``; a finished scan compares its ``predicted_log_rmse`` with
+    ``expected_log_rmse`` (:mod:`gonio.designgap`, docs/science.md 7.1). The other keys say
+    what that number assumes.
+
+    Attributes
+    ----------
+    expected_log_rmse : the mean ``log_rmse`` of the design's simulated scans over materials
+        held out of the basis (the number a scan's ``predicted_log_rmse`` estimates)
+    expected_log_rmse_measured, expected_log_rmse_synthetic : the same mean over the panel's
+        measured and synthetic materials
+    inside_basis_log_rmse : the joint fit's expected error on the basis' own materials (a best
+        case, not comparable with a scan's estimate), when the design had it
+    rotations : uniform stage angles of the simulated scans
+    span_deg : the arc they covered, degrees (180 or 360)
+    noise : relative reading noise of the simulated scans (0.01: 1 %)
+    pairs : light/sensor pairs of the design
+    calibrated : the simulated scans were in 1/sr (a calibrated rig)
+    materials : which materials the mean is over, in words
+    """
+
+    expected_log_rmse: Annotated[float, Field(gt=0, allow_inf_nan=False)]
+    expected_log_rmse_measured: Annotated[float, Field(gt=0, allow_inf_nan=False)] | None = None
+    expected_log_rmse_synthetic: Annotated[float, Field(gt=0, allow_inf_nan=False)] | None = None
+    inside_basis_log_rmse: Annotated[float, Field(gt=0, allow_inf_nan=False)] | None = None
+    rotations: Annotated[int, Field(ge=1)]
+    span_deg: float = 180.0
+    noise: Annotated[float, Field(ge=0, lt=1, allow_inf_nan=False)] = 0.01
+    pairs: Annotated[int, Field(ge=1)]
+    calibrated: bool = True
+    materials: str = ("held out of the basis: the shipped measured materials and one synthetic "
+                      "of each library family")
+
+    @field_validator("span_deg")
+    @classmethod
+    def _span(cls, v: float) -> float:
+        if v not in (180.0, 360.0):
+            raise ValueError(f"span_deg is the arc of the design's stage angles: 180 or 360 "
+                             f"degrees, got {v:g}")
+        return v
+
+
 class RigSection(_Strict):
     """``[rig]``."""
 
@@ -426,6 +488,7 @@ class RigConfig(_Strict):
     sensors: Annotated[list[SensorConfig], Field(min_length=1)]
     pairs: Literal["all"] | list[PairConfig] = "all"
     calibration: CalibrationConfig | None = None
+    design: DesignExpectation | None = None
 
     @model_validator(mode="after")
     def _check(self) -> RigConfig:

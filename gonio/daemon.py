@@ -34,12 +34,15 @@ import stat
 import threading
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from gonio.api.auth import ApiKeyring, KeyringError
 from gonio.config import read_toml
+
+if TYPE_CHECKING:
+    from gonio.basis_supply import BasisSupply
 
 log = logging.getLogger("gonio.daemon")
 
@@ -289,7 +292,7 @@ def build_app(
     rig_config: Any,
     keyring: ApiKeyring,
     *,
-    basis_provider: Any = None,
+    basis: BasisSupply | None = None,
     rig: Any = None,
 ) -> Any:
     """The daemon's ASGI app: store in ``data_dir``, real drivers for ``rig_config``.
@@ -299,7 +302,9 @@ def build_app(
     cfg : DaemonConfig
     rig_config : gonio.config.RigConfig
     keyring : ApiKeyring
-    basis_provider : callable returning the reconstruction basis (default: the cached default)
+    basis : BasisSupply, optional
+        The reconstruction basis of this daemon; default: the default basis, loaded (or built)
+        once on first use and shared by the service, its worker and finishing.
     rig : gonio.hal.Rig, optional
         Use this rig instead of building drivers from ``rig_config`` (tests, custom rigs).
 
@@ -308,6 +313,7 @@ def build_app(
     FastAPI app whose lifespan starts and stops the service (worker, devices).
     """
     from gonio.api.app import create_app
+    from gonio.basis_supply import BasisSupply
     from gonio.drivers.factory import build_rig
     from gonio.locks import claim_endpoints, claim_store
     from gonio.service import GonioService
@@ -329,7 +335,7 @@ def build_app(
             store,
             rig if rig is not None else (lambda: build_rig(rig_config)),
             rig_config=rig_config,
-            basis_provider=basis_provider,
+            basis=basis if basis is not None else BasisSupply(),
             data_dir=data_dir,
         )
         # State files are checked before anything is served (docs/engine.md, "State files

@@ -5,7 +5,9 @@ approaching from below, so backlash cancels); optionally read the dark signal wi
 off; then for each light: on, settle, read all of that light's sensors in parallel
 (``asyncio.gather``) while checking the lamp's status, off. The angle's readings are
 committed to the store (:meth:`gonio.store.JobStore.commit_angle`) before the next move: that
-is the checkpoint.
+is the checkpoint. The engine keeps the steps and readings it commits (it reads them from the
+store once, when a job starts or resumes), and after each round asks the plan's rounds
+(:mod:`gonio.plans.rounds`) for the next angles.
 
 Time that is not physical (moves, settling, exposures) is overhead, and most of it is device
 round trips on shared links, so the angle sends few of them: the stage position is read before a
@@ -27,7 +29,8 @@ in the sensor's lower gain ranges, docs/engine.md) suspends the job; the engine 
 the device's recovery (``clear_faults``, reconnect, lamp re-check), waits a settle delay and
 repeats the angle.
 More than ``max_retries`` consecutive failures at one angle, or an unrecoverable fault, fail
-the job with the reason. Cleanup (lights off, stage stopped) runs on every exit but a halt.
+the job with the reason: the rules are the plan's (:class:`gonio.plans.faults.Suspender`), the
+engine carries them out. Cleanup (lights off, stage stopped) runs on every exit but a halt.
 Given ``connect`` (the worker does), the engine first connects the rig under the same rules:
 a device silent at connection is waited for like one silent mid-scan, and an abort or halt
 asked before, during or after the connection ends the job before any stage move.
@@ -38,12 +41,12 @@ The engine sees only :mod:`gonio.hal` (import-linter enforces it).
 from __future__ import annotations
 
 import asyncio
+import bisect
 import contextlib
 import threading
 import time
 from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass, replace
-from typing import Any
 
 import numpy as np
 
@@ -53,19 +56,13 @@ from gonio.diskspace import disk_full_message, is_disk_full
 from gonio.hal import PairSpec
 from gonio.jobstates import FINISHED_STATES, JobState
 from gonio.motion import plan_overshoot_legs
-from gonio.plans.adaptive import adaptive_refinement
-from gonio.plans.models import MAX_ROTATIONS, AdaptivePlan, AnyPlan
+from gonio.plans.checked import CheckedPlan, check_plan
+from gonio.plans.faults import Suspender, Trouble
+from gonio.plans.models import AnyPlan
+from gonio.plans.rounds import Refiner, rounds_for
 from gonio.plans.route import order_for_travel
-from gonio.plans.timing import adaptive_bound, estimate_angles
-from gonio.plans.validation import initial_angles, lights_in_order, plan_pairs
 from gonio.rigdescription import RigDescription
 from gonio.store import JobStore, ReadingRow, StepRow
-
-#: The posterior rule of adaptive plans: ``(angles_deg, values (n, r, C) raw - dark,
-#: budget_angles, min_step_deg, min_gain, arc_deg) -> new angles in degrees``, with
-#: ``arc_deg = (start_deg, span_deg)`` the plan's arc (gonio.refinement).
-Refiner = Callable[[Sequence[float], np.ndarray, int, float, float, tuple[float, float]],
-                   list[float]]
 
 
 class SensorSaturated(hal.DeviceFault):
@@ -114,14 +111,15 @@ class ScanEngine:
     store : JobStore
     job_id : int
         The job (queued, or active after a restart: it resumes from its last checkpoint).
-    plan : the job's plan
+    plan : the job's plan, checked on ``rig_desc`` (:func:`gonio.plans.checked.check_plan`;
+        a plain plan is checked here)
     rig_desc : RigDescription of ``rig`` (limits, speeds, pairs)
     refiner : optional, the posterior rule of adaptive plans
-        (:class:`gonio.refinement.PosteriorRefiner`: ``(angles_deg, values, budget_angles,
-        min_step_deg, min_gain, arc_deg) -> new angles``, ``arc_deg`` the plan's ``(start_deg,
-        span_deg)``). Without it ``rule="posterior"`` plans fall back to V&F's rule (the
-        ``adaptive_done`` / ``adaptive_round`` events name the rule); either rule refines
-        within the plan's arc.
+        (:class:`gonio.plans.rounds.Refiner`, e.g. :class:`gonio.refinement.PosteriorRefiner`).
+        Without it ``rule="posterior"`` plans fall back to V&F's rule (the ``adaptive_done``
+        / ``adaptive_round`` events name the rule); either rule refines within the plan's
+        arc. The rounds are the plan kind's (:func:`gonio.plans.rounds.rounds_for`), the
+        fault rules its fault policy's (:class:`gonio.plans.faults.Suspender`).
     connect : optional, returns the connected rig (connects it if needed). The engine calls
         it first, under the plan's fault policy like any other device call: a device silent
         at connection suspends the job and is waited for (``wait_for_device_s``), and an
@@ -133,7 +131,7 @@ class ScanEngine:
         rig: hal.Rig | None,
         store: JobStore,
         job_id: int,
-        plan: AnyPlan,
+        plan: AnyPlan | CheckedPlan,
         rig_desc: RigDescription,
         refiner: Refiner | None = None,
         connect: Callable[[], Awaitable[hal.Rig]] | None = None,
@@ -145,13 +143,15 @@ class ScanEngine:
         self.refiner = refiner
         self.store = store
         self.job_id = job_id
-        self.plan = plan
+        self.checked = check_plan(plan, rig_desc)
+        self.plan = self.checked.plan
         self.desc = rig_desc
-        self.pairs: list[PairSpec] = plan_pairs(plan, rig_desc)
-        self.lights: list[str] = lights_in_order(self.pairs)
+        self.pairs: list[PairSpec] = list(self.checked.pairs)
+        self.lights: list[str] = list(self.checked.lights)
         self.sensors_of: dict[str, list[str]] = {
-            lt: [p.sensor for p in self.pairs if p.light == lt] for lt in self.lights
-        }
+            lt: list(names) for lt, names in self.checked.sensors_of.items()}
+        self.rounds = rounds_for(self.checked, refiner)
+        self.suspender = Suspender(self.plan.faults)
         self.state = JobState(store.get_job(job_id).state)
         self.from_queue = self.state is JobState.QUEUED
         """True for a job that starts here (not one resumed after a restart)."""
@@ -171,9 +171,13 @@ class ScanEngine:
         self._angle_task: asyncio.Task[tuple[float, list[ReadingRow]]] | None = None
         self._dark_once: dict[str, tuple[float, ...]] | None = None
         self._angle_times: list[float] = []
-        self._per_angle_estimate = self._estimate_per_angle()
-        self._max_angles = self._bound_angles()
+        self._per_angle_estimate = self.checked.per_angle_s
+        self._max_angles = self.checked.max_angles
         self.progress = Progress(0, 0, None)
+        # The job's steps and readings as the store holds them, kept here as they are
+        # written (read from the store once, when the job starts or resumes).
+        self._steps: list[StepRow] = []
+        self._readings: dict[int, list[ReadingRow]] = {}
 
     # ------------------------------------------------------------------ control (any time)
     # The requests may come from another thread (the API's loop, when the engine runs on its
@@ -249,24 +253,6 @@ class ScanEngine:
         self.store.set_state(self.job_id, new, reason=reason, data=dict(data) or None)
         self.state = new
 
-    def _estimate_per_angle(self) -> float:
-        """Physical time of one angle from the rig's settings (used for ETA before data)."""
-        step = self.plan.first_span_deg() / max(len(initial_angles(self.plan, self.desc)), 1)
-        motion, settle, exposure = estimate_angles(
-            [step], 0.0, len(self.lights), self.plan, self.desc,
-            self.plan.exposure.dark == "every_angle",
-        )
-        return motion + settle + exposure
-
-    def _bound_angles(self) -> int | None:
-        """Most stage angles an adaptive plan can reach (None for fixed plans)."""
-        if not isinstance(self.plan, AdaptivePlan):
-            return None
-        first = initial_angles(self.plan, self.desc)
-        extra, _ = adaptive_bound(self.plan, self.desc, len(self.pairs), len(self.lights),
-                                  first, 0.0)
-        return len(first) + extra
-
     def _update_progress(self, steps: Sequence[StepRow]) -> Progress:
         done = sum(s.done for s in steps)
         total = len(steps)
@@ -337,7 +323,7 @@ class ScanEngine:
         if self._connect is None:
             return
         retries = 0
-        trouble: _Trouble | None = None
+        trouble: Trouble | None = None
         while True:
             await self._gate()
             try:
@@ -346,7 +332,7 @@ class ScanEngine:
             except hal.DeviceFault as fault:
                 retries += 1
                 if trouble is None:
-                    trouble = _Trouble(fault, time.monotonic())
+                    trouble = self.suspender.trouble(fault)
                 await self._suspend(fault, retries, trouble, recover=self._connect_once)
 
     async def _connect_once(self) -> None:
@@ -357,32 +343,49 @@ class ScanEngine:
             raise JobFailed(f"rig not available: {exc}") from None
 
     async def _measure_all(self) -> None:
-        steps = self.store.steps(self.job_id)
-        if not steps:
+        # The store is read once (a resumed job has steps and readings); from here on the
+        # engine keeps both as it writes them.
+        self._steps = self.store.steps(self.job_id)
+        self._readings = {}
+        for r in self.store.readings(self.job_id) if self._steps else ():
+            self._readings.setdefault(r.angle_index, []).append(r)
+        if not self._steps:
             here = await self._stage_position()
-            route = order_for_travel(
-                initial_angles(self.plan, self.desc), here, self.desc, self.plan.backlash_deg
-            )
-            self.store.add_steps(
-                self.job_id,
-                [(k, 0, p % 360.0, p) for k, p in enumerate(route)],
-            )
-            steps = self.store.steps(self.job_id)
+            route = order_for_travel(self.checked.angles_deg, here, self.desc,
+                                     self.plan.backlash_deg)
+            self._add_steps(0, 0, route)
         self._load_dark()
+        todo = [s.angle_index for s in self._steps if not s.done]
         while True:
-            todo = [s for s in steps if not s.done]
             if not todo:
-                if not await self._plan_next_round(steps):
+                k0 = len(self._steps)
+                if not await self._plan_next_round(self._steps):
                     return
-                steps = self.store.steps(self.job_id)
+                todo = [s.angle_index for s in self._steps[k0:]]
                 continue
-            await self._measure_with_retries(todo[0], steps)
-            steps = self.store.steps(self.job_id)
+            await self._measure_with_retries(self._step_at(todo.pop(0)), self._steps)
+
+    def _add_steps(self, k0: int, rnd: int, route: Sequence[float]) -> None:
+        """Plan stage positions ``route`` as steps ``k0, k0 + 1, ...`` of round ``rnd``, in
+        the store and here."""
+        rows = [(k0 + j, rnd, p % 360.0, p) for j, p in enumerate(route)]
+        self.store.add_steps(self.job_id, rows)
+        self._steps.extend(StepRow(k, r, a, p, False, None) for k, r, a, p in rows)
+
+    def _step_at(self, angle_index: int) -> StepRow:
+        return self._steps[self._where(angle_index)]
+
+    def _where(self, angle_index: int) -> int:
+        """Position of step ``angle_index`` in :attr:`_steps` (sorted by angle index)."""
+        i = bisect.bisect_left(self._steps, angle_index, key=lambda s: s.angle_index)
+        if i == len(self._steps) or self._steps[i].angle_index != angle_index:
+            raise KeyError(angle_index)
+        return i
 
     async def _stage_position(self) -> float:
         """The stage position for planning a route, with the same fault handling as an angle."""
         retries = 0
-        trouble: _Trouble | None = None
+        trouble: Trouble | None = None
         while True:
             await self._gate()
             try:
@@ -390,7 +393,7 @@ class ScanEngine:
             except hal.DeviceFault as fault:
                 retries += 1
                 if trouble is None:
-                    trouble = _Trouble(fault, time.monotonic())
+                    trouble = self.suspender.trouble(fault)
                 await self._suspend(fault, retries, trouble)
 
     def _load_dark(self) -> None:
@@ -401,7 +404,7 @@ class ScanEngine:
 
     async def _measure_with_retries(self, step: StepRow, steps: Sequence[StepRow]) -> None:
         retries = 0
-        trouble: _Trouble | None = None  # the first fault at this angle, and when it came
+        trouble: Trouble | None = None  # the first fault at this angle, and when it came
         while True:
             await self._gate()
             t0 = time.monotonic()
@@ -413,18 +416,22 @@ class ScanEngine:
             except hal.DeviceFault as fault:
                 retries += 1
                 if trouble is None:
-                    trouble = _Trouble(fault, time.monotonic())
+                    trouble = self.suspender.trouble(fault)
                 await self._suspend(fault, retries, trouble)
                 continue
             self._angle_times.append(time.monotonic() - t0)
+            done = replace(step, done=True, actual_deg=actual)
             p = self._update_progress(
-                [s if s.angle_index != step.angle_index else replace(s, done=True) for s in steps]
+                [s if s.angle_index != step.angle_index else done for s in steps]
             )
             self.store.commit_angle(
                 self.job_id, step.angle_index, actual, readings,
                 {"specimen_deg": step.specimen_deg, "position_deg": step.position_deg,
                  "eta_s": p.eta_s, "round": p.round},
             )
+            # Committed: the store and the engine's copy now hold the same.
+            self._steps[self._where(step.angle_index)] = done
+            self._readings[step.angle_index] = readings
             return
 
     async def _angle_task_result(self) -> tuple[float, list[ReadingRow]]:
@@ -653,7 +660,7 @@ class ScanEngine:
         return {n: tuple(float(v) for v in r.values) for n, r in zip(names, readings, strict=True)}
 
     # ------------------------------------------------------------------ faults
-    async def _suspend(self, fault: hal.DeviceFault, retries: int, trouble: _Trouble,
+    async def _suspend(self, fault: hal.DeviceFault, retries: int, trouble: Trouble,
                        recover: Callable[[], Awaitable[None]] | None = None) -> None:
         """Suspend on ``fault``, recover, and return when the angle may be retried.
 
@@ -661,68 +668,37 @@ class ScanEngine:
         the rig is being connected, the recovery is connecting it. ``retries`` counts the
         consecutive failures at this angle; ``trouble`` is the first of them (reported with
         the last one when they differ, so a reason never loses the cause that started it).
-        A device that does not answer at all is waited for, up to ``wait_for_device_s`` from
-        the first fault, once the retries are spent.
+        Whether the job waits or fails is the plan's fault policy
+        (:class:`gonio.plans.faults.Suspender`).
         """
-        policy = self.plan.faults
-        if not fault.recoverable:
-            raise JobFailed(f"unrecoverable device fault: {fault}"
-                            + trouble.began_as(fault))
-        if retries > policy.max_retries and not self._may_wait(fault, trouble):
-            raise JobFailed(self._failure(fault, trouble, retries - 1))
+        rules = self.suspender
+        refused = rules.refusal(fault, retries, trouble)
+        if refused is not None:
+            raise JobFailed(refused)
         self._set_state(
             JobState.SUSPENDED, reason=str(fault), device=fault.device, code=fault.code,
             retry=retries,
         )
         await self._lights_off()
-        waiting_announced = False
+        announced = False
         while True:
-            await self._sleep(policy.retry_delay_s)
+            await self._sleep(rules.policy.retry_delay_s)
             await self._gate_in_suspension()
             try:
                 await (self._recover(fault) if recover is None else recover())
                 break
             except hal.DeviceFault as again:
                 retries += 1
-                if not again.recoverable:
-                    raise JobFailed(f"unrecoverable device fault: {again}"
-                                    + trouble.began_as(again)) from None
-                if retries <= policy.max_retries:
-                    self.store.append_event(self.job_id, "fault", {
-                        "device": again.device, "code": again.code, "message": str(again),
-                        "retry": retries})
-                elif not self._may_wait(again, trouble):
-                    raise JobFailed(self._failure(again, trouble, retries - 1)) from None
-                elif not waiting_announced or str(again) != str(fault):
-                    # One event when the waiting starts (and when the cause changes), not one
-                    # per probe: a lab may leave a job waiting for many minutes.
-                    waiting_announced = True
-                    left = policy.wait_for_device_s - (time.monotonic() - trouble.since)
-                    self.store.append_event(self.job_id, "fault", {
-                        "device": again.device, "code": again.code, "message": str(again),
-                        "retry": retries, "waiting_s": round(max(left, 0.0), 1),
-                        "note": f"{again.device} does not answer; waiting up to "
-                                f"{max(left, 0.0):.0f} s more for it (check its power and "
-                                "cable); the job resumes from its checkpoint when it answers"})
+                then = rules.after_failed_recovery(again, fault, retries, trouble, announced)
+                if then.failure is not None:
+                    raise JobFailed(then.failure) from None
+                if then.event is not None:
+                    self.store.append_event(self.job_id, "fault", then.event)
+                announced = then.announced
                 fault = again
-        await self._sleep(policy.resume_settle_s)
+        await self._sleep(rules.policy.resume_settle_s)
         self.store.append_event(self.job_id, "recovered", {
             "device": fault.device, "code": fault.code})
-
-    def _may_wait(self, fault: hal.DeviceFault, trouble: _Trouble) -> bool:
-        """True while a silent device may still be waited for (see ``wait_for_device_s``)."""
-        limit = self.plan.faults.wait_for_device_s
-        return (isinstance(fault, hal.DeviceUnavailable) and limit > 0
-                and time.monotonic() - trouble.since < limit)
-
-    def _failure(self, fault: hal.DeviceFault, trouble: _Trouble, retries: int) -> str:
-        waited = time.monotonic() - trouble.since
-        limit = self.plan.faults.wait_for_device_s
-        how = f"{retries} retries"
-        if isinstance(fault, hal.DeviceUnavailable) and limit > 0:
-            how += f" and {waited:.0f} s (wait_for_device_s {limit:g})"
-        return (f"device fault persisted after {how}: {fault} (code {fault.code})"
-                + trouble.began_as(fault) + "; fix the device and submit the job again")
 
     async def _gate_in_suspension(self) -> None:
         if self._halt:
@@ -767,66 +743,25 @@ class ScanEngine:
 
     # ------------------------------------------------------------------ adaptive rounds
     async def _plan_next_round(self, steps: Sequence[StepRow]) -> bool:
-        plan = self.plan
-        if not isinstance(plan, AdaptivePlan):
-            return False
+        """Plan the next round as the plan's rounds say (:mod:`gonio.plans.rounds`); False
+        when the job is measured."""
         rnd = max(s.round for s in steps)
-        if rnd + 1 >= plan.max_rounds:
-            self.store.append_event(self.job_id, "adaptive_done", {"reason": "max_rounds"})
-            return False
         angles, values = self.measured_values(steps)
-        # The sample budget, the plan's cap on stage angles, and in any case the cap per job
-        # (so the dry run's bound holds and a job cannot grow without end).
-        limit = MAX_ROTATIONS if plan.max_rotations is None else plan.max_rotations
-        if plan.max_samples is not None:
-            limit = min(limit, plan.max_samples // len(self.pairs))
-        budget = limit - len(steps)
-        if budget <= 0:
-            self.store.append_event(self.job_id, "adaptive_done", {"reason": "budget"})
+        nxt = await self.rounds.next_round(angles, values, len(steps), rnd)
+        for type_, data in nxt.events:
+            self.store.append_event(self.job_id, type_, data)
+        if not nxt.angles_deg:
             return False
-        min_step = plan.min_step_deg or self.desc.resolution_deg
-        # Either rule refines within the plan's arc: over half a turn the gaps are those
-        # modulo 180 and new angles stay in [start, start + 180) (docs/science.md 7.3).
-        arc = (plan.start_deg, plan.first_span_deg())
-        new: list[float] | None = None
-        rule = "vf"
-        if plan.rule == "posterior" and self.refiner is not None and np.isfinite(values).all():
-            # The joint fit's posterior (docs/science.md 7.3): CPU work of a second or so,
-            # off the event loop so pause/abort stay responsive. If it cannot run (no basis,
-            # unusable readings), the scan goes on with V&F's rule rather than failing.
-            try:
-                new = await asyncio.to_thread(self.refiner, angles, values, budget, min_step,
-                                              plan.min_gain, arc)
-                rule = "posterior"
-            except (ValueError, OSError, RuntimeError) as exc:
-                self.store.append_event(self.job_id, "adaptive_round",
-                                        {"round": rnd + 1, "rule": "vf",
-                                         "posterior_failed": str(exc)[:300]})
-        if new is None:
-            new = adaptive_refinement(angles, values, plan.threshold, min_step, budget,
-                                      period_deg=arc[1], start_deg=arc[0])
-        # What the posterior rule saw (its rho, offset and drops), so a lab can tell why it
-        # went on or stopped.
-        describe = getattr(self.refiner, "describe", None) if rule == "posterior" else None
-        seen: dict[str, Any] = describe() if callable(describe) else {}
-        if not new:
-            self.store.append_event(self.job_id, "adaptive_done",
-                                    {"reason": "converged", "rule": rule, **seen})
-            return False
-        self.store.append_event(self.job_id, "adaptive_round",
-                                {"round": rnd + 1, "rule": rule, "angles": len(new), **seen})
         here = await self._stage_position()
-        route = order_for_travel(new, here, self.desc, plan.backlash_deg)
-        k0 = max(s.angle_index for s in steps) + 1
-        self.store.add_steps(
-            self.job_id, [(k0 + j, rnd + 1, p % 360.0, p) for j, p in enumerate(route)]
-        )
+        route = order_for_travel(nxt.angles_deg, here, self.desc, self.plan.backlash_deg)
+        self._add_steps(max(s.angle_index for s in steps) + 1, rnd + 1, route)
         return True
 
     def measured_values(self, steps: Sequence[StepRow]) -> tuple[list[float], np.ndarray]:
-        """Specimen angles (deg) and dark-subtracted values (n_pairs, r, C) of done steps."""
+        """Specimen angles (deg) and dark-subtracted values (n_pairs, r, C) of done steps,
+        from the readings the engine holds (no store read)."""
         done = [s for s in steps if s.done]
-        rows = self.store.readings(self.job_id)
+        rows = [r for s in done for r in self._readings.get(s.angle_index, ())]
         nch = max((len(r.raw) for r in rows), default=1)
         vals = readings_array(rows, self.pairs, [s.angle_index for s in done], nch)
         return [s.specimen_deg for s in done], vals
@@ -843,20 +778,6 @@ class ScanEngine:
         await self._lights_off()
         if self._rig is not None:
             await _quietly(self._rig.stage.stop())
-
-
-@dataclass(frozen=True)
-class _Trouble:
-    """The first fault at an angle and when it happened (monotonic seconds)."""
-
-    first: hal.DeviceFault
-    since: float
-
-    def began_as(self, last: hal.DeviceFault) -> str:
-        """``"; it began as: ..."`` when the first fault says something else than ``last``."""
-        if str(self.first) == str(last):
-            return ""
-        return f"; it began as: {self.first} (code {self.first.code})"
 
 
 def _running_in(loop: asyncio.AbstractEventLoop) -> bool:

@@ -133,9 +133,14 @@ def headline_error(metrics: dict[str, Any]) -> dict[str, Any] | None:
     ``predicted_log_rmse`` when the result has it, else ``predicted_error`` (docs/science.md
     4.1); None when neither is there (calibration jobs, or no pair could be left out).
 
+    A result outside physical bounds, or more than x2 from the expected error of the design
+    its rig came from (``design_gap``, :mod:`gonio.designgap`), says so in ``text`` and starts
+    ``meaning`` with the warning.
+
     Returns
     -------
-    dict with ``key`` (metric name), ``value``, ``text`` (value as shown) and ``meaning``.
+    dict with ``key`` (metric name), ``value``, ``text`` (value as shown) and ``meaning``
+    (and ``physical_bounds`` / ``design_gap`` when they apply).
     """
     out = _headline(metrics)
     bounds = metrics.get("physical_bounds")
@@ -144,6 +149,21 @@ def headline_error(metrics: dict[str, Any]) -> dict[str, Any] | None:
         out["text"] += " (OUTSIDE PHYSICAL BOUNDS)"
         out["meaning"] = f"Warning: {bounds}. {out['meaning']}"
         out["physical_bounds"] = bounds
+    gap = metrics.get("design_gap")
+    if out is not None and isinstance(gap, str):
+        # More than x2 from what the rig's design expected: the headline says so, and why.
+        expected = metrics.get("design_expected_log_rmse")
+        out["text"] += (f" (design expected {expected:.3g})"
+                        if isinstance(expected, int | float) else " (far from its design)")
+        out["meaning"] = f"Warning: {gap}. {out['meaning']}"
+        out["design_gap"] = gap
+    misfit = metrics.get("basis_misfit")
+    if out is not None and isinstance(misfit, str):
+        # The readings carry structure the basis cannot hold: the estimate is a floor at best,
+        # and the headline says so before anyone trusts it.
+        out["text"] += " (BASIS MISFIT)"
+        out["meaning"] = f"Warning: {misfit}. {out['meaning']}"
+        out["basis_misfit"] = misfit
     return out
 
 

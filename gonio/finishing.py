@@ -30,10 +30,11 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from gonio.basis_supply import BasisSupply
 from gonio.calibration import (
     CALIBRATION_FILE,
     Calibration,
@@ -42,10 +43,15 @@ from gonio.calibration import (
     save_calibration,
     sensor_full_scale,
 )
+from gonio.plans.checked import CheckedPlan
+from gonio.plans.dryrun import BasisSymmetry, arc_warning
 from gonio.plans.models import AnyPlan, CalibrationPlan, PlanError
 from gonio.plans.validation import plan_pairs
 from gonio.rigdescription import RigDescription
 from gonio.store import JobStore
+
+if TYPE_CHECKING:  # the numerics load with the first reconstruction
+    from gonio.brdf.reconstruction.basis import Basis
 
 log = logging.getLogger("gonio.finishing")
 
@@ -60,7 +66,10 @@ class Finishing:
     desc : RigDescription of the rig the job ran on
     data_dir : results go to ``data_dir/results/job-<id>.h5``; calibrations to
         ``data_dir/calibration.json``
-    basis_provider : returns the reconstruction basis (may build it; slow)
+    basis : the process's reconstruction basis (:class:`gonio.basis_supply.BasisSupply`;
+        may build it, slow)
+    basis_at_hand : the basis the job measured with (loaded before an adaptive job's first
+        reading), used instead of asking ``basis`` again
     calibration : returns the calibration to apply to a specimen's readings (asked only when
         one is finished: the latest calibration job may have replaced it meanwhile)
     provenance : extra provenance stored in every result (e.g. the rig config)
@@ -72,12 +81,14 @@ class Finishing:
     save_calibration : a calibration job's factors become the data directory's calibration
         in effect; False when a result is rebuilt (``gonio jobs rebuild``), which must not
         replace a later calibration
+    note_arc : record the job's ``arc_warning`` event when it has one
+        (:meth:`gonio.basis_supply.BasisSupply.note_arc`); False when a result is rebuilt
     """
 
     store: JobStore
     desc: RigDescription
     data_dir: Path
-    basis_provider: Callable[[], Any]
+    basis: BasisSupply
     calibration: Callable[[], Calibration]
     provenance: dict[str, Any] = field(default_factory=dict)
     fit_exports: bool = True
@@ -85,6 +96,8 @@ class Finishing:
     on_activity: Callable[[str], None] = lambda what: None
     stop: threading.Event = field(default_factory=threading.Event)
     save_calibration: bool = True
+    basis_at_hand: Basis | None = None
+    note_arc: bool = True
 
     def checkpoint(self, job_id: int, before: str) -> None:
         """Raise :class:`FinishingStopped` if an abort was asked for.
@@ -100,10 +113,12 @@ class FinishingStopped(Exception):
     """Finishing saw its :attr:`Finishing.stop` set and stopped without writing anything."""
 
 
-def finish_job(job_id: int, plan: AnyPlan, how: Finishing) -> dict[str, Any]:
+def finish_job(job_id: int, plan: AnyPlan | CheckedPlan, how: Finishing) -> dict[str, Any]:
     """Turn job ``job_id``'s readings into its result file; returns the job's summary.
 
-    Blocking (reconstruction and fits take seconds): the worker runs it in a thread.
+    Blocking (reconstruction and fits take seconds): the worker runs it in a thread. ``plan``
+    is the job's plan as the worker checked it (its pairs are not derived again), or the
+    stored plan as it is (a rebuild: its pairs are those of the rig it ran on).
 
     Raises
     ------
@@ -118,7 +133,10 @@ def finish_job(job_id: int, plan: AnyPlan, how: Finishing) -> dict[str, Any]:
     t0 = time.perf_counter()
     desc = how.desc
     job = how.store.get_job(job_id)
-    pairs = plan_pairs(plan, desc)
+    if isinstance(plan, CheckedPlan):
+        pairs, plan = list(plan.pairs), plan.plan
+    else:
+        pairs = plan_pairs(plan, desc)
     light_dirs, sensor_dirs = desc.pair_directions(pairs)
     channel_sets = {desc.sensor(p.sensor).channels for p in pairs}
     if len(channel_sets) != 1:
@@ -174,9 +192,15 @@ def finish_job(job_id: int, plan: AnyPlan, how: Finishing) -> dict[str, Any]:
 
     how.on_activity("basis")
     try:
-        basis = how.basis_provider()
+        basis = how.basis_at_hand if how.basis_at_hand is not None else how.basis.get()
     finally:
         how.on_activity("reconstructing")
+    # A half-turn scan with a basis whose prior varies over a full turn: the result is valid
+    # but the other half turn rests on the prior; the job's events (once: the worker's start
+    # may have said it), its summary and its result say so (docs/science.md 7.4).
+    symmetry = BasisSymmetry.of(basis)
+    arc = (how.basis.note_arc(how.store, job_id, plan, symmetry) if how.note_arc
+           else arc_warning(plan, symmetry))
     how.checkpoint(job_id, "reconstructing")
     grid = samples.to_samples()
     # The joint fit takes the scan's own anisotropy when it is less than the library prior's
@@ -184,7 +208,7 @@ def finish_job(job_id: int, plan: AnyPlan, how: Finishing) -> dict[str, Any]:
     rec = reconstruct(basis, grid.cells, grid.ph_lab, grid.stage_angles,
                       np.maximum(grid.values, 0.0), channels=channels, name=job.specimen)
     colour = _colour(rec, how, [p.sensor for p in pairs], bool(cal.pairs))
-    metrics = {
+    metrics: dict[str, Any] = {
         "rel_sample_error": rec.rel_sample_error,
         "estimated_error": rec.estimated_error,
         # The reported error bar: calibrated leave-one-pair-out error (science notebook 4.1);
@@ -204,6 +228,19 @@ def finish_job(job_id: int, plan: AnyPlan, how: Finishing) -> dict[str, Any]:
     }
     if "prior_rho" in rec.settings:
         metrics["prior_rho"] = rec.settings["prior_rho"]  # 1: the library prior as it is
+    if rec.misfit is not None:
+        # How far the fit misses its own readings against their noise; when the basis cannot
+        # hold them, predicted_log_rmse was widened and the result says why (science.md 7.1.1).
+        metrics.update(misfit_chi2=_finite_or_none(rec.misfit.chi2),
+                       misfit_log=_finite_or_none(rec.misfit.log_misfit),
+                       misfit_persistent_pairs=rec.misfit.persistent_pairs,
+                       predicted_log_rmse_unwidened=_finite_or_none(
+                           rec.predicted_log_rmse_unwidened))
+    misfit_message = rec.misfit_warning
+    if misfit_message is not None:
+        metrics["basis_misfit"] = misfit_message
+        provenance["basis_misfit"] = misfit_message
+        log.info("job %d: %s", job_id, misfit_message)
     # A reconstruction outside physical bounds (albedo far above 1, or orders of magnitude
     # above every reading) completes with a warning rather than failing: the readings and the
     # table where the pairs look are still the measurement, a rebuild with another basis can
@@ -216,13 +253,11 @@ def finish_job(job_id: int, plan: AnyPlan, how: Finishing) -> dict[str, Any]:
         metrics["physical_bounds"] = bounds_message
         provenance["physical_bounds"] = bounds_message
         log.info("job %d: %s", job_id, bounds_message)  # the worker records the event
+    _compare_with_design(rec, readings, plan, samples, len(pairs), bool(cal.pairs),
+                         how.provenance, metrics, provenance)
+    if "design_gap" in metrics:
+        log.info("job %d: %s", job_id, metrics["design_gap"])  # the worker records the event
     provenance.update(basis_K=int(basis.K), basis_materials=json.dumps(list(basis.materials)))
-    # A half-turn scan with a basis whose prior varies over a full turn: the result is valid
-    # but the other half turn rests on the prior; the result and the job's summary say so
-    # (docs/science.md 7.4), not only the job's event log.
-    from gonio.plans.dryrun import BasisSymmetry, arc_warning
-
-    arc = arc_warning(plan, BasisSymmetry.of(basis))
     if arc is not None:
         summary["arc_warning"] = arc
         provenance["arc_warning"] = arc
@@ -257,6 +292,30 @@ def finish_job(job_id: int, plan: AnyPlan, how: Finishing) -> dict[str, Any]:
     )
     summary.update(result_path=relative, **metrics)
     return summary
+
+
+def _compare_with_design(rec: Any, readings: list[Any], plan: AnyPlan, samples: Any,
+                         n_pairs: int, calibrated: bool, extra: dict[str, Any],
+                         metrics: dict[str, Any], provenance: dict[str, Any]) -> None:
+    """The scan's ``predicted_log_rmse`` beside the expected error of the design its rig config
+    came from (its ``[design]`` table, :mod:`gonio.designgap`): ``metrics`` gain
+    ``design_expected_log_rmse`` and, for a gap above x2 either way, ``design_gap`` (why);
+    ``provenance`` the design and the gap. Nothing without a ``[design]`` table."""
+    from gonio.designgap import compare_with_design, design_expectation, scan_facts
+
+    design = design_expectation(extra.get("rig_config"))
+    if design is None:
+        return
+    metrics["design_expected_log_rmse"] = design.expected_log_rmse
+    provenance["design"] = design.model_dump_json()
+    span = getattr(plan, "first_span_deg", None)
+    facts = scan_facts(rec, readings, n_angles=int(samples.stage_angles_deg.size),
+                       span_deg=float(span()) if callable(span) else 360.0,
+                       n_pairs=n_pairs, calibrated=calibrated)
+    gap = compare_with_design(facts, design)
+    if gap is not None:
+        metrics["design_gap"] = gap.message()
+        provenance["design_gap"] = gap.message()
 
 
 def physical_bounds(table: Any, values: Any, calibrated: bool) -> Any:
@@ -356,7 +415,7 @@ class RebuildError(ValueError):
 
 
 def rebuild_result(store: JobStore, data_dir: Path, job_id: int,
-                   basis_provider: Callable[[], Any]) -> dict[str, Any]:
+                   basis: BasisSupply) -> dict[str, Any]:
     """Write job ``job_id``'s result file again from the readings the store holds
     (``gonio jobs rebuild``): finishing re-run on them, with the calibration the job was
     finished with (recorded in its summary), the rig snapshot and plan it ran with. The job's
@@ -370,7 +429,7 @@ def rebuild_result(store: JobStore, data_dir: Path, job_id: int,
     store : the job store holding the job and its readings
     data_dir : the data directory the result goes to (``results/job-<id>.h5``)
     job_id : a completed job
-    basis_provider : returns the reconstruction basis (specimen jobs)
+    basis : the reconstruction basis (specimen jobs)
 
     Returns
     -------
@@ -413,8 +472,8 @@ def rebuild_result(store: JobStore, data_dir: Path, job_id: int,
     else:
         cal = Calibration()
     how = Finishing(
-        store=store, desc=desc, data_dir=Path(data_dir), basis_provider=basis_provider,
-        calibration=lambda: cal, save_calibration=False,
+        store=store, desc=desc, data_dir=Path(data_dir), basis=basis,
+        calibration=lambda: cal, save_calibration=False, note_arc=False,
         provenance={"rebuilt": "from the job store's readings (gonio jobs rebuild) on "
                     + time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())},
     )

@@ -42,11 +42,17 @@ def redact_query(path: str) -> str:
     if not sep:
         return path
     parts = []
-    for name, value in parse_qsl(query, keep_blank_values=True):
+    for segment in query.split("&"):
+        if "=" not in segment:
+            # A bare word (``?s3cr3t``) is not a name=value pair: it may be the key itself.
+            if segment:
+                parts.append(REDACTED)
+            continue
+        ((name, value),) = parse_qsl(segment, keep_blank_values=True)
         shown = REDACTED if SECRET_PARAM.search(name) else quote(value, safe="")
         parts.append(f"{quote(name, safe='')}={shown}")
     if not parts and query:
-        # Not name=value pairs at all (e.g. "?sometoken"): it may be the key itself.
+        # Only separators ("?&&"): nothing to show, and nothing worth guessing about.
         return f"{base}?{REDACTED}"
     return f"{base}?{'&'.join(parts)}"
 

@@ -19,6 +19,12 @@ rig config uses for geometry (docs/file-formats.md)::
     light = "L1"
     sensor = "S1"
 
+    [design]                 # what the design expects of a scan (docs/science.md 7.1)
+    expected_log_rmse = 0.0376
+    rotations = 8
+    span_deg = 180.0
+    pairs = 10
+
 It carries no hardware (Modbus addresses, register maps). :func:`apply_design` merges it into
 a rig config (``gonio rig apply-design``), ``gonio sim --geometry`` mounts simulated devices
 there, and ``gonio simulate-scan --pairs`` reads its pairs.
@@ -35,7 +41,7 @@ from typing import TYPE_CHECKING, Annotated, Any, Literal
 import tomli_w
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from gonio.config import ConfigError, parse_rig_config, read_toml
+from gonio.config import ConfigError, DesignExpectation, parse_rig_config, read_toml
 
 if TYPE_CHECKING:
     from gonio.brdf.design.pairs import PairDesign
@@ -81,6 +87,9 @@ class DesignFragment(BaseModel):
     lights: Annotated[list[DesignDevice], Field(min_length=1)]
     sensors: Annotated[list[DesignDevice], Field(min_length=1)]
     pairs: Literal["all"] | Annotated[list[DesignPair], Field(min_length=1)] = "all"
+    #: What the design expects of a scan (``gonio design`` writes it when it has the held-out
+    #: error); :func:`apply_design` carries it into the rig config.
+    design: DesignExpectation | None = None
 
     @model_validator(mode="after")
     def _check(self) -> DesignFragment:
@@ -142,7 +151,8 @@ def parse_fragment(data: dict[str, Any], source: str = "design fragment") -> Des
         raise ConfigError(
             "\n".join(dict.fromkeys(lines))
             + "\n(a design fragment has [[lights]] and [[sensors]] tables with name, theta_deg, "
-            "phi_deg, and [[pairs]] tables or pairs = \"all\"; see docs/file-formats.md)"
+            "phi_deg, [[pairs]] tables or pairs = \"all\", and optionally the [design] table "
+            "gonio design writes; see docs/file-formats.md)"
         ) from None
 
 
@@ -160,9 +170,11 @@ def load_fragment(path: str | os.PathLike[str]) -> DesignFragment:
     return parse_fragment(data, p.name)
 
 
-def design_fragment(design: PairDesign) -> dict[str, Any]:
+def design_fragment(design: PairDesign,
+                    expectation: DesignExpectation | None = None) -> dict[str, Any]:
     """Design fragment of a :class:`~gonio.brdf.design.pairdesign.PairDesign` (``gonio design
-    -o``, the design API): ``lights``, ``sensors`` (name, theta_deg, phi_deg) and ``pairs``.
+    -o``, the design API): ``lights``, ``sensors`` (name, theta_deg, phi_deg) and ``pairs``,
+    and ``design`` (what it expects of a scan) when ``expectation`` is given.
 
     Independent pairs get one light and one sensor each (``L1``/``S1`` ...) and an explicit
     ``[[pairs]]`` list; a product rig uses ``pairs = "all"``.
@@ -183,6 +195,8 @@ def design_fragment(design: PairDesign) -> dict[str, Any]:
         ]
     out["lights"] = devices("L", design.lights_deg)
     out["sensors"] = devices("S", design.sensors_deg)
+    if expectation is not None:
+        out["design"] = expectation.model_dump(mode="json", exclude_none=True)
     return out
 
 
@@ -201,6 +215,8 @@ def dump_fragment(fragment: dict[str, Any], header: str = "") -> str:
             continue
         for entry in entries:
             lines += ["", f"[[{kind}]]", tomli_w.dumps(entry).rstrip()]
+    if isinstance(fragment.get("design"), dict):
+        lines += ["", "[design]", tomli_w.dumps(fragment["design"]).rstrip()]
     return "\n".join(lines).lstrip("\n") + "\n"
 
 
@@ -219,7 +235,9 @@ def apply_design(
     * rig devices the design does not name stay (a note lists them) but are in no pair;
     * ``pairs`` becomes the design's;
     * ``[[calibration.factors]]`` of pairs whose light or sensor moved, or that are no longer
-      measured, are dropped (a factor folds in the geometry it was measured with).
+      measured, are dropped (a factor folds in the geometry it was measured with);
+    * ``[design]`` (what the design expects of a scan) becomes the design's; a design without
+      one removes the rig's, which described another geometry (a note says so).
 
     Raises
     ------
@@ -301,5 +319,10 @@ def apply_design(
                 "measured; calibrate again on the white reference"
             )
         cal["factors"] = kept
+    if design.design is not None:
+        out["design"] = design.design.model_dump(mode="json", exclude_none=True)
+    elif out.pop("design", None) is not None:
+        notes.append("removed the rig's [design] table: it described another geometry, and "
+                     "this design carries none (scans are then not compared with a design)")
     parse_rig_config(out, source)  # the merged config must load
     return out, notes

@@ -31,9 +31,10 @@ import threading
 import time
 from collections.abc import Awaitable, Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from gonio import hal, heap
+from gonio.basis_supply import BasisSupply
 from gonio.calibration import (
     Calibration,
     CalibrationError,
@@ -48,13 +49,21 @@ from gonio.diskspace import (
 from gonio.engine import Progress, ScanEngine
 from gonio.finishing import Finishing, FinishingStopped, finish_job
 from gonio.jobstates import FINISHED_STATES, IllegalTransition, JobState
-from gonio.plans.dryrun import BasisSymmetry, arc_may_apply, arc_warning
+from gonio.plans.checked import CheckedPlan, check_plan
+from gonio.plans.dryrun import BasisSymmetry, arc_may_apply
 from gonio.plans.models import AdaptivePlan, AnyPlan, PlanError, parse_stored_plan
-from gonio.plans.validation import plan_pairs, validate_plan
 from gonio.rigdescription import RigDescription
 from gonio.store import JobRow, JobStore, NotFound
 
+if TYPE_CHECKING:  # the numerics load with the first basis
+    from gonio.brdf.reconstruction.basis import Basis
+    from gonio.refinement import PosteriorRefiner
+
 log = logging.getLogger("gonio.worker")
+
+KEEP_CHECKED = 64
+"""Checked plans of submitted jobs the worker keeps before it drops those of jobs that are no
+longer queued (:meth:`Worker.take_checked`)."""
 
 QUEUE_HOLD = "queue"
 """Name of the queue hold in the store's ``holds`` table."""
@@ -62,71 +71,6 @@ GATE_POLL_S = 1.0
 """How often a closed gate (maintenance lock) is looked at again, seconds."""
 DISK_POLL_S = 1.0
 """How often a full disk is looked at again, seconds."""
-
-BasisProvider = Callable[[], Any]
-"""Returns the :class:`gonio.brdf.reconstruction.basis.Basis` to reconstruct with (may build it;
-slow)."""
-
-
-def default_basis_provider() -> Any:
-    from gonio.brdf.reconstruction.basis import default_basis
-
-    return default_basis()
-
-
-def basis_build_needed(provider: BasisProvider) -> bool:
-    """Whether calling ``provider`` will *build* the default basis (minutes), not load it.
-
-    Only :func:`default_basis_provider` is known to build: true when its cache file does
-    not exist yet and the shipped synthetic basis cannot serve (it is stale: the code that
-    builds it changed). With the shipped one, a first scan or a ``gonio library import``
-    costs a fold-in of seconds: a load. Any other provider (a saved basis, tests) is taken to
-    load quickly.
-    """
-    if provider is not default_basis_provider:
-        return False
-    from gonio.brdf.reconstruction import shipped
-    from gonio.brdf.reconstruction.basis import default_basis_path
-
-    return not default_basis_path().is_file() and not shipped.is_current()
-
-
-# The symmetry of the default basis' cache file, by path, with the file's (mtime, size) it was
-# read from: a dry run reads the file once, not at every request (a few tenths of a second per
-# read for the default K = 64).
-_built_symmetry: dict[Path, tuple[tuple[int, int], BasisSymmetry]] = {}
-_built_symmetry_lock = threading.Lock()
-
-
-def built_basis_symmetry(provider: BasisProvider) -> BasisSymmetry | None:
-    """What the basis ``provider`` gives says about half a turn, when it is built already.
-
-    Only :func:`default_basis_provider`'s cache file is read (never built: a dry run must stay
-    fast); None when it does not exist yet or cannot be read (the build or the job says why),
-    and for any other provider (calling it may block: :meth:`Worker.basis_symmetry` knows the
-    bases that worker has loaded).
-    """
-    if provider is not default_basis_provider:
-        return None
-    from gonio.brdf.reconstruction.basis import Basis, BasisError, default_basis_path
-
-    path = default_basis_path()
-    try:
-        st = path.stat()
-    except OSError:
-        return None
-    version = (st.st_mtime_ns, st.st_size)
-    with _built_symmetry_lock:
-        known = _built_symmetry.get(path)
-        if known is not None and known[0] == version:
-            return known[1]
-        try:
-            symmetry = BasisSymmetry.of(Basis.load(path))
-        except BasisError:
-            return None
-        _built_symmetry[path] = (version, symmetry)
-        return symmetry
-
 
 def needs_basis_to_measure(plan: AnyPlan) -> bool:
     """True for plans whose measurement itself uses the basis: adaptive plans with the
@@ -144,11 +88,13 @@ class Worker:
     rig_desc : RigDescription of that rig
     data_dir : results go to ``data_dir/results/job-<id>.h5``; calibrations to
         ``data_dir/calibration.json``
-    basis_provider : callable returning the reconstruction basis
+    basis : the process's reconstruction basis (:class:`gonio.basis_supply.BasisSupply`)
     calibration : callable returning the calibration to apply to scans
     provenance : extra provenance stored in every result (e.g. the rig config)
     fit_exports : store the factored and principled fits in every scan's result (a few
         seconds each; exports then need no refit)
+    gate : callable saying why no job may start or resume now (None: they may), e.g. the
+        maintenance lock; looked at again at least every :data:`GATE_POLL_S` while it blocks
     """
 
     def __init__(
@@ -157,16 +103,17 @@ class Worker:
         get_rig: Callable[[], Awaitable[hal.Rig]],
         rig_desc: RigDescription,
         data_dir: Path,
-        basis_provider: BasisProvider = default_basis_provider,
+        basis: BasisSupply,
         calibration: Callable[[], Calibration] = Calibration,
         provenance: dict[str, Any] | None = None,
         fit_exports: bool = True,
+        gate: Callable[[], str | None] | None = None,
     ):
         self.store = store
         self.get_rig = get_rig
         self.desc = rig_desc
         self.data_dir = Path(data_dir)
-        self.basis_provider = basis_provider
+        self.basis = basis
         self.calibration = calibration
         self.on_job_start: Callable[[JobRow], None] | None = None
         self.provenance = provenance or {}
@@ -187,9 +134,7 @@ class Worker:
         # The queue hold survives restarts: it is read back from the store.
         stored = store.hold(QUEUE_HOLD)
         self.held: str | None = stored[0] if stored is not None else None
-        # Why no job may start or resume now (None: they may); the service wires the
-        # maintenance lock here. Checked again at least every GATE_POLL_S while it blocks.
-        self.gate: Callable[[], str | None] = lambda: None
+        self.gate: Callable[[], str | None] = gate if gate is not None else (lambda: None)
         self._wake = asyncio.Event()
         self._loop: asyncio.AbstractEventLoop | None = None  # where run_forever runs
         self._recon_task: asyncio.Task[dict[str, Any]] | None = None
@@ -199,16 +144,9 @@ class Worker:
         self.activity: str | None = None
         """What the current job waits for beyond measuring (e.g. the basis), or None."""
         self._activity_since = 0.0
-        # One basis load at a time: the warm-up at start and a job's own load share it, so a
-        # build in progress is waited for, never started twice.
-        self._basis_lock = threading.Lock()
-        self._prewarm: threading.Thread | None = None
-        # The symmetry of the last basis a provider gave this worker (a provider other than
-        # the default one is never called just to look: it may block) and the jobs whose
-        # arc warning is recorded already, in this process.
-        self._seen_symmetry: BasisSymmetry | None = None
-        self._arc_noted: set[int] = set()
-        self._arc_lock = threading.Lock()  # submission (API threads), the loop, finishing
+        # Plans checked at their submission in this process, by job id (taken at the start).
+        self._checked: dict[int, CheckedPlan] = {}
+        self._checked_lock = threading.Lock()  # submission (API threads) and the loop
         self.disk_full: str | None = None
         """Why no job starts now: the disk filled (see :meth:`note_disk_full`), or None."""
         # What the store could not record while the disk was full, done once it has room.
@@ -237,6 +175,11 @@ class Worker:
             self.store.set_hold(QUEUE_HOLD, reason, "queue_held", {"reason": reason})
         else:
             self.store.append_event(None, "queue_held", {"reason": reason})
+
+    def queue_held(self) -> str | None:
+        """Why the queue takes no new job now (a halt, a failed job's stop, a manual command,
+        the gate: the maintenance lock); None if it runs."""
+        return self.held if self.held is not None else self.gate()
 
     def release(self) -> None:
         self.held = None
@@ -448,35 +391,60 @@ class Worker:
             self._recon_task = None
             heap.trim()  # what the job's arrays left in the arenas (gonio/heap.py)
 
+    def take_checked(self, job_id: int, checked: CheckedPlan) -> None:
+        """Keep the plan :meth:`gonio.service.GonioService.submit` checked for job
+        ``job_id``: the job's start uses it instead of checking the stored plan again.
+
+        Jobs cancelled or removed before they start leave theirs behind: past
+        :data:`KEEP_CHECKED` kept plans, those of jobs no longer queued are dropped.
+        """
+        with self._checked_lock:
+            self._checked[job_id] = checked
+            if len(self._checked) <= KEEP_CHECKED:
+                return
+        waiting = {row.id for row in self.store.queue()}
+        with self._checked_lock:
+            for k in [k for k in self._checked if k not in waiting and k != job_id]:
+                del self._checked[k]
+
+    def _checked_plan(self, job: JobRow) -> CheckedPlan:
+        """The job's plan, checked on this rig: as submitted in this process, else parsed
+        from the store and checked (a restart, or a rig changed since). Raises PlanError."""
+        with self._checked_lock:
+            checked = self._checked.pop(job.id, None)
+        if checked is not None and checked.rig == self.desc:
+            return checked
+        return check_plan(parse_stored_plan(job.plan), self.desc)
+
     async def _run_job(self, job: JobRow) -> JobState:
         try:
-            plan = parse_stored_plan(job.plan)
-            validate_plan(plan, self.desc)
+            checked = self._checked_plan(job)
         except PlanError as exc:
             return self._fail(job, f"plan no longer valid on this rig: {exc}")
+        plan = checked.plan
         if job.state is not JobState.RECONSTRUCTING and plan.finishing != "calibration":
             # Checked at submission too; the calibration may have changed since (a new
             # calibration job, a file edited by hand). A result calibrated in part, or with a
             # damaged file, is refused before anything moves.
             try:
-                self.calibration().check_covers(plan_pairs(plan, self.desc), f"job {job.id}")
+                self.calibration().check_covers(checked.pairs, f"job {job.id}")
             except CalibrationError as exc:
                 return self._fail(job, f"not started: {exc}", plan)
-        basis: Any = None  # loaded before measuring when the plan needs it
+        basis: Basis | None = None  # loaded before measuring when the plan needs it
         if job.state is not JobState.RECONSTRUCTING:
             refiner = None
             if needs_basis_to_measure(plan):
                 # The adaptive rule needs the basis after the first round: load (or build) it
                 # now, before anything moves, so the stage never waits mid-scan for it.
                 basis = await self._basis_before_measuring(job)
-                refiner = self._refiner(plan, basis)
+                refiner = self._refiner(checked, basis)
             # A half-turn plan and a basis without the twofold symmetry: said before the first
             # reading whenever the basis is at hand (loaded above, or built). The file is read
             # once per version, mostly already by the submission's check.
             if arc_may_apply(plan):  # only then is the basis file worth a look
-                self.note_arc(job.id, plan, BasisSymmetry.of(basis) if basis is not None
-                              else self.basis_symmetry())
-            engine = self._hand_to_engine(job, plan, refiner)
+                self.basis.note_arc(self.store, job.id, plan, BasisSymmetry.of(basis)
+                                    if basis is not None else self.basis.symmetry())
+            engine = self._hand_to_engine(job, checked, refiner)
             if not isinstance(engine, ScanEngine):
                 return engine
             if self.on_job_start is not None:
@@ -510,9 +478,10 @@ class Worker:
             else:
                 self.store.set_state(job.id, JobState.RECONSTRUCTING)
             # From here an abort stops the finishing (:meth:`abort_reconstruction`).
-            how = self._finishing(basis, job.id, plan)
+            how = self._finishing(basis)
             self._finish_stop = how.stop
-        self._recon_task = asyncio.create_task(asyncio.to_thread(finish_job, job.id, plan, how))
+        self._recon_task = asyncio.create_task(
+            asyncio.to_thread(finish_job, job.id, checked, how))
         try:
             summary = await self._recon_task
         except asyncio.CancelledError:
@@ -541,6 +510,9 @@ class Worker:
             # Completed, but not plainly: the event log and its listeners (the CLI) say why.
             self.store.append_event(job.id, "physical_bounds",
                                     {"message": summary["physical_bounds"]})
+        if summary.get("design_gap"):
+            # The self-estimate is more than x2 from its design's expected error: why.
+            self.store.append_event(job.id, "design_gap", {"message": summary["design_gap"]})
         self.store.set_state(job.id, JobState.COMPLETED)
         return JobState.COMPLETED
 
@@ -559,69 +531,20 @@ class Worker:
             self.hold(f"job {job.id} failed and asked to stop the queue")
         return JobState.FAILED
 
-    def _refiner(self, plan: AnyPlan, basis: Any) -> Any:
+    def _refiner(self, checked: CheckedPlan, basis: Basis | None) -> PosteriorRefiner | None:
         """The posterior rule's bridge for adaptive plans that use it (docs/science.md 7.3);
         None without a basis (the engine then uses V&F's rule and says so)."""
-        if basis is None or not needs_basis_to_measure(plan):
+        if basis is None or not needs_basis_to_measure(checked.plan):
             return None
         from gonio.refinement import PosteriorRefiner
 
-        return PosteriorRefiner(lambda: basis, self.desc, plan_pairs(plan, self.desc),
-                                self.calibration())
+        return PosteriorRefiner(lambda: basis, self.desc, checked.pairs, self.calibration())
 
     # ------------------------------------------------------------------ the basis, early
-    def _load_basis(self) -> Any:
-        """The basis from the provider, one caller at a time (blocking: call in a thread)."""
-        with self._basis_lock:
-            return self.remember_basis(self.basis_provider())
-
-    def remember_basis(self, basis: Any) -> Any:
-        """Note what ``basis`` (from this worker's provider) says about half a turn, for
-        :meth:`basis_symmetry`; returns ``basis``."""
-        if basis is not None:
-            self._seen_symmetry = BasisSymmetry.of(basis)
-        return basis
-
-    def basis_symmetry(self) -> BasisSymmetry | None:
-        """What the basis a job would reconstruct with says about half a turn, when it is at
-        hand without building or calling a provider that may block: the default basis' cache
-        file (:func:`built_basis_symmetry`), else the last basis this worker's provider gave;
-        None when neither is known."""
-        if self.basis_provider is default_basis_provider:
-            return built_basis_symmetry(self.basis_provider)
-        return self._seen_symmetry
-
-    def note_arc(self, job_id: int, plan: AnyPlan, basis: BasisSymmetry | None) -> None:
-        """Record the job's arc warning (:func:`gonio.plans.dryrun.arc_warning`) as its
-        ``arc_warning`` event, once per job (a job resumed after a restart has it already:
-        the store is asked once per process); nothing when there is none.
-
-        Called when the job is queued, when it starts and when its finishing has the basis:
-        whichever first knows the basis records it, so a job left to run unattended carries
-        the warning in its own record (the joint fit still takes the scan: no refusal).
-        """
-        message = arc_warning(plan, basis)
-        if message is None or basis is None:
-            return
-        with self._arc_lock:
-            if job_id in self._arc_noted:
-                return
-            self._arc_noted.add(job_id)
-        if self.store.has_event(job_id, "arc_warning"):
-            return
-        self.store.append_event(job_id, "arc_warning", {
-            "message": message, "span_deg": plan.first_span_deg(),
-            "materials": list(basis.without_twofold_symmetry)})
-
-    def basis_build_needed(self) -> bool:
-        """Whether the next basis load is a build (the dry run says so; see
-        :func:`basis_build_needed`)."""
-        return basis_build_needed(self.basis_provider)
-
     def _start_prewarm(self) -> None:
         """At start: when the queue (or a job left active) holds a plan that measures with the
         basis and the basis must be built, build it now in a thread, while earlier jobs run."""
-        if self._prewarm is not None or not self.basis_build_needed():
+        if self.basis.prewarming or not self.basis.build_needed():
             return
         jobs = [*self.store.active_jobs(), *self.store.queue()]
         wanted = []
@@ -635,25 +558,16 @@ class Worker:
             "jobs": wanted, "message": "building the reconstruction basis for the queued "
             "adaptive jobs (first use on this install)"})
         log.info("building the default basis for queued adaptive jobs %s", wanted)
+        self.basis.prewarm()
 
-        def build() -> None:
-            try:
-                self._load_basis()
-            except Exception:  # the job's own load reports it, with the job
-                log.exception("building the basis at start failed")
-
-        # A daemon thread, not the loop's executor: shutting down must not wait for a build.
-        self._prewarm = threading.Thread(target=build, name="gonio-basis-prewarm", daemon=True)
-        self._prewarm.start()
-
-    async def _basis_before_measuring(self, job: JobRow) -> Any:
+    async def _basis_before_measuring(self, job: JobRow) -> Basis | None:
         """Load (or build) the basis before the job's first reading, off the event loop.
 
         The job's events say what happens (``basis_loading`` then ``basis_ready`` or
         ``basis_failed``) and its status shows the activity meanwhile. A basis that cannot
         be had does not fail the job: the engine measures with V&F's rule and says so.
         """
-        build = self.basis_build_needed()
+        build = self.basis.build_needed()
         self._set_activity("basis_before_measuring")
         self.store.append_event(job.id, "basis_loading", {
             "build": build,
@@ -662,7 +576,7 @@ class Worker:
             + " before the first reading: the adaptive rule plans later rounds with it"})
         t0 = time.monotonic()
         try:
-            basis = await asyncio.to_thread(self._load_basis)
+            basis = await asyncio.to_thread(self.basis.get)
         except Exception as exc:
             log.exception("job %s: the basis could not be loaded", job.id)
             self.store.append_event(job.id, "basis_failed", {
@@ -675,8 +589,8 @@ class Worker:
                                 {"seconds": round(time.monotonic() - t0, 2)})
         return basis
 
-    def _hand_to_engine(self, job: JobRow, plan: AnyPlan, refiner: Any
-                        ) -> ScanEngine | JobState:
+    def _hand_to_engine(self, job: JobRow, plan: CheckedPlan,
+                        refiner: PosteriorRefiner | None) -> ScanEngine | JobState:
         """The engine that will measure ``job``, or the state to report when the job is not
         to be measured after all.
 
@@ -706,22 +620,13 @@ class Worker:
             return self._engine
 
     # ------------------------------------------------------------------ finishing
-    def _finishing(self, basis: Any = None, job_id: int | None = None,
-                   plan: AnyPlan | None = None) -> Finishing:
+    def _finishing(self, basis: Basis | None = None) -> Finishing:
         """What :func:`gonio.finishing.finish_job` needs, from this worker's settings now;
-        ``basis``, when the job already has one, instead of the provider's. With ``job_id``
-        and ``plan``, the basis the finishing gets is checked against the plan's arc
-        (:meth:`note_arc`: a job whose basis was built only now still gets its warning)."""
-
-        def provide() -> Any:
-            got = self.remember_basis(self.basis_provider()) if basis is None else basis
-            if job_id is not None and plan is not None and got is not None:
-                self.note_arc(job_id, plan, BasisSymmetry.of(got))
-            return got
-
+        ``basis``, when the job already has one (loaded before measuring), instead of a new
+        one from the supply."""
         return Finishing(
             store=self.store, desc=self.desc, data_dir=self.data_dir,
-            basis_provider=provide,
+            basis=self.basis, basis_at_hand=basis,
             calibration=self.calibration,
             provenance=self.provenance, fit_exports=self.fit_exports,
             true_material=self.specimen_truth, on_activity=self._set_activity,
@@ -731,12 +636,15 @@ class Worker:
         self.activity = what
         self._activity_since = time.monotonic()
 
+    def activity_seconds(self) -> float | None:
+        """How long the current activity (:attr:`activity`) has lasted, seconds; None if none."""
+        return None if self.activity is None else time.monotonic() - self._activity_since
+
     def activity_report(self) -> tuple[str, float | None] | None:
         """What the current job waits for, in words, and the fraction done if known.
 
-        While the default basis is being obtained for more than a moment and must be built
-        (the shipped synthetic basis is stale: :func:`basis_build_needed`), the report counts
-        the library materials tabulated so far, then says the basis is being learned.
+        While the basis must be built, the report counts how far the build has come
+        (:meth:`gonio.basis_supply.BasisSupply.wait_report`).
         """
         what = self.activity
         if what is None:
@@ -746,19 +654,7 @@ class Worker:
         # Before measuring, an adaptive job says why it waits for the basis.
         why = (" before the first reading (the adaptive rule needs it)"
                if what == "basis_before_measuring" else "")
-        waited = time.monotonic() - self._activity_since
-        if (self.basis_provider is not default_basis_provider or waited < 1.0
-                or not self.basis_build_needed()):
-            return ("loading the reconstruction basis" + why, None)
-        from gonio.brdf.materials.library import build_progress
-
-        done, total = build_progress()
-        if done < total:
-            return (f"building the BRDF training library{why}, {done} of {total} materials "
-                    "(first scan on this install; later scans reuse it)",
-                    done / total if total else None)
-        return (f"learning the reconstruction basis from the library{why} (first scan on this "
-                "install, about a minute; later scans reuse it)", None)
+        return self.basis.wait_report(why, time.monotonic() - self._activity_since)
 
     async def stop(self) -> None:
         self._stopping = True

@@ -239,7 +239,9 @@ class StageMotion:
             pp, vv = ph.at(math.inf)
             tt += duration
         self._rest_pos = target
-        self._end_t = tt if self._phases else t
+        # A command to where the stage already rests moves nothing, so it starts no ringing
+        # (a ringing from the previous move goes on to its end): only a move rings.
+        self._end_t = tt if self._phases else min(self._end_t, t)
 
     def _time_at_fraction(self, start: float, target: float, fraction: float) -> float:
         """Sim time at which the running profile has covered ``fraction`` of the distance."""

@@ -15,6 +15,7 @@ the lab page. The service's typed errors become HTTP statuses in one place here:
 :class:`gonio.results.OffGridAngle`                   422
 :class:`gonio.brdf.design.errors.DesignError`         422
 :class:`gonio.brdf.design.errors.FeasibilityError`    422
+:class:`gonio.export.ExportError`                     422
 :class:`gonio.service.DeviceError`                    503
 :class:`gonio.results.ResultFileError`                500
 a full disk (:func:`gonio.diskspace.is_disk_full`)    507
@@ -53,6 +54,7 @@ from gonio.brdf.design.errors import DesignError, FeasibilityError
 from gonio.brdf.design.presets import UnknownPresetError
 from gonio.calibration import CalibrationError
 from gonio.diskspace import DiskFull, disk_full_message, is_disk_full
+from gonio.export import ExportError
 from gonio.jobstates import IllegalTransition
 from gonio.motion import StageMoveError
 from gonio.plans.models import PlanError
@@ -198,6 +200,7 @@ def create_app(
         (FeasibilityError, 422),
         (UnknownPresetError, 404),
         (ColourError, 422),
+        (ExportError, 422),
         (DeviceError, 503),
     ):
         app.add_exception_handler(exc_type, _mapped(status))

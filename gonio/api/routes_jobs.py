@@ -2,19 +2,16 @@
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Any
 
 from fastapi import APIRouter, Query, Response, status
 from pydantic import BaseModel, Field
 
 from gonio.api.deps import COMPUTE, READ, WRITE, JobId, Service
-from gonio.calibration import counts, uncalibrated_refusal, uncalibrated_warning
+from gonio.calibration import counts, uncalibrated_warning
 from gonio.jobstates import JobState
-from gonio.paths import scan_data_dir
 from gonio.plans.dryrun import DryRun
 from gonio.plans.models import Plan
-from gonio.plans.validation import plan_pairs
 from gonio.service import Conflict, JobDetail, JobInfo, JobRequest, ReorderRequest
 
 router = APIRouter(prefix="/api/v1/jobs", tags=["jobs"])
@@ -67,7 +64,7 @@ def create_job(
         "(otherwise 409: most likely the daemon runs on another data directory)"),
 ) -> JobInfo:
     if not accept_uncalibrated:
-        refusal = _uncalibrated_refusal(service, request.plan)
+        refusal = service.uncalibrated_refusal(request.plan)
         if refusal is not None:
             raise Conflict(refusal)
     info = service.submit(request)
@@ -88,27 +85,6 @@ def dry_run(request: DryRunRequest, service: Service) -> DryRun:
         if warning is not None:
             result = result.model_copy(update={"warnings": [*result.warnings, warning]})
     return result
-
-
-def _uncalibrated_refusal(service: Any, plan: Any) -> str | None:
-    """Why a scan of ``plan`` needs the user's acceptance
-    (:func:`gonio.calibration.uncalibrated_refusal`), None when it does not."""
-    if plan.kind == "calibration":
-        return None
-    try:
-        pairs = plan_pairs(plan, service.desc)
-    except ValueError:
-        return None  # a plan that cannot run: submit says why
-    try:
-        own: Path | None = scan_data_dir(service.rig_config)
-    except AttributeError:  # a rig without a rig config (tests, notebooks)
-        own = None
-    why = uncalibrated_refusal(service.calibration(), pairs, own, service.data_dir)
-    if why is None:
-        return None
-    return (f"{why}. Restart the daemon on that data directory (or without --data-dir), run a "
-            "calibration job, or send accept_uncalibrated=true to measure in sensor units all "
-            "the same")
 
 
 @router.get(

@@ -181,6 +181,7 @@ ExportFormat = Literal["factored", "mtlx", "gltf", "merl", "table"]
     "/{job_id}/export",
     dependencies=READ,
     responses={**_NO_RESULT, 200: {"content": {"application/octet-stream": {}}},
+               422: {"description": "with_mesh asked for a format other than gltf"},
                507: {"description": "no room on the data directory's disk for the export"}},
     response_class=FileResponse,
     summary="The result as a renderer format: factored, mtlx, gltf, merl or table "
@@ -190,10 +191,13 @@ async def export(
     job_id: JobId,
     service: Service,
     format: Annotated[ExportFormat, Query(description="factored | mtlx | gltf | merl | table")],
+    with_mesh: bool = Query(False, description="gltf only: add a preview sphere with "
+                            "tangents, so that any glTF viewer shows the material "
+                            "(gonio export --with-mesh)"),
 ) -> FileResponse:
     from gonio.export import MEDIA_TYPES
 
-    path, name = await asyncio.to_thread(service.export, job_id, format)
+    path, name = await asyncio.to_thread(service.export, job_id, format, with_mesh)
     return FileResponse(path, media_type=MEDIA_TYPES[format], filename=name)
 
 

@@ -260,6 +260,8 @@ def _cmd_reconstruct(args: argparse.Namespace) -> int:
     print(f"reconstructed {name}: K={s['K']} n={s['n']} r={s['r']} method={s['method']}")
     print(f"  predicted log_rmse {rec.predicted_log_rmse:.3f} (expected cosine-weighted log "
           "error against the true BRDF; within x2 on most held-out materials)")
+    if rec.misfit_warning is not None:
+        print(f"  warning: {rec.misfit_warning}")
     print(f"  sample error {100 * rec.rel_sample_error:.2f} %, "
           f"self-estimated MAPE {100 * rec.predicted_error:.1f} % "
           f"(V&F estimate {100 * rec.estimated_error:.2f} %), "
@@ -346,6 +348,8 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     print(f"  log_rmse {metrics.log_rmse(rec.table, reference):.4f}   "
           f"log_psnr {metrics.log_psnr(rec.table, reference):.2f} dB   "
           f"predicted log_rmse {rec.predicted_log_rmse:.4f}")
+    if rec.misfit_warning is not None:
+        print(f"  warning: {rec.misfit_warning}")
     print(f"  self-estimated MAPE {100 * rec.predicted_error:.1f} % "
           f"(V&F estimate {100 * rec.estimated_error:.2f} %)")
     print(f"  reconstruction {rec.settings['seconds']:.3f} s, total "

@@ -58,16 +58,21 @@ def register(sub: Any) -> None:
     c = sub.add_parser(
         "colour-chart", aliases=["color-chart"],
         help="fit an RGB sensor's colour calibration from a chart of known reflectances",
-        description="Fit the 3 x C matrix taking a sensor's reflectance factors to CIE XYZ from "
+        description="Fit the calibration taking a sensor's reflectance factors to CIE XYZ from "
         "a chart file (CSV: patch, the sensor's channel readings, the patches' reference "
-        "reflectance per wavelength; docs/colour.md), print its residual CIEDE2000 on the "
-        "patches, and write the [sensors.colour_calibration] table for the rig config.",
+        "reflectance per wavelength; docs/colour.md): a 3 x C matrix or, for 3 channels, a "
+        "root-polynomial correction, whichever predicts left-out patches better; print its "
+        "residual CIEDE2000 on the patches, and write the [sensors.colour_calibration] table "
+        "for the rig config.",
     )
     c.add_argument("chart", type=Path, help="the chart file (CSV)")
     c.add_argument("--channels", default=None, metavar="A,B,C",
                    help="the sensor's channels in its order (default: the chart's columns)")
     c.add_argument("--illuminant", default="D65", choices=list(ILLUMINANTS))
     c.add_argument("--observer", default="10", choices=["10", "2"])
+    c.add_argument("--method", default=None, choices=["linear", "root-polynomial"],
+                   help="the calibration's form (default: chosen on the chart, by leave-one-"
+                   "patch-out CIEDE2000)")
     c.add_argument("-o", "--output", type=Path, default=None,
                    help="write the TOML table to this file (default: print it)")
     c.set_defaults(func=run_chart)
@@ -89,18 +94,21 @@ def run_chart(args: argparse.Namespace) -> int:
         if not channels:
             raise UsageError("--channels: give the channel names separated by commas")
     m = fit_matrix(read_chart(args.chart), ViewingConditions(args.illuminant, args.observer),
-                   channels, source=args.chart.name)
+                   channels, source=args.chart.name, method=args.method)
     table = {"matrix": [[round(float(x), 6) for x in row] for row in m.matrix],
+             "method": m.method,
              "illuminant": m.conditions.illuminant, "observer": m.conditions.observer,
              "residual_median_de00": round(m.residual_median_de00, 4),
              "residual_max_de00": round(m.residual_max_de00, 4),
+             "loo_median_de00": round(m.loo_median_de00, 4),
              "n_patches": m.n_patches, "source": m.source}
     text = ("# paste under the sensor's [[sensors]] entry (channels "
             f"{', '.join(m.channels)}), docs/colour.md\n"
             + tomli_w.dumps({"sensors": {"colour_calibration": table}}))
-    print(f"colour calibration of channels {', '.join(m.channels)} from {m.n_patches} patches "
-          f"({m.conditions.label}): residual median {m.residual_median_de00:.2f}, max "
-          f"{m.residual_max_de00:.2f} dE00")
+    print(f"colour calibration ({m.method}) of channels {', '.join(m.channels)} from "
+          f"{m.n_patches} patches ({m.conditions.label}): residual median "
+          f"{m.residual_median_de00:.2f}, max {m.residual_max_de00:.2f} dE00; each patch "
+          f"predicted without it: median {m.loo_median_de00:.2f} dE00")
     if args.output is not None:
         args.output.write_text(text, encoding="utf-8")
         print(f"wrote {args.output}")

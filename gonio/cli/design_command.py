@@ -357,7 +357,26 @@ def run(args: argparse.Namespace) -> int:
         header = (f"gonio design fragment: {design.name}, {design.n_pairs} pairs, condition "
                   f"number {design.kappa:.4g}.{held_out}\nMerge it into a rig config with "
                   f"'gonio rig apply-design {args.output.name} rig.toml' (docs/rig-config.md).")
-        args.output.write_text(dump_fragment(design_fragment(design), header), encoding="utf-8")
+        expectation = None
+        if expected is not None:
+            from gonio.brdf.design.heldout import HELDOUT_NOISE
+            from gonio.config import DesignExpectation
+
+            # What a scan's predicted_log_rmse is compared with when it finishes
+            # (gonio.designgap), with what the number assumes.
+            expectation = DesignExpectation(
+                expected_log_rmse=round(expected.log_rmse, 5),
+                expected_log_rmse_measured=round(expected.measured, 5),
+                expected_log_rmse_synthetic=round(expected.synthetic, 5),
+                inside_basis_log_rmse=(
+                    round(float(design.expected_log_rmse), 5)
+                    if design.expected_log_rmse is not None
+                    and np.isfinite(design.expected_log_rmse) else None),
+                rotations=args.rotations, span_deg=args.span, noise=HELDOUT_NOISE,
+                pairs=design.n_pairs, calibrated=True,
+            )
+        args.output.write_text(dump_fragment(design_fragment(design, expectation), header),
+                               encoding="utf-8")
         print(f"wrote {args.output}; merge it with 'gonio rig apply-design {args.output} "
               "rig.toml'")
     return 0

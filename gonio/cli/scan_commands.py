@@ -18,10 +18,13 @@ import shutil
 import sys
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from gonio.cli import UsageError, finite_float, nonnegative_float, positive_float, positive_int
 from gonio.cli.daemon_client import DaemonClient, DaemonRefused, add_daemon_options
+
+if TYPE_CHECKING:
+    from gonio.basis_supply import BasisSupply
 
 
 def register(subparsers: Any) -> None:
@@ -192,19 +195,20 @@ def _scan(args: argparse.Namespace) -> int:
 
 
 async def _run_scan(args: argparse.Namespace, plan: Any, config: Any, sim: Any = None) -> int:
+    from gonio.basis_supply import BasisSupply
     from gonio.drivers.factory import build_rig
     from gonio.plans.dryrun import dry_run
     from gonio.rigdescription import RigDescription
 
     rig = build_rig(config)
     desc = RigDescription.from_rig(rig)
+    # The in-process scan reconstructs with the default basis (built on first use), loaded
+    # once for this run by whoever needs it first.
+    basis = BasisSupply()
     if args.dry_run:
-        from gonio.worker import basis_build_needed, built_basis_symmetry, default_basis_provider
-
-        # The in-process scan reconstructs with the default basis (built on first use).
-        dr = dry_run(plan, desc, basis_ready=not basis_build_needed(default_basis_provider),
-                     basis=built_basis_symmetry(default_basis_provider))
-        warning = None if sim is not None else _calibration_warning(args, plan, config, desc)
+        dr = dry_run(plan, desc, basis_ready=not basis.build_needed(), basis=basis.symmetry())
+        warning = None if sim is not None else _calibration_warning(args, plan, config,
+                                                                     dr.pairs)
         if warning is not None:
             dr = dr.model_copy(update={"warnings": [*dr.warnings, warning]})
         print(dr.model_dump_json(indent=2) if args.json
@@ -212,7 +216,11 @@ async def _run_scan(args: argparse.Namespace, plan: Any, config: Any, sim: Any =
         return 0
     if args.json:
         raise UsageError("--json goes with --dry-run")
-    dry_run(plan, desc)  # refuse a bad plan before connecting to anything
+    from gonio.plans.checked import check_plan
+
+    # Refuse a bad plan before connecting to anything; the check goes with the plan from here
+    # (the dry run below and the submission do not make it again).
+    checked = check_plan(plan, desc)
     from gonio.daemon import STORE_FILE
     from gonio.paths import scan_data_dir
 
@@ -234,22 +242,24 @@ async def _run_scan(args: argparse.Namespace, plan: Any, config: Any, sim: Any =
             lock.release()
         raise UsageError(str(exc)) from None
     try:
-        return await _run_owned(args, plan, config, sim, rig, desc, db, data_dir)
+        return await _run_owned(args, checked, config, sim, rig, db, data_dir, basis)
     finally:
         for lock in reversed(owned):
             lock.release()
 
 
-async def _run_owned(args: argparse.Namespace, plan: Any, config: Any, sim: Any, rig: Any,
-                     desc: Any, db: Path, data_dir: Path) -> int:
+async def _run_owned(args: argparse.Namespace, checked: Any, config: Any, sim: Any, rig: Any,
+                     db: Path, data_dir: Path, basis: BasisSupply) -> int:
     """Run the scan through an in-process :class:`gonio.service.GonioService` (the same door
-    as the daemon's API, without its queue worker), then copy the result to ``-o``."""
+    as the daemon's API, without its queue worker), then copy the result to ``-o``.
+    ``checked`` is the plan checked on the rig (:class:`gonio.plans.checked.CheckedPlan`)."""
     from gonio.cli.sim_session import attach_sim, calibrate_in_foreground, calibration_covers_rig
     from gonio.jobstates import JobState
     from gonio.service import GonioService, JobRequest
     from gonio.store import JobStore
 
     out: Path = args.output
+    plan = checked.plan
     store = JobStore(db)
     print(f"data directory {data_dir} (job store {db})", file=sys.stderr)
     # The same rule as the daemon: the latest calibration job here, else the rig config's
@@ -263,7 +273,7 @@ async def _run_owned(args: argparse.Namespace, plan: Any, config: Any, sim: Any,
         override = _read_calibration(args.calibration)
         check_plausible(override, sensor_full_scale(config),
                         f"calibration file {args.calibration}")
-    service = GonioService(store, rig, rig_config=config, data_dir=data_dir,
+    service = GonioService(store, rig, rig_config=config, basis=basis, data_dir=data_dir,
                            calibration=override)
     try:
         if sim is not None:
@@ -293,12 +303,13 @@ async def _run_owned(args: argparse.Namespace, plan: Any, config: Any, sim: Any,
                 if why is not None:
                     raise UsageError(why)
             if sim is None and plan.kind != "calibration":
-                _check_calibration(args, plan, config, desc, service.calibration(), data_dir)
+                _check_calibration(args, checked.pairs, config, service.calibration(),
+                                   data_dir)
             # What the submission records as the job's arc warning, said here too (a job whose
             # basis is known only later says it through the progress bar's events).
-            for warning in service.dry_run(plan).warnings:
+            for warning in service.dry_run(checked).warnings:
                 print(f"warning: {warning}", file=sys.stderr)
-            job = service.submit(JobRequest(plan=plan))
+            job = service.submit(JobRequest(plan=plan), checked=checked)
         bar = _progress(service, job.id, disabled=args.no_progress)
         try:
             final = await service.run_in_foreground(job.id)
@@ -326,11 +337,10 @@ async def _run_owned(args: argparse.Namespace, plan: Any, config: Any, sim: Any,
     summary = row.result or {}
     if plan.kind == "calibration":
         from gonio.calibration import CALIBRATION_FILE
-        from gonio.plans.validation import plan_pairs
 
         cal_out = out.with_name(out.stem + ".calibration.json")
         shutil.copyfile(data_dir / CALIBRATION_FILE, cal_out)
-        n_pairs = len(plan_pairs(plan, desc))
+        n_pairs = len(checked.pairs)
         print(f"job {job.id} completed: calibration of {n_pairs} pairs written to {cal_out}; "
               f"apply it with --calibration {cal_out}")
         return 0
@@ -346,15 +356,17 @@ async def _run_owned(args: argparse.Namespace, plan: Any, config: Any, sim: Any,
           f"in {units}, {err_text}; wrote {out}")
     if err:
         print(f"  {err['key']}: {err['meaning']}")
+    if summary.get("basis_misfit"):
+        print(f"warning: {summary['basis_misfit']}", file=sys.stderr)
     return 0
 
 
 def _calibration_warning(args: argparse.Namespace, plan: Any, config: Any,
-                         desc: Any) -> str | None:
-    """The dry run's ``uncalibrated: ...`` warning for ``plan`` on this rig, if any."""
+                         pairs: Any) -> str | None:
+    """The dry run's ``uncalibrated: ...`` warning for ``plan`` (measuring ``pairs``) on this
+    rig, if any."""
     from gonio.calibration import Calibration, calibration_in_effect, uncalibrated_warning
     from gonio.paths import scan_data_dir
-    from gonio.plans.validation import plan_pairs
 
     if plan.kind == "calibration":
         return None
@@ -362,20 +374,17 @@ def _calibration_warning(args: argparse.Namespace, plan: Any, config: Any,
         cal = _read_calibration(args.calibration)
     else:
         cal = calibration_in_effect(args.data_dir or scan_data_dir(config), config)
-    return uncalibrated_warning(cal if isinstance(cal, Calibration) else Calibration(),
-                                plan_pairs(plan, desc))
+    return uncalibrated_warning(cal if isinstance(cal, Calibration) else Calibration(), pairs)
 
 
-def _check_calibration(args: argparse.Namespace, plan: Any, config: Any, desc: Any,
-                       cal: Any, data_dir: Path) -> None:
+def _check_calibration(args: argparse.Namespace, pairs: Any, config: Any, cal: Any,
+                       data_dir: Path) -> None:
     """Warn of an uncalibrated scan; refuse one of a rig that was calibrated (its own data
     directory holds a calibration, or one of other pairs is in effect) unless
     ``--accept-uncalibrated``."""
     from gonio.calibration import CALIBRATION_FILE, uncalibrated_refusal, uncalibrated_warning
     from gonio.paths import scan_data_dir
-    from gonio.plans.validation import plan_pairs
 
-    pairs = plan_pairs(plan, desc)
     warning = uncalibrated_warning(cal, pairs)
     if warning is None:
         return
@@ -546,6 +555,8 @@ def _scan_through_daemon(args: argparse.Namespace, plan: Any) -> int:
     err_text = f"{err['key']} {err['text']}" if err else "no error estimate"
     print(f"job {job_id} completed: {summary.get('n_samples', summary.get('readings'))} samples "
           f"in {units}, {err_text}; wrote {out}")
+    if summary.get("basis_misfit"):
+        print(f"warning: {summary['basis_misfit']}", file=sys.stderr)
     return 0
 
 
@@ -584,7 +595,7 @@ def _progress(service: Any, job_id: int, disabled: bool) -> Any:
             bar.refresh()
         elif ev.type == "state":
             bar.set_description_str(f"job {job_id} {ev.data['state']}")
-        elif ev.type in ("arc_warning", "physical_bounds"):
+        elif ev.type in ("arc_warning", "physical_bounds", "design_gap"):
             bar.write(f"warning: {ev.data['message']}", file=sys.stderr)
 
     service.add_event_listener(on_event)
@@ -632,9 +643,9 @@ def _jobs(args: argparse.Namespace) -> int:
 
 def _rebuild(args: argparse.Namespace, store: Any) -> int:
     """``gonio jobs rebuild ID``: :func:`gonio.finishing.rebuild_result`, reported."""
+    from gonio.basis_supply import BasisSupply
     from gonio.finishing import rebuild_result
     from gonio.store import NotFound
-    from gonio.worker import default_basis_provider
 
     if args.job_id is None:
         raise UsageError("jobs rebuild needs a job id, e.g. 'gonio jobs rebuild 3 --db "
@@ -646,7 +657,7 @@ def _rebuild(args: argparse.Namespace, store: Any) -> int:
         raise UsageError(str(exc)) from None
     print(f"rebuilding job {args.job_id}'s result from the job store's readings",
           file=sys.stderr)
-    summary = rebuild_result(store, data_dir, args.job_id, default_basis_provider)
+    summary = rebuild_result(store, data_dir, args.job_id, BasisSupply())
     print(f"job {args.job_id}: wrote {data_dir / summary['result_path']} from "
           f"{summary['readings']} stored readings"
           + (" (calibrated, 1/sr)" if summary.get("calibrated") else " (sensor units)"))

@@ -134,10 +134,11 @@ def fit_warnings(fits: Fits) -> list[str]:
 def provenance(attrs: dict[str, Any], fits: Fits, metrics: dict[str, Any],
                result_provenance: dict[str, Any] | None = None) -> dict[str, Any]:
     """What an exported file says about itself (:func:`.metadata.export_provenance`)."""
+    from gonio.brdf.tables.twofold import twofold_asymmetry
     from gonio.export.metadata import export_provenance
 
     return export_provenance(attrs, metrics, result_provenance or {}, fit_summary(fits),
-                             fit_warnings(fits))
+                             fit_warnings(fits), twofold_asymmetry(fits.table))
 
 
 def write_export(fits: Fits, fmt: str, out: str | os.PathLike[str],

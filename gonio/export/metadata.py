@@ -22,12 +22,19 @@ layout has no room). Keys (docs/export.md lists them with examples):
     What the R, G, B numbers are (:data:`COLOUR_STATEMENT` unless the result states another).
 ``orientation``
     How the anisotropy direction is referred to the specimen and to a mesh (:data:`ORIENTATION`).
+``symmetry``
+    How far the result is from twofold symmetry (``twofold_asymmetry``,
+    :func:`gonio.brdf.tables.twofold.twofold_asymmetry`) and which formats can hold an
+    asymmetric result: the principled glTF and MaterialX models are twofold symmetric (a GGX
+    lobe reads the same turned by half a turn), MERL is isotropic, the table and factored
+    formats keep the asymmetry.
 ``fits``
     Each model's fit error against the reconstruction: table metrics and the rendered
     difference (:mod:`gonio.export.judge`).
 ``warnings``
     Plain sentences: large rendered differences, an averaged-away anisotropy, a half-turn
-    scan's arc, a reconstruction outside physical bounds (docs/science.md 7.5), ...
+    scan's arc, a reconstruction outside physical bounds (docs/science.md 7.5), a
+    self-estimate more than x2 from its design's expected error (7.1), ...
 """
 
 from __future__ import annotations
@@ -71,6 +78,42 @@ LOG_RMSE_MEANING = (
     "about a 5 % error where a rendering is bright. Calibrated on materials held out of the "
     "basis; within a factor of 2 of the truth on about 3 scans in 4 (docs/science.md 7.1)"
 )
+
+#: ``twofold_asymmetry`` above which an export warns that the principled models lose the
+#: difference between the specimen and itself turned by half a turn (the same scale as the MERL
+#: sidecar's ``anisotropy_lost`` warning, :data:`gonio.export.merl.ANISOTROPY_WARN`).
+TWOFOLD_WARN = 0.01
+
+SYMMETRY_STATEMENT = (
+    "the principled models (glTF KHR_materials_anisotropy, MaterialX standard_surface) are "
+    "twofold symmetric: a GGX lobe reads the same when the material is turned by half a turn, "
+    "so they hold only the half-turn average of the result; MERL is isotropic; the table and "
+    "factored formats keep a result without that symmetry as measured"
+)
+TWOFOLD_MEANING = (
+    "cosine-weighted log RMSE between the result and its half-turn average "
+    "(f(ph) + f(ph + 180 deg)) / 2; 0 for a twofold-symmetric result"
+)
+
+
+def symmetry_record(twofold_asymmetry: float) -> tuple[dict[str, Any], str | None]:
+    """The ``symmetry`` record of an export and its warning (None below :data:`TWOFOLD_WARN`).
+
+    Parameters
+    ----------
+    twofold_asymmetry : float
+        :func:`gonio.brdf.tables.twofold.twofold_asymmetry` of the result's table
+        (dimensionless log RMSE).
+    """
+    record = {"twofold_asymmetry": float(twofold_asymmetry),
+              "twofold_asymmetry_meaning": TWOFOLD_MEANING, "formats": SYMMETRY_STATEMENT}
+    if not twofold_asymmetry > TWOFOLD_WARN:
+        return record, None
+    return record, (
+        f"the result is not twofold symmetric (log RMSE {twofold_asymmetry:.3f} to its "
+        "half-turn average): the glTF and MaterialX principled models are symmetric and show "
+        "only that average; use the 'table' or 'factored' export to keep the difference"
+    )
 
 
 def _json(value: Any) -> Any:
@@ -125,7 +168,8 @@ def _calibration_summary(cal: Any, warning: Any) -> dict[str, Any]:
 
 def export_provenance(attrs: Mapping[str, Any], metrics: Mapping[str, Any],
                       provenance: Mapping[str, Any], fits: Mapping[str, Any],
-                      warnings: list[str] | None = None) -> dict[str, Any]:
+                      warnings: list[str] | None = None,
+                      twofold_asymmetry: float | None = None) -> dict[str, Any]:
     """The record every export carries (module docstring for its keys).
 
     Parameters
@@ -136,6 +180,9 @@ def export_provenance(attrs: Mapping[str, Any], metrics: Mapping[str, Any],
     fits : mapping
         ``{"principled": {...}, "factored": {...}}``: each model's fit errors.
     warnings : list of str, optional
+    twofold_asymmetry : float, optional
+        The result table's distance from twofold symmetry (:func:`symmetry_record`); the
+        ``symmetry`` key is left out when not given.
     """
     name, named = specimen_name(attrs.get("specimen"))
     truth = _json(provenance.get("true_material"))
@@ -166,10 +213,19 @@ def export_provenance(attrs: Mapping[str, Any], metrics: Mapping[str, Any],
         "fits": dict(fits),
         "warnings": list(warnings or []),
     }
+    if twofold_asymmetry is not None:
+        record, warning = symmetry_record(twofold_asymmetry)
+        out["symmetry"] = record
+        if warning is not None:
+            out["warnings"].append(warning)
     if truth:
         out["simulated_material"] = truth
     if provenance.get("arc_warning"):
         out["warnings"].append(str(provenance["arc_warning"]))
     if provenance.get("physical_bounds"):
         out["warnings"].append(str(provenance["physical_bounds"]))
+    if provenance.get("design_gap"):
+        out["warnings"].append(str(provenance["design_gap"]))
+    if provenance.get("basis_misfit"):
+        out["warnings"].append(str(provenance["basis_misfit"]))
     return out

@@ -8,12 +8,20 @@ Import each name from the module that holds it:
 ``validation``
     Checks of a plan against a :class:`gonio.rigdescription.RigDescription`; its pairs, lights
     and first-round angles.
+``checked``
+    :class:`~gonio.plans.checked.CheckedPlan`: a plan checked once, with what the check found,
+    handed from the submission to the worker, the engine and the finishing.
 ``route``
     Stage positions visiting a set of specimen angles in one direction with least travel.
 ``timing``
     Move times along a route (engine and driver backlash legs), and adaptive time bounds.
 ``adaptive``
-    Where an adaptive plan adds angles next (leave-one-out periodic PCHIP).
+    Where an adaptive plan adds angles next by V&F's rule (leave-one-out periodic PCHIP).
+``rounds``
+    The rounds each plan kind owns (one, or adaptive refinement) and the ``Refiner`` protocol
+    of the posterior rule.
+``faults``
+    ``Suspender``: a plan's fault policy applied (wait and retry, or fail, and why).
 ``dryrun``
     A plan's first-round route and duration estimate, without hardware.
 """

@@ -9,15 +9,9 @@ from pydantic import BaseModel, Field
 
 from gonio.brdf.reconstruction.samples import HALF_TURN_DEG
 from gonio.hal import PairSpec
+from gonio.plans.checked import CheckedPlan, check_plan
 from gonio.plans.models import AdaptivePlan, AnyPlan
-from gonio.plans.route import order_for_travel
 from gonio.plans.timing import adaptive_bound, estimate_angles, travel
-from gonio.plans.validation import (
-    lights_in_order,
-    plan_pairs,
-    uniform_angles,
-    validate_plan,
-)
 from gonio.rigdescription import RigDescription
 
 BASIS_BUILD_S = 120.0
@@ -127,7 +121,7 @@ class DryRun(BaseModel):
         "only when the basis is built: a dry run never builds it)")
 
 
-def dry_run(plan: AnyPlan, rig: RigDescription, current_deg: float | None = None,
+def dry_run(plan: AnyPlan | CheckedPlan, rig: RigDescription, current_deg: float | None = None,
             basis_ready: bool = True, basis: BasisSymmetry | None = None) -> DryRun:
     """Expand ``plan`` on ``rig`` and estimate its duration; raises :class:`PlanError`.
 
@@ -140,25 +134,26 @@ def dry_run(plan: AnyPlan, rig: RigDescription, current_deg: float | None = None
 
     Parameters
     ----------
-    plan, rig
+    plan : the plan, or the plan already checked on ``rig`` (:func:`check_plan`: its checks
+        are not made again)
+    rig : RigDescription
     current_deg : float, optional
         Present stage position, degrees; None when unknown (0 is assumed and the result says
         so).
     basis_ready : bool
         False when the reconstruction basis would have to be built first (see
-        :func:`gonio.worker.basis_build_needed`); an adaptive plan with the posterior rule then
-        reports :data:`BASIS_BUILD_S` as ``basis_build_s``.
+        :meth:`gonio.basis_supply.BasisSupply.build_needed`); an adaptive plan with the
+        posterior rule then reports :data:`BASIS_BUILD_S` as ``basis_build_s``.
     basis : BasisSymmetry, optional
         What the basis the job would reconstruct with says about half a turn, when that basis
         is at hand (built or loaded); None when it is not (nothing is said then). A half-turn
         plan with a basis that is not half-turn periodic gets a warning (:func:`arc_warning`).
     """
-    validate_plan(plan, rig)
-    pairs = plan_pairs(plan, rig)
-    lights = lights_in_order(pairs)
-    angles = uniform_angles(plan.start_deg, plan.first_rotations(), plan.first_span_deg())
     start = 0.0 if current_deg is None else float(current_deg)
-    route = order_for_travel(angles, start, rig, plan.backlash_deg)
+    checked = check_plan(plan, rig, from_deg=start)
+    plan = checked.plan
+    pairs, lights = list(checked.pairs), list(checked.lights)
+    angles, route = list(checked.angles_deg), list(checked.route_deg)
     motion, settle, exposure = estimate_angles(
         route, start, len(lights), plan, rig, plan.exposure.dark != "none"
     )

@@ -41,18 +41,14 @@ def uniform_angles(start_deg: float, r: int, span_deg: float = 360.0) -> list[fl
     return [float((start_deg + k * span_deg / r) % 360.0) for k in range(r)]
 
 
-def initial_angles(plan: AnyPlan, rig: RigDescription) -> list[float]:
-    """Specimen angles (degrees in [0, 360)) of the plan's first round, validated."""
-    validate_plan(plan, rig)
-    return uniform_angles(plan.start_deg, plan.first_rotations(), plan.first_span_deg())
-
-
-def validate_plan(plan: AnyPlan, rig: RigDescription) -> None:
+def validate_plan(plan: AnyPlan, rig: RigDescription) -> list[PairSpec]:
     """Check everything that can be checked without hardware; raise :class:`PlanError`.
 
     Checks: pairs exist and are unique; at least one rotation; no two angles closer than the
     stage resolution (duplicates); every angle reachable inside the travel limits; exposure
-    inside every used sensor's range; adaptive settings consistent.
+    inside every used sensor's range; adaptive settings consistent. Returns the plan's pairs
+    (:func:`plan_pairs`, found on the way). :func:`gonio.plans.checked.check_plan` keeps
+    what the check found.
     """
     pairs = plan_pairs(plan, rig)
     r = plan.first_rotations()
@@ -115,6 +111,7 @@ def validate_plan(plan: AnyPlan, rig: RigDescription) -> None:
                 f"({len(pairs)} pairs x {r} angles = {len(pairs) * r}); raise the budget or "
                 "lower initial_rotations"
             )
+    return pairs
 
 
 def lights_in_order(pairs: Sequence[PairSpec]) -> list[str]:

@@ -16,6 +16,7 @@ from typing import Any
 
 import pytest
 
+from gonio.basis_supply import BasisSupply
 from gonio.brdf.reconstruction.basis import Basis
 from gonio.jobstates import JobState
 from gonio.plans.dryrun import BasisSymmetry, dry_run
@@ -25,7 +26,7 @@ from gonio.rigdescription import RigDescription
 from gonio.service import GonioService, JobRequest
 from gonio.sim.memrig import MemRig
 from gonio.store import JobStore
-from gonio.worker import Worker, default_basis_provider
+from gonio.worker import Worker
 from tests.unit.brdf.reconstruction.test_reconstruct import random_basis
 from tests.unit.brdf.reconstruction.test_reconstruct_joint import _with_prior
 
@@ -115,7 +116,7 @@ def test_the_service_warns_once_the_default_basis_is_built(
         monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
     _cache_with(monkeypatch, tmp_path, None)
     svc = GonioService(JobStore(tmp_path / "jobs.sqlite"), MemRig(), data_dir=tmp_path / "d")
-    assert svc.worker.basis_provider is default_basis_provider
+    assert svc.basis.is_default
     assert svc.dry_run(HALF).warnings == []  # not built yet: not checked, not built
     _cache_with(monkeypatch, tmp_path, ODD)
     (message,) = svc.dry_run(HALF).warnings
@@ -139,13 +140,14 @@ def test_the_service_says_nothing_with_the_shipped_like_even_basis(
 
 
 def _worker(store: JobStore, provider: Any, tmp_path: Path) -> tuple[Worker, RigDescription]:
+    """A worker on a MemRig with a basis supply of ``provider`` (None: the default basis)."""
     rig = MemRig()
     desc = RigDescription.from_rig(rig)
 
     async def get_rig() -> MemRig:
         return rig
 
-    return Worker(store, get_rig, desc, tmp_path / "d", basis_provider=provider,
+    return Worker(store, get_rig, desc, tmp_path / "d", BasisSupply(provider),
                   fit_exports=False), desc
 
 
@@ -159,7 +161,7 @@ def test_a_job_records_the_warning_before_its_first_reading(
         monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
     _cache_with(monkeypatch, tmp_path, ODD)
     store = JobStore(tmp_path / "jobs.sqlite")
-    w, desc = _worker(store, default_basis_provider, tmp_path)
+    w, desc = _worker(store, None, tmp_path)
     job = _queue(store, desc, HALF)
     asyncio.run(w.run_once())
     events = store.events_after(0, job_id=job)
@@ -168,8 +170,8 @@ def test_a_job_records_the_warning_before_its_first_reading(
     assert "progress" in types and types.index("arc_warning") < types.index("progress")
     _says_what_and_what_to_do(_arc_events(store, job)[0]["message"])
     # A daemon restarted on the same store (a new worker) does not record it again.
-    again, _ = _worker(store, default_basis_provider, tmp_path)
-    again.note_arc(job, HALF, BasisSymmetry.of(ODD))
+    again, _ = _worker(store, None, tmp_path)
+    again.basis.note_arc(store, job, HALF, BasisSymmetry.of(ODD))
     assert len(_arc_events(store, job)) == 1
 
 
@@ -178,12 +180,12 @@ def test_a_job_whose_basis_comes_only_at_finishing_records_it_then(tmp_path: Pat
     is checked when the finishing gets it, and is known to later dry runs."""
     store = JobStore(tmp_path / "jobs.sqlite")
     w, desc = _worker(store, lambda: ODD, tmp_path)
-    assert w.basis_symmetry() is None
+    assert w.basis.symmetry() is None
     job = _queue(store, desc, HALF)
     asyncio.run(w.run_once())
     (event,) = _arc_events(store, job)
     _says_what_and_what_to_do(event["message"])
-    assert w.basis_symmetry() == BasisSymmetry(False, ("pile-lean",))
+    assert w.basis.symmetry() == BasisSymmetry(False, ("pile-lean",))
     # The lasting record: the job's summary and its result file carry the warning too.
     row = store.get_job(job)
     assert row.state is JobState.COMPLETED, row.reason

@@ -307,3 +307,17 @@ def test_an_uncalibrated_scan_needs_acceptance_only_when_the_rigs_own_calibratio
     assert uncalibrated_refusal(partial, pairs, own, here) is None
     with pytest.raises(CalibrationError, match="S2"):
         partial.check_covers(pairs)
+
+
+def test_apply_multiplies_each_pairs_rows_by_its_factor() -> None:
+    """The one place factors meet readings: a calibrated pair's rows times its per-channel
+    factor, an uncalibrated pair's as they are (ones); NaN (no reading) stays NaN."""
+    from gonio.calibration import PairCalibration
+
+    a, b = PairSpec(light="L1", sensor="S1"), PairSpec(light="L2", sensor="S1")
+    cal = Calibration(pairs=(PairCalibration(light="L1", sensor="S1", factor=(2.0, 0.5)),))
+    values = np.array([[[1.0, 4.0], [3.0, np.nan]], [[5.0, 6.0], [7.0, 8.0]]])
+    got = cal.apply(values, [a, b])
+    want = np.array([[[2.0, 2.0], [6.0, np.nan]], [[5.0, 6.0], [7.0, 8.0]]])
+    np.testing.assert_array_equal(got, want)
+    np.testing.assert_array_equal(cal.apply(values[::-1], [b, a]), want[::-1])

@@ -56,6 +56,9 @@ def test_spectral_bands_and_calibration_round_trip(example: dict[str, Any],  # n
     ({"wavelengths_nm": [450.0, 550.0, -1.0]}, "wavelengths_nm"),
     ({"colour_calibration": {"matrix": [[1, 2], [3, 4], [5, 6]]}}, "3 rows of 3 numbers"),
     ({"colour_calibration": {"matrix": MATRIX, "illuminant": "D66"}}, "illuminant"),
+    ({"colour_calibration": {"matrix": MATRIX, "method": "root-polynomial"}},
+     "3 rows of 6 numbers"),
+    ({"colour_calibration": {"matrix": MATRIX, "method": "cubic"}}, "method"),
     ({"colour_calibration": {"matrix": MATRIX}, "wavelengths_nm": [450.0, 550.0, 650.0]},
      "drop colour_calibration or wavelengths_nm"),
 ])
@@ -63,3 +66,20 @@ def test_bad_colour_keys_say_what_to_fix(example: dict[str, Any],  # noqa: F811
                                          change: dict[str, Any], words: str) -> None:
     example["sensors"][0].update(change)
     assert words in _error(example)
+
+
+def test_a_root_polynomial_calibration_reaches_the_result(example: dict[str, Any],  # noqa: F811
+                                                          tmp_path: Path) -> None:
+    s1 = example["sensors"][1]
+    rp = [[*row, 1.0, 2.0, 3.0] for row in MATRIX]
+    s1["colour_calibration"] = {"matrix": rp, "method": "root-polynomial"}
+    cfg = load_rig_config(dump_rig_config(parse_rig_config(example), tmp_path / "rig.toml"))
+    cal = colour_source(cfg.model_dump_json(), [s1["name"]])["calibration"]
+    m = ColourMatrix.from_dict(cal)
+    assert m.method == "root-polynomial" and m.matrix == pytest.approx(np.array(rp))
+    # XYZ = M (R, G, B, sqrt(RG), sqrt(GB), sqrt(RB)) (Finlayson et al. 2015), written out.
+    r, g, b = 0.2, 0.5, 0.8
+    terms = np.array([r, g, b, np.sqrt(r * g), np.sqrt(g * b), np.sqrt(r * b)])
+    from gonio.brdf.colour.conditions import ViewingConditions
+
+    assert m.to_xyz([r, g, b], ViewingConditions()) == pytest.approx(np.array(rp) @ terms)

@@ -131,6 +131,7 @@ def test_design_fragment(tmp_path: Path) -> None:
     design = load_fragment(path)
     assert design.pair_names() == [("L1", "S1"), ("L2", "S2")]
     assert design.light("L2").theta_deg == 55.0
+    assert design.design is not None and design.design.rotations == 8  # [design] reads
     assert read_pairs(path)[0].shape == (2, 3)
 
 

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from gonio.basis_supply import BasisSupply
 from gonio.finishing import RebuildError, rebuild_result
 from gonio.plans.models import CalibrationPlan, ExposureSettings, UniformPlan
 from gonio.results import read_result
@@ -58,7 +59,7 @@ def test_a_calibration_job_is_rebuilt_without_replacing_the_calibration_in_effec
     later = (data / "calibration.json").read_text().replace('"job 1', '"job 9')
     (data / "calibration.json").write_text(later)
     result.unlink()
-    summary = rebuild_result(svc.store, data, 1, _no_basis)
+    summary = rebuild_result(svc.store, data, 1, BasisSupply(_no_basis))
     assert summary["result_path"] == "results/job-1.h5" and summary["calibrated"] is False
     assert (data / "calibration.json").read_text() == later
     new, old = read_result(result), read_result(original)
@@ -74,15 +75,15 @@ def test_a_rebuild_refuses_jobs_not_completed_and_missing_readings(tmp_path: Pat
     data = tmp_path / "d"
     queued = svc.submit(JobRequest(plan=UniformPlan(rotations=2, exposure=FAST))).id
     with pytest.raises(RebuildError, match=f"job {queued} is queued"):
-        rebuild_result(svc.store, data, queued, _no_basis)
+        rebuild_result(svc.store, data, queued, BasisSupply(_no_basis))
     n = svc.store.reading_count(1)
     with sqlite3.connect(data / "gonio.sqlite") as con:
         con.execute("DELETE FROM readings WHERE job_id = 1 AND angle_index = 0")
     left = svc.store.reading_count(1)
     assert 0 < left < n
     with pytest.raises(RebuildError, match=f"holds {left} of the {n} readings"):
-        rebuild_result(svc.store, data, 1, _no_basis)
+        rebuild_result(svc.store, data, 1, BasisSupply(_no_basis))
     with sqlite3.connect(data / "gonio.sqlite") as con:
         con.execute("DELETE FROM readings WHERE job_id = 1")
     with pytest.raises(RebuildError, match="holds none of its readings"):
-        rebuild_result(svc.store, data, 1, _no_basis)
+        rebuild_result(svc.store, data, 1, BasisSupply(_no_basis))

@@ -13,7 +13,7 @@ from typing import Any
 
 import pytest
 
-from gonio import worker as worker_mod
+from gonio.basis_supply import BasisSupply
 from gonio.jobstates import JobState
 from gonio.plans.dryrun import BASIS_BUILD_S, dry_run
 from gonio.plans.models import AdaptivePlan, ExposureSettings, UniformPlan
@@ -58,7 +58,7 @@ def _worker(store: JobStore, provider: Provider, data_dir: Path
     async def get_rig() -> MemRig:
         return rig
 
-    return Worker(store, get_rig, desc, data_dir, basis_provider=provider,
+    return Worker(store, get_rig, desc, data_dir, BasisSupply(provider),
                   fit_exports=False), desc
 
 
@@ -137,7 +137,7 @@ def test_a_job_cancelled_while_its_basis_loads_never_moves_the_stage(tmp_path: P
 
     rig = MemRig()
     svc = GonioService(JobStore(tmp_path / "jobs.sqlite"), rig, data_dir=tmp_path / "d",
-                       basis_provider=slow_basis)
+                       basis=BasisSupply(slow_basis))
 
     async def go() -> tuple[str | None, JobState]:
         await svc.start()
@@ -166,7 +166,7 @@ def test_at_start_a_queue_with_an_adaptive_job_builds_the_basis_in_the_backgroun
     store = JobStore(":memory:")
     provider = Provider(store, serve=2)
     w, desc = _worker(store, provider, tmp_path)
-    monkeypatch.setattr(worker_mod, "basis_build_needed", lambda provider: True)
+    monkeypatch.setattr(w.basis, "build_needed", lambda: True)
     job = _submit(store, desc, PLAN)
 
     async def go() -> None:
@@ -180,9 +180,9 @@ def test_at_start_a_queue_with_an_adaptive_job_builds_the_basis_in_the_backgroun
     asyncio.run(go())
     prewarm = [e for e in store.events_after(0) if e.type == "basis_prewarm"]
     assert prewarm and prewarm[0].data["jobs"] == [job]
-    assert provider.calls[0] == (0, "gonio-basis-prewarm")
-    # The job's own load waited for that build (one at a time), still before any reading.
-    assert provider.calls[1][0] == 0
+    # The job's own load waited for that build (one at a time) and took its basis: the
+    # basis was made once, before any reading.
+    assert provider.calls == [(0, "gonio-basis-prewarm")]
     loading = next(e.data for e in store.events_after(0) if e.type == "basis_loading")
     assert loading["build"] is True and "building" in str(loading["message"])
 
@@ -192,19 +192,19 @@ def test_at_start_nothing_is_built_for_a_queue_without_adaptive_jobs(
     store = JobStore(":memory:")
     provider = Provider(store, serve=0)
     w, desc = _worker(store, provider, tmp_path)
-    monkeypatch.setattr(worker_mod, "basis_build_needed", lambda provider: True)
+    monkeypatch.setattr(w.basis, "build_needed", lambda: True)
     _submit(store, desc, UniformPlan(rotations=4, exposure=FAST))
     w._loop = None
     w._start_prewarm()
-    assert w._prewarm is None and provider.calls == []
+    assert not w.basis.prewarming and provider.calls == []
 
 
 def test_the_dry_run_says_when_the_first_adaptive_job_builds_the_basis(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     svc = GonioService(JobStore(tmp_path / "jobs.sqlite"), MemRig(), data_dir=tmp_path / "d",
-                       basis_provider=lambda: BASIS)
+                       basis=BasisSupply(lambda: BASIS))
     assert svc.dry_run(PLAN).basis_build_s is None  # a provider that loads
-    monkeypatch.setattr(worker_mod, "basis_build_needed", lambda provider: True)
+    monkeypatch.setattr(svc.basis, "build_needed", lambda: True)
     dr = svc.dry_run(PLAN)
     plain = dry_run(PLAN, svc.desc, svc.stage_deg)
     assert dr.basis_build_s == BASIS_BUILD_S
@@ -241,7 +241,8 @@ def test_a_job_the_calibration_in_effect_covers_in_part_fails_before_anything_mo
         return rig
 
     store = JobStore(tmp_path / "jobs.sqlite")
-    w = Worker(store, get_rig, desc, tmp_path / "d", calibration=lambda: cal)
+    w = Worker(store, get_rig, desc, tmp_path / "d", BasisSupply(lambda: BASIS),
+               calibration=lambda: cal)
     plan = UniformPlan(rotations=2, exposure=FAST)
     job = store.create_job(kind=plan.kind, specimen="s", plan=plan.model_dump(mode="json"),
                            rig=desc.model_dump(mode="json")).id
@@ -250,3 +251,39 @@ def test_a_job_the_calibration_in_effect_covers_in_part_fails_before_anything_mo
     assert row.reason is not None and row.reason.startswith("not started: ")
     assert "(edited by hand) has no factors for" in row.reason
     assert rig.mstage.moves == [] and store.reading_count(job) == 0
+
+
+def test_checked_plans_of_jobs_that_never_start_are_dropped(tmp_path: Path) -> None:
+    """The worker keeps each submitted job's checked plan until the job starts; those of
+    jobs cancelled before they start are dropped once it keeps more than KEEP_CHECKED, and
+    a queued job's stays (it starts with it)."""
+    from gonio.plans.checked import check_plan
+    from gonio.plans.models import UniformPlan
+    from gonio.worker import KEEP_CHECKED
+
+    rig = MemRig()
+    desc = RigDescription.from_rig(rig)
+    store = JobStore(tmp_path / "jobs.sqlite")
+
+    async def get_rig() -> MemRig:
+        return rig
+
+    worker = Worker(store, get_rig, desc, data_dir=tmp_path, basis=BasisSupply(lambda: BASIS))
+    checked = check_plan(UniformPlan(rotations=2), desc)
+    ids = []
+    for _ in range(KEEP_CHECKED + 1):
+        row = store.create_job(kind="uniform", specimen="s",
+                               plan=checked.plan.model_dump(mode="json"),
+                               rig=desc.model_dump(mode="json"))
+        worker.take_checked(row.id, checked)
+        ids.append(row.id)
+    kept = ids[-1]
+    for job_id in ids[:-2]:
+        store.set_state(job_id, JobState.ABORTED, reason="cancelled")  # as a cancel does
+    extra = store.create_job(kind="uniform", specimen="s",
+                             plan=checked.plan.model_dump(mode="json"),
+                             rig=desc.model_dump(mode="json"))
+    worker.take_checked(extra.id, checked)
+    assert set(worker._checked) == {ids[-2], kept, extra.id}
+    assert worker._checked_plan(store.get_job(kept)) is checked
+    assert kept not in worker._checked

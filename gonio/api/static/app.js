@@ -144,15 +144,45 @@ let selectedState = null;     // the selected job's state at the last list refre
 function etaText() {
   const d = selectedDetail;
   if (!d || d.id !== selected) return "";
-  if (d.state === "reconstructing") return d.activity ?? "reconstructing";
+  if (d.state === "reconstructing") {
+    const left = d.time_left_s != null ? `; ≈ ${eta(d.time_left_s)} left (est.)` : "";
+    return `${d.activity ?? "reconstructing"}${left}`;
+  }
   // An adaptive job loads (or builds) its basis before the first reading.
   if (d.state === "queued" && d.activity) return d.activity;
   if (!["running", "paused", "suspended"].includes(d.state)) return "";
-  let t = eta(d.eta_s);
-  if (d.eta_max_s != null && d.eta_max_s > (d.eta_s ?? 0) + 1) t += ` (≤ ${eta(d.eta_max_s)} if refined)`;
-  // The estimate is the measuring's; reconstruction (and, on a fresh install, building the
-  // basis first) follows: said, so the time is not read as the whole job's.
-  return t ? `${t} measuring, then reconstruction` : "";
+  // The whole job's time: measuring, then (when due) the basis build, then reconstruction,
+  // each said, so the time is not read as done when measuring ends. Reconstruction's is an
+  // estimate from the last scans' measured finishing (its source in the cell's tooltip).
+  if (d.time_left_s == null) return eta(d.eta_s) ? `${eta(d.eta_s)} measuring, then reconstruction` : "";
+  const parts = [`measuring ${eta(d.eta_s)}`];
+  if (d.basis_build_s != null) parts.push(`basis build ≈ ${eta(d.basis_build_s)}`);
+  parts.push(`reconstruction ≈ ${eta(d.reconstruction_s)}`);
+  let t = `≈ ${eta(d.time_left_s)} left in all (est.): ${parts.join(", ")}`;
+  if (d.eta_max_s != null && d.eta_max_s > (d.eta_s ?? 0) + 1) {
+    t += `; ≤ ${eta(d.time_left_s - d.eta_s + d.eta_max_s)} if refined`;
+  }
+  return t;
+}
+
+// The ETA cell's tooltip: what the reconstruction estimate rests on.
+function etaTitle() {
+  const d = selectedDetail;
+  return d && d.id === selected && d.reconstruction_estimate
+    ? `reconstruction estimate: ${d.reconstruction_estimate}` : "";
+}
+
+// Progress of a job: angles measured of those planned. An adaptive job plans round by round,
+// so its bar runs against the most angles the plan can reach (max_angles, fixed): it only
+// fills, never resets when a round adds angles; the round is said beside it.
+function progressOf(job) {
+  const done = job.done_angles ?? 0, total = job.total_angles ?? 0;
+  if (job.max_angles == null) return { value: done, max: Math.max(total, 1), text: `${done}/${total}` };
+  const max = Math.max(job.max_angles, total, 1);
+  if (job.state === "completed") return { value: 1, max: 1, text: `${done} angles (adaptive)` };
+  const d = selectedDetail;
+  const round = d && d.id === job.id && d.round != null ? ` · round ${d.round + 1}` : "";
+  return { value: done, max, text: `${done} of ≤${max} angles${round}` };
 }
 
 async function act(job, action) {
@@ -178,14 +208,17 @@ function renderJobs() {
     tr.dataset.id = job.id;
     tr.dataset.state = job.state;
     if (job.id === selected) tr.classList.add("selected");
-    const done = job.done_angles ?? 0, total = job.total_angles ?? 0;
     const cells = [job.id, job.specimen, job.kind, job.state, null, job.id === selected ? etaText() : ""];
     cells.forEach((c, i) => {
       const td = document.createElement("td");
       if (i === 4) {
+        const p = progressOf(job);
         const bar = document.createElement("progress");
-        bar.max = Math.max(total, 1); bar.value = done;
-        td.append(bar, ` ${done}/${total}`);
+        bar.max = p.max; bar.value = p.value;
+        const label = document.createElement("span");
+        label.className = "progress-text"; label.textContent = ` ${p.text}`;
+        td.className = "progress";
+        td.append(bar, label);
       } else td.textContent = c ?? "";
       if (i === 3) {
         td.className = `state-${job.state}`;
@@ -196,7 +229,7 @@ function renderJobs() {
           td.append(why);
         }
       }
-      if (i === 5) td.className = "eta";
+      if (i === 5) { td.className = "eta"; if (job.id === selected) td.title = etaTitle(); }
       tr.append(td);
     });
     const td = document.createElement("td");
@@ -243,7 +276,10 @@ async function pollSelected() {
   if (!j || !(starting || ["running", "suspended", "reconstructing", "paused"].includes(j.state))) return;
   selectedDetail = await getJSON(`/jobs/${selected}`);
   const cell = document.querySelector(`#jobs tr[data-id="${selected}"] td.eta`);
-  if (cell) cell.textContent = etaText();
+  if (cell) { cell.textContent = etaText(); cell.title = etaTitle(); }
+  // An adaptive job's round comes with its detail.
+  const prog = document.querySelector(`#jobs tr[data-id="${selected}"] td.progress .progress-text`);
+  if (prog) prog.textContent = ` ${progressOf(j).text}`;
   if (["reconstructing", "queued"].includes(selectedDetail.state)) showResult(jobs.find((x) => x.id === selected));
 }
 
@@ -380,7 +416,7 @@ async function showResult(job) {
   };
   const img = $("#preview");
   setImage(img, "preview", await getBlob(`/jobs/${job.id}/preview.png`));
-  $("#preview-caption").textContent = `${job.specimen}: the reconstructed table itself, log scale with a colour bar; ` +
+  $("#preview-caption").textContent = `${job.specimen}: the reconstructed table itself, log scale; the colour bar gives the brightest channel's value in the material's typical tint; ` +
     "columns φh = 0, 45, 90, 135°; rows φd = 90, 0°; in each panel θh runs down, θd right; hatched cells are below the horizon." + (shownUncalibrated ? UNCALIBRATED_NOTE : "");
   await Promise.all([refreshRender(), refreshPolar()]);
 }
@@ -390,6 +426,8 @@ async function showResult(job) {
 const METRIC_MEANING = {
   predicted_log_rmse: "predicted error of the whole BRDF (log RMSE, the number to report)",
   predicted_error: "predicted relative error of the whole BRDF (MAPE), from leave-one-pair-out",
+  design_expected_log_rmse: "the rig's design: expected log RMSE on held-out materials (compare with predicted_log_rmse)",
+  design_gap: "why predicted_log_rmse is more than 2 times away from the design's expected error",
   cv_log_error: "leave-one-pair-out error: each pair predicted by the fit to the other pairs (log)",
   cv_sample_error: "leave-one-pair-out relative error of the readings",
   rel_sample_error: "how far the fit is from its own readings (relative)",

@@ -4,13 +4,27 @@
 
 /* global Chart */
 
-// 20 colours that stay distinct side by side (Kelly's contrast set without white, black and
-// the greys), so 20 light/sensor pairs each get their own.
+// 20 colours that stay distinct side by side (a qualitative set without white and the light
+// greys), so 20 light/sensor pairs each get their own.
 export const PALETTE = [
   "#e6194b", "#3cb44b", "#4363d8", "#f58231", "#911eb4", "#42d4f4", "#f032e6", "#9a6324",
   "#800000", "#469990", "#000075", "#bfef45", "#808000", "#dcbeff", "#ffd8b1", "#aaffc3",
   "#fabed4", "#ffe119", "#a9a9a9", "#000000",
 ];
+// Colour alone does not tell 12 pairs apart for everyone: under a simulated red or green
+// deficiency several of the palette's colours nearly coincide (blue and magenta, red and
+// brown). Each pair also gets a marker for its readings and a dash for its curve, cycling
+// with period 5: pairs that share a marker and dash are 5 apart in the palette, and the 12
+// pairs of the default rig then differ by a CIEDE2000 of at least 17 with normal vision and
+// under each simulated deficiency (tests/system/api/test_browser_plots.py).
+export const POINT_STYLES = ["circle", "triangle", "rect", "rectRot", "star"];
+export const DASHES = [[], [8, 4], [2, 3], [10, 3, 2, 3], [4, 2]];
+
+/** The colour, marker and dash of the k-th light/sensor pair. */
+export function pairStyle(k) {
+  return { color: PALETTE[k % PALETTE.length], point: POINT_STYLES[k % POINT_STYLES.length],
+           dash: DASHES[k % DASHES.length] };
+}
 
 function fresh(canvas, config) {
   Chart.getChart(canvas)?.destroy();
@@ -37,17 +51,17 @@ export function plotRotation(canvas, pairs, yTitle, title = "") {
   pairs = pairs.map((p) => (p.curve ? { ...p, curve: p.curve.filter(([x]) => x <= xMax) } : p));
   const datasets = [];
   pairs.forEach((p, k) => {
-    const color = PALETTE[k % PALETTE.length];
+    const { color, point, dash } = pairStyle(k);
     datasets.push({
       label: p.label, type: "scatter", data: p.points.map(([x, y]) => ({ x, y })),
-      backgroundColor: color, borderColor: color, pointRadius: 3, showLine: !p.curve,
-      borderWidth: 1, order: 1,
+      backgroundColor: color, borderColor: color, pointRadius: 4, pointStyle: point,
+      showLine: !p.curve, borderDash: p.curve ? [] : dash, borderWidth: 1, order: 1,
     });
     if (p.curve) {
       datasets.push({
         label: `${p.label} reconstruction`, type: "line", data: p.curve.map(([x, y]) => ({ x, y })),
         borderColor: color, backgroundColor: color, pointRadius: 0, borderWidth: 1.5, order: 2,
-        isCurve: true,
+        borderDash: dash, isCurve: true,
       });
     }
   });
@@ -60,7 +74,8 @@ export function plotRotation(canvas, pairs, yTitle, title = "") {
         title: { display: Boolean(title), text: title },
         legend: {
           position: "right",
-          labels: { boxWidth: 12, filter: (item, data) => !data.datasets[item.datasetIndex].isCurve },
+          // The legend shows each pair's marker in its colour.
+          labels: { boxWidth: 12, usePointStyle: true, filter: (item, data) => !data.datasets[item.datasetIndex].isCurve },
           // One legend entry per pair: toggling it hides the readings and their curve.
           onClick: (e, item, legend) => {
             const chart = legend.chart, label = chart.data.datasets[item.datasetIndex].label;
@@ -123,6 +138,10 @@ export function plotPolar(canvas, angleDeg, curves, opts) {
       return { x: r * Math.sin(t), y: r * Math.cos(t), a, f: v };
     }),
   }));
+  // The grid's own labels: the angle ticks outside the rim, the ring values along the
+  // vertical. Their boxes are kept on the chart ($polarLabels, canvas pixels) so the page's
+  // tests can check that no label covers another or the titles.
+  const FONT_PX = 11;
   const grid = {
     id: "polarGrid",
     beforeDatasetsDraw(chart) {
@@ -131,30 +150,52 @@ export function plotPolar(canvas, angleDeg, curves, opts) {
       const px = (r) => x.getPixelForValue(r) - cx;
       ctx.save();
       ctx.strokeStyle = "#dde2e8"; ctx.fillStyle = "#6a737d"; ctx.lineWidth = 1;
-      ctx.font = "11px system-ui, sans-serif";
-      for (const v of rings) {
-        const r = px(radius(v));
-        ctx.beginPath(); ctx.arc(cx, cy, r, Math.PI, 2 * Math.PI); ctx.stroke();
-        ctx.fillText(fmt(v), cx + 3, cy - r - 3);  // along the vertical, clear of the angles
-      }
+      ctx.font = `${FONT_PX}px system-ui, sans-serif`;
+      ctx.textBaseline = "alphabetic";
+      const boxes = [];
+      const box = (text, left, baseline) => {
+        const m = ctx.measureText(text);
+        return { text, left, right: left + m.width, top: baseline - FONT_PX, bottom: baseline + 3 };
+      };
       const R = px(rmax);
+      const angles = [];
       for (let a = -90; a <= 90; a += 30) {
         const t = (a * Math.PI) / 180;
         ctx.beginPath(); ctx.moveTo(cx, cy); ctx.lineTo(cx + R * Math.sin(t), cy - R * Math.cos(t)); ctx.stroke();
-        ctx.textAlign = "center";
-        ctx.fillText(`${a}°`, cx + (R + 10) * Math.sin(t), cy - (R + 4) * Math.cos(t));
+        const text = `${a}°`, w = ctx.measureText(text).width;
+        // (±90° sit on the chart area's bottom edge: lifted clear of the legend below it.)
+        angles.push(box(text, cx + (R + 10) * Math.sin(t) - w / 2, cy - (R + 4) * Math.cos(t) - (Math.abs(a) === 90 ? 3 : 0)));
       }
+      // Each ring's value just above it, beside the vertical: right of the "0°" tick's
+      // half-width, as the outermost ring can come within a label's height of the rim.
+      const beside = cx + ctx.measureText("0°").width / 2 + 4;
+      for (const v of rings) {
+        const r = px(radius(v));
+        ctx.beginPath(); ctx.arc(cx, cy, r, Math.PI, 2 * Math.PI); ctx.stroke();
+        boxes.push(box(fmt(v), beside, cy - r - 3));
+      }
+      boxes.push(...angles);
+      for (const b of boxes) {
+        ctx.textAlign = "left";
+        ctx.fillText(b.text, b.left, b.bottom - 3);
+      }
+      chart.$polarLabels = boxes;
       ctx.restore();
     },
   };
   // Equal units per pixel on both axes, or circles would be ellipses: fit the ranges to the
   // chart area once it is laid out (the axes are hidden, so this does not move the layout).
+  // The angle ticks are drawn outside the rim, so the rim keeps clear of the area's edges by
+  // a tick label's height at the top and its width at the sides: drawn at the very edge, the
+  // "0°" tick landed on the subtitle above the chart area.
+  const TOP_ROOM = FONT_PX + 8, SIDE_ROOM = 40;
   const square = (chart) => {
     const a = chart.chartArea;
     if (!a || a.right <= a.left || a.bottom <= a.top) return;
     const w = a.right - a.left, h = a.bottom - a.top;
-    let xr = rmax, yr = rmax;
-    if (w / 2 > h) xr = (rmax * w) / (2 * h); else yr = (2 * rmax * h) / w;
+    const rimPx = Math.max(Math.min(w / 2 - SIDE_ROOM, h - TOP_ROOM), 1);
+    const perPx = rmax / rimPx;
+    const xr = (perPx * w) / 2, yr = perPx * h;
     const sx = chart.options.scales.x, sy = chart.options.scales.y;
     if (Math.abs(sx.max - xr) > 1e-9 * rmax || Math.abs(sy.max - yr) > 1e-9 * rmax) {
       sx.min = -xr; sx.max = xr; sy.max = yr;
@@ -167,7 +208,7 @@ export function plotPolar(canvas, angleDeg, curves, opts) {
     plugins: [grid, { id: "square", afterLayout: (c) => queueMicrotask(() => square(c)) }],
     options: {
       animation: false, responsive: true, maintainAspectRatio: false, parsing: false,
-      layout: { padding: { top: 34, left: 8, right: 8, bottom: 8 } },
+      layout: { padding: 8 },
       plugins: {
         title: { display: true, text: opts.title },
         subtitle: { display: true, text: `radius: BRDF in ${opts.units}${opts.log ? `, log scale over ${LOG_DECADES} decades` : ", linear"}` },

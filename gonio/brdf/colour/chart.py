@@ -9,6 +9,15 @@ the CIEDE2000 difference between ``M c_p`` and ``XYZ_p`` on the patches themselv
 median and maximum: a matrix cannot undo a sensor whose channels are not a linear transform of
 the colour-matching functions (the Luther condition), and this residual says how far off it is.
 
+A three-channel sensor may instead get a root-polynomial colour correction (Finlayson, Mackiewicz
+and Hurlbert 2015, IEEE TIP 24(5)): ``XYZ = M (R, G, B, sqrt(RG), sqrt(GB), sqrt(RB))``, degree
+2, fitted and applied by colour-science's ``colour.characterisation`` "Finlayson 2015" method.
+Its terms scale with the reading, so like the matrix it holds at every exposure and every
+reflectance level, which a BRDF's values (dark diffuse to bright specular) need; the extra terms
+follow some of what a 3 x 3 matrix cannot. :func:`fit_matrix` picks between the two on the
+chart alone: the form whose patches are best predicted by fits without them (leave one patch
+out, median CIEDE2000), since the fit's own residual always favours more terms.
+
 Chart file (CSV, UTF-8, one header row; documented in ``docs/colour.md``)::
 
     patch,R,G,B,380,390,...,730
@@ -25,6 +34,7 @@ from __future__ import annotations
 import csv
 import io
 import os
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -42,11 +52,25 @@ from gonio.brdf.colour.conditions import (
     xyz_to_lab,
 )
 
+with warnings.catch_warnings():
+    # colour-science warns at import that its plotting needs matplotlib; gonio plots no colour.
+    warnings.simplefilter("ignore")
+    import colour
+
 FloatArray = NDArray[np.float64]
 
 #: Fewest patches a 3 x C least-squares fit is accepted from (an RGB sensor has 9 unknowns;
 #: fewer than twice as many equations leaves the residual meaningless).
 MIN_PATCHES = 6
+#: The calibration forms: a 3 x C matrix on the readings, or on their degree-2 root-polynomial
+#: expansion (three channels only).
+LINEAR, ROOT_POLYNOMIAL = "linear", "root-polynomial"
+METHODS = (LINEAR, ROOT_POLYNOMIAL)
+#: Degree of the root-polynomial expansion: 6 terms of 3 channels. Degree 3 (13 terms) fits a
+#: 24-patch chart closer and predicts left-out patches worse (docs/colour.md).
+ROOT_POLYNOMIAL_DEGREE = 2
+#: Fewest patches the root-polynomial form is considered from (18 unknowns).
+MIN_PATCHES_ROOT_POLYNOMIAL = 12
 
 
 class ChartError(ColourError):
@@ -84,13 +108,19 @@ class ColourMatrix:
     Attributes
     ----------
     channels : tuple of str, length C
-    matrix : (3, C) array; XYZ = matrix @ c, perfect diffuser Y = 100
+    matrix : (3, T) array; XYZ = matrix @ terms(c), perfect diffuser Y = 100, with
+        ``terms(c) = c`` (T = C) for ``method="linear"`` and the degree-2 root-polynomial
+        expansion (T = 6, C = 3) for ``method="root-polynomial"``
     conditions : ViewingConditions the reference XYZ were computed for
     residual_median_de00, residual_max_de00 : float
         CIEDE2000 of the fit on the chart's patches.
     n_patches : int
     source : str
         Where the calibration came from (the chart file's name).
+    method : {"linear", "root-polynomial"}
+    loo_median_de00 : float
+        Median CIEDE2000 of each patch predicted by the fit to the other patches (NaN when not
+        computed): what the calibration does on colours it was not fitted to.
     """
 
     channels: tuple[str, ...]
@@ -100,6 +130,8 @@ class ColourMatrix:
     residual_max_de00: float
     n_patches: int
     source: str = ""
+    method: str = LINEAR
+    loo_median_de00: float = float("nan")
 
     def to_xyz(self, values: ArrayLike, conditions: ViewingConditions) -> FloatArray:
         """(..., 3) XYZ of reflectance factors (..., C).
@@ -121,7 +153,7 @@ class ColourMatrix:
                 f"{v.shape[-1]} channels for a colour calibration of {len(self.channels)} "
                 f"({', '.join(self.channels)})"
             )
-        return v @ self.matrix.T
+        return _apply(self.method, self.matrix, v)
 
     def as_dict(self) -> dict[str, Any]:
         """JSON form (the inverse of :meth:`from_dict`)."""
@@ -130,7 +162,8 @@ class ColourMatrix:
             "illuminant": self.conditions.illuminant, "observer": self.conditions.observer,
             "residual_median_de00": self.residual_median_de00,
             "residual_max_de00": self.residual_max_de00,
-            "n_patches": self.n_patches, "source": self.source,
+            "n_patches": self.n_patches, "source": self.source, "method": self.method,
+            "loo_median_de00": self.loo_median_de00,
         }
 
     @classmethod
@@ -145,17 +178,77 @@ class ColourMatrix:
                 v = d.get(key)
                 return float("nan") if v is None else float(v)
 
+            method = str(d.get("method") or LINEAR)
             out = cls(channels, m, conditions, num("residual_median_de00"),
                       num("residual_max_de00"), int(d.get("n_patches") or 0),
-                      str(d.get("source") or ""))
+                      str(d.get("source") or ""), method, num("loo_median_de00"))
         except (KeyError, TypeError, ValueError) as exc:
             raise ColourError(f"colour calibration is malformed ({exc}); fit it again") from None
-        if m.shape != (3, len(channels)) or not np.isfinite(m).all():
+        if method not in METHODS:
+            raise ColourError(f"colour calibration method {method!r} is unknown; use one of "
+                              f"{', '.join(METHODS)}, or fit it again")
+        if method == ROOT_POLYNOMIAL and len(channels) != 3:
+            raise ColourError(f"a root-polynomial colour calibration needs 3 channels, not "
+                              f"{len(channels)}; fit it again")
+        terms = n_terms(method, len(channels))
+        if m.shape != (3, terms) or not np.isfinite(m).all():
+            what = ("one column per channel" if method == LINEAR
+                    else "one column per root-polynomial term")
             raise ColourError(
-                f"colour calibration matrix is {m.shape}; expected 3 x {len(channels)} finite "
-                "numbers (one column per channel)"
+                f"colour calibration matrix is {m.shape}; expected 3 x {terms} finite "
+                f"numbers ({what})"
             )
         return out
+
+
+def n_terms(method: str, n_channels: int) -> int:
+    """Columns of a calibration's matrix: the channels, or the root-polynomial terms."""
+    if method == ROOT_POLYNOMIAL:
+        return int(np.asarray(colour.characterisation.polynomial_expansion_Finlayson2015(
+            np.ones(3), degree=ROOT_POLYNOMIAL_DEGREE, root_polynomial_expansion=True)).size)
+    return n_channels
+
+
+def _apply(method: str, matrix: FloatArray, values: FloatArray) -> FloatArray:
+    """(..., 3) XYZ of readings (..., C) through a calibration of ``method``."""
+    if method == ROOT_POLYNOMIAL:
+        # Readings are reflectance factors, >= 0; a noisy negative one would leave the square
+        # roots undefined.
+        return np.asarray(colour.apply_matrix_colour_correction(
+            np.maximum(values, 0.0), matrix, method="Finlayson 2015",
+            degree=ROOT_POLYNOMIAL_DEGREE, root_polynomial_expansion=True), dtype=float)
+    return np.asarray(values @ matrix.T, dtype=float)
+
+
+def _fit(method: str, readings: FloatArray, xyz: FloatArray) -> FloatArray:
+    """(3, T) least-squares calibration of ``method`` taking ``readings`` (P, C) to ``xyz``."""
+    if method == ROOT_POLYNOMIAL:
+        return np.asarray(colour.matrix_colour_correction(
+            np.maximum(readings, 0.0), xyz, method="Finlayson 2015",
+            degree=ROOT_POLYNOMIAL_DEGREE, root_polynomial_expansion=True), dtype=float)
+    sol, *_ = np.linalg.lstsq(readings, xyz, rcond=None)
+    return np.asarray(sol.T, dtype=np.float64)
+
+
+def loo_de00(method: str, readings: FloatArray, xyz: FloatArray,
+             conditions: ViewingConditions) -> FloatArray:
+    """(P,) CIEDE2000 of each patch predicted by the calibration fitted to the other patches.
+
+    Parameters
+    ----------
+    method : {"linear", "root-polynomial"}
+    readings : (P, C) the sensor's reflectance factors of the patches
+    xyz : (P, 3) the patches' reference XYZ (perfect diffuser Y = 100)
+    conditions : ViewingConditions of ``xyz``
+    """
+    lab = xyz_to_lab(xyz, conditions)
+    out = np.empty(readings.shape[0])
+    for p in range(readings.shape[0]):
+        keep = np.arange(readings.shape[0]) != p
+        m = _fit(method, readings[keep], xyz[keep])
+        out[p] = delta_e00(xyz_to_lab(_apply(method, m, readings[p:p + 1]), conditions),
+                           lab[p:p + 1])[0]
+    return out
 
 
 def read_chart(path: str | os.PathLike[str]) -> Chart:
@@ -229,7 +322,8 @@ def parse_chart(text: str) -> Chart:
 
 
 def fit_matrix(chart: Chart, conditions: ViewingConditions | None = None,
-               channels: Sequence[str] | None = None, source: str = "") -> ColourMatrix:
+               channels: Sequence[str] | None = None, source: str = "",
+               method: str | None = None) -> ColourMatrix:
     """Least-squares colour calibration from a chart, with its CIEDE2000 residual.
 
     Parameters
@@ -240,6 +334,11 @@ def fit_matrix(chart: Chart, conditions: ViewingConditions | None = None,
         The chart's columns are reordered to it; a channel missing from the chart is an error.
     source : str
         Recorded with the matrix.
+    method : {"linear", "root-polynomial"}, optional
+        The calibration's form (module docstring). Default: chosen on the chart, the form with
+        the lower median leave-one-patch-out CIEDE2000 (the root-polynomial form is a
+        candidate for three channels and at least :data:`MIN_PATCHES_ROOT_POLYNOMIAL`
+        patches).
     """
     cond = conditions or ViewingConditions()
     readings = chart.readings
@@ -258,11 +357,23 @@ def fit_matrix(chart: Chart, conditions: ViewingConditions | None = None,
     if np.linalg.matrix_rank(readings) < min(readings.shape[1], 3):
         raise ChartError("the chart's readings are linearly dependent (all patches alike, or a "
                          "channel that reads nothing); measure a chart of distinct colours")
-    sol, *_ = np.linalg.lstsq(readings, xyz, rcond=None)
-    m: FloatArray = np.asarray(sol.T, dtype=np.float64)
-    de = delta_e00(xyz_to_lab(readings @ m.T, cond), xyz_to_lab(xyz, cond))
+    if method is not None and method not in METHODS:
+        raise ChartError(f"calibration method {method!r} is unknown; use one of "
+                         f"{', '.join(METHODS)}")
+    rp_possible = readings.shape[1] == 3 and readings.shape[0] >= MIN_PATCHES_ROOT_POLYNOMIAL
+    if method == ROOT_POLYNOMIAL and not rp_possible:
+        raise ChartError(
+            f"a root-polynomial calibration needs 3 channels and at least "
+            f"{MIN_PATCHES_ROOT_POLYNOMIAL} patches (this chart: {readings.shape[1]} channels, "
+            f"{readings.shape[0]} patches); use the linear one")
+    candidates = [method] if method is not None else (
+        [LINEAR, ROOT_POLYNOMIAL] if rp_possible else [LINEAR])
+    loo = {c: float(np.median(loo_de00(c, readings, xyz, cond))) for c in candidates}
+    best = min(candidates, key=lambda c: loo[c])
+    m = _fit(best, readings, xyz)
+    de = delta_e00(xyz_to_lab(_apply(best, m, readings), cond), xyz_to_lab(xyz, cond))
     return ColourMatrix(names, m, cond, float(np.median(de)), float(np.max(de)),
-                        len(chart.patches), source)
+                        len(chart.patches), source, best, loo[best])
 
 
 def format_chart(chart: Chart) -> str:

@@ -47,6 +47,10 @@ from gonio.brdf.tables.table import BRDFTable
 
 FloatArray = NDArray[np.float64]
 
+HELDOUT_NOISE = 0.01
+"""Relative reading noise of the simulated scans (1 %): one of the assumptions a design's
+expected error states (``gonio design``, the rig config's ``[design]`` table)."""
+
 
 @dataclass(frozen=True)
 class ExpectedError:
@@ -103,7 +107,7 @@ def heldout_log_rmse(cells: ArrayLike, ph_lab: ArrayLike, rotations: int = 8,
     rotations : int
         Uniform stage angles of the simulated scans.
     seed : int
-        Noise seed (1 % relative noise).
+        Noise seed (:data:`HELDOUT_NOISE` relative noise).
     span_deg : {180, 360}
         The arc those angles cover.
     """
@@ -117,7 +121,7 @@ def heldout_log_rmse(cells: ArrayLike, ph_lab: ArrayLike, rotations: int = 8,
     runs = [(t, panel_basis, "synthetic") for t in synth] + [(t, b, "measured")
                                                               for t, b in meas]
     for k, (t, b, kind) in enumerate(runs):
-        vals = simulate_samples(t, c, p, alpha, noise=NoiseModel(0.01, seed=seed + k))
+        vals = simulate_samples(t, c, p, alpha, noise=NoiseModel(HELDOUT_NOISE, seed=seed + k))
         rec = reconstruct(b, c, p, alpha, vals)
         e = metrics.log_rmse(rec.table, t)
         per[t.name] = e

@@ -77,6 +77,9 @@ REFINE_GAIN = 3e-5
 #: The planning posterior's per-pair offset in adaptive plans (:class:`ScanPosterior`'s
 #: ``offset``): sized by each scan's marginal likelihood.
 REFINE_OFFSET = "scan"
+#: The ``log_rmse`` weights read every third slice of the table (they are taken as constant
+#: along ``ph``), so a caller that has no table yet expands only those slices.
+WEIGHT_SLICE_STEP = 3
 
 
 @functools.cache
@@ -126,9 +129,11 @@ class ScanPosterior:
     stage_angles : (r,) array_like, radians
     values : (n, r, C) array_like, 1/sr
         The readings (non-negative).
-    table : (C, 72, 18, 18, 36) array_like, optional
-        The reconstruction (1/sr), for the ``log_rmse`` weights; default: the joint fit of the
-        readings under the learnt prior (:func:`gonio.brdf.reconstruction.joint.solve_joint`).
+    table : (C, 72, 18, 18, 36) or (C, 24, 18, 18, 36) array_like, optional
+        The reconstruction (1/sr), for the ``log_rmse`` weights, or only its slices the
+        weights read (every :data:`WEIGHT_SLICE_STEP`-th, ``table[:, ::3]``); default: the
+        joint fit of the readings under the learnt prior
+        (:func:`gonio.brdf.reconstruction.joint.solve_joint`).
     eta, lam : float, optional
         The joint fit's settings (defaults :data:`JOINT_ETA`, :data:`JOINT_LAM`).
     rho : float or (float, float), optional
@@ -226,8 +231,8 @@ class ScanPosterior:
             # computes before it weighs the scan's own anisotropy).
             jf = solve_joint(y, self.Qt, self.ph_lab[:, None] - alpha[None, :], self.P,
                              self.eta)
-            table = expand_table(basis, np.moveaxis(jf.coef, -1, 0))
-        self._set_weights(basis, np.asarray(table, dtype=float))
+            table = expand_table(basis, np.moveaxis(jf.coef, -1, 0)[:, :, ::WEIGHT_SLICE_STEP])
+        self._set_weights(basis, np.asarray(table))
         self.alpha = alpha.copy()
         low = (self.harm > 0) & (self.harm <= BAND_SPLIT)
         self._G_iso = self._kernel(self._Am, (self.harm == 0).astype(float), alpha, alpha)
@@ -276,13 +281,35 @@ class ScanPosterior:
         ``g = d ln(1 + f cos ti) / dx = cos ti (f + eps / w) / (1 + f cos ti)`` turns a remapped
         error into a ``log_rmse`` error at the reconstructed ``f``; ``g^2`` is averaged over
         channels and every third slice (the weights along ``ph`` are taken as constant).
+        ``table`` holds all 72 slices or only those (``table[:, ::WEIGHT_SLICE_STEP]``).
         """
-        f = table.reshape(table.shape[0], geo.N_PH, geo.N_ROWS)[:, ::3][:, :, VALID_ROWS]
-        f = np.maximum(np.where(np.isfinite(f), f, 0.0), 0.0)
+        n_s = table.shape[1] if table.ndim > 1 else 0
+        if n_s == geo.N_PH:
+            table = table[:, ::WEIGHT_SLICE_STEP]
+        elif n_s != len(range(0, geo.N_PH, WEIGHT_SLICE_STEP)):
+            raise ReconstructionError(
+                f"table has shape {table.shape}; expected (C, {geo.N_PH}, 18, 18, 36) or its "
+                f"every {WEIGHT_SLICE_STEP}rd slice")
+        f_all = table.reshape(table.shape[0], -1, geo.N_ROWS)
         ci_v = _cos_ti_rows()
-        w = row_weight(basis.eps)[VALID_ROWS]
-        g = ci_v * (f + basis.eps / w) / (1.0 + f * ci_v)
-        g2 = np.mean(g**2, axis=(0, 1))
+        a = basis.eps / row_weight(basis.eps)[VALID_ROWS]
+        # One channel at a time, in place: the (C, 24, 7,861) float64 temporaries of a
+        # 31-band table cost more than the rest of the posterior.
+        g2 = np.zeros(VALID_ROWS.size)
+        g = np.empty((f_all.shape[1], VALID_ROWS.size))
+        den = np.empty_like(g)
+        for fc in f_all:
+            g[...] = np.take(fc, VALID_ROWS, axis=1)
+            np.nan_to_num(g, copy=False, nan=0.0, posinf=0.0, neginf=0.0)
+            np.maximum(g, 0.0, out=g)
+            np.multiply(g, ci_v, out=den)
+            den += 1.0
+            g += a
+            g *= ci_v
+            g /= den
+            g *= g
+            g2 += g.sum(axis=0)
+        g2 /= f_all.shape[0] * f_all.shape[1]
         wv = _volume_weight_rows()
         Qv = basis.Q[VALID_ROWS]
         W = Qv.T @ (Qv * (wv * g2)[:, None])

@@ -43,7 +43,11 @@ and puts the result together.
 
 Speed: the table of step 4 (C x 72 x 11,664 values) dominates the call, so it is computed at
 the valid rows only (:func:`.tabulate.expand_table`) and handed to :meth:`BRDFTable.trusted`
-without a re-validation pass. BLAS runs on one thread during the call
+without a re-validation pass, once per call: the scan's posterior, which chooses the prior
+factor before the final fit, reads only every third slice of the first fit's table, so only
+those are expanded for it (a spectral sensor's 31 bands made the two full expansions of
+earlier versions most of the call). All channels share one factorisation of the joint system.
+BLAS runs on one thread during the call
 (:func:`.blas.one_blas_thread`): the products are small, and on a shared machine OpenBLAS'
 spinning worker threads cost far more than they save.
 """
@@ -77,8 +81,17 @@ from gonio.brdf.reconstruction.joint import (
 )
 from gonio.brdf.reconstruction.mirror import MirrorModel, mirror_cells
 from gonio.brdf.reconstruction.periodic import arc_gaps, periodic_pchip_rows
-from gonio.brdf.reconstruction.posterior import ScanPosterior, harmonic_scale
-from gonio.brdf.reconstruction.selfcheck import predict_log_rmse
+from gonio.brdf.reconstruction.posterior import (
+    WEIGHT_SLICE_STEP,
+    ScanPosterior,
+    harmonic_scale,
+)
+from gonio.brdf.reconstruction.selfcheck import (
+    BasisMisfit,
+    basis_misfit,
+    predict_log_rmse,
+    widen_log_rmse,
+)
 from gonio.brdf.reconstruction.tabulate import expand_table
 from gonio.brdf.tables import geometry as geo
 from gonio.brdf.tables.table import TH0_ROWS, VALID_MASK, BRDFTable
@@ -139,7 +152,8 @@ class Reconstruction:
         The estimated ``metrics.log_rmse`` of the whole reconstruction against the true
         BRDF, calibrated on materials held out of the basis; the number to report. Joint
         fit: :func:`gonio.brdf.reconstruction.selfcheck.predict_log_rmse`; V&F path:
-        :func:`predict_log_rmse_vf`.
+        :func:`predict_log_rmse_vf`; either widened when the readings show a misfit the
+        basis cannot hold (``misfit``).
     angle_log_errors : (r,) float64 or None
         Joint fit only: per stage angle (in the order given), the RMS log error (units of
         ``log_rmse``) of that angle's readings predicted from all the other angles. Where it
@@ -160,6 +174,16 @@ class Reconstruction:
         (:attr:`gonio.brdf.reconstruction.posterior.ScanPosterior.mahalanobis`). Large when the
         material sits far from the training library; the witness of what the basis cannot
         represent in ``predicted_log_rmse``.
+    misfit : BasisMisfit or None
+        How far the fit misses its own readings against their noise, and whether that misfit
+        stays across the stage angles
+        (:func:`gonio.brdf.reconstruction.selfcheck.basis_misfit`). When it is flagged
+        (``misfit.flagged``) the basis cannot hold the material and ``predicted_log_rmse`` has
+        been widened (:func:`gonio.brdf.reconstruction.selfcheck.widen_log_rmse`);
+        ``misfit.message(...)`` says why.
+    predicted_log_rmse_unwidened : float
+        The estimate before that widening (equal to ``predicted_log_rmse`` unless the misfit
+        is flagged).
     """
 
     table: BRDFTable
@@ -175,6 +199,17 @@ class Reconstruction:
     pair_log_errors: FloatArray | None = None
     expected_log_rmse: float = float("nan")
     mahalanobis: float = float("nan")
+    misfit: BasisMisfit | None = None
+    predicted_log_rmse_unwidened: float = float("nan")
+
+    @property
+    def misfit_warning(self) -> str | None:
+        """Why ``predicted_log_rmse`` was widened (None when it was not): the readings carry
+        structure the basis cannot hold (:class:`gonio.brdf.reconstruction.selfcheck.BasisMisfit`,
+        :meth:`~gonio.brdf.reconstruction.selfcheck.BasisMisfit.message`)."""
+        if self.misfit is None:
+            return None
+        return self.misfit.message(self.predicted_log_rmse_unwidened, self.predicted_log_rmse)
 
 
 # ---------------------------------------------------------------------------- geometry helper
@@ -667,15 +702,18 @@ def _reconstruct(
         return BRDFTable.trusted(expand_table(basis, coef), channels, name, None,
                                  {"reconstruction": settings})
 
-    table = as_table(coef, prior_rho)
     post = None
     if method == "joint" and has_cv:
-        # The joint posterior (reconstruction.posterior; imported here because it builds on
-        # this module): the self-estimate's expected error, and the scan's own rho.
+        # The joint posterior (reconstruction.posterior): the self-estimate's expected error,
+        # and the scan's own rho. Its weights read only every third slice of the fit's table,
+        # so only those are expanded here; the whole table is expanded once, at the end, from
+        # the coefficients finally chosen (with many channels the expansion is most of the
+        # call's time).
 
         by_scan = rho in ("scan", "scan-bands")
-        post = ScanPosterior(basis, cells_, ph_, alpha, vals, table=table.values, eta=eta,
-                             lam=lam, rho=None if by_scan else prior_rho,
+        post = ScanPosterior(basis, cells_, ph_, alpha, vals,
+                             table=expand_table(basis, coef[:, :, ::WEIGHT_SLICE_STEP]),
+                             eta=eta, lam=lam, rho=None if by_scan else prior_rho,
                              bands=rho == "scan-bands")
         chosen = (post.rho, post.rho_high)
         if (rho == "scan" and post.rho < SCAN_RHO_MAX) or (
@@ -685,7 +723,6 @@ def _reconstruct(
             # posterior would cost as much as the fit).
             prior_rho = chosen
             coef, at_samples, has_cv, angle_err = joint(prior_rho)
-            table = as_table(coef, prior_rho)
     if method == "joint" and symmetry == "scan":
 
         mth, mtd, mpd = mirror_cells(cells_).T
@@ -706,11 +743,12 @@ def _reconstruct(
             float(np.rad2deg(pick.axis)), 6), "mirror_slack": pick.slack}
         if pick.axis is not None:
             coef = np.moveaxis(model.coefficients(pick.axis, pick.slack, geo.PH_GRID), -1, 0)
-        table = as_table(coef, prior_rho)
+    table = as_table(coef, prior_rho)
     rel = _relative_sample_error(at_samples[..., :n_ch], vals)
     cv = _relative_sample_error(at_samples[..., n_ch:], vals) if has_cv else float("nan")
     pair_err = _pair_log_errors(at_samples[..., n_ch:], vals, ci) if has_cv else None
     cv_log = float(np.sqrt(np.mean(pair_err**2))) if pair_err is not None else float("nan")
+    misfit = basis_misfit(_log_residuals(at_samples[..., :n_ch], vals, ci), vals, ci)
     n = int(cells_.shape[0])
     if post is not None and np.isfinite(cv):
 
@@ -719,6 +757,9 @@ def _reconstruct(
     else:
         expected = mahal = float("nan")
         predicted = predict_log_rmse_vf(cv, n, int(alpha.size))
+    # Residuals well above the noise that stay across the angles: the basis cannot hold the
+    # material, and the estimate never drops below the error the readings themselves show.
+    widened = widen_log_rmse(predicted, misfit)
     seconds = time.perf_counter() - t0
     return Reconstruction(
         table=table,
@@ -735,11 +776,13 @@ def _reconstruct(
         cv_sample_error=cv,
         predicted_error=cv_error_scale(n) * cv,
         cv_log_error=cv_log,
-        predicted_log_rmse=predicted,
+        predicted_log_rmse=widened,
+        predicted_log_rmse_unwidened=predicted,
         expected_log_rmse=expected,
         mahalanobis=mahal,
         angle_log_errors=angle_err,
         pair_log_errors=pair_err,
+        misfit=misfit,
     )
 
 
@@ -898,9 +941,14 @@ def refine_angles(
 
 def _pair_log_errors(pred: FloatArray, measured: FloatArray, cos_i: FloatArray) -> FloatArray:
     """(n,) RMS over each pair's readings of ``ln(1 + pred cos ti) - ln(1 + measured cos ti)``."""
-    ci = np.asarray(cos_i, dtype=float)[:, None, None]
-    d = np.log1p(np.maximum(pred, 0.0) * ci) - np.log1p(measured * ci)
+    d = _log_residuals(pred, measured, cos_i)
     return np.asarray(np.sqrt(np.mean(d**2, axis=(1, 2))))
+
+
+def _log_residuals(pred: FloatArray, measured: FloatArray, cos_i: FloatArray) -> FloatArray:
+    """(n, r, C) ``ln(1 + pred cos ti) - ln(1 + measured cos ti)`` per reading."""
+    ci = np.asarray(cos_i, dtype=float)[:, None, None]
+    return np.asarray(np.log1p(np.maximum(pred, 0.0) * ci) - np.log1p(measured * ci))
 
 
 def cv_error_scale(n_pairs: int) -> float:

@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 from gonio.brdf.reconstruction.basis import Basis, row_weight
 from gonio.brdf.reconstruction.errors import ReconstructionError
 from gonio.brdf.tables import geometry as geo
-from gonio.brdf.tables.table import INVALID_ROWS, VALID_ROWS
+from gonio.brdf.tables.table import VALID_ROWS
 
 FloatArray = NDArray[np.float64]
 
@@ -27,6 +27,23 @@ def _valid_row_weight(eps: float) -> FloatArray:
     w = row_weight(eps)[VALID_ROWS]
     w.setflags(write=False)
     return w
+
+
+@functools.lru_cache(maxsize=1)
+def _valid_runs() -> tuple[tuple[int, int, int, int], ...]:
+    """The valid rows as contiguous runs: ``(start, stop)`` in a slice's 11,664 rows and
+    ``(start, stop)`` in the valid rows' own order (169 runs).
+
+    Copying the valid values into the table run by run is a set of strided block copies;
+    a fancy-indexed assignment of the same 7,861 columns cost as much as the whole product
+    for a 31-band table.
+    """
+    rows = np.asarray(VALID_ROWS)
+    breaks = np.flatnonzero(np.diff(rows) != 1) + 1
+    starts = np.concatenate([[0], breaks])
+    stops = np.concatenate([breaks, [rows.size]])
+    return tuple((int(rows[a]), int(rows[b - 1]) + 1, int(a), int(b))
+                 for a, b in zip(starts, stops, strict=True))
 
 
 #: ``exp`` overflows float64 above about 709; a remapped value this large means a diverged fit.
@@ -43,11 +60,12 @@ def expand_table(basis: Basis, coef: FloatArray) -> FloatArray:
     Parameters
     ----------
     basis : Basis
-    coef : (C, K, 72) coefficients
+    coef : (C, K, S) coefficients of S slices (the 72 grid slices; fewer when only some are
+        needed, as the posterior's weights need every third)
 
     Returns
     -------
-    (C, 72, 18, 18, 36) float64 (float32 above :data:`FLOAT32_ABOVE_CHANNELS` channels), 1/sr
+    (C, S, 18, 18, 36) float64 (float32 above :data:`FLOAT32_ABOVE_CHANNELS` channels), 1/sr
         ``max((exp(Q C + mu) (f_med w + eps) - eps) / w, 0)`` at the valid cells, NaN at the
         invalid ones. The per-row constants fold into ``exp(Q C) * scale - offset`` with
         ``scale = exp(mu) (f_med w + eps) / w`` and ``offset = eps / w``, so the big array
@@ -71,7 +89,7 @@ def expand_table(basis: Basis, coef: FloatArray) -> FloatArray:
     X *= scale.astype(dtype, copy=False)
     X -= offset.astype(dtype, copy=False)
     np.maximum(X, 0.0, out=X)
-    out = np.empty((n_ch * n_s, geo.N_ROWS), dtype=dtype)
-    out[:, INVALID_ROWS] = np.nan
-    out[:, VALID_ROWS] = X
-    return out.reshape(n_ch, *geo.TABLE_SHAPE)
+    out = np.full((n_ch * n_s, geo.N_ROWS), np.nan, dtype=dtype)
+    for lo, hi, a, b in _valid_runs():
+        out[:, lo:hi] = X[:, a:b]
+    return out.reshape(n_ch, n_s, *geo.TABLE_SHAPE[1:])

@@ -20,6 +20,7 @@ import httpx
 import pytest
 
 from gonio.api.auth import ApiKeyring
+from gonio.basis_supply import BasisSupply
 from gonio.daemon import DaemonConfig, build_app
 from tests.system.api.live_server import live_server
 
@@ -73,7 +74,7 @@ def daemon(tmp_path_factory: pytest.TempPathFactory, basis: Any) -> Iterator[Dae
     # A short design limit keeps design requests (tests and fuzzing) to a few seconds each.
     cfg = DaemonConfig().with_overrides(paths__data_dir=str(data_dir),
                                         limits__design_time_limit_s=DESIGN_LIMIT_S)
-    app = build_app(cfg, sim.config, ApiKeyring({"tester": key}), basis_provider=lambda: basis)
+    app = build_app(cfg, sim.config, ApiKeyring({"tester": key}), basis=BasisSupply(lambda: basis))
     from gonio.figures import describe_material
 
     # As `gonio serve --sim` does: results record the simulated material (the truth).

@@ -11,6 +11,7 @@ from typing import Any
 import pytest
 
 from gonio.api.auth import ApiKeyring
+from gonio.basis_supply import BasisSupply
 from gonio.daemon import DaemonConfig, build_app
 from tests.system.api.conftest import Daemon
 from tests.system.api.live_server import live_server
@@ -36,7 +37,7 @@ def spectral_daemon(tmp_path_factory: pytest.TempPathFactory, basis: Any) -> Ite
                                       settle_s=0.0))
     key = secrets.token_hex(24)
     cfg = DaemonConfig().with_overrides(paths__data_dir=str(data_dir))
-    app = build_app(cfg, sim.config, ApiKeyring({"tester": key}), basis_provider=lambda: basis)
+    app = build_app(cfg, sim.config, ApiKeyring({"tester": key}), basis=BasisSupply(lambda: basis))
     app.state.service.worker.fit_exports = False  # 31-channel fits are not under test
     try:
         with live_server(app) as url:

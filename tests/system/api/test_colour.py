@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from gonio.basis_supply import BasisSupply
 from gonio.brdf.colour.conditions import ViewingConditions, delta_e00, spectra_to_xyz, xyz_to_lab
 from gonio.brdf.colour.instruments import geometries
 from gonio.cli.sim_session import start_sim_calibration
@@ -41,7 +42,7 @@ def test_spectral_sim_scan_gives_cielab(tmp_path: Path, basis: Any) -> None:
         assert sim.config.sensors[0].wavelengths_nm == list(np.arange(400.0, 701.0, 10.0))
         specimen = sim.specimen.brdf
         svc = GonioService(JobStore(tmp_path / "jobs.sqlite"), build_rig(sim.config),
-                           rig_config=sim.config, basis_provider=lambda: basis, data_dir=data)
+                           rig_config=sim.config, basis=BasisSupply(lambda: basis), data_dir=data)
 
         async def go() -> int:
             await svc.start()

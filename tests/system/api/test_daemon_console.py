@@ -18,7 +18,6 @@ from pathlib import Path
 import httpx
 import pytest
 
-from gonio.logfilters import RoutineRequestFilter
 from tests.system.daemon_proc import wait_for
 
 pytestmark = pytest.mark.system
@@ -85,15 +84,4 @@ def test_console_logs_job_lifecycle_and_calibration_but_not_polls(tmp_path: Path
     assert re.search(r'"POST /api/v1/jobs HTTP/1.1" 201', text), text
 
 
-def test_routine_request_filter_keeps_changes_and_refusals() -> None:
-    import logging
-
-    def record(method: str, status: int) -> logging.LogRecord:
-        return logging.LogRecord("uvicorn.access", logging.INFO, __file__, 1,
-                                 '%s - "%s %s HTTP/%s" %d',
-                                 ("127.0.0.1:5", method, "/api/v1/jobs", "1.1", status), None)
-
-    f = RoutineRequestFilter()
-    assert not f.filter(record("GET", 200)) and not f.filter(record("HEAD", 304))
-    assert f.filter(record("GET", 403)) and f.filter(record("GET", 500))
-    assert f.filter(record("POST", 201)) and f.filter(record("DELETE", 204))
+# RoutineRequestFilter itself: tests/unit/test_logfilters.py.

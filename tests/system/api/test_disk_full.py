@@ -21,6 +21,7 @@ from typing import Any
 import httpx
 import pytest
 
+from gonio.basis_supply import BasisSupply
 from gonio.diskspace import FREE_MARGIN_BYTES
 from gonio.results import read_result
 from tests.system.daemon_proc import DaemonProcess, start_daemon, wait_for
@@ -169,7 +170,7 @@ def test_a_disk_filling_while_the_result_file_is_written_fails_the_job_only(
     key = secrets.token_hex(24)
     with start_sim_rig(SimRigOptions(time_scale=10.0, settle_s=0.0)) as sim:
         cfg = DaemonConfig().with_overrides(paths__data_dir=str(data))
-        app = build_app(cfg, sim.config, ApiKeyring({"t": key}), basis_provider=lambda: basis)
+        app = build_app(cfg, sim.config, ApiKeyring({"t": key}), basis=BasisSupply(lambda: basis))
         with live_server(app) as url, httpx.Client(base_url=url, headers={"X-API-Key": key},
                                                    timeout=120) as c:
             def submit() -> int:

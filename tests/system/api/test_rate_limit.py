@@ -1,5 +1,6 @@
 """The limit on clients without a key (429 + Retry-After) and the refusal of keys in URLs, on a
-tiny app behind a real uvicorn server, and the token bucket against a clock of the test's own."""
+tiny app behind a real uvicorn server (the token bucket itself: tests/unit/api/test_ratelimit.py).
+"""
 
 from __future__ import annotations
 
@@ -13,7 +14,6 @@ import pytest
 from fastapi import Depends, FastAPI
 
 from gonio.api.auth import AccessPolicy, ApiKeyring, Caller, require_read_access, require_write_key
-from gonio.api.ratelimit import TokenBuckets
 from gonio.api.settings import ApiSettings, install
 from tests.system.api.live_server import live_server
 
@@ -81,22 +81,7 @@ def test_rate_zero_turns_the_limit_off(tmp_path: Path) -> None:
         assert {c.get("/read").status_code for _ in range(4 * BURST)} == {200}
 
 
-def test_token_bucket_refills_at_its_rate() -> None:
-    now = [100.0]
-    buckets = TokenBuckets(rate_per_s=2.0, burst=2, clock=lambda: now[0])
-    assert buckets.take("a") == 0 and buckets.take("a") == 0
-    assert buckets.take("a") == pytest.approx(0.5)  # one token every 1/2 s
-    assert buckets.take("b") == 0  # per client
-    now[0] += 0.25
-    assert buckets.take("a") == pytest.approx(0.25)
-    now[0] += 0.25
-    assert buckets.take("a") == 0
-    now[0] += 60  # a long pause fills the bucket to its size, not beyond
-    assert [buckets.take("a") for _ in range(3)][:2] == [0, 0]
-    with pytest.raises(ValueError, match="rate_per_s"):
-        TokenBuckets(rate_per_s=float("nan"), burst=1)
-    with pytest.raises(ValueError, match="burst"):
-        TokenBuckets(rate_per_s=1, burst=0)
+# TokenBuckets and the middleware's answer on their own: tests/unit/api/test_ratelimit.py.
 
 
 @pytest.mark.parametrize("param", ["api_key", "X-API-Key", "key", "token", "access_token"])

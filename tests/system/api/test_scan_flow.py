@@ -125,6 +125,18 @@ def test_full_scan_with_live_progress_and_results(daemon: Daemon) -> None:
         assert mt.status_code == 200 and b"standard_surface" in mt.content
         bad = c.get(f"/api/v1/jobs/{job_id}/export", params={"format": "obj"})
         assert bad.status_code == 422 and "factored" in bad.text
+        # A glTF that opens anywhere (issue 26 item 4): the preview sphere, with tangents,
+        # on request; the plain export above has no mesh.
+        assert "meshes" not in doc
+        meshed = c.get(f"/api/v1/jobs/{job_id}/export",
+                       params={"format": "gltf", "with_mesh": "true"})
+        assert meshed.status_code == 200, meshed.text
+        (prim,) = meshed.json()["meshes"][0]["primitives"]
+        assert {"POSITION", "NORMAL", "TANGENT"} <= set(prim["attributes"])
+        assert f"gonio-job-{job_id}-gltf-mesh.gltf" in meshed.headers["content-disposition"]
+        wrong = c.get(f"/api/v1/jobs/{job_id}/export",
+                      params={"format": "mtlx", "with_mesh": "true"})
+        assert wrong.status_code == 422 and "gltf only" in wrong.json()["detail"]
 
 
 def test_sse_resync_replays_missed_events(daemon: Daemon, no_export_fits: None) -> None:

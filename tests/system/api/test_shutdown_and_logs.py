@@ -15,8 +15,6 @@ from pathlib import Path
 import httpx
 import pytest
 
-from gonio.logfilters import PymodbusFrameFilter, QueryKeyRedactor, redact_query
-
 pytestmark = pytest.mark.system
 
 SECRET = "query-secret-0123456789abcdef"
@@ -91,34 +89,4 @@ def test_ctrl_c_with_an_event_stream_open_exits_cleanly(tmp_path: Path) -> None:
     assert SECRET not in out + err
 
 
-@pytest.mark.parametrize(
-    ("path", "shown"),
-    [
-        ("/api/v1/jobs?api_key=abc&since=3", "/api/v1/jobs?api_key=[redacted]&since=3"),
-        ("/x?X-API-Key=abc", "/x?X-API-Key=[redacted]"),
-        ("/x?token=abc&key=d", "/x?token=[redacted]&key=[redacted]"),
-        ("/x?since=5", "/x?since=5"),
-        ("/x", "/x"),
-    ],
-)
-def test_redact_query(path: str, shown: str) -> None:
-    assert redact_query(path) == shown
-
-
-def test_access_record_is_redacted_and_pymodbus_frames_are_not_errors() -> None:
-    import logging
-
-    rec = logging.LogRecord("uvicorn.access", logging.INFO, __file__, 1,
-                            '%s - "%s %s HTTP/%s" %d',
-                            ("127.0.0.1:1", "GET", f"/api/v1/rig?apikey={SECRET}", "1.1", 200),
-                            None)
-    assert QueryKeyRedactor().filter(rec)
-    assert SECRET not in rec.getMessage() and "apikey=[redacted]" in rec.getMessage()
-
-    frame = logging.LogRecord("pymodbus.logging", logging.ERROR, __file__, 1,
-                              "ERROR: request ask for id=2 but got id=1, Skipping.\n"
-                              ">>>>> send: 0x0 0x1 0x0 0x0 0x0 0x6\n>>>>> recv: 0x0 0x1", None,
-                              None)
-    assert PymodbusFrameFilter().filter(frame)
-    assert frame.levelno == logging.WARNING
-    assert "0x0" not in frame.getMessage() and "got id=1" in frame.getMessage()
+# redact_query and the filters themselves: tests/unit/test_logfilters.py.

@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from gonio.basis_supply import BasisSupply
 from gonio.calibration import Calibration
 from gonio.cli.sim_session import start_sim_calibration
 from gonio.drivers.factory import build_rig
@@ -35,7 +36,7 @@ def test_calibrated_sim_scan_is_in_one_per_sr(tmp_path: Path, basis: Any) -> Non
     with start_sim_rig(SimRigOptions(time_scale=10.0, settle_s=0.0, seed=5)) as sim:
         specimen = sim.specimen.brdf
         svc = GonioService(JobStore(tmp_path / "jobs.sqlite"), build_rig(sim.config),
-                           rig_config=sim.config, basis_provider=lambda: basis, data_dir=data)
+                           rig_config=sim.config, basis=BasisSupply(lambda: basis), data_dir=data)
         # Nothing here looks at the export fits (seconds of CPU per scan; asserted by
         # test_scan_flow's full scan): the scan finishes without them.
         svc.worker.fit_exports = False

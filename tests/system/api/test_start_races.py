@@ -30,6 +30,7 @@ import httpx
 import pytest
 
 from gonio.api.auth import ApiKeyring
+from gonio.basis_supply import BasisSupply
 from gonio.daemon import DaemonConfig, build_app
 from gonio.service import Event, GonioService
 from gonio.sim.rig import SimRig, SimRigOptions, start_sim_rig
@@ -54,7 +55,7 @@ def fresh_daemon(data_dir: Path, basis: Any, sim: SimRig | None = None) -> Itera
     rig = start_sim_rig(SimRigOptions(time_scale=10.0, settle_s=0.0)) if sim is None else sim
     key = secrets.token_hex(24)
     cfg = DaemonConfig().with_overrides(paths__data_dir=str(data_dir))
-    app = build_app(cfg, rig.config, ApiKeyring({"tester": key}), basis_provider=lambda: basis)
+    app = build_app(cfg, rig.config, ApiKeyring({"tester": key}), basis=BasisSupply(lambda: basis))
     app.state.service.worker.fit_exports = False  # the result is not under test
     try:
         with live_server(app) as url:

@@ -67,3 +67,13 @@ def test_design_says_what_its_expected_error_assumes(
     # The fragment keeps the number to compare a scan with, and what it assumed.
     header = frag.read_text().split("\n[", 1)[0]
     assert f"held-out materials {value} at 8 uniform rotations over 180 deg" in header, header
+    # ... and as the [design] table that rig apply-design carries into the rig config, so each
+    # scan compares its predicted_log_rmse with it (gonio.designgap).
+    from gonio.rigdesign import load_fragment
+
+    design = load_fragment(frag).design
+    assert design is not None
+    assert design.expected_log_rmse == pytest.approx(float(value), abs=5e-5)
+    assert (design.rotations, design.span_deg, design.noise, design.calibrated) == (
+        8, 180.0, 0.01, True)
+    assert design.pairs == 19  # MA98's pairs

@@ -196,3 +196,37 @@ def test_simple_pairs_are_distinct_valid_cells(n: int) -> None:
     idx = np.rint(cells / geo.STEP).astype(int)
     assert len({tuple(r) for r in idx}) == n
     assert geo.valid_mask()[idx[:, 0], idx[:, 1], idx[:, 2]].all()
+
+
+def test_reconstruct_says_when_the_basis_cannot_hold_the_readings(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A tilted-facet material (no twofold symmetry, no family of the shipped basis) read with
+    12 grid pairs: `gonio reconstruct` prints why its estimate is a floor; a library material
+    the basis holds, read the same way, prints no warning."""
+    from gonio.brdf.materials import library
+    from gonio.brdf.models import analytic as bm
+    from gonio.brdf.reconstruction import shipped
+    from tests.unit.brdf.reconstruction.test_reconstruct import grid_pairs
+
+    b = shipped.shipped_basis(shipped.SHIPPED_COMPONENTS)
+    assert b is not None
+    basis = b.save(tmp_path / "shipped.npz")
+    cells, ph = grid_pairs(12, seed=5)
+    pairs = tmp_path / "cells.csv"
+    pairs.write_text("th,td,pd,ph\n" + "\n".join(
+        ",".join(f"{v:g}" for v in np.rad2deg([*c, p])) for c, p in zip(cells, ph, strict=True)))
+    said = {}
+    for name in ("tilted-facet-002", "plastic-005"):
+        spec = next(s for s in library.library_specs(asymmetric=True) if s.name == name)
+        table = bm.tabulate(spec.model, np.float32).save(tmp_path / f"{name}.npz")
+        samples = tmp_path / f"{name}-s.npz"
+        assert main(["simulate-scan", "--table", str(table), "--pairs", str(pairs),
+                     "--rotations", "8", "--seed", "3", "-o", str(samples)]) == 0
+        capsys.readouterr()
+        assert main(["reconstruct", str(samples), "--basis", str(basis),
+                     "-o", str(tmp_path / f"{name}-rec.npz")]) == 0
+        said[name] = capsys.readouterr().out
+    assert "warning: the readings carry structure the basis cannot hold" in said[
+        "tilted-facet-002"]
+    assert "warning" not in said["plastic-005"]

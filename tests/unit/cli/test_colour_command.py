@@ -187,8 +187,17 @@ def test_colour_chart_writes_a_rig_config_table(tmp_path: Path,
     assert cal is not None and cal.source == "chart.csv"
     # The matrix maps the chart's own readings near its reference XYZ (what fitting means).
     ref = Chart(names, wl, refl, ("R", "G", "B"), read).reference_xyz(ViewingConditions())
-    fitted = read @ np.asarray(cal.matrix).T
+    # Root-polynomial terms (Finlayson et al. 2015) when that form was chosen.
+    r, g, b = read.T
+    terms = read if cal.method == "linear" else np.column_stack(
+        [r, g, b, np.sqrt(r * g), np.sqrt(g * b), np.sqrt(r * b)])
+    fitted = terms @ np.asarray(cal.matrix).T
     assert np.median(np.abs(fitted - ref)) < 3.0
+    assert f"colour calibration ({cal.method})" in said
+    assert main(["colour-chart", str(chart), "--method", "linear", "-o", str(out)]) == 0
+    capsys.readouterr()
+    linear = tomllib.loads(out.read_text())["sensors"]["colour_calibration"]
+    assert linear["method"] == "linear" and len(linear["matrix"][0]) == 3
     assert main(["colour-chart", str(tmp_path / "none.csv")]) == 2
     assert "does not exist" in capsys.readouterr().err
     assert main(["colour-chart", str(chart), "--channels", "R,IR"]) == 2

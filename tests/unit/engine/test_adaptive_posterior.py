@@ -153,43 +153,5 @@ def test_the_vf_rule_over_a_half_turn_moves_only_within_it() -> None:
     assert moves and all(m % 360.0 < 180.0 for m in moves)
 
 
-def _refiner_inputs(n_channels: int) -> tuple[PosteriorRefiner, list[float], np.ndarray,
-                                              np.ndarray]:
-    """A refiner for the default adaptive plan's pairs on the in-memory rig, with calibration
-    factors, and two scans at its first four angles: readings that stay the same at every
-    stage angle (an isotropic specimen, each pair off by its own factor) and readings that
-    swing with cos 2 alpha (an anisotropic one); ``(n, 4, n_channels)`` raw counts each."""
-    from gonio.calibration import Calibration, PairCalibration
-
-    desc = RigDescription.from_rig(MemRig())
-    pairs = plan_pairs(AdaptivePlan(), desc)
-    cal = Calibration(pairs=tuple(PairCalibration(light=p.light, sensor=p.sensor,
-                                                  factor=(0.5,) * n_channels) for p in pairs))
-    refiner = PosteriorRefiner(lambda: BASIS, desc, pairs, cal)
-    angles = [0.0, 45.0, 90.0, 135.0]
-    rng = np.random.default_rng(0)
-    n, a = len(pairs), np.deg2rad(angles)[None, :, None]
-    iso = 0.6 * np.exp(rng.normal(0.0, 0.3, (n, 1, n_channels))) * np.ones((n, 4, n_channels))
-    swing = 0.6 * (1 + 0.8 * np.cos(2 * (a + rng.uniform(0, 3, (n, 1, 1)))))
-    return refiner, angles, iso, swing * np.ones((n, 4, n_channels))
-
-
-def test_the_refiner_takes_sensors_of_any_channel_count() -> None:
-    """A one-channel sensor (a photodiode) with calibration factors: the posterior rule plans
-    (it must not fail into V&F's rule), within the plan's half turn, midpoints of its gaps."""
-    refiner, angles, _iso, swing = _refiner_inputs(1)
-    got = refiner(angles, swing, 12, 1.0, 1e-9, (0.0, 180.0))
-    assert refiner.last is not None
-    assert got and set(got) <= {22.5, 67.5, 112.5, 157.5}
-
-
-def test_a_new_angle_buys_more_where_the_readings_swing_with_it() -> None:
-    """The rule offers more for the next stage angle of a specimen whose readings change with
-    the stage angle than of one whose readings do not (one channel and three)."""
-    for channels in (1, 3):
-        refiner, angles, iso, swing = _refiner_inputs(channels)
-        refiner(angles, iso, 12, 1.0, 1e-12, (0.0, 180.0))
-        assert refiner.last is not None
-        flat = refiner.last.drops[0]
-        refiner(angles, swing, 12, 1.0, 1e-12, (0.0, 180.0))
-        assert refiner.last.drops[0] > 2 * flat
+# PosteriorRefiner on its own (channel counts, calibration, what a new angle buys):
+# tests/unit/test_refinement.py.

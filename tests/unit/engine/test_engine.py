@@ -5,15 +5,17 @@ from __future__ import annotations
 import asyncio
 from collections.abc import Callable
 
+import numpy as np
 import pytest
 
 from gonio import hal
+from gonio.calibration import readings_array
 from gonio.engine import ScanEngine
 from gonio.jobstates import JobState
 from gonio.plans.models import AdaptivePlan, AnyPlan, ExposureSettings, FaultPolicy, UniformPlan
 from gonio.rigdescription import RigDescription
 from gonio.sim.memrig import MemRig
-from gonio.store import JobStore
+from gonio.store import JobStore, ReadingRow, StepRow
 
 FAST = ExposureSettings(exposure_s=0.002, light_settle_s=0.0, dark="once")
 QUICK_FAULTS = FaultPolicy(max_retries=3, retry_delay_s=0.005, resume_settle_s=0.005)
@@ -256,3 +258,76 @@ def test_saturation_in_a_sensors_only_range_fails_naming_gain_stages() -> None:
     assert asyncio.run(eng.run()) is JobState.FAILED
     reason = store.get_job(1).reason or ""
     assert "S2: saturated in its only range" in reason and "gain_stages" in reason
+
+
+class CountingStore(JobStore):
+    """The real SQLite store, counting how often the engine reads steps and readings."""
+
+    def __init__(self, path: str) -> None:
+        super().__init__(path)
+        self.reads = {"steps": 0, "readings": 0}
+
+    def steps(self, job_id: int) -> list[StepRow]:
+        self.reads["steps"] += 1
+        return super().steps(job_id)
+
+    def readings(self, job_id: int) -> list[ReadingRow]:
+        self.reads["readings"] += 1
+        return super().readings(job_id)
+
+
+def _adaptive(store: JobStore, plan: AdaptivePlan) -> tuple[MemRig, ScanEngine]:
+    rig = MemRig(3600.0)
+    desc = RigDescription.from_rig(rig)
+    job = store.create_job(kind=plan.kind, specimen="s", plan=plan.model_dump(mode="json"),
+                           rig=desc.model_dump(mode="json"))
+    return rig, ScanEngine(rig, store, job.id, plan, desc)
+
+
+VF3 = AdaptivePlan(rule="vf", initial_rotations=8, threshold=0.01, exposure=FAST, max_rounds=3)
+
+
+def test_the_engine_keeps_its_readings_beside_the_store() -> None:
+    """An adaptive job of three rounds reads its steps from the store once (at its start)
+    and its readings never (it has none yet): the rounds are planned from the readings the
+    engine wrote, which are exactly those the store holds."""
+    store = CountingStore(":memory:")
+    _rig, eng = _adaptive(store, VF3)
+    assert asyncio.run(eng.run()) is JobState.RUNNING
+    assert store.reads == {"steps": 1, "readings": 0}
+    steps = JobStore.steps(store, 1)
+    assert {s.round for s in steps} == {0, 1, 2}
+    angles, values = eng.measured_values(steps)
+    rows = JobStore.readings(store, 1)
+    assert angles == [s.specimen_deg for s in steps]
+    np.testing.assert_array_equal(
+        values, readings_array(rows, eng.pairs, [s.angle_index for s in steps], len(rows[0].raw)))
+
+
+def test_an_adaptive_job_resumed_mid_round_plans_as_one_that_was_not() -> None:
+    """Killed during its second round, an adaptive job resumes from the store (read once)
+    and ends with the same steps, each reading once, as the job run in one go."""
+    whole = JobStore(":memory:")
+    _rig, eng = _adaptive(whole, VF3)
+    asyncio.run(eng.run())
+    want = [(s.angle_index, s.round, s.specimen_deg) for s in whole.steps(1)]
+    store = CountingStore(":memory:")
+    rig, eng = _adaptive(store, VF3)
+
+    async def first() -> None:
+        task = asyncio.create_task(eng.run())
+        await _until(lambda: store.get_job(1).done_angles >= 10)
+        task.cancel()  # the process dies: the job stays active in the store
+        with pytest.raises(asyncio.CancelledError):
+            await task
+
+    asyncio.run(first())
+    assert any(s.round == 1 and not s.done for s in JobStore.steps(store, 1))
+    store.reads = {"steps": 0, "readings": 0}
+    eng2 = ScanEngine(rig, store, 1, VF3, RigDescription.from_rig(rig))
+    assert asyncio.run(eng2.run()) is JobState.RUNNING
+    assert store.reads == {"steps": 1, "readings": 1}
+    assert [(s.angle_index, s.round, s.specimen_deg) for s in JobStore.steps(store, 1)] == want
+    rows = JobStore.readings(store, 1)
+    keys = [(r.angle_index, r.light, r.sensor) for r in rows]
+    assert len(keys) == len(set(keys)) == 3 * len(want)

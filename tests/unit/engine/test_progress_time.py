@@ -9,13 +9,14 @@ from pathlib import Path
 
 import pytest
 
+from gonio.basis_supply import BasisSupply
 from gonio.engine import Progress, ScanEngine
 from gonio.plans.dryrun import dry_run
 from gonio.plans.models import AdaptivePlan, ExposureSettings, UniformPlan
 from gonio.service import GonioService, JobRequest
 from gonio.sim.memrig import MemRig
 from gonio.store import JobStore, StepRow
-from gonio.worker import Worker, default_basis_provider
+from gonio.worker import Worker
 
 FAST = ExposureSettings(exposure_s=0.002, light_settle_s=0.0)
 
@@ -74,7 +75,7 @@ def _no_basis() -> None:
 def test_dry_run_starts_where_the_last_job_left_the_stage(tmp_path: Path) -> None:
     rig = MemRig()
     svc = GonioService(JobStore(tmp_path / "jobs.sqlite"), rig, data_dir=tmp_path / "d",
-                       basis_provider=_no_basis)
+                       basis=BasisSupply(_no_basis))
     plan = UniformPlan(rotations=4, exposure=FAST)
     before = svc.dry_run(plan)
     assert not before.from_known and before.from_deg == 0.0
@@ -101,7 +102,7 @@ def test_a_job_waiting_for_the_first_basis_build_says_so(tmp_path: Path,
 
     monkeypatch.setenv("GONIO_CACHE_DIR", str(tmp_path / "cache"))  # no default basis cached
     w = Worker(JobStore(":memory:"), lambda: None, None, tmp_path,  # type: ignore[arg-type]
-               basis_provider=default_basis_provider)
+               BasisSupply())
     assert w.activity_report() is None
     w._set_activity("basis")
     assert w.activity_report() == ("loading the reconstruction basis", None)  # a moment only

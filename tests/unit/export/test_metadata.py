@@ -12,10 +12,22 @@ import pytest
 
 from gonio.brdf.materials import library
 from gonio.brdf.models import analytic as bm
+from gonio.brdf.tables import geometry as geo
+from gonio.brdf.tables.metrics import log_rmse
+from gonio.brdf.tables.table import BRDFTable
 from gonio.calibration import CalibratedScan
 from gonio.cli import main
-from gonio.export import export_result, fit_all, merl
-from gonio.export.metadata import COLOUR_STATEMENT, specimen_name
+from gonio.cli.export_command import report
+from gonio.export import (
+    Fits,
+    export_result,
+    fit_all,
+    merl,
+    provenance,
+    result_fits,
+    write_export,
+)
+from gonio.export.metadata import COLOUR_STATEMENT, TWOFOLD_WARN, specimen_name
 from gonio.results import write_result
 
 PLAN = {"kind": "uniform", "specimen": "specimen", "rotations": 8, "span_deg": 180.0}
@@ -79,6 +91,11 @@ def _check(meta: dict[str, Any]) -> None:
     assert rendered["metric"] in ("HDR-FLIP", "relative image error")
     assert 0 <= rendered["value"] < 1
     assert meta["fits"]["factored"]["rendered"]["value"] >= 0
+    # A GGX brushed metal reads the same turned by half a turn: nothing for the principled
+    # models to lose, and no warning about it.
+    assert meta["symmetry"]["twofold_asymmetry"] < 1e-4
+    assert "twofold symmetric" in meta["symmetry"]["formats"]
+    assert not any("half-turn average" in w for w in meta["warnings"])
 
 
 def test_gltf_carries_the_record(brushed: Path, tmp_path: Path) -> None:
@@ -145,3 +162,26 @@ def test_specimen_names() -> None:
     assert specimen_name("  ") == ("unnamed", False)
     assert specimen_name("specimen") == ("unnamed", False)  # older gonio's silent placeholder
     assert specimen_name("copper 3") == ("copper 3", True)
+
+
+def test_an_asymmetric_result_says_what_the_principled_models_lose(
+        brushed: Path, tmp_path: Path) -> None:
+    """Issue 25 item 3: a result without twofold symmetry exported to a symmetric model."""
+    sym = bm.tabulate(library.get_material("brushed-metal-003"), np.float64)
+    # f (1 + 0.6 cos ph): the cos ph harmonic changes sign under a half turn, so the
+    # half-turn average of the table is exactly ``sym`` again.
+    tilt = 1.0 + 0.6 * np.cos(geo.PH_GRID)[None, :, None, None, None]
+    table = BRDFTable.trusted(np.asarray(sym.values) * tilt, sym.channels, "tilted")
+    # The brushed result's stored fits stand in for the tilted table's (fitting takes a
+    # minute on a busy machine, and what is checked here is the table's symmetry record).
+    stored, _ = result_fits(brushed)
+    fits = Fits(table, stored.factored, stored.principled)
+    prov = provenance({"job_id": 9, "specimen": "tilted pile"}, fits, {}, {})
+    out = write_export(fits, "gltf", tmp_path / "x.gltf", prov)
+    meta = json.loads(out.read_text())["asset"]["extras"]
+    assert meta["symmetry"]["twofold_asymmetry"] == pytest.approx(log_rmse(sym, table),
+                                                                  rel=1e-6)
+    assert meta["symmetry"]["twofold_asymmetry"] > TWOFOLD_WARN
+    assert any("not twofold symmetric" in w for w in meta["warnings"])
+    assert any("warning: the result is not twofold symmetric" in line
+               for line in report("gltf", out, prov))

@@ -12,6 +12,7 @@ import threading
 from pathlib import Path
 from typing import Any
 
+from gonio.basis_supply import BasisSupply
 from gonio.jobstates import JobState
 from gonio.plans.models import ExposureSettings, UniformPlan
 from gonio.service import GonioService, JobRequest
@@ -55,7 +56,7 @@ async def _wait_state(svc: GonioService, job_id: int, *states: JobState) -> JobS
 def test_abort_while_finishing_writes_nothing_and_holds_the_next_job(tmp_path: Path) -> None:
     gate = GatedBasis()
     data = tmp_path / "d"
-    svc = GonioService(JobStore(tmp_path / "jobs.sqlite"), MemRig(), basis_provider=gate,
+    svc = GonioService(JobStore(tmp_path / "jobs.sqlite"), MemRig(), basis=BasisSupply(gate),
                        data_dir=data)
 
     async def go() -> None:
@@ -81,4 +82,5 @@ def test_abort_while_finishing_writes_nothing_and_holds_the_next_job(tmp_path: P
     job = svc.get_job(1)
     assert job.reason == "aborted by request"
     assert not (data / "results" / "job-1.h5").exists()
-    assert gate.calls == 2  # the first job's finishing and the second's, nothing more
+    # The first job's finishing loaded the basis; the second job's reused it (one load).
+    assert gate.calls == 1

@@ -247,3 +247,38 @@ def test_a_plan_the_calibration_covers_in_part_is_refused_at_submission(tmp_path
     svc.submit(JobRequest(plan=UniformPlan(rotations=2, exposure=FAST, pairs=one)))
     svc.submit(JobRequest(plan=CalibrationPlan(reference_albedo=0.9, exposure=FAST)))
     assert len(svc.list_jobs()) == 2
+
+
+def test_a_plan_checked_before_submission_is_the_one_that_runs(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """`gonio scan` checks its plan once and submits it with the check: the job runs with
+    that check (its engine holds the same CheckedPlan); a check of another plan is not
+    taken for the request's, which is checked and refused on its own."""
+    from gonio.engine import ScanEngine
+    from gonio.plans.checked import check_plan
+
+    rig, svc = _service(tmp_path)
+    plan = UniformPlan(rotations=2, exposure=FAST)
+    checked = svc.check(plan)
+    assert svc.dry_run(checked) == svc.dry_run(plan)
+    with pytest.raises(PlanError, match="at least one stage angle"):
+        svc.submit(JobRequest(plan=UniformPlan(rotations=0)), checked=checked)
+    info = svc.submit(JobRequest(plan=plan), checked=checked)
+    seen: list[object] = []
+    real_run = ScanEngine.run
+
+    async def run(engine: ScanEngine) -> JobState:  # the real run, noting its plan
+        seen.append(engine.checked)
+        return await real_run(engine)
+
+    async def go() -> JobState:
+        try:
+            return await svc.run_in_foreground(info.id)
+        finally:
+            await svc.stop()
+
+    monkeypatch.setattr(ScanEngine, "run", run)
+    assert asyncio.run(go()) is JobState.COMPLETED
+    assert seen == [checked] and seen[0] is checked
+    assert check_plan(plan, svc.desc) == checked
+    assert len(rig.mstage.moves) >= 2

@@ -65,6 +65,23 @@ def test_settle_time_keeps_stage_moving_after_profile() -> None:
     assert not m.is_moving()
 
 
+def test_a_command_to_where_the_stage_rests_does_not_ring() -> None:
+    """Ringing follows a move: commanding the position the stage rests at moves nothing and
+    leaves it at rest; during the ringing of a move the same command does not extend it."""
+    m, clock = make(settle_s=0.2)
+    m.move_to(0.0)
+    assert not m.is_moving()
+    m.move_to(1.0)
+    end = 2 * math.sqrt(1.0 / 60.0)
+    clock.t += end + 0.1
+    m.move_to(1.0)  # still ringing: 0.1 s of the 0.2 s left
+    assert m.is_moving()
+    clock.t += 0.11
+    assert not m.is_moving()
+    m.move_to(1.0)
+    assert not m.is_moving() and m.position_deg() == pytest.approx(1.0)
+
+
 @settings(max_examples=60, deadline=None)
 @given(
     p0=st.floats(-500, 500),

@@ -78,9 +78,15 @@ def test_chart_file_round_trip_and_channel_order(tmp_path: Path) -> None:
     assert back.patches == names and back.channels == ("R", "G", "B")
     assert back.readings == pytest.approx(readings, rel=1e-5)
     assert back.reflectance == pytest.approx(refl, rel=1e-5)
-    swapped = fit_matrix(back, channels=["B", "G", "R"])
-    plain = fit_matrix(back)
+    swapped = fit_matrix(back, channels=["B", "G", "R"], method="linear")
+    plain = fit_matrix(back, method="linear")
     assert swapped.matrix[:, ::-1] == pytest.approx(plain.matrix)
+    # Either form: the same colour from the same readings in the other order.
+    cond = ViewingConditions()
+    rp_swapped = fit_matrix(back, channels=["B", "G", "R"], method="root-polynomial")
+    rp_plain = fit_matrix(back, method="root-polynomial")
+    assert rp_swapped.to_xyz(readings[:, ::-1], cond) == pytest.approx(
+        rp_plain.to_xyz(readings, cond), rel=1e-8, abs=1e-8)
     with pytest.raises(ChartError, match=r"no column for channels \['IR'\]"):
         fit_matrix(back, channels=["R", "IR"])
 
@@ -122,3 +128,90 @@ def test_matrix_round_trip_and_checks() -> None:
         ColourMatrix.from_dict({**m.as_dict(), "channels": ["R", "G"]})
     with pytest.raises(ColourError, match="malformed"):
         ColourMatrix.from_dict({"channels": ["R"]})
+
+
+def _gaussian_sensor(width_nm: float = 60.0) -> tuple[Chart, np.ndarray]:
+    """A non-Luther RGB sensor (Gaussian bands at 610/540/460 nm) reading the ColorChecker,
+    and the patches' XYZ under D65/10 computed by colour-science's own ASTM E308 path."""
+    names, wl, refl = colorchecker()
+    on_grid = resample(wl, refl)
+    centres = np.array([610.0, 540.0, 460.0])
+    sigma = width_nm / (2 * np.sqrt(2 * np.log(2)))
+    resp = np.exp(-0.5 * ((GRID_NM[None, :] - centres[:, None]) / sigma) ** 2)
+    readings = on_grid @ (resp / resp.sum(axis=1, keepdims=True)).T
+    cmfs = colour.MSDS_CMFS["CIE 1964 10 Degree Standard Observer"]
+    ill = colour.SDS_ILLUMINANTS["D65"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        xyz = np.stack([colour.sd_to_XYZ(colour.SpectralDistribution(r, wl), cmfs, ill,
+                                         method="ASTM E308") for r in refl])
+    return Chart(names, wl, refl, ("R", "G", "B"), readings), xyz
+
+
+def test_root_polynomial_calibration_is_colour_sciences_finlayson_2015() -> None:
+    chart, xyz = _gaussian_sensor()
+    cond = ViewingConditions()
+    m = fit_matrix(chart, cond, method="root-polynomial")
+    assert m.method == "root-polynomial" and m.matrix.shape == (3, 6)
+    ccm = colour.matrix_colour_correction(chart.readings, xyz, method="Finlayson 2015",
+                                          degree=2, root_polynomial_expansion=True)
+    want = colour.apply_matrix_colour_correction(chart.readings, ccm, method="Finlayson 2015",
+                                                 degree=2, root_polynomial_expansion=True)
+    # gonio's reference XYZ come from its 10 nm weights (E308 with colour-science's
+    # alignment); colour-science's own path differs by interpolation only.
+    assert m.to_xyz(chart.readings, cond) == pytest.approx(want, rel=5e-3, abs=0.05)
+    # Finlayson et al.'s point: the terms scale with the reading, so the colour of a
+    # brighter or darker surface of the same chromaticity scales with it.
+    for k in (0.05, 3.0):
+        assert m.to_xyz(k * chart.readings, cond) == pytest.approx(
+            k * m.to_xyz(chart.readings, cond), rel=1e-9)
+
+
+def test_the_form_is_chosen_by_left_out_patches() -> None:
+    """Default: the form whose patches are better predicted by fits without them, each
+    left-out prediction recomputed here with colour-science alone."""
+    chart, xyz = _gaussian_sensor()
+    cond = ViewingConditions()
+    white = colour.XYZ_to_xy(cond.white_xyz / 100.0)
+    lab = colour.XYZ_to_Lab(xyz / 100.0, white)
+
+    def loo(method: str) -> float:
+        out = []
+        for p in range(24):
+            keep = np.arange(24) != p
+            if method == "linear":
+                sol = np.linalg.lstsq(chart.readings[keep], xyz[keep], rcond=None)[0]
+                pred = chart.readings[p] @ sol
+            else:
+                ccm = colour.matrix_colour_correction(
+                    chart.readings[keep], xyz[keep], method="Finlayson 2015", degree=2)
+                pred = colour.apply_matrix_colour_correction(
+                    chart.readings[p], ccm, method="Finlayson 2015", degree=2)
+            out.append(colour.delta_E(colour.XYZ_to_Lab(pred / 100.0, white), lab[p],
+                                      method="CIE 2000"))
+        return float(np.median(out))
+
+    want = {"linear": loo("linear"), "root-polynomial": loo("root-polynomial")}
+    m = fit_matrix(chart, cond)
+    assert m.method == min(want, key=lambda k: want[k])
+    assert m.loo_median_de00 == pytest.approx(want[m.method], rel=0.05, abs=0.02)
+    assert m.loo_median_de00 > m.residual_median_de00  # left-out patches are harder
+    back = ColourMatrix.from_dict(m.as_dict())
+    assert back.method == m.method and back.to_xyz(chart.readings, cond) == pytest.approx(
+        m.to_xyz(chart.readings, cond))
+
+
+def test_bad_calibration_forms_say_what_to_do() -> None:
+    chart, _ = _gaussian_sensor()
+    with pytest.raises(ChartError, match="method 'cubic' is unknown"):
+        fit_matrix(chart, method="cubic")
+    four = Chart(chart.patches, chart.wavelengths_nm, chart.reflectance, ("R", "G", "B", "W"),
+                 np.column_stack([chart.readings, chart.readings.mean(axis=1)]))
+    with pytest.raises(ChartError, match="needs 3 channels"):
+        fit_matrix(four, method="root-polynomial")
+    assert fit_matrix(four).method == "linear"  # the only form for 4 channels
+    d = fit_matrix(chart, method="root-polynomial").as_dict()
+    with pytest.raises(ColourError, match="3 x 6"):
+        ColourMatrix.from_dict({**d, "matrix": [[1, 0, 0], [0, 1, 0], [0, 0, 1]]})
+    with pytest.raises(ColourError, match="unknown"):
+        ColourMatrix.from_dict({**d, "method": "spline"})

@@ -133,20 +133,47 @@ def test_channel_mismatch_is_refused() -> None:
 
 
 def test_log_lookup_follows_exponential_lobes_and_flat_tables() -> None:
-    from gonio.brdf.colour.report import LOG_OFFSET, log_lookup
+    from gonio.brdf.colour.report import LOG_OFFSET, log_lookup, log_lookup_linear
     from gonio.brdf.tables import geometry as geo
 
-    # f = exp(-12 theta_h) - f0 is exactly log-linear in theta_h: the log blend between two
-    # 5 degree cells reproduces it wherever theta_h falls, where a linear blend overshoots.
+    # f = exp(-12 theta_h) - f0 is exactly log-linear in theta_h: the multilinear log blend
+    # between two 5 degree cells reproduces it wherever theta_h falls (away from the pole,
+    # where this lobe has a cusp), where a linear blend of f overshoots.
     def fn(wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
         th = geo.directions_to_half_diff(wi, wo)[0]
         return (np.exp(-12.0 * th) - LOG_OFFSET)[:, None]
     t = from_function(fn, ["x"], "lobe")
-    th_h = np.deg2rad([2.5, 7.0, 13.0])
+    th_h = np.deg2rad([7.0, 13.0, 17.5])
     wi, wo = geo.half_diff_to_directions(th_h, 0.3, np.deg2rad(20.0), np.deg2rad(40.0))
     exact = np.exp(-12.0 * th_h) - LOG_OFFSET
+    assert log_lookup_linear(t, wi, wo)[:, 0] == pytest.approx(exact, rel=1e-6)
+    # The cubic along theta_h reproduces what is linear in it too.
     assert log_lookup(t, wi, wo)[:, 0] == pytest.approx(exact, rel=1e-6)
     assert (t.eval(wi, wo)[:, 0] > exact * 1.005).all()
     flat = spectral_table(RED)
     wi, wo = geo.half_diff_to_directions(th_h, 1.0, np.deg2rad(33.0), np.deg2rad(12.0))
     assert log_lookup(flat, wi, wo) == pytest.approx(flat.eval(wi, wo), rel=1e-6)
+
+
+def test_log_lookup_is_exact_for_a_gaussian_lobe_through_the_pole() -> None:
+    """log(f + f0) = -theta_h^2 / (2 s^2) (a Gaussian lobe, s = 6 degrees, about a grid step):
+    Catmull-Rom reproduces a quadratic exactly (Keys 1981), and the cell past the pole is the
+    same lobe at the opposite azimuth, so the lookup is exact at the instrument geometries'
+    half-way cells (aspecular -5, 15 and 25 degrees put theta_h at 2.5, 7.5, 12.5), where the
+    multilinear log blend is not."""
+    from gonio.brdf.colour.report import LOG_OFFSET, log_lookup, log_lookup_linear
+    from gonio.brdf.tables import geometry as geo
+
+    s = np.deg2rad(6.0)
+
+    def fn(wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+        th = geo.directions_to_half_diff(wi, wo)[0]
+        return (np.exp(-0.5 * (th / s) ** 2) - LOG_OFFSET)[:, None]
+    t = from_function(fn, ["x"], "gauss")
+    th_h = np.deg2rad([1.0, 2.5, 7.5, 12.5, 17.5])
+    wi, wo = geo.half_diff_to_directions(th_h, 2.0, np.deg2rad(37.5), np.deg2rad(0.0))
+    exact = np.exp(-0.5 * (th_h / s) ** 2) - LOG_OFFSET
+    got = log_lookup(t, wi, wo)[:, 0]
+    assert got == pytest.approx(exact, rel=1e-6, abs=1e-9)
+    linear = log_lookup_linear(t, wi, wo)[:, 0]
+    assert abs(linear[1] / exact[1] - 1) > 0.05  # the straight line in log misses the curvature

@@ -494,3 +494,32 @@ def test_the_band_search_finds_the_grid_maximum_of_the_marginal_likelihood() -> 
         lls = np.array([[post.log_marginal(lo, hi) for hi in RHO_GRID] for lo in RHO_GRID])
         i, j = np.unravel_index(int(np.argmax(lls)), lls.shape)
         assert (post.rho, post.rho_high) == (RHO_GRID[i], RHO_GRID[j]), k
+
+
+def test_weights_from_every_third_slice_equal_those_from_the_whole_table() -> None:
+    """The log_rmse weights read every third slice: given only those slices, the posterior is
+    the same; W is the docstring's ``Q^T diag(wV g^2) Q`` with ``g^2`` averaged over channels
+    and those slices (non-finite values counting as 0)."""
+    from gonio.brdf.reconstruction.basis import row_weight
+    from gonio.brdf.reconstruction.posterior import _cos_ti_rows, _volume_weight_rows
+    from gonio.brdf.tables.table import VALID_ROWS
+
+    b, cells, ph, alpha, _ = _scan()
+    rng = np.random.default_rng(8)
+    vals = np.abs(rng.normal(1.0, 0.1, (5, 5, 3)))
+    table = np.where(geo.valid_mask()[None, None], rng.uniform(0, 3, (3, *geo.TABLE_SHAPE)),
+                     np.nan)
+    table[1, 3, 2, 4, 5] = np.inf  # a valid cell the weights must ignore
+    whole = ScanPosterior(b, cells, ph, alpha, vals, table=table, rho=0.5)
+    thin = ScanPosterior(b, cells, ph, alpha, vals, table=table[:, ::3], rho=0.5)
+    np.testing.assert_allclose(thin.W, whole.W, rtol=1e-12)
+    assert thin.expected_log_rmse == pytest.approx(whole.expected_log_rmse, rel=1e-12)
+    f = table.reshape(3, geo.N_PH, geo.N_ROWS)[:, ::3][:, :, VALID_ROWS]
+    f = np.where(np.isfinite(f), f, 0.0)
+    ci = _cos_ti_rows()
+    g = ci * (f + b.eps / row_weight(b.eps)[VALID_ROWS]) / (1 + f * ci)
+    Qv = b.Q[VALID_ROWS]
+    W = Qv.T @ (Qv * (_volume_weight_rows() * np.mean(g**2, axis=(0, 1)))[:, None])
+    np.testing.assert_allclose(whole.W, W, rtol=1e-10)
+    with pytest.raises(ReconstructionError, match="table has shape"):
+        ScanPosterior(b, cells, ph, alpha, vals, table=table[:, :10], rho=0.5)

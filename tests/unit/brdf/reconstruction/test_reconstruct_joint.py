@@ -6,12 +6,8 @@ import numpy as np
 import pytest
 
 from gonio.brdf.reconstruction.basis import N_HARMONICS, Basis, inverse_remap, row_weight
-from gonio.brdf.reconstruction.reconstruct import (
-    ReconstructionError,
-    joint_prior,
-    reconstruct,
-    solve_joint,
-)
+from gonio.brdf.reconstruction.joint import joint_prior, solve_joint
+from gonio.brdf.reconstruction.reconstruct import ReconstructionError, reconstruct
 from gonio.brdf.tables import geometry as geo
 from tests.unit.brdf.reconstruction.test_reconstruct import grid_pairs, random_basis
 

@@ -1,9 +1,14 @@
-"""The committed OpenAPI schema matches the app: API changes are deliberate."""
+"""The committed OpenAPI schema matches the app: API changes are deliberate; and the
+regeneration command writes it in its canonical form."""
 
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
+import pytest
+
+from gonio.api import schema
 from gonio.api.schema import SCHEMA_FILE, current_schema, render
 
 
@@ -63,3 +68,21 @@ def test_every_operation_documents_the_errors_it_can_answer_with() -> None:
                 assert body == f"#/components/schemas/{want}", (where, status, body)
     dry = schema["paths"]["/api/v1/jobs/dry-run"]["post"]
     assert dry.get("security") and "423" not in dry["responses"]
+
+
+def test_render_is_sorted_two_space_json_with_a_final_newline() -> None:
+    assert render({"b": [1, {"d": "é", "c": None}], "a": 1}) == (
+        '{\n  "a": 1,\n  "b": [\n    1,\n    {\n      "c": null,\n      "d": "é"\n    }\n'
+        '  ]\n}\n')
+
+
+def test_the_command_prints_or_writes_the_schema(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    target = tmp_path / "openapi.json"
+    monkeypatch.setattr(schema, "SCHEMA_FILE", target)
+    assert schema.main([]) == 0
+    printed = capsys.readouterr().out
+    assert not target.exists() and json.loads(printed)["info"]["title"] == "gonio"
+    assert schema.main(["--write"]) == 0
+    assert target.read_text(encoding="utf-8") == printed
+    assert f"wrote {target}" in capsys.readouterr().out

@@ -1,0 +1,226 @@
+"""Benchmark: is ``predicted_log_rmse`` an estimate a lab can trust? (issue 23 item 4)
+
+Run from the project root (needs mitsuba: ``pip install 'gonio[rgl]'``)::
+
+    nice -n 10 .venv/bin/python bench/bench_selfestimate.py [--rows FILE]
+
+Materials, all held out of the basis they are reconstructed with (the helpers of
+``bench_unseen.py`` and ``bench_asymmetric.py``, whose caches this shares):
+
+* the eleven measured RGL materials, each with ``default_basis(exclude=[it])``;
+* ``bench_unseen.py``'s six anisotropic mitsuba specimens (default basis);
+* ``bench_asymmetric.py``'s eight specimens without twofold symmetry (tilted facets: structure
+  the default basis cannot hold) and their eight untilted versions (default basis);
+* every fourth material of the library's families without twofold symmetry (tilted facets,
+  pile, sawtooth; :func:`library_asymmetric`), none of them in the default basis.
+
+Plans (1 % noise, readings at the exact pair directions): the default scan (10 pairs designed
+by the joint fit's expected error on the material's basis, 8 stage angles over half a turn),
+the same pairs at 4 and at 16 angles, and the MA68 and MA98 presets at 8 angles.
+
+Split (:func:`calibration_set`): the widening's constants
+(:data:`gonio.brdf.reconstruction.selfcheck.MISFIT_WEIGHT`, the flag's limits) were chosen on
+the **calibration** set only: the six anisotropic mitsuba specimens, the measured materials at
+even positions (alphabetical, 0-based) and the library's asymmetric materials. The
+**validation** set, never looked at while choosing, is the measured materials at odd positions
+and all sixteen tilted / untilted normal-mapped mitsuba specimens.
+
+Printed: one table per plan (material, set, true ``log_rmse``, the estimate before the
+widening, its ratio, the estimate after it, its ratio, within x2, more than 2x too low, the
+misfit witness and whether the result carries the ``basis_misfit`` reason), then the shares
+within x2 and the counts more than 2x low per set and plan, before and after, the scans
+flagged per set and plan, and what the scans more than 2x low show (their misfit; with
+``--witnesses`` also their standardised leave-one-pair-out error). Results: docs/science.md
+7.1.1.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import bench_asymmetric as ba  # sibling benches (the script's folder is on sys.path)
+import bench_unseen as bu
+import numpy as np
+
+from gonio.brdf.design.presets import get_preset
+from gonio.brdf.reconstruction.basis import default_basis
+from gonio.brdf.reconstruction.reconstruct import reconstruct
+from gonio.brdf.reconstruction.samples import DEFAULT_SPAN_DEG, uniform_stage_angles
+from gonio.brdf.tables import metrics
+
+#: ``(label, design, r)``: ``design`` is "posterior" (the default 10-pair design) or a preset.
+PLANS: tuple[tuple[str, str, int], ...] = (
+    ("default n=10 r=8", "posterior", 8),
+    ("n=10 r=4", "posterior", 4),
+    ("n=10 r=16", "posterior", 16),
+    ("MA68 r=8", "MA68", 8),
+    ("MA98 r=8", "MA98", 8),
+)
+
+
+def calibration_set(kind: str, index: int) -> bool:
+    """True for the calibration materials (module docstring): ``index`` counts within the
+    measured materials only."""
+    return kind == "aniso-mitsuba" or (kind == "measured" and index % 2 == 0)
+
+
+def materials() -> list[tuple[bu.Material, str, bool]]:
+    """``(material, kind, calibration?)`` of every held-out material."""
+    out: list[tuple[bu.Material, str, bool]] = []
+    measured = bu.measured_materials() if bu.RGL_DIR.is_dir() else []
+    for i, m in enumerate(measured):
+        out.append((m, "measured", calibration_set("measured", i)))
+    out += [(m, "aniso-mitsuba", True) for m in bu.aniso_materials()]
+    out += [(m, "asymmetric", False) for m in ba.asym_materials()]
+    out += [(m, "untilted", False) for m in ba.asym_materials(tilted=False)]
+    out += [(m, "library-asym", True) for m in library_asymmetric()]
+    return out
+
+
+#: Every how-many-th material of the library's families without twofold symmetry is taken
+#: (:func:`library_asymmetric`).
+ASYM_STRIDE = 4
+
+
+def library_asymmetric() -> list[bu.Material]:
+    """Every :data:`ASYM_STRIDE`-th material of the library's families without twofold symmetry
+    (``library_specs(asymmetric=True)`` beyond ``library_specs()``): none of them is in the
+    default basis, which holds only twofold-symmetric families. Calibration only."""
+    from gonio.brdf.materials import library
+    from gonio.brdf.models import analytic as bm
+    from gonio.brdf.tables import geometry as geo
+
+    plain = {s.name for s in library.library_specs()}
+    specs = [s for s in library.library_specs(asymmetric=True) if s.name not in plain]
+    out = []
+    for s in specs[::ASYM_STRIDE]:
+        vals = bu._cached(f"libasym-{s.name}", lambda s=s: np.asarray(
+            bm.tabulate_valid(s.model), dtype=np.float32))
+        if vals.shape[1] == 1:
+            vals = np.repeat(vals, geo.N_PH, axis=1)
+        out.append(bu.Material(s.name, "aniso", bu._full_table(vals, s.name), s.model, ()))
+    return out
+
+
+def scans(witnesses: bool = False) -> list[dict[str, Any]]:
+    """One row per material and plan: the truth and every input of the estimate; with
+    ``witnesses``, also ``calibrate_log_rmse.witnesses``' standardised leave-one-pair-out
+    error ``z_loo_pair`` and the posterior's scale ``s2`` (one more fit per scan)."""
+    bu.CHOOSE["objective"] = "posterior"
+    bu.SPAN["scan"] = bu.SPAN["design"] = DEFAULT_SPAN_DEG
+    rows = []
+    t0 = time.perf_counter()
+    for i, (m, kind, cal) in enumerate(materials()):
+        b = default_basis(exclude=m.exclude)
+        for label, design, r in PLANS:
+            cells, ph = bu.design(b, 10) if design == "posterior" else get_preset(design).cells()
+            alpha = uniform_stage_angles(r, span=np.deg2rad(DEFAULT_SPAN_DEG))
+            vals = bu.read(m, cells, ph, alpha, 100 + i)
+            rec = reconstruct(b, cells, ph, alpha, vals)
+            rows.append({
+                "material": m.name, "kind": kind, "cal": cal, "plan": label,
+                "truth": metrics.log_rmse(rec.table, m.truth),
+                "predicted": rec.predicted_log_rmse_unwidened,
+                "widened": rec.predicted_log_rmse,
+                "reason": rec.misfit_warning,
+                **(rec.misfit.as_dict() if rec.misfit is not None else {}),
+            })
+            if witnesses:
+                from calibrate_log_rmse import witnesses as calibration_witnesses
+
+                w = calibration_witnesses(b, cells, ph, alpha, vals, m.truth)
+                rows[-1].update(z_loo_pair=w["z_loo_pair"], s2=w["s2"])
+        print(f"  {m.name} ({time.perf_counter() - t0:.0f} s)", flush=True)
+    return rows
+
+
+def table(rows: list[dict[str, Any]]) -> None:
+    """The per-plan tables and the summary (module docstring)."""
+    for label, _, _ in PLANS:
+        print(f"\n#### {label}\n")
+        print("| material | set | true log_rmse | before | ratio | after | ratio | within x2 | "
+              "> 2x low | misfit chi2 | misfit (log) | persistent pairs | basis_misfit |")
+        print("|---" * 13 + "|")
+        for r in (r for r in rows if r["plan"] == label):
+            q0, q1 = r["predicted"] / r["truth"], r["widened"] / r["truth"]
+            print(f"| {r['material']} | {'cal' if r['cal'] else 'val'} | {r['truth']:.4f} | "
+                  f"{r['predicted']:.4f} | x{q0:.2f} | {r['widened']:.4f} | x{q1:.2f} | "
+                  f"{'yes' if 0.5 <= q1 <= 2 else 'no'} | {'LOW' if q1 < 0.5 else ''} | "
+                  f"{r['misfit_chi2']:.3g} | {r['misfit_log']:.4f} | "
+                  f"{r['misfit_persistent_pairs']} | {'yes' if r['reason'] else ''} |")
+    print("\nwithin x2 (more than 2x low), before -> after the widening:\n")
+    print("| plan | calibration | validation | validation measured | validation asymmetric "
+          "| validation untilted | all |")
+    print("|---" * 7 + "|")
+    groups: tuple[tuple[str, Any], ...] = (
+              ("calibration", lambda r: r["cal"]), ("validation", lambda r: not r["cal"]),
+              ("val measured", lambda r: not r["cal"] and r["kind"] == "measured"),
+              ("val asymmetric", lambda r: r["kind"] == "asymmetric"),
+              ("val untilted", lambda r: r["kind"] == "untilted"), ("all", lambda r: True))
+    for label in [p[0] for p in PLANS] + ["every plan"]:
+        sel = [r for r in rows if label == "every plan" or r["plan"] == label]
+        cells = []
+        for _, g in groups:
+            s = [r for r in sel if g(r)]
+            if not s:
+                cells.append("")
+                continue
+
+            def count(key: str, s: list[dict[str, Any]] = s) -> str:
+                q = np.array([r[key] / r["truth"] for r in s])
+                ok = int(np.sum((q >= 0.5) & (q <= 2.0)))
+                return f"{ok}/{q.size} ({int(np.sum(q < 0.5))})"
+
+            cells.append(f"{count('predicted')} -> {count('widened')}")
+        print(f"| {label} | " + " | ".join(cells) + " |")
+    print("\nscans flagged basis_misfit (of the scans), per plan and set:\n")
+    print("| plan | " + " | ".join(g for g, _ in groups) + " |")
+    print("|---" * (1 + len(groups)) + "|")
+    for label in [p[0] for p in PLANS] + ["every plan"]:
+        sel = [r for r in rows if label == "every plan" or r["plan"] == label]
+        print(f"| {label} | " + " | ".join(
+            f"{sum(bool(r['reason']) for r in sel if g(r))}/{sum(1 for r in sel if g(r))}"
+            for _, g in groups) + " |")
+    low = [r for r in rows if r["widened"] / r["truth"] < 0.5]
+    print(f"\nmore than 2x too low after the widening: {len(low)} scans, "
+          f"{sum(bool(r['reason']) for r in low)} of them flagged; their misfit chi2 "
+          f"{min((r['misfit_chi2'] for r in low), default=float('nan')):.3g}-"
+          f"{max((r['misfit_chi2'] for r in low), default=float('nan')):.3g}; plans "
+          f"{sorted({r['plan'] for r in low})}")
+    if low and "z_loo_pair" in low[0]:
+        # A standardised leave-one-pair-out error near 1 (or below) says the posterior predicts
+        # the error at the pairs as large as it is: what it misses lies where no pair looks.
+        z = np.array([r["z_loo_pair"] for r in low])
+        print(f"their standardised leave-one-pair-out error z_loo_pair: median {np.median(z):.2f}, "
+              f"range {z.min():.2f}-{z.max():.2f} (1: as the posterior expects)")
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
+    ap.add_argument("--rows", type=Path, default=None,
+                    help="JSON file of the scans: read it if it exists, else write it")
+    ap.add_argument("--witnesses", action="store_true",
+                    help="also record the standardised leave-one-pair-out error and the "
+                         "posterior's scale (calibrate_log_rmse.witnesses) and print them for "
+                         "the scans more than 2x too low")
+    args = ap.parse_args(argv)
+    print(f"$ {' '.join(['python', *sys.argv])}")
+    t0 = time.perf_counter()
+    if args.rows is not None and args.rows.is_file():
+        rows = json.loads(args.rows.read_text())
+    else:
+        rows = scans(args.witnesses)
+        if args.rows is not None:
+            args.rows.write_text(json.dumps(rows))
+    table(rows)
+    print(f"total {time.perf_counter() - t0:.0f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,160 @@
+"""The rounds of a scan: after its first round, does a plan measure more angles, and which?
+
+Each plan kind owns its rounds (:func:`rounds_for`), the way a scan specification owns the
+points it visits: a uniform or calibration plan has one round (:class:`SingleRound`); an
+adaptive plan plans each next round from the readings so far (:class:`AdaptiveRounds`), with
+the posterior rule of a :class:`Refiner` when the worker gives one, else V&F's rule
+(:func:`gonio.plans.adaptive.adaptive_refinement`). The engine only measures what a round
+returns and records its events; it knows no rule.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+
+from gonio.plans.adaptive import adaptive_refinement
+from gonio.plans.checked import CheckedPlan
+from gonio.plans.models import MAX_ROTATIONS, AdaptivePlan
+
+
+@dataclass(frozen=True)
+class RoundRequest:
+    """What a refinement rule is asked before a round.
+
+    Attributes
+    ----------
+    angles_deg : (r,) measured specimen angles, degrees
+    values : (n_pairs, r, C) ``raw - dark`` counts (sensor units, uncalibrated), rows in the
+        order of the plan's pairs
+    budget_angles : most stage angles the round may add
+    min_step_deg : finest step between angles, degrees
+    min_gain : the posterior rule's threshold on the drop of the expected error
+    arc_deg : ``(start_deg, span_deg)`` of the plan, degrees: new angles lie in the arc
+    """
+
+    angles_deg: Sequence[float]
+    values: NDArray[np.float64]
+    budget_angles: int
+    min_step_deg: float
+    min_gain: float
+    arc_deg: tuple[float, float]
+
+
+class Refiner(Protocol):
+    """The posterior rule of adaptive plans (:class:`gonio.refinement.PosteriorRefiner`)."""
+
+    def next_angles(self, request: RoundRequest) -> list[float]:
+        """New specimen angles (degrees, sorted) for the next round; empty: stop.
+
+        Raises ValueError, OSError or RuntimeError when the rule cannot run (no basis,
+        unusable readings): the round then falls back to V&F's rule.
+        """
+        ...
+
+    def describe(self) -> dict[str, float]:
+        """What the last :meth:`next_angles` saw, for the round's event (empty before)."""
+        ...
+
+
+@dataclass(frozen=True)
+class NextRound:
+    """A round's plan: ``angles_deg`` to measure next (empty: the job is measured) and the
+    job events ``(type, data)`` that say why, in the order they happened."""
+
+    angles_deg: list[float]
+    events: list[tuple[str, dict[str, Any]]] = field(default_factory=list)
+
+
+class Rounds(Protocol):
+    """The rounds of one job's plan."""
+
+    async def next_round(self, angles_deg: Sequence[float], values: NDArray[np.float64],
+                         planned_angles: int, last_round: int) -> NextRound:
+        """The round after ``last_round``, given the measured angles and their ``raw - dark``
+        values ``(n_pairs, r, C)`` and the stage angles the job has planned so far."""
+        ...
+
+
+class SingleRound:
+    """A plan measured in one round (uniform and calibration plans)."""
+
+    async def next_round(self, angles_deg: Sequence[float], values: NDArray[np.float64],
+                         planned_angles: int, last_round: int) -> NextRound:
+        return NextRound([])
+
+
+class AdaptiveRounds:
+    """The refinement rounds of an adaptive plan (math.md 9; docs/science.md 7.3).
+
+    Parameters
+    ----------
+    checked : the job's plan, an :class:`~gonio.plans.models.AdaptivePlan`
+    refiner : the posterior rule, or None (then V&F's rule, whatever the plan's ``rule``)
+    """
+
+    def __init__(self, checked: CheckedPlan, refiner: Refiner | None = None) -> None:
+        plan = checked.plan
+        if not isinstance(plan, AdaptivePlan):
+            raise TypeError(f"adaptive rounds need an adaptive plan, not {plan.kind!r}")
+        self.plan = plan
+        self.refiner = refiner
+        self.arc_deg = checked.arc_deg
+        self.min_step_deg = plan.min_step_deg or checked.rig.resolution_deg
+        # The sample budget, the plan's cap on stage angles, and in any case the cap per job
+        # (so the dry run's bound holds and a job cannot grow without end).
+        limit = MAX_ROTATIONS if plan.max_rotations is None else plan.max_rotations
+        if plan.max_samples is not None:
+            limit = min(limit, plan.max_samples // len(checked.pairs))
+        self.limit_angles = limit
+
+    async def next_round(self, angles_deg: Sequence[float], values: NDArray[np.float64],
+                         planned_angles: int, last_round: int) -> NextRound:
+        plan = self.plan
+        if last_round + 1 >= plan.max_rounds:
+            return NextRound([], [("adaptive_done", {"reason": "max_rounds"})])
+        budget = self.limit_angles - planned_angles
+        if budget <= 0:
+            return NextRound([], [("adaptive_done", {"reason": "budget"})])
+        events: list[tuple[str, dict[str, Any]]] = []
+        # Either rule refines within the plan's arc: over half a turn the gaps are those
+        # modulo 180 and new angles stay in [start, start + 180) (docs/science.md 7.3).
+        start, span = self.arc_deg
+        new: list[float] | None = None
+        rule = "vf"
+        if plan.rule == "posterior" and self.refiner is not None and np.isfinite(values).all():
+            # The joint fit's posterior (docs/science.md 7.3): CPU work of a second or so,
+            # off the event loop so pause/abort stay responsive. If it cannot run (no basis,
+            # unusable readings), the scan goes on with V&F's rule rather than failing.
+            request = RoundRequest(angles_deg, values, budget, self.min_step_deg,
+                                   plan.min_gain, self.arc_deg)
+            try:
+                new = await asyncio.to_thread(self.refiner.next_angles, request)
+                rule = "posterior"
+            except (ValueError, OSError, RuntimeError) as exc:
+                events.append(("adaptive_round", {"round": last_round + 1, "rule": "vf",
+                                                  "posterior_failed": str(exc)[:300]}))
+        if new is None:
+            new = adaptive_refinement(angles_deg, values, plan.threshold, self.min_step_deg,
+                                      budget, period_deg=span, start_deg=start)
+        # What the posterior rule saw (its rho, offset and drops), so a lab can tell why it
+        # went on or stopped.
+        seen = self.refiner.describe() if rule == "posterior" and self.refiner else {}
+        if not new:
+            events.append(("adaptive_done", {"reason": "converged", "rule": rule, **seen}))
+            return NextRound([], events)
+        events.append(("adaptive_round", {"round": last_round + 1, "rule": rule,
+                                          "angles": len(new), **seen}))
+        return NextRound(list(new), events)
+
+
+def rounds_for(checked: CheckedPlan, refiner: Refiner | None = None) -> Rounds:
+    """The rounds of ``checked``'s plan kind: adaptive plans refine, the others do not."""
+    if checked.plan.refines:
+        return AdaptiveRounds(checked, refiner)
+    return SingleRound()

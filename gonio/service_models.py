@@ -1,0 +1,201 @@
+"""The service's request and response types, and the errors the API maps to a status.
+
+Every request and response of :class:`gonio.service.GonioService` is a pydantic model here (they
+become the API schema, ``gonio/api/openapi.json``). Errors are typed so the API can map them:
+:class:`NotFound` -> 404, :class:`Conflict` (and :class:`gonio.jobstates.IllegalTransition`) ->
+409, :class:`DeviceError` -> 503. :mod:`gonio.service` re-exports all of them: import from there.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Literal
+
+from pydantic import BaseModel, Field
+
+from gonio.fields import FINITE, Count
+from gonio.jobstates import JobState
+from gonio.plans.models import Plan
+from gonio.store import EventRow, JobRow, JobStore
+from gonio.store import NotFound as StoreNotFound
+
+__all__ = [
+    "Conflict",
+    "DeviceError",
+    "DeviceState",
+    "Event",
+    "JobDetail",
+    "JobInfo",
+    "JobRequest",
+    "NotFound",
+    "ReorderRequest",
+    "RigStatus",
+    "RunningJob",
+    "ServiceStatus",
+    "StageRequest",
+    "StageState",
+    "job_row",
+]
+
+
+class NotFound(StoreNotFound):
+    """No such job, or the job has no result yet (API: 404)."""
+
+
+class Conflict(ValueError):
+    """The request conflicts with the job's or the service's state (API: 409)."""
+
+
+class JobRequest(BaseModel):
+    """A scan request: the plan, and where it goes in the queue."""
+
+    model_config = FINITE
+
+    plan: Plan
+    priority: Count = Field(default=0, ge=-1000, le=1000, description="higher runs first")
+
+
+class ReorderRequest(BaseModel):
+    model_config = FINITE
+
+    priority: Count | None = Field(default=None, ge=-1000, le=1000)
+    position: Count | None = Field(default=None, ge=0, le=2**31, description="0 = next to run")
+
+
+class JobInfo(BaseModel):
+    """One line of the job list."""
+
+    id: int
+    state: JobState
+    kind: str
+    specimen: str
+    priority: int
+    created: float
+    started: float | None
+    finished: float | None
+    done_angles: int
+    total_angles: int
+    max_angles: int | None = Field(
+        default=None, description="adaptive plans: most stage angles the job can measure (the "
+        "dry run's max_angles); total_angles grows round by round, so progress is done_angles "
+        "of max_angles, which only rises. Null for other plans (total_angles is fixed)")
+    reason: str | None
+
+    @classmethod
+    def from_row(cls, row: JobRow, max_angles: int | None = None) -> JobInfo:
+        return cls(
+            id=row.id, state=row.state, kind=row.kind, specimen=row.specimen,
+            priority=row.priority, created=row.created, started=row.started,
+            finished=row.finished, done_angles=row.done_angles, total_angles=row.total_angles,
+            max_angles=max_angles, reason=row.reason,
+        )
+
+
+class JobDetail(JobInfo):
+    """Everything about one job in one call."""
+
+    plan: dict[str, Any]
+    eta_s: float | None = Field(description="estimated seconds to the end of measuring: the "
+                                "measured time per stage angle times the angles left, "
+                                "counted down since the last angle")
+    eta_max_s: float | None = Field(default=None, description="adaptive plans: bound on "
+                                    "eta_s if every refinement round runs in full")
+    activity: str | None = Field(default=None, description="what the job is doing or "
+                                 "waiting for beyond measuring (e.g. the first basis build)")
+    activity_fraction: float | None = Field(default=None, description="fraction of the "
+                                            "activity done, when known")
+    round: int | None = Field(default=None, description="adaptive plans: the round being "
+                              "measured, 0 = the first angles (as the progress events' round)")
+    basis_build_s: float | None = Field(
+        default=None, description="active jobs whose finishing will build the default basis "
+        "first (the shipped one is stale): about this many seconds more (the dry run's "
+        "basis_build_s); null when the basis loads in seconds")
+    reconstruction_s: float | None = Field(
+        default=None, description="active jobs: estimated seconds of finishing (basis load, "
+        "reconstruction, export fits, the result file), the median measured 'seconds' of the "
+        "last 3 completed scans of this daemon, or 6 s (the default scan's, measured) before "
+        "any; see reconstruction_estimate")
+    reconstruction_estimate: str | None = Field(
+        default=None, description="what reconstruction_s rests on, in words")
+    time_left_s: float | None = Field(
+        default=None, description="active jobs: estimated seconds to the job's end, an "
+        "estimate: eta_s + basis_build_s + reconstruction_s while measuring; while "
+        "reconstructing, what is left of basis_build_s + reconstruction_s")
+    queue_position: int | None = Field(description="0 = next to run; null unless queued")
+    result_path: str | None
+    result: dict[str, Any] | None = Field(description="summary: metrics, readings, paths")
+    rig: dict[str, Any]
+
+
+class Event(BaseModel):
+    seq: int
+    type: str
+    job_id: int | None
+    time: float
+    data: dict[str, Any]
+
+    @classmethod
+    def from_row(cls, ev: EventRow) -> Event:
+        return cls(seq=ev.seq, type=ev.type, job_id=ev.job_id, time=ev.time, data=ev.data)
+
+
+class DeviceState(BaseModel):
+    name: str
+    ok: bool
+    detail: dict[str, Any] = Field(default_factory=dict)
+
+
+class RunningJob(BaseModel):
+    """Progress of the job being measured now."""
+
+    id: int
+    done_angles: int = Field(description="stage angles measured so far")
+    total_angles: int = Field(description="stage angles planned so far (adaptive plans grow)")
+    eta_s: float | None = Field(description="estimated seconds to the end of measuring")
+
+
+class ServiceStatus(BaseModel):
+    """What the worker is doing, from memory (no store read, no device call)."""
+
+    current_job: int | None = Field(description="job being measured or reconstructed")
+    queue_held: str | None = Field(description="why the queue takes no new job (halt, a failed "
+                                   "job's stop, maintenance lock); null if it runs")
+    running: RunningJob | None = Field(description="progress while a job is measuring")
+
+
+class RigStatus(BaseModel):
+    connected: bool
+    error: str | None = None
+    current_job: int | None = None
+    queue_held: str | None = None
+    devices: list[DeviceState] = Field(default_factory=list)
+
+
+class StageRequest(BaseModel):
+    """A manual stage command: commissioning (set the zero at the holder's reference mark) and
+    loading specimens. Refused while a job is active; ``stop`` is always accepted."""
+
+    model_config = FINITE
+
+    action: Literal["move", "home", "stop", "clear_faults"] = Field(
+        description="move to angle_deg; home = make the present position 0 deg; stop; "
+                    "clear_faults = reboot / clear latched faults")
+    angle_deg: float | None = Field(None, description="target of a move, degrees")
+
+
+class StageState(BaseModel):
+    position_deg: float
+    moving: bool
+    homed: bool
+    faults: list[str] = Field(default_factory=list)
+
+
+class DeviceError(RuntimeError):
+    """A device fault while serving a manual command (the API answers 503 with the reason)."""
+
+
+def job_row(store: JobStore, job_id: int) -> JobRow:
+    """Job ``job_id``'s row; raises :class:`NotFound` ("no job with id ...") for an unknown job."""
+    try:
+        return store.get_job(job_id)
+    except StoreNotFound:
+        raise NotFound(f"no job with id {job_id}") from None

@@ -1,0 +1,84 @@
+"""How long a job has left in all: measuring, then (when due) the basis build, then finishing.
+
+The engine's ``eta_s`` covers measuring only. After the last reading the job finishes: it gets
+the reconstruction basis (a load of seconds, or a build of minutes when the shipped basis is
+stale), reconstructs and fits the exports. The lab page shows the sum, so a job's time is not
+read as done when measuring ends (issue 27). Finishing is estimated from what it took on this
+store: the ``seconds`` the last completed scans recorded in their summaries
+(:func:`gonio.finishing.finish_job` measures them); before any scan has finished, from the
+lab page's default scan as measured in docs/library.md.
+"""
+
+from __future__ import annotations
+
+import statistics
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from gonio.store import JobRow
+
+FINISHING_FALLBACK_S = 6.0
+"""Finishing time of the lab page's default scan on the simulated rig, seconds: 5-6 s measured
+with ``bench/bench_first_scan.py`` (docs/library.md), the upper end taken."""
+
+RECENT_SCANS = 3
+"""How many of the last completed scans the estimate takes the median of: one slow finishing
+(the first scan that built the basis) does not set the estimate of every later job."""
+
+
+@dataclass(frozen=True)
+class FinishingEstimate:
+    """Estimated seconds of a job's finishing and, in words, what the estimate rests on."""
+
+    seconds: float
+    source: str
+
+
+def finishing_estimate(completed: Sequence[JobRow]) -> FinishingEstimate:
+    """The finishing time to expect, from the completed jobs of the store (any order).
+
+    Parameters
+    ----------
+    completed : the store's completed jobs; calibration jobs and summaries without a
+        measured ``seconds`` are skipped (a calibration does not reconstruct).
+
+    Returns
+    -------
+    The median ``seconds`` of the newest :data:`RECENT_SCANS` completed scans, or
+    :data:`FINISHING_FALLBACK_S` when there is none.
+    """
+    timed = sorted(
+        (row.id, float(row.summary["seconds"])) for row in completed
+        if row.kind != "calibration" and row.summary
+        and isinstance(row.summary.get("seconds"), int | float)
+        and row.summary["seconds"] >= 0
+    )[-RECENT_SCANS:]
+    if not timed:
+        return FinishingEstimate(
+            FINISHING_FALLBACK_S,
+            f"no scan has finished on this daemon yet: {FINISHING_FALLBACK_S:g} s, the "
+            "default scan's measured finishing")
+    ids = ", ".join(str(i) for i, _ in timed)
+    seconds = statistics.median(s for _, s in timed)
+    what = f"job {ids}'s finishing" if len(timed) == 1 else f"the median of jobs {ids}"
+    return FinishingEstimate(seconds, f"{what} on this daemon")
+
+
+def time_left(eta_s: float | None, basis_build_s: float | None, finishing_s: float,
+              finishing_elapsed_s: float | None = None) -> float | None:
+    """Estimated seconds to the job's end.
+
+    Parameters
+    ----------
+    eta_s : measuring time left (the engine's ``eta_s``, counted down); None while the
+        job measures but has no estimate yet (then the total is unknown too: None).
+    basis_build_s : the basis build the job still waits for, seconds, or None.
+    finishing_s : :func:`finishing_estimate`'s seconds.
+    finishing_elapsed_s : while the job finishes, how long it has been finishing (measuring
+        is over: ``eta_s`` is then ignored); None while it measures.
+    """
+    if finishing_elapsed_s is not None:
+        return max(0.0, (basis_build_s or 0.0) + finishing_s - finishing_elapsed_s)
+    if eta_s is None:
+        return None
+    return eta_s + (basis_build_s or 0.0) + finishing_s

@@ -1,0 +1,145 @@
+"""API keys: digests, who a key is, what each guard asks for, and keys in URLs refused."""
+
+from __future__ import annotations
+
+import asyncio
+import hashlib
+import json
+from types import SimpleNamespace
+from typing import Any
+
+import pytest
+from fastapi import HTTPException
+from starlette.requests import Request
+
+from gonio.api.auth import (
+    AccessPolicy,
+    ApiKeyring,
+    Caller,
+    KeyringError,
+    RefuseKeysInUrl,
+    is_stored_digest,
+    require_key_when_configured,
+    require_read_access,
+    require_write_key,
+    stored_form,
+)
+
+ALICE = "a" * 16
+BOB = "b0b-" + "x" * 28
+
+
+def test_the_stored_form_is_the_sha256_of_the_key() -> None:
+    hexdigest = hashlib.sha256(ALICE.encode()).hexdigest()
+    assert stored_form(ALICE) == "sha256:" + hexdigest
+    assert is_stored_digest(stored_form(ALICE))
+    assert not is_stored_digest(ALICE)
+    assert not is_stored_digest("sha256:" + hexdigest.upper())  # lower-case hex only
+    assert not is_stored_digest("sha256:" + hexdigest[:-1])
+
+
+def test_keys_are_known_by_name_whether_given_plain_or_as_digest() -> None:
+    ring = ApiKeyring({"alice": ALICE, "bob": stored_form(BOB)})
+    assert len(ring) == 2 and ring.names == ("alice", "bob")
+    assert ring.identify(ALICE) == "alice"
+    assert ring.identify(BOB) == "bob"
+    assert ring.identify(stored_form(BOB)) is None  # the digest is not the key
+    assert ring.identify(ALICE[:-1]) is None
+    assert ring.identify(None) is None
+
+
+def test_the_first_name_wins_when_two_names_share_a_key() -> None:
+    assert ApiKeyring({"first": ALICE, "second": ALICE}).identify(ALICE) == "first"
+
+
+@pytest.mark.parametrize(("key", "message"), [
+    ("short", "API key 'lab' is 5 characters long; use at least 16"),
+    ("a" * 10 + " " + "b" * 10, "API key 'lab' contains whitespace; keys are single tokens"),
+])
+def test_an_unusable_key_is_refused_with_its_name(key: str, message: str) -> None:
+    with pytest.raises(KeyringError, match=message):
+        ApiKeyring({"lab": key})
+
+
+def request(policy: AccessPolicy) -> Request:
+    app = SimpleNamespace(state=SimpleNamespace(access_policy=policy))
+    return Request({"type": "http", "app": app, "headers": [], "state": {}})
+
+
+def call(guard: Any, policy: AccessPolicy, key: str | None) -> Caller | int:
+    """The guard's caller, or the status it refuses with."""
+    try:
+        return asyncio.run(guard(request(policy), key))  # type: ignore[no-any-return]
+    except HTTPException as exc:
+        return exc.status_code
+
+
+KEYED = AccessPolicy(ApiKeyring({"alice": ALICE}))
+CLOSED = AccessPolicy(ApiKeyring({"alice": ALICE}), read_requires_key=True)
+NO_KEYS = AccessPolicy()
+
+
+@pytest.mark.parametrize(("guard", "policy", "key", "expected"), [
+    # writes: a valid key, always
+    (require_write_key, KEYED, ALICE, Caller("alice")),
+    (require_write_key, KEYED, None, 401),
+    (require_write_key, KEYED, "", 401),
+    (require_write_key, KEYED, BOB, 403),
+    (require_write_key, NO_KEYS, None, 403),  # read-only daemon: no key can work
+    # reads: open unless configured, but a wrong key is refused anyway
+    (require_read_access, KEYED, None, Caller(None)),
+    (require_read_access, KEYED, BOB, 403),
+    (require_read_access, CLOSED, None, 401),
+    (require_read_access, CLOSED, ALICE, Caller("alice")),
+    # reads that compute: keyed whenever the daemon has keys
+    (require_key_when_configured, KEYED, None, 401),
+    (require_key_when_configured, NO_KEYS, None, Caller(None)),
+    (require_key_when_configured, KEYED, ALICE, Caller("alice")),
+])
+def test_each_guard_asks_for_what_docs_api_says(guard: Any, policy: AccessPolicy,
+                                                key: str | None, expected: object) -> None:
+    assert call(guard, policy, key) == expected
+
+
+def test_the_refusals_say_what_to_do() -> None:
+    with pytest.raises(HTTPException, match="needs an API key in the X-API-Key header"):
+        asyncio.run(require_write_key(request(KEYED), None))
+    with pytest.raises(HTTPException, match="is not valid for this daemon"):
+        asyncio.run(require_write_key(request(KEYED), BOB))
+    with pytest.raises(HTTPException, match="no API keys configured, so it is read-only"):
+        asyncio.run(require_write_key(request(NO_KEYS), None))
+
+
+def test_the_key_name_is_kept_on_the_request() -> None:
+    req = request(KEYED)
+    asyncio.run(require_write_key(req, ALICE))
+    assert req.state.key_name == "alice"
+
+
+def refuse(query: bytes) -> tuple[int, str]:
+    sent: list[dict[str, Any]] = []
+
+    async def app(scope: Any, receive: Any, send: Any) -> None:
+        await send({"type": "http.response.start", "status": 200, "headers": []})
+        await send({"type": "http.response.body", "body": b""})
+
+    async def send(m: dict[str, Any]) -> None:
+        sent.append(m)
+
+    asyncio.run(RefuseKeysInUrl(app)({"type": "http", "query_string": query}, None, send))
+    body = sent[1]["body"]
+    return sent[0]["status"], json.loads(body)["detail"] if body else ""
+
+
+@pytest.mark.parametrize("query", [b"api_key=x", b"since=1&X-API-Key=x", b"token=",
+                                   b"client_secret=s", b"password=p", b"Authorization=b"])
+def test_a_key_in_the_url_is_refused(query: bytes) -> None:
+    status, detail = refuse(query)
+    assert status == 400
+    assert "Send the key in the X-API-Key header instead" in detail
+    assert "treat a key that was sent in a URL as exposed" in detail
+
+
+@pytest.mark.parametrize("query", [b"", b"since=3", b"business=1", b"name=key"])
+def test_other_queries_pass(query: bytes) -> None:
+    assert refuse(query)[0] == 200

@@ -1,0 +1,154 @@
+"""Figures' data: the true material's recipe and back, the headline error in words, and the
+fit and polar curves of a result whose BRDF is known in closed form (a constant table and a
+Lambertian truth, f = albedo / pi). The physical-bounds warning of the headline:
+tests/unit/test_physical_bounds_report.py; colour renderings: tests/unit/test_result_colour.py.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from gonio.brdf.models import analytic as bm
+from gonio.brdf.tables.table import BRDFTable, from_function
+from gonio.calibration import CalibratedScan
+from gonio.figures import (
+    TRUE_MATERIAL_KEY,
+    FigureError,
+    describe_material,
+    fit_curves,
+    headline_error,
+    load_input,
+    material_from_description,
+    polar_curves,
+    render_inputs,
+    true_material,
+)
+from gonio.results import read_result, write_result
+
+VALUE = (0.1, 0.2, 0.05)  # the constant table, 1/sr per channel
+LAMBERT = bm.Lambert((0.3, 0.6, 0.9), name="paper")
+
+
+@functools.cache
+def _table() -> BRDFTable:
+    return from_function(lambda i, o: np.tile(VALUE, (i.shape[0], 1)), ["R", "G", "B"], "flat")
+
+
+@pytest.fixture(scope="module")
+def npz(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp("table") / "t.npz"
+    _table().save(path)
+    return path
+
+
+def _dir(theta_deg: float, phi_deg: float) -> list[float]:
+    t, p = math.radians(theta_deg), math.radians(phi_deg)
+    return [math.sin(t) * math.cos(p), math.sin(t) * math.sin(p), math.cos(t)]
+
+
+def _result(tmp: Path, table: BRDFTable | None = None, calibrated: bool = True,
+            truth: Any = LAMBERT, kind: str = "uniform") -> Path:
+    cal = {"pairs": [{"light": "L1", "sensor": "S1", "factor": [1, 1, 1]}]} if calibrated \
+        else {"pairs": []}
+    values = np.array([[[0.3, 0.3, 0.3], [0.6, 0.6, 0.6], [0.9, 0.9, 0.9]]])  # (1, 3, 3)
+    s = CalibratedScan(pairs=[("L1", "S1")], light_dirs=np.array([_dir(45, 0)]),
+                       sensor_dirs=np.array([_dir(30, 180)]),
+                       stage_angles_deg=np.array([370.0, 90.0, 200.0]), values=values,
+                       channels=("R", "G", "B"), calibration=cal)
+    prov = {TRUE_MATERIAL_KEY: json.dumps(describe_material(truth))} if truth else {}
+    return write_result(tmp / "r.h5", job_id=4, specimen="card", kind=kind, readings=[],
+                        samples=s, table=table, provenance=prov)
+
+
+def test_an_analytic_material_is_written_down_and_rebuilt() -> None:
+    desc = describe_material(LAMBERT)
+    assert desc is not None and desc["name"] == "paper"
+    again = material_from_description(json.loads(json.dumps(desc)))
+    wi, wo = np.array([_dir(30, 0)]), np.array([_dir(50, 120)])
+    np.testing.assert_allclose(again.eval(wi, wo), [[0.3 / math.pi, 0.6 / math.pi,
+                                                     0.9 / math.pi]])
+
+
+def test_what_cannot_be_written_down_is_none(npz: Path) -> None:
+    assert describe_material(object()) is None
+    assert describe_material(_table()) is None  # a table with no file behind it
+    loaded = BRDFTable.load(npz)
+    assert describe_material(loaded) == {"name": "flat", "table_file": str(npz)}
+
+
+def test_a_recipe_that_cannot_be_rebuilt_says_why(tmp_path: Path) -> None:
+    with pytest.raises(FigureError, match="has neither a model nor a table"):
+        material_from_description({"name": "x"})
+    with pytest.raises(FigureError, match="the true material 'gone' cannot be rebuilt: "):
+        material_from_description({"name": "gone", "table_file": str(tmp_path / "no.npz")})
+
+
+def test_the_headline_error_in_words() -> None:
+    log = headline_error({"predicted_log_rmse": 0.12345, "predicted_error": 0.5})
+    assert log is not None and (log["key"], log["text"]) == ("predicted_log_rmse", "0.123")
+    assert "0 is a perfect match" in log["meaning"]
+    rel = headline_error({"predicted_error": 0.0567})
+    assert rel is not None and (rel["key"], rel["value"], rel["text"]) == (
+        "predicted_error", 0.0567, "5.7 %")
+    assert headline_error({}) is None
+    assert headline_error({"predicted_log_rmse": None}) is None
+
+
+def test_fit_curves_of_a_flat_table(tmp_path: Path) -> None:
+    fit = fit_curves(read_result(_result(tmp_path, _table())), step_deg=90.0)
+    assert fit["units"] == "1/sr" and fit["calibrated"] is True
+    assert fit["channels"] == "mean of R, G, B"
+    assert fit["curve_deg"] == [0.0, 90.0, 180.0, 270.0, 360.0]
+    (pair,) = fit["pairs"]
+    assert pair["label"] == "L1/S1"
+    # stage angles taken modulo 360 and sorted, the readings with them
+    assert pair["stage_deg"] == [10.0, 90.0, 200.0]
+    assert pair["measured"] == pytest.approx([0.3, 0.6, 0.9])
+    assert pair["curve"] == pytest.approx([sum(VALUE) / 3] * 5)
+
+
+def test_polar_curves_of_a_flat_table_and_its_lambertian_truth(tmp_path: Path) -> None:
+    polar = polar_curves(read_result(_result(tmp_path, _table())), 30.0, 0.0)
+    assert polar["angle_deg"] == [float(a) for a in range(-89, 90)]
+    assert polar["truth_name"] == "paper"
+    for plane in ("in_plane", "cross_plane"):
+        rec = polar["reconstruction"][plane]
+        assert rec["G"][89] == pytest.approx(VALUE[1])  # at 0 deg: the normal, or the mirror
+        truth = polar["truth"][plane]
+        assert truth["B"] == pytest.approx([0.9 / math.pi] * 179)
+
+
+def test_no_truth_on_an_uncalibrated_result(tmp_path: Path) -> None:
+    res = read_result(_result(tmp_path, _table(), calibrated=False))
+    assert true_material(res) is None
+    assert polar_curves(res, 30.0, 0.0)["truth"] is None
+    assert fit_curves(res)["units"] == "sensor units (uncalibrated)"
+
+
+def test_a_calibration_result_has_no_curves_and_no_picture(tmp_path: Path) -> None:
+    path = _result(tmp_path, None, kind="calibration")
+    res = read_result(path)
+    for call in (lambda: fit_curves(res), lambda: polar_curves(res, 30, 0)):
+        with pytest.raises(FigureError, match="no reconstructed BRDF"):
+            call()
+    with pytest.raises(FigureError, match=r"holds no reconstructed BRDF .* a calibration "
+                                          r"result\); render a scan's result"):
+        load_input(path)
+    with pytest.raises(FigureError, match="nothing to render"):
+        render_inputs([])
+
+
+def test_the_rows_of_a_figure(tmp_path: Path, npz: Path) -> None:
+    path = _result(tmp_path, _table())
+    rows = load_input(path)
+    assert [label for label, _ in rows] == ["truth: paper", "job 4: card (reconstruction)"]
+    assert [label for label, _ in load_input(path, "mine", with_truth=False)] == [
+        "mine (reconstruction)"]
+    assert [label for label, _ in load_input(npz)] == ["t.npz: flat"]

@@ -1,0 +1,80 @@
+"""Manual stage commands through :class:`gonio.stage_control.StageControl`, on the in-memory rig.
+
+The queue it holds is a real :class:`gonio.worker.Worker` over a real (in-memory) job store, so
+what is asserted is what the store records: the hold around the command, its release, and a
+hold that was there before (a halt) left alone.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from pathlib import Path
+
+import pytest
+
+from gonio.basis_supply import BasisSupply
+from gonio.motion import StageMoveError
+from gonio.rigdescription import RigDescription
+from gonio.service_models import Conflict, JobInfo, StageRequest
+from gonio.sim.memrig import MemRig
+from gonio.stage_control import StageControl
+from gonio.store import JobStore
+from gonio.worker import Worker
+
+
+def _control(tmp_path: Path, active: JobInfo | None = None
+             ) -> tuple[StageControl, Worker, JobStore, MemRig]:
+    rig = MemRig()
+    desc = RigDescription.from_rig(rig)
+    store = JobStore(":memory:")
+
+    async def get_rig() -> MemRig:
+        return rig
+
+    worker = Worker(store, get_rig, desc, tmp_path, BasisSupply(lambda: pytest.fail("no basis")))
+
+    def record(type_: str, data: dict[str, object]) -> object:
+        return store.append_event(None, type_, data)
+
+    control = StageControl(desc, get_rig, worker, lambda: active, record)  # type: ignore[arg-type]
+    return control, worker, store, rig
+
+
+def test_a_move_holds_the_queue_for_its_duration_only(tmp_path: Path) -> None:
+    control, worker, store, rig = _control(tmp_path)
+    state = asyncio.run(control.command(StageRequest(action="move", angle_deg=40.0)))
+    assert state.position_deg == pytest.approx(40.0, abs=0.2)
+    assert rig.mstage.pos == pytest.approx(40.0, abs=0.2)
+    events = [(e.type, e.data) for e in store.events_after(0)]
+    assert [t for t, _ in events] == ["queue_held", "queue_released", "stage"]
+    assert events[0][1]["reason"] == "manual stage command: move"
+    assert events[2][1]["position_deg"] == pytest.approx(40.0, abs=0.2)
+    assert worker.held is None and store.hold("queue") is None  # not durable: nothing left
+
+
+def test_a_queue_held_before_stays_held(tmp_path: Path) -> None:
+    control, worker, store, _ = _control(tmp_path)
+    worker.hold("emergency halt")
+    asyncio.run(control.command(StageRequest(action="home")))
+    assert worker.held == "emergency halt"
+    assert "queue_released" not in [e.type for e in store.events_after(0)]
+
+
+def test_refused_while_a_job_is_active_but_stop_is_always_accepted(tmp_path: Path) -> None:
+    store = JobStore(":memory:")
+    row = store.create_job(kind="uniform", specimen="s", plan={}, rig={})
+    control, _, _, rig = _control(tmp_path, active=JobInfo.from_row(row))
+    with pytest.raises(Conflict, match=f"job {row.id} is queued"):
+        asyncio.run(control.command(StageRequest(action="move", angle_deg=10.0)))
+    assert rig.mstage.moves == []
+    asyncio.run(control.command(StageRequest(action="stop")))
+
+
+def test_a_move_outside_the_travel_limits_says_them(tmp_path: Path) -> None:
+    control, _, store, rig = _control(tmp_path)
+    lo, hi = control.desc.stage_min_deg, control.desc.stage_max_deg
+    with pytest.raises(StageMoveError, match=f"\\[{lo:g}, {hi:g}\\]"):
+        asyncio.run(control.command(StageRequest(action="move", angle_deg=hi + 1.0)))
+    with pytest.raises(StageMoveError, match="needs angle_deg"):
+        asyncio.run(control.command(StageRequest(action="move")))
+    assert rig.mstage.moves == [] and store.events_after(0) == []
