@@ -177,6 +177,8 @@ def finish_job(job_id: int, plan: AnyPlan | CheckedPlan, how: Finishing) -> dict
             {(p.light, p.sensor): samples.values[q] for q, p in enumerate(pairs)},
             exposure_s=plan.exposure.exposure_s,
             source=f"job {job_id}: {plan.reference_name}",
+            # Dated by its readings, not by when finishing ran: a rebuild gives the same.
+            created=max((r.t_read for r in readings), default=None),
         )
         if how.save_calibration:
             save_calibration(new_cal, how.data_dir / CALIBRATION_FILE,

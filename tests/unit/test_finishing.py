@@ -7,8 +7,10 @@ the rules, on an in-memory rig.
 from __future__ import annotations
 
 import asyncio
+import json
 import shutil
 import sqlite3
+import time
 from pathlib import Path
 
 import numpy as np
@@ -64,7 +66,11 @@ def test_a_calibration_job_is_rebuilt_without_replacing_the_calibration_in_effec
     assert (data / "calibration.json").read_text() == later
     new, old = read_result(result), read_result(original)
     np.testing.assert_array_equal(new.samples.values, old.samples.values)
+    # Dated by the white reference's readings, so the rebuild's is the same, whenever it runs.
     assert new.provenance["new_calibration"] == old.provenance["new_calibration"]
+    last = max(r.t_read for r in svc.store.readings(1))
+    assert json.loads(new.provenance["new_calibration"])["created"] == time.strftime(
+        "%Y-%m-%dT%H:%M:%SZ", time.gmtime(last))
     assert "gonio jobs rebuild" in new.provenance["rebuilt"]
     assert svc.store.get_job(1).summary == summary
     assert [e.type for e in svc.store.events_after(0, job_id=1)][-1] == "rebuilt"
