@@ -257,6 +257,11 @@ class Worker:
                 self._remove_when_stopped = job_id
             return True
 
+    def being_removed(self, job_id: int) -> bool:
+        """True while ``job_id`` is deleted (:meth:`stop_starting` with ``remove``) but its
+        engine has not stopped yet: to everyone else it is gone already."""
+        return self._remove_when_stopped == job_id
+
     def _engine_of(self, job_id: int) -> ScanEngine | None:
         eng = self._engine
         return eng if eng is not None and eng.job_id == job_id else None
