@@ -3,7 +3,7 @@
 A plan with ``arc = "auto"`` (:mod:`gonio.plans.models`) does not commit to half a turn
 before it knows its specimen reads the same turned by half a turn (docs/science.md 7.4). Its
 first round reads the plan's uniform angles over half a turn plus the opposites (``+ 180
-deg``) of two of them a quarter turn apart (:func:`test_round_angles`: 0/180 and 90/270 for a
+deg``) of two of them a quarter turn apart (:func:`first_round_angles`: 0/180 and 90/270 for a
 plan starting at 0). A specimen without twofold symmetry differs between ``a`` and ``a + 180``
 by an odd function of the stage angle, whose first harmonic ``cos(a - a0)`` cannot vanish at
 two angles a quarter turn apart, so the two opposite pairs see any lean, whatever its
@@ -14,9 +14,9 @@ read the opposites of the remaining first-round angles and continue over a full 
 (:func:`fill_angles`).
 
 The readings the engine holds are ``raw - dark`` counts, uncalibrated: the test works on
-the differences of their logarithms, which a pair's sensitivity does not change, so each
-pair is scaled by its largest reading and the absolute noise is a fraction of that
-(:data:`ABSOLUTE_FRACTION`).
+the differences of their logarithms, which a pair's (or a channel's) sensitivity does not
+change, so each pair and channel is scaled by its largest reading and the absolute noise is a
+fraction of that (:data:`ABSOLUTE_FRACTION`).
 """
 
 from __future__ import annotations
@@ -36,7 +36,8 @@ from gonio.rigdescription import RigDescription
 
 FULL_TURN_DEG = 360.0
 ABSOLUTE_FRACTION = 0.002
-"""Absolute noise of a reading as a fraction of its pair's largest reading in the test round:
+"""Absolute noise of a reading as a fraction of its pair's largest reading (per channel) in
+the test round:
 dim readings (dark-subtraction and read noise, a few counts) then weigh less, and those below
 about 2 % of the peak (predicted log deviation above 0.1) are left out of the test."""
 FALSE_ALARM = 0.01
@@ -47,7 +48,7 @@ ARC_TEST_EVENT = "arc_test"
 job continues on the arc it chose)."""
 
 
-def test_round_angles(start_deg: float, rotations: int) -> list[float]:
+def first_round_angles(start_deg: float, rotations: int) -> list[float]:
     """The first round of an auto-arc plan: ``rotations`` uniform angles over half a turn from
     ``start_deg``, then the opposites of the first of them and of the one a quarter turn on
     (index ``rotations // 2``; just the first's opposite when ``rotations`` is 1), degrees in
@@ -59,7 +60,7 @@ def test_round_angles(start_deg: float, rotations: int) -> list[float]:
 
 def fill_angles(start_deg: float, rotations: int) -> list[float]:
     """What an asymmetric specimen reads next: the opposites of the first round's half-turn
-    angles that :func:`test_round_angles` did not read, so that the first two rounds hold
+    angles that :func:`first_round_angles` did not read, so that the first two rounds hold
     ``2 rotations`` uniform angles over the full turn; degrees in [0, 360)."""
     half = uniform_angles(start_deg, rotations, HALF_TURN_DEG)
     done = set(sorted({0, rotations // 2}))
@@ -93,9 +94,9 @@ def arc_test(angles_deg: Sequence[float], values: ArrayLike, relative: float,
     v = np.asarray(values, dtype=float)
     if v.ndim == 2:
         v = v[:, :, None]
-    # Each pair scaled by its largest reading (log differences do not change).
+    # Each pair and channel scaled by its largest reading (log differences do not change).
     positive = np.where(np.isfinite(v) & (v > 0), v, 0.0)
-    peak = positive.max(axis=(1, 2), keepdims=True) if v.size else np.ones((0, 1, 1))
+    peak = positive.max(axis=1, keepdims=True) if v.size else np.ones((0, 1, 1))
     peak = np.where(peak > 0, peak, 1.0)
     noise = NoiseModel(relative=float(relative), absolute=ABSOLUTE_FRACTION)
     base: dict[str, Any] = {"noise": float(relative), "false_alarm": float(false_alarm)}
@@ -155,7 +156,7 @@ def branch_bounds(plan: AnyPlan, rig: RigDescription, n_lights: int, n_pairs: in
     plan : the plan (``arc`` auto)
     rig : RigDescription
     n_lights, n_pairs : of the plan
-    first_angles : (r + 2,) the first round's angles (:func:`test_round_angles`), degrees
+    first_angles : (r + 2,) the first round's angles (:func:`first_round_angles`), degrees
     end_deg : where the stage ends the first round, degrees
 
     Returns

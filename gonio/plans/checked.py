@@ -12,7 +12,7 @@ from dataclasses import dataclass, field, replace
 from functools import cached_property
 
 from gonio.hal import PairSpec
-from gonio.plans.arc import branch_bounds, test_round_angles
+from gonio.plans.arc import branch_bounds, first_round_angles
 from gonio.plans.models import AdaptivePlan, AnyPlan
 from gonio.plans.route import order_for_travel
 from gonio.plans.timing import adaptive_bound, estimate_angles
@@ -34,7 +34,7 @@ class CheckedPlan:
     pairs : the pairs the plan measures, in order (the rows of every values array)
     lights : their lights in first-appearance order (one exposure per light and angle)
     angles_deg : (r,) specimen angles of the first round, degrees in [0, 360) (an auto-arc
-        plan's: its half-turn angles and two opposites, :func:`gonio.plans.arc.test_round_angles`)
+        plan's: its half-turn angles and two opposites, :func:`gonio.plans.arc.first_round_angles`)
     route_deg : stage positions visiting ``angles_deg`` from ``from_deg``, degrees (proof
         that the first round can be visited in one direction inside the travel; the engine
         routes again from where the stage is)
@@ -106,7 +106,7 @@ def check_plan(plan: AnyPlan | CheckedPlan, rig: RigDescription,
             route = order_for_travel(plan.angles_deg, from_deg, rig, plan.plan.backlash_deg)
             return replace(plan, route_deg=tuple(route), from_deg=from_deg)
     pairs = validate_plan(plan, rig)
-    angles = (test_round_angles(plan.start_deg, plan.first_rotations())
+    angles = (first_round_angles(plan.start_deg, plan.first_rotations())
               if plan.arc_mode() == "auto"
               else uniform_angles(plan.start_deg, plan.first_rotations(), plan.first_span_deg()))
     route = order_for_travel(angles, from_deg, rig, plan.backlash_deg)

@@ -161,7 +161,7 @@ class ArcRounds:
     """The rounds of an auto-arc plan (``arc = "auto"``, :mod:`gonio.plans.arc`).
 
     Round 0 read the half-turn angles and two of their opposites
-    (:func:`gonio.plans.arc.test_round_angles`). After it, the twofold symmetry test on its
+    (:func:`gonio.plans.arc.first_round_angles`). After it, the twofold symmetry test on its
     readings chooses the arc (event ``arc_test``): symmetric, the plan goes on over half a
     turn as a fixed half-turn plan would (an adaptive plan refines in it); not symmetric, round
     1 reads the remaining opposites (:func:`gonio.plans.arc.fill_angles`), and an adaptive
