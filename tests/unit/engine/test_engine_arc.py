@@ -8,6 +8,7 @@ symmetric, so a fresh job stays on half a turn.
 from __future__ import annotations
 
 import asyncio
+
 import pytest
 
 from gonio.engine import ScanEngine

@@ -21,8 +21,8 @@ from gonio.plans.arc import (
     arc_test,
     branch_bounds,
     fill_angles,
-    half_turn_warning,
     first_round_angles,
+    half_turn_warning,
 )
 from gonio.plans.checked import check_plan
 from gonio.plans.dryrun import dry_run
@@ -151,7 +151,7 @@ def test_adaptive_plans_refine_within_the_arc_chosen(desc: RigDescription) -> No
     nxt = _next(sym, angles, _readings(angles, 0.0, n_pairs=3), len(angles), 0)
     assert isinstance(sym._after(), AdaptiveRounds) and sym._after().arc_deg == (0.0, 180.0)
     assert nxt.angles_deg and all(0 <= a < 180 for a in nxt.angles_deg)
-    assert [t for t, _ in nxt.events][0] == ARC_TEST_EVENT
+    assert next(t for t, _ in nxt.events) == ARC_TEST_EVENT
     # Asymmetric: the fill, then V&F's rule over the full turn (new angles past 180 too).
     asym = rounds_for(checked)
     fill = _next(asym, angles, _readings(angles, 0.1, n_pairs=3), len(angles), 0)
@@ -171,7 +171,7 @@ def test_fixed_plans_keep_their_rounds(desc: RigDescription) -> None:
 def test_auto_with_a_forced_full_turn_is_refused_with_what_to_do() -> None:
     with pytest.raises(PlanError, match="drop arc 'auto' or span_deg 360"):
         parse_plan({"kind": "uniform", "arc": "auto", "span_deg": 360})
-    with pytest.raises(PlanError, match="'fixed'.*'auto'"):
+    with pytest.raises(PlanError, match=r"'fixed'.*'auto'"):
         parse_plan({"kind": "uniform", "arc": "half"})
     with pytest.raises(PlanError, match="arc_noise"):
         parse_plan({"kind": "uniform", "arc": "auto", "arc_noise": 0})
