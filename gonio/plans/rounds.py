@@ -4,8 +4,9 @@ Each plan kind owns its rounds (:func:`rounds_for`), the way a scan specificatio
 points it visits: a uniform or calibration plan has one round (:class:`SingleRound`); an
 adaptive plan plans each next round from the readings so far (:class:`AdaptiveRounds`), with
 the posterior rule of a :class:`Refiner` when the worker gives one, else V&F's rule
-(:func:`gonio.plans.adaptive.adaptive_refinement`). The engine only measures what a round
-returns and records its events; it knows no rule.
+(:func:`gonio.plans.adaptive.adaptive_refinement`); a plan with ``arc = "auto"`` first tests
+twofold symmetry on its first round and goes on over the arc that chose (:class:`ArcRounds`).
+The engine only measures what a round returns and records its events; it knows no rule.
 """
 
 from __future__ import annotations
