@@ -341,7 +341,8 @@ def _record_arc_test(store: JobStore, job_id: int, plan: AnyPlan, samples: Any,
         angles = np.asarray(samples.stage_angles_deg, float)
         gap = np.abs((angles[:, None] - angles[None, :]) % 360.0 - 180.0)
         if (gap <= 0.5).any():  # some readings 180 deg apart: the test can say something
-            test = arc_test(angles, samples.values, float(getattr(plan, "arc_noise", 0.01)))
+            test = arc_test([float(x) for x in angles], samples.values,
+                            float(getattr(plan, "arc_noise", 0.01)))
             warning = half_turn_warning(test)
             if warning is not None:
                 metrics["arc_asymmetric"] = warning
