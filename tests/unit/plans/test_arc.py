@@ -70,16 +70,16 @@ def test_a_symmetric_specimen_keeps_half_a_turn_and_a_leaning_one_gets_the_full_
     assert sym["symmetric"] and sym["arc_deg"] == 180.0
     assert sym["opposite_pairs"] == 2 and sym["dof"] == 10 * 2 * 3
     assert half_turn_warning(sym) is None
-    # A lean of 3 % in log (the difference at opposite angles up to 6 %, six times the noise
-    # of a difference) is found whichever way each pair leans.
-    lean = arc_test(angles, _readings(angles, 0.03), NOISE)
+    # A lean of 5 % in log (the difference at opposite angles up to 10 %, seven times the
+    # noise of a difference) is found whichever way each pair leans.
+    lean = arc_test(angles, _readings(angles, 0.05), NOISE)
     assert not lean["symmetric"] and lean["arc_deg"] == 360.0
     assert lean["p_value"] < 1e-6 and lean["asymmetric_pairs"] >= 5
     assert "NOT twofold symmetric" in lean["message"]
     warning = half_turn_warning(lean)
     assert warning is not None and "span_deg 360" in warning
     # The pair's scale does not matter (uncalibrated counts): the same readings x 1000.
-    assert arc_test(angles, 1000 * _readings(angles, 0.03), NOISE)["statistic"] == \
+    assert arc_test(angles, 1000 * _readings(angles, 0.05), NOISE)["statistic"] == \
         pytest.approx(lean["statistic"])
 
 
