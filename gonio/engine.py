@@ -57,6 +57,7 @@ from gonio.diskspace import disk_full_message, is_disk_full
 from gonio.hal import PairSpec
 from gonio.jobstates import FINISHED_STATES, JobState
 from gonio.motion import plan_overshoot_legs
+from gonio.plans.arc import ARC_TEST_EVENT
 from gonio.plans.checked import CheckedPlan, check_plan
 from gonio.plans.faults import Suspender, Trouble
 from gonio.plans.models import AnyPlan
@@ -355,6 +356,11 @@ class ScanEngine:
             route = order_for_travel(self.checked.angles_deg, here, self.desc,
                                      self.plan.backlash_deg)
             self._add_steps(0, 0, route)
+        if self._steps and self.plan.arc_mode() == "auto":
+            # A resumed auto-arc job continues on the arc it chose (its arc_test event).
+            chosen = self.store.last_event(self.job_id, ARC_TEST_EVENT)
+            if chosen is not None:
+                self.rounds = rounds_for(self.checked, self.refiner, chosen.data)
         self._load_dark()
         todo = [s.angle_index for s in self._steps if not s.done]
         while True:

@@ -515,6 +515,10 @@ class Worker:
             # Completed, but not plainly: the event log and its listeners (the CLI) say why.
             self.store.append_event(job.id, "physical_bounds",
                                     {"message": summary["physical_bounds"]})
+        if summary.get("arc_asymmetric"):
+            # Forced over half a turn, but the readings at opposite angles differ: why.
+            self.store.append_event(job.id, "arc_asymmetric",
+                                    {"message": summary["arc_asymmetric"]})
         if summary.get("design_gap"):
             # The self-estimate is more than x2 from its design's expected error: why.
             self.store.append_event(job.id, "design_gap", {"message": summary["design_gap"]})
