@@ -209,6 +209,9 @@ class DynamixelStage(_Stage):
         self.profile_acceleration = self._profile_units(
             "accel_dps2", accel_dps2, gear / DPS2_PER_ACCEL_UNIT
         )
+        # What the servo really runs: the profile units above, back in stage units.
+        self._profile_dps = (self.profile_velocity * DPS_PER_VELOCITY_UNIT / gear,
+                             self.profile_acceleration * DPS2_PER_ACCEL_UNIT / gear)
         self._ph: Any = None
         self._claim: Any = None  # this process's lock on the port (gonio.locks)
         self._pk: Any = sdk.PacketHandler(2.0)
@@ -232,6 +235,13 @@ class DynamixelStage(_Stage):
                 f"ratio, above the servo maximum {PROFILE_MAX}; lower {what}"
             )
         return units
+
+    @property
+    def profile_dps(self) -> tuple[float, float]:
+        """(speed deg/s, acceleration deg/s^2) of Profile Velocity and Profile Acceleration
+        as written: the configured values rounded to the servo's units (e.g. 60 deg/s and
+        240 deg/s^2 at gear 1 run as 60.46 deg/s and 236.0 deg/s^2)."""
+        return self._profile_dps
 
     # ------------------------------------------------------------------ transport
     def _open(self) -> None:
@@ -493,8 +503,7 @@ class DynamixelStage(_Stage):
         for wp in waypoints:
             goal = round(wp * self.cpd)
             await self._write("write Goal Position", ADDR_GOAL_POSITION, 4, goal)
-            expected_end = time.monotonic() + move_time(wp - here, self.speed_dps,
-                                                        self.accel_dps2)
+            expected_end = time.monotonic() + move_time(wp - here, *self._profile_dps)
             present = await self._wait_arrival(goal, deadline, limit, expected_end)
             here = wp
         if self.settle_s > 0:

@@ -396,21 +396,41 @@ class ModbusLight(Light):
             After ``warmup_s`` the monitored output differs from the level by more than
             ``band`` (recoverable: a lamp may recover after a longer warm-up).
         """
+        if on:
+            await self.switch_on()
+            return
+        await self._io.write_coil(self.config.registers.on_coil, False)
+        self._on = False
+        self._feed(False)
+
+    async def switch_on(self, *, check: bool = True) -> None:
+        """Write the coil, wait ``warmup_s`` and, with ``check``, :meth:`check_output`.
+
+        ``check=False`` leaves the monitor read to the caller (one request fewer before the
+        exposure; the engine reads it while the sensors integrate)."""
         regs = self.config.registers
-        await self._io.write_coil(regs.on_coil, on)
-        self._on = on
-        self._feed(on)
-        if on and regs.monitor is not None:
-            if self.config.warmup_s > 0:
-                await asyncio.sleep(self.config.warmup_s)
-            self._last_output = await self._io.read_raw(regs.monitor) * regs.monitor.scale
-            if abs(self._last_output - self._level) > regs.band:
-                raise LampOutOfBand(
-                    self.name,
-                    f"output {self._last_output:.3f} is outside {self._level:.3f} +- "
-                    f"{regs.band:.3f}; check the lamp or lengthen warmup_s",
-                    code="out_of_band",
-                )
+        await self._io.write_coil(regs.on_coil, True)
+        self._on = True
+        self._feed(True)
+        if regs.monitor is not None and self.config.warmup_s > 0:
+            await asyncio.sleep(self.config.warmup_s)
+        if check:
+            await self.check_output()
+
+    async def check_output(self) -> None:
+        """Read the monitor (one request; nothing without a monitor register) and raise
+        :class:`LampOutOfBand` when the output differs from the level by more than ``band``."""
+        regs = self.config.registers
+        if regs.monitor is None:
+            return
+        self._last_output = await self._io.read_raw(regs.monitor) * regs.monitor.scale
+        if abs(self._last_output - self._level) > regs.band:
+            raise LampOutOfBand(
+                self.name,
+                f"output {self._last_output:.3f} is outside {self._level:.3f} +- "
+                f"{regs.band:.3f}; check the lamp or lengthen warmup_s",
+                code="out_of_band",
+            )
 
     async def set_level(self, level: float) -> None:
         """Drive level, fraction in [0, 1]; ``ValueError`` outside or without a level register."""

@@ -176,11 +176,20 @@ class ZaberStage(_Stage):
         self.resolution_deg = 1.0 / self.mpd
         self.maxspeed = max(1, round(self.speed_dps * self.mpd * SPEED_FACTOR))
         self.accel = max(1, round(self.accel_dps2 * self.mpd * ACCEL_FACTOR))
+        # What the stage really runs: maxspeed and accel back in degrees.
+        self._profile_dps = (self.maxspeed / (self.mpd * SPEED_FACTOR),
+                             self.accel / (self.mpd * ACCEL_FACTOR))
         self._port: Any = None
         self._claim: Any = None  # this process's lock on the port or URL (gonio.locks)
         self._lock = bus_lock(url)
         self._ids = itertools.cycle(range(100))
         self._op_lock = asyncio.Lock()
+
+    @property
+    def profile_dps(self) -> tuple[float, float]:
+        """(speed deg/s, acceleration deg/s^2) of ``maxspeed`` and ``accel`` as written: the
+        configured values rounded to the device's units."""
+        return self._profile_dps
 
     # ------------------------------------------------------------------ transport
     def _open(self) -> None:
@@ -377,8 +386,7 @@ class ZaberStage(_Stage):
         here = current
         for wp in waypoints:
             await self._ok(f"move abs {round(wp * self.mpd)}")
-            expected_end = time.monotonic() + move_time(wp - here, self.speed_dps,
-                                                        self.accel_dps2)
+            expected_end = time.monotonic() + move_time(wp - here, *self._profile_dps)
             idle = await self._wait_idle(deadline, limit, f"move to {wp:g} deg", expected_end)
             here = wp
         if idle.flag is not None:

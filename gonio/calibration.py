@@ -230,6 +230,7 @@ def from_reference(
     exposure_s: float | None = None,
     source: str = "white reference",
     check: bool = True,
+    created: float | None = None,
 ) -> Calibration:
     """Calibration from dark-subtracted readings of a white reference.
 
@@ -244,6 +245,10 @@ def from_reference(
     source : str
     check : bool
         Run :func:`check_white_reference` on the readings first (default).
+    created : float, optional
+        When the reference was read (Unix time, seconds); now when not given. Finishing
+        passes the last reading's time, so a calibration rebuilt from the same readings
+        (``gonio jobs rebuild``) is the same calibration, date included.
 
     Raises
     ------
@@ -269,7 +274,7 @@ def from_reference(
         check_white_reference(counts)
     return Calibration(pairs=tuple(out), reference_albedo=albedo, exposure_s=exposure_s,
                        source=source,
-                       created=time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()))
+                       created=time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime(created)))
 
 
 def from_config_factors(factors: Sequence[object], albedo: float | None = None) -> Calibration:

@@ -3,7 +3,7 @@
 Per stage angle (docs/architecture.md, "One scan, one way"): move the stage (always
 approaching from below, so backlash cancels); optionally read the dark signal with every light
 off; then for each light: on, settle, read all of that light's sensors in parallel
-(``asyncio.gather``) while checking the lamp's status, off. The angle's readings are
+(``asyncio.gather``) while checking the lamp's output, off. The angle's readings are
 committed to the store (:meth:`gonio.store.JobStore.commit_angle`) before the next move: that
 is the checkpoint. The engine keeps the steps and readings it commits (it reads them from the
 store once, when a job starts or resumes), and after each round asks the plan's rounds
@@ -11,9 +11,10 @@ store once, when a job starts or resumes), and after each round asks the plan's 
 
 Time that is not physical (moves, settling, exposures) is overhead, and most of it is device
 round trips on shared links, so the angle sends few of them: the stage position is read before a
-move only when a backlash overshoot may be needed, and the lamp check runs during the exposure,
-when the link is idle. The commit stays before the next move (it takes well under a
-millisecond; overlapping it with the move would break the checkpoint guarantee).
+move only when a backlash overshoot may be needed, and a lamp is switched on unchecked: its
+output check (the switch-on check too) runs during the exposure, when the link is idle. The
+commit stays before the next move (it takes well under a millisecond; overlapping it with the
+move would break the checkpoint guarantee).
 
 Control, requested from outside (the service) at any time:
 
@@ -56,6 +57,7 @@ from gonio.diskspace import disk_full_message, is_disk_full
 from gonio.hal import PairSpec
 from gonio.jobstates import FINISHED_STATES, JobState
 from gonio.motion import plan_overshoot_legs
+from gonio.plans.arc import ARC_TEST_EVENT
 from gonio.plans.checked import CheckedPlan, check_plan
 from gonio.plans.faults import Suspender, Trouble
 from gonio.plans.models import AnyPlan
@@ -354,6 +356,11 @@ class ScanEngine:
             route = order_for_travel(self.checked.angles_deg, here, self.desc,
                                      self.plan.backlash_deg)
             self._add_steps(0, 0, route)
+        if self._steps and self.plan.arc_mode() == "auto":
+            # A resumed auto-arc job continues on the arc it chose (its arc_test event).
+            chosen = self.store.last_event(self.job_id, ARC_TEST_EVENT)
+            if chosen is not None:
+                self.rounds = rounds_for(self.checked, self.refiner, chosen.data)
         self._load_dark()
         todo = [s.angle_index for s in self._steps if not s.done]
         while True:
@@ -515,7 +522,9 @@ class ScanEngine:
         for lname in self.lights:
             light = self.rig.lights[lname]
             sensors = self.sensors_of[lname]
-            await light.set_on(True)
+            # The output check is left to the exposure (``_read_sensors``): one round trip
+            # fewer between switching on and triggering the sensors.
+            await light.switch_on(check=False)
             try:
                 if ex.light_settle_s > 0:
                     await asyncio.sleep(ex.light_settle_s)
@@ -622,29 +631,25 @@ class ScanEngine:
     ) -> list[hal.SensorReading]:
         """Read sensors in parallel; wait for all, then raise the first fault (no orphan reads).
 
-        With ``lamp``, that light's status is checked while its sensors integrate: devices on
-        a shared link are idle during the exposure, so the check adds no time, and the output
-        that matters is the one during the exposure. The status request is started after the
-        reads, so it queues behind their triggers. A lamp out of band wins over sensor faults:
-        its readings are discarded and the angle repeated after recovery.
+        With ``lamp``, that light's output is checked (:meth:`gonio.hal.Light.check_output`)
+        while its sensors integrate: devices on a shared link are idle during the exposure, so
+        the check adds no time, and the output that matters is the one during the exposure. It
+        is also the switch-on check (the engine switches lights on with ``check=False``), so a
+        lamp out of band at switch-on fails here with the driver's switch-on message. The check
+        is started after the reads, so it queues behind their triggers. A lamp out of band wins
+        over sensor faults: its readings are discarded and the angle repeated after recovery.
         """
         ex = self.plan.exposure
         calls: list[Awaitable[object]] = [
             self.rig.sensors[n].read(ex.exposure_s, ex.averages) for n in names
         ]
         if lamp is not None:
-            calls.append(self.rig.lights[lamp].status())
+            calls.append(self.rig.lights[lamp].check_output())
         results = await asyncio.gather(*calls, return_exceptions=True)
         if lamp is not None:
             st = results.pop()
             if isinstance(st, BaseException):
                 raise _primary([st, *(r for r in results if isinstance(r, BaseException))])
-            assert isinstance(st, hal.LightStatus)
-            if not st.in_band:
-                raise hal.LampOutOfBand(
-                    lamp, f"output level {st.level:.3g} is outside its allowed band",
-                    code="out_of_band",
-                )
         errors = [r for r in results if isinstance(r, BaseException)]
         if errors:
             raise _primary(errors)

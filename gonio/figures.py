@@ -140,7 +140,8 @@ def headline_error(metrics: dict[str, Any]) -> dict[str, Any] | None:
     Returns
     -------
     dict with ``key`` (metric name), ``value``, ``text`` (value as shown) and ``meaning``
-    (and ``physical_bounds`` / ``design_gap`` when they apply).
+    (and ``physical_bounds`` / ``design_gap`` / ``arc_asymmetric`` when they apply; ``arc``,
+    the sentence on the arc an auto-arc scan chose).
     """
     out = _headline(metrics)
     bounds = metrics.get("physical_bounds")
@@ -157,6 +158,24 @@ def headline_error(metrics: dict[str, Any]) -> dict[str, Any] | None:
                         if isinstance(expected, int | float) else " (far from its design)")
         out["meaning"] = f"Warning: {gap}. {out['meaning']}"
         out["design_gap"] = gap
+    asym = metrics.get("arc_asymmetric")
+    if out is not None and isinstance(asym, str):
+        # A forced half turn on a specimen that is not twofold symmetric: the other half
+        # turn is an assumption the readings contradict.
+        out["text"] += " (NOT TWOFOLD SYMMETRIC)"
+        out["meaning"] = f"Warning: {asym}. {out['meaning']}"
+        out["arc_asymmetric"] = asym
+    elif out is not None and isinstance(metrics.get("arc_symmetric"), bool) and \
+            isinstance(metrics.get("arc_test_p_value"), int | float):
+        # An auto-arc scan: which arc its first round chose, and on what evidence.
+        arc = "half a turn" if metrics["arc_symmetric"] else "a full turn"
+        verdict = "twofold symmetric" if metrics["arc_symmetric"] else "not twofold symmetric"
+        out["arc"] = (f"Scanned over {arc}: the first round's readings at opposite stage "
+                      f"angles say the specimen is {verdict} (chi-square "
+                      f"{metrics.get('arc_test_statistic', float('nan')):.1f} on "
+                      f"{metrics.get('arc_test_dof')} degrees of freedom, p = "
+                      f"{metrics['arc_test_p_value']:.3g}).")
+        out["meaning"] = f"{out['meaning']} {out['arc']}"
     misfit = metrics.get("basis_misfit")
     if out is not None and isinstance(misfit, str):
         # The readings carry structure the basis cannot hold: the estimate is a floor at best,

@@ -177,6 +177,8 @@ def finish_job(job_id: int, plan: AnyPlan | CheckedPlan, how: Finishing) -> dict
             {(p.light, p.sensor): samples.values[q] for q, p in enumerate(pairs)},
             exposure_s=plan.exposure.exposure_s,
             source=f"job {job_id}: {plan.reference_name}",
+            # Dated by its readings, not by when finishing ran: a rebuild gives the same.
+            created=max((r.t_read for r in readings), default=None),
         )
         if how.save_calibration:
             save_calibration(new_cal, how.data_dir / CALIBRATION_FILE,
@@ -258,6 +260,7 @@ def finish_job(job_id: int, plan: AnyPlan | CheckedPlan, how: Finishing) -> dict
     if "design_gap" in metrics:
         log.info("job %d: %s", job_id, metrics["design_gap"])  # the worker records the event
     provenance.update(basis_K=int(basis.K), basis_materials=json.dumps(list(basis.materials)))
+    _record_arc_test(how.store, job_id, plan, samples, metrics, provenance)
     if arc is not None:
         summary["arc_warning"] = arc
         provenance["arc_warning"] = arc
@@ -316,6 +319,45 @@ def _compare_with_design(rec: Any, readings: list[Any], plan: AnyPlan, samples: 
     if gap is not None:
         metrics["design_gap"] = gap.message()
         provenance["design_gap"] = gap.message()
+
+
+def _record_arc_test(store: JobStore, job_id: int, plan: AnyPlan, samples: Any,
+                     metrics: dict[str, Any], provenance: dict[str, Any]) -> None:
+    """The twofold symmetry test of the scan in its result (docs/science.md 7.4).
+
+    An auto-arc plan's test is its ``arc_test`` event (what the scan chose, on its first
+    round's readings): ``metrics`` gain ``arc_symmetric``, ``arc_deg`` (the arc chosen) and
+    the test's ``arc_test_statistic``, ``arc_test_dof``, ``arc_test_p_value``;
+    ``provenance["arc_test"]`` the whole event. A plan forced over half a turn whose readings
+    include opposite stage angles is tested here, on its calibrated readings; when the test
+    calls it asymmetric, ``metrics["arc_asymmetric"]`` says so (the worker records it as an
+    event, the page's headline shows it).
+    """
+    from gonio.plans.arc import ARC_TEST_EVENT, arc_test, half_turn_warning
+
+    test: dict[str, Any] | None = None
+    if plan.arc_mode() == "auto":
+        ev = store.last_event(job_id, ARC_TEST_EVENT)
+        test = None if ev is None else ev.data
+    elif plan.first_span_deg() == 180.0:
+        angles = np.asarray(samples.stage_angles_deg, float)
+        gap = np.abs((angles[:, None] - angles[None, :]) % 360.0 - 180.0)
+        if (gap <= 0.5).any():  # some readings 180 deg apart: the test can say something
+            test = arc_test([float(x) for x in angles], samples.values,
+                            float(getattr(plan, "arc_noise", 0.01)))
+            warning = half_turn_warning(test)
+            if warning is not None:
+                metrics["arc_asymmetric"] = warning
+                provenance["arc_asymmetric"] = warning
+                log.info("job %d: %s", job_id, warning)  # the worker records the event
+    if test is None:
+        return
+    metrics.update(arc_symmetric=bool(test["symmetric"]), arc_deg=float(test["arc_deg"]),
+                   arc_test_statistic=test.get("statistic"), arc_test_dof=test.get("dof"),
+                   arc_test_p_value=test.get("p_value"))
+    if plan.arc_mode() == "fixed":
+        metrics["arc_deg"] = plan.first_span_deg()  # forced: the test chose nothing
+    provenance["arc_test"] = json.dumps(test)
 
 
 def physical_bounds(table: Any, values: Any, calibrated: bool) -> Any:

@@ -170,6 +170,17 @@ class Stage(Device):
     resolution_deg: float = 0.01
     """Smallest meaningful angular step of the stage, degrees."""
 
+    @property
+    def profile_dps(self) -> tuple[float, float]:
+        """(speed deg/s, acceleration deg/s^2) the device really moves with.
+
+        Devices take their motion profile in units of their own, so the configured
+        :attr:`speed_dps` and :attr:`accel_dps2` are rounded to the nearest unit; drivers
+        that know those units override this with the rounded values (the true physical move
+        time, :func:`gonio.motion.move_time`). The base class: the configured values.
+        """
+        return self.speed_dps, self.accel_dps2
+
     @abc.abstractmethod
     async def home(self) -> None:
         """Establish the reference position (0 degrees)."""
@@ -231,6 +242,28 @@ class Light(Device):
 
     @abc.abstractmethod
     async def status(self) -> LightStatus: ...
+
+    async def switch_on(self, *, check: bool = True) -> None:
+        """Switch on; with ``check=False`` the output is not checked here: the caller calls
+        :meth:`check_output` itself while the light is in use (the engine does so during the
+        exposure, when the link is idle, which saves a round trip before the exposure).
+
+        The base class always checks (it calls ``set_on(True)``); drivers whose switch-on
+        check costs a request override this.
+        """
+        await self.set_on(True)
+
+    async def check_output(self) -> None:
+        """Raise :class:`LampOutOfBand` when the lit light's output is outside its band.
+
+        The base class asks :meth:`status`; drivers that can read the output alone override
+        this with the switch-on check's own request and message.
+        """
+        st = await self.status()
+        if not st.in_band:
+            raise LampOutOfBand(self.name,
+                                f"output level {st.level:.3g} is outside its allowed band",
+                                code="out_of_band")
 
 
 class Sensor(Device):

@@ -451,7 +451,8 @@ class GonioService:
 
     def list_jobs(self, state: str | None = None) -> list[JobInfo]:
         return [JobInfo.from_row(r, self._max_angles(r))
-                for r in self.store.list_jobs([state] if state else None)]
+                for r in self.store.list_jobs([state] if state else None)
+                if not self.worker.being_removed(r.id)]
 
     def _max_angles(self, row: JobRow) -> int | None:
         """An adaptive job's most stage angles (the dry run's bound), once per job: its plan
@@ -476,6 +477,10 @@ class GonioService:
         return self._finishing_cache[1]
 
     def _row(self, job_id: int) -> JobRow:
+        if self.worker.being_removed(job_id):
+            # DELETE answered 204: the job is gone for every caller, though its engine takes
+            # a moment to stop before the store forgets it.
+            raise NotFound(f"no job with id {job_id} (it was removed)")
         return job_row(self.store, job_id)
 
     def get_job(self, job_id: int) -> JobDetail:

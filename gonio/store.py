@@ -789,6 +789,13 @@ class JobStore:
                              (job_id, type_)).fetchone()
         return row is not None
 
+    def last_event(self, job_id: int, type_: str) -> EventRow | None:
+        """The job's latest event of this type (e.g. the arc its scan chose), or None."""
+        with self._read() as db:
+            r = db.execute("SELECT seq, job_id, type, time, data FROM events WHERE job_id = ? "
+                           "AND type = ? ORDER BY seq DESC LIMIT 1", (job_id, type_)).fetchone()
+        return None if r is None else EventRow(r[0], r[1], r[2], r[3], json.loads(r[4]))
+
     def events_after(self, seq: int, limit: int = 1000, job_id: int | None = None
                      ) -> list[EventRow]:
         q = "SELECT seq, job_id, type, time, data FROM events WHERE seq > ?"

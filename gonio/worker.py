@@ -257,6 +257,11 @@ class Worker:
                 self._remove_when_stopped = job_id
             return True
 
+    def being_removed(self, job_id: int) -> bool:
+        """True while ``job_id`` is deleted (:meth:`stop_starting` with ``remove``) but its
+        engine has not stopped yet: to everyone else it is gone already."""
+        return self._remove_when_stopped == job_id
+
     def _engine_of(self, job_id: int) -> ScanEngine | None:
         eng = self._engine
         return eng if eng is not None and eng.job_id == job_id else None
@@ -510,6 +515,10 @@ class Worker:
             # Completed, but not plainly: the event log and its listeners (the CLI) say why.
             self.store.append_event(job.id, "physical_bounds",
                                     {"message": summary["physical_bounds"]})
+        if summary.get("arc_asymmetric"):
+            # Forced over half a turn, but the readings at opposite angles differ: why.
+            self.store.append_event(job.id, "arc_asymmetric",
+                                    {"message": summary["arc_asymmetric"]})
         if summary.get("design_gap"):
             # The self-estimate is more than x2 from its design's expected error: why.
             self.store.append_event(job.id, "design_gap", {"message": summary["design_gap"]})

@@ -11,15 +11,33 @@ PROJECT_ROOT = Path(__file__).resolve().parents[1]
 SHARED_DATA = PROJECT_ROOT.parent / "shared" / "data"
 
 
+def run_wide_dir(tmp_path_factory: pytest.TempPathFactory, name: str) -> Path:
+    """A temporary folder ``name`` shared by every process of this test run.
+
+    Under pytest-xdist (the README's ``-n``) each worker has its own base temporary folder,
+    ``<run's base>/popen-gw<N>``; a folder in the run's base is seen by all workers, so what is
+    built once there (the default basis, the small test basis) is built once per run, not
+    once per worker. Writers that share it must write atomically (gonio's ``.npz`` writers
+    do), as two workers may build the same file at the same time.
+    """
+    base = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        base = base.parent
+    path = base / name
+    path.mkdir(parents=True, exist_ok=True)
+    return path
+
+
 @pytest.fixture(scope="session", autouse=True)
 def _session_cache_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """Point gonio's user cache at one temporary folder for the whole run.
 
-    The synthetic library and default basis are built once per test session there, so tests
-    never read or write the developer's real cache.
+    The synthetic library and default basis are built once per test run there (shared by the
+    parallel workers: :func:`run_wide_dir`), so tests never read or write the developer's
+    real cache.
     """
     if "GONIO_CACHE_DIR" not in os.environ:
-        os.environ["GONIO_CACHE_DIR"] = str(tmp_path_factory.mktemp("gonio-cache"))
+        os.environ["GONIO_CACHE_DIR"] = str(run_wide_dir(tmp_path_factory, "gonio-cache"))
     # The user's imported tables (gonio library import) would change the default basis.
     if "GONIO_LIBRARY_DIR" not in os.environ:
         os.environ["GONIO_LIBRARY_DIR"] = str(tmp_path_factory.mktemp("gonio-library"))

@@ -58,6 +58,14 @@ def register(subparsers: Any) -> None:
                         "specimen reads the same turned by half a turn, so the angles see twice "
                         "as many distinct azimuths) or 360 (a full turn, for specimens without "
                         "that symmetry; the default with --rule vf)")
+    p.add_argument("--arc", choices=["fixed", "auto"], default="fixed",
+                   help="fixed (default): --span is the arc; auto: the first round reads the "
+                        "half-turn angles and two of their opposites, tests twofold symmetry "
+                        "and continues over half a turn if the specimen has it, else over a "
+                        "full turn (docs/science.md 7.4)")
+    p.add_argument("--arc-noise", type=positive_float, default=None,
+                   help="with --arc auto: the rig's relative noise of one reading, the "
+                        "symmetry test's scale (default 0.01)")
     p.add_argument("--adaptive", action="store_true", help="adaptive rotations (math.md 9)")
     p.add_argument("--rule", choices=["posterior", "vf"], default="posterior",
                    help="adaptive refinement rule: posterior (where the joint fit expects the "
@@ -135,6 +143,16 @@ def _plan(args: argparse.Namespace) -> Any:
         return CalibrationPlan(reference_albedo=args.white_reference,
                                reference_name=args.specimen or "white reference", exposure=ex,
                                rotations=args.rotations or 8, start_deg=args.start_deg)
+    arc: dict[str, Any] = {}
+    if args.arc == "auto":
+        if args.span == 360.0:
+            raise UsageError("--arc auto chooses the arc itself (half a turn for a "
+                             "twofold-symmetric specimen, else a full turn); --span 360 forces "
+                             "a full turn: give one of them")
+        arc = {"arc": "auto", **({"arc_noise": args.arc_noise} if args.arc_noise else {})}
+    elif args.arc_noise is not None:
+        raise UsageError("--arc-noise is the scale of the symmetry test of --arc auto; add "
+                         "--arc auto or drop --arc-noise")
     if args.adaptive:
         # Only what was given: the plan's defaults depend on the rule.
         given = {k: v for k, v in (("initial_rotations", args.rotations),
@@ -143,10 +161,10 @@ def _plan(args: argparse.Namespace) -> Any:
                                    ("span_deg", args.span)) if v is not None}
         return AdaptivePlan(specimen=_specimen(args), exposure=ex, rule=args.rule,
                             threshold=args.threshold, max_samples=args.max_samples,
-                            start_deg=args.start_deg, **given)
+                            start_deg=args.start_deg, **given, **arc)
     span = {"span_deg": args.span} if args.span is not None else {}
     return UniformPlan(specimen=_specimen(args), exposure=ex,
-                       rotations=args.rotations or 8, start_deg=args.start_deg, **span)
+                       rotations=args.rotations or 8, start_deg=args.start_deg, **span, **arc)
 
 
 def _specimen(args: argparse.Namespace) -> str:
@@ -356,9 +374,22 @@ async def _run_owned(args: argparse.Namespace, checked: Any, config: Any, sim: A
           f"in {units}, {err_text}; wrote {out}")
     if err:
         print(f"  {err['key']}: {err['meaning']}")
+    _print_arc(summary)
     if summary.get("basis_misfit"):
         print(f"warning: {summary['basis_misfit']}", file=sys.stderr)
     return 0
+
+
+def _print_arc(summary: dict[str, Any]) -> None:
+    """The arc an auto-arc scan chose and its test, or a forced half turn's warning."""
+    if summary.get("arc_asymmetric"):
+        print(f"warning: {summary['arc_asymmetric']}", file=sys.stderr)
+    elif isinstance(summary.get("arc_test_p_value"), int | float):
+        verdict = "twofold symmetric" if summary.get("arc_symmetric") else "NOT twofold symmetric"
+        print(f"  arc: {summary.get('arc_deg', 0):g} deg; the first round read the specimen "
+              f"{verdict} (chi-square {summary.get('arc_test_statistic', float('nan')):.1f} on "
+              f"{summary.get('arc_test_dof')} degrees of freedom, "
+              f"p = {summary['arc_test_p_value']:.3g})")
 
 
 def _calibration_warning(args: argparse.Namespace, plan: Any, config: Any,
@@ -474,6 +505,12 @@ def dry_run_summary(dr: Any, plan: Any, rig_name: str) -> str:
                      + (f"at most {most} angles and {_duration_text(bound)} in all"
                         if bound is not None and most is not None
                         else "no --max-samples, so no bound on the total"))
+    for b in getattr(dr, "arc_branches", None) or ():
+        arc_deg, angles, secs = b.arc_deg, b.angles, b.estimated_s
+        what = ("twofold symmetric: on over half a turn" if arc_deg == 180.0
+                else "not twofold symmetric: on over a full turn")
+        lines.append(f"  if the first round finds the specimen {what}, at most {angles} angles "
+                     f"({angles * n_pairs} readings) and {_duration_text(secs)} in all")
     build = getattr(dr, "basis_build_s", None)
     if build is not None:
         lines.append(f"  first, about {_duration_text(build)} more: the reconstruction basis is "
@@ -555,6 +592,7 @@ def _scan_through_daemon(args: argparse.Namespace, plan: Any) -> int:
     err_text = f"{err['key']} {err['text']}" if err else "no error estimate"
     print(f"job {job_id} completed: {summary.get('n_samples', summary.get('readings'))} samples "
           f"in {units}, {err_text}; wrote {out}")
+    _print_arc(summary)
     if summary.get("basis_misfit"):
         print(f"warning: {summary['basis_misfit']}", file=sys.stderr)
     return 0
@@ -595,8 +633,10 @@ def _progress(service: Any, job_id: int, disabled: bool) -> Any:
             bar.refresh()
         elif ev.type == "state":
             bar.set_description_str(f"job {job_id} {ev.data['state']}")
-        elif ev.type in ("arc_warning", "physical_bounds", "design_gap"):
+        elif ev.type in ("arc_warning", "physical_bounds", "design_gap", "arc_asymmetric"):
             bar.write(f"warning: {ev.data['message']}", file=sys.stderr)
+        elif ev.type == "arc_test":
+            bar.write(f"arc: {ev.data['message']}", file=sys.stderr)
 
     service.add_event_listener(on_event)
     return bar

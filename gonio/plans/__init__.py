@@ -17,9 +17,12 @@ Import each name from the module that holds it:
     Move times along a route (engine and driver backlash legs), and adaptive time bounds.
 ``adaptive``
     Where an adaptive plan adds angles next by V&F's rule (leave-one-out periodic PCHIP).
+``arc``
+    The arc from the data (``arc = "auto"``): the first round's opposite angles, the twofold
+    symmetry test that chooses half or a full turn, the dry run's bounds of both outcomes.
 ``rounds``
-    The rounds each plan kind owns (one, or adaptive refinement) and the ``Refiner`` protocol
-    of the posterior rule.
+    The rounds each plan kind owns (one, adaptive refinement, or the arc test first) and the
+    ``Refiner`` protocol of the posterior rule.
 ``faults``
     ``Suspender``: a plan's fault policy applied (wait and retry, or fail, and why).
 ``dryrun``

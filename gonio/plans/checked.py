@@ -12,6 +12,7 @@ from dataclasses import dataclass, field, replace
 from functools import cached_property
 
 from gonio.hal import PairSpec
+from gonio.plans.arc import branch_bounds, first_round_angles
 from gonio.plans.models import AdaptivePlan, AnyPlan
 from gonio.plans.route import order_for_travel
 from gonio.plans.timing import adaptive_bound, estimate_angles
@@ -32,7 +33,8 @@ class CheckedPlan:
     rig : the rig description it was checked against
     pairs : the pairs the plan measures, in order (the rows of every values array)
     lights : their lights in first-appearance order (one exposure per light and angle)
-    angles_deg : (r,) specimen angles of the first round, degrees in [0, 360)
+    angles_deg : (r,) specimen angles of the first round, degrees in [0, 360) (an auto-arc
+        plan's: its half-turn angles and two opposites, :func:`gonio.plans.arc.first_round_angles`)
     route_deg : stage positions visiting ``angles_deg`` from ``from_deg``, degrees (proof
         that the first round can be visited in one direction inside the travel; the engine
         routes again from where the stage is)
@@ -50,7 +52,9 @@ class CheckedPlan:
     @property
     def arc_deg(self) -> tuple[float, float]:
         """``(start_deg, span_deg)`` of the plan's arc, degrees: the first round's uniform
-        angles and every refinement round lie in it."""
+        angles and every refinement round lie in it. An auto-arc plan's first round is over
+        half a turn (plus two opposites); the arc it continues on is its rounds' choice
+        (:class:`gonio.plans.rounds.ArcRounds`)."""
         return (float(self.plan.start_deg), self.plan.first_span_deg())
 
     @cached_property
@@ -71,7 +75,12 @@ class CheckedPlan:
     @cached_property
     def max_angles(self) -> int | None:
         """Most stage angles the job can measure: an adaptive plan's bound over all its
-        rounds (:func:`gonio.plans.timing.adaptive_bound`); None for a fixed plan."""
+        rounds (:func:`gonio.plans.timing.adaptive_bound`), an auto-arc plan's over either
+        arc (:func:`gonio.plans.arc.branch_bounds`); None for a fixed plan."""
+        if self.plan.arc_mode() == "auto":
+            branches = branch_bounds(self.plan, self.rig, len(self.lights), len(self.pairs),
+                                     self.angles_deg, 0.0)
+            return len(self.angles_deg) + max(n for n, _ in branches.values())
         if not isinstance(self.plan, AdaptivePlan):
             return None
         extra, _ = adaptive_bound(self.plan, self.rig, len(self.pairs), len(self.lights),
@@ -97,7 +106,9 @@ def check_plan(plan: AnyPlan | CheckedPlan, rig: RigDescription,
             route = order_for_travel(plan.angles_deg, from_deg, rig, plan.plan.backlash_deg)
             return replace(plan, route_deg=tuple(route), from_deg=from_deg)
     pairs = validate_plan(plan, rig)
-    angles = uniform_angles(plan.start_deg, plan.first_rotations(), plan.first_span_deg())
+    angles = (first_round_angles(plan.start_deg, plan.first_rotations())
+              if plan.arc_mode() == "auto"
+              else uniform_angles(plan.start_deg, plan.first_rotations(), plan.first_span_deg()))
     route = order_for_travel(angles, from_deg, rig, plan.backlash_deg)
     return CheckedPlan(plan=plan, rig=rig, pairs=tuple(pairs),
                        lights=tuple(lights_in_order(pairs)), angles_deg=tuple(angles),

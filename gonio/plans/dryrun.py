@@ -9,6 +9,7 @@ from pydantic import BaseModel, Field
 
 from gonio.brdf.reconstruction.samples import HALF_TURN_DEG
 from gonio.hal import PairSpec
+from gonio.plans.arc import branch_bounds
 from gonio.plans.checked import CheckedPlan, check_plan
 from gonio.plans.models import AdaptivePlan, AnyPlan
 from gonio.plans.timing import adaptive_bound, estimate_angles, travel
@@ -49,7 +50,8 @@ class BasisSymmetry:
 def arc_may_apply(plan: AnyPlan) -> bool:
     """Whether :func:`arc_warning` can concern ``plan`` at all (a reconstruction over half a
     turn): callers skip looking at the basis otherwise."""
-    return plan.finishing == "reconstruction" and plan.first_span_deg() == HALF_TURN_DEG
+    return (plan.finishing == "reconstruction" and plan.first_span_deg() == HALF_TURN_DEG
+            and plan.arc_mode() == "fixed")
 
 
 def arc_warning(plan: AnyPlan, basis: BasisSymmetry | None) -> str | None:
@@ -76,6 +78,19 @@ def _names(names: Sequence[str], most: int = 5) -> str:
     shown = ", ".join(names[:most])
     more = f" and {len(names) - most} more" if len(names) > most else ""
     return f" ({shown}{more})"
+
+
+class ArcBranch(BaseModel):
+    """An auto-arc plan's job for one verdict of its twofold symmetry test (bounds)."""
+
+    arc_deg: float = Field(description="the arc the job continues on: 180 (the specimen "
+                           "reads twofold symmetric) or 360 (it does not)")
+    angles: int = Field(description="most stage angles the job measures, the first round's "
+                        "included")
+    readings: int = Field(description="most pair readings (pairs x angles)")
+    estimated_s: float = Field(description="bound on the job's duration, seconds (a uniform "
+                               "plan's is its duration; an adaptive plan's includes a basis "
+                               "build when one is needed)")
 
 
 class DryRun(BaseModel):
@@ -114,6 +129,10 @@ class DryRun(BaseModel):
         "without the default basis: the job builds it before its first reading, about this "
         "many seconds (once; not in estimated_s, included in max_estimated_s); null: the "
         "basis is ready or not needed while measuring")
+    arc_branches: list[ArcBranch] | None = Field(
+        default=None, description="plans with arc 'auto': the job when the first round's test "
+        "finds the specimen twofold symmetric (180) and when it does not (360), each bounded; "
+        "max_estimated_s and max_angles are the larger. null for a fixed arc")
     warnings: list[str] = Field(
         default_factory=list, description="what may make the result poorer than the plan "
         "suggests, and what to do; the plan runs as it is. E.g. a half-turn plan (span_deg "
@@ -165,6 +184,18 @@ def dry_run(plan: AnyPlan | CheckedPlan, rig: RigDescription, current_deg: float
         # The posterior rule waits for the basis before the first reading (gonio.worker).
         build = BASIS_BUILD_S if plan.rule == "posterior" and not basis_ready else None
         max_total, max_angles = total + extra_s + (build or 0.0), len(route) + extra_n
+    branches = None
+    if plan.arc_mode() == "auto":
+        _, _, end = travel(route, start, rig, plan.backlash_deg)
+        build = BASIS_BUILD_S if (isinstance(plan, AdaptivePlan) and plan.rule == "posterior"
+                                  and not basis_ready) else None
+        branches = [ArcBranch(arc_deg=arc, angles=len(route) + n,
+                              readings=len(pairs) * (len(route) + n),
+                              estimated_s=total + extra_s + (build or 0.0))
+                    for arc, (n, extra_s) in branch_bounds(
+                        plan, rig, len(lights), len(pairs), angles, end).items()]
+        max_total = max(b.estimated_s for b in branches)
+        max_angles = max(b.angles for b in branches)
     darks = len(route) if plan.exposure.dark == "every_angle" else int(plan.exposure.dark == "once")
     return DryRun(
         kind=plan.kind,
@@ -183,5 +214,6 @@ def dry_run(plan: AnyPlan | CheckedPlan, rig: RigDescription, current_deg: float
         from_deg=start,
         from_known=current_deg is not None,
         basis_build_s=build,
+        arc_branches=branches,
         warnings=[w for w in (arc_warning(plan, basis),) if w is not None],
     )

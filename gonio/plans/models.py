@@ -184,6 +184,60 @@ MinGain = Annotated[
 ]
 
 
+ARC_MODES = ("fixed", "auto")
+"""How a plan's arc is chosen: ``fixed`` (its ``span_deg``, 180 or 360, forces either) or
+``auto`` (the first round tests twofold symmetry, :mod:`gonio.plans.arc`)."""
+DEFAULT_ARC_NOISE = 0.01
+"""Default relative noise of one reading that the arc test scales by: 1 %, the simulated
+sensors' level at a few thousand counts (sim/specimen.py) and the noise the designs assume."""
+
+
+def _check_arc(value: object) -> object:
+    # Before the type check, so any wrong value gets the sentence on both modes.
+    if value not in ARC_MODES:
+        raise ValueError(
+            f"arc is 'fixed' (span_deg decides: 180 half a turn, 360 a full turn) or 'auto' "
+            f"(the first round reads opposite stage angles and tests twofold symmetry, then the "
+            f"scan continues over half a turn if the specimen has it, else over a full turn); "
+            f"got {value!r}")
+    return value
+
+
+ArcMode = Annotated[
+    Literal["fixed", "auto"],
+    BeforeValidator(_check_arc),
+    Field(description="fixed: span_deg is the arc (180 or 360 forces either); auto: the first "
+                      "round reads the half-turn angles plus two of their opposites, tests "
+                      "twofold symmetry against arc_noise (docs/science.md 7.4), and the scan "
+                      "continues over half a turn if the specimen has it, else over a full turn "
+                      "(span_deg must then be 180, the default)"),
+]
+ArcNoise = Annotated[
+    float,
+    Field(gt=0, lt=1, description="arc auto: the rig's relative noise of one reading (0.01: "
+                                  "1 %, the simulated sensors'); the symmetry test's scale. "
+                                  "Larger: fewer specimens called asymmetric"),
+]
+
+
+class _ArcChoice(BaseModel):
+    """The arc settings of the plan kinds that reconstruct (uniform, adaptive)."""
+
+    model_config = FINITE
+
+    arc: ArcMode = "fixed"
+    arc_noise: ArcNoise = DEFAULT_ARC_NOISE
+
+    @model_validator(mode="after")
+    def _auto_needs_half(self) -> _ArcChoice:
+        if self.arc == "auto" and getattr(self, "span_deg", 180.0) != 180.0:
+            raise ValueError(
+                "arc 'auto' chooses the arc itself (half a turn for a twofold-symmetric "
+                "specimen, else a full turn) and needs span_deg 180 (the default); span_deg "
+                "360 forces a full turn: drop arc 'auto' or span_deg 360")
+        return self
+
+
 StartDeg = Annotated[
     float,
     AfterValidator(_check_start),
@@ -224,13 +278,17 @@ class _PlanBase(BaseModel):
         """Number of stage angles of the first round (``start_deg + k span / r``)."""
         return int(getattr(self, self.rotations_field))
 
+    def arc_mode(self) -> Literal["fixed", "auto"]:
+        """``auto`` when the first round tests twofold symmetry (:mod:`gonio.plans.arc`)."""
+        return "auto" if getattr(self, "arc", "fixed") == "auto" else "fixed"
+
     def first_span_deg(self) -> float:
         """Arc (degrees) of the first round's uniform angles: the plan's ``span_deg``, or a
         full turn for kinds without one (a calibration's white reference)."""
         return float(getattr(self, "span_deg", 360.0))
 
 
-class UniformPlan(_PlanBase):
+class UniformPlan(_ArcChoice, _PlanBase):
     """n pairs x r uniformly spaced stage angles."""
 
     kind: Literal["uniform"] = "uniform"
@@ -239,7 +297,7 @@ class UniformPlan(_PlanBase):
     span_deg: SpanDeg = DEFAULT_SPAN_DEG
 
 
-class AdaptivePlan(_PlanBase):
+class AdaptivePlan(_ArcChoice, _PlanBase):
     """Uniform start, then refinement rounds (math.md 9; docs/science.md 7.3)."""
 
     kind: Literal["adaptive"] = "adaptive"
@@ -279,7 +337,9 @@ class AdaptivePlan(_PlanBase):
         # posterior rule refines from 4 angles up to 16 over half a turn, V&F's from their 8
         # over a full turn until it stops (explicit settings are kept as given).
         if isinstance(data, dict) and data.get("rule") == "vf":
-            vf = {"initial_rotations": 8, "max_rotations": None, "span_deg": 360.0}
+            vf: dict[str, object] = {"initial_rotations": 8, "max_rotations": None}
+            if data.get("arc") != "auto":  # auto chooses the arc; it starts over half a turn
+                vf["span_deg"] = 360.0
             return {**{k: v for k, v in vf.items() if k not in data}, **data}
         return data
 

@@ -4,8 +4,9 @@ Each plan kind owns its rounds (:func:`rounds_for`), the way a scan specificatio
 points it visits: a uniform or calibration plan has one round (:class:`SingleRound`); an
 adaptive plan plans each next round from the readings so far (:class:`AdaptiveRounds`), with
 the posterior rule of a :class:`Refiner` when the worker gives one, else V&F's rule
-(:func:`gonio.plans.adaptive.adaptive_refinement`). The engine only measures what a round
-returns and records its events; it knows no rule.
+(:func:`gonio.plans.adaptive.adaptive_refinement`); a plan with ``arc = "auto"`` first tests
+twofold symmetry on its first round and goes on over the arc that chose (:class:`ArcRounds`).
+The engine only measures what a round returns and records its events; it knows no rule.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from gonio.plans.adaptive import adaptive_refinement
+from gonio.plans.arc import ARC_TEST_EVENT, arc_test, fill_angles
 from gonio.plans.checked import CheckedPlan
 from gonio.plans.models import MAX_ROTATIONS, AdaptivePlan
 
@@ -96,15 +98,18 @@ class AdaptiveRounds:
     ----------
     checked : the job's plan, an :class:`~gonio.plans.models.AdaptivePlan`
     refiner : the posterior rule, or None (then V&F's rule, whatever the plan's ``rule``)
+    arc_deg : ``(start_deg, span_deg)`` to refine in, degrees; default the plan's
+        (:attr:`CheckedPlan.arc_deg`); an auto-arc plan's is the arc its test chose
     """
 
-    def __init__(self, checked: CheckedPlan, refiner: Refiner | None = None) -> None:
+    def __init__(self, checked: CheckedPlan, refiner: Refiner | None = None,
+                 arc_deg: tuple[float, float] | None = None) -> None:
         plan = checked.plan
         if not isinstance(plan, AdaptivePlan):
             raise TypeError(f"adaptive rounds need an adaptive plan, not {plan.kind!r}")
         self.plan = plan
         self.refiner = refiner
-        self.arc_deg = checked.arc_deg
+        self.arc_deg = checked.arc_deg if arc_deg is None else arc_deg
         self.min_step_deg = plan.min_step_deg or checked.rig.resolution_deg
         # The sample budget, the plan's cap on stage angles, and in any case the cap per job
         # (so the dry run's bound holds and a job cannot grow without end).
@@ -153,8 +158,76 @@ class AdaptiveRounds:
         return NextRound(list(new), events)
 
 
-def rounds_for(checked: CheckedPlan, refiner: Refiner | None = None) -> Rounds:
-    """The rounds of ``checked``'s plan kind: adaptive plans refine, the others do not."""
+class ArcRounds:
+    """The rounds of an auto-arc plan (``arc = "auto"``, :mod:`gonio.plans.arc`).
+
+    Round 0 read the half-turn angles and two of their opposites
+    (:func:`gonio.plans.arc.first_round_angles`). After it, the twofold symmetry test on its
+    readings chooses the arc (event ``arc_test``): symmetric, the plan goes on over half a
+    turn as a fixed half-turn plan would (an adaptive plan refines in it); not symmetric, round
+    1 reads the remaining opposites (:func:`gonio.plans.arc.fill_angles`), and an adaptive
+    plan then refines over the full turn. Only round 0's readings are tested, so the choice
+    does not depend on what later rounds read.
+
+    Parameters
+    ----------
+    checked : the job's plan, with ``arc = "auto"``
+    refiner : the posterior rule of an adaptive plan, or None
+    chosen : the ``arc_test`` event's data when the job already chose (a resumed job: it
+        continues on that arc and the test is neither run nor recorded again)
+    """
+
+    def __init__(self, checked: CheckedPlan, refiner: Refiner | None = None,
+                 chosen: dict[str, Any] | None = None) -> None:
+        plan = checked.plan
+        if plan.arc_mode() != "auto":
+            raise TypeError("arc rounds need a plan with arc 'auto'")
+        self.checked = checked
+        self.refiner = refiner
+        self.chosen = chosen
+        self.start_deg = float(plan.start_deg)
+        self.rotations = plan.first_rotations()
+        self.relative = float(getattr(plan, "arc_noise", 0.01))
+        self._then: Rounds | None = None
+
+    @property
+    def arc_deg(self) -> float | None:
+        """The arc chosen, degrees (180 or 360); None before the test."""
+        return None if self.chosen is None else float(self.chosen["arc_deg"])
+
+    def _after(self) -> Rounds:
+        """The rounds after the test (and the fill round): the plan kind's, in the arc chosen."""
+        if self._then is None:
+            arc = (self.start_deg, float(self.chosen["arc_deg"]) if self.chosen else 360.0)
+            self._then = (AdaptiveRounds(self.checked, self.refiner, arc)
+                          if self.checked.plan.refines else SingleRound())
+        return self._then
+
+    async def next_round(self, angles_deg: Sequence[float], values: NDArray[np.float64],
+                         planned_angles: int, last_round: int) -> NextRound:
+        events: list[tuple[str, dict[str, Any]]] = []
+        if self.chosen is None:
+            first = set(round(a, 6) for a in self.checked.angles_deg)
+            keep = [j for j, a in enumerate(angles_deg) if round(float(a), 6) in first]
+            self.chosen = await asyncio.to_thread(
+                arc_test, [angles_deg[j] for j in keep], np.asarray(values)[:, keep, :],
+                self.relative)
+            events.append((ARC_TEST_EVENT, self.chosen))
+        if last_round == 0 and not self.chosen["symmetric"]:
+            fill = fill_angles(self.start_deg, self.rotations)
+            if fill:
+                return NextRound(fill, events)
+        nxt = await self._after().next_round(angles_deg, values, planned_angles, last_round)
+        return NextRound(nxt.angles_deg, events + nxt.events)
+
+
+def rounds_for(checked: CheckedPlan, refiner: Refiner | None = None,
+               chosen: dict[str, Any] | None = None) -> Rounds:
+    """The rounds of ``checked``'s plan kind: an auto-arc plan tests its arc first, adaptive
+    plans refine, the others do not. ``chosen``: a resumed auto-arc job's stored
+    ``arc_test`` data (:class:`ArcRounds`)."""
+    if checked.plan.arc_mode() == "auto":
+        return ArcRounds(checked, refiner, chosen)
     if checked.plan.refines:
         return AdaptiveRounds(checked, refiner)
     return SingleRound()

@@ -109,6 +109,30 @@ def test_an_outage_longer_than_the_retries_suspends_until_the_device_answers() -
     assert len(keys) == len(set(keys)) == 4 * 12
 
 
+def test_a_lamp_out_of_band_at_switch_on_suspends_with_the_drivers_message() -> None:
+    # The engine switches a lamp on without reading its monitor and checks the output while
+    # the sensors integrate: the fault must still name the lamp, its output and the band.
+    policy = FaultPolicy(max_retries=1, retry_delay_s=0.05, resume_settle_s=0.0,
+                         wait_for_device_s=0)
+    with start_sim_rig(SimRigOptions(stage="zaber", time_scale=10.0, seed=11)) as sim:
+        lamp = next(lt for lt in sim.config.lights if lt.name == "L2")
+        regs = lamp.registers
+        assert regs.monitor is not None
+        store, _, state = asyncio.run(_scan(
+            sim, UniformPlan(rotations=2, exposure=FAST, faults=policy), "lamp-drift:L2:0.5"))
+    assert state is JobState.FAILED
+    suspended = [e.data for e in store.events_after(0)
+                 if e.type == "state" and e.data.get("state") == "suspended"]
+    assert suspended and (suspended[0]["device"], suspended[0]["code"]) == ("L2", "out_of_band")
+    # Half the drive level, to the monitor register's resolution (its scale).
+    output = round(0.5 * lamp.level / regs.monitor.scale) * regs.monitor.scale
+    assert suspended[0]["reason"] == (
+        f"L2: output {output:.3f} is outside {lamp.level:.3f} +- {regs.band:.3f}; check the "
+        "lamp or lengthen warmup_s")
+    # Nothing of an angle with the bad lamp was kept.
+    assert all(r.light != "L2" for r in store.readings(1))
+
+
 def test_the_wait_has_a_ceiling() -> None:
     policy = FaultPolicy(max_retries=1, retry_delay_s=0.1, resume_settle_s=0.0,
                          wait_for_device_s=1.5)

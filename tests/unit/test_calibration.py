@@ -321,3 +321,12 @@ def test_apply_multiplies_each_pairs_rows_by_its_factor() -> None:
     want = np.array([[[2.0, 2.0], [6.0, np.nan]], [[5.0, 6.0], [7.0, 8.0]]])
     np.testing.assert_array_equal(got, want)
     np.testing.assert_array_equal(cal.apply(values[::-1], [b, a]), want[::-1])
+
+
+def test_a_calibration_is_dated_by_its_readings_when_told() -> None:
+    counts = {("L1", "S1"): np.full((4, 3), 1000.0)}
+    # 86400 s after the Unix epoch is 1970-01-02 00:00:00 UTC.
+    cal = from_reference(0.99, counts, created=86400.0, check=False)
+    assert cal.created == "1970-01-02T00:00:00Z"
+    again = from_reference(0.99, counts, created=86400.0, check=False)
+    assert again == cal  # the same readings, the same calibration

@@ -101,6 +101,20 @@ def test_the_headline_error_in_words() -> None:
     assert headline_error({"predicted_log_rmse": None}) is None
 
 
+def test_the_headline_says_which_arc_and_warns_a_half_turn_that_is_not_symmetric() -> None:
+    base = {"predicted_log_rmse": 0.05}
+    auto = headline_error({**base, "arc_symmetric": False, "arc_deg": 360.0,
+                           "arc_test_statistic": 812.4, "arc_test_dof": 72,
+                           "arc_test_p_value": 0.0})
+    assert auto is not None and auto["text"] == "0.050"
+    assert "over a full turn" in auto["arc"] and "not twofold symmetric" in auto["arc"]
+    assert "812.4 on 72" in auto["arc"] and auto["meaning"].endswith(auto["arc"])
+    forced = headline_error({**base, "arc_asymmetric": "the plan was forced over half a turn"})
+    assert forced is not None and forced["text"].endswith("(NOT TWOFOLD SYMMETRIC)")
+    assert forced["meaning"].startswith("Warning: the plan was forced over half a turn")
+    assert "arc" not in (headline_error(base) or {})
+
+
 def test_fit_curves_of_a_flat_table(tmp_path: Path) -> None:
     fit = fit_curves(read_result(_result(tmp_path, _table())), step_deg=90.0)
     assert fit["units"] == "1/sr" and fit["calibrated"] is True

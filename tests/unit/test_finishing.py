@@ -7,8 +7,10 @@ the rules, on an in-memory rig.
 from __future__ import annotations
 
 import asyncio
+import json
 import shutil
 import sqlite3
+import time
 from pathlib import Path
 
 import numpy as np
@@ -64,7 +66,11 @@ def test_a_calibration_job_is_rebuilt_without_replacing_the_calibration_in_effec
     assert (data / "calibration.json").read_text() == later
     new, old = read_result(result), read_result(original)
     np.testing.assert_array_equal(new.samples.values, old.samples.values)
+    # Dated by the white reference's readings, so the rebuild's is the same, whenever it runs.
     assert new.provenance["new_calibration"] == old.provenance["new_calibration"]
+    last = max(r.t_read for r in svc.store.readings(1))
+    assert json.loads(new.provenance["new_calibration"])["created"] == time.strftime(
+        "%Y-%m-%dT%H:%M:%SZ", time.gmtime(last))
     assert "gonio jobs rebuild" in new.provenance["rebuilt"]
     assert svc.store.get_job(1).summary == summary
     assert [e.type for e in svc.store.events_after(0, job_id=1)][-1] == "rebuilt"
@@ -87,3 +93,37 @@ def test_a_rebuild_refuses_jobs_not_completed_and_missing_readings(tmp_path: Pat
         con.execute("DELETE FROM readings WHERE job_id = 1")
     with pytest.raises(RebuildError, match="holds none of its readings"):
         rebuild_result(svc.store, data, 1, BasisSupply(_no_basis))
+
+
+def test_a_forced_half_turn_with_opposite_readings_that_differ_is_warned() -> None:
+    """Only the finishing sees such readings (no plan kind reads opposites over half a turn
+    today; a rebuild of readings from elsewhere may): symmetric readings are recorded quietly,
+    a 5 % lean (ten times the noise of a difference) is warned of with what to do."""
+    from types import SimpleNamespace
+    from typing import Any
+
+    from gonio.finishing import _record_arc_test
+
+    angles = np.array([0.0, 45.0, 90.0, 135.0, 180.0, 270.0])
+    a = np.deg2rad(angles)[None, :, None]
+    rng = np.random.default_rng(4)
+    store = JobStore(":memory:")
+    for lean, warned in ((0.0, False), (0.05, True)):
+        values = np.exp(np.cos(2 * a) + lean * np.cos(a)) * np.ones((4, 1, 3))
+        values *= 1 + 0.01 * rng.standard_normal(values.shape)
+        metrics: dict[str, Any] = {}
+        provenance: dict[str, Any] = {}
+        _record_arc_test(store, 1, UniformPlan(), SimpleNamespace(
+            stage_angles_deg=angles, values=values), metrics, provenance)
+        assert ("arc_asymmetric" in metrics) == warned
+        assert metrics["arc_symmetric"] is not warned and metrics["arc_deg"] == 180.0
+        assert "arc_test" in provenance
+        if warned:
+            assert "span_deg 360" in metrics["arc_asymmetric"]
+    # A half turn without opposite angles, or a full turn: nothing to test, nothing recorded.
+    metrics = {}
+    _record_arc_test(store, 1, UniformPlan(), SimpleNamespace(
+        stage_angles_deg=angles[:4], values=np.ones((4, 4, 3))), metrics, {})
+    _record_arc_test(store, 1, UniformPlan(span_deg=360), SimpleNamespace(
+        stage_angles_deg=angles, values=np.ones((4, 6, 3))), metrics, {})
+    assert metrics == {}

@@ -118,3 +118,41 @@ def test_status_at_rest_reports_a_stage_that_keeps_moving() -> None:
             return hal.StageStatus(self.pos, True, True)
 
     assert asyncio.run(hal.status_at_rest(Moving(MemRig().log), timeout_s=0.0)).moving
+
+
+class LoggedLight(hal.Light):
+    """A light with only the abstract methods: what the base class does with them."""
+
+    def __init__(self, in_band: bool) -> None:
+        self.name, self.in_band, self.calls = "LX", in_band, []  # type: list[str]
+        self.direction = hal.LabDirection(0, 0)
+
+    async def connect(self) -> None: ...
+
+    async def close(self) -> None: ...
+
+    async def set_on(self, on: bool) -> None:
+        self.calls.append(f"set_on {on}")
+
+    async def set_level(self, level: float) -> None: ...
+
+    async def status(self) -> hal.LightStatus:
+        self.calls.append("status")
+        return hal.LightStatus(True, 0.7, self.in_band)
+
+
+def test_the_base_light_switches_on_by_set_on_and_checks_by_status() -> None:
+    light = LoggedLight(in_band=True)
+    asyncio.run(light.switch_on(check=False))
+    asyncio.run(light.check_output())
+    assert light.calls == ["set_on True", "status"]
+    bad = LoggedLight(in_band=False)
+    with pytest.raises(hal.LampOutOfBand,
+                       match=r"LX: output level 0\.7 is outside its allowed band") as err:
+        asyncio.run(bad.check_output())
+    assert err.value.code == "out_of_band"
+
+
+def test_a_stage_runs_its_configured_profile_unless_its_driver_knows_better() -> None:
+    stage = MemStage(MemRig().log, speed_dps=90.0)
+    assert stage.profile_dps == (90.0, stage.accel_dps2)

@@ -350,7 +350,7 @@ function ruleText(id) {
   const rule = p.rule ?? "posterior";
   const setting = rule === "vf" ? `threshold e ${p.threshold ?? 0.1}` : `min gain ${p.min_gain ?? 3e-5}`;
   const cap = p.max_rotations == null ? "" : ` up to ${p.max_rotations}`;
-  const arc = p.span_deg == null ? "" : ` over ${p.span_deg}°`;
+  const arc = p.arc === "auto" ? " over the arc its test chooses" : p.span_deg == null ? "" : ` over ${p.span_deg}°`;
   return ` · adaptive, ${rule} rule, ${setting}, from ${p.initial_rotations} angles${arc}${cap}`;
 }
 
@@ -438,6 +438,12 @@ const METRIC_MEANING = {
   angles: "stage angles", readings: "readings stored",
   calibrated: "values in 1/sr (true) or sensor units (false)",
   seconds: "reconstruction time, s",
+  arc_deg: "the arc the stage angles covered, degrees (an auto-arc scan: the one its test chose)",
+  arc_symmetric: "the readings at opposite stage angles agree within the noise (twofold symmetric)",
+  arc_test_statistic: "twofold symmetry test: chi-square of the log differences at opposite angles",
+  arc_test_dof: "twofold symmetry test: its degrees of freedom (readings compared)",
+  arc_test_p_value: "twofold symmetry test: probability of so large a statistic for a symmetric specimen",
+  arc_asymmetric: "a half-turn scan whose readings at opposite angles differ: not twofold symmetric",
 };
 
 function showMetrics(metrics) {
@@ -579,7 +585,11 @@ function readPlan() {
     if (plan.rule === "vf") plan.threshold = Number(f.get("threshold"));
     else plan.min_gain = Number(f.get("min_gain"));
   } else plan.rotations = Number(f.get("rotations"));
-  if (kind !== "calibration") plan.span_deg = Number(f.get("span_deg"));
+  if (kind !== "calibration") {
+    // "auto": the first round tests twofold symmetry and the job chooses the arc itself.
+    if (f.get("span_deg") === "auto") { plan.arc = "auto"; plan.span_deg = 180; }
+    else plan.span_deg = Number(f.get("span_deg"));
+  }
   if (kind === "calibration") plan.reference_albedo = Number(f.get("reference_albedo"));
   return plan;
 }
@@ -639,7 +649,10 @@ function initForm() {
     const from = r.from_known ? `from the stage at ${r.from_deg.toFixed(1)}°` : "assuming the stage at 0° (position not known yet)";
     let text = `${(r.warnings || []).length ? "Runs, but read the warnings below" : "OK"}: ${r.readings} readings at ${r.angles_deg.length} stage angles, about ${eta(r.estimated_s)} ${from}` +
       ` (moves ${eta(r.motion_s)}, exposures ${eta(r.exposure_s)}).`;
-    if (r.max_estimated_s != null) text += ` Adaptive refinement can add up to ${r.max_angles - r.angles_deg.length} angles: at most ${eta(r.max_estimated_s)} in all.`;
+    if (r.max_estimated_s != null && r.kind === "adaptive") text += ` Adaptive refinement can add up to ${r.max_angles - r.angles_deg.length} angles: at most ${eta(r.max_estimated_s)} in all.`;
+    for (const b of r.arc_branches || []) {
+      text += ` If the first round finds the specimen ${b.arc_deg === 180 ? "twofold symmetric, it goes on over half a turn" : "not twofold symmetric, it goes on over a full turn"}: at most ${b.angles} angles (${b.readings} readings), ${eta(b.estimated_s)} in all.`;
+    }
     if (r.basis_build_s != null) text += ` First, about ${eta(r.basis_build_s)} more: the reconstruction basis is not built on this install yet and the adaptive rule needs it, so the job builds it before its first reading (once).`;
     setNote(text, null, r.warnings || []);
   }, true));

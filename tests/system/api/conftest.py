@@ -11,6 +11,7 @@ from __future__ import annotations
 import os
 import secrets
 from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -85,12 +86,12 @@ def daemon(tmp_path_factory: pytest.TempPathFactory, basis: Any) -> Iterator[Dae
         sim.close()
 
 
-@pytest.fixture
-def no_export_fits(daemon: Daemon) -> Iterator[None]:
-    """For a test none of whose assertions looks at the export fits: while it runs, the shared
-    daemon's scans finish without them (``Worker.fit_exports``, the factored and principled fits
-    stored in each result: 3-6 s of CPU per scan here). The daemon's default stays on for every
-    other test; the stored fits are asserted by test_scan_flow's full scan."""
+@contextmanager
+def export_fits_off(daemon: Daemon) -> Iterator[None]:
+    """While in the block, ``daemon``'s scans finish without the export fits
+    (``Worker.fit_exports``, the factored and principled fits stored in each result, with
+    their rendered check: several seconds of CPU per scan, far more than a short scan's
+    reconstruction). For the scans of a test that asserts nothing about their fits."""
     worker = daemon.app.state.service.worker
     before = worker.fit_exports
     worker.fit_exports = False
@@ -98,6 +99,15 @@ def no_export_fits(daemon: Daemon) -> Iterator[None]:
         yield
     finally:
         worker.fit_exports = before
+
+
+@pytest.fixture
+def no_export_fits(daemon: Daemon) -> Iterator[None]:
+    """For a test none of whose assertions looks at the export fits: while it runs, the shared
+    daemon's scans finish without them (:func:`export_fits_off`). The daemon's default stays on
+    for every other test; the stored fits are asserted by test_scan_flow's full scan."""
+    with export_fits_off(daemon):
+        yield
 
 
 @pytest.fixture(scope="module")

@@ -88,10 +88,12 @@ def test_gonio_scan_through_the_daemon_says_it_before_queueing(
             "--exposure", "0.005", "--light-settle", "0", "--no-progress", "-o", str(out)]
     assert main(argv) == 0 and out.is_file()  # warned, not refused
     err = capsys.readouterr().err
+    # The arc warning, told by its own words (the 3-angle scan with this small basis is also
+    # warned of as uncalibrated and, at its end, as missing its readings: basis misfit).
     (line,) = [ln for ln in err.splitlines()
-               if ln.startswith("warning:") and "uncalibrated" not in ln]
+               if ln.startswith("warning:") and "over half a turn" in ln]
     says_what_and_what_to_do(line)
     assert err.index(line) < err.index("queued on")
     assert main([*argv, "--span", "360"]) == 0
     assert [ln for ln in capsys.readouterr().err.splitlines()
-            if ln.startswith("warning:") and "uncalibrated" not in ln] == []
+            if ln.startswith("warning:") and "over half a turn" in ln] == []

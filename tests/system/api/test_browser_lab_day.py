@@ -46,7 +46,7 @@ def _a_finished_job(daemon: Daemon) -> int:
 
 
 def test_a_stale_key_gets_a_prompt_and_the_new_address_in_the_same_tab_recovers(
-    daemon: Daemon, browser: Any  # noqa: F811
+    daemon: Daemon, browser: Any, no_export_fits: None  # noqa: F811
 ) -> None:
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support.ui import WebDriverWait
@@ -153,7 +153,7 @@ def test_an_uncalibrated_scan_is_warned_accepted_and_labelled_as_such(
 
 
 def test_the_stage_chip_gives_the_specimen_angle_and_a_long_eta_keeps_the_buttons_in_view(
-    daemon: Daemon, browser: Any  # noqa: F811
+    daemon: Daemon, browser: Any, no_export_fits: None  # noqa: F811
 ) -> None:
     from selenium.webdriver.common.by import By
 

@@ -79,6 +79,22 @@ def test_connect_configures_extended_mode_and_profile() -> None:
         assert stage.model_number == 1020
 
 
+def test_profile_is_the_speed_and_acceleration_the_servo_runs() -> None:
+    with rig() as (sim, stage):
+        run(stage.connect)
+        speed, accel = stage.profile_dps
+        # ROBOTIS e-manual units: Profile Velocity 0.229 rpm = 1.374 motor deg/s, Profile
+        # Acceleration 214.577 rev/min^2 = 21.4577 motor deg/s^2; the stage turns 1/GEAR as far.
+        # 30 deg/s at the stage: 60 motor deg/s = 43.7 -> 44 units; 60 deg/s^2: 120 motor
+        # deg/s^2 = 5.59 -> 6 units.
+        assert speed == pytest.approx(44 * 1.374 / GEAR)
+        assert accel == pytest.approx(6 * 21.4577 / GEAR)
+        # ... which is what the simulated servo decoded from the registers and moves with.
+        run(lambda: stage.move_to(10.0))
+        assert (speed, accel) == pytest.approx((sim.motion.speed_dps, sim.motion.accel_dps2))
+        assert (stage.speed_dps, stage.accel_dps2) == (30.0, 60.0)  # the config, kept
+
+
 def test_moves_past_one_turn_and_approaches_from_the_positive_side() -> None:
     with rig(backlash_deg=2.0) as (sim, stage):
         async def go() -> tuple[float, float, list[float]]:

@@ -470,6 +470,43 @@ def test_switching_a_monitored_light_on_costs_two_round_trips(bench: Bench) -> N
     assert asyncio.run(run()) == 2  # coil write, monitor read
 
 
+def test_switching_on_unchecked_costs_one_round_trip_and_the_check_one_more(
+        bench: Bench) -> None:
+    async def run() -> tuple[int, int]:
+        light = ModbusLight(bench.light)
+        await light.connect()
+        n0 = bench.server.request_counts()["L1"]
+        await light.switch_on(check=False)
+        switched = bench.server.request_counts()["L1"] - n0
+        await light.check_output()  # in band: nothing raised
+        checked = bench.server.request_counts()["L1"] - n0 - switched
+        assert (await light.status()).on
+        await light.set_on(False)
+        await light.close()
+        return switched, checked
+
+    assert asyncio.run(run()) == (1, 1)  # the coil write; then the monitor read
+
+
+def test_the_deferred_check_of_a_lamp_out_of_band_keeps_the_switch_on_message(
+        bench: Bench) -> None:
+    async def run() -> None:
+        light = ModbusLight(bench.light)
+        await light.connect()
+        bench.server.set_lamp_output("L1", 0.5)
+        await light.switch_on(check=False)  # no monitor read, so nothing to raise yet
+        assert (await light.status()).on
+        # The monitor reads 0.5 x the 0.8 level (register scale 0.001: 400 -> 0.400).
+        with pytest.raises(LampOutOfBand, match=r"L1: output 0\.400 is outside 0\.800 \+- 0\.050; "
+                           r"check the lamp or lengthen warmup_s") as err:
+            await light.check_output()
+        assert err.value.code == "out_of_band"
+        await light.set_on(False)
+        await light.close()
+
+    asyncio.run(run())
+
+
 def test_poll_interval_follows_the_exposure(bench: Bench) -> None:
     sensor = ModbusSensor(bench.sensors[0])
     assert sensor.poll_interval(0.05) == pytest.approx(0.001)

@@ -61,6 +61,20 @@ def test_connect_writes_speed_and_first_move_homes(transport: str) -> None:
         assert sim.motion.speed_dps == pytest.approx(20.0, rel=1e-3)
 
 
+def test_profile_is_the_speed_and_acceleration_the_stage_runs() -> None:
+    with rig("tcp", accel_dps2=80.3) as (sim, stage):
+        run(stage.connect)
+        speed, accel = stage.profile_dps
+        # Zaber ASCII units: maxspeed = microsteps/s x 1.6384, accel = microsteps/s^2 x
+        # 1.6384 / 10000, both integers. 20 deg/s: 32768 units exactly; 80.3 deg/s^2:
+        # 13.16 -> 13 units = 79.35 deg/s^2.
+        assert speed == pytest.approx(20.0)
+        assert accel == pytest.approx(13 / (MPD * 1.6384e-4))
+        run(lambda: stage.move_to(10.0))  # the simulator takes the settings for a move
+        assert (speed, accel) == pytest.approx((sim.motion.speed_dps, sim.motion.accel_dps2))
+        assert stage.accel_dps2 == 80.3  # the config, kept
+
+
 @pytest.mark.parametrize("transport", TRANSPORTS)
 def test_negative_approach_overshoots_then_returns(transport: str) -> None:
     with rig(transport, approach="negative", backlash_deg=1.5) as (sim, stage):

@@ -103,3 +103,29 @@ def test_cli_jobs_list(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> No
     assert args.func(args) == 0
     out = capsys.readouterr().out
     assert "queued" in out and "felt" in out
+
+
+def test_the_arc_options_build_an_auto_arc_plan_or_say_what_is_wrong() -> None:
+    auto = _parse("--arc", "auto")
+    assert isinstance(auto, UniformPlan) and (auto.arc, auto.span_deg) == ("auto", 180.0)
+    vf = _parse("--arc", "auto", "--adaptive", "--rule", "vf", "--arc-noise", "0.02")
+    assert isinstance(vf, AdaptivePlan) and (vf.arc, vf.span_deg, vf.arc_noise) == (
+        "auto", 180.0, 0.02)
+    assert _parse().arc == "fixed"  # type: ignore[attr-defined]
+    with pytest.raises(UsageError, match="--span 360 forces a full turn"):
+        _parse("--arc", "auto", "--span", "360")
+    with pytest.raises(UsageError, match="add --arc auto or drop --arc-noise"):
+        _parse("--arc-noise", "0.02")
+
+
+def test_the_dry_run_summary_states_both_branches_of_an_auto_arc_plan() -> None:
+    from gonio.plans.dryrun import dry_run
+    from gonio.rigdescription import RigDescription
+    from gonio.sim.memrig import MemRig
+
+    plan = _parse("--arc", "auto")
+    text = scan_commands.dry_run_summary(
+        dry_run(plan, RigDescription.from_rig(MemRig())), plan, "mem")  # type: ignore[arg-type]
+    # MemRig: 3 pairs; 8 over half a turn plus 2 opposites, or 16 over the full turn.
+    assert "twofold symmetric: on over half a turn, at most 10 angles (30 readings)" in text
+    assert "not twofold symmetric: on over a full turn, at most 16 angles (48 readings)" in text

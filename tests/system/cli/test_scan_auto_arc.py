@@ -1,0 +1,78 @@
+"""``gonio scan --sim --arc auto``: the first round tests twofold symmetry on the simulated
+rig's real sensors (Modbus, with their shot and read noise) and the scan takes the arc the
+specimen needs: the default material (twofold symmetric) stays on half a turn, a tilted-facet
+table from the library's asymmetric families (``--material FILE.npz``) goes to a full turn.
+The choice is in the output, the job's events, the result's metrics and provenance."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gonio.brdf.materials import library
+from gonio.brdf.models import analytic as bm
+from gonio.cli import main
+from gonio.plans.arc import fill_angles, first_round_angles
+from gonio.results import read_result
+from gonio.store import JobStore
+
+pytestmark = pytest.mark.system
+
+
+def _scan(tmp_path: Path, capsys: pytest.CaptureFixture[str], *extra: str
+          ) -> tuple[str, JobStore, dict]:
+    out, data = tmp_path / "a.h5", tmp_path / "data"
+    code = main(["scan", "--sim", "--arc", "auto", "--rotations", "8", "--time-scale", "50",
+                 "--no-progress", "--specimen", "s", "--data-dir", str(data), "-o", str(out),
+                 *extra])
+    cap = capsys.readouterr()
+    assert code == 0, cap.err
+    store = JobStore(data / "gonio.sqlite")
+    job = [j for j in store.list_jobs() if j.kind == "uniform"][-1]
+    return cap.out + cap.err, store, {"job": job, "result": read_result(out)}
+
+
+def _angles(store: JobStore, job_id: int) -> list[float]:
+    return sorted(s.specimen_deg for s in store.steps(job_id))
+
+
+def test_a_symmetric_specimen_stays_on_half_a_turn(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    text, store, got = _scan(tmp_path, capsys)
+    job = got["job"]
+    assert _angles(store, job.id) == pytest.approx(sorted(first_round_angles(0.0, 8)))
+    (ev,) = [e for e in store.events_after(0, job_id=job.id) if e.type == "arc_test"]
+    assert ev.data["symmetric"] and ev.data["arc_deg"] == 180.0 and ev.data["dof"] > 0
+    assert "arc: the specimen reads twofold symmetric" in text
+    assert "arc: 180 deg" in text
+    metrics = got["result"].metrics
+    assert metrics["arc_symmetric"] is True or metrics["arc_symmetric"] == 1
+    assert metrics["arc_deg"] == 180.0
+    assert metrics["arc_test_p_value"] == pytest.approx(ev.data["p_value"])
+    assert json.loads(got["result"].provenance["arc_test"])["statistic"] == \
+        pytest.approx(ev.data["statistic"])
+    assert job.summary is not None and job.summary["arc_deg"] == 180.0
+
+
+def test_a_tilted_facet_specimen_goes_to_a_full_turn(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    spec = next(s for s in library.library_specs(asymmetric=True)
+                if s.name == "tilted-facet-002")
+    table = tmp_path / "tilted-facet.npz"
+    bm.tabulate(spec.model, np.float32).save(table)
+    text, store, got = _scan(tmp_path, capsys, "--material", str(table))
+    job = got["job"]
+    # The first round, then the opposites it had not read: 16 uniform angles over the turn.
+    assert _angles(store, job.id) == pytest.approx([22.5 * k for k in range(16)])
+    fill = sorted(s.specimen_deg for s in store.steps(job.id) if s.round == 1)
+    assert fill == pytest.approx(fill_angles(0.0, 8))
+    (ev,) = [e for e in store.events_after(0, job_id=job.id) if e.type == "arc_test"]
+    assert not ev.data["symmetric"] and ev.data["arc_deg"] == 360.0
+    assert ev.data["p_value"] < 1e-6
+    assert "NOT twofold symmetric" in text and "arc: 360 deg" in text
+    metrics = got["result"].metrics
+    assert metrics["arc_deg"] == 360.0 and not metrics["arc_symmetric"]
+    assert metrics["n_angles"] == 16

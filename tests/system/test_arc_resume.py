@@ -1,0 +1,82 @@
+"""An auto-arc scan that switches to a full turn keeps every reading exactly once across a
+``kill -9`` and resumes on the arc it chose.
+
+The child (``_arc_child.py``) scans a tilted-facet specimen (no twofold symmetry) on the
+simulated rig: 10 angles of its first round (8 over half a turn, 180 and 270), the test, then
+6 fill angles. It is killed right after the first round's last checkpoint (before the test ran)
+or two angles into the fill round (after the choice was stored), restarted, and compared with
+an uninterrupted run of the same seed.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from gonio.jobstates import JobState
+from gonio.plans.arc import ARC_TEST_EVENT, fill_angles, first_round_angles
+from gonio.store import JobStore
+
+pytestmark = pytest.mark.system
+
+
+def _child(db: Path, seed: int, freeze_after: int = 0) -> subprocess.Popen[str]:
+    script = Path(__file__).with_name("_arc_child.py")
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2])}
+    return subprocess.Popen([sys.executable, str(script), str(db), str(seed),
+                             str(freeze_after)], stdout=subprocess.PIPE, text=True, env=env)
+
+
+def _stopped(pid: int) -> bool:
+    """True once the process is stopped (SIGSTOP): state 'T' in /proc/PID/stat."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return False
+    return stat.rsplit(")", 1)[1].split()[0] in ("T", "t")
+
+
+@pytest.mark.parametrize("freeze_after", [10, 12], ids=["before-the-test", "in-the-fill"])
+def test_sigkill_around_the_arc_switch_keeps_every_reading_once(
+        tmp_path: Path, freeze_after: int) -> None:
+    killed, clean = tmp_path / "killed.sqlite", tmp_path / "clean.sqlite"
+    proc = _child(killed, 3, freeze_after)
+    deadline = time.monotonic() + 300
+    while not _stopped(proc.pid) and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert proc.poll() is None, "the child ended before it could be killed mid-scan"
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    store = JobStore(killed)
+    assert store.get_job(1).done_angles == freeze_after
+    assert store.get_job(1).state is JobState.RUNNING
+    tested = store.last_event(1, ARC_TEST_EVENT)
+    # Killed inside the commit's event listener: the 10th angle's test had not run yet; two
+    # angles into the fill, the choice was stored.
+    assert (tested is None) == (freeze_after == 10)
+    assert _child(killed, 3).communicate(timeout=300)[0].strip() == "running"
+    assert _child(clean, 3).communicate(timeout=300)[0].strip() == "running"
+    a_store, b_store = JobStore(killed), JobStore(clean)
+    a, b = a_store.readings(1), b_store.readings(1)
+    keys = [(r.angle_index, r.light, r.sensor) for r in a]
+    assert len(keys) == len(set(keys)) == len(b)  # nothing lost, nothing duplicated
+    assert keys == [(r.angle_index, r.light, r.sensor) for r in b]
+    steps = a_store.steps(1)
+    assert [(s.angle_index, s.round, s.specimen_deg) for s in steps] == \
+        [(s.angle_index, s.round, s.specimen_deg) for s in b_store.steps(1)]
+    # On the full turn it chose: the first round, then the fill, each angle once.
+    assert sorted(s.specimen_deg for s in steps if s.round == 0) == pytest.approx(
+        sorted(first_round_angles(0.0, 8)))
+    assert sorted(s.specimen_deg for s in steps if s.round == 1) == pytest.approx(
+        fill_angles(0.0, 8))
+    assert all(s.done for s in steps) and len(steps) == 16
+    events = [e for e in a_store.events_after(0, job_id=1) if e.type == ARC_TEST_EVENT]
+    assert len(events) == 1 and events[0].data["arc_deg"] == 360.0
+    if tested is not None:
+        assert events[0].data == tested.data
