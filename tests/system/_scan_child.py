@@ -1,9 +1,11 @@
-"""Child process for the kill-and-restart test: measure a job on a fresh simulated rig.
+"""Child process for the kill-and-restart tests: measure a job on a fresh simulated rig.
 
-Usage: python _scan_child.py DB STAGE SEED ROTATIONS [FREEZE_AFTER]. Resumes the store's
-active job if there is one (as the daemon does after a crash), otherwise creates it. With
-FREEZE_AFTER the process stops dead (as if hung) right after committing that many angles, so
-the test's SIGKILL lands mid-scan however busy the machine is.
+Usage: python _scan_child.py DB STAGE SEED ROTATIONS [FREEZE_AFTER [MATERIAL [ARC]]].
+Resumes the store's active job if there is one (as the daemon does after a crash), otherwise
+creates it (uniform, ROTATIONS angles, ``arc`` ARC, default ``fixed``) on a rig holding
+MATERIAL (default: the simulated rig's own). With FREEZE_AFTER the process stops dead (as if
+hung) right after committing that many angles, so the test's SIGKILL lands mid-scan however busy
+the machine is. The tests start it with :func:`start_child` and wait for :func:`stopped`.
 """
 
 from __future__ import annotations
@@ -11,7 +13,9 @@ from __future__ import annotations
 import asyncio
 import os
 import signal
+import subprocess
 import sys
+from pathlib import Path
 from typing import Any
 
 from gonio.drivers.factory import build_rig
@@ -22,8 +26,31 @@ from gonio.sim.rig import SimRigOptions, start_sim_rig
 from gonio.store import JobStore
 
 
-async def main(db: str, stage: str, seed: int, rotations: int, freeze_after: int = 0) -> int:
-    with start_sim_rig(SimRigOptions(stage=stage, time_scale=10.0, seed=seed)) as sim:
+def start_child(db: Path, seed: int, freeze_after: int = 0, *, stage: str = "dynamixel",
+                rotations: int = 8, material: str | None = None,
+                arc: str = "fixed") -> subprocess.Popen[str]:
+    """This script in a child process (its stdout: the job's final state)."""
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2])}
+    argv = [str(db), stage, str(seed), str(rotations), str(freeze_after)]
+    if material is not None or arc != "fixed":
+        argv += [material or "", arc]
+    return subprocess.Popen([sys.executable, __file__, *argv], stdout=subprocess.PIPE,
+                            text=True, env=env)
+
+
+def stopped(pid: int) -> bool:
+    """True once the process is stopped (SIGSTOP): state 'T' in /proc/PID/stat."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return False
+    return stat.rsplit(")", 1)[1].split()[0] in ("T", "t")
+
+
+async def main(db: str, stage: str, seed: int, rotations: int, freeze_after: int = 0,
+               material: str | None = None, arc: str = "fixed") -> int:
+    with start_sim_rig(SimRigOptions(stage=stage, time_scale=10.0, seed=seed,
+                                     material=material or None)) as sim:
         rig = build_rig(sim.config)
         desc = RigDescription.from_rig(rig)
         store = JobStore(db)
@@ -33,8 +60,10 @@ async def main(db: str, stage: str, seed: int, rotations: int, freeze_after: int
             job = active[0]
             plan = parse_plan(job.plan)
         else:
-            plan = UniformPlan(rotations=rotations, exposure=ExposureSettings(
-                exposure_s=0.02, light_settle_s=0.0, dark="every_angle"))
+            plan = UniformPlan.model_validate({
+                "rotations": rotations, "arc": arc,  # validated: from the command line
+                "exposure": ExposureSettings(exposure_s=0.02, light_settle_s=0.0,
+                                             dark="every_angle")})
             job = store.create_job(kind=plan.kind, specimen="sim",
                                    plan=plan.model_dump(mode="json"),
                                    rig=desc.model_dump(mode="json"))
@@ -53,4 +82,7 @@ async def main(db: str, stage: str, seed: int, rotations: int, freeze_after: int
 if __name__ == "__main__":
     db, stage, seed, rotations = sys.argv[1:5]
     freeze_after = int(sys.argv[5]) if len(sys.argv) > 5 else 0
-    raise SystemExit(asyncio.run(main(db, stage, int(seed), int(rotations), freeze_after)))
+    material = sys.argv[6] or None if len(sys.argv) > 6 else None
+    arc = sys.argv[7] if len(sys.argv) > 7 else "fixed"
+    raise SystemExit(asyncio.run(main(db, stage, int(seed), int(rotations), freeze_after,
+                                      material, arc)))

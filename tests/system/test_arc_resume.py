@@ -1,8 +1,8 @@
 """An auto-arc scan that switches to a full turn keeps every reading exactly once across a
 ``kill -9`` and resumes on the arc it chose.
 
-The child (``_arc_child.py``) scans a tilted-facet specimen (no twofold symmetry) on the
-simulated rig: 10 angles of its first round (8 over half a turn, 180 and 270), the test, then
+The child (``_scan_child.py``, arc auto) scans a tilted-facet specimen (no twofold symmetry)
+on the simulated rig: 10 angles of its first round (8 over half a turn, 180 and 270), the test, then
 6 fill angles. It is killed right after the first round's last checkpoint (before the test ran)
 or two angles into the fill round (after the choice was stored), restarted, and compared with
 an uninterrupted run of the same seed.
@@ -10,10 +10,8 @@ an uninterrupted run of the same seed.
 
 from __future__ import annotations
 
-import os
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -22,24 +20,13 @@ import pytest
 from gonio.jobstates import JobState
 from gonio.plans.arc import ARC_TEST_EVENT, fill_angles, first_round_angles
 from gonio.store import JobStore
+from tests.system._scan_child import start_child, stopped
 
 pytestmark = pytest.mark.system
 
 
 def _child(db: Path, seed: int, freeze_after: int = 0) -> subprocess.Popen[str]:
-    script = Path(__file__).with_name("_arc_child.py")
-    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2])}
-    return subprocess.Popen([sys.executable, str(script), str(db), str(seed),
-                             str(freeze_after)], stdout=subprocess.PIPE, text=True, env=env)
-
-
-def _stopped(pid: int) -> bool:
-    """True once the process is stopped (SIGSTOP): state 'T' in /proc/PID/stat."""
-    try:
-        stat = Path(f"/proc/{pid}/stat").read_text()
-    except OSError:
-        return False
-    return stat.rsplit(")", 1)[1].split()[0] in ("T", "t")
+    return start_child(db, seed, freeze_after, material="tilted-facet-002", arc="auto")
 
 
 @pytest.mark.parametrize("freeze_after", [10, 12], ids=["before-the-test", "in-the-fill"])
@@ -48,7 +35,7 @@ def test_sigkill_around_the_arc_switch_keeps_every_reading_once(
     killed, clean = tmp_path / "killed.sqlite", tmp_path / "clean.sqlite"
     proc = _child(killed, 3, freeze_after)
     deadline = time.monotonic() + 300
-    while not _stopped(proc.pid) and proc.poll() is None and time.monotonic() < deadline:
+    while not stopped(proc.pid) and proc.poll() is None and time.monotonic() < deadline:
         time.sleep(0.05)
     assert proc.poll() is None, "the child ended before it could be killed mid-scan"
     proc.send_signal(signal.SIGKILL)

@@ -3,10 +3,8 @@
 from __future__ import annotations
 
 import asyncio
-import os
 import signal
 import subprocess
-import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -30,6 +28,7 @@ from gonio.plans.validation import plan_pairs, validate_plan
 from gonio.rigdescription import RigDescription
 from gonio.sim.rig import SimRig, SimRigOptions, start_sim_rig
 from gonio.store import JobStore
+from tests.system._scan_child import start_child, stopped
 
 pytestmark = pytest.mark.system
 FAST = ExposureSettings(exposure_s=0.02, light_settle_s=0.0, dark="every_angle")
@@ -127,20 +126,7 @@ def test_bad_plan_refused_before_anything_moves() -> None:
 
 
 def _child(db: Path, seed: int, freeze_after: int = 0) -> subprocess.Popen[str]:
-    script = Path(__file__).with_name("_scan_child.py")
-    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2])}
-    return subprocess.Popen([sys.executable, str(script), str(db), "dynamixel", str(seed), "8",
-                             str(freeze_after)],
-                            stdout=subprocess.PIPE, text=True, env=env)
-
-
-def _stopped(pid: int) -> bool:
-    """True once the process is stopped (SIGSTOP): state 'T' in /proc/PID/stat."""
-    try:
-        stat = Path(f"/proc/{pid}/stat").read_text()
-    except OSError:
-        return False
-    return stat.rsplit(")", 1)[1].split()[0] in ("T", "t")
+    return start_child(db, seed, freeze_after)
 
 
 def test_sigkill_mid_scan_then_restart_resumes(tmp_path: Path) -> None:
@@ -149,7 +135,7 @@ def test_sigkill_mid_scan_then_restart_resumes(tmp_path: Path) -> None:
     # machine, instead of racing a busy test process against the scan.
     proc = _child(killed, 7, freeze_after=3)
     deadline = time.monotonic() + 300
-    while not _stopped(proc.pid) and proc.poll() is None and time.monotonic() < deadline:
+    while not stopped(proc.pid) and proc.poll() is None and time.monotonic() < deadline:
         time.sleep(0.05)
     assert proc.poll() is None, "the child ended before it could be killed mid-scan"
     proc.send_signal(signal.SIGKILL)
