@@ -5,7 +5,8 @@ Resumes the store's active job if there is one (as the daemon does after a crash
 creates it (uniform, ROTATIONS angles, ``arc`` ARC, default ``fixed``) on a rig holding
 MATERIAL (default: the simulated rig's own). With FREEZE_AFTER the process stops dead (as if
 hung) right after committing that many angles, so the test's SIGKILL lands mid-scan however busy
-the machine is. The tests start it with :func:`start_child` and wait for :func:`stopped`.
+the machine is. The tests start it with :func:`start_child` and kill it with
+:func:`kill_when_frozen`.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ import os
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 from typing import Any
 
@@ -45,6 +47,17 @@ def stopped(pid: int) -> bool:
     except OSError:
         return False
     return stat.rsplit(")", 1)[1].split()[0] in ("T", "t")
+
+
+def kill_when_frozen(proc: subprocess.Popen[str], timeout_s: float = 300.0) -> None:
+    """SIGKILL a child started with FREEZE_AFTER once it has stopped itself there; fails the
+    test if it ended first (it was never mid-scan)."""
+    deadline = time.monotonic() + timeout_s
+    while not stopped(proc.pid) and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert proc.poll() is None, "the child ended before it could be killed mid-scan"
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
 
 
 async def main(db: str, stage: str, seed: int, rotations: int, freeze_after: int = 0,

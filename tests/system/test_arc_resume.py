@@ -10,9 +10,7 @@ an uninterrupted run of the same seed.
 
 from __future__ import annotations
 
-import signal
 import subprocess
-import time
 from pathlib import Path
 
 import pytest
@@ -20,7 +18,7 @@ import pytest
 from gonio.jobstates import JobState
 from gonio.plans.arc import ARC_TEST_EVENT, fill_angles, first_round_angles
 from gonio.store import JobStore
-from tests.system._scan_child import start_child, stopped
+from tests.system._scan_child import kill_when_frozen, start_child
 
 pytestmark = pytest.mark.system
 
@@ -34,12 +32,7 @@ def test_sigkill_around_the_arc_switch_keeps_every_reading_once(
         tmp_path: Path, freeze_after: int) -> None:
     killed, clean = tmp_path / "killed.sqlite", tmp_path / "clean.sqlite"
     proc = _child(killed, 3, freeze_after)
-    deadline = time.monotonic() + 300
-    while not stopped(proc.pid) and proc.poll() is None and time.monotonic() < deadline:
-        time.sleep(0.05)
-    assert proc.poll() is None, "the child ended before it could be killed mid-scan"
-    proc.send_signal(signal.SIGKILL)
-    proc.wait()
+    kill_when_frozen(proc)
     store = JobStore(killed)
     assert store.get_job(1).done_angles == freeze_after
     assert store.get_job(1).state is JobState.RUNNING

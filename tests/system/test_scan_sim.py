@@ -3,9 +3,7 @@
 from __future__ import annotations
 
 import asyncio
-import signal
 import subprocess
-import time
 from collections.abc import Callable
 from pathlib import Path
 
@@ -28,7 +26,7 @@ from gonio.plans.validation import plan_pairs, validate_plan
 from gonio.rigdescription import RigDescription
 from gonio.sim.rig import SimRig, SimRigOptions, start_sim_rig
 from gonio.store import JobStore
-from tests.system._scan_child import start_child, stopped
+from tests.system._scan_child import kill_when_frozen, start_child
 
 pytestmark = pytest.mark.system
 FAST = ExposureSettings(exposure_s=0.02, light_settle_s=0.0, dark="every_angle")
@@ -134,12 +132,7 @@ def test_sigkill_mid_scan_then_restart_resumes(tmp_path: Path) -> None:
     # The child freezes itself after its 3rd checkpoint: the kill lands mid-scan on any
     # machine, instead of racing a busy test process against the scan.
     proc = _child(killed, 7, freeze_after=3)
-    deadline = time.monotonic() + 300
-    while not stopped(proc.pid) and proc.poll() is None and time.monotonic() < deadline:
-        time.sleep(0.05)
-    assert proc.poll() is None, "the child ended before it could be killed mid-scan"
-    proc.send_signal(signal.SIGKILL)
-    proc.wait()
+    kill_when_frozen(proc)
     store = JobStore(killed)
     done_before = store.get_job(1).done_angles
     assert done_before == 3
