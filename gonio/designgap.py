@@ -53,8 +53,8 @@ class ScanFacts:
     Attributes
     ----------
     predicted_log_rmse : its self-estimate (log_rmse units)
-    undetermined, outside : the two parts of that estimate, log_rmse units
-        (:func:`gonio.brdf.reconstruction.selfcheck.estimate_parts`; NaN without a joint fit)
+    undetermined, outside : two parts of that estimate, log_rmse units
+        (:func:`gonio.brdf.reconstruction.selfcheck.final_parts`; NaN without a joint fit)
     n_angles : stage angles measured
     span_deg : the arc its angles were planned over (180 or 360 degrees)
     n_pairs : light/sensor pairs measured
@@ -63,6 +63,8 @@ class ScanFacts:
     readings : readings stored
     ranged : readings taken in a lower sensor range than the nominal one (a bright peak)
     saturated : readings that saturated in the range they were kept in
+    unseen : the third part, the error where no pair looks (the coverage term; NaN without a
+        joint fit)
     """
 
     predicted_log_rmse: float
@@ -76,6 +78,7 @@ class ScanFacts:
     readings: int = 0
     ranged: int = 0
     saturated: int = 0
+    unseen: float = float("nan")
 
 
 @dataclass(frozen=True)
@@ -126,11 +129,17 @@ def scan_facts(rec: Any, readings: Sequence[Any], *, n_angles: int, span_deg: fl
     readings : the job's :class:`gonio.store.ReadingRow` s
     n_angles, span_deg, n_pairs, calibrated : as in :class:`ScanFacts`
     """
-    from gonio.brdf.reconstruction.selfcheck import estimate_parts
+    from gonio.brdf.reconstruction.selfcheck import estimate_parts, final_parts
 
-    undetermined, outside = estimate_parts(rec.expected_log_rmse, rec.mahalanobis,
-                                           rec.cv_sample_error)
-    return ScanFacts(
+    if rec.misfit is not None:
+        undetermined, outside, unseen = final_parts(
+            rec.expected_log_rmse, rec.mahalanobis, rec.cv_sample_error, rec.uncovered_share,
+            rec.misfit)
+    else:
+        undetermined, outside = estimate_parts(rec.expected_log_rmse, rec.mahalanobis,
+                                               rec.cv_sample_error)
+        unseen = float("nan")
+    return ScanFacts(unseen=unseen,
         predicted_log_rmse=float(rec.predicted_log_rmse), undetermined=undetermined,
         outside=outside, n_angles=int(n_angles), span_deg=float(span_deg),
         n_pairs=int(n_pairs), calibrated=bool(calibrated),
@@ -210,6 +219,11 @@ def _above(facts: ScanFacts, design: DesignExpectation) -> list[str]:
                    f"{facts.outside:.3g} of its {p:.3g} comes from what the basis cannot "
                    "represent (how far the fit had to leave the training library, and how "
                    "badly the other pairs predict each pair)")
+    elif _share(facts.unseen, p) > _DOMINANT:
+        out.append(f"the pairs leave much of the table unseen: {facts.unseen:.3g} of its "
+                   f"{p:.3g} is the error expected where no pair looks (the share of the "
+                   "prior's variance the readings do not reach; docs/science.md 7.1.1); pairs "
+                   "spread over more of the table lower it")
     elif _share(facts.undetermined, p) > _DOMINANT:
         out.append(f"the readings leave this specimen undetermined: {facts.undetermined:.3g} "
                    f"of its {p:.3g} is what the fit cannot pin down from them, so it changes "
@@ -233,8 +247,10 @@ def _below(facts: ScanFacts, design: DesignExpectation) -> list[str]:
     out = _departures(facts, design, above=False)
     parts = ""
     if math.isfinite(facts.undetermined) and math.isfinite(facts.outside):
+        unseen = (f"; where no pair looks: {facts.unseen:.3g}" if math.isfinite(facts.unseen)
+                  else "")
         parts = (f" (what the readings leave undetermined: {facts.undetermined:.3g}; what the "
-                 f"basis cannot represent: {facts.outside:.3g})")
+                 f"basis cannot represent: {facts.outside:.3g}{unseen})")
     panel = ""
     if (design.expected_log_rmse_measured is not None
             and design.expected_log_rmse_synthetic is not None):

@@ -498,10 +498,31 @@ class ScanPosterior:
     # ------------------------------------------------------------------ results
     def weighted_variance(self) -> float:
         """``sum_ph tr(W Cov_post(c(ph)))`` in units of the prior (before the scale ``s2``)."""
-        prior = geo.N_PH * float(np.sum(self._rho_m * self._trWP))
+        prior = self.prior_weighted_variance()
         Gw = self._weighted(self.alpha, self.alpha)
         explained = float(np.sum(scipy.linalg.cho_solve(self._chol, Gw) * np.eye(len(Gw))))
         return max(prior - explained, 0.0)
+
+    def prior_weighted_variance(self) -> float:
+        """``sum_ph tr(W Cov_prior(c(ph)))`` in units of the prior: what
+        :meth:`weighted_variance` would be with no reading at all."""
+        return geo.N_PH * float(np.sum(self._rho_m * self._trWP))
+
+    def uncovered_share(self) -> float:
+        """Share of the prior's ``log_rmse``-weighted variance the readings leave (0..1).
+
+        The coverage witness of the self-estimate (:func:`gonio.brdf.reconstruction.selfcheck.
+        final_log_rmse`): it depends on where the pairs and stage angles are, on the prior's
+        shape (``rho``) and on the ``log_rmse`` weights, not on the readings' scale ``s2``.
+        A layout whose pairs all lie in one plane leaves most of the table to the prior's
+        correlations (0.1-0.45 for the MA68 preset on held-out materials), a designed layout
+        little (about 0.02 for 10 designed pairs at 8 angles): docs/science.md 7.1.1. NaN when
+        the prior carries no weighted variance.
+        """
+        prior = self.prior_weighted_variance()
+        if not prior > 0:
+            return float("nan")
+        return float(min(self.weighted_variance() / prior, 1.0))
 
     @property
     def expected_log_rmse(self) -> float:

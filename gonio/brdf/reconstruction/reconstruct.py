@@ -89,6 +89,7 @@ from gonio.brdf.reconstruction.posterior import (
 from gonio.brdf.reconstruction.selfcheck import (
     BasisMisfit,
     basis_misfit,
+    final_log_rmse,
     predict_log_rmse,
     widen_log_rmse,
 )
@@ -151,9 +152,10 @@ class Reconstruction:
     predicted_log_rmse : float
         The estimated ``metrics.log_rmse`` of the whole reconstruction against the true
         BRDF, calibrated on materials held out of the basis; the number to report. Joint
-        fit: :func:`gonio.brdf.reconstruction.selfcheck.predict_log_rmse`; V&F path:
-        :func:`predict_log_rmse_vf`; either widened when the readings show a misfit the
-        basis cannot hold (``misfit``).
+        fit: :func:`gonio.brdf.reconstruction.selfcheck.predict_log_rmse` through the final
+        mapping :func:`gonio.brdf.reconstruction.selfcheck.final_log_rmse` (a coverage term;
+        its own factor and a floor at the misfit when the readings show structure the basis
+        cannot hold, ``misfit``); V&F path: :func:`predict_log_rmse_vf`, widened by such a misfit.
     angle_log_errors : (r,) float64 or None
         Joint fit only: per stage angle (in the order given), the RMS log error (units of
         ``log_rmse``) of that angle's readings predicted from all the other angles. Where it
@@ -178,12 +180,18 @@ class Reconstruction:
         How far the fit misses its own readings against their noise, and whether that misfit
         stays across the stage angles
         (:func:`gonio.brdf.reconstruction.selfcheck.basis_misfit`). When it is flagged
-        (``misfit.flagged``) the basis cannot hold the material and ``predicted_log_rmse`` has
-        been widened (:func:`gonio.brdf.reconstruction.selfcheck.widen_log_rmse`);
+        (``misfit.flagged``) the basis cannot hold the material and ``predicted_log_rmse`` is
+        never below the misfit
+        (:func:`gonio.brdf.reconstruction.selfcheck.final_log_rmse`);
         ``misfit.message(...)`` says why.
     predicted_log_rmse_unwidened : float
-        The estimate before that widening (equal to ``predicted_log_rmse`` unless the misfit
-        is flagged).
+        The calibrated model's estimate before the final mapping
+        (:func:`gonio.brdf.reconstruction.selfcheck.predict_log_rmse` or, on V&F's path,
+        :func:`predict_log_rmse_vf`).
+    uncovered_share : float
+        Joint fit only (else NaN): the share of the prior's ``log_rmse``-weighted variance
+        the readings leave (0..1; :meth:`gonio.brdf.reconstruction.posterior.ScanPosterior.
+        uncovered_share`), the coverage witness of ``predicted_log_rmse``.
     """
 
     table: BRDFTable
@@ -201,6 +209,7 @@ class Reconstruction:
     mahalanobis: float = float("nan")
     misfit: BasisMisfit | None = None
     predicted_log_rmse_unwidened: float = float("nan")
+    uncovered_share: float = float("nan")
 
     @property
     def misfit_warning(self) -> str | None:
@@ -754,12 +763,16 @@ def _reconstruct(
 
         expected, mahal = post.expected_log_rmse, post.mahalanobis
         predicted = predict_log_rmse(expected, mahal, cv)
+        uncovered = post.uncovered_share()
+        # The calibrated final mapping: a coverage term for the error where no pair looks,
+        # and, when the basis cannot hold the readings (residuals well above the noise that
+        # stay across the angles), a floor at the error the readings themselves show.
+        widened = final_log_rmse(predicted, uncovered, misfit)
     else:
-        expected = mahal = float("nan")
+        expected = mahal = uncovered = float("nan")
         predicted = predict_log_rmse_vf(cv, n, int(alpha.size))
-    # Residuals well above the noise that stay across the angles: the basis cannot hold the
-    # material, and the estimate never drops below the error the readings themselves show.
-    widened = widen_log_rmse(predicted, misfit)
+        # V&F's path: never below the error the readings themselves show.
+        widened = widen_log_rmse(predicted, misfit)
     seconds = time.perf_counter() - t0
     return Reconstruction(
         table=table,
@@ -783,6 +796,7 @@ def _reconstruct(
         angle_log_errors=angle_err,
         pair_log_errors=pair_err,
         misfit=misfit,
+        uncovered_share=uncovered,
     )
 
 

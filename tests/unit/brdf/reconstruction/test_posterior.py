@@ -63,6 +63,31 @@ def test_weighted_variance_equals_the_explicit_posterior() -> None:
                                                      rel=1e-8)
 
 
+def test_uncovered_share_is_the_explicit_posterior_over_the_prior() -> None:
+    """The coverage witness: the posterior's weighted variance over the prior's, both from
+    the explicit Gaussian process (the prior's: 72 slices of tr(W Cov(c(ph), c(ph))))."""
+    b, cells, ph, alpha, vals = _scan()
+    post = ScanPosterior(b, cells, ph, alpha, vals, lam=0.0, rho=2.0)
+    P = np.asarray(post.P)
+    rho_m = np.where(np.arange(P.shape[0]) > 0, post.rho, 1.0)
+    prior = geo.N_PH * float(np.trace(post.W @ np.tensordot(rho_m, P, axes=1)))
+    assert post.prior_weighted_variance() == pytest.approx(prior, rel=1e-10)
+    share = _dense_weighted_variance(post, alpha) / prior
+    assert 0.0 < share < 1.0
+    assert post.uncovered_share() == pytest.approx(share, rel=1e-8)
+
+
+def test_readings_drowned_in_noise_leave_everything_uncovered() -> None:
+    """With a reading noise far above the prior's variance the readings say nothing: the
+    posterior is the prior and the share is 1; more stage angles never raise it."""
+    b, cells, ph, alpha, vals = _scan()
+    assert ScanPosterior(b, cells, ph, alpha, vals, eta=1e9, lam=1e-3,
+                         rho=1.0).uncovered_share() == pytest.approx(1.0, abs=1e-6)
+    fewer = ScanPosterior(b, cells, ph, alpha[:3], vals[:, :3], lam=0.0, rho=1.0)
+    more = ScanPosterior(b, cells, ph, alpha, vals, lam=0.0, rho=1.0)
+    assert more.uncovered_share() < fewer.uncovered_share()
+
+
 def test_angle_gain_is_the_variance_drop_of_reading_there() -> None:
     """The gain of a candidate equals the drop of the explicit posterior variance after
     conditioning on every pair read at that angle."""

@@ -13,6 +13,7 @@ from gonio.brdf.reconstruction.reconstruct import reconstruct
 from gonio.brdf.reconstruction.selfcheck import (
     LOG_RMSE_CAPS,
     LOG_RMSE_MODEL,
+    final_log_rmse,
     predict_log_rmse,
 )
 from gonio.brdf.tables import geometry as geo
@@ -117,7 +118,12 @@ def test_reconstruction_reports_the_witnesses_it_predicts_from() -> None:
     post = ScanPosterior(b, cells, ph, alpha, vals, table=plain.table.values)
     assert rec.mahalanobis == pytest.approx(post.mahalanobis, rel=1e-9)
     assert rec.expected_log_rmse == pytest.approx(post.expected_log_rmse, rel=1e-9)
-    assert rec.predicted_log_rmse == pytest.approx(
+    assert rec.predicted_log_rmse_unwidened == pytest.approx(
         predict_log_rmse(rec.expected_log_rmse, rec.mahalanobis, rec.cv_sample_error), rel=1e-9)
+    # The coverage witness of the final mapping is the same posterior's.
+    assert rec.uncovered_share == pytest.approx(post.uncovered_share(), rel=1e-9)
+    assert rec.predicted_log_rmse == pytest.approx(final_log_rmse(
+        rec.predicted_log_rmse_unwidened, rec.uncovered_share, rec.misfit), rel=1e-9)
     vf = reconstruct(b, cells, ph, alpha, vals, channels=["Y"], method="vf")
     assert math.isnan(vf.mahalanobis) and math.isnan(vf.expected_log_rmse)
+    assert math.isnan(vf.uncovered_share)
