@@ -256,6 +256,8 @@ DESIGNS = {
     "kappa": "",  # V&F's condition-number search
     "posterior": "-posterior",  # the expected-error design (median slope, no aliasing)
     "posterior-spread-alias": "-posterior-spread-alias",  # with both corrections
+    # The design a lab gets when it asks for colour at the MA98 geometries (docs/colour.md).
+    "posterior-colour-MA98": "-posterior-colour-MA98",
 }
 
 
@@ -277,6 +279,14 @@ def design(b: Basis, n: int) -> tuple[np.ndarray, np.ndarray]:
             return z["cells"], z["ph_lab"]
     if obj == "posterior":
         d = design_pairs(b, n, RigConstraints(), objective="posterior", span_deg=span)
+    elif obj == "posterior-colour-MA98":
+        from gonio.brdf.colour.instruments import geometries
+        from gonio.brdf.design.colourtargets import ColourTargets
+
+        g = geometries(["MA98"])
+        d = design_pairs(b, n, RigConstraints(), objective="posterior", span_deg=span,
+                         colour=ColourTargets(np.stack([x.directions()[0] for x in g]),
+                                              np.stack([x.directions()[1] for x in g])))
     elif obj == "posterior-spread-alias":
         d = posterior_design(b, n, RigConstraints(), slope="spread", aliasing=True,
                              span_deg=span)
@@ -489,7 +499,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="pair design (default: design_pairs' DEFAULT_OBJECTIVE): V&F's "
                          "condition-number search, the joint fit's expected "
                          "error (gonio.brdf.design.posterior), or that design with the slope "
-                         "averaged over the basis' spread and aliasing as noise")
+                         "averaged over the basis' spread and aliasing as noise, or the "
+                         "expected-error design asked for colour at the MA98 geometries")
     ap.add_argument("--rho", choices=["scan", "scan-bands"], default=None,
                     help="the joint fit's prior along ph: one factor on the varying harmonics "
                          "('scan', reconstruct's default) or one per band ('scan-bands')")
