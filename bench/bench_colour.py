@@ -236,6 +236,12 @@ def main(argv: list[str] | None = None) -> int:
           f"(goal <= 1.0), worst {m.max():.2f} (goal <= 2.0); 45 degree incidence only: "
           f"median {np.median(np.concatenate([x[:6] for x in ma98_all])):.2f}, worst "
           f"{max(x[:6].max() for x in ma98_all):.2f}")
+    for family in ("solid", "metallic", "anodised", "brushed", "plastic"):
+        fam = [x for nm, x in zip(names, ma98_all, strict=True) if family in nm]
+        if fam:
+            v = np.concatenate(fam)
+            print(f"MA98, {family:<8} ({len(fam)} materials): median {np.median(v):.2f}, "
+                  f"worst {v.max():.2f}")
     per_geo = np.stack(ma98_all).max(axis=0)
     print("MA98, worst per geometry over the materials: " + ", ".join(
         f"{g.name} {v:.2f}" for g, v in zip(geometries(["MA98"]), per_geo, strict=True)))

@@ -61,6 +61,7 @@ from typing import Any
 
 import numpy as np
 
+from gonio.brdf.design.colourtargets import DEFAULT_COLOUR_WEIGHT
 from gonio.brdf.design.pairs import DEFAULT_OBJECTIVE
 from gonio.brdf.design.presets import get_preset, preset_names
 from gonio.brdf.materials.library import cache_root
@@ -261,6 +262,10 @@ DESIGNS = {
 }
 
 
+#: The colour design's weight (``--colour-weight``), for ``--design posterior-colour-MA98``.
+COLOUR_WEIGHT = {"w": DEFAULT_COLOUR_WEIGHT}
+
+
 def design(b: Basis, n: int) -> tuple[np.ndarray, np.ndarray]:
     from gonio.brdf.design.constraints import RigConstraints
     from gonio.brdf.design.pairs import design_pairs
@@ -270,6 +275,8 @@ def design(b: Basis, n: int) -> tuple[np.ndarray, np.ndarray]:
     obj = CHOOSE["objective"]
     span = SPAN["design"]
     tag = f"{DESIGNS[obj]}{f'-choose{k}' if k > 1 else ''}-span{span:g}"
+    if obj == "posterior-colour-MA98" and COLOUR_WEIGHT["w"] != DEFAULT_COLOUR_WEIGHT:
+        tag += f"-w{COLOUR_WEIGHT['w']:g}"
     # Keyed by the code's fingerprint too: the basis alone would reuse designs made by older
     # design code. The probe runs the expected-error design (and so the placement every
     # objective shares), not the condition-number search itself.
@@ -286,7 +293,8 @@ def design(b: Basis, n: int) -> tuple[np.ndarray, np.ndarray]:
         g = geometries(["MA98"])
         d = design_pairs(b, n, RigConstraints(), objective="posterior", span_deg=span,
                          colour=ColourTargets(np.stack([x.directions()[0] for x in g]),
-                                              np.stack([x.directions()[1] for x in g])))
+                                              np.stack([x.directions()[1] for x in g]),
+                                              weight=COLOUR_WEIGHT["w"]))
     elif obj == "posterior-spread-alias":
         d = posterior_design(b, n, RigConstraints(), slope="spread", aliasing=True,
                              span_deg=span)
@@ -501,6 +509,8 @@ def main(argv: list[str] | None = None) -> int:
                          "error (gonio.brdf.design.posterior), or that design with the slope "
                          "averaged over the basis' spread and aliasing as noise, or the "
                          "expected-error design asked for colour at the MA98 geometries")
+    ap.add_argument("--colour-weight", type=float, default=DEFAULT_COLOUR_WEIGHT,
+                    help="with --design posterior-colour-MA98: the colour targets' weight")
     ap.add_argument("--rho", choices=["scan", "scan-bands"], default=None,
                     help="the joint fit's prior along ph: one factor on the varying harmonics "
                          "('scan', reconstruct's default) or one per band ('scan-bands')")
@@ -541,6 +551,7 @@ def main(argv: list[str] | None = None) -> int:
     RHO["rho"], RHO["symmetry"] = args.rho, args.symmetry
     CHOOSE["k"] = args.choose
     CHOOSE["objective"] = args.design
+    COLOUR_WEIGHT["w"] = args.colour_weight
     SPAN["scan"] = args.span
     SPAN["design"] = args.span if args.design_span is None else args.design_span
     print(f"stage angles over {SPAN['scan']:g} deg, pairs designed for {SPAN['design']:g} deg")
