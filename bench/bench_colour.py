@@ -26,6 +26,12 @@ median ΔE00 <= 2.0. The calibration's form is chosen on the chart alone (``fit_
 default: the form whose patches are best predicted by fits without them); the linear 3 x 3
 matrix is reported beside it.
 
+``--colour-design`` designs the 10 pairs for colour at the MA98 geometries (``design_pairs(...,
+colour=ColourTargets(...))``: a pair at each near-specular geometry, the others weighted toward
+the rest; ``--colour-weight``) and gives the colour report the scan's readings, so the geometries
+a pair measured use them (:mod:`gonio.brdf.colour.direct`): what a lab that asks for colour
+gets. Without it the design is the default one and the report reads the table only.
+
 ``--add-pair INCIDENCE,ASPECULAR`` (repeatable) adds an in-plane pair at that instrument
 geometry (degrees, e.g. ``15,-5``) to the designed ones: what reading the specular peak near
 normal incidence does for the near-specular geometries (docs/colour.md).
@@ -51,9 +57,11 @@ from gonio.brdf.colour.conditions import (
     spectra_to_xyz,
     xyz_to_lab,
 )
+from gonio.brdf.colour.direct import ScanReadings
 from gonio.brdf.colour.instruments import Geometry, geometries
 from gonio.brdf.colour.report import colour_report
 from gonio.brdf.colour.spectral import SpectralBands
+from gonio.brdf.design.colourtargets import DEFAULT_COLOUR_WEIGHT, ColourTargets
 from gonio.brdf.design.constraints import RigConstraints
 from gonio.brdf.design.pairs import design_pairs
 from gonio.brdf.materials.library import cache_root
@@ -80,14 +88,26 @@ RGB_BANDS = SpectralBands((610.0, 540.0, 460.0), (60.0, 60.0, 60.0))
 COND = ViewingConditions()
 
 
-def design(basis: object, cache: Path) -> tuple[np.ndarray, np.ndarray]:
-    """The 10 designed pairs, cached by the basis' identity."""
+def colour_targets(instrument: str, weight: float) -> ColourTargets:
+    """The design's colour targets: ``instrument``'s geometries at azimuth 0."""
+    g = geometries([instrument])
+    return ColourTargets(np.stack([x.directions()[0] for x in g]),
+                         np.stack([x.directions()[1] for x in g]), weight=weight)
+
+
+def design(basis: object, cache: Path, colour: ColourTargets | None = None
+           ) -> tuple[np.ndarray, np.ndarray]:
+    """The 10 designed pairs, cached by the basis' identity (and the colour targets)."""
     ident = hashlib.sha1(np.asarray(basis.Q)[:50].tobytes()).hexdigest()[:12]  # type: ignore[attr-defined]
-    path = cache / f"design-n{N_PAIRS}-{ident}.npz"
+    tag = "" if colour is None else "-colour-" + hashlib.sha1(
+        np.concatenate([colour.light.ravel(), colour.view.ravel(),
+                        [colour.weight, colour.direct_within_deg]]).tobytes()).hexdigest()[:12]
+    path = cache / f"design-n{N_PAIRS}-{ident}{tag}.npz"
     if path.is_file():
         with np.load(path) as z:
             return z["cells"], z["ph_lab"]
-    d = design_pairs(basis, N_PAIRS, RigConstraints(), span_deg=DEFAULT_SPAN_DEG)  # type: ignore[arg-type]
+    d = design_pairs(basis, N_PAIRS, RigConstraints(), span_deg=DEFAULT_SPAN_DEG,  # type: ignore[arg-type]
+                     colour=colour)
     path.parent.mkdir(parents=True, exist_ok=True)
     np.savez(path, cells=d.cells, ph_lab=d.ph_lab)
     return np.asarray(d.cells), np.asarray(d.ph_lab)
@@ -131,11 +151,17 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--materials", type=int, default=len(SPECTRAL_MATERIALS))
     ap.add_argument("--cache", type=Path, default=cache_root() / "bench-colour",
                     help="where the designed pairs are kept between runs")
+    ap.add_argument("--colour-design", action="store_true",
+                    help="design the pairs for colour at the MA98 geometries and report the "
+                         "geometries a pair measured from its readings")
+    ap.add_argument("--colour-weight", type=float, default=DEFAULT_COLOUR_WEIGHT,
+                    help="weight of the MA98 geometries in the colour design")
     ap.add_argument("--add-pair", action="append", default=[], metavar="INC,ASP",
                     help="add an in-plane pair at this incidence and aspecular angle (deg)")
     args = ap.parse_args(argv)
     basis = default_basis()
-    cells, ph = design(basis, args.cache)
+    targets = colour_targets("MA98", args.colour_weight) if args.colour_design else None
+    cells, ph = design(basis, args.cache, targets)
     for text in args.add_pair:
         inc, asp = (float(x) for x in text.split(","))
         light, view = Geometry("added", inc, asp).directions()
@@ -144,6 +170,13 @@ def main(argv: list[str] | None = None) -> int:
         print(f"added pair {inc:g}as{asp:g}: cell (th, td, pd) = "
               f"{np.round(np.rad2deg(c[0]), 2).tolist()} deg")
     alpha = uniform_stage_angles(R, span=np.deg2rad(DEFAULT_SPAN_DEG))
+    light_lab, sensor_lab = pair_directions(cells, ph)
+
+    def scan(vals: np.ndarray) -> ScanReadings | None:
+        if not args.colour_design:
+            return None
+        return ScanReadings(light_lab, sensor_lab, np.rad2deg(alpha), vals)
+
     chart = rgb_chart()
     xyz = chart.reference_xyz(COND)
     for form in (LINEAR, ROOT_POLYNOMIAL):
@@ -169,7 +202,8 @@ def main(argv: list[str] | None = None) -> int:
         rec = reconstruct(basis, cells, ph, alpha, vals, channels=channels, name=name)
         seconds.append(time.perf_counter() - t0)
         cpu.append(time.process_time() - c0)
-        rep = colour_report(rec.table, SPECTROMETER_31, COND, ["MA98", "BYK-mac"])
+        rep = colour_report(rec.table, SPECTROMETER_31, COND, ["MA98", "BYK-mac"],
+                            scan=scan(vals))
         assert rep.lab is not None
         true = np.concatenate([truth_lab(spec, ["MA98"]), truth_lab(spec, ["BYK-mac"])])
         de = delta_e00(rep.lab, true)
@@ -179,11 +213,13 @@ def main(argv: list[str] | None = None) -> int:
         rgb_spec = spectral_specimen(name, RGB_BANDS)
         rgb_vals = readings(rgb_spec, cells, ph, alpha, seed=100 + k)
         rgb_rec = reconstruct(basis, cells, ph, alpha, rgb_vals, channels=("R", "G", "B"))
-        rgb_rep = colour_report(rgb_rec.table, matrix, COND, ["MA98"])  # type: ignore[arg-type]
+        rgb_rep = colour_report(rgb_rec.table, matrix, COND, ["MA98"],  # type: ignore[arg-type]
+                                scan=scan(rgb_vals))
         assert rgb_rep.lab is not None
         rgb_de = delta_e00(rgb_rep.lab, true[:11])
         rgb_all.append(rgb_de)
-        lin_rep = colour_report(rgb_rec.table, linear, COND, ["MA98"])  # type: ignore[arg-type]
+        lin_rep = colour_report(rgb_rec.table, linear, COND, ["MA98"],  # type: ignore[arg-type]
+                                scan=scan(rgb_vals))
         assert lin_rep.lab is not None
         lin_de = delta_e00(lin_rep.lab, true[:11])
         lin_all.append(lin_de)
@@ -200,6 +236,15 @@ def main(argv: list[str] | None = None) -> int:
           f"(goal <= 1.0), worst {m.max():.2f} (goal <= 2.0); 45 degree incidence only: "
           f"median {np.median(np.concatenate([x[:6] for x in ma98_all])):.2f}, worst "
           f"{max(x[:6].max() for x in ma98_all):.2f}")
+    for family in ("solid", "metallic", "anodised", "brushed", "plastic"):
+        fam = [x for nm, x in zip(names, ma98_all, strict=True) if family in nm]
+        if fam:
+            v = np.concatenate(fam)
+            print(f"MA98, {family:<8} ({len(fam)} materials): median {np.median(v):.2f}, "
+                  f"worst {v.max():.2f}")
+    per_geo = np.stack(ma98_all).max(axis=0)
+    print("MA98, worst per geometry over the materials: " + ", ".join(
+        f"{g.name} {v:.2f}" for g, v in zip(geometries(["MA98"]), per_geo, strict=True)))
     print(f"BYK-mac geometries: median {np.median(b):.2f}, worst {b.max():.2f}")
     far = np.concatenate([x[[2, 3, 4, 5, 6, 9, 10]] for x in ma98_all])
     print(f"MA98 away from the specular direction (|aspecular| >= 25 deg): median "

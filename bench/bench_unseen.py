@@ -61,6 +61,7 @@ from typing import Any
 
 import numpy as np
 
+from gonio.brdf.design.colourtargets import DEFAULT_COLOUR_WEIGHT
 from gonio.brdf.design.pairs import DEFAULT_OBJECTIVE
 from gonio.brdf.design.presets import get_preset, preset_names
 from gonio.brdf.materials.library import cache_root
@@ -256,7 +257,13 @@ DESIGNS = {
     "kappa": "",  # V&F's condition-number search
     "posterior": "-posterior",  # the expected-error design (median slope, no aliasing)
     "posterior-spread-alias": "-posterior-spread-alias",  # with both corrections
+    # The design a lab gets when it asks for colour at the MA98 geometries (docs/colour.md).
+    "posterior-colour-MA98": "-posterior-colour-MA98",
 }
+
+
+#: The colour design's weight (``--colour-weight``), for ``--design posterior-colour-MA98``.
+COLOUR_WEIGHT = {"w": DEFAULT_COLOUR_WEIGHT}
 
 
 def design(b: Basis, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -268,6 +275,8 @@ def design(b: Basis, n: int) -> tuple[np.ndarray, np.ndarray]:
     obj = CHOOSE["objective"]
     span = SPAN["design"]
     tag = f"{DESIGNS[obj]}{f'-choose{k}' if k > 1 else ''}-span{span:g}"
+    if obj == "posterior-colour-MA98" and COLOUR_WEIGHT["w"] != DEFAULT_COLOUR_WEIGHT:
+        tag += f"-w{COLOUR_WEIGHT['w']:g}"
     # Keyed by the code's fingerprint too: the basis alone would reuse designs made by older
     # design code. The probe runs the expected-error design (and so the placement every
     # objective shares), not the condition-number search itself.
@@ -277,6 +286,15 @@ def design(b: Basis, n: int) -> tuple[np.ndarray, np.ndarray]:
             return z["cells"], z["ph_lab"]
     if obj == "posterior":
         d = design_pairs(b, n, RigConstraints(), objective="posterior", span_deg=span)
+    elif obj == "posterior-colour-MA98":
+        from gonio.brdf.colour.instruments import geometries
+        from gonio.brdf.design.colourtargets import ColourTargets
+
+        g = geometries(["MA98"])
+        d = design_pairs(b, n, RigConstraints(), objective="posterior", span_deg=span,
+                         colour=ColourTargets(np.stack([x.directions()[0] for x in g]),
+                                              np.stack([x.directions()[1] for x in g]),
+                                              weight=COLOUR_WEIGHT["w"]))
     elif obj == "posterior-spread-alias":
         d = posterior_design(b, n, RigConstraints(), slope="spread", aliasing=True,
                              span_deg=span)
@@ -489,7 +507,10 @@ def main(argv: list[str] | None = None) -> int:
                     help="pair design (default: design_pairs' DEFAULT_OBJECTIVE): V&F's "
                          "condition-number search, the joint fit's expected "
                          "error (gonio.brdf.design.posterior), or that design with the slope "
-                         "averaged over the basis' spread and aliasing as noise")
+                         "averaged over the basis' spread and aliasing as noise, or the "
+                         "expected-error design asked for colour at the MA98 geometries")
+    ap.add_argument("--colour-weight", type=float, default=DEFAULT_COLOUR_WEIGHT,
+                    help="with --design posterior-colour-MA98: the colour targets' weight")
     ap.add_argument("--rho", choices=["scan", "scan-bands"], default=None,
                     help="the joint fit's prior along ph: one factor on the varying harmonics "
                          "('scan', reconstruct's default) or one per band ('scan-bands')")
@@ -530,6 +551,7 @@ def main(argv: list[str] | None = None) -> int:
     RHO["rho"], RHO["symmetry"] = args.rho, args.symmetry
     CHOOSE["k"] = args.choose
     CHOOSE["objective"] = args.design
+    COLOUR_WEIGHT["w"] = args.colour_weight
     SPAN["scan"] = args.span
     SPAN["design"] = args.span if args.design_span is None else args.design_span
     print(f"stage angles over {SPAN['scan']:g} deg, pairs designed for {SPAN['design']:g} deg")

@@ -209,7 +209,7 @@ def finish_job(job_id: int, plan: AnyPlan | CheckedPlan, how: Finishing) -> dict
     # (reconstruct's rho="scan", docs/science.md 7.3); settings["prior_rho"] says which.
     rec = reconstruct(basis, grid.cells, grid.ph_lab, grid.stage_angles,
                       np.maximum(grid.values, 0.0), channels=channels, name=job.specimen)
-    colour = _colour(rec, how, [p.sensor for p in pairs], bool(cal.pairs))
+    colour = _colour(rec, how, [p.sensor for p in pairs], bool(cal.pairs), samples)
     metrics: dict[str, Any] = {
         "rel_sample_error": rec.rel_sample_error,
         "estimated_error": rec.estimated_error,
@@ -368,7 +368,8 @@ def physical_bounds(table: Any, values: Any, calibrated: bool) -> Any:
     return bounds_check(table, values, calibrated=calibrated)
 
 
-def _colour(rec: Any, how: Finishing, sensors: list[str], calibrated: bool) -> dict[str, Any]:
+def _colour(rec: Any, how: Finishing, sensors: list[str], calibrated: bool,
+            samples: Any = None) -> dict[str, Any]:
     """The result's ``/colour`` group (docs/colour.md); a spectral sensor's band centres go on
     the reconstructed table (``rec`` is changed in place: its table gains the wavelengths).
     Its ``fit_table`` entry (taken out before writing) is the table the export fits are made
@@ -379,7 +380,7 @@ def _colour(rec: Any, how: Finishing, sensors: list[str], calibrated: bool) -> d
     """
     from gonio.brdf.colour.errors import ColourError
     from gonio.brdf.tables.table import BRDFTable
-    from gonio.result_colour import colour_group, colour_source, table_for_fits
+    from gonio.result_colour import colour_group, colour_source, scan_readings, table_for_fits
 
     try:
         source = colour_source(how.provenance.get("rig_config"), sensors)
@@ -391,7 +392,8 @@ def _colour(rec: Any, how: Finishing, sensors: list[str], calibrated: bool) -> d
         t = rec.table
         object.__setattr__(rec, "table", BRDFTable.trusted(
             np.asarray(t.values), t.channels, t.name, centres, t.provenance))
-    return {**colour_group(rec.table, source, calibrated),
+    scan = None if samples is None else scan_readings(samples)
+    return {**colour_group(rec.table, source, calibrated, scan),
             "fit_table": table_for_fits(rec.table, source, calibrated)}
 
 

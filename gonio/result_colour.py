@@ -27,6 +27,7 @@ import numpy as np
 
 from gonio.brdf.colour.chart import ColourMatrix
 from gonio.brdf.colour.conditions import ColourError, ViewingConditions
+from gonio.brdf.colour.direct import ScanReadings
 from gonio.brdf.colour.instruments import DEFAULT_INSTRUMENTS, Geometry, canonical_instrument
 from gonio.brdf.colour.report import (
     CIELAB,
@@ -83,7 +84,20 @@ def result_report(
     if name != table.name:
         table = BRDFTable.trusted(np.asarray(table.values), table.channels, name,
                                   table.wavelengths_nm, table.provenance)
-    return colour_report(table, conversion_of(res), conditions, instruments, azimuths_deg)
+    return colour_report(table, conversion_of(res), conditions, instruments, azimuths_deg,
+                         scan=scan_readings(res.samples))
+
+
+def scan_readings(samples: Any) -> ScanReadings | None:
+    """A result's ``/samples`` (or the samples a job is finishing with) as the colour report's
+    scan readings, so that instrument geometries a pair measured use its readings
+    (:mod:`gonio.brdf.colour.direct`); None when there are none."""
+    values = np.asarray(samples.values, dtype=float)
+    if values.ndim != 3 or values.shape[0] == 0:
+        return None
+    return ScanReadings(np.asarray(samples.light_dirs, dtype=float).reshape(-1, 3),
+                        np.asarray(samples.sensor_dirs, dtype=float).reshape(-1, 3),
+                        np.asarray(samples.stage_angles_deg, dtype=float), values)
 
 
 def in_reflectance(calibration: Mapping[str, Any]) -> bool:
@@ -93,8 +107,11 @@ def in_reflectance(calibration: Mapping[str, Any]) -> bool:
 
 
 def colour_group(table: BRDFTable, source: Mapping[str, Any],
-                 calibrated: bool = True) -> dict[str, Any]:
+                 calibrated: bool = True, scan: ScanReadings | None = None) -> dict[str, Any]:
     """The ``/colour`` attributes of a new result: the source and the default report.
+
+    ``scan``: the readings the table was reconstructed from; instrument geometries one of its
+    pairs measured take their value from it (:mod:`gonio.brdf.colour.direct`).
 
     ``calibrated`` False (values in sensor units) gives a report in uncalibrated sensor units
     with a note saying why.
@@ -110,7 +127,8 @@ def colour_group(table: BRDFTable, source: Mapping[str, Any],
         out["note"] = ("values in sensor units (no white reference calibration): no "
                        "colour until the rig is calibrated")
     try:
-        out["report"] = colour_report(table, _conversion(table, source, calibrated)).as_dict()
+        out["report"] = colour_report(table, _conversion(table, source, calibrated),
+                                      scan=scan).as_dict()
     except ColourError as exc:
         out["error"] = str(exc)
     return out

@@ -24,6 +24,9 @@ from typing import Literal
 import numpy as np
 from pydantic import BaseModel, Field, model_validator
 
+from gonio.brdf.colour.conditions import ColourError
+from gonio.brdf.colour.instruments import canonical_instrument, geometries
+from gonio.brdf.design.colourtargets import DEFAULT_COLOUR_WEIGHT, ColourTargets
 from gonio.brdf.design.constraints import RigConstraints, parse_exclusion
 from gonio.brdf.design.pairs import (
     BasisLike,
@@ -45,6 +48,22 @@ MAX_DEVICES = 8
 MAX_TIME_LIMIT_S = 600.0
 """Schema bound of ``time_limit_s``; the daemon's own limit is usually lower (``[limits]``)."""
 DEFAULT_TIME_LIMIT_S = 10.0
+
+
+def colour_targets(instrument: str, weight: float = DEFAULT_COLOUR_WEIGHT) -> ColourTargets:
+    """The design's colour targets for ``instrument``: its in-plane geometries with the plane
+    of incidence along the specimen's reference mark (:mod:`gonio.brdf.colour.instruments`).
+
+    Raises
+    ------
+    gonio.brdf.colour.conditions.ColourError
+        An unknown instrument (the message lists the known ones).
+    gonio.brdf.design.errors.DesignError
+        A weight below 0 or not a number.
+    """
+    g = geometries([instrument])
+    return ColourTargets(np.stack([x.directions()[0] for x in g]),
+                         np.stack([x.directions()[1] for x in g]), weight=weight)
 
 
 class DesignRequest(BaseModel):
@@ -92,6 +111,15 @@ class DesignRequest(BaseModel):
     span_deg: SpanDeg = Field(DEFAULT_SPAN_DEG,
                               description="arc those angles cover, degrees: 180 (half a turn, "
                                           "the scans' default) or 360")
+    colour_instrument: Text | None = Field(
+        None, description="design for colour at this multi-angle instrument's geometries "
+                          "(MA68, MA98, BYK-mac, MultiFX10; docs/colour.md 'Designing for "
+                          "colour'): a pair at each near-specular one, the others weighted "
+                          "toward the rest; pairs with the 'posterior' objective only")
+    colour_weight: float = Field(
+        DEFAULT_COLOUR_WEIGHT, ge=0, le=1000,
+        description="with 'colour_instrument': how much the instrument geometries' expected "
+                    "error counts against the whole table's (0: only their direct pairs)")
 
     @model_validator(mode="after")
     def _one_kind(self) -> DesignRequest:
@@ -109,7 +137,22 @@ class DesignRequest(BaseModel):
                              "'pairs'")
         if self.neighbourhood % 2 == 0:
             raise ValueError(f"'neighbourhood' must be odd, got {self.neighbourhood}")
+        if self.colour_instrument is not None:
+            if self.pairs is None or self.objective == "kappa":
+                raise ValueError("'colour_instrument' designs independent 'pairs' by the "
+                                 "expected error: ask for 'pairs' and drop objective 'kappa'")
+            try:
+                canonical_instrument(self.colour_instrument)
+            except ColourError as exc:
+                raise ValueError(f"'colour_instrument': {exc}") from None
         return self
+
+    def colour(self) -> ColourTargets | None:
+        """The colour targets asked for, or None."""
+        if self.colour_instrument is None:
+            return None
+        return colour_targets(self.colour_instrument, self.colour_weight)
+
 
     def constraints(self) -> RigConstraints:
         """The mounting limits (raises ``FeasibilityError`` for an unreadable exclusion)."""
@@ -187,6 +230,9 @@ class DesignResult(BaseModel):
     fallback: str | None = Field(
         None, description="why the objective asked for did not make the design (e.g. its "
                           "choice could not be mounted); null when it did")
+    colour_pairs: int = Field(
+        0, description="how many of the pairs (the first ones) sit at the colour instrument's "
+                       "near-specular geometries ('colour_instrument'); 0 without colour")
     min_device_distance_deg: float = Field(description="closest two devices, degrees")
     lights: list[Device]
     sensors: list[Device]
@@ -236,6 +282,7 @@ def describe(design: PairDesign, rotations: int,
         objective=design.objective,
         expected_log_rmse=None if expected is None else _finite(expected),
         fallback=design.fallback,
+        colour_pairs=design.colour_pairs,
         min_device_distance_deg=float(design.min_distance_deg),
         lights=lights,
         sensors=sensors,
@@ -268,7 +315,7 @@ def run_design(basis: BasisLike, request: DesignRequest) -> DesignResult:
             basis, request.pairs, constraints, h=request.neighbourhood, starts=request.starts,
             descents=request.descents, seed=request.seed, time_limit_s=request.time_limit_s,
             objective=request.objective, rotations=request.rotations,
-            span_deg=request.span_deg,
+            span_deg=request.span_deg, colour=request.colour(),
         )
     else:
         assert request.lights is not None and request.sensors is not None

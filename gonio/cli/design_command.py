@@ -6,6 +6,7 @@ Examples::
     gonio design --pairs 10 --objective posterior --candidates 4
     gonio design --lights 3 --sensors 4 --exclude cone:0,0,10 -o product.toml
     gonio design --preset MA98 --rotations 8
+    gonio design --pairs 10 --colour MA98 -o pairs.toml
 
 The design is printed (cells and lab placements), with the objective that chose it
 (``--objective``: V&F's condition number or the joint fit's expected error; default
@@ -24,7 +25,10 @@ from typing import Any, TextIO
 
 import numpy as np
 
+from gonio.brdf.colour.conditions import ColourError
+from gonio.brdf.design.colourtargets import DEFAULT_COLOUR_WEIGHT, ColourTargets
 from gonio.brdf.design.constraints import RigConstraints, parse_exclusion
+from gonio.brdf.design.errors import DesignError
 from gonio.brdf.design.pairs import (
     DEFAULT_OBJECTIVE,
     OBJECTIVES,
@@ -39,6 +43,7 @@ from gonio.brdf.design.product import design_product_rig
 from gonio.brdf.design.roughness import RoughnessBound, bound_angles, roughness_bound
 from gonio.brdf.reconstruction.samples import DEFAULT_SPAN_DEG, SPANS_DEG
 from gonio.cli import UsageError
+from gonio.sampling_design import colour_targets
 
 
 def register(subparsers: Any) -> None:
@@ -74,6 +79,14 @@ def register(subparsers: Any) -> None:
                         "posterior (the joint fit's expected error at --rotations; falls back "
                         "to the search when its choice cannot be mounted) (default "
                         f"{DEFAULT_OBJECTIVE})")
+    p.add_argument("--colour", metavar="INSTRUMENT", default=None,
+                   help="for --pairs: design for colour at this instrument's geometries "
+                        "(MA68, MA98, BYK-mac, MultiFX10): a pair at each near-specular one, "
+                        "the others weighted toward the rest (docs/colour.md)")
+    p.add_argument("--colour-weight", type=float, default=DEFAULT_COLOUR_WEIGHT, metavar="W",
+                   help="with --colour: weight of the instrument geometries' expected error "
+                        f"against the whole table's (default {DEFAULT_COLOUR_WEIGHT:g}; 0: only "
+                        "the pairs at the near-specular geometries)")
     p.add_argument("--seed", type=int, default=0,
                    help="random seed of the kappa search; for --objective posterior it picks "
                         "the first pair the greedy choice starts from (0: the best single "
@@ -136,6 +149,11 @@ def _check_args(args: argparse.Namespace) -> None:
     if args.objective is not None and args.pairs is None:
         raise UsageError("--objective chooses --pairs designs; product rigs use the condition "
                          "number and presets are fixed geometries")
+    if args.colour is not None:
+        if args.pairs is None or args.objective == "kappa":
+            raise UsageError("--colour designs --pairs by the expected error: use it with "
+                             "--pairs and without --objective kappa")
+        _colour(args)
     if args.seed < 0:
         raise UsageError(f"--seed must be at least 0, got {args.seed}")
     if args.rotations < 1:
@@ -150,6 +168,16 @@ def _check_args(args: argparse.Namespace) -> None:
                                 or args.no_expected_error):
         raise UsageError("--candidates chooses among --pairs designs by their expected error on "
                          "held-out materials: it needs --pairs and the default basis")
+
+
+def _colour(args: argparse.Namespace) -> ColourTargets | None:
+    """The colour targets ``--colour`` asks for (UsageError for a bad name or weight)."""
+    if getattr(args, "colour", None) is None:
+        return None
+    try:
+        return colour_targets(args.colour, args.colour_weight)
+    except (ColourError, DesignError) as exc:
+        raise UsageError(f"--colour / --colour-weight: {exc}") from None
 
 
 def make_design(args: argparse.Namespace, basis: BasisLike) -> PairDesign:
@@ -170,6 +198,7 @@ def make_design(args: argparse.Namespace, basis: BasisLike) -> PairDesign:
         basis, args.pairs, constraints, h=args.neighbourhood, starts=args.starts,
         descents=args.descents, seed=args.seed, time_limit_s=args.time_limit,
         objective=args.objective, rotations=args.rotations, span_deg=args.span,
+        colour=_colour(args),
     )
 
 
@@ -266,6 +295,10 @@ def print_design(
                  else "joint fit's expected error") + ")", file=out)
     if design.fallback is not None:
         print(f"  note: {design.fallback}", file=out)
+    if design.colour_pairs:
+        print(f"colour: pairs 1-{design.colour_pairs} sit at the instrument's near-specular "
+              "geometries; the colour report reads those from the scan (docs/colour.md)",
+              file=out)
     expected = ""
     if design.expected_log_rmse is not None:
         arc = "" if design.span_deg is None else f" over {design.span_deg:g} deg"
@@ -322,6 +355,7 @@ def run(args: argparse.Namespace) -> int:
                 basis, args.pairs, constraints, h=args.neighbourhood, starts=args.starts,
                 descents=args.descents, seed=args.seed + seed, time_limit_s=args.time_limit,
                 objective=args.objective, rotations=args.rotations, span_deg=args.span,
+                colour=_colour(args),
             )
 
         design, expected, table = choose_design(make, range(args.candidates), args.rotations,

@@ -19,6 +19,7 @@ from gonio.result_colour import (
     conversion_of,
     linear_srgb,
     read_standard_csv,
+    result_report,
     srgb_view,
 )
 from gonio.results import read_result, write_result
@@ -118,3 +119,33 @@ def test_colour_statement_names_the_space_conditions_and_source() -> None:
                              "clamped_at_zero": True})
     assert text.startswith("linear sRGB (Rec. 709 primaries, D65)")
     assert "(D50/2)" in text and "spectral bands (31)" in text and "clamped at 0" in text
+
+
+def test_a_result_report_uses_the_readings_of_a_pair_at_an_instrument_geometry(
+        tmp_path: Path) -> None:
+    """A pair mounted at MA98's 45as15 (light at 45 degrees, sensor 30 degrees on the far
+    side, plane turned 70 degrees in the lab) read twice the table's constant value at every
+    stage angle: the report gives pi times the readings there and the table elsewhere."""
+    table = _table(WL)
+    az = np.deg2rad(70.0)
+    light = np.array([np.sin(np.pi / 4) * np.cos(az), np.sin(np.pi / 4) * np.sin(az),
+                      np.cos(np.pi / 4)])
+    tv = np.deg2rad(30.0)
+    sensor = np.array([-np.sin(tv) * np.cos(az), -np.sin(tv) * np.sin(az), np.cos(tv)])
+    read = np.array([0.2, 0.4, 0.1])
+    s = CalibratedScan(pairs=[("L1", "S1")], light_dirs=light[None], sensor_dirs=sensor[None],
+                       stage_angles_deg=np.arange(8) * 22.5,
+                       values=np.tile(read, (1, 8, 1)), channels=table.channels,
+                       calibration={"pairs": [{"light": "L1", "sensor": "S1",
+                                               "factor": [1, 1, 1]}]})
+    path = write_result(tmp_path / "r.h5", job_id=1, specimen="s", kind="uniform", readings=[],
+                        samples=s, table=table, colour=None)
+    rep = result_report(read_result(path), instruments=["MA98"])
+    names = [g.name for g in rep.geometries]
+    assert [n for n, m in zip(names, rep.measured, strict=True) if m] == ["45as15"]
+    k = names.index("45as15")
+    np.testing.assert_allclose(rep.reflectance[k], np.pi * read, rtol=1e-5)
+    others = [i for i in range(len(names)) if i != k]
+    np.testing.assert_allclose(rep.reflectance[others],
+                               np.tile(np.pi * np.array([0.1, 0.2, 0.05]), (len(others), 1)),
+                               rtol=1e-5)

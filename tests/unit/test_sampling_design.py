@@ -29,6 +29,13 @@ from tests.unit.engine.test_adaptive_posterior import BASIS
     ({"pairs": 3.0}, "valid integer"),
     ({"pairs": 3, "time_limit_s": math.nan}, "finite number"),
     ({"pairs": 3, "colour": "red"}, "Extra inputs are not permitted"),
+    ({"pairs": 6, "colour_instrument": "MA99"}, "known instruments are MA68, MA98"),
+    ({"lights": 2, "sensors": 2, "colour_instrument": "MA98"},
+     "'colour_instrument' designs independent 'pairs' by the expected error"),
+    ({"pairs": 6, "colour_instrument": "MA98", "objective": "kappa"},
+     "drop objective 'kappa'"),
+    ({"pairs": 6, "colour_instrument": "MA98", "colour_weight": -1},
+     "greater than or equal to 0"),
 ])
 def test_a_request_that_cannot_be_designed_is_refused(fields: dict[str, object],
                                                       message: str) -> None:
@@ -96,3 +103,12 @@ def test_a_product_rig_measures_every_light_with_every_sensor() -> None:
     assert result.name == "product" and result.objective is None
     assert sorted((p.light, p.sensor) for p in result.pairs) == [
         ("L1", "S1"), ("L1", "S2"), ("L2", "S1"), ("L2", "S2")]
+
+
+def test_a_colour_request_reports_its_colour_pairs() -> None:
+    """MA98 has five in-plane geometries with aspecular angles up to 25 degrees; a colour
+    design of 7 pairs gives them the first five, and a plain design none."""
+    result = run_design(BASIS, DesignRequest(pairs=7, colour_instrument="ma98"))
+    assert result.n_pairs == 7 and result.colour_pairs == 5
+    assert result.objective == "posterior" and result.fallback is None
+    assert run_design(BASIS, DesignRequest(pairs=3)).colour_pairs == 0

@@ -44,6 +44,7 @@ from gonio.brdf.colour.conditions import (
     describe,
     xyz_to_lab,
 )
+from gonio.brdf.colour.direct import ScanReadings, direct_values
 from gonio.brdf.colour.instruments import DEFAULT_INSTRUMENTS, Geometry, geometries
 from gonio.brdf.colour.spectral import SpectralBands
 from gonio.brdf.tables import geometry as geo
@@ -238,6 +239,9 @@ class ColourReport:
         ``"MA98@0"``-style key (instrument at azimuth) to flop index.
     provenance : dict
         Conditions, weighting, library version.
+    measured : tuple of bool, length G (or empty)
+        Which geometries a pair of the scan measured (:mod:`gonio.brdf.colour.direct`); the
+        others are read from the table.
     """
 
     name: str
@@ -251,6 +255,7 @@ class ColourReport:
     lab: FloatArray | None
     flop: dict[str, float] = field(default_factory=dict)
     provenance: dict[str, Any] = field(default_factory=dict)
+    measured: tuple[bool, ...] = ()
 
     @property
     def calibrated(self) -> bool:
@@ -286,6 +291,7 @@ class ColourReport:
             "name": self.name, "space": self.space, "conversion": self.conversion,
             "conditions": self.conditions.as_dict(), "channels": list(self.channels),
             "rows": self.rows(), "flop_index": dict(self.flop), "provenance": self.provenance,
+            "measured": [bool(m) for m in self.measured] or [False] * len(self.geometries),
         }
 
     def csv(self) -> str:
@@ -322,8 +328,13 @@ def colour_report(
     conditions: ViewingConditions | None = None,
     instruments: Sequence[str] = DEFAULT_INSTRUMENTS,
     azimuths_deg: Sequence[float] = (0.0,),
+    scan: ScanReadings | None = None,
 ) -> ColourReport:
     """The colour of ``table`` at the instruments' geometries.
+
+    A geometry one of ``scan``'s pairs measured takes the table's value corrected by that
+    pair's readings (:func:`gonio.brdf.colour.direct.direct_values`); the others are read
+    from the table.
 
     Parameters
     ----------
@@ -333,6 +344,8 @@ def colour_report(
     conditions : ViewingConditions, default D65 / CIE 1964 10 degree
     instruments : names from :data:`~gonio.brdf.colour.instruments.INSTRUMENTS`
     azimuths_deg : specimen azimuths of the plane of incidence, degrees
+    scan : ScanReadings, optional
+        The readings the table was reconstructed from, in the table's units.
 
     Raises
     ------
@@ -343,7 +356,12 @@ def colour_report(
     geos = geometries(instruments, azimuths_deg)
     wi = np.stack([g.directions()[0] for g in geos])
     wo = np.stack([g.directions()[1] for g in geos])
-    refl = np.pi * log_lookup(table, wi, wo)
+    f = log_lookup(table, wi, wo)
+    measured = np.zeros(len(geos), dtype=bool)
+    if scan is not None:
+        f, measured = direct_values(lambda a, b: log_lookup(table, a, b), wi, wo, f, scan,
+                                    LOG_OFFSET)
+    refl = np.pi * f
     if not np.isfinite(refl).all():
         finite = np.asarray(np.isfinite(refl).all(axis=1), dtype=bool)
         ok: list[bool] = [bool(finite[k]) for k in range(len(geos))]
@@ -366,6 +384,7 @@ def colour_report(
     return ColourReport(
         table.name, cond, space, conversion_label(conversion), table.channels, geos, refl,
         xyz, lab, flop, {**describe(cond), "conversion": conversion_label(conversion)},
+        tuple(bool(m) for m in measured),
     )
 
 

@@ -101,6 +101,9 @@ class PairDesign:
         The arc (degrees, 180 or 360) those angles cover.
     greedy : GreedyStats or None
         Statistics of the expected-error choice, for designs it made.
+    colour_pairs : int
+        How many of the pairs (the first ones) sit at colour geometries asked for
+        (:mod:`gonio.brdf.design.colourtargets`); 0 when no colour was asked for.
     fallback : str or None
         Why the design was not made by the objective asked for (e.g. the expected-error
         choice could not be mounted on a crowded rig and the condition-number search, which
@@ -122,6 +125,7 @@ class PairDesign:
     span_deg: float | None = None
     greedy: GreedyStats | None = None
     fallback: str | None = None
+    colour_pairs: int = 0
 
     @classmethod
     def independent(cls, name: str, placement: Placement, kappa: float,

@@ -23,6 +23,7 @@ from dataclasses import replace
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from gonio.brdf.design.colourtargets import ColourTargets
 from gonio.brdf.design.conditioning import KappaMethod, condition_number
 from gonio.brdf.design.constraints import (
     RigConstraints,
@@ -107,6 +108,7 @@ def design_pairs(
     objective: Objective | None = None,
     rotations: int = 8,
     span_deg: float = DEFAULT_SPAN_DEG,
+    colour: ColourTargets | None = None,
 ) -> PairDesign:
     """Choose ``n`` independent light/sensor pairs and place them in the lab.
 
@@ -127,6 +129,12 @@ def design_pairs(
       the greedy starts from (0: the best); ``time_limit_s`` bounds its mount checks' CPU time. It
       needs a gonio :class:`~gonio.brdf.reconstruction.basis.Basis` (its medians and prior).
 
+    ``colour``: geometries a colour lab will read (:mod:`gonio.brdf.design.colourtargets`);
+    only the expected-error design takes them (their direct pairs and weighted error), so
+    asking for colour with ``objective="kappa"`` is an error, and a colour design that cannot
+    be mounted or runs out of time raises instead of falling back to the condition-number
+    search, which would drop the colour geometries.
+
     Either way the condition-number search's ability to plan mounts is kept: when the
     expected-error choice cannot be mounted (a crowded rig, :class:`FeasibilityError`), runs
     past ``time_limit_s`` (the CPU time of its mount checks; the search then has
@@ -146,9 +154,10 @@ def design_pairs(
     Raises
     ------
     DesignError
-        For ``n < 1``, more pairs than feasible cells, an unknown objective, or
-        ``objective="posterior"`` asked for explicitly with a basis that is not a gonio
-        ``Basis``.
+        For ``n < 1``, more pairs than feasible cells, an unknown objective,
+        ``objective="posterior"`` (or ``colour``) asked for with a basis that is not a gonio
+        ``Basis``, ``colour`` with ``objective="kappa"``, or fewer pairs than ``colour``'s
+        direct pairs.
     FeasibilityError
         When no cell is feasible, or ``n`` pairs cannot be mounted under ``constraints``.
     """
@@ -161,6 +170,16 @@ def design_pairs(
         raise DesignError(f"a scan needs at least one stage angle, got rotations={rotations}")
     if span_deg not in SPANS_DEG:
         raise DesignError(f"span_deg must be 180 or 360 (half or a full turn), got {span_deg:g}")
+    if colour is not None:
+        if asked != "posterior":
+            raise DesignError(
+                "colour geometries are taken by the expected-error design only; use "
+                "objective='posterior' (the default) or leave the colour out")
+        if not isinstance(basis, Basis):
+            raise DesignError("a colour design needs a gonio Basis (its medians and prior)")
+        return posterior_design(basis, n, constraints, rotations=rotations, span_deg=span_deg,
+                                seed=0 if seed is None else seed, time_limit_s=time_limit_s,
+                                colour=colour)
     fallback = None
     if asked == "posterior":
         if isinstance(basis, Basis):

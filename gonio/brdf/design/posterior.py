@@ -67,6 +67,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from gonio.brdf.design.colourtargets import ColourTargets, colour_gram
 from gonio.brdf.design.conditioning import condition_number
 from gonio.brdf.design.constraints import RigConstraints, candidate_rows, rows_to_cells
 from gonio.brdf.design.errors import DesignError, DesignTimeout, FeasibilityError
@@ -357,6 +358,7 @@ def posterior_design(
     slope: MetricSlope = "median",
     aliasing: bool = False,
     span_deg: float = DEFAULT_SPAN_DEG,
+    colour: ColourTargets | None = None,
 ) -> PairDesign:
     """``n`` pairs that minimise the joint fit's expected metric error (module notes).
 
@@ -390,6 +392,11 @@ def posterior_design(
         Count the harmonics ``rotations`` cannot resolve as noise (module notes).
         The defaults (median slope, no aliasing) are the design as shipped: the two
         corrections did not lower the error on the benchmark (``docs/science.md`` 7.2.1).
+    colour : ColourTargets, optional
+        Geometries a colour lab will read (:mod:`gonio.brdf.design.colourtargets`): the ones
+        near the specular direction become pairs of their own (the first of the design), and
+        the other pairs minimise the table's expected error plus ``colour.weight`` times the
+        targets'. None (the default): the table's expected error alone.
 
     Returns
     -------
@@ -401,8 +408,8 @@ def posterior_design(
     Raises
     ------
     DesignError
-        For ``n < 1``, more pairs than feasible cells, or bad ``rotations`` / ``eta`` / ``lam``
-        / ``slope``.
+        For ``n < 1``, more pairs than feasible cells, bad ``rotations`` / ``eta`` / ``lam``
+        / ``slope``, or fewer pairs than ``colour`` needs for its direct pairs.
     FeasibilityError
         When no cell is feasible or the chosen pairs cannot be mounted under ``constraints``.
     DesignTimeout
@@ -412,10 +419,15 @@ def posterior_design(
         raise DesignError(f"the number of pairs must be at least 1, got {n}")
     t0, cpu0 = time.perf_counter(), time.thread_time()
     model = prior_model(basis, rotations, eta, lam, slope, aliasing, span_deg)
+    fixed: FloatArray = np.zeros((0, 3))
+    choice = model
+    if colour is not None:
+        fixed, choice = _colour_choice(basis, model, colour, n)
     accept = None
     checks = 0
     if constraints.min_device_distance_deg > 0:
-        # Devices can collide: keep only choices that still mount (a quick placement check).
+        # Devices can collide: keep only choices that still mount (a quick placement check),
+        # with the direct colour pairs, if any.
         def accept(rows: NDArray[np.intp]) -> bool:
             nonlocal checks
             if time_limit_s is not None and time.thread_time() - cpu0 > time_limit_s:
@@ -424,8 +436,8 @@ def posterior_design(
                     f"CPU time (at pair {rows.size} of {n}, {checks} mount checks)")
             checks += 1
             try:
-                place_pairs(rows_to_cells(rows), constraints, ph_step_deg=1.0, orderings=4,
-                            seed=seed)
+                place_pairs(np.concatenate([fixed, rows_to_cells(rows)]), constraints,
+                            ph_step_deg=1.0, orderings=4, seed=seed)
             except FeasibilityError:
                 return False
             return True
@@ -433,14 +445,52 @@ def posterior_design(
     cand = candidate_rows(constraints, basis.valid)
     if seed < 0:
         raise DesignError(f"the seed must be at least 0, got {seed}")
+    n_free = n - fixed.shape[0]
     # Any seed is valid; only the best few first pairs are worth starting from.
     first = seed % min(cand.size, FIRST_RANKS) if cand.size else 0
-    rows = greedy_rows(model, basis.Q, cand, n, accept, first=first)
-    placement = place_pairs(rows_to_cells(rows), constraints, ph_step_deg=1.0, seed=seed)
-    design = PairDesign.independent("optimized", placement, condition_number(basis.Q[rows]))
-    stats = GreedyStats(candidates=int(cand.size), evaluations=int(n * cand.size),
+    rows = (greedy_rows(choice, basis.Q, cand, n_free, accept, first=first) if n_free
+            else np.zeros(0, dtype=np.intp))
+    cells = np.concatenate([fixed, rows_to_cells(rows)])
+    placement = place_pairs(cells, constraints, ph_step_deg=1.0, seed=seed)
+    q = np.asarray(basis.Q[rows])
+    if fixed.shape[0]:
+        q = np.concatenate([basis.rows_at(fixed[:, 0], fixed[:, 1], fixed[:, 2]), q])
+    design = PairDesign.independent("optimized", placement, condition_number(q))
+    stats = GreedyStats(candidates=int(cand.size), evaluations=int(n_free * cand.size),
                         mount_checks=checks, first=int(first),
                         seconds=time.perf_counter() - t0)
     return replace(design, objective="posterior",
-                   expected_log_rmse=expected_log_rmse(model, basis.Q[rows]),
-                   rotations=int(rotations), span_deg=float(span_deg), greedy=stats)
+                   expected_log_rmse=expected_log_rmse(model, q),
+                   rotations=int(rotations), span_deg=float(span_deg), greedy=stats,
+                   colour_pairs=int(fixed.shape[0]))
+
+
+def _colour_choice(basis: Basis, model: PriorModel, colour: ColourTargets, n: int
+                   ) -> tuple[FloatArray, PriorModel]:
+    """The direct pairs' cells ((k, 3) radians) and the model the other pairs are chosen by:
+    the prior after reading the direct pairs, the metric plus the weighted target term."""
+    cells, _ph = colour.cells()
+    direct = colour.direct()
+    k = int(direct.sum())
+    if k > n:
+        raise DesignError(
+            f"the colour geometries within {colour.direct_within_deg:g} deg of the specular "
+            f"direction need {k} pairs of their own, but the design has {n}; ask for at least "
+            f"{k} pairs or lower direct_within_deg")
+    q_all = basis.rows_at(cells[:, 0], cells[:, 1], cells[:, 2])
+    fixed = cells[direct]
+    P = model.P
+    if k:
+        q = q_all[direct]
+        P = np.stack([_posterior(Pm, q, s) for Pm, s in zip(model.P, model.pair_noise(q),
+                                                                 strict=True)])
+    W = model.W
+    if colour.weight > 0:
+        Wc = colour_gram(q_all)
+        prior = model.P.sum(axis=0)
+        # Scaled so that, under the prior, weight 1 makes the targets count as much as the
+        # whole table.
+        ratio = float(np.sum(model.W * prior)) / max(float(np.sum(Wc * prior)), 1e-300)
+        W = W + colour.weight * ratio * Wc
+    return fixed, replace(model, P=P, W=W)
+

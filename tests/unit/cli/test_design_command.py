@@ -117,6 +117,13 @@ def test_design_preset(basis_file: Path, capsys: pytest.CaptureFixture[str]) -> 
         (["--pairs", "2", "--neighbourhood", "4"], "odd number"),
         (["--preset", "XYZ"], "known presets are MA68, MA98, BYK-mac, MultiFX10"),
         (["--pairs", "2", "--basis", "/nonexistent/basis.npz"], "does not exist"),
+        (["--lights", "2", "--sensors", "2", "--colour", "MA98"], "--colour designs --pairs"),
+        (["--pairs", "6", "--colour", "MA98", "--objective", "kappa"],
+         "without --objective kappa"),
+        (["--pairs", "6", "--colour", "MA99"], "known instruments are MA68, MA98"),
+        (["--pairs", "6", "--colour", "MA98", "--colour-weight", "-1"],
+         "colour weight must be a number >= 0"),
+        (["--pairs", "3", "--colour", "MA98"], "need 5 pairs of their own"),
         (["--pairs", "3", "--max-elevation", "5", "--min-separation", "30"],
          "no grid cell is feasible"),
         # the core names the settings to relax; the CLI words them as its flags
@@ -222,3 +229,31 @@ def test_an_unknown_objective_names_the_choices(basis_file: Path,
     assert exc.value.code == 2
     assert ("argument --objective: invalid choice: 'nope' (choose from 'kappa', 'posterior')"
             in capsys.readouterr().err)
+
+
+def test_a_colour_design_puts_pairs_at_the_near_specular_geometries(
+        basis_file: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``--colour MA98``: MA98's in-plane geometries with aspecular angles up to 25 degrees
+    (45as-15, 45as15, 45as25, 15as-15, 15as-5) are the first five pairs: light at the
+    incidence, sensor at ``incidence - aspecular`` on the far side, in one plane (or light and
+    sensor swapped, which reads the same by reciprocity)."""
+    out = tmp_path / "colour.toml"
+    assert main(["design", "--pairs", "6", "--basis", str(basis_file), "--colour", "ma98",
+                 "-o", str(out)]) == 0
+    assert "colour: pairs 1-5 sit at the instrument's near-specular geometries" in (
+        capsys.readouterr().out)
+    frag = tomllib.loads(out.read_text())
+    lights = {d["name"]: (d["theta_deg"], d["phi_deg"]) for d in frag["lights"]}
+    sensors = {d["name"]: (d["theta_deg"], d["phi_deg"]) for d in frag["sensors"]}
+    got = []
+    for pair in frag["pairs"][:5]:
+        (ti, pi), (tv, pv) = lights[pair["light"]], sensors[pair["sensor"]]
+        # Same plane of incidence, sensor on the far side (or on the light's side when the
+        # aspecular angle passes the normal).
+        turn = (pv - pi) % 360.0
+        assert min(abs(turn - 180.0), abs(turn)) < 1e-6
+        signed_view = tv if abs(turn - 180.0) < 1e-6 else -tv
+        got.append(tuple(sorted((round(ti, 6), round(signed_view, 6)))))
+    want = [tuple(sorted((float(i), float(i - a))))
+            for i, a in ((45, -15), (45, 15), (45, 25), (15, -15), (15, -5))]
+    assert sorted(got) == sorted(want)
