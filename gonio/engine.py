@@ -4,17 +4,21 @@ Per stage angle (docs/architecture.md, "One scan, one way"): move the stage (alw
 approaching from below, so backlash cancels); optionally read the dark signal with every light
 off; then for each light: on, settle, read all of that light's sensors in parallel
 (``asyncio.gather``) while checking the lamp's output, off. The angle's readings are
-committed to the store (:meth:`gonio.store.JobStore.commit_angle`) before the next move: that
-is the checkpoint. The engine keeps the steps and readings it commits (it reads them from the
+committed to the store (:meth:`gonio.store.JobStore.commit_angle`) in one transaction: that is
+the checkpoint. It is written by a worker thread while the stage moves to the next angle, and
+it is stored before anything that follows it is stored or reported (the next checkpoint, a
+dark, a state change, a fault, a round's events, the end of :meth:`ScanEngine.run`); a process
+killed before it completes resumes from the angle before. The engine keeps the steps and readings it commits (it reads them from the
 store once, when a job starts or resumes), and after each round asks the plan's rounds
 (:mod:`gonio.plans.rounds`) for the next angles.
 
 Time that is not physical (moves, settling, exposures) is overhead, and most of it is device
 round trips on shared links, so the angle sends few of them: the stage position is read before a
 move only when a backlash overshoot may be needed, and a lamp is switched on unchecked: its
-output check (the switch-on check too) runs during the exposure, when the link is idle. The
-commit stays before the next move (it takes well under a millisecond; overlapping it with the
-move would break the checkpoint guarantee).
+output check (the switch-on check too) runs during the exposure, when the link is idle. What
+needs no angle waits for none: the checkpoint (a durable commit waits for the disk), the
+switching off of an angle's last light and, when no dark is read there, the switching on of
+the next angle's first light all run while the stage moves (the lamps are on another link).
 
 Control, requested from outside (the service) at any time:
 
