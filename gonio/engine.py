@@ -8,9 +8,9 @@ committed to the store (:meth:`gonio.store.JobStore.commit_angle`) in one transa
 the checkpoint. It is written by a worker thread while the stage moves to the next angle, and
 it is stored before anything that follows it is stored or reported (the next checkpoint, a
 dark, a state change, a fault, a round's events, the end of :meth:`ScanEngine.run`); a process
-killed before it completes resumes from the angle before. The engine keeps the steps and readings it commits (it reads them from the
-store once, when a job starts or resumes), and after each round asks the plan's rounds
-(:mod:`gonio.plans.rounds`) for the next angles.
+killed before it completes resumes from the angle before. The engine keeps the steps and
+readings it commits (it reads them from the store once, when a job starts or resumes), and
+after each round asks the plan's rounds (:mod:`gonio.plans.rounds`) for the next angles.
 
 Time that is not physical (moves, settling, exposures) is overhead, and most of it is device
 round trips on shared links, so the angle sends few of them: the stage position is read before a
