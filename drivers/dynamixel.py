@@ -21,6 +21,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import math
+import select
 import time
 from collections.abc import Callable
 from typing import Any
@@ -111,6 +112,25 @@ class _PortHandler(_ExclusivePortHandler):
         super().setPacketTimeout(packet_length)
         base = float(getattr(self, "packet_timeout", 0.0))
         self.packet_timeout: float = max(base, self.min_timeout_ms)
+
+    def readPort(self, length: int) -> bytes:
+        """The bytes waiting on the port (at most ``length``), after waiting for the first
+        of them until the packet's timeout.
+
+        The SDK calls this in a loop until a whole status packet or its timeout has come, and
+        the port is non-blocking (``timeout=0``), so the SDK's own read spins on a core for the
+        whole of every reply's latency: CPU taken from the device, the event loop and, on a
+        busy PC, everything else. Waiting in ``select`` for the port to become readable costs
+        nothing meanwhile and returns as soon as a byte arrives; the SDK's loop, its timeout
+        (:meth:`isPacketTimeout`) and what it reads are unchanged.
+        """
+        ser = self.ser
+        if not ser.in_waiting:
+            left_ms = float(self.packet_timeout) - self.getTimeSinceStart()
+            if left_ms > 0:
+                select.select([ser.fileno()], [], [], left_ms / 1000.0)
+        data: bytes = ser.read(length)
+        return data
 
 
 class DynamixelStage(_Stage):

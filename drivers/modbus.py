@@ -14,7 +14,6 @@ mistakes.
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import time
 from collections.abc import Awaitable, Callable, Sequence
 from typing import Any, TypeVar
@@ -245,6 +244,16 @@ class _ModbusDevice:
         self._addr = (host, port, timeout_s)
         self._device_id = device_id
         self._conn: ModbusConnection | None = None
+        # When the last request this device answered was sent (monotonic seconds): a device's
+        # communication watchdog restarts at every request that reaches it.
+        self.last_request = float("-inf")
+
+    async def _request(self, what: str, call: Callable[[AsyncModbusTcpClient], Awaitable[Any]]
+                       ) -> Any:
+        sent = time.monotonic()
+        reply = await self._connection().request(self.name, what, call)
+        self.last_request = sent
+        return reply
 
     def _connection(self) -> ModbusConnection:
         if self._conn is None:
@@ -271,7 +280,7 @@ class _ModbusDevice:
             return await c.read_holding_registers(address, count=count, device_id=dev)
 
         what = f"read {table} registers {address}..{address + count - 1}"
-        reply = await self._connection().request(self.name, what, call)
+        reply = await self._request(what, call)
         words = list(reply.registers)
         if len(words) < count:
             raise DeviceUnavailable(self.name, f"{what}: short reply {words}", code="short")
@@ -308,7 +317,7 @@ class _ModbusDevice:
                 return await c.write_register(reg.address, words[0], device_id=dev)
             return await c.write_registers(reg.address, words, device_id=dev)
 
-        await self._connection().request(self.name, f"write {what} at {reg.address}", call)
+        await self._request(f"write {what} at {reg.address}", call)
 
     async def write_coil(self, address: int, value: bool) -> None:
         dev = self._device_id
@@ -316,7 +325,7 @@ class _ModbusDevice:
         async def call(c: AsyncModbusTcpClient) -> Any:
             return await c.write_coil(address, value, device_id=dev)
 
-        await self._connection().request(self.name, f"write coil {address}", call)
+        await self._request(f"write coil {address}", call)
 
     async def read_coil(self, address: int) -> bool:
         dev = self._device_id
@@ -324,7 +333,7 @@ class _ModbusDevice:
         async def call(c: AsyncModbusTcpClient) -> Any:
             return await c.read_coils(address, count=1, device_id=dev)
 
-        reply = await self._connection().request(self.name, f"read coil {address}", call)
+        reply = await self._request(f"read coil {address}", call)
         return bool(reply.bits[0])
 
 
@@ -367,7 +376,11 @@ class ModbusLight(Light):
     def _feed(self, on: bool) -> None:
         """While the light is on, make sure a request reaches its controller at least every
         third of the watchdog timeout (a long exposure sends it nothing otherwise); when this
-        process dies the feeding stops and the controller switches the lamp off."""
+        process dies the feeding stops and the controller switches the lamp off. Any request
+        to the controller restarts its watchdog, so a feed is sent only after a third of the
+        timeout without one: during a scan the lamp's own requests (switching, the output
+        check) keep it fed, and no feed queues on the shared link before a sensor's trigger
+        or poll."""
         if self.config.registers.watchdog is None:
             return
         if on and self._feeder is None:
@@ -380,9 +393,14 @@ class ModbusLight(Light):
         period = self.config.watchdog_s / 3.0
         coil = self.config.registers.on_coil
         while True:
-            await asyncio.sleep(period)
-            with contextlib.suppress(DeviceFault):  # the engine sees a dead link by itself
+            wait = self._io.last_request + period - time.monotonic()
+            if wait > 0:
+                await asyncio.sleep(wait)
+                continue
+            try:
                 await self._io.read_coil(coil)
+            except DeviceFault:  # the engine sees a dead link by itself
+                await asyncio.sleep(period)
 
     async def set_on(self, on: bool) -> None:
         """Switch the light; when switching on with a monitor, check the output band.

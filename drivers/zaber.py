@@ -184,6 +184,9 @@ class ZaberStage(_Stage):
         self._lock = bus_lock(url)
         self._ids = itertools.cycle(range(100))
         self._op_lock = asyncio.Lock()
+        # Where the last move came to rest, degrees; None once anything else may have moved
+        # the axis (see move_to).
+        self._rest_deg: float | None = None
 
     @property
     def profile_dps(self) -> tuple[float, float]:
@@ -312,6 +315,7 @@ class ZaberStage(_Stage):
 
     # ------------------------------------------------------------------ Device
     async def connect(self) -> None:
+        self._rest_deg = None
         if self._claim is None:
             self._claim = claim(self.name, self.url)
         try:
@@ -337,6 +341,8 @@ class ZaberStage(_Stage):
             await self._ok(f"set accel {self.accel}")
 
     async def close(self) -> None:
+        self._rest_deg = None
+
         def _close() -> None:
             with self._lock:
                 self._drop_port()
@@ -357,10 +363,12 @@ class ZaberStage(_Stage):
             ) from None
 
     async def home(self) -> None:
+        self._rest_deg = None
         async with self._op_lock:
             await self._home_locked(None)
 
     async def _home_locked(self, timeout_s: float | None) -> None:
+        self._rest_deg = None
         self._raise_faults(await self._warnings())
         await self._ok("home")
         limit = self.move_timeout_s if timeout_s is None else timeout_s
@@ -372,6 +380,15 @@ class ZaberStage(_Stage):
                              code="WR")
 
     async def move_to(self, angle_deg: float, timeout_s: float | None = None) -> float:
+        try:
+            actual = await self._move(angle_deg, timeout_s)
+        except BaseException:
+            self._rest_deg = None
+            raise
+        self._rest_deg = actual
+        return actual
+
+    async def _move(self, angle_deg: float, timeout_s: float | None) -> float:
         check_target(self.name, self.limits, angle_deg, [angle_deg])
         limit = self.move_timeout_s if timeout_s is None else float(timeout_s)
         deadline = time.monotonic() + limit
@@ -380,7 +397,13 @@ class ZaberStage(_Stage):
         if any(f in NO_REFERENCE_FLAGS for f in flags):
             async with self._op_lock:
                 await self._home_locked(limit)
-        current = await self.position()
+        if self._rest_deg is not None and (self.approach == "none" or self.backlash_deg <= 0):
+            # Without an approach side the start position only times the completion polls,
+            # so the rest position of the previous move saves a request; a wrong guess costs
+            # a few polls, never a wrong arrival (the axis reports itself idle at the target).
+            current = self._rest_deg
+        else:
+            current = await self.position()
         waypoints = approach_waypoints(current, angle_deg, self.approach, self.backlash_deg)
         check_target(self.name, self.limits, angle_deg, waypoints)
         here = current
@@ -395,14 +418,20 @@ class ZaberStage(_Stage):
             self._raise_faults(await self._warnings())
         if self.settle_s > 0:
             await asyncio.sleep(self.settle_s)
-        return await self.position()
+            return await self.position()
+        try:  # the idle poll's reply carries the position at rest
+            return int(idle.data.split()[0]) / self.mpd
+        except (ValueError, IndexError):
+            return await self.position()
 
     async def _wait_idle(
         self, deadline: float, limit: float, what: str, expected_end: float | None = None
     ) -> Reply:
-        """Poll until the axis is idle; returns the idle reply (its flag is the top warning)."""
+        """Poll until the axis is idle; returns the idle reply (its flag is the top warning,
+        its data the position in microsteps: each poll is a ``get pos``, so the reply that
+        shows the axis idle also says where it came to rest)."""
         while True:
-            reply = await self._send("")
+            reply = await self._send("get pos")
             if reply.flag in FAULT_FLAGS:
                 self._raise_faults([reply.flag])
             if not reply.busy:
@@ -417,10 +446,12 @@ class ZaberStage(_Stage):
             await asyncio.sleep(poll_delay(now, expected_end, self.poll_interval_s))
 
     async def stop(self) -> None:
+        self._rest_deg = None
         await self._send("stop")
 
     async def emergency_stop(self) -> None:
         """Stop at once without deceleration (``estop``)."""
+        self._rest_deg = None
         await self._send("estop")
 
     async def status(self) -> StageStatus:
@@ -435,6 +466,7 @@ class ZaberStage(_Stage):
         )
 
     async def clear_faults(self) -> None:
+        self._rest_deg = None
         async with self._op_lock:
             await self._ok("warnings clear")
             self._raise_faults(await self._warnings())

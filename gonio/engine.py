@@ -4,17 +4,21 @@ Per stage angle (docs/architecture.md, "One scan, one way"): move the stage (alw
 approaching from below, so backlash cancels); optionally read the dark signal with every light
 off; then for each light: on, settle, read all of that light's sensors in parallel
 (``asyncio.gather``) while checking the lamp's output, off. The angle's readings are
-committed to the store (:meth:`gonio.store.JobStore.commit_angle`) before the next move: that
-is the checkpoint. The engine keeps the steps and readings it commits (it reads them from the
-store once, when a job starts or resumes), and after each round asks the plan's rounds
-(:mod:`gonio.plans.rounds`) for the next angles.
+committed to the store (:meth:`gonio.store.JobStore.commit_angle`) in one transaction: that is
+the checkpoint. It is written by a worker thread while the stage moves to the next angle, and
+it is stored before anything that follows it is stored or reported (the next checkpoint, a
+dark, a state change, a fault, a round's events, the end of :meth:`ScanEngine.run`); a process
+killed before it completes resumes from the angle before. The engine keeps the steps and
+readings it commits (it reads them from the store once, when a job starts or resumes), and
+after each round asks the plan's rounds (:mod:`gonio.plans.rounds`) for the next angles.
 
 Time that is not physical (moves, settling, exposures) is overhead, and most of it is device
 round trips on shared links, so the angle sends few of them: the stage position is read before a
 move only when a backlash overshoot may be needed, and a lamp is switched on unchecked: its
-output check (the switch-on check too) runs during the exposure, when the link is idle. The
-commit stays before the next move (it takes well under a millisecond; overlapping it with the
-move would break the checkpoint guarantee).
+output check (the switch-on check too) runs during the exposure, when the link is idle. What
+needs no angle waits for none: the checkpoint (a durable commit waits for the disk), the
+switching off of an angle's last light and, when no dark is read there, the switching on of
+the next angle's first light all run while the stage moves (the lamps are on another link).
 
 Control, requested from outside (the service) at any time:
 
@@ -171,6 +175,11 @@ class ScanEngine:
         self._wake = asyncio.Event()
         self._loop: asyncio.AbstractEventLoop | None = None  # the loop run() runs on
         self._angle_task: asyncio.Task[tuple[float, list[ReadingRow]]] | None = None
+        # The last angle's checkpoint, written by a worker thread while the stage moves on
+        # (awaited before anything else is stored or reported, :meth:`_committed`).
+        self._commit: asyncio.Task[None] | None = None
+        # Switching off the last light of the last angle, sent while the stage moves on.
+        self._lamp_off: asyncio.Task[None] | None = None
         self._dark_once: dict[str, tuple[float, ...]] | None = None
         self._angle_times: list[float] = []
         self._per_angle_estimate = self.checked.per_angle_s
@@ -255,7 +264,8 @@ class ScanEngine:
         self.store.set_state(self.job_id, new, reason=reason, data=dict(data) or None)
         self.state = new
 
-    def _update_progress(self, steps: Sequence[StepRow]) -> Progress:
+    def _next_progress(self, steps: Sequence[StepRow]) -> Progress:
+        """The progress once ``steps`` are committed (:attr:`progress` is set when they are)."""
         done = sum(s.done for s in steps)
         total = len(steps)
         # Measured: the median of the last angles' wall times (a long first move or a retry
@@ -266,9 +276,7 @@ class ScanEngine:
         eta_max = None
         if self._max_angles is not None:
             eta_max = per * max(self._max_angles - done, total - done)
-        self.progress = Progress(done, total, per * (total - done), rnd, eta_max, time.time(),
-                                 per)
-        return self.progress
+        return Progress(done, total, per * (total - done), rnd, eta_max, time.time(), per)
 
     # ------------------------------------------------------------------ main loop
     async def run(self) -> JobState:
@@ -292,7 +300,9 @@ class ScanEngine:
         try:
             await self._connect_rig()
             await self._measure_all()
+            await self._committed()
         except _Halt:
+            await self._drop_lamp_off()  # an emergency halt sends nothing more
             self._set_state(JobState.HALTED, reason="emergency halt")
             return self.state
         except _Abort:
@@ -417,7 +427,13 @@ class ScanEngine:
             t0 = time.monotonic()
             self._angle_task = asyncio.create_task(self._measure_angle(step))
             try:
-                actual, readings = await self._angle_task_result()
+                try:
+                    actual, readings = await self._angle_task_result()
+                except BaseException:
+                    # The previous angle's checkpoint is stored before anything else is
+                    # (a state change, a fault event) and before the job ends.
+                    await self._committed()
+                    raise
             except _Interrupted:
                 continue  # the gate handles the request; the angle is repeated
             except hal.DeviceFault as fault:
@@ -428,18 +444,44 @@ class ScanEngine:
                 continue
             self._angle_times.append(time.monotonic() - t0)
             done = replace(step, done=True, actual_deg=actual)
-            p = self._update_progress(
+            p = self._next_progress(
                 [s if s.angle_index != step.angle_index else done for s in steps]
             )
-            self.store.commit_angle(
-                self.job_id, step.angle_index, actual, readings,
-                {"specimen_deg": step.specimen_deg, "position_deg": step.position_deg,
-                 "eta_s": p.eta_s, "round": p.round},
-            )
-            # Committed: the store and the engine's copy now hold the same.
+            await self._committed()  # the previous angle's (long done: a move ran since)
+            # The checkpoint is written by a worker thread while the stage moves to the next
+            # angle: a durable commit waits for the disk (several ms), the move for the
+            # stage. It is awaited before anything else is stored, reported or measured
+            # after the move (see _committed); a process killed before it completes resumes
+            # from the angle before and measures this one again.
+            self._commit = asyncio.create_task(self._commit_angle(step, actual, readings, p))
+            # The engine's copy: what the store holds once that commit is done.
             self._steps[self._where(step.angle_index)] = done
             self._readings[step.angle_index] = readings
             return
+
+    async def _commit_angle(self, step: StepRow, actual: float, readings: list[ReadingRow],
+                            p: Progress) -> None:
+        """Store one angle's checkpoint (readings, step done, progress event) off the loop,
+        then report its progress."""
+        await asyncio.to_thread(
+            self.store.commit_angle, self.job_id, step.angle_index, actual, readings,
+            {"specimen_deg": step.specimen_deg, "position_deg": step.position_deg,
+             "eta_s": p.eta_s, "round": p.round},
+        )
+        self.progress = p
+
+    async def _committed(self) -> None:
+        """Wait for the last angle's checkpoint to be stored; raises what the commit raised
+        (a full disk), once. Shielded: a cancelled engine still waits for a commit under way
+        when it cleans up."""
+        task = self._commit
+        if task is None:
+            return
+        try:
+            await asyncio.shield(task)
+        finally:
+            if task.done():
+                self._commit = None
 
     async def _angle_task_result(self) -> tuple[float, list[ReadingRow]]:
         assert self._angle_task is not None
@@ -460,6 +502,8 @@ class ScanEngine:
     # ------------------------------------------------------------------ control at checkpoints
     async def _gate(self) -> None:
         """Act on pending requests; return when the engine may measure the next angle."""
+        if self._halt or self._abort or self._pause or self.state is not JobState.RUNNING:
+            await self._committed()  # a checkpoint is stored before the state that follows it
         while True:
             if self._halt:
                 raise _Halt()
@@ -507,11 +551,15 @@ class ScanEngine:
             for leg in plan_overshoot_legs(here, target, self.plan.backlash_deg,
                                            self.desc.stage_min_deg)[:-1]:
                 await stage.move_to(leg)
-        actual = await stage.move_to(target)
-        dark: dict[str, tuple[float, ...]] = {}
         mode = self.plan.exposure.dark
-        if mode == "every_angle" or (mode == "once" and self._dark_once is None):
+        dark_due = mode == "every_angle" or (mode == "once" and self._dark_once is None)
+        # Without a dark to read here, the first light is switched on while the stage moves.
+        first = None if dark_due or not self.lights else self.rig.lights[self.lights[0]]
+        actual, lit_at = await self._move_and_switch(target, first)
+        dark: dict[str, tuple[float, ...]] = {}
+        if dark_due:
             dark = await self._read_dark()
+            await self._committed()  # the store is written in checkpoint order
             self.store.add_darks(self.job_id, step.angle_index, dark)
             if mode == "once":
                 self._dark_once = dark
@@ -519,21 +567,33 @@ class ScanEngine:
             dark = self._dark_once
         ex = self.plan.exposure
         out: list[ReadingRow] = []
-        for lname in self.lights:
+        for k, lname in enumerate(self.lights):
             light = self.rig.lights[lname]
             sensors = self.sensors_of[lname]
+            last = k == len(self.lights) - 1
+            measured = False
             # The output check is left to the exposure (``_read_sensors``): one round trip
             # fewer between switching on and triggering the sensors.
-            await light.switch_on(check=False)
+            if k > 0 or lit_at is None:
+                await light.switch_on(check=False)
+                lit_at = time.monotonic()
             try:
-                if ex.light_settle_s > 0:
-                    await asyncio.sleep(ex.light_settle_s)
+                # The light settles from its switch-on (the first one's during the move).
+                settle = ex.light_settle_s - (time.monotonic() - lit_at)
+                if settle > 0:
+                    await asyncio.sleep(settle)
                 results = await self._read_sensors(sensors, lamp=lname)
                 # Auto-ranging while the lamp is still on: a saturated reading is taken again
                 # in its sensor's next lower range, until one does not saturate.
                 results = await self._range_down(sensors, results)
+                measured = True
             finally:
-                await _quietly(light.set_on(False))
+                if last and measured:
+                    # The angle's last light goes off while the angle is committed and the
+                    # stage moves on: the next light is switched on only after it.
+                    self._lamp_off = asyncio.create_task(_quietly(light.set_on(False)))
+                else:
+                    await _quietly(light.set_on(False))
             for sname, rd in zip(sensors, results, strict=True):
                 if rd.saturated and self.plan.faults.saturation == "suspend":
                     raise SensorSaturated(sname, self._saturation_message(sname, lname),
@@ -558,10 +618,50 @@ class ScanEngine:
         # range's offset would otherwise be divided by its small scale), with every lamp off.
         ranged = sorted({(r.sensor, r.range_index) for r in out if r.range_index > 0})
         if ranged:
+            await self._lamp_off_done()  # every lamp off
             darks = await self._read_range_darks(ranged)
             out = [replace(r, dark=darks[(r.sensor, r.range_index)]) if r.range_index else r
                    for r in out]
         return actual, out
+
+    async def _move_and_switch(self, target: float, first: hal.Light | None
+                               ) -> tuple[float, float | None]:
+        """Move the stage to ``target`` while the lamps (another link) switch the previous
+        angle's last light off and then, given ``first``, the next one on.
+
+        Returns the position reached and when ``first`` was on (monotonic seconds; None
+        without it). A fault of either is raised once both have ended (the lamps are
+        switched off by the fault handling, as after any fault).
+        """
+        async def lamps() -> float | None:
+            await self._lamp_off_done()
+            if first is None:
+                return None
+            await first.switch_on(check=False)
+            return time.monotonic()
+
+        moved, lit = await asyncio.gather(self.rig.stage.move_to(target), lamps(),
+                                          return_exceptions=True)
+        errors = [r for r in (moved, lit) if isinstance(r, BaseException)]
+        if errors:
+            raise _primary(errors)
+        assert isinstance(moved, float) and not isinstance(lit, BaseException)
+        return moved, lit
+
+    async def _lamp_off_done(self) -> None:
+        """Wait until the previous angle's last light is off (it was switched off quietly:
+        a lamp that did not answer is dealt with by the next request to it)."""
+        task, self._lamp_off = self._lamp_off, None
+        if task is not None:
+            await task
+
+    async def _drop_lamp_off(self) -> None:
+        """Cancel a lamp switch-off not yet sent (an emergency halt sends nothing more)."""
+        task, self._lamp_off = self._lamp_off, None
+        if task is not None:
+            task.cancel()
+            with contextlib.suppress(BaseException):
+                await task
 
     def _saturation_message(self, sensor: str, light: str) -> str:
         """Why a reading that saturated in every range the sensor has fails, and what to do."""
@@ -676,6 +776,7 @@ class ScanEngine:
         Whether the job waits or fails is the plan's fault policy
         (:class:`gonio.plans.faults.Suspender`).
         """
+        await self._committed()
         rules = self.suspender
         refused = rules.refusal(fault, retries, trouble)
         if refused is not None:
@@ -750,6 +851,7 @@ class ScanEngine:
     async def _plan_next_round(self, steps: Sequence[StepRow]) -> bool:
         """Plan the next round as the plan's rounds say (:mod:`gonio.plans.rounds`); False
         when the job is measured."""
+        await self._committed()  # the round's last checkpoint, before its events
         rnd = max(s.round for s in steps)
         angles, values = self.measured_values(steps)
         nxt = await self.rounds.next_round(angles, values, len(steps), rnd)
@@ -773,6 +875,7 @@ class ScanEngine:
 
     # ------------------------------------------------------------------ cleanup
     async def _lights_off(self) -> None:
+        await self._lamp_off_done()
         if self._rig is None:
             return  # never connected: no light was switched on
         for light in self._rig.lights.values():
@@ -780,6 +883,10 @@ class ScanEngine:
 
     async def _cleanup(self) -> None:
         """Lights off and stage stopped; best effort, every step tried even if one fails."""
+        with contextlib.suppress(Exception):
+            # Normally stored already; under way only when the engine itself is cancelled.
+            # A commit that failed has failed the job already (or resumes it on restart).
+            await self._committed()
         await self._lights_off()
         if self._rig is not None:
             await _quietly(self._rig.stage.stop())

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import os
 import statistics
 import threading
 import time
@@ -12,7 +13,7 @@ from typing import Any
 
 import pytest
 
-from gonio.drivers.dynamixel import DynamixelStage
+from gonio.drivers.dynamixel import DynamixelStage, _PortHandler
 from gonio.hal import DeviceUnavailable, StageFault, TravelLimits
 from gonio.motion import move_time
 from gonio.sim.dynamixel_device import DynamixelSimHandle, start_dynamixel_sim
@@ -278,3 +279,52 @@ def test_a_stale_start_position_only_times_the_polls_never_the_arrival() -> None
         assert first == pytest.approx(10.0, abs=1.5 / CPD)
         assert second == pytest.approx(20.0, abs=1.5 / CPD)
         assert sim.motion.position_deg() == pytest.approx(20.0, abs=1.5 / CPD)
+
+
+@contextmanager
+def _port_pair() -> Iterator[tuple[Any, int, list[int]]]:
+    """The driver's port handler on one end of a pseudo-terminal, the other end's file
+    descriptor, and a list that counts the handler's reads of the port."""
+    master, slave = os.openpty()
+    ph = _PortHandler(os.ttyname(slave))
+    try:
+        assert ph.setBaudRate(57600)
+        reads: list[int] = []
+        read = ph.ser.read
+
+        def counted(n: int) -> bytes:
+            reads.append(n)
+            data: bytes = read(n)
+            return data
+
+        ph.ser.read = counted
+        yield ph, master, reads
+    finally:
+        ph.closePort()
+        os.close(master)
+        os.close(slave)
+
+
+def test_a_reply_is_waited_for_without_spinning_on_the_port() -> None:
+    # The SDK reads the port in a loop until the status packet is complete: a non-blocking
+    # read there spins a core for the whole reply latency. The handler waits for the bytes.
+    with _port_pair() as (ph, master, reads):
+        ph.setPacketTimeoutMillis(5000.0)
+        reply = bytes([0xFF, 0xFF, 0xFD, 0x00, 0x01, 0x04, 0x00, 0x55, 0x00, 0xA1, 0x0C])
+        late = threading.Timer(0.05, os.write, (master, reply))
+        late.start()
+        try:
+            got = ph.readPort(len(reply))
+        finally:
+            late.cancel()
+        assert got == reply
+        assert len(reads) == 1  # one read, when the bytes were there
+        assert not ph.isPacketTimeout()
+
+
+def test_no_reply_returns_nothing_once_the_packet_timeout_has_passed() -> None:
+    with _port_pair() as (ph, _master, reads):
+        ph.setPacketTimeoutMillis(100.0)
+        assert ph.readPort(11) == b""
+        assert len(reads) == 1
+        assert ph.isPacketTimeout()  # it gave up only when the SDK's timeout had passed

@@ -35,6 +35,7 @@ from gonio.sim.modbus_server import (
     to_words,
 )
 from gonio.sim.motion import StageMotion
+from gonio.sim.rig import SimRigOptions, start_sim_rig
 from gonio.sim.specimen import NoiseModel, Specimen
 
 pytestmark = pytest.mark.system
@@ -588,3 +589,44 @@ def test_link_reconnected_during_an_exposure_discards_the_reading(bench: Bench) 
     err, again = asyncio.run(asyncio.wait_for(run(), 10))
     assert err.code == "reconnected" and err.recoverable and err.device == "S1"
     np.testing.assert_allclose(again.values, bench.expected_counts(0.01), atol=0.51)
+
+
+def test_a_lamp_in_use_is_not_fed_and_an_idle_one_is() -> None:
+    """Any request restarts a controller's watchdog: a lamp that hears from the driver anyway
+    (here its output check, every 50 ms for longer than a feeding period) gets no feed to
+    queue on the shared link, and a lamp left on alone is still fed before it would trip."""
+    watchdog_s = 3.0  # a feed is due after 1 s without a request
+    with start_sim_rig(SimRigOptions(time_scale=1.0, lamp_watchdog_s=watchdog_s)) as sim:
+        assert sim.modbus is not None
+        modbus = sim.modbus
+        cfg = sim.config.lights[0]
+        coil = cfg.registers.on_coil
+
+        def coil_reads() -> int:  # function code 1 at the lamp's coil: a feed
+            return sum(1 for name, fc, addr in modbus.recent_requests()
+                       if name == cfg.name and fc == 1 and addr == coil)
+
+        async def run() -> tuple[int, int]:
+            light = ModbusLight(cfg)
+            await light.connect()
+            try:
+                await light.switch_on(check=False)
+                before = coil_reads()
+                t_end = time.monotonic() + 1.5 * watchdog_s / 3.0
+                while time.monotonic() < t_end:
+                    await light.check_output()
+                    await asyncio.sleep(0.05)
+                in_use = coil_reads() - before
+                deadline = time.monotonic() + 60.0
+                while coil_reads() - before == in_use and time.monotonic() < deadline:
+                    await asyncio.sleep(0.02)  # left alone: wait for the feed
+                return in_use, coil_reads() - before - in_use
+            finally:
+                await light.set_on(False)
+                await light.close()
+
+        in_use, idle = asyncio.run(run())
+        assert in_use == 0
+        assert idle >= 1
+        trips = sum(t for _, t in modbus.snapshot()["watchdogs"].values())
+        assert trips == 0

@@ -224,3 +224,39 @@ def test_poll_interval_must_be_positive() -> None:
         ZaberStage("rot", "loop://", microsteps_per_degree=MPD,
                    limits=TravelLimits(0.0, 360.0), speed_dps=10.0, accel_dps2=10.0,
                    poll_interval_s=0.0)
+
+
+def test_a_move_from_rest_asks_no_position_of_its_own() -> None:
+    """Without an approach side the previous move's rest position times the polls, and the
+    poll that sees the axis idle (a ``get pos``) gives the position reached: the requests of a
+    move are the warnings, the move and its polls. After a stop the position is asked again."""
+    with rig("pty", approach="none") as (sim, stage):
+        sent: list[str] = []
+        exchange = stage._exchange
+
+        def spy(command: str) -> Any:
+            sent.append(command)
+            return exchange(command)
+
+        stage._exchange = spy  # type: ignore[method-assign]
+
+        async def go() -> tuple[float, list[str], float, list[str]]:
+            await stage.connect()
+            await stage.move_to(0.0)  # homes first
+            await stage.move_to(10.0)
+            sent.clear()
+            reached = await stage.move_to(25.0)
+            moves = list(sent)
+            await stage.stop()
+            sent.clear()
+            await stage.move_to(30.0)
+            return reached, moves, await stage.position(), list(sent)
+
+        reached, moves, last, after_stop = run(go)
+        assert moves[:2] == ["warnings", "move abs 25000"]
+        assert set(moves[2:]) == {"get pos"}  # the polls
+        assert reached == pytest.approx(25.0, abs=1 / MPD)
+        assert last == pytest.approx(30.0, abs=1 / MPD)
+        assert sim.motion.position_deg() == pytest.approx(30.0, abs=1 / MPD)
+        # After the stop the start position is asked before the move again.
+        assert after_stop[:3] == ["warnings", "get pos", "move abs 30000"]

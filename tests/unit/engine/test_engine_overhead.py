@@ -1,14 +1,22 @@
 """The engine spends no device round trips it does not need, without giving up its checks.
 
-Each test arms one device of the in-memory rig to record when it is asked something, and checks
-the order of events against what the measurement needs: the lamp is checked while its sensors
-integrate, the stage position is read only when a backlash overshoot may follow, and a lamp
-found out of band during the exposure still discards the angle.
+Each test arms one device of the in-memory rig (or the store) to record when it is asked
+something, and checks the order of events against what the measurement needs: the lamp is
+checked while its sensors integrate, the stage position is read only when a backlash overshoot
+may follow, a lamp found out of band during the exposure still discards the angle, the lamps
+are switched and the checkpoint written while the stage moves on, and a checkpoint that cannot
+be written fails the job keeping what was stored.
 """
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
+import sqlite3
+import time
+from typing import Any
+
+import pytest
 
 from gonio import hal
 from gonio.engine import ScanEngine
@@ -130,3 +138,152 @@ def test_stage_position_is_read_per_angle_when_an_overshoot_may_be_needed() -> N
     first, *rest = stage.moves
     assert first < stage.moves[1] and first == stage.moves[1] - 2.0  # approached from below
     assert rest == sorted(rest)
+
+
+class LampWatchingStage(MemStage):
+    """A stage whose every move lasts until light ``L1`` is on (or 5 s, when nothing switches
+    it meanwhile) and records the device calls made while it moved."""
+
+    def __init__(self, log: Log, lights: dict[str, hal.Light]) -> None:
+        super().__init__(log)
+        self.lights = lights
+        self.during: list[list[tuple[str, str]]] = []
+
+    async def move_to(self, angle_deg: float, timeout_s: float | None = None) -> float:
+        start = len(self.log.calls)
+        first = self.lights["L1"]
+        assert isinstance(first, MemLight)
+        with contextlib.suppress(TimeoutError):
+            async with asyncio.timeout(5.0):
+                while not first.on:
+                    await asyncio.sleep(0.001)
+        pos = await super().move_to(angle_deg, timeout_s)
+        self.during.append([(dev, what) for dev, what, _ in self.log.calls[start:]])
+        return pos
+
+
+class SlowToSwitchOff(MemLight):
+    """A light whose switching off is acknowledged after 5 ms (a request on a real link)."""
+
+    async def set_on(self, on: bool) -> None:
+        if not on:
+            await asyncio.sleep(0.005)
+        await super().set_on(on)
+
+
+def test_lamps_are_switched_while_the_stage_moves() -> None:
+    rig = MemRig()
+    rig.lights["L2"] = SlowToSwitchOff("L2", rig.log, 30.0, 90.0)
+    stage = LampWatchingStage(rig.log, rig.lights)
+    rig.stage = stage
+    store, eng = _engine(rig, UniformPlan(rotations=3, exposure=EXPOSURE))
+    assert asyncio.run(eng.run()) is JobState.RUNNING
+    assert store.reading_count(1) == 3 * 3
+    # No dark to read: the first light goes on during each move, and from the second move
+    # on the previous angle's last light goes off first; nothing is read while it moves.
+    assert [[c for c in d if c[1] in ("on", "off", "read")] for d in stage.during] == [
+        [("L1", "on")],
+        [("L2", "off"), ("L1", "on")],
+        [("L2", "off"), ("L1", "on")],
+    ]
+    assert not rig.any_light_on()
+
+
+def test_a_dark_is_read_with_every_lamp_off_after_the_move() -> None:
+    rig = MemRig()
+    plan = UniformPlan(rotations=2, exposure=ExposureSettings(
+        exposure_s=0.02, light_settle_s=0.0, dark="every_angle"))
+    store, eng = _engine(rig, plan)
+    assert asyncio.run(eng.run()) is JobState.RUNNING
+    # Each angle: move, then the darks with every lamp off, then the lights.
+    lit: set[str] = set()
+    darks_read = 0
+    for dev, what, _ in rig.log.calls:
+        if what == "on":
+            lit.add(dev)
+        elif what == "off":
+            lit.discard(dev)
+        elif what == "read" and not lit:
+            darks_read += 1
+        elif what == "move":
+            darks_read = 0
+        assert len(lit) <= 1
+    assert len(store.darks(1)) == 2
+    rows = store.readings(1)
+    assert all(r.dark == (0.01, 0.01, 0.01) for r in rows)  # MemSensor's dark level
+
+
+class BesideTheMoveStore(JobStore):
+    """A store whose angle checkpoint waits (up to 5 s) until the stage has started the move
+    after it, and notes whether it had; the last angle's does not wait."""
+
+    def __init__(self, stage: MemStage, angles: int) -> None:
+        super().__init__(":memory:")
+        self.stage = stage
+        self.angles = angles
+        self.beside_next_move: list[bool] = []
+
+    def commit_angle(self, job_id: int, angle_index: int, *args: Any, **kwargs: Any) -> Any:
+        if angle_index < self.angles - 1:
+            deadline = time.monotonic() + 5.0
+            while (sum(1 for c in self.stage.log.calls if c[1] == "move") <= angle_index + 1
+                   and time.monotonic() < deadline):
+                time.sleep(0.001)
+            moves = sum(1 for c in self.stage.log.calls if c[1] == "move")
+            self.beside_next_move.append(moves > angle_index + 1)
+        return super().commit_angle(job_id, angle_index, *args, **kwargs)
+
+
+def test_the_checkpoint_is_written_while_the_stage_moves_on_and_before_what_follows() -> None:
+    rig = MemRig()
+    plan = UniformPlan(rotations=4, exposure=EXPOSURE)
+    desc = RigDescription.from_rig(rig)
+    store = BesideTheMoveStore(rig.mstage, 4)
+    job = store.create_job(kind=plan.kind, specimen="s", plan=plan.model_dump(mode="json"),
+                           rig=desc.model_dump(mode="json"))
+    eng = ScanEngine(rig, store, job.id, plan, desc)
+    assert asyncio.run(eng.run()) is JobState.RUNNING
+    assert store.beside_next_move == [True, True, True]
+    # Every checkpoint is stored by the time the engine returns, in order, and the progress
+    # the engine reports is the last stored one.
+    assert [s.done for s in store.steps(1)] == [True] * 4
+    assert store.reading_count(1) == 4 * 3
+    done = [e.data["done"] for e in store.events_after(0) if e.type == "progress"]
+    assert done == [1, 2, 3, 4]
+    assert eng.progress.done == 4
+
+
+class FullAtStore(JobStore):
+    """A store whose checkpoint of angle ``full_at`` fails as SQLite does on a full disk."""
+
+    def __init__(self, full_at: int) -> None:
+        super().__init__(":memory:")
+        self.full_at = full_at
+
+    def commit_angle(self, job_id: int, angle_index: int, *args: Any, **kwargs: Any) -> Any:
+        if angle_index == self.full_at:
+            tiny = sqlite3.connect(":memory:")
+            tiny.execute("CREATE TABLE t (x BLOB)")
+            tiny.execute("PRAGMA max_page_count = 2")
+            tiny.execute("INSERT INTO t VALUES (zeroblob(100000))")  # raises SQLITE_FULL
+        return super().commit_angle(job_id, angle_index, *args, **kwargs)
+
+
+def test_a_checkpoint_refused_for_a_full_disk_fails_the_job_keeping_what_was_stored() -> None:
+    rig = MemRig()
+    plan = UniformPlan(rotations=4, exposure=EXPOSURE)
+    desc = RigDescription.from_rig(rig)
+    store = FullAtStore(full_at=1)
+    job = store.create_job(kind=plan.kind, specimen="s", plan=plan.model_dump(mode="json"),
+                           rig=desc.model_dump(mode="json"))
+    eng = ScanEngine(rig, store, job.id, plan, desc)
+    with pytest.raises(sqlite3.OperationalError):
+        asyncio.run(eng.run())
+    got = store.get_job(job.id)
+    assert got.state == JobState.FAILED.value
+    assert got.reason is not None and got.reason.startswith("disk full: ")
+    # Angle 0 stays stored; angle 1 was never reported; the lamps are off, the stage stopped.
+    assert [s.done for s in store.steps(1)] == [True, False, False, False]
+    assert store.reading_count(1) == 3
+    assert [e.data["done"] for e in store.events_after(0) if e.type == "progress"] == [1]
+    assert not rig.any_light_on() and rig.mstage.stopped >= 1

@@ -47,7 +47,7 @@ def test_eta_is_the_median_measured_angle_time_times_the_angles_left() -> None:
     eng = _engine(UniformPlan(rotations=8, exposure=FAST))
     # A slow first angle (the long move from where the stage was parked) does not dominate.
     eng._angle_times = [9.0, 1.0, 1.2, 0.8]
-    p = eng._update_progress(_steps(8, 4))
+    p = eng._next_progress(_steps(8, 4))
     assert p.eta_s == pytest.approx(1.1 * 4)  # median of the four, times four angles left
     assert p.eta_max_s is None and p.at == pytest.approx(time.time(), abs=5)
 
@@ -56,7 +56,7 @@ def test_adaptive_eta_has_a_bound_over_the_worst_case_angles() -> None:
     plan = AdaptivePlan(initial_rotations=8, max_rounds=3, max_rotations=None, exposure=FAST)
     eng = _engine(plan)
     eng._angle_times = [2.0]
-    p = eng._update_progress(_steps(8, 8))
+    p = eng._next_progress(_steps(8, 8))
     assert p.eta_s == 0.0  # the first round is done; nothing more is planned yet
     # ... but up to 8 + 16 more angles may come (dry run: max_angles = 32).
     assert dry_run(plan, eng.desc).max_angles == 32
@@ -65,7 +65,7 @@ def test_adaptive_eta_has_a_bound_over_the_worst_case_angles() -> None:
     capped = plan.model_copy(update={"max_rotations": 16})
     eng = _engine(capped)
     eng._angle_times = [2.0]
-    assert eng._update_progress(_steps(8, 8)).eta_max_s == pytest.approx(2.0 * 8)
+    assert eng._next_progress(_steps(8, 8)).eta_max_s == pytest.approx(2.0 * 8)
 
 
 def _no_basis() -> None:
