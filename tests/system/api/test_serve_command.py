@@ -56,7 +56,8 @@ def test_sim_demo_scan_keeps_its_data_and_prints_the_result_file(
     """Default data directory: the user data folder's serve-sim/ (the session's temporary
     GONIO_DATA_DIR here); the demo prints a result file that is still there after exit."""
     monkeypatch.delenv("GONIO_API_KEYS", raising=False)
-    assert main(["serve", "--sim", "--demo-scan", "--port", "0", "--time-scale", "10"]) == 0
+    assert main(["serve", "--sim", "--demo-scan", "--no-export-fits", "--port", "0",
+                 "--time-scale", "10"]) == 0
     out = capsys.readouterr().out
     data = Path(os.environ["GONIO_DATA_DIR"]) / "serve-sim"
     assert f"data directory {data} (kept across restarts)" in out
@@ -69,7 +70,8 @@ def test_sim_demo_scan_keeps_its_data_and_prints_the_result_file(
     angles = [float(a) for a in re.findall(r"specimen at (\S+) deg", out)]
     assert len(angles) == 8 and all(0 <= a < 360 for a in angles), out
     # Run again on the same folder: the calibration is still in effect, none is queued.
-    assert main(["serve", "--sim", "--demo-scan", "--port", "0", "--time-scale", "10"]) == 0
+    assert main(["serve", "--sim", "--demo-scan", "--no-export-fits", "--port", "0",
+                 "--time-scale", "10"]) == 0
     again = capsys.readouterr().out
     assert "calibration: in effect" in again and "calibrating the simulated rig" not in again
 
