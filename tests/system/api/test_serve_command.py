@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 
 from gonio.cli import main
+from gonio.results import read_result
 
 
 @pytest.mark.parametrize(
@@ -65,6 +66,8 @@ def test_sim_demo_scan_keeps_its_data_and_prints_the_result_file(
     assert m is not None, out
     result = Path(m.group(1))
     assert result.parent == data / "results" and result.is_file()
+    demo = read_result(result)  # --no-export-fits: reconstructed, fits left to the exports
+    assert demo.table is not None and demo.factored is None and demo.principled is None
     assert "api/v1/jobs" not in out.split("demo scan completed")[1]  # no dead URL
     # Progress names the specimen's angle (0-360), not the multi-turn stage position.
     angles = [float(a) for a in re.findall(r"specimen at (\S+) deg", out)]
