@@ -98,6 +98,17 @@ class PathsSection(_Section):
     rig_config: Path | None = None
 
 
+class ResultsSection(_Section):
+    """``[results]``: what a finished scan's result file holds.
+
+    ``export_fits``: fit the export models (factored and principled, judged by rendering)
+    when a scan finishes, so exports are immediate. Several seconds of CPU per scan; with
+    ``false`` scans finish sooner and each export fits when it is made (docs/export.md).
+    """
+
+    export_fits: bool = True
+
+
 class DaemonConfig(_Section):
     """A whole daemon config file, validated; paths are absolute after loading."""
 
@@ -105,6 +116,7 @@ class DaemonConfig(_Section):
     auth: AuthSection = AuthSection()
     limits: LimitsSection = LimitsSection()
     paths: PathsSection = PathsSection()
+    results: ResultsSection = ResultsSection()
 
     def for_rig(self, rig_config: Any) -> DaemonConfig:
         """This config with its data directory settled: ``[paths] data_dir`` if given, else the
@@ -337,6 +349,7 @@ def build_app(
             rig_config=rig_config,
             basis=basis if basis is not None else BasisSupply(),
             data_dir=data_dir,
+            fit_exports=cfg.results.export_fits,
         )
         # State files are checked before anything is served (docs/engine.md, "State files
         # at start"): the store by JobStore itself (quick_check), the calibration here (a

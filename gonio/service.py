@@ -121,6 +121,8 @@ class GonioService:
     data_dir : folder for result files and the latest calibration
     calibration : applied to every scan instead of the one in effect (``gonio scan
         --calibration``); default: :meth:`calibration`'s rule
+    fit_exports : store the export fits in every scan's result (``[results] export_fits``;
+        False: scans finish seconds sooner and each export fits when it is made)
     """
 
     def __init__(
@@ -131,6 +133,7 @@ class GonioService:
         basis: BasisSupply | None = None,
         data_dir: str | Path = "gonio-data",
         calibration: Calibration | None = None,
+        fit_exports: bool = True,
     ):
         self.store = store
         self._calibration = calibration
@@ -170,7 +173,7 @@ class GonioService:
         self.maintenance = MaintenanceLock(self.data_dir / LOCK_FILE_NAME)
         self.worker = Worker(
             store, self._get_rig, self.desc, self.data_dir, self.basis, self.calibration,
-            provenance, gate=self.maintenance.reason,
+            provenance, gate=self.maintenance.reason, fit_exports=fit_exports,
         )
         self.stage = StageControl(self.desc, self._get_rig, self.worker, self.active_job,
                                   self.record_event)

@@ -106,6 +106,9 @@ def register(subparsers: Any) -> None:
                    help="print the plan's angles, readings and duration; nothing moves")
     p.add_argument("--json", action="store_true", help="with --dry-run: the full plan as JSON")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--no-export-fits", action="store_true",
+                   help="finish without the export fits (several seconds of CPU sooner); "
+                   "'gonio export' then fits when it exports")
     p.add_argument("-o", "--output", type=Path, required=True, help="result file (.h5)")
     p.set_defaults(func=_scan)
 
@@ -292,7 +295,7 @@ async def _run_owned(args: argparse.Namespace, checked: Any, config: Any, sim: A
         check_plausible(override, sensor_full_scale(config),
                         f"calibration file {args.calibration}")
     service = GonioService(store, rig, rig_config=config, basis=basis, data_dir=data_dir,
-                           calibration=override)
+                           calibration=override, fit_exports=not args.no_export_fits)
     try:
         if sim is not None:
             attach_sim(service, sim)

@@ -56,6 +56,10 @@ def register(subparsers: Any) -> None:
     p.add_argument("--data-dir", type=Path, default=None,
                    help="jobs database and results (with --sim, default: the user data "
                    "folder's serve-sim/, printed at start)")
+    p.add_argument("--no-export-fits", action="store_true",
+                   help="scans finish without the export fits (several seconds of CPU "
+                   "sooner; each export fits when it is made); sets [results] export_fits "
+                   "= false")
     sim = p.add_argument_group("simulated rig (--sim)")
     sim.add_argument("--sim", action="store_true",
                      help="start a simulated rig in this process and serve it")
@@ -105,6 +109,7 @@ def run(args: argparse.Namespace) -> int:
             paths__data_dir=str(args.data_dir) if args.data_dir is not None else None,
             paths__rig_config=str(args.rig) if args.rig is not None else None,
             auth__keys_file=str(args.keys_file) if args.keys_file is not None else None,
+            results__export_fits=False if args.no_export_fits else None,
         )
         keyring = load_keyring(cfg)
     except DaemonConfigError as exc:

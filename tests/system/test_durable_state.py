@@ -39,7 +39,8 @@ def sim(tmp_path: Path) -> Iterator[SimRig]:
 
 
 def _serve(sim: SimRig, data: Path) -> DaemonProcess:
-    return start_daemon(["--rig", str(sim.config_path), "--data-dir", str(data), "--port", "0"])
+    return start_daemon(["--no-export-fits",
+                         "--rig", str(sim.config_path), "--data-dir", str(data), "--port", "0"])
 
 
 def _state(c: Any, job: int) -> str:

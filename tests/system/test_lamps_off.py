@@ -58,7 +58,8 @@ def _trips(sim: SimRig) -> int:
 
 
 def _kill_with_a_lamp_on(sim: SimRig, data: Path) -> DaemonProcess:
-    daemon = start_daemon(["--rig", str(sim.config_path), "--data-dir", str(data),
+    daemon = start_daemon(["--no-export-fits",
+                           "--rig", str(sim.config_path), "--data-dir", str(data),
                            "--port", "0"])
     try:
         with daemon.client() as c:
@@ -84,7 +85,8 @@ def test_the_watchdog_switches_the_lamp_off_after_kill_9(watched: SimRig, tmp_pa
 
 def test_a_fed_watchdog_never_cuts_a_long_exposure(watched: SimRig, tmp_path: Path) -> None:
     data = tmp_path / "data"
-    daemon = start_daemon(["--rig", str(watched.config_path), "--data-dir", str(data),
+    daemon = start_daemon(["--no-export-fits",
+                           "--rig", str(watched.config_path), "--data-dir", str(data),
                            "--port", "0"])
     try:
         with daemon.client() as c:
@@ -123,7 +125,7 @@ def test_lights_off_after_the_daemon_died(unwatched: SimRig, tmp_path: Path) -> 
 
 def test_lights_off_is_refused_while_a_daemon_owns_the_rig(unwatched: SimRig, tmp_path: Path
                                                            ) -> None:
-    daemon = start_daemon(["--rig", str(unwatched.config_path), "--data-dir",
+    daemon = start_daemon(["--no-export-fits", "--rig", str(unwatched.config_path), "--data-dir",
                            str(tmp_path / "data"), "--port", "0"])
     try:
         refused = gonio(["rig", "lights-off", "--rig", str(unwatched.config_path)])

@@ -58,7 +58,7 @@ def test_second_daemon_and_scan_on_a_data_dir_in_use_are_refused(
         assert second.returncode == 2, second.stdout + second.stderr
         assert "data directory" in second.stderr and f"pid {first.pid}" in second.stderr
         assert "gonio serve" in second.stderr  # the holder's program
-        scan = gonio(["scan", "--rig", str(other_sim.config_path), "--db",
+        scan = gonio(["scan", "--no-export-fits", "--rig", str(other_sim.config_path), "--db",
                       str(data / "gonio.sqlite"), "--rotations", "2", "-o",
                       str(tmp_path / "x.h5")])
         assert scan.returncode == 2, scan.stdout + scan.stderr
@@ -102,7 +102,8 @@ def test_cli_on_a_rig_the_daemon_owns_is_refused_and_the_job_is_unharmed(
                      what="the daemon's job to measure its first angle")
             # While it measures: a manual move and a foreground scan on the same rig.
             move = gonio(["stage", "--rig", str(sim.config_path), "move", "10"])
-            scan = gonio(["scan", "--rig", str(sim.config_path), "--rotations", "2", "-o",
+            scan = gonio(["scan", "--no-export-fits",
+                          "--rig", str(sim.config_path), "--rotations", "2", "-o",
                           str(tmp_path / "cli.h5")])
             assert c.get(f"/api/v1/jobs/{job}").json()["state"] in ("running", "completed",
                                                                      "reconstructing")

@@ -54,7 +54,8 @@ def test_calibration_on_the_specimen_fails_and_writes_no_factors(
     data = tmp_path / "data"
     with start_sim_rig(SimRigOptions(time_scale=10.0, settle_s=0.0, config_path=rig)):
         # The user forgot to put the white reference on the stage.
-        code = main(["scan", "--rig", str(rig), "--white-reference", "0.99", "--rotations", "4",
+        code = main(["scan", "--no-export-fits",
+                     "--rig", str(rig), "--white-reference", "0.99", "--rotations", "4",
                      "--data-dir", str(data), "--no-progress", "-o", str(tmp_path / "w.h5")])
     assert code == 1
     err = capsys.readouterr().err
@@ -71,7 +72,8 @@ def test_sim_scan_with_white_reference_puts_the_reference_on_itself(
     from gonio.results import read_result
 
     out = tmp_path / "w.h5"
-    assert main(["scan", "--sim", "--white-reference", "0.9", "--rotations", "4",
+    assert main(["scan", "--no-export-fits",
+                 "--sim", "--white-reference", "0.9", "--rotations", "4",
                  "--time-scale", "10", "--data-dir", str(tmp_path / "d"), "--no-progress",
                  "-o", str(out)]) == 0
     cal = Calibration.model_validate_json((tmp_path / "w.calibration.json").read_text())

@@ -55,7 +55,8 @@ def served(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A ``gonio serve --sim`` data directory after its start-up calibration (job 1) and one
     calibrated scan (job 2); the daemon stopped."""
     data = tmp_path_factory.mktemp("served") / "data"
-    d = start_daemon(["--sim", "--port", "0", "--time-scale", "10", "--data-dir", str(data)])
+    d = start_daemon(["--no-export-fits",
+                      "--sim", "--port", "0", "--time-scale", "10", "--data-dir", str(data)])
     try:
         wait_for(lambda: "calibration job 1 completed" in d.text(), 300,
                  "the start-up calibration")
@@ -138,7 +139,8 @@ def test_a_calibration_without_some_pairs_refuses_their_scan_before_it_moves(
     assert len(cal["pairs"]) == N_PAIRS - len(gone)
     (data / "calibration.json").write_text(json.dumps(cal))
     rig.load("specimen")
-    d = start_daemon(["--rig", str(rig.config_path), "--data-dir", str(data), "--port", "0"])
+    d = start_daemon(["--no-export-fits",
+                      "--rig", str(rig.config_path), "--data-dir", str(data), "--port", "0"])
     try:
         with d.client() as c:
             position = rig.motion.position_deg()
@@ -226,7 +228,8 @@ def test_each_data_directory_serves_its_own_results_wherever_the_daemon_starts(
     for lab, specimen in labs.items():
         (tmp_path / lab).mkdir()
         # Each lab's daemon started in its own folder, on ./data.
-        d = start_daemon(["--rig", str(rig.config_path), "--data-dir", "data", "--port", "0"],
+        d = start_daemon(["--no-export-fits",
+                          "--rig", str(rig.config_path), "--data-dir", "data", "--port", "0"],
                          cwd=tmp_path / lab)
         try:
             with d.client() as c:
@@ -239,7 +242,8 @@ def test_each_data_directory_serves_its_own_results_wherever_the_daemon_starts(
     for cwd, data_dir in ((tmp_path / "lab-b", "../lab-a/data"),
                           (third, str(tmp_path / "lab-a" / "data")),
                           (third, str(restored))):
-        d = start_daemon(["--rig", str(rig.config_path), "--data-dir", data_dir, "--port", "0"],
+        d = start_daemon(["--no-export-fits",
+                          "--rig", str(rig.config_path), "--data-dir", data_dir, "--port", "0"],
                          cwd=cwd)
         try:
             with d.client() as c:
@@ -253,7 +257,8 @@ def test_an_older_store_with_absolute_and_cwd_relative_paths_is_migrated_on_open
     rig: SimRig, tmp_path: Path
 ) -> None:
     data = tmp_path / "moved" / "data"
-    d = start_daemon(["--rig", str(rig.config_path), "--data-dir", str(data), "--port", "0"])
+    d = start_daemon(["--no-export-fits",
+                      "--rig", str(rig.config_path), "--data-dir", str(data), "--port", "0"])
     try:
         with d.client() as c:
             assert [_calibrate(rig, c, s) for s in ("first", "second")] == [1, 2]
@@ -270,7 +275,8 @@ def test_an_older_store_with_absolute_and_cwd_relative_paths_is_migrated_on_open
                            "calibration.json")
             con.execute("UPDATE jobs SET result_path = ?, summary = ? WHERE id = ?",
                         (path, json.dumps(summary), job))
-    d = start_daemon(["--rig", str(rig.config_path), "--data-dir", str(data), "--port", "0"])
+    d = start_daemon(["--no-export-fits",
+                      "--rig", str(rig.config_path), "--data-dir", str(data), "--port", "0"])
     try:
         with d.client() as c:
             assert _served_specimen(c, 1, tmp_path) == "first"
@@ -324,7 +330,8 @@ def test_a_truncated_result_is_refused_and_rebuilt_from_the_stored_readings(
     original = Path(shutil.copyfile(result, tmp_path / "original.h5"))
     with open(result, "r+b") as f:
         f.truncate(result.stat().st_size // 2)
-    d = start_daemon(["--sim", "--port", "0", "--time-scale", "10", "--data-dir", str(data)])
+    d = start_daemon(["--no-export-fits",
+                      "--sim", "--port", "0", "--time-scale", "10", "--data-dir", str(data)])
     try:
         assert "job 2:" in d.text() and "gonio jobs rebuild 2" in d.text(), d.text()
         with d.client() as c:

@@ -54,6 +54,17 @@ def test_example_config_loads() -> None:
     assert cfg.server.host == "127.0.0.1"
     assert cfg.paths.data_dir == Path("/var/lib/gonio")
     assert cfg.auth.keys_file == Path("/etc/gonio/api-keys")
+    assert cfg.results.export_fits is True
+
+
+def test_export_fits_from_the_file_and_the_command_line(tmp_path: Path) -> None:
+    assert load_daemon_config(None).results.export_fits is True
+    (tmp_path / "d.toml").write_text("[results]\nexport_fits = false\n")
+    assert load_daemon_config(tmp_path / "d.toml").results.export_fits is False
+    # `gonio serve --no-export-fits` overrides the file; an unset flag keeps it.
+    on = load_daemon_config(None)
+    assert on.with_overrides(results__export_fits=False).results.export_fits is False
+    assert on.with_overrides(results__export_fits=None).results.export_fits is True
 
 
 def test_relative_paths_resolve_against_the_config_file(tmp_path: Path) -> None:
@@ -72,6 +83,8 @@ def test_relative_paths_resolve_against_the_config_file(tmp_path: Path) -> None:
         ("[limits]\nmax_body_bytes = 10\n", "limits.max_body_bytes"),
         ("[limits]\ndesign_time_limit_s = 0\n", "limits.design_time_limit_s"),
         ("[limits]\ndesign_time_limit_s = 3600\n", "limits.design_time_limit_s"),
+        ('[results]\nexport_fits = "later"\n', "results.export_fits"),
+        ("[results]\nfit_exports = false\n", "unknown key 'results.fit_exports'"),
     ],
 )
 def test_bad_config_names_the_key(tmp_path: Path, text: str, message: str) -> None:

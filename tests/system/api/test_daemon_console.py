@@ -29,7 +29,7 @@ def test_console_logs_job_lifecycle_and_calibration_but_not_polls(tmp_path: Path
     env = {**os.environ, "GONIO_API_KEYS": f"tester:{KEY}", "PYTHONUNBUFFERED": "1"}
     proc = subprocess.Popen(
         [sys.executable, "-c", "from gonio.cli import main; raise SystemExit(main())",
-         "serve", "--sim", "--time-scale", "10", "--port", "0", "--data-dir",
+         "serve", "--sim", "--no-export-fits", "--time-scale", "10", "--port", "0", "--data-dir",
          str(tmp_path / "data")],
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
     lines: list[str] = []

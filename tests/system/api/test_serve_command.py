@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 
 from gonio.cli import main
+from gonio.results import read_result
 
 
 @pytest.mark.parametrize(
@@ -56,7 +57,8 @@ def test_sim_demo_scan_keeps_its_data_and_prints_the_result_file(
     """Default data directory: the user data folder's serve-sim/ (the session's temporary
     GONIO_DATA_DIR here); the demo prints a result file that is still there after exit."""
     monkeypatch.delenv("GONIO_API_KEYS", raising=False)
-    assert main(["serve", "--sim", "--demo-scan", "--port", "0", "--time-scale", "10"]) == 0
+    assert main(["serve", "--sim", "--demo-scan", "--no-export-fits", "--port", "0",
+                 "--time-scale", "10"]) == 0
     out = capsys.readouterr().out
     data = Path(os.environ["GONIO_DATA_DIR"]) / "serve-sim"
     assert f"data directory {data} (kept across restarts)" in out
@@ -64,12 +66,15 @@ def test_sim_demo_scan_keeps_its_data_and_prints_the_result_file(
     assert m is not None, out
     result = Path(m.group(1))
     assert result.parent == data / "results" and result.is_file()
+    demo = read_result(result)  # --no-export-fits: reconstructed, fits left to the exports
+    assert demo.table is not None and demo.factored is None and demo.principled is None
     assert "api/v1/jobs" not in out.split("demo scan completed")[1]  # no dead URL
     # Progress names the specimen's angle (0-360), not the multi-turn stage position.
     angles = [float(a) for a in re.findall(r"specimen at (\S+) deg", out)]
     assert len(angles) == 8 and all(0 <= a < 360 for a in angles), out
     # Run again on the same folder: the calibration is still in effect, none is queued.
-    assert main(["serve", "--sim", "--demo-scan", "--port", "0", "--time-scale", "10"]) == 0
+    assert main(["serve", "--sim", "--demo-scan", "--no-export-fits", "--port", "0",
+                 "--time-scale", "10"]) == 0
     again = capsys.readouterr().out
     assert "calibration: in effect" in again and "calibrating the simulated rig" not in again
 

@@ -21,7 +21,8 @@ EXPOSED = "reachable from other machines"
 def _sim(tmp_path: Path, *args: str):  # type: ignore[no-untyped-def]
     # No keys configured: the daemon makes a session key and prints it in the address. TMPDIR
     # is this test's folder, so the temporary rig folder is looked for here.
-    return start_daemon(["--sim", "--throwaway", "--port", "0", "--time-scale", "10", *args],
+    return start_daemon(["--no-export-fits",
+                         "--sim", "--throwaway", "--port", "0", "--time-scale", "10", *args],
                         GONIO_API_KEYS="", TMPDIR=str(tmp_path))
 
 

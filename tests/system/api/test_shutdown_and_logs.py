@@ -24,7 +24,8 @@ def _start(tmp_path: Path) -> tuple[subprocess.Popen[str], str]:
     env = {**os.environ, "GONIO_API_KEYS": "tester:" + "k" * 32, "PYTHONUNBUFFERED": "1"}
     proc = subprocess.Popen(
         [sys.executable, "-c", "from gonio.cli import main; raise SystemExit(main())",
-         "serve", "--sim", "--port", "0", "--data-dir", str(tmp_path / "data")],
+         "serve", "--sim", "--no-export-fits", "--port", "0", "--data-dir",
+         str(tmp_path / "data")],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
     )
     assert proc.stdout is not None

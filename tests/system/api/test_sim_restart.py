@@ -43,7 +43,8 @@ class Daemon:
     def __init__(self, data_dir: Path, time_scale: str, *extra: str) -> None:
         code = "from gonio.cli import main; raise SystemExit(main())"
         self.proc = subprocess.Popen(
-            [sys.executable, "-c", code, "serve", "--sim", "--port", "0", "--time-scale",
+            [sys.executable, "-c", code, "serve", "--sim", "--no-export-fits", "--port", "0",
+             "--time-scale",
              time_scale, "--data-dir", str(data_dir), *extra],
             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=dict(os.environ),
         )

@@ -96,7 +96,8 @@ def test_highlight_axis_measures_an_elongated_gaussian() -> None:
 
 def test_default_sim_scan_renders_the_streak(tmp_path: Path) -> None:
     out = tmp_path / "flagship.h5"
-    argv = ["scan", "--sim", "--rotations", "8", "--span", "180", "--exposure", "0.01",
+    argv = ["scan", "--no-export-fits",
+            "--sim", "--rotations", "8", "--span", "180", "--exposure", "0.01",
             "--averages", "1", "--time-scale", "20", "--no-progress",
             "--data-dir", str(tmp_path / "data"), "-o", str(out)]
     assert main(argv) == 0

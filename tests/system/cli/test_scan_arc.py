@@ -45,7 +45,8 @@ def test_a_half_turn_scan_says_it_once_and_runs(
     rig = tmp_path / "rig" / "rig.toml"
     rig.parent.mkdir()
     with start_sim_rig(SimRigOptions(time_scale=10.0, settle_s=0.0, config_path=rig)):
-        code = main(["scan", "--rig", str(rig), "--rotations", "3", "--no-progress",
+        code = main(["scan", "--no-export-fits",
+                     "--rig", str(rig), "--rotations", "3", "--no-progress",
                      "--data-dir", str(tmp_path / "data"), "-o", str(tmp_path / "a.h5")])
     err = capsys.readouterr().err
     lines = [ln for ln in _arc_lines(err) if ln.startswith("warning:")]

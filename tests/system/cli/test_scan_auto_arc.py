@@ -25,7 +25,8 @@ pytestmark = pytest.mark.system
 def _scan(tmp_path: Path, capsys: pytest.CaptureFixture[str], *extra: str
           ) -> tuple[str, JobStore, dict]:
     out, data = tmp_path / "a.h5", tmp_path / "data"
-    code = main(["scan", "--sim", "--arc", "auto", "--rotations", "8", "--time-scale", "50",
+    code = main(["scan", "--no-export-fits",
+                 "--sim", "--arc", "auto", "--rotations", "8", "--time-scale", "50",
                  "--no-progress", "--specimen", "s", "--data-dir", str(data), "-o", str(out),
                  *extra])
     cap = capsys.readouterr()

@@ -33,7 +33,7 @@ def test_a_scan_whose_reconstruction_blows_up_says_why(
     assert true_albedo < 1.0  # the material itself is physical: the blow-up is the fit's
     out = tmp_path / "al.h5"
     data = tmp_path / "data"
-    code = main(["scan", "--sim", "--material", str(table), "--rotations", "4",
+    code = main(["scan", "--no-export-fits", "--sim", "--material", str(table), "--rotations", "4",
                  "--time-scale", "50", "--no-progress", "--specimen", "tilted-al",
                  "--data-dir", str(data), "-o", str(out)])
     err = capsys.readouterr()

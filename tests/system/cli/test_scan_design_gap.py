@@ -72,7 +72,8 @@ def test_a_scan_far_from_its_design_says_why_and_one_close_to_it_does_not(
         assert main(["rig", "apply-design", str(geometry), str(rig)]) == 0
         assert "[design]" in rig.read_text(encoding="utf-8")
         sim.place_white_reference(0.99)
-        assert main(["scan", *common, "--white-reference", "0.99", "--rotations", "4",
+        assert main(["scan", "--no-export-fits",
+                     *common, "--white-reference", "0.99", "--rotations", "4",
                      "-o", str(tmp_path / "white.h5")]) == 0
         cal = ["--calibration", str(tmp_path / "white.calibration.json")]
         capsys.readouterr()
@@ -83,13 +84,15 @@ def test_a_scan_far_from_its_design_says_why_and_one_close_to_it_does_not(
         # x2 since the final mapping of docs/science.md 7.1.1).
         sim.place_specimen(resolve_material("brushed-metal-000"))
         far = tmp_path / "far.h5"
-        assert main(["scan", *common, *cal, "--rotations", "4", "-o", str(far)]) == 0
+        assert main(["scan", "--no-export-fits",
+                     *common, *cal, "--rotations", "4", "-o", str(far)]) == 0
         said = capsys.readouterr()
 
         # The default material at the design's 8 angles: within x2 of 0.0376.
         sim.place_specimen(default_material())
         close = tmp_path / "close.h5"
-        assert main(["scan", *common, *cal, "--rotations", "8", "-o", str(close)]) == 0
+        assert main(["scan", "--no-export-fits",
+                     *common, *cal, "--rotations", "8", "-o", str(close)]) == 0
         quiet = capsys.readouterr()
 
     res = read_result(far)

@@ -35,7 +35,8 @@ def test_ctrl_c_leaves_the_job_paused_and_the_same_command_resumes_it(tmp_path: 
     db = data / "gonio.sqlite"
     # Real time and a long exposure: the scan lasts long enough to be interrupted mid-way.
     with start_sim_rig(SimRigOptions(time_scale=1.0, settle_s=0.0, config_path=rig)):
-        argv = ["scan", "--rig", str(rig), "--rotations", "4", "--exposure", "0.3",
+        argv = ["scan", "--no-export-fits",
+                "--rig", str(rig), "--rotations", "4", "--exposure", "0.3",
                 "--data-dir", str(data), "--no-progress", "-o", str(tmp_path / "felt.h5")]
         proc = subprocess.Popen([*GONIO, *argv], stdout=subprocess.PIPE,
                                 stderr=subprocess.PIPE, text=True, env=child_env(),

@@ -30,7 +30,7 @@ def test_a_scan_of_a_material_outside_the_basis_says_why(
     bm.tabulate(spec.model, np.float32).save(table)
     out = tmp_path / "tf.h5"
     data = tmp_path / "data"
-    code = main(["scan", "--sim", "--material", str(table), "--rotations", "8",
+    code = main(["scan", "--no-export-fits", "--sim", "--material", str(table), "--rotations", "8",
                  "--time-scale", "50", "--no-progress", "--specimen", "tilted-facet",
                  "--data-dir", str(data), "-o", str(out)])
     err = capsys.readouterr()
