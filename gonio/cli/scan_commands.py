@@ -383,7 +383,8 @@ async def _run_owned(args: argparse.Namespace, checked: Any, config: Any, sim: A
 
 
 def _print_arc(summary: dict[str, Any]) -> None:
-    """The arc an auto-arc scan chose and its test, or a forced half turn's warning."""
+    """The arc an auto-arc scan chose and its test, or a forced half turn's warning; the
+    basis the test's verdict chose."""
     if summary.get("arc_asymmetric"):
         print(f"warning: {summary['arc_asymmetric']}", file=sys.stderr)
     elif isinstance(summary.get("arc_test_p_value"), int | float):
@@ -392,6 +393,8 @@ def _print_arc(summary: dict[str, Any]) -> None:
               f"{verdict} (chi-square {summary.get('arc_test_statistic', float('nan')):.1f} on "
               f"{summary.get('arc_test_dof')} degrees of freedom, "
               f"p = {summary['arc_test_p_value']:.3g})")
+    if summary.get("basis_switch"):
+        print(f"  basis: {summary['basis_switch']}")
 
 
 def _calibration_warning(args: argparse.Namespace, plan: Any, config: Any,
