@@ -216,8 +216,10 @@ def dry_run(plan: AnyPlan | CheckedPlan, rig: RigDescription, current_deg: float
         branches = [ArcBranch(arc_deg=arc, angles=len(route) + n,
                               readings=len(pairs) * (len(route) + n),
                               estimated_s=total + extra_s + (build or 0.0),
-                              **({"basis": "asymmetric", "basis_build_s": asymmetric_build_s}
-                                 if switch and arc == FULL_TURN_DEG else {}))
+                              basis="asymmetric" if switch and arc == FULL_TURN_DEG
+                              else "default",
+                              basis_build_s=asymmetric_build_s
+                              if switch and arc == FULL_TURN_DEG else None)
                     for arc, (n, extra_s) in branch_bounds(
                         plan, rig, len(lights), len(pairs), angles, end).items()]
         max_total = max(b.estimated_s for b in branches)
