@@ -358,18 +358,13 @@ class BasisSwitch:
     ----------
     basis : ``"asymmetric"`` (the supply's basis with odd harmonics,
         :meth:`gonio.basis_supply.BasisSupply.asymmetric`) or ``"default"``
-    message : one sentence: the switch made, or why it was not (None: a symmetric specimen,
-        nothing to say)
-    seconds : time taken to load or build the asymmetric basis, None when not asked for
-    built : whether that basis was built for this job (minutes, once per install)
-    failed : why the asymmetric basis could not be had (the job kept the default one)
+    message : one sentence: the switch made (with the time its basis took, and whether it was
+        built for this job), or why it was not made (None: a symmetric specimen, nothing to
+        say)
     """
 
     basis: str
     message: str | None = None
-    seconds: float | None = None
-    built: bool = False
-    failed: str | None = None
 
     def entries(self) -> dict[str, Any]:
         """The summary's, metrics' and provenance's entries beside ``reconstruction_basis``:
@@ -407,6 +402,7 @@ def _basis_for_test(how: Finishing, job_id: int, plan: AnyPlan, basis: Basis,
         return basis, BasisSwitch("default", "the specimen is not twofold symmetric, but this "
                                   "process reconstructs with a basis of its own and has none "
                                   "with odd harmonics: reconstructed with it as it is")
+    how.checkpoint(job_id, "getting the basis for specimens without twofold symmetry")
     build = how.basis.asymmetric_build_needed()
     how.on_activity("asymmetric_basis")
     t0 = time.perf_counter()
@@ -419,7 +415,7 @@ def _basis_for_test(how: Finishing, job_id: int, plan: AnyPlan, basis: Basis,
             "default", "the specimen is not twofold symmetric, but the basis for such "
             f"specimens could not be had ({why}); reconstructed with the default basis, which "
             "cannot represent it: rebuild the result (gonio jobs rebuild) once the cause is "
-            "fixed", failed=why)
+            "fixed")
     finally:
         how.on_activity("reconstructing")
     seconds = time.perf_counter() - t0
@@ -432,7 +428,7 @@ def _basis_for_test(how: Finishing, job_id: int, plan: AnyPlan, basis: Basis,
         "it was reconstructed with the basis for such specimens (trained on the library's "
         "families without twofold symmetry too: its prior along the rotation holds odd "
         f"harmonics; K = {asym.K}, {made}) instead of the default one, which cannot represent "
-        "it (docs/science.md 7.4)", seconds=seconds, built=build)
+        "it (docs/science.md 7.4)")
 
 
 def _record_arc_test(job_id: int, plan: AnyPlan, test: dict[str, Any] | None,
