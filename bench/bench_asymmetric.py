@@ -29,6 +29,17 @@ of the row, ``r`` uniform stage angles):
 
 The issue's goals: asymmetric mean ``log_rmse <= 0.06`` within 120 readings at 10 pairs; the
 test calls at most 1 in 20 symmetric scans asymmetric.
+
+The auto-arc path (``--auto``, what a scan with ``arc = "auto"`` does, docs/science.md 7.4):
+the rig's 10 pairs (designed for the default basis over half a turn, as the default design),
+the first round of :func:`gonio.plans.arc.first_round_angles` (``R`` angles over half a turn
+plus two opposites), the engine's test (:func:`gonio.plans.arc.arc_test`, on the readings
+scaled per pair as the engine's raw counts are); symmetric, the joint fit with the default
+basis on those angles; asymmetric, the fill round (:func:`gonio.plans.arc.fill_angles`: ``2R``
+angles over the full turn in all) and the fit with the basis the verdict chooses: the default
+one (before issue 25's switch) or the asymmetric one (after). Rows for ``R`` = 6 (120 readings
+when asymmetric) and 8 (160), on the asymmetric specimens, and on the symmetric ones (their
+readings and error beside today's half-turn scan of 8 angles, 80 readings).
 """
 
 from __future__ import annotations
@@ -128,6 +139,72 @@ def scan(b: Basis, m: bu.Material, cells: np.ndarray, ph: np.ndarray, r: int, sp
     return metrics.log_rmse(rec.table, m.truth), alpha, vals
 
 
+def auto_scan(plain: Basis, asym: Basis, m: bu.Material, cells: np.ndarray, ph: np.ndarray,
+              rotations: int, seed: int) -> dict[str, Any]:
+    """The auto-arc path on one specimen: the verdict, readings and the log_rmse with the
+    default basis and (when found asymmetric) with the asymmetric one."""
+    from gonio.plans.arc import arc_test, fill_angles, first_round_angles
+
+    first = first_round_angles(0.0, rotations)
+    vals = bu.read(m, cells, ph, np.deg2rad(first), seed)
+    test = arc_test(first, vals, 0.01)
+    angles = list(first)
+    if not test["symmetric"]:
+        fill = fill_angles(0.0, rotations)
+        vals = np.concatenate([vals, bu.read(m, cells, ph, np.deg2rad(fill), seed + 1)], axis=1)
+        angles += fill
+    alpha = np.deg2rad(angles)
+    out: dict[str, Any] = {"symmetric": bool(test["symmetric"]), "p": test["p_value"],
+                           "readings": len(cells) * len(angles)}
+    out["default"] = metrics.log_rmse(reconstruct(plain, cells, ph, alpha, vals).table, m.truth)
+    out["switched"] = out["default"] if test["symmetric"] else metrics.log_rmse(
+        reconstruct(asym, cells, ph, alpha, vals).table, m.truth)
+    return out
+
+
+def auto_rows(plain: Basis, asym: Basis, d_half: tuple[np.ndarray, np.ndarray],
+              seeds: int) -> None:
+    """The auto-arc path's tables (module notes): asymmetric and symmetric specimens."""
+    mats = asym_materials()
+    print("\nauto arc, the default design's 10 pairs (designed for half a turn):")
+    print("\n| specimen | R | verdict (p) | readings | default basis (before) | "
+          "asymmetric basis (after) |")
+    print("|---|---|---|---|---|---|")
+    means: dict[int, list[tuple[float, float, int]]] = {6: [], 8: []}
+    for rotations in (6, 8):
+        for i, m in enumerate(mats):
+            r = auto_scan(plain, asym, m, *d_half, rotations, 500 + i)
+            means[rotations].append((r["default"], r["switched"], r["readings"]))
+            verdict = "symmetric" if r["symmetric"] else "NOT symmetric"
+            print(f"| {m.name} | {rotations} | {verdict} ({r['p']:.2g}) | {r['readings']} | "
+                  f"{r['default']:.4f} | {r['switched']:.4f} |", flush=True)
+        a = np.array(means[rotations], dtype=float)
+        print(f"| **mean** | {rotations} | | {a[:, 2].mean():.0f} | {a[:, 0].mean():.4f} | "
+              f"**{a[:, 1].mean():.4f}** |")
+    sym = bu.aniso_materials() + asym_materials(tilted=False)
+    print(f"\nsymmetric specimens ({len(sym)}), auto arc R = 8 against today's half turn "
+          f"r = 8 (80 readings), {seeds} noise seeds each (mean over seeds):")
+    print("\n| specimen | half r=8 | auto R=8 | auto readings | called asymmetric |")
+    print("|---|---|---|---|---|")
+    rows, alarms, total = [], 0, 0
+    for j, m in enumerate(sym):
+        half, auto, reads, flagged = [], [], [], 0
+        for k in range(seeds):
+            seed = 9000 + 37 * j + k
+            half.append(scan(plain, m, *d_half, 8, 180.0, seed)[0])
+            r = auto_scan(plain, asym, m, *d_half, 8, seed)
+            auto.append(r["switched"])
+            reads.append(r["readings"])
+            flagged += not r["symmetric"]
+        alarms, total = alarms + flagged, total + seeds
+        rows.append((np.mean(half), np.mean(auto), np.mean(reads)))
+        print(f"| {m.name} | {rows[-1][0]:.4f} | {rows[-1][1]:.4f} | {rows[-1][2]:.0f} | "
+              f"{flagged} of {seeds} |", flush=True)
+    a = np.array(rows)
+    print(f"| **mean** | {a[:, 0].mean():.4f} | {a[:, 1].mean():.4f} | {a[:, 2].mean():.0f} | "
+          f"{alarms} of {total} |")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=5,
@@ -139,6 +216,8 @@ def main(argv: list[str] | None = None) -> int:
                          "the library's count (a study of how many the prior needs)")
     ap.add_argument("--pairs", type=int, default=10,
                     help="pairs of the asymmetric-basis rows (the goal is stated for 10)")
+    ap.add_argument("--auto", action="store_true",
+                    help="only the auto-arc path's tables (module notes)")
     args = ap.parse_args(argv)
     if args.tilted_facets is not None:
         from gonio.brdf.materials import library
@@ -151,6 +230,10 @@ def main(argv: list[str] | None = None) -> int:
     plain = default_basis()
     asym = default_basis(asymmetric=True)
     d_half, d_full = design(plain, 180.0), design(plain, 360.0)
+    if args.auto:
+        auto_rows(plain, asym, d_half, args.seeds)
+        print(f"total {time.perf_counter() - t0:.0f} s")
+        return 0
     d_asym = design(asym, 360.0, args.pairs)
     noise = NoiseModel(0.01)
     print(f"ready in {time.perf_counter() - t0:.0f} s")

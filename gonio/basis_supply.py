@@ -10,6 +10,14 @@ load is a build (:meth:`BasisSupply.build_needed`), how far that build has come
 turn (:meth:`BasisSupply.symmetry`); and it records a job's arc warning once
 (:meth:`BasisSupply.note_arc`).
 
+Beside it, the supply holds the basis a specimen *without* twofold symmetry is reconstructed
+with (:meth:`BasisSupply.asymmetric`): when an auto-arc scan's test calls its specimen
+asymmetric, finishing switches to a basis whose prior along ``ph`` holds odd harmonics
+(:func:`gonio.brdf.reconstruction.basis.default_basis` with ``asymmetric=True``, trained on the
+library's families without twofold symmetry too; docs/science.md 7.4). It is built on first
+need (minutes: :data:`gonio.plans.dryrun.ASYMMETRIC_BASIS_BUILD_S`), under a lock of its own,
+and :meth:`BasisSupply.asymmetric_build_needed` says, without a load, whether that is due.
+
 The default supply serves :func:`gonio.brdf.reconstruction.basis.default_basis`: the basis kept
 in memory is the one of the cache file as it is now (a ``gonio library import`` changes that file's
 name, and the next job gets the new basis). Any other supply calls its provider once (a saved
@@ -49,10 +57,21 @@ class BasisSupply:
         Called once, on the first :meth:`get`. Default: the default basis
         (:func:`gonio.brdf.reconstruction.basis.default_basis`), kept while its cache file is
         unchanged, built on first use.
+    asymmetric_provider : callable returning a basis with odd harmonics, optional
+        Called once, on the first :meth:`asymmetric`. Default: with the default ``provider``,
+        ``default_basis(asymmetric=True)``; with a provider of its own, none (a saved basis
+        is used as it is, whatever the specimen).
     """
 
-    def __init__(self, provider: BasisProvider | None = None) -> None:
+    def __init__(self, provider: BasisProvider | None = None,
+                 asymmetric_provider: BasisProvider | None = None) -> None:
         self._provider = provider
+        self._asymmetric_provider = asymmetric_provider
+        # The asymmetric basis has a lock of its own: building it (minutes) must not hold up
+        # a job that needs only the default basis.
+        self._asym_lock = threading.Lock()
+        self._asym: Basis | None = None
+        self._asym_version: _FileVersion | None = None
         # One load or build at a time: a second caller waits for the first one's basis.
         self._load_lock = threading.Lock()
         # Guards the fields below; never held across a load (dry runs must stay fast).
@@ -103,6 +122,72 @@ class BasisSupply:
             self._basis, self._basis_version, self._seen = basis, version, symmetry
             if version is not None:
                 self._file_symmetry = (version, symmetry)
+
+    # ------------------------------------------------------------------ the asymmetric basis
+    @property
+    def has_asymmetric(self) -> bool:
+        """Whether this supply has a basis for specimens without twofold symmetry."""
+        return self.is_default or self._asymmetric_provider is not None
+
+    def asymmetric(self) -> Basis | None:
+        """The basis a specimen without twofold symmetry is reconstructed with: its prior along
+        ``ph`` holds odd harmonics. Loaded (or built: minutes, the first time on an install)
+        on the first call and kept while its cache file is unchanged; None when this supply has
+        none (:attr:`has_asymmetric`). Blocking; call it in a thread from async code.
+
+        Raises whatever the build raises (:class:`gonio.brdf.reconstruction.basis.BasisError`,
+        :class:`gonio.brdf.materials.library.LibraryError`: an unwritable cache folder); the
+        next call tries again.
+        """
+        if not self.has_asymmetric:
+            return None
+        with self._asym_lock:
+            if self._asymmetric_provider is not None:
+                if self._asym is None:
+                    self._asym = self._asymmetric_provider()
+                return self._asym
+            from gonio.brdf.reconstruction.basis import default_basis, default_basis_path
+
+            path = default_basis_path(asymmetric=True)
+            if self._asym is not None and self._asym_version == _version(path):
+                return self._asym
+            basis = default_basis(asymmetric=True)
+            self._asym, self._asym_version = basis, _version(path)
+            return basis
+
+    def asymmetric_wait_report(self, waited_s: float) -> tuple[str, float | None]:
+        """What a job waiting ``waited_s`` seconds for the asymmetric basis is told, in words,
+        and the fraction done if known (not known: the build reports no progress)."""
+        what = ("the specimen is not twofold symmetric: {} the reconstruction basis for such "
+                "specimens")
+        if waited_s < 1.0 or not self.asymmetric_build_needed():
+            return (what.format("loading"), None)
+        seconds = self.asymmetric_build_s() or 0.0
+        return (what.format("building") + " (first such scan on this install, about "
+                f"{max(1.0, seconds / 60):.0f} minutes; later scans reuse it)", None)
+
+    def asymmetric_build_s(self) -> float | None:
+        """Seconds a job whose specimen is found asymmetric waits at finishing for the
+        asymmetric basis to be built (:data:`gonio.plans.dryrun.ASYMMETRIC_BASIS_BUILD_S`,
+        plus :data:`gonio.plans.dryrun.BASIS_BUILD_S` when the default training library is
+        not tabulated on this install either); None when no build is due."""
+        if not self.asymmetric_build_needed():
+            return None
+        from gonio.brdf.materials.library import build_progress
+        from gonio.plans.dryrun import ASYMMETRIC_BASIS_BUILD_S, BASIS_BUILD_S
+
+        done, total = build_progress()
+        return ASYMMETRIC_BASIS_BUILD_S + (BASIS_BUILD_S if done < total else 0.0)
+
+    def asymmetric_build_needed(self) -> bool:
+        """Whether the next :meth:`asymmetric` will *build* that basis (minutes): the default
+        supply without its cache file. Known without a load; False for a supply that has none
+        or a provider of its own (taken to load quickly)."""
+        if not self.is_default or self._asymmetric_provider is not None:
+            return False
+        from gonio.brdf.reconstruction.basis import default_basis_path
+
+        return not default_basis_path(asymmetric=True).is_file()
 
     def build_needed(self) -> bool:
         """Whether the next :meth:`get` will *build* the default basis (minutes), not load it.

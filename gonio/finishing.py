@@ -197,6 +197,10 @@ def finish_job(job_id: int, plan: AnyPlan | CheckedPlan, how: Finishing) -> dict
         basis = how.basis_at_hand if how.basis_at_hand is not None else how.basis.get()
     finally:
         how.on_activity("reconstructing")
+    # The twofold symmetry test first (an auto-arc scan's own, or one made here on the readings):
+    # a specimen it calls asymmetric is reconstructed with a basis that can hold it.
+    test = _arc_test(how.store, job_id, plan, samples)
+    basis, switch = _basis_for_test(how, job_id, plan, basis, test)
     # A half-turn scan with a basis whose prior varies over a full turn: the result is valid
     # but the other half turn rests on the prior; the job's events (once: the worker's start
     # may have said it), its summary and its result say so (docs/science.md 7.4).
@@ -260,7 +264,10 @@ def finish_job(job_id: int, plan: AnyPlan | CheckedPlan, how: Finishing) -> dict
     if "design_gap" in metrics:
         log.info("job %d: %s", job_id, metrics["design_gap"])  # the worker records the event
     provenance.update(basis_K=int(basis.K), basis_materials=json.dumps(list(basis.materials)))
-    _record_arc_test(how.store, job_id, plan, samples, metrics, provenance)
+    _record_arc_test(job_id, plan, test, metrics, provenance)
+    if switch is not None:
+        metrics.update(reconstruction_basis=switch.basis, **switch.entries())
+        provenance.update(reconstruction_basis=switch.basis, **switch.entries())
     if arc is not None:
         summary["arc_warning"] = arc
         provenance["arc_warning"] = arc
@@ -321,37 +328,130 @@ def _compare_with_design(rec: Any, readings: list[Any], plan: AnyPlan, samples: 
         provenance["design_gap"] = gap.message()
 
 
-def _record_arc_test(store: JobStore, job_id: int, plan: AnyPlan, samples: Any,
-                     metrics: dict[str, Any], provenance: dict[str, Any]) -> None:
-    """The twofold symmetry test of the scan in its result (docs/science.md 7.4).
+def _arc_test(store: JobStore, job_id: int, plan: AnyPlan, samples: Any
+              ) -> dict[str, Any] | None:
+    """The scan's twofold symmetry test (docs/science.md 7.4), or None when it has none.
 
     An auto-arc plan's test is its ``arc_test`` event (what the scan chose, on its first
-    round's readings): ``metrics`` gain ``arc_symmetric``, ``arc_deg`` (the arc chosen) and
-    the test's ``arc_test_statistic``, ``arc_test_dof``, ``arc_test_p_value``;
-    ``provenance["arc_test"]`` the whole event. A plan forced over half a turn whose readings
-    include opposite stage angles is tested here, on its calibrated readings; when the test
-    calls it asymmetric, ``metrics["arc_asymmetric"]`` says so (the worker records it as an
-    event, the page's headline shows it).
+    round's readings). A plan of a fixed arc whose readings include opposite stage angles
+    (8 uniform angles over a full turn hold 4 such pairs) is tested here, on its calibrated
+    readings (:func:`gonio.plans.arc.arc_test`, the same test and level).
     """
-    from gonio.plans.arc import ARC_TEST_EVENT, arc_test, half_turn_warning
+    from gonio.plans.arc import ARC_TEST_EVENT, arc_test
 
-    test: dict[str, Any] | None = None
     if plan.arc_mode() == "auto":
         ev = store.last_event(job_id, ARC_TEST_EVENT)
-        test = None if ev is None else ev.data
-    elif plan.first_span_deg() == 180.0:
-        angles = np.asarray(samples.stage_angles_deg, float)
-        gap = np.abs((angles[:, None] - angles[None, :]) % 360.0 - 180.0)
-        if (gap <= 0.5).any():  # some readings 180 deg apart: the test can say something
-            test = arc_test([float(x) for x in angles], samples.values,
-                            float(getattr(plan, "arc_noise", 0.01)))
-            warning = half_turn_warning(test)
-            if warning is not None:
-                metrics["arc_asymmetric"] = warning
-                provenance["arc_asymmetric"] = warning
-                log.info("job %d: %s", job_id, warning)  # the worker records the event
+        return None if ev is None else ev.data
+    angles = np.asarray(samples.stage_angles_deg, float)
+    gap = np.abs((angles[:, None] - angles[None, :]) % 360.0 - 180.0)
+    if not (gap <= 0.5).any():  # no readings 180 deg apart: nothing to test
+        return None
+    return arc_test([float(x) for x in angles], samples.values,
+                    float(getattr(plan, "arc_noise", 0.01)))
+
+
+@dataclass(frozen=True)
+class BasisSwitch:
+    """Which basis reconstructed a scan whose twofold symmetry test ran, and why.
+
+    Attributes
+    ----------
+    basis : ``"asymmetric"`` (the supply's basis with odd harmonics,
+        :meth:`gonio.basis_supply.BasisSupply.asymmetric`) or ``"default"``
+    message : one sentence: the switch made (with the time its basis took, and whether it was
+        built for this job), or why it was not made (None: a symmetric specimen, nothing to
+        say)
+    """
+
+    basis: str
+    message: str | None = None
+
+    def entries(self) -> dict[str, Any]:
+        """The summary's, metrics' and provenance's entries beside ``reconstruction_basis``:
+        ``basis_switch`` (the message) when there is one."""
+        return {} if self.message is None else {"basis_switch": self.message}
+
+
+def _basis_for_test(how: Finishing, job_id: int, plan: AnyPlan, basis: Basis,
+                    test: dict[str, Any] | None) -> tuple[Basis, BasisSwitch | None]:
+    """The basis to reconstruct with, given the scan's symmetry test (docs/science.md 7.4).
+
+    A specimen the test calls asymmetric over a full turn, with a basis whose prior along
+    ``ph`` has only even harmonics (the shipped one), is reconstructed with the supply's basis
+    with odd harmonics instead: the symmetric basis cannot represent what the other half turn
+    read. Over half a turn (a forced half turn) the switch would not help: the readings
+    cannot tell an odd harmonic from its alias, so the basis is kept (and the result warned,
+    :func:`_record_arc_test`). None when the scan had no test.
+    """
+    if test is None:
+        return basis, None
+    asymmetric = test.get("statistic") is not None and not test.get("symmetric", True)
+    # The arc the stage angles covered: an auto-arc plan's is the one its test chose.
+    full_turn = (float(test.get("arc_deg", 180.0)) if plan.arc_mode() == "auto"
+                 else plan.first_span_deg()) >= 360.0
+    if not asymmetric:
+        return basis, BasisSwitch("default")
+    if not full_turn:
+        return basis, BasisSwitch("default")  # arc_asymmetric says why (_record_arc_test)
+    if not basis.half_turn_periodic:
+        # The basis in use already holds odd harmonics (a lab's imported tables): kept.
+        return basis, BasisSwitch("default", "the specimen is not twofold symmetric; the "
+                                  "reconstruction basis already holds odd harmonics along the "
+                                  "specimen's rotation, so it was kept")
+    if not how.basis.has_asymmetric:
+        return basis, BasisSwitch("default", "the specimen is not twofold symmetric, but this "
+                                  "process reconstructs with a basis of its own and has none "
+                                  "with odd harmonics: reconstructed with it as it is")
+    how.checkpoint(job_id, "getting the basis for specimens without twofold symmetry")
+    build = how.basis.asymmetric_build_needed()
+    how.on_activity("asymmetric_basis")
+    t0 = time.perf_counter()
+    try:
+        asym = how.basis.asymmetric()
+    except Exception as exc:  # the measurement is kept: the default basis reconstructs it
+        log.exception("job %d: the basis for specimens without twofold symmetry failed", job_id)
+        why = f"{type(exc).__name__}: {exc}"
+        return basis, BasisSwitch(
+            "default", "the specimen is not twofold symmetric, but the basis for such "
+            f"specimens could not be had ({why}); reconstructed with the default basis, which "
+            "cannot represent it: rebuild the result (gonio jobs rebuild) once the cause is "
+            "fixed")
+    finally:
+        how.on_activity("reconstructing")
+    seconds = time.perf_counter() - t0
+    if asym is None:  # has_asymmetric said otherwise; kept for the type checker
+        return basis, BasisSwitch("default")
+    made = (f"built for this job in {seconds:.0f} s, once per install" if build
+            else "loaded")
+    return asym, BasisSwitch(
+        "asymmetric", "the twofold symmetry test found the specimen NOT twofold symmetric, so "
+        "it was reconstructed with the basis for such specimens (trained on the library's "
+        "families without twofold symmetry too: its prior along the rotation holds odd "
+        f"harmonics; K = {asym.K}, {made}) instead of the default one, which cannot represent "
+        "it (docs/science.md 7.4)")
+
+
+def _record_arc_test(job_id: int, plan: AnyPlan, test: dict[str, Any] | None,
+                     metrics: dict[str, Any], provenance: dict[str, Any]) -> None:
+    """The twofold symmetry test of the scan (:func:`_arc_test`) in its result
+    (docs/science.md 7.4).
+
+    ``metrics`` gain ``arc_symmetric``, ``arc_deg`` (the arc chosen; a fixed plan's own) and
+    the test's ``arc_test_statistic``, ``arc_test_dof``, ``arc_test_p_value``;
+    ``provenance["arc_test"]`` the whole test. A plan forced over half a turn that the test
+    calls asymmetric gets ``metrics["arc_asymmetric"]`` (the worker records it as an event,
+    the page's headline shows it).
+    """
+    from gonio.plans.arc import half_turn_warning
+
     if test is None:
         return
+    if plan.arc_mode() == "fixed" and plan.first_span_deg() == 180.0:
+        warning = half_turn_warning(test)
+        if warning is not None:
+            metrics["arc_asymmetric"] = warning
+            provenance["arc_asymmetric"] = warning
+            log.info("job %d: %s", job_id, warning)  # the worker records the event
     metrics.update(arc_symmetric=bool(test["symmetric"]), arc_deg=float(test["arc_deg"]),
                    arc_test_statistic=test.get("statistic"), arc_test_dof=test.get("dof"),
                    arc_test_p_value=test.get("p_value"))

@@ -514,6 +514,9 @@ class GonioService:
             # The whole job's time, not only the measuring's (docs/api.md "Time").
             est = self._finishing_estimate()
             build = BASIS_BUILD_S if self.basis.build_needed() else None
+            asym = self._asymmetric_build_due(row)
+            if asym is not None:  # the test found the specimen asymmetric (science.md 7.4)
+                build = (build or 0.0) + asym
             finishing_for = None
             if row.state is JobState.RECONSTRUCTING:
                 finishing_for = (self.worker.activity_seconds()
@@ -526,6 +529,19 @@ class GonioService:
                          round=p.round if p is not None else None, **times,
                          queue_position=qpos, result_path=row.result_path, result=row.summary,
                          rig=row.rig)
+
+    def _asymmetric_build_due(self, row: JobRow) -> float | None:
+        """Seconds ``row``'s finishing will wait for the basis for specimens without twofold
+        symmetry to be built: its auto-arc test called the specimen asymmetric and that basis
+        is not built yet (:meth:`BasisSupply.asymmetric_build_s`); None otherwise."""
+        from gonio.plans.arc import ARC_TEST_EVENT
+
+        if row.plan.get("arc") != "auto" or not self.basis.asymmetric_build_needed():
+            return None
+        ev = self.store.last_event(row.id, ARC_TEST_EVENT)
+        if ev is None or ev.data.get("statistic") is None or ev.data.get("symmetric", True):
+            return None
+        return self.basis.asymmetric_build_s()
 
     def readings(self, job_id: int, after_angle: int = -1) -> list[ReadingRow]:
         """The readings stored so far for a job (angles with index > ``after_angle``).
@@ -651,7 +667,10 @@ class GonioService:
         kind = p.plan if isinstance(p, CheckedPlan) else p
         return dry_run(p, self.desc, self.stage_deg,
                        basis_ready=not self.basis.build_needed(),
-                       basis=self.basis.symmetry() if arc_may_apply(kind) else None)
+                       basis=self.basis.symmetry() if arc_may_apply(kind) else None,
+                       asymmetric_build_s=(self.basis.asymmetric_build_s()
+                                           if kind.arc_mode() == "auto" else None),
+                       asymmetric_basis=self.basis.has_asymmetric)
 
     @property
     def disk_full(self) -> str | None:

@@ -519,6 +519,11 @@ class Worker:
             # Forced over half a turn, but the readings at opposite angles differ: why.
             self.store.append_event(job.id, "arc_asymmetric",
                                     {"message": summary["arc_asymmetric"]})
+        if summary.get("basis_switch"):
+            # The test's verdict chose the reconstruction basis (docs/science.md 7.4): which.
+            self.store.append_event(job.id, "basis_switch", {
+                "message": summary["basis_switch"],
+                "basis": summary.get("reconstruction_basis"), "K": summary.get("K")})
         if summary.get("design_gap"):
             # The self-estimate is more than x2 from its design's expected error: why.
             self.store.append_event(job.id, "design_gap", {"message": summary["design_gap"]})
@@ -660,6 +665,8 @@ class Worker:
             return None
         if what == "reconstructing":
             return ("reconstructing the BRDF from the readings", None)
+        if what == "asymmetric_basis":
+            return self.basis.asymmetric_wait_report(time.monotonic() - self._activity_since)
         # Before measuring, an adaptive job says why it waits for the basis.
         why = (" before the first reading (the adaptive rule needs it)"
                if what == "basis_before_measuring" else "")

@@ -174,7 +174,9 @@ class MemSensor(hal.Sensor):
 
     Channel ``c`` reads ``dark_level + k_c * sum over lit lights of (1 + 0.5 cos(2 (alpha -
     phi_l)))`` with ``k = (1.0, 0.8, 0.6)``, ``alpha`` the stage angle and ``phi_l`` the
-    light's azimuth: a known anisotropic signal, period 180 degrees. A read sleeps
+    light's azimuth: a known anisotropic signal, period 180 degrees, times
+    ``1 + lean cos(alpha)`` with the rig's :attr:`MemRig.lean` (0 by default: a specimen
+    without twofold symmetry when it is not). A read sleeps
     ``exposure_s * averages`` seconds. Set ``saturate_next = n`` to flag the next ``n`` lit
     readings saturated.
 
@@ -214,7 +216,7 @@ class MemSensor(hal.Sensor):
         angle = math.radians(self.rig.mstage.pos)
         sig = sum(
             1.0 + 0.5 * math.cos(2 * (angle - math.radians(lt.direction.phi_deg))) for lt in lit
-        )
+        ) * (1.0 + self.rig.lean * math.cos(angle))
         vals = tuple(self.dark_level + sig * k for k in (1.0, 0.8, 0.6))
         sat = False
         if self.saturate_next > 0 and lit:
@@ -236,10 +238,15 @@ class MemRig(hal.Rig):
     ----------
     speed_dps : float
         Stage speed, degrees per second; the default makes a full turn take 0.1 s.
+    lean : float
+        The specimen's once-per-turn lean: every reading times ``1 + lean cos(alpha)``
+        (alpha the stage angle), so that a specimen turned by half a turn no longer reads the
+        same (|lean| < 1; 0, the default: twofold symmetric).
     """
 
-    def __init__(self, speed_dps: float = 3600.0) -> None:
+    def __init__(self, speed_dps: float = 3600.0, lean: float = 0.0) -> None:
         self.log = Log()
+        self.lean = float(lean)
         stage = MemStage(self.log, speed_dps=speed_dps)
         lights: dict[str, hal.Light] = {
             "L1": MemLight("L1", self.log, 45.0, 0.0),

@@ -227,7 +227,9 @@ async def _run_scan(args: argparse.Namespace, plan: Any, config: Any, sim: Any =
     # once for this run by whoever needs it first.
     basis = BasisSupply()
     if args.dry_run:
-        dr = dry_run(plan, desc, basis_ready=not basis.build_needed(), basis=basis.symmetry())
+        dr = dry_run(plan, desc, basis_ready=not basis.build_needed(), basis=basis.symmetry(),
+                     asymmetric_build_s=(basis.asymmetric_build_s()
+                                         if plan.arc_mode() == "auto" else None))
         warning = None if sim is not None else _calibration_warning(args, plan, config,
                                                                      dr.pairs)
         if warning is not None:
@@ -384,7 +386,8 @@ async def _run_owned(args: argparse.Namespace, checked: Any, config: Any, sim: A
 
 
 def _print_arc(summary: dict[str, Any]) -> None:
-    """The arc an auto-arc scan chose and its test, or a forced half turn's warning."""
+    """The arc an auto-arc scan chose and its test, or a forced half turn's warning; the
+    basis the test's verdict chose."""
     if summary.get("arc_asymmetric"):
         print(f"warning: {summary['arc_asymmetric']}", file=sys.stderr)
     elif isinstance(summary.get("arc_test_p_value"), int | float):
@@ -393,6 +396,8 @@ def _print_arc(summary: dict[str, Any]) -> None:
               f"{verdict} (chi-square {summary.get('arc_test_statistic', float('nan')):.1f} on "
               f"{summary.get('arc_test_dof')} degrees of freedom, "
               f"p = {summary['arc_test_p_value']:.3g})")
+    if summary.get("basis_switch"):
+        print(f"  basis: {summary['basis_switch']}")
 
 
 def _calibration_warning(args: argparse.Namespace, plan: Any, config: Any,
@@ -513,7 +518,13 @@ def dry_run_summary(dr: Any, plan: Any, rig_name: str) -> str:
         what = ("twofold symmetric: on over half a turn" if arc_deg == 180.0
                 else "not twofold symmetric: on over a full turn")
         lines.append(f"  if the first round finds the specimen {what}, at most {angles} angles "
-                     f"({angles * n_pairs} readings) and {_duration_text(secs)} in all")
+                     f"({angles * n_pairs} readings) and {_duration_text(secs)} in all"
+                     + ("; reconstructed with the basis for specimens without twofold "
+                        "symmetry" if getattr(b, "basis", "default") == "asymmetric" else ""))
+        if getattr(b, "basis_build_s", None) is not None:
+            lines.append(f"    then about {_duration_text(b.basis_build_s)} more: that basis is "
+                         "not built on this install yet, so the job builds it before "
+                         "reconstructing (once; later jobs reuse it)")
     build = getattr(dr, "basis_build_s", None)
     if build is not None:
         lines.append(f"  first, about {_duration_text(build)} more: the reconstruction basis is "

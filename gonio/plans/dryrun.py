@@ -9,7 +9,7 @@ from pydantic import BaseModel, Field
 
 from gonio.brdf.reconstruction.samples import HALF_TURN_DEG
 from gonio.hal import PairSpec
-from gonio.plans.arc import branch_bounds
+from gonio.plans.arc import FULL_TURN_DEG, branch_bounds
 from gonio.plans.checked import CheckedPlan, check_plan
 from gonio.plans.models import AdaptivePlan, AnyPlan
 from gonio.plans.timing import adaptive_bound, estimate_angles, travel
@@ -20,6 +20,14 @@ BASIS_BUILD_S = 120.0
 library, then the basis), seconds: about two minutes measured on a busy 2-core machine
 (README); slower machines take longer. An adaptive plan with the posterior rule waits for it
 before its first reading."""
+
+ASYMMETRIC_BASIS_BUILD_S = 240.0
+"""Time to build the basis for specimens without twofold symmetry
+(``default_basis(asymmetric=True)``: the library's 65 asymmetric materials tabulated, the
+basis learnt from them and the default library, the measured materials folded in), seconds,
+once per install, on an install whose default library is tabulated: 190 s measured on the busy
+2-core machine (load average 11; docs/science.md 7.4), rounded up. A job whose auto-arc test
+finds its specimen asymmetric waits for it at finishing."""
 
 
 @dataclass(frozen=True)
@@ -91,6 +99,13 @@ class ArcBranch(BaseModel):
     estimated_s: float = Field(description="bound on the job's duration, seconds (a uniform "
                                "plan's is its duration; an adaptive plan's includes a basis "
                                "build when one is needed)")
+    basis: str = Field(default="default", description="the basis the job is reconstructed "
+                       "with: 'default', or (360, the specimen is not twofold symmetric) "
+                       "'asymmetric', the basis whose prior holds odd harmonics "
+                       "(docs/science.md 7.4)")
+    basis_build_s: float | None = Field(
+        default=None, description="seconds the job waits at finishing for that basis to be "
+        "built (once per install; not in estimated_s); null: ready, or not needed")
 
 
 class DryRun(BaseModel):
@@ -141,7 +156,8 @@ class DryRun(BaseModel):
 
 
 def dry_run(plan: AnyPlan | CheckedPlan, rig: RigDescription, current_deg: float | None = None,
-            basis_ready: bool = True, basis: BasisSymmetry | None = None) -> DryRun:
+            basis_ready: bool = True, basis: BasisSymmetry | None = None,
+            asymmetric_build_s: float | None = None, asymmetric_basis: bool = True) -> DryRun:
     """Expand ``plan`` on ``rig`` and estimate its duration; raises :class:`PlanError`.
 
     The estimate is the physical time (see :class:`DryRun`): trapezoidal stage moves at the
@@ -167,6 +183,13 @@ def dry_run(plan: AnyPlan | CheckedPlan, rig: RigDescription, current_deg: float
         What the basis the job would reconstruct with says about half a turn, when that basis
         is at hand (built or loaded); None when it is not (nothing is said then). A half-turn
         plan with a basis that is not half-turn periodic gets a warning (:func:`arc_warning`).
+    asymmetric_build_s : float, optional
+        Auto-arc plans: seconds the full-turn branch waits at finishing for the basis for
+        specimens without twofold symmetry to be built
+        (:meth:`gonio.basis_supply.BasisSupply.asymmetric_build_s`); None when it is ready.
+    asymmetric_basis : bool
+        Whether the full-turn branch reconstructs with that basis (False: the process has
+        none, or its basis already holds odd harmonics, so the job keeps its basis).
     """
     start = 0.0 if current_deg is None else float(current_deg)
     checked = check_plan(plan, rig, from_deg=start)
@@ -189,9 +212,14 @@ def dry_run(plan: AnyPlan | CheckedPlan, rig: RigDescription, current_deg: float
         _, _, end = travel(route, start, rig, plan.backlash_deg)
         build = BASIS_BUILD_S if (isinstance(plan, AdaptivePlan) and plan.rule == "posterior"
                                   and not basis_ready) else None
+        switch = asymmetric_basis and (basis is None or basis.half_turn_periodic)
         branches = [ArcBranch(arc_deg=arc, angles=len(route) + n,
                               readings=len(pairs) * (len(route) + n),
-                              estimated_s=total + extra_s + (build or 0.0))
+                              estimated_s=total + extra_s + (build or 0.0),
+                              basis="asymmetric" if switch and arc == FULL_TURN_DEG
+                              else "default",
+                              basis_build_s=asymmetric_build_s
+                              if switch and arc == FULL_TURN_DEG else None)
                     for arc, (n, extra_s) in branch_bounds(
                         plan, rig, len(lights), len(pairs), angles, end).items()]
         max_total = max(b.estimated_s for b in branches)

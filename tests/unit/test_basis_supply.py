@@ -16,7 +16,7 @@ import pytest
 
 from gonio.basis_supply import BasisSupply
 from gonio.brdf.reconstruction.basis import Basis, default_basis_path
-from gonio.plans.dryrun import BasisSymmetry
+from gonio.plans.dryrun import ASYMMETRIC_BASIS_BUILD_S, BASIS_BUILD_S, BasisSymmetry
 from gonio.plans.models import ExposureSettings, UniformPlan
 from gonio.store import JobStore
 from tests.unit.brdf.reconstruction.test_reconstruct import random_basis
@@ -141,3 +141,40 @@ def test_the_arc_warning_is_recorded_once_per_job(tmp_path: Path) -> None:
     assert supply.note_arc(store, full, FULL, odd) is None
     assert supply.note_arc(store, job, HALF, BasisSymmetry.of(EVEN)) is None
     assert not store.has_event(full, "arc_warning")
+
+
+def test_the_asymmetric_basis_is_asked_for_once_and_only_when_wanted() -> None:
+    calls: list[int] = []
+
+    def odd() -> Basis:
+        calls.append(1)
+        return ODD
+
+    supply = BasisSupply(lambda: EVEN, odd)
+    assert supply.has_asymmetric and not supply.asymmetric_build_needed()
+    assert supply.asymmetric_build_s() is None and calls == []  # looked at, not asked
+    assert supply.asymmetric() is ODD and supply.asymmetric() is ODD and calls == [1]
+    own = BasisSupply(lambda: EVEN)  # a saved basis of its own, nothing beside it
+    assert not own.has_asymmetric and own.asymmetric() is None
+
+
+def test_the_default_asymmetric_basis_is_its_cache_file_and_its_build_is_announced(
+        monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    monkeypatch.setenv("GONIO_CACHE_DIR", str(tmp_path / "cache"))
+    supply = BasisSupply()
+    assert supply.has_asymmetric and supply.asymmetric_build_needed()
+    # Neither library is tabulated in this cache: the default one's build comes first.
+    assert supply.asymmetric_build_s() == ASYMMETRIC_BASIS_BUILD_S + BASIS_BUILD_S
+    text, fraction = supply.asymmetric_wait_report(30.0)
+    assert "building" in text and "not twofold symmetric" in text and fraction is None
+    assert f"{(ASYMMETRIC_BASIS_BUILD_S + BASIS_BUILD_S) / 60:.0f} minutes" in text
+    path = default_basis_path(asymmetric=True)
+    assert path != default_basis_path()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    ODD.save(path)
+    assert not supply.asymmetric_build_needed() and supply.asymmetric_build_s() is None
+    assert "loading" in supply.asymmetric_wait_report(30.0)[0]
+    got = supply.asymmetric()
+    assert got is not None and got.K == ODD.K and not got.half_turn_periodic
+    assert supply.asymmetric() is got  # kept while the file is unchanged
+    assert not default_basis_path().exists()  # the default basis was not made to get it

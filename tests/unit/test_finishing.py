@@ -102,7 +102,11 @@ def test_a_forced_half_turn_with_opposite_readings_that_differ_is_warned() -> No
     from types import SimpleNamespace
     from typing import Any
 
-    from gonio.finishing import _record_arc_test
+    from gonio.finishing import _arc_test, _record_arc_test
+
+    def record(plan: UniformPlan, samples: Any, metrics: dict[str, Any],
+               provenance: dict[str, Any]) -> None:
+        _record_arc_test(1, plan, _arc_test(store, 1, plan, samples), metrics, provenance)
 
     angles = np.array([0.0, 45.0, 90.0, 135.0, 180.0, 270.0])
     a = np.deg2rad(angles)[None, :, None]
@@ -113,17 +117,20 @@ def test_a_forced_half_turn_with_opposite_readings_that_differ_is_warned() -> No
         values *= 1 + 0.01 * rng.standard_normal(values.shape)
         metrics: dict[str, Any] = {}
         provenance: dict[str, Any] = {}
-        _record_arc_test(store, 1, UniformPlan(), SimpleNamespace(
-            stage_angles_deg=angles, values=values), metrics, provenance)
+        record(UniformPlan(), SimpleNamespace(stage_angles_deg=angles, values=values),
+               metrics, provenance)
         assert ("arc_asymmetric" in metrics) == warned
         assert metrics["arc_symmetric"] is not warned and metrics["arc_deg"] == 180.0
         assert "arc_test" in provenance
         if warned:
             assert "span_deg 360" in metrics["arc_asymmetric"]
-    # A half turn without opposite angles, or a full turn: nothing to test, nothing recorded.
+    # A half turn without opposite angles: nothing to test, nothing recorded.
     metrics = {}
-    _record_arc_test(store, 1, UniformPlan(), SimpleNamespace(
-        stage_angles_deg=angles[:4], values=np.ones((4, 4, 3))), metrics, {})
-    _record_arc_test(store, 1, UniformPlan(span_deg=360), SimpleNamespace(
-        stage_angles_deg=angles, values=np.ones((4, 6, 3))), metrics, {})
+    record(UniformPlan(), SimpleNamespace(stage_angles_deg=angles[:4],
+                                          values=np.ones((4, 4, 3))), metrics, {})
     assert metrics == {}
+    # A full turn is tested too (its verdict chooses the basis), never warned: its own arc.
+    record(UniformPlan(span_deg=360), SimpleNamespace(
+        stage_angles_deg=angles, values=np.ones((4, 6, 3))), metrics, {})
+    assert metrics["arc_symmetric"] and metrics["arc_deg"] == 360.0
+    assert "arc_asymmetric" not in metrics

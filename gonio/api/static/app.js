@@ -444,6 +444,8 @@ const METRIC_MEANING = {
   arc_test_dof: "twofold symmetry test: its degrees of freedom (readings compared)",
   arc_test_p_value: "twofold symmetry test: probability of so large a statistic for a symmetric specimen",
   arc_asymmetric: "a half-turn scan whose readings at opposite angles differ: not twofold symmetric",
+  reconstruction_basis: "the basis the test's verdict chose: default, or asymmetric (odd harmonics along the rotation)",
+  basis_switch: "why the reconstruction used the basis for specimens without twofold symmetry (or could not)",
 };
 
 function showMetrics(metrics) {
@@ -651,7 +653,8 @@ function initForm() {
       ` (moves ${eta(r.motion_s)}, exposures ${eta(r.exposure_s)}).`;
     if (r.max_estimated_s != null && r.kind === "adaptive") text += ` Adaptive refinement can add up to ${r.max_angles - r.angles_deg.length} angles: at most ${eta(r.max_estimated_s)} in all.`;
     for (const b of r.arc_branches || []) {
-      text += ` If the first round finds the specimen ${b.arc_deg === 180 ? "twofold symmetric, it goes on over half a turn" : "not twofold symmetric, it goes on over a full turn"}: at most ${b.angles} angles (${b.readings} readings), ${eta(b.estimated_s)} in all.`;
+      text += ` If the first round finds the specimen ${b.arc_deg === 180 ? "twofold symmetric, it goes on over half a turn" : "not twofold symmetric, it goes on over a full turn"}: at most ${b.angles} angles (${b.readings} readings), ${eta(b.estimated_s)} in all${b.basis === "asymmetric" ? ", reconstructed with the basis for specimens without twofold symmetry" : ""}.`;
+      if (b.basis_build_s != null) text += ` Then about ${eta(b.basis_build_s)} more: that basis is not built on this install yet, so the job builds it before reconstructing (once).`;
     }
     if (r.basis_build_s != null) text += ` First, about ${eta(r.basis_build_s)} more: the reconstruction basis is not built on this install yet and the adaptive rule needs it, so the job builds it before its first reading (once).`;
     setNote(text, null, r.warnings || []);

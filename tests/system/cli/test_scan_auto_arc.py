@@ -1,8 +1,9 @@
 """``gonio scan --sim --arc auto``: the first round tests twofold symmetry on the simulated
 rig's real sensors (Modbus, with their shot and read noise) and the scan takes the arc the
 specimen needs: the default material (twofold symmetric) stays on half a turn, a tilted-facet
-table from the library's asymmetric families (``--material FILE.npz``) goes to a full turn.
-The choice is in the output, the job's events, the result's metrics and provenance."""
+table from the library's asymmetric families (``--material FILE.npz``) goes to a full turn and
+is reconstructed with the basis with odd harmonics. The choices are in the output, the job's
+events, the result's metrics and provenance."""
 
 from __future__ import annotations
 
@@ -14,10 +15,13 @@ import pytest
 
 from gonio.brdf.materials import library
 from gonio.brdf.models import analytic as bm
+from gonio.brdf.reconstruction.basis import default_basis_path
 from gonio.cli import main
 from gonio.plans.arc import fill_angles, first_round_angles
 from gonio.results import read_result
 from gonio.store import JobStore
+from tests.unit.brdf.reconstruction.test_reconstruct import random_basis
+from tests.unit.brdf.reconstruction.test_reconstruct_joint import _with_prior
 
 pytestmark = pytest.mark.system
 
@@ -59,11 +63,19 @@ def test_a_symmetric_specimen_stays_on_half_a_turn(
 
 
 def test_a_tilted_facet_specimen_goes_to_a_full_turn(
-        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+        tmp_path: Path, capsys: pytest.CaptureFixture[str],
+        monkeypatch: pytest.MonkeyPatch) -> None:
     spec = next(s for s in library.library_specs(asymmetric=True)
                 if s.name == "tilted-facet-002")
     table = tmp_path / "tilted-facet.npz"
     bm.tabulate(spec.model, np.float32).save(table)
+    # The basis for specimens without twofold symmetry, as a built install has it: a small one
+    # with an odd harmonic (building the real one takes minutes) in a cache of this test's own.
+    monkeypatch.setenv("GONIO_CACHE_DIR", str(tmp_path / "cache"))
+    odd = _with_prior(random_basis(7, seed=2), {0: 1.0, 1: 0.3, 2: 0.5})
+    asym_path = default_basis_path(asymmetric=True)
+    asym_path.parent.mkdir(parents=True)
+    odd.save(asym_path)
     text, store, got = _scan(tmp_path, capsys, "--material", str(table))
     job = got["job"]
     # The first round, then the opposites it had not read: 16 uniform angles over the turn.
@@ -77,3 +89,9 @@ def test_a_tilted_facet_specimen_goes_to_a_full_turn(
     metrics = got["result"].metrics
     assert metrics["arc_deg"] == 360.0 and not metrics["arc_symmetric"]
     assert metrics["n_angles"] == 16
+    # Reconstructed with the basis with odd harmonics, and said so (issue 25).
+    assert metrics["reconstruction_basis"] == "asymmetric" and metrics["K"] == odd.K
+    assert got["result"].provenance["basis_switch"] == metrics["basis_switch"]
+    assert "basis: the twofold symmetry test found the specimen NOT twofold symmetric" in text
+    (switch,) = [e for e in store.events_after(0, job_id=job.id) if e.type == "basis_switch"]
+    assert switch.data["basis"] == "asymmetric"

@@ -129,3 +129,12 @@ def test_the_dry_run_summary_states_both_branches_of_an_auto_arc_plan() -> None:
     # MemRig: 3 pairs; 8 over half a turn plus 2 opposites, or 16 over the full turn.
     assert "twofold symmetric: on over half a turn, at most 10 angles (30 readings)" in text
     assert "not twofold symmetric: on over a full turn, at most 16 angles (48 readings)" in text
+    # The full turn is reconstructed with the basis for specimens without twofold symmetry,
+    # and its build (not done yet on this install) is stated with its time.
+    assert "16 angles (48 readings) and" in text
+    assert "reconstructed with the basis for specimens without twofold symmetry" in text
+    assert "more: that basis" not in text  # built (None): nothing to wait for
+    built_later = scan_commands.dry_run_summary(
+        dry_run(plan, RigDescription.from_rig(MemRig()), asymmetric_build_s=240.0),  # type: ignore[arg-type]
+        plan, "mem")  # type: ignore[arg-type]
+    assert "then about 4.0 min more: that basis is not built on this install yet" in built_later

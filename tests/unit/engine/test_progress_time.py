@@ -120,3 +120,33 @@ def test_a_job_waiting_for_the_first_basis_build_says_so(tmp_path: Path,
     assert "learning the reconstruction basis" in text and frac is None
     w._set_activity("reconstructing")
     assert w.activity_report() == ("reconstructing the BRDF from the readings", None)
+
+
+def test_a_job_found_asymmetric_counts_the_asymmetric_basis_build_in_its_time(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Its finishing will build the basis for specimens without twofold symmetry (not built in
+    this cache): the job's basis_build_s (which its time left adds, gonio.timeleft) includes
+    it once the test has said so, and the worker's activity names it while it is built."""
+    from gonio.jobstates import JobState
+    from gonio.plans.arc import ARC_TEST_EVENT
+    from gonio.plans.dryrun import ASYMMETRIC_BASIS_BUILD_S, BASIS_BUILD_S
+
+    monkeypatch.setenv("GONIO_CACHE_DIR", str(tmp_path / "cache"))  # nothing cached
+    svc = GonioService(JobStore(tmp_path / "jobs.sqlite"), MemRig(), data_dir=tmp_path / "d")
+    plan = UniformPlan(rotations=4, arc="auto", exposure=FAST)
+    job = svc.store.create_job(kind=plan.kind, specimen="x", plan=plan.model_dump(mode="json"),
+                               rig=svc.desc.model_dump(mode="json")).id
+    svc.store.set_state(job, JobState.RUNNING)
+    assert svc.get_job(job).basis_build_s is None  # not tested yet
+    svc.store.append_event(job, ARC_TEST_EVENT, {"symmetric": True, "statistic": 3.0,
+                                                 "arc_deg": 180.0})
+    assert svc.get_job(job).basis_build_s is None  # symmetric: the default basis
+    svc.store.append_event(job, ARC_TEST_EVENT, {"symmetric": False, "statistic": 900.0,
+                                                 "arc_deg": 360.0})
+    detail = svc.get_job(job)
+    # Neither library is tabulated in this cache: the default one's build comes first.
+    assert detail.basis_build_s == ASYMMETRIC_BASIS_BUILD_S + BASIS_BUILD_S
+    svc.worker._set_activity("asymmetric_basis")
+    svc.worker._activity_since -= 5.0
+    text, _ = svc.worker.activity_report()  # type: ignore[misc]
+    assert "building" in text and "not twofold symmetric" in text

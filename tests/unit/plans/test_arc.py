@@ -205,6 +205,29 @@ def test_the_dry_run_bounds_both_verdicts_of_a_uniform_plan(desc: RigDescription
     assert dry_run(UniformPlan(exposure=EX), desc).arc_branches is None
 
 
+def test_the_dry_run_says_which_basis_each_verdict_reconstructs_with(
+        desc: RigDescription) -> None:
+    """Found asymmetric, the job is reconstructed with the basis with odd harmonics, and waits
+    at finishing for its build when it is not built yet (not in the measuring bound)."""
+    from gonio.plans.dryrun import BasisSymmetry
+
+    plan = UniformPlan(rotations=8, arc="auto", exposure=EX)
+    d = dry_run(plan, desc, asymmetric_build_s=300.0)
+    assert d.arc_branches is not None
+    sym, asym = d.arc_branches
+    assert (sym.basis, sym.basis_build_s) == ("default", None)
+    assert (asym.basis, asym.basis_build_s) == ("asymmetric", 300.0)
+    assert d.max_estimated_s == pytest.approx(asym.estimated_s)  # measuring only
+    built = dry_run(plan, desc).arc_branches
+    assert built is not None and (built[1].basis, built[1].basis_build_s) == ("asymmetric", None)
+    # No such basis in the process, or its own basis already holds odd harmonics: kept.
+    for kept in (dry_run(plan, desc, asymmetric_basis=False, asymmetric_build_s=300.0),
+                 dry_run(plan, desc, basis=BasisSymmetry(False, ("pile-000",)))):
+        assert kept.arc_branches is not None
+        assert [(b.basis, b.basis_build_s) for b in kept.arc_branches] == [
+            ("default", None), ("default", None)]
+
+
 def test_the_dry_run_bounds_both_verdicts_of_an_adaptive_plan(desc: RigDescription) -> None:
     """Counted by hand, 4 first angles, max_rounds 3, no cap: symmetric, 0 45 90 135 (180 and
     270 are the same positions over half a turn) gain 4 then 8 midpoints: 6 + 4 + 8 = 18;
