@@ -111,14 +111,14 @@ def _axis(a: FloatArray, n: int, period: float) -> tuple[NDArray[np.intp], NDArr
     return lo, lo + 1, u - lo
 
 
-def log_pchip_lookup(logs: NDArray[np.floating], valid: NDArray[np.floating],
+def log_pchip_lookup(logs: FloatArray, valid: NDArray[np.floating],
                      th: FloatArray, ph: FloatArray, td: FloatArray, pd: FloatArray
                      ) -> tuple[FloatArray, FloatArray]:
     """``L = ln(f + eps)`` interpolated at half/difference angles (module docstring).
 
     Parameters
     ----------
-    logs : (cells, C) array
+    logs : (cells, C) float64 array
         ``ln(f + eps)`` of a table's cells in C order over ``(ph, th, td, pd)``; any finite
         value at invalid cells.
     valid : (cells,) array of 0.0 / 1.0

@@ -58,7 +58,7 @@ def test_an_exponential_fall_off_in_th_is_followed_exactly() -> None:
     th, ph, td, pd = _queries(rng, 2000)
     truth = 10.0 * np.exp(k * th / geo.STEP)
     got = TableLookup(table).eval_half_diff(th, ph, td, pd)[:, 0]
-    eps = interp.LOG_EPS * np.nanmean(np.asarray(table.values))
+    eps = interp.LOG_EPS * float(np.nanmean(np.asarray(table.values)))
     np.testing.assert_allclose(got, truth, rtol=1e-9, atol=4 * eps)
     # The multilinear lookup cuts the same curve with chords: far outside that tolerance.
     lin = TableLookup(table, "multilinear").eval_half_diff(th, ph, td, pd)[:, 0]
