@@ -62,33 +62,45 @@ def log_offset(values: NDArray[np.floating], valid: NDArray[np.bool_]) -> float:
     return max(LOG_EPS * mean, 1e-12)
 
 
-def pchip_slopes(ym: FloatArray, y0: FloatArray, y1: FloatArray, y2: FloatArray,
-                 okm: NDArray[np.bool_], ok2: NDArray[np.bool_]) -> tuple[FloatArray, FloatArray]:
-    """Monotone slopes (per unit step) at the two nodes of an interval of a uniform grid.
+def harmonic_slope(d_before: FloatArray, d_after: FloatArray) -> FloatArray:
+    """Fritsch & Butland's slope at a node of a uniform grid from the secants on either side:
+    ``2 / (1/d_before + 1/d_after)`` where they share a sign, 0 otherwise (an extremum)."""
+    same = d_before * d_after > 0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        h = 2.0 / (1.0 / d_before + 1.0 / d_after)
+    return np.where(same, h, 0.0)
+
+
+def node_slopes(logs: FloatArray, valid: NDArray[np.bool_]) -> FloatArray:
+    """The monotone cubic's slope along ``th`` at every cell, per step, computed once a table.
+
+    A slope depends only on its node and the two beside it along ``th``: the harmonic mean
+    of the secants (:func:`harmonic_slope`) when both neighbours are valid, the secant to the
+    one valid neighbour at an end of the axis or beside an invalid node, 0 with none.
 
     Parameters
     ----------
-    ym, y0, y1, y2 : (N, C) arrays
-        Values at the nodes before the interval, at its two ends and after it.
-    okm, ok2 : (N, 1) bool arrays
-        Whether the outer nodes exist and are valid; where not, the slope at that end is the
-        interval's secant ``y1 - y0``.
+    logs : (cells, C) float64 array, ``ln(f + eps)`` in C order over ``(ph, th, td, pd)``
+    valid : (cells,) bool
 
     Returns
     -------
-    s0, s1 : (N, C) arrays, slopes at ``y0`` and ``y1`` in value per step
+    (cells, C) float64 array
     """
-    d0 = y1 - y0
-    dm = np.where(okm, y0 - ym, d0)
-    d1 = np.where(ok2, y2 - y1, d0)
-
-    def harmonic(a: FloatArray, b: FloatArray) -> FloatArray:
-        same = a * b > 0
-        with np.errstate(divide="ignore", invalid="ignore"):
-            h = 2.0 / (1.0 / a + 1.0 / b)
-        return np.where(same, h, 0.0)
-
-    return np.where(okm, harmonic(dm, d0), d0), np.where(ok2, harmonic(d0, d1), d0)
+    n_c = logs.shape[1]
+    y = logs.reshape(geo.N_PH, geo.N_TH, geo.N_TD * geo.N_PD, n_c)
+    ok = valid.reshape(geo.N_PH, geo.N_TH, geo.N_TD * geo.N_PD, 1)
+    before = np.zeros_like(y)
+    after = np.zeros_like(y)
+    has_before = np.zeros(ok.shape, dtype=bool)
+    has_after = np.zeros(ok.shape, dtype=bool)
+    before[:, 1:] = y[:, 1:] - y[:, :-1]
+    after[:, :-1] = y[:, 1:] - y[:, :-1]
+    has_before[:, 1:] = ok[:, :-1] & ok[:, 1:]
+    has_after[:, :-1] = ok[:, 1:] & ok[:, :-1]
+    out = np.where(has_before & has_after, harmonic_slope(before, after),
+                   np.where(has_before, before, np.where(has_after, after, 0.0)))
+    return np.ascontiguousarray(out.reshape(logs.shape))
 
 
 def hermite(y0: FloatArray, y1: FloatArray, s0: FloatArray, s1: FloatArray,
@@ -111,7 +123,7 @@ def _axis(a: FloatArray, n: int, period: float) -> tuple[NDArray[np.intp], NDArr
     return lo, lo + 1, u - lo
 
 
-def log_pchip_lookup(logs: FloatArray, valid: NDArray[np.floating],
+def log_pchip_lookup(logs: FloatArray, slopes: FloatArray, valid: NDArray[np.floating],
                      th: FloatArray, ph: FloatArray, td: FloatArray, pd: FloatArray
                      ) -> tuple[FloatArray, FloatArray]:
     """``L = ln(f + eps)`` interpolated at half/difference angles (module docstring).
@@ -121,6 +133,8 @@ def log_pchip_lookup(logs: FloatArray, valid: NDArray[np.floating],
     logs : (cells, C) float64 array
         ``ln(f + eps)`` of a table's cells in C order over ``(ph, th, td, pd)``; any finite
         value at invalid cells.
+    slopes : (cells, C) float64 array
+        :func:`node_slopes` of ``logs``.
     valid : (cells,) array of 0.0 / 1.0
         Whether each cell is valid.
     th, ph, td, pd : (N,) arrays, radians
@@ -134,7 +148,6 @@ def log_pchip_lookup(logs: FloatArray, valid: NDArray[np.floating],
     """
     s_ph, s_th, s_td = geo.N_TH * geo.N_TD * geo.N_PD, geo.N_TD * geo.N_PD, geo.N_PD
     lo, hi, t = _axis(th, geo.N_TH, 0.0)
-    im, i2 = np.maximum(lo - 1, 0), np.minimum(hi + 1, geo.N_TH - 1)
     others: Sequence[tuple[NDArray[np.intp], NDArray[np.intp], FloatArray]] = [
         (a * s, b * s, f) for (a, b, f), s in (
             (_axis(ph, geo.N_PH, 2 * np.pi), s_ph),
@@ -147,7 +160,7 @@ def log_pchip_lookup(logs: FloatArray, valid: NDArray[np.floating],
     wsum = np.zeros(th.size)
     for idx, w in geo.lattice_corners(others):
         base = idx[0] + idx[1] + idx[2]
-        f0, f1, fm, f2 = (base + i * s_th for i in (lo, hi, im, i2))
+        f0, f1 = base + lo * s_th, base + hi * s_th
         k0, k1 = valid[f0], valid[f1]
         y0, y1 = logs[f0], logs[f1]
         # Along th, invalid nodes are left out exactly as the multilinear lookup does; the
@@ -155,11 +168,8 @@ def log_pchip_lookup(logs: FloatArray, valid: NDArray[np.floating],
         wl = (1 - t) * k0 + t * k1
         with np.errstate(invalid="ignore", divide="ignore"):
             line = (((1 - t) * k0)[:, None] * y0 + (t * k1)[:, None] * y1) / wl[:, None]
-        okm = ((valid[fm] > 0) & (im < lo))[:, None]
-        ok2 = ((valid[f2] > 0) & (i2 > hi))[:, None]
-        s0, s1 = pchip_slopes(logs[fm], y0, y1, logs[f2], okm, ok2)
         both = ((k0 > 0) & (k1 > 0))[:, None]
-        val = np.where(both, hermite(y0, y1, s0, s1, tt), line)
+        val = np.where(both, hermite(y0, y1, slopes[f0], slopes[f1], tt), line)
         ww = w * wl
         use = ww > 0
         acc[use] += ww[use, None] * val[use]

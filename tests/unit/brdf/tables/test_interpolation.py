@@ -28,13 +28,21 @@ def _queries(rng: np.random.Generator, n: int, th_max_deg: float = 45.0
 
 
 def test_slopes_are_the_harmonic_mean_of_the_secants_and_zero_at_an_extremum() -> None:
-    y = np.array([[1.0], [2.0], [4.0], [3.0]])  # secants 1, 2, -1
-    yes, no = np.array([[True]]), np.array([[False]])
-    s0, s1 = interp.pchip_slopes(y[0:1], y[1:2], y[2:3], y[3:4], yes, yes)
-    assert s0[0, 0] == pytest.approx(2.0 / (1.0 / 1.0 + 1.0 / 2.0))  # 4/3
-    assert s1[0, 0] == 0.0  # secants 2 and -1 differ in sign: a local maximum
-    s0, s1 = interp.pchip_slopes(y[0:1], y[1:2], y[2:3], y[3:4], no, no)
-    assert s0[0, 0] == s1[0, 0] == 2.0  # no outer node: the interval's own secant
+    # Along th at one (ph, td, pd): 1, 2, 4, 3, then 3 everywhere; secants 1, 2, -1, 0, ...
+    f_th = np.array([1.0, 2.0, 4.0, 3.0] + [3.0] * (geo.N_TH - 4))
+    logs = np.broadcast_to(f_th[None, :, None, None], geo.TABLE_SHAPE).reshape(-1, 1)
+    logs = np.ascontiguousarray(logs)
+    valid = np.ones(logs.shape[0], dtype=bool)
+    s = interp.node_slopes(logs, valid).reshape(*geo.TABLE_SHAPE)[0, :5, 0, 0]
+    assert s[0] == 1.0  # end of the axis: the secant to the one neighbour
+    assert s[1] == pytest.approx(2.0 / (1.0 / 1.0 + 1.0 / 2.0))  # 4/3
+    assert s[2] == 0.0  # secants 2 and -1 differ in sign: a local maximum
+    assert s[3] == 0.0 and s[4] == 0.0  # a flat secant beside it: no slope
+    # Beside an invalid node: the secant to the valid side.
+    valid = valid.reshape(geo.TABLE_SHAPE).copy()
+    valid[:, 3] = False
+    s = interp.node_slopes(logs, valid.ravel()).reshape(*geo.TABLE_SHAPE)[0, :3, 0, 0]
+    assert s[2] == 2.0
 
 
 def test_hermite_meets_its_nodes_and_slopes() -> None:
