@@ -5,7 +5,8 @@ One subpackage per job; each module's docstring says what it holds.
 ==================  ===========================================================================
 ``tables``          the 5 degree half/difference grid (``geometry``), the tabulated BRDF
                     (``table``), the ``.npz`` container (``npzfile``), errors between tables
-                    (``metrics``), physical bounds of a table (``bounds``)
+                    (``metrics``), physical bounds of a table (``bounds``), the pictures'
+                    monotone cubic lookup in log (``interpolation``)
 ``models``          analytic BRDF models (``analytic``), the factored fit (``factored``), the
                     principled-parameter fit (``principled``)
 ``materials``       where BRDFs come from: synthetic training library (``library``), shipped

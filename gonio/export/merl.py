@@ -46,6 +46,7 @@ from gonio.brdf.materials.merl import (
     MerlError,
     read_merl_values,
 )
+from gonio.brdf.pictures.render import TableLookup
 from gonio.brdf.tables import geometry as geo
 from gonio.brdf.tables import metrics as tmetrics
 from gonio.brdf.tables.table import BRDFTable
@@ -116,8 +117,10 @@ def merl_sidecar(table: BRDFTable, provenance: Mapping[str, Any]) -> dict[str, A
 def merl_values(table: BRDFTable) -> NDArray[np.float64]:
     """(3, 90, 90, 180) BRDF in 1/sr on MERL's bins, from a gonio table averaged over ``ph``.
 
-    Cells below the horizon hold NaN. Values between gonio's 5 degree nodes are multilinear
-    (:meth:`BRDFTable.eval_half_diff`), clamped at 85 deg in ``th`` and ``td``.
+    Cells below the horizon, or with no valid gonio cell around them, hold NaN. Values
+    between gonio's 5 degree nodes come from the pictures' lookup
+    (:class:`gonio.brdf.pictures.render.TableLookup`: monotone cubic in log along ``th``, so
+    MERL's fine bins near the peak keep its shape), clamped at 85 deg in ``th`` and ``td``.
 
     Raises
     ------
@@ -131,7 +134,9 @@ def merl_values(table: BRDFTable) -> NDArray[np.float64]:
         )
     averaged = azimuthal_average(table)
     th, td, pd = np.meshgrid(*bin_centres(), indexing="ij")
-    out = averaged.eval_half_diff(th, 0.0, td, pd)  # (90, 90, 180, 3)
+    look = TableLookup(averaged)
+    out = look.eval_half_diff(th.ravel(), np.zeros(th.size), td.ravel(), pd.ravel(),
+                              empty=np.nan).reshape(*th.shape, -1)  # (90, 90, 180, 3)
     ci, co = geo.cell_cosines(th, td, pd)
     out[(ci <= 0) | (co <= 0)] = np.nan
     return np.moveaxis(out, -1, 0)

@@ -1,2 +1,2 @@
 """The tabulated BRDF on the 5 degree half/difference grid: directions and the grid, the table,
-the ``.npz`` container, and error metrics between two tables."""
+the ``.npz`` container, error metrics between two tables, and the pictures' interpolation."""

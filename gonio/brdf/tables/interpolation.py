@@ -1,0 +1,178 @@
+"""Interpolation between the grid's nodes for pictures and exports: monotone cubic in log.
+
+A table holds the BRDF at the 5 degree nodes of math.md 3. Between them, the multilinear
+lookup of :meth:`gonio.brdf.tables.table.BRDFTable.eval_half_diff` draws a specular peak as a
+tent: a highlight narrower than a cell comes out too wide and too dim, with corners
+(the "rings" of a rendered sphere). This module interpolates
+``L = ln(f + eps)`` instead of ``f``:
+
+* along ``th`` (the half vector's angle from the normal, the axis a highlight falls off
+  along) by the monotone piecewise cubic of Fritsch & Carlson (1980) with Fritsch & Butland's
+  harmonic-mean slopes: on a uniform grid the slope at a node is ``2 / (1/d0 + 1/d1)`` of
+  the secants ``d0, d1`` on either side when they share a sign, 0 otherwise; at an end of the
+  axis, or beside an invalid node, the interval's own secant. The cubic is then monotone on
+  every interval and stays between its two nodes: no overshoot, no ringing;
+* along ``ph``, ``td`` and ``pd`` linearly, with the same periodicity, clamping and handling
+  of invalid (NaN) neighbours as the multilinear lookup (their weights are left out and the
+  rest renormalised).
+
+In log, a lobe that falls off exponentially between two nodes is followed exactly instead of
+being cut by a straight line, and every result is a convex blend of node values of ``L``, so it
+lies between the smallest and the largest of its 16 neighbours. ``eps`` (:data:`LOG_EPS` times
+the table's mean valid value) keeps zeros finite and sets how far down the log reaches: far
+below ``eps`` the blend is linear in ``f``. The mean, not the median: a polished metal is 0 on
+most cells, and a vanishing ``eps`` would make every tail next to a 0 node collapse.
+
+Measured in docs/notes/2026-11-26-grid-limit.md: the truth tabulated on the grid and rendered
+through this lookup is closer to the truth (HDR-FLIP) than through the multilinear one.
+
+The basis, the reconstruction and the simulators keep the multilinear lookup of math.md 3
+(linear in the table's values, which the basis' off-grid rows rely on).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from gonio.brdf.tables import geometry as geo
+
+FloatArray = NDArray[np.float64]
+
+Interpolation = Literal["log-pchip", "multilinear"]
+INTERPOLATIONS: tuple[Interpolation, ...] = ("log-pchip", "multilinear")
+DEFAULT_INTERPOLATION: Interpolation = "log-pchip"
+"""What pictures, page plots and exports interpolate with (module docstring)."""
+LOG_EPS = 1e-3
+"""``eps`` of ``ln(f + eps)`` relative to the table's mean valid value."""
+
+
+def log_offset(values: NDArray[np.floating], valid: NDArray[np.bool_]) -> float:
+    """``eps`` for a table: :data:`LOG_EPS` x the mean valid value (1e-12 if that is 0).
+
+    Parameters
+    ----------
+    values : (cells, C) array, BRDF values (any units)
+    valid : (cells,) bool, cells whose values are finite
+    """
+    mean = float(np.mean(values[valid], dtype=np.float64)) if valid.any() else 0.0
+    return max(LOG_EPS * mean, 1e-12)
+
+
+def harmonic_slope(d_before: FloatArray, d_after: FloatArray) -> FloatArray:
+    """Fritsch & Butland's slope at a node of a uniform grid from the secants on either side:
+    ``2 / (1/d_before + 1/d_after)`` where they share a sign, 0 otherwise (an extremum)."""
+    same = d_before * d_after > 0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        h = 2.0 / (1.0 / d_before + 1.0 / d_after)
+    return np.where(same, h, 0.0)
+
+
+def node_slopes(logs: FloatArray, valid: NDArray[np.bool_]) -> FloatArray:
+    """The monotone cubic's slope along ``th`` at every cell, per step, computed once a table.
+
+    A slope depends only on its node and the two beside it along ``th``: the harmonic mean
+    of the secants (:func:`harmonic_slope`) when both neighbours are valid, the secant to the
+    one valid neighbour at an end of the axis or beside an invalid node, 0 with none.
+
+    Parameters
+    ----------
+    logs : (cells, C) float64 array, ``ln(f + eps)`` in C order over ``(ph, th, td, pd)``
+    valid : (cells,) bool
+
+    Returns
+    -------
+    (cells, C) float64 array
+    """
+    n_c = logs.shape[1]
+    y = logs.reshape(geo.N_PH, geo.N_TH, geo.N_TD * geo.N_PD, n_c)
+    ok = valid.reshape(geo.N_PH, geo.N_TH, geo.N_TD * geo.N_PD, 1)
+    before = np.zeros_like(y)
+    after = np.zeros_like(y)
+    has_before = np.zeros(ok.shape, dtype=bool)
+    has_after = np.zeros(ok.shape, dtype=bool)
+    before[:, 1:] = y[:, 1:] - y[:, :-1]
+    after[:, :-1] = y[:, 1:] - y[:, :-1]
+    has_before[:, 1:] = ok[:, :-1] & ok[:, 1:]
+    has_after[:, :-1] = ok[:, 1:] & ok[:, :-1]
+    out = np.where(has_before & has_after, harmonic_slope(before, after),
+                   np.where(has_before, before, np.where(has_after, after, 0.0)))
+    return np.ascontiguousarray(out.reshape(logs.shape))
+
+
+def hermite(y0: FloatArray, y1: FloatArray, s0: FloatArray, s1: FloatArray,
+            t: FloatArray) -> FloatArray:
+    """Cubic Hermite between ``y0`` (t = 0) and ``y1`` (t = 1) with slopes per unit ``t``."""
+    t2, t3 = t * t, t * t * t
+    return ((2 * t3 - 3 * t2 + 1) * y0 + (t3 - 2 * t2 + t) * s0
+            + (3 * t2 - 2 * t3) * y1 + (t3 - t2) * s1)
+
+
+def _axis(a: FloatArray, n: int, period: float) -> tuple[NDArray[np.intp], NDArray[np.intp],
+                                                           FloatArray]:
+    """Lower and upper node index and fraction along one axis (math.md 3)."""
+    if period:
+        u = np.mod(a, period) / geo.STEP
+        i0 = np.floor(u).astype(np.intp)
+        return i0 % n, (i0 + 1) % n, u - i0
+    u = np.clip(a / geo.STEP, 0.0, n - 1)
+    lo = np.minimum(np.floor(u).astype(np.intp), n - 2)
+    return lo, lo + 1, u - lo
+
+
+def log_pchip_lookup(logs: FloatArray, slopes: FloatArray, valid: NDArray[np.floating],
+                     th: FloatArray, ph: FloatArray, td: FloatArray, pd: FloatArray
+                     ) -> tuple[FloatArray, FloatArray]:
+    """``L = ln(f + eps)`` interpolated at half/difference angles (module docstring).
+
+    Parameters
+    ----------
+    logs : (cells, C) float64 array
+        ``ln(f + eps)`` of a table's cells in C order over ``(ph, th, td, pd)``; any finite
+        value at invalid cells.
+    slopes : (cells, C) float64 array
+        :func:`node_slopes` of ``logs``.
+    valid : (cells,) array of 0.0 / 1.0
+        Whether each cell is valid.
+    th, ph, td, pd : (N,) arrays, radians
+
+    Returns
+    -------
+    L : (N, C) array
+        Interpolated ``ln(f + eps)``; undefined where ``weight`` is 0.
+    weight : (N,) array
+        The multilinear weight of the valid neighbours (0: no valid neighbour).
+    """
+    s_ph, s_th, s_td = geo.N_TH * geo.N_TD * geo.N_PD, geo.N_TD * geo.N_PD, geo.N_PD
+    lo, hi, t = _axis(th, geo.N_TH, 0.0)
+    others: Sequence[tuple[NDArray[np.intp], NDArray[np.intp], FloatArray]] = [
+        (a * s, b * s, f) for (a, b, f), s in (
+            (_axis(ph, geo.N_PH, 2 * np.pi), s_ph),
+            (_axis(td, geo.N_TD, 0.0), s_td),
+            (_axis(pd, geo.N_PD, np.pi), 1),
+        )
+    ]
+    tt = t[:, None]
+    acc = np.zeros((th.size, logs.shape[1]))
+    wsum = np.zeros(th.size)
+    for idx, w in geo.lattice_corners(others):
+        base = idx[0] + idx[1] + idx[2]
+        f0, f1 = base + lo * s_th, base + hi * s_th
+        k0, k1 = valid[f0], valid[f1]
+        y0, y1 = logs[f0], logs[f1]
+        # Along th, invalid nodes are left out exactly as the multilinear lookup does; the
+        # cubic replaces the straight line only where both ends of the interval are valid.
+        wl = (1 - t) * k0 + t * k1
+        with np.errstate(invalid="ignore", divide="ignore"):
+            line = (((1 - t) * k0)[:, None] * y0 + (t * k1)[:, None] * y1) / wl[:, None]
+        both = ((k0 > 0) & (k1 > 0))[:, None]
+        val = np.where(both, hermite(y0, y1, slopes[f0], slopes[f1], tt), line)
+        ww = w * wl
+        use = ww > 0
+        acc[use] += ww[use, None] * val[use]
+        wsum += np.where(use, ww, 0.0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return acc / wsum[:, None], wsum
