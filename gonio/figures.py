@@ -195,8 +195,9 @@ def _headline(metrics: dict[str, Any]) -> dict[str, Any] | None:
                        "(cosine-weighted, Löw et al. 2012): 0 is a perfect match, lower is "
                        "better. It adds what the readings leave undetermined to how far the "
                        "material sits from the training library; on materials held out of "
-                       "the library it was within a factor of 2 of the truth on about 3 "
-                       "scans in 4 (docs/science.md 7.1).",
+                       "the library it was within a factor of 2 of the truth on about 2 "
+                       "scans in 3 and seldom more than 2 times too low (docs/science.md "
+                       "7.1.1).",
         }
     v = metrics.get("predicted_error")
     if isinstance(v, int | float):

@@ -76,7 +76,8 @@ LOG_RMSE_MEANING = (
     "material, the cosine-weighted RMS difference of log(1 + f cos theta_i) over the "
     "hemispheres (Löw et al. 2012; f in 1/sr), dimensionless; 0 is a perfect match, 0.05 is "
     "about a 5 % error where a rendering is bright. Calibrated on materials held out of the "
-    "basis; within a factor of 2 of the truth on about 3 scans in 4 (docs/science.md 7.1)"
+    "basis; within a factor of 2 of the truth on about 2 scans in 3, seldom more than 2 times "
+    "too low (docs/science.md 7.1.1)"
 )
 
 #: ``twofold_asymmetry`` above which an export warns that the principled models lose the
