@@ -461,14 +461,22 @@ class ScanEngine:
 
     async def _commit_angle(self, step: StepRow, actual: float, readings: list[ReadingRow],
                             p: Progress) -> None:
-        """Store one angle's checkpoint (readings, step done, progress event) off the loop,
-        then report its progress."""
-        await asyncio.to_thread(
-            self.store.commit_angle, self.job_id, step.angle_index, actual, readings,
-            {"specimen_deg": step.specimen_deg, "position_deg": step.position_deg,
-             "eta_s": p.eta_s, "round": p.round},
-        )
-        self.progress = p
+        """Store one angle's checkpoint (readings, step done, progress event) off the loop.
+
+        The engine's progress (what the service's status reports) moves first: the store
+        publishes the progress event as the commit ends, and a client told "2 angles done"
+        that then asks for the status must not read 1. A commit that fails puts it back.
+        """
+        before, self.progress = self.progress, p
+        try:
+            await asyncio.to_thread(
+                self.store.commit_angle, self.job_id, step.angle_index, actual, readings,
+                {"specimen_deg": step.specimen_deg, "position_deg": step.position_deg,
+                 "eta_s": p.eta_s, "round": p.round},
+            )
+        except BaseException:
+            self.progress = before
+            raise
 
     async def _committed(self) -> None:
         """Wait for the last angle's checkpoint to be stored; raises what the commit raised
