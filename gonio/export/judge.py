@@ -27,6 +27,12 @@ its table error does not show it. So:
   layer), and a fractional metallic that does not clearly render better is a fitting artefact:
   fitted to a reconstruction of a brushed copper it was 0.97-0.998, which added a diffuse glow
   where the truth is black, and, with ``specular`` near 0, an index of refraction of 1.0003.
+  The table-space fit itself, made pure (:func:`pure`), is judged beside them and kept when it
+  renders closer than the refined candidates (a reconstruction with a spurious sharp spike
+  drew the rendered fit onto the spike: a Beckmann copper, bench/bench_export.py).
+* An export warns (:func:`gonio.export.fit_warnings`) when the factored model's rendered
+  difference is less than the principled one's over :data:`TWO_LOBE_RATIO`: a diffuse colour
+  under a highlight of another colour (two lobes) is out of reach of one principled material.
 """
 
 from __future__ import annotations
@@ -172,6 +178,24 @@ def rendered_difference(reference: Any, model: Any,
 MODES = ("dielectric", "metal", "blend")
 #: A blend is kept only when it renders this much better than the better pure candidate.
 BLEND_MARGIN = 0.8
+#: The principled export warns that it cannot show the material (and points to the factored
+#: one) when its rendered difference is above the warning threshold and this many times the
+#: factored model's. On bench/bench_export.py's simulated scans the two diffuse + brushed
+#: conductor blends are at 2.3x and 2.9x; every other material at most 1.35x.
+TWO_LOBE_RATIO = 1.5
+
+
+def pure(p: Principled) -> Principled:
+    """``p`` made a pure dielectric or metal, as the rendered fit's candidates are.
+
+    Metallic at least 0.5: a metal with the same ``F0`` and no diffuse; else a dielectric with
+    ``specular`` clipped to [:data:`SPECULAR_MIN`, :data:`SPECULAR_MAX`].
+    """
+    if p.metallic >= 0.5:
+        return Principled(tuple(float(v) for v in np.clip(p.f0, 0.0, 1.0)), 1.0, 0.5,
+                          p.alpha_t, p.alpha_b, p.direction_deg, p.channels)
+    return Principled(p.base_color, 0.0, float(np.clip(p.specular, SPECULAR_MIN, SPECULAR_MAX)),
+                      p.alpha_t, p.alpha_b, p.direction_deg, p.channels)
 
 
 def _params(x: FloatArray, mode: str, nc: int, channels: tuple[str, ...]) -> Principled:
@@ -253,8 +277,8 @@ def fit_principled_rendered(table: BRDFTable, start: Principled, *, max_nfev: in
     Returns
     -------
     (Principled, RenderedDifference)
-        The better of the dielectric and the metal candidate, or the blend when it renders
-        clearly better (:data:`BLEND_MARGIN`), with ``metrics``:
+        The best of the dielectric, the metal and the pure start (:func:`pure`), or the
+        blend when it renders clearly better (:data:`BLEND_MARGIN`), with ``metrics``:
         the table metrics of :func:`gonio.brdf.models.factored.fit_metrics`, ``seconds``,
         ``rendered`` (:meth:`RenderedDifference.as_dict`) and ``fit`` = "rendered".
     """
@@ -268,9 +292,12 @@ def fit_principled_rendered(table: BRDFTable, start: Principled, *, max_nfev: in
     for mode in MODES:
         cand = _fit_candidate(start, mode, ref_fit, max_nfev)
         judged[mode] = (cand, rendered_difference(table, cand.model(), ref_judge))
-    pure = min((judged["dielectric"], judged["metal"]), key=lambda c: c[1].value)
+    unrefined = pure(start)
+    judged["start"] = (unrefined, rendered_difference(table, unrefined.model(), ref_judge))
+    best_pure = min((judged["dielectric"], judged["metal"], judged["start"]),
+                    key=lambda c: c[1].value)
     blend = judged["blend"]
-    p, diff = blend if blend[1].value < BLEND_MARGIN * pure[1].value else pure
+    p, diff = blend if blend[1].value < BLEND_MARGIN * best_pure[1].value else best_pure
     quality: dict[str, Any] = dict(fit_metrics(bm.tabulate(p.model(), np.float64), table))
     quality.update(seconds=round(time.perf_counter() - t0 + float(
         start.metrics.get("seconds", 0.0)), 3), rendered=diff.as_dict(), fit="rendered",
