@@ -57,11 +57,16 @@ def fit_all(table: BRDFTable) -> Fits:
     """Factored and principled fits of a reconstructed table, judged by rendering (seconds of
     CPU): the principled fit is refined on renderings (:func:`.judge.fit_principled_rendered`)
     and each model's ``metrics["rendered"]`` is its rendered difference from ``table``."""
+    from gonio.brdf.reconstruction.blas import one_blas_thread
     from gonio.export.judge import fit_principled_rendered
 
-    principled, _ = fit_principled_rendered(table, fit_principled(table))
-    return Fits(table, _judged_factored(table, fit_factored(table, iterations=FIT_ITERATIONS)),
-                principled)
+    # One BLAS thread: the fits' products and small SVDs gain nothing from more, and on a
+    # shared 2-core machine OpenBLAS' spinning threads doubled the fits' CPU time
+    # (docs/export.md, "What the fits cost"). The results are the same.
+    with one_blas_thread():
+        principled, _ = fit_principled_rendered(table, fit_principled(table))
+        factored = _judged_factored(table, fit_factored(table, iterations=FIT_ITERATIONS))
+    return Fits(table, factored, principled)
 
 
 def _judged_factored(table: BRDFTable, factored: FactoredBRDF) -> FactoredBRDF:
@@ -94,14 +99,16 @@ def result_fits(result_path: str | os.PathLike[str]) -> tuple[Fits, dict[str, An
             f"{Path(result_path).name} is a {res.attrs.get('kind', '?')} job's result without a "
             "reconstructed BRDF; export a scan's result"
         )
+    from gonio.brdf.reconstruction.blas import one_blas_thread
     from gonio.export.judge import fit_principled_rendered
 
-    factored = _judged_factored(
-        res.table, res.factored or fit_factored(res.table, iterations=FIT_ITERATIONS))
-    principled = res.principled
-    if principled is None or principled.metrics.get("fit") != "rendered":
-        # Missing, or fitted on the table alone by an older gonio (issue 26): fit again.
-        principled, _ = fit_principled_rendered(res.table, fit_principled(res.table))
+    with one_blas_thread():  # as in fit_all
+        factored = _judged_factored(
+            res.table, res.factored or fit_factored(res.table, iterations=FIT_ITERATIONS))
+        principled = res.principled
+        if principled is None or principled.metrics.get("fit") != "rendered":
+            # Missing, or fitted on the table alone by an older gonio (issue 26): fit again.
+            principled, _ = fit_principled_rendered(res.table, fit_principled(res.table))
     fits = Fits(res.table, factored, principled)
     return fits, provenance(res.attrs, fits, res.metrics, res.provenance)
 
@@ -113,21 +120,43 @@ def fit_summary(fits: Fits) -> dict[str, Any]:
             "factored": {k: fits.factored.metrics.get(k) for k in keys}}
 
 
+def _rendered_value(metrics: Any) -> tuple[float, dict[str, Any]] | None:
+    """A fit's stored rendered difference and its record, if it has one."""
+    r = metrics.get("rendered")
+    if not isinstance(r, dict) or not isinstance(r.get("value"), int | float):
+        return None
+    return float(r["value"]), r
+
+
 def fit_warnings(fits: Fits) -> list[str]:
-    """A sentence for each model whose rendering differs much from the reconstruction's."""
-    from gonio.export.judge import WARN_FLIP, WARN_RELATIVE
+    """A sentence for each model whose rendering differs much from the reconstruction's, and
+    one when the factored model renders much closer than the principled material (a material
+    one principled lobe cannot show, :data:`.judge.TWO_LOBE_RATIO`)."""
+    from gonio.export.judge import TWO_LOBE_RATIO, WARN_FLIP, WARN_RELATIVE
 
     out = []
     for what, m in (("principled", fits.principled.metrics), ("factored", fits.factored.metrics)):
-        r = m.get("rendered")
-        if not isinstance(r, dict) or not isinstance(r.get("value"), int | float):
+        got = _rendered_value(m)
+        if got is None:
             continue
+        value, r = got
         limit = WARN_FLIP if r.get("flip") is not None else WARN_RELATIVE
-        if r["value"] > limit:
+        if value > limit:
             out.append(
                 f"the {what} fit renders visibly unlike the reconstruction ({r['metric']} "
-                f"{r['value']:.3f} > {limit:g}): this model does not represent the material "
+                f"{value:.3f} > {limit:g}): this model does not represent the material "
                 "well; use the 'table' export where a renderer can take a table")
+    p, f = _rendered_value(fits.principled.metrics), _rendered_value(fits.factored.metrics)
+    if p is not None and f is not None and p[1].get("metric") == f[1].get("metric"):
+        limit = WARN_FLIP if p[1].get("flip") is not None else WARN_RELATIVE
+        if p[0] > limit and p[0] > TWO_LOBE_RATIO * f[0]:
+            out.append(
+                f"one principled material cannot show this material: the factored model's "
+                f"rendered difference from the reconstruction is {p[0] / max(f[0], 1e-12):.1f}"
+                f"x smaller ({p[1]['metric']} {f[0]:.3f} against {p[0]:.3f}). Typically two "
+                "lobes, such as a diffuse colour under a highlight of another colour (a coated or "
+                "dusty metal, a metallic paint), which principled parameters tie together; "
+                "use the 'factored' (or 'table') export for this material")
     return out
 
 

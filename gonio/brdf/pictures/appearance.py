@@ -28,6 +28,7 @@ the reference.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import Any
 
@@ -64,6 +65,15 @@ def flip_module() -> Any:
     except ImportError:
         return None
     return flip_evaluator
+
+
+@functools.cache
+def _openmp_controller() -> Any:
+    """threadpoolctl's controller of the libraries loaded once flip-evaluator is (its OpenMP
+    runtime among them; scanning the loaded libraries takes ~10 ms, so once per process)."""
+    from threadpoolctl import ThreadpoolController
+
+    return ThreadpoolController()
 
 
 def render_appearance(brdf: Any, views: tuple[render.View, ...] = APPEARANCE_VIEWS,
@@ -143,12 +153,18 @@ def rendered_flip(reference: list[FloatArray], test: list[FloatArray]) -> FlipRe
                               "pip install flip-evaluator")
     peak = reference_peak(reference)
     per: list[float] = []
-    for r, t in zip(reference, test, strict=True):
-        _, mean, _ = flip.evaluate(
-            np.ascontiguousarray(np.clip(np.nan_to_num(r) / peak, 0, None), dtype=np.float32),
-            np.ascontiguousarray(np.clip(np.nan_to_num(t) / peak, 0, None), dtype=np.float32),
-            "HDR", applyMagma=False)
-        per.append(float(mean))
+    # One OpenMP thread: flip-evaluator's threads spin-wait, and on a shared 2-core machine
+    # four 96 pixel images took 0.9-2.5 s of CPU on its default two threads against 0.33 s
+    # on one, with the same result (docs/export.md, "What the fits cost").
+    with _openmp_controller().limit(limits=1, user_api="openmp"):
+        for r, t in zip(reference, test, strict=True):
+            _, mean, _ = flip.evaluate(
+                np.ascontiguousarray(np.clip(np.nan_to_num(r) / peak, 0, None),
+                                     dtype=np.float32),
+                np.ascontiguousarray(np.clip(np.nan_to_num(t) / peak, 0, None),
+                                     dtype=np.float32),
+                "HDR", applyMagma=False)
+            per.append(float(mean))
     return FlipResult(per, float(np.mean(per)))
 
 

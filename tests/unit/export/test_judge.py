@@ -8,6 +8,7 @@ import pytest
 
 from gonio.brdf.models import analytic as bm
 from gonio.brdf.models.principled import Principled, fit_principled
+from gonio.brdf.pictures import appearance
 from gonio.export import judge
 
 PLASTIC = Principled((0.45, 0.20, 0.10), 0.0, 0.5, 0.13, 0.13, 0.0)  # roughness 0.36
@@ -57,3 +58,53 @@ def test_dielectric_specular_stays_physical() -> None:
     fitted, _ = judge.fit_principled_rendered(table, fit_principled(table))
     assert fitted.specular >= judge.SPECULAR_MIN
     assert 0.08 * fitted.specular >= 0.02 - 1e-9
+
+
+def test_pure_start_keeps_f0_and_is_a_dielectric_or_a_metal() -> None:
+    """A table fit's fractional metallic (0.97 on a copper reconstruction, issue 26) becomes a
+    metal with the same normal-incidence reflectance; a dielectric's specular is clipped."""
+    base, m, s = (0.9, 0.6, 0.5), 0.97, 0.01
+    # F0 = mix(0.08 specular, base, metallic) (docs/export.md), worked out here by hand.
+    f0 = [0.08 * s * (1 - m) + b * m for b in base]
+    metal = judge.pure(Principled(base, m, s, 0.3, 0.06, 35.0))
+    assert metal.metallic == 1.0 and np.allclose(metal.f0, f0)
+    assert (metal.alpha_t, metal.alpha_b, metal.direction_deg) == (0.3, 0.06, 35.0)
+    plastic = judge.pure(Principled(base, 0.2, s, 0.13, 0.13, 0.0))
+    assert plastic.metallic == 0.0 and plastic.base_color == base
+    assert plastic.specular == judge.SPECULAR_MIN  # F0 0.02, not 0.0008 (IOR 1.06)
+
+
+def test_rendered_flip_runs_on_one_openmp_thread_with_the_same_result() -> None:
+    """HDR-FLIP is computed on one OpenMP thread (spinning threads cost CPU on a shared
+    machine) and gives what flip-evaluator gives on its own threads; the limit is lifted."""
+    flip = appearance.flip_module()
+    if flip is None:
+        pytest.skip("flip-evaluator is not installed")
+    from threadpoolctl import threadpool_info
+
+    ref = judge.render_views(bm.tabulate(PLASTIC.model(), np.float64))
+    test = judge.render_views(COPPER.model())
+    peak = appearance.reference_peak(ref)
+    direct = [float(flip.evaluate(np.clip(r / peak, 0, None).astype(np.float32),
+                                  np.clip(t / peak, 0, None).astype(np.float32), "HDR",
+                                  applyMagma=False)[1]) for r, t in zip(ref, test, strict=True)]
+    before = [p["num_threads"] for p in threadpool_info() if p["user_api"] == "openmp"]
+    got = appearance.rendered_flip(ref, test)
+    assert got.per_image == pytest.approx(direct, rel=1e-5)
+    assert [p["num_threads"] for p in threadpool_info() if p["user_api"] == "openmp"] == before
+
+
+def test_a_two_lobe_material_warns_and_points_to_the_factored_export() -> None:
+    """A red diffuse under a white metallic highlight (a coated metal, two lobes): principled
+    ties a metal's F0 to its base colour and bounds a dielectric's at 0.08, so no principled
+    material shows both (docs/export.md); the export says so and names the factored model.
+    A principled plastic, which one lobe does show, gets no such warning."""
+    from gonio.export import fit_all, fit_warnings
+
+    white = bm.GGX(0.35, 0.06, bm.SchlickFresnel((0.55, 0.55, 0.55)), "separable")
+    blend = bm.LobeSum((bm.Lambert((0.20, 0.04, 0.04)), bm.Rotated(white, np.radians(30.0))))
+    fits = fit_all(bm.tabulate(blend, np.float64))
+    warned = [w for w in fit_warnings(fits) if "cannot show this material" in w]
+    assert len(warned) == 1 and "'factored'" in warned[0]
+    plastic = fit_all(bm.tabulate(PLASTIC.model(), np.float64))
+    assert not any("cannot show" in w for w in fit_warnings(plastic))
