@@ -592,6 +592,8 @@ def _scan_through_daemon(args: argparse.Namespace, plan: Any) -> int:
     err_text = f"{err['key']} {err['text']}" if err else "no error estimate"
     print(f"job {job_id} completed: {summary.get('n_samples', summary.get('readings'))} samples "
           f"in {units}, {err_text}; wrote {out}")
+    if err and err.get("coverage"):
+        print(f"  {err['coverage']}")
     _print_arc(summary)
     if summary.get("basis_misfit"):
         print(f"warning: {summary['basis_misfit']}", file=sys.stderr)
