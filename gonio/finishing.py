@@ -545,7 +545,8 @@ def rebuild_result(store: JobStore, data_dir: Path, job_id: int,
                            f"{old['readings']} readings it was finished with; restore the "
                            "store from a backup, or measure it again")
     inputs = store.finishing_inputs(job_id) or {}
-    kept = inputs.get("provenance") if isinstance(inputs.get("provenance"), dict) else {}
+    stored = inputs.get("provenance")
+    kept: dict[str, Any] = stored if isinstance(stored, dict) else {}
     cal: Calibration | None = None
     if isinstance(old.get("calibration"), dict):
         cal = Calibration.model_validate(old["calibration"])
