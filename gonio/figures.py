@@ -141,7 +141,8 @@ def headline_error(metrics: dict[str, Any]) -> dict[str, Any] | None:
     -------
     dict with ``key`` (metric name), ``value``, ``text`` (value as shown) and ``meaning``
     (and ``physical_bounds`` / ``design_gap`` / ``arc_asymmetric`` when they apply; ``arc``,
-    the sentence on the arc an auto-arc scan chose).
+    the sentence on the arc an auto-arc scan chose; ``uncovered_share`` and ``coverage``, the
+    self-estimate's coverage witness and its sentence, when the result has it).
     """
     out = _headline(metrics)
     bounds = metrics.get("physical_bounds")
@@ -176,6 +177,16 @@ def headline_error(metrics: dict[str, Any]) -> dict[str, Any] | None:
                       f"{metrics.get('arc_test_dof')} degrees of freedom, p = "
                       f"{metrics['arc_test_p_value']:.3g}).")
         out["meaning"] = f"{out['meaning']} {out['arc']}"
+    uncovered = metrics.get("uncovered_share")
+    if out is not None and out["key"] == "predicted_log_rmse" and \
+            isinstance(uncovered, int | float):
+        # The coverage witness the estimate was mapped with (docs/science.md 7.1.1): how much
+        # of the table the layout leaves to the prior, the part no reading can show.
+        out["uncovered_share"] = float(uncovered)
+        out["coverage"] = (f"The readings leave {100 * uncovered:.1f} % of the prior's "
+                           "weighted variance uncovered (uncovered_share: the part of the "
+                           "table no pair looks at, part of the estimate).")
+        out["meaning"] = f"{out['meaning']} {out['coverage']}"
     misfit = metrics.get("basis_misfit")
     if out is not None and isinstance(misfit, str):
         # The readings carry structure the basis cannot hold: the estimate is a floor at best,

@@ -83,6 +83,10 @@ class Finishing:
         replace a later calibration
     note_arc : record the job's ``arc_warning`` event when it has one
         (:meth:`gonio.basis_supply.BasisSupply.note_arc`); False when a result is rebuilt
+    keep_inputs : keep ``provenance`` and the true material in the store
+        (:meth:`gonio.store.JobStore.set_finishing_inputs`), so ``gonio jobs rebuild`` writes
+        what this finishing wrote (the design comparison and colour come from the rig config);
+        False when a result is rebuilt from them
     """
 
     store: JobStore
@@ -98,6 +102,7 @@ class Finishing:
     save_calibration: bool = True
     basis_at_hand: Basis | None = None
     note_arc: bool = True
+    keep_inputs: bool = True
 
     def checkpoint(self, job_id: int, before: str) -> None:
         """Raise :class:`FinishingStopped` if an abort was asked for.
@@ -165,6 +170,14 @@ def finish_job(job_id: int, plan: AnyPlan | CheckedPlan, how: Finishing) -> dict
         # readings as it was made (gonio jobs rebuild), whatever is in effect by then.
         "calibration": cal.model_dump(mode="json"),
     }
+    truth = how.true_material() if how.true_material is not None else None
+    if how.keep_inputs:
+        # Before anything is written: a rebuild (even of a job whose result write failed)
+        # then has the rig config and truth this finishing used.
+        how.store.set_finishing_inputs(job_id, {"provenance": how.provenance,
+                                                "true_material": truth,
+                                                "fit_exports": how.fit_exports,
+                                                "calibration": cal.model_dump(mode="json")})
     warning = exposure_mismatch(cal, readings)
     if warning is not None:
         summary["calibration_warning"] = warning
@@ -180,13 +193,23 @@ def finish_job(job_id: int, plan: AnyPlan | CheckedPlan, how: Finishing) -> dict
             # Dated by its readings, not by when finishing ran: a rebuild gives the same.
             created=max((r.t_read for r in readings), default=None),
         )
-        if how.save_calibration:
-            save_calibration(new_cal, how.data_dir / CALIBRATION_FILE,
-                             _full_scale(how.provenance))
         provenance["new_calibration"] = new_cal.model_dump_json()
+        # The result first, then the calibration (each written whole or not at all): a
+        # result that cannot be written (a full disk, a kill) leaves the calibration in
+        # effect as it was, never a new one whose job shows failed or unfinished.
         write_result(path, job_id=job_id, specimen=job.specimen, kind=job.kind,
                      readings=readings, samples=samples, provenance=provenance,
                      metrics={"seconds": time.perf_counter() - t0})
+        if how.save_calibration:
+            try:
+                how.checkpoint(job_id, "saving the calibration")
+                save_calibration(new_cal, how.data_dir / CALIBRATION_FILE,
+                                 _full_scale(how.provenance))
+            except BaseException:
+                # The job fails (or stops) without its calibration: nor does it keep a
+                # result that says it made one.
+                path.unlink(missing_ok=True)
+                raise
         summary.update(result_path=relative, calibration_path=CALIBRATION_FILE)
         return summary
 
@@ -226,6 +249,9 @@ def finish_job(job_id: int, plan: AnyPlan | CheckedPlan, how: Finishing) -> dict
         # including measured ones (docs/science.md).
         "predicted_log_rmse": _finite_or_none(rec.predicted_log_rmse),
         "cv_log_error": _finite_or_none(rec.cv_log_error),
+        # The coverage witness of predicted_log_rmse: the share of the prior's weighted
+        # variance the layout leaves (joint fit only; docs/science.md 7.1.1).
+        "uncovered_share": _finite_or_none(rec.uncovered_share),
         "n_pairs": len(pairs),
         "n_angles": int(samples.stage_angles_deg.size),
         "n_samples": len(pairs) * int(samples.stage_angles_deg.size),
@@ -288,7 +314,6 @@ def finish_job(job_id: int, plan: AnyPlan | CheckedPlan, how: Finishing) -> dict
             principled_log_rmse=fits.principled.metrics["log_rmse"],
         )
     metrics["seconds"] = time.perf_counter() - t0
-    truth = how.true_material() if how.true_material is not None else None
     if truth is not None:
         provenance["true_material"] = json.dumps(truth)
     how.checkpoint(job_id, "writing the result")
@@ -554,6 +579,11 @@ def _finite_or_none(x: float) -> float | None:
     return float(x) if math.isfinite(x) else None
 
 
+_DISK_FULL = "disk full: "
+"""How the reason of a job failed by a full disk begins
+(:func:`gonio.diskspace.disk_full_message`)."""
+
+
 class RebuildError(ValueError):
     """A result cannot be rebuilt from the job store; the message says why and what to do."""
 
@@ -562,9 +592,16 @@ def rebuild_result(store: JobStore, data_dir: Path, job_id: int,
                    basis: BasisSupply) -> dict[str, Any]:
     """Write job ``job_id``'s result file again from the readings the store holds
     (``gonio jobs rebuild``): finishing re-run on them, with the calibration the job was
-    finished with (recorded in its summary), the rig snapshot and plan it ran with. The job's
-    summary is replaced by the new one; a calibration job's factors do not replace the
+    finished with (recorded in its summary), the rig snapshot and plan it ran with, and what
+    its finishing took from the rig config (the design comparison, the colour) and, on a
+    simulated rig, the true material (:meth:`gonio.store.JobStore.finishing_inputs`). The
+    job's summary is replaced by the new one; a calibration job's factors do not replace the
     calibration in effect.
+
+    A job that failed because the disk filled while its result was written (``failed``, its
+    reason "disk full: ...", after ``reconstructing``) has every reading: it is finished here
+    and becomes ``completed``, with the events its finishing would have recorded. A calibration
+    job so failed puts its calibration in effect unless a later one is.
 
     Blocking (reconstruction and fits take seconds).
 
@@ -572,7 +609,7 @@ def rebuild_result(store: JobStore, data_dir: Path, job_id: int,
     ----------
     store : the job store holding the job and its readings
     data_dir : the data directory the result goes to (``results/job-<id>.h5``)
-    job_id : a completed job
+    job_id : a completed job, or one failed by a full disk while finishing
     basis : the reconstruction basis (specimen jobs)
 
     Returns
@@ -582,16 +619,16 @@ def rebuild_result(store: JobStore, data_dir: Path, job_id: int,
     Raises
     ------
     RebuildError
-        The job is not completed, its plan or rig snapshot no longer parses, or its readings
-        are missing or incomplete.
+        The job is not completed (nor failed by a full disk while finishing), its plan or rig
+        snapshot no longer parses, or its readings are missing or incomplete.
     """
     from gonio.jobstates import JobState
     from gonio.plans.models import parse_stored_plan
 
     job = store.get_job(job_id)
-    if job.state is not JobState.COMPLETED:
-        raise RebuildError(f"job {job_id} is {job.state.value}: only a completed job's result "
-                           "is rebuilt (a job still to finish writes its own)")
+    completing = _failed_finishing(store, job)
+    if job.state is not JobState.COMPLETED and not completing:
+        raise RebuildError(_not_rebuilt(store, job))
     try:
         plan = parse_stored_plan(job.plan)
         desc = RigDescription.model_validate(job.rig)
@@ -607,19 +644,31 @@ def rebuild_result(store: JobStore, data_dir: Path, job_id: int,
         raise RebuildError(f"cannot rebuild job {job_id}: the job store holds {n} of the "
                            f"{old['readings']} readings it was finished with; restore the "
                            "store from a backup, or measure it again")
+    inputs = store.finishing_inputs(job_id) or {}
+    stored = inputs.get("provenance")
+    kept: dict[str, Any] = stored if isinstance(stored, dict) else {}
+    cal: Calibration | None = None
     if isinstance(old.get("calibration"), dict):
         cal = Calibration.model_validate(old["calibration"])
+    elif isinstance(inputs.get("calibration"), dict):
+        # Failed before its summary was stored: finishing kept the calibration it applied.
+        cal = Calibration.model_validate(inputs["calibration"])
     elif old.get("calibrated"):
         raise RebuildError(f"cannot rebuild job {job_id}: it was calibrated, and this store "
                            "(from an older gonio) does not record with which factors; measure "
                            "it again")
-    else:
-        cal = Calibration()
+    applied = cal if cal is not None else Calibration()
+    truth = inputs.get("true_material")
     how = Finishing(
         store=store, desc=desc, data_dir=Path(data_dir), basis=basis,
-        calibration=lambda: cal, save_calibration=False, note_arc=False,
-        provenance={"rebuilt": "from the job store's readings (gonio jobs rebuild) on "
+        calibration=lambda: applied, note_arc=False, keep_inputs=False,
+        # A completed job's calibration stays as the calibration in effect is; a failed
+        # calibration job's becomes it unless a later one is in effect.
+        save_calibration=completing and _no_later_calibration(store, data_dir, job),
+        provenance={**kept, "rebuilt": "from the job store's readings (gonio jobs rebuild) on "
                     + time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())},
+        true_material=(lambda: truth) if isinstance(truth, dict) else None,
+        fit_exports=bool(inputs.get("fit_exports", True)),
     )
     from gonio.calibration import CalibrationError
 
@@ -630,4 +679,52 @@ def rebuild_result(store: JobStore, data_dir: Path, job_id: int,
                            "backup, or measure it again") from None
     store.set_result(job_id, summary.get("result_path"), summary)
     store.append_event(job_id, "rebuilt", {"result_path": summary.get("result_path")})
+    if completing:
+        # What the worker records after a finishing, then the state the result now backs.
+        for key in ("physical_bounds", "arc_asymmetric", "design_gap"):
+            if summary.get(key):
+                store.append_event(job_id, key, {"message": summary[key]})
+        store.set_state(job_id, JobState.COMPLETED,
+                        reason="completed by gonio jobs rebuild from its stored readings "
+                        f"(it had failed: {job.reason})")
     return summary
+
+
+def _failed_finishing(store: JobStore, job: Any) -> bool:
+    """Whether ``job`` failed for want of disk space while it was being finished (all its
+    readings are stored; only its result or calibration file could not be written)."""
+    from gonio.jobstates import JobState
+
+    if job.state is not JobState.FAILED or not (job.reason or "").startswith(_DISK_FULL):
+        return False
+    ev = store.last_event(job.id, "state")
+    return ev is not None and ev.data.get("from") == JobState.RECONSTRUCTING.value
+
+
+def _not_rebuilt(store: JobStore, job: Any) -> str:
+    """Why ``job`` (not completed) has no result to rebuild, and what to do."""
+    from gonio.jobstates import JobState
+
+    if job.state is JobState.FAILED and (job.reason or "").startswith(_DISK_FULL):
+        return (f"job {job.id} failed while it was measuring, when the disk filled "
+                f"({job.done_angles} of {job.total_angles} angles measured): its readings stay "
+                "in the job store but are not a whole scan, so there is no result to write; "
+                "measure it again (submit the same plan) once the disk has room")
+    return (f"job {job.id} is {job.state.value}: only a completed job's result is rebuilt, or "
+            "one whose result could not be written for a full disk (a job still to finish "
+            "writes its own)")
+
+
+def _no_later_calibration(store: JobStore, data_dir: Path, job: Any) -> bool:
+    """No calibration job completed after ``job`` was created (a later one's calibration is
+    the one in effect and stays so)."""
+    from gonio.jobstates import JobState
+
+    return not any(r.id > job.id and r.state is JobState.COMPLETED
+                   and _plan_kind(r.plan) == "calibration" for r in store.list_jobs())
+
+
+def _plan_kind(plan: dict[str, Any]) -> str | None:
+    """A stored plan's ``kind``, without parsing the rest."""
+    kind = plan.get("kind")
+    return kind if isinstance(kind, str) else None

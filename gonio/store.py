@@ -114,6 +114,13 @@ CREATE TABLE IF NOT EXISTS darks (
     t_read        REAL NOT NULL,
     UNIQUE (job_id, angle_index, sensor)
 );
+-- What finishing took beyond the readings (the rig config's provenance, a simulated
+-- specimen's recipe), so a rebuilt result holds what the original did. A table of its own,
+-- created on open: stores without it read as before, and older gonio versions ignore it.
+CREATE TABLE IF NOT EXISTS finishing (
+    job_id        INTEGER PRIMARY KEY REFERENCES jobs(id) ON DELETE CASCADE,
+    inputs        TEXT NOT NULL
+);
 CREATE TABLE IF NOT EXISTS holds (
     name          TEXT PRIMARY KEY,
     reason        TEXT NOT NULL,
@@ -551,6 +558,21 @@ class JobStore:
                 "UPDATE jobs SET result_path = ?, summary = ? WHERE id = ?",
                 (result_path, json.dumps(summary), job_id),
             )
+
+    def set_finishing_inputs(self, job_id: int, inputs: dict[str, Any]) -> None:
+        """Keep what finishing job ``job_id`` took beyond its readings (JSON-serialisable:
+        the provenance it added, a simulated specimen's recipe), for ``gonio jobs rebuild``."""
+        with self._tx() as c:
+            c.execute("INSERT OR REPLACE INTO finishing (job_id, inputs) VALUES (?, ?)",
+                      (job_id, json.dumps(inputs)))
+
+    def finishing_inputs(self, job_id: int) -> dict[str, Any] | None:
+        """What :meth:`set_finishing_inputs` kept for job ``job_id``; None when nothing was
+        (a job finished by a gonio from before it, or not finished)."""
+        with self._read() as c:
+            row = c.execute("SELECT inputs FROM finishing WHERE job_id = ?",
+                            (job_id,)).fetchone()
+        return None if row is None else cast("dict[str, Any]", json.loads(row[0]))
 
     def reorder(self, job_id: int, *, priority: int | None = None,
                 position: int | None = None) -> JobRow:

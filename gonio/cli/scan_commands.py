@@ -117,7 +117,8 @@ def register(subparsers: Any) -> None:
         description="list: the jobs; show ID: one job as JSON; abort ID: end one left "
         "unfinished (e.g. a foreground scan interrupted by Ctrl-C); rebuild ID: write a "
         "completed job's result file again from the readings the store holds (when the file "
-        "is missing or damaged), with the calibration the job was finished with.")
+        "is missing or damaged), with the calibration the job was finished with; a job that "
+        "failed because the disk filled while its result was written is completed so.")
     j.add_argument("action", nargs="?", choices=["list", "show", "abort", "rebuild"],
                    default="list")
     j.add_argument("job_id", nargs="?", type=int)
@@ -606,6 +607,8 @@ def _scan_through_daemon(args: argparse.Namespace, plan: Any) -> int:
     err_text = f"{err['key']} {err['text']}" if err else "no error estimate"
     print(f"job {job_id} completed: {summary.get('n_samples', summary.get('readings'))} samples "
           f"in {units}, {err_text}; wrote {out}")
+    if err and err.get("coverage"):
+        print(f"  {err['coverage']}")
     _print_arc(summary)
     if summary.get("basis_misfit"):
         print(f"warning: {summary['basis_misfit']}", file=sys.stderr)
@@ -706,15 +709,17 @@ def _rebuild(args: argparse.Namespace, store: Any) -> int:
                          "DATA/gonio.sqlite'")
     data_dir = args.data_dir if args.data_dir is not None else args.db.resolve().parent
     try:
-        store.get_job(args.job_id)
+        before = store.get_job(args.job_id).state
     except NotFound as exc:
         raise UsageError(str(exc)) from None
     print(f"rebuilding job {args.job_id}'s result from the job store's readings",
           file=sys.stderr)
     summary = rebuild_result(store, data_dir, args.job_id, BasisSupply())
+    after = store.get_job(args.job_id).state
     print(f"job {args.job_id}: wrote {data_dir / summary['result_path']} from "
           f"{summary['readings']} stored readings"
-          + (" (calibrated, 1/sr)" if summary.get("calibrated") else " (sensor units)"))
+          + (" (calibrated, 1/sr)" if summary.get("calibrated") else " (sensor units)")
+          + (f"; it was {before.value} and is {after.value} now" if after != before else ""))
     return 0
 
 

@@ -101,6 +101,18 @@ def test_the_headline_error_in_words() -> None:
     assert headline_error({"predicted_log_rmse": None}) is None
 
 
+def test_the_headline_states_the_coverage_of_the_self_estimate() -> None:
+    covered = headline_error({"predicted_log_rmse": 0.05, "uncovered_share": 0.0213})
+    assert covered is not None and covered["uncovered_share"] == 0.0213
+    assert "leave 2.1 % of the prior's weighted variance uncovered" in covered["coverage"]
+    assert covered["meaning"].endswith(covered["coverage"])
+    # V&F's path has none (null), and a MAPE headline is not the estimate it witnesses.
+    for metrics in ({"predicted_log_rmse": 0.05, "uncovered_share": None},
+                    {"predicted_error": 0.1, "uncovered_share": 0.02}):
+        h = headline_error(metrics)
+        assert h is not None and "coverage" not in h and "uncovered_share" not in h
+
+
 def test_the_headline_says_which_arc_and_warns_a_half_turn_that_is_not_symmetric() -> None:
     base = {"predicted_log_rmse": 0.05}
     auto = headline_error({**base, "arc_symmetric": False, "arc_deg": 360.0,

@@ -134,3 +134,34 @@ def test_a_forced_half_turn_with_opposite_readings_that_differ_is_warned() -> No
         stage_angles_deg=angles, values=np.ones((4, 6, 3))), metrics, {})
     assert metrics["arc_symmetric"] and metrics["arc_deg"] == 360.0
     assert "arc_asymmetric" not in metrics
+
+
+def test_a_calibration_whose_result_cannot_be_written_does_not_take_effect(
+    tmp_path: Path
+) -> None:
+    """The result is written before the calibration: when it cannot be (here a directory
+    stands where the file goes, a real failure of the write), the job fails and the
+    calibration in effect stays the earlier job's, not one whose job shows failed."""
+    _calibrated(tmp_path).store.close()
+    data = tmp_path / "d"
+    before = (data / "calibration.json").read_text()
+    blocked = data / "results" / "job-2.h5"
+    blocked.mkdir()
+    svc = GonioService(JobStore(data / "gonio.sqlite"), MemRig(), data_dir=data)
+
+    async def go() -> None:
+        await svc.start()
+        svc.submit(JobRequest(plan=CalibrationPlan(reference_albedo=0.5, rotations=2,
+                                                   exposure=FAST)))
+        async for ev in svc.subscribe(0, job_id=2):
+            if ev.type == "state" and ev.data["state"] in ("completed", "failed"):
+                break
+        await svc.stop()
+
+    asyncio.run(go())
+    job = svc.store.get_job(2)
+    assert job.state.value == "failed", job.reason
+    assert (data / "calibration.json").read_text() == before
+    assert svc.calibration().source == json.loads(before)["source"]
+    assert blocked.is_dir() and not any(blocked.iterdir())
+    assert not list(data.glob("calibration.json*.part"))

@@ -24,7 +24,7 @@ import pytest
 from gonio.basis_supply import BasisSupply
 from gonio.diskspace import FREE_MARGIN_BYTES
 from gonio.results import read_result
-from tests.system.daemon_proc import DaemonProcess, start_daemon, wait_for
+from tests.system.daemon_proc import DaemonProcess, gonio, start_daemon, wait_for
 
 pytestmark = [pytest.mark.system, pytest.mark.timeout(400)]
 
@@ -114,6 +114,12 @@ def test_a_disk_filling_during_a_job_fails_the_job_not_the_daemon(small_disk: Pa
         failed = _job(d, job)
         assert failed["state"] == "failed" and failed["reason"].startswith("disk full"), failed
         assert failed["done_angles"] >= 1  # its readings are kept
+        # Failed part way through its measurement: not a whole scan, and rebuild says so.
+        r = gonio(["jobs", "rebuild", str(job), "--db", str(data / "gonio.sqlite")])
+        assert r.returncode == 2, r.stdout + r.stderr
+        assert f"job {job} failed while it was measuring" in r.stderr, r.stderr
+        assert "measure it again" in r.stderr and "Traceback" not in r.stderr, r.stderr
+        assert _job(d, job)["state"] == "failed"
 
         filler = fill(small_disk)
     finally:
@@ -206,3 +212,24 @@ def test_a_disk_filling_while_the_result_file_is_written_fails_the_job_only(
             wait_for(lambda: c.get("/health").json()["status"] == "ok", 60, "room again")
             export = c.get(f"/api/v1/jobs/{done}/export", params={"format": "table"})
             assert export.status_code == 200 and len(export.content) > 0
+
+            # Its readings are all stored: once there is room, gonio jobs rebuild (its own
+            # store handle, beside the running daemon) writes the result and completes it.
+            from gonio.finishing import rebuild_result
+            from gonio.store import JobStore
+
+            store = JobStore(data / "gonio.sqlite", durable=False)
+            summary = rebuild_result(store, data, job, BasisSupply(lambda: basis))
+            detail = c.get(f"/api/v1/jobs/{job}").json()
+            assert detail["state"] == "completed", detail
+            assert "completed by gonio jobs rebuild" in detail["reason"], detail
+            # With the calibration it was being finished with (the same as the first scan's).
+            assert detail["result"]["calibration"] == \
+                c.get(f"/api/v1/jobs/{done}").json()["result"]["calibration"]
+            assert detail["result"]["result_path"] == summary["result_path"]
+            served = c.get(f"/api/v1/jobs/{job}/result")
+            assert served.status_code == 200, served.text
+            first, rebuilt = read_result(data / f"results/job-{done}.h5"), read_result(
+                data / summary["result_path"])
+            assert rebuilt.table is not None and first.table is not None
+            assert rebuilt.provenance["rig_config"] == first.provenance["rig_config"]
