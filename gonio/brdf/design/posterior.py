@@ -115,6 +115,55 @@ def metric_gram(basis: Basis, slope: MetricSlope = "median") -> FloatArray:
     -------
     (K, K) float64, symmetric positive semi-definite.
     """
+    rows, s2 = _row_slopes(basis, slope)
+    Qv = np.asarray(basis.Q, dtype=float)[rows]
+    wv = geo.volume_weight().ravel()[rows]
+    return np.asarray((Qv * (wv * s2)[:, None]).T @ Qv)
+
+
+def cell_gram(basis: Basis, cell_weight: ArrayLike, slope: MetricSlope = "median"
+              ) -> FloatArray:
+    """(K, K) ``W`` with the cells weighed by ``cell_weight`` instead of the volume weight.
+
+    ``W = sum_rows c_row E[s^2] Q_row^T Q_row``, ``s`` as in :func:`metric_gram`: the same
+    error in the remapped value costs what it costs ``ln(1 + f cos ti)`` at that cell, counted
+    ``c_row`` times. With ``c`` the pixel counts of
+    :func:`gonio.brdf.pictures.appearance.render_importance` this is the expected squared log
+    error over the pixels of the standard renderings (``ph`` averaged) instead of over the
+    hemispheres' volume.
+
+    Parameters
+    ----------
+    basis : Basis
+    cell_weight : (18, 18, 36) or (11664,) array_like, >= 0, finite
+        Weight of each grid cell (invalid cells are left out).
+    slope : {"spread", "median"}
+
+    Returns
+    -------
+    (K, K) float64, symmetric positive semi-definite.
+
+    Raises
+    ------
+    DesignError
+        For a map of the wrong size, negative or non-finite weights, or no weight on any
+        valid cell.
+    """
+    c = np.asarray(cell_weight, dtype=float).ravel()
+    if c.size != geo.N_ROWS:
+        raise DesignError(f"a cell weight map has one value per grid cell ({geo.N_ROWS}, "
+                          f"shape {geo.SLICE_SHAPE}), got {c.size} values")
+    if not np.all(np.isfinite(c)) or np.any(c < 0):
+        raise DesignError("cell weights must be finite and >= 0")
+    rows, s2 = _row_slopes(basis, slope)
+    if not np.any(c[rows] > 0):
+        raise DesignError("the cell weight map puts no weight on any valid cell")
+    Qv = np.asarray(basis.Q, dtype=float)[rows]
+    return np.asarray((Qv * (c[rows] * s2)[:, None]).T @ Qv)
+
+
+def _row_slopes(basis: Basis, slope: MetricSlope) -> tuple[NDArray[np.intp], FloatArray]:
+    """The valid rows and the metric's ``E[s^2]`` at each (:func:`metric_gram`)."""
     if slope not in ("spread", "median"):
         raise DesignError(f"slope must be 'spread' or 'median', not {slope!r}")
     rows = np.flatnonzero(basis.valid)
@@ -135,8 +184,7 @@ def metric_gram(basis: Basis, slope: MetricSlope = "median") -> FloatArray:
         f = np.maximum(inverse_remap(x, f_med[:, None], w[:, None], basis.eps), 0.0)
         s = ci[:, None] * (f * w[:, None] + basis.eps) / (w[:, None] * (1.0 + f * ci[:, None]))
         s2 = (s**2) @ wt / np.sqrt(np.pi)
-    wv = geo.volume_weight().ravel()[rows]
-    return np.asarray((Qv * (wv * s2)[:, None]).T @ Qv)
+    return rows, np.asarray(s2, dtype=float)
 
 
 @dataclass(frozen=True)
@@ -359,6 +407,8 @@ def posterior_design(
     aliasing: bool = False,
     span_deg: float = DEFAULT_SPAN_DEG,
     colour: ColourTargets | None = None,
+    cell_weight: ArrayLike | None = None,
+    cell_mix: float = 0.0,
 ) -> PairDesign:
     """``n`` pairs that minimise the joint fit's expected metric error (module notes).
 
@@ -397,6 +447,15 @@ def posterior_design(
         near the specular direction become pairs of their own (the first of the design), and
         the other pairs minimise the table's expected error plus ``colour.weight`` times the
         targets'. None (the default): the table's expected error alone.
+    cell_weight : (18, 18, 36) array_like, optional
+        Another weighting of the grid's cells (:func:`cell_gram`), e.g. the pixel counts of
+        the standard renderings (:func:`gonio.brdf.pictures.appearance.render_importance`).
+    cell_mix : float in [0, 1]
+        The pairs minimise ``(1 - cell_mix)`` times the table's expected error plus
+        ``cell_mix`` times the expected error weighted by ``cell_weight``, the latter scaled so
+        that under the prior both count alike (``docs/science.md`` 7.2.2). 0 (the default):
+        the table's expected error alone. ``expected_log_rmse`` of the result stays the
+        table's.
 
     Returns
     -------
@@ -409,7 +468,8 @@ def posterior_design(
     ------
     DesignError
         For ``n < 1``, more pairs than feasible cells, bad ``rotations`` / ``eta`` / ``lam``
-        / ``slope``, or fewer pairs than ``colour`` needs for its direct pairs.
+        / ``slope``, or fewer pairs than ``colour`` needs for its direct pairs, a
+        ``cell_mix`` outside [0, 1] or without a ``cell_weight``, or a bad ``cell_weight``.
     FeasibilityError
         When no cell is feasible or the chosen pairs cannot be mounted under ``constraints``.
     DesignTimeout
@@ -423,6 +483,13 @@ def posterior_design(
     choice = model
     if colour is not None:
         fixed, choice = _colour_choice(basis, model, colour, n)
+    if not 0.0 <= cell_mix <= 1.0:
+        raise DesignError(f"cell_mix must be in [0, 1], got {cell_mix}")
+    if cell_mix > 0:
+        if cell_weight is None:
+            raise DesignError("cell_mix > 0 needs a cell_weight map to mix in")
+        choice = replace(choice, W=_mixed_gram(choice, cell_gram(basis, cell_weight, slope),
+                                               cell_mix))
     accept = None
     checks = 0
     if constraints.min_device_distance_deg > 0:
@@ -463,6 +530,13 @@ def posterior_design(
                    expected_log_rmse=expected_log_rmse(model, q),
                    rotations=int(rotations), span_deg=float(span_deg), greedy=stats,
                    colour_pairs=int(fixed.shape[0]))
+
+
+def _mixed_gram(model: PriorModel, Wc: FloatArray, mix: float) -> FloatArray:
+    """``(1 - mix) W + mix ratio Wc``, ``ratio`` making both weigh the prior alike."""
+    prior = model.P.sum(axis=0)
+    ratio = float(np.sum(model.W * prior)) / max(float(np.sum(Wc * prior)), 1e-300)
+    return np.asarray((1.0 - mix) * model.W + mix * ratio * Wc)
 
 
 def _colour_choice(basis: Basis, model: PriorModel, colour: ColourTargets, n: int

@@ -36,6 +36,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from gonio.brdf.pictures import render
+from gonio.brdf.tables import geometry as geo
 
 FloatArray = NDArray[np.float64]
 
@@ -177,3 +178,56 @@ def appearance_flip(reference: Any, test: Any, ref_images: list[FloatArray] | No
     """
     ref = ref_images if ref_images is not None else render_appearance(reference)
     return rendered_flip(ref, render_appearance(test))
+
+
+class _CellCounter:
+    """An ``eval(wi, wo)`` that renders black and counts which grid cells it was asked for."""
+
+    def __init__(self) -> None:
+        self.counts = np.zeros(geo.N_ROWS)
+
+    def eval(self, wi: FloatArray, wo: FloatArray) -> FloatArray:
+        th, _ph, td, pd = geo.directions_to_half_diff(wi, wo)
+        axes = []
+        for x, n, wrap in ((th, geo.N_TH, False), (td, geo.N_TD, False), (pd, geo.N_PD, True)):
+            u = np.asarray(x, dtype=float) / geo.STEP
+            lo = np.floor(u).astype(np.intp)
+            frac = u - lo
+            if wrap:  # pd is periodic over 180 deg: past the last node comes the first
+                lo, hi = np.mod(lo, n), np.mod(lo + 1, n)
+            else:  # past the last node (85 deg) the lookup holds the last node's value
+                hi = np.minimum(lo + 1, n - 1)
+                lo = np.minimum(lo, n - 1)
+            axes.append((lo, hi, frac))
+        for idx, w in geo.lattice_corners(axes):
+            self.counts += np.bincount(geo.flat_row(*idx), weights=w, minlength=geo.N_ROWS)
+        return np.zeros((np.asarray(wi).shape[0], 3))
+
+
+def render_importance(views: tuple[render.View, ...] = APPEARANCE_VIEWS,
+                      size: int = APPEARANCE_SIZE) -> FloatArray:
+    """How many pixels of the standard renderings look up each cell of gonio's grid.
+
+    Every lit pixel of a sphere view under a point light is one ``(wi, wo)`` pair (the same
+    pairs :func:`render_appearance` evaluates, taken from the same renderer); it counts 1,
+    shared among the eight ``(th, td, pd)`` nodes around it by their multilinear weights (how
+    a lookup between nodes blends them). ``ph`` is summed over: a specimen sits at any
+    holder angle, so the renderings see every ``ph`` of a cell alike on average. This is the
+    map of the grid the pictures (and so HDR-FLIP) look at; the expected-error design can weigh
+    cells by it (:func:`gonio.brdf.design.posterior.posterior_design`'s ``cell_weight``).
+
+    Parameters
+    ----------
+    views : tuple of View
+        Sphere views under point lights (other kinds count their lookups alike).
+    size : int, pixels per side
+
+    Returns
+    -------
+    (18, 18, 36) float64, pixel counts per ``(th, td, pd)`` node, summed over the views (the
+    total is the number of lit pixels).
+    """
+    counter = _CellCounter()
+    for v in views:
+        render.render_view(counter, v, size)
+    return counter.counts.reshape(geo.SLICE_SHAPE)

@@ -12,6 +12,7 @@ from gonio.brdf.design.errors import DesignError
 from gonio.brdf.design.posterior import (
     PriorModel,
     _posterior,
+    cell_gram,
     expected_error,
     folded_onto,
     greedy_rows,
@@ -140,6 +141,90 @@ def test_metric_gram_spread_matches_a_monte_carlo_over_the_basis_materials() -> 
     assert np.abs(metric_gram(b, "median") - want).max() > 0.1 * np.abs(want).max()
     with pytest.raises(DesignError, match="slope must be"):
         metric_gram(b, "mean")  # type: ignore[arg-type]
+
+
+def test_cell_gram_weighs_each_cell_by_the_map_and_the_metric_slope() -> None:
+    """One cell weighted: ``W = c s^2 q q^T`` with ``s`` by finite differences through the
+    basis' inverse remap (as for metric_gram); the volume weight as map gives metric_gram."""
+    b = random_basis(3)
+    rows = np.flatnonzero(b.valid)
+    r = int(rows[1234])
+    ci, _ = geo.cell_cosines(*geo.grid_angles())
+    w = row_weight(b.eps)[r]
+    h = 1e-6
+    f0 = inverse_remap(np.zeros(1), b.f_med[[r]], w, b.eps)
+    f1 = inverse_remap(np.full(1, h), b.f_med[[r]], w, b.eps)
+    s = float((np.log1p(f1 * ci.ravel()[r]) - np.log1p(f0 * ci.ravel()[r]))[0] / h)
+    c = np.zeros(geo.N_ROWS)
+    c[r] = 2.5
+    np.testing.assert_allclose(cell_gram(b, c.reshape(geo.SLICE_SHAPE)),
+                               2.5 * s**2 * np.outer(b.Q[r], b.Q[r]), rtol=1e-4, atol=1e-12)
+    # an invalid cell's weight is left out
+    c[np.flatnonzero(~b.valid)[0]] = 100.0
+    np.testing.assert_allclose(cell_gram(b, c), 2.5 * s**2 * np.outer(b.Q[r], b.Q[r]),
+                               rtol=1e-4, atol=1e-12)
+    np.testing.assert_allclose(cell_gram(b, geo.volume_weight()), metric_gram(b), rtol=1e-12)
+
+
+@pytest.mark.parametrize(("weight", "match"), [
+    (np.ones(10), "one value per grid cell"),
+    (-np.ones(geo.SLICE_SHAPE), "finite and >= 0"),
+    (np.full(geo.SLICE_SHAPE, np.nan), "finite and >= 0"),
+    (np.where(geo.valid_mask(), 0.0, 1.0), "no weight on any valid cell"),
+])
+def test_cell_gram_rejects_bad_maps(weight: np.ndarray, match: str) -> None:
+    with pytest.raises(DesignError, match=match):
+        cell_gram(random_basis(3), weight)
+
+
+def test_cell_mix_chooses_by_the_mixed_expected_error() -> None:
+    """The first pair of a design with ``cell_mix = a`` is the best single pair under
+    ``(1 - a) E_W + a ratio E_Wc``, ``ratio = sum(W P) / sum(Wc P)`` over the summed prior,
+    evaluated pair by pair with expected_error; the reported expected log_rmse stays the
+    table's. Mixing in the table's own weights (the volume) changes nothing."""
+    from dataclasses import replace
+
+    from gonio.brdf.design.posterior import expected_log_rmse
+
+    b = _with_prior(random_basis(6), {0: 1.0, 2: 0.5})
+    cons = RigConstraints(min_device_distance_deg=0.0)
+    model = prior_model(b, 8)
+    cand = np.flatnonzero(feasible_mask(cons, b.valid).ravel())
+    plain_err = np.array([expected_error(model, b.Q[[c]]) for c in cand])
+    # A map on one cell whose row the prior knows least, other than the table's first choice:
+    # a pair read there teaches most about that cell.
+    spread = np.einsum("nk,kl,nl->n", b.Q[cand], model.P[0], b.Q[cand])
+    spread[int(np.argmin(plain_err))] = -np.inf
+    cmap = np.zeros(geo.N_ROWS)
+    cmap[cand[int(np.argmax(spread))]] = 1.0
+    Wc = cell_gram(b, cmap)
+    Ps = model.P.sum(axis=0)
+    ratio = np.sum(model.W * Ps) / np.sum(Wc * Ps)
+    for a in (0.7, 1.0):
+        mixed = np.array([(1 - a) * expected_error(model, b.Q[[c]])
+                          + a * ratio * expected_error(replace(model, W=Wc), b.Q[[c]])
+                          for c in cand])
+        d = posterior_design(b, 3, cons, cell_weight=cmap.reshape(geo.SLICE_SHAPE),
+                             cell_mix=a)
+        first = np.ravel_multi_index(tuple(np.rint(d.cells[0] / geo.STEP).astype(int)),
+                                     geo.SLICE_SHAPE)
+        assert first == cand[int(np.argmin(mixed))]
+        q = b.rows_at(d.cells[:, 0], d.cells[:, 1], d.cells[:, 2])
+        assert d.expected_log_rmse == pytest.approx(expected_log_rmse(model, q))
+    assert first != cand[int(np.argmin(plain_err))]  # the map moved the choice
+    plain = posterior_design(b, 3, cons)
+    same = posterior_design(b, 3, cons, cell_weight=geo.volume_weight(), cell_mix=1.0)
+    np.testing.assert_allclose(same.cells, plain.cells)
+
+
+@pytest.mark.parametrize(("kwargs", "match"), [
+    ({"cell_mix": 0.5}, "needs a cell_weight"),
+    ({"cell_mix": -0.1, "cell_weight": np.ones(geo.SLICE_SHAPE)}, r"cell_mix must be in \[0, 1\]"),
+    ({"cell_mix": 1.5, "cell_weight": np.ones(geo.SLICE_SHAPE)}, r"cell_mix must be in \[0, 1\]"),
+])
+def test_cell_mix_rejects_bad_requests(kwargs: dict, match: str) -> None:
+    with pytest.raises(DesignError, match=match):
+        posterior_design(random_basis(4), 3, RigConstraints(), **kwargs)
 
 
 def test_posterior_design_gives_distinct_feasible_mountable_pairs() -> None:

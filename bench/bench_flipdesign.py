@@ -1,0 +1,164 @@
+"""Benchmark: the expected-error design weighted towards what the renderings see (issue 23 item 3).
+
+Run from the project root (needs mitsuba and flip-evaluator: ``pip install 'gonio[rgl]'``)::
+
+    nice -n 5 .venv/bin/python bench/bench_flipdesign.py choose [--mix 0 0.25 0.5 0.75 1]
+    nice -n 5 .venv/bin/python bench/bench_flipdesign.py test --mix A
+
+The expected-error design (:mod:`gonio.brdf.design.posterior`) weighs the grid's cells as
+``log_rmse`` does (by their volume). The standard renderings
+(:mod:`gonio.brdf.pictures.appearance`) look at a few thousand of them, each as often as pixels
+land on it (:func:`~gonio.brdf.pictures.appearance.render_importance`). ``cell_mix = a`` chooses
+the pairs by ``(1 - a)`` times the ``log_rmse`` objective plus ``a`` times the one weighted by
+the pixel counts.
+
+Sets (the discipline of docs/science.md 7.2.2):
+
+* **choice** (``choose``): the measured RGL materials at even positions of bench_unseen's
+  order (0, 2, ...: six materials) and :data:`CHOICE_ANISO`, five mitsuba specimens made here
+  the way bench_unseen makes its six, with other parameters and holder angles, never used
+  anywhere else. ``a`` is chosen here, by mean HDR-FLIP subject to ``log_rmse``.
+* **test** (``test``): the measured materials at odd positions (five) and bench_unseen's six
+  anisotropic specimens; run once with the chosen ``a`` against ``a = 0`` and every preset.
+  ``test`` also prints the choice set's rows so the 17 bench_unseen materials can be read
+  together (the even measured ones saw the choice).
+
+Everything else as bench_unseen: n = 10 pairs, r = 8 uniform stage angles over half a turn,
+1 % noise, the default joint fit, each measured material on a basis that leaves it out, HDR-FLIP
+against the truth rendered by mitsuba. Per material it prints ``log_rmse`` and HDR-FLIP of
+every ``a`` and every preset.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import sys
+import time
+from typing import Any
+
+import bench_unseen as bu  # the sibling bench (the script's folder is on sys.path)
+import numpy as np
+
+from gonio.brdf.design.constraints import RigConstraints
+from gonio.brdf.design.posterior import posterior_design
+from gonio.brdf.design.presets import get_preset, preset_names
+from gonio.brdf.pictures.appearance import render_importance
+from gonio.brdf.reconstruction.basis import Basis, default_basis
+from gonio.brdf.tables import geometry as geo
+
+#: Specimens for the choice set only: bench_unseen's kinds of mitsuba BSDF with other
+#: parameters and holder angles (name, mitsuba dict, holder angle in degrees).
+CHOICE_ANISO: list[tuple[str, dict[str, Any], float]] = [
+    ("mc-conductor-Al", {"type": "roughconductor", "material": "Al", "distribution": "ggx",
+                         "alpha_u": 0.15, "alpha_v": 0.05}, 41.0),
+    ("mc-conductor-Cr", {"type": "roughconductor", "material": "Cr",
+                         "distribution": "beckmann", "alpha_u": 0.12, "alpha_v": 0.4}, 333.0),
+    ("mc-principled-red", {"type": "principled", "metallic": 0.0, "roughness": 0.45,
+                           "anisotropic": 0.4, "specular": 0.5,
+                           "base_color": {"type": "rgb", "value": [0.6, 0.15, 0.1]}}, 155.0),
+    ("mc-blend-brushed-Cu", {"type": "blendbsdf", "weight": 0.45,
+                             "bsdf_0": {"type": "diffuse",
+                                        "reflectance": {"type": "rgb", "value": [0.3, 0.3, 0.5]}},
+                             "bsdf_1": {"type": "roughconductor", "material": "Cu",
+                                        "alpha_u": 0.05, "alpha_v": 0.2}}, 248.0),
+    ("mc-plastic", {"type": "roughplastic", "distribution": "ggx", "alpha": 0.12,
+                    "diffuse_reflectance": {"type": "rgb", "value": [0.2, 0.4, 0.1]}}, 0.0),
+]
+
+
+def choice_aniso() -> list[bu.Material]:
+    """The choice set's mitsuba specimens (truth tables cached like bench_unseen's)."""
+    saved = bu.ANISO
+    try:
+        bu.ANISO = CHOICE_ANISO
+        return bu.aniso_materials()
+    finally:
+        bu.ANISO = saved
+
+
+def material_sets() -> tuple[list[bu.Material], list[bu.Material]]:
+    """(choice, test) as in the module notes."""
+    measured = bu.measured_materials()
+    choice = measured[0::2] + choice_aniso()
+    test = measured[1::2] + bu.aniso_materials()
+    return choice, test
+
+
+def design(b: Basis, mix: float, importance: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """10 pairs for 8 angles over half a turn, ``cell_mix = mix``; cached per basis and code."""
+    key = f"{bu.basis_id(b)}-{bu.fit_fingerprint()}-{mix:g}"
+    path = bu.CACHE / f"flipdesign-{hashlib.sha256(key.encode()).hexdigest()[:16]}.npz"
+    if path.is_file():
+        with np.load(path) as z:
+            return z["cells"], z["ph_lab"]
+    d = posterior_design(b, 10, RigConstraints(), span_deg=bu.SPAN["design"],
+                         cell_weight=importance if mix > 0 else None, cell_mix=mix)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    np.savez(path, cells=d.cells, ph_lab=d.ph_lab)
+    return np.asarray(d.cells), np.asarray(d.ph_lab)
+
+
+def evaluate(mats: list[bu.Material], mixes: list[float], label: str) -> None:
+    """Per material and in the mean: log_rmse / HDR-FLIP of every mix and every preset."""
+    importance = render_importance()
+    presets = {p: get_preset(p).cells() for p in preset_names()}
+    rows: dict[str, dict[str, bu.Score]] = {}
+    t0 = time.perf_counter()
+    for m in mats:
+        b = default_basis(exclude=m.exclude)
+        seed = 100 + int(hashlib.sha256(m.name.encode()).hexdigest()[:6], 16) % 1000
+        for a in mixes:
+            cells, ph = design(b, a, importance)
+            rows.setdefault(f"gonio a={a:g}", {})[m.name] = bu.run_scan(
+                b, m, cells, ph, 8, seed, "joint")
+        for p, (pc, pph) in presets.items():
+            rows.setdefault(p, {})[m.name] = bu.run_scan(b, m, pc, pph, 8, seed, "joint")
+        print(f"  {m.name} ({time.perf_counter() - t0:.0f} s)", flush=True)
+    order = list(rows)
+    print(f"\n{label}: log_rmse / HDR-FLIP per material (lower is better)")
+    print("| material | " + " | ".join(order) + " |")
+    print("|---" * (1 + len(order)) + "|")
+    for m in mats:
+        print(f"| {m.name} | " + " | ".join(
+            f"{rows[r][m.name].log_rmse:.4f} / {rows[r][m.name].flip:.3f}" for r in order) + " |")
+    for kind in ("measured", "aniso"):
+        ks = [m for m in mats if m.kind == kind]
+        if ks:
+            print(f"| **mean {kind} ({len(ks)})** | " + " | ".join(
+                f"**{np.mean([rows[r][m.name].log_rmse for m in ks]):.4f} / "
+                f"{np.mean([rows[r][m.name].flip for m in ks]):.3f}**" for r in order) + " |")
+    print("\nwins against the best preset per material (log_rmse; HDR-FLIP), of "
+          f"{len(mats)}:")
+    for a in mixes:
+        g = rows[f"gonio a={a:g}"]
+        wl = sum(g[m.name].log_rmse < min(rows[p][m.name].log_rmse for p in presets)
+                 for m in mats)
+        wf = sum(g[m.name].flip < min(rows[p][m.name].flip for p in presets) for m in mats)
+        print(f"  a={a:g}: log_rmse {wl}, HDR-FLIP {wf}")
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("stage", choices=["choose", "test"])
+    ap.add_argument("--mix", type=float, nargs="+", default=[0.0, 0.25, 0.5, 0.75, 1.0],
+                    help="cell_mix values to compare (test: the chosen one; 0 is added)")
+    ap.add_argument("--only", nargs="*", default=None, help="material names (exploring)")
+    args = ap.parse_args(argv)
+    print(f"$ {' '.join(['python', *sys.argv])}")
+    imp = render_importance()
+    print(f"render importance: {imp.sum():.0f} pixel lookups on {(imp > 0).sum()} nodes, "
+          f"{imp[geo.valid_mask()].sum() / imp.sum():.1%} on valid cells")
+    choice, test = material_sets()
+    mixes = sorted(set([0.0, *args.mix]))
+    sets = [("choice set", choice)] if args.stage == "choose" else [
+        ("test set", test), ("choice set", choice)]
+    for label, mats in sets:
+        if args.only:
+            mats = [m for m in mats if m.name in args.only]
+        evaluate(mats, mixes, label)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
