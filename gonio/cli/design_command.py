@@ -87,6 +87,10 @@ def register(subparsers: Any) -> None:
                    help="with --colour: weight of the instrument geometries' expected error "
                         f"against the whole table's (default {DEFAULT_COLOUR_WEIGHT:g}; 0: only "
                         "the pairs at the near-specular geometries)")
+    p.add_argument("--render-mix", type=float, default=0.0, metavar="A",
+                   help="for --pairs by the expected error: weigh the grid's cells (1 - A) as "
+                        "log_rmse does plus A as the standard renderings' pixels see them "
+                        "(0..1; default 0; docs/science.md 7.2.2)")
     p.add_argument("--seed", type=int, default=0,
                    help="random seed of the kappa search; for --objective posterior it picks "
                         "the first pair the greedy choice starts from (0: the best single "
@@ -154,6 +158,12 @@ def _check_args(args: argparse.Namespace) -> None:
             raise UsageError("--colour designs --pairs by the expected error: use it with "
                              "--pairs and without --objective kappa")
         _colour(args)
+    if args.render_mix != 0.0:
+        if args.pairs is None or args.objective == "kappa":
+            raise UsageError("--render-mix weighs the expected-error design of --pairs: use it "
+                             "with --pairs and without --objective kappa")
+        if not 0.0 <= args.render_mix <= 1.0:
+            raise UsageError(f"--render-mix must be between 0 and 1, got {args.render_mix:g}")
     if args.seed < 0:
         raise UsageError(f"--seed must be at least 0, got {args.seed}")
     if args.rotations < 1:
@@ -198,8 +208,18 @@ def make_design(args: argparse.Namespace, basis: BasisLike) -> PairDesign:
         basis, args.pairs, constraints, h=args.neighbourhood, starts=args.starts,
         descents=args.descents, seed=args.seed, time_limit_s=args.time_limit,
         objective=args.objective, rotations=args.rotations, span_deg=args.span,
-        colour=_colour(args),
+        colour=_colour(args), **_render_mix(args),
     )
+
+
+def _render_mix(args: argparse.Namespace) -> dict[str, Any]:
+    """``design_pairs``' cell weighting for ``--render-mix`` (nothing when it is 0)."""
+    mix = float(getattr(args, "render_mix", 0.0) or 0.0)
+    if mix == 0.0:
+        return {}
+    from gonio.brdf.pictures.appearance import render_importance
+
+    return {"cell_weight": render_importance(), "cell_mix": mix}
 
 
 SINGULAR_KAPPA = 1e6

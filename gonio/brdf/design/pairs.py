@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -109,6 +110,8 @@ def design_pairs(
     rotations: int = 8,
     span_deg: float = DEFAULT_SPAN_DEG,
     colour: ColourTargets | None = None,
+    cell_weight: ArrayLike | None = None,
+    cell_mix: float = 0.0,
 ) -> PairDesign:
     """Choose ``n`` independent light/sensor pairs and place them in the lab.
 
@@ -134,6 +137,12 @@ def design_pairs(
     asking for colour with ``objective="kappa"`` is an error, and a colour design that cannot
     be mounted or runs out of time raises instead of falling back to the condition-number
     search, which would drop the colour geometries.
+
+    ``cell_weight``, ``cell_mix``: the expected-error design's second weighting of the grid's
+    cells and its share (:func:`gonio.brdf.design.posterior.posterior_design`; e.g. the pixel
+    counts of the standard renderings, docs/science.md 7.2.2); like ``colour``, only the
+    expected-error design takes them (``cell_mix > 0`` with ``objective="kappa"`` is an
+    error).
 
     Either way the condition-number search's ability to plan mounts is kept: when the
     expected-error choice cannot be mounted (a crowded rig, :class:`FeasibilityError`), runs
@@ -170,6 +179,12 @@ def design_pairs(
         raise DesignError(f"a scan needs at least one stage angle, got rotations={rotations}")
     if span_deg not in SPANS_DEG:
         raise DesignError(f"span_deg must be 180 or 360 (half or a full turn), got {span_deg:g}")
+    if cell_mix and asked != "posterior":
+        raise DesignError(
+            "a cell weighting (cell_mix > 0) is taken by the expected-error design only; use "
+            "objective='posterior' (the default) or cell_mix=0")
+    cells_asked: dict[str, Any] = ({"cell_weight": cell_weight, "cell_mix": cell_mix}
+                                   if cell_mix else {})
     if colour is not None:
         if asked != "posterior":
             raise DesignError(
@@ -179,14 +194,14 @@ def design_pairs(
             raise DesignError("a colour design needs a gonio Basis (its medians and prior)")
         return posterior_design(basis, n, constraints, rotations=rotations, span_deg=span_deg,
                                 seed=0 if seed is None else seed, time_limit_s=time_limit_s,
-                                colour=colour)
+                                colour=colour, **cells_asked)
     fallback = None
     if asked == "posterior":
         if isinstance(basis, Basis):
             try:
                 return posterior_design(basis, n, constraints, rotations=rotations,
                                         span_deg=span_deg, seed=0 if seed is None else seed,
-                                        time_limit_s=time_limit_s)
+                                        time_limit_s=time_limit_s, **cells_asked)
             except FeasibilityError as exc:
                 fallback = (f"the expected-error choice could not be mounted ({exc}); the "
                             "condition-number search, which plans mounts as it goes, made "

@@ -124,6 +124,11 @@ def test_design_preset(basis_file: Path, capsys: pytest.CaptureFixture[str]) -> 
         (["--pairs", "6", "--colour", "MA98", "--colour-weight", "-1"],
          "colour weight must be a number >= 0"),
         (["--pairs", "3", "--colour", "MA98"], "need 5 pairs of their own"),
+        (["--lights", "2", "--sensors", "2", "--render-mix", "0.5"],
+         "--render-mix weighs the expected-error design of --pairs"),
+        (["--pairs", "3", "--render-mix", "0.5", "--objective", "kappa"],
+         "without --objective kappa"),
+        (["--pairs", "3", "--render-mix", "1.5"], "--render-mix must be between 0 and 1"),
         (["--pairs", "3", "--max-elevation", "5", "--min-separation", "30"],
          "no grid cell is feasible"),
         # the core names the settings to relax; the CLI words them as its flags
@@ -220,6 +225,35 @@ def test_the_objective_is_chosen_and_reported(objective: str, basis_file: Path, 
             gap = np.abs(written - c)
             gap[:, 2] = np.minimum(gap[:, 2], np.pi - gap[:, 2])
             assert gap.max(axis=1).min() < np.deg2rad(0.01)
+
+
+def test_render_mix_designs_with_the_renderings_cell_weights(
+        basis_file: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``--render-mix A``: the pairs are the core's expected-error design with the standard
+    renderings' pixel counts mixed in at A (docs/science.md 7.2.2)."""
+    from gonio.brdf.design.constraints import RigConstraints
+    from gonio.brdf.design.posterior import posterior_design
+    from gonio.brdf.pictures.appearance import render_importance
+
+    out = tmp_path / "frag.toml"
+    assert main(["design", "--pairs", "5", "--basis", str(basis_file), "--render-mix", "1",
+                 "-o", str(out)]) == 0
+    assert "objective: posterior (" in capsys.readouterr().out
+    basis = Basis.load(basis_file)
+    frag = tomllib.loads(out.read_text())
+    li = np.deg2rad([[d["theta_deg"], d["phi_deg"]] for d in frag["lights"]])
+    se = np.deg2rad([[d["theta_deg"], d["phi_deg"]] for d in frag["sensors"]])
+    th, _, td, pd = geo.directions_to_half_diff(geo.spherical_to_direction(li[:, 0], li[:, 1]),
+                                                geo.spherical_to_direction(se[:, 0], se[:, 1]))
+    written = np.stack([th, td, np.mod(pd, np.pi)], axis=1)
+    mixed = posterior_design(basis, 5, RigConstraints(), cell_weight=render_importance(),
+                             cell_mix=1.0)
+    plain = posterior_design(basis, 5, RigConstraints())
+    assert not np.allclose(np.sort(mixed.cells, axis=0), np.sort(plain.cells, axis=0))
+    for c in mixed.cells:  # (the fragment holds rounded angles)
+        gap = np.abs(written - c)
+        gap[:, 2] = np.minimum(gap[:, 2], np.pi - gap[:, 2])
+        assert gap.max(axis=1).min() < np.deg2rad(0.01)
 
 
 def test_an_unknown_objective_names_the_choices(basis_file: Path,

@@ -271,6 +271,18 @@ def test_design_pairs_objective_posterior_is_the_expected_error_design() -> None
         design_pairs(b, 4, RigConstraints(), objective="nope")  # type: ignore[arg-type]
 
 
+def test_design_pairs_passes_a_cell_weighting_to_the_expected_error_design_only() -> None:
+    from gonio.brdf.design.pairs import design_pairs
+
+    b = _with_prior(random_basis(6), {0: 1.0, 2: 0.5})
+    cmap = np.where(geo.grid_angles()[0] > np.deg2rad(70), 1.0, 0.0)
+    via = design_pairs(b, 4, RigConstraints(), cell_weight=cmap, cell_mix=0.8)
+    direct = posterior_design(b, 4, RigConstraints(), cell_weight=cmap, cell_mix=0.8)
+    np.testing.assert_array_equal(via.cells, direct.cells)
+    with pytest.raises(DesignError, match="expected-error design only"):
+        design_pairs(b, 4, RigConstraints(), objective="kappa", cell_weight=cmap, cell_mix=0.8)
+
+
 def test_design_pairs_objective_posterior_needs_a_basis() -> None:
     from gonio.brdf.design.pairs import design_pairs
 
