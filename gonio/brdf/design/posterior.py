@@ -40,6 +40,14 @@ coefficients' covariance over the training columns, averaged with a Gauss-Hermit
 corrections (this and aliasing) are options: on held-out materials they did not lower the
 error (``docs/science.md`` 7.2.1).
 
+Other weightings of the cells (``cell_weight``, ``cell_mix``). ``wV`` is how ``log_rmse``
+weighs cells; a picture weighs them by how many of its pixels look them up
+(:func:`gonio.brdf.pictures.appearance.render_importance`: the standard renderings see a few
+thousand cells, at ``td`` = half their lights' angles). :func:`cell_gram` is ``W`` with such a
+map ``c`` in place of ``wV``, and the design can minimise ``(1 - a) W + a ratio W_c``, ``ratio``
+making both weigh the prior alike (``docs/science.md`` 7.2.2: ``a = 0.5`` trades a few percent
+of ``log_rmse`` for HDR-FLIP on the measured materials; off by default).
+
 Search: greedy, one pair at a time, each time the feasible cell that lowers
 ``sum_m tr(W Sigma_m)`` most (gain ``q^T Sigma_m W Sigma_m q / (q^T Sigma_m q + s_m)``, for
 every candidate at once). Exchange passes after the greedy start lowered the objective

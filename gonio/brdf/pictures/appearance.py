@@ -17,6 +17,8 @@ implementation of "what it looks like" that the benches and the exports share:
   a model through its ``eval``.
 * :func:`rendered_flip`: HDR-FLIP (Andersson et al. 2021, the ``flip-evaluator`` package) of a
   test against a reference, per image and mean: 0 = identical, 1 = as different as can be.
+* :func:`render_importance`: how many pixels of those renderings look up each cell of gonio's
+  grid, the weights a design can give the cells a picture sees (docs/science.md 7.2.2).
 
 Exposure: both images of a view are divided by the reference's brightest pixel over all views,
 so FLIP sees them as a viewer would side by side (one exposure for the whole set). HDR-FLIP is
