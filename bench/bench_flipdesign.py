@@ -4,6 +4,7 @@ Run from the project root (needs mitsuba and flip-evaluator: ``pip install 'goni
 
     nice -n 5 .venv/bin/python bench/bench_flipdesign.py choose [--mix 0 0.25 0.5 0.75 1]
     nice -n 5 .venv/bin/python bench/bench_flipdesign.py test --mix A
+    nice -n 5 .venv/bin/python bench/bench_flipdesign.py choose --mix A --seeds 0 1 2
 
 The expected-error design (:mod:`gonio.brdf.design.posterior`) weighs the grid's cells as
 ``log_rmse`` does (by their volume). The standard renderings
@@ -22,6 +23,10 @@ Sets (the discipline of docs/science.md 7.2.2):
   anisotropic specimens; run once with the chosen ``a`` against ``a = 0`` and every preset.
   (The even measured materials' rows of the 17 bench_unseen materials are ``choose``'s: same
   designs, seeds and fits, so the same numbers.)
+
+``--seeds`` averages each ``a`` over several designs (the greedy started from the k-th best
+first pair, :func:`~gonio.brdf.design.posterior.posterior_design`'s ``seed``): whether the
+weighting helps on average over designs of nearly equal expected error, or one design.
 
 Everything else as bench_unseen: n = 10 pairs, r = 8 uniform stage angles over half a turn,
 1 % noise, the default joint fit, each measured material on a basis that leaves it out, HDR-FLIP
@@ -85,33 +90,38 @@ def material_sets() -> tuple[list[bu.Material], list[bu.Material]]:
     return choice, test
 
 
-def design(b: Basis, mix: float, importance: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """10 pairs for 8 angles over half a turn, ``cell_mix = mix``; cached per basis and code."""
-    key = f"{bu.basis_id(b)}-{bu.fit_fingerprint()}-{mix:g}"
+def design(b: Basis, mix: float, importance: np.ndarray, seed: int = 0
+           ) -> tuple[np.ndarray, np.ndarray]:
+    """10 pairs for 8 angles over half a turn, ``cell_mix = mix``, greedy started from the
+    ``seed``-th best first pair; cached per basis and code."""
+    key = f"{bu.basis_id(b)}-{bu.fit_fingerprint()}-{mix:g}" + (f"-seed{seed}" if seed else "")
     path = bu.CACHE / f"flipdesign-{hashlib.sha256(key.encode()).hexdigest()[:16]}.npz"
     if path.is_file():
         with np.load(path) as z:
             return z["cells"], z["ph_lab"]
-    d = posterior_design(b, 10, RigConstraints(), span_deg=bu.SPAN["design"],
+    d = posterior_design(b, 10, RigConstraints(), span_deg=bu.SPAN["design"], seed=seed,
                          cell_weight=importance if mix > 0 else None, cell_mix=mix)
     path.parent.mkdir(parents=True, exist_ok=True)
     np.savez(path, cells=d.cells, ph_lab=d.ph_lab)
     return np.asarray(d.cells), np.asarray(d.ph_lab)
 
 
-def evaluate(mats: list[bu.Material], mixes: list[float], label: str) -> None:
-    """Per material and in the mean: log_rmse / HDR-FLIP of every mix and every preset."""
+def evaluate(mats: list[bu.Material], mixes: list[float], label: str,
+             seeds: tuple[int, ...] = (0,)) -> None:
+    """Per material and in the mean: log_rmse / HDR-FLIP of every mix (each design seed) and
+    every preset (not with several seeds: those compare designs, not presets)."""
     importance = render_importance()
-    presets = {p: get_preset(p).cells() for p in preset_names()}
+    presets = ({p: get_preset(p).cells() for p in preset_names()} if seeds == (0,) else {})
     rows: dict[str, dict[str, bu.Score]] = {}
     t0 = time.perf_counter()
     for m in mats:
         b = default_basis(exclude=m.exclude)
         seed = 100 + int(hashlib.sha256(m.name.encode()).hexdigest()[:6], 16) % 1000
         for a in mixes:
-            cells, ph = design(b, a, importance)
-            rows.setdefault(f"gonio a={a:g}", {})[m.name] = bu.run_scan(
-                b, m, cells, ph, 8, seed, "joint")
+            for ds in seeds:
+                cells, ph = design(b, a, importance, ds)
+                row = f"gonio a={a:g}" + (f" seed {ds}" if ds else "")
+                rows.setdefault(row, {})[m.name] = bu.run_scan(b, m, cells, ph, 8, seed, "joint")
         for p, (pc, pph) in presets.items():
             rows.setdefault(p, {})[m.name] = bu.run_scan(b, m, pc, pph, 8, seed, "joint")
         print(f"  {m.name} ({time.perf_counter() - t0:.0f} s)", flush=True)
@@ -128,6 +138,19 @@ def evaluate(mats: list[bu.Material], mixes: list[float], label: str) -> None:
             print(f"| **mean {kind} ({len(ks)})** | " + " | ".join(
                 f"**{np.mean([rows[r][m.name].log_rmse for m in ks]):.4f} / "
                 f"{np.mean([rows[r][m.name].flip for m in ks]):.3f}**" for r in order) + " |")
+    if len(seeds) > 1:
+        print("\nmean over the design seeds (log_rmse / HDR-FLIP):")
+        for a in mixes:
+            for kind in ("measured", "aniso"):
+                ks = [m for m in mats if m.kind == kind]
+                rs = [r for r in order if r == f"gonio a={a:g}" or
+                      r.startswith(f"gonio a={a:g} seed")]
+                if ks:
+                    print(f"  a={a:g} {kind} ({len(ks)}): "
+                          f"{np.mean([rows[r][m.name].log_rmse for r in rs for m in ks]):.4f}"
+                          f" / {np.mean([rows[r][m.name].flip for r in rs for m in ks]):.3f}")
+    if not presets:
+        return
     print("\nwins against the best preset per material (log_rmse; HDR-FLIP), of "
           f"{len(mats)}:")
     for a in mixes:
@@ -144,6 +167,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--mix", type=float, nargs="+", default=[0.0, 0.25, 0.5, 0.75, 1.0],
                     help="cell_mix values to compare (test: the chosen one; 0 is added)")
     ap.add_argument("--only", nargs="*", default=None, help="material names (exploring)")
+    ap.add_argument("--seeds", type=int, nargs="+", default=[0],
+                    help="design seeds (the greedy's first-pair rank) to average over; with "
+                         "more than one, no preset rows (design-to-design spread)")
     args = ap.parse_args(argv)
     print(f"$ {' '.join(['python', *sys.argv])}")
     imp = render_importance()
@@ -155,7 +181,7 @@ def main(argv: list[str] | None = None) -> int:
     for label, mats in sets:
         if args.only:
             mats = [m for m in mats if m.name in args.only]
-        evaluate(mats, mixes, label)
+        evaluate(mats, mixes, label, tuple(args.seeds))
     return 0
 
 
