@@ -257,3 +257,7 @@ def test_a_colour_design_puts_pairs_at_the_near_specular_geometries(
     want = [tuple(sorted((float(i), float(i - a))))
             for i, a in ((45, -15), (45, 15), (45, 25), (15, -15), (15, -5))]
     assert sorted(got) == sorted(want)
+    # --basis leaves out the held-out error, so [design] records only the colour design
+    # (what the rig config keeps after 'gonio rig apply-design'), under its known name.
+    assert frag["design"] == {"rotations": 8, "span_deg": 180.0, "pairs": 6,
+                              "colour_instrument": "MA98", "colour_weight": 10.0}
