@@ -296,17 +296,20 @@ class ColourReport:
 
     def csv(self) -> str:
         """The rows as CSV text (header first), with the space and conditions in a comment-free
-        column so every line states them."""
+        column so every line states them, and ``measured`` (``true``: a pair of the scan read
+        that geometry, :attr:`measured`; ``false``: read from the table)."""
         rows = self.rows()
         buf = io.StringIO()
-        fields = ["space", "illuminant", "observer", *rows[0].keys(), "flop_index"]
+        fields = ["space", "illuminant", "observer", *rows[0].keys(), "flop_index", "measured"]
         w = csv.DictWriter(buf, fieldnames=fields, lineterminator="\n")
         w.writeheader()
-        for g, row in zip(self.geometries, rows, strict=True):
+        flags = self.measured or (False,) * len(self.geometries)
+        for g, row, m in zip(self.geometries, rows, flags, strict=True):
             fi = self.flop.get(_flop_key(g.instrument, g.azimuth_deg))
             w.writerow({"space": self.space, "illuminant": self.conditions.illuminant,
                         "observer": self.conditions.observer, **_fmt(row),
-                        "flop_index": "" if fi is None else f"{fi:.4f}"})
+                        "flop_index": "" if fi is None else f"{fi:.4f}",
+                        "measured": "true" if m else "false"})
         return buf.getvalue()
 
 
