@@ -428,6 +428,13 @@ class CalibrationConfig(_Strict):
     dark: dict[str, list[float]] = Field(default_factory=dict)
 
 
+#: The instruments a colour design may name, as ``gonio.brdf.colour.instruments.INSTRUMENTS``
+#: names them (case, spaces and dashes ignored when read). Repeated because the drivers read
+#: this module and may not import the numerical core; tests/unit/test_designgap.py keeps the
+#: two in agreement.
+COLOUR_INSTRUMENTS: tuple[str, ...] = ("MA68", "MA98", "BYK-mac", "MultiFX10")
+
+
 class DesignExpectation(_Strict):
     """``[design]``: what the design this geometry came from expects of a scan.
 
@@ -487,14 +494,13 @@ class DesignExpectation(_Strict):
     def _instrument(cls, v: str | None) -> str | None:
         if v is None:
             return None
-        from gonio.brdf.colour.errors import ColourError
-        from gonio.brdf.colour.instruments import canonical_instrument
-
-        try:
-            return canonical_instrument(v)
-        except ColourError as exc:
-            raise ValueError(f"colour_instrument: {exc} (the instrument 'gonio design "
-                             "--colour' designed for)") from None
+        key = "".join(ch for ch in v.lower() if ch.isalnum())
+        for known in COLOUR_INSTRUMENTS:
+            if "".join(ch for ch in known.lower() if ch.isalnum()) == key:
+                return known
+        raise ValueError(f"colour_instrument: unknown instrument {v!r}; known instruments are "
+                         f"{', '.join(COLOUR_INSTRUMENTS)} (the instrument 'gonio design "
+                         "--colour' designed for)")
 
     @model_validator(mode="after")
     def _colour_pair(self) -> DesignExpectation:

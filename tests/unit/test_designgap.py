@@ -274,6 +274,13 @@ def test_the_colour_report_covers_the_instrument_the_rig_was_designed_for(
     assert report_instruments(None) == DEFAULT_INSTRUMENTS
 
 
+def test_the_config_knows_the_instruments_the_colour_core_knows() -> None:
+    from gonio.brdf.colour.instruments import INSTRUMENTS
+    from gonio.config import COLOUR_INSTRUMENTS
+
+    assert tuple(INSTRUMENTS) == COLOUR_INSTRUMENTS
+
+
 def read_toml_text(text: str) -> dict[str, object]:
     import tomllib
 
