@@ -261,3 +261,13 @@ def test_a_colour_design_puts_pairs_at_the_near_specular_geometries(
     # (what the rig config keeps after 'gonio rig apply-design'), under its known name.
     assert frag["design"] == {"rotations": 8, "span_deg": 180.0, "pairs": 6,
                               "colour_instrument": "MA98", "colour_weight": 10.0}
+    # Merged into a rig config, the record stays; the config's design is the colour design.
+    rig = tmp_path / "rig.toml"
+    rig.write_text((Path(__file__).resolve().parents[3] / "deploy" / "rig.example.toml")
+                   .read_text())
+    assert main(["rig", "apply-design", str(out), str(rig)]) == 0
+    from gonio.config import load_rig_config
+
+    design = load_rig_config(rig).design
+    assert design is not None and design.expected_log_rmse is None
+    assert (design.colour_instrument, design.colour_weight) == ("MA98", 10.0)
