@@ -31,9 +31,10 @@ for a twofold-symmetric specimen shows each pair ``r`` distinct azimuths instead
 the pairs designed for ``r = 8`` angles over ``--design-span`` (default: ``--span``). Converted
 tables and designs (named with the design's arc) are cached under ``<gonio cache>/bench-unseen``.
 
-Rows: gonio default (n = 10, r = 8), V&F's path (``method="vf"``), each industrial preset with 8
-rotations, n = 5 / 20, r = 4 / 16 (all over ``--span``), V&F's adaptive plan (e = 0.1, start 8,
-budget 16 rotations; readings used; the adaptive rows always scan a full turn, their midpoint
+Rows: gonio default (n = 10, r = 8; ``--pairs N``: N pairs), V&F's path (``method="vf"``),
+each industrial preset with 8 rotations, n = 5 / 20, r = 4 / 16 (all over ``--span``), V&F's
+adaptive plan (e = 0.1, start 8, budget 16 rotations; readings used; the adaptive rows always
+scan a full turn, their midpoint
 rule is periodic over 360 degrees), and the basis ceiling (the best the basis can do with every
 cell known: least squares of every slice on the basis), and the representation's own limit
 (the truth tabulated on gonio's grid, ``log_rmse`` 0). Columns: mean ``log_rmse`` (headline,
@@ -509,6 +510,8 @@ def main(argv: list[str] | None = None) -> int:
                          "error (gonio.brdf.design.posterior), or that design with the slope "
                          "averaged over the basis' spread and aliasing as noise, or the "
                          "expected-error design asked for colour at the MA98 geometries")
+    ap.add_argument("--pairs", type=int, default=10,
+                    help="pairs of gonio's design (default 10, the benchmark's)")
     ap.add_argument("--colour-weight", type=float, default=DEFAULT_COLOUR_WEIGHT,
                     help="with --design posterior-colour-MA98: the colour targets' weight")
     ap.add_argument("--rho", choices=["scan", "scan-bands"], default=None,
@@ -558,16 +561,18 @@ def main(argv: list[str] | None = None) -> int:
     asym = {"asymmetric": True} if args.asymmetric_library else {}
     fixed = default_basis(measured_weight=0.0, **asym) if args.fixed_design else None
     other = "vf" if args.method == "joint" else "joint"
+    main_row = f"gonio ({args.method}) n={args.pairs} r=8"
     for i, m in enumerate(mats):
         b = default_basis(exclude=m.exclude, measured_weight=args.measured_weight, **asym)
         seed = 100 + i
-        cells, ph = design(fixed or b, 10)
-        put(f"gonio ({args.method}) n=10 r=8", m, run_scan(b, m, cells, ph, 8, seed, args.method))
+        cells, ph = design(fixed or b, args.pairs)
+        put(main_row, m, run_scan(b, m, cells, ph, 8, seed, args.method))
         try:
-            put(f"{other} path n=10 r=8", m, run_scan(b, m, cells, ph, 8, seed, other))
+            put(f"{other} path n={args.pairs} r=8", m,
+                run_scan(b, m, cells, ph, 8, seed, other))
         except ReconstructionError as exc:  # V&F's path refuses half a turn on an odd prior
             print(f"  {m.name}: {other} path refused: {str(exc)[:80]}...", flush=True)
-            put(f"{other} path n=10 r=8", m, Score(float("nan"), float("nan")))
+            put(f"{other} path n={args.pairs} r=8", m, Score(float("nan"), float("nan")))
         for p, (pc, pph) in presets.items():
             put(f"{p} ({len(pc)} pairs) r=8", m, run_scan(b, m, pc, pph, 8, seed, args.method))
         if args.full:
@@ -575,7 +580,8 @@ def main(argv: list[str] | None = None) -> int:
                 c2, p2 = design(fixed or b, n)
                 put(f"gonio n={n} r=8", m, run_scan(b, m, c2, p2, 8, seed, args.method))
             for r in (4, 16):
-                put(f"gonio n=10 r={r}", m, run_scan(b, m, cells, ph, r, seed, args.method))
+                put(f"gonio n={args.pairs} r={r}", m,
+                    run_scan(b, m, cells, ph, r, seed, args.method))
             # The adaptive plans insert midpoints on a full turn, whatever --span says.
             turn = "" if SPAN["scan"] == 360 else ", full turn"
             put(f"adaptive V&F e=0.1, 8->16{turn}", m,
@@ -587,7 +593,7 @@ def main(argv: list[str] | None = None) -> int:
                     run_adaptive(b, m, cells, ph, seed, args.method, joint_e=e, everywhere=True))
         put("basis ceiling (every cell)", m, score(ceiling(b, m.truth), m.truth, m=m))
         put(LIMIT_ROW, m, score(m.truth, m.truth, m=m))
-        print(f"  {m.name}: {rows[f'gonio ({args.method}) n=10 r=8'][m.name].log_rmse:.4f} "
+        print(f"  {m.name}: {rows[main_row][m.name].log_rmse:.4f} "
               f"({time.perf_counter() - t0:.0f} s)", flush=True)
 
     kinds = [k for k in ("measured", "aniso") if any(m.kind == k for m in mats)]
@@ -606,10 +612,9 @@ def main(argv: list[str] | None = None) -> int:
         rd = np.mean([s.readings for s in per.values()])
         print(f"| {row}{cells_txt} | {rd:.0f} |" if rd else f"| {row}{cells_txt} | |")
 
-    main_row = f"gonio ({args.method}) n=10 r=8"
     preset_rows = [r for r in rows if r.split(" ")[0] in preset_names()]
     if FLIP["on"]:
-        flip_table(rows, mats, [main_row, f"{other} path n=10 r=8", *preset_rows,
+        flip_table(rows, mats, [main_row, f"{other} path n={args.pairs} r=8", *preset_rows,
                                 "basis ceiling (every cell)", LIMIT_ROW])
     print("\n| material | gonio log_rmse | best preset | predicted_log_rmse | ceiling |")
     print("|---|---|---|---|---|")

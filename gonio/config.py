@@ -428,6 +428,13 @@ class CalibrationConfig(_Strict):
     dark: dict[str, list[float]] = Field(default_factory=dict)
 
 
+#: The instruments a colour design may name, as ``gonio.brdf.colour.instruments.INSTRUMENTS``
+#: names them (case, spaces and dashes ignored when read). Repeated because the drivers read
+#: this module and may not import the numerical core; tests/unit/test_designgap.py keeps the
+#: two in agreement.
+COLOUR_INSTRUMENTS: tuple[str, ...] = ("MA68", "MA98", "BYK-mac", "MultiFX10")
+
+
 class DesignExpectation(_Strict):
     """``[design]``: what the design this geometry came from expects of a scan.
 
@@ -450,9 +457,17 @@ class DesignExpectation(_Strict):
     pairs : light/sensor pairs of the design
     calibrated : the simulated scans were in 1/sr (a calibrated rig)
     materials : which materials the mean is over, in words
+    colour_instrument : the multi-angle instrument the design was made for (``gonio design
+        --colour``, docs/colour.md "Designing for colour"), its known name; a scan of the rig
+        then reports colour at its geometries too
+    colour_weight : the colour design's weight of the instrument's geometries
+
+    ``expected_log_rmse`` may be missing (a design made without the held-out error, e.g. through
+    the API or with ``--no-expected-error``): the table then only records the colour design,
+    and a scan is not compared with it.
     """
 
-    expected_log_rmse: Annotated[float, Field(gt=0, allow_inf_nan=False)]
+    expected_log_rmse: Annotated[float, Field(gt=0, allow_inf_nan=False)] | None = None
     expected_log_rmse_measured: Annotated[float, Field(gt=0, allow_inf_nan=False)] | None = None
     expected_log_rmse_synthetic: Annotated[float, Field(gt=0, allow_inf_nan=False)] | None = None
     inside_basis_log_rmse: Annotated[float, Field(gt=0, allow_inf_nan=False)] | None = None
@@ -463,6 +478,8 @@ class DesignExpectation(_Strict):
     calibrated: bool = True
     materials: str = ("held out of the basis: the shipped measured materials and one synthetic "
                       "of each library family")
+    colour_instrument: str | None = None
+    colour_weight: Annotated[float, Field(ge=0, le=1000, allow_inf_nan=False)] | None = None
 
     @field_validator("span_deg")
     @classmethod
@@ -471,6 +488,26 @@ class DesignExpectation(_Strict):
             raise ValueError(f"span_deg is the arc of the design's stage angles: 180 or 360 "
                              f"degrees, got {v:g}")
         return v
+
+    @field_validator("colour_instrument")
+    @classmethod
+    def _instrument(cls, v: str | None) -> str | None:
+        if v is None:
+            return None
+        key = "".join(ch for ch in v.lower() if ch.isalnum())
+        for known in COLOUR_INSTRUMENTS:
+            if "".join(ch for ch in known.lower() if ch.isalnum()) == key:
+                return known
+        raise ValueError(f"colour_instrument: unknown instrument {v!r}; known instruments are "
+                         f"{', '.join(COLOUR_INSTRUMENTS)} (the instrument 'gonio design "
+                         "--colour' designed for)")
+
+    @model_validator(mode="after")
+    def _colour_pair(self) -> DesignExpectation:
+        if self.colour_weight is not None and self.colour_instrument is None:
+            raise ValueError("colour_weight is the weight of a colour design's instrument "
+                             "geometries: give colour_instrument with it, or drop it")
+        return self
 
 
 class RigSection(_Strict):

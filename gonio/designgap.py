@@ -170,10 +170,11 @@ def compare_with_design(facts: ScanFacts, design: DesignExpectation,
     Returns
     -------
     DesignGap or None
-        None when the ratio is within the factor or the scan has no finite estimate.
+        None when the ratio is within the factor, the scan has no finite estimate or the
+        design no expected error.
     """
     p, e = facts.predicted_log_rmse, design.expected_log_rmse
-    if not (math.isfinite(p) and p > 0.0):
+    if e is None or not (math.isfinite(p) and p > 0.0):
         return None
     ratio = p / e
     if 1.0 / factor <= ratio <= factor:

@@ -341,8 +341,10 @@ def _compare_with_design(rec: Any, readings: list[Any], plan: AnyPlan, samples: 
     design = design_expectation(extra.get("rig_config"))
     if design is None:
         return
-    metrics["design_expected_log_rmse"] = design.expected_log_rmse
     provenance["design"] = design.model_dump_json()
+    if design.expected_log_rmse is None:  # a design recorded without its held-out error
+        return
+    metrics["design_expected_log_rmse"] = design.expected_log_rmse
     span = getattr(plan, "first_span_deg", None)
     facts = scan_facts(rec, readings, n_angles=int(samples.stage_angles_deg.size),
                        span_deg=float(span()) if callable(span) else 360.0,
@@ -505,7 +507,13 @@ def _colour(rec: Any, how: Finishing, sensors: list[str], calibrated: bool,
     """
     from gonio.brdf.colour.errors import ColourError
     from gonio.brdf.tables.table import BRDFTable
-    from gonio.result_colour import colour_group, colour_source, scan_readings, table_for_fits
+    from gonio.result_colour import (
+        colour_group,
+        colour_source,
+        report_instruments,
+        scan_readings,
+        table_for_fits,
+    )
 
     try:
         source = colour_source(how.provenance.get("rig_config"), sensors)
@@ -518,7 +526,8 @@ def _colour(rec: Any, how: Finishing, sensors: list[str], calibrated: bool,
         object.__setattr__(rec, "table", BRDFTable.trusted(
             np.asarray(t.values), t.channels, t.name, centres, t.provenance))
     scan = None if samples is None else scan_readings(samples)
-    return {**colour_group(rec.table, source, calibrated, scan),
+    instruments = report_instruments(how.provenance.get("rig_config"))
+    return {**colour_group(rec.table, source, calibrated, scan, instruments),
             "fit_table": table_for_fits(rec.table, source, calibrated)}
 
 

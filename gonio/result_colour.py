@@ -106,9 +106,29 @@ def in_reflectance(calibration: Mapping[str, Any]) -> bool:
     return "pairs" not in calibration or bool(calibration["pairs"])
 
 
+def report_instruments(rig_config_json: Any) -> tuple[str, ...]:
+    """The instruments a finished scan's colour report covers: the defaults, then the one the
+    rig's geometry was designed for (its ``[design]`` table's ``colour_instrument``, written
+    by ``gonio design --colour``) when that is another.
+
+    Parameters
+    ----------
+    rig_config_json : the rig config as a job's provenance records it (JSON text), or None
+    """
+    from gonio.designgap import design_expectation
+
+    design = design_expectation(rig_config_json)
+    extra = None if design is None else design.colour_instrument
+    if extra is None or extra in DEFAULT_INSTRUMENTS:
+        return DEFAULT_INSTRUMENTS
+    return (*DEFAULT_INSTRUMENTS, extra)
+
+
 def colour_group(table: BRDFTable, source: Mapping[str, Any],
-                 calibrated: bool = True, scan: ScanReadings | None = None) -> dict[str, Any]:
-    """The ``/colour`` attributes of a new result: the source and the default report.
+                 calibrated: bool = True, scan: ScanReadings | None = None,
+                 instruments: Sequence[str] = DEFAULT_INSTRUMENTS) -> dict[str, Any]:
+    """The ``/colour`` attributes of a new result: the source and the report at
+    ``instruments``' geometries (:func:`report_instruments`).
 
     ``scan``: the readings the table was reconstructed from; instrument geometries one of its
     pairs measured take their value from it (:mod:`gonio.brdf.colour.direct`).
@@ -128,7 +148,7 @@ def colour_group(table: BRDFTable, source: Mapping[str, Any],
                        "colour until the rig is calibrated")
     try:
         out["report"] = colour_report(table, _conversion(table, source, calibrated),
-                                      scan=scan).as_dict()
+                                      instruments=instruments, scan=scan).as_dict()
     except ColourError as exc:
         out["error"] = str(exc)
     return out

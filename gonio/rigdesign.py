@@ -24,6 +24,8 @@ rig config uses for geometry (docs/file-formats.md)::
     rotations = 8
     span_deg = 180.0
     pairs = 10
+    colour_instrument = "MA98"   # a colour design only (docs/colour.md)
+    colour_weight = 10.0
 
 It carries no hardware (Modbus addresses, register maps). :func:`apply_design` merges it into
 a rig config (``gonio rig apply-design``), ``gonio sim --geometry`` mounts simulated devices
@@ -196,7 +198,11 @@ def design_fragment(design: PairDesign,
     out["lights"] = devices("L", design.lights_deg)
     out["sensors"] = devices("S", design.sensors_deg)
     if expectation is not None:
-        out["design"] = expectation.model_dump(mode="json", exclude_none=True)
+        # Without a held-out error the simulated scans' assumptions (noise, materials ...)
+        # describe nothing: only the keys given are written.
+        out["design"] = expectation.model_dump(
+            mode="json", exclude_none=True,
+            exclude_unset=expectation.expected_log_rmse is None)
     return out
 
 

@@ -244,7 +244,8 @@ class DesignResult(BaseModel):
         None, description="expected-error choice statistics (designs it made)")
     rig_config_toml: str = Field(
         description="[[lights]], [[sensors]] and pairs, to merge into a rig config (each device "
-                    "still needs its driver settings)")
+                    "still needs its driver settings); a colour design adds a [design] table "
+                    "with its colour_instrument and colour_weight")
 
 
 class PresetInfo(BaseModel):
@@ -258,12 +259,21 @@ def _finite(x: float) -> float | None:
 
 
 def describe(design: PairDesign, rotations: int,
-             span_deg: float = DEFAULT_SPAN_DEG) -> DesignResult:
-    """The API view of a :class:`~gonio.brdf.design.pairdesign.PairDesign`."""
+             span_deg: float = DEFAULT_SPAN_DEG,
+             colour: tuple[str, float] | None = None) -> DesignResult:
+    """The API view of a :class:`~gonio.brdf.design.pairdesign.PairDesign`.
+
+    ``colour``: the instrument and weight of a colour design, recorded in the fragment's
+    ``[design]`` table so the rig config it goes into says so (docs/colour.md).
+    """
+    from gonio.config import DesignExpectation
     from gonio.rigdesign import design_fragment, dump_fragment
 
     bound = roughness_bound(design.cells, design.ph_lab, bound_angles(rotations, span_deg))
-    frag = design_fragment(design)
+    record = None if colour is None else DesignExpectation(
+        rotations=rotations, span_deg=span_deg, pairs=design.n_pairs,
+        colour_instrument=colour[0], colour_weight=colour[1])
+    frag = design_fragment(design, record)
     lights = [Device(**d) for d in frag["lights"]]
     sensors = [Device(**d) for d in frag["sensors"]]
     cells = np.rad2deg(design.cells)
@@ -323,7 +333,9 @@ def run_design(basis: BasisLike, request: DesignRequest) -> DesignResult:
             basis, request.lights, request.sensors, constraints, h=request.neighbourhood,
             starts=request.starts, seed=request.seed, time_limit_s=request.time_limit_s,
         ), request.rotations, request.span_deg)
-    return describe(design, request.rotations, request.span_deg)
+    colour = (None if request.colour_instrument is None else
+              (canonical_instrument(request.colour_instrument), request.colour_weight))
+    return describe(design, request.rotations, request.span_deg, colour)
 
 
 def evaluate_preset(basis: BasisLike, preset: Preset, rotations: int,

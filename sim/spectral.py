@@ -83,8 +83,9 @@ def _colorchecker() -> dict[str, FloatArray]:
 
 
 def reflectance(patch: str) -> FloatArray:
-    """(G,) reflectance of a ColorChecker patch on the colour grid."""
-    return _colorchecker()[patch]
+    """(G,) reflectance of a ColorChecker patch on the colour grid; ``"a + b"`` is the mean of
+    patches ``a`` and ``b`` (a colour no chart patch has, for the held-out specimens)."""
+    return np.mean([_colorchecker()[p.strip()] for p in patch.split(" + ")], axis=0)
 
 
 _CH = tuple(f"{w:g}" for w in GRID_NM)
@@ -108,10 +109,10 @@ def _sum(name: str, lobes: list[Any], weights: list[ArrayLike]) -> LobeSum:
                                   for w in weights], channels=_CH, name=name)
 
 
-def _solid_paint(patch: str) -> Callable[[], LobeSum]:
+def _solid_paint(patch: str, coat_alpha: float = 0.06) -> Callable[[], LobeSum]:
     # The clear coat reflects about 4 % at normal incidence; the pigment below sees the rest.
-    return lambda: _sum(f"solid paint ({patch})", [_lambert(reflectance(patch)), _coat(0.06)],
-                        [0.96, 1.0])
+    return lambda: _sum(f"solid paint ({patch})",
+                        [_lambert(reflectance(patch)), _coat(coat_alpha)], [0.96, 1.0])
 
 
 def _metallic_paint(patch: str, flake_alpha: float) -> Callable[[], LobeSum]:
@@ -129,17 +130,17 @@ def _plastic(patch: str, alpha: float) -> Callable[[], LobeSum]:
                         [0.95, 1.0])
 
 
-def _anodised(patch: str) -> Callable[[], LobeSum]:
+def _anodised(patch: str, alpha: float = 0.18) -> Callable[[], LobeSum]:
     def make() -> LobeSum:
         dye = np.clip(reflectance(patch) / reflectance(patch).max(), 0.02, 1.0)
         return _sum(f"anodised aluminium ({patch})",
-                    [_metal("aluminium", 0.18, 0.18), _lambert(0.08 * dye), _coat(0.08)],
+                    [_metal("aluminium", alpha, alpha), _lambert(0.08 * dye), _coat(0.08)],
                     [dye, 1.0, 0.5])
     return make
 
 
-def _brushed(metal: str) -> Callable[[], LobeSum]:
-    return lambda: _sum(f"brushed {metal}", [_metal(metal, 0.08, 0.30), _lambert(0.02)],
+def _brushed(metal: str, ax: float = 0.08, ay: float = 0.30) -> Callable[[], LobeSum]:
+    return lambda: _sum(f"brushed {metal}", [_metal(metal, ax, ay), _lambert(0.02)],
                         [1.0, 1.0])
 
 
@@ -156,6 +157,24 @@ SPECTRAL_MATERIALS: dict[str, Callable[[], LobeSum]] = {
     "brushed-copper": _brushed("copper"),
     "yellow-plastic": _plastic("yellow", 0.12),
     "green-plastic": _plastic("bluish green", 0.30),
+}
+
+#: Held-out specimens of the same five families with other colours (some no chart patch has),
+#: coat and flake roughnesses, dyes and metals: the colour benchmark's validation set
+#: (``bench_colour.py --set validation``), on which nothing is chosen. Not offered by the
+#: simulator's ``--material``.
+VALIDATION_MATERIALS: dict[str, Callable[[], LobeSum]] = {
+    "solid-orange-paint": _solid_paint("orange", coat_alpha=0.05),
+    "solid-purple-paint": _solid_paint("purple + magenta", coat_alpha=0.08),
+    "metallic-red-paint": _metallic_paint("moderate red", 0.22),
+    "metallic-cyan-paint": _metallic_paint("blue sky + cyan", 0.35),
+    "metallic-bronze-paint": _metallic_paint("dark skin", 0.28),
+    "anodised-blue-aluminium": _anodised("purplish blue", alpha=0.15),
+    "anodised-green-aluminium": _anodised("yellow green + green", alpha=0.22),
+    "brushed-gold": _brushed("gold", 0.10, 0.25),
+    "brushed-copper-fine": _brushed("copper", 0.06, 0.20),
+    "purple-plastic": _plastic("purple", 0.20),
+    "orange-plastic": _plastic("orange + yellow", 0.40),
 }
 
 
@@ -192,16 +211,21 @@ class SpectralSpecimen:
         return self.bands.read(self.spectral_eval(wi, wo))
 
 
-def spectral_specimen(name: str, bands: SpectralBands = SPECTROMETER_31) -> SpectralSpecimen:
+def spectral_specimen(name: str, bands: SpectralBands = SPECTROMETER_31,
+                      materials: dict[str, Callable[[], LobeSum]] | None = None
+                      ) -> SpectralSpecimen:
     """The spectral material ``name`` read through ``bands``.
+
+    ``materials``: where ``name`` is looked up (default :data:`SPECTRAL_MATERIALS`; the colour
+    benchmark passes :data:`VALIDATION_MATERIALS` for its held-out set).
 
     Raises
     ------
     ValueError
         For an unknown name; the message lists the known ones.
     """
-    make = SPECTRAL_MATERIALS.get(name)
+    known = SPECTRAL_MATERIALS if materials is None else materials
+    make = known.get(name)
     if make is None:
-        raise ValueError(f"unknown spectral material {name!r}; known: "
-                         f"{', '.join(SPECTRAL_MATERIALS)}")
+        raise ValueError(f"unknown spectral material {name!r}; known: {', '.join(known)}")
     return SpectralSpecimen(make(), bands, name)

@@ -152,12 +152,18 @@ def _table(report: Any) -> str:
         lines.append("reflectance factors per channel (pi f); no CIELAB without spectral bands "
                      "or a chart colour calibration (docs/colour.md)")
         return "\n".join(lines)
-    lines.append("instrument  geometry  azimuth        L*       a*       b*       C*      h")
-    for row, g in zip(report.rows(), report.geometries, strict=True):
+    lines.append("instrument  geometry  azimuth        L*       a*       b*       C*      h"
+                 "  source")
+    flags = report.measured or (False,) * len(report.geometries)
+    for row, g, m in zip(report.rows(), report.geometries, flags, strict=True):
         lines.append(f"{g.instrument:<10}  {g.name:<8}  {g.azimuth_deg:>7g}  {row['L']:8.2f} "
-                     f"{row['a']:8.2f} {row['b']:8.2f} {row['C']:8.2f} {row['h_deg']:6.1f}")
+                     f"{row['a']:8.2f} {row['b']:8.2f} {row['C']:8.2f} {row['h_deg']:6.1f}"
+                     f"  {'pair' if m else 'table'}")
     for key, fi in report.flop.items():
         lines.append(f"flop index {key.replace('@', ' at azimuth ')}: {fi:.2f}")
+    if any(flags):
+        lines.append("source: 'pair' = read directly by a pair of the scan at that geometry, "
+                     "'table' = read from the reconstructed table")
     return "\n".join(lines)
 
 

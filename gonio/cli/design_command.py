@@ -190,6 +190,16 @@ def _colour(args: argparse.Namespace) -> ColourTargets | None:
         raise UsageError(f"--colour / --colour-weight: {exc}") from None
 
 
+def _colour_record(args: argparse.Namespace) -> dict[str, Any]:
+    """The ``[design]`` keys of a colour design (none without ``--colour``)."""
+    if getattr(args, "colour", None) is None:
+        return {}
+    from gonio.brdf.colour.instruments import canonical_instrument
+
+    return {"colour_instrument": canonical_instrument(args.colour),
+            "colour_weight": float(args.colour_weight)}
+
+
 def make_design(args: argparse.Namespace, basis: BasisLike) -> PairDesign:
     """The design the arguments ask for (optimized pairs, product rig or preset)."""
     if args.preset is not None:
@@ -427,8 +437,15 @@ def run(args: argparse.Namespace) -> int:
                     if design.expected_log_rmse is not None
                     and np.isfinite(design.expected_log_rmse) else None),
                 rotations=args.rotations, span_deg=args.span, noise=HELDOUT_NOISE,
-                pairs=design.n_pairs, calibrated=True,
+                pairs=design.n_pairs, calibrated=True, **_colour_record(args),
             )
+        elif getattr(args, "colour", None) is not None:
+            from gonio.config import DesignExpectation
+
+            # No held-out error to compare scans with, but the rig config still records
+            # that its geometry is a colour design (its scans report that instrument).
+            expectation = DesignExpectation(rotations=args.rotations, span_deg=args.span,
+                                            pairs=design.n_pairs, **_colour_record(args))
         args.output.write_text(dump_fragment(design_fragment(design, expectation), header),
                                encoding="utf-8")
         print(f"wrote {args.output}; merge it with 'gonio rig apply-design {args.output} "

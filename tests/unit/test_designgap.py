@@ -226,6 +226,61 @@ def test_a_bad_design_table_is_refused_by_name(tmp_path: Path, table: str, words
     assert "geometry.toml: design" in str(err2.value)
 
 
+@pytest.mark.parametrize(("table", "words"), [
+    ('rotations = 8\npairs = 10\ncolour_instrument = "MA99"',
+     "unknown instrument 'MA99'; known instruments are MA68, MA98"),
+    ('rotations = 8\npairs = 10\ncolour_instrument = "MA98"\ncolour_weight = -1.0',
+     "design.colour_weight"),
+    ('rotations = 8\npairs = 10\ncolour_instrument = "MA98"\ncolour_weight = "high"',
+     "design.colour_weight"),
+    ("rotations = 8\npairs = 10\ncolour_weight = 10.0",
+     "give colour_instrument with it"),
+])
+def test_a_bad_colour_design_record_is_refused_by_name(tmp_path: Path, table: str,
+                                                       words: str) -> None:
+    rig = tmp_path / "rig.toml"
+    rig.write_text(EXAMPLE.read_text() + "\n[design]\n" + table + "\n")
+    with pytest.raises(ConfigError, match="design") as err:
+        load_rig_config(rig)
+    assert words in str(err.value)
+
+
+def test_a_colour_design_record_without_held_out_error_is_kept_and_not_compared(
+        tmp_path: Path) -> None:
+    """A colour design made without the held-out error (the API, ``--no-expected-error``):
+    the rig config keeps the instrument under its known name; no scan is compared with it."""
+    rig = tmp_path / "rig.toml"
+    rig.write_text(EXAMPLE.read_text() + '\n[design]\nrotations = 8\npairs = 10\n'
+                   'colour_instrument = "multi fx10"\ncolour_weight = 3.0\n')
+    cfg = load_rig_config(rig)
+    assert cfg.design is not None
+    assert cfg.design.colour_instrument == "MultiFX10" and cfg.design.colour_weight == 3.0
+    assert cfg.design.expected_log_rmse is None
+    assert compare_with_design(facts(predicted_log_rmse=0.5), cfg.design) is None
+
+
+def test_the_colour_report_covers_the_instrument_the_rig_was_designed_for(
+        tmp_path: Path) -> None:
+    from gonio.brdf.colour.instruments import DEFAULT_INSTRUMENTS
+    from gonio.result_colour import report_instruments
+
+    rig = tmp_path / "rig.toml"
+    base = EXAMPLE.read_text() + "\n[design]\nrotations = 8\npairs = 10\n"
+    rig.write_text(base + 'colour_instrument = "MultiFX10"\n')
+    assert report_instruments(load_rig_config(rig).model_dump_json()) == (
+        *DEFAULT_INSTRUMENTS, "MultiFX10")
+    rig.write_text(base + 'colour_instrument = "ma98"\n')  # already reported
+    assert report_instruments(load_rig_config(rig).model_dump_json()) == DEFAULT_INSTRUMENTS
+    assert report_instruments(None) == DEFAULT_INSTRUMENTS
+
+
+def test_the_config_knows_the_instruments_the_colour_core_knows() -> None:
+    from gonio.brdf.colour.instruments import INSTRUMENTS
+    from gonio.config import COLOUR_INSTRUMENTS
+
+    assert tuple(INSTRUMENTS) == COLOUR_INSTRUMENTS
+
+
 def read_toml_text(text: str) -> dict[str, object]:
     import tomllib
 

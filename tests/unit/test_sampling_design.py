@@ -112,3 +112,9 @@ def test_a_colour_request_reports_its_colour_pairs() -> None:
     assert result.n_pairs == 7 and result.colour_pairs == 5
     assert result.objective == "posterior" and result.fallback is None
     assert run_design(BASIS, DesignRequest(pairs=3)).colour_pairs == 0
+    # The fragment to merge into a rig config records the colour design in [design].
+    design = tomllib.loads(result.rig_config_toml)["design"]
+    assert design == {"rotations": 8, "span_deg": 180.0, "pairs": 7,
+                      "colour_instrument": "MA98", "colour_weight": 10.0}
+    assert "design" not in tomllib.loads(run_design(BASIS, DesignRequest(pairs=3))
+                                         .rig_config_toml)

@@ -1,7 +1,9 @@
 // The result panel's colour table: GET /api/v1/jobs/{id}/colour, beside the renderings.
 // CIELAB at the chosen instrument's aspecular geometries (D65/10), the flop index, and with a
 // comparison job chosen above, the CIEDE2000 against it. A result without colour (uncalibrated
-// sensor RGB) shows its channel values under that label, never as a colour space.
+// sensor RGB) shows its channel values under that label, never as a colour space. The "source"
+// column says which geometries a pair of the scan read directly ("pair", the report's
+// `measured` flags) and which came from the reconstructed table ("table").
 import { getJSON } from "./api.js";
 
 const $ = (sel) => document.querySelector(sel);
@@ -60,25 +62,32 @@ async function refresh() {
   const lab = rep.space === "CIELAB";
   const cols = lab ? ["geometry", "L*", "a*", "b*", "C*", "h°"]
     : ["geometry", ...rep.channels.slice(0, 6).map((c) => `R ${c}`)];
+  cols.push("source");
   if (diff) cols.push("ΔE00");
   for (const c of cols) cell(head, c, "th");
   $("#colour-table thead").replaceChildren(head);
+  const measured = rep.measured || [];
   const rows = rep.rows.map((r, i) => {
     const tr = document.createElement("tr");
     cell(tr, `${r.incidence_deg}as${r.aspecular_deg}`);
     if (lab) for (const k of ["L", "a", "b", "C"]) cell(tr, fmt(r[k]));
     if (lab) cell(tr, fmt(r.h_deg, 0));
     else for (const c of rep.channels.slice(0, 6)) cell(tr, fmt(r[`R_${c}`], 3));
+    cell(tr, measured[i] ? "pair" : "table");
     if (diff) cell(tr, fmt(diff.rows[i]?.dE00));
     return tr;
   });
   $("#colour-table tbody").replaceChildren(...rows);
+  const read = measured.filter(Boolean).length;
+  const source = read
+    ? `; source "pair": ${read} of ${measured.length} geometries read directly by a pair of the scan, the others from the reconstructed table`
+    : "; every geometry read from the reconstructed table";
   const flop = Object.values(rep.flop_index)[0];
   const cond = `${rep.conditions.illuminant}/${rep.conditions.observer}°`;
   caption.textContent = lab
     ? `${rep.space}, ${cond}, ${instrument} geometries at azimuth ${azimuth}° (${rep.conversion})` +
       (flop !== undefined ? `; flop index ${flop.toFixed(2)}` : "") +
-      (diff ? `; ΔE00 against job ${against}: max ${diff.max_dE00.toFixed(2)}` : "")
+      (diff ? `; ΔE00 against job ${against}: max ${diff.max_dE00.toFixed(2)}` : "") + source
     : `${rep.space}: reflectance factors per channel (${rep.channels.length} channels), no CIELAB. ` +
       "Give the sensor spectral bands or a chart colour calibration (docs/colour.md).";
 }

@@ -19,6 +19,10 @@ the grid (``bench/bench_colour.py``, MA98, 11 spectral specimens) linear interpo
 is off by up to 10 ΔE00, of ``log f`` by up to 6.7 (median 0.31), the cubic by up to 2.6
 (median 0.04). The cubic reproduces a logarithm quadratic in ``th`` (a Gaussian lobe) exactly.
 Where one of the four cells is invalid the lookup falls back to the multilinear one.
+The shared lookup of pictures and exports (:mod:`gonio.brdf.tables.interpolation`) clamps
+``th`` at the pole instead of continuing through it, which on the same specimens raises the
+worst MA98 error of the lookup from 2.6 to 6.7 ΔE00 (at 15as-5, half vector 2.5 degrees from
+the normal); docs/colour.md "Why not the shared lookup".
 
 Flop index (X-Rite): ``FI = 2.69 (L*15 - L*110)^1.11 / (L*45)^0.86`` from the 45 degree
 incidence readings at aspecular 15, 45 and 110 degrees; where ``L*15 <= L*110`` (no flop) it
@@ -296,17 +300,20 @@ class ColourReport:
 
     def csv(self) -> str:
         """The rows as CSV text (header first), with the space and conditions in a comment-free
-        column so every line states them."""
+        column so every line states them, and ``measured`` (``true``: a pair of the scan read
+        that geometry, :attr:`measured`; ``false``: read from the table)."""
         rows = self.rows()
         buf = io.StringIO()
-        fields = ["space", "illuminant", "observer", *rows[0].keys(), "flop_index"]
+        fields = ["space", "illuminant", "observer", *rows[0].keys(), "flop_index", "measured"]
         w = csv.DictWriter(buf, fieldnames=fields, lineterminator="\n")
         w.writeheader()
-        for g, row in zip(self.geometries, rows, strict=True):
+        flags = self.measured or (False,) * len(self.geometries)
+        for g, row, m in zip(self.geometries, rows, flags, strict=True):
             fi = self.flop.get(_flop_key(g.instrument, g.azimuth_deg))
             w.writerow({"space": self.space, "illuminant": self.conditions.illuminant,
                         "observer": self.conditions.observer, **_fmt(row),
-                        "flop_index": "" if fi is None else f"{fi:.4f}"})
+                        "flop_index": "" if fi is None else f"{fi:.4f}",
+                        "measured": "true" if m else "false"})
         return buf.getvalue()
 
 

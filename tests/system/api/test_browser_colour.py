@@ -4,6 +4,8 @@ a comparison job adds CIEDE2000."""
 
 from __future__ import annotations
 
+import csv
+import io
 import secrets
 from collections.abc import Iterator
 from typing import Any
@@ -29,12 +31,19 @@ pytestmark = pytest.mark.system
 
 @pytest.fixture(scope="module")
 def spectral_daemon(tmp_path_factory: pytest.TempPathFactory, basis: Any) -> Iterator[Daemon]:
-    """A daemon of its own whose simulated rig holds a spectral specimen (31-band sensors)."""
-    from gonio.sim.rig import SimRigOptions, start_sim_rig
+    """A daemon of its own whose simulated rig holds a spectral specimen (31-band sensors).
+
+    Besides the default devices, a fifth sensor at 30 degrees in the plane of the first light
+    (45 degrees), on the far side: that pair sits at the instruments' 45as15 geometry
+    (aspecular 15: the sensor 15 degrees from the specular direction, toward the light)."""
+    from gonio.sim.rig import DEFAULT_LIGHTS, DEFAULT_SENSORS, SimRigOptions, start_sim_rig
 
     data_dir = tmp_path_factory.mktemp("gonio-data")
+    theta_l, phi_l = DEFAULT_LIGHTS[0]
+    assert theta_l == 45.0
+    sensors = (*DEFAULT_SENSORS, (30.0, (phi_l + 180.0) % 360.0))
     sim = start_sim_rig(SimRigOptions(material="metallic-blue-paint", time_scale=10.0,
-                                      settle_s=0.0))
+                                      settle_s=0.0, sensors=sensors))
     key = secrets.token_hex(24)
     cfg = DaemonConfig().with_overrides(paths__data_dir=str(data_dir))
     app = build_app(cfg, sim.config, ApiKeyring({"tester": key}), basis=BasisSupply(lambda: basis))
@@ -59,7 +68,16 @@ def test_colour_table_beside_the_rendering(spectral_daemon: Daemon,
         for job_id in ids:
             assert wait_state(c, job_id, {"completed", "failed"}, 240)["state"] == "completed"
         api = c.get(f"/api/v1/jobs/{ids[0]}/colour", params={"instrument": "MA98"}).json()
+        api_csv = c.get(f"/api/v1/jobs/{ids[0]}/colour",
+                        params={"instrument": "MA98", "format": "csv"}).text
     assert api["colour"]["space"] == "CIELAB"
+    # The one pair placed at 45as15 read that geometry; every other row is the table's. The
+    # JSON's flags and the CSV's column say so.
+    names = [f"{r['incidence_deg']:g}as{r['aspecular_deg']:g}" for r in api["colour"]["rows"]]
+    assert [n for n, m in zip(names, api["colour"]["measured"], strict=True) if m] == ["45as15"]
+    csv_rows = list(csv.DictReader(io.StringIO(api_csv)))
+    assert [r["measured"] for r in csv_rows] == [
+        "true" if n == "45as15" else "false" for n in names]
     wait = open_live(browser, d, 240)
     row = f'#jobs tr[data-id="{ids[0]}"]'
     click_when_steady(wait, row)
@@ -70,9 +88,14 @@ def test_colour_table_beside_the_rendering(spectral_daemon: Daemon,
     cells = [[td.text for td in tr.find_elements(By.TAG_NAME, "td")]
              for tr in browser.find_elements(By.CSS_SELECTOR, "#colour-table tbody tr")]
     assert len(cells) == 11 and cells[0][0] == "45as-15"
-    # The page shows the API's numbers.
+    # The page shows the API's numbers, and beside them where each row came from.
     first = api["colour"]["rows"][0]
     assert cells[0][1:4] == [f"{first[k]:.2f}" for k in ("L", "a", "b")]
+    head = [th.text for th in browser.find_elements(By.CSS_SELECTOR, "#colour-table thead th")]
+    assert head[-1] == "source"
+    assert {c[0]: c[-1] for c in cells} == {n: "pair" if n == "45as15" else "table"
+                                           for n in names}
+    assert "1 of 11 geometries read directly by a pair" in caption
     # Another instrument, then a comparison: ΔE00 appears as a column.
     Select(browser.find_element(By.ID, "colour-instrument")).select_by_value("BYK-mac")
     wait.until(lambda b: "BYK-mac geometries" in b.find_element(By.ID, "colour-caption").text)
@@ -82,5 +105,5 @@ def test_colour_table_beside_the_rendering(spectral_daemon: Daemon,
     Select(browser.find_element(By.ID, "compare")).select_by_value(str(ids[1]))
     wait.until(lambda b: f"against job {ids[1]}" in b.find_element(By.ID, "colour-caption").text)
     head = [th.text for th in browser.find_elements(By.CSS_SELECTOR, "#colour-table thead th")]
-    assert head[-1] == "ΔE00"
+    assert head[-2:] == ["source", "ΔE00"]
     assert not _severe(browser)

@@ -38,6 +38,8 @@ span_deg = 180.0
 noise = 0.01
 pairs = 10
 calibrated = true
+colour_instrument = "MultiFX10"
+colour_weight = 10.0
 """
 
 
@@ -123,4 +125,13 @@ def test_a_scan_far_from_its_design_says_why_and_one_close_to_it_does_not(
     assert 0.5 <= ratio <= 2.0, ratio
     assert ok.metrics["design_expected_log_rmse"] == pytest.approx(EXPECTED)
     assert "design_gap" not in ok.metrics and "design_gap" not in ok.provenance
+    # The [design] table names an instrument besides the defaults (as 'gonio design --colour
+    # MultiFX10 -o' would): the finished report covers its geometries too, and the provenance
+    # keeps the record.
+    assert ok.colour is not None
+    report = ok.colour["report"]
+    reported = [r["instrument"] for r in report["rows"]]
+    assert list(dict.fromkeys(reported)) == ["MA98", "BYK-mac", "MultiFX10"]
+    assert reported.count("MultiFX10") == 10  # 6 at 45 degrees, 2 at 15, 2 at 65
+    assert json.loads(str(ok.provenance["design"]))["colour_instrument"] == "MultiFX10"
     assert "design expected" not in quiet.out and "warning" not in quiet.out + quiet.err

@@ -91,6 +91,12 @@ def test_table_json_and_csv_file(files: dict[str, Path], tmp_path: Path,
     assert "panel: CIELAB, D65/10 (chart colour calibration (24 patches" in text
     assert "flop index MA68 at azimuth 90: 0.00" in text and f"wrote {out}" in text
     assert len(list(csv.DictReader(out.open()))) == 10
+    # The result's one pair (normal incidence and view) sits at no MA68 geometry: every row
+    # says it was read from the table, in the printout and in the CSV.
+    lines = text.splitlines()
+    assert lines[1].split()[-1] == "source"
+    assert [ln.split()[-1] for ln in lines[2:12]] == ["table"] * 10
+    assert {r["measured"] for r in csv.DictReader(out.open())} == {"false"}
     assert main(["colour", str(files["cal"]), "--json", "--observer", "2"]) == 2
     err = capsys.readouterr()
     # A matrix fitted for D65/10 refuses other conditions with what to do.

@@ -291,3 +291,17 @@ def test_a_colour_design_puts_pairs_at_the_near_specular_geometries(
     want = [tuple(sorted((float(i), float(i - a))))
             for i, a in ((45, -15), (45, 15), (45, 25), (15, -15), (15, -5))]
     assert sorted(got) == sorted(want)
+    # --basis leaves out the held-out error, so [design] records only the colour design
+    # (what the rig config keeps after 'gonio rig apply-design'), under its known name.
+    assert frag["design"] == {"rotations": 8, "span_deg": 180.0, "pairs": 6,
+                              "colour_instrument": "MA98", "colour_weight": 10.0}
+    # Merged into a rig config, the record stays; the config's design is the colour design.
+    rig = tmp_path / "rig.toml"
+    rig.write_text((Path(__file__).resolve().parents[3] / "deploy" / "rig.example.toml")
+                   .read_text())
+    assert main(["rig", "apply-design", str(out), str(rig)]) == 0
+    from gonio.config import load_rig_config
+
+    design = load_rig_config(rig).design
+    assert design is not None and design.expected_log_rmse is None
+    assert (design.colour_instrument, design.colour_weight) == ("MA98", 10.0)

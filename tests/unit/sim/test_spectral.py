@@ -12,6 +12,7 @@ from gonio.sim.spectral import (
     CHIP_11,
     SPECTRAL_MATERIALS,
     SPECTROMETER_31,
+    VALIDATION_MATERIALS,
     conductor_fresnel,
     reflectance,
     spectral_specimen,
@@ -25,9 +26,10 @@ def _dirs() -> tuple[np.ndarray, np.ndarray]:
     return wi, wo
 
 
-@pytest.mark.parametrize("name", list(SPECTRAL_MATERIALS))
+@pytest.mark.parametrize("name", [*SPECTRAL_MATERIALS, *VALIDATION_MATERIALS])
 def test_every_material_is_finite_and_read_through_its_bands(name: str) -> None:
-    spec = spectral_specimen(name)
+    spec = spectral_specimen(name, materials=(
+        SPECTRAL_MATERIALS if name in SPECTRAL_MATERIALS else VALIDATION_MATERIALS))
     wi, wo = _dirs()
     full = spec.spectral_eval(wi, wo)
     assert full.shape == (3, GRID_NM.size) and np.isfinite(full).all() and (full >= 0).all()
@@ -64,3 +66,16 @@ def test_other_bands_and_names() -> None:
         spectral_specimen("purple-paint")
     narrow = spectral_specimen("green-plastic", SpectralBands((500.0, 600.0)))
     assert narrow.eval(*_dirs()).shape == (3, 2)
+
+
+def test_the_held_out_set_is_apart_from_the_simulators_set() -> None:
+    """bench_colour's validation specimens share no name with the set choices are made on, and
+    the simulator does not offer them."""
+    assert not set(VALIDATION_MATERIALS) & set(SPECTRAL_MATERIALS)
+    assert len(VALIDATION_MATERIALS) == len(SPECTRAL_MATERIALS)
+    with pytest.raises(ValueError, match="unknown spectral material 'brushed-gold'"):
+        spectral_specimen("brushed-gold")
+    # A mixture colour is the mean of its two patches' reflectances, wavelength by wavelength.
+    mix = reflectance("purple + magenta")
+    assert mix == pytest.approx((reflectance("purple") + reflectance("magenta")) / 2)
+    assert not np.allclose(mix, reflectance("purple"), atol=0.02)

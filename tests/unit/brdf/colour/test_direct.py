@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+import csv
+import io
 import math
 
 import numpy as np
@@ -70,6 +72,11 @@ def test_measured_geometries_read_the_specimen_not_the_table() -> None:
     other = [k for k, m in enumerate(direct.measured) if not m]
     np.testing.assert_array_equal(direct.reflectance[other], plain.reflectance[other])
     assert direct.as_dict()["measured"] == list(direct.measured)
+    # The CSV carries the same flags, geometry by geometry; a report without a scan says none.
+    rows = list(csv.DictReader(io.StringIO(direct.csv())))
+    assert [r["measured"] for r in rows] == [
+        "true" if n in ("45as15", "15as-5") else "false" for n in names]
+    assert {r["measured"] for r in csv.DictReader(io.StringIO(plain.csv()))} == {"false"}
 
 
 @pytest.mark.parametrize("azimuth", [0.0, 30.0, 90.0])
