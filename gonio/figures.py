@@ -194,7 +194,7 @@ def headline_error(metrics: dict[str, Any]) -> dict[str, Any] | None:
         out["upper"] = float(upper)
         out["interval"] = (f"Upper end of its interval: {upper:.3f} (predicted_log_rmse_upper; "
                            "the true error of held-out materials was below it on 98 % of the "
-                           "calibration scans).")
+                           "calibration scans and on 128 of 130 test and fresh scans).")
         out["meaning"] = f"{out['meaning']} {out['interval']}"
     misfit = metrics.get("basis_misfit")
     if out is not None and isinstance(misfit, str):
@@ -216,9 +216,9 @@ def _headline(metrics: dict[str, Any]) -> dict[str, Any] | None:
                        "better. It adds what the readings leave undetermined to how far the "
                        "material sits from the training library; on materials held out of "
                        "the library it was within a factor of 2 of the truth on about 3 "
-                       "scans in 5 (half of the test scans that saw no choice) and more "
-                       "than 2 times too low on about 1 scan in 40, all read with the MA98 "
-                       "preset (docs/science.md 7.1.1).",
+                       "scans in 5 (81 of 130 test and fresh scans) and more than 2 times "
+                       "too low on about 1 in 30 (4 of 130), all read with the MA98 preset "
+                       "(docs/science.md 7.1.1).",
         }
     v = metrics.get("predicted_error")
     if isinstance(v, int | float):

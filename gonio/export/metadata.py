@@ -77,10 +77,10 @@ LOG_RMSE_MEANING = (
     "material, the cosine-weighted RMS difference of log(1 + f cos theta_i) over the "
     "hemispheres (Löw et al. 2012; f in 1/sr), dimensionless; 0 is a perfect match, 0.05 is "
     "about a 5 % error where a rendering is bright. Calibrated on materials held out of the "
-    "basis; within a factor of 2 of the truth on about 3 scans in 5 (half of the test scans "
-    "that saw no choice), more than 2 times too low on about 1 scan in 40 (MA98 preset "
-    "layouts); the true error was below twice the estimate (predicted_log_rmse_upper) on 98 % "
-    "of the calibration scans (docs/science.md 7.1.1)"
+    "basis; within a factor of 2 of the truth on about 3 scans in 5 (81 of 130 test and fresh "
+    "scans), more than 2 times too low on about 1 in 30 (4 of 130, MA98 preset layouts); the "
+    "true error was below the interval's upper end (predicted_log_rmse_upper) on 98 % of the "
+    "calibration scans and 128 of 130 test and fresh scans (docs/science.md 7.1.1)"
 )
 
 #: ``twofold_asymmetry`` above which an export warns that the principled models lose the

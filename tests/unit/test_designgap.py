@@ -126,20 +126,20 @@ def test_the_estimate_splits_into_its_two_parts_as_variances() -> None:
 
 
 def test_the_final_estimate_splits_into_three_parts_as_variances() -> None:
-    """docs/science.md 7.1.1: final^2 = (0.80 und)^2 + (0.80 out)^2 + 0.19^2 uncovered for a
-    scan whose fit holds its readings; a flagged scan's parts (factor 0.55) are scaled up
+    """docs/science.md 7.1.1: final^2 = (0.61 und)^2 + (0.61 out)^2 + 0.19^2 uncovered for a
+    scan whose fit holds its readings; a flagged scan's parts (factor 0.6) are scaled up
     together when the misfit floor sets the estimate."""
     e, m, cv, u = 0.03, 1e-3, 0.4, 0.2
     und, out = estimate_parts(e, m, cv)
     quiet = BasisMisfit(chi2=0.5, log_misfit=0.0, persistent_pairs=0, n_pairs=10, n_angles=8)
     parts = final_parts(e, m, cv, u, quiet)
-    assert parts == pytest.approx((0.80 * und, 0.80 * out, 0.19 * math.sqrt(u)))
+    assert parts == pytest.approx((0.61 * und, 0.61 * out, 0.19 * math.sqrt(u)))
     assert math.hypot(*parts) == pytest.approx(
         final_log_rmse(predict_log_rmse(e, m, cv), u, quiet))
     floor = BasisMisfit(chi2=900.0, log_misfit=0.5, persistent_pairs=6, n_pairs=10, n_angles=8)
     fparts = final_parts(e, m, cv, u, floor)
     assert math.hypot(*fparts) == pytest.approx(0.5)
-    raw = (0.55 * und, 0.55 * out, 0.19 * math.sqrt(u))
+    raw = (0.6 * und, 0.6 * out, 0.19 * math.sqrt(u))
     assert [f / r for f, r in zip(fparts, raw, strict=True)] == pytest.approx(
         [0.5 / math.hypot(*raw)] * 3)
     assert all(math.isnan(x) for x in final_parts(e, m, cv, float("nan"), quiet))

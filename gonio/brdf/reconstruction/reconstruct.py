@@ -775,7 +775,7 @@ def _reconstruct(
         # and, when the basis cannot hold the readings (residuals well above the noise that
         # stay across the angles), a floor at the error the readings themselves show.
         widened = final_log_rmse(predicted, uncovered, misfit)
-        upper = upper_log_rmse(widened)
+        upper = upper_log_rmse(widened, misfit)
     else:
         expected = mahal = uncovered = float("nan")
         predicted = predict_log_rmse_vf(cv, n, int(alpha.size))

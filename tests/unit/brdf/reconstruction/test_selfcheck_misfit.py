@@ -27,6 +27,7 @@ from gonio.brdf.reconstruction.selfcheck import (
     MISFIT_CHI2_LIMIT,
     MISFIT_MIN_LOG,
     UPPER_FACTOR,
+    UPPER_FACTOR_FLAGGED,
     BasisMisfit,
     basis_misfit,
     final_log_rmse,
@@ -167,7 +168,7 @@ def _table_at_readings(table: BRDFTable, cells: np.ndarray, ph: np.ndarray) -> n
 
 #: The final mapping's constants as docs/science.md 7.1.1 publishes them:
 #: (factor on the model's estimate, coverage scale, factor on a flagged scan's estimate).
-PUBLISHED = (0.80, 0.19, 0.55)
+PUBLISHED = (0.61, 0.19, 0.6)
 
 
 def _final(predicted: float, uncovered: float, flagged: bool, log_misfit: float) -> float:
@@ -183,26 +184,32 @@ def test_the_final_mapping_is_the_published_one() -> None:
     quiet = BasisMisfit(chi2=0.5, log_misfit=0.0, persistent_pairs=0, n_pairs=10, n_angles=8)
     flagged = BasisMisfit(chi2=400.0, log_misfit=0.12, persistent_pairs=3, n_pairs=10,
                           n_angles=8)
-    # Unflagged: sqrt((0.80 * 0.05)^2 + 0.19^2 * 0.04) = sqrt(0.040^2 + 0.038^2).
-    assert final_log_rmse(0.05, 0.04, quiet) == pytest.approx(math.hypot(0.040, 0.038))
+    # Unflagged: sqrt((0.61 * 0.05)^2 + 0.19^2 * 0.04) = sqrt(0.0305^2 + 0.038^2).
+    assert final_log_rmse(0.05, 0.04, quiet) == pytest.approx(math.hypot(0.0305, 0.038))
     assert (FINAL_PREDICTED_FACTOR, FINAL_COVERAGE_SCALE, FINAL_FLAGGED_FACTOR) == PUBLISHED
     # A layout that leaves more of the table to the prior widens the estimate.
     assert final_log_rmse(0.05, 0.4, quiet) > final_log_rmse(0.05, 0.04, quiet)
-    # Flagged: 0.55 * 1.0 beats the misfit 0.12; a small estimate is floored at the misfit.
-    assert final_log_rmse(1.0, 0.04, flagged) == pytest.approx(math.hypot(0.55, 0.038))
+    # Flagged: 0.6 * 1.0 beats the misfit 0.12; a small estimate is floored at the misfit.
+    assert final_log_rmse(1.0, 0.04, flagged) == pytest.approx(math.hypot(0.6, 0.038))
     assert final_log_rmse(0.01, 0.0, flagged) == pytest.approx(0.12)
     assert math.isnan(final_log_rmse(float("nan"), 0.04, quiet))
     assert math.isnan(final_log_rmse(0.05, float("nan"), quiet))
 
 
-#: The interval's upper end as docs/science.md 7.1.1 publishes it: twice the estimate.
-PUBLISHED_UPPER = 2.0
+#: The interval's upper end as docs/science.md 7.1.1 publishes it: the factor on the estimate
+#: of a scan whose fit holds its readings, and of a flagged one.
+PUBLISHED_UPPER = (3.33, 1.83)
 
 
 def test_the_interval_upper_end_is_the_published_factor_on_the_estimate() -> None:
-    assert UPPER_FACTOR == PUBLISHED_UPPER
-    assert upper_log_rmse(0.0437) == pytest.approx(0.0874)
-    assert math.isnan(upper_log_rmse(float("nan")))
+    quiet = BasisMisfit(chi2=0.5, log_misfit=0.0, persistent_pairs=0, n_pairs=10, n_angles=8)
+    flagged = BasisMisfit(chi2=400.0, log_misfit=0.12, persistent_pairs=3, n_pairs=10,
+                          n_angles=8)
+    assert (UPPER_FACTOR, UPPER_FACTOR_FLAGGED) == PUBLISHED_UPPER
+    # 3.33 * 0.04 = 0.1332; 1.83 * 0.2 = 0.366.
+    assert upper_log_rmse(0.04, quiet) == pytest.approx(0.1332)
+    assert upper_log_rmse(0.2, flagged) == pytest.approx(0.366)
+    assert math.isnan(upper_log_rmse(float("nan"), quiet))
 
 
 def test_a_joint_fit_reports_the_upper_end_and_the_vf_path_does_not(basis: Basis) -> None:
@@ -210,8 +217,9 @@ def test_a_joint_fit_reports_the_upper_end_and_the_vf_path_does_not(basis: Basis
     cells, ph = grid_pairs(12, seed=5)
     vals = simulate_samples(spec.model, cells, ph, ALPHA, noise=NoiseModel(0.01, seed=3))
     rec = reconstruct(basis, cells, ph, ALPHA, vals)
+    assert rec.misfit is not None and not rec.misfit.flagged
     assert rec.predicted_log_rmse_upper == pytest.approx(
-        PUBLISHED_UPPER * rec.predicted_log_rmse)
+        PUBLISHED_UPPER[0] * rec.predicted_log_rmse)
     vf = reconstruct(basis, cells, ph, ALPHA, vals, method="vf")
     assert np.isfinite(vf.predicted_log_rmse) and math.isnan(vf.predicted_log_rmse_upper)
 
@@ -290,3 +298,6 @@ def test_structure_outside_the_basis_is_flagged_and_the_estimate_covers_it(
         rec.predicted_log_rmse_unwidened, rec.uncovered_share, True, rec.misfit.log_misfit))
     truth = metrics.log_rmse(rec.table, _truth(spec.model, spec.name))
     assert rec.predicted_log_rmse > 0.5 * truth
+    # A flagged scan's interval uses the flagged factor.
+    assert rec.predicted_log_rmse_upper == pytest.approx(
+        PUBLISHED_UPPER[1] * rec.predicted_log_rmse)
