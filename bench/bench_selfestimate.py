@@ -12,28 +12,40 @@ Materials, all held out of the basis they are reconstructed with (the helpers of
 * ``bench_asymmetric.py``'s eight specimens without twofold symmetry (tilted facets: structure
   the default basis cannot hold) and their eight untilted versions (default basis);
 * every fourth material of the library's families without twofold symmetry (tilted facets,
-  pile, sawtooth; :func:`library_asymmetric`), none of them in the default basis.
+  pile, sawtooth; :func:`library_asymmetric`), none of them in the default basis;
+* sixteen fresh mitsuba specimens (:data:`FRESH`, default basis).
 
 Plans (1 % noise, readings at the exact pair directions): the default scan (10 pairs designed
 by the joint fit's expected error on the material's basis, 8 stage angles over half a turn),
 the same pairs at 4 and at 16 angles, and the MA68 and MA98 presets at 8 angles.
 
-Split (:func:`calibration_set`): the constants of the final mapping
-(:func:`gonio.brdf.reconstruction.selfcheck.final_log_rmse`: ``FINAL_PREDICTED_FACTOR``,
-``FINAL_COVERAGE_SCALE``, ``FINAL_FLAGGED_FACTOR``) and the misfit flag's limits were chosen on
-the **calibration** set only: the six anisotropic mitsuba specimens, the measured materials at
-even positions (alphabetical, 0-based) and the library's asymmetric materials. The
-**validation** set, not used to choose them, is the measured materials at odd positions and
-all sixteen tilted / untilted normal-mapped mitsuba specimens.
+Split (:func:`which_set`), three sets:
 
-Printed: one table per plan (material, set, true ``log_rmse``, the estimate before (the
-two-term model widened by a flagged misfit, the previous release's number), its ratio, the
-estimate after the final mapping, its ratio, within x2, more than 2x too low, the coverage
+* **calibration** ("cal"): the six anisotropic mitsuba specimens, the measured materials at
+  even positions (alphabetical, 0-based) and the library's asymmetric materials. The constants
+  of the final mapping (:func:`gonio.brdf.reconstruction.selfcheck.final_log_rmse`:
+  ``FINAL_PREDICTED_FACTOR``, ``FINAL_COVERAGE_SCALE``, ``FINAL_FLAGGED_FACTOR``) and of its
+  interval (``UPPER_FACTOR``) are fitted on it alone;
+* **choice**: the measured materials at positions 1, 5, 9 and the tilted / untilted
+  normal-mapped mitsuba specimens of ``bench_asymmetric.ASYM`` at even positions: the
+  candidate forms of the mapping were compared on it, and one was chosen;
+* **test**: the measured materials at positions 3, 7 and the specimens at odd positions,
+  reported once, after the choice (a specimen and its untilted version are in the same set);
+* **fresh**: sixteen mitsuba specimens (:data:`FRESH`) added after that report, scanned once.
+
+Before this round the choice and test sets were one validation set, whose numbers earlier
+rounds printed while comparing forms; the test and fresh sets then decided whether the refit
+chosen on the choice set replaced the shipped mapping (it did not). docs/science.md 7.1.1 says
+which set saw what.
+
+Printed: one table per plan (material, set, true ``log_rmse``, the estimate of the rejected
+refit (:data:`REFIT_CANDIDATE`, from the same scan), its ratio, the shipped final mapping's
+estimate, its ratio, within x2, more than 2x too low, the coverage
 witness ``uncovered``, the misfit witness and whether the result carries the ``basis_misfit``
 reason), then the shares within x2, the counts more than 2x low and the lowest ratio per set
-and plan, before and after, the scans flagged per set and plan, and what the scans more than
-2x low show (their misfit; with ``--witnesses`` also their standardised leave-one-pair-out
-error). Results: docs/science.md
+and plan for both, how often the truth is above the interval's upper end, the scans
+flagged per set and plan, and what the scans more than 2x low show (their misfit; with
+``--witnesses`` also their standardised leave-one-pair-out error). Results: docs/science.md
 7.1.1.
 """
 
@@ -57,6 +69,21 @@ from gonio.brdf.reconstruction.samples import DEFAULT_SPAN_DEG, uniform_stage_an
 from gonio.brdf.reconstruction.selfcheck import widen_log_rmse
 from gonio.brdf.tables import metrics
 
+#: The refit of the final mapping (factor on the model's estimate, coverage scale, factor on a
+#: flagged scan's estimate; misfit floor as shipped) that the choice set preferred and the
+#: test and fresh sets rejected (docs/science.md 7.1.1): the "refit" columns.
+REFIT_CANDIDATE: tuple[float, float, float] = (0.80, 0.19, 0.55)
+
+
+def refit_candidate(row: dict[str, Any]) -> float:
+    """The rejected refit's ``predicted_log_rmse`` of a row (:data:`REFIT_CANDIDATE`)."""
+    k, c, kf = REFIT_CANDIDATE
+    cover = c * np.sqrt(max(row["uncovered"], 0.0))
+    if row["reason"]:
+        return float(max(np.hypot(kf * row["unwidened"], cover), row["misfit_log"]))
+    return float(np.hypot(k * row["unwidened"], cover))
+
+
 #: ``(label, design, r)``: ``design`` is "posterior" (the default 10-pair design) or a preset.
 PLANS: tuple[tuple[str, str, int], ...] = (
     ("default n=10 r=8", "posterior", 8),
@@ -67,22 +94,104 @@ PLANS: tuple[tuple[str, str, int], ...] = (
 )
 
 
+#: The sets (module docstring): constants are fitted on "cal", forms are chosen on "choice",
+#: "test" is reported once, after every choice, and "fresh" holds specimens no round had
+#: seen before that report (:data:`FRESH`).
+SETS: tuple[str, ...] = ("cal", "choice", "test", "fresh")
+
+#: Fresh mitsuba specimens ``(name, spec, holder angle in degrees, tilt in degrees, tilt
+#: azimuth in degrees)``: added after the test set's one report, scanned once with the mapping
+#: already chosen, and in no choice. Anisotropic conductors at new roughness pairs and holder
+#: angles, plastics, layered clear-coated and sheen (satin-like) principled materials, a
+#: blend, and four normal-mapped surfaces tilted like ``bench_asymmetric.ASYM`` (tilt 0: not
+#: normal-mapped).
+FRESH: tuple[tuple[str, dict[str, Any], float, float, float], ...] = (
+    ("fr-cr-u05-v22", {"type": "roughconductor", "material": "Cr", "distribution": "ggx",
+                       "alpha_u": 0.05, "alpha_v": 0.22}, 33.0, 0.0, 0.0),
+    ("fr-al-u30-v10", {"type": "roughconductor", "material": "Al",
+                       "distribution": "beckmann", "alpha_u": 0.30, "alpha_v": 0.10},
+     151.0, 0.0, 0.0),
+    ("fr-au-r18", {"type": "roughconductor", "material": "Au", "alpha": 0.18}, 0.0, 0.0, 0.0),
+    ("fr-cu-u15-v45", {"type": "roughconductor", "material": "Cu", "distribution": "ggx",
+                       "alpha_u": 0.15, "alpha_v": 0.45}, 242.0, 0.0, 0.0),
+    ("fr-ag-r04", {"type": "roughconductor", "material": "Ag", "alpha": 0.04}, 0.0, 0.0, 0.0),
+    ("fr-green-plastic-r05", {"type": "roughplastic", "alpha": 0.05, "diffuse_reflectance": {
+        "type": "rgb", "value": [0.1, 0.45, 0.15]}}, 12.0, 0.0, 0.0),
+    ("fr-white-plastic-r30", {"type": "roughplastic", "alpha": 0.30, "diffuse_reflectance": {
+        "type": "rgb", "value": [0.8, 0.8, 0.78]}}, 77.0, 0.0, 0.0),
+    ("fr-paper-r45", {"type": "roughplastic", "alpha": 0.45, "diffuse_reflectance": {
+        "type": "rgb", "value": [0.85, 0.84, 0.8]}}, 0.0, 0.0, 0.0),
+    ("fr-clearcoat-red", {"type": "principled", "roughness": 0.5, "clearcoat": 1.0,
+                          "clearcoat_gloss": 0.9, "base_color": {
+                              "type": "rgb", "value": [0.6, 0.05, 0.05]}}, 120.0, 0.0, 0.0),
+    ("fr-clearcoat-brushed", {"type": "principled", "metallic": 1.0, "roughness": 0.3,
+                              "anisotropic": 0.5, "clearcoat": 0.8, "base_color": {
+                                  "type": "rgb", "value": [0.7, 0.7, 0.75]}}, 200.0, 0.0, 0.0),
+    ("fr-sheen-satin", {"type": "principled", "roughness": 0.6, "sheen": 1.0, "base_color": {
+        "type": "rgb", "value": [0.5, 0.3, 0.6]}}, 45.0, 0.0, 0.0),
+    ("fr-blend-brushed-cr", {"type": "blendbsdf", "weight": 0.5,
+                             "bsdf_0": {"type": "diffuse", "reflectance": {
+                                 "type": "rgb", "value": [0.3, 0.3, 0.35]}},
+                             "bsdf_1": {"type": "roughconductor", "material": "Cr",
+                                        "alpha_u": 0.07, "alpha_v": 0.4}}, 288.0, 0.0, 0.0),
+    ("fr-tilt-cr-t12", {"type": "roughconductor", "material": "Cr", "alpha": 0.12},
+     95.0, 12.0, 60.0),
+    ("fr-tilt-green-plastic-t18", {"type": "roughplastic", "alpha": 0.15,
+                                   "diffuse_reflectance": {
+                                       "type": "rgb", "value": [0.1, 0.45, 0.15]}},
+     170.0, 18.0, 250.0),
+    ("fr-tilt-au-aniso-t8", {"type": "roughconductor", "material": "Au", "alpha_u": 0.1,
+                             "alpha_v": 0.3}, 15.0, 8.0, 330.0),
+    ("fr-tilt-white-plastic-t25", {"type": "roughplastic", "alpha": 0.3,
+                                   "diffuse_reflectance": {
+                                       "type": "rgb", "value": [0.8, 0.8, 0.78]}},
+     260.0, 25.0, 140.0),
+)
+
+
+def fresh_materials() -> list[tuple[bu.Material, str]]:
+    """``(material, kind)`` of :data:`FRESH`: kind "fresh-tilted" for the normal-mapped ones."""
+    out = []
+    for name, inner, holder, tilt, azimuth in FRESH:
+        spec = ba.normalmap_spec(tilt, azimuth, inner) if tilt else inner
+        m = ba.specimen(name, spec, holder, repr((inner, holder, tilt, azimuth)))
+        out.append((m, "fresh-tilted" if tilt else "fresh"))
+    return out
+
+
 def calibration_set(kind: str, index: int) -> bool:
     """True for the calibration materials (module docstring): ``index`` counts within the
     measured materials only."""
-    return kind == "aniso-mitsuba" or (kind == "measured" and index % 2 == 0)
+    return which_set(kind, index) == "cal"
 
 
-def materials() -> list[tuple[bu.Material, str, bool]]:
-    """``(material, kind, calibration?)`` of every held-out material."""
-    out: list[tuple[bu.Material, str, bool]] = []
+def which_set(kind: str, index: int) -> str:
+    """The set of a material (:data:`SETS`): ``index`` counts within its kind (for the tilted
+    and untilted specimens, within ``bench_asymmetric.ASYM``, so a specimen and its untilted
+    version are always in the same set).
+
+    The calibration set is the previous rounds'. Their validation set is split in two: the
+    measured materials at positions 1, 5, 9 and the specimens at even positions choose; the
+    measured materials at positions 3, 7 and the specimens at odd positions test."""
+    if kind in ("aniso-mitsuba", "library-asym"):
+        return "cal"
+    if kind == "measured":
+        return "cal" if index % 2 == 0 else ("choice" if index % 4 == 1 else "test")
+    return "choice" if index % 2 == 0 else "test"
+
+
+def materials() -> list[tuple[bu.Material, str, str]]:
+    """``(material, kind, set)`` of every held-out material (:func:`which_set`)."""
+    out: list[tuple[bu.Material, str, str]] = []
     measured = bu.measured_materials() if bu.RGL_DIR.is_dir() else []
-    for i, m in enumerate(measured):
-        out.append((m, "measured", calibration_set("measured", i)))
-    out += [(m, "aniso-mitsuba", True) for m in bu.aniso_materials()]
-    out += [(m, "asymmetric", False) for m in ba.asym_materials()]
-    out += [(m, "untilted", False) for m in ba.asym_materials(tilted=False)]
-    out += [(m, "library-asym", True) for m in library_asymmetric()]
+    out += [(m, "measured", which_set("measured", i)) for i, m in enumerate(measured)]
+    out += [(m, "aniso-mitsuba", "cal") for m in bu.aniso_materials()]
+    out += [(m, "asymmetric", which_set("asymmetric", i))
+            for i, m in enumerate(ba.asym_materials())]
+    out += [(m, "untilted", which_set("untilted", i))
+            for i, m in enumerate(ba.asym_materials(tilted=False))]
+    out += [(m, "library-asym", "cal") for m in library_asymmetric()]
+    out += [(m, kind, "fresh") for m, kind in fresh_materials()]
     return out
 
 
@@ -119,22 +228,36 @@ def scans(witnesses: bool = False) -> list[dict[str, Any]]:
     bu.SPAN["scan"] = bu.SPAN["design"] = DEFAULT_SPAN_DEG
     rows = []
     t0 = time.perf_counter()
-    for i, (m, kind, cal) in enumerate(materials()):
+    for i, (m, kind, which) in enumerate(materials()):
         b = default_basis(exclude=m.exclude)
         for label, design, r in PLANS:
             cells, ph = bu.design(b, 10) if design == "posterior" else get_preset(design).cells()
             alpha = uniform_stage_angles(r, span=np.deg2rad(DEFAULT_SPAN_DEG))
             vals = bu.read(m, cells, ph, alpha, 100 + i)
             rec = reconstruct(b, cells, ph, alpha, vals)
+            angle_err = (np.asarray(rec.angle_log_errors) if rec.angle_log_errors is not None
+                         else np.full(r, np.nan))
+            pair_err = (np.asarray(rec.pair_log_errors) if rec.pair_log_errors is not None
+                        else np.full(len(cells), np.nan))
             rows.append({
-                "material": m.name, "kind": kind, "cal": cal, "plan": label,
+                "material": m.name, "kind": kind, "cal": which == "cal", "set": which,
+                "plan": label, "n": len(cells), "r": int(r),
                 "truth": metrics.log_rmse(rec.table, m.truth),
-                # Before: the previous release's estimate (the two-term model, widened by a
-                # flagged misfit); after: the final mapping (selfcheck.final_log_rmse).
+                # The two-term model widened by a flagged misfit (two releases ago); after:
+                # the final mapping (selfcheck.final_log_rmse) and its interval's upper end.
                 "predicted": (widen_log_rmse(rec.predicted_log_rmse_unwidened, rec.misfit)
                               if rec.misfit is not None else rec.predicted_log_rmse_unwidened),
                 "widened": rec.predicted_log_rmse,
+                "upper": rec.predicted_log_rmse_upper,
                 "uncovered": rec.uncovered_share,
+                # The inputs of the mapping, so that candidates can be refitted on these rows.
+                "unwidened": rec.predicted_log_rmse_unwidened,
+                "expected": rec.expected_log_rmse, "mahalanobis": rec.mahalanobis,
+                "cv_sample_error": rec.cv_sample_error, "cv_log_error": rec.cv_log_error,
+                "angle_log_rms": float(np.sqrt(np.nanmean(angle_err**2))),
+                "angle_log_max": float(np.nanmax(angle_err)),
+                "pair_log_max": float(np.nanmax(pair_err)),
+                "rho": float(rec.settings.get("prior_rho", float("nan"))),
                 "reason": rec.misfit_warning,
                 **(rec.misfit.as_dict() if rec.misfit is not None else {}),
             })
@@ -149,29 +272,38 @@ def scans(witnesses: bool = False) -> list[dict[str, Any]]:
 
 def table(rows: list[dict[str, Any]]) -> None:
     """The per-plan tables and the summary (module docstring)."""
+    for r in rows:
+        # "refit" is the rejected candidate, from the same scan's inputs.
+        r["before"] = refit_candidate(r)
+        r.setdefault("set", "cal" if r["cal"] else "validation")
     for label, _, _ in PLANS:
         print(f"\n#### {label}\n")
-        print("| material | set | true log_rmse | before | ratio | after | ratio | within x2 | "
+        print("| material | set | true log_rmse | refit | ratio | shipped | ratio | within x2 | "
               "> 2x low | uncovered | misfit chi2 | misfit (log) | persistent pairs | "
               "basis_misfit |")
         print("|---" * 14 + "|")
         for r in (r for r in rows if r["plan"] == label):
-            q0, q1 = r["predicted"] / r["truth"], r["widened"] / r["truth"]
-            print(f"| {r['material']} | {'cal' if r['cal'] else 'val'} | {r['truth']:.4f} | "
-                  f"{r['predicted']:.4f} | x{q0:.2f} | {r['widened']:.4f} | x{q1:.2f} | "
+            q0, q1 = r["before"] / r["truth"], r["widened"] / r["truth"]
+            print(f"| {r['material']} | {r['set']} | {r['truth']:.4f} | "
+                  f"{r['before']:.4f} | x{q0:.2f} | {r['widened']:.4f} | x{q1:.2f} | "
                   f"{'yes' if 0.5 <= q1 <= 2 else 'no'} | {'LOW' if q1 < 0.5 else ''} | "
                   f"{r.get('uncovered', float('nan')):.3f} | {r['misfit_chi2']:.3g} | "
                   f"{r['misfit_log']:.4f} | "
                   f"{r['misfit_persistent_pairs']} | {'yes' if r['reason'] else ''} |")
-    print("\nwithin x2 (more than 2x low, lowest ratio), before -> after the final mapping:\n")
-    print("| plan | calibration | validation | validation measured | validation asymmetric "
-          "| validation untilted | all |")
-    print("|---" * 7 + "|")
+    print("\nwithin x2 (more than 2x low, lowest ratio), the rejected refit -> the shipped final "
+          "mapping:\n")
     groups: tuple[tuple[str, Any], ...] = (
-              ("calibration", lambda r: r["cal"]), ("validation", lambda r: not r["cal"]),
-              ("val measured", lambda r: not r["cal"] and r["kind"] == "measured"),
-              ("val asymmetric", lambda r: r["kind"] == "asymmetric"),
-              ("val untilted", lambda r: r["kind"] == "untilted"), ("all", lambda r: True))
+              ("calibration", lambda r: r["set"] == "cal"),
+              ("choice", lambda r: r["set"] == "choice"),
+              ("test", lambda r: r["set"] == "test"),
+              ("test measured", lambda r: r["set"] == "test" and r["kind"] == "measured"),
+              ("test asymmetric", lambda r: r["set"] == "test" and r["kind"] == "asymmetric"),
+              ("test untilted", lambda r: r["set"] == "test" and r["kind"] == "untilted"),
+              ("fresh", lambda r: r["set"] == "fresh"),
+              ("fresh tilted", lambda r: r["kind"] == "fresh-tilted"),
+              ("all", lambda r: True))
+    print("| plan | " + " | ".join(g for g, _ in groups) + " |")
+    print("|---" * (1 + len(groups)) + "|")
     for label in [p[0] for p in PLANS] + ["every plan"]:
         sel = [r for r in rows if label == "every plan" or r["plan"] == label]
         cells = []
@@ -186,8 +318,22 @@ def table(rows: list[dict[str, Any]]) -> None:
                 ok = int(np.sum((q >= 0.5) & (q <= 2.0)))
                 return f"{ok}/{q.size} ({int(np.sum(q < 0.5))}, x{q.min():.2f})"
 
-            cells.append(f"{count('predicted')} -> {count('widened')}")
+            cells.append(f"{count('before')} -> {count('widened')}")
         print(f"| {label} | " + " | ".join(cells) + " |")
+    if all(np.isfinite(r.get("upper", float("nan"))) for r in rows):
+        print("\ntrue log_rmse above the interval's upper end (predicted_log_rmse_upper), of "
+              "the scans; median upper / true:\n")
+        print("| plan | " + " | ".join(g for g, _ in groups) + " |")
+        print("|---" * (1 + len(groups)) + "|")
+        for label in [p[0] for p in PLANS] + ["every plan"]:
+            sel = [r for r in rows if label == "every plan" or r["plan"] == label]
+            cells = []
+            for _, g in groups:
+                s = [r for r in sel if g(r)]
+                u = np.array([r["upper"] / r["truth"] for r in s])
+                cells.append(f"{int(np.sum(u < 1.0))}/{u.size} (x{np.median(u):.2f})"
+                             if u.size else "")
+            print(f"| {label} | " + " | ".join(cells) + " |")
     print("\nscans flagged basis_misfit (of the scans), per plan and set:\n")
     print("| plan | " + " | ".join(g for g, _ in groups) + " |")
     print("|---" * (1 + len(groups)) + "|")

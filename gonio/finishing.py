@@ -252,6 +252,8 @@ def finish_job(job_id: int, plan: AnyPlan | CheckedPlan, how: Finishing) -> dict
         # The coverage witness of predicted_log_rmse: the share of the prior's weighted
         # variance the layout leaves (joint fit only; docs/science.md 7.1.1).
         "uncovered_share": _finite_or_none(rec.uncovered_share),
+        # The upper end of the self-estimate's interval (joint fit only; science.md 7.1.1).
+        "predicted_log_rmse_upper": _finite_or_none(rec.predicted_log_rmse_upper),
         "n_pairs": len(pairs),
         "n_angles": int(samples.stage_angles_deg.size),
         "n_samples": len(pairs) * int(samples.stage_angles_deg.size),

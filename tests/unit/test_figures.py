@@ -113,6 +113,18 @@ def test_the_headline_states_the_coverage_of_the_self_estimate() -> None:
         assert h is not None and "coverage" not in h and "uncovered_share" not in h
 
 
+def test_the_headline_states_the_upper_end_of_the_estimate() -> None:
+    h = headline_error({"predicted_log_rmse": 0.05, "predicted_log_rmse_upper": 0.1})
+    assert h is not None and h["upper"] == 0.1 and h["text"] == "0.050"
+    assert "Upper end of its interval: 0.100" in h["interval"]
+    assert h["meaning"].endswith(h["interval"])
+    # V&F's path stores none (null); a MAPE headline has no such interval.
+    for metrics in ({"predicted_log_rmse": 0.05, "predicted_log_rmse_upper": None},
+                    {"predicted_error": 0.1, "predicted_log_rmse_upper": 0.2}):
+        h = headline_error(metrics)
+        assert h is not None and "interval" not in h and "upper" not in h
+
+
 def test_the_headline_says_which_arc_and_warns_a_half_turn_that_is_not_symmetric() -> None:
     base = {"predicted_log_rmse": 0.05}
     auto = headline_error({**base, "arc_symmetric": False, "arc_deg": 360.0,

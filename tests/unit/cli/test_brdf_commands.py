@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -96,6 +97,14 @@ def test_simulate_then_reconstruct(
                  "--preview", str(png), "-o", str(out)]) == 0
     text = capsys.readouterr().out
     assert "K=8 n=8 r=12" in text and "predicted log_rmse" in text
+    # The upper end of the estimate's interval: 3.33 times it, 1.83 when the basis cannot hold
+    # the readings (docs/science.md 7.1.1), both printed to 3 decimals.
+    found = [re.search(rf"{what} (\d+\.\d+)", text)
+             for what in ("predicted log_rmse", "upper end of its interval")]
+    assert all(m is not None for m in found), text
+    predicted, upper = (float(m.group(1)) for m in found if m is not None)
+    factor = 1.83 if "cannot hold" in text else 3.33
+    assert abs(upper - factor * predicted) <= factor * 5e-4 + 5e-4
     t = BRDFTable.load(out)
     assert t.name == "rec" and t.values.shape == (3, *geo.TABLE_SHAPE)
     assert png.read_bytes()[:4] == b"\x89PNG"

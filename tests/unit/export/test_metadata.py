@@ -27,7 +27,12 @@ from gonio.export import (
     result_fits,
     write_export,
 )
-from gonio.export.metadata import COLOUR_STATEMENT, TWOFOLD_WARN, specimen_name
+from gonio.export.metadata import (
+    COLOUR_STATEMENT,
+    TWOFOLD_WARN,
+    export_provenance,
+    specimen_name,
+)
 from gonio.results import write_result
 
 PLAN = {"kind": "uniform", "specimen": "specimen", "rotations": 8, "span_deg": 180.0}
@@ -155,6 +160,17 @@ def test_measured_and_named(tmp_path: Path) -> None:
     extras = meta["asset"]["extras"]
     assert extras["source"] == "measured" and "simulated_material" not in extras
     assert extras["specimen"] == "felt #2" and extras["specimen_named"] is True
+
+
+def test_the_record_carries_the_upper_end_of_the_estimate_when_stored() -> None:
+    with_upper = export_provenance({}, {"predicted_log_rmse": 0.04,
+                                        "predicted_log_rmse_upper": 0.08}, {}, {})
+    assert with_upper["reconstruction_error"]["predicted_log_rmse_upper"] == 0.08
+    # A result made before the interval was stored (or by V&F's path, null) has none.
+    for metrics in ({"predicted_log_rmse": 0.04},
+                    {"predicted_log_rmse": 0.04, "predicted_log_rmse_upper": None}):
+        rec_error = export_provenance({}, metrics, {}, {})["reconstruction_error"]
+        assert "predicted_log_rmse_upper" not in rec_error
 
 
 def test_specimen_names() -> None:

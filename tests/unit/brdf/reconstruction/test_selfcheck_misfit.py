@@ -26,9 +26,12 @@ from gonio.brdf.reconstruction.selfcheck import (
     FINAL_PREDICTED_FACTOR,
     MISFIT_CHI2_LIMIT,
     MISFIT_MIN_LOG,
+    UPPER_FACTOR,
+    UPPER_FACTOR_FLAGGED,
     BasisMisfit,
     basis_misfit,
     final_log_rmse,
+    upper_log_rmse,
     widen_log_rmse,
 )
 from gonio.brdf.tables import geometry as geo
@@ -193,6 +196,34 @@ def test_the_final_mapping_is_the_published_one() -> None:
     assert math.isnan(final_log_rmse(0.05, float("nan"), quiet))
 
 
+#: The interval's upper end as docs/science.md 7.1.1 publishes it: the factor on the estimate
+#: of a scan whose fit holds its readings, and of a flagged one.
+PUBLISHED_UPPER = (3.33, 1.83)
+
+
+def test_the_interval_upper_end_is_the_published_factor_on_the_estimate() -> None:
+    quiet = BasisMisfit(chi2=0.5, log_misfit=0.0, persistent_pairs=0, n_pairs=10, n_angles=8)
+    flagged = BasisMisfit(chi2=400.0, log_misfit=0.12, persistent_pairs=3, n_pairs=10,
+                          n_angles=8)
+    assert (UPPER_FACTOR, UPPER_FACTOR_FLAGGED) == PUBLISHED_UPPER
+    # 3.33 * 0.04 = 0.1332; 1.83 * 0.2 = 0.366.
+    assert upper_log_rmse(0.04, quiet) == pytest.approx(0.1332)
+    assert upper_log_rmse(0.2, flagged) == pytest.approx(0.366)
+    assert math.isnan(upper_log_rmse(float("nan"), quiet))
+
+
+def test_a_joint_fit_reports_the_upper_end_and_the_vf_path_does_not(basis: Basis) -> None:
+    spec = next(s for s in library.library_specs() if s.name == "plastic-005")
+    cells, ph = grid_pairs(12, seed=5)
+    vals = simulate_samples(spec.model, cells, ph, ALPHA, noise=NoiseModel(0.01, seed=3))
+    rec = reconstruct(basis, cells, ph, ALPHA, vals)
+    assert rec.misfit is not None and not rec.misfit.flagged
+    assert rec.predicted_log_rmse_upper == pytest.approx(
+        PUBLISHED_UPPER[0] * rec.predicted_log_rmse)
+    vf = reconstruct(basis, cells, ph, ALPHA, vals, method="vf")
+    assert np.isfinite(vf.predicted_log_rmse) and math.isnan(vf.predicted_log_rmse_upper)
+
+
 @pytest.mark.parametrize("name", ["plastic-005", "metal-000"])
 def test_a_library_material_is_not_flagged_and_its_estimate_is_not_low(
         basis: Basis, name: str) -> None:
@@ -267,3 +298,6 @@ def test_structure_outside_the_basis_is_flagged_and_the_estimate_covers_it(
         rec.predicted_log_rmse_unwidened, rec.uncovered_share, True, rec.misfit.log_misfit))
     truth = metrics.log_rmse(rec.table, _truth(spec.model, spec.name))
     assert rec.predicted_log_rmse > 0.5 * truth
+    # A flagged scan's interval uses the flagged factor.
+    assert rec.predicted_log_rmse_upper == pytest.approx(
+        PUBLISHED_UPPER[1] * rec.predicted_log_rmse)
