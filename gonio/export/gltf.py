@@ -13,7 +13,13 @@
   specimen's x must run along ``u`` there.
 * ``KHR_materials_specular`` (only when the dielectric ``F0 = 0.08 specular`` differs from
   glTF's 0.04 and the material is not fully metallic): ``specularColorFactor = F0 / 0.04``
-  in every channel, ``specularFactor = 1``.
+  in every channel (up to 25 for ``F0 = 1``; the extension allows factors above 1 and
+  defines ``dielectric_f0 = min(0.04 specularColor, 1) specularFactor``), ``specularFactor =
+  1`` (so ``dielectric_f90`` = 1). The extension's ``fresnel_mix`` weighs the diffuse base by
+  ``1 - max_value(F)``, which gonio's model does too
+  (:class:`gonio.brdf.models.principled.LayeredDiffuse`).
+
+:func:`principled_from_gltf` reads such a material back.
 
 The provenance (:mod:`gonio.export.metadata`) goes into ``asset.extras`` and the material's
 ``extras``. By default the file holds no mesh: it is a material library to reference or merge
@@ -86,6 +92,44 @@ def gltf_material(p: Principled, name: str, extras: Mapping[str, Any]) -> tuple[
         material["extensions"] = ext
         used = sorted(ext)
     return material, used
+
+
+def principled_from_gltf(material: Mapping[str, Any]) -> Principled:
+    """The principled parameters of a glTF material written by :func:`gltf_material`.
+
+    The inverse of the module docstring's mapping: ``alpha_b = roughnessFactor^2``,
+    ``alpha_t = mix(alpha_b, 1, anisotropyStrength^2)``, the direction from
+    ``anisotropyRotation``, the dielectric ``F0 = min(0.04 specularColorFactor, 1)
+    specularFactor`` (``KHR_materials_specular``; 0.04 without it) as ``specular = F0 / 0.08``.
+
+    Raises
+    ------
+    GltfError
+        A specular colour that is not grey or a ``specularFactor`` other than 1 (gonio's model
+        has one grey ``F0`` and ``F90 = 1``), or values outside the model's ranges.
+    """
+    from gonio.brdf.models.principled import PrincipledError
+
+    pbr = material.get("pbrMetallicRoughness", {})
+    ext = material.get("extensions", {})
+    alpha_b = float(pbr.get("roughnessFactor", 1.0)) ** 2
+    aniso = ext.get("KHR_materials_anisotropy", {})
+    strength = float(aniso.get("anisotropyStrength", 0.0))
+    direction = math.degrees(float(aniso.get("anisotropyRotation", 0.0)))
+    spec = ext.get("KHR_materials_specular", {})
+    colour = [float(c) for c in spec.get("specularColorFactor", [1.0, 1.0, 1.0])]
+    factor = float(spec.get("specularFactor", 1.0))
+    if max(colour) - min(colour) > 1e-9 or abs(factor - 1.0) > 1e-9:
+        raise GltfError(
+            f"specularColorFactor {colour} and specularFactor {factor}: gonio's principled "
+            "model has one grey F0 and F90 = 1 (a grey specularColorFactor, specularFactor 1)")
+    f0 = min(0.04 * colour[0], 1.0) * factor
+    try:
+        return Principled(tuple(float(c) for c in pbr.get("baseColorFactor", [1.0] * 4)[:3]),
+                          float(pbr.get("metallicFactor", 1.0)), f0 / 0.08,
+                          alpha_b + (1.0 - alpha_b) * strength**2, alpha_b, direction)
+    except PrincipledError as exc:
+        raise GltfError(f"not a gonio principled material: {exc}") from None
 
 
 def preview_sphere(rings: int = SPHERE_RINGS, segments: int = SPHERE_SEGMENTS) -> dict[

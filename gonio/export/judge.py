@@ -74,8 +74,12 @@ finer detail on a 48 pixel sphere)."""
 #: 0.52 (bench/bench_export.py --rendered, docs/export.md).
 WARN_FLIP = 0.25
 WARN_RELATIVE = 0.5
-#: Dielectric specular bounds: F0 = 0.08 specular in [0.02, 0.08] (IOR 1.33 to 1.79).
-SPECULAR_MIN, SPECULAR_MAX = 0.25, 1.0
+#: Dielectric specular bounds: F0 = 0.08 specular in [0.02, 0.9]. The lower bound keeps the
+#: index of refraction at least 1.33 (a fit reached 1.0003, issue 26). Above Burley's F0 = 0.08
+#: (IOR 1.79) the dielectric stands for a diffuse colour under a bright highlight (a coated or
+#: dusty metal); glTF writes F0 up to 1 (``KHR_materials_specular``) and MaterialX through
+#: ``specular_IOR``, which is infinite at F0 = 1: 0.9 keeps it at 37.9.
+SPECULAR_MIN, SPECULAR_MAX = 0.25, 0.9 / 0.08
 _EPS = 1e-3
 
 

@@ -11,7 +11,10 @@ base, base_color       1, the fitted base colour
 metalness              metallic
 specular, _color       1, white
 specular_IOR           ``(1 + sqrt(F0)) / (1 - sqrt(F0))`` with the dielectric
-                       ``F0 = 0.08 specular`` (1.5 for a metal, where it is unused)
+                       ``F0 = 0.08 specular`` (1.5 for a metal, where it is unused): the
+                       index whose normal-incidence reflectance ``((n - 1)/(n + 1))^2`` is
+                       ``F0``; above 3 (``F0`` 0.25, past the input's soft range) for a
+                       diffuse colour under a bright highlight (F0 up to 0.9, IOR 37.9)
 specular_roughness     ``(alpha_t alpha_b)^(1/4)``
 specular_anisotropy    ``1 - alpha_b / alpha_t`` (MaterialX clamps it at 0.98)
 specular_rotation      ``((180 - direction_deg) mod 180) / 360``: MaterialX turns the tangent
@@ -28,6 +31,15 @@ the cross product reversed ("MaterialX follows v' = v * M"): the tangent ``x`` a
 is written negated (issue 26: written un-negated, the streak came out mirrored).
 ``tests/unit/export/test_mtlx_render.py`` renders the document's reading by that formula and
 checks the highlight's direction.
+
+**Specular strength.** ``specular`` (the layer's weight) and ``specular_color`` (its tint)
+stay 1 and white: they can only lower the reflectance below the index's, so the index carries
+``F0``. Standard surface weighs the base under the specular layer by one minus the layer's
+directional albedo (MaterialX's ``dielectric_bsdf`` throughput), glTF by ``1 - F(v.h)``, and
+its dielectric Fresnel is the exact one of the index, glTF's Schlick's; gonio's own rendering
+follows glTF (:class:`gonio.brdf.models.principled.LayeredDiffuse`). Both reflect ``F0`` at
+normal incidence and give the base what the layer leaves; they part towards grazing angles.
+:func:`principled_from_inputs` reads the inputs back.
 
 The document is validated against MaterialX's standard library before it is written; the
 provenance (:mod:`gonio.export.metadata`) is the material's ``doc`` string, as JSON, and the
@@ -80,6 +92,55 @@ def standard_surface_inputs(p: Principled) -> dict[str, float | tuple[float, flo
         "specular_anisotropy": min(0.98, max(0.0, 1.0 - p.alpha_b / p.alpha_t)),
         "specular_rotation": rotation_from_direction(p.direction_deg),
     }
+
+
+def principled_from_inputs(inputs: Mapping[str, Any]) -> Principled:
+    """Principled parameters from ``standard_surface`` input values written by
+    :func:`standard_surface_inputs` (the inverse of the module docstring's mapping:
+    ``F0 = ((IOR - 1)/(IOR + 1))^2``, ``alpha_t = r^2 / sqrt(1 - a)``, ``alpha_b = r^2
+    sqrt(1 - a)``, direction ``(180 - 360 specular_rotation) mod 180``).
+
+    Raises
+    ------
+    MtlxError
+        Values outside the model's ranges, or ``specular``/``specular_color`` other than
+        1/white (gonio's model puts the strength into the index).
+    """
+    from gonio.brdf.models.principled import PrincipledError
+
+    weight, tint = float(inputs["specular"]), tuple(float(c) for c in inputs["specular_color"])
+    if abs(weight - 1.0) > 1e-6 or any(abs(c - 1.0) > 1e-6 for c in tint):
+        raise MtlxError(f"specular {weight} and specular_color {tint}: gonio's principled "
+                        "model carries the specular strength in specular_IOR (1 and white)")
+    metallic = float(inputs["metalness"])
+    ior = float(inputs["specular_IOR"])
+    f0 = ((ior - 1.0) / (ior + 1.0)) ** 2 if metallic < 1.0 else 0.04
+    r2 = float(inputs["specular_roughness"]) ** 2
+    aspect = math.sqrt(1.0 - float(inputs["specular_anisotropy"]))
+    direction = (180.0 - 360.0 * float(inputs["specular_rotation"])) % 180.0
+    try:
+        return Principled(tuple(float(c) for c in inputs["base_color"]), metallic, f0 / 0.08,
+                          r2 / aspect, r2 * aspect, direction)
+    except PrincipledError as exc:
+        raise MtlxError(f"not a gonio principled material: {exc}") from None
+
+
+def read_standard_surface(text: str) -> dict[str, Any]:
+    """The input values of the first ``standard_surface`` node of a MaterialX document (XML
+    text), colours as tuples."""
+    import MaterialX
+
+    doc = MaterialX.createDocument()
+    MaterialX.readFromXmlString(doc, text)
+    nodes = doc.getNodes("standard_surface")
+    if not nodes:
+        raise MtlxError("the document holds no standard_surface node")
+    node = nodes[0]
+    out: dict[str, Any] = {}
+    for inp in node.getInputs():
+        v = inp.getValue()
+        out[inp.getName()] = tuple(v.asTuple()) if hasattr(v, "asTuple") else v
+    return out
 
 
 def _library() -> Any:

@@ -3,10 +3,15 @@
 The parameters renderers take: base colour, metallic, specular, roughness, anisotropy strength
 and direction. They describe, as in :func:`gonio.brdf.models.analytic.principled` and 004 App. A.3,
 
-* a Lambert term ``(1 - metallic) base / pi``;
+* a Lambert term ``(1 - metallic) (1 - F_d(wi.h)) base / pi``, weighted by what the
+  dielectric specular layer leaves (``F_d`` the dielectric's Schlick Fresnel below): glTF 2.0's
+  ``fresnel_mix`` (Appendix B and ``KHR_materials_specular``), which the exports are;
 * an anisotropic GGX lobe with separable Smith masking and Schlick Fresnel of ``wi.h`` with
   ``F0 = mix(0.08 specular, base, metallic)`` per channel (``specular = 0.5`` gives the
-  dielectric ``F0 = 0.04`` of 004 Eq. 9; Burley 2012 scales it so);
+  dielectric ``F0 = 0.04`` of 004 Eq. 9; Burley 2012 scales it so). ``specular`` runs from 0
+  to :data:`SPECULAR_LEVEL_MAX` = 12.5: above Burley's 1 (``F0`` 0.08) the same linear map
+  goes on to ``F0 = 1``, the range glTF's ``KHR_materials_specular`` can write (a diffuse
+  colour under a bright white highlight: a coated or dusty metal, issue 26);
 * roughnesses ``alpha_t`` along the tangent and ``alpha_b`` across it, with the tangent at
   azimuth ``direction`` in the specimen frame (from the holder mark, counter-clockwise).
 
@@ -43,10 +48,48 @@ FloatArray = NDArray[np.float64]
 #: Burley's aspect ratio bound: anisotropy 1 means alpha_t / alpha_b = 10.
 MAX_RATIO = 10.0
 ALPHA_MIN, ALPHA_MAX = 1e-3, 2.0
+#: Largest ``specular``: ``F0 = 0.08 specular`` reaches 1.
+SPECULAR_LEVEL_MAX = 12.5
 
 
 class PrincipledError(ValueError):
     """Principled parameters out of range, or a table that cannot be fitted."""
+
+
+def schlick(f0: float | FloatArray, cos_d: FloatArray) -> FloatArray:
+    """Schlick's Fresnel ``F0 + (1 - F0)(1 - cos)^5`` of (N,) cosines (clipped to [0, 1])."""
+    c = np.clip(cos_d, 0.0, 1.0)
+    return np.asarray(f0 + (1.0 - np.asarray(f0)) * (1.0 - c) ** 5, dtype=float)
+
+
+@dataclass(frozen=True)
+class LayeredDiffuse:
+    """Lambert under a dielectric specular layer: ``(1 - F(wi.h)) albedo / pi``.
+
+    ``F`` is Schlick's Fresnel of the grey ``f0`` (``F90 = 1``): the diffuse gets what the
+    specular layer does not reflect, as glTF 2.0's ``fresnel_mix`` weighs it (``base`` with
+    ``1 - weight max_value(fr)``; ``KHR_materials_specular`` with ``weight`` = 1).
+
+    Parameters
+    ----------
+    albedo : (C,) floats in [0, 1]
+    f0 : float in [0, 1]
+    """
+
+    albedo: tuple[float, ...]
+    f0: float
+    channels: tuple[str, ...] = bm.RGB
+    name: str = "layered-diffuse"
+    isotropic: bool = True
+
+    def eval(self, wi: Any, wo: Any) -> FloatArray:
+        """(..., 3) + (..., 3) unit vectors -> (..., C) in 1/sr; 0 below the horizon."""
+        i, o = np.broadcast_arrays(np.asarray(wi, dtype=float), np.asarray(wo, dtype=float))
+        lam = bm.Lambert(self.albedo, channels=self.channels).eval(i, o)
+        h = i + o
+        h = h / np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), 1e-300)
+        keep = 1.0 - schlick(self.f0, np.sum(i * h, axis=-1))
+        return np.asarray(lam * keep[..., None], dtype=float)
 
 
 @dataclass(frozen=True)
@@ -56,7 +99,10 @@ class Principled:
     Parameters
     ----------
     base_color : (C,) floats in [0, 1]
-    metallic, specular : float in [0, 1]
+    metallic : float in [0, 1]
+    specular : float in [0, 12.5]
+        Dielectric ``F0 = 0.08 specular`` (Burley's range is [0, 1]; above it, module
+        docstring).
     alpha_t, alpha_b : float in [1e-3, 2], ``alpha_t >= alpha_b``
         GGX roughness along and across the tangent.
     direction_deg : float in [0, 180)
@@ -83,7 +129,7 @@ class Principled:
             )
         for what, vals, lo, hi in (
             ("base_color", base, 0.0, 1.0), ("metallic", (self.metallic,), 0.0, 1.0),
-            ("specular", (self.specular,), 0.0, 1.0),
+            ("specular", (self.specular,), 0.0, SPECULAR_LEVEL_MAX),
             ("alpha_t", (self.alpha_t,), ALPHA_MIN, ALPHA_MAX),
             ("alpha_b", (self.alpha_b,), ALPHA_MIN, ALPHA_MAX),
         ):
@@ -110,6 +156,11 @@ class Principled:
         return float(min(1.0, (1.0 - self.alpha_b / self.alpha_t) / 0.9))
 
     @property
+    def dielectric_f0(self) -> float:
+        """The dielectric part's normal-incidence reflectance ``0.08 specular`` (grey)."""
+        return 0.08 * self.specular
+
+    @property
     def f0(self) -> tuple[float, ...]:
         """Normal-incidence specular reflectance per channel."""
         s = 0.08 * self.specular
@@ -119,8 +170,9 @@ class Principled:
         """The analytic model these parameters describe."""
         spec = bm.GGX(self.alpha_t, self.alpha_b, bm.SchlickFresnel(self.f0), "separable",
                       channels=self.channels, name=f"{name}/spec")
-        diffuse = bm.Lambert(tuple((1.0 - self.metallic) * b for b in self.base_color),
-                             channels=self.channels, name=f"{name}/diffuse")
+        diffuse = LayeredDiffuse(tuple((1.0 - self.metallic) * b for b in self.base_color),
+                                 self.dielectric_f0, channels=self.channels,
+                                 name=f"{name}/diffuse")
         return bm.LobeSum(
             (diffuse, bm.Rotated(spec, math.radians(self.direction_deg))),
             channels=self.channels, name=name,
@@ -261,7 +313,8 @@ def fit_principled(table: BRDFTable, *, n_cells: int = 12000, seed: int = 0) -> 
         c = np.clip(np.sum(i * h, axis=1), 0.0, 1.0)[:, None]
         fres = f0[None, :] + (1.0 - f0[None, :]) * (1.0 - c) ** 5
         spec = (d * g / (4.0 * i[:, 2] * o[:, 2]))[:, None] * fres
-        return np.asarray((1 - m) * base[None, :] / np.pi + spec, dtype=float)
+        keep = 1.0 - schlick(0.08 * s, c)  # LayeredDiffuse
+        return np.asarray((1 - m) * base[None, :] * keep / np.pi + spec, dtype=float)
 
     def resid(p: FloatArray) -> FloatArray:
         return np.asarray((sw * (np.log1p(predict(p) * cos_i) - target)).ravel(), dtype=float)
