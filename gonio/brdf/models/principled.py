@@ -13,10 +13,10 @@ and direction. They describe, as in :func:`gonio.brdf.models.analytic.principled
   (``specular = 0.5``, weight 1 give the dielectric ``F0 = 0.04`` of 004 Eq. 9; Burley 2012
   scales it so). With weight 1 this is Schlick's Fresnel of ``F0 = mix(0.08 specular, base,
   metallic)``. ``specular`` runs from 0 to :data:`SPECULAR_LEVEL_MAX` = 12.5: above Burley's 1
-  (``F0`` 0.08) the same linear map goes on to ``F0 = 1``. Weight and level are glTF's
-  ``KHR_materials_specular`` ``specularFactor`` and ``specularColorFactor / 2`` (a diffuse
-  colour under a bright highlight, a coated or dusty metal, is a weight below 1 and a high
-  level, issue 26);
+  (``F0`` 0.08) the same linear map goes on to ``F0 = 1``. In glTF's
+  ``KHR_materials_specular`` the weight is ``specularFactor`` and ``specular`` is
+  ``specularColorFactor / 2`` (a diffuse colour under a bright highlight, a coated or dusty
+  metal, is a high level, possibly with a weight below 1; issue 26);
 * roughnesses ``alpha_t`` along the tangent and ``alpha_b`` across it, with the tangent at
   azimuth ``direction`` in the specimen frame (from the holder mark, counter-clockwise).
 
