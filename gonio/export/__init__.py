@@ -154,8 +154,8 @@ def fit_warnings(fits: Fits) -> list[str]:
                 f"one principled material cannot show this material: the factored model's "
                 f"rendered difference from the reconstruction is {p[0] / max(f[0], 1e-12):.1f}"
                 f"x smaller ({p[1]['metric']} {f[0]:.3f} against {p[0]:.3f}). Typically two "
-                "lobes, such as a diffuse colour under a highlight of another colour (a coated or "
-                "dusty metal, a metallic paint), which principled parameters tie together; "
+                "lobes, such as a diffuse colour under a coloured highlight of another hue (a "
+                "metallic paint) or two highlights, which principled parameters tie together; "
                 "use the 'factored' (or 'table') export for this material")
     return out
 

@@ -11,9 +11,17 @@
   bitangent = normal x tangent (``TANGENT.w = +1``). A mesh without tangents gets them from
   its ``TEXCOORD_0`` (the glTF spec: MikkTSpace, tangent along increasing ``u``), so the
   specimen's x must run along ``u`` there.
-* ``KHR_materials_specular`` (only when the dielectric ``F0 = 0.08 specular`` differs from
-  glTF's 0.04 and the material is not fully metallic): ``specularColorFactor = F0 / 0.04``
-  in every channel, ``specularFactor = 1``.
+* ``KHR_materials_specular`` (only when the material is not fully metallic and its
+  dielectric layer is not glTF's default, ``0.08 specular`` = 0.04 and weight 1):
+  ``specularColorFactor = 0.08 specular / 0.04`` in every channel (up to 22.5 for the fit's
+  0.9; the extension allows factors above 1), ``specularFactor = specular_weight``. The
+  extension defines ``dielectric_f0 = min(0.04 specularColor, 1) specularFactor`` and
+  ``dielectric_f90 = specularFactor``, gonio's model the same
+  (:mod:`gonio.brdf.models.principled`); its ``fresnel_mix`` weighs the diffuse base by ``1 -
+  specularFactor max_value(fr)``, which gonio's model does too
+  (:class:`gonio.brdf.models.principled.LayeredDiffuse`).
+
+:func:`principled_from_gltf` reads such a material back.
 
 The provenance (:mod:`gonio.export.metadata`) goes into ``asset.extras`` and the material's
 ``extras``. By default the file holds no mesh: it is a material library to reference or merge
@@ -77,15 +85,52 @@ def gltf_material(p: Principled, name: str, extras: Mapping[str, Any]) -> tuple[
             "anisotropyStrength": min(1.0, strength),
             "anisotropyRotation": math.radians(p.direction_deg % 180.0),
         }
-    f0 = 0.08 * p.specular
-    if p.metallic < 1.0 and abs(f0 - 0.04) > 1e-3:
+    level = min(1.0, 0.08 * p.specular)
+    if p.metallic < 1.0 and (abs(level - 0.04) > 1e-3 or p.specular_weight < 1.0):
         ext["KHR_materials_specular"] = {
-            "specularFactor": 1.0, "specularColorFactor": [f0 / 0.04] * 3,
+            "specularFactor": p.specular_weight, "specularColorFactor": [level / 0.04] * 3,
         }
     if ext:
         material["extensions"] = ext
         used = sorted(ext)
     return material, used
+
+
+def principled_from_gltf(material: Mapping[str, Any]) -> Principled:
+    """The principled parameters of a glTF material written by :func:`gltf_material`.
+
+    The inverse of the module docstring's mapping: ``alpha_b = roughnessFactor^2``,
+    ``alpha_t = mix(alpha_b, 1, anisotropyStrength^2)``, the direction from
+    ``anisotropyRotation``, ``specular = min(0.04 specularColorFactor, 1) / 0.08`` and
+    ``specular_weight = specularFactor`` (``KHR_materials_specular``; 0.5 and 1 without it).
+
+    Raises
+    ------
+    GltfError
+        A specular colour that is not grey (gonio's model has one grey ``F0``), or values
+        outside the model's ranges.
+    """
+    from gonio.brdf.models.principled import PrincipledError
+
+    pbr = material.get("pbrMetallicRoughness", {})
+    ext = material.get("extensions", {})
+    alpha_b = float(pbr.get("roughnessFactor", 1.0)) ** 2
+    aniso = ext.get("KHR_materials_anisotropy", {})
+    strength = float(aniso.get("anisotropyStrength", 0.0))
+    direction = math.degrees(float(aniso.get("anisotropyRotation", 0.0)))
+    spec = ext.get("KHR_materials_specular", {})
+    colour = [float(c) for c in spec.get("specularColorFactor", [1.0, 1.0, 1.0])]
+    factor = float(spec.get("specularFactor", 1.0))
+    if max(colour) - min(colour) > 1e-9:
+        raise GltfError(f"specularColorFactor {colour}: gonio's principled model has one grey "
+                        "F0 (equal components)")
+    try:
+        return Principled(tuple(float(c) for c in pbr.get("baseColorFactor", [1.0] * 4)[:3]),
+                          float(pbr.get("metallicFactor", 1.0)), min(0.04 * colour[0], 1.0) / 0.08,
+                          alpha_b + (1.0 - alpha_b) * strength**2, alpha_b, direction,
+                          specular_weight=factor)
+    except PrincipledError as exc:
+        raise GltfError(f"not a gonio principled material: {exc}") from None
 
 
 def preview_sphere(rings: int = SPHERE_RINGS, segments: int = SPHERE_SEGMENTS) -> dict[

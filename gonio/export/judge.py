@@ -19,10 +19,14 @@ its table error does not show it. So:
   :data:`FIT_VIEWS` (``peak`` the view's brightest reference pixel, ``eps = 1e-3``): the
   square root compresses like a display does, so the highlight's size, height and colour and
   the diffuse colour all count. Three candidates are fitted: metallic fixed at 0 (dielectric:
-  Lambert base, specular with ``F0`` in [0.02, 0.08], index of refraction 1.33 to 1.79), fixed
-  at 1 (metal: ``F0`` = base colour, no diffuse), and fitted in [0, 1] (a blend, specular
-  bounded as for a dielectric). The better pure one is kept unless the blend's rendered
-  difference is below :data:`BLEND_MARGIN` times its own: a real surface is one or the other
+  a Lambert base under a specular layer of level ``0.08 specular`` in [0.02, 0.9], index of
+  refraction 1.33 to 37.9, and weight in [0, 1], :data:`SPECULAR_MIN`, :data:`WEIGHT_MIN`;
+  the layer reflects ``weight x level`` at normal incidence and ``weight`` at grazing angles,
+  glTF's ``KHR_materials_specular``, so a diffuse colour under a bright white highlight, a
+  coated or dusty metal, is a dielectric too), fixed at 1 (metal: ``F0`` = base colour, no
+  diffuse), and fitted in [0, 1] (a blend, the dielectric part bounded as above). The
+  better pure one is kept unless the blend's rendered difference is below
+  :data:`BLEND_MARGIN` times its own: a real surface is one or the other
   (Burley 2012 keeps in-between values for blends, e.g. a metal under dirt or a diffuse
   layer), and a fractional metallic that does not clearly render better is a fitting artefact:
   fitted to a reconstruction of a brushed copper it was 0.97-0.998, which added a diffuse glow
@@ -34,7 +38,8 @@ its table error does not show it. So:
   replaces it when it renders clearly closer (:data:`BLUR_MARGIN`).
 * An export warns (:func:`gonio.export.fit_warnings`) when the factored model's rendered
   difference is less than the principled one's over :data:`TWO_LOBE_RATIO`: a diffuse colour
-  under a highlight of another colour (two lobes) is out of reach of one principled material.
+  under a coloured highlight of another hue, or two highlights (two lobes), is out of reach of
+  one principled material.
 """
 
 from __future__ import annotations
@@ -74,8 +79,15 @@ finer detail on a 48 pixel sphere)."""
 #: 0.52 (bench/bench_export.py --rendered, docs/export.md).
 WARN_FLIP = 0.25
 WARN_RELATIVE = 0.5
-#: Dielectric specular bounds: F0 = 0.08 specular in [0.02, 0.08] (IOR 1.33 to 1.79).
-SPECULAR_MIN, SPECULAR_MAX = 0.25, 1.0
+#: Dielectric specular bounds: F0 = 0.08 specular in [0.02, 0.9]. The lower bound keeps the
+#: index of refraction at least 1.33 (a fit reached 1.0003, issue 26). Above Burley's F0 = 0.08
+#: (IOR 1.79) the dielectric stands for a diffuse colour under a bright highlight (a coated or
+#: dusty metal); glTF writes F0 up to 1 (``KHR_materials_specular``) and MaterialX through
+#: ``specular_IOR``, which is infinite at F0 = 1: 0.9 keeps it at 37.9.
+SPECULAR_MIN, SPECULAR_MAX = 0.25, 0.9 / 0.08
+#: Lower bound of the dielectric's specular weight (glTF ``specularFactor``, MaterialX
+#: ``specular``; the reflectance at grazing angles), whose range in both formats is [0, 1].
+WEIGHT_MIN = 0.0
 _EPS = 1e-3
 
 
@@ -195,7 +207,8 @@ BLUR_MARGIN = 0.95
 #: The principled export warns that it cannot show the material (and points to the factored
 #: one) when its rendered difference is above the warning threshold and this many times the
 #: factored model's. On bench/bench_export.py's simulated scans the two diffuse + brushed
-#: conductor blends are at 2.3x and 2.9x; every other material at most 1.35x.
+#: conductor blends were at 2.3x and 2.9x before the free specular strength and weight,
+#: every other material at most 1.35x (docs/export.md).
 TWO_LOBE_RATIO = 1.5
 
 
@@ -209,28 +222,32 @@ def pure(p: Principled) -> Principled:
         return Principled(tuple(float(v) for v in np.clip(p.f0, 0.0, 1.0)), 1.0, 0.5,
                           p.alpha_t, p.alpha_b, p.direction_deg, p.channels)
     return Principled(p.base_color, 0.0, float(np.clip(p.specular, SPECULAR_MIN, SPECULAR_MAX)),
-                      p.alpha_t, p.alpha_b, p.direction_deg, p.channels)
+                      p.alpha_t, p.alpha_b, p.direction_deg, p.channels,
+                      specular_weight=p.specular_weight)
 
 
 def _params(x: FloatArray, mode: str, nc: int, channels: tuple[str, ...]) -> Principled:
-    """Principled parameters from a candidate's vector ``[base (nc), (metallic), (specular),
-    log alpha_x, log alpha_y, angle]`` (metallic only for a blend, specular not for a metal)."""
+    """Principled parameters from a candidate's vector ``[base (nc), (metallic), (specular,
+    specular weight), log alpha_x, log alpha_y, angle]`` (metallic only for a blend, the
+    specular pair not for a metal)."""
     base = tuple(float(b) for b in np.clip(x[:nc], 0.0, 1.0))
     k = nc
     metallic = {"dielectric": 0.0, "metal": 1.0}.get(mode)
     if metallic is None:
         metallic = float(np.clip(x[k], 0.0, 1.0))
         k += 1
-    specular = 0.5  # unused by a pure metal; 0.5 is the dielectric default (F0 = 0.04)
+    specular, weight = 0.5, 1.0  # unused by a pure metal; the dielectric default (F0 = 0.04)
     if mode != "metal":
         specular = float(np.clip(x[k], SPECULAR_MIN, SPECULAR_MAX))
-        k += 1
+        weight = float(np.clip(x[k + 1], WEIGHT_MIN, 1.0))
+        k += 2
     ax = float(np.clip(math.exp(x[k]), ALPHA_MIN, ALPHA_MAX))
     ay = float(np.clip(math.exp(x[k + 1]), ALPHA_MIN, ALPHA_MAX))
     direction = math.degrees(float(x[k + 2]))
     if ay > ax:  # the tangent is the rougher axis
         ax, ay, direction = ay, ax, direction + 90.0
-    return Principled(base, metallic, specular, ax, ay, direction, channels)
+    return Principled(base, metallic, specular, ax, ay, direction, channels,
+                      specular_weight=weight)
 
 
 def _fit_candidate(start: Principled, mode: str, ref: list[FloatArray],
@@ -258,9 +275,10 @@ def _fit_candidate(start: Principled, mode: str, ref: list[FloatArray],
         hi_parts.append([1.0])
     if mode != "metal":
         x0_parts.append([float(np.clip(start.specular, SPECULAR_MIN + 1e-6,
-                                       SPECULAR_MAX - 1e-6))])
-        lo_parts.append([SPECULAR_MIN])
-        hi_parts.append([SPECULAR_MAX])
+                                       SPECULAR_MAX - 1e-6)),
+                         float(np.clip(start.specular_weight, WEIGHT_MIN + 1e-6, 1.0 - 1e-6))])
+        lo_parts.append([SPECULAR_MIN, WEIGHT_MIN])
+        hi_parts.append([SPECULAR_MAX, 1.0])
     lo_a, hi_a = math.log(ALPHA_MIN), math.log(ALPHA_MAX)
     x0_parts.append([math.log(start.alpha_t), math.log(start.alpha_b),
                      math.radians(start.direction_deg)])
@@ -331,4 +349,4 @@ def fit_principled_rendered(table: BRDFTable, start: Principled, *, max_nfev: in
         start.metrics.get("seconds", 0.0)), 3), rendered=diff.as_dict(), fit="rendered",
         table_fit_log_rmse=start.metrics.get("log_rmse"))
     return Principled(p.base_color, p.metallic, p.specular, p.alpha_t, p.alpha_b,
-                      p.direction_deg, p.channels, quality), diff
+                      p.direction_deg, p.channels, quality, p.specular_weight), diff

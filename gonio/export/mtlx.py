@@ -9,9 +9,13 @@ input                  value
 =====================  ======================================================================
 base, base_color       1, the fitted base colour
 metalness              metallic
-specular, _color       1, white
-specular_IOR           ``(1 + sqrt(F0)) / (1 - sqrt(F0))`` with the dielectric
-                       ``F0 = 0.08 specular`` (1.5 for a metal, where it is unused)
+specular               the dielectric's ``specular_weight`` (1 for a metal, where it is unused)
+specular_color         white
+specular_IOR           ``(1 + sqrt(L)) / (1 - sqrt(L))`` with the dielectric's level
+                       ``L = 0.08 specular`` (1.5 for a metal, where it is unused): the
+                       index whose normal-incidence reflectance ``((n - 1)/(n + 1))^2`` is
+                       ``L``; above 3 (``L`` 0.25, past the input's soft range) for a
+                       diffuse colour under a bright highlight (``L`` up to 0.9, IOR 37.9)
 specular_roughness     ``(alpha_t alpha_b)^(1/4)``
 specular_anisotropy    ``1 - alpha_b / alpha_t`` (MaterialX clamps it at 0.98)
 specular_rotation      ``((180 - direction_deg) mod 180) / 360``: MaterialX turns the tangent
@@ -28,6 +32,18 @@ the cross product reversed ("MaterialX follows v' = v * M"): the tangent ``x`` a
 is written negated (issue 26: written un-negated, the streak came out mirrored).
 ``tests/unit/export/test_mtlx_render.py`` renders the document's reading by that formula and
 checks the highlight's direction.
+
+**Specular strength.** The layer's reflectance is ``specular`` times the index's Fresnel
+factor (MaterialX's ``dielectric_bsdf``: ``weight`` times ``F(ior)``), so at normal
+incidence ``specular_weight 0.08 specular`` and at grazing angles ``specular_weight``, as in
+gonio's model and glTF's ``KHR_materials_specular``. ``specular_color`` (a tint of the
+reflection alone) stays white. Standard surface weighs the base under the specular layer
+by one minus the layer's directional albedo (MaterialX's ``dielectric_bsdf`` throughput),
+glTF by ``1 - F(v.h)``, and its dielectric Fresnel is the exact one of the index, glTF's
+Schlick's; gonio's own rendering follows glTF
+(:class:`gonio.brdf.models.principled.LayeredDiffuse`). Both reflect ``F0`` at normal
+incidence and give the base what the layer leaves; they part towards grazing angles.
+:func:`principled_from_inputs` reads the inputs back.
 
 The document is validated against MaterialX's standard library before it is written; the
 provenance (:mod:`gonio.export.metadata`) is the material's ``doc`` string, as JSON, and the
@@ -69,17 +85,67 @@ def standard_surface_inputs(p: Principled) -> dict[str, float | tuple[float, flo
             f"a MaterialX colour has three channels; these parameters have {len(p.base_color)} "
             f"({', '.join(p.channels)})"
         )
-    f0 = 0.08 * p.specular
-    s = math.sqrt(f0)
+    s = math.sqrt(min(0.08 * p.specular, 0.999))  # the fit stops at 0.9 (IOR 37.9)
     ior = (1.0 + s) / (1.0 - s) if p.metallic < 1.0 else 1.5
     r, g, b = p.base_color
     return {
         "base": 1.0, "base_color": (r, g, b), "metalness": p.metallic,
-        "specular": 1.0, "specular_color": (1.0, 1.0, 1.0), "specular_IOR": ior,
+        "specular": p.specular_weight if p.metallic < 1.0 else 1.0,
+        "specular_color": (1.0, 1.0, 1.0), "specular_IOR": ior,
         "specular_roughness": math.sqrt(math.sqrt(p.alpha_t * p.alpha_b)),
         "specular_anisotropy": min(0.98, max(0.0, 1.0 - p.alpha_b / p.alpha_t)),
         "specular_rotation": rotation_from_direction(p.direction_deg),
     }
+
+
+def principled_from_inputs(inputs: Mapping[str, Any]) -> Principled:
+    """Principled parameters from ``standard_surface`` input values written by
+    :func:`standard_surface_inputs` (the inverse of the module docstring's mapping:
+    ``F0 = ((IOR - 1)/(IOR + 1))^2``, ``alpha_t = r^2 / sqrt(1 - a)``, ``alpha_b = r^2
+    sqrt(1 - a)``, direction ``(180 - 360 specular_rotation) mod 180``).
+
+    Raises
+    ------
+    MtlxError
+        Values outside the model's ranges, or a ``specular_color`` other than white (gonio's
+        model has no tint).
+    """
+    from gonio.brdf.models.principled import PrincipledError
+
+    weight, tint = float(inputs["specular"]), tuple(float(c) for c in inputs["specular_color"])
+    if any(abs(c - 1.0) > 1e-6 for c in tint):
+        raise MtlxError(f"specular_color {tint}: gonio's principled model has no specular "
+                        "tint (white)")
+    metallic = float(inputs["metalness"])
+    ior = float(inputs["specular_IOR"])
+    level = ((ior - 1.0) / (ior + 1.0)) ** 2 if metallic < 1.0 else 0.04
+    r2 = float(inputs["specular_roughness"]) ** 2
+    aspect = math.sqrt(1.0 - float(inputs["specular_anisotropy"]))
+    direction = (180.0 - 360.0 * float(inputs["specular_rotation"])) % 180.0
+    try:
+        return Principled(tuple(float(c) for c in inputs["base_color"]), metallic, level / 0.08,
+                          r2 / aspect, r2 * aspect, direction,
+                          specular_weight=weight if metallic < 1.0 else 1.0)
+    except PrincipledError as exc:
+        raise MtlxError(f"not a gonio principled material: {exc}") from None
+
+
+def read_standard_surface(text: str) -> dict[str, Any]:
+    """The input values of the first ``standard_surface`` node of a MaterialX document (XML
+    text), colours as tuples."""
+    import MaterialX
+
+    doc = MaterialX.createDocument()
+    MaterialX.readFromXmlString(doc, text)
+    nodes = doc.getNodes("standard_surface")
+    if not nodes:
+        raise MtlxError("the document holds no standard_surface node")
+    node = nodes[0]
+    out: dict[str, Any] = {}
+    for inp in node.getInputs():
+        v = inp.getValue()
+        out[inp.getName()] = tuple(v.asTuple()) if hasattr(v, "asTuple") else v
+    return out
 
 
 def _library() -> Any:

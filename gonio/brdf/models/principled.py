@@ -3,10 +3,20 @@
 The parameters renderers take: base colour, metallic, specular, roughness, anisotropy strength
 and direction. They describe, as in :func:`gonio.brdf.models.analytic.principled` and 004 App. A.3,
 
-* a Lambert term ``(1 - metallic) base / pi``;
-* an anisotropic GGX lobe with separable Smith masking and Schlick Fresnel of ``wi.h`` with
-  ``F0 = mix(0.08 specular, base, metallic)`` per channel (``specular = 0.5`` gives the
-  dielectric ``F0 = 0.04`` of 004 Eq. 9; Burley 2012 scales it so);
+* a Lambert term ``(1 - metallic) (1 - F_d(wi.h)) base / pi``, weighted by what the
+  dielectric specular layer leaves: glTF 2.0's ``fresnel_mix`` (Appendix B and
+  ``KHR_materials_specular``), which the exports are;
+* an anisotropic GGX lobe with separable Smith masking and the Fresnel factor
+  ``(1 - metallic) F_d(wi.h) + metallic S(base, wi.h)`` per channel, ``S(F0, c) = F0 + (1 -
+  F0)(1 - c)^5`` Schlick's, with the dielectric's ``F_d = specular_weight S(0.08 specular, c)``:
+  normal-incidence reflectance ``specular_weight 0.08 specular``, grazing ``specular_weight``
+  (``specular = 0.5``, weight 1 give the dielectric ``F0 = 0.04`` of 004 Eq. 9; Burley 2012
+  scales it so). With weight 1 this is Schlick's Fresnel of ``F0 = mix(0.08 specular, base,
+  metallic)``. ``specular`` runs from 0 to :data:`SPECULAR_LEVEL_MAX` = 12.5: above Burley's 1
+  (``F0`` 0.08) the same linear map goes on to ``F0 = 1``. In glTF's
+  ``KHR_materials_specular`` the weight is ``specularFactor`` and ``specular`` is
+  ``specularColorFactor / 2`` (a diffuse colour under a bright highlight, a coated or dusty
+  metal, is a high level, possibly with a weight below 1; issue 26);
 * roughnesses ``alpha_t`` along the tangent and ``alpha_b`` across it, with the tangent at
   azimuth ``direction`` in the specimen frame (from the holder mark, counter-clockwise).
 
@@ -43,10 +53,50 @@ FloatArray = NDArray[np.float64]
 #: Burley's aspect ratio bound: anisotropy 1 means alpha_t / alpha_b = 10.
 MAX_RATIO = 10.0
 ALPHA_MIN, ALPHA_MAX = 1e-3, 2.0
+#: Largest ``specular``: ``F0 = 0.08 specular`` reaches 1.
+SPECULAR_LEVEL_MAX = 12.5
 
 
 class PrincipledError(ValueError):
     """Principled parameters out of range, or a table that cannot be fitted."""
+
+
+def schlick(f0: float | FloatArray, cos_d: FloatArray) -> FloatArray:
+    """Schlick's Fresnel ``F0 + (1 - F0)(1 - cos)^5`` of (N,) cosines (clipped to [0, 1])."""
+    c = np.clip(cos_d, 0.0, 1.0)
+    return np.asarray(f0 + (1.0 - np.asarray(f0)) * (1.0 - c) ** 5, dtype=float)
+
+
+@dataclass(frozen=True)
+class LayeredDiffuse:
+    """Lambert under a dielectric specular layer: ``(1 - weight S(f0, wi.h)) albedo / pi``.
+
+    ``S`` is Schlick's Fresnel of the grey ``f0``: the diffuse gets what the specular layer
+    does not reflect, as glTF 2.0's ``fresnel_mix`` weighs it (``base`` with ``1 - weight
+    max_value(fr)``, ``KHR_materials_specular``).
+
+    Parameters
+    ----------
+    albedo : (C,) floats in [0, 1]
+    f0 : float in [0, 1]
+    weight : float in [0, 1]
+    """
+
+    albedo: tuple[float, ...]
+    f0: float
+    weight: float = 1.0
+    channels: tuple[str, ...] = bm.RGB
+    name: str = "layered-diffuse"
+    isotropic: bool = True
+
+    def eval(self, wi: Any, wo: Any) -> FloatArray:
+        """(..., 3) + (..., 3) unit vectors -> (..., C) in 1/sr; 0 below the horizon."""
+        i, o = np.broadcast_arrays(np.asarray(wi, dtype=float), np.asarray(wo, dtype=float))
+        lam = bm.Lambert(self.albedo, channels=self.channels).eval(i, o)
+        h = i + o
+        h = h / np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), 1e-300)
+        keep = 1.0 - self.weight * schlick(self.f0, np.sum(i * h, axis=-1))
+        return np.asarray(lam * keep[..., None], dtype=float)
 
 
 @dataclass(frozen=True)
@@ -56,7 +106,10 @@ class Principled:
     Parameters
     ----------
     base_color : (C,) floats in [0, 1]
-    metallic, specular : float in [0, 1]
+    metallic : float in [0, 1]
+    specular : float in [0, 12.5]
+        Dielectric ``F0 = 0.08 specular`` before the weight (Burley's range is [0, 1]; above
+        it, module docstring).
     alpha_t, alpha_b : float in [1e-3, 2], ``alpha_t >= alpha_b``
         GGX roughness along and across the tangent.
     direction_deg : float in [0, 180)
@@ -64,6 +117,9 @@ class Principled:
     channels : tuple of str
     metrics : mapping
         Fit error against the fitted table and fit timing.
+    specular_weight : float in [0, 1]
+        Weight of the dielectric's specular layer (its reflectance at grazing angles; module
+        docstring); 1 is Burley's model.
     """
 
     base_color: tuple[float, ...]
@@ -74,6 +130,7 @@ class Principled:
     direction_deg: float
     channels: tuple[str, ...] = bm.RGB
     metrics: Mapping[str, Any] = field(default_factory=dict)
+    specular_weight: float = 1.0
 
     def __post_init__(self) -> None:
         base = tuple(float(b) for b in self.base_color)
@@ -83,7 +140,8 @@ class Principled:
             )
         for what, vals, lo, hi in (
             ("base_color", base, 0.0, 1.0), ("metallic", (self.metallic,), 0.0, 1.0),
-            ("specular", (self.specular,), 0.0, 1.0),
+            ("specular", (self.specular,), 0.0, SPECULAR_LEVEL_MAX),
+            ("specular_weight", (self.specular_weight,), 0.0, 1.0),
             ("alpha_t", (self.alpha_t,), ALPHA_MIN, ALPHA_MAX),
             ("alpha_b", (self.alpha_b,), ALPHA_MIN, ALPHA_MAX),
         ):
@@ -110,27 +168,48 @@ class Principled:
         return float(min(1.0, (1.0 - self.alpha_b / self.alpha_t) / 0.9))
 
     @property
+    def dielectric_f0(self) -> float:
+        """The dielectric part's normal-incidence reflectance ``specular_weight 0.08
+        specular`` (grey)."""
+        return self.specular_weight * min(1.0, 0.08 * self.specular)
+
+    @property
     def f0(self) -> tuple[float, ...]:
         """Normal-incidence specular reflectance per channel."""
-        s = 0.08 * self.specular
+        s = self.dielectric_f0
         return tuple(s + (b - s) * self.metallic for b in self.base_color)
 
     def model(self, name: str = "principled") -> bm.LobeSum:
         """The analytic model these parameters describe."""
-        spec = bm.GGX(self.alpha_t, self.alpha_b, bm.SchlickFresnel(self.f0), "separable",
-                      channels=self.channels, name=f"{name}/spec")
-        diffuse = bm.Lambert(tuple((1.0 - self.metallic) * b for b in self.base_color),
-                             channels=self.channels, name=f"{name}/diffuse")
-        return bm.LobeSum(
-            (diffuse, bm.Rotated(spec, math.radians(self.direction_deg))),
-            channels=self.channels, name=name,
-        )
+        def lobe(f0: tuple[float, ...], what: str) -> bm.Rotated:
+            spec = bm.GGX(self.alpha_t, self.alpha_b, bm.SchlickFresnel(f0), "separable",
+                          channels=self.channels, name=f"{name}/{what}")
+            return bm.Rotated(spec, math.radians(self.direction_deg))
+
+        level = min(1.0, 0.08 * self.specular)
+        diffuse = LayeredDiffuse(tuple((1.0 - self.metallic) * b for b in self.base_color),
+                                 level, self.specular_weight, channels=self.channels,
+                                 name=f"{name}/diffuse")
+        lobes: list[Any] = [diffuse]
+        weights: list[float] = [1.0]
+        if self.specular_weight == 1.0 or self.metallic == 1.0:
+            # Schlick's Fresnel is linear in F0: one lobe of F0 = mix(level, base, metallic)
+            lobes.append(lobe(self.f0, "spec"))
+            weights.append(1.0)
+        else:
+            lobes.append(lobe((level,) * len(self.channels), "dielectric"))
+            weights.append((1.0 - self.metallic) * self.specular_weight)
+            if self.metallic > 0.0:
+                lobes.append(lobe(self.base_color, "metal"))
+                weights.append(self.metallic)
+        return bm.LobeSum(tuple(lobes), weights, channels=self.channels, name=name)
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready parameters, derived renderer values included (angles in degrees)."""
         return {
             "base_color": list(self.base_color), "metallic": self.metallic,
-            "specular": self.specular, "roughness": self.roughness,
+            "specular": self.specular, "specular_weight": self.specular_weight,
+            "roughness": self.roughness,
             "anisotropy": self.anisotropy, "direction_deg": self.direction_deg,
             "alpha_t": self.alpha_t, "alpha_b": self.alpha_b, "f0": list(self.f0),
             "channels": list(self.channels), "metrics": dict(self.metrics),
@@ -144,6 +223,7 @@ class Principled:
                 tuple(d["base_color"]), float(d["metallic"]), float(d["specular"]),
                 float(d["alpha_t"]), float(d["alpha_b"]), float(d["direction_deg"]),
                 tuple(d.get("channels", bm.RGB)), d.get("metrics", {}),
+                float(d.get("specular_weight", 1.0)),  # 1 before issue 26's weight
             )
         except (KeyError, TypeError) as exc:
             raise PrincipledError(f"malformed principled parameters ({exc})") from None
@@ -261,7 +341,8 @@ def fit_principled(table: BRDFTable, *, n_cells: int = 12000, seed: int = 0) -> 
         c = np.clip(np.sum(i * h, axis=1), 0.0, 1.0)[:, None]
         fres = f0[None, :] + (1.0 - f0[None, :]) * (1.0 - c) ** 5
         spec = (d * g / (4.0 * i[:, 2] * o[:, 2]))[:, None] * fres
-        return np.asarray((1 - m) * base[None, :] / np.pi + spec, dtype=float)
+        keep = 1.0 - schlick(0.08 * s, c)  # LayeredDiffuse
+        return np.asarray((1 - m) * base[None, :] * keep / np.pi + spec, dtype=float)
 
     def resid(p: FloatArray) -> FloatArray:
         return np.asarray((sw * (np.log1p(predict(p) * cos_i) - target)).ravel(), dtype=float)

@@ -19,6 +19,8 @@ GLTF_DIR = Path(__file__).resolve().parents[2] / "gltf"
 BRUSHED = Principled((0.9, 0.8, 0.6), 1.0, 0.5, 0.40, 0.10, 30.0)
 PLASTIC = Principled((0.6, 0.2, 0.1), 0.0, 0.8, 0.09, 0.09, 0.0)
 PROV = {"job_id": 7, "specimen": "felt", "factored_fit": {"rel_mse": 0.02}}
+#: A red diffuse under a strong white highlight (a coated metal): level 0.88, weight 0.6.
+COATED = Principled((0.45, 0.09, 0.09), 0.0, 11.0, 0.35, 0.06, 120.0, specular_weight=0.6)
 
 
 def test_gltf_parameters() -> None:
@@ -39,6 +41,32 @@ def test_gltf_parameters() -> None:
     assert 0.04 * spec["specularColorFactor"][0] == pytest.approx(0.08 * 0.8)
 
 
+def test_gltf_specular_strength_follows_khr_materials_specular() -> None:
+    """The F0 and F90 that KHR_materials_specular defines for the written factors
+    (``dielectric_f0 = min(0.04 specularColorFactor, 1) specularFactor``, ``dielectric_f90 =
+    specularFactor``, glTF's default IOR 1.5 giving the 0.04) are the model's: at normal
+    incidence ``0.6 x 0.88``, at grazing 0.6. Reading the material back gives the parameters."""
+    m = gltf.gltf_document(COATED, "c", PROV)["materials"][0]
+    spec = m["extensions"]["KHR_materials_specular"]
+    colour, factor = np.asarray(spec["specularColorFactor"]), spec["specularFactor"]
+    f0 = np.minimum(0.04 * colour, 1.0) * factor
+    assert np.allclose(f0, 0.6 * 0.88) and factor == pytest.approx(0.6)
+    assert np.allclose(f0, COATED.f0)
+    assert m["pbrMetallicRoughness"]["metallicFactor"] == 0.0
+    for p in (BRUSHED, PLASTIC, COATED):
+        back = gltf.principled_from_gltf(gltf.gltf_document(p, "x", PROV)["materials"][0])
+        assert back.specular_weight == pytest.approx(p.specular_weight)
+        assert back.dielectric_f0 == pytest.approx(p.dielectric_f0)
+        for a, b in ((back.alpha_t, p.alpha_t), (back.alpha_b, p.alpha_b),
+                     (back.direction_deg, p.direction_deg), (back.metallic, p.metallic)):
+            assert a == pytest.approx(b, rel=1e-9, abs=1e-9)
+        assert np.allclose(back.base_color, p.base_color)
+    tinted = json.loads(json.dumps(m))
+    tinted["extensions"]["KHR_materials_specular"]["specularColorFactor"] = [20.0, 10.0, 5.0]
+    with pytest.raises(gltf.GltfError, match="grey"):
+        gltf.principled_from_gltf(tinted)
+
+
 def _validate(path: Path) -> dict:
     node = shutil.which("node")
     if node is None:
@@ -52,7 +80,7 @@ def _validate(path: Path) -> dict:
 
 
 def test_gltf_passes_the_khronos_validator(tmp_path: Path) -> None:
-    for p in (BRUSHED, PLASTIC):
+    for p in (BRUSHED, PLASTIC, COATED):
         path = gltf.write_gltf(p, tmp_path / "m.gltf", "m", PROV)
         report = _validate(path)
         errors = [m for m in report["issues"]["messages"] if m["severity"] == 0]

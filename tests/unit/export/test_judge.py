@@ -94,15 +94,42 @@ def test_rendered_flip_runs_on_one_openmp_thread_with_the_same_result() -> None:
     assert [p["num_threads"] for p in threadpool_info() if p["user_api"] == "openmp"] == before
 
 
-def test_a_two_lobe_material_warns_and_points_to_the_factored_export() -> None:
-    """A red diffuse under a white metallic highlight (a coated metal, two lobes): principled
-    ties a metal's F0 to its base colour and bounds a dielectric's at 0.08, so no principled
-    material shows both (docs/export.md); the export says so and names the factored model.
-    A principled plastic, which one lobe does show, gets no such warning."""
+def test_a_diffuse_under_a_white_highlight_fits_a_strong_specular() -> None:
+    """A red diffuse under a white metallic highlight (a coated or dusty metal: two lobes, of
+    which the highlight has F0 0.55) was out of reach while a dielectric's F0 stopped at 0.08
+    (issue 26). With the free specular strength the rendered fit finds a dielectric whose F0
+    is near the highlight's, far above a plastic's (F0 0.04), renders close to the table and
+    draws no two-lobe warning."""
     from gonio.export import fit_all, fit_warnings
 
     white = bm.GGX(0.35, 0.06, bm.SchlickFresnel((0.55, 0.55, 0.55)), "separable")
     blend = bm.LobeSum((bm.Lambert((0.20, 0.04, 0.04)), bm.Rotated(white, np.radians(30.0))))
+    fits = fit_all(bm.tabulate(blend, np.float64))
+    p = fits.principled
+    plastic = fit_all(bm.tabulate(PLASTIC.model(), np.float64)).principled
+    print(f"blend: metallic {p.metallic}, F0 {p.dielectric_f0:.3f}, base {p.base_color}; "
+          f"plastic F0 {plastic.dielectric_f0:.3f}")
+    assert p.metallic == 0.0 and plastic.metallic == 0.0
+    assert p.dielectric_f0 == pytest.approx(0.55, rel=0.15)
+    assert plastic.dielectric_f0 == pytest.approx(0.04, rel=0.15)
+    # The diffuse keeps its red: the base under a layer that reflects F0 is brighter by
+    # about 1 / (1 - F0) (glTF's fresnel_mix), with the same hue.
+    assert p.base_color[0] > 3 * max(p.base_color[1:])
+    assert p.base_color[0] == pytest.approx(0.20 / (1 - 0.55), rel=0.25)
+    assert not fits.principled.metrics["rendered"]["value"] > judge.WARN_FLIP
+    assert not any("cannot show" in w for w in fit_warnings(fits))
+
+
+def test_a_two_lobe_material_warns_and_points_to_the_factored_export() -> None:
+    """A blue diffuse under a gold metallic highlight (a metallic paint: two lobes of
+    different hue): principled ties a metal's F0 to its base colour and gives a dielectric a
+    grey F0, so no principled material shows both (docs/export.md); the export says so and
+    names the factored model. A principled plastic, which one lobe does show, gets no such
+    warning."""
+    from gonio.export import fit_all, fit_warnings
+
+    gold = bm.GGX(0.35, 0.06, bm.SchlickFresnel((0.9, 0.55, 0.1)), "separable")
+    blend = bm.LobeSum((bm.Lambert((0.02, 0.06, 0.40)), bm.Rotated(gold, np.radians(30.0))))
     fits = fit_all(bm.tabulate(blend, np.float64))
     warned = [w for w in fit_warnings(fits) if "cannot show this material" in w]
     assert len(warned) == 1 and "'factored'" in warned[0]

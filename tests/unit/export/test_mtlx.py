@@ -65,3 +65,27 @@ def test_mtlx_dielectric_ior_from_specular() -> None:
     assert ((ior - 1) / (ior + 1)) ** 2 == pytest.approx(0.08 * 0.8)  # Fresnel at normal
     with pytest.raises(mtlx.MtlxError, match="three channels"):
         mtlx.standard_surface_inputs(Principled((0.5,), 0.0, 0.5, 0.2, 0.2, 0.0, ("Y",)))
+
+
+def test_mtlx_specular_strength_round_trips(tmp_path: Path) -> None:
+    """A strong, weighted dielectric layer: ``specular_IOR`` is the index whose
+    normal-incidence Fresnel reflectance ``((n - 1)/(n + 1))^2`` is the level 0.88 (IOR 15.6,
+    past the input's soft maximum of 3, which validation allows), ``specular`` the weight 0.6,
+    so MaterialX's dielectric layer reflects ``weight F(ior)``: 0.6 x 0.88 at normal incidence
+    as in gonio's model. The written document reads back to the same parameters."""
+    coated = Principled((0.45, 0.09, 0.09), 0.0, 11.0, 0.35, 0.06, 120.0, specular_weight=0.6)
+    inputs = mtlx.standard_surface_inputs(coated)
+    ior = float(inputs["specular_IOR"])  # type: ignore[arg-type]
+    assert ((ior - 1) / (ior + 1)) ** 2 == pytest.approx(0.88)
+    assert inputs["specular"] == pytest.approx(0.6)
+    assert inputs["specular"] * ((ior - 1) / (ior + 1)) ** 2 == pytest.approx(coated.f0[0])
+    for p in (BRUSHED, PLASTIC, coated):
+        path = mtlx.write_mtlx(p, tmp_path / "c.mtlx", "coated", PROV)  # validated
+        back = mtlx.principled_from_inputs(mtlx.read_standard_surface(path.read_text()))
+        assert back.specular_weight == pytest.approx(p.specular_weight, rel=1e-6)
+        assert back.dielectric_f0 == pytest.approx(p.dielectric_f0, rel=1e-5)
+        assert (back.alpha_t, back.alpha_b) == pytest.approx((p.alpha_t, p.alpha_b), rel=1e-5)
+        assert back.direction_deg == pytest.approx(p.direction_deg, abs=1e-3)
+        assert np.allclose(back.base_color, p.base_color, atol=1e-6)
+    with pytest.raises(mtlx.MtlxError, match="tint"):
+        mtlx.principled_from_inputs({**inputs, "specular_color": (1.0, 0.5, 0.5)})

@@ -182,3 +182,40 @@ def test_three_js_recovers_an_isotropic_roughness(browser: Any, server: tuple[st
                                                                                 ours)
         widths.append(theirs.major_px)
     assert widths[1] > 1.5 * widths[0]
+
+
+def test_three_js_reads_a_specular_strength_above_glass(browser: Any, server: tuple[str, Path]
+                                                        ) -> None:
+    """A dielectric with F0 = 0.4 (``KHR_materials_specular`` ``specularColorFactor`` 10,
+    above the extension's 1) loads and renders in three.js as the extension defines it, and
+    as gonio's picture shows it. Under a flash ``v.h = 1`` everywhere, so glTF's Fresnel is
+    ``F0 = min(0.04 specularColor, 1) specularFactor`` at every pixel: the diffuse base away
+    from the highlight is ``(1 - F0) base cos / pi`` (``fresnel_mix``), and the highlight
+    above it grows with ``F0``, tenfold from glTF's default 0.04."""
+    base, models = server
+    flash = render.PointLight(0.0, 0.0)
+    f0s = {"glass": 0.04, "strong": 0.4}
+    seen: dict[str, dict[str, tuple[float, float]]] = {}
+    c = slice(SIZE // 2 - 3, SIZE // 2 + 3)
+    row, col = SIZE // 2, int(SIZE / 2 * 1.7)  # 0.7 of the radius right: no highlight there
+    for label, f0 in f0s.items():
+        p = Principled((0.5, 0.5, 0.5), 0.0, f0 / 0.08, 0.05, 0.05, 0.0)  # a tight lobe
+        name = f"spec-{label}.gltf"
+        gltf.write_gltf(p, models / name, "coated", {"specimen": "test"}, with_mesh=True)
+        assert ("KHR_materials_specular" in (models / name).read_text()) == (label == "strong")
+        img, _ = three_render(browser, base, name, flash)
+        assert np.isfinite(img).all() and img.max() > 0, "three.js rendered nothing"
+        ours = gonio_render(p, flash)
+        seen[label] = {"diffuse": (float(img[row, col, 0]), float(ours[row, col, 0])),
+                       "peak": (float(img[c, c, 0].max()), float(ours[c, c, 0].max()))}
+    print(f"(three.js, gonio): {seen}")
+    # glTF's diffuse under a flash: (1 - F0) base cos(theta) / pi, irradiance 1 (render.html)
+    cos_t = np.sqrt(1.0 - 0.7**2)
+    for label, f0 in f0s.items():
+        expected = (1.0 - f0) * 0.5 * cos_t / np.pi
+        # the pixel's centre lies within half a pixel of 0.7 of the radius: 2 %
+        assert seen[label]["diffuse"][0] == pytest.approx(expected, rel=0.02), label
+        assert seen[label]["diffuse"][1] == pytest.approx(seen[label]["diffuse"][0], rel=0.02)
+    for who in (0, 1):  # the highlight above the centre's diffuse (the same cos there: 1)
+        spec = {k: seen[k]["peak"][who] - (1.0 - f) * 0.5 / np.pi for k, f in f0s.items()}
+        assert spec["strong"] / spec["glass"] == pytest.approx(10.0, rel=0.05), (who, spec)

@@ -58,3 +58,43 @@ def test_parameters_and_round_trip() -> None:
         pr.Principled((0.5, 0.5, 0.5), 1.5, 0.5, 0.4, 0.1, 0.0)
     with pytest.raises(pr.PrincipledError, match="malformed"):
         pr.Principled.from_dict({"base_color": [0.5]})
+
+
+def test_specular_strength_and_weight_round_trip_and_bounds() -> None:
+    p = pr.Principled((0.4, 0.1, 0.1), 0.0, 11.0, 0.3, 0.06, 20.0, specular_weight=0.6)
+    assert p.dielectric_f0 == pytest.approx(0.6 * 0.08 * 11.0)
+    assert pr.Principled.from_dict(p.as_dict()) == p
+    old = p.as_dict()
+    del old["specular_weight"]  # a result stored before the weight existed
+    assert pr.Principled.from_dict(old).specular_weight == 1.0
+    with pytest.raises(pr.PrincipledError, match="specular ="):
+        pr.Principled((0.5, 0.5, 0.5), 0.0, 13.0, 0.2, 0.2, 0.0)  # F0 = 1.04
+    with pytest.raises(pr.PrincipledError, match="specular_weight"):
+        pr.Principled((0.5, 0.5, 0.5), 0.0, 0.5, 0.2, 0.2, 0.0, specular_weight=1.2)
+
+
+@pytest.mark.parametrize("metallic", [0.0, 0.3, 1.0])
+def test_model_is_gltfs_metallic_roughness_brdf(metallic: float) -> None:
+    """gonio's principled model is glTF 2.0's BRDF (Appendix B) with
+    ``KHR_materials_specular``, written here from the specification:
+    ``mix(dielectric_brdf, metal_brdf, metallic)``, ``dielectric_brdf = fresnel_mix(...) =
+    weight fr S + (1 - weight max_value(fr)) base / pi`` with ``fr = f0 + (1 - f0)(1 -
+    v.h)^5``, ``f0 = min(0.04 specularColor, 1)``, and ``metal_brdf = (base + (1 - base)(1 -
+    v.h)^5) S``, ``S`` the GGX lobe without Fresnel."""
+    base, level, weight = np.array([0.5, 0.2, 0.1]), 0.88, 0.6
+    p = pr.Principled(tuple(base), metallic, level / 0.08, 0.3, 0.06, 20.0,
+                      specular_weight=weight)
+    rng = np.random.default_rng(3)
+    w = rng.normal(size=(2, 500, 3))
+    w[..., 2] = np.abs(w[..., 2]) + 0.05
+    wi, wo = w / np.linalg.norm(w, axis=-1, keepdims=True)
+    lobe = bm.Rotated(bm.GGX(0.3, 0.06, bm.SchlickFresnel((1.0, 1.0, 1.0)), "separable"),
+                      math.radians(20.0))
+    s = lobe.eval(wi, wo)[:, 0:1]
+    h = (wi + wo) / np.linalg.norm(wi + wo, axis=-1, keepdims=True)
+    k = (1.0 - np.sum(wo * h, axis=-1, keepdims=True)) ** 5
+    fr = level + (1.0 - level) * k
+    dielectric = weight * fr * s + (1.0 - weight * fr) * base / np.pi
+    metal = (base + (1.0 - base) * k) * s
+    expected = (1.0 - metallic) * dielectric + metallic * metal
+    np.testing.assert_allclose(p.model().eval(wi, wo), expected, rtol=1e-9, atol=1e-12)
