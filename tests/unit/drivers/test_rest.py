@@ -27,35 +27,21 @@ class Axis:
         return to
 
 
-def test_without_an_approach_side_the_last_rest_position_stands_in_for_a_read() -> None:
+@pytest.mark.parametrize(("approach", "backlash_deg", "stands_in"), [
+    ("none", 0.5, True),  # no approach side: the overshoot is never used
+    ("positive", 0.0, True),  # no overshoot, whatever the side
+    ("positive", 0.5, False),  # the start decides whether an overshoot leg is needed
+    ("negative", 0.2, False),
+])
+def test_the_rest_position_stands_in_for_a_read_only_without_an_overshoot(
+        approach: str, backlash_deg: float, stands_in: bool) -> None:
     async def main() -> None:
-        axis, rest = Axis(5.0), RestPosition("none", 0.5)
+        axis, rest = Axis(5.0), RestPosition(approach, backlash_deg)
         assert await rest.start(axis.read) == 5.0  # nothing known yet: read
         assert await rest.track(axis.move(30.0)) == 30.0
         axis.at = 31.0  # where a read would say it is now
-        assert await rest.start(axis.read) == 30.0
-        assert axis.reads == 1
-
-    asyncio.run(main())
-
-
-def test_with_no_overshoot_the_rest_position_stands_in_whatever_the_side() -> None:
-    async def main() -> None:
-        axis, rest = Axis(0.0), RestPosition("positive", 0.0)
-        await rest.track(axis.move(12.0))
-        assert await rest.start(axis.read) == 12.0
-        assert axis.reads == 0
-
-    asyncio.run(main())
-
-
-def test_with_an_approach_side_and_an_overshoot_the_start_is_always_read() -> None:
-    async def main() -> None:
-        axis, rest = Axis(0.0), RestPosition("positive", 0.5)
-        await rest.track(axis.move(12.0))
-        axis.at = 11.0
-        assert await rest.start(axis.read) == 11.0
-        assert axis.reads == 1
+        assert await rest.start(axis.read) == (30.0 if stands_in else 31.0)
+        assert axis.reads == (1 if stands_in else 2)
 
     asyncio.run(main())
 

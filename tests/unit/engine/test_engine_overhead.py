@@ -254,6 +254,26 @@ def test_the_checkpoint_is_written_while_the_stage_moves_on_and_before_what_foll
     assert eng.progress.done == 4
 
 
+def _fill_the_disk() -> None:
+    """Raise what SQLite raises on a full disk (SQLITE_FULL)."""
+    tiny = sqlite3.connect(":memory:")
+    tiny.execute("CREATE TABLE t (x BLOB)")
+    tiny.execute("PRAGMA max_page_count = 2")
+    tiny.execute("INSERT INTO t VALUES (zeroblob(100000))")
+
+
+def _fails_for_a_full_disk(rig: MemRig, plan: UniformPlan, store: JobStore) -> None:
+    """Run ``plan`` on ``rig`` into ``store``: the job fails, saying the disk is full."""
+    desc = RigDescription.from_rig(rig)
+    job = store.create_job(kind=plan.kind, specimen="s", plan=plan.model_dump(mode="json"),
+                           rig=desc.model_dump(mode="json"))
+    with pytest.raises(sqlite3.OperationalError):
+        asyncio.run(ScanEngine(rig, store, job.id, plan, desc).run())
+    got = store.get_job(job.id)
+    assert got.state == JobState.FAILED.value
+    assert got.reason is not None and got.reason.startswith("disk full: ")
+
+
 class FullAtStore(JobStore):
     """A store whose checkpoint of angle ``full_at`` fails as SQLite does on a full disk."""
 
@@ -263,26 +283,14 @@ class FullAtStore(JobStore):
 
     def commit_angle(self, job_id: int, angle_index: int, *args: Any, **kwargs: Any) -> Any:
         if angle_index == self.full_at:
-            tiny = sqlite3.connect(":memory:")
-            tiny.execute("CREATE TABLE t (x BLOB)")
-            tiny.execute("PRAGMA max_page_count = 2")
-            tiny.execute("INSERT INTO t VALUES (zeroblob(100000))")  # raises SQLITE_FULL
+            _fill_the_disk()
         return super().commit_angle(job_id, angle_index, *args, **kwargs)
 
 
 def test_a_checkpoint_refused_for_a_full_disk_fails_the_job_keeping_what_was_stored() -> None:
     rig = MemRig()
-    plan = UniformPlan(rotations=4, exposure=EXPOSURE)
-    desc = RigDescription.from_rig(rig)
     store = FullAtStore(full_at=1)
-    job = store.create_job(kind=plan.kind, specimen="s", plan=plan.model_dump(mode="json"),
-                           rig=desc.model_dump(mode="json"))
-    eng = ScanEngine(rig, store, job.id, plan, desc)
-    with pytest.raises(sqlite3.OperationalError):
-        asyncio.run(eng.run())
-    got = store.get_job(job.id)
-    assert got.state == JobState.FAILED.value
-    assert got.reason is not None and got.reason.startswith("disk full: ")
+    _fails_for_a_full_disk(rig, UniformPlan(rotations=4, exposure=EXPOSURE), store)
     # Angle 0 stays stored; angle 1 was never reported; the lamps are off, the stage stopped.
     assert [s.done for s in store.steps(1)] == [True, False, False, False]
     assert store.reading_count(1) == 3
@@ -352,26 +360,14 @@ class DarkFullStore(JobStore):
     """A store whose dark fails as SQLite does on a full disk."""
 
     def add_darks(self, job_id: int, angle_index: int, darks: Any) -> None:
-        tiny = sqlite3.connect(":memory:")
-        tiny.execute("CREATE TABLE t (x BLOB)")
-        tiny.execute("PRAGMA max_page_count = 2")
-        tiny.execute("INSERT INTO t VALUES (zeroblob(100000))")  # raises SQLITE_FULL
+        _fill_the_disk()
 
 
 def test_a_dark_refused_for_a_full_disk_fails_the_job_before_any_checkpoint() -> None:
     rig = MemRig()
-    plan = UniformPlan(rotations=3, exposure=ExposureSettings(
-        exposure_s=0.02, light_settle_s=0.0, dark="once"))
-    desc = RigDescription.from_rig(rig)
     store = DarkFullStore(":memory:")
-    job = store.create_job(kind=plan.kind, specimen="s", plan=plan.model_dump(mode="json"),
-                           rig=desc.model_dump(mode="json"))
-    eng = ScanEngine(rig, store, job.id, plan, desc)
-    with pytest.raises(sqlite3.OperationalError):
-        asyncio.run(eng.run())
-    got = store.get_job(job.id)
-    assert got.state == JobState.FAILED.value
-    assert got.reason is not None and got.reason.startswith("disk full: ")
+    _fails_for_a_full_disk(rig, UniformPlan(rotations=3, exposure=ExposureSettings(
+        exposure_s=0.02, light_settle_s=0.0, dark="once")), store)
     # The planned steps stay; no reading of the angle whose dark was lost was reported.
     assert [s.done for s in store.steps(1)] == [False] * 3
     assert store.reading_count(1) == 0
