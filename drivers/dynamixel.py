@@ -31,6 +31,7 @@ import serial
 
 from gonio.drivers._arrival import poll_delay
 from gonio.drivers._ownership import bus_lock, claim
+from gonio.drivers._rest import RestPosition
 from gonio.drivers._stage_settings import check_motion_settings, check_target
 from gonio.hal import DeviceInUse, DeviceUnavailable, StageFault, StageStatus, TravelLimits
 from gonio.hal import Stage as _Stage
@@ -240,9 +241,8 @@ class DynamixelStage(_Stage):
         self._lock = bus_lock(port)
         self._op_lock = asyncio.Lock()
         self._homed = False
-        # Where the last move came to rest, degrees; None once anything else may have moved
-        # the servo (see move_to).
-        self._rest_deg: float | None = None
+        # Where the last move came to rest (gonio.drivers._rest).
+        self._rest = RestPosition(self.approach, self.backlash_deg)
         self.model_number: int | None = None
 
     def _profile_units(self, what: str, value: float, units_per_stage_unit: float) -> int:
@@ -401,7 +401,7 @@ class DynamixelStage(_Stage):
 
     # ------------------------------------------------------------------ Device
     async def connect(self) -> None:
-        self._rest_deg = None
+        self._rest.forget()
         if self._claim is None:
             self._claim = claim(self.name, self.port)
         try:
@@ -455,7 +455,7 @@ class DynamixelStage(_Stage):
         await self._write("torque on", ADDR_TORQUE_ENABLE, 1, 1)
 
     async def close(self) -> None:
-        self._rest_deg = None
+        self._rest.forget()
         ph, self._ph = self._ph, None
         if ph is not None:
             def _close() -> None:
@@ -476,7 +476,7 @@ class DynamixelStage(_Stage):
 
     async def home(self) -> None:
         """Make the present position the 0-degree reference (stored in Homing Offset)."""
-        self._rest_deg = None
+        self._rest.forget()
         async with self._op_lock:
             await self._write("torque off", ADDR_TORQUE_ENABLE, 1, 0)
             present = await self._counts()
@@ -497,23 +497,12 @@ class DynamixelStage(_Stage):
             self._homed = True
 
     async def move_to(self, angle_deg: float, timeout_s: float | None = None) -> float:
-        try:
-            actual = await self._move(angle_deg, timeout_s)
-        except BaseException:
-            self._rest_deg = None
-            raise
-        self._rest_deg = actual
-        return actual
+        return await self._rest.track(self._move(angle_deg, timeout_s))
 
     async def _move(self, angle_deg: float, timeout_s: float | None) -> float:
-        if self._rest_deg is not None and (self.approach == "none" or self.backlash_deg <= 0):
-            # Without an approach side the start position only times the completion polls,
-            # so the rest position of the previous move saves a transaction; a wrong guess
-            # costs a few extra polls, never a wrong arrival (that compares Present Position
-            # with the goal).
-            current = self._rest_deg
-        else:
-            current = await self.position()
+        # The last rest position may save a transaction (the arrival compares Present
+        # Position with the goal, so a wrong guess never makes a wrong arrival).
+        current = await self._rest.start(self.position)
         waypoints = approach_waypoints(current, angle_deg, self.approach, self.backlash_deg)
         check_target(self.name, self.limits, angle_deg, waypoints)
         limit = self.move_timeout_s if timeout_s is None else float(timeout_s)
@@ -573,7 +562,7 @@ class DynamixelStage(_Stage):
 
     async def stop(self) -> None:
         """Hold the present position: the servo's profile decelerates to it."""
-        self._rest_deg = None
+        self._rest.forget()
         await self._write("stop (goal = present)", ADDR_GOAL_POSITION, 4, await self._counts())
 
     async def status(self) -> StageStatus:
@@ -601,7 +590,7 @@ class DynamixelStage(_Stage):
 
     async def clear_faults(self) -> None:
         """Reboot the servo, keep its multi-turn reference, restore mode and profile."""
-        self._rest_deg = None
+        self._rest.forget()
         async with self._op_lock:
             before: int | None
             try:

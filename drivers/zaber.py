@@ -30,6 +30,7 @@ import serial
 
 from gonio.drivers._arrival import poll_delay
 from gonio.drivers._ownership import bus_lock, claim
+from gonio.drivers._rest import RestPosition
 from gonio.drivers._stage_settings import check_motion_settings, check_target
 from gonio.hal import DeviceInUse, DeviceUnavailable, StageFault, StageStatus, TravelLimits
 from gonio.hal import Stage as _Stage
@@ -184,9 +185,8 @@ class ZaberStage(_Stage):
         self._lock = bus_lock(url)
         self._ids = itertools.cycle(range(100))
         self._op_lock = asyncio.Lock()
-        # Where the last move came to rest, degrees; None once anything else may have moved
-        # the axis (see move_to).
-        self._rest_deg: float | None = None
+        # Where the last move came to rest (gonio.drivers._rest).
+        self._rest = RestPosition(self.approach, self.backlash_deg)
 
     @property
     def profile_dps(self) -> tuple[float, float]:
@@ -315,7 +315,7 @@ class ZaberStage(_Stage):
 
     # ------------------------------------------------------------------ Device
     async def connect(self) -> None:
-        self._rest_deg = None
+        self._rest.forget()
         if self._claim is None:
             self._claim = claim(self.name, self.url)
         try:
@@ -341,7 +341,7 @@ class ZaberStage(_Stage):
             await self._ok(f"set accel {self.accel}")
 
     async def close(self) -> None:
-        self._rest_deg = None
+        self._rest.forget()
 
         def _close() -> None:
             with self._lock:
@@ -363,12 +363,12 @@ class ZaberStage(_Stage):
             ) from None
 
     async def home(self) -> None:
-        self._rest_deg = None
+        self._rest.forget()
         async with self._op_lock:
             await self._home_locked(None)
 
     async def _home_locked(self, timeout_s: float | None) -> None:
-        self._rest_deg = None
+        self._rest.forget()
         self._raise_faults(await self._warnings())
         await self._ok("home")
         limit = self.move_timeout_s if timeout_s is None else timeout_s
@@ -380,13 +380,7 @@ class ZaberStage(_Stage):
                              code="WR")
 
     async def move_to(self, angle_deg: float, timeout_s: float | None = None) -> float:
-        try:
-            actual = await self._move(angle_deg, timeout_s)
-        except BaseException:
-            self._rest_deg = None
-            raise
-        self._rest_deg = actual
-        return actual
+        return await self._rest.track(self._move(angle_deg, timeout_s))
 
     async def _move(self, angle_deg: float, timeout_s: float | None) -> float:
         check_target(self.name, self.limits, angle_deg, [angle_deg])
@@ -397,13 +391,9 @@ class ZaberStage(_Stage):
         if any(f in NO_REFERENCE_FLAGS for f in flags):
             async with self._op_lock:
                 await self._home_locked(limit)
-        if self._rest_deg is not None and (self.approach == "none" or self.backlash_deg <= 0):
-            # Without an approach side the start position only times the completion polls,
-            # so the rest position of the previous move saves a request; a wrong guess costs
-            # a few polls, never a wrong arrival (the axis reports itself idle at the target).
-            current = self._rest_deg
-        else:
-            current = await self.position()
+        # The last rest position may save a request (the axis reports itself idle at the
+        # target, so a wrong guess never makes a wrong arrival).
+        current = await self._rest.start(self.position)
         waypoints = approach_waypoints(current, angle_deg, self.approach, self.backlash_deg)
         check_target(self.name, self.limits, angle_deg, waypoints)
         here = current
@@ -446,12 +436,12 @@ class ZaberStage(_Stage):
             await asyncio.sleep(poll_delay(now, expected_end, self.poll_interval_s))
 
     async def stop(self) -> None:
-        self._rest_deg = None
+        self._rest.forget()
         await self._send("stop")
 
     async def emergency_stop(self) -> None:
         """Stop at once without deceleration (``estop``)."""
-        self._rest_deg = None
+        self._rest.forget()
         await self._send("estop")
 
     async def status(self) -> StageStatus:
@@ -466,7 +456,7 @@ class ZaberStage(_Stage):
         )
 
     async def clear_faults(self) -> None:
-        self._rest_deg = None
+        self._rest.forget()
         async with self._op_lock:
             await self._ok("warnings clear")
             self._raise_faults(await self._warnings())

@@ -16,9 +16,10 @@ Time that is not physical (moves, settling, exposures) is overhead, and most of 
 round trips on shared links, so the angle sends few of them: the stage position is read before a
 move only when a backlash overshoot may be needed, and a lamp is switched on unchecked: its
 output check (the switch-on check too) runs during the exposure, when the link is idle. What
-needs no angle waits for none: the checkpoint (a durable commit waits for the disk), the
-switching off of an angle's last light and, when no dark is read there, the switching on of
-the next angle's first light all run while the stage moves (the lamps are on another link).
+needs no angle waits for none: the checkpoint (a durable commit waits for the disk) and a
+dark are written beside the device work that follows them; the switching off of an angle's
+last light and, when no dark is read there, the switching on of the next angle's first light
+run while the stage moves (the lamps are on another link).
 
 Control, requested from outside (the service) at any time:
 
@@ -48,6 +49,7 @@ from __future__ import annotations
 import asyncio
 import bisect
 import contextlib
+import functools
 import threading
 import time
 from collections.abc import Awaitable, Callable, Sequence
@@ -175,8 +177,9 @@ class ScanEngine:
         self._wake = asyncio.Event()
         self._loop: asyncio.AbstractEventLoop | None = None  # the loop run() runs on
         self._angle_task: asyncio.Task[tuple[float, list[ReadingRow]]] | None = None
-        # The last angle's checkpoint, written by a worker thread while the stage moves on
-        # (awaited before anything else is stored or reported, :meth:`_committed`).
+        # The store write in flight: the last angle's checkpoint, written by a worker thread
+        # while the stage moves on, or a dark (:meth:`_write_beside`);
+        # awaited before anything else is stored or reported (:meth:`_committed`).
         self._commit: asyncio.Task[None] | None = None
         # Switching off the last light of the last angle, sent while the stage moves on.
         self._lamp_off: asyncio.Task[None] | None = None
@@ -384,7 +387,9 @@ class ScanEngine:
 
     def _add_steps(self, k0: int, rnd: int, route: Sequence[float]) -> None:
         """Plan stage positions ``route`` as steps ``k0, k0 + 1, ...`` of round ``rnd``, in
-        the store and here."""
+        the store and here. Stored before the first of them is moved to: its ``planned``
+        event is the last word before the stage moves (an abort or halt asked from then on
+        still lands before the move, :meth:`_check_before_move`)."""
         rows = [(k0 + j, rnd, p % 360.0, p) for j, p in enumerate(route)]
         self.store.add_steps(self.job_id, rows)
         self._steps.extend(StepRow(k, r, a, p, False, None) for k, r, a, p in rows)
@@ -478,10 +483,23 @@ class ScanEngine:
             self.progress = before
             raise
 
+    def _write_beside(self, write: Callable[[], None]) -> None:
+        """Start ``write`` (a dark) in a worker thread, as a checkpoint is.
+
+        A durable write waits for the disk (several ms); what follows it needs the devices
+        (the exposures), not the write. Called with nothing in flight (after
+        :meth:`_committed`), so the store is written in the engine's order; awaited like a
+        checkpoint before anything else is stored, reported or ended. A process killed before
+        it completes has stored no checkpoint that needs it: the angle is measured again on
+        resume.
+        """
+        assert self._commit is None, "a store write is still in flight"
+        self._commit = asyncio.create_task(asyncio.to_thread(write))
+
     async def _committed(self) -> None:
-        """Wait for the last angle's checkpoint to be stored; raises what the commit raised
-        (a full disk), once. Shielded: a cancelled engine still waits for a commit under way
-        when it cleans up."""
+        """Wait for the store write in flight (the last angle's checkpoint or a dark) to be
+        stored; raises what the write raised (a full disk), once. Shielded: a cancelled
+        engine still waits for a write under way when it cleans up."""
         task = self._commit
         if task is None:
             return
@@ -568,7 +586,9 @@ class ScanEngine:
         if dark_due:
             dark = await self._read_dark()
             await self._committed()  # the store is written in checkpoint order
-            self.store.add_darks(self.job_id, step.angle_index, dark)
+            # Stored while the lamps and sensors work, before this angle's checkpoint.
+            self._write_beside(functools.partial(self.store.add_darks, self.job_id,
+                                                 step.angle_index, dark))
             if mode == "once":
                 self._dark_once = dark
         elif mode == "once" and self._dark_once is not None:

@@ -37,7 +37,7 @@ import contextlib
 import struct
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
@@ -117,6 +117,29 @@ class SimLampSpec:
 
 
 @dataclass
+class Exposure:
+    """One triggered exposure of a simulated sensor.
+
+    What the sensor sees is fixed at the trigger (the lamps on, the stage angle, the gain,
+    the exposure time, the specimen); its counts are drawn from it by ``render`` once, during
+    the exposure (or when published, whichever comes first). A real sensor module
+    acknowledges a trigger at once; rendering before the acknowledgement would put the
+    simulator's own computing time between the triggers of a light's sensors, time a scan on
+    the real rig does not spend.
+    """
+
+    ready: float  # time.monotonic() when the counts are published
+    render: Callable[[], list[float]]
+    counts: list[float] | None = None
+
+    def rendered(self) -> list[float]:
+        """The counts, drawn now if they were not yet."""
+        if self.counts is None:
+            self.counts = self.render()
+        return self.counts
+
+
+@dataclass
 class SimSensorSpec:
     """A simulated triggered sensor module.
 
@@ -138,7 +161,7 @@ class SimSensorSpec:
     gain: float = 1.0
     sequence: int = 0
     values: list[float] = field(default_factory=list)
-    pending: tuple[float, list[float]] | None = None  # (wall time ready, counts)
+    pending: Exposure | None = None  # the exposure under way
     saturate: bool = False
     rng: np.random.Generator = field(default_factory=lambda: np.random.default_rng(0))
 
@@ -543,6 +566,10 @@ class ModbusRigServer:
         return None
 
     def _trigger(self, sensor: SimSensorSpec) -> None:
+        if sensor.pending is not None:
+            # A trigger before the last exposure was published: draw its counts first, so
+            # the sensor's noise is drawn in trigger order whatever the timing.
+            sensor.pending.rendered()
         angle = self.stage.position_deg()
         lights = [
             (
@@ -552,18 +579,29 @@ class ModbusRigServer:
             for lamp in self.lamps.values()
             if lamp.on
         ]
-        signal = expected_counts(
-            self.specimen, lights, sensor.direction, angle, sensor.gain, sensor.exposure_s
-        )
-        counts = sample_counts(signal, sensor.exposure_s, sensor.noise, sensor.rng)
-        if sensor.saturate:
-            counts = np.full_like(counts, sensor.noise.saturation)
-        ready = time.monotonic() + sensor.exposure_s / self.time_scale
-        sensor.pending = (ready, [float(c) for c in counts])
+        specimen, gain, exposure_s = self.specimen, sensor.gain, sensor.exposure_s
+        saturate = sensor.saturate
+
+        def render() -> list[float]:
+            signal = expected_counts(specimen, lights, sensor.direction, angle, gain, exposure_s)
+            counts = sample_counts(signal, exposure_s, sensor.noise, sensor.rng)
+            if saturate:
+                counts = np.full_like(counts, sensor.noise.saturation)
+            return [float(c) for c in counts]
+
+        wall_s = exposure_s / self.time_scale
+        sensor.pending = exposure = Exposure(time.monotonic() + wall_s, render)
+        # Drawn halfway through the exposure, when the link is idle (the trigger's reply
+        # goes out first); on this server's loop, under the device lock.
+        asyncio.get_running_loop().call_later(wall_s / 2, self._render, exposure)
+
+    def _render(self, exposure: Exposure) -> None:
+        with self._lock:
+            exposure.rendered()
 
     def _publish_if_ready(self, sensor: SimSensorSpec) -> None:
-        if sensor.pending is not None and time.monotonic() >= sensor.pending[0]:
-            sensor.values = sensor.pending[1]
+        if sensor.pending is not None and time.monotonic() >= sensor.pending.ready:
+            sensor.values = sensor.pending.rendered()
             sensor.pending = None
             seq = sensor.registers.sequence
             bits = 16 * seq.width - (1 if seq.type[0] == "s" else 0)

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import asyncio
 import math
+import threading
 import time
 from collections.abc import Iterator
 from typing import Any
@@ -27,6 +28,7 @@ from gonio.config import (
 )
 from gonio.drivers.modbus import ModbusLight, ModbusPool, ModbusSensor, decode, encode
 from gonio.hal import DeviceFault, DeviceUnavailable, LabDirection, LampOutOfBand
+from gonio.sim import modbus_server
 from gonio.sim.modbus_server import (
     ModbusRigServer,
     SimLampSpec,
@@ -630,3 +632,51 @@ def test_a_lamp_in_use_is_not_fed_and_an_idle_one_is() -> None:
         assert idle >= 1
         trips = sum(t for _, t in modbus.snapshot()["watchdogs"].values())
         assert trips == 0
+
+
+def test_a_trigger_is_acknowledged_before_its_reading_is_drawn(
+        bench: Bench, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A real sensor acknowledges its trigger at once: the simulator draws the reading after
+    the reply (during the exposure), from what the sensor saw at the trigger."""
+    acked = threading.Event()
+    drawn_after_ack: list[bool] = []
+    draw = modbus_server.expected_counts
+
+    def drawing(*args: Any, **kwargs: Any) -> Any:
+        # Holds the simulator until the client has the trigger's reply: one that drew the
+        # reading before replying waits here in vain, and the trigger times out.
+        drawn_after_ack.append(acked.wait(timeout=10.0))
+        return draw(*args, **kwargs)
+
+    monkeypatch.setattr(modbus_server, "expected_counts", drawing)
+    regs = SENSOR_REGS
+
+    async def run() -> list[float]:
+        light = ModbusLight(bench.light)
+        await light.connect()
+        await light.set_on(True)
+        raw = AsyncModbusTcpClient("127.0.0.1", port=bench.server.port, timeout=30.0)
+        await raw.connect()
+        try:
+            seq = (await raw.read_input_registers(regs.sequence.address, count=1,
+                                                  device_id=2)).registers[0]
+            await raw.write_registers(regs.exposure.address, encode(regs.exposure, 0.02, "e"),
+                                      device_id=2)
+            await raw.write_register(regs.trigger.address, 1, device_id=2)
+            acked.set()
+            await light.set_on(False)  # after the trigger: the reading stays lit
+            deadline = time.monotonic() + 30.0
+            while (await raw.read_input_registers(regs.sequence.address, count=1,
+                                                  device_id=2)).registers[0] == seq:
+                assert time.monotonic() < deadline, "the exposure never completed"
+                await asyncio.sleep(0.01)
+            words = (await raw.read_input_registers(0, count=8, device_id=2)).registers
+        finally:
+            raw.close()
+            await light.close()
+        return [decode(r, words[r.address:r.address + r.width]) * r.scale for r in regs.values]
+
+    values = asyncio.run(run())
+    assert drawn_after_ack == [True]
+    # Noiseless counts of the lit specimen at the sensor's own gain (1: no driver set it).
+    np.testing.assert_allclose(values, bench.expected_counts(0.02, gain=1.0), atol=0.51)

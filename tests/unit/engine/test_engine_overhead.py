@@ -4,8 +4,9 @@ Each test arms one device of the in-memory rig (or the store) to record when it 
 something, and checks the order of events against what the measurement needs: the lamp is
 checked while its sensors integrate, the stage position is read only when a backlash overshoot
 may follow, a lamp found out of band during the exposure still discards the angle, the lamps
-are switched and the checkpoint written while the stage moves on, and a checkpoint that cannot
-be written fails the job keeping what was stored.
+are switched and the checkpoint written while the stage moves on, a dark is written while the
+lamps work and before the checkpoint, the planned steps before the first move, and a
+checkpoint or a dark that cannot be written fails the job keeping what was stored.
 """
 
 from __future__ import annotations
@@ -253,6 +254,26 @@ def test_the_checkpoint_is_written_while_the_stage_moves_on_and_before_what_foll
     assert eng.progress.done == 4
 
 
+def _fill_the_disk() -> None:
+    """Raise what SQLite raises on a full disk (SQLITE_FULL)."""
+    tiny = sqlite3.connect(":memory:")
+    tiny.execute("CREATE TABLE t (x BLOB)")
+    tiny.execute("PRAGMA max_page_count = 2")
+    tiny.execute("INSERT INTO t VALUES (zeroblob(100000))")
+
+
+def _fails_for_a_full_disk(rig: MemRig, plan: UniformPlan, store: JobStore) -> None:
+    """Run ``plan`` on ``rig`` into ``store``: the job fails, saying the disk is full."""
+    desc = RigDescription.from_rig(rig)
+    job = store.create_job(kind=plan.kind, specimen="s", plan=plan.model_dump(mode="json"),
+                           rig=desc.model_dump(mode="json"))
+    with pytest.raises(sqlite3.OperationalError):
+        asyncio.run(ScanEngine(rig, store, job.id, plan, desc).run())
+    got = store.get_job(job.id)
+    assert got.state == JobState.FAILED.value
+    assert got.reason is not None and got.reason.startswith("disk full: ")
+
+
 class FullAtStore(JobStore):
     """A store whose checkpoint of angle ``full_at`` fails as SQLite does on a full disk."""
 
@@ -262,28 +283,93 @@ class FullAtStore(JobStore):
 
     def commit_angle(self, job_id: int, angle_index: int, *args: Any, **kwargs: Any) -> Any:
         if angle_index == self.full_at:
-            tiny = sqlite3.connect(":memory:")
-            tiny.execute("CREATE TABLE t (x BLOB)")
-            tiny.execute("PRAGMA max_page_count = 2")
-            tiny.execute("INSERT INTO t VALUES (zeroblob(100000))")  # raises SQLITE_FULL
+            _fill_the_disk()
         return super().commit_angle(job_id, angle_index, *args, **kwargs)
 
 
 def test_a_checkpoint_refused_for_a_full_disk_fails_the_job_keeping_what_was_stored() -> None:
     rig = MemRig()
-    plan = UniformPlan(rotations=4, exposure=EXPOSURE)
-    desc = RigDescription.from_rig(rig)
     store = FullAtStore(full_at=1)
-    job = store.create_job(kind=plan.kind, specimen="s", plan=plan.model_dump(mode="json"),
-                           rig=desc.model_dump(mode="json"))
-    eng = ScanEngine(rig, store, job.id, plan, desc)
-    with pytest.raises(sqlite3.OperationalError):
-        asyncio.run(eng.run())
-    got = store.get_job(job.id)
-    assert got.state == JobState.FAILED.value
-    assert got.reason is not None and got.reason.startswith("disk full: ")
+    _fails_for_a_full_disk(rig, UniformPlan(rotations=4, exposure=EXPOSURE), store)
     # Angle 0 stays stored; angle 1 was never reported; the lamps are off, the stage stopped.
     assert [s.done for s in store.steps(1)] == [True, False, False, False]
     assert store.reading_count(1) == 3
     assert [e.data["done"] for e in store.events_after(0) if e.type == "progress"] == [1]
+    assert not rig.any_light_on() and rig.mstage.stopped >= 1
+
+
+def _wait_for(log: Log, seen: Any, limit_s: float = 5.0) -> bool:
+    """Block (a store's worker thread) until ``seen(log.calls)`` holds or ``limit_s`` passed;
+    whether it held."""
+    deadline = time.monotonic() + limit_s
+    while not seen(log.calls) and time.monotonic() < deadline:
+        time.sleep(0.001)
+    return bool(seen(log.calls))
+
+
+class BesideTheLampsStore(JobStore):
+    """A store whose dark waits (up to 5 s) until a lamp was switched on after it was read,
+    noting whether one had; it notes the stage moves made before the steps were planned, and
+    in what order the writes came."""
+
+    def __init__(self, log: Log) -> None:
+        super().__init__(":memory:")
+        self.log = log
+        self.moves_before_steps: list[int] = []
+        self.dark_beside_lamp: list[bool] = []
+        self.order: list[str] = []
+
+    def add_steps(self, job_id: int, steps: Any) -> None:
+        self.moves_before_steps.append(sum(1 for c in self.log.calls if c[1] == "move"))
+        self.order.append("steps")
+        super().add_steps(job_id, steps)
+
+    def add_darks(self, job_id: int, angle_index: int, darks: Any) -> None:
+        ons = sum(1 for c in self.log.calls if c[1] == "on")
+        self.dark_beside_lamp.append(_wait_for(
+            self.log, lambda calls: sum(1 for c in calls if c[1] == "on") > ons))
+        self.order.append("dark")
+        super().add_darks(job_id, angle_index, darks)
+
+    def commit_angle(self, job_id: int, angle_index: int, *args: Any, **kwargs: Any) -> Any:
+        self.order.append(f"angle {angle_index}")
+        return super().commit_angle(job_id, angle_index, *args, **kwargs)
+
+
+def test_the_dark_is_written_beside_the_lamps_and_in_order() -> None:
+    rig = MemRig()
+    plan = UniformPlan(rotations=3, exposure=ExposureSettings(
+        exposure_s=0.02, light_settle_s=0.0, dark="once"))
+    desc = RigDescription.from_rig(rig)
+    store = BesideTheLampsStore(rig.log)
+    job = store.create_job(kind=plan.kind, specimen="s", plan=plan.model_dump(mode="json"),
+                           rig=desc.model_dump(mode="json"))
+    assert asyncio.run(ScanEngine(rig, store, job.id, plan, desc).run()) is JobState.RUNNING
+    # The steps were stored before anything moved (their "planned" event is the last word
+    # before a move), the dark while the first lamp was on, each before the checkpoint.
+    assert store.moves_before_steps == [0]
+    assert store.dark_beside_lamp == [True]
+    assert store.order == ["steps", "dark", "angle 0", "angle 1", "angle 2"]
+    assert [s.done for s in store.steps(1)] == [True] * 3
+    assert list(store.darks(1)) == [0]
+    types = [e.type for e in store.events_after(0)]
+    assert types.index("planned") < types.index("progress")
+
+
+class DarkFullStore(JobStore):
+    """A store whose dark fails as SQLite does on a full disk."""
+
+    def add_darks(self, job_id: int, angle_index: int, darks: Any) -> None:
+        _fill_the_disk()
+
+
+def test_a_dark_refused_for_a_full_disk_fails_the_job_before_any_checkpoint() -> None:
+    rig = MemRig()
+    store = DarkFullStore(":memory:")
+    _fails_for_a_full_disk(rig, UniformPlan(rotations=3, exposure=ExposureSettings(
+        exposure_s=0.02, light_settle_s=0.0, dark="once")), store)
+    # The planned steps stay; no reading of the angle whose dark was lost was reported.
+    assert [s.done for s in store.steps(1)] == [False] * 3
+    assert store.reading_count(1) == 0
+    assert not [e for e in store.events_after(0) if e.type == "progress"]
     assert not rig.any_light_on() and rig.mstage.stopped >= 1
