@@ -34,7 +34,8 @@ from gonio.brdf.tables import geometry as geo
 FloatArray = NDArray[np.float64]
 
 #: How much the target geometries' expected error counts against the whole table's
-#: (``bench/bench_colour.py --colour-design``: 3, 10, 30 measured; 10 chosen).
+#: (``bench/bench_colour.py --colour-design --colour-weight W`` on its choice set: 0, 1, 3 and 10
+#: measured, 10 chosen; docs/colour.md gives the table and the held-out set's numbers).
 DEFAULT_COLOUR_WEIGHT = 10.0
 #: Targets with the half vector within this angle of the normal get a pair of their own:
 #: aspecular angles up to 25 degrees (the half vector sits at half the aspecular angle).
