@@ -10,34 +10,34 @@ import pytest
 PROJECT_ROOT = Path(__file__).resolve().parents[1]
 SHARED_DATA = PROJECT_ROOT.parent / "shared" / "data"
 
-#: The files that take longest, longest first (wall seconds of each run alone, README "The suite
-#: on a busy machine"). The parallel run (``-n auto --dist loadfile``) hands whole files to its
-#: workers as they free up; started first, these end before the many short files do, so no
-#: worker is left running one of them alone at the end while the others idle. A file missing
-#: here only starts later; the list orders the run and decides nothing else.
+#: The files that take longest, longest first (wall time of each run alone on idle cores,
+#: README "The suite on a busy machine"; the last ones from earlier rounds' runs). The parallel
+#: run (``-n auto --dist loadfile``) hands whole files to its workers as they free up; started
+#: first, these end before the many short files do, so no worker is left running one of them
+#: alone at the end while the others idle. A file missing here only starts later; the list
+#: orders the run and decides nothing else.
 LONGEST_FIRST = (
-    "tests/system/test_state_files.py",
-    "tests/unit/brdf/reconstruction/test_shipped.py",
-    "tests/system/api/test_colour.py",
-    "tests/system/api/test_disk_full.py",
-    "tests/system/cli/test_scan_design_gap.py",
-    "tests/system/test_rebuild.py",
-    "tests/system/api/test_browser_colour.py",
     "tests/system/api/test_browser.py",
-    "tests/unit/export/test_judge.py",
     "tests/system/api/test_browser_lab_day.py",
+    "tests/system/test_state_files.py",
+    "tests/system/api/test_disk_full.py",
     "tests/system/test_readme_session.py",
-    "tests/system/cli/test_scan_interrupt.py",
-    "tests/system/cli/test_scan_bounds.py",
-    "tests/system/cli/test_scan_misfit.py",
+    "tests/system/api/test_browser_colour.py",
+    "tests/unit/export/test_judge.py",
+    "tests/system/api/test_colour.py",
+    "tests/system/test_rebuild.py",
+    "tests/unit/brdf/reconstruction/test_shipped.py",
     "tests/system/api/test_sim_restart.py",
     "tests/system/api/test_start_races.py",
+    "tests/system/cli/test_scan_design_gap.py",
     "tests/system/api/test_serve_command.py",
     "tests/system/test_durable_state.py",
     "tests/system/api/test_device_wait.py",
     "tests/system/drivers/test_zaber.py",
-    "tests/unit/service/test_service.py",
     "tests/unit/test_project.py",
+    "tests/system/cli/test_scan_interrupt.py",
+    "tests/system/cli/test_scan_bounds.py",
+    "tests/system/cli/test_scan_misfit.py",
     "tests/unit/export/test_metadata.py",
     "tests/system/cli/test_messages.py",
     "tests/system/cli/test_scan.py",
