@@ -10,6 +10,75 @@ import pytest
 PROJECT_ROOT = Path(__file__).resolve().parents[1]
 SHARED_DATA = PROJECT_ROOT.parent / "shared" / "data"
 
+#: The files that take longest, longest first (wall time of each run alone on idle cores,
+#: README "The suite on a busy machine"; the last ones from earlier rounds' runs). The parallel
+#: run (``-n auto --dist loadfile``) hands whole files to its workers as they free up; started
+#: first, these end before the many short files do, so no worker is left running one of them
+#: alone at the end while the others idle. A file missing here only starts later; the list
+#: orders the run and decides nothing else.
+LONGEST_FIRST = (
+    "tests/system/api/test_browser.py",
+    "tests/system/api/test_browser_lab_day.py",
+    "tests/system/test_state_files.py",
+    "tests/system/api/test_disk_full.py",
+    "tests/system/test_readme_session.py",
+    "tests/system/api/test_browser_colour.py",
+    "tests/unit/export/test_judge.py",
+    "tests/system/api/test_colour.py",
+    "tests/system/test_rebuild.py",
+    "tests/unit/brdf/reconstruction/test_shipped.py",
+    "tests/system/api/test_sim_restart.py",
+    "tests/system/api/test_start_races.py",
+    "tests/system/cli/test_scan_design_gap.py",
+    "tests/system/api/test_serve_command.py",
+    "tests/system/test_durable_state.py",
+    "tests/system/api/test_device_wait.py",
+    "tests/system/drivers/test_zaber.py",
+    "tests/unit/test_project.py",
+    "tests/system/cli/test_scan_interrupt.py",
+    "tests/system/cli/test_scan_bounds.py",
+    "tests/system/cli/test_scan_misfit.py",
+    "tests/unit/export/test_metadata.py",
+    "tests/system/cli/test_messages.py",
+    "tests/system/cli/test_scan.py",
+)
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Keep :data:`LONGEST_FIRST`'s order in the parallel run: pytest-xdist would otherwise
+    sort the files by their number of tests, most first, which sends the long one-test files
+    (a whole scan each) last."""
+    if hasattr(config.option, "loadscopereorder"):
+        config.option.loadscopereorder = False
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """The files of :data:`LONGEST_FIRST` first, in its order; the rest as collected (the
+    sort is stable, so a file's tests keep their order and stay together)."""
+    rank = {name: k for k, name in enumerate(LONGEST_FIRST)}
+
+    def key(item: pytest.Item) -> int:
+        try:
+            name = item.path.relative_to(PROJECT_ROOT).as_posix()
+        except ValueError:
+            return len(rank)
+        return rank.get(name, len(rank))
+
+    items.sort(key=key)
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_auto_num_workers(config: pytest.Config) -> int | None:
+    """``-n auto``: one worker more than the cores this process may use.
+
+    Most system tests wait part of their time (a simulated stage moving in real time, a daemon
+    or browser starting, a device left silent on purpose); one worker per core leaves a core
+    idle while its worker waits. ``PYTEST_XDIST_AUTO_NUM_WORKERS`` still decides when set.
+    """
+    if os.environ.get("PYTEST_XDIST_AUTO_NUM_WORKERS"):
+        return None
+    return len(os.sched_getaffinity(0)) + 1
+
 
 def run_wide_dir(tmp_path_factory: pytest.TempPathFactory, name: str) -> Path:
     """A temporary folder ``name`` shared by every process of this test run.

@@ -18,9 +18,10 @@ from gonio.store import JobStore
 FAST = ExposureSettings(exposure_s=0.002, light_settle_s=0.0)
 
 
-def _service(tmp_path: Path) -> tuple[MemRig, GonioService]:
+def _service(tmp_path: Path, *, fit_exports: bool = True) -> tuple[MemRig, GonioService]:
     rig = MemRig()
-    return rig, GonioService(JobStore(tmp_path / "jobs.sqlite"), rig, data_dir=tmp_path / "d")
+    return rig, GonioService(JobStore(tmp_path / "jobs.sqlite"), rig, data_dir=tmp_path / "d",
+                             fit_exports=fit_exports)
 
 
 def test_bad_request_refused_before_queueing(tmp_path: Path) -> None:
@@ -257,7 +258,9 @@ def test_a_plan_checked_before_submission_is_the_one_that_runs(
     from gonio.engine import ScanEngine
     from gonio.plans.checked import check_plan
 
-    rig, svc = _service(tmp_path)
+    # The job's export fits are not under test (seconds of CPU; a daemon's scan stores
+    # them in tests/system/api/test_colour.py).
+    rig, svc = _service(tmp_path, fit_exports=False)
     plan = UniformPlan(rotations=2, exposure=FAST)
     checked = svc.check(plan)
     assert svc.dry_run(checked) == svc.dry_run(plan)
