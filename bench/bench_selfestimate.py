@@ -272,9 +272,14 @@ def scans(witnesses: bool = False) -> list[dict[str, Any]]:
 
 def table(rows: list[dict[str, Any]]) -> None:
     """The per-plan tables and the summary (module docstring)."""
+    missing = sorted({k for r in rows for k in ("unwidened", "uncovered", "misfit_log")
+                      if k not in r})
+    if missing:
+        raise SystemExit(f"--rows file lacks {', '.join(missing)} (written by an older bench): "
+                         "rerun without --rows to measure the rows again")
     for r in rows:
         # "refit" is the rejected candidate, from the same scan's inputs.
-        r["before"] = refit_candidate(r)
+        r["refit"] = refit_candidate(r)
         r.setdefault("set", "cal" if r["cal"] else "validation")
     for label, _, _ in PLANS:
         print(f"\n#### {label}\n")
@@ -283,9 +288,9 @@ def table(rows: list[dict[str, Any]]) -> None:
               "basis_misfit |")
         print("|---" * 14 + "|")
         for r in (r for r in rows if r["plan"] == label):
-            q0, q1 = r["before"] / r["truth"], r["widened"] / r["truth"]
+            q0, q1 = r["refit"] / r["truth"], r["widened"] / r["truth"]
             print(f"| {r['material']} | {r['set']} | {r['truth']:.4f} | "
-                  f"{r['before']:.4f} | x{q0:.2f} | {r['widened']:.4f} | x{q1:.2f} | "
+                  f"{r['refit']:.4f} | x{q0:.2f} | {r['widened']:.4f} | x{q1:.2f} | "
                   f"{'yes' if 0.5 <= q1 <= 2 else 'no'} | {'LOW' if q1 < 0.5 else ''} | "
                   f"{r.get('uncovered', float('nan')):.3f} | {r['misfit_chi2']:.3g} | "
                   f"{r['misfit_log']:.4f} | "
@@ -318,7 +323,7 @@ def table(rows: list[dict[str, Any]]) -> None:
                 ok = int(np.sum((q >= 0.5) & (q <= 2.0)))
                 return f"{ok}/{q.size} ({int(np.sum(q < 0.5))}, x{q.min():.2f})"
 
-            cells.append(f"{count('before')} -> {count('widened')}")
+            cells.append(f"{count('refit')} -> {count('widened')}")
         print(f"| {label} | " + " | ".join(cells) + " |")
     if all(np.isfinite(r.get("upper", float("nan"))) for r in rows):
         print("\ntrue log_rmse above the interval's upper end (predicted_log_rmse_upper), of "

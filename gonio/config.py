@@ -464,7 +464,8 @@ class DesignExpectation(_Strict):
 
     ``expected_log_rmse`` may be missing (a design made without the held-out error, e.g. through
     the API or with ``--no-expected-error``): the table then only records the colour design,
-    and a scan is not compared with it.
+    and a scan is not compared with it. A record with neither ``expected_log_rmse`` nor
+    ``colour_instrument`` is refused: it would load and do nothing.
     """
 
     expected_log_rmse: Annotated[float, Field(gt=0, allow_inf_nan=False)] | None = None
@@ -507,6 +508,13 @@ class DesignExpectation(_Strict):
         if self.colour_weight is not None and self.colour_instrument is None:
             raise ValueError("colour_weight is the weight of a colour design's instrument "
                              "geometries: give colour_instrument with it, or drop it")
+        if self.expected_log_rmse is None and self.colour_instrument is None:
+            # Neither a held-out error to compare a scan with nor a colour design to record:
+            # the table would load and do nothing, so say what it lacks.
+            raise ValueError("a [design] record needs expected_log_rmse (the design's held-out "
+                             "error, compared with every scan) or colour_instrument (the "
+                             "instrument 'gonio design --colour' designed for): add one of them, "
+                             "or drop the table")
         return self
 
 

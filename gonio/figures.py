@@ -193,8 +193,9 @@ def headline_error(metrics: dict[str, Any]) -> dict[str, Any] | None:
         # be worse than it is told (docs/science.md 7.1.1).
         out["upper"] = float(upper)
         out["interval"] = (f"Upper end of its interval: {upper:.3f} (predicted_log_rmse_upper; "
-                           "the true error of held-out materials was below it on 98 % of the "
-                           "calibration scans and on 128 of 130 test and fresh scans).")
+                           "its factors put the true error of held-out materials below it on "
+                           "98 % of the calibration scans; the test and fresh scans were seen "
+                           "while the interval's form was chosen).")
         out["meaning"] = f"{out['meaning']} {out['interval']}"
     misfit = metrics.get("basis_misfit")
     if out is not None and isinstance(misfit, str):

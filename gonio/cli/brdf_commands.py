@@ -351,6 +351,9 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     print(f"  log_rmse {metrics.log_rmse(rec.table, reference):.4f}   "
           f"log_psnr {metrics.log_psnr(rec.table, reference):.2f} dB   "
           f"predicted log_rmse {rec.predicted_log_rmse:.4f}")
+    if np.isfinite(rec.predicted_log_rmse_upper):
+        print(f"  upper end of its interval {rec.predicted_log_rmse_upper:.4f} "
+              "(predicted_log_rmse_upper)")
     if rec.misfit_warning is not None:
         print(f"  warning: {rec.misfit_warning}")
     print(f"  self-estimated MAPE {100 * rec.predicted_error:.1f} % "

@@ -609,6 +609,8 @@ def _scan_through_daemon(args: argparse.Namespace, plan: Any) -> int:
           f"in {units}, {err_text}; wrote {out}")
     if err and err.get("coverage"):
         print(f"  {err['coverage']}")
+    if err and err.get("interval"):
+        print(f"  {err['interval']}")
     _print_arc(summary)
     if summary.get("basis_misfit"):
         print(f"warning: {summary['basis_misfit']}", file=sys.stderr)

@@ -385,6 +385,9 @@ def _demo_scan(url: str, key: str | None, result: dict[str, int], stop: Any) -> 
                 err_text = f"{err['key']} {err['text']}" if err else "no error estimate"
                 print(f"demo scan completed: {m.get('n_samples')} samples in {units}, "
                       f"{err_text}", flush=True)
+                for part in ("coverage", "interval"):
+                    if err and err.get(part):
+                        print(f"  {err[part]}", flush=True)
                 code = 0
     except Exception as exc:  # reported, and the exit code says it failed
         print(f"demo scan failed: {exc}", file=sys.stderr)

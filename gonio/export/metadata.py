@@ -79,8 +79,9 @@ LOG_RMSE_MEANING = (
     "about a 5 % error where a rendering is bright. Calibrated on materials held out of the "
     "basis; within a factor of 2 of the truth on about 3 scans in 5 (81 of 130 test and fresh "
     "scans), more than 2 times too low on about 1 in 30 (4 of 130, MA98 preset layouts); the "
-    "true error was below the interval's upper end (predicted_log_rmse_upper) on 98 % of the "
-    "calibration scans and 128 of 130 test and fresh scans (docs/science.md 7.1.1)"
+    "interval's upper end (predicted_log_rmse_upper) is set so the true error was below it on "
+    "98 % of the calibration scans; the test and fresh scans were seen while its form was "
+    "chosen (docs/science.md 7.1.1)"
 )
 
 #: ``twofold_asymmetry`` above which an export warns that the principled models lose the

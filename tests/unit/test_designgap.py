@@ -235,6 +235,9 @@ def test_a_bad_design_table_is_refused_by_name(tmp_path: Path, table: str, words
      "design.colour_weight"),
     ("rotations = 8\npairs = 10\ncolour_weight = 10.0",
      "give colour_instrument with it"),
+    ("rotations = 8\npairs = 10\nexpected_log_rmse_measured = 0.05",
+     "needs expected_log_rmse (the design's held-out error, compared with every scan) or "
+     "colour_instrument"),
 ])
 def test_a_bad_colour_design_record_is_refused_by_name(tmp_path: Path, table: str,
                                                        words: str) -> None:

@@ -31,6 +31,11 @@ def test_sim_scan_is_calibrated_and_matches_the_material(
     assert "in 1/sr" in captured.out
     res = read_result(out)
     assert "white reference" in res.samples.calibration["source"]
+    # The headline's upper end is printed beside the estimate (docs/science.md 7.1.1): the
+    # number the result file stores, to 3 decimals.
+    upper = res.metrics.get("predicted_log_rmse_upper")
+    assert isinstance(upper, float) and np.isfinite(upper)
+    assert f"Upper end of its interval: {upper:.3f}" in captured.out
     s = res.samples
     alpha = np.deg2rad(s.stage_angles_deg)[None, :]
     wi = lab_to_specimen(np.asarray(s.light_dirs)[:, None, :], alpha)
