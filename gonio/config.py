@@ -479,6 +479,7 @@ class DesignExpectation(_Strict):
     materials: str = ("held out of the basis: the shipped measured materials and one synthetic "
                       "of each library family")
     colour_instrument: str | None = None
+    # le: gonio.brdf.design.colourtargets.MAX_COLOUR_WEIGHT (this layer may not import it)
     colour_weight: Annotated[float, Field(ge=0, le=1000, allow_inf_nan=False)] | None = None
 
     @field_validator("span_deg")

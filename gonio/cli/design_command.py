@@ -26,7 +26,11 @@ from typing import Any, TextIO
 import numpy as np
 
 from gonio.brdf.colour.conditions import ColourError
-from gonio.brdf.design.colourtargets import DEFAULT_COLOUR_WEIGHT, ColourTargets
+from gonio.brdf.design.colourtargets import (
+    DEFAULT_COLOUR_WEIGHT,
+    MAX_COLOUR_WEIGHT,
+    ColourTargets,
+)
 from gonio.brdf.design.constraints import RigConstraints, parse_exclusion
 from gonio.brdf.design.errors import DesignError
 from gonio.brdf.design.pairs import (
@@ -159,6 +163,9 @@ def _check_args(args: argparse.Namespace) -> None:
         if args.pairs is None or args.objective == "kappa":
             raise UsageError("--colour designs --pairs by the expected error: use it with "
                              "--pairs and without --objective kappa")
+        if not args.colour_weight <= MAX_COLOUR_WEIGHT:  # also refuses nan
+            raise UsageError(f"--colour-weight must be between 0 and {MAX_COLOUR_WEIGHT:g}, "
+                             f"got {args.colour_weight:g}")
         _colour(args)
     if args.render_mix != 0.0:
         if args.pairs is None or args.objective == "kappa":
@@ -381,13 +388,14 @@ def run(args: argparse.Namespace) -> int:
         from gonio.brdf.design.heldout import choose_design
 
         constraints = _constraints(args)
+        colour, mix = _colour(args), _render_mix(args)  # the importance map once, not per seed
 
         def make(seed: int) -> PairDesign:
             return design_pairs(
                 basis, args.pairs, constraints, h=args.neighbourhood, starts=args.starts,
                 descents=args.descents, seed=args.seed + seed, time_limit_s=args.time_limit,
                 objective=args.objective, rotations=args.rotations, span_deg=args.span,
-                colour=_colour(args),
+                colour=colour, **mix,
             )
 
         design, expected, table = choose_design(make, range(args.candidates), args.rotations,
