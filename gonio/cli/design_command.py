@@ -173,6 +173,9 @@ def _check_args(args: argparse.Namespace) -> None:
                              "with --pairs and without --objective kappa")
         if not 0.0 <= args.render_mix <= 1.0:
             raise UsageError(f"--render-mix must be between 0 and 1, got {args.render_mix:g}")
+        if args.colour is not None:
+            raise UsageError("--render-mix and --colour cannot be combined (each reweighs the "
+                             "expected error; together the scales are wrong): use one")
     if args.seed < 0:
         raise UsageError(f"--seed must be at least 0, got {args.seed}")
     if args.rotations < 1:

@@ -132,6 +132,8 @@ def test_design_preset(basis_file: Path, capsys: pytest.CaptureFixture[str]) -> 
         (["--pairs", "3", "--render-mix", "0.5", "--objective", "kappa"],
          "without --objective kappa"),
         (["--pairs", "3", "--render-mix", "1.5"], "--render-mix must be between 0 and 1"),
+        (["--pairs", "6", "--colour", "MA98", "--render-mix", "0.5"],
+         "--render-mix and --colour cannot be combined"),
         (["--pairs", "3", "--max-elevation", "5", "--min-separation", "30"],
          "no grid cell is feasible"),
         # the core names the settings to relax; the CLI words them as its flags
