@@ -481,6 +481,8 @@ class DesignExpectation(_Strict):
     colour_instrument: str | None = None
     # le: gonio.brdf.design.colourtargets.MAX_COLOUR_WEIGHT (this layer may not import it)
     colour_weight: Annotated[float, Field(ge=0, le=1000, allow_inf_nan=False)] | None = None
+    #: ``gonio design --render-mix``: the share of the renderings' cell weighting (a record)
+    render_mix: Annotated[float, Field(ge=0, le=1, allow_inf_nan=False)] | None = None
 
     @field_validator("span_deg")
     @classmethod

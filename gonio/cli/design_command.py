@@ -203,9 +203,11 @@ def _colour(args: argparse.Namespace) -> ColourTargets | None:
 
 
 def _colour_record(args: argparse.Namespace) -> dict[str, Any]:
-    """The ``[design]`` keys of a colour design (none without ``--colour``)."""
+    """The ``[design]`` keys of a colour design (none without ``--colour``) and the
+    ``render_mix`` of a rendering-weighted one (none at 0)."""
+    mix = float(getattr(args, "render_mix", 0.0) or 0.0)
     if getattr(args, "colour", None) is None:
-        return {}
+        return {"render_mix": mix} if mix else {}
     from gonio.brdf.colour.instruments import canonical_instrument
 
     return {"colour_instrument": canonical_instrument(args.colour),
@@ -411,6 +413,9 @@ def run(args: argparse.Namespace) -> int:
         design = make_design(args, basis)
     bound = roughness_bound(design.cells, design.ph_lab, bound_angles(args.rotations, args.span))
     print_design(design, bound, args.rotations, span_deg=args.span)
+    if args.render_mix:
+        print(f"cells weighted by the standard renderings at --render-mix {args.render_mix:g} "
+              "(docs/science.md 7.2.2)")
     if args.basis is None and not args.no_expected_error and args.lights is None:
         if expected is None:
             from gonio.brdf.design.heldout import heldout_log_rmse
@@ -452,11 +457,12 @@ def run(args: argparse.Namespace) -> int:
                 rotations=args.rotations, span_deg=args.span, noise=HELDOUT_NOISE,
                 pairs=design.n_pairs, calibrated=True, **_colour_record(args),
             )
-        elif getattr(args, "colour", None) is not None:
+        elif _colour_record(args):
             from gonio.config import DesignExpectation
 
             # No held-out error to compare scans with, but the rig config still records
-            # that its geometry is a colour design (its scans report that instrument).
+            # that its geometry is a colour design (its scans report that instrument) or a
+            # rendering-weighted one.
             expectation = DesignExpectation(rotations=args.rotations, span_deg=args.span,
                                             pairs=design.n_pairs, **_colour_record(args))
         args.output.write_text(dump_fragment(design_fragment(design, expectation), header),

@@ -243,9 +243,12 @@ def test_render_mix_designs_with_the_renderings_cell_weights(
     out = tmp_path / "frag.toml"
     assert main(["design", "--pairs", "5", "--basis", str(basis_file), "--render-mix", "1",
                  "-o", str(out)]) == 0
-    assert "objective: posterior (" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "objective: posterior (" in printed
+    assert "weighted by the standard renderings at --render-mix 1" in printed
     basis = Basis.load(basis_file)
     frag = tomllib.loads(out.read_text())
+    assert frag["design"]["render_mix"] == 1.0
     li = np.deg2rad([[d["theta_deg"], d["phi_deg"]] for d in frag["lights"]])
     se = np.deg2rad([[d["theta_deg"], d["phi_deg"]] for d in frag["sensors"]])
     th, _, td, pd = geo.directions_to_half_diff(geo.spherical_to_direction(li[:, 0], li[:, 1]),
