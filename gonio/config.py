@@ -480,7 +480,10 @@ class DesignExpectation(_Strict):
     materials: str = ("held out of the basis: the shipped measured materials and one synthetic "
                       "of each library family")
     colour_instrument: str | None = None
+    # le: gonio.brdf.design.colourtargets.MAX_COLOUR_WEIGHT (this layer may not import it)
     colour_weight: Annotated[float, Field(ge=0, le=1000, allow_inf_nan=False)] | None = None
+    #: ``gonio design --render-mix``: the share of the renderings' cell weighting (a record)
+    render_mix: Annotated[float, Field(ge=0, le=1, allow_inf_nan=False)] | None = None
 
     @field_validator("span_deg")
     @classmethod
@@ -508,13 +511,15 @@ class DesignExpectation(_Strict):
         if self.colour_weight is not None and self.colour_instrument is None:
             raise ValueError("colour_weight is the weight of a colour design's instrument "
                              "geometries: give colour_instrument with it, or drop it")
-        if self.expected_log_rmse is None and self.colour_instrument is None:
-            # Neither a held-out error to compare a scan with nor a colour design to record:
-            # the table would load and do nothing, so say what it lacks.
+        if (self.expected_log_rmse is None and self.colour_instrument is None
+                and self.render_mix is None):
+            # Neither a held-out error to compare a scan with nor a design choice to record
+            # (colour, rendering weighting): the table would load and do nothing, so say
+            # what it lacks.
             raise ValueError("a [design] record needs expected_log_rmse (the design's held-out "
-                             "error, compared with every scan) or colour_instrument (the "
-                             "instrument 'gonio design --colour' designed for): add one of them, "
-                             "or drop the table")
+                             "error, compared with every scan), colour_instrument (the "
+                             "instrument 'gonio design --colour' designed for) or render_mix "
+                             "('gonio design --render-mix'): add one of them, or drop the table")
         return self
 
 

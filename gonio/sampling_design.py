@@ -26,7 +26,11 @@ from pydantic import BaseModel, Field, model_validator
 
 from gonio.brdf.colour.conditions import ColourError
 from gonio.brdf.colour.instruments import canonical_instrument, geometries
-from gonio.brdf.design.colourtargets import DEFAULT_COLOUR_WEIGHT, ColourTargets
+from gonio.brdf.design.colourtargets import (
+    DEFAULT_COLOUR_WEIGHT,
+    MAX_COLOUR_WEIGHT,
+    ColourTargets,
+)
 from gonio.brdf.design.constraints import RigConstraints, parse_exclusion
 from gonio.brdf.design.pairs import (
     BasisLike,
@@ -117,7 +121,7 @@ class DesignRequest(BaseModel):
                           "colour'): a pair at each near-specular one, the others weighted "
                           "toward the rest; pairs with the 'posterior' objective only")
     colour_weight: float = Field(
-        DEFAULT_COLOUR_WEIGHT, ge=0, le=1000,
+        DEFAULT_COLOUR_WEIGHT, ge=0, le=MAX_COLOUR_WEIGHT,
         description="with 'colour_instrument': how much the instrument geometries' expected "
                     "error counts against the whole table's (0: only their direct pairs)")
 

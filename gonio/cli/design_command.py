@@ -26,7 +26,11 @@ from typing import Any, TextIO
 import numpy as np
 
 from gonio.brdf.colour.conditions import ColourError
-from gonio.brdf.design.colourtargets import DEFAULT_COLOUR_WEIGHT, ColourTargets
+from gonio.brdf.design.colourtargets import (
+    DEFAULT_COLOUR_WEIGHT,
+    MAX_COLOUR_WEIGHT,
+    ColourTargets,
+)
 from gonio.brdf.design.constraints import RigConstraints, parse_exclusion
 from gonio.brdf.design.errors import DesignError
 from gonio.brdf.design.pairs import (
@@ -90,7 +94,9 @@ def register(subparsers: Any) -> None:
     p.add_argument("--render-mix", type=float, default=0.0, metavar="A",
                    help="for --pairs by the expected error: weigh the grid's cells (1 - A) as "
                         "log_rmse does plus A as the standard renderings' pixels see them "
-                        "(0..1; default 0; docs/science.md 7.2.2)")
+                        "(0..1; default 0; only A = 0.5 was measured to help and the response is "
+                        "not smooth: A = 0.25 made the measured log_rmse +64 %% worse; "
+                        "docs/science.md 7.2.2)")
     p.add_argument("--seed", type=int, default=0,
                    help="random seed of the kappa search; for --objective posterior it picks "
                         "the first pair the greedy choice starts from (0: the best single "
@@ -157,6 +163,9 @@ def _check_args(args: argparse.Namespace) -> None:
         if args.pairs is None or args.objective == "kappa":
             raise UsageError("--colour designs --pairs by the expected error: use it with "
                              "--pairs and without --objective kappa")
+        if not args.colour_weight <= MAX_COLOUR_WEIGHT:  # also refuses nan
+            raise UsageError(f"--colour-weight must be between 0 and {MAX_COLOUR_WEIGHT:g}, "
+                             f"got {args.colour_weight:g}")
         _colour(args)
     if args.render_mix != 0.0:
         if args.pairs is None or args.objective == "kappa":
@@ -164,6 +173,9 @@ def _check_args(args: argparse.Namespace) -> None:
                              "with --pairs and without --objective kappa")
         if not 0.0 <= args.render_mix <= 1.0:
             raise UsageError(f"--render-mix must be between 0 and 1, got {args.render_mix:g}")
+        if args.colour is not None:
+            raise UsageError("--render-mix and --colour cannot be combined (each reweighs the "
+                             "expected error; together the scales are wrong): use one")
     if args.seed < 0:
         raise UsageError(f"--seed must be at least 0, got {args.seed}")
     if args.rotations < 1:
@@ -191,9 +203,11 @@ def _colour(args: argparse.Namespace) -> ColourTargets | None:
 
 
 def _colour_record(args: argparse.Namespace) -> dict[str, Any]:
-    """The ``[design]`` keys of a colour design (none without ``--colour``)."""
+    """The ``[design]`` keys of a colour design (none without ``--colour``) and the
+    ``render_mix`` of a rendering-weighted one (none at 0)."""
+    mix = float(getattr(args, "render_mix", 0.0) or 0.0)
     if getattr(args, "colour", None) is None:
-        return {}
+        return {"render_mix": mix} if mix else {}
     from gonio.brdf.colour.instruments import canonical_instrument
 
     return {"colour_instrument": canonical_instrument(args.colour),
@@ -379,13 +393,14 @@ def run(args: argparse.Namespace) -> int:
         from gonio.brdf.design.heldout import choose_design
 
         constraints = _constraints(args)
+        colour, mix = _colour(args), _render_mix(args)  # the importance map once, not per seed
 
         def make(seed: int) -> PairDesign:
             return design_pairs(
                 basis, args.pairs, constraints, h=args.neighbourhood, starts=args.starts,
                 descents=args.descents, seed=args.seed + seed, time_limit_s=args.time_limit,
                 objective=args.objective, rotations=args.rotations, span_deg=args.span,
-                colour=_colour(args),
+                colour=colour, **mix,
             )
 
         design, expected, table = choose_design(make, range(args.candidates), args.rotations,
@@ -398,6 +413,9 @@ def run(args: argparse.Namespace) -> int:
         design = make_design(args, basis)
     bound = roughness_bound(design.cells, design.ph_lab, bound_angles(args.rotations, args.span))
     print_design(design, bound, args.rotations, span_deg=args.span)
+    if args.render_mix:
+        print(f"cells weighted by the standard renderings at --render-mix {args.render_mix:g} "
+              "(docs/science.md 7.2.2)")
     if args.basis is None and not args.no_expected_error and args.lights is None:
         if expected is None:
             from gonio.brdf.design.heldout import heldout_log_rmse
@@ -439,11 +457,12 @@ def run(args: argparse.Namespace) -> int:
                 rotations=args.rotations, span_deg=args.span, noise=HELDOUT_NOISE,
                 pairs=design.n_pairs, calibrated=True, **_colour_record(args),
             )
-        elif getattr(args, "colour", None) is not None:
+        elif _colour_record(args):
             from gonio.config import DesignExpectation
 
             # No held-out error to compare scans with, but the rig config still records
-            # that its geometry is a colour design (its scans report that instrument).
+            # that its geometry is a colour design (its scans report that instrument) or a
+            # rendering-weighted one.
             expectation = DesignExpectation(rotations=args.rotations, span_deg=args.span,
                                             pairs=design.n_pairs, **_colour_record(args))
         args.output.write_text(dump_fragment(design_fragment(design, expectation), header),

@@ -236,8 +236,9 @@ def test_a_bad_design_table_is_refused_by_name(tmp_path: Path, table: str, words
     ("rotations = 8\npairs = 10\ncolour_weight = 10.0",
      "give colour_instrument with it"),
     ("rotations = 8\npairs = 10\nexpected_log_rmse_measured = 0.05",
-     "needs expected_log_rmse (the design's held-out error, compared with every scan) or "
+     "needs expected_log_rmse (the design's held-out error, compared with every scan), "
      "colour_instrument"),
+    ("rotations = 8\npairs = 10\nrender_mix = 1.5", "design.render_mix"),
 ])
 def test_a_bad_colour_design_record_is_refused_by_name(tmp_path: Path, table: str,
                                                        words: str) -> None:
@@ -246,6 +247,14 @@ def test_a_bad_colour_design_record_is_refused_by_name(tmp_path: Path, table: st
     with pytest.raises(ConfigError, match="design") as err:
         load_rig_config(rig)
     assert words in str(err.value)
+
+
+def test_a_rendering_weighted_design_record_is_kept(tmp_path: Path) -> None:
+    rig = tmp_path / "rig.toml"
+    rig.write_text(EXAMPLE.read_text() + "\n[design]\nrotations = 8\npairs = 10\n"
+                   "render_mix = 0.5\n")
+    design = load_rig_config(rig).design
+    assert design is not None and design.render_mix == 0.5
 
 
 def test_a_colour_design_record_without_held_out_error_is_kept_and_not_compared(

@@ -37,6 +37,9 @@ FloatArray = NDArray[np.float64]
 #: (``bench/bench_colour.py --colour-design --colour-weight W`` on its choice set: 0, 1, 3 and 10
 #: measured, 10 chosen; docs/colour.md gives the table and the held-out set's numbers).
 DEFAULT_COLOUR_WEIGHT = 10.0
+#: The largest colour weight a request, a rig config or ``gonio design`` accepts (config.py
+#: repeats it: the config layer may not import the design room).
+MAX_COLOUR_WEIGHT = 1000.0
 #: Targets with the half vector within this angle of the normal get a pair of their own:
 #: aspecular angles up to 25 degrees (the half vector sits at half the aspecular angle).
 DEFAULT_DIRECT_WITHIN_DEG = 12.5

@@ -195,6 +195,15 @@ def design_pairs(
         return posterior_design(basis, n, constraints, rotations=rotations, span_deg=span_deg,
                                 seed=0 if seed is None else seed, time_limit_s=time_limit_s,
                                 colour=colour, **cells_asked)
+    if cells_asked:
+        # Like colour: the condition-number search cannot take the weighting, so its fallbacks
+        # would drop it silently; the weighted design fails instead.
+        if not isinstance(basis, Basis):
+            raise DesignError("a cell weighting (cell_mix > 0) needs a gonio Basis (its medians "
+                              "and prior)")
+        return posterior_design(basis, n, constraints, rotations=rotations, span_deg=span_deg,
+                                seed=0 if seed is None else seed, time_limit_s=time_limit_s,
+                                **cells_asked)
     fallback = None
     if asked == "posterior":
         if isinstance(basis, Basis):

@@ -489,6 +489,11 @@ def posterior_design(
     model = prior_model(basis, rotations, eta, lam, slope, aliasing, span_deg)
     fixed: FloatArray = np.zeros((0, 3))
     choice = model
+    if colour is not None and cell_mix > 0:
+        # The mix would scale the renderings' term against a W that already holds the colour
+        # term, inflating it by the colour weight: refuse rather than design on a wrong scale.
+        raise DesignError("a colour design cannot also mix in a cell weighting (cell_mix > 0): "
+                          "use one or the other")
     if colour is not None:
         fixed, choice = _colour_choice(basis, model, colour, n)
     if not 0.0 <= cell_mix <= 1.0:
@@ -542,9 +547,13 @@ def posterior_design(
 
 def _mixed_gram(model: PriorModel, Wc: FloatArray, mix: float) -> FloatArray:
     """``(1 - mix) W + mix ratio Wc``, ``ratio`` making both weigh the prior alike."""
+    return np.asarray((1.0 - mix) * model.W + mix * _prior_ratio(model, Wc) * Wc)
+
+
+def _prior_ratio(model: PriorModel, Wc: FloatArray) -> float:
+    """How much ``Wc`` ((m, m)) must be scaled to weigh the prior as much as ``model.W`` does."""
     prior = model.P.sum(axis=0)
-    ratio = float(np.sum(model.W * prior)) / max(float(np.sum(Wc * prior)), 1e-300)
-    return np.asarray((1.0 - mix) * model.W + mix * ratio * Wc)
+    return float(np.sum(model.W * prior)) / max(float(np.sum(Wc * prior)), 1e-300)
 
 
 def _colour_choice(basis: Basis, model: PriorModel, colour: ColourTargets, n: int
@@ -569,10 +578,8 @@ def _colour_choice(basis: Basis, model: PriorModel, colour: ColourTargets, n: in
     W = model.W
     if colour.weight > 0:
         Wc = colour_gram(q_all)
-        prior = model.P.sum(axis=0)
         # Scaled so that, under the prior, weight 1 makes the targets count as much as the
         # whole table.
-        ratio = float(np.sum(model.W * prior)) / max(float(np.sum(Wc * prior)), 1e-300)
-        W = W + colour.weight * ratio * Wc
+        W = W + colour.weight * _prior_ratio(model, Wc) * Wc
     return fixed, replace(model, P=P, W=W)
 

@@ -183,7 +183,12 @@ def appearance_flip(reference: Any, test: Any, ref_images: list[FloatArray] | No
 
 
 class _CellCounter:
-    """An ``eval(wi, wo)`` that renders black and counts which grid cells it was asked for."""
+    """An ``eval(wi, wo)`` that renders black and counts which grid cells it was asked for.
+
+    Each asked direction pair adds its multilinear (trilinear over th, td, pd) weights to the
+    eight surrounding grid nodes: a smooth share of attention per cell, not the weights of the
+    lookup the pictures render with (log-pchip by default), which reaches further nodes.
+    """
 
     def __init__(self) -> None:
         self.counts = np.zeros(geo.N_ROWS)

@@ -123,12 +123,17 @@ def test_design_preset(basis_file: Path, capsys: pytest.CaptureFixture[str]) -> 
         (["--pairs", "6", "--colour", "MA99"], "known instruments are MA68, MA98"),
         (["--pairs", "6", "--colour", "MA98", "--colour-weight", "-1"],
          "colour weight must be a number >= 0"),
+        # the rig config's bound (config.py), refused before the design is computed
+        (["--pairs", "6", "--colour", "MA98", "--colour-weight", "5000"],
+         "--colour-weight must be between 0 and 1000"),
         (["--pairs", "3", "--colour", "MA98"], "need 5 pairs of their own"),
         (["--lights", "2", "--sensors", "2", "--render-mix", "0.5"],
          "--render-mix weighs the expected-error design of --pairs"),
         (["--pairs", "3", "--render-mix", "0.5", "--objective", "kappa"],
          "without --objective kappa"),
         (["--pairs", "3", "--render-mix", "1.5"], "--render-mix must be between 0 and 1"),
+        (["--pairs", "6", "--colour", "MA98", "--render-mix", "0.5"],
+         "--render-mix and --colour cannot be combined"),
         (["--pairs", "3", "--max-elevation", "5", "--min-separation", "30"],
          "no grid cell is feasible"),
         # the core names the settings to relax; the CLI words them as its flags
@@ -238,9 +243,12 @@ def test_render_mix_designs_with_the_renderings_cell_weights(
     out = tmp_path / "frag.toml"
     assert main(["design", "--pairs", "5", "--basis", str(basis_file), "--render-mix", "1",
                  "-o", str(out)]) == 0
-    assert "objective: posterior (" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "objective: posterior (" in printed
+    assert "weighted by the standard renderings at --render-mix 1" in printed
     basis = Basis.load(basis_file)
     frag = tomllib.loads(out.read_text())
+    assert frag["design"]["render_mix"] == 1.0
     li = np.deg2rad([[d["theta_deg"], d["phi_deg"]] for d in frag["lights"]])
     se = np.deg2rad([[d["theta_deg"], d["phi_deg"]] for d in frag["sensors"]])
     th, _, td, pd = geo.directions_to_half_diff(geo.spherical_to_direction(li[:, 0], li[:, 1]),
@@ -305,3 +313,38 @@ def test_a_colour_design_puts_pairs_at_the_near_specular_geometries(
     design = load_rig_config(rig).design
     assert design is not None and design.expected_log_rmse is None
     assert (design.colour_instrument, design.colour_weight) == ("MA98", 10.0)
+
+
+def test_render_mix_reaches_every_candidate_design(
+        basis_file: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """``--candidates K --render-mix A``: each candidate is the rendering-weighted design of its
+    seed (the core's, compared by condition number), not the plain one. The small basis stands
+    in for the default one and the candidates are ranked by kappa instead of the (slow) held-out
+    error: what is tested is what reaches ``design_pairs``."""
+    from types import SimpleNamespace
+    from typing import Any
+
+    from gonio.brdf.design import heldout
+    from gonio.brdf.design.constraints import RigConstraints
+    from gonio.brdf.design.pairs import design_pairs
+    from gonio.brdf.pictures.appearance import render_importance
+    from gonio.cli import design_command
+
+    basis = Basis.load(basis_file)
+    monkeypatch.setattr(design_command, "_load_basis", lambda _path: basis)
+
+    def by_kappa(make: Any, seeds: Any, _rotations: int, span_deg: float) -> Any:
+        designs = [(s, make(s)) for s in seeds]
+        unknown = SimpleNamespace(log_rmse=np.nan, measured=np.nan, synthetic=np.nan)
+        return (min(designs, key=lambda sd: sd[1].kappa)[1], unknown,
+                [(s, d.kappa, np.nan) for s, d in designs])
+
+    monkeypatch.setattr(heldout, "choose_design", by_kappa)
+    assert main(["design", "--pairs", "5", "--render-mix", "1", "--candidates", "2"]) == 0
+    out = capsys.readouterr().out
+    mixed = design_pairs(basis, 5, RigConstraints(), seed=1, cell_weight=render_importance(),
+                         cell_mix=1.0)
+    plain = design_pairs(basis, 5, RigConstraints(), seed=1)
+    assert f"seed 1: kappa {mixed.kappa:.4g}," in out
+    assert f"seed 1: kappa {plain.kappa:.4g}," not in out

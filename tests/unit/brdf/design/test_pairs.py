@@ -223,6 +223,7 @@ def test_a_default_posterior_objective_falls_back_for_rows_without_a_basis(
     from gonio.brdf.design import pairs
     from gonio.brdf.design.constraints import RigConstraints
     from gonio.brdf.design.errors import DesignError
+    from gonio.brdf.tables import geometry as geo
 
     class RowsOnly:
         def __init__(self, b: Basis) -> None:
@@ -237,6 +238,10 @@ def test_a_default_posterior_objective_falls_back_for_rows_without_a_basis(
         pairs.design_pairs(rows_only, 3, RigConstraints(), objective="posterior")
     with pytest.raises(DesignError, match="rotations=0"):
         pairs.design_pairs(rows_only, 3, RigConstraints(), rotations=0)
+    # a cell weighting is refused, as colour is, rather than dropped by the kappa fallback
+    with pytest.raises(DesignError, match=r"cell weighting \(cell_mix > 0\) needs a gonio Basis"):
+        pairs.design_pairs(rows_only, 3, RigConstraints(), h=3, starts=1, descents=1,
+                           cell_weight=np.ones(geo.SLICE_SHAPE), cell_mix=0.5)
 
 
 def test_an_expected_error_choice_past_its_time_limit_hands_over_to_the_search(

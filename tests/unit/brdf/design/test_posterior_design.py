@@ -227,6 +227,15 @@ def test_cell_mix_rejects_bad_requests(kwargs: dict, match: str) -> None:
         posterior_design(random_basis(4), 3, RigConstraints(), **kwargs)
 
 
+def test_cell_mix_with_a_colour_design_is_refused() -> None:
+    """The mix would scale against a metric already holding the colour term."""
+    from gonio.sampling_design import colour_targets
+
+    with pytest.raises(DesignError, match="colour design cannot also mix in a cell weighting"):
+        posterior_design(random_basis(4), 6, RigConstraints(), colour=colour_targets("MA98"),
+                         cell_weight=np.ones(geo.SLICE_SHAPE), cell_mix=0.5)
+
+
 def test_posterior_design_gives_distinct_feasible_mountable_pairs() -> None:
     b = _with_prior(random_basis(6), {0: 1.0, 2: 0.5})
     cons = RigConstraints()
