@@ -55,6 +55,7 @@ import argparse
 import json
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -270,6 +271,21 @@ def scans(witnesses: bool = False) -> list[dict[str, Any]]:
     return rows
 
 
+def _plan_table(rows: list[dict[str, Any]], groups: tuple[tuple[str, Any], ...],
+                cell: Callable[[list[dict[str, Any]]], str]) -> None:
+    """Print a markdown table: one line per plan (and every plan), one column per group of
+    scans, each cell ``cell(scans)`` (empty where the group has no scan of that plan)."""
+    print("| plan | " + " | ".join(g for g, _ in groups) + " |")
+    print("|---" * (1 + len(groups)) + "|")
+    for label in [p[0] for p in PLANS] + ["every plan"]:
+        sel = [r for r in rows if label == "every plan" or r["plan"] == label]
+        cells = []
+        for _, g in groups:
+            s = [r for r in sel if g(r)]
+            cells.append(cell(s) if s else "")
+        print(f"| {label} | " + " | ".join(cells) + " |")
+
+
 def table(rows: list[dict[str, Any]]) -> None:
     """The per-plan tables and the summary (module docstring)."""
     missing = sorted({k for r in rows for k in ("unwidened", "uncovered", "misfit_log")
@@ -307,46 +323,24 @@ def table(rows: list[dict[str, Any]]) -> None:
               ("fresh", lambda r: r["set"] == "fresh"),
               ("fresh tilted", lambda r: r["kind"] == "fresh-tilted"),
               ("all", lambda r: True))
-    print("| plan | " + " | ".join(g for g, _ in groups) + " |")
-    print("|---" * (1 + len(groups)) + "|")
-    for label in [p[0] for p in PLANS] + ["every plan"]:
-        sel = [r for r in rows if label == "every plan" or r["plan"] == label]
-        cells = []
-        for _, g in groups:
-            s = [r for r in sel if g(r)]
-            if not s:
-                cells.append("")
-                continue
 
-            def count(key: str, s: list[dict[str, Any]] = s) -> str:
-                q = np.array([r[key] / r["truth"] for r in s])
-                ok = int(np.sum((q >= 0.5) & (q <= 2.0)))
-                return f"{ok}/{q.size} ({int(np.sum(q < 0.5))}, x{q.min():.2f})"
+    def count(key: str, s: list[dict[str, Any]]) -> str:
+        q = np.array([r[key] / r["truth"] for r in s])
+        ok = int(np.sum((q >= 0.5) & (q <= 2.0)))
+        return f"{ok}/{q.size} ({int(np.sum(q < 0.5))}, x{q.min():.2f})"
 
-            cells.append(f"{count('refit')} -> {count('widened')}")
-        print(f"| {label} | " + " | ".join(cells) + " |")
+    _plan_table(rows, groups, lambda s: f"{count('refit', s)} -> {count('widened', s)}")
     if all(np.isfinite(r.get("upper", float("nan"))) for r in rows):
         print("\ntrue log_rmse above the interval's upper end (predicted_log_rmse_upper), of "
               "the scans; median upper / true:\n")
-        print("| plan | " + " | ".join(g for g, _ in groups) + " |")
-        print("|---" * (1 + len(groups)) + "|")
-        for label in [p[0] for p in PLANS] + ["every plan"]:
-            sel = [r for r in rows if label == "every plan" or r["plan"] == label]
-            cells = []
-            for _, g in groups:
-                s = [r for r in sel if g(r)]
-                u = np.array([r["upper"] / r["truth"] for r in s])
-                cells.append(f"{int(np.sum(u < 1.0))}/{u.size} (x{np.median(u):.2f})"
-                             if u.size else "")
-            print(f"| {label} | " + " | ".join(cells) + " |")
+
+        def above(s: list[dict[str, Any]]) -> str:
+            u = np.array([r["upper"] / r["truth"] for r in s])
+            return f"{int(np.sum(u < 1.0))}/{u.size} (x{np.median(u):.2f})"
+
+        _plan_table(rows, groups, above)
     print("\nscans flagged basis_misfit (of the scans), per plan and set:\n")
-    print("| plan | " + " | ".join(g for g, _ in groups) + " |")
-    print("|---" * (1 + len(groups)) + "|")
-    for label in [p[0] for p in PLANS] + ["every plan"]:
-        sel = [r for r in rows if label == "every plan" or r["plan"] == label]
-        print(f"| {label} | " + " | ".join(
-            f"{sum(bool(r['reason']) for r in sel if g(r))}/{sum(1 for r in sel if g(r))}"
-            for _, g in groups) + " |")
+    _plan_table(rows, groups, lambda s: f"{sum(bool(r['reason']) for r in s)}/{len(s)}")
     low = [r for r in rows if r["widened"] / r["truth"] < 0.5]
     print(f"\nmore than 2x too low after the final mapping: {len(low)} scans, "
           f"{sum(bool(r['reason']) for r in low)} of them flagged; their misfit chi2 "
