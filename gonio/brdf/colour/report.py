@@ -300,11 +300,12 @@ class ColourReport:
 
     def csv(self) -> str:
         """The rows as CSV text (header first), with the space and conditions in a comment-free
-        column so every line states them, and ``measured`` (``true``: a pair of the scan read
-        that geometry, :attr:`measured`; ``false``: read from the table)."""
+        column so every line states them, and ``source`` (``pair``: a pair of the scan read that
+        geometry, :attr:`measured`; ``table``: read from the reconstructed table; the same
+        words as the page's and ``gonio colour``'s column)."""
         rows = self.rows()
         buf = io.StringIO()
-        fields = ["space", "illuminant", "observer", *rows[0].keys(), "flop_index", "measured"]
+        fields = ["space", "illuminant", "observer", *rows[0].keys(), "flop_index", "source"]
         w = csv.DictWriter(buf, fieldnames=fields, lineterminator="\n")
         w.writeheader()
         flags = self.measured or (False,) * len(self.geometries)
@@ -313,7 +314,7 @@ class ColourReport:
             w.writerow({"space": self.space, "illuminant": self.conditions.illuminant,
                         "observer": self.conditions.observer, **_fmt(row),
                         "flop_index": "" if fi is None else f"{fi:.4f}",
-                        "measured": "true" if m else "false"})
+                        "source": "pair" if m else "table"})
         return buf.getvalue()
 
 

@@ -76,8 +76,8 @@ def test_colour_table_beside_the_rendering(spectral_daemon: Daemon,
     names = [f"{r['incidence_deg']:g}as{r['aspecular_deg']:g}" for r in api["colour"]["rows"]]
     assert [n for n, m in zip(names, api["colour"]["measured"], strict=True) if m] == ["45as15"]
     csv_rows = list(csv.DictReader(io.StringIO(api_csv)))
-    assert [r["measured"] for r in csv_rows] == [
-        "true" if n == "45as15" else "false" for n in names]
+    assert [r["source"] for r in csv_rows] == [
+        "pair" if n == "45as15" else "table" for n in names]
     wait = open_live(browser, d, 240)
     row = f'#jobs tr[data-id="{ids[0]}"]'
     click_when_steady(wait, row)

@@ -96,7 +96,7 @@ def test_table_json_and_csv_file(files: dict[str, Path], tmp_path: Path,
     lines = text.splitlines()
     assert lines[1].split()[-1] == "source"
     assert [ln.split()[-1] for ln in lines[2:12]] == ["table"] * 10
-    assert {r["measured"] for r in csv.DictReader(out.open())} == {"false"}
+    assert {r["source"] for r in csv.DictReader(out.open())} == {"table"}
     assert main(["colour", str(files["cal"]), "--json", "--observer", "2"]) == 2
     err = capsys.readouterr()
     # A matrix fitted for D65/10 refuses other conditions with what to do.

@@ -74,9 +74,9 @@ def test_measured_geometries_read_the_specimen_not_the_table() -> None:
     assert direct.as_dict()["measured"] == list(direct.measured)
     # The CSV carries the same flags, geometry by geometry; a report without a scan says none.
     rows = list(csv.DictReader(io.StringIO(direct.csv())))
-    assert [r["measured"] for r in rows] == [
-        "true" if n in ("45as15", "15as-5") else "false" for n in names]
-    assert {r["measured"] for r in csv.DictReader(io.StringIO(plain.csv()))} == {"false"}
+    assert [r["source"] for r in rows] == [
+        "pair" if n in ("45as15", "15as-5") else "table" for n in names]
+    assert {r["source"] for r in csv.DictReader(io.StringIO(plain.csv()))} == {"table"}
 
 
 @pytest.mark.parametrize("azimuth", [0.0, 30.0, 90.0])
