@@ -30,16 +30,18 @@ of the row, ``r`` uniform stage angles):
 The issue's goals: asymmetric mean ``log_rmse <= 0.06`` within 120 readings at 10 pairs; the
 test calls at most 1 in 20 symmetric scans asymmetric.
 
-The auto-arc path (``--auto``, what a scan with ``arc = "auto"`` does, docs/science.md 7.4):
-the rig's 10 pairs (designed for the default basis over half a turn, as the default design),
-the first round of :func:`gonio.plans.arc.first_round_angles` (``R`` angles over half a turn
-plus two opposites), the engine's test (:func:`gonio.plans.arc.arc_test`, on the readings
-scaled per pair as the engine's raw counts are); symmetric, the joint fit with the default
-basis on those angles; asymmetric, the fill round (:func:`gonio.plans.arc.fill_angles`: ``2R``
-angles over the full turn in all) and the fit with the basis the verdict chooses: the default
-one (before issue 25's switch) or the asymmetric one (after). Rows for ``R`` = 6 (120 readings
-when asymmetric) and 8 (160), on the asymmetric specimens, and on the symmetric ones (their
-readings and error beside today's half-turn scan of 8 angles, 80 readings).
+The auto-arc path (``--auto``, what a scan with ``arc = "auto"`` does, docs/science.md 7.4): the
+rig's 10 pairs (designed for the default basis over half a turn, as the default design), the first
+round of :func:`gonio.plans.arc.first_round_angles` (``R`` angles over half a turn plus one
+opposite; ``--layout`` compares other first rounds, ``LAYOUTS``), the engine's test
+(:func:`gonio.plans.arc.arc_test`, on the readings scaled per pair as the engine's raw counts are);
+symmetric, the joint fit with the default basis on those angles; asymmetric, the fill round
+(:func:`gonio.plans.arc.fill_angles`: ``2R`` angles over the full turn in all) and the fit with the
+basis the verdict chooses: the default one (before issue 25's switch) or the asymmetric one
+(after). Rows for ``R`` = 6 (120 readings when asymmetric) and 8 (160), on the asymmetric
+specimens, and on the symmetric ones (their readings and error beside today's half-turn scan of 8
+angles, 80 readings). ``--set fresh`` runs the same tables on ``ASYM_FRESH`` and its untilted twins
+(the held-out set of the layout choice).
 """
 
 from __future__ import annotations
@@ -59,6 +61,7 @@ from gonio.brdf.reconstruction.samples import NoiseModel, uniform_stage_angles
 from gonio.brdf.reconstruction.symmetry import twofold_test
 from gonio.brdf.tables import geometry as geo
 from gonio.brdf.tables import metrics
+from gonio.plans.arc import fill_angles, first_round_angles
 
 MASK = geo.valid_mask()
 
@@ -83,6 +86,32 @@ ASYM: list[tuple[str, float, float, dict[str, Any], float]] = [
       "diffuse_reflectance": {"type": "rgb", "value": [0.1, 0.2, 0.55]}}, 199.0),
     ("ag-aniso-t15", 15.0, 90.0, {"type": "roughconductor", "material": "Ag", "alpha_u": 0.08,
                                   "alpha_v": 0.3}, 58.0),
+]
+
+
+#: A fresh set for the auto arc's layout choice (``--set fresh``), written before its first
+#: run and run once: other metals, roughnesses, colours, holder angles, and two small tilts
+#: (6 and 8 deg) that probe the test's power below the choice set's 10 deg.
+ASYM_FRESH: list[tuple[str, float, float, dict[str, Any], float]] = [
+    ("cr-r0.12-t12", 12.0, 250.0, {"type": "roughconductor", "material": "Cr", "alpha": 0.12},
+     33.0),
+    ("w-r0.35-t22", 22.0, 75.0, {"type": "roughconductor", "material": "W", "alpha": 0.35},
+     288.0),
+    ("au-r0.08-t6", 6.0, 330.0, {"type": "roughconductor", "material": "Au", "alpha": 0.08},
+     151.0),
+    ("cu-aniso-t18", 18.0, 160.0, {"type": "roughconductor", "material": "Cu", "alpha_u": 0.3,
+                                   "alpha_v": 0.07}, 96.0),
+    ("green-plastic-r0.15-t8", 8.0, 20.0,
+     {"type": "roughplastic", "alpha": 0.15,
+      "diffuse_reflectance": {"type": "rgb", "value": [0.08, 0.4, 0.1]}}, 222.0),
+    ("white-plastic-r0.30-t28", 28.0, 210.0,
+     {"type": "roughplastic", "alpha": 0.30,
+      "diffuse_reflectance": {"type": "rgb", "value": [0.8, 0.8, 0.78]}}, 12.0),
+    ("yellow-plastic-r0.06-t16", 16.0, 130.0,
+     {"type": "roughplastic", "alpha": 0.06,
+      "diffuse_reflectance": {"type": "rgb", "value": [0.7, 0.55, 0.05]}}, 345.0),
+    ("al-r0.18-t25", 25.0, 285.0, {"type": "roughconductor", "material": "Al", "alpha": 0.18},
+     180.0),
 ]
 
 
@@ -114,9 +143,10 @@ def specimen(name: str, spec: dict[str, Any], holder: float, key: str) -> bu.Mat
     return bu.Material(name, "aniso", bu._full_table(vals, name), s, ())
 
 
-def asym_materials(tilted: bool = True) -> list[bu.Material]:
+def asym_materials(tilted: bool = True, fresh: bool = False) -> list[bu.Material]:
+    """The asymmetric specimens (``tilted``) or their untilted twins; ``fresh``: ASYM_FRESH."""
     out = []
-    for name, tilt, azimuth, inner, holder in ASYM:
+    for name, tilt, azimuth, inner, holder in (ASYM_FRESH if fresh else ASYM):
         t = tilt if tilted else 0.0
         spec = normalmap_spec(t, azimuth, inner)
         out.append(specimen(name if tilted else f"{name}-untilted", spec, holder,
@@ -139,18 +169,42 @@ def scan(b: Basis, m: bu.Material, cells: np.ndarray, ph: np.ndarray, r: int, sp
     return metrics.log_rmse(rec.table, m.truth), alpha, vals
 
 
+def _layout_opposites(distinct: int, picks: list[int]
+                      ) -> tuple[list[float], list[float]]:
+    """``distinct`` uniform angles over half a turn, the opposites of those at ``picks``, and
+    the fill round's opposites of the rest."""
+    half = [180.0 * k / distinct for k in range(distinct)]
+    first = half + [half[k] + 180.0 for k in picks]
+    fill = [a + 180.0 for k, a in enumerate(half) if k not in picks]
+    return first, fill
+
+
+#: First-round layouts of the auto arc (``--layout``): each maps ``R`` to (first round, fill
+#: round) angles in degrees. ``one``: the product's (R over half a turn plus the first one's
+#: opposite, R + 1 angles; :func:`gonio.plans.arc.first_round_angles`); ``two``: the
+#: product's for pairs in one plane, and every auto scan's before this bench chose ``one``
+#: (plus a second opposite a quarter turn on, R + 2); ``swap``: R - 1 over half a turn
+#: plus one opposite (R angles, so a symmetric specimen reads as many as a half-turn plan but
+#: sees R - 1 distinct azimuths); ``swap2``: R - 2 plus two opposites a quarter turn apart.
+LAYOUTS = {
+    "one": lambda r: (first_round_angles(0.0, r, 1), fill_angles(0.0, r, 1)),
+    "two": lambda r: (first_round_angles(0.0, r, 2), fill_angles(0.0, r, 2)),
+    "swap": lambda r: _layout_opposites(r - 1, [0]),
+    "swap2": lambda r: _layout_opposites(r - 2, [0, (r - 2) // 2]),
+}
+
+
 def auto_scan(plain: Basis, asym: Basis, m: bu.Material, cells: np.ndarray, ph: np.ndarray,
-              rotations: int, seed: int) -> dict[str, Any]:
+              rotations: int, seed: int, layout: str = "one") -> dict[str, Any]:
     """The auto-arc path on one specimen: the verdict, readings and the log_rmse with the
     default basis and (when found asymmetric) with the asymmetric one."""
-    from gonio.plans.arc import arc_test, fill_angles, first_round_angles
+    from gonio.plans.arc import arc_test
 
-    first = first_round_angles(0.0, rotations)
+    first, fill = LAYOUTS[layout](rotations)
     vals = bu.read(m, cells, ph, np.deg2rad(first), seed)
     test = arc_test(first, vals, 0.01)
     angles = list(first)
     if not test["symmetric"]:
-        fill = fill_angles(0.0, rotations)
         vals = np.concatenate([vals, bu.read(m, cells, ph, np.deg2rad(fill), seed + 1)], axis=1)
         angles += fill
     alpha = np.deg2rad(angles)
@@ -163,17 +217,19 @@ def auto_scan(plain: Basis, asym: Basis, m: bu.Material, cells: np.ndarray, ph: 
 
 
 def auto_rows(plain: Basis, asym: Basis, d_half: tuple[np.ndarray, np.ndarray],
-              seeds: int) -> None:
-    """The auto-arc path's tables (module notes): asymmetric and symmetric specimens."""
-    mats = asym_materials()
-    print("\nauto arc, the default design's 10 pairs (designed for half a turn):")
+              seeds: int, layout: str = "one", fresh: bool = False) -> None:
+    """The auto-arc path's tables (module notes): asymmetric and symmetric specimens
+    (``fresh``: ASYM_FRESH and its untilted twins only)."""
+    mats = asym_materials(fresh=fresh)
+    print(f"\nauto arc, first-round layout {layout!r}, the default design's 10 pairs (designed "
+          "for half a turn):")
     print("\n| specimen | R | verdict (p) | readings | default basis (before) | "
           "asymmetric basis (after) |")
     print("|---|---|---|---|---|---|")
     means: dict[int, list[tuple[float, float, int]]] = {6: [], 8: []}
     for rotations in (6, 8):
         for i, m in enumerate(mats):
-            r = auto_scan(plain, asym, m, *d_half, rotations, 500 + i)
+            r = auto_scan(plain, asym, m, *d_half, rotations, 500 + i, layout)
             means[rotations].append((r["default"], r["switched"], r["readings"]))
             verdict = "symmetric" if r["symmetric"] else "NOT symmetric"
             print(f"| {m.name} | {rotations} | {verdict} ({r['p']:.2g}) | {r['readings']} | "
@@ -181,7 +237,8 @@ def auto_rows(plain: Basis, asym: Basis, d_half: tuple[np.ndarray, np.ndarray],
         a = np.array(means[rotations], dtype=float)
         print(f"| **mean** | {rotations} | | {a[:, 2].mean():.0f} | {a[:, 0].mean():.4f} | "
               f"**{a[:, 1].mean():.4f}** |")
-    sym = bu.aniso_materials() + asym_materials(tilted=False)
+    sym = (asym_materials(tilted=False, fresh=True) if fresh
+           else bu.aniso_materials() + asym_materials(tilted=False))
     print(f"\nsymmetric specimens ({len(sym)}), auto arc R = 8 against today's half turn "
           f"r = 8 (80 readings), {seeds} noise seeds each (mean over seeds):")
     print("\n| specimen | half r=8 | auto R=8 | auto readings | called asymmetric |")
@@ -192,7 +249,7 @@ def auto_rows(plain: Basis, asym: Basis, d_half: tuple[np.ndarray, np.ndarray],
         for k in range(seeds):
             seed = 9000 + 37 * j + k
             half.append(scan(plain, m, *d_half, 8, 180.0, seed)[0])
-            r = auto_scan(plain, asym, m, *d_half, 8, seed)
+            r = auto_scan(plain, asym, m, *d_half, 8, seed, layout)
             auto.append(r["switched"])
             reads.append(r["readings"])
             flagged += not r["symmetric"]
@@ -218,6 +275,10 @@ def main(argv: list[str] | None = None) -> int:
                     help="pairs of the asymmetric-basis rows (the goal is stated for 10)")
     ap.add_argument("--auto", action="store_true",
                     help="only the auto-arc path's tables (module notes)")
+    ap.add_argument("--layout", choices=sorted(LAYOUTS), default="one",
+                    help="the auto arc's first-round layout (with --auto; module LAYOUTS)")
+    ap.add_argument("--set", choices=("choice", "fresh"), default="choice",
+                    help="with --auto: the specimens (fresh: ASYM_FRESH, run once)")
     args = ap.parse_args(argv)
     if args.tilted_facets is not None:
         from gonio.brdf.materials import library
@@ -231,7 +292,7 @@ def main(argv: list[str] | None = None) -> int:
     asym = default_basis(asymmetric=True)
     d_half, d_full = design(plain, 180.0), design(plain, 360.0)
     if args.auto:
-        auto_rows(plain, asym, d_half, args.seeds)
+        auto_rows(plain, asym, d_half, args.seeds, args.layout, args.set == "fresh")
         print(f"total {time.perf_counter() - t0:.0f} s")
         return 0
     d_asym = design(asym, 360.0, args.pairs)

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field, replace
 from functools import cached_property
 
 from gonio.hal import PairSpec
-from gonio.plans.arc import branch_bounds, first_round_angles
+from gonio.plans.arc import branch_bounds, first_round_angles, opposites_needed
 from gonio.plans.models import AdaptivePlan, AnyPlan
 from gonio.plans.route import order_for_travel
 from gonio.plans.timing import adaptive_bound, estimate_angles
@@ -34,7 +34,8 @@ class CheckedPlan:
     pairs : the pairs the plan measures, in order (the rows of every values array)
     lights : their lights in first-appearance order (one exposure per light and angle)
     angles_deg : (r,) specimen angles of the first round, degrees in [0, 360) (an auto-arc
-        plan's: its half-turn angles and two opposites, :func:`gonio.plans.arc.first_round_angles`)
+        plan's: its half-turn angles and one or two opposites,
+        :func:`gonio.plans.arc.first_round_angles`)
     route_deg : stage positions visiting ``angles_deg`` from ``from_deg``, degrees (proof
         that the first round can be visited in one direction inside the travel; the engine
         routes again from where the stage is)
@@ -53,14 +54,21 @@ class CheckedPlan:
     def arc_deg(self) -> tuple[float, float]:
         """``(start_deg, span_deg)`` of the plan's arc, degrees: the first round's uniform
         angles and every refinement round lie in it. An auto-arc plan's first round is over
-        half a turn (plus two opposites); the arc it continues on is its rounds' choice
-        (:class:`gonio.plans.rounds.ArcRounds`)."""
+        half a turn (plus one or two opposites, :attr:`arc_opposites`); the arc it continues
+        on is its rounds' choice (:class:`gonio.plans.rounds.ArcRounds`)."""
         return (float(self.plan.start_deg), self.plan.first_span_deg())
 
     @cached_property
     def sensors_of(self) -> dict[str, tuple[str, ...]]:
         """The sensors read under each light, in pair order."""
         return {lt: tuple(p.sensor for p in self.pairs if p.light == lt) for lt in self.lights}
+
+    @cached_property
+    def arc_opposites(self) -> int:
+        """Opposite stage angles an auto-arc plan's first round reads on these pairs (1, or 2
+        when they all lie in one plane through the normal;
+        :func:`gonio.plans.arc.opposites_needed`)."""
+        return opposites_needed(*self.rig.pair_directions(self.pairs))
 
     @cached_property
     def per_angle_s(self) -> float:
@@ -79,7 +87,7 @@ class CheckedPlan:
         arc (:func:`gonio.plans.arc.branch_bounds`); None for a fixed plan."""
         if self.plan.arc_mode() == "auto":
             branches = branch_bounds(self.plan, self.rig, len(self.lights), len(self.pairs),
-                                     self.angles_deg, 0.0)
+                                     self.angles_deg, 0.0, self.arc_opposites)
             return len(self.angles_deg) + max(n for n, _ in branches.values())
         if not isinstance(self.plan, AdaptivePlan):
             return None
@@ -106,7 +114,8 @@ def check_plan(plan: AnyPlan | CheckedPlan, rig: RigDescription,
             route = order_for_travel(plan.angles_deg, from_deg, rig, plan.plan.backlash_deg)
             return replace(plan, route_deg=tuple(route), from_deg=from_deg)
     pairs = validate_plan(plan, rig)
-    angles = (first_round_angles(plan.start_deg, plan.first_rotations())
+    angles = (first_round_angles(plan.start_deg, plan.first_rotations(),
+                                 opposites_needed(*rig.pair_directions(pairs)))
               if plan.arc_mode() == "auto"
               else uniform_angles(plan.start_deg, plan.first_rotations(), plan.first_span_deg()))
     route = order_for_travel(angles, from_deg, rig, plan.backlash_deg)

@@ -161,7 +161,7 @@ class AdaptiveRounds:
 class ArcRounds:
     """The rounds of an auto-arc plan (``arc = "auto"``, :mod:`gonio.plans.arc`).
 
-    Round 0 read the half-turn angles and two of their opposites
+    Round 0 read the half-turn angles and one or two of their opposites
     (:func:`gonio.plans.arc.first_round_angles`). After it, the twofold symmetry test on its
     readings chooses the arc (event ``arc_test``): symmetric, the plan goes on over half a
     turn as a fixed half-turn plan would (an adaptive plan refines in it); not symmetric, round
@@ -214,7 +214,11 @@ class ArcRounds:
                 self.relative)
             events.append((ARC_TEST_EVENT, self.chosen))
         if last_round == 0 and not self.chosen["symmetric"]:
-            fill = fill_angles(self.start_deg, self.rotations)
+            fill = fill_angles(self.start_deg, self.rotations, self.checked.arc_opposites)
+            # A job whose first round read more opposites (started by a gonio that read two
+            # on every rig) does not read them twice.
+            seen = {round(float(a) % 360.0, 6) for a in angles_deg}
+            fill = [a for a in fill if round(a % 360.0, 6) not in seen]
             if fill:
                 return NextRound(fill, events)
         nxt = await self._after().next_round(angles_deg, values, planned_angles, last_round)
