@@ -576,28 +576,40 @@ class LobeSum(_Analytic):
 
 
 @dataclass(frozen=True)
-class Rotated(_Analytic):
-    """A model whose specimen is turned by ``angle`` radians about the normal.
-
-    ``Rotated(m, a).eval(wi, wo) == m.eval(Rz(-a) wi, Rz(-a) wo)``: the material's x axis now
-    points at azimuth ``a``, matching :meth:`BRDFTable.rotated`.
-    """
+class _Wrapping(_Analytic):
+    """A model made of another one (:class:`Rotated`, :class:`Tilted`): the inner model is
+    checked once here, and the wrapper keeps its channels and, unless given, its name."""
 
     model: Any = None
-    angle: float = 0.0
     name: str = field(default="", kw_only=True)
 
-    def __post_init__(self) -> None:
+    def _adopt(self) -> None:
+        """Check the inner model and take its name; subclasses call it from
+        ``__post_init__`` before their own checks."""
         if not isinstance(self.model, BRDFModel):
-            raise ModelError(f"Rotated: {self.model!r} is not a BRDF model")
-        if not math.isfinite(self.angle):
-            raise ModelError(f"Rotated.angle = {self.angle} must be a finite angle in radians")
+            raise ModelError(f"{type(self).__name__}: {self.model!r} is not a BRDF model")
         if not self.name:
             object.__setattr__(self, "name", self.model.name)
 
     @property
     def channels(self) -> tuple[str, ...]:  # type: ignore[override]
         return tuple(self.model.channels)
+
+
+@dataclass(frozen=True)
+class Rotated(_Wrapping):
+    """A model whose specimen is turned by ``angle`` radians about the normal.
+
+    ``Rotated(m, a).eval(wi, wo) == m.eval(Rz(-a) wi, Rz(-a) wo)``: the material's x axis now
+    points at azimuth ``a``, matching :meth:`BRDFTable.rotated`.
+    """
+
+    angle: float = 0.0
+
+    def __post_init__(self) -> None:
+        self._adopt()
+        if not math.isfinite(self.angle):
+            raise ModelError(f"Rotated.angle = {self.angle} must be a finite angle in radians")
 
     @property
     def isotropic(self) -> bool:
@@ -612,7 +624,7 @@ class Rotated(_Analytic):
 
 
 @dataclass(frozen=True)
-class Tilted(_Analytic):
+class Tilted(_Wrapping):
     """A model on facets whose normal leans ``tilt`` radians toward azimuth ``azimuth``.
 
     A constant normal map made physical: a sawtooth (a blazed profile) whose facets all have
@@ -646,26 +658,17 @@ class Tilted(_Analytic):
         The sawtooth's shadowing and masking, or none (a renderer's normal map).
     """
 
-    model: Any = None
     tilt: float = 0.0
     azimuth: float = 0.0
     masking: Literal["sawtooth", "none"] = "sawtooth"
-    name: str = field(default="", kw_only=True)
 
     def __post_init__(self) -> None:
-        if not isinstance(self.model, BRDFModel):
-            raise ModelError(f"Tilted: {self.model!r} is not a BRDF model")
+        self._adopt()
         _check_range([self.tilt], 0.0, 1.2, "Tilted.tilt")
         if not math.isfinite(self.azimuth):
             raise ModelError(f"Tilted.azimuth = {self.azimuth} must be a finite angle in radians")
         if self.masking not in ("sawtooth", "none"):
             raise ModelError(f"Tilted.masking = {self.masking!r}; use 'sawtooth' or 'none'")
-        if not self.name:
-            object.__setattr__(self, "name", self.model.name)
-
-    @property
-    def channels(self) -> tuple[str, ...]:  # type: ignore[override]
-        return tuple(self.model.channels)
 
     @property
     def isotropic(self) -> bool:
