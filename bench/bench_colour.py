@@ -43,6 +43,9 @@ normal incidence does for the near-specular geometries (docs/colour.md).
 several of them mixtures no chart patch has, other coat and flake roughnesses, dyes and metals;
 other noise seeds). Every choice made with this benchmark (the colour design's weight among
 them) was made on the default set, ``--set choice``; the validation set only tests them.
+``--set validation2`` is a third disjoint set (:data:`gonio.sim.spectral.VALIDATION2_MATERIALS`,
+13 specimens, seeds 2000 + k), written after the validation set had been seen: each change is
+tested on it once (docs/colour.md says which set saw which choice).
 
 Reconstruction time: wall time of the 31-band call (the machine may be busy) and its CPU time
 (the process' own, which other users' load does not inflate).
@@ -86,6 +89,7 @@ from gonio.brdf.tables.table import from_function
 from gonio.sim.spectral import (
     SPECTRAL_MATERIALS,
     SPECTROMETER_31,
+    VALIDATION2_MATERIALS,
     VALIDATION_MATERIALS,
     SpectralSpecimen,
     _colorchecker,
@@ -94,7 +98,8 @@ from gonio.sim.spectral import (
 
 N_PAIRS, R = 10, 8
 #: The specimen sets and their seeds' offsets: choices are made on "choice" only.
-SETS = {"choice": (SPECTRAL_MATERIALS, 0), "validation": (VALIDATION_MATERIALS, 1000)}
+SETS = {"choice": (SPECTRAL_MATERIALS, 0), "validation": (VALIDATION_MATERIALS, 1000),
+        "validation2": (VALIDATION2_MATERIALS, 2000)}
 RGB_BANDS = SpectralBands((610.0, 540.0, 460.0), (60.0, 60.0, 60.0))
 COND = ViewingConditions()
 
