@@ -32,7 +32,9 @@ the rest; ``--colour-weight``) and gives the colour report the scan's readings, 
 a pair measured use them (:mod:`gonio.brdf.colour.direct`): what a lab that asks for colour
 gets. Without it the design is the default one and the report reads the table only.
 
-``--pairs N`` designs N pairs instead of 10.
+``--pairs N`` designs N pairs instead of 10. ``--direct-within DEG`` gives the colour design a
+direct pair at every MA98 geometry whose half vector is within DEG of the normal (default
+12.5: the five near-specular ones).
 
 ``--add-pair INCIDENCE,ASPECULAR`` (repeatable) adds an in-plane pair at that instrument
 geometry (degrees, e.g. ``15,-5``) to the designed ones: what reading the specular peak near
@@ -72,7 +74,11 @@ from gonio.brdf.colour.direct import ScanReadings
 from gonio.brdf.colour.instruments import Geometry, geometries
 from gonio.brdf.colour.report import colour_report
 from gonio.brdf.colour.spectral import SpectralBands
-from gonio.brdf.design.colourtargets import DEFAULT_COLOUR_WEIGHT, ColourTargets
+from gonio.brdf.design.colourtargets import (
+    DEFAULT_COLOUR_WEIGHT,
+    DEFAULT_DIRECT_WITHIN_DEG,
+    ColourTargets,
+)
 from gonio.brdf.design.constraints import RigConstraints
 from gonio.brdf.design.pairs import design_pairs
 from gonio.brdf.materials.library import cache_root
@@ -104,11 +110,13 @@ RGB_BANDS = SpectralBands((610.0, 540.0, 460.0), (60.0, 60.0, 60.0))
 COND = ViewingConditions()
 
 
-def colour_targets(instrument: str, weight: float) -> ColourTargets:
+def colour_targets(instrument: str, weight: float,
+                   direct_within_deg: float = DEFAULT_DIRECT_WITHIN_DEG) -> ColourTargets:
     """The design's colour targets: ``instrument``'s geometries at azimuth 0."""
     g = geometries([instrument])
     return ColourTargets(np.stack([x.directions()[0] for x in g]),
-                         np.stack([x.directions()[1] for x in g]), weight=weight)
+                         np.stack([x.directions()[1] for x in g]), weight=weight,
+                         direct_within_deg=direct_within_deg)
 
 
 def design(basis: object, cache: Path, colour: ColourTargets | None = None,
@@ -175,13 +183,17 @@ def main(argv: list[str] | None = None) -> int:
                          "geometries a pair measured from its readings")
     ap.add_argument("--colour-weight", type=float, default=DEFAULT_COLOUR_WEIGHT,
                     help="weight of the MA98 geometries in the colour design")
+    ap.add_argument("--direct-within", type=float, default=DEFAULT_DIRECT_WITHIN_DEG,
+                    metavar="DEG", help="the colour design's direct pairs: every MA98 geometry "
+                                        "whose half vector is within DEG of the normal")
     ap.add_argument("--pairs", type=int, default=N_PAIRS,
                     help="designed pairs (the issue's benchmark: 10)")
     ap.add_argument("--add-pair", action="append", default=[], metavar="INC,ASP",
                     help="add an in-plane pair at this incidence and aspecular angle (deg)")
     args = ap.parse_args(argv)
     basis = default_basis()
-    targets = colour_targets("MA98", args.colour_weight) if args.colour_design else None
+    targets = (colour_targets("MA98", args.colour_weight, args.direct_within)
+               if args.colour_design else None)
     cells, ph = design(basis, args.cache, targets, args.pairs)
     for text in args.add_pair:
         inc, asp = (float(x) for x in text.split(","))
