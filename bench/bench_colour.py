@@ -32,7 +32,9 @@ the rest; ``--colour-weight``) and gives the colour report the scan's readings, 
 a pair measured use them (:mod:`gonio.brdf.colour.direct`): what a lab that asks for colour
 gets. Without it the design is the default one and the report reads the table only.
 
-``--pairs N`` designs N pairs instead of 10.
+``--pairs N`` designs N pairs instead of 10. ``--direct-within DEG`` gives the colour design a
+direct pair at every MA98 geometry whose half vector is within DEG of the normal (default
+12.5: the five near-specular ones).
 
 ``--add-pair INCIDENCE,ASPECULAR`` (repeatable) adds an in-plane pair at that instrument
 geometry (degrees, e.g. ``15,-5``) to the designed ones: what reading the specular peak near
@@ -43,6 +45,9 @@ normal incidence does for the near-specular geometries (docs/colour.md).
 several of them mixtures no chart patch has, other coat and flake roughnesses, dyes and metals;
 other noise seeds). Every choice made with this benchmark (the colour design's weight among
 them) was made on the default set, ``--set choice``; the validation set only tests them.
+``--set validation2`` is a third disjoint set (:data:`gonio.sim.spectral.VALIDATION2_MATERIALS`,
+13 specimens, seeds 2000 + k), written after the validation set had been seen: each change is
+tested on it once (docs/colour.md says which set saw which choice).
 
 Reconstruction time: wall time of the 31-band call (the machine may be busy) and its CPU time
 (the process' own, which other users' load does not inflate).
@@ -69,7 +74,11 @@ from gonio.brdf.colour.direct import ScanReadings
 from gonio.brdf.colour.instruments import Geometry, geometries
 from gonio.brdf.colour.report import colour_report
 from gonio.brdf.colour.spectral import SpectralBands
-from gonio.brdf.design.colourtargets import DEFAULT_COLOUR_WEIGHT, ColourTargets
+from gonio.brdf.design.colourtargets import (
+    DEFAULT_COLOUR_WEIGHT,
+    DEFAULT_DIRECT_WITHIN_DEG,
+    ColourTargets,
+)
 from gonio.brdf.design.constraints import RigConstraints
 from gonio.brdf.design.pairs import design_pairs
 from gonio.brdf.materials.library import cache_root
@@ -86,6 +95,7 @@ from gonio.brdf.tables.table import from_function
 from gonio.sim.spectral import (
     SPECTRAL_MATERIALS,
     SPECTROMETER_31,
+    VALIDATION2_MATERIALS,
     VALIDATION_MATERIALS,
     SpectralSpecimen,
     _colorchecker,
@@ -94,16 +104,19 @@ from gonio.sim.spectral import (
 
 N_PAIRS, R = 10, 8
 #: The specimen sets and their seeds' offsets: choices are made on "choice" only.
-SETS = {"choice": (SPECTRAL_MATERIALS, 0), "validation": (VALIDATION_MATERIALS, 1000)}
+SETS = {"choice": (SPECTRAL_MATERIALS, 0), "validation": (VALIDATION_MATERIALS, 1000),
+        "validation2": (VALIDATION2_MATERIALS, 2000)}
 RGB_BANDS = SpectralBands((610.0, 540.0, 460.0), (60.0, 60.0, 60.0))
 COND = ViewingConditions()
 
 
-def colour_targets(instrument: str, weight: float) -> ColourTargets:
+def colour_targets(instrument: str, weight: float,
+                   direct_within_deg: float = DEFAULT_DIRECT_WITHIN_DEG) -> ColourTargets:
     """The design's colour targets: ``instrument``'s geometries at azimuth 0."""
     g = geometries([instrument])
     return ColourTargets(np.stack([x.directions()[0] for x in g]),
-                         np.stack([x.directions()[1] for x in g]), weight=weight)
+                         np.stack([x.directions()[1] for x in g]), weight=weight,
+                         direct_within_deg=direct_within_deg)
 
 
 def design(basis: object, cache: Path, colour: ColourTargets | None = None,
@@ -170,13 +183,17 @@ def main(argv: list[str] | None = None) -> int:
                          "geometries a pair measured from its readings")
     ap.add_argument("--colour-weight", type=float, default=DEFAULT_COLOUR_WEIGHT,
                     help="weight of the MA98 geometries in the colour design")
+    ap.add_argument("--direct-within", type=float, default=DEFAULT_DIRECT_WITHIN_DEG,
+                    metavar="DEG", help="the colour design's direct pairs: every MA98 geometry "
+                                        "whose half vector is within DEG of the normal")
     ap.add_argument("--pairs", type=int, default=N_PAIRS,
                     help="designed pairs (the issue's benchmark: 10)")
     ap.add_argument("--add-pair", action="append", default=[], metavar="INC,ASP",
                     help="add an in-plane pair at this incidence and aspecular angle (deg)")
     args = ap.parse_args(argv)
     basis = default_basis()
-    targets = colour_targets("MA98", args.colour_weight) if args.colour_design else None
+    targets = (colour_targets("MA98", args.colour_weight, args.direct_within)
+               if args.colour_design else None)
     cells, ph = design(basis, args.cache, targets, args.pairs)
     for text in args.add_pair:
         inc, asp = (float(x) for x in text.split(","))

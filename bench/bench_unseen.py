@@ -276,7 +276,9 @@ def design(b: Basis, n: int) -> tuple[np.ndarray, np.ndarray]:
     obj = CHOOSE["objective"]
     span = SPAN["design"]
     tag = f"{DESIGNS[obj]}{f'-choose{k}' if k > 1 else ''}-span{span:g}"
-    if obj == "posterior-colour-MA98" and COLOUR_WEIGHT["w"] != DEFAULT_COLOUR_WEIGHT:
+    if obj == "posterior-colour-MA98":
+        # Always the weight's value: a design cached under the default's name would be reused
+        # after the default changed (10 to 100).
         tag += f"-w{COLOUR_WEIGHT['w']:g}"
     # Keyed by the code's fingerprint too: the basis alone would reuse designs made by older
     # design code. The probe runs the expected-error design (and so the placement every

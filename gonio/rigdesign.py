@@ -25,7 +25,7 @@ rig config uses for geometry (docs/file-formats.md)::
     span_deg = 180.0
     pairs = 10
     colour_instrument = "MA98"   # a colour design only (docs/colour.md)
-    colour_weight = 10.0
+    colour_weight = 100.0
 
 It carries no hardware (Modbus addresses, register maps). :func:`apply_design` merges it into
 a rig config (``gonio rig apply-design``), ``gonio sim --geometry`` mounts simulated devices

@@ -177,6 +177,28 @@ VALIDATION_MATERIALS: dict[str, Callable[[], LobeSum]] = {
     "orange-plastic": _plastic("orange + yellow", 0.40),
 }
 
+#: A third set, held out of every choice made on the other two: other hues (cyan, a dark green,
+#: a near black, magenta, a gold tint, charcoal, blue flower, white; several mixtures), other
+#: coat, flake and dye roughnesses (clear coats GGX alpha 0.065 and 0.07, flakes 0.18, 0.24,
+#: 0.32, anodising 0.16 and 0.20, plastics 0.15, 0.18, 0.25) and metals brushed otherwise
+#: (coarse aluminium, fine gold): ``bench_colour.py --set validation2``, written before the
+#: benchmark first ran on it. Not offered by the simulator's ``--material``.
+VALIDATION2_MATERIALS: dict[str, Callable[[], LobeSum]] = {
+    "solid-cyan-paint": _solid_paint("cyan", coat_alpha=0.07),
+    "solid-foliage-paint": _solid_paint("foliage", coat_alpha=0.065),
+    "solid-black-paint": _solid_paint("black 2 (1.5 D) + neutral 3.5 (1.05 D)", coat_alpha=0.07),
+    "metallic-magenta-paint": _metallic_paint("magenta", 0.24),
+    "metallic-gold-paint": _metallic_paint("orange yellow + yellow", 0.32),
+    "metallic-charcoal-paint": _metallic_paint("neutral 3.5 (1.05 D)", 0.18),
+    "anodised-purple-aluminium": _anodised("purple", alpha=0.20),
+    "anodised-cyan-aluminium": _anodised("cyan + blue sky", alpha=0.16),
+    "brushed-aluminium-coarse": _brushed("aluminium", 0.12, 0.35),
+    "brushed-gold-fine": _brushed("gold", 0.06, 0.15),
+    "blue-flower-plastic": _plastic("blue flower", 0.15),
+    "red-plastic": _plastic("red + orange", 0.25),
+    "white-plastic": _plastic("white 9.5 (.05 D)", 0.18),
+}
+
 
 @dataclass(frozen=True)
 class SpectralSpecimen:
@@ -217,7 +239,8 @@ def spectral_specimen(name: str, bands: SpectralBands = SPECTROMETER_31,
     """The spectral material ``name`` read through ``bands``.
 
     ``materials``: where ``name`` is looked up (default :data:`SPECTRAL_MATERIALS`; the colour
-    benchmark passes :data:`VALIDATION_MATERIALS` for its held-out set).
+    benchmark passes :data:`VALIDATION_MATERIALS` and :data:`VALIDATION2_MATERIALS` for its
+    held-out sets).
 
     Raises
     ------

@@ -115,6 +115,6 @@ def test_a_colour_request_reports_its_colour_pairs() -> None:
     # The fragment to merge into a rig config records the colour design in [design].
     design = tomllib.loads(result.rig_config_toml)["design"]
     assert design == {"rotations": 8, "span_deg": 180.0, "pairs": 7,
-                      "colour_instrument": "MA98", "colour_weight": 10.0}
+                      "colour_instrument": "MA98", "colour_weight": 100.0}
     assert "design" not in tomllib.loads(run_design(BASIS, DesignRequest(pairs=3))
                                          .rig_config_toml)

@@ -4,10 +4,29 @@
 // sensor RGB) shows its channel values under that label, never as a colour space. The "source"
 // column says which geometries a pair of the scan read directly ("pair", the report's
 // `measured` flags) and which came from the reconstructed table ("table").
+// The instrument menu starts on the rig's design instrument (GET /api/v1/rig/config, its
+// [design] colour_instrument, written by `gonio design --colour`) when the rig has one, until
+// the user picks another.
 import { getJSON } from "./api.js";
 
 const $ = (sel) => document.querySelector(sel);
 let shown = null;
+// The rig's design instrument: undefined until the rig config was read, null when it has none.
+let designInstrument;
+let userChose = false;
+
+// Read once, when a result is first shown (by then the page has a key that works); a refused
+// read (no key yet) is tried again at the next result.
+async function useDesignInstrument() {
+  if (designInstrument !== undefined) return;
+  let cfg;
+  try { cfg = await getJSON("/rig/config"); } catch { return; }
+  designInstrument = cfg?.design?.colour_instrument ?? null;
+  const option = [...$("#colour-instrument").options].find((o) => o.value === designInstrument);
+  if (!option) return;
+  option.textContent = `${designInstrument} (rig design)`;
+  if (!userChose) $("#colour-instrument").value = designInstrument;
+}
 
 function shownJob() {
   const m = ($("#result-job").textContent || "").match(/^job (\d+) \(completed\)/);
@@ -27,6 +46,7 @@ async function refresh() {
   const box = $("#colour");
   // A calibration job's result has no BRDF (the panel hides its body): no colour to ask for.
   if (id === null || $("#result-body").hidden) { box.hidden = true; shown = null; return; }
+  await useDesignInstrument();
   const instrument = $("#colour-instrument").value;
   const azimuth = Number($("#colour-azimuth").value) || 0;
   const against = $("#compare").value;
@@ -95,6 +115,7 @@ async function refresh() {
 window.addEventListener("DOMContentLoaded", () => {
   const go = () => { refresh().catch(() => {}); };
   new MutationObserver(go).observe($("#result-job"), { childList: true, characterData: true, subtree: true });
+  $("#colour-instrument").addEventListener("change", () => { userChose = true; });
   for (const id of ["#colour-instrument", "#colour-azimuth", "#compare"]) $(id).addEventListener("change", go);
   go();
 });

@@ -302,7 +302,7 @@ def test_a_colour_design_puts_pairs_at_the_near_specular_geometries(
     # --basis leaves out the held-out error, so [design] records only the colour design
     # (what the rig config keeps after 'gonio rig apply-design'), under its known name.
     assert frag["design"] == {"rotations": 8, "span_deg": 180.0, "pairs": 6,
-                              "colour_instrument": "MA98", "colour_weight": 10.0}
+                              "colour_instrument": "MA98", "colour_weight": 100.0}
     # Merged into a rig config, the record stays; the config's design is the colour design.
     rig = tmp_path / "rig.toml"
     rig.write_text((Path(__file__).resolve().parents[3] / "deploy" / "rig.example.toml")
@@ -312,7 +312,7 @@ def test_a_colour_design_puts_pairs_at_the_near_specular_geometries(
 
     design = load_rig_config(rig).design
     assert design is not None and design.expected_log_rmse is None
-    assert (design.colour_instrument, design.colour_weight) == ("MA98", 10.0)
+    assert (design.colour_instrument, design.colour_weight) == ("MA98", 100.0)
 
 
 def test_render_mix_reaches_every_candidate_design(

@@ -12,6 +12,7 @@ from gonio.sim.spectral import (
     CHIP_11,
     SPECTRAL_MATERIALS,
     SPECTROMETER_31,
+    VALIDATION2_MATERIALS,
     VALIDATION_MATERIALS,
     conductor_fresnel,
     reflectance,
@@ -26,10 +27,11 @@ def _dirs() -> tuple[np.ndarray, np.ndarray]:
     return wi, wo
 
 
-@pytest.mark.parametrize("name", [*SPECTRAL_MATERIALS, *VALIDATION_MATERIALS])
+@pytest.mark.parametrize("name", [*SPECTRAL_MATERIALS, *VALIDATION_MATERIALS,
+                                  *VALIDATION2_MATERIALS])
 def test_every_material_is_finite_and_read_through_its_bands(name: str) -> None:
-    spec = spectral_specimen(name, materials=(
-        SPECTRAL_MATERIALS if name in SPECTRAL_MATERIALS else VALIDATION_MATERIALS))
+    spec = spectral_specimen(name, materials=next(
+        m for m in (SPECTRAL_MATERIALS, VALIDATION_MATERIALS, VALIDATION2_MATERIALS) if name in m))
     wi, wo = _dirs()
     full = spec.spectral_eval(wi, wo)
     assert full.shape == (3, GRID_NM.size) and np.isfinite(full).all() and (full >= 0).all()
@@ -73,6 +75,9 @@ def test_the_held_out_set_is_apart_from_the_simulators_set() -> None:
     the simulator does not offer them."""
     assert not set(VALIDATION_MATERIALS) & set(SPECTRAL_MATERIALS)
     assert len(VALIDATION_MATERIALS) == len(SPECTRAL_MATERIALS)
+    # The third set shares no name with either, and has at least as many specimens.
+    assert not set(VALIDATION2_MATERIALS) & (set(SPECTRAL_MATERIALS) | set(VALIDATION_MATERIALS))
+    assert len(VALIDATION2_MATERIALS) >= len(SPECTRAL_MATERIALS)
     with pytest.raises(ValueError, match="unknown spectral material 'brushed-gold'"):
         spectral_specimen("brushed-gold")
     # A mixture colour is the mean of its two patches' reflectances, wavelength by wavelength.
