@@ -67,7 +67,7 @@ from gonio.brdf.design.presets import get_preset
 from gonio.brdf.reconstruction.basis import default_basis
 from gonio.brdf.reconstruction.reconstruct import reconstruct
 from gonio.brdf.reconstruction.samples import DEFAULT_SPAN_DEG, uniform_stage_angles
-from gonio.brdf.reconstruction.selfcheck import widen_log_rmse
+from gonio.brdf.reconstruction.selfcheck import BasisMisfit, final_log_rmse, widen_log_rmse
 from gonio.brdf.tables import metrics
 
 #: The refit of the final mapping (factor on the model's estimate, coverage scale, factor on a
@@ -76,13 +76,20 @@ from gonio.brdf.tables import metrics
 REFIT_CANDIDATE: tuple[float, float, float] = (0.80, 0.19, 0.55)
 
 
+def row_misfit(row: dict[str, Any]) -> BasisMisfit:
+    """The scan's basis misfit, from a row's numbers (flagged exactly when the scan's result
+    carried the ``basis_misfit`` reason: checked in :func:`table`)."""
+    return BasisMisfit(chi2=row["misfit_chi2"], log_misfit=row["misfit_log"],
+                       persistent_pairs=int(row["misfit_persistent_pairs"]),
+                       n_pairs=int(row["n"]), n_angles=int(row["r"]))
+
+
 def refit_candidate(row: dict[str, Any]) -> float:
-    """The rejected refit's ``predicted_log_rmse`` of a row (:data:`REFIT_CANDIDATE`)."""
+    """The rejected refit's ``predicted_log_rmse`` of a row (:data:`REFIT_CANDIDATE`): the
+    shipped final mapping with the refit's constants."""
     k, c, kf = REFIT_CANDIDATE
-    cover = c * np.sqrt(max(row["uncovered"], 0.0))
-    if row["reason"]:
-        return float(max(np.hypot(kf * row["unwidened"], cover), row["misfit_log"]))
-    return float(np.hypot(k * row["unwidened"], cover))
+    return final_log_rmse(row["unwidened"], row["uncovered"], row_misfit(row),
+                          predicted_factor=k, coverage_scale=c, flagged_factor=kf)
 
 
 #: ``(label, design, r)``: ``design`` is "posterior" (the default 10-pair design) or a preset.
@@ -294,6 +301,10 @@ def table(rows: list[dict[str, Any]]) -> None:
         raise SystemExit(f"--rows file lacks {', '.join(missing)} (written by an older bench): "
                          "rerun without --rows to measure the rows again")
     for r in rows:
+        if row_misfit(r).flagged != bool(r["reason"]):
+            raise SystemExit(f"--rows file: {r['material']} ({r['plan']}) was "
+                             f"{'' if r['reason'] else 'not '}flagged, which today's misfit "
+                             "rule does not reproduce: rerun without --rows")
         # "refit" is the rejected candidate, from the same scan's inputs.
         r["refit"] = refit_candidate(r)
         r.setdefault("set", "cal" if r["cal"] else "validation")

@@ -327,7 +327,10 @@ UPPER_FACTOR: float = 3.33
 UPPER_FACTOR_FLAGGED: float = 1.83
 
 
-def final_log_rmse(predicted: float, uncovered: float, misfit: BasisMisfit) -> float:
+def final_log_rmse(predicted: float, uncovered: float, misfit: BasisMisfit, *,
+                   predicted_factor: float = FINAL_PREDICTED_FACTOR,
+                   coverage_scale: float = FINAL_COVERAGE_SCALE,
+                   flagged_factor: float = FINAL_FLAGGED_FACTOR) -> float:
     """The reported ``predicted_log_rmse`` of a joint fit: the calibrated final mapping.
 
     The three constants were chosen on the **calibration** set of
@@ -357,6 +360,11 @@ def final_log_rmse(predicted: float, uncovered: float, misfit: BasisMisfit) -> f
     uncovered : float
         Share of the prior's weighted variance the readings leave (0..1, dimensionless).
     misfit : BasisMisfit
+    predicted_factor, coverage_scale, flagged_factor : float, optional
+        The mapping's constants (dimensionless, ``log_rmse`` units, dimensionless); the
+        shipped ones by default. Other values are for benches that compare candidate
+        mappings on the same scans (``bench/bench_selfestimate.py``'s rejected refit), so
+        the formula has one owner.
 
     Returns
     -------
@@ -364,11 +372,11 @@ def final_log_rmse(predicted: float, uncovered: float, misfit: BasisMisfit) -> f
         ``log_rmse`` units; NaN when an input it needs is NaN.
     """
     u = float(uncovered)
-    coverage = FINAL_COVERAGE_SCALE * np.sqrt(max(u, 0.0)) if np.isfinite(u) else float("nan")
+    coverage = coverage_scale * np.sqrt(max(u, 0.0)) if np.isfinite(u) else float("nan")
     if misfit.flagged:
-        return widen_log_rmse(float(np.hypot(FINAL_FLAGGED_FACTOR * float(predicted),
+        return widen_log_rmse(float(np.hypot(flagged_factor * float(predicted),
                                              coverage)), misfit)
-    return float(np.hypot(FINAL_PREDICTED_FACTOR * float(predicted), coverage))
+    return float(np.hypot(predicted_factor * float(predicted), coverage))
 
 
 def final_parts(expected: float, mahalanobis: float, cv_sample_error: float,

@@ -196,6 +196,19 @@ def test_the_final_mapping_is_the_published_one() -> None:
     assert math.isnan(final_log_rmse(0.05, float("nan"), quiet))
 
 
+def test_the_final_mapping_takes_other_constants_as_keywords() -> None:
+    """A bench's candidate mapping (other constants) goes through the same formula."""
+    quiet = BasisMisfit(chi2=0.5, log_misfit=0.0, persistent_pairs=0, n_pairs=10, n_angles=8)
+    flagged = BasisMisfit(chi2=400.0, log_misfit=0.12, persistent_pairs=3, n_pairs=10,
+                          n_angles=8)
+    other = {"predicted_factor": 0.8, "coverage_scale": 0.3, "flagged_factor": 0.5}
+    # sqrt((0.8 * 0.05)^2 + 0.3^2 * 0.04) = sqrt(0.04^2 + 0.06^2).
+    assert final_log_rmse(0.05, 0.04, quiet, **other) == pytest.approx(math.hypot(0.04, 0.06))
+    # Flagged: sqrt((0.5 * 1.0)^2 + 0.06^2); a small estimate is floored at the misfit 0.12.
+    assert final_log_rmse(1.0, 0.04, flagged, **other) == pytest.approx(math.hypot(0.5, 0.06))
+    assert final_log_rmse(0.01, 0.0, flagged, **other) == pytest.approx(0.12)
+
+
 #: The interval's upper end as docs/science.md 7.1.1 publishes it: the factor on the estimate
 #: of a scan whose fit holds its readings, and of a flagged one.
 PUBLISHED_UPPER = (3.33, 1.83)
