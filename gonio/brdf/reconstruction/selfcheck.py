@@ -60,6 +60,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 #: Features of :data:`LOG_RMSE_MODEL`, in the order :func:`predict_log_rmse` takes them.
 LOG_RMSE_FEATURES: tuple[str, ...] = ("expected", "mahalanobis", "cv_sample_error")
@@ -325,6 +326,36 @@ UPPER_FACTOR: float = 3.33
 #: other candidate; on the choice set it left 1 of 55 scans above the upper end, the two
 #: factors none (docs/science.md 7.1.1).
 UPPER_FACTOR_FLAGGED: float = 1.83
+
+
+#: Percentile of ``true / predicted`` over the calibration scans that :data:`UPPER_FACTOR` and
+#: :data:`UPPER_FACTOR_FLAGGED` are (:func:`upper_factor_from`).
+UPPER_PERCENTILE: float = 98.0
+
+
+def upper_factor_from(ratios: npt.ArrayLike) -> tuple[float, float]:
+    """The upper factor a set of scans gives: how :data:`UPPER_FACTOR` and
+    :data:`UPPER_FACTOR_FLAGGED` were made (``bench/bench_selfestimate.py`` prints both).
+
+    The :data:`UPPER_PERCENTILE` th percentile of ``true / predicted``, taken as the order
+    statistic at or above that position (numpy's ``method="higher"``: never interpolated down
+    between the largest ratios, so at most 2 % of the scans lie above it), then rounded up to
+    0.01.
+
+    Parameters
+    ----------
+    ratios : array_like, shape (n,)
+        ``true log_rmse / predicted_log_rmse`` of n scans (dimensionless, finite, n >= 1).
+
+    Returns
+    -------
+    (float, float)
+        The percentile, and the factor (it rounded up to 0.01).
+    """
+    q = float(np.percentile(np.asarray(ratios, dtype=float), UPPER_PERCENTILE,
+                            method="higher"))
+    # The small tolerance keeps a percentile already on the 0.01 grid (e.g. 2.0) where it is.
+    return q, float(np.ceil(q * 100.0 - 1e-9) / 100.0)
 
 
 def final_log_rmse(predicted: float, uncovered: float, misfit: BasisMisfit, *,

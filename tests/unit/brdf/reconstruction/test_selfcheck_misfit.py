@@ -31,6 +31,7 @@ from gonio.brdf.reconstruction.selfcheck import (
     BasisMisfit,
     basis_misfit,
     final_log_rmse,
+    upper_factor_from,
     upper_log_rmse,
     widen_log_rmse,
 )
@@ -223,6 +224,19 @@ def test_the_interval_upper_end_is_the_published_factor_on_the_estimate() -> Non
     assert upper_log_rmse(0.04, quiet) == pytest.approx(0.1332)
     assert upper_log_rmse(0.2, flagged) == pytest.approx(0.366)
     assert math.isnan(upper_log_rmse(float("nan"), quiet))
+
+
+def test_the_upper_factor_is_the_order_statistic_at_the_98th_percentile_rounded_up() -> None:
+    # 95 ratios 1..95: the 98th percentile's position is 0.98 * 94 = 92.12 (0-based), so the
+    # order statistic at or above it is index 93, the value 94; one ratio (95) lies above.
+    assert upper_factor_from(np.arange(1.0, 96.0)) == (94.0, 94.0)
+    # 101 ratios 0..100: the position 98 is exact, the value 98.
+    assert upper_factor_from(np.arange(0.0, 101.0)) == (98.0, 98.0)
+    # Five ratios: position 0.98 * 4 = 3.92, so the largest, 3.3246, rounded up to 3.33.
+    q, factor = upper_factor_from([1.2, 3.3246, 0.5, 2.0, 1.0])
+    assert q == 3.3246 and factor == pytest.approx(3.33)
+    # A percentile already on the 0.01 grid stays where it is.
+    assert upper_factor_from([1.83]) == (1.83, pytest.approx(1.83))
 
 
 def test_a_joint_fit_reports_the_upper_end_and_the_vf_path_does_not(basis: Basis) -> None:
