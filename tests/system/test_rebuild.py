@@ -12,6 +12,7 @@ from __future__ import annotations
 import asyncio
 import json
 import shutil
+import sqlite3
 from pathlib import Path
 from typing import Any
 
@@ -126,3 +127,49 @@ def test_a_rebuilt_result_holds_the_design_comparison_colour_and_coverage(tmp_pa
     with h5py.File(original) as f, h5py.File(result) as g:
         np.testing.assert_allclose(g["reconstruction/values"][()],
                                    f["reconstruction/values"][()], rtol=1e-5, equal_nan=True)
+
+    # The same job as an older gonio left it: its store had no `finishing` table (dropped
+    # here; opening the store creates it empty), and its result file is as docs/engine.md's
+    # "Result file" lays it out, written here by hand, with the rig config in /provenance.
+    store.close()
+    with sqlite3.connect(data / "gonio.sqlite") as con:
+        con.execute("DROP TABLE finishing")
+    store = JobStore(data / "gonio.sqlite", durable=False)
+    assert store.finishing_inputs(job) is None
+    _older_result(result, job, rig_config=config.model_dump_json())
+    older = rebuild_result(store, data, job, BasisSupply(lambda: basis))
+    assert older["design_expected_log_rmse"] == DESIGN.expected_log_rmse
+    assert older["design_gap"] == row.summary["design_gap"]
+    assert "design_comparison" not in older
+    with h5py.File(result) as f:
+        assert "as it was before this rebuild" in f["provenance"].attrs["rig_config_from"]
+        assert "bands" in json.loads(f["colour"].attrs["source"])  # the colour came back too
+
+    # Without the result file the rig config it ran on is not known: the rebuilt result says
+    # so where the comparison would be, and a rebuild of that result keeps saying it.
+    result.unlink()
+    for _ in range(2):
+        lost = rebuild_result(store, data, job, BasisSupply(lambda: basis))
+        why = lost["design_comparison"]
+        assert why.startswith(f"not available: job {job} was finished by a gonio"), why
+        assert f"results/job-{job}.h5 is missing" in why, why
+        assert "design_expected_log_rmse" not in lost and "design_gap" not in lost
+        with h5py.File(result) as f:
+            assert f["metrics"].attrs["design_comparison"] == why
+            assert f["provenance"].attrs["design_comparison"] == why
+            assert "rig_config" not in f["provenance"].attrs
+
+
+def _older_result(path: Path, job: int, rig_config: str) -> None:
+    """A result file with the groups and root attributes of docs/engine.md's layout and the
+    /provenance attributes an older gonio wrote (plan, rig, rig_config, calibration)."""
+    with h5py.File(path, "w") as f:
+        f.attrs.update(format="gonio-result", version=1, gonio_version="0.9.0", job_id=job,
+                       specimen="yellow plastic", kind="specimen",
+                       created="2026-01-05T10:00:00Z")
+        for group in ("raw", "samples", "reconstruction", "metrics"):
+            f.create_group(group)
+        f["metrics"].attrs["predicted_log_rmse"] = 0.05
+        p = f.create_group("provenance")
+        p.attrs.update(plan=json.dumps({"kind": "uniform"}), rig=json.dumps({}),
+                       rig_config=rig_config, calibration=json.dumps({"pairs": {}}))
