@@ -693,7 +693,8 @@ def rebuild_result(store: JobStore, data_dir: Path, job_id: int,
         provenance={**kept, "rebuilt": "from the job store's readings (gonio jobs rebuild) on "
                     + time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())},
         true_material=(lambda: truth) if isinstance(truth, dict) else None,
-        fit_exports=bool(inputs.get("fit_exports", True)),
+        # A store that kept no inputs: the fits were stored when its summary has their metric.
+        fit_exports=bool(inputs.get("fit_exports", "factored_rel_mse" in old if old else True)),
     )
     from gonio.calibration import CalibrationError
 
