@@ -4,7 +4,9 @@ A scan on the simulated rig (31-band spectral sensors, so its colour comes from 
 config) whose rig config carries a ``[design]`` table is finished by the worker; its result file
 is deleted and rebuilt from the job store's readings in another store handle, as the CLI does.
 Every group, dataset and attribute of the original is in the rebuilt file, with the same design
-comparison, colour report and self-estimate (its coverage witness among the metrics).
+comparison, colour report and self-estimate (its coverage witness among the metrics). Then
+the same job as an older gonio left it (no `finishing` table, a result file written by hand):
+the rig config comes from that file, and with it the design comparison and the colour.
 """
 
 from __future__ import annotations
