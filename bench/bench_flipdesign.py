@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import argparse
 import hashlib
+import inspect
 import sys
 import time
 from typing import Any
@@ -45,6 +46,7 @@ from typing import Any
 import bench_unseen as bu  # the sibling bench (the script's folder is on sys.path)
 import numpy as np
 
+from gonio.brdf.design import posterior as posterior_module
 from gonio.brdf.design.constraints import RigConstraints
 from gonio.brdf.design.posterior import posterior_design
 from gonio.brdf.design.presets import get_preset, preset_names
@@ -74,12 +76,7 @@ CHOICE_ANISO: list[tuple[str, dict[str, Any], float]] = [
 
 def choice_aniso() -> list[bu.Material]:
     """The choice set's mitsuba specimens (truth tables cached like bench_unseen's)."""
-    saved = bu.ANISO
-    try:
-        bu.ANISO = CHOICE_ANISO
-        return bu.aniso_materials()
-    finally:
-        bu.ANISO = saved
+    return bu.aniso_materials(CHOICE_ANISO)
 
 
 def material_sets() -> tuple[list[bu.Material], list[bu.Material]]:
@@ -90,16 +87,31 @@ def material_sets() -> tuple[list[bu.Material], list[bu.Material]]:
     return choice, test
 
 
+def design_key(b: Basis, mix: float, importance: np.ndarray, seed: int,
+               rig: RigConstraints) -> str:
+    """Everything a cached design depends on: the basis, the joint fit and default design
+    (``bu.fit_fingerprint``), the design code's source (the render-weighted path, which the
+    fingerprint's probe does not run), the rig limits, the arc it is designed for, the mix,
+    the seed and, when it weighs cells (``mix > 0``), the render-importance map's values,
+    so a change to the renderings designs again."""
+    weight = (hashlib.sha256(np.ascontiguousarray(importance, dtype=np.float64).tobytes())
+              .hexdigest()[:16] if mix > 0 else "none")
+    code = hashlib.sha256(inspect.getsource(posterior_module).encode()).hexdigest()[:16]
+    return (f"{bu.basis_id(b)}-{bu.fit_fingerprint()}-{mix:g}-code{code}-{rig!r}"
+            f"-span{bu.SPAN['design']:g}-importance{weight}" + (f"-seed{seed}" if seed else ""))
+
+
 def design(b: Basis, mix: float, importance: np.ndarray, seed: int = 0
            ) -> tuple[np.ndarray, np.ndarray]:
     """10 pairs for 8 angles over half a turn, ``cell_mix = mix``, greedy started from the
-    ``seed``-th best first pair; cached per basis and code."""
-    key = f"{bu.basis_id(b)}-{bu.fit_fingerprint()}-{mix:g}" + (f"-seed{seed}" if seed else "")
+    ``seed``-th best first pair; cached by :func:`design_key`."""
+    rig = RigConstraints()
+    key = design_key(b, mix, importance, seed, rig)
     path = bu.CACHE / f"flipdesign-{hashlib.sha256(key.encode()).hexdigest()[:16]}.npz"
     if path.is_file():
         with np.load(path) as z:
             return z["cells"], z["ph_lab"]
-    d = posterior_design(b, 10, RigConstraints(), span_deg=bu.SPAN["design"], seed=seed,
+    d = posterior_design(b, 10, rig, span_deg=bu.SPAN["design"], seed=seed,
                          cell_weight=importance if mix > 0 else None, cell_mix=mix)
     path.parent.mkdir(parents=True, exist_ok=True)
     np.savez(path, cells=d.cells, ph_lab=d.ph_lab)

@@ -67,7 +67,15 @@ from gonio.brdf.design.presets import get_preset
 from gonio.brdf.reconstruction.basis import default_basis
 from gonio.brdf.reconstruction.reconstruct import reconstruct
 from gonio.brdf.reconstruction.samples import DEFAULT_SPAN_DEG, uniform_stage_angles
-from gonio.brdf.reconstruction.selfcheck import widen_log_rmse
+from gonio.brdf.reconstruction.selfcheck import (
+    UPPER_FACTOR,
+    UPPER_FACTOR_FLAGGED,
+    UPPER_PERCENTILE,
+    BasisMisfit,
+    final_log_rmse,
+    upper_factor_from,
+    widen_log_rmse,
+)
 from gonio.brdf.tables import metrics
 
 #: The refit of the final mapping (factor on the model's estimate, coverage scale, factor on a
@@ -76,13 +84,20 @@ from gonio.brdf.tables import metrics
 REFIT_CANDIDATE: tuple[float, float, float] = (0.80, 0.19, 0.55)
 
 
+def row_misfit(row: dict[str, Any]) -> BasisMisfit:
+    """The scan's basis misfit, from a row's numbers (flagged exactly when the scan's result
+    carried the ``basis_misfit`` reason: checked in :func:`table`)."""
+    return BasisMisfit(chi2=row["misfit_chi2"], log_misfit=row["misfit_log"],
+                       persistent_pairs=int(row["misfit_persistent_pairs"]),
+                       n_pairs=int(row["n"]), n_angles=int(row["r"]))
+
+
 def refit_candidate(row: dict[str, Any]) -> float:
-    """The rejected refit's ``predicted_log_rmse`` of a row (:data:`REFIT_CANDIDATE`)."""
+    """The rejected refit's ``predicted_log_rmse`` of a row (:data:`REFIT_CANDIDATE`): the
+    shipped final mapping with the refit's constants."""
     k, c, kf = REFIT_CANDIDATE
-    cover = c * np.sqrt(max(row["uncovered"], 0.0))
-    if row["reason"]:
-        return float(max(np.hypot(kf * row["unwidened"], cover), row["misfit_log"]))
-    return float(np.hypot(k * row["unwidened"], cover))
+    return final_log_rmse(row["unwidened"], row["uncovered"], row_misfit(row),
+                          predicted_factor=k, coverage_scale=c, flagged_factor=kf)
 
 
 #: ``(label, design, r)``: ``design`` is "posterior" (the default 10-pair design) or a preset.
@@ -294,6 +309,10 @@ def table(rows: list[dict[str, Any]]) -> None:
         raise SystemExit(f"--rows file lacks {', '.join(missing)} (written by an older bench): "
                          "rerun without --rows to measure the rows again")
     for r in rows:
+        if row_misfit(r).flagged != bool(r["reason"]):
+            raise SystemExit(f"--rows file: {r['material']} ({r['plan']}) was "
+                             f"{'' if r['reason'] else 'not '}flagged, which today's misfit "
+                             "rule does not reproduce: rerun without --rows")
         # "refit" is the rejected candidate, from the same scan's inputs.
         r["refit"] = refit_candidate(r)
         r.setdefault("set", "cal" if r["cal"] else "validation")
@@ -339,6 +358,7 @@ def table(rows: list[dict[str, Any]]) -> None:
             return f"{int(np.sum(u < 1.0))}/{u.size} (x{np.median(u):.2f})"
 
         _plan_table(rows, groups, above)
+    upper_factor_table(rows)
     print("\nscans flagged basis_misfit (of the scans), per plan and set:\n")
     _plan_table(rows, groups, lambda s: f"{sum(bool(r['reason']) for r in s)}/{len(s)}")
     low = [r for r in rows if r["widened"] / r["truth"] < 0.5]
@@ -353,6 +373,41 @@ def table(rows: list[dict[str, Any]]) -> None:
         z = np.array([r["z_loo_pair"] for r in low])
         print(f"their standardised leave-one-pair-out error z_loo_pair: median {np.median(z):.2f}, "
               f"range {z.min():.2f}-{z.max():.2f} (1: as the posterior expects)")
+
+
+def upper_factor_table(rows: list[dict[str, Any]]) -> None:
+    """Where the interval's upper factors come from: the 98th percentile of true / estimate
+    (the shipped final mapping's) per set, for the scans whose fit holds its readings and the
+    flagged ones (:func:`~gonio.brdf.reconstruction.selfcheck.upper_factor_from`; numpy's
+    default linear interpolation beside it), and how many scans lie above the shipped factor.
+    The factors are the calibration set's; the other sets are for information."""
+    print("\n98th percentile of true / estimate (the interval's upper factor; the calibration "
+          "set's is shipped), scans above the shipped factor:\n")
+    print("| set | not flagged: scans | p98 (higher) | p98 (linear) | above x"
+          f"{UPPER_FACTOR:g} | flagged: scans | p98 (higher) | p98 (linear) | above x"
+          f"{UPPER_FACTOR_FLAGGED:g} |")
+    print("|---" * 9 + "|")
+    cal: dict[bool, float] = {}
+    for which in SETS:
+        cells = []
+        for flagged, shipped in ((False, UPPER_FACTOR), (True, UPPER_FACTOR_FLAGGED)):
+            q = np.array([r["truth"] / r["widened"] for r in rows
+                          if r["set"] == which and bool(r["reason"]) == flagged])
+            if q.size == 0:
+                cells.append("0 | | | ")
+                continue
+            p98, factor = upper_factor_from(q)
+            if which == "cal":
+                cal[flagged] = factor
+            cells.append(f"{q.size} | {p98:.4f} | {np.percentile(q, UPPER_PERCENTILE):.4f} | "
+                         f"{int(np.sum(q > shipped))}")
+        print(f"| {which} | " + " | ".join(cells) + " |")
+    for flagged, shipped, name in ((False, UPPER_FACTOR, "UPPER_FACTOR"),
+                                   (True, UPPER_FACTOR_FLAGGED, "UPPER_FACTOR_FLAGGED")):
+        if flagged in cal:
+            print(f"calibration p98 rounded up to 0.01: {cal[flagged]:.2f}, shipped {name} "
+                  f"{shipped:.2f}: " + ("reproduced" if cal[flagged] == shipped
+                                        else f"DIFFERS by {cal[flagged] - shipped:+.2f}"))
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -191,10 +191,13 @@ def measured_materials() -> list[Material]:
     return out
 
 
-def aniso_materials() -> list[Material]:
+def aniso_materials(specimens: list[tuple[str, dict[str, Any], float]] | None = None
+                    ) -> list[Material]:
+    """Mitsuba specimens ``(name, spec, holder angle in degrees)`` as materials (truth tables
+    cached by name and recipe); ``specimens`` defaults to :data:`ANISO`."""
     th, td, pd = geo.grid_angles()
     out = []
-    for name, spec, holder in ANISO:
+    for name, spec, holder in (ANISO if specimens is None else specimens):
         s = MitsubaSpecimen(spec, holder)
         digest = hashlib.sha256(repr((spec, holder)).encode()).hexdigest()[:12]
 

@@ -337,11 +337,17 @@ def _compare_with_design(rec: Any, readings: list[Any], plan: AnyPlan, samples: 
     """The scan's ``predicted_log_rmse`` beside the expected error of the design its rig config
     came from (its ``[design]`` table, :mod:`gonio.designgap`): ``metrics`` gain
     ``design_expected_log_rmse`` and, for a gap above x2 either way, ``design_gap`` (why);
-    ``provenance`` the design and the gap. Nothing without a ``[design]`` table."""
+    ``provenance`` the design and the gap. Nothing without a ``[design]`` table, except a
+    rebuild's :data:`DESIGN_COMPARISON` ("not available: ...") in ``extra``, which becomes a
+    metric."""
     from gonio.designgap import compare_with_design, design_expectation, scan_facts
 
     design = design_expectation(extra.get("rig_config"))
     if design is None:
+        if isinstance(extra.get(DESIGN_COMPARISON), str):
+            # A rebuild that could not recover the rig config: say so where the comparison
+            # would show (the provenance already holds it).
+            metrics[DESIGN_COMPARISON] = extra[DESIGN_COMPARISON]
         return
     provenance["design"] = design.model_dump_json()
     if design.expected_log_rmse is None:  # a design recorded without its held-out error
@@ -605,9 +611,11 @@ def rebuild_result(store: JobStore, data_dir: Path, job_id: int,
     (``gonio jobs rebuild``): finishing re-run on them, with the calibration the job was
     finished with (recorded in its summary), the rig snapshot and plan it ran with, and what
     its finishing took from the rig config (the design comparison, the colour) and, on a
-    simulated rig, the true material (:meth:`gonio.store.JobStore.finishing_inputs`). The
-    job's summary is replaced by the new one; a calibration job's factors do not replace the
-    calibration in effect.
+    simulated rig, the true material (:meth:`gonio.store.JobStore.finishing_inputs`). A job
+    finished by a gonio whose store did not keep them takes the rig config from its result
+    file, or its result says why the design comparison is not available
+    (:func:`_older_rig_config`). The job's summary is replaced by the new one; a calibration
+    job's factors do not replace the calibration in effect.
 
     A job that failed because the disk filled while its result was written (``failed``, its
     reason "disk full: ...", after ``reconstructing``) has every reading: it is finished here
@@ -658,6 +666,12 @@ def rebuild_result(store: JobStore, data_dir: Path, job_id: int,
     inputs = store.finishing_inputs(job_id) or {}
     stored = inputs.get("provenance")
     kept: dict[str, Any] = stored if isinstance(stored, dict) else {}
+    if "provenance" not in inputs:
+        # Finished by a gonio whose store did not keep its finishing inputs: the rig config
+        # (the design comparison, the colour) is the one its result file recorded, if any.
+        kept = _older_rig_config(Path(data_dir), job)
+        if plan.finishing == "calibration":
+            kept.pop(DESIGN_COMPARISON, None)  # a calibration is compared with no design
     cal: Calibration | None = None
     if isinstance(old.get("calibration"), dict):
         cal = Calibration.model_validate(old["calibration"])
@@ -679,7 +693,8 @@ def rebuild_result(store: JobStore, data_dir: Path, job_id: int,
         provenance={**kept, "rebuilt": "from the job store's readings (gonio jobs rebuild) on "
                     + time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())},
         true_material=(lambda: truth) if isinstance(truth, dict) else None,
-        fit_exports=bool(inputs.get("fit_exports", True)),
+        # A store that kept no inputs: the fits were stored when its summary has their metric.
+        fit_exports=bool(inputs.get("fit_exports", "factored_rel_mse" in old if old else True)),
     )
     from gonio.calibration import CalibrationError
 
@@ -699,6 +714,41 @@ def rebuild_result(store: JobStore, data_dir: Path, job_id: int,
                         reason="completed by gonio jobs rebuild from its stored readings "
                         f"(it had failed: {job.reason})")
     return summary
+
+
+#: Provenance key (and metric) of a result whose design comparison could not be made: why.
+DESIGN_COMPARISON = "design_comparison"
+
+
+def _older_rig_config(data_dir: Path, job: Any) -> dict[str, Any]:
+    """What a rebuild takes from the rig config of a job finished by a gonio whose job store
+    kept no finishing inputs (:meth:`gonio.store.JobStore.finishing_inputs` is None).
+
+    That gonio wrote the rig config into the result file's provenance (``rig_config``), so it
+    is taken from there while the file still reads (``rig_config_from`` says so). Otherwise
+    the design comparison cannot be made, and :data:`DESIGN_COMPARISON` says why ("not
+    available: ..."); a result already rebuilt so keeps that reason.
+    """
+    from gonio.results import ResultFileError, read_provenance
+
+    relative = job.result_path or result_relpath(job.id)
+    try:
+        old = read_provenance(data_dir / relative)
+    except ResultFileError as exc:
+        why = (f"its result file {relative} is missing" if not (data_dir / relative).is_file()
+               else f"its result file does not read ({exc})")
+    else:
+        text = old.get("rig_config")
+        if isinstance(text, str) and text:
+            return {"rig_config": text,
+                    "rig_config_from": f"{relative} as it was before this rebuild (finished "
+                    "by a gonio whose job store did not keep the rig config)"}
+        if isinstance(old.get(DESIGN_COMPARISON), str):
+            return {DESIGN_COMPARISON: old[DESIGN_COMPARISON]}
+        why = f"its result file {relative} records no rig config"
+    return {DESIGN_COMPARISON: f"not available: job {job.id} was finished by a gonio whose "
+            f"job store did not keep the rig config it ran on, and {why}, so the design it "
+            "would be compared with is unknown"}
 
 
 def _failed_finishing(store: JobStore, job: Any) -> bool:

@@ -38,7 +38,7 @@ Layout (also in ``docs/engine.md``; strings are UTF-8, JSON attributes are strin
                                      basis_K, basis_materials (JSON list), and when they
                                      apply calibration_warning, arc_warning
 
-Read back with :func:`read_result`.
+Read back with :func:`read_result` (the provenance alone, of any version: :func:`read_provenance`).
 """
 
 from __future__ import annotations
@@ -310,6 +310,33 @@ def read_result(path: str | os.PathLike[str]) -> ResultFile:
             raise
         # A truncated or overwritten file can open and still fail on a dataset or attribute.
         raise ResultFileError(f"{p} is damaged ({type(exc).__name__}: {exc})") from None
+
+
+def read_provenance(path: str | os.PathLike[str]) -> dict[str, Any]:
+    """The ``/provenance`` attributes of a result file, of any format version: what the gonio
+    that wrote it recorded (e.g. the rig config ``gonio jobs rebuild`` needs for a job
+    finished by a gonio whose job store did not keep it). Nothing else is read.
+
+    Raises
+    ------
+    ResultFileError
+        Missing, not HDF5, damaged, not a gonio result or without ``/provenance``; the message
+        says which.
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise ResultFileError(f"result file {p} does not exist")
+    try:
+        with h5py.File(p, "r") as f:
+            if _attr_dict(f.attrs).get("format") != FORMAT_NAME:
+                raise ResultFileError(f"{p} is not a gonio result file")
+            if "provenance" not in f:
+                raise ResultFileError(f"{p} has no /provenance group")
+            return _attr_dict(f["provenance"].attrs)
+    except ResultFileError:
+        raise
+    except (OSError, KeyError, ValueError, TypeError) as exc:
+        raise ResultFileError(f"{p} is damaged ({exc})") from None
 
 
 def check_result_file(path: str | os.PathLike[str]) -> None:

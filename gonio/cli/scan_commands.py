@@ -722,7 +722,18 @@ def _rebuild(args: argparse.Namespace, store: Any) -> int:
           f"{summary['readings']} stored readings"
           + (" (calibrated, 1/sr)" if summary.get("calibrated") else " (sensor units)")
           + (f"; it was {before.value} and is {after.value} now" if after != before else ""))
+    line = design_comparison_line(summary)
+    if line is not None:
+        print(line)
     return 0
+
+
+def design_comparison_line(summary: dict[str, Any]) -> str | None:
+    """What ``gonio jobs rebuild`` says of a rebuilt result's design comparison: why it is not
+    available (a job finished by an older gonio whose rig config is lost), the gap when there
+    is one, or None (no gap, or no ``[design]`` on the rig)."""
+    why = summary.get("design_comparison") or summary.get("design_gap")
+    return f"design comparison: {why}" if why else None
 
 
 def _abort_job(args: argparse.Namespace) -> int:

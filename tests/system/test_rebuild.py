@@ -4,7 +4,9 @@ A scan on the simulated rig (31-band spectral sensors, so its colour comes from 
 config) whose rig config carries a ``[design]`` table is finished by the worker; its result file
 is deleted and rebuilt from the job store's readings in another store handle, as the CLI does.
 Every group, dataset and attribute of the original is in the rebuilt file, with the same design
-comparison, colour report and self-estimate (its coverage witness among the metrics).
+comparison, colour report and self-estimate (its coverage witness among the metrics). Then
+the same job as an older gonio left it (no `finishing` table, a result file written by hand):
+the rig config comes from that file, and with it the design comparison and the colour.
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ from __future__ import annotations
 import asyncio
 import json
 import shutil
+import sqlite3
 from pathlib import Path
 from typing import Any
 
@@ -126,3 +129,36 @@ def test_a_rebuilt_result_holds_the_design_comparison_colour_and_coverage(tmp_pa
     with h5py.File(original) as f, h5py.File(result) as g:
         np.testing.assert_allclose(g["reconstruction/values"][()],
                                    f["reconstruction/values"][()], rtol=1e-5, equal_nan=True)
+
+    # The same job as an older gonio left it: its store had no `finishing` table (dropped
+    # here; opening the store creates it empty), and its result file is as docs/engine.md's
+    # "Result file" lays it out, written here by hand, with the rig config in /provenance.
+    # (Without that file: tests/unit/test_finishing.py.)
+    store.close()
+    with sqlite3.connect(data / "gonio.sqlite") as con:
+        con.execute("DROP TABLE finishing")
+    store = JobStore(data / "gonio.sqlite", durable=False)
+    assert store.finishing_inputs(job) is None
+    _older_result(result, job, rig_config=config.model_dump_json())
+    older = rebuild_result(store, data, job, BasisSupply(lambda: basis))
+    assert older["design_expected_log_rmse"] == DESIGN.expected_log_rmse
+    assert older["design_gap"] == row.summary["design_gap"]
+    assert "design_comparison" not in older
+    with h5py.File(result) as f:
+        assert "as it was before this rebuild" in f["provenance"].attrs["rig_config_from"]
+        assert "bands" in json.loads(f["colour"].attrs["source"])  # the colour came back too
+
+
+def _older_result(path: Path, job: int, rig_config: str) -> None:
+    """A result file with the groups and root attributes of docs/engine.md's layout and the
+    /provenance attributes an older gonio wrote (plan, rig, rig_config, calibration)."""
+    with h5py.File(path, "w") as f:
+        f.attrs.update(format="gonio-result", version=1, gonio_version="0.9.0", job_id=job,
+                       specimen="yellow plastic", kind="specimen",
+                       created="2026-01-05T10:00:00Z")
+        for group in ("raw", "samples", "reconstruction", "metrics"):
+            f.create_group(group)
+        f["metrics"].attrs["predicted_log_rmse"] = 0.05
+        p = f.create_group("provenance")
+        p.attrs.update(plan=json.dumps({"kind": "uniform"}), rig=json.dumps({}),
+                       rig_config=rig_config, calibration=json.dumps({"pairs": {}}))

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from gonio.basis_supply import BasisSupply
-from gonio.finishing import RebuildError, rebuild_result
+from gonio.finishing import RebuildError, _older_rig_config, rebuild_result
 from gonio.plans.models import CalibrationPlan, ExposureSettings, UniformPlan
 from gonio.results import read_result
 from gonio.service import GonioService, JobRequest
@@ -165,3 +165,56 @@ def test_a_calibration_whose_result_cannot_be_written_does_not_take_effect(
     assert svc.calibration().source == json.loads(before)["source"]
     assert blocked.is_dir() and not any(blocked.iterdir())
     assert not list(data.glob("calibration.json*.part"))
+
+
+def test_a_job_of_an_older_gonio_rebuilt_without_its_result_file_says_why_it_is_not_compared(
+    tmp_path: Path
+) -> None:
+    """A store from before the `finishing` table (dropped here; opening the store creates it
+    empty) keeps no rig config: with the result file gone, the design it ran on is unknown,
+    and the rebuilt result says so where the comparison shows (metrics, provenance, the
+    summary the CLI prints), and keeps saying it when rebuilt again; export fits are stored
+    as the original did (its summary's fit metrics say). A calibration job is
+    compared with no design, so its rebuild says nothing of it."""
+    from tests.unit.brdf.reconstruction.test_basis import small_basis
+
+    _calibrated(tmp_path).store.close()
+    data = tmp_path / "d"
+    basis = small_basis()
+    svc = GonioService(JobStore(data / "gonio.sqlite"), MemRig(), data_dir=data,
+                       basis=BasisSupply(lambda: basis), fit_exports=False)
+
+    async def go() -> None:
+        await svc.start()
+        svc.submit(JobRequest(plan=UniformPlan(rotations=4, exposure=FAST)))
+        async for ev in svc.subscribe(0, job_id=2):
+            if ev.type == "state" and ev.data["state"] in ("completed", "failed"):
+                break
+        await svc.stop()
+
+    asyncio.run(go())
+    assert svc.store.get_job(2).state.value == "completed", svc.store.get_job(2).reason
+    svc.store.close()
+    with sqlite3.connect(data / "gonio.sqlite") as con:
+        con.execute("DROP TABLE finishing")
+    store = JobStore(data / "gonio.sqlite")
+    assert store.finishing_inputs(2) is None
+    (data / "results" / "job-2.h5").unlink()
+    summary = rebuild_result(store, data, 2, BasisSupply(lambda: basis))
+    why = summary["design_comparison"]
+    assert why.startswith("not available: job 2 was finished by a gonio whose job store "
+                          "did not keep the rig config it ran on"), why
+    assert "results/job-2.h5 is missing" in why, why
+    new = read_result(data / "results" / "job-2.h5")
+    assert new.metrics["design_comparison"] == why
+    assert new.provenance["design_comparison"] == why
+    assert "rig_config" not in new.provenance
+    assert "design_expected_log_rmse" not in new.metrics
+    # Its summary has no fit metric: it stored no export fits, nor does its rebuild.
+    assert new.factored is None and "factored_rel_mse" not in summary
+    # What a further rebuild takes from that file (a whole rebuild again costs its fits).
+    assert _older_rig_config(data, store.get_job(2)) == {"design_comparison": why}
+    (data / "results" / "job-1.h5").unlink()
+    calibration = rebuild_result(store, data, 1, BasisSupply(_no_basis))
+    assert "design_comparison" not in calibration
+    assert "design_comparison" not in read_result(data / "results" / "job-1.h5").provenance

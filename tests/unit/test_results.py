@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import h5py
 import numpy as np
 import pytest
 
@@ -11,7 +12,7 @@ from gonio.brdf.tables import geometry as geo
 from gonio.brdf.tables.table import BRDFTable
 from gonio.calibration import Calibration, calibrated_samples
 from gonio.hal import PairSpec
-from gonio.results import ResultFileError, read_result, write_result
+from gonio.results import ResultFileError, read_provenance, read_result, write_result
 from tests.unit.test_calibration import _reading_rows
 
 
@@ -109,3 +110,31 @@ def test_a_truncated_result_is_damaged_for_the_check_and_the_reader(tmp_path: Pa
     path.unlink()
     with pytest.raises(ResultFileError, match="does not exist"):
         check_result_file(path)
+
+
+def test_the_provenance_of_any_result_version_reads_alone_or_says_why_not(tmp_path: Path
+                                                                         ) -> None:
+    # Written by hand as docs/engine.md lays it out, at a format version this gonio does not
+    # read whole: its provenance still reads (what a rebuild takes from an older result).
+    older = tmp_path / "older.h5"
+    with h5py.File(older, "w") as f:
+        f.attrs.update(format="gonio-result", version=0)
+        f.create_group("provenance").attrs.update(rig_config='{"rig": {"name": "r"}}',
+                                                  plan="{}")
+    assert read_provenance(older) == {"rig_config": '{"rig": {"name": "r"}}', "plan": "{}"}
+    with pytest.raises(ResultFileError, match="does not exist"):
+        read_provenance(tmp_path / "none.h5")
+    other = tmp_path / "other.h5"
+    with h5py.File(other, "w") as f:
+        f.attrs["format"] = "something-else"
+    with pytest.raises(ResultFileError, match="not a gonio result file"):
+        read_provenance(other)
+    bare = tmp_path / "bare.h5"
+    with h5py.File(bare, "w") as f:
+        f.attrs["format"] = "gonio-result"
+    with pytest.raises(ResultFileError, match="has no /provenance group"):
+        read_provenance(bare)
+    junk = tmp_path / "junk.h5"
+    junk.write_bytes(b"not hdf5 at all" * 10)
+    with pytest.raises(ResultFileError, match="damaged"):
+        read_provenance(junk)

@@ -428,6 +428,7 @@ const METRIC_MEANING = {
   predicted_error: "predicted relative error of the whole BRDF (MAPE), from leave-one-pair-out",
   design_expected_log_rmse: "the rig's design: expected log RMSE on held-out materials (compare with predicted_log_rmse)",
   design_gap: "why predicted_log_rmse is more than 2 times away from the design's expected error",
+  design_comparison: "why predicted_log_rmse could not be compared with the rig's design (a result rebuilt without the rig config it ran on)",
   predicted_log_rmse_upper: "upper end of predicted_log_rmse's interval: the true error of held-out materials was below it on 98 % of the calibration scans",
   uncovered_share: "share of the prior's weighted variance the readings leave uncovered (0 to 1): the part of the table no pair looks at, part of predicted_log_rmse",
   cv_log_error: "leave-one-pair-out error: each pair predicted by the fit to the other pairs (log)",

@@ -60,6 +60,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 #: Features of :data:`LOG_RMSE_MODEL`, in the order :func:`predict_log_rmse` takes them.
 LOG_RMSE_FEATURES: tuple[str, ...] = ("expected", "mahalanobis", "cv_sample_error")
@@ -327,7 +328,40 @@ UPPER_FACTOR: float = 3.33
 UPPER_FACTOR_FLAGGED: float = 1.83
 
 
-def final_log_rmse(predicted: float, uncovered: float, misfit: BasisMisfit) -> float:
+#: Percentile of ``true / predicted`` over the calibration scans that :data:`UPPER_FACTOR` and
+#: :data:`UPPER_FACTOR_FLAGGED` are (:func:`upper_factor_from`).
+UPPER_PERCENTILE: float = 98.0
+
+
+def upper_factor_from(ratios: npt.ArrayLike) -> tuple[float, float]:
+    """The upper factor a set of scans gives: how :data:`UPPER_FACTOR` and
+    :data:`UPPER_FACTOR_FLAGGED` were made (``bench/bench_selfestimate.py`` prints both).
+
+    The :data:`UPPER_PERCENTILE` th percentile of ``true / predicted``, taken as the order
+    statistic at or above that position (numpy's ``method="higher"``: never interpolated down
+    between the largest ratios, so at most 2 % of the scans lie above it), then rounded up to
+    0.01.
+
+    Parameters
+    ----------
+    ratios : array_like, shape (n,)
+        ``true log_rmse / predicted_log_rmse`` of n scans (dimensionless, finite, n >= 1).
+
+    Returns
+    -------
+    (float, float)
+        The percentile, and the factor (it rounded up to 0.01).
+    """
+    q = float(np.percentile(np.asarray(ratios, dtype=float), UPPER_PERCENTILE,
+                            method="higher"))
+    # The small tolerance keeps a percentile already on the 0.01 grid (e.g. 2.0) where it is.
+    return q, float(np.ceil(q * 100.0 - 1e-9) / 100.0)
+
+
+def final_log_rmse(predicted: float, uncovered: float, misfit: BasisMisfit, *,
+                   predicted_factor: float = FINAL_PREDICTED_FACTOR,
+                   coverage_scale: float = FINAL_COVERAGE_SCALE,
+                   flagged_factor: float = FINAL_FLAGGED_FACTOR) -> float:
     """The reported ``predicted_log_rmse`` of a joint fit: the calibrated final mapping.
 
     The three constants were chosen on the **calibration** set of
@@ -357,6 +391,11 @@ def final_log_rmse(predicted: float, uncovered: float, misfit: BasisMisfit) -> f
     uncovered : float
         Share of the prior's weighted variance the readings leave (0..1, dimensionless).
     misfit : BasisMisfit
+    predicted_factor, coverage_scale, flagged_factor : float, optional
+        The mapping's constants (dimensionless, ``log_rmse`` units, dimensionless); the
+        shipped ones by default. Other values are for benches that compare candidate
+        mappings on the same scans (``bench/bench_selfestimate.py``'s rejected refit), so
+        the formula has one owner.
 
     Returns
     -------
@@ -364,11 +403,11 @@ def final_log_rmse(predicted: float, uncovered: float, misfit: BasisMisfit) -> f
         ``log_rmse`` units; NaN when an input it needs is NaN.
     """
     u = float(uncovered)
-    coverage = FINAL_COVERAGE_SCALE * np.sqrt(max(u, 0.0)) if np.isfinite(u) else float("nan")
+    coverage = coverage_scale * np.sqrt(max(u, 0.0)) if np.isfinite(u) else float("nan")
     if misfit.flagged:
-        return widen_log_rmse(float(np.hypot(FINAL_FLAGGED_FACTOR * float(predicted),
+        return widen_log_rmse(float(np.hypot(flagged_factor * float(predicted),
                                              coverage)), misfit)
-    return float(np.hypot(FINAL_PREDICTED_FACTOR * float(predicted), coverage))
+    return float(np.hypot(predicted_factor * float(predicted), coverage))
 
 
 def final_parts(expected: float, mahalanobis: float, cv_sample_error: float,

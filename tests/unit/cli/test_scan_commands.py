@@ -139,3 +139,16 @@ def test_the_dry_run_summary_states_both_branches_of_an_auto_arc_plan() -> None:
         dry_run(plan, RigDescription.from_rig(MemRig()), asymmetric_build_s=240.0),  # type: ignore[arg-type]
         plan, "mem")  # type: ignore[arg-type]
     assert "then about 4.0 min more: that basis is not built on this install yet" in built_later
+
+
+def test_a_rebuild_says_why_its_design_comparison_is_missing_or_off() -> None:
+    lost = "not available: job 3 was finished by a gonio whose job store did not keep ..."
+    assert (scan_commands.design_comparison_line({"design_comparison": lost})
+            == f"design comparison: {lost}")
+    gap = "predicted_log_rmse 0.0997 is 2.7 times the design's expected 0.0370 ..."
+    assert (scan_commands.design_comparison_line({"design_expected_log_rmse": 0.037,
+                                                  "design_gap": gap})
+            == f"design comparison: {gap}")
+    # Within x2 of the design, or a rig without a [design]: nothing to say.
+    assert scan_commands.design_comparison_line({"design_expected_log_rmse": 0.037}) is None
+    assert scan_commands.design_comparison_line({"predicted_log_rmse": 0.05}) is None

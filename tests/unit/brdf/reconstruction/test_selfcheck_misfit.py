@@ -31,6 +31,7 @@ from gonio.brdf.reconstruction.selfcheck import (
     BasisMisfit,
     basis_misfit,
     final_log_rmse,
+    upper_factor_from,
     upper_log_rmse,
     widen_log_rmse,
 )
@@ -196,6 +197,19 @@ def test_the_final_mapping_is_the_published_one() -> None:
     assert math.isnan(final_log_rmse(0.05, float("nan"), quiet))
 
 
+def test_the_final_mapping_takes_other_constants_as_keywords() -> None:
+    """A bench's candidate mapping (other constants) goes through the same formula."""
+    quiet = BasisMisfit(chi2=0.5, log_misfit=0.0, persistent_pairs=0, n_pairs=10, n_angles=8)
+    flagged = BasisMisfit(chi2=400.0, log_misfit=0.12, persistent_pairs=3, n_pairs=10,
+                          n_angles=8)
+    other = {"predicted_factor": 0.8, "coverage_scale": 0.3, "flagged_factor": 0.5}
+    # sqrt((0.8 * 0.05)^2 + 0.3^2 * 0.04) = sqrt(0.04^2 + 0.06^2).
+    assert final_log_rmse(0.05, 0.04, quiet, **other) == pytest.approx(math.hypot(0.04, 0.06))
+    # Flagged: sqrt((0.5 * 1.0)^2 + 0.06^2); a small estimate is floored at the misfit 0.12.
+    assert final_log_rmse(1.0, 0.04, flagged, **other) == pytest.approx(math.hypot(0.5, 0.06))
+    assert final_log_rmse(0.01, 0.0, flagged, **other) == pytest.approx(0.12)
+
+
 #: The interval's upper end as docs/science.md 7.1.1 publishes it: the factor on the estimate
 #: of a scan whose fit holds its readings, and of a flagged one.
 PUBLISHED_UPPER = (3.33, 1.83)
@@ -210,6 +224,19 @@ def test_the_interval_upper_end_is_the_published_factor_on_the_estimate() -> Non
     assert upper_log_rmse(0.04, quiet) == pytest.approx(0.1332)
     assert upper_log_rmse(0.2, flagged) == pytest.approx(0.366)
     assert math.isnan(upper_log_rmse(float("nan"), quiet))
+
+
+def test_the_upper_factor_is_the_order_statistic_at_the_98th_percentile_rounded_up() -> None:
+    # 95 ratios 1..95: the 98th percentile's position is 0.98 * 94 = 92.12 (0-based), so the
+    # order statistic at or above it is index 93, the value 94; one ratio (95) lies above.
+    assert upper_factor_from(np.arange(1.0, 96.0)) == (94.0, 94.0)
+    # 101 ratios 0..100: the position 98 is exact, the value 98.
+    assert upper_factor_from(np.arange(0.0, 101.0)) == (98.0, 98.0)
+    # Five ratios: position 0.98 * 4 = 3.92, so the largest, 3.3246, rounded up to 3.33.
+    q, factor = upper_factor_from([1.2, 3.3246, 0.5, 2.0, 1.0])
+    assert q == 3.3246 and factor == pytest.approx(3.33)
+    # A percentile already on the 0.01 grid stays where it is.
+    assert upper_factor_from([1.83]) == (1.83, pytest.approx(1.83))
 
 
 def test_a_joint_fit_reports_the_upper_end_and_the_vf_path_does_not(basis: Basis) -> None:

@@ -1,0 +1,55 @@
+"""bench_flipdesign's design cache key holds what a cached design depends on (issue 29).
+
+A design weighted by the render-importance map must be designed again when the map changes
+(a change to the renderings), when the rig limits or the arc it is designed for change; an
+unweighted one does not depend on the map.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from types import ModuleType
+
+import numpy as np
+import pytest
+
+from gonio.brdf.design.constraints import RigConstraints
+from tests.unit.brdf.reconstruction.test_basis import small_basis
+
+BENCH = Path(__file__).resolve().parents[2] / "bench"
+
+
+@pytest.fixture(scope="module")
+def benches() -> tuple[ModuleType, ModuleType]:
+    """bench_flipdesign and its sibling bench_unseen, imported as the scripts import them."""
+    sys.path.insert(0, str(BENCH))
+    try:
+        import bench_flipdesign
+        import bench_unseen
+    finally:
+        sys.path.remove(str(BENCH))
+    return bench_flipdesign, bench_unseen
+
+
+def test_the_design_key_changes_with_the_importance_map_the_rig_and_the_arc(
+        benches: tuple[ModuleType, ModuleType]) -> None:
+    bf, bu = benches
+    b = small_basis()
+    rig = RigConstraints()
+    imp = np.ones((18, 18, 36))
+    other = imp.copy()
+    other[3, 4, 5] = 2.0  # one node seen by one more pixel
+    key = bf.design_key(b, 0.5, imp, 0, rig)
+    assert key == bf.design_key(b, 0.5, imp.copy(), 0, rig)
+    assert key != bf.design_key(b, 0.5, other, 0, rig)
+    assert key != bf.design_key(b, 0.5, imp, 1, rig)
+    assert key != bf.design_key(b, 0.5, imp, 0, RigConstraints(max_elevation_deg=70.0))
+    # Unweighted (mix 0): the map is not used, so it does not count.
+    assert bf.design_key(b, 0.0, imp, 0, rig) == bf.design_key(b, 0.0, other, 0, rig)
+    saved = bu.SPAN["design"]
+    try:
+        bu.SPAN["design"] = 360.0 if saved != 360.0 else 180.0
+        assert key != bf.design_key(b, 0.5, imp, 0, rig)
+    finally:
+        bu.SPAN["design"] = saved
