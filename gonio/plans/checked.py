@@ -54,21 +54,14 @@ class CheckedPlan:
     def arc_deg(self) -> tuple[float, float]:
         """``(start_deg, span_deg)`` of the plan's arc, degrees: the first round's uniform
         angles and every refinement round lie in it. An auto-arc plan's first round is over
-        half a turn (plus one or two opposites, :attr:`arc_opposites`); the arc it continues
-        on is its rounds' choice (:class:`gonio.plans.rounds.ArcRounds`)."""
+        half a turn (plus one or two opposites); the arc it continues on is its rounds' choice
+        (:class:`gonio.plans.rounds.ArcRounds`)."""
         return (float(self.plan.start_deg), self.plan.first_span_deg())
 
     @cached_property
     def sensors_of(self) -> dict[str, tuple[str, ...]]:
         """The sensors read under each light, in pair order."""
         return {lt: tuple(p.sensor for p in self.pairs if p.light == lt) for lt in self.lights}
-
-    @cached_property
-    def arc_opposites(self) -> int:
-        """Opposite stage angles an auto-arc plan's first round reads on these pairs (1, or 2
-        when they all lie in one plane through the normal;
-        :func:`gonio.plans.arc.opposites_needed`)."""
-        return opposites_needed(*self.rig.pair_directions(self.pairs))
 
     @cached_property
     def per_angle_s(self) -> float:
@@ -87,7 +80,7 @@ class CheckedPlan:
         arc (:func:`gonio.plans.arc.branch_bounds`); None for a fixed plan."""
         if self.plan.arc_mode() == "auto":
             branches = branch_bounds(self.plan, self.rig, len(self.lights), len(self.pairs),
-                                     self.angles_deg, 0.0, self.arc_opposites)
+                                     self.angles_deg, 0.0)
             return len(self.angles_deg) + max(n for n, _ in branches.values())
         if not isinstance(self.plan, AdaptivePlan):
             return None
@@ -114,10 +107,12 @@ def check_plan(plan: AnyPlan | CheckedPlan, rig: RigDescription,
             route = order_for_travel(plan.angles_deg, from_deg, rig, plan.plan.backlash_deg)
             return replace(plan, route_deg=tuple(route), from_deg=from_deg)
     pairs = validate_plan(plan, rig)
-    angles = (first_round_angles(plan.start_deg, plan.first_rotations(),
-                                 opposites_needed(*rig.pair_directions(pairs)))
-              if plan.arc_mode() == "auto"
-              else uniform_angles(plan.start_deg, plan.first_rotations(), plan.first_span_deg()))
+    if plan.arc_mode() == "auto":
+        # One opposite stage angle when the pairs' planes spread, else two (gonio.plans.arc).
+        angles = first_round_angles(plan.start_deg, plan.first_rotations(),
+                                    opposites_needed(*rig.pair_directions(pairs)))
+    else:
+        angles = uniform_angles(plan.start_deg, plan.first_rotations(), plan.first_span_deg())
     route = order_for_travel(angles, from_deg, rig, plan.backlash_deg)
     return CheckedPlan(plan=plan, rig=rig, pairs=tuple(pairs),
                        lights=tuple(lights_in_order(pairs)), angles_deg=tuple(angles),

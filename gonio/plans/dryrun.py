@@ -221,8 +221,7 @@ def dry_run(plan: AnyPlan | CheckedPlan, rig: RigDescription, current_deg: float
                               basis_build_s=asymmetric_build_s
                               if switch and arc == FULL_TURN_DEG else None)
                     for arc, (n, extra_s) in branch_bounds(
-                        plan, rig, len(lights), len(pairs), angles, end,
-                        checked.arc_opposites).items()]
+                        plan, rig, len(lights), len(pairs), angles, end).items()]
         max_total = max(b.estimated_s for b in branches)
         max_angles = max(b.angles for b in branches)
     darks = len(route) if plan.exposure.dark == "every_angle" else int(plan.exposure.dark == "once")

@@ -214,11 +214,12 @@ class ArcRounds:
                 self.relative)
             events.append((ARC_TEST_EVENT, self.chosen))
         if last_round == 0 and not self.chosen["symmetric"]:
-            fill = fill_angles(self.start_deg, self.rotations, self.checked.arc_opposites)
-            # A job whose first round read more opposites (started by a gonio that read two
-            # on every rig) does not read them twice.
-            seen = {round(float(a) % 360.0, 6) for a in angles_deg}
-            fill = [a for a in fill if round(a % 360.0, 6) not in seen]
+            # As many opposites as the first round read (checked.angles_deg); an angle a job
+            # stored by another version already read is not read twice.
+            read = {round(float(a) % 360.0, 6) for a in angles_deg}
+            fill = [a for a in fill_angles(self.start_deg, self.rotations,
+                                           len(self.checked.angles_deg) - self.rotations)
+                    if round(a, 6) not in read]
             if fill:
                 return NextRound(fill, events)
         nxt = await self._after().next_round(angles_deg, values, planned_angles, last_round)

@@ -1,11 +1,12 @@
 """An auto-arc scan that switches to a full turn keeps every reading exactly once across a
 ``kill -9`` and resumes on the arc it chose.
 
-The child (``_scan_child.py``, arc auto) scans a tilted-facet specimen (no twofold symmetry) on the
-simulated rig: 9 angles of its first round (8 over half a turn and 180: the rig's pairs do not lie
-in one plane, so one opposite), the test, then 7 fill angles. It is killed right after the first
-round's last checkpoint (before the test ran) or two angles into the fill round (after the choice
-was stored), restarted, and compared with an uninterrupted run of the same seed.
+The child (``_scan_child.py``, arc auto) scans a tilted-facet specimen (no twofold symmetry)
+on the simulated rig: 9 angles of its first round (8 over half a turn and 180: the rig's pairs
+lie in planes spread around the normal, so one opposite tests it), the test, then 7 fill
+angles. It is killed right after the first round's last checkpoint (before the test ran) or
+three angles into the fill round (after the choice was stored), restarted, and compared with
+an uninterrupted run of the same seed.
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ def _child(db: Path, seed: int, freeze_after: int = 0) -> subprocess.Popen[str]:
     return start_child(db, seed, freeze_after, material="tilted-facet-002", arc="auto")
 
 
-@pytest.mark.parametrize("freeze_after", [9, 11], ids=["before-the-test", "in-the-fill"])
+@pytest.mark.parametrize("freeze_after", [9, 12], ids=["before-the-test", "in-the-fill"])
 def test_sigkill_around_the_arc_switch_keeps_every_reading_once(
         tmp_path: Path, freeze_after: int) -> None:
     killed, clean = tmp_path / "killed.sqlite", tmp_path / "clean.sqlite"
@@ -37,7 +38,7 @@ def test_sigkill_around_the_arc_switch_keeps_every_reading_once(
     assert store.get_job(1).done_angles == freeze_after
     assert store.get_job(1).state is JobState.RUNNING
     tested = store.last_event(1, ARC_TEST_EVENT)
-    # Killed inside the commit's event listener: the 9th angle's test had not run yet; two
+    # Killed inside the commit's event listener: the 9th angle's test had not run yet; three
     # angles into the fill, the choice was stored.
     assert (tested is None) == (freeze_after == 9)
     assert _child(killed, 3).communicate(timeout=300)[0].strip() == "running"

@@ -37,8 +37,8 @@ def test_the_page_runs_an_auto_arc_plan_and_says_which_arc(daemon: Daemon,
     wait.until(lambda d: "If the first round finds" in d.find_element(By.ID,
                                                                       "dry-run-result").text)
     text = browser.find_element(By.ID, "dry-run-result").text
-    # 4 over half a turn plus the opposite of 0 (the simulated rig's pairs are not in one
-    # plane): 5 angles; a full turn adds 3 more.
+    # 4 over half a turn plus the opposite of 0 (the simulated rig's pairs lie in planes
+    # spread around the normal, so one opposite tests it): 5 angles; a full turn adds 3 more.
     assert "at 5 stage angles" in text
     assert "twofold symmetric, it goes on over half a turn: at most 5 angles" in text
     assert "not twofold symmetric, it goes on over a full turn: at most 8 angles" in text

@@ -126,9 +126,10 @@ def test_the_dry_run_summary_states_both_branches_of_an_auto_arc_plan() -> None:
     plan = _parse("--arc", "auto")
     text = scan_commands.dry_run_summary(
         dry_run(plan, RigDescription.from_rig(MemRig())), plan, "mem")  # type: ignore[arg-type]
-    # MemRig: 3 pairs not in one plane; 8 over half a turn plus 1 opposite, or 16 over the
+    # MemRig: 3 pairs in planes within 12 deg of each other (two opposites,
+    # gonio.plans.arc.opposites_needed); 8 over half a turn plus 2 opposites, or 16 over the
     # full turn.
-    assert "twofold symmetric: on over half a turn, at most 9 angles (27 readings)" in text
+    assert "twofold symmetric: on over half a turn, at most 10 angles (30 readings)" in text
     assert "not twofold symmetric: on over a full turn, at most 16 angles (48 readings)" in text
     # The full turn is reconstructed with the basis for specimens without twofold symmetry,
     # and its build (not done yet on this install) is stated with its time.

@@ -2,7 +2,8 @@
 resumed job goes on on the arc its stored ``arc_test`` event chose.
 
 The in-memory rig's sensors follow ``1 + 0.5 cos 2 (alpha - phi)``, noiseless: twofold
-symmetric, so a fresh job stays on half a turn.
+symmetric, so a fresh job stays on half a turn. Its three pairs lie within 12 deg of one plane,
+so the first round reads two opposites (``gonio.plans.arc.opposites_needed``).
 """
 
 from __future__ import annotations
@@ -36,7 +37,7 @@ def test_a_symmetric_specimen_is_measured_over_half_a_turn_once_tested() -> None
     assert asyncio.run(ScanEngine(rig, store, job, plan, desc).run()) is JobState.RUNNING
     steps = store.steps(job)
     assert sorted(s.specimen_deg for s in steps) == pytest.approx(
-        sorted(first_round_angles(0.0, 8)))
+        sorted(first_round_angles(0.0, 8, opposites=2)))
     assert {s.round for s in steps} == {0}
     tests = [e for e in store.events_after(0, job_id=job) if e.type == ARC_TEST_EVENT]
     assert len(tests) == 1 and tests[0].data["symmetric"] and tests[0].data["arc_deg"] == 180
@@ -69,10 +70,11 @@ def test_a_resumed_job_fills_the_full_turn_it_chose_without_testing_again() -> N
     assert asyncio.run(ScanEngine(rig2, store, job, plan, desc).run()) is JobState.RUNNING
     after = store.steps(job)
     fill = [s for s in after if s.round == 1]
-    assert sorted(s.specimen_deg for s in fill) == pytest.approx(fill_angles(0.0, 8))
+    assert sorted(s.specimen_deg for s in fill) == pytest.approx(fill_angles(0.0, 8, opposites=2))
     assert all(s.done for s in after) and len(after) == 16
     keys = [(r.angle_index, r.light, r.sensor) for r in store.readings(job)]
     assert len(keys) == len(set(keys)) == 16 * 3
     assert [e.type for e in store.events_after(0, job_id=job)].count(ARC_TEST_EVENT) == 1
     # The resumed rig measured only the fill round's angles.
-    assert sorted(m % 360 for m in rig2.mstage.moves) == pytest.approx(fill_angles(0.0, 8))
+    assert sorted(m % 360 for m in rig2.mstage.moves) == pytest.approx(
+        fill_angles(0.0, 8, opposites=2))

@@ -15,7 +15,6 @@ from typing import Any
 import numpy as np
 import pytest
 
-from gonio.hal import PairSpec
 from gonio.motion import move_time
 from gonio.plans.arc import (
     ARC_TEST_EVENT,
@@ -25,6 +24,7 @@ from gonio.plans.arc import (
     first_round_angles,
     half_turn_warning,
     opposites_needed,
+    pair_planes_deg,
 )
 from gonio.plans.checked import check_plan
 from gonio.plans.dryrun import dry_run
@@ -54,15 +54,16 @@ def _next(rounds: Any, angles: list[float], values: np.ndarray, planned: int,
 
 
 def test_the_first_round_reads_one_opposite_or_two_a_quarter_turn_apart() -> None:
-    # Counted by hand: 8 over half a turn from 0 plus the opposite of 0.
+    # Counted by hand: 8 over half a turn from 0 plus the opposite of 0 (one opposite), or of
+    # 0 and 90 (two); the fill reads the other opposites.
     assert first_round_angles(0.0, 8) == pytest.approx(
         [0, 22.5, 45, 67.5, 90, 112.5, 135, 157.5, 180])
     assert fill_angles(0.0, 8) == pytest.approx([202.5, 225, 247.5, 270, 292.5, 315, 337.5])
-    # Pairs in one plane: the opposites of 0 and 90.
-    assert first_round_angles(0.0, 8, 2) == pytest.approx(
+    assert first_round_angles(0.0, 8, opposites=2) == pytest.approx(
         [0, 22.5, 45, 67.5, 90, 112.5, 135, 157.5, 180, 270])
-    assert fill_angles(0.0, 8, 2) == pytest.approx([202.5, 225, 247.5, 292.5, 315, 337.5])
-    # Together: 16 uniform angles over the full turn, each once, either way.
+    assert fill_angles(0.0, 8, opposites=2) == pytest.approx(
+        [202.5, 225, 247.5, 292.5, 315, 337.5])
+    # Together, either way: 16 uniform angles over the full turn, each once.
     for k in (1, 2):
         both = sorted(first_round_angles(0.0, 8, k) + fill_angles(0.0, 8, k))
         assert both == pytest.approx([22.5 * j for j in range(16)])
@@ -77,27 +78,34 @@ def test_the_first_round_reads_one_opposite_or_two_a_quarter_turn_apart() -> Non
         first_round_angles(0.0, 8, 3)
 
 
-def _dirs(theta_phi: list[tuple[float, float]]) -> np.ndarray:
-    t, p = np.deg2rad(np.asarray(theta_phi, float)).T
-    return np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], axis=1)
+def _dirs(*pairs: tuple[tuple[float, float], tuple[float, float]]) -> tuple[Any, Any]:
+    """Lab vectors of (light, sensor) pairs given as ((theta, phi), (theta, phi)) degrees."""
+    from gonio.hal import LabDirection
+
+    return (np.array([LabDirection(*li).vector() for li, _ in pairs]),
+            np.array([LabDirection(*se).vector() for _, se in pairs]))
 
 
-def test_pairs_in_one_plane_need_a_second_opposite() -> None:
-    # An in-plane instrument: lights at 45 deg, sensors at -15 .. 110 deg aspecular, all in
-    # the plane phi = 0 / 180 (and one on the normal, which lies in every plane).
-    lights = _dirs([(45, 180)] * 4)
-    sensors = _dirs([(30, 0), (60, 0), (0, 0), (65, 180)])
-    assert opposites_needed(lights, sensors) == 2
-    # Within the tolerance of that plane: still in-plane.
-    assert opposites_needed(lights, _dirs([(30, 1.5), (60, 0), (0, 0), (65, 180)])) == 2
-    # One sensor out of the plane (an MA98-like out-of-plane geometry): one opposite.
-    assert opposites_needed(lights, _dirs([(30, 0), (60, 0), (45, 90), (65, 180)])) == 1
-    # Everything on the normal: no azimuth to tell, the safe two.
-    assert opposites_needed(_dirs([(0, 0)]), _dirs([(0, 0)])) == 2
+def test_each_pair_has_a_plane_and_one_opposite_needs_planes_spread() -> None:
+    # By hand: an in-plane pair lies in its plane of incidence, a retro pair in its own
+    # azimuth's; both at the pole, or at right angles and equally tilted, have no axis.
+    planes = pair_planes_deg(*_dirs(((45, 30), (45, 210)), ((30, 100), (30, 100)),
+                                    ((0, 0), (0, 0)), ((45, 0), (45, 90)),
+                                    ((45, 170), (60, 350))))
+    assert planes[:2] == pytest.approx([30, 100])
+    assert np.isnan(planes[2]) and np.isnan(planes[3]) and planes[4] == pytest.approx(170)
+    # Light (60, 90), sensor (45, 180): (i sin 60)^2 + (-sin 45)^2 = -0.25, axis 90.
+    assert pair_planes_deg(*_dirs(((60, 90), (45, 180)))) == pytest.approx([90])
+    in_plane = ((45, 0), (45, 180))
+    assert opposites_needed(*_dirs(in_plane)) == 2  # one pair: two opposites
+    assert opposites_needed(*_dirs(in_plane, ((45, 30), (45, 210)))) == 2  # 30 deg apart
+    assert opposites_needed(*_dirs(in_plane, ((45, 60), (45, 240)))) == 1  # 60 deg apart
+    assert opposites_needed(*_dirs(in_plane, ((45, 150), (45, 330)))) == 2  # 150 = -30
+    assert opposites_needed(*_dirs(in_plane, ((0, 0), (0, 0)))) == 2  # no axis: not counted
 
 
-def test_a_lean_across_the_plane_is_seen_only_by_the_second_opposite() -> None:
-    """Why in-plane pairs read two opposites: a lean at 90 deg to their plane makes each
+def test_a_lean_across_the_pairs_plane_is_seen_only_by_the_second_opposite() -> None:
+    """Why pairs in one plane read two opposites: a lean at 90 deg to their plane makes each
     pair's ``ln f(a) - ln f(a + 180)`` vary as ``cos(a - 90)``, zero at 0 and 180."""
     rng = np.random.default_rng(3)
     one, two = first_round_angles(0.0, 8, 1), first_round_angles(0.0, 8, 2)
@@ -112,10 +120,10 @@ def test_a_lean_across_the_plane_is_seen_only_by_the_second_opposite() -> None:
 
 
 def test_a_symmetric_specimen_keeps_half_a_turn_and_a_leaning_one_gets_the_full_turn() -> None:
-    angles = first_round_angles(0.0, 8)
+    angles = first_round_angles(0.0, 8, opposites=2)
     sym = arc_test(angles, _readings(angles, 0.0), NOISE)
     assert sym["symmetric"] and sym["arc_deg"] == 180.0
-    assert sym["opposite_pairs"] == 1 and sym["dof"] == 10 * 1 * 3
+    assert sym["opposite_pairs"] == 2 and sym["dof"] == 10 * 2 * 3
     assert half_turn_warning(sym) is None
     # A lean of 5 % in log (the difference at opposite angles up to 10 %, seven times the
     # noise of a difference) is found whichever way each pair leans.
@@ -128,12 +136,19 @@ def test_a_symmetric_specimen_keeps_half_a_turn_and_a_leaning_one_gets_the_full_
     # The pair's scale does not matter (uncalibrated counts): the same readings x 1000.
     assert arc_test(angles, 1000 * _readings(angles, 0.05), NOISE)["statistic"] == \
         pytest.approx(lean["statistic"])
+    # One opposite: the ten pairs lean each its own way (as pairs in different planes see one
+    # lean), so at one stage angle some see it; the same 5 % lean is found.
+    one = first_round_angles(0.0, 8)
+    sym1 = arc_test(one, _readings(one, 0.0), NOISE)
+    assert sym1["symmetric"] and sym1["opposite_pairs"] == 1 and sym1["dof"] == 10 * 3
+    lean1 = arc_test(one, _readings(one, 0.05), NOISE)
+    assert not lean1["symmetric"] and lean1["p_value"] < 1e-6
 
 
 def test_the_false_alarm_rate_is_the_level() -> None:
     """200 symmetric specimens with noise at the model's level: the test calls about 1 %
     (its level) asymmetric; binomial(200, 0.01) exceeds 8 with probability below 1e-3."""
-    angles = first_round_angles(0.0, 8)
+    angles = first_round_angles(0.0, 8, opposites=2)
     called = sum(not arc_test(angles, _readings(angles, 0.0, seed=s), NOISE)["symmetric"]
                  for s in range(200))
     assert called <= 8
@@ -151,9 +166,25 @@ def _auto(desc: RigDescription, **kw: Any) -> Any:
     return check_plan(kind(arc="auto", **kw), desc)
 
 
+def _spread(desc: RigDescription) -> RigDescription:
+    """The in-memory rig with light L2 at (60, 90): pair L2/S1's plane at 90 deg (by hand,
+    test above) against L1/S1's at 0, so one opposite tests it."""
+    lights = tuple(li.model_copy(update={"theta_deg": 60.0, "phi_deg": 90.0})
+                   if li.name == "L2" else li for li in desc.lights)
+    return desc.model_copy(update={"lights": lights})
+
+
+def test_the_pairs_planes_choose_the_first_round(desc: RigDescription) -> None:
+    # The in-memory rig's pairs lie in planes at 0, 12 and 0 deg: two opposites.
+    assert list(_auto(desc, rotations=8).angles_deg) == pytest.approx(
+        [0, 22.5, 45, 67.5, 90, 112.5, 135, 157.5, 180, 270])
+    assert list(_auto(_spread(desc), rotations=8).angles_deg) == pytest.approx(
+        [0, 22.5, 45, 67.5, 90, 112.5, 135, 157.5, 180])
+
+
 def test_a_symmetric_uniform_plan_stops_after_its_first_round(desc: RigDescription) -> None:
     checked = _auto(desc, rotations=8)
-    assert list(checked.angles_deg) == pytest.approx(first_round_angles(0.0, 8))
+    assert list(checked.angles_deg) == pytest.approx(first_round_angles(0.0, 8, 2))
     rounds = rounds_for(checked)
     assert isinstance(rounds, ArcRounds)
     angles = list(checked.angles_deg)
@@ -169,7 +200,7 @@ def test_an_asymmetric_uniform_plan_fills_the_full_turn_then_stops(
     rounds = rounds_for(checked)
     angles = list(checked.angles_deg)
     nxt = _next(rounds, angles, _readings(angles, 0.05, n_pairs=3), len(angles), 0)
-    assert nxt.angles_deg == pytest.approx(fill_angles(0.0, 8))
+    assert nxt.angles_deg == pytest.approx(fill_angles(0.0, 8, 2))
     assert nxt.events[0][0] == ARC_TEST_EVENT and rounds.arc_deg == 360.0
     done = angles + nxt.angles_deg
     # Round 1 was the fill: nothing more, and the test is not run or recorded again.
@@ -186,18 +217,22 @@ def test_a_resumed_plan_goes_on_on_the_arc_it_chose(desc: RigDescription) -> Non
     chosen = arc_test(angles, _readings(angles, 0.1, n_pairs=3), NOISE)
     assert not chosen["symmetric"]
     nxt = _next(rounds_for(checked, chosen=chosen), angles, values, len(angles), 0)
-    assert nxt == NextRound(fill_angles(0.0, 4), [])
+    assert nxt == NextRound(fill_angles(0.0, 4, 2), [])
 
 
-def test_a_job_whose_first_round_read_two_opposites_does_not_read_one_twice(
+def test_one_opposite_fills_seven_angles_and_never_reads_an_angle_twice(
         desc: RigDescription) -> None:
-    """A job started by a gonio that read 180 and 270 on every rig, resumed by this one (one
-    opposite on the MemRig's pairs): the fill skips 270, already read."""
-    checked = _auto(desc, rotations=8)
-    old_first = first_round_angles(0.0, 8, 2)
-    chosen = arc_test(old_first, _readings(old_first, 0.1, n_pairs=3), NOISE)
-    nxt = _next(rounds_for(checked, chosen=chosen), old_first,
-                _readings(old_first, 0.1, n_pairs=3), len(old_first), 0)
+    """Pairs spread: the first round's 9 angles, then (asymmetric) the 7 other opposites
+    (202.5 ... 337.5, 270 among them). A job whose round 0 already read 270 (two opposites,
+    stored by an earlier version) fills the other 6."""
+    checked = _auto(_spread(desc), rotations=8)
+    angles = list(checked.angles_deg)
+    nxt = _next(rounds_for(checked), angles, _readings(angles, 0.1, n_pairs=3), len(angles), 0)
+    assert nxt.angles_deg == pytest.approx([202.5, 225, 247.5, 270, 292.5, 315, 337.5])
+    old = [*angles, 270.0]
+    chosen = arc_test(old, _readings(old, 0.1, n_pairs=3), NOISE)
+    nxt = _next(rounds_for(checked, chosen=chosen), old, _readings(old, 0.1, n_pairs=3),
+                len(old), 0)
     assert nxt.angles_deg == pytest.approx([202.5, 225, 247.5, 292.5, 315, 337.5])
 
 
@@ -214,7 +249,7 @@ def test_adaptive_plans_refine_within_the_arc_chosen(desc: RigDescription) -> No
     # Asymmetric: the fill, then V&F's rule over the full turn (new angles past 180 too).
     asym = rounds_for(checked)
     fill = _next(asym, angles, _readings(angles, 0.1, n_pairs=3), len(angles), 0)
-    assert fill.angles_deg == pytest.approx([225.0, 270.0, 315.0])
+    assert fill.angles_deg == pytest.approx([225.0, 315.0])
     done = angles + fill.angles_deg
     nxt = _next(asym, done, _readings(done, 0.1, n_pairs=3), len(done), 1)
     assert asym._after().arc_deg == (0.0, 360.0)
@@ -244,43 +279,42 @@ EX = ExposureSettings(exposure_s=0.1, light_settle_s=0.0, dark="none")
 
 
 def test_the_dry_run_bounds_both_verdicts_of_a_uniform_plan(desc: RigDescription) -> None:
-    """Counted by hand, 3 pairs (not in one plane: one opposite), 2 lights, 0.1 s per
-    exposure, from 0 at 30 deg/s: symmetric, the first round's 9 angles (0 .. 180 in 22.5
-    steps); asymmetric, 7 more (202.5 .. 337.5 in 22.5 steps, on from 180)."""
+    """Counted by hand, 3 pairs, 2 lights, 0.1 s per exposure, from 0 at 30 deg/s:
+    symmetric, the first round's 10 angles (0 .. 157.5 in 22.5 steps, then 180 and 270);
+    asymmetric, 6 more (202.5, 225, 247.5 after coming down from 270, then 292.5 .. 337.5)."""
     d = dry_run(UniformPlan(rotations=8, arc="auto", exposure=EX), desc)
     v, a = desc.speed_dps, desc.accel_dps2
-    first_motion = 8 * move_time(22.5, v, a)
+    first_motion = 7 * move_time(22.5, v, a) + move_time(22.5, v, a) + move_time(90, v, a)
     assert d.motion_s == pytest.approx(first_motion)
-    assert d.estimated_s == pytest.approx(first_motion + 9 * 2 * 0.1)
+    assert d.estimated_s == pytest.approx(first_motion + 10 * 2 * 0.1)
     assert d.arc_branches is not None
     sym, asym = d.arc_branches
-    assert (sym.arc_deg, sym.angles, sym.readings) == (180.0, 9, 27)
+    assert (sym.arc_deg, sym.angles, sym.readings) == (180.0, 10, 30)
     assert sym.estimated_s == pytest.approx(d.estimated_s)
     assert (asym.arc_deg, asym.angles, asym.readings) == (360.0, 16, 48)
-    fill_motion = 7 * move_time(22.5, v, a)
-    assert asym.estimated_s == pytest.approx(d.estimated_s + fill_motion + 7 * 2 * 0.1)
+    fill_motion = move_time(270 - 202.5, v, a) + 2 * move_time(22.5, v, a) + \
+        move_time(45, v, a) + 2 * move_time(22.5, v, a)
+    assert asym.estimated_s == pytest.approx(d.estimated_s + fill_motion + 6 * 2 * 0.1)
     assert d.max_angles == 16 and d.max_estimated_s == pytest.approx(asym.estimated_s)
     assert dry_run(UniformPlan(exposure=EX), desc).arc_branches is None
 
 
-def test_pairs_in_one_plane_read_two_opposites_through_the_plan(desc: RigDescription) -> None:
-    """The rule reaches the plan: the MemRig's pair L1/S1 alone lies in the plane phi = 0 /
-    180 (light at phi 0, sensor at 180), so its first round reads 0/180 and 90/270, and the
-    fill the 6 others (hand count as in the first test)."""
-    plan = UniformPlan(rotations=8, arc="auto", exposure=EX,
-                       pairs=[PairSpec(light="L1", sensor="S1")])
-    checked = check_plan(plan, desc)
-    assert checked.arc_opposites == 2
-    assert list(checked.angles_deg) == pytest.approx(
-        [0, 22.5, 45, 67.5, 90, 112.5, 135, 157.5, 180, 270])
-    d = dry_run(plan, desc)
+def test_the_dry_run_bounds_both_verdicts_with_one_opposite(desc: RigDescription) -> None:
+    """Counted by hand, the spread rig (3 pairs, 2 lights), 0.1 s per exposure, from 0:
+    symmetric, 9 angles (0 .. 157.5, then 180: eight moves of 22.5); asymmetric, 7 more
+    (202.5 .. 337.5 from 180: seven moves of 22.5), 16 in all."""
+    spread = _spread(desc)
+    d = dry_run(UniformPlan(rotations=8, arc="auto", exposure=EX), spread)
+    v, a = spread.speed_dps, spread.accel_dps2
+    assert d.motion_s == pytest.approx(8 * move_time(22.5, v, a))
+    assert d.estimated_s == pytest.approx(8 * move_time(22.5, v, a) + 9 * 2 * 0.1)
     assert d.arc_branches is not None
-    assert [(b.angles, b.readings) for b in d.arc_branches] == [(10, 10), (16, 16)]
-    rounds = rounds_for(checked)
-    angles = list(checked.angles_deg)
-    lean = _readings(angles, 0.1, n_pairs=1)
-    assert _next(rounds, angles, lean, len(angles), 0).angles_deg == pytest.approx(
-        [202.5, 225, 247.5, 292.5, 315, 337.5])
+    sym, asym = d.arc_branches
+    assert (sym.arc_deg, sym.angles, sym.readings) == (180.0, 9, 27)
+    assert (asym.arc_deg, asym.angles, asym.readings) == (360.0, 16, 48)
+    assert asym.estimated_s == pytest.approx(
+        d.estimated_s + 7 * move_time(22.5, v, a) + 7 * 2 * 0.1)
+    assert d.max_angles == 16
 
 
 def test_the_dry_run_says_which_basis_each_verdict_reconstructs_with(
@@ -307,19 +341,19 @@ def test_the_dry_run_says_which_basis_each_verdict_reconstructs_with(
 
 
 def test_the_dry_run_bounds_both_verdicts_of_an_adaptive_plan(desc: RigDescription) -> None:
-    """Counted by hand, 4 first angles and one opposite, max_rounds 3, no cap: symmetric, 0
-    45 90 135 (180 is the same position as 0 over half a turn) gain 4 then 8 midpoints:
-    5 + 4 + 8 = 17; asymmetric, the fill (225, 270, 315) makes 8 over the full turn, one
-    refinement round left adds 8 midpoints: 16."""
+    """Counted by hand, 4 first angles, max_rounds 3, no cap: symmetric, 0 45 90 135 (180 and
+    270 are the same positions over half a turn) gain 4 then 8 midpoints: 6 + 4 + 8 = 18;
+    asymmetric, the fill (225, 315) makes 8 over the full turn, one refinement round left
+    adds 8 midpoints: 16."""
     plan = AdaptivePlan(initial_rotations=4, max_rounds=3, max_rotations=None, arc="auto",
                         exposure=EX)
     d = dry_run(plan, desc)
-    assert d.angles_deg == pytest.approx([0, 45, 90, 135, 180])
+    assert d.angles_deg == pytest.approx([0, 45, 90, 135, 180, 270])
     assert d.arc_branches is not None
-    assert [(b.arc_deg, b.angles) for b in d.arc_branches] == [(180.0, 17), (360.0, 16)]
-    assert d.max_angles == 17
+    assert [(b.arc_deg, b.angles) for b in d.arc_branches] == [(180.0, 18), (360.0, 16)]
+    assert d.max_angles == 18
     assert all(b.estimated_s >= b.angles * 2 * 0.1 for b in d.arc_branches)
-    assert check_plan(plan, desc).max_angles == 17
+    assert check_plan(plan, desc).max_angles == 18
     # The bounds are branch_bounds' (what the engine's ETA uses too).
     extra = branch_bounds(plan, desc, 2, 3, d.angles_deg, d.positions_deg[-1])
-    assert {k: n for k, (n, _) in extra.items()} == {180.0: 12, 360.0: 11}
+    assert {k: n for k, (n, _) in extra.items()} == {180.0: 12, 360.0: 10}
