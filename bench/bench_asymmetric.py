@@ -182,7 +182,7 @@ def _layout_opposites(distinct: int, picks: list[int]
 #: First-round layouts of the auto arc (``--layout``): each maps ``R`` to (first round, fill
 #: round) angles in degrees. ``one``: the product's (R over half a turn plus the first one's
 #: opposite, R + 1 angles; :func:`gonio.plans.arc.first_round_angles`); ``two``: the
-#: product's for pairs in one plane, and every auto scan's before this bench chose ``one``
+#: product's when the pairs' planes do not spread, and every auto scan's before this round
 #: (plus a second opposite a quarter turn on, R + 2); ``swap``: R - 1 over half a turn
 #: plus one opposite (R angles, so a symmetric specimen reads as many as a half-turn plan but
 #: sees R - 1 distinct azimuths); ``swap2``: R - 2 plus two opposites a quarter turn apart.
