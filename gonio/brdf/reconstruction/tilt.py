@@ -78,7 +78,7 @@ def tilt_rotation(tilt: float, azimuth: float) -> FloatArray:
     return np.eye(3) + st * K + (1.0 - ct) * (K @ K)
 
 
-def tilt_factor(R: FloatArray, wo: ArrayLike) -> FloatArray:
+def tilt_factor(R: FloatArray, wo: ArrayLike, terminator: bool = True) -> FloatArray:
     """The normal map's factor on ``g`` (module notes), 0 below either horizon.
 
     ``(R wo)_z / wo_z`` (the leaning frame's cosine over the geometric one) times the
@@ -92,6 +92,9 @@ def tilt_factor(R: FloatArray, wo: ArrayLike) -> FloatArray:
     ----------
     R : (3, 3) from :func:`tilt_rotation`
     wo : (..., 3) unit vectors, specimen frame
+    terminator : bool
+        Include the shadowing term (default); without it, the bare normal map of
+        :class:`gonio.brdf.models.analytic.Tilted` with ``masking="none"``.
 
     Returns
     -------
@@ -104,7 +107,7 @@ def tilt_factor(R: FloatArray, wo: ArrayLike) -> FloatArray:
     with np.errstate(divide="ignore", invalid="ignore"):
         c = ro[..., 2] / o[..., 2]
         tan2 = (1.0 - o[..., 2] ** 2) / o[..., 2] ** 2
-        shadow = 2.0 / (1.0 + np.sqrt(1.0 + a2 * tan2))
+        shadow = 2.0 / (1.0 + np.sqrt(1.0 + a2 * tan2)) if terminator else 1.0
     return np.where((o[..., 2] > 0) & (ro[..., 2] > 0), c * shadow, 0.0)
 
 
