@@ -40,6 +40,15 @@ angles over the full turn in all) and the fit with the basis the verdict chooses
 one (before issue 25's switch) or the asymmetric one (after). Rows for ``R`` = 6 (120 readings
 when asymmetric) and 8 (160), on the asymmetric specimens, and on the symmetric ones (their
 readings and error beside today's half-turn scan of 8 angles, 80 readings).
+
+The tilt fit (``--tilt choice|fresh|symmetric``, docs/science.md 7.4): on the auto-arc path's
+readings (``--rotations`` R, 6 by default: 120 readings when asymmetric), today's fit (the basis
+the verdict chooses) against :func:`gonio.brdf.reconstruction.tilt.fit_tilt` with the default
+basis on the same readings, the lean it finds against the truth's, both fits' leave-one-pair-out
+errors and the tilt search's CPU time. ``choice``: the 8 specimens above, where its settings
+were chosen; ``fresh``: :data:`FRESH`, written before its single run; ``symmetric``:
+``bench_unseen.py``'s six anisotropic specimens read over a full turn (2R angles), plain joint
+fit against the tilt fit. The ``rule`` column: the fit with the lower held-out error.
 """
 
 from __future__ import annotations

@@ -365,10 +365,15 @@ def fit_tilt(basis: Basis, cells: ArrayLike, ph_lab: ArrayLike, stage_angles: Ar
             best = min(tried, key=tried.__getitem__)
             dt, db = dt / 2, db / 2
     tilt, azimuth = np.deg2rad(best[0]), np.deg2rad(best[1])
-    m = map_readings(cells, ph_lab, stage_angles, vals, tilt, azimuth)
-    g = reconstruct(basis, m.cells, m.ph, np.zeros(1), m.values[:, None, :],
-                    channels=channels, name=f"{name} (untilted)")
-    table = tilted_table(g.table, tilt, azimuth, name) if best[0] > 0 else g.table
+    if best[0] > 0:
+        m = map_readings(cells, ph_lab, stage_angles, vals, tilt, azimuth)
+        g = reconstruct(basis, m.cells, m.ph, np.zeros(1), m.values[:, None, :],
+                        channels=channels, name=f"{name} (untilted)")
+        table = tilted_table(g.table, tilt, azimuth, name)
+    else:
+        # No lean: exactly the plain joint fit of the scan as read.
+        g = reconstruct(basis, cells, ph_lab, stage_angles, vals, channels=channels, name=name)
+        table = g.table
     cand = np.array([(t, b, e) for (t, b), e in tried.items()], dtype=float)
     return TiltFit(float(tilt), float(azimuth), tried[best], tried[(0.0, 0.0)], table, g,
                    cand, time.perf_counter() - t0)

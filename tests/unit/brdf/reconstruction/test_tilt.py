@@ -11,6 +11,7 @@ import pytest
 from gonio.brdf.models import analytic as bm
 from gonio.brdf.reconstruction import shipped
 from gonio.brdf.reconstruction.basis import Basis
+from gonio.brdf.reconstruction.reconstruct import reconstruct
 from gonio.brdf.reconstruction.samples import NoiseModel, simulate_samples, uniform_stage_angles
 from gonio.brdf.reconstruction.tilt import (
     fit_tilt,
@@ -170,6 +171,9 @@ def test_an_untilted_specimen_keeps_no_lean(basis: Basis) -> None:
     fit = fit_tilt(basis, cells, ph, alpha, vals, **SMALL_GRID)
     assert fit.tilt == 0.0
     assert fit.holdout_error == fit.plain_holdout_error
+    # No lean: the plain joint fit of the scan as read, unchanged.
+    plain = reconstruct(basis, cells, ph, alpha, vals)
+    np.testing.assert_array_equal(fit.table.values, plain.table.values)
 
 
 def test_readings_below_the_lean_leave_the_fit() -> None:
