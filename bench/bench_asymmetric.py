@@ -42,6 +42,15 @@ basis the verdict chooses: the default one (before issue 25's switch) or the asy
 specimens, and on the symmetric ones (their readings and error beside today's half-turn scan of 8
 angles, 80 readings). ``--set fresh`` runs the same tables on ``ASYM_FRESH`` and its untilted twins
 (the held-out set of the layout choice).
+
+The tilt fit (``--tilt choice|fresh|symmetric``, docs/science.md 7.4): on the auto-arc path's
+readings (``--rotations`` R, 6 by default: 120 readings when asymmetric), today's fit (the basis
+the verdict chooses) against :func:`gonio.brdf.reconstruction.tilt.fit_tilt` with the default
+basis on the same readings, the lean it finds against the truth's, both fits' leave-one-pair-out
+errors and the tilt search's CPU time. ``choice``: the 8 specimens above, where its settings
+were chosen; ``fresh``: :data:`FRESH`, written before its single run; ``symmetric``:
+``bench_unseen.py``'s six anisotropic specimens read over a full turn (2R angles), plain joint
+fit against the tilt fit. The ``rule`` column: the fit with the lower held-out error.
 """
 
 from __future__ import annotations
@@ -59,6 +68,7 @@ from gonio.brdf.reconstruction.basis import Basis, default_basis
 from gonio.brdf.reconstruction.reconstruct import reconstruct
 from gonio.brdf.reconstruction.samples import NoiseModel, uniform_stage_angles
 from gonio.brdf.reconstruction.symmetry import twofold_test
+from gonio.brdf.reconstruction.tilt import fit_tilt
 from gonio.brdf.tables import geometry as geo
 from gonio.brdf.tables import metrics
 from gonio.plans.arc import fill_angles, first_round_angles
@@ -86,6 +96,31 @@ ASYM: list[tuple[str, float, float, dict[str, Any], float]] = [
       "diffuse_reflectance": {"type": "rgb", "value": [0.1, 0.2, 0.55]}}, 199.0),
     ("ag-aniso-t15", 15.0, 90.0, {"type": "roughconductor", "material": "Ag", "alpha_u": 0.08,
                                   "alpha_v": 0.3}, 58.0),
+]
+
+#: Fresh asymmetric specimens for the tilt fit's single test (``--tilt fresh``), written
+#: down before its first run: other tilts, roughnesses, holder angles, metals and plastics.
+#: Nothing was chosen on them.
+FRESH: list[tuple[str, float, float, dict[str, Any], float]] = [
+    ("fresh-al-r0.18-t12", 12.0, 250.0,
+     {"type": "roughconductor", "material": "Al", "alpha": 0.18}, 102.0),
+    ("fresh-au-r0.08-t22", 22.0, 330.0,
+     {"type": "roughconductor", "material": "Au", "alpha": 0.08}, 17.0),
+    ("fresh-cu-r0.12-t8", 8.0, 60.0,
+     {"type": "roughconductor", "material": "Cu", "alpha": 0.12}, 215.0),
+    ("fresh-ag-r0.20-t26", 26.0, 150.0,
+     {"type": "roughconductor", "material": "Ag", "alpha": 0.20}, 289.0),
+    ("fresh-cr-aniso-t18", 18.0, 275.0,
+     {"type": "roughconductor", "material": "Cr", "alpha_u": 0.12, "alpha_v": 0.25}, 133.0),
+    ("fresh-green-plastic-r0.12-t28", 28.0, 95.0,
+     {"type": "roughplastic", "alpha": 0.12,
+      "diffuse_reflectance": {"type": "rgb", "value": [0.1, 0.45, 0.12]}}, 44.0),
+    ("fresh-white-plastic-r0.30-t10", 10.0, 205.0,
+     {"type": "roughplastic", "alpha": 0.30,
+      "diffuse_reflectance": {"type": "rgb", "value": [0.7, 0.7, 0.65]}}, 166.0),
+    ("fresh-yellow-plastic-r0.06-t18", 18.0, 20.0,
+     {"type": "roughplastic", "alpha": 0.06,
+      "diffuse_reflectance": {"type": "rgb", "value": [0.6, 0.5, 0.05]}}, 321.0),
 ]
 
 
@@ -143,10 +178,13 @@ def specimen(name: str, spec: dict[str, Any], holder: float, key: str) -> bu.Mat
     return bu.Material(name, "aniso", bu._full_table(vals, name), s, ())
 
 
-def asym_materials(tilted: bool = True, fresh: bool = False) -> list[bu.Material]:
-    """The asymmetric specimens (``tilted``) or their untilted twins; ``fresh``: ASYM_FRESH."""
+def asym_materials(tilted: bool = True,
+                   specs: list[tuple[str, float, float, dict[str, Any], float]] | None = None
+                   ) -> list[bu.Material]:
+    """The asymmetric specimens of ``specs`` (default :data:`ASYM`; :data:`ASYM_FRESH`,
+    :data:`FRESH`), or with ``tilted`` False their untilted twins."""
     out = []
-    for name, tilt, azimuth, inner, holder in (ASYM_FRESH if fresh else ASYM):
+    for name, tilt, azimuth, inner, holder in ASYM if specs is None else specs:
         t = tilt if tilted else 0.0
         spec = normalmap_spec(t, azimuth, inner)
         out.append(specimen(name if tilted else f"{name}-untilted", spec, holder,
@@ -220,7 +258,7 @@ def auto_rows(plain: Basis, asym: Basis, d_half: tuple[np.ndarray, np.ndarray],
               seeds: int, layout: str = "one", fresh: bool = False) -> None:
     """The auto-arc path's tables (module notes): asymmetric and symmetric specimens
     (``fresh``: ASYM_FRESH and its untilted twins only)."""
-    mats = asym_materials(fresh=fresh)
+    mats = asym_materials(specs=ASYM_FRESH if fresh else None)
     print(f"\nauto arc, first-round layout {layout!r}, the default design's 10 pairs (designed "
           "for half a turn):")
     print("\n| specimen | R | verdict (p) | readings | default basis (before) | "
@@ -237,7 +275,7 @@ def auto_rows(plain: Basis, asym: Basis, d_half: tuple[np.ndarray, np.ndarray],
         a = np.array(means[rotations], dtype=float)
         print(f"| **mean** | {rotations} | | {a[:, 2].mean():.0f} | {a[:, 0].mean():.4f} | "
               f"**{a[:, 1].mean():.4f}** |")
-    sym = (asym_materials(tilted=False, fresh=True) if fresh
+    sym = (asym_materials(tilted=False, specs=ASYM_FRESH) if fresh
            else bu.aniso_materials() + asym_materials(tilted=False))
     print(f"\nsymmetric specimens ({len(sym)}), auto arc R = 8 against today's half turn "
           f"r = 8 (80 readings), {seeds} noise seeds each (mean over seeds):")
@@ -262,6 +300,89 @@ def auto_rows(plain: Basis, asym: Basis, d_half: tuple[np.ndarray, np.ndarray],
           f"{alarms} of {total} |")
 
 
+def tilt_scan(plain: Basis, asym: Basis, m: bu.Material, cells: np.ndarray, ph: np.ndarray,
+              rotations: int, seed: int) -> dict[str, Any]:
+    """The auto-arc path (:func:`auto_scan`'s readings) and, on the same readings, the tilt fit
+    (:func:`gonio.brdf.reconstruction.tilt.fit_tilt`) with the default basis."""
+    from gonio.plans.arc import arc_test, fill_angles, first_round_angles
+
+    first = first_round_angles(0.0, rotations)
+    vals = bu.read(m, cells, ph, np.deg2rad(first), seed)
+    test = arc_test(first, vals, 0.01)
+    angles = list(first)
+    if not test["symmetric"]:
+        fill = fill_angles(0.0, rotations)
+        vals = np.concatenate([vals, bu.read(m, cells, ph, np.deg2rad(fill), seed + 1)], axis=1)
+        angles += fill
+    alpha = np.deg2rad(angles)
+    today = reconstruct(plain if test["symmetric"] else asym, cells, ph, alpha, vals)
+    t0 = time.process_time()
+    tf = fit_tilt(plain, cells, ph, alpha, vals)
+    cpu = time.process_time() - t0
+    return {"symmetric": bool(test["symmetric"]), "readings": len(cells) * len(angles),
+            "today": metrics.log_rmse(today.table, m.truth), "today_cv": today.cv_log_error,
+            "tilt": metrics.log_rmse(tf.table, m.truth), "tilt_cv": tf.holdout_error,
+            "plain_cv": tf.plain_holdout_error, "t": np.rad2deg(tf.tilt),
+            "b": np.rad2deg(tf.azimuth) % 360.0, "cpu": cpu}
+
+
+def full_turn_tilt(plain: Basis, m: bu.Material, cells: np.ndarray, ph: np.ndarray, r: int,
+                   seed: int) -> dict[str, Any]:
+    """A symmetric specimen read over a full turn: the plain joint fit against the tilt fit on
+    the same readings (the tilt fit must find no lean and cost nothing)."""
+    alpha = uniform_stage_angles(r)
+    vals = bu.read(m, cells, ph, alpha, seed)
+    plain_fit = reconstruct(plain, cells, ph, alpha, vals)
+    tf = fit_tilt(plain, cells, ph, alpha, vals)
+    return {"plain": metrics.log_rmse(plain_fit.table, m.truth),
+            "tilt": metrics.log_rmse(tf.table, m.truth), "t": np.rad2deg(tf.tilt),
+            "b": np.rad2deg(tf.azimuth) % 360.0, "tilt_cv": tf.holdout_error,
+            "plain_cv": plain_fit.cv_log_error}
+
+
+def tilt_rows(plain: Basis, asym: Basis, d_half: tuple[np.ndarray, np.ndarray],
+              which: str, rotations: int) -> None:
+    """The tilt fit's study (``--tilt``): ``which`` is ``choice`` (the 8 specimens above, where
+    any setting was chosen), ``fresh`` (:data:`FRESH`, tested once) or ``symmetric``
+    (bench_unseen's six anisotropic specimens, untilted, read over a full turn)."""
+    if which == "symmetric":
+        print(f"\nsymmetric specimens, the default design's 10 pairs, {2 * rotations} angles over "
+              "a full turn: plain joint fit against the tilt fit on the same readings")
+        print("\n| specimen | plain | tilt fit | fitted tilt (deg) / azimuth | held-out: plain / "
+              "tilt |")
+        print("|---|---|---|---|---|")
+        rows = []
+        for j, m in enumerate(bu.aniso_materials()):
+            r = full_turn_tilt(plain, m, *d_half, 2 * rotations, 9000 + 37 * j)
+            rows.append((r["plain"], r["tilt"], r["t"]))
+            print(f"| {m.name} | {r['plain']:.4f} | {r['tilt']:.4f} | {r['t']:.1f} / "
+                  f"{r['b']:.0f} | {r['plain_cv']:.4f} / {r['tilt_cv']:.4f} |", flush=True)
+        a = np.array(rows)
+        print(f"| **mean** | {a[:, 0].mean():.4f} | {a[:, 1].mean():.4f} | "
+              f"{int((a[:, 2] == 0).sum())} of {len(a)} at 0 | |")
+        return
+    specs = ASYM if which == "choice" else FRESH
+    mats = asym_materials(specs=specs)
+    print(f"\n{which} set, auto arc R = {rotations}, the default design's 10 pairs: today's "
+          "path (the basis the verdict chooses) against the tilt fit on the same readings")
+    print("\n| specimen | readings | today | tilt fit | rule | fitted t / b (deg) | truth t / b "
+          "| held-out: today / tilt | tilt CPU s |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    rows = []
+    for i, (m, spec) in enumerate(zip(mats, specs, strict=True)):
+        r = tilt_scan(plain, asym, m, *d_half, rotations, 500 + i)
+        # The rule (chosen on the choice set): the fit with the lower held-out reading error.
+        rule = r["tilt"] if r["tilt_cv"] < r["today_cv"] else r["today"]
+        truth_b = (spec[2] + spec[4]) % 360.0  # the lean's azimuth in the specimen frame
+        rows.append((r["today"], r["tilt"], rule, r["readings"], r["cpu"]))
+        print(f"| {m.name} | {r['readings']} | {r['today']:.4f} | {r['tilt']:.4f} | {rule:.4f} | "
+              f"{r['t']:.1f} / {r['b']:.0f} | {spec[1]:.0f} / {truth_b:.0f} | "
+              f"{r['today_cv']:.4f} / {r['tilt_cv']:.4f} | {r['cpu']:.1f} |", flush=True)
+    a = np.array(rows)
+    print(f"| **mean** | {a[:, 3].mean():.0f} | {a[:, 0].mean():.4f} | **{a[:, 1].mean():.4f}** "
+          f"| {a[:, 2].mean():.4f} | | | | {a[:, 4].mean():.1f} |")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=5,
@@ -279,6 +400,10 @@ def main(argv: list[str] | None = None) -> int:
                     help="the auto arc's first-round layout (with --auto; module LAYOUTS)")
     ap.add_argument("--set", choices=("choice", "fresh"), default="choice",
                     help="with --auto: the specimens (fresh: ASYM_FRESH, run once)")
+    ap.add_argument("--tilt", choices=("choice", "fresh", "symmetric"), default=None,
+                    help="only the tilt fit's study on that set (module notes)")
+    ap.add_argument("--rotations", type=int, default=6,
+                    help="R of the auto arc for --tilt (6: 120 readings when asymmetric)")
     args = ap.parse_args(argv)
     if args.tilted_facets is not None:
         from gonio.brdf.materials import library
@@ -291,6 +416,10 @@ def main(argv: list[str] | None = None) -> int:
     plain = default_basis()
     asym = default_basis(asymmetric=True)
     d_half, d_full = design(plain, 180.0), design(plain, 360.0)
+    if args.tilt is not None:
+        tilt_rows(plain, asym, d_half, args.tilt, args.rotations)
+        print(f"total {time.perf_counter() - t0:.0f} s")
+        return 0
     if args.auto:
         auto_rows(plain, asym, d_half, args.seeds, args.layout, args.set == "fresh")
         print(f"total {time.perf_counter() - t0:.0f} s")
