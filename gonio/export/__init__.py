@@ -205,9 +205,12 @@ def _write(fits: Fits, fmt: str, out: str | os.PathLike[str], prov: dict[str, An
     if fmt == "factored":
         return fits.factored.save(out, prov)
     if fmt == "mtlx":
+        from gonio.export.judge import fit_f82
         from gonio.export.mtlx import write_mtlx
 
-        return write_mtlx(fits.principled, out, name, prov)
+        # The open_pbr_surface beside the standard_surface: a metal's F82 tint, fitted here
+        # (seconds; glTF and standard_surface have no such term, docs/export.md)
+        return write_mtlx(fits.principled, out, name, prov, fit_f82(fits.table, fits.principled))
     if fmt == "gltf":
         from gonio.export.gltf import write_gltf
 
