@@ -4,7 +4,7 @@
 format     suffix     what
 ========== ========== ===================================================================
 factored   ``.npz``   the factored fit of paper 000 (:mod:`gonio.brdf.models.factored`)
-mtlx       ``.mtlx``  MaterialX ``standard_surface`` from the principled fit (:mod:`.mtlx`)
+mtlx       ``.mtlx``  MaterialX ``standard_surface`` and ``open_pbr_surface`` (:mod:`.mtlx`)
 gltf       ``.gltf``  glTF 2.0 material with ``KHR_materials_anisotropy`` (:mod:`.gltf`)
 merl       ``.binary`` MERL layout, azimuthally averaged, with a ``.json`` sidecar (:mod:`.merl`)
 table      ``.npz``   gonio's own BRDF table (:class:`gonio.brdf.tables.table.BRDFTable`)

@@ -385,7 +385,8 @@ def fit_f82(table: BRDFTable, fit: Principled) -> Principled:
     t0 = time.perf_counter()
     cand = Principled(fit.base_color, 1.0, fit.specular, fit.alpha_t, fit.alpha_b,
                       fit.direction_deg, fit.channels, {}, 1.0, fit_f82_tint(table, fit))
-    table_metrics = dict(fit_metrics(bm.tabulate(cand.model(), np.float64), table))
+    table_metrics: dict[str, Any] = dict(fit_metrics(bm.tabulate(cand.model(), np.float64),
+                                                     table))
     before_log = fit.metrics.get("log_rmse")
     if before_log is None:
         before_log = fit_metrics(bm.tabulate(fit.model(), np.float64), table)["log_rmse"]
