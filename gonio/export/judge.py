@@ -41,8 +41,9 @@ its table error does not show it. So:
   ``standard_surface`` keep the fit above). The tint is fitted on the table
   (:func:`gonio.brdf.models.principled.fit_f82_tint`), the other parameters held: the
   judge's views cannot see it (their light-view angles are at most 55 degrees, where the
-  correction is below 1e-5). It is kept when it lowers the table's ``log_rmse`` and the
-  rendered difference is not above the Schlick fit's by more than :data:`F82_RENDER_SLACK`.
+  correction is at most 3.3e-5 of the dip at 82 degrees). It is kept when it lowers the
+  table's ``log_rmse`` and the rendered difference is not above the Schlick fit's by more
+  than :data:`F82_RENDER_SLACK`.
 * An export warns (:func:`gonio.export.fit_warnings`) when the factored model's rendered
   difference is less than the principled one's over :data:`TWO_LOBE_RATIO`: a diffuse colour
   under a coloured highlight of another hue, or two highlights (two lobes), is out of reach of
@@ -96,8 +97,9 @@ SPECULAR_MIN, SPECULAR_MAX = 0.25, 0.9 / 0.08
 #: ``specular``; the reflectance at grazing angles), whose range in both formats is [0, 1].
 WEIGHT_MIN = 0.0
 #: HDR-FLIP (or relative image error) by which the F82-tinted fit may render farther from the
-#: table than the Schlick fit in the judge's views (where the tint changes nothing above 1e-5;
-#: what is left is the float noise of the renderings).
+#: table than the Schlick fit in the judge's views (where the tint changes the Fresnel factor
+#: by at most 3.3e-5 of its dip; what is left is the lookup's blending of grid cells, which
+#: reaches a few wider cells: 0.001 on a tinted metal's own table, test_fit_f82.py).
 F82_RENDER_SLACK = 1e-3
 _EPS = 1e-3
 
