@@ -55,10 +55,10 @@ material stays the ``standard_surface`` one, so readers of older gonio documents
 :func:`read_standard_surface`) read what they read before. OpenPBR's roughness mapping is
 ``alpha_t = r^2 sqrt(2 / (1 + (1 - a)^2))``, ``alpha_b = (1 - a) alpha_t``, and it has no
 rotation input: the anisotropy follows ``geometry_tangent``. gonio writes that input as
-``normalize(cos(d) T + sin(d) B)`` of the ``tangent`` and ``bitangent`` geometric nodes in
-world space (:func:`tangent_coefficients`): the direction ``d`` counter-clockwise from the
-mesh's tangent towards its bitangent, which with a right-handed frame (``B = N x T``, glTF's
-``w = 1``) is counter-clockwise seen from the normal's tip, as gonio's direction is. No
+``normalize(cos(d) T + sin(d) (N x T))`` of the ``tangent`` and ``normal`` geometric nodes
+in world space and a ``crossproduct`` (:func:`tangent_coefficients`): the direction ``d``
+counter-clockwise seen from the normal's tip, as gonio's direction is, whatever the mesh's
+bitangent sign (``N x T`` is glTF's bitangent with ``w = 1``). No
 rotation sense of a library node is involved.
 
 The document is validated against MaterialX's standard library before it is written; the
@@ -165,7 +165,7 @@ def read_standard_surface(text: str) -> dict[str, Any]:
 
 
 def tangent_coefficients(direction_deg: float) -> tuple[float, float]:
-    """``(cos d, sin d)``: the weights of the mesh's tangent and bitangent in the
+    """``(cos d, sin d)``: the weights of the tangent ``T`` and of ``N x T`` in the
     ``geometry_tangent`` of the ``open_pbr_surface`` (module docstring)."""
     d = math.radians(direction_deg)
     return math.cos(d), math.sin(d)
@@ -240,15 +240,15 @@ def _upstream(element: Any, name: str) -> Any:
     inp = element if element.getCategory() == "input" else element.getInput(name)
     node = inp.getConnectedNode() if inp is not None else None
     if node is None:
-        raise MtlxError("geometry_tangent is not normalize(cos(d) tangent + sin(d) "
-                        "bitangent) as gonio writes it")
+        raise MtlxError("geometry_tangent is not normalize(cos(d) tangent + sin(d) normal x "
+                        "tangent) as gonio writes it")
     return node
 
 
 def read_open_pbr_surface(text: str) -> tuple[dict[str, Any], float]:
     """The input values of the first ``open_pbr_surface`` node of a MaterialX document and
-    its anisotropy direction in degrees, counter-clockwise from the mesh's tangent towards its
-    bitangent, from a ``geometry_tangent`` written as gonio writes it (module docstring).
+    its anisotropy direction in degrees, counter-clockwise from the mesh's tangent seen from
+    the normal's tip, from a ``geometry_tangent`` written as gonio writes it (module docstring).
 
     Raises
     ------
@@ -263,21 +263,26 @@ def read_open_pbr_surface(text: str) -> tuple[dict[str, Any], float]:
     if not nodes:
         raise MtlxError("the document holds no open_pbr_surface node")
     out: dict[str, Any] = {}
-    weights = {"tangent": 0.0, "bitangent": 0.0}
+    weights = {"tangent": 0.0, "n_cross_t": 0.0}
     for inp in nodes[0].getInputs():
         if inp.getName() == "geometry_tangent":
             add = _upstream(_upstream(inp, "geometry_tangent"), "in")
             for term in ("in1", "in2"):
                 mul = _upstream(add, term)
-                geom = _upstream(mul, "in1")
-                if geom.getCategory() not in weights or mul.getInputValue("in2") is None:
-                    raise MtlxError("geometry_tangent is not a sum of the tangent and the "
-                                    "bitangent as gonio writes it")
-                weights[geom.getCategory()] = float(mul.getInputValue("in2"))
+                vec = _upstream(mul, "in1")
+                kind = vec.getCategory()
+                if kind == "crossproduct" and (
+                        _upstream(vec, "in1").getCategory() == "normal"
+                        and _upstream(vec, "in2").getCategory() == "tangent"):
+                    kind = "n_cross_t"
+                if kind not in weights or mul.getInputValue("in2") is None:
+                    raise MtlxError("geometry_tangent is not a sum of the tangent and normal "
+                                    "x tangent as gonio writes it")
+                weights[kind] = float(mul.getInputValue("in2"))
             continue
         v = inp.getValue()
         out[inp.getName()] = tuple(v.asTuple()) if hasattr(v, "asTuple") else v
-    direction = math.degrees(math.atan2(weights["bitangent"], weights["tangent"])) % 180.0
+    direction = math.degrees(math.atan2(weights["n_cross_t"], weights["tangent"])) % 180.0
     return out, direction
 
 
@@ -317,13 +322,18 @@ def _add_open_pbr(doc: Any, p: Principled, base: str) -> Any:
     shader = doc.addNode("open_pbr_surface", f"SR_{base}_openpbr", "surfaceshader")
     for key, value in open_pbr_inputs(p).items():
         shader.setInputValue(key, MaterialX.Color3(*value) if isinstance(value, tuple) else value)
+    tangent = doc.addNode("tangent", f"tangent_{base}_openpbr", "vector3")
+    tangent.setInputValue("space", "world")
+    normal = doc.addNode("normal", f"normal_{base}_openpbr", "vector3")
+    normal.setInputValue("space", "world")
+    across = doc.addNode("crossproduct", f"n_cross_t_{base}_openpbr", "vector3")
+    across.setConnectedNode("in1", normal)
+    across.setConnectedNode("in2", tangent)
     terms = []
-    for geom, w in zip(("tangent", "bitangent"), tangent_coefficients(p.direction_deg),
-                       strict=True):
-        g = doc.addNode(geom, f"{geom}_{base}_openpbr", "vector3")
-        g.setInputValue("space", "world")
-        mul = doc.addNode("multiply", f"{geom}_weighted_{base}_openpbr", "vector3")
-        mul.setConnectedNode("in1", g)
+    for what, vec, w in zip(("tangent", "n_cross_t"), (tangent, across),
+                            tangent_coefficients(p.direction_deg), strict=True):
+        mul = doc.addNode("multiply", f"{what}_weighted_{base}_openpbr", "vector3")
+        mul.setConnectedNode("in1", vec)
         mul.setInputValue("in2", float(w))
         terms.append(mul)
     add = doc.addNode("add", f"tangent_sum_{base}_openpbr", "vector3")

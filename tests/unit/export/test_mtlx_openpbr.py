@@ -6,9 +6,10 @@ MaterialX's node definitions say, written here independently of the exporter:
 * roughness (OpenPBR "Specular", MaterialX ``open_pbr_anisotropy``): ``alpha_t = r^2
   sqrt(2 / (1 + (1 - a)^2))``, ``alpha_b = (1 - a) alpha_t``;
 * the anisotropy follows ``geometry_tangent`` (no rotation input in MaterialX 1.39): the
-  document's node graph is evaluated node by node (``tangent`` = T, ``bitangent`` = B,
-  ``multiply``, ``add``, ``normalize`` by the standard library's definitions) on a frame with
-  T = x, N = z and B = N x T = y;
+  document's node graph is evaluated node by node (``tangent`` = T, ``normal`` = N,
+  ``crossproduct``, ``multiply``, ``add``, ``normalize`` by the standard library's
+  definitions) on a frame with T = x and N = z; the direction is then measured
+  counter-clockwise from x seen from +z;
 * the metal's ``specular_color`` is the F82 tint (OpenPBR "Metal").
 """
 
@@ -28,7 +29,7 @@ from gonio.export import mtlx
 from tests.unit.export.highlight import angle_between, highlight
 
 PROV = {"job_id": 3, "specimen": "brushed Al"}
-FRAME = {"tangent": np.array([1.0, 0.0, 0.0]), "bitangent": np.array([0.0, 1.0, 0.0])}
+FRAME = {"tangent": np.array([1.0, 0.0, 0.0]), "normal": np.array([0.0, 0.0, 1.0])}
 
 
 def evaluate(node: Any) -> Any:
@@ -45,6 +46,8 @@ def evaluate(node: Any) -> Any:
 
     if cat == "multiply":
         return evaluate(node.getInput("in1").getConnectedNode()) * float(arg("in2"))
+    if cat == "crossproduct":
+        return np.cross(arg("in1"), arg("in2"))
     if cat == "add":
         return arg("in1") + arg("in2")
     if cat == "normalize":
