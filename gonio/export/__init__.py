@@ -205,12 +205,12 @@ def _write(fits: Fits, fmt: str, out: str | os.PathLike[str], prov: dict[str, An
     if fmt == "factored":
         return fits.factored.save(out, prov)
     if fmt == "mtlx":
-        from gonio.export.judge import fit_f82
         from gonio.export.mtlx import write_mtlx
 
-        # The open_pbr_surface beside the standard_surface: a metal's F82 tint, fitted here
-        # (seconds; glTF and standard_surface have no such term, docs/export.md)
-        return write_mtlx(fits.principled, out, name, prov, fit_f82(fits.table, fits.principled))
+        # The open_pbr_surface beside the standard_surface carries the same fit, with a white
+        # F82 tint: a tint fitted to a reconstruction (judge.fit_f82) moved every simulated
+        # metal scan's export farther from the truth (docs/export.md, "OpenPBR Surface")
+        return write_mtlx(fits.principled, out, name, prov)
     if fmt == "gltf":
         from gonio.export.gltf import write_gltf
 

@@ -48,9 +48,10 @@ incidence and give the base what the layer leaves; they part towards grazing ang
 :func:`principled_from_inputs` reads the inputs back.
 
 **OpenPBR Surface.** The document holds a second material, ``M_<name>_openpbr``, whose
-shader is MaterialX 1.39's ``open_pbr_surface`` (the OpenPBR 1.0 specification): the fit
-of :func:`gonio.export.judge.fit_f82`, which for a metal adds the F82 tint of the
-specification's metal Fresnel (``specular_color``; :func:`open_pbr_inputs`). The first
+shader is MaterialX 1.39's ``open_pbr_surface`` (the OpenPBR 1.0 specification) of the
+principled fit, whose ``specular_color`` is a metal's F82 tint (:func:`open_pbr_inputs`):
+white unless a tinted fit is given (:func:`gonio.export.judge.fit_f82`; the export gives
+none, docs/export.md says why). The first
 material stays the ``standard_surface`` one, so readers of older gonio documents (and
 :func:`read_standard_surface`) read what they read before. OpenPBR's roughness mapping is
 ``alpha_t = r^2 sqrt(2 / (1 + (1 - a)^2))``, ``alpha_b = (1 - a) alpha_t``, and it has no
