@@ -37,7 +37,11 @@ Columns: the reconstruction's rendered error against the truth ("rec"), the expo
 principled material against the reconstruction and against the truth, their ratio to "rec"
 (the issue's goal: at most 1.5), the table-space fit of before issue 26 ("log fit") against
 the truth, the factored model against both, roughness (principled fit of the truth table /
-export) and metallic.
+export) and metallic; last, the MaterialX export's ``open_pbr_surface`` (the same fit, with
+an F82 tint per channel for a metal, :func:`gonio.export.judge.fit_f82`) against the truth and
+its ratio to "rec", and the ``log_rmse`` against the truth's table of the principled fit and
+of the open_pbr_surface's (the tint shows where light and view are far apart, which the
+rendered views do not reach: :func:`gonio.export.judge.fit_f82`).
 """
 
 from __future__ import annotations
@@ -174,10 +178,12 @@ def rendered_header(title: str, metric: str) -> None:
     print(f"{title} ({metric})")
     print(f"{'material':22s} {'pred':>5s} | {'rec':>6s} | {'princ/rec':>9s} {'princ/true':>10s} "
           f"{'ratio':>5s} {'logfit':>6s} | {'fact/rec':>8s} {'fact/true':>9s} | "
-          f"{'rough true/exp':>14s} {'metal':>5s}")
+          f"{'rough true/exp':>14s} {'metal':>5s} | {'opbr/true':>9s} {'ratio':>5s} "
+          f"{'logRMSE/true princ opbr':>23s}")
 
 
-def rendered_row(name: str, truth: BRDFTable, rec: BRDFTable, pred: float) -> float:
+def rendered_row(name: str, truth: BRDFTable, rec: BRDFTable, pred: float,
+                 openpbr: list[float] | None = None) -> float:
     from gonio.brdf.models.principled import fit_principled
     from gonio.export import judge
 
@@ -192,9 +198,19 @@ def rendered_row(name: str, truth: BRDFTable, rec: BRDFTable, pred: float) -> fl
     f_true = judge.rendered_difference(truth, f, ref_truth).value
     rough_truth = fit_principled(truth).roughness
     ratio = p_true / e_rec if e_rec > 0 else float("nan")
+    o = judge.fit_f82(rec, p)  # the .mtlx's open_pbr_surface
+    o_true = (p_true if o is p else
+              judge.rendered_difference(truth, o.model(), ref_truth).value)
+    o_ratio = o_true / e_rec if e_rec > 0 else float("nan")
+    if openpbr is not None:
+        openpbr.append(o_ratio)
+    log_p = fit_metrics(bm.tabulate(p.model(), np.float64), truth)["log_rmse"]
+    log_o = (log_p if o is p else
+             fit_metrics(bm.tabulate(o.model(), np.float64), truth)["log_rmse"])
     print(f"{name[:22]:22s} {pred:5.3f} | {e_rec:6.3f} | {p_rec:9.3f} {p_true:10.3f} "
           f"{ratio:5.2f} {log_fit:6.3f} | {f_rec:8.3f} {f_true:9.3f} | "
-          f"{rough_truth:6.3f} / {p.roughness:5.3f} {p.metallic:5.2f}")
+          f"{rough_truth:6.3f} / {p.roughness:5.3f} {p.metallic:5.2f} | {o_true:9.3f} "
+          f"{o_ratio:5.2f} {log_p:11.4f} {log_o:11.4f}")
     return ratio
 
 
@@ -226,12 +242,15 @@ def rendered_section(preset: str, library_rows: bool, unseen_rows: bool) -> None
         bench_unseen.CACHE = Path(tempfile.gettempdir()) / "gonio-bench-export-unseen"
         rendered_header("simulated scans of the unseen anisotropic specimens (mitsuba)", metric)
         unseen: list[float] = []
+        opbr: list[float] = []
         for m in bench_unseen.aniso_materials():
             rec, pred = simulated_reconstruction(m.specimen, preset)
-            unseen.append(rendered_row(m.name, m.truth, rec, pred))
+            unseen.append(rendered_row(m.name, m.truth, rec, pred, opbr))
         print(f"unseen: principled/truth over rec/truth: median {np.median(unseen):.2f}, "
               f"max {max(unseen):.2f}; within 1.5x on {sum(r <= 1.5 for r in unseen)} of "
               f"{len(unseen)}")
+        print(f"unseen, open_pbr_surface: median {np.median(opbr):.2f}, max {max(opbr):.2f}; "
+              f"within 1.5x on {sum(r <= 1.5 for r in opbr)} of {len(opbr)}")
         ratios += unseen
         print()
 

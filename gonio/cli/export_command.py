@@ -12,7 +12,8 @@ from typing import Any
 from gonio.cli import UsageError
 
 _FORMATS_HELP = (
-    "factored: the factored fit of paper 000 (.npz); mtlx: MaterialX standard_surface; "
+    "factored: the factored fit of paper 000 (.npz); mtlx: MaterialX standard_surface and "
+    "open_pbr_surface; "
     "gltf: glTF 2.0 material with KHR_materials_anisotropy; merl: MERL .binary, azimuthally "
     "averaged, with a .json sidecar; table: gonio's BRDF table (.npz). Formats: docs/export.md"
 )

@@ -4,7 +4,7 @@
 format     suffix     what
 ========== ========== ===================================================================
 factored   ``.npz``   the factored fit of paper 000 (:mod:`gonio.brdf.models.factored`)
-mtlx       ``.mtlx``  MaterialX ``standard_surface`` from the principled fit (:mod:`.mtlx`)
+mtlx       ``.mtlx``  MaterialX ``standard_surface`` and ``open_pbr_surface`` (:mod:`.mtlx`)
 gltf       ``.gltf``  glTF 2.0 material with ``KHR_materials_anisotropy`` (:mod:`.gltf`)
 merl       ``.binary`` MERL layout, azimuthally averaged, with a ``.json`` sidecar (:mod:`.merl`)
 table      ``.npz``   gonio's own BRDF table (:class:`gonio.brdf.tables.table.BRDFTable`)
@@ -207,6 +207,9 @@ def _write(fits: Fits, fmt: str, out: str | os.PathLike[str], prov: dict[str, An
     if fmt == "mtlx":
         from gonio.export.mtlx import write_mtlx
 
+        # The open_pbr_surface beside the standard_surface carries the same fit, with a white
+        # F82 tint: a tint fitted to a reconstruction (judge.fit_f82) moved every simulated
+        # metal scan's export farther from the truth (docs/export.md, "OpenPBR Surface")
         return write_mtlx(fits.principled, out, name, prov)
     if fmt == "gltf":
         from gonio.export.gltf import write_gltf

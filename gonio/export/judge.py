@@ -36,6 +36,14 @@ its table error does not show it. So:
   drew the rendered fit onto the spike: a Beckmann copper, bench/bench_export.py). Last, the
   best pure candidate is refined once more on images blurred by :data:`BLUR_PX` pixels and
   replaces it when it renders clearly closer (:data:`BLUR_MARGIN`).
+* :func:`fit_f82` adds OpenPBR's F82 tint per channel to a metal's fit (the
+  ``open_pbr_surface`` of the MaterialX export; glTF has no such term, so the glTF and
+  ``standard_surface`` keep the fit above). The tint is fitted on the table
+  (:func:`gonio.brdf.models.principled.fit_f82_tint`), the other parameters held: the
+  judge's views cannot see it (their light-view angles are at most 55 degrees, where the
+  correction is at most 3.3e-5 of the dip at 82 degrees). It is kept when it lowers the
+  table's ``log_rmse`` and the rendered difference is not above the Schlick fit's by more
+  than :data:`F82_RENDER_SLACK`.
 * An export warns (:func:`gonio.export.fit_warnings`) when the factored model's rendered
   difference is less than the principled one's over :data:`TWO_LOBE_RATIO`: a diffuse colour
   under a coloured highlight of another hue, or two highlights (two lobes), is out of reach of
@@ -54,7 +62,7 @@ from numpy.typing import NDArray
 
 from gonio.brdf.models import analytic as bm
 from gonio.brdf.models.factored import fit_metrics
-from gonio.brdf.models.principled import ALPHA_MAX, ALPHA_MIN, Principled
+from gonio.brdf.models.principled import ALPHA_MAX, ALPHA_MIN, Principled, fit_f82_tint
 from gonio.brdf.pictures import appearance, render
 from gonio.brdf.tables.table import BRDFTable
 
@@ -88,6 +96,11 @@ SPECULAR_MIN, SPECULAR_MAX = 0.25, 0.9 / 0.08
 #: Lower bound of the dielectric's specular weight (glTF ``specularFactor``, MaterialX
 #: ``specular``; the reflectance at grazing angles), whose range in both formats is [0, 1].
 WEIGHT_MIN = 0.0
+#: HDR-FLIP (or relative image error) by which the F82-tinted fit may render farther from the
+#: table than the Schlick fit in the judge's views (where the tint changes the Fresnel factor
+#: by at most 3.3e-5 of its dip; what is left is the lookup's blending of grid cells, which
+#: reaches a few wider cells: 0.001 on a tinted metal's own table, test_fit_f82.py).
+F82_RENDER_SLACK = 1e-3
 _EPS = 1e-3
 
 
@@ -350,3 +363,44 @@ def fit_principled_rendered(table: BRDFTable, start: Principled, *, max_nfev: in
         table_fit_log_rmse=start.metrics.get("log_rmse"))
     return Principled(p.base_color, p.metallic, p.specular, p.alpha_t, p.alpha_b,
                       p.direction_deg, p.channels, quality, p.specular_weight), diff
+
+
+def fit_f82(table: BRDFTable, fit: Principled) -> Principled:
+    """``fit`` with OpenPBR's F82 tint per channel when it helps (module docstring).
+
+    Parameters
+    ----------
+    table : BRDFTable, 1/sr, three channels
+    fit : Principled
+        The rendered fit (:func:`fit_principled_rendered`). A dielectric or a blend, or a
+        table of other channels, is returned as it is: the tint bends a metal's curve.
+
+    Returns
+    -------
+    Principled
+        With ``f82_tint`` and its own ``metrics`` (as :func:`fit_principled_rendered`'s,
+        ``fit`` = "rendered+f82", ``schlick_rendered`` and ``schlick_log_rmse`` the fit's
+        without it), or ``fit`` itself when the tint does not help (module docstring).
+    """
+    if fit.metallic < 1.0 or table.n_channels != 3:
+        return fit
+    t0 = time.perf_counter()
+    cand = Principled(fit.base_color, 1.0, fit.specular, fit.alpha_t, fit.alpha_b,
+                      fit.direction_deg, fit.channels, {}, 1.0, fit_f82_tint(table, fit))
+    table_metrics: dict[str, Any] = dict(fit_metrics(bm.tabulate(cand.model(), np.float64),
+                                                     table))
+    before_log = fit.metrics.get("log_rmse")
+    if before_log is None:
+        before_log = fit_metrics(bm.tabulate(fit.model(), np.float64), table)["log_rmse"]
+    ref_judge = render_views(table)
+    diff = rendered_difference(table, cand.model(), ref_judge)
+    before = fit.metrics.get("rendered", {}).get("value")
+    if before is None:
+        before = rendered_difference(table, fit.model(), ref_judge).value
+    if table_metrics["log_rmse"] >= before_log or diff.value > before + F82_RENDER_SLACK:
+        return fit
+    table_metrics.update(seconds=round(time.perf_counter() - t0, 3), rendered=diff.as_dict(),
+                         fit="rendered+f82", schlick_rendered=before,
+                         schlick_log_rmse=before_log)
+    return Principled(cand.base_color, 1.0, cand.specular, cand.alpha_t, cand.alpha_b,
+                      cand.direction_deg, cand.channels, table_metrics, 1.0, cand.f82_tint)

@@ -1,4 +1,6 @@
-"""MaterialX export: the principled fit as an Autodesk Standard Surface material.
+"""MaterialX export: the principled fit as an Autodesk Standard Surface material, and beside
+it as an OpenPBR Surface material (``open_pbr_surface``, below) that can carry a metal's F82
+tint.
 
 Parameter mapping (MaterialX 1.39 ``standard_surface`` and its ``roughness_anisotropy`` node:
 ``alpha_x = r^2 / sqrt(1 - a)`` along the tangent, ``alpha_y = r^2 sqrt(1 - a)``, the tangent
@@ -44,6 +46,21 @@ Schlick's; gonio's own rendering follows glTF
 (:class:`gonio.brdf.models.principled.LayeredDiffuse`). Both reflect ``F0`` at normal
 incidence and give the base what the layer leaves; they part towards grazing angles.
 :func:`principled_from_inputs` reads the inputs back.
+
+**OpenPBR Surface.** The document holds a second material, ``M_<name>_openpbr``, whose
+shader is MaterialX 1.39's ``open_pbr_surface`` (the OpenPBR 1.0 specification) of the
+principled fit, whose ``specular_color`` is a metal's F82 tint (:func:`open_pbr_inputs`):
+white unless a tinted fit is given (:func:`gonio.export.judge.fit_f82`; the export gives
+none, docs/export.md says why). The first
+material stays the ``standard_surface`` one, so readers of older gonio documents (and
+:func:`read_standard_surface`) read what they read before. OpenPBR's roughness mapping is
+``alpha_t = r^2 sqrt(2 / (1 + (1 - a)^2))``, ``alpha_b = (1 - a) alpha_t``, and it has no
+rotation input: the anisotropy follows ``geometry_tangent``. gonio writes that input as
+``normalize(cos(d) T + sin(d) (N x T))`` of the ``tangent`` and ``normal`` geometric nodes
+in world space and a ``crossproduct`` (:func:`tangent_coefficients`): the direction ``d``
+counter-clockwise seen from the normal's tip, as gonio's direction is, whatever the mesh's
+bitangent sign (``N x T`` is glTF's bitangent with ``w = 1``). No
+rotation sense of a library node is involved.
 
 The document is validated against MaterialX's standard library before it is written; the
 provenance (:mod:`gonio.export.metadata`) is the material's ``doc`` string, as JSON, and the
@@ -148,6 +165,128 @@ def read_standard_surface(text: str) -> dict[str, Any]:
     return out
 
 
+def tangent_coefficients(direction_deg: float) -> tuple[float, float]:
+    """``(cos d, sin d)``: the weights of the tangent ``T`` and of ``N x T`` in the
+    ``geometry_tangent`` of the ``open_pbr_surface`` (module docstring)."""
+    d = math.radians(direction_deg)
+    return math.cos(d), math.sin(d)
+
+
+def open_pbr_inputs(p: Principled) -> dict[str, float | tuple[float, float, float]]:
+    """``open_pbr_surface`` input values (the tangent apart) for principled parameters.
+
+    ``base_color`` the base colour (``F0`` of a metal), ``base_metalness`` metallic,
+    ``specular_color`` the metal's F82 tint (white without one), ``specular_weight`` 1 and
+    ``specular_ior`` the index whose ``((n - 1)/(n + 1))^2`` is the dielectric's normal
+    incidence ``specular_weight 0.08 specular`` (OpenPBR's dielectric reflects 1 at grazing
+    angles, gonio's ``specular_weight``; 1.5 for a metal), roughness by OpenPBR's mapping
+    (module docstring), capped at 1.
+
+    Raises
+    ------
+    MtlxError
+        Not three channels, or an F82 tint on a blend (OpenPBR's ``specular_color`` tints
+        the dielectric as well).
+    """
+    if len(p.base_color) != 3:
+        raise MtlxError(f"a MaterialX colour has three channels; these parameters have "
+                        f"{len(p.base_color)} ({', '.join(p.channels)})")
+    if p.f82_tint is not None and 0.0 < p.metallic < 1.0:
+        raise MtlxError("an F82 tint on a blend of metal and dielectric: OpenPBR's "
+                        "specular_color would tint the dielectric too")
+    s = math.sqrt(min(p.dielectric_f0, 0.999))
+    ior = (1.0 + s) / (1.0 - s) if p.metallic < 1.0 else 1.5
+    a = min(1.0, max(0.0, 1.0 - p.alpha_b / p.alpha_t))
+    rough = math.sqrt(p.alpha_t / math.sqrt(2.0 / (1.0 + (1.0 - a) ** 2)))
+    tint = p.f82_tint if p.f82_tint is not None and p.metallic == 1.0 else (1.0, 1.0, 1.0)
+    r, g, b = p.base_color
+    return {
+        "base_weight": 1.0, "base_color": (r, g, b), "base_metalness": p.metallic,
+        "specular_weight": 1.0, "specular_color": (tint[0], tint[1], tint[2]),
+        "specular_ior": ior, "specular_roughness": min(1.0, rough),
+        "specular_roughness_anisotropy": a,
+    }
+
+
+def principled_from_open_pbr(inputs: Mapping[str, Any], direction_deg: float) -> Principled:
+    """Principled parameters from ``open_pbr_surface`` values written by
+    :func:`open_pbr_inputs` and the tangent's direction (:func:`read_open_pbr_surface`).
+
+    Raises
+    ------
+    MtlxError
+        Values outside the model's ranges.
+    """
+    from gonio.brdf.models.principled import PrincipledError
+
+    metallic = float(inputs["base_metalness"])
+    ior = float(inputs["specular_ior"])
+    level = ((ior - 1.0) / (ior + 1.0)) ** 2 if metallic < 1.0 else 0.04
+    r2 = float(inputs["specular_roughness"]) ** 2
+    a = float(inputs["specular_roughness_anisotropy"])
+    alpha_t = r2 * math.sqrt(2.0 / (1.0 + (1.0 - a) ** 2))
+    tint = tuple(float(c) for c in inputs["specular_color"])
+    try:
+        return Principled(tuple(float(c) for c in inputs["base_color"]), metallic, level / 0.08,
+                          alpha_t, (1.0 - a) * alpha_t, direction_deg,
+                          specular_weight=float(inputs["specular_weight"]),
+                          f82_tint=tint if metallic > 0.0 else None)
+    except PrincipledError as exc:
+        raise MtlxError(f"not a gonio principled material: {exc}") from None
+
+
+def _upstream(element: Any, name: str) -> Any:
+    """The node connected to input ``name`` of a node (or the input ``element`` itself when
+    it is one), else :class:`MtlxError`."""
+    inp = element if element.getCategory() == "input" else element.getInput(name)
+    node = inp.getConnectedNode() if inp is not None else None
+    if node is None:
+        raise MtlxError("geometry_tangent is not normalize(cos(d) tangent + sin(d) normal x "
+                        "tangent) as gonio writes it")
+    return node
+
+
+def read_open_pbr_surface(text: str) -> tuple[dict[str, Any], float]:
+    """The input values of the first ``open_pbr_surface`` node of a MaterialX document and
+    its anisotropy direction in degrees, counter-clockwise from the mesh's tangent seen from
+    the normal's tip, from a ``geometry_tangent`` written as gonio writes it (module docstring).
+
+    Raises
+    ------
+    MtlxError
+        No such node, or a tangent input of another form.
+    """
+    import MaterialX
+
+    doc = MaterialX.createDocument()
+    MaterialX.readFromXmlString(doc, text)
+    nodes = doc.getNodes("open_pbr_surface")
+    if not nodes:
+        raise MtlxError("the document holds no open_pbr_surface node")
+    out: dict[str, Any] = {}
+    weights = {"tangent": 0.0, "n_cross_t": 0.0}
+    for inp in nodes[0].getInputs():
+        if inp.getName() == "geometry_tangent":
+            add = _upstream(_upstream(inp, "geometry_tangent"), "in")
+            for term in ("in1", "in2"):
+                mul = _upstream(add, term)
+                vec = _upstream(mul, "in1")
+                kind = vec.getCategory()
+                if kind == "crossproduct" and (
+                        _upstream(vec, "in1").getCategory() == "normal"
+                        and _upstream(vec, "in2").getCategory() == "tangent"):
+                    kind = "n_cross_t"
+                if kind not in weights or mul.getInputValue("in2") is None:
+                    raise MtlxError("geometry_tangent is not a sum of the tangent and normal "
+                                    "x tangent as gonio writes it")
+                weights[kind] = float(mul.getInputValue("in2"))
+            continue
+        v = inp.getValue()
+        out[inp.getName()] = tuple(v.asTuple()) if hasattr(v, "asTuple") else v
+    direction = math.degrees(math.atan2(weights["n_cross_t"], weights["tangent"])) % 180.0
+    return out, direction
+
+
 def _library() -> Any:
     import MaterialX
 
@@ -166,8 +305,51 @@ def _element_name(text: str) -> str:
     return name if name[0].isalpha() else f"m_{name}"
 
 
-def mtlx_document(p: Principled, name: str, provenance: Mapping[str, Any]) -> Any:
-    """A validated ``MaterialX.Document`` with one ``standard_surface`` material.
+def _label(material: Any, provenance: Mapping[str, Any]) -> None:
+    """The provenance on a material node: its doc string and the ``gonio_*`` attributes."""
+    material.setDocString(json.dumps(dict(provenance), default=str, sort_keys=True))
+    for attr, key in ATTRIBUTES.items():
+        if provenance.get(key) is not None:
+            material.setAttribute(attr, str(provenance[key]))
+    err = provenance.get("reconstruction_error")
+    if isinstance(err, Mapping) and err.get("predicted_log_rmse") is not None:
+        material.setAttribute("gonio_predicted_log_rmse", f"{err['predicted_log_rmse']:.6g}")
+
+
+def _add_open_pbr(doc: Any, p: Principled, base: str) -> Any:
+    """The ``open_pbr_surface`` shader of ``p`` and its tangent nodes (module docstring)."""
+    import MaterialX
+
+    shader = doc.addNode("open_pbr_surface", f"SR_{base}_openpbr", "surfaceshader")
+    for key, value in open_pbr_inputs(p).items():
+        shader.setInputValue(key, MaterialX.Color3(*value) if isinstance(value, tuple) else value)
+    tangent = doc.addNode("tangent", f"tangent_{base}_openpbr", "vector3")
+    tangent.setInputValue("space", "world")
+    normal = doc.addNode("normal", f"normal_{base}_openpbr", "vector3")
+    normal.setInputValue("space", "world")
+    across = doc.addNode("crossproduct", f"n_cross_t_{base}_openpbr", "vector3")
+    across.setConnectedNode("in1", normal)
+    across.setConnectedNode("in2", tangent)
+    terms = []
+    for what, vec, w in zip(("tangent", "n_cross_t"), (tangent, across),
+                            tangent_coefficients(p.direction_deg), strict=True):
+        mul = doc.addNode("multiply", f"{what}_weighted_{base}_openpbr", "vector3")
+        mul.setConnectedNode("in1", vec)
+        mul.setInputValue("in2", float(w))
+        terms.append(mul)
+    add = doc.addNode("add", f"tangent_sum_{base}_openpbr", "vector3")
+    add.setConnectedNode("in1", terms[0])
+    add.setConnectedNode("in2", terms[1])
+    norm = doc.addNode("normalize", f"tangent_dir_{base}_openpbr", "vector3")
+    norm.setConnectedNode("in", add)
+    shader.setConnectedNode("geometry_tangent", norm)
+    return shader
+
+
+def mtlx_document(p: Principled, name: str, provenance: Mapping[str, Any],
+                  openpbr: Principled | None = None) -> Any:
+    """A validated ``MaterialX.Document``: a ``standard_surface`` material of ``p`` and an
+    ``open_pbr_surface`` one of ``openpbr`` (default ``p``; module docstring).
 
     Raises
     ------
@@ -183,13 +365,14 @@ def mtlx_document(p: Principled, name: str, provenance: Mapping[str, Any]) -> An
     for key, value in standard_surface_inputs(p).items():
         shader.setInputValue(key, MaterialX.Color3(*value) if isinstance(value, tuple) else value)
     material = doc.addMaterialNode(f"M_{base}", shader)
-    material.setDocString(json.dumps(dict(provenance), default=str, sort_keys=True))
-    for attr, key in ATTRIBUTES.items():
-        if provenance.get(key) is not None:
-            material.setAttribute(attr, str(provenance[key]))
-    err = provenance.get("reconstruction_error")
-    if isinstance(err, Mapping) and err.get("predicted_log_rmse") is not None:
-        material.setAttribute("gonio_predicted_log_rmse", f"{err['predicted_log_rmse']:.6g}")
+    _label(material, provenance)
+    opbr = openpbr if openpbr is not None else p
+    opbr_material = doc.addMaterialNode(f"M_{base}_openpbr", _add_open_pbr(doc, opbr, base))
+    _label(opbr_material, provenance)
+    opbr_rendered = opbr.metrics.get("rendered")
+    if isinstance(opbr_rendered, Mapping) and opbr_rendered.get("value") is not None:
+        opbr_material.setAttribute("gonio_rendered_difference",
+                                   f"{opbr_rendered['metric']} {opbr_rendered['value']:.4g}")
     rendered = (provenance.get("fits") or {}).get("principled", {}).get("rendered")
     if isinstance(rendered, Mapping) and rendered.get("value") is not None:
         material.setAttribute("gonio_rendered_difference",
@@ -201,10 +384,12 @@ def mtlx_document(p: Principled, name: str, provenance: Mapping[str, Any]) -> An
 
 
 def write_mtlx(
-    p: Principled, path: str | os.PathLike[str], name: str, provenance: Mapping[str, Any]
+    p: Principled, path: str | os.PathLike[str], name: str, provenance: Mapping[str, Any],
+    openpbr: Principled | None = None,
 ) -> Path:
-    """Write a validated ``.mtlx`` document (atomically); returns the path."""
+    """Write a validated ``.mtlx`` document (atomically); returns the path. ``openpbr`` is
+    the ``open_pbr_surface``'s fit (default ``p``; :func:`gonio.export.judge.fit_f82`)."""
     import MaterialX
 
-    doc = mtlx_document(p, name, provenance)
+    doc = mtlx_document(p, name, provenance, openpbr)
     return write_atomically(path, MaterialX.writeToXmlString(doc))

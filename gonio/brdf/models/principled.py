@@ -17,6 +17,12 @@ and direction. They describe, as in :func:`gonio.brdf.models.analytic.principled
   ``KHR_materials_specular`` the weight is ``specularFactor`` and ``specular`` is
   ``specularColorFactor / 2`` (a diffuse colour under a bright highlight, a coated or dusty
   metal, is a high level, possibly with a weight below 1; issue 26);
+* optionally (``f82_tint``, OpenPBR's metal, issue 26) the metal's Fresnel factor is the
+  F82-tint one of the OpenPBR specification (after Hoffman 2019 and Kutz et al. 2021),
+  :class:`F82TintFresnel`: Schlick's curve less ``b mu (1 - mu)^6``, with ``b`` chosen so
+  that at ``mu_bar = 1/7`` (about 82 degrees) the reflectance is ``tint x Schlick(mu_bar)``;
+  a tint below 1 makes the reflectance dip before grazing, as aluminium's does. glTF has
+  no such term: only the MaterialX ``open_pbr_surface`` export carries it;
 * roughnesses ``alpha_t`` along the tangent and ``alpha_b`` across it, with the tangent at
   azimuth ``direction`` in the specimen frame (from the holder mark, counter-clockwise).
 
@@ -57,6 +63,10 @@ ALPHA_MIN, ALPHA_MAX = 1e-3, 2.0
 SPECULAR_LEVEL_MAX = 12.5
 
 
+#: OpenPBR's F82-tint reference cosine ``mu_bar = 1/7`` (an angle of about 81.8 degrees).
+MU_BAR = 1.0 / 7.0
+
+
 class PrincipledError(ValueError):
     """Principled parameters out of range, or a table that cannot be fitted."""
 
@@ -65,6 +75,53 @@ def schlick(f0: float | FloatArray, cos_d: FloatArray) -> FloatArray:
     """Schlick's Fresnel ``F0 + (1 - F0)(1 - cos)^5`` of (N,) cosines (clipped to [0, 1])."""
     c = np.clip(cos_d, 0.0, 1.0)
     return np.asarray(f0 + (1.0 - np.asarray(f0)) * (1.0 - c) ** 5, dtype=float)
+
+
+def f82_tint_fresnel(f0: Any, tint: Any, cos_d: FloatArray) -> FloatArray:
+    """OpenPBR's F82-tint metal Fresnel of (N,) cosines -> (N, C), clipped to [0, 1].
+
+    ``F(mu) = S(mu) - b mu (1 - mu)^6`` with Schlick's ``S(mu) = F0 + (1 - F0)(1 - mu)^5``
+    and ``b = S(mu_bar)(1 - tint) / (mu_bar (1 - mu_bar)^6)``, ``mu_bar = 1/7``, so that
+    ``F(mu_bar) = tint S(mu_bar)`` (OpenPBR specification, "Metal"). With ``tint = 1`` it
+    is Schlick's. The correction can take the curve below 0 between ``mu_bar`` and 1 for a
+    dark ``F0`` and a small tint; reflectance cannot be negative, so it is clipped.
+
+    Parameters
+    ----------
+    f0, tint : (C,) floats in [0, 1]
+    cos_d : (N,) cosines between the light and the microfacet normal
+    """
+    f0a = np.asarray(f0, dtype=float)[None, :]
+    ta = np.asarray(tint, dtype=float)[None, :]
+    c = np.clip(np.asarray(cos_d, dtype=float), 0.0, 1.0)[:, None]
+    s_bar = f0a + (1.0 - f0a) * (1.0 - MU_BAR) ** 5
+    b = s_bar * (1.0 - ta) / (MU_BAR * (1.0 - MU_BAR) ** 6)
+    f = f0a + (1.0 - f0a) * (1.0 - c) ** 5 - b * c * (1.0 - c) ** 6
+    return np.asarray(np.clip(f, 0.0, 1.0), dtype=float)
+
+
+@dataclass(frozen=True)
+class F82TintFresnel(bm.SchlickFresnel):
+    """Schlick's Fresnel with OpenPBR's F82 tint (:func:`f82_tint_fresnel`), per channel.
+
+    A :class:`gonio.brdf.models.analytic.SchlickFresnel` (``f0``) with a ``tint``: the
+    analytic GGX takes it where it takes Schlick's.
+    """
+
+    tint: tuple[float, ...] = (1.0,)
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        tint = tuple(float(v) for v in np.atleast_1d(self.tint))
+        if any(not 0.0 <= v <= 1.0 for v in tint):
+            raise PrincipledError(f"F82 tint {tint} is outside [0, 1]")
+        object.__setattr__(self, "tint", tint)
+
+    def reflectance(self, cos_d: FloatArray, n_channels: int) -> FloatArray:
+        """(N,) cosine between light and microfacet normal -> (N, C) reflectance in [0, 1]."""
+        f0 = np.broadcast_to(np.asarray(self.f0, dtype=float), (n_channels,))
+        tint = np.broadcast_to(np.asarray(self.tint, dtype=float), (n_channels,))
+        return f82_tint_fresnel(f0, tint, cos_d)
 
 
 @dataclass(frozen=True)
@@ -120,6 +177,9 @@ class Principled:
     specular_weight : float in [0, 1]
         Weight of the dielectric's specular layer (its reflectance at grazing angles; module
         docstring); 1 is Burley's model.
+    f82_tint : (C,) floats in [0, 1] or None
+        The metal's OpenPBR F82 tint (module docstring); None (glTF's model) is Schlick's,
+        as is a tint of 1.
     """
 
     base_color: tuple[float, ...]
@@ -131,6 +191,7 @@ class Principled:
     channels: tuple[str, ...] = bm.RGB
     metrics: Mapping[str, Any] = field(default_factory=dict)
     specular_weight: float = 1.0
+    f82_tint: tuple[float, ...] | None = None
 
     def __post_init__(self) -> None:
         base = tuple(float(b) for b in self.base_color)
@@ -153,6 +214,12 @@ class Principled:
                 f"alpha_b = {self.alpha_b} > alpha_t = {self.alpha_t}: the tangent is the "
                 "rougher axis; swap them and turn the direction by 90 degrees"
             )
+        if self.f82_tint is not None:
+            tint = tuple(float(t) for t in self.f82_tint)
+            if len(tint) != len(self.channels) or any(not 0.0 <= t <= 1.0 for t in tint):
+                raise PrincipledError(
+                    f"f82_tint {tint} must be {len(self.channels)} values in [0, 1]")
+            object.__setattr__(self, "f82_tint", tint)
         object.__setattr__(self, "base_color", base)
         object.__setattr__(self, "direction_deg", float(self.direction_deg) % 180.0)
         object.__setattr__(self, "metrics", dict(self.metrics))
@@ -181,8 +248,10 @@ class Principled:
 
     def model(self, name: str = "principled") -> bm.LobeSum:
         """The analytic model these parameters describe."""
-        def lobe(f0: tuple[float, ...], what: str) -> bm.Rotated:
-            spec = bm.GGX(self.alpha_t, self.alpha_b, bm.SchlickFresnel(f0), "separable",
+        def lobe(f0: tuple[float, ...], what: str,
+                 tint: tuple[float, ...] | None = None) -> bm.Rotated:
+            fresnel = bm.SchlickFresnel(f0) if tint is None else F82TintFresnel(f0, tint)
+            spec = bm.GGX(self.alpha_t, self.alpha_b, fresnel, "separable",
                           channels=self.channels, name=f"{name}/{what}")
             return bm.Rotated(spec, math.radians(self.direction_deg))
 
@@ -192,7 +261,14 @@ class Principled:
                                  name=f"{name}/diffuse")
         lobes: list[Any] = [diffuse]
         weights: list[float] = [1.0]
-        if self.specular_weight == 1.0 or self.metallic == 1.0:
+        if self.f82_tint is not None and self.metallic > 0.0:
+            # The tint bends the metal's curve only: its lobe apart from the dielectric's
+            if self.metallic < 1.0:
+                lobes.append(lobe((level,) * len(self.channels), "dielectric"))
+                weights.append((1.0 - self.metallic) * self.specular_weight)
+            lobes.append(lobe(self.base_color, "metal", self.f82_tint))
+            weights.append(self.metallic)
+        elif self.specular_weight == 1.0 or self.metallic == 1.0:
             # Schlick's Fresnel is linear in F0: one lobe of F0 = mix(level, base, metallic)
             lobes.append(lobe(self.f0, "spec"))
             weights.append(1.0)
@@ -213,6 +289,7 @@ class Principled:
             "anisotropy": self.anisotropy, "direction_deg": self.direction_deg,
             "alpha_t": self.alpha_t, "alpha_b": self.alpha_b, "f0": list(self.f0),
             "channels": list(self.channels), "metrics": dict(self.metrics),
+            **({} if self.f82_tint is None else {"f82_tint": list(self.f82_tint)}),
         }
 
     @classmethod
@@ -224,6 +301,7 @@ class Principled:
                 float(d["alpha_t"]), float(d["alpha_b"]), float(d["direction_deg"]),
                 tuple(d.get("channels", bm.RGB)), d.get("metrics", {}),
                 float(d.get("specular_weight", 1.0)),  # 1 before issue 26's weight
+                None if d.get("f82_tint") is None else tuple(d["f82_tint"]),
             )
         except (KeyError, TypeError) as exc:
             raise PrincipledError(f"malformed principled parameters ({exc})") from None
@@ -366,3 +444,53 @@ def fit_principled(table: BRDFTable, *, n_cells: int = 12000, seed: int = 0) -> 
         params.base_color, params.metallic, params.specular, params.alpha_t, params.alpha_b,
         params.direction_deg, params.channels, quality,
     )
+
+
+def fit_f82_tint(table: BRDFTable, p: Principled, *, n_cells: int = 12000,
+                 seed: int = 0) -> tuple[float, ...]:
+    """The metal's F82 tint per channel that best fits ``table``, ``p``'s other parameters
+    held (``p`` a metal).
+
+    Fitted on the table, not on renderings: the tint changes the Fresnel factor only where
+    ``wi.h`` is well below 1, i.e. light and view far apart (at ``wi.h = 1/7`` they are 164
+    degrees apart), which no view of :mod:`gonio.export.judge` has (its lights are at most 55
+    degrees from the view, ``wi.h >= 0.89``, where the correction is at most 3.3e-5 of the
+    dip at 82 degrees: ``0.887 (1 - 0.887)^6 / (mu_bar (1 - mu_bar)^6)``). The residuals
+    are :func:`fit_principled`'s (cosine-weighted log error on a fixed random subset of
+    valid cells), bounds [0, 1], start 1 (Schlick's curve).
+
+    Returns
+    -------
+    (C,) floats in [0, 1]
+
+    Raises
+    ------
+    PrincipledError
+        ``p`` is not a metal.
+    """
+    from scipy.optimize import least_squares
+
+    if p.metallic != 1.0:
+        raise PrincipledError(f"an F82 tint is a metal's; metallic is {p.metallic}")
+    vals = np.asarray(table.values, dtype=float)
+    wi, wo, k, v, wv = _sample_cells(n_cells, seed)
+    y = vals[:, :, VALID_MASK][:, k, v].T  # (N, C)
+    ok = np.isfinite(y)
+    target = np.log1p(np.where(ok, y, 0.0) * wi[:, 2:3])
+    sw = np.sqrt(wv / wv.sum())[:, None] * ok
+    # The lobe without its Fresnel factor, evaluated once: the tint only scales it per cell
+    plain = Principled(p.base_color, 1.0, 0.5, p.alpha_t, p.alpha_b, p.direction_deg,
+                       p.channels).model().eval(wi, wo)
+    h = wi + wo
+    c = np.sum(wi * h, axis=1) / np.linalg.norm(h, axis=1)  # wi.h, the Fresnel's cosine
+    schlick_f = schlick(np.asarray(p.base_color)[None, :], c[:, None])
+    lobe = plain / np.maximum(schlick_f, 1e-12)
+
+    def resid(t: FloatArray) -> FloatArray:
+        pred = lobe * f82_tint_fresnel(p.base_color, t, c)
+        return np.asarray((sw * (np.log1p(pred * wi[:, 2:3]) - target)).ravel(), dtype=float)
+
+    nc = len(p.base_color)
+    r = least_squares(resid, np.full(nc, 1.0 - 1e-6), bounds=(np.zeros(nc), np.ones(nc)),
+                      x_scale="jac")
+    return tuple(float(t) for t in np.clip(r.x, 0.0, 1.0))

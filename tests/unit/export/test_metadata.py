@@ -115,11 +115,14 @@ def test_mtlx_carries_the_record(brushed: Path, tmp_path: Path) -> None:
 
     doc = MaterialX.createDocument()
     MaterialX.readFromXmlFile(doc, str(export_result(brushed, "mtlx", tmp_path / "x.mtlx")))
-    (material,) = [n for n in doc.getNodes() if n.getCategory() == "surfacematerial"]
-    _check(json.loads(material.getDocString()))
-    assert material.getAttribute("gonio_source") == "simulated"
-    assert float(material.getAttribute("gonio_predicted_log_rmse")) == pytest.approx(0.053)
-    assert material.getAttribute("gonio_colour_space") == COLOUR_STATEMENT
+    # the standard_surface material first, the open_pbr_surface one beside it: both carry it
+    materials = [n for n in doc.getNodes() if n.getCategory() == "surfacematerial"]
+    assert [m.getName().endswith("_openpbr") for m in materials] == [False, True]
+    for material in materials:
+        _check(json.loads(material.getDocString()))
+        assert material.getAttribute("gonio_source") == "simulated"
+        assert float(material.getAttribute("gonio_predicted_log_rmse")) == pytest.approx(0.053)
+        assert material.getAttribute("gonio_colour_space") == COLOUR_STATEMENT
 
 
 @pytest.mark.parametrize("fmt", ["factored", "table"])

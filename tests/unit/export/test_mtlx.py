@@ -53,7 +53,7 @@ def test_mtlx_validates_and_maps_parameters(tmp_path: Path) -> None:
                   np.array([0.0, 0.0, 1.0]))
     assert math.degrees(math.atan2(t[1], t[0])) % 180 == pytest.approx(30.0, abs=1e-3)
     assert value["metalness"] == 1.0
-    (material,) = [n for n in doc.getNodes() if n.getCategory() == "surfacematerial"]
+    material, _openpbr = [n for n in doc.getNodes() if n.getCategory() == "surfacematerial"]
     assert json.loads(material.getDocString())["job_id"] == 7
     assert material.getAttribute("gonio_specimen") == "felt"
 
