@@ -236,6 +236,22 @@ def test_one_opposite_fills_seven_angles_and_never_reads_an_angle_twice(
     assert nxt.angles_deg == pytest.approx([202.5, 225, 247.5, 292.5, 315, 337.5])
 
 
+def test_a_job_whose_pairs_closed_up_after_its_first_round_still_reads_every_opposite(
+        desc: RigDescription) -> None:
+    """Round 0 stored with the pairs spread (9 angles, one opposite); resumed on a rig whose
+    pairs now lie in one plane (check_plan lists two opposites, 180 and 270). The fill reads
+    every opposite round 0 did not (counted by hand: 202.5 ... 337.5, 270 among them), so the
+    full turn still holds the 16 uniform angles."""
+    first = list(_auto(_spread(desc), rotations=8).angles_deg)
+    assert len(first) == 9
+    checked = _auto(desc, rotations=8)  # the same plan, checked on the closed-up rig
+    assert len(checked.angles_deg) == 10
+    values = _readings(first, 0.1, n_pairs=3)
+    nxt = _next(rounds_for(checked), first, values, len(first), 0)
+    assert nxt.angles_deg == pytest.approx([202.5, 225, 247.5, 270, 292.5, 315, 337.5])
+    assert sorted(first + nxt.angles_deg) == pytest.approx([22.5 * j for j in range(16)])
+
+
 def test_adaptive_plans_refine_within_the_arc_chosen(desc: RigDescription) -> None:
     checked = _auto(desc, adaptive=True, rule="vf", initial_rotations=4, max_rounds=4)
     assert checked.plan.span_deg == 180.0  # auto keeps vf's first round over half a turn
