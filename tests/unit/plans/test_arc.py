@@ -182,6 +182,23 @@ def test_the_pairs_planes_choose_the_first_round(desc: RigDescription) -> None:
         [0, 22.5, 45, 67.5, 90, 112.5, 135, 157.5, 180])
 
 
+def test_an_auto_plan_whose_full_turn_the_travel_cannot_reach_is_refused_before_it_runs(
+        desc: RigDescription) -> None:
+    """Travel [-10, 200] deg: the spread rig's first round (0 ... 157.5, 180) fits, but the
+    fill round an asymmetric specimen reads (202.5 ... 337.5) does not; refused at the check,
+    naming the fix, not after the first round. The in-plane rig's first round (270) already
+    does not fit."""
+    limited = {"stage_min_deg": -10.0, "stage_max_deg": 200.0}
+    with pytest.raises(PlanError, match=r"arc 'auto' reads the full turn .* 202\.5.*"
+                                        r"arc 'fixed' with span_deg 180"):
+        _auto(_spread(desc).model_copy(update=limited), rotations=8)
+    with pytest.raises(PlanError, match=r"180, 270 deg cannot all be visited"):
+        _auto(desc.model_copy(update=limited), rotations=8)
+    # A fixed half turn on the same stage is fine.
+    assert check_plan(UniformPlan(rotations=8, exposure=EX),
+                      desc.model_copy(update=limited)).angles_deg[-1] == pytest.approx(157.5)
+
+
 def test_a_symmetric_uniform_plan_stops_after_its_first_round(desc: RigDescription) -> None:
     checked = _auto(desc, rotations=8)
     assert list(checked.angles_deg) == pytest.approx(first_round_angles(0.0, 8, 2))
