@@ -60,7 +60,8 @@ def register(subparsers: Any) -> None:
                         "that symmetry; the default with --rule vf)")
     p.add_argument("--arc", choices=["fixed", "auto"], default="fixed",
                    help="fixed (default): --span is the arc; auto: the first round reads the "
-                        "half-turn angles and two of their opposites, tests twofold symmetry "
+                        "half-turn angles and the first one's opposite (two opposites when "
+                        "the pairs lie in nearly one plane), tests twofold symmetry "
                         "and continues over half a turn if the specimen has it, else over a "
                         "full turn (docs/science.md 7.4)")
     p.add_argument("--arc-noise", type=positive_float, default=None,

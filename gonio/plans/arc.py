@@ -58,10 +58,12 @@ SPREAD_DEG = 60.0
 """How far apart (modulo 180 deg) the planes of two of the plan's pairs must lie for one
 opposite stage angle to test the specimen (:func:`opposites_needed`). A pair whose light and
 sensor lie in one plane through the normal is blind, at one stage angle, to a lean across
-that plane (the plane is a mirror of the pair and swaps a lean with its opposite); a lean
-across pair 1's plane reaches a pair whose plane is ``d`` away with at least ``sin(d / 2)``
-of its full first harmonic, so 60 deg keeps half of it (two opposites a quarter turn apart
-keep ``sin 45 deg`` = 71 % for any single pair)."""
+that plane (the plane is a mirror of the pair and swaps a lean with its opposite). A pair
+sees ``|cos|`` of the angle between the lean and its plane, so a lean across pair 1's plane
+reaches a pair whose plane is ``d`` away with ``sin d``, and a lean in any direction reaches
+the better of the two with at least ``sin(d / 2)`` of its full first harmonic (the worst lean
+lies midway between the two planes' normals): 60 deg keeps half of it (two opposites a
+quarter turn apart keep ``sin 45 deg`` = 71 % for any single pair)."""
 
 
 def pair_planes_deg(light_dirs: ArrayLike, sensor_dirs: ArrayLike) -> NDArray[np.float64]:

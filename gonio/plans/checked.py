@@ -12,8 +12,8 @@ from dataclasses import dataclass, field, replace
 from functools import cached_property
 
 from gonio.hal import PairSpec
-from gonio.plans.arc import branch_bounds, first_round_angles, opposites_needed
-from gonio.plans.models import AdaptivePlan, AnyPlan
+from gonio.plans.arc import branch_bounds, fill_angles, first_round_angles, opposites_needed
+from gonio.plans.models import AdaptivePlan, AnyPlan, PlanError
 from gonio.plans.route import order_for_travel
 from gonio.plans.timing import adaptive_bound, estimate_angles
 from gonio.plans.validation import lights_in_order, uniform_angles, validate_plan
@@ -95,7 +95,8 @@ def check_plan(plan: AnyPlan | CheckedPlan, rig: RigDescription,
 
     The checks are those of :func:`~gonio.plans.validation.validate_plan` and the first
     round's route from ``from_deg`` (degrees; the angles can be visited in one direction
-    inside the travel), as a dry run makes them. A plan already checked on this very rig
+    inside the travel), as a dry run makes them; an auto-arc plan's fill round too (the full
+    turn an asymmetric specimen goes on to). A plan already checked on this very rig
     description is returned as it is, its route taken again only from another ``from_deg``.
     """
     if isinstance(plan, CheckedPlan):
@@ -114,6 +115,18 @@ def check_plan(plan: AnyPlan | CheckedPlan, rig: RigDescription,
     else:
         angles = uniform_angles(plan.start_deg, plan.first_rotations(), plan.first_span_deg())
     route = order_for_travel(angles, from_deg, rig, plan.backlash_deg)
+    if plan.arc_mode() == "auto":
+        # The fill round an asymmetric specimen reads must fit the travel too: refused now,
+        # not after the first round (a first round of one opposite no longer reaches 270).
+        fill = fill_angles(plan.start_deg, plan.first_rotations(),
+                           len(angles) - plan.first_rotations())
+        try:
+            if fill:
+                order_for_travel(fill, route[-1], rig, plan.backlash_deg)
+        except PlanError as exc:
+            raise PlanError(f"arc 'auto' reads the full turn when the specimen is not twofold "
+                            f"symmetric, and the stage cannot: {exc} (or use arc 'fixed' "
+                            "with span_deg 180)") from None
     return CheckedPlan(plan=plan, rig=rig, pairs=tuple(pairs),
                        lights=tuple(lights_in_order(pairs)), angles_deg=tuple(angles),
                        route_deg=tuple(route), from_deg=from_deg)

@@ -207,7 +207,8 @@ ArcMode = Annotated[
     Literal["fixed", "auto"],
     BeforeValidator(_check_arc),
     Field(description="fixed: span_deg is the arc (180 or 360 forces either); auto: the first "
-                      "round reads the half-turn angles plus two of their opposites, tests "
+                      "round reads the half-turn angles plus the first one's opposite (and the "
+                      "one a quarter turn on when the pairs lie in nearly one plane), tests "
                       "twofold symmetry against arc_noise (docs/science.md 7.4), and the scan "
                       "continues over half a turn if the specimen has it, else over a full turn "
                       "(span_deg must then be 180, the default)"),

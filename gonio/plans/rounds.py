@@ -214,11 +214,13 @@ class ArcRounds:
                 self.relative)
             events.append((ARC_TEST_EVENT, self.chosen))
         if last_round == 0 and not self.chosen["symmetric"]:
-            # As many opposites as the first round read (checked.angles_deg); an angle a job
-            # stored by another version already read is not read twice.
+            # Every opposite the first round did not read, whatever count its stored route
+            # held: a job resumed after its pairs changed (or stored by another version) may
+            # have read one opposite where checked.angles_deg now holds two, or the reverse.
+            # fill_angles with one opposite lists all but the first's, which every first
+            # round reads; an angle already read is not read twice.
             read = {round(float(a) % 360.0, 6) for a in angles_deg}
-            fill = [a for a in fill_angles(self.start_deg, self.rotations,
-                                           len(self.checked.angles_deg) - self.rotations)
+            fill = [a for a in fill_angles(self.start_deg, self.rotations, 1)
                     if round(a, 6) not in read]
             if fill:
                 return NextRound(fill, events)

@@ -182,6 +182,23 @@ def test_the_pairs_planes_choose_the_first_round(desc: RigDescription) -> None:
         [0, 22.5, 45, 67.5, 90, 112.5, 135, 157.5, 180])
 
 
+def test_an_auto_plan_whose_full_turn_the_travel_cannot_reach_is_refused_before_it_runs(
+        desc: RigDescription) -> None:
+    """Travel [-10, 200] deg: the spread rig's first round (0 ... 157.5, 180) fits, but the
+    fill round an asymmetric specimen reads (202.5 ... 337.5) does not; refused at the check,
+    naming the fix, not after the first round. The in-plane rig's first round (270) already
+    does not fit."""
+    limited = {"stage_min_deg": -10.0, "stage_max_deg": 200.0}
+    with pytest.raises(PlanError, match=r"arc 'auto' reads the full turn .* 202\.5.*"
+                                        r"arc 'fixed' with span_deg 180"):
+        _auto(_spread(desc).model_copy(update=limited), rotations=8)
+    with pytest.raises(PlanError, match=r"180, 270 deg cannot all be visited"):
+        _auto(desc.model_copy(update=limited), rotations=8)
+    # A fixed half turn on the same stage is fine.
+    assert check_plan(UniformPlan(rotations=8, exposure=EX),
+                      desc.model_copy(update=limited)).angles_deg[-1] == pytest.approx(157.5)
+
+
 def test_a_symmetric_uniform_plan_stops_after_its_first_round(desc: RigDescription) -> None:
     checked = _auto(desc, rotations=8)
     assert list(checked.angles_deg) == pytest.approx(first_round_angles(0.0, 8, 2))
@@ -234,6 +251,22 @@ def test_one_opposite_fills_seven_angles_and_never_reads_an_angle_twice(
     nxt = _next(rounds_for(checked, chosen=chosen), old, _readings(old, 0.1, n_pairs=3),
                 len(old), 0)
     assert nxt.angles_deg == pytest.approx([202.5, 225, 247.5, 292.5, 315, 337.5])
+
+
+def test_a_job_whose_pairs_closed_up_after_its_first_round_still_reads_every_opposite(
+        desc: RigDescription) -> None:
+    """Round 0 stored with the pairs spread (9 angles, one opposite); resumed on a rig whose
+    pairs now lie in one plane (check_plan lists two opposites, 180 and 270). The fill reads
+    every opposite round 0 did not (counted by hand: 202.5 ... 337.5, 270 among them), so the
+    full turn still holds the 16 uniform angles."""
+    first = list(_auto(_spread(desc), rotations=8).angles_deg)
+    assert len(first) == 9
+    checked = _auto(desc, rotations=8)  # the same plan, checked on the closed-up rig
+    assert len(checked.angles_deg) == 10
+    values = _readings(first, 0.1, n_pairs=3)
+    nxt = _next(rounds_for(checked), first, values, len(first), 0)
+    assert nxt.angles_deg == pytest.approx([202.5, 225, 247.5, 270, 292.5, 315, 337.5])
+    assert sorted(first + nxt.angles_deg) == pytest.approx([22.5 * j for j in range(16)])
 
 
 def test_adaptive_plans_refine_within_the_arc_chosen(desc: RigDescription) -> None:
