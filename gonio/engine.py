@@ -66,7 +66,7 @@ from gonio.motion import plan_overshoot_legs
 from gonio.plans.arc import ARC_TEST_EVENT
 from gonio.plans.checked import CheckedPlan, check_plan
 from gonio.plans.faults import Suspender, Trouble
-from gonio.plans.models import AnyPlan
+from gonio.plans.models import AnyPlan, PlanError
 from gonio.plans.rounds import Refiner, rounds_for
 from gonio.plans.route import order_for_travel
 from gonio.rigdescription import RigDescription
@@ -888,7 +888,12 @@ class ScanEngine:
         if not nxt.angles_deg:
             return False
         here = await self._stage_position()
-        route = order_for_travel(nxt.angles_deg, here, self.desc, self.plan.backlash_deg)
+        try:
+            route = order_for_travel(nxt.angles_deg, here, self.desc, self.plan.backlash_deg)
+        except PlanError as exc:
+            # Submission checks the rounds it can foresee; a round the travel cannot reach
+            # (a rig config edited since) is the lab's to fix, not an internal error.
+            raise JobFailed(f"round {rnd + 1} cannot be measured: {exc}") from None
         self._add_steps(max(s.angle_index for s in steps) + 1, rnd + 1, route)
         return True
 

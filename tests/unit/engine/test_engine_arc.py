@@ -16,6 +16,7 @@ from gonio.engine import ScanEngine
 from gonio.jobstates import JobState
 from gonio.plans.arc import ARC_TEST_EVENT, fill_angles, first_round_angles
 from gonio.plans.models import ExposureSettings, UniformPlan
+from gonio.plans.rounds import NextRound
 from gonio.rigdescription import RigDescription
 from gonio.sim.memrig import MemRig
 from gonio.store import JobStore
@@ -78,3 +79,31 @@ def test_a_resumed_job_fills_the_full_turn_it_chose_without_testing_again() -> N
     # The resumed rig measured only the fill round's angles.
     assert sorted(m % 360 for m in rig2.mstage.moves) == pytest.approx(
         fill_angles(0.0, 8, opposites=2))
+
+
+class _BeyondTravel:
+    """Rounds (gonio.plans.rounds.Rounds) that ask, after the first round, for an angle the
+    stage's travel cannot reach: what a rig config edited between submission and a later
+    round would do."""
+
+    async def next_round(self, angles_deg: object, values: object, planned_angles: int,
+                         last_round: int) -> NextRound:
+        return NextRound([300.0] if last_round == 0 else [])
+
+
+def test_a_round_the_travel_cannot_reach_fails_the_job_with_the_reason() -> None:
+    """Not an internal error: the job fails naming the round and the travel, and the first
+    round's readings stay stored."""
+    plan = UniformPlan(rotations=4, exposure=FAST)
+    rig = MemRig(3600.0)
+    desc = RigDescription.from_rig(rig).model_copy(
+        update={"stage_min_deg": -10.0, "stage_max_deg": 200.0})
+    store = JobStore(":memory:")
+    job = _job(store, plan, desc)
+    engine = ScanEngine(rig, store, job, plan, desc)
+    engine.rounds = _BeyondTravel()
+    assert asyncio.run(engine.run()) is JobState.FAILED
+    row = store.get_job(job)
+    assert "round 1 cannot be measured" in (row.reason or "")
+    assert "internal error" not in (row.reason or "")
+    assert len(store.readings(job)) == 4 * 3  # the first round's 4 angles x 3 pairs, kept
