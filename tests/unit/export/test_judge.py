@@ -22,8 +22,8 @@ KNOWN = {"plastic": PLASTIC, "copper": COPPER}
 def _fits(name: str) -> Fits:
     """The export's fits (:func:`gonio.export.fit_all`, whose principled fit is
     :func:`judge.fit_principled_rendered` from the table fit) of a known material's table,
-    fitted once per run: the rendered fit's tests and the two-lobe test share them (seconds
-    of CPU each)."""
+    fitted once per run: the rendered fit's tests, the two-lobe test and the white-highlight
+    test's plastic share them (seconds of CPU each)."""
     return fit_all(bm.tabulate(KNOWN[name].model(), np.float64))
 
 
@@ -118,7 +118,7 @@ def test_a_diffuse_under_a_white_highlight_fits_a_strong_specular() -> None:
     blend = bm.LobeSum((bm.Lambert((0.20, 0.04, 0.04)), bm.Rotated(white, np.radians(30.0))))
     fits = fit_all(bm.tabulate(blend, np.float64))
     p = fits.principled
-    plastic = fit_all(bm.tabulate(PLASTIC.model(), np.float64)).principled
+    plastic = _fits("plastic").principled  # the same fit as the known-parameter test's
     print(f"blend: metallic {p.metallic}, F0 {p.dielectric_f0:.3f}, base {p.base_color}; "
           f"plastic F0 {plastic.dielectric_f0:.3f}")
     assert p.metallic == 0.0 and plastic.metallic == 0.0

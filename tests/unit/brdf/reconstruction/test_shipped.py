@@ -11,6 +11,7 @@ import pytest
 from gonio.brdf.materials import library, measured
 from gonio.brdf.reconstruction import basis as basis_mod
 from gonio.brdf.reconstruction import shipped
+from gonio.brdf.tables import geometry as geo
 from tests.unit.brdf.reconstruction.test_basis import small_library
 
 
@@ -108,22 +109,61 @@ def test_a_fresh_install_and_an_import_fold_into_the_shipped_basis(
 
 
 @pytest.mark.slow
-def test_the_shipped_basis_is_what_the_builder_makes() -> None:
-    """A real build from the tabulated library (minutes on a fresh cache; the library test
-    builds it too) spans the shipped basis' leading components with the same singular values.
+def test_the_shipped_basis_is_the_leading_subspace_of_the_library() -> None:
+    """The shipped basis against the tabulated library it claims to summarise (minutes on a
+    fresh cache, where the library test builds the library too), checked without running the
+    builder's randomized SVD again: from the library's slice matrix, remapped and centred as
+    math.md 4 defines it (written out here), the shipped row medians and means come back, and
+    each shipped component is a singular pair of that matrix, ``Y Y^T u = s^2 u`` with
+    ``|Y^T u| = s``; nothing outside the shipped span is as strong as its leading components.
 
-    Randomized SVD in float32 may round differently on another BLAS, so the comparison is of
-    subspaces and singular values to 1e-4, not of bits.
+    Two passes over the data instead of the build's eight and its QR factorisations (about a
+    third of the CPU). Float32 data and a randomized SVD's accuracy set the tolerances: the
+    measured residuals are 2e-3 (leading 64 components) and 3e-6 (singular values).
     """
-    fresh = basis_mod.build_basis(library.default_library(), shipped.SHIPPED_COMPONENTS)
+    tables = library.default_library()
     syn = shipped.shipped_basis(shipped.SHIPPED_COMPONENTS)
     assert syn is not None
-    np.testing.assert_allclose(syn.S, fresh.S, rtol=1e-4)
-    rows = np.flatnonzero(syn.valid)
+    assert list(syn.materials) == [t.name for t in tables]
+    rows = np.flatnonzero(geo.valid_mask().ravel())
+    # Every channel of every ph slice of every material is one column (p rows, m columns).
+    m = sum(t.n_channels * geo.N_PH for t in tables)
+    Y = np.empty((rows.size, m), dtype=np.float32)
+    j = 0
+    for t in tables:
+        cols = t.columns()[:, rows]
+        Y[:, j:j + cols.shape[0]] = cols.T
+        j += cols.shape[0]
+    f_med = np.median(Y, axis=1)
+    np.testing.assert_allclose(syn.f_med[rows], f_med, rtol=1e-6, atol=1e-9)
+    w = basis_mod.row_weight(syn.eps)[rows]
+    for r0 in range(0, rows.size, 512):  # Eq. 1 in row blocks, so temporaries stay small
+        blk = slice(r0, r0 + 512)
+        Y[blk] = basis_mod.remap(Y[blk], f_med[blk, None], w[blk, None], syn.eps)
+    mu = Y.mean(axis=1, dtype=np.float64)
+    np.testing.assert_allclose(syn.mu[rows], mu, atol=1e-6)
+    Y -= mu[:, None].astype(np.float32)
+
+    S = syn.S
+    U = syn.Q[rows] / S  # unit left singular vectors (the file keeps U S)
+    np.testing.assert_allclose(U.T @ U, np.eye(S.size), atol=1e-5)
+    G = (Y.T @ U.astype(np.float32)).astype(np.float64)  # (m, K): Y^T u for every component
+    np.testing.assert_allclose(np.linalg.norm(G, axis=0), S, rtol=1e-4)
+    rayleigh = G.T @ G / np.outer(S, S)
+    np.testing.assert_allclose(rayleigh, np.eye(S.size), atol=1e-4)
     k = basis_mod.DEFAULT_COMPONENTS
-    Ua = syn.Q[rows, :k] / syn.S[:k]
-    Ub = fresh.Q[rows, :k] / fresh.S[:k]
-    # Cosines of the principal angles between the two K-dimensional subspaces.
-    cosines = np.linalg.svd(Ua.T @ Ub, compute_uv=False)
-    assert cosines.min() > 0.999
-    np.testing.assert_allclose(syn.f_med, fresh.f_med, rtol=1e-6, atol=1e-9)
+    YYtU = (Y @ G[:, :k].astype(np.float32)).astype(np.float64)
+    residual = np.linalg.norm(YYtU - U[:, :k] * S[:k] ** 2, axis=0) / S[:k] ** 2
+    assert residual.max() < 1e-2, residual
+    # What the shipped components leave: a few block power steps from random probes find
+    # nothing as strong as the K-th leading component.
+    rng = np.random.default_rng(1)
+    Z = rng.standard_normal((rows.size, 8))
+    for _ in range(4):
+        Z -= U @ (U.T @ Z)
+        Z = np.linalg.qr(Z)[0]
+        Z = (Y @ (Y.T @ Z.astype(np.float32))).astype(np.float64)
+    Z -= U @ (U.T @ Z)
+    Z = np.linalg.qr(Z)[0]
+    left = np.linalg.norm((Y.T @ Z.astype(np.float32)).astype(np.float64), axis=0)
+    assert left.max() < S[k - 1], (left, S[k - 1])
