@@ -306,12 +306,12 @@ def tilt_scan(plain: Basis, asym: Basis, m: bu.Material, cells: np.ndarray, ph: 
     (:func:`gonio.brdf.reconstruction.tilt.fit_tilt`) with the default basis."""
     from gonio.plans.arc import arc_test, fill_angles, first_round_angles
 
-    first = first_round_angles(0.0, rotations)
+    first = first_round_angles(0.0, rotations, 1)  # the design's pairs spread
     vals = bu.read(m, cells, ph, np.deg2rad(first), seed)
     test = arc_test(first, vals, 0.01)
     angles = list(first)
     if not test["symmetric"]:
-        fill = fill_angles(0.0, rotations)
+        fill = fill_angles(0.0, rotations, 1)
         vals = np.concatenate([vals, bu.read(m, cells, ph, np.deg2rad(fill), seed + 1)], axis=1)
         angles += fill
     alpha = np.deg2rad(angles)

@@ -110,7 +110,7 @@ def _picks(rotations: int, opposites: int) -> list[int]:
     return sorted({0, rotations // 2}) if opposites == 2 else [0]
 
 
-def first_round_angles(start_deg: float, rotations: int, opposites: int = 1) -> list[float]:
+def first_round_angles(start_deg: float, rotations: int, opposites: int) -> list[float]:
     """The first round of an auto-arc plan: ``rotations`` uniform angles over half a turn from
     ``start_deg``, then the opposite of the first of them and, with ``opposites`` 2 (pairs
     whose planes do not spread, :func:`opposites_needed`), of the one a quarter turn on (index
@@ -120,7 +120,7 @@ def first_round_angles(start_deg: float, rotations: int, opposites: int = 1) -> 
                    for k in _picks(rotations, opposites)]
 
 
-def fill_angles(start_deg: float, rotations: int, opposites: int = 1) -> list[float]:
+def fill_angles(start_deg: float, rotations: int, opposites: int) -> list[float]:
     """What an asymmetric specimen reads next: the opposites of the first round's half-turn
     angles that :func:`first_round_angles` (with the same ``opposites``) did not read, so that
     the first two rounds hold ``2 rotations`` uniform angles over the full turn; degrees in

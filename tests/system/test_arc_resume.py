@@ -53,9 +53,9 @@ def test_sigkill_around_the_arc_switch_keeps_every_reading_once(
         [(s.angle_index, s.round, s.specimen_deg) for s in b_store.steps(1)]
     # On the full turn it chose: the first round, then the fill, each angle once.
     assert sorted(s.specimen_deg for s in steps if s.round == 0) == pytest.approx(
-        sorted(first_round_angles(0.0, 8)))
+        sorted(first_round_angles(0.0, 8, 1)))
     assert sorted(s.specimen_deg for s in steps if s.round == 1) == pytest.approx(
-        fill_angles(0.0, 8))
+        fill_angles(0.0, 8, 1))
     assert all(s.done for s in steps) and len(steps) == 16
     events = [e for e in a_store.events_after(0, job_id=1) if e.type == ARC_TEST_EVENT]
     assert len(events) == 1 and events[0].data["arc_deg"] == 360.0

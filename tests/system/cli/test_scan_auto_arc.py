@@ -48,7 +48,8 @@ def test_a_symmetric_specimen_stays_on_half_a_turn(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     text, store, got = _scan(tmp_path, capsys)
     job = got["job"]
-    assert _angles(store, job.id) == pytest.approx(sorted(first_round_angles(0.0, 8)))
+    # The simulated rig's pairs lie in planes 30-144 deg apart: one opposite.
+    assert _angles(store, job.id) == pytest.approx(sorted(first_round_angles(0.0, 8, 1)))
     (ev,) = [e for e in store.events_after(0, job_id=job.id) if e.type == "arc_test"]
     assert ev.data["symmetric"] and ev.data["arc_deg"] == 180.0 and ev.data["dof"] > 0
     assert "arc: the specimen reads twofold symmetric" in text
@@ -81,7 +82,7 @@ def test_a_tilted_facet_specimen_goes_to_a_full_turn(
     # The first round, then the opposites it had not read: 16 uniform angles over the turn.
     assert _angles(store, job.id) == pytest.approx([22.5 * k for k in range(16)])
     fill = sorted(s.specimen_deg for s in store.steps(job.id) if s.round == 1)
-    assert fill == pytest.approx(fill_angles(0.0, 8))
+    assert fill == pytest.approx(fill_angles(0.0, 8, 1))
     (ev,) = [e for e in store.events_after(0, job_id=job.id) if e.type == "arc_test"]
     assert not ev.data["symmetric"] and ev.data["arc_deg"] == 360.0
     assert ev.data["p_value"] < 1e-6

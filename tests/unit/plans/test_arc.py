@@ -56,9 +56,9 @@ def _next(rounds: Any, angles: list[float], values: np.ndarray, planned: int,
 def test_the_first_round_reads_one_opposite_or_two_a_quarter_turn_apart() -> None:
     # Counted by hand: 8 over half a turn from 0 plus the opposite of 0 (one opposite), or of
     # 0 and 90 (two); the fill reads the other opposites.
-    assert first_round_angles(0.0, 8) == pytest.approx(
+    assert first_round_angles(0.0, 8, 1) == pytest.approx(
         [0, 22.5, 45, 67.5, 90, 112.5, 135, 157.5, 180])
-    assert fill_angles(0.0, 8) == pytest.approx([202.5, 225, 247.5, 270, 292.5, 315, 337.5])
+    assert fill_angles(0.0, 8, 1) == pytest.approx([202.5, 225, 247.5, 270, 292.5, 315, 337.5])
     assert first_round_angles(0.0, 8, opposites=2) == pytest.approx(
         [0, 22.5, 45, 67.5, 90, 112.5, 135, 157.5, 180, 270])
     assert fill_angles(0.0, 8, opposites=2) == pytest.approx(
@@ -67,8 +67,8 @@ def test_the_first_round_reads_one_opposite_or_two_a_quarter_turn_apart() -> Non
     for k in (1, 2):
         both = sorted(first_round_angles(0.0, 8, k) + fill_angles(0.0, 8, k))
         assert both == pytest.approx([22.5 * j for j in range(16)])
-    assert first_round_angles(30.0, 4) == pytest.approx([30, 75, 120, 165, 210])
-    assert fill_angles(30.0, 4) == pytest.approx([255, 300, 345])
+    assert first_round_angles(30.0, 4, 1) == pytest.approx([30, 75, 120, 165, 210])
+    assert fill_angles(30.0, 4, 1) == pytest.approx([255, 300, 345])
     assert first_round_angles(30.0, 4, 2) == pytest.approx([30, 75, 120, 165, 210, 300])
     assert fill_angles(30.0, 4, 2) == pytest.approx([255, 345])
     for k in (1, 2):
@@ -138,7 +138,7 @@ def test_a_symmetric_specimen_keeps_half_a_turn_and_a_leaning_one_gets_the_full_
         pytest.approx(lean["statistic"])
     # One opposite: the ten pairs lean each its own way (as pairs in different planes see one
     # lean), so at one stage angle some see it; the same 5 % lean is found.
-    one = first_round_angles(0.0, 8)
+    one = first_round_angles(0.0, 8, 1)
     sym1 = arc_test(one, _readings(one, 0.0), NOISE)
     assert sym1["symmetric"] and sym1["opposite_pairs"] == 1 and sym1["dof"] == 10 * 3
     lean1 = arc_test(one, _readings(one, 0.05), NOISE)
@@ -155,7 +155,7 @@ def test_the_false_alarm_rate_is_the_level() -> None:
 
 
 def test_readings_that_cannot_be_tested_take_the_full_turn() -> None:
-    angles = first_round_angles(0.0, 4)
+    angles = first_round_angles(0.0, 4, 1)
     out = arc_test(angles, np.zeros((3, len(angles), 1)), NOISE)
     assert not out["symmetric"] and out["arc_deg"] == 360.0 and out["statistic"] is None
     assert "could not run" in out["message"] and half_turn_warning(out) is None
