@@ -60,6 +60,7 @@ import numpy as np
 from gonio import hal
 from gonio.calibration import readings_array
 from gonio.diskspace import disk_full_message, is_disk_full
+from gonio.engine_loop import running_in
 from gonio.hal import PairSpec
 from gonio.jobstates import FINISHED_STATES, JobState
 from gonio.motion import plan_overshoot_legs
@@ -246,7 +247,7 @@ class ScanEngine:
 
     def _signal(self, interrupt: bool) -> None:
         loop = self._loop
-        if loop is not None and not _running_in(loop):
+        if loop is not None and not running_in(loop):
             loop.call_soon_threadsafe(self._signal_here, interrupt)
         else:
             self._signal_here(interrupt)
@@ -923,14 +924,6 @@ class ScanEngine:
         await self._lights_off()
         if self._rig is not None:
             await _quietly(self._rig.stage.stop())
-
-
-def _running_in(loop: asyncio.AbstractEventLoop) -> bool:
-    """True when the caller runs on ``loop`` (its thread, inside it)."""
-    try:
-        return asyncio.get_running_loop() is loop
-    except RuntimeError:
-        return False
 
 
 def _primary(errors: Sequence[BaseException]) -> BaseException:

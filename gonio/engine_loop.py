@@ -112,6 +112,15 @@ class EngineLoop:
             self._saved_switch = None
 
 
+def running_in(loop: asyncio.AbstractEventLoop) -> bool:
+    """True when the caller runs on ``loop`` (in its thread, inside it): a call from there
+    must not wait for the loop through ``run_coroutine_threadsafe``, which would deadlock."""
+    try:
+        return asyncio.get_running_loop() is loop
+    except RuntimeError:
+        return False
+
+
 def _cancel_all(loop: asyncio.AbstractEventLoop) -> None:
     tasks = [t for t in asyncio.all_tasks(loop) if not t.done()]
     for t in tasks:

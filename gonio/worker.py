@@ -47,6 +47,7 @@ from gonio.diskspace import (
     low_space,
 )
 from gonio.engine import Progress, ScanEngine
+from gonio.engine_loop import running_in
 from gonio.finishing import Finishing, FinishingStopped, finish_job
 from gonio.jobstates import FINISHED_STATES, IllegalTransition, JobState
 from gonio.plans.checked import CheckedPlan, check_plan
@@ -162,7 +163,7 @@ class Worker:
         Callable from any thread: the worker may run on its own loop (gonio.engine_loop).
         """
         loop = self._loop
-        if loop is not None and not loop.is_closed() and not _running_in(loop):
+        if loop is not None and not loop.is_closed() and not running_in(loop):
             loop.call_soon_threadsafe(self._wake.set)
         else:
             self._wake.set()
@@ -678,10 +679,3 @@ class Worker:
         if self._recon_task is not None:
             with contextlib.suppress(BaseException):
                 await asyncio.shield(self._recon_task)
-
-
-def _running_in(loop: asyncio.AbstractEventLoop) -> bool:
-    try:
-        return asyncio.get_running_loop() is loop
-    except RuntimeError:
-        return False

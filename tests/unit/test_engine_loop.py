@@ -93,3 +93,19 @@ def test_close_cancels_pending_work_and_restores_the_switch_interval() -> None:
     assert cancelled.is_set() and future.cancelled()
     assert not el.running
     assert sys.getswitchinterval() == pytest.approx(before)
+
+
+def test_running_in_tells_the_loop_the_caller_runs_on() -> None:
+    """Inside a loop's own coroutine: that loop, not another; outside any loop: none."""
+    from gonio.engine_loop import running_in
+
+    other = asyncio.new_event_loop()
+    try:
+        async def check() -> tuple[bool, bool]:
+            here = asyncio.get_running_loop()
+            return running_in(here), running_in(other)
+
+        assert asyncio.run(check()) == (True, False)
+        assert not running_in(other)
+    finally:
+        other.close()
