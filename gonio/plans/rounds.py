@@ -207,8 +207,13 @@ class ArcRounds:
                          planned_angles: int, last_round: int) -> NextRound:
         events: list[tuple[str, dict[str, Any]]] = []
         if self.chosen is None:
+            # Round 0's readings, all of them: a job resumed after its pairs changed (or stored
+            # by another version) may hold an opposite the current first round does not list,
+            # and it still tells. Later rounds never reach here untested (the choice is stored
+            # before the fill), but only first-round angles would count if they did.
             first = set(round(a, 6) for a in self.checked.angles_deg)
-            keep = [j for j, a in enumerate(angles_deg) if round(float(a), 6) in first]
+            keep = [j for j, a in enumerate(angles_deg)
+                    if last_round == 0 or round(float(a), 6) in first]
             self.chosen = await asyncio.to_thread(
                 arc_test, [angles_deg[j] for j in keep], np.asarray(values)[:, keep, :],
                 self.relative)

@@ -269,6 +269,17 @@ def test_a_job_whose_pairs_closed_up_after_its_first_round_still_reads_every_opp
     assert sorted(first + nxt.angles_deg) == pytest.approx([22.5 * j for j in range(16)])
 
 
+def test_the_test_uses_every_opposite_its_first_round_read(desc: RigDescription) -> None:
+    """A first round stored with two opposites (0/180 and 90/270), resumed where the check now
+    lists one: both opposite pairs are tested, not only 0/180."""
+    checked = _auto(_spread(desc), rotations=8)
+    assert len(checked.angles_deg) == 9  # one opposite now
+    stored = first_round_angles(0.0, 8, 2)
+    nxt = _next(rounds_for(checked), stored, _readings(stored, 0.0, n_pairs=3), len(stored), 0)
+    (kind, data), = nxt.events
+    assert kind == ARC_TEST_EVENT and data["opposite_pairs"] == 2
+
+
 def test_adaptive_plans_refine_within_the_arc_chosen(desc: RigDescription) -> None:
     checked = _auto(desc, adaptive=True, rule="vf", initial_rotations=4, max_rounds=4)
     assert checked.plan.span_deg == 180.0  # auto keeps vf's first round over half a turn
