@@ -130,6 +130,17 @@ def fill_angles(start_deg: float, rotations: int, opposites: int) -> list[float]
     return [float((a + HALF_TURN_DEG) % 360.0) for k, a in enumerate(half) if k not in done]
 
 
+def fill_after(start_deg: float, rotations: int, read_deg: Sequence[float]) -> list[float]:
+    """The fill round after the stage angles ``read_deg`` (degrees): every opposite of the
+    half-turn angles not read yet, whatever count of opposites the first round held (one, two,
+    or a resumed job's stored round under another count); degrees in [0, 360). The one
+    derivation the dry run's bound, the submission check and the rounds share."""
+    read = {round(float(a) % 360.0, 6) for a in read_deg}
+    opposites = [float((a + HALF_TURN_DEG) % 360.0)
+                 for a in uniform_angles(start_deg, rotations, HALF_TURN_DEG)]
+    return [a for a in opposites if round(a, 6) not in read]
+
+
 def arc_test(angles_deg: Sequence[float], values: ArrayLike, relative: float,
              false_alarm: float = FALSE_ALARM) -> dict[str, Any]:
     """Test readings for twofold symmetry and choose the arc; the ``arc_test`` event's data.
@@ -229,15 +240,13 @@ def branch_bounds(plan: AnyPlan, rig: RigDescription, n_lights: int, n_pairs: in
         ``{180.0: (angles, seconds), 360.0: (angles, seconds)}``: most stage angles and
         seconds after the first round when the specimen is found twofold symmetric (an
         adaptive plan's refinement over half a turn, :func:`adaptive_bound`; nothing for a
-        uniform plan) and when it is not (the fill round of :func:`fill_angles`, timed from
+        uniform plan) and when it is not (the fill round of :func:`fill_after`, timed from
         ``end_deg``, then an adaptive plan's refinement over the full turn, one round fewer).
     """
     out: dict[float, tuple[int, float]] = {HALF_TURN_DEG: (0, 0.0)}
     if isinstance(plan, AdaptivePlan):
         out[HALF_TURN_DEG] = adaptive_bound(plan, rig, n_pairs, n_lights, first_angles, end_deg)
-    rotations = plan.first_rotations()
-    fill = fill_angles(float(plan.start_deg), rotations,
-                       opposites=len(first_angles) - rotations)
+    fill = fill_after(float(plan.start_deg), plan.first_rotations(), first_angles)
     route = order_for_travel(fill, end_deg, rig, plan.backlash_deg) if fill else []
     motion, settle, exposure = estimate_angles(route, end_deg, n_lights, plan, rig, False)
     angles, seconds = len(route), motion + settle + exposure

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field, replace
 from functools import cached_property
 
 from gonio.hal import PairSpec
-from gonio.plans.arc import branch_bounds, fill_angles, first_round_angles, opposites_needed
+from gonio.plans.arc import branch_bounds, fill_after, first_round_angles, opposites_needed
 from gonio.plans.models import AdaptivePlan, AnyPlan, PlanError
 from gonio.plans.route import order_for_travel
 from gonio.plans.timing import adaptive_bound, estimate_angles
@@ -118,8 +118,7 @@ def check_plan(plan: AnyPlan | CheckedPlan, rig: RigDescription,
     if plan.arc_mode() == "auto":
         # The fill round an asymmetric specimen reads must fit the travel too: refused now,
         # not after the first round (a first round of one opposite no longer reaches 270).
-        fill = fill_angles(plan.start_deg, plan.first_rotations(),
-                           len(angles) - plan.first_rotations())
+        fill = fill_after(plan.start_deg, plan.first_rotations(), angles)
         try:
             if fill:
                 order_for_travel(fill, route[-1], rig, plan.backlash_deg)

@@ -20,7 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from gonio.plans.adaptive import adaptive_refinement
-from gonio.plans.arc import ARC_TEST_EVENT, arc_test, fill_angles
+from gonio.plans.arc import ARC_TEST_EVENT, arc_test, fill_after
 from gonio.plans.checked import CheckedPlan
 from gonio.plans.models import MAX_ROTATIONS, AdaptivePlan
 
@@ -222,11 +222,7 @@ class ArcRounds:
             # Every opposite the first round did not read, whatever count its stored route
             # held: a job resumed after its pairs changed (or stored by another version) may
             # have read one opposite where checked.angles_deg now holds two, or the reverse.
-            # fill_angles with one opposite lists all but the first's, which every first
-            # round reads; an angle already read is not read twice.
-            read = {round(float(a) % 360.0, 6) for a in angles_deg}
-            fill = [a for a in fill_angles(self.start_deg, self.rotations, 1)
-                    if round(a, 6) not in read]
+            fill = fill_after(self.start_deg, self.rotations, angles_deg)
             if fill:
                 return NextRound(fill, events)
         nxt = await self._after().next_round(angles_deg, values, planned_angles, last_round)

@@ -20,6 +20,7 @@ from gonio.plans.arc import (
     ARC_TEST_EVENT,
     arc_test,
     branch_bounds,
+    fill_after,
     fill_angles,
     first_round_angles,
     half_turn_warning,
@@ -76,6 +77,20 @@ def test_the_first_round_reads_one_opposite_or_two_a_quarter_turn_apart() -> Non
         assert fill_angles(350, 1, k) == []
     with pytest.raises(ValueError, match="1 or 2"):
         first_round_angles(0.0, 8, 3)
+
+
+def test_the_fill_after_any_first_round_is_the_opposites_not_read() -> None:
+    # By hand: after 0 .. 157.5 and 180, the other seven opposites; after 180 and 270 too,
+    # six; a stored round that also read 225 leaves five; nothing read but the half turn's
+    # first angle's opposite missing: all eight.
+    half = [22.5 * k for k in range(8)]
+    assert fill_after(0.0, 8, [*half, 180]) == pytest.approx(
+        [202.5, 225, 247.5, 270, 292.5, 315, 337.5])
+    assert fill_after(0.0, 8, [*half, 180, 270]) == pytest.approx(
+        [202.5, 225, 247.5, 292.5, 315, 337.5])
+    assert fill_after(0.0, 8, [*half, 180, 225, 270]) == pytest.approx(
+        [202.5, 247.5, 292.5, 315, 337.5])
+    assert fill_after(0.0, 8, half) == pytest.approx([180 + 22.5 * k for k in range(8)])
 
 
 def _dirs(*pairs: tuple[tuple[float, float], tuple[float, float]]) -> tuple[Any, Any]:
