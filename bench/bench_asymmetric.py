@@ -124,6 +124,32 @@ FRESH: list[tuple[str, float, float, dict[str, Any], float]] = [
 ]
 
 
+#: A second fresh set for the tilt fit's selection rule (``--tilt fresh2``), written down and
+#: committed before any run on it and run once with the rule chosen on the choice set: other
+#: metals (Rh, Mo, Ni, Ta), roughnesses, colours, tilts 6-28 deg and holder angles.
+FRESH2: list[tuple[str, float, float, dict[str, Any], float]] = [
+    ("fresh2-rh-r0.14-t14", 14.0, 120.0,
+     {"type": "roughconductor", "material": "Rh", "alpha": 0.14}, 71.0),
+    ("fresh2-mo-r0.22-t24", 24.0, 305.0,
+     {"type": "roughconductor", "material": "Mo", "alpha": 0.22}, 238.0),
+    ("fresh2-ni-r0.09-t9", 9.0, 185.0,
+     {"type": "roughconductor", "material": "Ni_palik", "alpha": 0.09}, 12.0),
+    ("fresh2-ta-aniso-t20", 20.0, 35.0,
+     {"type": "roughconductor", "material": "Ta", "alpha_u": 0.20, "alpha_v": 0.08}, 147.0),
+    ("fresh2-cu-r0.20-t16", 16.0, 260.0,
+     {"type": "roughconductor", "material": "Cu", "alpha": 0.20}, 299.0),
+    ("fresh2-orange-plastic-r0.09-t21", 21.0, 345.0,
+     {"type": "roughplastic", "alpha": 0.09,
+      "diffuse_reflectance": {"type": "rgb", "value": [0.7, 0.3, 0.05]}}, 84.0),
+    ("fresh2-grey-plastic-r0.18-t6", 6.0, 95.0,
+     {"type": "roughplastic", "alpha": 0.18,
+      "diffuse_reflectance": {"type": "rgb", "value": [0.3, 0.3, 0.3]}}, 201.0),
+    ("fresh2-purple-plastic-r0.24-t28", 28.0, 230.0,
+     {"type": "roughplastic", "alpha": 0.24,
+      "diffuse_reflectance": {"type": "rgb", "value": [0.35, 0.1, 0.45]}}, 330.0),
+]
+
+
 #: A fresh set for the auto arc's layout choice (``--set fresh``), written before its first
 #: run and run once: other metals, roughnesses, colours, holder angles, and two small tilts
 #: (6 and 8 deg) that probe the test's power below the choice set's 10 deg.
