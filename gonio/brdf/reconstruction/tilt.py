@@ -32,6 +32,7 @@ from __future__ import annotations
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import scipy.linalg
@@ -57,6 +58,13 @@ REFINE_STEPS_DEG: tuple[float, float] = (2.5, 10.0)
 #: Readings whose mapped directions are this close to the leaning horizon (cosine) leave the
 #: fit: the basis holds nothing there.
 HORIZON_COS = 0.02
+#: The selection rule (docs/science.md 7.4): the tilt fit is accepted over the reference fit
+#: (the one a scan would get without it) only when its leave-one-pair-out error is lower on at
+#: least this share of the pairs. Chosen on the choice set, where the tilt fit's losers lower
+#: it on 3 and 6 of 10 pairs and its winners on 8 or 9: 0.7 sits in that gap.
+ACCEPT_PAIR_SHARE = 0.7
+#: Fewer pairs than this cannot show a majority of folds: the tilt fit is never accepted.
+ACCEPT_MIN_PAIRS = 5
 
 
 def tilt_rotation(tilt: float, azimuth: float) -> FloatArray:
@@ -174,6 +182,25 @@ def holdout_error(basis: Basis, cells: ArrayLike, ph_lab: ArrayLike, stage_angle
                   prior: FloatArray | None = None) -> float:
     """Leave-one-pair-out RMS log error of the readings under one candidate lean.
 
+    The root mean square of :func:`holdout_errors` (module notes; parameters as there).
+
+    Returns
+    -------
+    float
+        RMS over readings and channels of the cosine-weighted log error (natural log units);
+        inf when the candidate cannot be fitted.
+    """
+    err = holdout_errors(basis, cells, ph_lab, stage_angles, values, tilt, azimuth,
+                         eta=eta, lam=lam, prior=prior)
+    return float(np.sqrt(np.mean(err**2))) if err is not None else float("inf")
+
+
+def holdout_errors(basis: Basis, cells: ArrayLike, ph_lab: ArrayLike, stage_angles: ArrayLike,
+                   values: ArrayLike, tilt: float, azimuth: float, *,
+                   eta: float = JOINT_ETA, lam: float = JOINT_LAM,
+                   prior: FloatArray | None = None) -> FloatArray | None:
+    """Each reading's leave-one-pair-out log error under one candidate lean.
+
     Each pair's readings (every stage angle) are predicted by the joint fit (learnt prior,
     math.md 6) of all other pairs' mapped readings, times the factor; readings the lean puts
     below its horizon are predicted 0 (what a normal map gives there).
@@ -191,8 +218,9 @@ def holdout_error(basis: Basis, cells: ArrayLike, ph_lab: ArrayLike, stage_angle
 
     Returns
     -------
-    float
-        RMS over readings and channels of the cosine-weighted log error (natural log units).
+    (n, r, C) float or None
+        The cosine-weighted log error of every reading predicted without its pair (natural
+        log units); None when the candidate cannot be fitted.
     """
     vals = np.asarray(values, dtype=float)
     n, r, _ = vals.shape
@@ -202,7 +230,7 @@ def holdout_error(basis: Basis, cells: ArrayLike, ph_lab: ArrayLike, stage_angle
     try:
         rows, weights = basis.neighbours(*m.cells.T)
     except BasisError:
-        return float("inf")
+        return None
     Qt = np.einsum("nj,njk->nk", weights, basis.Q[rows])
     fmed = (weights * basis.f_med[rows]).sum(axis=1)[:, None]
     mu = (weights * basis.mu[rows]).sum(axis=1)[:, None]
@@ -218,7 +246,7 @@ def holdout_error(basis: Basis, cells: ArrayLike, ph_lab: ArrayLike, stage_angle
     try:
         cho = scipy.linalg.cho_factor(G, lower=True)
     except np.linalg.LinAlgError:
-        return float("inf")
+        return None
     beta = scipy.linalg.cho_solve(cho, Y)
     Ginv = scipy.linalg.cho_solve(cho, np.eye(G.shape[0]))
     held = np.empty_like(Y)
@@ -228,7 +256,7 @@ def holdout_error(basis: Basis, cells: ArrayLike, ph_lab: ArrayLike, stage_angle
             held[idx] = Y[idx] - np.linalg.solve(Ginv[np.ix_(idx, idx)], beta[idx])
     back = inverse_remap(np.minimum(held + mu, 300.0), fmed, w, basis.eps)
     pred[m.keep] = np.maximum(back, 0.0) * m.factor[:, None]
-    return float(np.sqrt(np.mean(_log_err(pred, vals, m.cos_i) ** 2)))
+    return _log_err(pred, vals, m.cos_i)
 
 
 def tilted_table(g: BRDFTable, tilt: float, azimuth: float, name: str = "tilt fit",
@@ -283,6 +311,93 @@ def tilted_table(g: BRDFTable, tilt: float, azimuth: float, name: str = "tilt fi
                                                      round(float(np.rad2deg(azimuth)), 3)}})
 
 
+def pair_rms(errors: ArrayLike) -> FloatArray:
+    """Per pair, the RMS of its readings' held-out log errors.
+
+    Parameters
+    ----------
+    errors : (n, r, C) from :func:`holdout_errors`
+
+    Returns
+    -------
+    (n,) float
+    """
+    e = np.asarray(errors, dtype=float)
+    return np.asarray(np.sqrt(np.mean(e.reshape(e.shape[0], -1) ** 2, axis=1)), dtype=float)
+
+
+def tilt_decision(tilt_errors: ArrayLike | None, reference_errors: ArrayLike | None,
+                  tilt: float, share: float = ACCEPT_PAIR_SHARE,
+                  min_pairs: int = ACCEPT_MIN_PAIRS) -> tuple[bool, int, str]:
+    """Whether the tilt fit replaces the reference fit: the selection rule (module notes).
+
+    The lean is accepted when it is not zero and the tilt fit's leave-one-pair-out error is
+    lower than the reference's on at least ``share`` of the pairs (a fold-wise vote, not the
+    pooled error: on the choice set a misplaced lean won the pooled error on the strength of
+    three pairs and lost the other seven, docs/science.md 7.4).
+
+    Parameters
+    ----------
+    tilt_errors, reference_errors : (n, r, C) from :func:`holdout_errors`, or None when that
+        fit could not be scored
+    tilt : float, radians, the lean found
+    share : float in (0, 1]
+    min_pairs : int, fewer pairs are never enough
+
+    Returns
+    -------
+    (accepted, pairs improved, reason)
+    """
+    if tilt <= 0:
+        return False, 0, "no lean found (tilt 0)"
+    if tilt_errors is None:
+        return False, 0, "the lean's readings could not be fitted"
+    if reference_errors is None:
+        return False, 0, "the reference fit could not be scored"
+    t, r = pair_rms(tilt_errors), pair_rms(reference_errors)
+    if t.shape != r.shape:
+        raise ReconstructionError(f"per-pair errors of different shapes: {t.shape}, {r.shape}")
+    n = int(t.size)
+    better = int(np.sum(t < r))
+    if n < min_pairs:
+        return False, better, f"{n} pairs are too few to judge a lean (at least {min_pairs})"
+    need = int(np.ceil(share * n - 1e-9))
+    verdict = better >= need
+    return verdict, better, (f"the lean lowers the held-out error on {better} of {n} pairs "
+                             f"({'at least' if verdict else 'fewer than'} {need} needed)")
+
+
+def reconstruct_through(basis: Basis, cells: ArrayLike, ph_lab: ArrayLike,
+                        stage_angles: ArrayLike, values: ArrayLike, tilt: float, azimuth: float,
+                        *, channels: Sequence[str] = ("R", "G", "B"),
+                        name: str = "tilt fit") -> tuple[Reconstruction, BRDFTable]:
+    """The joint fit of the readings seen through one lean, and its table on gonio's grid.
+
+    Parameters
+    ----------
+    basis : Basis
+    cells, ph_lab, stage_angles, values
+        The scan, as for :func:`map_readings`.
+    tilt, azimuth : float, radians; a tilt of 0 gives exactly the plain joint fit of the
+        scan as read
+    channels : names of the ``C`` channels
+
+    Returns
+    -------
+    (Reconstruction, BRDFTable)
+        The fit of the untilted BRDF ``g`` and the table of ``g`` seen through the lean.
+    """
+    vals = np.asarray(values, dtype=float)
+    if tilt > 0:
+        m = map_readings(cells, ph_lab, stage_angles, vals, tilt, azimuth)
+        g = reconstruct(basis, m.cells, m.ph, np.zeros(1), m.values[:, None, :],
+                        channels=channels, name=f"{name} (untilted)")
+        return g, tilted_table(g.table, tilt, azimuth, name)
+    # No lean: exactly the plain joint fit of the scan as read.
+    g = reconstruct(basis, cells, ph_lab, stage_angles, vals, channels=channels, name=name)
+    return g, g.table
+
+
 @dataclass(frozen=True)
 class TiltFit:
     """The lean chosen and the reconstruction through it.
@@ -296,6 +411,11 @@ class TiltFit:
     g : Reconstruction, the joint fit of the untilted BRDF
     candidates : (N, 3) float, every ``(tilt deg, azimuth deg, error)`` tried
     seconds : float, CPU-side wall time of the search and fit
+    accepted : bool, the selection rule's verdict against the reference fit
+        (:func:`tilt_decision`); False without a reference
+    pairs_improved : int, pairs whose held-out error the lean lowers against the reference
+    n_pairs : int
+    decision : str, the rule's reason in words
     """
 
     tilt: float
@@ -306,19 +426,25 @@ class TiltFit:
     g: Reconstruction
     candidates: FloatArray = field(repr=False)
     seconds: float = 0.0
+    accepted: bool = False
+    pairs_improved: int = 0
+    n_pairs: int = 0
+    decision: str = "not judged (no reference fit)"
 
     @property
-    def settings(self) -> dict[str, float]:
-        """The fitted lean in degrees, for a result's settings."""
+    def settings(self) -> dict[str, Any]:
+        """The fitted lean in degrees and the rule's decision, for a result's metrics."""
         return {"tilt_deg": round(float(np.rad2deg(self.tilt)), 3),
-                "tilt_azimuth_deg": round(float(np.rad2deg(self.azimuth)) % 360.0, 3)}
+                "tilt_azimuth_deg": round(float(np.rad2deg(self.azimuth)) % 360.0, 3),
+                "tilt_accepted": bool(self.accepted), "tilt_decision": self.decision}
 
 
 def fit_tilt(basis: Basis, cells: ArrayLike, ph_lab: ArrayLike, stage_angles: ArrayLike,
              values: ArrayLike, *, channels: Sequence[str] = ("R", "G", "B"),
              tilts_deg: Sequence[float] = COARSE_TILTS_DEG,
              azimuths_deg: Sequence[float] = COARSE_AZIMUTHS_DEG,
-             refine: bool = True, name: str = "tilt fit") -> TiltFit:
+             refine: bool = True, name: str = "tilt fit",
+             reference: Basis | None = None) -> TiltFit:
     """Choose the lean by held-out error, then reconstruct through it (module notes).
 
     Parameters
@@ -330,6 +456,10 @@ def fit_tilt(basis: Basis, cells: ArrayLike, ph_lab: ArrayLike, stage_angles: Ar
     channels : names of the ``C`` channels
     tilts_deg, azimuths_deg : the coarse grid; a tilt of 0 is always tried
     refine : search a finer grid (:data:`REFINE_STEPS_DEG`) around the coarse best
+    reference : Basis, optional
+        The basis of the fit the scan gets without the tilt (the asymmetric basis for a scan
+        its test calls asymmetric): its plain joint fit's leave-one-pair-out errors, computed
+        as the candidates' are, decide :attr:`TiltFit.accepted` (:func:`tilt_decision`).
 
     Returns
     -------
@@ -365,15 +495,14 @@ def fit_tilt(basis: Basis, cells: ArrayLike, ph_lab: ArrayLike, stage_angles: Ar
             best = min(tried, key=tried.__getitem__)
             dt, db = dt / 2, db / 2
     tilt, azimuth = np.deg2rad(best[0]), np.deg2rad(best[1])
-    if best[0] > 0:
-        m = map_readings(cells, ph_lab, stage_angles, vals, tilt, azimuth)
-        g = reconstruct(basis, m.cells, m.ph, np.zeros(1), m.values[:, None, :],
-                        channels=channels, name=f"{name} (untilted)")
-        table = tilted_table(g.table, tilt, azimuth, name)
-    else:
-        # No lean: exactly the plain joint fit of the scan as read.
-        g = reconstruct(basis, cells, ph_lab, stage_angles, vals, channels=channels, name=name)
-        table = g.table
+    g, table = reconstruct_through(basis, cells, ph_lab, stage_angles, vals, tilt, azimuth,
+                                   channels=channels, name=name)
     cand = np.array([(t, b, e) for (t, b), e in tried.items()], dtype=float)
+    accepted, better, why, n_pairs = False, 0, "not judged (no reference fit)", vals.shape[0]
+    if reference is not None:
+        ref_errors = holdout_errors(reference, cells, ph_lab, stage_angles, vals, 0.0, 0.0)
+        tilt_errors = (holdout_errors(basis, cells, ph_lab, stage_angles, vals, tilt, azimuth,
+                                      prior=P) if best[0] > 0 else None)
+        accepted, better, why = tilt_decision(tilt_errors, ref_errors, float(tilt))
     return TiltFit(float(tilt), float(azimuth), tried[best], tried[(0.0, 0.0)], table, g,
-                   cand, time.perf_counter() - t0)
+                   cand, time.perf_counter() - t0, accepted, better, n_pairs, why)
