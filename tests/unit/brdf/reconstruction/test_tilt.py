@@ -11,11 +11,14 @@ import pytest
 from gonio.brdf.models import analytic as bm
 from gonio.brdf.reconstruction import shipped
 from gonio.brdf.reconstruction.basis import Basis
+from gonio.brdf.reconstruction.errors import ReconstructionError
 from gonio.brdf.reconstruction.reconstruct import reconstruct
 from gonio.brdf.reconstruction.samples import NoiseModel, simulate_samples, uniform_stage_angles
 from gonio.brdf.reconstruction.tilt import (
     fit_tilt,
     map_readings,
+    pair_rms,
+    tilt_decision,
     tilt_factor,
     tilt_rotation,
     tilted_table,
@@ -157,8 +160,11 @@ def test_a_lean_is_recovered_from_the_readings(basis: Basis) -> None:
     inner = bm.LobeSum((bm.Lambert((0.3, 0.2, 0.1)), bm.GGX(0.12, 0.12)))
     t, b = np.deg2rad(15.0), np.deg2rad(80.0)
     cells, ph, alpha, vals = _scan(_Terminated(bm.Tilted(inner, t, b, masking="none"), t, b), 3)
-    fit = fit_tilt(basis, cells, ph, alpha, vals, **SMALL_GRID)
+    fit = fit_tilt(basis, cells, ph, alpha, vals, **SMALL_GRID, reference=basis)
     assert abs(np.rad2deg(fit.tilt) - 15.0) <= 4.0
+    # A true lean of 15 deg: the rule takes it over the plain fit, on most pairs.
+    assert fit.accepted and fit.n_pairs == 10 and fit.pairs_improved >= 7
+    assert fit.settings["tilt_accepted"] is True
     assert abs((np.rad2deg(fit.azimuth) - 80.0 + 180) % 360 - 180) <= 20.0
     assert fit.holdout_error < fit.plain_holdout_error
     assert fit.settings["tilt_deg"] == pytest.approx(np.rad2deg(fit.tilt), abs=1e-3)
@@ -168,8 +174,9 @@ def test_a_lean_is_recovered_from_the_readings(basis: Basis) -> None:
 def test_an_untilted_specimen_keeps_no_lean(basis: Basis) -> None:
     model = bm.Rotated(bm.GGX(0.1, 0.35), 0.7)
     cells, ph, alpha, vals = _scan(model, 5)
-    fit = fit_tilt(basis, cells, ph, alpha, vals, **SMALL_GRID)
+    fit = fit_tilt(basis, cells, ph, alpha, vals, **SMALL_GRID, reference=basis)
     assert fit.tilt == 0.0
+    assert not fit.accepted and "tilt 0" in fit.decision
     assert fit.holdout_error == fit.plain_holdout_error
     # No lean: the plain joint fit of the scan as read, unchanged.
     plain = reconstruct(basis, cells, ph, alpha, vals)
@@ -186,3 +193,45 @@ def test_readings_below_the_lean_leave_the_fit() -> None:
     # sensor at the normal: a 30 deg lean towards +x puts the light at 50 deg, then at 110.
     np.testing.assert_array_equal(m.keep, [[True, False]])
     assert m.values.shape == (int(m.keep.sum()), 3)
+
+
+def test_pair_rms_is_the_rms_over_each_pairs_readings() -> None:
+    e = np.zeros((2, 2, 2))
+    e[0] = [[3.0, 0.0], [4.0, 0.0]]
+    e[1] = [[1.0, 1.0], [1.0, 1.0]]
+    # Pair 0: sqrt((9 + 16) / 4) = 2.5; pair 1: 1.
+    np.testing.assert_allclose(pair_rms(e), [2.5, 1.0])
+
+
+def _errors(per_pair: list[float]) -> np.ndarray:
+    """(n, 3, 1) held-out errors whose per-pair RMS is ``per_pair``."""
+    return np.broadcast_to(np.asarray(per_pair, dtype=float)[:, None, None], (len(per_pair), 3, 1))
+
+
+def test_the_rule_counts_pairs_not_the_pooled_error() -> None:
+    ref = _errors([0.1] * 10)
+    # Lower on 7 of 10 pairs: 7 >= ceil(0.7 * 10), accepted.
+    ok, better, why = tilt_decision(_errors([0.05] * 7 + [0.2] * 3), ref, 0.2)
+    assert (ok, better) == (True, 7) and "7 of 10" in why
+    # Lower on 6 of 10: rejected, although the pooled error is lower (6 * 0.0025 + 4 * 0.0121
+    # = 0.0634 < 0.1 = 10 * 0.01).
+    tilt = _errors([0.05] * 6 + [0.11] * 4)
+    assert np.mean(tilt**2) < np.mean(ref**2)
+    ok, better, why = tilt_decision(tilt, ref, 0.2)
+    assert (ok, better) == (False, 6) and "fewer than 7" in why
+    # A lean that wins the pooled error on three pairs and loses the other seven (the choice
+    # set's misplaced lean): 3 * 0 + 7 * 0.0121 = 0.0847 < 0.1 pooled, rejected.
+    ok, better, _ = tilt_decision(_errors([0.0] * 3 + [0.11] * 7), ref, 0.2)
+    assert (ok, better) == (False, 3)
+
+
+def test_the_rule_refuses_what_it_cannot_judge() -> None:
+    ref = _errors([0.1] * 10)
+    better = _errors([0.01] * 10)
+    assert tilt_decision(better, ref, 0.0)[0] is False  # no lean
+    assert tilt_decision(None, ref, 0.2)[0] is False
+    assert tilt_decision(better, None, 0.2)[0] is False
+    ok, n, why = tilt_decision(_errors([0.01] * 4), _errors([0.1] * 4), 0.2)
+    assert (ok, n) == (False, 4) and "too few" in why
+    with pytest.raises(ReconstructionError, match="shapes"):
+        tilt_decision(_errors([0.01] * 5), _errors([0.1] * 6), 0.2)
