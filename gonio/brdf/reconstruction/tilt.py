@@ -25,6 +25,14 @@ their evidences are not comparable, while the held-out error of the original rea
 it is what the result is judged by. ``t = 0`` is always a candidate, so a specimen without a
 lean keeps the plain fit when nothing is gained. The search is a coarse grid, then a finer one
 around its best.
+
+Whether the lean found should replace the fit a scan gets without it (the reference: the
+asymmetric basis' joint fit for a scan its test calls asymmetric) is a separate question, the
+selection rule (:func:`tilt_decision`): the pooled held-out error cannot answer it, since a
+misplaced lean can win it on the strength of a few pairs, so the rule counts the pairs whose
+held-out error the lean lowers against the reference's (computed alike, :func:`holdout_errors`
+at no lean with the reference basis) and accepts at least :data:`ACCEPT_PAIR_SHARE` of them.
+The product does not call it yet (docs/science.md 7.4).
 """
 
 from __future__ import annotations
