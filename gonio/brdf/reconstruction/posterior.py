@@ -529,7 +529,8 @@ class ScanPosterior:
         """Root of the posterior's expected weighted squared log error over the whole table.
 
         The error the model itself expects (components of the basis only: what the basis
-        cannot represent is not in it).
+        cannot represent is not in it). Before any reading, a design's counterpart is
+        :func:`gonio.brdf.design.posterior.design_expected_log_rmse`.
         """
         return float(np.sqrt(self.s2 * self.weighted_variance() / self.norm))
 
