@@ -37,6 +37,7 @@ import numpy as np
 import scipy.linalg
 from numpy.typing import ArrayLike, NDArray
 
+from gonio.brdf.models.analytic import facet_rotation
 from gonio.brdf.reconstruction.basis import Basis, BasisError, inverse_remap, remap
 from gonio.brdf.reconstruction.errors import ReconstructionError
 from gonio.brdf.reconstruction.joint import JOINT_ETA, JOINT_LAM, joint_prior
@@ -59,25 +60,6 @@ REFINE_STEPS_DEG: tuple[float, float] = (2.5, 10.0)
 HORIZON_COS = 0.02
 
 
-def tilt_rotation(tilt: float, azimuth: float) -> FloatArray:
-    """(3, 3) rotation taking the normal leaning ``tilt`` towards ``azimuth`` onto ``+z``.
-
-    The shortest rotation (about ``n x z``), so a lean of 0 is the identity and the tangent
-    frame follows the lean as a renderer's normal map builds it.
-
-    Parameters
-    ----------
-    tilt, azimuth : float, radians
-    """
-    st, ct = np.sin(tilt), np.cos(tilt)
-    if abs(st) < 1e-12:
-        return np.eye(3)
-    # Axis n x z / |n x z| = (sin b, -cos b, 0); Rodrigues with angle t.
-    k = np.array([np.sin(azimuth), -np.cos(azimuth), 0.0])
-    K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
-    return np.eye(3) + st * K + (1.0 - ct) * (K @ K)
-
-
 def tilt_factor(R: FloatArray, wo: ArrayLike, terminator: bool = True) -> FloatArray:
     """The normal map's factor on ``g`` (module notes), 0 below either horizon.
 
@@ -90,7 +72,7 @@ def tilt_factor(R: FloatArray, wo: ArrayLike, terminator: bool = True) -> FloatA
 
     Parameters
     ----------
-    R : (3, 3) from :func:`tilt_rotation`
+    R : (3, 3) from :func:`facet_rotation`
     wo : (..., 3) unit vectors, specimen frame
     terminator : bool
         Include the shadowing term (default); without it, the bare normal map of
@@ -135,7 +117,7 @@ class MappedReadings:
 
 def map_readings(cells: ArrayLike, ph_lab: ArrayLike, stage_angles: ArrayLike,
                  values: ArrayLike, tilt: float, azimuth: float) -> MappedReadings:
-    """Every reading's directions through :func:`tilt_rotation` and its value over the factor.
+    """Every reading's directions through :func:`facet_rotation` and its value over the factor.
 
     Parameters
     ----------
@@ -153,7 +135,7 @@ def map_readings(cells: ArrayLike, ph_lab: ArrayLike, stage_angles: ArrayLike,
     wi_lab, wo_lab = pair_directions(cells, ph_lab)
     wi = geo.lab_to_specimen(wi_lab[:, None, :], alpha[None, :])  # (n, r, 3)
     wo = geo.lab_to_specimen(wo_lab[:, None, :], alpha[None, :])
-    R = tilt_rotation(tilt, azimuth)
+    R = facet_rotation(tilt, azimuth)
     ri, ro = wi @ R.T, wo @ R.T
     keep = (ri[..., 2] > HORIZON_COS) & (ro[..., 2] > HORIZON_COS)
     th, ph, td, pd = geo.directions_to_half_diff(ri[keep], ro[keep])
@@ -235,7 +217,7 @@ def tilted_table(g: BRDFTable, tilt: float, azimuth: float, name: str = "tilt fi
                  interpolation: interp.Interpolation = "log-pchip") -> BRDFTable:
     """The table on gonio's grid of ``g`` seen through the lean (module notes).
 
-    Every valid cell's directions are mapped through :func:`tilt_rotation`, ``g`` is looked up
+    Every valid cell's directions are mapped through :func:`facet_rotation`, ``g`` is looked up
     there and multiplied by the factor; 0 where the lean puts either direction below its
     horizon. The lookup is the pictures' monotone cubic in ``ln(f + eps)``
     (:mod:`gonio.brdf.tables.interpolation`, math.md 3): the mapped cells fall between the
@@ -254,7 +236,7 @@ def tilted_table(g: BRDFTable, tilt: float, azimuth: float, name: str = "tilt fi
     BRDFTable, float32, NaN at invalid cells
     """
     th, td, pd = geo.grid_angles()
-    R = tilt_rotation(tilt, azimuth)
+    R = facet_rotation(tilt, azimuth)
     v = np.asarray(g.values)
     flat = np.moveaxis(v, 0, -1).reshape(-1, v.shape[0]).astype(np.float64)
     ok: NDArray[np.bool_] = np.asarray(np.isfinite(flat).all(axis=1))
