@@ -243,7 +243,7 @@ def tilted_table(g: BRDFTable, tilt: float, azimuth: float, name: str = "tilt fi
     flat = np.where(ok[:, None], np.maximum(flat, 0.0), 0.0)
     eps = interp.log_offset(flat, ok)
     logs = np.log(flat + eps)
-    slopes = interp.node_slopes(logs, ok)
+    nodes = interp.pack_nodes(logs, interp.node_slopes(logs, ok))
     valid = ok.astype(np.float64)
     out = np.full((g.n_channels, geo.N_PH, *VALID_MASK.shape), np.nan, dtype=np.float32)
     for k, ph in enumerate(geo.PH_GRID):
@@ -255,7 +255,7 @@ def tilted_table(g: BRDFTable, tilt: float, azimuth: float, name: str = "tilt fi
             val[up] = g.eval(ri[up], ro[up])
         else:
             mth, mph, mtd, mpd = geo.directions_to_half_diff(ri[up], ro[up])
-            lg, weight = interp.log_pchip_lookup(logs, slopes, valid, mth, mph, mtd, mpd)
+            lg, weight = interp.log_pchip_lookup(nodes, valid, mth, mph, mtd, mpd)
             val[up] = np.where(weight[:, None] > 1e-12, np.exp(lg) - eps, 0.0)
         val *= tilt_factor(R, wo)[:, None]
         out[:, k][:, VALID_MASK] = np.nan_to_num(np.maximum(val, 0.0), nan=0.0).T
