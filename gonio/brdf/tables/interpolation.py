@@ -191,13 +191,14 @@ def log_pchip_lookup(nodes: FloatArray, valid: NDArray[np.floating],
         a0, a1 = (1 - t) * k0, t * k1
         wl = a0 + a1
         ww = w * wl
-        both = (k0 > 0) & (k1 > 0)
-        if both.all():
-            val = h00 * y0 + h10 * s0 + h01 * y1 + h11 * s1
-        else:
+        # The cubic (hermite(), its polynomials computed once above), then the straight
+        # line where an end of the interval is invalid.
+        val = h00 * y0 + h10 * s0 + h01 * y1 + h11 * s1
+        one_end = (k0 <= 0) | (k1 <= 0)
+        if one_end.any():
             with np.errstate(invalid="ignore", divide="ignore"):
-                line = (a0[:, None] * y0 + a1[:, None] * y1) / wl[:, None]
-            val = np.where(both[:, None], hermite(y0, y1, s0, s1, tt), line)
+                val[one_end] = ((a0[one_end, None] * y0[one_end] + a1[one_end, None]
+                                 * y1[one_end]) / wl[one_end, None])
             # A corner without a valid node along th adds nothing (its line is 0 / 0).
             val[ww <= 0] = 0.0
         acc += ww[:, None] * val
