@@ -38,15 +38,15 @@ from __future__ import annotations
 
 import argparse
 import hashlib
-import inspect
 import sys
 import time
+from pathlib import Path
 from typing import Any
 
 import bench_unseen as bu  # the sibling bench (the script's folder is on sys.path)
 import numpy as np
 
-from gonio.brdf.design import posterior as posterior_module
+import gonio.brdf
 from gonio.brdf.design.constraints import RigConstraints
 from gonio.brdf.design.posterior import posterior_design
 from gonio.brdf.design.presets import get_preset, preset_names
@@ -87,16 +87,30 @@ def material_sets() -> tuple[list[bu.Material], list[bu.Material]]:
     return choice, test
 
 
+def design_code_digest() -> str:
+    """Digest of the source of every module the design search can run: the design package
+    and the reconstruction package it calls (its prior, rows and arcs), and the table
+    geometry. Any edit there designs again; a few needless rebuilds are cheaper than a stale
+    design read from the cache."""
+    root = Path(gonio.brdf.__file__).parent
+    h = hashlib.sha256()
+    for path in sorted([*(root / "design").glob("*.py"), *(root / "reconstruction").glob("*.py"),
+                        *(root / "tables").glob("*.py")]):
+        h.update(path.relative_to(root).as_posix().encode())
+        h.update(path.read_bytes())
+    return h.hexdigest()[:16]
+
+
 def design_key(b: Basis, mix: float, importance: np.ndarray, seed: int,
                rig: RigConstraints) -> str:
     """Everything a cached design depends on: the basis, the joint fit and default design
-    (``bu.fit_fingerprint``), the design code's source (the render-weighted path, which the
-    fingerprint's probe does not run), the rig limits, the arc it is designed for, the mix,
-    the seed and, when it weighs cells (``mix > 0``), the render-importance map's values,
-    so a change to the renderings designs again."""
+    (``bu.fit_fingerprint``), the source of what the design runs (:func:`design_code_digest`:
+    the render-weighted path, which the fingerprint's probe does not run), the rig limits,
+    the arc it is designed for, the mix, the seed and, when it weighs cells (``mix > 0``),
+    the render-importance map's values, so a change to the renderings designs again."""
     weight = (hashlib.sha256(np.ascontiguousarray(importance, dtype=np.float64).tobytes())
               .hexdigest()[:16] if mix > 0 else "none")
-    code = hashlib.sha256(inspect.getsource(posterior_module).encode()).hexdigest()[:16]
+    code = design_code_digest()
     return (f"{bu.basis_id(b)}-{bu.fit_fingerprint()}-{mix:g}-code{code}-{rig!r}"
             f"-span{bu.SPAN['design']:g}-importance{weight}" + (f"-seed{seed}" if seed else ""))
 

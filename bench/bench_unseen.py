@@ -397,7 +397,7 @@ def score(rec_table: BRDFTable, truth: BRDFTable, rec: Any = None, readings: int
 def calibrate(rows: dict[str, dict[str, Score]], mats: list[Material]) -> None:
     """Fit ``ln(log_rmse) = a + b ln(cv_sample_error) + c ln(n r)`` on half the materials
     (alternate positions within each kind) and validate on the other half."""
-    from gonio.brdf.reconstruction.reconstruct import LOG_RMSE_MODEL
+    from gonio.brdf.reconstruction.selfcheck import VF_LOG_RMSE_MODEL
 
     order = {m.name: i for i, m in enumerate([m for m in mats if m.kind == "measured"])}
     order.update({m.name: i for i, m in enumerate([m for m in mats if m.kind == "aniso"])})
@@ -407,8 +407,8 @@ def calibrate(rows: dict[str, dict[str, Score]], mats: list[Material]) -> None:
     X = np.array([[1.0, np.log(s.cv_rel), np.log(s.n * s.r)] for s in fit])
     y = np.log([s.log_rmse for s in fit])
     coef = np.linalg.lstsq(X, y, rcond=None)[0]
-    print(f"\ncalibration (even positions, {len(fit)} scans): LOG_RMSE_MODEL = "
-          f"({coef[0]:.3f}, {coef[1]:.3f}, {coef[2]:.3f}); module has {LOG_RMSE_MODEL}")
+    print(f"\ncalibration (even positions, {len(fit)} scans): VF_LOG_RMSE_MODEL = "
+          f"({coef[0]:.3f}, {coef[1]:.3f}, {coef[2]:.3f}); module has {VF_LOG_RMSE_MODEL}")
     for half, label in ((0, "calibration half"), (1, "validation half")):
         ss = [s for h, s in data if h == half]
         pred = np.exp(coef[0]) * np.array([s.cv_rel for s in ss]) ** coef[1] * np.array(

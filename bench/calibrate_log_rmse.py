@@ -97,7 +97,7 @@ from gonio.brdf.reconstruction.selfcheck import (
     LOG_RMSE_CAPS,
     LOG_RMSE_FEATURES,
     LOG_RMSE_MODEL,
-    predict_log_rmse,
+    predict_joint_log_rmse,
 )
 from gonio.brdf.tables import geometry as geo
 from gonio.brdf.tables import metrics
@@ -446,7 +446,8 @@ def main(argv: list[str] | None = None) -> int:
             args.rows.write_text(json.dumps(rows))
     print(f"scans ready in {time.perf_counter() - t0:.0f} s")
     for r in rows:  # the module's current model (the file may predate it)
-        r["predicted"] = predict_log_rmse(r["expected"], r["mahalanobis"], r["cv_sample_error"])
+        r["predicted"] = predict_joint_log_rmse(r["expected"], r["mahalanobis"],
+                                                r["cv_sample_error"])
     fit_rows = [r for r in rows if r["design"] in args.fit_on
                 and float(r.get("span_deg", 360.0)) in args.fit_arcs]
     report(rows, fit_rows)

@@ -51,6 +51,7 @@ if TYPE_CHECKING:
 __all__ = [
     "DesignDevice",
     "DesignFragment",
+    "FragmentPair",
     "apply_design",
     "dump_fragment",
     "load_fragment",
@@ -68,8 +69,9 @@ class DesignDevice(BaseModel):
     phi_deg: float
 
 
-class DesignPair(BaseModel):
-    """One measured pair of a design, by device names."""
+class FragmentPair(BaseModel):
+    """One measured pair of a design fragment, by device names (the API's view of a designed
+    pair, with its half/difference cell, is :class:`gonio.sampling_design.DesignPair`)."""
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
@@ -88,7 +90,7 @@ class DesignFragment(BaseModel):
 
     lights: Annotated[list[DesignDevice], Field(min_length=1)]
     sensors: Annotated[list[DesignDevice], Field(min_length=1)]
-    pairs: Literal["all"] | Annotated[list[DesignPair], Field(min_length=1)] = "all"
+    pairs: Literal["all"] | Annotated[list[FragmentPair], Field(min_length=1)] = "all"
     #: What the design expects of a scan (``gonio design`` writes it when it has the held-out
     #: error); :func:`apply_design` carries it into the rig config.
     design: DesignExpectation | None = None

@@ -174,6 +174,8 @@ class Device(BaseModel):
     phi_deg: float = Field(description="lab azimuth, degrees in [0, 360)")
 
 
+# Its docstring is the API schema's description; a design fragment's pair (device names
+# only) is gonio.rigdesign.FragmentPair.
 class DesignPair(BaseModel):
     """One measured pair: its half/difference cell and its devices."""
 

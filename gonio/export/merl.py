@@ -1,4 +1,7 @@
-"""The MERL ``.binary`` BRDF layout (Matusik et al. 2003): writer and reader.
+"""The MERL ``.binary`` BRDF layout (Matusik et al. 2003): the writer.
+
+The reader, shared with the library import, is
+:func:`gonio.brdf.materials.merl.read_merl_values` (the layout's one owner).
 
 Layout, as the MERL database's published reader expects it:
 
@@ -44,7 +47,6 @@ from gonio.brdf.materials.merl import (
     SCALES,
     SHAPE,
     MerlError,
-    read_merl_values,
 )
 from gonio.brdf.pictures.render import TableLookup
 from gonio.brdf.tables import geometry as geo
@@ -155,15 +157,3 @@ def write_merl(table: BRDFTable, path: str | os.PathLike[str],
     if provenance is not None:
         write_atomically(sidecar_path(p), json.dumps(merl_sidecar(table, provenance), indent=2))
     return p
-
-
-def read_merl(path: str | os.PathLike[str]) -> NDArray[np.float64]:
-    """Read a MERL ``.binary`` file of the database's dimensions: (3, 90, 90, 180) BRDF in
-    1/sr, NaN below the horizon (:func:`gonio.brdf.materials.merl.read_merl_values`).
-
-    Raises
-    ------
-    MerlError
-        Missing file, wrong dimensions or wrong size, with what was found.
-    """
-    return read_merl_values(path, SHAPE)

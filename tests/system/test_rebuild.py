@@ -77,7 +77,8 @@ def test_a_rebuilt_result_holds_the_design_comparison_colour_and_coverage(tmp_pa
         assert sim.config.sensors[0].wavelengths_nm  # spectral: colour from the rig config
         config = sim.config.model_copy(update={"design": DESIGN})
         svc = GonioService(JobStore(data / "gonio.sqlite"), build_rig(sim.config),
-                           rig_config=config, basis=BasisSupply(lambda: basis), data_dir=data)
+                           rig_config=config, basis=BasisSupply(lambda: basis), data_dir=data,
+                           fit_exports=False)  # a rebuild with fits: test_disk_full.py
 
         async def go() -> int:
             await svc.start()

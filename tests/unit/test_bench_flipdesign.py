@@ -53,3 +53,27 @@ def test_the_design_key_changes_with_the_importance_map_the_rig_and_the_arc(
         assert key != bf.design_key(b, 0.5, imp, 0, rig)
     finally:
         bu.SPAN["design"] = saved
+
+
+def test_the_design_code_digest_follows_every_module_the_design_runs(
+        benches: tuple[ModuleType, ModuleType], tmp_path: Path,
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """An edit to a module the design calls (the joint fit's prior, not the design module
+    itself) changes the digest; the digest is read from a copy of the package here."""
+    import shutil
+
+    import gonio.brdf
+
+    bf, _ = benches
+    copy = tmp_path / "brdf"
+    shutil.copytree(Path(gonio.brdf.__file__).parent, copy,
+                    ignore=shutil.ignore_patterns("*.npz", "__pycache__", "data"))
+    monkeypatch.setattr(gonio.brdf, "__file__", str(copy / "__init__.py"))
+    before = bf.design_code_digest()
+    assert before == bf.design_code_digest()
+    joint = copy / "reconstruction" / "joint.py"
+    joint.write_text(joint.read_text() + "\n# an edit\n")
+    edited = bf.design_code_digest()
+    assert edited != before
+    (copy / "pictures" / "render.py").write_text("# outside what the design runs\n")
+    assert bf.design_code_digest() == edited

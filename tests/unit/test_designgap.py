@@ -17,7 +17,7 @@ from gonio.brdf.reconstruction.selfcheck import (
     estimate_parts,
     final_log_rmse,
     final_parts,
-    predict_log_rmse,
+    predict_joint_log_rmse,
 )
 from gonio.cli import main
 from gonio.config import ConfigError, DesignExpectation, load_rig_config, read_toml
@@ -117,7 +117,7 @@ def test_the_estimate_splits_into_its_two_parts_as_variances() -> None:
     und, out = estimate_parts(e, m, cv)
     assert und == pytest.approx(math.sqrt(math.exp(a)) * e)
     assert out == pytest.approx(math.sqrt(math.exp(b) * m ** c * cv ** d))
-    assert math.hypot(und, out) == pytest.approx(predict_log_rmse(e, m, cv))
+    assert math.hypot(und, out) == pytest.approx(predict_joint_log_rmse(e, m, cv))
     # Above the caps the witnesses count as the caps, as in the estimate itself.
     _, capped = estimate_parts(e, 10.0, 100.0)
     assert capped == pytest.approx(math.sqrt(math.exp(b) * LOG_RMSE_CAPS[0] ** c
@@ -135,7 +135,7 @@ def test_the_final_estimate_splits_into_three_parts_as_variances() -> None:
     parts = final_parts(e, m, cv, u, quiet)
     assert parts == pytest.approx((0.61 * und, 0.61 * out, 0.19 * math.sqrt(u)))
     assert math.hypot(*parts) == pytest.approx(
-        final_log_rmse(predict_log_rmse(e, m, cv), u, quiet))
+        final_log_rmse(predict_joint_log_rmse(e, m, cv), u, quiet))
     floor = BasisMisfit(chi2=900.0, log_misfit=0.5, persistent_pairs=6, n_pairs=10, n_angles=8)
     fparts = final_parts(e, m, cv, u, floor)
     assert math.hypot(*fparts) == pytest.approx(0.5)

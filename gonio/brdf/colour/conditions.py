@@ -13,6 +13,7 @@ from __future__ import annotations
 import functools
 import warnings
 from dataclasses import dataclass
+from types import ModuleType
 from typing import Any
 
 import numpy as np
@@ -20,10 +21,19 @@ from numpy.typing import ArrayLike, NDArray
 
 from gonio.brdf.colour.errors import ColourError
 
-with warnings.catch_warnings():
-    # colour-science warns at import that its plotting needs matplotlib; gonio plots no colour.
-    warnings.simplefilter("ignore")
-    import colour
+
+@functools.cache
+def _colour() -> ModuleType:
+    """colour-science, imported on first use: it takes about half a second, which every
+    ``gonio`` command paid at start (the CLI's parser imports this module) for a colour
+    computation few commands make."""
+    with warnings.catch_warnings():
+        # colour-science warns at import that its plotting needs matplotlib; gonio plots no
+        # colour.
+        warnings.simplefilter("ignore")
+        import colour
+    return colour
+
 
 FloatArray = NDArray[np.float64]
 __all__ = ["ColourError", "ViewingConditions", "delta_e00", "resample", "sd_to_xyz",
@@ -87,7 +97,8 @@ class ViewingConditions:
     @property
     def white_xy(self) -> FloatArray:
         """(2,) chromaticity of the illuminant for the observer (colour-science's table)."""
-        return np.asarray(colour.CCS_ILLUMINANTS[self.observer_name][self.illuminant], float)
+        xy = _colour().CCS_ILLUMINANTS[self.observer_name][self.illuminant]
+        return np.asarray(xy, float)
 
     @property
     def white_xyz(self) -> FloatArray:
@@ -103,17 +114,17 @@ def _weights(conditions: ViewingConditions) -> FloatArray:
     (ASTM E308 weighting is linear in the reflectance), so a batch of spectra costs one
     matrix product instead of one library call each.
     """
-    cmfs = colour.MSDS_CMFS[conditions.observer_name]
-    illuminant = colour.SDS_ILLUMINANTS[conditions.illuminant]
+    cmfs = _colour().MSDS_CMFS[conditions.observer_name]
+    illuminant = _colour().SDS_ILLUMINANTS[conditions.illuminant]
     # The perfect diffuser fixes the normalisation k; unit spectra reuse it (E308's k depends
     # only on the illuminant and observer).
-    white = colour.SpectralDistribution(np.ones_like(GRID_NM), GRID_NM)
+    white = _colour().SpectralDistribution(np.ones_like(GRID_NM), GRID_NM)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        k = 100.0 / float(colour.sd_to_XYZ(white, cmfs, illuminant, method="ASTM E308",
+        k = 100.0 / float(_colour().sd_to_XYZ(white, cmfs, illuminant, method="ASTM E308",
                                            k=1.0)[1])
-        eye = colour.MultiSpectralDistributions(np.eye(GRID_NM.size), GRID_NM)
-        w = np.asarray(colour.msds_to_XYZ(eye, cmfs, illuminant, method="ASTM E308", k=k),
+        eye = _colour().MultiSpectralDistributions(np.eye(GRID_NM.size), GRID_NM)
+        w = np.asarray(_colour().msds_to_XYZ(eye, cmfs, illuminant, method="ASTM E308", k=k),
                        dtype=float)
     return np.ascontiguousarray(w.reshape(GRID_NM.size, 3).T)
 
@@ -157,12 +168,12 @@ def sd_to_xyz(wavelengths_nm: ArrayLike, reflectance: ArrayLike,
     -------
     (3,) array, perfect diffuser Y = 100
     """
-    sd = colour.SpectralDistribution(np.asarray(reflectance, float),
+    sd = _colour().SpectralDistribution(np.asarray(reflectance, float),
                                      np.asarray(wavelengths_nm, float))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        xyz = colour.sd_to_XYZ(sd, colour.MSDS_CMFS[conditions.observer_name],
-                               colour.SDS_ILLUMINANTS[conditions.illuminant],
+        xyz = _colour().sd_to_XYZ(sd, _colour().MSDS_CMFS[conditions.observer_name],
+                               _colour().SDS_ILLUMINANTS[conditions.illuminant],
                                method="ASTM E308")
     return np.asarray(xyz, dtype=float)
 
@@ -184,7 +195,7 @@ def resample(wavelengths_nm: ArrayLike, values: ArrayLike) -> FloatArray:
     wl = np.asarray(wavelengths_nm, dtype=float)
     v = np.asarray(values, dtype=float)
     flat = v.reshape(-1, wl.size)
-    shape = colour.SpectralShape(GRID_START_NM, GRID_END_NM, GRID_STEP_NM)
+    shape = _colour().SpectralShape(GRID_START_NM, GRID_END_NM, GRID_STEP_NM)
     if wl.ndim != 1 or wl.size < 2 or np.any(np.diff(wl) <= 0):
         raise ColourError(
             f"spectral wavelengths must be at least 2 increasing values in nm; got {wl.tolist()}"
@@ -194,9 +205,9 @@ def resample(wavelengths_nm: ArrayLike, values: ArrayLike) -> FloatArray:
     out = np.empty((flat.shape[0], GRID_NM.size))
     kwargs: dict[str, Any] = {"extrapolator_kwargs": {"method": "Constant"}}
     if wl.size < 6:
-        kwargs["interpolator"] = colour.LinearInterpolator
+        kwargs["interpolator"] = _colour().LinearInterpolator
     for i, row in enumerate(flat):
-        sd = colour.SpectralDistribution(row, wl)
+        sd = _colour().SpectralDistribution(row, wl)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             sd = sd.copy().align(shape, **kwargs)
@@ -219,19 +230,19 @@ def xyz_to_lab(xyz: ArrayLike, conditions: ViewingConditions) -> FloatArray:
     (..., 3) array: L*, a*, b*
     """
     x = np.asarray(xyz, dtype=float) / 100.0
-    white = colour.XYZ_to_xy(conditions.white_xyz / 100.0)
-    return np.asarray(colour.XYZ_to_Lab(x, white), dtype=float)
+    white = _colour().XYZ_to_xy(conditions.white_xyz / 100.0)
+    return np.asarray(_colour().XYZ_to_Lab(x, white), dtype=float)
 
 
 def delta_e00(lab_1: ArrayLike, lab_2: ArrayLike) -> FloatArray:
     """CIEDE2000 colour difference (``kL = kC = kH = 1``) of broadcastable (..., 3) CIELAB."""
-    return np.asarray(colour.delta_E(np.asarray(lab_1, float), np.asarray(lab_2, float),
+    return np.asarray(_colour().delta_E(np.asarray(lab_1, float), np.asarray(lab_2, float),
                                      method="CIE 2000"), dtype=float)
 
 
 def library_version() -> str:
     """The colour-science version that computed the numbers (for provenance)."""
-    return str(colour.__version__)
+    return str(_colour().__version__)
 
 
 def describe(conditions: ViewingConditions) -> dict[str, Any]:

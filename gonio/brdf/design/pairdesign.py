@@ -92,7 +92,7 @@ class PairDesign:
         The objective that chose the cells (None for presets, rig configs and product rigs).
     expected_log_rmse : float or None
         The joint fit's expected log_rmse for a scan of ``rotations`` uniform stage angles,
-        under the basis' learnt prior (:func:`gonio.brdf.design.posterior.expected_log_rmse`:
+        under the basis' learnt prior (:func:`gonio.brdf.design.posterior.design_expected_log_rmse`:
         the error the readings leave inside the basis; what the basis cannot represent is not
         in it). None when the basis is not a gonio ``Basis``.
     rotations : int or None

@@ -10,7 +10,7 @@ evaluates a given geometry (a preset or a rig config) the same way. All return a
 
 Every optimized design reports the objective that made it, ``kappa`` of its rows and, for a
 gonio :class:`~gonio.brdf.reconstruction.basis.Basis`, the joint fit's expected log_rmse
-(:func:`gonio.brdf.design.posterior.expected_log_rmse`), whichever objective chose it; only
+(:func:`gonio.brdf.design.posterior.design_expected_log_rmse`), whichever objective chose it; only
 the statistics of the search that actually ran (:class:`SearchResult` or
 :class:`~gonio.brdf.design.pairdesign.GreedyStats`).
 """
@@ -36,7 +36,11 @@ from gonio.brdf.design.errors import DesignError, DesignTimeout, FeasibilityErro
 from gonio.brdf.design.mounting import MountPlanner
 from gonio.brdf.design.pairdesign import OBJECTIVES, BasisLike, Objective, PairDesign
 from gonio.brdf.design.placement import place_pairs
-from gonio.brdf.design.posterior import expected_log_rmse, posterior_design, prior_model
+from gonio.brdf.design.posterior import (
+    design_expected_log_rmse,
+    posterior_design,
+    prior_model,
+)
 from gonio.brdf.design.search import optimize_rows
 from gonio.brdf.reconstruction.basis import Basis
 from gonio.brdf.reconstruction.samples import DEFAULT_SPAN_DEG, SPANS_DEG
@@ -239,7 +243,7 @@ def with_expected_error(basis: BasisLike, design: PairDesign, rotations: int,
     over ``span_deg`` (180 or 360 degrees).
 
     For any geometry (an optimized design, a preset, a product rig): the expected error of its
-    cells' basis rows (:func:`gonio.brdf.design.posterior.expected_log_rmse`; off-grid cells
+    cells' basis rows (:func:`gonio.brdf.design.posterior.design_expected_log_rmse`; off-grid cells
     read the basis's interpolated rows). ``design`` unchanged when ``basis`` is not a gonio
     :class:`~gonio.brdf.reconstruction.basis.Basis` (no prior to take the expectation under).
     """
@@ -247,7 +251,7 @@ def with_expected_error(basis: BasisLike, design: PairDesign, rotations: int,
         return design
     rows = basis.rows_at(design.cells[:, 0], design.cells[:, 1], design.cells[:, 2])
     model = prior_model(basis, rotations, span_deg=span_deg)
-    return replace(design, expected_log_rmse=expected_log_rmse(model, rows),
+    return replace(design, expected_log_rmse=design_expected_log_rmse(model, rows),
                    rotations=int(rotations), span_deg=float(span_deg))
 
 

@@ -57,7 +57,7 @@ far still mount (:func:`~gonio.brdf.design.placement.place_pairs`, a few orders 
 none of the best cells of a step mounts, :func:`~gonio.brdf.design.pairs.design_pairs` lets
 the condition-number search (which plans mounts as it goes) make the design instead.
 
-Expected log_rmse (:func:`expected_log_rmse`). ``ph_prior`` is the covariance of the training
+Expected log_rmse (:func:`design_expected_log_rmse`). ``ph_prior`` is the covariance of the training
 coefficients times the number of training columns (``Basis.provenance["n_columns"]``), so the
 prior of one material is ``P_m / n_columns``; with that scale the expected squared metric error
 divided by ``sum wV`` over the valid cells (``log_rmse``'s denominator per slice) is an
@@ -308,8 +308,12 @@ def expected_error(model: PriorModel, rows: ArrayLike) -> float:
     return total
 
 
-def expected_log_rmse(model: PriorModel, rows: ArrayLike) -> float:
-    """The joint fit's expected ``log_rmse`` after reading ``rows`` (module notes).
+def design_expected_log_rmse(model: PriorModel, rows: ArrayLike) -> float:
+    """A design's expected ``log_rmse``: the joint fit's, after reading ``rows``, under the
+    prior ``model`` (module notes).
+
+    Not :attr:`gonio.brdf.reconstruction.posterior.ScanPosterior.expected_log_rmse`, the same
+    expectation for one scan's readings under the prior scaled to its material.
 
     ``sqrt(scale * expected_error(model, rows) / norm)``: in ``log_rmse`` units for a model
     from :func:`prior_model` of a trained basis. It counts only what the readings leave
@@ -470,7 +474,7 @@ def posterior_design(
     PairDesign
         ``name="optimized"``, ``objective="posterior"``; ``kappa`` is the condition number of
         its rows, for comparison, ``expected_log_rmse`` the objective's own value
-        (:func:`expected_log_rmse`), ``greedy`` what the choice did.
+        (:func:`design_expected_log_rmse`), ``greedy`` what the choice did.
 
     Raises
     ------
@@ -540,7 +544,7 @@ def posterior_design(
                         mount_checks=checks, first=int(first),
                         seconds=time.perf_counter() - t0)
     return replace(design, objective="posterior",
-                   expected_log_rmse=expected_log_rmse(model, q),
+                   expected_log_rmse=design_expected_log_rmse(model, q),
                    rotations=int(rotations), span_deg=float(span_deg), greedy=stats,
                    colour_pairs=int(fixed.shape[0]))
 

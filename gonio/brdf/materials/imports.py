@@ -47,7 +47,7 @@ class TableImportError(AdvisedError):
     """A file cannot be imported; the message says why and what to do."""
 
 
-def read_merl(path: str | os.PathLike[str], name: str | None = None) -> BRDFTable:
+def read_merl_table(path: str | os.PathLike[str], name: str | None = None) -> BRDFTable:
     """Tabulate a MERL ``.binary`` file on gonio's grid (layout in the module notes).
 
     Returns
@@ -100,7 +100,7 @@ def read_any(path: str | os.PathLike[str], name: str | None = None) -> BRDFTable
 
         t = read_rgl(p, name)  # RGLError (a ValueError) says how to get mitsuba
     elif suffix == ".binary":
-        t = read_merl(p, name)
+        t = read_merl_table(p, name)
     elif suffix == ".npz":
         try:
             t = BRDFTable.load(p)

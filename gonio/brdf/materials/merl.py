@@ -14,8 +14,9 @@ Bins: ``i_theta_d = floor(theta_d / (pi/2) n_td)``, ``i_phi_d = floor(phi_d / pi
 ``phi_d`` in ``[0, pi)`` (reciprocity); ``theta_h`` is binned non-linearly,
 ``i_theta_h = floor(n_th sqrt(theta_h / (pi/2)))``, fine near the specular peak.
 
-The writer (:mod:`gonio.export.merl`) and the library import (:mod:`gonio.brdf.materials.imports`)
-both read through :func:`read_merl_values`, so the layout lives here once.
+The writer (:mod:`gonio.export.merl`) takes the layout from here, and everything that reads a
+MERL file (the library import, :mod:`gonio.brdf.materials.imports`, and whatever reads an
+exported file back) reads through :func:`read_merl_values`, so the layout lives here once.
 """
 
 from __future__ import annotations

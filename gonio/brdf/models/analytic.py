@@ -623,18 +623,48 @@ class Rotated(_Wrapping):
         )
 
 
+def facet_rotation(tilt: float, azimuth: float) -> FloatArray:
+    """The facet frame of a lean: the rotation taking the normal that leans ``tilt`` towards
+    ``azimuth``, ``n = (sin t cos b, sin t sin b, cos t)``, onto ``+z``.
+
+    The shortest such rotation, by ``tilt`` about the level axis ``n x z / |n x z| =
+    (sin b, -cos b, 0)`` (Rodrigues' formula), so no lean is the identity and the tangent
+    frame follows the lean as a renderer's normal map builds it. A specimen-frame direction
+    ``w`` in the facet's frame is ``R w`` (rows: ``w @ R.T``). :class:`Tilted` and the
+    tilt fit (:mod:`gonio.brdf.reconstruction.tilt`) both use it.
+
+    Parameters
+    ----------
+    tilt : float, radians
+        How far the normal leans from ``+z``.
+    azimuth : float, radians
+        The specimen-frame azimuth it leans toward.
+
+    Returns
+    -------
+    (3, 3) float64
+        ``R``, orthonormal with determinant 1 (dimensionless).
+    """
+    st, ct = np.sin(tilt), np.cos(tilt)
+    if abs(st) < 1e-12:
+        return np.eye(3)
+    k = np.array([np.sin(azimuth), -np.cos(azimuth), 0.0])
+    K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    return np.asarray(np.eye(3) + st * K + (1.0 - ct) * (K @ K), dtype=float)
+
+
 @dataclass(frozen=True)
 class Tilted(_Wrapping):
     """A model on facets whose normal leans ``tilt`` radians toward azimuth ``azimuth``.
 
     A constant normal map made physical: a sawtooth (a blazed profile) whose facets all have
     the normal ``n' = (sin t cos p, sin t sin p, cos t)``, joined by vertical risers that reflect
-    nothing. Directions are expressed in the facet's frame (``w' = R^-1 w``, ``R`` the rotation
-    about ``z x n'`` that takes ``z`` to ``n'``). The facets' projected area, seen from ``w``, is
-    ``g(w) = cos t' / (cos t cos t_w)`` times the surface's (``cos t'``, ``cos t_w`` the
-    cosines of ``w`` to the facet and surface normals); from the side the facets face it is
-    above 1 and the risers hide the excess, from the other side the risers mask the rest. With
-    shadowing and masking taken independent,
+    nothing. Directions are expressed in the facet's frame (``w' = R w``, ``R`` the rotation
+    about ``n' x z`` that takes ``n'`` to ``z``: :func:`facet_rotation`). The facets' projected
+    area, seen from ``w``, is ``g(w) = cos t' / (cos t cos t_w)`` times the surface's
+    (``cos t'``, ``cos t_w`` the cosines of ``w`` to the facet and surface normals); from the
+    side the facets face it is above 1 and the risers hide the excess, from the other side the
+    risers mask the rest. With shadowing and masking taken independent,
 
     ``f(wi, wo) = cos t f'(wi', wo') G(wi) G(wo)``,  ``G(w) = min(1, g(w))``,
 
@@ -675,11 +705,8 @@ class Tilted(_Wrapping):
         return self.tilt == 0.0 and bool(getattr(self.model, "isotropic", False))
 
     def _to_facet(self, w: FloatArray) -> FloatArray:
-        """Specimen-frame directions in the facet's frame: ``Rz(p) Ry(-t) Rz(-p) w``."""
-        u = geo.rotate_z(w, -self.azimuth)
-        c, s = math.cos(self.tilt), math.sin(self.tilt)
-        u = np.stack([c * u[:, 0] - s * u[:, 2], u[:, 1], s * u[:, 0] + c * u[:, 2]], axis=1)
-        return np.asarray(geo.rotate_z(u, self.azimuth), dtype=float)
+        """Specimen-frame directions (n, 3) in the facet's frame (:func:`facet_rotation`)."""
+        return np.asarray(w @ facet_rotation(self.tilt, self.azimuth).T, dtype=float)
 
     def _eval_above(self, wi: FloatArray, wo: FloatArray) -> FloatArray:
         fi, fo = self._to_facet(wi), self._to_facet(wo)

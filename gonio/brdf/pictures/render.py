@@ -102,11 +102,10 @@ class TableLookup:
         self._eps = interp.log_offset(self._values, ok)
         # ln(f + eps) once per table; float64, the cubic's differences of nearby logs would
         # lose digits in float32.
-        self._logs: FloatArray | None = None
-        self._slopes: FloatArray | None = None
+        self._nodes: FloatArray | None = None
         if interpolation == "log-pchip":
-            self._logs = np.log(np.maximum(self._values.astype(np.float64), 0.0) + self._eps)
-            self._slopes = interp.node_slopes(self._logs, ok)
+            logs = np.log(np.maximum(self._values.astype(np.float64), 0.0) + self._eps)
+            self._nodes = interp.pack_nodes(logs, interp.node_slopes(logs, ok))
 
     def eval(self, wi: FloatArray, wo: FloatArray) -> FloatArray:
         """BRDF at (N, 3) direction pairs (specimen frame); (N, C), 1/sr."""
@@ -133,10 +132,10 @@ class TableLookup:
         # 1.5 million points would be gigabytes at once.
         for k in range(0, th.size, _LOOKUP_BLOCK):
             part = slice(k, k + _LOOKUP_BLOCK)
-            if self._logs is None or self._slopes is None:
+            if self._nodes is None:
                 res, weight = self._multilinear(th[part], ph[part], td[part], pd[part])
             else:
-                logs, weight = interp.log_pchip_lookup(self._logs, self._slopes, self._valid,
+                logs, weight = interp.log_pchip_lookup(self._nodes, self._valid,
                                                        th[part], ph[part], td[part], pd[part])
                 res = np.maximum(np.exp(logs) - self._eps, 0.0)
             res[weight <= 1e-12] = empty

@@ -52,7 +52,7 @@ from gonio.brdf.reconstruction.blas import one_blas_thread
 from gonio.brdf.reconstruction.errors import ReconstructionError
 from gonio.brdf.reconstruction.joint import JOINT_ETA, JOINT_LAM, joint_prior, solve_joint
 from gonio.brdf.reconstruction.periodic import arc_angle, arc_gaps
-from gonio.brdf.reconstruction.selfcheck import predict_log_rmse
+from gonio.brdf.reconstruction.selfcheck import predict_joint_log_rmse
 from gonio.brdf.reconstruction.tabulate import expand_table
 from gonio.brdf.tables import geometry as geo
 from gonio.brdf.tables.table import VALID_ROWS
@@ -529,7 +529,8 @@ class ScanPosterior:
         """Root of the posterior's expected weighted squared log error over the whole table.
 
         The error the model itself expects (components of the basis only: what the basis
-        cannot represent is not in it).
+        cannot represent is not in it). Before any reading, a design's counterpart is
+        :func:`gonio.brdf.design.posterior.design_expected_log_rmse`.
         """
         return float(np.sqrt(self.s2 * self.weighted_variance() / self.norm))
 
@@ -767,7 +768,7 @@ def next_angles(
         The scan's leave-one-pair-out relative error
         (:attr:`gonio.brdf.reconstruction.reconstruct.Reconstruction.cv_sample_error`). When
         given, a pick's drop is that of the self-estimate
-        (:func:`gonio.brdf.reconstruction.selfcheck.predict_log_rmse`, with the posterior's
+        (:func:`gonio.brdf.reconstruction.selfcheck.predict_joint_log_rmse`, with the posterior's
         ``mahalanobis``) rather than of the posterior's expected error alone: what the basis
         cannot represent does not fall with more stage angles, and a large part of it shrinks
         what a new angle buys in the whole error (errors add as variances). The self-estimate's
@@ -824,9 +825,9 @@ def next_angles(
             if cv_sample_error is None:
                 drop = post.log_rmse_drop(float(gains[k]))
             else:
-                drop = (predict_log_rmse(post.expected_log_rmse, mahal, cv_sample_error)
-                        - predict_log_rmse(post.expected_after(float(gains[k])), mahal,
-                                           cv_sample_error))
+                drop = (predict_joint_log_rmse(post.expected_log_rmse, mahal, cv_sample_error)
+                        - predict_joint_log_rmse(post.expected_after(float(gains[k])), mahal,
+                                                 cv_sample_error))
             last_drop = float(drop)
             if not (drop >= threshold and drop >= rel_threshold * post.expected_log_rmse):
                 reason = "threshold" if not picked else ""

@@ -90,7 +90,8 @@ from gonio.brdf.reconstruction.selfcheck import (
     BasisMisfit,
     basis_misfit,
     final_log_rmse,
-    predict_log_rmse,
+    predict_joint_log_rmse,
+    predict_vf_log_rmse,
     upper_log_rmse,
     widen_log_rmse,
 )
@@ -153,10 +154,11 @@ class Reconstruction:
     predicted_log_rmse : float
         The estimated ``metrics.log_rmse`` of the whole reconstruction against the true
         BRDF, calibrated on materials held out of the basis; the number to report. Joint
-        fit: :func:`gonio.brdf.reconstruction.selfcheck.predict_log_rmse` through the final
+        fit: :func:`gonio.brdf.reconstruction.selfcheck.predict_joint_log_rmse` through the final
         mapping :func:`gonio.brdf.reconstruction.selfcheck.final_log_rmse` (a coverage term;
         its own factor and a floor at the misfit when the readings show structure the basis
-        cannot hold, ``misfit``); V&F path: :func:`predict_log_rmse_vf`, widened by such a misfit.
+        cannot hold, ``misfit``); V&F path:
+        :func:`gonio.brdf.reconstruction.selfcheck.predict_vf_log_rmse`, widened by such a misfit.
     angle_log_errors : (r,) float64 or None
         Joint fit only: per stage angle (in the order given), the RMS log error (units of
         ``log_rmse``) of that angle's readings predicted from all the other angles. Where it
@@ -187,8 +189,8 @@ class Reconstruction:
         ``misfit.message(...)`` says why.
     predicted_log_rmse_unwidened : float
         The calibrated model's estimate before the final mapping
-        (:func:`gonio.brdf.reconstruction.selfcheck.predict_log_rmse` or, on V&F's path,
-        :func:`predict_log_rmse_vf`).
+        (:func:`gonio.brdf.reconstruction.selfcheck.predict_joint_log_rmse` or, on V&F's path,
+        :func:`gonio.brdf.reconstruction.selfcheck.predict_vf_log_rmse`).
     uncovered_share : float
         Joint fit only (else NaN): the share of the prior's ``log_rmse``-weighted variance
         the readings leave (0..1; :meth:`gonio.brdf.reconstruction.posterior.ScanPosterior.
@@ -769,7 +771,7 @@ def _reconstruct(
     if post is not None and np.isfinite(cv):
 
         expected, mahal = post.expected_log_rmse, post.mahalanobis
-        predicted = predict_log_rmse(expected, mahal, cv)
+        predicted = predict_joint_log_rmse(expected, mahal, cv)
         uncovered = post.uncovered_share()
         # The calibrated final mapping: a coverage term for the error where no pair looks,
         # and, when the basis cannot hold the readings (residuals well above the noise that
@@ -778,7 +780,7 @@ def _reconstruct(
         upper = upper_log_rmse(widened, misfit)
     else:
         expected = mahal = uncovered = float("nan")
-        predicted = predict_log_rmse_vf(cv, n, int(alpha.size))
+        predicted = predict_vf_log_rmse(cv, n, int(alpha.size))
         # V&F's path: never below the error the readings themselves show.
         widened = widen_log_rmse(predicted, misfit)
         upper = float("nan")  # the interval was calibrated on the joint fit only
@@ -866,40 +868,6 @@ def _vf_path(
     remapped = np.minimum(remapped + mu_t, 300.0)
     both = np.maximum(inverse_remap(remapped, fmed_t, w_t, basis.eps), 0.0)
     return coef, slices_at_stage_angles(ph_, alpha, both), has_cv
-
-
-#: ``predicted_log_rmse = exp(a) cv_sample_error^b (n r)^c`` with these ``(a, b, c)``: a
-#: least-squares fit in logs on half of the held-out materials of ``bench/bench_unseen.py``
-#: (measured materials with leave-one-out bases and mitsuba anisotropic specimens, alternate
-#: positions; 3 pair layouts + 2 presets x r = 4, 8, 16); the other half validates it
-#: (``docs/science.md`` section 7: within x2 of the truth on 78 % of those scans). The small
-#: exponents say the sample errors carry little information about the whole-table error of
-#: materials unlike the training set: the estimate is mostly a calibrated typical error for
-#: the scan's size.
-LOG_RMSE_MODEL: tuple[float, float, float] = (-1.773, 0.070, -0.177)
-
-
-def predict_log_rmse_vf(cv_sample_error: float, n_pairs: int, n_rotations: int) -> float:
-    """Calibrated estimate of the whole-BRDF ``log_rmse`` on V&F's path (:data:`LOG_RMSE_MODEL`).
-
-    The joint fit's estimate is :func:`gonio.brdf.reconstruction.selfcheck.predict_log_rmse`.
-
-    Parameters
-    ----------
-    cv_sample_error : float
-        :attr:`Reconstruction.cv_sample_error` (leave-one-pair-out relative error).
-    n_pairs, n_rotations : int
-
-    Returns
-    -------
-    float
-        NaN when ``cv_sample_error`` is NaN.
-    """
-    if not np.isfinite(cv_sample_error):
-        return float("nan")
-    a, b, c = LOG_RMSE_MODEL
-    x = max(float(cv_sample_error), 1e-6)
-    return float(np.exp(a) * x**b * float(max(n_pairs * n_rotations, 1)) ** c)
 
 
 def refine_angles(

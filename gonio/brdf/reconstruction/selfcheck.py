@@ -39,6 +39,9 @@ validation scans and on 76 % of the 121 with the default half-turn design (a con
 and over-estimates the anisotropic specimens read over half a turn (x1.43 typically with the
 default design).
 
+V&F's path has no posterior to ask: its estimate, :func:`predict_vf_log_rmse`, is a calibrated
+typical error for the scan's size and its leave-one-pair-out error (:data:`VF_LOG_RMSE_MODEL`).
+
 When the readings carry structure the basis cannot hold, the fit misses its own readings by
 more than their noise, the same way across the stage angles: :func:`basis_misfit` measures that
 against the 1 % noise model, and :func:`widen_log_rmse` keeps a flagged estimate at least as
@@ -62,7 +65,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-#: Features of :data:`LOG_RMSE_MODEL`, in the order :func:`predict_log_rmse` takes them.
+#: Features of :data:`LOG_RMSE_MODEL`, in the order :func:`predict_joint_log_rmse` takes them.
 LOG_RMSE_FEATURES: tuple[str, ...] = ("expected", "mahalanobis", "cv_sample_error")
 #: ``(a, b, c, d)`` of ``predicted^2 = exp(a) expected^2 + exp(b) mahalanobis^c cv^d``.
 LOG_RMSE_MODEL: tuple[float, float, float, float] = (0.873, -0.299, 0.653, 1.007)
@@ -73,8 +76,11 @@ LOG_RMSE_CAPS: tuple[float, float] = (2.428e-3, 17.88)
 _FLOOR = 1e-12  # keeps the logarithms finite for exact (noise-free, in-span) data
 
 
-def predict_log_rmse(expected: float, mahalanobis: float, cv_sample_error: float) -> float:
-    """Calibrated estimate of the whole-table ``log_rmse`` of a joint reconstruction.
+def predict_joint_log_rmse(expected: float, mahalanobis: float, cv_sample_error: float
+                           ) -> float:
+    """Calibrated estimate of the whole-table ``log_rmse`` of a joint reconstruction, from
+    its posterior's two witnesses (:data:`LOG_RMSE_MODEL`; V&F's path has
+    :func:`predict_vf_log_rmse`).
 
     Parameters
     ----------
@@ -112,7 +118,7 @@ def _log_terms(expected: float, mahalanobis: float, cv_sample_error: float
 
 def estimate_parts(expected: float, mahalanobis: float,
                    cv_sample_error: float) -> tuple[float, float]:
-    """The two parts of :func:`predict_log_rmse`, each in ``log_rmse`` units.
+    """The two parts of :func:`predict_joint_log_rmse`, each in ``log_rmse`` units.
 
     ``(undetermined, outside)`` with ``undetermined^2 + outside^2 = predicted^2``: what the
     readings leave undetermined inside the basis (``sqrt(exp(a)) expected``) and what the
@@ -129,6 +135,43 @@ def estimate_parts(expected: float, mahalanobis: float,
         return float("nan"), float("nan")
     undetermined, outside = _log_terms(*x)
     return float(np.exp(0.5 * undetermined)), float(np.exp(0.5 * outside))
+
+
+# ---------------------------------------------------------------------------- V&F's path
+#: ``predicted_log_rmse = exp(a) cv_sample_error^b (n r)^c`` with these ``(a, b, c)``: a
+#: least-squares fit in logs on half of the held-out materials of ``bench/bench_unseen.py``
+#: (measured materials with leave-one-out bases and mitsuba anisotropic specimens, alternate
+#: positions; 3 pair layouts + 2 presets x r = 4, 8, 16); the other half validates it
+#: (``docs/science.md`` section 7: within x2 of the truth on 78 % of those scans). The small
+#: exponents say the sample errors carry little information about the whole-table error of
+#: materials unlike the training set: the estimate is mostly a calibrated typical error for
+#: the scan's size.
+VF_LOG_RMSE_MODEL: tuple[float, float, float] = (-1.773, 0.070, -0.177)
+
+
+def predict_vf_log_rmse(cv_sample_error: float, n_pairs: int, n_rotations: int) -> float:
+    """Calibrated estimate of the whole-BRDF ``log_rmse`` on V&F's path, from the
+    leave-one-pair-out error and the scan's size alone (:data:`VF_LOG_RMSE_MODEL`).
+
+    The joint fit's estimate is :func:`predict_joint_log_rmse` (it has a posterior to ask).
+
+    Parameters
+    ----------
+    cv_sample_error : float
+        :attr:`gonio.brdf.reconstruction.reconstruct.Reconstruction.cv_sample_error`
+        (leave-one-pair-out relative error).
+    n_pairs, n_rotations : int
+
+    Returns
+    -------
+    float
+        NaN when ``cv_sample_error`` is NaN.
+    """
+    if not np.isfinite(cv_sample_error):
+        return float("nan")
+    a, b, c = VF_LOG_RMSE_MODEL
+    x = max(float(cv_sample_error), 1e-6)
+    return float(np.exp(a) * x**b * float(max(n_pairs * n_rotations, 1)) ** c)
 
 
 # ---------------------------------------------------------------------------- basis misfit
@@ -278,7 +321,8 @@ def widen_log_rmse(predicted: float, misfit: BasisMisfit) -> float:
     Parameters
     ----------
     predicted : float
-        :func:`predict_log_rmse`'s estimate (``log_rmse`` units; NaN stays NaN).
+        :func:`predict_joint_log_rmse`'s or :func:`predict_vf_log_rmse`'s estimate
+        (``log_rmse`` units; NaN stays NaN).
     misfit : BasisMisfit
 
     Returns
@@ -294,8 +338,8 @@ def widen_log_rmse(predicted: float, misfit: BasisMisfit) -> float:
 
 
 # ---------------------------------------------------------------------------- final mapping
-#: Factor on :func:`predict_log_rmse`'s estimate of a scan whose fit holds its readings (no
-#: flagged misfit): the two-term model, fitted in ``ln(log_rmse)`` on the broader panel of
+#: Factor on :func:`predict_joint_log_rmse`'s estimate of a scan whose fit holds its readings
+#: (no flagged misfit): the two-term model, fitted in ``ln(log_rmse)`` on the broader panel of
 #: ``bench/calibrate_log_rmse.py``, over-estimates the held-out materials of
 #: ``bench/bench_selfestimate.py``'s calibration set read with designed layouts (docs/science.md
 #: 7.1.1).
@@ -305,8 +349,8 @@ FINAL_PREDICTED_FACTOR: float = 0.61
 #: share of the prior's weighted variance the layout leaves (``uncovered``,
 #: :meth:`gonio.brdf.reconstruction.posterior.ScanPosterior.uncovered_share`).
 FINAL_COVERAGE_SCALE: float = 0.19
-#: Factor on :func:`predict_log_rmse`'s estimate of a scan with a flagged misfit: there the
-#: witnesses of what the basis cannot represent (the Mahalanobis norm, the leave-one-pair-out
+#: Factor on :func:`predict_joint_log_rmse`'s estimate of a scan with a flagged misfit: there
+#: the witnesses of what the basis cannot represent (the Mahalanobis norm, the leave-one-pair-out
 #: error) sit at or beyond their calibrated caps and over-state the error (median x3.9 on the
 #: calibration set). Chosen more cautiously than the other two: the smallest factor (0.1
 #: steps) that leaves no flagged calibration scan more than 2x low, since the spread of these
@@ -387,7 +431,7 @@ def final_log_rmse(predicted: float, uncovered: float, misfit: BasisMisfit, *,
     Parameters
     ----------
     predicted : float
-        :func:`predict_log_rmse`'s estimate (``log_rmse`` units).
+        :func:`predict_joint_log_rmse`'s estimate (``log_rmse`` units).
     uncovered : float
         Share of the prior's weighted variance the readings leave (0..1, dimensionless).
     misfit : BasisMisfit

@@ -46,6 +46,7 @@ import numpy as np
 import scipy.linalg
 from numpy.typing import ArrayLike, NDArray
 
+from gonio.brdf.models.analytic import facet_rotation
 from gonio.brdf.reconstruction.basis import Basis, BasisError, inverse_remap, remap
 from gonio.brdf.reconstruction.errors import ReconstructionError
 from gonio.brdf.reconstruction.joint import JOINT_ETA, JOINT_LAM, joint_prior
@@ -75,25 +76,6 @@ ACCEPT_PAIR_SHARE = 0.7
 ACCEPT_MIN_PAIRS = 5
 
 
-def tilt_rotation(tilt: float, azimuth: float) -> FloatArray:
-    """(3, 3) rotation taking the normal leaning ``tilt`` towards ``azimuth`` onto ``+z``.
-
-    The shortest rotation (about ``n x z``), so a lean of 0 is the identity and the tangent
-    frame follows the lean as a renderer's normal map builds it.
-
-    Parameters
-    ----------
-    tilt, azimuth : float, radians
-    """
-    st, ct = np.sin(tilt), np.cos(tilt)
-    if abs(st) < 1e-12:
-        return np.eye(3)
-    # Axis n x z / |n x z| = (sin b, -cos b, 0); Rodrigues with angle t.
-    k = np.array([np.sin(azimuth), -np.cos(azimuth), 0.0])
-    K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
-    return np.eye(3) + st * K + (1.0 - ct) * (K @ K)
-
-
 def tilt_factor(R: FloatArray, wo: ArrayLike, terminator: bool = True) -> FloatArray:
     """The normal map's factor on ``g`` (module notes), 0 below either horizon.
 
@@ -106,7 +88,7 @@ def tilt_factor(R: FloatArray, wo: ArrayLike, terminator: bool = True) -> FloatA
 
     Parameters
     ----------
-    R : (3, 3) from :func:`tilt_rotation`
+    R : (3, 3) from :func:`facet_rotation`
     wo : (..., 3) unit vectors, specimen frame
     terminator : bool
         Include the shadowing term (default); without it, the bare normal map of
@@ -151,7 +133,7 @@ class MappedReadings:
 
 def map_readings(cells: ArrayLike, ph_lab: ArrayLike, stage_angles: ArrayLike,
                  values: ArrayLike, tilt: float, azimuth: float) -> MappedReadings:
-    """Every reading's directions through :func:`tilt_rotation` and its value over the factor.
+    """Every reading's directions through :func:`facet_rotation` and its value over the factor.
 
     Parameters
     ----------
@@ -169,7 +151,7 @@ def map_readings(cells: ArrayLike, ph_lab: ArrayLike, stage_angles: ArrayLike,
     wi_lab, wo_lab = pair_directions(cells, ph_lab)
     wi = geo.lab_to_specimen(wi_lab[:, None, :], alpha[None, :])  # (n, r, 3)
     wo = geo.lab_to_specimen(wo_lab[:, None, :], alpha[None, :])
-    R = tilt_rotation(tilt, azimuth)
+    R = facet_rotation(tilt, azimuth)
     ri, ro = wi @ R.T, wo @ R.T
     keep = (ri[..., 2] > HORIZON_COS) & (ro[..., 2] > HORIZON_COS)
     th, ph, td, pd = geo.directions_to_half_diff(ri[keep], ro[keep])
@@ -271,7 +253,7 @@ def tilted_table(g: BRDFTable, tilt: float, azimuth: float, name: str = "tilt fi
                  interpolation: interp.Interpolation = "log-pchip") -> BRDFTable:
     """The table on gonio's grid of ``g`` seen through the lean (module notes).
 
-    Every valid cell's directions are mapped through :func:`tilt_rotation`, ``g`` is looked up
+    Every valid cell's directions are mapped through :func:`facet_rotation`, ``g`` is looked up
     there and multiplied by the factor; 0 where the lean puts either direction below its
     horizon. The lookup is the pictures' monotone cubic in ``ln(f + eps)``
     (:mod:`gonio.brdf.tables.interpolation`, math.md 3): the mapped cells fall between the
@@ -290,14 +272,14 @@ def tilted_table(g: BRDFTable, tilt: float, azimuth: float, name: str = "tilt fi
     BRDFTable, float32, NaN at invalid cells
     """
     th, td, pd = geo.grid_angles()
-    R = tilt_rotation(tilt, azimuth)
+    R = facet_rotation(tilt, azimuth)
     v = np.asarray(g.values)
     flat = np.moveaxis(v, 0, -1).reshape(-1, v.shape[0]).astype(np.float64)
     ok: NDArray[np.bool_] = np.asarray(np.isfinite(flat).all(axis=1))
     flat = np.where(ok[:, None], np.maximum(flat, 0.0), 0.0)
     eps = interp.log_offset(flat, ok)
     logs = np.log(flat + eps)
-    slopes = interp.node_slopes(logs, ok)
+    nodes = interp.pack_nodes(logs, interp.node_slopes(logs, ok))
     valid = ok.astype(np.float64)
     out = np.full((g.n_channels, geo.N_PH, *VALID_MASK.shape), np.nan, dtype=np.float32)
     for k, ph in enumerate(geo.PH_GRID):
@@ -309,7 +291,7 @@ def tilted_table(g: BRDFTable, tilt: float, azimuth: float, name: str = "tilt fi
             val[up] = g.eval(ri[up], ro[up])
         else:
             mth, mph, mtd, mpd = geo.directions_to_half_diff(ri[up], ro[up])
-            lg, weight = interp.log_pchip_lookup(logs, slopes, valid, mth, mph, mtd, mpd)
+            lg, weight = interp.log_pchip_lookup(nodes, valid, mth, mph, mtd, mpd)
             val[up] = np.where(weight[:, None] > 1e-12, np.exp(lg) - eps, 0.0)
         val *= tilt_factor(R, wo)[:, None]
         out[:, k][:, VALID_MASK] = np.nan_to_num(np.maximum(val, 0.0), nan=0.0).T

@@ -32,8 +32,9 @@ class MetricError(ValueError):
     """The two BRDFs cannot be compared (shape or channel mismatch)."""
 
 
-def _values(t: TableLike, what: str) -> FloatArray:
-    v = np.asarray(t.values if isinstance(t, BRDFTable) else t, dtype=float)
+def _values(t: TableLike, what: str) -> NDArray[Any]:
+    """A table's values as stored (float32 or float64), shape checked: (C, 72, 18, 18, 36)."""
+    v = np.asarray(t.values if isinstance(t, BRDFTable) else t)
     if v.ndim != 5 or v.shape[1:] != geo.TABLE_SHAPE:
         raise MetricError(
             f"{what} has shape {v.shape}; expected (C, {', '.join(map(str, geo.TABLE_SHAPE))})"
@@ -41,8 +42,11 @@ def _values(t: TableLike, what: str) -> FloatArray:
     return v
 
 
-def _pair(f_hat: TableLike, f_ref: TableLike) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Flattened valid values of both tables and their volume weights, all (N,)."""
+def _valid_values(f_hat: TableLike, f_ref: TableLike) -> tuple[FloatArray, FloatArray]:
+    """Both tables at the grid's valid cells, float64: (C, 72, valid cells) each.
+
+    Only the valid cells are converted to float64 (a 31-band table holds 26 million values,
+    a third of them outside the valid region)."""
     a = _values(f_hat, "reconstruction")
     b = _values(f_ref, "reference")
     if a.shape != b.shape:
@@ -51,11 +55,24 @@ def _pair(f_hat: TableLike, f_ref: TableLike) -> tuple[FloatArray, FloatArray, F
             "tables with the same channels"
         )
     mask = geo.valid_mask()
-    wv = np.broadcast_to(geo.volume_weight()[mask], (a.shape[0], geo.N_PH, int(mask.sum())))
-    av, bv = a[:, :, mask], b[:, :, mask]
-    ok = np.isfinite(av) & np.isfinite(bv)
+    return (np.asarray(a[:, :, mask], dtype=np.float64),
+            np.asarray(b[:, :, mask], dtype=np.float64))
+
+
+def _pair(f_hat: TableLike, f_ref: TableLike) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Flattened valid values of both tables and their volume weights, all (N,)."""
+    return _pair_valid(*_valid_values(f_hat, f_ref))
+
+
+def _pair_valid(av: FloatArray, bv: FloatArray, ok: NDArray[np.bool_] | None = None
+                ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """:func:`_pair` of values already at the valid cells, (C, 72, valid cells) each;
+    ``ok``: the cells to keep, if not those where both are finite."""
+    if ok is None:
+        ok = np.isfinite(av) & np.isfinite(bv)
     if not ok.any():
         raise MetricError("the two tables share no finite valid cell")
+    wv = np.broadcast_to(geo.volume_weight()[geo.valid_mask()], av.shape)
     return av[ok], bv[ok], np.asarray(wv[ok])
 
 
@@ -78,12 +95,13 @@ def log_rmse(f_hat: TableLike, f_ref: TableLike) -> float:
     -------
     float, dimensionless
     """
-    a = _values(f_hat, "reconstruction")
-    b = _values(f_ref, "reference")
-    cos_ti = _cos_ti()[None, None]
+    a, b = _valid_values(f_hat, f_ref)
+    # Cells where either table is not finite are left out, as by every metric here.
+    ok = np.isfinite(a) & np.isfinite(b)
+    cos_ti = _cos_ti()[geo.valid_mask()]
     la = np.log1p(np.maximum(a, 0.0) * cos_ti)
     lb = np.log1p(np.maximum(b, 0.0) * cos_ti)
-    x, y, w = _pair(la, lb)
+    x, y, w = _pair_valid(la, lb, ok)
     return float(np.sqrt(np.sum(w * (x - y) ** 2) / np.sum(w)))
 
 

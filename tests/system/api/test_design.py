@@ -41,11 +41,11 @@ def _expected_log_rmse(basis: Any, pairs: list[dict[str, Any]], rotations: int,
                        span_deg: float = 180.0) -> float:
     """The joint fit's expected log_rmse of the returned cells (gonio.brdf.design.posterior)
     for ``rotations`` angles over ``span_deg`` (half a turn: the scans' default)."""
-    from gonio.brdf.design.posterior import expected_log_rmse, prior_model
+    from gonio.brdf.design.posterior import design_expected_log_rmse, prior_model
 
     deg = np.array([[p["theta_h_deg"], p["theta_d_deg"], p["phi_d_deg"]] for p in pairs])
     th, td, pd = np.deg2rad(deg).T
-    return expected_log_rmse(prior_model(basis, rotations, span_deg=span_deg),
+    return design_expected_log_rmse(prior_model(basis, rotations, span_deg=span_deg),
                              basis.rows_at(th, td, pd))
 
 

@@ -193,7 +193,11 @@ def test_a_well_conditioned_design_gets_no_explanation(
 def test_the_objective_is_chosen_and_reported(objective: str, basis_file: Path, tmp_path: Path,
                                               capsys: pytest.CaptureFixture[str]) -> None:
     from gonio.brdf.design.constraints import RigConstraints
-    from gonio.brdf.design.posterior import expected_log_rmse, posterior_design, prior_model
+    from gonio.brdf.design.posterior import (
+        design_expected_log_rmse,
+        posterior_design,
+        prior_model,
+    )
 
     out = tmp_path / "frag.toml"
     assert main(["design", "--pairs", "5", "--basis", str(basis_file), "--objective",
@@ -220,7 +224,7 @@ def test_the_objective_is_chosen_and_reported(objective: str, basis_file: Path, 
     assert float(line.split()[0].rstrip(",")) == pytest.approx(condition_number(rows), rel=1e-3)
     printed = float(line.split("expected log_rmse")[1].split()[0])
     assert "at 12 rotations" in line
-    want = expected_log_rmse(prior_model(basis, 12), rows)
+    want = design_expected_log_rmse(prior_model(basis, 12), rows)
     assert printed == pytest.approx(want, rel=1e-3, abs=1e-4)
     if objective == "posterior":
         # The cells are the expected-error design's (checked against the core directly).

@@ -63,9 +63,9 @@ def test_every_format(result: Path, tmp_path: Path, fmt: str,
 
         assert BRDFTable.load(out).provenance["job_id"] == 5
     else:
-        from gonio.export.merl import read_merl
+        from gonio.brdf.materials.merl import read_merl_values
 
-        assert read_merl(out).shape == (3, 90, 90, 180)
+        assert read_merl_values(out).shape == (3, 90, 90, 180)
 
 
 def test_bad_input(result: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from gonio.brdf.materials.merl import read_merl_values
 from gonio.brdf.models import analytic as bm
 from gonio.export import merl
 
@@ -40,7 +41,7 @@ def test_round_trip_and_index_mapping(tmp_path: Path) -> None:
     model = bm.LobeSum((bm.Lambert((0.2, 0.3, 0.4)),
                         bm.GGX(0.5, 0.5, bm.SchlickFresnel(0.04), "separable")))
     path = merl.write_merl(bm.tabulate(model, np.float64), tmp_path / "m.binary")
-    back = merl.read_merl(path)
+    back = read_merl_values(path)
     assert back.shape == (3, 90, 90, 180)
     rng = np.random.default_rng(1)
     checked = 0
@@ -63,14 +64,14 @@ def test_round_trip_and_index_mapping(tmp_path: Path) -> None:
 
 def test_bad_files_and_tables_are_refused(tmp_path: Path) -> None:
     with pytest.raises(merl.MerlError, match="cannot be read"):
-        merl.read_merl(tmp_path / "missing.binary")
+        read_merl_values(tmp_path / "missing.binary")
     bad = tmp_path / "bad.binary"
     bad.write_bytes(np.array([90, 90, 90], "<i4").tobytes() + b"\0" * 64)
     with pytest.raises(merl.MerlError, match="dimensions"):
-        merl.read_merl(bad)
+        read_merl_values(bad)
     bad.write_bytes(np.array([90, 90, 180], "<i4").tobytes() + b"\0" * 64)
     with pytest.raises(merl.MerlError, match="bytes"):
-        merl.read_merl(bad)
+        read_merl_values(bad)
     mono = bm.tabulate(bm.Lambert(0.5, channels=("Y",)), np.float64)
     with pytest.raises(merl.MerlError, match="three channels"):
         merl.write_merl(mono, tmp_path / "y.binary")

@@ -201,7 +201,7 @@ def test_design_pairs_uses_the_module_default_objective(
 ) -> None:
     from gonio.brdf.design import pairs
     from gonio.brdf.design.constraints import RigConstraints
-    from gonio.brdf.design.posterior import expected_log_rmse, prior_model
+    from gonio.brdf.design.posterior import design_expected_log_rmse, prior_model
 
     monkeypatch.setattr(pairs, "DEFAULT_OBJECTIVE", default)
     basis = _grid_basis()
@@ -212,7 +212,8 @@ def test_design_pairs_uses_the_module_default_objective(
     # Whichever objective chose the rows, the report carries both numbers for them.
     rows = basis.Q[_rows_of(d.cells)]
     assert d.kappa == pytest.approx(condition_number(rows))
-    assert d.expected_log_rmse == pytest.approx(expected_log_rmse(prior_model(basis, 8), rows))
+    want = design_expected_log_rmse(prior_model(basis, 8), rows)
+    assert d.expected_log_rmse == pytest.approx(want)
 
 
 def test_a_default_posterior_objective_falls_back_for_rows_without_a_basis(

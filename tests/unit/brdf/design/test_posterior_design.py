@@ -184,7 +184,7 @@ def test_cell_mix_chooses_by_the_mixed_expected_error() -> None:
     table's. Mixing in the table's own weights (the volume) changes nothing."""
     from dataclasses import replace
 
-    from gonio.brdf.design.posterior import expected_log_rmse
+    from gonio.brdf.design.posterior import design_expected_log_rmse
 
     b = _with_prior(random_basis(6), {0: 1.0, 2: 0.5})
     cons = RigConstraints(min_device_distance_deg=0.0)
@@ -210,7 +210,7 @@ def test_cell_mix_chooses_by_the_mixed_expected_error() -> None:
                                      geo.SLICE_SHAPE)
         assert first == cand[int(np.argmin(mixed))]
         q = b.rows_at(d.cells[:, 0], d.cells[:, 1], d.cells[:, 2])
-        assert d.expected_log_rmse == pytest.approx(expected_log_rmse(model, q))
+        assert d.expected_log_rmse == pytest.approx(design_expected_log_rmse(model, q))
     assert first != cand[int(np.argmin(plain_err))]  # the map moved the choice
     plain = posterior_design(b, 3, cons)
     same = posterior_design(b, 3, cons, cell_weight=geo.volume_weight(), cell_mix=1.0)
@@ -306,7 +306,7 @@ def test_design_pairs_objective_posterior_needs_a_basis() -> None:
 def test_expected_log_rmse_is_the_root_of_the_scaled_error_over_the_volume() -> None:
     """In log_rmse units: the prior of one material is ``P / n_columns`` and log_rmse divides
     by the volume weights of the valid cells (``tables.metrics.log_rmse``)."""
-    from gonio.brdf.design.posterior import expected_log_rmse
+    from gonio.brdf.design.posterior import design_expected_log_rmse
 
     b = _with_prior(random_basis(5), {0: 1.0, 2: 0.5})
     trained = type(b)(b.Q, b.S, b.f_med, b.mu, b.valid, b.eps, b.materials,
@@ -314,9 +314,9 @@ def test_expected_log_rmse_is_the_root_of_the_scaled_error_over_the_volume() -> 
     rows = b.Q[[100, 2000, 3000]]
     wv = float(np.sum(geo.volume_weight()[geo.valid_mask()]))
     raw = expected_error(prior_model(b, 8), rows)
-    assert expected_log_rmse(prior_model(b, 8), rows) == pytest.approx(np.sqrt(raw / wv))
+    assert design_expected_log_rmse(prior_model(b, 8), rows) == pytest.approx(np.sqrt(raw / wv))
     # the same weights for both (a trained basis would otherwise get the spread slope)
-    assert expected_log_rmse(prior_model(trained, 8, slope="median"), rows) == pytest.approx(
+    assert design_expected_log_rmse(prior_model(trained, 8, slope="median"), rows) == pytest.approx(
         np.sqrt(raw / 400 / wv))
 
 

@@ -13,7 +13,7 @@ from gonio.brdf.materials.imports import (
     TableImportError,
     import_files,
     read_any,
-    read_merl,
+    read_merl_table,
 )
 from gonio.brdf.tables import geometry as geo
 from gonio.brdf.tables.table import BRDFTable
@@ -60,7 +60,7 @@ def test_merl_file_is_read_at_the_documented_indices(tmp_path: Path) -> None:
     f = tmp_path / "lin.binary"
     # Linear in sqrt(th) (the th index), td and pd.
     write_merl(f, (12, 10, 20), lambda th, td, pd: 0.1 + np.sqrt(th / (np.pi / 2)) + td + 0.1 * pd)
-    t = read_merl(f)
+    t = read_merl_table(f)
     th, td, pd = geo.grid_angles()
     m = geo.valid_mask()
     # Clamped at the first and last bin centres of each axis, as the reader documents.
@@ -77,7 +77,7 @@ def test_merl_negative_values_are_unmeasured(tmp_path: Path) -> None:
     f = tmp_path / "holes.binary"
     # Bins with td > 60 deg unmeasured; the rest hold 0.5 (R).
     write_merl(f, (6, 6, 12), lambda th, td, pd: np.where(td > np.deg2rad(60), -1.0, 0.5))
-    t = read_merl(f)
+    t = read_merl_table(f)
     _, td, _ = geo.grid_angles()
     m = geo.valid_mask()
     # Beyond the last measured bin centre (52.5 deg) only unmeasured neighbours: NaN ...
@@ -97,7 +97,7 @@ def test_bad_merl_files_are_clear_errors(tmp_path: Path, content: bytes, match: 
     f = tmp_path / "bad.binary"
     f.write_bytes(content)
     with pytest.raises(TableImportError, match=match):
-        read_merl(f)
+        read_merl_table(f)
 
 
 def test_import_round_trips_a_gonio_table(tmp_path: Path, libdir: Path,
@@ -180,7 +180,7 @@ def test_a_table_written_by_gonio_export_merl_imports_back(tmp_path: Path) -> No
     vals = np.stack([slice_ * (c + 1) for c in range(3)])[:, None].repeat(72, 1)
     src = BRDFTable(vals.astype(np.float32), ("R", "G", "B"), "smooth")
     path = merl.write_merl(src, tmp_path / "smooth.binary")
-    back = read_merl(path)
+    back = read_merl_table(path)
     inner = m & (th < np.deg2rad(60)) & (td < np.deg2rad(60))
     np.testing.assert_allclose(back.values[:, 3][:, inner], src.values[:, 3][:, inner],
                                rtol=0.02)

@@ -322,6 +322,33 @@ def test_bad_parameters_are_reported(build: object, message: str) -> None:
         build()  # type: ignore[operator]
 
 
+@pytest.mark.parametrize(("t", "b"), [(0.3, 1.0), (1.1, -2.5), (0.05, 4.0), (0.7, 0.0)])
+def test_facet_rotation_is_rodrigues_rotation_of_the_normal_onto_z(t: float, b: float) -> None:
+    """Against Rodrigues' rotation written out for vectors, ``v cos t + (k x v) sin t +
+    k (k . v)(1 - cos t)`` with ``k = n x z / |n x z|``, and against the composition
+    ``Rz(b) Ry(-t) Rz(-b)`` (lean back about the level axis at right angles to ``b``)."""
+    R = bm.facet_rotation(t, b)
+    n = np.array([math.sin(t) * math.cos(b), math.sin(t) * math.sin(b), math.cos(t)])
+    k = np.cross(n, [0.0, 0.0, 1.0])
+    k /= np.linalg.norm(k)
+    for j, v in enumerate(np.eye(3)):
+        want = (v * math.cos(t) + np.cross(k, v) * math.sin(t)
+                + k * float(k @ v) * (1.0 - math.cos(t)))
+        np.testing.assert_allclose(R[:, j], want, atol=1e-14)
+    np.testing.assert_allclose(R @ n, [0.0, 0.0, 1.0], atol=1e-14)
+    np.testing.assert_allclose(R @ R.T, np.eye(3), atol=1e-14)
+    assert np.linalg.det(R) == pytest.approx(1.0, abs=1e-14)
+
+    def rz(a: float) -> np.ndarray:
+        return np.array([[math.cos(a), -math.sin(a), 0.0], [math.sin(a), math.cos(a), 0.0],
+                         [0.0, 0.0, 1.0]])
+
+    ry = np.array([[math.cos(t), 0.0, -math.sin(t)], [0.0, 1.0, 0.0],
+                   [math.sin(t), 0.0, math.cos(t)]])  # Ry(-t)
+    np.testing.assert_allclose(R, rz(b) @ ry @ rz(-b), atol=1e-14)
+    assert np.array_equal(bm.facet_rotation(0.0, b), np.eye(3))
+
+
 def test_tilted_facets_mirror_about_their_own_normal() -> None:
     """A narrow lobe on facets leaning 20 deg toward azimuth 1 rad peaks where the mirror law
     about the facet normal ``n' = (sin t cos p, sin t sin p, cos t)`` puts it."""

@@ -13,8 +13,10 @@ from gonio.brdf.reconstruction.reconstruct import reconstruct
 from gonio.brdf.reconstruction.selfcheck import (
     LOG_RMSE_CAPS,
     LOG_RMSE_MODEL,
+    VF_LOG_RMSE_MODEL,
     final_log_rmse,
-    predict_log_rmse,
+    predict_joint_log_rmse,
+    predict_vf_log_rmse,
 )
 from gonio.brdf.tables import geometry as geo
 from tests.unit.brdf.reconstruction.test_posterior import _scan
@@ -76,7 +78,7 @@ def test_prediction_is_the_two_term_formula() -> None:
     a, b, c, d = LOG_RMSE_MODEL
     for e, m, cv in ((0.02, 3e-5, 0.4), (0.005, 1e-6, 2.0), (0.1, 1e-3, 0.05)):
         want = math.sqrt(math.exp(a) * e * e + math.exp(b) * m**c * cv**d)
-        assert predict_log_rmse(e, m, cv) == pytest.approx(want, rel=1e-12)
+        assert predict_joint_log_rmse(e, m, cv) == pytest.approx(want, rel=1e-12)
 
 
 def test_witnesses_beyond_the_calibration_count_as_the_cap() -> None:
@@ -86,10 +88,10 @@ def test_witnesses_beyond_the_calibration_count_as_the_cap() -> None:
     e = 0.02
     at_caps = math.sqrt(math.exp(a) * e * e + math.exp(b) * m_cap**c * cv_cap**d)
     for m, cv in ((10 * m_cap, 5 * cv_cap), (m_cap, 100 * cv_cap), (1e3 * m_cap, cv_cap)):
-        assert predict_log_rmse(e, m, cv) == pytest.approx(at_caps, rel=1e-12)
+        assert predict_joint_log_rmse(e, m, cv) == pytest.approx(at_caps, rel=1e-12)
     # Below the caps both witnesses still count in full.
     half = math.sqrt(math.exp(a) * e * e + math.exp(b) * (m_cap / 2) ** c * cv_cap**d)
-    assert predict_log_rmse(e, m_cap / 2, 10 * cv_cap) == pytest.approx(half, rel=1e-12)
+    assert predict_joint_log_rmse(e, m_cap / 2, 10 * cv_cap) == pytest.approx(half, rel=1e-12)
     assert half < at_caps
 
 
@@ -98,15 +100,26 @@ def test_prediction_limits() -> None:
     # A fit at the library's mean (no discrepancy): the posterior term alone. The witness is
     # floored at 1e-12 to keep the logarithm finite, which leaves a discrepancy term of order
     # 1e-12^c (c below 1: about 1e-6 of the total here), hence the tolerance.
-    assert predict_log_rmse(0.03, 1e-300, 0.5) == pytest.approx(math.exp(a / 2) * 0.03,
-                                                               rel=1e-5)
+    assert predict_joint_log_rmse(0.03, 1e-300, 0.5) == pytest.approx(math.exp(a / 2) * 0.03,
+                                                                     rel=1e-5)
     # It never falls below the posterior term, and grows with either witness.
-    p0 = predict_log_rmse(0.03, 3e-5, 0.5)
+    p0 = predict_joint_log_rmse(0.03, 3e-5, 0.5)
     assert p0 > math.exp(a / 2) * 0.03
-    assert predict_log_rmse(0.03, 3e-4, 0.5) > p0
-    assert predict_log_rmse(0.03, 3e-5, 2.0) > p0
+    assert predict_joint_log_rmse(0.03, 3e-4, 0.5) > p0
+    assert predict_joint_log_rmse(0.03, 3e-5, 2.0) > p0
     for bad in ((float("nan"), 1e-5, 0.1), (0.01, float("nan"), 0.1), (0.01, 1e-5, float("nan"))):
-        assert math.isnan(predict_log_rmse(*bad))
+        assert math.isnan(predict_joint_log_rmse(*bad))
+
+
+def test_vf_prediction_is_the_power_law_of_cv_and_scan_size() -> None:
+    """Evaluated by hand: predicted = e^a cv^b (n r)^c, from the cross-validation error and
+    the number of readings alone; undefined without a cross-validation error."""
+    a, b, c = VF_LOG_RMSE_MODEL
+    for cv, n, r in ((0.2, 10, 8), (1.0, 1, 1), (3.5, 6, 16)):
+        want = math.exp(a) * cv**b * (n * r) ** c
+        assert predict_vf_log_rmse(cv, n, r) == pytest.approx(want, rel=1e-12)
+    assert predict_vf_log_rmse(1.0, 1, 1) == pytest.approx(math.exp(a), rel=1e-12)
+    assert math.isnan(predict_vf_log_rmse(float("nan"), 10, 8))
 
 
 def test_reconstruction_reports_the_witnesses_it_predicts_from() -> None:
@@ -119,7 +132,8 @@ def test_reconstruction_reports_the_witnesses_it_predicts_from() -> None:
     assert rec.mahalanobis == pytest.approx(post.mahalanobis, rel=1e-9)
     assert rec.expected_log_rmse == pytest.approx(post.expected_log_rmse, rel=1e-9)
     assert rec.predicted_log_rmse_unwidened == pytest.approx(
-        predict_log_rmse(rec.expected_log_rmse, rec.mahalanobis, rec.cv_sample_error), rel=1e-9)
+        predict_joint_log_rmse(rec.expected_log_rmse, rec.mahalanobis, rec.cv_sample_error),
+        rel=1e-9)
     # The coverage witness of the final mapping is the same posterior's.
     assert rec.uncovered_share == pytest.approx(post.uncovered_share(), rel=1e-9)
     assert rec.predicted_log_rmse == pytest.approx(final_log_rmse(

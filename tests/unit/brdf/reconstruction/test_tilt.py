@@ -20,7 +20,6 @@ from gonio.brdf.reconstruction.tilt import (
     pair_rms,
     tilt_decision,
     tilt_factor,
-    tilt_rotation,
     tilted_table,
 )
 from gonio.brdf.tables import geometry as geo
@@ -33,7 +32,7 @@ def _normal(t: float, b: float) -> np.ndarray:
 
 @pytest.mark.parametrize(("t", "b"), [(0.3, 1.0), (0.1, 4.0), (0.5, -2.0)])
 def test_the_rotation_takes_the_leaning_normal_to_z(t: float, b: float) -> None:
-    R = tilt_rotation(t, b)
+    R = bm.facet_rotation(t, b)
     np.testing.assert_allclose(R @ _normal(t, b), [0.0, 0.0, 1.0], atol=1e-12)
     np.testing.assert_allclose(R @ R.T, np.eye(3), atol=1e-12)
     assert np.linalg.det(R) == pytest.approx(1.0)
@@ -43,7 +42,7 @@ def test_the_rotation_takes_the_leaning_normal_to_z(t: float, b: float) -> None:
 
 
 def test_no_lean_is_the_identity_and_a_factor_of_one() -> None:
-    np.testing.assert_array_equal(tilt_rotation(0.0, 2.0), np.eye(3))
+    np.testing.assert_array_equal(bm.facet_rotation(0.0, 2.0), np.eye(3))
     wo = geo.spherical_to_direction(np.array([0.1, 0.7, 1.3]), np.array([0.0, 2.0, 4.0]))
     np.testing.assert_allclose(tilt_factor(np.eye(3), wo), 1.0)
 
@@ -56,7 +55,7 @@ def test_the_bare_factor_matches_the_analytic_normal_map() -> None:
     rng = np.random.default_rng(4)
     wi = geo.spherical_to_direction(rng.uniform(0, 1.3, 300), rng.uniform(0, 2 * np.pi, 300))
     wo = geo.spherical_to_direction(rng.uniform(0, 1.3, 300), rng.uniform(0, 2 * np.pi, 300))
-    R = tilt_rotation(t, b)
+    R = bm.facet_rotation(t, b)
     ri, ro = wi @ R.T, wo @ R.T
     up = (ri[:, 2] > 0) & (ro[:, 2] > 0)
     model = np.zeros((300, 3))
@@ -68,7 +67,7 @@ def test_the_terminator_term_follows_estevez() -> None:
     """Estevez et al. 2019: 2 / (1 + sqrt(1 + a2 tan^2 theta_o)), a2 = min(tan^2 t / 8, 1);
     worked by hand for t = 20 deg, theta_o = 80 deg, wo in the plane of the lean."""
     t = np.deg2rad(20.0)
-    R = tilt_rotation(t, 0.0)
+    R = bm.facet_rotation(t, 0.0)
     wo = geo.spherical_to_direction(np.deg2rad(80.0), 0.0)
     a2 = np.tan(t) ** 2 / 8  # 0.016559
     expected_shadow = 2 / (1 + np.sqrt(1 + a2 * np.tan(np.deg2rad(80.0)) ** 2))  # 0.8353

@@ -138,3 +138,11 @@ def test_an_unknown_interpolation_is_refused_with_the_choices() -> None:
     table = _table_of_th(np.ones(geo.N_TH))
     with pytest.raises(RenderError, match="log-pchip, multilinear"):
         TableLookup(table, "cubic")  # type: ignore[arg-type]
+
+
+def test_packed_nodes_hold_each_cell_value_beside_its_slope() -> None:
+    logs = np.arange(12.0).reshape(4, 3)
+    slopes = -logs
+    nodes = interp.pack_nodes(logs, slopes)
+    assert nodes.shape == (4, 6) and nodes.flags.c_contiguous
+    np.testing.assert_array_equal(nodes[2], [6.0, 7.0, 8.0, -6.0, -7.0, -8.0])
