@@ -410,7 +410,7 @@ def fit_principled_rendered(table: BRDFTable, start: Principled, *, max_nfev: in
     p, diff = blend if blend[1].value < BLEND_MARGIN * best_pure[1].value else best_pure
     # Last, the chosen candidate polished on the rendered difference itself (POLISH_NFEV):
     # the square-root residuals weigh every pixel alike, HDR-FLIP does not (docs/export.md,
-    # "Specular strength": the Al blend's sharp streak).
+    # "The fitter, not the model": the Al blend's sharp streak).
     if flip_available() and POLISH_NFEV > 0:
         polished = _polish_flip(p, ref_fit, POLISH_NFEV)
         polished_diff = rendered_difference(table, polished.model(), ref_judge)
