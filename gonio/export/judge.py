@@ -369,7 +369,8 @@ def _polish_flip(start: Principled, ref: list[FloatArray], max_nfev: int) -> Pri
     return _params(np.asarray(r.x, dtype=float), mode, nc, start.channels)
 
 
-def fit_principled_rendered(table: BRDFTable, start: Principled, *, max_nfev: int = 60
+def fit_principled_rendered(table: BRDFTable, start: Principled, *, max_nfev: int = 60,
+                            polish_nfev: int = POLISH_NFEV
                             ) -> tuple[Principled, RenderedDifference]:
     """Refine a principled fit so that it renders like ``table`` (module docstring).
 
@@ -381,6 +382,8 @@ def fit_principled_rendered(table: BRDFTable, start: Principled, *, max_nfev: in
         The table-space fit (:func:`gonio.brdf.models.principled.fit_principled`).
     max_nfev : int
         Residual evaluations per candidate (each renders :data:`FIT_VIEWS`).
+    polish_nfev : int
+        HDR-FLIP evaluations of the polish (:func:`_polish_flip`); 0 skips it.
 
     Returns
     -------
@@ -418,8 +421,8 @@ def fit_principled_rendered(table: BRDFTable, start: Principled, *, max_nfev: in
     # Last, the chosen candidate polished on the rendered difference itself (POLISH_NFEV):
     # the square-root residuals weigh every pixel alike, HDR-FLIP does not (docs/export.md,
     # "The fitter, not the model": the Al blend's sharp streak).
-    if flip_available() and POLISH_NFEV > 0 and diff.value > POLISH_ABOVE:
-        polished = _polish_flip(p, ref_fit, POLISH_NFEV)
+    if flip_available() and polish_nfev > 0 and diff.value > POLISH_ABOVE:
+        polished = _polish_flip(p, ref_fit, polish_nfev)
         polished_diff = rendered_difference(table, polished.model(), ref_judge)
         if polished_diff.value < POLISH_MARGIN * diff.value:
             p, diff = polished, polished_diff

@@ -69,9 +69,10 @@ def test_dielectric_specular_stays_physical() -> None:
     """A fit may not reach F0 below 0.02 (the index of refraction 1.0003 of the issue)."""
     p = Principled((0.3, 0.3, 0.3), 0.0, 0.05, 0.2, 0.2, 0.0)  # F0 = 0.004, IOR 1.13
     table = bm.tabulate(p.model(), np.float64)
-    # The bound holds at every step of the search, so a short search tests it as well as a
-    # full one (which takes seconds of CPU more).
-    fitted, _ = judge.fit_principled_rendered(table, fit_principled(table), max_nfev=8)
+    # The bound holds at every step of the search and of the polish, so short ones test it as
+    # well as full ones (which take seconds of CPU more).
+    fitted, _ = judge.fit_principled_rendered(table, fit_principled(table), max_nfev=8,
+                                              polish_nfev=12)
     assert fitted.specular >= judge.SPECULAR_MIN
     assert 0.08 * fitted.specular >= 0.02 - 1e-9
 
