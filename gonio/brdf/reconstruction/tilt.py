@@ -183,9 +183,13 @@ def holdout_error(basis: Basis, cells: ArrayLike, ph_lab: ArrayLike, stage_angle
         RMS over readings and channels of the cosine-weighted log error (natural log units);
         inf when the candidate cannot be fitted.
     """
-    err = holdout_errors(basis, cells, ph_lab, stage_angles, values, tilt, azimuth,
-                         eta=eta, lam=lam, prior=prior)
-    return float(np.sqrt(np.mean(err**2))) if err is not None else float("inf")
+    return _pooled(holdout_errors(basis, cells, ph_lab, stage_angles, values, tilt, azimuth,
+                                  eta=eta, lam=lam, prior=prior))
+
+
+def _pooled(errors: FloatArray | None) -> float:
+    """RMS of :func:`holdout_errors`' per-reading errors; inf for a candidate not fitted."""
+    return float(np.sqrt(np.mean(errors**2))) if errors is not None else float("inf")
 
 
 def holdout_errors(basis: Basis, cells: ArrayLike, ph_lab: ArrayLike, stage_angles: ArrayLike,
@@ -464,12 +468,15 @@ def fit_tilt(basis: Basis, cells: ArrayLike, ph_lab: ArrayLike, stage_angles: Ar
         raise ReconstructionError(f"values must be (n, r, C), got shape {vals.shape}")
     P = joint_prior(basis, JOINT_LAM / JOINT_ETA)
     tried: dict[tuple[float, float], float] = {}
+    # Each candidate's per-reading errors, kept: the selection rule reads the best one's.
+    errors: dict[tuple[float, float], FloatArray | None] = {}
 
     def score(t: float, b: float) -> float:
         key = (round(t, 6), round(b % 360.0, 6) if t > 0 else 0.0)
         if key not in tried:
-            tried[key] = holdout_error(basis, cells, ph_lab, stage_angles, vals,
-                                       np.deg2rad(key[0]), np.deg2rad(key[1]), prior=P)
+            err = holdout_errors(basis, cells, ph_lab, stage_angles, vals,
+                                 np.deg2rad(key[0]), np.deg2rad(key[1]), prior=P)
+            errors[key], tried[key] = err, _pooled(err)
         return tried[key]
 
     score(0.0, 0.0)
@@ -494,8 +501,7 @@ def fit_tilt(basis: Basis, cells: ArrayLike, ph_lab: ArrayLike, stage_angles: Ar
     accepted, better, why, n_pairs = False, 0, "not judged (no reference fit)", vals.shape[0]
     if reference is not None:
         ref_errors = holdout_errors(reference, cells, ph_lab, stage_angles, vals, 0.0, 0.0)
-        tilt_errors = (holdout_errors(basis, cells, ph_lab, stage_angles, vals, tilt, azimuth,
-                                      prior=P) if best[0] > 0 else None)
+        tilt_errors = errors[best] if best[0] > 0 else None
         accepted, better, why = tilt_decision(tilt_errors, ref_errors, float(tilt))
     return TiltFit(float(tilt), float(azimuth), tried[best], tried[(0.0, 0.0)], table, g,
                    cand, time.perf_counter() - t0, accepted, better, n_pairs, why)
