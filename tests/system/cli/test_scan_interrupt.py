@@ -34,12 +34,13 @@ def test_ctrl_c_leaves_the_job_paused_and_the_same_command_resumes_it(tmp_path: 
     data = tmp_path / "data"
     db = data / "gonio.sqlite"
     # Real time and a long exposure: the scan lasts long enough to be interrupted mid-way.
-    # Five angles (7 s or more of exposures) remain after the first is stored, so a test
+    # Eleven angles (16 s or more of exposures) remain after the first is stored, so a test
     # process slowed by a busy machine still signals while the scan measures (with 4 angles
-    # of 0.3 s, one run on a loaded machine saw the scan complete, exit 0, not 130).
+    # of 0.3 s, and later with 6 angles of 0.5 s, runs on a loaded machine saw the scan
+    # measure to the end before the signal came: exit 0, not 130).
     with start_sim_rig(SimRigOptions(time_scale=1.0, settle_s=0.0, config_path=rig)):
         argv = ["scan", "--no-export-fits",
-                "--rig", str(rig), "--rotations", "6", "--exposure", "0.5",
+                "--rig", str(rig), "--rotations", "12", "--exposure", "0.5",
                 "--data-dir", str(data), "--no-progress", "-o", str(tmp_path / "felt.h5")]
         proc = subprocess.Popen([*GONIO, *argv], stdout=subprocess.PIPE,
                                 stderr=subprocess.PIPE, text=True, env=child_env(),
