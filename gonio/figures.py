@@ -268,20 +268,24 @@ def fit_curves(res: ResultFile, step_deg: float = 2.0) -> dict[str, Any]:
     if res.table is None:
         raise FigureError("this result has no reconstructed BRDF (a calibration job)")
     s = res.samples
-    look = render.TableLookup(res.table)
     curve_deg = np.arange(0.0, 360.0 + 1e-9, step_deg)
     alphas = np.deg2rad(curve_deg)
+    n_pairs, n_a = len(s.pairs), alphas.size
+    # Every pair's curve in one lookup, so the cubic's nodes are computed once, and only at
+    # the cells these few hundred points read (render.TableLookup, "auto").
+    turns = np.tile(alphas, n_pairs)
+    wi = geo.lab_to_specimen(np.repeat(np.asarray(s.light_dirs, dtype=float), n_a, axis=0), turns)
+    wo = geo.lab_to_specimen(np.repeat(np.asarray(s.sensor_dirs, dtype=float), n_a, axis=0), turns)
+    curves = render.TableLookup(res.table).eval(wi, wo).reshape(n_pairs, n_a, -1)
     pairs = []
     order = np.argsort(np.mod(s.stage_angles_deg, 360.0))
     stage = np.mod(s.stage_angles_deg, 360.0)[order]
     for q, (light, sensor) in enumerate(s.pairs):
-        wi = geo.lab_to_specimen(np.broadcast_to(s.light_dirs[q], (alphas.size, 3)), alphas)
-        wo = geo.lab_to_specimen(np.broadcast_to(s.sensor_dirs[q], (alphas.size, 3)), alphas)
         pairs.append({
             "label": f"{light}/{sensor}",
             "stage_deg": [float(a) for a in stage],
             "measured": _mean_or_none(np.asarray(s.values[q])[order]),
-            "curve": _mean_or_none(look.eval(wi, wo)),
+            "curve": _mean_or_none(curves[q]),
         })
     return {"units": _units(res), "calibrated": bool(s.calibration.get("pairs")),
             "channels": "mean of " + ", ".join(s.channels),

@@ -16,6 +16,8 @@ import numpy as np
 import pytest
 
 from gonio.brdf.models import analytic as bm
+from gonio.brdf.pictures import render
+from gonio.brdf.tables import geometry as geo
 from gonio.brdf.tables.table import BRDFTable, from_function
 from gonio.calibration import CalibratedScan
 from gonio.figures import (
@@ -161,6 +163,48 @@ def test_polar_curves_of_a_flat_table_and_its_lambertian_truth(tmp_path: Path) -
         assert rec["G"][89] == pytest.approx(VALUE[1])  # at 0 deg: the normal, or the mirror
         truth = polar["truth"][plane]
         assert truth["B"] == pytest.approx([0.9 / math.pi] * 179)
+
+
+def _lobe_table() -> BRDFTable:
+    """A highlight over a diffuse body, three channels; NaN at the grid's invalid cells."""
+    def f(i: np.ndarray, o: np.ndarray) -> np.ndarray:
+        h = (i + o) / np.linalg.norm(i + o, axis=1, keepdims=True)
+        return (0.05 + 20.0 * np.exp(-(1.0 - h[:, 2]) / 0.005))[:, None] * np.array(
+            [1.0, 0.7, 0.4])
+
+    return from_function(f, ["R", "G", "B"], "lobe")
+
+
+def test_curves_are_the_whole_tables_lookup_at_each_pairs_directions(tmp_path: Path) -> None:
+    # fit_curves and polar_curves look up only the nodes their points read
+    # (render.TableLookup, "auto"); the reference is the lookup over the whole table's nodes
+    # at the directions of each pair and stage angle, computed here one pair at a time.
+    table = _lobe_table()
+    light, sensor = np.array([_dir(45, 0), _dir(60, 90), _dir(20, 200)]), np.array(
+        [_dir(45, 180), _dir(30, 300), _dir(70, 10)])
+    s = CalibratedScan(pairs=[("L1", "S1"), ("L2", "S1"), ("L3", "S2")], light_dirs=light,
+                       sensor_dirs=sensor, stage_angles_deg=np.array([0.0, 120.0]),
+                       values=np.ones((3, 2, 3)), channels=("R", "G", "B"),
+                       calibration={"pairs": []})
+    res = read_result(write_result(tmp_path / "lobe.h5", job_id=5, specimen="lobe",
+                                   kind="uniform", readings=[], samples=s, table=table))
+    assert res.table is not None
+    whole = render.TableLookup(res.table, nodes="table")  # as stored (float32)
+    fit = fit_curves(res, step_deg=3.0)
+    alphas = np.deg2rad(fit["curve_deg"])
+    for q, pair in enumerate(fit["pairs"]):
+        wi = geo.lab_to_specimen(np.broadcast_to(light[q], (alphas.size, 3)), alphas)
+        wo = geo.lab_to_specimen(np.broadcast_to(sensor[q], (alphas.size, 3)), alphas)
+        assert pair["curve"] == whole.eval(wi, wo).mean(axis=1).tolist()
+    polar = polar_curves(res, 40.0, 30.0)["reconstruction"]
+    ti, pi_ = np.deg2rad(40.0), np.deg2rad(30.0)
+    a = np.deg2rad(np.arange(-89.0, 90.0))
+    wi = np.array([np.sin(ti) * np.cos(pi_), np.sin(ti) * np.sin(pi_), np.cos(ti)])
+    wo = np.stack([-np.sin(a) * np.cos(pi_), -np.sin(a) * np.sin(pi_), np.cos(a)], axis=1)
+    ref = whole.eval(np.broadcast_to(wi, wo.shape), wo)
+    for c, ch in enumerate("RGB"):
+        assert polar["in_plane"][ch] == ref[:, c].tolist()
+    assert max(polar["in_plane"]["R"]) > 10 * min(polar["in_plane"]["R"])  # a lobe, not flat
 
 
 def test_no_truth_on_an_uncalibrated_result(tmp_path: Path) -> None:

@@ -98,9 +98,82 @@ def node_slopes(logs: FloatArray, valid: NDArray[np.bool_]) -> FloatArray:
     after[:, :-1] = y[:, 1:] - y[:, :-1]
     has_before[:, 1:] = ok[:, :-1] & ok[:, 1:]
     has_after[:, :-1] = ok[:, 1:] & ok[:, :-1]
-    out = np.where(has_before & has_after, harmonic_slope(before, after),
-                   np.where(has_before, before, np.where(has_after, after, 0.0)))
+    out = _slope_rule(before, after, has_before, has_after)
     return np.ascontiguousarray(out.reshape(logs.shape))
+
+
+def _slope_rule(before: FloatArray, after: FloatArray, has_before: NDArray[np.bool_],
+                has_after: NDArray[np.bool_]) -> FloatArray:
+    """A node's slope from its secants and which of them exist (:func:`node_slopes`);
+    shared by the whole-table and the gathered slopes so both give the same numbers."""
+    return np.where(has_before & has_after, harmonic_slope(before, after),
+                    np.where(has_before, before, np.where(has_after, after, 0.0)))
+
+
+def node_logs(values: NDArray[np.floating], eps: float) -> FloatArray:
+    """``ln(f + eps)`` of (cells, C) values (0 at invalid cells, negatives clamped to 0).
+
+    float64: the cubic's differences of nearby logs would lose digits in float32.
+    """
+    return np.log(np.maximum(values.astype(np.float64), 0.0) + eps)
+
+
+def gathered_cells(th: FloatArray, ph: FloatArray, td: FloatArray, pd: FloatArray
+                   ) -> NDArray[np.intp]:
+    """The cells :func:`log_pchip_lookup` reads at these points, sorted, each once.
+
+    Parameters
+    ----------
+    th, ph, td, pd : (N,) arrays, radians
+
+    Returns
+    -------
+    (M,) intp array of flat cell indices (C order over ``(ph, th, td, pd)``), M <= 16 N
+    """
+    lo, hi, _t, others, s_th = _lookup_axes(th, ph, td, pd)
+    corners = []
+    for idx, _w in geo.lattice_corners(others):
+        base = idx[0] + idx[1] + idx[2]
+        corners += [base + lo * s_th, base + hi * s_th]
+    return np.unique(np.concatenate(corners))
+
+
+def gathered_nodes(values: NDArray[np.floating], valid: NDArray[np.bool_], eps: float,
+                   cells: NDArray[np.intp]) -> tuple[FloatArray, int]:
+    """:func:`pack_nodes` rows of only some cells, equal to the whole table's rows there.
+
+    A lookup at a few hundred points reads a few thousand of a table's 839,808 cells; the
+    logs are taken at those cells and at their neighbours along ``th`` (which their slopes
+    need), and the slopes by the same rule and arithmetic as :func:`node_slopes`.
+
+    Parameters
+    ----------
+    values : (cells, C) array, the whole table's values (0 at invalid cells)
+    valid : (cells,) bool
+    eps : float, :func:`log_offset` of the whole table
+    cells : (M,) sorted intp array, e.g. :func:`gathered_cells`
+
+    Returns
+    -------
+    nodes : (M, 2 C) float64 array, row k for cell ``cells[k]``
+    computed : int, how many cells' logs were taken (M plus their ``th`` neighbours)
+    """
+    s_th = geo.N_TD * geo.N_PD
+    j = (cells // s_th) % geo.N_TH
+    first, last = j == 0, j == geo.N_TH - 1
+    # Logs once per cell, at the gathered cells and the neighbours their slopes need.
+    need = np.unique(np.concatenate([cells, cells[~first] - s_th, cells[~last] + s_th]))
+    logs = node_logs(values[need], eps)
+    ok = valid[need]
+    at = np.searchsorted(need, cells)
+    below = np.searchsorted(need, np.where(first, cells, cells - s_th))
+    above = np.searchsorted(need, np.where(last, cells, cells + s_th))
+    y = logs[at]
+    before = np.where(first[:, None], 0.0, y - logs[below])
+    after = np.where(last[:, None], 0.0, logs[above] - y)
+    has_before = (~first & ok[below] & ok[at])[:, None]
+    has_after = (~last & ok[above] & ok[at])[:, None]
+    return pack_nodes(y, _slope_rule(before, after, has_before, has_after)), int(need.size)
 
 
 def pack_nodes(logs: FloatArray, slopes: FloatArray) -> FloatArray:
@@ -140,8 +213,26 @@ def _axis(a: FloatArray, n: int, period: float) -> tuple[NDArray[np.intp], NDArr
     return lo, lo + 1, u - lo
 
 
+def _lookup_axes(th: FloatArray, ph: FloatArray, td: FloatArray, pd: FloatArray
+                 ) -> tuple[NDArray[np.intp], NDArray[np.intp], FloatArray,
+                            Sequence[tuple[NDArray[np.intp], NDArray[np.intp], FloatArray]], int]:
+    """Where a lookup reads: ``th``'s lower and upper node and fraction, the other axes'
+    (lower, upper) flat offsets and fractions, and the flat stride of ``th``."""
+    s_ph, s_th, s_td = geo.N_TH * geo.N_TD * geo.N_PD, geo.N_TD * geo.N_PD, geo.N_PD
+    lo, hi, t = _axis(th, geo.N_TH, 0.0)
+    others: Sequence[tuple[NDArray[np.intp], NDArray[np.intp], FloatArray]] = [
+        (a * s, b * s, f) for (a, b, f), s in (
+            (_axis(ph, geo.N_PH, 2 * np.pi), s_ph),
+            (_axis(td, geo.N_TD, 0.0), s_td),
+            (_axis(pd, geo.N_PD, np.pi), 1),
+        )
+    ]
+    return lo, hi, t, others, s_th
+
+
 def log_pchip_lookup(nodes: FloatArray, valid: NDArray[np.floating],
-                     th: FloatArray, ph: FloatArray, td: FloatArray, pd: FloatArray
+                     th: FloatArray, ph: FloatArray, td: FloatArray, pd: FloatArray,
+                     cells: NDArray[np.intp] | None = None
                      ) -> tuple[FloatArray, FloatArray]:
     """``L = ln(f + eps)`` interpolated at half/difference angles (module docstring).
 
@@ -154,6 +245,10 @@ def log_pchip_lookup(nodes: FloatArray, valid: NDArray[np.floating],
     valid : (cells,) array of 0.0 / 1.0
         Whether each cell is valid.
     th, ph, td, pd : (N,) arrays, radians
+    cells : (M,) sorted intp array or None
+        When ``nodes`` and ``valid`` hold only some cells (:func:`gathered_nodes`), the flat
+        cell of each of their rows; it must include every cell these points read
+        (:func:`gathered_cells`). None: one row per cell of the table.
 
     Returns
     -------
@@ -162,15 +257,7 @@ def log_pchip_lookup(nodes: FloatArray, valid: NDArray[np.floating],
     weight : (N,) array
         The multilinear weight of the valid neighbours (0: no valid neighbour).
     """
-    s_ph, s_th, s_td = geo.N_TH * geo.N_TD * geo.N_PD, geo.N_TD * geo.N_PD, geo.N_PD
-    lo, hi, t = _axis(th, geo.N_TH, 0.0)
-    others: Sequence[tuple[NDArray[np.intp], NDArray[np.intp], FloatArray]] = [
-        (a * s, b * s, f) for (a, b, f), s in (
-            (_axis(ph, geo.N_PH, 2 * np.pi), s_ph),
-            (_axis(td, geo.N_TD, 0.0), s_td),
-            (_axis(pd, geo.N_PD, np.pi), 1),
-        )
-    ]
+    lo, hi, t, others, s_th = _lookup_axes(th, ph, td, pd)
     # The cubic's four basis polynomials in t, the same for every corner: computed once.
     tt, tt2 = t[:, None], (t * t)[:, None]
     tt3 = tt2 * tt
@@ -182,6 +269,8 @@ def log_pchip_lookup(nodes: FloatArray, valid: NDArray[np.floating],
     for idx, w in geo.lattice_corners(others):
         base = idx[0] + idx[1] + idx[2]
         f0, f1 = base + lo * s_th, base + hi * s_th
+        if cells is not None:  # rows of the gathered cells instead of the whole table
+            f0, f1 = np.searchsorted(cells, f0), np.searchsorted(cells, f1)
         k0, k1 = valid[f0], valid[f1]
         # np.take gathers rows faster than fancy indexing; each row is a value and its slope.
         n0, n1 = np.take(nodes, f0, axis=0), np.take(nodes, f1, axis=0)
