@@ -8,6 +8,32 @@ from pathlib import Path
 import pytest
 
 PROJECT_ROOT = Path(__file__).resolve().parents[1]
+
+#: Native thread pools each parallel worker (and every process it starts) may use.
+WORKER_THREAD_VARS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS")
+
+
+def _one_native_thread_per_worker() -> None:
+    """Under pytest-xdist, BLAS and OpenMP on one thread in each worker and its children.
+
+    The README's run has one worker more than the cores, and each would otherwise start
+    OpenBLAS (and flip-evaluator's OpenMP) threads for every core: more threads than cores,
+    whose spin-waiting burns CPU without doing work. Measured on the 2-core machine beside a
+    loaded run: the basis, design and posterior tests took 47.8 s of CPU with the default
+    threads and 24.1 s with one. Set in the environment (read by those libraries when they
+    load, also in the daemons and commands the tests start) and, as numpy may already be
+    loaded, through threadpoolctl for this process. A run without ``-n`` keeps the defaults.
+    """
+    if not os.environ.get("PYTEST_XDIST_WORKER"):
+        return
+    for name in WORKER_THREAD_VARS:
+        os.environ.setdefault(name, "1")
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(limits=1)
+
+
+_one_native_thread_per_worker()
 SHARED_DATA = PROJECT_ROOT.parent / "shared" / "data"
 
 #: The files that take longest, longest first (wall time of each run alone on idle cores,
