@@ -154,6 +154,34 @@ FRESH2: list[tuple[str, float, float, dict[str, Any], float]] = [
 ]
 
 
+#: A third fresh set for the disagreement round (``--disagree fresh3``), written down and
+#: committed before any run on it, made as :data:`FRESH2` is: metals no set used before (Ir,
+#: Nb, TiN, anisotropic V, Be), three plastics of new colours, roughnesses 0.07-0.27, tilts
+#: 7-30 deg and new holder angles. Nothing was chosen on it.
+FRESH3: list[tuple[str, float, float, dict[str, Any], float]] = [
+    ("fresh3-ir-r0.16-t18", 18.0, 70.0,
+     {"type": "roughconductor", "material": "Ir", "alpha": 0.16}, 118.0),
+    ("fresh3-nb-r0.11-t27", 27.0, 210.0,
+     {"type": "roughconductor", "material": "Nb", "alpha": 0.11}, 263.0),
+    ("fresh3-tin-r0.20-t11", 11.0, 340.0,
+     {"type": "roughconductor", "material": "TiN", "alpha": 0.20}, 29.0),
+    ("fresh3-v-aniso-t23", 23.0, 160.0,
+     {"type": "roughconductor", "material": "V_palik", "alpha_u": 0.10, "alpha_v": 0.22},
+     187.0),
+    ("fresh3-be-r0.07-t7", 7.0, 25.0,
+     {"type": "roughconductor", "material": "Be", "alpha": 0.07}, 312.0),
+    ("fresh3-cyan-plastic-r0.13-t30", 30.0, 285.0,
+     {"type": "roughplastic", "alpha": 0.13,
+      "diffuse_reflectance": {"type": "rgb", "value": [0.05, 0.4, 0.45]}}, 56.0),
+    ("fresh3-brown-plastic-r0.27-t13", 13.0, 120.0,
+     {"type": "roughplastic", "alpha": 0.27,
+      "diffuse_reflectance": {"type": "rgb", "value": [0.35, 0.2, 0.08]}}, 241.0),
+    ("fresh3-pink-plastic-r0.07-t24", 24.0, 50.0,
+     {"type": "roughplastic", "alpha": 0.07,
+      "diffuse_reflectance": {"type": "rgb", "value": [0.7, 0.3, 0.4]}}, 164.0),
+]
+
+
 #: A fresh set for the auto arc's layout choice (``--set fresh``), written before its first
 #: run and run once: other metals, roughnesses, colours, holder angles, and two small tilts
 #: (6 and 8 deg) that probe the test's power below the choice set's 10 deg.
