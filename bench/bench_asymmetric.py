@@ -486,8 +486,8 @@ def disagree_round(plain: Basis, ref: Basis, m: bu.Material, cells: np.ndarray, 
     out: dict[tuple[str, str], dict[str, Any]] = {}
     for score in scores:
         t1 = time.process_time()
-        spread = (dg.disagreement(pa, pb, peak) if score == "noise"
-                  else dg.metric_disagreement(pa, pb, cos_i))
+        spread = (dg.metric_disagreement(pa, pb, cos_i) if score == "metric"
+                  else dg.disagreement(pa, pb, peak))
         new = dg.choose_angles(spread, cand, angles, count)
         new_alpha = np.deg2rad(new)
         nv = bu.read(m, cells, ph, new_alpha, seed)
@@ -495,6 +495,9 @@ def disagree_round(plain: Basis, ref: Basis, m: bu.Material, cells: np.ndarray, 
         qb = dg.predict_readings(tf1.table, cells, ph, new_alpha)
         if score == "noise":
             e_today, e_tilt = dg.chi_square(qa, nv, peak), dg.chi_square(qb, nv, peak)
+        elif score == "noise-median":
+            e_today = float(np.median(dg.chi_terms(qa, nv, peak)))
+            e_tilt = float(np.median(dg.chi_terms(qb, nv, peak)))
         else:
             e_today, e_tilt = dg.metric_error(qa, nv, cos_i), dg.metric_error(qb, nv, cos_i)
         all_alpha = np.concatenate([alpha, new_alpha])
@@ -510,8 +513,12 @@ def disagree_round(plain: Basis, ref: Basis, m: bu.Material, cells: np.ndarray, 
             t, b = tf1.tilt, tf1.azimuth
             if tf1.tilt > 0 and e_tilt < e_today:
                 kept = "tilt"
-                if refit == "search":
-                    tf2 = fit_tilt(plain, cells, ph, all_alpha, all_vals)
+                if refit in ("search", "near"):
+                    near = {} if refit == "search" else {
+                        "tilts_deg": [x for x in np.rad2deg(t) + np.array([-5.0, 0.0, 5.0])
+                                      if x > 0],
+                        "azimuths_deg": list(np.rad2deg(b) + np.arange(-30.0, 31.0, 15.0))}
+                    tf2 = fit_tilt(plain, cells, ph, all_alpha, all_vals, **near)
                     table, t, b = tf2.table, tf2.tilt, tf2.azimuth
                 else:
                     table = reconstruct_through(plain, cells, ph, all_alpha, all_vals, t, b)[1]
@@ -633,13 +640,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--first-rotations", type=int, nargs="+", default=[4],
                     help="with --disagree: R of the first pass (20 R readings when "
                          "asymmetric; the round fills up to 120)")
-    ap.add_argument("--refit", nargs="+", choices=("search", "lean"), default=["search"],
+    ap.add_argument("--refit", nargs="+", choices=("search", "near", "lean"),
+                    default=["near"],
                     help="with --disagree: the tilt fit kept is searched again on every "
-                         "reading (search) or refitted at the first pass's lean (lean)")
-    ap.add_argument("--score", nargs="+", choices=("noise", "metric"), default=["noise"],
+                         "reading (search), searched within 5 deg of tilt and 30 of azimuth "
+                         "of the first pass's lean (near) or refitted at that lean (lean)")
+    ap.add_argument("--score", nargs="+", choices=("noise", "noise-median", "metric"),
+                    default=["noise"],
                     help="with --disagree: the units the round is placed and judged in: "
-                         "noise-scaled chi-square (noise) or the cosine-weighted log of "
-                         "log_rmse (metric)")
+                         "noise-scaled chi-square (noise; noise-median: judged by the median "
+                         "reading's term) or the cosine-weighted log of log_rmse (metric)")
     ap.add_argument("--rotations", type=int, default=6,
                     help="R of the auto arc for --tilt (6: 120 readings when asymmetric)")
     args = ap.parse_args(argv)

@@ -151,12 +151,12 @@ def disagreement(pred_a: ArrayLike, pred_b: ArrayLike, peak: ArrayLike,
     return np.asarray(np.sum((la - lb) ** 2 / var, axis=(0, 2)), dtype=float)
 
 
-def chi_square(pred: ArrayLike, readings: ArrayLike, peak: ArrayLike,
-               relative: float = RELATIVE_NOISE, absolute: float = ABSOLUTE_NOISE) -> float:
-    """How well a fit predicted readings: the noise-scaled sum of squared log residuals.
+def chi_terms(pred: ArrayLike, readings: ArrayLike, peak: ArrayLike,
+              relative: float = RELATIVE_NOISE, absolute: float = ABSOLUTE_NOISE) -> FloatArray:
+    """Each reading's noise-scaled squared log residual against a fit's prediction.
 
     As :func:`disagreement` does for two predictions, between a fit's predictions and the
-    readings (the variance at the reading's level).
+    readings (the variance at the reading's level); 0 for a reading that is not finite.
 
     Parameters
     ----------
@@ -166,7 +166,7 @@ def chi_square(pred: ArrayLike, readings: ArrayLike, peak: ArrayLike,
 
     Returns
     -------
-    float, lower is better
+    (n, r, C) float
     """
     p = np.asarray(pred, dtype=float)
     y = np.asarray(readings, dtype=float)
@@ -177,7 +177,24 @@ def chi_square(pred: ArrayLike, readings: ArrayLike, peak: ArrayLike,
     yy = np.where(ok, y, floor)
     res = np.log(np.maximum(p, floor)) - np.log(np.maximum(yy, floor))
     var = log_noise_var(np.maximum(yy, floor), peak, relative, absolute)
-    return float(np.sum(np.where(ok, res**2 / var, 0.0)))
+    return np.asarray(np.where(ok, res**2 / var, 0.0), dtype=float)
+
+
+def chi_square(pred: ArrayLike, readings: ArrayLike, peak: ArrayLike,
+               relative: float = RELATIVE_NOISE, absolute: float = ABSOLUTE_NOISE) -> float:
+    """How well a fit predicted readings: the sum of :func:`chi_terms` (lower is better).
+
+    Parameters
+    ----------
+    pred, readings : (n, r, C)
+    peak : (n, 1, C), the pairs' largest readings of the pass before (:func:`pair_peaks`)
+    relative, absolute : float
+
+    Returns
+    -------
+    float
+    """
+    return float(np.sum(chi_terms(pred, readings, peak, relative, absolute)))
 
 
 def pair_cosines(cells: ArrayLike, ph_lab: ArrayLike) -> FloatArray:

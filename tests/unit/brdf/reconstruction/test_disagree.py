@@ -12,6 +12,7 @@ import pytest
 from gonio.brdf.reconstruction.disagree import (
     candidate_angles,
     chi_square,
+    chi_terms,
     choose_angles,
     disagreement,
     log_noise_var,
@@ -174,3 +175,15 @@ def test_metric_units_are_the_cosine_weighted_log() -> None:
         metric_disagreement(a, b[:, :1], cos_i)
     with pytest.raises(ReconstructionError, match="differ in shape"):
         metric_error(a, b[:, :1], cos_i)
+
+
+def test_chi_terms_are_per_reading_and_skip_missing_readings() -> None:
+    peak = np.full((1, 1, 1), 1.0)
+    pred = np.array([[[1.0], [0.5], [0.5]]])
+    readings = np.array([[[1.0 * np.exp(0.01)], [np.nan], [0.5]]])
+    terms = chi_terms(pred, readings, peak, relative=0.01, absolute=0.01)
+    assert terms.shape == (1, 3, 1)
+    # Worked by hand: 0.01^2 / (1e-4 + (0.01 / e^0.01)^2) at the first, nothing missing, 0.
+    expected = 0.01**2 / (1e-4 + (0.01 / np.exp(0.01)) ** 2)
+    np.testing.assert_allclose(terms[0, :, 0], [expected, 0.0, 0.0], rtol=1e-12)
+    assert chi_square(pred, readings, peak) == pytest.approx(expected, rel=1e-12)
