@@ -10,7 +10,9 @@ chi-square) is kept.
 
 The noise is modelled in log units as the arc test models it: a relative part plus an absolute
 part proportional to the pair's largest reading (so dim readings, whose shot noise is larger,
-weigh less). A study: the product does not call it.
+weigh less). A study: the product does not call it. Chosen on one set of specimens and run
+once on two fresh ones, a round of 40 readings after a first pass of 80 kept the better fit on
+half the specimens only, and lost to today's path (docs/science.md 7.4).
 """
 
 from __future__ import annotations
