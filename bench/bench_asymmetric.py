@@ -55,6 +55,14 @@ for the selection rule's single test. The ``rule`` column: the selection rule
 (:func:`gonio.brdf.reconstruction.tilt.tilt_decision`, chosen on the choice set): the tilt
 fit when it lowers the leave-one-pair-out error of at least 70 % of the pairs against the
 fit the scan gets without it, else that fit.
+
+The disagreement round (``--disagree choice|fresh|fresh2|fresh3|symmetric``, docs/science.md
+7.4, :mod:`gonio.brdf.reconstruction.disagree`): a first pass on the auto-arc path with
+``--first-rotations`` R (``20 R`` readings when asymmetric), today's fit and the tilt fit on
+it, a round of stage angles placed where their predictions disagree most (``--score``), read,
+and the fit that predicted them better refitted on every reading (``--refit``), up to 120
+readings; beside today's path and the tilt fit at 120 readings (R = 6). ``fresh3``:
+:data:`FRESH3`, written and committed before any run.
 """
 
 from __future__ import annotations
@@ -151,6 +159,34 @@ FRESH2: list[tuple[str, float, float, dict[str, Any], float]] = [
     ("fresh2-purple-plastic-r0.24-t28", 28.0, 230.0,
      {"type": "roughplastic", "alpha": 0.24,
       "diffuse_reflectance": {"type": "rgb", "value": [0.35, 0.1, 0.45]}}, 330.0),
+]
+
+
+#: A third fresh set for the disagreement round (``--disagree fresh3``), written down and
+#: committed before any run on it, made as :data:`FRESH2` is: metals no set used before (Ir,
+#: Nb, TiN, anisotropic V, Be), three plastics of new colours, roughnesses 0.07-0.27, tilts
+#: 7-30 deg and new holder angles. Nothing was chosen on it.
+FRESH3: list[tuple[str, float, float, dict[str, Any], float]] = [
+    ("fresh3-ir-r0.16-t18", 18.0, 70.0,
+     {"type": "roughconductor", "material": "Ir", "alpha": 0.16}, 118.0),
+    ("fresh3-nb-r0.11-t27", 27.0, 210.0,
+     {"type": "roughconductor", "material": "Nb", "alpha": 0.11}, 263.0),
+    ("fresh3-tin-r0.20-t11", 11.0, 340.0,
+     {"type": "roughconductor", "material": "TiN", "alpha": 0.20}, 29.0),
+    ("fresh3-v-aniso-t23", 23.0, 160.0,
+     {"type": "roughconductor", "material": "V_palik", "alpha_u": 0.10, "alpha_v": 0.22},
+     187.0),
+    ("fresh3-be-r0.07-t7", 7.0, 25.0,
+     {"type": "roughconductor", "material": "Be", "alpha": 0.07}, 312.0),
+    ("fresh3-cyan-plastic-r0.13-t30", 30.0, 285.0,
+     {"type": "roughplastic", "alpha": 0.13,
+      "diffuse_reflectance": {"type": "rgb", "value": [0.05, 0.4, 0.45]}}, 56.0),
+    ("fresh3-brown-plastic-r0.27-t13", 13.0, 120.0,
+     {"type": "roughplastic", "alpha": 0.27,
+      "diffuse_reflectance": {"type": "rgb", "value": [0.35, 0.2, 0.08]}}, 241.0),
+    ("fresh3-pink-plastic-r0.07-t24", 24.0, 50.0,
+     {"type": "roughplastic", "alpha": 0.07,
+      "diffuse_reflectance": {"type": "rgb", "value": [0.7, 0.3, 0.4]}}, 164.0),
 ]
 
 
@@ -424,6 +460,161 @@ def tilt_rows(plain: Basis, asym: Basis, d_half: tuple[np.ndarray, np.ndarray],
           f"{int(np.sum(a[:, 2] - a[:, 0] > 0.01))} specimens worse by more than 0.01")
 
 
+def disagree_round(plain: Basis, ref: Basis, m: bu.Material, cells: np.ndarray, ph: np.ndarray,
+                   angles: list[float], vals: np.ndarray, count: int, refits: list[str],
+                   scores: list[str], seed: int) -> dict[tuple[str, str], dict[str, Any]]:
+    """The disagreement round after a first pass (``angles`` deg, ``vals``; docs/science.md
+    7.4): today's fit (``ref``) and the tilt fit (``plain``) predict every pair at the
+    candidate angles, ``count`` angles are read where they disagree most, the fit that
+    predicted them better is kept and refitted on every reading. Per score in ``scores``
+    (``noise``: noise-scaled chi-square; ``metric``: the cosine-weighted log of log_rmse), for
+    the placement and the choice alike, and per refit in ``refits`` (``search``: the tilt
+    searched again; ``lean``: refitted at the first pass's lean)."""
+    from gonio.brdf.reconstruction import disagree as dg
+    from gonio.brdf.reconstruction.tilt import reconstruct_through
+
+    alpha = np.deg2rad(angles)
+    t0 = time.process_time()
+    today1 = reconstruct(ref, cells, ph, alpha, vals)
+    tf1 = fit_tilt(plain, cells, ph, alpha, vals)
+    cand = dg.candidate_angles()
+    peak = dg.pair_peaks(vals)
+    cos_i = dg.pair_cosines(cells, ph)
+    pa = dg.predict_readings(today1.table, cells, ph, np.deg2rad(cand))
+    pb = dg.predict_readings(tf1.table, cells, ph, np.deg2rad(cand))
+    base_cpu = time.process_time() - t0
+    out: dict[tuple[str, str], dict[str, Any]] = {}
+    for score in scores:
+        t1 = time.process_time()
+        spread = (dg.metric_disagreement(pa, pb, cos_i) if score == "metric"
+                  else dg.disagreement(pa, pb, peak))
+        new = dg.choose_angles(spread, cand, angles, count)
+        new_alpha = np.deg2rad(new)
+        nv = bu.read(m, cells, ph, new_alpha, seed)
+        qa = dg.predict_readings(today1.table, cells, ph, new_alpha)
+        qb = dg.predict_readings(tf1.table, cells, ph, new_alpha)
+        if score == "noise":
+            e_today, e_tilt = dg.chi_square(qa, nv, peak), dg.chi_square(qb, nv, peak)
+        elif score == "noise-median":
+            e_today = float(np.median(dg.chi_terms(qa, nv, peak)))
+            e_tilt = float(np.median(dg.chi_terms(qb, nv, peak)))
+        else:
+            e_today, e_tilt = dg.metric_error(qa, nv, cos_i), dg.metric_error(qb, nv, cos_i)
+        all_alpha = np.concatenate([alpha, new_alpha])
+        all_vals = np.concatenate([vals, nv], axis=1)
+        common = {"first_today": metrics.log_rmse(today1.table, m.truth),
+                  "first_tilt": metrics.log_rmse(tf1.table, m.truth),
+                  "readings": all_vals.shape[0] * all_vals.shape[1], "e_today": e_today,
+                  "e_tilt": e_tilt, "n_new": nv.size, "angles": new}
+        round_cpu = time.process_time() - t1
+        today_table = None
+        for refit in refits:
+            t2 = time.process_time()
+            t, b = tf1.tilt, tf1.azimuth
+            if tf1.tilt > 0 and e_tilt < e_today:
+                kept = "tilt"
+                if refit in ("search", "near"):
+                    near = {} if refit == "search" else {
+                        "tilts_deg": [x for x in np.rad2deg(t) + np.array([-5.0, 0.0, 5.0])
+                                      if x > 0],
+                        "azimuths_deg": list(np.rad2deg(b) + np.arange(-30.0, 31.0, 15.0))}
+                    tf2 = fit_tilt(plain, cells, ph, all_alpha, all_vals, **near)
+                    table, t, b = tf2.table, tf2.tilt, tf2.azimuth
+                else:
+                    table = reconstruct_through(plain, cells, ph, all_alpha, all_vals, t, b)[1]
+            else:
+                kept = "today" if tf1.tilt > 0 else "same (no lean)"
+                if today_table is None:
+                    today_table = reconstruct(ref, cells, ph, all_alpha, all_vals).table
+                table = today_table
+            out[(refit, score)] = {
+                **common, "round": metrics.log_rmse(table, m.truth), "kept": kept,
+                "t": np.rad2deg(t), "b": np.rad2deg(b) % 360.0,
+                "cpu": base_cpu + round_cpu + time.process_time() - t2}
+    return out
+
+
+def disagree_rows(plain: Basis, asym: Basis, d_half: tuple[np.ndarray, np.ndarray],
+                  which: str, firsts: list[int], refits: list[str], scores: list[str]
+                  ) -> None:
+    """The disagreement round's study (``--disagree SET``, docs/science.md 7.4): per specimen,
+    today's path and the tilt fit at 120 readings (:func:`tilt_scan`, R = 6) against the round
+    after a first pass of ``R`` in ``firsts`` (the auto-arc path: ``20 R`` readings when
+    asymmetric) filled up to 120 readings, for each refit in ``refits``. ``symmetric``:
+    bench_unseen's six anisotropic specimens, the first pass ``2R`` uniform angles over a full
+    turn, against their plain fit of 12 uniform angles (:func:`full_turn_tilt`)."""
+    from gonio.plans.arc import arc_test
+
+    cells, ph = d_half
+    n = len(cells)
+    if which == "symmetric":
+        mats, specs = bu.aniso_materials(), None
+    else:
+        specs = {"choice": ASYM, "fresh": FRESH, "fresh2": FRESH2, "fresh3": FRESH3}[which]
+        mats = asym_materials(specs=specs)
+    variants = [(r, f, s) for r in firsts for f in refits for s in scores]
+    rows: dict[tuple[int, str, str], list[tuple[float, float, float, int]]] = {
+        v: [] for v in variants}
+    lines: dict[tuple[int, str, str], list[str]] = {v: [] for v in variants}
+    for i, m in enumerate(mats):
+        if which == "symmetric":
+            seed = 9000 + 37 * i
+            ref = full_turn_tilt(plain, m, cells, ph, 12, seed)
+            today, tilt = ref["plain"], ref["tilt"]
+        else:
+            seed = 500 + i
+            ref = tilt_scan(plain, asym, m, cells, ph, 6, seed)
+            today, tilt = ref["today"], ref["tilt"]
+        for r_first in firsts:
+            if which == "symmetric":
+                angles = [float(a) for a in np.rad2deg(uniform_stage_angles(2 * r_first))]
+                vals = bu.read(m, cells, ph, np.deg2rad(angles), seed + 1)
+                basis = plain
+            else:
+                angles = first_round_angles(0.0, r_first, 1)
+                vals = bu.read(m, cells, ph, np.deg2rad(angles), seed + 1)
+                test = arc_test(angles, vals, 0.01)
+                basis = plain if test["symmetric"] else asym
+                if not test["symmetric"]:
+                    fill = fill_angles(0.0, r_first, 1)
+                    vals = np.concatenate(
+                        [vals, bu.read(m, cells, ph, np.deg2rad(fill), seed + 2)], axis=1)
+                    angles += fill
+            count = max(0, (120 - n * len(angles)) // n)
+            res = disagree_round(plain, basis, m, cells, ph, angles, vals, count, refits,
+                                 scores, seed + 3)
+            for (refit, score), d in res.items():
+                key = (r_first, refit, score)
+                rows[key].append((today, tilt, d["round"], d["readings"]))
+                lines[key].append(
+                    f"| {m.name} | {today:.4f} | {tilt:.4f} | **{d['round']:.4f}** | "
+                    f"{d['readings']} | {d['kept']} | {d['first_today']:.4f} / "
+                    f"{d['first_tilt']:.4f} | {d['e_today']:.4g} / {d['e_tilt']:.4g} "
+                    f"({d['n_new']}) | {d['t']:.1f} / {d['b']:.0f} | "
+                    f"{', '.join(f'{a:g}' for a in d['angles'])} | {d['cpu']:.1f} |")
+                print(f"  {which} {m.name} R={r_first} {refit} {score}: today {today:.4f} tilt "
+                      f"{tilt:.4f} round {d['round']:.4f} kept {d['kept']}", flush=True)
+    for key in variants:
+        r_first, refit, score = key
+        print(f"\n{which} set, first pass R = {r_first} ({n * 2 * r_first} readings when "
+              f"asymmetric) + the disagreement round to 120, refit {refit!r}, score {score!r}; "
+              "today and tilt fit at 120 readings (R = 6)")
+        print("\n| specimen | today | tilt fit | round | readings | kept | first pass: today "
+              "/ tilt | round's error: today / tilt (readings) | final t / b (deg) | round "
+              "angles (deg) | round CPU s |")
+        print("|---|---|---|---|---|---|---|---|---|---|---|")
+        for line in lines[key]:
+            print(line)
+        a = np.array(rows[key], dtype=float)
+        print(f"| **mean** | {a[:, 0].mean():.4f} | {a[:, 1].mean():.4f} | "
+              f"**{a[:, 2].mean():.4f}** | {a[:, 3].mean():.0f} | | | | | | |")
+        worse = a[:, 2] - a[:, 0]
+        print(f"\nround against today: mean {a[:, 2].mean() - a[:, 0].mean():+.4f} "
+              f"({100 * (a[:, 2].mean() / a[:, 0].mean() - 1):+.1f} %), worst "
+              f"{worse.max():+.4f}, {int(np.sum(worse > 0.01))} specimens worse by more than "
+              "0.01", flush=True)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=5,
@@ -443,6 +634,22 @@ def main(argv: list[str] | None = None) -> int:
                     help="with --auto: the specimens (fresh: ASYM_FRESH, run once)")
     ap.add_argument("--tilt", choices=("choice", "fresh", "fresh2", "symmetric"), default=None,
                     help="only the tilt fit's study on that set (module notes)")
+    ap.add_argument("--disagree", choices=("choice", "fresh", "fresh2", "fresh3", "symmetric"),
+                    default=None, help="only the disagreement round's study on that set "
+                                       "(docs/science.md 7.4)")
+    ap.add_argument("--first-rotations", type=int, nargs="+", default=[4],
+                    help="with --disagree: R of the first pass (20 R readings when "
+                         "asymmetric; the round fills up to 120)")
+    ap.add_argument("--refit", nargs="+", choices=("search", "near", "lean"),
+                    default=["near"],
+                    help="with --disagree: the tilt fit kept is searched again on every "
+                         "reading (search), searched within 5 deg of tilt and 30 of azimuth "
+                         "of the first pass's lean (near) or refitted at that lean (lean)")
+    ap.add_argument("--score", nargs="+", choices=("noise", "noise-median", "metric"),
+                    default=["noise"],
+                    help="with --disagree: the units the round is placed and judged in: "
+                         "noise-scaled chi-square (noise; noise-median: judged by the median "
+                         "reading's term) or the cosine-weighted log of log_rmse (metric)")
     ap.add_argument("--rotations", type=int, default=6,
                     help="R of the auto arc for --tilt (6: 120 readings when asymmetric)")
     args = ap.parse_args(argv)
@@ -457,6 +664,11 @@ def main(argv: list[str] | None = None) -> int:
     plain = default_basis()
     asym = default_basis(asymmetric=True)
     d_half, d_full = design(plain, 180.0), design(plain, 360.0)
+    if args.disagree is not None:
+        disagree_rows(plain, asym, d_half, args.disagree, args.first_rotations, args.refit,
+                      args.score)
+        print(f"total {time.perf_counter() - t0:.0f} s")
+        return 0
     if args.tilt is not None:
         tilt_rows(plain, asym, d_half, args.tilt, args.rotations)
         print(f"total {time.perf_counter() - t0:.0f} s")
