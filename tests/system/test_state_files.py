@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import math
 import shutil
 import sqlite3
 from collections.abc import Callable, Iterator
@@ -110,13 +109,13 @@ def _sha(path: Path) -> str:
 
 
 # --------------------------------------------------------------------------- item 1
+# One factor that is not finite and positive (zero and NaN meet the same check of the file:
+# tests/unit/test_calibration.py), and one that no reading of this rig's sensors could give.
 @pytest.mark.parametrize(("change", "words"), [
     (lambda v: -v, "finite and positive"),
-    (lambda v: 0.0, "finite and positive"),
-    (lambda v: math.nan, "finite and positive"),
     # A reference that read a billion times its full scale: no calibration of this rig.
     (lambda v: v * 1e-9, "outside what sensor"),
-], ids=["negated", "zero", "nan", "implausible"])
+], ids=["negated", "implausible"])
 def test_serve_sim_refuses_a_nonsense_calibration(
     data: Path, change: Callable[[float], float], words: str
 ) -> None:

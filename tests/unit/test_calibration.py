@@ -224,6 +224,13 @@ def test_load_calibration_names_the_file_of_every_kind_of_damage(tmp_path: Path)
     path.write_bytes(b"\xff\xfe")
     with pytest.raises(CalibrationError, match=f"calibration file {path} cannot be read"):
         load_calibration(path)
+    # Every factor that is not finite and positive, as a file holds it (NaN: JSON's common
+    # extension, as json.dumps writes it); gonio serve refuses with this message.
+    for factor in (-1e-5, 0.0, math.nan):
+        path.write_text(json.dumps(_cal((factor,))))
+        with pytest.raises(CalibrationError, match="finite and positive") as e:
+            load_calibration(path)
+        assert f"calibration file {path}" in str(e.value)
 
 
 def test_a_factor_is_plausible_when_its_reference_reading_is_within_the_sensor_range() -> None:

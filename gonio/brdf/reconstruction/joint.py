@@ -15,7 +15,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import scipy.linalg
 from numpy.typing import NDArray
 
 from gonio.brdf.reconstruction.basis import N_HARMONICS, Basis
@@ -125,6 +124,10 @@ def solve_joint(
         ``loo`` row ``q``: the fit to the other pairs' readings predicting pair ``q``'s, from
         the blocks of ``G^-1`` (``y_I - (G^-1)_II^-1 beta_I``), no refits.
     """
+    # scipy loads with the first fit, not with the module: the daemon's start path imports
+    # this one (design routes) for its constants, and most daemons and commands never fit.
+    import scipy.linalg
+
     n, r, C = Y.shape
     M = P.shape[0]
     harm = np.arange(M, dtype=float)

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.interpolate import PchipInterpolator
 
 FloatArray = NDArray[np.float64]
 
@@ -39,6 +38,10 @@ def periodic_pchip_rows(
     n, r, C = y.shape
     if r == 1:
         return np.broadcast_to(y[:, :1, :], (n, xq.shape[1], C)).copy()
+    # scipy loads with the first interpolation, not with the plans (the daemon's start path
+    # imports this module for the arc helpers below).
+    from scipy.interpolate import PchipInterpolator
+
     xp = np.concatenate([x - period, x, x + period])
     yp = np.tile(np.moveaxis(y, 1, 0).reshape(r, n * C), (3, 1))  # (3r, n C)
     pp = PchipInterpolator(xp, yp, axis=0)

@@ -14,7 +14,9 @@ import shutil
 import signal
 import subprocess
 import sys
+import threading
 from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -158,8 +160,17 @@ def _refused(d: DaemonProcess) -> None:
         assert c.get("/api/v1/jobs").status_code == 200  # reads still work
 
 
+@contextmanager
+def _released(event: threading.Event) -> Iterator[None]:
+    """Set ``event`` on the way out, however the block ends (a held thread goes on)."""
+    try:
+        yield
+    finally:
+        event.set()
+
+
 def test_a_disk_filling_while_the_result_file_is_written_fails_the_job_only(
-    small_disk: Path, basis: Any
+    small_disk: Path, basis: Any, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """The reconstruction's HDF5 file meets the full disk part way through (its first bytes
     fit, its table does not): the case that crashed the daemon with SIGSEGV when HDF5 wrote
@@ -167,6 +178,7 @@ def test_a_disk_filling_while_the_result_file_is_written_fails_the_job_only(
     this process, with a small basis."""
     import secrets
 
+    from gonio import results
     from gonio.api.auth import ApiKeyring
     from gonio.daemon import DaemonConfig, build_app
     from gonio.sim.rig import SimRigOptions, start_sim_rig
@@ -174,14 +186,27 @@ def test_a_disk_filling_while_the_result_file_is_written_fails_the_job_only(
 
     data = small_disk / "data"
     key = secrets.token_hex(24)
-    with start_sim_rig(SimRigOptions(time_scale=10.0, settle_s=0.0)) as sim:
+    # The second job's result is written only once the disk is full: the real write_result,
+    # held at its start while ``hold`` is set, so the filling cannot come too late.
+    hold, reached, filled = threading.Event(), threading.Event(), threading.Event()
+    write_result = results.write_result
+
+    def held_write_result(*args: Any, **kwargs: Any) -> Path:
+        if hold.is_set():
+            reached.set()
+            assert filled.wait(240), "the disk was not filled"
+        return write_result(*args, **kwargs)
+
+    monkeypatch.setattr(results, "write_result", held_write_result)
+    with start_sim_rig(SimRigOptions(time_scale=10.0, settle_s=0.0)) as sim, \
+            _released(filled):
         cfg = DaemonConfig().with_overrides(paths__data_dir=str(data))
         app = build_app(cfg, sim.config, ApiKeyring({"t": key}), basis=BasisSupply(lambda: basis))
         with live_server(app) as url, httpx.Client(base_url=url, headers={"X-API-Key": key},
                                                    timeout=120) as c:
             def submit() -> int:
                 r = c.post("/api/v1/jobs", json={"plan": {"kind": "uniform", "specimen": "x",
-                                                          "rotations": 8}})
+                                                          "rotations": 4}})
                 assert r.status_code == 201, r.text
                 return int(r.json()["id"])
 
@@ -190,12 +215,18 @@ def test_a_disk_filling_while_the_result_file_is_written_fails_the_job_only(
 
             done = submit()  # a result to export later, with its fits stored
             wait_for(lambda: state(done) == "completed", 240, "the first scan")
+            # The second job and its rebuild without them: nothing here is about its fits.
+            app.state.service.worker.fit_exports = False
+            hold.set()
             job = submit()
-            wait_for(lambda: state(job) == "reconstructing", 120, "the reconstruction")
+            assert reached.wait(240), f"job {job} never wrote its result"
+            hold.clear()
+            assert state(job) == "reconstructing"
             # Leave 64 KiB: the file's header fits, the 72x18x18x36 table does not.
             filler = fill(small_disk)
             with open(filler, "r+b") as f:
                 f.truncate(filler.stat().st_size - 64 * 1024)
+            filled.set()
             wait_for(lambda: state(job) == "failed", 120, "the job's failure")
             detail = c.get(f"/api/v1/jobs/{job}").json()
             assert detail["reason"].startswith(f"disk full: the result file of job {job}")

@@ -207,13 +207,19 @@ def test_user_errors_get_clear_statuses(daemon: Daemon) -> None:
         assert c.post("/api/v1/jobs/999999/pause").status_code == 404
         dry = c.post("/api/v1/jobs/dry-run", json=scan("dry"))
         assert dry.status_code == 200 and dry.json()["readings"] > 0
-        # A job without a result yet: 404 with a reason, not a 500.
-        q = c.post("/api/v1/jobs", json=scan("pending", rotations=4)).json()["id"]
-        c.post(f"/api/v1/jobs/{q}/cancel")
-        r = c.get(f"/api/v1/jobs/{q}/result")
-        assert r.status_code == 404 and "no result" in r.json()["detail"]
-        r = c.get(f"/api/v1/jobs/{q}/export", params={"format": "gltf"})
-        assert r.status_code == 404 and "no result" in r.json()["detail"]
+        # A job without a result yet: 404 with a reason, not a 500. The queue is held, so it
+        # stays queued until cancelled (started, it would measure and fit in the background
+        # long after this test).
+        assert c.post("/api/v1/rig/halt").status_code == 200
+        try:
+            q = c.post("/api/v1/jobs", json=scan("pending", rotations=4)).json()["id"]
+            assert c.post(f"/api/v1/jobs/{q}/cancel").json()["state"] == "aborted"
+            r = c.get(f"/api/v1/jobs/{q}/result")
+            assert r.status_code == 404 and "no result" in r.json()["detail"]
+            r = c.get(f"/api/v1/jobs/{q}/export", params={"format": "gltf"})
+            assert r.status_code == 404 and "no result" in r.json()["detail"]
+        finally:
+            assert c.post("/api/v1/rig/release").status_code == 200
 
 
 @pytest.mark.parametrize(
