@@ -149,8 +149,8 @@ def test_colour_table_beside_the_rendering(spectral_daemon: Daemon, spectral_job
 
     d, ids = spectral_daemon, spectral_jobs
     with d.client() as c:
-        api = c.get(f"/api/v1/jobs/{ids[0]}/colour", params={"instrument": "MA98"}).json()
-        api_csv = c.get(f"/api/v1/jobs/{ids[0]}/colour",
+        api = c.get(f"/api/v1/jobs/{ids[1]}/colour", params={"instrument": "MA98"}).json()
+        api_csv = c.get(f"/api/v1/jobs/{ids[1]}/colour",
                         params={"instrument": "MA98", "format": "csv"}).text
     assert api["colour"]["space"] == "CIELAB"
     # The one pair placed at 45as15 read that geometry; every other row is the table's. The
@@ -160,10 +160,11 @@ def test_colour_table_beside_the_rendering(spectral_daemon: Daemon, spectral_job
     csv_rows = list(csv.DictReader(io.StringIO(api_csv)))
     assert [r["source"] for r in csv_rows] == [
         "pair" if n == "45as15" else "table" for n in names]
+    # The page opens on the newest job (the second scan), which the test reads first: no
+    # click, and no other job's views computed; the first scan is the one compared with.
     wait = open_live(browser, d, 240)
-    row = f'#jobs tr[data-id="{ids[0]}"]'
-    click_when_steady(wait, row)
-    wait.until(lambda b: b.find_element(By.ID, "colour").is_displayed()
+    wait.until(lambda b: b.find_element(By.ID, "result-job").text.startswith(f"job {ids[1]} ")
+               and b.find_element(By.ID, "colour").is_displayed()
                and "CIELAB" in b.find_element(By.ID, "colour-caption").text)
     caption = browser.find_element(By.ID, "colour-caption").text
     assert "D65/10°" in caption and "MA98 geometries" in caption and "flop index" in caption
@@ -186,10 +187,10 @@ def test_colour_table_beside_the_rendering(spectral_daemon: Daemon, spectral_job
     Select(browser.find_element(By.ID, "colour-instrument")).select_by_value("BYK-mac")
     wait.until(lambda b: "BYK-mac geometries" in b.find_element(By.ID, "colour-caption").text)
     assert len(browser.find_elements(By.CSS_SELECTOR, "#colour-table tbody tr")) == 6
-    wait.until(lambda b: str(ids[1]) in [o.get_attribute("value") for o in
+    wait.until(lambda b: str(ids[0]) in [o.get_attribute("value") for o in
                                          b.find_elements(By.CSS_SELECTOR, "#compare option")])
-    Select(browser.find_element(By.ID, "compare")).select_by_value(str(ids[1]))
-    wait.until(lambda b: f"against job {ids[1]}" in b.find_element(By.ID, "colour-caption").text)
+    Select(browser.find_element(By.ID, "compare")).select_by_value(str(ids[0]))
+    wait.until(lambda b: f"against job {ids[0]}" in b.find_element(By.ID, "colour-caption").text)
     head = [th.text for th in browser.find_elements(By.CSS_SELECTOR, "#colour-table thead th")]
     assert head[-2:] == ["source", "ΔE00"]
     assert not _severe(browser)
@@ -204,12 +205,13 @@ def test_instrument_menu_starts_on_the_rig_design_instrument(
     with d.client() as c:
         # What the page reads: the rig config's [design] table, the name made canonical.
         assert c.get("/api/v1/rig/config").json()["design"]["colour_instrument"] == "BYK-mac"
-        api = c.get(f"/api/v1/jobs/{ids[0]}/colour", params={"instrument": "BYK-mac"}).json()
+        api = c.get(f"/api/v1/jobs/{ids[1]}/colour", params={"instrument": "BYK-mac"}).json()
     # The BYK-mac's six geometries (45as-15 ... 45as110; docs/colour.md), independent of gonio.
     byk = ["45as-15", "45as15", "45as25", "45as45", "45as75", "45as110"]
+    # The page opens on the newest job (the second scan); then the first is chosen.
     wait = open_live(browser, d, 240)
-    click_when_steady(wait, f'#jobs tr[data-id="{ids[0]}"]')
-    wait.until(lambda b: "BYK-mac geometries" in b.find_element(By.ID, "colour-caption").text)
+    wait.until(lambda b: b.find_element(By.ID, "result-job").text.startswith(f"job {ids[1]} ")
+               and "BYK-mac geometries" in b.find_element(By.ID, "colour-caption").text)
     menu = Select(browser.find_element(By.ID, "colour-instrument"))
     assert menu.first_selected_option.get_attribute("value") == "BYK-mac"
     assert menu.first_selected_option.text == "BYK-mac (rig design)"
@@ -221,8 +223,8 @@ def test_instrument_menu_starts_on_the_rig_design_instrument(
     # The user's choice holds: another instrument, then another job, stays on it.
     menu.select_by_value("MA98")
     wait.until(lambda b: "MA98 geometries" in b.find_element(By.ID, "colour-caption").text)
-    click_when_steady(wait, f'#jobs tr[data-id="{ids[1]}"]')
-    wait.until(lambda b: b.find_element(By.ID, "result-job").text.startswith(f"job {ids[1]} ")
+    click_when_steady(wait, f'#jobs tr[data-id="{ids[0]}"]')
+    wait.until(lambda b: b.find_element(By.ID, "result-job").text.startswith(f"job {ids[0]} ")
                and "MA98 geometries" in b.find_element(By.ID, "colour-caption").text)
     assert Select(browser.find_element(By.ID, "colour-instrument")).first_selected_option \
         .get_attribute("value") == "MA98"
