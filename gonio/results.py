@@ -387,12 +387,16 @@ def _read_open(p: Path, f: h5py.File) -> ResultFile:
     # Files from before auto-ranging have every reading in range 0.
     range_index = g["range_index"][()] if "range_index" in g else np.zeros(len(lights), int)
     range_scale = g["range_scale"][()] if "range_scale" in g else np.ones(len(lights))
+    # Each column read whole, once: indexing an h5py dataset reading by reading is one HDF5
+    # read per value (13 a reading), which made this loop most of a small result's read.
+    c = {k: g[k][()] for k in ("angle_index", "commanded_deg", "actual_deg", "raw", "dark",
+                               "exposure_s", "averages", "saturated", "t_read")}
     readings = [
-        ReadingRow(int(g["angle_index"][i]), float(g["commanded_deg"][i]),
-                   float(g["actual_deg"][i]), lights[i], sensors[i],
-                   tuple(float(x) for x in g["raw"][i]), tuple(float(x) for x in g["dark"][i]),
-                   float(g["exposure_s"][i]), int(g["averages"][i]), bool(g["saturated"][i]),
-                   float(g["t_read"][i]), int(range_index[i]), float(range_scale[i]))
+        ReadingRow(int(c["angle_index"][i]), float(c["commanded_deg"][i]),
+                   float(c["actual_deg"][i]), lights[i], sensors[i],
+                   tuple(float(x) for x in c["raw"][i]), tuple(float(x) for x in c["dark"][i]),
+                   float(c["exposure_s"][i]), int(c["averages"][i]), bool(c["saturated"][i]),
+                   float(c["t_read"][i]), int(range_index[i]), float(range_scale[i]))
         for i in range(len(lights))
     ]
     s = f["samples"]

@@ -1,7 +1,10 @@
 """The lab page's colour table (headless Chromium): a spectral specimen scanned on the simulated
 rig shows CIELAB at the instrument geometries beside its rendering, the numbers the API gives;
 a comparison job adds CIEDE2000. The instrument menu starts on the rig's design instrument
-(``[design] colour_instrument``) when the rig config has one, on MA98 when it has none."""
+(``[design] colour_instrument``) when the rig config has one, on MA98 when it has none.
+
+One simulated rig and one pair of scans serve both tests: the daemon restarts on the same data
+directory when the rig config gains its ``[design]`` table (``_SpectralLab``)."""
 
 from __future__ import annotations
 
@@ -9,7 +12,7 @@ import csv
 import io
 import secrets
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import ExitStack
 from typing import Any
 
 import pytest
@@ -31,69 +34,123 @@ from tests.system.api.test_scan_flow import scan, wait_state
 pytestmark = pytest.mark.system
 
 
-@contextmanager
-def _spectral_daemon(tmp_path_factory: pytest.TempPathFactory, basis: Any,
-                     design: dict[str, Any] | None = None) -> Iterator[Daemon]:
-    """A daemon of its own whose simulated rig holds a spectral specimen (31-band sensors);
-    ``design``, when given, is the rig config's ``[design]`` table.
+class _SpectralLab:
+    """One simulated spectral rig and its data directory, served by one daemon at a time.
+
+    :meth:`serve` restarts the daemon when asked for another ``[design]`` table, as a lab
+    restarts ``gonio serve`` after pasting the table ``gonio design --colour`` wrote into its
+    rig config: the calibration, the jobs and their results stay in the data directory, so
+    the scans are made once for every test of the module."""
+
+    def __init__(self, tmp_path_factory: pytest.TempPathFactory, basis: Any) -> None:
+        from gonio.sim.rig import DEFAULT_LIGHTS, DEFAULT_SENSORS, SimRigOptions, start_sim_rig
+        from gonio.sim.spectral import CHIP_11, spectral_specimen
+
+        self.basis = basis
+        self.data_dir = tmp_path_factory.mktemp("gonio-data")
+        theta_l, phi_l = DEFAULT_LIGHTS[0]
+        assert theta_l == 45.0
+        sensors = (*DEFAULT_SENSORS, (30.0, (phi_l + 180.0) % 360.0))
+        # An 11-channel spectral sensor chip rather than the 31-band spectrometer
+        # (tests/system/api/test_colour.py scans with that one): what the page shows does not
+        # depend on the number of bands, and every request on a result reads all of them.
+        self.sim = start_sim_rig(SimRigOptions(
+            material=spectral_specimen("metallic-blue-paint", CHIP_11), time_scale=10.0,
+            settle_s=0.0, sensors=sensors))
+        self.design: dict[str, Any] | None = None
+        self.daemon: Daemon | None = None
+        self._serving = ExitStack()
+
+    def serve(self, design: dict[str, Any] | None) -> Daemon:
+        """The daemon whose rig config's ``[design]`` table is ``design`` (None: none),
+        restarted on the same data directory when the one running has another."""
+        from gonio.config import RigConfig
+
+        if self.daemon is not None and design == self.design:
+            return self.daemon
+        self._serving.close()
+        rig = self.sim.config
+        if design is not None:
+            # Validated as a rig config file's table is (the instrument's name made canonical).
+            rig = RigConfig.model_validate({**rig.model_dump(), "design": design})
+        key = secrets.token_hex(24)
+        cfg = DaemonConfig().with_overrides(paths__data_dir=str(self.data_dir))
+        app = build_app(cfg, rig, ApiKeyring({"tester": key}),
+                        basis=BasisSupply(lambda: self.basis))
+        app.state.service.worker.fit_exports = False  # the spectral fits are not under test
+        url = self._serving.enter_context(live_server(app))
+        self.design, self.daemon = design, Daemon(url, key, app, self.sim, self.data_dir)
+        return self.daemon
+
+    def close(self) -> None:
+        try:
+            self._serving.close()
+        finally:
+            self.sim.close()
+
+
+@pytest.fixture(scope="module")
+def spectral_lab(tmp_path_factory: pytest.TempPathFactory, basis: Any) -> Iterator[_SpectralLab]:
+    """The spectral rig: a spectral specimen read by spectral sensors.
 
     Besides the default devices, a fifth sensor at 30 degrees in the plane of the first light
     (45 degrees), on the far side: that pair sits at the instruments' 45as15 geometry
     (aspecular 15: the sensor 15 degrees from the specular direction, toward the light)."""
-    from gonio.config import RigConfig
-    from gonio.sim.rig import DEFAULT_LIGHTS, DEFAULT_SENSORS, SimRigOptions, start_sim_rig
-
-    data_dir = tmp_path_factory.mktemp("gonio-data")
-    theta_l, phi_l = DEFAULT_LIGHTS[0]
-    assert theta_l == 45.0
-    sensors = (*DEFAULT_SENSORS, (30.0, (phi_l + 180.0) % 360.0))
-    sim = start_sim_rig(SimRigOptions(material="metallic-blue-paint", time_scale=10.0,
-                                      settle_s=0.0, sensors=sensors))
-    rig = sim.config
-    if design is not None:
-        # Validated as a rig config file's table is (the instrument's name made canonical).
-        rig = RigConfig.model_validate({**rig.model_dump(), "design": design})
-    key = secrets.token_hex(24)
-    cfg = DaemonConfig().with_overrides(paths__data_dir=str(data_dir))
-    app = build_app(cfg, rig, ApiKeyring({"tester": key}), basis=BasisSupply(lambda: basis))
-    app.state.service.worker.fit_exports = False  # 31-channel fits are not under test
+    lab = _SpectralLab(tmp_path_factory, basis)
     try:
-        with live_server(app) as url:
-            yield Daemon(url, key, app, sim, data_dir)
+        yield lab
     finally:
-        sim.close()
+        lab.close()
 
 
 @pytest.fixture(scope="module")
-def spectral_daemon(tmp_path_factory: pytest.TempPathFactory, basis: Any) -> Iterator[Daemon]:
-    """The spectral rig without a ``[design]`` table."""
-    with _spectral_daemon(tmp_path_factory, basis) as d:
-        yield d
-
-
-@pytest.fixture(scope="module")
-def byk_design_daemon(tmp_path_factory: pytest.TempPathFactory, basis: Any) -> Iterator[Daemon]:
-    """The spectral rig whose ``[design]`` was made for the BYK-mac (``gonio design --colour
-    BYK-mac``), its name written as a user might (the config makes it canonical)."""
-    design = {"rotations": 8, "pairs": 10, "colour_instrument": "byk mac", "colour_weight": 10.0}
-    with _spectral_daemon(tmp_path_factory, basis, design) as d:
-        yield d
-
-
-def test_colour_table_beside_the_rendering(spectral_daemon: Daemon,
-                                           browser: Any) -> None:  # noqa: F811
-    from selenium.webdriver.common.by import By
-    from selenium.webdriver.support.ui import Select
-
-    d = spectral_daemon
+def spectral_jobs(spectral_lab: _SpectralLab) -> list[int]:
+    """Two completed scans of the blue panel, calibrated against the white reference, made
+    once (by the daemon without a ``[design]`` table) for every test of the module."""
+    d = spectral_lab.serve(None)
     _calibrate(d)
     with d.client() as c:
         ids = [c.post("/api/v1/jobs", json=scan(name, rotations=4)).json()["id"]
                for name in ("blue panel", "blue panel, batch 2")]
         for job_id in ids:
             assert wait_state(c, job_id, {"completed", "failed"}, 240)["state"] == "completed"
-        api = c.get(f"/api/v1/jobs/{ids[0]}/colour", params={"instrument": "MA98"}).json()
-        api_csv = c.get(f"/api/v1/jobs/{ids[0]}/colour",
+    return ids
+
+
+def _serve(lab: _SpectralLab, design: dict[str, Any] | None, browser: Any) -> Daemon:  # noqa: F811
+    """``lab``'s daemon with ``design``, the browser on a blank page meanwhile: a page left
+    open on a daemon that restarts logs its refused requests, which are not the next test's."""
+    browser.get("about:blank")
+    d = lab.serve(design)
+    browser.get_log("browser")
+    return d
+
+
+@pytest.fixture
+def spectral_daemon(spectral_lab: _SpectralLab, spectral_jobs: list[int],
+                    browser: Any) -> Daemon:  # noqa: F811
+    """The spectral rig without a ``[design]`` table."""
+    return _serve(spectral_lab, None, browser)
+
+
+@pytest.fixture
+def byk_design_daemon(spectral_lab: _SpectralLab, spectral_jobs: list[int],
+                      browser: Any) -> Daemon:  # noqa: F811
+    """The spectral rig whose ``[design]`` was made for the BYK-mac (``gonio design --colour
+    BYK-mac``), its name written as a user might (the config makes it canonical)."""
+    design = {"rotations": 8, "pairs": 10, "colour_instrument": "byk mac", "colour_weight": 10.0}
+    return _serve(spectral_lab, design, browser)
+
+
+def test_colour_table_beside_the_rendering(spectral_daemon: Daemon, spectral_jobs: list[int],
+                                           browser: Any) -> None:  # noqa: F811
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support.ui import Select
+
+    d, ids = spectral_daemon, spectral_jobs
+    with d.client() as c:
+        api = c.get(f"/api/v1/jobs/{ids[1]}/colour", params={"instrument": "MA98"}).json()
+        api_csv = c.get(f"/api/v1/jobs/{ids[1]}/colour",
                         params={"instrument": "MA98", "format": "csv"}).text
     assert api["colour"]["space"] == "CIELAB"
     # The one pair placed at 45as15 read that geometry; every other row is the table's. The
@@ -103,10 +160,11 @@ def test_colour_table_beside_the_rendering(spectral_daemon: Daemon,
     csv_rows = list(csv.DictReader(io.StringIO(api_csv)))
     assert [r["source"] for r in csv_rows] == [
         "pair" if n == "45as15" else "table" for n in names]
+    # The page opens on the newest job (the second scan), which the test reads first: no
+    # click, and no other job's views computed; the first scan is the one compared with.
     wait = open_live(browser, d, 240)
-    row = f'#jobs tr[data-id="{ids[0]}"]'
-    click_when_steady(wait, row)
-    wait.until(lambda b: b.find_element(By.ID, "colour").is_displayed()
+    wait.until(lambda b: b.find_element(By.ID, "result-job").text.startswith(f"job {ids[1]} ")
+               and b.find_element(By.ID, "colour").is_displayed()
                and "CIELAB" in b.find_element(By.ID, "colour-caption").text)
     caption = browser.find_element(By.ID, "colour-caption").text
     assert "D65/10°" in caption and "MA98 geometries" in caption and "flop index" in caption
@@ -129,35 +187,31 @@ def test_colour_table_beside_the_rendering(spectral_daemon: Daemon,
     Select(browser.find_element(By.ID, "colour-instrument")).select_by_value("BYK-mac")
     wait.until(lambda b: "BYK-mac geometries" in b.find_element(By.ID, "colour-caption").text)
     assert len(browser.find_elements(By.CSS_SELECTOR, "#colour-table tbody tr")) == 6
-    wait.until(lambda b: str(ids[1]) in [o.get_attribute("value") for o in
+    wait.until(lambda b: str(ids[0]) in [o.get_attribute("value") for o in
                                          b.find_elements(By.CSS_SELECTOR, "#compare option")])
-    Select(browser.find_element(By.ID, "compare")).select_by_value(str(ids[1]))
-    wait.until(lambda b: f"against job {ids[1]}" in b.find_element(By.ID, "colour-caption").text)
+    Select(browser.find_element(By.ID, "compare")).select_by_value(str(ids[0]))
+    wait.until(lambda b: f"against job {ids[0]}" in b.find_element(By.ID, "colour-caption").text)
     head = [th.text for th in browser.find_elements(By.CSS_SELECTOR, "#colour-table thead th")]
     assert head[-2:] == ["source", "ΔE00"]
     assert not _severe(browser)
 
 
-def test_instrument_menu_starts_on_the_rig_design_instrument(byk_design_daemon: Daemon,
-                                                             browser: Any) -> None:  # noqa: F811
+def test_instrument_menu_starts_on_the_rig_design_instrument(
+        byk_design_daemon: Daemon, spectral_jobs: list[int], browser: Any) -> None:  # noqa: F811
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support.ui import Select
 
-    d = byk_design_daemon
-    _calibrate(d)
+    d, ids = byk_design_daemon, spectral_jobs
     with d.client() as c:
         # What the page reads: the rig config's [design] table, the name made canonical.
         assert c.get("/api/v1/rig/config").json()["design"]["colour_instrument"] == "BYK-mac"
-        ids = [c.post("/api/v1/jobs", json=scan(name, rotations=4)).json()["id"]
-               for name in ("blue panel", "blue panel, batch 2")]
-        for job_id in ids:
-            assert wait_state(c, job_id, {"completed", "failed"}, 240)["state"] == "completed"
-        api = c.get(f"/api/v1/jobs/{ids[0]}/colour", params={"instrument": "BYK-mac"}).json()
+        api = c.get(f"/api/v1/jobs/{ids[1]}/colour", params={"instrument": "BYK-mac"}).json()
     # The BYK-mac's six geometries (45as-15 ... 45as110; docs/colour.md), independent of gonio.
     byk = ["45as-15", "45as15", "45as25", "45as45", "45as75", "45as110"]
+    # The page opens on the newest job (the second scan); then the first is chosen.
     wait = open_live(browser, d, 240)
-    click_when_steady(wait, f'#jobs tr[data-id="{ids[0]}"]')
-    wait.until(lambda b: "BYK-mac geometries" in b.find_element(By.ID, "colour-caption").text)
+    wait.until(lambda b: b.find_element(By.ID, "result-job").text.startswith(f"job {ids[1]} ")
+               and "BYK-mac geometries" in b.find_element(By.ID, "colour-caption").text)
     menu = Select(browser.find_element(By.ID, "colour-instrument"))
     assert menu.first_selected_option.get_attribute("value") == "BYK-mac"
     assert menu.first_selected_option.text == "BYK-mac (rig design)"
@@ -169,8 +223,8 @@ def test_instrument_menu_starts_on_the_rig_design_instrument(byk_design_daemon: 
     # The user's choice holds: another instrument, then another job, stays on it.
     menu.select_by_value("MA98")
     wait.until(lambda b: "MA98 geometries" in b.find_element(By.ID, "colour-caption").text)
-    click_when_steady(wait, f'#jobs tr[data-id="{ids[1]}"]')
-    wait.until(lambda b: b.find_element(By.ID, "result-job").text.startswith(f"job {ids[1]} ")
+    click_when_steady(wait, f'#jobs tr[data-id="{ids[0]}"]')
+    wait.until(lambda b: b.find_element(By.ID, "result-job").text.startswith(f"job {ids[0]} ")
                and "MA98 geometries" in b.find_element(By.ID, "colour-caption").text)
     assert Select(browser.find_element(By.ID, "colour-instrument")).first_selected_option \
         .get_attribute("value") == "MA98"

@@ -11,7 +11,7 @@ import pytest
 
 from gonio.calibration import CALIBRATION_FILE, Calibration, PairCalibration, save_calibration
 from gonio.paths import scan_data_dir
-from tests.system.api.conftest import Daemon
+from tests.system.api.conftest import Daemon, export_fits_off
 from tests.system.api.test_browser import _severe, browser, open_live  # noqa: F401 (fixture)
 
 pytestmark = [pytest.mark.system, pytest.mark.timeout(600)]
@@ -30,11 +30,14 @@ def _text(browser: Any, element_id: str) -> str:  # noqa: F811 (the fixture's na
         "return document.getElementById(arguments[0])?.textContent ?? ''", element_id))
 
 
-def _a_finished_job(daemon: Daemon) -> int:
-    """Run one short scan to its end through the API; its id."""
+@pytest.fixture(scope="module")
+def finished_job(daemon: Daemon) -> int:
+    """One short scan run to its end through the API (its id), made once for the tests that
+    need a row in the queue or a measured reconstruction. Its export fits are not under test
+    (none of these tests opens an export): it finishes without them."""
     import time
 
-    with daemon.client() as c:
+    with export_fits_off(daemon), daemon.client() as c:
         job = int(c.post("/api/v1/jobs", params={"accept_uncalibrated": "true"},
                          json={"plan": PLAN}).json()["id"])
         deadline = time.monotonic() + 300
@@ -46,13 +49,13 @@ def _a_finished_job(daemon: Daemon) -> int:
 
 
 def test_a_stale_key_gets_a_prompt_and_the_new_address_in_the_same_tab_recovers(
-    daemon: Daemon, browser: Any, no_export_fits: None  # noqa: F811
+    daemon: Daemon, browser: Any, finished_job: int  # noqa: F811
 ) -> None:
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support.ui import WebDriverWait
 
     wait = WebDriverWait(browser, 300, poll_frequency=0.2)
-    job = _a_finished_job(daemon)  # the queue is not empty
+    job = finished_job  # the queue is not empty
     # The tab still holds the key of a daemon that has restarted since (a new key each start).
     browser.get(f"{daemon.url}/#key={'0' * 48}")
     wait.until(lambda d: d.find_element(By.ID, "key-prompt").is_displayed())
@@ -153,11 +156,10 @@ def test_an_uncalibrated_scan_is_warned_accepted_and_labelled_as_such(
 
 
 def test_the_stage_chip_gives_the_specimen_angle_and_a_long_eta_keeps_the_buttons_in_view(
-    daemon: Daemon, browser: Any, no_export_fits: None  # noqa: F811
+    daemon: Daemon, browser: Any, finished_job: int,  # noqa: F811 (a row with its buttons)
 ) -> None:
     from selenium.webdriver.common.by import By
 
-    _a_finished_job(daemon)  # a row with its buttons
     wait = open_live(browser, daemon, 120)
     with daemon.client() as c:
         # One and a half turns and a bit: the stage's position is not the specimen's angle.
@@ -187,7 +189,8 @@ def _seconds(text: str) -> float:
 
 
 def test_the_eta_covers_reconstruction_with_a_measured_estimate_and_keeps_abort_in_view(
-    daemon: Daemon, browser: Any  # noqa: F811
+    daemon: Daemon, browser: Any, no_export_fits: None,  # noqa: F811
+    finished_job: int,  # at least one reconstruction measured on this daemon
 ) -> None:
     """Issue 27: the ETA left out reconstruction ("N min measuring, then reconstruction").
     It now adds an estimate of it from the last scans' measured finishing times, says it is
@@ -196,7 +199,6 @@ def test_the_eta_covers_reconstruction_with_a_measured_estimate_and_keeps_abort_
     import statistics
     import time
 
-    _a_finished_job(daemon)  # at least one reconstruction measured on this daemon
     browser.set_window_size(1024, 1600)
     try:
         wait = open_live(browser, daemon, 300)

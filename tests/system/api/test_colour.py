@@ -88,15 +88,18 @@ def test_spectral_sim_scan_gives_cielab(tmp_path: Path, basis: Any) -> None:
     # The export fits are made of the linear sRGB table (from XYZ), not of the first three
     # bands: a glTF export is a yellow, the table export keeps the 31 bands.
     assert res.factored is not None and res.factored.channels == ("R", "G", "B")
-    from gonio.export import export_result
+    from gonio.export import result_fits, write_export
 
-    gltf = export_result(svc.result_path(scan_id), "gltf", tmp_path / "y.gltf")
+    # Both exports from one reading of the result's fits and provenance, as export_result
+    # makes each (check_format, result_fits, write_export): the 31-band file is read once.
+    fits, prov = result_fits(svc.result_path(scan_id))
+    gltf = write_export(fits, "gltf", tmp_path / "y.gltf", prov)
     base = json.loads(gltf.read_text())["materials"][0]["pbrMetallicRoughness"][
         "baseColorFactor"]
     assert base[0] > base[2] * 2 and base[1] > base[2] * 1.5, base  # R, G well above B
     stated = json.loads(gltf.read_text())["asset"]["extras"]["colour_space"]
     assert stated.startswith("linear sRGB") and "D65/10" in stated and "spectral bands" in stated
-    table = export_result(svc.result_path(scan_id), "table", tmp_path / "y.npz")
+    table = write_export(fits, "table", tmp_path / "y.npz", prov)
     from gonio.brdf.tables.table import BRDFTable
 
     assert BRDFTable.load(table).wavelengths_nm == tuple(np.arange(400.0, 701.0, 10.0))
