@@ -442,10 +442,11 @@ GEOMETRY_CACHE_SIZE = 128
 the next rendering of the same view. The export's rendered fit renders the same 48 and 96
 pixel views a thousand times (:mod:`gonio.export.judge`), and working out the directions took
 about as long as evaluating a principled model at them; a figure's 512 pixel views are
-rendered a few times each, and would hold megabytes each."""
+rendered a few times each, and would hold megabytes each. At most 16 sphere and 8 swatch
+views are kept (under a megabyte each at 128 pixels); the judge's are 8."""
 
 
-@functools.lru_cache(maxsize=32)
+@functools.lru_cache(maxsize=16)
 def _point_light_geometry(size: int, light: PointLight, rotation_deg: float, batch: int
                           ) -> tuple[NDArray[np.bool_], int, tuple[_SpherePiece, ...]]:
     """:func:`_sphere_geometry` of one point light, kept (read-only) for the next rendering."""
@@ -525,7 +526,7 @@ def render_swatch(brdf: Any, light: PointLight = PointLight(0.0, 0.0),
     return (val * scale).reshape(size, size, 3)
 
 
-@functools.lru_cache(maxsize=16)
+@functools.lru_cache(maxsize=8)
 def _swatch_geometry(size: int, light: PointLight, rotation_deg: float
                      ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """The swatch's direction pairs in the specimen frame (size*size, 3) and each pixel's
