@@ -22,7 +22,7 @@ def _blas_controller() -> Any:
     ``least_squares``, ``scipy.linalg``) is an OpenBLAS of its own beside NumPy's: it is loaded
     first, else a first call before anything imported ``scipy.linalg`` (``gonio export`` in a
     fresh process) left SciPy's two threads spinning for the rest of the process (the export's
-    rendered fit spent a third of its CPU in them).
+    rendered fit spent about a quarter of its CPU in them).
     """
     import scipy.linalg  # noqa: F401  (loads SciPy's BLAS, so that the scan below sees it)
     from threadpoolctl import ThreadpoolController
