@@ -396,8 +396,9 @@ def fit_principled_rendered(table: BRDFTable, start: Principled, *, max_nfev: in
         ``rendered`` (:meth:`RenderedDifference.as_dict`) and ``fit`` = "rendered".
     """
     t0 = time.perf_counter()
-    ref_fit = render_views(table, FIT_VIEWS, FIT_SIZE)
-    ref_judge = render_views(table)
+    looked_up = render.evaluator(table)  # the table's lookup is made once for both sizes
+    ref_fit = render_views(looked_up, FIT_VIEWS, FIT_SIZE)
+    ref_judge = render_views(looked_up)
     if table.n_channels != 3:
         diff = rendered_difference(table, start.model(), ref_judge)
         return start, diff

@@ -37,8 +37,9 @@ renormalised).
 
 from __future__ import annotations
 
+import functools
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -426,16 +427,41 @@ def render_sphere(brdf: Any, light: PointLight | Environment, size: int = DEFAUL
     the sphere.
     """
     f = evaluator(brdf)
-    mask, n = sphere_normals(size)
-    t, b = _frame(n, rotation_deg)
-    wo = _to_local(np.array([0.0, 0.0, 1.0]), t, b, n)
+    pieces: Iterable[_SpherePiece]
     if isinstance(light, PointLight):
-        dirs, weights = light.direction()[None, :], np.ones((1, 3))
+        weights = np.ones((1, 3))
+        if size <= GEOMETRY_CACHE_SIZE:
+            mask, m, pieces = _point_light_geometry(size, light, rotation_deg, batch)
+        else:
+            mask, m, pieces = _sphere_geometry(size, light.direction()[None, :],
+                                               rotation_deg, batch)
     else:
-        dirs, weights = light.directions, light.weights
+        weights = light.weights
+        mask, m, pieces = _sphere_geometry(size, light.directions, rotation_deg, batch)
+    rad = np.zeros((m, 3))
+    for s_idx, m_idx, wi, wo, cos in pieces:
+        # Copies: an evaluator may work in its arguments, and a cached piece is read-only.
+        val = _rgb(f(wi.copy(), wo.copy()))
+        contrib = val * cos * weights[s_idx]
+        for c in range(3):
+            rad[:, c] += np.bincount(m_idx, weights=contrib[:, c], minlength=m)
+    img = np.full((size, size, 3), np.nan)
+    img[mask] = rad
+    return img
+
+
+_SpherePiece = tuple[NDArray[np.intp], NDArray[np.intp], FloatArray, FloatArray, FloatArray]
+"""One evaluation call of :func:`render_sphere`: light sample and pixel of each direction
+pair, the local ``wi`` and ``wo`` (N, 3), and ``cos(theta_i)`` (N, 1)."""
+
+
+def _sphere_pieces(n: FloatArray, t: FloatArray, b: FloatArray, dirs: FloatArray, batch: int
+                   ) -> Iterator[_SpherePiece]:
+    """The direction pairs of :func:`render_sphere` (normals ``n`` and their frames, light
+    directions ``dirs`` (K, 3)) in evaluation calls of about ``batch`` pairs."""
+    wo = _to_local(np.array([0.0, 0.0, 1.0]), t, b, n)
     frame = np.stack([t, b, n], axis=1)  # (M, 3, 3): rows t, b, n
     m = n.shape[0]
-    rad = np.zeros((m, 3))
     per = max(1, batch // max(m, 1))  # light samples per evaluation call
     for k0 in range(0, dirs.shape[0], per):
         d = dirs[k0 : k0 + per]
@@ -443,13 +469,36 @@ def render_sphere(brdf: Any, light: PointLight | Environment, size: int = DEFAUL
         s_idx, m_idx = np.nonzero(wi[..., 2] > 0)
         if s_idx.size == 0:
             continue
-        val = _rgb(f(wi[s_idx, m_idx], wo[m_idx]))
-        contrib = val * wi[s_idx, m_idx, 2:3] * weights[k0 + s_idx]
-        for c in range(3):
-            rad[:, c] += np.bincount(m_idx, weights=contrib[:, c], minlength=m)
-    img = np.full((size, size, 3), np.nan)
-    img[mask] = rad
-    return img
+        yield k0 + s_idx, m_idx, wi[s_idx, m_idx], wo[m_idx], wi[s_idx, m_idx, 2:3]
+
+
+def _sphere_geometry(size: int, dirs: FloatArray, rotation_deg: float, batch: int
+                     ) -> tuple[NDArray[np.bool_], int, Iterator[_SpherePiece]]:
+    """The sphere's mask, its pixel count and its direction pairs (made as they are used, so
+    an environment's many samples are never all held at once)."""
+    mask, n = sphere_normals(size)
+    t, b = _frame(n, rotation_deg)
+    return mask, n.shape[0], _sphere_pieces(n, t, b, dirs, batch)
+
+
+GEOMETRY_CACHE_SIZE = 128
+"""Largest image side whose point-light geometry (the pixels' direction pairs) is kept for
+the next rendering of the same view. The export's rendered fit renders the same 48 and 96
+pixel views a thousand times (:mod:`gonio.export.judge`), and working out the directions took
+about as long as evaluating a principled model at them; a figure's 512 pixel views are
+rendered a few times each, and would hold megabytes each. At most 16 sphere and 8 swatch
+views are kept (under a megabyte each at 128 pixels); the judge's are 8."""
+
+
+@functools.lru_cache(maxsize=16)
+def _point_light_geometry(size: int, light: PointLight, rotation_deg: float, batch: int
+                          ) -> tuple[NDArray[np.bool_], int, tuple[_SpherePiece, ...]]:
+    """:func:`_sphere_geometry` of one point light, kept (read-only) for the next rendering."""
+    mask, m, pieces = _sphere_geometry(size, light.direction()[None, :], rotation_deg, batch)
+    kept = tuple(pieces)
+    for arr in (mask, *(a for piece in kept for a in piece)):
+        arr.flags.writeable = False
+    return mask, m, kept
 
 
 def render_sphere_env(brdf: Any, env: Environment | None = None, size: int = DEFAULT_SIZE,
@@ -515,6 +564,18 @@ def render_swatch(brdf: Any, light: PointLight = PointLight(0.0, 0.0),
     centre (``1/r^2`` elsewhere). ``rotation_deg`` turns the specimen about its normal.
     """
     f = evaluator(brdf)
+    geometry = _swatch_geometry if size <= GEOMETRY_CACHE_SIZE else _swatch_geometry.__wrapped__
+    wi, wo, scale = geometry(size, light, rotation_deg)
+    val = _rgb(f(wi.copy(), wo.copy()))  # copies: as in render_sphere
+    return (val * scale).reshape(size, size, 3)
+
+
+@functools.lru_cache(maxsize=8)
+def _swatch_geometry(size: int, light: PointLight, rotation_deg: float
+                     ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The swatch's direction pairs in the specimen frame (size*size, 3) and each pixel's
+    ``cos(theta_i) E`` (size*size, 1), kept (read-only) for the next rendering of the same
+    view (:data:`GEOMETRY_CACHE_SIZE`)."""
     p = swatch_points(size)
     cam = np.array([0.0, 0.0, SWATCH_DISTANCE])
     lamp = SWATCH_DISTANCE * light.direction()
@@ -526,9 +587,11 @@ def render_swatch(brdf: Any, light: PointLight = PointLight(0.0, 0.0),
     c, s = math.cos(math.radians(rotation_deg)), math.sin(math.radians(rotation_deg))
     # Specimen frame = world frame turned by rotation_deg: express directions in it.
     rot = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
-    val = _rgb(f(wi @ rot.T, wo @ rot.T))
     e = SWATCH_DISTANCE**2 / r2
-    return (val * (wi[:, 2] * e)[:, None]).reshape(size, size, 3)
+    out = (wi @ rot.T, wo @ rot.T, (wi[:, 2] * e)[:, None])
+    for arr in out:
+        arr.flags.writeable = False
+    return out
 
 
 # --------------------------------------------------------------------------- display

@@ -16,7 +16,15 @@ from typing import Any
 
 @functools.cache
 def _blas_controller() -> Any:
-    """The process' threadpoolctl controller (scanning the loaded libraries takes ~10 ms)."""
+    """The process' threadpoolctl controller (scanning the loaded libraries takes ~10 ms).
+
+    It controls only the libraries loaded when it is made, and SciPy's LAPACK (the SVDs of
+    ``least_squares``, ``scipy.linalg``) is an OpenBLAS of its own beside NumPy's: it is loaded
+    first, else a first call before anything imported ``scipy.linalg`` (``gonio export`` in a
+    fresh process) left SciPy's two threads spinning for the rest of the process (the export's
+    rendered fit spent about a quarter of its CPU in them).
+    """
+    import scipy.linalg  # noqa: F401  (loads SciPy's BLAS, so that the scan below sees it)
     from threadpoolctl import ThreadpoolController
 
     return ThreadpoolController()

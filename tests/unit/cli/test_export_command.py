@@ -13,8 +13,8 @@ from gonio.brdf.models import analytic as bm
 from gonio.brdf.models.factored import FactoredBRDF
 from gonio.calibration import CalibratedScan
 from gonio.cli import main
-from gonio.export import fit_all
 from gonio.results import read_result, write_result
+from tests.unit.export.test_metadata import library_principled, stand_in_fits
 
 
 def _samples() -> CalibratedScan:
@@ -25,9 +25,13 @@ def _samples() -> CalibratedScan:
 
 @pytest.fixture(scope="module")
 def result(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A result file of a library brushed metal with its fits stored, as the daemon writes."""
+    """A result file of a library brushed metal with its fits stored, as the daemon writes,
+    the principled one the metal's own parameters recorded as a rendered fit
+    (:func:`tests.unit.export.test_metadata.stand_in_fits`: what is tested here is storing
+    and exporting; the export's own principled fit of this table is made, and checked
+    against the metal's parameters, by the refit test below)."""
     table = bm.tabulate(library.get_material("brushed-metal-003"))
-    fits = fit_all(table)
+    fits = stand_in_fits(table, library_principled("brushed-metal-003"))
     return write_result(
         tmp_path_factory.mktemp("res") / "job-5.h5", job_id=5, specimen="brushed",
         kind="uniform", readings=[], samples=_samples(), table=table,
@@ -41,6 +45,8 @@ def test_fits_are_stored_in_the_result(result: Path) -> None:
     assert res.factored.D.shape == (18, 72) and res.factored.metrics["rel_mse"] > 0
     assert res.principled.roughness == pytest.approx(
         (0.10277148177302968 * 0.37092948532791287) ** 0.25, rel=0.1)
+    assert res.principled.metrics["fit"] == "rendered"
+    assert 0 <= res.principled.metrics["rendered"]["value"] < 1
 
 
 @pytest.mark.parametrize("fmt", ["factored", "mtlx", "gltf", "merl", "table"])
@@ -166,10 +172,12 @@ def test_a_damaged_stored_fit_is_fitted_again(result: Path, tmp_path: Path,
     out = tmp_path / "b.gltf"
     assert main(["export", str(broken), "-f", "gltf", "-o", str(out)]) == 0
     material = json.loads(out.read_text())["materials"][0]
-    # Refitted: the library material's roughness, as the stored fit had it (test above).
+    # Refitted (the export's rendered fit, as fit_all makes it): the library material's
+    # smoother axis, alpha 0.1028 (its definition; the stored stand-in fit has it too).
     alpha_b = material["pbrMetallicRoughness"]["roughnessFactor"] ** 2
     stored = read_result(result).principled
-    assert stored is not None and alpha_b == pytest.approx(stored.alpha_b, rel=0.05)
+    assert stored is not None and stored.alpha_b == pytest.approx(0.10277148177302968)
+    assert alpha_b == pytest.approx(0.10277148177302968, rel=0.05)
 
 
 def test_gltf_with_mesh_and_the_report(result: Path, tmp_path: Path,

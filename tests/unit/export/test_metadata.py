@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import functools
 import json
+import math
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -12,6 +14,9 @@ import pytest
 
 from gonio.brdf.materials import library
 from gonio.brdf.models import analytic as bm
+from gonio.brdf.models.factored import fit_factored, fit_metrics
+from gonio.brdf.models.principled import Principled
+from gonio.brdf.reconstruction.blas import one_blas_thread
 from gonio.brdf.tables import geometry as geo
 from gonio.brdf.tables.metrics import log_rmse
 from gonio.brdf.tables.table import BRDFTable
@@ -19,9 +24,10 @@ from gonio.calibration import CalibratedScan
 from gonio.cli import main
 from gonio.cli.export_command import report
 from gonio.export import (
+    FIT_ITERATIONS,
     Fits,
     export_result,
-    fit_all,
+    judge,
     merl,
     provenance,
     result_fits,
@@ -50,12 +56,48 @@ def _samples() -> CalibratedScan:
                           channels=("R", "G", "B"))
 
 
+def library_principled(name: str) -> Principled:
+    """A library conductor's own principled parameters, worked out from its definition: a
+    GGX metal (``Rotated(GGX(alpha_x, alpha_y, ConductorFresnel(eta, k)))``) whose ``F0`` is
+    the normal-incidence Fresnel reflectance ``((eta - 1)^2 + k^2) / ((eta + 1)^2 + k^2)``,
+    the tangent its rougher axis."""
+    m = library.get_material(name)
+    ggx, fresnel = m.model, m.model.fresnel
+    f0 = tuple(((e - 1) ** 2 + k**2) / ((e + 1) ** 2 + k**2)
+               for e, k in zip(fresnel.eta, fresnel.k, strict=True))
+    ax, ay, direction = ggx.alpha_x, ggx.alpha_y, math.degrees(m.angle)
+    if ay > ax:
+        ax, ay, direction = ay, ax, direction + 90.0
+    return Principled(f0, 1.0, 0.5, ax, ay, direction)
+
+
+def stand_in_fits(table: BRDFTable, principled: Principled) -> Fits:
+    """Fits of ``table`` as a result stores them, without fitting the principled material:
+    the factored fit as :func:`gonio.export.fit_all` makes it (with its rendered difference),
+    and ``principled`` (the material's own parameters) recorded as a rendered fit (its table
+    metrics, rendered difference and ``fit`` = "rendered", so that no export fits it again,
+    :func:`gonio.export.result_fits`). For tests of what is stored and what an export says,
+    which do not depend on how the principled parameters were found: fitting them costs
+    seconds of CPU, and test_judge.py and test_export_command.py's refit test check the
+    rendered fit itself."""
+    with one_blas_thread():  # as fit_all runs it
+        factored = fit_factored(table, iterations=FIT_ITERATIONS)
+    factored = replace(factored, metrics={
+        **factored.metrics, "rendered": judge.rendered_difference(table, factored).as_dict()})
+    metrics: dict[str, Any] = dict(fit_metrics(bm.tabulate(principled.model(), np.float64),
+                                               table))
+    metrics.update(rendered=judge.rendered_difference(table, principled.model()).as_dict(),
+                   fit="rendered")
+    return Fits(table, factored, replace(principled, metrics=metrics))
+
+
 @functools.cache
 def _fitted(name: str) -> tuple[Any, Any]:
-    """Library material ``name`` tabulated and its export fits (seconds of CPU: once per
-    material in this module)."""
+    """Library material ``name`` tabulated and its fits as a result stores them (the material
+    does not matter here, only the record: :func:`stand_in_fits`), once per material in
+    this module."""
     table = bm.tabulate(library.get_material(name))
-    return table, fit_all(table)
+    return table, stand_in_fits(table, library_principled(name))
 
 
 def _result(path: Path, name: str, specimen: str, simulated: bool) -> Path:

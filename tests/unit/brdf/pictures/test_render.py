@@ -46,6 +46,39 @@ def test_lambertian_sphere_follows_the_cosine_law(tabulated: bool) -> None:
     assert np.all(img[inside & (cos == 0.0)] == 0.0)  # the unlit side is black
 
 
+
+def test_a_small_views_kept_directions_survive_an_evaluator_that_writes_into_them() -> None:
+    """Views of at most GEOMETRY_CACHE_SIZE pixels keep their direction pairs for the next
+    rendering (the export's rendered fit renders the same views a thousand times): an
+    evaluator that scribbles over its arguments changes no later rendering."""
+    lam = bm.Lambert(ALBEDO)
+    light = R.PointLight(40.0, 30.0)
+    size = R.GEOMETRY_CACHE_SIZE // 2
+
+    class Scribbler:
+        channels = ("R", "G", "B")
+
+        def eval(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+            out = lam.eval(wi, wo)
+            wi *= -1.0
+            wo[:] = 0.0
+            return out
+
+    sphere, swatch = R.render_sphere(lam, light, size), R.render_swatch(lam, size=size)
+    scribbled = R.render_sphere(Scribbler(), light, size), R.render_swatch(Scribbler(), size=size)
+    assert np.array_equal(scribbled[0], sphere, equal_nan=True)
+    assert np.array_equal(scribbled[1], swatch)
+    assert np.array_equal(R.render_sphere(lam, light, size), sphere, equal_nan=True)
+    assert np.array_equal(R.render_swatch(lam, size=size), swatch)
+    # and the kept directions are the right ones: Lambert's cosine law, as above
+    inside, n = _pixel_normals(size)
+    t, p = math.radians(40.0), math.radians(30.0)
+    cos = np.clip(n @ [math.sin(t) * math.cos(p), math.sin(t) * math.sin(p), math.cos(t)],
+                  0.0, None)
+    np.testing.assert_allclose(sphere[inside], np.asarray(ALBEDO) / math.pi * cos[inside][:, None],
+                               rtol=1e-6, atol=1e-9)
+
+
 def _long_axis_deg(img: np.ndarray) -> float:
     """Orientation (degrees in [0, 180), counter-clockwise from image right) of the bright
     region's principal axis, from intensity-weighted second moments."""
