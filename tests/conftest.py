@@ -36,37 +36,37 @@ def _one_native_thread_per_worker() -> None:
 _one_native_thread_per_worker()
 SHARED_DATA = PROJECT_ROOT.parent / "shared" / "data"
 
-#: The files that take longest, longest first (wall time of each run alone on idle cores,
-#: README "The suite on a busy machine"; the last ones from earlier rounds' runs). The parallel
-#: run (``-n auto --dist loadfile``) hands whole files to its workers as they free up; started
+#: The files that take longest, longest first (wall time of each in a whole parallel run on
+#: the quiet machine, its tests' times summed; README "The suite on a busy machine"). The
+#: parallel run (``-n auto --dist loadfile``) hands whole files to its workers as they free up; started
 #: first, these end before the many short files do, so no worker is left running one of them
 #: alone at the end while the others idle. A file missing here only starts later; the list
 #: orders the run and decides nothing else.
 LONGEST_FIRST = (
-    "tests/system/api/test_browser.py",
-    "tests/system/api/test_browser_lab_day.py",
-    "tests/system/test_state_files.py",
-    "tests/system/api/test_disk_full.py",
-    "tests/system/test_readme_session.py",
-    "tests/system/api/test_browser_colour.py",
     "tests/unit/export/test_judge.py",
-    "tests/system/api/test_colour.py",
-    "tests/system/test_rebuild.py",
-    "tests/unit/brdf/reconstruction/test_shipped.py",
-    "tests/system/api/test_sim_restart.py",
-    "tests/system/api/test_start_races.py",
-    "tests/system/cli/test_scan_design_gap.py",
-    "tests/system/api/test_serve_command.py",
-    "tests/system/test_durable_state.py",
-    "tests/system/api/test_device_wait.py",
-    "tests/system/drivers/test_zaber.py",
-    "tests/unit/test_project.py",
+    "tests/system/test_readme_session.py",
+    "tests/system/api/test_disk_full.py",
+    "tests/system/api/test_browser.py",
+    "tests/system/test_state_files.py",
+    "tests/system/api/test_browser_lab_day.py",
     "tests/system/cli/test_scan_interrupt.py",
-    "tests/system/cli/test_scan_bounds.py",
-    "tests/system/cli/test_scan_misfit.py",
-    "tests/unit/export/test_metadata.py",
-    "tests/system/cli/test_messages.py",
-    "tests/system/cli/test_scan.py",
+    "tests/system/api/test_browser_colour.py",
+    "tests/system/api/test_scan_flow.py",
+    "tests/unit/brdf/reconstruction/test_shipped.py",
+    "tests/system/api/test_start_races.py",
+    "tests/system/api/test_colour.py",
+    "tests/system/drivers/test_zaber.py",
+    "tests/system/api/test_device_wait.py",
+    "tests/system/test_durable_state.py",
+    "tests/system/test_arc_resume.py",
+    "tests/system/test_rebuild.py",
+    "tests/unit/test_project.py",
+    "tests/unit/cli/test_export_command.py",
+    "tests/system/api/test_sim_restart.py",
+    "tests/system/api/test_browser_auto_arc.py",
+    "tests/system/api/test_fuzz.py",
+    "tests/system/test_scan_sim.py",
+    "tests/system/cli/test_scan_design_gap.py",
 )
 
 
