@@ -38,10 +38,10 @@ SHARED_DATA = PROJECT_ROOT.parent / "shared" / "data"
 
 #: The files that take longest, longest first (wall time of each in a whole parallel run on
 #: the quiet machine, its tests' times summed; README "The suite on a busy machine"). The
-#: parallel run (``-n auto --dist loadfile``) hands whole files to its workers as they free up; started
-#: first, these end before the many short files do, so no worker is left running one of them
-#: alone at the end while the others idle. A file missing here only starts later; the list
-#: orders the run and decides nothing else.
+#: parallel run (``-n auto --dist loadfile``) hands whole files to its workers as they free
+#: up; started first, these end before the many short files do, so no worker is left running
+#: one of them alone at the end while the others idle. A file missing here only starts later;
+#: the list orders the run and decides nothing else.
 LONGEST_FIRST = (
     "tests/unit/export/test_judge.py",
     "tests/system/test_readme_session.py",
