@@ -280,13 +280,7 @@ def tilted_table(g: BRDFTable, tilt: float, azimuth: float, name: str = "tilt fi
     """
     th, td, pd = geo.grid_angles()
     R = facet_rotation(tilt, azimuth)
-    v = np.asarray(g.values)
-    flat = np.moveaxis(v, 0, -1).reshape(-1, v.shape[0]).astype(np.float64)
-    ok: NDArray[np.bool_] = np.asarray(np.isfinite(flat).all(axis=1))
-    flat = np.where(ok[:, None], np.maximum(flat, 0.0), 0.0)
-    eps = interp.log_offset(flat, ok)
-    logs = np.log(flat + eps)
-    nodes = interp.pack_nodes(logs, interp.node_slopes(logs, ok))
+    nodes, ok, eps = interp.table_nodes(g.values)
     valid = ok.astype(np.float64)
     out = np.full((g.n_channels, geo.N_PH, *VALID_MASK.shape), np.nan, dtype=np.float32)
     for k, ph in enumerate(geo.PH_GRID):

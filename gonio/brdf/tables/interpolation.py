@@ -118,6 +118,32 @@ def node_logs(values: NDArray[np.floating], eps: float) -> FloatArray:
     return np.log(np.maximum(values.astype(np.float64), 0.0) + eps)
 
 
+def table_nodes(values: NDArray[np.floating]) -> tuple[FloatArray, NDArray[np.bool_], float]:
+    """A whole table's packed nodes for :func:`log_pchip_lookup`, with its validity and ``eps``.
+
+    For code below the renderer (whose :class:`~gonio.brdf.pictures.render.TableLookup`
+    also gathers nodes only where few points read): the tilt fit and the disagreement study
+    look up most of a table at once. Negative values are clamped to 0 before ``eps`` is taken.
+
+    Parameters
+    ----------
+    values : (C, 72, 18, 18, 36) array, a table's values (NaN at invalid cells)
+
+    Returns
+    -------
+    nodes : (cells, 2 C) float64, :func:`pack_nodes` of the logs and their slopes
+    valid : (cells,) bool
+    eps : float, :func:`log_offset` of the clamped values
+    """
+    v = np.asarray(values)
+    flat = np.moveaxis(v, 0, -1).reshape(-1, v.shape[0]).astype(np.float64)
+    ok: NDArray[np.bool_] = np.asarray(np.isfinite(flat).all(axis=1))
+    flat = np.where(ok[:, None], np.maximum(flat, 0.0), 0.0)
+    eps = log_offset(flat, ok)
+    logs = np.log(flat + eps)
+    return pack_nodes(logs, node_slopes(logs, ok)), ok, eps
+
+
 def gathered_cells(th: FloatArray, ph: FloatArray, td: FloatArray, pd: FloatArray
                    ) -> NDArray[np.intp]:
     """The cells :func:`log_pchip_lookup` reads at these points, sorted, each once.

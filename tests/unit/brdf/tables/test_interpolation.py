@@ -146,3 +146,23 @@ def test_packed_nodes_hold_each_cell_value_beside_its_slope() -> None:
     nodes = interp.pack_nodes(logs, slopes)
     assert nodes.shape == (4, 6) and nodes.flags.c_contiguous
     np.testing.assert_array_equal(nodes[2], [6.0, 7.0, 8.0, -6.0, -7.0, -8.0])
+
+
+def test_table_nodes_are_the_clamped_logs_beside_their_slopes() -> None:
+    from gonio.brdf.tables import geometry as geo
+    from gonio.brdf.tables.interpolation import LOG_EPS, node_slopes, table_nodes
+
+    rng = np.random.default_rng(5)
+    values = rng.uniform(-0.1, 3.0, size=(2, *geo.TABLE_SHAPE))
+    values[:, :, 4, 2, 7] = np.nan  # an invalid cell in every ph slice
+    values[1, 3, 5, 6, 8] = np.nan  # invalid in one channel: the cell is invalid
+    nodes, ok, eps = table_nodes(values)
+    flat = np.moveaxis(values, 0, -1).reshape(-1, 2)
+    assert np.array_equal(ok, np.isfinite(flat).all(axis=1))
+    clamped = np.clip(flat[ok], 0.0, None)
+    assert eps == pytest.approx(LOG_EPS * clamped.mean())
+    logs = np.zeros_like(flat)
+    logs[ok] = np.log(clamped + eps)
+    logs[~ok] = np.log(eps)
+    assert np.allclose(nodes[:, :2], logs, rtol=0, atol=1e-12)
+    assert np.array_equal(nodes[:, 2:], node_slopes(nodes[:, :2], ok))
