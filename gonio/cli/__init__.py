@@ -94,6 +94,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    # Before the parser loads NumPy: BLAS on one thread (why: gonio.brdf.reconstruction.blas).
+    from gonio.brdf.reconstruction.blas import prefer_one_thread
+
+    prefer_one_thread()
     parser = build_parser()
     args = parser.parse_args(argv)
     if getattr(args, "func", None) is None:
