@@ -7,9 +7,8 @@ the error on a material the basis has not seen. :func:`heldout_log_rmse` simulat
 * the shipped measured materials, each reconstructed with a basis that leaves it out
   (``default_basis(exclude=[it])``, a fold-in of seconds, cached);
 * one synthetic material of each library family, held out of a *panel basis* (the synthetic
-  library without those seven: shipped with gonio, :mod:`gonio.brdf.reconstruction.shipped`,
-  or built once and cached when the shipped file is stale; the measured materials folded in
-  as in the default basis).
+  library without those seven, built once and cached; the measured materials folded in as in
+  the default basis).
 
 :func:`choose_design` runs the condition-number search from several seeds and keeps the
 candidate with the lowest expected error. The panel is part of the training data of the
@@ -26,7 +25,6 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from gonio.brdf.design.pairs import PairDesign
-from gonio.brdf.reconstruction import shipped
 from gonio.brdf.reconstruction.basis import (
     _FOLD_EXTRA,
     DEFAULT_COMPONENTS,
@@ -64,19 +62,29 @@ class ExpectedError:
     per_material: dict[str, float]
 
 
+def _synthetic_panel_names() -> list[str]:
+    from gonio.brdf.materials.library import library_specs
+
+    seen: set[str] = set()
+    names = []
+    for s in library_specs():
+        if s.family not in seen:
+            seen.add(s.family)
+            names.append(s.name)
+    return names
+
+
 @functools.cache
 def _panel() -> tuple[Basis, list[BRDFTable], list[tuple[BRDFTable, Basis]]]:
     """(panel basis, held-out synthetic tables, [(measured table, basis without it)])."""
     from gonio.brdf.materials import library, measured
 
-    held = shipped.panel_held_out()
+    held = _synthetic_panel_names()
     path = (library.cache_root() / "basis"
             / f"panel-K{DEFAULT_COMPONENTS + _FOLD_EXTRA}-{library.library_key()[:16]}.npz")
-    # Shipped with gonio while its code is current (built from the whole library otherwise).
-    base = shipped.shipped_panel_basis()
-    if base is None and path.is_file():
+    if path.is_file():
         base = Basis.load(path)
-    if base is None:
+    else:
         tables = library.default_library()
         base = build_basis([t for t in tables if t.name not in held],
                            DEFAULT_COMPONENTS + _FOLD_EXTRA)

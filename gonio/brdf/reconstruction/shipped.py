@@ -21,13 +21,6 @@ built as before, slowly but right), and the unit test
 it::
 
     python -m gonio.brdf.reconstruction.shipped
-
-The same command writes a second file, ``data/panel-basis.npz``: the synthetic basis without
-one material of each library family (:func:`panel_held_out`), which the held-out expected error
-of a design (:mod:`gonio.brdf.design.heldout`, ``gonio design``) reconstructs those materials
-with. Shipped for the same reason: without it the first ``gonio design`` on a fresh install
-tabulated the whole library and built this basis (35 s of CPU and 3.5 GB at its peak on the
-2-core machine, against 16 s and 0.7 GB with it). One fingerprint covers both files.
 """
 
 from __future__ import annotations
@@ -52,7 +45,6 @@ from gonio.brdf.reconstruction import basis as _basis
 DATA_DIR = Path(__file__).resolve().parent / "data"
 SHIPPED_FILE = DATA_DIR / "synthetic-basis.npz"
 FINGERPRINT_FILE = DATA_DIR / "synthetic-basis.json"
-PANEL_FILE = DATA_DIR / "panel-basis.npz"
 REBUILD_COMMAND = "python -m gonio.brdf.reconstruction.shipped"
 #: Components of the shipped synthetic basis: the default K plus the extra ones the fold-in of
 #: measured tables starts from (96), so the default basis is derived from it.
@@ -65,32 +57,11 @@ SOURCE_MODULES: tuple[str, ...] = (
     "gonio.brdf.models.analytic",
     "gonio.brdf.materials.library",
     "gonio.brdf.reconstruction.basis",
-    # its own code: which materials the panel basis leaves out (panel_held_out)
-    "gonio.brdf.reconstruction.shipped",
 )
 
 
 class ShippedBasisError(RuntimeError):
     """The shipped basis and its fingerprint file disagree or cannot be read."""
-
-
-def panel_held_out() -> list[str]:
-    """The synthetic materials the panel basis leaves out: the first of each library family.
-
-    Returns
-    -------
-    list of str
-        Library material names, one per family, in library order (seven today).
-    """
-    from gonio.brdf.materials.library import library_specs
-
-    seen: set[str] = set()
-    names = []
-    for spec in library_specs():
-        if spec.family not in seen:
-            seen.add(spec.family)
-            names.append(spec.name)
-    return names
 
 
 def build_parameters() -> dict[str, Any]:
@@ -238,32 +209,11 @@ def shipped_basis(n_components: int) -> _basis.Basis | None:
         return None
 
 
-def shipped_panel_basis() -> _basis.Basis | None:
-    """The shipped panel basis (:func:`panel_held_out` left out, K = :data:`SHIPPED_COMPONENTS`)
-    when the shipped files are current; else None (the caller builds it).
-    """
-    if not PANEL_FILE.is_file() or not is_current():
-        return None
-    try:
-        return _basis.Basis.load(PANEL_FILE)
-    except _basis.BasisError:
-        return None
-
-
-def _write_shipped(basis: _basis.Basis, path: Path) -> None:
-    # No timing, machine-specific path or fingerprint in the file itself: the same numbers
-    # give the same bytes, so a rebuild after a change that moves no number (a refactoring)
-    # leaves the committed binary alone and only the fingerprint file changes.
-    prov = {k: v for k, v in basis.provenance.items() if k not in ("build_seconds", "file")}
-    prov["shipped"] = {"fingerprint_file": FINGERPRINT_FILE.name, "rebuild": REBUILD_COMMAND}
-    dataclasses.replace(basis, provenance=prov).save(path, dtype=np.float32)
-
-
 def rebuild(progress: bool = True) -> Path:
-    """Build the synthetic and panel bases from the library; write both and the fingerprint.
+    """Build the synthetic basis from the library and write the shipped file and fingerprint.
 
     The library is tabulated into the user cache first when it is not there (about two
-    minutes); each basis build takes a few seconds more.
+    minutes); the basis build itself takes a few seconds more.
 
     Returns
     -------
@@ -273,19 +223,18 @@ def rebuild(progress: bool = True) -> Path:
     from gonio.brdf.materials import library
 
     tables = library.default_library(progress=progress)
+    basis = _basis.build_basis(tables, SHIPPED_COMPONENTS, progress=progress)
+    # No timing, machine-specific path or fingerprint in the file itself: the same numbers
+    # give the same bytes, so a rebuild after a change that moves no number (a refactoring)
+    # leaves the committed binary alone and only the fingerprint file changes.
+    prov = {k: v for k, v in basis.provenance.items() if k not in ("build_seconds", "file")}
+    prov["shipped"] = {"fingerprint_file": FINGERPRINT_FILE.name, "rebuild": REBUILD_COMMAND}
     DATA_DIR.mkdir(parents=True, exist_ok=True)
-    _write_shipped(_basis.build_basis(tables, SHIPPED_COMPONENTS, progress=progress),
-                   SHIPPED_FILE)
-    held = set(panel_held_out())
-    _write_shipped(_basis.build_basis([t for t in tables if t.name not in held],
-                                      SHIPPED_COMPONENTS, progress=progress), PANEL_FILE)
+    dataclasses.replace(basis, provenance=prov).save(SHIPPED_FILE, dtype=np.float32)
     record = {
         "fingerprint": fingerprint(),
         "sha256": file_sha256(),
         "bytes": SHIPPED_FILE.stat().st_size,
-        "panel_sha256": file_sha256(PANEL_FILE),
-        "panel_bytes": PANEL_FILE.stat().st_size,
-        "panel_held_out": sorted(held),
         "parameters": build_parameters(),
         "modules": list(SOURCE_MODULES),
         "rebuild": REBUILD_COMMAND,
@@ -309,8 +258,7 @@ def main(argv: list[str] | None = None) -> int:
               f"stale or missing; rebuild it with `{REBUILD_COMMAND}`"))
         return 0 if ok else 1
     path = rebuild(progress=sys.stderr.isatty())
-    print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB), {PANEL_FILE.name} "
-          f"({PANEL_FILE.stat().st_size / 1e6:.1f} MB) and {FINGERPRINT_FILE.name}")
+    print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB) and {FINGERPRINT_FILE.name}")
     return 0
 
 

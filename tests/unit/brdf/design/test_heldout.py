@@ -48,31 +48,3 @@ def test_choose_design_keeps_the_lowest_expected_error(tiny_panel: list) -> None
     assert [row[0] for row in table] == [0, 1, 2]
     assert err.log_rmse == pytest.approx(min(row[2] for row in table))
     assert best is designs[int(np.argmin([row[2] for row in table]))]
-
-
-def test_the_panel_basis_comes_shipped_so_a_fresh_install_builds_no_library(
-        monkeypatch: pytest.MonkeyPatch) -> None:
-    from gonio.brdf.materials import library, measured
-    from gonio.brdf.reconstruction import shipped
-
-    def built(*args: object, **kwargs: object) -> None:
-        pytest.fail("the library or the panel basis was built")
-
-    monkeypatch.setattr(library, "default_library", built)
-    monkeypatch.setattr(heldout, "build_basis", built)
-    folded: list[object] = []
-    monkeypatch.setattr(heldout, "fold_in", lambda base, *a, **k: folded.append(base) or base)
-    monkeypatch.setattr(measured, "measured_tables", lambda: [])
-    heldout._panel.cache_clear()
-    try:
-        panel, synth, meas = heldout._panel()
-    finally:
-        heldout._panel.cache_clear()
-    # One material of each family is held out, and the panel basis was trained without them.
-    specs = library.library_specs()
-    held = [t.name for t in synth]
-    assert sorted({s.family for s in specs if s.name in held}) == sorted({s.family for s in specs})
-    assert len(held) == len({s.family for s in specs})
-    assert folded == [panel]
-    assert set(panel.materials) == {s.name for s in specs} - set(held)
-    assert panel.K == shipped.SHIPPED_COMPONENTS and meas == []

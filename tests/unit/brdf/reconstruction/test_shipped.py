@@ -27,9 +27,6 @@ def test_the_shipped_basis_was_built_by_this_code() -> None:
     assert recorded["sha256"] == shipped.file_sha256(), (
         f"{shipped.SHIPPED_FILE.name} is not the file its fingerprint was recorded for: "
         f"run `{shipped.REBUILD_COMMAND}`")
-    assert recorded["panel_sha256"] == shipped.file_sha256(shipped.PANEL_FILE), (
-        f"{shipped.PANEL_FILE.name} is not the file its fingerprint was recorded for: "
-        f"run `{shipped.REBUILD_COMMAND}`")
     assert shipped.is_current()
 
 
@@ -49,16 +46,6 @@ def test_the_shipped_file_is_small_float32_and_holds_the_library() -> None:
     assert "build_seconds" not in prov and '"file"' not in prov
     # Another K is not the shipped one.
     assert shipped.shipped_basis(shipped.SHIPPED_COMPONENTS - 1) is None
-    # The panel basis: the same library without the first material of each family.
-    assert shipped.PANEL_FILE.stat().st_size < 6e6
-    panel = shipped.shipped_panel_basis()
-    assert panel is not None and panel.K == shipped.SHIPPED_COMPONENTS
-    first: dict[str, str] = {}
-    for spec in library.library_specs():
-        first.setdefault(spec.family, spec.name)
-    assert shipped.panel_held_out() == list(first.values())
-    assert list(panel.materials) == [s.name for s in library.library_specs()
-                                     if s.name not in first.values()]
 
 
 def test_the_code_text_ignores_comments_and_docstrings_only() -> None:
@@ -82,7 +69,6 @@ def test_a_stale_shipped_basis_is_not_used(monkeypatch: pytest.MonkeyPatch,
     monkeypatch.setattr(shipped, "fingerprint", lambda: "0" * 64)  # as if the code changed
     assert not shipped.is_current()
     assert shipped.shipped_basis(shipped.SHIPPED_COMPONENTS) is None
-    assert shipped.shipped_panel_basis() is None
     tables = small_library()[:3]
     monkeypatch.setattr(library, "default_library", lambda progress=False: list(tables))
     b = basis_mod.synthetic_basis(shipped.SHIPPED_COMPONENTS)  # built from the "library"
