@@ -140,7 +140,7 @@ def table_nodes(values: NDArray[np.floating]) -> tuple[FloatArray, NDArray[np.bo
     ok: NDArray[np.bool_] = np.asarray(np.isfinite(flat).all(axis=1))
     flat = np.where(ok[:, None], np.maximum(flat, 0.0), 0.0)
     eps = log_offset(flat, ok)
-    logs = np.log(flat + eps)
+    logs = node_logs(flat, eps)  # flat is float64 and clamped already: the same numbers
     return pack_nodes(logs, node_slopes(logs, ok)), ok, eps
 
 
