@@ -5,6 +5,7 @@ Run from the project root (needs mitsuba and flip-evaluator: ``pip install 'goni
     nice -n 5 .venv/bin/python bench/bench_flipdesign.py choose [--mix 0 0.25 0.5 0.75 1]
     nice -n 5 .venv/bin/python bench/bench_flipdesign.py test --mix A
     nice -n 5 .venv/bin/python bench/bench_flipdesign.py choose --mix A --seeds 0 1 2
+    nice -n 5 .venv/bin/python bench/bench_flipdesign.py fresh --mix A
 
 The expected-error design (:mod:`gonio.brdf.design.posterior`) weighs the grid's cells as
 ``log_rmse`` does (by their volume). The standard renderings
@@ -21,6 +22,10 @@ Sets (the discipline of docs/science.md 7.2.2):
   anywhere else. ``a`` is chosen here, by mean HDR-FLIP subject to ``log_rmse``.
 * **test** (``test``): the measured materials at odd positions (five) and bench_unseen's six
   anisotropic specimens; run once with the chosen ``a`` against ``a = 0`` and every preset.
+* **fresh** (``fresh``): :data:`FRESH_FLIP`, ten twofold-symmetric mitsuba specimens written
+  and committed (2026-11-27) before any run on them, after the choice of ``a``: narrow and
+  wide brushed metals, glossy isotropic metal, clear-coated (layered) paints, paper, satin and
+  felt stand-ins, a glossy plastic. Run once, to decide whether ``a`` becomes the default.
   (The even measured materials' rows of the 17 bench_unseen materials are ``choose``'s: same
   designs, seeds and fits, so the same numbers.)
 
@@ -71,6 +76,39 @@ CHOICE_ANISO: list[tuple[str, dict[str, Any], float]] = [
                                         "alpha_u": 0.05, "alpha_v": 0.2}}, 248.0),
     ("mc-plastic", {"type": "roughplastic", "distribution": "ggx", "alpha": 0.12,
                     "diffuse_reflectance": {"type": "rgb", "value": [0.2, 0.4, 0.1]}}, 0.0),
+]
+
+
+#: The fresh set (see the module notes): never used by any choice; twofold symmetric (no
+#: facet tilt or normal map), so half-turn scans are right for them.
+FRESH_FLIP: list[tuple[str, dict[str, Any], float]] = [
+    ("ff-conductor-W-narrow", {"type": "roughconductor", "material": "W", "distribution": "ggx",
+                               "alpha_u": 0.04, "alpha_v": 0.18}, 76.0),
+    ("ff-conductor-Ni", {"type": "roughconductor", "material": "Ni_palik",
+                         "distribution": "beckmann", "alpha_u": 0.30, "alpha_v": 0.12}, 199.0),
+    ("ff-conductor-Ta-iso", {"type": "roughconductor", "material": "Ta", "distribution": "ggx",
+                             "alpha": 0.09}, 0.0),
+    ("ff-coated-red", {"type": "principled", "metallic": 0.0, "roughness": 0.5,
+                       "clearcoat": 1.0, "clearcoat_gloss": 0.9, "specular": 0.4,
+                       "base_color": {"type": "rgb", "value": [0.55, 0.08, 0.06]}}, 37.0),
+    ("ff-coated-gold-aniso", {"type": "principled", "metallic": 0.9, "roughness": 0.3,
+                              "anisotropic": 0.7, "clearcoat": 0.6, "clearcoat_gloss": 0.8,
+                              "base_color": {"type": "rgb", "value": [0.9, 0.7, 0.3]}}, 287.0),
+    ("ff-paper", {"type": "roughplastic", "distribution": "beckmann", "alpha": 0.45,
+                  "diffuse_reflectance": {"type": "rgb", "value": [0.75, 0.75, 0.7]}}, 0.0),
+    ("ff-satin", {"type": "principled", "metallic": 0.0, "roughness": 0.6, "sheen": 0.8,
+                  "anisotropic": 0.5, "specular": 0.3,
+                  "base_color": {"type": "rgb", "value": [0.5, 0.2, 0.35]}}, 143.0),
+    ("ff-blend-brushed-Au", {"type": "blendbsdf", "weight": 0.5,
+                             "bsdf_0": {"type": "diffuse",
+                                        "reflectance": {"type": "rgb", "value": [0.1, 0.1, 0.1]}},
+                             "bsdf_1": {"type": "roughconductor", "material": "Au",
+                                        "alpha_u": 0.03, "alpha_v": 0.25}}, 321.0),
+    ("ff-felt", {"type": "principled", "metallic": 0.0, "roughness": 0.9, "specular": 0.2,
+                 "base_color": {"type": "rgb", "value": [0.1, 0.4, 0.2]}}, 0.0),
+    ("ff-plastic-glossy", {"type": "roughplastic", "distribution": "ggx", "alpha": 0.05,
+                           "diffuse_reflectance": {"type": "rgb", "value": [0.4, 0.05, 0.05]}},
+     0.0),
 ]
 
 
@@ -189,7 +227,7 @@ def evaluate(mats: list[bu.Material], mixes: list[float], label: str,
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("stage", choices=["choose", "test"])
+    ap.add_argument("stage", choices=["choose", "test", "fresh"])
     ap.add_argument("--mix", type=float, nargs="+", default=[0.0, 0.25, 0.5, 0.75, 1.0],
                     help="cell_mix values to compare (test: the chosen one; 0 is added)")
     ap.add_argument("--only", nargs="*", default=None, help="material names (exploring)")
@@ -203,7 +241,8 @@ def main(argv: list[str] | None = None) -> int:
           f"{imp[geo.valid_mask()].sum() / imp.sum():.1%} on valid cells")
     choice, test = material_sets()
     mixes = sorted(set([0.0, *args.mix]))
-    sets = [("choice set", choice)] if args.stage == "choose" else [("test set", test)]
+    sets = {"choose": [("choice set", choice)], "test": [("test set", test)],
+            "fresh": [("fresh set", bu.aniso_materials(FRESH_FLIP))]}[args.stage]
     for label, mats in sets:
         if args.only:
             mats = [m for m in mats if m.name in args.only]
