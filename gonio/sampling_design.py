@@ -239,6 +239,11 @@ class DesignResult(BaseModel):
     colour_pairs: int = Field(
         0, description="how many of the pairs (the first ones) sit at the colour instrument's "
                        "near-specular geometries ('colour_instrument'); 0 without colour")
+    render_mix: float = Field(
+        0.0, description="the share of the standard renderings' weighting of the grid's cells "
+                         "in the expected-error objective that chose the pairs (0.5 by default, "
+                         "docs/science.md 7.2.2); 0 for an unweighted design, a preset, a "
+                         "product rig or a colour design")
     min_device_distance_deg: float = Field(description="closest two devices, degrees")
     lights: list[Device]
     sensors: list[Device]
@@ -299,6 +304,7 @@ def describe(design: PairDesign, rotations: int,
         expected_log_rmse=None if expected is None else _finite(expected),
         fallback=design.fallback,
         colour_pairs=design.colour_pairs,
+        render_mix=float(design.cell_mix),
         min_device_distance_deg=float(design.min_distance_deg),
         lights=lights,
         sensors=sensors,

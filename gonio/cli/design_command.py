@@ -44,6 +44,7 @@ from gonio.brdf.design.pairs import (
 )
 from gonio.brdf.design.presets import get_preset, preset_names
 from gonio.brdf.design.product import design_product_rig
+from gonio.brdf.design.renderweight import DEFAULT_CELL_MIX, render_weight
 from gonio.brdf.design.roughness import RoughnessBound, bound_angles, roughness_bound
 from gonio.brdf.reconstruction.samples import DEFAULT_SPAN_DEG, SPANS_DEG
 from gonio.cli import UsageError
@@ -91,12 +92,12 @@ def register(subparsers: Any) -> None:
                    help="with --colour: weight of the instrument geometries' expected error "
                         f"against the whole table's (default {DEFAULT_COLOUR_WEIGHT:g}; 0: only "
                         "the pairs at the near-specular geometries)")
-    p.add_argument("--render-mix", type=float, default=0.0, metavar="A",
+    p.add_argument("--render-mix", type=float, default=None, metavar="A",
                    help="for --pairs by the expected error: weigh the grid's cells (1 - A) as "
                         "log_rmse does plus A as the standard renderings' pixels see them "
-                        "(0..1; default 0; only A = 0.5 was measured to help and the response is "
-                        "not smooth: A = 0.25 made the measured log_rmse +64 %% worse; "
-                        "docs/science.md 7.2.2)")
+                        f"(0..1; default {DEFAULT_CELL_MIX:g}, the design's own; 0: weigh them "
+                        "as log_rmse does alone; the response is not smooth: A = 0.25 made the "
+                        "measured log_rmse +64 %% worse; docs/science.md 7.2.2)")
     p.add_argument("--seed", type=int, default=0,
                    help="random seed of the kappa search; for --objective posterior it picks "
                         "the first pair the greedy choice starts from (0: the best single "
@@ -167,7 +168,7 @@ def _check_args(args: argparse.Namespace) -> None:
             raise UsageError(f"--colour-weight must be between 0 and {MAX_COLOUR_WEIGHT:g}, "
                              f"got {args.colour_weight:g}")
         _colour(args)
-    if args.render_mix != 0.0:
+    if args.render_mix is not None and args.render_mix != 0.0:
         if args.pairs is None or args.objective == "kappa":
             raise UsageError("--render-mix weighs the expected-error design of --pairs: use it "
                              "with --pairs and without --objective kappa")
@@ -202,10 +203,10 @@ def _colour(args: argparse.Namespace) -> ColourTargets | None:
         raise UsageError(f"--colour / --colour-weight: {exc}") from None
 
 
-def _colour_record(args: argparse.Namespace) -> dict[str, Any]:
+def _colour_record(args: argparse.Namespace, design: PairDesign) -> dict[str, Any]:
     """The ``[design]`` keys of a colour design (none without ``--colour``) and the
-    ``render_mix`` of a rendering-weighted one (none at 0)."""
-    mix = float(getattr(args, "render_mix", 0.0) or 0.0)
+    ``render_mix`` of a rendering-weighted one (``design.cell_mix``; none at 0)."""
+    mix = float(design.cell_mix)
     if getattr(args, "colour", None) is None:
         return {"render_mix": mix} if mix else {}
     from gonio.brdf.colour.instruments import canonical_instrument
@@ -237,13 +238,14 @@ def make_design(args: argparse.Namespace, basis: BasisLike) -> PairDesign:
 
 
 def _render_mix(args: argparse.Namespace) -> dict[str, Any]:
-    """``design_pairs``' cell weighting for ``--render-mix`` (nothing when it is 0)."""
-    mix = float(getattr(args, "render_mix", 0.0) or 0.0)
-    if mix == 0.0:
+    """``design_pairs``' cell weighting for ``--render-mix``: nothing without it (the
+    design's default), the unweighted design at 0, the shipped map at the share asked."""
+    mix = getattr(args, "render_mix", None)
+    if mix is None:
         return {}
-    from gonio.brdf.pictures.appearance import render_importance
-
-    return {"cell_weight": render_importance(), "cell_mix": mix}
+    if float(mix) == 0.0:
+        return {"cell_mix": 0.0}
+    return {"cell_weight": render_weight(), "cell_mix": float(mix)}
 
 
 SINGULAR_KAPPA = 1e6
@@ -413,9 +415,9 @@ def run(args: argparse.Namespace) -> int:
         design = make_design(args, basis)
     bound = roughness_bound(design.cells, design.ph_lab, bound_angles(args.rotations, args.span))
     print_design(design, bound, args.rotations, span_deg=args.span)
-    if args.render_mix:
-        print(f"cells weighted by the standard renderings at --render-mix {args.render_mix:g} "
-              "(docs/science.md 7.2.2)")
+    if design.cell_mix:
+        print(f"cells weighted by the standard renderings at {design.cell_mix:g} "
+              "(--render-mix; docs/science.md 7.2.2)")
     if args.basis is None and not args.no_expected_error and args.lights is None:
         if expected is None:
             from gonio.brdf.design.heldout import heldout_log_rmse
@@ -455,16 +457,16 @@ def run(args: argparse.Namespace) -> int:
                     if design.expected_log_rmse is not None
                     and np.isfinite(design.expected_log_rmse) else None),
                 rotations=args.rotations, span_deg=args.span, noise=HELDOUT_NOISE,
-                pairs=design.n_pairs, calibrated=True, **_colour_record(args),
+                pairs=design.n_pairs, calibrated=True, **_colour_record(args, design),
             )
-        elif _colour_record(args):
+        elif _colour_record(args, design):
             from gonio.config import DesignExpectation
 
             # No held-out error to compare scans with, but the rig config still records
             # that its geometry is a colour design (its scans report that instrument) or a
             # rendering-weighted one.
             expectation = DesignExpectation(rotations=args.rotations, span_deg=args.span,
-                                            pairs=design.n_pairs, **_colour_record(args))
+                                            pairs=design.n_pairs, **_colour_record(args, design))
         args.output.write_text(dump_fragment(design_fragment(design, expectation), header),
                                encoding="utf-8")
         print(f"wrote {args.output}; merge it with 'gonio rig apply-design {args.output} "

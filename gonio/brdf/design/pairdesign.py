@@ -104,6 +104,11 @@ class PairDesign:
     colour_pairs : int
         How many of the pairs (the first ones) sit at colour geometries asked for
         (:mod:`gonio.brdf.design.colourtargets`); 0 when no colour was asked for.
+    cell_mix : float
+        The share of a second weighting of the grid's cells (the standard renderings' pixel
+        counts by default) in the expected-error objective that chose the pairs
+        (:func:`gonio.brdf.design.posterior.posterior_design`); 0 for an unweighted design,
+        a preset or a design the condition-number search made.
     fallback : str or None
         Why the design was not made by the objective asked for (e.g. the expected-error
         choice could not be mounted on a crowded rig and the condition-number search, which
@@ -126,6 +131,7 @@ class PairDesign:
     greedy: GreedyStats | None = None
     fallback: str | None = None
     colour_pairs: int = 0
+    cell_mix: float = 0.0
 
     @classmethod
     def independent(cls, name: str, placement: Placement, kappa: float,

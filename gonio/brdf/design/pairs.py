@@ -41,6 +41,7 @@ from gonio.brdf.design.posterior import (
     posterior_design,
     prior_model,
 )
+from gonio.brdf.design.renderweight import DEFAULT_CELL_MIX, render_weight
 from gonio.brdf.design.search import optimize_rows
 from gonio.brdf.reconstruction.basis import Basis
 from gonio.brdf.reconstruction.samples import DEFAULT_SPAN_DEG, SPANS_DEG
@@ -115,7 +116,7 @@ def design_pairs(
     span_deg: float = DEFAULT_SPAN_DEG,
     colour: ColourTargets | None = None,
     cell_weight: ArrayLike | None = None,
-    cell_mix: float = 0.0,
+    cell_mix: float | None = None,
 ) -> PairDesign:
     """Choose ``n`` independent light/sensor pairs and place them in the lab.
 
@@ -143,10 +144,17 @@ def design_pairs(
     search, which would drop the colour geometries.
 
     ``cell_weight``, ``cell_mix``: the expected-error design's second weighting of the grid's
-    cells and its share (:func:`gonio.brdf.design.posterior.posterior_design`; e.g. the pixel
-    counts of the standard renderings, docs/science.md 7.2.2); like ``colour``, only the
-    expected-error design takes them (``cell_mix > 0`` with ``objective="kappa"`` is an
-    error).
+    cells and its share (:func:`gonio.brdf.design.posterior.posterior_design`,
+    docs/science.md 7.2.2). By default (``cell_mix=None``) the expected-error design mixes in
+    the pixel counts of the standard renderings
+    (:func:`gonio.brdf.design.renderweight.render_weight`, or ``cell_weight`` when given) at
+    :data:`~gonio.brdf.design.renderweight.DEFAULT_CELL_MIX`, so the pairs also read the
+    cells a picture of the specimen looks at; a colour design, which weighs its own
+    geometries, and the condition-number search take no weighting by default, and a default
+    weighted choice that cannot be mounted falls back like the unweighted one. An explicit
+    ``cell_mix=0`` is the unweighted design; an explicit ``cell_mix > 0``, like ``colour``, is
+    taken by the expected-error design only (with ``objective="kappa"`` it is an error, and
+    it never falls back).
 
     Either way the condition-number search's ability to plan mounts is kept: when the
     expected-error choice cannot be mounted (a crowded rig, :class:`FeasibilityError`), runs
@@ -187,8 +195,14 @@ def design_pairs(
         raise DesignError(
             "a cell weighting (cell_mix > 0) is taken by the expected-error design only; use "
             "objective='posterior' (the default) or cell_mix=0")
+    # The default weighting (cell_mix=None) goes with the default's fallbacks below; only an
+    # explicit cell_mix > 0 takes the strict path that raises instead.
     cells_asked: dict[str, Any] = ({"cell_weight": cell_weight, "cell_mix": cell_mix}
                                    if cell_mix else {})
+    cells_default: dict[str, Any] = (
+        {"cell_weight": render_weight() if cell_weight is None else cell_weight,
+         "cell_mix": DEFAULT_CELL_MIX}
+        if cell_mix is None and colour is None and isinstance(basis, Basis) else {})
     if colour is not None:
         if asked != "posterior":
             raise DesignError(
@@ -214,7 +228,7 @@ def design_pairs(
             try:
                 return posterior_design(basis, n, constraints, rotations=rotations,
                                         span_deg=span_deg, seed=0 if seed is None else seed,
-                                        time_limit_s=time_limit_s, **cells_asked)
+                                        time_limit_s=time_limit_s, **cells_default)
             except FeasibilityError as exc:
                 fallback = (f"the expected-error choice could not be mounted ({exc}); the "
                             "condition-number search, which plans mounts as it goes, made "

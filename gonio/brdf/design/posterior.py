@@ -546,7 +546,7 @@ def posterior_design(
     return replace(design, objective="posterior",
                    expected_log_rmse=design_expected_log_rmse(model, q),
                    rotations=int(rotations), span_deg=float(span_deg), greedy=stats,
-                   colour_pairs=int(fixed.shape[0]))
+                   colour_pairs=int(fixed.shape[0]), cell_mix=float(cell_mix))
 
 
 def _mixed_gram(model: PriorModel, Wc: FloatArray, mix: float) -> FloatArray:

@@ -227,8 +227,15 @@ def test_the_objective_is_chosen_and_reported(objective: str, basis_file: Path, 
     want = design_expected_log_rmse(prior_model(basis, 12), rows)
     assert printed == pytest.approx(want, rel=1e-3, abs=1e-4)
     if objective == "posterior":
-        # The cells are the expected-error design's (checked against the core directly).
-        direct = posterior_design(basis, 5, RigConstraints(), rotations=12)
+        # The cells are the expected-error design's, by default with the standard renderings'
+        # pixel counts mixed in at one half (docs/science.md 7.2.2; checked against the core
+        # directly, with the map counted by the renderer, not the shipped copy).
+        from gonio.brdf.pictures.appearance import render_importance
+
+        assert "weighted by the standard renderings at 0.5" in text
+        assert frag["design"]["render_mix"] == 0.5
+        direct = posterior_design(basis, 5, RigConstraints(), rotations=12,
+                                  cell_weight=render_importance(), cell_mix=0.5)
         written = np.stack([th, td, np.mod(pd, np.pi)], axis=1)
         for c in direct.cells:  # (the fragment holds angles rounded to 0.001 deg or so)
             gap = np.abs(written - c)
@@ -249,7 +256,7 @@ def test_render_mix_designs_with_the_renderings_cell_weights(
                  "-o", str(out)]) == 0
     printed = capsys.readouterr().out
     assert "objective: posterior (" in printed
-    assert "weighted by the standard renderings at --render-mix 1" in printed
+    assert "weighted by the standard renderings at 1 (--render-mix" in printed
     basis = Basis.load(basis_file)
     frag = tomllib.loads(out.read_text())
     assert frag["design"]["render_mix"] == 1.0
@@ -263,6 +270,31 @@ def test_render_mix_designs_with_the_renderings_cell_weights(
     plain = posterior_design(basis, 5, RigConstraints())
     assert not np.allclose(np.sort(mixed.cells, axis=0), np.sort(plain.cells, axis=0))
     for c in mixed.cells:  # (the fragment holds rounded angles)
+        gap = np.abs(written - c)
+        gap[:, 2] = np.minimum(gap[:, 2], np.pi - gap[:, 2])
+        assert gap.max(axis=1).min() < np.deg2rad(0.01)
+
+
+def test_render_mix_zero_is_the_unweighted_design(
+        basis_file: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``--render-mix 0``: the expected-error design weighing cells as log_rmse does alone
+    (the design before the renderings' weighting became the default); nothing recorded."""
+    from gonio.brdf.design.constraints import RigConstraints
+    from gonio.brdf.design.posterior import posterior_design
+
+    out = tmp_path / "frag.toml"
+    assert main(["design", "--pairs", "5", "--basis", str(basis_file), "--render-mix", "0",
+                 "--no-expected-error", "-o", str(out)]) == 0
+    assert "weighted by the standard renderings" not in capsys.readouterr().out
+    frag = tomllib.loads(out.read_text())
+    assert "render_mix" not in frag.get("design", {})
+    li = np.deg2rad([[d["theta_deg"], d["phi_deg"]] for d in frag["lights"]])
+    se = np.deg2rad([[d["theta_deg"], d["phi_deg"]] for d in frag["sensors"]])
+    th, _, td, pd = geo.directions_to_half_diff(geo.spherical_to_direction(li[:, 0], li[:, 1]),
+                                                geo.spherical_to_direction(se[:, 0], se[:, 1]))
+    written = np.stack([th, td, np.mod(pd, np.pi)], axis=1)
+    plain = posterior_design(Basis.load(basis_file), 5, RigConstraints())
+    for c in plain.cells:
         gap = np.abs(written - c)
         gap[:, 2] = np.minimum(gap[:, 2], np.pi - gap[:, 2])
         assert gap.max(axis=1).min() < np.deg2rad(0.01)

@@ -264,3 +264,29 @@ def test_an_expected_error_choice_past_its_time_limit_hands_over_to_the_search(
     assert d.objective == "kappa" and d.search is not None and d.greedy is None
     assert d.fallback is not None and "did not finish within 1e-06 s" in d.fallback
     assert np.degrees(min_pairwise_distance(_devices_of(d))) >= 10.0 - 1e-6
+
+
+def test_the_default_design_weighs_the_cells_the_renderings_see(library_basis: Basis) -> None:
+    """``design_pairs(basis, n, constraints)`` is the expected-error design with the standard
+    renderings' pixel counts mixed in at one half (docs/science.md 7.2.2): the same pairs as
+    the core asked for that weighting, with the map counted by the renderer itself (not the
+    shipped copy), and other pairs than the unweighted design; ``cell_mix=0`` is that
+    unweighted design."""
+    from gonio.brdf.design.constraints import RigConstraints
+    from gonio.brdf.design.pairs import design_pairs
+    from gonio.brdf.design.posterior import posterior_design
+    from gonio.brdf.pictures.appearance import render_importance
+
+    c = RigConstraints()
+    d = design_pairs(library_basis, 6, c)
+    assert d.objective == "posterior" and d.fallback is None and d.cell_mix == 0.5
+    weighted = posterior_design(library_basis, 6, c, cell_weight=render_importance(),
+                                cell_mix=0.5)
+    np.testing.assert_allclose(d.cells, weighted.cells)
+    plain = design_pairs(library_basis, 6, c, cell_mix=0.0)
+    assert plain.cell_mix == 0.0
+    np.testing.assert_allclose(plain.cells, posterior_design(library_basis, 6, c).cells)
+    assert not np.allclose(np.sort(plain.cells, axis=0), np.sort(d.cells, axis=0))
+    # The condition-number search takes no weighting.
+    assert design_pairs(library_basis, 4, c, objective="kappa", starts=1,
+                        descents=1).cell_mix == 0.0
