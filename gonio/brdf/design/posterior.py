@@ -46,7 +46,9 @@ weighs cells; a picture weighs them by how many of its pixels look them up
 thousand cells, at ``td`` = half their lights' angles). :func:`cell_gram` is ``W`` with such a
 map ``c`` in place of ``wV``, and the design can minimise ``(1 - a) W + a ratio W_c``, ``ratio``
 making both weigh the prior alike (``docs/science.md`` 7.2.2: ``a = 0.5`` trades a few percent
-of ``log_rmse`` for HDR-FLIP on the measured materials; off by default).
+of ``log_rmse`` for HDR-FLIP on the measured materials). This function takes no weighting
+unless asked; :func:`gonio.brdf.design.pairs.design_pairs` asks for ``a = 0.5`` with the
+shipped map (:mod:`gonio.brdf.design.renderweight`) by default.
 
 Search: greedy, one pair at a time, each time the feasible cell that lowers
 ``sum_m tr(W Sigma_m)`` most (gain ``q^T Sigma_m W Sigma_m q / (q^T Sigma_m q + s_m)``, for
