@@ -63,6 +63,10 @@ it, a round of stage angles placed where their predictions disagree most (``--sc
 and the fit that predicted them better refitted on every reading (``--refit``), up to 120
 readings; beside today's path and the tilt fit at 120 readings (R = 6). ``fresh3``:
 :data:`FRESH3`, written and committed before any run.
+
+``--tilt`` also prints the two fits **averaged in log** (:func:`log_average`: no choice
+between them, so no rule to be fooled by a misplaced lean). ``fresh4``: :data:`FRESH4`,
+written and committed before any run, to test the average once.
 """
 
 from __future__ import annotations
@@ -83,6 +87,7 @@ from gonio.brdf.reconstruction.symmetry import twofold_test
 from gonio.brdf.reconstruction.tilt import fit_tilt
 from gonio.brdf.tables import geometry as geo
 from gonio.brdf.tables import metrics
+from gonio.brdf.tables.table import BRDFTable
 from gonio.plans.arc import fill_angles, first_round_angles
 
 MASK = geo.valid_mask()
@@ -187,6 +192,34 @@ FRESH3: list[tuple[str, float, float, dict[str, Any], float]] = [
     ("fresh3-pink-plastic-r0.07-t24", 24.0, 50.0,
      {"type": "roughplastic", "alpha": 0.07,
       "diffuse_reflectance": {"type": "rgb", "value": [0.7, 0.3, 0.4]}}, 164.0),
+]
+
+
+#: A fourth fresh set for the averaged fit (``--tilt fresh4``: today's fit and the tilt fit
+#: averaged in log), written down and committed (2026-11-27) before any run on it, made as
+#: :data:`FRESH2` is: two metals no set used before (TiC, VN), three used before (Ag,
+#: anisotropic Al, W) at new roughnesses, three plastics of new colours; roughnesses
+#: 0.08-0.30, tilts 8-27 deg and new holder angles. Nothing is chosen on it.
+FRESH4: list[tuple[str, float, float, dict[str, Any], float]] = [
+    ("fresh4-tic-r0.12-t16", 16.0, 150.0,
+     {"type": "roughconductor", "material": "TiC", "alpha": 0.12}, 205.0),
+    ("fresh4-vn-r0.20-t22", 22.0, 10.0,
+     {"type": "roughconductor", "material": "VN", "alpha": 0.20}, 87.0),
+    ("fresh4-ag-r0.10-t9", 9.0, 275.0,
+     {"type": "roughconductor", "material": "Ag", "alpha": 0.10}, 319.0),
+    ("fresh4-al-aniso-t19", 19.0, 65.0,
+     {"type": "roughconductor", "material": "Al", "alpha_u": 0.08, "alpha_v": 0.24}, 12.0),
+    ("fresh4-w-r0.28-t13", 13.0, 320.0,
+     {"type": "roughconductor", "material": "W", "alpha": 0.28}, 140.0),
+    ("fresh4-teal-plastic-r0.11-t27", 27.0, 240.0,
+     {"type": "roughplastic", "alpha": 0.11,
+      "diffuse_reflectance": {"type": "rgb", "value": [0.05, 0.35, 0.3]}}, 262.0),
+    ("fresh4-olive-plastic-r0.30-t8", 8.0, 100.0,
+     {"type": "roughplastic", "alpha": 0.30,
+      "diffuse_reflectance": {"type": "rgb", "value": [0.4, 0.4, 0.1]}}, 33.0),
+    ("fresh4-navy-plastic-r0.08-t20", 20.0, 190.0,
+     {"type": "roughplastic", "alpha": 0.08,
+      "diffuse_reflectance": {"type": "rgb", "value": [0.05, 0.08, 0.35]}}, 171.0),
 ]
 
 
@@ -385,12 +418,24 @@ def tilt_scan(plain: Basis, asym: Basis, m: bu.Material, cells: np.ndarray, ph: 
     t0 = time.process_time()
     tf = fit_tilt(plain, cells, ph, alpha, vals, reference=plain if test["symmetric"] else asym)
     cpu = time.process_time() - t0
+    average = log_average(today.table, tf.table)
     return {"symmetric": bool(test["symmetric"]), "readings": len(cells) * len(angles),
+            "average": metrics.log_rmse(average, m.truth),
             "accepted": tf.accepted, "improved": tf.pairs_improved, "n_pairs": tf.n_pairs,
             "today": metrics.log_rmse(today.table, m.truth), "today_cv": today.cv_log_error,
             "tilt": metrics.log_rmse(tf.table, m.truth), "tilt_cv": tf.holdout_error,
             "plain_cv": tf.plain_holdout_error, "t": np.rad2deg(tf.tilt),
             "b": np.rad2deg(tf.azimuth) % 360.0, "cpu": cpu}
+
+
+def log_average(a: BRDFTable, b: BRDFTable, eps: float = 1e-4) -> BRDFTable:
+    """The two fits averaged in log: ``sqrt((a + eps) (b + eps)) - eps`` cell by cell (1/sr;
+    ``eps`` keeps a zero of one fit from zeroing the average). Its log error is at most the
+    mean of the two fits' (the log table's distance is a norm), less when they err apart."""
+    va = np.asarray(a.values, dtype=float)
+    vb = np.asarray(b.values, dtype=float)
+    avg = np.sqrt((np.maximum(va, 0) + eps) * (np.maximum(vb, 0) + eps)) - eps
+    return BRDFTable.trusted(avg, a.channels, f"mean of {a.name} and {b.name}")
 
 
 def full_turn_tilt(plain: Basis, m: bu.Material, cells: np.ndarray, ph: np.ndarray, r: int,
@@ -434,13 +479,14 @@ def tilt_rows(plain: Basis, asym: Basis, d_half: tuple[np.ndarray, np.ndarray],
               f"**{a[:, 3].mean():.4f}** | | {int((a[:, 2] == 0).sum())} of {len(a)} at 0 | | "
               f"{a[:, 4].mean():.1f} |")
         return
-    specs = {"choice": ASYM, "fresh": FRESH, "fresh2": FRESH2}[which]
+    specs = {"choice": ASYM, "fresh": FRESH, "fresh2": FRESH2, "fresh4": FRESH4}[which]
     mats = asym_materials(specs=specs)
     print(f"\n{which} set, auto arc R = {rotations}, the default design's 10 pairs: today's "
-          "path (the basis the verdict chooses) against the tilt fit on the same readings")
-    print("\n| specimen | readings | today | tilt fit | rule | pairs improved | fitted t / b "
-          "(deg) | truth t / b | held-out: today / tilt | tilt CPU s |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+          "path (the basis the verdict chooses) against the tilt fit on the same readings, "
+          "and the two averaged in log")
+    print("\n| specimen | readings | today | tilt fit | rule | average | pairs improved | "
+          "fitted t / b (deg) | truth t / b | held-out: today / tilt | tilt CPU s |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     rows = []
     for i, (m, spec) in enumerate(zip(mats, specs, strict=True)):
         r = tilt_scan(plain, asym, m, *d_half, rotations, 500 + i)
@@ -448,16 +494,19 @@ def tilt_rows(plain: Basis, asym: Basis, d_half: tuple[np.ndarray, np.ndarray],
         # the held-out error of at least 70 % of the pairs against today's basis.
         rule = r["tilt"] if r["accepted"] else r["today"]
         truth_b = (spec[2] + spec[4]) % 360.0  # the lean's azimuth in the specimen frame
-        rows.append((r["today"], r["tilt"], rule, r["readings"], r["cpu"]))
+        rows.append((r["today"], r["tilt"], rule, r["readings"], r["cpu"], r["average"]))
         print(f"| {m.name} | {r['readings']} | {r['today']:.4f} | {r['tilt']:.4f} | {rule:.4f} | "
-              f"{r['improved']} of {r['n_pairs']} | {r['t']:.1f} / {r['b']:.0f} | "
+              f"{r['average']:.4f} | {r['improved']} of {r['n_pairs']} | "
+              f"{r['t']:.1f} / {r['b']:.0f} | "
               f"{spec[1]:.0f} / {truth_b:.0f} | "
               f"{r['today_cv']:.4f} / {r['tilt_cv']:.4f} | {r['cpu']:.1f} |", flush=True)
     a = np.array(rows)
     print(f"| **mean** | {a[:, 3].mean():.0f} | {a[:, 0].mean():.4f} | {a[:, 1].mean():.4f} "
-          f"| **{a[:, 2].mean():.4f}** | | | | | {a[:, 4].mean():.1f} |")
-    print(f"\nrule against today: worst {np.max(a[:, 2] - a[:, 0]):+.4f}, "
-          f"{int(np.sum(a[:, 2] - a[:, 0] > 0.01))} specimens worse by more than 0.01")
+          f"| **{a[:, 2].mean():.4f}** | **{a[:, 5].mean():.4f}** | | | | | "
+          f"{a[:, 4].mean():.1f} |")
+    for label, col in (("rule", 2), ("average", 5)):
+        print(f"\n{label} against today: worst {np.max(a[:, col] - a[:, 0]):+.4f}, "
+              f"{int(np.sum(a[:, col] - a[:, 0] > 0.01))} specimens worse by more than 0.01")
 
 
 def disagree_round(plain: Basis, ref: Basis, m: bu.Material, cells: np.ndarray, ph: np.ndarray,
@@ -632,7 +681,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="the auto arc's first-round layout (with --auto; module LAYOUTS)")
     ap.add_argument("--set", choices=("choice", "fresh"), default="choice",
                     help="with --auto: the specimens (fresh: ASYM_FRESH, run once)")
-    ap.add_argument("--tilt", choices=("choice", "fresh", "fresh2", "symmetric"), default=None,
+    ap.add_argument("--tilt", choices=("choice", "fresh", "fresh2", "fresh4", "symmetric"),
+                    default=None,
                     help="only the tilt fit's study on that set (module notes)")
     ap.add_argument("--disagree", choices=("choice", "fresh", "fresh2", "fresh3", "symmetric"),
                     default=None, help="only the disagreement round's study on that set "
