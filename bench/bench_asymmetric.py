@@ -479,7 +479,8 @@ def tilt_rows(plain: Basis, asym: Basis, d_half: tuple[np.ndarray, np.ndarray],
               f"**{a[:, 3].mean():.4f}** | | {int((a[:, 2] == 0).sum())} of {len(a)} at 0 | | "
               f"{a[:, 4].mean():.1f} |")
         return
-    specs = {"choice": ASYM, "fresh": FRESH, "fresh2": FRESH2, "fresh4": FRESH4}[which]
+    specs = {"choice": ASYM, "fresh": FRESH, "fresh2": FRESH2, "fresh3": FRESH3,
+             "fresh4": FRESH4}[which]
     mats = asym_materials(specs=specs)
     print(f"\n{which} set, auto arc R = {rotations}, the default design's 10 pairs: today's "
           "path (the basis the verdict chooses) against the tilt fit on the same readings, "
@@ -681,7 +682,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="the auto arc's first-round layout (with --auto; module LAYOUTS)")
     ap.add_argument("--set", choices=("choice", "fresh"), default="choice",
                     help="with --auto: the specimens (fresh: ASYM_FRESH, run once)")
-    ap.add_argument("--tilt", choices=("choice", "fresh", "fresh2", "fresh4", "symmetric"),
+    ap.add_argument("--tilt", choices=("choice", "fresh", "fresh2", "fresh3", "fresh4",
+                                       "symmetric"),
                     default=None,
                     help="only the tilt fit's study on that set (module notes)")
     ap.add_argument("--disagree", choices=("choice", "fresh", "fresh2", "fresh3", "symmetric"),
