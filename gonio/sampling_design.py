@@ -19,7 +19,7 @@ basis, and the API routes call it in a worker thread.
 from __future__ import annotations
 
 import math
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 from pydantic import BaseModel, Field, model_validator
@@ -41,6 +41,7 @@ from gonio.brdf.design.pairs import (
 )
 from gonio.brdf.design.presets import Preset
 from gonio.brdf.design.product import design_product_rig
+from gonio.brdf.design.renderweight import render_weight
 from gonio.brdf.design.roughness import bound_angles, roughness_bound
 from gonio.fields import FINITE, Count, Text
 from gonio.plans.models import DEFAULT_SPAN_DEG, SpanDeg
@@ -124,6 +125,11 @@ class DesignRequest(BaseModel):
         DEFAULT_COLOUR_WEIGHT, ge=0, le=MAX_COLOUR_WEIGHT,
         description="with 'colour_instrument': how much the instrument geometries' expected "
                     "error counts against the whole table's (0: only their direct pairs)")
+    render_mix: float | None = Field(
+        None, ge=0, le=1,
+        description="the share of the standard renderings' weighting of the grid's cells in "
+                    "the expected-error objective of 'pairs' (docs/science.md 7.2.2); null: the "
+                    "design's default (0.5), 0: weigh the cells as log_rmse does alone")
 
     @model_validator(mode="after")
     def _one_kind(self) -> DesignRequest:
@@ -149,7 +155,23 @@ class DesignRequest(BaseModel):
                 canonical_instrument(self.colour_instrument)
             except ColourError as exc:
                 raise ValueError(f"'colour_instrument': {exc}") from None
+        if self.render_mix:
+            if self.pairs is None or self.objective == "kappa":
+                raise ValueError("'render_mix' weighs the expected-error design of 'pairs': ask "
+                                 "for 'pairs' and drop objective 'kappa' (or set render_mix 0)")
+            if self.colour_instrument is not None:
+                raise ValueError("'render_mix' and 'colour_instrument' both reweigh the "
+                                 "expected error and cannot be combined: use one")
         return self
+
+    def cells_weighting(self) -> dict[str, Any]:
+        """``design_pairs``' ``cell_weight`` / ``cell_mix`` for ``render_mix`` (nothing for
+        the default, the unweighted design for 0)."""
+        if self.render_mix is None:
+            return {}
+        if self.render_mix == 0:
+            return {"cell_mix": 0.0}
+        return {"cell_weight": render_weight(), "cell_mix": float(self.render_mix)}
 
     def colour(self) -> ColourTargets | None:
         """The colour targets asked for, or None."""
@@ -337,7 +359,7 @@ def run_design(basis: BasisLike, request: DesignRequest) -> DesignResult:
             basis, request.pairs, constraints, h=request.neighbourhood, starts=request.starts,
             descents=request.descents, seed=request.seed, time_limit_s=request.time_limit_s,
             objective=request.objective, rotations=request.rotations,
-            span_deg=request.span_deg, colour=request.colour(),
+            span_deg=request.span_deg, colour=request.colour(), **request.cells_weighting(),
         )
     else:
         assert request.lights is not None and request.sensors is not None

@@ -36,6 +36,12 @@ from tests.unit.engine.test_adaptive_posterior import BASIS
      "drop objective 'kappa'"),
     ({"pairs": 6, "colour_instrument": "MA98", "colour_weight": -1},
      "greater than or equal to 0"),
+    ({"pairs": 6, "render_mix": 1.5}, "less than or equal to 1"),
+    ({"pairs": 6, "render_mix": math.nan}, "finite number"),
+    ({"lights": 2, "sensors": 2, "render_mix": 0.5},
+     "'render_mix' weighs the expected-error design of 'pairs'"),
+    ({"pairs": 6, "objective": "kappa", "render_mix": 0.5}, "drop objective 'kappa'"),
+    ({"pairs": 6, "colour_instrument": "MA98", "render_mix": 0.5}, "cannot be combined"),
 ])
 def test_a_request_that_cannot_be_designed_is_refused(fields: dict[str, object],
                                                       message: str) -> None:
@@ -103,6 +109,28 @@ def test_a_product_rig_measures_every_light_with_every_sensor() -> None:
     assert result.name == "product" and result.objective is None
     assert sorted((p.light, p.sensor) for p in result.pairs) == [
         ("L1", "S1"), ("L1", "S2"), ("L2", "S1"), ("L2", "S2")]
+
+
+def test_the_renderings_weighting_is_the_default_and_can_be_asked_for_or_off() -> None:
+    """Pairs are chosen with the standard renderings' cell weighting at one half unless the
+    request says otherwise (docs/science.md 7.2.2); the result says which; ``render_mix`` 0
+    is the design weighing cells as log_rmse does alone, the core's plain expected-error
+    design."""
+    from gonio.brdf.design.constraints import RigConstraints
+    from gonio.brdf.design.posterior import posterior_design
+
+    default = run_design(BASIS, DesignRequest(pairs=4))
+    assert default.render_mix == 0.5 and default.objective == "posterior"
+    plain = run_design(BASIS, DesignRequest(pairs=4, render_mix=0))
+    assert plain.render_mix == 0.0
+    core = posterior_design(BASIS, 4, RigConstraints())
+    got = sorted((p.theta_h_deg, p.theta_d_deg) for p in plain.pairs)
+    want = sorted((float(c[0]), float(c[1])) for c in np.rad2deg(core.cells))
+    np.testing.assert_allclose(got, want, atol=1e-9)
+    assert run_design(BASIS, DesignRequest(pairs=4, render_mix=1)).render_mix == 1.0
+    # Nothing to weigh: a colour design and a product rig report 0.
+    assert run_design(BASIS, DesignRequest(pairs=7, colour_instrument="ma98")).render_mix == 0
+    assert run_design(BASIS, DesignRequest(lights=2, sensors=2, starts=1)).render_mix == 0
 
 
 def test_a_colour_request_reports_its_colour_pairs() -> None:
