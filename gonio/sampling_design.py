@@ -278,7 +278,8 @@ class DesignResult(BaseModel):
     rig_config_toml: str = Field(
         description="[[lights]], [[sensors]] and pairs, to merge into a rig config (each device "
                     "still needs its driver settings); a colour design adds a [design] table "
-                    "with its colour_instrument and colour_weight")
+                    "with its colour_instrument and colour_weight, a design weighted by the "
+                    "renderings one with its render_mix")
 
 
 class PresetInfo(BaseModel):
@@ -297,15 +298,21 @@ def describe(design: PairDesign, rotations: int,
     """The API view of a :class:`~gonio.brdf.design.pairdesign.PairDesign`.
 
     ``colour``: the instrument and weight of a colour design, recorded in the fragment's
-    ``[design]`` table so the rig config it goes into says so (docs/colour.md).
+    ``[design]`` table so the rig config it goes into says so (docs/colour.md); otherwise a
+    design weighted by the standard renderings records its ``render_mix`` there.
     """
     from gonio.config import DesignExpectation
     from gonio.rigdesign import design_fragment, dump_fragment
 
     bound = roughness_bound(design.cells, design.ph_lab, bound_angles(rotations, span_deg))
-    record = None if colour is None else DesignExpectation(
-        rotations=rotations, span_deg=span_deg, pairs=design.n_pairs,
-        colour_instrument=colour[0], colour_weight=colour[1])
+    # The fragment records what chose the pairs, as `gonio design -o` writes it: a colour
+    # design's instrument and weight, or the renderings' weighting (docs/rig-config.md).
+    record = (DesignExpectation(rotations=rotations, span_deg=span_deg, pairs=design.n_pairs,
+                                colour_instrument=colour[0], colour_weight=colour[1])
+              if colour is not None else
+              DesignExpectation(rotations=rotations, span_deg=span_deg, pairs=design.n_pairs,
+                                render_mix=float(design.cell_mix))
+              if design.cell_mix else None)
     frag = design_fragment(design, record)
     lights = [Device(**d) for d in frag["lights"]]
     sensors = [Device(**d) for d in frag["sensors"]]

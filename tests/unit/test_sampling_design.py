@@ -144,5 +144,9 @@ def test_a_colour_request_reports_its_colour_pairs() -> None:
     design = tomllib.loads(result.rig_config_toml)["design"]
     assert design == {"rotations": 8, "span_deg": 180.0, "pairs": 7,
                       "colour_instrument": "MA98", "colour_weight": 100.0}
-    assert "design" not in tomllib.loads(run_design(BASIS, DesignRequest(pairs=3))
+    # A plain design records the renderings' weighting that chose it (as `gonio design -o`
+    # does), an unweighted one nothing.
+    assert tomllib.loads(run_design(BASIS, DesignRequest(pairs=3)).rig_config_toml)[
+        "design"] == {"rotations": 8, "span_deg": 180.0, "pairs": 3, "render_mix": 0.5}
+    assert "design" not in tomllib.loads(run_design(BASIS, DesignRequest(pairs=3, render_mix=0))
                                          .rig_config_toml)
