@@ -81,6 +81,7 @@ from gonio.brdf.design.colourtargets import (
 )
 from gonio.brdf.design.constraints import RigConstraints
 from gonio.brdf.design.pairs import design_pairs
+from gonio.brdf.design.renderweight import DEFAULT_CELL_MIX, render_weight
 from gonio.brdf.materials.library import cache_root
 from gonio.brdf.reconstruction.basis import default_basis
 from gonio.brdf.reconstruction.reconstruct import pair_cells, reconstruct
@@ -127,7 +128,11 @@ def design(basis: object, cache: Path, colour: ColourTargets | None = None,
     tag = "" if colour is None else "-colour-" + hashlib.sha1(
         np.concatenate([colour.light.ravel(), colour.view.ravel(),
                         [colour.weight, colour.direct_within_deg]]).tobytes()).hexdigest()[:12]
-    path = cache / f"design-n{n_pairs}-{ident}{tag}.npz"
+    # The default design's weighting (docs/science.md 7.2.2) is part of the key: a change of
+    # it designs again instead of reading the previous default's pairs.
+    weight = "" if colour is not None else f"-mix{DEFAULT_CELL_MIX:g}-" + hashlib.sha1(
+        render_weight().tobytes()).hexdigest()[:8]
+    path = cache / f"design-n{n_pairs}-{ident}{tag}{weight}.npz"
     if path.is_file():
         with np.load(path) as z:
             return z["cells"], z["ph_lab"]

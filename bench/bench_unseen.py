@@ -65,6 +65,7 @@ import numpy as np
 from gonio.brdf.design.colourtargets import DEFAULT_COLOUR_WEIGHT
 from gonio.brdf.design.pairs import DEFAULT_OBJECTIVE
 from gonio.brdf.design.presets import get_preset, preset_names
+from gonio.brdf.design.renderweight import DEFAULT_CELL_MIX, render_weight
 from gonio.brdf.materials.library import cache_root
 from gonio.brdf.reconstruction.basis import Basis, default_basis, remap, row_weight
 from gonio.brdf.reconstruction.errors import ReconstructionError
@@ -259,7 +260,9 @@ SPAN: dict[str, float] = {"scan": DEFAULT_SPAN_DEG, "design": DEFAULT_SPAN_DEG}
 #: ``--design`` names: the bench's cache tag and how the pairs are made.
 DESIGNS = {
     "kappa": "",  # V&F's condition-number search
-    "posterior": "-posterior",  # the expected-error design (median slope, no aliasing)
+    # the expected-error design (median slope, no aliasing, the renderings' weighting at
+    # DEFAULT_CELL_MIX: design_pairs' default)
+    "posterior": "-posterior",
     "posterior-spread-alias": "-posterior-spread-alias",  # with both corrections
     # The design a lab gets when it asks for colour at the MA98 geometries (docs/colour.md).
     "posterior-colour-MA98": "-posterior-colour-MA98",
@@ -303,7 +306,8 @@ def design(b: Basis, n: int) -> tuple[np.ndarray, np.ndarray]:
                                               weight=COLOUR_WEIGHT["w"]))
     elif obj == "posterior-spread-alias":
         d = posterior_design(b, n, RigConstraints(), slope="spread", aliasing=True,
-                             span_deg=span)
+                             span_deg=span, cell_weight=render_weight(),
+                             cell_mix=DEFAULT_CELL_MIX)
     elif k > 1:
         from gonio.brdf.design.heldout import choose_design
 

@@ -157,8 +157,10 @@ class DesignRequest(BaseModel):
                 raise ValueError(f"'colour_instrument': {exc}") from None
         if self.render_mix:
             if self.pairs is None or self.objective == "kappa":
-                raise ValueError("'render_mix' weighs the expected-error design of 'pairs': ask "
-                                 "for 'pairs' and drop objective 'kappa' (or set render_mix 0)")
+                raise ValueError("'render_mix' weighs the expected-error design of 'pairs': "
+                                 + ("a product rig takes none (drop render_mix)"
+                                    if self.pairs is None else
+                                    "drop objective 'kappa' or render_mix"))
             if self.colour_instrument is not None:
                 raise ValueError("'render_mix' and 'colour_instrument' both reweigh the "
                                  "expected error and cannot be combined: use one")
@@ -265,7 +267,8 @@ class DesignResult(BaseModel):
         0.0, description="the share of the standard renderings' weighting of the grid's cells "
                          "in the expected-error objective that chose the pairs (0.5 by default, "
                          "docs/science.md 7.2.2); 0 for an unweighted design, a preset, a "
-                         "product rig or a colour design")
+                         "product rig, a colour design or a condition-number design (asked "
+                         "for, or the fallback)")
     min_device_distance_deg: float = Field(description="closest two devices, degrees")
     lights: list[Device]
     sensors: list[Device]

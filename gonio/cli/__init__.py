@@ -26,6 +26,7 @@ CORE_SETTING_FLAGS = {
     "min_separation_deg": "--min-separation",
     "min_device_distance_deg": "--min-device-distance",
     "replace": "--replace",
+    "cell_mix": "--render-mix",
 }
 
 COMMAND_MODULES: tuple[str, ...] = (

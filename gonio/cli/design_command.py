@@ -97,7 +97,9 @@ def register(subparsers: Any) -> None:
                         "log_rmse does plus A as the standard renderings' pixels see them "
                         f"(0..1; default {DEFAULT_CELL_MIX:g}, the design's own; 0: weigh them "
                         "as log_rmse does alone; the response is not smooth: A = 0.25 made the "
-                        "measured log_rmse +64 %% worse; docs/science.md 7.2.2)")
+                        "measured log_rmse +64 %% worse; --colour designs take none; a value "
+                        "given here has no fallback on a crowded rig, the default has; "
+                        "docs/science.md 7.2.2)")
     p.add_argument("--seed", type=int, default=0,
                    help="random seed of the kappa search; for --objective posterior it picks "
                         "the first pair the greedy choice starts from (0: the best single "

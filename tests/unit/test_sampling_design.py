@@ -39,8 +39,9 @@ from tests.unit.engine.test_adaptive_posterior import BASIS
     ({"pairs": 6, "render_mix": 1.5}, "less than or equal to 1"),
     ({"pairs": 6, "render_mix": math.nan}, "finite number"),
     ({"lights": 2, "sensors": 2, "render_mix": 0.5},
-     "'render_mix' weighs the expected-error design of 'pairs'"),
-    ({"pairs": 6, "objective": "kappa", "render_mix": 0.5}, "drop objective 'kappa'"),
+     "a product rig takes none (drop render_mix)"),
+    ({"pairs": 6, "objective": "kappa", "render_mix": 0.5},
+     "drop objective 'kappa' or render_mix"),
     ({"pairs": 6, "colour_instrument": "MA98", "render_mix": 0.5}, "cannot be combined"),
 ])
 def test_a_request_that_cannot_be_designed_is_refused(fields: dict[str, object],

@@ -202,7 +202,8 @@ def design_pairs(
     cells_default: dict[str, Any] = (
         {"cell_weight": render_weight() if cell_weight is None else cell_weight,
          "cell_mix": DEFAULT_CELL_MIX}
-        if cell_mix is None and colour is None and isinstance(basis, Basis) else {})
+        if cell_mix is None and colour is None and asked == "posterior"
+        and isinstance(basis, Basis) else {})
     if colour is not None:
         if asked != "posterior":
             raise DesignError(
@@ -219,9 +220,19 @@ def design_pairs(
         if not isinstance(basis, Basis):
             raise DesignError("a cell weighting (cell_mix > 0) needs a gonio Basis (its medians "
                               "and prior)")
-        return posterior_design(basis, n, constraints, rotations=rotations, span_deg=span_deg,
-                                seed=0 if seed is None else seed, time_limit_s=time_limit_s,
-                                **cells_asked)
+        try:
+            return posterior_design(basis, n, constraints, rotations=rotations,
+                                    span_deg=span_deg, seed=0 if seed is None else seed,
+                                    time_limit_s=time_limit_s, **cells_asked)
+        except FeasibilityError as exc:
+            # Say the way out the default has: its choice falls back to the search that plans
+            # mounts, an explicit weighting does not.
+            raise FeasibilityError(
+                exc.problem, (exc.advice + ", " if exc.advice else "")
+                + "or leave {cell_mix} out (the default weighting falls back to the "
+                "condition-number search, which plans mounts as it goes)",
+                {**exc.words, "cell_mix": "the cell weighting (cell_mix; the API's render_mix)"}
+            ) from exc
     fallback = None
     if asked == "posterior":
         if isinstance(basis, Basis):

@@ -456,6 +456,8 @@ def posterior_design(
         Count the harmonics ``rotations`` cannot resolve as noise (module notes).
         The defaults (median slope, no aliasing) are the design as shipped: the two
         corrections did not lower the error on the benchmark (``docs/science.md`` 7.2.1).
+        (The shipped design also mixes in the renderings' weighting, ``cell_mix=0.5``,
+        which :func:`gonio.brdf.design.pairs.design_pairs` adds; here it is asked for.)
     colour : ColourTargets, optional
         Geometries a colour lab will read (:mod:`gonio.brdf.design.colourtargets`): the ones
         near the specular direction become pairs of their own (the first of the design), and

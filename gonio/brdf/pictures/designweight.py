@@ -10,6 +10,7 @@ Run it after any change to the standard renderings; the suite's
 
 from __future__ import annotations
 
+import argparse
 import json
 import sys
 from pathlib import Path
@@ -54,7 +55,17 @@ def write_render_weight(path: Path, counts: NDArray[np.float64],
 
 
 def main(argv: list[str] | None = None) -> int:
-    path = Path(argv[0]) if argv else shipped_path()
+    ap = argparse.ArgumentParser(
+        prog="python -m gonio.brdf.pictures.designweight",
+        description="Count the standard renderings' pixel lookups per grid cell and write them "
+                    "where the default design reads them.")
+    ap.add_argument("output", nargs="?", type=Path, default=None,
+                    help="file to write (.npz is added if missing); default: the design "
+                         "package's data/render-importance.npz in this source tree")
+    args = ap.parse_args(argv)
+    path = shipped_path() if args.output is None else args.output
+    if path.suffix != ".npz":  # numpy would add it; say the name it really writes
+        path = path.with_name(path.name + ".npz")
     write_render_weight(path, appearance.render_importance(), views_description())
     print(f"wrote {path}")
     return 0

@@ -94,6 +94,11 @@ def test_optimised_pairs_respect_constraints_and_match_the_basis(
     frag = tomllib.loads(d["rig_config_toml"])
     assert [p["light"] for p in frag["pairs"]] == [p["light"] for p in d["pairs"]]
     assert frag["lights"] == d["lights"] and frag["sensors"] == d["sensors"]
+    # The expected-error choice weighs the cells the renderings see by default
+    # (docs/science.md 7.2.2), says so, and records it in the fragment; a kappa design not.
+    want_mix = 0.5 if made_by == "posterior" else 0.0
+    assert d["render_mix"] == want_mix
+    assert frag.get("design", {}).get("render_mix", 0.0) == want_mix
 
 
 def test_product_rig_measures_every_pair(daemon: Daemon, basis: Any) -> None:
@@ -136,6 +141,9 @@ def test_product_rig_measures_every_pair(daemon: Daemon, basis: Any) -> None:
         ({"pairs": 6, "colour_instrument": "MA98", "colour_weight": -2},
          "greater than or equal to 0"),
         ({"pairs": 3, "colour_instrument": "MA98"}, "need 5 pairs of their own"),
+        ({"lights": 2, "sensors": 2, "render_mix": 0.5},
+         "a product rig takes none (drop render_mix)"),
+        ({"pairs": 4, "render_mix": 2}, "less than or equal to 1"),
         ({"pairs": 12, "max_elevation_deg": 10, "min_device_distance_deg": 30,
           "time_limit_s": 1}, ""),
     ],

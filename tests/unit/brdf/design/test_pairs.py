@@ -290,3 +290,38 @@ def test_the_default_design_weighs_the_cells_the_renderings_see(library_basis: B
     # The condition-number search takes no weighting.
     assert design_pairs(library_basis, 4, c, objective="kappa", starts=1,
                         descents=1).cell_mix == 0.0
+
+
+def test_an_explicit_weighting_on_a_crowded_rig_fails_and_says_how_the_default_falls_back(
+        library_basis: Basis) -> None:
+    """The crowded rig above: the default weighting falls back to the search, a weighting
+    asked for explicitly is not dropped silently; its error names the way out."""
+    from gonio.brdf.design.constraints import RigConstraints
+    from gonio.brdf.design.errors import FeasibilityError
+    from gonio.brdf.design.pairs import design_pairs
+    from gonio.brdf.design.renderweight import render_weight
+
+    c = RigConstraints(max_elevation_deg=55.0, min_device_distance_deg=25.0)
+    with pytest.raises(FeasibilityError) as exc:
+        design_pairs(library_basis, 7, c, cell_weight=render_weight(), cell_mix=0.5)
+    assert "no mountable cell" in str(exc.value)
+    assert "or leave the cell weighting (cell_mix; the API's render_mix) out" in str(exc.value)
+    # The CLI words the knobs as its flags.
+    assert "or leave --render-mix out" in exc.value.advise({"cell_mix": "--render-mix"})
+    assert design_pairs(library_basis, 7, c, starts=1, descents=2).objective == "kappa"
+
+
+def test_a_condition_number_design_does_not_read_the_renderings_map(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The default weighting is the expected-error design's: a kappa design never needs the
+    shipped map (so an install that lost it can still make one)."""
+    from gonio.brdf.design import pairs
+    from gonio.brdf.design.constraints import RigConstraints
+
+    def missing() -> None:
+        raise AssertionError("the map was read")
+
+    monkeypatch.setattr(pairs, "render_weight", missing)
+    d = pairs.design_pairs(_grid_basis(), 4, RigConstraints(), h=3, starts=1, descents=1,
+                           objective="kappa")
+    assert d.objective == "kappa" and d.cell_mix == 0.0

@@ -45,3 +45,15 @@ def test_the_writer_writes_to_the_design_package_by_default(tmp_path: Path) -> N
     out = tmp_path / "here.npz"
     assert designweight.main([str(out)]) == 0
     assert np.array_equal(read_render_weight(str(out)), appearance.render_importance())
+
+
+def test_the_writer_says_the_name_it_writes_and_has_help(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """numpy adds .npz to a name without it; the printed path is the file on disk."""
+    assert designweight.main([str(tmp_path / "plain")]) == 0
+    assert (tmp_path / "plain.npz").is_file()
+    assert f"wrote {tmp_path / 'plain.npz'}" in capsys.readouterr().out
+    with pytest.raises(SystemExit) as exc:
+        designweight.main(["--help"])
+    assert exc.value.code == 0
+    assert "usage: python -m gonio.brdf.pictures.designweight" in capsys.readouterr().out
