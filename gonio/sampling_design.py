@@ -41,7 +41,7 @@ from gonio.brdf.design.pairs import (
 )
 from gonio.brdf.design.presets import Preset
 from gonio.brdf.design.product import design_product_rig
-from gonio.brdf.design.renderweight import render_weight
+from gonio.brdf.design.renderweight import cell_weighting
 from gonio.brdf.design.roughness import bound_angles, roughness_bound
 from gonio.fields import FINITE, Count, Text
 from gonio.plans.models import DEFAULT_SPAN_DEG, SpanDeg
@@ -167,13 +167,8 @@ class DesignRequest(BaseModel):
         return self
 
     def cells_weighting(self) -> dict[str, Any]:
-        """``design_pairs``' ``cell_weight`` / ``cell_mix`` for ``render_mix`` (nothing for
-        the default, the unweighted design for 0)."""
-        if self.render_mix is None:
-            return {}
-        if self.render_mix == 0:
-            return {"cell_mix": 0.0}
-        return {"cell_weight": render_weight(), "cell_mix": float(self.render_mix)}
+        """``design_pairs``' ``cell_weight`` / ``cell_mix`` for ``render_mix``."""
+        return cell_weighting(self.render_mix)
 
     def colour(self) -> ColourTargets | None:
         """The colour targets asked for, or None."""

@@ -44,7 +44,7 @@ from gonio.brdf.design.pairs import (
 )
 from gonio.brdf.design.presets import get_preset, preset_names
 from gonio.brdf.design.product import design_product_rig
-from gonio.brdf.design.renderweight import DEFAULT_CELL_MIX, render_weight
+from gonio.brdf.design.renderweight import DEFAULT_CELL_MIX, cell_weighting
 from gonio.brdf.design.roughness import RoughnessBound, bound_angles, roughness_bound
 from gonio.brdf.reconstruction.samples import DEFAULT_SPAN_DEG, SPANS_DEG
 from gonio.cli import UsageError
@@ -240,14 +240,8 @@ def make_design(args: argparse.Namespace, basis: BasisLike) -> PairDesign:
 
 
 def _render_mix(args: argparse.Namespace) -> dict[str, Any]:
-    """``design_pairs``' cell weighting for ``--render-mix``: nothing without it (the
-    design's default), the unweighted design at 0, the shipped map at the share asked."""
-    mix = getattr(args, "render_mix", None)
-    if mix is None:
-        return {}
-    if float(mix) == 0.0:
-        return {"cell_mix": 0.0}
-    return {"cell_weight": render_weight(), "cell_mix": float(mix)}
+    """``design_pairs``' cell weighting for ``--render-mix`` (none given: the default)."""
+    return cell_weighting(getattr(args, "render_mix", None))
 
 
 SINGULAR_KAPPA = 1e6

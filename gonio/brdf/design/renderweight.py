@@ -20,6 +20,8 @@ from __future__ import annotations
 
 import functools
 from importlib import resources
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -61,14 +63,17 @@ def read_render_weight(path: str | None = None) -> FloatArray:
         gonio's grid; the message says how to write it again.
     """
     again = "write it again with `python -m gonio.brdf.pictures.designweight`"
+    def load(p: str | Path) -> dict[str, Any]:
+        with np.load(p, allow_pickle=False) as z:
+            return {k: z[k] for k in z.files}
+
     try:
         if path is None:
-            with resources.as_file(resources.files("gonio.brdf.design") / "data" / FILE_NAME
-                                   ) as p, np.load(p, allow_pickle=False) as z:
-                data = {k: z[k] for k in z.files}
+            with resources.as_file(resources.files("gonio.brdf.design") / "data"
+                                   / FILE_NAME) as shipped:
+                data = load(shipped)
         else:
-            with np.load(path, allow_pickle=False) as z:
-                data = {k: z[k] for k in z.files}
+            data = load(path)
     except (OSError, ValueError) as exc:
         raise DesignError(f"cannot read the render-weight file {path or FILE_NAME}: {exc}; "
                           f"{again}") from exc
@@ -102,3 +107,14 @@ def _shipped() -> FloatArray:
 def render_weight() -> FloatArray:
     """The shipped map (read once per process, read-only): ``(18, 18, 36)`` pixel counts."""
     return _shipped()
+
+
+def cell_weighting(mix: float | None) -> dict[str, Any]:
+    """``design_pairs``' ``cell_weight`` / ``cell_mix`` for a share asked for by a user (the
+    CLI's ``--render-mix``, the API's ``render_mix``): nothing for None (the design's own
+    default), the unweighted design for 0, the shipped map at that share otherwise."""
+    if mix is None:
+        return {}
+    if float(mix) == 0.0:
+        return {"cell_mix": 0.0}
+    return {"cell_weight": render_weight(), "cell_mix": float(mix)}

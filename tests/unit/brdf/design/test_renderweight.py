@@ -72,3 +72,12 @@ def test_a_missing_or_unreadable_file_is_a_design_error(tmp_path: Path) -> None:
     junk.write_bytes(b"not a zip")
     with pytest.raises(DesignError, match="cannot read the render-weight file"):
         read_render_weight(str(junk))
+
+
+def test_a_share_asked_for_becomes_the_designs_cell_weighting() -> None:
+    from gonio.brdf.design.renderweight import cell_weighting
+
+    assert cell_weighting(None) == {}
+    assert cell_weighting(0) == {"cell_mix": 0.0}
+    asked = cell_weighting(0.25)
+    assert asked["cell_mix"] == 0.25 and asked["cell_weight"] is render_weight()
