@@ -38,7 +38,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from gonio.api.auth import ApiKeyring, KeyringError
+from gonio.apikeys import KEYS_ENV, ApiKeyring, KeyringError, parse_keys_env, parse_keys_file
 from gonio.config import read_toml
 
 if TYPE_CHECKING:
@@ -48,7 +48,6 @@ log = logging.getLogger("gonio.daemon")
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 8600
-KEYS_ENV = "GONIO_API_KEYS"
 
 
 class DaemonConfigError(ValueError):
@@ -196,48 +195,6 @@ def load_daemon_config(path: str | os.PathLike[str] | None) -> DaemonConfig:
     )
 
 
-def parse_keys_file(text: str, source: str) -> dict[str, str]:
-    """Parse a keys file: one ``name key`` per line; blank lines and ``#`` comments ignored.
-
-    Raises
-    ------
-    DaemonConfigError
-        A line does not have exactly two fields, or a name repeats. The message gives the line
-        number but never the key itself.
-    """
-    keys: dict[str, str] = {}
-    for n, raw in enumerate(text.splitlines(), start=1):
-        line = raw.split("#", 1)[0].strip()
-        if not line:
-            continue
-        fields = line.split()
-        if len(fields) != 2:
-            raise DaemonConfigError(
-                f"{source}, line {n}: expected 'name key' (two fields separated by spaces), "
-                f"found {len(fields)} field(s)"
-            )
-        name, key = fields
-        if name in keys:
-            raise DaemonConfigError(f"{source}, line {n}: key name {name!r} is used twice")
-        keys[name] = key
-    return keys
-
-
-def parse_keys_env(value: str) -> dict[str, str]:
-    """Parse ``GONIO_API_KEYS``: comma-separated ``name:key`` entries (a bare key is ``env-N``)."""
-    keys: dict[str, str] = {}
-    for n, entry in enumerate((e.strip() for e in value.split(",")), start=1):
-        if not entry:
-            continue
-        name, sep, key = entry.partition(":")
-        if not sep:
-            name, key = f"env-{n}", entry
-        if name in keys:
-            raise DaemonConfigError(f"{KEYS_ENV}: key name {name!r} is used twice")
-        keys[name] = key
-    return keys
-
-
 def load_keyring(cfg: DaemonConfig, environ: Mapping[str, str] | None = None) -> ApiKeyring:
     """All API keys of the daemon: the keys file plus ``GONIO_API_KEYS``.
 
@@ -252,28 +209,30 @@ def load_keyring(cfg: DaemonConfig, environ: Mapping[str, str] | None = None) ->
     env = os.environ if environ is None else environ
     keys: dict[str, str] = {}
     path = cfg.auth.keys_file
-    if path is not None:
-        try:
-            text = path.read_text(encoding="utf-8")
-        except FileNotFoundError:
-            raise DaemonConfigError(
-                f"{path}: API keys file not found; create it with one 'name key' line per user "
-                "(see docs/install.md) or remove [auth] keys_file from the daemon config"
-            ) from None
-        except OSError as exc:
-            raise DaemonConfigError(
-                f"{path}: cannot read the API keys file: {exc.strerror}"
-            ) from None
-        if path.stat().st_mode & (stat.S_IRGRP | stat.S_IROTH):
-            log.warning("API keys file %s is readable by other users; chmod 600 it", path)
-        keys.update(parse_keys_file(text, str(path)))
-    for name, key in parse_keys_env(env.get(KEYS_ENV, "")).items():
-        if name in keys:
-            raise DaemonConfigError(
-                f"{KEYS_ENV}: key name {name!r} is also in the keys file; use distinct names"
-            )
-        keys[name] = key
+    # The parsers and the keyring say what is wrong as KeyringError; to the daemon that is
+    # a configuration error like any other.
     try:
+        if path is not None:
+            try:
+                text = path.read_text(encoding="utf-8")
+            except FileNotFoundError:
+                raise DaemonConfigError(
+                    f"{path}: API keys file not found; create it with one 'name key' line per "
+                    "user (see docs/install.md) or remove [auth] keys_file from the daemon config"
+                ) from None
+            except OSError as exc:
+                raise DaemonConfigError(
+                    f"{path}: cannot read the API keys file: {exc.strerror}"
+                ) from None
+            if path.stat().st_mode & (stat.S_IRGRP | stat.S_IROTH):
+                log.warning("API keys file %s is readable by other users; chmod 600 it", path)
+            keys.update(parse_keys_file(text, str(path)))
+        for name, key in parse_keys_env(env.get(KEYS_ENV, "")).items():
+            if name in keys:
+                raise DaemonConfigError(
+                    f"{KEYS_ENV}: key name {name!r} is also in the keys file; use distinct names"
+                )
+            keys[name] = key
         return ApiKeyring(keys)
     except KeyringError as exc:
         raise DaemonConfigError(str(exc)) from None

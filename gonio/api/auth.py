@@ -4,19 +4,14 @@ Every mutating endpoint needs a valid key in the ``X-API-Key`` header. Read-only
 open unless the daemon is configured with ``read_requires_key``. A missing key is answered with
 401, a wrong one with 403.
 
-Keys are held only as SHA-256 digests and compared with :func:`hmac.compare_digest` against
-*every* configured digest without stopping at the first match, so the time a check takes does not
-tell an attacker how many characters were right, nor which key matched. A key is known to the
-rest of the daemon (logs, events) only by its name, never by its value.
+How keys are stored and compared (digests only, in constant time) is :mod:`gonio.apikeys`;
+this module applies them to requests. A key is known to the rest of the daemon (logs, events)
+only by its name, never by its value.
 """
 
 from __future__ import annotations
 
-import hashlib
-import hmac
 import json
-import re
-from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 from urllib.parse import parse_qsl
@@ -24,9 +19,9 @@ from urllib.parse import parse_qsl
 from fastapi import Depends, HTTPException, Request, status
 from fastapi.security import APIKeyHeader
 
+from gonio.apikeys import ApiKeyring
+
 API_KEY_HEADER = "X-API-Key"
-MIN_KEY_LENGTH = 16
-"""Shorter keys are refused at start-up: a lab network is not a trusted network."""
 
 # auto_error=False: we answer 401 ourselves with a message that says what to do.
 _api_key_scheme = APIKeyHeader(
@@ -34,85 +29,6 @@ _api_key_scheme = APIKeyHeader(
     auto_error=False,
     description="API key of the daemon (see docs/api.md, 'Keys'). Required for every change.",
 )
-
-
-class KeyringError(ValueError):
-    """A configured API key is unusable; the message names it and says how to fix it."""
-
-
-DIGEST_PREFIX = "sha256:"
-"""A keys-file entry ``name sha256:<64 hex digits>`` is a key stored as its digest only."""
-_STORED_DIGEST = re.compile(r"^sha256:([0-9a-f]{64})$")
-
-
-def _digest(key: str) -> bytes:
-    return hashlib.sha256(key.encode("utf-8")).digest()
-
-
-def stored_form(key: str) -> str:
-    """What a keys file keeps of ``key``: ``sha256:<hex digest>`` (all the daemon needs)."""
-    return DIGEST_PREFIX + _digest(key).hex()
-
-
-def is_stored_digest(value: str) -> bool:
-    """True when a keys-file value is a digest (:func:`stored_form`), not the key itself."""
-    return _STORED_DIGEST.match(value) is not None
-
-
-class ApiKeyring:
-    """The set of accepted API keys, by name.
-
-    Parameters
-    ----------
-    keys : mapping of str to str
-        Key name (shown in logs and events, e.g. ``"alice"``) to key value, or to its stored
-        digest ``sha256:<64 hex digits>`` (:func:`stored_form`, what ``gonio keys new`` writes).
-
-    Raises
-    ------
-    KeyringError
-        A key is shorter than :data:`MIN_KEY_LENGTH` characters or contains whitespace.
-    """
-
-    def __init__(self, keys: Mapping[str, str]) -> None:
-        digests: list[tuple[str, bytes]] = []
-        for name, key in keys.items():
-            stored = _STORED_DIGEST.match(key)
-            if stored is not None:
-                digests.append((name, bytes.fromhex(stored.group(1))))
-                continue
-            if len(key) < MIN_KEY_LENGTH:
-                raise KeyringError(
-                    f"API key {name!r} is {len(key)} characters long; use at least "
-                    f"{MIN_KEY_LENGTH} (generate one with: python -c "
-                    "'import secrets; print(secrets.token_hex(32))')"
-                )
-            if any(c.isspace() for c in key):
-                raise KeyringError(f"API key {name!r} contains whitespace; keys are single tokens")
-            digests.append((name, _digest(key)))
-        self._digests = tuple(digests)
-
-    def __len__(self) -> int:
-        return len(self._digests)
-
-    @property
-    def names(self) -> tuple[str, ...]:
-        return tuple(n for n, _ in self._digests)
-
-    def identify(self, presented: str | None) -> str | None:
-        """Name of the key ``presented`` matches, or None.
-
-        Runs the same comparisons whatever the input, so timing does not leak which key (or how
-        much of one) matched.
-        """
-        if presented is None:
-            return None
-        candidate = _digest(presented)
-        found: str | None = None
-        for name, digest in self._digests:
-            if hmac.compare_digest(candidate, digest) and found is None:
-                found = name
-        return found
 
 
 @dataclass(frozen=True)

@@ -5,6 +5,9 @@ to the keys file (created with mode 600) and prints the key once: the file keeps
 SHA-256 digest, which is all the daemon needs to check it, so reading the file does not give a
 key away. ``gonio keys list`` shows the names (never a key). A running daemon reads its keys at
 start-up: restart it after adding one.
+
+Keys are written and read with :mod:`gonio.apikeys` alone, so these commands do not load the
+HTTP stack; only ``--config`` loads the daemon config's reader.
 """
 
 from __future__ import annotations
@@ -66,7 +69,7 @@ def _keys_file(args: argparse.Namespace) -> Path:
 
 
 def _read(path: Path) -> dict[str, str]:
-    from gonio.daemon import DaemonConfigError, parse_keys_file
+    from gonio.apikeys import KeyringError, parse_keys_file
 
     try:
         text = path.read_text(encoding="utf-8")
@@ -76,12 +79,12 @@ def _read(path: Path) -> dict[str, str]:
         raise UsageError(f"{path}: cannot read the keys file: {exc.strerror}") from None
     try:
         return parse_keys_file(text, str(path))
-    except DaemonConfigError as exc:
+    except KeyringError as exc:
         raise UsageError(str(exc)) from None
 
 
 def _new(args: argparse.Namespace) -> int:
-    from gonio.api.auth import stored_form
+    from gonio.apikeys import stored_form
 
     if not NAME.match(args.name):
         raise UsageError(f"key name {args.name!r}: use 1 to 64 letters, digits or _.@- "
@@ -109,8 +112,7 @@ def _new(args: argparse.Namespace) -> int:
 
 
 def _list(args: argparse.Namespace) -> int:
-    from gonio.api.auth import is_stored_digest
-    from gonio.daemon import KEYS_ENV, DaemonConfigError, parse_keys_env
+    from gonio.apikeys import KEYS_ENV, KeyringError, is_stored_digest, parse_keys_env
 
     path = _keys_file(args)
     if not path.exists():
@@ -123,7 +125,7 @@ def _list(args: argparse.Namespace) -> int:
         print(f"{name}\t{path}\t{kind}")
     try:
         env = parse_keys_env(os.environ.get(KEYS_ENV, ""))
-    except DaemonConfigError as exc:
+    except KeyringError as exc:
         raise UsageError(str(exc)) from None
     for name in env:
         print(f"{name}\t${KEYS_ENV}\tplain key")

@@ -195,7 +195,7 @@ def _configure_logging(level: str) -> None:
 
 
 def _run_sim(args: argparse.Namespace, cfg: Any, keyring: Any) -> int:
-    from gonio.api.auth import ApiKeyring
+    from gonio.apikeys import ApiKeyring
     from gonio.cli.sim_session import attach_sim, calibration_not_needed, start_sim_calibration
     from gonio.daemon import build_app, is_loopback_host, serve, warn_if_exposed
     from gonio.sim.rig import WHITE_REFERENCE_ALBEDO, SimRigOptions, start_sim_rig
@@ -325,7 +325,7 @@ def _print_calibration(job_id: int, state: str, reason: str | None) -> None:
 def _first_key_hint() -> str:
     import os
 
-    from gonio.daemon import KEYS_ENV, parse_keys_env
+    from gonio.apikeys import KEYS_ENV, parse_keys_env
 
     keys = parse_keys_env(os.environ.get(KEYS_ENV, ""))
     if not keys:

@@ -12,7 +12,7 @@ from types import SimpleNamespace
 
 import pytest
 
-from gonio.api.auth import ApiKeyring
+from gonio.apikeys import ApiKeyring
 from gonio.daemon import (
     DEFAULT_HOST,
     DaemonConfig,
@@ -22,8 +22,6 @@ from gonio.daemon import (
     job_event_line,
     load_daemon_config,
     load_keyring,
-    parse_keys_env,
-    parse_keys_file,
 )
 
 PROJECT = Path(__file__).resolve().parents[2]
@@ -133,11 +131,16 @@ def test_missing_keys_file_says_what_to_do(tmp_path: Path) -> None:
         load_keyring(load_daemon_config(tmp_path / "d.toml"), {})
 
 
-def test_parse_helpers() -> None:
-    assert parse_keys_file(f"a {K1}\nb {K2} # comment\n", "f") == {"a": K1, "b": K2}
-    with pytest.raises(DaemonConfigError, match="used twice"):
-        parse_keys_file(f"a {K1}\na {K2}\n", "f")
-    assert parse_keys_env(f"{K1}, x:{K2}") == {"env-1": K1, "x": K2}
+def test_a_malformed_keys_file_is_a_config_error_naming_the_line(tmp_path: Path) -> None:
+    # The parser says what is wrong (tests/unit/test_apikeys.py); the daemon reports it as
+    # its configuration error, like a missing file.
+    (tmp_path / "api-keys").write_text(f"a {K1}\na {K2}\n")
+    (tmp_path / "api-keys").chmod(0o600)
+    (tmp_path / "d.toml").write_text('[auth]\nkeys_file = "api-keys"\n')
+    with pytest.raises(DaemonConfigError, match="api-keys, line 2: key name 'a' is used twice"):
+        load_keyring(load_daemon_config(tmp_path / "d.toml"), {})
+    with pytest.raises(DaemonConfigError, match="GONIO_API_KEYS: key name 'x' is used twice"):
+        load_keyring(load_daemon_config(None), {"GONIO_API_KEYS": f"x:{K1},x:{K2}"})
 
 
 @pytest.mark.parametrize(("host", "loopback"), [

@@ -146,7 +146,8 @@ def test_rig_config(tmp_path: Path) -> None:
 
 
 def test_daemon_config_and_keys_file(tmp_path: Path) -> None:
-    from gonio.daemon import load_daemon_config, load_keyring, parse_keys_file
+    from gonio.apikeys import parse_keys_file
+    from gonio.daemon import load_daemon_config, load_keyring
 
     (tmp_path / "daemon.toml").write_text(examples()["daemon-config"])
     (tmp_path / "api-keys").write_text(examples()["keys-file"])

@@ -1,9 +1,9 @@
-"""API keys: digests, who a key is, what each guard asks for, and keys in URLs refused."""
+"""API keys at the HTTP door: what each guard asks for, and keys in URLs refused (the keys
+themselves, digests and the keyring: tests/unit/test_apikeys.py)."""
 
 from __future__ import annotations
 
 import asyncio
-import hashlib
 import json
 from types import SimpleNamespace
 from typing import Any
@@ -14,51 +14,16 @@ from starlette.requests import Request
 
 from gonio.api.auth import (
     AccessPolicy,
-    ApiKeyring,
     Caller,
-    KeyringError,
     RefuseKeysInUrl,
-    is_stored_digest,
     require_key_when_configured,
     require_read_access,
     require_write_key,
-    stored_form,
 )
+from gonio.apikeys import ApiKeyring
 
 ALICE = "a" * 16
 BOB = "b0b-" + "x" * 28
-
-
-def test_the_stored_form_is_the_sha256_of_the_key() -> None:
-    hexdigest = hashlib.sha256(ALICE.encode()).hexdigest()
-    assert stored_form(ALICE) == "sha256:" + hexdigest
-    assert is_stored_digest(stored_form(ALICE))
-    assert not is_stored_digest(ALICE)
-    assert not is_stored_digest("sha256:" + hexdigest.upper())  # lower-case hex only
-    assert not is_stored_digest("sha256:" + hexdigest[:-1])
-
-
-def test_keys_are_known_by_name_whether_given_plain_or_as_digest() -> None:
-    ring = ApiKeyring({"alice": ALICE, "bob": stored_form(BOB)})
-    assert len(ring) == 2 and ring.names == ("alice", "bob")
-    assert ring.identify(ALICE) == "alice"
-    assert ring.identify(BOB) == "bob"
-    assert ring.identify(stored_form(BOB)) is None  # the digest is not the key
-    assert ring.identify(ALICE[:-1]) is None
-    assert ring.identify(None) is None
-
-
-def test_the_first_name_wins_when_two_names_share_a_key() -> None:
-    assert ApiKeyring({"first": ALICE, "second": ALICE}).identify(ALICE) == "first"
-
-
-@pytest.mark.parametrize(("key", "message"), [
-    ("short", "API key 'lab' is 5 characters long; use at least 16"),
-    ("a" * 10 + " " + "b" * 10, "API key 'lab' contains whitespace; keys are single tokens"),
-])
-def test_an_unusable_key_is_refused_with_its_name(key: str, message: str) -> None:
-    with pytest.raises(KeyringError, match=message):
-        ApiKeyring({"lab": key})
 
 
 def request(policy: AccessPolicy) -> Request:
