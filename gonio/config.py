@@ -18,11 +18,9 @@ import tomllib
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import TYPE_CHECKING, Annotated, Any, Literal
 
-import numpy as np
 import tomli_w
-from numpy.typing import NDArray
 from pydantic import (
     BaseModel,
     ConfigDict,
@@ -34,6 +32,12 @@ from pydantic import (
 
 from gonio.hal import LabDirection, PairSpec
 from gonio.motion import Approach
+
+if TYPE_CHECKING:
+    # At run time only pair_directions needs NumPy (imported there): reading a config, as
+    # the daemon does for its own, does not load it.
+    import numpy as np
+    from numpy.typing import NDArray
 
 __all__ = [
     "CalibrationConfig",
@@ -621,6 +625,8 @@ class RigConfig(_Strict):
 
     def pair_directions(self) -> list[PairDirections]:
         """Each measured pair with its light and sensor lab-frame unit vectors."""
+        import numpy as np
+
         out = []
         for p in self.pair_list():
             wi = np.asarray(self.light(p.light).direction.vector(), dtype=float)

@@ -15,6 +15,15 @@ from __future__ import annotations
 import threading
 from dataclasses import dataclass, field, fields
 
+# Here rather than beside the parser in rig.py (SimRig.apply_fault): ``gonio sim --help`` shows it,
+# and this module loads in no time where rig.py loads the whole simulated rig.
+FAULT_HELP = (
+    "silence:NAME[:SECONDS] (a lamp or sensor stops answering), lamp-drift:NAME:FACTOR "
+    "(a lamp's output is scaled by FACTOR), saturate:NAME (a sensor reads full scale), "
+    "stage-silent, stage-overload, stage-stall"
+)
+"""The faults a simulated rig injects from text (``gonio sim --fault``, ``SimRig.apply_fault``)."""
+
 
 @dataclass
 class FaultPlan:

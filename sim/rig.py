@@ -43,7 +43,7 @@ from gonio.config import (
     dump_rig_config,
 )
 from gonio.hal import LabDirection
-from gonio.sim.faults import FaultPlan
+from gonio.sim.faults import FAULT_HELP, FaultPlan
 from gonio.sim.modbus_server import ModbusRigServer, SimHolderSpec, SimLampSpec, SimSensorSpec
 from gonio.sim.motion import StageMotion
 from gonio.sim.specimen import BRDFLike, NoiseModel, Specimen
@@ -84,13 +84,6 @@ ADC_FULL_SCALE = float(2**20 - 1)
 #: default irradiance and exposure, gain 1 saturates above about 5 1/sr, gain 0.001 above
 #: about 5000 1/sr, which covers the specular peaks of polished metals (auto-ranging).
 SENSOR_GAIN_STAGES = (0.1, 0.01, 0.001)
-
-FAULT_HELP = (
-    "silence:NAME[:SECONDS] (a lamp or sensor stops answering), lamp-drift:NAME:FACTOR "
-    "(a lamp's output is scaled by FACTOR), saturate:NAME (a sensor reads full scale), "
-    "stage-silent, stage-overload, stage-stall"
-)
-
 
 SIM_REPLY_TIMEOUT_S = 0.5
 """Reply timeout of the simulated Dynamixel's driver: generous, for busy test machines."""

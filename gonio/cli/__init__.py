@@ -2,7 +2,14 @@
 
 Each sub-command lives in its own module of this package and exposes
 ``register(subparsers) -> None``, which adds its parser and sets ``func`` (a callable taking the
-parsed namespace and returning an exit code). Add new modules to ``COMMAND_MODULES``.
+parsed namespace and returning an exit code). Add new modules to ``COMMAND_MODULES`` with the
+names their ``register`` adds.
+
+A command pays only for its own imports: ``gonio keys list`` imports ``keys_command`` alone
+(:func:`build_parser`), and a command module imports at its top only what ``register`` needs
+(argparse, a few constants); what its commands do imports inside the function that does it.
+``gonio --help`` and a mistyped name still import every module, to list them all.
+Measured figures: docs/architecture.md, "What a command imports".
 """
 
 from __future__ import annotations
@@ -15,7 +22,7 @@ import math
 import os
 import sqlite3
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 
 from gonio import __version__
 from gonio.brdf.advice import AdvisedError
@@ -29,19 +36,21 @@ CORE_SETTING_FLAGS = {
     "cell_mix": "--render-mix",
 }
 
-COMMAND_MODULES: tuple[str, ...] = (
-    "gonio.cli.brdf_commands",
-    "gonio.cli.scan_commands",
-    "gonio.cli.sim_command",
-    "gonio.cli.serve_command",
-    "gonio.cli.design_command",
-    "gonio.cli.stage_command",
-    "gonio.cli.rig_command",
-    "gonio.cli.export_command",
-    "gonio.cli.keys_command",
-    "gonio.cli.render_command",
-    "gonio.cli.colour_command",
-)
+COMMAND_MODULES: dict[str, tuple[str, ...]] = {
+    "gonio.cli.brdf_commands": ("basis", "library", "simulate-scan", "reconstruct", "demo"),
+    "gonio.cli.scan_commands": ("scan", "jobs"),
+    "gonio.cli.sim_command": ("sim", "sim-place"),
+    "gonio.cli.serve_command": ("serve",),
+    "gonio.cli.design_command": ("design",),
+    "gonio.cli.stage_command": ("stage",),
+    "gonio.cli.rig_command": ("rig",),
+    "gonio.cli.export_command": ("export",),
+    "gonio.cli.keys_command": ("keys",),
+    "gonio.cli.render_command": ("render",),
+    "gonio.cli.colour_command": ("colour", "color", "colour-chart", "color-chart"),
+}
+"""Each command module, in the order ``gonio --help`` lists them, with the command names (and
+aliases) its ``register`` adds (tests/unit/test_start_imports.py holds them to it)."""
 
 
 class UsageError(Exception):
@@ -82,14 +91,29 @@ def _describe_validation(exc: Exception) -> str:
     return "; ".join(parts)
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
+    """The ``gonio`` parser, for parsing ``argv``.
+
+    Parameters
+    ----------
+    argv : sequence of str, optional
+        The arguments it will parse. When the first one names a command, only that command's
+        module registers (its import is all the command pays for before it runs); for
+        ``--version`` none does; otherwise (no command, ``--help``, a mistyped name) every
+        module does, so the help and argparse's "invalid choice" list every command.
+    """
     parser = argparse.ArgumentParser(
         prog="gonio",
         description="Fast anisotropic BRDF acquisition: design, scan, reconstruct, serve.",
     )
     parser.add_argument("--version", action="version", version=f"gonio {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for name in COMMAND_MODULES:
+    first = argv[0] if argv else None
+    if first == "--version":
+        modules: Iterable[str] = ()
+    else:
+        modules = [m for m, names in COMMAND_MODULES.items() if first in names] or COMMAND_MODULES
+    for name in modules:
         importlib.import_module(name).register(sub)
     return parser
 
@@ -99,13 +123,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     from gonio.brdf.reconstruction.blas import prefer_one_thread
 
     prefer_one_thread()
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = build_parser(argv)
     args = parser.parse_args(argv)
     if getattr(args, "func", None) is None:
         parser.print_help()
         return 2
-    from pydantic import ValidationError
-
     try:
         code = int(args.func(args) or 0)
         sys.stdout.flush()  # a closed pipe shows up here, inside the handlers below
@@ -121,7 +144,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             devnull = os.open(os.devnull, os.O_WRONLY)
             os.dup2(devnull, sys.stdout.fileno())
         return 141  # 128 + SIGPIPE, what a shell reports for a process killed by it
-    except ValidationError as exc:
+    except _validation_error() as exc:
         print(f"gonio {args.command}: error: {_describe_validation(exc)}", file=sys.stderr)
         return 2
     except ValueError as exc:
@@ -142,6 +165,21 @@ def main(argv: Sequence[str] | None = None) -> int:
         # A file or directory the user named cannot be read or written: say which and why.
         print(f"gonio {args.command}: error: {_describe_os_error(exc)}", file=sys.stderr)
         return 1
+
+
+class _NotRaised(Exception):
+    """Matches nothing: what :func:`_validation_error` gives before pydantic is loaded."""
+
+
+def _validation_error() -> type[Exception]:
+    """pydantic's ``ValidationError`` if the command loaded pydantic, else :class:`_NotRaised`.
+
+    Evaluated by ``main``'s ``except`` clause only when an exception arrives. A command that
+    never loaded pydantic cannot have raised its error, and importing pydantic just to catch
+    one would make every light command (``gonio keys``) pay for loading it.
+    """
+    pydantic = sys.modules.get("pydantic")
+    return _NotRaised if pydantic is None else pydantic.ValidationError
 
 
 def _describe_os_error(exc: OSError) -> str:

@@ -95,7 +95,7 @@ def register(subparsers: Any) -> None:
         default=None,
         help="stop after this many seconds instead of waiting for Ctrl-C",
     )
-    from gonio.sim.rig import FAULT_HELP
+    from gonio.sim.faults import FAULT_HELP
 
     p.epilog = f"faults: {FAULT_HELP}"
     p.set_defaults(func=run)

@@ -141,3 +141,14 @@ def test_jobs_show_into_a_closed_pipe(tmp_path: Path) -> None:
     err = proc.stderr.read().decode()
     assert proc.wait(timeout=120) != 0
     assert "Traceback" not in err and "BrokenPipe" not in err
+
+
+def test_a_value_the_plan_model_refuses_is_one_line_naming_the_field(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # pydantic's error reaches main (which catches it only once a command has loaded pydantic):
+    # the plan allows at most 60 s of light settling (ExposureSettings.light_settle_s).
+    code = main(["scan", "--sim", "-o", str(tmp_path / "r.h5"), "--light-settle", "61"])
+    assert code == 2
+    line = _one_error_line(capsys.readouterr().err)
+    assert line.startswith("gonio scan: error: light_settle_s:") and "60" in line
+    assert not (tmp_path / "r.h5").exists()
