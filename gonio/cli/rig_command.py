@@ -17,7 +17,6 @@ unless ``-o`` names another file.
 from __future__ import annotations
 
 import argparse
-import asyncio
 import shutil
 import sys
 from pathlib import Path
@@ -130,6 +129,8 @@ async def lights_off(config: Any) -> dict[str, str | None]:
 
 
 def _lights_off(args: argparse.Namespace) -> int:
+    import asyncio
+
     from gonio.hal import DeviceInUse
 
     config = _rig_config(args)

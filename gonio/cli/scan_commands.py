@@ -12,7 +12,6 @@ checkpoint instead of starting again.
 from __future__ import annotations
 
 import argparse
-import asyncio
 import json
 import shutil
 import sys
@@ -210,6 +209,8 @@ def _scan(args: argparse.Namespace) -> int:
         from gonio.config import load_rig_config
 
         config = load_rig_config(args.rig)
+    import asyncio
+
     try:
         return asyncio.run(_run_scan(args, plan, config, sim))
     finally:
@@ -278,6 +279,8 @@ async def _run_owned(args: argparse.Namespace, checked: Any, config: Any, sim: A
     """Run the scan through an in-process :class:`gonio.service.GonioService` (the same door
     as the daemon's API, without its queue worker), then copy the result to ``-o``.
     ``checked`` is the plan checked on the rig (:class:`gonio.plans.checked.CheckedPlan`)."""
+    import asyncio
+
     from gonio.cli.sim_session import attach_sim, calibrate_in_foreground, calibration_covers_rig
     from gonio.jobstates import JobState
     from gonio.service import GonioService, JobRequest

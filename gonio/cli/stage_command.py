@@ -10,7 +10,6 @@ daemon, a scan) owns the rig; with ``--daemon URL`` it asks that daemon to do it
 from __future__ import annotations
 
 import argparse
-import asyncio
 import sys
 from typing import Any
 
@@ -100,6 +99,8 @@ def _through_daemon(args: argparse.Namespace) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    import asyncio
+
     from gonio.hal import DeviceFault, DeviceInUse
 
     _check_args(args)
