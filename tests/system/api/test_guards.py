@@ -15,15 +15,14 @@ from fastapi import Depends, FastAPI
 
 from gonio.api.auth import (
     AccessPolicy,
-    ApiKeyring,
     Caller,
-    KeyringError,
     require_key_when_configured,
     require_read_access,
     require_write_key,
 )
 from gonio.api.maintenance import refuse_while_locked
 from gonio.api.settings import ApiSettings, install
+from gonio.apikeys import ApiKeyring, KeyringError
 from tests.system.api.live_server import live_server
 
 pytestmark = pytest.mark.system
