@@ -6,8 +6,9 @@ the API, then asks for each view the lab page shows of it twice in a row: the fi
 curves (``/fit``), the polar plot's (``/polar``), the rendering and the preview. The first
 request of a view reads and computes; the second is what every later look at the same job
 costs (the result views' cache, gonio/result_cache.py). Then a second scan's views are asked
-for all at once, from four threads, as the lab page asks when a job is opened (fit, polar,
-preview, slice): the row ``together`` is their wall time and the daemon's CPU for all four.
+for all at once, from four threads (fit, polar, preview, slice; the lab page asks for several
+views of a job together): the row ``together`` is their wall time and the daemon's CPU for all
+four.
 Prints one row per request.
 
     .venv/bin/python bench/bench_result_views.py [--material NAME] [--rotations 8]

@@ -14,8 +14,8 @@ Bounded twice, least recently used first out: result files (a 31-band table alon
 100 MB in memory: 839,808 cells x 31 channels in float32) by :data:`MAX_RESULTS` and
 :data:`RESULT_BYTES`, and the views computed from them by :data:`MAX_VIEWS` and
 :data:`VIEW_BYTES`. Thread-safe (the API serves from threads); requests for an entry that is
-being made wait for it instead of reading the same file again (the lab page asks for a job's
-fit, polar plot, preview and slice at once).
+being made wait for it instead of reading the same file again (the lab page asks for several
+views of a job together).
 """
 
 from __future__ import annotations
@@ -39,10 +39,10 @@ T = TypeVar("T")
 MAX_RESULTS = 2
 """Result files kept: the job on the page and the one it is compared with."""
 RESULT_BYTES = 256 * 2**20
-"""Bytes of result files kept: two 31-band results (about 110 MB each), or a few RGB ones."""
+"""Bytes of result files kept: two 31-band results (about 105 MB each), or a few RGB ones."""
 MAX_VIEWS = 32
 """Computed views kept (curves, PNGs), over all jobs and query parameters."""
-VIEW_BYTES = 16 * 2**20
+VIEW_BYTES = 8 * 2**20
 """Bytes of computed views kept: a rendering is about 1 MB, a 31-band polar plot 0.7 MB in
 memory, a fit plot 0.1 MB. More rendered figures kept the daemon growing scan after scan
 (bench/bench_memory.py looks at every scan's views)."""
