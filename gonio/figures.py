@@ -80,21 +80,25 @@ def true_material(res: ResultFile) -> Any | None:
         return None
 
 
-def load_input(path: str | os.PathLike[str], label: str | None = None,
+def load_input(path: str | os.PathLike[str] | ResultFile, label: str | None = None,
                with_truth: bool = True) -> list[tuple[str, Any]]:
-    """Figure rows for one input: a result file (``.h5``) or a BRDF table (``.npz``).
+    """Figure rows for one input: a result file (``.h5``), a BRDF table (``.npz``), or a
+    result file already read (the service's cached one: it is not read again).
 
     A result gives its reconstruction and, with ``with_truth``, the true material before it
     when known. Raises :class:`FigureError` for a file without a BRDF.
     """
-    p = Path(path)
-    if p.suffix.lower() == ".npz":
-        table = BRDFTable.load(p)
-        return [(label or f"{p.name}: {table.name}", table)]
-    res = read_result(p)
+    if isinstance(path, ResultFile):
+        res, where = path, f"job {path.attrs.get('job_id')}'s result"
+    else:
+        p = Path(path)
+        if p.suffix.lower() == ".npz":
+            table = BRDFTable.load(p)
+            return [(label or f"{p.name}: {table.name}", table)]
+        res, where = read_result(p), str(p)
     if res.table is None:
-        raise FigureError(f"{p} holds no reconstructed BRDF (it is a {res.attrs.get('kind')} "
-                          "result); render a scan's result")
+        raise FigureError(f"{where} holds no reconstructed BRDF (it is a "
+                          f"{res.attrs.get('kind')} result); render a scan's result")
     name = label or f"job {res.attrs.get('job_id')}: {res.attrs.get('specimen')}"
     rows: list[tuple[str, Any]] = []
     truth = true_material(res) if with_truth else None
@@ -110,10 +114,12 @@ def load_input(path: str | os.PathLike[str], label: str | None = None,
     return rows
 
 
-def render_inputs(paths: Sequence[str | os.PathLike[str]], size: int = render.DEFAULT_SIZE,
+def render_inputs(paths: Sequence[str | os.PathLike[str] | ResultFile],
+                  size: int = render.DEFAULT_SIZE,
                   labels: Sequence[str | None] | None = None, title: str | None = None) -> bytes:
-    """PNG of one or more results/tables. One input shows truth (if known) and reconstruction;
-    several are compared row by row (each with its truth only when there is one input)."""
+    """PNG of one or more results/tables (paths, or result files already read,
+    :func:`load_input`). One input shows truth (if known) and reconstruction; several are
+    compared row by row (each with its truth only when there is one input)."""
     if not paths:
         raise FigureError("nothing to render: give at least one result or table file")
     labels = list(labels or [None] * len(paths))

@@ -1,30 +1,30 @@
 """A job's result file as the service serves it: found, checked, read once, kept, rendered.
 
-Every read of a result file for serving goes through :class:`ResultViews`: one cache of opened
-files (:class:`gonio.results.ResultCache`), the last few preview and rendering PNGs (finished
-result files never change; each entry is keyed by the file's modification time), and the exports
-kept on disk under ``data_dir/exports``. A missing or damaged file is never served as if it were
-good: the error names the job and how to rebuild it from the job store.
+Every read of a result file for serving goes through :class:`ResultViews`, and so does every
+view computed from one (the fit and polar plots' curves, the preview and rendering PNGs): both
+are kept in one cache keyed by the file's identity on disk (:mod:`gonio.result_cache`), so a
+view is computed once while its file stays the same and never outlives it (``gonio jobs
+rebuild`` replaces the file: the next request reads the new one). Exports are kept on disk under
+``data_dir/exports``. A missing or damaged file is never served as if it were good: the error
+names the job and how to rebuild it from the job store.
 """
 
 from __future__ import annotations
 
 import threading
+from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from gonio.jobstates import JobState
 from gonio.service_models import NotFound, job_row
 from gonio.store import JobStore
 
 if TYPE_CHECKING:  # HDF5 and the figures load with the first result served
-    from gonio.results import ResultCache, ResultFile
+    from gonio.result_cache import ResultCache
+    from gonio.results import ResultFile
 
-_PREVIEW_CACHE = 8
-"""Preview PNGs kept in memory (a few tens of kB each)."""
-_RENDER_CACHE = 3
-"""Rendered figures kept in memory (about 1-3 MB each): the job on the page, the one it is
-compared with, one more. More kept the daemon growing for six scans (bench/bench_memory.py)."""
+T = TypeVar("T")
 
 
 class ResultViews:
@@ -42,10 +42,8 @@ class ResultViews:
         self.store = store
         self.data_dir = data_dir
         self._lock = threading.Lock()
-        self._previews: dict[tuple[str, int], bytes] = {}
-        self._renders: dict[tuple[Any, ...], bytes] = {}
         # Made on first use: HDF5 loads with it.
-        self._result_cache: ResultCache | None = None
+        self._cache: ResultCache | None = None
 
     def result_path(self, job_id: int) -> Path:
         """Where job ``job_id``'s result file is: the store's path, relative to the data
@@ -103,7 +101,8 @@ class ResultViews:
         return out
 
     def result(self, job_id: int) -> ResultFile:
-        """A job's result file, read whole; the last few are kept (:class:`ResultCache`).
+        """A job's result file, read whole; the last few are kept
+        (:class:`gonio.result_cache.ResultCache`).
 
         Blocking (reads the file): call it from a thread in async code.
 
@@ -117,24 +116,52 @@ class ResultViews:
         """
         from gonio.results import ResultFileError
 
+        path = self._existing_path(job_id)
+        try:
+            return self.cache.result(path)
+        except ResultFileError as exc:
+            if not path.is_file():  # removed while it was being read
+                self._existing_path(job_id)
+            raise ResultFileError(f"job {job_id}'s result file is damaged: {exc}; "
+                                  f"{self.rebuild_hint(job_id)}") from None
+
+    @property
+    def cache(self) -> ResultCache:
+        """The cache of result files and their views (:mod:`gonio.result_cache`)."""
+        with self._lock:
+            if self._cache is None:
+                from gonio.result_cache import ResultCache
+
+                self._cache = ResultCache()
+            return self._cache
+
+    def _existing_path(self, job_id: int) -> Path:
+        """Job ``job_id``'s result file, which must be there.
+
+        Raises
+        ------
+        NotFound
+            No such job, no result yet, or the file is missing (with how to rebuild it).
+        """
         path = self.result_path(job_id)
         if not path.is_file():
             raise NotFound(f"job {job_id}'s result file {path.name} is missing from the data "
                            f"directory; {self.rebuild_hint(job_id)}")
+        return path
+
+    def _view(self, name: str, params: tuple[Any, ...], job_ids: list[int],
+              make: Callable[[], T]) -> T:
+        """A view of the result files of ``job_ids`` (:meth:`ResultCache.view`): made once
+        while the files stay the same; a missing one is said as :meth:`result` says it."""
+        from gonio.results import ResultFileError
+
+        paths = [self._existing_path(j) for j in job_ids]
         try:
-            return self._results().get(path)
-        except ResultFileError as exc:
-            raise ResultFileError(f"job {job_id}'s result file is damaged: {exc}; "
-                                  f"{self.rebuild_hint(job_id)}") from None
-
-    def _results(self) -> ResultCache:
-        with self._lock:
-            if self._result_cache is None:
-                from gonio.results import ResultCache
-
-                # Two: a job and the one it is compared with (a table is 5-10 MB in memory).
-                self._result_cache = ResultCache(size=2)
-            return self._result_cache
+            return self.cache.view(name, params, paths, make)
+        except ResultFileError:
+            for j in job_ids:  # removed between the check and the view: NotFound, as above
+                self._existing_path(j)
+            raise
 
     def reconstruction(self, job_id: int) -> ResultFile:
         """A job's result file that holds a reconstructed BRDF (for the plots of the page).
@@ -153,30 +180,51 @@ class ResultViews:
         """PNG preview of the reconstructed table (:func:`gonio.brdf.pictures.preview.preview_png`).
 
         Blocking (reads the result file, renders): call it from a thread in async code. The
-        PNG of the last few results is kept, since a finished result file never changes.
+        PNG is kept while the result file stays the same (:attr:`cache`).
 
         Raises
         ------
         NotFound
             The job has no result yet, or it is a calibration job (no BRDF).
         """
-        path = self.result_path(job_id)
-        key = (str(path), path.stat().st_mtime_ns if path.is_file() else 0)
-        with self._lock:
-            cached = self._previews.get(key)
-        if cached is not None:
-            return cached
-        res = self.result(job_id)
-        if res.table is None:
-            raise NotFound(f"job {job_id} is a {res.attrs.get('kind')} job without a BRDF")
-        from gonio.brdf.pictures.preview import preview_png
+        def make() -> bytes:
+            res = self.result(job_id)
+            if res.table is None:
+                raise NotFound(f"job {job_id} is a {res.attrs.get('kind')} job without a BRDF")
+            from gonio.brdf.pictures.preview import preview_png
 
-        png = preview_png(res.table, title=f"job {job_id}: {res.table.name}")
-        with self._lock:
-            self._previews[key] = png
-            while len(self._previews) > _PREVIEW_CACHE:
-                self._previews.pop(next(iter(self._previews)))
-        return png
+            return preview_png(res.table, title=f"job {job_id}: {res.table.name}")
+
+        return self._view("preview", (job_id,), [job_id], make)
+
+    def fit_curves(self, job_id: int) -> dict[str, Any]:
+        """Each pair's samples against stage angle and the reconstruction's curve through
+        them (:func:`gonio.figures.fit_curves`), computed once while the file stays the same.
+
+        Blocking (reads the result file, evaluates the table): call it from a thread in async
+        code. The dict is shared: callers must not change it.
+
+        Raises
+        ------
+        NotFound
+            The job has no result yet, its file is missing, or it has no BRDF (calibration).
+        gonio.results.ResultFileError
+            The file is damaged; the message names the job and how to rebuild it.
+        """
+        from gonio.figures import fit_curves
+
+        return self._view("fit", (job_id,), [job_id],
+                          lambda: fit_curves(self.reconstruction(job_id)))
+
+    def polar_curves(self, job_id: int, theta_i_deg: float, phi_i_deg: float) -> dict[str, Any]:
+        """In-plane and cross-plane BRDF at one incidence
+        (:func:`gonio.figures.polar_curves`), computed once per incidence while the file
+        stays the same. Blocking, shared and raising as :meth:`fit_curves`."""
+        from gonio.figures import polar_curves
+
+        return self._view("polar", (job_id, float(theta_i_deg), float(phi_i_deg)), [job_id],
+                          lambda: polar_curves(self.reconstruction(job_id), theta_i_deg,
+                                               phi_i_deg))
 
     def export(self, job_id: int, fmt: str, with_mesh: bool = False) -> tuple[Path, str]:
         """A job's result exported as ``fmt`` (:mod:`gonio.export`): file path and file name.
@@ -217,8 +265,9 @@ class ResultViews:
 
         With ``compare``, that job's reconstruction is shown below for comparison; without,
         the true material above it when the result records one (simulated rig). Blocking
-        (seconds: it renders six views per material): call it from a thread. The last few
-        PNGs are kept, since finished result files never change.
+        (seconds: it renders six views per material): call it from a thread. The PNG is kept
+        while the result files stay the same (:attr:`cache`), and the files are not read again
+        for it.
 
         Raises
         ------
@@ -227,23 +276,14 @@ class ResultViews:
         """
         from gonio.figures import FigureError, render_inputs
 
-        paths = [self.result_path(job_id)]
-        if compare is not None:
-            paths.append(self.result_path(compare))
-        key = ("render", *((str(p), p.stat().st_mtime_ns if p.is_file() else 0) for p in paths))
-        with self._lock:
-            cached = self._renders.get(key)
-        if cached is not None:
-            return cached
         ids = [job_id] if compare is None else [job_id, compare]
-        for jid in ids:
-            self.result(jid)  # missing or damaged: said with the way to rebuild it
-        try:
-            png = render_inputs(paths)
-        except FigureError as exc:
-            raise NotFound(str(exc).replace(str(paths[0]), f"job {job_id}")) from None
-        with self._lock:
-            self._renders[key] = png
-            while len(self._renders) > _RENDER_CACHE:
-                self._renders.pop(next(iter(self._renders)))
-        return png
+
+        def make() -> bytes:
+            # Missing, damaged or without a BRDF: said with the job (and how to rebuild it).
+            results = [self.reconstruction(jid) for jid in ids]
+            try:
+                return render_inputs(results)
+            except FigureError as exc:
+                raise NotFound(f"job {job_id}: {exc}") from None
+
+        return self._view("render", tuple(ids), ids, make)

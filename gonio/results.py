@@ -48,7 +48,6 @@ import logging
 import os
 import threading
 import time
-from collections import OrderedDict
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -439,36 +438,3 @@ def _read_colour(f: h5py.File) -> dict[str, Any]:
     except (TypeError, ValueError) as exc:
         _log.warning("%s: /colour is damaged (%r); ignoring it", f.filename, exc)
         return {}
-
-
-class ResultCache:
-    """The last few result files read whole (samples, table, provenance), thread-safe.
-
-    The one place result files are read for serving (previews, slices, plots): a finished
-    result never changes, so a file is read once while its modification time stays the same.
-
-    Parameters
-    ----------
-    size : int
-        Files kept (a reconstructed table is about 5 MB).
-    """
-
-    def __init__(self, size: int = 3) -> None:
-        self.size = size
-        self._lock = threading.Lock()
-        self._items: OrderedDict[tuple[Path, int], ResultFile] = OrderedDict()
-
-    def get(self, path: Path) -> ResultFile:
-        """The result file at ``path``; raises :class:`ResultFileError` like :func:`read_result`
-        (missing or unreadable)."""
-        key = (path, path.stat().st_mtime_ns if path.is_file() else 0)
-        with self._lock:
-            if key in self._items:
-                self._items.move_to_end(key)
-                return self._items[key]
-        res = read_result(path)
-        with self._lock:
-            self._items[key] = res
-            while len(self._items) > self.size:
-                self._items.popitem(last=False)
-        return res

@@ -743,6 +743,16 @@ class GonioService:
         """Rendering of a job's reconstruction (:meth:`ResultViews.render_png`)."""
         return self.results.render_png(job_id, compare)
 
+    def fit_curves(self, job_id: int) -> dict[str, Any]:
+        """A job's samples and the reconstruction's curves through them
+        (:meth:`ResultViews.fit_curves`)."""
+        return self.results.fit_curves(job_id)
+
+    def polar_curves(self, job_id: int, theta_i_deg: float, phi_i_deg: float) -> dict[str, Any]:
+        """A job's in-plane and cross-plane BRDF at one incidence
+        (:meth:`ResultViews.polar_curves`)."""
+        return self.results.polar_curves(job_id, theta_i_deg, phi_i_deg)
+
     # ------------------------------------------------------------------ rig
     async def rig_status(self) -> RigStatus:
         devices = await self._on_engine(self._device_states())

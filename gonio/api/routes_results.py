@@ -105,10 +105,7 @@ async def render_png(
             "curve through them (mean over channels)",
 )
 async def fit(job_id: JobId, service: Service) -> dict[str, Any]:
-    from gonio.figures import fit_curves
-
-    res = await asyncio.to_thread(service.reconstruction, job_id)
-    return await asyncio.to_thread(fit_curves, res)
+    return await asyncio.to_thread(service.fit_curves, job_id)
 
 
 @router.get(
@@ -125,10 +122,7 @@ async def polar(
     phi_i: float = Query(0, ge=-360, le=360, description="incidence azimuth from the holder "
                          "mark (specimen x axis), degrees"),
 ) -> dict[str, Any]:
-    from gonio.figures import polar_curves
-
-    res = await asyncio.to_thread(service.reconstruction, job_id)
-    return await asyncio.to_thread(polar_curves, res, theta_i, phi_i)
+    return await asyncio.to_thread(service.polar_curves, job_id, theta_i, phi_i)
 
 
 def _grid(value: float, name: str, upper: int) -> int:
