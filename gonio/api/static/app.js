@@ -436,6 +436,8 @@ const METRIC_MEANING = {
   rel_sample_error: "how far the fit is from its own readings (relative)",
   estimated_error: "V&F's error estimate (0.8 × rel_sample_error), kept for comparison",
   prior_rho: "weight of the library prior the fit used (1: the prior as learnt)",
+  local_prior: "the measured or imported material whose shape the fit leaned on where no pair looks (none: the library's prior alone)",
+  local_prior_gain: "how much better that material's shape explains the readings than the library's (log likelihood)",
   n_samples: "readings used by the reconstruction",
   n_pairs: "light/sensor pairs", n_angles: "stage angles", pairs: "light/sensor pairs",
   angles: "stage angles", readings: "readings stored",

@@ -51,6 +51,10 @@ key                shape / dtype           meaning
 ``ph_prior``       (37, K, K) float64      optional: covariance of the coefficients along
                                            ``ph`` per harmonic ``m = 0..36`` (see below;
                                            float32 when ``Q`` is)
+``local_priors``   (G, K, K) float64       optional: each folded-in material's own
+                                           isotropic (``m = 0``) covariance, scaled to the
+                                           trace of ``ph_prior[0]`` (:func:`fold_in`)
+``local_names``    (G,) str                the materials of ``local_priors``
 =================  ======================  ==================================================
 
 Prior along ``ph`` (math.md 6)
@@ -177,6 +181,13 @@ class Basis:
     ph_prior : (37, K, K) float64, optional
         Covariance of the coefficients along ``ph`` per harmonic (module notes); ``None`` for
         a basis built without it (the joint fit then assumes an isotropic prior).
+    local_priors : (G, K, K) float64, optional
+        Local priors: the isotropic (``m = 0``) coefficient covariance of each material folded
+        in by :func:`fold_in` (the measured and user tables), each scaled to the trace of
+        ``ph_prior[0]``. The joint fit may lean on the one its readings favour
+        (:mod:`gonio.brdf.reconstruction.localprior`). ``None``: none.
+    local_names : tuple of str
+        The material of each local prior (G names).
     """
 
     Q: FloatArray
@@ -188,6 +199,8 @@ class Basis:
     materials: tuple[str, ...] = ()
     provenance: Mapping[str, Any] = field(default_factory=dict)
     ph_prior: FloatArray | None = None
+    local_priors: FloatArray | None = None
+    local_names: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         Q = np.asarray(self.Q, dtype=np.float64)
@@ -226,6 +239,19 @@ class Basis:
                 )
             prior.setflags(write=False)
             object.__setattr__(self, "ph_prior", prior)
+        names = tuple(str(n) for n in self.local_names)
+        if self.local_priors is not None:
+            local = np.asarray(self.local_priors, dtype=np.float64)
+            if (local.ndim != 3 or local.shape[1:] != (K, K) or local.shape[0] != len(names)
+                    or not np.isfinite(local).all()):
+                raise BasisError(
+                    f"basis local_priors has shape {local.shape} for {len(names)} names, "
+                    f"expected ({len(names)}, {K}, {K}) finite values; rebuild the basis")
+            local.setflags(write=False)
+            object.__setattr__(self, "local_priors", local)
+        elif names:
+            raise BasisError("basis local_names given without local_priors; rebuild the basis")
+        object.__setattr__(self, "local_names", names)
         Q = np.where(valid[:, None], Q, 0.0)
         for arr in (Q, S, f_med, mu, valid):
             arr.setflags(write=False)
@@ -272,9 +298,11 @@ class Basis:
         if k == self.K:
             return self
         prior = None if self.ph_prior is None else self.ph_prior[:, :k, :k]
+        local = None if self.local_priors is None else self.local_priors[:, :k, :k]
         return Basis(
             self.Q[:, :k], self.S[:k], self.f_med, self.mu, self.valid, self.eps,
-            self.materials, {**self.provenance, "truncated_from": self.K}, prior,
+            self.materials, {**self.provenance, "truncated_from": self.K}, prior, local,
+            self.local_names,
         )
 
     # ------------------------------------------------------------------ off-grid rows
@@ -353,6 +381,9 @@ class Basis:
             eps=np.array(self.eps), materials=np.array(self.materials, dtype=str),
             grid_deg=_GRID_SIGNATURE,
             **({} if self.ph_prior is None else {"ph_prior": self.ph_prior.astype(dtype)}),
+            **({} if self.local_priors is None else {
+                "local_priors": self.local_priors.astype(dtype),
+                "local_names": np.array(self.local_names, dtype=str)}),
         )
 
     @classmethod
@@ -375,7 +406,8 @@ class Basis:
             return cls(
                 data["Q"], data["S"], data["f_med"], data["mu"], data["valid"],
                 float(data["eps"]), tuple(np.asarray(data.get("materials", [])).tolist()),
-                prov, data.get("ph_prior"),
+                prov, data.get("ph_prior"), data.get("local_priors"),
+                tuple(np.asarray(data.get("local_names", [])).tolist()),
             )
         except BasisError as exc:
             raise BasisError(f"{p}: {exc}") from None
@@ -591,13 +623,15 @@ def fold_in(
     groups: list[tuple[int, int, float]] = []  # (first column, count, weight of each column)
     # (name, first column, columns) of the tables that are not isotropic: 72 slices a channel
     anisotropic: list[tuple[str, int, int]] = []
-    for t in tables:
+    owners: list[int] = []  # which added table each group is a channel of
+    for ti, t in enumerate(tables):
         v = np.asarray(t.values, dtype=np.float64).reshape(
             t.n_channels, geo.N_PH, geo.N_ROWS)[:, :, rows]
         iso = bool(np.allclose(v, v[:, :1], equal_nan=True))
         if not iso:
             anisotropic.append((t.name, len(cols), t.n_channels * geo.N_PH))
         for c in range(t.n_channels):
+            owners.append(ti)
             x = remap(v[c], base.f_med[rows], w_rows, base.eps)
             x = np.nan_to_num(x, nan=0.0)  # unmeasured cells count as the median (as build)
             if iso:
@@ -634,8 +668,8 @@ def fold_in(
     for name, first, n in anisotropic:
         odd += _odd_materials([name], C[:, first:first + n], [n])
     prior = None
+    T = pinv @ base.Q[rows]  # (k, K0)
     if base.ph_prior is not None:
-        T = pinv @ base.Q[rows]  # (k, K0)
         d = pinv @ (mu0 - mu)
         # Priors are sums over the training columns (sum_m P_m ~ I): carry the base's into the
         # new coordinates (c_new = T c_old + d), then add the shift of the mean and the new
@@ -648,6 +682,7 @@ def fold_in(
                 prior[0] += wcol * np.outer(sub[:, 0], sub[:, 0])
             else:
                 prior += wcol * geo.N_PH * ph_prior_from_coefficients(sub, 1.0)
+    local_priors, local_names = _local_priors(base, tables, T, C, groups, owners, prior)
     names = (*base.materials, *(t.name for t in tables))
     dupes = sorted({n for n in names if names.count(n) > 1})
     if dupes:
@@ -660,7 +695,37 @@ def fold_in(
         "materials_digest": _names_digest(names),
         "without_twofold_symmetry": odd,
     }
-    return Basis(Q, S, base.f_med, mu_full, base.valid, base.eps, names, prov, prior)
+    return Basis(Q, S, base.f_med, mu_full, base.valid, base.eps, names, prov, prior,
+                 local_priors, local_names)
+
+
+def _local_priors(
+    base: Basis, tables: Sequence[BRDFTable], T: FloatArray, C: FloatArray,
+    groups: Sequence[tuple[int, int, float]], owners: Sequence[int], prior: FloatArray | None,
+) -> tuple[FloatArray | None, tuple[str, ...]]:
+    """Each added table's isotropic coefficient covariance, for :func:`fold_in`.
+
+    The ``m = 0`` part of the table's own prior (its channels' slices averaged), scaled to the
+    trace of the whole prior's ``prior[0]`` so that leaning on it keeps the prior's size;
+    the base's own local priors are carried into the new coordinates (``T P T^T``).
+    """
+    if prior is None:
+        return None, ()
+    scale = float(np.trace(prior[0]))
+    out: list[FloatArray] = []
+    if base.local_priors is not None:
+        out += [T @ p @ T.T for p in base.local_priors]
+    for i in range(len(tables)):
+        m0 = np.zeros((C.shape[0], C.shape[0]))
+        for (first, count, _), owner in zip(groups, owners, strict=True):
+            if owner != i:
+                continue
+            sub = C[:, first:first + count]
+            m0 += (np.outer(sub[:, 0], sub[:, 0]) if count == 1
+                   else ph_prior_from_coefficients(sub, 1.0)[0])
+        out.append(m0)
+    scaled = [p * (scale / t) if (t := float(np.trace(p))) > 0 else p for p in out]
+    return np.stack(scaled), (*base.local_names, *(t.name for t in tables))
 
 
 def _randomized_svd(
@@ -726,6 +791,9 @@ MEASURED_WEIGHT = 1.0
 #: The synthetic part is built with this many extra components, so folding the measured
 #: tables in (:func:`fold_in`) loses little of it.
 _FOLD_EXTRA = 32
+#: What a cached default basis holds beyond the arrays every version had; a new entry makes
+#: caches written before it build again (1: the folded-in materials' local priors).
+_DEFAULT_LAYOUT = "local-priors-1"
 
 
 def _library_tag(asymmetric: bool) -> str:
@@ -793,7 +861,7 @@ def default_basis_path(
         _library_tag(asymmetric) if asymmetric else library.library_key(),
         measured.measured_digest(),
         measured.user_library_digest() if user_library else "-", repr(weight),
-        ",".join(sorted(exclude)),
+        ",".join(sorted(exclude)), _DEFAULT_LAYOUT,
     ]).encode()).hexdigest()[:16]
     return library.cache_root() / "basis" / f"default-K{k}-{key}.npz"
 
@@ -851,7 +919,8 @@ def default_basis(
     extra = measured.measured_tables(exclude) + (measured.user_tables() if user_library else [])
     basis = fold_in(base, extra, weight, min(k, base.K))
     basis = Basis(basis.Q, basis.S, basis.f_med, basis.mu, basis.valid, basis.eps,
-                  basis.materials, {**basis.provenance, "default_key": key}, basis.ph_prior)
+                  basis.materials, {**basis.provenance, "default_key": key}, basis.ph_prior,
+                  basis.local_priors, basis.local_names)
     path.parent.mkdir(parents=True, exist_ok=True)
     basis.save(path)
     return basis

@@ -193,6 +193,7 @@ class ScanPosterior:
         rho: float | tuple[float, float] | None = None,
         bands: bool = False,
         offset: float | str = 0.0,
+        prior: ArrayLike | None = None,
     ) -> None:
         cells_ = np.asarray(cells, dtype=float)
         self.ph_lab = np.asarray(ph_lab, dtype=float)
@@ -223,7 +224,12 @@ class ScanPosterior:
         y = remap(vals, fmed_t, w_t, basis.eps) - mu_t  # (n, r, C), as the joint fit sees them
         self.n, self.C = vals.shape[0], vals.shape[2]
         self.y = y.reshape(self.n * alpha.size, self.C)
-        self.P = joint_prior(basis, lam_ / self.eta)  # (M, K, K)
+        self.P = (joint_prior(basis, lam_ / self.eta) if prior is None
+                  else np.asarray(prior, dtype=float))  # (M, K, K)
+        if self.P.shape != (geo.N_PH // 2 + 1, basis.K, basis.K):
+            raise ReconstructionError(
+                f"prior has shape {self.P.shape}; expected ({geo.N_PH // 2 + 1}, {basis.K}, "
+                f"{basis.K})")
         M = self.P.shape[0]
         self.harm = np.arange(M, dtype=float)
         if table is None:
@@ -391,6 +397,19 @@ class ScanPosterior:
         ``low``) plus ``eta I``, ``s2 = y^T G^-1 y / (N C)``. ``-inf`` when ``G`` is singular.
         """
         G = self._prior_readings(low, low if high is None else high)
+        G[np.diag_indices_from(G)] += self.eta
+        return profiled_log_marginal(G, self.y)
+
+    def log_marginal_isotropic(self, P0: ArrayLike) -> float:
+        """:meth:`log_marginal` at the scan's own factors and offset, with the prior's
+        isotropic harmonic ``P_0`` replaced by ``P0`` (K, K): how well another isotropic
+        prior explains the readings (:mod:`gonio.brdf.reconstruction.localprior`)."""
+        A0 = self.Qt @ np.asarray(P0, dtype=float) @ self.Qt.T  # (n, n)
+        r = self.alpha.size
+        # m = 0 does not vary with ph: every reading of pair q meets every reading of pair p
+        # with A0[q, p] (pair-major order).
+        G = (np.kron(A0, np.ones((r, r))) + self.rho * self._G_low
+             + self.rho_high * self._G_high + self.tau * self._B)
         G[np.diag_indices_from(G)] += self.eta
         return profiled_log_marginal(G, self.y)
 

@@ -79,6 +79,7 @@ from gonio.brdf.reconstruction.joint import (
     joint_prior,
     solve_joint,
 )
+from gonio.brdf.reconstruction.localprior import choose_local_prior
 from gonio.brdf.reconstruction.mirror import MirrorModel, mirror_cells
 from gonio.brdf.reconstruction.periodic import arc_gaps, periodic_pchip_rows
 from gonio.brdf.reconstruction.posterior import (
@@ -548,6 +549,7 @@ def reconstruct(
     method: Method = "joint",
     rho: Rho = "scan",
     symmetry: Literal["scan"] | None = None,
+    local: Literal["scan"] | None = "scan",
 ) -> Reconstruction:
     """Reconstruct the full anisotropic BRDF from ``n`` pairs read at ``r`` stage angles.
 
@@ -597,6 +599,13 @@ def reconstruct(
         those of the fit without the symmetry. ``settings["mirror_axis_deg"]`` (None: no
         symmetry) and ``settings["mirror_slack"]`` say what was chosen. None (default): no
         symmetry assumed.
+    local : {"scan", None}
+        Joint fit only. ``"scan"`` (default): when the basis holds local priors (the
+        measured and user tables folded into it, :attr:`Basis.local_priors`), lean the
+        prior's isotropic part on the one the readings favour by marginal likelihood, if any
+        does (:mod:`gonio.brdf.reconstruction.localprior`); ``settings["local_prior"]`` names
+        it (None: the library's prior) and ``settings["local_prior_gain"]`` gives its log
+        marginal likelihood gain. None: the library's prior only.
 
     Returns
     -------
@@ -606,7 +615,7 @@ def reconstruct(
         return _reconstruct(
             basis, cells, ph_lab, stage_angles, values, channels=channels, eta=eta, lam=lam,
             n_components=n_components, solver=solver, name=name, method=method, rho=rho,
-            symmetry=symmetry,
+            symmetry=symmetry, local=local,
         )
 
 
@@ -626,6 +635,7 @@ def _reconstruct(
     method: Method,
     rho: Rho = "scan",
     symmetry: Literal["scan"] | None = None,
+    local: Literal["scan"] | None = "scan",
 ) -> Reconstruction:
     """:func:`reconstruct` without the BLAS thread limit (same parameters)."""
     t0 = time.perf_counter()
@@ -657,6 +667,8 @@ def _reconstruct(
             f"got {rho!r}")
     if symmetry not in (None, "scan"):
         raise ReconstructionError(f"symmetry must be 'scan' or None, got {symmetry!r}")
+    if local not in (None, "scan"):
+        raise ReconstructionError(f"local must be 'scan' or None, got {local!r}")
     if n_components is not None:
         try:
             basis = basis.truncated(int(n_components))
@@ -709,6 +721,7 @@ def _reconstruct(
         angle_err = None
 
     mirror_settings: dict[str, Any] = {}
+    local_settings: dict[str, Any] = {"local_prior": None} if method == "joint" else {}
 
     def as_table(coef: FloatArray, factor: tuple[float, float]) -> BRDFTable:
         settings = {"K": basis.K, "n": int(cells_.shape[0]), "r": int(alpha.size),
@@ -717,10 +730,12 @@ def _reconstruct(
         if method == "joint":
             settings.update(_rho_settings(factor))
             settings.update(mirror_settings)
+            settings.update(local_settings)
         return BRDFTable.trusted(expand_table(basis, coef), channels, name, None,
                                  {"reconstruction": settings})
 
-    post = None
+    post: ScanPosterior | None = None
+    estimate_post: ScanPosterior | None = None
     if method == "joint" and has_cv:
         # The joint posterior (reconstruction.posterior): the self-estimate's expected error,
         # and the scan's own rho. Its weights read only every third slice of the fit's table,
@@ -729,17 +744,34 @@ def _reconstruct(
         # call's time).
 
         by_scan = rho in ("scan", "scan-bands")
-        post = ScanPosterior(basis, cells_, ph_, alpha, vals,
-                             table=expand_table(basis, coef[:, :, ::WEIGHT_SLICE_STEP]),
+        weight_table = expand_table(basis, coef[:, :, ::WEIGHT_SLICE_STEP])
+        post = ScanPosterior(basis, cells_, ph_, alpha, vals, table=weight_table,
                              eta=eta, lam=lam, rho=None if by_scan else prior_rho,
                              bands=rho == "scan-bands")
+        # The self-estimate keeps the library prior's posterior: its calibration
+        # (selfcheck) was made on it, and a local prior the readings favour can still be the
+        # wrong material where no pair looks (docs/science.md 7.2.3).
+        estimate_post = post
+        local_pick = choose_local_prior(post, basis) if local == "scan" else None
+        if local_pick is not None:
+            # The readings favour leaning on a folded-in material: the posterior (and the
+            # scan's anisotropy factors) again under that prior, then the fit below.
+            P = local_pick.prior
+            post = ScanPosterior(basis, cells_, ph_, alpha, vals, table=weight_table,
+                                 eta=eta, lam=lam, rho=None if by_scan else prior_rho,
+                                 bands=rho == "scan-bands", prior=P)
+            local_settings = {"local_prior": local_pick.name,
+                              "local_prior_gain": round(local_pick.gain, 3)}
         chosen = (post.rho, post.rho_high)
+        refit = local_pick is not None
         if (rho == "scan" and post.rho < SCAN_RHO_MAX) or (
                 rho == "scan-bands" and chosen != prior_rho):
             # Refit under the scan's factors. The posterior already assumed them; its weights
             # come from the first table, which the refit changes little (and a second
             # posterior would cost as much as the fit).
             prior_rho = chosen
+            refit = True
+        if refit:
             coef, at_samples, has_cv, angle_err = joint(prior_rho)
     if method == "joint" and symmetry == "scan":
 
@@ -752,9 +784,7 @@ def _reconstruct(
         fmed_m = (mweights * basis.f_med[mrows]).sum(axis=1)[:, None, None]
         mu_m = (mweights * basis.mu[mrows]).sum(axis=1)[:, None, None]
         Ym = remap(vals, fmed_m, w_t, basis.eps) - mu_m  # same value, the mirror row's remap
-        Pf = joint_prior(basis, lam / eta)
-
-        Pf = Pf * harmonic_scale(Pf.shape[0], *prior_rho)[:, None, None]
+        Pf = P * harmonic_scale(P.shape[0], *prior_rho)[:, None, None]
         model = MirrorModel(Yr, Ym, Qt, Qm, ph_[:, None] - alpha[None, :], Pf, eta)
         pick = model.choose()
         mirror_settings = {"mirror_axis_deg": None if pick.axis is None else round(
@@ -768,11 +798,11 @@ def _reconstruct(
     cv_log = float(np.sqrt(np.mean(pair_err**2))) if pair_err is not None else float("nan")
     misfit = basis_misfit(_log_residuals(at_samples[..., :n_ch], vals, ci), vals, ci)
     n = int(cells_.shape[0])
-    if post is not None and np.isfinite(cv):
+    if estimate_post is not None and np.isfinite(cv):
 
-        expected, mahal = post.expected_log_rmse, post.mahalanobis
+        expected, mahal = estimate_post.expected_log_rmse, estimate_post.mahalanobis
         predicted = predict_joint_log_rmse(expected, mahal, cv)
-        uncovered = post.uncovered_share()
+        uncovered = estimate_post.uncovered_share()
         # The calibrated final mapping: a coverage term for the error where no pair looks,
         # and, when the basis cannot hold the readings (residuals well above the noise that
         # stay across the angles), a floor at the error the readings themselves show.
@@ -796,6 +826,7 @@ def _reconstruct(
             "channels": list(channels), "seconds": round(seconds, 4),
             **(_rho_settings(prior_rho) if method == "joint" else {}),
             **mirror_settings,
+            **local_settings,
         },
         cv_sample_error=cv,
         predicted_error=cv_error_scale(n) * cv,

@@ -1,0 +1,101 @@
+"""Local priors: the joint fit leans on the folded-in material its readings favour.
+
+The learnt prior along ``ph`` (:attr:`Basis.ph_prior`) is one covariance over the whole
+training library, so what the readings leave undetermined is filled in with the library's
+average. A basis with measured (or user) tables folded in also holds each of those tables' own
+isotropic covariance (:attr:`Basis.local_priors`, ``m = 0`` only: the ``(th, td, pd)`` shape of
+a material, not how it varies along ``ph``). For a scan, each candidate prior replaces the
+isotropic harmonic by an even blend of the library's and one local prior,
+``P_0' = (1 - s) P_0 + s L_g`` with ``s =`` :data:`LOCAL_SHARE`; the candidate with the largest
+marginal likelihood of the readings (the prior's scale profiled out, the scan's own anisotropy
+factors) is used when it beats the library's own prior by strong evidence (:data:`EVIDENCE`),
+and the library's prior otherwise (docs/science.md 7.2.3). A
+specimen like one of the folded-in materials is then filled in with that material's shape where
+no pair looks: a felt like the measured felt, a matte paper like the measured matte paint.
+
+Only ``m = 0`` is replaced: the varying harmonics stay the library's, so an anisotropic
+specimen keeps the anisotropy the whole library taught. The candidates cost one Cholesky
+factor of the ``(n r) x (n r)`` readings' covariance each.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from gonio.brdf.reconstruction.basis import Basis
+from gonio.brdf.reconstruction.posterior import ScanPosterior
+
+FloatArray = np.ndarray
+
+#: A local prior is used only when it raises the log marginal likelihood of the readings by at
+#: least ``ln(EVIDENCE) + ln(G)`` over the library's prior (``G`` candidates): a Bayes factor of
+#: 20, "strong" on Kass & Raftery's scale, after paying for having tried ``G`` of them. Without it
+#: a glossy plastic of the choice set leaned on a measured paint for a gain of 1.2 and doubled
+#: its error (docs/science.md 7.2.3).
+EVIDENCE = 20.0
+
+#: Share of the local prior in the blended isotropic harmonic (chosen on the choice set of
+#: docs/science.md 7.2.3 between 0.1 and 0.5; a share chosen per scan by marginal likelihood
+#: from 0.25 / 0.5 / 0.75 did no better there).
+LOCAL_SHARE = 0.5
+
+
+@dataclass(frozen=True)
+class LocalPick:
+    """A local prior chosen for one scan.
+
+    Attributes
+    ----------
+    name : the folded-in material whose isotropic covariance the prior leans on
+    gain : log marginal likelihood of the readings under the blended prior minus under the
+        library's own (natural log units; at least ``ln(EVIDENCE G)``)
+    prior : (M, K, K) the joint fit's per-harmonic prior with the blended ``m = 0``
+    """
+
+    name: str
+    gain: float
+    prior: FloatArray
+
+
+def blended_prior(P: FloatArray, local: FloatArray, share: float = LOCAL_SHARE) -> FloatArray:
+    """The joint fit's prior ``P`` (M, K, K) with ``P_0`` blended with ``local`` (K, K)."""
+    out = np.array(P, dtype=float)
+    out[0] = (1.0 - share) * out[0] + share * np.asarray(local, dtype=float)
+    return out
+
+
+def choose_local_prior(post: ScanPosterior, basis: Basis,
+                       share: float = LOCAL_SHARE) -> LocalPick | None:
+    """The local prior the readings favour over the library's own, or ``None``.
+
+    Parameters
+    ----------
+    post : ScanPosterior
+        The scan's posterior under the library's prior (its readings, its chosen anisotropy
+        factors and offset).
+    basis : Basis
+        The basis ``post`` was made with; its :attr:`Basis.local_priors` are the candidates.
+    share : float in (0, 1]
+
+    Returns
+    -------
+    LocalPick or None
+        ``None`` when the basis has no local priors or none raises the marginal likelihood by
+        the evidence :data:`EVIDENCE` asks for.
+    """
+    if basis.local_priors is None or not len(basis.local_names):
+        return None
+    base = post.log_marginal_isotropic(post.P[0])
+    needed = np.log(EVIDENCE) + np.log(len(basis.local_names))
+    best: tuple[float, int] | None = None
+    for g, local in enumerate(basis.local_priors):
+        ll = post.log_marginal_isotropic((1.0 - share) * post.P[0] + share * local)
+        if np.isfinite(ll) and ll - base >= needed and (best is None or ll > best[0]):
+            best = (ll, g)
+    if best is None:
+        return None
+    ll, g = best
+    return LocalPick(basis.local_names[g], float(ll - base),
+                     blended_prior(post.P, basis.local_priors[g], share))

@@ -1,0 +1,39 @@
+"""A simulated scan of a measured material the default basis holds (issue 23 item 3): the fit
+leans on that material's own shape, and the job's summary, the result file and the page's
+metrics name it (docs/science.md 7.2.3)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from gonio.brdf.materials import measured
+from gonio.cli import main
+from gonio.results import read_result
+from gonio.store import JobStore
+
+pytestmark = pytest.mark.system
+
+
+def test_a_scan_of_a_folded_in_material_names_the_prior_it_leaned_on(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # A matte felt: unlike the synthetic library's families, and one of the measured tables
+    # folded into the default basis, so its own shape explains its readings best.
+    felt = next(t for t in measured.measured_tables(()) if "acrylic_felt_green" in t.name)
+    table = tmp_path / "felt.npz"
+    felt.save(table)
+    out = tmp_path / "felt.h5"
+    data = tmp_path / "data"
+    code = main(["scan", "--no-export-fits", "--sim", "--material", str(table), "--rotations", "8",
+                 "--time-scale", "50", "--no-progress", "--specimen", "felt",
+                 "--data-dir", str(data), "-o", str(out)])
+    err = capsys.readouterr()
+    assert code == 0, err.err
+    res = read_result(out)
+    assert res.metrics["local_prior"] == felt.name
+    assert res.metrics["local_prior_gain"] > 0
+    assert res.provenance["local_prior"] == felt.name
+    store = JobStore(data / "gonio.sqlite", durable=False)
+    job = store.get_job(2)  # job 1 is the simulated rig's white-reference calibration
+    assert job.summary is not None and job.summary["local_prior"] == felt.name
