@@ -79,7 +79,10 @@ from gonio.brdf.reconstruction.joint import (
     joint_prior,
     solve_joint,
 )
-from gonio.brdf.reconstruction.localprior import choose_local_prior
+from gonio.brdf.reconstruction.localprior import (
+    choose_local_prior,
+    layout_takes_local_priors,
+)
 from gonio.brdf.reconstruction.mirror import MirrorModel, mirror_cells
 from gonio.brdf.reconstruction.periodic import arc_gaps, periodic_pchip_rows
 from gonio.brdf.reconstruction.posterior import (
@@ -603,9 +606,11 @@ def reconstruct(
         Joint fit only. ``"scan"`` (default): when the basis holds local priors (the
         measured and user tables folded into it, :attr:`Basis.local_priors`), lean the
         prior's isotropic part on the one the readings favour by marginal likelihood, if any
-        does (:mod:`gonio.brdf.reconstruction.localprior`); ``settings["local_prior"]`` names
-        it (None: the library's prior) and ``settings["local_prior_gain"]`` gives its log
-        marginal likelihood gain. None: the library's prior only.
+        does (:mod:`gonio.brdf.reconstruction.localprior`) and at least half of the pairs
+        read out of the plane of incidence (instrument geometries keep the library's prior);
+        ``settings["local_prior"]`` names it (None: the library's prior) and
+        ``settings["local_prior_gain"]`` gives its log marginal likelihood gain. None: the
+        library's prior only.
 
     Returns
     -------
@@ -752,7 +757,8 @@ def _reconstruct(
         # (selfcheck) was made on it, and a local prior the readings favour can still be the
         # wrong material where no pair looks (docs/science.md 7.2.3).
         estimate_post = post
-        local_pick = choose_local_prior(post, basis) if local == "scan" else None
+        local_pick = (choose_local_prior(post, basis)
+                      if local == "scan" and layout_takes_local_priors(cells_) else None)
         if local_pick is not None:
             # The readings favour leaning on a folded-in material: the posterior (and the
             # scan's anisotropy factors) again under that prior, then the fit below.

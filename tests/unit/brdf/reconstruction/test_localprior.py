@@ -8,7 +8,13 @@ import numpy as np
 import pytest
 
 from gonio.brdf.reconstruction.basis import Basis, BasisError, fold_in, remap, row_weight
-from gonio.brdf.reconstruction.localprior import EVIDENCE, LOCAL_SHARE, choose_local_prior
+from gonio.brdf.reconstruction.localprior import (
+    EVIDENCE,
+    LOCAL_SHARE,
+    choose_local_prior,
+    layout_takes_local_priors,
+    out_of_plane_share,
+)
 from gonio.brdf.reconstruction.posterior import ScanPosterior
 from gonio.brdf.reconstruction.reconstruct import ReconstructionError, reconstruct
 from gonio.brdf.reconstruction.samples import NoiseModel, simulate_samples, uniform_stage_angles
@@ -177,3 +183,31 @@ def test_an_unknown_local_setting_is_refused() -> None:
     cells, ph, alpha, vals = _scan(_grey())
     with pytest.raises(ReconstructionError, match="local must be 'scan' or None"):
         reconstruct(_folded(), cells, ph, alpha, vals, local="yes")  # type: ignore[arg-type]
+
+
+def test_the_share_of_pairs_out_of_the_plane_of_incidence() -> None:
+    # pd 0, 5 and 175 degrees lie within 10 degrees of the plane; 30 and 90 do not.
+    cells = np.deg2rad([[10.0, 20.0, 0.0], [10.0, 20.0, 5.0], [10.0, 20.0, 175.0],
+                        [10.0, 20.0, 30.0], [10.0, 20.0, 90.0]])
+    assert out_of_plane_share(cells) == pytest.approx(2 / 5)
+    assert not layout_takes_local_priors(cells)
+    assert layout_takes_local_priors(cells[2:])  # 2 of 3
+
+
+def test_pairs_in_the_plane_of_incidence_keep_the_library_prior() -> None:
+    """The same specimen read by pairs all in the plane of incidence: however strong the
+    evidence, the fit keeps the library's prior (an instrument geometry)."""
+    b = _folded()
+    truth = _sharp_cousin()
+    # Six in-plane geometries (light and sensor on either side of the normal, th + td < 90).
+    cells = np.deg2rad([[0.0, 15.0, 0.0], [5.0, 30.0, 0.0], [10.0, 45.0, 0.0],
+                        [20.0, 25.0, 0.0], [30.0, 40.0, 0.0], [45.0, 20.0, 0.0]])
+    ph = np.deg2rad([0.0, 30.0, 60.0, 90.0, 120.0, 150.0])
+    alpha = uniform_stage_angles(8)
+    vals = simulate_samples(truth, cells, ph, alpha, noise=NoiseModel(0.01, seed=3))
+    post = ScanPosterior(b, cells, ph, alpha, vals)
+    assert choose_local_prior(post, b) is not None  # the evidence alone would lean
+    rec = reconstruct(b, cells, ph, alpha, vals)
+    assert rec.settings["local_prior"] is None
+    np.testing.assert_array_equal(
+        rec.table.values, reconstruct(b, cells, ph, alpha, vals, local=None).table.values)
