@@ -13,6 +13,12 @@ and the library's prior otherwise (docs/science.md 7.2.3). A
 specimen like one of the folded-in materials is then filled in with that material's shape where
 no pair looks: a felt like the measured felt, a matte paper like the measured matte paint.
 
+Local priors are not tried with a basis whose prior holds odd harmonics (the asymmetric basis
+a scan switches to when its specimen is found without twofold symmetry, docs/science.md 7.4):
+the folded-in tables are isotropic measured materials, the least like such a specimen, and
+leaning on them made the auto-arc path's asymmetric specimens worse (0.0887 -> 0.0907 mean
+``log_rmse`` on bench_asymmetric's choice set).
+
 Only ``m = 0`` is replaced: the varying harmonics stay the library's, so an anisotropic
 specimen keeps the anisotropy the whole library taught. The candidates cost one Cholesky
 factor of the ``(n r) x (n r)`` readings' covariance each.

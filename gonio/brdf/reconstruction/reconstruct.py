@@ -606,8 +606,11 @@ def reconstruct(
         Joint fit only. ``"scan"`` (default): when the basis holds local priors (the
         measured and user tables folded into it, :attr:`Basis.local_priors`), lean the
         prior's isotropic part on the one the readings favour by marginal likelihood, if any
-        does (:mod:`gonio.brdf.reconstruction.localprior`) and at least half of the pairs
-        read out of the plane of incidence (instrument geometries keep the library's prior);
+        does (:mod:`gonio.brdf.reconstruction.localprior`), at least half of the pairs
+        read out of the plane of incidence (instrument geometries keep the library's prior)
+        and the basis is twofold symmetric (:attr:`Basis.half_turn_periodic`: a basis with
+        odd harmonics is the one a specimen found asymmetric is fitted with, and the
+        folded-in tables, isotropic measured ones, are the least like it);
         ``settings["local_prior"]`` names it (None: the library's prior) and
         ``settings["local_prior_gain"]`` gives its log marginal likelihood gain. None: the
         library's prior only.
@@ -758,7 +761,8 @@ def _reconstruct(
         # wrong material where no pair looks (docs/science.md 7.2.3).
         estimate_post = post
         local_pick = (choose_local_prior(post, basis)
-                      if local == "scan" and layout_takes_local_priors(cells_) else None)
+                      if local == "scan" and basis.half_turn_periodic
+                      and layout_takes_local_priors(cells_) else None)
         if local_pick is not None:
             # The readings favour leaning on a folded-in material: the posterior (and the
             # scan's anisotropy factors) again under that prior, then the fit below.

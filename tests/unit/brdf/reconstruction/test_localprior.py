@@ -211,3 +211,17 @@ def test_pairs_in_the_plane_of_incidence_keep_the_library_prior() -> None:
     assert rec.settings["local_prior"] is None
     np.testing.assert_array_equal(
         rec.table.values, reconstruct(b, cells, ph, alpha, vals, local=None).table.values)
+
+
+def test_a_basis_with_odd_harmonics_keeps_its_library_prior() -> None:
+    """A basis that learnt a leaning lobe (odd harmonics: the basis an asymmetric specimen is
+    fitted with) does not lean on its folded-in tables, even when the evidence would."""
+    from tests.unit.brdf.reconstruction.test_basis import leaning_table
+
+    b = fold_in(small_basis(), [small_library()[0], _grey(), _sharp(), leaning_table()], 4.0)
+    assert not b.half_turn_periodic and "sharp" in b.local_names
+    cells, ph, alpha, vals = _scan(_sharp_cousin())
+    post = ScanPosterior(b, cells, ph, alpha, vals)
+    assert choose_local_prior(post, b) is not None  # the evidence alone would lean
+    rec = reconstruct(b, cells, ph, alpha, vals)
+    assert rec.settings["local_prior"] is None
