@@ -13,26 +13,14 @@ and the growth after the first scan, against the target: within 10 % of the size
 from __future__ import annotations
 
 import argparse
-import os
-import secrets
-import socket
-import subprocess
-import sys
 import time
 from pathlib import Path
-from typing import Any
 
 import httpx
+from simdaemon import scan, sim_daemon
 
-GONIO = [sys.executable, "-c", "from gonio.cli import main; raise SystemExit(main())"]
 TARGET = 0.10
 """Allowed growth of the resident set after the first scan (fraction of its size then)."""
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def rss_mb(pid: int) -> tuple[float, float]:
@@ -43,16 +31,6 @@ def rss_mb(pid: int) -> tuple[float, float]:
         if key in ("VmRSS", "VmHWM"):
             fields[key] = float(value.split()[0]) / 1024.0  # kB
     return fields["VmRSS"], fields["VmHWM"]
-
-
-def wait_for(c: httpx.Client, job_id: int, states: set[str], timeout: float = 900) -> str:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        r = c.get(f"/api/v1/jobs/{job_id}")
-        if r.status_code == 200 and r.json()["state"] in states:
-            return str(r.json()["state"])
-        time.sleep(0.5)
-    raise TimeoutError(f"job {job_id} not in {states} after {timeout} s")
 
 
 def look_at(c: httpx.Client, job_id: int) -> None:
@@ -74,42 +52,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--time-scale", type=float, default=20.0)
     args = ap.parse_args(argv)
 
-    key = secrets.token_hex(16)
-    port = free_port()
-    env = {**os.environ, "GONIO_API_KEYS": f"bench:{key}"}
-    proc = subprocess.Popen([*GONIO, "serve", "--sim", "--throwaway", "--port", str(port),
-                             "--time-scale", str(args.time_scale)], env=env,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    url = f"http://127.0.0.1:{port}"
     rows: list[tuple[str, float, float, float]] = []
-    try:
-        with httpx.Client(base_url=url, headers={"X-API-Key": key}, timeout=120) as c:
-            deadline = time.monotonic() + 120
-            while True:
-                try:
-                    if c.get("/health").status_code == 200:
-                        break
-                except httpx.TransportError:
-                    if time.monotonic() > deadline:
-                        raise
-                time.sleep(0.2)
-            wait_for(c, 1, {"completed"})  # the start-up calibration
-            rows.append(("calibrated", *rss_mb(proc.pid), 0.0))
-            for i in range(1, args.scans + 1):
-                t0 = time.monotonic()
-                plan: dict[str, Any] = {"kind": "uniform", "specimen": f"scan-{i}",
-                                        "rotations": args.rotations}
-                r = c.post("/api/v1/jobs", json={"plan": plan})
-                r.raise_for_status()
-                job = int(r.json()["id"])
-                state = wait_for(c, job, {"completed", "failed", "aborted"})
-                if state != "completed":
-                    raise RuntimeError(f"scan {i} (job {job}) {state}")
-                look_at(c, job)
-                rows.append((f"scan {i}", *rss_mb(proc.pid), time.monotonic() - t0))
-    finally:
-        proc.terminate()
-        proc.wait(60)
+    with sim_daemon(time_scale=args.time_scale, timeout=120) as (proc, c):
+        rows.append(("calibrated", *rss_mb(proc.pid), 0.0))
+        for i in range(1, args.scans + 1):
+            t0 = time.monotonic()
+            job = scan(c, args.rotations, f"scan-{i}")
+            look_at(c, job)
+            rows.append((f"scan {i}", *rss_mb(proc.pid), time.monotonic() - t0))
 
     first = rows[1][1]
     print(f"{'after':<12} {'RSS MB':>8} {'peak MB':>8} {'vs scan 1':>10} {'scan s':>7}")

@@ -21,23 +21,11 @@ from __future__ import annotations
 
 import argparse
 import os
-import secrets
-import socket
-import subprocess
-import sys
 import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
-import httpx
-
-GONIO = [sys.executable, "-c", "from gonio.cli import main; raise SystemExit(main())"]
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+from simdaemon import scan, sim_daemon
 
 
 def cpu_s(pid: int) -> float:
@@ -47,27 +35,6 @@ def cpu_s(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
-def wait_for(c: httpx.Client, job_id: int, states: set[str], timeout: float = 900) -> str:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        r = c.get(f"/api/v1/jobs/{job_id}")
-        if r.status_code == 200 and r.json()["state"] in states:
-            return str(r.json()["state"])
-        time.sleep(0.5)
-    raise TimeoutError(f"job {job_id} not in {states} after {timeout} s")
-
-
-def scan(c: httpx.Client, rotations: int) -> int:
-    """Run one uniform scan through the API; its job id once it has completed."""
-    r = c.post("/api/v1/jobs", json={"plan": {
-        "kind": "uniform", "specimen": "bench", "rotations": rotations}})
-    r.raise_for_status()
-    job = int(r.json()["id"])
-    if wait_for(c, job, {"completed", "failed", "aborted"}) != "completed":
-        raise RuntimeError(f"the scan (job {job}) did not complete")
-    return job
-
-
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--material", default=None, help="simulated material (gonio serve --sim)")
@@ -75,54 +42,32 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--time-scale", type=float, default=20.0)
     args = ap.parse_args(argv)
 
-    key = secrets.token_hex(16)
-    port = free_port()
-    env = {**os.environ, "GONIO_API_KEYS": f"bench:{key}"}
-    cmd = [*GONIO, "serve", "--sim", "--throwaway", "--no-export-fits", "--port", str(port),
-           "--time-scale", str(args.time_scale)]
-    if args.material:
-        cmd += ["--material", args.material]
-    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    url = f"http://127.0.0.1:{port}"
+    extra = ["--no-export-fits", *(["--material", args.material] if args.material else [])]
     rows: list[tuple[str, int, float, float, int]] = []
-    try:
-        with httpx.Client(base_url=url, headers={"X-API-Key": key}, timeout=300) as c:
-            deadline = time.monotonic() + 120
-            while True:
-                try:
-                    if c.get("/health").status_code == 200:
-                        break
-                except httpx.TransportError:
-                    if time.monotonic() > deadline:
-                        raise
-                time.sleep(0.2)
-            wait_for(c, 1, {"completed"})  # the start-up calibration
-            job = scan(c, args.rotations)
-            base = f"/api/v1/jobs/{job}"
-            views = ((f"{base}/fit", {}), (f"{base}/polar", {"theta_i": 30, "phi_i": 0}),
-                     (f"{base}/render.png", {}), (f"{base}/preview.png", {}))
-            for path, params in views:
-                for n in (1, 2):
-                    cpu0, t0 = cpu_s(proc.pid), time.perf_counter()
-                    r = c.get(path, params=params)
-                    wall, cpu = time.perf_counter() - t0, cpu_s(proc.pid) - cpu0
-                    if r.status_code != 200:
-                        raise RuntimeError(f"GET {path}: {r.status_code} {r.text[:200]}")
-                    rows.append((path.rsplit("/", 1)[1], n, wall, cpu, len(r.content)))
-            base = f"/api/v1/jobs/{scan(c, args.rotations)}"
-            page = ((f"{base}/fit", {}), (f"{base}/polar", {"theta_i": 30, "phi_i": 0}),
-                    (f"{base}/preview.png", {}),
-                    (f"{base}/slice", {"theta_h": 30, "theta_d": 30, "phi_d": 90}))
-            with ThreadPoolExecutor(len(page)) as pool:
+    with sim_daemon(extra, args.time_scale) as (proc, c):
+        job = scan(c, args.rotations)
+        base = f"/api/v1/jobs/{job}"
+        views = ((f"{base}/fit", {}), (f"{base}/polar", {"theta_i": 30, "phi_i": 0}),
+                 (f"{base}/render.png", {}), (f"{base}/preview.png", {}))
+        for path, params in views:
+            for n in (1, 2):
                 cpu0, t0 = cpu_s(proc.pid), time.perf_counter()
-                got = list(pool.map(lambda v: c.get(v[0], params=v[1]), page))
+                r = c.get(path, params=params)
                 wall, cpu = time.perf_counter() - t0, cpu_s(proc.pid) - cpu0
-            if any(r.status_code != 200 for r in got):
-                raise RuntimeError(f"a view failed: {[r.status_code for r in got]}")
-            rows.append(("together", 1, wall, cpu, sum(len(r.content) for r in got)))
-    finally:
-        proc.terminate()
-        proc.wait(60)
+                if r.status_code != 200:
+                    raise RuntimeError(f"GET {path}: {r.status_code} {r.text[:200]}")
+                rows.append((path.rsplit("/", 1)[1], n, wall, cpu, len(r.content)))
+        base = f"/api/v1/jobs/{scan(c, args.rotations)}"
+        page = ((f"{base}/fit", {}), (f"{base}/polar", {"theta_i": 30, "phi_i": 0}),
+                (f"{base}/preview.png", {}),
+                (f"{base}/slice", {"theta_h": 30, "theta_d": 30, "phi_d": 90}))
+        with ThreadPoolExecutor(len(page)) as pool:
+            cpu0, t0 = cpu_s(proc.pid), time.perf_counter()
+            got = list(pool.map(lambda v: c.get(v[0], params=v[1]), page))
+            wall, cpu = time.perf_counter() - t0, cpu_s(proc.pid) - cpu0
+        if any(r.status_code != 200 for r in got):
+            raise RuntimeError(f"a view failed: {[r.status_code for r in got]}")
+        rows.append(("together", 1, wall, cpu, sum(len(r.content) for r in got)))
 
     print(f"{'view':<12} {'request':>7} {'wall s':>8} {'CPU s':>7} {'bytes':>9}")
     for view, n, wall, cpu, size in rows:
