@@ -262,13 +262,12 @@ def finish_job(job_id: int, plan: AnyPlan | CheckedPlan, how: Finishing) -> dict
     }
     if "prior_rho" in rec.settings:
         metrics["prior_rho"] = rec.settings["prior_rho"]  # 1: the library prior as it is
-    if "local_prior" in rec.settings:
+    if rec.settings.get("local_prior") is not None:
         # The folded-in (measured or user) material whose shape the fit leaned on where no
-        # pair looks, None for the library's prior alone (docs/science.md 7.2.3).
-        metrics["local_prior"] = rec.settings["local_prior"]
-        if rec.settings["local_prior"] is not None:
-            provenance["local_prior"] = str(rec.settings["local_prior"])
-            metrics["local_prior_gain"] = rec.settings["local_prior_gain"]
+        # pair looks; absent: the library's prior alone (docs/science.md 7.2.3).
+        metrics["local_prior"] = str(rec.settings["local_prior"])
+        provenance["local_prior"] = str(rec.settings["local_prior"])
+        metrics["local_prior_gain"] = rec.settings["local_prior_gain"]
     if rec.misfit is not None:
         # How far the fit misses its own readings against their noise; when the basis cannot
         # hold them, predicted_log_rmse was widened and the result says why (science.md 7.1.1).

@@ -79,7 +79,10 @@ class PosteriorRefiner:
         # sized by the scan (docs/science.md 7.3).
         rec = reconstruct(self._basis, self.cells, self.ph_lab,
                           np.deg2rad(np.asarray(angles_deg, dtype=float)), v,
-                          channels=[f"c{k}" for k in range(v.shape[2])])  # any sensor's count
+                          channels=[f"c{k}" for k in range(v.shape[2])],  # any sensor's count
+                          # The rule was tuned on the library prior's fits; the local prior is
+                          # the finishing fit's choice (docs/science.md 7.2.3).
+                          local=None)
         cv = rec.cv_sample_error if np.isfinite(rec.cv_sample_error) else None
         self.last = next_angles(self._basis, self.cells, self.ph_lab, list(angles_deg), v,
                                 threshold=request.min_gain,

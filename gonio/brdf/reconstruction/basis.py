@@ -51,10 +51,10 @@ key                shape / dtype           meaning
 ``ph_prior``       (37, K, K) float64      optional: covariance of the coefficients along
                                            ``ph`` per harmonic ``m = 0..36`` (see below;
                                            float32 when ``Q`` is)
-``local_priors``   (G, K, K) float64       optional: each folded-in material's own
-                                           isotropic (``m = 0``) covariance, scaled to the
-                                           trace of ``ph_prior[0]`` (:func:`fold_in`)
-``local_names``    (G,) str                the materials of ``local_priors``
+``local_means``    (G, C, K) float64       optional: each folded-in table's coefficients
+                                           averaged over ``ph``, per channel (the local
+                                           priors, :func:`fold_in`; float32 when ``Q`` is)
+``local_names``    (G,) str                the tables of ``local_means``
 =================  ======================  ==================================================
 
 Prior along ``ph`` (math.md 6)
@@ -181,13 +181,14 @@ class Basis:
     ph_prior : (37, K, K) float64, optional
         Covariance of the coefficients along ``ph`` per harmonic (module notes); ``None`` for
         a basis built without it (the joint fit then assumes an isotropic prior).
-    local_priors : (G, K, K) float64, optional
-        Local priors: the isotropic (``m = 0``) coefficient covariance of each material folded
-        in by :func:`fold_in` (the measured and user tables), each scaled to the trace of
-        ``ph_prior[0]``. The joint fit may lean on the one its readings favour
+    local_means : (G, C, K) float64, optional
+        Each table folded in by :func:`fold_in` (the measured and user tables): its
+        coefficients averaged over ``ph``, one row per channel, in this basis' coordinates
+        (centred on ``mu``). Their second moments are the local priors
+        (:attr:`local_priors`); the joint fit may lean on the one its readings favour
         (:mod:`gonio.brdf.reconstruction.localprior`). ``None``: none.
     local_names : tuple of str
-        The material of each local prior (G names).
+        The table of each row of ``local_means`` (G names).
     """
 
     Q: FloatArray
@@ -199,7 +200,7 @@ class Basis:
     materials: tuple[str, ...] = ()
     provenance: Mapping[str, Any] = field(default_factory=dict)
     ph_prior: FloatArray | None = None
-    local_priors: FloatArray | None = None
+    local_means: FloatArray | None = None
     local_names: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
@@ -240,17 +241,17 @@ class Basis:
             prior.setflags(write=False)
             object.__setattr__(self, "ph_prior", prior)
         names = tuple(str(n) for n in self.local_names)
-        if self.local_priors is not None:
-            local = np.asarray(self.local_priors, dtype=np.float64)
-            if (local.ndim != 3 or local.shape[1:] != (K, K) or local.shape[0] != len(names)
+        if self.local_means is not None:
+            local = np.asarray(self.local_means, dtype=np.float64)
+            if (local.ndim != 3 or local.shape[0] != len(names) or local.shape[2] != K
                     or not np.isfinite(local).all()):
                 raise BasisError(
-                    f"basis local_priors has shape {local.shape} for {len(names)} names, "
-                    f"expected ({len(names)}, {K}, {K}) finite values; rebuild the basis")
+                    f"basis local_means has shape {local.shape} for {len(names)} names, "
+                    f"expected ({len(names)}, channels, {K}) finite values; rebuild the basis")
             local.setflags(write=False)
-            object.__setattr__(self, "local_priors", local)
+            object.__setattr__(self, "local_means", local)
         elif names:
-            raise BasisError("basis local_names given without local_priors; rebuild the basis")
+            raise BasisError("basis local_names given without local_means; rebuild the basis")
         object.__setattr__(self, "local_names", names)
         Q = np.where(valid[:, None], Q, 0.0)
         for arr in (Q, S, f_med, mu, valid):
@@ -268,6 +269,21 @@ class Basis:
     def K(self) -> int:
         """Number of components."""
         return int(self.Q.shape[1])
+
+    @property
+    def local_priors(self) -> FloatArray | None:
+        """(G, K, K) the local priors: each folded-in table's second moment of its
+        ``ph``-averaged coefficients, summed over channels (``sum_c m_c m_c^T``), scaled to the
+        trace of the learnt prior's isotropic harmonic ``ph_prior[0]`` (so that leaning on one
+        keeps the prior's size, whatever ``K``). ``None`` without ``local_means`` or
+        ``ph_prior``."""
+        if self.local_means is None or self.ph_prior is None:
+            return None
+        L = np.einsum("gck,gcl->gkl", self.local_means, self.local_means)
+        size = np.trace(L, axis1=1, axis2=2)
+        scale = np.where(size > 0, float(np.trace(self.ph_prior[0])) / np.where(
+            size > 0, size, 1.0), 1.0)
+        return np.asarray(L * scale[:, None, None])
 
     @property
     def half_turn_periodic(self) -> bool:
@@ -298,7 +314,7 @@ class Basis:
         if k == self.K:
             return self
         prior = None if self.ph_prior is None else self.ph_prior[:, :k, :k]
-        local = None if self.local_priors is None else self.local_priors[:, :k, :k]
+        local = None if self.local_means is None else self.local_means[:, :, :k]
         return Basis(
             self.Q[:, :k], self.S[:k], self.f_med, self.mu, self.valid, self.eps,
             self.materials, {**self.provenance, "truncated_from": self.K}, prior, local,
@@ -381,8 +397,8 @@ class Basis:
             eps=np.array(self.eps), materials=np.array(self.materials, dtype=str),
             grid_deg=_GRID_SIGNATURE,
             **({} if self.ph_prior is None else {"ph_prior": self.ph_prior.astype(dtype)}),
-            **({} if self.local_priors is None else {
-                "local_priors": self.local_priors.astype(dtype),
+            **({} if self.local_means is None else {
+                "local_means": self.local_means.astype(dtype),
                 "local_names": np.array(self.local_names, dtype=str)}),
         )
 
@@ -406,7 +422,7 @@ class Basis:
             return cls(
                 data["Q"], data["S"], data["f_med"], data["mu"], data["valid"],
                 float(data["eps"]), tuple(np.asarray(data.get("materials", [])).tolist()),
-                prov, data.get("ph_prior"), data.get("local_priors"),
+                prov, data.get("ph_prior"), data.get("local_means"),
                 tuple(np.asarray(data.get("local_names", [])).tolist()),
             )
         except BasisError as exc:
@@ -682,7 +698,8 @@ def fold_in(
                 prior[0] += wcol * np.outer(sub[:, 0], sub[:, 0])
             else:
                 prior += wcol * geo.N_PH * ph_prior_from_coefficients(sub, 1.0)
-    local_priors, local_names = _local_priors(base, tables, T, C, groups, owners, prior)
+    local_means, local_names = _local_means(base, tables, T, C, groups, owners,
+                                            pinv @ (mu0 - mu))
     names = (*base.materials, *(t.name for t in tables))
     dupes = sorted({n for n in names if names.count(n) > 1})
     if dupes:
@@ -696,36 +713,32 @@ def fold_in(
         "without_twofold_symmetry": odd,
     }
     return Basis(Q, S, base.f_med, mu_full, base.valid, base.eps, names, prov, prior,
-                 local_priors, local_names)
+                 local_means, local_names)
 
 
-def _local_priors(
+def _local_means(
     base: Basis, tables: Sequence[BRDFTable], T: FloatArray, C: FloatArray,
-    groups: Sequence[tuple[int, int, float]], owners: Sequence[int], prior: FloatArray | None,
+    groups: Sequence[tuple[int, int, float]], owners: Sequence[int], shift: FloatArray,
 ) -> tuple[FloatArray | None, tuple[str, ...]]:
-    """Each added table's isotropic coefficient covariance, for :func:`fold_in`.
+    """Each added table's ``ph``-averaged coefficients per channel, for :func:`fold_in`.
 
-    The ``m = 0`` part of the table's own prior (its channels' slices averaged), scaled to the
-    trace of the whole prior's ``prior[0]`` so that leaning on it keeps the prior's size;
-    the base's own local priors are carried into the new coordinates (``T P T^T``).
+    The base's own rows are carried into the new coordinates exactly, as every coefficient
+    is: ``T m + shift`` (``shift`` the old mean in the new coordinates). The rows must share
+    one number of channels; tables with another are left out of the local priors.
     """
-    if prior is None:
+    entries: list[tuple[str, FloatArray]] = []
+    if base.local_means is not None:
+        carried = base.local_means @ T.T + shift[None, None, :]
+        entries += list(zip(base.local_names, carried, strict=True))
+    for i, t in enumerate(tables):
+        means = [C[:, first:first + count].mean(axis=1)
+                 for (first, count, _), owner in zip(groups, owners, strict=True) if owner == i]
+        entries.append((t.name, np.stack(means)))
+    if not entries:
         return None, ()
-    scale = float(np.trace(prior[0]))
-    out: list[FloatArray] = []
-    if base.local_priors is not None:
-        out += [T @ p @ T.T for p in base.local_priors]
-    for i in range(len(tables)):
-        m0 = np.zeros((C.shape[0], C.shape[0]))
-        for (first, count, _), owner in zip(groups, owners, strict=True):
-            if owner != i:
-                continue
-            sub = C[:, first:first + count]
-            m0 += (np.outer(sub[:, 0], sub[:, 0]) if count == 1
-                   else ph_prior_from_coefficients(sub, 1.0)[0])
-        out.append(m0)
-    scaled = [p * (scale / t) if (t := float(np.trace(p))) > 0 else p for p in out]
-    return np.stack(scaled), (*base.local_names, *(t.name for t in tables))
+    width = entries[0][1].shape[0]
+    kept = [(n, m) for n, m in entries if m.shape[0] == width]
+    return np.stack([m for _, m in kept]), tuple(n for n, _ in kept)
 
 
 def _randomized_svd(
@@ -792,8 +805,8 @@ MEASURED_WEIGHT = 1.0
 #: tables in (:func:`fold_in`) loses little of it.
 _FOLD_EXTRA = 32
 #: What a cached default basis holds beyond the arrays every version had; a new entry makes
-#: caches written before it build again (1: the folded-in materials' local priors).
-_DEFAULT_LAYOUT = "local-priors-1"
+#: caches written before it build again (2: the folded-in tables' local means).
+_DEFAULT_LAYOUT = "local-priors-2"
 
 
 def _library_tag(asymmetric: bool) -> str:
@@ -918,9 +931,12 @@ def default_basis(
     base = synthetic_basis(k + _FOLD_EXTRA, progress=progress, asymmetric=asymmetric)
     extra = measured.measured_tables(exclude) + (measured.user_tables() if user_library else [])
     basis = fold_in(base, extra, weight, min(k, base.K))
+    # asymmetric_library: the basis a scan switches to for a specimen without twofold
+    # symmetry (it does not lean on local priors, localprior's module notes).
     basis = Basis(basis.Q, basis.S, basis.f_med, basis.mu, basis.valid, basis.eps,
-                  basis.materials, {**basis.provenance, "default_key": key}, basis.ph_prior,
-                  basis.local_priors, basis.local_names)
+                  basis.materials, {**basis.provenance, "default_key": key,
+                                    "asymmetric_library": bool(asymmetric)}, basis.ph_prior,
+                  basis.local_means, basis.local_names)
     path.parent.mkdir(parents=True, exist_ok=True)
     basis.save(path)
     return basis

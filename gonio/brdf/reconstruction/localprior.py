@@ -13,8 +13,8 @@ and the library's prior otherwise (docs/science.md 7.2.3). A
 specimen like one of the folded-in materials is then filled in with that material's shape where
 no pair looks: a felt like the measured felt, a matte paper like the measured matte paint.
 
-Local priors are not tried with a basis whose prior holds odd harmonics (the asymmetric basis
-a scan switches to when its specimen is found without twofold symmetry, docs/science.md 7.4):
+Local priors are not tried with the asymmetric default basis (the one a scan switches to when
+its specimen is found without twofold symmetry, docs/science.md 7.4):
 the folded-in tables are isotropic measured materials, the least like such a specimen, and
 leaning on them made the auto-arc path's asymmetric specimens worse (0.0887 -> 0.0907 mean
 ``log_rmse`` on bench_asymmetric's choice set).
@@ -68,7 +68,7 @@ class LocalPick:
     ----------
     name : the folded-in material whose isotropic covariance the prior leans on
     gain : log marginal likelihood of the readings under the blended prior minus under the
-        library's own (natural log units; at least ``ln(EVIDENCE G)``)
+        library's own, per three channels (natural log units; at least ``ln(EVIDENCE G)``)
     prior : (M, K, K) the joint fit's per-harmonic prior with the blended ``m = 0``
     """
 
@@ -119,14 +119,20 @@ def choose_local_prior(post: ScanPosterior, basis: Basis,
     if basis.local_priors is None or not len(basis.local_names):
         return None
     base = post.log_marginal_isotropic(post.P[0])
+    # The likelihood treats the channels as independent draws of one covariance; a table's
+    # channels are strongly correlated (the same surface at other wavelengths), so its
+    # evidence is counted per three channels, the RGB readings the threshold was chosen on:
+    # a 31-band rig does not lean ten times more readily for the same information.
+    per_rgb = 3.0 / post.C
     needed = np.log(EVIDENCE) + np.log(len(basis.local_names))
     best: tuple[float, int] | None = None
     for g, local in enumerate(basis.local_priors):
         ll = post.log_marginal_isotropic((1.0 - share) * post.P[0] + share * local)
-        if np.isfinite(ll) and ll - base >= needed and (best is None or ll > best[0]):
+        if np.isfinite(ll) and (ll - base) * per_rgb >= needed and (best is None
+                                                                     or ll > best[0]):
             best = (ll, g)
     if best is None:
         return None
     ll, g = best
-    return LocalPick(basis.local_names[g], float(ll - base),
+    return LocalPick(basis.local_names[g], float((ll - base) * per_rgb),
                      blended_prior(post.P, basis.local_priors[g], share))

@@ -608,9 +608,9 @@ def reconstruct(
         prior's isotropic part on the one the readings favour by marginal likelihood, if any
         does (:mod:`gonio.brdf.reconstruction.localprior`), at least half of the pairs
         read out of the plane of incidence (instrument geometries keep the library's prior)
-        and the basis is twofold symmetric (:attr:`Basis.half_turn_periodic`: a basis with
-        odd harmonics is the one a specimen found asymmetric is fitted with, and the
-        folded-in tables, isotropic measured ones, are the least like it);
+        and the basis is not the asymmetric default basis (the one a specimen found without
+        twofold symmetry is fitted with: the folded-in tables, isotropic measured ones, are
+        the least like it);
         ``settings["local_prior"]`` names it (None: the library's prior) and
         ``settings["local_prior_gain"]`` gives its log marginal likelihood gain. None: the
         library's prior only.
@@ -756,12 +756,13 @@ def _reconstruct(
         post = ScanPosterior(basis, cells_, ph_, alpha, vals, table=weight_table,
                              eta=eta, lam=lam, rho=None if by_scan else prior_rho,
                              bands=rho == "scan-bands")
-        # The self-estimate keeps the library prior's posterior: its calibration
-        # (selfcheck) was made on it, and a local prior the readings favour can still be the
-        # wrong material where no pair looks (docs/science.md 7.2.3).
+        # The self-estimate's posterior terms (expected error, Mahalanobis norm, coverage)
+        # stay the library prior's: its calibration (selfcheck) was made on them, and a local
+        # prior the readings favour can still be the wrong material where no pair looks; its
+        # leave-one-pair-out error and misfit are the final fit's (docs/science.md 7.2.3).
         estimate_post = post
         local_pick = (choose_local_prior(post, basis)
-                      if local == "scan" and basis.half_turn_periodic
+                      if local == "scan" and not basis.provenance.get("asymmetric_library")
                       and layout_takes_local_priors(cells_) else None)
         if local_pick is not None:
             # The readings favour leaning on a folded-in material: the posterior (and the

@@ -40,19 +40,20 @@ def _folded() -> Basis:
     return fold_in(small_basis(), [small_library()[0], _grey(), _sharp()], 4.0)
 
 
-def _isotropic_second_moment(b: Basis, t: BRDFTable) -> np.ndarray:
+def _channel_means(b: Basis, t: BRDFTable) -> np.ndarray:
     """Reference: least-squares coefficients of every slice of ``t`` in ``b`` (numpy's lstsq
-    on the remapped, centred values), averaged over ``ph`` per channel, outer products summed
-    over the channels."""
+    on the remapped, centred values), averaged over ``ph``: (C, K)."""
     rows = np.flatnonzero(b.valid)
     v = np.asarray(t.values, dtype=float).reshape(t.n_channels, geo.N_PH, geo.N_ROWS)[:, :, rows]
     x = remap(v, b.f_med[rows], row_weight(b.eps)[rows], b.eps) - b.mu[rows]
-    out = np.zeros((b.K, b.K))
-    for c in range(t.n_channels):
-        coef = np.linalg.lstsq(b.Q[rows], x[c].T, rcond=None)[0]  # (K, 72)
-        mean = coef.mean(axis=1)
-        out += np.outer(mean, mean)
-    return out
+    return np.stack([np.linalg.lstsq(b.Q[rows], x[c].T, rcond=None)[0].mean(axis=1)
+                     for c in range(t.n_channels)])
+
+
+def _isotropic_second_moment(b: Basis, t: BRDFTable) -> np.ndarray:
+    """Reference: the outer products of :func:`_channel_means` summed over the channels."""
+    m = _channel_means(b, t)
+    return np.asarray(m.T @ m)
 
 
 def test_fold_in_keeps_each_added_materials_isotropic_covariance() -> None:
@@ -71,6 +72,27 @@ def test_fold_in_keeps_each_added_materials_isotropic_covariance() -> None:
     assert fold_in(small_basis(), [], 4.0).local_priors is None
 
 
+def test_folding_in_twice_carries_the_first_tables() -> None:
+    """The first fold's tables, carried through a second fold (the mean shift included), have
+    the coefficients the second basis gives them directly, up to what the first fold's
+    truncation to K components lost of them; the second fold's own are exact."""
+    once = fold_in(small_basis(), [_grey()], 4.0)
+    twice = fold_in(once, [_sharp()], 4.0)
+    assert twice.local_names == ("grey", "sharp")
+    assert twice.local_means is not None
+    grey = _channel_means(twice, _grey())
+    assert np.linalg.norm(twice.local_means[0] - grey) < 0.01 * np.linalg.norm(grey)
+    # Without the shift of the mean the carried rows would be far off (this test's point).
+    assert once.local_means is not None
+    rows_once, rows_twice = np.flatnonzero(once.valid), np.flatnonzero(twice.valid)
+    T = np.linalg.pinv(twice.Q[rows_twice]) @ once.Q[rows_once]
+    unshifted = once.local_means[0] @ T.T
+    assert np.linalg.norm(unshifted - grey) > 0.1 * np.linalg.norm(grey)
+    sharp = _channel_means(twice, _sharp())
+    np.testing.assert_allclose(twice.local_means[1], sharp, rtol=1e-6,
+                               atol=1e-9 * np.abs(sharp).max())
+
+
 def test_local_priors_survive_a_file_and_truncation(tmp_path: Path) -> None:
     b = _folded()
     back = Basis.load(b.save(tmp_path / "b.npz"))
@@ -79,7 +101,14 @@ def test_local_priors_survive_a_file_and_truncation(tmp_path: Path) -> None:
     np.testing.assert_array_equal(back.local_priors, b.local_priors)
     cut = b.truncated(5)
     assert cut.local_priors is not None and cut.local_names == b.local_names
-    np.testing.assert_array_equal(cut.local_priors, b.local_priors[:, :5, :5])
+    assert cut.ph_prior is not None
+    # Still each its table's second moment in the first five components, scaled to the
+    # truncated prior's isotropic size.
+    size = np.trace(cut.ph_prior[0])
+    for got, t in zip(cut.local_priors, (small_library()[0], _grey(), _sharp()), strict=True):
+        want = _isotropic_second_moment(b, t)[:5, :5]
+        np.testing.assert_allclose(got, want * size / np.trace(want), rtol=1e-6,
+                                   atol=1e-9 * size)
 
 
 def test_a_basis_file_with_broken_local_priors_is_refused_with_the_fix(tmp_path: Path) -> None:
@@ -87,12 +116,12 @@ def test_a_basis_file_with_broken_local_priors_is_refused_with_the_fix(tmp_path:
     path = b.save(tmp_path / "b.npz")
     with np.load(path) as z:
         data = dict(z)
-    data["local_priors"] = data["local_priors"][:, :3]  # wrong shape
+    data["local_means"] = data["local_means"][:, :, :3]  # wrong shape
     bad = tmp_path / "bad.npz"
     np.savez(bad, **data)
-    with pytest.raises(BasisError, match=r"local_priors.*rebuild"):
+    with pytest.raises(BasisError, match=r"local_means.*rebuild"):
         Basis.load(bad)
-    with pytest.raises(BasisError, match="local_names given without local_priors"):
+    with pytest.raises(BasisError, match="local_names given without local_means"):
         Basis(b.Q, b.S, b.f_med, b.mu, b.valid, b.eps, b.materials, b.provenance, b.ph_prior,
               None, ("x",))
 
@@ -156,9 +185,30 @@ def test_a_scan_of_a_folded_in_material_leans_on_its_own_prior() -> None:
     assert leaned.settings["local_prior"] == "sharp"
     assert leaned.settings["local_prior_gain"] == pytest.approx(pick.gain, abs=1e-3)
     assert plain.settings["local_prior"] is None
-    # Not the library prior's fit, and still a fit of these readings.
     assert not np.array_equal(leaned.table.values, plain.table.values)
-    assert metrics.log_rmse(leaned.table, truth) < 0.2
+
+
+def test_leaning_on_the_specimens_own_table_brings_the_fit_closer() -> None:
+    """The specimen is one of the folded-in tables: leaning on its own shape, the fit is
+    closer to it than the library prior's fit of the same readings."""
+    b = _folded()
+    cells, ph, alpha, vals = _scan(_sharp())
+    leaned = reconstruct(b, cells, ph, alpha, vals)
+    plain = reconstruct(b, cells, ph, alpha, vals, local=None)
+    assert leaned.settings["local_prior"] == "sharp"
+    assert metrics.log_rmse(leaned.table, _sharp()) < metrics.log_rmse(plain.table, _sharp())
+
+
+def test_the_evidence_is_counted_per_three_channels() -> None:
+    """The same readings copied into more channels carry no more information: the gain per
+    three channels, and the choice, stay those of the RGB scan."""
+    b = _folded()
+    cells, ph, alpha, vals = _scan(_sharp_cousin())
+    rgb = choose_local_prior(ScanPosterior(b, cells, ph, alpha, vals), b)
+    many = np.concatenate([vals] * 4, axis=2)  # 12 channels
+    twelve = choose_local_prior(ScanPosterior(b, cells, ph, alpha, many), b)
+    assert rgb is not None and twelve is not None and twelve.name == rgb.name
+    assert twelve.gain == pytest.approx(rgb.gain, rel=1e-6)
 
 
 def test_without_strong_evidence_the_library_prior_stays() -> None:
@@ -213,15 +263,14 @@ def test_pairs_in_the_plane_of_incidence_keep_the_library_prior() -> None:
         rec.table.values, reconstruct(b, cells, ph, alpha, vals, local=None).table.values)
 
 
-def test_a_basis_with_odd_harmonics_keeps_its_library_prior() -> None:
-    """A basis that learnt a leaning lobe (odd harmonics: the basis an asymmetric specimen is
-    fitted with) does not lean on its folded-in tables, even when the evidence would."""
-    from tests.unit.brdf.reconstruction.test_basis import leaning_table
-
-    b = fold_in(small_basis(), [small_library()[0], _grey(), _sharp(), leaning_table()], 4.0)
-    assert not b.half_turn_periodic and "sharp" in b.local_names
+def test_the_asymmetric_default_basis_keeps_its_library_prior() -> None:
+    """The basis a specimen without twofold symmetry is fitted with (marked so by
+    default_basis) does not lean on its folded-in tables, even when the evidence would; the
+    same basis unmarked does."""
+    b = _folded()
+    marked = Basis(b.Q, b.S, b.f_med, b.mu, b.valid, b.eps, b.materials,
+                   {**b.provenance, "asymmetric_library": True}, b.ph_prior, b.local_means,
+                   b.local_names)
     cells, ph, alpha, vals = _scan(_sharp_cousin())
-    post = ScanPosterior(b, cells, ph, alpha, vals)
-    assert choose_local_prior(post, b) is not None  # the evidence alone would lean
-    rec = reconstruct(b, cells, ph, alpha, vals)
-    assert rec.settings["local_prior"] is None
+    assert reconstruct(b, cells, ph, alpha, vals).settings["local_prior"] == "sharp"
+    assert reconstruct(marked, cells, ph, alpha, vals).settings["local_prior"] is None
