@@ -269,3 +269,33 @@ def test_reconstruct_says_when_the_basis_cannot_hold_the_readings(
     assert "warning: the readings carry structure the basis cannot hold" in said[
         "tilted-facet-002"]
     assert "warning" not in said["plastic-005"]
+
+
+def test_reconstruct_names_the_local_prior_it_leaned_on(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """`gonio reconstruct` with a basis holding a folded-in table prints the `prior:` line
+    when the fit leans on it (the specimen is that table) and not with the library prior."""
+    from gonio.brdf.reconstruction.basis import fold_in
+    from tests.unit.brdf.reconstruction.test_basis import small_basis
+    from tests.unit.brdf.reconstruction.test_localprior import _grey, _sharp
+    from tests.unit.brdf.reconstruction.test_reconstruct import grid_pairs
+
+    basis = fold_in(small_basis(), [_grey(), _sharp()], 4.0).save(tmp_path / "b.npz")
+    cells, ph = grid_pairs(6, seed=11)
+    pairs = tmp_path / "cells.csv"
+    pairs.write_text("th,td,pd,ph\n" + "\n".join(
+        ",".join(f"{v:g}" for v in np.rad2deg([*c, p])) for c, p in zip(cells, ph, strict=True)))
+    table = _sharp().save(tmp_path / "sharp.npz")
+    samples = tmp_path / "s.npz"
+    assert main(["simulate-scan", "--table", str(table), "--pairs", str(pairs),
+                 "--rotations", "8", "--seed", "3", "-o", str(samples)]) == 0
+    capsys.readouterr()
+    assert main(["reconstruct", str(samples), "--basis", str(basis),
+                 "-o", str(tmp_path / "rec.npz")]) == 0
+    out = capsys.readouterr().out
+    assert "prior: leaned on sharp where no pair looks" in out
+    bare = small_basis().save(tmp_path / "bare.npz")
+    assert main(["reconstruct", str(samples), "--basis", str(bare),
+                 "-o", str(tmp_path / "rec2.npz")]) == 0
+    assert "prior:" not in capsys.readouterr().out
