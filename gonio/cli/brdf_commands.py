@@ -265,6 +265,7 @@ def _cmd_reconstruct(args: argparse.Namespace) -> int:
         basis, samples.cells, samples.ph_lab, samples.stage_angles, samples.values,
         channels=samples.channels, eta=args.eta, lam=args.lam, n_components=args.components,
         solver=args.solver, name=name, method=args.method,
+        local=None if args.local_prior == "none" else "scan",
     )
     rec.table.save(args.output)
     s = rec.settings
@@ -466,6 +467,9 @@ def register(subparsers: Any) -> None:
     r.add_argument("--lam", type=float, default=None, help="th=0 consistency weight (V&F: 0.1)")
     r.add_argument("--solver", choices=("closed", "iterative"), default="closed",
                    help="for --method vf: closed form or V&F's L-BFGS")
+    r.add_argument("--local-prior", choices=("scan", "none"), default="scan",
+                   help="joint fit: lean on the basis' folded-in table the readings favour "
+                        "(scan, default) or keep the library's prior (none)")
     r.add_argument("--name", help="material name stored in the table (default: file stem)")
     r.add_argument("--preview", help="also write a PNG preview here")
     r.add_argument("-o", "--output", required=True, help="table file to write (.npz)")

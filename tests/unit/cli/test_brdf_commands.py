@@ -299,3 +299,7 @@ def test_reconstruct_names_the_local_prior_it_leaned_on(
     assert main(["reconstruct", str(samples), "--basis", str(bare),
                  "-o", str(tmp_path / "rec2.npz")]) == 0
     assert "prior:" not in capsys.readouterr().out
+    # --local-prior none keeps the library's prior with the same basis.
+    assert main(["reconstruct", str(samples), "--basis", str(basis), "--local-prior", "none",
+                 "-o", str(tmp_path / "rec3.npz")]) == 0
+    assert "prior:" not in capsys.readouterr().out
