@@ -133,6 +133,18 @@ def render_inputs(paths: Sequence[str | os.PathLike[str] | ResultFile],
 
 
 # --------------------------------------------------------------------------- the error number
+def local_prior_text(metrics: dict[str, Any]) -> str | None:
+    """The sentence for a joint fit that leaned on a folded-in table's shape (the metrics or
+    settings' ``local_prior`` and ``local_prior_gain``; docs/science.md 7.2.3), or ``None``."""
+    name = metrics.get("local_prior")
+    if not name:
+        return None
+    gain = metrics.get("local_prior_gain")
+    how = f" by {gain:.1f} in log likelihood" if isinstance(gain, int | float) else ""
+    return (f"prior: leaned on {name} where no pair looks (a measured or imported material of "
+            f"the basis; its shape explains the readings better{how})")
+
+
 def headline_error(metrics: dict[str, Any]) -> dict[str, Any] | None:
     """The one error number to show for a result, with what it means in plain words.
 

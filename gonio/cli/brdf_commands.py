@@ -237,15 +237,10 @@ def _cmd_simulate_scan(args: argparse.Namespace) -> int:
     return 0
 
 
-def local_prior_line(settings: dict[str, Any]) -> str | None:
-    """The printed line for a joint fit that leaned on a folded-in material's shape, if any
-    (``reconstruct``'s ``local``, docs/science.md 7.2.3)."""
-    name = settings.get("local_prior")
-    if not name:
-        return None
-    return (f"  prior: leaned on {name} where no pair looks (a measured or imported material "
-            f"of the basis; its shape explains the readings better by "
-            f"{settings.get('local_prior_gain', float('nan')):.1f} in log likelihood)")
+def _local_prior_text(settings: dict[str, Any]) -> str | None:
+    from gonio.figures import local_prior_text
+
+    return local_prior_text(settings)
 
 
 def _load_basis(path: str | None, progress: bool = True) -> Any:
@@ -275,8 +270,8 @@ def _cmd_reconstruct(args: argparse.Namespace) -> int:
     if np.isfinite(rec.predicted_log_rmse_upper):
         print(f"  upper end of its interval {rec.predicted_log_rmse_upper:.3f} (the true error "
               "of held-out materials was below it on 98 % of the calibration scans)")
-    if (line := local_prior_line(rec.settings)) is not None:
-        print(line)
+    if (line := _local_prior_text(rec.settings)) is not None:
+        print(f"  {line}")
     if rec.misfit_warning is not None:
         print(f"  warning: {rec.misfit_warning}")
     print(f"  sample error {100 * rec.rel_sample_error:.2f} %, "
@@ -368,8 +363,8 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     if np.isfinite(rec.predicted_log_rmse_upper):
         print(f"  upper end of its interval {rec.predicted_log_rmse_upper:.4f} "
               "(predicted_log_rmse_upper)")
-    if (line := local_prior_line(rec.settings)) is not None:
-        print(line)
+    if (line := _local_prior_text(rec.settings)) is not None:
+        print(f"  {line}")
     if rec.misfit_warning is not None:
         print(f"  warning: {rec.misfit_warning}")
     print(f"  self-estimated MAPE {100 * rec.predicted_error:.1f} % "

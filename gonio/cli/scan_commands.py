@@ -375,7 +375,7 @@ async def _run_owned(args: argparse.Namespace, checked: Any, config: Any, sim: A
     cal = service.calibration()
     if sim is None and cal.pairs:
         print(f"calibration: {cal.source}", file=sys.stderr)
-    from gonio.figures import headline_error
+    from gonio.figures import headline_error, local_prior_text
 
     units = "1/sr" if cal.pairs else "sensor units (uncalibrated)"
     err = headline_error(summary)
@@ -384,6 +384,8 @@ async def _run_owned(args: argparse.Namespace, checked: Any, config: Any, sim: A
           f"in {units}, {err_text}; wrote {out}")
     if err:
         print(f"  {err['key']}: {err['meaning']}")
+    if (prior := local_prior_text(summary)) is not None:
+        print(f"  {prior}")
     _print_arc(summary)
     if summary.get("basis_misfit"):
         print(f"warning: {summary['basis_misfit']}", file=sys.stderr)
@@ -604,7 +606,7 @@ def _scan_through_daemon(args: argparse.Namespace, plan: Any) -> int:
             print(f"job {job_id} completed: the daemon now applies this calibration to its "
                   f"scans; a copy is in {cal_out}")
             return 0
-    from gonio.figures import headline_error
+    from gonio.figures import headline_error, local_prior_text
 
     units = "1/sr" if summary.get("calibrated") else "sensor units (uncalibrated)"
     err = headline_error(summary)
@@ -615,6 +617,8 @@ def _scan_through_daemon(args: argparse.Namespace, plan: Any) -> int:
         print(f"  {err['coverage']}")
     if err and err.get("interval"):
         print(f"  {err['interval']}")
+    if (prior := local_prior_text(summary)) is not None:
+        print(f"  {prior}")
     _print_arc(summary)
     if summary.get("basis_misfit"):
         print(f"warning: {summary['basis_misfit']}", file=sys.stderr)

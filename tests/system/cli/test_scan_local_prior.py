@@ -33,6 +33,7 @@ def test_a_scan_of_a_folded_in_material_names_the_prior_it_leaned_on(
                  "--data-dir", str(data), "-o", str(out)])
     err = capsys.readouterr()
     assert code == 0, err.err
+    assert f"prior: leaned on {felt.name} where no pair looks" in err.out
     res = read_result(out)
     assert res.metrics["local_prior"] == felt.name
     # At least the evidence the rule asks for: a Bayes factor of 20 after trying every
