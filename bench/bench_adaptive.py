@@ -180,7 +180,8 @@ def adaptive(c: Case, gain: float, r0: int, max_r: int,
     angles = list(np.rad2deg(uniform_stage_angles(r0, span=np.deg2rad(period))))
     vals = bu.read(c.mat, c.cells, c.ph, np.deg2rad(angles), seed)
     for rnd in range(8):
-        rec = reconstruct(c.basis, c.cells, c.ph, np.deg2rad(angles), vals)  # as the engine
+        # As the engine plans (gonio/refinement.py): the library prior's fit.
+        rec = reconstruct(c.basis, c.cells, c.ph, np.deg2rad(angles), vals, local=None)
         cv = rec.cv_sample_error if DROP["of"] == "predicted" else None
         step = next_angles(c.basis, c.cells, c.ph, angles, vals, threshold=gain,
                            rel_threshold=rel, budget_angles=max_r - len(angles), per_gap=1,
