@@ -97,6 +97,18 @@ def layout_takes_local_priors(cells: FloatArray) -> bool:
     return out_of_plane_share(cells) >= MIN_OUT_OF_PLANE_SHARE
 
 
+def local_prior_skipped(basis: Basis, cells: FloatArray) -> str | None:
+    """Why a scan of ``cells`` (n, 3) with ``basis`` does not try local priors, or ``None``
+    when it does (recorded as the fit's ``settings["local_prior_note"]``)."""
+    if basis.local_priors is None or not len(basis.local_names):
+        return "the basis holds no folded-in tables"
+    if basis.provenance.get("asymmetric_library"):
+        return "the asymmetric basis keeps its library prior"
+    if not layout_takes_local_priors(cells):
+        return "most pairs read in the plane of incidence"
+    return None
+
+
 def choose_local_prior(post: ScanPosterior, basis: Basis,
                        share: float = LOCAL_SHARE) -> LocalPick | None:
     """The local prior the readings favour over the library's own, or ``None``.

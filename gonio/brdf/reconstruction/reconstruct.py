@@ -79,10 +79,7 @@ from gonio.brdf.reconstruction.joint import (
     joint_prior,
     solve_joint,
 )
-from gonio.brdf.reconstruction.localprior import (
-    choose_local_prior,
-    layout_takes_local_priors,
-)
+from gonio.brdf.reconstruction.localprior import choose_local_prior, local_prior_skipped
 from gonio.brdf.reconstruction.mirror import MirrorModel, mirror_cells
 from gonio.brdf.reconstruction.periodic import arc_gaps, periodic_pchip_rows
 from gonio.brdf.reconstruction.posterior import (
@@ -761,9 +758,11 @@ def _reconstruct(
         # prior the readings favour can still be the wrong material where no pair looks; its
         # leave-one-pair-out error and misfit are the final fit's (docs/science.md 7.2.3).
         estimate_post = post
-        local_pick = (choose_local_prior(post, basis)
-                      if local == "scan" and not basis.provenance.get("asymmetric_library")
-                      and layout_takes_local_priors(cells_) else None)
+        why_not = local_prior_skipped(basis, cells_) if local == "scan" else "not asked"
+        local_pick = choose_local_prior(post, basis) if why_not is None else None
+        local_settings["local_prior_note"] = (
+            why_not if why_not is not None else "no folded-in table favoured by strong evidence"
+            if local_pick is None else "leaned")
         if local_pick is not None:
             # The readings favour leaning on a folded-in material: the posterior (and the
             # scan's anisotropy factors) again under that prior, then the fit below.
@@ -771,8 +770,8 @@ def _reconstruct(
             post = ScanPosterior(basis, cells_, ph_, alpha, vals, table=weight_table,
                                  eta=eta, lam=lam, rho=None if by_scan else prior_rho,
                                  bands=rho == "scan-bands", prior=P)
-            local_settings = {"local_prior": local_pick.name,
-                              "local_prior_gain": round(local_pick.gain, 3)}
+            local_settings.update(local_prior=local_pick.name,
+                                  local_prior_gain=round(local_pick.gain, 3))
         chosen = (post.rho, post.rho_high)
         refit = local_pick is not None
         if (rho == "scan" and post.rho < SCAN_RHO_MAX) or (

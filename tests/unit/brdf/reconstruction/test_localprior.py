@@ -183,6 +183,7 @@ def test_a_scan_of_a_folded_in_material_leans_on_its_own_prior() -> None:
     leaned = reconstruct(b, cells, ph, alpha, vals)
     plain = reconstruct(b, cells, ph, alpha, vals, local=None)
     assert leaned.settings["local_prior"] == "sharp"
+    assert leaned.settings["local_prior_note"] == "leaned"
     assert leaned.settings["local_prior_gain"] == pytest.approx(pick.gain, abs=1e-3)
     assert plain.settings["local_prior"] is None
     assert not np.array_equal(leaned.table.values, plain.table.values)
@@ -219,13 +220,17 @@ def test_without_strong_evidence_the_library_prior_stays() -> None:
     vals = np.abs(np.random.default_rng(4).normal(0.5, 0.25, (cells.shape[0], alpha.size, 3)))
     rec = reconstruct(b, cells, ph, alpha, vals)
     assert rec.settings["local_prior"] is None
+    assert rec.settings["local_prior_note"] == "no folded-in table favoured by strong evidence"
     off = reconstruct(b, cells, ph, alpha, vals, local=None)
+    assert off.settings["local_prior_note"] == "not asked"
     np.testing.assert_array_equal(rec.table.values, off.table.values)
     # The basis without local priors fits the same scan the same way.
     bare = Basis(b.Q, b.S, b.f_med, b.mu, b.valid, b.eps, b.materials, b.provenance, b.ph_prior)
     cells, ph, alpha, vals = _scan(_sharp())
+    bare_fit = reconstruct(bare, cells, ph, alpha, vals)
+    assert bare_fit.settings["local_prior_note"] == "the basis holds no folded-in tables"
     np.testing.assert_array_equal(
-        reconstruct(bare, cells, ph, alpha, vals).table.values,
+        bare_fit.table.values,
         reconstruct(b, cells, ph, alpha, vals, local=None).table.values)
 
 
@@ -259,6 +264,7 @@ def test_pairs_in_the_plane_of_incidence_keep_the_library_prior() -> None:
     assert choose_local_prior(post, b) is not None  # the evidence alone would lean
     rec = reconstruct(b, cells, ph, alpha, vals)
     assert rec.settings["local_prior"] is None
+    assert rec.settings["local_prior_note"] == "most pairs read in the plane of incidence"
     np.testing.assert_array_equal(
         rec.table.values, reconstruct(b, cells, ph, alpha, vals, local=None).table.values)
 
@@ -273,4 +279,6 @@ def test_the_asymmetric_default_basis_keeps_its_library_prior() -> None:
                    b.local_names)
     cells, ph, alpha, vals = _scan(_sharp_cousin())
     assert reconstruct(b, cells, ph, alpha, vals).settings["local_prior"] == "sharp"
-    assert reconstruct(marked, cells, ph, alpha, vals).settings["local_prior"] is None
+    kept = reconstruct(marked, cells, ph, alpha, vals).settings
+    assert kept["local_prior"] is None
+    assert kept["local_prior_note"] == "the asymmetric basis keeps its library prior"
