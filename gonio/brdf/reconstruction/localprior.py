@@ -3,7 +3,7 @@
 The learnt prior along ``ph`` (:attr:`Basis.ph_prior`) is one covariance over the whole
 training library, so what the readings leave undetermined is filled in with the library's
 average. A basis with measured (or user) tables folded in also holds each of those tables' own
-isotropic covariance (:attr:`Basis.local_priors`, ``m = 0`` only: the ``(th, td, pd)`` shape of
+isotropic second moment (:attr:`Basis.local_priors`, ``m = 0`` only: the ``(th, td, pd)`` shape of
 a material, not how it varies along ``ph``). For a scan, each candidate prior replaces the
 isotropic harmonic by an even blend of the library's and one local prior,
 ``P_0' = (1 - s) P_0 + s L_g`` with ``s =`` :data:`LOCAL_SHARE`; the candidate with the largest
@@ -66,7 +66,7 @@ class LocalPick:
 
     Attributes
     ----------
-    name : the folded-in material whose isotropic covariance the prior leans on
+    name : the folded-in material whose isotropic second moment the prior leans on
     gain : log marginal likelihood of the readings under the blended prior minus under the
         library's own, per three channels (natural log units; at least ``ln(EVIDENCE G)``)
     prior : (M, K, K) the joint fit's per-harmonic prior with the blended ``m = 0``
