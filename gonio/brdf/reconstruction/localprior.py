@@ -100,7 +100,7 @@ def layout_takes_local_priors(cells: FloatArray) -> bool:
 def local_prior_skipped(basis: Basis, cells: FloatArray) -> str | None:
     """Why a scan of ``cells`` (n, 3) with ``basis`` does not try local priors, or ``None``
     when it does (recorded as the fit's ``settings["local_prior_note"]``)."""
-    if basis.local_priors is None or not len(basis.local_names):
+    if basis.local_means is None or basis.ph_prior is None or not len(basis.local_names):
         return "the basis holds no folded-in tables"
     if basis.provenance.get("asymmetric_library"):
         return "the asymmetric basis keeps its library prior"
@@ -128,7 +128,8 @@ def choose_local_prior(post: ScanPosterior, basis: Basis,
         ``None`` when the basis has no local priors or none raises the marginal likelihood by
         the evidence :data:`EVIDENCE` asks for.
     """
-    if basis.local_priors is None or not len(basis.local_names):
+    priors = basis.local_priors  # formed from the stored means on each access: once here
+    if priors is None or not len(basis.local_names):
         return None
     base = post.log_marginal_isotropic(post.P[0])
     # The likelihood treats the channels as independent draws of one covariance; a table's
@@ -138,7 +139,7 @@ def choose_local_prior(post: ScanPosterior, basis: Basis,
     per_rgb = 3.0 / post.C
     needed = np.log(EVIDENCE) + np.log(len(basis.local_names))
     best: tuple[float, int] | None = None
-    for g, local in enumerate(basis.local_priors):
+    for g, local in enumerate(priors):
         ll = post.log_marginal_isotropic((1.0 - share) * post.P[0] + share * local)
         if np.isfinite(ll) and (ll - base) * per_rgb >= needed and (best is None
                                                                      or ll > best[0]):
@@ -147,4 +148,4 @@ def choose_local_prior(post: ScanPosterior, basis: Basis,
         return None
     ll, g = best
     return LocalPick(basis.local_names[g], float((ll - base) * per_rgb),
-                     blended_prior(post.P, basis.local_priors[g], share))
+                     blended_prior(post.P, priors[g], share))

@@ -760,9 +760,10 @@ def _reconstruct(
         estimate_post = post
         why_not = local_prior_skipped(basis, cells_) if local == "scan" else "not asked"
         local_pick = choose_local_prior(post, basis) if why_not is None else None
-        local_settings["local_prior_note"] = (
-            why_not if why_not is not None else "no folded-in table favoured by strong evidence"
-            if local_pick is None else "leaned")
+        if why_not is None:
+            why_not = ("leaned" if local_pick is not None
+                       else "no folded-in table favoured by strong evidence")
+        local_settings["local_prior_note"] = why_not
         if local_pick is not None:
             # The readings favour leaning on a folded-in material: the posterior (and the
             # scan's anisotropy factors) again under that prior, then the fit below.
