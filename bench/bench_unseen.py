@@ -383,7 +383,7 @@ def flip_of(table: BRDFTable, m: Material) -> float:
     """Mean HDR-FLIP of ``table`` (rendered through gonio's lookup) against the truth."""
     from gonio.brdf.pictures import appearance
 
-    return appearance.rendered_flip(truth_images(m), appearance.render_appearance(table)).mean
+    return appearance.standard_flip(truth_images(m), appearance.render_appearance(table)).mean
 
 
 def score(rec_table: BRDFTable, truth: BRDFTable, rec: Any = None, readings: int = 0,

@@ -16,7 +16,13 @@ implementation of "what it looks like" that the benches and the exports share:
   up with gonio's own multilinear lookup (:class:`~gonio.brdf.pictures.render.TableLookup`),
   a model through its ``eval``.
 * :func:`rendered_flip`: HDR-FLIP (Andersson et al. 2021, the ``flip-evaluator`` package) of a
-  test against a reference, per image and mean: 0 = identical, 1 = as different as can be.
+  test against a reference, per image and mean: 0 = identical, 1 = as different as can be;
+  averaged over every pixel of an image, or over the pixels a view draws (``drawn``).
+* :func:`standard_flip`: the appearance metric itself, HDR-FLIP of two sets of standard
+  renderings averaged **over the sphere's pixels** (its disc, lit or not), as issue 23 defines
+  it. Averaged over the whole square image instead, the black background around the disc
+  (about a fifth of the pixels, where both images are 0) dilutes every number; the benches
+  used that whole-image mean until 2026-11-27 (docs/science.md section 7 says which tables).
 * :func:`render_importance`: how many pixels of those renderings look up each cell of gonio's
   grid, the weights a design can give the cells a picture sees (docs/science.md 7.2.2).
 
@@ -106,7 +112,8 @@ class FlipResult:
     Attributes
     ----------
     per_image : list of float
-        Mean HDR-FLIP over each image's pixels, in [0, 1], in the order of the views.
+        Mean HDR-FLIP over each image's pixels (or the pixels its view draws), in [0, 1], in
+        the order of the views.
     mean : float
         Mean of ``per_image``.
     """
@@ -132,13 +139,24 @@ def reference_peak(reference: list[FloatArray]) -> float:
     return peak if peak > 0 and np.isfinite(peak) else 1.0
 
 
-def rendered_flip(reference: list[FloatArray], test: list[FloatArray]) -> FlipResult:
+def drawn_masks(views: tuple[render.View, ...] = APPEARANCE_VIEWS,
+                size: int = APPEARANCE_SIZE) -> list[NDArray[np.bool_]]:
+    """(size, size) bool per view: the pixels it draws (:func:`render.drawn_mask`)."""
+    return [render.drawn_mask(v, size) for v in views]
+
+
+def rendered_flip(reference: list[FloatArray], test: list[FloatArray],
+                  drawn: list[NDArray[np.bool_]] | None = None) -> FlipResult:
     """Per-image and mean HDR-FLIP of ``test`` against ``reference`` (module docstring).
 
     Parameters
     ----------
     reference, test : lists of (H, W, 3) linear radiance images of the same views (e.g. from
         :func:`render_appearance`); negative values are clipped to 0.
+    drawn : list of (H, W) bool, optional
+        Per image, the pixels to average the error map over (:func:`drawn_masks`); None:
+        every pixel. HDR-FLIP itself always sees the whole image (its filters and its range
+        of exposures); only the average is restricted.
 
     Returns
     -------
@@ -150,6 +168,14 @@ def rendered_flip(reference: list[FloatArray], test: list[FloatArray]) -> FlipRe
         When the lists differ in length or shapes, or flip-evaluator is not installed.
     """
     _check_pairs(reference, test)
+    if drawn is not None:
+        if len(drawn) != len(reference):
+            raise AppearanceError(f"{len(drawn)} pixel masks for {len(reference)} images; "
+                                  "give one per image")
+        for k, (m, r) in enumerate(zip(drawn, reference, strict=True)):
+            if m.shape != r.shape[:2] or not m.any():
+                raise AppearanceError(f"image {k}: its pixel mask {m.shape} must be the "
+                                      f"image's {r.shape[:2]} and select some pixels")
     flip = flip_module()
     if flip is None:
         raise AppearanceError("HDR-FLIP needs the flip-evaluator package: "
@@ -161,25 +187,50 @@ def rendered_flip(reference: list[FloatArray], test: list[FloatArray]) -> FlipRe
     # on one, with the same result (docs/export.md, "What the fits cost").
     with _openmp_controller().limit(limits=1, user_api="openmp"):
         for r, t in zip(reference, test, strict=True):
-            _, mean, _ = flip.evaluate(
+            error_map, mean, _ = flip.evaluate(
                 np.ascontiguousarray(np.clip(np.nan_to_num(r) / peak, 0, None),
                                      dtype=np.float32),
                 np.ascontiguousarray(np.clip(np.nan_to_num(t) / peak, 0, None),
                                      dtype=np.float32),
                 "HDR", applyMagma=False)
+            if drawn is not None:
+                err = np.asarray(error_map, dtype=float)
+                mean = float(np.mean((err[..., 0] if err.ndim == 3 else err)[drawn[len(per)]]))
             per.append(float(mean))
     return FlipResult(per, float(np.mean(per)))
 
 
+def standard_flip(reference: list[FloatArray], test: list[FloatArray]) -> FlipResult:
+    """The appearance metric: HDR-FLIP of two sets of standard renderings
+    (:func:`render_appearance` with the default views and size), averaged over the sphere's
+    pixels (:func:`drawn_masks`; module docstring).
+
+    Raises
+    ------
+    AppearanceError
+        When the images are not the standard renderings' count and size, or as
+        :func:`rendered_flip`.
+    """
+    _check_pairs(reference, test)
+    want = (len(APPEARANCE_VIEWS), APPEARANCE_SIZE)
+    if (len(reference), reference[0].shape[0]) != want:
+        raise AppearanceError(
+            f"standard_flip compares the {want[0]} standard renderings of {want[1]} pixels; "
+            f"got {len(reference)} images of {reference[0].shape[0]}: use rendered_flip for "
+            "other views")
+    return rendered_flip(reference, test, drawn_masks())
+
+
 def appearance_flip(reference: Any, test: Any, ref_images: list[FloatArray] | None = None
                     ) -> FlipResult:
-    """HDR-FLIP of two BRDFs in the standard renderings (:data:`APPEARANCE_VIEWS`).
+    """HDR-FLIP of two BRDFs in the standard renderings (:data:`APPEARANCE_VIEWS`), averaged
+    over the sphere's pixels (:func:`standard_flip`).
 
     ``ref_images`` (from :func:`render_appearance` of ``reference``) saves rendering the
     reference again when many tests are compared with one truth.
     """
     ref = ref_images if ref_images is not None else render_appearance(reference)
-    return rendered_flip(ref, render_appearance(test))
+    return standard_flip(ref, render_appearance(test))
 
 
 class _CellCounter:

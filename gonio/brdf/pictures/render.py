@@ -649,6 +649,16 @@ def render_view(brdf: Any, view: View, size: int = DEFAULT_SIZE, rotation_deg: f
     raise RenderError(f"unknown view kind {view.kind!r}; use sphere, swatch or environment")
 
 
+def drawn_mask(view: View, size: int = DEFAULT_SIZE) -> NDArray[np.bool_]:
+    """(size, size) bool: the pixels :func:`render_view` draws for ``view`` (the sphere's disc,
+    lit or not, for "sphere" and "environment"; every pixel for "swatch")."""
+    if view.kind in ("sphere", "environment"):
+        return sphere_normals(size)[0]
+    if view.kind == "swatch":
+        return np.ones((size, size), dtype=bool)
+    raise RenderError(f"unknown view kind {view.kind!r}; use sphere, swatch or environment")
+
+
 def render_rows(rows: Sequence[tuple[str, Any]], views: Sequence[View] = DEFAULT_VIEWS,
                 size: int = DEFAULT_SIZE) -> list[list[FloatArray]]:
     """Linear radiance of every (row material, view); rows are (label, BRDF) pairs."""

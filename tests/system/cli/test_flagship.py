@@ -13,9 +13,9 @@ Two checks, neither taken from the code under test:
 * HDR-FLIP of the reconstruction against the truth rendered from the analytic model at each
   pixel's exact directions is at most the benchmark's mean for the default scan on the
   independent renderer's anisotropic specimens with the same lookup
-  (``bench/bench_grid_limit.py``, row "gonio n=10 r=8, log-pchip", recorded in
-  docs/science.md section 7.0: 0.174). A loose bound: a demo material no harder than those must
-  render no worse than they do on average.
+  (``bench/bench_unseen.py``, row "gonio (joint) n=10 r=8", recorded in docs/science.md
+  section 7: 0.213, HDR-FLIP averaged over the sphere's pixels). A loose bound: a demo
+  material no harder than those must render no worse than they do on average.
 * The streak is there: the bright region of the 20 degree light's rendering (pixels above 70 %
   of that image's peak, weighted by how far above) has its major axis along the image's
   vertical and its length (the square root of the largest second moment) within 25 % of the
@@ -40,9 +40,10 @@ pytestmark = [pytest.mark.timeout(900),
               pytest.mark.skipif(appearance.flip_module() is None,
                                  reason="HDR-FLIP needs flip-evaluator")]
 
-#: bench/bench_grid_limit.py, row "gonio n=10 r=8, log-pchip" (the renderings' lookup), column
-#: "aniso (6) HDR-FLIP" (docs/science.md section 7.0; 0.180 through the multilinear lookup).
-BENCH_ANISO_DEFAULT_FLIP = 0.174
+#: bench/bench_unseen.py, row "gonio (joint) n=10 r=8", column "aniso (6)" HDR-FLIP over the
+#: sphere's pixels (docs/science.md section 7; 0.172 averaged over the whole image, before
+#: 2026-11-27, when this bound was 0.174 from bench/bench_grid_limit.py's equal row).
+BENCH_ANISO_DEFAULT_FLIP = 0.213
 #: Relative tolerance on the streak's length (the truth's own grid limit is within 2 %).
 STREAK_LENGTH_TOL = 0.25
 #: Largest angle between the streak's major axis and the truth's, degrees.
@@ -106,7 +107,7 @@ def test_default_sim_scan_renders_the_streak(tmp_path: Path) -> None:
     assert res.table is not None
     truth = appearance.render_appearance(default_material())
     rec = appearance.render_appearance(res.table)
-    flip = appearance.rendered_flip(truth, rec)
+    flip = appearance.standard_flip(truth, rec)
     assert flip.mean <= BENCH_ANISO_DEFAULT_FLIP, flip.per_image
     t_len, t_axis = highlight_axis(truth[0])
     r_len, r_axis = highlight_axis(rec[0])

@@ -98,3 +98,62 @@ def test_mismatched_image_sets_are_refused_with_a_reason() -> None:
         appearance.rendered_flip(a, a * 2)
     with pytest.raises(appearance.AppearanceError, match=r"\(H, W, 3\)"):
         appearance.rendered_flip(a, [np.zeros((8, 9, 3))])
+
+
+@pytest.mark.parametrize("size", [48, 96])
+def test_the_sphere_views_draw_the_disc_and_the_swatch_every_pixel(size: int) -> None:
+    # The disc of radius 1 / (1 + 2 / size) in an image of side 2: its share of the pixels is
+    # pi / 4 / (1 + 2 / size)^2, up to the pixels its edge cuts (a few per cent at 48 pixels).
+    share = math.pi / 4 / (1 + 2 / size) ** 2
+    for view in (*appearance.APPEARANCE_VIEWS, render.View("environment")):
+        mask = render.drawn_mask(view, size)
+        assert mask.shape == (size, size)
+        assert mask.mean() == pytest.approx(share, rel=0.03)
+        assert not mask[0].any() and not mask[:, 0].any()  # the one-pixel margin
+    assert render.drawn_mask(render.View("swatch", render.PointLight(0.0, 0.0)), size).all()
+    # Every pixel a sphere rendering lights lies in the disc.
+    img = appearance.render_appearance(bm.tabulate(PLASTIC, np.float64))[0]
+    disc = render.drawn_mask(appearance.APPEARANCE_VIEWS[0], appearance.APPEARANCE_SIZE)
+    assert not (img.sum(axis=-1) > 0)[~disc].any()
+
+
+def test_the_standard_flip_averages_flip_evaluators_error_map_over_the_disc() -> None:
+    """The reference is flip-evaluator's own error map, averaged by hand over the disc."""
+    import flip_evaluator
+
+    table = bm.tabulate(PLASTIC, np.float64)
+    ref = appearance.render_appearance(table)
+    test = appearance.render_appearance(
+        BRDFTable(np.asarray(table.values) * 1.5, table.channels, "brighter"))
+    got = appearance.standard_flip(ref, test)
+    whole = appearance.rendered_flip(ref, test)
+    peak = max(float(r.max()) for r in ref)
+    for k, (r, t) in enumerate(zip(ref, test, strict=True)):
+        err, whole_mean, _ = flip_evaluator.evaluate(
+            np.ascontiguousarray(r / peak, dtype=np.float32),
+            np.ascontiguousarray(t / peak, dtype=np.float32), "HDR", applyMagma=False)
+        err = np.asarray(err).reshape(r.shape[:2])
+        disc = render.drawn_mask(appearance.APPEARANCE_VIEWS[k], appearance.APPEARANCE_SIZE)
+        assert got.per_image[k] == pytest.approx(float(err[disc].mean()), rel=1e-5)
+        assert whole.per_image[k] == pytest.approx(float(whole_mean), rel=1e-5)
+        # The background only dilutes: both images are black there, and the filters' spill
+        # over the silhouette is the only error outside the disc.
+        assert got.per_image[k] > whole.per_image[k]
+    assert got.mean == pytest.approx(float(np.mean(got.per_image)))
+
+
+def test_pixel_masks_and_image_sets_that_do_not_fit_are_refused_with_a_reason() -> None:
+    table = bm.tabulate(PLASTIC, np.float64)
+    ref = appearance.render_appearance(table)
+    masks = appearance.drawn_masks()
+    with pytest.raises(appearance.AppearanceError, match="one per image"):
+        appearance.rendered_flip(ref, ref, masks[:2])
+    with pytest.raises(appearance.AppearanceError, match="image 1: its pixel mask"):
+        appearance.rendered_flip(ref, ref, [masks[0], masks[1][:10], *masks[2:]])
+    with pytest.raises(appearance.AppearanceError, match="select some pixels"):
+        appearance.rendered_flip(ref, ref, [masks[0], np.zeros_like(masks[1]), *masks[2:]])
+    small = appearance.render_appearance(table, size=48)
+    with pytest.raises(appearance.AppearanceError, match="use rendered_flip for other views"):
+        appearance.standard_flip(small, small)
+    with pytest.raises(render.RenderError, match="unknown view kind"):
+        render.drawn_mask(render.View("cylinder"))
