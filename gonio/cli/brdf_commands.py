@@ -378,10 +378,20 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 def _cmd_library_import(args: argparse.Namespace) -> int:
     from gonio.brdf.materials.imports import import_files
     from gonio.brdf.materials.measured import user_library_dir
+    from gonio.brdf.tables.table import BRDFTable
 
     written = import_files(args.files, replace=args.replace)
     for f in written:
         print(f"imported {f.stem} -> {f}")
+        # An RGL file records how far it is from reciprocal, which gonio's table assumes
+        # (gonio.brdf.materials.rgl): say so where the lab looks, not only in the file.
+        rec = BRDFTable.load(f).provenance.get("reciprocity")
+        if isinstance(rec, dict) and rec.get("median_abs_log_ratio") is not None:
+            print(f"  the file is not reciprocal: |ln f(l, v) / f(v, l)| median "
+                  f"{rec['median_abs_log_ratio']:.3f}, 90th percentile "
+                  f"{rec['p90_abs_log_ratio']:.3f} over the grid; gonio's table assumes "
+                  "reciprocity, so a rendering of it differs from the file's on the mirrored "
+                  "half of each view (docs/science.md 7.0.1)")
     print(f"{len(written)} table(s) in {user_library_dir()}; the default basis is rebuilt with "
           "them on next use (gonio scan, reconstruct, design, serve)")
     return 0

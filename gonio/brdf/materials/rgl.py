@@ -16,6 +16,15 @@ interpolation near the horizon is noisy. Values there can come back negative (cl
 here) or spuriously large once divided by a small ``cos(theta_o)``. The counts of clamped and
 non-finite values are recorded in the table's provenance; treat cells with either elevation
 above ~80 degrees as unreliable when comparing with real data.
+
+Reciprocity: gonio's tables hold ``pd`` over half a turn, ``pd + 180 deg`` being the same pair
+with light and view exchanged (docs/math.md 2). The files, evaluated by mitsuba, are not
+reciprocal: the table holds the value with the file's incident direction as the light, and a
+rendering of it shows ``f(v, l)`` where the true ``f(l, v)`` differs. How far apart they are is
+recorded in the provenance (``reciprocity``, :func:`reciprocity_of`); on the eleven shipped
+materials the median of ``|ln(f(l, v) / f(v, l))|`` is 0.015-0.28 and its 90th percentile
+0.36-2.6, which is half of the rendered difference between the table and the file
+(docs/science.md 7.0.1).
 """
 
 from __future__ import annotations
@@ -143,6 +152,36 @@ def _mitsuba() -> Any:
     return mi
 
 
+def reciprocity_of(forward: np.ndarray, exchanged: np.ndarray) -> dict[str, Any]:
+    """How far a BRDF is from reciprocal, for a table's provenance.
+
+    Parameters
+    ----------
+    forward, exchanged : (N, C) arrays, 1/sr
+        The BRDF at N direction pairs ``(l, v)`` and at the same pairs with light and view
+        exchanged, ``(v, l)``.
+
+    Returns
+    -------
+    dict
+        ``median_abs_log_ratio`` and ``p90_abs_log_ratio`` of ``|ln(sum_c f(l, v) /
+        sum_c f(v, l))|`` over the pairs where both sums are positive (None when there is
+        none), ``pairs`` (how many), and ``meaning``.
+    """
+    a, b = np.asarray(forward).sum(axis=1), np.asarray(exchanged).sum(axis=1)
+    ok = (a > 0) & (b > 0) & np.isfinite(a) & np.isfinite(b)
+    ratio = np.abs(np.log(a[ok] / b[ok]))
+    return {
+        "median_abs_log_ratio": round(float(np.median(ratio)), 4) if ok.any() else None,
+        "p90_abs_log_ratio": round(float(np.percentile(ratio, 90)), 4) if ok.any() else None,
+        "pairs": int(ok.sum()),
+        "meaning": "|ln f(l, v) / f(v, l)| over the grid's valid cells (channels summed): 0 "
+                   "for a reciprocal BRDF. gonio's table assumes reciprocity and holds f with "
+                   "the file's incident direction as the light, so its renderings show "
+                   "f(v, l) on the mirrored half of a view (docs/science.md 7.0.1)",
+    }
+
+
 def read_rgl(path: str | os.PathLike[str], name: str | None = None) -> BRDFTable:
     """Tabulate an RGL ``.bsdf`` file on gonio's grid.
 
@@ -156,7 +195,8 @@ def read_rgl(path: str | os.PathLike[str], name: str | None = None) -> BRDFTable
     -------
     BRDFTable
         Float32 ``(3, 72, 18, 18, 36)`` in 1/sr (R, G, B), identical in every ``ph`` slice.
-        Provenance: source file, reader, clamped and non-finite counts, load seconds.
+        Provenance: source file, reader, clamped and non-finite counts, how far the file is
+        from reciprocal (:func:`reciprocity_of`), load seconds.
 
     Raises
     ------
@@ -178,12 +218,18 @@ def read_rgl(path: str | os.PathLike[str], name: str | None = None) -> BRDFTable
     ctx = mi.BSDFContext()
     si = mi.SurfaceInteraction3f()
     raw = np.empty((wi.shape[0], 3))
+    raw_exchanged = np.empty((wi.shape[0], 3))
     # The scalar variant evaluates one direction pair per call; 7861 calls take ~0.1 s.
     for k in range(wi.shape[0]):
         si.wi = mi.Vector3f(*wi[k])  # light direction: the incidence axis of the RGL tables
         value = bsdf.eval(ctx, si, mi.Vector3f(*wo[k]))
         raw[k] = (value[0], value[1], value[2])
+        si.wi = mi.Vector3f(*wo[k])  # the same pair with light and view exchanged
+        value = bsdf.eval(ctx, si, mi.Vector3f(*wi[k]))
+        raw_exchanged[k] = (value[0], value[1], value[2])
     brdf = raw / wo[:, 2:3]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        exchanged = raw_exchanged / wi[:, 2:3]
     nonfinite = ~np.isfinite(brdf)
     negative = brdf < 0
     brdf = np.where(nonfinite | negative, 0.0, brdf)
@@ -201,6 +247,7 @@ def read_rgl(path: str | os.PathLike[str], name: str | None = None) -> BRDFTable
         "isotropic": True,
         "negative_clamped": int(negative.sum()),
         "nonfinite_zeroed": int(nonfinite.sum()),
+        "reciprocity": reciprocity_of(brdf, np.where(exchanged > 0, exchanged, 0.0)),
         "load_seconds": round(time.perf_counter() - t0, 3),
     }
     return BRDFTable(values, CHANNELS, name or p.stem, None, provenance)

@@ -184,3 +184,21 @@ def test_a_table_written_by_gonio_export_merl_imports_back(tmp_path: Path) -> No
     inner = m & (th < np.deg2rad(60)) & (td < np.deg2rad(60))
     np.testing.assert_allclose(back.values[:, 3][:, inner], src.values[:, 3][:, inner],
                                rtol=0.02)
+
+
+def test_importing_an_rgl_file_reports_how_far_from_reciprocal_it_is(
+        rgl_dir: Path, libdir: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    pytest.importorskip("mitsuba")
+    src = rgl_dir / "cm_military_green_rgb.bsdf"
+    assert main(["library", "import", str(src)]) == 0
+    out = capsys.readouterr().out
+    rec = BRDFTable.load(measured.user_table_files()[0]).provenance["reciprocity"]
+    assert (f"not reciprocal: |ln f(l, v) / f(v, l)| median {rec['median_abs_log_ratio']:.3f}, "
+            f"90th percentile {rec['p90_abs_log_ratio']:.3f}") in out
+    assert "docs/science.md 7.0.1" in out
+    # A gonio table carries no such record, and the import says nothing of it.
+    vals = np.where(geo.valid_mask(), 0.3, np.nan)[None, None].repeat(3, 0).repeat(72, 1)
+    plain = BRDFTable(vals.astype(np.float32), ("R", "G", "B"), "plain").save(
+        libdir.parent / "plain.npz")
+    assert main(["library", "import", str(plain)]) == 0
+    assert "reciprocal" not in capsys.readouterr().out
