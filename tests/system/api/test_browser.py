@@ -156,11 +156,11 @@ def test_start_a_scan_from_the_page_and_see_the_result(daemon: Daemon, browser: 
         field = form.find_element(By.NAME, name)
         field.clear()
         field.send_keys(value)
-    browser.find_element(By.ID, "dry-run").click()
+    click_when_steady(wait, "#dry-run")
     wait.until(lambda d: d.find_element(By.ID, "dry-run-result").text.startswith("OK"))
     # The last calibration left the stage somewhere: the estimate says it starts from there.
     assert "from the stage at" in browser.find_element(By.ID, "dry-run-result").text
-    browser.find_element(By.ID, "start-scan").click()
+    click_when_steady(wait, "#start-scan")
     new_row = "//tbody[@id='jobs']/tr[td[2][text()='browser sample']]"
     wait.until(lambda d: d.find_elements(By.XPATH, new_row)
                or d.find_element(By.ID, "message").is_displayed())
@@ -194,7 +194,7 @@ def test_start_a_scan_from_the_page_and_see_the_result(daemon: Daemon, browser: 
     wait.until(lambda d: _chart(d, "polar-in") is not None and _chart(d, "polar-cross"))
     labels = [s["label"] for s in _chart(browser, "polar-in")]
     assert any(lab.startswith("truth") for lab in labels), labels
-    browser.find_element(By.ID, "polar-log").click()
+    click_when_steady(wait, "#polar-log")
     wait.until(lambda d: d.execute_script(
         "return Chart.getChart(document.getElementById('polar-in'))"
         ".options.plugins.subtitle.text.includes('log scale')"))
@@ -205,7 +205,7 @@ def test_start_a_scan_from_the_page_and_see_the_result(daemon: Daemon, browser: 
     assert head.startswith("predicted") and ("lower is better" in head
                                              or "expected to be off" in head), head
     assert not browser.find_element(By.ID, "metrics").is_displayed()
-    browser.find_element(By.CSS_SELECTOR, "#metrics-details summary").click()
+    click_when_steady(wait, "#metrics-details summary")
     assert "rel_sample_error" in browser.find_element(By.ID, "metrics").text
     wait.until(lambda d: d.execute_script(
         "const i = document.getElementById('preview');"
@@ -234,7 +234,7 @@ def test_start_a_scan_from_the_page_and_see_the_result(daemon: Daemon, browser: 
     # Export from the page: the control appears with the result and fetches the file.
     wait.until(lambda d: d.find_element(By.ID, "export").is_displayed())
     Select(browser.find_element(By.ID, "export-format")).select_by_value("gltf")
-    browser.find_element(By.ID, "export-button").click()
+    click_when_steady(wait, "#export-button")
     wait.until(lambda d: d.find_element(By.ID, "export-state").text.startswith(
         ("saved", "export failed")))
     assert browser.find_element(By.ID, "export-state").text == f"saved gonio-job-{job_id}-gltf.gltf"
@@ -275,7 +275,7 @@ def test_an_adaptive_plan_from_the_page_sets_its_rule(daemon: Daemon, browser: A
     assert form.find_element(By.NAME, "max_rotations").get_attribute("value") == "16"
     assert arc.first_selected_option.get_attribute("value") == "180"
     # The dry run's bound is the cap: 4 angles, then at most 12 more.
-    browser.find_element(By.ID, "dry-run").click()
+    click_when_steady(wait, "#dry-run")
     wait.until(lambda d: d.find_element(By.ID, "dry-run-result").text.startswith("OK"))
     assert "can add up to 12 angles" in browser.find_element(By.ID, "dry-run-result").text
 
@@ -286,14 +286,14 @@ def test_an_adaptive_plan_from_the_page_sets_its_rule(daemon: Daemon, browser: A
 
     # A bad value reaches the server, which says what is wrong and what to do.
     fill("min_gain", "-1")
-    browser.find_element(By.ID, "dry-run").click()
+    click_when_steady(wait, "#dry-run")
     wait.until(lambda d: d.find_element(By.ID, "message").is_displayed())
     text = browser.find_element(By.ID, "message").text
     assert "min_gain" in text and "> 0" in text and "got -1" in text, text
 
     fill("min_gain", "0.002")
     fill("max_rotations", "3")
-    browser.find_element(By.ID, "dry-run").click()
+    click_when_steady(wait, "#dry-run")
     wait.until(lambda d: "max_rotations 3" in d.find_element(By.ID, "message").text)
     assert "fewer than the first round's 4" in browser.find_element(By.ID, "message").text
 
@@ -301,7 +301,7 @@ def test_an_adaptive_plan_from_the_page_sets_its_rule(daemon: Daemon, browser: A
                         ("min_gain", "0.002"), ("max_rotations", "6"),
                         ("exposure_s", "0.005")):
         fill(name, value)
-    browser.find_element(By.ID, "start-scan").click()
+    click_when_steady(wait, "#start-scan")
     new_row = "//tbody[@id='jobs']/tr[td[2][text()='adaptive sample']]"
     wait.until(lambda d: d.find_elements(By.XPATH, new_row))
     job_id = int(browser.execute_script(
@@ -335,7 +335,7 @@ def test_page_without_key_shows_a_clear_error(daemon: Daemon, browser: Any) -> N
     browser.refresh()
     wait = WebDriverWait(browser, 30, poll_frequency=0.2)
     wait.until(lambda d: d.find_element(By.ID, "live-chip").text == "live")
-    browser.find_element(By.ID, "start-scan").click()
+    click_when_steady(wait, "#start-scan")
     wait.until(lambda d: d.find_element(By.ID, "message").is_displayed())
     text = browser.find_element(By.ID, "message").text
     assert "X-API-Key" in text and "enter a valid API key" in text, text

@@ -10,7 +10,12 @@ import pytest
 
 from tests.system.api.conftest import Daemon
 from tests.system.api.test_arc_check import says_what_and_what_to_do
-from tests.system.api.test_browser import _calibrate, browser, open_live  # noqa: F401  (the fixture)
+from tests.system.api.test_browser import (  # noqa: F401  (the fixture)
+    _calibrate,
+    browser,
+    click_when_steady,
+    open_live,
+)
 
 pytestmark = pytest.mark.system
 
@@ -29,7 +34,7 @@ def test_the_page_shows_the_dry_runs_warning(odd_daemon: Daemon,
     arc.select_by_value("180")
     warnings = browser.find_element(By.ID, "dry-run-warnings")
     assert not warnings.is_displayed()
-    browser.find_element(By.ID, "dry-run").click()
+    click_when_steady(wait, "#dry-run")
     # Not a bare "OK" when there is something to read.
     wait.until(lambda d: d.find_element(By.ID, "dry-run-result").text.startswith(
         "Runs, but read the warnings below"))
@@ -39,6 +44,6 @@ def test_the_page_shows_the_dry_runs_warning(odd_daemon: Daemon,
     # A full turn, checked again: no warning left over from the half turn.
     browser.execute_script("document.getElementById('dry-run-result').textContent = ''")
     arc.select_by_value("360")
-    browser.find_element(By.ID, "dry-run").click()
+    click_when_steady(wait, "#dry-run")
     wait.until(lambda d: d.find_element(By.ID, "dry-run-result").text.startswith("OK"))
     assert not warnings.is_displayed() and warnings.find_elements(By.TAG_NAME, "li") == []

@@ -10,7 +10,12 @@ from typing import Any
 import pytest
 
 from tests.system.api.conftest import Daemon
-from tests.system.api.test_browser import _calibrate, browser, open_live  # noqa: F401  (the fixture)
+from tests.system.api.test_browser import (  # noqa: F401  (the fixture)
+    _calibrate,
+    browser,
+    click_when_steady,
+    open_live,
+)
 
 pytestmark = pytest.mark.system
 
@@ -33,7 +38,7 @@ def test_the_page_runs_an_auto_arc_plan_and_says_which_arc(daemon: Daemon,
         field.clear()
         field.send_keys(value)
     Select(form.find_element(By.NAME, "span_deg")).select_by_value("auto")
-    browser.find_element(By.ID, "dry-run").click()
+    click_when_steady(wait, "#dry-run")
     wait.until(lambda d: "If the first round finds" in d.find_element(By.ID,
                                                                       "dry-run-result").text)
     text = browser.find_element(By.ID, "dry-run-result").text
@@ -42,7 +47,7 @@ def test_the_page_runs_an_auto_arc_plan_and_says_which_arc(daemon: Daemon,
     assert "at 5 stage angles" in text
     assert "twofold symmetric, it goes on over half a turn: at most 5 angles" in text
     assert "not twofold symmetric, it goes on over a full turn: at most 8 angles" in text
-    browser.find_element(By.ID, "start-scan").click()
+    click_when_steady(wait, "#start-scan")
     row = "//tbody[@id='jobs']/tr[td[2][text()='auto arc']]"
     wait.until(lambda d: d.find_elements(By.XPATH, row)
                or d.find_element(By.ID, "message").is_displayed())
@@ -54,6 +59,8 @@ def test_the_page_runs_an_auto_arc_plan_and_says_which_arc(daemon: Daemon,
     wait.until(lambda d: "Scanned over" in d.find_element(By.ID, "headline-error").text)
     head = browser.find_element(By.ID, "headline-error").text
     assert "Scanned over half a turn" in head and "twofold symmetric" in head, head
-    browser.find_element(By.CSS_SELECTOR, "#metrics-details summary").click()
+    # The preview image arrives after the job completes and moves the page: a plain click can
+    # land on it (CI, 2026-11-27); click once the summary is where the click goes.
+    click_when_steady(wait, "#metrics-details summary")
     metrics = browser.find_element(By.ID, "metrics").text
     assert "arc_test_p_value" in metrics and "arc_deg" in metrics

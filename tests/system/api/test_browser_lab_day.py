@@ -12,7 +12,12 @@ import pytest
 from gonio.calibration import CALIBRATION_FILE, Calibration, PairCalibration, save_calibration
 from gonio.paths import scan_data_dir
 from tests.system.api.conftest import Daemon, export_fits_off
-from tests.system.api.test_browser import _severe, browser, open_live  # noqa: F401 (fixture)
+from tests.system.api.test_browser import (  # noqa: F401 (fixture)
+    _severe,
+    browser,
+    click_when_steady,
+    open_live,
+)
 
 pytestmark = [pytest.mark.system, pytest.mark.timeout(600)]
 
@@ -113,20 +118,20 @@ def test_an_uncalibrated_scan_is_warned_accepted_and_labelled_as_such(
     exposure.clear()
     exposure.send_keys("0.005")
     # Check plan: not a bare "OK", and the warning says the values will be sensor units.
-    browser.find_element(By.ID, "dry-run").click()
+    click_when_steady(wait, "#dry-run")
     wait.until(lambda d: d.find_element(By.ID, "dry-run-warnings").is_displayed())
     assert not browser.find_element(By.ID, "dry-run-result").text.startswith("OK")
     warnings = browser.find_element(By.ID, "dry-run-warnings").text
     assert "uncalibrated" in warnings and "sensor units" in warnings, warnings
     before = set(_row_ids(browser))
     # Start: the daemon refuses an uncalibrated scan of a calibrated rig; the page asks.
-    browser.find_element(By.ID, "start-scan").click()
+    click_when_steady(wait, "#start-scan")
     alert = wait.until(ec.alert_is_present())
     assert "uncalibrated" in alert.text and str(scan_data_dir(daemon.sim.config)) in alert.text
     alert.dismiss()
     wait.until(lambda d: "Not started" in d.find_element(By.ID, "dry-run-result").text)
     assert set(_row_ids(browser)) == before
-    browser.find_element(By.ID, "start-scan").click()
+    click_when_steady(wait, "#start-scan")
     wait.until(ec.alert_is_present()).accept()
     wait.until(lambda d: set(_row_ids(d)) - before)
     (job,) = set(_row_ids(browser)) - before
