@@ -21,7 +21,7 @@ implementation of "what it looks like" that the benches and the exports share:
 * :func:`standard_flip`: the appearance metric itself, HDR-FLIP of two sets of standard
   renderings averaged **over the sphere's pixels** (its disc, lit or not), as issue 23 defines
   it. Averaged over the whole square image instead, the black background around the disc
-  (about a fifth of the pixels, where both images are 0) dilutes every number; the benches
+  (a quarter of the pixels, where both images are 0) dilutes every number; the benches
   used that whole-image mean until 2026-11-27 (docs/science.md section 7 says which tables).
 * :func:`render_importance`: how many pixels of those renderings look up each cell of gonio's
   grid, the weights a design can give the cells a picture sees (docs/science.md 7.2.2).
@@ -186,7 +186,7 @@ def rendered_flip(reference: list[FloatArray], test: list[FloatArray],
     # four 96 pixel images took 0.9-2.5 s of CPU on its default two threads against 0.33 s
     # on one, with the same result (docs/export.md, "What the fits cost").
     with _openmp_controller().limit(limits=1, user_api="openmp"):
-        for r, t in zip(reference, test, strict=True):
+        for k, (r, t) in enumerate(zip(reference, test, strict=True)):
             error_map, mean, _ = flip.evaluate(
                 np.ascontiguousarray(np.clip(np.nan_to_num(r) / peak, 0, None),
                                      dtype=np.float32),
@@ -194,8 +194,8 @@ def rendered_flip(reference: list[FloatArray], test: list[FloatArray],
                                      dtype=np.float32),
                 "HDR", applyMagma=False)
             if drawn is not None:
-                err = np.asarray(error_map, dtype=float)
-                mean = float(np.mean((err[..., 0] if err.ndim == 3 else err)[drawn[len(per)]]))
+                err = np.asarray(error_map, dtype=float).reshape(r.shape[:2])
+                mean = float(np.mean(err[drawn[k]]))
             per.append(float(mean))
     return FlipResult(per, float(np.mean(per)))
 
