@@ -22,12 +22,18 @@ Sets (the discipline of docs/science.md 7.2.2):
   anywhere else. ``a`` is chosen here, by mean HDR-FLIP subject to ``log_rmse``.
 * **test** (``test``): the measured materials at odd positions (five) and bench_unseen's six
   anisotropic specimens; run once with the chosen ``a`` against ``a = 0`` and every preset.
+* **second fresh set** (``fresh2``): :data:`FRESH2_FLIP`, eight more twofold-symmetric mitsuba
+  specimens written and committed (2026-11-27, the retro-pair study) before any run on them.
 * **fresh** (``fresh``): :data:`FRESH_FLIP`, ten twofold-symmetric mitsuba specimens written
   and committed (2026-11-27) before any run on them, after the choice of ``a``: narrow and
   wide brushed metals, glossy isotropic metal, clear-coated (layered) paints, paper, satin and
   felt stand-ins, a glossy plastic. Run once, to decide whether ``a`` becomes the default.
   (The even measured materials' rows of the 17 bench_unseen materials are ``choose``'s: same
   designs, seeds and fits, so the same numbers.)
+
+``--retro K --retro-td T`` adds the retro-pair study's designs (:func:`retro_design`): ``K``
+forced near-retro specular pairs at ``td = T`` degrees, the rest by the shipped objective
+(docs/notes/2026-11-27-retro-pair.md); a bench option, not the product's design.
 
 ``--seeds`` averages each ``a`` over several designs (the greedy started from the k-th best
 first pair, :func:`~gonio.brdf.design.posterior.posterior_design`'s ``seed``): whether the
@@ -121,6 +127,39 @@ FRESH_FLIP: list[tuple[str, dict[str, Any], float]] = [
     ("ff-plastic-glossy", {"type": "roughplastic", "distribution": "ggx", "alpha": 0.05,
                            "diffuse_reflectance": {"type": "rgb", "value": [0.4, 0.05, 0.05]}},
      0.0),
+]
+
+
+#: A second fresh set (the retro-pair study, docs/notes/2026-11-27-retro-pair.md): written and
+#: committed before any run on it, after FRESH_FLIP had been seen by the choice of cell_mix;
+#: eight twofold-symmetric specimens (no facet tilt or normal map) with other metals,
+#: parameters and holder angles than every set above.
+FRESH2_FLIP: list[tuple[str, dict[str, Any], float]] = [
+    ("f2-conductor-Mo", {"type": "roughconductor", "material": "Mo", "distribution": "ggx",
+                         "alpha_u": 0.07, "alpha_v": 0.22}, 112.0),
+    ("f2-conductor-Rh-iso", {"type": "roughconductor", "material": "Rh",
+                             "distribution": "beckmann", "alpha": 0.16}, 0.0),
+    ("f2-conductor-TiN", {"type": "roughconductor", "material": "TiN", "distribution": "ggx",
+                          "alpha_u": 0.35, "alpha_v": 0.15}, 268.0),
+    ("f2-coated-blue", {"type": "principled", "metallic": 0.0, "roughness": 0.25,
+                        "anisotropic": 0.3, "clearcoat": 0.7, "clearcoat_gloss": 0.6,
+                        "specular": 0.5,
+                        "base_color": {"type": "rgb", "value": [0.1, 0.2, 0.55]}}, 58.0),
+    ("f2-principled-bronze", {"type": "principled", "metallic": 1.0, "roughness": 0.2,
+                              "anisotropic": 0.5,
+                              "base_color": {"type": "rgb", "value": [0.7, 0.45, 0.2]}}, 173.0),
+    ("f2-plastic-yellow", {"type": "roughplastic", "distribution": "beckmann", "alpha": 0.2,
+                           "diffuse_reflectance": {"type": "rgb", "value": [0.7, 0.6, 0.1]}},
+     0.0),
+    ("f2-blend-brushed-V", {"type": "blendbsdf", "weight": 0.35,
+                            "bsdf_0": {"type": "diffuse",
+                                       "reflectance": {"type": "rgb",
+                                                       "value": [0.45, 0.45, 0.45]}},
+                            "bsdf_1": {"type": "roughconductor", "material": "V_palik",
+                                       "alpha_u": 0.2, "alpha_v": 0.04}}, 226.0),
+    ("f2-plastic-dark-glossy", {"type": "roughplastic", "distribution": "ggx", "alpha": 0.08,
+                                "diffuse_reflectance": {"type": "rgb",
+                                                        "value": [0.05, 0.05, 0.08]}}, 0.0),
 ]
 
 
@@ -372,7 +411,7 @@ def evaluate(mats: list[bu.Material], mixes: list[float], label: str,
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("stage", choices=["choose", "test", "fresh"])
+    ap.add_argument("stage", choices=["choose", "test", "fresh", "fresh2"])
     ap.add_argument("--mix", type=float, nargs="+", default=[0.0, 0.25, 0.5, 0.75, 1.0],
                     help="cell_mix values to compare (test: the chosen one; 0 is added)")
     ap.add_argument("--only", nargs="*", default=None, help="material names (exploring)")
@@ -390,11 +429,13 @@ def main(argv: list[str] | None = None) -> int:
     imp = render_importance()
     print(f"render importance: {imp.sum():.0f} pixel lookups on {(imp > 0).sum()} nodes, "
           f"{imp[geo.valid_mask()].sum() / imp.sum():.1%} on valid cells")
-    choice, test = material_sets()
     mixes = sorted(set([0.0, *args.mix]))
-    sets = {"choose": [("choice set", choice)], "test": [("test set", test)],
-            "fresh": [("fresh set", bu.aniso_materials(FRESH_FLIP))]}[args.stage]
-    for label, mats in sets:
+    # Built only for the stage asked for: a set's truth tables are made when it first runs.
+    make = {"choose": lambda: ("choice set", material_sets()[0]),
+            "test": lambda: ("test set", material_sets()[1]),
+            "fresh": lambda: ("fresh set", bu.aniso_materials(FRESH_FLIP)),
+            "fresh2": lambda: ("second fresh set", bu.aniso_materials(FRESH2_FLIP))}
+    for label, mats in [make[args.stage]()]:
         if args.only:
             mats = [m for m in mats if m.name in args.only]
         evaluate(mats, mixes, label, tuple(args.seeds),
