@@ -50,6 +50,7 @@ from __future__ import annotations
 import argparse
 import hashlib
 import inspect
+import json
 import sys
 import time
 from dataclasses import replace
@@ -325,7 +326,7 @@ def _flip_recording(table: Any, m: bu.Material) -> float:
 
 def evaluate(mats: list[bu.Material], mixes: list[float], label: str,
              seeds: tuple[int, ...] = (0,), retro: tuple[tuple[int, float], ...] = (),
-             presets_on: bool = True) -> None:
+             presets_on: bool = True, save: str | None = None) -> None:
     """Per material and in the mean: log_rmse / HDR-FLIP of every mix (each design seed) and
     every preset (not with several seeds: those compare designs, not presets)."""
     importance = render_importance()
@@ -362,6 +363,13 @@ def evaluate(mats: list[bu.Material], mixes: list[float], label: str,
             views.setdefault(p, {})[m.name] = LAST_VIEWS["views"]
         print(f"  {m.name} ({time.perf_counter() - t0:.0f} s)", flush=True)
     order = list(rows)
+    if save:
+        Path(save).write_text(json.dumps(
+            {r: {m: {"kind": next(x.kind for x in mats if x.name == m),
+                     "log_rmse": s.log_rmse, "flip": s.flip,
+                     "views": views.get(r, {}).get(m, [])} for m, s in per.items()}
+             for r, per in rows.items()}, indent=1))
+        print(f"unrounded scores written to {save}")
     print(f"\n{label}: log_rmse / HDR-FLIP per material (lower is better)")
     print("| material | " + " | ".join(order) + " |")
     print("|---" * (1 + len(order)) + "|")
@@ -424,6 +432,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--retro-td", type=float, nargs="+", default=[10.0],
                     help="td (degrees) of the forced pairs")
     ap.add_argument("--no-presets", action="store_true", help="leave out the preset rows")
+    ap.add_argument("--save", default=None, help="write the unrounded scores to this JSON file")
     args = ap.parse_args(argv)
     print(f"$ {' '.join(['python', *sys.argv])}")
     imp = render_importance()
@@ -440,7 +449,7 @@ def main(argv: list[str] | None = None) -> int:
             mats = [m for m in mats if m.name in args.only]
         evaluate(mats, mixes, label, tuple(args.seeds),
                  tuple((k, td) for k in args.retro for td in args.retro_td),
-                 not args.no_presets)
+                 not args.no_presets, args.save)
     return 0
 
 
