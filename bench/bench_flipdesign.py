@@ -326,7 +326,7 @@ def _flip_recording(table: Any, m: bu.Material) -> float:
 
 def evaluate(mats: list[bu.Material], mixes: list[float], label: str,
              seeds: tuple[int, ...] = (0,), retro: tuple[tuple[int, float], ...] = (),
-             presets_on: bool = True, save: str | None = None) -> None:
+             presets_on: bool = True, save: str | None = None, limits: bool = False) -> None:
     """Per material and in the mean: log_rmse / HDR-FLIP of every mix (each design seed) and
     every preset (not with several seeds: those compare designs, not presets)."""
     importance = render_importance()
@@ -361,6 +361,10 @@ def evaluate(mats: list[bu.Material], mixes: list[float], label: str,
         for p, (pc, pph) in presets.items():
             rows.setdefault(p, {})[m.name] = bu.run_scan(b, m, pc, pph, 8, seed, "joint")
             views.setdefault(p, {})[m.name] = LAST_VIEWS["views"]
+        if limits:  # what no design reaches: the basis' best fit, the truth on the grid
+            for row, table in (("basis ceiling", bu.ceiling(b, m.truth)), ("grid limit", m.truth)):
+                rows.setdefault(row, {})[m.name] = bu.score(table, m.truth, m=m)
+                views.setdefault(row, {})[m.name] = LAST_VIEWS["views"]
         print(f"  {m.name} ({time.perf_counter() - t0:.0f} s)", flush=True)
     order = list(rows)
     if save:
@@ -408,7 +412,7 @@ def evaluate(mats: list[bu.Material], mixes: list[float], label: str,
     print("\nwins against the best preset per material (log_rmse; HDR-FLIP), of "
           f"{len(mats)}:")
     for r in order:
-        if r in presets:
+        if r in presets or r in ("basis ceiling", "grid limit"):
             continue
         g = rows[r]
         wl = sum(g[m.name].log_rmse < min(rows[p][m.name].log_rmse for p in presets)
@@ -432,6 +436,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--retro-td", type=float, nargs="+", default=[10.0],
                     help="td (degrees) of the forced pairs")
     ap.add_argument("--no-presets", action="store_true", help="leave out the preset rows")
+    ap.add_argument("--limits", action="store_true",
+                    help="add the basis ceiling and the grid limit rows (no scan)")
     ap.add_argument("--save", default=None, help="write the unrounded scores to this JSON file")
     args = ap.parse_args(argv)
     print(f"$ {' '.join(['python', *sys.argv])}")
@@ -449,7 +455,7 @@ def main(argv: list[str] | None = None) -> int:
             mats = [m for m in mats if m.name in args.only]
         evaluate(mats, mixes, label, tuple(args.seeds),
                  tuple((k, td) for k in args.retro for td in args.retro_td),
-                 not args.no_presets, args.save)
+                 not args.no_presets, args.save, args.limits)
     return 0
 
 
