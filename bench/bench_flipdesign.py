@@ -326,7 +326,8 @@ def _flip_recording(table: Any, m: bu.Material) -> float:
 
 def evaluate(mats: list[bu.Material], mixes: list[float], label: str,
              seeds: tuple[int, ...] = (0,), retro: tuple[tuple[int, float], ...] = (),
-             presets_on: bool = True, save: str | None = None, limits: bool = False) -> None:
+             presets_on: bool = True, save: str | None = None, limits: bool = False,
+             retro_add: tuple[float, ...] = ()) -> None:
     """Per material and in the mean: log_rmse / HDR-FLIP of every mix (each design seed) and
     every preset (not with several seeds: those compare designs, not presets)."""
     importance = render_importance()
@@ -356,6 +357,13 @@ def evaluate(mats: list[bu.Material], mixes: list[float], label: str,
                 print(f"  {row} pairs (th, td, pd deg): "
                       + " ".join(f"({c[0]:.0f},{c[1]:g},{c[2]:.0f})" for c in np.rad2deg(cells)),
                       flush=True)
+            rows.setdefault(row, {})[m.name] = bu.run_scan(b, m, cells, ph, 8, seed, "joint")
+            views.setdefault(row, {})[m.name] = LAST_VIEWS["views"]
+        for td in retro_add:  # diagnostic: the default's ten pairs plus (0, td, 0) as an 11th
+            row = f"a=0.5 + (0,{td:g},0)"
+            dc, _dph = design(b, 0.5, importance)
+            cells = np.concatenate([dc, [[0.0, np.deg2rad(td), 0.0]]])
+            ph = place_pairs(cells, RigConstraints(), ph_step_deg=1.0, seed=0).ph_lab
             rows.setdefault(row, {})[m.name] = bu.run_scan(b, m, cells, ph, 8, seed, "joint")
             views.setdefault(row, {})[m.name] = LAST_VIEWS["views"]
         for p, (pc, pph) in presets.items():
@@ -436,6 +444,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--retro-td", type=float, nargs="+", default=[10.0],
                     help="td (degrees) of the forced pairs")
     ap.add_argument("--no-presets", action="store_true", help="leave out the preset rows")
+    ap.add_argument("--retro-add", type=float, nargs="*", default=[],
+                    help="diagnostic rows: the default's ten pairs plus (0, TD, 0) as an 11th")
     ap.add_argument("--limits", action="store_true",
                     help="add the basis ceiling and the grid limit rows (no scan)")
     ap.add_argument("--save", default=None, help="write the unrounded scores to this JSON file")
@@ -455,7 +465,7 @@ def main(argv: list[str] | None = None) -> int:
             mats = [m for m in mats if m.name in args.only]
         evaluate(mats, mixes, label, tuple(args.seeds),
                  tuple((k, td) for k in args.retro for td in args.retro_td),
-                 not args.no_presets, args.save, args.limits)
+                 not args.no_presets, args.save, args.limits, tuple(args.retro_add))
     return 0
 
 
