@@ -22,12 +22,18 @@ Sets (the discipline of docs/science.md 7.2.2):
   anywhere else. ``a`` is chosen here, by mean HDR-FLIP subject to ``log_rmse``.
 * **test** (``test``): the measured materials at odd positions (five) and bench_unseen's six
   anisotropic specimens; run once with the chosen ``a`` against ``a = 0`` and every preset.
+* **second fresh set** (``fresh2``): :data:`FRESH2_FLIP`, eight more twofold-symmetric mitsuba
+  specimens written and committed (2026-11-27, the retro-pair study) before any run on them.
 * **fresh** (``fresh``): :data:`FRESH_FLIP`, ten twofold-symmetric mitsuba specimens written
   and committed (2026-11-27) before any run on them, after the choice of ``a``: narrow and
   wide brushed metals, glossy isotropic metal, clear-coated (layered) paints, paper, satin and
   felt stand-ins, a glossy plastic. Run once, to decide whether ``a`` becomes the default.
   (The even measured materials' rows of the 17 bench_unseen materials are ``choose``'s: same
   designs, seeds and fits, so the same numbers.)
+
+``--retro K --retro-td T`` adds the retro-pair study's designs (:func:`retro_design`): ``K``
+forced near-retro specular pairs at ``td = T`` degrees, the rest by the shipped objective
+(docs/notes/2026-11-27-retro-pair.md); a bench option, not the product's design.
 
 ``--seeds`` averages each ``a`` over several designs (the greedy started from the k-th best
 first pair, :func:`~gonio.brdf.design.posterior.posterior_design`'s ``seed``): whether the
@@ -43,8 +49,11 @@ from __future__ import annotations
 
 import argparse
 import hashlib
+import inspect
+import json
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -52,8 +61,18 @@ import bench_unseen as bu  # the sibling bench (the script's folder is on sys.pa
 import numpy as np
 
 import gonio.brdf
-from gonio.brdf.design.constraints import RigConstraints
-from gonio.brdf.design.posterior import posterior_design
+from gonio.brdf.design.constraints import RigConstraints, candidate_rows, rows_to_cells
+from gonio.brdf.design.errors import FeasibilityError
+from gonio.brdf.design.placement import place_pairs
+from gonio.brdf.design.posterior import (
+    PriorModel,
+    _mixed_gram,
+    _posterior,
+    cell_gram,
+    greedy_rows,
+    posterior_design,
+    prior_model,
+)
 from gonio.brdf.design.presets import get_preset, preset_names
 from gonio.brdf.pictures.appearance import render_importance
 from gonio.brdf.reconstruction.basis import Basis, default_basis
@@ -109,6 +128,39 @@ FRESH_FLIP: list[tuple[str, dict[str, Any], float]] = [
     ("ff-plastic-glossy", {"type": "roughplastic", "distribution": "ggx", "alpha": 0.05,
                            "diffuse_reflectance": {"type": "rgb", "value": [0.4, 0.05, 0.05]}},
      0.0),
+]
+
+
+#: A second fresh set (the retro-pair study, docs/notes/2026-11-27-retro-pair.md): written and
+#: committed before any run on it, after FRESH_FLIP had been seen by the choice of cell_mix;
+#: eight twofold-symmetric specimens (no facet tilt or normal map) with other metals,
+#: parameters and holder angles than every set above.
+FRESH2_FLIP: list[tuple[str, dict[str, Any], float]] = [
+    ("f2-conductor-Mo", {"type": "roughconductor", "material": "Mo", "distribution": "ggx",
+                         "alpha_u": 0.07, "alpha_v": 0.22}, 112.0),
+    ("f2-conductor-Rh-iso", {"type": "roughconductor", "material": "Rh",
+                             "distribution": "beckmann", "alpha": 0.16}, 0.0),
+    ("f2-conductor-TiN", {"type": "roughconductor", "material": "TiN", "distribution": "ggx",
+                          "alpha_u": 0.35, "alpha_v": 0.15}, 268.0),
+    ("f2-coated-blue", {"type": "principled", "metallic": 0.0, "roughness": 0.25,
+                        "anisotropic": 0.3, "clearcoat": 0.7, "clearcoat_gloss": 0.6,
+                        "specular": 0.5,
+                        "base_color": {"type": "rgb", "value": [0.1, 0.2, 0.55]}}, 58.0),
+    ("f2-principled-bronze", {"type": "principled", "metallic": 1.0, "roughness": 0.2,
+                              "anisotropic": 0.5,
+                              "base_color": {"type": "rgb", "value": [0.7, 0.45, 0.2]}}, 173.0),
+    ("f2-plastic-yellow", {"type": "roughplastic", "distribution": "beckmann", "alpha": 0.2,
+                           "diffuse_reflectance": {"type": "rgb", "value": [0.7, 0.6, 0.1]}},
+     0.0),
+    ("f2-blend-brushed-V", {"type": "blendbsdf", "weight": 0.35,
+                            "bsdf_0": {"type": "diffuse",
+                                       "reflectance": {"type": "rgb",
+                                                       "value": [0.45, 0.45, 0.45]}},
+                            "bsdf_1": {"type": "roughconductor", "material": "V_palik",
+                                       "alpha_u": 0.2, "alpha_v": 0.04}}, 226.0),
+    ("f2-plastic-dark-glossy", {"type": "roughplastic", "distribution": "ggx", "alpha": 0.08,
+                                "diffuse_reflectance": {"type": "rgb",
+                                                        "value": [0.05, 0.05, 0.08]}}, 0.0),
 ]
 
 
@@ -170,13 +222,120 @@ def design(b: Basis, mix: float, importance: np.ndarray, seed: int = 0
     return np.asarray(d.cells), np.asarray(d.ph_lab)
 
 
+#: Where the second forced near-retro pair may sit (``--retro 2``): ``th`` in degrees; ``td``
+#: is the first pair's, ``pd`` any grid value (docs/notes/2026-11-27-retro-pair.md).
+RETRO_TH_DEG = np.arange(5.0, 36.0, 5.0)
+
+
+def _mounts(cells: np.ndarray, rig: RigConstraints) -> bool:
+    """Whether ``cells`` mount together under ``rig`` (the check ``posterior_design``'s greedy
+    makes at each step)."""
+    try:
+        place_pairs(cells, rig, ph_step_deg=1.0, orderings=4, seed=0)
+    except FeasibilityError:
+        return False
+    return True
+
+
+def _read(model: PriorModel, q: np.ndarray) -> PriorModel:
+    """``model`` after reading the pairs of basis rows ``q`` ((k, K)): each harmonic's
+    posterior, as the colour design's direct pairs condition it."""
+    P = np.stack([_posterior(Pm, q, s) for Pm, s in zip(model.P, model.pair_noise(q),
+                                                             strict=True)])
+    return replace(model, P=P)
+
+
+def retro_design(b: Basis, importance: np.ndarray, k: int, td_deg: float, n: int = 10,
+                 mix: float = 0.5, rig: RigConstraints | None = None
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """The study's design (docs/notes/2026-11-27-retro-pair.md): ``k`` forced near-retro
+    specular pairs, the other ``n - k`` by the shipped objective.
+
+    Pair 1 is ``(th, td, pd) = (0, td_deg, 0)``; with ``k = 2`` pair 2 is the best near-retro
+    cell (``th`` in :data:`RETRO_TH_DEG`, the same ``td``, any grid ``pd``) by the objective
+    after pair 1, among those that mount with it. The objective is ``posterior_design``'s with
+    ``cell_weight=importance, cell_mix=mix`` (the default's), its prior conditioned on the
+    forced pairs; the rest are chosen greedily (greedy seed 0) over ``rig``'s candidate cells,
+    each step only among cells that mount with the pairs so far.
+
+    Returns
+    -------
+    cells : (n, 3) radians, the forced pairs first
+    ph_lab : (n,) radians, from ``place_pairs(cells, rig, ph_step_deg=1, seed=0)``
+
+    Raises
+    ------
+    FeasibilityError
+        When the forced pairs, or the design, do not mount under ``rig``.
+    """
+    if k not in (1, 2):
+        raise ValueError(f"k must be 1 or 2, got {k}")
+    rig = RigConstraints() if rig is None else rig
+    td = np.deg2rad(td_deg)
+    model = prior_model(b, span_deg=bu.SPAN["design"])
+    model = replace(model, W=_mixed_gram(model, cell_gram(b, importance), mix))
+    forced = np.array([[0.0, td, 0.0]])
+    if not _mounts(forced, rig):
+        raise FeasibilityError(f"the retro pair (0, {td_deg:g}, 0) deg does not mount")
+    model = _read(model, b.rows_at(forced[:, 0], forced[:, 1], forced[:, 2]))
+    if k == 2:
+        th, pd = np.meshgrid(np.deg2rad(RETRO_TH_DEG), geo.PD_GRID, indexing="ij")
+        near = np.stack([th.ravel(), np.full(th.size, td), pd.ravel()], axis=1)
+        qn = b.rows_at(near[:, 0], near[:, 1], near[:, 2])
+        j = greedy_rows(model, qn, np.arange(near.shape[0]), 1,
+                        accept=lambda r: _mounts(np.concatenate([forced, near[r]]), rig))
+        forced = np.concatenate([forced, near[j]])
+        model = _read(model, qn[j])
+    rows = greedy_rows(model, b.Q, candidate_rows(rig, b.valid), n - k,
+                       accept=lambda r: _mounts(np.concatenate([forced, rows_to_cells(r)]), rig))
+    cells = np.concatenate([forced, rows_to_cells(rows)])
+    placement = place_pairs(cells, rig, ph_step_deg=1.0, seed=0)
+    return np.asarray(placement.cells), np.asarray(placement.ph_lab)
+
+
+def retro_cached(b: Basis, importance: np.ndarray, k: int, td_deg: float
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`retro_design`, cached by the default design's key plus the study's source."""
+    rig = RigConstraints()
+    study = hashlib.sha256((inspect.getsource(retro_design) + inspect.getsource(_read)
+                            + inspect.getsource(_mounts) + repr(RETRO_TH_DEG)).encode())
+    key = (design_key(b, 0.5, importance, 0, rig) + f"-retro{k}-td{td_deg:g}-"
+           + study.hexdigest()[:16])
+    path = bu.CACHE / f"flipdesign-{hashlib.sha256(key.encode()).hexdigest()[:16]}.npz"
+    if path.is_file():
+        with np.load(path) as z:
+            return z["cells"], z["ph_lab"]
+    cells, ph = retro_design(b, importance, k, td_deg)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    np.savez(path, cells=cells, ph_lab=ph)
+    return cells, ph
+
+
+#: Per-view HDR-FLIP of the last scan scored (``bu.flip_of`` is wrapped to record it).
+LAST_VIEWS: dict[str, list[float]] = {"views": []}
+
+
+def _flip_recording(table: Any, m: bu.Material) -> float:
+    """``bu.flip_of`` that also keeps the per-view values in :data:`LAST_VIEWS`."""
+    from gonio.brdf.pictures import appearance
+
+    res = appearance.standard_flip(bu.truth_images(m), appearance.render_appearance(table))
+    LAST_VIEWS["views"] = list(res.per_image)
+    return float(res.mean)
+
+
 def evaluate(mats: list[bu.Material], mixes: list[float], label: str,
-             seeds: tuple[int, ...] = (0,)) -> None:
+             seeds: tuple[int, ...] = (0,), retro: tuple[tuple[int, float], ...] = (),
+             presets_on: bool = True, save: str | None = None, limits: bool = False,
+             retro_add: tuple[float, ...] = ()) -> None:
     """Per material and in the mean: log_rmse / HDR-FLIP of every mix (each design seed) and
     every preset (not with several seeds: those compare designs, not presets)."""
     importance = render_importance()
-    presets = ({p: get_preset(p).cells() for p in preset_names()} if seeds == (0,) else {})
+    presets = ({p: get_preset(p).cells() for p in preset_names()}
+               if seeds == (0,) and presets_on else {})
     rows: dict[str, dict[str, bu.Score]] = {}
+    views: dict[str, dict[str, list[float]]] = {}
+    bu.flip_of = _flip_recording  # type: ignore[assignment]
     t0 = time.perf_counter()
     for m in mats:
         b = default_basis(exclude=m.exclude)
@@ -186,10 +345,43 @@ def evaluate(mats: list[bu.Material], mixes: list[float], label: str,
                 cells, ph = design(b, a, importance, ds)
                 row = f"gonio a={a:g}" + (f" seed {ds}" if ds else "")
                 rows.setdefault(row, {})[m.name] = bu.run_scan(b, m, cells, ph, 8, seed, "joint")
+                views.setdefault(row, {})[m.name] = LAST_VIEWS["views"]
+        for k, td in retro:
+            row = f"retro {k} td={td:g}"
+            try:
+                cells, ph = retro_cached(b, importance, k, td)
+            except FeasibilityError as exc:
+                print(f"  {row}: does not mount ({exc})", flush=True)
+                continue
+            if m is mats[0]:
+                print(f"  {row} pairs (th, td, pd deg): "
+                      + " ".join(f"({c[0]:.0f},{c[1]:g},{c[2]:.0f})" for c in np.rad2deg(cells)),
+                      flush=True)
+            rows.setdefault(row, {})[m.name] = bu.run_scan(b, m, cells, ph, 8, seed, "joint")
+            views.setdefault(row, {})[m.name] = LAST_VIEWS["views"]
+        for td in retro_add:  # diagnostic: the default's ten pairs plus (0, td, 0) as an 11th
+            row = f"a=0.5 + (0,{td:g},0)"
+            dc, _dph = design(b, 0.5, importance)
+            cells = np.concatenate([dc, [[0.0, np.deg2rad(td), 0.0]]])
+            ph = place_pairs(cells, RigConstraints(), ph_step_deg=1.0, seed=0).ph_lab
+            rows.setdefault(row, {})[m.name] = bu.run_scan(b, m, cells, ph, 8, seed, "joint")
+            views.setdefault(row, {})[m.name] = LAST_VIEWS["views"]
         for p, (pc, pph) in presets.items():
             rows.setdefault(p, {})[m.name] = bu.run_scan(b, m, pc, pph, 8, seed, "joint")
+            views.setdefault(p, {})[m.name] = LAST_VIEWS["views"]
+        if limits:  # what no design reaches: the basis' best fit, the truth on the grid
+            for row, table in (("basis ceiling", bu.ceiling(b, m.truth)), ("grid limit", m.truth)):
+                rows.setdefault(row, {})[m.name] = bu.score(table, m.truth, m=m)
+                views.setdefault(row, {})[m.name] = LAST_VIEWS["views"]
         print(f"  {m.name} ({time.perf_counter() - t0:.0f} s)", flush=True)
     order = list(rows)
+    if save:
+        Path(save).write_text(json.dumps(
+            {r: {m: {"kind": next(x.kind for x in mats if x.name == m),
+                     "log_rmse": s.log_rmse, "flip": s.flip,
+                     "views": views.get(r, {}).get(m, [])} for m, s in per.items()}
+             for r, per in rows.items()}, indent=1))
+        print(f"unrounded scores written to {save}")
     print(f"\n{label}: log_rmse / HDR-FLIP per material (lower is better)")
     print("| material | " + " | ".join(order) + " |")
     print("|---" * (1 + len(order)) + "|")
@@ -202,6 +394,16 @@ def evaluate(mats: list[bu.Material], mixes: list[float], label: str,
             print(f"| **mean {kind} ({len(ks)})** | " + " | ".join(
                 f"**{np.mean([rows[r][m.name].log_rmse for m in ks]):.4f} / "
                 f"{np.mean([rows[r][m.name].flip for m in ks]):.3f}**" for r in order) + " |")
+    print(f"| **mean all ({len(mats)})** | " + " | ".join(
+        f"**{np.mean([rows[r][m.name].log_rmse for m in mats]):.4f} / "
+        f"{np.mean([rows[r][m.name].flip for m in mats]):.3f}**" for r in order) + " |")
+    print("\nmean HDR-FLIP per standard view (lights 20, 55, 55, 70 deg from the view):")
+    for kind in ("measured", "aniso"):
+        ks = [m for m in mats if m.kind == kind]
+        for r in order:
+            if ks and all(m.name in views.get(r, {}) for m in ks):
+                v = np.mean([views[r][m.name] for m in ks], axis=0)
+                print(f"  {kind} ({len(ks)}) {r}: [" + " ".join(f"{x:.3f}" for x in v) + "]")
     if len(seeds) > 1:
         print("\nmean over the design seeds (log_rmse / HDR-FLIP):")
         for a in mixes:
@@ -217,36 +419,53 @@ def evaluate(mats: list[bu.Material], mixes: list[float], label: str,
         return
     print("\nwins against the best preset per material (log_rmse; HDR-FLIP), of "
           f"{len(mats)}:")
-    for a in mixes:
-        g = rows[f"gonio a={a:g}"]
+    for r in order:
+        if r in presets or r in ("basis ceiling", "grid limit"):
+            continue
+        g = rows[r]
         wl = sum(g[m.name].log_rmse < min(rows[p][m.name].log_rmse for p in presets)
                  for m in mats)
         wf = sum(g[m.name].flip < min(rows[p][m.name].flip for p in presets) for m in mats)
-        print(f"  a={a:g}: log_rmse {wl}, HDR-FLIP {wf}")
+        print(f"  {r}: log_rmse {wl}, HDR-FLIP {wf}")
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("stage", choices=["choose", "test", "fresh"])
+    ap.add_argument("stage", choices=["choose", "test", "fresh", "fresh2"])
     ap.add_argument("--mix", type=float, nargs="+", default=[0.0, 0.25, 0.5, 0.75, 1.0],
                     help="cell_mix values to compare (test: the chosen one; 0 is added)")
     ap.add_argument("--only", nargs="*", default=None, help="material names (exploring)")
     ap.add_argument("--seeds", type=int, nargs="+", default=[0],
                     help="design seeds (the greedy's first-pair rank) to average over; with "
                          "more than one, no preset rows (design-to-design spread)")
+    ap.add_argument("--retro", type=int, nargs="*", default=[], choices=[1, 2],
+                    help="forced near-retro specular pairs (retro-pair study, "
+                         "docs/notes/2026-11-27-retro-pair.md): each K runs with each --retro-td")
+    ap.add_argument("--retro-td", type=float, nargs="+", default=[10.0],
+                    help="td (degrees) of the forced pairs")
+    ap.add_argument("--no-presets", action="store_true", help="leave out the preset rows")
+    ap.add_argument("--retro-add", type=float, nargs="*", default=[],
+                    help="diagnostic rows: the default's ten pairs plus (0, TD, 0) as an 11th")
+    ap.add_argument("--limits", action="store_true",
+                    help="add the basis ceiling and the grid limit rows (no scan)")
+    ap.add_argument("--save", default=None, help="write the unrounded scores to this JSON file")
     args = ap.parse_args(argv)
     print(f"$ {' '.join(['python', *sys.argv])}")
     imp = render_importance()
     print(f"render importance: {imp.sum():.0f} pixel lookups on {(imp > 0).sum()} nodes, "
           f"{imp[geo.valid_mask()].sum() / imp.sum():.1%} on valid cells")
-    choice, test = material_sets()
     mixes = sorted(set([0.0, *args.mix]))
-    sets = {"choose": [("choice set", choice)], "test": [("test set", test)],
-            "fresh": [("fresh set", bu.aniso_materials(FRESH_FLIP))]}[args.stage]
-    for label, mats in sets:
+    # Built only for the stage asked for: a set's truth tables are made when it first runs.
+    make = {"choose": lambda: ("choice set", material_sets()[0]),
+            "test": lambda: ("test set", material_sets()[1]),
+            "fresh": lambda: ("fresh set", bu.aniso_materials(FRESH_FLIP)),
+            "fresh2": lambda: ("second fresh set", bu.aniso_materials(FRESH2_FLIP))}
+    for label, mats in [make[args.stage]()]:
         if args.only:
             mats = [m for m in mats if m.name in args.only]
-        evaluate(mats, mixes, label, tuple(args.seeds))
+        evaluate(mats, mixes, label, tuple(args.seeds),
+                 tuple((k, td) for k in args.retro for td in args.retro_td),
+                 not args.no_presets, args.save, args.limits, tuple(args.retro_add))
     return 0
 
 

@@ -77,3 +77,22 @@ def test_the_design_code_digest_follows_every_module_the_design_runs(
     assert edited != before
     (copy / "pictures" / "render.py").write_text("# outside what the design runs\n")
     assert bf.design_code_digest() == edited
+
+
+@pytest.mark.parametrize(("k", "td"), [(1, 10.0), (2, 12.5)])
+def test_the_retro_study_design_forces_its_pairs_first_and_mounts(
+        benches: tuple[ModuleType, ModuleType], k: int, td: float) -> None:
+    """The retro-pair study's design (docs/notes/2026-11-27-retro-pair.md): ``(0, td, 0)``
+    first, with two pairs a second at the same ``td`` and ``th`` in the study's range, ten
+    pairs in all, placed under the default rig."""
+    from gonio.brdf.design.placement import place_pairs
+
+    bf, _ = benches
+    b = small_basis()
+    cells, ph = bf.retro_design(b, np.ones((18, 18, 36)), k, td)
+    deg = np.rad2deg(cells)
+    assert cells.shape == (10, 3) and ph.shape == (10,)
+    assert np.allclose(deg[0], [0.0, td, 0.0])
+    if k == 2:
+        assert np.isclose(deg[1, 1], td) and 5.0 <= deg[1, 0] <= 35.0
+    place_pairs(cells, RigConstraints(), ph_step_deg=1.0, seed=0)  # raises if it cannot mount
