@@ -3,7 +3,7 @@
 Run from the project root (needs mitsuba and ``../shared/data/rgl``, like
 ``bench/bench_unseen.py``, whose materials, readings and designs it reuses)::
 
-    nice -n 5 .venv/bin/python bench/bench_adaptive.py [--gains 3e-5] [--starts 8 4]
+    nice -n 5 .venv/bin/python bench/bench_adaptive.py [--gains 2e-5] [--starts 8 4]
         [--max-rotations 16] [--set panel|wide|unseen|both] [--only measured|aniso]
         [--rel-gains 0.02 ...] [--candidates midpoints|quarters] [--seed 0]
         [--span 180] [--digits 4] [--drop predicted|expected]

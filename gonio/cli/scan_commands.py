@@ -72,7 +72,7 @@ def register(subparsers: Any) -> None:
                         "error to fall most) or vf (V&F's PCHIP midpoints)")
     p.add_argument("--min-gain", type=positive_float, default=None,
                    help="posterior rule: least drop of the self-estimated log_rmse a new "
-                        "stage angle must buy (default 0.00003)")
+                        "stage angle must buy (default 0.00002)")
     p.add_argument("--max-rotations", type=positive_int, default=None,
                    help="with --adaptive: most stage angles in all, the first round's included "
                         "(default 16 with the posterior rule, no cap with --rule vf)")

@@ -132,7 +132,7 @@ SpanDeg = Annotated[
 ]
 
 
-DEFAULT_MIN_GAIN = 3e-5
+DEFAULT_MIN_GAIN = 2e-5
 """Default ``min_gain`` of adaptive plans: ``gonio.brdf.reconstruction.posterior.REFINE_GAIN``
 (a test keeps the two equal; the plans do not import the numerical core for one number)."""
 DEFAULT_MAX_ROTATIONS = 16

@@ -348,7 +348,7 @@ function ruleText(id) {
   if (!d || d.id !== id || d.plan?.kind !== "adaptive") return "";
   const p = d.plan;
   const rule = p.rule ?? "posterior";
-  const setting = rule === "vf" ? `threshold e ${p.threshold ?? 0.1}` : `min gain ${p.min_gain ?? 3e-5}`;
+  const setting = rule === "vf" ? `threshold e ${p.threshold ?? 0.1}` : `min gain ${p.min_gain ?? 2e-5}`;
   const cap = p.max_rotations == null ? "" : ` up to ${p.max_rotations}`;
   const arc = p.arc === "auto" ? " over the arc its test chooses" : p.span_deg == null ? "" : ` over ${p.span_deg}°`;
   return ` · adaptive, ${rule} rule, ${setting}, from ${p.initial_rotations} angles${arc}${cap}`;

@@ -72,8 +72,9 @@ OFFSET_GRID: tuple[float, ...] = (0.0, *(float(v) for v in np.geomspace(1 / 64, 
 #: ``log_rmse`` one more stage angle must buy, as the engine's refiner calls
 #: :func:`next_angles` (the reconstruction's witnesses, ``offset=REFINE_OFFSET``; chosen on
 #: the wide held-out panel for scans over half a turn, ``bench/bench_adaptive.py --set wide
-#: --span 180``; docs/science.md 7.3).
-REFINE_GAIN = 3e-5
+#: --span 180``; re-chosen there on 2026-11-27 with the render-weighted design and the local
+#: priors, 3e-5 before; docs/science.md 7.3).
+REFINE_GAIN = 2e-5
 #: The planning posterior's per-pair offset in adaptive plans (:class:`ScanPosterior`'s
 #: ``offset``): sized by each scan's marginal likelihood.
 REFINE_OFFSET = "scan"

@@ -118,7 +118,7 @@ def test_start_angle_outside_a_turn_says_the_equivalent(daemon: Daemon) -> None:
 @pytest.mark.parametrize(("setting", "words"), [
     ('"rule": "bayes"', ["rule must be 'posterior'", "'vf'", "got 'bayes'"]),
     ('"rule": null', ["rule must be", "got None"]),
-    ('"min_gain": -0.001', ["min_gain", "> 0", "got -0.001", "default 3e-05",
+    ('"min_gain": -0.001', ["min_gain", "> 0", "got -0.001", "default 2e-05",
                             "larger stops refining sooner"]),
     ('"min_gain": 0', ["min_gain", "> 0", "got 0"]),
     ('"min_gain": "much"', ["valid number"]),

@@ -254,7 +254,7 @@ def test_an_adaptive_plan_from_the_page_sets_its_rule(daemon: Daemon, browser: A
     rule = Select(form.find_element(By.NAME, "rule"))
     # Defaults shown: the posterior rule and the calibrated min gain, with what they mean.
     assert rule.first_selected_option.get_attribute("value") == "posterior"
-    assert form.find_element(By.NAME, "min_gain").get_attribute("value") == "0.00003"
+    assert form.find_element(By.NAME, "min_gain").get_attribute("value") == "0.00002"
     help_text = browser.find_element(By.ID, "rule-help").text
     assert "min gain" in help_text and "threshold e" in help_text and "default" in help_text
     assert form.find_element(By.NAME, "initial_rotations").get_attribute("value") == "4"

@@ -41,7 +41,7 @@ def test_scan_keeps_its_specimen_names() -> None:
 def test_adaptive_scans_take_the_rule_and_its_defaults() -> None:
     plan = _parse("--adaptive")
     assert isinstance(plan, AdaptivePlan)
-    assert (plan.rule, plan.initial_rotations, plan.min_gain) == ("posterior", 4, 3e-5)
+    assert (plan.rule, plan.initial_rotations, plan.min_gain) == ("posterior", 4, 2e-5)
     vf = _parse("--adaptive", "--rule", "vf", "--threshold", "0.05")
     assert isinstance(vf, AdaptivePlan)
     assert (vf.rule, vf.initial_rotations, vf.threshold) == ("vf", 8, 0.05)
