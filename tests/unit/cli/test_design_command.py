@@ -234,6 +234,10 @@ def test_the_objective_is_chosen_and_reported(objective: str, basis_file: Path, 
 
         assert "weighted by the standard renderings at 0.5" in text
         assert frag["design"]["render_mix"] == 0.5
+        # Retro-reflection (light and view together, td near 0) is read only when some pair's
+        # difference angle, from the written lab directions, is below 15 degrees.
+        assert ("a retro-reflective specimen's lobe goes unread" in text) == bool(
+            np.degrees(td).min() >= 15.0 - 0.01), np.degrees(td)
         direct = posterior_design(basis, 5, RigConstraints(), rotations=12,
                                   cell_weight=render_importance(), cell_mix=0.5)
         written = np.stack([th, td, np.mod(pd, np.pi)], axis=1)
