@@ -245,13 +245,14 @@ def _render_mix(args: argparse.Namespace) -> dict[str, Any]:
 
 
 SINGULAR_KAPPA = 1e6
-#: A design whose pairs all sit at least this far from light and view together (their
-#: difference angle ``td``, degrees) reads no retro-reflection: the render-weighted default
-#: does so (the renderings see ``td`` only at 10, 27.5 and 35 degrees), and on held-out
-#: synthetic retro-reflectors it read +82 % ``log_rmse`` against the unweighted design, whose
-#: pairs reached ``td`` 5-10 (docs/notes/2026-11-27-wide-panel-rise.md).
-RETRO_TD_DEG = 15.0
 """Above this condition number the design gets an explanation of what makes it singular."""
+#: A render-weighted design whose pairs all sit at least this far from light and view
+#: together (their difference angle ``td``, degrees) reads a broad retro-reflective lobe
+#: poorly: the renderings see ``td`` only at 10, 27.5 and 35 degrees, and on the library's
+#: held-out synthetic retro-reflectors (broad lobes) the weighted default read +82 %
+#: ``log_rmse`` against the unweighted design, whose pairs reached ``td`` 5-10
+#: (docs/notes/2026-11-27-wide-panel-rise.md).
+RETRO_TD_DEG = 15.0
 
 
 def explain_condition(design: PairDesign, rotations: int,
@@ -422,10 +423,10 @@ def run(args: argparse.Namespace) -> int:
               "(--render-mix; docs/science.md 7.2.2)")
         closest = float(np.degrees(np.min(np.asarray(design.cells)[:, 1])))
         if closest >= RETRO_TD_DEG - 1e-6:
-            print(f"retro-reflection: no pair has light and view within {2 * closest:.0f} "
-                  f"degrees of each other (difference angle td >= {closest:.1f} degrees), so a "
-                  "retro-reflective specimen's lobe goes unread; for such specimens design "
-                  "with --render-mix 0 (docs/design.md)")
+            print(f"retro-reflection: the closest pair has light and view {2 * closest:.0f} "
+                  f"degrees apart (difference angle td {closest:.1f} degrees), so a broad "
+                  "retro-reflective lobe is read poorly; for such specimens try --render-mix "
+                  "0 (docs/design.md)")
     if args.basis is None and not args.no_expected_error and args.lights is None:
         if expected is None:
             from gonio.brdf.design.heldout import heldout_log_rmse

@@ -236,7 +236,7 @@ def test_the_objective_is_chosen_and_reported(objective: str, basis_file: Path, 
         assert frag["design"]["render_mix"] == 0.5
         # Retro-reflection (light and view together, td near 0) is read only when some pair's
         # difference angle, from the written lab directions, is below 15 degrees.
-        assert ("a retro-reflective specimen's lobe goes unread" in text) == bool(
+        assert ("broad retro-reflective lobe is read poorly" in text) == bool(
             np.degrees(td).min() >= 15.0 - 0.01), np.degrees(td)
         direct = posterior_design(basis, 5, RigConstraints(), rotations=12,
                                   cell_weight=render_importance(), cell_mix=0.5)
@@ -388,3 +388,31 @@ def test_render_mix_reaches_every_candidate_design(
     plain = design_pairs(basis, 5, RigConstraints(), seed=1)
     assert f"seed 1: kappa {mixed.kappa:.4g}," in out
     assert f"seed 1: kappa {plain.kappa:.4g}," not in out
+
+
+@pytest.mark.parametrize("margin_deg", [-1.0, 1.0])
+def test_the_retro_line_follows_the_closest_pairs_difference_angle(
+        margin_deg: float, basis_file: Path, tmp_path: Path,
+        capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    """Both sides of the threshold: with it just below the written design's smallest ``td``
+    (from the lab directions) the line is printed with that angle, just above it is not."""
+    from gonio.cli import design_command
+
+    out = tmp_path / "frag.toml"
+    assert main(["design", "--pairs", "5", "--basis", str(basis_file), *FAST,
+                 "-o", str(out)]) == 0
+    capsys.readouterr()
+    frag = tomllib.loads(out.read_text())
+    li = np.deg2rad([[d["theta_deg"], d["phi_deg"]] for d in frag["lights"]])
+    se = np.deg2rad([[d["theta_deg"], d["phi_deg"]] for d in frag["sensors"]])
+    _, _, td, _ = geo.directions_to_half_diff(geo.spherical_to_direction(li[:, 0], li[:, 1]),
+                                              geo.spherical_to_direction(se[:, 0], se[:, 1]))
+    closest = float(np.degrees(td).min())
+    monkeypatch.setattr(design_command, "RETRO_TD_DEG", closest + margin_deg)
+    assert main(["design", "--pairs", "5", "--basis", str(basis_file), *FAST]) == 0
+    text = capsys.readouterr().out
+    if margin_deg < 0:
+        assert f"difference angle td {closest:.1f} degrees" in text
+        assert "try --render-mix 0" in text
+    else:
+        assert "retro-reflection:" not in text
