@@ -387,11 +387,16 @@ def _cmd_library_import(args: argparse.Namespace) -> int:
         # (gonio.brdf.materials.rgl): say so where the lab looks, not only in the file.
         rec = BRDFTable.load(f).provenance.get("reciprocity")
         if isinstance(rec, dict) and rec.get("median_abs_log_ratio") is not None:
-            print(f"  the file is not reciprocal: |ln f(l, v) / f(v, l)| median "
-                  f"{rec['median_abs_log_ratio']:.3f}, 90th percentile "
-                  f"{rec['p90_abs_log_ratio']:.3f} over the grid; gonio's table assumes "
-                  "reciprocity, so a rendering of it differs from the file's on the mirrored "
-                  "half of each view (docs/science.md 7.0.1)")
+            line = (f"  reciprocity: f(l, v) and f(v, l) differ by a median factor of "
+                    f"{np.exp(rec['median_abs_log_ratio']):.2f} over the grid, by more than "
+                    f"{np.exp(rec['p90_abs_log_ratio']):.2f} in 1 cell of 10")
+            if rec.get("median_abs_log_ratio_below_80deg") is not None:
+                line += (f" ({np.exp(rec['median_abs_log_ratio_below_80deg']):.2f} and "
+                         f"{np.exp(rec['p90_abs_log_ratio_below_80deg']):.2f} with light and "
+                         "view within 80 degrees of the normal)")
+            print(line + "; gonio's table assumes they are equal, so a rendering of it can "
+                  "differ from the file's on the mirrored half of each view "
+                  "(docs/science.md 7.0.1)")
     print(f"{len(written)} table(s) in {user_library_dir()}; the default basis is rebuilt with "
           "them on next use (gonio scan, reconstruct, design, serve)")
     return 0

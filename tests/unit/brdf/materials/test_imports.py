@@ -193,8 +193,11 @@ def test_importing_an_rgl_file_reports_how_far_from_reciprocal_it_is(
     assert main(["library", "import", str(src)]) == 0
     out = capsys.readouterr().out
     rec = BRDFTable.load(measured.user_table_files()[0]).provenance["reciprocity"]
-    assert (f"not reciprocal: |ln f(l, v) / f(v, l)| median {rec['median_abs_log_ratio']:.3f}, "
-            f"90th percentile {rec['p90_abs_log_ratio']:.3f}") in out
+    # The recorded logarithms printed as factors, over the grid and over its steep part.
+    assert (f"differ by a median factor of {np.exp(rec['median_abs_log_ratio']):.2f} over the "
+            f"grid, by more than {np.exp(rec['p90_abs_log_ratio']):.2f} in 1 cell of 10") in out
+    assert (f"({np.exp(rec['median_abs_log_ratio_below_80deg']):.2f} and "
+            f"{np.exp(rec['p90_abs_log_ratio_below_80deg']):.2f} with light and view") in out
     assert "docs/science.md 7.0.1" in out
     # A gonio table carries no such record, and the import says nothing of it.
     vals = np.where(geo.valid_mask(), 0.3, np.nan)[None, None].repeat(3, 0).repeat(72, 1)
