@@ -62,7 +62,7 @@ import numpy as np
 
 import gonio.brdf
 from gonio.brdf.design.constraints import RigConstraints, candidate_rows, rows_to_cells
-from gonio.brdf.design.errors import FeasibilityError
+from gonio.brdf.design.errors import DesignError, FeasibilityError
 from gonio.brdf.design.placement import place_pairs
 from gonio.brdf.design.posterior import (
     PriorModel,
@@ -335,6 +335,7 @@ def evaluate(mats: list[bu.Material], mixes: list[float], label: str,
                if seeds == (0,) and presets_on else {})
     rows: dict[str, dict[str, bu.Score]] = {}
     views: dict[str, dict[str, list[float]]] = {}
+    flip_before = bu.flip_of
     bu.flip_of = _flip_recording  # type: ignore[assignment]
     t0 = time.perf_counter()
     for m in mats:
@@ -350,7 +351,7 @@ def evaluate(mats: list[bu.Material], mixes: list[float], label: str,
             row = f"retro {k} td={td:g}"
             try:
                 cells, ph = retro_cached(b, importance, k, td)
-            except FeasibilityError as exc:
+            except (FeasibilityError, DesignError) as exc:  # greedy_rows: DesignError
                 print(f"  {row}: does not mount ({exc})", flush=True)
                 continue
             if m is mats[0]:
@@ -363,7 +364,11 @@ def evaluate(mats: list[bu.Material], mixes: list[float], label: str,
             row = f"a=0.5 + (0,{td:g},0)"
             dc, _dph = design(b, 0.5, importance)
             cells = np.concatenate([dc, [[0.0, np.deg2rad(td), 0.0]]])
-            ph = place_pairs(cells, RigConstraints(), ph_step_deg=1.0, seed=0).ph_lab
+            try:
+                ph = place_pairs(cells, RigConstraints(), ph_step_deg=1.0, seed=0).ph_lab
+            except FeasibilityError as exc:
+                print(f"  {row}: does not mount ({exc})", flush=True)
+                continue
             rows.setdefault(row, {})[m.name] = bu.run_scan(b, m, cells, ph, 8, seed, "joint")
             views.setdefault(row, {})[m.name] = LAST_VIEWS["views"]
         for p, (pc, pph) in presets.items():
@@ -374,6 +379,7 @@ def evaluate(mats: list[bu.Material], mixes: list[float], label: str,
                 rows.setdefault(row, {})[m.name] = bu.score(table, m.truth, m=m)
                 views.setdefault(row, {})[m.name] = LAST_VIEWS["views"]
         print(f"  {m.name} ({time.perf_counter() - t0:.0f} s)", flush=True)
+    bu.flip_of = flip_before  # type: ignore[assignment]
     order = list(rows)
     if save:
         Path(save).write_text(json.dumps(
