@@ -95,21 +95,31 @@ def click_when_steady(wait: Any, css: str) -> None:
         ElementClickInterceptedException,
         NoSuchElementException,
         StaleElementReferenceException,
+        TimeoutException,
     )
     from selenium.webdriver.common.by import By
+
+    last: list[str] = []
 
     def attempt(browser: Any) -> bool:
         try:
             element = browser.find_element(By.CSS_SELECTOR, css)
             if not (element.is_displayed() and element.is_enabled()):
+                last[:] = [f"{css} is not shown and enabled"]
                 return False
             element.click()
         except (StaleElementReferenceException, NoSuchElementException,
-                ElementClickInterceptedException):
+                ElementClickInterceptedException) as exc:
+            last[:] = [f"{type(exc).__name__}: {exc.msg}"]
             return False
         return True
 
-    wait.until(attempt)
+    try:
+        wait.until(attempt)
+    except TimeoutException:
+        # Say why the click never landed (an overlay, a missing element), not only a timeout.
+        raise TimeoutException(f"could not click {css}: {last[-1] if last else 'no attempt'}"
+                               ) from None
 
 
 def test_start_a_scan_from_the_page_and_see_the_result(daemon: Daemon, browser: Any) -> None:

@@ -157,3 +157,13 @@ def test_pixel_masks_and_image_sets_that_do_not_fit_are_refused_with_a_reason() 
         appearance.standard_flip(small, small)
     with pytest.raises(render.RenderError, match="unknown view kind"):
         render.drawn_mask(render.View("cylinder"))
+
+
+def test_the_drawn_masks_are_the_pixels_the_renderer_draws() -> None:
+    """Against the renderer itself: ``render_view`` leaves NaN where it draws nothing."""
+    f = render.evaluator(bm.tabulate(PLASTIC, np.float64))
+    size = 48
+    for view in (*appearance.APPEARANCE_VIEWS, render.View("environment"),
+                 render.View("swatch", render.PointLight(30.0, 0.0))):
+        drawn = np.isfinite(render.render_view(f, view, size)).all(axis=-1)
+        np.testing.assert_array_equal(render.drawn_mask(view, size), drawn)
