@@ -77,10 +77,16 @@ class LocalPick:
     prior: FloatArray
 
 
+def blended_isotropic(P0: FloatArray, local: FloatArray, share: float = LOCAL_SHARE
+                      ) -> FloatArray:
+    """``(1 - share) P0 + share local``: the isotropic harmonic (K, K) leaning on ``local``."""
+    return (1.0 - share) * np.asarray(P0, dtype=float) + share * np.asarray(local, dtype=float)
+
+
 def blended_prior(P: FloatArray, local: FloatArray, share: float = LOCAL_SHARE) -> FloatArray:
     """The joint fit's prior ``P`` (M, K, K) with ``P_0`` blended with ``local`` (K, K)."""
     out = np.array(P, dtype=float)
-    out[0] = (1.0 - share) * out[0] + share * np.asarray(local, dtype=float)
+    out[0] = blended_isotropic(out[0], local, share)
     return out
 
 
@@ -140,7 +146,7 @@ def choose_local_prior(post: ScanPosterior, basis: Basis,
     needed = np.log(EVIDENCE) + np.log(len(basis.local_names))
     best: tuple[float, int] | None = None
     for g, local in enumerate(priors):
-        ll = post.log_marginal_isotropic((1.0 - share) * post.P[0] + share * local)
+        ll = post.log_marginal_isotropic(blended_isotropic(post.P[0], local, share))
         if np.isfinite(ll) and (ll - base) * per_rgb >= needed and (best is None
                                                                      or ll > best[0]):
             best = (ll, g)
