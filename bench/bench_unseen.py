@@ -379,11 +379,43 @@ def truth_images(m: Material) -> list[np.ndarray]:
 _TRUTH_IMAGES: dict[str, list[np.ndarray]] = {}
 
 
-def flip_of(table: BRDFTable, m: Material) -> float:
-    """Mean HDR-FLIP of ``table`` (rendered through gonio's lookup) against the truth."""
+def with_black_level(images: list[np.ndarray], level: float, peak: float) -> list[np.ndarray]:
+    """``images`` with ``level * peak`` added to every colour of the sphere's pixels (a floor
+    under the rendering, as a display's black or any real surface's faint body gives); the
+    background stays black. ``level`` is a fraction of ``peak``, the reference's brightest
+    pixel value (radiance units); 0 returns the images as they are."""
     from gonio.brdf.pictures import appearance
 
-    return appearance.standard_flip(truth_images(m), appearance.render_appearance(table)).mean
+    if level == 0:
+        return images
+    return [np.where(d[..., None], np.asarray(i) + level * peak, np.asarray(i))
+            for i, d in zip(images, appearance.drawn_masks(), strict=True)]
+
+
+def reference_quantiles(m: Material) -> np.ndarray:
+    """25th, 50th and 75th percentiles of the truth renderings' pixel luminance (mean of the
+    three colours) over the sphere's pixels of the four views, as fractions of the brightest
+    pixel value (dimensionless, shape (3,))."""
+    from gonio.brdf.pictures import appearance
+
+    ref = truth_images(m)
+    peak = max(float(np.nanmax(i)) for i in ref)
+    lum = np.concatenate([np.asarray(i).mean(axis=-1)[d]
+                          for i, d in zip(ref, appearance.drawn_masks(), strict=True)])
+    return np.asarray(np.percentile(lum / peak, [25, 50, 75]))
+
+
+def flip_of(table: BRDFTable, m: Material) -> float:
+    """Mean HDR-FLIP of ``table`` (rendered through gonio's lookup) against the truth; with
+    ``--black-level`` both renderings get that floor first (:func:`with_black_level`)."""
+    from gonio.brdf.pictures import appearance
+
+    ref, test = truth_images(m), appearance.render_appearance(table)
+    level = BLACK["level"]
+    if level:
+        peak = max(float(np.nanmax(i)) for i in ref)
+        ref, test = with_black_level(ref, level, peak), with_black_level(test, level, peak)
+    return appearance.standard_flip(ref, test).mean
 
 
 def score(rec_table: BRDFTable, truth: BRDFTable, rec: Any = None, readings: int = 0,
@@ -425,6 +457,9 @@ def calibrate(rows: dict[str, dict[str, Score]], mats: list[Material]) -> None:
 ETA: dict[str, float | None] = {"eta": None, "lam": None}
 #: Whether rows get the HDR-FLIP column (``--no-flip`` turns it off).
 FLIP: dict[str, bool] = {"on": True}
+#: ``--black-level``: a floor added to both renderings before HDR-FLIP, as a fraction of the
+#: reference's brightest pixel (0: the standard metric; a diagnostic, science.md 7).
+BLACK: dict[str, float] = {"level": 0.0}
 #: The representation's own limit: the truth tabulated on gonio's grid, rendered through
 #: gonio's lookup, against the truth rendered from mitsuba (log_rmse 0 by definition).
 LIMIT_ROW = "truth on gonio's grid (representation limit)"
@@ -539,9 +574,16 @@ def main(argv: list[str] | None = None) -> int:
                          "too (default_basis(asymmetric=True); science.md 7.4)")
     ap.add_argument("--no-flip", action="store_true",
                     help="leave out the HDR-FLIP columns (rendering costs about 1 s a row)")
+    ap.add_argument("--black-level", type=float, default=0.0, metavar="FRACTION",
+                    help="diagnostic: add this fraction of the reference's brightest pixel to "
+                         "the sphere's pixels of both renderings before HDR-FLIP (default 0, "
+                         "the standard metric; e.g. 1e-4, a 10,000:1 display)")
     ap.add_argument("--calibrate", action="store_true",
                     help="fit predicted_log_rmse's model on half the materials, check the rest")
     args = ap.parse_args(argv)
+    if not 0 <= args.black_level < 1:
+        ap.error(f"--black-level {args.black_level:g}: give a fraction of the brightest pixel "
+                 "in [0, 1), e.g. 1e-4")
     print(f"$ {' '.join(['python', *sys.argv])}")
     t0 = time.perf_counter()
     mats: list[Material] = []
@@ -560,6 +602,15 @@ def main(argv: list[str] | None = None) -> int:
     presets = {p: get_preset(p).cells() for p in preset_names()}
     ETA["eta"], ETA["lam"] = args.eta, args.lam
     FLIP["on"] = not args.no_flip
+    BLACK["level"] = args.black_level
+    if BLACK["level"] and FLIP["on"]:
+        print(f"\nHDR-FLIP with a floor of {BLACK['level']:g} x the reference's brightest pixel "
+              "added to both renderings (a diagnostic, science.md 7.0.2). The reference's "
+              "pixels over the sphere, as a fraction of its brightest (the floor hides what "
+              "lies below it):")
+        for m in mats:
+            q = reference_quantiles(m)
+            print(f"  {m.name}: 25th percentile {q[0]:.1e}, median {q[1]:.1e}, 75th {q[2]:.1e}")
     RHO["rho"], RHO["symmetry"] = args.rho, args.symmetry
     CHOOSE["k"] = args.choose
     CHOOSE["objective"] = args.design
