@@ -65,6 +65,7 @@ import numpy as np
 
 from gonio.brdf.design.presets import get_preset
 from gonio.brdf.reconstruction.basis import default_basis
+from gonio.brdf.reconstruction.localprior import out_of_plane_share
 from gonio.brdf.reconstruction.reconstruct import reconstruct
 from gonio.brdf.reconstruction.samples import DEFAULT_SPAN_DEG, uniform_stage_angles
 from gonio.brdf.reconstruction.selfcheck import (
@@ -73,6 +74,7 @@ from gonio.brdf.reconstruction.selfcheck import (
     UPPER_PERCENTILE,
     BasisMisfit,
     final_log_rmse,
+    in_plane_term,
     upper_factor_from,
     widen_log_rmse,
 )
@@ -113,7 +115,7 @@ PLANS: tuple[tuple[str, str, int], ...] = (
 #: The sets (module docstring): constants are fitted on "cal", forms are chosen on "choice",
 #: "test" is reported once, after every choice, and "fresh" holds specimens no round had
 #: seen before that report (:data:`FRESH`).
-SETS: tuple[str, ...] = ("cal", "choice", "test", "fresh")
+SETS: tuple[str, ...] = ("cal", "choice", "test", "fresh", "fresh3")
 
 #: Fresh mitsuba specimens ``(name, spec, holder angle in degrees, tilt in degrees, tilt
 #: azimuth in degrees)``: added after the test set's one report, scanned once with the mapping
@@ -165,13 +167,65 @@ FRESH: tuple[tuple[str, dict[str, Any], float, float, float], ...] = (
 )
 
 
-def fresh_materials() -> list[tuple[bu.Material, str]]:
-    """``(material, kind)`` of :data:`FRESH`: kind "fresh-tilted" for the normal-mapped ones."""
+#: A third set of fresh mitsuba specimens, written down on 2026-11-27 together with the
+#: in-plane candidate and its rule (:func:`in_plane_study`) and before any scan of them: the
+#: blind test of that candidate, scanned once. Glossy and anisotropic conductors (one below
+#: the library's roughest-smooth alpha 0.05), a black and two coloured rough plastics, a
+#: satin, an anisotropic gold and a clear-coated metallic principled material, two blends and
+#: a white diffuse, and two normal-mapped surfaces.
+FRESH3: tuple[tuple[str, dict[str, Any], float, float, float], ...] = (
+    ("f3-ag-u10-v30", {"type": "roughconductor", "material": "Ag", "distribution": "ggx",
+                       "alpha_u": 0.10, "alpha_v": 0.30}, 71.0, 0.0, 0.0),
+    ("f3-cr-r08", {"type": "roughconductor", "material": "Cr", "alpha": 0.08}, 0.0, 0.0, 0.0),
+    ("f3-au-u04-v12", {"type": "roughconductor", "material": "Au", "distribution": "ggx",
+                       "alpha_u": 0.04, "alpha_v": 0.12}, 203.0, 0.0, 0.0),
+    ("f3-al-r03", {"type": "roughconductor", "material": "Al", "distribution": "ggx",
+                   "alpha": 0.03}, 0.0, 0.0, 0.0),
+    ("f3-cu-r12", {"type": "roughconductor", "material": "Cu", "distribution": "ggx",
+                   "alpha": 0.12}, 0.0, 0.0, 0.0),
+    ("f3-black-plastic-r08", {"type": "roughplastic", "alpha": 0.08, "diffuse_reflectance": {
+        "type": "rgb", "value": [0.03, 0.03, 0.03]}}, 0.0, 0.0, 0.0),
+    ("f3-yellow-plastic-r15", {"type": "roughplastic", "alpha": 0.15, "diffuse_reflectance": {
+        "type": "rgb", "value": [0.7, 0.6, 0.1]}}, 0.0, 0.0, 0.0),
+    ("f3-grey-plastic-r60", {"type": "roughplastic", "alpha": 0.6, "diffuse_reflectance": {
+        "type": "rgb", "value": [0.4, 0.4, 0.4]}}, 0.0, 0.0, 0.0),
+    ("f3-satin", {"type": "principled", "roughness": 0.45, "specular": 0.3, "sheen": 0.5,
+                  "base_color": {"type": "rgb", "value": [0.2, 0.4, 0.7]}}, 33.0, 0.0, 0.0),
+    ("f3-brushed-gold", {"type": "principled", "metallic": 1.0, "roughness": 0.25,
+                         "anisotropic": 0.9, "base_color": {
+                             "type": "rgb", "value": [0.9, 0.7, 0.3]}}, 148.0, 0.0, 0.0),
+    ("f3-clearcoat-blue-metallic", {"type": "principled", "metallic": 0.7, "roughness": 0.4,
+                                    "clearcoat": 1.0, "clearcoat_gloss": 0.95, "base_color": {
+                                        "type": "rgb", "value": [0.1, 0.2, 0.6]}},
+     0.0, 0.0, 0.0),
+    ("f3-blend-diffuse-au", {"type": "blendbsdf", "weight": 0.4,
+                             "bsdf_0": {"type": "diffuse", "reflectance": {
+                                 "type": "rgb", "value": [0.6, 0.6, 0.55]}},
+                             "bsdf_1": {"type": "roughconductor", "material": "Au",
+                                        "alpha": 0.05}}, 0.0, 0.0, 0.0),
+    ("f3-blend-brushed-ag", {"type": "blendbsdf", "weight": 0.5,
+                             "bsdf_0": {"type": "diffuse", "reflectance": {
+                                 "type": "rgb", "value": [0.1, 0.1, 0.3]}},
+                             "bsdf_1": {"type": "roughconductor", "material": "Ag",
+                                        "alpha_u": 0.05, "alpha_v": 0.25}}, 256.0, 0.0, 0.0),
+    ("f3-diffuse-white", {"type": "diffuse", "reflectance": {
+        "type": "rgb", "value": [0.85, 0.85, 0.85]}}, 0.0, 0.0, 0.0),
+    ("f3-tilt-ag-t20", {"type": "roughconductor", "material": "Ag", "alpha": 0.15},
+     40.0, 20.0, 200.0),
+    ("f3-tilt-red-plastic-t10", {"type": "roughplastic", "alpha": 0.2, "diffuse_reflectance": {
+        "type": "rgb", "value": [0.6, 0.1, 0.1]}}, 12.0, 10.0, 300.0),
+)
+
+
+def fresh_materials(specimens: tuple[tuple[str, dict[str, Any], float, float, float], ...]
+                    = FRESH, kind: str = "fresh") -> list[tuple[bu.Material, str]]:
+    """``(material, kind)`` of ``specimens`` (:data:`FRESH` by default): kind ``kind``, or
+    ``kind + "-tilted"`` for the normal-mapped ones."""
     out = []
-    for name, inner, holder, tilt, azimuth in FRESH:
+    for name, inner, holder, tilt, azimuth in specimens:
         spec = ba.normalmap_spec(tilt, azimuth, inner) if tilt else inner
         m = ba.specimen(name, spec, holder, repr((inner, holder, tilt, azimuth)))
-        out.append((m, "fresh-tilted" if tilt else "fresh"))
+        out.append((m, f"{kind}-tilted" if tilt else kind))
     return out
 
 
@@ -208,6 +262,7 @@ def materials() -> list[tuple[bu.Material, str, str]]:
             for i, m in enumerate(ba.asym_materials(tilted=False))]
     out += [(m, "library-asym", "cal") for m in library_asymmetric()]
     out += [(m, kind, "fresh") for m, kind in fresh_materials()]
+    out += [(m, kind, "fresh3") for m, kind in fresh_materials(FRESH3, "fresh3")]
     return out
 
 
@@ -274,6 +329,7 @@ def scans(witnesses: bool = False) -> list[dict[str, Any]]:
                 "angle_log_max": float(np.nanmax(angle_err)),
                 "pair_log_max": float(np.nanmax(pair_err)),
                 "rho": float(rec.settings.get("prior_rho", float("nan"))),
+                "out_of_plane": out_of_plane_share(cells),
                 "reason": rec.misfit_warning,
                 **(rec.misfit.as_dict() if rec.misfit is not None else {}),
             })
@@ -341,6 +397,7 @@ def table(rows: list[dict[str, Any]]) -> None:
               ("test untilted", lambda r: r["set"] == "test" and r["kind"] == "untilted"),
               ("fresh", lambda r: r["set"] == "fresh"),
               ("fresh tilted", lambda r: r["kind"] == "fresh-tilted"),
+              ("fresh3", lambda r: r["set"] == "fresh3"),
               ("all", lambda r: True))
 
     def count(key: str, s: list[dict[str, Any]]) -> str:
@@ -410,6 +467,84 @@ def upper_factor_table(rows: list[dict[str, Any]]) -> None:
                                         else f"DIFFERS by {cal[flagged] - shipped:+.2f}"))
 
 
+#: The in-plane candidate's coefficients tried on the calibration set (:func:`in_plane_study`).
+IN_PLANE_GRID: tuple[float, ...] = tuple(round(0.05 * i, 2) for i in range(31))
+
+
+def in_plane_candidate(row: dict[str, Any], k: float) -> float:
+    """The shipped final mapping of a row plus the in-plane term with coefficient ``k``
+    (:func:`gonio.brdf.reconstruction.selfcheck.in_plane_term`; ``log_rmse`` units)."""
+    term = in_plane_term(1.0 - row["out_of_plane"], row["cv_log_error"], k)
+    return final_log_rmse(row["unwidened"], row["uncovered"], row_misfit(row), in_plane=term)
+
+
+def _counts(sel: list[dict[str, Any]], estimate: Callable[[dict[str, Any]], float]
+            ) -> tuple[int, int, int]:
+    """(within x2, more than 2x low, scans) of ``estimate`` over ``sel``."""
+    q = np.array([estimate(r) / r["truth"] for r in sel])
+    return int(np.sum((q >= 0.5) & (q <= 2.0))), int(np.sum(q < 0.5)), int(q.size)
+
+
+def in_plane_study(rows: list[dict[str, Any]]) -> float | None:
+    """The in-plane candidate (issue 23 item 4), its protocol written before any of its sets
+    was scanned for it (2026-11-27; science.md 7.1.1): returns the chosen coefficient, or None
+    when the rows lack what it needs.
+
+    * **Form.** The shipped final mapping with ``in_plane_term(s_in, cv_log_error, k)`` added
+      as a variance beside the coverage term, ``s_in`` the share of the pairs reading in the
+      plane of incidence (1 for MA68, 11/19 for MA98, 0.1 for the default design).
+    * **Fit (calibration set only).** ``k`` over :data:`IN_PLANE_GRID`: the fewest scans more
+      than 2x low, then the most within x2, then the smallest ``k``.
+    * **Choice set.** Adopted when it leaves no more choice scans more than 2x low than the
+      shipped mapping and at most one fewer within x2.
+    * **Test, fresh, fresh3.** Printed once for both mappings. The test and fresh sets' MA98
+      rows were looked at before the form was written down, so only :data:`FRESH3` is blind;
+      the candidate ships only if it also leaves no more fresh3 scans more than 2x low.
+    """
+    if any("out_of_plane" not in r for r in rows):
+        print("\nin-plane candidate: the rows lack out_of_plane (written by an older bench); "
+              "rerun without --rows")
+        return None
+    cal = [r for r in rows if r["set"] == "cal"]
+    print("\n#### The in-plane candidate (science.md 7.1.1)\n")
+    print("| k | calibration within x2 | more than 2x low |")
+    print("|---|---|---|")
+    best: tuple[int, int, float] | None = None
+    for k in IN_PLANE_GRID:
+        w, lo, n = _counts(cal, lambda r, k=k: in_plane_candidate(r, k))
+        print(f"| {k:.2f} | {w}/{n} | {lo} |")
+        key = (lo, -w, k)
+        if best is None or key < best:
+            best = key
+    assert best is not None
+    k = best[2]
+    print(f"\nchosen on the calibration set: k = {k:.2f}\n")
+    print("| set | plan | shipped: within x2 / more than 2x low | candidate |")
+    print("|---|---|---|---|")
+    verdict: dict[str, tuple[tuple[int, int, int], tuple[int, int, int]]] = {}
+    for which in SETS:
+        sel_set = [r for r in rows if r["set"] == which]
+        if not sel_set:
+            continue
+        for label in [pl[0] for pl in PLANS] + ["every plan"]:
+            sel = [r for r in sel_set if label == "every plan" or r["plan"] == label]
+            a = _counts(sel, lambda r: r["widened"])
+            b = _counts(sel, lambda r: in_plane_candidate(r, k))
+            print(f"| {which} | {label} | {a[0]}/{a[2]} / {a[1]} | {b[0]}/{b[2]} / {b[1]} |")
+            if label == "every plan":
+                verdict[which] = (a, b)
+    if "choice" in verdict:
+        (aw, al, _), (bw, bl, _) = verdict["choice"]
+        adopted = bl <= al and bw >= aw - 1
+        print(f"\nchoice rule: {'adopted' if adopted else 'not adopted'} (choice: shipped "
+              f"{aw} within x2 / {al} low, candidate {bw} / {bl})")
+        if adopted and "fresh3" in verdict:
+            (_, fl, _), (_, gl, _) = verdict["fresh3"]
+            print(f"fresh3 guard: {'passed' if gl <= fl else 'FAILED'} (more than 2x low: "
+                  f"shipped {fl}, candidate {gl})")
+    return k
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     ap.add_argument("--rows", type=Path, default=None,
@@ -428,6 +563,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.rows is not None:
             args.rows.write_text(json.dumps(rows))
     table(rows)
+    in_plane_study(rows)
     print(f"total {time.perf_counter() - t0:.0f} s")
     return 0
 
