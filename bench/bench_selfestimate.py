@@ -31,7 +31,9 @@ Split (:func:`which_set`), three sets:
   candidate forms of the mapping were compared on it, and one was chosen;
 * **test**: the measured materials at positions 3, 7 and the specimens at odd positions,
   reported once, after the choice (a specimen and its untilted version are in the same set);
-* **fresh**: sixteen mitsuba specimens (:data:`FRESH`) added after that report, scanned once.
+* **fresh**: sixteen mitsuba specimens (:data:`FRESH`) added after that report, scanned once;
+* **fresh3**: sixteen more (:data:`FRESH3`), written down with the in-plane candidate
+  (:func:`in_plane_study`) before any scan of them: that candidate's blind set.
 
 Before this round the choice and test sets were one validation set, whose numbers earlier
 rounds printed while comparing forms; the test and fresh sets then decided whether the refit
@@ -44,9 +46,10 @@ estimate, its ratio, within x2, more than 2x too low, the coverage
 witness ``uncovered``, the misfit witness and whether the result carries the ``basis_misfit``
 reason), then the shares within x2, the counts more than 2x low and the lowest ratio per set
 and plan for both, how often the truth is above the interval's upper end, the scans
-flagged per set and plan, and what the scans more than 2x low show (their misfit; with
-``--witnesses`` also their standardised leave-one-pair-out error). Results: docs/science.md
-7.1.1.
+flagged per set and plan, what the scans more than 2x low show (their misfit; with
+``--witnesses`` also their standardised leave-one-pair-out error), and the in-plane
+candidate's fit, choice and one report (:func:`in_plane_study`, not adopted). Results:
+docs/science.md 7.1.1.
 """
 
 from __future__ import annotations
@@ -74,7 +77,6 @@ from gonio.brdf.reconstruction.selfcheck import (
     UPPER_PERCENTILE,
     BasisMisfit,
     final_log_rmse,
-    in_plane_term,
     upper_factor_from,
     widen_log_rmse,
 )
@@ -467,13 +469,46 @@ def upper_factor_table(rows: list[dict[str, Any]]) -> None:
                                         else f"DIFFERS by {cal[flagged] - shipped:+.2f}"))
 
 
+def in_plane_term(in_plane_share: float, cv_log_error: float,
+                  scale: float) -> float:
+    """What a layout in the plane of incidence cannot show: ``scale s_in cv_log_error``.
+
+    A pair whose light and sensor lie in one plane through the normal reads one slice of each
+    ``(th, td)`` profile; when most pairs do (the instrument presets), every other plane of the
+    table is the prior's guess, and the posterior's own variance (``expected``) takes that guess
+    as the library's average. How badly the pairs predict each other when one is left out
+    (``cv_log_error``, the leave-one-pair-out RMS log error of the readings) is then the one
+    witness the readings give of how far the specimen is from that average.
+
+    Parameters
+    ----------
+    in_plane_share : float
+        Share of the pairs reading in the plane of incidence, 0..1 (1 minus
+        :func:`gonio.brdf.reconstruction.localprior.out_of_plane_share`).
+    cv_log_error : float
+        Leave-one-pair-out RMS log error (dimensionless, natural log); NaN (no pair could be
+        left out) gives 0.
+    scale : float
+        The term's coefficient (dimensionless).
+
+    Returns
+    -------
+    float
+        ``log_rmse`` units, >= 0.
+    """
+    s, c = float(in_plane_share), float(cv_log_error)
+    if not (np.isfinite(s) and np.isfinite(c)) or scale == 0:
+        return 0.0
+    return float(scale * min(max(s, 0.0), 1.0) * max(c, 0.0))
+
+
 #: The in-plane candidate's coefficients tried on the calibration set (:func:`in_plane_study`).
 IN_PLANE_GRID: tuple[float, ...] = tuple(round(0.05 * i, 2) for i in range(31))
 
 
 def in_plane_candidate(row: dict[str, Any], k: float) -> float:
     """The shipped final mapping of a row plus the in-plane term with coefficient ``k``
-    (:func:`gonio.brdf.reconstruction.selfcheck.in_plane_term`; ``log_rmse`` units)."""
+    (:func:`in_plane_term`; ``log_rmse`` units)."""
     term = in_plane_term(1.0 - row["out_of_plane"], row["cv_log_error"], k)
     return final_log_rmse(row["unwidened"], row["uncovered"], row_misfit(row), in_plane=term)
 

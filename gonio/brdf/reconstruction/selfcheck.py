@@ -360,10 +360,6 @@ FINAL_COVERAGE_SCALE: float = 0.19
 #: ``bench/bench_selfestimate.py`` but lost on its test and fresh sets, so these stay
 #: (docs/science.md 7.1.1).
 FINAL_FLAGGED_FACTOR: float = 0.6
-#: Coefficient of the in-plane term ``FINAL_IN_PLANE_SCALE s_in cv_log_error``
-#: (dimensionless; :func:`in_plane_term`), ``s_in`` the share of the pairs that read in the
-#: plane of incidence. 0: not used (docs/science.md 7.1.1 says how it was weighed).
-FINAL_IN_PLANE_SCALE: float = 0.0
 #: Factor from :func:`final_log_rmse` to the upper end of its interval for a scan whose fit
 #: holds its readings (:func:`upper_log_rmse`): the 98th percentile of ``true / predicted``
 #: over the 95 such calibration scans of ``bench/bench_selfestimate.py`` (3.325, rounded up);
@@ -406,39 +402,6 @@ def upper_factor_from(ratios: npt.ArrayLike) -> tuple[float, float]:
     return q, float(np.ceil(q * 100.0 - 1e-9) / 100.0)
 
 
-def in_plane_term(in_plane_share: float, cv_log_error: float,
-                  scale: float = FINAL_IN_PLANE_SCALE) -> float:
-    """What a layout in the plane of incidence cannot show: ``scale s_in cv_log_error``.
-
-    A pair whose light and sensor lie in one plane through the normal reads one slice of each
-    ``(th, td)`` profile; when most pairs do (the instrument presets), every other plane of the
-    table is the prior's guess, and the posterior's own variance (``expected``) takes that guess
-    as the library's average. How badly the pairs predict each other when one is left out
-    (``cv_log_error``, the leave-one-pair-out RMS log error of the readings) is then the one
-    witness the readings give of how far the specimen is from that average.
-
-    Parameters
-    ----------
-    in_plane_share : float
-        Share of the pairs reading in the plane of incidence, 0..1 (1 minus
-        :func:`gonio.brdf.reconstruction.localprior.out_of_plane_share`).
-    cv_log_error : float
-        Leave-one-pair-out RMS log error (dimensionless, natural log); NaN (no pair could be
-        left out) gives 0.
-    scale : float
-        The term's coefficient (:data:`FINAL_IN_PLANE_SCALE` by default).
-
-    Returns
-    -------
-    float
-        ``log_rmse`` units, >= 0.
-    """
-    s, c = float(in_plane_share), float(cv_log_error)
-    if not (np.isfinite(s) and np.isfinite(c)) or scale == 0:
-        return 0.0
-    return float(scale * min(max(s, 0.0), 1.0) * max(c, 0.0))
-
-
 def final_log_rmse(predicted: float, uncovered: float, misfit: BasisMisfit, *,
                    predicted_factor: float = FINAL_PREDICTED_FACTOR,
                    coverage_scale: float = FINAL_COVERAGE_SCALE,
@@ -479,8 +442,10 @@ def final_log_rmse(predicted: float, uncovered: float, misfit: BasisMisfit, *,
         mappings on the same scans (``bench/bench_selfestimate.py``'s rejected refit), so
         the formula has one owner.
     in_plane : float, optional
-        :func:`in_plane_term` of the scan (``log_rmse`` units), added as a variance beside the
-        coverage term; 0 by default.
+        A further term (``log_rmse`` units) added as a variance beside the coverage term; 0,
+        the shipped mapping, by default. For a bench's candidate mapping
+        (``bench/bench_selfestimate.py``'s in-plane candidate, not adopted: docs/science.md
+        7.1.1).
 
     Returns
     -------

@@ -31,7 +31,6 @@ from gonio.brdf.reconstruction.selfcheck import (
     BasisMisfit,
     basis_misfit,
     final_log_rmse,
-    in_plane_term,
     upper_factor_from,
     upper_log_rmse,
     widen_log_rmse,
@@ -211,21 +210,15 @@ def test_the_final_mapping_takes_other_constants_as_keywords() -> None:
     assert final_log_rmse(0.01, 0.0, flagged, **other) == pytest.approx(0.12)
 
 
-def test_the_in_plane_term_is_the_share_times_the_leave_one_pair_out_error() -> None:
-    """``k s_in cv_log_error``, the share clipped to 0..1, and a missing error adds nothing;
-    the term adds to the estimate as a variance beside the coverage term."""
-    assert in_plane_term(0.5, 0.4, 0.8) == pytest.approx(0.16)
-    assert in_plane_term(1.7, 0.4, 0.8) == pytest.approx(0.32)
-    assert in_plane_term(-0.2, 0.4, 0.8) == 0.0
-    assert in_plane_term(1.0, float("nan"), 0.8) == 0.0
-    assert in_plane_term(1.0, 0.4, 0.0) == 0.0
+def test_a_further_term_adds_as_a_variance_under_the_misfit_floor() -> None:
+    """A bench's candidate term (``in_plane``) adds to the estimate as a variance beside the
+    coverage term, and a flagged scan's misfit floor stays a floor under the sum."""
     quiet = BasisMisfit(chi2=0.5, log_misfit=0.0, persistent_pairs=0, n_pairs=10, n_angles=8)
     flagged = BasisMisfit(chi2=400.0, log_misfit=0.12, persistent_pairs=3, n_pairs=10,
                           n_angles=8)
     # sqrt((0.61 * 0.05)^2 + 0.19^2 * 0.04 + 0.16^2)
     assert final_log_rmse(0.05, 0.04, quiet, in_plane=0.16) == pytest.approx(
         math.sqrt(0.0305**2 + 0.038**2 + 0.16**2))
-    # Flagged: the misfit floor stays a floor under the sum.
     assert final_log_rmse(0.01, 0.0, flagged, in_plane=0.05) == pytest.approx(0.12)
     assert final_log_rmse(0.01, 0.0, flagged, in_plane=0.3) == pytest.approx(
         math.hypot(0.006, 0.3))
