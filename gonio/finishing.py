@@ -287,7 +287,9 @@ def finish_job(job_id: int, plan: AnyPlan | CheckedPlan, how: Finishing) -> dict
     # use them, and a failed job would hide both (docs/science.md 7.6).
     physical = physical_bounds(rec.table, grid.values, bool(cal.pairs))
     metrics.update(worst_directional_albedo=physical.as_dict()["worst_albedo"],
-                   peak_to_reading_ratio=physical.as_dict()["peak_ratio"])
+                   peak_to_reading_ratio=physical.as_dict()["peak_ratio"],
+                   # predicted_log_rmse is never below this (science.md 7.5)
+                   peak_excess_log_rmse=physical.as_dict()["peak_excess_log_rmse"])
     bounds_message = physical.message()
     if bounds_message is not None:
         metrics["physical_bounds"] = bounds_message

@@ -32,5 +32,5 @@ def test_the_term_is_the_share_times_the_leave_one_pair_out_error(bench: ModuleT
 
 def test_the_grid_and_the_fresh_set_are_as_written_down(bench: ModuleType) -> None:
     assert bench.IN_PLANE_GRID[0] == 0.0 and bench.IN_PLANE_GRID[-1] == pytest.approx(1.5)
-    assert len(bench.FRESH3) == 16
-    assert not {n for n, *_ in bench.FRESH3} & {n for n, *_ in bench.FRESH}
+    assert len(bench.FRESH_INPLANE) == 16
+    assert not {n for n, *_ in bench.FRESH_INPLANE} & {n for n, *_ in bench.FRESH}

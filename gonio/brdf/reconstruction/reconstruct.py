@@ -98,6 +98,7 @@ from gonio.brdf.reconstruction.selfcheck import (
 )
 from gonio.brdf.reconstruction.tabulate import expand_table
 from gonio.brdf.tables import geometry as geo
+from gonio.brdf.tables.bounds import peak_excess_log_rmse
 from gonio.brdf.tables.table import TH0_ROWS, VALID_MASK, BRDFTable
 
 FloatArray = NDArray[np.float64]
@@ -201,6 +202,11 @@ class Reconstruction:
         (:func:`gonio.brdf.reconstruction.selfcheck.upper_log_rmse`, ``log_rmse`` units): the
         true error of a held-out material was below it on 98 % of the calibration scans;
         ``predicted_log_rmse`` stays the central value.
+    peak_excess_log_rmse : float
+        The error the table carries above the physical peak bound, ``PEAK_RATIO_LIMIT`` times
+        the largest reading (:func:`gonio.brdf.tables.bounds.peak_excess_log_rmse`,
+        ``log_rmse`` units; 0 when nothing is above it). A lower bound of the true error for
+        any material within that bound, so ``predicted_log_rmse`` is never below it.
     """
 
     table: BRDFTable
@@ -220,6 +226,7 @@ class Reconstruction:
     predicted_log_rmse_unwidened: float = float("nan")
     uncovered_share: float = float("nan")
     predicted_log_rmse_upper: float = float("nan")
+    peak_excess_log_rmse: float = 0.0
 
     @property
     def misfit_warning(self) -> str | None:
@@ -818,13 +825,18 @@ def _reconstruct(
         # and, when the basis cannot hold the readings (residuals well above the noise that
         # stay across the angles), a floor at the error the readings themselves show.
         widened = final_log_rmse(predicted, uncovered, misfit)
-        upper = upper_log_rmse(widened, misfit)
     else:
         expected = mahal = uncovered = float("nan")
         predicted = predict_vf_log_rmse(cv, n, int(alpha.size))
         # V&F's path: never below the error the readings themselves show.
         widened = widen_log_rmse(predicted, misfit)
-        upper = float("nan")  # the interval was calibrated on the joint fit only
+    # Never below the error the table carries above the physical peak bound: a lower bound of
+    # the true error for any material within it (gonio.brdf.tables.bounds; science.md 7.5).
+    excess = peak_excess_log_rmse(table, vals)
+    if np.isfinite(excess) and np.isfinite(widened) and excess > widened:
+        widened = excess
+    upper = (upper_log_rmse(widened, misfit) if estimate_post is not None and np.isfinite(cv)
+             else float("nan"))  # the interval was calibrated on the joint fit only
     seconds = time.perf_counter() - t0
     return Reconstruction(
         table=table,
@@ -851,6 +863,7 @@ def _reconstruct(
         misfit=misfit,
         uncovered_share=uncovered,
         predicted_log_rmse_upper=upper,
+        peak_excess_log_rmse=float(excess) if np.isfinite(excess) else 0.0,
     )
 
 

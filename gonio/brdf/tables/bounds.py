@@ -15,6 +15,12 @@ truth:
   was fitted to. A reconstruction may legitimately peak above every reading (a narrow highlight
   falls between the pairs), but not by orders of magnitude.
 
+Where a table exceeds the peak bound, :func:`peak_excess_log_rmse` says how much error that
+part alone carries: the ``log_rmse`` between the table and itself capped at the bound. For any
+truth within the bound it is a lower bound of the table's true ``log_rmse`` (in every cell
+above the cap the truth is at or below it, and ``ln(1 + f cos ti)`` grows with ``f``), so a
+reconstruction's self-estimate is never reported below it (``predicted_log_rmse``).
+
 :func:`bounds_check` returns both with a verdict against :data:`ALBEDO_LIMIT` and
 :data:`PEAK_RATIO_LIMIT` (their docstrings say why those values).
 """
@@ -111,6 +117,40 @@ def directional_albedo(table: BRDFTable,
     return alb.reshape(ti.size, pi.size, -1)
 
 
+def peak_excess_log_rmse(table: BRDFTable, readings: Any) -> float:
+    """``log_rmse`` of ``table`` against itself capped at :data:`PEAK_RATIO_LIMIT` times the
+    largest reading (module docstring): 0 when no cell is above the cap.
+
+    For a truth whose values stay within that cap this is a lower bound of the table's true
+    ``log_rmse``: in every cell above the cap the truth is at or below it, so the cell's log
+    difference is at least the one to the cap, and the other cells add nothing negative.
+
+    Parameters
+    ----------
+    table : BRDFTable
+        The reconstruction (its units, 1/sr or sensor units).
+    readings : array_like
+        The readings it was fitted to, same units (any shape; NaN ignored).
+
+    Returns
+    -------
+    float
+        ``log_rmse`` units (dimensionless), >= 0; NaN when no reading is positive.
+    """
+    from gonio.brdf.tables import metrics
+
+    r = np.asarray(readings, dtype=float)
+    r = r[np.isfinite(r)]
+    if not r.size or not r.max() > 0:
+        return float("nan")
+    cap = PEAK_RATIO_LIMIT * float(r.max())
+    vals = np.asarray(table.values, dtype=float)
+    if not np.nanmax(vals) > cap:  # the common case: nothing above the bound, no metric pass
+        return 0.0
+    capped = BRDFTable.trusted(np.minimum(vals, cap), table.channels, table.name)
+    return float(metrics.log_rmse(table, capped))
+
+
 @dataclass(frozen=True)
 class BoundsCheck:
     """Whether a reconstruction is a possible material (module docstring).
@@ -128,6 +168,9 @@ class BoundsCheck:
         Largest reading the reconstruction was fitted to (same units); NaN when unknown.
     peak_ratio : float
         ``table_max / reading_max``; NaN when ``reading_max`` is not positive.
+    peak_excess_log_rmse : float
+        :func:`peak_excess_log_rmse` of the table (``log_rmse`` units; 0 within the bound, NaN
+        when not computed).
     """
 
     worst_albedo: float
@@ -135,6 +178,7 @@ class BoundsCheck:
     table_max: float
     reading_max: float
     peak_ratio: float
+    peak_excess_log_rmse: float = float("nan")
 
     @property
     def albedo_exceeded(self) -> bool:
@@ -161,8 +205,13 @@ class BoundsCheck:
                        f"above {ALBEDO_LIMIT:g} (a surface cannot reflect more light than falls "
                        "on it)")
         if self.peak_exceeded:
+            excess = ""
+            if np.isfinite(self.peak_excess_log_rmse) and self.peak_excess_log_rmse > 0:
+                excess = (f"; what lies above that bound alone is {self.peak_excess_log_rmse:.3g} "
+                          "in log_rmse, so predicted_log_rmse is at least that")
             why.append(f"its maximum {self.table_max:.3g} is {self.peak_ratio:.3g} times the "
-                       f"largest reading ({self.reading_max:.3g}), above {PEAK_RATIO_LIMIT:g}")
+                       f"largest reading ({self.reading_max:.3g}), above {PEAK_RATIO_LIMIT:g}"
+                       + excess)
         return ("the reconstruction is outside physical bounds: " + "; ".join(why)
                 + ". The readings do not determine the BRDF where it blows up: add stage "
                 "angles or pairs, check the specimen's alignment and the calibration, and "
@@ -176,7 +225,8 @@ class BoundsCheck:
             "ok": self.ok, "worst_albedo": num(self.worst_albedo),
             "worst_incidence_deg": list(self.worst_incidence_deg),
             "table_max": num(self.table_max), "reading_max": num(self.reading_max),
-            "peak_ratio": num(self.peak_ratio), "albedo_limit": ALBEDO_LIMIT,
+            "peak_ratio": num(self.peak_ratio),
+            "peak_excess_log_rmse": num(self.peak_excess_log_rmse), "albedo_limit": ALBEDO_LIMIT,
             "peak_ratio_limit": PEAK_RATIO_LIMIT, "message": self.message(),
         }
 
@@ -213,4 +263,5 @@ def bounds_check(table: BRDFTable, readings: Any = None, *, calibrated: bool = T
         k = np.unravel_index(int(np.argmax(alb)), alb.shape)
         worst = float(alb[k])
         where = (INCIDENCE_DEG[k[0]], INCIDENCE_AZIMUTH_DEG[k[1]])
-    return BoundsCheck(worst, where, table_max, reading_max, ratio)
+    excess = peak_excess_log_rmse(table, readings) if readings is not None else float("nan")
+    return BoundsCheck(worst, where, table_max, reading_max, ratio, excess)

@@ -10,7 +10,9 @@ import numpy as np
 import pytest
 
 from gonio.brdf.models import analytic as bm
-from gonio.brdf.tables.bounds import ALBEDO_LIMIT, directional_albedo
+from gonio.brdf.tables.bounds import ALBEDO_LIMIT, PEAK_RATIO_LIMIT, directional_albedo
+from gonio.brdf.tables.metrics import log_rmse
+from gonio.brdf.tables.table import BRDFTable
 from gonio.cli import main
 from gonio.results import read_result
 from gonio.store import JobStore
@@ -45,6 +47,17 @@ def test_a_scan_whose_reconstruction_blows_up_says_why(
     assert res.metrics["worst_directional_albedo"] > ALBEDO_LIMIT
     assert "albedo (off the mirror direction) reaches" in str(res.metrics["physical_bounds"])
     assert res.provenance["physical_bounds"] == res.metrics["physical_bounds"]
+    # The self-estimate is never below the error the table carries above the peak bound, which
+    # is checked here against its definition on the result's own table and readings.
+    readings = np.asarray(res.samples.to_samples().values, dtype=float)
+    cap = PEAK_RATIO_LIMIT * float(np.nanmax(readings))
+    values = np.asarray(res.table.values, dtype=float)
+    assert np.nanmax(values) > cap
+    excess = log_rmse(res.table, BRDFTable.trusted(np.minimum(values, cap), res.table.channels,
+                                                   "capped"))
+    assert res.metrics["peak_excess_log_rmse"] == pytest.approx(excess, rel=1e-6)
+    assert res.metrics["predicted_log_rmse"] >= excess
+    assert "so predicted_log_rmse is at least that" in str(res.metrics["physical_bounds"])
     store = JobStore(data / "gonio.sqlite", durable=False)
     job = store.get_job(2)  # job 1 is the simulated rig's white-reference calibration
     assert job.state.value == "completed" and job.summary is not None

@@ -67,3 +67,40 @@ def test_a_table_far_above_every_reading_is_out_of_bounds_even_in_sensor_units()
     assert check.peak_ratio == pytest.approx(2.3e13 / 0.75, rel=1e-6)
     assert check.peak_exceeded and not check.ok
     assert "times the largest reading" in (check.message() or "")
+
+
+def test_the_error_above_the_peak_bound_is_a_lower_bound_for_any_truth_within_it() -> None:
+    """``peak_excess_log_rmse`` is the log_rmse of the table against itself capped at
+    PEAK_RATIO_LIMIT x the largest reading; any truth at or below the cap where the table is
+    above it is at least that far from the table (ln(1 + f cos ti) grows with f)."""
+    from gonio.brdf.tables import metrics
+
+    base = np.asarray(_lambert(0.5).values)
+    v = base.copy()
+    cells = [(3, 4, 5, 6), (10, 2, 3, 4), (40, 6, 1, 20)]
+    for ph, th, td, pd in cells:
+        v[:, ph, th, td, pd] = [1e6, 3e5, 2e7]
+    table = BRDFTable(v, ("R", "G", "B"), "blown up")
+    readings = np.array([0.1, 0.75, np.nan])
+    cap = bounds.PEAK_RATIO_LIMIT * 0.75
+    excess = bounds.peak_excess_log_rmse(table, readings)
+    assert excess > 0
+    # Equality: the truth equals the cap where the table is above it, the table elsewhere.
+    at_cap = BRDFTable(np.minimum(v, cap), table.channels, "at the cap")
+    assert excess == pytest.approx(metrics.log_rmse(table, at_cap), rel=1e-12)
+    # Any truth within the bound is at least that far from the table.
+    rng = np.random.default_rng(5)
+    for _ in range(5):
+        t = base * rng.uniform(0.5, 2.0, base.shape)
+        for ph, th, td, pd in cells:
+            t[:, ph, th, td, pd] = rng.uniform(0.0, cap, 3)
+        truth = BRDFTable(t, table.channels, "a truth within the bound")
+        assert metrics.log_rmse(table, truth) >= excess
+    # Within the bound: nothing; no positive reading: undefined.
+    assert bounds.peak_excess_log_rmse(_lambert(0.5), [0.2]) == 0.0
+    assert math.isnan(bounds.peak_excess_log_rmse(table, [0.0, np.nan]))
+    check = bounds.bounds_check(table, readings, calibrated=False)
+    assert check.peak_excess_log_rmse == pytest.approx(excess)
+    assert check.as_dict()["peak_excess_log_rmse"] == pytest.approx(excess)
+    assert f"alone is {excess:.3g} in log_rmse, so predicted_log_rmse is at least that" in (
+        check.message() or "")
