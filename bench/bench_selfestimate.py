@@ -264,7 +264,8 @@ def materials() -> list[tuple[bu.Material, str, str]]:
             for i, m in enumerate(ba.asym_materials(tilted=False))]
     out += [(m, "library-asym", "cal") for m in library_asymmetric()]
     out += [(m, kind, "fresh") for m, kind in fresh_materials()]
-    out += [(m, kind, "fresh-inplane") for m, kind in fresh_materials(FRESH_INPLANE, "fresh-inplane")]
+    out += [(m, kind, "fresh-inplane")
+            for m, kind in fresh_materials(FRESH_INPLANE, "fresh-inplane")]
     return out
 
 
