@@ -429,8 +429,13 @@ def run(args: argparse.Namespace) -> int:
                   "0 (docs/design.md)")
     if args.basis is None and not args.no_expected_error and args.lights is None:
         if expected is None:
-            from gonio.brdf.design.heldout import heldout_log_rmse
+            from gonio.brdf.design.heldout import heldout_log_rmse, panel_is_cached
 
+            if not panel_is_cached():
+                # The first run builds the held-out panel: say why it is quiet for a while.
+                print("expected error: building the held-out panel's bases from the training "
+                      "library (first use only; about half a minute and 3.5 GB of memory; "
+                      "--no-expected-error skips it)", file=sys.stderr, flush=True)
             expected = heldout_log_rmse(design.cells, design.ph_lab, args.rotations,
                                          span_deg=args.span)
         print(f"expected log_rmse on held-out materials at {args.rotations} rotations over "

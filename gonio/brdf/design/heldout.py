@@ -18,6 +18,7 @@ default basis, so the numbers are estimates for "a material like these", not gua
 from __future__ import annotations
 
 import functools
+from pathlib import Path
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -74,14 +75,29 @@ def _synthetic_panel_names() -> list[str]:
     return names
 
 
+def panel_basis_path() -> Path:
+    """Cache file of the held-out panel's synthetic basis (the training library without the
+    panel's synthetic materials), under the library's cache root."""
+    from gonio.brdf.materials import library
+
+    return (library.cache_root() / "basis"
+            / f"panel-K{DEFAULT_COMPONENTS + _FOLD_EXTRA}-{library.library_key()[:16]}.npz")
+
+
+def panel_is_cached() -> bool:
+    """Whether the panel's basis is cached: when it is not, the first
+    :func:`heldout_log_rmse` tabulates the training library and builds it (about half a minute
+    and 3.5 GB of memory on a 2-core machine, once)."""
+    return panel_basis_path().is_file()
+
+
 @functools.cache
 def _panel() -> tuple[Basis, list[BRDFTable], list[tuple[BRDFTable, Basis]]]:
     """(panel basis, held-out synthetic tables, [(measured table, basis without it)])."""
     from gonio.brdf.materials import library, measured
 
     held = _synthetic_panel_names()
-    path = (library.cache_root() / "basis"
-            / f"panel-K{DEFAULT_COMPONENTS + _FOLD_EXTRA}-{library.library_key()[:16]}.npz")
+    path = panel_basis_path()
     if path.is_file():
         base = Basis.load(path)
     else:
