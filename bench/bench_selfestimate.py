@@ -96,12 +96,21 @@ def row_misfit(row: dict[str, Any]) -> BasisMisfit:
                        n_pairs=int(row["n"]), n_angles=int(row["r"]))
 
 
+def peak_floor(row: dict[str, Any]) -> float:
+    """The floor every estimate has under it (``reconstruct``: the error above the physical
+    peak bound, science.md 7.5); 0 for rows written before it or without a positive reading."""
+    v = float(row.get("peak_excess", 0.0))
+    return v if np.isfinite(v) else 0.0
+
+
 def refit_candidate(row: dict[str, Any]) -> float:
     """The rejected refit's ``predicted_log_rmse`` of a row (:data:`REFIT_CANDIDATE`): the
-    shipped final mapping with the refit's constants."""
+    shipped final mapping with the refit's constants, under the same floor as the shipped
+    estimate."""
     k, c, kf = REFIT_CANDIDATE
-    return final_log_rmse(row["unwidened"], row["uncovered"], row_misfit(row),
-                          predicted_factor=k, coverage_scale=c, flagged_factor=kf)
+    return max(final_log_rmse(row["unwidened"], row["uncovered"], row_misfit(row),
+                              predicted_factor=k, coverage_scale=c, flagged_factor=kf),
+               peak_floor(row))
 
 
 #: ``(label, design, r)``: ``design`` is "posterior" (the default 10-pair design) or a preset.
@@ -515,7 +524,7 @@ def in_plane_candidate(row: dict[str, Any], k: float) -> float:
     # Under the same floor as the shipped estimate (reconstruct: the error above the peak
     # bound; rows written before it have none).
     return max(final_log_rmse(row["unwidened"], row["uncovered"], row_misfit(row),
-                              in_plane=term), float(row.get("peak_excess", 0.0)))
+                              in_plane=term), peak_floor(row))
 
 
 def _counts(sel: list[dict[str, Any]], estimate: Callable[[dict[str, Any]], float]

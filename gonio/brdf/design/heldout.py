@@ -18,9 +18,9 @@ default basis, so the numbers are estimates for "a material like these", not gua
 from __future__ import annotations
 
 import functools
-from pathlib import Path
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray

@@ -205,8 +205,10 @@ class Reconstruction:
     peak_excess_log_rmse : float
         The error the table carries above the physical peak bound, ``PEAK_RATIO_LIMIT`` times
         the largest reading (:func:`gonio.brdf.tables.bounds.peak_excess_log_rmse`,
-        ``log_rmse`` units; 0 when nothing is above it). A lower bound of the true error for
-        any material within that bound, so ``predicted_log_rmse`` is never below it.
+        ``log_rmse`` units; 0 when nothing is above it, NaN without a positive reading). A
+        lower bound of the true error for any material within that bound (an assumption a
+        polished specimen no pair reads near its mirror direction can break: docs/science.md
+        7.5), so ``predicted_log_rmse`` is never below it.
     """
 
     table: BRDFTable
@@ -226,7 +228,7 @@ class Reconstruction:
     predicted_log_rmse_unwidened: float = float("nan")
     uncovered_share: float = float("nan")
     predicted_log_rmse_upper: float = float("nan")
-    peak_excess_log_rmse: float = 0.0
+    peak_excess_log_rmse: float = float("nan")
 
     @property
     def misfit_warning(self) -> str | None:
@@ -863,7 +865,7 @@ def _reconstruct(
         misfit=misfit,
         uncovered_share=uncovered,
         predicted_log_rmse_upper=upper,
-        peak_excess_log_rmse=float(excess) if np.isfinite(excess) else 0.0,
+        peak_excess_log_rmse=float(excess),
     )
 
 

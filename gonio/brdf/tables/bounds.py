@@ -143,12 +143,7 @@ def peak_excess_log_rmse(table: BRDFTable, readings: Any) -> float:
     r = r[np.isfinite(r)]
     if not r.size or not r.max() > 0:
         return float("nan")
-    cap = PEAK_RATIO_LIMIT * float(r.max())
-    vals = np.asarray(table.values, dtype=float)
-    if not np.nanmax(vals) > cap:  # the common case: nothing above the bound, no metric pass
-        return 0.0
-    capped = BRDFTable.trusted(np.minimum(vals, cap), table.channels, table.name)
-    return float(metrics.log_rmse(table, capped))
+    return metrics.log_rmse_to_cap(table, PEAK_RATIO_LIMIT * float(r.max()))
 
 
 @dataclass(frozen=True)
@@ -231,8 +226,8 @@ class BoundsCheck:
         }
 
 
-def bounds_check(table: BRDFTable, readings: Any = None, *, calibrated: bool = True
-                 ) -> BoundsCheck:
+def bounds_check(table: BRDFTable, readings: Any = None, *, calibrated: bool = True,
+                 peak_excess: float | None = None) -> BoundsCheck:
     """Directional albedo and peak ratio of ``table`` against the readings it was fitted to.
 
     Parameters
@@ -243,6 +238,9 @@ def bounds_check(table: BRDFTable, readings: Any = None, *, calibrated: bool = T
     calibrated : bool
         The table is in 1/sr. False (sensor units): the albedo is not compared with 1 (it is
         left NaN); the peak ratio still applies, being unit-free.
+    peak_excess : float, optional
+        :func:`peak_excess_log_rmse` of this table and these readings when the caller has it
+        already (a reconstruction's ``peak_excess_log_rmse``); computed when omitted.
 
     Returns
     -------
@@ -263,5 +261,7 @@ def bounds_check(table: BRDFTable, readings: Any = None, *, calibrated: bool = T
         k = np.unravel_index(int(np.argmax(alb)), alb.shape)
         worst = float(alb[k])
         where = (INCIDENCE_DEG[k[0]], INCIDENCE_AZIMUTH_DEG[k[1]])
-    excess = peak_excess_log_rmse(table, readings) if readings is not None else float("nan")
+    excess = (float(peak_excess) if peak_excess is not None
+              else peak_excess_log_rmse(table, readings) if readings is not None
+              else float("nan"))
     return BoundsCheck(worst, where, table_max, reading_max, ratio, excess)

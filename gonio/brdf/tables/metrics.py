@@ -105,6 +105,40 @@ def log_rmse(f_hat: TableLike, f_ref: TableLike) -> float:
     return float(np.sqrt(np.sum(w * (x - y) ** 2) / np.sum(w)))
 
 
+def log_rmse_to_cap(f: TableLike, cap: float) -> float:
+    """:func:`log_rmse` of a table against itself capped at ``cap``, ``min(f, cap)``, without
+    building the capped copy: only the cells above ``cap`` add to the sum, over the weights of
+    every finite valid cell (the cells the full metric would compare).
+
+    Parameters
+    ----------
+    f : BRDFTable or (C, 72, 18, 18, 36) array, 1/sr (or any unit: the metric is not
+        unit-free, ``ln(1 + f cos ti)``)
+    cap : float
+        The cap, in ``f``'s units.
+
+    Returns
+    -------
+    float, dimensionless; 0 when no finite value is above ``cap``.
+    """
+    v = _values(f, "table")
+    mask = geo.valid_mask()
+    valid = v[:, :, mask]  # (C, 72, valid cells), the stored dtype: no float64 copy of it all
+    finite = np.isfinite(valid)
+    if not finite.any():
+        raise MetricError("the table has no finite valid cell")
+    wv = geo.volume_weight()[mask]
+    total = float(np.sum(finite.sum(axis=(0, 1)) * wv))
+    above = finite & (valid > cap)
+    if not above.any():
+        return 0.0
+    _, _, cell = np.nonzero(above)
+    x = np.asarray(valid[above], dtype=np.float64)
+    c = _cos_ti()[mask][cell]
+    d = np.log1p(x * c) - np.log1p(float(cap) * c)
+    return float(np.sqrt(np.sum(wv[cell] * d * d) / total))
+
+
 def log_psnr(f_hat: TableLike, f_ref: TableLike) -> float:
     """Log-domain PSNR in dB (higher is better).
 

@@ -75,3 +75,30 @@ def test_mismatched_inputs_are_clear_errors() -> None:
         metrics.log_rmse(constant(0.2, 3), constant(0.2, 1))
     with pytest.raises(metrics.MetricError, match="expected"):
         metrics.psnr(np.zeros((3, 10)), constant(0.2))
+
+
+def test_log_rmse_to_a_cap_is_the_metric_against_the_capped_table() -> None:
+    """One cell above the cap: the weighted squared log difference of that cell over the
+    weights of every finite valid cell, written out from the metric's definition; and the
+    same as log_rmse against the capped copy on a table with several cells above it and
+    unmeasured (NaN) cells."""
+    mask = geo.valid_mask()
+    v = np.full((3, *geo.TABLE_SHAPE), 0.1)
+    th, td, pd = (int(i[0]) for i in np.nonzero(mask))
+    v[0, 5, th, td, pd] = 1e6
+    wv = geo.volume_weight()
+    ci, _ = geo.cell_cosines(*geo.grid_angles())
+    c = ci[th, td, pd]
+    num = wv[th, td, pd] * (np.log(1 + 1e6 * c) - np.log(1 + 100.0 * c)) ** 2
+    den = 3 * 72 * wv[mask].sum()
+    assert metrics.log_rmse_to_cap(v, 100.0) == pytest.approx(np.sqrt(num / den), rel=1e-12)
+    rng = np.random.default_rng(11)
+    w = rng.uniform(0.0, 50.0, v.shape)
+    w[:, :, mask] = np.where(rng.random(w[:, :, mask].shape) < 0.01, 5e3, w[:, :, mask])
+    w[1, 7] = np.nan  # an unmeasured slice: left out of both
+    capped = np.minimum(w, 200.0)
+    assert metrics.log_rmse_to_cap(w, 200.0) == pytest.approx(metrics.log_rmse(w, capped),
+                                                               rel=1e-12)
+    assert metrics.log_rmse_to_cap(w, 1e4) == 0.0
+    with pytest.raises(metrics.MetricError, match="no finite valid cell"):
+        metrics.log_rmse_to_cap(np.full_like(v, np.nan), 1.0)
