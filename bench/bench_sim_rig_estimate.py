@@ -14,9 +14,12 @@ and the result's ``predicted_log_rmse`` is set beside the true ``log_rmse`` of i
 against the specimen's table (mitsuba on gonio's grid: the same table the simulated rig reads,
 so the readings carry no lookup error of their own). Printed per specimen: the true error, the
 estimate and its ratio, the upper end of its interval, the error above the physical peak bound
-(``peak_excess_log_rmse``, under which the estimate never goes: docs/science.md 7.5) and
-whether the result is outside physical bounds; then the share within x2, the scans more than
-2x too low and those above the upper end. Results: docs/science.md 7.5. About 8 s a specimen.
+(``peak_excess_log_rmse``, under which the estimate never goes: docs/science.md 7.5),
+whether the result is outside physical bounds, and the floor's premise: the truth's own peak
+over the largest reading (the floor is a lower bound of the error only while that stays within
+``PEAK_RATIO_LIMIT``) and the floor a perfect table, the truth itself, would get; then the
+share within x2, the scans more than 2x too low, those above the upper end and the specimens
+that break the premise. Results: docs/science.md 7.5. About 8 s a specimen.
 """
 
 from __future__ import annotations
@@ -33,6 +36,7 @@ import bench_selfestimate as bs  # sibling bench (the script's folder is on sys.
 import numpy as np
 
 from gonio.brdf.tables import metrics
+from gonio.brdf.tables.bounds import PEAK_RATIO_LIMIT, peak_excess_log_rmse
 from gonio.cli import main as gonio_main
 from gonio.results import read_result
 
@@ -61,9 +65,10 @@ def main(argv: list[str] | None = None) -> int:
     for name in args.set:
         print(f"\n#### {name}\n")
         print("| specimen | true log_rmse | predicted | ratio | upper | above the peak bound | "
-              "outside physical bounds |")
-        print("|---|---|---|---|---|---|---|")
-        ratios, above = [], 0
+              "outside physical bounds | truth's peak / largest reading | the floor of the "
+              "truth itself |")
+        print("|---|---|---|---|---|---|---|---|---|")
+        ratios, above, premise_broken = [], 0, 0
         with tempfile.TemporaryDirectory(prefix="gonio-sim-rig-") as tmp:
             work = Path(tmp)
             for m, _kind in bs.fresh_materials(SETS[name], name):
@@ -79,12 +84,20 @@ def main(argv: list[str] | None = None) -> int:
                 q = p / true
                 ratios.append(q)
                 above += int(true > up)
+                # The floor's premise: the truth within PEAK_RATIO_LIMIT x the largest reading.
+                readings = np.asarray(res.samples.to_samples().values, dtype=float)
+                truth_ratio = float(np.nanmax(np.asarray(m.truth.values))) / float(
+                    np.nanmax(readings))
+                truth_floor = peak_excess_log_rmse(m.truth, readings)
+                premise_broken += int(truth_ratio > PEAK_RATIO_LIMIT)
                 print(f"| {m.name} | {true:.4f} | {p:.4f} | x{q:.2f} | {up:.4f} | "
                       f"{float(met.get('peak_excess_log_rmse') or 0.0):.4f} | "
-                      f"{'yes' if met.get('physical_bounds') else ''} |", flush=True)
+                      f"{'yes' if met.get('physical_bounds') else ''} | {truth_ratio:.3g} | "
+                      f"{truth_floor:.4f} |", flush=True)
         r = np.asarray(ratios)
         print(f"\n{name}: within x2 {int(np.sum((r >= 0.5) & (r <= 2)))} of {r.size}, more than "
-              f"2x low {int(np.sum(r < 0.5))}, true above the upper end {above}")
+              f"2x low {int(np.sum(r < 0.5))}, true above the upper end {above}; the truth "
+              f"itself above the peak bound on {premise_broken} (the floor's premise broken)")
     print(f"\ntotal {time.perf_counter() - t0:.0f} s")
     return 0
 

@@ -237,7 +237,10 @@ class Reconstruction:
         :meth:`~gonio.brdf.reconstruction.selfcheck.BasisMisfit.message`)."""
         if self.misfit is None:
             return None
-        return self.misfit.message(self.predicted_log_rmse_unwidened, self.predicted_log_rmse)
+        floored = bool(np.isfinite(self.peak_excess_log_rmse) and self.peak_excess_log_rmse > 0
+                       and self.predicted_log_rmse == self.peak_excess_log_rmse)
+        return self.misfit.message(self.predicted_log_rmse_unwidened, self.predicted_log_rmse,
+                                   floored)
 
 
 # ---------------------------------------------------------------------------- geometry helper

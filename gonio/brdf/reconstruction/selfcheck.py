@@ -250,19 +250,25 @@ class BasisMisfit:
                 "misfit_persistent_pairs": self.persistent_pairs}
 
     @staticmethod
-    def _widened(before: float, after: float) -> str:
+    def _widened(before: float, after: float, floored: bool = False) -> str:
         """What the widening did to the estimate, in words."""
+        if floored:
+            return (f"is {after:.3f}, the error the table carries above the physical peak bound "
+                    "(physical_bounds), which covers that misfit")
         if after > before:
             return f"was widened from {before:.3f} to {after:.3f}"
         return f"{after:.3f} already covers that misfit"
 
-    def message(self, before: float, after: float) -> str | None:
+    def message(self, before: float, after: float, floored: bool = False) -> str | None:
         """What the misfit means and what it did to the estimate (None when not flagged).
 
         Parameters
         ----------
         before, after : float
             The estimate without and with the widening (``log_rmse`` units).
+        floored : bool
+            ``after`` is the floor at the physical peak bound
+            (:func:`gonio.brdf.tables.bounds.peak_excess_log_rmse`), not the misfit's doing.
         """
         if not self.flagged:
             return None
@@ -271,7 +277,8 @@ class BasisMisfit:
                 f"RMS {np.sqrt(self.chi2):.1f} times the readings' noise, taken as "
                 f"{100 * MISFIT_NOISE:g} %), the same way across the stage angles on "
                 f"{self.persistent_pairs} of {self.n_pairs} pairs; predicted_log_rmse "
-                f"{self._widened(before, after)}. The material is unlike the training library: "
+                f"{self._widened(before, after, floored)}. The material is unlike the training "
+                "library: "
                 "expect the error where no pair looks to be at least this large; a basis "
                 "trained on similar materials, or more pairs, would do better")
 

@@ -79,3 +79,17 @@ def test_the_vf_path_has_the_same_floor_and_no_interval(scan: tuple) -> None:
     assert excess > before
     assert rec.predicted_log_rmse == pytest.approx(excess, rel=1e-9)
     assert math.isnan(rec.predicted_log_rmse_upper)
+
+
+
+def test_a_misfit_message_names_the_floor_when_the_floor_set_the_estimate() -> None:
+    """The misfit's message says the estimate is the peak-bound floor, not that the misfit
+    widened it."""
+    from gonio.brdf.reconstruction.selfcheck import BasisMisfit
+
+    flagged = BasisMisfit(chi2=400.0, log_misfit=0.12, persistent_pairs=3, n_pairs=10,
+                          n_angles=8)
+    text = flagged.message(0.05, 0.4, floored=True) or ""
+    assert "is 0.400, the error the table carries above the physical peak bound" in text
+    assert "was widened from" not in text
+    assert "was widened from 0.050 to 0.400" in (flagged.message(0.05, 0.4) or "")
