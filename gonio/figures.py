@@ -234,9 +234,9 @@ def _headline(metrics: dict[str, Any]) -> dict[str, Any] | None:
                        "(cosine-weighted, Löw et al. 2012): 0 is a perfect match, lower is "
                        "better. It adds what the readings leave undetermined to how far the "
                        "material sits from the training library; on materials held out of "
-                       "the library it was within a factor of 2 of the truth on about 3 "
-                       "scans in 5 (81 of 130 test and fresh scans) and more than 2 times "
-                       "too low on about 1 in 30 (4 of 130), all read with the MA98 preset "
+                       "the library it was within a factor of 2 of the truth on about 2 "
+                       "scans in 3 (139 of 210 test and fresh scans) and more than 2 times "
+                       "too low on about 1 in 35 (6 of 210), all read with the MA98 preset "
                        "(docs/science.md 7.1.1).",
         }
     v = metrics.get("predicted_error")
