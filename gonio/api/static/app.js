@@ -185,7 +185,20 @@ function progressOf(job) {
   return { value: done, max, text: `${done} of ≤${max} angles${round}` };
 }
 
+// What removing a job loses, asked before it is done (DELETE /jobs/{id}): its readings leave
+// the job store for good, so nothing can show, export or rebuild its result again; a completed
+// job's result file stays in the data directory, out of the page's reach.
+function removeQuestion(job) {
+  const file = job.state === "completed"
+    ? ` Its result file stays in the daemon's data directory (results/job-${job.id}.h5), no longer listed here.`
+    : "";
+  const calibration = job.kind === "calibration" ? " The calibration in effect does not change." : "";
+  return `Remove job ${job.id} (${job.specimen})? Its stored readings are deleted for good: the page, ` +
+    `the API and \`gonio jobs rebuild\` can no longer show, export or rebuild its result.${file}${calibration}`;
+}
+
 async function act(job, action) {
+  if (action === "remove" && !window.confirm(removeQuestion(job))) return;
   await guarded(async () => {
     if (action === "remove") await send("DELETE", `/jobs/${job.id}`);
     else if (action === "up" || action === "down") {

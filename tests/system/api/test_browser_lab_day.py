@@ -324,3 +324,36 @@ def test_an_adaptive_jobs_progress_only_fills_and_says_its_round(
     # Completed: a full bar and the angles it took.
     last = samples[-1]
     assert last[0] == last[1] and f"{row['done_angles']} angles" in last[2], last
+
+
+def test_removing_a_job_asks_first_and_says_what_is_lost(
+    daemon: Daemon, browser: Any  # noqa: F811
+) -> None:
+    """"remove" deleted a job and its stored readings at one click: no result can be shown,
+    exported or rebuilt after that. The page now asks, saying so; dismissed, nothing goes."""
+    from selenium.webdriver.support import expected_conditions as ec
+
+    # A job that ends without moving anything: queued behind a halt, then cancelled (aborted).
+    with daemon.client() as c:
+        assert c.post("/api/v1/rig/halt").status_code == 200
+        try:
+            job = int(c.post("/api/v1/jobs", params={"accept_uncalibrated": "true"},
+                             json={"plan": {**PLAN, "specimen": "to remove"}}).json()["id"])
+            assert c.post(f"/api/v1/jobs/{job}/cancel").json()["state"] == "aborted"
+        finally:
+            assert c.post("/api/v1/rig/release").status_code == 200
+    wait = open_live(browser, daemon, 120)
+    remove = f"#jobs tr[data-id='{job}'] button[data-action='remove']"
+    click_when_steady(wait, remove)
+    alert = wait.until(ec.alert_is_present())
+    question = alert.text
+    assert f"Remove job {job} (to remove)?" in question, question
+    assert "readings are deleted for good" in question and "rebuild" in question, question
+    alert.dismiss()
+    with daemon.client() as c:
+        assert c.get(f"/api/v1/jobs/{job}").status_code == 200  # still there
+    click_when_steady(wait, remove)
+    wait.until(ec.alert_is_present()).accept()
+    wait.until(lambda d: str(job) not in _row_ids(d))
+    with daemon.client() as c:
+        assert c.get(f"/api/v1/jobs/{job}").status_code == 404
