@@ -508,6 +508,9 @@ async function refreshRender() {
   const id = shownResult, other = compareWith;
   const caption = $("#render-caption");
   caption.textContent = "Rendering… (a few seconds the first time)";
+  // The picture shown is of another job (or comparison) until this one arrives: not shown.
+  $("#render").hidden = true;
+  $("#render-link").removeAttribute("href");
   const q = other !== null ? `?compare=${other}` : "";
   const blob = await getBlob(`/jobs/${id}/render.png${q}`);
   if (id !== shownResult || other !== compareWith) return;

@@ -326,6 +326,60 @@ def test_an_adaptive_jobs_progress_only_fills_and_says_its_round(
     assert last[0] == last[1] and f"{row['done_angles']} angles" in last[2], last
 
 
+def _scan_to_the_end(daemon: Daemon, specimen: str) -> int:
+    """One more short scan (``PLAN``), run to completion through the API: its id."""
+    import time
+
+    with export_fits_off(daemon), daemon.client() as c:
+        job = int(c.post("/api/v1/jobs", params={"accept_uncalibrated": "true"},
+                         json={"plan": {**PLAN, "specimen": specimen}}).json()["id"])
+        deadline = time.monotonic() + 300
+        while (state := c.get(f"/api/v1/jobs/{job}").json()["state"]) not in (
+                "completed", "failed", "aborted"):
+            assert time.monotonic() < deadline, "the scan did not end"
+            time.sleep(0.2)
+    assert state == "completed", state
+    return job
+
+
+def test_another_jobs_rendering_is_not_shown_while_this_ones_is_made(
+    daemon: Daemon, browser: Any, finished_job: int  # noqa: F811
+) -> None:
+    """A rendering takes seconds (8-13 s on a busy 2-core machine), and the page kept showing
+    the previously selected job's picture under the new job's heading until it came, with only
+    the caption saying "Rendering…". Here the second job's rendering is held back in the page's
+    fetch: meanwhile no picture is shown; once it arrives, it is."""
+    from selenium.webdriver.common.by import By
+
+    other = _scan_to_the_end(daemon, "second")
+    wait = open_live(browser, daemon, 300)
+
+    def rendered(d: Any) -> bool:
+        return bool(d.execute_script(
+            "const img = document.getElementById('render');"
+            "return !img.hidden && img.complete && img.naturalWidth > 0 && "
+            "!document.getElementById('render-caption').textContent.startsWith('Rendering')"))
+
+    click_when_steady(wait, f"#jobs tr[data-id='{finished_job}']")
+    wait.until(lambda d: _text(d, "result-job") == f"job {finished_job} (completed)")
+    wait.until(rendered)
+    # From now on the page's requests for a rendering wait until the test lets them go.
+    browser.execute_script("""
+        const fetchNow = window.fetch;
+        window.__held = [];
+        window.fetch = (url, init) => String(url).includes('render.png')
+          ? new Promise((done) => window.__held.push(() => done(fetchNow(url, init))))
+          : fetchNow(url, init);""")
+    click_when_steady(wait, f"#jobs tr[data-id='{other}']")
+    wait.until(lambda d: _text(d, "result-job") == f"job {other} (completed)")
+    wait.until(lambda d: d.execute_script("return window.__held.length") > 0)
+    assert _text(browser, "render-caption").startswith("Rendering")
+    assert not browser.find_element(By.ID, "render").is_displayed(), \
+        f"job {finished_job}'s rendering is shown as job {other}'s"
+    browser.execute_script("window.__held.splice(0).forEach((go) => go())")
+    wait.until(rendered)
+
+
 def test_removing_a_job_asks_first_and_says_what_is_lost(
     daemon: Daemon, browser: Any  # noqa: F811
 ) -> None:
