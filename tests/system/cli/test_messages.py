@@ -8,7 +8,11 @@ from pathlib import Path
 
 import pytest
 
-from gonio.brdf.materials.library import FAMILY_COUNTS, library_specs
+from gonio.brdf.materials.library import (
+    ASYMMETRIC_FAMILY_COUNTS,
+    FAMILY_COUNTS,
+    library_specs,
+)
 from gonio.cli import main
 
 
@@ -27,6 +31,13 @@ def test_a_misspelt_material_points_to_the_command_that_lists_materials(
         assert f"{family}-000 .. {family}-{n - 1:03d}" in out, out
     names = {s.name for s in library_specs()}
     assert names == {f"{f}-{i:03d}" for f, n in FAMILY_COUNTS.items() for i in range(n)}
+    # The message names the families without twofold symmetry too, which --material takes:
+    # the list has them (it had not), and says the shipped measured names are not such names.
+    for family, n in ASYMMETRIC_FAMILY_COUNTS.items():
+        assert f"{family}" in err and f"{family}-000 .. {family}-{n - 1:03d}" in out, out
+    assert "not --material names" in out, out
+    last = f"pile-{ASYMMETRIC_FAMILY_COUNTS['pile'] - 1:03d}"
+    assert main(["scan", "--sim", "--material", last, "--dry-run", "-o", "/dev/null"]) == 0
 
 
 def test_an_exposure_out_of_a_sensors_range_reads_as_english(
