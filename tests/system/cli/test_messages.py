@@ -96,3 +96,22 @@ def test_design_says_what_its_expected_error_assumes(
     assert (design.rotations, design.span_deg, design.noise, design.calibrated) == (
         8, 180.0, 0.01, True)
     assert design.pairs == 19  # MA98's pairs
+
+
+def test_a_taken_port_is_refused_before_anything_starts_saying_what_to_do(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # A second `gonio serve --sim` (or any program on 8600) made uvicorn stop after the service
+    # and the simulated rig had started: "[Errno 98] ... address already in use", status 3.
+    import socket
+
+    monkeypatch.setenv("HOME", str(tmp_path))
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        assert main(["serve", "--sim", "--throwaway", "--port", str(port)]) == 2
+    out, err = capsys.readouterr()
+    assert f"port {port} on 127.0.0.1 is in use by another program" in err, err
+    assert "--port N" in err and "--port 0" in err, err
+    assert "simulated rig" not in out, out  # nothing was started
