@@ -211,11 +211,23 @@ async function act(job, action) {
   }, true);
 }
 
+// Why a queued job does not start while another holds the rig: a paused or suspended job is
+// still the rig's job, and the queue waits behind it (after a restart too, or a `gonio scan`
+// interrupted by Ctrl-C in the same data directory) until it is resumed or aborted.
+function waitsFor() {
+  const holder = jobs.find((j) => j.state === "paused" || j.state === "suspended");
+  if (!holder) return null;
+  return holder.state === "paused"
+    ? `waits for job ${holder.id} (paused): resume or abort it`
+    : `waits for job ${holder.id} (suspended until its device answers)`;
+}
+
 function renderJobs() {
   const body = $("#jobs");
   body.replaceChildren();
   // "No jobs yet" only when the list was read and is empty, never when it could not be read.
   $("#no-jobs").hidden = jobs.length > 0 || keyRefused;
+  const waiting = waitsFor();
   for (const job of jobs) {
     const tr = document.createElement("tr");
     tr.dataset.id = job.id;
@@ -239,6 +251,10 @@ function renderJobs() {
         if (job.reason && SHOW_REASON.has(job.state)) {
           const why = document.createElement("span");
           why.className = "reason"; why.textContent = job.reason;
+          td.append(why);
+        } else if (job.state === "queued" && waiting) {
+          const why = document.createElement("span");
+          why.className = "reason"; why.textContent = waiting;
           td.append(why);
         }
       }

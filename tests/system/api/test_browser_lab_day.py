@@ -411,3 +411,43 @@ def test_removing_a_job_asks_first_and_says_what_is_lost(
     wait.until(lambda d: str(job) not in _row_ids(d))
     with daemon.client() as c:
         assert c.get(f"/api/v1/jobs/{job}").status_code == 404
+
+
+def test_a_queued_job_behind_a_paused_one_says_what_it_waits_for(
+    daemon: Daemon, browser: Any, no_export_fits: None  # noqa: F811
+) -> None:
+    """A paused job holds the rig, and the queue waits behind it (after a restart too, or a
+    `gonio scan` interrupted by Ctrl-C in the same data directory): the queued row said only
+    "queued", with no word of why nothing started."""
+    import time
+
+    from selenium.webdriver.common.by import By
+
+    long = {**PLAN, "specimen": "held", "rotations": 400}
+    with daemon.client() as c:
+        held = int(c.post("/api/v1/jobs", params={"accept_uncalibrated": "true"},
+                          json={"plan": long}).json()["id"])
+        deadline = time.monotonic() + 120
+        while c.get(f"/api/v1/jobs/{held}").json()["state"] != "running":
+            assert time.monotonic() < deadline, "the long scan did not start"
+            time.sleep(0.05)
+        assert c.post(f"/api/v1/jobs/{held}/pause", params={"immediate": "true"}
+                      ).status_code == 200
+        behind = int(c.post("/api/v1/jobs", params={"accept_uncalibrated": "true"},
+                            json={"plan": {**PLAN, "specimen": "behind"}}).json()["id"])
+    try:
+        wait = open_live(browser, daemon, 120)
+        row = f"#jobs tr[data-id='{behind}'] td.state-queued"
+        wait.until(lambda d: f"waits for job {held} (paused): resume or abort it" in
+                   str(d.execute_script(
+                       "return document.querySelector(arguments[0])?.textContent", row)))
+    finally:
+        with daemon.client() as c:
+            c.post(f"/api/v1/jobs/{held}/abort")
+            deadline = time.monotonic() + 300
+            while c.get(f"/api/v1/jobs/{behind}").json()["state"] not in (
+                    "completed", "failed", "aborted"):
+                assert time.monotonic() < deadline, "the queued scan did not end"
+                time.sleep(0.2)
+    # Nothing holds the rig now: no row says it waits.
+    wait.until(lambda d: "waits for job" not in d.find_element(By.ID, "jobs").text)
