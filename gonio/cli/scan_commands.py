@@ -144,8 +144,11 @@ def _plan(args: argparse.Namespace) -> Any:
         if not 0 < args.white_reference <= 1:
             raise UsageError(f"--white-reference is the reference's albedo, in (0, 1]; got "
                              f"{args.white_reference:g}")
-        return CalibrationPlan(reference_albedo=args.white_reference,
-                               reference_name=args.specimen or "white reference", exposure=ex,
+        # The job's name too (the job list, the page, the result file's specimen), as the
+        # white reference `gonio serve --sim` measures is named (gonio.cli.sim_session).
+        name = args.specimen or "white reference"
+        return CalibrationPlan(reference_albedo=args.white_reference, specimen=name,
+                               reference_name=name, exposure=ex,
                                rotations=args.rotations or 8, start_deg=args.start_deg)
     arc: dict[str, Any] = {}
     if args.arc == "auto":

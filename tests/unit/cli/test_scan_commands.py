@@ -25,6 +25,9 @@ def test_white_reference_job_is_named_after_the_reference_not_the_specimen() -> 
     assert isinstance(plan, CalibrationPlan) and plan.reference_name == "white reference"
     named = _parse("--white-reference", "0.99", "--specimen", "spectralon-99")
     assert isinstance(named, CalibrationPlan) and named.reference_name == "spectralon-99"
+    # The job's own name (the job list, the page, the result's specimen) is the reference's
+    # too: it was the plans' default "specimen".
+    assert plan.specimen == "white reference" and named.specimen == "spectralon-99"
 
 
 def test_scan_keeps_its_specimen_names() -> None:
