@@ -381,8 +381,14 @@ def job_event_line(type_: str, data: Mapping[str, Any], row: Any,
     angles = f"{row.done_angles} of {row.total_angles} angles"
     reason = f": {data['reason']}" if data.get("reason") else ""
     if type_ == "recovered":
-        return logging.INFO, (f"{job} found {data.get('state')} at start ({angles}): "
-                              "resumes from its checkpoint")
+        found = data.get("state")
+        # What happens next depends on the state: a paused job waits for the user, and the
+        # queue behind it waits too.
+        then = {"paused": f"stays paused until resumed (the page's resume, or POST "
+                          f"/api/v1/jobs/{row.id}/resume); queued jobs wait behind it",
+                "reconstructing": "its reconstruction starts again from the stored readings",
+                }.get(str(found), "resumes from its checkpoint")
+        return logging.INFO, f"{job} found {found} at start ({angles}): {then}"
     state, before = data.get("state"), data.get("from")
     if state == "running":
         if before == "queued":

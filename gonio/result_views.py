@@ -27,6 +27,11 @@ if TYPE_CHECKING:  # HDF5 and the figures load with the first result served
 T = TypeVar("T")
 
 
+def warnings_path(export: Path) -> Path:
+    """Where :meth:`ResultViews.export` keeps an export's warnings: ``<file>.warnings.json``."""
+    return export.with_name(export.name + ".warnings.json")
+
+
 class ResultViews:
     """The results of one job store's jobs, read for serving.
 
@@ -231,8 +236,9 @@ class ResultViews:
 
         Blocking (may fit and resample for seconds): call it from a thread in async code.
         Exports are kept under ``data_dir/exports`` and reused while the result file is
-        unchanged. ``with_mesh`` adds the glTF's preview sphere (``gonio export --with-mesh``),
-        a file of its own (``...-gltf-mesh.gltf``).
+        unchanged, each with its warnings beside it (:meth:`export_warnings`; an export kept
+        without them is made again). ``with_mesh`` adds the glTF's preview sphere (``gonio
+        export --with-mesh``), a file of its own (``...-gltf-mesh.gltf``).
 
         Raises
         ------
@@ -241,7 +247,17 @@ class ResultViews:
         ExportError
             ``with_mesh`` for a format other than glTF.
         """
-        from gonio.export import FORMATS, ExportError, check_format, export_result
+        import json
+
+        from gonio.atomicfile import write_atomically
+        from gonio.export import (
+            FORMATS,
+            ExportError,
+            check_format,
+            export_warnings,
+            result_fits,
+            write_export,
+        )
 
         check_format(fmt)
         if with_mesh and fmt != "gltf":
@@ -251,14 +267,27 @@ class ResultViews:
         self.result(job_id)  # missing or damaged: said with the way to rebuild it
         name = f"gonio-job-{job_id}-{fmt}{'-mesh' if with_mesh else ''}{FORMATS[fmt]}"
         out = self.data_dir / "exports" / name
-        if out.is_file() and out.stat().st_mtime_ns >= path.stat().st_mtime_ns:
+        warned = warnings_path(out)
+        if (out.is_file() and warned.is_file()
+                and out.stat().st_mtime_ns >= path.stat().st_mtime_ns):
             return out, name
         out.parent.mkdir(parents=True, exist_ok=True)
         try:
-            export_result(path, fmt, out, with_mesh=with_mesh)
+            fits, prov = result_fits(path)
+            write_export(fits, fmt, out, prov, with_mesh=with_mesh)
         except ExportError as exc:
             raise NotFound(f"job {job_id}: {exc}") from None
+        # What `gonio export` would print as warnings, kept for the download's header.
+        write_atomically(warned, json.dumps(export_warnings(fmt, out, prov)))
         return out, name
+
+    @staticmethod
+    def export_warnings(out: Path) -> list[str]:
+        """The warnings of an export :meth:`export` made (its path): what ``gonio export``
+        prints for the same file, e.g. that a MERL file lost the result's anisotropy."""
+        import json
+
+        return [str(w) for w in json.loads(warnings_path(out).read_text())]
 
     def render_png(self, job_id: int, compare: int | None = None) -> bytes:
         """Rendering of a job's reconstruction (:func:`gonio.figures.render_inputs`).

@@ -739,6 +739,10 @@ class GonioService:
         """A job's result exported as ``fmt`` (:meth:`ResultViews.export`)."""
         return self.results.export(job_id, fmt, with_mesh)
 
+    def export_warnings(self, path: Path) -> list[str]:
+        """The warnings of an export :meth:`export` made (:meth:`ResultViews.export_warnings`)."""
+        return self.results.export_warnings(path)
+
     def render_png(self, job_id: int, compare: int | None = None) -> bytes:
         """Rendering of a job's reconstruction (:meth:`ResultViews.render_png`)."""
         return self.results.render_png(job_id, compare)

@@ -32,6 +32,23 @@ class QueueHold(Protocol):
         """Take queued jobs again."""
 
 
+def busy_message(job_id: int, state: str) -> str:
+    """Why a manual stage command is refused while job ``job_id`` is active, and what frees the
+    stage: only its end (or an abort). A paused job still holds it (it resumes at its
+    checkpoint), so "pause it" is no advice; a reconstructing job moves nothing but keeps the
+    stage until its result is written."""
+    if state == "paused":
+        return (f"job {job_id} is paused: it still holds the stage (it resumes at its "
+                "checkpoint); resume it and wait for it to end, or abort it, before moving the "
+                "stage by hand")
+    if state == "reconstructing":
+        return (f"job {job_id} is reconstructing: it moves the stage no more but holds it until "
+                "its result is written (seconds; minutes when a basis must be built first); "
+                "wait for it, or abort it, before moving the stage by hand")
+    return (f"job {job_id} is {state}: the stage is in use; wait for the job to end, or abort "
+            "it, before moving the stage by hand (a paused job still holds the stage)")
+
+
 class StageControl:
     """Manual commands to one rig's stage.
 
@@ -80,8 +97,7 @@ class StageControl:
                     f"[{lo:g}, {hi:g}] deg (min_deg/max_deg in the rig config)")
         active = self._active_job()
         if active is not None and request.action != "stop":
-            raise Conflict(f"job {active.id} is {active.state.value}: the stage is in use; wait "
-                           "for it, or pause or abort it, before moving the stage by hand")
+            raise Conflict(busy_message(active.id, active.state.value))
         was_held = self._queue.held is not None
         manual = f"manual stage command: {request.action}"
         if not was_held:

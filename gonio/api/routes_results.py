@@ -7,6 +7,7 @@ so no request can name a file of its choosing (``JobId`` is an integer path para
 from __future__ import annotations
 
 import asyncio
+import json
 import math
 from typing import Annotated, Any, Literal
 
@@ -169,12 +170,20 @@ async def slice_(
 
 
 ExportFormat = Literal["factored", "mtlx", "gltf", "merl", "table"]
+# The export's warnings, as `gonio export` prints them (a JSON list of sentences).
+EXPORT_WARNINGS_HEADER = "X-Gonio-Export-Warnings"
 
 
 @router.get(
     "/{job_id}/export",
     dependencies=READ,
-    responses={**_NO_RESULT, 200: {"content": {"application/octet-stream": {}}},
+    responses={**_NO_RESULT, 200: {"content": {"application/octet-stream": {}},
+                                   "headers": {EXPORT_WARNINGS_HEADER: {
+                                       "description": "the export's warnings, as gonio "
+                                       "export prints them (e.g. a MERL file lost the "
+                                       "result's anisotropy): a JSON list of sentences, "
+                                       "ASCII (non-ASCII as \\u escapes); [] when none",
+                                       "schema": {"type": "string"}}}},
                422: {"description": "with_mesh asked for a format other than gltf"},
                507: {"description": "no room on the data directory's disk for the export"}},
     response_class=FileResponse,
@@ -192,7 +201,10 @@ async def export(
     from gonio.export import MEDIA_TYPES
 
     path, name = await asyncio.to_thread(service.export, job_id, format, with_mesh)
-    return FileResponse(path, media_type=MEDIA_TYPES[format], filename=name)
+    warnings = await asyncio.to_thread(service.export_warnings, path)
+    # A download carries no sentence the page could show: the warnings come in a header.
+    return FileResponse(path, media_type=MEDIA_TYPES[format], filename=name,
+                        headers={EXPORT_WARNINGS_HEADER: json.dumps(warnings)})
 
 
 ColourFormat = Literal["json", "csv"]

@@ -377,7 +377,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
 def _cmd_library_import(args: argparse.Namespace) -> int:
     from gonio.brdf.materials.imports import import_files
-    from gonio.brdf.materials.measured import user_library_dir
+    from gonio.brdf.materials.measured import user_library_dir, user_table_files
     from gonio.brdf.tables.table import BRDFTable
 
     written = import_files(args.files, replace=args.replace)
@@ -397,25 +397,34 @@ def _cmd_library_import(args: argparse.Namespace) -> int:
             print(line + "; gonio's table assumes they are equal, so a rendering of it can "
                   "differ from the file's on the mirrored half of each view "
                   "(docs/science.md 7.0.1)")
-    print(f"{len(written)} table(s) in {user_library_dir()}; the default basis is rebuilt with "
-          "them on next use (gonio scan, reconstruct, design, serve)")
+    held = len(user_table_files())
+    print(f"{len(written)} table(s) imported; {held} in {user_library_dir()}; the default basis "
+          "is rebuilt with them on next use (gonio scan, reconstruct, design, serve)")
     return 0
 
 
 def _cmd_library_list(args: argparse.Namespace) -> int:
-    from gonio.brdf.materials.library import FAMILY_COUNTS
+    from gonio.brdf.materials.library import ASYMMETRIC_FAMILY_COUNTS, FAMILY_COUNTS
     from gonio.brdf.materials.measured import measured_names, user_library_dir, user_table_files
+
+    def ranges(counts: dict[str, int]) -> str:
+        return ", ".join(f"{family}-000 .. {family}-{n - 1:03d}" for family, n in counts.items())
 
     # The synthetic library: what `--material NAME` of the simulators and simulate-scan take.
     print(f"synthetic library materials ({sum(FAMILY_COUNTS.values())}; --material NAME of "
-          "gonio sim, scan --sim, serve --sim, simulate-scan): "
-          + ", ".join(f"{family}-000 .. {family}-{n - 1:03d}"
-                      for family, n in FAMILY_COUNTS.items()))
-    print(f"shipped measured materials ({len(measured_names())}, RGL, CC0): "
-          + ", ".join(measured_names()))
+          "gonio sim, scan --sim, serve --sim, simulate-scan): " + ranges(FAMILY_COUNTS))
+    # `--material` takes these too (get_material); they train only the basis for specimens
+    # without twofold symmetry (docs/science.md 7.4), so a lab testing --arc auto finds them.
+    print(f"synthetic materials without twofold symmetry "
+          f"({sum(ASYMMETRIC_FAMILY_COUNTS.values())}; --material NAME as well; in the basis "
+          "for such specimens only): " + ranges(ASYMMETRIC_FAMILY_COUNTS))
+    print(f"shipped measured materials ({len(measured_names())}, RGL, CC0; in the default "
+          "basis, not --material names): " + ", ".join(measured_names()))
     files = user_table_files()
     print(f"imported ({len(files)}) in {user_library_dir()}"
-          + (": " + ", ".join(f.stem for f in files) if files else ""))
+          + (": " + ", ".join(f.stem for f in files) if files else "")
+          + (" (--material takes their files, e.g. "
+             f"--material {files[0]})" if files else ""))
     return 0
 
 

@@ -77,6 +77,8 @@ def report(fmt: str, path: Path, prov: dict[str, Any]) -> list[str]:
     """What the written file is, in a few lines (the same facts as its provenance)."""
     import json
 
+    from gonio.export import export_warnings
+
     lines = []
     who = prov.get("specimen", "?")
     if not prov.get("specimen_named"):
@@ -91,7 +93,6 @@ def report(fmt: str, path: Path, prov: dict[str, Any]) -> list[str]:
     if isinstance(rendered, dict) and rendered.get("value") is not None:
         lines.append(f"  {model} fit renders {rendered['metric']} {rendered['value']:.3f} "
                      "from the reconstruction (sphere and swatch under point lights)")
-    warnings = list(prov.get("warnings") or [])
     if fmt == "merl":
         from gonio.export.merl import sidecar_path
 
@@ -100,6 +101,5 @@ def report(fmt: str, path: Path, prov: dict[str, Any]) -> list[str]:
         lines.append(f"  provenance in {side.name}; MERL is isotropic: the result was averaged "
                      f"over azimuth (anisotropy lost: log RMSE "
                      f"{sidecar['merl']['anisotropy_lost']:.3f})")
-        warnings = list(sidecar.get("warnings") or [])
-    lines.extend(f"  warning: {w}" for w in warnings if model or fmt == "merl")
+    lines.extend(f"  warning: {w}" for w in export_warnings(fmt, path, prov))
     return lines

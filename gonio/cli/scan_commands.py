@@ -144,8 +144,11 @@ def _plan(args: argparse.Namespace) -> Any:
         if not 0 < args.white_reference <= 1:
             raise UsageError(f"--white-reference is the reference's albedo, in (0, 1]; got "
                              f"{args.white_reference:g}")
-        return CalibrationPlan(reference_albedo=args.white_reference,
-                               reference_name=args.specimen or "white reference", exposure=ex,
+        # The job's name too (the job list, the page, the result file's specimen), as the
+        # white reference `gonio serve --sim` measures is named (gonio.cli.sim_session).
+        name = args.specimen or "white reference"
+        return CalibrationPlan(reference_albedo=args.white_reference, specimen=name,
+                               reference_name=name, exposure=ex,
                                rotations=args.rotations or 8, start_deg=args.start_deg)
     arc: dict[str, Any] = {}
     if args.arc == "auto":
@@ -724,6 +727,7 @@ def _rebuild(args: argparse.Namespace, store: Any) -> int:
         raise UsageError(str(exc)) from None
     print(f"rebuilding job {args.job_id}'s result from the job store's readings",
           file=sys.stderr)
+    old = store.get_job(args.job_id).summary or {}
     summary = rebuild_result(store, data_dir, args.job_id, BasisSupply())
     after = store.get_job(args.job_id).state
     print(f"job {args.job_id}: wrote {data_dir / summary['result_path']} from "
@@ -733,7 +737,29 @@ def _rebuild(args: argparse.Namespace, store: Any) -> int:
     line = design_comparison_line(summary)
     if line is not None:
         print(line)
+    if (line := rebuild_change_line(old, summary)) is not None:
+        print(line)
     return 0
+
+
+def rebuild_change_line(old: dict[str, Any], new: dict[str, Any]) -> str | None:
+    """What ``gonio jobs rebuild`` says when the rebuilt result is not the one the job was
+    finished with: the readings and calibration are the same, but the default basis is built
+    from today's library, so a table imported since can become the fit's local prior
+    (docs/library.md) and move the numbers. None when the prior is the same (or the job had
+    no summary to compare with)."""
+    if not old or old.get("local_prior") == new.get("local_prior"):
+        return None
+    was, now = old.get("local_prior"), new.get("local_prior")
+    prior = (f"it now leans on {now!r} where no pair looks" if now is not None
+             else "it no longer leans on a local prior")
+    before = f"; it leaned on {was!r}" if was is not None and now is not None else (
+        f" (it leaned on {was!r})" if was is not None else "")
+    old_err, new_err = old.get("predicted_log_rmse"), new.get("predicted_log_rmse")
+    err = (f"; predicted_log_rmse {old_err:.4f} -> {new_err:.4f}"
+           if isinstance(old_err, int | float) and isinstance(new_err, int | float) else "")
+    return (f"note: not the result the job was finished with: the basis is built from today's "
+            f"library (gonio library list), and {prior}{before}{err}")
 
 
 def design_comparison_line(summary: dict[str, Any]) -> str | None:

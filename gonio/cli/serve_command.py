@@ -114,6 +114,7 @@ def run(args: argparse.Namespace) -> int:
         keyring = load_keyring(cfg)
     except DaemonConfigError as exc:
         raise UsageError(str(exc)) from None
+    _check_port_free(cfg.server.host, cfg.server.port)
     _configure_logging(cfg.server.log_level)
 
     if not args.sim:
@@ -147,6 +148,36 @@ def run(args: argparse.Namespace) -> int:
 
         return serve(app, cfg, on_started=started)
     return _run_sim(args, cfg, keyring)
+
+
+def _check_port_free(host: str, port: int) -> None:
+    """Refuse to start, saying what to do, when ``host:port`` is taken (another daemon, or any
+    program): uvicorn would start the service (and a simulated rig) first, then stop with
+    "[Errno 98] ... address already in use" and exit status 3. Binds as uvicorn does
+    (``SO_REUSEADDR``), then lets go; port 0 (any free port) is never taken."""
+    import errno
+    import socket
+
+    if port == 0:
+        return
+    try:
+        infos = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)
+    except OSError:
+        return  # a host that does not resolve: uvicorn says so
+    family, kind, proto, _, address = infos[0]
+    with socket.socket(family, kind, proto) as sock:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            sock.bind(address)
+        except OSError as exc:
+            if exc.errno != errno.EADDRINUSE:
+                return  # not ours to judge (permissions ...): uvicorn reports it
+            where = f"[{host}]" if ":" in host else host  # an IPv6 address in a URL
+            raise UsageError(
+                f"cannot start: port {port} on {host} is in use by another program (a gonio "
+                f"daemon already running? open http://{where}:{port}/health to see); stop it, "
+                "or choose another port with --port N (--port 0: any free port, printed at "
+                "start)") from None
 
 
 def _calibration_line(service: Any) -> str:

@@ -220,6 +220,35 @@ def _write(fits: Fits, fmt: str, out: str | os.PathLike[str], prov: dict[str, An
     return write_merl(fits.table, out, prov)
 
 
+def export_warnings(fmt: str, path: str | os.PathLike[str], prov: dict[str, Any]) -> list[str]:
+    """The warnings that go with an exported file, as ``gonio export`` prints them and the
+    daemon sends them with a download (the ``X-Gonio-Export-Warnings`` header).
+
+    The model formats (``gltf`` and ``mtlx``: the principled fit; ``factored``) carry the
+    provenance's warnings; ``merl`` its sidecar's, which add the anisotropy the azimuthal
+    average lost; ``table``, the reconstruction itself, none.
+
+    Parameters
+    ----------
+    fmt : str
+        The format written.
+    path : path-like
+        The file written (a MERL file's sidecar is read beside it).
+    prov : dict
+        The provenance it was written with (:func:`result_fits`).
+    """
+    import json
+
+    if fmt == "merl":
+        from gonio.export.merl import sidecar_path
+
+        side = json.loads(sidecar_path(path).read_text())
+        return [str(w) for w in side.get("warnings") or []]
+    if fmt == "table":
+        return []
+    return [str(w) for w in prov.get("warnings") or []]
+
+
 def export_result(result_path: str | os.PathLike[str], fmt: str,
                   out: str | os.PathLike[str], *, with_mesh: bool = False) -> Path:
     """Export a job's result file to ``out`` in format ``fmt``; returns the path.

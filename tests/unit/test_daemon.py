@@ -181,9 +181,16 @@ def _row(**kw: object) -> SimpleNamespace:
      "job 7 (uniform, 'red tile') aborted (3 of 8 angles): by request"),
     ("state", {"state": "failed"}, _row(), logging.ERROR,
      "job 7 (uniform, 'red tile') failed (3 of 8 angles)"),
+    # A paused job is not resumed at start: it waits for the user, and the queue with it.
     ("recovered", {"state": "paused"}, _row(), logging.INFO,
-     "job 7 (uniform, 'red tile') found paused at start (3 of 8 angles): resumes from its "
+     "job 7 (uniform, 'red tile') found paused at start (3 of 8 angles): stays paused until "
+     "resumed (the page's resume, or POST /api/v1/jobs/7/resume); queued jobs wait behind it"),
+    ("recovered", {"state": "running"}, _row(), logging.INFO,
+     "job 7 (uniform, 'red tile') found running at start (3 of 8 angles): resumes from its "
      "checkpoint"),
+    ("recovered", {"state": "reconstructing"}, _row(done_angles=8), logging.INFO,
+     "job 7 (uniform, 'red tile') found reconstructing at start (8 of 8 angles): its "
+     "reconstruction starts again from the stored readings"),
     ("state", {"state": "queued"}, _row(), logging.DEBUG, None),
 ])
 def test_the_console_line_of_each_job_event(type_: str, data: dict[str, object],

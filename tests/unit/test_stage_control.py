@@ -70,6 +70,29 @@ def test_refused_while_a_job_is_active_but_stop_is_always_accepted(tmp_path: Pat
     asyncio.run(control.command(StageRequest(action="stop")))
 
 
+@pytest.mark.parametrize(("states", "says", "never"), [
+    # Paused: it said "pause or abort it" to a paused job, whose stage stays refused.
+    (("running", "paused"), "is paused: it still holds the stage", "or pause"),
+    # Reconstructing: a job that cannot be paused, whose stage does not move any more.
+    (("running", "reconstructing"), "is reconstructing: it moves the stage no more", "pause"),
+    (("running",), "is running: the stage is in use; wait for the job to end, or abort it",
+     "or pause"),
+])
+def test_a_refusal_says_what_frees_the_stage(tmp_path: Path, states: tuple[str, ...],
+                                             says: str, never: str) -> None:
+    from gonio.jobstates import JobState
+
+    store = JobStore(":memory:")
+    row = store.create_job(kind="uniform", specimen="s", plan={}, rig={})
+    for state in states:
+        row = store.set_state(row.id, JobState(state))
+    control, _, _, rig = _control(tmp_path, active=JobInfo.from_row(row))
+    with pytest.raises(Conflict) as refused:
+        asyncio.run(control.command(StageRequest(action="move", angle_deg=10.0)))
+    assert says in str(refused.value) and never not in str(refused.value), refused.value
+    assert rig.mstage.moves == []
+
+
 def test_a_move_outside_the_travel_limits_says_them(tmp_path: Path) -> None:
     control, _, store, rig = _control(tmp_path)
     lo, hi = control.desc.stage_min_deg, control.desc.stage_max_deg

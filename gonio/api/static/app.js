@@ -185,7 +185,20 @@ function progressOf(job) {
   return { value: done, max, text: `${done} of ≤${max} angles${round}` };
 }
 
+// What removing a job loses, asked before it is done (DELETE /jobs/{id}): its readings leave
+// the job store for good, so nothing can show, export or rebuild its result again; a completed
+// job's result file stays in the data directory, out of the page's reach.
+function removeQuestion(job) {
+  const file = job.state === "completed"
+    ? ` Its result file stays in the daemon's data directory (results/job-${job.id}.h5), no longer listed here.`
+    : "";
+  const calibration = job.kind === "calibration" ? " The calibration in effect does not change." : "";
+  return `Remove job ${job.id} (${job.specimen})? Its stored readings are deleted for good: the page, ` +
+    `the API and \`gonio jobs rebuild\` can no longer show, export or rebuild its result.${file}${calibration}`;
+}
+
 async function act(job, action) {
+  if (action === "remove" && !window.confirm(removeQuestion(job))) return;
   await guarded(async () => {
     if (action === "remove") await send("DELETE", `/jobs/${job.id}`);
     else if (action === "up" || action === "down") {
@@ -198,11 +211,23 @@ async function act(job, action) {
   }, true);
 }
 
+// Why a queued job does not start while another holds the rig: a paused or suspended job is
+// still the rig's job, and the queue waits behind it (after a restart too, or a `gonio scan`
+// interrupted by Ctrl-C in the same data directory) until it is resumed or aborted.
+function waitsFor() {
+  const holder = jobs.find((j) => j.state === "paused" || j.state === "suspended");
+  if (!holder) return null;
+  return holder.state === "paused"
+    ? `waits for job ${holder.id} (paused): resume or abort it`
+    : `waits for job ${holder.id} (suspended until its device answers)`;
+}
+
 function renderJobs() {
   const body = $("#jobs");
   body.replaceChildren();
   // "No jobs yet" only when the list was read and is empty, never when it could not be read.
   $("#no-jobs").hidden = jobs.length > 0 || keyRefused;
+  const waiting = waitsFor();
   for (const job of jobs) {
     const tr = document.createElement("tr");
     tr.dataset.id = job.id;
@@ -226,6 +251,10 @@ function renderJobs() {
         if (job.reason && SHOW_REASON.has(job.state)) {
           const why = document.createElement("span");
           why.className = "reason"; why.textContent = job.reason;
+          td.append(why);
+        } else if (job.state === "queued" && waiting) {
+          const why = document.createElement("span");
+          why.className = "reason"; why.textContent = waiting;
           td.append(why);
         }
       }
@@ -495,6 +524,9 @@ async function refreshRender() {
   const id = shownResult, other = compareWith;
   const caption = $("#render-caption");
   caption.textContent = "Rendering… (a few seconds the first time)";
+  // The picture shown is of another job (or comparison) until this one arrives: not shown.
+  $("#render").hidden = true;
+  $("#render-link").removeAttribute("href");
   const q = other !== null ? `?compare=${other}` : "";
   const blob = await getBlob(`/jobs/${id}/render.png${q}`);
   if (id !== shownResult || other !== compareWith) return;

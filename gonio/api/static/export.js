@@ -29,11 +29,15 @@ async function exportShown() {
     }
     const name = (resp.headers.get("content-disposition") || "").match(/filename="?([^";]+)"?/)?.[1]
       ?? `gonio-job-${id}-${fmt}`;
+    // What `gonio export` would print as warnings (e.g. a MERL file holds only the azimuthal
+    // average): the download cannot say it, so the daemon sends them in a header.
+    let warnings = [];
+    try { warnings = JSON.parse(resp.headers.get("x-gonio-export-warnings") || "[]"); } catch { /* none */ }
     const a = document.createElement("a");
     a.href = URL.createObjectURL(await resp.blob());
     a.download = name;
     a.click();
-    state.textContent = `saved ${name}`;
+    state.textContent = [`saved ${name}`, ...warnings.map((w) => `warning: ${w}`)].join("\n");
   } catch (e) {
     state.textContent = `export failed: ${e.message}`;
   }

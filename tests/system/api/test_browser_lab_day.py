@@ -324,3 +324,130 @@ def test_an_adaptive_jobs_progress_only_fills_and_says_its_round(
     # Completed: a full bar and the angles it took.
     last = samples[-1]
     assert last[0] == last[1] and f"{row['done_angles']} angles" in last[2], last
+
+
+def _scan_to_the_end(daemon: Daemon, specimen: str) -> int:
+    """One more short scan (``PLAN``), run to completion through the API: its id."""
+    import time
+
+    with export_fits_off(daemon), daemon.client() as c:
+        job = int(c.post("/api/v1/jobs", params={"accept_uncalibrated": "true"},
+                         json={"plan": {**PLAN, "specimen": specimen}}).json()["id"])
+        deadline = time.monotonic() + 300
+        while (state := c.get(f"/api/v1/jobs/{job}").json()["state"]) not in (
+                "completed", "failed", "aborted"):
+            assert time.monotonic() < deadline, "the scan did not end"
+            time.sleep(0.2)
+    assert state == "completed", state
+    return job
+
+
+def test_another_jobs_rendering_is_not_shown_while_this_ones_is_made(
+    daemon: Daemon, browser: Any, finished_job: int  # noqa: F811
+) -> None:
+    """A rendering takes seconds (8-13 s on a busy 2-core machine), and the page kept showing
+    the previously selected job's picture under the new job's heading until it came, with only
+    the caption saying "Rendering…". Here the second job's rendering is held back in the page's
+    fetch: meanwhile no picture is shown; once it arrives, it is."""
+    from selenium.webdriver.common.by import By
+
+    other = _scan_to_the_end(daemon, "second")
+    wait = open_live(browser, daemon, 300)
+
+    def rendered(d: Any) -> bool:
+        return bool(d.execute_script(
+            "const img = document.getElementById('render');"
+            "return !img.hidden && img.complete && img.naturalWidth > 0 && "
+            "!document.getElementById('render-caption').textContent.startsWith('Rendering')"))
+
+    click_when_steady(wait, f"#jobs tr[data-id='{finished_job}']")
+    wait.until(lambda d: _text(d, "result-job") == f"job {finished_job} (completed)")
+    wait.until(rendered)
+    # From now on the page's requests for a rendering wait until the test lets them go.
+    browser.execute_script("""
+        const fetchNow = window.fetch;
+        window.__held = [];
+        window.fetch = (url, init) => String(url).includes('render.png')
+          ? new Promise((done) => window.__held.push(() => done(fetchNow(url, init))))
+          : fetchNow(url, init);""")
+    click_when_steady(wait, f"#jobs tr[data-id='{other}']")
+    wait.until(lambda d: _text(d, "result-job") == f"job {other} (completed)")
+    wait.until(lambda d: d.execute_script("return window.__held.length") > 0)
+    assert _text(browser, "render-caption").startswith("Rendering")
+    assert not browser.find_element(By.ID, "render").is_displayed(), \
+        f"job {finished_job}'s rendering is shown as job {other}'s"
+    browser.execute_script("window.__held.splice(0).forEach((go) => go())")
+    wait.until(rendered)
+
+
+def test_removing_a_job_asks_first_and_says_what_is_lost(
+    daemon: Daemon, browser: Any  # noqa: F811
+) -> None:
+    """"remove" deleted a job and its stored readings at one click: no result can be shown,
+    exported or rebuilt after that. The page now asks, saying so; dismissed, nothing goes."""
+    from selenium.webdriver.support import expected_conditions as ec
+
+    # A job that ends without moving anything: queued behind a halt, then cancelled (aborted).
+    with daemon.client() as c:
+        assert c.post("/api/v1/rig/halt").status_code == 200
+        try:
+            job = int(c.post("/api/v1/jobs", params={"accept_uncalibrated": "true"},
+                             json={"plan": {**PLAN, "specimen": "to remove"}}).json()["id"])
+            assert c.post(f"/api/v1/jobs/{job}/cancel").json()["state"] == "aborted"
+        finally:
+            assert c.post("/api/v1/rig/release").status_code == 200
+    wait = open_live(browser, daemon, 120)
+    remove = f"#jobs tr[data-id='{job}'] button[data-action='remove']"
+    click_when_steady(wait, remove)
+    alert = wait.until(ec.alert_is_present())
+    question = alert.text
+    assert f"Remove job {job} (to remove)?" in question, question
+    assert "readings are deleted for good" in question and "rebuild" in question, question
+    alert.dismiss()
+    with daemon.client() as c:
+        assert c.get(f"/api/v1/jobs/{job}").status_code == 200  # still there
+    click_when_steady(wait, remove)
+    wait.until(ec.alert_is_present()).accept()
+    wait.until(lambda d: str(job) not in _row_ids(d))
+    with daemon.client() as c:
+        assert c.get(f"/api/v1/jobs/{job}").status_code == 404
+
+
+def test_a_queued_job_behind_a_paused_one_says_what_it_waits_for(
+    daemon: Daemon, browser: Any, no_export_fits: None  # noqa: F811
+) -> None:
+    """A paused job holds the rig, and the queue waits behind it (after a restart too, or a
+    `gonio scan` interrupted by Ctrl-C in the same data directory): the queued row said only
+    "queued", with no word of why nothing started."""
+    import time
+
+    from selenium.webdriver.common.by import By
+
+    long = {**PLAN, "specimen": "held", "rotations": 400}
+    with daemon.client() as c:
+        held = int(c.post("/api/v1/jobs", params={"accept_uncalibrated": "true"},
+                          json={"plan": long}).json()["id"])
+        deadline = time.monotonic() + 120
+        while c.get(f"/api/v1/jobs/{held}").json()["state"] != "running":
+            assert time.monotonic() < deadline, "the long scan did not start"
+            time.sleep(0.05)
+        assert c.post(f"/api/v1/jobs/{held}/pause", params={"immediate": "true"}
+                      ).status_code == 200
+        behind = int(c.post("/api/v1/jobs", params={"accept_uncalibrated": "true"},
+                            json={"plan": {**PLAN, "specimen": "behind"}}).json()["id"])
+    try:
+        wait = open_live(browser, daemon, 120)
+        row = f"#jobs tr[data-id='{behind}'] td.state-queued"
+        wait.until(lambda d: f"waits for job {held} (paused): resume or abort it" in
+                   str(d.execute_script(
+                       "return document.querySelector(arguments[0])?.textContent", row)))
+    finally:
+        with daemon.client() as c:
+            c.post(f"/api/v1/jobs/{held}/abort")
+            deadline = time.monotonic() + 300
+            while c.get(f"/api/v1/jobs/{behind}").json()["state"] not in (
+                    "completed", "failed", "aborted"):
+                assert time.monotonic() < deadline, "the queued scan did not end"
+                time.sleep(0.2)
+    # Nothing holds the rig now: no row says it waits.
+    wait.until(lambda d: "waits for job" not in d.find_element(By.ID, "jobs").text)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import time
 from typing import Any
 
@@ -137,6 +138,16 @@ def test_full_scan_with_live_progress_and_results(daemon: Daemon) -> None:
         wrong = c.get(f"/api/v1/jobs/{job_id}/export",
                       params={"format": "mtlx", "with_mesh": "true"})
         assert wrong.status_code == 422 and "gltf only" in wrong.json()["detail"]
+        # A download says what `gonio export` prints as warnings, in a header: the MERL file
+        # of this anisotropic specimen holds only its azimuthal average (its provenance
+        # sidecar stays on the daemon's disk), asked for once and again from the kept file.
+        assert json.loads(gl.headers["x-gonio-export-warnings"]) == extras["warnings"]
+        for _ in range(2):
+            merl = c.get(f"/api/v1/jobs/{job_id}/export", params={"format": "merl"})
+            assert merl.status_code == 200, merl.text
+            warned = json.loads(merl.headers["x-gonio-export-warnings"])
+            assert any("azimuthal average" in w and "gltf, mtlx or table" in w
+                       for w in warned), warned
 
 
 def test_sse_resync_replays_missed_events(daemon: Daemon, no_export_fits: None) -> None:

@@ -8,7 +8,11 @@ from pathlib import Path
 
 import pytest
 
-from gonio.brdf.materials.library import FAMILY_COUNTS, library_specs
+from gonio.brdf.materials.library import (
+    ASYMMETRIC_FAMILY_COUNTS,
+    FAMILY_COUNTS,
+    library_specs,
+)
 from gonio.cli import main
 
 
@@ -27,6 +31,13 @@ def test_a_misspelt_material_points_to_the_command_that_lists_materials(
         assert f"{family}-000 .. {family}-{n - 1:03d}" in out, out
     names = {s.name for s in library_specs()}
     assert names == {f"{f}-{i:03d}" for f, n in FAMILY_COUNTS.items() for i in range(n)}
+    # The message names the families without twofold symmetry too, which --material takes:
+    # the list has them (it had not), and says the shipped measured names are not such names.
+    for family, n in ASYMMETRIC_FAMILY_COUNTS.items():
+        assert f"{family}" in err and f"{family}-000 .. {family}-{n - 1:03d}" in out, out
+    assert "not --material names" in out, out
+    last = f"pile-{ASYMMETRIC_FAMILY_COUNTS['pile'] - 1:03d}"
+    assert main(["scan", "--sim", "--material", last, "--dry-run", "-o", "/dev/null"]) == 0
 
 
 def test_an_exposure_out_of_a_sensors_range_reads_as_english(
@@ -85,3 +96,22 @@ def test_design_says_what_its_expected_error_assumes(
     assert (design.rotations, design.span_deg, design.noise, design.calibrated) == (
         8, 180.0, 0.01, True)
     assert design.pairs == 19  # MA98's pairs
+
+
+def test_a_taken_port_is_refused_before_anything_starts_saying_what_to_do(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # A second `gonio serve --sim` (or any program on 8600) made uvicorn stop after the service
+    # and the simulated rig had started: "[Errno 98] ... address already in use", status 3.
+    import socket
+
+    monkeypatch.setenv("HOME", str(tmp_path))
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        assert main(["serve", "--sim", "--throwaway", "--port", str(port)]) == 2
+    out, err = capsys.readouterr()
+    assert f"port {port} on 127.0.0.1 is in use by another program" in err, err
+    assert "--port N" in err and "--port 0" in err, err
+    assert "simulated rig" not in out, out  # nothing was started

@@ -25,6 +25,9 @@ def test_white_reference_job_is_named_after_the_reference_not_the_specimen() -> 
     assert isinstance(plan, CalibrationPlan) and plan.reference_name == "white reference"
     named = _parse("--white-reference", "0.99", "--specimen", "spectralon-99")
     assert isinstance(named, CalibrationPlan) and named.reference_name == "spectralon-99"
+    # The job's own name (the job list, the page, the result's specimen) is the reference's
+    # too: it was the plans' default "specimen".
+    assert plan.specimen == "white reference" and named.specimen == "spectralon-99"
 
 
 def test_scan_keeps_its_specimen_names() -> None:
@@ -153,3 +156,19 @@ def test_a_rebuild_says_why_its_design_comparison_is_missing_or_off() -> None:
     # Within x2 of the design, or a rig without a [design]: nothing to say.
     assert scan_commands.design_comparison_line({"design_expected_log_rmse": 0.037}) is None
     assert scan_commands.design_comparison_line({"predicted_log_rmse": 0.05}) is None
+
+
+def test_a_rebuild_says_when_an_import_since_changed_the_result() -> None:
+    # A table imported after the scan became the rebuilt fit's local prior and moved its
+    # numbers (job 2 of a lab day: 0.0511 -> 0.0512, the factored fit's error x6), while the
+    # rebuild said only that it wrote the file.
+    line = scan_commands.rebuild_change_line(
+        {"local_prior": None, "predicted_log_rmse": 0.051054},
+        {"local_prior": "felt", "predicted_log_rmse": 0.051166})
+    assert line is not None and "it now leans on 'felt' where no pair looks" in line, line
+    assert "0.0511 -> 0.0512" in line and "today's library" in line, line
+    gone = scan_commands.rebuild_change_line({"local_prior": "felt"}, {"local_prior": None})
+    assert gone is not None and "no longer leans on a local prior (it leaned on 'felt')" in gone
+    assert scan_commands.rebuild_change_line({"local_prior": "felt"},
+                                             {"local_prior": "felt"}) is None
+    assert scan_commands.rebuild_change_line({}, {"local_prior": "felt"}) is None

@@ -124,6 +124,19 @@ def test_import_round_trips_a_gonio_table(tmp_path: Path, libdir: Path,
     assert main(["library", "import", "--replace", str(src)]) == 0
 
 
+def test_import_says_how_many_it_imported_and_how_many_the_library_holds(
+    tmp_path: Path, libdir: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # It said "1 table(s) in DIR" after a second import into a folder holding two.
+    vals = np.full((3, *geo.TABLE_SHAPE), 0.3, np.float32)
+    vals[:, :, ~geo.valid_mask()] = np.nan
+    for name in ("first", "second"):
+        src = BRDFTable(vals, ("R", "G", "B"), name).save(tmp_path / f"{name}.npz")
+        assert main(["library", "import", str(src)]) == 0
+    last = capsys.readouterr().out.strip().splitlines()[-1]
+    assert last.startswith(f"1 table(s) imported; 2 in {measured.user_library_dir()};"), last
+
+
 def test_import_of_a_merl_file_and_the_basis_key(tmp_path: Path, libdir: Path) -> None:
     f = tmp_path / "gold.binary"
     write_merl(f, (8, 8, 16), lambda th, td, pd: 0.2 + 0.0 * th)
