@@ -19,7 +19,9 @@ Where a table exceeds the peak bound, :func:`peak_excess_log_rmse` says how much
 part alone carries: the ``log_rmse`` between the table and itself capped at the bound. For any
 truth within the bound it is a lower bound of the table's true ``log_rmse`` (in every cell
 above the cap the truth is at or below it, and ``ln(1 + f cos ti)`` grows with ``f``), so a
-reconstruction's self-estimate is never reported below it (``predicted_log_rmse``).
+reconstruction's self-estimate is never reported below it (``predicted_log_rmse``). That the
+truth stays within the bound is an assumption: a polished specimen no pair reads near its
+mirror direction can peak higher (docs/science.md 7.5).
 
 :func:`bounds_check` returns both with a verdict against :data:`ALBEDO_LIMIT` and
 :data:`PEAK_RATIO_LIMIT` (their docstrings say why those values).
@@ -49,7 +51,10 @@ PEAK_RATIO_LIMIT = 1.0e3
 highlight between the pairs legitimately peaks above every reading: a GGX lobe of roughness
 alpha = 0.06 (polished brushed metal) peaks near 1/(4 pi alpha^2) ~ 22 1/sr while a pair 10
 degrees off its mirror direction reads ~0.1 1/sr, a ratio of about 200. Three orders of
-magnitude is beyond what the readings can support; the issue's blow-up was thirteen."""
+magnitude is beyond what the readings can support; the issue's blow-up was thirteen. A
+polished specimen whose mirror direction no pair comes near can exceed it itself (GGX alpha
+0.03 on the default simulated rig: 1.5e4 times its largest reading, docs/science.md 7.5): such
+a result is flagged although its peak may be real, since the readings cannot tell."""
 INCIDENCE_DEG: tuple[float, ...] = (0.0, 15.0, 30.0, 45.0, 60.0, 75.0)
 """Polar angles of incidence at which the directional albedo is integrated."""
 INCIDENCE_AZIMUTH_DEG: tuple[float, ...] = (0.0, 45.0, 90.0, 135.0, 180.0, 225.0, 270.0, 315.0)
@@ -123,7 +128,9 @@ def peak_excess_log_rmse(table: BRDFTable, readings: Any) -> float:
 
     For a truth whose values stay within that cap this is a lower bound of the table's true
     ``log_rmse``: in every cell above the cap the truth is at or below it, so the cell's log
-    difference is at least the one to the cap, and the other cells add nothing negative.
+    difference is at least the one to the cap, and the other cells add nothing negative. The
+    premise is an assumption (module docstring); cells the truth leaves unmeasured are not
+    compared and void it there. Not unit-free: ``ln(1 + f cos ti)``.
 
     Parameters
     ----------
