@@ -66,6 +66,8 @@ class ScanFacts:
     saturated : readings that saturated in the range they were kept in
     unseen : the third part, the error where no pair looks (the coverage term; NaN without a
         joint fit)
+    peak_excess : the error the table carries above the physical peak bound, under which the
+        estimate never goes (``Reconstruction.peak_excess_log_rmse``; 0 within the bound)
     """
 
     predicted_log_rmse: float
@@ -80,6 +82,7 @@ class ScanFacts:
     ranged: int = 0
     saturated: int = 0
     unseen: float = float("nan")
+    peak_excess: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -140,7 +143,8 @@ def scan_facts(rec: Any, readings: Sequence[Any], *, n_angles: int, span_deg: fl
         undetermined, outside = estimate_parts(rec.expected_log_rmse, rec.mahalanobis,
                                                rec.cv_sample_error)
         unseen = float("nan")
-    return ScanFacts(unseen=unseen,
+    excess = float(getattr(rec, "peak_excess_log_rmse", 0.0))
+    return ScanFacts(unseen=unseen, peak_excess=excess if math.isfinite(excess) else 0.0,
         predicted_log_rmse=float(rec.predicted_log_rmse), undetermined=undetermined,
         outside=outside, n_angles=int(n_angles), span_deg=float(span_deg),
         n_pairs=int(n_pairs), calibrated=bool(calibrated),
@@ -216,7 +220,13 @@ def _share(part: float, whole: float) -> float:
 def _above(facts: ScanFacts, design: DesignExpectation) -> list[str]:
     out = _departures(facts, design, above=True)
     p = facts.predicted_log_rmse
-    if _share(facts.outside, p) > _DOMINANT:
+    if math.isfinite(facts.peak_excess) and facts.peak_excess > 0 and facts.peak_excess >= p:
+        # The estimate is the floor at the peak bound: the parts below describe the estimate
+        # before it and do not add up to this one.
+        out.append(f"the reconstruction blows up where no pair looks: {facts.peak_excess:.3g}, "
+                   "all of its estimate, is the error the table carries above the physical "
+                   "peak bound (physical_bounds; docs/science.md 7.5)")
+    elif _share(facts.outside, p) > _DOMINANT:
         out.append(f"the specimen is unlike the materials the basis was learnt from: "
                    f"{facts.outside:.3g} of its {p:.3g} comes from what the basis cannot "
                    "represent (how far the fit had to leave the training library, and how "

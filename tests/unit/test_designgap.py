@@ -297,3 +297,19 @@ def read_toml_text(text: str) -> dict[str, object]:
     import tomllib
 
     return tomllib.loads(text)
+
+
+def test_an_estimate_set_by_the_peak_floor_names_the_blow_up() -> None:
+    """When the estimate is the floor at the physical peak bound, its parts describe the
+    estimate before the floor; the gap names the blow-up, not a part."""
+    gap = compare_with_design(facts(predicted_log_rmse=0.575, undetermined=0.05, outside=0.14,
+                                    peak_excess=0.575), DESIGN)
+    assert gap is not None
+    assert gap.reasons[0].startswith("the reconstruction blows up where no pair looks: 0.575, "
+                                     "all of its estimate, is the error the table carries "
+                                     "above the physical peak bound")
+    assert not any("unlike the materials" in r for r in gap.reasons)
+    # A floor below the estimate changes nothing: the dominant part is named as before.
+    gap = compare_with_design(facts(predicted_log_rmse=0.12, undetermined=0.04, outside=0.113,
+                                    peak_excess=0.02), DESIGN)
+    assert gap is not None and "unlike the materials" in gap.reasons[0]

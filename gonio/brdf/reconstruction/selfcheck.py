@@ -476,7 +476,10 @@ def final_parts(expected: float, mahalanobis: float, cv_sample_error: float,
     ``(undetermined, outside, unseen)`` with ``undetermined^2 + outside^2 + unseen^2`` equal
     to the final estimate squared: :func:`estimate_parts` scaled by the mapping's factor, and
     the coverage term (the error where no pair looks). When a flagged scan's estimate is the
-    misfit floor, all three are scaled up together to meet it.
+    misfit floor, all three are scaled up together to meet it. They add up to the estimate
+    before ``reconstruct``'s floor at the physical peak bound; when that floor sets the
+    estimate (``Reconstruction.peak_excess_log_rmse``) the parts do not describe it
+    (:mod:`gonio.designgap` names the blow-up instead).
 
     Returns
     -------
