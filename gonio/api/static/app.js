@@ -480,6 +480,21 @@ const METRIC_MEANING = {
   arc_asymmetric: "a half-turn scan whose readings at opposite angles differ: not twofold symmetric",
   reconstruction_basis: "the basis the test's verdict chose: default, or asymmetric (odd harmonics along the rotation)",
   basis_switch: "why the reconstruction used the basis for specimens without twofold symmetry (or could not)",
+  K: "components of the basis the fit used",
+  local_prior_note: "why the fit did not lean on a measured or imported material's shape",
+  basis_misfit: "the readings carry structure the basis cannot hold: why predicted_log_rmse was widened",
+  misfit_chi2: "how far the fit misses its own readings, in units of their noise (chi-square per reading; about 1 for noise alone)",
+  misfit_log: "the fit's miss at its own readings beyond the noise (RMS, log units)",
+  misfit_persistent_pairs: "pairs the fit misses the same way at every stage angle (a shape the basis cannot hold, not noise)",
+  predicted_log_rmse_unwidened: "the calibrated model's estimate before the final mapping (coverage term, misfit and peak floors)",
+  worst_directional_albedo: "largest share of incident light the table reflects off the mirror direction (a physical material stays at or below 1)",
+  peak_to_reading_ratio: "the table's maximum over the largest reading (above 1000: beyond what the readings support)",
+  peak_excess_log_rmse: "the error the table carries above 1000 times the largest reading; predicted_log_rmse is never below it",
+  physical_bounds: "why the reconstruction is outside physical bounds",
+  factored_rel_mse: "relative error of the factored BRDF export fitted to this table (volume-weighted mean squared)",
+  factored_psnr: "the factored export's fit as a PSNR, dB",
+  principled_roughness: "roughness of the principled (glTF / MaterialX) material fitted to this table",
+  principled_log_rmse: "log RMSE of that principled material against this table",
 };
 
 function showMetrics(metrics) {

@@ -81,7 +81,9 @@ async function refresh() {
   const head = document.createElement("tr");
   const lab = rep.space === "CIELAB";
   const cols = lab ? ["geometry", "L*", "a*", "b*", "C*", "h°"]
-    : ["geometry", ...rep.channels.slice(0, 6).map((c) => `R ${c}`)];
+    // One column per channel, headed by its name: the caption says they are reflectance
+    // factors ("R R, R G, R B" read as three channels named R).
+    : ["geometry", ...rep.channels.slice(0, 6)];
   cols.push("source");
   if (diff) cols.push("ΔE00");
   for (const c of cols) cell(head, c, "th");
