@@ -215,6 +215,14 @@ def headline_error(metrics: dict[str, Any]) -> dict[str, Any] | None:
                            "98 % of the calibration scans; the test and fresh scans were seen "
                            "while the interval's form was chosen).")
         out["meaning"] = f"{out['meaning']} {out['interval']}"
+    lean = metrics.get("local_prior")
+    if out is not None and out["key"] == "predicted_log_rmse" and isinstance(lean, str):
+        # The fit leaned on a folded-in material's shape where no pair looks (docs/science.md
+        # 7.2.3): what the CLI prints as its "prior:" line, said where the page shows the error.
+        out["local_prior"] = lean
+        out["prior"] = (f"Where no pair looks, the fit leaned on the shape of '{lean}', the "
+                        "measured or imported material the readings favour (local_prior).")
+        out["meaning"] = f"{out['meaning']} {out['prior']}"
     misfit = metrics.get("basis_misfit")
     if out is not None and isinstance(misfit, str):
         # The readings carry structure the basis cannot hold: the estimate is a floor at best,

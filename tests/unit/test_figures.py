@@ -127,6 +127,18 @@ def test_the_headline_states_the_upper_end_of_the_estimate() -> None:
         assert h is not None and "interval" not in h and "upper" not in h
 
 
+def test_the_headline_names_the_local_prior_the_fit_leaned_on() -> None:
+    h = headline_error({"predicted_log_rmse": 0.05, "local_prior": "rgl-acrylic_felt_green"})
+    assert h is not None and h["local_prior"] == "rgl-acrylic_felt_green"
+    assert "leaned on the shape of 'rgl-acrylic_felt_green'" in h["prior"]
+    assert h["meaning"].endswith(h["prior"])
+    # No lean (the library's prior alone), or a MAPE headline: nothing said.
+    for metrics in ({"predicted_log_rmse": 0.05},
+                    {"predicted_error": 0.1, "local_prior": "rgl-acrylic_felt_green"}):
+        h = headline_error(metrics)
+        assert h is not None and "prior" not in h and "local_prior" not in h
+
+
 def test_the_headline_says_which_arc_and_warns_a_half_turn_that_is_not_symmetric() -> None:
     base = {"predicted_log_rmse": 0.05}
     auto = headline_error({**base, "arc_symmetric": False, "arc_deg": 360.0,
