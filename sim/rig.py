@@ -121,10 +121,15 @@ class _WhiteReference:
         return self.model.eval(wi, wo)
 
 
+#: The default material's name, as results and the page show it; ``--material`` takes it too.
+DEFAULT_MATERIAL_NAME = "sim-brushed"
+
+
 def default_material() -> BRDFLike:
     """A brushed, slightly coloured dielectric: Lambert base plus an anisotropic GGX lobe."""
     return LobeSum(
-        (Lambert((0.35, 0.25, 0.15)), GGX(alpha_x=0.15, alpha_y=0.45)), name="sim-brushed"
+        (Lambert((0.35, 0.25, 0.15)), GGX(alpha_x=0.15, alpha_y=0.45)),
+        name=DEFAULT_MATERIAL_NAME,
     )
 
 
@@ -143,6 +148,8 @@ def resolve_material(material: str | os.PathLike[str] | BRDFLike | None) -> BRDF
     text = os.fspath(material)
     if text.endswith(".npz") or Path(text).is_file():
         return BRDFTable.load(text)
+    if text == DEFAULT_MATERIAL_NAME:  # the name the page and the results give the default
+        return default_material()
     from gonio.sim.spectral import SPECTRAL_MATERIALS, spectral_specimen
 
     if text in SPECTRAL_MATERIALS:  # read by a 31-band spectrometer (docs/colour.md)
