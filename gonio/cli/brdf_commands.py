@@ -377,12 +377,25 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
 def _cmd_library_import(args: argparse.Namespace) -> int:
     from gonio.brdf.materials.imports import import_files
-    from gonio.brdf.materials.measured import user_library_dir, user_table_files
+    from gonio.brdf.materials.measured import (
+        PREFIX,
+        measured_names,
+        user_library_dir,
+        user_table_files,
+    )
     from gonio.brdf.tables.table import BRDFTable
 
+    shipped = set(measured_names())
     written = import_files(args.files, replace=args.replace)
     for f in written:
         print(f"imported {f.stem} -> {f}")
+        # The same material as a shipped one (RGL files are named <material>_rgb / _spec):
+        # the default basis would then hold it twice, weighed toward it.
+        base = f.stem.removesuffix("_rgb").removesuffix("_spec")
+        if PREFIX + base in shipped:
+            print(f"  note: gonio already ships this material as '{PREFIX}{base}' in its default "
+                  "basis; imported as well, it counts twice there and weighs the basis toward "
+                  f"it. If that is not what you want, delete {f}")
         # An RGL file records how far it is from reciprocal, which gonio's table assumes
         # (gonio.brdf.materials.rgl): say so where the lab looks, not only in the file.
         rec = BRDFTable.load(f).provenance.get("reciprocity")

@@ -212,9 +212,13 @@ def test_importing_an_rgl_file_reports_how_far_from_reciprocal_it_is(
     assert (f"({np.exp(rec['median_abs_log_ratio_below_80deg']):.2f} and "
             f"{np.exp(rec['p90_abs_log_ratio_below_80deg']):.2f} with light and view") in out
     assert "docs/science.md 7.0.1" in out
+    # The file is one of the shipped materials: the import says it now counts twice.
+    assert ("note: gonio already ships this material as 'rgl-cm_military_green' in its "
+            "default basis") in out
     # A gonio table carries no such record, and the import says nothing of it.
     vals = np.where(geo.valid_mask(), 0.3, np.nan)[None, None].repeat(3, 0).repeat(72, 1)
     plain = BRDFTable(vals.astype(np.float32), ("R", "G", "B"), "plain").save(
         libdir.parent / "plain.npz")
     assert main(["library", "import", str(plain)]) == 0
-    assert "reciprocal" not in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "reciprocal" not in out and "already ships" not in out
