@@ -197,8 +197,17 @@ function removeQuestion(job) {
     `the API and \`gonio jobs rebuild\` can no longer show, export or rebuild its result.${file}${calibration}`;
 }
 
+// What aborting a job means, asked before it is done (POST /jobs/{id}/abort): it stops for
+// good and writes no result; its readings stay in the job store, but it cannot be resumed.
+function abortQuestion(job) {
+  return `Abort job ${job.id} (${job.specimen})? It stops for good and writes no result: the ` +
+    "readings measured so far stay in the job store, but the job cannot be resumed or finished. " +
+    "To stop it for a while instead, pause it.";
+}
+
 async function act(job, action) {
   if (action === "remove" && !window.confirm(removeQuestion(job))) return;
+  if (action === "abort" && !window.confirm(abortQuestion(job))) return;
   await guarded(async () => {
     if (action === "remove") await send("DELETE", `/jobs/${job.id}`);
     else if (action === "up" || action === "down") {

@@ -451,3 +451,46 @@ def test_a_queued_job_behind_a_paused_one_says_what_it_waits_for(
                 time.sleep(0.2)
     # Nothing holds the rig now: no row says it waits.
     wait.until(lambda d: "waits for job" not in d.find_element(By.ID, "jobs").text)
+
+
+def test_aborting_a_job_asks_first_and_says_what_it_ends(
+    daemon: Daemon, browser: Any, no_export_fits: None  # noqa: F811
+) -> None:
+    """"abort" ended a job for good at one click, next to "pause": the page now asks, saying
+    that it writes no result and cannot be resumed; dismissed, the job stays as it was."""
+    import time
+
+    from selenium.webdriver.support import expected_conditions as ec
+
+    long = {**PLAN, "specimen": "to abort", "rotations": 400}
+    with daemon.client() as c:
+        job = int(c.post("/api/v1/jobs", params={"accept_uncalibrated": "true"},
+                         json={"plan": long}).json()["id"])
+        deadline = time.monotonic() + 120
+        while c.get(f"/api/v1/jobs/{job}").json()["state"] != "running":
+            assert time.monotonic() < deadline, "the long scan did not start"
+            time.sleep(0.05)
+        assert c.post(f"/api/v1/jobs/{job}/pause", params={"immediate": "true"}
+                      ).status_code == 200
+    try:
+        wait = open_live(browser, daemon, 120)
+        abort = f"#jobs tr[data-id='{job}'] button[data-action='abort']"
+        click_when_steady(wait, abort)
+        alert = wait.until(ec.alert_is_present())
+        question = alert.text
+        assert f"Abort job {job} (to abort)?" in question, question
+        assert "writes no result" in question and "cannot be resumed" in question, question
+        alert.dismiss()
+        with daemon.client() as c:
+            assert c.get(f"/api/v1/jobs/{job}").json()["state"] == "paused"  # as it was
+        click_when_steady(wait, abort)
+        wait.until(ec.alert_is_present()).accept()
+        with daemon.client() as c:
+            deadline = time.monotonic() + 120
+            while c.get(f"/api/v1/jobs/{job}").json()["state"] != "aborted":
+                assert time.monotonic() < deadline, "the job was not aborted"
+                time.sleep(0.1)
+    finally:
+        with daemon.client() as c:
+            if c.get(f"/api/v1/jobs/{job}").json()["state"] != "aborted":
+                c.post(f"/api/v1/jobs/{job}/abort")
