@@ -413,6 +413,23 @@ def test_removing_a_job_asks_first_and_says_what_is_lost(
         assert c.get(f"/api/v1/jobs/{job}").status_code == 404
 
 
+def _paused_long_job(daemon: Daemon, specimen: str) -> int:
+    """A long scan started and paused at once (it holds the rig until resumed or aborted)."""
+    import time
+
+    long = {**PLAN, "specimen": specimen, "rotations": 400}
+    with daemon.client() as c:
+        job = int(c.post("/api/v1/jobs", params={"accept_uncalibrated": "true"},
+                         json={"plan": long}).json()["id"])
+        deadline = time.monotonic() + 120
+        while c.get(f"/api/v1/jobs/{job}").json()["state"] != "running":
+            assert time.monotonic() < deadline, "the long scan did not start"
+            time.sleep(0.05)
+        assert c.post(f"/api/v1/jobs/{job}/pause", params={"immediate": "true"}
+                      ).status_code == 200
+    return job
+
+
 def test_a_queued_job_behind_a_paused_one_says_what_it_waits_for(
     daemon: Daemon, browser: Any, no_export_fits: None  # noqa: F811
 ) -> None:
@@ -423,16 +440,8 @@ def test_a_queued_job_behind_a_paused_one_says_what_it_waits_for(
 
     from selenium.webdriver.common.by import By
 
-    long = {**PLAN, "specimen": "held", "rotations": 400}
+    held = _paused_long_job(daemon, "held")
     with daemon.client() as c:
-        held = int(c.post("/api/v1/jobs", params={"accept_uncalibrated": "true"},
-                          json={"plan": long}).json()["id"])
-        deadline = time.monotonic() + 120
-        while c.get(f"/api/v1/jobs/{held}").json()["state"] != "running":
-            assert time.monotonic() < deadline, "the long scan did not start"
-            time.sleep(0.05)
-        assert c.post(f"/api/v1/jobs/{held}/pause", params={"immediate": "true"}
-                      ).status_code == 200
         behind = int(c.post("/api/v1/jobs", params={"accept_uncalibrated": "true"},
                             json={"plan": {**PLAN, "specimen": "behind"}}).json()["id"])
     try:
@@ -462,16 +471,7 @@ def test_aborting_a_job_asks_first_and_says_what_it_ends(
 
     from selenium.webdriver.support import expected_conditions as ec
 
-    long = {**PLAN, "specimen": "to abort", "rotations": 400}
-    with daemon.client() as c:
-        job = int(c.post("/api/v1/jobs", params={"accept_uncalibrated": "true"},
-                         json={"plan": long}).json()["id"])
-        deadline = time.monotonic() + 120
-        while c.get(f"/api/v1/jobs/{job}").json()["state"] != "running":
-            assert time.monotonic() < deadline, "the long scan did not start"
-            time.sleep(0.05)
-        assert c.post(f"/api/v1/jobs/{job}/pause", params={"immediate": "true"}
-                      ).status_code == 200
+    job = _paused_long_job(daemon, "to abort")
     try:
         wait = open_live(browser, daemon, 120)
         abort = f"#jobs tr[data-id='{job}'] button[data-action='abort']"
