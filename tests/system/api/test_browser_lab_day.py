@@ -380,13 +380,28 @@ def test_another_jobs_rendering_is_not_shown_while_this_ones_is_made(
     wait.until(rendered)
 
 
+def _asked_then_confirmed(wait: Any, button: str, phrases: tuple[str, ...],
+                          unchanged: Any) -> None:
+    """Click ``button``: the page asks first, its question holding every phrase; dismissed,
+    ``unchanged()`` (its own assertions) holds; clicked again, the question is accepted."""
+    from selenium.webdriver.support import expected_conditions as ec
+
+    click_when_steady(wait, button)
+    alert = wait.until(ec.alert_is_present())
+    question = alert.text
+    for phrase in phrases:
+        assert phrase in question, question
+    alert.dismiss()
+    unchanged()
+    click_when_steady(wait, button)
+    wait.until(ec.alert_is_present()).accept()
+
+
 def test_removing_a_job_asks_first_and_says_what_is_lost(
     daemon: Daemon, browser: Any  # noqa: F811
 ) -> None:
     """"remove" deleted a job and its stored readings at one click: no result can be shown,
     exported or rebuilt after that. The page now asks, saying so; dismissed, nothing goes."""
-    from selenium.webdriver.support import expected_conditions as ec
-
     # A job that ends without moving anything: queued behind a halt, then cancelled (aborted).
     with daemon.client() as c:
         assert c.post("/api/v1/rig/halt").status_code == 200
@@ -397,17 +412,14 @@ def test_removing_a_job_asks_first_and_says_what_is_lost(
         finally:
             assert c.post("/api/v1/rig/release").status_code == 200
     wait = open_live(browser, daemon, 120)
-    remove = f"#jobs tr[data-id='{job}'] button[data-action='remove']"
-    click_when_steady(wait, remove)
-    alert = wait.until(ec.alert_is_present())
-    question = alert.text
-    assert f"Remove job {job} (to remove)?" in question, question
-    assert "readings are deleted for good" in question and "rebuild" in question, question
-    alert.dismiss()
-    with daemon.client() as c:
-        assert c.get(f"/api/v1/jobs/{job}").status_code == 200  # still there
-    click_when_steady(wait, remove)
-    wait.until(ec.alert_is_present()).accept()
+
+    def still_there() -> None:
+        with daemon.client() as c:
+            assert c.get(f"/api/v1/jobs/{job}").status_code == 200
+
+    _asked_then_confirmed(wait, f"#jobs tr[data-id='{job}'] button[data-action='remove']",
+                          (f"Remove job {job} (to remove)?", "readings are deleted for good",
+                           "rebuild"), still_there)
     wait.until(lambda d: str(job) not in _row_ids(d))
     with daemon.client() as c:
         assert c.get(f"/api/v1/jobs/{job}").status_code == 404
@@ -469,22 +481,17 @@ def test_aborting_a_job_asks_first_and_says_what_it_ends(
     that it writes no result and cannot be resumed; dismissed, the job stays as it was."""
     import time
 
-    from selenium.webdriver.support import expected_conditions as ec
-
     job = _paused_long_job(daemon, "to abort")
+
+    def still_paused() -> None:
+        with daemon.client() as c:
+            assert c.get(f"/api/v1/jobs/{job}").json()["state"] == "paused"
+
     try:
         wait = open_live(browser, daemon, 120)
-        abort = f"#jobs tr[data-id='{job}'] button[data-action='abort']"
-        click_when_steady(wait, abort)
-        alert = wait.until(ec.alert_is_present())
-        question = alert.text
-        assert f"Abort job {job} (to abort)?" in question, question
-        assert "writes no result" in question and "cannot be resumed" in question, question
-        alert.dismiss()
-        with daemon.client() as c:
-            assert c.get(f"/api/v1/jobs/{job}").json()["state"] == "paused"  # as it was
-        click_when_steady(wait, abort)
-        wait.until(ec.alert_is_present()).accept()
+        _asked_then_confirmed(wait, f"#jobs tr[data-id='{job}'] button[data-action='abort']",
+                              (f"Abort job {job} (to abort)?", "writes no result",
+                               "cannot be resumed"), still_paused)
         with daemon.client() as c:
             deadline = time.monotonic() + 120
             while c.get(f"/api/v1/jobs/{job}").json()["state"] != "aborted":
