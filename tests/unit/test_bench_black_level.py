@@ -4,26 +4,18 @@ fraction of the reference's brightest pixel and leaves the background black (sci
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
 from types import ModuleType
 
 import numpy as np
 import pytest
 
 from gonio.brdf.pictures import appearance
-
-BENCH = Path(__file__).resolve().parents[2] / "bench"
+from tests.unit.bench_import import import_bench
 
 
 @pytest.fixture(scope="module")
 def bench_unseen() -> ModuleType:
-    sys.path.insert(0, str(BENCH))
-    try:
-        import bench_unseen
-    finally:
-        sys.path.remove(str(BENCH))
-    return bench_unseen
+    return import_bench("bench_unseen")
 
 
 def test_the_floor_is_added_to_the_sphere_only(bench_unseen: ModuleType) -> None:

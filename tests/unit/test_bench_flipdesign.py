@@ -7,7 +7,6 @@ unweighted one does not depend on the map.
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 from types import ModuleType
 
@@ -15,21 +14,14 @@ import numpy as np
 import pytest
 
 from gonio.brdf.design.constraints import RigConstraints
+from tests.unit.bench_import import import_bench
 from tests.unit.brdf.reconstruction.test_basis import small_basis
-
-BENCH = Path(__file__).resolve().parents[2] / "bench"
 
 
 @pytest.fixture(scope="module")
 def benches() -> tuple[ModuleType, ModuleType]:
     """bench_flipdesign and its sibling bench_unseen, imported as the scripts import them."""
-    sys.path.insert(0, str(BENCH))
-    try:
-        import bench_flipdesign
-        import bench_unseen
-    finally:
-        sys.path.remove(str(BENCH))
-    return bench_flipdesign, bench_unseen
+    return import_bench("bench_flipdesign"), import_bench("bench_unseen")
 
 
 def test_the_design_key_changes_with_the_importance_map_the_rig_and_the_arc(

@@ -2,23 +2,16 @@
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
 from types import ModuleType
 
 import pytest
 
-BENCH = Path(__file__).resolve().parents[2] / "bench"
+from tests.unit.bench_import import import_bench
 
 
 @pytest.fixture(scope="module")
 def bench() -> ModuleType:
-    sys.path.insert(0, str(BENCH))
-    try:
-        import bench_selfestimate
-    finally:
-        sys.path.remove(str(BENCH))
-    return bench_selfestimate
+    return import_bench("bench_selfestimate")
 
 
 def test_the_term_is_the_share_times_the_leave_one_pair_out_error(bench: ModuleType) -> None:

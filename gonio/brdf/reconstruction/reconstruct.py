@@ -821,8 +821,10 @@ def _reconstruct(
     cv_log = float(np.sqrt(np.mean(pair_err**2))) if pair_err is not None else float("nan")
     misfit = basis_misfit(_log_residuals(at_samples[..., :n_ch], vals, ci), vals, ci)
     n = int(cells_.shape[0])
-    if estimate_post is not None and np.isfinite(cv):
-
+    # The joint fit's calibrated estimate and its interval; V&F's path has neither.
+    joint_estimate = estimate_post is not None and np.isfinite(cv)
+    if joint_estimate:
+        assert estimate_post is not None  # for the type checker: joint_estimate says so
         expected, mahal = estimate_post.expected_log_rmse, estimate_post.mahalanobis
         predicted = predict_joint_log_rmse(expected, mahal, cv)
         uncovered = estimate_post.uncovered_share()
@@ -840,7 +842,7 @@ def _reconstruct(
     excess = peak_excess_log_rmse(table, vals)
     if np.isfinite(excess) and np.isfinite(widened) and excess > widened:
         widened = excess
-    upper = (upper_log_rmse(widened, misfit) if estimate_post is not None and np.isfinite(cv)
+    upper = (upper_log_rmse(widened, misfit) if joint_estimate
              else float("nan"))  # the interval was calibrated on the joint fit only
     seconds = time.perf_counter() - t0
     return Reconstruction(
