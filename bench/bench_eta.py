@@ -5,12 +5,13 @@ Run from the project root (needs mitsuba and flip-evaluator: ``pip install 'goni
     nice -n 5 .venv/bin/python bench/bench_eta.py choose [--eta 40 80 160 320 640]
     nice -n 5 .venv/bin/python bench/bench_eta.py fresh --eta E
 
-``eta`` (:data:`gonio.brdf.reconstruction.joint.JOINT_ETA`, 40) is the joint fit's ratio of a
-reading's noise to the prior's variance (docs/science.md 2.1). It was chosen by ``log_rmse`` on
-held-out library materials and never judged by what the renderings show. Here every candidate
-is passed to ``reconstruct(eta=...)``, so everything the call does moves with it: the fit, the
-scan's own anisotropy factor, the local prior's evidence, the leave-one-pair-out errors and
-the self-estimate. The pairs stay the default design's (``design_pairs``' model keeps 40).
+``eta`` (:data:`gonio.brdf.reconstruction.joint.JOINT_ETA`, 40, when this was written) is the
+joint fit's ratio of a reading's noise to the prior's variance (docs/science.md 2.1). It was
+chosen by ``log_rmse`` on held-out library materials and never judged by what the renderings
+show. Here every candidate is passed to ``reconstruct(eta=...)``, so everything the call does
+moves with it: the fit, the scan's own anisotropy factor, the local prior's evidence, the
+leave-one-pair-out errors and the self-estimate. The pairs stay the default design's
+(``design_pairs``' model keeps 40).
 
 Protocol, written and committed before any run of this script:
 
@@ -25,6 +26,10 @@ Protocol, written and committed before any run of this script:
   with the chosen ``eta`` against 40. The chosen value becomes the default only if its mean
   HDR-FLIP there is lower and its mean ``log_rmse`` within 5 % of 40's, and if
   ``bench_selfestimate.py`` with it has no more scans more than 2x low than today.
+
+Outcome (2026-11-27, docs/science.md 7.2.4): the rule chose 80, the blind run kept it, and
+``reconstruct`` now defaults to :data:`~gonio.brdf.reconstruction.joint.FIT_ETA` = 80. The
+script still compares every candidate against 40 (:data:`JOINT_ETA`, the design's model).
 
 Everything else as bench_unseen: 10 pairs (``cell_mix`` 0.5, the default design), 8 uniform
 stage angles over half a turn, 1 % noise seeded per material name, HDR-FLIP over the sphere's

@@ -303,10 +303,11 @@ def library_asymmetric() -> list[bu.Material]:
     return out
 
 
-def scans(witnesses: bool = False) -> list[dict[str, Any]]:
+def scans(witnesses: bool = False, eta: float | None = None) -> list[dict[str, Any]]:
     """One row per material and plan: the truth and every input of the estimate; with
     ``witnesses``, also ``calibrate_log_rmse.witnesses``' standardised leave-one-pair-out
-    error ``z_loo_pair`` and the posterior's scale ``s2`` (one more fit per scan)."""
+    error ``z_loo_pair`` and the posterior's scale ``s2`` (one more fit per scan); ``eta``
+    overrides the joint fit's (None: the default, ``reconstruct``'s)."""
     bu.CHOOSE["objective"] = "posterior"
     bu.SPAN["scan"] = bu.SPAN["design"] = DEFAULT_SPAN_DEG
     rows = []
@@ -317,7 +318,7 @@ def scans(witnesses: bool = False) -> list[dict[str, Any]]:
             cells, ph = bu.design(b, 10) if design == "posterior" else get_preset(design).cells()
             alpha = uniform_stage_angles(r, span=np.deg2rad(DEFAULT_SPAN_DEG))
             vals = bu.read(m, cells, ph, alpha, 100 + i)
-            rec = reconstruct(b, cells, ph, alpha, vals)
+            rec = reconstruct(b, cells, ph, alpha, vals, eta=eta)
             angle_err = (np.asarray(rec.angle_log_errors) if rec.angle_log_errors is not None
                          else np.full(r, np.nan))
             pair_err = (np.asarray(rec.pair_log_errors) if rec.pair_log_errors is not None
@@ -602,13 +603,16 @@ def main(argv: list[str] | None = None) -> int:
                     help="also record the standardised leave-one-pair-out error and the "
                          "posterior's scale (calibrate_log_rmse.witnesses) and print them for "
                          "the scans more than 2x too low")
+    ap.add_argument("--eta", type=float, default=None,
+                    help="the joint fit's eta for every scan (bench_eta.py's check; default: "
+                         "reconstruct's)")
     args = ap.parse_args(argv)
     print(f"$ {' '.join(['python', *sys.argv])}")
     t0 = time.perf_counter()
     if args.rows is not None and args.rows.is_file():
         rows = json.loads(args.rows.read_text())
     else:
-        rows = scans(args.witnesses)
+        rows = scans(args.witnesses, args.eta)
         if args.rows is not None:
             args.rows.write_text(json.dumps(rows))
     table(rows)

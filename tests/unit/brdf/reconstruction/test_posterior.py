@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from gonio.brdf.reconstruction.joint import FIT_ETA
 from gonio.brdf.reconstruction.posterior import (
     QUARTERS,
     RHO_GRID,
@@ -493,7 +494,7 @@ def test_reconstruct_with_two_factors_is_the_fit_under_the_rescaled_bands() -> N
     assert got.settings["prior_rho"] == 3.0 and got.settings["prior_rho_high"] == 0.25
 
     rec = reconstruct(b, cells, ph, alpha, vals, channels=("Y",), rho="scan-bands")
-    post = ScanPosterior(b, cells, ph, alpha, vals, bands=True)
+    post = ScanPosterior(b, cells, ph, alpha, vals, bands=True, eta=FIT_ETA)
     pair = (post.rho, post.rho_high)
     assert (rec.settings["prior_rho"], rec.settings.get("prior_rho_high", pair[0])) == pair
     np.testing.assert_array_equal(
