@@ -47,7 +47,7 @@ from gonio.brdf.design.product import design_product_rig
 from gonio.brdf.design.renderweight import DEFAULT_CELL_MIX, cell_weighting
 from gonio.brdf.design.roughness import RoughnessBound, bound_angles, roughness_bound
 from gonio.brdf.reconstruction.samples import DEFAULT_SPAN_DEG, SPANS_DEG
-from gonio.cli import UsageError
+from gonio.cli import CORE_SETTING_FLAGS, UsageError
 from gonio.sampling_design import colour_targets
 
 
@@ -343,7 +343,8 @@ def print_design(
               + ("condition-number search" if design.objective == "kappa"
                  else "joint fit's expected error") + ")", file=out)
     if design.fallback is not None:
-        print(f"  note: {design.fallback}", file=out)
+        # Worded with the flags this command takes, as its errors are (gonio.cli).
+        print(f"  note: {design.fallback_for(CORE_SETTING_FLAGS)}", file=out)
     if design.colour_pairs:
         print(f"colour: pairs 1-{design.colour_pairs} sit at the instrument's near-specular "
               "geometries; the colour report reads those from the scan (docs/colour.md)",

@@ -9,12 +9,14 @@ did; :class:`BasisLike` is what a design needs from a basis.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 from typing import Literal, Protocol, get_args
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from gonio.brdf.advice import AdvisedError
 from gonio.brdf.design.placement import Placement
 from gonio.brdf.design.search import SearchResult
 
@@ -112,7 +114,12 @@ class PairDesign:
     fallback : str or None
         Why the design was not made by the objective asked for (e.g. the expected-error
         choice could not be mounted on a crowded rig and the condition-number search, which
-        plans mounts as it goes, made it instead); None when it was.
+        plans mounts as it goes, made it instead); None when it was. Settings named in it
+        use the core's words (``min_device_distance_deg``); :meth:`fallback_for` words them as
+        a caller does.
+    fallback_error : AdvisedError or None
+        The error that made the fallback, when it was one (its advice is a template of
+        settings); not part of the design's value (not compared).
     """
 
     name: str
@@ -132,6 +139,15 @@ class PairDesign:
     fallback: str | None = None
     colour_pairs: int = 0
     cell_mix: float = 0.0
+    fallback_error: AdvisedError | None = field(default=None, compare=False, repr=False)
+
+    def fallback_for(self, names: Mapping[str, str]) -> str | None:
+        """:attr:`fallback` with the settings its advice names worded as in ``names`` (e.g. the
+        CLI's flags: ``min_device_distance_deg`` -> ``--min-device-distance``)."""
+        if self.fallback is None or self.fallback_error is None:
+            return self.fallback
+        core = str(self.fallback_error)
+        return self.fallback.replace(core, self.fallback_error.advise(names))
 
     @classmethod
     def independent(cls, name: str, placement: Placement, kappa: float,

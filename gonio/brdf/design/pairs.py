@@ -234,6 +234,7 @@ def design_pairs(
                 {**exc.words, "cell_mix": "the cell weighting (cell_mix; the API's render_mix)"}
             ) from exc
     fallback = None
+    fallback_error: FeasibilityError | None = None
     if asked == "posterior":
         if isinstance(basis, Basis):
             try:
@@ -241,6 +242,7 @@ def design_pairs(
                                         span_deg=span_deg, seed=0 if seed is None else seed,
                                         time_limit_s=time_limit_s, **cells_default)
             except FeasibilityError as exc:
+                fallback_error = exc
                 fallback = (f"the expected-error choice could not be mounted ({exc}); the "
                             "condition-number search, which plans mounts as it goes, made "
                             "the design")
@@ -259,7 +261,8 @@ def design_pairs(
         log.warning("design of %d pairs: %s", n, fallback)
     design = _kappa_design(basis, n, constraints, h=h, starts=starts, descents=descents,
                            seed=seed, method=method, time_limit_s=time_limit_s)
-    return replace(with_expected_error(basis, design, rotations, span_deg), fallback=fallback)
+    return replace(with_expected_error(basis, design, rotations, span_deg), fallback=fallback,
+                   fallback_error=fallback_error)
 
 
 def with_expected_error(basis: BasisLike, design: PairDesign, rotations: int,

@@ -416,3 +416,19 @@ def test_the_retro_line_follows_the_closest_pairs_difference_angle(
         assert "try --render-mix 0" in text
     else:
         assert "retro-reflection:" not in text
+
+
+def test_a_fallback_note_names_the_flags_this_command_takes(
+        basis_file: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Six pairs within 50 deg of the normal, devices 25 deg apart: the expected-error choice
+    cannot mount its last pair, the condition-number search makes the design, and the note
+    that says so words its advice with ``gonio design``'s flags (as the command's errors do),
+    not the library's setting names."""
+    code = main(["design", "--pairs", "6", "--basis", str(basis_file), "--objective",
+                 "posterior", "--max-elevation", "50", "--min-device-distance", "25", *FAST])
+    assert code == 0
+    notes = [line for line in capsys.readouterr().out.splitlines()
+             if line.strip().startswith("note:")]
+    assert len(notes) == 1 and "could not be mounted" in notes[0]
+    assert "lower --min-device-distance" in notes[0]
+    assert "min_device_distance_deg" not in notes[0]

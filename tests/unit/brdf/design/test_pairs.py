@@ -187,6 +187,10 @@ def test_a_crowded_rig_falls_back_to_the_search_that_plans_mounts(
     assert d.objective == "kappa" and d.search is not None and d.greedy is None
     assert d.fallback is not None and "could not be mounted" in d.fallback
     assert "no mountable cell" in d.fallback and d.fallback in caplog.text
+    # Worded for a caller: the advice's setting names replaced, the rest kept.
+    worded = d.fallback_for({"min_device_distance_deg": "--min-device-distance"})
+    assert worded == d.fallback.replace("min_device_distance_deg", "--min-device-distance")
+    assert worded != d.fallback
     dev = _devices_of(d)
     assert np.degrees(min_pairwise_distance(dev)) >= 25.0 - 1e-6
     assert (np.degrees(np.arccos(np.clip(dev[:, 2], -1, 1))) <= 55.0 + 1e-6).all()
