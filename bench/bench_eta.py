@@ -132,15 +132,7 @@ def evaluate(mats: list[bu.Material], etas: list[float], presets_at: list[float]
         print(f"| {m.name} | " + " | ".join(
             f"{s.log_rmse:.4f} / {s.flip:.3f} / x{s.predicted / s.log_rmse:.2f}"
             for s in (rows[r][m.name] for r in order)) + " |")
-    for kind in ("measured", "aniso"):
-        ks = [m for m in mats if m.kind == kind]
-        if ks:
-            print(f"| **mean {kind} ({len(ks)})** | " + " | ".join(
-                f"**{np.mean([rows[r][m.name].log_rmse for m in ks]):.4f} / "
-                f"{np.mean([rows[r][m.name].flip for m in ks]):.3f}**" for r in order) + " |")
-    print(f"| **mean all ({len(mats)})** | " + " | ".join(
-        f"**{np.mean([rows[r][m.name].log_rmse for m in mats]):.4f} / "
-        f"{np.mean([rows[r][m.name].flip for m in mats]):.3f}**" for r in order) + " |")
+    bf.print_mean_rows(rows, mats, order)
     print("\nself-estimate: within x2 / more than 2x low, of", len(mats))
     for r in order:
         ratio = np.array([rows[r][m.name].predicted / rows[r][m.name].log_rmse for m in mats])
@@ -148,10 +140,8 @@ def evaluate(mats: list[bu.Material], etas: list[float], presets_at: list[float]
     for e in presets_at:
         if f"gonio eta={e:g}" not in rows:
             continue
-        g = rows[f"gonio eta={e:g}"]
-        ps = [f"{p} eta={e:g}" for p in presets]
-        wl = sum(g[m.name].log_rmse < min(rows[p][m.name].log_rmse for p in ps) for m in mats)
-        wf = sum(g[m.name].flip < min(rows[p][m.name].flip for p in ps) for m in mats)
+        wl, wf = bf.best_preset_wins(rows, mats, f"gonio eta={e:g}",
+                                     [f"{p} eta={e:g}" for p in presets])
         print(f"wins of gonio eta={e:g} against the best preset at the same eta, of "
               f"{len(mats)}: log_rmse {wl}, HDR-FLIP {wf}")
 

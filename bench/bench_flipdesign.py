@@ -324,6 +324,29 @@ def _flip_recording(table: Any, m: bu.Material) -> float:
     return float(res.mean)
 
 
+def print_mean_rows(rows: dict[str, dict[str, bu.Score]], mats: list[bu.Material],
+                    order: list[str]) -> None:
+    """The markdown rows of mean ``log_rmse`` / HDR-FLIP per kind of material and over all,
+    one column per row name in ``order`` (the per-material table's closing rows)."""
+    groups = [(f"mean {kind}", [m for m in mats if m.kind == kind])
+              for kind in ("measured", "aniso")] + [("mean all", mats)]
+    for label, ks in groups:
+        if ks:
+            print(f"| **{label} ({len(ks)})** | " + " | ".join(
+                f"**{np.mean([rows[r][m.name].log_rmse for m in ks]):.4f} / "
+                f"{np.mean([rows[r][m.name].flip for m in ks]):.3f}**" for r in order) + " |")
+
+
+def best_preset_wins(rows: dict[str, dict[str, bu.Score]], mats: list[bu.Material], row: str,
+                     presets: list[str]) -> tuple[int, int]:
+    """On how many of ``mats`` row ``row`` beats the best of ``presets`` (row names) by
+    ``log_rmse`` and by HDR-FLIP, each material's best preset taken per metric."""
+    g = rows[row]
+    wl = sum(g[m.name].log_rmse < min(rows[p][m.name].log_rmse for p in presets) for m in mats)
+    wf = sum(g[m.name].flip < min(rows[p][m.name].flip for p in presets) for m in mats)
+    return int(wl), int(wf)
+
+
 def evaluate(mats: list[bu.Material], mixes: list[float], label: str,
              seeds: tuple[int, ...] = (0,), retro: tuple[tuple[int, float], ...] = (),
              presets_on: bool = True, save: str | None = None, limits: bool = False,
@@ -394,15 +417,7 @@ def evaluate(mats: list[bu.Material], mixes: list[float], label: str,
     for m in mats:
         print(f"| {m.name} | " + " | ".join(
             f"{rows[r][m.name].log_rmse:.4f} / {rows[r][m.name].flip:.3f}" for r in order) + " |")
-    for kind in ("measured", "aniso"):
-        ks = [m for m in mats if m.kind == kind]
-        if ks:
-            print(f"| **mean {kind} ({len(ks)})** | " + " | ".join(
-                f"**{np.mean([rows[r][m.name].log_rmse for m in ks]):.4f} / "
-                f"{np.mean([rows[r][m.name].flip for m in ks]):.3f}**" for r in order) + " |")
-    print(f"| **mean all ({len(mats)})** | " + " | ".join(
-        f"**{np.mean([rows[r][m.name].log_rmse for m in mats]):.4f} / "
-        f"{np.mean([rows[r][m.name].flip for m in mats]):.3f}**" for r in order) + " |")
+    print_mean_rows(rows, mats, order)
     print("\nmean HDR-FLIP per standard view (lights 20, 55, 55, 70 deg from the view):")
     for kind in ("measured", "aniso"):
         ks = [m for m in mats if m.kind == kind]
@@ -428,10 +443,7 @@ def evaluate(mats: list[bu.Material], mixes: list[float], label: str,
     for r in order:
         if r in presets or r in ("basis ceiling", "grid limit"):
             continue
-        g = rows[r]
-        wl = sum(g[m.name].log_rmse < min(rows[p][m.name].log_rmse for p in presets)
-                 for m in mats)
-        wf = sum(g[m.name].flip < min(rows[p][m.name].flip for p in presets) for m in mats)
+        wl, wf = best_preset_wins(rows, mats, r, list(presets))
         print(f"  {r}: log_rmse {wl}, HDR-FLIP {wf}")
 
 

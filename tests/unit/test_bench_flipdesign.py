@@ -88,3 +88,26 @@ def test_the_retro_study_design_forces_its_pairs_first_and_mounts(
     if k == 2:
         assert np.isclose(deg[1, 1], td) and 5.0 <= deg[1, 0] <= 35.0
     place_pairs(cells, RigConstraints(), ph_step_deg=1.0, seed=0)  # raises if it cannot mount
+
+
+def test_wins_and_means_count_each_materials_best_preset_per_metric(
+        benches: tuple[ModuleType, ModuleType], capsys: pytest.CaptureFixture[str]) -> None:
+    """Two materials, two presets: the best preset is taken per material and per metric, and
+    a tie is not a win; the mean rows average each kind and all."""
+    bf, bu = benches
+    mats = [bu.Material("a", "measured", None, None, ()), bu.Material("b", "aniso", None, None, ())]
+    s = bu.Score
+    rows = {
+        "gonio": {"a": s(0.01, 0.0, flip=0.30), "b": s(0.02, 0.0, flip=0.10)},
+        "P1": {"a": s(0.02, 0.0, flip=0.20), "b": s(0.02, 0.0, flip=0.40)},
+        "P2": {"a": s(0.05, 0.0, flip=0.35), "b": s(0.03, 0.0, flip=0.05)},
+    }
+    # a: log_rmse 0.01 < min(0.02, 0.05) wins; FLIP 0.30 > 0.20 loses.
+    # b: log_rmse 0.02 == min(0.02, 0.03) is a tie, not a win; FLIP 0.10 > 0.05 loses.
+    assert bf.best_preset_wins(rows, mats, "gonio", ["P1", "P2"]) == (1, 0)
+    assert bf.best_preset_wins(rows, mats, "P2", ["P1"]) == (0, 1)
+    bf.print_mean_rows(rows, mats, ["gonio", "P1"])
+    out = capsys.readouterr().out.splitlines()
+    assert out == ["| **mean measured (1)** | **0.0100 / 0.300** | **0.0200 / 0.200** |",
+                   "| **mean aniso (1)** | **0.0200 / 0.100** | **0.0200 / 0.400** |",
+                   "| **mean all (2)** | **0.0150 / 0.200** | **0.0200 / 0.300** |"]
