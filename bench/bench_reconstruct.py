@@ -30,7 +30,7 @@ import numpy as np
 from gonio.brdf.materials.library import get_material
 from gonio.brdf.reconstruction.basis import default_basis, remap
 from gonio.brdf.reconstruction.reconstruct import (
-    FIT_ETA,
+    JOINT_ETA,
     JOINT_LAM,
     _objective,
     joint_prior,
@@ -106,13 +106,13 @@ def main(argv: list[str] | None = None) -> int:
                   f"{diff:>10.2e} {obj:>10.2e}")
         # The default joint fit: one (n r) x (n r) solve for all channels.
         Yr = remap(vals, fm[:, None, None], w[:, None, None]) - mu[:, None, None]
-        P = joint_prior(basis, JOINT_LAM / FIT_ETA)
+        P = joint_prior(basis, JOINT_LAM / JOINT_ETA)
         phr = ph[:, None] - alpha[None, :]
 
         def joint_solve(Yr: np.ndarray = Yr, Qt: np.ndarray = Qt, phr: np.ndarray = phr,
                         P: np.ndarray = P) -> object:
             with one_blas_thread():
-                return solve_joint(Yr, Qt, phr, P, FIT_ETA)
+                return solve_joint(Yr, Qt, phr, P, JOINT_ETA)
 
         t_solve = median_time(joint_solve, args.repeats)
         t_total = median_time(partial(reconstruct, basis, cells, ph, alpha, vals), args.repeats)

@@ -607,6 +607,12 @@ def main(argv: list[str] | None = None) -> int:
                     help="the joint fit's eta for every scan (bench_eta.py's check; default: "
                          "reconstruct's)")
     args = ap.parse_args(argv)
+    if args.eta is not None and args.witnesses:
+        ap.error("--witnesses computes the default fit's witnesses (calibrate_log_rmse); "
+                 "leave out --eta")
+    if args.eta is not None and args.rows is not None and args.rows.is_file():
+        ap.error(f"--rows {args.rows} exists and holds scans made at whatever eta wrote it; "
+                 "give a new file with --eta")
     print(f"$ {' '.join(['python', *sys.argv])}")
     t0 = time.perf_counter()
     if args.rows is not None and args.rows.is_file():

@@ -243,10 +243,9 @@ def _headline(metrics: dict[str, Any]) -> dict[str, Any] | None:
                        "better. It adds what the readings leave undetermined to how far the "
                        "material sits from the training library; on materials held out of "
                        "the library it was within a factor of 2 of the truth on about 2 "
-                       "scans in 3 (141 of 210 test and fresh scans) and more than 2 times "
-                       "too low on about 1 in 35 (6 of 210: five read with the MA98 preset, "
-                       "one a specimen without twofold symmetry scanned over half a turn, "
-                       "flagged as a basis misfit; docs/science.md 7.1.1, 7.2.4).",
+                       "scans in 3 (139 of 210 test and fresh scans) and more than 2 times "
+                       "too low on about 1 in 35 (6 of 210), all read with the MA98 preset "
+                       "(docs/science.md 7.1.1).",
         }
     v = metrics.get("predicted_error")
     if isinstance(v, int | float):

@@ -495,8 +495,7 @@ def register(subparsers: Any) -> None:
     r.add_argument("--method", choices=("joint", "vf"), default="joint",
                    help="joint fit of every reading (default) or V&F's per-slice path")
     r.add_argument("--eta", type=float, default=None,
-                   help="reading noise / prior ratio (default: the method's: 80 for the "
-                        "joint fit, 40 for V&F's path)")
+                   help="reading noise / prior ratio (default: the method's, V&F: 40)")
     r.add_argument("--lam", type=float, default=None, help="th=0 consistency weight (V&F: 0.1)")
     r.add_argument("--solver", choices=("closed", "iterative"), default="closed",
                    help="for --method vf: closed form or V&F's L-BFGS")

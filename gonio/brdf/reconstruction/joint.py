@@ -24,18 +24,11 @@ from gonio.brdf.tables.table import TH0_ROWS
 
 FloatArray = NDArray[np.float64]
 
-#: Noise-to-prior ratio of one reading in the joint fit's *model* (the prior sums to the
-#: identity over the harmonics, so this is V&F's ``eta`` per reading): what the expected-error
-#: design, the adaptive plans' planning posterior and the tilt fit assume. Chosen on held-out
-#: library materials by ``log_rmse`` (``bench/bench_unseen.py --tune``).
+#: Noise-to-prior ratio of one reading in the joint fit (the prior sums to the identity over
+#: the harmonics, so this is V&F's ``eta`` per reading): V&F's value. Judged by the standard
+#: renderings in docs/science.md 7.2.4, where 80 rendered a little closer (HDR-FLIP -0.002)
+#: but widened the self-estimate's misses and flagged more scans; kept at 40.
 JOINT_ETA = 40.0
-#: ``reconstruct``'s default ``eta`` for the joint fit: twice the model's. Chosen on
-#: bench_eta.py's choice set by HDR-FLIP of the standard renderings, with ``log_rmse`` held
-#: within 5 %, and kept after one blind run (docs/science.md 2.1): a stronger prior renders
-#: a little closer to the truth (HDR-FLIP -0.002 on both sets) for 1-2 % of ``log_rmse`` on
-#: the anisotropic specimens. The design and planning were not re-chosen with it and keep
-#: :data:`JOINT_ETA`.
-FIT_ETA = 80.0
 #: Weight of Eq. 5's specular (th = 0) condition in the joint fit, in V&F's units.
 JOINT_LAM = 0.1
 #: ``reconstruct(..., rho="scan")`` adopts the scan's own factor on the prior's varying

@@ -73,7 +73,7 @@ from gonio.brdf.reconstruction.basis import (
 from gonio.brdf.reconstruction.blas import one_blas_thread
 from gonio.brdf.reconstruction.errors import ReconstructionError
 from gonio.brdf.reconstruction.joint import (
-    FIT_ETA,
+    JOINT_ETA,
     JOINT_LAM,
     SCAN_RHO_MAX,
     joint_prior,
@@ -580,9 +580,8 @@ def reconstruct(
     channels : sequence of str, length C
     eta, lam : float, optional
         Regularisation weights of Eq. 5: noise-to-prior ratio and the specular (th = 0)
-        condition. Defaults: V&F's 40 and 0.1 for ``method="vf"``, :data:`FIT_ETA` (80) and
-        :data:`JOINT_LAM` for the joint fit (the posterior, the local prior's evidence and the
-        self-estimate use the same ``eta``).
+        condition. Defaults: V&F's 40 and 0.1 for ``method="vf"``, :data:`JOINT_ETA` and
+        :data:`JOINT_LAM` for the joint fit.
     n_components : int, optional
         Use only the first K components (default: all of ``basis``).
     solver : {"closed", "iterative"}
@@ -668,7 +667,7 @@ def _reconstruct(
     if method not in ("joint", "vf"):
         raise ReconstructionError(f"method must be 'joint' or 'vf', not {method!r}")
     if eta is None:
-        eta = FIT_ETA if method == "joint" else 40.0
+        eta = JOINT_ETA if method == "joint" else 40.0
     if lam is None:
         lam = JOINT_LAM if method == "joint" else 0.1
     if method == "joint" and not eta > 0:

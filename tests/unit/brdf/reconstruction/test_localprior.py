@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 
 from gonio.brdf.reconstruction.basis import Basis, BasisError, fold_in, remap, row_weight
-from gonio.brdf.reconstruction.joint import FIT_ETA
 from gonio.brdf.reconstruction.localprior import (
     EVIDENCE,
     LOCAL_SHARE,
@@ -173,7 +172,7 @@ def test_a_scan_of_a_folded_in_material_leans_on_its_own_prior() -> None:
     b = _folded()
     truth = _sharp_cousin()
     cells, ph, alpha, vals = _scan(truth)
-    post = ScanPosterior(b, cells, ph, alpha, vals, eta=FIT_ETA)  # reconstruct's default
+    post = ScanPosterior(b, cells, ph, alpha, vals)
     pick = choose_local_prior(post, b)
     assert pick is not None and pick.name == "sharp"
     assert pick.gain >= np.log(EVIDENCE * 3)

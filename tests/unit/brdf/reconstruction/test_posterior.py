@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gonio.brdf.reconstruction.joint import FIT_ETA
 from gonio.brdf.reconstruction.posterior import (
     QUARTERS,
     RHO_GRID,
@@ -494,7 +493,7 @@ def test_reconstruct_with_two_factors_is_the_fit_under_the_rescaled_bands() -> N
     assert got.settings["prior_rho"] == 3.0 and got.settings["prior_rho_high"] == 0.25
 
     rec = reconstruct(b, cells, ph, alpha, vals, channels=("Y",), rho="scan-bands")
-    post = ScanPosterior(b, cells, ph, alpha, vals, bands=True, eta=FIT_ETA)
+    post = ScanPosterior(b, cells, ph, alpha, vals, bands=True)
     pair = (post.rho, post.rho_high)
     assert (rec.settings["prior_rho"], rec.settings.get("prior_rho_high", pair[0])) == pair
     np.testing.assert_array_equal(
@@ -549,3 +548,21 @@ def test_weights_from_every_third_slice_equal_those_from_the_whole_table() -> No
     np.testing.assert_allclose(whole.W, W, rtol=1e-10)
     with pytest.raises(ReconstructionError, match="table has shape"):
         ScanPosterior(b, cells, ph, alpha, vals, table=table[:, :10], rho=0.5)
+
+
+def test_the_fit_and_the_posteriors_share_one_default_eta() -> None:
+    """reconstruct's joint fit, the scan posterior (its witnesses, the adaptive planning) and
+    the design's prior model default to the same noise ratio, V&F's 40 (docs/science.md 2.1;
+    7.2.4 says why 80 was not adopted): a split would make the self-estimate and the design
+    describe a fit that is not the one run."""
+    import inspect
+
+    from gonio.brdf.design.posterior import prior_model
+    from gonio.brdf.reconstruction.joint import JOINT_ETA
+    from gonio.brdf.reconstruction.reconstruct import reconstruct
+
+    b, cells, ph, alpha, vals = _scan()
+    rec = reconstruct(b, cells, ph, alpha, vals, channels=("Y",))
+    assert rec.settings["eta"] == JOINT_ETA == 40.0
+    assert ScanPosterior(b, cells, ph, alpha, vals).eta == JOINT_ETA
+    assert inspect.signature(prior_model).parameters["eta"].default == JOINT_ETA

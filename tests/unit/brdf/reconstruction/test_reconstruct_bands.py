@@ -11,7 +11,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gonio.brdf.reconstruction.joint import FIT_ETA
 from gonio.brdf.reconstruction.posterior import ScanPosterior
 from gonio.brdf.reconstruction.reconstruct import reconstruct
 from gonio.brdf.reconstruction.tabulate import FLOAT32_ABOVE_CHANNELS
@@ -60,7 +59,7 @@ def test_scan_factor_is_chosen_as_from_the_whole_first_table() -> None:
     b, cells, ph, alpha, vals = _spectral_scan(seed=6)
     names = tuple(str(k) for k in range(N_BANDS))
     first = reconstruct(b, cells, ph, alpha, vals, channels=names, rho=None)
-    post = ScanPosterior(b, cells, ph, alpha, vals, table=first.table.values, eta=FIT_ETA)
+    post = ScanPosterior(b, cells, ph, alpha, vals, table=first.table.values)
     assert post.rho < 1.0  # the scan's own factor is adopted, so the fit is redone
     want = reconstruct(b, cells, ph, alpha, vals, channels=names, rho=post.rho)
     got = reconstruct(b, cells, ph, alpha, vals, channels=names)

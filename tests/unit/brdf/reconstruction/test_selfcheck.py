@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 
 from gonio.brdf.reconstruction.basis import inverse_remap
-from gonio.brdf.reconstruction.joint import FIT_ETA
 from gonio.brdf.reconstruction.posterior import ScanPosterior
 from gonio.brdf.reconstruction.reconstruct import reconstruct
 from gonio.brdf.reconstruction.selfcheck import (
@@ -129,7 +128,7 @@ def test_reconstruction_reports_the_witnesses_it_predicts_from() -> None:
     # The posterior's log_rmse weights come from the fit under the learnt prior, before the
     # fit adopts the scan's own rho (reconstruct's notes: one posterior per call).
     plain = reconstruct(b, cells, ph, alpha, vals, channels=["Y"], rho=None)
-    post = ScanPosterior(b, cells, ph, alpha, vals, table=plain.table.values, eta=FIT_ETA)
+    post = ScanPosterior(b, cells, ph, alpha, vals, table=plain.table.values)
     assert rec.mahalanobis == pytest.approx(post.mahalanobis, rel=1e-9)
     assert rec.expected_log_rmse == pytest.approx(post.expected_log_rmse, rel=1e-9)
     assert rec.predicted_log_rmse_unwidened == pytest.approx(
