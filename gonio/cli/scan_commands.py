@@ -633,6 +633,7 @@ def _follow(client: Any, job_id: int, disabled: bool, poll_s: float = 0.5) -> di
     from tqdm import tqdm
 
     bar = tqdm(total=None, unit="angle", desc=f"job {job_id}", disable=disabled, file=sys.stderr)
+    told: str | None = None
     try:
         while True:
             row: dict[str, Any] = client.request("GET", f"/api/v1/jobs/{job_id}")
@@ -640,11 +641,20 @@ def _follow(client: Any, job_id: int, disabled: bool, poll_s: float = 0.5) -> di
             bar.n = int(row.get("done_angles") or 0)
             bar.set_description_str(f"job {job_id} {row['state']}")
             bar.refresh()
+            reason = row.get("reason") if row["state"] == "suspended" else None
+            if reason and reason != told:
+                bar.write(_suspended_line(job_id, reason), file=sys.stderr)
+            told = reason
             if row["state"] in _FINAL:
                 return row
             time.sleep(poll_s)
     finally:
         bar.close()
+
+
+def _suspended_line(job_id: int, reason: str) -> str:
+    """What a terminal shows when a job suspends: the bar alone said 'suspended' and no why."""
+    return f"job {job_id} suspended: {reason}"
 
 
 def _progress(service: Any, job_id: int, disabled: bool) -> Any:
@@ -663,6 +673,8 @@ def _progress(service: Any, job_id: int, disabled: bool) -> Any:
             bar.refresh()
         elif ev.type == "state":
             bar.set_description_str(f"job {job_id} {ev.data['state']}")
+            if ev.data["state"] == "suspended" and ev.data.get("reason"):
+                bar.write(_suspended_line(job_id, ev.data["reason"]), file=sys.stderr)
         elif ev.type in ("arc_warning", "physical_bounds", "design_gap", "arc_asymmetric"):
             bar.write(f"warning: {ev.data['message']}", file=sys.stderr)
         elif ev.type == "arc_test":
