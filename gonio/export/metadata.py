@@ -33,7 +33,8 @@ layout has no room). Keys (docs/export.md lists them with examples):
     Each model's fit error against the reconstruction: table metrics and the rendered
     difference (:mod:`gonio.export.judge`).
 ``warnings``
-    Plain sentences: large rendered differences, an averaged-away anisotropy, a half-turn
+    Plain sentences: large rendered differences, an averaged-away anisotropy, a calibration
+    measured at another exposure than the scan, a half-turn
     scan's arc, a reconstruction outside physical bounds (docs/science.md 7.5), a
     self-estimate more than x2 from its design's expected error (7.1), ...
 """
@@ -230,6 +231,9 @@ def export_provenance(attrs: Mapping[str, Any], metrics: Mapping[str, Any],
             out["warnings"].append(warning)
     if truth:
         out["simulated_material"] = truth
+    if provenance.get("calibration_warning"):
+        # The calibration does not fit the scan (another exposure): every value is off.
+        out["warnings"].append(str(provenance["calibration_warning"]))
     if provenance.get("arc_warning"):
         out["warnings"].append(str(provenance["arc_warning"]))
     if provenance.get("physical_bounds"):
