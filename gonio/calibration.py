@@ -602,6 +602,22 @@ def uncalibrated_warning(cal: Calibration, pairs: Sequence[PairSpec]) -> str | N
             "calibration job with the white reference on the stage first)")
 
 
+def exposure_warning(cal: Calibration, exposure_s: float) -> str | None:
+    """What a scan at ``exposure_s`` under ``cal`` gets wrong when ``cal`` was measured at
+    another exposure (None when it was not, or the exposure is not recorded): said by the dry
+    runs and ``gonio scan`` before anything is measured. Counts are not rescaled between
+    exposure times (sensors need not be linear in exposure), so the values would be off by
+    about the ratio; :func:`gonio.finishing.exposure_mismatch` says it again in the result."""
+    if not cal.pairs or cal.exposure_s is None or math.isclose(exposure_s, cal.exposure_s,
+                                                                  rel_tol=1e-6):
+        return None
+    return (f"exposure: the calibration in effect ({cal.source}) was measured at "
+            f"{cal.exposure_s:g} s and this scan reads at {exposure_s:g} s; counts are not "
+            f"rescaled between exposures, so its values in 1/sr would be off by about "
+            f"{exposure_s / cal.exposure_s:.3g} times: scan at {cal.exposure_s:g} s, or "
+            f"calibrate at {exposure_s:g} s first")
+
+
 def uncalibrated_refusal(cal: Calibration, pairs: Sequence[PairSpec],
                          rig_data_dir: Path | None, data_dir: Path) -> str | None:
     """Why a scan of ``pairs`` needs the user's explicit acceptance, or None.

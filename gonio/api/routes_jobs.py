@@ -8,7 +8,7 @@ from fastapi import APIRouter, Query, Response, status
 from pydantic import BaseModel, Field
 
 from gonio.api.deps import COMPUTE, READ, WRITE, JobId, Service
-from gonio.calibration import counts, uncalibrated_warning
+from gonio.calibration import counts, exposure_warning, uncalibrated_warning
 from gonio.jobstates import JobState
 from gonio.plans.dryrun import DryRun
 from gonio.plans.models import Plan
@@ -81,9 +81,12 @@ def create_job(
 def dry_run(request: DryRunRequest, service: Service) -> DryRun:
     result = service.dry_run(request.plan)
     if request.plan.kind != "calibration":
-        warning = uncalibrated_warning(service.calibration(), result.pairs)
-        if warning is not None:
-            result = result.model_copy(update={"warnings": [*result.warnings, warning]})
+        cal = service.calibration()
+        more = [w for w in (uncalibrated_warning(cal, result.pairs),
+                            exposure_warning(cal, request.plan.exposure.exposure_s))
+                if w is not None]
+        if more:
+            result = result.model_copy(update={"warnings": [*result.warnings, *more]})
     return result
 
 

@@ -236,10 +236,9 @@ async def _run_scan(args: argparse.Namespace, plan: Any, config: Any, sim: Any =
         dr = dry_run(plan, desc, basis_ready=not basis.build_needed(), basis=basis.symmetry(),
                      asymmetric_build_s=(basis.asymmetric_build_s()
                                          if plan.arc_mode() == "auto" else None))
-        warning = None if sim is not None else _calibration_warning(args, plan, config,
-                                                                     dr.pairs)
-        if warning is not None:
-            dr = dr.model_copy(update={"warnings": [*dr.warnings, warning]})
+        more = [] if sim is not None else _calibration_warnings(args, plan, config, dr.pairs)
+        if more:
+            dr = dr.model_copy(update={"warnings": [*dr.warnings, *more]})
         print(dr.model_dump_json(indent=2) if args.json
               else dry_run_summary(dr, plan, config.rig.name))
         return 0
@@ -336,6 +335,12 @@ async def _run_owned(args: argparse.Namespace, checked: Any, config: Any, sim: A
             if sim is None and plan.kind != "calibration":
                 _check_calibration(args, checked.pairs, config, service.calibration(),
                                    data_dir)
+            if plan.kind != "calibration":
+                from gonio.calibration import exposure_warning
+
+                off = exposure_warning(service.calibration(), plan.exposure.exposure_s)
+                if off is not None:
+                    print(f"warning: {off}", file=sys.stderr)
             # What the submission records as the job's arc warning, said here too (a job whose
             # basis is known only later says it through the progress bar's events).
             for warning in service.dry_run(checked).warnings:
@@ -410,20 +415,27 @@ def _print_arc(summary: dict[str, Any]) -> None:
         print(f"  basis: {summary['basis_switch']}")
 
 
-def _calibration_warning(args: argparse.Namespace, plan: Any, config: Any,
-                         pairs: Any) -> str | None:
-    """The dry run's ``uncalibrated: ...`` warning for ``plan`` (measuring ``pairs``) on this
-    rig, if any."""
-    from gonio.calibration import Calibration, calibration_in_effect, uncalibrated_warning
+def _calibration_warnings(args: argparse.Namespace, plan: Any, config: Any,
+                          pairs: Any) -> list[str]:
+    """The dry run's ``uncalibrated: ...`` and ``exposure: ...`` warnings for ``plan``
+    (measuring ``pairs``) on this rig, if any."""
+    from gonio.calibration import (
+        Calibration,
+        calibration_in_effect,
+        exposure_warning,
+        uncalibrated_warning,
+    )
     from gonio.paths import scan_data_dir
 
     if plan.kind == "calibration":
-        return None
+        return []
     if args.calibration is not None and args.calibration.is_file():
         cal = _read_calibration(args.calibration)
     else:
         cal = calibration_in_effect(args.data_dir or scan_data_dir(config), config)
-    return uncalibrated_warning(cal if isinstance(cal, Calibration) else Calibration(), pairs)
+    cal = cal if isinstance(cal, Calibration) else Calibration()
+    return [w for w in (uncalibrated_warning(cal, pairs),
+                        exposure_warning(cal, plan.exposure.exposure_s)) if w is not None]
 
 
 def _check_calibration(args: argparse.Namespace, pairs: Any, config: Any, cal: Any,
