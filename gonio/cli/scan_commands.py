@@ -327,18 +327,22 @@ async def _run_owned(args: argparse.Namespace, checked: Any, config: Any, sim: A
                 # comes in the foreground.
                 store.set_state(job.id, JobState.RUNNING)
         else:
+            from gonio.calibration import exposure_warning
+
+            exposure_s = plan.exposure.exposure_s
             if (sim is not None and override is None and plan.kind != "calibration"
-                    and not calibration_covers_rig(service)):
-                why = await calibrate_in_foreground(service, sim)
+                    and (not calibration_covers_rig(service)
+                         or exposure_warning(service.calibration(), exposure_s))):
+                # The simulated rig's calibration is measured at the scan's exposure (one
+                # at another exposure would leave the scan off by the ratio).
+                why = await calibrate_in_foreground(service, sim, exposure_s)
                 if why is not None:
                     raise UsageError(why)
             if sim is None and plan.kind != "calibration":
                 _check_calibration(args, checked.pairs, config, service.calibration(),
                                    data_dir)
             if plan.kind != "calibration":
-                from gonio.calibration import exposure_warning
-
-                off = exposure_warning(service.calibration(), plan.exposure.exposure_s)
+                off = exposure_warning(service.calibration(), exposure_s)
                 if off is not None:
                     print(f"warning: {off}", file=sys.stderr)
             # What the submission records as the job's arc warning, said here too (a job whose
