@@ -263,3 +263,23 @@ def test_a_calibration_at_another_exposure_is_among_the_export_warnings(
     assert f"warning: {warning}" in capsys.readouterr().out
     extras = json.loads((tmp_path / "x.gltf").read_text())["asset"]["extras"]
     assert extras["calibration"]["warning"] == warning and warning in extras["warnings"]
+
+
+def test_the_table_export_says_the_reconstructions_own_warnings(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # "outside physical bounds ... do not use this table without checking it" was printed
+    # with the gltf, mtlx, merl and factored exports, and not with the table's (nor in its
+    # file): the one export it is about. The fits' warnings stay off the table.
+    bounds = ("the reconstruction is outside physical bounds: its directional albedo reaches "
+              "18.1; do not use this table without checking it")
+    path = _result(tmp_path / "job-9.h5", "brushed-metal-003", "felt", simulated=False,
+                   physical_bounds=bounds)
+    out = tmp_path / "x.table.npz"
+    assert main(["export", str(path), "--format", "table", "-o", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert f"warning: {bounds}" in printed
+    with np.load(out) as z:
+        meta = json.loads(str(z["provenance"]))
+    assert meta["warnings"] == [bounds] == meta["reconstruction_warnings"]
+    assert main(["export", str(path), "--format", "gltf", "-o", str(tmp_path / "x.gltf")]) == 0
+    assert f"warning: {bounds}" in capsys.readouterr().out
