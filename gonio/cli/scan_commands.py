@@ -736,7 +736,34 @@ def _jobs(args: argparse.Namespace) -> int:
         print(f"{r.id:>4}  {r.state.value:<14} {r.kind:<11} "
               f"{r.done_angles:>4}/{r.total_angles:<4}  {created}  {r.specimen}"
               + (f"  ({r.reason})" if r.reason else ""))
+    note = _interrupted_note(args.db, rows)
+    if note is not None:
+        print(note)
     return 0
+
+
+def _interrupted_note(db: Path, rows: list[Any]) -> str | None:
+    """What the list's 'running' (or suspended, reconstructing) means when no process runs
+    jobs from the store: the job was interrupted (a daemon stopped, SIGTERM or kill -9; a
+    gonio scan killed) and waits for the next one; None when nothing is active or a process
+    holds the store."""
+    from gonio.locks import LockBusy, claim_store
+
+    active = [r for r in rows if r.state.value in ("running", "suspended", "reconstructing")]
+    if not active:
+        return None
+    try:
+        claim_store(db).release()
+    except LockBusy:
+        return None  # a daemon or a gonio scan runs them: the states are live
+    except OSError:
+        return None  # cannot tell (no write access to the store's directory)
+    ids = ", ".join(str(r.id) for r in active)
+    return (f"note: no daemon or gonio scan runs jobs from this store now, so job(s) {ids} "
+            "above are not measuring: they were interrupted (a stopped or killed process) and "
+            "resume from their checkpoint when 'gonio serve' starts on this data directory "
+            "(a gonio scan's job: when the same command runs again); 'gonio jobs abort ID "
+            f"--db {db}' ends one instead")
 
 
 def _rebuild(args: argparse.Namespace, store: Any) -> int:
