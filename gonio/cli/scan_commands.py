@@ -759,11 +759,11 @@ def _interrupted_note(db: Path, rows: list[Any]) -> str | None:
     except OSError:
         return None  # cannot tell (no write access to the store's directory)
     ids = ", ".join(str(r.id) for r in active)
-    return (f"note: no daemon or gonio scan runs jobs from this store now, so job(s) {ids} "
-            "above are not measuring: they were interrupted (a stopped or killed process) and "
-            "resume from their checkpoint when 'gonio serve' starts on this data directory "
-            "(a gonio scan's job: when the same command runs again); 'gonio jobs abort ID "
-            f"--db {db}' ends one instead")
+    return (f"note: no daemon or gonio scan runs jobs from this store now, so nothing goes on "
+            f"with job(s) {ids} above: they were interrupted (a stopped or killed process). "
+            "The next 'gonio serve' on this data directory takes them up again (measuring "
+            "from the checkpoint, or reconstructing from the stored readings; a gonio scan's "
+            f"job: the same command again); 'gonio jobs abort ID --db {db}' ends one instead")
 
 
 def _rebuild(args: argparse.Namespace, store: Any) -> int:

@@ -44,7 +44,8 @@ def test_a_running_job_with_no_process_behind_it_is_said_to_be_interrupted(
     assert main(["jobs", "list", "--db", str(db)]) == 0
     out = capsys.readouterr().out
     assert "running" in out
-    assert f"no daemon or gonio scan runs jobs from this store now, so job(s) {job}" in out
+    assert "no daemon or gonio scan runs jobs from this store now, so nothing goes on with " \
+        f"job(s) {job} above" in out
     assert f"'gonio jobs abort ID --db {db}'" in out
     # While a process holds the store (a daemon), 'running' is live: no note.
     holder = subprocess.Popen([sys.executable, "-c", HOLD, str(db)], stdout=subprocess.PIPE,
