@@ -123,7 +123,8 @@ def register(subparsers: Any) -> None:
                    default="list")
     j.add_argument("job_id", nargs="?", type=int)
     j.add_argument("--db", type=Path, required=True,
-                   help="job store (SQLite), e.g. the one 'gonio scan' prints")
+                   help="job store (SQLite), e.g. the one 'gonio scan' prints, or the "
+                        "data directory holding it")
     j.add_argument("--data-dir", type=Path, default=None,
                    help="the data directory the store's result paths are relative to (show: "
                         "result_file; rebuild: its results/ gets the file); default: the "
@@ -703,6 +704,14 @@ def _progress(service: Any, job_id: int, disabled: bool) -> Any:
 def _jobs(args: argparse.Namespace) -> int:
     from gonio.store import JobStore, NotFound
 
+    if args.db.is_dir():
+        # The data directory that gonio scan and gonio serve print, given for its store.
+        from gonio.daemon import STORE_FILE
+
+        if not (args.db / STORE_FILE).is_file():
+            raise UsageError(f"{args.db} is a folder without a job store ({STORE_FILE}); "
+                             "--db takes the store, DATA_DIR/gonio.sqlite")
+        args.db = args.db / STORE_FILE
     if not args.db.is_file():
         raise UsageError(f"job store {args.db} does not exist")
     if args.action == "abort":

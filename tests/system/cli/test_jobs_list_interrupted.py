@@ -59,3 +59,17 @@ def test_a_running_job_with_no_process_behind_it_is_said_to_be_interrupted(
         holder.wait()
     assert main(["jobs", "list", "--db", str(db)]) == 0
     assert "no daemon or gonio scan runs jobs" in capsys.readouterr().out
+
+
+def test_the_data_directory_serves_for_its_store(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # gonio serve and gonio scan print the data directory; --db DATA_DIR said 'job store
+    # DATA_DIR does not exist' though the store is in it.
+    _store_with_a_running_job(tmp_path / "gonio.sqlite")
+    assert main(["jobs", "list", "--db", str(tmp_path)]) == 0
+    assert "felt" in capsys.readouterr().out
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    assert main(["jobs", "list", "--db", str(empty)]) == 2
+    assert "is a folder without a job store (gonio.sqlite)" in capsys.readouterr().err
