@@ -591,12 +591,16 @@ def uncalibrated_warning(cal: Calibration, pairs: Sequence[PairSpec]) -> str | N
     if cal.covers(pairs):
         return None
     if cal.pairs:
+        # Not a scan in sensor units: submission refuses it (a result is calibrated in full
+        # or not at all), so the dry run must not say it would run.
         missing = sorted({f"{p.light}/{p.sensor}" for p in pairs}
                          - {f"{p.light}/{p.sensor}" for p in cal.pairs})
-        what = (f"the calibration in effect ({cal.source}) does not cover pair(s) "
-                f"{', '.join(missing[:4])}{' ...' if len(missing) > 4 else ''}")
-    else:
-        what = "no calibration is in effect on this rig"
+        return (f"not calibrated: the calibration in effect ({cal.source}) has no factors "
+                f"for pair(s) {', '.join(missing[:4])}{' ...' if len(missing) > 4 else ''} "
+                f"({len(missing)} of the plan's pairs), so the scan would be refused when "
+                "submitted: calibrate those pairs (a calibration job with the white reference "
+                "on the stage), or list only calibrated pairs in the plan")
+    what = "no calibration is in effect on this rig"
     return (f"uncalibrated: {what}, so this scan's values stay in sensor units, not 1/sr; its "
             "rendering, exports and error numbers are not those of the material (run a "
             "calibration job with the white reference on the stage first)")

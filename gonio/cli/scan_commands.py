@@ -452,8 +452,8 @@ def _check_calibration(args: argparse.Namespace, pairs: Any, config: Any, cal: A
     from gonio.paths import scan_data_dir
 
     warning = uncalibrated_warning(cal, pairs)
-    if warning is None:
-        return
+    if warning is None or cal.pairs:
+        return  # covered, or partly: the submission refuses it, saying which pairs
     own: Path | None = scan_data_dir(config)
     why = uncalibrated_refusal(cal, pairs, own, data_dir)
     if why is not None and not args.accept_uncalibrated:

@@ -88,3 +88,21 @@ def test_dry_run_warns_of_a_calibration_measured_at_another_exposure(
     assert ("exposure: the calibration in effect (job 1: white reference) was measured at "
             "0.01 s and this scan reads at 0.5 s") in out, out
     assert "off by about 50 times: scan at 0.01 s, or calibrate at 0.5 s first" in out, out
+
+
+def test_dry_run_of_a_partly_calibrated_plan_says_it_would_be_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # The rig config's factors cover L1/S1 only: the dry run said the scan's values would
+    # 'stay in sensor units', and gonio scan printed that warning, then refused the scan.
+    rig = tmp_path / "rig.toml"
+    rig.write_text(RIG.read_text() + '\n[[calibration.factors]]\nlight = "L1"\nsensor = "S1"\n'
+                   'factor = [1e-5, 1e-5, 1e-5]\n')
+    data = str(tmp_path / "data")
+    assert main(["scan", "--rig", str(rig), "--data-dir", data, "--dry-run",
+                 "-o", "/dev/null"]) == 0
+    out = capsys.readouterr().out
+    assert "not calibrated: the calibration in effect (rig config) has no factors for " \
+           "pair(s) L1/S2" in out, out
+    assert "so the scan would be refused when submitted" in out, out
+    assert "sensor units" not in out, out
