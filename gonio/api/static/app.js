@@ -716,7 +716,11 @@ function initForm() {
   $("#dry-run").addEventListener("click", () => guarded(async () => {
     const r = await send("POST", "/jobs/dry-run", { plan: readPlan() });
     const from = r.from_known ? `from the stage at ${r.from_deg.toFixed(1)}°` : "assuming the stage at 0° (position not known yet)";
-    let text = `${(r.warnings || []).length ? "Runs, but read the warnings below" : "OK"}: ${r.readings} readings at ${r.angles_deg.length} stage angles, about ${eta(r.estimated_s)} ${from}` +
+    // A plan the calibration covers only in part does not run: Start is refused (422).
+    const refused = (r.warnings || []).some((w) => w.startsWith("not calibrated:"));
+    const verdict = refused ? "Start would be refused: read the warning below"
+      : (r.warnings || []).length ? "Runs, but read the warnings below" : "OK";
+    let text = `${verdict}: ${r.readings} readings at ${r.angles_deg.length} stage angles, about ${eta(r.estimated_s)} ${from}` +
       ` (moves ${eta(r.motion_s)}, exposures ${eta(r.exposure_s)}).`;
     if (r.max_estimated_s != null && r.kind === "adaptive") text += ` Adaptive refinement can add up to ${r.max_angles - r.angles_deg.length} angles: at most ${eta(r.max_estimated_s)} in all.`;
     for (const b of r.arc_branches || []) {
