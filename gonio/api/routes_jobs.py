@@ -9,6 +9,7 @@ from pydantic import BaseModel, Field
 
 from gonio.api.deps import COMPUTE, READ, WRITE, JobId, Service
 from gonio.calibration import counts, exposure_warning, uncalibrated_warning
+from gonio.fields import FINITE
 from gonio.jobstates import JobState
 from gonio.plans.dryrun import DryRun
 from gonio.plans.models import Plan
@@ -19,6 +20,9 @@ router = APIRouter(prefix="/api/v1/jobs", tags=["jobs"])
 
 class DryRunRequest(BaseModel):
     """A plan to check and time without queueing it."""
+
+    # As a job request: a misspelt key is refused, not checked as if it were absent.
+    model_config = FINITE
 
     plan: Plan
 
