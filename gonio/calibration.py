@@ -591,15 +591,35 @@ def uncalibrated_warning(cal: Calibration, pairs: Sequence[PairSpec]) -> str | N
     if cal.covers(pairs):
         return None
     if cal.pairs:
+        # Not a scan in sensor units: submission refuses it (a result is calibrated in full
+        # or not at all), so the dry run must not say it would run.
         missing = sorted({f"{p.light}/{p.sensor}" for p in pairs}
                          - {f"{p.light}/{p.sensor}" for p in cal.pairs})
-        what = (f"the calibration in effect ({cal.source}) does not cover pair(s) "
-                f"{', '.join(missing[:4])}{' ...' if len(missing) > 4 else ''}")
-    else:
-        what = "no calibration is in effect on this rig"
+        return (f"not calibrated: the calibration in effect ({cal.source}) has no factors "
+                f"for pair(s) {', '.join(missing[:4])}{' ...' if len(missing) > 4 else ''} "
+                f"({len(missing)} of the plan's pairs), so the scan would be refused when "
+                "submitted: calibrate those pairs (a calibration job with the white reference "
+                "on the stage), or list only calibrated pairs in the plan")
+    what = "no calibration is in effect on this rig"
     return (f"uncalibrated: {what}, so this scan's values stay in sensor units, not 1/sr; its "
             "rendering, exports and error numbers are not those of the material (run a "
             "calibration job with the white reference on the stage first)")
+
+
+def exposure_warning(cal: Calibration, exposure_s: float) -> str | None:
+    """What a scan at ``exposure_s`` under ``cal`` gets wrong when ``cal`` was measured at
+    another exposure (None when it was not, or the exposure is not recorded): said by the dry
+    runs and ``gonio scan`` before anything is measured. Counts are not rescaled between
+    exposure times (sensors need not be linear in exposure), so the values would be off by
+    about the ratio; :func:`gonio.finishing.exposure_mismatch` says it again in the result."""
+    if not cal.pairs or cal.exposure_s is None or math.isclose(exposure_s, cal.exposure_s,
+                                                                  rel_tol=1e-6):
+        return None
+    return (f"exposure: the calibration in effect ({cal.source}) was measured at "
+            f"{cal.exposure_s:g} s and this scan reads at {exposure_s:g} s; counts are not "
+            f"rescaled between exposures, so its values in 1/sr would be off by about "
+            f"{exposure_s / cal.exposure_s:.3g} times: scan at {cal.exposure_s:g} s, or "
+            f"calibrate at {exposure_s:g} s first")
 
 
 def uncalibrated_refusal(cal: Calibration, pairs: Sequence[PairSpec],

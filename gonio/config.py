@@ -552,7 +552,12 @@ class RigConfig(_Strict):
         both = light_names + sensor_names
         dup = sorted({n for n in both if both.count(n) > 1})
         if dup:
-            errors.append(f"device names must be unique across lights and sensors; repeated: {dup}")
+            entries = [f"lights[{k}]" for k, n in enumerate(light_names) if n in dup]
+            entries += [f"sensors[{k}]" for k, n in enumerate(sensor_names) if n in dup]
+            errors.append(
+                f"device names must be unique across lights and sensors; repeated: {dup} "
+                f"({', '.join(entries)}); give each device its own name"
+            )
         # Two devices answering on the same host:port:device_id would read each other's registers.
         seen: dict[tuple[str, int, int], str] = {}
         for dev in [*self.lights, *self.sensors]:
@@ -568,6 +573,7 @@ class RigConfig(_Strict):
                 errors.append('pairs: empty list; list at least one pair or use pairs = "all"')
             for k, p in enumerate(self.pairs):
                 errors.extend(_check_pair_names(f"pairs[{k}]", p.light, p.sensor, self))
+            errors.extend(_repeated_pairs("pairs", self.pairs, "list each pair once"))
         if self.calibration is not None:
             for k, f in enumerate(self.calibration.factors):
                 where = f"calibration.factors[{k}]"
@@ -578,6 +584,10 @@ class RigConfig(_Strict):
                         f"{where}.factor: {len(f.factor)} values for the "
                         f"{len(sensor.channels)} channels of {f.sensor}"
                     )
+            errors.extend(_repeated_pairs(
+                "calibration.factors", self.calibration.factors,
+                "keep one factor per pair (the one from the latest calibration)",
+            ))
             for name, levels in self.calibration.dark.items():
                 if name not in sensor_names:
                     errors.append(
@@ -663,6 +673,19 @@ def _check_pair_names(where: str, light: str, sensor: str, cfg: RigConfig) -> li
         errors.append(f"{where}.light: no light named {light!r}; lights are {_quoted(lights)}")
     if sensor not in sensors:
         errors.append(f"{where}.sensor: no sensor named {sensor!r}; sensors are {_quoted(sensors)}")
+    return errors
+
+
+def _repeated_pairs(key: str, entries: Sequence[PairConfig | PairFactor], fix: str) -> list[str]:
+    """One error per entry of ``key`` whose light/sensor pair an earlier entry already has."""
+    errors = []
+    first: dict[tuple[str, str], int] = {}
+    for k, e in enumerate(entries):
+        j = first.setdefault((e.light, e.sensor), k)
+        if j != k:
+            errors.append(
+                f"{key}[{k}]: {e.light}/{e.sensor} is already listed as {key}[{j}]; {fix}"
+            )
     return errors
 
 

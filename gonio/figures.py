@@ -151,14 +151,16 @@ def headline_error(metrics: dict[str, Any]) -> dict[str, Any] | None:
     ``predicted_log_rmse`` when the result has it, else ``predicted_error`` (docs/science.md
     4.1); None when neither is there (calibration jobs, or no pair could be left out).
 
-    A result outside physical bounds, or more than x2 from the expected error of the design
+    A result outside physical bounds, calibrated at another exposure than its scan's, or more
+    than x2 from the expected error of the design
     its rig came from (``design_gap``, :mod:`gonio.designgap`), says so in ``text`` and starts
     ``meaning`` with the warning.
 
     Returns
     -------
     dict with ``key`` (metric name), ``value``, ``text`` (value as shown) and ``meaning``
-    (and ``physical_bounds`` / ``design_gap`` / ``arc_asymmetric`` when they apply; ``arc``,
+    (and ``physical_bounds`` / ``calibration_warning`` / ``design_gap`` / ``arc_asymmetric``
+    when they apply; ``arc``,
     the sentence on the arc an auto-arc scan chose; ``uncovered_share`` and ``coverage``, the
     self-estimate's coverage witness and its sentence, when the result has it).
     """
@@ -169,6 +171,12 @@ def headline_error(metrics: dict[str, Any]) -> dict[str, Any] | None:
         out["text"] += " (OUTSIDE PHYSICAL BOUNDS)"
         out["meaning"] = f"Warning: {bounds}. {out['meaning']}"
         out["physical_bounds"] = bounds
+    off = metrics.get("calibration_warning")
+    if out is not None and isinstance(off, str):
+        # The calibration was measured at another exposure: every value is off by the ratio.
+        out["text"] += " (CALIBRATED AT ANOTHER EXPOSURE)"
+        out["meaning"] = f"Warning: {off}. {out['meaning']}"
+        out["calibration_warning"] = off
     gap = metrics.get("design_gap")
     if out is not None and isinstance(gap, str):
         # More than x2 from what the rig's design expected: the headline says so, and why.

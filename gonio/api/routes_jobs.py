@@ -8,7 +8,8 @@ from fastapi import APIRouter, Query, Response, status
 from pydantic import BaseModel, Field
 
 from gonio.api.deps import COMPUTE, READ, WRITE, JobId, Service
-from gonio.calibration import counts, uncalibrated_warning
+from gonio.calibration import counts, exposure_warning, uncalibrated_warning
+from gonio.fields import FINITE
 from gonio.jobstates import JobState
 from gonio.plans.dryrun import DryRun
 from gonio.plans.models import Plan
@@ -19,6 +20,9 @@ router = APIRouter(prefix="/api/v1/jobs", tags=["jobs"])
 
 class DryRunRequest(BaseModel):
     """A plan to check and time without queueing it."""
+
+    # As a job request: a misspelt key is refused, not checked as if it were absent.
+    model_config = FINITE
 
     plan: Plan
 
@@ -81,9 +85,12 @@ def create_job(
 def dry_run(request: DryRunRequest, service: Service) -> DryRun:
     result = service.dry_run(request.plan)
     if request.plan.kind != "calibration":
-        warning = uncalibrated_warning(service.calibration(), result.pairs)
-        if warning is not None:
-            result = result.model_copy(update={"warnings": [*result.warnings, warning]})
+        cal = service.calibration()
+        more = [w for w in (uncalibrated_warning(cal, result.pairs),
+                            exposure_warning(cal, request.plan.exposure.exposure_s))
+                if w is not None]
+        if more:
+            result = result.model_copy(update={"warnings": [*result.warnings, *more]})
     return result
 
 

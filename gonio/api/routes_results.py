@@ -260,6 +260,10 @@ async def colour(
                         headers={"Content-Disposition":
                                  f'attachment; filename="gonio-job-{job_id}-colour.csv"'})
     out: dict[str, Any] = {"job_id": job_id, "colour": report.as_dict()}
+    off = res.provenance.get("calibration_warning")
+    if off:
+        # The calibration was measured at another exposure: every value is off by the ratio.
+        out["warnings"] = [str(off)]
     if diff is not None:
         out["difference"] = {"against": against, **diff.as_dict()}
     return out

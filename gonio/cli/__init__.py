@@ -87,7 +87,9 @@ def _describe_validation(exc: Exception) -> str:
     parts = []
     for err in errors():
         loc = ".".join(str(p) for p in err.get("loc", ())) or "value"
-        parts.append(f"{loc}: {err.get('msg', 'invalid')}")
+        # pydantic prefixes a validator's own sentence with "Value error, ": not the user's.
+        msg = str(err.get("msg", "invalid")).removeprefix("Value error, ")
+        parts.append(f"{loc}: {msg}")
     return "; ".join(parts)
 
 

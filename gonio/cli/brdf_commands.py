@@ -398,7 +398,19 @@ def _cmd_library_import(args: argparse.Namespace) -> int:
                   f"it. If that is not what you want, delete {f}")
         # An RGL file records how far it is from reciprocal, which gonio's table assumes
         # (gonio.brdf.materials.rgl): say so where the lab looks, not only in the file.
-        rec = BRDFTable.load(f).provenance.get("reciprocity")
+        prov = BRDFTable.load(f).provenance
+        # A table exported from a scan keeps its reconstruction's warnings (a calibration at
+        # another exposure, outside physical bounds, ...): imported, it trains every default
+        # basis and may be a later fit's local prior, so say them here.
+        warned = prov.get("warnings")
+        if isinstance(warned, list) and warned:
+            print(f"  warning: the table's record carries {len(warned)} warning(s) from the "
+                  "scan it came from; it now trains every default basis and can become the "
+                  "shape a later fit leans on, so check it first (delete "
+                  f"{f} to take it out):")
+            for w in warned:
+                print(f"    - {w}")
+        rec = prov.get("reciprocity")
         if isinstance(rec, dict) and rec.get("median_abs_log_ratio") is not None:
             line = (f"  reciprocity: f(l, v) and f(v, l) differ by a median factor of "
                     f"{np.exp(rec['median_abs_log_ratio']):.2f} over the grid, by more than "

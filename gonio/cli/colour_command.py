@@ -191,7 +191,12 @@ def run(args: argparse.Namespace) -> int:
     azimuths = _azimuths(args.azimuth)
     instruments = args.instrument or list(DEFAULT_INSTRUMENTS)
     cond = ViewingConditions(args.illuminant, args.observer)
-    report = result_report(read_result(args.result), cond, instruments, azimuths)
+    res = read_result(args.result)
+    report = result_report(res, cond, instruments, azimuths)
+    off = res.provenance.get("calibration_warning")
+    if off:
+        # The calibration was measured at another exposure: every L* is off by the ratio.
+        print(f"warning: {off}", file=sys.stderr)
     diff = None
     if args.against is not None:
         diff = compare(report, _standard(args.against, cond, instruments, azimuths))

@@ -123,7 +123,8 @@ def register(subparsers: Any) -> None:
                    default="list")
     j.add_argument("job_id", nargs="?", type=int)
     j.add_argument("--db", type=Path, required=True,
-                   help="job store (SQLite), e.g. the one 'gonio scan' prints")
+                   help="job store (SQLite), e.g. the one 'gonio scan' prints, or the "
+                        "data directory holding it")
     j.add_argument("--data-dir", type=Path, default=None,
                    help="the data directory the store's result paths are relative to (show: "
                         "result_file; rebuild: its results/ gets the file); default: the "
@@ -236,10 +237,9 @@ async def _run_scan(args: argparse.Namespace, plan: Any, config: Any, sim: Any =
         dr = dry_run(plan, desc, basis_ready=not basis.build_needed(), basis=basis.symmetry(),
                      asymmetric_build_s=(basis.asymmetric_build_s()
                                          if plan.arc_mode() == "auto" else None))
-        warning = None if sim is not None else _calibration_warning(args, plan, config,
-                                                                     dr.pairs)
-        if warning is not None:
-            dr = dr.model_copy(update={"warnings": [*dr.warnings, warning]})
+        more = [] if sim is not None else _calibration_warnings(args, plan, config, dr.pairs)
+        if more:
+            dr = dr.model_copy(update={"warnings": [*dr.warnings, *more]})
         print(dr.model_dump_json(indent=2) if args.json
               else dry_run_summary(dr, plan, config.rig.name))
         return 0
@@ -328,14 +328,24 @@ async def _run_owned(args: argparse.Namespace, checked: Any, config: Any, sim: A
                 # comes in the foreground.
                 store.set_state(job.id, JobState.RUNNING)
         else:
+            from gonio.calibration import exposure_warning
+
+            exposure_s = plan.exposure.exposure_s
             if (sim is not None and override is None and plan.kind != "calibration"
-                    and not calibration_covers_rig(service)):
-                why = await calibrate_in_foreground(service, sim)
+                    and (not calibration_covers_rig(service)
+                         or exposure_warning(service.calibration(), exposure_s))):
+                # The simulated rig's calibration is measured at the scan's exposure (one
+                # at another exposure would leave the scan off by the ratio).
+                why = await calibrate_in_foreground(service, sim, exposure_s)
                 if why is not None:
                     raise UsageError(why)
             if sim is None and plan.kind != "calibration":
                 _check_calibration(args, checked.pairs, config, service.calibration(),
                                    data_dir)
+            if plan.kind != "calibration":
+                off = exposure_warning(service.calibration(), exposure_s)
+                if off is not None:
+                    print(f"warning: {off}", file=sys.stderr)
             # What the submission records as the job's arc warning, said here too (a job whose
             # basis is known only later says it through the progress bar's events).
             for warning in service.dry_run(checked).warnings:
@@ -410,20 +420,27 @@ def _print_arc(summary: dict[str, Any]) -> None:
         print(f"  basis: {summary['basis_switch']}")
 
 
-def _calibration_warning(args: argparse.Namespace, plan: Any, config: Any,
-                         pairs: Any) -> str | None:
-    """The dry run's ``uncalibrated: ...`` warning for ``plan`` (measuring ``pairs``) on this
-    rig, if any."""
-    from gonio.calibration import Calibration, calibration_in_effect, uncalibrated_warning
+def _calibration_warnings(args: argparse.Namespace, plan: Any, config: Any,
+                          pairs: Any) -> list[str]:
+    """The dry run's ``uncalibrated: ...`` and ``exposure: ...`` warnings for ``plan``
+    (measuring ``pairs``) on this rig, if any."""
+    from gonio.calibration import (
+        Calibration,
+        calibration_in_effect,
+        exposure_warning,
+        uncalibrated_warning,
+    )
     from gonio.paths import scan_data_dir
 
     if plan.kind == "calibration":
-        return None
+        return []
     if args.calibration is not None and args.calibration.is_file():
         cal = _read_calibration(args.calibration)
     else:
         cal = calibration_in_effect(args.data_dir or scan_data_dir(config), config)
-    return uncalibrated_warning(cal if isinstance(cal, Calibration) else Calibration(), pairs)
+    cal = cal if isinstance(cal, Calibration) else Calibration()
+    return [w for w in (uncalibrated_warning(cal, pairs),
+                        exposure_warning(cal, plan.exposure.exposure_s)) if w is not None]
 
 
 def _check_calibration(args: argparse.Namespace, pairs: Any, config: Any, cal: Any,
@@ -435,8 +452,8 @@ def _check_calibration(args: argparse.Namespace, pairs: Any, config: Any, cal: A
     from gonio.paths import scan_data_dir
 
     warning = uncalibrated_warning(cal, pairs)
-    if warning is None:
-        return
+    if warning is None or cal.pairs:
+        return  # covered, or partly: the submission refuses it, saying which pairs
     own: Path | None = scan_data_dir(config)
     why = uncalibrated_refusal(cal, pairs, own, data_dir)
     if why is not None and not args.accept_uncalibrated:
@@ -633,6 +650,7 @@ def _follow(client: Any, job_id: int, disabled: bool, poll_s: float = 0.5) -> di
     from tqdm import tqdm
 
     bar = tqdm(total=None, unit="angle", desc=f"job {job_id}", disable=disabled, file=sys.stderr)
+    told: str | None = None
     try:
         while True:
             row: dict[str, Any] = client.request("GET", f"/api/v1/jobs/{job_id}")
@@ -640,11 +658,20 @@ def _follow(client: Any, job_id: int, disabled: bool, poll_s: float = 0.5) -> di
             bar.n = int(row.get("done_angles") or 0)
             bar.set_description_str(f"job {job_id} {row['state']}")
             bar.refresh()
+            reason = row.get("reason") if row["state"] == "suspended" else None
+            if reason and reason != told:
+                bar.write(_suspended_line(job_id, reason), file=sys.stderr)
+            told = reason
             if row["state"] in _FINAL:
                 return row
             time.sleep(poll_s)
     finally:
         bar.close()
+
+
+def _suspended_line(job_id: int, reason: str) -> str:
+    """What a terminal shows when a job suspends: the bar alone said 'suspended' and no why."""
+    return f"job {job_id} suspended: {reason}"
 
 
 def _progress(service: Any, job_id: int, disabled: bool) -> Any:
@@ -663,6 +690,8 @@ def _progress(service: Any, job_id: int, disabled: bool) -> Any:
             bar.refresh()
         elif ev.type == "state":
             bar.set_description_str(f"job {job_id} {ev.data['state']}")
+            if ev.data["state"] == "suspended" and ev.data.get("reason"):
+                bar.write(_suspended_line(job_id, ev.data["reason"]), file=sys.stderr)
         elif ev.type in ("arc_warning", "physical_bounds", "design_gap", "arc_asymmetric"):
             bar.write(f"warning: {ev.data['message']}", file=sys.stderr)
         elif ev.type == "arc_test":
@@ -675,6 +704,14 @@ def _progress(service: Any, job_id: int, disabled: bool) -> Any:
 def _jobs(args: argparse.Namespace) -> int:
     from gonio.store import JobStore, NotFound
 
+    if args.db.is_dir():
+        # The data directory that gonio scan and gonio serve print, given for its store.
+        from gonio.daemon import STORE_FILE
+
+        if not (args.db / STORE_FILE).is_file():
+            raise UsageError(f"{args.db} is a folder without a job store ({STORE_FILE}); "
+                             "--db takes the store, DATA_DIR/gonio.sqlite")
+        args.db = args.db / STORE_FILE
     if not args.db.is_file():
         raise UsageError(f"job store {args.db} does not exist")
     if args.action == "abort":
@@ -708,7 +745,34 @@ def _jobs(args: argparse.Namespace) -> int:
         print(f"{r.id:>4}  {r.state.value:<14} {r.kind:<11} "
               f"{r.done_angles:>4}/{r.total_angles:<4}  {created}  {r.specimen}"
               + (f"  ({r.reason})" if r.reason else ""))
+    note = _interrupted_note(args.db, rows)
+    if note is not None:
+        print(note)
     return 0
+
+
+def _interrupted_note(db: Path, rows: list[Any]) -> str | None:
+    """What the list's 'running' (or suspended, reconstructing) means when no process runs
+    jobs from the store: the job was interrupted (a daemon stopped, SIGTERM or kill -9; a
+    gonio scan killed) and waits for the next one; None when nothing is active or a process
+    holds the store."""
+    from gonio.locks import LockBusy, claim_store
+
+    active = [r for r in rows if r.state.value in ("running", "suspended", "reconstructing")]
+    if not active:
+        return None
+    try:
+        claim_store(db).release()
+    except LockBusy:
+        return None  # a daemon or a gonio scan runs them: the states are live
+    except OSError:
+        return None  # cannot tell (no write access to the store's directory)
+    ids = ", ".join(str(r.id) for r in active)
+    return (f"note: no daemon or gonio scan runs jobs from this store now, so nothing goes on "
+            f"with job(s) {ids} above: they were interrupted (a stopped or killed process). "
+            "The next 'gonio serve' on this data directory takes them up again (measuring "
+            "from the checkpoint, or reconstructing from the stored readings; a gonio scan's "
+            f"job: the same command again); 'gonio jobs abort ID --db {db}' ends one instead")
 
 
 def _rebuild(args: argparse.Namespace, store: Any) -> int:

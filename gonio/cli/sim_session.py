@@ -21,16 +21,20 @@ MEASURING_OVER = ("reconstructing", "completed", "failed", "aborted", "halted")
 FINAL = ("completed", "failed", "aborted", "halted")
 
 
-def sim_calibration_plan(albedo: float | None = None) -> Any:
+def sim_calibration_plan(albedo: float | None = None, exposure_s: float | None = None) -> Any:
     """The calibration plan of a simulated rig's white reference (default albedo
-    :data:`gonio.sim.rig.WHITE_REFERENCE_ALBEDO`)."""
-    from gonio.plans.models import CalibrationPlan
+    :data:`gonio.sim.rig.WHITE_REFERENCE_ALBEDO`), at ``exposure_s`` (default: the plans'
+    default exposure; a calibration serves scans at its own exposure only)."""
+    from gonio.plans.models import CalibrationPlan, ExposureSettings
     from gonio.sim.rig import WHITE_REFERENCE_ALBEDO
 
     albedo = WHITE_REFERENCE_ALBEDO if albedo is None else albedo
     # The job list shows ``specimen``: name the reference there too, not "specimen".
+    exposure = ExposureSettings() if exposure_s is None else ExposureSettings(
+        exposure_s=exposure_s)
     return CalibrationPlan(reference_albedo=albedo, specimen="white reference",
-                           reference_name=f"simulated white reference, albedo {albedo:g}")
+                           reference_name=f"simulated white reference, albedo {albedo:g}",
+                           exposure=exposure)
 
 
 def attach_sim(service: Any, sim: Any) -> None:
@@ -77,7 +81,8 @@ def calibration_not_needed(service: Any) -> str | None:
 
 
 def start_sim_calibration(
-    service: Any, sim: Any, albedo: float | None = None, report: Any = None
+    service: Any, sim: Any, albedo: float | None = None, report: Any = None,
+    exposure_s: float | None = None,
 ) -> int:
     """Queue a white-reference calibration of a simulated rig, first in line; returns its job id.
 
@@ -95,6 +100,8 @@ def start_sim_calibration(
         Of the simulated reference (default :data:`gonio.sim.rig.WHITE_REFERENCE_ALBEDO`).
     report : callable, optional
         ``report(job_id, state, reason)`` when the job ends (completed, failed, ...).
+    exposure_s : float, optional
+        Of the calibration (default: the plans' default, 0.01 s).
     """
     from gonio.service import Event, JobRequest
 
@@ -116,7 +123,7 @@ def start_sim_calibration(
 
     handle = service.add_event_listener(watch)
     try:
-        plan = sim_calibration_plan(albedo)
+        plan = sim_calibration_plan(albedo, exposure_s)
         job["id"] = service.submit(JobRequest(plan=plan, priority=1000)).id
     except BaseException:
         service.remove_event_listener(handle)
@@ -124,7 +131,8 @@ def start_sim_calibration(
     return int(job["id"])
 
 
-async def calibrate_in_foreground(service: Any, sim: Any) -> str | None:
+async def calibrate_in_foreground(service: Any, sim: Any,
+                                  exposure_s: float | None = None) -> str | None:
     """Run the white-reference calibration of :func:`start_sim_calibration` here and now
     (``gonio scan --sim``); returns None when it completed, else why not.
 
@@ -132,12 +140,15 @@ async def calibrate_in_foreground(service: Any, sim: Any) -> str | None:
     ----------
     service : gonio.service.GonioService, not started (no queue worker)
     sim : gonio.sim.rig.SimRig
+    exposure_s : float, optional
+        The scan's exposure, which the calibration is measured at (counts are not rescaled
+        between exposures).
     """
     import sys
 
     from gonio.jobstates import JobState
 
-    job_id = start_sim_calibration(service, sim)
+    job_id = start_sim_calibration(service, sim, exposure_s=exposure_s)
     print(f"calibrating the simulated rig on a white reference (job {job_id})", file=sys.stderr)
     final = await service.run_in_foreground(job_id)
     if final is JobState.COMPLETED:

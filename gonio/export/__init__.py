@@ -197,9 +197,11 @@ def _write(fits: Fits, fmt: str, out: str | os.PathLike[str], prov: dict[str, An
     if prov.get("job_id") is not None:
         name = f"{name}_job{prov['job_id']}"  # unnamed scans stay apart in a scene
     if fmt == "table":
+        # The table is the reconstruction: the fits' warnings (which point to it) are not its.
+        own = {**prov, "warnings": list(prov.get("reconstruction_warnings") or [])}
         table = BRDFTable.trusted(
             fits.table.values, fits.table.channels, fits.table.name, fits.table.wavelengths_nm,
-            {**fits.table.provenance, **prov},
+            {**fits.table.provenance, **own},
         )
         return table.save(out)
     if fmt == "factored":
@@ -226,7 +228,9 @@ def export_warnings(fmt: str, path: str | os.PathLike[str], prov: dict[str, Any]
 
     The model formats (``gltf`` and ``mtlx``: the principled fit; ``factored``) carry the
     provenance's warnings; ``merl`` its sidecar's, which add the anisotropy the azimuthal
-    average lost; ``table``, the reconstruction itself, none.
+    average lost; ``table``, the reconstruction itself, only the reconstruction's own
+    (``reconstruction_warnings``: calibration, arc, physical bounds, design gap, misfit), not
+    the fits'.
 
     Parameters
     ----------
@@ -245,7 +249,7 @@ def export_warnings(fmt: str, path: str | os.PathLike[str], prov: dict[str, Any]
         side = json.loads(sidecar_path(path).read_text())
         return [str(w) for w in side.get("warnings") or []]
     if fmt == "table":
-        return []
+        return [str(w) for w in prov.get("reconstruction_warnings") or []]
     return [str(w) for w in prov.get("warnings") or []]
 
 

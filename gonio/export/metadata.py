@@ -32,8 +32,12 @@ layout has no room). Keys (docs/export.md lists them with examples):
 ``fits``
     Each model's fit error against the reconstruction: table metrics and the rendered
     difference (:mod:`gonio.export.judge`).
+``reconstruction_warnings``
+    The warnings about the reconstruction itself (a calibration at another exposure, the
+    arc, outside physical bounds, a design gap, a basis misfit): the ``table`` export's.
 ``warnings``
-    Plain sentences: large rendered differences, an averaged-away anisotropy, a half-turn
+    Plain sentences: large rendered differences, an averaged-away anisotropy, a calibration
+    measured at another exposure than the scan, a half-turn
     scan's arc, a reconstruction outside physical bounds (docs/science.md 7.5), a
     self-estimate more than x2 from its design's expected error (7.1), ...
 """
@@ -230,12 +234,15 @@ def export_provenance(attrs: Mapping[str, Any], metrics: Mapping[str, Any],
             out["warnings"].append(warning)
     if truth:
         out["simulated_material"] = truth
-    if provenance.get("arc_warning"):
-        out["warnings"].append(str(provenance["arc_warning"]))
-    if provenance.get("physical_bounds"):
-        out["warnings"].append(str(provenance["physical_bounds"]))
-    if provenance.get("design_gap"):
-        out["warnings"].append(str(provenance["design_gap"]))
-    if provenance.get("basis_misfit"):
-        out["warnings"].append(str(provenance["basis_misfit"]))
+    # The reconstruction's own warnings (the calibration does not fit the scan, the arc, a
+    # table outside physical bounds, ...): they hold for every format, the table's included.
+    recon = [str(provenance[k]) for k in RECONSTRUCTION_WARNINGS if provenance.get(k)]
+    out["warnings"].extend(recon)
+    out["reconstruction_warnings"] = recon
     return out
+
+
+RECONSTRUCTION_WARNINGS = ("calibration_warning", "arc_warning", "physical_bounds", "design_gap",
+                           "basis_misfit")
+"""The result provenance's warnings about the reconstruction itself, in the order an export
+lists them (``reconstruction_warnings``; also at the end of ``warnings``)."""

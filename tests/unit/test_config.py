@@ -180,3 +180,30 @@ def test_nesting_within_the_limit_and_dots_in_strings_are_not_refused(tmp_path: 
     with pytest.raises(ConfigError) as err:
         load_rig_config(ok)
     assert "nested more than" not in str(err.value)
+
+
+def test_a_pair_listed_twice_is_refused_at_load_naming_both_entries(example: dict) -> None:
+    # It loaded, and only a scan said "pair L1/S1 is listed twice in the plan" (a plan the
+    # user never wrote); a daemon started on the file and refused every job.
+    example["pairs"] = [{"light": "L1", "sensor": "S1"}, {"light": "L2", "sensor": "S2"},
+                        {"light": "L1", "sensor": "S1"}]
+    msg = _error(example)
+    assert "pairs[2]: L1/S1 is already listed as pairs[0]; list each pair once" in msg
+
+
+def test_a_calibration_factor_given_twice_is_refused_at_load(example: dict) -> None:
+    # It loaded, and a scan failed later with no key path in the file.
+    example["calibration"]["factors"] = [
+        {"light": "L1", "sensor": "S1", "factor": [1e-5, 1e-5, 1e-5]},
+        {"light": "L1", "sensor": "S1", "factor": [2e-5, 2e-5, 2e-5]},
+    ]
+    msg = _error(example)
+    assert "calibration.factors[1]: L1/S1 is already listed as calibration.factors[0]" in msg
+    assert "keep one factor per pair" in msg
+
+
+def test_a_sensor_listed_twice_names_both_entries_and_what_to_do(example: dict) -> None:
+    example["sensors"][1]["name"] = "S1"
+    example["calibration"]["dark"] = {"S1": [1.0, 2.0, 3.0]}
+    msg = _error(example)
+    assert "repeated: ['S1'] (sensors[0], sensors[1]); give each device its own name" in msg

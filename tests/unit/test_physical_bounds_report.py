@@ -24,3 +24,14 @@ def test_every_export_lists_the_bounds_warning() -> None:
     out = export_provenance({"specimen": "al"}, {}, {"physical_bounds": WHY}, {})
     assert WHY in out["warnings"]
     assert export_provenance({"specimen": "al"}, {}, {}, {})["warnings"] == []
+
+
+def test_the_headline_error_says_a_calibration_at_another_exposure() -> None:
+    # The daemon's log and gonio scan read 'completed, in 1/sr: predicted_log_rmse 0.088'
+    # for a scan 50 times off through a calibration at another exposure.
+    off = "the calibration was measured at exposure 0.01 s, this scan at 0.5 s; ..."
+    flagged = headline_error({"predicted_log_rmse": 0.088, "calibration_warning": off})
+    assert flagged is not None
+    assert flagged["text"] == "0.088 (CALIBRATED AT ANOTHER EXPOSURE)"
+    assert flagged["meaning"].startswith(f"Warning: {off}")
+    assert flagged["calibration_warning"] == off

@@ -480,6 +480,7 @@ const METRIC_MEANING = {
   n_pairs: "light/sensor pairs", n_angles: "stage angles", pairs: "light/sensor pairs",
   angles: "stage angles", readings: "readings stored",
   calibrated: "values in 1/sr (true) or sensor units (false)",
+  calibration_warning: "why the calibration does not fit this scan (measured at another exposure): its values in 1/sr are off by about the ratio",
   seconds: "reconstruction time, s",
   arc_deg: "the arc the stage angles covered, degrees (an auto-arc scan: the one its test chose)",
   arc_symmetric: "the readings at opposite stage angles agree within the noise (twofold symmetric)",
@@ -520,9 +521,14 @@ function showMetrics(metrics) {
   // Every headline says whether the values are the material's (1/sr) or sensor units.
   const cal = document.createElement("p");
   cal.id = "headline-calibration";
-  cal.className = metrics.calibrated ? "muted" : "uncalibrated";
+  // A calibration measured at another exposure than the scan leaves every value off by the
+  // ratio (counts are not rescaled): not the plain "Calibrated" line.
+  const calWarning = metrics.calibration_warning;
+  cal.className = metrics.calibrated && !calWarning ? "muted" : "uncalibrated";
   cal.textContent = metrics.calibrated
-    ? `Calibrated: values in 1/sr (${metrics.calibration_source ?? "white reference"}).`
+    ? (calWarning
+      ? `Calibrated, but not for this scan: ${calWarning}.`
+      : `Calibrated: values in 1/sr (${metrics.calibration_source ?? "white reference"}).`)
     : "Uncalibrated: no calibration was in effect, so the values are sensor units, not 1/sr; the rendering, exports and the error above are not those of the material. Calibrate the rig (a calibration job with the white reference) and scan again.";
   head.append(cal);
   const tbody = $("#metrics tbody");
@@ -710,7 +716,11 @@ function initForm() {
   $("#dry-run").addEventListener("click", () => guarded(async () => {
     const r = await send("POST", "/jobs/dry-run", { plan: readPlan() });
     const from = r.from_known ? `from the stage at ${r.from_deg.toFixed(1)}°` : "assuming the stage at 0° (position not known yet)";
-    let text = `${(r.warnings || []).length ? "Runs, but read the warnings below" : "OK"}: ${r.readings} readings at ${r.angles_deg.length} stage angles, about ${eta(r.estimated_s)} ${from}` +
+    // A plan the calibration covers only in part does not run: Start is refused (422).
+    const refused = (r.warnings || []).some((w) => w.startsWith("not calibrated:"));
+    const verdict = refused ? "Start would be refused: read the warning below"
+      : (r.warnings || []).length ? "Runs, but read the warnings below" : "OK";
+    let text = `${verdict}: ${r.readings} readings at ${r.angles_deg.length} stage angles, about ${eta(r.estimated_s)} ${from}` +
       ` (moves ${eta(r.motion_s)}, exposures ${eta(r.exposure_s)}).`;
     if (r.max_estimated_s != null && r.kind === "adaptive") text += ` Adaptive refinement can add up to ${r.max_angles - r.angles_deg.length} angles: at most ${eta(r.max_estimated_s)} in all.`;
     for (const b of r.arc_branches || []) {

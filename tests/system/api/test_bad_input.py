@@ -191,3 +191,13 @@ def test_huge_last_event_id_starts_live(daemon: Daemon) -> None:
         assert r.status_code == 200
         first = next(r.iter_lines())
         assert first.startswith("retry:")
+
+
+def test_a_dry_run_refuses_a_misspelt_key_as_a_job_request_does(daemon: Daemon) -> None:
+    # {"plan": ..., "priorty": 5} was checked as if the key were absent (200), while POST
+    # /jobs refuses it (422 extra_forbidden).
+    body = {"plan": {"kind": "uniform", "rotations": 4}, "priorty": 5}
+    with daemon.client() as c:
+        r = c.post("/api/v1/jobs/dry-run", json=body)
+    assert r.status_code == 422, r.text
+    assert r.json()["detail"][0]["loc"] == ["body", "priorty"]

@@ -30,6 +30,11 @@ def test_the_page_shows_the_dry_runs_warning(odd_daemon: Daemon,
     wait = open_live(browser, odd_daemon, 60)
     form = browser.find_element(By.ID, "scan-form")
     Select(form.find_element(By.NAME, "kind")).select_by_value("uniform")
+    # At the calibration's exposure (_calibrate's 0.005 s): another one draws the exposure
+    # warning of the dry run.
+    exposure = form.find_element(By.NAME, "exposure_s")
+    exposure.clear()
+    exposure.send_keys("0.005")
     arc = Select(form.find_element(By.NAME, "span_deg"))
     arc.select_by_value("180")
     warnings = browser.find_element(By.ID, "dry-run-warnings")

@@ -31,7 +31,7 @@ def rig_calibration() -> Iterator[Path]:
     save_calibration(Calibration(
         pairs=tuple(PairCalibration(light=p.light, sensor=p.sensor, factor=(1e-5,) * 3)
                     for p in cfg.pair_list()),
-        reference_albedo=0.99, source="job 1: white reference"), path)
+        reference_albedo=0.99, source="job 1: white reference", exposure_s=0.01), path)
     try:
         yield path
     finally:
@@ -73,3 +73,36 @@ def test_a_toml_given_as_calibration_is_named_with_what_is_expected(
     assert f"--calibration {geometry}: not a calibration file" in err, err
     assert "TOML" in err and "white.calibration.json" in err, err
     assert "value: Invalid JSON" not in err
+
+
+def test_dry_run_warns_of_a_calibration_measured_at_another_exposure(
+    rig_calibration: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # A calibration at 0.01 s and a scan at 0.5 s: values 50 times off, said only in the
+    # result's calibration_warning after the scan (the page's headline: "Calibrated").
+    assert main(["scan", "--rig", str(RIG), "--dry-run", "-o", "/dev/null"]) == 0
+    assert "exposure:" not in capsys.readouterr().out
+    assert main(["scan", "--rig", str(RIG), "--exposure", "0.5", "--dry-run",
+                 "-o", "/dev/null"]) == 0
+    out = capsys.readouterr().out
+    assert ("exposure: the calibration in effect (job 1: white reference) was measured at "
+            "0.01 s and this scan reads at 0.5 s") in out, out
+    assert "off by about 50 times: scan at 0.01 s, or calibrate at 0.5 s first" in out, out
+
+
+def test_dry_run_of_a_partly_calibrated_plan_says_it_would_be_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # The rig config's factors cover L1/S1 only: the dry run said the scan's values would
+    # 'stay in sensor units', and gonio scan printed that warning, then refused the scan.
+    rig = tmp_path / "rig.toml"
+    rig.write_text(RIG.read_text() + '\n[[calibration.factors]]\nlight = "L1"\nsensor = "S1"\n'
+                   'factor = [1e-5, 1e-5, 1e-5]\n')
+    data = str(tmp_path / "data")
+    assert main(["scan", "--rig", str(rig), "--data-dir", data, "--dry-run",
+                 "-o", "/dev/null"]) == 0
+    out = capsys.readouterr().out
+    assert "not calibrated: the calibration in effect (rig config) has no factors for " \
+           "pair(s) L1/S2" in out, out
+    assert "so the scan would be refused when submitted" in out, out
+    assert "sensor units" not in out, out

@@ -208,3 +208,21 @@ def test_colour_chart_writes_a_rig_config_table(tmp_path: Path,
     assert "does not exist" in capsys.readouterr().err
     assert main(["colour-chart", str(chart), "--channels", "R,IR"]) == 2
     assert "no column for channels ['IR']" in capsys.readouterr().err
+
+
+def test_a_calibration_at_another_exposure_is_said_with_the_colour(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # Every L* of such a scan is off (its values by the exposure ratio): gonio colour printed
+    # the table as if nothing were wrong.
+    off = ("the calibration was measured at exposure 0.01 s, this scan at 0.5 s; its values "
+           "are off by about the ratio. Calibrate at the scan's exposure")
+    path = write_result(tmp_path / "off.h5", job_id=8, specimen="panel", kind="uniform",
+                        readings=[], samples=_samples(("R", "G", "B")), table=_lambert(),
+                        colour={"source": {"calibration": _matrix()}},
+                        provenance={"calibration_warning": off})
+    assert main(["colour", str(path)]) == 0
+    assert f"warning: {off}" in capsys.readouterr().err
+
+    plain = _write(tmp_path / "plain.h5", _lambert(), {"calibration": _matrix()})
+    assert main(["colour", str(plain)]) == 0
+    assert "warning" not in capsys.readouterr().err

@@ -54,6 +54,8 @@ def test_start_angle_outside_a_turn_is_refused_not_wrapped(
                  "-o", "unused.h5"]) == 2
     line = _one_error_line(capsys.readouterr().err)
     assert "start_deg" in line and "[0, 360)" in line and "220" in line
+    # pydantic's "Value error, " prefix is not part of what the user reads.
+    assert "Value error" not in line, line
 
 
 @pytest.fixture()

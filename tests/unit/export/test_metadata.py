@@ -100,10 +100,11 @@ def _fitted(name: str) -> tuple[Any, Any]:
     return table, stand_in_fits(table, library_principled(name))
 
 
-def _result(path: Path, name: str, specimen: str, simulated: bool) -> Path:
+def _result(path: Path, name: str, specimen: str, simulated: bool,
+            **extra: str) -> Path:
     table, fits = _fitted(name)
     prov: dict[str, Any] = {"plan": json.dumps(PLAN), "rig": json.dumps(RIG),
-                            "calibration": json.dumps(CAL)}
+                            "calibration": json.dumps(CAL), **extra}
     if simulated:
         prov["true_material"] = json.dumps({"library": name})
     return write_result(
@@ -246,3 +247,39 @@ def test_an_asymmetric_result_says_what_the_principled_models_lose(
     assert any("not twofold symmetric" in w for w in meta["warnings"])
     assert any("warning: the result is not twofold symmetric" in line
                for line in report("gltf", out, prov))
+
+
+def test_a_calibration_at_another_exposure_is_among_the_export_warnings(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # A scan at 0.5 s with a calibration taken at 0.01 s is 50 times off. The record's
+    # calibration.warning said so, but the warnings gonio export prints (and the daemon's
+    # X-Gonio-Export-Warnings header) left it out while they listed the physical-bounds
+    # warning that mismatch caused.
+    warning = ("the calibration was measured at exposure 0.01 s, this scan at 0.5 s; its "
+               "values are off by about the ratio. Calibrate at the scan's exposure")
+    path = _result(tmp_path / "job-9.h5", "brushed-metal-003", "felt", simulated=False,
+                   calibration_warning=warning)
+    assert main(["export", str(path), "--format", "gltf", "-o", str(tmp_path / "x.gltf")]) == 0
+    assert f"warning: {warning}" in capsys.readouterr().out
+    extras = json.loads((tmp_path / "x.gltf").read_text())["asset"]["extras"]
+    assert extras["calibration"]["warning"] == warning and warning in extras["warnings"]
+
+
+def test_the_table_export_says_the_reconstructions_own_warnings(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # "outside physical bounds ... do not use this table without checking it" was printed
+    # with the gltf, mtlx, merl and factored exports, and not with the table's (nor in its
+    # file): the one export it is about. The fits' warnings stay off the table.
+    bounds = ("the reconstruction is outside physical bounds: its directional albedo reaches "
+              "18.1; do not use this table without checking it")
+    path = _result(tmp_path / "job-9.h5", "brushed-metal-003", "felt", simulated=False,
+                   physical_bounds=bounds)
+    out = tmp_path / "x.table.npz"
+    assert main(["export", str(path), "--format", "table", "-o", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert f"warning: {bounds}" in printed
+    with np.load(out) as z:
+        meta = json.loads(str(z["provenance"]))
+    assert meta["warnings"] == [bounds] == meta["reconstruction_warnings"]
+    assert main(["export", str(path), "--format", "gltf", "-o", str(tmp_path / "x.gltf")]) == 0
+    assert f"warning: {bounds}" in capsys.readouterr().out

@@ -222,3 +222,22 @@ def test_importing_an_rgl_file_reports_how_far_from_reciprocal_it_is(
     assert main(["library", "import", str(plain)]) == 0
     out = capsys.readouterr().out
     assert "reciprocal" not in out and "already ships" not in out
+
+
+def test_importing_a_table_whose_scan_was_warned_about_says_the_warnings(
+        libdir: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # A table exported from a scan 50 times off (its calibration at another exposure) and
+    # outside physical bounds was imported without a word; it then trains every default
+    # basis and can be a later fit's local prior.
+    warned = ["the calibration was measured at exposure 0.01 s, this scan at 0.5 s; its values "
+              "are off by about the ratio. Calibrate at the scan's exposure",
+              "the reconstruction is outside physical bounds: ... do not use this table "
+              "without checking it"]
+    vals = np.where(geo.valid_mask(), 0.3, np.nan)[None, None].repeat(3, 0).repeat(72, 1)
+    path = BRDFTable(vals.astype(np.float32), ("R", "G", "B"), "felt-B",
+                     provenance={"warnings": warned}).save(libdir.parent / "felt-B.table.npz")
+    assert main(["library", "import", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "warning: the table's record carries 2 warning(s) from the scan it came from" in out
+    assert f"delete {libdir / 'felt-B.npz'} to take it out" in out
+    assert all(f"    - {w}" in out for w in warned), out

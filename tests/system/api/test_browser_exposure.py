@@ -1,0 +1,51 @@
+"""The lab page's result headline does not say a plain "Calibrated: values in 1/sr" for a scan
+whose calibration was measured at another exposure (counts are not rescaled, so every value is
+off by the ratio): it said exactly that, with the reason only as a bare key under "All
+metrics". Headless Chromium against the real daemon on the simulated rig, as
+tests/system/api/test_browser.py."""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import pytest
+
+from tests.system.api.conftest import Daemon, export_fits_off
+from tests.system.api.test_browser import (  # noqa: F401 (fixture)
+    _calibrate,
+    browser,
+    open_live,
+)
+
+pytestmark = [pytest.mark.system, pytest.mark.timeout(600)]
+
+
+def _text(browser: Any, element_id: str) -> str:  # noqa: F811 (the fixture's name)
+    return str(browser.execute_script(
+        "return document.getElementById(arguments[0])?.textContent ?? ''", element_id))
+
+
+def test_the_headline_says_a_calibration_at_another_exposure_does_not_fit(
+    daemon: Daemon, browser: Any  # noqa: F811
+) -> None:
+    _calibrate(daemon)  # at 0.005 s
+    plan = {"kind": "uniform", "specimen": "felt", "rotations": 2,
+            "exposure": {"exposure_s": 0.01}}
+    with export_fits_off(daemon), daemon.client() as c:
+        job = int(c.post("/api/v1/jobs", json={"plan": plan}).json()["id"])
+        deadline = time.monotonic() + 300
+        while c.get(f"/api/v1/jobs/{job}").json()["state"] not in (
+                "completed", "failed", "aborted"):
+            assert time.monotonic() < deadline, "the scan did not end"
+            time.sleep(0.2)
+        assert c.get(f"/api/v1/jobs/{job}").json()["state"] == "completed"
+    wait = open_live(browser, daemon, 120)
+    # The newest job's result is shown.
+    wait.until(lambda d: f"job {job}" in _text(d, "result-job"))
+    wait.until(lambda d: _text(d, "headline-calibration") != "")
+    head = _text(browser, "headline-calibration")
+    assert head.startswith("Calibrated, but not for this scan"), head
+    assert "measured at exposure 0.005 s, this scan at 0.01 s" in head, head
+    assert browser.execute_script(
+        "return document.getElementById('headline-calibration').className") == "uncalibrated"

@@ -1,0 +1,59 @@
+"""The page's Check plan (the API's dry run) says when the calibration in effect was measured
+at another exposure than the plan's: counts are not rescaled between exposures, so such a scan
+is off by the ratio, and it was said only in the result's calibration_warning afterwards (the
+page's headline read "Calibrated: values in 1/sr"). A real daemon on the simulated rig
+(tests/system/api/conftest.py), calibrated by a calibration job."""
+
+from __future__ import annotations
+
+import pytest
+
+from tests.system.api.conftest import Daemon, export_fits_off
+from tests.system.daemon_proc import wait_for
+
+pytestmark = pytest.mark.system
+
+
+@pytest.fixture(scope="module")
+def calibrated(daemon: Daemon) -> None:
+    """The daemon calibrated by a calibration job at the plans' default exposure, 0.01 s."""
+    before = daemon.sim.place_white_reference()
+    try:
+        with daemon.client() as c:
+            r = c.post("/api/v1/jobs", json={"plan": {"kind": "calibration", "rotations": 2,
+                                                      "reference_albedo": 0.99}})
+            assert r.status_code == 201, r.text
+            job = r.json()["id"]
+            wait_for(lambda: c.get(f"/api/v1/jobs/{job}").json()["state"]
+                     in ("completed", "failed"), what="the calibration job")
+            assert c.get(f"/api/v1/jobs/{job}").json()["state"] == "completed"
+    finally:
+        daemon.sim.place_specimen(before.brdf)
+
+
+def test_check_plan_warns_of_a_calibration_at_another_exposure(
+        daemon: Daemon, calibrated: None) -> None:
+    with daemon.client() as c:
+        same = {"kind": "uniform", "rotations": 4, "exposure": {"exposure_s": 0.01}}
+        r = c.post("/api/v1/jobs/dry-run", json={"plan": same})
+        assert r.status_code == 200, r.text
+        assert not any(w.startswith("exposure:") for w in r.json()["warnings"])
+        other = {**same, "exposure": {"exposure_s": 0.5}}
+        r = c.post("/api/v1/jobs/dry-run", json={"plan": other})
+        assert r.status_code == 200, r.text
+        (w,) = [w for w in r.json()["warnings"] if w.startswith("exposure:")]
+        assert "was measured at 0.01 s and this scan reads at 0.5 s" in w, w
+        assert "off by about 50 times" in w, w
+
+
+def test_the_colour_of_a_scan_at_another_exposure_says_so(
+        daemon: Daemon, calibrated: None) -> None:
+    plan = {"kind": "uniform", "rotations": 2, "exposure": {"exposure_s": 0.02}}
+    with export_fits_off(daemon), daemon.client() as c:
+        job = c.post("/api/v1/jobs", json={"plan": plan}).json()["id"]
+        wait_for(lambda: c.get(f"/api/v1/jobs/{job}").json()["state"]
+                 in ("completed", "failed"), what="the scan")
+        r = c.get(f"/api/v1/jobs/{job}/colour")
+        assert r.status_code == 200, r.text
+        (w,) = r.json()["warnings"]
+        assert "measured at exposure 0.01 s, this scan at 0.02 s" in w, w

@@ -1,0 +1,75 @@
+"""``gonio jobs list`` on a store nobody runs says that its 'running' jobs are not measuring:
+after a daemon was stopped mid-job (SIGTERM or kill -9) the list read 'running 3/8' with no
+process behind it, and nothing said it waits for the next start (or how to end it)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from gonio.cli import main
+from gonio.jobstates import JobState
+from gonio.store import JobStore
+
+pytestmark = pytest.mark.system
+
+HOLD = """
+import sys, time
+from gonio.locks import claim_store
+claim_store(sys.argv[1])
+print("held", flush=True)
+time.sleep(60)
+"""
+
+
+def _store_with_a_running_job(db: Path) -> int:
+    store = JobStore(db)
+    try:
+        job = store.create_job(kind="uniform", specimen="felt", plan={"kind": "uniform"},
+                               rig={})
+        store.set_state(job.id, JobState.RUNNING)
+        return job.id
+    finally:
+        store.close()
+
+
+def test_a_running_job_with_no_process_behind_it_is_said_to_be_interrupted(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    db = tmp_path / "gonio.sqlite"
+    job = _store_with_a_running_job(db)
+    assert main(["jobs", "list", "--db", str(db)]) == 0
+    out = capsys.readouterr().out
+    assert "running" in out
+    assert "no daemon or gonio scan runs jobs from this store now, so nothing goes on with " \
+        f"job(s) {job} above" in out
+    assert f"'gonio jobs abort ID --db {db}'" in out
+    # While a process holds the store (a daemon), 'running' is live: no note.
+    holder = subprocess.Popen([sys.executable, "-c", HOLD, str(db)], stdout=subprocess.PIPE,
+                              text=True)
+    try:
+        assert holder.stdout is not None and holder.stdout.readline().strip() == "held"
+        assert main(["jobs", "list", "--db", str(db)]) == 0
+        assert "no daemon" not in capsys.readouterr().out
+    finally:
+        holder.kill()
+        holder.wait()
+    assert main(["jobs", "list", "--db", str(db)]) == 0
+    assert "no daemon or gonio scan runs jobs" in capsys.readouterr().out
+
+
+def test_the_data_directory_serves_for_its_store(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # gonio serve and gonio scan print the data directory; --db DATA_DIR said 'job store
+    # DATA_DIR does not exist' though the store is in it.
+    _store_with_a_running_job(tmp_path / "gonio.sqlite")
+    assert main(["jobs", "list", "--db", str(tmp_path)]) == 0
+    assert "felt" in capsys.readouterr().out
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    assert main(["jobs", "list", "--db", str(empty)]) == 2
+    assert "is a folder without a job store (gonio.sqlite)" in capsys.readouterr().err

@@ -1,0 +1,51 @@
+"""A foreground ``gonio scan`` whose job suspends says why on the terminal: the bar alone read
+'job 1 suspended' (with pymodbus's 'Failed to connect ... Repeating....'), while the reason a
+person needs (which device, which address, what to check) sat only in the job store."""
+
+from __future__ import annotations
+
+import re
+import socket
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from gonio.sim.rig import SimRigOptions, start_sim_rig
+from tests.system.daemon_proc import GONIO, PROJECT_ROOT, child_env, wait_for
+
+pytestmark = [pytest.mark.system, pytest.mark.timeout(300)]
+
+
+def _closed_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def test_a_suspended_scan_prints_the_reason(tmp_path: Path) -> None:
+    rig = tmp_path / "rig.toml"
+    wrong = tmp_path / "wrong-port.toml"
+    err = tmp_path / "stderr.txt"
+    with start_sim_rig(SimRigOptions(config_path=rig)):
+        text = rig.read_text()
+        port = re.search(r"^port = (\d+)$", text, re.M)
+        assert port is not None, text
+        closed = _closed_port()
+        # The first Modbus device (light L1) on a port nothing listens on: a typo'd port.
+        wrong.write_text(text.replace(f"port = {port[1]}", f"port = {closed}", 1))
+        with err.open("w") as f:
+            proc = subprocess.Popen(
+                [*GONIO, "scan", "--rig", str(wrong), "--rotations", "4", "--no-export-fits",
+                 "--data-dir", str(tmp_path / "data"), "--no-progress",
+                 "-o", str(tmp_path / "x.h5")],
+                stdout=subprocess.DEVNULL, stderr=f, env=child_env(), cwd=PROJECT_ROOT)
+            try:
+                wait_for(lambda: "suspended:" in err.read_text() or proc.poll() is not None,
+                         what="the scan to say why it is suspended")
+            finally:
+                proc.kill()
+                proc.wait()
+    out = err.read_text()
+    assert f"job 1 suspended: L1: no Modbus TCP connection to 127.0.0.1:{closed}" in out, out
+    assert "check that the device is powered and the host/port in the rig config" in out, out
