@@ -90,7 +90,8 @@ def metrics(service: Service, request: Request) -> PlainTextResponse:
     "/api/v1/events",
     dependencies=READ,
     response_class=StreamingResponse,
-    responses={200: {"content": {"text/event-stream": {}}}},
+    responses={200: {"content": {"text/event-stream": {}}},
+               404: {"description": "job_id names no job (never submitted, or removed)"}},
     summary="Live events (server-sent events); resume with Last-Event-ID or ?since=",
 )
 async def events(
@@ -100,6 +101,10 @@ async def events(
     job_id: int | None = Query(None, ge=1, le=MAX_ID, description="only this job's events"),
     last_event_id: str | None = Header(None, description="set by EventSource on reconnect"),
 ) -> StreamingResponse:
+    if job_id is not None:
+        # A job that does not exist would give a stream that never says anything: a typo'd
+        # id would look like a quiet job. NotFound -> 404, as every other job route.
+        service.get_job(job_id)
     start = since
     if start is None and last_event_id is not None:
         text = last_event_id.strip()

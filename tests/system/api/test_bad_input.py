@@ -201,3 +201,12 @@ def test_a_dry_run_refuses_a_misspelt_key_as_a_job_request_does(daemon: Daemon) 
         r = c.post("/api/v1/jobs/dry-run", json=body)
     assert r.status_code == 422, r.text
     assert r.json()["detail"][0]["loc"] == ["body", "priorty"]
+
+
+def test_events_of_a_job_that_does_not_exist_are_404(daemon: Daemon) -> None:
+    # ?job_id=999 used to open a stream that never said anything (200), so a mistyped id
+    # looked like a quiet job; every other job route answers 404 for it.
+    with daemon.client() as c:
+        r = c.get("/api/v1/events?job_id=999999")
+    assert r.status_code == 404, r.text
+    assert "999999" in r.json()["detail"]
