@@ -90,6 +90,16 @@ class Calibration(BaseModel):
                 return np.asarray(p.factor, dtype=float)
         return np.ones(n_channels)
 
+    def measured_at_another_exposure(self, exposure_s: float) -> bool:
+        """Whether factors were measured at an exposure other than ``exposure_s`` (seconds).
+
+        False without factors or without a recorded exposure: counts are not rescaled between
+        exposure times, so this is the one test :func:`exposure_warning` (before a scan) and
+        :func:`gonio.finishing.exposure_mismatch` (in its result) both make.
+        """
+        return bool(self.pairs) and self.exposure_s is not None and not math.isclose(
+            exposure_s, self.exposure_s, rel_tol=1e-6)
+
     @model_validator(mode="after")
     def _one_factor_per_pair(self) -> Calibration:
         seen: set[tuple[str, str]] = set()
@@ -612,8 +622,7 @@ def exposure_warning(cal: Calibration, exposure_s: float) -> str | None:
     runs and ``gonio scan`` before anything is measured. Counts are not rescaled between
     exposure times (sensors need not be linear in exposure), so the values would be off by
     about the ratio; :func:`gonio.finishing.exposure_mismatch` says it again in the result."""
-    if not cal.pairs or cal.exposure_s is None or math.isclose(exposure_s, cal.exposure_s,
-                                                                  rel_tol=1e-6):
+    if not cal.measured_at_another_exposure(exposure_s) or cal.exposure_s is None:
         return None
     return (f"exposure: the calibration in effect ({cal.source}) was measured at "
             f"{cal.exposure_s:g} s and this scan reads at {exposure_s:g} s; counts are not "

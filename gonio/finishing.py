@@ -592,10 +592,8 @@ def exposure_mismatch(cal: Calibration, readings: list[Any]) -> str | None:
     Factors are not rescaled between exposure times (sensors need not be linear in exposure),
     so a scan at another exposure than its calibration is flagged rather than silently trusted.
     """
-    if not cal.pairs or cal.exposure_s is None or not readings:
-        return None
     used = sorted({float(r.exposure_s) for r in readings})
-    if all(math.isclose(t, cal.exposure_s, rel_tol=1e-6) for t in used):
+    if cal.exposure_s is None or not any(cal.measured_at_another_exposure(t) for t in used):
         return None
     return (f"the calibration was measured at exposure {cal.exposure_s:g} s, this scan at "
             f"{', '.join(f'{t:g}' for t in used)} s; its values are off by about the ratio. "

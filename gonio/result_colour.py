@@ -88,6 +88,15 @@ def result_report(
                          scan=scan_readings(res.samples))
 
 
+def colour_warnings(res: ResultFile) -> list[str]:
+    """What a colour report of ``res`` must say beside its numbers: the calibration was
+    measured at another exposure than the scan's, so every value (and L*) is off by about the
+    ratio (``calibration_warning``, :func:`gonio.finishing.exposure_mismatch`); [] when not.
+    ``gonio colour`` and the API's colour route both say these."""
+    off = res.provenance.get("calibration_warning")
+    return [str(off)] if off else []
+
+
 def scan_readings(samples: Any) -> ScanReadings | None:
     """A result's ``/samples`` (or the samples a job is finishing with) as the colour report's
     scan readings, so that instrument geometries a pair measured use its readings

@@ -240,7 +240,7 @@ async def colour(
     from gonio.brdf.colour.conditions import ViewingConditions
     from gonio.brdf.colour.instruments import DEFAULT_INSTRUMENTS
     from gonio.brdf.colour.report import compare
-    from gonio.result_colour import difference_csv, result_report
+    from gonio.result_colour import colour_warnings, difference_csv, result_report
 
     azimuths = azimuth or [0.0]
     if not all(math.isfinite(a) and -360 <= a <= 360 for a in azimuths):
@@ -260,10 +260,9 @@ async def colour(
                         headers={"Content-Disposition":
                                  f'attachment; filename="gonio-job-{job_id}-colour.csv"'})
     out: dict[str, Any] = {"job_id": job_id, "colour": report.as_dict()}
-    off = res.provenance.get("calibration_warning")
-    if off:
-        # The calibration was measured at another exposure: every value is off by the ratio.
-        out["warnings"] = [str(off)]
+    warnings = colour_warnings(res)
+    if warnings:
+        out["warnings"] = warnings
     if diff is not None:
         out["difference"] = {"against": against, **diff.as_dict()}
     return out

@@ -181,7 +181,7 @@ def _diff_table(diff: Any) -> str:
 def run(args: argparse.Namespace) -> int:
     from gonio.brdf.colour.conditions import ViewingConditions
     from gonio.brdf.colour.report import compare
-    from gonio.result_colour import difference_csv, result_report
+    from gonio.result_colour import colour_warnings, difference_csv, result_report
     from gonio.results import read_result
 
     if not args.result.is_file():
@@ -193,10 +193,8 @@ def run(args: argparse.Namespace) -> int:
     cond = ViewingConditions(args.illuminant, args.observer)
     res = read_result(args.result)
     report = result_report(res, cond, instruments, azimuths)
-    off = res.provenance.get("calibration_warning")
-    if off:
-        # The calibration was measured at another exposure: every L* is off by the ratio.
-        print(f"warning: {off}", file=sys.stderr)
+    for warning in colour_warnings(res):
+        print(f"warning: {warning}", file=sys.stderr)
     diff = None
     if args.against is not None:
         diff = compare(report, _standard(args.against, cond, instruments, azimuths))
