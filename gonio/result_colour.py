@@ -88,13 +88,17 @@ def result_report(
                          scan=scan_readings(res.samples))
 
 
-def colour_warnings(res: ResultFile) -> list[str]:
+def colour_warnings(res: ResultFile, role: str = "") -> list[str]:
     """What a colour report of ``res`` must say beside its numbers: the calibration was
     measured at another exposure than the scan's, so every value (and L*) is off by about the
     ratio (``calibration_warning``, :func:`gonio.finishing.exposure_mismatch`); [] when not.
-    ``gonio colour`` and the API's colour route both say these."""
+    ``gonio colour`` and the API's colour route both say these, and write them into the
+    CSV's ``warnings`` column. ``role`` (e.g. ``"standard"``) prefixes each sentence, for a
+    comparison that reports the standard's warnings beside the sample's."""
     off = res.provenance.get("calibration_warning")
-    return [str(off)] if off else []
+    if not off:
+        return []
+    return [f"{role}: {off}" if role else str(off)]
 
 
 def scan_readings(samples: Any) -> ScanReadings | None:
@@ -245,18 +249,22 @@ def read_standard_csv(path: str | os.PathLike[str]) -> ColourReport:
                         np.zeros((len(geos), 0)), None, lab_arr)
 
 
-def difference_csv(diff: ColourDifference) -> str:
-    """CIEDE2000 rows as CSV text (header first), each stating the conditions."""
+def difference_csv(diff: ColourDifference, warnings: Sequence[str] = ()) -> str:
+    """CIEDE2000 rows as CSV text (header first), each stating the conditions and, in a last
+    ``warnings`` column, the sentences that must travel with the numbers (joined by
+    ``"; "``; empty when there are none)."""
     buf = io.StringIO()
     rows = diff.rows()
-    w = csv.DictWriter(buf, fieldnames=["illuminant", "observer", *rows[0].keys()],
+    w = csv.DictWriter(buf, fieldnames=["illuminant", "observer", *rows[0].keys(), "warnings"],
                        lineterminator="\n")
     w.writeheader()
+    said = "; ".join(warnings)
     for r in rows:
         w.writerow({"illuminant": diff.conditions.illuminant,
                     "observer": diff.conditions.observer,
                     **{k: (f"{v:g}" if k.endswith("_deg") else f"{v:.4f}")
-                       if isinstance(v, float) else v for k, v in r.items()}})
+                       if isinstance(v, float) else v for k, v in r.items()},
+                    "warnings": said})
     return buf.getvalue()
 
 

@@ -249,18 +249,20 @@ async def colour(
     cond = ViewingConditions(illuminant, observer)
     res = await asyncio.to_thread(service.reconstruction, job_id)
     report = await asyncio.to_thread(result_report, res, cond, instruments, azimuths)
+    warnings = colour_warnings(res)
     diff = None
     if against is not None:
         std = await asyncio.to_thread(service.reconstruction, against)
         diff = compare(report, await asyncio.to_thread(
             result_report, std, cond, instruments, azimuths))
+        warnings += colour_warnings(std, f"standard (job {against})")
     if format == "csv":
-        text = difference_csv(diff) if diff is not None else report.csv()
+        text = (difference_csv(diff, warnings) if diff is not None
+                else report.csv(warnings))
         return Response(text, media_type="text/csv",
                         headers={"Content-Disposition":
                                  f'attachment; filename="gonio-job-{job_id}-colour.csv"'})
     out: dict[str, Any] = {"job_id": job_id, "colour": report.as_dict()}
-    warnings = colour_warnings(res)
     if warnings:
         out["warnings"] = warnings
     if diff is not None:

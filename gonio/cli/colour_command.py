@@ -128,21 +128,26 @@ def _azimuths(text: str) -> list[float]:
     return out
 
 
-def _standard(path: Path, conditions: Any, instruments: list[str], azimuths: list[float]) -> Any:
-    from gonio.result_colour import read_standard_csv, result_report
+def _standard(path: Path, conditions: Any, instruments: list[str],
+              azimuths: list[float]) -> tuple[Any, list[str]]:
+    """The standard's colour report and its warnings (a stored CSV carries its own)."""
+    from gonio.result_colour import colour_warnings, read_standard_csv, result_report
     from gonio.results import read_result
 
     if not path.is_file():
         raise UsageError(f"standard {path} does not exist")
     if path.suffix.lower() == ".csv":
-        return read_standard_csv(path)
-    return result_report(read_result(path), conditions, instruments, azimuths)
+        return read_standard_csv(path), []
+    std = read_result(path)
+    return (result_report(std, conditions, instruments, azimuths),
+            colour_warnings(std, "standard"))
 
 
 def _table(report: Any) -> str:
     """The colour table as a person reads it."""
-    lines = [f"{report.name}: {report.space}, {report.conditions.label} "
-             f"({report.conversion})"]
+    # An uncalibrated report names no illuminant or observer: its values depend on neither.
+    lines = [f"{report.name}: {report.space}, {report.conditions.label} ({report.conversion})"
+             if report.calibrated else f"{report.name}: {report.space}"]
     if report.lab is None:
         head = "instrument  geometry  azimuth  " + "  ".join(f"{c:>8}" for c in report.channels)
         lines.append(head)
@@ -193,14 +198,19 @@ def run(args: argparse.Namespace) -> int:
     cond = ViewingConditions(args.illuminant, args.observer)
     res = read_result(args.result)
     report = result_report(res, cond, instruments, azimuths)
-    for warning in colour_warnings(res):
-        print(f"warning: {warning}", file=sys.stderr)
+    warnings = colour_warnings(res)
     diff = None
     if args.against is not None:
-        diff = compare(report, _standard(args.against, cond, instruments, azimuths))
-    text_csv = difference_csv(diff) if diff is not None else report.csv()
+        std, std_warnings = _standard(args.against, cond, instruments, azimuths)
+        diff = compare(report, std)
+        warnings += std_warnings
+    for warning in warnings:
+        print(f"warning: {warning}", file=sys.stderr)
+    text_csv = difference_csv(diff, warnings) if diff is not None else report.csv(warnings)
     if args.json:
         out: dict[str, Any] = {"colour": report.as_dict()}
+        if warnings:
+            out["warnings"] = warnings
         if diff is not None:
             out["difference"] = diff.as_dict()
         print(json.dumps(out, indent=2))

@@ -105,13 +105,14 @@ async function refresh() {
     ? `; source "pair": ${read} of ${measured.length} geometries read directly by a pair of the scan, the others from the reconstructed table`
     : "; every geometry read from the reconstructed table";
   const flop = Object.values(rep.flop_index)[0];
-  const cond = `${rep.conditions.illuminant}/${rep.conditions.observer}°`;
   caption.textContent = lab
-    ? `${rep.space}, ${cond}, ${instrument} geometries at azimuth ${azimuth}° (${rep.conversion})` +
+    ? `${rep.space}, ${rep.conditions.illuminant}/${rep.conditions.observer}°, ${instrument} geometries at azimuth ${azimuth}° (${rep.conversion})` +
       (flop !== undefined ? `; flop index ${flop.toFixed(2)}` : "") +
       (diff ? `; ΔE00 against job ${against}: max ${diff.max_dE00.toFixed(2)}` : "") + source
     : `${rep.space}: reflectance factors per channel (${rep.channels.length} channels), no CIELAB. ` +
       "Give the sensor spectral bands or a chart colour calibration (docs/colour.md).";
+  // What must travel with the numbers (a calibration from another exposure): said first.
+  if (body.warnings?.length) caption.textContent = `Warning: ${body.warnings.join("; ")}. ${caption.textContent}`;
 }
 
 window.addEventListener("DOMContentLoaded", () => {

@@ -290,31 +290,44 @@ class ColourReport:
         return out
 
     def as_dict(self) -> dict[str, Any]:
-        """JSON form for the API and the result file."""
+        """JSON form for the API and the result file. ``conditions`` is null for an
+        uncalibrated report: its channel values do not depend on an illuminant or observer,
+        so naming one would suggest colour it does not have."""
         return {
             "name": self.name, "space": self.space, "conversion": self.conversion,
-            "conditions": self.conditions.as_dict(), "channels": list(self.channels),
+            "conditions": self.conditions.as_dict() if self.calibrated else None,
+            "channels": list(self.channels),
             "rows": self.rows(), "flop_index": dict(self.flop), "provenance": self.provenance,
             "measured": [bool(m) for m in self.measured] or [False] * len(self.geometries),
         }
 
-    def csv(self) -> str:
-        """The rows as CSV text (header first), with the space and conditions in a comment-free
-        column so every line states them, and ``source`` (``pair``: a pair of the scan read that
-        geometry, :attr:`measured`; ``table``: read from the reconstructed table; the same
-        words as the page's and ``gonio colour``'s column)."""
+    def csv(self, warnings: Sequence[str] = ()) -> str:
+        """The rows as CSV text (header first).
+
+        Every line states what a reader of one line needs: the space and conditions (empty
+        for an uncalibrated report, whose values depend on neither), ``source`` (``pair``: a
+        pair of the scan read that geometry, :attr:`measured`; ``table``: read from the
+        reconstructed table; the same words as the page's and ``gonio colour``'s column) and
+        ``warnings``, the sentences that must travel with the numbers (e.g. a calibration
+        measured at another exposure, :func:`gonio.result_colour.colour_warnings`), joined
+        by ``"; "``, empty when there are none.
+        """
         rows = self.rows()
         buf = io.StringIO()
-        fields = ["space", "illuminant", "observer", *rows[0].keys(), "flop_index", "source"]
+        fields = ["space", "illuminant", "observer", *rows[0].keys(), "flop_index", "source",
+                  "warnings"]
         w = csv.DictWriter(buf, fieldnames=fields, lineterminator="\n")
         w.writeheader()
         flags = self.measured or (False,) * len(self.geometries)
+        said = "; ".join(warnings)
         for g, row, m in zip(self.geometries, rows, flags, strict=True):
             fi = self.flop.get(_flop_key(g.instrument, g.azimuth_deg))
-            w.writerow({"space": self.space, "illuminant": self.conditions.illuminant,
-                        "observer": self.conditions.observer, **_fmt(row),
+            w.writerow({"space": self.space,
+                        "illuminant": self.conditions.illuminant if self.calibrated else "",
+                        "observer": self.conditions.observer if self.calibrated else "",
+                        **_fmt(row),
                         "flop_index": "" if fi is None else f"{fi:.4f}",
-                        "source": "pair" if m else "table"})
+                        "source": "pair" if m else "table", "warnings": said})
         return buf.getvalue()
 
 
@@ -391,7 +404,11 @@ def colour_report(
                     flop[_flop_key(inst, az)] = float(flop_index(ls[15.0], ls[45.0], ls[110.0]))
     return ColourReport(
         table.name, cond, space, conversion_label(conversion), table.channels, geos, refl,
-        xyz, lab, flop, {**describe(cond), "conversion": conversion_label(conversion)},
+        xyz, lab, flop,
+        # An uncalibrated report's values depend on no illuminant or observer: its provenance
+        # names none.
+        {**(describe(cond) if lab is not None else {}),
+         "conversion": conversion_label(conversion)},
         tuple(bool(m) for m in measured),
     )
 

@@ -201,6 +201,12 @@ def test_start_a_scan_from_the_page_and_see_the_result(daemon: Daemon, browser: 
     w, h = browser.execute_script(
         "const i = document.getElementById('render'); return [i.naturalWidth, i.naturalHeight]")
     assert w >= 5 * 512 and h >= 2 * 512, (w, h)  # five views, two rows
+    # The colour panel: this rig's RGB sensors have no spectral bands or chart calibration, so
+    # it shows channel values under that name, with no illuminant or observer named.
+    wait.until(lambda d: "reflectance factors per channel" in
+               d.find_element(By.ID, "colour-caption").text)
+    caption = browser.find_element(By.ID, "colour-caption").text
+    assert caption.startswith("uncalibrated sensor RGB") and "D65" not in caption, caption
     # Polar plots with the reconstruction and the truth, units in the subtitle.
     wait.until(lambda d: _chart(d, "polar-in") is not None and _chart(d, "polar-cross"))
     labels = [s["label"] for s in _chart(browser, "polar-in")]

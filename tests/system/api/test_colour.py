@@ -120,10 +120,13 @@ def test_colour_route(daemon: Daemon, no_export_fits: None) -> None:
         # answer says so instead of pretending its values are sRGB.
         assert body["space"] == "uncalibrated sensor RGB"
         assert len(body["rows"]) == 10 and "L" not in body["rows"][0]
+        # Channel values depend on no illuminant or observer: the answer names none.
+        assert body["conditions"] is None and "illuminant" not in body["provenance"]
         text = c.get(f"/api/v1/jobs/{job_id}/colour", params={"format": "csv"})
         assert text.status_code == 200 and text.headers["content-type"].startswith("text/csv")
         rows = list(csv.DictReader(io.StringIO(text.text)))
         assert rows[0]["space"] == "uncalibrated sensor RGB" and len(rows) == 17
+        assert {(r["illuminant"], r["observer"]) for r in rows} == {("", "")}
         bad = c.get(f"/api/v1/jobs/{job_id}/colour", params={"illuminant": "D66"})
         assert bad.status_code == 422 and "unknown illuminant" in bad.json()["detail"]
         bad = c.get(f"/api/v1/jobs/{job_id}/colour", params={"instrument": ["MA99"]})

@@ -6,6 +6,9 @@ page's headline read "Calibrated: values in 1/sr"). A real daemon on the simulat
 
 from __future__ import annotations
 
+import csv
+import io
+
 import pytest
 
 from tests.system.api.conftest import Daemon, export_fits_off
@@ -57,3 +60,8 @@ def test_the_colour_of_a_scan_at_another_exposure_says_so(
         assert r.status_code == 200, r.text
         (w,) = r.json()["warnings"]
         assert "measured at exposure 0.01 s, this scan at 0.02 s" in w, w
+        # The CSV a lab downloads and keeps carries it on every row.
+        r = c.get(f"/api/v1/jobs/{job}/colour", params={"format": "csv"})
+        assert r.status_code == 200, r.text
+        rows = list(csv.DictReader(io.StringIO(r.text)))
+        assert rows and {row["warnings"] for row in rows} == {w}

@@ -109,8 +109,15 @@ def test_uncalibrated_result_says_so(files: dict[str, Path],
     rep = json.loads(capsys.readouterr().out)["colour"]
     assert rep["space"] == "uncalibrated sensor RGB"
     assert rep["rows"][0]["R_R"] == pytest.approx(np.pi * RGB[0], rel=1e-5)
+    # Channel values depend on no illuminant or observer: none is named anywhere.
+    assert rep["conditions"] is None and "illuminant" not in rep["provenance"]
     assert main(["colour", str(files["raw"])]) == 0
-    assert "no CIELAB without spectral bands" in capsys.readouterr().out
+    text = capsys.readouterr().out
+    assert "no CIELAB without spectral bands" in text
+    assert text.splitlines()[0] == "panel: uncalibrated sensor RGB"
+    assert main(["colour", str(files["raw"]), "--csv", "-"]) == 0
+    rows = list(csv.DictReader(io.StringIO(capsys.readouterr().out)))
+    assert {(r["illuminant"], r["observer"]) for r in rows} == {("", "")}
     assert main(["colour", str(files["raw"]), "--against", str(files["cal"])]) == 2
     assert "uncalibrated sensor RGB" in capsys.readouterr().err
 
@@ -222,7 +229,20 @@ def test_a_calibration_at_another_exposure_is_said_with_the_colour(
                         provenance={"calibration_warning": off})
     assert main(["colour", str(path)]) == 0
     assert f"warning: {off}" in capsys.readouterr().err
+    # The CSV a lab keeps carries it on every row, and so does the JSON.
+    assert main(["colour", str(path), "--csv", "-"]) == 0
+    rows = list(csv.DictReader(io.StringIO(capsys.readouterr().out)))
+    assert rows and {r["warnings"] for r in rows} == {off}
+    assert main(["colour", str(path), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["warnings"] == [off]
 
     plain = _write(tmp_path / "plain.h5", _lambert(), {"calibration": _matrix()})
     assert main(["colour", str(plain)]) == 0
     assert "warning" not in capsys.readouterr().err
+    assert main(["colour", str(plain), "--csv", "-"]) == 0
+    assert {r["warnings"] for r in csv.DictReader(io.StringIO(capsys.readouterr().out))} == {""}
+    # Compared with the off scan as the standard: the standard's warning travels too.
+    assert main(["colour", str(plain), "--against", str(path), "--csv", "-"]) == 0
+    out = capsys.readouterr()
+    assert f"warning: standard: {off}" in out.err
+    assert {r["warnings"] for r in csv.DictReader(io.StringIO(out.out))} == {f"standard: {off}"}

@@ -95,7 +95,10 @@ def test_uncalibrated_report_states_it_and_keeps_channel_values() -> None:
     assert row["R_R"] == pytest.approx(0.3 * np.pi, rel=1e-6) and "L" not in row
     text = report.csv()
     parsed = list(csv.DictReader(io.StringIO(text)))
-    assert parsed[0]["space"] == UNCALIBRATED and parsed[0]["illuminant"] == "D65"
+    # Channel values depend on no illuminant or observer, so the CSV names none.
+    assert parsed[0]["space"] == UNCALIBRATED and parsed[0]["illuminant"] == ""
+    assert parsed[0]["observer"] == "" and parsed[0]["warnings"] == ""
+    assert report.as_dict()["conditions"] is None
     with pytest.raises(ColourError, match="uncalibrated sensor RGB"):
         compare(report, report)
 
