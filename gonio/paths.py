@@ -5,7 +5,9 @@
 
 * ``scans/<rig>-<geometry hash>/``: the data directory of ``gonio scan`` for one rig geometry
   (job store ``gonio.sqlite``, ``results/job-<id>.h5``, ``calibration.json``);
-* ``serve-sim/``: the data directory of ``gonio serve --sim``.
+* ``serve-sim/``: the data directory of ``gonio serve --sim``;
+* ``library/``: the user library of imported tables, unless ``$GONIO_LIBRARY_DIR`` names
+  another (``gonio.brdf.materials.measured.user_library_dir``).
 
 A data directory has the daemon's layout (docs/file-formats.md, "Data directory").
 """

@@ -97,10 +97,23 @@ def measured_digest() -> str:
 
 
 # ---------------------------------------------------------------------------- user library
+#: The user library's own folder, when set.
+LIBRARY_ENV = "GONIO_LIBRARY_DIR"
+#: gonio's user data folder (the same variable as ``gonio.paths.DATA_ENV``; ``gonio.brdf``
+#: imports nothing else from gonio, so the name is repeated and a test keeps the two equal).
+DATA_ENV = "GONIO_DATA_DIR"
+
+
 def user_library_dir() -> Path:
-    """Folder of the user's imported tables: ``$GONIO_LIBRARY_DIR``, else the user data dir."""
-    env = os.environ.get("GONIO_LIBRARY_DIR")
-    return Path(env) if env else Path(platformdirs.user_data_dir("gonio")) / "library"
+    """Folder of the user's imported tables: ``$GONIO_LIBRARY_DIR``, else ``library/`` in
+    gonio's user data folder (``$GONIO_DATA_DIR``, else the platform's), where the scans'
+    data directories also live: a lab that moves its data with ``GONIO_DATA_DIR`` moves its
+    library with it."""
+    env = os.environ.get(LIBRARY_ENV)
+    if env:
+        return Path(env)
+    data = os.environ.get(DATA_ENV)
+    return (Path(data) if data else Path(platformdirs.user_data_dir("gonio"))) / "library"
 
 
 def user_table_files() -> list[Path]:

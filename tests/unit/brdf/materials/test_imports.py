@@ -241,3 +241,19 @@ def test_importing_a_table_whose_scan_was_warned_about_says_the_warnings(
     assert "warning: the table's record carries 2 warning(s) from the scan it came from" in out
     assert f"delete {libdir / 'felt-B.npz'} to take it out" in out
     assert all(f"    - {w}" in out for w in warned), out
+
+
+def test_the_user_library_moves_with_the_data_folder(tmp_path: Path,
+                                                     monkeypatch: pytest.MonkeyPatch) -> None:
+    # A lab that points GONIO_DATA_DIR at its own disk found its scans there and its imported
+    # tables still in the platform's folder.
+    from gonio import paths
+
+    assert measured.DATA_ENV == paths.DATA_ENV
+    monkeypatch.delenv(measured.LIBRARY_ENV, raising=False)
+    monkeypatch.setenv(paths.DATA_ENV, str(tmp_path / "data"))
+    assert measured.user_library_dir() == tmp_path / "data" / "library"
+    assert measured.user_library_dir().parent == paths.user_data_root()
+    # Its own variable still wins.
+    monkeypatch.setenv(measured.LIBRARY_ENV, str(tmp_path / "lib"))
+    assert measured.user_library_dir() == tmp_path / "lib"
