@@ -118,7 +118,8 @@ class StageConfig(_Strict):
     microsteps_per_degree: Annotated[float, Field(gt=0)] | None = None
     speed_dps: Annotated[float, Field(gt=0)] = 30.0
     accel_dps2: Annotated[float, Field(gt=0)] = 60.0
-    settle_s: Annotated[float, Field(ge=0)] = 0.0
+    # Seconds; a stage that needs more than a minute to settle is a unit typed as ms.
+    settle_s: Annotated[float, Field(ge=0, le=60, allow_inf_nan=False)] = 0.0
     approach: Approach = "positive"
     backlash_deg: Annotated[float, Field(ge=0, le=10)] = 0.0
     min_deg: float = -360.0
@@ -719,7 +720,17 @@ def _describe(err: Any) -> str:
         what = str(err["msg"]).removeprefix("Value error, ")
     else:
         what = f"{err['msg']} (got {given!r})"
+        unit = _UNITS.get(str(loc[-1]).rsplit("_", 1)[-1]) if loc else None
+        if unit and kind in ("less_than_equal", "less_than", "greater_than",
+                             "greater_than_equal"):
+            # Out of range is most often another unit typed (200 ms as settle_s = 200).
+            what += f"; the value is in {unit}"
     return f"{where}: {what}" if where else what
+
+
+#: Units named by the keys' suffixes, said beside an out-of-range value.
+_UNITS = {"s": "seconds", "deg": "degrees", "nm": "nanometres", "dps": "degrees per second",
+          "dps2": "degrees per second squared"}
 
 
 def parse_rig_config(data: dict[str, Any], source: str = "rig config") -> RigConfig:

@@ -70,6 +70,18 @@ def test_wrong_type_shows_the_given_value(example: dict) -> None:
     assert "lights[0].theta_deg" in msg and "'thirty'" in msg
 
 
+def test_an_out_of_range_time_says_its_unit(example: dict) -> None:
+    # 200 typed as milliseconds loaded, and every reading waited over three minutes.
+    example["stage"]["settle_s"] = 200
+    msg = _error(example)
+    assert "stage.settle_s: Input should be less than or equal to 60 (got 200); the value is " \
+        "in seconds" in msg, msg
+    example["stage"]["settle_s"] = float("nan")
+    assert "stage.settle_s" in _error(example)
+    example["stage"]["settle_s"] = 0.2
+    assert parse_rig_config(example).stage.settle_s == 0.2
+
+
 def test_misspelt_key_is_refused(example: dict) -> None:
     example["stage"]["sped_dps"] = 10
     assert "stage: unknown key 'sped_dps'" in _error(example)
