@@ -12,7 +12,8 @@
   WARNINGs of one line (the frames are logged by pymodbus itself at DEBUG level).
 
 :func:`install` attaches them; :func:`gonio.daemon.serve` calls it after uvicorn has
-configured its loggers.
+configured its loggers. :func:`install_pymodbus` attaches the pymodbus filter alone, for the
+``gonio`` command line (``gonio scan`` and the other commands that talk to a rig).
 """
 
 from __future__ import annotations
@@ -87,10 +88,18 @@ class RoutineRequestFilter(logging.Filter):
         return True
 
 
+#: What pymodbus logs, at the level of the line before, instead of a line said again.
+PYMODBUS_REPEAT = "Repeating...."
+
+
 class PymodbusFrameFilter(logging.Filter):
-    """ERROR records of pymodbus become one-line WARNINGs without the raw frame dump."""
+    """ERROR records of pymodbus become one-line WARNINGs without the raw frame dump, and its
+    "Repeating...." records (which say only that the line before happened again) are
+    dropped."""
 
     def filter(self, record: logging.LogRecord) -> bool:
+        if record.getMessage().strip() == PYMODBUS_REPEAT:
+            return False
         if record.levelno >= logging.ERROR:
             text = record.getMessage().split("\n>>>>>", 1)[0].strip()
             record.msg = f"{text} (pymodbus; the driver reports the fault)"
@@ -98,6 +107,23 @@ class PymodbusFrameFilter(logging.Filter):
             record.levelno = logging.WARNING
             record.levelname = logging.getLevelName(logging.WARNING)
         return True
+
+
+def install_pymodbus() -> None:
+    """For the ``gonio`` command line (``gonio scan`` and the other commands that talk to a
+    rig), idempotent: pymodbus' warnings are not shown and its errors pass through
+    :class:`PymodbusFrameFilter`.
+
+    Without a logging configuration a command's warnings reach the terminal through Python's
+    last-resort handler, bare: pymodbus' "Failed to connect [Errno 111] ..." and then
+    "Repeating...." at every retry, beside the driver's own fault, which names the device, its
+    address and what to check. The daemon keeps them in its log (:func:`install`), where
+    each line names its logger.
+    """
+    logging.getLogger("pymodbus").setLevel(logging.ERROR)
+    logger = logging.getLogger(PYMODBUS_LOGGER)
+    if not any(isinstance(f, PymodbusFrameFilter) for f in logger.filters):
+        logger.addFilter(PymodbusFrameFilter())
 
 
 def install(quiet_reads: bool = True) -> None:

@@ -125,6 +125,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     from gonio.brdf.reconstruction.blas import prefer_one_thread
 
     prefer_one_thread()
+    # pymodbus' own lines on the terminal ("Failed to connect ...", "Repeating....", raw frame
+    # dumps) beside the driver's fault, which names the device and what to check.
+    from gonio.logfilters import install_pymodbus
+
+    install_pymodbus()
     argv = sys.argv[1:] if argv is None else list(argv)
     parser = build_parser(argv)
     args = parser.parse_args(argv)

@@ -85,6 +85,13 @@ def test_a_pymodbus_id_mismatch_keeps_its_words_not_its_frames() -> None:
     assert "0x0" not in frame.getMessage() and "got id=1" in frame.getMessage()
 
 
+@pytest.mark.parametrize("level", [logging.DEBUG, logging.WARNING, logging.ERROR])
+def test_pymodbus_repeat_lines_are_dropped(level: int) -> None:
+    # pymodbus logs "Repeating...." at the level of the line it repeats: it adds nothing.
+    rec = logging.LogRecord(PYMODBUS_LOGGER, level, "p.py", 1, "Repeating....", None, None)
+    assert PymodbusFrameFilter().filter(rec) is False
+
+
 def test_a_pymodbus_debug_record_is_left_alone() -> None:
     rec = logging.LogRecord(PYMODBUS_LOGGER, logging.DEBUG, "p.py", 1, "frame %s", ("0x1",), None)
     assert PymodbusFrameFilter().filter(rec)
@@ -115,3 +122,19 @@ def test_install_attaches_each_filter_once() -> None:
 def test_install_without_quiet_reads_keeps_the_reads() -> None:
     install(quiet_reads=False)
     assert [type(f) for f in logging.getLogger(ACCESS_LOGGER).filters] == [QueryKeyRedactor]
+
+
+@pytest.mark.usefixtures("clean_loggers")
+def test_the_command_line_hides_pymodbus_warnings_and_keeps_its_errors() -> None:
+    from gonio.logfilters import install_pymodbus
+
+    parent = logging.getLogger("pymodbus")
+    before = parent.level
+    try:
+        install_pymodbus()
+        install_pymodbus()
+        log = logging.getLogger(PYMODBUS_LOGGER)
+        assert [type(f) for f in log.filters] == [PymodbusFrameFilter]
+        assert not log.isEnabledFor(logging.WARNING) and log.isEnabledFor(logging.ERROR)
+    finally:
+        parent.setLevel(before)
