@@ -46,11 +46,18 @@ class ExportError(ValueError):
 
 @dataclass(frozen=True)
 class Fits:
-    """A result's table and the two fits every export format starts from."""
+    """A result's table and the two fits every export format starts from.
+
+    ``srgb_table`` is the table in linear sRGB from XYZ when the result's channels have colour
+    (spectral bands, or an RGB sensor with a chart calibration;
+    :func:`gonio.result_colour.linear_srgb`), which the fits were made of and MERL is written
+    from; None when they have none (uncalibrated sensor RGB, written as it is).
+    """
 
     table: BRDFTable
     factored: FactoredBRDF
     principled: Principled
+    srgb_table: BRDFTable | None = None
 
 
 def fit_all(table: BRDFTable) -> Fits:
@@ -87,7 +94,9 @@ def check_format(fmt: str) -> str:
 
 
 def result_fits(result_path: str | os.PathLike[str]) -> tuple[Fits, dict[str, Any]]:
-    """The fits of a result file (stored ones, else fitted now) and its provenance."""
+    """The fits of a result file (stored ones, else fitted now), its table in linear sRGB
+    when it has colour (:attr:`Fits.srgb_table`), and its provenance."""
+    from gonio.result_colour import linear_srgb
     from gonio.results import ResultFileError, read_result
 
     try:
@@ -109,7 +118,8 @@ def result_fits(result_path: str | os.PathLike[str]) -> tuple[Fits, dict[str, An
         if principled is None or principled.metrics.get("fit") != "rendered":
             # Missing, or fitted on the table alone by an older gonio (issue 26): fit again.
             principled, _ = fit_principled_rendered(res.table, fit_principled(res.table))
-    fits = Fits(res.table, factored, principled)
+    srgb = linear_srgb(res)
+    fits = Fits(res.table, factored, principled, None if srgb is None else srgb[0])
     return fits, provenance(res.attrs, fits, res.metrics, res.provenance)
 
 
@@ -199,6 +209,12 @@ def _write(fits: Fits, fmt: str, out: str | os.PathLike[str], prov: dict[str, An
     if fmt == "table":
         # The table is the reconstruction: the fits' warnings (which point to it) are not its.
         own = {**prov, "warnings": list(prov.get("reconstruction_warnings") or [])}
+        if fits.srgb_table is not None and prov.get("colour_space"):
+            # Its channels are the sensor's own (bands, or raw RGB), not the linear sRGB the
+            # other formats hold: say what they are and how colour is made of them.
+            own["colour_space"] = (
+                f"the reconstruction's own channels ({', '.join(fits.table.channels)}), as "
+                f"measured, not sRGB; the other exports hold {prov['colour_space']}")
         table = BRDFTable.trusted(
             fits.table.values, fits.table.channels, fits.table.name, fits.table.wavelengths_nm,
             {**fits.table.provenance, **own},
@@ -219,7 +235,10 @@ def _write(fits: Fits, fmt: str, out: str | os.PathLike[str], prov: dict[str, An
         return write_gltf(fits.principled, out, name, prov, with_mesh)
     from gonio.export.merl import write_merl
 
-    return write_merl(fits.table, out, prov)
+    # R, G, B as the glTF and MaterialX fits hold them: linear sRGB from XYZ when the result
+    # has colour (a spectral table has no R, G, B of its own; a chart-calibrated sensor's raw
+    # channels are not sRGB, while the sidecar's colour_space says linear sRGB).
+    return write_merl(fits.table if fits.srgb_table is None else fits.srgb_table, out, prov)
 
 
 def export_warnings(fmt: str, path: str | os.PathLike[str], prov: dict[str, Any]) -> list[str]:

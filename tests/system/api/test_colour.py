@@ -102,7 +102,24 @@ def test_spectral_sim_scan_gives_cielab(tmp_path: Path, basis: Any) -> None:
     table = write_export(fits, "table", tmp_path / "y.npz", prov)
     from gonio.brdf.tables.table import BRDFTable
 
-    assert BRDFTable.load(table).wavelengths_nm == tuple(np.arange(400.0, 701.0, 10.0))
+    kept = BRDFTable.load(table)
+    assert kept.wavelengths_nm == tuple(np.arange(400.0, 701.0, 10.0))
+    # The bands are not sRGB, and the table's record says so instead of the fits' sRGB.
+    assert kept.provenance["colour_space"].startswith("the reconstruction's own channels (400")
+    # MERL holds R, G, B: the same linear sRGB as the glTF (it was refused: 31 channels).
+    from gonio.brdf.materials.imports import read_merl_table
+    from gonio.export.merl import sidecar_path
+
+    merl = write_export(fits, "merl", tmp_path / "y.binary", prov)
+    side = json.loads(sidecar_path(merl).read_text())
+    assert side["colour_space"] == stated
+    back = read_merl_table(merl)
+    assert back.channels == ("R", "G", "B")
+    # At a diffuse geometry (light and view 30 degrees from the normal, a quarter turn
+    # apart), the material's yellow: R and G well above B, as in the glTF.
+    c, n = np.cos(np.radians(30)), np.sin(np.radians(30))
+    rgb = back.eval(np.array([[n, 0.0, c]]), np.array([[0.0, n, c]]))[0]
+    assert rgb[0] > rgb[2] * 2 and rgb[1] > rgb[2] * 1.5, rgb
 
 
 def test_colour_route(daemon: Daemon, no_export_fits: None) -> None:

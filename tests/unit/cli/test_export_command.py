@@ -128,6 +128,33 @@ def test_a_table_that_is_not_rgb_gives_an_export_error(tmp_path: Path, fmt: str)
     assert not out.exists() and list(tmp_path.iterdir()) == []  # no partial file left
 
 
+def test_merl_holds_the_srgb_table_of_a_result_with_colour(tmp_path: Path) -> None:
+    """A chart-calibrated RGB sensor's raw channels are not sRGB: MERL was written from them
+    while its sidecar's colour_space said linear sRGB. It now holds the table the fits were
+    made of, and a result without colour keeps its own."""
+    from gonio.brdf.materials.imports import read_merl_table
+    from gonio.brdf.models.principled import Principled
+    from gonio.brdf.tables.table import BRDFTable, from_function
+    from gonio.export import Fits, write_export
+
+    # Diffuse tables (MERL averages over the half vector's azimuth: a diffuse table keeps its
+    # values exactly), the raw channels' and another, as a conversion would give.
+    def diffuse(rgb: list[float], name: str) -> BRDFTable:
+        return from_function(lambda i, o: np.tile(rgb, (i.shape[0], 1)), ["R", "G", "B"], name)
+
+    raw, srgb = diffuse([0.1, 0.2, 0.05], "raw"), diffuse([0.05, 0.3, 0.02], "srgb")
+    factored = FactoredBRDF(np.full(3, 0.2), np.ones(3), np.ones((18, 72)), np.ones((3, 18)),
+                            np.ones((19, 72)), ("R", "G", "B"), "x")
+    principled = Principled((0.5, 0.5, 0.5), 0.0, 0.5, 0.2, 0.1, 30.0, ("R", "G", "B"))
+    wi = np.array([[0.5, 0.0, np.sqrt(0.75)]])
+    wo = np.array([[0.0, 0.5, np.sqrt(0.75)]])
+    for table, expected in ((srgb, srgb), (None, raw)):
+        out = write_export(Fits(raw, factored, principled, table), "merl",
+                           tmp_path / f"{expected.name}.binary", {})
+        got = read_merl_table(out).eval(wi, wo)[0]
+        assert got == pytest.approx(expected.eval(wi, wo)[0], rel=1e-3), expected.name
+
+
 @pytest.mark.parametrize("fmt", ["gltf", "mtlx", "factored", "table"])
 def test_two_writers_of_one_path_do_not_collide(result: Path, tmp_path: Path,
                                                 monkeypatch: pytest.MonkeyPatch, fmt: str) -> None:
