@@ -184,7 +184,8 @@ EXPORT_WARNINGS_HEADER = "X-Gonio-Export-Warnings"
                                        "result's anisotropy): a JSON list of sentences, "
                                        "ASCII (non-ASCII as \\u escapes); [] when none",
                                        "schema": {"type": "string"}}}},
-               422: {"description": "with_mesh asked for a format other than gltf"},
+               422: {"description": "with_mesh asked for a format other than gltf, or part="
+                                    "sidecar for a format other than merl"},
                507: {"description": "no room on the data directory's disk for the export"}},
     response_class=FileResponse,
     summary="The result as a renderer format: factored, mtlx, gltf, merl or table "
@@ -197,11 +198,24 @@ async def export(
     with_mesh: bool = Query(False, description="gltf only: add a preview sphere with "
                             "tangents, so that any glTF viewer shows the material "
                             "(gonio export --with-mesh)"),
+    part: Annotated[Literal["file", "sidecar"], Query(
+        description="merl only: 'sidecar' gives the JSON file gonio export writes beside the "
+        "MERL file (provenance, colour space, warnings; MERL's layout has no room for them)")
+    ] = "file",
 ) -> FileResponse:
-    from gonio.export import MEDIA_TYPES
+    from gonio.export import MEDIA_TYPES, ExportError
+    from gonio.export.merl import sidecar_path
 
+    if part == "sidecar" and format != "merl":
+        raise ExportError(f"part=sidecar applies to format merl only, not {format!r}; "
+                                 "the other formats carry their record inside the file")
     path, name = await asyncio.to_thread(service.export, job_id, format, with_mesh)
     warnings = await asyncio.to_thread(service.export_warnings, path)
+    if part == "sidecar":
+        # Named after the download, as gonio export names it beside its file.
+        return FileResponse(sidecar_path(path), media_type="application/json",
+                            filename=sidecar_path(name).name,
+                            headers={EXPORT_WARNINGS_HEADER: json.dumps(warnings)})
     # A download carries no sentence the page could show: the warnings come in a header.
     return FileResponse(path, media_type=MEDIA_TYPES[format], filename=name,
                         headers={EXPORT_WARNINGS_HEADER: json.dumps(warnings)})

@@ -13,6 +13,29 @@ function sync() {
   $("#export").hidden = shownJob() === null;
 }
 
+// One download: the response saved under the name the daemon gives; returns that name and
+// the export's warnings.
+async function download(id, query, fallback) {
+  const headers = getKey() ? { "X-API-Key": getKey() } : {};
+  const resp = await fetch(`/api/v1/jobs/${id}/export?${new URLSearchParams(query)}`, { headers });
+  if (!resp.ok) {
+    let detail = resp.statusText;
+    try { detail = (await resp.json()).detail ?? detail; } catch { /* not JSON */ }
+    throw new ApiError(resp.status, detail);
+  }
+  const name = (resp.headers.get("content-disposition") || "").match(/filename="?([^";]+)"?/)?.[1]
+    ?? fallback;
+  // What `gonio export` would print as warnings (e.g. a MERL file holds only the azimuthal
+  // average): the download cannot say it, so the daemon sends them in a header.
+  let warnings = [];
+  try { warnings = JSON.parse(resp.headers.get("x-gonio-export-warnings") || "[]"); } catch { /* none */ }
+  const a = document.createElement("a");
+  a.href = URL.createObjectURL(await resp.blob());
+  a.download = name;
+  a.click();
+  return { name, warnings };
+}
+
 async function exportShown() {
   const id = shownJob();
   if (id === null) return;
@@ -20,24 +43,14 @@ async function exportShown() {
   const state = $("#export-state");
   state.textContent = "exporting…";
   try {
-    const headers = getKey() ? { "X-API-Key": getKey() } : {};
-    const resp = await fetch(`/api/v1/jobs/${id}/export?format=${encodeURIComponent(fmt)}`, { headers });
-    if (!resp.ok) {
-      let detail = resp.statusText;
-      try { detail = (await resp.json()).detail ?? detail; } catch { /* not JSON */ }
-      throw new ApiError(resp.status, detail);
+    const { name, warnings } = await download(id, { format: fmt }, `gonio-job-${id}-${fmt}`);
+    const saved = [name];
+    // MERL's layout has no room for the provenance: it comes as a JSON sidecar, saved beside
+    // it as `gonio export` writes it.
+    if (fmt === "merl") {
+      saved.push((await download(id, { format: fmt, part: "sidecar" }, `${name}.json`)).name);
     }
-    const name = (resp.headers.get("content-disposition") || "").match(/filename="?([^";]+)"?/)?.[1]
-      ?? `gonio-job-${id}-${fmt}`;
-    // What `gonio export` would print as warnings (e.g. a MERL file holds only the azimuthal
-    // average): the download cannot say it, so the daemon sends them in a header.
-    let warnings = [];
-    try { warnings = JSON.parse(resp.headers.get("x-gonio-export-warnings") || "[]"); } catch { /* none */ }
-    const a = document.createElement("a");
-    a.href = URL.createObjectURL(await resp.blob());
-    a.download = name;
-    a.click();
-    state.textContent = [`saved ${name}`, ...warnings.map((w) => `warning: ${w}`)].join("\n");
+    state.textContent = [`saved ${saved.join(" and ")}`, ...warnings.map((w) => `warning: ${w}`)].join("\n");
   } catch (e) {
     state.textContent = `export failed: ${e.message}`;
   }

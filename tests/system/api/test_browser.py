@@ -268,7 +268,9 @@ def test_start_a_scan_from_the_page_and_see_the_result(daemon: Daemon, browser: 
         sent = json.loads(c.get(f"/api/v1/jobs/{job_id}/export", params={"format": "merl"})
                           .headers["x-gonio-export-warnings"])
     assert sent, "no warning to show"  # this small test basis leaves a misfit, at least
-    assert state == [f"saved gonio-job-{job_id}-merl.binary", *(f"warning: {w}" for w in sent)]
+    # With its provenance sidecar, saved beside it as gonio export writes it.
+    assert state == [f"saved gonio-job-{job_id}-merl.binary and "
+                     f"gonio-job-{job_id}-merl.binary.json", *(f"warning: {w}" for w in sent)]
     assert _severe(browser) == []
 
 

@@ -139,8 +139,8 @@ def test_full_scan_with_live_progress_and_results(daemon: Daemon) -> None:
                       params={"format": "mtlx", "with_mesh": "true"})
         assert wrong.status_code == 422 and "gltf only" in wrong.json()["detail"]
         # A download says what `gonio export` prints as warnings, in a header: the MERL file
-        # of this anisotropic specimen holds only its azimuthal average (its provenance
-        # sidecar stays on the daemon's disk), asked for once and again from the kept file.
+        # of this anisotropic specimen holds only its azimuthal average, asked for once and
+        # again from the kept file.
         assert json.loads(gl.headers["x-gonio-export-warnings"]) == extras["warnings"]
         for _ in range(2):
             merl = c.get(f"/api/v1/jobs/{job_id}/export", params={"format": "merl"})
@@ -148,6 +148,18 @@ def test_full_scan_with_live_progress_and_results(daemon: Daemon) -> None:
             warned = json.loads(merl.headers["x-gonio-export-warnings"])
             assert any("azimuthal average" in w and "gltf, mtlx or table" in w
                        for w in warned), warned
+        # Its provenance sidecar, which stayed on the daemon's disk, is downloadable, named
+        # as gonio export names it beside the file; only MERL has one.
+        side = c.get(f"/api/v1/jobs/{job_id}/export", params={"format": "merl",
+                                                              "part": "sidecar"})
+        assert side.status_code == 200, side.text
+        assert f'gonio-job-{job_id}-merl.binary.json' in side.headers["content-disposition"]
+        record = side.json()
+        assert record["job_id"] == job_id and record["merl"]["azimuthally_averaged"] is True
+        assert record["warnings"] == warned
+        wrong = c.get(f"/api/v1/jobs/{job_id}/export", params={"format": "gltf",
+                                                               "part": "sidecar"})
+        assert wrong.status_code == 422 and "merl only" in wrong.json()["detail"]
 
 
 def test_sse_resync_replays_missed_events(daemon: Daemon, no_export_fits: None) -> None:
