@@ -27,3 +27,32 @@ def test_the_grid_and_the_fresh_set_are_as_written_down(bench: ModuleType) -> No
     assert bench.IN_PLANE_GRID[0] == 0.0 and bench.IN_PLANE_GRID[-1] == pytest.approx(1.5)
     assert len(bench.FRESH_INPLANE) == 16
     assert not {n for n, *_ in bench.FRESH_INPLANE} & {n for n, *_ in bench.FRESH}
+
+
+def _row(truth: float, shipped: float, plan: str = "MA98 r=8") -> dict[str, object]:
+    """A fresh-confirm row whose shipped estimate is ``shipped``; an MA98-like layout (11 of
+    19 pairs in the plane) with a large leave-one-pair-out error, unflagged."""
+    return {"set": "fresh-confirm", "plan": plan, "truth": truth, "widened": shipped,
+            "unwidened": shipped / 0.61, "uncovered": 0.0, "out_of_plane": 8 / 19,
+            "cv_log_error": 0.5, "misfit_chi2": 0.5, "misfit_log": 0.0,
+            "misfit_persistent_pairs": 0, "n": 19, "r": 8}
+
+
+def test_the_confirmation_rule_adopts_only_fewer_low_scans_at_little_cost(
+        bench: ModuleType, capsys: pytest.CaptureFixture[str]) -> None:
+    assert bench.CONFIRM_K == 0.90 and len(bench.FRESH_CONFIRM) == 16
+    older = {n for spec in (bench.FRESH, bench.FRESH_INPLANE) for n, *_ in spec}
+    assert not {n for n, *_ in bench.FRESH_CONFIRM} & older
+    # The term here: 0.9 * (11/19) * 0.5 = 0.26 added as a variance, so an estimate of 0.05
+    # becomes sqrt(0.05^2 + 0.26^2) = 0.265.
+    low = _row(truth=0.2, shipped=0.05)  # x0.25 shipped, x1.3 with the term
+    assert bench.in_plane_candidate(low, bench.CONFIRM_K) == pytest.approx(
+        (0.05 ** 2 + (0.9 * 11 / 19 * 0.5) ** 2) ** 0.5, rel=1e-6)
+    fine = _row(truth=0.05, shipped=0.05)  # x1 shipped, x5.3 with the term
+    assert bench.confirm_in_plane([low, fine]) is True  # one low saved, one within x2 lost
+    assert bench.confirm_in_plane([fine]) is False  # nothing low to save
+    # Six within x2 lost for one saved: a net loss of five, beyond the slack of four.
+    assert bench.confirm_in_plane([low] + [fine] * 6) is False
+    assert bench.confirm_in_plane([low] + [fine] * 5) is True
+    assert bench.confirm_in_plane([{**low, "set": "fresh"}]) is None
+    assert "confirmation rule" in capsys.readouterr().out
