@@ -276,6 +276,7 @@ def finish_job(job_id: int, plan: AnyPlan | CheckedPlan, how: Finishing) -> dict
                        misfit_persistent_pairs=rec.misfit.persistent_pairs,
                        predicted_log_rmse_unwidened=_finite_or_none(
                            rec.predicted_log_rmse_unwidened))
+    _record_adaptive_stop(how.store, job_id, metrics, provenance)
     misfit_message = rec.misfit_warning
     if misfit_message is not None:
         metrics["basis_misfit"] = misfit_message
@@ -473,6 +474,27 @@ def _basis_for_test(how: Finishing, job_id: int, plan: AnyPlan, basis: Basis,
         "families without twofold symmetry too: its prior along the rotation holds odd "
         f"harmonics; K = {asym.K}, {made}) instead of the default one, which cannot represent "
         "it (docs/science.md 7.4)")
+
+
+def _record_adaptive_stop(store: JobStore, job_id: int, metrics: dict[str, Any],
+                          provenance: dict[str, Any]) -> None:
+    """Why an adaptive scan stopped refining (its last ``adaptive_done`` event), in its result.
+
+    ``metrics["adaptive_stop"]``: ``converged`` (the rule asked for no more angles),
+    ``budget`` or ``max_rounds`` (a limit of the plan); at a limit ``adaptive_wanted``, how
+    many more angles the rule still asked for, and when it asked for any ``adaptive_limit``,
+    the sentence that says so (also in the provenance, so exports carry it). Nothing for a
+    plan that is not adaptive.
+    """
+    ev = store.last_event(job_id, "adaptive_done")
+    if ev is None:
+        return
+    metrics["adaptive_stop"] = str(ev.data.get("reason"))
+    if "wanted" in ev.data:
+        metrics["adaptive_wanted"] = int(ev.data["wanted"])
+    if ev.data.get("message"):
+        metrics["adaptive_limit"] = str(ev.data["message"])
+        provenance["adaptive_limit"] = str(ev.data["message"])
 
 
 def _record_arc_test(job_id: int, plan: AnyPlan, test: dict[str, Any] | None,

@@ -696,6 +696,9 @@ def _progress(service: Any, job_id: int, disabled: bool) -> Any:
             bar.write(f"warning: {ev.data['message']}", file=sys.stderr)
         elif ev.type == "arc_test":
             bar.write(f"arc: {ev.data['message']}", file=sys.stderr)
+        elif ev.type == "adaptive_done" and ev.data.get("message"):
+            # Stopped at the plan's limit while its rule still asked for more angles.
+            bar.write(f"note: {ev.data['message']}", file=sys.stderr)
 
     service.add_event_listener(on_event)
     return bar

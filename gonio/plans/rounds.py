@@ -34,7 +34,8 @@ class RoundRequest:
     angles_deg : (r,) measured specimen angles, degrees
     values : (n_pairs, r, C) ``raw - dark`` counts (sensor units, uncalibrated), rows in the
         order of the plan's pairs
-    budget_angles : most stage angles the round may add
+    budget_angles : most stage angles the round may add; None: no limit (the rule is asked
+        so at the plan's limit, to tell whether it still wanted more)
     min_step_deg : finest step between angles, degrees
     min_gain : the posterior rule's threshold on the drop of the expected error
     arc_deg : ``(start_deg, span_deg)`` of the plan, degrees: new angles lie in the arc
@@ -42,7 +43,7 @@ class RoundRequest:
 
     angles_deg: Sequence[float]
     values: NDArray[np.float64]
-    budget_angles: int
+    budget_angles: int | None
     min_step_deg: float
     min_gain: float
     arc_deg: tuple[float, float]
@@ -121,12 +122,36 @@ class AdaptiveRounds:
     async def next_round(self, angles_deg: Sequence[float], values: NDArray[np.float64],
                          planned_angles: int, last_round: int) -> NextRound:
         plan = self.plan
-        if last_round + 1 >= plan.max_rounds:
-            return NextRound([], [("adaptive_done", {"reason": "max_rounds"})])
         budget = self.limit_angles - planned_angles
-        if budget <= 0:
-            return NextRound([], [("adaptive_done", {"reason": "budget"})])
+        limit = ("max_rounds" if last_round + 1 >= plan.max_rounds
+                 else "budget" if budget <= 0 else None)
         events: list[tuple[str, dict[str, Any]]] = []
+        # At a limit the rule is still asked (without one), so the job can say whether it
+        # stopped refined or short of what its rule wanted.
+        new, rule, seen = await self._ask(angles_deg, values, None if limit else budget,
+                                          last_round, events)
+        if limit is not None:
+            done: dict[str, Any] = {"reason": limit, "rule": rule, "wanted": len(new), **seen}
+            if new:
+                done["message"] = limit_message(limit, plan.max_rounds, self.limit_angles,
+                                                planned_angles, len(new), rule)
+            events.append(("adaptive_done", done))
+            return NextRound([], events)
+        if not new:
+            events.append(("adaptive_done", {"reason": "converged", "rule": rule, **seen}))
+            return NextRound([], events)
+        events.append(("adaptive_round", {"round": last_round + 1, "rule": rule,
+                                          "angles": len(new), **seen}))
+        return NextRound(list(new), events)
+
+    async def _ask(self, angles_deg: Sequence[float], values: NDArray[np.float64],
+                   budget: int | None, last_round: int,
+                   events: list[tuple[str, dict[str, Any]]]
+                   ) -> tuple[list[float], str, dict[str, Any]]:
+        """The angles the plan's rule would add (at most ``budget``; None: no limit), the rule
+        that answered and what it saw; a posterior rule that cannot run leaves an event in
+        ``events`` and V&F's rule answers."""
+        plan = self.plan
         # Either rule refines within the plan's arc: over half a turn the gaps are those
         # modulo 180 and new angles stay in [start, start + 180) (docs/science.md 7.3).
         start, span = self.arc_deg
@@ -150,12 +175,19 @@ class AdaptiveRounds:
         # What the posterior rule saw (its rho, offset and drops), so a lab can tell why it
         # went on or stopped.
         seen = self.refiner.describe() if rule == "posterior" and self.refiner else {}
-        if not new:
-            events.append(("adaptive_done", {"reason": "converged", "rule": rule, **seen}))
-            return NextRound([], events)
-        events.append(("adaptive_round", {"round": last_round + 1, "rule": rule,
-                                          "angles": len(new), **seen}))
-        return NextRound(list(new), events)
+        return list(new), rule, dict(seen)
+
+
+def limit_message(limit: str, max_rounds: int, limit_angles: int, planned_angles: int,
+                  wanted: int, rule: str) -> str:
+    """The sentence of an adaptive plan stopped at a limit while its rule still asked for
+    ``wanted`` more stage angles (event ``adaptive_done``, the result's ``adaptive_limit``)."""
+    what = (f"its {max_rounds} rounds (max_rounds)" if limit == "max_rounds"
+            else f"its limit of {limit_angles} stage angles (max_rotations or max_samples)")
+    raise_ = "max_rounds" if limit == "max_rounds" else "max_rotations (or max_samples)"
+    return (f"the adaptive plan stopped at {what} with {planned_angles} angles read, while "
+            f"its rule ({rule}) still asked for {wanted} more: the reconstruction is less "
+            f"refined than the rule would make it; raise {raise_} to let it finish")
 
 
 class ArcRounds:

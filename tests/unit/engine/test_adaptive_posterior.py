@@ -78,6 +78,14 @@ def test_the_plan_stops_when_the_rule_says() -> None:
     # What the rule saw is in the event: the drop that stopped it is below the plan's min_gain.
     assert 0 <= float(done["best_drop"]) < plan.min_gain  # type: ignore[arg-type]
     assert {"rho", "offset", "expected_log_rmse"} <= set(done)
+    # Converged: nothing about a limit in the result.
+    from typing import Any
+
+    from gonio.finishing import _record_adaptive_stop
+
+    metrics: dict[str, Any] = {}
+    _record_adaptive_stop(store, 1, metrics, {})
+    assert metrics == {"adaptive_stop": "converged"}
 
 
 def test_without_a_basis_the_engine_uses_the_vf_rule_and_says_so() -> None:
@@ -121,8 +129,22 @@ def test_the_job_stops_at_max_rotations() -> None:
     store, _eng, _ = _run(plan)
     steps = store.steps(1)
     assert len(steps) == 7 and len({round(s.specimen_deg % 360.0, 6) for s in steps}) == 7
-    assert _events(store, "adaptive_done")[-1]["reason"] == "budget"
+    done = _events(store, "adaptive_done")[-1]
+    assert done["reason"] == "budget"
     assert AdaptivePlan().max_rotations == 16
+    # The rule was still asked at the cap: with a tiny min_gain it wanted more, and the job
+    # says so in its event and, through finishing, in its result's metrics and provenance.
+    assert isinstance(done["wanted"], int) and done["wanted"] > 0
+    assert "limit of 7 stage angles" in str(done["message"])
+    from typing import Any
+
+    from gonio.finishing import _record_adaptive_stop
+
+    metrics: dict[str, Any] = {}
+    provenance: dict[str, Any] = {}
+    _record_adaptive_stop(store, 1, metrics, provenance)
+    assert metrics["adaptive_stop"] == "budget" and metrics["adaptive_wanted"] == done["wanted"]
+    assert metrics["adaptive_limit"] == provenance["adaptive_limit"] == done["message"]
 
 
 def test_a_half_turn_job_refines_and_moves_only_within_its_half_turn() -> None:

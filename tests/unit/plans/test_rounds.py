@@ -69,13 +69,30 @@ def test_vf_rounds_plan_what_the_vf_rule_plans(desc: RigDescription) -> None:
 
 def test_the_last_round_and_the_budget_end_the_job(desc: RigDescription) -> None:
     plan = AdaptivePlan(rule="vf", initial_rotations=8, max_rounds=2, max_rotations=10)
-    rounds = rounds_for(check_plan(plan, desc))
+    checked = check_plan(plan, desc)
+    rounds = rounds_for(checked)
     angles = [45.0 * k for k in range(8)]
-    values = _swing(angles, len(check_plan(plan, desc).pairs))
-    assert _next(rounds, angles, values, 8, 1).events == [
-        ("adaptive_done", {"reason": "max_rounds"})]
-    assert _next(rounds, angles, values, 10, 0).events == [
-        ("adaptive_done", {"reason": "budget"})]
+    values = _swing(angles, len(checked.pairs))
+    # At a limit the rule is still asked, without one, so the job says whether it stopped
+    # short of what the rule wanted: here V&F's rule wants every gap of the swing refined.
+    wanted = len(adaptive_refinement(angles, values, plan.threshold, desc.resolution_deg, None,
+                                     period_deg=360.0, start_deg=0.0))
+    assert wanted > 0
+    got = _next(rounds, angles, values, 8, 1)
+    assert got.angles_deg == []
+    ((kind, data),) = got.events
+    assert kind == "adaptive_done" and data["reason"] == "max_rounds"
+    assert data["wanted"] == wanted and data["rule"] == "vf"
+    assert "stopped at its 2 rounds (max_rounds)" in data["message"]
+    assert f"still asked for {wanted} more" in data["message"]
+    ((kind, data),) = _next(rounds, angles, values, 10, 0).events
+    assert data["reason"] == "budget" and data["wanted"] == wanted
+    assert "its limit of 10 stage angles" in data["message"] and "raise max_rotations" in \
+        data["message"]
+    # Flat readings: the rule wants nothing more, and the limit is not a shortfall.
+    flat = np.ones_like(values)
+    ((kind, data),) = _next(rounds, angles, flat, 10, 0).events
+    assert data == {"reason": "budget", "rule": "vf", "wanted": 0}
 
 
 def test_the_posterior_rule_is_asked_with_the_plans_settings(desc: RigDescription) -> None:
