@@ -205,7 +205,8 @@ def table_for_fits(table: BRDFTable, source: Mapping[str, Any],
 def read_standard_csv(path: str | os.PathLike[str]) -> ColourReport:
     """A standard's colour from a CSV written by ``gonio colour --csv`` (or by hand, same
     columns: space, illuminant, observer, instrument, incidence_deg, aspecular_deg,
-    azimuth_deg, L, a, b).
+    azimuth_deg, L, a, b). The ``warnings`` column, when there is one, goes to the report's
+    ``provenance["warnings"]``.
 
     Raises
     ------
@@ -245,8 +246,12 @@ def read_standard_csv(path: str | os.PathLike[str]) -> ColourReport:
     lab_arr = np.asarray(lab, dtype=float)
     if not np.isfinite(lab_arr).all():
         raise ColourError(f"{p}: a CIELAB value is not a finite number")
+    # What the CSV's rows said must travel with its numbers (its ``warnings`` column; kept
+    # whole, since a sentence may hold the "; " that joins several).
+    said = sorted({str(r["warnings"]) for r in rows if r.get("warnings")})
     return ColourReport(p.stem, cond, CIELAB, "stored standard", (), tuple(geos),
-                        np.zeros((len(geos), 0)), None, lab_arr)
+                        np.zeros((len(geos), 0)), None, lab_arr,
+                        provenance={"warnings": said} if said else {})
 
 
 def difference_csv(diff: ColourDifference, warnings: Sequence[str] = ()) -> str:

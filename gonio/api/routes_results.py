@@ -208,7 +208,7 @@ async def export(
 
     if part == "sidecar" and format != "merl":
         raise ExportError(f"part=sidecar applies to format merl only, not {format!r}; "
-                                 "the other formats carry their record inside the file")
+                          "the other formats carry their record inside the file")
     path, name = await asyncio.to_thread(service.export, job_id, format, with_mesh)
     warnings = await asyncio.to_thread(service.export_warnings, path)
     if part == "sidecar":

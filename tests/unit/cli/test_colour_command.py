@@ -246,3 +246,9 @@ def test_a_calibration_at_another_exposure_is_said_with_the_colour(
     out = capsys.readouterr()
     assert f"warning: standard: {off}" in out.err
     assert {r["warnings"] for r in csv.DictReader(io.StringIO(out.out))} == {f"standard: {off}"}
+    # The off scan's CSV kept as a stored standard carries its warning into the comparison.
+    std = tmp_path / "std.csv"
+    assert main(["colour", str(path), "--csv", str(std)]) == 0
+    capsys.readouterr()
+    assert main(["colour", str(plain), "--against", str(std), "--csv", "-"]) == 0
+    assert f"warning: standard: {off}" in capsys.readouterr().err
