@@ -16,8 +16,9 @@ so the readings carry no lookup error of their own). Printed per specimen: the t
 estimate and its ratio, the upper end of its interval, the error above the physical peak bound
 (``peak_excess_log_rmse``, under which the estimate never goes: docs/science.md 7.5),
 whether the result is outside physical bounds, and the floor's premise: the truth's own peak
-over the largest reading (the floor is a lower bound of the error only while that stays within
-``PEAK_RATIO_LIMIT``) and the floor a perfect table, the truth itself, would get; then the
+over the largest reading, both projected (``f cos ti cos to``, as the bound compares them; the
+floor is a lower bound of the error only while that stays within ``PEAK_RATIO_LIMIT``) and the
+floor a perfect table, the truth itself, would get; then the
 share within x2, the scans more than 2x too low, those above the upper end and the specimens
 that break the premise. Results: docs/science.md 7.5. About 8 s a specimen.
 """
@@ -36,7 +37,7 @@ import bench_selfestimate as bs  # sibling bench (the script's folder is on sys.
 import numpy as np
 
 from gonio.brdf.tables import metrics
-from gonio.brdf.tables.bounds import PEAK_RATIO_LIMIT, peak_excess_log_rmse
+from gonio.brdf.tables.bounds import PEAK_RATIO_LIMIT, bounds_check, peak_excess_log_rmse
 from gonio.cli import main as gonio_main
 from gonio.results import read_result
 
@@ -84,11 +85,13 @@ def main(argv: list[str] | None = None) -> int:
                 q = p / true
                 ratios.append(q)
                 above += int(true > up)
-                # The floor's premise: the truth within PEAK_RATIO_LIMIT x the largest reading.
-                readings = np.asarray(res.samples.to_samples().values, dtype=float)
-                truth_ratio = float(np.nanmax(np.asarray(m.truth.values))) / float(
-                    np.nanmax(readings))
-                truth_floor = peak_excess_log_rmse(m.truth, readings)
+                # The floor's premise: the truth within PEAK_RATIO_LIMIT x the largest reading,
+                # both projected (f cos ti cos to), as the bound compares them.
+                grid = res.samples.to_samples()
+                readings = np.asarray(grid.values, dtype=float)
+                truth_ratio = bounds_check(m.truth, readings, cells=grid.cells,
+                                           calibrated=False).peak_ratio
+                truth_floor = peak_excess_log_rmse(m.truth, readings, grid.cells)
                 premise_broken += int(truth_ratio > PEAK_RATIO_LIMIT)
                 print(f"| {m.name} | {true:.4f} | {p:.4f} | x{q:.2f} | {up:.4f} | "
                       f"{float(met.get('peak_excess_log_rmse') or 0.0):.4f} | "

@@ -286,7 +286,7 @@ def finish_job(job_id: int, plan: AnyPlan | CheckedPlan, how: Finishing) -> dict
     # above every reading) completes with a warning rather than failing: the readings and the
     # table where the pairs look are still the measurement, a rebuild with another basis can
     # use them, and a failed job would hide both (docs/science.md 7.6).
-    physical = physical_bounds(rec.table, grid.values, bool(cal.pairs),
+    physical = physical_bounds(rec.table, grid.values, grid.cells, bool(cal.pairs),
                                rec.peak_excess_log_rmse)
     metrics.update(worst_directional_albedo=physical.as_dict()["worst_albedo"],
                    peak_to_reading_ratio=physical.as_dict()["peak_ratio"],
@@ -526,14 +526,16 @@ def _record_arc_test(job_id: int, plan: AnyPlan, test: dict[str, Any] | None,
     provenance["arc_test"] = json.dumps(test)
 
 
-def physical_bounds(table: Any, values: Any, calibrated: bool,
+def physical_bounds(table: Any, values: Any, cells: Any, calibrated: bool,
                     peak_excess: float | None = None) -> Any:
     """:func:`gonio.brdf.tables.bounds.bounds_check` of a reconstruction against the readings
-    it was fitted to (``values``, calibrated when ``calibrated``); ``peak_excess``: the
-    reconstruction's own ``peak_excess_log_rmse``, so it is not computed twice."""
+    it was fitted to (``values``, one row per pair of ``cells``, calibrated when
+    ``calibrated``); ``peak_excess``: the reconstruction's own ``peak_excess_log_rmse``, so it
+    is not computed twice."""
     from gonio.brdf.tables.bounds import bounds_check
 
-    return bounds_check(table, values, calibrated=calibrated, peak_excess=peak_excess)
+    return bounds_check(table, values, cells=cells, calibrated=calibrated,
+                        peak_excess=peak_excess)
 
 
 def _colour(rec: Any, how: Finishing, sensors: list[str], calibrated: bool,

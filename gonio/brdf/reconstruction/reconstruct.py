@@ -204,7 +204,8 @@ class Reconstruction:
         ``predicted_log_rmse`` stays the central value.
     peak_excess_log_rmse : float
         The error the table carries above the physical peak bound, ``PEAK_RATIO_LIMIT`` times
-        the largest reading (:func:`gonio.brdf.tables.bounds.peak_excess_log_rmse`,
+        the largest projected reading ``f cos ti cos to``, over each cell's ``cos ti cos to``
+        (:func:`gonio.brdf.tables.bounds.peak_excess_log_rmse`,
         ``log_rmse`` units; 0 when nothing is above it, NaN without a positive reading). A
         lower bound of the true error for any material within that bound (an assumption a
         polished specimen no pair reads near its mirror direction can break: docs/science.md
@@ -839,7 +840,7 @@ def _reconstruct(
         widened = widen_log_rmse(predicted, misfit)
     # Never below the error the table carries above the physical peak bound: a lower bound of
     # the true error for any material within it (gonio.brdf.tables.bounds; science.md 7.5).
-    excess = peak_excess_log_rmse(table, vals)
+    excess = peak_excess_log_rmse(table, vals, cells_)
     if np.isfinite(excess) and np.isfinite(widened) and excess > widened:
         widened = excess
     upper = (upper_log_rmse(widened, misfit) if joint_estimate

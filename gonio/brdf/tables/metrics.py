@@ -13,7 +13,7 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from gonio.brdf.tables import geometry as geo
 from gonio.brdf.tables.table import BRDFTable
@@ -105,7 +105,7 @@ def log_rmse(f_hat: TableLike, f_ref: TableLike) -> float:
     return float(np.sqrt(np.sum(w * (x - y) ** 2) / np.sum(w)))
 
 
-def log_rmse_to_cap(f: TableLike, cap: float) -> float:
+def log_rmse_to_cap(f: TableLike, cap: float | ArrayLike) -> float:
     """:func:`log_rmse` of a table against itself capped at ``cap``, ``min(f, cap)``, without
     building the capped copy: only the cells above ``cap`` add to the sum, over the weights of
     every finite valid cell (the cells the full metric would compare).
@@ -114,33 +114,45 @@ def log_rmse_to_cap(f: TableLike, cap: float) -> float:
     ----------
     f : BRDFTable or (C, 72, 18, 18, 36) array, 1/sr (or any unit: the metric is not
         unit-free, ``ln(1 + f cos ti)``)
-    cap : float
-        The cap, in ``f``'s units.
+    cap : float or (18, 18, 36) array
+        The cap, in ``f``'s units: one value for every cell, or one per slice cell ``(th, td,
+        pd)``, the same for every ``ph`` and channel (the physical peak bound's cap is
+        ``PEAK_RATIO_LIMIT`` times the largest projected reading over ``cos ti cos to``,
+        :func:`gonio.brdf.tables.bounds.peak_cap`).
 
     Returns
     -------
     float, dimensionless; 0 when no finite value is above ``cap``.
     """
     v = _values(f, "table")
-    # The common case, nothing above the cap, is settled by one pass over the stored values
-    # (fmax skips NaN; every fit asks this): no copy of the valid cells.
-    peak = float(np.fmax.reduce(v, axis=None))
-    if not np.isnan(peak) and not peak > cap:
-        return 0.0
     mask = geo.valid_mask()
+    per_cell = np.ndim(cap) > 0
+    cap_v = (np.broadcast_to(np.asarray(cap, dtype=float), geo.SLICE_SHAPE)[mask] if per_cell
+             else np.full(int(mask.sum()), float(np.asarray(cap, dtype=float))))
+    # The common case, nothing above the cap, is settled by one pass over the stored values
+    # (fmax skips NaN; every fit asks this): no copy of the valid cells. With a cap per cell
+    # the pass compares each cell's largest value over the channels and ph with its cap.
+    if per_cell:
+        peak_cells = np.fmax.reduce(v, axis=(0, 1))[mask]  # (valid cells,)
+        if np.isfinite(peak_cells).any() and not np.any(peak_cells > cap_v):
+            return 0.0
+    else:
+        peak = float(np.fmax.reduce(v, axis=None))
+        if not np.isnan(peak) and not peak > cap_v[0]:
+            return 0.0
     valid = v[:, :, mask]  # (C, 72, valid cells), the stored dtype: no float64 copy of it all
     finite = np.isfinite(valid)
     if not finite.any():
         raise MetricError("the table has no finite valid cell")
     wv = geo.volume_weight()[mask]
     total = float(np.sum(finite.sum(axis=(0, 1)) * wv))
-    above = finite & (valid > cap)
+    above = finite & (valid > cap_v)
     if not above.any():
         return 0.0
     _, _, cell = np.nonzero(above)
     x = np.asarray(valid[above], dtype=np.float64)
     c = _cos_ti()[mask][cell]
-    d = np.log1p(x * c) - np.log1p(float(cap) * c)
+    d = np.log1p(x * c) - np.log1p(cap_v[cell] * c)
     return float(np.sqrt(np.sum(wv[cell] * d * d) / total))
 
 
