@@ -251,8 +251,8 @@ def _headline(metrics: dict[str, Any]) -> dict[str, Any] | None:
                        "better. It adds what the readings leave undetermined to how far the "
                        "material sits from the training library; on materials held out of "
                        "the library it was within a factor of 2 of the truth on about 2 "
-                       "scans in 3 (185 of 290 test and fresh scans) and more than 2 times "
-                       "too low on about 1 in 40 (7 of 290), all read with the MA98 preset "
+                       "scans in 3 (184 of 290 test and fresh scans) and more than 2 times "
+                       "too low on about 1 in 36 (8 of 290), all read with the MA98 or MA68 preset "
                        "(docs/science.md 7.1.1).",
         }
     v = metrics.get("predicted_error")
