@@ -519,7 +519,9 @@ class GonioService:
                 build = (build or 0.0) + asym
             finishing_for = None
             if row.state is JobState.RECONSTRUCTING:
-                finishing_for = (self.worker.activity_seconds()
+                # Counted from the finishing's start, not from its latest activity (the
+                # switch from the basis to the reconstruction must not add time back).
+                finishing_for = (self.worker.finishing_seconds()
                                  if self.worker.current_job == job_id else None) or 0.0
             times = {"basis_build_s": build, "reconstruction_s": est.seconds,
                      "reconstruction_estimate": est.source,

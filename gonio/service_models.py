@@ -119,7 +119,9 @@ class JobDetail(JobInfo):
     time_left_s: float | None = Field(
         default=None, description="active jobs: estimated seconds to the job's end, an "
         "estimate: eta_s + basis_build_s + reconstruction_s while measuring; while "
-        "reconstructing, what is left of basis_build_s + reconstruction_s")
+        "reconstructing, what is left of basis_build_s + reconstruction_s since finishing "
+        "began; null once finishing runs past them (not done, and how much longer is not "
+        "known)")
     queue_position: int | None = Field(description="0 = next to run; null unless queued")
     result_path: str | None
     result: dict[str, Any] | None = Field(description="summary: metrics, readings, paths")

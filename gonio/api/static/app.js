@@ -145,7 +145,10 @@ function etaText() {
   const d = selectedDetail;
   if (!d || d.id !== selected) return "";
   if (d.state === "reconstructing") {
-    const left = d.time_left_s != null ? `; ≈ ${eta(d.time_left_s)} left (est.)` : "";
+    // Past its estimate the daemon gives no time left (null, not 0 s): it is not done.
+    const planned = (d.reconstruction_s ?? 0) + (d.basis_build_s ?? 0);
+    const left = d.time_left_s != null ? `; ≈ ${eta(d.time_left_s)} left (est.)`
+      : d.reconstruction_s != null ? `; taking longer than the ≈ ${eta(planned)} estimated` : "";
     return `${d.activity ?? "reconstructing"}${left}`;
   }
   // An adaptive job loads (or builds) its basis before the first reading.

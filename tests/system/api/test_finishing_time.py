@@ -1,0 +1,59 @@
+"""The time left while a job finishes, over HTTP: counted from the finishing's start (the
+switch from loading the basis to reconstructing adds no time back), and no "0 s left" while a
+finishing runs past its estimate (the first scan's ETA reached 0 s seconds before its end)."""
+
+from __future__ import annotations
+
+import itertools
+import time
+from typing import Any
+
+import pytest
+
+from gonio.timeleft import FINISHING_FALLBACK_S
+from tests.system.api.conftest import SLOW_BASIS_S, Daemon
+
+pytestmark = [pytest.mark.system, pytest.mark.timeout(300)]
+
+PLAN = {"kind": "uniform", "specimen": "slow finish", "rotations": 2,
+        "exposure": {"exposure_s": 0.005}}
+
+
+def finishing_timeline(daemon: Daemon) -> list[dict[str, Any]]:
+    """Submit ``PLAN`` and poll its detail every 0.1 s until it ends; the polls made while
+    it was reconstructing, each with its time since the first of them (``t``)."""
+    with daemon.client() as c:
+        job = c.post("/api/v1/jobs", params={"accept_uncalibrated": "true"},
+                     json={"plan": PLAN}).json()["id"]
+        polls: list[dict[str, Any]] = []
+        t0 = None
+        deadline = time.monotonic() + 240
+        while (d := c.get(f"/api/v1/jobs/{job}").json())["state"] not in (
+                "completed", "failed", "aborted"):
+            assert time.monotonic() < deadline, "the scan did not end"
+            if d["state"] == "reconstructing":
+                t0 = time.monotonic() if t0 is None else t0
+                polls.append({**d, "t": time.monotonic() - t0})
+            time.sleep(0.1)
+        assert d["state"] == "completed", d
+    return polls
+
+
+def test_time_left_while_finishing_counts_down_once_and_is_unknown_past_its_estimate(
+    slow_basis_daemon: Daemon,
+) -> None:
+    polls = finishing_timeline(slow_basis_daemon)
+    assert polls and polls[-1]["t"] > SLOW_BASIS_S - 1, [p["t"] for p in polls]
+    # No finished scan on this daemon: the estimate is the measured default.
+    assert {p["reconstruction_s"] for p in polls} == {FINISHING_FALLBACK_S}
+    lefts = [(p["t"], p["time_left_s"], p["activity"]) for p in polls]
+    known = [x for x in lefts if x[1] is not None]
+    assert known, lefts
+    # Counted down from the finishing's start: it never goes up (the basis loading and the
+    # reconstruction are one finishing), and is never 0 s while the job is not done.
+    for (_, a, _), (_, b, _) in itertools.pairwise(known):
+        assert b <= a + 0.3, lefts
+    assert all(left > 0 for _, left, _ in known), lefts
+    # Past the estimate (6 s) the basis still loads (9 s): the time left is unknown, null.
+    late = [x for x in lefts if x[0] > FINISHING_FALLBACK_S + 1.0]
+    assert late and all(left is None for _, left, _ in late), lefts
