@@ -49,7 +49,7 @@ from gonio.diskspace import (
 from gonio.engine import Progress, ScanEngine
 from gonio.engine_loop import running_in
 from gonio.finishing import Finishing, FinishingStopped, finish_job
-from gonio.jobstates import FINISHED_STATES, IllegalTransition, JobState
+from gonio.jobstates import FINISHED_STATES, QUEUE_HOLD, IllegalTransition, JobState
 from gonio.plans.checked import CheckedPlan, check_plan
 from gonio.plans.dryrun import BasisSymmetry, arc_may_apply
 from gonio.plans.models import AdaptivePlan, AnyPlan, PlanError, parse_stored_plan
@@ -66,8 +66,6 @@ KEEP_CHECKED = 64
 """Checked plans of submitted jobs the worker keeps before it drops those of jobs that are no
 longer queued (:meth:`Worker.take_checked`)."""
 
-QUEUE_HOLD = "queue"
-"""Name of the queue hold in the store's ``holds`` table."""
 GATE_POLL_S = 1.0
 """How often a closed gate (maintenance lock) is looked at again, seconds."""
 DISK_POLL_S = 1.0
