@@ -419,6 +419,7 @@ class GonioService:
         row = self.store.create_job(
             kind=plan.kind, specimen=plan.specimen, plan=plan.model_dump(mode="json"),
             rig=self.desc.model_dump(mode="json"), priority=request.priority,
+            total_angles=len(checked.angles_deg),
         )
         self.worker.take_checked(row.id, checked)
         self.basis.note_arc(self.store, row.id, plan, symmetry)

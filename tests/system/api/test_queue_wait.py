@@ -53,3 +53,25 @@ def test_a_queued_job_under_a_halt_says_why_it_waits_in_the_api_and_gonio_jobs(
         while c.get(f"/api/v1/jobs/{job}").json()["state"] != "completed":
             assert time.monotonic() < deadline, "the released job did not complete"
             time.sleep(0.2)
+
+
+def test_a_queued_job_counts_the_angles_it_will_measure(
+    daemon: Daemon, capsys: pytest.CaptureFixture[str],
+) -> None:
+    """A queued 8-angle scan read "0/0" in the API, on the page's progress and in gonio jobs
+    until it started; it reads 0 of 8, and a cancelled one says how many it would have."""
+    with daemon.client() as c:
+        assert c.post("/api/v1/rig/halt").status_code == 200  # it stays queued
+        try:
+            job = c.post("/api/v1/jobs", params={"accept_uncalibrated": "true"},
+                         json={"plan": {**PLAN, "rotations": 8}}).json()
+            assert (job["done_angles"], job["total_angles"]) == (0, 8)
+            assert c.get(f"/api/v1/jobs/{job['id']}").json()["total_angles"] == 8
+            assert main(["jobs", "list", "--db", str(daemon.data_dir / "gonio.sqlite")]) == 0
+            line = next(x for x in capsys.readouterr().out.splitlines()
+                        if x.split()[:2] == [str(job["id"]), "queued"])
+            assert line.split()[3] == "0/8", line
+            assert c.post(f"/api/v1/jobs/{job['id']}/cancel").status_code == 200
+            assert c.get(f"/api/v1/jobs/{job['id']}").json()["total_angles"] == 8
+        finally:
+            assert c.post("/api/v1/rig/release").status_code == 200
