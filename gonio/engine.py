@@ -91,7 +91,8 @@ class Progress:
     """Where a running job is: ``done`` of ``total`` stage angles and the estimated time left.
 
     ``eta_s`` is measured: the median time of the last few angles times the angles left, as of
-    ``at`` (Unix seconds, the last checkpoint). ``eta_max_s`` bounds it for adaptive plans,
+    ``at`` (Unix seconds: the last checkpoint, or when the job last paused, suspended or ran
+    again: the countdown stands still meanwhile). ``eta_max_s`` bounds it for adaptive plans,
     whose later rounds are not planned yet (every gap refined, :func:`adaptive_bound`).
     """
 
@@ -266,7 +267,24 @@ class ScanEngine:
         if new is self.state:
             return
         self.store.set_state(self.job_id, new, reason=reason, data=dict(data) or None)
+        self._hold_countdown(self.state, new)
         self.state = new
+
+    def _hold_countdown(self, old: JobState, new: JobState) -> None:
+        """The ETA counts down while the job measures only: frozen at what it was when the job
+        pauses or suspends, counted on from there when it runs again (the time it stood still
+        is not measuring time: after a 30 s pause it read 0 s until the next checkpoint)."""
+        p, now = self.progress, time.time()
+        if p.eta_s is None:
+            return
+        if old is JobState.RUNNING and new in (JobState.PAUSED, JobState.SUSPENDED):
+            left = p.eta_now(now)
+            assert left is not None
+            spent = p.eta_s - left
+            self.progress = replace(p, eta_s=left, at=now, eta_max_s=None if p.eta_max_s is None
+                                    else p.eta_max_s - spent)
+        elif new is JobState.RUNNING and old in (JobState.PAUSED, JobState.SUSPENDED):
+            self.progress = replace(p, at=now)
 
     def _next_progress(self, steps: Sequence[StepRow]) -> Progress:
         """The progress once ``steps`` are committed (:attr:`progress` is set when they are)."""

@@ -1,6 +1,7 @@
-"""The time left while a job finishes, over HTTP: counted from the finishing's start (the
+"""The time left over HTTP. While a job finishes: counted from the finishing's start (the
 switch from loading the basis to reconstructing adds no time back), and no "0 s left" while a
-finishing runs past its estimate (the first scan's ETA reached 0 s seconds before its end)."""
+finishing runs past its estimate (the first scan's ETA reached 0 s seconds before its end).
+While it measures: a pause does not count as measuring time."""
 
 from __future__ import annotations
 
@@ -57,3 +58,42 @@ def test_time_left_while_finishing_counts_down_once_and_is_unknown_past_its_esti
     # Past the estimate (6 s) the basis still loads (9 s): the time left is unknown, null.
     late = [x for x in lefts if x[0] > FINISHING_FALLBACK_S + 1.0]
     assert late and all(left is None for _, left, _ in late), lefts
+
+
+def test_the_measuring_eta_stands_still_while_paused_and_goes_on_after_resume(
+    daemon: Daemon, no_export_fits: None,
+) -> None:
+    """After a pause the ETA counted the paused time as measuring: resumed after 5 s, it read
+    5 s less than when it paused (0 s after a long pause) until the next checkpoint."""
+    # About 1.5 s per angle at the test daemon's time scale: a window after the resume
+    # before the next checkpoint.
+    slow = {**PLAN, "specimen": "paused a while", "rotations": 24,
+            "exposure": {"exposure_s": 0.05, "averages": 10}}
+    with daemon.client() as c:
+        job = c.post("/api/v1/jobs", params={"accept_uncalibrated": "true"},
+                     json={"plan": slow}).json()["id"]
+        try:
+            deadline = time.monotonic() + 120
+            while c.get(f"/api/v1/jobs/{job}").json()["done_angles"] < 2:
+                assert time.monotonic() < deadline, "the scan did not measure"
+                time.sleep(0.1)
+            assert c.post(f"/api/v1/jobs/{job}/pause").status_code == 200
+            while (d := c.get(f"/api/v1/jobs/{job}").json())["state"] != "paused":
+                assert time.monotonic() < deadline, "the scan did not pause"
+                time.sleep(0.1)
+            paused_eta = d["eta_s"]
+            assert paused_eta is not None and paused_eta > 5
+            time.sleep(5.0)
+            assert c.get(f"/api/v1/jobs/{job}").json()["eta_s"] == paused_eta  # frozen
+            assert c.post(f"/api/v1/jobs/{job}/resume").status_code == 200
+            resumed = c.get(f"/api/v1/jobs/{job}").json()
+            assert resumed["state"] == "running" and resumed["done_angles"] == d["done_angles"]
+            # Counted on from the paused value, not from the checkpoint before the pause.
+            assert resumed["eta_s"] == pytest.approx(paused_eta, abs=1.0), (paused_eta, resumed)
+        finally:
+            c.post(f"/api/v1/jobs/{job}/abort")
+            deadline = time.monotonic() + 120
+            while c.get(f"/api/v1/jobs/{job}").json()["state"] not in (
+                    "completed", "failed", "aborted"):
+                assert time.monotonic() < deadline
+                time.sleep(0.2)
