@@ -164,7 +164,10 @@ function etaText() {
   const parts = [`measuring ${eta(d.eta_s)}`];
   if (d.basis_build_s != null) parts.push(`basis build ≈ ${eta(d.basis_build_s)}`);
   parts.push(`reconstruction ≈ ${eta(d.reconstruction_s)}`);
-  let t = `≈ ${eta(d.time_left_s)} left in all (est.): ${parts.join(", ")}`;
+  // A paused or suspended job's time does not run out while it stands still: it is the time
+  // from when it runs again (the daemon's countdown is frozen meanwhile).
+  let t = d.state === "running" ? `≈ ${eta(d.time_left_s)} left in all (est.): ${parts.join(", ")}`
+    : `${d.state}: ≈ ${eta(d.time_left_s)} in all once it runs again (est.): ${parts.join(", ")}`;
   if (d.eta_max_s != null && d.eta_max_s > (d.eta_s ?? 0) + 1) {
     t += `; ≤ ${eta(d.time_left_s - d.eta_s + d.eta_max_s)} if refined`;
   }

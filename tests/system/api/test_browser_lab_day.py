@@ -478,6 +478,48 @@ def test_a_queued_job_behind_a_paused_one_says_what_it_waits_for(
     wait.until(lambda d: "waits for job" not in d.find_element(By.ID, "jobs").text)
 
 
+def test_a_paused_jobs_eta_is_the_time_once_it_runs_again_not_time_left(
+    daemon: Daemon, browser: Any, no_export_fits: None  # noqa: F811
+) -> None:
+    """A paused job's ETA cell read "≈ 29 s left in all (est.)", as if the time ran out while
+    it stood still; it now says the job is paused and the time is from when it runs again."""
+    import time
+
+    with daemon.client() as c:
+        job = int(c.post("/api/v1/jobs", params={"accept_uncalibrated": "true"}, json={
+            "plan": {**PLAN, "specimen": "paused eta", "rotations": 400}}).json()["id"])
+        deadline = time.monotonic() + 120
+        while c.get(f"/api/v1/jobs/{job}").json()["done_angles"] < 3:  # it has an ETA
+            assert time.monotonic() < deadline, "the long scan did not measure"
+            time.sleep(0.05)
+        assert c.post(f"/api/v1/jobs/{job}/pause").status_code == 200
+        while c.get(f"/api/v1/jobs/{job}").json()["state"] != "paused":
+            assert time.monotonic() < deadline, "the long scan did not pause"
+            time.sleep(0.05)
+    try:
+        wait = open_live(browser, daemon, 120)
+
+        def eta_text(d: Any) -> str:
+            d.execute_script(
+                "document.querySelector(`#jobs tr[data-id='${arguments[0]}']`)?.click()", job)
+            return str(d.execute_script(
+                "return document.querySelector(`#jobs tr[data-id='${arguments[0]}'] td.eta`)"
+                "?.textContent ?? ''", job))
+
+        wait.until(lambda d: "in all" in eta_text(d))
+        text = eta_text(browser)
+        assert text.startswith("paused: ≈ ") and "once it runs again" in text, text
+        assert "left" not in text, text
+    finally:
+        with daemon.client() as c:
+            c.post(f"/api/v1/jobs/{job}/abort")
+            deadline = time.monotonic() + 120
+            while c.get(f"/api/v1/jobs/{job}").json()["state"] not in (
+                    "completed", "failed", "aborted"):
+                assert time.monotonic() < deadline
+                time.sleep(0.2)
+
+
 def test_a_halted_queue_says_so_on_the_queued_row_and_is_released_from_the_page(
     daemon: Daemon, browser: Any, no_export_fits: None  # noqa: F811
 ) -> None:
