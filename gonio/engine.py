@@ -397,6 +397,10 @@ class ScanEngine:
             if chosen is not None:
                 self.rounds = rounds_for(self.checked, self.refiner, chosen.data)
         self._load_dark()
+        # An ETA from the first move on (the rig's physical time per angle, as after the first
+        # angle), not none until the first checkpoint: the page showed no time for a whole
+        # angle, and a job paused before it none at all.
+        self.progress = self._next_progress(self._steps)
         todo = [s.angle_index for s in self._steps if not s.done]
         while True:
             if not todo:

@@ -97,3 +97,30 @@ def test_the_measuring_eta_stands_still_while_paused_and_goes_on_after_resume(
                     "completed", "failed", "aborted"):
                 assert time.monotonic() < deadline
                 time.sleep(0.2)
+
+
+def test_a_job_has_a_measuring_eta_before_its_first_angle_is_done(
+    daemon: Daemon, no_export_fits: None,
+) -> None:
+    """Until its first checkpoint a running job had no eta_s (and the page no time at all);
+    it has the rig's physical estimate from the start, as the dry run times it."""
+    slow = {**PLAN, "specimen": "first angle", "rotations": 6,
+            "exposure": {"exposure_s": 0.05, "averages": 10}}
+    with daemon.client() as c:
+        job = c.post("/api/v1/jobs", params={"accept_uncalibrated": "true"},
+                     json={"plan": slow}).json()["id"]
+        seen: list[dict[str, Any]] = []
+        deadline = time.monotonic() + 120
+        while (d := c.get(f"/api/v1/jobs/{job}").json())["state"] not in (
+                "reconstructing", "completed", "failed", "aborted"):
+            assert time.monotonic() < deadline, "the scan did not end"
+            if d["state"] == "running" and d["done_angles"] == 0 and d["total_angles"]:
+                seen.append(d)
+            time.sleep(0.05)
+        while c.get(f"/api/v1/jobs/{job}").json()["state"] not in (
+                "completed", "failed", "aborted"):
+            assert time.monotonic() < deadline, "the scan did not end"
+            time.sleep(0.2)
+    assert seen, "never saw the job before its first checkpoint"
+    assert all(p["eta_s"] is not None and p["time_left_s"] is not None for p in seen), seen[0]
+    assert seen[0]["eta_s"] > 0
