@@ -21,6 +21,7 @@ reason when it cannot be resumed (see :meth:`gonio.store.JobStore.reconcile`).
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from enum import StrEnum
 
 
@@ -131,3 +132,35 @@ def check_action(action: str, current: str, job_id: int | None = None) -> None:
             job_id=job_id,
             state=cur.value,
         )
+
+
+QUEUE_HOLD = "queue"
+"""Name of the queue hold in the store's ``holds`` table (:meth:`gonio.store.JobStore.hold`):
+an emergency halt's, or a job's that stops the queue on failure."""
+
+
+def queue_wait(active: Iterable[tuple[int, str]], held: str | None,
+               maintenance: str | None = None) -> str | None:
+    """Why no queued job starts now, in words; None when the next one starts once the rig is
+    free. One sentence for the API's ``waiting``, the lab page's queue and ``gonio jobs``.
+
+    Parameters
+    ----------
+    active : ``(id, state)`` of the jobs that own the rig (running, paused, suspended,
+        reconstructing), in id order
+    held : why the queue is held (an emergency halt, a failed job that stops the queue), or
+        None
+    maintenance : the maintenance lock's reason while it is set (a daemon's), or None
+    """
+    if held is not None:
+        return (f"the queue is held ({held}): queued jobs start once it is released "
+                "(release on the lab page, or POST /api/v1/rig/release)")
+    if maintenance is not None:
+        return (f"{maintenance}: queued jobs start once it is lifted "
+                "(DELETE /api/v1/maintenance)")
+    for job_id, state in active:
+        if state == JobState.PAUSED:
+            return f"waits for job {job_id} (paused): resume or abort it"
+        if state == JobState.SUSPENDED:
+            return f"waits for job {job_id} (suspended until its device answers)"
+    return None

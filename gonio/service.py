@@ -38,7 +38,13 @@ from gonio.calibration import Calibration, calibration_in_effect, uncalibrated_r
 from gonio.diskspace import DiskFull, disk_full_message, is_disk_full, low_space
 from gonio.engine_loop import EngineLoop
 from gonio.event_hub import EventHub
-from gonio.jobstates import ACTIVE_STATES, IllegalTransition, JobState, check_action
+from gonio.jobstates import (
+    ACTIVE_STATES,
+    IllegalTransition,
+    JobState,
+    check_action,
+    queue_wait,
+)
 from gonio.maintenance import LOCK_FILE_NAME, MaintenanceLock
 from gonio.paths import scan_data_dir
 from gonio.plans.checked import CheckedPlan, check_plan
@@ -413,6 +419,7 @@ class GonioService:
         row = self.store.create_job(
             kind=plan.kind, specimen=plan.specimen, plan=plan.model_dump(mode="json"),
             rig=self.desc.model_dump(mode="json"), priority=request.priority,
+            total_angles=len(checked.angles_deg),
         )
         self.worker.take_checked(row.id, checked)
         self.basis.note_arc(self.store, row.id, plan, symmetry)
@@ -453,9 +460,17 @@ class GonioService:
             raise PlanError(str(exc)) from None
 
     def list_jobs(self, state: str | None = None) -> list[JobInfo]:
-        return [JobInfo.from_row(r, self._max_angles(r))
-                for r in self.store.list_jobs([state] if state else None)
+        rows = [r for r in self.store.list_jobs([state] if state else None)
                 if not self.worker.being_removed(r.id)]
+        wait = (self._queue_wait() if any(r.state is JobState.QUEUED for r in rows)
+                else None)
+        return [JobInfo.from_row(r, self._max_angles(r), wait) for r in rows]
+
+    def _queue_wait(self) -> str | None:
+        """:func:`gonio.jobstates.queue_wait` of this daemon now: its queue hold (or the
+        maintenance lock) and the jobs that own the rig."""
+        return queue_wait(((r.id, r.state) for r in self.store.active_jobs()),
+                          self.worker.held, self.worker.gate())
 
     def _max_angles(self, row: JobRow) -> int | None:
         """An adaptive job's most stage angles (the dry run's bound), once per job: its plan
@@ -507,7 +522,8 @@ class GonioService:
             if report is not None:
                 activity, fraction = report
         qpos = self.store.queue_position(job_id) if row.state is JobState.QUEUED else None
-        base = JobInfo.from_row(row, self._max_angles(row)).model_dump()
+        wait = self._queue_wait() if row.state is JobState.QUEUED else None
+        base = JobInfo.from_row(row, self._max_angles(row), wait).model_dump()
         times: dict[str, Any] = {}
         measuring = row.state in (JobState.RUNNING, JobState.PAUSED, JobState.SUSPENDED)
         if (measuring or row.state is JobState.RECONSTRUCTING) and row.kind != "calibration":
@@ -519,7 +535,9 @@ class GonioService:
                 build = (build or 0.0) + asym
             finishing_for = None
             if row.state is JobState.RECONSTRUCTING:
-                finishing_for = (self.worker.activity_seconds()
+                # Counted from the finishing's start, not from its latest activity (the
+                # switch from the basis to the reconstruction must not add time back).
+                finishing_for = (self.worker.finishing_seconds()
                                  if self.worker.current_job == job_id else None) or 0.0
             times = {"basis_build_s": build, "reconstruction_s": est.seconds,
                      "reconstruction_estimate": est.source,

@@ -79,14 +79,21 @@ class JobInfo(BaseModel):
         "dry run's max_angles); total_angles grows round by round, so progress is done_angles "
         "of max_angles, which only rises. Null for other plans (total_angles is fixed)")
     reason: str | None
+    waiting: str | None = Field(
+        default=None, description="queued jobs: why no queued job starts now (the queue is "
+        "held by a halt, a failed job or the maintenance lock, or a paused or suspended job "
+        "holds the rig) and what lets it start; null when it starts once the rig is free "
+        "(the queue_position says when). The lab page and gonio jobs list say the same")
 
     @classmethod
-    def from_row(cls, row: JobRow, max_angles: int | None = None) -> JobInfo:
+    def from_row(cls, row: JobRow, max_angles: int | None = None,
+                 waiting: str | None = None) -> JobInfo:
         return cls(
             id=row.id, state=row.state, kind=row.kind, specimen=row.specimen,
             priority=row.priority, created=row.created, started=row.started,
             finished=row.finished, done_angles=row.done_angles, total_angles=row.total_angles,
             max_angles=max_angles, reason=row.reason,
+            waiting=waiting if row.state is JobState.QUEUED else None,
         )
 
 
@@ -119,7 +126,9 @@ class JobDetail(JobInfo):
     time_left_s: float | None = Field(
         default=None, description="active jobs: estimated seconds to the job's end, an "
         "estimate: eta_s + basis_build_s + reconstruction_s while measuring; while "
-        "reconstructing, what is left of basis_build_s + reconstruction_s")
+        "reconstructing, what is left of basis_build_s + reconstruction_s since finishing "
+        "began; null once finishing runs past them (not done, and how much longer is not "
+        "known)")
     queue_position: int | None = Field(description="0 = next to run; null unless queued")
     result_path: str | None
     result: dict[str, Any] | None = Field(description="summary: metrics, readings, paths")

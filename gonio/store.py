@@ -447,15 +447,20 @@ class JobStore:
         plan: dict[str, Any],
         rig: dict[str, Any],
         priority: int = 0,
+        total_angles: int = 0,
     ) -> JobRow:
-        """Store a new queued job (FIFO within its priority) and a ``created`` event."""
+        """Store a new queued job (FIFO within its priority) and a ``created`` event.
+
+        ``total_angles``: the stage angles its plan measures first, when known at submission
+        (a queued job then reads "0 of 8", not "0 of 0"); the engine sets it again when it
+        plans them, and adaptive rounds add to it."""
         with self._tx() as c:
             pos = c.execute("SELECT COALESCE(MAX(position), 0) + 1 FROM jobs").fetchone()[0]
             cur = c.execute(
-                "INSERT INTO jobs (state, kind, specimen, priority, position, created, plan, rig)"
-                " VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
+                "INSERT INTO jobs (state, kind, specimen, priority, position, created, plan, rig,"
+                " total_angles) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
                 (JobState.QUEUED.value, kind, specimen, priority, pos, time.time(),
-                 json.dumps(plan), json.dumps(rig)),
+                 json.dumps(plan), json.dumps(rig), total_angles),
             )
             job_id = int(cur.lastrowid or 0)
             ev = self._insert_event(

@@ -76,9 +76,16 @@ def time_left(eta_s: float | None, basis_build_s: float | None, finishing_s: flo
     finishing_s : :func:`finishing_estimate`'s seconds.
     finishing_elapsed_s : while the job finishes, how long it has been finishing (measuring
         is over: ``eta_s`` is then ignored); None while it measures.
+
+    Returns
+    -------
+    The seconds left, or None when unknown: no measuring estimate yet, or a finishing that
+    has run past its estimate (it is not done, so 0 s would be false; how much longer it
+    takes is not known).
     """
     if finishing_elapsed_s is not None:
-        return max(0.0, (basis_build_s or 0.0) + finishing_s - finishing_elapsed_s)
+        left = (basis_build_s or 0.0) + finishing_s - finishing_elapsed_s
+        return left if left > 0.0 else None
     if eta_s is None:
         return None
     return eta_s + (basis_build_s or 0.0) + finishing_s

@@ -49,7 +49,7 @@ from gonio.diskspace import (
 from gonio.engine import Progress, ScanEngine
 from gonio.engine_loop import running_in
 from gonio.finishing import Finishing, FinishingStopped, finish_job
-from gonio.jobstates import FINISHED_STATES, IllegalTransition, JobState
+from gonio.jobstates import FINISHED_STATES, QUEUE_HOLD, IllegalTransition, JobState
 from gonio.plans.checked import CheckedPlan, check_plan
 from gonio.plans.dryrun import BasisSymmetry, arc_may_apply
 from gonio.plans.models import AdaptivePlan, AnyPlan, PlanError, parse_stored_plan
@@ -66,8 +66,6 @@ KEEP_CHECKED = 64
 """Checked plans of submitted jobs the worker keeps before it drops those of jobs that are no
 longer queued (:meth:`Worker.take_checked`)."""
 
-QUEUE_HOLD = "queue"
-"""Name of the queue hold in the store's ``holds`` table."""
 GATE_POLL_S = 1.0
 """How often a closed gate (maintenance lock) is looked at again, seconds."""
 DISK_POLL_S = 1.0
@@ -145,6 +143,9 @@ class Worker:
         self.activity: str | None = None
         """What the current job waits for beyond measuring (e.g. the basis), or None."""
         self._activity_since = 0.0
+        # When the current job's finishing began (monotonic), or None while it is not
+        # finishing: its time left counts from here, across the activities it goes through.
+        self._finishing_since: float | None = None
         # Plans checked at their submission in this process, by job id (taken at the start).
         self._checked: dict[int, CheckedPlan] = {}
         self._checked_lock = threading.Lock()  # submission (API threads) and the loop
@@ -394,6 +395,7 @@ class Worker:
                 self._engine = None
                 self._finish_stop = None
             self._set_activity(None)
+            self._finishing_since = None
             self._recon_task = None
             heap.trim()  # what the job's arrays left in the arenas (gonio/heap.py)
 
@@ -486,6 +488,7 @@ class Worker:
             # From here an abort stops the finishing (:meth:`abort_reconstruction`).
             how = self._finishing(basis)
             self._finish_stop = how.stop
+            self._finishing_since = time.monotonic()
         self._recon_task = asyncio.create_task(
             asyncio.to_thread(finish_job, job.id, checked, how))
         try:
@@ -651,9 +654,12 @@ class Worker:
         self.activity = what
         self._activity_since = time.monotonic()
 
-    def activity_seconds(self) -> float | None:
-        """How long the current activity (:attr:`activity`) has lasted, seconds; None if none."""
-        return None if self.activity is None else time.monotonic() - self._activity_since
+    def finishing_seconds(self) -> float | None:
+        """How long the current job has been finishing (since it became ``reconstructing``
+        in this process, through the basis and the reconstruction alike), seconds; None
+        while no job finishes."""
+        since = self._finishing_since
+        return None if since is None else time.monotonic() - since
 
     def activity_report(self) -> tuple[str, float | None] | None:
         """What the current job waits for, in words, and the fraction done if known.

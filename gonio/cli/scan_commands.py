@@ -737,21 +737,40 @@ def _jobs(args: argparse.Namespace) -> int:
         print(json.dumps(d, indent=2, default=str))
         return 0
     rows = store.list_jobs()
+    waiting = _queue_wait(store, args.db, rows)
     if args.json:
         print(json.dumps([{"id": r.id, "state": r.state.value, "kind": r.kind,
                            "specimen": r.specimen, "done": r.done_angles,
-                           "total": r.total_angles, "reason": r.reason} for r in rows]))
+                           "total": r.total_angles, "reason": r.reason,
+                           "waiting": waiting if r.state.value == "queued" else None}
+                          for r in rows]))
         return 0
     print(f"{'id':>4}  {'state':<14} {'kind':<11} {'angles':>9}  {'created':<19}  specimen")
     for r in rows:
         created = time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(r.created))
+        why = waiting if r.state.value == "queued" else r.reason
         print(f"{r.id:>4}  {r.state.value:<14} {r.kind:<11} "
               f"{r.done_angles:>4}/{r.total_angles:<4}  {created}  {r.specimen}"
-              + (f"  ({r.reason})" if r.reason else ""))
+              + (f"  ({why})" if why else ""))
     note = _interrupted_note(args.db, rows)
     if note is not None:
         print(note)
     return 0
+
+
+def _queue_wait(store: Any, db: Path, rows: list[Any]) -> str | None:
+    """Why the store's queued jobs do not start (:func:`gonio.jobstates.queue_wait`, as the
+    API's ``waiting`` and the lab page say it): its stored queue hold, the maintenance lock of
+    its data directory, or a paused or suspended job."""
+    from gonio.jobstates import ACTIVE_STATES, QUEUE_HOLD, queue_wait
+    from gonio.maintenance import LOCK_FILE_NAME, MaintenanceLock
+
+    if not any(r.state.value == "queued" for r in rows):
+        return None
+    hold = store.hold(QUEUE_HOLD)
+    maintenance = MaintenanceLock(db.resolve().parent / LOCK_FILE_NAME).reason()
+    return queue_wait(((r.id, r.state) for r in rows if r.state in ACTIVE_STATES),
+                      hold[0] if hold is not None else None, maintenance)
 
 
 def _interrupted_note(db: Path, rows: list[Any]) -> str | None:

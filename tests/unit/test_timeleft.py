@@ -45,7 +45,8 @@ def test_the_median_of_the_newest_three_scans_calibrations_left_out() -> None:
     (30.0, 120.0, 5.0, None, 155.0),    # a basis build between them
     (None, None, 5.0, None, None),      # no measuring estimate yet: no total either
     (None, None, 5.0, 2.0, 3.0),        # reconstructing for 2 s of 5
-    (12.0, None, 5.0, 9.0, 0.0),        # over its estimate: never below 0
+    (12.0, None, 5.0, 9.0, None),       # over its estimate: unknown, not 0 s left
+    (None, None, 5.0, 5.0, None),       # at its estimate and not done: unknown
     (None, 120.0, 5.0, 20.0, 105.0),    # building the basis for 20 s of 120, then 5 s
 ])
 def test_time_left_adds_what_follows_measuring(eta: float | None, build: float | None,

@@ -113,6 +113,9 @@ async function refreshRig() {
   }
   chip.className = bad.length || rig.error ? "chip fault" : "chip";
   if (rig.queue_held) chip.textContent += ` · queue held: ${rig.queue_held}`;
+  // A halt or a failed job's stop holds the queue until it is released (not the
+  // maintenance lock, which is lifted where it was set).
+  $("#release-queue").hidden = !rig.queue_held || rig.queue_held.startsWith("maintenance lock");
   const m = await getJSON("/maintenance");
   const banner = $("#maintenance");
   banner.hidden = !m.locked;
@@ -145,7 +148,10 @@ function etaText() {
   const d = selectedDetail;
   if (!d || d.id !== selected) return "";
   if (d.state === "reconstructing") {
-    const left = d.time_left_s != null ? `; ≈ ${eta(d.time_left_s)} left (est.)` : "";
+    // Past its estimate the daemon gives no time left (null, not 0 s): it is not done.
+    const planned = (d.reconstruction_s ?? 0) + (d.basis_build_s ?? 0);
+    const left = d.time_left_s != null ? `; ≈ ${eta(d.time_left_s)} left (est.)`
+      : d.reconstruction_s != null ? `; taking longer than the ≈ ${eta(planned)} estimated` : "";
     return `${d.activity ?? "reconstructing"}${left}`;
   }
   // An adaptive job loads (or builds) its basis before the first reading.
@@ -158,7 +164,10 @@ function etaText() {
   const parts = [`measuring ${eta(d.eta_s)}`];
   if (d.basis_build_s != null) parts.push(`basis build ≈ ${eta(d.basis_build_s)}`);
   parts.push(`reconstruction ≈ ${eta(d.reconstruction_s)}`);
-  let t = `≈ ${eta(d.time_left_s)} left in all (est.): ${parts.join(", ")}`;
+  // A paused or suspended job's time does not run out while it stands still: it is the time
+  // from when it runs again (the daemon's countdown is frozen meanwhile).
+  let t = d.state === "running" ? `≈ ${eta(d.time_left_s)} left in all (est.): ${parts.join(", ")}`
+    : `${d.state}: ≈ ${eta(d.time_left_s)} in all once it runs again (est.): ${parts.join(", ")}`;
   if (d.eta_max_s != null && d.eta_max_s > (d.eta_s ?? 0) + 1) {
     t += `; ≤ ${eta(d.time_left_s - d.eta_s + d.eta_max_s)} if refined`;
   }
@@ -220,23 +229,11 @@ async function act(job, action) {
   }, true);
 }
 
-// Why a queued job does not start while another holds the rig: a paused or suspended job is
-// still the rig's job, and the queue waits behind it (after a restart too, or a `gonio scan`
-// interrupted by Ctrl-C in the same data directory) until it is resumed or aborted.
-function waitsFor() {
-  const holder = jobs.find((j) => j.state === "paused" || j.state === "suspended");
-  if (!holder) return null;
-  return holder.state === "paused"
-    ? `waits for job ${holder.id} (paused): resume or abort it`
-    : `waits for job ${holder.id} (suspended until its device answers)`;
-}
-
 function renderJobs() {
   const body = $("#jobs");
   body.replaceChildren();
   // "No jobs yet" only when the list was read and is empty, never when it could not be read.
   $("#no-jobs").hidden = jobs.length > 0 || keyRefused;
-  const waiting = waitsFor();
   for (const job of jobs) {
     const tr = document.createElement("tr");
     tr.dataset.id = job.id;
@@ -261,9 +258,11 @@ function renderJobs() {
           const why = document.createElement("span");
           why.className = "reason"; why.textContent = job.reason;
           td.append(why);
-        } else if (job.state === "queued" && waiting) {
+        } else if (job.state === "queued" && job.waiting) {
+          // Why it does not start (the daemon's words, as GET /jobs/{id} and gonio jobs
+          // give them): a held queue, or a paused or suspended job holding the rig.
           const why = document.createElement("span");
-          why.className = "reason"; why.textContent = waiting;
+          why.className = "reason"; why.textContent = job.waiting;
           td.append(why);
         }
       }
@@ -766,7 +765,7 @@ async function refreshAll() {
 function onEvent(ev) {
   scheduleRefresh();
   if (ev.job_id !== null && ev.job_id === selected) scheduleReadings();
-  if (ev.type === "maintenance" || ev.type === "rig") guarded(refreshRig);
+  if (["maintenance", "rig", "queue_held", "queue_released"].includes(ev.type)) guarded(refreshRig);
 }
 
 let stopEvents = null;
@@ -785,6 +784,11 @@ function restartEvents() {
 window.addEventListener("DOMContentLoaded", async () => {
   initKey();
   initForm();
+  $("#release-queue").addEventListener("click", () => guarded(async () => {
+    await send("POST", "/rig/release");
+    await refreshRig();
+    await refreshJobs();
+  }, true));
   for (const id of ["#polar-ti", "#polar-pi", "#polar-log"]) $(id).addEventListener("change", () => guarded(refreshPolar, true));
   $("#compare").addEventListener("change", (e) => guarded(() => setCompare(e.target.value ? Number(e.target.value) : null), true));
   setInterval(() => guarded(pollSelected), 1000);

@@ -139,3 +139,34 @@ def odd_daemon(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Daemon]:
                 yield Daemon(url, key, app, sim, data_dir)
         finally:
             sim.close()
+
+
+SLOW_BASIS_S = 9.0
+"""How long :func:`slow_basis_daemon`'s basis takes to load: longer than the 6 s finishing
+estimate a daemon without a finished scan gives (gonio.timeleft.FINISHING_FALLBACK_S)."""
+
+
+@pytest.fixture(scope="module")
+def slow_basis_daemon(tmp_path_factory: pytest.TempPathFactory, basis: Any) -> Iterator[Daemon]:
+    """A daemon of its own whose first basis load takes :data:`SLOW_BASIS_S` (as a first
+    scan's fold-in on a busy machine), without export fits and with no scan finished yet: a
+    finishing that runs past its estimate."""
+    import time
+
+    from gonio.sim.rig import SimRigOptions, start_sim_rig
+
+    def slow() -> Any:
+        time.sleep(SLOW_BASIS_S)
+        return basis
+
+    data_dir = tmp_path_factory.mktemp("gonio-data")
+    sim = start_sim_rig(SimRigOptions(time_scale=10.0, settle_s=0.0))
+    key = secrets.token_hex(24)
+    cfg = DaemonConfig().with_overrides(paths__data_dir=str(data_dir))
+    app = build_app(cfg, sim.config, ApiKeyring({"tester": key}), basis=BasisSupply(slow))
+    app.state.service.worker.fit_exports = False  # the result is not under test
+    try:
+        with live_server(app) as url:
+            yield Daemon(url, key, app, sim, data_dir)
+    finally:
+        sim.close()

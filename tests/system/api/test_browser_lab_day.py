@@ -462,6 +462,10 @@ def test_a_queued_job_behind_a_paused_one_says_what_it_waits_for(
         wait.until(lambda d: f"waits for job {held} (paused): resume or abort it" in
                    str(d.execute_script(
                        "return document.querySelector(arguments[0])?.textContent", row)))
+        # The API says it in the same words (the page shows the daemon's).
+        with daemon.client() as c:
+            assert c.get(f"/api/v1/jobs/{behind}").json()["waiting"] == (
+                f"waits for job {held} (paused): resume or abort it")
     finally:
         with daemon.client() as c:
             c.post(f"/api/v1/jobs/{held}/abort")
@@ -472,6 +476,87 @@ def test_a_queued_job_behind_a_paused_one_says_what_it_waits_for(
                 time.sleep(0.2)
     # Nothing holds the rig now: no row says it waits.
     wait.until(lambda d: "waits for job" not in d.find_element(By.ID, "jobs").text)
+
+
+def test_a_paused_jobs_eta_is_the_time_once_it_runs_again_not_time_left(
+    daemon: Daemon, browser: Any, no_export_fits: None  # noqa: F811
+) -> None:
+    """A paused job's ETA cell read "≈ 29 s left in all (est.)", as if the time ran out while
+    it stood still; it now says the job is paused and the time is from when it runs again."""
+    import time
+
+    with daemon.client() as c:
+        job = int(c.post("/api/v1/jobs", params={"accept_uncalibrated": "true"}, json={
+            "plan": {**PLAN, "specimen": "paused eta", "rotations": 400}}).json()["id"])
+        deadline = time.monotonic() + 120
+        while c.get(f"/api/v1/jobs/{job}").json()["done_angles"] < 3:  # it has an ETA
+            assert time.monotonic() < deadline, "the long scan did not measure"
+            time.sleep(0.05)
+        assert c.post(f"/api/v1/jobs/{job}/pause").status_code == 200
+        while c.get(f"/api/v1/jobs/{job}").json()["state"] != "paused":
+            assert time.monotonic() < deadline, "the long scan did not pause"
+            time.sleep(0.05)
+    try:
+        wait = open_live(browser, daemon, 120)
+
+        def eta_text(d: Any) -> str:
+            d.execute_script(
+                "document.querySelector(`#jobs tr[data-id='${arguments[0]}']`)?.click()", job)
+            return str(d.execute_script(
+                "return document.querySelector(`#jobs tr[data-id='${arguments[0]}'] td.eta`)"
+                "?.textContent ?? ''", job))
+
+        wait.until(lambda d: "in all" in eta_text(d))
+        text = eta_text(browser)
+        assert text.startswith("paused: ≈ ") and "once it runs again" in text, text
+        assert "left" not in text, text
+    finally:
+        with daemon.client() as c:
+            c.post(f"/api/v1/jobs/{job}/abort")
+            deadline = time.monotonic() + 120
+            while c.get(f"/api/v1/jobs/{job}").json()["state"] not in (
+                    "completed", "failed", "aborted"):
+                assert time.monotonic() < deadline
+                time.sleep(0.2)
+
+
+def test_a_halted_queue_says_so_on_the_queued_row_and_is_released_from_the_page(
+    daemon: Daemon, browser: Any, no_export_fits: None  # noqa: F811
+) -> None:
+    """After an emergency halt the queue is held: a queued job's row said only "queued", and
+    nothing on the page could release it (the stage chip said "queue held", the API alone
+    released). The row now says why (the API's ``waiting``), and "release queue" lets it run."""
+    import time
+
+    from selenium.webdriver.common.by import By
+
+    wait = open_live(browser, daemon, 120)
+    with daemon.client() as c:
+        assert c.post("/api/v1/rig/halt").status_code == 200
+        job = int(c.post("/api/v1/jobs", params={"accept_uncalibrated": "true"},
+                         json={"plan": {**PLAN, "specimen": "after halt"}}).json()["id"])
+    try:
+        row = f"#jobs tr[data-id='{job}'] td.state-queued"
+        wait.until(lambda d: "the queue is held (emergency halt)" in str(d.execute_script(
+            "return document.querySelector(arguments[0])?.textContent", row)))
+        with daemon.client() as c:
+            waiting = c.get(f"/api/v1/jobs/{job}").json()["waiting"]
+        assert waiting in browser.execute_script(
+            "return document.querySelector(arguments[0]).textContent", row)
+        click_when_steady(wait, "#release-queue")
+        wait.until(lambda d: not d.find_element(By.ID, "release-queue").is_displayed())
+        wait.until(lambda d: d.execute_script(
+            f"return document.querySelector('#jobs tr[data-id=\"{job}\"]')?.dataset.state")
+            == "completed")
+        assert "queue held" not in browser.find_element(By.ID, "stage-chip").text
+    finally:
+        with daemon.client() as c:
+            c.post("/api/v1/rig/release")
+            deadline = time.monotonic() + 300
+            while c.get(f"/api/v1/jobs/{job}").json()["state"] not in (
+                    "completed", "failed", "aborted"):
+                assert time.monotonic() < deadline, "the queued scan did not end"
+                time.sleep(0.2)
 
 
 def test_aborting_a_job_asks_first_and_says_what_it_ends(

@@ -45,17 +45,30 @@ def _steps(n: int, done: int) -> list[StepRow]:
 
 def test_eta_is_the_median_measured_angle_time_times_the_angles_left() -> None:
     eng = _engine(UniformPlan(rotations=8, exposure=FAST))
-    # A slow first angle (the long move from where the stage was parked) does not dominate.
+    # The slow first angle (the long move from where the stage was parked) is left out.
     eng._angle_times = [9.0, 1.0, 1.2, 0.8]
     p = eng._next_progress(_steps(8, 4))
-    assert p.eta_s == pytest.approx(1.1 * 4)  # median of the four, times four angles left
+    assert p.eta_s == pytest.approx(1.0 * 4)  # median of the last three, times four left
     assert p.eta_max_s is None and p.at == pytest.approx(time.time(), abs=5)
+
+
+def test_after_the_first_angle_alone_the_eta_is_the_rigs_physical_estimate() -> None:
+    """The first angle's time includes the travel from where the stage was: with it alone the
+    ETA of a page scan read 13 s where 5 s were left. Until a second angle is done, the rig's
+    physical time per angle (the dry run's) stands in."""
+    eng = _engine(UniformPlan(rotations=8, exposure=FAST))
+    per = eng.checked.per_angle_s
+    eng._angle_times = [20 * per]  # a long first move
+    p = eng._next_progress(_steps(8, 1))
+    assert p.eta_s == pytest.approx(per * 7)
+    eng._angle_times = [20 * per, 1.5 * per]  # the second angle: measured from here on
+    assert eng._next_progress(_steps(8, 2)).eta_s == pytest.approx(1.5 * per * 6)
 
 
 def test_adaptive_eta_has_a_bound_over_the_worst_case_angles() -> None:
     plan = AdaptivePlan(initial_rotations=8, max_rounds=3, max_rotations=None, exposure=FAST)
     eng = _engine(plan)
-    eng._angle_times = [2.0]
+    eng._angle_times = [5.0, 2.0]  # the first (with its travel) left out
     p = eng._next_progress(_steps(8, 8))
     assert p.eta_s == 0.0  # the first round is done; nothing more is planned yet
     # ... but up to 8 + 16 more angles may come (dry run: max_angles = 32).
@@ -64,7 +77,7 @@ def test_adaptive_eta_has_a_bound_over_the_worst_case_angles() -> None:
     # With the default cap of 16 angles, only 8 more.
     capped = plan.model_copy(update={"max_rotations": 16})
     eng = _engine(capped)
-    eng._angle_times = [2.0]
+    eng._angle_times = [5.0, 2.0]
     assert eng._next_progress(_steps(8, 8)).eta_max_s == pytest.approx(2.0 * 8)
 
 
