@@ -40,6 +40,7 @@ from gonio.brdf.colour.report import (
     UNCALIBRATED as UNCALIBRATED_SPACE,
 )
 from gonio.brdf.colour.spectral import SpectralBands, bands_from_channels
+from gonio.brdf.colour.spreadsheet import csv_rows
 from gonio.brdf.tables.table import BRDFTable
 from gonio.results import ResultFile
 
@@ -205,7 +206,11 @@ def table_for_fits(table: BRDFTable, source: Mapping[str, Any],
 def read_standard_csv(path: str | os.PathLike[str]) -> ColourReport:
     """A standard's colour from a CSV written by ``gonio colour --csv`` (or by hand, same
     columns: space, illuminant, observer, instrument, incidence_deg, aspecular_deg,
-    azimuth_deg, L, a, b).
+    azimuth_deg, L, a, b; other columns are ignored).
+
+    The file may have been saved by a spreadsheet: a byte order mark, cells separated by
+    semicolons or tabs with decimal commas, spaces around the cells, blank rows
+    (:func:`gonio.brdf.colour.spreadsheet.csv_rows`).
 
     Raises
     ------
@@ -217,7 +222,10 @@ def read_standard_csv(path: str | os.PathLike[str]) -> ColourReport:
         text = p.read_text(encoding="utf-8-sig")
     except (OSError, UnicodeDecodeError) as exc:
         raise ColourError(f"cannot read standard {p}: {exc}") from None
-    rows = list(csv.DictReader(io.StringIO(text)))
+    cells = csv_rows(text)
+    header = cells[0] if cells else []
+    rows = [dict(zip(header, row + [""] * (len(header) - len(row)), strict=False))
+            for row in cells[1:]]
     need = ("illuminant", "observer", "instrument", "incidence_deg", "aspecular_deg", "L", "a",
             "b")
     if not rows:

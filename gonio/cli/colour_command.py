@@ -67,7 +67,8 @@ def register(sub: Any) -> None:
     )
     c.add_argument("chart", type=Path, help="the chart file (CSV)")
     c.add_argument("--channels", default=None, metavar="A,B,C",
-                   help="the sensor's channels in its order (default: the chart's columns)")
+                   help="the sensor's channels in its order; other columns of the chart "
+                   "are left out (default: every column not headed by a wavelength)")
     c.add_argument("--illuminant", default="D65", choices=list(ILLUMINANTS))
     c.add_argument("--observer", default="10", choices=["10", "2"])
     c.add_argument("--method", default=None, choices=["linear", "root-polynomial"],
@@ -93,8 +94,9 @@ def run_chart(args: argparse.Namespace) -> int:
         channels = [x.strip() for x in args.channels.split(",") if x.strip()]
         if not channels:
             raise UsageError("--channels: give the channel names separated by commas")
-    m = fit_matrix(read_chart(args.chart), ViewingConditions(args.illuminant, args.observer),
-                   channels, source=args.chart.name, method=args.method)
+    m = fit_matrix(read_chart(args.chart, channels),
+                   ViewingConditions(args.illuminant, args.observer), channels,
+                   source=args.chart.name, method=args.method)
     table = {"matrix": [[round(float(x), 6) for x in row] for row in m.matrix],
              "method": m.method,
              "illuminant": m.conditions.illuminant, "observer": m.conditions.observer,

@@ -110,6 +110,42 @@ def test_stored_standard_errors(tmp_path: Path) -> None:
     assert std.lab is not None and std.lab[0] == pytest.approx([50, 1, 2])
 
 
+#: Sharma, Wu and Dalal (2005), "The CIEDE2000 color-difference formula: implementation notes,
+#: supplementary test data", Color Res. Appl. 30(1), Table 1, pairs 1 and 7: sample, standard,
+#: their CIEDE2000.
+SHARMA = (((50.0, 2.6772, -79.7751), (50.0, 0.0, -82.7485), 2.0425),
+          ((50.0, 0.0, 0.0), (50.0, -1.0, 2.0), 2.3669))
+
+
+def test_a_standard_saved_by_a_spreadsheet_reads_as_written(tmp_path: Path) -> None:
+    """A stored standard edited in a spreadsheet of a decimal-comma locale comes back with a
+    byte order mark, semicolons, decimal commas, CRLF, spaces, a column of its own and blank
+    rows: the same CIELAB as the comma file, and CIEDE2000 against it is Sharma's."""
+    from gonio.brdf.colour.instruments import Geometry
+    from gonio.brdf.colour.report import CIELAB, ColourReport, compare
+
+    head = ["space", "illuminant", "observer", "instrument", "incidence_deg", "aspecular_deg",
+            "azimuth_deg", "L", "a", "b", "source", "warnings"]
+    rows = [["CIELAB", "D65", "10", "MA98", "45", asp, "0", *(f"{v:.4f}" for v in std), "table",
+             ""] for asp, (_, std, _) in zip(("15", "45"), SHARMA, strict=True)]
+    comma = tmp_path / "std.csv"
+    comma.write_text("\n".join(",".join(r) for r in [head, *rows]) + "\n", encoding="utf-8")
+    sheet = tmp_path / "std-sheet.csv"
+    lines = [" ; ".join([*head, "operator"])]
+    lines += [";".join([*(c.replace(".", ",") for c in r), "anna"]) for r in rows]
+    sheet.write_text("\ufeff" + "\r\n".join([lines[0], lines[1], ";;;", "", lines[2]]) + "\r\n",
+                     encoding="utf-8")
+    geos = tuple(Geometry("MA98", 45.0, a, 0.0) for a in (15.0, 45.0))
+    sample = ColourReport("sample", ViewingConditions(), CIELAB, "test", (), geos,
+                          np.zeros((2, 0)), None, np.array([s for s, _, _ in SHARMA]))
+    for path in (comma, sheet):
+        std = read_standard_csv(path)
+        assert std.conditions == ViewingConditions("D65", "10")
+        assert std.geometries == geos
+        assert std.lab == pytest.approx(np.array([s for _, s, _ in SHARMA]))
+        assert compare(sample, std).de00 == pytest.approx([d for _, _, d in SHARMA], abs=1e-4)
+
+
 def test_colour_statement_names_the_space_conditions_and_source() -> None:
     from gonio.brdf.colour.exportspace import conversion_record
     from gonio.result_colour import colour_statement
