@@ -66,6 +66,9 @@ FloatArray = NDArray[np.float64]
 #: Fewest patches a 3 x C least-squares fit is accepted from (an RGB sensor has 9 unknowns;
 #: fewer than twice as many equations leaves the residual meaningless).
 MIN_PATCHES = 6
+#: Fewest channels a calibration is fitted for: XYZ has three dimensions, so fewer channels
+#: give colours on a plane or a line through black, whatever the chart.
+MIN_CHANNELS = 3
 #: The calibration forms: a 3 x C matrix on the readings, or on their degree-2 root-polynomial
 #: expansion (three channels only).
 LINEAR, ROOT_POLYNOMIAL = "linear", "root-polynomial"
@@ -392,6 +395,11 @@ def fit_matrix(chart: Chart, conditions: ViewingConditions | None = None,
         idx = [chart.channels.index(c) for c in channels]
         readings = readings[:, idx]
         names = tuple(channels)
+    if readings.shape[1] < MIN_CHANNELS:
+        raise ChartError(
+            f"{readings.shape[1]} channels ({', '.join(names)}); colour needs a sensor of at "
+            f"least {MIN_CHANNELS} (CIE XYZ has three dimensions: fewer channels cannot tell "
+            "colours apart that differ in the missing ones)")
     xyz = chart.reference_xyz(cond)
     if np.linalg.matrix_rank(readings) < min(readings.shape[1], 3):
         raise ChartError("the chart's readings are linearly dependent (all patches alike, or a "

@@ -138,6 +138,18 @@ def test_a_chart_saved_by_a_spreadsheet_reads_as_written(tmp_path: Path) -> None
         read_chart(path)
 
 
+def test_fewer_than_three_channels_are_refused() -> None:
+    """Two channels map every patch into a plane of XYZ: the fit was accepted, at a residual
+    of 13.7 dE00 median (the simulated RGB chart's R, G), and made CIELAB of it."""
+    names, wl, refl = colorchecker()
+    readings = np.random.default_rng(2).uniform(0.05, 0.9, (24, 3))
+    chart = Chart(names, wl, refl, ("R", "G", "B"), readings)
+    for channels in (["R", "G"], ["B"]):
+        with pytest.raises(ChartError, match=f"{len(channels)} channels .*at least 3"):
+            fit_matrix(chart, channels=channels)
+    assert fit_matrix(chart, channels=["B", "G", "R"]).channels == ("B", "G", "R")
+
+
 def test_missing_chart_file_names_it(tmp_path: Path) -> None:
     with pytest.raises(ChartError, match="cannot read chart file"):
         read_chart(tmp_path / "nope.csv")
