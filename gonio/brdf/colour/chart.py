@@ -69,6 +69,10 @@ MIN_PATCHES = 6
 #: Fewest channels a calibration is fitted for: XYZ has three dimensions, so fewer channels
 #: give colours on a plane or a line through black, whatever the chart.
 MIN_CHANNELS = 3
+#: Largest reflectance factor a chart file may hold, as reference or reading: a matte
+#: chart's patches stay below 1 (fluorescent ones a little above), while percent (or raw
+#: counts) reach tens, which fitted silently into a calibration 100 times off.
+MAX_FACTOR = 2.0
 #: The calibration forms: a 3 x C matrix on the readings, or on their degree-2 root-polynomial
 #: expansion (three channels only).
 LINEAR, ROOT_POLYNOMIAL = "linear", "root-polynomial"
@@ -359,6 +363,14 @@ def parse_chart(text: str, channels: Sequence[str] | None = None) -> Chart:
     if len(names) < MIN_PATCHES:
         raise ChartError(f"{len(names)} patches; a colour calibration needs at least "
                          f"{MIN_PATCHES}")
+    for what, values, unit in (("reference reflectances", refl, "reflectance factors"),
+                               ("sensor readings", read, "reflectance factors (pi f, the "
+                                "values a white-reference calibration gives)")):
+        top = float(np.max(values))
+        if top > MAX_FACTOR:
+            raise ChartError(
+                f"the {what} reach {top:g}: give them as {unit}, 1 for the perfect white "
+                "(percent: divide by 100)")
     return Chart(tuple(names), wl, np.array(refl), tuple(header[i] for i in ch_cols),
                  np.array(read))
 

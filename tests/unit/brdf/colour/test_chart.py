@@ -138,6 +138,23 @@ def test_a_chart_saved_by_a_spreadsheet_reads_as_written(tmp_path: Path) -> None
         read_chart(path)
 
 
+@pytest.mark.parametrize("percent", ["reference", "readings"])
+def test_a_chart_in_percent_is_refused(percent: str) -> None:
+    """Ohta's ColorChecker spectra (colour-science) reach 0.891 as factors, 89.1 in percent: a
+    chart with either column set in percent was fitted, into a calibration 100 times off
+    (every result's XYZ 100 times too high or too low)."""
+    names, wl, refl = colorchecker()
+    assert refl.max() == pytest.approx(0.891)
+    readings = np.random.default_rng(3).uniform(0.05, 0.9, (24, 3))
+    if percent == "reference":
+        refl = refl * 100
+    else:
+        readings = readings * 100
+    text = format_chart(Chart(names, wl, refl, ("R", "G", "B"), readings))
+    with pytest.raises(ChartError, match=r"reach \d+.*divide by 100"):
+        parse_chart(text)
+
+
 def test_fewer_than_three_channels_are_refused() -> None:
     """Two channels map every patch into a plane of XYZ: the fit was accepted, at a residual
     of 13.7 dE00 median (the simulated RGB chart's R, G), and made CIELAB of it."""
