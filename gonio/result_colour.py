@@ -258,18 +258,20 @@ def read_standard_csv(path: str | os.PathLike[str]) -> ColourReport:
 
 
 def difference_csv(diff: ColourDifference, warnings: Sequence[str] = ()) -> str:
-    """CIEDE2000 rows as CSV text (header first), each stating the conditions and, in a last
-    ``warnings`` column, the sentences that must travel with the numbers (joined by
+    """CIEDE2000 rows as CSV text (header first), each stating the conditions, what was
+    compared (``sample`` and ``standard``: the names the JSON's ``difference`` gives) and, in
+    a last ``warnings`` column, the sentences that must travel with the numbers (joined by
     ``"; "``; empty when there are none)."""
     buf = io.StringIO()
     rows = diff.rows()
-    w = csv.DictWriter(buf, fieldnames=["illuminant", "observer", *rows[0].keys(), "warnings"],
-                       lineterminator="\n")
+    w = csv.DictWriter(buf, fieldnames=["illuminant", "observer", "sample", "standard",
+                                        *rows[0].keys(), "warnings"], lineterminator="\n")
     w.writeheader()
     said = "; ".join(warnings)
     for r in rows:
         w.writerow({"illuminant": diff.conditions.illuminant,
                     "observer": diff.conditions.observer,
+                    "sample": diff.sample_name, "standard": diff.standard_name,
                     **{k: (f"{v:g}" if k.endswith("_deg") else f"{v:.4f}")
                        if isinstance(v, float) else v for k, v in r.items()},
                     "warnings": said})

@@ -3,6 +3,8 @@ linear sRGB for renderings and exports, stored standards."""
 
 from __future__ import annotations
 
+import csv
+import io
 from pathlib import Path
 
 import numpy as np
@@ -17,6 +19,7 @@ from gonio.figures import load_input
 from gonio.result_colour import (
     colour_group,
     conversion_of,
+    difference_csv,
     linear_srgb,
     read_standard_csv,
     result_report,
@@ -144,6 +147,11 @@ def test_a_standard_saved_by_a_spreadsheet_reads_as_written(tmp_path: Path) -> N
         assert std.geometries == geos
         assert std.lab == pytest.approx(np.array([s for _, s, _ in SHARMA]))
         assert compare(sample, std).de00 == pytest.approx([d for _, _, d in SHARMA], abs=1e-4)
+    # The differences' CSV says what was compared with what on every row.
+    rows = list(csv.DictReader(io.StringIO(difference_csv(compare(sample, std)))))
+    assert [(r["sample"], r["standard"]) for r in rows] == [("sample", "std-sheet")] * 2
+    assert [float(r["dE00"]) for r in rows] == pytest.approx([d for _, _, d in SHARMA],
+                                                             abs=1e-4)
 
 
 def test_colour_statement_names_the_space_conditions_and_source() -> None:
