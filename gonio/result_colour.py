@@ -234,13 +234,17 @@ def read_standard_csv(path: str | os.PathLike[str]) -> ColourReport:
     if missing:
         raise ColourError(f"{p}: columns {missing} are missing; write the standard with "
                           "'gonio colour RESULT.h5 --csv FILE'")
-    conds = {(r["illuminant"], r["observer"]) for r in rows}
+    # As a person types them in a spreadsheet: "d65", "10°".
+    conds = {(r["illuminant"].upper(), r["observer"].rstrip("°º")) for r in rows}
     if len(conds) != 1:
         raise ColourError(f"{p}: rows under several conditions {sorted(conds)}; keep one")
     if any(r.get("space", CIELAB) != CIELAB for r in rows):
         raise ColourError(f"{p}: holds {rows[0].get('space')}, not CIELAB; a standard must be "
                           "colour from a spectral or chart-calibrated sensor")
-    cond = ViewingConditions(*next(iter(conds)))
+    try:
+        cond = ViewingConditions(*next(iter(conds)))
+    except ColourError as exc:
+        raise ColourError(f"{p}: {exc}") from None
     geos, lab = [], []
     for n, r in enumerate(rows, start=2):
         try:
@@ -253,6 +257,14 @@ def read_standard_csv(path: str | os.PathLike[str]) -> ColourReport:
     lab_arr = np.asarray(lab, dtype=float)
     if not np.isfinite(lab_arr).all():
         raise ColourError(f"{p}: a CIELAB value is not a finite number")
+    first: dict[Geometry, int] = {}
+    for n, g in enumerate(geos, start=2):
+        if g in first:
+            # A comparison takes one standard per geometry: a second row would silently win.
+            raise ColourError(
+                f"{p}: rows {first[g]} and {n} are both {g.instrument} {g.name} at azimuth "
+                f"{g.azimuth_deg:g}; keep one row per geometry (average repeated readings)")
+        first[g] = n
     return ColourReport(p.stem, cond, CIELAB, "stored standard", (), tuple(geos),
                         np.zeros((len(geos), 0)), None, lab_arr)
 

@@ -107,6 +107,20 @@ def test_stored_standard_errors(tmp_path: Path) -> None:
     p.write_text("")
     with pytest.raises(ColourError, match="no rows"):
         read_standard_csv(p)
+    # A repeated geometry (two readings of the standard): the last row silently won.
+    p.write_text("illuminant,observer,instrument,incidence_deg,aspecular_deg,L,a,b\n"
+                 "D65,10,MA98,45,15,50,1,2\nD65,10,MA98,45,25,40,1,2\n"
+                 "D65,10,ma98,45,15,60,1,2\n")
+    with pytest.raises(ColourError, match="rows 2 and 4 are both MA98 45as15 at azimuth 0"):
+        read_standard_csv(p)
+    # Conditions as typed in a spreadsheet read as written; unknown ones name the file.
+    p.write_text("illuminant,observer,instrument,incidence_deg,aspecular_deg,L,a,b\n"
+                 "d50,2°,MA98,45,15,50,1,2\n")
+    assert read_standard_csv(p).conditions == ViewingConditions("D50", "2")
+    p.write_text("illuminant,observer,instrument,incidence_deg,aspecular_deg,L,a,b\n"
+                 "D66,10,MA98,45,15,50,1,2\n")
+    with pytest.raises(ColourError, match=r"std.csv: unknown illuminant 'D66'"):
+        read_standard_csv(p)
     p.write_text("illuminant,observer,instrument,incidence_deg,aspecular_deg,L,a,b\n"
                  "D65,10,MA98,45,15,50,1,2\n")
     std = read_standard_csv(p)
