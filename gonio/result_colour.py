@@ -89,17 +89,25 @@ def result_report(
                          scan=scan_readings(res.samples))
 
 
+#: The result provenance's warnings about the reconstruction, in the order exports list them
+#: (``gonio.export.metadata.RECONSTRUCTION_WARNINGS``, a layer above this one; a test keeps
+#: the two equal): the calibration measured at another exposure, the arc, a table outside
+#: physical bounds, a predicted error far from the design's, a basis that does not fit.
+RECONSTRUCTION_WARNINGS = ("calibration_warning", "arc_warning", "physical_bounds",
+                           "design_gap", "basis_misfit")
+
+
 def colour_warnings(res: ResultFile, role: str = "") -> list[str]:
-    """What a colour report of ``res`` must say beside its numbers: the calibration was
-    measured at another exposure than the scan's, so every value (and L*) is off by about the
-    ratio (``calibration_warning``, :func:`gonio.finishing.exposure_mismatch`); [] when not.
+    """What a colour report of ``res`` must say beside its numbers: the reconstruction's own
+    warnings (:data:`RECONSTRUCTION_WARNINGS`), which every export of the result carries too:
+    e.g. the calibration was measured at another exposure than the scan's, so every value
+    (and L*) is off by about the ratio (:func:`gonio.finishing.exposure_mismatch`), or the
+    table is outside physical bounds where the readings do not determine it; [] when none.
     ``gonio colour`` and the API's colour route both say these, and write them into the
     CSV's ``warnings`` column. ``role`` (e.g. ``"standard"``) prefixes each sentence, for a
     comparison that reports the standard's warnings beside the sample's."""
-    off = res.provenance.get("calibration_warning")
-    if not off:
-        return []
-    return [f"{role}: {off}" if role else str(off)]
+    said = [str(res.provenance[k]) for k in RECONSTRUCTION_WARNINGS if res.provenance.get(k)]
+    return [f"{role}: {w}" if role else w for w in said]
 
 
 def scan_readings(samples: Any) -> ScanReadings | None:

@@ -246,3 +246,30 @@ def test_a_calibration_at_another_exposure_is_said_with_the_colour(
     out = capsys.readouterr()
     assert f"warning: standard: {off}" in out.err
     assert {r["warnings"] for r in csv.DictReader(io.StringIO(out.out))} == {f"standard: {off}"}
+
+
+def test_the_reconstruction_s_warnings_travel_with_the_colour(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A table outside physical bounds (the simulated solid red paint's clear coat: 1.3e3 1/sr,
+    3.9e3 times its largest reading) was said by its exports and its headline, and not by its
+    colour: gonio colour printed 15as-5 at L* 91.9 (the material's is 114.6, 25.6 dE00 off)
+    as if nothing were wrong. Every reconstruction warning an export carries travels with the
+    colour, in the exports' order."""
+    from gonio.export.metadata import RECONSTRUCTION_WARNINGS
+    from gonio.result_colour import RECONSTRUCTION_WARNINGS as COLOUR_WARNINGS
+
+    assert COLOUR_WARNINGS == RECONSTRUCTION_WARNINGS
+    bounds = ("the reconstruction is outside physical bounds: its maximum 1.33e+03 is 3.86e+03 "
+              "times the largest reading (0.345), above 1000")
+    gap = "the predicted error is 3.1 times the design's expectation"
+    path = write_result(tmp_path / "red.h5", job_id=9, specimen="red", kind="uniform",
+                        readings=[], samples=_samples(("R", "G", "B")), table=_lambert(),
+                        colour={"source": {"calibration": _matrix()}},
+                        provenance={"design_gap": gap, "physical_bounds": bounds})
+    assert main(["colour", str(path), "--csv", "-"]) == 0
+    out = capsys.readouterr()
+    assert f"warning: {bounds}" in out.err and f"warning: {gap}" in out.err
+    assert {r["warnings"] for r in csv.DictReader(io.StringIO(out.out))} == {
+        f"{bounds}; {gap}"}
+    assert main(["colour", str(path), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["warnings"] == [bounds, gap]
