@@ -212,6 +212,11 @@ def table_for_fits(table: BRDFTable, source: Mapping[str, Any],
 
 # ---------------------------------------------------------------------------- stored standards
 def read_standard_csv(path: str | os.PathLike[str]) -> ColourReport:
+    """A standard's colour from a colour CSV (:func:`read_standard`, without its warnings)."""
+    return read_standard(path)[0]
+
+
+def read_standard(path: str | os.PathLike[str]) -> tuple[ColourReport, list[str]]:
     """A standard's colour from a CSV written by ``gonio colour --csv`` (or by hand, same
     columns: space, illuminant, observer, instrument, incidence_deg, aspecular_deg,
     azimuth_deg, L, a, b; other columns are ignored).
@@ -219,6 +224,12 @@ def read_standard_csv(path: str | os.PathLike[str]) -> ColourReport:
     The file may have been saved by a spreadsheet: a byte order mark, cells separated by
     semicolons or tabs with decimal commas, spaces around the cells, blank rows
     (:func:`gonio.brdf.colour.spreadsheet.csv_rows`).
+
+    Returns
+    -------
+    ColourReport, and the standard's warnings: the distinct non-empty values of its
+    ``warnings`` column (what its result said beside its numbers when the CSV was written,
+    :func:`colour_warnings`), to travel with a comparison as a result file standard's do.
 
     Raises
     ------
@@ -238,6 +249,10 @@ def read_standard_csv(path: str | os.PathLike[str]) -> ColourReport:
             "b")
     if not rows:
         raise ColourError(f"{p}: no rows; a standard is a colour CSV (gonio colour --csv)")
+    # An uncalibrated result's CSV has no L, a, b: say why, not which columns are missing.
+    if any((r.get("space") or CIELAB) != CIELAB for r in rows):
+        raise ColourError(f"{p}: holds {rows[0].get('space')}, not CIELAB; a standard must be "
+                          "colour from a spectral or chart-calibrated sensor")
     missing = [c for c in need if c not in rows[0]]
     if missing:
         raise ColourError(f"{p}: columns {missing} are missing; write the standard with "
@@ -246,9 +261,6 @@ def read_standard_csv(path: str | os.PathLike[str]) -> ColourReport:
     conds = {(r["illuminant"].upper(), r["observer"].rstrip("°º")) for r in rows}
     if len(conds) != 1:
         raise ColourError(f"{p}: rows under several conditions {sorted(conds)}; keep one")
-    if any(r.get("space", CIELAB) != CIELAB for r in rows):
-        raise ColourError(f"{p}: holds {rows[0].get('space')}, not CIELAB; a standard must be "
-                          "colour from a spectral or chart-calibrated sensor")
     try:
         cond = ViewingConditions(*next(iter(conds)))
     except ColourError as exc:
@@ -273,8 +285,9 @@ def read_standard_csv(path: str | os.PathLike[str]) -> ColourReport:
                 f"{p}: rows {first[g]} and {n} are both {g.instrument} {g.name} at azimuth "
                 f"{g.azimuth_deg:g}; keep one row per geometry (average repeated readings)")
         first[g] = n
+    said = list(dict.fromkeys(w for r in rows if (w := r.get("warnings") or "")))
     return ColourReport(p.stem, cond, CIELAB, "stored standard", (), tuple(geos),
-                        np.zeros((len(geos), 0)), None, lab_arr)
+                        np.zeros((len(geos), 0)), None, lab_arr), said
 
 
 def difference_csv(diff: ColourDifference, warnings: Sequence[str] = ()) -> str:

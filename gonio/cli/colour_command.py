@@ -133,13 +133,14 @@ def _azimuths(text: str) -> list[float]:
 def _standard(path: Path, conditions: Any, instruments: list[str],
               azimuths: list[float]) -> tuple[Any, list[str]]:
     """The standard's colour report and its warnings (a stored CSV carries its own)."""
-    from gonio.result_colour import colour_warnings, read_standard_csv, result_report
+    from gonio.result_colour import colour_warnings, read_standard, result_report
     from gonio.results import read_result
 
     if not path.is_file():
         raise UsageError(f"standard {path} does not exist")
     if path.suffix.lower() == ".csv":
-        return read_standard_csv(path), []
+        std_csv, said = read_standard(path)
+        return std_csv, [f"standard: {w}" for w in said]
     std = read_result(path)
     return (result_report(std, conditions, instruments, azimuths),
             colour_warnings(std, "standard"))

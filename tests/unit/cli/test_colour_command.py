@@ -273,3 +273,32 @@ def test_the_reconstruction_s_warnings_travel_with_the_colour(
         f"{bounds}; {gap}"}
     assert main(["colour", str(path), "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["warnings"] == [bounds, gap]
+
+
+def test_a_stored_standard_keeps_its_warnings_and_its_space(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A standard kept as a colour CSV carries its result's warnings in its warnings column:
+    a comparison with it says them, prefixed 'standard:', as with the result file itself
+    (they were dropped). An uncalibrated result's CSV as a standard is refused for its space
+    (it was refused for 'columns ['L', 'a', 'b'] are missing')."""
+    bounds = "the reconstruction is outside physical bounds: its maximum 1.33e+03 is above 1000"
+    path = write_result(tmp_path / "red.h5", job_id=9, specimen="red", kind="uniform",
+                        readings=[], samples=_samples(("R", "G", "B")), table=_lambert(),
+                        colour={"source": {"calibration": _matrix()}},
+                        provenance={"physical_bounds": bounds})
+    std = tmp_path / "std.csv"
+    assert main(["colour", str(path), "--csv", str(std)]) == 0
+    capsys.readouterr()
+    plain = _write(tmp_path / "plain.h5", _lambert(), {"calibration": _matrix()})
+    for against in (path, std):
+        assert main(["colour", str(plain), "--against", str(against), "--csv", "-"]) == 0
+        out = capsys.readouterr()
+        assert f"warning: standard: {bounds}" in out.err
+        rows = list(csv.DictReader(io.StringIO(out.out)))
+        assert rows and {r["warnings"] for r in rows} == {f"standard: {bounds}"}
+    unc = _write(tmp_path / "unc.h5", _lambert(), {})
+    unc_csv = tmp_path / "unc.csv"
+    assert main(["colour", str(unc), "--csv", str(unc_csv)]) == 0
+    capsys.readouterr()
+    assert main(["colour", str(plain), "--against", str(unc_csv)]) == 2
+    assert "holds uncalibrated sensor RGB, not CIELAB" in capsys.readouterr().err
