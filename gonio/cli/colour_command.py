@@ -103,7 +103,7 @@ def run_chart(args: argparse.Namespace) -> int:
              "residual_median_de00": round(m.residual_median_de00, 4),
              "residual_max_de00": round(m.residual_max_de00, 4),
              "loo_median_de00": round(m.loo_median_de00, 4),
-             "n_patches": m.n_patches, "source": m.source}
+             "n_patches": m.n_patches, "source": m.source, "channels": list(m.channels)}
     text = ("# paste under the sensor's [[sensors]] entry (channels "
             f"{', '.join(m.channels)}), docs/colour.md\n"
             + tomli_w.dumps({"sensors": {"colour_calibration": table}}))

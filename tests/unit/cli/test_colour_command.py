@@ -198,6 +198,18 @@ def test_colour_chart_writes_a_rig_config_table(tmp_path: Path,
     cfg = parse_rig_config(rig)
     cal = cfg.sensors[0].colour_calibration
     assert cal is not None and cal.source == "chart.csv"
+    # The table names the channels its matrix's columns are for; under a sensor whose
+    # channels are in another order it is refused, not applied to the wrong channels.
+    assert fragment["channels"] == ["R", "G", "B"] == cfg.sensors[0].channels
+    assert main(["colour-chart", str(chart), "--channels", "B,G,R", "-o",
+                 str(tmp_path / "bgr.toml")]) == 0
+    capsys.readouterr()
+    rig["sensors"][0]["colour_calibration"] = tomllib.loads(
+        (tmp_path / "bgr.toml").read_text())["sensors"]["colour_calibration"]
+    from gonio.config import ConfigError
+
+    with pytest.raises(ConfigError, match=r"fitted for channels \['B', 'G', 'R'\]"):
+        parse_rig_config(rig)
     # The matrix maps the chart's own readings near its reference XYZ (what fitting means).
     ref = Chart(names, wl, refl, ("R", "G", "B"), read).reference_xyz(ViewingConditions())
     # Root-polynomial terms (Finlayson et al. 2015) when that form was chosen.
