@@ -292,6 +292,9 @@ class ColourCalibrationConfig(_Strict):
     n_patches: Annotated[int, Field(ge=0)] = 0
     source: str = ""
     loo_median_de00: Annotated[float, Field(ge=0)] | None = None
+    channels: list[Annotated[str, Field(min_length=1)]] | None = None
+    """The channels the matrix was fitted for, in its order (written by ``gonio
+    colour-chart``); when given, the sensor's ``channels`` must be the same, in the same order."""
 
 
 class SensorConfig(_Device):
@@ -349,6 +352,13 @@ class SensorConfig(_Device):
                                      "somewhere")
         cal = self.colour_calibration
         if cal is not None:
+            if cal.channels is not None and cal.channels != self.channels:
+                # The matrix's columns are the chart's channels in the chart's order: under a
+                # sensor of other names or order it would mix the wrong channels, silently.
+                raise ValueError(
+                    f"colour_calibration was fitted for channels {cal.channels}, the sensor's "
+                    f"are {self.channels}; fit it again with gonio colour-chart CHART.csv "
+                    f"--channels {','.join(self.channels)}")
             if self.wavelengths_nm is not None:
                 raise ValueError("a spectral sensor (wavelengths_nm) gets its colour from its "
                                  "bands; drop colour_calibration or wavelengths_nm")

@@ -40,6 +40,7 @@ from gonio.brdf.colour.report import (
     UNCALIBRATED as UNCALIBRATED_SPACE,
 )
 from gonio.brdf.colour.spectral import SpectralBands, bands_from_channels
+from gonio.brdf.colour.spreadsheet import csv_rows
 from gonio.brdf.tables.table import BRDFTable
 from gonio.results import ResultFile
 
@@ -88,17 +89,25 @@ def result_report(
                          scan=scan_readings(res.samples))
 
 
+#: The result provenance's warnings about the reconstruction, in the order exports list them
+#: (``gonio.export.metadata.RECONSTRUCTION_WARNINGS``, a layer above this one; a test keeps
+#: the two equal): the calibration measured at another exposure, the arc, a table outside
+#: physical bounds, a predicted error far from the design's, a basis that does not fit.
+RECONSTRUCTION_WARNINGS = ("calibration_warning", "arc_warning", "physical_bounds",
+                           "design_gap", "basis_misfit")
+
+
 def colour_warnings(res: ResultFile, role: str = "") -> list[str]:
-    """What a colour report of ``res`` must say beside its numbers: the calibration was
-    measured at another exposure than the scan's, so every value (and L*) is off by about the
-    ratio (``calibration_warning``, :func:`gonio.finishing.exposure_mismatch`); [] when not.
+    """What a colour report of ``res`` must say beside its numbers: the reconstruction's own
+    warnings (:data:`RECONSTRUCTION_WARNINGS`), which every export of the result carries too:
+    e.g. the calibration was measured at another exposure than the scan's, so every value
+    (and L*) is off by about the ratio (:func:`gonio.finishing.exposure_mismatch`), or the
+    table is outside physical bounds where the readings do not determine it; [] when none.
     ``gonio colour`` and the API's colour route both say these, and write them into the
     CSV's ``warnings`` column. ``role`` (e.g. ``"standard"``) prefixes each sentence, for a
     comparison that reports the standard's warnings beside the sample's."""
-    off = res.provenance.get("calibration_warning")
-    if not off:
-        return []
-    return [f"{role}: {off}" if role else str(off)]
+    said = [str(res.provenance[k]) for k in RECONSTRUCTION_WARNINGS if res.provenance.get(k)]
+    return [f"{role}: {w}" if role else w for w in said]
 
 
 def scan_readings(samples: Any) -> ScanReadings | None:
@@ -203,10 +212,24 @@ def table_for_fits(table: BRDFTable, source: Mapping[str, Any],
 
 # ---------------------------------------------------------------------------- stored standards
 def read_standard_csv(path: str | os.PathLike[str]) -> ColourReport:
+    """A standard's colour from a colour CSV (:func:`read_standard`, without its warnings)."""
+    return read_standard(path)[0]
+
+
+def read_standard(path: str | os.PathLike[str]) -> tuple[ColourReport, list[str]]:
     """A standard's colour from a CSV written by ``gonio colour --csv`` (or by hand, same
     columns: space, illuminant, observer, instrument, incidence_deg, aspecular_deg,
-    azimuth_deg, L, a, b). The ``warnings`` column, when there is one, goes to the report's
-    ``provenance["warnings"]``.
+    azimuth_deg, L, a, b; other columns are ignored).
+
+    The file may have been saved by a spreadsheet: a byte order mark, cells separated by
+    semicolons or tabs with decimal commas, spaces around the cells, blank rows
+    (:func:`gonio.brdf.colour.spreadsheet.csv_rows`).
+
+    Returns
+    -------
+    ColourReport, and the standard's warnings: the distinct non-empty values of its
+    ``warnings`` column (what its result said beside its numbers when the CSV was written,
+    :func:`colour_warnings`), to travel with a comparison as a result file standard's do.
 
     Raises
     ------
@@ -218,22 +241,30 @@ def read_standard_csv(path: str | os.PathLike[str]) -> ColourReport:
         text = p.read_text(encoding="utf-8-sig")
     except (OSError, UnicodeDecodeError) as exc:
         raise ColourError(f"cannot read standard {p}: {exc}") from None
-    rows = list(csv.DictReader(io.StringIO(text)))
+    cells = csv_rows(text)
+    header = cells[0] if cells else []
+    rows = [dict(zip(header, row + [""] * (len(header) - len(row)), strict=False))
+            for row in cells[1:]]
     need = ("illuminant", "observer", "instrument", "incidence_deg", "aspecular_deg", "L", "a",
             "b")
     if not rows:
         raise ColourError(f"{p}: no rows; a standard is a colour CSV (gonio colour --csv)")
+    # An uncalibrated result's CSV has no L, a, b: say why, not which columns are missing.
+    if any((r.get("space") or CIELAB) != CIELAB for r in rows):
+        raise ColourError(f"{p}: holds {rows[0].get('space')}, not CIELAB; a standard must be "
+                          "colour from a spectral or chart-calibrated sensor")
     missing = [c for c in need if c not in rows[0]]
     if missing:
         raise ColourError(f"{p}: columns {missing} are missing; write the standard with "
                           "'gonio colour RESULT.h5 --csv FILE'")
-    conds = {(r["illuminant"], r["observer"]) for r in rows}
+    # As a person types them in a spreadsheet: "d65", "10°".
+    conds = {(r["illuminant"].upper(), r["observer"].rstrip("°º")) for r in rows}
     if len(conds) != 1:
         raise ColourError(f"{p}: rows under several conditions {sorted(conds)}; keep one")
-    if any(r.get("space", CIELAB) != CIELAB for r in rows):
-        raise ColourError(f"{p}: holds {rows[0].get('space')}, not CIELAB; a standard must be "
-                          "colour from a spectral or chart-calibrated sensor")
-    cond = ViewingConditions(*next(iter(conds)))
+    try:
+        cond = ViewingConditions(*next(iter(conds)))
+    except ColourError as exc:
+        raise ColourError(f"{p}: {exc}") from None
     geos, lab = [], []
     for n, r in enumerate(rows, start=2):
         try:
@@ -246,27 +277,34 @@ def read_standard_csv(path: str | os.PathLike[str]) -> ColourReport:
     lab_arr = np.asarray(lab, dtype=float)
     if not np.isfinite(lab_arr).all():
         raise ColourError(f"{p}: a CIELAB value is not a finite number")
-    # What the CSV's rows said must travel with its numbers (its ``warnings`` column; kept
-    # whole, since a sentence may hold the "; " that joins several).
-    said = sorted({str(r["warnings"]) for r in rows if r.get("warnings")})
+    first: dict[Geometry, int] = {}
+    for n, g in enumerate(geos, start=2):
+        if g in first:
+            # A comparison takes one standard per geometry: a second row would silently win.
+            raise ColourError(
+                f"{p}: rows {first[g]} and {n} are both {g.instrument} {g.name} at azimuth "
+                f"{g.azimuth_deg:g}; keep one row per geometry (average repeated readings)")
+        first[g] = n
+    said = list(dict.fromkeys(w for r in rows if (w := r.get("warnings") or "")))
     return ColourReport(p.stem, cond, CIELAB, "stored standard", (), tuple(geos),
-                        np.zeros((len(geos), 0)), None, lab_arr,
-                        provenance={"warnings": said} if said else {})
+                        np.zeros((len(geos), 0)), None, lab_arr), said
 
 
 def difference_csv(diff: ColourDifference, warnings: Sequence[str] = ()) -> str:
-    """CIEDE2000 rows as CSV text (header first), each stating the conditions and, in a last
-    ``warnings`` column, the sentences that must travel with the numbers (joined by
+    """CIEDE2000 rows as CSV text (header first), each stating the conditions, what was
+    compared (``sample`` and ``standard``: the names the JSON's ``difference`` gives) and, in
+    a last ``warnings`` column, the sentences that must travel with the numbers (joined by
     ``"; "``; empty when there are none)."""
     buf = io.StringIO()
     rows = diff.rows()
-    w = csv.DictWriter(buf, fieldnames=["illuminant", "observer", *rows[0].keys(), "warnings"],
-                       lineterminator="\n")
+    w = csv.DictWriter(buf, fieldnames=["illuminant", "observer", "sample", "standard",
+                                        *rows[0].keys(), "warnings"], lineterminator="\n")
     w.writeheader()
     said = "; ".join(warnings)
     for r in rows:
         w.writerow({"illuminant": diff.conditions.illuminant,
                     "observer": diff.conditions.observer,
+                    "sample": diff.sample_name, "standard": diff.standard_name,
                     **{k: (f"{v:g}" if k.endswith("_deg") else f"{v:.4f}")
                        if isinstance(v, float) else v for k, v in r.items()},
                     "warnings": said})

@@ -154,8 +154,19 @@ def resolve_material(material: str | os.PathLike[str] | BRDFLike | None) -> BRDF
 
     if text in SPECTRAL_MATERIALS:  # read by a 31-band spectrometer (docs/colour.md)
         return spectral_specimen(text)
-    # An unknown name raises the library's own ValueError, which suggests close names.
-    return library.get_material(text)
+    # An unknown name raises the library's own ValueError, which suggests close names; a
+    # misspelt spectral material ("metalic-blue-paint") was answered with the library's
+    # families alone, so the error names the spectral materials too.
+    try:
+        return library.get_material(text)
+    except library.LibraryError as exc:
+        import difflib
+
+        close = difflib.get_close_matches(text, SPECTRAL_MATERIALS, n=1)
+        hint = f"did you mean {close[0]}? " if close else ""
+        raise library.LibraryError(
+            f"{exc}; {hint}spectral materials (read by 31-band sensors, docs/colour.md): "
+            f"{', '.join(SPECTRAL_MATERIALS)}") from None
 
 
 @dataclass

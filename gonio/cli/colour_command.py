@@ -67,7 +67,8 @@ def register(sub: Any) -> None:
     )
     c.add_argument("chart", type=Path, help="the chart file (CSV)")
     c.add_argument("--channels", default=None, metavar="A,B,C",
-                   help="the sensor's channels in its order (default: the chart's columns)")
+                   help="the sensor's channels in its order; other columns of the chart "
+                   "are left out (default: every column not headed by a wavelength)")
     c.add_argument("--illuminant", default="D65", choices=list(ILLUMINANTS))
     c.add_argument("--observer", default="10", choices=["10", "2"])
     c.add_argument("--method", default=None, choices=["linear", "root-polynomial"],
@@ -93,15 +94,16 @@ def run_chart(args: argparse.Namespace) -> int:
         channels = [x.strip() for x in args.channels.split(",") if x.strip()]
         if not channels:
             raise UsageError("--channels: give the channel names separated by commas")
-    m = fit_matrix(read_chart(args.chart), ViewingConditions(args.illuminant, args.observer),
-                   channels, source=args.chart.name, method=args.method)
+    m = fit_matrix(read_chart(args.chart, channels),
+                   ViewingConditions(args.illuminant, args.observer), channels,
+                   source=args.chart.name, method=args.method)
     table = {"matrix": [[round(float(x), 6) for x in row] for row in m.matrix],
              "method": m.method,
              "illuminant": m.conditions.illuminant, "observer": m.conditions.observer,
              "residual_median_de00": round(m.residual_median_de00, 4),
              "residual_max_de00": round(m.residual_max_de00, 4),
              "loo_median_de00": round(m.loo_median_de00, 4),
-             "n_patches": m.n_patches, "source": m.source}
+             "n_patches": m.n_patches, "source": m.source, "channels": list(m.channels)}
     text = ("# paste under the sensor's [[sensors]] entry (channels "
             f"{', '.join(m.channels)}), docs/colour.md\n"
             + tomli_w.dumps({"sensors": {"colour_calibration": table}}))
@@ -130,16 +132,15 @@ def _azimuths(text: str) -> list[float]:
 
 def _standard(path: Path, conditions: Any, instruments: list[str],
               azimuths: list[float]) -> tuple[Any, list[str]]:
-    """The standard's colour report and its warnings (a stored CSV's from its ``warnings``
-    column), each prefixed ``standard:``."""
-    from gonio.result_colour import colour_warnings, read_standard_csv, result_report
+    """The standard's colour report and its warnings (a stored CSV carries its own)."""
+    from gonio.result_colour import colour_warnings, read_standard, result_report
     from gonio.results import read_result
 
     if not path.is_file():
         raise UsageError(f"standard {path} does not exist")
     if path.suffix.lower() == ".csv":
-        std_csv = read_standard_csv(path)
-        return std_csv, [f"standard: {w}" for w in std_csv.provenance.get("warnings", [])]
+        std_csv, said = read_standard(path)
+        return std_csv, [f"standard: {w}" for w in said]
     std = read_result(path)
     return (result_report(std, conditions, instruments, azimuths),
             colour_warnings(std, "standard"))

@@ -41,7 +41,10 @@ def register(subparsers: Any) -> None:
     add_daemon_options(p)
     p.add_argument("--stage", choices=["dynamixel", "zaber"], default="dynamixel",
                    help="simulated stage kind (with --sim)")
-    p.add_argument("--material", default=None, help="simulated material (with --sim)")
+    p.add_argument("--material", default=None,
+                   help="simulated material (with --sim): library name, .npz table, or a "
+                   "spectral material read by 31-band sensors (metallic-blue-paint, ...: "
+                   "docs/colour.md)")
     p.add_argument("--time-scale", type=positive_float, default=1.0,
                    help="simulated seconds per wall second (with --sim)")
     p.add_argument("--seed", type=int, default=0, help="sensor noise seed (with --sim)")

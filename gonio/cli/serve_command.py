@@ -66,7 +66,9 @@ def register(subparsers: Any) -> None:
     sim.add_argument("--stage", choices=("dynamixel", "zaber"), default="dynamixel",
                      help="simulated stage protocol (default dynamixel)")
     sim.add_argument("--material", default=None,
-                     help="library material name or .npz BRDF table for the specimen")
+                     help="library material name, .npz BRDF table, or a spectral material "
+                     "read by 31-band sensors (solid-red-paint, metallic-blue-paint, ...: "
+                     "docs/colour.md) for the specimen")
     sim.add_argument("--time-scale", type=positive_float, default=1.0,
                      help="sim seconds per wall second for motion and exposures")
     sim.add_argument("--modbus-port", type=int, default=0, metavar="PORT",

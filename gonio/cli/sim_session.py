@@ -62,9 +62,20 @@ def follow_jobs_with_holder(service: Any, sim: Any) -> None:
 
 
 def calibration_covers_rig(service: Any) -> bool:
-    """Whether the calibration in effect has factors for every pair of the rig."""
+    """Whether the calibration in effect has factors for every pair of the rig, one per channel
+    of the pair's sensor.
+
+    A simulated rig keeps its data directory (and calibration) across materials: a spectral
+    material's 31-band sensors have the names and directions of an RGB material's, and a scan
+    with the RGB calibration ran to its end and failed there ("calibration of pair L1/S1 has 3
+    channels, the readings have 31").
+    """
     cal = service.calibration()
-    return bool(cal.pairs) and bool(cal.covers(service.desc.pairs))
+    if not cal.pairs or not cal.covers(service.desc.pairs):
+        return False
+    sensors = getattr(service.rig_config, "sensors", None) or ()
+    channels = {s.name: len(s.channels) for s in sensors}
+    return all(len(p.factor) == channels.get(p.sensor, len(p.factor)) for p in cal.pairs)
 
 
 def calibration_not_needed(service: Any) -> str | None:

@@ -61,6 +61,12 @@ def test_spectral_bands_and_calibration_round_trip(example: dict[str, Any],  # n
     ({"colour_calibration": {"matrix": MATRIX, "method": "cubic"}}, "method"),
     ({"colour_calibration": {"matrix": MATRIX}, "wavelengths_nm": [450.0, 550.0, 650.0]},
      "drop colour_calibration or wavelengths_nm"),
+    # A chart whose columns were B, G, R fitted the matrix in that order: under an R, G, B
+    # sensor it was taken silently, mixing red readings as blue.
+    ({"channels": ["R", "G", "B"], "colour_calibration": {"matrix": MATRIX,
+                                                          "channels": ["B", "G", "R"]}},
+     "fitted for channels ['B', 'G', 'R'], the sensor's are ['R', 'G', 'B']; fit it again "
+     "with gonio colour-chart CHART.csv --channels R,G,B"),
 ])
 def test_bad_colour_keys_say_what_to_fix(example: dict[str, Any],  # noqa: F811
                                          change: dict[str, Any], words: str) -> None:

@@ -3,6 +3,8 @@ linear sRGB for renderings and exports, stored standards."""
 
 from __future__ import annotations
 
+import csv
+import io
 from pathlib import Path
 
 import numpy as np
@@ -17,6 +19,7 @@ from gonio.figures import load_input
 from gonio.result_colour import (
     colour_group,
     conversion_of,
+    difference_csv,
     linear_srgb,
     read_standard_csv,
     result_report,
@@ -104,10 +107,65 @@ def test_stored_standard_errors(tmp_path: Path) -> None:
     p.write_text("")
     with pytest.raises(ColourError, match="no rows"):
         read_standard_csv(p)
+    # A repeated geometry (two readings of the standard): the last row silently won.
+    p.write_text("illuminant,observer,instrument,incidence_deg,aspecular_deg,L,a,b\n"
+                 "D65,10,MA98,45,15,50,1,2\nD65,10,MA98,45,25,40,1,2\n"
+                 "D65,10,ma98,45,15,60,1,2\n")
+    with pytest.raises(ColourError, match="rows 2 and 4 are both MA98 45as15 at azimuth 0"):
+        read_standard_csv(p)
+    # Conditions as typed in a spreadsheet read as written; unknown ones name the file.
+    p.write_text("illuminant,observer,instrument,incidence_deg,aspecular_deg,L,a,b\n"
+                 "d50,2°,MA98,45,15,50,1,2\n")
+    assert read_standard_csv(p).conditions == ViewingConditions("D50", "2")
+    p.write_text("illuminant,observer,instrument,incidence_deg,aspecular_deg,L,a,b\n"
+                 "D66,10,MA98,45,15,50,1,2\n")
+    with pytest.raises(ColourError, match=r"std.csv: unknown illuminant 'D66'"):
+        read_standard_csv(p)
     p.write_text("illuminant,observer,instrument,incidence_deg,aspecular_deg,L,a,b\n"
                  "D65,10,MA98,45,15,50,1,2\n")
     std = read_standard_csv(p)
     assert std.lab is not None and std.lab[0] == pytest.approx([50, 1, 2])
+
+
+#: Sharma, Wu and Dalal (2005), "The CIEDE2000 color-difference formula: implementation notes,
+#: supplementary test data", Color Res. Appl. 30(1), Table 1, pairs 1 and 7: sample, standard,
+#: their CIEDE2000.
+SHARMA = (((50.0, 2.6772, -79.7751), (50.0, 0.0, -82.7485), 2.0425),
+          ((50.0, 0.0, 0.0), (50.0, -1.0, 2.0), 2.3669))
+
+
+def test_a_standard_saved_by_a_spreadsheet_reads_as_written(tmp_path: Path) -> None:
+    """A stored standard edited in a spreadsheet of a decimal-comma locale comes back with a
+    byte order mark, semicolons, decimal commas, CRLF, spaces, a column of its own and blank
+    rows: the same CIELAB as the comma file, and CIEDE2000 against it is Sharma's."""
+    from gonio.brdf.colour.instruments import Geometry
+    from gonio.brdf.colour.report import CIELAB, ColourReport, compare
+
+    head = ["space", "illuminant", "observer", "instrument", "incidence_deg", "aspecular_deg",
+            "azimuth_deg", "L", "a", "b", "source", "warnings"]
+    rows = [["CIELAB", "D65", "10", "MA98", "45", asp, "0", *(f"{v:.4f}" for v in std), "table",
+             ""] for asp, (_, std, _) in zip(("15", "45"), SHARMA, strict=True)]
+    comma = tmp_path / "std.csv"
+    comma.write_text("\n".join(",".join(r) for r in [head, *rows]) + "\n", encoding="utf-8")
+    sheet = tmp_path / "std-sheet.csv"
+    lines = [" ; ".join([*head, "operator"])]
+    lines += [";".join([*(c.replace(".", ",") for c in r), "anna"]) for r in rows]
+    sheet.write_text("\ufeff" + "\r\n".join([lines[0], lines[1], ";;;", "", lines[2]]) + "\r\n",
+                     encoding="utf-8")
+    geos = tuple(Geometry("MA98", 45.0, a, 0.0) for a in (15.0, 45.0))
+    sample = ColourReport("sample", ViewingConditions(), CIELAB, "test", (), geos,
+                          np.zeros((2, 0)), None, np.array([s for s, _, _ in SHARMA]))
+    for path in (comma, sheet):
+        std = read_standard_csv(path)
+        assert std.conditions == ViewingConditions("D65", "10")
+        assert std.geometries == geos
+        assert std.lab == pytest.approx(np.array([s for _, s, _ in SHARMA]))
+        assert compare(sample, std).de00 == pytest.approx([d for _, _, d in SHARMA], abs=1e-4)
+    # The differences' CSV says what was compared with what on every row.
+    rows = list(csv.DictReader(io.StringIO(difference_csv(compare(sample, std)))))
+    assert [(r["sample"], r["standard"]) for r in rows] == [("sample", "std-sheet")] * 2
+    assert [float(r["dE00"]) for r in rows] == pytest.approx([d for _, _, d in SHARMA],
+                                                             abs=1e-4)
 
 
 def test_colour_statement_names_the_space_conditions_and_source() -> None:

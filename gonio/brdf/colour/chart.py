@@ -26,7 +26,9 @@ Chart file (CSV, UTF-8, one header row; documented in ``docs/colour.md``)::
 ``patch`` names the patch; every column whose header is a number is the patch's reference
 reflectance factor at that wavelength (nm, increasing, at least 5); every other column is a
 sensor channel's reading of the patch as a reflectance factor (``pi f``, the value a white
-reference calibration gives). At least 6 patches; channels named as the sensor names them.
+reference calibration gives), unless the channels are named (:func:`parse_chart`). At least
+6 patches; channels named as the sensor names them. A spreadsheet's CSV (semicolons, decimal
+commas) reads the same (:mod:`gonio.brdf.colour.spreadsheet`).
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ from __future__ import annotations
 import csv
 import io
 import os
+import re
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -51,6 +54,7 @@ from gonio.brdf.colour.conditions import (
     spectra_to_xyz,
     xyz_to_lab,
 )
+from gonio.brdf.colour.spreadsheet import csv_rows
 
 with warnings.catch_warnings():
     # colour-science warns at import that its plotting needs matplotlib; gonio plots no colour.
@@ -62,6 +66,13 @@ FloatArray = NDArray[np.float64]
 #: Fewest patches a 3 x C least-squares fit is accepted from (an RGB sensor has 9 unknowns;
 #: fewer than twice as many equations leaves the residual meaningless).
 MIN_PATCHES = 6
+#: Fewest channels a calibration is fitted for: XYZ has three dimensions, so fewer channels
+#: give colours on a plane or a line through black, whatever the chart.
+MIN_CHANNELS = 3
+#: Largest reflectance factor a chart file may hold, as reference or reading: a matte
+#: chart's patches stay below 1 (fluorescent ones a little above), while percent (or raw
+#: counts) reach tens, which fitted silently into a calibration 100 times off.
+MAX_FACTOR = 2.0
 #: The calibration forms: a 3 x C matrix on the readings, or on their degree-2 root-polynomial
 #: expansion (three channels only).
 LINEAR, ROOT_POLYNOMIAL = "linear", "root-polynomial"
@@ -251,8 +262,8 @@ def loo_de00(method: str, readings: FloatArray, xyz: FloatArray,
     return out
 
 
-def read_chart(path: str | os.PathLike[str]) -> Chart:
-    """Read a chart file (format in the module docstring).
+def read_chart(path: str | os.PathLike[str], channels: Sequence[str] | None = None) -> Chart:
+    """Read a chart file (format in the module docstring; :func:`parse_chart`).
 
     Raises
     ------
@@ -265,29 +276,67 @@ def read_chart(path: str | os.PathLike[str]) -> Chart:
     except (OSError, UnicodeDecodeError) as exc:
         raise ChartError(f"cannot read chart file {p}: {exc}") from None
     try:
-        return parse_chart(text)
+        return parse_chart(text, channels)
     except ChartError as exc:
         raise ChartError(f"{p}: {exc}") from None
 
 
-def _is_number(s: str) -> bool:
+#: A wavelength column's header: the number of nanometres, ``nm`` after it allowed.
+_WAVELENGTH = re.compile(r"^([0-9]+(?:\.[0-9]*)?)\s*nm$", re.IGNORECASE)
+
+
+def _wavelength(s: str) -> float | None:
+    """The wavelength (nm) a column header names, or None for another column."""
+    m = _WAVELENGTH.match(s)
     try:
-        float(s)
+        return float(m.group(1) if m else s)
     except ValueError:
-        return False
-    return True
+        return None
 
 
-def parse_chart(text: str) -> Chart:
-    """A chart from the text of a chart file (see :func:`read_chart`)."""
-    rows = [r for r in csv.reader(io.StringIO(text)) if any(c.strip() for c in r)]
+def _number(s: str, n: int, patch: str, column: str, channel: bool) -> float:
+    try:
+        return float(s)
+    except ValueError:
+        hint = ("; every column not headed by a wavelength is read as a sensor channel: name "
+                "the sensor's channels (--channels R,G,B) and the other columns are left out"
+                if channel else "")
+        raise ChartError(f"row {n} ({patch!r}), column {column!r}: {s!r} is not a number"
+                         f"{hint}") from None
+
+
+def parse_chart(text: str, channels: Sequence[str] | None = None) -> Chart:
+    """A chart from the text of a chart file (see :func:`read_chart`).
+
+    The text may be as a spreadsheet saves it (cells separated by semicolons or tabs, decimal
+    commas, blank rows; :func:`gonio.brdf.colour.spreadsheet.csv_rows`); a wavelength header
+    may end in ``nm``.
+
+    Parameters
+    ----------
+    text : the file's text
+    channels : the sensor's channels, optional
+        Only these columns are read as channels (in the file's order; :func:`fit_matrix`
+        orders them), so other columns (notes, an index) are left out; a channel with no
+        column is an error. Default: every column not headed by a wavelength.
+    """
+    rows = csv_rows(text)
     if not rows:
         raise ChartError("the chart file is empty; see docs/colour.md for its columns")
-    header = [h.strip() for h in rows[0]]
+    header = rows[0]
     if not header or header[0].lower() != "patch":
         raise ChartError("the first column must be 'patch' (the patch names)")
-    wl_cols = [i for i, h in enumerate(header) if i > 0 and _is_number(h)]
-    ch_cols = [i for i, h in enumerate(header) if i > 0 and not _is_number(h)]
+    wls = [_wavelength(h) for h in header]
+    wl_cols = [i for i in range(1, len(header)) if wls[i] is not None]
+    ch_cols = [i for i in range(1, len(header)) if wls[i] is None]
+    if channels is not None:
+        missing = [c for c in channels if c not in [header[i] for i in ch_cols]]
+        if missing:
+            raise ChartError(
+                f"the chart has no column for channels {missing} (it has "
+                f"{', '.join(header[i] for i in ch_cols)}); name its columns as the sensor's "
+                "channels")
+        ch_cols = [i for i in ch_cols if header[i] in channels]
     if len(wl_cols) < 5:
         raise ChartError(
             f"{len(wl_cols)} reference wavelength columns; give each patch's reflectance at "
@@ -296,7 +345,7 @@ def parse_chart(text: str) -> Chart:
     if not ch_cols:
         raise ChartError("no sensor channel columns; add the sensor's reading of each patch "
                          "under a column named after its channel (R, G, B, ...)")
-    wl = np.array([float(header[i]) for i in wl_cols])
+    wl = np.array([wls[i] for i in wl_cols], dtype=float)
     if np.any(np.diff(wl) <= 0):
         raise ChartError("reference wavelength columns must increase from left to right")
     names: list[str] = []
@@ -304,19 +353,24 @@ def parse_chart(text: str) -> Chart:
     for n, row in enumerate(rows[1:], start=2):
         if len(row) != len(header):
             raise ChartError(f"row {n} has {len(row)} fields, the header {len(header)}")
-        try:
-            vals = [float(x) for x in row[1:]]
-        except ValueError as exc:
-            raise ChartError(f"row {n} ({row[0]!r}): {exc}") from None
-        values = np.array(vals)
-        if not np.isfinite(values).all():
+        r = [_number(row[i], n, row[0], header[i], False) for i in wl_cols]
+        c = [_number(row[i], n, row[0], header[i], True) for i in ch_cols]
+        if not np.isfinite(r + c).all():
             raise ChartError(f"row {n} ({row[0]!r}) holds a value that is not finite")
-        names.append(row[0].strip())
-        refl.append([float(row[i]) for i in wl_cols])
-        read.append([float(row[i]) for i in ch_cols])
+        names.append(row[0])
+        refl.append(r)
+        read.append(c)
     if len(names) < MIN_PATCHES:
         raise ChartError(f"{len(names)} patches; a colour calibration needs at least "
                          f"{MIN_PATCHES}")
+    for what, values, unit in (("reference reflectances", refl, "reflectance factors"),
+                               ("sensor readings", read, "reflectance factors (pi f, the "
+                                "values a white-reference calibration gives)")):
+        top = float(np.max(values))
+        if top > MAX_FACTOR:
+            raise ChartError(
+                f"the {what} reach {top:g}: give them as {unit}, 1 for the perfect white "
+                "(percent: divide by 100)")
     return Chart(tuple(names), wl, np.array(refl), tuple(header[i] for i in ch_cols),
                  np.array(read))
 
@@ -353,6 +407,11 @@ def fit_matrix(chart: Chart, conditions: ViewingConditions | None = None,
         idx = [chart.channels.index(c) for c in channels]
         readings = readings[:, idx]
         names = tuple(channels)
+    if readings.shape[1] < MIN_CHANNELS:
+        raise ChartError(
+            f"{readings.shape[1]} channels ({', '.join(names)}); colour needs a sensor of at "
+            f"least {MIN_CHANNELS} (CIE XYZ has three dimensions: fewer channels cannot tell "
+            "colours apart that differ in the missing ones)")
     xyz = chart.reference_xyz(cond)
     if np.linalg.matrix_rank(readings) < min(readings.shape[1], 3):
         raise ChartError("the chart's readings are linearly dependent (all patches alike, or a "

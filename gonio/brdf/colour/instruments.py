@@ -104,11 +104,12 @@ def canonical_instrument(name: str) -> str:
 
 def geometries(instruments: Sequence[str] = DEFAULT_INSTRUMENTS,
                azimuths_deg: Sequence[float] = (0.0,)) -> tuple[Geometry, ...]:
-    """Every geometry of the named instruments at each specimen azimuth, in that order."""
+    """Every geometry of the named instruments at each specimen azimuth, in that order; an
+    instrument or azimuth named twice counts once."""
     if not instruments:
         raise ColourError(f"name at least one instrument ({', '.join(INSTRUMENTS)})")
     out: list[Geometry] = []
-    for az in azimuths_deg:
+    for az in dict.fromkeys(float(a) for a in azimuths_deg):
         if not np.isfinite(az):
             raise ColourError(f"azimuth {az} is not a number of degrees")
         for name in dict.fromkeys(canonical_instrument(n) for n in instruments):

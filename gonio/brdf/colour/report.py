@@ -305,7 +305,9 @@ class ColourReport:
         """The rows as CSV text (header first).
 
         Every line states what a reader of one line needs: the space and conditions (empty
-        for an uncalibrated report, whose values depend on neither), ``source`` (``pair``: a
+        for an uncalibrated report, whose values depend on neither), ``conversion`` (how the
+        channels became colour, :func:`conversion_label`: a chart calibration's residual
+        travels with every number it produced), ``source`` (``pair``: a
         pair of the scan read that geometry, :attr:`measured`; ``table``: read from the
         reconstructed table; the same words as the page's and ``gonio colour``'s column) and
         ``warnings``, the sentences that must travel with the numbers (e.g. a calibration
@@ -314,8 +316,8 @@ class ColourReport:
         """
         rows = self.rows()
         buf = io.StringIO()
-        fields = ["space", "illuminant", "observer", *rows[0].keys(), "flop_index", "source",
-                  "warnings"]
+        fields = ["space", "illuminant", "observer", "conversion", *rows[0].keys(),
+                  "flop_index", "source", "warnings"]
         w = csv.DictWriter(buf, fieldnames=fields, lineterminator="\n")
         w.writeheader()
         flags = self.measured or (False,) * len(self.geometries)
@@ -325,6 +327,7 @@ class ColourReport:
             w.writerow({"space": self.space,
                         "illuminant": self.conditions.illuminant if self.calibrated else "",
                         "observer": self.conditions.observer if self.calibrated else "",
+                        "conversion": self.conversion,
                         **_fmt(row),
                         "flop_index": "" if fi is None else f"{fi:.4f}",
                         "source": "pair" if m else "table", "warnings": said})

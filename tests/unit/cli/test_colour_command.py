@@ -198,6 +198,18 @@ def test_colour_chart_writes_a_rig_config_table(tmp_path: Path,
     cfg = parse_rig_config(rig)
     cal = cfg.sensors[0].colour_calibration
     assert cal is not None and cal.source == "chart.csv"
+    # The table names the channels its matrix's columns are for; under a sensor whose
+    # channels are in another order it is refused, not applied to the wrong channels.
+    assert fragment["channels"] == ["R", "G", "B"] == cfg.sensors[0].channels
+    assert main(["colour-chart", str(chart), "--channels", "B,G,R", "-o",
+                 str(tmp_path / "bgr.toml")]) == 0
+    capsys.readouterr()
+    rig["sensors"][0]["colour_calibration"] = tomllib.loads(
+        (tmp_path / "bgr.toml").read_text())["sensors"]["colour_calibration"]
+    from gonio.config import ConfigError
+
+    with pytest.raises(ConfigError, match=r"fitted for channels \['B', 'G', 'R'\]"):
+        parse_rig_config(rig)
     # The matrix maps the chart's own readings near its reference XYZ (what fitting means).
     ref = Chart(names, wl, refl, ("R", "G", "B"), read).reference_xyz(ViewingConditions())
     # Root-polynomial terms (Finlayson et al. 2015) when that form was chosen.
@@ -252,3 +264,59 @@ def test_a_calibration_at_another_exposure_is_said_with_the_colour(
     capsys.readouterr()
     assert main(["colour", str(plain), "--against", str(std), "--csv", "-"]) == 0
     assert f"warning: standard: {off}" in capsys.readouterr().err
+
+
+def test_the_reconstruction_s_warnings_travel_with_the_colour(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A table outside physical bounds (the simulated solid red paint's clear coat: 1.3e3 1/sr,
+    3.9e3 times its largest reading) was said by its exports and its headline, and not by its
+    colour: gonio colour printed 15as-5 at L* 91.9 (the material's is 114.6, 25.6 dE00 off)
+    as if nothing were wrong. Every reconstruction warning an export carries travels with the
+    colour, in the exports' order."""
+    from gonio.export.metadata import RECONSTRUCTION_WARNINGS
+    from gonio.result_colour import RECONSTRUCTION_WARNINGS as COLOUR_WARNINGS
+
+    assert COLOUR_WARNINGS == RECONSTRUCTION_WARNINGS
+    bounds = ("the reconstruction is outside physical bounds: its maximum 1.33e+03 is 3.86e+03 "
+              "times the largest reading (0.345), above 1000")
+    gap = "the predicted error is 3.1 times the design's expectation"
+    path = write_result(tmp_path / "red.h5", job_id=9, specimen="red", kind="uniform",
+                        readings=[], samples=_samples(("R", "G", "B")), table=_lambert(),
+                        colour={"source": {"calibration": _matrix()}},
+                        provenance={"design_gap": gap, "physical_bounds": bounds})
+    assert main(["colour", str(path), "--csv", "-"]) == 0
+    out = capsys.readouterr()
+    assert f"warning: {bounds}" in out.err and f"warning: {gap}" in out.err
+    assert {r["warnings"] for r in csv.DictReader(io.StringIO(out.out))} == {
+        f"{bounds}; {gap}"}
+    assert main(["colour", str(path), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["warnings"] == [bounds, gap]
+
+
+def test_a_stored_standard_keeps_its_warnings_and_its_space(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A standard kept as a colour CSV carries its result's warnings in its warnings column:
+    a comparison with it says them, prefixed 'standard:', as with the result file itself
+    (they were dropped). An uncalibrated result's CSV as a standard is refused for its space
+    (it was refused for 'columns ['L', 'a', 'b'] are missing')."""
+    bounds = "the reconstruction is outside physical bounds: its maximum 1.33e+03 is above 1000"
+    path = write_result(tmp_path / "red.h5", job_id=9, specimen="red", kind="uniform",
+                        readings=[], samples=_samples(("R", "G", "B")), table=_lambert(),
+                        colour={"source": {"calibration": _matrix()}},
+                        provenance={"physical_bounds": bounds})
+    std = tmp_path / "std.csv"
+    assert main(["colour", str(path), "--csv", str(std)]) == 0
+    capsys.readouterr()
+    plain = _write(tmp_path / "plain.h5", _lambert(), {"calibration": _matrix()})
+    for against in (path, std):
+        assert main(["colour", str(plain), "--against", str(against), "--csv", "-"]) == 0
+        out = capsys.readouterr()
+        assert f"warning: standard: {bounds}" in out.err
+        rows = list(csv.DictReader(io.StringIO(out.out)))
+        assert rows and {r["warnings"] for r in rows} == {f"standard: {bounds}"}
+    unc = _write(tmp_path / "unc.h5", _lambert(), {})
+    unc_csv = tmp_path / "unc.csv"
+    assert main(["colour", str(unc), "--csv", str(unc_csv)]) == 0
+    capsys.readouterr()
+    assert main(["colour", str(plain), "--against", str(unc_csv)]) == 2
+    assert "holds uncalibrated sensor RGB, not CIELAB" in capsys.readouterr().err

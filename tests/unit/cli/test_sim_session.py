@@ -9,13 +9,16 @@ from pathlib import Path
 from types import SimpleNamespace
 
 from gonio.brdf.models import analytic as bm
+from gonio.calibration import Calibration, PairCalibration
 from gonio.cli.sim_session import (
+    calibration_covers_rig,
     follow_jobs_with_holder,
     sim_calibration_plan,
     sim_specimen_path,
     write_sim_specimen,
 )
 from gonio.figures import material_from_description
+from gonio.hal import PairSpec
 from gonio.plans.models import CalibrationPlan
 
 
@@ -68,3 +71,20 @@ def test_no_recipe_without_a_config_or_a_describable_specimen(tmp_path: Path) ->
                           config_path=tmp_path / "r.toml")
     assert write_sim_specimen(odd) is None
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_calibration_of_other_channels_does_not_cover_the_rig() -> None:
+    """The simulated rig's data directory kept the RGB material's calibration (3 factors a
+    pair) when the rig came back with a spectral material's 31-band sensors of the same names:
+    it counted as covering, no white reference was measured, and the scan failed at its end."""
+    def service(n_factors: int, n_channels: int) -> SimpleNamespace:
+        cal = Calibration(pairs=(PairCalibration(light="L1", sensor="S1",
+                                                 factor=(1e-5,) * n_factors),))
+        sensor = SimpleNamespace(name="S1", channels=[f"c{i}" for i in range(n_channels)])
+        return SimpleNamespace(calibration=lambda: cal,
+                               desc=SimpleNamespace(pairs=[PairSpec(light="L1", sensor="S1")]),
+                               rig_config=SimpleNamespace(sensors=[sensor]))
+
+    assert calibration_covers_rig(service(31, 31))
+    assert not calibration_covers_rig(service(3, 31))
+    assert not calibration_covers_rig(service(31, 3))

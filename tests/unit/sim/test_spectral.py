@@ -68,6 +68,11 @@ def test_other_bands_and_names() -> None:
         spectral_specimen("purple-paint")
     narrow = spectral_specimen("green-plastic", SpectralBands((500.0, 600.0)))
     assert narrow.eval(*_dirs()).shape == (3, 2)
+    # A misspelt spectral material (--material of gonio scan --sim, sim, serve --sim) names
+    # the spectral materials and the close one, not only the library's families.
+    with pytest.raises(ValueError, match=r"did you mean metallic-blue-paint\? spectral "
+                                         r"materials .*: solid-red-paint, "):
+        resolve_material("metalic-blue-paint")
 
 
 def test_the_held_out_set_is_apart_from_the_simulators_set() -> None:

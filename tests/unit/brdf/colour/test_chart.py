@@ -114,6 +114,59 @@ def test_bad_chart_files_say_what_is_wrong(text: str, words: str) -> None:
         parse_chart(text)
 
 
+def test_a_chart_saved_by_a_spreadsheet_reads_as_written(tmp_path: Path) -> None:
+    """The chart as a decimal-comma spreadsheet saves it (byte order mark, semicolons,
+    decimal commas, CRLF, blank rows, wavelengths headed '400 nm', a notes column): the same
+    patches, spectra and readings as written, once the channels are named."""
+    names, wl, refl = colorchecker()
+    readings = np.random.default_rng(1).uniform(0.05, 0.9, (24, 3))
+    lines = [";".join(["patch", "R", "G", "B", *(f"{x:g} nm" for x in wl), "notes"])]
+    for n, read, r in zip(names, readings, refl, strict=True):
+        lines.append(";".join([n, *(f"{x:.6f}".replace(".", ",") for x in (*read, *r)),
+                               "checked, ok"]))
+        lines.append(";" * (len(wl) + 4))
+    path = tmp_path / "chart.csv"
+    path.write_text("\ufeff" + "\r\n".join(lines) + "\r\n", encoding="utf-8")
+    back = read_chart(path, channels=["R", "G", "B"])
+    assert back.patches == names and back.channels == ("R", "G", "B")
+    assert back.wavelengths_nm == pytest.approx(wl)
+    assert back.readings == pytest.approx(readings, abs=1e-6)
+    assert back.reflectance == pytest.approx(refl, abs=1e-6)
+    # Without the channels named the notes column is one: the error says which and what to do.
+    with pytest.raises(ChartError, match=r"column 'notes': 'checked, ok' is not a number.*"
+                                         r"--channels R,G,B"):
+        read_chart(path)
+
+
+@pytest.mark.parametrize("percent", ["reference", "readings"])
+def test_a_chart_in_percent_is_refused(percent: str) -> None:
+    """Ohta's ColorChecker spectra (colour-science) reach 0.891 as factors, 89.1 in percent: a
+    chart with either column set in percent was fitted, into a calibration 100 times off
+    (every result's XYZ 100 times too high or too low)."""
+    names, wl, refl = colorchecker()
+    assert refl.max() == pytest.approx(0.891)
+    readings = np.random.default_rng(3).uniform(0.05, 0.9, (24, 3))
+    if percent == "reference":
+        refl = refl * 100
+    else:
+        readings = readings * 100
+    text = format_chart(Chart(names, wl, refl, ("R", "G", "B"), readings))
+    with pytest.raises(ChartError, match=r"reach \d+.*divide by 100"):
+        parse_chart(text)
+
+
+def test_fewer_than_three_channels_are_refused() -> None:
+    """Two channels map every patch into a plane of XYZ: the fit was accepted, at a residual
+    of 13.7 dE00 median (the simulated RGB chart's R, G), and made CIELAB of it."""
+    names, wl, refl = colorchecker()
+    readings = np.random.default_rng(2).uniform(0.05, 0.9, (24, 3))
+    chart = Chart(names, wl, refl, ("R", "G", "B"), readings)
+    for channels in (["R", "G"], ["B"]):
+        with pytest.raises(ChartError, match=f"{len(channels)} channels .*at least 3"):
+            fit_matrix(chart, channels=channels)
+    assert fit_matrix(chart, channels=["B", "G", "R"]).channels == ("B", "G", "R")
+
+
 def test_missing_chart_file_names_it(tmp_path: Path) -> None:
     with pytest.raises(ChartError, match="cannot read chart file"):
         read_chart(tmp_path / "nope.csv")

@@ -43,6 +43,10 @@ def test_directions_place_the_sensor_by_aspecular_angle() -> None:
 def test_geometries_and_names() -> None:
     g = geometries(["ma 98", "MA98"], [0, 90])
     assert len(g) == 2 * 11 and g[11].azimuth_deg == 90
+    # An azimuth given twice is one (its rows were repeated: the CSV, kept as a standard,
+    # then held two rows per geometry), as an instrument given twice is.
+    again = geometries(["MA98"], [0, 90, 0.0, 90])
+    assert again == g and len(set(again)) == len(again)
     assert canonical_instrument("byk mac") == "BYK-mac"
     assert g[0].name == "45as-15"
     with pytest.raises(ColourError, match="known instruments are MA68"):

@@ -129,6 +129,47 @@ def test_csv_rows_carry_space_conditions_and_numbers() -> None:
     assert float(rows[2]["L"]) == pytest.approx(report.lab[2, 0], abs=1e-4)
 
 
+def test_csv_rows_say_how_the_channels_became_colour() -> None:
+    """A chart-calibrated sensor's numbers carry the calibration's residual on every CSV row,
+    as the printed table's header and the JSON's ``conversion`` do: the residual median is
+    colour-science's own, computed here from the chart without gonio."""
+    from gonio.brdf.colour.chart import Chart, fit_matrix
+
+    sds = colour.SDS_COLOURCHECKERS["ColorChecker N Ohta"]
+    names = tuple(sds)
+    # Every 10 nm (Ohta's 5 nm data): the ASTM E308 table both paths weigh with.
+    wl = np.asarray(sds[names[0]].wavelengths, float)[::2]
+    refl = np.stack([np.asarray(sds[n].values, float)[::2] for n in names])
+    resp = np.exp(-0.5 * ((wl[None, :] - np.array([[610.0], [540.0], [460.0]])) / 25.0) ** 2)
+    readings = refl @ (resp / resp.sum(axis=1, keepdims=True)).T
+    cond = ViewingConditions()
+    cal = fit_matrix(Chart(names, wl, refl, ("R", "G", "B"), readings), cond, method="linear")
+    cmfs = colour.MSDS_CMFS["CIE 1964 10 Degree Standard Observer"]
+    ill = colour.SDS_ILLUMINANTS["D65"]
+    with warnings.catch_warnings():
+        # colour-science says it trims the CMFs to the spectra's 380-780 nm.
+        warnings.simplefilter("ignore")
+        xyz = np.stack([colour.sd_to_XYZ(colour.SpectralDistribution(r, wl), cmfs, ill,
+                                         method="ASTM E308") for r in refl])
+        white = colour.XYZ_to_xy(colour.sd_to_XYZ(
+            colour.SpectralDistribution(np.ones_like(wl), wl), cmfs, ill,
+            method="ASTM E308") / 100)
+    m = np.linalg.lstsq(readings, xyz, rcond=None)[0]
+    residual = np.median(colour.delta_E(colour.XYZ_to_Lab(readings @ m / 100, white),
+                                        colour.XYZ_to_Lab(xyz / 100, white), method="CIE 2000"))
+    grey = from_function(lambda i, o: np.full((i.shape[0], 3), 0.5 / np.pi), ["R", "G", "B"],
+                         "grey")
+    said = {r["conversion"] for r in csv.DictReader(io.StringIO(
+        colour_report(grey, cal, cond, ["MA68"]).csv()))}
+    assert said == {f"chart colour calibration (24 patches, residual median {residual:.2f} "
+                    "dE00)"}
+    spectral = colour_report(spectral_table(RED), BANDS, instruments=["MA68"]).csv()
+    assert {r["conversion"] for r in csv.DictReader(io.StringIO(spectral))} == {
+        "spectral bands (31)"}
+    plain = colour_report(grey, None, instruments=["MA68"]).csv()
+    assert {r["conversion"] for r in csv.DictReader(io.StringIO(plain))} == {UNCALIBRATED}
+
+
 def test_channel_mismatch_is_refused() -> None:
     rgb = from_function(lambda i, o: np.ones((i.shape[0], 3)), ["R", "G", "B"], "x")
     with pytest.raises(ColourError, match="3 values for 31 spectral bands"):
