@@ -110,6 +110,37 @@ def colour_warnings(res: ResultFile, role: str = "") -> list[str]:
     return [f"{role}: {w}" if role else w for w in said]
 
 
+#: Geometries within this many degrees of the specular direction (aspecular angle) are the
+#: ones a reconstruction is least sure of (docs/colour.md, "Measured").
+NEAR_SPECULAR_DEG = 25.0
+
+
+def near_specular_note(report: ColourReport) -> str | None:
+    """A sentence when a report's colour at near-specular geometries (aspecular within
+    :data:`NEAR_SPECULAR_DEG`) was read from the table rather than by a pair of the scan;
+    None when every such geometry was read directly, or the report has no colour.
+
+    Near the specular direction the table holds the gloss lobe's flank, which a design not
+    made for the instrument does not read: on bench_colour's held-out specimens the default
+    design's worst there was 7.4 dE00 (15as-5), a colour design's 2.1 at any geometry
+    (docs/colour.md). ``gonio colour`` prints it as a note, the API and ``--json`` give it
+    under ``notes``, the lab page adds it to the colour's caption.
+    """
+    if not report.calibrated:
+        return None
+    flags = report.measured or (False,) * len(report.geometries)
+    labels = list(dict.fromkeys(
+        g.name for g, m in zip(report.geometries, flags, strict=True)
+        if not m and abs(g.aspecular_deg) <= NEAR_SPECULAR_DEG))
+    if not labels:
+        return None
+    return (f"{', '.join(labels)} were read from the reconstructed table, not by a pair of "
+            "the scan: near the specular direction the table is least certain (on held-out "
+            "simulated specimens the default design's worst there was 7.4 dE00, a colour "
+            "design's 2.1 at any geometry; docs/colour.md); for an instrument's numbers, scan "
+            "with pairs designed for it (gonio design --colour INSTRUMENT)")
+
+
 def scan_readings(samples: Any) -> ScanReadings | None:
     """A result's ``/samples`` (or the samples a job is finishing with) as the colour report's
     scan readings, so that instrument geometries a pair measured use its readings

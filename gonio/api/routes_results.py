@@ -254,7 +254,12 @@ async def colour(
     from gonio.brdf.colour.conditions import ViewingConditions
     from gonio.brdf.colour.instruments import DEFAULT_INSTRUMENTS
     from gonio.brdf.colour.report import compare
-    from gonio.result_colour import colour_warnings, difference_csv, result_report
+    from gonio.result_colour import (
+        colour_warnings,
+        difference_csv,
+        near_specular_note,
+        result_report,
+    )
 
     azimuths = azimuth or [0.0]
     if not all(math.isfinite(a) and -360 <= a <= 360 for a in azimuths):
@@ -279,6 +284,9 @@ async def colour(
     out: dict[str, Any] = {"job_id": job_id, "colour": report.as_dict()}
     if warnings:
         out["warnings"] = warnings
+    note = near_specular_note(report)
+    if note is not None:
+        out["notes"] = [note]
     if diff is not None:
         out["difference"] = {"against": against, **diff.as_dict()}
     return out

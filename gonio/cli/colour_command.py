@@ -189,7 +189,12 @@ def _diff_table(diff: Any) -> str:
 def run(args: argparse.Namespace) -> int:
     from gonio.brdf.colour.conditions import ViewingConditions
     from gonio.brdf.colour.report import compare
-    from gonio.result_colour import colour_warnings, difference_csv, result_report
+    from gonio.result_colour import (
+        colour_warnings,
+        difference_csv,
+        near_specular_note,
+        result_report,
+    )
     from gonio.results import read_result
 
     if not args.result.is_file():
@@ -209,11 +214,17 @@ def run(args: argparse.Namespace) -> int:
         warnings += std_warnings
     for warning in warnings:
         print(f"warning: {warning}", file=sys.stderr)
+    # Which near-specular geometries no pair read (the CSV's source column says it per row).
+    notes = [n for n in (near_specular_note(report),) if n is not None]
+    for note in notes:
+        print(f"note: {note}", file=sys.stderr)
     text_csv = difference_csv(diff, warnings) if diff is not None else report.csv(warnings)
     if args.json:
         out: dict[str, Any] = {"colour": report.as_dict()}
         if warnings:
             out["warnings"] = warnings
+        if notes:
+            out["notes"] = notes
         if diff is not None:
             out["difference"] = diff.as_dict()
         print(json.dumps(out, indent=2))

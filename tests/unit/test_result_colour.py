@@ -207,3 +207,29 @@ def test_a_result_report_uses_the_readings_of_a_pair_at_an_instrument_geometry(
     np.testing.assert_allclose(rep.reflectance[others],
                                np.tile(np.pi * np.array([0.1, 0.2, 0.05]), (len(others), 1)),
                                rtol=1e-5)
+
+
+def test_near_specular_geometries_read_from_the_table_are_noted() -> None:
+    """Colour at a near-specular geometry no pair read is the table's gloss flank, where the
+    default design's worst was 7.4 dE00 (docs/colour.md): the report says which; a geometry
+    a pair read, a far one (aspecular above 25) or a report without colour says nothing."""
+    from dataclasses import replace
+
+    from gonio.brdf.colour.report import colour_report
+    from gonio.result_colour import NEAR_SPECULAR_DEG, near_specular_note
+
+    bands = SpectralBands(WL, (40.0, 40.0, 40.0))
+    report = colour_report(_table(WL), bands, instruments=["MA98"])
+    near = [g.name for g in report.geometries if abs(g.aspecular_deg) <= NEAR_SPECULAR_DEG]
+    # MA98's near-specular geometries, from the instrument's published aspecular angles.
+    assert near == ["45as-15", "45as15", "45as25", "15as-15", "15as-5"]
+    note = near_specular_note(report)
+    assert note is not None and note.startswith(", ".join(near) + " were read from the")
+    assert "gonio design --colour" in note
+    # The first two read by a pair: only the others are named.
+    read = tuple(g.name in ("45as-15", "45as15") for g in report.geometries)
+    note = near_specular_note(replace(report, measured=read))
+    assert note is not None and note.startswith("45as25, 15as-15, 15as-5 were read")
+    every = tuple(abs(g.aspecular_deg) <= NEAR_SPECULAR_DEG for g in report.geometries)
+    assert near_specular_note(replace(report, measured=every)) is None
+    assert near_specular_note(colour_report(_table(WL), None, instruments=["MA98"])) is None

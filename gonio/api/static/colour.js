@@ -113,6 +113,8 @@ async function refresh() {
       "Give the sensor spectral bands or a chart colour calibration (docs/colour.md).";
   // What must travel with the numbers (a calibration from another exposure): said first.
   if (body.warnings?.length) caption.textContent = `Warning: ${body.warnings.join("; ")}. ${caption.textContent}`;
+  // Which near-specular geometries no pair read (their rows say "table"), and what that means.
+  if (body.notes?.length) caption.textContent += `. Note: ${body.notes.join("; ")}.`;
 }
 
 window.addEventListener("DOMContentLoaded", () => {
