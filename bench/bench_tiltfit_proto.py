@@ -159,9 +159,13 @@ def candidate_errors(basis: Basis, cells: np.ndarray, ph: np.ndarray, alpha: np.
 
 
 def search(basis: Basis, cells: np.ndarray, ph: np.ndarray, alpha: np.ndarray,
-           vals: np.ndarray, prior: np.ndarray, scores: list[str]
+           vals: np.ndarray, prior: np.ndarray, scores: list[str], starts: int = 1
            ) -> dict[str, tuple[float, float, float]]:
     """The lean of least error for each score: coarse grid, then two finer rounds.
+
+    ``starts`` > 1 refines around each of that many best coarse candidates (leans) and keeps
+    the best refined one (a multi-start search). With one start each refinement round moves
+    to the best lean tried so far by any score (the leans are shared between scores).
 
     Returns
     -------
@@ -180,26 +184,38 @@ def search(basis: Basis, cells: np.ndarray, ph: np.ndarray, alpha: np.ndarray,
         for b in AZIMUTHS_DEG if t > 0 else (0.0,):
             err(t, b, scores[0])
     out = {}
+    coarse = list(tried)
     for s in scores:
-        best = min(tried, key=lambda k: err(k[0], k[1], s))
-        if best[0] > 0:
-            dt, db = REFINE_DEG
-            for _ in range(2):
-                t_c, b_c = best
-                for t in (t_c - dt, t_c, t_c + dt):
-                    for b in (b_c - db, b_c, b_c + db):
-                        if t >= 0:
-                            err(t, b, s)
-                best = min(tried, key=lambda k: err(k[0], k[1], s))
-                dt, db = dt / 2, db / 2
+        finals = []
+        firsts = ([min(tried, key=lambda k: err(k[0], k[1], s))] if starts == 1
+                  else sorted(coarse, key=lambda k: err(k[0], k[1], s))[:starts])
+        for start in firsts:
+            best = start
+            if best[0] > 0:
+                dt, db = REFINE_DEG
+                for _ in range(2):
+                    t_c, b_c = best
+                    near = [(t, b) for t in (t_c - dt, t_c, t_c + dt)
+                            for b in (b_c - db, b_c, b_c + db) if t >= 0]
+                    for t, b in near:
+                        err(t, b, s)
+                    keys = [(round(t, 6), round(b % 360.0, 6) if t > 0 else 0.0)
+                            for t, b in near]
+                    # One start: the best of every lean tried so far (for any score), as
+                    # the runs before the multi-start option did.
+                    pool = list(tried) if starts == 1 else [best, *keys]
+                    best = min(pool, key=lambda k: err(k[0], k[1], s))
+                    dt, db = dt / 2, db / 2
+            finals.append(best)
+        best = min(finals, key=lambda k: err(k[0], k[1], s))
         out[s] = (best[0], best[1], err(best[0], best[1], s))
     return out
 
 
 def one_specimen(plain: Basis, asym: Basis, prior: np.ndarray, m: bu.Material,
                  cells: np.ndarray, ph: np.ndarray, seed: int, true_lean: tuple[float, float],
-                 scores: list[str], twin: bu.Material | None, readings: str = "row"
-                 ) -> dict[str, Any]:
+                 scores: list[str], twin: bu.Material | None, readings: str = "row",
+                 starts: int = 1) -> dict[str, Any]:
     """Every column of the table for one specimen (module notes)."""
     out: dict[str, Any] = {}
     t0 = time.process_time()
@@ -230,7 +246,7 @@ def one_specimen(plain: Basis, asym: Basis, prior: np.ndarray, m: bu.Material,
     out["plain"] = metrics.log_rmse(reconstruct(plain, cells, ph, alpha, vals).table, m.truth)
     out["plain_cpu"] = time.process_time() - t0
     t0 = time.process_time()
-    found = search(plain, cells, ph, alpha, vals, prior, scores)
+    found = search(plain, cells, ph, alpha, vals, prior, scores, starts)
     search_cpu = time.process_time() - t0
     for s, (t, b, e) in found.items():
         t1 = time.process_time()
@@ -297,6 +313,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="row: the asym full r=12 row's readings (default); auto: the auto-arc "
                          "path's (the default design's pairs, R = 6: 12 angles over the full "
                          "turn when the arc test calls the specimen asymmetric)")
+    ap.add_argument("--starts", type=int, default=1,
+                    help="refine around this many best coarse leans (a multi-start search)")
     ap.add_argument("--check", action="store_true",
                     help="only the truth check (mitsuba's normal map against the inner BSDF)")
     args = ap.parse_args(argv)
@@ -333,7 +351,7 @@ def main(argv: list[str] | None = None) -> int:
         for i, (m, lean) in enumerate(zip(group, leans, strict=True)):
             twin = twins[i] if group is mats and twins else None
             r = one_specimen(plain, asym, prior, m, cells, ph, 500 + i, lean, scores, twin,
-                             args.readings)
+                             args.readings, args.starts)
             rows.append([r["shipped"], r["plain"], *[r[f"est_{s}"] for s in scores],
                          r["true"], r.get("lookup", np.nan)])
             est = " | ".join(f"{r[f'est_{s}']:.4f} | {r[f'lean_{s}'][0]:.2f} / "
