@@ -59,14 +59,18 @@ from typing import Any
 import bench_asymmetric as ba  # the sibling benches (the script's folder is on sys.path)
 import bench_unseen as bu
 import numpy as np
-import scipy.linalg
 
 from gonio.brdf.models.analytic import facet_rotation
-from gonio.brdf.reconstruction.basis import Basis, BasisError, default_basis, inverse_remap, remap
+from gonio.brdf.reconstruction.basis import Basis, default_basis, inverse_remap
 from gonio.brdf.reconstruction.joint import JOINT_ETA, JOINT_LAM, joint_prior
 from gonio.brdf.reconstruction.reconstruct import reconstruct
 from gonio.brdf.reconstruction.samples import pair_directions, uniform_stage_angles
-from gonio.brdf.reconstruction.tilt import map_readings, reconstruct_through, tilt_factor
+from gonio.brdf.reconstruction.tilt import (
+    map_readings,
+    mapped_joint_fit,
+    reconstruct_through,
+    tilt_factor,
+)
 from gonio.brdf.tables import geometry as geo
 from gonio.brdf.tables import metrics
 
@@ -118,34 +122,10 @@ def candidate_errors(basis: Basis, cells: np.ndarray, ph: np.ndarray, alpha: np.
     up_o = geo.lab_to_specimen(wo_lab[:, None, :], alpha[None, :]) @ R.T
     band = ~m.keep & (up_i[..., 2] > 0) & (up_o[..., 2] > 0)
     fail = {k: float("inf") for k in SCORES}
-    pair_of = np.broadcast_to(np.arange(n)[:, None], (n, r))[m.keep]
-    try:
-        rows, weights = basis.neighbours(*m.cells.T)
-    except BasisError:
+    fit = mapped_joint_fit(basis, m, (n, r), JOINT_ETA, prior)
+    if fit is None:
         return fail
-    Qt = np.einsum("nj,njk->nk", weights, basis.Q[rows])
-    fmed = (weights * basis.f_med[rows]).sum(axis=1)[:, None]
-    mu = (weights * basis.mu[rows]).sum(axis=1)[:, None]
-    ci, co = geo.cell_cosines(*m.cells.T)
-    w = np.maximum(ci * co, basis.eps)[:, None]
-    Y = remap(m.values, fmed, w, basis.eps) - mu
-    harm = np.arange(prior.shape[0], dtype=float)
-    A = np.matmul(np.matmul(Qt[None], prior), Qt.T[None])
-    Z = np.exp(-1j * m.ph[:, None] * harm[None, :])
-    G = np.einsum("am,mab,bm->ab", Z, A, np.conj(Z)).real
-    G[np.diag_indices_from(G)] += JOINT_ETA
-    try:
-        cho = scipy.linalg.cho_factor(G, lower=True)
-    except np.linalg.LinAlgError:
-        return fail
-    beta = scipy.linalg.cho_solve(cho, Y)
-    Ginv = scipy.linalg.cho_solve(cho, np.eye(G.shape[0]))
-    held = np.empty_like(Y)
-    for q in range(n):
-        idx = np.flatnonzero(pair_of == q)
-        if idx.size:
-            held[idx] = Y[idx] - np.linalg.solve(Ginv[np.ix_(idx, idx)], beta[idx])
-    fitted = Y - JOINT_ETA * beta  # the posterior mean at the readings themselves
+    held, fitted, mu, fmed, w = fit.held, fit.fitted, fit.mu, fit.fmed, fit.w
     out = {}
     c = m.cos_i[..., None]
     for name, y in (("loo", held), ("insample", fitted)):

@@ -192,6 +192,57 @@ def _pooled(errors: FloatArray | None) -> float:
     return float(np.sqrt(np.mean(errors**2))) if errors is not None else float("inf")
 
 
+@dataclass(frozen=True)
+class MappedFit:
+    """The joint fit of one lean's mapped readings (:func:`mapped_joint_fit`), in the basis'
+    remapped units: ``held`` each reading predicted without its pair, ``fitted`` the posterior
+    mean at the readings themselves, both (N, C) over the readings kept; ``mu``, ``fmed``,
+    ``w`` the (N, 1) terms that take them back to values (:func:`inverse_remap` of ``x + mu``)."""
+
+    held: FloatArray
+    fitted: FloatArray
+    mu: FloatArray
+    fmed: FloatArray
+    w: FloatArray
+
+
+def mapped_joint_fit(basis: Basis, m: MappedReadings, shape: tuple[int, int], eta: float,
+                     prior: FloatArray) -> MappedFit | None:
+    """The joint fit (learnt prior ``prior``, math.md 6; noise ratio ``eta``) of readings
+    mapped through a lean (:func:`map_readings`), with each pair's readings also predicted
+    from all the other pairs' (``shape`` = (n pairs, r angles) of the scan). None when the
+    mapped cells fall outside the basis or the system is not positive definite."""
+    n, r = shape
+    pair_of = np.broadcast_to(np.arange(n)[:, None], (n, r))[m.keep]
+    try:
+        rows, weights = basis.neighbours(*m.cells.T)
+    except BasisError:
+        return None
+    Qt = np.einsum("nj,njk->nk", weights, basis.Q[rows])
+    fmed = (weights * basis.f_med[rows]).sum(axis=1)[:, None]
+    mu = (weights * basis.mu[rows]).sum(axis=1)[:, None]
+    ci, co = geo.cell_cosines(*m.cells.T)
+    w = np.maximum(ci * co, basis.eps)[:, None]
+    Y = remap(m.values, fmed, w, basis.eps) - mu  # (N, C)
+    harm = np.arange(prior.shape[0], dtype=float)
+    A = np.matmul(np.matmul(Qt[None], prior), Qt.T[None])  # (M, N, N)
+    Z = np.exp(-1j * m.ph[:, None] * harm[None, :])  # (N, M)
+    G = np.einsum("am,mab,bm->ab", Z, A, np.conj(Z)).real
+    G[np.diag_indices_from(G)] += eta
+    try:
+        cho = scipy.linalg.cho_factor(G, lower=True)
+    except np.linalg.LinAlgError:
+        return None
+    beta = scipy.linalg.cho_solve(cho, Y)
+    Ginv = scipy.linalg.cho_solve(cho, np.eye(G.shape[0]))
+    held = np.empty_like(Y)
+    for q in range(n):
+        idx = np.flatnonzero(pair_of == q)
+        if idx.size:
+            held[idx] = Y[idx] - np.linalg.solve(Ginv[np.ix_(idx, idx)], beta[idx])
+    return MappedFit(held, Y - eta * beta, mu, fmed, w)
+
+
 def holdout_errors(basis: Basis, cells: ArrayLike, ph_lab: ArrayLike, stage_angles: ArrayLike,
                    values: ArrayLike, tilt: float, azimuth: float, *,
                    eta: float = JOINT_ETA, lam: float = JOINT_LAM,
@@ -220,37 +271,13 @@ def holdout_errors(basis: Basis, cells: ArrayLike, ph_lab: ArrayLike, stage_angl
         log units); None when the candidate cannot be fitted.
     """
     vals = np.asarray(values, dtype=float)
-    n, r, _ = vals.shape
     m = map_readings(cells, ph_lab, stage_angles, vals, tilt, azimuth)
-    pred = np.zeros_like(vals)
-    pair_of = np.broadcast_to(np.arange(n)[:, None], (n, r))[m.keep]
-    try:
-        rows, weights = basis.neighbours(*m.cells.T)
-    except BasisError:
-        return None
-    Qt = np.einsum("nj,njk->nk", weights, basis.Q[rows])
-    fmed = (weights * basis.f_med[rows]).sum(axis=1)[:, None]
-    mu = (weights * basis.mu[rows]).sum(axis=1)[:, None]
-    ci, co = geo.cell_cosines(*m.cells.T)
-    w = np.maximum(ci * co, basis.eps)[:, None]
-    Y = remap(m.values, fmed, w, basis.eps) - mu  # (N, C)
     P = joint_prior(basis, lam / eta) if prior is None else prior
-    harm = np.arange(P.shape[0], dtype=float)
-    A = np.matmul(np.matmul(Qt[None], P), Qt.T[None])  # (M, N, N)
-    Z = np.exp(-1j * m.ph[:, None] * harm[None, :])  # (N, M)
-    G = np.einsum("am,mab,bm->ab", Z, A, np.conj(Z)).real
-    G[np.diag_indices_from(G)] += eta
-    try:
-        cho = scipy.linalg.cho_factor(G, lower=True)
-    except np.linalg.LinAlgError:
+    fit = mapped_joint_fit(basis, m, vals.shape[:2], eta, P)
+    if fit is None:
         return None
-    beta = scipy.linalg.cho_solve(cho, Y)
-    Ginv = scipy.linalg.cho_solve(cho, np.eye(G.shape[0]))
-    held = np.empty_like(Y)
-    for q in range(n):
-        idx = np.flatnonzero(pair_of == q)
-        if idx.size:
-            held[idx] = Y[idx] - np.linalg.solve(Ginv[np.ix_(idx, idx)], beta[idx])
+    pred = np.zeros_like(vals)
+    held, mu, fmed, w = fit.held, fit.mu, fit.fmed, fit.w
     back = inverse_remap(np.minimum(held + mu, 300.0), fmed, w, basis.eps)
     pred[m.keep] = np.maximum(back, 0.0) * m.factor[:, None]
     return _log_err(pred, vals, m.cos_i)
