@@ -286,6 +286,18 @@ class ScanEngine:
         elif new is JobState.RUNNING and old in (JobState.PAUSED, JobState.SUSPENDED):
             self.progress = replace(p, at=now)
 
+    def _first_progress(self) -> Progress:
+        """The progress before the steps are read: the job's stored counts (a resumed job's
+        angles done; a new one's plan, counted at submission) at the rig's physical time per
+        angle. :meth:`_measure_all` replaces it once it has the steps."""
+        row = self.store.get_job(self.job_id)
+        total = max(row.total_angles, len(self.checked.angles_deg))
+        done = min(row.done_angles, total)
+        per = self._per_angle_estimate
+        eta_max = (None if self._max_angles is None
+                   else per * max(self._max_angles - done, total - done))
+        return Progress(done, total, per * (total - done), 0, eta_max, time.time(), per)
+
     def _next_progress(self, steps: Sequence[StepRow]) -> Progress:
         """The progress once ``steps`` are committed (:attr:`progress` is set when they are)."""
         done = sum(s.done for s in steps)
@@ -316,6 +328,10 @@ class ScanEngine:
         self._loop = asyncio.get_running_loop()
         if self.state in FINISHED_STATES:
             return self.state  # ended before it started: nothing to measure, nothing to touch
+        # An ETA from the moment the job is running, before the rig is connected and the stage
+        # read (its steps are read then): set before the state, so no one reads "running"
+        # without it.
+        self.progress = self._first_progress()
         if self.state is JobState.QUEUED:
             self._set_state(JobState.RUNNING)
         elif self.state is JobState.PAUSED:

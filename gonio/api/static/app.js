@@ -150,7 +150,8 @@ function etaText() {
   if (d.state === "reconstructing") {
     // Past its estimate the daemon gives no time left (null, not 0 s): it is not done.
     const planned = (d.reconstruction_s ?? 0) + (d.basis_build_s ?? 0);
-    const left = d.time_left_s != null ? `; ≈ ${eta(d.time_left_s)} left (est.)`
+    // At least 1 s while some is left: 0.3 s left read "0 s left" while the job was not done.
+    const left = d.time_left_s != null ? `; ≈ ${eta(Math.max(d.time_left_s, 1))} left (est.)`
       : d.reconstruction_s != null ? `; taking longer than the ≈ ${eta(planned)} estimated` : "";
     return `${d.activity ?? "reconstructing"}${left}`;
   }
