@@ -116,7 +116,6 @@ def odd_daemon(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Daemon]:
     cache folder of its own: the session's must not get it) has an odd harmonic in its prior:
     a material without twofold symmetry, ``pile-lean``, as a lab's import would bring."""
     from gonio.brdf.reconstruction.basis import Basis, default_basis_path
-    from gonio.sim.rig import SimRigOptions, start_sim_rig
     from tests.unit.brdf.reconstruction.test_reconstruct import random_basis
     from tests.unit.brdf.reconstruction.test_reconstruct_joint import _with_prior
 
@@ -128,17 +127,7 @@ def odd_daemon(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Daemon]:
         path = default_basis_path()
         path.parent.mkdir(parents=True, exist_ok=True)
         odd.save(path)
-        data_dir = tmp_path_factory.mktemp("gonio-data")
-        sim = start_sim_rig(SimRigOptions(time_scale=10.0, settle_s=0.0))
-        key = secrets.token_hex(24)
-        cfg = DaemonConfig().with_overrides(paths__data_dir=str(data_dir))
-        app = build_app(cfg, sim.config, ApiKeyring({"tester": key}))
-        app.state.service.worker.fit_exports = False  # the result is not under test
-        try:
-            with live_server(app) as url:
-                yield Daemon(url, key, app, sim, data_dir)
-        finally:
-            sim.close()
+        yield from _own_daemon(tmp_path_factory)
 
 
 SLOW_BASIS_S = 9.0
@@ -153,18 +142,25 @@ def slow_basis_daemon(tmp_path_factory: pytest.TempPathFactory, basis: Any) -> I
     finishing that runs past its estimate."""
     import time
 
-    from gonio.sim.rig import SimRigOptions, start_sim_rig
-
     def slow() -> Any:
         time.sleep(SLOW_BASIS_S)
         return basis
+
+    yield from _own_daemon(tmp_path_factory, BasisSupply(slow))
+
+
+def _own_daemon(tmp_path_factory: pytest.TempPathFactory,
+                basis: BasisSupply | None = None) -> Iterator[Daemon]:
+    """A daemon of its own on a simulated rig and a fresh data directory, without export fits
+    (the results are not under test), with ``basis`` (None: the default provider)."""
+    from gonio.sim.rig import SimRigOptions, start_sim_rig
 
     data_dir = tmp_path_factory.mktemp("gonio-data")
     sim = start_sim_rig(SimRigOptions(time_scale=10.0, settle_s=0.0))
     key = secrets.token_hex(24)
     cfg = DaemonConfig().with_overrides(paths__data_dir=str(data_dir))
-    app = build_app(cfg, sim.config, ApiKeyring({"tester": key}), basis=BasisSupply(slow))
-    app.state.service.worker.fit_exports = False  # the result is not under test
+    app = build_app(cfg, sim.config, ApiKeyring({"tester": key}), basis=basis)
+    app.state.service.worker.fit_exports = False
     try:
         with live_server(app) as url:
             yield Daemon(url, key, app, sim, data_dir)

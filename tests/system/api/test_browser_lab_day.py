@@ -18,6 +18,7 @@ from tests.system.api.test_browser import (  # noqa: F401 (fixture)
     click_when_steady,
     open_live,
 )
+from tests.system.api.test_scan_flow import ENDED, wait_state
 
 pytestmark = [pytest.mark.system, pytest.mark.timeout(600)]
 
@@ -40,16 +41,11 @@ def finished_job(daemon: Daemon) -> int:
     """One short scan run to its end through the API (its id), made once for the tests that
     need a row in the queue or a measured reconstruction. Its export fits are not under test
     (none of these tests opens an export): it finishes without them."""
-    import time
 
     with export_fits_off(daemon), daemon.client() as c:
         job = int(c.post("/api/v1/jobs", params={"accept_uncalibrated": "true"},
                          json={"plan": PLAN}).json()["id"])
-        deadline = time.monotonic() + 300
-        while c.get(f"/api/v1/jobs/{job}").json()["state"] not in (
-                "completed", "failed", "aborted"):
-            assert time.monotonic() < deadline, "the scan did not end"
-            time.sleep(0.2)
+        wait_state(c, job, ENDED, timeout=300)
     return job
 
 
@@ -202,7 +198,6 @@ def test_the_eta_covers_reconstruction_with_a_measured_estimate_and_keeps_abort_
     an estimate, and still wraps so the Abort button stays on screen in a narrower window."""
     import re
     import statistics
-    import time
 
     browser.set_window_size(1024, 1600)
     try:
@@ -263,11 +258,7 @@ def test_the_eta_covers_reconstruction_with_a_measured_estimate_and_keeps_abort_
                     pytest.fail("the job ended before its Abort button could be checked")
             finally:
                 c.post(f"/api/v1/jobs/{job}/abort")
-                deadline = time.monotonic() + 120
-                while c.get(f"/api/v1/jobs/{job}").json()["state"] not in (
-                        "completed", "failed", "aborted"):
-                    assert time.monotonic() < deadline
-                    time.sleep(0.2)
+                wait_state(c, job, ENDED, timeout=120)
     finally:
         browser.set_window_size(1280, 1600)
 
@@ -448,7 +439,6 @@ def test_a_queued_job_behind_a_paused_one_says_what_it_waits_for(
     """A paused job holds the rig, and the queue waits behind it (after a restart too, or a
     `gonio scan` interrupted by Ctrl-C in the same data directory): the queued row said only
     "queued", with no word of why nothing started."""
-    import time
 
     from selenium.webdriver.common.by import By
 
@@ -469,11 +459,7 @@ def test_a_queued_job_behind_a_paused_one_says_what_it_waits_for(
     finally:
         with daemon.client() as c:
             c.post(f"/api/v1/jobs/{held}/abort")
-            deadline = time.monotonic() + 300
-            while c.get(f"/api/v1/jobs/{behind}").json()["state"] not in (
-                    "completed", "failed", "aborted"):
-                assert time.monotonic() < deadline, "the queued scan did not end"
-                time.sleep(0.2)
+            wait_state(c, behind, ENDED, timeout=300)
     # Nothing holds the rig now: no row says it waits.
     wait.until(lambda d: "waits for job" not in d.find_element(By.ID, "jobs").text)
 
@@ -513,11 +499,7 @@ def test_a_paused_jobs_eta_is_the_time_once_it_runs_again_not_time_left(
     finally:
         with daemon.client() as c:
             c.post(f"/api/v1/jobs/{job}/abort")
-            deadline = time.monotonic() + 120
-            while c.get(f"/api/v1/jobs/{job}").json()["state"] not in (
-                    "completed", "failed", "aborted"):
-                assert time.monotonic() < deadline
-                time.sleep(0.2)
+            wait_state(c, job, ENDED, timeout=120)
 
 
 def test_a_halted_queue_says_so_on_the_queued_row_and_is_released_from_the_page(
@@ -526,7 +508,6 @@ def test_a_halted_queue_says_so_on_the_queued_row_and_is_released_from_the_page(
     """After an emergency halt the queue is held: a queued job's row said only "queued", and
     nothing on the page could release it (the stage chip said "queue held", the API alone
     released). The row now says why (the API's ``waiting``), and "release queue" lets it run."""
-    import time
 
     from selenium.webdriver.common.by import By
 
@@ -552,11 +533,7 @@ def test_a_halted_queue_says_so_on_the_queued_row_and_is_released_from_the_page(
     finally:
         with daemon.client() as c:
             c.post("/api/v1/rig/release")
-            deadline = time.monotonic() + 300
-            while c.get(f"/api/v1/jobs/{job}").json()["state"] not in (
-                    "completed", "failed", "aborted"):
-                assert time.monotonic() < deadline, "the queued scan did not end"
-                time.sleep(0.2)
+            wait_state(c, job, ENDED, timeout=300)
 
 
 def test_aborting_a_job_asks_first_and_says_what_it_ends(

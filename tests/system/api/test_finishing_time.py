@@ -13,6 +13,7 @@ import pytest
 
 from gonio.timeleft import FINISHING_FALLBACK_S
 from tests.system.api.conftest import SLOW_BASIS_S, Daemon
+from tests.system.api.test_scan_flow import ENDED, wait_state
 
 pytestmark = [pytest.mark.system, pytest.mark.timeout(300)]
 
@@ -92,11 +93,7 @@ def test_the_measuring_eta_stands_still_while_paused_and_goes_on_after_resume(
             assert resumed["eta_s"] == pytest.approx(paused_eta, abs=1.0), (paused_eta, resumed)
         finally:
             c.post(f"/api/v1/jobs/{job}/abort")
-            deadline = time.monotonic() + 120
-            while c.get(f"/api/v1/jobs/{job}").json()["state"] not in (
-                    "completed", "failed", "aborted"):
-                assert time.monotonic() < deadline
-                time.sleep(0.2)
+            wait_state(c, job, ENDED, timeout=120)
 
 
 def test_a_job_has_a_measuring_eta_before_its_first_angle_is_done(

@@ -24,6 +24,10 @@ def scan(specimen: str, rotations: int = ROTATIONS, **extra: Any) -> dict[str, A
                      "exposure": FAST, **extra}}
 
 
+#: The states a job ends in (what a test waits for after it aborts or lets a job run out).
+ENDED = {"completed", "failed", "aborted"}
+
+
 def wait_state(
     c: httpx.Client, job_id: int, states: set[str], timeout: float = 120
 ) -> dict[str, Any]:
