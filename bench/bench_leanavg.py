@@ -294,12 +294,15 @@ def main(argv: list[str] | None = None) -> int:
                     help="with --summarise: basin SEP_DEG RATIO (fires when a lean more than "
                          "SEP_DEG from the best fits within RATIO of its misfit) or spread "
                          "N_EFF DEG (fires when the weights' RMS angle exceeds DEG)")
+    ap.add_argument("--per-specimen", action="store_true",
+                    help="with --summarise: also a row per specimen (the variants after the "
+                         "first two as columns)")
     args = ap.parse_args(argv)
     print(f"$ {' '.join(['python', *sys.argv])}")
     if args.summarise is not None:
         guard = None if args.guard is None else (args.guard[0], float(args.guard[1]),
                                                  float(args.guard[2]))
-        summarise(args.summarise, args.variants, guard)
+        summarise(args.summarise, args.variants, guard, args.per_specimen)
         return 0
     t0 = time.perf_counter()
     run(args.set, not args.no_twins, args.out)
@@ -328,54 +331,80 @@ def spread_deg(r: dict[str, Any], n_eff: float) -> float:
 
 def variant_value(r: dict[str, Any], variant: str, guard: tuple[str, float, float] | None
                   ) -> tuple[float, bool, float]:
-    """(log_rmse, guard fired, CPU s) of one variant, falling back to the shipped fit when
-    the guard fires. ``guard``: ("basin", separation deg, ratio) or ("spread", n_eff, deg)."""
-    lean = r["point_lean"] if variant == "point" else r["refined_lean"]
+    """(log_rmse, guard fired, CPU s) of one variant; a variant named ``NAME+g`` falls back
+    to the shipped fit when the guard fires, ``NAME`` is only marked. ``guard``: ("basin",
+    separation deg, ratio) or ("spread", n_eff, deg)."""
+    fallback = variant.endswith("+g")
+    name = variant.removesuffix("+g")
+    lean = r["point_lean"] if name == "point" else r["refined_lean"]
     # A lean below SNAP_DEG is no lean: the plain fit (t = 0), neither refined nor averaged.
-    value = r["plain"] if 0 < lean[0] < SNAP_DEG else r[variant]
-    cpu_key = {"point": "cpu_point", "refined": "cpu_refined"}.get(variant, f"cpu_{variant}")
+    value = r["plain"] if 0 < lean[0] < SNAP_DEG else r[name]
+    cpu_key = {"point": "cpu_point", "refined": "cpu_refined"}.get(name, f"cpu_{name}")
     cpu = r.get(cpu_key, np.nan)
     fired = False
     if guard is not None:
         kind, a, b = guard
         fired = (basin_ratio(r, lean, a) < b if kind == "basin" else spread_deg(r, a) > b)
-    return (r["shipped"] if fired else value), fired, cpu + (r["cpu_shipped"] if fired else 0.0)
+    if fired and fallback:
+        return r["shipped"], True, cpu + r["cpu_shipped"]
+    return value, fired, cpu
 
 
-def summarise(files: list[Path], variants: list[str], guard: tuple[str, float, float] | None
-              ) -> None:
+def _column(r: dict[str, Any], v: str, guard: tuple[str, float, float] | None
+            ) -> tuple[float, bool, float]:
+    if v in ("shipped", "true"):
+        return r[v], False, r["cpu_shipped"] if v == "shipped" else np.nan
+    return variant_value(r, v, guard)
+
+
+def summarise(files: list[Path], variants: list[str], guard: tuple[str, float, float] | None,
+              per_specimen: bool = False) -> None:
     """Per set and kind: mean log_rmse, count <= 0.06, count worse than shipped by > 0.01
-    (and > 0.02), guard firings (on those that would have lost > 0.01 unguarded), CPU."""
+    (and > 0.02), guard firings (and on how many of those the variant would lose > 0.01
+    unguarded), t = 0 kept on the untilted, CPU per scan."""
     recs = [json.loads(line) for f in files for line in f.read_text().splitlines() if line]
     groups: dict[tuple[str, str], list[dict[str, Any]]] = {}
     for r in recs:
         groups.setdefault((r["set"], r["kind"]), []).append(r)
-    print(f"guard: {guard}")
-    print("\n| set | kind | n | variant | mean | <= 0.06 | worse than shipped > 0.01 | "
-          "> 0.02 | guard fired (on would-be losers) | t = 0 kept (untilted) | CPU s / scan |")
+    print(f"guard: {guard}; a lean below {SNAP_DEG} deg is none")
+    print("\n| set | kind | n | variant | mean | <= 0.06 | worse than shipped by > 0.01 (worst)"
+          " | by > 0.02 | guard fired (on would-be losers > 0.01) | untilted: t = 0 kept, "
+          "worse than plain by > 0.01 | CPU s / scan |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     for (s, kind), rs in groups.items():
+        ship = np.array([r["shipped"] for r in rs])
+        plain = np.array([r["plain"] for r in rs])
         for v in ["shipped", *variants, "true"]:
-            g = guard if v not in ("shipped", "true") else None
-            vals = [variant_value(r, v, g) if v not in ("shipped", "true")
-                    else (r[v], False, r["cpu_shipped"] if v == "shipped" else np.nan)
-                    for r in rs]
+            vals = [_column(r, v, guard) for r in rs]
             x = np.array([a for a, _, _ in vals])
             fired = np.array([f for _, f, _ in vals])
-            raw = np.array([r[v] for r in rs])
-            ship = np.array([r["shipped"] for r in rs])
+            raw = np.array([_column(r, v.removesuffix("+g"), None)[0] for r in rs])
             losers = raw - ship > 0.01
-            lean_key = "point_lean" if v == "point" else "refined_lean"
-            plain = np.array([r["plain"] for r in rs])
+            lean_key = "point_lean" if v.startswith("point") else "refined_lean"
             kept = ("-" if kind == "tilted" or v in ("shipped", "true") else
                     f"{sum(r[lean_key][0] < SNAP_DEG for r in rs)} of {len(rs)}, "
-                    f"{int(np.sum(x - plain > 0.01))} worse than plain by > 0.01")
+                    f"{int(np.sum(x - plain > 0.01))}")
             cpu = np.nanmean([c for _, _, c in vals]) if v != "true" else np.nan
-            caught = f"{int(fired.sum())} ({int(np.sum(fired & losers))} of {int(losers.sum())})"
+            caught = ("-" if v in ("shipped", "true") else
+                      f"{int(fired.sum())} ({int(np.sum(fired & losers))} of "
+                      f"{int(losers.sum())})")
             print(f"| {s} | {kind} | {len(rs)} | {v} | {x.mean():.4f} | "
                   f"{int(np.sum(x <= 0.06))} | {int(np.sum(x - ship > 0.01))} "
                   f"({np.max(x - ship):+.3f}) | {int(np.sum(x - ship > 0.02))} | {caught} | "
                   f"{kept} | {cpu:.1f} |")
+        if per_specimen:
+            print(f"\n{s} {kind}:\n\n| specimen | shipped | point (t / b) | refined (t / b) | "
+                  + " | ".join(variants[2:]) + " | basin ratio | true (t / b) |")
+            print("|---" * (6 + len(variants[2:])) + "|")
+            for r in rs:
+                cols = " | ".join(f"{_column(r, v, guard)[0]:.4f}" for v in variants[2:])
+                pl, rl, tl = r["point_lean"], r["refined_lean"], r["true_lean"]
+                br = (basin_ratio(r, rl, guard[1]) if guard is not None and guard[0] == "basin"
+                      else float("nan"))
+                print(f"| {r['name']} | {r['shipped']:.4f} | "
+                      f"{_column(r, 'point', None)[0]:.4f} ({pl[0]:.2f} / {pl[1]:.0f}) | "
+                      f"{_column(r, 'refined', None)[0]:.4f} ({rl[0]:.2f} / {rl[1]:.1f}) | "
+                      f"{cols} | {br:.2f} | {r['true']:.4f} ({tl[0]:g} / {tl[1]:g}) |")
 
 
 if __name__ == "__main__":
