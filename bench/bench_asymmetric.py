@@ -223,6 +223,35 @@ FRESH4: list[tuple[str, float, float, dict[str, Any], float]] = [
 ]
 
 
+#: A fifth fresh set for the lean-uncertainty study (``bench_leanavg.py --set fresh5``; docs/notes/
+#: 2026-11-27-lean-averaging.md), written down and committed (2026-11-27) before any fit on it,
+#: made as :data:`FRESH2` is: two metals no set used before (VC, Li), three used before (Au,
+#: anisotropic Ni, Ag) at new roughnesses, three plastics of new colours; roughnesses
+#: 0.09-0.24, tilts 6-30 deg and new holder angles. Nothing is chosen on it: it is a test set.
+FRESH5: list[tuple[str, float, float, dict[str, Any], float]] = [
+    ("fresh5-vc-r0.15-t21", 21.0, 115.0,
+     {"type": "roughconductor", "material": "VC", "alpha": 0.15}, 308.0),
+    ("fresh5-au-r0.11-t14", 14.0, 285.0,
+     {"type": "roughconductor", "material": "Au", "alpha": 0.11}, 62.0),
+    ("fresh5-ni-aniso-t26", 26.0, 20.0,
+     {"type": "roughconductor", "material": "Ni_palik", "alpha_u": 0.09, "alpha_v": 0.20},
+     227.0),
+    ("fresh5-li-r0.24-t9", 9.0, 170.0,
+     {"type": "roughconductor", "material": "Li", "alpha": 0.24}, 14.0),
+    ("fresh5-ag-r0.13-t30", 30.0, 235.0,
+     {"type": "roughconductor", "material": "Ag", "alpha": 0.13}, 131.0),
+    ("fresh5-magenta-plastic-r0.16-t6", 6.0, 300.0,
+     {"type": "roughplastic", "alpha": 0.16,
+      "diffuse_reflectance": {"type": "rgb", "value": [0.55, 0.08, 0.45]}}, 99.0),
+    ("fresh5-lime-plastic-r0.09-t19", 19.0, 65.0,
+     {"type": "roughplastic", "alpha": 0.09,
+      "diffuse_reflectance": {"type": "rgb", "value": [0.4, 0.6, 0.08]}}, 176.0),
+    ("fresh5-sand-plastic-r0.21-t24", 24.0, 140.0,
+     {"type": "roughplastic", "alpha": 0.21,
+      "diffuse_reflectance": {"type": "rgb", "value": [0.6, 0.5, 0.3]}}, 251.0),
+]
+
+
 #: A fresh set for the auto arc's layout choice (``--set fresh``), written before its first
 #: run and run once: other metals, roughnesses, colours, holder angles, and two small tilts
 #: (6 and 8 deg) that probe the test's power below the choice set's 10 deg.
