@@ -78,7 +78,7 @@ from gonio.service_models import (
 )
 from gonio.stage_control import StageControl
 from gonio.store import EventRow, JobRow, JobStore, ReadingRow
-from gonio.timeleft import FinishingEstimate, finishing_estimate, time_left
+from gonio.timeleft import FinishingEstimate, finishing_estimate
 from gonio.worker import Worker
 
 if TYPE_CHECKING:  # the design numerics load on the first design, not with the service
@@ -508,45 +508,27 @@ class GonioService:
         engine's last estimate (updated at each checkpoint), not recomputed.
         """
         row = self._row(job_id)
-        eta = eta_max = None
-        p = self.worker.progress(job_id)
-        if p is not None:
-            # Counted down while measuring; frozen while paused or suspended.
-            eta = p.eta_now() if row.state is JobState.RUNNING else p.eta_s
-            if p.eta_max_s is not None:
-                eta_max = max(p.eta_max_s - (p.eta_s or 0.0) + (eta or 0.0), eta or 0.0)
-        activity = fraction = None
+        activity = None
         if self.worker.current_job == job_id:
             # Reconstructing, or an adaptive job loading its basis before the first reading.
-            report = self.worker.activity_report()
-            if report is not None:
-                activity, fraction = report
-        qpos = self.store.queue_position(job_id) if row.state is JobState.QUEUED else None
-        wait = self._queue_wait() if row.state is JobState.QUEUED else None
-        base = JobInfo.from_row(row, self._max_angles(row), wait).model_dump()
-        times: dict[str, Any] = {}
-        measuring = row.state in (JobState.RUNNING, JobState.PAUSED, JobState.SUSPENDED)
-        if (measuring or row.state is JobState.RECONSTRUCTING) and row.kind != "calibration":
-            # The whole job's time, not only the measuring's (docs/api.md "Time").
+            activity = self.worker.activity_report()
+        queued = row.state is JobState.QUEUED
+        active = row.state in (JobState.RUNNING, JobState.PAUSED, JobState.SUSPENDED,
+                               JobState.RECONSTRUCTING)
+        est = build = finishing_for = None
+        if active and row.kind != "calibration":
             est = self._finishing_estimate()
             build = BASIS_BUILD_S if self.basis.build_needed() else None
             asym = self._asymmetric_build_due(row)
             if asym is not None:  # the test found the specimen asymmetric (science.md 7.4)
                 build = (build or 0.0) + asym
-            finishing_for = None
-            if row.state is JobState.RECONSTRUCTING:
-                # Counted from the finishing's start, not from its latest activity (the
-                # switch from the basis to the reconstruction must not add time back).
-                finishing_for = (self.worker.finishing_seconds()
-                                 if self.worker.current_job == job_id else None) or 0.0
-            times = {"basis_build_s": build, "reconstruction_s": est.seconds,
-                     "reconstruction_estimate": est.source,
-                     "time_left_s": time_left(eta, build, est.seconds, finishing_for)}
-        return JobDetail(**base, plan=row.plan, eta_s=eta, eta_max_s=eta_max,
-                         activity=activity, activity_fraction=fraction,
-                         round=p.round if p is not None else None, **times,
-                         queue_position=qpos, result_path=row.result_path, result=row.summary,
-                         rig=row.rig)
+            if row.state is JobState.RECONSTRUCTING and self.worker.current_job == job_id:
+                finishing_for = self.worker.finishing_seconds()
+        return JobDetail.from_row(
+            row, self._max_angles(row), self._queue_wait() if queued else None,
+            queue_position=self.store.queue_position(job_id) if queued else None,
+            progress=self.worker.progress(job_id), activity=activity, finishing=est,
+            basis_build_s=build, finishing_for_s=finishing_for)
 
     def _asymmetric_build_due(self, row: JobRow) -> float | None:
         """Seconds ``row``'s finishing will wait for the basis for specimens without twofold
