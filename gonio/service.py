@@ -24,6 +24,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import math
 import threading
 import time
 from collections.abc import AsyncIterator, Callable, Coroutine
@@ -412,6 +413,7 @@ class GonioService:
                              self.desc)
         if plan.finishing != "calibration":
             self._check_calibration_covers(checked)
+            self._check_calibration_exposure(plan)
         full = self.disk_full
         if full is not None:
             # Queued now, it would measure for minutes and then fail writing its result.
@@ -457,6 +459,26 @@ class GonioService:
         try:
             self.calibration().check_covers(checked.pairs, "this plan")
         except PartialCalibration as exc:
+            raise PlanError(str(exc)) from None
+
+    def _check_calibration_exposure(self, plan: AnyPlan) -> None:
+        """Refuse a scan at another exposure than the calibration in effect
+        (:meth:`gonio.calibration.Calibration.check_exposure`): raises :class:`PlanError`
+        naming both exposures. A calibration job at the plan's exposure queued or under way
+        lets it be queued behind it: the worker checks again when the scan starts."""
+        from gonio.calibration import ExposureMismatch
+
+        exposure_s = plan.exposure.exposure_s
+        try:
+            self.calibration().check_exposure(exposure_s, "this plan")
+        except ExposureMismatch as exc:
+            for row in self.store.list_jobs([JobState.QUEUED.value,
+                                             *(st.value for st in ACTIVE_STATES)]):
+                if row.kind != "calibration":
+                    continue
+                at = (row.plan.get("exposure") or {}).get("exposure_s")
+                if isinstance(at, int | float) and math.isclose(at, exposure_s, rel_tol=1e-6):
+                    return
             raise PlanError(str(exc)) from None
 
     def list_jobs(self, state: str | None = None) -> list[JobInfo]:

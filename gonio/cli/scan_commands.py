@@ -346,10 +346,8 @@ async def _run_owned(args: argparse.Namespace, checked: Any, config: Any, sim: A
             if sim is None and plan.kind != "calibration":
                 _check_calibration(args, checked.pairs, config, service.calibration(),
                                    data_dir)
-            if plan.kind != "calibration":
-                off = exposure_warning(service.calibration(), exposure_s)
-                if off is not None:
-                    print(f"warning: {off}", file=sys.stderr)
+            # A scan at another exposure than the calibration in effect is refused by
+            # service.submit below, naming both exposures (Calibration.check_exposure).
             # What the submission records as the job's arc warning, said here too (a job whose
             # basis is known only later says it through the progress bar's events).
             for warning in service.dry_run(checked).warnings:
