@@ -753,6 +753,18 @@ class GonioService:
         """A job's result file holding a BRDF (:meth:`ResultViews.reconstruction`)."""
         return self.results.reconstruction(job_id)
 
+    def colour_standard(self, name: str) -> tuple[Any, list[str]]:
+        """A stored colour standard of this daemon's data directory by name
+        (:func:`gonio.result_colour.stored_standard` in its ``standards/``): its colour report
+        and warnings. Raises :class:`NotFound` for an unknown name, ``ColourError`` for a file
+        that cannot be read as a standard."""
+        from gonio.result_colour import STANDARDS_DIR, UnknownStandard, stored_standard
+
+        try:
+            return stored_standard(self.data_dir / STANDARDS_DIR, name)
+        except UnknownStandard as exc:
+            raise NotFound(str(exc)) from None
+
     def preview_png(self, job_id: int) -> bytes:
         """PNG preview of a job's table (:meth:`ResultViews.preview_png`)."""
         return self.results.preview_png(job_id)
