@@ -767,6 +767,11 @@ def _show_job(args: argparse.Namespace, store: Any) -> int:
         row = store.get_job(args.job_id)
     except NotFound as exc:
         raise UsageError(str(exc)) from None
+    live = _daemon_detail(args.db, row.id)
+    if live is not None:
+        # A daemon runs this store: its answer has what only it knows (the live ETA, the
+        # activity, the basis build), from the same JobDetail.from_row.
+        return _print_detail(args, row, live, None)
     queued = row.state.value == "queued"
     max_angles = None
     if row.kind == "adaptive":
@@ -781,7 +786,13 @@ def _show_job(args: argparse.Namespace, store: Any) -> int:
         queue_position=store.queue_position(row.id) if queued else None,
         finishing=(finishing_estimate(store.list_jobs(["completed"]))
                    if active and row.kind != "calibration" else None))
-    d = detail.model_dump(mode="json")
+    return _print_detail(args, row, detail.model_dump(mode="json"), args.db if active else None)
+
+
+def _print_detail(args: argparse.Namespace, row: Any, d: dict[str, Any],
+                  interrupted_db: Path | None) -> int:
+    """Print a job's detail ``d`` (as JSON with --json), with ``result_file``, and when
+    ``interrupted_db`` is given the note on active jobs no process runs."""
     if row.result_path:
         # The store's path is relative to the data directory (docs/engine.md).
         data_dir = args.data_dir if args.data_dir is not None else args.db.resolve().parent
@@ -791,10 +802,36 @@ def _show_job(args: argparse.Namespace, store: Any) -> int:
         return 0
     for line in _detail_lines(d):
         print(line)
-    note = _interrupted_note(args.db, [row]) if active else None
+    note = _interrupted_note(interrupted_db, [row]) if interrupted_db is not None else None
     if note is not None:
         print(note)
     return 0
+
+
+def _daemon_detail(db: Path, job_id: int) -> dict[str, Any] | None:
+    """``GET /api/v1/jobs/{job_id}`` of the daemon that runs jobs from ``db`` (the address
+    it records in the store's lock, :func:`gonio.locks.advertise_url`); None when no daemon
+    holds the store (or a ``gonio scan`` does) or it does not answer."""
+    from gonio.cli.daemon_client import DaemonClient
+    from gonio.locks import LockBusy, claim_store
+
+    try:
+        claim_store(db).release()
+        return None
+    except LockBusy as exc:
+        url = exc.holder.get("url")
+    except OSError:
+        return None
+    if not isinstance(url, str) or not url:
+        return None
+    try:
+        with DaemonClient(url, timeout_s=10.0) as client:
+            got = client.request("GET", f"/api/v1/jobs/{job_id}")
+    except (UsageError, OSError) as exc:
+        print(f"note: the daemon at {url} did not answer ({exc}); the job as stored:",
+              file=sys.stderr)
+        return None
+    return got if isinstance(got, dict) else None
 
 
 def _detail_lines(d: dict[str, Any]) -> list[str]:
