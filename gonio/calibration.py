@@ -8,9 +8,11 @@ solid angle and the cosine foreshortening of each fixed pair into one number per
 which is what :class:`gonio.config.PairFactor` stores.
 
 Calibrate at the exposure the scans use: sensors are not assumed to scale linearly with
-exposure time. Readings a sensor took in a lower gain range (auto-ranging, docs/engine.md) are
-divided by that range's relative sensitivity first (:func:`counts`), so one factor serves every
-range. Without any calibration the values stay in sensor units (factor 1), and the result file
+exposure time, so factors are never rescaled and a scan at another exposure than the
+calibration in effect is refused (:meth:`Calibration.check_exposure`). Readings a sensor took
+in a lower gain range (auto-ranging, docs/engine.md) are divided by that range's relative
+sensitivity first (:func:`counts`), so one factor serves every range. Without any calibration
+the values stay in sensor units (factor 1), and the result file
 says so.
 """
 
@@ -41,6 +43,11 @@ class CalibrationError(ValueError):
 class PartialCalibration(CalibrationError):
     """A calibration has factors for some of a plan's pairs but not all
     (:meth:`Calibration.check_covers`)."""
+
+
+class ExposureMismatch(CalibrationError):
+    """A scan reads at another exposure than the calibration in effect was measured at
+    (:meth:`Calibration.check_exposure`)."""
 
 
 class PairCalibration(BaseModel):
@@ -156,6 +163,29 @@ class Calibration(BaseModel):
                 f"of the {len(pairs)} pairs of {what}: {names}. Run a calibration job that "
                 "measures them (a white reference on the stage), or measure only calibrated pairs"
             )
+
+    def check_exposure(self, exposure_s: float, what: str = "the plan") -> None:
+        """Refuse a scan at ``exposure_s`` (seconds) under factors measured at another
+        exposure: counts are not rescaled between exposure times (sensors need not be linear
+        in exposure), so its values in 1/sr would be off by about the ratio. No factors, or
+        no recorded exposure (an older calibration file), accept every exposure.
+
+        Raises
+        ------
+        ExposureMismatch
+            Naming both exposures and how to calibrate at the plan's.
+        """
+        if not self.measured_at_another_exposure(exposure_s) or self.exposure_s is None:
+            return
+        raise ExposureMismatch(
+            f"{what} reads at exposure {exposure_s:g} s, but the calibration in effect "
+            f"({self.source}) was measured at {self.exposure_s:g} s; counts are not rescaled "
+            f"between exposures (sensors are not assumed linear in exposure time), so its "
+            f"values would be off by about {exposure_s / self.exposure_s:.3g} times. Scan at "
+            f"{self.exposure_s:g} s, or calibrate at {exposure_s:g} s first: a calibration "
+            f"job with exposure {exposure_s:g} s and the white reference on the stage (gonio "
+            f"scan --white-reference ALBEDO --exposure {exposure_s:g}, or the page's "
+            "calibration)")
 
 
 REFERENCE_TOLERANCE = 0.10
@@ -627,7 +657,8 @@ def exposure_warning(cal: Calibration, exposure_s: float) -> str | None:
     return (f"exposure: the calibration in effect ({cal.source}) was measured at "
             f"{cal.exposure_s:g} s and this scan reads at {exposure_s:g} s; counts are not "
             f"rescaled between exposures, so its values in 1/sr would be off by about "
-            f"{exposure_s / cal.exposure_s:.3g} times: scan at {cal.exposure_s:g} s, or "
+            f"{exposure_s / cal.exposure_s:.3g} times, and such a scan is refused: scan at "
+            f"{cal.exposure_s:g} s, or "
             f"calibrate at {exposure_s:g} s first")
 
 

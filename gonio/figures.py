@@ -135,10 +135,14 @@ def render_inputs(paths: Sequence[str | os.PathLike[str] | ResultFile],
 # --------------------------------------------------------------------------- the error number
 def local_prior_text(metrics: dict[str, Any]) -> str | None:
     """The sentence for a joint fit that leaned on a folded-in table's shape (the metrics or
-    settings' ``local_prior`` and ``local_prior_gain``; docs/science.md 7.2.3), or ``None``."""
+    settings' ``local_prior`` and ``local_prior_gain``; docs/science.md 7.2.3), or ``None``;
+    the result's ``local_prior_own`` when that table is the specimen's own earlier result."""
     name = metrics.get("local_prior")
     if not name:
         return None
+    own = metrics.get("local_prior_own")
+    if own:
+        return str(own)  # the specimen's own earlier result (gonio.finishing.own_result_prior)
     gain = metrics.get("local_prior_gain")
     how = f" by {gain:.1f} in log likelihood" if isinstance(gain, int | float) else ""
     return (f"prior: leaned on {name} where no pair looks (a measured or imported material of "

@@ -268,6 +268,11 @@ def finish_job(job_id: int, plan: AnyPlan | CheckedPlan, how: Finishing) -> dict
         metrics["local_prior"] = str(rec.settings["local_prior"])
         provenance["local_prior"] = str(rec.settings["local_prior"])
         metrics["local_prior_gain"] = rec.settings["local_prior_gain"]
+        own = own_result_prior(str(rec.settings["local_prior"]), job.specimen)
+        if own is not None:
+            metrics["local_prior_own"] = own
+            provenance["local_prior_own"] = own
+            log.info("job %d: %s", job_id, own)
     if rec.misfit is not None:
         # How far the fit misses its own readings against their noise; when the basis cannot
         # hold them, predicted_log_rmse was widened and the result says why (science.md 7.1.1).
@@ -622,6 +627,39 @@ def exposure_mismatch(cal: Calibration, readings: list[Any]) -> str | None:
     return (f"the calibration was measured at exposure {cal.exposure_s:g} s, this scan at "
             f"{', '.join(f'{t:g}' for t in used)} s; its values are off by about the ratio. "
             "Calibrate at the scan's exposure")
+
+
+def own_result_prior(name: str, specimen: str) -> str | None:
+    """What a result must say when its joint fit leaned on the local prior of a user-library
+    table that is this specimen's own earlier gonio result (exported with ``gonio export
+    --format table``, then ``gonio library import``; docs/science.md 7.2.3): where no pair
+    looks the reconstruction repeats that earlier scan rather than measuring, and its
+    ``predicted_log_rmse`` is not independent of it. None for any other prior (a shipped
+    measured material, another lab measurement, another specimen's result) or an unnamed
+    specimen.
+
+    Parameters
+    ----------
+    name : the local prior's material (the basis' ``local_names``; a user table's file stem)
+    specimen : the job's specimen name
+    """
+    from gonio.brdf.materials.measured import user_table_provenance
+    from gonio.export.metadata import specimen_name
+
+    prov = user_table_provenance(name)
+    if prov is None or prov.get("job_id") is None:
+        return None  # not an export of a gonio result
+    theirs, named = specimen_name(prov.get("specimen"))
+    ours, ours_named = specimen_name(specimen)
+    if not (named and ours_named) or theirs.strip().casefold() != ours.strip().casefold():
+        return None
+    source = prov.get("source")
+    scan = f"{source} scan" if isinstance(source, str) and source else "scan"
+    return (f"prior: the fit leaned on {name}, this specimen's own earlier result ({scan}, "
+            f"job {prov['job_id']}) imported into the user library ({prov['file']}): where no "
+            "pair looks this reconstruction repeats that one instead of measuring, and "
+            "predicted_log_rmse is not independent of it; for an independent result move the "
+            "file out of the library and rebuild this result (gonio jobs rebuild)")
 
 
 def _finite_or_none(x: float) -> float | None:

@@ -31,6 +31,7 @@ import json
 import os
 import re
 import socket
+import stat
 import sys
 import tempfile
 import threading
@@ -137,9 +138,13 @@ def canonical_host(host: str) -> str:
 def endpoint_key(endpoint: str) -> str:
     """A file-name-safe key for a device endpoint; two names of one device share it.
 
-    ``/dev/gonio-zaber`` (a udev symlink) and ``/dev/ttyUSB0`` resolve to the same device;
-    ``socket://host:port`` and a Modbus ``tcp://host:port`` are the same TCP endpoint, and so
-    are ``tcp://localhost:502`` and ``tcp://127.0.0.1:502`` (:func:`canonical_host`).
+    A path that is a device node is keyed by the device itself (character or block, major and
+    minor number: its ``st_rdev``), not by a name: ``/dev/gonio-zaber`` (a udev symlink),
+    ``/dev/serial/by-id/...``, ``/dev/fd/N``, a second node made with ``mknod`` (a container's
+    own ``/dev``) and ``/dev/ttyUSB0`` are one device. Another path (a device not plugged in
+    yet, a file) is keyed by its real path (symlinks resolved). ``socket://host:port`` and a
+    Modbus ``tcp://host:port`` are the same TCP endpoint, and so are ``tcp://localhost:502``
+    and ``tcp://127.0.0.1:502`` (:func:`canonical_host`).
     """
     text = endpoint.strip()
     m = re.match(r"^(?:socket|tcp|rfc2217)://(\[[^]]+\]|[^/?#:]*)(?::(\d+))?", text)
@@ -147,7 +152,26 @@ def endpoint_key(endpoint: str) -> str:
         text = f"tcp-{canonical_host(m.group(1))}-{m.group(2) or ''}"
     elif text.startswith("/"):
         text = os.path.realpath(text)
+        device = _device_identity(text)
+        if device is not None:
+            return device
     return re.sub(r"[^A-Za-z0-9_.-]+", "-", text).strip("-") or "endpoint"
+
+
+def _device_identity(path: str) -> str | None:
+    """``chr-MAJOR-MINOR`` (or ``blk-...``) of the device node at ``path``; None when it is
+    not one or cannot be looked at."""
+    try:
+        st = os.stat(path)
+    except OSError:
+        return None
+    if stat.S_ISCHR(st.st_mode):
+        kind = "chr"
+    elif stat.S_ISBLK(st.st_mode):
+        kind = "blk"
+    else:
+        return None
+    return f"{kind}-{os.major(st.st_rdev)}-{os.minor(st.st_rdev)}"
 
 
 RIG_ADVICE = ("one program drives a rig at a time; stop that process, or act through its API "

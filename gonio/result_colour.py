@@ -19,6 +19,7 @@ from __future__ import annotations
 import csv
 import io
 import os
+import re
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -92,9 +93,10 @@ def result_report(
 #: The result provenance's warnings about the reconstruction, in the order exports list them
 #: (``gonio.export.metadata.RECONSTRUCTION_WARNINGS``, a layer above this one; a test keeps
 #: the two equal): the calibration measured at another exposure, the arc, a table outside
-#: physical bounds, a predicted error far from the design's, a basis that does not fit.
+#: physical bounds, a predicted error far from the design's, a basis that does not fit, a
+#: prior that is the specimen's own earlier result (gonio.finishing.own_result_prior).
 RECONSTRUCTION_WARNINGS = ("calibration_warning", "arc_warning", "physical_bounds",
-                           "design_gap", "basis_misfit")
+                           "design_gap", "basis_misfit", "local_prior_own")
 
 
 def colour_warnings(res: ResultFile, role: str = "") -> list[str]:
@@ -242,6 +244,57 @@ def table_for_fits(table: BRDFTable, source: Mapping[str, Any],
 
 
 # ---------------------------------------------------------------------------- stored standards
+STANDARDS_DIR = "standards"
+"""The folder of a daemon's data directory that holds its stored colour standards: colour CSVs
+(``gonio colour RESULT.h5 --csv NAME.csv``, or edited in a spreadsheet) that
+``GET /api/v1/jobs/{id}/colour?against=NAME`` compares with (:func:`stored_standard`)."""
+
+_STANDARD_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._ -]{0,99}$")
+
+
+class UnknownStandard(LookupError):
+    """No stored standard of that name (:func:`stored_standard`); the message names the
+    folder and the standards it holds."""
+
+
+def standard_names(folder: str | os.PathLike[str]) -> list[str]:
+    """The stored standards of ``folder`` (a data directory's :data:`STANDARDS_DIR`): the
+    stems of its ``.csv`` files, sorted; empty when it does not exist."""
+    try:
+        return sorted(p.stem for p in Path(folder).iterdir()
+                      if p.suffix.lower() == ".csv" and p.is_file())
+    except OSError:
+        return []
+
+
+def stored_standard(folder: str | os.PathLike[str],
+                    name: str) -> tuple[ColourReport, list[str]]:
+    """A stored standard by name: ``folder/NAME.csv`` read by :func:`read_standard` (its
+    colour report and warnings). ``name`` may end in ``.csv``; it names a file of ``folder``
+    only (letters, digits, ``. _ -`` and spaces, no path), so a request cannot name any
+    other file.
+
+    Raises
+    ------
+    UnknownStandard
+        No such file (or a name that cannot be one), naming ``folder`` and what it holds.
+    ColourError
+        The file cannot be read as a standard (:func:`read_standard`'s reasons).
+    """
+    folder = Path(folder)
+    stem = name[:-4] if name.lower().endswith(".csv") else name
+    path = folder / f"{stem}.csv"
+    if not _STANDARD_NAME.match(stem) or not path.is_file():
+        held = standard_names(folder)
+        have = (f"it holds {', '.join(held)}" if held else "it holds none")
+        raise UnknownStandard(
+            f"no stored colour standard {name!r} in {folder} ({have}); a stored standard is "
+            "a colour CSV there (gonio colour RESULT.h5 --csv FILE.csv), named without .csv; "
+            "a job's result is named by its id")
+    report, said = read_standard(path)
+    return report, said
+
+
 def read_standard_csv(path: str | os.PathLike[str]) -> ColourReport:
     """A standard's colour from a colour CSV (:func:`read_standard`, without its warnings)."""
     return read_standard(path)[0]

@@ -24,6 +24,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import math
 import threading
 import time
 from collections.abc import AsyncIterator, Callable, Coroutine
@@ -78,7 +79,7 @@ from gonio.service_models import (
 )
 from gonio.stage_control import StageControl
 from gonio.store import EventRow, JobRow, JobStore, ReadingRow
-from gonio.timeleft import FinishingEstimate, finishing_estimate, time_left
+from gonio.timeleft import FinishingEstimate, finishing_estimate
 from gonio.worker import Worker
 
 if TYPE_CHECKING:  # the design numerics load on the first design, not with the service
@@ -412,6 +413,7 @@ class GonioService:
                              self.desc)
         if plan.finishing != "calibration":
             self._check_calibration_covers(checked)
+            self._check_calibration_exposure(plan)
         full = self.disk_full
         if full is not None:
             # Queued now, it would measure for minutes and then fail writing its result.
@@ -457,6 +459,26 @@ class GonioService:
         try:
             self.calibration().check_covers(checked.pairs, "this plan")
         except PartialCalibration as exc:
+            raise PlanError(str(exc)) from None
+
+    def _check_calibration_exposure(self, plan: AnyPlan) -> None:
+        """Refuse a scan at another exposure than the calibration in effect
+        (:meth:`gonio.calibration.Calibration.check_exposure`): raises :class:`PlanError`
+        naming both exposures. A calibration job at the plan's exposure queued or under way
+        lets it be queued behind it: the worker checks again when the scan starts."""
+        from gonio.calibration import ExposureMismatch
+
+        exposure_s = plan.exposure.exposure_s
+        try:
+            self.calibration().check_exposure(exposure_s, "this plan")
+        except ExposureMismatch as exc:
+            for row in self.store.list_jobs([JobState.QUEUED.value,
+                                             *(st.value for st in ACTIVE_STATES)]):
+                if row.kind != "calibration":
+                    continue
+                at = (row.plan.get("exposure") or {}).get("exposure_s")
+                if isinstance(at, int | float) and math.isclose(at, exposure_s, rel_tol=1e-6):
+                    return
             raise PlanError(str(exc)) from None
 
     def list_jobs(self, state: str | None = None) -> list[JobInfo]:
@@ -508,45 +530,27 @@ class GonioService:
         engine's last estimate (updated at each checkpoint), not recomputed.
         """
         row = self._row(job_id)
-        eta = eta_max = None
-        p = self.worker.progress(job_id)
-        if p is not None:
-            # Counted down while measuring; frozen while paused or suspended.
-            eta = p.eta_now() if row.state is JobState.RUNNING else p.eta_s
-            if p.eta_max_s is not None:
-                eta_max = max(p.eta_max_s - (p.eta_s or 0.0) + (eta or 0.0), eta or 0.0)
-        activity = fraction = None
+        activity = None
         if self.worker.current_job == job_id:
             # Reconstructing, or an adaptive job loading its basis before the first reading.
-            report = self.worker.activity_report()
-            if report is not None:
-                activity, fraction = report
-        qpos = self.store.queue_position(job_id) if row.state is JobState.QUEUED else None
-        wait = self._queue_wait() if row.state is JobState.QUEUED else None
-        base = JobInfo.from_row(row, self._max_angles(row), wait).model_dump()
-        times: dict[str, Any] = {}
-        measuring = row.state in (JobState.RUNNING, JobState.PAUSED, JobState.SUSPENDED)
-        if (measuring or row.state is JobState.RECONSTRUCTING) and row.kind != "calibration":
-            # The whole job's time, not only the measuring's (docs/api.md "Time").
+            activity = self.worker.activity_report()
+        queued = row.state is JobState.QUEUED
+        active = row.state in (JobState.RUNNING, JobState.PAUSED, JobState.SUSPENDED,
+                               JobState.RECONSTRUCTING)
+        est = build = finishing_for = None
+        if active and row.kind != "calibration":
             est = self._finishing_estimate()
             build = BASIS_BUILD_S if self.basis.build_needed() else None
             asym = self._asymmetric_build_due(row)
             if asym is not None:  # the test found the specimen asymmetric (science.md 7.4)
                 build = (build or 0.0) + asym
-            finishing_for = None
-            if row.state is JobState.RECONSTRUCTING:
-                # Counted from the finishing's start, not from its latest activity (the
-                # switch from the basis to the reconstruction must not add time back).
-                finishing_for = (self.worker.finishing_seconds()
-                                 if self.worker.current_job == job_id else None) or 0.0
-            times = {"basis_build_s": build, "reconstruction_s": est.seconds,
-                     "reconstruction_estimate": est.source,
-                     "time_left_s": time_left(eta, build, est.seconds, finishing_for)}
-        return JobDetail(**base, plan=row.plan, eta_s=eta, eta_max_s=eta_max,
-                         activity=activity, activity_fraction=fraction,
-                         round=p.round if p is not None else None, **times,
-                         queue_position=qpos, result_path=row.result_path, result=row.summary,
-                         rig=row.rig)
+            if row.state is JobState.RECONSTRUCTING and self.worker.current_job == job_id:
+                finishing_for = self.worker.finishing_seconds()
+        return JobDetail.from_row(
+            row, self._max_angles(row), self._queue_wait() if queued else None,
+            queue_position=self.store.queue_position(job_id) if queued else None,
+            progress=self.worker.progress(job_id), activity=activity, finishing=est,
+            basis_build_s=build, finishing_for_s=finishing_for)
 
     def _asymmetric_build_due(self, row: JobRow) -> float | None:
         """Seconds ``row``'s finishing will wait for the basis for specimens without twofold
@@ -748,6 +752,18 @@ class GonioService:
     def reconstruction(self, job_id: int) -> ResultFile:
         """A job's result file holding a BRDF (:meth:`ResultViews.reconstruction`)."""
         return self.results.reconstruction(job_id)
+
+    def colour_standard(self, name: str) -> tuple[Any, list[str]]:
+        """A stored colour standard of this daemon's data directory by name
+        (:func:`gonio.result_colour.stored_standard` in its ``standards/``): its colour report
+        and warnings. Raises :class:`NotFound` for an unknown name, ``ColourError`` for a file
+        that cannot be read as a standard."""
+        from gonio.result_colour import STANDARDS_DIR, UnknownStandard, stored_standard
+
+        try:
+            return stored_standard(self.data_dir / STANDARDS_DIR, name)
+        except UnknownStandard as exc:
+            raise NotFound(str(exc)) from None
 
     def preview_png(self, job_id: int) -> bytes:
         """PNG preview of a job's table (:meth:`ResultViews.preview_png`)."""

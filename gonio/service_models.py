@@ -8,7 +8,7 @@ become the API schema, ``gonio/api/openapi.json``). Errors are typed so the API 
 
 from __future__ import annotations
 
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 from pydantic import BaseModel, Field
 
@@ -17,6 +17,10 @@ from gonio.jobstates import JobState
 from gonio.plans.models import Plan
 from gonio.store import EventRow, JobRow, JobStore
 from gonio.store import NotFound as StoreNotFound
+from gonio.timeleft import FinishingEstimate, time_left
+
+if TYPE_CHECKING:
+    from gonio.engine import Progress
 
 __all__ = [
     "Conflict",
@@ -133,6 +137,57 @@ class JobDetail(JobInfo):
     result_path: str | None
     result: dict[str, Any] | None = Field(description="summary: metrics, readings, paths")
     rig: dict[str, Any]
+
+    @classmethod
+    def from_row(cls, row: JobRow, max_angles: int | None = None,
+                 waiting: str | None = None, *, queue_position: int | None = None,
+                 progress: Progress | None = None,
+                 activity: tuple[str, float | None] | None = None,
+                 finishing: FinishingEstimate | None = None,
+                 basis_build_s: float | None = None,
+                 finishing_for_s: float | None = None) -> JobDetail:
+        """One job's status from its stored row and what is known of it live: the one
+        assembly of ``GET /api/v1/jobs/{id}`` (:meth:`gonio.service.GonioService.get_job`)
+        and ``gonio jobs show`` (which has no live parts when no daemon runs the store).
+
+        Parameters
+        ----------
+        row : the stored job.
+        max_angles, waiting : as :meth:`JobInfo.from_row` (``waiting`` is kept for queued
+            jobs only).
+        queue_position : the store's queue position of a queued job (None otherwise).
+        progress : the engine's progress while this job measures, or None.
+        activity : what the job does beyond measuring and the fraction done, or None.
+        finishing : the store's finishing estimate (:func:`gonio.timeleft.finishing_estimate`);
+            None leaves the time fields of an active job null.
+        basis_build_s : the basis build the job's finishing waits for, seconds, or None.
+        finishing_for_s : while the job reconstructs, how long it has finished so far.
+        """
+        eta = eta_max = None
+        if progress is not None:
+            # Counted down while measuring; frozen while paused or suspended.
+            eta = progress.eta_now() if row.state is JobState.RUNNING else progress.eta_s
+            if progress.eta_max_s is not None:
+                eta_max = max(progress.eta_max_s - (progress.eta_s or 0.0) + (eta or 0.0),
+                              eta or 0.0)
+        base = JobInfo.from_row(row, max_angles, waiting).model_dump()
+        times: dict[str, Any] = {}
+        measuring = row.state in (JobState.RUNNING, JobState.PAUSED, JobState.SUSPENDED)
+        if (finishing is not None and row.kind != "calibration"
+                and (measuring or row.state is JobState.RECONSTRUCTING)):
+            # The whole job's time, not only the measuring's (docs/api.md "Time"). Counted
+            # from the finishing's start, not from its latest activity.
+            elapsed = ((finishing_for_s or 0.0) if row.state is JobState.RECONSTRUCTING
+                       else None)
+            times = {"basis_build_s": basis_build_s, "reconstruction_s": finishing.seconds,
+                     "reconstruction_estimate": finishing.source,
+                     "time_left_s": time_left(eta, basis_build_s, finishing.seconds, elapsed)}
+        act, fraction = activity if activity is not None else (None, None)
+        return cls(**base, plan=row.plan, eta_s=eta, eta_max_s=eta_max,
+                   activity=act, activity_fraction=fraction,
+                   round=progress.round if progress is not None else None, **times,
+                   queue_position=queue_position if row.state is JobState.QUEUED else None,
+                   result_path=row.result_path, result=row.summary, rig=row.rig)
 
 
 class Event(BaseModel):

@@ -432,10 +432,12 @@ class Worker:
         plan = checked.plan
         if job.state is not JobState.RECONSTRUCTING and plan.finishing != "calibration":
             # Checked at submission too; the calibration may have changed since (a new
-            # calibration job, a file edited by hand). A result calibrated in part, or with a
-            # damaged file, is refused before anything moves.
+            # calibration job, a file edited by hand). A result calibrated in part, at another
+            # exposure, or with a damaged file, is refused before anything moves.
             try:
-                self.calibration().check_covers(checked.pairs, f"job {job.id}")
+                cal = self.calibration()
+                cal.check_covers(checked.pairs, f"job {job.id}")
+                cal.check_exposure(plan.exposure.exposure_s, f"job {job.id}")
             except CalibrationError as exc:
                 return self._fail(job, f"not started: {exc}", plan)
         basis: Basis | None = None  # loaded before measuring when the plan needs it

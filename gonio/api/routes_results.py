@@ -246,8 +246,10 @@ async def colour(
     azimuth: Annotated[list[float] | None, Query(
         max_length=36, description="specimen azimuths of the plane of incidence, degrees "
         "(repeat; default 0)")] = None,
-    against: int | None = Query(None, ge=1, le=2**53, description="a standard's job id: "
-                                "CIEDE2000 of this job against it per geometry"),
+    against: str | None = Query(
+        None, min_length=1, max_length=104, description="the standard: a job id, or the name "
+        "of a stored standard (a colour CSV in the data directory's standards/ folder, named "
+        "without .csv; docs/colour.md): CIEDE2000 of this job against it per geometry"),
     format: Annotated[ColourFormat, Query(description="json, or csv: the colour table (or "
                                           "with against, the differences)")] = "json",
 ) -> Any:
@@ -270,11 +272,19 @@ async def colour(
     report = await asyncio.to_thread(result_report, res, cond, instruments, azimuths)
     warnings = colour_warnings(res)
     diff = None
-    if against is not None:
-        std = await asyncio.to_thread(service.reconstruction, against)
+    standard: int | str | None = against
+    if against is not None and against.isascii() and against.isdigit():
+        standard = int(against)
+        if not 1 <= standard <= 2**53:
+            raise ColourError(f"against={against}: a job id is 1 to 2^53")
+        std = await asyncio.to_thread(service.reconstruction, standard)
         diff = compare(report, await asyncio.to_thread(
             result_report, std, cond, instruments, azimuths))
-        warnings += colour_warnings(std, f"standard (job {against})")
+        warnings += colour_warnings(std, f"standard (job {standard})")
+    elif against is not None:
+        std_report, said = await asyncio.to_thread(service.colour_standard, against)
+        diff = compare(report, std_report)
+        warnings += [f"standard ({std_report.name}): {w}" for w in said]
     if format == "csv":
         text = (difference_csv(diff, warnings) if diff is not None
                 else report.csv(warnings))
@@ -288,5 +298,5 @@ async def colour(
     if note is not None:
         out["notes"] = [note]
     if diff is not None:
-        out["difference"] = {"against": against, **diff.as_dict()}
+        out["difference"] = {"against": standard, **diff.as_dict()}
     return out

@@ -117,7 +117,8 @@ def register(subparsers: Any) -> None:
 
     j = subparsers.add_parser(
         "jobs", help="list, show or abort jobs in a job store, or rebuild a job's result file",
-        description="list: the jobs; show ID: one job as JSON; abort ID: end one left "
+        description="list: the jobs; show ID: one job as the API's GET /api/v1/jobs/ID has it "
+        "(--json: as JSON); abort ID: end one left "
         "unfinished (e.g. a foreground scan interrupted by Ctrl-C); rebuild ID: write a "
         "completed job's result file again from the readings the store holds (when the file "
         "is missing or damaged), with the calibration the job was finished with; a job that "
@@ -345,10 +346,8 @@ async def _run_owned(args: argparse.Namespace, checked: Any, config: Any, sim: A
             if sim is None and plan.kind != "calibration":
                 _check_calibration(args, checked.pairs, config, service.calibration(),
                                    data_dir)
-            if plan.kind != "calibration":
-                off = exposure_warning(service.calibration(), exposure_s)
-                if off is not None:
-                    print(f"warning: {off}", file=sys.stderr)
+            # A scan at another exposure than the calibration in effect is refused by
+            # service.submit below, naming both exposures (Calibration.check_exposure).
             # What the submission records as the job's arc warning, said here too (a job whose
             # basis is known only later says it through the progress bar's events).
             for warning in service.dry_run(checked).warnings:
@@ -708,7 +707,7 @@ def _progress(service: Any, job_id: int, disabled: bool) -> Any:
 
 
 def _jobs(args: argparse.Namespace) -> int:
-    from gonio.store import JobStore, NotFound
+    from gonio.store import JobStore
 
     if args.db.is_dir():
         # The data directory that gonio scan and gonio serve print, given for its store.
@@ -726,19 +725,7 @@ def _jobs(args: argparse.Namespace) -> int:
     if args.action == "rebuild":
         return _rebuild(args, store)
     if args.action == "show":
-        if args.job_id is None:
-            raise UsageError("jobs show needs a job id, e.g. 'gonio jobs show 3 --db jobs.sqlite'")
-        try:
-            row = store.get_job(args.job_id)
-        except NotFound as exc:
-            raise UsageError(str(exc)) from None
-        d = {k: (v.value if hasattr(v, "value") else v) for k, v in vars(row).items()}
-        if row.result_path:
-            # The store's path is relative to the data directory (docs/engine.md).
-            data_dir = args.data_dir if args.data_dir is not None else args.db.resolve().parent
-            d["result_file"] = str((data_dir / row.result_path).resolve())
-        print(json.dumps(d, indent=2, default=str))
-        return 0
+        return _show_job(args, store)
     rows = store.list_jobs()
     waiting = _queue_wait(store, args.db, rows)
     if args.json:
@@ -759,6 +746,127 @@ def _jobs(args: argparse.Namespace) -> int:
     if note is not None:
         print(note)
     return 0
+
+
+def _show_job(args: argparse.Namespace, store: Any) -> int:
+    """``gonio jobs show ID``: the job as ``GET /api/v1/jobs/{id}`` has it
+    (:meth:`gonio.service_models.JobDetail.from_row`, the one assembly of a job's status),
+    from the store: its queue position and why it waits, the angles an adaptive plan may
+    measure, the finishing estimate of an active job. The engine's live ETA is the daemon's
+    alone (null here); plus ``result_file``, the result's path on this machine."""
+    from gonio.plans.dryrun import dry_run
+    from gonio.plans.models import PlanError, parse_stored_plan
+    from gonio.rigdescription import RigDescription
+    from gonio.service_models import JobDetail
+    from gonio.store import NotFound
+    from gonio.timeleft import finishing_estimate
+
+    if args.job_id is None:
+        raise UsageError("jobs show needs a job id, e.g. 'gonio jobs show 3 --db jobs.sqlite'")
+    try:
+        row = store.get_job(args.job_id)
+    except NotFound as exc:
+        raise UsageError(str(exc)) from None
+    live = _daemon_detail(args.db, row.id)
+    if live is not None:
+        # A daemon runs this store: its answer has what only it knows (the live ETA, the
+        # activity, the basis build), from the same JobDetail.from_row.
+        return _print_detail(args, row, live, None)
+    queued = row.state.value == "queued"
+    max_angles = None
+    if row.kind == "adaptive":
+        try:
+            max_angles = dry_run(parse_stored_plan(row.plan),
+                                 RigDescription.model_validate(row.rig)).max_angles
+        except (PlanError, ValueError):
+            max_angles = None  # a plan or rig the code no longer reads: done/total only
+    active = row.state.value in ("running", "paused", "suspended", "reconstructing")
+    detail = JobDetail.from_row(
+        row, max_angles, _queue_wait(store, args.db, store.list_jobs()) if queued else None,
+        queue_position=store.queue_position(row.id) if queued else None,
+        finishing=(finishing_estimate(store.list_jobs(["completed"]))
+                   if active and row.kind != "calibration" else None))
+    return _print_detail(args, row, detail.model_dump(mode="json"), args.db if active else None)
+
+
+def _print_detail(args: argparse.Namespace, row: Any, d: dict[str, Any],
+                  interrupted_db: Path | None) -> int:
+    """Print a job's detail ``d`` (as JSON with --json), with ``result_file``, and when
+    ``interrupted_db`` is given the note on active jobs no process runs."""
+    if row.result_path:
+        # The store's path is relative to the data directory (docs/engine.md).
+        data_dir = args.data_dir if args.data_dir is not None else args.db.resolve().parent
+        d["result_file"] = str((data_dir / row.result_path).resolve())
+    if args.json:
+        print(json.dumps(d, indent=2))
+        return 0
+    for line in _detail_lines(d):
+        print(line)
+    note = _interrupted_note(interrupted_db, [row]) if interrupted_db is not None else None
+    if note is not None:
+        print(note)
+    return 0
+
+
+def _daemon_detail(db: Path, job_id: int) -> dict[str, Any] | None:
+    """``GET /api/v1/jobs/{job_id}`` of the daemon that runs jobs from ``db`` (the address
+    it records in the store's lock, :func:`gonio.locks.advertise_url`); None when no daemon
+    holds the store (or a ``gonio scan`` does) or it does not answer."""
+    from gonio.cli.daemon_client import DaemonClient
+    from gonio.locks import LockBusy, claim_store
+
+    try:
+        claim_store(db).release()
+        return None
+    except LockBusy as exc:
+        url = exc.holder.get("url")
+    except OSError:
+        return None
+    if not isinstance(url, str) or not url:
+        return None
+    try:
+        with DaemonClient(url, timeout_s=10.0) as client:
+            got = client.request("GET", f"/api/v1/jobs/{job_id}")
+    except (UsageError, OSError) as exc:
+        print(f"note: the daemon at {url} did not answer ({exc}); the job as stored:",
+              file=sys.stderr)
+        return None
+    return got if isinstance(got, dict) else None
+
+
+def _detail_lines(d: dict[str, Any]) -> list[str]:
+    """A job's detail (``GET /api/v1/jobs/{id}``'s fields) as lines for a terminal."""
+    def when(t: float | None) -> str:
+        return time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(t)) if t else "-"
+
+    angles = f"{d['done_angles']}/{d['total_angles']} angles"
+    if d.get("max_angles") is not None:
+        angles += f" (at most {d['max_angles']})"
+    lines = [f"job {d['id']}: {d['kind']} '{d['specimen']}', {d['state']}, {angles}, "
+             f"priority {d['priority']}",
+             f"  created {when(d['created'])}, started {when(d['started'])}, "
+             f"finished {when(d['finished'])}"]
+    if d.get("queue_position") is not None:
+        lines.append(f"  queue position: {d['queue_position']} (0 = next)")
+    if d.get("waiting"):
+        lines.append(f"  waiting: {d['waiting']}")
+    if d.get("reason"):
+        lines.append(f"  reason: {d['reason']}")
+    if d.get("activity"):
+        lines.append(f"  activity: {d['activity']}")
+    if d.get("eta_s") is not None:
+        lines.append(f"  measuring left: {d['eta_s']:.0f} s")
+    if d.get("reconstruction_s") is not None:
+        lines.append(f"  finishing: about {d['reconstruction_s']:.0f} s "
+                     f"({d['reconstruction_estimate']})")
+    if d.get("basis_build_s") is not None:
+        lines.append(f"  basis build first: about {d['basis_build_s']:.0f} s")
+    if d.get("time_left_s") is not None:
+        lines.append(f"  time left in all: about {d['time_left_s']:.0f} s")
+    if d.get("result_file"):
+        lines.append(f"  result: {d['result_file']}")
+    lines.append("  (--json: every field, as GET /api/v1/jobs/ID)")
+    return lines
 
 
 def _queue_wait(store: Any, db: Path, rows: list[Any]) -> str | None:

@@ -8,6 +8,7 @@ disturbed.
 
 from __future__ import annotations
 
+import json
 import signal
 import sys
 from collections.abc import Iterator
@@ -195,3 +196,33 @@ def test_a_key_from_gonio_keys_new_opens_the_daemon(sim: SimRig, tmp_path: Path)
     finally:
         daemon.stop()
     assert key not in daemon.text()  # logged by name only
+
+
+def test_gonio_jobs_show_of_a_store_a_daemon_runs_has_the_daemons_live_answer(
+    sim: SimRig, tmp_path: Path
+) -> None:
+    """What only the daemon knows of a measuring job (its ETA counted down by the engine)
+    was null in ``gonio jobs show``, which read the store: with a daemon running the store it
+    asks that daemon, at the address the store's lock records."""
+    data = tmp_path / "data"
+    daemon = _serve(sim, data)
+    try:
+        with daemon.client() as c:
+            plan = {"kind": "calibration", "reference_albedo": 0.99, "rotations": 36,
+                    "exposure": {"exposure_s": EXPOSURE_S, "light_settle_s": 0.0}}
+            job = c.post("/api/v1/jobs", json={"plan": plan}).json()["id"]
+            wait_for(lambda: c.get(f"/api/v1/jobs/{job}").json()["done_angles"] >= 1,
+                     what="the daemon's job to measure its first angle")
+            api = c.get(f"/api/v1/jobs/{job}").json()
+            shown = gonio(["jobs", "show", str(job), "--db", str(data / "gonio.sqlite"),
+                           "--json"])
+            text = gonio(["jobs", "show", str(job), "--db", str(data / "gonio.sqlite")])
+            c.post(f"/api/v1/jobs/{job}/abort")
+    finally:
+        daemon.stop()
+    assert shown.returncode == 0, shown.stderr
+    got = json.loads(shown.stdout)
+    assert api["eta_s"] is not None and got["eta_s"] is not None, (api, got)
+    assert got["state"] == "running" and got["done_angles"] >= api["done_angles"]
+    assert got.keys() == api.keys()
+    assert text.returncode == 0 and "measuring left:" in text.stdout, text.stdout

@@ -218,3 +218,68 @@ def test_a_job_of_an_older_gonio_rebuilt_without_its_result_file_says_why_it_is_
     calibration = rebuild_result(store, data, 1, BasisSupply(_no_basis))
     assert "design_comparison" not in calibration
     assert "design_comparison" not in read_result(data / "results" / "job-1.h5").provenance
+
+
+def test_a_scan_leaning_on_its_own_imported_export_says_so(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A result exported as a table and imported into the user library (gonio export
+    --format table; gonio library import) becomes a local prior of the default basis; the
+    next scan of the same specimen can lean on it where no pair looks, and its result then
+    rests on the earlier scan. The result says so (and its exports and colour carry it); a
+    scan of another specimen leaning on it does not. Which prior the joint fit picks is the
+    reconstruction's business (docs/science.md 7.2.3): here it is set to the imported table."""
+    import gonio.brdf.reconstruction.reconstruct as recon_module
+    from gonio.brdf.materials.imports import import_files
+    from gonio.export import export_result
+    from gonio.result_colour import colour_warnings
+    from tests.unit.test_worker import BASIS  # twofold symmetric: no other basis is built
+
+    monkeypatch.setenv("GONIO_LIBRARY_DIR", str(tmp_path / "library"))
+    svc = GonioService(JobStore(tmp_path / "d" / "gonio.sqlite"), MemRig(),
+                       data_dir=tmp_path / "d", basis=BasisSupply(lambda: BASIS))
+    svc.worker.fit_exports = False
+    leaned: list[str] = []
+    real = recon_module.reconstruct
+
+    def leaning(*args: object, **kwargs: object) -> object:
+        rec = real(*args, **kwargs)  # type: ignore[arg-type]
+        if leaned:
+            rec.settings.update(local_prior=leaned[0], local_prior_gain=7.5)
+        return rec
+
+    monkeypatch.setattr(recon_module, "reconstruct", leaning)
+
+    async def scan(specimen: str) -> int:
+        job = svc.submit(JobRequest(plan=UniformPlan(specimen=specimen, rotations=2,
+                                                     exposure=FAST))).id
+        async for ev in svc.subscribe(0, job_id=job):
+            if ev.type == "state" and ev.data["state"] in ("completed", "failed"):
+                break
+        assert svc.get_job(job).state.value == "completed", svc.get_job(job).reason
+        return job
+
+    async def day() -> tuple[int, int, int]:
+        await svc.start()
+        try:
+            first = await scan("green felt")
+            table = tmp_path / "green-felt.npz"
+            export_result(tmp_path / "d" / "results" / f"job-{first}.h5", "table", table)
+            (imported,) = import_files([table])
+            leaned.append(imported.stem)
+            return first, await scan("Green felt"), await scan("white paper")
+        finally:
+            await svc.stop()
+
+    first, again, other = asyncio.run(day())
+    imported = tmp_path / "library" / f"{leaned[0]}.npz"
+    res = read_result(tmp_path / "d" / "results" / f"job-{again}.h5")
+    said = res.provenance["local_prior_own"]
+    assert said.startswith(f"prior: the fit leaned on {imported.stem}, this specimen's own "
+                           f"earlier result (measured scan, job {first})"), said
+    assert "predicted_log_rmse is not independent of it" in said, said
+    assert str(imported) in said
+    assert svc.get_job(again).result["local_prior_own"] == said
+    assert said in colour_warnings(res)  # what the colour and every export carry
+    assert "local_prior_own" not in read_result(
+        tmp_path / "d" / "results" / f"job-{other}.h5").provenance

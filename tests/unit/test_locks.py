@@ -5,11 +5,19 @@ from __future__ import annotations
 import fcntl
 import json
 import os
+import stat
 from pathlib import Path
 
 import pytest
 
-from gonio.locks import FileLock, LockBusy, claim_endpoints, claim_store, endpoint_key
+from gonio.locks import (
+    FileLock,
+    LockBusy,
+    claim_endpoints,
+    claim_store,
+    endpoint_key,
+    endpoint_lock,
+)
 
 
 def _foreign_holder(path: Path, record: dict[str, object]) -> int:
@@ -76,6 +84,53 @@ def test_endpoint_keys_name_one_device_once(tmp_path: Path) -> None:
     assert endpoint_key("socket://10.0.0.5:55550") == endpoint_key("tcp://10.0.0.5:55550")
     assert endpoint_key("tcp://10.0.0.5:502") != endpoint_key("tcp://10.0.0.5:503")
     assert "/" not in endpoint_key("/dev/pts/7")
+
+
+def test_a_pty_is_one_endpoint_under_every_name_and_is_refused_through_another(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Two jobs must not open one serial device through two names: a real pty, named by its
+    /dev/pts path, a symlink to it, /dev/fd/N and a second device node of it (mknod, as a
+    container's own /dev or a hand-made node has), shares one lock; another pty does not."""
+    monkeypatch.setenv("GONIO_LOCK_DIR", str(tmp_path / "locks"))
+    (tmp_path / "locks").mkdir()
+    master, slave = os.openpty()
+    other_master, other_slave = os.openpty()
+    try:
+        name = os.ttyname(slave)
+        link = tmp_path / "gonio-stage"
+        link.symlink_to(name)
+        names = [str(link), f"/dev/fd/{slave}"]
+        node = tmp_path / "ttyStage"
+        try:
+            os.mknod(node, stat.S_IFCHR | 0o600, os.stat(name).st_rdev)
+            names.append(str(node))
+        except PermissionError:
+            pass  # no CAP_MKNOD here: the other names still are checked
+        assert {endpoint_key(n) for n in names} == {endpoint_key(name)}, names
+        assert endpoint_key(os.ttyname(other_slave)) != endpoint_key(name)
+        for alias in names:
+            held = claim_endpoints([alias])  # this process, through one name...
+            try:
+                fd = os.open(endpoint_lock(name).path, os.O_RDONLY)
+                try:  # ...is what another process meets through the device's own name
+                    with pytest.raises(BlockingIOError):
+                        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                finally:
+                    os.close(fd)
+            finally:
+                held.release()
+        fd = _foreign_holder(tmp_path / "locks" / f"gonio-{endpoint_key(name)}.lock",
+                             {"pid": 4242, "host": "labpc", "program": "gonio serve"})
+        try:
+            for alias in names:
+                with pytest.raises(LockBusy, match=f"{alias} is in use by gonio serve"):
+                    claim_endpoints([alias])
+        finally:
+            os.close(fd)
+    finally:
+        for fd in (master, slave, other_master, other_slave):
+            os.close(fd)
 
 
 @pytest.mark.parametrize("spelling", ["tcp://localhost:1502", "socket://LOCALHOST:1502",

@@ -15,9 +15,11 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import json
 import os
 from collections.abc import Iterable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import platformdirs
@@ -120,6 +122,23 @@ def user_table_files() -> list[Path]:
     """The ``.npz`` tables in :func:`user_library_dir` (sorted; empty when there is none)."""
     d = user_library_dir()
     return sorted(d.glob("*.npz")) if d.is_dir() else []
+
+
+def user_table_provenance(name: str) -> dict[str, Any] | None:
+    """The provenance stored in the user library's table ``name`` (``<name>.npz`` in
+    :func:`user_library_dir`, as ``gonio library import`` names it), read without its values;
+    None when there is no such table or it cannot be read. A table exported from a gonio
+    result (``gonio export --format table``) names its ``specimen`` and ``job_id`` there."""
+    path = user_library_dir() / f"{name}.npz"
+    if not path.is_file():
+        return None
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            text = str(z["provenance"]) if "provenance" in z.files else "{}"
+        prov = json.loads(text)
+    except Exception:  # zip, npy and JSON errors come in many types: nothing to say then
+        return None
+    return {**prov, "file": str(path)} if isinstance(prov, dict) else None
 
 
 def user_tables() -> list[BRDFTable]:

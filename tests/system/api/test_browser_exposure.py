@@ -32,8 +32,21 @@ def test_the_headline_says_a_calibration_at_another_exposure_does_not_fit(
     _calibrate(daemon)  # at 0.005 s
     plan = {"kind": "uniform", "specimen": "felt", "rotations": 2,
             "exposure": {"exposure_s": 0.01}}
+    # A scan at another exposure than the calibration is refused at submission and at its
+    # start: the mismatch is made as a calibration replaced under the running scan (a file
+    # edited by hand), the service seeing one at the scan's exposure until it has started.
+    service = daemon.app.state.service
+    assert service._calibration is None  # the calibration job's, read from the data dir
+    service._calibration = service.calibration().model_copy(update={"exposure_s": 0.01})
     with export_fits_off(daemon), daemon.client() as c:
-        job = int(c.post("/api/v1/jobs", json={"plan": plan}).json()["id"])
+        try:
+            r = c.post("/api/v1/jobs", json={"plan": plan})
+            assert r.status_code == 201, r.text
+            job = int(r.json()["id"])
+            while c.get(f"/api/v1/jobs/{job}").json()["state"] == "queued":
+                time.sleep(0.05)
+        finally:
+            service._calibration = None
         deadline = time.monotonic() + 300
         while c.get(f"/api/v1/jobs/{job}").json()["state"] not in (
                 "completed", "failed", "aborted"):

@@ -51,20 +51,76 @@ def test_check_plan_warns_of_a_calibration_at_another_exposure(
 
 def test_the_colour_of_a_scan_at_another_exposure_says_so(
         daemon: Daemon, calibrated: None) -> None:
-    plan = {"kind": "uniform", "rotations": 2, "exposure": {"exposure_s": 0.02}}
+    """Such a scan is refused at submission and at its start (below), so the mismatch is
+    made here as a calibration replaced under a running scan (a file edited by hand): the
+    result and its colour still say it."""
+    plan = {"kind": "uniform", "rotations": 2, "exposure": {"exposure_s": 0.01}}
+    worker = daemon.app.state.service.worker
+    in_effect = worker.calibration
     with export_fits_off(daemon), daemon.client() as c:
         job = c.post("/api/v1/jobs", json={"plan": plan}).json()["id"]
-        wait_for(lambda: c.get(f"/api/v1/jobs/{job}").json()["state"]
-                 in ("completed", "failed"), what="the scan")
+        try:
+            wait_for(lambda: c.get(f"/api/v1/jobs/{job}").json()["state"] != "queued",
+                     what="the scan's start")
+            worker.calibration = lambda: in_effect().model_copy(update={"exposure_s": 0.005})
+            wait_for(lambda: c.get(f"/api/v1/jobs/{job}").json()["state"]
+                     in ("completed", "failed"), what="the scan")
+        finally:
+            worker.calibration = in_effect
         r = c.get(f"/api/v1/jobs/{job}/colour")
         assert r.status_code == 200, r.text
         said = r.json()["warnings"]
         # First of the reconstruction's warnings (a 2-angle scan has others: the colour
         # carries all its exports carry).
         w = said[0]
-        assert "measured at exposure 0.01 s, this scan at 0.02 s" in w, said
+        assert "measured at exposure 0.005 s, this scan at 0.01 s" in w, said
         # The CSV a lab downloads and keeps carries them on every row.
         r = c.get(f"/api/v1/jobs/{job}/colour", params={"format": "csv"})
         assert r.status_code == 200, r.text
         rows = list(csv.DictReader(io.StringIO(r.text)))
         assert rows and {row["warnings"] for row in rows} == {"; ".join(said)}
+
+
+def test_a_scan_at_another_exposure_is_refused_naming_both_exposures(
+        daemon: Daemon, calibrated: None) -> None:
+    """It was queued with a warning, and its values came out off by the ratio: the sensors
+    are not assumed linear in exposure time (gonio.calibration), so factors measured at
+    0.01 s (the calibration job's default exposure) cannot serve a scan at 0.5 s."""
+    with daemon.client() as c:
+        before = len(c.get("/api/v1/jobs").json())
+        r = c.post("/api/v1/jobs", json={"plan": {"kind": "uniform", "rotations": 2,
+                                                  "exposure": {"exposure_s": 0.5}}})
+        assert r.status_code == 422, r.text
+        said = r.json()["detail"]
+        assert "reads at exposure 0.5 s" in said and "measured at 0.01 s" in said, said
+        assert "calibrate at 0.5 s first" in said, said
+        assert len(c.get("/api/v1/jobs").json()) == before  # nothing queued
+
+
+def test_a_scan_queued_behind_a_calibration_at_its_exposure_is_taken_and_checked_at_start(
+        daemon: Daemon, calibrated: None) -> None:
+    """Calibrate at 0.02 s, then scan at 0.02 s, queued together: the scan is accepted behind
+    the calibration job. Were that calibration cancelled, the scan is refused when it would
+    start (the worker checks the calibration in effect again) and nothing moves."""
+    with daemon.client() as c:
+        assert c.post("/api/v1/rig/halt").status_code == 200
+        try:
+            cal = c.post("/api/v1/jobs", json={"plan": {
+                "kind": "calibration", "rotations": 2, "reference_albedo": 0.99,
+                "exposure": {"exposure_s": 0.02}}})
+            assert cal.status_code == 201, cal.text
+            scan = c.post("/api/v1/jobs", json={"plan": {
+                "kind": "uniform", "rotations": 2, "exposure": {"exposure_s": 0.02}}})
+            assert scan.status_code == 201, scan.text
+            assert c.post(f"/api/v1/jobs/{cal.json()['id']}/cancel").status_code == 200
+        finally:
+            assert c.post("/api/v1/rig/release").status_code == 200
+        job = scan.json()["id"]
+        wait_for(lambda: c.get(f"/api/v1/jobs/{job}").json()["state"]
+                 in ("completed", "failed"), what="the scan")
+        detail = c.get(f"/api/v1/jobs/{job}").json()
+        assert detail["state"] == "failed", detail
+        assert detail["reason"].startswith(f"not started: job {job} reads at exposure 0.02 s"), (
+            detail["reason"])
+        assert "measured at 0.01 s" in detail["reason"], detail["reason"]
+        assert detail["done_angles"] == 0

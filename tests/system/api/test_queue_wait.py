@@ -75,3 +75,30 @@ def test_a_queued_job_counts_the_angles_it_will_measure(
             assert c.get(f"/api/v1/jobs/{job['id']}").json()["total_angles"] == 8
         finally:
             assert c.post("/api/v1/rig/release").status_code == 200
+
+
+def test_gonio_jobs_show_says_what_the_api_says_of_a_queued_job(
+    daemon: Daemon, capsys: pytest.CaptureFixture[str],
+) -> None:
+    """``gonio jobs show`` printed the stored row (no ``waiting``, no queue position): it
+    shows the fields of ``GET /api/v1/jobs/{id}``, as JSON with --json and readable without."""
+    with daemon.client() as c:
+        assert c.post("/api/v1/rig/halt").status_code == 200  # it stays queued
+        try:
+            job = c.post("/api/v1/jobs", params={"accept_uncalibrated": "true"},
+                         json={"plan": {**PLAN, "specimen": "shown"}}).json()["id"]
+            time.sleep(1.0)  # the worker has looked at the queue
+            api = c.get(f"/api/v1/jobs/{job}").json()
+            db = str(daemon.data_dir / "gonio.sqlite")
+            assert main(["jobs", "show", str(job), "--db", db, "--json"]) == 0
+            shown = json.loads(capsys.readouterr().out)
+            assert shown == api  # every field, the same values
+            assert api["waiting"] and api["queue_position"] == 0
+            assert main(["jobs", "show", str(job), "--db", db]) == 0
+            text = capsys.readouterr().out
+            assert f"job {job}: uniform 'shown', queued, 0/2 angles" in text
+            assert f"waiting: {api['waiting']}" in text
+            assert "queue position: 0" in text
+        finally:
+            assert c.post(f"/api/v1/jobs/{job}/cancel").status_code == 200
+            assert c.post("/api/v1/rig/release").status_code == 200

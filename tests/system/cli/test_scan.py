@@ -149,7 +149,7 @@ def test_scan_leaves_only_its_output_and_the_store_keeps_a_real_result_path(
     assert sorted(p.name for p in outdir.iterdir()) == [
         "felt.h5", "white.calibration.json", "white.h5"]
     assert sorted(p.name for p in rig.parent.iterdir()) == ["rig.toml"]
-    assert main(["jobs", "--db", str(data / "gonio.sqlite"), "show", "2"]) == 0
+    assert main(["jobs", "--db", str(data / "gonio.sqlite"), "show", "2", "--json"]) == 0
     row = json.loads(capsys.readouterr().out)
     assert row["state"] == "completed"
     # Stored relative to the data directory; `jobs show` says where that is.

@@ -87,7 +87,8 @@ def test_dry_run_warns_of_a_calibration_measured_at_another_exposure(
     out = capsys.readouterr().out
     assert ("exposure: the calibration in effect (job 1: white reference) was measured at "
             "0.01 s and this scan reads at 0.5 s") in out, out
-    assert "off by about 50 times: scan at 0.01 s, or calibrate at 0.5 s first" in out, out
+    assert ("off by about 50 times, and such a scan is refused: scan at 0.01 s, or calibrate "
+            "at 0.5 s first") in out, out
 
 
 def test_dry_run_of_a_partly_calibrated_plan_says_it_would_be_refused(
@@ -106,3 +107,17 @@ def test_dry_run_of_a_partly_calibrated_plan_says_it_would_be_refused(
            "pair(s) L1/S2" in out, out
     assert "so the scan would be refused when submitted" in out, out
     assert "sensor units" not in out, out
+
+
+def test_a_scan_at_another_exposure_than_the_calibration_is_refused_before_it_measures(
+    rig_calibration: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """It measured with a warning, its values 50 times off: the sensors are not assumed
+    linear in exposure (gonio.calibration), so a calibration at 0.01 s cannot serve 0.5 s."""
+    out = tmp_path / "felt.h5"
+    assert main(["scan", "--rig", str(RIG), "--exposure", "0.5", "--no-progress",
+                 "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "reads at exposure 0.5 s" in err and "measured at 0.01 s" in err, err
+    assert "calibrate at 0.5 s first" in err and "--white-reference" in err, err
+    assert not out.exists()

@@ -1,0 +1,64 @@
+"""``GET /api/v1/jobs/{id}/colour?against=`` takes a stored standard by name, as a lab keeps
+its standards: colour CSVs (``gonio colour --csv`` or the route's ``format=csv``) in the data
+directory's ``standards/`` folder. It took job ids only. The spectral rig and its two scans of
+the blue panel are tests/system/api/test_browser_colour.py's (no browser here)."""
+
+from __future__ import annotations
+
+import pytest
+
+from tests.system.api.test_browser_colour import (  # noqa: F401 (fixtures)
+    _SpectralLab,
+    spectral_jobs,
+    spectral_lab,
+)
+
+pytestmark = [pytest.mark.system, pytest.mark.timeout(600)]
+
+
+def test_against_takes_a_stored_standard_by_name_and_names_an_unknown_or_unreadable_one(
+    spectral_lab: _SpectralLab, spectral_jobs: list[int],  # noqa: F811
+) -> None:
+    d = spectral_lab.serve(None)
+    first, second = spectral_jobs
+    folder = d.data_dir / "standards"
+    folder.mkdir(exist_ok=True)
+    with d.client() as c:
+        # The first panel's colour table, kept as the lab's standard.
+        table = c.get(f"/api/v1/jobs/{first}/colour", params={"format": "csv"})
+        assert table.status_code == 200, table.text
+        (folder / "blue master.csv").write_text(table.text, encoding="utf-8")
+
+        by_job = c.get(f"/api/v1/jobs/{second}/colour", params={"against": first})
+        assert by_job.status_code == 200, by_job.text
+        by_name = c.get(f"/api/v1/jobs/{second}/colour", params={"against": "blue master"})
+        assert by_name.status_code == 200, by_name.text
+        diff = by_name.json()["difference"]
+        assert diff["against"] == "blue master" and diff["standard"] == "blue master"
+        # The same standard through the job and through its stored table: the same
+        # differences, up to the CSV's rounding of L*, a*, b*.
+        rows_job = {(r["instrument"], r["aspecular_deg"], r["azimuth_deg"]): r["dE00"]
+                    for r in by_job.json()["difference"]["rows"]}
+        rows_name = {(r["instrument"], r["aspecular_deg"], r["azimuth_deg"]): r["dE00"]
+                     for r in diff["rows"]}
+        assert rows_name.keys() == rows_job.keys() and rows_name
+        for k, de in rows_job.items():
+            assert rows_name[k] == pytest.approx(de, abs=0.01), k
+        # A panel against its own stored colour: no difference (".csv" may be given).
+        own = c.get(f"/api/v1/jobs/{first}/colour", params={"against": "blue master.csv"})
+        assert own.status_code == 200, own.text
+        assert own.json()["difference"]["max_dE00"] < 0.01
+
+        unknown = c.get(f"/api/v1/jobs/{second}/colour", params={"against": "green master"})
+        assert unknown.status_code == 404, unknown.text
+        said = unknown.json()["detail"]
+        assert "no stored colour standard 'green master'" in said, said
+        assert "it holds blue master" in said and "gonio colour RESULT.h5 --csv" in said, said
+        # A name is a file of standards/ only, never a path.
+        outside = c.get(f"/api/v1/jobs/{second}/colour", params={"against": "../gonio"})
+        assert outside.status_code == 404, outside.text
+
+        (folder / "torn.csv").write_text("patch,value\n1,2\n", encoding="utf-8")
+        torn = c.get(f"/api/v1/jobs/{second}/colour", params={"against": "torn"})
+        assert torn.status_code == 422, torn.text
+        assert "torn.csv: columns" in torn.json()["detail"], torn.json()
