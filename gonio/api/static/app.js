@@ -724,6 +724,8 @@ function initForm() {
   });
   showKind();
   $("#dry-run").addEventListener("click", () => guarded(async () => {
+    // The form's own limits first, at the field, as Start scan's submit checks them.
+    if (!form.reportValidity()) { setNote("", null); return; }
     const r = await send("POST", "/jobs/dry-run", { plan: readPlan() });
     // The specimen's angle, as the stage chip gives it; the stage's own position beside it
     // when it is turns away (517.5° is the specimen at 157.5°).

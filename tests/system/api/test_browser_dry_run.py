@@ -60,3 +60,31 @@ def test_check_plan_adds_up_and_names_the_specimen_angle(
     # docs/api.md: estimated_s = motion_s + settle_s + exposure_s; shown to 0.1 s.
     assert moves > 0 and settling > 0, note
     assert moves + settling + exposures == pytest.approx(total, abs=0.16), note
+
+
+@pytest.mark.parametrize(("name", "value"), [("averages", "0"), ("exposure_s", "0"),
+                                             ("rotations", "0")])
+def test_check_plan_refuses_what_the_form_itself_refuses_as_start_does(
+        daemon: Daemon, browser: Any, name: str, value: str,  # noqa: F811 (the fixture)
+) -> None:
+    """A value outside the form's own limits (index.html's min/max: at least 1 average, an
+    exposure of at least 0.1 ms, at least one stage angle) is refused at the field by Start
+    scan, with the browser's message there; Check plan sent it and showed the daemon's
+    validation path instead ("plan.uniform.exposure.averages: Input should be greater than
+    or equal to 1")."""
+    from selenium.webdriver.common.by import By
+
+    wait = open_live(browser, daemon, 60)
+    field = browser.find_element(By.ID, "scan-form").find_element(By.NAME, name)
+    field.clear()
+    field.send_keys(value)
+    browser.execute_script("window.__sent = []; const f = window.fetch;"
+                           "window.fetch = (u, i) => { window.__sent.push(String(u));"
+                           " return f(u, i); };")
+    click_when_steady(wait, "#dry-run")
+    # The field says what is wrong, where the user typed it, as Start scan's check does.
+    wait.until(lambda d: d.switch_to.active_element == field)
+    assert browser.execute_script("return arguments[0].validity.valid", field) is False
+    assert not any("dry-run" in u for u in browser.execute_script("return window.__sent"))
+    message = browser.find_element(By.ID, "message")
+    assert not message.is_displayed() or "plan." not in message.text, message.text
