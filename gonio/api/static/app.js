@@ -653,7 +653,10 @@ function readPlan() {
   const kind = f.get("kind");
   const plan = {
     kind,
-    specimen: f.get("specimen"),
+    // Left empty: "unnamed", the name exports give a scan without one (gonio scan does the
+    // same; a calibration: "white reference", as gonio serve --sim names its own); the
+    // field's old prefilled "specimen" was listed as such and exported as unnamed.
+    specimen: String(f.get("specimen") ?? "").trim() || (kind === "calibration" ? "white reference" : "unnamed"),
     exposure: { exposure_s: Number(f.get("exposure_s")), averages: Number(f.get("averages")) },
   };
   if (kind === "adaptive") {
