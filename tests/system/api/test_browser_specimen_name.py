@@ -41,7 +41,10 @@ def test_an_unnamed_scan_is_unnamed_on_the_page_and_in_its_export(
         while c.get(f"/api/v1/jobs/{job['id']}").json()["state"] != "completed":
             assert time.monotonic() < deadline, "the scan did not complete"
             time.sleep(0.2)
-        export = c.get(f"/api/v1/jobs/{job['id']}/export", params={"format": "table"})
+        # The export fits on demand (the scan finished without its fits): seconds of CPU,
+        # more on a busy machine than the client's default 30 s.
+        export = c.get(f"/api/v1/jobs/{job['id']}/export", params={"format": "table"},
+                       timeout=240)
         assert export.status_code == 200, export.text
     path = tmp_path / "export.npz"
     path.write_bytes(export.content)
