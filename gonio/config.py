@@ -743,6 +743,10 @@ _UNITS = {"s": "seconds", "deg": "degrees", "nm": "nanometres", "dps": "degrees 
           "dps2": "degrees per second squared"}
 
 
+#: The top-level tables of a daemon config (deploy/daemon.example.toml), none of a rig config.
+DAEMON_TABLES = frozenset({"server", "auth", "limits", "paths", "results"})
+
+
 def parse_rig_config(data: dict[str, Any], source: str = "rig config") -> RigConfig:
     """Validate already-parsed TOML data.
 
@@ -758,6 +762,17 @@ def parse_rig_config(data: dict[str, Any], source: str = "rig config") -> RigCon
     ConfigError
         One line per problem, each starting with ``source``.
     """
+    daemon_tables = sorted(DAEMON_TABLES & data.keys())
+    if "rig" not in data and "stage" not in data and daemon_tables:
+        # The daemon config passed where the rig config belongs (both sit in /etc/gonio):
+        # one line that says so beats an "unknown key" for each of its tables.
+        tables = ", ".join(f"[{t}]" for t in daemon_tables)
+        raise ConfigError(
+            f"{source}: a daemon config ({tables}), not a rig config: give it to 'gonio serve "
+            "--config' (also 'gonio keys' and 'gonio rig lights-off'); where a rig config "
+            "is asked for, give the rig's own file (deploy/rig.example.toml; the daemon config "
+            "names it in [paths] rig_config)"
+        )
     if "rig" not in data and "stage" not in data and isinstance(data.get("lights"), list):
         # A design fragment (gonio design -o) passed where a rig config belongs: one line
         # that says so beats a "required key is missing" for every device.

@@ -39,7 +39,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from gonio.apikeys import KEYS_ENV, ApiKeyring, KeyringError, parse_keys_env, parse_keys_file
-from gonio.config import read_toml
+from gonio.config import DAEMON_TABLES, read_toml
 
 if TYPE_CHECKING:
     from gonio.basis_supply import BasisSupply
@@ -149,7 +149,20 @@ def _describe(err: Mapping[str, Any]) -> str:
     return f"{loc}: {err['msg']} (got {err.get('input')!r})"
 
 
+#: Top-level tables only a rig config has (deploy/rig.example.toml).
+_RIG_TABLES = frozenset({"rig", "stage", "lights", "sensors", "pairs", "calibration"})
+
+
 def _validate(data: Mapping[str, Any], source: str) -> DaemonConfig:
+    rig_tables = sorted(_RIG_TABLES & data.keys())
+    if rig_tables and not DAEMON_TABLES & data.keys():
+        # The rig config passed where the daemon config belongs: one line that says so beats
+        # an "unknown key" for each of its tables.
+        tables = ", ".join(f"[{t}]" for t in rig_tables)
+        raise DaemonConfigError(
+            f"{source}: a rig config ({tables}), not a daemon config: give it as --rig "
+            f"{source}, or name it in the daemon config's [paths] rig_config "
+            "(deploy/daemon.example.toml)")
     try:
         return DaemonConfig.model_validate(data)
     except ValidationError as exc:

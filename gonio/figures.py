@@ -326,8 +326,16 @@ def fit_curves(res: ResultFile, step_deg: float = 2.0) -> dict[str, Any]:
             "curve": _mean_or_none(curves[q]),
         })
     return {"units": _units(res), "calibrated": bool(s.calibration.get("pairs")),
-            "channels": "mean of " + ", ".join(s.channels),
+            "channels": _channels_text(s.channels),
             "curve_deg": [float(a) for a in curve_deg], "pairs": pairs}
+
+
+def _channels_text(channels: Sequence[str]) -> str:
+    """What the fit's curves average, for the page's y axis: "mean of R, G, B"; many channels
+    (a 31-band spectrometer's) by count and range, not 31 names past the axis."""
+    if len(channels) <= 4:
+        return "mean of " + ", ".join(channels)
+    return f"mean of {len(channels)} channels, {channels[0]} to {channels[-1]}"
 
 
 def polar_curves(res: ResultFile, theta_i_deg: float, phi_i_deg: float) -> dict[str, Any]:

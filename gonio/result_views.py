@@ -197,8 +197,14 @@ class ResultViews:
             if res.table is None:
                 raise NotFound(f"job {job_id} is a {res.attrs.get('kind')} job without a BRDF")
             from gonio.brdf.pictures.preview import preview_png
+            from gonio.result_colour import linear_srgb
 
-            return preview_png(res.table, title=f"job {job_id}: {res.table.name}")
+            # A result with colour (spectral bands, a chart calibration) is shown in linear
+            # sRGB from XYZ, as its renderings are; its first three channels (a 31-band
+            # table's 400-420 nm) drew a red paint grey.
+            srgb = linear_srgb(res)
+            table = res.table if srgb is None else srgb[0]
+            return preview_png(table, title=f"job {job_id}: {res.table.name}")
 
         return self._view("preview", (job_id,), [job_id], make)
 

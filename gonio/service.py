@@ -88,6 +88,8 @@ if TYPE_CHECKING:  # the design numerics load on the first design, not with the 
     from gonio.sampling_design import DesignRequest, DesignResult
 
 log = logging.getLogger("gonio.service")
+JOB_LOG = logging.getLogger("gonio.jobs")
+"""The daemon's console line per job (``gonio.daemon.log_job_events`` writes the others)."""
 
 __all__ = [
     "Conflict",
@@ -242,11 +244,30 @@ class GonioService:
             await asyncio.to_thread(self._engine.close)
         else:
             await self._stop_worker()
+        self._say_what_stays_active()
         self.events.close()
         self.store.remove_listener(self._track_stage)
         for lock in reversed(self.owned):
             lock.release()
         self.owned.clear()
+
+    def _say_what_stays_active(self) -> None:
+        """Log each job the stop leaves active and what the next start does with it: the
+        console said only "Shutting down" of a scan stopped midway."""
+        try:
+            jobs = self.store.active_jobs()
+        except Exception:  # the store may be what failed; the stop goes on
+            log.debug("no list of active jobs at stop", exc_info=True)
+            return
+        then = {"paused": "it stays paused until resumed after the next start",
+                "reconstructing": "its reconstruction starts again from the stored readings "
+                                  "when the daemon starts again on this data directory"}
+        for job in jobs:
+            JOB_LOG.info("job %d (%s, %r) interrupted by the daemon's stop at %d of %d angles: "
+                         "%s", job.id, job.kind, job.specimen, job.done_angles,
+                         job.total_angles,
+                         then.get(job.state.value, "it resumes from its checkpoint when the daemon "
+                                         "starts again on this data directory"))
 
     async def _stop_worker(self) -> None:
         if self._task is not None:

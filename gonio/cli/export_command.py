@@ -56,6 +56,13 @@ def run(args: argparse.Namespace) -> int:
     result: Path = args.result
     if not result.is_file():
         raise UsageError(f"result file {result} does not exist")
+    with result.open("rb") as f:
+        if f.read(4) == b"PK\x03\x04":  # a zip: numpy's .npz, not HDF5
+            raise UsageError(
+                f"{result} is a .npz archive (a gonio table or samples file), not a scan's "
+                "result file: gonio export reads the HDF5 result of a scan (the page's "
+                "'Download HDF5 result', gonio scan -o, or DATA_DIR/results/job-N.h5); a "
+                "gonio table is itself one of the export formats (gonio render draws it)")
     out: Path = args.output or default_output(result, args.fmt)
     if out.resolve() == result.resolve():
         raise UsageError(f"-o {out} is the result file itself; choose another output name")

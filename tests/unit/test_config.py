@@ -219,3 +219,16 @@ def test_a_sensor_listed_twice_names_both_entries_and_what_to_do(example: dict) 
     example["calibration"]["dark"] = {"S1": [1.0, 2.0, 3.0]}
     msg = _error(example)
     assert "repeated: ['S1'] (sensors[0], sensors[1]); give each device its own name" in msg
+
+
+def test_a_daemon_config_given_as_the_rig_config_says_so() -> None:
+    """A newcomer with both files of docs/install.md passed the daemon config where the rig
+    config belongs (``gonio stage --rig daemon.toml``) and read one "unknown key" line per
+    table of it, with "check the spelling": the file is the other kind, and one line says so."""
+    daemon_example = EXAMPLE.with_name("daemon.example.toml")
+    with pytest.raises(ConfigError) as exc:
+        load_rig_config(daemon_example)
+    text = str(exc.value)
+    assert text.startswith("daemon.example.toml: a daemon config") and "not a rig config" in text
+    assert "--config" in text and "rig_config" in text, text
+    assert "unknown key" not in text and len(text.splitlines()) == 1, text

@@ -217,3 +217,14 @@ def test_the_http_settings_follow_the_config(tmp_path: Path) -> None:
     settings = api_settings(cfg, ring)
     assert settings.access.keyring is ring and settings.access.read_requires_key
     assert settings.data_dir == tmp_path and settings.max_body_bytes == 4096
+
+
+def test_a_rig_config_given_as_the_daemon_config_says_so() -> None:
+    """``gonio serve --config rig.toml`` listed an "unknown key" line for each of the rig
+    config's tables; the file is the other kind, and one line says so and where it goes."""
+    with pytest.raises(DaemonConfigError) as exc:
+        load_daemon_config(PROJECT / "deploy" / "rig.example.toml")
+    text = str(exc.value)
+    assert text.startswith("rig.example.toml: a rig config") and "not a daemon config" in text
+    assert "--rig" in text and "rig_config" in text, text
+    assert "unknown key" not in text and len(text.splitlines()) == 1, text

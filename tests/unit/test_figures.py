@@ -246,3 +246,20 @@ def test_the_rows_of_a_figure(tmp_path: Path, npz: Path) -> None:
     assert [label for label, _ in load_input(path, "mine", with_truth=False)] == [
         "mine (reconstruction)"]
     assert [label for label, _ in load_input(npz)] == ["t.npz: flat"]
+
+
+def test_fit_curves_of_a_spectral_result_name_the_bands_in_a_line(tmp_path: Path) -> None:
+    """The page's readings plot puts ``channels`` beside its y axis. A 31-band spectrometer
+    scan's was "mean of 400nm, 410nm, ..., 700nm", 31 names, far past the axis (cut off on
+    the page); a few channels are still named one by one."""
+    names = [f"{w}nm" for w in range(400, 701, 10)]
+    table = from_function(lambda i, o: np.full((i.shape[0], len(names)), 0.1), names, "paint")
+    cal = {"pairs": [{"light": "L1", "sensor": "S1", "factor": [1.0] * len(names)}]}
+    s = CalibratedScan(pairs=[("L1", "S1")], light_dirs=np.array([_dir(45, 0)]),
+                       sensor_dirs=np.array([_dir(30, 180)]), stage_angles_deg=np.zeros(1),
+                       values=np.full((1, 1, len(names)), 0.1), channels=tuple(names),
+                       calibration=cal)
+    path = write_result(tmp_path / "s.h5", job_id=5, specimen="paint", kind="uniform",
+                        readings=[], samples=s, table=table)
+    fit = fit_curves(read_result(path), step_deg=90.0)
+    assert fit["channels"] == "mean of 31 channels, 400nm to 700nm"

@@ -73,3 +73,44 @@ def test_a_mesh_is_asked_of_gltf_only_before_any_file_is_touched(views: ResultVi
     with pytest.raises(ExportError, match="unknown export format 'obj'"):
         views.export(job, "obj")
     assert not (views.data_dir / "exports").exists()
+
+
+def test_a_spectral_results_preview_shows_its_colour_not_its_first_three_bands(
+        views: ResultViews) -> None:
+    """A red paint read by 31-band spectrometers (400-700 nm) was previewed as its first
+    three bands (400, 410, 420 nm) taken for R, G and B: grey, where the page's rendering of
+    the same result, in linear sRGB from XYZ, is red. The preview now shows the same linear
+    sRGB as the renderings (gonio.result_colour.linear_srgb)."""
+    import io
+
+    import numpy as np
+    from PIL import Image
+
+    from gonio.brdf.colour.spectral import SpectralBands
+    from gonio.brdf.tables.table import BRDFTable, from_function
+    from gonio.calibration import CalibratedScan
+    from gonio.results import write_result
+
+    wl = tuple(float(w) for w in range(400, 701, 10))
+    # A red diffuser: reflects 60 % above 600 nm, 4 % below (albedo / pi in 1/sr).
+    red = np.where(np.asarray(wl) >= 600.0, 0.60, 0.04) / np.pi
+    t = from_function(lambda i, o: np.tile(red, (i.shape[0], 1)),
+                      [f"{w:.0f}nm" for w in wl], "red paint", dtype=np.float32)
+    table = BRDFTable.trusted(np.asarray(t.values), t.channels, "red paint", wl)
+    scan = CalibratedScan(
+        pairs=[("L1", "S1")], light_dirs=np.array([[0.0, 0.0, 1.0]]),
+        sensor_dirs=np.array([[0.0, 0.0, 1.0]]), stage_angles_deg=np.zeros(1),
+        values=np.ones((1, 1, len(wl))), channels=table.channels,
+        calibration={"pairs": [{"light": "L1", "sensor": "S1", "factor": [1.0] * len(wl)}]})
+    write_result(views.data_dir / "red.h5", job_id=1, specimen="red paint", kind="uniform",
+                 readings=[], samples=scan, table=table,
+                 colour={"bands": SpectralBands(wl, (10.0,) * len(wl)).as_dict()})
+    job = _completed(views.store, "red.h5", {})
+
+    png = Image.open(io.BytesIO(views.preview_png(job))).convert("RGB")
+    pixels = np.asarray(png, dtype=float)
+    # The panels' valid cells (and the colour bar, at the table's typical tint) are red: R
+    # above G and B (each channel on the preview's log scale, so a pale red). The bands
+    # 400-420 nm, equal here, drew every cell white.
+    red_pixels = pixels[..., 0] >= pixels[..., 1:].max(axis=-1) + 25
+    assert red_pixels.mean() > 0.2, red_pixels.mean()

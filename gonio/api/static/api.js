@@ -42,19 +42,38 @@ async function check(resp) {
   throw err;
 }
 
+// A request that got no answer at all (the daemon stopped, restarting, or out of reach):
+// fetch rejects with a bare "TypeError: Failed to fetch", which told a lab nothing. Status 0:
+// no HTTP status came back.
+export class DaemonGone extends ApiError {
+  constructor() {
+    super(0, `The daemon at ${location.origin} does not answer: it is stopped, restarting or ` +
+      "out of reach. What the page shows is what it last reported; the page reconnects by " +
+      "itself once the daemon is back (a scan it was running resumes from its checkpoint " +
+      "when it starts again on the same data directory).");
+  }
+}
+
+export async function request(path, init) {
+  try { return await fetch(API + path, init); } catch (e) {
+    if (e?.name === "AbortError") throw e;
+    throw new DaemonGone();
+  }
+}
+
 export async function getJSON(path) {
-  return (await check(await fetch(API + path, { headers: headers() }))).json();
+  return (await check(await request(path, { headers: headers() }))).json();
 }
 
 export async function send(method, path, body = undefined) {
   const init = { method, headers: headers(body === undefined ? {} : { "Content-Type": "application/json" }) };
   if (body !== undefined) init.body = JSON.stringify(body);
-  const resp = await check(await fetch(API + path, init));
+  const resp = await check(await request(path, init));
   return resp.status === 204 ? null : resp.json();
 }
 
 export async function getBlob(path) {
-  return (await check(await fetch(API + path, { headers: headers() }))).blob();
+  return (await check(await request(path, { headers: headers() }))).blob();
 }
 
 /**

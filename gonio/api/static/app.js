@@ -140,6 +140,13 @@ function eta(s) {
   return s < 5400 ? `${Math.round(s / 60)} min` : `${(s / 3600).toFixed(1)} h`;
 }
 
+// A plan's time and its parts (Check plan): tenths of a second below 10 s, so the parts add
+// up to the total; whole seconds rounded a 0.25 s exposure total to "0 s".
+function planTime(s) {
+  if (typeof s !== "number" || !Number.isFinite(s) || s >= 10) return eta(s);
+  return s < 1 ? `${Number(s.toPrecision(2))} s` : `${s.toFixed(1)} s`;
+}
+
 // The selected job's detail (ETA from measured angle times, activity while reconstructing).
 let selectedDetail = null;
 let selectedState = null;     // the selected job's state at the last list refresh
@@ -646,7 +653,10 @@ function readPlan() {
   const kind = f.get("kind");
   const plan = {
     kind,
-    specimen: f.get("specimen"),
+    // Left empty: "unnamed", the name exports give a scan without one (gonio scan does the
+    // same; a calibration: "white reference", as gonio serve --sim names its own); the
+    // field's old prefilled "specimen" was listed as such and exported as unnamed.
+    specimen: String(f.get("specimen") ?? "").trim() || (kind === "calibration" ? "white reference" : "unnamed"),
     exposure: { exposure_s: Number(f.get("exposure_s")), averages: Number(f.get("averages")) },
   };
   if (kind === "adaptive") {
@@ -717,14 +727,22 @@ function initForm() {
   });
   showKind();
   $("#dry-run").addEventListener("click", () => guarded(async () => {
+    // The form's own limits first, at the field, as Start scan's submit checks them.
+    if (!form.reportValidity()) { setNote("", null); return; }
     const r = await send("POST", "/jobs/dry-run", { plan: readPlan() });
-    const from = r.from_known ? `from the stage at ${r.from_deg.toFixed(1)}°` : "assuming the stage at 0° (position not known yet)";
+    // The specimen's angle, as the stage chip gives it; the stage's own position beside it
+    // when it is turns away (517.5° is the specimen at 157.5°).
+    const specimenDeg = ((r.from_deg % 360) + 360) % 360;
+    const from = !r.from_known ? "assuming the stage at 0° (position not known yet)"
+      : `from the specimen at ${specimenDeg.toFixed(1)}°` +
+        (Math.abs(specimenDeg - r.from_deg) > 1e-6 ? ` (stage position ${r.from_deg.toFixed(1)}°)` : "");
     // A plan the calibration covers only in part does not run: Start is refused (422).
     const refused = (r.warnings || []).some((w) => w.startsWith("not calibrated:"));
     const verdict = refused ? "Start would be refused: read the warning below"
       : (r.warnings || []).length ? "Runs, but read the warnings below" : "OK";
-    let text = `${verdict}: ${r.readings} readings at ${r.angles_deg.length} stage angles, about ${eta(r.estimated_s)} ${from}` +
-      ` (moves ${eta(r.motion_s)}, exposures ${eta(r.exposure_s)}).`;
+    // estimated_s = motion_s + settle_s + exposure_s (docs/api.md): all three are said.
+    let text = `${verdict}: ${r.readings} readings at ${r.angles_deg.length} stage angles, about ${planTime(r.estimated_s)} ${from}` +
+      `: moves ${planTime(r.motion_s)}, settling ${planTime(r.settle_s)}, exposures ${planTime(r.exposure_s)}.`;
     if (r.max_estimated_s != null && r.kind === "adaptive") text += ` Adaptive refinement can add up to ${r.max_angles - r.angles_deg.length} angles: at most ${eta(r.max_estimated_s)} in all.`;
     for (const b of r.arc_branches || []) {
       text += ` If the first round finds the specimen ${b.arc_deg === 180 ? "twofold symmetric, it goes on over half a turn" : "not twofold symmetric, it goes on over a full turn"}: at most ${b.angles} angles (${b.readings} readings), ${eta(b.estimated_s)} in all${b.basis === "asymmetric" ? ", reconstructed with the basis for specimens without twofold symmetry" : ""}.`;

@@ -1,6 +1,6 @@
 // The result panel's export control: GET /api/v1/jobs/{id}/export?format=... as a download.
 // It follows the job shown in the result panel ("job N (completed)") and needs no other state.
-import { ApiError, getKey } from "./api.js";
+import { ApiError, getKey, request } from "./api.js";
 
 const $ = (sel) => document.querySelector(sel);
 
@@ -17,7 +17,7 @@ function sync() {
 // the export's warnings.
 async function download(id, query, fallback) {
   const headers = getKey() ? { "X-API-Key": getKey() } : {};
-  const resp = await fetch(`/api/v1/jobs/${id}/export?${new URLSearchParams(query)}`, { headers });
+  const resp = await request(`/jobs/${id}/export?${new URLSearchParams(query)}`, { headers });
   if (!resp.ok) {
     let detail = resp.statusText;
     try { detail = (await resp.json()).detail ?? detail; } catch { /* not JSON */ }

@@ -19,17 +19,19 @@ from starlette.types import ASGIApp
 
 @contextmanager
 def live_server(
-    app: ASGIApp, *, log_level: str = "warning", startup_timeout_s: float = 60.0
+    app: ASGIApp, *, log_level: str = "warning", startup_timeout_s: float = 60.0,
+    port: int = 0,
 ) -> Iterator[str]:
     """Serve ``app`` on ``127.0.0.1:<free port>``; yield its base URL (``http://127.0.0.1:N``).
 
     The socket is bound here (port 0) and handed to uvicorn, so there is no race between
     picking a port and binding it. The server stops (and the app's lifespan shuts down) when
-    the context exits.
+    the context exits. ``port``: serve on that port instead, e.g. the one a stopped server
+    used, as a restarted daemon does.
     """
     sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
     sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-    sock.bind(("127.0.0.1", 0))
+    sock.bind(("127.0.0.1", port))
     port = sock.getsockname()[1]
     config = uvicorn.Config(
         app,

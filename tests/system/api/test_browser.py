@@ -170,7 +170,7 @@ def test_start_a_scan_from_the_page_and_see_the_result(daemon: Daemon, browser: 
     click_when_steady(wait, "#dry-run")
     wait.until(lambda d: d.find_element(By.ID, "dry-run-result").text.startswith("OK"))
     # The last calibration left the stage somewhere: the estimate says it starts from there.
-    assert "from the stage at" in browser.find_element(By.ID, "dry-run-result").text
+    assert "from the specimen at" in browser.find_element(By.ID, "dry-run-result").text
     click_when_steady(wait, "#start-scan")
     new_row = "//tbody[@id='jobs']/tr[td[2][text()='browser sample']]"
     wait.until(lambda d: d.find_elements(By.XPATH, new_row)

@@ -91,3 +91,55 @@ def test_ctrl_c_with_an_event_stream_open_exits_cleanly(tmp_path: Path) -> None:
 
 
 # redact_query and the filters themselves: tests/unit/test_logfilters.py.
+
+
+def test_ctrl_c_mid_scan_says_what_becomes_of_the_scan(tmp_path: Path) -> None:
+    """A newcomer stopped `gonio serve --sim` mid-scan and read only "Shutting down ...
+    Finished server process": nothing said the scan was left unfinished, nor that the next
+    start on the same data directory resumes it (README, docs/install.md). The console now
+    says both, and the next start's "found running at start" line agrees with it."""
+    import re
+
+    key = "k" * 32
+    proc, url = _start(tmp_path)
+    try:
+        with httpx.Client(base_url=url, timeout=30, headers={"X-API-Key": key}) as c:
+            # The start-up calibration (job 1) first, then a scan long enough to stop midway.
+            deadline = time.monotonic() + 120
+            while c.get("/api/v1/jobs/1").json()["state"] != "completed":
+                assert time.monotonic() < deadline, "the start-up calibration did not complete"
+                time.sleep(0.2)
+            job = c.post("/api/v1/jobs", json={"plan": {
+                "kind": "uniform", "specimen": "felt", "rotations": 36}}).json()["id"]
+            while (seen := c.get(f"/api/v1/jobs/{job}").json()["done_angles"]) < 2:
+                assert time.monotonic() < deadline, "the scan did not start measuring"
+                time.sleep(0.1)
+        proc.send_signal(signal.SIGINT)
+        code = proc.wait(timeout=60)
+        err = proc.stderr.read() if proc.stderr else ""
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert code == 0, err
+    said = re.search(rf"job {job} \(uniform, 'felt'\) interrupted by the daemon's stop at "
+                     r"(\d+) of 36 angles: it resumes from its checkpoint when the daemon "
+                     r"starts again on this data directory", err)
+    assert said, err
+    stopped_at = int(said.group(1))
+    assert seen <= stopped_at < 36, err
+
+    # The next start on the same data directory finds it where the stop said.
+    proc, url = _start(tmp_path)
+    try:
+        with httpx.Client(base_url=url, timeout=30) as c:
+            assert c.get(f"/api/v1/jobs/{job}").json()["done_angles"] >= stopped_at
+        proc.send_signal(signal.SIGINT)
+        proc.wait(timeout=60)
+        err = proc.stderr.read() if proc.stderr else ""
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert f"job {job} (uniform, 'felt') found running at start ({stopped_at} of 36 angles)" \
+        in err, err

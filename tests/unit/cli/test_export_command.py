@@ -221,3 +221,18 @@ def test_gltf_with_mesh_and_the_report(result: Path, tmp_path: Path,
                  "-o", str(tmp_path / "m.binary")]) == 2
     assert "--with-mesh applies to --format gltf only" in capsys.readouterr().err
     assert not (tmp_path / "m.binary").exists()
+
+
+def test_a_table_file_is_told_apart_from_a_result(tmp_path: Path,
+                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    """A newcomer gave `gonio export` the gonio table (.npz) the page had exported, to turn it
+    into glTF, and read "is not an HDF5 file or is damaged": it is neither damaged nor a
+    result, and the message now says what it is and what export reads."""
+    table = bm.tabulate(library.library_specs()[0].model)
+    path = tmp_path / "gonio-job-2-table.npz"
+    table.save(path)
+    assert main(["export", str(path), "-f", "gltf", "-o", str(tmp_path / "t.gltf")]) == 2
+    err = capsys.readouterr().err
+    assert "not an HDF5 file" not in err and "damaged" not in err, err
+    assert "gonio-job-2-table.npz is a .npz archive (a gonio table or samples file)" in err, err
+    assert "result file" in err and not (tmp_path / "t.gltf").exists()

@@ -1,0 +1,90 @@
+"""The lab page's "Check plan" note (POST /api/v1/jobs/dry-run) in headless Chromium: its
+parts add up to its total, a short exposure total is not "0 s", and it names the angle the
+stage chip names. A newcomer read "about 8 s from the stage at 517.5° (moves 6 s, exposures
+0 s)" beside a chip saying "specimen at 157.5°": 6 + 0 is not 8 (the settling was left out),
+the scan's 25 exposures of 0.01 s were "0 s", and 517.5° was nowhere else on the page."""
+
+from __future__ import annotations
+
+import re
+from typing import Any
+
+import pytest
+
+from tests.system.api.conftest import Daemon
+from tests.system.api.test_browser import browser, click_when_steady, open_live  # noqa: F401
+
+pytestmark = pytest.mark.system
+
+EXPOSURE_S = 0.01
+ROTATIONS = 8
+
+
+def _seconds(text: str) -> float:
+    """A time as the note writes it ("0.25 s", "7.3 s", "40 s", "3 min") in seconds."""
+    number, unit = text.split()
+    return float(number) * {"s": 1, "min": 60, "h": 3600}[unit]
+
+
+def test_check_plan_adds_up_and_names_the_specimen_angle(
+        daemon: Daemon, browser: Any,  # noqa: F811 (the fixture)
+) -> None:
+    from selenium.webdriver.common.by import By
+
+    with daemon.client() as c:
+        # One and a quarter turns: the stage's position (450°) is not the specimen's angle.
+        r = c.post("/api/v1/rig/stage", json={"action": "move", "angle_deg": 450.0})
+        assert r.status_code == 200, r.text
+        lights = len(c.get("/api/v1/rig").json()["description"]["lights"])
+    wait = open_live(browser, daemon, 60)
+    # 450 - 360 = 90 degrees.
+    wait.until(lambda d: d.find_element(By.ID, "stage-chip").text.startswith("specimen at 90.0°"))
+    form = browser.find_element(By.ID, "scan-form")
+    for name, value in (("rotations", ROTATIONS), ("exposure_s", EXPOSURE_S), ("averages", 1)):
+        field = form.find_element(By.NAME, name)
+        field.clear()
+        field.send_keys(str(value))
+    click_when_steady(wait, "#dry-run")
+    wait.until(lambda d: "readings at" in d.find_element(By.ID, "dry-run-result").text)
+    note = browser.find_element(By.ID, "dry-run-result").text
+
+    # The angle the chip gives, and the stage's own position beside it.
+    assert "from the specimen at 90.0° (stage position 450.0°)" in note, note
+    m = re.search(r"about (\S+ \S+) from .*: moves (\S+ \S+), settling (\S+ \S+), "
+                  r"exposures (\S+ \S+)\.", note)
+    assert m, note
+    total, moves, settling, exposures = (_seconds(g) for g in m.groups())
+    # One exposure per light at each angle and one dark (`dark` = `once`, the default:
+    # docs/engine.md), each 0.01 s.
+    assert exposures == pytest.approx((ROTATIONS * lights + 1) * EXPOSURE_S, rel=0.05), note
+    # docs/api.md: estimated_s = motion_s + settle_s + exposure_s; shown to 0.1 s.
+    assert moves > 0 and settling > 0, note
+    assert moves + settling + exposures == pytest.approx(total, abs=0.16), note
+
+
+@pytest.mark.parametrize(("name", "value"), [("averages", "0"), ("exposure_s", "0"),
+                                             ("rotations", "0")])
+def test_check_plan_refuses_what_the_form_itself_refuses_as_start_does(
+        daemon: Daemon, browser: Any, name: str, value: str,  # noqa: F811 (the fixture)
+) -> None:
+    """A value outside the form's own limits (index.html's min/max: at least 1 average, an
+    exposure of at least 0.1 ms, at least one stage angle) is refused at the field by Start
+    scan, with the browser's message there; Check plan sent it and showed the daemon's
+    validation path instead ("plan.uniform.exposure.averages: Input should be greater than
+    or equal to 1")."""
+    from selenium.webdriver.common.by import By
+
+    wait = open_live(browser, daemon, 60)
+    field = browser.find_element(By.ID, "scan-form").find_element(By.NAME, name)
+    field.clear()
+    field.send_keys(value)
+    browser.execute_script("window.__sent = []; const f = window.fetch;"
+                           "window.fetch = (u, i) => { window.__sent.push(String(u));"
+                           " return f(u, i); };")
+    click_when_steady(wait, "#dry-run")
+    # The field says what is wrong, where the user typed it, as Start scan's check does.
+    wait.until(lambda d: d.switch_to.active_element == field)
+    assert browser.execute_script("return arguments[0].validity.valid", field) is False
+    assert not any("dry-run" in u for u in browser.execute_script("return window.__sent"))
+    message = browser.find_element(By.ID, "message")
+    assert not message.is_displayed() or "plan." not in message.text, message.text
