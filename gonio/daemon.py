@@ -299,7 +299,7 @@ def build_app(
     from gonio.api.app import create_app
     from gonio.basis_supply import BasisSupply
     from gonio.drivers.factory import build_rig
-    from gonio.locks import claim_endpoints, claim_store
+    from gonio.locks import DATA_DIR_ELSEWHERE, claim_endpoints, claim_store
     from gonio.service import GonioService
     from gonio.store import JobStore
 
@@ -309,7 +309,8 @@ def build_app(
     data_dir.mkdir(parents=True, exist_ok=True)
     # One daemon per data directory and one owner per rig, for this process's life: refused
     # here (LockBusy naming the holder) before anything is opened or served.
-    owned: list[Any] = [claim_store(data_dir / STORE_FILE, f"data directory {data_dir}")]
+    owned: list[Any] = [claim_store(data_dir / STORE_FILE, f"data directory {data_dir}",
+                                    DATA_DIR_ELSEWHERE)]
     try:
         endpoints = getattr(rig_config, "endpoints", None)
         if endpoints is not None:

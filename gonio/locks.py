@@ -371,13 +371,25 @@ class LockSet:
         self.release()
 
 
-def claim_store(store_path: str | os.PathLike[str], what: str | None = None) -> FileLock:
+STORE_ELSEWHERE = "another data directory (--data-dir) or job store (--db)"
+"""Where a ``gonio scan`` or ``gonio jobs`` refused a busy store can go instead."""
+
+DATA_DIR_ELSEWHERE = (
+    "another data directory (--data-dir, or [paths] data_dir in the daemon config)")
+"""Where a daemon refused a busy data directory can go instead (``gonio serve`` has no
+``--db``: its store is always the data directory's)."""
+
+
+def claim_store(store_path: str | os.PathLike[str], what: str | None = None,
+                elsewhere: str = STORE_ELSEWHERE) -> FileLock:
     """Take the job store's lock (``<store>.lock``) for this process; returns it (held).
 
     Parameters
     ----------
     store_path : the SQLite file of the job store
     what : how to name it in a refusal (default: "job store <path>")
+    elsewhere : the refusal's advice on where this process can keep its jobs instead, in the
+        caller's own options (:data:`STORE_ELSEWHERE`, :data:`DATA_DIR_ELSEWHERE`)
 
     Raises
     ------
@@ -388,7 +400,7 @@ def claim_store(store_path: str | os.PathLike[str], what: str | None = None) -> 
     return FileLock(
         path.with_name(path.name + ".lock"), what or f"job store {path}",
         advice="two programs must not run jobs from one store; stop that process, use its "
-               "API, or give this one another data directory / --db",
+               f"API, or give this one {elsewhere}",
     ).acquire()
 
 

@@ -196,10 +196,11 @@ def _claim_data_dir(data_dir: Path) -> Any:
     """This process's lock on a daemon data directory (:func:`gonio.locks.claim_store`), or a
     one-line refusal naming the process that has it."""
     from gonio.daemon import STORE_FILE
-    from gonio.locks import LockBusy, claim_store
+    from gonio.locks import DATA_DIR_ELSEWHERE, LockBusy, claim_store
 
     try:
-        return claim_store(Path(data_dir) / STORE_FILE, f"data directory {data_dir}")
+        return claim_store(Path(data_dir) / STORE_FILE, f"data directory {data_dir}",
+                           DATA_DIR_ELSEWHERE)
     except LockBusy as exc:
         raise UsageError(f"cannot start: {exc}") from None
 

@@ -9,6 +9,7 @@ disturbed.
 from __future__ import annotations
 
 import json
+import re
 import signal
 import sys
 from collections.abc import Iterator
@@ -59,11 +60,14 @@ def test_second_daemon_and_scan_on_a_data_dir_in_use_are_refused(
         assert second.returncode == 2, second.stdout + second.stderr
         assert "data directory" in second.stderr and f"pid {first.pid}" in second.stderr
         assert "gonio serve" in second.stderr  # the holder's program
+        # Its advice names only options gonio serve has (it advised --db, which serve lacks).
+        _assert_advice_fits(second.stderr, "serve", "--data-dir")
         scan = gonio(["scan", "--no-export-fits", "--rig", str(other_sim.config_path), "--db",
                       str(data / "gonio.sqlite"), "--rotations", "2", "-o",
                       str(tmp_path / "x.h5")])
         assert scan.returncode == 2, scan.stdout + scan.stderr
         assert f"pid {first.pid}" in scan.stderr
+        _assert_advice_fits(scan.stderr, "scan", "--db")
         assert not (tmp_path / "x.h5").exists()
         with first.client() as c:
             assert c.get("/health").json()["status"] == "ok"  # the first one is unharmed
@@ -77,6 +81,15 @@ def test_second_daemon_and_scan_on_a_data_dir_in_use_are_refused(
     finally:
         # uvicorn re-raises SIGTERM after its graceful shutdown: systemd counts that as clean.
         assert again.stop() in (0, -signal.SIGTERM)
+
+
+def _assert_advice_fits(refusal: str, command: str, must_name: str) -> None:
+    """Every ``--option`` a refusal advises is one ``gonio COMMAND --help`` lists, and it names
+    ``must_name``: the advice is one the user can follow with that command."""
+    listed = set(re.findall(r"--[a-z][a-z-]+", gonio([command, "--help"]).stdout))
+    advised = set(re.findall(r"--[a-z][a-z-]+", refusal))
+    assert must_name in advised, refusal
+    assert advised <= listed, (advised - listed, refusal)
 
 
 def _expected_counts(sim: SimRig, r: object) -> float:
