@@ -440,9 +440,13 @@ async function showResult(job) {
   state.className = SHOW_REASON.has(job.state) ? `state-${job.state}` : "muted";
   if (job.state !== "completed" || job.kind === "calibration") {
     $("#result-body").hidden = true;
+    // The comparison's readings belong beside a result: "Compare with" is in the result's
+    // body, so a job without one (a calibration, a scan still measuring) hides them too.
+    $("#compare-fit").hidden = true;
     shownResult = null;
     return;
   }
+  $("#compare-fit").hidden = compareWith === null;
   if (shownResult === job.id) return;
   shownResult = job.id;
   $("#result-body").hidden = false;

@@ -275,6 +275,13 @@ def test_start_a_scan_from_the_page_and_see_the_result(daemon: Daemon, browser: 
     # With its provenance sidecar, saved beside it as gonio export writes it.
     assert state == [f"saved gonio-job-{job_id}-merl.binary and "
                      f"gonio-job-{job_id}-merl.binary.json", *(f"warning: {w}" for w in sent)]
+    # The calibration selected: it has no result and no "Compare with", so the comparison's
+    # readings go too (they stayed, beside the calibration's own); back on the scan, they show.
+    click_when_steady(wait, f'#jobs tr[data-id="{cal_id}"]')
+    wait.until(lambda d: "Calibration completed" in d.find_element(By.ID, "result-state").text)
+    assert not browser.find_element(By.ID, "compare-plot").is_displayed()
+    click_when_steady(wait, row)
+    wait.until(lambda d: d.find_element(By.ID, "compare-plot").is_displayed())
     assert _severe(browser) == []
 
 
