@@ -518,6 +518,14 @@ def _duration_text(seconds: float) -> str:
     return f"{seconds / 3600:.1f} h"
 
 
+def _part_text(seconds: float) -> str:
+    """A part of a duration (moves, settling, exposures) to within a few per cent: a quarter
+    of a second's exposures read "0.2 s" at one decimal (round half to even)."""
+    if seconds >= 10:
+        return f"{seconds:.0f} s"
+    return f"{seconds:.1f} s" if seconds >= 1 else f"{seconds:.2g} s"
+
+
 def dry_run_summary(dr: Any, plan: Any, rig_name: str) -> str:
     """A few lines a person reads: angles, readings, duration (``--json`` has everything)."""
     n_pairs = len(dr.pairs)
@@ -530,8 +538,8 @@ def dry_run_summary(dr: Any, plan: Any, rig_name: str) -> str:
         f"  pairs: {n_pairs} ({len(dr.lights)} lights)",
         f"  readings: {dr.readings}{first} ({n_pairs} pairs x {len(angles)} angles), "
         f"exposure {ex.exposure_s:g} s x {ex.averages}",
-        f"  duration: about {_duration_text(dr.estimated_s)} (moves {dr.motion_s:.1f} s, "
-        f"settling {dr.settle_s:.1f} s, exposures {dr.exposure_s:.1f} s)",
+        f"  duration: about {_duration_text(dr.estimated_s)} (moves {_part_text(dr.motion_s)}, "
+        f"settling {_part_text(dr.settle_s)}, exposures {_part_text(dr.exposure_s)})",
     ]
     bound = getattr(dr, "max_estimated_s", None)
     if plan.kind == "adaptive":

@@ -145,6 +145,31 @@ def test_the_dry_run_summary_states_both_branches_of_an_auto_arc_plan() -> None:
     assert "then about 4.0 min more: that basis is not built on this install yet" in built_later
 
 
+def test_the_dry_run_summary_states_each_part_of_the_duration_to_a_few_per_cent() -> None:
+    import re
+
+    from gonio.plans.dryrun import dry_run
+    from gonio.rigdescription import RigDescription
+    from gonio.sim.memrig import MemRig
+
+    desc = RigDescription.from_rig(MemRig())
+    for argv in (("--rotations", "1", "--exposure", "0.05"),
+                 ("--rotations", "6", "--exposure", "0.01"), ("--rotations", "24",)):
+        plan = _parse(*argv)
+        dr = dry_run(plan, desc)  # type: ignore[arg-type]
+        text = scan_commands.dry_run_summary(dr, plan, "mem")
+        m = re.search(r"moves ([\d.]+) s, settling ([\d.]+) s, exposures ([\d.]+) s", text)
+        assert m is not None, text
+        # Each part as printed is within 5 % of the dry run's own (0.25 s printed as "0.2 s"
+        # was 20 % off); exposures: every light at every angle plus one dark, each exposure
+        # times its averages (docs/api.md), not the dry run's own sum.
+        exposures = (len(dr.lights) * len(dr.angles_deg) + 1) * plan.exposure.exposure_s \
+            * plan.exposure.averages  # type: ignore[attr-defined]
+        for shown, true in zip(map(float, m.groups()), (dr.motion_s, dr.settle_s, exposures),
+                               strict=True):
+            assert shown == pytest.approx(true, rel=0.05, abs=1e-9), (argv, text)
+
+
 def test_a_rebuild_says_why_its_design_comparison_is_missing_or_off() -> None:
     lost = "not available: job 3 was finished by a gonio whose job store did not keep ..."
     assert (scan_commands.design_comparison_line({"design_comparison": lost})
