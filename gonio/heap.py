@@ -36,6 +36,7 @@ MMAP_THRESHOLD_BYTES = 128 * 1024
 initial threshold, kept fixed."""
 
 _libc: Any = None
+_bounded = False
 
 
 def _glibc() -> Any:
@@ -56,6 +57,7 @@ def _glibc() -> Any:
 def bound_heap() -> bool:
     """Fix glibc's mmap threshold and bound its arenas for this process (see module doc);
     True when done. Call early, before threads allocate."""
+    global _bounded
     lib = _glibc()
     if lib is None:
         return False
@@ -64,7 +66,16 @@ def bound_heap() -> bool:
         if not lib.mallopt(ctypes.c_int(param), ctypes.c_int(value)):
             log.debug("mallopt(%d, %d) refused; the heap may grow across scans", param, value)
             ok = False
+    _bounded = _bounded or ok
     return ok
+
+
+def heap_bounded() -> bool:
+    """Whether :func:`bound_heap` fixed this process's mmap threshold: then every array of
+    128 KiB or more is mapped afresh and its pages zeroed by the kernel on first touch, which
+    doubles the CPU of work that makes thousands of them (the export fits:
+    docs/notes/2026-11-27-export-cpu.md; :mod:`gonio.export.child` runs those elsewhere)."""
+    return _bounded
 
 
 def trim() -> None:

@@ -264,6 +264,7 @@ class ResultViews:
             result_fits,
             write_export,
         )
+        from gonio.export.child import run_fits
 
         check_format(fmt)
         if with_mesh and fmt != "gltf":
@@ -279,7 +280,9 @@ class ResultViews:
             return out, name
         out.parent.mkdir(parents=True, exist_ok=True)
         try:
-            fits, prov = result_fits(path)
+            # In a fresh interpreter when the daemon's heap is bounded: half the CPU
+            # (gonio.export.child).
+            fits, prov = run_fits(result_fits, path)
             write_export(fits, fmt, out, prov, with_mesh=with_mesh)
         except ExportError as exc:
             raise NotFound(f"job {job_id}: {exc}") from None
