@@ -17,9 +17,9 @@ from dataclasses import dataclass
 
 from gonio.store import JobRow
 
-FINISHING_FALLBACK_S = 6.0
-"""Finishing time of the lab page's default scan on the simulated rig, seconds: 5-6 s measured
-with ``bench/bench_first_scan.py`` (docs/library.md), the upper end taken."""
+FINISHING_FALLBACK_S = 7.5
+"""Finishing time of the lab page's default scan on the simulated rig, seconds: 7.1-7.4 s
+measured with ``bench/bench_first_scan.py`` (docs/library.md), the upper end rounded up."""
 
 RECENT_SCANS = 3
 """How many of the last completed scans the estimate takes the median of: one slow finishing
