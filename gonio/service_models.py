@@ -123,7 +123,7 @@ class JobDetail(JobInfo):
     reconstruction_s: float | None = Field(
         default=None, description="active jobs: estimated seconds of finishing (basis load, "
         "reconstruction, export fits, the result file), the median measured 'seconds' of the "
-        "last 3 completed scans of this daemon, or 6 s (the default scan's, measured) before "
+        "last 3 completed scans of this daemon, or 7.5 s (the default scan's, measured) before "
         "any; see reconstruction_estimate")
     reconstruction_estimate: str | None = Field(
         default=None, description="what reconstruction_s rests on, in words")
