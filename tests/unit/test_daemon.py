@@ -219,6 +219,15 @@ def test_the_http_settings_follow_the_config(tmp_path: Path) -> None:
     assert settings.data_dir == tmp_path and settings.max_body_bytes == 4096
 
 
+def test_the_config_module_knows_every_table_of_the_daemon_config() -> None:
+    """gonio.config tells a daemon config from a rig config by its tables (it cannot import
+    the daemon's model, a layer above): the list must stay the model's."""
+    from gonio.config import DAEMON_TABLES
+    from gonio.daemon import DaemonConfig
+
+    assert set(DaemonConfig.model_fields) == DAEMON_TABLES
+
+
 def test_a_rig_config_given_as_the_daemon_config_says_so() -> None:
     """``gonio serve --config rig.toml`` listed an "unknown key" line for each of the rig
     config's tables; the file is the other kind, and one line says so and where it goes."""
