@@ -295,6 +295,37 @@ def stored_standard(folder: str | os.PathLike[str],
     return report, said
 
 
+def store_standard(folder: str | os.PathLike[str], name: str,
+                   text: str) -> tuple[ColourReport, list[str], bool]:
+    """Keep a colour CSV as the stored standard ``name`` of ``folder`` (created if needed),
+    once it reads as one (:func:`parse_standard`); a standard already stored under that name
+    is replaced, atomically, and nothing is written when the text is refused.
+
+    Returns
+    -------
+    The standard's colour report and warnings, and whether it replaced one.
+
+    Raises
+    ------
+    ColourError
+        A name that cannot be a stored standard's (letters, digits, ``. _ -`` and spaces, no
+        path), or a text that is not a colour CSV (what is wrong in it).
+    """
+    from gonio.atomicfile import write_atomically
+
+    stem = name[:-4] if name.lower().endswith(".csv") else name
+    if not _STANDARD_NAME.match(stem):
+        raise ColourError(
+            f"{name!r} cannot name a stored standard: use letters, digits, '.', '_', '-' and "
+            "spaces (up to 100, starting with a letter or digit), no folders")
+    report, said = parse_standard(text.removeprefix("\ufeff"), f"standard {stem!r}", stem)
+    path = Path(folder) / f"{stem}.csv"
+    replaced = path.is_file()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_atomically(path, text)
+    return report, said, replaced
+
+
 def read_standard_csv(path: str | os.PathLike[str]) -> ColourReport:
     """A standard's colour from a colour CSV (:func:`read_standard`, without its warnings)."""
     return read_standard(path)[0]
@@ -325,6 +356,24 @@ def read_standard(path: str | os.PathLike[str]) -> tuple[ColourReport, list[str]
         text = p.read_text(encoding="utf-8-sig")
     except (OSError, UnicodeDecodeError) as exc:
         raise ColourError(f"cannot read standard {p}: {exc}") from None
+    return parse_standard(text, str(p), p.stem)
+
+
+def parse_standard(text: str, source: str, name: str) -> tuple[ColourReport, list[str]]:
+    """A standard's colour from a colour CSV's text (:func:`read_standard`'s rules).
+
+    Parameters
+    ----------
+    text : the CSV, decoded
+    source : how the errors name it (a file's path, "standard 'NAME'")
+    name : the standard's name in the report and its comparisons
+
+    Raises
+    ------
+    ColourError
+        Naming ``source`` and what is missing or wrong.
+    """
+    p = source
     cells = csv_rows(text)
     header = cells[0] if cells else []
     rows = [dict(zip(header, row + [""] * (len(header) - len(row)), strict=False))
@@ -370,7 +419,7 @@ def read_standard(path: str | os.PathLike[str]) -> tuple[ColourReport, list[str]
                 f"{g.azimuth_deg:g}; keep one row per geometry (average repeated readings)")
         first[g] = n
     said = list(dict.fromkeys(w for r in rows if (w := r.get("warnings") or "")))
-    return ColourReport(p.stem, cond, CIELAB, "stored standard", (), tuple(geos),
+    return ColourReport(name, cond, CIELAB, "stored standard", (), tuple(geos),
                         np.zeros((len(geos), 0)), None, lab_arr), said
 
 

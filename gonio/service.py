@@ -786,6 +786,24 @@ class GonioService:
         except UnknownStandard as exc:
             raise NotFound(str(exc)) from None
 
+    def colour_standard_names(self) -> list[str]:
+        """The stored colour standards of this daemon's data directory, by name."""
+        from gonio.result_colour import STANDARDS_DIR, standard_names
+
+        return standard_names(self.data_dir / STANDARDS_DIR)
+
+    def store_colour_standard(self, name: str, text: str) -> dict[str, Any]:
+        """Keep a colour CSV as the stored standard ``name``
+        (:func:`gonio.result_colour.store_standard`): what it holds, and whether it replaced
+        one. Raises ``ColourError`` for a name or text that cannot be one (nothing written)."""
+        from gonio.result_colour import STANDARDS_DIR, store_standard
+
+        report, said, replaced = store_standard(self.data_dir / STANDARDS_DIR, name, text)
+        return {"name": report.name, "replaced": replaced,
+                "illuminant": report.conditions.illuminant,
+                "observer": report.conditions.observer,
+                "geometries": len(report.geometries), "warnings": said}
+
     def preview_png(self, job_id: int) -> bytes:
         """PNG preview of a job's table (:meth:`ResultViews.preview_png`)."""
         return self.results.preview_png(job_id)

@@ -44,7 +44,14 @@ from fastapi.staticfiles import StaticFiles
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from gonio import __version__
-from gonio.api import routes_design, routes_jobs, routes_results, routes_rig, routes_system
+from gonio.api import (
+    routes_design,
+    routes_jobs,
+    routes_results,
+    routes_rig,
+    routes_standards,
+    routes_system,
+)
 from gonio.api.errors import document_errors
 from gonio.api.events import HEARTBEAT_S, StreamCloser
 from gonio.api.limits import LimitExceeded
@@ -228,7 +235,8 @@ def create_app(
     for unexpected in (OSError, sqlite3.Error, Exception):
         app.add_exception_handler(unexpected, unexpected_error)
 
-    for module in (routes_system, routes_rig, routes_jobs, routes_results, routes_design):
+    for module in (routes_system, routes_rig, routes_jobs, routes_results, routes_standards,
+                   routes_design):
         document_errors(module.router.routes)
         app.include_router(module.router)
 

@@ -62,3 +62,59 @@ def test_against_takes_a_stored_standard_by_name_and_names_an_unknown_or_unreada
         torn = c.get(f"/api/v1/jobs/{second}/colour", params={"against": "torn"})
         assert torn.status_code == 422, torn.text
         assert "torn.csv: columns" in torn.json()["detail"], torn.json()
+
+
+def test_a_standard_is_stored_listed_and_refused_through_the_api_losing_nothing(
+    spectral_lab: _SpectralLab, spectral_jobs: list[int],  # noqa: F811
+) -> None:
+    """``PUT /api/v1/colour-standards/{name}`` keeps a colour CSV as a stored standard and
+    ``GET /api/v1/colour-standards`` lists them: a lab saves its master's colour from the
+    page or a script instead of copying files into the data directory."""
+    d = spectral_lab.serve(None)
+    first, second = spectral_jobs
+    with d.client() as c:
+        # (The data directory is shared with the test above, which copied some in by hand.)
+        before = set(c.get("/api/v1/colour-standards").json()["standards"])
+        assert "panel master" not in before
+        table = c.get(f"/api/v1/jobs/{first}/colour", params={"format": "csv"}).text
+        put = c.put("/api/v1/colour-standards/panel master", content=table,
+                    headers={"Content-Type": "text/csv"})
+        assert put.status_code == 200, put.text
+        stored = put.json()
+        assert stored["name"] == "panel master" and stored["replaced"] is False
+        # As many geometries as the table has rows (the header aside).
+        assert stored["geometries"] == len(table.strip().splitlines()) - 1
+        assert set(c.get("/api/v1/colour-standards").json()["standards"]) == before | {
+            "panel master"}
+        # The file is the one a lab would have copied there by hand.
+        assert (d.data_dir / "standards" / "panel master.csv").read_text() == table
+        # The panel against its own stored colour: no difference.
+        own = c.get(f"/api/v1/jobs/{first}/colour", params={"against": "panel master"})
+        assert own.json()["difference"]["max_dE00"] < 0.01
+
+        # Refused, and the standard stored before is kept as it was.
+        for name, body, said in (
+                ("panel master", "patch,value\n1,2\n", "standard 'panel master': columns"),
+                ("panel master", "", "no rows"),
+                ("..", table, "cannot name a stored standard"),
+                (".hidden", table, "cannot name a stored standard")):
+            bad = c.put(f"/api/v1/colour-standards/{name}", content=body,
+                        headers={"Content-Type": "text/csv"})
+            assert bad.status_code in (404, 422), (name, bad.text)
+            if bad.status_code == 422:
+                assert said in bad.json()["detail"], (name, bad.json())
+        assert (d.data_dir / "standards" / "panel master.csv").read_text() == table
+        assert set(c.get("/api/v1/colour-standards").json()["standards"]) == before | {
+            "panel master"}
+
+        # Replaced by the second panel's colour: said, and compared with from then on.
+        other = c.get(f"/api/v1/jobs/{second}/colour", params={"format": "csv"}).text
+        again = c.put("/api/v1/colour-standards/panel master.csv", content=other,
+                      headers={"Content-Type": "text/csv"})
+        assert again.status_code == 200 and again.json()["replaced"] is True, again.text
+        assert c.get(f"/api/v1/jobs/{second}/colour", params={"against": "panel master"}
+                     ).json()["difference"]["max_dE00"] < 0.01
+        # Storing needs the write key.
+        anon = d.client(None).put("/api/v1/colour-standards/x", content=table,
+                                        headers={"Content-Type": "text/csv"})
+        assert anon.status_code == 401, anon.text
