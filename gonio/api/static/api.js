@@ -72,6 +72,12 @@ export async function send(method, path, body = undefined) {
   return resp.status === 204 ? null : resp.json();
 }
 
+// A body that is not JSON (a colour CSV stored as a standard), sent as it is.
+export async function sendText(method, path, text, type = "text/plain") {
+  const resp = await check(await request(path, { method, headers: headers({ "Content-Type": type }), body: text }));
+  return resp.status === 204 ? null : resp.json();
+}
+
 export async function getBlob(path) {
   return (await check(await request(path, { headers: headers() }))).blob();
 }

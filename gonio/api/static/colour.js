@@ -4,13 +4,18 @@
 // sensor RGB) shows its channel values under that label, never as a colour space. The "source"
 // column says which geometries a pair of the scan read directly ("pair", the report's
 // `measured` flags) and which came from the reconstructed table ("table").
+// "against standard" compares with a stored standard instead (GET /api/v1/colour-standards;
+// the data directory's standards/ CSVs), and "Save" stores the table shown as one (PUT
+// /api/v1/colour-standards/{name}): a lab measures its master once and compares each batch
+// with it by name. "Download CSV" saves the table shown (format=csv), as gonio colour --csv.
 // The instrument menu starts on the rig's design instrument (GET /api/v1/rig/config, its
 // [design] colour_instrument, written by `gonio design --colour`) when the rig has one, until
 // the user picks another.
-import { getJSON } from "./api.js";
+import { getBlob, getJSON, sendText } from "./api.js";
 
 const $ = (sel) => document.querySelector(sel);
 let shown = null;
+let shownSpace = null;  // the colour space of the table shown (CIELAB, or channel values)
 // The rig's design instrument: undefined until the rig config was read, null when it has none.
 let designInstrument;
 let userChose = false;
@@ -39,6 +44,64 @@ function cell(tr, text, tag = "td") {
   tr.append(el);
 }
 
+// The stored standards in the menu, keeping the one chosen (or ``choose``) while it exists.
+async function refreshStandards(choose = undefined) {
+  let names;
+  try { names = (await getJSON("/colour-standards")).standards; } catch { return; }
+  const sel = $("#colour-standard");
+  const want = choose ?? sel.value;
+  const listed = names.join("\n");
+  if (sel.dataset.names !== listed) {
+    sel.dataset.names = listed;
+    sel.replaceChildren(new Option("(none)", ""), ...names.map((n) => new Option(n, n)));
+  }
+  sel.value = names.includes(want) ? want : "";
+}
+
+function tableQuery(format = undefined) {
+  const q = new URLSearchParams({ instrument: $("#colour-instrument").value,
+    azimuth: String(Number($("#colour-azimuth").value) || 0) });
+  if (format) q.set("format", format);
+  return q;
+}
+
+async function saveStandard() {
+  const id = shownJob(), state = $("#colour-standard-state"), field = $("#colour-standard-name");
+  if (id === null) return;
+  const name = field.value.trim();
+  if (!name) { state.textContent = "Name the standard first."; field.focus(); return; }
+  state.textContent = "Saving…";
+  try {
+    const csv = await (await getBlob(`/jobs/${id}/colour?${tableQuery("csv")}`)).text();
+    const r = await sendText("PUT", `/colour-standards/${encodeURIComponent(name)}`, csv, "text/csv");
+    state.textContent = `${r.replaced ? "Replaced" : "Saved"} standard ${r.name}: job ${id} at ` +
+      `${r.geometries} ${$("#colour-instrument").value} geometries, ${r.illuminant}/${r.observer}°.`;
+    await refreshStandards();
+  } catch (e) {
+    state.textContent = `Not saved: ${e.message}`;
+  }
+}
+
+async function downloadCsv() {
+  const id = shownJob(), state = $("#colour-standard-state");
+  if (id === null) return;
+  try {
+    const q = tableQuery("csv");
+    const standard = $("#colour-standard").value;
+    // Channel values (no CIELAB) cannot be compared: their table alone.
+    if (standard && shownSpace === "CIELAB") q.set("against", standard);
+    const file = await getBlob(`/jobs/${id}/colour?${q}`);
+    const a = document.createElement("a");
+    a.href = URL.createObjectURL(file);
+    a.download = `gonio-job-${id}-colour-${$("#colour-instrument").value}.csv`;
+    a.click();
+    state.textContent = `saved ${a.download}`;
+  } catch (e) {
+    state.textContent = `Not saved: ${e.message}`;
+  }
+}
+
+
 function fmt(v, digits = 2) { return typeof v === "number" ? v.toFixed(digits) : "–"; }
 
 async function refresh() {
@@ -47,10 +110,12 @@ async function refresh() {
   // A calibration job's result has no BRDF (the panel hides its body): no colour to ask for.
   if (id === null || $("#result-body").hidden) { box.hidden = true; shown = null; return; }
   await useDesignInstrument();
+  await refreshStandards();
   const instrument = $("#colour-instrument").value;
   const azimuth = Number($("#colour-azimuth").value) || 0;
   const against = $("#compare").value;
-  const key = `${id}/${instrument}/${azimuth}/${against}`;
+  const standard = $("#colour-standard").value;
+  const key = `${id}/${instrument}/${azimuth}/${against}/${standard}`;
   if (key === shown) return;
   shown = key;
   box.hidden = false;
@@ -62,7 +127,11 @@ async function refresh() {
     body = await getJSON(`/jobs/${id}/colour?${q}`);
     // A difference only between two results with CIELAB (the server refuses the others):
     // the compared job's space is asked first, so no request is made that must fail.
-    if (against && body.colour.space === "CIELAB") {
+    if (standard && body.colour.space === "CIELAB") {
+      // A stored standard chosen: compared with it, not with the job chosen above.
+      q.set("against", standard);
+      body = await getJSON(`/jobs/${id}/colour?${q}`);
+    } else if (against && body.colour.space === "CIELAB") {
       const other = await getJSON(`/jobs/${against}/colour?${q}`);
       if (other.colour.space === "CIELAB") {
         q.set("against", against);
@@ -78,6 +147,7 @@ async function refresh() {
   }
   if (key !== shown) return;
   const rep = body.colour, diff = body.difference;
+  shownSpace = rep.space;
   const head = document.createElement("tr");
   const lab = rep.space === "CIELAB";
   const cols = lab ? ["geometry", "L*", "a*", "b*", "C*", "h°"]
@@ -108,7 +178,7 @@ async function refresh() {
   caption.textContent = lab
     ? `${rep.space}, ${rep.conditions.illuminant}/${rep.conditions.observer}°, ${instrument} geometries at azimuth ${azimuth}° (${rep.conversion})` +
       (flop !== undefined ? `; flop index ${flop.toFixed(2)}` : "") +
-      (diff ? `; ΔE00 against job ${against}: max ${diff.max_dE00.toFixed(2)}` : "") + source
+      (diff ? `; ΔE00 against ${standard ? `standard ${standard}` : `job ${against}`}: max ${diff.max_dE00.toFixed(2)}` : "") + source
     : `${rep.space}: reflectance factors per channel (${rep.channels.length} channels), no CIELAB. ` +
       "Give the sensor spectral bands or a chart colour calibration (docs/colour.md).";
   // What must travel with the numbers (a calibration from another exposure): said first.
@@ -121,6 +191,8 @@ window.addEventListener("DOMContentLoaded", () => {
   const go = () => { refresh().catch(() => {}); };
   new MutationObserver(go).observe($("#result-job"), { childList: true, characterData: true, subtree: true });
   $("#colour-instrument").addEventListener("change", () => { userChose = true; });
-  for (const id of ["#colour-instrument", "#colour-azimuth", "#compare"]) $(id).addEventListener("change", go);
+  for (const id of ["#colour-instrument", "#colour-azimuth", "#compare", "#colour-standard"]) $(id).addEventListener("change", go);
+  $("#colour-save-standard").addEventListener("click", () => { saveStandard().then(go); });
+  $("#colour-csv").addEventListener("click", () => { downloadCsv(); });
   go();
 });

@@ -237,3 +237,52 @@ def test_instrument_menu_starts_on_the_rig_design_instrument(
         .get_attribute("value") == "MA98"
     assert len(browser.find_elements(By.CSS_SELECTOR, "#colour-table tbody tr")) == 11
     assert not _severe(browser)
+
+
+def test_a_result_saved_as_a_standard_is_compared_with_by_name_on_the_page(
+        spectral_daemon: Daemon, spectral_jobs: list[int], browser: Any) -> None:  # noqa: F811
+    """The colour panel saves the table shown as a stored standard (PUT
+    /api/v1/colour-standards/NAME) and compares any result with a stored standard chosen by
+    name; a lab's standards were files it copied into the data directory by hand."""
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support.ui import Select
+
+    d, ids = spectral_daemon, spectral_jobs
+    with d.client() as c:
+        # The differences the page must show: the API's own, against the first panel's job.
+        by_job = c.get(f"/api/v1/jobs/{ids[1]}/colour",
+                       params={"instrument": "MA98", "against": ids[0]}).json()["difference"]
+    wait = open_live(browser, d, 240)
+    click_when_steady(wait, f'#jobs tr[data-id="{ids[0]}"]')
+    wait.until(lambda b: b.find_element(By.ID, "result-job").text.startswith(f"job {ids[0]} ")
+               and "MA98 geometries" in b.find_element(By.ID, "colour-caption").text)
+    # Nameless: not sent, the field asks for a name.
+    click_when_steady(wait, "#colour-save-standard")
+    wait.until(lambda b: "Name the standard first" in
+               b.find_element(By.ID, "colour-standard-state").text)
+    browser.find_element(By.ID, "colour-standard-name").send_keys("page master")
+    click_when_steady(wait, "#colour-save-standard")
+    wait.until(lambda b: "standard page master" in
+               b.find_element(By.ID, "colour-standard-state").text)
+    assert browser.find_element(By.ID, "colour-standard-state").text.startswith(
+        ("Saved standard page master: job", "Replaced standard page master: job"))
+    assert (d.data_dir / "standards" / "page master.csv").is_file()
+    # The second panel against it, by name: the same ΔE00 as against the first job itself,
+    # up to the CSV's rounding of L*, a*, b*.
+    click_when_steady(wait, f'#jobs tr[data-id="{ids[1]}"]')
+    wait.until(lambda b: "page master" in [o.get_attribute("value") for o in b.find_elements(
+        By.CSS_SELECTOR, "#colour-standard option")])
+    Select(browser.find_element(By.ID, "colour-standard")).select_by_value("page master")
+    wait.until(lambda b: b.find_element(By.ID, "result-job").text.startswith(f"job {ids[1]} ")
+               and "against standard page master" in
+               b.find_element(By.ID, "colour-caption").text)
+    head = [th.text for th in browser.find_elements(By.CSS_SELECTOR, "#colour-table thead th")]
+    assert head[-1] == "ΔE00"
+    shown = [float(tr.find_elements(By.TAG_NAME, "td")[-1].text)
+             for tr in browser.find_elements(By.CSS_SELECTOR, "#colour-table tbody tr")]
+    assert shown == pytest.approx([r["dE00"] for r in by_job["rows"]], abs=0.011)
+    # The table shown, downloaded as gonio colour --csv writes it (the API has had it).
+    click_when_steady(wait, "#colour-csv")
+    wait.until(lambda b: b.find_element(By.ID, "colour-standard-state").text
+               == f"saved gonio-job-{ids[1]}-colour-MA98.csv")
+    assert not _severe(browser)
