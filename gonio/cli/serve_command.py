@@ -4,8 +4,10 @@ Two ways to run it:
 
 * ``gonio serve --config daemon.toml [--rig rig.toml]``: the lab PC (see docs/install.md);
 * ``gonio serve --sim``: a simulated rig started in this process, and the daemon on it. Prints
-  the address to open, with a one-off API key in the address's ``#fragment`` (browsers never
-  send the fragment to the server, so the key does not reach any log). ``--demo-scan`` also
+  the address to open, with the session's API key in the address's ``#fragment`` (browsers
+  never send the fragment to the server, so the key does not reach any log); the key is kept
+  in the data directory (:func:`gonio.cli.sim_session.session_key`), so an open page keeps
+  working across restarts. ``--demo-scan`` also
   runs one scan through the HTTP API, prints its progress and result, and exits (smoke test).
 
 What is on the simulated stage is part of the rig's state and follows the jobs, as a person
@@ -22,7 +24,6 @@ unless ``--data-dir`` names one; ``--throwaway`` uses a temporary folder deleted
 from __future__ import annotations
 
 import argparse
-import secrets
 import sys
 import tempfile
 import threading
@@ -230,18 +231,21 @@ def _configure_logging(level: str) -> None:
 
 def _run_sim(args: argparse.Namespace, cfg: Any, keyring: Any) -> int:
     from gonio.apikeys import ApiKeyring
-    from gonio.cli.sim_session import attach_sim, calibration_not_needed, start_sim_calibration
+    from gonio.cli.sim_session import (
+        SESSION_KEY_FILE,
+        attach_sim,
+        calibration_not_needed,
+        start_sim_calibration,
+    )
+    from gonio.cli.sim_session import session_key as sim_session_key
     from gonio.daemon import build_app, is_loopback_host, serve, warn_if_exposed
     from gonio.sim.rig import WHITE_REFERENCE_ALBEDO, SimRigOptions, start_sim_rig
 
     if not args.time_scale > 0:
         raise UsageError(f"--time-scale must be > 0, got {args.time_scale}")
-    # A newcomer's sim session gets its own key unless keys are configured.
+    # A newcomer's sim session gets its own key unless keys are configured: one kept in the
+    # data directory, so a page left open keeps working across restarts (session_key).
     session_key = None
-    if len(keyring) == 0:
-        session_key = secrets.token_hex(24)  # hex: never starts with '-' (argparse)
-        keyring = ApiKeyring({"sim-session": session_key})
-    warn_if_exposed(cfg, keyring)
     with tempfile.TemporaryDirectory(prefix="gonio-serve-") as tmp:
         if args.throwaway:
             cfg = cfg.with_overrides(paths__data_dir=str(Path(tmp) / "data"))
@@ -254,6 +258,11 @@ def _run_sim(args: argparse.Namespace, cfg: Any, keyring: Any) -> int:
         # Own the data directory before reading or writing anything in it (a second daemon on
         # it is refused here, naming the first); build_app takes the same lock again.
         owned = _claim_data_dir(data_dir)
+        key_kept = False
+        if len(keyring) == 0:
+            session_key, key_kept = sim_session_key(Path(data_dir))
+            keyring = ApiKeyring({"sim-session": session_key})
+        warn_if_exposed(cfg, keyring)
         material = _sim_material(data_dir, args.material)
         try:
             sim = start_sim_rig(SimRigOptions(
@@ -283,6 +292,9 @@ def _run_sim(args: argparse.Namespace, cfg: Any, keyring: Any) -> int:
                 kept = ("a temporary folder, deleted at exit" if args.throwaway
                         else "kept across restarts")
                 print(f"data directory {data_dir} ({kept})")
+                if key_kept:
+                    print(f"API key: the one of the last start on this data directory (kept in "
+                          f"{Path(data_dir) / SESSION_KEY_FILE}; delete it for a new one)")
                 print(f"gonio serving on {url}")
                 print(f"open {url}{fragment} and start a scan (Ctrl-C stops)", flush=True)
                 # Called on the server's event loop, once it listens: the service runs.

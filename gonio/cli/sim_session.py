@@ -13,6 +13,9 @@ Two things a person at a real rig does, done here for the simulated one, once fo
 
 from __future__ import annotations
 
+import os
+import re
+import secrets
 from pathlib import Path
 from typing import Any
 
@@ -225,3 +228,39 @@ def sim_specimen_truth(rig_config_path: Path, rig_config: Any) -> dict[str, Any]
     finally:
         client.close()
     return recipe if answered and isinstance(recipe, dict) else None
+
+
+SESSION_KEY_FILE = "sim-session.key"
+"""The file of a ``gonio serve --sim`` data directory that keeps its session's API key."""
+
+_SESSION_KEY = re.compile(r"[0-9a-f]{48}")
+
+
+def session_key(data_dir: Path) -> tuple[str, bool]:
+    """The API key of ``gonio serve --sim`` on ``data_dir`` when no keys are configured: the
+    one kept in :data:`SESSION_KEY_FILE` (readable by its owner only), or a new one written
+    there. A page left open (the key is in its tab) keeps working across a restart on the same
+    data directory; a new key each start made it ask for one. Deleting the file makes a new
+    key at the next start.
+
+    Returns
+    -------
+    The key (48 hex digits: never starts with '-', which argparse would take for an option),
+    and whether it was kept from an earlier start.
+    """
+    path = data_dir / SESSION_KEY_FILE
+    try:
+        kept = path.read_text(encoding="ascii").strip()
+    except (OSError, UnicodeDecodeError):
+        kept = ""
+    if _SESSION_KEY.fullmatch(kept):
+        return kept, True
+    key = secrets.token_hex(24)
+    data_dir.mkdir(parents=True, exist_ok=True)
+    part = path.with_name(path.name + ".part")
+    # Created owner-only before the key is in it, then renamed over any damaged one.
+    fd = os.open(part, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    with os.fdopen(fd, "w", encoding="ascii") as f:
+        f.write(key + "\n")
+    os.replace(part, path)
+    return key, False

@@ -145,6 +145,11 @@ def test_killed_sim_daemon_resumes_its_specimen_scan_without_recalibrating(
     #    calibration job is queued.
     with daemon(data) as second:
         second.wait_for(r"calibration: in effect")
+        # The same API key as before the kill: a page left open (the key in its tab) keeps
+        # working; it was a new key each start. Kept owner-only in the data directory.
+        assert second.key == first.key
+        assert "API key: the one of the last start on this data directory" in second.output()
+        assert (data / "sim-session.key").stat().st_mode & 0o777 == 0o600
         resumed = second.wait_job(job_id, lambda j: j["state"] in MEASURED)
         assert resumed["done_angles"] == 8
         jobs = second.client.get("/api/v1/jobs").json()
@@ -157,6 +162,7 @@ def test_killed_sim_daemon_resumes_its_specimen_scan_without_recalibrating(
         clean_id = _calibrated_and_submitted(clean)
         clean.wait_job(clean_id, lambda j: j["state"] in MEASURED)
         want = clean.readings(clean_id)
+        assert clean.key != first.key  # another data directory: a key of its own
 
     assert sorted(got) == sorted(want) and len(got) == 8 * 12
     a = np.stack([got[k] for k in sorted(got)])
