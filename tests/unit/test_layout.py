@@ -55,6 +55,8 @@ TESTED_IN: dict[str, tuple[str, ...]] = {
     "gonio/api/routes_results.py": ("tests/system/api/test_scan_flow.py",
                                     "tests/system/api/test_time_api.py",
                                     "tests/system/api/test_colour.py"),
+    "gonio/api/routes_standards.py": ("tests/system/api/test_colour_standards.py",
+                                      "tests/system/api/test_browser_colour.py"),
     "gonio/api/routes_rig.py": ("tests/system/api/test_stage.py",
                                 "tests/system/test_durable_state.py"),
     "gonio/api/routes_system.py": ("tests/system/api/test_scan_flow.py",
