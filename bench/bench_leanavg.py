@@ -52,7 +52,7 @@ import scipy.optimize
 from gonio.brdf.reconstruction.basis import Basis, default_basis
 from gonio.brdf.reconstruction.joint import JOINT_ETA, JOINT_LAM, joint_prior
 from gonio.brdf.reconstruction.reconstruct import reconstruct
-from gonio.brdf.reconstruction.tilt import reconstruct_through
+from gonio.brdf.reconstruction.tilt import reconstruct_through, refine_around
 from gonio.brdf.tables import metrics
 from gonio.brdf.tables.table import BRDFTable
 
@@ -162,17 +162,7 @@ def one_specimen(plain: Basis, asym: Basis, prior: np.ndarray, m: bu.Material,
         for b in proto.AZIMUTHS_DEG if t > 0 else (0.0,):
             misfit(t, b)
     coarse = dict(pool)
-    best = min(pool, key=pool.__getitem__)
-    if best[0] > 0:
-        dt, db = proto.REFINE_DEG
-        for _ in range(2):
-            tc, bc = best
-            for t in (tc - dt, tc, tc + dt):
-                for b in (bc - db, bc, bc + db):
-                    if t >= 0:
-                        misfit(t, b)
-            best = min(pool, key=pool.__getitem__)
-            dt, db = dt / 2, db / 2
+    best = refine_around(misfit, pool, proto.REFINE_DEG)
     out["cpu_grid"] = time.process_time() - t0
     out["point_lean"], out["point_misfit"] = list(best), pool[best]
 

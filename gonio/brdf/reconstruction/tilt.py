@@ -40,7 +40,7 @@ The product does not call it: run once on two fresh sets it let through losses o
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -457,6 +457,43 @@ class TiltFit:
                 "tilt_accepted": bool(self.accepted), "tilt_decision": self.decision}
 
 
+def refine_around(score: Callable[[float, float], float],
+                  tried: Mapping[tuple[float, float], float],
+                  steps_deg: tuple[float, float] = REFINE_STEPS_DEG,
+                  rounds: int = 2) -> tuple[float, float]:
+    """The lean of least score after finer rounds around the best one tried so far.
+
+    Each round scores the 3 x 3 leans at the steps around the best (tilts below 0 skipped),
+    then halves the steps. A best lean of no tilt is kept as it is (there is no azimuth to
+    refine).
+
+    Parameters
+    ----------
+    score : scores a lean ``(t, b)`` in degrees and records it in ``tried`` (under the
+        caller's own key for it)
+    tried : the leans scored so far, ``(t, b)`` degrees -> score; read after every round
+    steps_deg : the first round's steps of tilt and azimuth, degrees
+    rounds : how many rounds
+
+    Returns
+    -------
+    The best key of ``tried`` at the end.
+    """
+    best = min(tried, key=tried.__getitem__)
+    if best[0] <= 0:
+        return best
+    dt, db = steps_deg
+    for _ in range(rounds):
+        t_c, b_c = best
+        for t in (t_c - dt, t_c, t_c + dt):
+            for b in (b_c - db, b_c, b_c + db):
+                if t >= 0:
+                    score(t, b)
+        best = min(tried, key=tried.__getitem__)
+        dt, db = dt / 2, db / 2
+    return best
+
+
 def fit_tilt(basis: Basis, cells: ArrayLike, ph_lab: ArrayLike, stage_angles: ArrayLike,
              values: ArrayLike, *, channels: Sequence[str] = ("R", "G", "B"),
              tilts_deg: Sequence[float] = COARSE_TILTS_DEG,
@@ -504,17 +541,8 @@ def fit_tilt(basis: Basis, cells: ArrayLike, ph_lab: ArrayLike, stage_angles: Ar
     for t in tilts_deg:
         for b in (azimuths_deg if t > 0 else (0.0,)):
             score(float(t), float(b))
-    best = min(tried, key=tried.__getitem__)
-    if refine and best[0] > 0:
-        dt, db = REFINE_STEPS_DEG
-        for _ in range(2):
-            t_c, b_c = best
-            for t in (t_c - dt, t_c, t_c + dt):
-                for b in (b_c - db, b_c, b_c + db):
-                    if t >= 0:
-                        score(t, b)
-            best = min(tried, key=tried.__getitem__)
-            dt, db = dt / 2, db / 2
+    best = (refine_around(score, tried) if refine
+            else min(tried, key=tried.__getitem__))
     tilt, azimuth = np.deg2rad(best[0]), np.deg2rad(best[1])
     g, table = reconstruct_through(basis, cells, ph_lab, stage_angles, vals, tilt, azimuth,
                                    channels=channels, name=name)

@@ -234,3 +234,30 @@ def test_the_rule_refuses_what_it_cannot_judge() -> None:
     assert (ok, n) == (False, 4) and "too few" in why
     with pytest.raises(ReconstructionError, match="shapes"):
         tilt_decision(_errors([0.01] * 5), _errors([0.1] * 6), 0.2)
+
+
+def test_refine_around_narrows_to_the_minimum_of_a_bowl_within_its_last_steps() -> None:
+    """Two rounds of 3 x 3 around the coarse best, the steps halved: on a smooth bowl the
+    lean found is the grid point of the last round's steps nearest the true minimum."""
+    from gonio.brdf.reconstruction.tilt import refine_around
+
+    t0, b0 = 12.3, 47.0  # the bowl's minimum, off every grid
+
+    tried: dict[tuple[float, float], float] = {}
+
+    def score(t: float, b: float) -> float:
+        tried[(t, b)] = (t - t0) ** 2 + ((b - b0) / 4.0) ** 2
+        return tried[(t, b)]
+
+    for t in (0.0, 5.0, 10.0, 15.0, 20.0):
+        for b in range(0, 360, 30):
+            score(t, float(b))
+    assert min(tried, key=tried.__getitem__) == (10.0, 60.0)  # the coarse best
+    t, b = refine_around(score, tried, steps_deg=(2.5, 10.0))
+    # Steps 2.5 / 10, then 1.25 / 5: from (10, 60) to (12.5, 50), then (12.5, 45) at most
+    # 1.25 / 5 from the truth's (12.3, 47).
+    assert (t, b) == (12.5, 45.0)
+    assert abs(t - t0) <= 1.25 and abs(b - b0) <= 5.0
+    # No tilt at the coarse best: nothing to refine.
+    flat = {(0.0, 0.0): 0.0, (5.0, 0.0): 1.0}
+    assert refine_around(lambda t, b: 9.0, flat) == (0.0, 0.0)
