@@ -110,14 +110,18 @@ async function refresh() {
   // A calibration job's result has no BRDF (the panel hides its body): no colour to ask for.
   if (id === null || $("#result-body").hidden) { box.hidden = true; shown = null; return; }
   await useDesignInstrument();
-  await refreshStandards();
   const instrument = $("#colour-instrument").value;
   const azimuth = Number($("#colour-azimuth").value) || 0;
   const against = $("#compare").value;
   const standard = $("#colour-standard").value;
   const key = `${id}/${instrument}/${azimuth}/${against}/${standard}`;
-  if (key === shown) return;
+  if (key === shown) return;  // every job-list event comes here: nothing more to ask then
   shown = key;
+  // The stored standards, read when the table changes (and when the menu is opened), not at
+  // every event; a standard another client stored shows up then.
+  await refreshStandards();
+  // The standard chosen is gone from the folder: the menu fell back to none; ask again.
+  if ($("#colour-standard").value !== standard) { shown = null; return refresh(); }
   box.hidden = false;
   const caption = $("#colour-caption");
   caption.textContent = "Computing colour…";
@@ -194,5 +198,6 @@ window.addEventListener("DOMContentLoaded", () => {
   for (const id of ["#colour-instrument", "#colour-azimuth", "#compare", "#colour-standard"]) $(id).addEventListener("change", go);
   $("#colour-save-standard").addEventListener("click", () => { saveStandard().then(go); });
   $("#colour-csv").addEventListener("click", () => { downloadCsv(); });
+  $("#colour-standard").addEventListener("focus", () => { refreshStandards(); });
   go();
 });
