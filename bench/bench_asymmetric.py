@@ -64,6 +64,19 @@ and the fit that predicted them better refitted on every reading (``--refit``), 
 readings; beside today's path and the tilt fit at 120 readings (R = 6). ``fresh3``:
 :data:`FRESH3`, written and committed before any run.
 
+The adaptive auto-arc path (``--adaptive SET``, docs/science.md 7.4): the product's default
+adaptive plan (:class:`gonio.plans.models.AdaptivePlan`: 4 first angles, the posterior rule,
+``min_gain``, at most 16 angles and 6 rounds) with ``arc = "auto"``, its rounds as
+:class:`gonio.plans.rounds.ArcRounds` runs them (the first round with one opposite, the test,
+the fill round when asymmetric, then :class:`gonio.refinement.PosteriorRefiner` in the arc
+chosen) and the fit with the basis the verdict chooses. Two columns: the refinement planned
+with the default basis' posterior (``before``: the product until issue 25's refinement basis)
+and with the basis finishing reconstructs with (``after``: the asymmetric one once the test
+calls the specimen so). ``SET`` is ``choice`` (:data:`ASYM`), ``asym-fresh``
+(:data:`ASYM_FRESH`) or ``fresh``..``fresh5``; each with its untilted twins (and for
+``choice`` ``bench_unseen.py``'s six anisotropic specimens) as the symmetric specimens,
+``--seeds`` noise seeds each, beside a fixed half-turn adaptive plan (today's default arc).
+
 ``--tilt`` also prints the two fits **averaged in log** (:func:`log_average`: no choice
 between them, so no rule to be fooled by a misplaced lean). ``fresh4``: :data:`FRESH4`,
 written and committed before any run, to test the average once.
@@ -88,7 +101,10 @@ from gonio.brdf.reconstruction.tilt import fit_tilt
 from gonio.brdf.tables import geometry as geo
 from gonio.brdf.tables import metrics
 from gonio.brdf.tables.table import BRDFTable
-from gonio.plans.arc import fill_angles, first_round_angles
+from gonio.plans.arc import fill_after, fill_angles, first_round_angles
+from gonio.plans.models import AdaptivePlan
+from gonio.plans.rounds import RoundRequest, refinement_basis
+from gonio.refinement import PosteriorRefiner
 
 MASK = geo.valid_mask()
 
@@ -457,6 +473,142 @@ def tilt_scan(plain: Basis, asym: Basis, m: bu.Material, cells: np.ndarray, ph: 
             "b": np.rad2deg(tf.azimuth) % 360.0, "cpu": cpu}
 
 
+def adaptive_scan(plain: Basis, asym: Basis, m: bu.Material, cells: np.ndarray,
+                  ph: np.ndarray, seed: int, refine_basis: bool, arc: str = "auto",
+                  max_rotations: int | None = None) -> dict[str, Any]:
+    """The product's default adaptive plan on one specimen, its rounds as the engine runs
+    them (:class:`gonio.plans.rounds.ArcRounds`, :class:`gonio.plans.rounds.AdaptiveRounds`):
+    ``arc`` ``"auto"`` (the first round with one opposite, the test, the fill round when
+    asymmetric, the refinement in the arc chosen) or ``"half"`` (a fixed half turn). With
+    ``refine_basis`` the refinement after an asymmetric verdict plans with the asymmetric
+    basis (the product since issue 25's refinement basis), else with the default one (the
+    product before). The readings, the verdict, the bases the rounds planned with and the
+    log_rmse of the fit with the basis the verdict chooses. ``max_rotations``: the plan's cap
+    on stage angles (default the plan's, 16)."""
+    from gonio.plans.arc import arc_test
+
+    plan = (AdaptivePlan() if max_rotations is None
+            else AdaptivePlan(max_rotations=max_rotations))
+    r0, limit = plan.initial_rotations, plan.max_rotations or 16
+    refiner = PosteriorRefiner.for_cells(lambda: plain, cells, ph,
+                                         (lambda: asym) if refine_basis else None)
+    test: dict[str, Any] | None = None
+    if arc == "auto":
+        angles = first_round_angles(0.0, r0, 1)  # the design's pairs spread
+        vals = bu.read(m, cells, ph, np.deg2rad(angles), seed)
+        test = arc_test(angles, vals, 0.01)
+    else:
+        angles = [180.0 * k / r0 for k in range(r0)]
+        vals = bu.read(m, cells, ph, np.deg2rad(angles), seed)
+    last_round = 0
+    if test is not None and not test["symmetric"]:
+        fill = fill_after(0.0, r0, angles)
+        vals = np.concatenate([vals, bu.read(m, cells, ph, np.deg2rad(fill), seed + 1)], axis=1)
+        angles, last_round = angles + fill, 1
+    span = 180.0 if test is None else float(test["arc_deg"])
+    basis = refinement_basis(test)
+    used: list[str] = []
+    while True:
+        budget = limit - len(angles)
+        if last_round + 1 >= plan.max_rounds or budget <= 0:
+            break
+        new = refiner.next_angles(RoundRequest(angles, vals, budget, 0.01, plan.min_gain,
+                                               (0.0, span), basis))
+        used.append(str(refiner.basis_used))
+        if not new:
+            break
+        extra = bu.read(m, cells, ph, np.deg2rad(new), seed + 1000 * (last_round + 1))
+        vals = np.concatenate([vals, extra], axis=1)
+        angles, last_round = angles + list(new), last_round + 1
+    final = asym if basis == "asymmetric" else plain
+    rec = reconstruct(final, cells, ph, np.deg2rad(angles), vals)
+    return {"symmetric": test is None or bool(test["symmetric"]),
+            "p": None if test is None else test["p_value"],
+            "readings": len(cells) * len(angles), "angles": len(angles),
+            "planned_with": sorted(set(used)),
+            "log_rmse": metrics.log_rmse(rec.table, m.truth)}
+
+
+ADAPTIVE_SETS = {"choice": "ASYM", "asym-fresh": "ASYM_FRESH", "fresh": "FRESH",
+                 "fresh2": "FRESH2", "fresh3": "FRESH3", "fresh4": "FRESH4", "fresh5": "FRESH5"}
+"""``--adaptive`` sets: the name of each module list of specimens."""
+
+
+def adaptive_rows(plain: Basis, asym: Basis, d_half: tuple[np.ndarray, np.ndarray],
+                  which: str, seeds: int, max_rotations: int | None = None,
+                  symmetric: bool = True) -> None:
+    """The adaptive auto-arc tables (``--adaptive``, module notes): the asymmetric specimens
+    of ``which`` (``seeds`` noise seeds each), the refinement planned with the default basis
+    (before) and with the basis finishing uses (after); then the symmetric ones.
+    ``max_rotations``: the plan's cap on stage angles (default the plan's)."""
+    specs = globals()[ADAPTIVE_SETS[which]]
+    mats = asym_materials(specs=specs)
+    print(f"\n{which} set ({ADAPTIVE_SETS[which]}), the default adaptive plan with arc auto, the "
+          f"default design's 10 pairs, max_rotations {max_rotations or 'default'}, "
+          f"{seeds} noise seed(s) each (means over seeds); the "
+          "refinement planned with the default basis (before) or the asymmetric one (after)")
+    print("\n| specimen | verdict | readings before | log_rmse before | readings after | "
+          "**log_rmse after** | planned with (after) |")
+    print("|---|---|---|---|---|---|---|")
+    rows = []
+    for i, m in enumerate(mats):
+        got: dict[bool, list[dict[str, Any]]] = {False: [], True: []}
+        for k in range(seeds):
+            for refine in (False, True):
+                got[refine].append(adaptive_scan(plain, asym, m, *d_half, 500 + i + 100 * k,
+                                                 refine, max_rotations=max_rotations))
+        b, a = got[False], got[True]
+        found = sum(not r["symmetric"] for r in a)
+        row = [np.mean([r["readings"] for r in b]), np.mean([r["log_rmse"] for r in b]),
+               np.mean([r["readings"] for r in a]), np.mean([r["log_rmse"] for r in a])]
+        rows.append(row)
+        used = sorted({u for r in a for u in r["planned_with"]})
+        print(f"| {m.name} | {found} of {seeds} NOT symmetric | {row[0]:.0f} | {row[1]:.4f} | "
+              f"{row[2]:.0f} | {row[3]:.4f} | {', '.join(used) or 'none'} |", flush=True)
+    x = np.array(rows)
+    print(f"| **mean** | | {x[:, 0].mean():.1f} | {x[:, 1].mean():.4f} | {x[:, 2].mean():.1f} | "
+          f"**{x[:, 3].mean():.4f}** | |")
+    worse = x[:, 3] - x[:, 1]
+    print(f"\nafter against before: worst {worse.max():+.4f}, best {worse.min():+.4f}, "
+          f"{int((worse > 0.01).sum())} of {len(x)} worse by more than 0.01")
+    if not symmetric:
+        return
+    sym = asym_materials(tilted=False, specs=specs)
+    if which == "choice":
+        sym = bu.aniso_materials() + sym
+    print(f"\nsymmetric specimens ({len(sym)}), {seeds} noise seeds each (means over seeds): "
+          "the default adaptive plan over a fixed half turn, and with arc auto (before / after: "
+          "the same scan unless the test calls it asymmetric; both are run then)")
+    print("\n| specimen | half turn: readings | half turn | auto: readings | auto before | "
+          "auto after | called asymmetric |")
+    print("|---|---|---|---|---|---|---|")
+    srows, alarms, total = [], 0, 0
+    for j, m in enumerate(sym):
+        half, before, after, flagged = [], [], [], 0
+        for k in range(seeds):
+            seed = 9000 + 37 * j + k
+            half.append(adaptive_scan(plain, asym, m, *d_half, seed, True, "half",
+                                      max_rotations))
+            r = adaptive_scan(plain, asym, m, *d_half, seed, True, "auto", max_rotations)
+            after.append(r)
+            before.append(r if r["symmetric"] else
+                          adaptive_scan(plain, asym, m, *d_half, seed, False, "auto",
+                                        max_rotations))
+            flagged += not r["symmetric"]
+        alarms, total = alarms + flagged, total + seeds
+        srows.append([np.mean([r["readings"] for r in half]),
+                      np.mean([r["log_rmse"] for r in half]),
+                      np.mean([r["readings"] for r in after]),
+                      np.mean([r["log_rmse"] for r in before]),
+                      np.mean([r["log_rmse"] for r in after])])
+        sr = srows[-1]
+        print(f"| {m.name} | {sr[0]:.0f} | {sr[1]:.4f} | {sr[2]:.0f} | {sr[3]:.4f} | "
+              f"{sr[4]:.4f} | {flagged} of {seeds} |", flush=True)
+    y = np.array(srows)
+    print(f"| **mean** | {y[:, 0].mean():.1f} | {y[:, 1].mean():.4f} | {y[:, 2].mean():.1f} | "
+          f"{y[:, 3].mean():.4f} | {y[:, 4].mean():.4f} | {alarms} of {total} |")
+
+
 def log_average(a: BRDFTable, b: BRDFTable, eps: float = 1e-4) -> BRDFTable:
     """The two fits averaged in log: ``sqrt((a + eps) (b + eps)) - eps`` cell by cell (1/sr;
     ``eps`` keeps a zero of one fit from zeroing the average). Its log error is at most the
@@ -731,6 +883,12 @@ def main(argv: list[str] | None = None) -> int:
                     help="with --disagree: the units the round is placed and judged in: "
                          "noise-scaled chi-square (noise; noise-median: judged by the median "
                          "reading's term) or the cosine-weighted log of log_rmse (metric)")
+    ap.add_argument("--adaptive", choices=sorted(ADAPTIVE_SETS), default=None,
+                    help="only the adaptive auto-arc tables on that set (module notes)")
+    ap.add_argument("--max-rotations", type=int, default=None,
+                    help="with --adaptive: the plan's cap on stage angles (default the plan's)")
+    ap.add_argument("--no-symmetric", action="store_true",
+                    help="with --adaptive: the asymmetric specimens only")
     ap.add_argument("--rotations", type=int, default=6,
                     help="R of the auto arc for --tilt (6: 120 readings when asymmetric)")
     args = ap.parse_args(argv)
@@ -745,6 +903,11 @@ def main(argv: list[str] | None = None) -> int:
     plain = default_basis()
     asym = default_basis(asymmetric=True)
     d_half, d_full = design(plain, 180.0), design(plain, 360.0)
+    if args.adaptive is not None:
+        adaptive_rows(plain, asym, d_half, args.adaptive, args.seeds, args.max_rotations,
+                      not args.no_symmetric)
+        print(f"total {time.perf_counter() - t0:.0f} s")
+        return 0
     if args.disagree is not None:
         disagree_rows(plain, asym, d_half, args.disagree, args.first_rotations, args.refit,
                       args.score)

@@ -553,12 +553,24 @@ class Worker:
 
     def _refiner(self, checked: CheckedPlan, basis: Basis | None) -> PosteriorRefiner | None:
         """The posterior rule's bridge for adaptive plans that use it (docs/science.md 7.3);
-        None without a basis (the engine then uses V&F's rule and says so)."""
+        None without a basis (the engine then uses V&F's rule and says so). An auto-arc plan's
+        refiner also gets the basis for specimens without twofold symmetry, for the rounds
+        after its test calls the specimen so (docs/science.md 7.4), when this process has one
+        and it is at hand without a build: the stage does not wait minutes mid-scan for it
+        (the rounds then plan with the default basis and their events say so; finishing
+        builds it)."""
         if basis is None or not needs_basis_to_measure(checked.plan):
             return None
         from gonio.refinement import PosteriorRefiner
 
-        return PosteriorRefiner(lambda: basis, self.desc, checked.pairs, self.calibration())
+        supply = self.basis
+
+        def asymmetric() -> Basis | None:
+            return None if supply.asymmetric_build_needed() else supply.asymmetric()
+
+        auto = checked.plan.arc_mode() == "auto" and supply.has_asymmetric
+        return PosteriorRefiner(lambda: basis, self.desc, checked.pairs, self.calibration(),
+                                asymmetric_provider=asymmetric if auto else None)
 
     # ------------------------------------------------------------------ the basis, early
     def _start_prewarm(self) -> None:

@@ -39,6 +39,10 @@ class RoundRequest:
     min_step_deg : finest step between angles, degrees
     min_gain : the posterior rule's threshold on the drop of the expected error
     arc_deg : ``(start_deg, span_deg)`` of the plan, degrees: new angles lie in the arc
+    basis : the basis the job will finish with, which the rule plans with when it has it:
+        ``"default"``, or ``"asymmetric"`` once an auto-arc plan's test called the specimen
+        not twofold symmetric and the scan went on over the full turn (finishing then
+        reconstructs with the basis whose prior holds odd harmonics, docs/science.md 7.4)
     """
 
     angles_deg: Sequence[float]
@@ -47,6 +51,7 @@ class RoundRequest:
     min_step_deg: float
     min_gain: float
     arc_deg: tuple[float, float]
+    basis: str = "default"
 
 
 class Refiner(Protocol):
@@ -60,8 +65,9 @@ class Refiner(Protocol):
         """
         ...
 
-    def describe(self) -> dict[str, float]:
-        """What the last :meth:`next_angles` saw, for the round's event (empty before)."""
+    def describe(self) -> dict[str, Any]:
+        """What the last :meth:`next_angles` saw, for the round's event (empty before); with
+        the basis it planned with (``basis``), when it knows."""
         ...
 
 
@@ -101,16 +107,19 @@ class AdaptiveRounds:
     refiner : the posterior rule, or None (then V&F's rule, whatever the plan's ``rule``)
     arc_deg : ``(start_deg, span_deg)`` to refine in, degrees; default the plan's
         (:attr:`CheckedPlan.arc_deg`); an auto-arc plan's is the arc its test chose
+    basis : the basis the job will finish with (:attr:`RoundRequest.basis`): ``"default"``,
+        or ``"asymmetric"`` after an auto-arc test called the specimen not twofold symmetric
     """
 
     def __init__(self, checked: CheckedPlan, refiner: Refiner | None = None,
-                 arc_deg: tuple[float, float] | None = None) -> None:
+                 arc_deg: tuple[float, float] | None = None, basis: str = "default") -> None:
         plan = checked.plan
         if not isinstance(plan, AdaptivePlan):
             raise TypeError(f"adaptive rounds need an adaptive plan, not {plan.kind!r}")
         self.plan = plan
         self.refiner = refiner
         self.arc_deg = checked.arc_deg if arc_deg is None else arc_deg
+        self.basis = basis
         self.min_step_deg = plan.min_step_deg or checked.rig.resolution_deg
         # The sample budget, the plan's cap on stage angles, and in any case the cap per job
         # (so the dry run's bound holds and a job cannot grow without end).
@@ -162,7 +171,7 @@ class AdaptiveRounds:
             # off the event loop so pause/abort stay responsive. If it cannot run (no basis,
             # unusable readings), the scan goes on with V&F's rule rather than failing.
             request = RoundRequest(angles_deg, values, budget, self.min_step_deg,
-                                   plan.min_gain, self.arc_deg)
+                                   plan.min_gain, self.arc_deg, self.basis)
             try:
                 new = await asyncio.to_thread(self.refiner.next_angles, request)
                 rule = "posterior"
@@ -172,8 +181,8 @@ class AdaptiveRounds:
         if new is None:
             new = adaptive_refinement(angles_deg, values, plan.threshold, self.min_step_deg,
                                       budget, period_deg=span, start_deg=start)
-        # What the posterior rule saw (its rho, offset and drops), so a lab can tell why it
-        # went on or stopped.
+        # What the posterior rule saw (the basis it planned with, its rho, offset and drops),
+        # so a lab can tell why it went on or stopped.
         seen = self.refiner.describe() if rule == "posterior" and self.refiner else {}
         return list(new), rule, dict(seen)
 
@@ -198,8 +207,11 @@ class ArcRounds:
     readings chooses the arc (event ``arc_test``): symmetric, the plan goes on over half a
     turn as a fixed half-turn plan would (an adaptive plan refines in it); not symmetric, round
     1 reads the remaining opposites (:func:`gonio.plans.arc.fill_angles`), and an adaptive
-    plan then refines over the full turn. Only round 0's readings are tested, so the choice
-    does not depend on what later rounds read.
+    plan then refines over the full turn with the posterior of the basis finishing will
+    reconstruct with (:func:`refinement_basis`: the one for specimens without twofold
+    symmetry). Only round 0's readings are tested, so the choice (the arc and the basis) does
+    not depend on what later rounds read, and a resumed job, given its stored test, makes the
+    same one.
 
     Parameters
     ----------
@@ -231,7 +243,8 @@ class ArcRounds:
         """The rounds after the test (and the fill round): the plan kind's, in the arc chosen."""
         if self._then is None:
             arc = (self.start_deg, float(self.chosen["arc_deg"]) if self.chosen else 360.0)
-            self._then = (AdaptiveRounds(self.checked, self.refiner, arc)
+            self._then = (AdaptiveRounds(self.checked, self.refiner, arc,
+                                         refinement_basis(self.chosen))
                           if self.checked.plan.refines else SingleRound())
         return self._then
 
@@ -259,6 +272,16 @@ class ArcRounds:
                 return NextRound(fill, events)
         nxt = await self._after().next_round(angles_deg, values, planned_angles, last_round)
         return NextRound(nxt.angles_deg, events + nxt.events)
+
+
+def refinement_basis(test: dict[str, Any] | None) -> str:
+    """The basis an auto-arc plan's refinement plans with, given its ``arc_test`` data:
+    ``"asymmetric"`` when the test ran, called the specimen not twofold symmetric and chose
+    the full turn (the case in which finishing reconstructs with the basis for such
+    specimens, :func:`gonio.finishing._basis_for_test`), else ``"default"``."""
+    if test is None or test.get("statistic") is None or test.get("symmetric", True):
+        return "default"
+    return "asymmetric" if float(test.get("arc_deg", 180.0)) >= 360.0 else "default"
 
 
 def rounds_for(checked: CheckedPlan, refiner: Refiner | None = None,

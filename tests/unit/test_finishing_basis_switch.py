@@ -23,7 +23,7 @@ from gonio.brdf.reconstruction.basis import Basis
 from gonio.finishing import rebuild_result
 from gonio.jobstates import JobState
 from gonio.plans.arc import ARC_TEST_EVENT
-from gonio.plans.models import ExposureSettings, UniformPlan
+from gonio.plans.models import AdaptivePlan, ExposureSettings, UniformPlan
 from gonio.results import read_result
 from gonio.rigdescription import RigDescription
 from gonio.sim.memrig import MemRig
@@ -45,7 +45,7 @@ def _never() -> Basis:
     raise AssertionError("a symmetric specimen needs no asymmetric basis")
 
 
-def _run(tmp_path: Path, lean: float, plan: UniformPlan, asymmetric: Any
+def _run(tmp_path: Path, lean: float, plan: UniformPlan | AdaptivePlan, asymmetric: Any
          ) -> tuple[JobStore, JobRow]:
     """One job of ``plan`` on an in-memory rig of ``lean``, measured and finished."""
     rig = MemRig(lean=lean)
@@ -130,6 +130,29 @@ def test_a_supply_without_an_asymmetric_basis_says_so(tmp_path: Path) -> None:
     _, row = _run(tmp_path, 0.3, AUTO, None)
     assert row.summary is not None and row.summary["reconstruction_basis"] == "default"
     assert "has none with odd harmonics" in row.summary["basis_switch"]
+
+
+def test_an_adaptive_auto_plan_refines_with_the_basis_it_will_finish_with(
+        tmp_path: Path) -> None:
+    """Issue 25: once the test calls the specimen asymmetric, the refinement rounds over the
+    full turn plan with the asymmetric basis' posterior (the one finishing reconstructs with),
+    and each round's event says so; a symmetric specimen's rounds plan with the default basis
+    and the asymmetric one is never asked for."""
+    plan = AdaptivePlan(initial_rotations=4, max_rotations=12, min_gain=1e-9, arc="auto",
+                        exposure=FAST)
+    store, row = _run(tmp_path, 0.3, plan, lambda: ODD)
+    (test,) = _events(store, row.id, ARC_TEST_EVENT)
+    assert not test["symmetric"] and test["arc_deg"] == 360.0
+    rounds = _events(store, row.id, "adaptive_round") + _events(store, row.id, "adaptive_done")
+    assert rounds and all(r["rule"] == "posterior" and r["basis"] == "asymmetric"
+                          for r in rounds)
+    assert any(s.specimen_deg > 180.0 for s in store.steps(row.id) if s.round >= 2)
+    assert row.summary is not None and row.summary["reconstruction_basis"] == "asymmetric"
+    sym_store, sym = _run(tmp_path / "sym", 0.0, plan, _never)
+    rounds = (_events(sym_store, sym.id, "adaptive_round")
+              + _events(sym_store, sym.id, "adaptive_done"))
+    assert rounds and all(r["basis"] == "default" and "basis_note" not in r for r in rounds)
+    assert sym.summary is not None and sym.summary["reconstruction_basis"] == "default"
 
 
 @pytest.mark.parametrize("lean", [0.0, 0.3])

@@ -30,7 +30,15 @@ from gonio.plans.arc import (
 from gonio.plans.checked import check_plan
 from gonio.plans.dryrun import dry_run
 from gonio.plans.models import AdaptivePlan, ExposureSettings, PlanError, UniformPlan, parse_plan
-from gonio.plans.rounds import AdaptiveRounds, ArcRounds, NextRound, SingleRound, rounds_for
+from gonio.plans.rounds import (
+    AdaptiveRounds,
+    ArcRounds,
+    NextRound,
+    RoundRequest,
+    SingleRound,
+    refinement_basis,
+    rounds_for,
+)
 from gonio.rigdescription import RigDescription
 
 NOISE = 0.01
@@ -314,6 +322,71 @@ def test_adaptive_plans_refine_within_the_arc_chosen(desc: RigDescription) -> No
     assert asym._after().arc_deg == (0.0, 360.0)
     assert nxt.angles_deg and any(a > 180 for a in nxt.angles_deg)
     assert ARC_TEST_EVENT not in [t for t, _ in nxt.events]
+
+
+class _Recorder:
+    """A posterior rule that records what each round asks it and plans one midpoint."""
+
+    def __init__(self) -> None:
+        self.requests: list[RoundRequest] = []
+
+    def next_angles(self, request: RoundRequest) -> list[float]:
+        self.requests.append(request)
+        a = sorted(request.angles_deg)
+        return [0.5 * (a[0] + a[1])]
+
+    def describe(self) -> dict[str, Any]:
+        return {"basis": self.requests[-1].basis} if self.requests else {}
+
+
+def test_the_refinement_plans_with_the_basis_the_verdict_chooses(desc: RigDescription) -> None:
+    """After an asymmetric verdict the posterior rule is asked for the asymmetric basis (the one
+    finishing reconstructs with) over the full turn, and the round's event says which; after a
+    symmetric one, for the default basis over half a turn. A resumed job given its stored test
+    asks the same as the job that made it."""
+    checked = _auto(desc, adaptive=True, initial_rotations=4, max_rotations=12)
+    angles = list(checked.angles_deg)
+    rule = _Recorder()
+    asym = rounds_for(checked, rule)
+    lean = _readings(angles, 0.1, n_pairs=3)
+    fill = _next(asym, angles, lean, len(angles), 0)
+    assert rule.requests == []  # the fill round is the arc's, not the rule's
+    done = angles + fill.angles_deg
+    nxt = _next(asym, done, _readings(done, 0.1, n_pairs=3), len(done), 1)
+    (req,) = rule.requests
+    assert req.basis == "asymmetric" and req.arc_deg == (0.0, 360.0)
+    (kind, data), = nxt.events
+    assert kind == "adaptive_round" and data["basis"] == "asymmetric"
+    # Resumed after the fill with the stored test: the same basis, no second test.
+    test = next(d for t, d in fill.events if t == ARC_TEST_EVENT)
+    again = _Recorder()
+    _next(rounds_for(checked, again, chosen=test), done, _readings(done, 0.1, n_pairs=3),
+          len(done), 1)
+    assert [r.basis for r in again.requests] == ["asymmetric"]
+    # Symmetric: the default basis over half a turn.
+    plain = _Recorder()
+    _next(rounds_for(checked, plain), angles, _readings(angles, 0.0, n_pairs=3), len(angles), 0)
+    assert [(r.basis, r.arc_deg) for r in plain.requests] == [("default", (0.0, 180.0))]
+    # Fixed plans never ask for it.
+    fixed = _Recorder()
+    plan = check_plan(AdaptivePlan(initial_rotations=4, span_deg=360), desc)
+    _next(rounds_for(plan, fixed), list(plan.angles_deg),
+          _readings(list(plan.angles_deg), 0.1, n_pairs=3), 4, 0)
+    assert [r.basis for r in fixed.requests] == ["default"]
+
+
+def test_the_refinement_basis_follows_finishing_s_choice() -> None:
+    """As :func:`gonio.finishing._basis_for_test`: the asymmetric basis only for a test that ran,
+    called the specimen asymmetric, and chose the full turn."""
+    assert refinement_basis(None) == "default"
+    assert refinement_basis({"symmetric": True, "arc_deg": 180.0, "statistic": 3.0}) == "default"
+    assert refinement_basis({"symmetric": False, "arc_deg": 360.0, "statistic": 99.0}) == \
+        "asymmetric"
+    # Readings that could not be tested take the full turn but keep the default basis.
+    assert refinement_basis({"symmetric": False, "arc_deg": 360.0, "statistic": None}) == \
+        "default"
+    assert refinement_basis({"symmetric": False, "arc_deg": 180.0, "statistic": 99.0}) == \
+        "default"
 
 
 def test_fixed_plans_keep_their_rounds(desc: RigDescription) -> None:
