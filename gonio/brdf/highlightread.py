@@ -47,6 +47,9 @@ class HighlightRead:
     excess : float
         The projected peak over the largest projected reading (mean over channels); NaN when
         no reading is positive.
+    nearest_td_deg : float
+        The nearest reading in half vector and ``td`` together: the smallest
+        ``sqrt(angle(h)^2 + (td_peak - td_reading)^2)``, degrees.
     """
 
     peak_th_deg: float
@@ -55,6 +58,7 @@ class HighlightRead:
     peak_pd_deg: float
     nearest_deg: float
     excess: float
+    nearest_td_deg: float = float("nan")
 
 
 def _half_vector(th: Any, ph: Any) -> np.ndarray:
@@ -63,7 +67,7 @@ def _half_vector(th: Any, ph: Any) -> np.ndarray:
 
 
 def highlight_read(table: BRDFTable, cells: Any, ph_lab: Any, stage_angles: Any,
-                   values: Any) -> HighlightRead:
+                   values: Any, td_max_deg: float | None = None) -> HighlightRead:
     """Where ``table`` peaks and how near the scan's readings come to it.
 
     Parameters
@@ -78,6 +82,8 @@ def highlight_read(table: BRDFTable, cells: Any, ph_lab: Any, stage_angles: Any,
         ``(r,)`` stage angles, radians.
     values : array_like
         ``(n, r, C)`` readings, same units as ``table`` (NaN ignored).
+    td_max_deg : float or None
+        Look for the peak only at ``td`` up to this (degrees); None: every valid cell.
 
     Returns
     -------
@@ -91,7 +97,10 @@ def highlight_read(table: BRDFTable, cells: Any, ph_lab: Any, stage_angles: Any,
     w = projection_weight()
     mean = np.nanmean(np.asarray(table.values, dtype=float), axis=0)  # (72, 18, 18, 36)
     proj = np.where(np.isfinite(mean), mean, -np.inf) * w[None]
-    proj = np.where(w[None] > 0, proj, -np.inf)
+    keep = w > 0
+    if td_max_deg is not None:
+        keep = keep & (np.rad2deg(geo.TD_GRID)[None, :, None] <= td_max_deg + 1e-9)
+    proj = np.where(keep[None], proj, -np.inf)
     i_ph, i_th, i_td, i_pd = np.unravel_index(int(np.argmax(proj)), proj.shape)
     peak = float(proj[i_ph, i_th, i_td, i_pd])
     h_peak = _half_vector(geo.TH_GRID[i_th], geo.PH_GRID[i_ph])
@@ -100,6 +109,10 @@ def highlight_read(table: BRDFTable, cells: Any, ph_lab: Any, stage_angles: Any,
     read_ok = np.isfinite(v).any(axis=-1)
     cosang = np.clip(h_read[read_ok] @ h_peak, -1.0, 1.0)
     nearest = math.degrees(math.acos(float(cosang.max()))) if cosang.size else float("nan")
+    ang = np.degrees(np.arccos(cosang))
+    dtd = np.rad2deg(geo.TD_GRID[i_td]) - np.rad2deg(np.broadcast_to(c[:, 1:2], ph_read.shape)
+                                                    [read_ok])
+    nearest_td = float(np.sqrt(ang ** 2 + dtd ** 2).min()) if ang.size else float("nan")
     ci, co = geo.cell_cosines(c[:, 0], c[:, 1], c[:, 2])
     pv = np.nanmean(v, axis=-1) * (np.maximum(ci, 0.0) * np.maximum(co, 0.0))[:, None]
     top = float(np.nanmax(pv)) if np.isfinite(pv).any() else float("nan")
@@ -109,4 +122,4 @@ def highlight_read(table: BRDFTable, cells: Any, ph_lab: Any, stage_angles: Any,
         peak_ph_deg=float(np.rad2deg(geo.PH_GRID[i_ph])),
         peak_td_deg=float(np.rad2deg(geo.TD_GRID[i_td])),
         peak_pd_deg=float(np.rad2deg(geo.PD_GRID[i_pd])),
-        nearest_deg=nearest, excess=excess)
+        nearest_deg=nearest, excess=excess, nearest_td_deg=nearest_td)
