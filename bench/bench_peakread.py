@@ -94,7 +94,8 @@ def projected_peaks(table: BRDFTable, td_max_deg: float | None = None) -> np.nda
     w = projection_weight()
     if td_max_deg is not None:
         w = np.where(np.rad2deg(geo.TD_GRID)[None, :, None] <= td_max_deg + 1e-9, w, 0.0)
-    p = np.where(w > 0, np.nan_to_num(v, nan=-np.inf) * w, -np.inf)
+    with np.errstate(invalid="ignore"):  # -inf * 0 at the cells the weight leaves out
+        p = np.where(w > 0, np.nan_to_num(v, nan=-np.inf) * w, -np.inf)
     return np.asarray(p.reshape(v.shape[0], -1).max(axis=1))
 
 

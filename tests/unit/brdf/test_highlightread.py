@@ -87,3 +87,14 @@ def test_the_peak_is_looked_for_where_the_renderings_look() -> None:
     assert not highlight_read(spiked, cells, ph, alpha, vals).flagged
     every = highlight_read(spiked, cells, ph, alpha, vals, td_max_deg=None)
     assert every.peak_td_deg == 80.0 and every.flagged
+
+
+def test_reconstruct_and_demo_print_the_same_sentence() -> None:
+    # `gonio reconstruct` and `gonio demo` print what finishing records for a scan.
+    from gonio.cli.brdf_commands import _highlight_warning
+
+    far = readings([(30.0, 20.0, 90.0), (50.0, 40.0, 45.0)])
+    at = readings([(0.0, 10.0, 0.0), (50.0, 40.0, 45.0)])
+    assert _highlight_warning(lobe_table(), *far) == highlight_read(lobe_table(), *far).message()
+    assert _highlight_warning(lobe_table(), *far) is not None
+    assert _highlight_warning(lobe_table(), *at) is None
