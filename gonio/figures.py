@@ -164,7 +164,7 @@ def headline_error(metrics: dict[str, Any]) -> dict[str, Any] | None:
     -------
     dict with ``key`` (metric name), ``value``, ``text`` (value as shown) and ``meaning``
     (and ``physical_bounds`` / ``calibration_warning`` / ``design_gap`` / ``arc_asymmetric``
-    when they apply; ``arc``,
+    / ``basis_misfit`` / ``highlight_not_read`` when they apply; ``arc``,
     the sentence on the arc an auto-arc scan chose; ``uncovered_share`` and ``coverage``, the
     self-estimate's coverage witness and its sentence, when the result has it).
     """
@@ -242,6 +242,13 @@ def headline_error(metrics: dict[str, Any]) -> dict[str, Any] | None:
         out["text"] += " (BASIS MISFIT)"
         out["meaning"] = f"Warning: {misfit}. {out['meaning']}"
         out["basis_misfit"] = misfit
+    unread = metrics.get("highlight_not_read")
+    if out is not None and isinstance(unread, str):
+        # No reading comes near the table's peak: the highlight is the prior's extrapolation
+        # (gonio.brdf.highlightread, docs/science.md 7.1.1); the number covers the rest.
+        out["text"] += " (HIGHLIGHT NOT READ)"
+        out["meaning"] = f"Warning: {unread}. {out['meaning']}"
+        out["highlight_not_read"] = unread
     return out
 
 

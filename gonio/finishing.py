@@ -213,6 +213,7 @@ def finish_job(job_id: int, plan: AnyPlan | CheckedPlan, how: Finishing) -> dict
         summary.update(result_path=relative, calibration_path=CALIBRATION_FILE)
         return summary
 
+    from gonio.brdf.highlightread import highlight_read
     from gonio.brdf.reconstruction.reconstruct import reconstruct
 
     how.on_activity("basis")
@@ -302,6 +303,16 @@ def finish_job(job_id: int, plan: AnyPlan | CheckedPlan, how: Finishing) -> dict
         metrics["physical_bounds"] = bounds_message
         provenance["physical_bounds"] = bounds_message
         log.info("job %d: %s", job_id, bounds_message)  # the worker records the event
+    # Where the table peaks far above every reading, its highlight (height, width, colour) is
+    # the prior's extrapolation, not the specimen's: the result says so (science.md 7.1.1).
+    highlight = highlight_read(rec.table, grid.cells, grid.ph_lab, grid.stage_angles,
+                               np.maximum(grid.values, 0.0))
+    metrics.update(highlight.as_metrics())
+    highlight_message = highlight.message()
+    if highlight_message is not None:
+        metrics["highlight_not_read"] = highlight_message
+        provenance["highlight_not_read"] = highlight_message
+        log.info("job %d: %s", job_id, highlight_message)
     _compare_with_design(rec, readings, plan, samples, len(pairs), bool(cal.pairs),
                          how.provenance, metrics, provenance)
     if "design_gap" in metrics:

@@ -94,9 +94,11 @@ def result_report(
 #: (``gonio.export.metadata.RECONSTRUCTION_WARNINGS``, a layer above this one; a test keeps
 #: the two equal): the calibration measured at another exposure, the arc, a table outside
 #: physical bounds, a predicted error far from the design's, a basis that does not fit, a
-#: prior that is the specimen's own earlier result (gonio.finishing.own_result_prior).
+#: prior that is the specimen's own earlier result (gonio.finishing.own_result_prior), a
+#: highlight no reading comes near (gonio.brdf.highlightread).
 RECONSTRUCTION_WARNINGS = ("calibration_warning", "arc_warning", "physical_bounds",
-                           "design_gap", "basis_misfit", "local_prior_own")
+                           "design_gap", "basis_misfit", "local_prior_own",
+                           "highlight_not_read")
 
 
 def colour_warnings(res: ResultFile, role: str = "") -> list[str]:

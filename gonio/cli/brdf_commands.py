@@ -243,6 +243,16 @@ def _local_prior_text(settings: dict[str, Any]) -> str | None:
     return local_prior_text(settings)
 
 
+def _highlight_warning(table: Any, cells: Any, ph_lab: Any, alpha: Any, values: Any
+                       ) -> str | None:
+    """The highlight-not-read sentence of a reconstruction (:mod:`gonio.brdf.highlightread`),
+    as finishing records it for a scan; None when a reading comes near its peak."""
+    from gonio.brdf.highlightread import highlight_read
+
+    return highlight_read(table, cells, ph_lab, alpha,
+                          np.maximum(np.asarray(values, dtype=float), 0.0)).message()
+
+
 def _load_basis(path: str | None, progress: bool = True) -> Any:
     from gonio.brdf.reconstruction.basis import Basis, default_basis
 
@@ -274,6 +284,9 @@ def _cmd_reconstruct(args: argparse.Namespace) -> int:
         print(f"  {line}")
     if rec.misfit_warning is not None:
         print(f"  warning: {rec.misfit_warning}")
+    if (unread := _highlight_warning(rec.table, samples.cells, samples.ph_lab,
+                                     samples.stage_angles, samples.values)) is not None:
+        print(f"  warning: {unread}")
     print(f"  sample error {100 * rec.rel_sample_error:.2f} %, "
           f"self-estimated MAPE {100 * rec.predicted_error:.1f} % "
           f"(V&F estimate {100 * rec.estimated_error:.2f} %), "
@@ -367,6 +380,8 @@ def _cmd_demo(args: argparse.Namespace) -> int:
         print(f"  {line}")
     if rec.misfit_warning is not None:
         print(f"  warning: {rec.misfit_warning}")
+    if (unread := _highlight_warning(rec.table, cells, ph, alpha, vals)) is not None:
+        print(f"  warning: {unread}")
     print(f"  self-estimated MAPE {100 * rec.predicted_error:.1f} % "
           f"(V&F estimate {100 * rec.estimated_error:.2f} %)")
     print(f"  reconstruction {rec.settings['seconds']:.3f} s, total "

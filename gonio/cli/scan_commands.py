@@ -404,6 +404,8 @@ async def _run_owned(args: argparse.Namespace, checked: Any, config: Any, sim: A
     _print_arc(summary)
     if summary.get("basis_misfit"):
         print(f"warning: {summary['basis_misfit']}", file=sys.stderr)
+    if summary.get("highlight_not_read"):
+        print(f"warning: {summary['highlight_not_read']}", file=sys.stderr)
     return 0
 
 
@@ -652,6 +654,8 @@ def _scan_through_daemon(args: argparse.Namespace, plan: Any) -> int:
     _print_arc(summary)
     if summary.get("basis_misfit"):
         print(f"warning: {summary['basis_misfit']}", file=sys.stderr)
+    if summary.get("highlight_not_read"):
+        print(f"warning: {summary['highlight_not_read']}", file=sys.stderr)
     return 0
 
 

@@ -243,6 +243,6 @@ def export_provenance(attrs: Mapping[str, Any], metrics: Mapping[str, Any],
 
 
 RECONSTRUCTION_WARNINGS = ("calibration_warning", "arc_warning", "physical_bounds", "design_gap",
-                           "basis_misfit", "local_prior_own")
+                           "basis_misfit", "local_prior_own", "highlight_not_read")
 """The result provenance's warnings about the reconstruction itself, in the order an export
 lists them (``reconstruction_warnings``; also at the end of ``warnings``)."""

@@ -31,6 +31,7 @@ import numpy as np
 import pytest
 from numpy.typing import NDArray
 
+from gonio.brdf.highlightread import EXCESS_LIMIT
 from gonio.brdf.pictures import appearance
 from gonio.cli import main
 from gonio.results import read_result
@@ -105,6 +106,10 @@ def test_default_sim_scan_renders_the_streak(tmp_path: Path) -> None:
     assert main(argv) == 0
     res = read_result(out)
     assert res.table is not None
+    # A pair reads near the streak's peak (measured: 1.14 times the brightest reading), so the
+    # result does not call its highlight unread (gonio.brdf.highlightread).
+    assert res.metrics["highlight_excess"] < EXCESS_LIMIT
+    assert "highlight_not_read" not in res.metrics
     truth = appearance.render_appearance(default_material())
     rec = appearance.render_appearance(res.table)
     flip = appearance.standard_flip(truth, rec)
