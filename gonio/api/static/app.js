@@ -711,7 +711,23 @@ function initForm() {
       const otherRule = [...l.classList].some((c) => c.startsWith("rule-") && c !== `rule-${ruleSel.value}`);
       l.hidden = !l.classList.contains(kindSel.value) || otherRule;
     }
+    markEmpty();
   };
+  // A number field left empty would be sent as 0 and refused by the daemon in its own terms
+  // ("rotations is 0"): each field the plan needs says at the field what to enter instead
+  // (index.html's data-empty), for Check plan and Start scan alike. A field of another kind
+  // or rule is hidden, not sent, and not checked.
+  const markEmpty = () => {
+    for (const input of form.querySelectorAll("input[data-empty]")) {
+      const shown = !input.closest("label").hidden;
+      input.setCustomValidity(shown && input.value === "" && !input.validity.badInput ? input.dataset.empty : "");
+    }
+  };
+  form.addEventListener("input", markEmpty);
+  form.addEventListener("change", markEmpty);
+  // A click on Start scan comes before the browser checks the form (Enter in a field clicks
+  // it too), so a field emptied without an input event (a script's) is caught as well.
+  $("#start-scan").addEventListener("click", markEmpty);
   kindSel.addEventListener("change", showKind);
   // Each rule's default first round (posterior 4, vf 8) and cap (posterior 16, vf none),
   // unless the user typed another.
@@ -732,6 +748,7 @@ function initForm() {
   showKind();
   $("#dry-run").addEventListener("click", () => guarded(async () => {
     // The form's own limits first, at the field, as Start scan's submit checks them.
+    markEmpty();
     if (!form.reportValidity()) { setNote("", null); return; }
     const r = await send("POST", "/jobs/dry-run", { plan: readPlan() });
     // The specimen's angle, as the stage chip gives it; the stage's own position beside it
