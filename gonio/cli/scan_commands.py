@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, Any
 
 from gonio.cli import UsageError, finite_float, nonnegative_float, positive_float, positive_int
 from gonio.cli.daemon_client import DaemonClient, DaemonRefused, add_daemon_options
+from gonio.wording import counted
 
 if TYPE_CHECKING:
     from gonio.basis_supply import BasisSupply
@@ -384,7 +385,8 @@ async def _run_owned(args: argparse.Namespace, checked: Any, config: Any, sim: A
         cal_out = out.with_name(out.stem + ".calibration.json")
         shutil.copyfile(data_dir / CALIBRATION_FILE, cal_out)
         n_pairs = len(checked.pairs)
-        print(f"job {job.id} completed: calibration of {n_pairs} pairs written to {cal_out}; "
+        print(f"job {job.id} completed: calibration of {counted(n_pairs, 'pair')} written to "
+              f"{cal_out}; "
               f"apply it with --calibration {cal_out}")
         return 0
     cal = service.calibration()
@@ -536,7 +538,8 @@ def dry_run_summary(dr: Any, plan: Any, rig_name: str) -> str:
         f"dry run of the {plan.kind} plan on rig {rig_name!r}; nothing moves",
         f"  stage angles: {len(angles)}{first} ({_angles_text(angles)})",
         f"  pairs: {n_pairs} ({len(dr.lights)} lights)",
-        f"  readings: {dr.readings}{first} ({n_pairs} pairs x {len(angles)} angles), "
+        f"  readings: {dr.readings}{first} ({counted(n_pairs, 'pair')} x "
+        f"{counted(len(angles), 'angle')}), "
         f"exposure {ex.exposure_s:g} s x {ex.averages}",
         f"  duration: about {_duration_text(dr.estimated_s)} (moves {_part_text(dr.motion_s)}, "
         f"settling {_part_text(dr.settle_s)}, exposures {_part_text(dr.exposure_s)})",
@@ -547,15 +550,16 @@ def dry_run_summary(dr: Any, plan: Any, rig_name: str) -> str:
                  else "where the readings change fastest")
         most = getattr(dr, "max_angles", None)
         lines.append(f"  later rounds add angles {where}; "
-                     + (f"at most {most} angles and {_duration_text(bound)} in all"
+                     + (f"at most {counted(most, 'angle')} and {_duration_text(bound)} in all"
                         if bound is not None and most is not None
                         else "no --max-samples, so no bound on the total"))
     for b in getattr(dr, "arc_branches", None) or ():
         arc_deg, angles, secs = b.arc_deg, b.angles, b.estimated_s
         what = ("twofold symmetric: on over half a turn" if arc_deg == 180.0
                 else "not twofold symmetric: on over a full turn")
-        lines.append(f"  if the first round finds the specimen {what}, at most {angles} angles "
-                     f"({angles * n_pairs} readings) and {_duration_text(secs)} in all"
+        lines.append(f"  if the first round finds the specimen {what}, at most "
+                     f"{counted(angles, 'angle')} ({counted(angles * n_pairs, 'reading')}) and "
+                     f"{_duration_text(secs)} in all"
                      + ("; reconstructed with the basis for specimens without twofold "
                         "symmetry" if getattr(b, "basis", "default") == "asymmetric" else ""))
         if getattr(b, "basis_build_s", None) is not None:

@@ -134,6 +134,11 @@ const ACTIONS = {
 
 const SHOW_REASON = new Set(["suspended", "failed", "aborted", "halted"]);
 
+// A count before its noun: "1 stage angle", "8 stage angles" (gonio.wording.counted).
+function counted(n, noun, plural = `${noun}s`) {
+  return `${n} ${n === 1 ? noun : plural}`;
+}
+
 function eta(s) {
   if (typeof s !== "number" || !Number.isFinite(s)) return "";
   if (s < 90) return `${Math.round(s)} s`;
@@ -196,7 +201,7 @@ function progressOf(job) {
   const done = job.done_angles ?? 0, total = job.total_angles ?? 0;
   if (job.max_angles == null) return { value: done, max: Math.max(total, 1), text: `${done}/${total}` };
   const max = Math.max(job.max_angles, total, 1);
-  if (job.state === "completed") return { value: 1, max: 1, text: `${done} angles (adaptive)` };
+  if (job.state === "completed") return { value: 1, max: 1, text: `${counted(done, "angle")} (adaptive)` };
   const d = selectedDetail;
   const round = d && d.id === job.id && d.round != null ? ` · round ${d.round + 1}` : "";
   return { value: done, max, text: `${done} of ≤${max} angles${round}` };
@@ -383,7 +388,7 @@ async function refreshReadings() {
   if (id !== selected) return;
   plotRotation($("#readings-plot"), data.pairs, data.yTitle);
   $("#readings-caption").textContent = data.caption;
-  $("#live-job").textContent = `job ${id} · ${data.count} readings`;
+  $("#live-job").textContent = `job ${id} · ${counted(data.count, "reading")}`;
   $("#live-rule").textContent = ruleText(id);
 }
 
@@ -762,11 +767,11 @@ function initForm() {
     const verdict = refused ? "Start would be refused: read the warning below"
       : (r.warnings || []).length ? "Runs, but read the warnings below" : "OK";
     // estimated_s = motion_s + settle_s + exposure_s (docs/api.md): all three are said.
-    let text = `${verdict}: ${r.readings} readings at ${r.angles_deg.length} stage angles, about ${planTime(r.estimated_s)} ${from}` +
+    let text = `${verdict}: ${counted(r.readings, "reading")} at ${counted(r.angles_deg.length, "stage angle")}, about ${planTime(r.estimated_s)} ${from}` +
       `: moves ${planTime(r.motion_s)}, settling ${planTime(r.settle_s)}, exposures ${planTime(r.exposure_s)}.`;
-    if (r.max_estimated_s != null && r.kind === "adaptive") text += ` Adaptive refinement can add up to ${r.max_angles - r.angles_deg.length} angles: at most ${eta(r.max_estimated_s)} in all.`;
+    if (r.max_estimated_s != null && r.kind === "adaptive") text += ` Adaptive refinement can add up to ${counted(r.max_angles - r.angles_deg.length, "angle")}: at most ${eta(r.max_estimated_s)} in all.`;
     for (const b of r.arc_branches || []) {
-      text += ` If the first round finds the specimen ${b.arc_deg === 180 ? "twofold symmetric, it goes on over half a turn" : "not twofold symmetric, it goes on over a full turn"}: at most ${b.angles} angles (${b.readings} readings), ${eta(b.estimated_s)} in all${b.basis === "asymmetric" ? ", reconstructed with the basis for specimens without twofold symmetry" : ""}.`;
+      text += ` If the first round finds the specimen ${b.arc_deg === 180 ? "twofold symmetric, it goes on over half a turn" : "not twofold symmetric, it goes on over a full turn"}: at most ${counted(b.angles, "angle")} (${counted(b.readings, "reading")}), ${eta(b.estimated_s)} in all${b.basis === "asymmetric" ? ", reconstructed with the basis for specimens without twofold symmetry" : ""}.`;
       if (b.basis_build_s != null) text += ` Then about ${eta(b.basis_build_s)} more: that basis is not built on this install yet, so the job builds it before reconstructing (once).`;
     }
     if (r.basis_build_s != null) text += ` First, about ${eta(r.basis_build_s)} more: the reconstruction basis is not built on this install yet and the adaptive rule needs it, so the job builds it before its first reading (once).`;

@@ -62,6 +62,24 @@ def test_check_plan_adds_up_and_names_the_specimen_angle(
     assert moves + settling + exposures == pytest.approx(total, abs=0.16), note
 
 
+def test_check_plan_of_one_angle_says_one_stage_angle(
+        daemon: Daemon, browser: Any,  # noqa: F811 (the fixture)
+) -> None:
+    """A one-angle plan's note read "12 readings at 1 stage angles"."""
+    from selenium.webdriver.common.by import By
+
+    wait = open_live(browser, daemon, 60)
+    form = browser.find_element(By.ID, "scan-form")
+    for name, value in (("rotations", 1), ("exposure_s", EXPOSURE_S), ("averages", 1)):
+        field = form.find_element(By.NAME, name)
+        field.clear()
+        field.send_keys(str(value))
+    click_when_steady(wait, "#dry-run")
+    wait.until(lambda d: "readings at" in d.find_element(By.ID, "dry-run-result").text)
+    note = browser.find_element(By.ID, "dry-run-result").text
+    assert re.search(r"\d+ readings at 1 stage angle, about", note), note
+
+
 @pytest.mark.parametrize(("name", "value"), [("averages", "0"), ("exposure_s", "0"),
                                              ("rotations", "0")])
 def test_check_plan_refuses_what_the_form_itself_refuses_as_start_does(
