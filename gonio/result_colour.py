@@ -155,6 +155,40 @@ def scan_readings(samples: Any) -> ScanReadings | None:
                         np.asarray(samples.stage_angles_deg, dtype=float), values)
 
 
+def no_colour_reason(res: ResultFile, who: str | None = None) -> str | None:
+    """Why ``res`` has no CIELAB, hence no CIEDE2000 against anything, and what to do; None
+    when it has colour (or no reconstruction, which :func:`result_report` refuses itself).
+
+    Two causes ask for different remedies: values in sensor units (no white reference was in
+    effect: calibrate, then scan again) and reflectance factors from sensors with neither
+    spectral bands nor a chart colour calibration (give them one, then scan again). A rebuild
+    (``gonio jobs rebuild``) keeps the calibration and colour source the job was finished
+    with, so it does not help either. The API answers it as the colour's ``no_colour`` (and
+    as a refused comparison's reason), the lab page shows it in the caption instead of a
+    silently missing ΔE00 column, and ``gonio colour`` prints it.
+
+    Parameters
+    ----------
+    res
+        The result file.
+    who
+        How the sentence names the result; default ``"job N"`` from the file.
+    """
+    if res.table is None or conversion_of(res) is not None:
+        return None
+    who = who or f"job {res.attrs.get('job_id', '?')}"
+    if not in_reflectance(res.samples.calibration):
+        return (f"{who} is uncalibrated: its values are sensor units, not 1/sr (no white "
+                "reference calibration was in effect when it was scanned), so it has no "
+                "CIELAB and no colour difference (CIEDE2000); calibrate the rig on the white "
+                "reference (a calibration job), then scan the specimen again")
+    return (f"{who}'s sensors have neither spectral bands nor a chart colour calibration: its "
+            f"values are reflectance factors per channel ({UNCALIBRATED_SPACE}), with no "
+            "CIELAB and no colour difference (CIEDE2000); give the sensors spectral bands or "
+            "a chart colour calibration in the rig config (gonio colour-chart, "
+            "docs/colour.md), then scan the specimen again")
+
+
 def in_reflectance(calibration: Mapping[str, Any]) -> bool:
     """False when a result's calibration (``/samples`` attribute) says its values are in sensor
     units: a calibration that lists no pair. Files without the record are taken as calibrated."""

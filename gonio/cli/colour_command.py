@@ -133,7 +133,12 @@ def _azimuths(text: str) -> list[float]:
 def _standard(path: Path, conditions: Any, instruments: list[str],
               azimuths: list[float]) -> tuple[Any, list[str]]:
     """The standard's colour report and its warnings (a stored CSV carries its own)."""
-    from gonio.result_colour import colour_warnings, read_standard, result_report
+    from gonio.result_colour import (
+        colour_warnings,
+        no_colour_reason,
+        read_standard,
+        result_report,
+    )
     from gonio.results import read_result
 
     if not path.is_file():
@@ -142,12 +147,15 @@ def _standard(path: Path, conditions: Any, instruments: list[str],
         std_csv, said = read_standard(path)
         return std_csv, [f"standard: {w}" for w in said]
     std = read_result(path)
+    no_colour = no_colour_reason(std, path.name)
+    if no_colour is not None:
+        raise UsageError(f"no dE00 against {path}: {no_colour}")
     return (result_report(std, conditions, instruments, azimuths),
             colour_warnings(std, "standard"))
 
 
-def _table(report: Any) -> str:
-    """The colour table as a person reads it."""
+def _table(report: Any, no_colour: str | None = None) -> str:
+    """The colour table as a person reads it; ``no_colour`` says why it has no CIELAB."""
     # An uncalibrated report names no illuminant or observer: its values depend on neither.
     lines = [f"{report.name}: {report.space}, {report.conditions.label} ({report.conversion})"
              if report.calibrated else f"{report.name}: {report.space}"]
@@ -157,8 +165,9 @@ def _table(report: Any) -> str:
         for g, r in zip(report.geometries, report.reflectance, strict=True):
             lines.append(f"{g.instrument:<10}  {g.name:<8}  {g.azimuth_deg:>7g}  "
                          + "  ".join(f"{v:8.4f}" for v in r))
-        lines.append("reflectance factors per channel (pi f); no CIELAB without spectral bands "
-                     "or a chart colour calibration (docs/colour.md)")
+        lines.append("reflectance factors per channel (pi f); " + (
+            no_colour or "no CIELAB without spectral bands or a chart colour calibration "
+            "(docs/colour.md)"))
         return "\n".join(lines)
     lines.append("instrument  geometry  azimuth        L*       a*       b*       C*      h"
                  "  source")
@@ -193,6 +202,7 @@ def run(args: argparse.Namespace) -> int:
         colour_warnings,
         difference_csv,
         near_specular_note,
+        no_colour_reason,
         result_report,
     )
     from gonio.results import read_result
@@ -207,8 +217,11 @@ def run(args: argparse.Namespace) -> int:
     res = read_result(args.result)
     report = result_report(res, cond, instruments, azimuths)
     warnings = colour_warnings(res)
+    no_colour = no_colour_reason(res, args.result.name)
     diff = None
     if args.against is not None:
+        if no_colour is not None:
+            raise UsageError(f"no dE00 against {args.against}: {no_colour}")
         std, std_warnings = _standard(args.against, cond, instruments, azimuths)
         diff = compare(report, std)
         warnings += std_warnings
@@ -225,13 +238,15 @@ def run(args: argparse.Namespace) -> int:
             out["warnings"] = warnings
         if notes:
             out["notes"] = notes
+        if no_colour is not None:
+            out["no_colour"] = no_colour
         if diff is not None:
             out["difference"] = diff.as_dict()
         print(json.dumps(out, indent=2))
     elif str(args.csv) == "-":
         sys.stdout.write(text_csv)
     else:
-        print(_table(report))
+        print(_table(report, no_colour))
         if diff is not None:
             print()
             print(_diff_table(diff))

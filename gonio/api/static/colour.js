@@ -127,20 +127,26 @@ async function refresh() {
   caption.textContent = "Computing colour…";
   const q = new URLSearchParams({ instrument, azimuth: String(azimuth) });
   let body;
+  // A comparison asked for that cannot be made: which, and why (the answer's no_colour: an
+  // uncalibrated result, and what to do), said in the caption instead of a missing column.
+  let noDiff = null;
+  const compared = standard ? `standard ${standard}` : against ? `job ${against}` : null;
   try {
     body = await getJSON(`/jobs/${id}/colour?${q}`);
     // A difference only between two results with CIELAB (the server refuses the others):
     // the compared job's space is asked first, so no request is made that must fail.
-    if (standard && body.colour.space === "CIELAB") {
+    if (compared && body.colour.space !== "CIELAB") {
+      noDiff = `No ΔE00 against ${compared}: ${body.no_colour ?? "this result has no CIELAB"}`;
+    } else if (standard) {
       // A stored standard chosen: compared with it, not with the job chosen above.
       q.set("against", standard);
       body = await getJSON(`/jobs/${id}/colour?${q}`);
-    } else if (against && body.colour.space === "CIELAB") {
+    } else if (against) {
       const other = await getJSON(`/jobs/${against}/colour?${q}`);
       if (other.colour.space === "CIELAB") {
         q.set("against", against);
         body = await getJSON(`/jobs/${id}/colour?${q}`);
-      }
+      } else noDiff = `No ΔE00 against ${compared}: ${other.no_colour ?? `job ${against} has no CIELAB`}`;
     }
   } catch (e) {
     if (key !== shown) return;
@@ -184,7 +190,8 @@ async function refresh() {
       (flop !== undefined ? `; flop index ${flop.toFixed(2)}` : "") +
       (diff ? `; ΔE00 against ${standard ? `standard ${standard}` : `job ${against}`}: max ${diff.max_dE00.toFixed(2)}` : "") + source
     : `${rep.space}: reflectance factors per channel (${rep.channels.length} channels), no CIELAB. ` +
-      "Give the sensor spectral bands or a chart colour calibration (docs/colour.md).";
+      (noDiff ? "" : `${body.no_colour ?? "Give the sensor spectral bands or a chart colour calibration (docs/colour.md)"}.`);
+  if (noDiff) caption.textContent += `${lab ? ". " : ""}${noDiff}.`;
   // What must travel with the numbers (a calibration from another exposure): said first.
   if (body.warnings?.length) caption.textContent = `Warning: ${body.warnings.join("; ")}. ${caption.textContent}`;
   // Which near-specular geometries no pair read (their rows say "table"), and what that means.

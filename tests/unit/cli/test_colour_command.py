@@ -67,6 +67,15 @@ def files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
         "cal": _write(d / "cal.h5", _lambert(), {"calibration": _matrix()}),
         "cal2": _write(d / "cal2.h5", _lambert(0.9), {"calibration": _matrix()}, "batch 2"),
         "raw": _write(d / "raw.h5", _lambert(), None),
+        # Scanned with no white reference in effect: sensor units (its calibration lists no
+        # pair), whatever the sensor's colour source.
+        "units": write_result(d / "units.h5", job_id=9, specimen="panel", kind="uniform",
+                              readings=[], samples=CalibratedScan(
+                                  pairs=[("L1", "S1")], light_dirs=np.array([[0.0, 0.0, 1.0]]),
+                                  sensor_dirs=np.array([[0.0, 0.0, 1.0]]),
+                                  stage_angles_deg=np.array([0.0]), values=np.ones((1, 1, 3)),
+                                  channels=("R", "G", "B"), calibration={"pairs": []}),
+                              table=_lambert(), colour={"source": {"calibration": _matrix()}}),
     }
 
 
@@ -118,13 +127,34 @@ def test_uncalibrated_result_says_so(files: dict[str, Path],
     assert rep["conditions"] is None and "illuminant" not in rep["provenance"]
     assert main(["colour", str(files["raw"])]) == 0
     text = capsys.readouterr().out
-    assert "no CIELAB without spectral bands" in text
+    assert "raw.h5's sensors have neither spectral bands nor a chart colour calibration" in text
     assert text.splitlines()[0] == "panel: uncalibrated sensor RGB"
     assert main(["colour", str(files["raw"]), "--csv", "-"]) == 0
     rows = list(csv.DictReader(io.StringIO(capsys.readouterr().out)))
     assert {(r["illuminant"], r["observer"]) for r in rows} == {("", "")}
     assert main(["colour", str(files["raw"]), "--against", str(files["cal"])]) == 2
-    assert "uncalibrated sensor RGB" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert f"no dE00 against {files['cal']}: raw.h5's sensors have neither" in err, err
+
+
+def test_a_result_in_sensor_units_says_why_it_has_no_colour_difference(
+        files: dict[str, Path], capsys: pytest.CaptureFixture[str]) -> None:
+    """Its sensors have a chart calibration, but its values are not in 1/sr: the advice is
+    the white reference, not a colour calibration it already has. It said "give its sensor
+    spectral bands or a chart colour calibration first"."""
+    for args in ([str(files["units"]), "--against", str(files["cal"])],
+                 [str(files["cal"]), "--against", str(files["units"])]):
+        assert main(["colour", *args]) == 2
+        err = capsys.readouterr().err
+        assert "no dE00 against" in err and "units.h5 is uncalibrated: its values are sensor " \
+            "units, not 1/sr" in err, err
+        assert "calibrate the rig on the white reference" in err, err
+    assert main(["colour", str(files["units"]), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["colour"]["space"] == "uncalibrated sensor RGB"
+    assert out["no_colour"].startswith("units.h5 is uncalibrated"), out
+    assert main(["colour", str(files["units"])]) == 0
+    assert "units.h5 is uncalibrated" in capsys.readouterr().out
 
 
 def test_against_a_result_and_a_stored_csv(files: dict[str, Path], tmp_path: Path,
