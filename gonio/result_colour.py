@@ -315,18 +315,46 @@ def stored_standard(folder: str | os.PathLike[str],
     ColourError
         The file cannot be read as a standard (:func:`read_standard`'s reasons).
     """
+    path = _standard_path(folder, name, "a stored standard is a colour CSV there (gonio "
+                          "colour RESULT.h5 --csv FILE.csv), named without .csv; a job's "
+                          "result is named by its id")
+    report, said = read_standard(path)
+    return report, said
+
+
+def _standard_path(folder: str | os.PathLike[str], name: str, advice: str) -> Path:
+    """The file of the stored standard ``name`` (a trailing ``.csv`` dropped), which exists;
+    :class:`UnknownStandard` naming ``folder``, what it holds and ``advice`` otherwise."""
     folder = Path(folder)
     stem = name[:-4] if name.lower().endswith(".csv") else name
     path = folder / f"{stem}.csv"
     if not _STANDARD_NAME.match(stem) or not path.is_file():
         held = standard_names(folder)
         have = (f"it holds {', '.join(held)}" if held else "it holds none")
-        raise UnknownStandard(
-            f"no stored colour standard {name!r} in {folder} ({have}); a stored standard is "
-            "a colour CSV there (gonio colour RESULT.h5 --csv FILE.csv), named without .csv; "
-            "a job's result is named by its id")
-    report, said = read_standard(path)
-    return report, said
+        raise UnknownStandard(f"no stored colour standard {name!r} in {folder} ({have}); "
+                              f"{advice}")
+    return path
+
+
+def delete_standard(folder: str | os.PathLike[str], name: str) -> str:
+    """Remove the stored standard ``name`` of ``folder`` (its CSV file; ``name`` may end in
+    ``.csv``, and names a file of ``folder`` only, as in :func:`stored_standard`).
+
+    Returns
+    -------
+    str
+        The name it was stored under (without ``.csv``).
+
+    Raises
+    ------
+    UnknownStandard
+        No such standard (or a name that cannot be one), naming ``folder`` and the standards
+        it holds.
+    """
+    path = _standard_path(folder, name, "nothing was removed; the names are the stored "
+                          "standards' as listed (GET /api/v1/colour-standards), without .csv")
+    path.unlink()
+    return path.stem
 
 
 def store_standard(folder: str | os.PathLike[str], name: str,

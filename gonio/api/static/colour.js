@@ -7,11 +7,13 @@
 // "against standard" compares with a stored standard instead (GET /api/v1/colour-standards;
 // the data directory's standards/ CSVs), and "Save" stores the table shown as one (PUT
 // /api/v1/colour-standards/{name}): a lab measures its master once and compares each batch
-// with it by name. "Download CSV" saves the table shown (format=csv), as gonio colour --csv.
+// with it by name; "Delete standard" removes the one chosen (DELETE
+// /api/v1/colour-standards/{name}), after asking. "Download CSV" saves the table shown
+// (format=csv), as gonio colour --csv.
 // The instrument menu starts on the rig's design instrument (GET /api/v1/rig/config, its
 // [design] colour_instrument, written by `gonio design --colour`) when the rig has one, until
 // the user picks another.
-import { getBlob, getJSON, sendText } from "./api.js";
+import { getBlob, getJSON, send, sendText } from "./api.js";
 
 const $ = (sel) => document.querySelector(sel);
 let shown = null;
@@ -56,6 +58,22 @@ async function refreshStandards(choose = undefined) {
     sel.replaceChildren(new Option("(none)", ""), ...names.map((n) => new Option(n, n)));
   }
   sel.value = names.includes(want) ? want : "";
+  $("#colour-delete-standard").disabled = !sel.value;
+}
+
+async function deleteStandard() {
+  const name = $("#colour-standard").value, state = $("#colour-standard-state");
+  if (!name) return;
+  if (!window.confirm(`Delete the stored standard ${name}? Its colour CSV is removed from ` +
+    "the daemon's standards folder, for every client: nothing can be compared with it by " +
+    "name afterwards (save a result's colour again to restore it).")) return;
+  try {
+    await send("DELETE", `/colour-standards/${encodeURIComponent(name)}`);
+    state.textContent = `Deleted standard ${name}.`;
+  } catch (e) {
+    state.textContent = `Not deleted: ${e.message}`;
+  }
+  await refreshStandards();
 }
 
 function tableQuery(format = undefined) {
@@ -205,6 +223,10 @@ window.addEventListener("DOMContentLoaded", () => {
   for (const id of ["#colour-instrument", "#colour-azimuth", "#compare", "#colour-standard"]) $(id).addEventListener("change", go);
   $("#colour-save-standard").addEventListener("click", () => { saveStandard().then(go); });
   $("#colour-csv").addEventListener("click", () => { downloadCsv(); });
+  $("#colour-delete-standard").addEventListener("click", () => { deleteStandard().then(go); });
+  $("#colour-standard").addEventListener("change", (e) => {
+    $("#colour-delete-standard").disabled = !e.target.value;
+  });
   $("#colour-standard").addEventListener("focus", () => { refreshStandards(); });
   go();
 });
