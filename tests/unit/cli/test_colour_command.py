@@ -175,6 +175,48 @@ def test_against_a_result_and_a_stored_csv(files: dict[str, Path], tmp_path: Pat
     assert max(float(r["dE00"]) for r in rows) < 1e-3
 
 
+def test_against_takes_a_stored_standard_by_name_as_the_page_does(
+        files: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``--against NAME``: a stored standard of the data directory (its standards/ folder, as
+    the lab page and the API name them), from --data-dir or the result's own data directory;
+    it took files only. A name that is neither a file nor a stored standard is refused,
+    listing the stored ones."""
+    import shutil
+
+    data = tmp_path / "data"
+    (data / "standards").mkdir(parents=True)
+    assert main(["colour", str(files["cal"]), "--csv", str(data / "standards" /
+                                                           "blue master.csv")]) == 0
+    capsys.readouterr()
+    assert main(["colour", str(files["cal2"]), "--against", str(files["cal"]), "--json"]) == 0
+    by_file = json.loads(capsys.readouterr().out)["difference"]["max_dE00"]
+    assert main(["colour", str(files["cal2"]), "--against", "blue master", "--data-dir",
+                 str(data), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["difference"]["standard"] == "blue master"
+    assert out["difference"]["max_dE00"] == pytest.approx(by_file, abs=0.01)
+    # A result in a data directory's results/ folder looks in that directory by itself.
+    (data / "results").mkdir()
+    shutil.copy(files["cal2"], data / "results" / "job-7.h5")
+    assert main(["colour", str(data / "results" / "job-7.h5"), "--against", "blue master.csv",
+                 "--csv", "-"]) == 0
+    rows = list(csv.DictReader(io.StringIO(capsys.readouterr().out)))
+    assert rows and {r["standard"] for r in rows} == {"blue master"}
+    # Neither a file nor a stored name: the stored ones are listed.
+    assert main(["colour", str(files["cal2"]), "--against", "green master", "--data-dir",
+                 str(data)]) == 2
+    err = capsys.readouterr().err
+    assert "--against green master: no such file, and no stored standard of that name in " \
+        f"{data / 'standards'} (it holds blue master)" in err, err
+    # No data directory to look in: said, with what to give.
+    assert main(["colour", str(files["cal2"]), "--against", "blue master"]) == 2
+    err = capsys.readouterr().err
+    assert "no data directory to look for a stored standard" in err and "--data-dir" in err, err
+    assert main(["colour", str(files["cal2"]), "--against", "blue master", "--data-dir",
+                 str(tmp_path / "none")]) == 2
+    assert "is not a folder" in capsys.readouterr().err
+
+
 def test_bad_input(files: dict[str, Path], tmp_path: Path,
                    capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["colour", str(tmp_path / "none.h5")]) == 2
