@@ -32,6 +32,7 @@ import serial
 from gonio.drivers._arrival import poll_delay
 from gonio.drivers._ownership import bus_lock, claim
 from gonio.drivers._rest import RestPosition
+from gonio.drivers._serialport import lock_refused, open_failure
 from gonio.drivers._stage_settings import check_motion_settings, check_target
 from gonio.hal import DeviceInUse, DeviceUnavailable, StageFault, StageStatus, TravelLimits
 from gonio.hal import Stage as _Stage
@@ -272,14 +273,11 @@ class DynamixelStage(_Stage):
             ok = ph.setBaudRate(self.baudrate)
         except Exception as exc:  # pyserial raises SerialException/OSError on a missing port
             if "exclusively lock" in str(exc):
-                raise DeviceInUse(
-                    self.name, f"serial port {self.port!r} is held by another program "
-                    f"({exc}); close it (a terminal program, another gonio) and retry"
-                ) from exc
+                raise DeviceInUse(self.name, lock_refused(self.port)) from exc
             raise DeviceUnavailable(
                 self.name,
-                f"cannot open serial port {self.port!r}: {exc}; check the USB adapter and the "
-                "port name in the rig config",
+                f"{open_failure(self.port, exc)}; check the USB adapter and the port name in "
+                "the rig config",
                 code="port",
             ) from exc
         if not ok:
@@ -300,9 +298,13 @@ class DynamixelStage(_Stage):
         """
         last = ""
         corrupt = 0  # attempts answered with a broken packet (bad CRC, malformed)
+        # The port could not be opened at the last attempt (an adapter unplugged mid-scan):
+        # that is the fault, said as the driver says it, not inside "no valid reply (...)".
+        lost: DeviceUnavailable | None = None
         self.last_comm_result = sdk.COMM_RX_TIMEOUT
         with self._lock:
             for attempt in range(self.retries):
+                lost = None
                 try:
                     if self._ph is None:
                         self._open()
@@ -312,10 +314,11 @@ class DynamixelStage(_Stage):
                     raise  # retrying cannot take the port from its owner
                 except DeviceUnavailable as exc:
                     last = str(exc)
+                    lost = exc if exc.code == "port" else None
                     time.sleep(0.05 * (attempt + 1))
                     continue
                 except Exception as exc:  # lost port: pyserial raises from read/write
-                    last = f"port error {exc!r}"
+                    last = f"port error: {exc}"
                     with contextlib.suppress(DeviceUnavailable):
                         self._reopen()
                     continue
@@ -326,6 +329,8 @@ class DynamixelStage(_Stage):
                 self.last_comm_result = result
                 corrupt += result == sdk.COMM_RX_CORRUPT
                 self._ph.clearPort()
+        if lost is not None:
+            raise lost
         if corrupt:
             # The servo answers, but what arrives is broken: noise or a loose contact on the
             # cable, not a missing servo (a timeout), so the lab looks at the wiring first.

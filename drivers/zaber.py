@@ -22,6 +22,7 @@ import contextlib
 import itertools
 import math
 import re
+import termios
 import time
 from dataclasses import dataclass
 from typing import Any
@@ -31,6 +32,7 @@ import serial
 from gonio.drivers._arrival import poll_delay
 from gonio.drivers._ownership import bus_lock, claim
 from gonio.drivers._rest import RestPosition
+from gonio.drivers._serialport import lock_refused, open_failure
 from gonio.drivers._stage_settings import check_motion_settings, check_target
 from gonio.hal import DeviceInUse, DeviceUnavailable, StageFault, StageStatus, TravelLimits
 from gonio.hal import Stage as _Stage
@@ -204,13 +206,10 @@ class ZaberStage(_Stage):
             )
         except (serial.SerialException, OSError, ValueError) as exc:
             if "exclusively lock" in str(exc):
-                raise DeviceInUse(
-                    self.name, f"serial port {self.url!r} is held by another program ({exc}); "
-                    "close it (a terminal program, another gonio) and retry"
-                ) from exc
+                raise DeviceInUse(self.name, lock_refused(self.url)) from exc
             raise DeviceUnavailable(
                 self.name,
-                f"cannot open {self.url!r}: {exc}; check the cable or network and the url in "
+                f"{open_failure(self.url, exc)}; check the cable or network and the url in "
                 "the rig config",
                 code="port",
             ) from exc
@@ -233,8 +232,10 @@ class ZaberStage(_Stage):
                         raise  # retrying cannot fix a wrong url or a foreign protocol
                     last = str(exc)
                     continue
-                except (serial.SerialException, OSError) as exc:
-                    last = f"port error {exc!r}"
+                except (serial.SerialException, OSError, termios.error) as exc:
+                    # A vanished port fails in termios (tcflush: EIO), not in pyserial; the
+                    # next attempt reopens it, and says so if it is gone.
+                    last = f"port error: {exc}"
                     self._drop_port()
                     continue
                 if reply is not None:

@@ -31,6 +31,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 
 from gonio.atomicfile import write_atomically
 from gonio.hal import PairSpec
+from gonio.wording import counted
 
 if TYPE_CHECKING:
     from gonio.brdf.reconstruction.samples import Samples as BrdfSamples
@@ -160,8 +161,9 @@ class Calibration(BaseModel):
             names = ", ".join(p.label() for p in missing)
             raise PartialCalibration(
                 f"the calibration in effect ({self.source}) has no factors for {len(missing)} "
-                f"of the {len(pairs)} pairs of {what}: {names}. Run a calibration job that "
-                "measures them (a white reference on the stage), or measure only calibrated pairs"
+                f"of the {counted(len(pairs), 'pair')} of {what}: {names}. Run a calibration "
+                "job that measures them (a white reference on the stage), or measure only "
+                "calibrated pairs"
             )
 
     def check_exposure(self, exposure_s: float, what: str = "the plan") -> None:

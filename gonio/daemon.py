@@ -40,6 +40,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from gonio.apikeys import KEYS_ENV, ApiKeyring, KeyringError, parse_keys_env, parse_keys_file
 from gonio.config import DAEMON_TABLES, read_toml
+from gonio.wording import counted
 
 if TYPE_CHECKING:
     from gonio.basis_supply import BasisSupply
@@ -409,7 +410,7 @@ def job_event_line(type_: str, data: Mapping[str, Any], row: Any,
             # The plan's stage angles (the job's own steps are laid out just after this).
             n = row.total_angles or row.plan.get("rotations") or row.plan.get(
                 "initial_rotations")
-            return logging.INFO, f"{job} started" + (f": {n} stage angles" if n else "")
+            return logging.INFO, f"{job} started" + (f": {counted(n, 'stage angle')}" if n else "")
         return logging.INFO, f"{job} resumed from {before} ({angles})"
     if state in ("paused", "suspended"):
         level = logging.WARNING if state == "suspended" else logging.INFO
@@ -420,7 +421,7 @@ def job_event_line(type_: str, data: Mapping[str, Any], row: Any,
         if row.kind == "calibration":
             cal = service.calibration()
             return logging.INFO, (f"{job} completed: calibration applied ({cal.source}, "
-                                  f"{len(cal.pairs)} pairs): later scans are in 1/sr")
+                                  f"{counted(len(cal.pairs), 'pair')}): later scans are in 1/sr")
         from gonio.figures import headline_error
 
         summary = row.summary or {}

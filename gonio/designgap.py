@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from gonio.config import DesignExpectation, RigConfig
+from gonio.wording import counted
 
 __all__ = [
     "GAP_FACTOR",
@@ -200,13 +201,14 @@ def _departures(facts: ScanFacts, design: DesignExpectation, above: bool) -> lis
                    "1/sr: calibrate on the white reference")
     fewer = facts.n_angles < design.rotations
     if facts.n_angles != design.rotations and fewer == above:
-        out.append(f"{facts.n_angles} stage angles, the design assumed {design.rotations}")
+        out.append(f"{counted(facts.n_angles, 'stage angle')}, the design assumed "
+                   f"{design.rotations}")
     wider = facts.span_deg > design.span_deg
     if not math.isclose(facts.span_deg, design.span_deg) and wider == above:
         out.append(f"the angles covered {facts.span_deg:g} deg, the design assumed "
                    f"{design.span_deg:g} deg")
     if facts.n_pairs != design.pairs and (facts.n_pairs < design.pairs) == above:
-        out.append(f"{facts.n_pairs} pairs measured, the design has {design.pairs}")
+        out.append(f"{counted(facts.n_pairs, 'pair')} measured, the design has {design.pairs}")
     return out
 
 

@@ -157,6 +157,40 @@ def scan_readings(samples: Any) -> ScanReadings | None:
                         np.asarray(samples.stage_angles_deg, dtype=float), values)
 
 
+def no_colour_reason(res: ResultFile, who: str | None = None) -> str | None:
+    """Why ``res`` has no CIELAB, hence no CIEDE2000 against anything, and what to do; None
+    when it has colour (or no reconstruction, which :func:`result_report` refuses itself).
+
+    Two causes ask for different remedies: values in sensor units (no white reference was in
+    effect: calibrate, then scan again) and reflectance factors from sensors with neither
+    spectral bands nor a chart colour calibration (give them one, then scan again). A rebuild
+    (``gonio jobs rebuild``) keeps the calibration and colour source the job was finished
+    with, so it does not help either. The API answers it as the colour's ``no_colour`` (and
+    as a refused comparison's reason), the lab page shows it in the caption instead of a
+    silently missing ΔE00 column, and ``gonio colour`` prints it.
+
+    Parameters
+    ----------
+    res
+        The result file.
+    who
+        How the sentence names the result; default ``"job N"`` from the file.
+    """
+    if res.table is None or conversion_of(res) is not None:
+        return None
+    who = who or f"job {res.attrs.get('job_id', '?')}"
+    if not in_reflectance(res.samples.calibration):
+        return (f"{who} is uncalibrated: its values are sensor units, not 1/sr (no white "
+                "reference calibration was in effect when it was scanned), so it has no "
+                "CIELAB and no colour difference (CIEDE2000); calibrate the rig on the white "
+                "reference (a calibration job), then scan the specimen again")
+    return (f"{who}'s sensors have neither spectral bands nor a chart colour calibration: its "
+            f"values are reflectance factors per channel ({UNCALIBRATED_SPACE}), with no "
+            "CIELAB and no colour difference (CIEDE2000); give the sensors spectral bands or "
+            "a chart colour calibration in the rig config (gonio colour-chart, "
+            "docs/colour.md), then scan the specimen again")
+
+
 def in_reflectance(calibration: Mapping[str, Any]) -> bool:
     """False when a result's calibration (``/samples`` attribute) says its values are in sensor
     units: a calibration that lists no pair. Files without the record are taken as calibrated."""
@@ -283,18 +317,46 @@ def stored_standard(folder: str | os.PathLike[str],
     ColourError
         The file cannot be read as a standard (:func:`read_standard`'s reasons).
     """
+    path = _standard_path(folder, name, "a stored standard is a colour CSV there (gonio "
+                          "colour RESULT.h5 --csv FILE.csv), named without .csv; a job's "
+                          "result is named by its id")
+    report, said = read_standard(path)
+    return report, said
+
+
+def _standard_path(folder: str | os.PathLike[str], name: str, advice: str) -> Path:
+    """The file of the stored standard ``name`` (a trailing ``.csv`` dropped), which exists;
+    :class:`UnknownStandard` naming ``folder``, what it holds and ``advice`` otherwise."""
     folder = Path(folder)
     stem = name[:-4] if name.lower().endswith(".csv") else name
     path = folder / f"{stem}.csv"
     if not _STANDARD_NAME.match(stem) or not path.is_file():
         held = standard_names(folder)
         have = (f"it holds {', '.join(held)}" if held else "it holds none")
-        raise UnknownStandard(
-            f"no stored colour standard {name!r} in {folder} ({have}); a stored standard is "
-            "a colour CSV there (gonio colour RESULT.h5 --csv FILE.csv), named without .csv; "
-            "a job's result is named by its id")
-    report, said = read_standard(path)
-    return report, said
+        raise UnknownStandard(f"no stored colour standard {name!r} in {folder} ({have}); "
+                              f"{advice}")
+    return path
+
+
+def delete_standard(folder: str | os.PathLike[str], name: str) -> str:
+    """Remove the stored standard ``name`` of ``folder`` (its CSV file; ``name`` may end in
+    ``.csv``, and names a file of ``folder`` only, as in :func:`stored_standard`).
+
+    Returns
+    -------
+    str
+        The name it was stored under (without ``.csv``).
+
+    Raises
+    ------
+    UnknownStandard
+        No such standard (or a name that cannot be one), naming ``folder`` and the standards
+        it holds.
+    """
+    path = _standard_path(folder, name, "nothing was removed; the names are the stored "
+                          "standards' as listed (GET /api/v1/colour-standards), without .csv")
+    path.unlink()
+    return path.stem
 
 
 def store_standard(folder: str | os.PathLike[str], name: str,

@@ -804,6 +804,17 @@ class GonioService:
                 "observer": report.conditions.observer,
                 "geometries": len(report.geometries), "warnings": said}
 
+    def delete_colour_standard(self, name: str) -> str:
+        """Remove the stored standard ``name`` (:func:`gonio.result_colour.delete_standard`):
+        the name it had. Raises :class:`NotFound` for an unknown name, listing the stored
+        ones."""
+        from gonio.result_colour import STANDARDS_DIR, UnknownStandard, delete_standard
+
+        try:
+            return delete_standard(self.data_dir / STANDARDS_DIR, name)
+        except UnknownStandard as exc:
+            raise NotFound(str(exc)) from None
+
     def preview_png(self, job_id: int) -> bytes:
         """PNG preview of a job's table (:meth:`ResultViews.preview_png`)."""
         return self.results.preview_png(job_id)

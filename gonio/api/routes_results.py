@@ -260,6 +260,7 @@ async def colour(
         colour_warnings,
         difference_csv,
         near_specular_note,
+        no_colour_reason,
         result_report,
     )
 
@@ -271,13 +272,22 @@ async def colour(
     res = await asyncio.to_thread(service.reconstruction, job_id)
     report = await asyncio.to_thread(result_report, res, cond, instruments, azimuths)
     warnings = colour_warnings(res)
+    # Why there is no CIELAB (uncalibrated: which calibration is missing, what to do), said
+    # rather than left to a missing ΔE00.
+    no_colour = no_colour_reason(res)
     diff = None
     standard: int | str | None = against
+    if against is not None and no_colour is not None:
+        what = f"job {against}" if against.isascii() and against.isdigit() else repr(against)
+        raise ColourError(f"no ΔE00 against {what}: {no_colour}")
     if against is not None and against.isascii() and against.isdigit():
         standard = int(against)
         if not 1 <= standard <= 2**53:
             raise ColourError(f"against={against}: a job id is 1 to 2^53")
         std = await asyncio.to_thread(service.reconstruction, standard)
+        std_no_colour = no_colour_reason(std)
+        if std_no_colour is not None:
+            raise ColourError(f"no ΔE00 against job {standard}: {std_no_colour}")
         diff = compare(report, await asyncio.to_thread(
             result_report, std, cond, instruments, azimuths))
         warnings += colour_warnings(std, f"standard (job {standard})")
@@ -294,6 +304,8 @@ async def colour(
     out: dict[str, Any] = {"job_id": job_id, "colour": report.as_dict()}
     if warnings:
         out["warnings"] = warnings
+    if no_colour is not None:
+        out["no_colour"] = no_colour
     note = near_specular_note(report)
     if note is not None:
         out["notes"] = [note]

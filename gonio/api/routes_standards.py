@@ -2,8 +2,8 @@
 
 A stored standard is a colour CSV (``GET /api/v1/jobs/{id}/colour?format=csv``, ``gonio colour
 --csv``, or one edited in a spreadsheet) kept in the data directory's ``standards/`` folder;
-``GET /api/v1/jobs/{id}/colour?against=NAME`` compares with it (docs/colour.md). The name is a
-file name of that folder only, never a path.
+``GET /api/v1/jobs/{id}/colour?against=NAME`` compares with it (docs/colour.md); ``PUT`` stores
+one, ``DELETE`` removes one. The name is a file name of that folder only, never a path.
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ from __future__ import annotations
 import asyncio
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Body, Path
+from fastapi import APIRouter, Body, Path, Response
 from pydantic import BaseModel, Field
 
 from gonio.api.deps import READ, WRITE, Service
@@ -57,3 +57,13 @@ async def store_standard(
 ) -> Any:
     # An empty body is read as an empty CSV, so the refusal says what a standard needs.
     return StoredStandard(**await asyncio.to_thread(service.store_colour_standard, name, csv))
+
+
+@router.delete(
+    "/{name}", dependencies=WRITE, status_code=204,
+    responses={404: {"description": "no stored standard of that name (the message lists the "
+                     "stored ones); nothing is removed"}},
+    summary="Remove a stored colour standard")
+async def delete_standard(name: StandardName, service: Service) -> Response:
+    await asyncio.to_thread(service.delete_colour_standard, name)
+    return Response(status_code=204)

@@ -2,7 +2,8 @@
 ``gonio colour-chart CHART.csv``: an RGB sensor's colour calibration from a chart.
 
 CIELAB at the aspecular geometries of multi-angle spectrophotometers, the flop index, and
-CIEDE2000 against a standard (another result file or a colour CSV written by this command),
+CIEDE2000 against a standard (another result file, a colour CSV written by this command, or a
+stored standard of the data directory named as the lab page and the API name it),
 under a stated illuminant and observer (docs/colour.md).
 """
 
@@ -36,9 +37,15 @@ def register(sub: Any) -> None:
         "printed as 'uncalibrated sensor RGB'. See docs/colour.md.",
     )
     p.add_argument("result", type=Path, help="a gonio result file (HDF5)")
-    p.add_argument("--against", type=Path, default=None, metavar="STD",
-                   help="the standard: another result file (.h5) or a colour CSV written by "
-                   "'gonio colour --csv'; prints CIEDE2000 per geometry")
+    p.add_argument("--against", default=None, metavar="STD",
+                   help="the standard: another result file (.h5), a colour CSV written by "
+                   "'gonio colour --csv', or the name of a stored standard (a colour CSV in "
+                   "the data directory's standards/ folder, as the lab page and the API name "
+                   "them); prints CIEDE2000 per geometry")
+    p.add_argument("--data-dir", type=Path, default=None, metavar="DIR",
+                   help="the data directory whose stored standards --against may name (the "
+                   "daemon's; default: the result's own, when the result file is in its "
+                   "results/ folder)")
     p.add_argument("--csv", type=Path, default=None, metavar="FILE",
                    help="also write the numbers as CSV (the colour table, or with --against "
                    "the differences); '-' writes CSV to standard output instead of the table")
@@ -130,24 +137,62 @@ def _azimuths(text: str) -> list[float]:
     return out
 
 
-def _standard(path: Path, conditions: Any, instruments: list[str],
+def _standards_folder(result: Path, data_dir: Path | None) -> Path | None:
+    """The stored standards' folder ``--against`` names are looked up in: ``--data-dir``'s,
+    else the result's data directory's when the result is one of its ``results/`` files."""
+    from gonio.result_colour import STANDARDS_DIR
+
+    if data_dir is not None:
+        return data_dir / STANDARDS_DIR
+    parent = result.resolve().parent
+    return parent.parent / STANDARDS_DIR if parent.name == "results" else None
+
+
+def _standard(against: str, folder: Path | None, conditions: Any, instruments: list[str],
               azimuths: list[float]) -> tuple[Any, list[str]]:
-    """The standard's colour report and its warnings (a stored CSV carries its own)."""
-    from gonio.result_colour import colour_warnings, read_standard, result_report
+    """The standard's colour report and its warnings (a stored CSV carries its own):
+    ``against`` is a result file, a colour CSV, or a stored standard's name in ``folder``."""
+    from gonio.result_colour import (
+        UnknownStandard,
+        colour_warnings,
+        no_colour_reason,
+        read_standard,
+        result_report,
+        standard_names,
+        stored_standard,
+    )
     from gonio.results import read_result
 
+    path = Path(against)
     if not path.is_file():
-        raise UsageError(f"standard {path} does not exist")
+        if folder is None:
+            raise UsageError(
+                f"--against {against}: no such file, and no data directory to look for a "
+                "stored standard of that name in (the result is not in a data directory's "
+                "results/ folder); give --data-dir DIR (the daemon's data directory), or a "
+                "result file (.h5) or colour CSV")
+        try:
+            report, said = stored_standard(folder, against)
+        except UnknownStandard:
+            held = standard_names(folder)
+            raise UsageError(
+                f"--against {against}: no such file, and no stored standard of that name in "
+                f"{folder} ({'it holds ' + ', '.join(held) if held else 'it holds none'}); "
+                "give a result file (.h5), a colour CSV, or a stored standard's name") from None
+        return report, [f"standard ({report.name}): {w}" for w in said]
     if path.suffix.lower() == ".csv":
         std_csv, said = read_standard(path)
         return std_csv, [f"standard: {w}" for w in said]
     std = read_result(path)
+    no_colour = no_colour_reason(std, path.name)
+    if no_colour is not None:
+        raise UsageError(f"no dE00 against {path}: {no_colour}")
     return (result_report(std, conditions, instruments, azimuths),
             colour_warnings(std, "standard"))
 
 
-def _table(report: Any) -> str:
-    """The colour table as a person reads it."""
+def _table(report: Any, no_colour: str | None = None) -> str:
+    """The colour table as a person reads it; ``no_colour`` says why it has no CIELAB."""
     # An uncalibrated report names no illuminant or observer: its values depend on neither.
     lines = [f"{report.name}: {report.space}, {report.conditions.label} ({report.conversion})"
              if report.calibrated else f"{report.name}: {report.space}"]
@@ -157,8 +202,9 @@ def _table(report: Any) -> str:
         for g, r in zip(report.geometries, report.reflectance, strict=True):
             lines.append(f"{g.instrument:<10}  {g.name:<8}  {g.azimuth_deg:>7g}  "
                          + "  ".join(f"{v:8.4f}" for v in r))
-        lines.append("reflectance factors per channel (pi f); no CIELAB without spectral bands "
-                     "or a chart colour calibration (docs/colour.md)")
+        lines.append("reflectance factors per channel (pi f); " + (
+            no_colour or "no CIELAB without spectral bands or a chart colour calibration "
+            "(docs/colour.md)"))
         return "\n".join(lines)
     lines.append("instrument  geometry  azimuth        L*       a*       b*       C*      h"
                  "  source")
@@ -193,6 +239,7 @@ def run(args: argparse.Namespace) -> int:
         colour_warnings,
         difference_csv,
         near_specular_note,
+        no_colour_reason,
         result_report,
     )
     from gonio.results import read_result
@@ -201,15 +248,23 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"result file {args.result} does not exist")
     if args.csv is not None and str(args.csv) != "-" and not args.csv.parent.is_dir():
         raise UsageError(f"--csv {args.csv}: folder {args.csv.parent} does not exist")
+    if args.data_dir is not None and not args.data_dir.is_dir():
+        raise UsageError(f"--data-dir {args.data_dir} is not a folder: give the data directory "
+                         "whose standards/ folder holds the stored standards")
     azimuths = _azimuths(args.azimuth)
     instruments = args.instrument or list(DEFAULT_INSTRUMENTS)
     cond = ViewingConditions(args.illuminant, args.observer)
     res = read_result(args.result)
     report = result_report(res, cond, instruments, azimuths)
     warnings = colour_warnings(res)
+    no_colour = no_colour_reason(res, args.result.name)
     diff = None
     if args.against is not None:
-        std, std_warnings = _standard(args.against, cond, instruments, azimuths)
+        if no_colour is not None:
+            raise UsageError(f"no dE00 against {args.against}: {no_colour}")
+        std, std_warnings = _standard(args.against,
+                                      _standards_folder(args.result, args.data_dir), cond,
+                                      instruments, azimuths)
         diff = compare(report, std)
         warnings += std_warnings
     for warning in warnings:
@@ -225,13 +280,15 @@ def run(args: argparse.Namespace) -> int:
             out["warnings"] = warnings
         if notes:
             out["notes"] = notes
+        if no_colour is not None:
+            out["no_colour"] = no_colour
         if diff is not None:
             out["difference"] = diff.as_dict()
         print(json.dumps(out, indent=2))
     elif str(args.csv) == "-":
         sys.stdout.write(text_csv)
     else:
-        print(_table(report))
+        print(_table(report, no_colour))
         if diff is not None:
             print()
             print(_diff_table(diff))

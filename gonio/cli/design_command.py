@@ -49,6 +49,7 @@ from gonio.brdf.design.roughness import RoughnessBound, bound_angles, roughness_
 from gonio.brdf.reconstruction.samples import DEFAULT_SPAN_DEG, SPANS_DEG
 from gonio.cli import CORE_SETTING_FLAGS, UsageError
 from gonio.sampling_design import colour_targets
+from gonio.wording import counted
 
 
 def register(subparsers: Any) -> None:
@@ -325,7 +326,7 @@ def print_design(
 ) -> None:
     """Human-readable table of the design, its condition number and roughness bound."""
     out = sys.stdout if out is None else out
-    print(f"design: {design.name}, {design.n_pairs} pairs", file=out)
+    print(f"design: {design.name}, {counted(design.n_pairs, 'pair')}", file=out)
     print(
         f"{'pair':>4} {'th':>6} {'td':>6} {'pd':>6} | {'theta_i':>7} {'phi_i':>6} "
         f"{'theta_v':>7} {'phi_v':>6}   (degrees)",

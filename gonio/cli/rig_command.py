@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from gonio.cli import UsageError
+from gonio.wording import counted
 
 
 def register(subparsers: Any) -> None:
@@ -78,7 +79,8 @@ def _apply_design(args: argparse.Namespace) -> int:
         print(f"note: {note}")
     n = len(design.pair_names())
     saved = f" (previous version in {args.rig.name}.bak)" if in_place else ""
-    print(f"wrote {out}: {len(design.lights)} lights, {len(design.sensors)} sensors, {n} pairs "
+    print(f"wrote {out}: {counted(len(design.lights), 'light')}, "
+          f"{counted(len(design.sensors), 'sensor')}, {counted(n, 'pair')} "
           f"from {args.design}{saved}")
     return 0
 

@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, Any
 
 from gonio.cli import UsageError, finite_float, nonnegative_float, positive_float, positive_int
 from gonio.cli.daemon_client import DaemonClient, DaemonRefused, add_daemon_options
+from gonio.wording import counted
 
 if TYPE_CHECKING:
     from gonio.basis_supply import BasisSupply
@@ -384,7 +385,8 @@ async def _run_owned(args: argparse.Namespace, checked: Any, config: Any, sim: A
         cal_out = out.with_name(out.stem + ".calibration.json")
         shutil.copyfile(data_dir / CALIBRATION_FILE, cal_out)
         n_pairs = len(checked.pairs)
-        print(f"job {job.id} completed: calibration of {n_pairs} pairs written to {cal_out}; "
+        print(f"job {job.id} completed: calibration of {counted(n_pairs, 'pair')} written to "
+              f"{cal_out}; "
               f"apply it with --calibration {cal_out}")
         return 0
     cal = service.calibration()
@@ -538,7 +540,8 @@ def dry_run_summary(dr: Any, plan: Any, rig_name: str) -> str:
         f"dry run of the {plan.kind} plan on rig {rig_name!r}; nothing moves",
         f"  stage angles: {len(angles)}{first} ({_angles_text(angles)})",
         f"  pairs: {n_pairs} ({len(dr.lights)} lights)",
-        f"  readings: {dr.readings}{first} ({n_pairs} pairs x {len(angles)} angles), "
+        f"  readings: {dr.readings}{first} ({counted(n_pairs, 'pair')} x "
+        f"{counted(len(angles), 'angle')}), "
         f"exposure {ex.exposure_s:g} s x {ex.averages}",
         f"  duration: about {_duration_text(dr.estimated_s)} (moves {_part_text(dr.motion_s)}, "
         f"settling {_part_text(dr.settle_s)}, exposures {_part_text(dr.exposure_s)})",
@@ -549,15 +552,16 @@ def dry_run_summary(dr: Any, plan: Any, rig_name: str) -> str:
                  else "where the readings change fastest")
         most = getattr(dr, "max_angles", None)
         lines.append(f"  later rounds add angles {where}; "
-                     + (f"at most {most} angles and {_duration_text(bound)} in all"
+                     + (f"at most {counted(most, 'angle')} and {_duration_text(bound)} in all"
                         if bound is not None and most is not None
                         else "no --max-samples, so no bound on the total"))
     for b in getattr(dr, "arc_branches", None) or ():
         arc_deg, angles, secs = b.arc_deg, b.angles, b.estimated_s
         what = ("twofold symmetric: on over half a turn" if arc_deg == 180.0
                 else "not twofold symmetric: on over a full turn")
-        lines.append(f"  if the first round finds the specimen {what}, at most {angles} angles "
-                     f"({angles * n_pairs} readings) and {_duration_text(secs)} in all"
+        lines.append(f"  if the first round finds the specimen {what}, at most "
+                     f"{counted(angles, 'angle')} ({counted(angles * n_pairs, 'reading')}) and "
+                     f"{_duration_text(secs)} in all"
                      + ("; reconstructed with the basis for specimens without twofold "
                         "symmetry" if getattr(b, "basis", "default") == "asymmetric" else ""))
         if getattr(b, "basis_build_s", None) is not None:
@@ -766,6 +770,7 @@ def _show_job(args: argparse.Namespace, store: Any) -> int:
     from the store: its queue position and why it waits, the angles an adaptive plan may
     measure, the finishing estimate of an active job. The engine's live ETA is the daemon's
     alone (null here); plus ``result_file``, the result's path on this machine."""
+    from gonio.jobstates import ACTIVE_STATES
     from gonio.plans.dryrun import dry_run
     from gonio.plans.models import PlanError, parse_stored_plan
     from gonio.rigdescription import RigDescription
@@ -779,11 +784,14 @@ def _show_job(args: argparse.Namespace, store: Any) -> int:
         row = store.get_job(args.job_id)
     except NotFound as exc:
         raise UsageError(str(exc)) from None
-    live = _daemon_detail(args.db, row.id)
+    # The store's lock, probed once: whether a daemon answers for the job, and whether an
+    # active job is interrupted (it was probed a second time for the note).
+    holder = _store_holder(args.db)
+    live = _daemon_detail(holder, row.id)
     if live is not None:
         # A daemon runs this store: its answer has what only it knows (the live ETA, the
         # activity, the basis build), from the same JobDetail.from_row.
-        return _print_detail(args, row, live, None)
+        return _print_detail(args, row, live, False)
     queued = row.state.value == "queued"
     max_angles = None
     if row.kind == "adaptive":
@@ -792,19 +800,25 @@ def _show_job(args: argparse.Namespace, store: Any) -> int:
                                  RigDescription.model_validate(row.rig)).max_angles
         except (PlanError, ValueError):
             max_angles = None  # a plan or rig the code no longer reads: done/total only
-    active = row.state.value in ("running", "paused", "suspended", "reconstructing")
+    active = row.state in ACTIVE_STATES
+    # Why a queued job waits needs the active jobs only, not the whole list again (every
+    # job's plan and rig decoded, this one's a second time).
     detail = JobDetail.from_row(
-        row, max_angles, _queue_wait(store, args.db, store.list_jobs()) if queued else None,
+        row, max_angles,
+        _queue_wait(store, args.db, [row, *store.list_jobs(ACTIVE_STATES)]) if queued else None,
         queue_position=store.queue_position(row.id) if queued else None,
         finishing=(finishing_estimate(store.list_jobs(["completed"]))
                    if active and row.kind != "calibration" else None))
-    return _print_detail(args, row, detail.model_dump(mode="json"), args.db if active else None)
+    # A paused job waits for the user whether or not a process holds the store.
+    interrupted = holder is None and row.state.value in ("running", "suspended",
+                                                         "reconstructing")
+    return _print_detail(args, row, detail.model_dump(mode="json"), interrupted)
 
 
 def _print_detail(args: argparse.Namespace, row: Any, d: dict[str, Any],
-                  interrupted_db: Path | None) -> int:
+                  interrupted: bool) -> int:
     """Print a job's detail ``d`` (as JSON with --json), with ``result_file``, and when
-    ``interrupted_db`` is given the note on active jobs no process runs."""
+    ``interrupted`` (an active job no process runs) the note saying so."""
     if row.result_path:
         # The store's path is relative to the data directory (docs/engine.md).
         data_dir = args.data_dir if args.data_dir is not None else args.db.resolve().parent
@@ -814,26 +828,34 @@ def _print_detail(args: argparse.Namespace, row: Any, d: dict[str, Any],
         return 0
     for line in _detail_lines(d):
         print(line)
-    note = _interrupted_note(interrupted_db, [row]) if interrupted_db is not None else None
-    if note is not None:
-        print(note)
+    if interrupted:
+        print(_interrupted_text(args.db, [row]))
     return 0
 
 
-def _daemon_detail(db: Path, job_id: int) -> dict[str, Any] | None:
-    """``GET /api/v1/jobs/{job_id}`` of the daemon that runs jobs from ``db`` (the address
-    it records in the store's lock, :func:`gonio.locks.advertise_url`); None when no daemon
-    holds the store (or a ``gonio scan`` does) or it does not answer."""
-    from gonio.cli.daemon_client import DaemonClient
+def _store_holder(db: Path) -> dict[str, Any] | None:
+    """The record of the process that holds the store ``db``'s lock (a daemon, a ``gonio
+    scan``; possibly empty when unreadable), or None when none does. A store whose lock
+    cannot be probed (no write access to its folder) counts as held: nothing can be said of
+    who runs it, so nothing is called interrupted."""
     from gonio.locks import LockBusy, claim_store
 
     try:
         claim_store(db).release()
         return None
     except LockBusy as exc:
-        url = exc.holder.get("url")
+        return dict(exc.holder)
     except OSError:
-        return None
+        return {}
+
+
+def _daemon_detail(holder: dict[str, Any] | None, job_id: int) -> dict[str, Any] | None:
+    """``GET /api/v1/jobs/{job_id}`` of the daemon that runs jobs from the store whose lock
+    ``holder`` holds (the address it records, :func:`gonio.locks.advertise_url`); None when
+    no daemon holds the store (or a ``gonio scan`` does) or it does not answer."""
+    from gonio.cli.daemon_client import DaemonClient
+
+    url = (holder or {}).get("url")
     if not isinstance(url, str) or not url:
         return None
     try:
@@ -912,6 +934,12 @@ def _interrupted_note(db: Path, rows: list[Any]) -> str | None:
         return None  # a daemon or a gonio scan runs them: the states are live
     except OSError:
         return None  # cannot tell (no write access to the store's directory)
+    return _interrupted_text(db, active)
+
+
+def _interrupted_text(db: Path, active: list[Any]) -> str:
+    """The note on ``active`` jobs (running, suspended, reconstructing) that no process runs
+    from the store ``db``: they were interrupted, and what happens to them next."""
     ids = ", ".join(str(r.id) for r in active)
     return (f"note: no daemon or gonio scan runs jobs from this store now, so nothing goes on "
             f"with job(s) {ids} above: they were interrupted (a stopped or killed process). "

@@ -31,6 +31,7 @@ from pathlib import Path
 from typing import Any
 
 from gonio.cli import UsageError, positive_float
+from gonio.wording import counted
 
 DEMO_ROTATIONS = 8
 
@@ -187,7 +188,7 @@ def _calibration_line(service: Any) -> str:
     """One line on the calibration the daemon applies (printed at start)."""
     cal = service.calibration()
     if cal.pairs:
-        return f"{cal.source}, {len(cal.pairs)} pairs: scans are in 1/sr"
+        return f"{cal.source}, {counted(len(cal.pairs), 'pair')}: scans are in 1/sr"
     return ("none: scans stay in sensor units until a calibration job completes (a white "
             "reference on the stage: 'gonio scan --daemon URL --white-reference ALBEDO' or "
             "the page's calibration kind)")

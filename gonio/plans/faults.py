@@ -90,12 +90,16 @@ class Suspender:
         # One event when the waiting starts (and when the cause changes), not one per probe:
         # a lab may leave a job waiting for many minutes.
         left = max(self.policy.wait_for_device_s - (self._clock() - trouble.since), 0.0)
+        # A port that cannot be opened (code "port": a serial adapter unplugged) is not a
+        # device that is silent: its message says which port; the note says what to do.
+        gone, check = (("has no port to talk through", "plug its USB adapter or cable back in")
+                       if again.code == "port" else
+                       ("does not answer", "check its power and cable"))
         return AfterRecovery(None, {
             "device": again.device, "code": again.code, "message": str(again),
             "retry": retries, "waiting_s": round(left, 1),
-            "note": f"{again.device} does not answer; waiting up to {left:.0f} s more for it "
-                    "(check its power and cable); the job resumes from its checkpoint when "
-                    "it answers"}, True)
+            "note": f"{again.device} {gone}; waiting up to {left:.0f} s more for it "
+                    f"({check}); the job resumes from its checkpoint when it answers"}, True)
 
     def may_wait(self, fault: hal.DeviceFault, trouble: Trouble) -> bool:
         """True while a silent device may still be waited for (``wait_for_device_s``)."""

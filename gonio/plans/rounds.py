@@ -23,6 +23,7 @@ from gonio.plans.adaptive import adaptive_refinement
 from gonio.plans.arc import ARC_TEST_EVENT, arc_test, fill_after
 from gonio.plans.checked import CheckedPlan
 from gonio.plans.models import MAX_ROTATIONS, AdaptivePlan
+from gonio.wording import counted
 
 
 @dataclass(frozen=True)
@@ -192,9 +193,11 @@ def limit_message(limit: str, max_rounds: int, limit_angles: int, planned_angles
     """The sentence of an adaptive plan stopped at a limit while its rule still asked for
     ``wanted`` more stage angles (event ``adaptive_done``, the result's ``adaptive_limit``)."""
     what = (f"its {max_rounds} rounds (max_rounds)" if limit == "max_rounds"
-            else f"its limit of {limit_angles} stage angles (max_rotations or max_samples)")
+            else f"its limit of {counted(limit_angles, 'stage angle')} (max_rotations or "
+                  "max_samples)")
     raise_ = "max_rounds" if limit == "max_rounds" else "max_rotations (or max_samples)"
-    return (f"the adaptive plan stopped at {what} with {planned_angles} angles read, while "
+    return (f"the adaptive plan stopped at {what} with {counted(planned_angles, 'angle')} "
+            "read, while "
             f"its rule ({rule}) still asked for {wanted} more: the reconstruction is less "
             f"refined than the rule would make it; raise {raise_} to let it finish")
 

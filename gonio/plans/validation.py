@@ -12,6 +12,7 @@ from gonio.hal import PairSpec
 from gonio.plans.models import MAX_ROTATIONS, AdaptivePlan, AnyPlan, PlanError
 from gonio.plans.route import stage_positions
 from gonio.rigdescription import RigDescription
+from gonio.wording import counted
 
 
 def plan_pairs(plan: AnyPlan, rig: RigDescription) -> list[PairSpec]:
@@ -108,7 +109,8 @@ def validate_plan(plan: AnyPlan, rig: RigDescription) -> list[PairSpec]:
         if plan.max_samples is not None and plan.max_samples < len(pairs) * r:
             raise PlanError(
                 f"max_samples {plan.max_samples} is smaller than the first round alone "
-                f"({len(pairs)} pairs x {r} angles = {len(pairs) * r}); raise the budget or "
+                f"({counted(len(pairs), 'pair')} x {r} angles = {len(pairs) * r}); raise the "
+                f"budget or "
                 "lower initial_rotations"
             )
     return pairs

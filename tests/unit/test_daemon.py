@@ -165,6 +165,10 @@ def _row(**kw: object) -> SimpleNamespace:
 @pytest.mark.parametrize(("type_", "data", "row", "level", "line"), [
     ("state", {"from": "queued", "state": "running"}, _row(total_angles=0), logging.INFO,
      "job 7 (uniform, 'red tile') started: 8 stage angles"),
+    # One angle is "1 stage angle", not "1 stage angles".
+    ("state", {"from": "queued", "state": "running"},
+     _row(total_angles=0, plan={"rotations": 1}), logging.INFO,
+     "job 7 (uniform, 'red tile') started: 1 stage angle"),
     ("state", {"from": "paused", "state": "running"}, _row(), logging.INFO,
      "job 7 (uniform, 'red tile') resumed from paused (3 of 8 angles)"),
     ("state", {"state": "suspended", "reason": "stage: overload"}, _row(), logging.WARNING,
@@ -207,6 +211,13 @@ def test_a_finished_calibration_says_it_applies() -> None:
     assert level == logging.INFO
     assert line == ("job 7 (calibration, 'red tile') completed: calibration applied (job 7, 3 "
                     "pairs): later scans are in 1/sr")
+
+
+def test_a_calibration_of_one_pair_says_one_pair() -> None:
+    service = SimpleNamespace(calibration=lambda: SimpleNamespace(source="job 7", pairs=[1]))
+    _, line = job_event_line("state", {"state": "completed"}, _row(kind="calibration"),
+                             service)
+    assert line is not None and "(job 7, 1 pair): later scans" in line, line
 
 
 def test_the_http_settings_follow_the_config(tmp_path: Path) -> None:

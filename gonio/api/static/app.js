@@ -134,6 +134,11 @@ const ACTIONS = {
 
 const SHOW_REASON = new Set(["suspended", "failed", "aborted", "halted"]);
 
+// A count before its noun: "1 stage angle", "8 stage angles" (gonio.wording.counted).
+function counted(n, noun, plural = `${noun}s`) {
+  return `${n} ${n === 1 ? noun : plural}`;
+}
+
 function eta(s) {
   if (typeof s !== "number" || !Number.isFinite(s)) return "";
   if (s < 90) return `${Math.round(s)} s`;
@@ -196,7 +201,7 @@ function progressOf(job) {
   const done = job.done_angles ?? 0, total = job.total_angles ?? 0;
   if (job.max_angles == null) return { value: done, max: Math.max(total, 1), text: `${done}/${total}` };
   const max = Math.max(job.max_angles, total, 1);
-  if (job.state === "completed") return { value: 1, max: 1, text: `${done} angles (adaptive)` };
+  if (job.state === "completed") return { value: 1, max: 1, text: `${counted(done, "angle")} (adaptive)` };
   const d = selectedDetail;
   const round = d && d.id === job.id && d.round != null ? ` · round ${d.round + 1}` : "";
   return { value: done, max, text: `${done} of ≤${max} angles${round}` };
@@ -383,7 +388,7 @@ async function refreshReadings() {
   if (id !== selected) return;
   plotRotation($("#readings-plot"), data.pairs, data.yTitle);
   $("#readings-caption").textContent = data.caption;
-  $("#live-job").textContent = `job ${id} · ${data.count} readings`;
+  $("#live-job").textContent = `job ${id} · ${counted(data.count, "reading")}`;
   $("#live-rule").textContent = ruleText(id);
 }
 
@@ -717,7 +722,23 @@ function initForm() {
       const otherRule = [...l.classList].some((c) => c.startsWith("rule-") && c !== `rule-${ruleSel.value}`);
       l.hidden = !l.classList.contains(kindSel.value) || otherRule;
     }
+    markEmpty();
   };
+  // A number field left empty would be sent as 0 and refused by the daemon in its own terms
+  // ("rotations is 0"): each field the plan needs says at the field what to enter instead
+  // (index.html's data-empty), for Check plan and Start scan alike. A field of another kind
+  // or rule is hidden, not sent, and not checked.
+  const markEmpty = () => {
+    for (const input of form.querySelectorAll("input[data-empty]")) {
+      const shown = !input.closest("label").hidden;
+      input.setCustomValidity(shown && input.value === "" && !input.validity.badInput ? input.dataset.empty : "");
+    }
+  };
+  form.addEventListener("input", markEmpty);
+  form.addEventListener("change", markEmpty);
+  // A click on Start scan comes before the browser checks the form (Enter in a field clicks
+  // it too), so a field emptied without an input event (a script's) is caught as well.
+  $("#start-scan").addEventListener("click", markEmpty);
   kindSel.addEventListener("change", showKind);
   // Each rule's default first round (posterior 4, vf 8) and cap (posterior 16, vf none),
   // unless the user typed another.
@@ -738,6 +759,7 @@ function initForm() {
   showKind();
   $("#dry-run").addEventListener("click", () => guarded(async () => {
     // The form's own limits first, at the field, as Start scan's submit checks them.
+    markEmpty();
     if (!form.reportValidity()) { setNote("", null); return; }
     const r = await send("POST", "/jobs/dry-run", { plan: readPlan() });
     // The specimen's angle, as the stage chip gives it; the stage's own position beside it
@@ -751,11 +773,11 @@ function initForm() {
     const verdict = refused ? "Start would be refused: read the warning below"
       : (r.warnings || []).length ? "Runs, but read the warnings below" : "OK";
     // estimated_s = motion_s + settle_s + exposure_s (docs/api.md): all three are said.
-    let text = `${verdict}: ${r.readings} readings at ${r.angles_deg.length} stage angles, about ${planTime(r.estimated_s)} ${from}` +
+    let text = `${verdict}: ${counted(r.readings, "reading")} at ${counted(r.angles_deg.length, "stage angle")}, about ${planTime(r.estimated_s)} ${from}` +
       `: moves ${planTime(r.motion_s)}, settling ${planTime(r.settle_s)}, exposures ${planTime(r.exposure_s)}.`;
-    if (r.max_estimated_s != null && r.kind === "adaptive") text += ` Adaptive refinement can add up to ${r.max_angles - r.angles_deg.length} angles: at most ${eta(r.max_estimated_s)} in all.`;
+    if (r.max_estimated_s != null && r.kind === "adaptive") text += ` Adaptive refinement can add up to ${counted(r.max_angles - r.angles_deg.length, "angle")}: at most ${eta(r.max_estimated_s)} in all.`;
     for (const b of r.arc_branches || []) {
-      text += ` If the first round finds the specimen ${b.arc_deg === 180 ? "twofold symmetric, it goes on over half a turn" : "not twofold symmetric, it goes on over a full turn"}: at most ${b.angles} angles (${b.readings} readings), ${eta(b.estimated_s)} in all${b.basis === "asymmetric" ? ", reconstructed with the basis for specimens without twofold symmetry" : ""}.`;
+      text += ` If the first round finds the specimen ${b.arc_deg === 180 ? "twofold symmetric, it goes on over half a turn" : "not twofold symmetric, it goes on over a full turn"}: at most ${counted(b.angles, "angle")} (${counted(b.readings, "reading")}), ${eta(b.estimated_s)} in all${b.basis === "asymmetric" ? ", reconstructed with the basis for specimens without twofold symmetry" : ""}.`;
       if (b.basis_build_s != null) text += ` Then about ${eta(b.basis_build_s)} more: that basis is not built on this install yet, so the job builds it before reconstructing (once).`;
     }
     if (r.basis_build_s != null) text += ` First, about ${eta(r.basis_build_s)} more: the reconstruction basis is not built on this install yet and the adaptive rule needs it, so the job builds it before its first reading (once).`;

@@ -7,11 +7,13 @@
 // "against standard" compares with a stored standard instead (GET /api/v1/colour-standards;
 // the data directory's standards/ CSVs), and "Save" stores the table shown as one (PUT
 // /api/v1/colour-standards/{name}): a lab measures its master once and compares each batch
-// with it by name. "Download CSV" saves the table shown (format=csv), as gonio colour --csv.
+// with it by name; "Delete standard" removes the one chosen (DELETE
+// /api/v1/colour-standards/{name}), after asking. "Download CSV" saves the table shown
+// (format=csv), as gonio colour --csv.
 // The instrument menu starts on the rig's design instrument (GET /api/v1/rig/config, its
 // [design] colour_instrument, written by `gonio design --colour`) when the rig has one, until
 // the user picks another.
-import { getBlob, getJSON, sendText } from "./api.js";
+import { getBlob, getJSON, send, sendText } from "./api.js";
 
 const $ = (sel) => document.querySelector(sel);
 let shown = null;
@@ -56,6 +58,22 @@ async function refreshStandards(choose = undefined) {
     sel.replaceChildren(new Option("(none)", ""), ...names.map((n) => new Option(n, n)));
   }
   sel.value = names.includes(want) ? want : "";
+  $("#colour-delete-standard").disabled = !sel.value;
+}
+
+async function deleteStandard() {
+  const name = $("#colour-standard").value, state = $("#colour-standard-state");
+  if (!name) return;
+  if (!window.confirm(`Delete the stored standard ${name}? Its colour CSV is removed from ` +
+    "the daemon's standards folder, for every client: nothing can be compared with it by " +
+    "name afterwards (save a result's colour again to restore it).")) return;
+  try {
+    await send("DELETE", `/colour-standards/${encodeURIComponent(name)}`);
+    state.textContent = `Deleted standard ${name}.`;
+  } catch (e) {
+    state.textContent = `Not deleted: ${e.message}`;
+  }
+  await refreshStandards();
 }
 
 function tableQuery(format = undefined) {
@@ -127,20 +145,26 @@ async function refresh() {
   caption.textContent = "Computing colour…";
   const q = new URLSearchParams({ instrument, azimuth: String(azimuth) });
   let body;
+  // A comparison asked for that cannot be made: which, and why (the answer's no_colour: an
+  // uncalibrated result, and what to do), said in the caption instead of a missing column.
+  let noDiff = null;
+  const compared = standard ? `standard ${standard}` : against ? `job ${against}` : null;
   try {
     body = await getJSON(`/jobs/${id}/colour?${q}`);
     // A difference only between two results with CIELAB (the server refuses the others):
     // the compared job's space is asked first, so no request is made that must fail.
-    if (standard && body.colour.space === "CIELAB") {
+    if (compared && body.colour.space !== "CIELAB") {
+      noDiff = `No ΔE00 against ${compared}: ${body.no_colour ?? "this result has no CIELAB"}`;
+    } else if (standard) {
       // A stored standard chosen: compared with it, not with the job chosen above.
       q.set("against", standard);
       body = await getJSON(`/jobs/${id}/colour?${q}`);
-    } else if (against && body.colour.space === "CIELAB") {
+    } else if (against) {
       const other = await getJSON(`/jobs/${against}/colour?${q}`);
       if (other.colour.space === "CIELAB") {
         q.set("against", against);
         body = await getJSON(`/jobs/${id}/colour?${q}`);
-      }
+      } else noDiff = `No ΔE00 against ${compared}: ${other.no_colour ?? `job ${against} has no CIELAB`}`;
     }
   } catch (e) {
     if (key !== shown) return;
@@ -184,7 +208,8 @@ async function refresh() {
       (flop !== undefined ? `; flop index ${flop.toFixed(2)}` : "") +
       (diff ? `; ΔE00 against ${standard ? `standard ${standard}` : `job ${against}`}: max ${diff.max_dE00.toFixed(2)}` : "") + source
     : `${rep.space}: reflectance factors per channel (${rep.channels.length} channels), no CIELAB. ` +
-      "Give the sensor spectral bands or a chart colour calibration (docs/colour.md).";
+      (noDiff ? "" : `${body.no_colour ?? "Give the sensor spectral bands or a chart colour calibration (docs/colour.md)"}.`);
+  if (noDiff) caption.textContent += `${lab ? ". " : ""}${noDiff}.`;
   // What must travel with the numbers (a calibration from another exposure): said first.
   if (body.warnings?.length) caption.textContent = `Warning: ${body.warnings.join("; ")}. ${caption.textContent}`;
   // Which near-specular geometries no pair read (their rows say "table"), and what that means.
@@ -198,6 +223,10 @@ window.addEventListener("DOMContentLoaded", () => {
   for (const id of ["#colour-instrument", "#colour-azimuth", "#compare", "#colour-standard"]) $(id).addEventListener("change", go);
   $("#colour-save-standard").addEventListener("click", () => { saveStandard().then(go); });
   $("#colour-csv").addEventListener("click", () => { downloadCsv(); });
+  $("#colour-delete-standard").addEventListener("click", () => { deleteStandard().then(go); });
+  $("#colour-standard").addEventListener("change", (e) => {
+    $("#colour-delete-standard").disabled = !e.target.value;
+  });
   $("#colour-standard").addEventListener("focus", () => { refreshStandards(); });
   go();
 });

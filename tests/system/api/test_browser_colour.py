@@ -286,3 +286,55 @@ def test_a_result_saved_as_a_standard_is_compared_with_by_name_on_the_page(
     wait.until(lambda b: b.find_element(By.ID, "colour-standard-state").text
                == f"saved gonio-job-{ids[1]}-colour-MA98.csv")
     assert not _severe(browser)
+
+
+def test_a_stored_standard_is_deleted_from_the_page_after_asking(
+        spectral_daemon: Daemon, spectral_jobs: list[int], browser: Any) -> None:  # noqa: F811
+    """The colour panel lists the stored standards but could not remove one: "Delete
+    standard" removes the one chosen (DELETE /api/v1/colour-standards/NAME) once the user
+    confirms; dismissed, it stays."""
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support import expected_conditions as ec
+    from selenium.webdriver.support.ui import Select
+
+    d, ids = spectral_daemon, spectral_jobs
+    stored = d.data_dir / "standards" / "to remove.csv"
+    with d.client() as c:
+        table = c.get(f"/api/v1/jobs/{ids[0]}/colour", params={"instrument": "MA98",
+                                                              "format": "csv"}).text
+        put = c.put("/api/v1/colour-standards/to remove", content=table,
+                    headers={"Content-Type": "text/csv"})
+        assert put.status_code == 200, put.text
+    wait = open_live(browser, d, 240)
+    wait.until(lambda b: b.find_element(By.ID, "result-job").text.startswith(f"job {ids[1]} ")
+               and "CIELAB" in b.find_element(By.ID, "colour-caption").text)
+    button = browser.find_element(By.ID, "colour-delete-standard")
+    assert not button.is_enabled()  # no standard chosen: nothing to delete
+    # The menu's options are replaced as the list changes: read in one script call.
+    def listed(b: Any) -> list[str]:
+        return list(b.execute_script(
+            "return [...document.querySelectorAll('#colour-standard option')].map(o => o.value)"))
+
+    wait.until(lambda b: "to remove" in listed(b))
+    Select(browser.find_element(By.ID, "colour-standard")).select_by_value("to remove")
+    wait.until(lambda b: "against standard to remove" in
+               b.find_element(By.ID, "colour-caption").text)
+    assert button.is_enabled()
+    click_when_steady(wait, "#colour-delete-standard")
+    alert = wait.until(ec.alert_is_present())
+    assert "Delete the stored standard to remove?" in alert.text, alert.text
+    assert "for every client" in alert.text
+    alert.dismiss()
+    assert stored.is_file()
+    click_when_steady(wait, "#colour-delete-standard")
+    wait.until(ec.alert_is_present()).accept()
+    wait.until(lambda b: b.find_element(By.ID, "colour-standard-state").text
+               == "Deleted standard to remove.")
+    assert not stored.exists()
+    # Gone from the menu; the table is this job's alone again, without a ΔE00 column.
+    wait.until(lambda b: "to remove" not in listed(b))
+    wait.until(lambda b: "against standard" not in b.find_element(By.ID, "colour-caption").text)
+    assert Select(browser.find_element(By.ID, "colour-standard")) \
+        .first_selected_option.get_attribute("value") == ""
+    assert not browser.find_element(By.ID, "colour-delete-standard").is_enabled()
+    assert not _severe(browser)

@@ -62,6 +62,24 @@ def test_check_plan_adds_up_and_names_the_specimen_angle(
     assert moves + settling + exposures == pytest.approx(total, abs=0.16), note
 
 
+def test_check_plan_of_one_angle_says_one_stage_angle(
+        daemon: Daemon, browser: Any,  # noqa: F811 (the fixture)
+) -> None:
+    """A one-angle plan's note read "12 readings at 1 stage angles"."""
+    from selenium.webdriver.common.by import By
+
+    wait = open_live(browser, daemon, 60)
+    form = browser.find_element(By.ID, "scan-form")
+    for name, value in (("rotations", 1), ("exposure_s", EXPOSURE_S), ("averages", 1)):
+        field = form.find_element(By.NAME, name)
+        field.clear()
+        field.send_keys(str(value))
+    click_when_steady(wait, "#dry-run")
+    wait.until(lambda d: "readings at" in d.find_element(By.ID, "dry-run-result").text)
+    note = browser.find_element(By.ID, "dry-run-result").text
+    assert re.search(r"\d+ readings at 1 stage angle, about", note), note
+
+
 @pytest.mark.parametrize(("name", "value"), [("averages", "0"), ("exposure_s", "0"),
                                              ("rotations", "0")])
 def test_check_plan_refuses_what_the_form_itself_refuses_as_start_does(
@@ -88,3 +106,32 @@ def test_check_plan_refuses_what_the_form_itself_refuses_as_start_does(
     assert not any("dry-run" in u for u in browser.execute_script("return window.__sent"))
     message = browser.find_element(By.ID, "message")
     assert not message.is_displayed() or "plan." not in message.text, message.text
+
+
+@pytest.mark.parametrize("button", ["#dry-run", "#start-scan"])
+def test_an_empty_stage_angles_field_says_what_to_enter(
+        daemon: Daemon, browser: Any, button: str,  # noqa: F811 (the fixture)
+) -> None:
+    """An emptied "Stage angles r" was sent as 0 and answered with the daemon's own terms,
+    "rotations is 0; ... (e.g. rotations=8)", a field name the page shows nowhere. The field
+    itself now says what to enter and in what range, for Check plan and Start scan alike, and
+    nothing is sent."""
+    from selenium.webdriver.common.by import By
+
+    wait = open_live(browser, daemon, 60)
+    field = browser.find_element(By.ID, "scan-form").find_element(By.NAME, "rotations")
+    field.clear()
+    # (Its own list: the page may still hold an earlier test's fetch hook.)
+    browser.execute_script("window.__posted = []; const f = window.fetch;"
+                           "window.fetch = (u, i) => { if (i && i.method === 'POST')"
+                           " window.__posted.push(String(u)); return f(u, i); };")
+    click_when_steady(wait, button)
+    wait.until(lambda d: d.switch_to.active_element == field)
+    said = browser.execute_script("return arguments[0].validationMessage", field)
+    assert "how many stage angles" in said and "1 to 3600" in said, said
+    assert browser.execute_script("return window.__posted") == []
+    message = browser.find_element(By.ID, "message")
+    assert not message.is_displayed() or "rotations is" not in message.text, message.text
+    # Once a number is typed the field is valid again.
+    field.send_keys("8")
+    assert browser.execute_script("return arguments[0].validity.valid", field) is True

@@ -563,3 +563,47 @@ def test_aborting_a_job_asks_first_and_says_what_it_ends(
         with daemon.client() as c:
             if c.get(f"/api/v1/jobs/{job}").json()["state"] != "aborted":
                 c.post(f"/api/v1/jobs/{job}/abort")
+
+
+def test_an_uncalibrated_result_against_a_standard_says_why_there_is_no_delta_e(
+    daemon: Daemon, browser: Any, finished_job: int,  # noqa: F811
+) -> None:
+    """A stored standard chosen for an uncalibrated result (values in sensor units) showed
+    the channel values and no ΔE00 column, saying nothing about the comparison asked for.
+    The caption now says there is none, why, and what to do (the API's ``no_colour``)."""
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support.ui import Select
+
+    from gonio.brdf.colour.chart import ColourMatrix
+    from gonio.brdf.colour.report import colour_report
+    from tests.unit.cli.test_colour_command import _lambert, _matrix
+
+    job = finished_job
+    # A lab's master, measured elsewhere with colour: a CIELAB colour CSV.
+    master = colour_report(_lambert(), ColourMatrix.from_dict(_matrix()), None, ["MA98"])
+    stored = daemon.data_dir / "standards" / "lab master.csv"
+    try:
+        with daemon.client() as c:
+            put = c.put("/api/v1/colour-standards/lab master", content=master.csv(),
+                        headers={"Content-Type": "text/csv"})
+            assert put.status_code in (200, 201), put.text
+            why = c.get(f"/api/v1/jobs/{job}/colour").json()["no_colour"]
+        wait = open_live(browser, daemon, 120)
+        click_when_steady(wait, f'#jobs tr[data-id="{job}"]')
+        wait.until(lambda d: _text(d, "result-job").startswith(f"job {job} ")
+                   and "uncalibrated sensor RGB" in _text(d, "colour-caption"))
+        wait.until(lambda d: "lab master" in [o.get_attribute("value") for o in
+                                              d.find_elements(By.CSS_SELECTOR,
+                                                              "#colour-standard option")])
+        Select(browser.find_element(By.ID, "colour-standard")).select_by_value("lab master")
+        wait.until(lambda d: "No ΔE00 against standard lab master" in
+                   _text(d, "colour-caption"))
+        caption = _text(browser, "colour-caption")
+        assert f"No ΔE00 against standard lab master: {why}." in caption, caption
+        assert "calibrate the rig on the white reference" in caption, caption
+        head = [th.text for th in browser.find_elements(By.CSS_SELECTOR,
+                                                        "#colour-table thead th")]
+        assert "ΔE00" not in head
+        Select(browser.find_element(By.ID, "colour-standard")).select_by_value("")
+    finally:
+        stored.unlink(missing_ok=True)

@@ -148,6 +148,14 @@ def test_colour_route(daemon: Daemon, no_export_fits: None) -> None:
         assert bad.status_code == 422 and "unknown illuminant" in bad.json()["detail"]
         bad = c.get(f"/api/v1/jobs/{job_id}/colour", params={"instrument": ["MA99"]})
         assert bad.status_code == 422 and "known instruments" in bad.json()["detail"]
+        # Why there is no CIELAB, hence no ΔE00, and what to do: said, not left to a missing
+        # difference. The rig's sensors would not matter: its values are not in 1/sr.
+        why = got.json()["no_colour"]
+        assert why.startswith(f"job {job_id} is uncalibrated: its values are sensor units, "
+                              "not 1/sr"), why
+        assert "calibrate the rig on the white reference" in why and "scan the specimen " \
+            "again" in why, why
         vs = c.get(f"/api/v1/jobs/{job_id}/colour", params={"against": job_id})
-        assert vs.status_code == 422 and "uncalibrated sensor RGB" in vs.json()["detail"]
+        assert vs.status_code == 422
+        assert vs.json()["detail"] == f"no ΔE00 against job {job_id}: {why}"
         assert c.get("/api/v1/jobs/999999/colour").status_code == 404

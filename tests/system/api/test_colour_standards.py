@@ -118,3 +118,36 @@ def test_a_standard_is_stored_listed_and_refused_through_the_api_losing_nothing(
         anon = d.client(None).put("/api/v1/colour-standards/x", content=table,
                                         headers={"Content-Type": "text/csv"})
         assert anon.status_code == 401, anon.text
+
+
+def test_a_stored_standard_is_deleted_by_name_and_an_unknown_name_is_a_404_naming_the_others(
+    spectral_lab: _SpectralLab, spectral_jobs: list[int],  # noqa: F811
+) -> None:
+    """``DELETE /api/v1/colour-standards/{name}``: a lab removes a standard it no longer
+    uses (a mistyped name, an old master) without reaching into the data directory."""
+    d = spectral_lab.serve(None)
+    first, _ = spectral_jobs
+    stored = d.data_dir / "standards" / "old master.csv"
+    with d.client() as c:
+        table = c.get(f"/api/v1/jobs/{first}/colour", params={"format": "csv"}).text
+        put = c.put("/api/v1/colour-standards/old master", content=table,
+                    headers={"Content-Type": "text/csv"})
+        assert put.status_code == 200 and stored.is_file(), put.text
+        # Removing needs the write key; refused, nothing is removed.
+        anon = d.client(None).delete("/api/v1/colour-standards/old master")
+        assert anon.status_code == 401 and stored.is_file(), anon.text
+        gone = c.delete("/api/v1/colour-standards/old master.csv")
+        assert gone.status_code == 204, gone.text
+        assert not stored.exists()
+        assert "old master" not in c.get("/api/v1/colour-standards").json()["standards"]
+        against = c.get(f"/api/v1/jobs/{first}/colour", params={"against": "old master"})
+        assert against.status_code == 404, against.text
+        # Twice, or a name never stored: 404 saying so, what is stored, and what to do.
+        held = c.get("/api/v1/colour-standards").json()["standards"]
+        for name in ("old master", "..gonio"):
+            again = c.delete(f"/api/v1/colour-standards/{name}")
+            assert again.status_code == 404, (name, again.text)
+            said = again.json()["detail"]
+            assert f"no stored colour standard {name!r}" in said, said
+            assert (f"it holds {', '.join(held)}" if held else "it holds none") in said, said
+            assert "nothing was removed" in said and "GET /api/v1/colour-standards" in said

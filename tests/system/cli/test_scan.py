@@ -182,6 +182,14 @@ def test_dry_run_prints_a_short_summary_and_json_on_request(
     assert "--json goes with --dry-run" in capsys.readouterr().err
 
 
+def test_a_dry_run_of_one_angle_says_one_angle(capsys: pytest.CaptureFixture[str]) -> None:
+    """A count of one reads "1 angle", not "1 angles"."""
+    assert main(["scan", "--rig", "deploy/rig.example.toml", "--dry-run", "--rotations", "1",
+                 "-o", "/dev/null"]) == 0
+    text = capsys.readouterr().out
+    assert "readings: 4 (4 pairs x 1 angle), exposure" in text, text
+
+
 def test_an_adaptive_dry_run_states_its_cap_and_refuses_a_cap_below_the_start(
     capsys: pytest.CaptureFixture[str]
 ) -> None:

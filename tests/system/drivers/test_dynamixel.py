@@ -222,13 +222,35 @@ def test_silent_device_gives_a_clear_device_unavailable() -> None:
 
 
 def test_missing_port_and_bad_speed_are_user_errors(tmp_path: Any) -> None:
-    stage = DynamixelStage("rot", str(tmp_path / "ttyUSB9"), counts_per_degree=CPD,
+    port = str(tmp_path / "ttyUSB9")
+    stage = DynamixelStage("rot", port, counts_per_degree=CPD,
                            limits=TravelLimits(0, 90), speed_dps=10, accel_dps2=10)
-    with pytest.raises(DeviceUnavailable, match="cannot open serial port"):
+    with pytest.raises(DeviceUnavailable, match=r"serial port .* does not exist") as err:
         run(stage.connect)
+    # pyserial's "[Errno 2] could not open port P: [Errno 2] No such file ...: 'P'" is said in
+    # words, the port named once.
+    assert "Errno" not in str(err.value) and str(err.value).count(port) == 1, err.value
+    assert "check the USB adapter and the port name" in str(err.value)
     with pytest.raises(ValueError, match="above the servo maximum 32767; lower speed_dps"):
         DynamixelStage("rot", "x", counts_per_degree=CPD, limits=TravelLimits(0, 90),
                        speed_dps=50_000, accel_dps2=10)
+
+
+def test_a_port_that_disappears_mid_run_is_said_once_in_words() -> None:
+    """The adapter unplugged after connecting: the fault says the port is gone and what to
+    check, once; it said "no valid reply ... (rot: cannot open serial port 'P': [Errno 2]
+    could not open port P: [Errno 2] No such file or directory: 'P'; check ...); check power,
+    cable, ID and baud rate"."""
+    with rig(retries=2) as (sim, stage):
+        run(stage.connect)
+        port = sim.port
+        sim.close()
+        with pytest.raises(DeviceUnavailable) as err:
+            run(stage.status)
+    said = str(err.value)
+    assert said.startswith(f"rot: serial port {port!r} does not exist"), said
+    assert "Errno" not in said and said.count(port) == 1, said
+    assert err.value.code == "port"
 
 
 def test_arrival_is_seen_soon_after_the_move_ends_despite_a_slow_poll() -> None:

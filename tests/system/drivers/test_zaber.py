@@ -194,6 +194,29 @@ def test_config_errors_name_the_setting() -> None:
         run(stage.connect)
 
 
+def test_a_port_that_disappears_mid_run_is_said_once_in_words(tmp_path: Any) -> None:
+    """The serial port gone after connecting: the driver let termios' "(5, 'Input/output
+    error')" escape, and a port missing at (re)open was "cannot open 'P': [Errno 2] could not
+    open port P: [Errno 2] No such file or directory: 'P'". Now both say once, in words,
+    which port is gone and what to check."""
+    with rig("pty", retries=2) as (sim, stage):
+        run(stage.connect)
+        port = sim.url
+        sim.close()
+        with pytest.raises(DeviceUnavailable) as err:
+            run(stage.status)
+    said = str(err.value)
+    assert said.startswith(f"rot: serial port {port!r} does not exist"), said
+    assert "Errno" not in said and said.count(port) == 1, said
+    assert "check the cable or network and the url in the rig config" in said
+    missing = str(tmp_path / "ttyUSB9")
+    stage = ZaberStage("rot", missing, microsteps_per_degree=MPD, limits=TravelLimits(0, 1),
+                       speed_dps=1, accel_dps2=1)
+    with pytest.raises(DeviceUnavailable, match="does not exist") as err:
+        run(stage.connect)
+    assert "Errno" not in str(err.value) and str(err.value).count(missing) == 1, err.value
+
+
 def test_arrival_is_seen_soon_after_the_move_ends_despite_a_slow_poll() -> None:
     """In real time: the coarse poll (100 ms here) would find the end 50 ms late on average;
     predicting the end from the profile and polling finely from there finds it within a few

@@ -67,6 +67,15 @@ def files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
         "cal": _write(d / "cal.h5", _lambert(), {"calibration": _matrix()}),
         "cal2": _write(d / "cal2.h5", _lambert(0.9), {"calibration": _matrix()}, "batch 2"),
         "raw": _write(d / "raw.h5", _lambert(), None),
+        # Scanned with no white reference in effect: sensor units (its calibration lists no
+        # pair), whatever the sensor's colour source.
+        "units": write_result(d / "units.h5", job_id=9, specimen="panel", kind="uniform",
+                              readings=[], samples=CalibratedScan(
+                                  pairs=[("L1", "S1")], light_dirs=np.array([[0.0, 0.0, 1.0]]),
+                                  sensor_dirs=np.array([[0.0, 0.0, 1.0]]),
+                                  stage_angles_deg=np.array([0.0]), values=np.ones((1, 1, 3)),
+                                  channels=("R", "G", "B"), calibration={"pairs": []}),
+                              table=_lambert(), colour={"source": {"calibration": _matrix()}}),
     }
 
 
@@ -118,13 +127,34 @@ def test_uncalibrated_result_says_so(files: dict[str, Path],
     assert rep["conditions"] is None and "illuminant" not in rep["provenance"]
     assert main(["colour", str(files["raw"])]) == 0
     text = capsys.readouterr().out
-    assert "no CIELAB without spectral bands" in text
+    assert "raw.h5's sensors have neither spectral bands nor a chart colour calibration" in text
     assert text.splitlines()[0] == "panel: uncalibrated sensor RGB"
     assert main(["colour", str(files["raw"]), "--csv", "-"]) == 0
     rows = list(csv.DictReader(io.StringIO(capsys.readouterr().out)))
     assert {(r["illuminant"], r["observer"]) for r in rows} == {("", "")}
     assert main(["colour", str(files["raw"]), "--against", str(files["cal"])]) == 2
-    assert "uncalibrated sensor RGB" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert f"no dE00 against {files['cal']}: raw.h5's sensors have neither" in err, err
+
+
+def test_a_result_in_sensor_units_says_why_it_has_no_colour_difference(
+        files: dict[str, Path], capsys: pytest.CaptureFixture[str]) -> None:
+    """Its sensors have a chart calibration, but its values are not in 1/sr: the advice is
+    the white reference, not a colour calibration it already has. It said "give its sensor
+    spectral bands or a chart colour calibration first"."""
+    for args in ([str(files["units"]), "--against", str(files["cal"])],
+                 [str(files["cal"]), "--against", str(files["units"])]):
+        assert main(["colour", *args]) == 2
+        err = capsys.readouterr().err
+        assert "no dE00 against" in err and "units.h5 is uncalibrated: its values are sensor " \
+            "units, not 1/sr" in err, err
+        assert "calibrate the rig on the white reference" in err, err
+    assert main(["colour", str(files["units"]), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["colour"]["space"] == "uncalibrated sensor RGB"
+    assert out["no_colour"].startswith("units.h5 is uncalibrated"), out
+    assert main(["colour", str(files["units"])]) == 0
+    assert "units.h5 is uncalibrated" in capsys.readouterr().out
 
 
 def test_against_a_result_and_a_stored_csv(files: dict[str, Path], tmp_path: Path,
@@ -143,6 +173,48 @@ def test_against_a_result_and_a_stored_csv(files: dict[str, Path], tmp_path: Pat
     assert main(["colour", str(files["cal"]), "--against", str(std), "--csv", "-"]) == 0
     rows = list(csv.DictReader(io.StringIO(capsys.readouterr().out)))
     assert max(float(r["dE00"]) for r in rows) < 1e-3
+
+
+def test_against_takes_a_stored_standard_by_name_as_the_page_does(
+        files: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``--against NAME``: a stored standard of the data directory (its standards/ folder, as
+    the lab page and the API name them), from --data-dir or the result's own data directory;
+    it took files only. A name that is neither a file nor a stored standard is refused,
+    listing the stored ones."""
+    import shutil
+
+    data = tmp_path / "data"
+    (data / "standards").mkdir(parents=True)
+    assert main(["colour", str(files["cal"]), "--csv", str(data / "standards" /
+                                                           "blue master.csv")]) == 0
+    capsys.readouterr()
+    assert main(["colour", str(files["cal2"]), "--against", str(files["cal"]), "--json"]) == 0
+    by_file = json.loads(capsys.readouterr().out)["difference"]["max_dE00"]
+    assert main(["colour", str(files["cal2"]), "--against", "blue master", "--data-dir",
+                 str(data), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["difference"]["standard"] == "blue master"
+    assert out["difference"]["max_dE00"] == pytest.approx(by_file, abs=0.01)
+    # A result in a data directory's results/ folder looks in that directory by itself.
+    (data / "results").mkdir()
+    shutil.copy(files["cal2"], data / "results" / "job-7.h5")
+    assert main(["colour", str(data / "results" / "job-7.h5"), "--against", "blue master.csv",
+                 "--csv", "-"]) == 0
+    rows = list(csv.DictReader(io.StringIO(capsys.readouterr().out)))
+    assert rows and {r["standard"] for r in rows} == {"blue master"}
+    # Neither a file nor a stored name: the stored ones are listed.
+    assert main(["colour", str(files["cal2"]), "--against", "green master", "--data-dir",
+                 str(data)]) == 2
+    err = capsys.readouterr().err
+    assert "--against green master: no such file, and no stored standard of that name in " \
+        f"{data / 'standards'} (it holds blue master)" in err, err
+    # No data directory to look in: said, with what to give.
+    assert main(["colour", str(files["cal2"]), "--against", "blue master"]) == 2
+    err = capsys.readouterr().err
+    assert "no data directory to look for a stored standard" in err and "--data-dir" in err, err
+    assert main(["colour", str(files["cal2"]), "--against", "blue master", "--data-dir",
+                 str(tmp_path / "none")]) == 2
+    assert "is not a folder" in capsys.readouterr().err
 
 
 def test_bad_input(files: dict[str, Path], tmp_path: Path,

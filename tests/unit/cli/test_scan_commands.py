@@ -100,6 +100,56 @@ def test_cli_user_errors(tmp_path: Path) -> None:
         args.func(args)
 
 
+def test_jobs_show_reads_each_job_once_and_probes_the_store_lock_once(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str],
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """``gonio jobs show`` of a queued job read its row, then the whole job list (every job's
+    plan and rig decoded, its own again) to say why it waits; of a running job no process
+    runs, it took the store's lock twice (once to find a daemon, once for the note). Each is
+    read once now; what it prints is the same."""
+    import gonio.locks
+
+    db = tmp_path / "gonio.sqlite"
+    store = JobStore(db)
+    ids = [store.create_job(kind="uniform", specimen=name, plan={}, rig={}).id
+           for name in ("done", "measuring", "held", "waiting")]
+    for state in ("running", "reconstructing", "completed"):
+        store.set_state(ids[0], state)
+    store.set_state(ids[1], "running")
+    store.set_state(ids[2], "running")
+    store.set_state(ids[2], "paused")  # the queue waits for it
+    read: list[int] = []
+    for name in ("get_job", "list_jobs", "queue"):
+        def spy(self: JobStore, *a: object, _orig: object = getattr(JobStore, name),
+                **k: object) -> object:
+            got = _orig(self, *a, **k)  # type: ignore[operator]
+            read.extend(r.id for r in (got if isinstance(got, list) else [got]))
+            return got
+        monkeypatch.setattr(JobStore, name, spy)
+    probes: list[object] = []
+    claim = gonio.locks.claim_store
+    monkeypatch.setattr(gonio.locks, "claim_store",
+                        lambda *a, **k: probes.append(a) or claim(*a, **k))
+
+    args = _args(["jobs", "show", str(ids[3]), "--db", str(db)])
+    assert args.func(args) == 0
+    out = capsys.readouterr().out
+    assert sorted(read) == sorted(set(read)), read  # no job read twice
+    assert ids[0] not in read  # a completed job says nothing of why a queued one waits
+    assert f"job {ids[3]}: uniform 'waiting', queued" in out
+    assert f"waiting: waits for job {ids[2]} (paused): resume or abort it" in out, out
+    assert "queue position: 0 (0 = next)" in out
+
+    read.clear()
+    args = _args(["jobs", "show", str(ids[1]), "--db", str(db)])
+    assert args.func(args) == 0
+    out = capsys.readouterr().out
+    assert len(probes) == 2, probes  # one probe per show
+    assert f"job {ids[1]}: uniform 'measuring', running" in out
+    assert out.count("note: no daemon or gonio scan runs jobs from this store now") == 1, out
+    assert f"with job(s) {ids[1]} above: they were interrupted" in out
+
+
 def test_cli_jobs_list(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     JobStore(tmp_path / "j.sqlite").create_job(kind="uniform", specimen="felt", plan={}, rig={})
     args = _args(["jobs", "list", "--db", str(tmp_path / "j.sqlite")])

@@ -66,6 +66,23 @@ def test_a_silent_device_is_waited_for_then_given_up() -> None:
     assert "4 retries and 61 s (wait_for_device_s 60)" in late.failure
 
 
+def test_a_vanished_port_is_waited_for_saying_to_plug_it_back() -> None:
+    """A serial port that disappeared (code "port") is not "a device that does not answer":
+    the waiting note says to plug its adapter back in, and the message (the driver's) says
+    which port, once."""
+    clock = Clock()
+    rules = Suspender(FaultPolicy(max_retries=0, wait_for_device_s=60.0), clock)
+    gone = hal.DeviceUnavailable(
+        "stage", "serial port '/dev/ttyUSB0' does not exist (nothing is plugged in under that "
+        "name); check the USB adapter and the port name in the rig config", code="port")
+    then = rules.after_failed_recovery(gone, gone, 1, rules.trouble(gone), announced=False)
+    assert then.failure is None and then.event is not None
+    note = then.event["note"]
+    assert note.startswith("stage has no port to talk through; waiting up to 60 s"), note
+    assert "plug its USB adapter or cable back in" in note and "does not answer" not in note
+    assert then.event["message"].count("/dev/ttyUSB0") == 1
+
+
 def test_a_fault_that_answers_is_not_waited_for() -> None:
     rules = Suspender(FaultPolicy(max_retries=0, wait_for_device_s=600.0), Clock())
     fault = hal.StageFault("stage", "position error", code="pos")
