@@ -310,10 +310,15 @@ def test_an_older_store_is_migrated_when_opened(tmp_path: Path) -> None:
     db = tmp_path / "jobs.sqlite"
     store = JobStore(db)
     job = _job(store)
-    store.set_result(job, f"/old/data/results/job-{job}.h5",
-                     {"result_path": f"/old/data/results/job-{job}.h5",
-                      "calibration_path": "/old/data/calibration.json", "readings": 3})
     store.close()
+    # As an older gonio left it: absolute paths, and no mark that the paths were looked at.
+    with sqlite3.connect(db) as con:
+        con.execute("UPDATE jobs SET result_path = ?, summary = ? WHERE id = ?",
+                    (f"/old/data/results/job-{job}.h5",
+                     json.dumps({"result_path": f"/old/data/results/job-{job}.h5",
+                                 "calibration_path": "/old/data/calibration.json",
+                                 "readings": 3}), job))
+        con.execute("DELETE FROM meta WHERE key = 'result_paths'")
     store = JobStore(db)
     row = store.get_job(job)
     assert row.result_path == f"results/job-{job}.h5"
@@ -323,3 +328,35 @@ def test_an_older_store_is_migrated_when_opened(tmp_path: Path) -> None:
     with sqlite3.connect(db) as con:  # stored so, not only read so
         assert con.execute("SELECT result_path FROM jobs").fetchone()[0] == row.result_path
         assert json.loads(con.execute("SELECT summary FROM jobs").fetchone()[0]) == row.summary
+
+
+def test_result_paths_are_stored_relative_and_a_marked_store_is_not_looked_through_again(
+        tmp_path: Path) -> None:
+    """set_result stores the data directory's relative paths, so once a store is marked
+    (every later open) the pass over every finished job is skipped: a path written behind
+    gonio's back after the mark stays as it was written, where an unmarked store rewrites it."""
+    db = tmp_path / "jobs.sqlite"
+    store = JobStore(db)
+    job = _job(store)
+    store.set_result(job, f"/somewhere/data/results/job-{job}.h5",
+                     {"result_path": f"/somewhere/data/results/job-{job}.h5",
+                      "calibration_path": "/somewhere/data/calibration.json"})
+    row = store.get_job(job)
+    assert row.result_path == f"results/job-{job}.h5"
+    assert row.summary == {"result_path": f"results/job-{job}.h5",
+                           "calibration_path": "calibration.json"}
+    store.close()
+    raw = f"/behind/its/back/results/job-{job}.h5"
+    with sqlite3.connect(db) as con:
+        assert con.execute("SELECT value FROM meta WHERE key = 'result_paths'").fetchone() \
+            == ("relative",)
+        con.execute("UPDATE jobs SET result_path = ? WHERE id = ?", (raw, job))
+    store = JobStore(db)
+    assert store.get_job(job).result_path == raw  # not looked through: the store was marked
+    store.close()
+    with sqlite3.connect(db) as con:
+        con.execute("DELETE FROM meta WHERE key = 'result_paths'")
+    store = JobStore(db)
+    assert store.get_job(job).result_path == f"results/job-{job}.h5"  # unmarked: rewritten
+    assert store.get_job(job).summary["result_path"] == f"results/job-{job}.h5"
+    store.close()
