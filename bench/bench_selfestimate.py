@@ -65,6 +65,12 @@ than 2x low with their excess and flagged / not flagged x low / within x2 / high
 * **fresh-wide** (60 scans), printed last: adopted only if the candidate leaves no more of them
   more than 2x low (within x2 reported, not a condition).
 
+Result (one run): ``"variance"``, ``s`` = 0.025, passed every step and is shipped as
+``selfcheck.FINAL_HIGHLIGHT_SCALE`` (docs/science.md 7.1.1). Since then the rows' shipped
+estimate (``widened``) carries the term; the study compares against the mapping without it
+(:func:`before_highlight`), and the older candidates (the rejected refit, the in-plane term)
+are still built on the mapping without it.
+
 Before this round the choice and test sets were one validation set, whose numbers earlier
 rounds printed while comparing forms; the test and fresh sets then decided whether the refit
 chosen on the choice set replaced the shipped mapping (it did not). docs/science.md 7.1.1 says
