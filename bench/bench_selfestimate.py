@@ -35,7 +35,41 @@ Split (:func:`which_set`), three sets:
 * **fresh-inplane**: sixteen more (:data:`FRESH_INPLANE`), written down with the in-plane candidate
   (:func:`in_plane_study`) before any scan of them: that candidate's blind set;
 * **fresh-confirm**: sixteen more (:data:`FRESH_CONFIRM`), written down with the rule of the
-  candidate's confirmation (:func:`confirm_in_plane`) before any scan of them.
+  candidate's confirmation (:func:`confirm_in_plane`) before any scan of them;
+* **fresh-wide**: twelve more (:data:`FRESH_WIDE`), written down with the rule of the highlight
+  widening (below, :func:`highlight_study`) and committed before any scan of them.
+
+**The highlight widening (2026-11-28; rule written down and committed before any row of the
+statistic was computed, so before any set, the calibration set included, was looked at).**
+Question: are the scans whose estimate is more than 2x too low the scans whose highlight is not
+read (``highlight_excess`` above ``gonio.brdf.highlightread.EXCESS_LIMIT`` = 3.4), and does
+widening the estimate by that witness fix them without costing the scans within x2? Every row
+stores ``highlight_excess`` (:func:`gonio.brdf.highlightread.highlight_read` on the
+reconstruction and its readings, clipped at 0, as ``gonio/finishing.py`` calls it; NaN, no
+positive reading, is taken as 1). :func:`highlight_cross_table` prints per set the scans more
+than 2x low with their excess and flagged / not flagged x low / within x2 / high. The rule:
+
+* **Two forms, one parameter each** (``est`` the shipped final mapping before the peak floor,
+  ``e`` the excess; both under the shipped floor, ``max(., peak_excess_log_rmse)``):
+  ``"widen"``: ``est max(1, e / 3.4)^g``, ``g`` over 0-2 in steps of 0.05 (only flagged scans
+  move); ``"variance"``: ``s ln(max(e, 1))`` added as a variance beside the coverage term
+  (``final_log_rmse(..., in_plane=s ln(max(e, 1)))``, i.e. ``k ln(e)^2`` with ``k = s^2``),
+  ``s`` over 0-0.15 in steps of 0.0025 (every scan with ``e`` > 1 moves, more the larger).
+* **Fit (calibration set only, 145 scans).** Over both grids: the fewest scans more than 2x
+  low, then the most within x2, then the form ``"widen"`` before ``"variance"``, then the
+  smaller parameter. A parameter of 0 (the shipped estimate) ends the study: not adopted.
+* **Choice set (55 scans).** Adopted only if the candidate leaves no more choice scans more
+  than 2x low than the shipped estimate and at most one fewer within x2.
+* **Test and fresh sets** (test, fresh, fresh-inplane, fresh-confirm: 290 scans), printed once
+  after the choice: adopted only if the candidate leaves no more of them more than 2x low.
+* **fresh-wide** (60 scans), printed last: adopted only if the candidate leaves no more of them
+  more than 2x low (within x2 reported, not a condition).
+
+Result (one run): ``"variance"``, ``s`` = 0.025, passed every step and is shipped as
+``selfcheck.FINAL_HIGHLIGHT_SCALE`` (docs/science.md 7.1.1). Since then the rows' shipped
+estimate (``widened``) carries the term; the study compares against the mapping without it
+(:func:`before_highlight`), and the older candidates (the rejected refit, the in-plane term)
+are still built on the mapping without it.
 
 Before this round the choice and test sets were one validation set, whose numbers earlier
 rounds printed while comparing forms; the test and fresh sets then decided whether the refit
@@ -69,11 +103,13 @@ import bench_unseen as bu
 import numpy as np
 
 from gonio.brdf.design.presets import get_preset
+from gonio.brdf.highlightread import EXCESS_LIMIT, highlight_read
 from gonio.brdf.reconstruction.basis import default_basis
 from gonio.brdf.reconstruction.localprior import out_of_plane_share
 from gonio.brdf.reconstruction.reconstruct import reconstruct
 from gonio.brdf.reconstruction.samples import DEFAULT_SPAN_DEG, uniform_stage_angles
 from gonio.brdf.reconstruction.selfcheck import (
+    FINAL_HIGHLIGHT_SCALE,
     UPPER_FACTOR,
     UPPER_FACTOR_FLAGGED,
     UPPER_PERCENTILE,
@@ -128,7 +164,8 @@ PLANS: tuple[tuple[str, str, int], ...] = (
 #: The sets (module docstring): constants are fitted on "cal", forms are chosen on "choice",
 #: "test" is reported once, after every choice, and "fresh" holds specimens no round had
 #: seen before that report (:data:`FRESH`).
-SETS: tuple[str, ...] = ("cal", "choice", "test", "fresh", "fresh-inplane", "fresh-confirm")
+SETS: tuple[str, ...] = ("cal", "choice", "test", "fresh", "fresh-inplane", "fresh-confirm",
+                         "fresh-wide")
 
 #: Fresh mitsuba specimens ``(name, spec, holder angle in degrees, tilt in degrees, tilt
 #: azimuth in degrees)``: added after the test set's one report, scanned once with the mapping
@@ -283,6 +320,48 @@ FRESH_CONFIRM: tuple[tuple[str, dict[str, Any], float, float, float], ...] = (
 )
 
 
+#: A fifth set of fresh mitsuba specimens, written down on 2026-11-28 with the highlight
+#: widening's rule (:func:`highlight_study`) and committed before any scan of them: its blind
+#: set, scanned once and reported last. Conductors no set has held (Ir, Nb, Ni, V, Be, TiC;
+#: glossy to rough, two anisotropic at holder angles), glossy to rough coloured plastics,
+#: clear-coated principled materials (white, black, a metallic green turned in the holder) and
+#: a tilted normal-mapped niobium.
+FRESH_WIDE: tuple[tuple[str, dict[str, Any], float, float, float], ...] = (
+    ("f6-ir-r05", {"type": "roughconductor", "material": "Ir", "alpha": 0.05},
+     0.0, 0.0, 0.0),
+    ("f6-nb-u06-v20", {"type": "roughconductor", "material": "Nb", "distribution": "ggx",
+                       "alpha_u": 0.06, "alpha_v": 0.20}, 134.0, 0.0, 0.0),
+    ("f6-ni-r15", {"type": "roughconductor", "material": "Ni_palik",
+                   "distribution": "beckmann", "alpha": 0.15}, 0.0, 0.0, 0.0),
+    ("f6-v-u30-v08", {"type": "roughconductor", "material": "V_palik", "distribution": "ggx",
+                      "alpha_u": 0.30, "alpha_v": 0.08}, 221.0, 0.0, 0.0),
+    ("f6-be-r25", {"type": "roughconductor", "material": "Be", "alpha": 0.25},
+     0.0, 0.0, 0.0),
+    ("f6-tic-r09", {"type": "roughconductor", "material": "TiC", "distribution": "ggx",
+                    "alpha": 0.09}, 0.0, 0.0, 0.0),
+    ("f6-magenta-plastic-r04", {"type": "roughplastic", "alpha": 0.04,
+                                "diffuse_reflectance": {"type": "rgb",
+                                                        "value": [0.6, 0.05, 0.4]}},
+     0.0, 0.0, 0.0),
+    ("f6-teal-plastic-r12", {"type": "roughplastic", "distribution": "beckmann",
+                             "alpha": 0.12, "diffuse_reflectance": {
+                                 "type": "rgb", "value": [0.05, 0.4, 0.4]}}, 0.0, 0.0, 0.0),
+    ("f6-clearcoat-white", {"type": "principled", "roughness": 0.6, "clearcoat": 1.0,
+                            "clearcoat_gloss": 1.0, "base_color": {
+                                "type": "rgb", "value": [0.8, 0.8, 0.8]}}, 0.0, 0.0, 0.0),
+    ("f6-clearcoat-black", {"type": "principled", "roughness": 0.3, "clearcoat": 1.0,
+                            "clearcoat_gloss": 0.8, "base_color": {
+                                "type": "rgb", "value": [0.02, 0.02, 0.02]}}, 0.0, 0.0, 0.0),
+    ("f6-clearcoat-green-metallic", {"type": "principled", "metallic": 0.6, "roughness": 0.35,
+                                     "anisotropic": 0.4, "clearcoat": 1.0,
+                                     "clearcoat_gloss": 0.9, "base_color": {
+                                         "type": "rgb", "value": [0.1, 0.5, 0.2]}},
+     72.0, 0.0, 0.0),
+    ("f6-tilt-nb-t10", {"type": "roughconductor", "material": "Nb", "alpha": 0.10},
+     300.0, 10.0, 120.0),
+)
+
+
 def fresh_materials(specimens: tuple[tuple[str, dict[str, Any], float, float, float], ...]
                     = FRESH, kind: str = "fresh") -> list[tuple[bu.Material, str]]:
     """``(material, kind)`` of ``specimens`` (:data:`FRESH` by default): kind ``kind``, or
@@ -332,6 +411,8 @@ def materials() -> list[tuple[bu.Material, str, str]]:
             for m, kind in fresh_materials(FRESH_INPLANE, "fresh-inplane")]
     out += [(m, kind, "fresh-confirm")
             for m, kind in fresh_materials(FRESH_CONFIRM, "fresh-confirm")]
+    out += [(m, kind, "fresh-wide")
+            for m, kind in fresh_materials(FRESH_WIDE, "fresh-wide")]
     return out
 
 
@@ -401,6 +482,9 @@ def scans(witnesses: bool = False, eta: float | None = None) -> list[dict[str, A
                 "rho": float(rec.settings.get("prior_rho", float("nan"))),
                 "out_of_plane": out_of_plane_share(cells),
                 "peak_excess": rec.peak_excess_log_rmse,
+                # The highlight-not-read statistic as finishing computes it (science.md 7.1.1).
+                "highlight_excess": highlight_read(rec.table, cells, ph, alpha,
+                                                   np.maximum(vals, 0.0)).excess,
                 "reason": rec.misfit_warning,
                 **(rec.misfit.as_dict() if rec.misfit is not None else {}),
             })
@@ -701,6 +785,164 @@ def confirm_in_plane(rows: list[dict[str, Any]]) -> bool | None:
     return adopted
 
 
+def excess_of(row: dict[str, Any]) -> float:
+    """A row's ``highlight_excess``; 1 (nothing beyond the readings) when it is NaN, missing or
+    not positive."""
+    e = float(row.get("highlight_excess", float("nan")))
+    return e if np.isfinite(e) and e > 0 else 1.0
+
+
+def highlight_flagged(row: dict[str, Any]) -> bool:
+    """True when the scan's result would carry ``highlight_not_read`` (excess above
+    :data:`~gonio.brdf.highlightread.EXCESS_LIMIT`)."""
+    return excess_of(row) > EXCESS_LIMIT
+
+
+def _verdict(q: float) -> str:
+    return "low" if q < 0.5 else ("high" if q > 2.0 else "within")
+
+
+def before_highlight(row: dict[str, Any]) -> float:
+    """A row's estimate by the final mapping without the highlight term (the shipped estimate
+    when the study was decided; :func:`highlight_candidate` at parameter 0)."""
+    return highlight_candidate(row, "variance", 0.0)
+
+
+def highlight_cross_table(rows: list[dict[str, Any]]) -> None:
+    """Per set (calibration first): the scans more than 2x low under the estimate without the
+    highlight term (:func:`before_highlight`) with their ``highlight_excess``, and flagged /
+    not flagged x low / within x2 / high; then how many stay low under the shipped estimate
+    (with the term since 2026-11-28)."""
+    if any("highlight_excess" not in r for r in rows):
+        print("\nhighlight cross-table: the rows lack highlight_excess (written by an older "
+              "bench); rerun without --rows")
+        return
+    print(f"\n#### Highlight not read (excess > {EXCESS_LIMIT:g}) against the estimate "
+          "without the highlight term (science.md 7.1.1)\n")
+    for which in SETS:
+        sel = [r for r in rows if r["set"] == which]
+        if not sel:
+            continue
+        low = [r for r in sel if before_highlight(r) / r["truth"] < 0.5]
+        print(f"\n{which}: {len(sel)} scans, {len(low)} more than 2x low; with the shipped "
+              f"estimate {sum(r['widened'] / r['truth'] < 0.5 for r in sel)}")
+        for r in low:
+            print(f"  {r['material']} ({r['plan']}): x{before_highlight(r) / r['truth']:.2f} "
+                  f"(shipped x{r['widened'] / r['truth']:.2f}), excess {excess_of(r):.3g}"
+                  f"{' FLAGGED' if highlight_flagged(r) else ''}")
+        print("\n| | low | within x2 | high |")
+        print("|---|---|---|---|")
+        for flagged in (True, False):
+            v = [_verdict(before_highlight(r) / r["truth"]) for r in sel
+                 if highlight_flagged(r) == flagged]
+            print(f"| {'flagged' if flagged else 'not flagged'} | {v.count('low')} | "
+                  f"{v.count('within')} | {v.count('high')} |")
+
+
+#: The highlight widening's grids (:func:`highlight_study`): ``g`` of ``"widen"``, ``s`` of
+#: ``"variance"``.
+HIGHLIGHT_GRIDS: dict[str, tuple[float, ...]] = {
+    "widen": tuple(round(0.05 * i, 2) for i in range(41)),
+    "variance": tuple(round(0.0025 * i, 4) for i in range(61)),
+}
+
+
+def highlight_candidate(row: dict[str, Any], form: str, p: float) -> float:
+    """The estimate of a row widened by its ``highlight_excess`` (module docstring): ``form``
+    ``"widen"`` (``est max(1, e / 3.4)^p``) or ``"variance"`` (``p ln(max(e, 1))`` beside the
+    coverage term); under the shipped peak floor. ``p`` = 0 gives the shipped estimate."""
+    e = excess_of(row)
+    misfit = row_misfit(row)
+    if form == "widen":
+        # The mapping before the highlight term (rows written after its wiring carry it in
+        # "widened"; this candidate replaces it).
+        est = final_log_rmse(row["unwidened"], row["uncovered"], misfit, highlight_excess=1.0)
+        est *= max(1.0, e / EXCESS_LIMIT) ** p
+    elif form == "variance":
+        est = final_log_rmse(row["unwidened"], row["uncovered"], misfit, highlight_excess=1.0,
+                             in_plane=p * np.log(max(e, 1.0)))
+    else:
+        raise ValueError(f"unknown form {form!r}")
+    return max(est, peak_floor(row))
+
+
+def highlight_study(rows: list[dict[str, Any]]) -> bool | None:
+    """The highlight widening, its rule committed before any of its rows (module docstring):
+    returns whether it is adopted, None when the rows lack ``highlight_excess``.
+
+    Prints, in this order: the calibration fit over both forms, the choice set's verdict, the
+    test and fresh sets (once), then :data:`FRESH_WIDE`'s blind set."""
+    if any("highlight_excess" not in r for r in rows):
+        return None
+    by = {w: [r for r in rows if r["set"] == w] for w in SETS}
+    def reproduced(p: float) -> int:
+        return sum(abs(highlight_candidate(r, "variance", p) - r["widened"])
+                   <= 1e-9 * max(r["widened"], 1.0) for r in rows)
+
+    print(f"\n#### The highlight widening (science.md 7.1.1)\n\nrows whose shipped estimate "
+          f"the candidate reproduces at parameter 0 (rows written before the term's wiring): "
+          f"{reproduced(0.0)} of {len(rows)}; at the shipped FINAL_HIGHLIGHT_SCALE "
+          f"{FINAL_HIGHLIGHT_SCALE:g} (rows written after): {reproduced(FINAL_HIGHLIGHT_SCALE)}")
+    print("\ncalibration fit: within x2 / more than 2x low / scans\n")
+    print("| form | parameter | calibration |")
+    print("|---|---|---|")
+    best: tuple[int, int, int, float] | None = None
+    for fi, (form, grid) in enumerate(HIGHLIGHT_GRIDS.items()):
+        for p in grid:
+            w, lo, n = _counts(by["cal"], lambda r, f=form, p=p: highlight_candidate(r, f, p))
+            print(f"| {form} | {p:g} | {w} / {lo} / {n} |")
+            key = (lo, -w, fi, p)
+            if best is None or key < best:
+                best = key
+    assert best is not None
+    form, p = list(HIGHLIGHT_GRIDS)[best[2]], best[3]
+    print(f"\nchosen on the calibration set: {form}, parameter {p:g}")
+
+    def compare(names: tuple[str, ...]) -> tuple[tuple[int, int, int], tuple[int, int, int]]:
+        print("\n| set | plan | without the term: within x2 / low / scans | candidate |")
+        print("|---|---|---|---|")
+        out = ((0, 0, 0), (0, 0, 0))
+        for which in names:
+            for label in [pl[0] for pl in PLANS] + ["every plan"]:
+                sel = [r for r in by[which] if label == "every plan" or r["plan"] == label]
+                if not sel:
+                    continue
+                a = _counts(sel, before_highlight)
+                b = _counts(sel, lambda r: highlight_candidate(r, form, p))
+                print(f"| {which} | {label} | {a[0]} / {a[1]} / {a[2]} | "
+                      f"{b[0]} / {b[1]} / {b[2]} |")
+                if label == "every plan":
+                    out = (tuple(x + y for x, y in zip(out[0], a, strict=True)),  # type: ignore[assignment]
+                           tuple(x + y for x, y in zip(out[1], b, strict=True)))
+        return out
+
+    print("\ncalibration:")
+    compare(("cal",))
+    if p == 0:
+        print("\nthe calibration set prefers the shipped estimate: not adopted")
+        return False
+    print("\nchoice:")
+    (aw, al, _), (bw, bl, _) = compare(("choice",))
+    adopted = bl <= al and bw >= aw - 1
+    print(f"\nchoice rule: {'passed' if adopted else 'FAILED'} (without the term {aw} within "
+          f"x2 / {al} low, candidate {bw} / {bl})")
+    print("\ntest and fresh (printed once):")
+    (aw, al, _), (bw, bl, _) = compare(("test", "fresh", "fresh-inplane", "fresh-confirm"))
+    ok = bl <= al
+    adopted = adopted and ok
+    print(f"\ntest and fresh rule: {'passed' if ok else 'FAILED'} (without the term {aw} "
+          f"within x2 / {al} low, candidate {bw} / {bl})")
+    print("\nfresh-wide (blind, last):")
+    (aw, al, n), (bw, bl, _) = compare(("fresh-wide",))
+    if n:
+        ok = bl <= al
+        adopted = adopted and ok
+        print(f"\nfresh-wide rule: {'passed' if ok else 'FAILED'} (without the term {aw} "
+              f"within x2 / {al} low, candidate {bw} / {bl})")
+    print(f"\nhighlight widening: {'ADOPT' if adopted else 'not adopted'}")
+    return adopted
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     ap.add_argument("--rows", type=Path, default=None,
@@ -730,6 +972,8 @@ def main(argv: list[str] | None = None) -> int:
     table(rows)
     in_plane_study(rows)
     confirm_in_plane(rows)
+    highlight_cross_table(rows)
+    highlight_study(rows)
     print(f"total {time.perf_counter() - t0:.0f} s")
     return 0
 

@@ -259,11 +259,13 @@ def _headline(metrics: dict[str, Any]) -> dict[str, Any] | None:
             "key": "predicted_log_rmse", "value": float(v), "text": f"{v:.3f}",
             "meaning": "predicted log RMSE of the whole BRDF against the true material "
                        "(cosine-weighted, Löw et al. 2012): 0 is a perfect match, lower is "
-                       "better. It adds what the readings leave undetermined to how far the "
-                       "material sits from the training library; on materials held out of "
+                       "better. It adds what the readings leave undetermined, how far the "
+                       "material sits from the training library and how far the table's "
+                       "highlight stands above every reading; on materials held out of "
                        "the library it was within a factor of 2 of the truth on about 2 "
-                       "scans in 3 (184 of 290 test and fresh scans) and more than 2 times "
-                       "too low on about 1 in 36 (8 of 290), all read with the MA98 or MA68 preset "
+                       "scans in 3 (187 of 290 test and fresh scans) and more than 2 times "
+                       "too low on about 1 in 100 (3 of 290, all read with the MA98 preset; 6 "
+                       "of 60 on a later blind set, 5 of them one clear-coated white specimen) "
                        "(docs/science.md 7.1.1).",
         }
     v = metrics.get("predicted_error")

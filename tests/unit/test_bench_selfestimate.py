@@ -56,3 +56,30 @@ def test_the_confirmation_rule_adopts_only_fewer_low_scans_at_little_cost(
     assert bench.confirm_in_plane([low] + [fine] * 5) is True
     assert bench.confirm_in_plane([{**low, "set": "fresh"}]) is None
     assert "confirmation rule" in capsys.readouterr().out
+
+
+def test_the_highlight_candidates_and_the_blind_set_are_as_written_down(
+        bench: ModuleType) -> None:
+    """The highlight widening (science.md 7.1.1): at parameter 0 both forms are the mapping
+    without the term; "variance" at the shipped scale is the shipped mapping; "widen" moves
+    only scans above the warning's limit; the blind set is new."""
+    import math
+
+    from gonio.brdf.reconstruction.selfcheck import FINAL_HIGHLIGHT_SCALE, final_log_rmse
+
+    row = {"unwidened": 0.05, "uncovered": 0.04, "peak_excess": 0.0, "misfit_chi2": 0.5,
+           "misfit_log": 0.0, "misfit_persistent_pairs": 0, "n": 10, "r": 8,
+           "highlight_excess": math.exp(3.0)}
+    plain = math.hypot(0.61 * 0.05, 0.19 * 0.2)
+    assert bench.highlight_candidate(row, "widen", 0.0) == pytest.approx(plain)
+    assert bench.before_highlight(row) == pytest.approx(plain)
+    assert bench.highlight_candidate(row, "variance", FINAL_HIGHLIGHT_SCALE) == pytest.approx(
+        final_log_rmse(0.05, 0.04, bench.row_misfit(row), highlight_excess=math.exp(3.0)))
+    assert bench.highlight_candidate(row, "widen", 1.0) == pytest.approx(
+        plain * math.exp(3.0) / 3.4)
+    below = {**row, "highlight_excess": 3.0}
+    assert bench.highlight_candidate(below, "widen", 1.0) == pytest.approx(plain)
+    assert bench.excess_of({**row, "highlight_excess": float("nan")}) == 1.0
+    assert len(bench.FRESH_WIDE) == 12
+    older = {n for s in (bench.FRESH, bench.FRESH_INPLANE, bench.FRESH_CONFIRM) for n, *_ in s}
+    assert not {n for n, *_ in bench.FRESH_WIDE} & older

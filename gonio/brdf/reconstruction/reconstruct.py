@@ -64,6 +64,7 @@ import scipy.linalg
 import scipy.optimize
 from numpy.typing import ArrayLike, NDArray
 
+from gonio.brdf.highlightread import highlight_read
 from gonio.brdf.reconstruction.basis import (
     Basis,
     BasisError,
@@ -158,8 +159,8 @@ class Reconstruction:
         BRDF, calibrated on materials held out of the basis; the number to report. Joint
         fit: :func:`gonio.brdf.reconstruction.selfcheck.predict_joint_log_rmse` through the final
         mapping :func:`gonio.brdf.reconstruction.selfcheck.final_log_rmse` (a coverage term;
-        its own factor and a floor at the misfit when the readings show structure the basis
-        cannot hold, ``misfit``); V&F path:
+        a highlight term of ``highlight_excess``; its own factor and a floor at the misfit
+        when the readings show structure the basis cannot hold, ``misfit``); V&F path:
         :func:`gonio.brdf.reconstruction.selfcheck.predict_vf_log_rmse`, widened by such a misfit.
     angle_log_errors : (r,) float64 or None
         Joint fit only: per stage angle (in the order given), the RMS log error (units of
@@ -210,6 +211,12 @@ class Reconstruction:
         lower bound of the true error for any material within that bound (an assumption a
         polished specimen no pair reads near its mirror direction can break: docs/science.md
         7.5), so ``predicted_log_rmse`` is never below it.
+    highlight_excess : float
+        The table's largest projected value ``f cos ti cos to`` at ``td`` up to 45 degrees over
+        the largest projected reading (:func:`gonio.brdf.highlightread.highlight_read`,
+        dimensionless; NaN without a positive reading). On the joint fit
+        ``predicted_log_rmse`` carries a term that grows with its logarithm
+        (:func:`gonio.brdf.reconstruction.selfcheck.highlight_term`, docs/science.md 7.1.1).
     """
 
     table: BRDFTable
@@ -230,6 +237,7 @@ class Reconstruction:
     uncovered_share: float = float("nan")
     predicted_log_rmse_upper: float = float("nan")
     peak_excess_log_rmse: float = float("nan")
+    highlight_excess: float = float("nan")
 
     @property
     def misfit_warning(self) -> str | None:
@@ -822,6 +830,9 @@ def _reconstruct(
     cv_log = float(np.sqrt(np.mean(pair_err**2))) if pair_err is not None else float("nan")
     misfit = basis_misfit(_log_residuals(at_samples[..., :n_ch], vals, ci), vals, ci)
     n = int(cells_.shape[0])
+    # How far the table's projected peak lies above the brightest projected reading (as
+    # finishing reports it): a witness of the estimate on the joint path.
+    highlight = highlight_read(table, cells_, ph_, alpha, np.maximum(vals, 0.0))
     # The joint fit's calibrated estimate and its interval; V&F's path has neither.
     joint_estimate = estimate_post is not None and np.isfinite(cv)
     if joint_estimate:
@@ -831,8 +842,10 @@ def _reconstruct(
         uncovered = estimate_post.uncovered_share()
         # The calibrated final mapping: a coverage term for the error where no pair looks,
         # and, when the basis cannot hold the readings (residuals well above the noise that
-        # stay across the angles), a floor at the error the readings themselves show.
-        widened = final_log_rmse(predicted, uncovered, misfit)
+        # stay across the angles), a floor at the error the readings themselves show; and a
+        # highlight term when the table peaks far above every reading (science.md 7.1.1).
+        widened = final_log_rmse(predicted, uncovered, misfit,
+                                 highlight_excess=highlight.excess)
     else:
         expected = mahal = uncovered = float("nan")
         predicted = predict_vf_log_rmse(cv, n, int(alpha.size))
@@ -872,6 +885,7 @@ def _reconstruct(
         uncovered_share=uncovered,
         predicted_log_rmse_upper=upper,
         peak_excess_log_rmse=float(excess),
+        highlight_excess=float(highlight.excess),
     )
 
 

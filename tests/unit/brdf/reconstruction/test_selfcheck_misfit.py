@@ -23,6 +23,7 @@ from gonio.brdf.reconstruction.samples import NoiseModel, simulate_samples
 from gonio.brdf.reconstruction.selfcheck import (
     FINAL_COVERAGE_SCALE,
     FINAL_FLAGGED_FACTOR,
+    FINAL_HIGHLIGHT_SCALE,
     FINAL_PREDICTED_FACTOR,
     MISFIT_CHI2_LIMIT,
     MISFIT_MIN_LOG,
@@ -172,10 +173,17 @@ def _table_at_readings(table: BRDFTable, cells: np.ndarray, ph: np.ndarray) -> n
 PUBLISHED = (0.61, 0.19, 0.6)
 
 
-def _final(predicted: float, uncovered: float, flagged: bool, log_misfit: float) -> float:
-    """docs/science.md 7.1.1's final mapping, written out."""
+#: The highlight term's published coefficient (docs/science.md 7.1.1).
+PUBLISHED_HIGHLIGHT = 0.025
+
+
+def _final(predicted: float, uncovered: float, flagged: bool, log_misfit: float,
+           highlight_excess: float = 1.0) -> float:
+    """docs/science.md 7.1.1's final mapping, written out (with the highlight term
+    ``0.025 ln(excess)`` added as a variance beside the coverage term)."""
     k, c, kf = PUBLISHED
-    cover = c * math.sqrt(uncovered)
+    cover = math.hypot(c * math.sqrt(uncovered),
+                       PUBLISHED_HIGHLIGHT * math.log(max(highlight_excess, 1.0)))
     if flagged:
         return max(math.hypot(kf * predicted, cover), log_misfit)
     return math.hypot(k * predicted, cover)
@@ -188,6 +196,12 @@ def test_the_final_mapping_is_the_published_one() -> None:
     # Unflagged: sqrt((0.61 * 0.05)^2 + 0.19^2 * 0.04) = sqrt(0.0305^2 + 0.038^2).
     assert final_log_rmse(0.05, 0.04, quiet) == pytest.approx(math.hypot(0.0305, 0.038))
     assert (FINAL_PREDICTED_FACTOR, FINAL_COVERAGE_SCALE, FINAL_FLAGGED_FACTOR) == PUBLISHED
+    assert FINAL_HIGHLIGHT_SCALE == PUBLISHED_HIGHLIGHT
+    # The highlight term: e^2 above the brightest reading adds 2 * 0.025 as a variance.
+    assert final_log_rmse(0.05, 0.04, quiet, highlight_excess=math.exp(2.0)) == pytest.approx(
+        _final(0.05, 0.04, False, 0.0, math.exp(2.0)))
+    assert _final(0.05, 0.04, False, 0.0, math.exp(2.0)) == pytest.approx(
+        math.sqrt(0.0305**2 + 0.038**2 + 0.05**2))
     # A layout that leaves more of the table to the prior widens the estimate.
     assert final_log_rmse(0.05, 0.4, quiet) > final_log_rmse(0.05, 0.04, quiet)
     # Flagged: 0.6 * 1.0 beats the misfit 0.12; a small estimate is floored at the misfit.
@@ -277,7 +291,8 @@ def test_a_library_material_is_not_flagged_and_its_estimate_is_not_low(
     assert rec.misfit is not None and not rec.misfit.flagged
     assert rec.misfit_warning is None
     assert rec.predicted_log_rmse == pytest.approx(_final(
-        rec.predicted_log_rmse_unwidened, rec.uncovered_share, False, 0.0))
+        rec.predicted_log_rmse_unwidened, rec.uncovered_share, False, 0.0,
+        rec.highlight_excess))
     truth = metrics.log_rmse(rec.table, _truth(spec.model, name))
     assert rec.predicted_log_rmse / truth > 0.5
     assert rec.predicted_log_rmse < 0.05  # the held-out materials' typical 0.03-0.1
@@ -336,7 +351,8 @@ def test_structure_outside_the_basis_is_flagged_and_the_estimate_covers_it(
     assert excess > MISFIT_MIN_LOG
     assert rec.predicted_log_rmse >= 0.95 * excess
     assert rec.predicted_log_rmse == pytest.approx(_final(
-        rec.predicted_log_rmse_unwidened, rec.uncovered_share, True, rec.misfit.log_misfit))
+        rec.predicted_log_rmse_unwidened, rec.uncovered_share, True, rec.misfit.log_misfit,
+        rec.highlight_excess))
     truth = metrics.log_rmse(rec.table, _truth(spec.model, spec.name))
     assert rec.predicted_log_rmse > 0.5 * truth
     # A flagged scan's interval uses the flagged factor.
