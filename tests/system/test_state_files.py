@@ -264,9 +264,11 @@ def test_an_older_store_with_absolute_and_cwd_relative_paths_is_migrated_on_open
     finally:
         d.stop()
     # As an older gonio stored them: absolute (where the directory was before it moved), and
-    # relative to the working directory it was started in.
+    # relative to the working directory it was started in; and without the mark that a gonio
+    # which makes them relative leaves in the store.
     old = {1: "/srv/old-lab/data/results/job-1.h5", 2: "data/results/job-2.h5"}
     with sqlite3.connect(data / "gonio.sqlite") as con:
+        con.execute("DELETE FROM meta WHERE key = 'result_paths'")
         for job, path in old.items():
             summary = json.loads(con.execute("SELECT summary FROM jobs WHERE id = ?",
                                              (job,)).fetchone()[0])
