@@ -62,3 +62,32 @@ def test_the_headline_says_a_calibration_at_another_exposure_does_not_fit(
     assert "measured at exposure 0.005 s, this scan at 0.01 s" in head, head
     assert browser.execute_script(
         "return document.getElementById('headline-calibration').className") == "uncalibrated"
+
+
+def test_start_scan_at_another_exposure_shows_the_refusal_and_queues_nothing(
+    daemon: Daemon, browser: Any  # noqa: F811
+) -> None:
+    """A scan at another exposure than the calibration in effect is refused at submission
+    (422, tests/system/api/test_exposure_warning.py); on the page the refusal must reach the
+    lab in the daemon's own words (both exposures and what to do), not as a bare status, and
+    the job list must stay as it was."""
+    from selenium.webdriver.common.by import By
+
+    from tests.system.api.test_browser import click_when_steady
+
+    _calibrate(daemon)  # at 0.005 s
+    with daemon.client() as c:
+        before = len(c.get("/api/v1/jobs").json())
+    wait = open_live(browser, daemon, 60)
+    field = browser.find_element(By.ID, "scan-form").find_element(By.NAME, "exposure_s")
+    field.clear()
+    field.send_keys("0.5")
+    click_when_steady(wait, "#start-scan")
+    message = browser.find_element(By.ID, "message")
+    wait.until(lambda d: message.is_displayed() and "0.5 s" in message.text)
+    said = message.text
+    assert "reads at exposure 0.5 s" in said and "measured at 0.005 s" in said, said
+    assert "calibrate at 0.5 s first" in said, said
+    assert "422" not in said and "Unprocessable" not in said, said
+    with daemon.client() as c:
+        assert len(c.get("/api/v1/jobs").json()) == before  # nothing queued
