@@ -202,6 +202,8 @@ def _scan(args: argparse.Namespace) -> int:
     if args.white_reference is None and not args.specimen and not args.dry_run:
         print(f"note: no --specimen NAME given; the job, its result and its exports call the "
               f"specimen {_specimen(args)!r}", file=sys.stderr)
+    if not args.dry_run:
+        _check_output(args.output)
     if args.daemon:
         return _scan_through_daemon(args, plan)
     sim = None
@@ -224,6 +226,43 @@ def _scan(args: argparse.Namespace) -> int:
     finally:
         if sim is not None:
             sim.close()
+
+
+def _check_output(out: Path) -> None:
+    """Refuse an ``-o`` that cannot be written before anything is measured.
+
+    The result is copied to ``-o`` when the scan has finished: a folder that cannot be made or
+    written found only then cost the lab the whole scan's wait for an error (the result stays
+    in the data directory, but the message did not say so). A file is made and removed in the
+    folder, so whatever the file system or the permissions refuse is found now.
+    """
+    import os
+    import tempfile
+
+    folder = out.parent
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        fd, probe = tempfile.mkstemp(prefix=".gonio-probe-", dir=folder)
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        why = exc.strerror or str(exc)
+        raise UsageError(f"-o {out}: cannot write into {folder} ({why}); choose another "
+                         "location for the result (nothing was measured)") from None
+    if out.is_dir():
+        raise UsageError(f"-o {out} is a folder; give the result file's name, e.g. "
+                         f"{out / 'felt.h5'}")
+
+
+def _copy_result(src: Path, out: Path, job_id: int) -> None:
+    """Copy a completed job's result to ``-o``; when that fails, say where the result is."""
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(src, out)
+    except OSError as exc:
+        why = exc.strerror or str(exc)
+        raise UsageError(f"job {job_id} completed, but its result could not be copied to "
+                         f"{out} ({why}); it is kept in {src}: copy it from there") from None
 
 
 async def _run_scan(args: argparse.Namespace, plan: Any, config: Any, sim: Any = None) -> int:
@@ -374,9 +413,8 @@ async def _run_owned(args: argparse.Namespace, checked: Any, config: Any, sim: A
         print(f"job {job.id} {final.value}: {row.reason}", file=sys.stderr)
         return 1
     assert row.result_path is not None
-    out.parent.mkdir(parents=True, exist_ok=True)
     # A copy: the data directory keeps its result (what 'gonio jobs show' reports stays true).
-    shutil.copyfile(service.result_path(job.id), out)
+    _copy_result(service.result_path(job.id), out, job.id)
     summary = row.result or {}
     if plan.kind == "calibration":
         from gonio.calibration import CALIBRATION_FILE
