@@ -479,8 +479,19 @@ def _calibration_warnings(args: argparse.Namespace, plan: Any, config: Any,
     else:
         cal = calibration_in_effect(args.data_dir or scan_data_dir(config), config)
     cal = cal if isinstance(cal, Calibration) else Calibration()
-    return [w for w in (uncalibrated_warning(cal, pairs),
+    uncal = uncalibrated_warning(cal, pairs)
+    return [w for w in (_how_to_calibrate(uncal, args),
                         exposure_warning(cal, plan.exposure.exposure_s)) if w is not None]
+
+
+def _how_to_calibrate(warning: str | None, args: argparse.Namespace) -> str | None:
+    """An ``uncalibrated: ...`` warning (the API's and the page's words, which name no
+    command) with the command that calibrates this rig from the command line."""
+    if warning is None or not warning.startswith("uncalibrated:") or args.rig is None:
+        return warning
+    return (f"{warning}; here: with the white reference on the stage, 'gonio scan --rig "
+            f"{args.rig} --white-reference 0.99 -o white.h5' (its calibration stays in effect "
+            "for this rig's later scans)")
 
 
 def _check_calibration(args: argparse.Namespace, pairs: Any, config: Any, cal: Any,
@@ -491,7 +502,7 @@ def _check_calibration(args: argparse.Namespace, pairs: Any, config: Any, cal: A
     from gonio.calibration import CALIBRATION_FILE, uncalibrated_refusal, uncalibrated_warning
     from gonio.paths import scan_data_dir
 
-    warning = uncalibrated_warning(cal, pairs)
+    warning = _how_to_calibrate(uncalibrated_warning(cal, pairs), args)
     if warning is None or cal.pairs:
         return  # covered, or partly: the submission refuses it, saying which pairs
     own: Path | None = scan_data_dir(config)
