@@ -776,6 +776,10 @@ def _jobs(args: argparse.Namespace) -> int:
         args.db = args.db / STORE_FILE
     if not args.db.is_file():
         raise UsageError(f"job store {args.db} does not exist")
+    if args.action == "list" and args.job_id is not None:
+        # 'gonio jobs list 3' listed every job without a word about the 3.
+        raise UsageError(f"list takes no job id; 'gonio jobs show {args.job_id} --db "
+                         f"{args.db}' shows job {args.job_id}")
     if args.action == "abort":
         return _abort_job(args)
     store = JobStore(args.db, durable=False)
