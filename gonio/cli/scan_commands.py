@@ -719,7 +719,8 @@ def _follow(client: Any, job_id: int, disabled: bool, poll_s: float = 0.5) -> di
             bar.refresh()
             reason = row.get("reason") if row["state"] == "suspended" else None
             if reason and reason != told:
-                bar.write(_suspended_line(job_id, reason), file=sys.stderr)
+                bar.write(_suspended_line(job_id, reason, through_daemon=True),
+                          file=sys.stderr)
             told = reason
             if row["state"] in _FINAL:
                 return row
@@ -728,9 +729,14 @@ def _follow(client: Any, job_id: int, disabled: bool, poll_s: float = 0.5) -> di
         bar.close()
 
 
-def _suspended_line(job_id: int, reason: str) -> str:
-    """What a terminal shows when a job suspends: the bar alone said 'suspended' and no why."""
-    return f"job {job_id} suspended: {reason}"
+def _suspended_line(job_id: int, reason: str, through_daemon: bool = False) -> str:
+    """What a terminal shows when a job suspends: the bar alone said 'suspended' and no why,
+    and then nothing while the job waited for the device (a scan that seemed to hang)."""
+    then = ("the daemon retries and goes on once it answers (Ctrl-C stops following, not the "
+            "job)" if through_daemon else
+            "the scan retries and goes on once it answers; Ctrl-C leaves the job paused, and "
+            "the same command resumes it")
+    return f"job {job_id} suspended: {reason}\n  {then}"
 
 
 def _progress(service: Any, job_id: int, disabled: bool) -> Any:
