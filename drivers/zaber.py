@@ -22,6 +22,7 @@ import contextlib
 import itertools
 import math
 import re
+import termios
 import time
 from dataclasses import dataclass
 from typing import Any
@@ -233,7 +234,9 @@ class ZaberStage(_Stage):
                         raise  # retrying cannot fix a wrong url or a foreign protocol
                     last = str(exc)
                     continue
-                except (serial.SerialException, OSError) as exc:
+                except (serial.SerialException, OSError, termios.error) as exc:
+                    # termios.error (not an OSError): pyserial's flush of a pseudo-terminal
+                    # whose other side went away (a stopped `gonio sim`).
                     last = f"port error {exc!r}"
                     self._drop_port()
                     continue
