@@ -989,8 +989,11 @@ def _rebuild(args: argparse.Namespace, store: Any) -> int:
         before = store.get_job(args.job_id).state
     except NotFound as exc:
         raise UsageError(str(exc)) from None
-    print(f"rebuilding job {args.job_id}'s result from the job store's readings",
-          file=sys.stderr)
+    if before.value in ("completed", "failed"):
+        # Only these may be rebuilt (rebuild_result refuses the others, saying why): the line
+        # said "rebuilding" before the refusal of a paused job.
+        print(f"rebuilding job {args.job_id}'s result from the job store's readings",
+              file=sys.stderr)
     old = store.get_job(args.job_id).summary or {}
     summary = rebuild_result(store, data_dir, args.job_id, BasisSupply())
     after = store.get_job(args.job_id).state

@@ -84,6 +84,10 @@ def test_list_with_a_job_id_says_show_takes_one_and_a_non_store_is_named(
     assert main(["jobs", "list", "1", "--db", str(db)]) == 2
     err = capsys.readouterr().err
     assert f"list takes no job id; 'gonio jobs show 1 --db {db}' shows job 1" in err, err
+    # A rebuild of a job still running is refused, and does not first say it is rebuilding.
+    assert main(["jobs", "rebuild", "1", "--db", str(db)]) == 2
+    err = capsys.readouterr().err
+    assert "job 1 is running" in err and "rebuilding" not in err, err
     # A rig config given as the store read "point --db at a new file", which lists nothing.
     rig = tmp_path / "rig.toml"
     rig.write_text('[rig]\nname = "sim"\n' * 200)
