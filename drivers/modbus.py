@@ -190,12 +190,42 @@ class ModbusConnection:
         if reply.isError():
             raise DeviceFault(
                 device,
-                f"{what}: the device refused the request ({reply}); check this address in "
-                "the rig config's register map",
+                f"{what}: {self._refusal(reply)}",
                 code="modbus_exception",
                 recoverable=False,
             )
         return reply
+
+    def _refusal(self, reply: Any) -> str:
+        """What a Modbus exception reply means and where to look, by its exception code.
+
+        Only an illegal address (code 2) points at the register map: a device id with no
+        device behind it (gateway codes 10 and 11, or code 4 from a server that has no such
+        device, as pymodbus' simulator answers) is the ``device_id`` or the wiring.
+        """
+        code = getattr(reply, "exception_code", None)
+        dev = getattr(reply, "dev_id", None)
+        at = f"device_id {dev} at {self.host}:{self.port}"
+        raw = f"Modbus exception {code}"
+        if code == 2:
+            return (f"{at} has no such register ({raw}, illegal data address); check this "
+                    "address in the rig config's register map")
+        if code == 1:
+            return (f"{at} does not support this request ({raw}, illegal function); check "
+                    "the register's table in the rig config's register map")
+        if code == 3:
+            return (f"{at} refused the value written ({raw}, illegal data value); check the "
+                    "register's type and scale in the rig config's register map")
+        if code in (10, 11):
+            return (f"no device answers as {at} ({raw}, gateway: no path or no response); "
+                    "check modbus.device_id in the rig config and the device's wiring and "
+                    "power")
+        if code == 4:
+            return (f"{at} reports a device failure ({raw}); check that a device with this "
+                    "id is there (modbus.device_id in the rig config: a server without it "
+                    "can answer so) and that it works")
+        return (f"{at} refused the request ({raw}: {reply}); check this device's entry in "
+                "the rig config")
 
     def close(self) -> None:
         self._drop()

@@ -80,6 +80,15 @@ def true_material(res: ResultFile) -> Any | None:
         return None
 
 
+def _is_zip(p: Path) -> bool:
+    """Whether ``p`` is a zip archive (NumPy's .npz), whatever its name."""
+    try:
+        with p.open("rb") as f:
+            return f.read(4) == b"PK\x03\x04"
+    except OSError:
+        return False
+
+
 def load_input(path: str | os.PathLike[str] | ResultFile, label: str | None = None,
                with_truth: bool = True) -> list[tuple[str, Any]]:
     """Figure rows for one input: a result file (``.h5``), a BRDF table (``.npz``), or a
@@ -92,7 +101,7 @@ def load_input(path: str | os.PathLike[str] | ResultFile, label: str | None = No
         res, where = path, f"job {path.attrs.get('job_id')}'s result"
     else:
         p = Path(path)
-        if p.suffix.lower() == ".npz":
+        if p.suffix.lower() == ".npz" or _is_zip(p):  # a table saved under another name
             table = BRDFTable.load(p)
             return [(label or f"{p.name}: {table.name}", table)]
         res, where = read_result(p), str(p)

@@ -284,6 +284,16 @@ def finish_job(job_id: int, plan: AnyPlan | CheckedPlan, how: Finishing) -> dict
                            rec.predicted_log_rmse_unwidened))
     _record_adaptive_stop(how.store, job_id, metrics, provenance)
     misfit_message = rec.misfit_warning
+    if misfit_message is not None and not cal.pairs:
+        # The basis holds BRDFs in 1/sr; sensor units differ from them by each pair's own
+        # factor (lamp, sensor, geometry), so an uncalibrated scan's readings miss it whatever
+        # the material: the message's "unlike the training library" would send the lab the
+        # wrong way.
+        misfit_message += (". This scan is uncalibrated: its values are sensor units, which "
+                           "differ from 1/sr by each pair's own factor, so the basis misses "
+                           "them whatever the material; calibrate with the white reference "
+                           "on the stage (gonio scan --white-reference 0.99) and scan again "
+                           "before reading this as the material's")
     if misfit_message is not None:
         metrics["basis_misfit"] = misfit_message
         provenance["basis_misfit"] = misfit_message

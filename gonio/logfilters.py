@@ -102,6 +102,13 @@ class PymodbusFrameFilter(logging.Filter):
             return False
         if record.levelno >= logging.ERROR:
             text = record.getMessage().split("\n>>>>>", 1)[0].strip()
+            # A server-side failure comes with its whole traceback in the message (pymodbus'
+            # "Datastore unable to fulfill request: 0; Traceback ..." when a client asks the
+            # simulator for a device id it does not have): its last line says what it was.
+            head, cut, trace = text.partition("; Traceback (most recent call last):")
+            if cut:
+                lines = trace.strip().splitlines()
+                text = f"{head} ({lines[-1].strip()})" if lines else head
             record.msg = f"{text} (pymodbus; the driver reports the fault)"
             record.args = None
             record.levelno = logging.WARNING

@@ -300,7 +300,7 @@ def read_result(path: str | os.PathLike[str]) -> ResultFile:
     try:
         f = h5py.File(p, "r")
     except OSError as exc:
-        raise ResultFileError(f"{p} is not an HDF5 file or is damaged ({exc})") from None
+        raise ResultFileError(_unopenable(p, exc)) from None
     try:
         with f:
             return _read_open(p, f)
@@ -365,7 +365,39 @@ def check_result_file(path: str | os.PathLike[str]) -> None:
         raise ResultFileError(f"{p} is damaged or truncated ({exc})") from None
 
 
+#: What a result file is, for the messages about a file that is not one.
+_WHAT_A_RESULT_IS = ("a result is the HDF5 file 'gonio scan -o' writes, the page's "
+                     "'Download HDF5 result', or DATA_DIR/results/job-N.h5")
+#: The HDF5 signature, at 0 or at a power of two from 512 on (a user block before it).
+_HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
+
+
+def _unopenable(p: Path, exc: OSError) -> str:
+    """Why h5py could not open ``p``, in the user's terms: a file of another kind (a .npz
+    table, a rig config, a picture) is not called damaged, and a damaged HDF5 file is."""
+    try:
+        with p.open("rb") as f:
+            head = f.read(8)
+            signed = head == _HDF5_SIGNATURE
+            for at in (512, 1024, 2048, 4096):
+                if signed:
+                    break
+                f.seek(at)
+                signed = f.read(8) == _HDF5_SIGNATURE
+    except OSError:
+        return f"{p} cannot be read ({exc})"
+    if signed:
+        return f"{p} is an HDF5 file but damaged ({exc})"
+    if head.startswith(b"PK\x03\x04"):
+        return (f"{p} is a .npz archive (a gonio table or samples file), not a scan's result "
+                f"file; {_WHAT_A_RESULT_IS}")
+    return f"{p} is not an HDF5 file, so not a gonio result file; {_WHAT_A_RESULT_IS}"
+
+
 def _check_format(p: Path, attrs: dict[str, Any]) -> None:
+    if attrs.get("format") is None:
+        raise ResultFileError(f"{p} is an HDF5 file but not a gonio result file (it has no "
+                              f"'format' attribute); {_WHAT_A_RESULT_IS}")
     if attrs.get("format") != FORMAT_NAME:
         raise ResultFileError(
             f"{p} is not a gonio result file (format {attrs.get('format')!r})"

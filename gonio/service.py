@@ -41,6 +41,7 @@ from gonio.engine_loop import EngineLoop
 from gonio.event_hub import EventHub
 from gonio.jobstates import (
     ACTIVE_STATES,
+    FINISHED_STATES,
     IllegalTransition,
     JobState,
     check_action,
@@ -466,6 +467,13 @@ class GonioService:
             own = None
         why = uncalibrated_refusal(self.calibration(), pairs, own, self.data_dir)
         if why is None:
+            return None
+        if any(r.kind == "calibration" and r.state not in FINISHED_STATES
+               for r in self.store.list_jobs()):
+            # A calibration job is queued or under way here (`gonio serve --sim` queues one at
+            # start): jobs run in order, so the scan is finished with its calibration. Its
+            # refusal stopped `gonio serve --sim --demo-scan` whenever a `gonio sim` rig of
+            # the same geometry had been calibrated in the user data folder.
             return None
         return (f"{why}. Restart the daemon on that data directory (or without --data-dir), "
                 "run a calibration job, or send accept_uncalibrated=true to measure in sensor "

@@ -217,6 +217,12 @@ class EventRow:
 EventListener = Callable[[EventRow], None]
 
 
+#: Where --db should point instead of a file that is not a job store: reading jobs wants an
+#: existing store, starting one a new file (the old hint gave only the latter).
+_STORE_HINT = ("point --db at a gonio job store (DATA_DIR/gonio.sqlite, the one 'gonio scan' "
+               "and the daemon print), or at a new file to start one")
+
+
 class JobStore:
     """The SQLite job store at ``path`` (created on first use).
 
@@ -363,13 +369,13 @@ class JobStore:
                 self._db.close()
                 raise StoreError(
                     f"{self.path} is not a usable gonio job store ({exc}); "
-                    "point --db at a new file"
+                    f"{_STORE_HINT}"
                 ) from None
             except sqlite3.DatabaseError as exc:
                 self._db.close()
                 raise StoreError(
                     f"{self.path} is not a usable gonio job store ({exc}); "
-                    "point --db at a new file"
+                    f"{_STORE_HINT}"
                 ) from None
 
     # ------------------------------------------------------------------ plumbing

@@ -401,6 +401,15 @@ def _cmd_library_import(args: argparse.Namespace) -> int:
     from gonio.brdf.tables.table import BRDFTable
 
     shipped = set(measured_names())
+    for f in args.files:
+        if Path(f).suffix.lower() == ".h5":
+            # A scan's result holds its reconstruction, but the library takes tables: the
+            # step between is an export the lab would not guess from "unknown kind of file".
+            table = Path(f).with_suffix(".table.npz")
+            raise UsageError(
+                f"{f} is a scan's result file; the library takes BRDF tables: export its "
+                f"reconstruction first ('gonio export {f} --format table' writes {table}), "
+                f"then 'gonio library import {table}'")
     written = import_files(args.files, replace=args.replace)
     for f in written:
         print(f"imported {f.stem} -> {f}")

@@ -82,7 +82,26 @@ def _apply_design(args: argparse.Namespace) -> int:
     print(f"wrote {out}: {counted(len(design.lights), 'light')}, "
           f"{counted(len(design.sensors), 'sensor')}, {counted(n, 'pair')} "
           f"from {args.design}{saved}")
+    _simulated_rig_note(args, data, merged)
     return 0
+
+
+def _simulated_rig_note(args: argparse.Namespace, before: dict[str, Any],
+                        after: dict[str, Any]) -> None:
+    """Say so when the design added devices to a rig config ``gonio sim`` wrote: the running
+    simulator has only the devices it started with, so a scan on the new ones fails (with a
+    Modbus exception from each missing device id)."""
+    from gonio.cli.sim_session import sim_specimen_path
+
+    def count(data: dict[str, Any]) -> int:
+        return len(data.get("lights") or []) + len(data.get("sensors") or [])
+
+    if count(after) <= count(before) or not sim_specimen_path(args.rig).is_file():
+        return
+    print(f"note: {args.rig} was written by 'gonio sim' ({sim_specimen_path(args.rig).name} "
+          "beside it): the running simulator has only the devices it started with, so the "
+          "ones added here do not answer; stop it and start 'gonio sim --geometry "
+          f"{args.design} -o {args.rig}' for a simulated rig with the design's devices")
 
 
 def _rig_config(args: argparse.Namespace) -> Any:

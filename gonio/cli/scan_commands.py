@@ -203,6 +203,8 @@ def _scan(args: argparse.Namespace) -> int:
     if args.white_reference is None and not args.specimen and not args.dry_run:
         print(f"note: no --specimen NAME given; the job, its result and its exports call the "
               f"specimen {_specimen(args)!r}", file=sys.stderr)
+    if not args.dry_run:
+        _check_output(args.output)
     if args.daemon:
         return _scan_through_daemon(args, plan)
     sim = None
@@ -225,6 +227,43 @@ def _scan(args: argparse.Namespace) -> int:
     finally:
         if sim is not None:
             sim.close()
+
+
+def _check_output(out: Path) -> None:
+    """Refuse an ``-o`` that cannot be written before anything is measured.
+
+    The result is copied to ``-o`` when the scan has finished: a folder that cannot be made or
+    written found only then cost the lab the whole scan's wait for an error (the result stays
+    in the data directory, but the message did not say so). A file is made and removed in the
+    folder, so whatever the file system or the permissions refuse is found now.
+    """
+    import os
+    import tempfile
+
+    folder = out.parent
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        fd, probe = tempfile.mkstemp(prefix=".gonio-probe-", dir=folder)
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        why = exc.strerror or str(exc)
+        raise UsageError(f"-o {out}: cannot write into {folder} ({why}); choose another "
+                         "location for the result (nothing was measured)") from None
+    if out.is_dir():
+        raise UsageError(f"-o {out} is a folder; give the result file's name, e.g. "
+                         f"{out / 'felt.h5'}")
+
+
+def _copy_result(src: Path, out: Path, job_id: int) -> None:
+    """Copy a completed job's result to ``-o``; when that fails, say where the result is."""
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(src, out)
+    except OSError as exc:
+        why = exc.strerror or str(exc)
+        raise UsageError(f"job {job_id} completed, but its result could not be copied to "
+                         f"{out} ({why}); it is kept in {src}: copy it from there") from None
 
 
 async def _run_scan(args: argparse.Namespace, plan: Any, config: Any, sim: Any = None) -> int:
@@ -375,9 +414,8 @@ async def _run_owned(args: argparse.Namespace, checked: Any, config: Any, sim: A
         print(f"job {job.id} {final.value}: {row.reason}", file=sys.stderr)
         return 1
     assert row.result_path is not None
-    out.parent.mkdir(parents=True, exist_ok=True)
     # A copy: the data directory keeps its result (what 'gonio jobs show' reports stays true).
-    shutil.copyfile(service.result_path(job.id), out)
+    _copy_result(service.result_path(job.id), out, job.id)
     summary = row.result or {}
     if plan.kind == "calibration":
         from gonio.calibration import CALIBRATION_FILE
@@ -445,8 +483,19 @@ def _calibration_warnings(args: argparse.Namespace, plan: Any, config: Any,
     else:
         cal = calibration_in_effect(args.data_dir or scan_data_dir(config), config)
     cal = cal if isinstance(cal, Calibration) else Calibration()
-    return [w for w in (uncalibrated_warning(cal, pairs),
+    uncal = uncalibrated_warning(cal, pairs)
+    return [w for w in (_how_to_calibrate(uncal, args),
                         exposure_warning(cal, plan.exposure.exposure_s)) if w is not None]
+
+
+def _how_to_calibrate(warning: str | None, args: argparse.Namespace) -> str | None:
+    """An ``uncalibrated: ...`` warning (the API's and the page's words, which name no
+    command) with the command that calibrates this rig from the command line."""
+    if warning is None or not warning.startswith("uncalibrated:") or args.rig is None:
+        return warning
+    return (f"{warning}; here: with the white reference on the stage, 'gonio scan --rig "
+            f"{args.rig} --white-reference 0.99 -o white.h5' (its calibration stays in effect "
+            "for this rig's later scans)")
 
 
 def _check_calibration(args: argparse.Namespace, pairs: Any, config: Any, cal: Any,
@@ -457,7 +506,7 @@ def _check_calibration(args: argparse.Namespace, pairs: Any, config: Any, cal: A
     from gonio.calibration import CALIBRATION_FILE, uncalibrated_refusal, uncalibrated_warning
     from gonio.paths import scan_data_dir
 
-    warning = uncalibrated_warning(cal, pairs)
+    warning = _how_to_calibrate(uncalibrated_warning(cal, pairs), args)
     if warning is None or cal.pairs:
         return  # covered, or partly: the submission refuses it, saying which pairs
     own: Path | None = scan_data_dir(config)
@@ -678,7 +727,8 @@ def _follow(client: Any, job_id: int, disabled: bool, poll_s: float = 0.5) -> di
             bar.refresh()
             reason = row.get("reason") if row["state"] == "suspended" else None
             if reason and reason != told:
-                bar.write(_suspended_line(job_id, reason), file=sys.stderr)
+                bar.write(_suspended_line(job_id, reason, through_daemon=True),
+                          file=sys.stderr)
             told = reason
             if row["state"] in _FINAL:
                 return row
@@ -687,9 +737,14 @@ def _follow(client: Any, job_id: int, disabled: bool, poll_s: float = 0.5) -> di
         bar.close()
 
 
-def _suspended_line(job_id: int, reason: str) -> str:
-    """What a terminal shows when a job suspends: the bar alone said 'suspended' and no why."""
-    return f"job {job_id} suspended: {reason}"
+def _suspended_line(job_id: int, reason: str, through_daemon: bool = False) -> str:
+    """What a terminal shows when a job suspends: the bar alone said 'suspended' and no why,
+    and then nothing while the job waited for the device (a scan that seemed to hang)."""
+    then = ("the daemon retries and goes on once it answers (Ctrl-C stops following, not the "
+            "job)" if through_daemon else
+            "the scan retries and goes on once it answers; Ctrl-C leaves the job paused, and "
+            "the same command resumes it")
+    return f"job {job_id} suspended: {reason}\n  {then}"
 
 
 def _progress(service: Any, job_id: int, disabled: bool) -> Any:
@@ -735,6 +790,10 @@ def _jobs(args: argparse.Namespace) -> int:
         args.db = args.db / STORE_FILE
     if not args.db.is_file():
         raise UsageError(f"job store {args.db} does not exist")
+    if args.action == "list" and args.job_id is not None:
+        # 'gonio jobs list 3' listed every job without a word about the 3.
+        raise UsageError(f"list takes no job id; 'gonio jobs show {args.job_id} --db "
+                         f"{args.db}' shows job {args.job_id}")
     if args.action == "abort":
         return _abort_job(args)
     store = JobStore(args.db, durable=False)
@@ -962,8 +1021,11 @@ def _rebuild(args: argparse.Namespace, store: Any) -> int:
         before = store.get_job(args.job_id).state
     except NotFound as exc:
         raise UsageError(str(exc)) from None
-    print(f"rebuilding job {args.job_id}'s result from the job store's readings",
-          file=sys.stderr)
+    if before.value in ("completed", "failed"):
+        # Only these may be rebuilt (rebuild_result refuses the others, saying why): the line
+        # said "rebuilding" before the refusal of a paused job.
+        print(f"rebuilding job {args.job_id}'s result from the job store's readings",
+              file=sys.stderr)
     old = store.get_job(args.job_id).summary or {}
     summary = rebuild_result(store, data_dir, args.job_id, BasisSupply())
     after = store.get_job(args.job_id).state

@@ -64,6 +64,22 @@ COLOUR_STATEMENT = (
 """What the colour channels of an export are today. A result whose provenance has a
 ``colour_space`` entry (set by colour calibration) states that instead."""
 
+UNCALIBRATED_COLOUR_STATEMENT = (
+    "uncalibrated sensor units: the rig's sensors' R, G, B channels as read (dark "
+    "subtracted), with no white reference: not 1/sr, and no colour space"
+)
+"""What the channels of a scan measured with no white-reference calibration are: the
+:data:`COLOUR_STATEMENT`'s "scaled to 1/sr by a white reference" would be untrue."""
+
+UNCALIBRATED_WARNING = (
+    "uncalibrated: the scan had no white-reference calibration, so this material's values are "
+    "sensor units, not 1/sr; each light/sensor pair is off by its own factor and a renderer "
+    "shows it too bright or too dark. Calibrate with the white reference on the stage "
+    "(gonio scan --white-reference 0.99, or the page's calibration) and scan again"
+)
+"""The warning every export of such a scan carries, first among its reconstruction
+warnings (the table's included: a table in sensor units trains a basis wrongly)."""
+
 ORIENTATION: dict[str, str] = {
     "specimen_frame": "x = the reference mark on the specimen holder (+u of the specimen), "
                       "z = the surface normal, y = z cross x (right-handed)",
@@ -210,6 +226,12 @@ def export_provenance(attrs: Mapping[str, Any], metrics: Mapping[str, Any],
         rec_error["note"] = "this result has no predicted_log_rmse (an older result, or no " \
                             "pair could be left out)"
     plan = _json(provenance.get("plan"))
+    cal = _json(provenance.get("calibration"))
+    # Only a result that records its calibration and that it had none: older results without
+    # the record are not called uncalibrated.
+    uncalibrated = isinstance(cal, Mapping) and not cal.get("pairs")
+    colour_space = provenance.get("colour_space") or (
+        UNCALIBRATED_COLOUR_STATEMENT if uncalibrated else COLOUR_STATEMENT)
     out: dict[str, Any] = {
         "gonio_provenance": VERSION,
         "generator": f"gonio {attrs.get('gonio_version') or __version__}",
@@ -223,7 +245,7 @@ def export_provenance(attrs: Mapping[str, Any], metrics: Mapping[str, Any],
         "plan": plan if isinstance(plan, Mapping) else None,
         "calibration": _calibration_summary(provenance.get("calibration"),
                                             provenance.get("calibration_warning")),
-        "colour_space": str(provenance.get("colour_space") or COLOUR_STATEMENT),
+        "colour_space": str(colour_space),
         "orientation": dict(ORIENTATION),
         "fits": dict(fits),
         "warnings": list(warnings or []),
@@ -238,6 +260,8 @@ def export_provenance(attrs: Mapping[str, Any], metrics: Mapping[str, Any],
     # The reconstruction's own warnings (the calibration does not fit the scan, the arc, a
     # table outside physical bounds, ...): they hold for every format, the table's included.
     recon = [str(provenance[k]) for k in RECONSTRUCTION_WARNINGS if provenance.get(k)]
+    if uncalibrated:
+        recon.insert(0, UNCALIBRATED_WARNING)
     out["warnings"].extend(recon)
     out["reconstruction_warnings"] = recon
     return out

@@ -85,6 +85,20 @@ def test_a_pymodbus_id_mismatch_keeps_its_words_not_its_frames() -> None:
     assert "0x0" not in frame.getMessage() and "got id=1" in frame.getMessage()
 
 
+def test_a_pymodbus_server_traceback_becomes_its_last_line() -> None:
+    # `gonio sim` printed a 14-line traceback for each request to a device id it does not
+    # have (a rig config with devices added by `gonio rig apply-design`).
+    trace = ("Datastore unable to fulfill request: 0; Traceback (most recent call last):\n"
+             '  File "requesthandler.py", line 92, in handle_request\n'
+             "    response = await self.last_pdu.datastore_update(\n"
+             "               ^^^^^^^^^^^^^^^^^^^^^^^^^^^^^^^^^^^^^\n"
+             "KeyError: 0\n")
+    rec = logging.LogRecord(PYMODBUS_LOGGER, logging.ERROR, "p.py", 1, trace, None, None)
+    assert PymodbusFrameFilter().filter(rec)
+    assert rec.getMessage() == ("Datastore unable to fulfill request: 0 (KeyError: 0) "
+                                "(pymodbus; the driver reports the fault)")
+
+
 @pytest.mark.parametrize("level", [logging.DEBUG, logging.WARNING, logging.ERROR])
 def test_pymodbus_repeat_lines_are_dropped(level: int) -> None:
     # pymodbus logs "Repeating...." at the level of the line it repeats: it adds nothing.

@@ -138,3 +138,18 @@ def test_the_provenance_of_any_result_version_reads_alone_or_says_why_not(tmp_pa
     junk.write_bytes(b"not hdf5 at all" * 10)
     with pytest.raises(ResultFileError, match="damaged"):
         read_provenance(junk)
+
+
+def test_a_file_h5py_cannot_open_is_called_damaged_only_when_it_is_hdf5(tmp_path: Path) -> None:
+    table = tmp_path / "felt.table"
+    BRDFTable(np.full((3, *geo.TABLE_SHAPE), 0.25), ("R", "G", "B"), "spec").save(
+        tmp_path / "t.npz").rename(table)
+    with pytest.raises(ResultFileError, match=r"is a \.npz archive .*not a scan's result file"):
+        read_result(table)
+    cut = tmp_path / "cut.h5"
+    with h5py.File(cut, "w") as f:
+        f.attrs["format"] = "gonio-result"
+        f.create_dataset("x", data=np.zeros(1000))
+    cut.write_bytes(cut.read_bytes()[:600])
+    with pytest.raises(ResultFileError, match="is an HDF5 file but damaged"):
+        read_result(cut)

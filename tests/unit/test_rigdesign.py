@@ -219,3 +219,28 @@ def test_a_missing_or_binary_design_file_is_named_with_what_to_do(tmp_path: Path
     (tmp_path / "g.toml").write_bytes(b"\x89PNG\r\n")
     with pytest.raises(ConfigError, match=r"g\.toml: not a text file"):
         load_fragment(tmp_path / "g.toml")
+
+
+def test_apply_design_on_a_gonio_sim_rig_config_says_to_restart_the_simulator(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # The README's real-rig session run against `gonio sim -o rig.toml`: apply-design added
+    # devices with the next free ids, which the running simulator does not have, and the scan
+    # failed on the first of them. The README's own substitution is `gonio sim --geometry`.
+    from gonio.cli.sim_session import sim_specimen_path
+
+    rig = tmp_path / "rig.toml"
+    rig.write_text(EXAMPLE.read_text())
+    geometry = tmp_path / "geometry.toml"
+    geometry.write_text(dump_fragment(FRAGMENT))
+    assert main(["rig", "apply-design", str(geometry), str(rig), "-o",
+                 str(tmp_path / "real.toml")]) == 0
+    assert "gonio sim" not in capsys.readouterr().out  # a real rig's config: no such note
+    sim_specimen_path(rig).write_text("{}")  # what `gonio sim -o rig.toml` leaves beside it
+    assert main(["rig", "apply-design", str(geometry), str(rig)]) == 0
+    out = capsys.readouterr().out
+    assert f"note: {rig} was written by 'gonio sim'" in out, out
+    assert f"'gonio sim --geometry {geometry} -o {rig}'" in out, out
+    # Nothing added (the same design again): nothing to say.
+    assert main(["rig", "apply-design", str(geometry), str(rig)]) == 0
+    assert "gonio sim" not in capsys.readouterr().out

@@ -73,3 +73,25 @@ def test_the_data_directory_serves_for_its_store(
     empty.mkdir()
     assert main(["jobs", "list", "--db", str(empty)]) == 2
     assert "is a folder without a job store (gonio.sqlite)" in capsys.readouterr().err
+
+
+def test_list_with_a_job_id_says_show_takes_one_and_a_non_store_is_named(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    db = tmp_path / "gonio.sqlite"
+    _store_with_a_running_job(db)
+    # `gonio jobs list 1` listed every job, the 1 silently dropped.
+    assert main(["jobs", "list", "1", "--db", str(db)]) == 2
+    err = capsys.readouterr().err
+    assert f"list takes no job id; 'gonio jobs show 1 --db {db}' shows job 1" in err, err
+    # A rebuild of a job still running is refused, and does not first say it is rebuilding.
+    assert main(["jobs", "rebuild", "1", "--db", str(db)]) == 2
+    err = capsys.readouterr().err
+    assert "job 1 is running" in err and "rebuilding" not in err, err
+    # A rig config given as the store read "point --db at a new file", which lists nothing.
+    rig = tmp_path / "rig.toml"
+    rig.write_text('[rig]\nname = "sim"\n' * 200)
+    assert main(["jobs", "list", "--db", str(rig)]) == 2
+    err = capsys.readouterr().err
+    assert f"{rig} is not a usable gonio job store" in err, err
+    assert "DATA_DIR/gonio.sqlite, the one 'gonio scan' and the daemon print" in err, err

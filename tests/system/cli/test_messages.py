@@ -115,3 +115,30 @@ def test_a_taken_port_is_refused_before_anything_starts_saying_what_to_do(
     assert f"port {port} on 127.0.0.1 is in use by another program" in err, err
     assert "--port N" in err and "--port 0" in err, err
     assert "simulated rig" not in out, out  # nothing was started
+
+
+def test_an_output_that_cannot_be_written_is_refused_before_the_scan(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # `gonio scan -o` into a folder that could not be written measured the whole scan and only
+    # then failed to copy the result, with "No such file or directory; check that the
+    # directory exists" about a folder that existed, and no word that the result was kept.
+    from gonio.sim.rig import SimRigOptions, start_sim_rig
+
+    blocker = tmp_path / "a-file"
+    blocker.write_text("")
+    out = blocker / "felt.h5"
+    folder = tmp_path / "results"
+    folder.mkdir()
+    rig, data = tmp_path / "rig.toml", tmp_path / "data"
+    with start_sim_rig(SimRigOptions(time_scale=10.0, settle_s=0.0, config_path=rig)):
+        argv = ["scan", "--no-export-fits", "--rig", str(rig), "--rotations", "2",
+                "--accept-uncalibrated", "--no-progress", "--data-dir", str(data)]
+        assert main([*argv, "-o", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert f"-o {out}: cannot write into {blocker}" in err, err
+        assert "nothing was measured" in err, err
+        assert not data.exists()  # no job store, no job
+        assert main([*argv, "-o", str(folder)]) == 2
+        assert f"-o {folder} is a folder" in capsys.readouterr().err
+    assert list(folder.iterdir()) == []  # the probe left nothing behind

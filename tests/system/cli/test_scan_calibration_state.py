@@ -48,6 +48,9 @@ def test_dry_run_warns_only_when_no_calibration_covers_the_plan(
     out = capsys.readouterr().out
     assert "warning: uncalibrated: no calibration is in effect" in out, out
     assert "sensor units, not 1/sr" in out
+    # ... and, on the command line, which command calibrates (it named none).
+    assert f"here: with the white reference on the stage, 'gonio scan --rig {RIG} " \
+           "--white-reference 0.99 -o white.h5'" in out, out
 
 
 def test_an_uncalibrated_scan_of_a_calibrated_rig_is_refused_unless_accepted(

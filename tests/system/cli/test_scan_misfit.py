@@ -50,3 +50,25 @@ def test_a_scan_of_a_material_outside_the_basis_says_why(
     job = store.get_job(2)  # job 1 is the simulated rig's white-reference calibration
     assert job.state.value == "completed" and job.summary is not None
     assert "cannot hold" in job.summary["basis_misfit"]
+
+
+def test_an_uncalibrated_scan_that_misses_the_basis_says_calibration_is_the_cause(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # A newcomer's first `gonio scan --rig rig.toml` on `gonio sim`, before any white
+    # reference: sensor units, each pair off 1/sr by its own factor, flagged BASIS MISFIT
+    # with "The material is unlike the training library" about the simulator's own
+    # brushed dielectric (calibrated, the same specimen reads 0.05 without a flag).
+    from gonio.sim.rig import SimRigOptions, start_sim_rig
+
+    rig, out = tmp_path / "rig.toml", tmp_path / "felt.h5"
+    with start_sim_rig(SimRigOptions(time_scale=10.0, settle_s=0.0, config_path=rig,
+                                     seed=1)):
+        code = main(["scan", "--no-export-fits", "--rig", str(rig), "--no-progress",
+                     "--data-dir", str(tmp_path / "data"), "-o", str(out)])
+    err = capsys.readouterr()
+    assert code == 0, err.err
+    assert "in sensor units (uncalibrated)" in err.out, err.out
+    assert "(BASIS MISFIT)" in err.out, err.out  # the premise: flagged
+    why = str(read_result(out).metrics["basis_misfit"])
+    assert "This scan is uncalibrated" in why and "--white-reference 0.99" in why, why
+    assert "This scan is uncalibrated" in err.err, err.err

@@ -5,6 +5,7 @@ person needs (which device, which address, what to check) sat only in the job st
 from __future__ import annotations
 
 import re
+import signal
 import socket
 import subprocess
 from pathlib import Path
@@ -43,11 +44,18 @@ def test_a_suspended_scan_prints_the_reason(tmp_path: Path) -> None:
             try:
                 wait_for(lambda: "suspended:" in err.read_text() or proc.poll() is not None,
                          what="the scan to say why it is suspended")
+                # What it said it does on Ctrl-C, it does: the job is left paused.
+                proc.send_signal(signal.SIGINT)
+                proc.wait(timeout=60)
             finally:
                 proc.kill()
                 proc.wait()
     out = err.read_text()
     assert f"job 1 suspended: L1: no Modbus TCP connection to 127.0.0.1:{closed}" in out, out
+    # It said what happens next: the scan then waited in silence, like a hang.
+    assert "the scan retries and goes on once it answers; Ctrl-C leaves the job paused, " \
+           "and the same command resumes it" in out, out
+    assert "job 1 interrupted: paused at its checkpoint" in out, out
     assert "check that the device is powered and the host/port in the rig config" in out, out
     # pymodbus' own lines add nothing to that reason ("Failed to connect [Errno 111] ...",
     # then "Repeating...." at every retry).

@@ -346,7 +346,32 @@ def test_wrong_address_in_the_map_is_a_permanent_fault(bench: Bench) -> None:
         with pytest.raises(DeviceFault, match="check this address") as info:
             await sensor.connect()
         assert not info.value.recoverable
+        assert "has no such register (Modbus exception 2" in str(info.value), info.value
         await sensor.close()
+
+    asyncio.run(run())
+
+
+def test_a_device_id_with_no_device_points_at_the_device_id_not_the_register_map(
+    bench: Bench
+) -> None:
+    # `gonio rig apply-design` on a `gonio sim` rig adds lights with the next free device ids,
+    # which the simulator does not have: the scan failed with "the device refused the request
+    # (ExceptionResponse(dev_id=8, function_code=129, exception_code=4)); check this address
+    # in the rig config's register map", whose register map was right.
+    modbus = bench.light.modbus.model_copy(update={"device_id": 9})
+    cfg = bench.light.model_copy(update={"modbus": modbus})
+
+    async def run() -> None:
+        light = ModbusLight(cfg)
+        with pytest.raises(DeviceFault) as info:
+            await light.connect()
+        await light.close()
+        text = str(info.value)
+        assert f"device_id 9 at 127.0.0.1:{bench.server.port}" in text, text
+        assert "modbus.device_id in the rig config" in text, text
+        assert "register map" not in text and "ExceptionResponse" not in text, text
+        assert not info.value.recoverable
 
     asyncio.run(run())
 

@@ -283,3 +283,14 @@ def test_a_move_from_rest_asks_no_position_of_its_own() -> None:
         assert sim.motion.position_deg() == pytest.approx(30.0, abs=1 / MPD)
         # After the stop the start position is asked before the move again.
         assert after_stop[:3] == ["warnings", "get pos", "move abs 30000"]
+
+
+def test_a_port_that_vanishes_mid_session_is_device_unavailable_not_a_traceback() -> None:
+    # `gonio stage --rig rig.toml move 400` while the `gonio sim` behind it was stopped: the
+    # pseudo-terminal went away under the open port, pyserial's flush raised termios.error
+    # (not an OSError) and the command ended in a 30-line traceback.
+    with rig("pty") as (sim, stage):
+        run(stage.connect)
+        sim.close()
+        with pytest.raises(DeviceUnavailable, match="check the cable"):
+            run(stage.position)

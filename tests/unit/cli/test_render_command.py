@@ -29,3 +29,33 @@ def test_cli_render_table_and_bad_inputs(tmp_path: Path, capsys: pytest.CaptureF
     bad = tmp_path / "bad.npz"
     bad.write_bytes(b"not a table")
     assert cli_main(["render", str(bad), "-o", str(out)]) == 2
+
+
+def test_files_that_are_not_results_are_named_for_what_they_are(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A newcomer's slips: a table exported as `-o felt.table` (no .npz), a rig config and an
+    empty HDF5 file given as results. They read "is not an HDF5 file or is damaged (Unable
+    to synchronously open file (file signature not found))" and "(format None)"."""
+    import h5py
+
+    table = bm.tabulate(bm.GGX(alpha_x=0.1, alpha_y=0.4, name="brushed"))
+    named = tmp_path / "felt.table"
+    table.save(tmp_path / "t.npz").rename(named)
+    out = tmp_path / "r.png"
+    assert cli_main(["render", str(named), "-o", str(out), "--size", "64"]) == 0  # drawn
+    capsys.readouterr()
+    toml = tmp_path / "rig.toml"
+    toml.write_text('[rig]\nname = "sim"\n')
+    assert cli_main(["render", str(toml), "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert f"{toml} is not an HDF5 file, so not a gonio result file" in err, err
+    assert "damaged" not in err and "signature" not in err and "'gonio scan -o'" in err, err
+    other = tmp_path / "other.h5"
+    h5py.File(other, "w").close()
+    for command in ("render", "colour", "export"):
+        argv = [command, str(other)] + (["-o", str(out)] if command == "render" else [])
+        assert cli_main(argv + (["-f", "gltf"] if command == "export" else [])) == 2
+        err = capsys.readouterr().err
+        assert f"{other} is an HDF5 file but not a gonio result file" in err, err
+        assert "None" not in err, err

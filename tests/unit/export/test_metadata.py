@@ -283,3 +283,31 @@ def test_the_table_export_says_the_reconstructions_own_warnings(
     assert meta["warnings"] == [bounds] == meta["reconstruction_warnings"]
     assert main(["export", str(path), "--format", "gltf", "-o", str(tmp_path / "x.gltf")]) == 0
     assert f"warning: {bounds}" in capsys.readouterr().out
+
+
+def test_an_uncalibrated_scan_is_exported_saying_its_values_are_sensor_units(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # A first scan before any white reference: its exports' colour_space said "each scaled to
+    # 1/sr by a white reference" and nothing printed or stored said the values were sensor
+    # units (the MaterialX base_color came out 1, 1, 1).
+    from gonio.export.metadata import UNCALIBRATED_COLOUR_STATEMENT, UNCALIBRATED_WARNING
+
+    none = json.dumps({"pairs": [], "source": "none"})
+    path = _result(tmp_path / "job-9.h5", "brushed-metal-003", "felt", simulated=False,
+                   calibration=none)
+    assert main(["export", str(path), "--format", "gltf", "-o", str(tmp_path / "x.gltf")]) == 0
+    assert f"warning: {UNCALIBRATED_WARNING}" in capsys.readouterr().out
+    extras = json.loads((tmp_path / "x.gltf").read_text())["asset"]["extras"]
+    assert extras["colour_space"] == UNCALIBRATED_COLOUR_STATEMENT
+    assert "1/sr by a white reference" not in extras["colour_space"]
+    assert extras["calibration"]["calibrated"] is False
+    assert extras["reconstruction_warnings"][0] == UNCALIBRATED_WARNING
+    out = tmp_path / "x.table.npz"  # the table too: imported, it would train the basis
+    assert main(["export", str(path), "--format", "table", "-o", str(out)]) == 0
+    with np.load(out) as z:
+        assert json.loads(str(z["provenance"]))["warnings"] == [UNCALIBRATED_WARNING]
+    # A calibrated result, and an older one that records no calibration, say nothing of it.
+    calibrated = export_provenance({}, {}, {"calibration": json.dumps(CAL)}, {})
+    older = export_provenance({}, {}, {}, {})
+    for meta in (calibrated, older):
+        assert meta["colour_space"] == COLOUR_STATEMENT and not meta["warnings"]

@@ -103,3 +103,28 @@ def test_readings_array_orders_subtracts_calibrates_and_marks_gaps() -> None:
     c = readings_array(readings, pairs, [1, 0], 2, cal)
     np.testing.assert_array_equal(c[0], [[14.5, 9.5], [4.5, 4.5]])
     np.testing.assert_array_equal(c[1, 0], [4.0, 5.0])  # uncalibrated pair: factor 1
+
+
+def test_a_scan_behind_a_queued_calibration_needs_no_acceptance(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # `gonio serve --sim --demo-scan` queues a calibration (job 1), then its scan: refused
+    # with "would be uncalibrated although the rig was calibrated" whenever a `gonio sim` rig
+    # of the same geometry had been calibrated in the user data folder, though the scan runs
+    # after the calibration and is finished with it.
+    import gonio.service
+
+    own = tmp_path / "own"
+    own.mkdir()
+    (own / "calibration.json").write_text("{}")  # the rig's own data directory calibrated
+    monkeypatch.setattr(gonio.service, "scan_data_dir", lambda cfg: own)
+    svc = _service(tmp_path)
+    plan = UniformPlan(rotations=3, exposure=FAST)
+    assert svc.uncalibrated_refusal(plan) is not None  # the premise: refused on its own
+    cal = svc.submit(JobRequest(plan=CalibrationPlan(reference_albedo=0.99, rotations=2,
+                                                     exposure=FAST), priority=1000))
+    assert svc.uncalibrated_refusal(plan) is None
+    svc.store.set_state(cal.id, JobState.RUNNING)
+    assert svc.uncalibrated_refusal(plan) is None
+    svc.store.set_state(cal.id, JobState.FAILED)  # a calibration that failed calibrates nothing
+    assert svc.uncalibrated_refusal(plan) is not None

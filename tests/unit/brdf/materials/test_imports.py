@@ -155,6 +155,15 @@ def test_import_refuses_bad_files_and_writes_nothing(tmp_path: Path, libdir: Pat
     bad.write_text("hello")
     assert main(["library", "import", str(good), str(bad)]) == 2
     assert "unknown kind of file" in capsys.readouterr().err
+    # A scan's result is not refused as an "unknown kind of file" (.h5): the message gives
+    # the export that makes a table of it.
+    result = tmp_path / "felt.h5"
+    result.write_bytes(b"")
+    assert main(["library", "import", str(good), str(result)]) == 2
+    err = capsys.readouterr().err
+    assert f"'gonio export {result} --format table' writes {tmp_path / 'felt.table.npz'}" \
+        in err, err
+    assert "unknown kind of file" not in err, err
     assert measured.user_table_files() == []
     with pytest.raises(TableImportError, match="no such file"):
         read_any(tmp_path / "missing.bsdf")
