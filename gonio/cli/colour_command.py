@@ -191,8 +191,10 @@ def _standard(against: str, folder: Path | None, conditions: Any, instruments: l
             colour_warnings(std, "standard"))
 
 
-def _table(report: Any, no_colour: str | None = None) -> str:
-    """The colour table as a person reads it; ``no_colour`` says why it has no CIELAB."""
+def _table(report: Any, no_colour: str | None = None, in_reflectance: bool = True) -> str:
+    """The colour table as a person reads it; ``no_colour`` says why it has no CIELAB;
+    ``in_reflectance`` False: the values are pi times sensor units (no white reference was in
+    effect), not reflectance factors, and the table says so."""
     # An uncalibrated report names no illuminant or observer: its values depend on neither.
     lines = [f"{report.name}: {report.space}, {report.conditions.label} ({report.conversion})"
              if report.calibrated else f"{report.name}: {report.space}"]
@@ -202,7 +204,9 @@ def _table(report: Any, no_colour: str | None = None) -> str:
         for g, r in zip(report.geometries, report.reflectance, strict=True):
             lines.append(f"{g.instrument:<10}  {g.name:<8}  {g.azimuth_deg:>7g}  "
                          + "  ".join(f"{v:8.4f}" for v in r))
-        lines.append("reflectance factors per channel (pi f); " + (
+        units = ("reflectance factors per channel (pi f)" if in_reflectance else
+                 "pi times the sensor units per channel (uncalibrated: not reflectance factors)")
+        lines.append(f"{units}; " + (
             no_colour or "no CIELAB without spectral bands or a chart colour calibration "
             "(docs/colour.md)"))
         return "\n".join(lines)
@@ -238,6 +242,7 @@ def run(args: argparse.Namespace) -> int:
     from gonio.result_colour import (
         colour_warnings,
         difference_csv,
+        in_reflectance,
         near_specular_note,
         no_colour_reason,
         result_report,
@@ -288,7 +293,7 @@ def run(args: argparse.Namespace) -> int:
     elif str(args.csv) == "-":
         sys.stdout.write(text_csv)
     else:
-        print(_table(report, no_colour))
+        print(_table(report, no_colour, in_reflectance(res.samples.calibration)))
         if diff is not None:
             print()
             print(_diff_table(diff))

@@ -154,7 +154,15 @@ def test_a_result_in_sensor_units_says_why_it_has_no_colour_difference(
     assert out["colour"]["space"] == "uncalibrated sensor RGB"
     assert out["no_colour"].startswith("units.h5 is uncalibrated"), out
     assert main(["colour", str(files["units"])]) == 0
-    assert "units.h5 is uncalibrated" in capsys.readouterr().out
+    text = capsys.readouterr().out
+    assert "units.h5 is uncalibrated" in text
+    # Its values are pi times sensor units: the table must not call them reflectance factors
+    # (docs/colour.md), as it did.
+    assert "pi times the sensor units per channel (uncalibrated: not reflectance factors)" \
+        in text and "reflectance factors per channel (pi f)" not in text, text
+    # A result in 1/sr without colour keeps the name (its values are reflectance factors).
+    assert main(["colour", str(files["raw"])]) == 0
+    assert "reflectance factors per channel (pi f)" in capsys.readouterr().out
 
 
 def test_against_a_result_and_a_stored_csv(files: dict[str, Path], tmp_path: Path,
