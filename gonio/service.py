@@ -450,11 +450,14 @@ class GonioService:
         self.worker.wake()
         return JobInfo.from_row(row)
 
-    def uncalibrated_refusal(self, plan: AnyPlan) -> str | None:
+    def uncalibrated_refusal(self, plan: AnyPlan, priority: int = 0) -> str | None:
         """Why a scan of ``plan`` needs the user's acceptance before it is queued
         (:func:`gonio.calibration.uncalibrated_refusal`: most likely this daemon runs on
         another data directory than the rig's own, which holds its calibration), None when
-        it does not (a calibration job, a plan that cannot run: :meth:`submit` says why)."""
+        it does not (a calibration job, a plan that cannot run: :meth:`submit` says why; a
+        calibration job that will run before it: one under way or paused, or one queued at
+        ``priority`` or above, the scan's own, since the queue takes the higher priority first
+        and the earlier job among equals)."""
         if plan.kind == "calibration":
             return None
         try:
@@ -469,11 +472,13 @@ class GonioService:
         if why is None:
             return None
         if any(r.kind == "calibration" and r.state not in FINISHED_STATES
+               and (r.state != JobState.QUEUED or r.priority >= priority)
                for r in self.store.list_jobs()):
-            # A calibration job is queued or under way here (`gonio serve --sim` queues one at
-            # start): jobs run in order, so the scan is finished with its calibration. Its
-            # refusal stopped `gonio serve --sim --demo-scan` whenever a `gonio sim` rig of
-            # the same geometry had been calibrated in the user data folder.
+            # A calibration job will run before this scan (`gonio serve --sim` queues one at
+            # start), so the scan is finished with its calibration. Its refusal stopped `gonio
+            # serve --sim --demo-scan` whenever a `gonio sim` rig of the same geometry had been
+            # calibrated in the user data folder. A scan submitted at a higher priority than
+            # a queued calibration would run first, uncalibrated: that one is still asked.
             return None
         return (f"{why}. Restart the daemon on that data directory (or without --data-dir), "
                 "run a calibration job, or send accept_uncalibrated=true to measure in sensor "

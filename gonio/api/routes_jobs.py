@@ -68,7 +68,7 @@ def create_job(
         "(otherwise 409: most likely the daemon runs on another data directory)"),
 ) -> JobInfo:
     if not accept_uncalibrated:
-        refusal = service.uncalibrated_refusal(request.plan)
+        refusal = service.uncalibrated_refusal(request.plan, request.priority)
         if refusal is not None:
             raise Conflict(refusal)
     info = service.submit(request)

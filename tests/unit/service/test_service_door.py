@@ -128,3 +128,10 @@ def test_a_scan_behind_a_queued_calibration_needs_no_acceptance(
     assert svc.uncalibrated_refusal(plan) is None
     svc.store.set_state(cal.id, JobState.FAILED)  # a calibration that failed calibrates nothing
     assert svc.uncalibrated_refusal(plan) is not None
+    # Queued, a calibration lifts the refusal only for scans the queue takes after it: at its
+    # priority or below (the queue takes the higher priority first, the earlier among equals).
+    svc.submit(JobRequest(plan=CalibrationPlan(reference_albedo=0.99, rotations=2,
+                                               exposure=FAST), priority=5))
+    assert svc.uncalibrated_refusal(plan, priority=5) is None
+    assert svc.uncalibrated_refusal(plan, priority=0) is None
+    assert svc.uncalibrated_refusal(plan, priority=6) is not None  # it would run first
