@@ -64,7 +64,7 @@ import scipy.linalg
 import scipy.optimize
 from numpy.typing import ArrayLike, NDArray
 
-from gonio.brdf.highlightread import highlight_read
+from gonio.brdf.highlightread import HighlightRead, highlight_read
 from gonio.brdf.reconstruction.basis import (
     Basis,
     BasisError,
@@ -217,6 +217,11 @@ class Reconstruction:
         dimensionless; NaN without a positive reading). On the joint fit
         ``predicted_log_rmse`` carries a term that grows with its logarithm
         (:func:`gonio.brdf.reconstruction.selfcheck.highlight_term`, docs/science.md 7.1.1).
+    highlight : HighlightRead or None
+        The whole :func:`gonio.brdf.highlightread.highlight_read` of ``table`` and the
+        readings (where the table peaks, how near the nearest reading comes, ``excess``):
+        ``gonio/finishing.py`` reports it as it is rather than computing it again. None on
+        a Reconstruction made by hand.
     """
 
     table: BRDFTable
@@ -238,6 +243,7 @@ class Reconstruction:
     predicted_log_rmse_upper: float = float("nan")
     peak_excess_log_rmse: float = float("nan")
     highlight_excess: float = float("nan")
+    highlight: HighlightRead | None = None
 
     @property
     def misfit_warning(self) -> str | None:
@@ -886,6 +892,7 @@ def _reconstruct(
         predicted_log_rmse_upper=upper,
         peak_excess_log_rmse=float(excess),
         highlight_excess=float(highlight.excess),
+        highlight=highlight,
     )
 
 

@@ -138,8 +138,12 @@ def test_reconstruction_reports_the_witnesses_it_predicts_from() -> None:
     # The coverage witness of the final mapping is the same posterior's.
     assert rec.uncovered_share == pytest.approx(post.uncovered_share(), rel=1e-9)
     # With the highlight term of the table's own highlight_excess (docs/science.md 7.1.1).
-    assert rec.highlight_excess == pytest.approx(
-        highlight_read(rec.table, cells, ph, alpha, np.maximum(vals, 0.0)).excess, rel=1e-12)
+    read = highlight_read(rec.table, cells, ph, alpha, np.maximum(vals, 0.0))
+    assert rec.highlight_excess == pytest.approx(read.excess, rel=1e-12)
+    # The whole read travels with the result (finishing reports it rather than reading again).
+    assert rec.highlight is not None
+    assert rec.highlight.as_metrics() == pytest.approx(read.as_metrics(), rel=1e-12,
+                                                       nan_ok=True)
     assert rec.predicted_log_rmse == pytest.approx(final_log_rmse(
         rec.predicted_log_rmse_unwidened, rec.uncovered_share, rec.misfit,
         highlight_excess=rec.highlight_excess), rel=1e-9)
