@@ -306,9 +306,11 @@ async def colour(
         out["warnings"] = warnings
     if no_colour is not None:
         out["no_colour"] = no_colour
-    note = near_specular_note(report)
-    if note is not None:
-        out["notes"] = [note]
+    # Which near-specular geometries no pair read; which instruments' geometries were compared
+    # by angle (an MA68 standard against an MA98 report).
+    notes = [n for n in (near_specular_note(report), diff and diff.note) if n]
+    if notes:
+        out["notes"] = notes
     if diff is not None:
         out["difference"] = {"against": standard, **diff.as_dict()}
     return out

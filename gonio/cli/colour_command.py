@@ -275,7 +275,7 @@ def run(args: argparse.Namespace) -> int:
     for warning in warnings:
         print(f"warning: {warning}", file=sys.stderr)
     # Which near-specular geometries no pair read (the CSV's source column says it per row).
-    notes = [n for n in (near_specular_note(report),) if n is not None]
+    notes = [n for n in (near_specular_note(report), diff and diff.note) if n]
     for note in notes:
         print(f"note: {note}", file=sys.stderr)
     text_csv = difference_csv(diff, warnings) if diff is not None else report.csv(warnings)

@@ -194,7 +194,11 @@ async function refresh() {
     if (lab) cell(tr, fmt(r.h_deg, 0));
     else for (const c of rep.channels.slice(0, 6)) cell(tr, fmt(r[`R_${c}`], 3));
     cell(tr, measured[i] ? "pair" : "table");
-    if (diff) cell(tr, fmt(diff.rows[i]?.dE00));
+    // The difference's rows are the geometries both reports hold, not every row shown: each
+    // is found by its geometry (a standard without 45as-15 must not shift the column).
+    if (diff) cell(tr, fmt(diff.rows.find((d) => d.instrument === r.instrument &&
+      d.incidence_deg === r.incidence_deg && d.aspecular_deg === r.aspecular_deg &&
+      d.azimuth_deg === r.azimuth_deg)?.dE00));
     return tr;
   });
   $("#colour-table tbody").replaceChildren(...rows);

@@ -423,8 +423,13 @@ class ColourDifference:
     Attributes
     ----------
     geometries : tuple of Geometry, length G
+        The sample's geometries compared, in the sample report's order.
     sample, standard : (G, 3) CIELAB
     de00 : (G,) array
+    standard_instruments : tuple of str, length G
+        The instrument of the standard's geometry each row was compared with: the sample's
+        own, or another whose geometry has the same angles (:func:`compare`). Empty: the
+        sample's on every row.
     """
 
     sample_name: str
@@ -434,13 +439,30 @@ class ColourDifference:
     sample: FloatArray
     standard: FloatArray
     de00: FloatArray
+    standard_instruments: tuple[str, ...] = ()
+
+    @property
+    def note(self) -> str | None:
+        """What a reader must know when the two were read at other instruments' geometries
+        of the same angles (None when every row compares an instrument with itself)."""
+        pairs = dict.fromkeys(
+            (g.instrument, s) for g, s in zip(self.geometries, self.standard_instruments,
+                                              strict=True) if s != g.instrument)
+        if not pairs:
+            return None
+        which = ", ".join(f"the sample's {a} with the standard's {b}" for a, b in pairs)
+        return (f"compared at the geometries of the same incidence, aspecular angle and "
+                f"azimuth: {which}; a geometry is the same light and sensor direction "
+                f"whichever instrument names it")
 
     def rows(self) -> list[dict[str, Any]]:
         out = []
+        theirs = self.standard_instruments or tuple(g.instrument for g in self.geometries)
         for k, g in enumerate(self.geometries):
             d = self.sample[k] - self.standard[k]
             out.append({
-                "instrument": g.instrument, "incidence_deg": g.incidence_deg,
+                "instrument": g.instrument, "standard_instrument": theirs[k],
+                "incidence_deg": g.incidence_deg,
                 "aspecular_deg": g.aspecular_deg, "azimuth_deg": g.azimuth_deg,
                 "dL": float(d[0]), "da": float(d[1]), "db": float(d[2]),
                 "dE00": float(self.de00[k]),
@@ -448,13 +470,28 @@ class ColourDifference:
         return out
 
     def as_dict(self) -> dict[str, Any]:
-        return {"sample": self.sample_name, "standard": self.standard_name,
-                "conditions": self.conditions.as_dict(), "rows": self.rows(),
-                "max_dE00": float(self.de00.max()), "mean_dE00": float(self.de00.mean())}
+        out = {"sample": self.sample_name, "standard": self.standard_name,
+               "conditions": self.conditions.as_dict(), "rows": self.rows(),
+               "max_dE00": float(self.de00.max()), "mean_dE00": float(self.de00.mean())}
+        if self.note is not None:
+            out["note"] = self.note
+        return out
+
+
+def _angles(g: Geometry) -> tuple[float, float, float]:
+    """A geometry's light and sensor directions as a key: incidence, aspecular, azimuth
+    (degrees; azimuth modulo 360, rounded so that -90 and 270 meet)."""
+    return (round(g.incidence_deg, 6), round(g.aspecular_deg, 6),
+            round(g.azimuth_deg % 360.0, 6) % 360.0)
 
 
 def compare(sample: ColourReport, standard: ColourReport) -> ColourDifference:
     """CIEDE2000 of ``sample`` against ``standard`` at the geometries both report.
+
+    A geometry of the sample is compared with the standard's of the same instrument and angles;
+    failing that, with one of another instrument at the same incidence, aspecular angle and
+    azimuth (an MA68 standard's 45as15 with an MA98 sample's: the same light and sensor
+    directions), each such set of angles once. The result's ``note`` says when that happened.
 
     Raises
     ------
@@ -474,12 +511,34 @@ def compare(sample: ColourReport, standard: ColourReport) -> ColourDifference:
             "compare colours under the same illuminant and observer"
         )
     assert sample.lab is not None and standard.lab is not None
-    index = {g: k for k, g in enumerate(standard.geometries)}
-    shared = [(k, index[g]) for k, g in enumerate(sample.geometries) if g in index]
+    exact = {g: j for j, g in enumerate(standard.geometries)}
+    by_angles: dict[tuple[float, float, float], int] = {}
+    for j, g in enumerate(standard.geometries):
+        by_angles.setdefault(_angles(g), j)
+    shared = {k: exact[g] for k, g in enumerate(sample.geometries) if g in exact}
+    done = {_angles(sample.geometries[k]) for k in shared}
+    # The rest by angle alone, each set of angles once: a sample reported at MA98's and
+    # BYK-mac's geometries holds 45as15 twice, and one comparison of it is enough.
+    for k, g in enumerate(sample.geometries):
+        key = _angles(g)
+        if k not in shared and key in by_angles and key not in done:
+            shared[k] = by_angles[key]
+            done.add(key)
     if not shared:
-        raise ColourError("the two reports share no geometry; use the same instruments and "
-                          "azimuths for both")
-    ks, js = (np.array(x) for x in zip(*shared, strict=True))
+        raise ColourError(
+            f"the two reports share no geometry: the sample holds "
+            f"{_which(sample.geometries)}, the standard {_which(standard.geometries)}; "
+            f"report the sample with the standard's instrument and azimuth "
+            f"(gonio colour --instrument NAME --azimuth DEG)")
+    ks = np.array(sorted(shared))
+    js = np.array([shared[k] for k in ks])
     a, b = sample.lab[ks], standard.lab[js]
     return ColourDifference(sample.name, standard.name, sample.conditions,
-                            tuple(sample.geometries[k] for k in ks), a, b, delta_e00(a, b))
+                            tuple(sample.geometries[k] for k in ks), a, b, delta_e00(a, b),
+                            tuple(standard.geometries[j].instrument for j in js))
+
+
+def _which(geos: Sequence[Geometry]) -> str:
+    """``"MA68 at azimuth 30 deg"``-style summary of a report's geometries."""
+    parts = dict.fromkeys(f"{g.instrument} at azimuth {g.azimuth_deg:g} deg" for g in geos)
+    return ", ".join(parts) or "no geometry"

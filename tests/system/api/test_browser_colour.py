@@ -338,3 +338,49 @@ def test_a_stored_standard_is_deleted_from_the_page_after_asking(
         .first_selected_option.get_attribute("value") == ""
     assert not browser.find_element(By.ID, "colour-delete-standard").is_enabled()
     assert not _severe(browser)
+
+
+def test_a_standard_of_another_instrument_is_compared_at_its_angles_row_by_row(
+        spectral_daemon: Daemon, spectral_jobs: list[int], browser: Any) -> None:  # noqa: F811
+    """A standard measured at MA68's five geometries against a result shown at MA98's eleven:
+    the five shared angles get their ΔE00 on their own rows (the column was filled by
+    position, which put 45as15's difference on 45as-15's row), the other six none, and the
+    caption says the instruments differ."""
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support.ui import Select
+
+    d, ids = spectral_daemon, spectral_jobs
+    with d.client() as c:
+        table = c.get(f"/api/v1/jobs/{ids[0]}/colour", params={"instrument": "MA68",
+                                                              "format": "csv"}).text
+        put = c.put("/api/v1/colour-standards/ma68 master", content=table,
+                    headers={"Content-Type": "text/csv"})
+        assert put.status_code == 200, put.text
+        body = c.get(f"/api/v1/jobs/{ids[1]}/colour",
+                     params={"instrument": "MA98", "against": "ma68 master"}).json()
+    # What the API says, from the instruments' published angles: MA68's five are MA98's
+    # 45 degree geometries from 15 to 110 aspecular.
+    want = {f"{r['incidence_deg']:g}as{r['aspecular_deg']:g}": r["dE00"]
+            for r in body["difference"]["rows"]}
+    assert sorted(want) == sorted(["45as15", "45as25", "45as45", "45as75", "45as110"])
+    assert any("MA68" in n for n in body["notes"])
+    wait = open_live(browser, d, 240)
+    click_when_steady(wait, f'#jobs tr[data-id="{ids[1]}"]')
+    Select(browser.find_element(By.ID, "colour-instrument")).select_by_value("MA98")
+    wait.until(lambda b: "ma68 master" in [o.get_attribute("value") for o in b.find_elements(
+        By.CSS_SELECTOR, "#colour-standard option")])
+    Select(browser.find_element(By.ID, "colour-standard")).select_by_value("ma68 master")
+    wait.until(lambda b: "against standard ma68 master" in
+               b.find_element(By.ID, "colour-caption").text)
+    shown = {}
+    for tr in browser.find_elements(By.CSS_SELECTOR, "#colour-table tbody tr"):
+        cells = [td.text for td in tr.find_elements(By.TAG_NAME, "td")]
+        shown[cells[0]] = cells[-1]
+    assert len(shown) == 11
+    for name, cell in shown.items():
+        if name in want:
+            assert float(cell) == pytest.approx(want[name], abs=0.006), name
+        else:
+            assert cell == "–", name
+    assert "MA68" in browser.find_element(By.ID, "colour-caption").text
+    assert not _severe(browser)

@@ -181,6 +181,19 @@ def test_against_a_result_and_a_stored_csv(files: dict[str, Path], tmp_path: Pat
     assert main(["colour", str(files["cal"]), "--against", str(std), "--csv", "-"]) == 0
     rows = list(csv.DictReader(io.StringIO(capsys.readouterr().out)))
     assert max(float(r["dE00"]) for r in rows) < 1e-3
+    # A standard written at MA68's geometries against the default report (MA98, BYK-mac): met
+    # at MA68's five angles, each once, and the note says the instruments differ.
+    ma68 = tmp_path / "ma68.csv"
+    assert main(["colour", str(files["cal"]), "--instrument", "MA68", "--csv", str(ma68)]) == 0
+    capsys.readouterr()
+    assert main(["colour", str(files["cal2"]), "--against", str(ma68), "--csv", "-"]) == 0
+    out = capsys.readouterr()
+    rows = list(csv.DictReader(io.StringIO(out.out)))
+    assert [(r["incidence_deg"], r["aspecular_deg"]) for r in rows] == [
+        ("45", "15"), ("45", "25"), ("45", "45"), ("45", "75"), ("45", "110")]
+    assert {r["standard_instrument"] for r in rows} == {"MA68"}
+    assert float(rows[0]["dE00"]) == pytest.approx(expected, abs=1e-3)
+    assert "note: compared at the geometries of the same incidence" in out.err
 
 
 def test_against_takes_a_stored_standard_by_name_as_the_page_does(

@@ -221,3 +221,34 @@ def test_log_lookup_is_exact_for_a_gaussian_lobe_through_the_pole() -> None:
     assert got == pytest.approx(exact, rel=1e-6, abs=1e-9)
     linear = log_lookup_linear(t, wi, wo)[:, 0]
     assert abs(linear[1] / exact[1] - 1) > 0.05  # the straight line in log misses the curvature
+
+
+def test_compare_across_instruments_meets_at_the_same_angles() -> None:
+    # An MA68 standard against an MA98 report: MA68's five geometries are MA98's 45as15 to
+    # 45as110 (the instruments' published angles, gonio.brdf.colour.instruments), so those
+    # five are compared, in the sample's order, and the note names both instruments.
+    sample = colour_report(spectral_table(RED, gloss=0.3), BANDS, instruments=["MA98"])
+    standard = colour_report(spectral_table(RED * 0.9, gloss=0.3), BANDS, instruments=["MA68"])
+    d = compare(sample, standard)
+    assert [g.name for g in d.geometries] == ["45as15", "45as25", "45as45", "45as75", "45as110"]
+    assert sample.lab is not None and standard.lab is not None
+    assert d.de00 == pytest.approx(colour.delta_E(sample.lab[1:6], standard.lab, method="CIE 2000"))
+    rows = d.as_dict()["rows"]
+    assert {(r["instrument"], r["standard_instrument"]) for r in rows} == {("MA98", "MA68")}
+    assert d.note is not None and "MA98" in d.note and "MA68" in d.note
+    assert d.as_dict()["note"] == d.note
+    # The default report (MA98 and BYK-mac) holds 45as15 twice: each angle is compared once.
+    both = colour_report(spectral_table(RED, gloss=0.3), BANDS)
+    assert [g.name for g in compare(both, standard).geometries] == [g.name for g in d.geometries]
+    # Same instrument: as before, no note, and each row is compared with its own instrument.
+    same = compare(sample, sample)
+    assert same.note is None and "note" not in same.as_dict()
+    assert all(r["standard_instrument"] == "MA98" for r in same.as_dict()["rows"])
+
+
+def test_compare_with_no_shared_geometry_says_what_each_holds() -> None:
+    sample = colour_report(spectral_table(RED), BANDS, instruments=["MA98"])
+    turned = colour_report(spectral_table(RED), BANDS, instruments=["MA68"], azimuths_deg=[30])
+    with pytest.raises(ColourError, match=r"MA98 at azimuth 0 deg.*MA68 at azimuth 30 deg"
+                                          r".*--instrument NAME --azimuth DEG"):
+        compare(sample, turned)
