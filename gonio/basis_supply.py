@@ -84,6 +84,7 @@ class BasisSupply:
         self._file_symmetry: tuple[_FileVersion, BasisSymmetry] | None = None
         self._arc_noted: set[int] = set()
         self._prewarm: threading.Thread | None = None
+        self._asym_prewarm: threading.Thread | None = None
 
     @property
     def is_default(self) -> bool:
@@ -154,6 +155,40 @@ class BasisSupply:
             basis = default_basis(asymmetric=True)
             self._asym, self._asym_version = basis, _version(path)
             return basis
+
+    def prewarm_asymmetric(self) -> bool:
+        """Start getting :meth:`asymmetric` in a thread of its own, unless one was started or
+        this supply has none: when an auto-arc scan's test calls its specimen asymmetric, the
+        build (minutes on a new install) runs while the stage reads the other half turn, and
+        finishing's own :meth:`asymmetric` waits only for what is left of it. A failure is
+        logged; finishing's call tries again and reports it with the job.
+
+        Returns
+        -------
+        bool
+            Whether a thread was started by this call.
+        """
+        # The state lock, not the basis' own: that one is held for the whole build.
+        with self._state_lock:
+            if not self.has_asymmetric or self._asym_prewarm is not None:
+                return False
+
+            def build() -> None:
+                try:
+                    self.asymmetric()
+                except Exception:
+                    log.exception("building the basis for specimens without twofold symmetry "
+                                  "failed")
+
+            self._asym_prewarm = threading.Thread(target=build, daemon=True,
+                                                  name="gonio-asymmetric-basis")
+        self._asym_prewarm.start()
+        return True
+
+    @property
+    def asymmetric_prewarming(self) -> bool:
+        """Whether :meth:`prewarm_asymmetric` has started a build in this process."""
+        return self._asym_prewarm is not None
 
     def asymmetric_wait_report(self, waited_s: float) -> tuple[str, float | None]:
         """What a job waiting ``waited_s`` seconds for the asymmetric basis is told, in words,

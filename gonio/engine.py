@@ -50,10 +50,12 @@ import asyncio
 import bisect
 import contextlib
 import functools
+import logging
 import threading
 import time
 from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
@@ -72,6 +74,8 @@ from gonio.plans.rounds import Refiner, rounds_for
 from gonio.plans.route import order_for_travel
 from gonio.rigdescription import RigDescription
 from gonio.store import JobStore, ReadingRow, StepRow
+
+log = logging.getLogger("gonio.engine")
 
 
 class SensorSaturated(hal.DeviceFault):
@@ -134,6 +138,10 @@ class ScanEngine:
         it first, under the plan's fault policy like any other device call: a device silent
         at connection suspends the job and is waited for (``wait_for_device_s``), and an
         abort or halt requested meanwhile ends the job before anything moves.
+    on_arc : optional, called with an auto-arc job's ``arc_test`` data when its test chooses
+        the arc (or, for a resumed job, when the choice is read back), before the next round
+        moves: the worker starts getting the basis that verdict reconstructs with
+        (:meth:`gonio.basis_supply.BasisSupply.prewarm_asymmetric`). Must not block.
     """
 
     def __init__(
@@ -145,12 +153,14 @@ class ScanEngine:
         rig_desc: RigDescription,
         refiner: Refiner | None = None,
         connect: Callable[[], Awaitable[hal.Rig]] | None = None,
+        on_arc: Callable[[dict[str, Any]], None] | None = None,
     ):
         if rig is None and connect is None:
             raise ValueError("ScanEngine needs a connected rig or a way to connect one")
         self._rig = rig
         self._connect = connect
         self.refiner = refiner
+        self._on_arc = on_arc
         self.store = store
         self.job_id = job_id
         self.checked = check_plan(plan, rig_desc)
@@ -412,6 +422,7 @@ class ScanEngine:
             chosen = self.store.last_event(self.job_id, ARC_TEST_EVENT)
             if chosen is not None:
                 self.rounds = rounds_for(self.checked, self.refiner, chosen.data)
+                self._arc_chosen(chosen.data)
         self._load_dark()
         # An ETA from the first move on (the rig's physical time per angle, as after the first
         # angle), not none until the first checkpoint: the page showed no time for a whole
@@ -927,6 +938,8 @@ class ScanEngine:
         nxt = await self.rounds.next_round(angles, values, len(steps), rnd)
         for type_, data in nxt.events:
             self.store.append_event(self.job_id, type_, data)
+            if type_ == ARC_TEST_EVENT:
+                self._arc_chosen(data)
         if not nxt.angles_deg:
             return False
         here = await self._stage_position()
@@ -938,6 +951,16 @@ class ScanEngine:
             raise JobFailed(f"round {rnd + 1} cannot be measured: {exc}") from None
         self._add_steps(max(s.angle_index for s in steps) + 1, rnd + 1, route)
         return True
+
+    def _arc_chosen(self, test: dict[str, Any]) -> None:
+        """Tell ``on_arc`` the verdict; its failure costs the scan nothing (finishing gets
+        the basis itself), so it is logged, not raised."""
+        if self._on_arc is None:
+            return
+        try:
+            self._on_arc(test)
+        except Exception:
+            log.exception("job %d: acting on the arc test's verdict failed", self.job_id)
 
     def measured_values(self, steps: Sequence[StepRow]) -> tuple[list[float], np.ndarray]:
         """Specimen angles (deg) and dark-subtracted values (n_pairs, r, C) of done steps,

@@ -494,8 +494,17 @@ def _basis_for_test(how: Finishing, job_id: int, plan: AnyPlan, basis: Basis,
     seconds = time.perf_counter() - t0
     if asym is None:  # has_asymmetric said otherwise; kept for the type checker
         return basis, BasisSwitch("default")
-    made = (f"built for this job in {seconds:.0f} s, once per install" if build
-            else "loaded")
+    # Started when the test gave its verdict (the worker's prewarm): built mostly while the
+    # stage read the other half turn.
+    early = how.store.last_event(job_id, "basis_prewarm")
+    if early is not None and early.data.get("basis") == "asymmetric":
+        made = ("built for this job while the stage read its other half turn, once per "
+                "install" + (f"; finishing waited {seconds:.0f} s for the rest" if build
+                             else ""))
+    elif build:
+        made = f"built for this job in {seconds:.0f} s, once per install"
+    else:
+        made = "loaded"
     return asym, BasisSwitch(
         "asymmetric", "the twofold symmetry test found the specimen NOT twofold symmetric, so "
         "it was reconstructed with the basis for such specimens (trained on the library's "

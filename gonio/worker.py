@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import logging
 import threading
 import time
@@ -648,8 +649,29 @@ class Worker:
                                                  or self.gate() is not None):
                 return row.state
             self._engine = ScanEngine(None, self.store, job.id, plan, self.desc,
-                                      refiner=refiner, connect=self.get_rig)
+                                      refiner=refiner, connect=self.get_rig,
+                                      on_arc=functools.partial(self._arc_chosen, job.id))
             return self._engine
+
+    def _arc_chosen(self, job_id: int, test: dict[str, Any]) -> None:
+        """An auto-arc job's verdict (the engine's ``on_arc``): a specimen called asymmetric,
+        scanned on over a full turn, is reconstructed at finishing with the basis for such
+        specimens (gonio.finishing, docs/science.md 7.4). When that basis must be built
+        (minutes, the first time on an install), the build starts now, while the stage reads
+        the other half turn, and the job's events say so; finishing waits only for the rest."""
+        asymmetric = test.get("statistic") is not None and not test.get("symmetric", True)
+        if not asymmetric or float(test.get("arc_deg", 180.0)) < 360.0:
+            return
+        supply = self.basis
+        if not supply.asymmetric_build_needed() or not supply.prewarm_asymmetric():
+            return
+        self.store.append_event(job_id, "basis_prewarm", {
+            "basis": "asymmetric",
+            "message": "the specimen is not twofold symmetric: building the reconstruction "
+                       "basis for such specimens while the other half turn is read (first "
+                       "such scan on this install; later scans reuse it)"})
+        log.info("job %d: building the basis for specimens without twofold symmetry while "
+                 "the scan goes on", job_id)
 
     # ------------------------------------------------------------------ finishing
     def _finishing(self, basis: Basis | None = None) -> Finishing:

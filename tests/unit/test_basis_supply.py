@@ -178,3 +178,29 @@ def test_the_default_asymmetric_basis_is_its_cache_file_and_its_build_is_announc
     assert got is not None and got.K == ODD.K and not got.half_turn_periodic
     assert supply.asymmetric() is got  # kept while the file is unchanged
     assert not default_basis_path().exists()  # the default basis was not made to get it
+
+
+def test_the_asymmetric_basis_is_prewarmed_once_in_a_thread_of_its_own() -> None:
+    release = threading.Event()
+    calls: list[str] = []
+
+    def build() -> Basis:
+        calls.append(threading.current_thread().name)
+        release.wait(30)  # a build of minutes, held until the test lets it end
+        return ODD
+
+    supply = BasisSupply(lambda: EVEN, asymmetric_provider=build)
+    assert not supply.asymmetric_prewarming
+    assert supply.prewarm_asymmetric()
+    assert not supply.prewarm_asymmetric()  # one build, however often a verdict asks
+    assert supply.asymmetric_prewarming
+    # Finishing's own call waits for the build in progress rather than starting another.
+    got: list[Basis | None] = []
+    waiter = threading.Thread(target=lambda: got.append(supply.asymmetric()))
+    waiter.start()
+    release.set()
+    waiter.join(30)
+    assert got == [ODD] and calls == ["gonio-asymmetric-basis"]
+    # A supply with no such basis starts nothing.
+    plain = BasisSupply(lambda: EVEN)
+    assert not plain.prewarm_asymmetric() and not plain.asymmetric_prewarming

@@ -96,3 +96,62 @@ def test_a_tilted_facet_specimen_goes_to_a_full_turn(
     assert "basis: the twofold symmetry test found the specimen NOT twofold symmetric" in text
     (switch,) = [e for e in store.events_after(0, job_id=job.id) if e.type == "basis_switch"]
     assert switch.data["basis"] == "asymmetric"
+
+
+def test_the_asymmetric_basis_is_built_while_the_other_half_turn_is_read(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str],
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """On an install without the basis for asymmetric specimens, its build (minutes) began at
+    finishing, after the last reading. It now begins when the test calls the specimen
+    asymmetric, in a thread of its own, while the stage reads the fill round; finishing waits
+    for what is left. The build here is a stand-in (the real one takes minutes) that saves a
+    small basis with an odd harmonic where the real one would be cached."""
+    import sqlite3
+    import threading
+
+    from gonio.brdf.reconstruction import basis as basis_module
+
+    spec = next(s for s in library.library_specs(asymmetric=True)
+                if s.name == "tilted-facet-002")
+    table = tmp_path / "tilted-facet.npz"
+    bm.tabulate(spec.model, np.float32).save(table)
+    monkeypatch.setenv("GONIO_CACHE_DIR", str(tmp_path / "cache"))
+    db = tmp_path / "data" / "gonio.sqlite"
+    odd = _with_prior(random_basis(7, seed=2), {0: 1.0, 1: 0.3, 2: 0.5})
+    real = basis_module.default_basis
+    builds: list[tuple[str, int]] = []
+
+    def default_basis(*args: object, asymmetric: bool = False, **kw: object) -> object:
+        if not asymmetric:
+            return real(*args, **kw)  # type: ignore[arg-type]
+        # Where the scan was when the build began: its readings stored so far.
+        with sqlite3.connect(db) as con:
+            (n,) = con.execute("SELECT COUNT(*) FROM readings").fetchone()
+        builds.append((threading.current_thread().name, int(n)))
+        path = basis_module.default_basis_path(asymmetric=True)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        odd.save(path)
+        return odd
+
+    monkeypatch.setattr(basis_module, "default_basis", default_basis)
+    text, store, got = _scan(tmp_path, capsys, "--material", str(table))
+    job = got["job"]
+    readings = store.readings(job.id)
+    # Built once, in the prewarm's thread (not finishing's), after the first round's readings
+    # (8 of the 16 angles) were in.
+    assert len(builds) == 1, builds
+    thread, stored = builds[0]
+    assert thread == "gonio-asymmetric-basis"
+    assert stored >= len(readings) // 2, (stored, len(readings))
+    events = list(store.events_after(0, job_id=job.id))
+    (test_ev,) = [e for e in events if e.type == "arc_test"]
+    (prewarm,) = [e for e in events if e.type == "basis_prewarm"]
+    assert prewarm.data["basis"] == "asymmetric" and prewarm.seq > test_ev.seq
+    assert "while the other half turn is read" in prewarm.data["message"]
+    assert "built for this job while the stage read its other half turn" in text
+    # Started before the fill round's first reading was taken, not at finishing.
+    fill = {s.angle_index for s in store.steps(job.id) if s.round == 1}
+    assert fill and prewarm.time < min(r.t_read for r in readings if r.angle_index in fill)
+    # And finishing reconstructs with it, as before.
+    assert got["result"].metrics["reconstruction_basis"] == "asymmetric"
+    assert got["result"].metrics["K"] == odd.K
