@@ -427,41 +427,86 @@ async def _run_owned(args: argparse.Namespace, checked: Any, config: Any, sim: A
               f"{cal_out}; "
               f"apply it with --calibration {cal_out}")
         return 0
-    cal = service.calibration()
-    if sim is None and cal.pairs:
-        print(f"calibration: {cal.source}", file=sys.stderr)
-    from gonio.figures import headline_error, local_prior_text
-
-    units = "1/sr" if cal.pairs else "sensor units (uncalibrated)"
-    err = headline_error(summary)
-    err_text = f"{err['key']} {err['text']}" if err else "no error estimate"
-    print(f"job {job.id} completed: {summary.get('n_samples', summary.get('readings'))} samples "
-          f"in {units}, {err_text}; wrote {out}")
-    if err:
-        print(f"  {err['key']}: {err['meaning']}")
-    if (prior := local_prior_text(summary)) is not None:
-        print(f"  {prior}")
-    _print_arc(summary)
-    if summary.get("basis_misfit"):
-        print(f"warning: {summary['basis_misfit']}", file=sys.stderr)
-    if summary.get("highlight_not_read"):
-        print(f"warning: {summary['highlight_not_read']}", file=sys.stderr)
+    print_scan_summary(job.id, summary, out, f"kept in {service.result_path(job.id)}")
     return 0
 
 
-def _print_arc(summary: dict[str, Any]) -> None:
+def scan_summary(job_id: int, summary: dict[str, Any], out: Path,
+                 kept: str) -> list[tuple[str, bool]]:
+    """The end-of-scan summary of completed scan ``job_id``, the same whoever ran it.
+
+    Both ``gonio scan`` and ``gonio scan --daemon`` print it, from the job's stored summary
+    alone: the headline (samples, their units, the headline error), where the result is (``out``
+    and ``kept``, where the data directory or the daemon keeps its own copy), the calibration
+    the values carry, what the headline error means and the result's warnings.
+
+    Parameters
+    ----------
+    job_id
+        The job's id.
+    summary
+        The job's ``result`` summary (:func:`gonio.finishing.finish_job`).
+    out
+        The copy written for ``-o``.
+    kept
+        Where the original stays, in words (``kept in PATH``, or the daemon's URL).
+
+    Returns
+    -------
+    list of (line, to_stderr)
+        Lines for standard output, and warnings (``True``) for standard error.
+    """
+    from gonio.figures import headline_error, local_prior_text
+
+    calibrated = bool(summary.get("calibrated"))
+    units = "1/sr" if calibrated else "sensor units (uncalibrated)"
+    err = headline_error(summary)
+    err_text = f"{err['key']} {err['text']}" if err else "no error estimate"
+    n = summary.get("n_samples", summary.get("readings"))
+    lines: list[tuple[str, bool]] = [
+        (f"job {job_id} completed: {n} samples in {units}, {err_text}; wrote {out} ({kept})",
+         False)]
+    cal = summary.get("calibration")
+    source = cal.get("source") if isinstance(cal, dict) else None
+    if calibrated:
+        lines.append((f"  calibration: {source or 'recorded in the result'}", False))
+    else:
+        lines.append(("  calibration: none in effect (values are sensor units, not BRDF; "
+                      "calibrate with --white-reference ALBEDO)", False))
+    if err:
+        lines.append((f"  {err['key']}: {err['meaning']}", False))
+    if (prior := local_prior_text(summary)) is not None:
+        lines.append((f"  {prior}", False))
+    lines.extend(_arc_lines(summary))
+    for key in ("basis_misfit", "highlight_not_read"):
+        if summary.get(key):
+            lines.append((f"warning: {summary[key]}", True))
+    return lines
+
+
+def print_scan_summary(job_id: int, summary: dict[str, Any], out: Path, kept: str) -> None:
+    """Print :func:`scan_summary`: its lines to standard output, its warnings to standard
+    error."""
+    for line, to_stderr in scan_summary(job_id, summary, out, kept):
+        print(line, file=sys.stderr if to_stderr else sys.stdout)
+
+
+def _arc_lines(summary: dict[str, Any]) -> list[tuple[str, bool]]:
     """The arc an auto-arc scan chose and its test, or a forced half turn's warning; the
-    basis the test's verdict chose."""
+    basis the test's verdict chose (``(line, to_stderr)`` pairs)."""
+    lines: list[tuple[str, bool]] = []
     if summary.get("arc_asymmetric"):
-        print(f"warning: {summary['arc_asymmetric']}", file=sys.stderr)
+        lines.append((f"warning: {summary['arc_asymmetric']}", True))
     elif isinstance(summary.get("arc_test_p_value"), int | float):
         verdict = "twofold symmetric" if summary.get("arc_symmetric") else "NOT twofold symmetric"
-        print(f"  arc: {summary.get('arc_deg', 0):g} deg; the first round read the specimen "
-              f"{verdict} (chi-square {summary.get('arc_test_statistic', float('nan')):.1f} on "
-              f"{summary.get('arc_test_dof')} degrees of freedom, "
-              f"p = {summary['arc_test_p_value']:.3g})")
+        lines.append((f"  arc: {summary.get('arc_deg', 0):g} deg; the first round read the "
+                      f"specimen {verdict} (chi-square "
+                      f"{summary.get('arc_test_statistic', float('nan')):.1f} on "
+                      f"{summary.get('arc_test_dof')} degrees of freedom, "
+                      f"p = {summary['arc_test_p_value']:.3g})", False))
     if summary.get("basis_switch"):
-        print(f"  basis: {summary['basis_switch']}")
+        lines.append((f"  basis: {summary['basis_switch']}", False))
+    return lines
 
 
 def _calibration_warnings(args: argparse.Namespace, plan: Any, config: Any,
@@ -691,24 +736,8 @@ def _scan_through_daemon(args: argparse.Namespace, plan: Any) -> int:
             print(f"job {job_id} completed: the daemon now applies this calibration to its "
                   f"scans; a copy is in {cal_out}")
             return 0
-    from gonio.figures import headline_error, local_prior_text
-
-    units = "1/sr" if summary.get("calibrated") else "sensor units (uncalibrated)"
-    err = headline_error(summary)
-    err_text = f"{err['key']} {err['text']}" if err else "no error estimate"
-    print(f"job {job_id} completed: {summary.get('n_samples', summary.get('readings'))} samples "
-          f"in {units}, {err_text}; wrote {out}")
-    if err and err.get("coverage"):
-        print(f"  {err['coverage']}")
-    if err and err.get("interval"):
-        print(f"  {err['interval']}")
-    if (prior := local_prior_text(summary)) is not None:
-        print(f"  {prior}")
-    _print_arc(summary)
-    if summary.get("basis_misfit"):
-        print(f"warning: {summary['basis_misfit']}", file=sys.stderr)
-    if summary.get("highlight_not_read"):
-        print(f"warning: {summary['highlight_not_read']}", file=sys.stderr)
+    print_scan_summary(job_id, summary, out,
+                       f"the daemon keeps it: {client.url}/api/v1/jobs/{job_id}/result")
     return 0
 
 

@@ -36,6 +36,10 @@ def test_sim_scan_is_calibrated_and_matches_the_material(
     upper = res.metrics.get("predicted_log_rmse_upper")
     assert isinstance(upper, float) and np.isfinite(upper)
     assert f"Upper end of its interval: {upper:.3f}" in captured.out
+    # The summary 'gonio scan --daemon' prints too (scan_summary): the calibration the values
+    # carry (a local scan on the simulated rig did not say it) and where the original is.
+    assert f"  calibration: {res.samples.calibration['source']}" in captured.out
+    assert str(tmp_path / "data" / "results") in captured.out.splitlines()[0]
     s = res.samples
     alpha = np.deg2rad(s.stage_angles_deg)[None, :]
     wi = lab_to_specimen(np.asarray(s.light_dirs)[:, None, :], alpha)
