@@ -127,9 +127,10 @@ def register(subparsers: Any) -> None:
     j.add_argument("action", nargs="?", choices=["list", "show", "abort", "rebuild"],
                    default="list")
     j.add_argument("job_id", nargs="?", type=int)
-    j.add_argument("--db", type=Path, required=True,
-                   help="job store (SQLite), e.g. the one 'gonio scan' prints, or the "
-                        "data directory holding it")
+    j.add_argument("--db", type=Path, default=None,
+                   help="job store (SQLite, DATA_DIR/gonio.sqlite), e.g. the one 'gonio scan' "
+                        "prints, or the data directory holding it (required; without it the "
+                        "error lists the stores found in the default data directories)")
     j.add_argument("--data-dir", type=Path, default=None,
                    help="the data directory the store's result paths are relative to (show: "
                         "result_file; rebuild: its results/ gets the file); default: the "
@@ -809,6 +810,8 @@ def _progress(service: Any, job_id: int, disabled: bool) -> Any:
 def _jobs(args: argparse.Namespace) -> int:
     from gonio.store import JobStore
 
+    if args.db is None:
+        raise UsageError(_no_store_text())
     if args.db.is_dir():
         # The data directory that gonio scan and gonio serve print, given for its store.
         from gonio.daemon import STORE_FILE
@@ -850,6 +853,23 @@ def _jobs(args: argparse.Namespace) -> int:
     if note is not None:
         print(note)
     return 0
+
+
+def _no_store_text() -> str:
+    """What ``gonio jobs`` without ``--db`` says: where it looked, what it found, what to
+    pass."""
+    from gonio.paths import default_stores, store_places
+
+    found = default_stores()
+    how = ("pass --db DATA_DIR/gonio.sqlite (or the data directory), the data directory "
+           "'gonio scan' or 'gonio serve' prints at start")
+    if not found:
+        return (f"which job store? --db is required, and none was found in the default places "
+                f"({', '.join(store_places())}); {how} (a daemon with a data_dir in its "
+                "config keeps its store there)")
+    listed = "; ".join(f"--db {p}" for p in found)
+    return (f"which job store? --db is required; the default places hold: {listed}. Pass one "
+            "of them, or --db DATA_DIR/gonio.sqlite for another data directory")
 
 
 def _show_job(args: argparse.Namespace, store: Any) -> int:
