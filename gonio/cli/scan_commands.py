@@ -424,9 +424,13 @@ async def _run_owned(args: argparse.Namespace, checked: Any, config: Any, sim: A
         cal_out = out.with_name(out.stem + ".calibration.json")
         shutil.copyfile(data_dir / CALIBRATION_FILE, cal_out)
         n_pairs = len(checked.pairs)
-        print(f"job {job.id} completed: calibration of {counted(n_pairs, 'pair')} written to "
-              f"{cal_out}; "
-              f"apply it with --calibration {cal_out}")
+        # In effect from now on for this data directory's scans (the latest calibration job
+        # here, as the daemon applies it): it said "apply it with --calibration", which a
+        # later scan here does not need.
+        print(f"job {job.id} completed: calibration of {counted(n_pairs, 'pair')}, in effect "
+              f"now for this rig's later scans (data directory {data_dir}); a copy is in "
+              f"{cal_out} (--calibration {cal_out} applies it to a scan with another data "
+              "directory)")
         return 0
     print_scan_summary(job.id, summary, out, f"kept in {service.result_path(job.id)}")
     return 0

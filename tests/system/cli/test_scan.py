@@ -91,7 +91,14 @@ def test_white_reference_calibration_then_a_calibrated_scan(
                      "--rig", str(rig), "--white-reference", "0.99", "--rotations", "4",
                      *data, "--no-progress", "-o", str(cal_h5)]) == 0
         cal_json = tmp_path / "white.calibration.json"
-        assert f"--calibration {cal_json}" in capsys.readouterr().out
+        said = capsys.readouterr().out
+        assert f"--calibration {cal_json}" in said
+        # It is in effect for the later scans of this data directory without --calibration
+        # (it said "apply it with --calibration", as if they needed it), and it says so.
+        assert f"in effect now for this rig's later scans (data directory {tmp_path / 'data'})" \
+            in said, said
+        assert main(["scan", "--rig", str(rig), *data, "--dry-run", "-o", os.devnull]) == 0
+        assert "uncalibrated" not in capsys.readouterr().out
         sim.place_specimen(default_material())
         out = tmp_path / "scan.h5"
         assert main(["scan", "--no-export-fits",
