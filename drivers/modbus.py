@@ -154,9 +154,13 @@ class ModbusConnection:
         return client
 
     async def request(
-        self, device: str, what: str, call: Callable[[AsyncModbusTcpClient], Awaitable[Any]]
+        self, device: str, what: str, call: Callable[[AsyncModbusTcpClient], Awaitable[Any]],
+        device_id: int | None = None,
     ) -> Any:
         """Run one request under the connection lock and check the reply.
+
+        ``device_id``, the Modbus id the request goes to, is named when no reply comes (a
+        device id nobody answers to, on a serial line behind a gateway that passes silence on).
 
         Raises
         ------
@@ -175,10 +179,15 @@ class ModbusConnection:
                     reply = await call(client)
             except (TimeoutError, ModbusException, OSError) as exc:
                 self._drop()
+                at = (f"device_id {device_id} at {self.host}:{self.port}"
+                      if device_id is not None else f"{self.host}:{self.port}")
+                check = (f"; check that a device with id {device_id} is there, powered and "
+                         "wired (modbus.device_id in the rig config)"
+                         if device_id is not None else "")
                 raise DeviceUnavailable(
                     device,
-                    f"{what}: no valid reply from {self.host}:{self.port} within "
-                    f"{self.timeout_s:g} s ({type(exc).__name__}: {exc})",
+                    f"{what}: no valid reply from {at} within "
+                    f"{self.timeout_s:g} s ({type(exc).__name__}: {exc}){check}",
                     code="timeout",
                 ) from None
         task = asyncio.current_task()
@@ -200,8 +209,9 @@ class ModbusConnection:
         """What a Modbus exception reply means and where to look, by its exception code.
 
         Only an illegal address (code 2) points at the register map: a device id with no
-        device behind it (gateway codes 10 and 11, or code 4 from a server that has no such
-        device, as pymodbus' simulator answers) is the ``device_id`` or the wiring.
+        device behind it (a gateway's codes 10 and 11, as gonio's simulator answers too, or
+        code 4 from a server that has no such device, as pymodbus' own simulator core does) is
+        the ``device_id`` or the wiring.
         """
         code = getattr(reply, "exception_code", None)
         dev = getattr(reply, "dev_id", None)
@@ -281,7 +291,7 @@ class _ModbusDevice:
     async def _request(self, what: str, call: Callable[[AsyncModbusTcpClient], Awaitable[Any]]
                        ) -> Any:
         sent = time.monotonic()
-        reply = await self._connection().request(self.name, what, call)
+        reply = await self._connection().request(self.name, what, call, self._device_id)
         self.last_request = sent
         return reply
 

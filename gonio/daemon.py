@@ -40,6 +40,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from gonio.apikeys import KEYS_ENV, ApiKeyring, KeyringError, parse_keys_env, parse_keys_file
 from gonio.config import DAEMON_TABLES, read_toml
+from gonio.paths import STORE_NAME
 from gonio.wording import counted
 
 if TYPE_CHECKING:
@@ -253,7 +254,7 @@ def load_keyring(cfg: DaemonConfig, environ: Mapping[str, str] | None = None) ->
 
 
 # --------------------------------------------------------------------------- wiring
-STORE_FILE = "gonio.sqlite"
+STORE_FILE = STORE_NAME  # gonio.sqlite, where `gonio jobs` also looks (gonio.paths)
 
 
 def api_settings(cfg: DaemonConfig, keyring: ApiKeyring) -> Any:

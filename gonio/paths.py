@@ -53,6 +53,26 @@ def scan_data_dir(rig_config: Any) -> Path:
     return user_data_root() / "scans" / f"{name}-{geometry_key(rig_config)}"
 
 
+STORE_NAME = "gonio.sqlite"
+"""The job store's file name in a data directory (``gonio.daemon.STORE_FILE``)."""
+
+
+def store_places() -> list[str]:
+    """Where :func:`default_stores` looks for job stores, as patterns to tell a user."""
+    root = user_data_root()
+    return [str(root / "scans" / "*" / STORE_NAME), str(root / "serve-sim" / STORE_NAME),
+            str(Path(STORE_NAME))]
+
+
+def default_stores() -> list[Path]:
+    """The job stores in gonio's default data directories (each of ``gonio scan``'s and
+    ``gonio serve --sim``'s) and ``./gonio.sqlite``, those that exist."""
+    root = user_data_root()
+    found = sorted((root / "scans").glob(f"*/{STORE_NAME}"))
+    found += [p for p in (root / "serve-sim" / STORE_NAME, Path(STORE_NAME)) if p.is_file()]
+    return [p for p in found if p.is_file()]
+
+
 def sim_daemon_data_dir() -> Path:
     """Default data directory of ``gonio serve --sim`` (not created)."""
     return user_data_root() / "serve-sim"

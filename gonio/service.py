@@ -458,17 +458,7 @@ class GonioService:
         calibration job that will run before it: one under way or paused, or one queued at
         ``priority`` or above, the scan's own, since the queue takes the higher priority first
         and the earlier job among equals)."""
-        if plan.kind == "calibration":
-            return None
-        try:
-            pairs = plan_pairs(plan, self.desc)
-        except ValueError:
-            return None
-        try:
-            own: Path | None = scan_data_dir(self.rig_config)
-        except AttributeError:  # a rig without a rig config (tests, notebooks)
-            own = None
-        why = uncalibrated_refusal(self.calibration(), pairs, own, self.data_dir)
+        why = self._uncalibrated_why(plan)
         if why is None:
             return None
         if any(r.kind == "calibration" and r.state not in FINISHED_STATES
@@ -483,6 +473,70 @@ class GonioService:
         return (f"{why}. Restart the daemon on that data directory (or without --data-dir), "
                 "run a calibration job, or send accept_uncalibrated=true to measure in sensor "
                 "units all the same")
+
+    def _uncalibrated_why(self, plan: AnyPlan) -> str | None:
+        """Why a scan of ``plan`` would be uncalibrated on a rig calibrated elsewhere
+        (:func:`gonio.calibration.uncalibrated_refusal`), whatever the queue holds; None for a
+        calibration job, a plan that cannot run or a scan the calibration in effect covers."""
+        if plan.kind == "calibration":
+            return None
+        try:
+            pairs = plan_pairs(plan, self.desc)
+        except ValueError:
+            return None
+        try:
+            own: Path | None = scan_data_dir(self.rig_config)
+        except AttributeError:  # a rig without a rig config (tests, notebooks)
+            own = None
+        return uncalibrated_refusal(self.calibration(), pairs, own, self.data_dir)
+
+    def _calibration_overtaken_check(self) -> Callable[[list[tuple[int, str]],
+                                                       list[tuple[int, str]]], None] | None:
+        """A check for :meth:`JobStore.reorder` that refuses a new queue order in which a
+        queued scan that would be uncalibrated (:meth:`_uncalibrated_why`) no longer runs
+        after a queued calibration it ran after before; None when no reorder can do that (no
+        calibration queued, or one under way or paused, which runs before every queued job).
+
+        Such a scan was queued without the user's acceptance because the calibration ran
+        first (:meth:`uncalibrated_refusal`); run before it, it would measure in sensor units
+        unasked.
+        """
+        rows = self.store.list_jobs()
+        pending = [r for r in rows if r.kind == "calibration" and r.state not in FINISHED_STATES]
+        if not any(r.state == JobState.QUEUED for r in pending) or \
+                any(r.state != JobState.QUEUED for r in pending):
+            return None
+        plans = {r.id: r for r in rows if r.state == JobState.QUEUED and r.kind != "calibration"}
+        why: dict[int, str] = {}
+        for job_id, row in plans.items():
+            try:
+                reason = self._uncalibrated_why(parse_plan(row.plan))
+            except ValueError:
+                continue
+            if reason is not None:
+                why[job_id] = reason
+        if not why:
+            return None
+
+        def behind_calibration(order: list[tuple[int, str]]) -> set[int]:
+            first = next((k for k, (_, kind) in enumerate(order) if kind == "calibration"),
+                         len(order))
+            return {job_id for job_id, _ in order[first + 1:]}
+
+        def check(before: list[tuple[int, str]], after: list[tuple[int, str]]) -> None:
+            overtaken = sorted((behind_calibration(before) - behind_calibration(after))
+                               & why.keys())
+            if overtaken:
+                cal = next(job_id for job_id, kind in after if kind == "calibration")
+                jobs = ", ".join(str(j) for j in overtaken)
+                raise Conflict(
+                    f"not reordered: job {jobs} would then run before calibration job {cal}, "
+                    f"uncalibrated ({why[overtaken[0]]}); it was queued without asking because "
+                    f"the calibration ran first. Keep it behind job {cal} (no higher priority, "
+                    f"no earlier place), let job {cal} finish first, or send "
+                    "accept_uncalibrated=true to measure it in sensor units all the same")
+
+        return check
 
     def _check_calibration_covers(self, checked: CheckedPlan) -> None:
         """Refuse, before anything moves, a plan the calibration in effect covers only in part
@@ -663,13 +717,22 @@ class GonioService:
             return JobInfo.from_row(self._row(job_id))
 
     def reorder(self, job_id: int, request: ReorderRequest | None = None, *,
-                priority: int | None = None, position: int | None = None) -> JobInfo:
+                priority: int | None = None, position: int | None = None,
+                accept_uncalibrated: bool = False) -> JobInfo:
+        """Move queued job ``job_id`` (a new priority and/or queue position).
+
+        Refused with :class:`Conflict` when a queued scan that would be uncalibrated, queued
+        without asking because a queued calibration ran first, would then run before it
+        (:meth:`_calibration_overtaken_check`), unless ``accept_uncalibrated``.
+        """
         if request is not None:
             priority, position = request.priority, request.position
         if priority is None and position is None:
             raise Conflict("reorder needs a priority or a position")
         self._row(job_id)
-        return JobInfo.from_row(self.store.reorder(job_id, priority=priority, position=position))
+        check = None if accept_uncalibrated else self._calibration_overtaken_check()
+        return JobInfo.from_row(self.store.reorder(job_id, priority=priority, position=position,
+                                                   check=check))
 
     def remove(self, job_id: int) -> None:
         """Delete a queued or finished job and its readings (not its result file).

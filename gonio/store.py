@@ -605,17 +605,24 @@ class JobStore:
         return None if row is None else cast("dict[str, Any]", json.loads(row[0]))
 
     def reorder(self, job_id: int, *, priority: int | None = None,
-                position: int | None = None) -> JobRow:
+                position: int | None = None,
+                check: Callable[[list[tuple[int, str]], list[tuple[int, str]]], None] | None
+                = None) -> JobRow:
         """Change a queued job's priority and/or move it to index ``position`` of the queue.
 
         The queue is ordered by priority, then position; a job moved to an index takes the
         priority of the job it lands next to, so the stored order and the requested order agree.
+        ``check(before, after)``, given the queue's ``(id, kind)`` in order before and after the
+        change, may refuse it by raising: nothing is changed then.
         """
+        queue_sql = ("SELECT id, kind FROM jobs WHERE state = 'queued' "
+                     "ORDER BY priority DESC, position, id")
         with self._tx() as c:
             row = c.execute("SELECT state FROM jobs WHERE id = ?", (job_id,)).fetchone()
             if row is None:
                 raise NotFound(f"no job with id {job_id}")
             check_action("reorder", row[0], job_id)
+            before = [(r[0], r[1]) for r in c.execute(queue_sql)]
             if priority is not None:
                 c.execute("UPDATE jobs SET priority = ? WHERE id = ?", (priority, job_id))
             if position is not None:
@@ -640,6 +647,8 @@ class JobStore:
                     "UPDATE jobs SET position = ? WHERE id = ?",
                     [(float(i + 1), jid) for i, jid in enumerate(ids)],
                 )
+            if check is not None:
+                check(before, [(r[0], r[1]) for r in c.execute(queue_sql)])
             ev = self._insert_event(
                 c, job_id, "reordered", {"priority": priority, "position": position}
             )

@@ -26,6 +26,11 @@ for a while; requests hang so the client times out), :meth:`ModbusRigServer.set_
 (a lamp's real output drifts, so its monitor leaves the band and the light it gives changes)
 and :meth:`ModbusRigServer.force_saturation` (a sensor reports full scale).
 
+A request for a device id the server does not have is answered as a Modbus TCP gateway answers
+one for a device that does not reply: exception 0x0B, gateway target device failed to respond
+(:class:`_Gateway`; pymodbus' own simulator core answered 4, device failure, and the project's
+notes say nothing else).
+
 Register values are encoded here with :mod:`struct`, independently of the driver's decoder.
 """
 
@@ -43,6 +48,7 @@ from typing import Any, Protocol
 
 import numpy as np
 from pymodbus.constants import ExcCodes
+from pymodbus.exceptions import NoSuchIdException
 from pymodbus.server import ModbusTcpServer
 from pymodbus.simulator import DataType, SimData, SimDevice
 
@@ -193,6 +199,39 @@ def _span(regs: Sequence[Register], table: str) -> int:
     return max([1, *ends])
 
 
+class _Gateway:
+    """The server's device store (pymodbus' ``SimCore``), answering for unknown ids as a gateway.
+
+    ``SimCore`` looks up an unknown device id as device 0 and, having none, fails with a
+    ``KeyError`` that pymodbus answers with exception 4 (device failure). A Modbus TCP gateway
+    answers a request for a device that does not reply with 0x0B (gateway target device failed
+    to respond): raising ``NoSuchIdException`` makes pymodbus' request handler answer so.
+    """
+
+    def __init__(self, core: Any) -> None:
+        self._core = core
+
+    def device_ids(self) -> list[int]:
+        """The ids of the devices served."""
+        return list(self._core.device_ids())
+
+    def _check(self, device_id: int) -> None:
+        if device_id not in self._core.devices:
+            raise NoSuchIdException(f"no device {device_id}")
+
+    async def async_getValues(self, device_id: int, func_code: int, address: int,
+                              count: int = 1) -> Any:
+        """Read from device ``device_id``; an unknown id is the gateway's 0x0B."""
+        self._check(device_id)
+        return await self._core.async_getValues(device_id, func_code, address, count)
+
+    async def async_setValues(self, device_id: int, func_code: int, address: int,
+                              values: Any) -> Any:
+        """Write to device ``device_id``; an unknown id is the gateway's 0x0B."""
+        self._check(device_id)
+        return await self._core.async_setValues(device_id, func_code, address, values)
+
+
 class ModbusRigServer:
     """All lamps and sensors of a simulated rig behind one Modbus TCP server.
 
@@ -279,6 +318,7 @@ class ModbusRigServer:
         if self.holder is not None:
             devices.append(self._holder_device(self.holder))
         server = ModbusTcpServer(context=devices, address=(self.host, self.port))
+        server.context = _Gateway(server.context)
         cannot = OSError(f"the simulated Modbus server cannot listen on {self.host}:{self.port} "
                          "(is the port in use? choose another, or 0 for any free port)")
         try:

@@ -170,8 +170,15 @@ def cancel(job_id: JobId, service: Service) -> JobInfo:
 
 @router.post("/{job_id}/reorder", dependencies=WRITE, responses=_CONFLICT,
              summary="Move a queued job: a new priority and/or position (0 = next)")
-def reorder(job_id: JobId, request: ReorderRequest, service: Service) -> JobInfo:
-    return service.reorder(job_id, request)
+def reorder(
+    job_id: JobId,
+    request: ReorderRequest,
+    service: Service,
+    accept_uncalibrated: bool = Query(
+        False, description="move a scan that no calibration covers ahead of the queued "
+        "calibration it was queued behind (otherwise 409: it would run uncalibrated unasked)"),
+) -> JobInfo:
+    return service.reorder(job_id, request, accept_uncalibrated=accept_uncalibrated)
 
 
 @router.delete("/{job_id}", dependencies=WRITE, responses=_CONFLICT,

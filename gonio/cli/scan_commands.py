@@ -127,9 +127,10 @@ def register(subparsers: Any) -> None:
     j.add_argument("action", nargs="?", choices=["list", "show", "abort", "rebuild"],
                    default="list")
     j.add_argument("job_id", nargs="?", type=int)
-    j.add_argument("--db", type=Path, required=True,
-                   help="job store (SQLite), e.g. the one 'gonio scan' prints, or the "
-                        "data directory holding it")
+    j.add_argument("--db", type=Path, default=None,
+                   help="job store (SQLite, DATA_DIR/gonio.sqlite), e.g. the one 'gonio scan' "
+                        "prints, or the data directory holding it (required; without it the "
+                        "error lists the stores found in the default data directories)")
     j.add_argument("--data-dir", type=Path, default=None,
                    help="the data directory the store's result paths are relative to (show: "
                         "result_file; rebuild: its results/ gets the file); default: the "
@@ -423,45 +424,94 @@ async def _run_owned(args: argparse.Namespace, checked: Any, config: Any, sim: A
         cal_out = out.with_name(out.stem + ".calibration.json")
         shutil.copyfile(data_dir / CALIBRATION_FILE, cal_out)
         n_pairs = len(checked.pairs)
-        print(f"job {job.id} completed: calibration of {counted(n_pairs, 'pair')} written to "
-              f"{cal_out}; "
-              f"apply it with --calibration {cal_out}")
+        # In effect from now on for this data directory's scans (the latest calibration job
+        # here, as the daemon applies it): it said "apply it with --calibration", which a
+        # later scan here does not need.
+        print(f"job {job.id} completed: calibration of {counted(n_pairs, 'pair')}, in effect "
+              f"now for this rig's later scans (data directory {data_dir}); a copy is in "
+              f"{cal_out} (--calibration {cal_out} applies it to a scan with another data "
+              "directory)")
         return 0
-    cal = service.calibration()
-    if sim is None and cal.pairs:
-        print(f"calibration: {cal.source}", file=sys.stderr)
-    from gonio.figures import headline_error, local_prior_text
-
-    units = "1/sr" if cal.pairs else "sensor units (uncalibrated)"
-    err = headline_error(summary)
-    err_text = f"{err['key']} {err['text']}" if err else "no error estimate"
-    print(f"job {job.id} completed: {summary.get('n_samples', summary.get('readings'))} samples "
-          f"in {units}, {err_text}; wrote {out}")
-    if err:
-        print(f"  {err['key']}: {err['meaning']}")
-    if (prior := local_prior_text(summary)) is not None:
-        print(f"  {prior}")
-    _print_arc(summary)
-    if summary.get("basis_misfit"):
-        print(f"warning: {summary['basis_misfit']}", file=sys.stderr)
-    if summary.get("highlight_not_read"):
-        print(f"warning: {summary['highlight_not_read']}", file=sys.stderr)
+    print_scan_summary(job.id, summary, out, f"kept in {service.result_path(job.id)}")
     return 0
 
 
-def _print_arc(summary: dict[str, Any]) -> None:
+def scan_summary(job_id: int, summary: dict[str, Any], out: Path,
+                 kept: str) -> list[tuple[str, bool]]:
+    """The end-of-scan summary of completed scan ``job_id``, the same whoever ran it.
+
+    Both ``gonio scan`` and ``gonio scan --daemon`` print it, from the job's stored summary
+    alone: the headline (samples, their units, the headline error), where the result is (``out``
+    and ``kept``, where the data directory or the daemon keeps its own copy), the calibration
+    the values carry, what the headline error means and the result's warnings.
+
+    Parameters
+    ----------
+    job_id
+        The job's id.
+    summary
+        The job's ``result`` summary (:func:`gonio.finishing.finish_job`).
+    out
+        The copy written for ``-o``.
+    kept
+        Where the original stays, in words (``kept in PATH``, or the daemon's URL).
+
+    Returns
+    -------
+    list of (line, to_stderr)
+        Lines for standard output, and warnings (``True``) for standard error.
+    """
+    from gonio.figures import headline_error, local_prior_text
+
+    calibrated = bool(summary.get("calibrated"))
+    units = "1/sr" if calibrated else "sensor units (uncalibrated)"
+    err = headline_error(summary)
+    err_text = f"{err['key']} {err['text']}" if err else "no error estimate"
+    n = summary.get("n_samples", summary.get("readings"))
+    lines: list[tuple[str, bool]] = [
+        (f"job {job_id} completed: {n} samples in {units}, {err_text}; wrote {out} ({kept})",
+         False)]
+    cal = summary.get("calibration")
+    source = cal.get("source") if isinstance(cal, dict) else None
+    if calibrated:
+        lines.append((f"  calibration: {source or 'recorded in the result'}", False))
+    else:
+        lines.append(("  calibration: none in effect (values are sensor units, not BRDF; "
+                      "calibrate with --white-reference ALBEDO)", False))
+    if err:
+        lines.append((f"  {err['key']}: {err['meaning']}", False))
+    if (prior := local_prior_text(summary)) is not None:
+        lines.append((f"  {prior}", False))
+    lines.extend(_arc_lines(summary))
+    for key in ("basis_misfit", "highlight_not_read"):
+        if summary.get(key):
+            lines.append((f"warning: {summary[key]}", True))
+    return lines
+
+
+def print_scan_summary(job_id: int, summary: dict[str, Any], out: Path, kept: str) -> None:
+    """Print :func:`scan_summary`: its lines to standard output, its warnings to standard
+    error."""
+    for line, to_stderr in scan_summary(job_id, summary, out, kept):
+        print(line, file=sys.stderr if to_stderr else sys.stdout)
+
+
+def _arc_lines(summary: dict[str, Any]) -> list[tuple[str, bool]]:
     """The arc an auto-arc scan chose and its test, or a forced half turn's warning; the
-    basis the test's verdict chose."""
+    basis the test's verdict chose (``(line, to_stderr)`` pairs)."""
+    lines: list[tuple[str, bool]] = []
     if summary.get("arc_asymmetric"):
-        print(f"warning: {summary['arc_asymmetric']}", file=sys.stderr)
+        lines.append((f"warning: {summary['arc_asymmetric']}", True))
     elif isinstance(summary.get("arc_test_p_value"), int | float):
         verdict = "twofold symmetric" if summary.get("arc_symmetric") else "NOT twofold symmetric"
-        print(f"  arc: {summary.get('arc_deg', 0):g} deg; the first round read the specimen "
-              f"{verdict} (chi-square {summary.get('arc_test_statistic', float('nan')):.1f} on "
-              f"{summary.get('arc_test_dof')} degrees of freedom, "
-              f"p = {summary['arc_test_p_value']:.3g})")
+        lines.append((f"  arc: {summary.get('arc_deg', 0):g} deg; the first round read the "
+                      f"specimen {verdict} (chi-square "
+                      f"{summary.get('arc_test_statistic', float('nan')):.1f} on "
+                      f"{summary.get('arc_test_dof')} degrees of freedom, "
+                      f"p = {summary['arc_test_p_value']:.3g})", False))
     if summary.get("basis_switch"):
-        print(f"  basis: {summary['basis_switch']}")
+        lines.append((f"  basis: {summary['basis_switch']}", False))
+    return lines
 
 
 def _calibration_warnings(args: argparse.Namespace, plan: Any, config: Any,
@@ -691,24 +741,8 @@ def _scan_through_daemon(args: argparse.Namespace, plan: Any) -> int:
             print(f"job {job_id} completed: the daemon now applies this calibration to its "
                   f"scans; a copy is in {cal_out}")
             return 0
-    from gonio.figures import headline_error, local_prior_text
-
-    units = "1/sr" if summary.get("calibrated") else "sensor units (uncalibrated)"
-    err = headline_error(summary)
-    err_text = f"{err['key']} {err['text']}" if err else "no error estimate"
-    print(f"job {job_id} completed: {summary.get('n_samples', summary.get('readings'))} samples "
-          f"in {units}, {err_text}; wrote {out}")
-    if err and err.get("coverage"):
-        print(f"  {err['coverage']}")
-    if err and err.get("interval"):
-        print(f"  {err['interval']}")
-    if (prior := local_prior_text(summary)) is not None:
-        print(f"  {prior}")
-    _print_arc(summary)
-    if summary.get("basis_misfit"):
-        print(f"warning: {summary['basis_misfit']}", file=sys.stderr)
-    if summary.get("highlight_not_read"):
-        print(f"warning: {summary['highlight_not_read']}", file=sys.stderr)
+    print_scan_summary(job_id, summary, out,
+                       f"the daemon keeps it: {client.url}/api/v1/jobs/{job_id}/result")
     return 0
 
 
@@ -780,6 +814,8 @@ def _progress(service: Any, job_id: int, disabled: bool) -> Any:
 def _jobs(args: argparse.Namespace) -> int:
     from gonio.store import JobStore
 
+    if args.db is None:
+        raise UsageError(_no_store_text())
     if args.db.is_dir():
         # The data directory that gonio scan and gonio serve print, given for its store.
         from gonio.daemon import STORE_FILE
@@ -821,6 +857,23 @@ def _jobs(args: argparse.Namespace) -> int:
     if note is not None:
         print(note)
     return 0
+
+
+def _no_store_text() -> str:
+    """What ``gonio jobs`` without ``--db`` says: where it looked, what it found, what to
+    pass."""
+    from gonio.paths import default_stores, store_places
+
+    found = default_stores()
+    how = ("pass --db DATA_DIR/gonio.sqlite (or the data directory), the data directory "
+           "'gonio scan' or 'gonio serve' prints at start")
+    if not found:
+        return (f"which job store? --db is required, and none was found in the default places "
+                f"({', '.join(store_places())}); {how} (a daemon with a data_dir in its "
+                "config keeps its store there)")
+    listed = "; ".join(f"--db {p}" for p in found)
+    return (f"which job store? --db is required; the default places hold: {listed}. Pass one "
+            "of them, or --db DATA_DIR/gonio.sqlite for another data directory")
 
 
 def _show_job(args: argparse.Namespace, store: Any) -> int:

@@ -285,29 +285,29 @@ def _run_sim(args: argparse.Namespace, cfg: Any, keyring: Any) -> int:
                 if fragment and not is_loopback_host(cfg.server.host):
                     # The address works from other machines: whoever sees it (a shared
                     # screen, a terminal log) can control the rig with the key in it.
-                    print(f"warning: --host {cfg.server.host} is reachable from other "
+                    _line(f"warning: --host {cfg.server.host} is reachable from other "
                           "machines; the address below holds the session's API key: anyone "
-                          "who sees it can control the rig", file=sys.stderr, flush=True)
-                print(f"simulated rig {sim.config.rig.name!r}: {len(sim.config.lights)} lights, "
+                          "who sees it can control the rig", err=True)
+                _line(f"simulated rig {sim.config.rig.name!r}: {len(sim.config.lights)} lights, "
                       f"{len(sim.config.sensors)} sensors; rig config {sim.config_path}")
                 kept = ("a temporary folder, deleted at exit" if args.throwaway
                         else "kept across restarts")
-                print(f"data directory {data_dir} ({kept})")
+                _line(f"data directory {data_dir} ({kept})")
                 if key_kept:
-                    print(f"API key: the one of the last start on this data directory (kept in "
+                    _line(f"API key: the one of the last start on this data directory (kept in "
                           f"{Path(data_dir) / SESSION_KEY_FILE}; delete it for a new one)")
-                print(f"gonio serving on {url}")
-                print(f"open {url}{fragment} and start a scan (Ctrl-C stops)", flush=True)
+                _line(f"gonio serving on {url}")
+                _line(f"open {url}{fragment} and start a scan (Ctrl-C stops)")
                 # Called on the server's event loop, once it listens: the service runs.
                 service = app.state.service
                 why_not = calibration_not_needed(service)
                 if why_not is not None:
-                    print(f"calibration: {why_not}", flush=True)
+                    _line(f"calibration: {why_not}")
                 else:
                     job_id = start_sim_calibration(service, sim, report=_print_calibration)
-                    print(f"calibrating the simulated rig: job {job_id} measures a white "
+                    _line(f"calibrating the simulated rig: job {job_id} measures a white "
                           f"reference (albedo {WHITE_REFERENCE_ALBEDO:g}), then the specimen "
-                          "goes back", flush=True)
+                          "goes back")
                 if args.demo_scan:
                     key = session_key or _first_key_hint()
                     threading.Thread(target=_demo_scan, args=(url, key, result, stop),
@@ -317,9 +317,8 @@ def _run_sim(args: argparse.Namespace, cfg: Any, keyring: Any) -> int:
             if args.demo_scan and code == 0:
                 job_id = result.get("job_id")
                 if job_id is not None and result.get("code") == 0:
-                    print(f"demo scan result file: {data_dir / 'results' / f'job-{job_id}.h5'}"
-                          + (" (deleted now: --throwaway)" if args.throwaway else ""),
-                          flush=True)
+                    _line(f"demo scan result file: {data_dir / 'results' / f'job-{job_id}.h5'}"
+                          + (" (deleted now: --throwaway)" if args.throwaway else ""))
                 return result.get("code", 1)
     return code
 
@@ -360,13 +359,25 @@ def _sim_material(data_dir: Path, requested: str | None) -> str | None:
     return material
 
 
+def _line(text: str, *, err: bool = False) -> None:
+    """Print ``text`` and its newline in one write, then flush.
+
+    ``serve --sim`` prints from the demo-scan thread and the server's loop while the daemon
+    logs from its own threads to the same terminal: ``print`` writes the text and the newline
+    separately, and on an unbuffered stream (``python -u``, ``PYTHONUNBUFFERED``) another
+    thread's log line could land between them, joined to the text.
+    """
+    stream = sys.stderr if err else sys.stdout
+    stream.write(text + "\n")
+    stream.flush()
+
+
 def _print_calibration(job_id: int, state: str, reason: str | None) -> None:
     if state == "completed":
-        print(f"calibration job {job_id} completed: scans are now in 1/sr", flush=True)
+        _line(f"calibration job {job_id} completed: scans are now in 1/sr")
     else:
-        print(f"calibration job {job_id} {state}" + (f" ({reason})" if reason else "")
-              + ": scans stay in sensor counts until a calibration completes", file=sys.stderr,
-              flush=True)
+        _line(f"calibration job {job_id} {state}" + (f" ({reason})" if reason else "")
+              + ": scans stay in sensor counts until a calibration completes", err=True)
 
 
 def _first_key_hint() -> str:
@@ -398,11 +409,11 @@ def _demo_scan(url: str, key: str | None, result: dict[str, int], stop: Any) -> 
             plan = {"kind": "uniform", "specimen": "demo", "rotations": DEMO_ROTATIONS}
             r = c.post("/api/v1/jobs", json={"plan": plan})
             if r.status_code != 201:
-                print(f"demo scan refused: {r.status_code} {r.text}", file=sys.stderr)
+                _line(f"demo scan refused: {r.status_code} {r.text}", err=True)
                 return
             job_id = r.json()["id"]
             result["job_id"] = job_id
-            print(f"demo scan: job {job_id} queued", flush=True)
+            _line(f"demo scan: job {job_id} queued")
             with c.stream("GET", "/api/v1/events", params={"since": seq, "job_id": job_id}) as s:
                 for line in s.iter_lines():
                     if not line.startswith("data:"):
@@ -411,16 +422,15 @@ def _demo_scan(url: str, key: str | None, result: dict[str, int], stop: Any) -> 
                     if ev["type"] == "progress":
                         d = ev["data"]
                         # The specimen's angle (0-360); the stage itself may be turns further.
-                        print(f"  angle {d['done']}/{d['total']}: specimen at "
-                              f"{d['actual_deg'] % 360:.2f} deg", flush=True)
+                        _line(f"  angle {d['done']}/{d['total']}: specimen at "
+                              f"{d['actual_deg'] % 360:.2f} deg")
                     elif ev["type"] == "state":
                         state = ev["data"]["state"]
-                        print(f"  job {job_id}: {state}"
-                              + (f" ({ev['data']['reason']})" if ev["data"].get("reason") else ""),
-                              flush=True)
+                        _line(f"  job {job_id}: {state}"
+                              + (f" ({ev['data']['reason']})" if ev["data"].get("reason") else ""))
                         if state == "reconstructing":
-                            print("  reconstructing (the first run also builds the default "
-                                  "basis; later runs reuse it)", flush=True)
+                            _line("  reconstructing (the first run also builds the default "
+                                  "basis; later runs reuse it)")
                         if state in ("completed", "failed", "aborted", "halted"):
                             break
             job = c.get(f"/api/v1/jobs/{job_id}").json()
@@ -430,14 +440,14 @@ def _demo_scan(url: str, key: str | None, result: dict[str, int], stop: Any) -> 
                 # The one error number the page shows too (docs/api.md, headline_error).
                 err = m.get("headline_error")
                 err_text = f"{err['key']} {err['text']}" if err else "no error estimate"
-                print(f"demo scan completed: {m.get('n_samples')} samples in {units}, "
-                      f"{err_text}", flush=True)
+                _line(f"demo scan completed: {m.get('n_samples')} samples in {units}, "
+                      f"{err_text}")
                 for part in ("coverage", "interval"):
                     if err and err.get(part):
-                        print(f"  {err[part]}", flush=True)
+                        _line(f"  {err[part]}")
                 code = 0
     except Exception as exc:  # reported, and the exit code says it failed
-        print(f"demo scan failed: {exc}", file=sys.stderr)
+        _line(f"demo scan failed: {exc}", err=True)
     finally:
         result["code"] = code
         stop()

@@ -82,3 +82,50 @@ def test_an_uncalibrated_rig_needs_no_acceptance(daemon: Daemon) -> None:
         assert r.status_code == 201, r.text
         job = r.json()["id"]
         c.post(f"/api/v1/jobs/{job}/abort")
+
+
+def test_a_scan_queued_behind_a_calibration_is_not_moved_ahead_of_it_unasked(
+    daemon: Daemon, calibrated_elsewhere: Calibration
+) -> None:
+    # A scan behind a queued calibration is queued without asking (it is finished with that
+    # calibration). Moved ahead of it afterwards (a higher priority, an earlier place, or the
+    # calibration moved down), it ran first, uncalibrated, and nobody had been asked.
+    cal_plan = {"kind": "calibration", "reference_albedo": 0.99, "rotations": 4}
+    with daemon.client() as c:
+        assert c.post("/api/v1/rig/halt").status_code == 200  # the queue holds: all stay queued
+        try:
+            r = c.post("/api/v1/jobs", json={"plan": cal_plan, "priority": 5})
+            assert r.status_code == 201, r.text
+            cal = r.json()["id"]
+            r = c.post("/api/v1/jobs", json={"plan": PLAN})
+            assert r.status_code == 201, r.text  # behind the calibration: not asked
+            scan = r.json()["id"]
+
+            def first(a: int, b: int) -> bool:
+                """Whether the queue takes job a before job b."""
+                pos = {j: c.get(f"/api/v1/jobs/{j}").json()["queue_position"] for j in (a, b)}
+                return bool(pos[a] < pos[b])
+
+            assert first(cal, scan)
+            for job, move in ((scan, {"priority": 10}), (scan, {"position": 0}),
+                              (cal, {"priority": -5})):
+                r = c.post(f"/api/v1/jobs/{job}/reorder", json=move)
+                assert r.status_code == 409, (move, r.text)
+                detail = r.json()["detail"]
+                assert f"job {scan} would then run before calibration job {cal}" in detail, detail
+                assert "uncalibrated" in detail and "accept_uncalibrated=true" in detail, detail
+                assert first(cal, scan)  # nothing moved
+                assert c.get(f"/api/v1/jobs/{scan}").json()["priority"] == 0
+            # Still behind it: moved as asked.
+            r = c.post(f"/api/v1/jobs/{scan}/reorder", json={"priority": 5})
+            assert r.status_code == 200, r.text
+            assert first(cal, scan)
+            # Accepted: it runs first, in sensor units, as asked.
+            r = c.post(f"/api/v1/jobs/{scan}/reorder", params={"accept_uncalibrated": "true"},
+                       json={"priority": 10})
+            assert r.status_code == 200, r.text
+            assert first(scan, cal)
+        finally:
+            for job in (j["id"] for j in c.get("/api/v1/jobs", params={"state": "queued"}).json()):
+                c.post(f"/api/v1/jobs/{job}/cancel")
+            c.post("/api/v1/rig/release")

@@ -8,6 +8,7 @@ from pathlib import Path
 import pytest
 
 from gonio.cli import main
+from gonio.cli.scan_commands import scan_summary
 from gonio.results import read_result
 from tests.system.api.conftest import Daemon
 
@@ -31,6 +32,31 @@ def test_scan_through_the_daemon_writes_its_result(
     with daemon.client() as c:
         job = c.get(f"/api/v1/jobs/{res.attrs['job_id']}").json()
     assert job["state"] == "completed" and job["specimen"] == "felt"
+
+
+def test_scan_through_the_daemon_prints_the_local_scans_summary(
+    daemon: Daemon, tmp_path: Path, capsys: pytest.CaptureFixture[str], no_export_fits: None
+) -> None:
+    # The end-of-scan summary is the one a local 'gonio scan' prints (scan_summary, from the
+    # job's stored summary): the headline error's meaning, the calibration the values carry
+    # and where the result is. It printed the coverage and interval sentences alone, without
+    # the meaning or the calibration, and not where the daemon keeps the result.
+    out = tmp_path / "felt.h5"
+    argv = ["scan", "--daemon", daemon.url, "--api-key", daemon.key, "--rotations", "4",
+            "--specimen", "felt", "--exposure", "0.02", "--light-settle", "0", "--no-progress",
+            "-o", str(out)]
+    assert main(argv) == 0
+    printed = capsys.readouterr().out
+    job_id = read_result(out).attrs["job_id"]
+    with daemon.client() as c:
+        job = c.get(f"/api/v1/jobs/{job_id}").json()
+    lines = scan_summary(job_id, job["result"], out,
+                         f"the daemon keeps it: {daemon.url}/api/v1/jobs/{job_id}/result")
+    assert printed.splitlines() == [line for line, to_err in lines if not to_err]
+    assert f"/api/v1/jobs/{job_id}/result" in printed.splitlines()[0]
+    # This daemon has no calibration: the summary says so, and what the headline means.
+    assert "  calibration: none in effect (values are sensor units" in printed
+    assert "\n  predicted_log_rmse: " in printed
 
 
 def test_scan_dry_run_through_the_daemon_moves_nothing(

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import io
 import os
 import re
+import sys
 from pathlib import Path
 
 import pytest
@@ -77,6 +79,37 @@ def test_sim_demo_scan_keeps_its_data_and_prints_the_result_file(
                  "--time-scale", "10"]) == 0
     again = capsys.readouterr().out
     assert "calibration: in effect" in again and "calibrating the simulated rig" not in again
+
+
+class _Terminal(io.StringIO):
+    """One stream for standard output and error, as a terminal is, that keeps each write."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.writes: list[str] = []
+
+    def write(self, text: str) -> int:
+        self.writes.append(text)
+        return super().write(text)
+
+
+@pytest.mark.timeout(400)
+def test_sim_demo_scan_writes_each_line_whole(monkeypatch: pytest.MonkeyPatch) -> None:
+    # The demo's progress lines are printed from its own thread while the daemon logs from
+    # others to the same terminal. print() wrote "  job 2: completed" and its newline
+    # separately: on an unbuffered stream the daemon's next log line landed between them, on
+    # the same line. Each line is now one write with its newline.
+    monkeypatch.delenv("GONIO_API_KEYS", raising=False)
+    term = _Terminal()
+    monkeypatch.setattr(sys, "stdout", term)
+    monkeypatch.setattr(sys, "stderr", term)
+    assert main(["serve", "--sim", "--throwaway", "--demo-scan", "--no-export-fits",
+                 "--port", "0", "--time-scale", "10"]) == 0
+    said = [w for w in term.writes if w]
+    assert any(re.fullmatch(r"  job \d+: completed\n", w) for w in said), said
+    assert any(w.startswith("demo scan result file: ") for w in said), said
+    broken = [w for w in said if not w.endswith("\n")]
+    assert not broken, broken
 
 
 def test_an_interrupted_scan_keeps_its_simulated_material_across_restarts(

@@ -36,6 +36,10 @@ def test_sim_scan_is_calibrated_and_matches_the_material(
     upper = res.metrics.get("predicted_log_rmse_upper")
     assert isinstance(upper, float) and np.isfinite(upper)
     assert f"Upper end of its interval: {upper:.3f}" in captured.out
+    # The summary 'gonio scan --daemon' prints too (scan_summary): the calibration the values
+    # carry (a local scan on the simulated rig did not say it) and where the original is.
+    assert f"  calibration: {res.samples.calibration['source']}" in captured.out
+    assert str(tmp_path / "data" / "results") in captured.out.splitlines()[0]
     s = res.samples
     alpha = np.deg2rad(s.stage_angles_deg)[None, :]
     wi = lab_to_specimen(np.asarray(s.light_dirs)[:, None, :], alpha)
@@ -87,7 +91,14 @@ def test_white_reference_calibration_then_a_calibrated_scan(
                      "--rig", str(rig), "--white-reference", "0.99", "--rotations", "4",
                      *data, "--no-progress", "-o", str(cal_h5)]) == 0
         cal_json = tmp_path / "white.calibration.json"
-        assert f"--calibration {cal_json}" in capsys.readouterr().out
+        said = capsys.readouterr().out
+        assert f"--calibration {cal_json}" in said
+        # It is in effect for the later scans of this data directory without --calibration
+        # (it said "apply it with --calibration", as if they needed it), and it says so.
+        assert f"in effect now for this rig's later scans (data directory {tmp_path / 'data'})" \
+            in said, said
+        assert main(["scan", "--rig", str(rig), *data, "--dry-run", "-o", os.devnull]) == 0
+        assert "uncalibrated" not in capsys.readouterr().out
         sim.place_specimen(default_material())
         out = tmp_path / "scan.h5"
         assert main(["scan", "--no-export-fits",

@@ -235,6 +235,10 @@ def test_silent_device_times_out_quickly_and_recovers(bench: Bench) -> None:
             await sensor.read(0.005)
         elapsed = time.monotonic() - t0
         assert info.value.recoverable and info.value.device == "S2"
+        # The device id that went silent, and what to check (it named host:port alone).
+        text = str(info.value)
+        assert f"device_id 3 at 127.0.0.1:{bench.server.port}" in text, text
+        assert "modbus.device_id in the rig config" in text, text
         assert not (await sensor.status()).ok
         bench.server.clear_faults()
         reading = await sensor.read(0.005)  # reconnects by itself
@@ -358,7 +362,10 @@ def test_a_device_id_with_no_device_points_at_the_device_id_not_the_register_map
     # `gonio rig apply-design` on a `gonio sim` rig adds lights with the next free device ids,
     # which the simulator does not have: the scan failed with "the device refused the request
     # (ExceptionResponse(dev_id=8, function_code=129, exception_code=4)); check this address
-    # in the rig config's register map", whose register map was right.
+    # in the rig config's register map", whose register map was right. The simulator answers
+    # as a Modbus TCP gateway does for a device that does not reply: 0x0B, gateway target
+    # device failed to respond (it answered 4, device failure, pymodbus' simulator core's
+    # KeyError).
     modbus = bench.light.modbus.model_copy(update={"device_id": 9})
     cfg = bench.light.model_copy(update={"modbus": modbus})
 
@@ -370,6 +377,7 @@ def test_a_device_id_with_no_device_points_at_the_device_id_not_the_register_map
         text = str(info.value)
         assert f"device_id 9 at 127.0.0.1:{bench.server.port}" in text, text
         assert "modbus.device_id in the rig config" in text, text
+        assert "(Modbus exception 11, gateway: no path or no response)" in text, text
         assert "register map" not in text and "ExceptionResponse" not in text, text
         assert not info.value.recoverable
 

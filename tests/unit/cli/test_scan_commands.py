@@ -158,6 +158,30 @@ def test_cli_jobs_list(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> No
     assert "queued" in out and "felt" in out
 
 
+@pytest.mark.parametrize("action", [[], ["list"], ["show", "3"], ["abort", "3"],
+                                    ["rebuild", "3"]])
+def test_jobs_without_a_store_says_where_it_looked_and_what_to_pass(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch,
+    action: list[str],
+) -> None:
+    # It was argparse's "the following arguments are required: --db" alone.
+    from gonio.cli import main
+
+    monkeypatch.setenv("GONIO_DATA_DIR", str(tmp_path / "data"))
+    monkeypatch.chdir(tmp_path)
+    assert main(["jobs", *action]) == 2
+    err = capsys.readouterr().err
+    assert "--db DATA_DIR/gonio.sqlite" in err
+    assert str(tmp_path / "data" / "scans" / "*" / "gonio.sqlite") in err
+    assert str(tmp_path / "data" / "serve-sim" / "gonio.sqlite") in err
+    # The stores that are there are named, each as the --db to pass.
+    store = tmp_path / "data" / "scans" / "sim-201fe981" / "gonio.sqlite"
+    store.parent.mkdir(parents=True)
+    JobStore(store).create_job(kind="uniform", specimen="felt", plan={}, rig={})
+    assert main(["jobs", *action]) == 2
+    assert f"--db {store}" in capsys.readouterr().err
+
+
 def test_the_arc_options_build_an_auto_arc_plan_or_say_what_is_wrong() -> None:
     auto = _parse("--arc", "auto")
     assert isinstance(auto, UniformPlan) and (auto.arc, auto.span_deg) == ("auto", 180.0)
