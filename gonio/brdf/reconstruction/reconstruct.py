@@ -160,14 +160,15 @@ class Reconstruction:
         ti))`` (same units; at most ``cv_log_error``). A pair far brighter than the rest of
         the scan predicts, e.g. one reading a mirror peak the others never see, shows here;
         ``cv_sample_error``, a relative error, cannot exceed 1 for such a pair. NaN when
-        undefined. A witness studied for the self-estimate (docs/science.md 7.1.1), stored,
-        not used by it.
+        undefined. A witness of the self-estimate since 2026-11-28 (its under-prediction
+        term, :func:`gonio.brdf.reconstruction.selfcheck.under_term`; docs/science.md 7.1.1).
     predicted_log_rmse : float
         The estimated ``metrics.log_rmse`` of the whole reconstruction against the true
         BRDF, calibrated on materials held out of the basis; the number to report. Joint
         fit: :func:`gonio.brdf.reconstruction.selfcheck.predict_joint_log_rmse` through the final
         mapping :func:`gonio.brdf.reconstruction.selfcheck.final_log_rmse` (a coverage term;
-        a highlight term of ``highlight_excess``; its own factor and a floor at the misfit
+        a highlight term of ``highlight_excess``; an under-prediction term of
+        ``cv_log_under``; its own factor and a floor at the misfit
         when the readings show structure the basis cannot hold, ``misfit``); V&F path:
         :func:`gonio.brdf.reconstruction.selfcheck.predict_vf_log_rmse`, widened by such a misfit.
     angle_log_errors : (r,) float64 or None
@@ -855,7 +856,7 @@ def _reconstruct(
         # stay across the angles), a floor at the error the readings themselves show; and a
         # highlight term when the table peaks far above every reading (science.md 7.1.1).
         widened = final_log_rmse(predicted, uncovered, misfit,
-                                 highlight_excess=highlight.excess)
+                                 highlight_excess=highlight.excess, cv_log_under=cv_under)
     else:
         expected = mahal = uncovered = float("nan")
         predicted = predict_vf_log_rmse(cv, n, int(alpha.size))
