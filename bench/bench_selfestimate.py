@@ -106,6 +106,12 @@ no witness of the readings is expected to see the spike: this term cannot mend t
 * **fresh-coat** (60 scans, :data:`FRESH_COAT`, blind), printed last: adopted only if no more
   of them more than 2x low (within x2 reported, not a condition).
 
+Result (one run): ``v`` = 0.0425 (the calibration set keeps 86 of 145 within x2 up to there, 85
+from 0.045); it passed every step (test and fresh 187 / 3 -> 187 / 3, fresh-wide 35 / 6 ->
+38 / 3, fresh-coat 22 / 25 -> 31 / 16, within x2 / more than 2x low) and is shipped as
+``selfcheck.FINAL_UNDER_SCALE`` (docs/science.md 7.1.1). Since then the rows' shipped estimate
+(``widened``) carries the term; :func:`under_candidate` at ``v`` = 0 is the mapping without it.
+
 Before this round the choice and test sets were one validation set, whose numbers earlier
 rounds printed while comparing forms; the test and fresh sets then decided whether the refit
 chosen on the choice set replaced the shipped mapping (it did not). docs/science.md 7.1.1 says
@@ -145,6 +151,7 @@ from gonio.brdf.reconstruction.reconstruct import reconstruct
 from gonio.brdf.reconstruction.samples import DEFAULT_SPAN_DEG, uniform_stage_angles
 from gonio.brdf.reconstruction.selfcheck import (
     FINAL_HIGHLIGHT_SCALE,
+    FINAL_UNDER_SCALE,
     UPPER_FACTOR,
     UPPER_FACTOR_FLAGGED,
     UPPER_PERCENTILE,
@@ -1053,11 +1060,16 @@ def under_study(rows: list[dict[str, Any]]) -> bool | None:
         return None
     by = {w: [r for r in rows if r["set"] == w] for w in SETS}
     shipped = {w: _counts(by[w], lambda r: under_candidate(r, 0.0)) for w in SETS if by[w]}
-    reproduced = sum(abs(under_candidate(r, 0.0) - r["widened"]) <= 1e-9 * max(r["widened"], 1)
-                     for r in rows)
+
+    def reproduced(v: float) -> int:
+        return sum(abs(under_candidate(r, v) - r["widened"]) <= 1e-9 * max(r["widened"], 1.0)
+                   for r in rows)
+
     print(f"\n#### The leave-one-pair-out under-prediction term (science.md 7.1.1)\n\nrows "
-          f"whose shipped estimate the candidate reproduces at v = 0: {reproduced} of "
-          f"{len(rows)}")
+          f"whose shipped estimate the candidate reproduces at v = 0 (rows written before the "
+          f"term's wiring): {reproduced(0.0)} of {len(rows)}; at the shipped "
+          f"FINAL_UNDER_SCALE {FINAL_UNDER_SCALE:g} (rows written after): "
+          f"{reproduced(FINAL_UNDER_SCALE)}")
     print("\n| v | calibration: within x2 / low / scans | choice |")
     print("|---|---|---|")
     admissible, chosen = [], 0.0
@@ -1076,7 +1088,7 @@ def under_study(rows: list[dict[str, Any]]) -> bool | None:
         return False
 
     def compare(names: tuple[str, ...]) -> tuple[tuple[int, int, int], tuple[int, int, int]]:
-        print("\n| set | plan | shipped: within x2 / low / scans | candidate | "
+        print("\n| set | plan | without the term: within x2 / low / scans | candidate | "
               "unsigned cv_log_error at the same v |")
         print("|---|---|---|---|---|")
         tot = [[0, 0, 0], [0, 0, 0]]
@@ -1101,19 +1113,19 @@ def under_study(rows: list[dict[str, Any]]) -> bool | None:
     print("\ntest and fresh (printed once):")
     (aw, al, _), (bw, bl, _) = compare(("test", "fresh", "fresh-inplane", "fresh-confirm"))
     adopted = bl <= al
-    print(f"\ntest and fresh rule: {'passed' if adopted else 'FAILED'} (shipped {aw} within "
+    print(f"\ntest and fresh rule: {'passed' if adopted else 'FAILED'} (without {aw} within "
           f"x2 / {al} low, candidate {bw} / {bl})")
     print("\nfresh-wide (not blind):")
     (aw, al, n), (bw, bl, _) = compare(("fresh-wide",))
     ok = bool(n) and bl < al
     adopted = adopted and ok
-    print(f"\nfresh-wide rule: {'passed' if ok else 'FAILED'} (shipped {aw} within x2 / {al} "
+    print(f"\nfresh-wide rule: {'passed' if ok else 'FAILED'} (without {aw} within x2 / {al} "
           f"low, candidate {bw} / {bl})")
     print("\nfresh-coat (blind, last):")
     (aw, al, n), (bw, bl, _) = compare(("fresh-coat",))
     ok = bool(n) and bl <= al
     adopted = adopted and ok
-    print(f"\nfresh-coat rule: {'passed' if ok else 'FAILED'} (shipped {aw} within x2 / {al} "
+    print(f"\nfresh-coat rule: {'passed' if ok else 'FAILED'} (without {aw} within x2 / {al} "
           f"low, candidate {bw} / {bl})")
     print(f"\nunder-prediction term: {'ADOPT' if adopted else 'not adopted'}")
     return adopted
