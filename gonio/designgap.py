@@ -139,7 +139,8 @@ def scan_facts(rec: Any, readings: Sequence[Any], *, n_angles: int, span_deg: fl
     if rec.misfit is not None:
         undetermined, outside, unseen = final_parts(
             rec.expected_log_rmse, rec.mahalanobis, rec.cv_sample_error, rec.uncovered_share,
-            rec.misfit, float(getattr(rec, "highlight_excess", 1.0)))
+            rec.misfit, float(getattr(rec, "highlight_excess", 1.0)),
+            float(getattr(rec, "cv_log_under", 0.0)))
     else:
         undetermined, outside = estimate_parts(rec.expected_log_rmse, rec.mahalanobis,
                                                rec.cv_sample_error)

@@ -269,12 +269,15 @@ def _headline(metrics: dict[str, Any]) -> dict[str, Any] | None:
             "meaning": "predicted log RMSE of the whole BRDF against the true material "
                        "(cosine-weighted, Löw et al. 2012): 0 is a perfect match, lower is "
                        "better. It adds what the readings leave undetermined, how far the "
-                       "material sits from the training library and how far the table's "
-                       "highlight stands above every reading; on materials held out of "
+                       "material sits from the training library, how far the table's "
+                       "highlight stands above every reading and how far readings stand "
+                       "above what the other pairs predict; on materials held out of "
                        "the library it was within a factor of 2 of the truth on about 2 "
                        "scans in 3 (187 of 290 test and fresh scans) and more than 2 times "
-                       "too low on about 1 in 100 (3 of 290, all read with the MA98 preset; 6 "
-                       "of 60 on a later blind set, 5 of them one clear-coated white specimen) "
+                       "too low on about 1 in 100 (3 of 290, all read with the MA98 preset); "
+                       "on two later sets of 60 holding clear coats and mirror-smooth "
+                       "plastics over bright bodies, 3 and 16 (a mirror peak only one pair, "
+                       "or no reading, sees; 13 of them read with presets) "
                        "(docs/science.md 7.1.1).",
         }
     v = metrics.get("predicted_error")

@@ -250,6 +250,7 @@ def finish_job(job_id: int, plan: AnyPlan | CheckedPlan, how: Finishing) -> dict
         # including measured ones (docs/science.md).
         "predicted_log_rmse": _finite_or_none(rec.predicted_log_rmse),
         "cv_log_error": _finite_or_none(rec.cv_log_error),
+        "cv_log_under": _finite_or_none(getattr(rec, "cv_log_under", float("nan"))),
         # The coverage witness of predicted_log_rmse: the share of the prior's weighted
         # variance the layout leaves (joint fit only; docs/science.md 7.1.1).
         "uncovered_share": _finite_or_none(rec.uncovered_share),

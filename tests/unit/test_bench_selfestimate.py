@@ -83,3 +83,28 @@ def test_the_highlight_candidates_and_the_blind_set_are_as_written_down(
     assert len(bench.FRESH_WIDE) == 12
     older = {n for s in (bench.FRESH, bench.FRESH_INPLANE, bench.FRESH_CONFIRM) for n, *_ in s}
     assert not {n for n, *_ in bench.FRESH_WIDE} & older
+
+
+def test_the_under_prediction_candidate_and_its_blind_set_are_as_written_down(
+        bench: ModuleType) -> None:
+    """The leave-one-pair-out under-prediction term (science.md 7.1.1): ``v u`` added as a
+    variance beside the coverage and highlight terms; at ``v`` = 0 the shipped estimate; the
+    grid 0-0.10; the blind set is new."""
+    import math
+
+    row = {"unwidened": 0.05, "uncovered": 0.04, "peak_excess": 0.0, "misfit_chi2": 0.5,
+           "misfit_log": 0.0, "misfit_persistent_pairs": 0, "n": 10, "r": 8,
+           "highlight_excess": 1.0, "cv_log_under": 1.5, "cv_log_error": 2.0}
+    plain = math.hypot(0.61 * 0.05, 0.19 * 0.2)
+    assert bench.under_candidate(row, 0.0) == pytest.approx(plain)
+    assert bench.under_candidate(row, 0.02) == pytest.approx(
+        math.sqrt((0.61 * 0.05) ** 2 + 0.19**2 * 0.04 + (0.02 * 1.5) ** 2))
+    assert bench.under_candidate(row, 0.02, "cv_log_error") == pytest.approx(
+        math.sqrt((0.61 * 0.05) ** 2 + 0.19**2 * 0.04 + (0.02 * 2.0) ** 2))
+    assert bench.under_candidate({**row, "cv_log_under": float("nan")}, 0.02) == pytest.approx(
+        plain)
+    assert bench.UNDER_GRID[0] == 0.0 and bench.UNDER_GRID[-1] == pytest.approx(0.10)
+    assert len(bench.FRESH_COAT) == 12
+    older = {n for s in (bench.FRESH, bench.FRESH_INPLANE, bench.FRESH_CONFIRM,
+                         bench.FRESH_WIDE) for n, *_ in s}
+    assert not {n for n, *_ in bench.FRESH_COAT} & older

@@ -489,6 +489,7 @@ const METRIC_MEANING = {
   predicted_log_rmse_upper: "upper end of predicted_log_rmse's interval: the true error of held-out materials was below it on 98 % of the calibration scans",
   uncovered_share: "share of the prior's weighted variance the readings leave uncovered (0 to 1): the part of the table no pair looks at, part of predicted_log_rmse",
   cv_log_error: "leave-one-pair-out error: each pair predicted by the fit to the other pairs (log)",
+  cv_log_under: "the part of cv_log_error where a reading is above what the other pairs predict (log): a peak one pair reads, part of predicted_log_rmse",
   cv_sample_error: "leave-one-pair-out relative error of the readings",
   rel_sample_error: "how far the fit is from its own readings (relative)",
   estimated_error: "V&F's error estimate (0.8 × rel_sample_error), kept for comparison",

@@ -154,12 +154,21 @@ class Reconstruction:
     cv_log_error : float
         Leave-one-pair-out error in the units of ``log_rmse``: root mean square over the
         readings of ``ln(1 + f_loo cos ti) - ln(1 + f cos ti)``. NaN when undefined.
+    cv_log_under : float
+        The part of ``cv_log_error`` where a reading is above what the other pairs predict:
+        root mean square over the readings of ``max(0, ln(1 + f cos ti) - ln(1 + f_loo cos
+        ti))`` (same units; at most ``cv_log_error``). A pair far brighter than the rest of
+        the scan predicts, e.g. one reading a mirror peak the others never see, shows here;
+        ``cv_sample_error``, a relative error, cannot exceed 1 for such a pair. NaN when
+        undefined. A witness of the self-estimate since 2026-11-28 (its under-prediction
+        term, :func:`gonio.brdf.reconstruction.selfcheck.under_term`; docs/science.md 7.1.1).
     predicted_log_rmse : float
         The estimated ``metrics.log_rmse`` of the whole reconstruction against the true
         BRDF, calibrated on materials held out of the basis; the number to report. Joint
         fit: :func:`gonio.brdf.reconstruction.selfcheck.predict_joint_log_rmse` through the final
         mapping :func:`gonio.brdf.reconstruction.selfcheck.final_log_rmse` (a coverage term;
-        a highlight term of ``highlight_excess``; its own factor and a floor at the misfit
+        a highlight term of ``highlight_excess``; an under-prediction term of
+        ``cv_log_under``; its own factor and a floor at the misfit
         when the readings show structure the basis cannot hold, ``misfit``); V&F path:
         :func:`gonio.brdf.reconstruction.selfcheck.predict_vf_log_rmse`, widened by such a misfit.
     angle_log_errors : (r,) float64 or None
@@ -232,6 +241,7 @@ class Reconstruction:
     cv_sample_error: float = float("nan")
     predicted_error: float = float("nan")
     cv_log_error: float = float("nan")
+    cv_log_under: float = float("nan")
     predicted_log_rmse: float = float("nan")
     angle_log_errors: FloatArray | None = None
     pair_log_errors: FloatArray | None = None
@@ -834,6 +844,7 @@ def _reconstruct(
     cv = _relative_sample_error(at_samples[..., n_ch:], vals) if has_cv else float("nan")
     pair_err = _pair_log_errors(at_samples[..., n_ch:], vals, ci) if has_cv else None
     cv_log = float(np.sqrt(np.mean(pair_err**2))) if pair_err is not None else float("nan")
+    cv_under = (_log_under(at_samples[..., n_ch:], vals, ci) if has_cv else float("nan"))
     misfit = basis_misfit(_log_residuals(at_samples[..., :n_ch], vals, ci), vals, ci)
     n = int(cells_.shape[0])
     # How far the table's projected peak lies above the brightest projected reading (as
@@ -851,7 +862,7 @@ def _reconstruct(
         # stay across the angles), a floor at the error the readings themselves show; and a
         # highlight term when the table peaks far above every reading (science.md 7.1.1).
         widened = final_log_rmse(predicted, uncovered, misfit,
-                                 highlight_excess=highlight.excess)
+                                 highlight_excess=highlight.excess, cv_log_under=cv_under)
     else:
         expected = mahal = uncovered = float("nan")
         predicted = predict_vf_log_rmse(cv, n, int(alpha.size))
@@ -881,6 +892,7 @@ def _reconstruct(
         cv_sample_error=cv,
         predicted_error=cv_error_scale(n) * cv,
         cv_log_error=cv_log,
+        cv_log_under=cv_under,
         predicted_log_rmse=widened,
         predicted_log_rmse_unwidened=predicted,
         expected_log_rmse=expected,
@@ -1019,6 +1031,13 @@ def _pair_log_errors(pred: FloatArray, measured: FloatArray, cos_i: FloatArray) 
     """(n,) RMS over each pair's readings of ``ln(1 + pred cos ti) - ln(1 + measured cos ti)``."""
     d = _log_residuals(pred, measured, cos_i)
     return np.asarray(np.sqrt(np.mean(d**2, axis=(1, 2))))
+
+
+def _log_under(pred: FloatArray, measured: FloatArray, cos_i: FloatArray) -> float:
+    """RMS over every reading of ``max(0, ln(1 + measured cos ti) - ln(1 + pred cos ti))``:
+    how far the readings lie above ``pred`` (:attr:`Reconstruction.cv_log_under`)."""
+    d = np.maximum(-_log_residuals(pred, measured, cos_i), 0.0)
+    return float(np.sqrt(np.mean(d**2)))
 
 
 def _log_residuals(pred: FloatArray, measured: FloatArray, cos_i: FloatArray) -> FloatArray:

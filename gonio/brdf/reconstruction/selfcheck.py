@@ -379,6 +379,13 @@ FINAL_FLAGGED_FACTOR: float = 0.6
 #: was the other form and lost there), then checked on the choice, test and fresh sets and on a
 #: blind set (docs/science.md 7.1.1).
 FINAL_HIGHLIGHT_SCALE: float = 0.025
+#: Coefficient of the leave-one-pair-out under-prediction term ``FINAL_UNDER_SCALE
+#: cv_log_under`` (``log_rmse`` units per log unit; :func:`under_term`). Under a rule committed
+#: before any of its rows: the largest value (0-0.10 in steps of 0.0025) that leaves the
+#: calibration set of ``bench/bench_selfestimate.py`` and then its choice set no more scans
+#: more than 2x low and no fewer within x2; then checked on the test and fresh sets and on a
+#: blind set of clear coats and smooth plastics (docs/science.md 7.1.1).
+FINAL_UNDER_SCALE: float = 0.0425
 #: Factor from :func:`final_log_rmse` to the upper end of its interval for a scan whose fit
 #: holds its readings (:func:`upper_log_rmse`): the 98th percentile of ``true / predicted``
 #: over the 95 such calibration scans of ``bench/bench_selfestimate.py`` (3.325, rounded up);
@@ -449,11 +456,42 @@ def highlight_term(highlight_excess: float, scale: float = FINAL_HIGHLIGHT_SCALE
     return float(scale * np.log(e))
 
 
+def under_term(cv_log_under: float, scale: float = FINAL_UNDER_SCALE) -> float:
+    """The error of a peak that one pair reads and the others do not predict:
+    ``scale cv_log_under``.
+
+    ``cv_log_under`` is the root mean square over the readings of how far each lies above
+    the fit to the other pairs, in the units of ``log_rmse``
+    (:attr:`gonio.brdf.reconstruction.reconstruct.Reconstruction.cv_log_under`). A sharp
+    peak (a clear coat's mirror spike over a diffuse body) read by a single pair is held by
+    the fit at that pair but nowhere else along it; the rest of the scan predicts that pair
+    far too low, which the relative leave-one-pair-out error of the model cannot show (it is
+    at most 1 for a reading predicted too low).
+
+    Parameters
+    ----------
+    cv_log_under : float
+        ``log_rmse`` units; NaN or at most 0 gives 0.
+    scale : float, optional
+        Dimensionless coefficient; :data:`FINAL_UNDER_SCALE`.
+
+    Returns
+    -------
+    float
+        ``log_rmse`` units, >= 0.
+    """
+    u = float(cv_log_under)
+    if not np.isfinite(u) or u <= 0.0:
+        return 0.0
+    return float(scale * u)
+
+
 def final_log_rmse(predicted: float, uncovered: float, misfit: BasisMisfit, *,
                    predicted_factor: float = FINAL_PREDICTED_FACTOR,
                    coverage_scale: float = FINAL_COVERAGE_SCALE,
                    flagged_factor: float = FINAL_FLAGGED_FACTOR,
-                   in_plane: float = 0.0, highlight_excess: float = 1.0) -> float:
+                   in_plane: float = 0.0, highlight_excess: float = 1.0,
+                   cv_log_under: float = 0.0) -> float:
     """The reported ``predicted_log_rmse`` of a joint fit: the calibrated final mapping.
 
     The three constants were chosen on the **calibration** set of
@@ -475,8 +513,9 @@ def final_log_rmse(predicted: float, uncovered: float, misfit: BasisMisfit, *,
       ``max(sqrt((FINAL_FLAGGED_FACTOR predicted)^2 + FINAL_COVERAGE_SCALE^2 uncovered),
       log_misfit)`` (:func:`widen_log_rmse`): never below the error the table shows where the
       readings are.
-    * Either way the highlight term :func:`highlight_term` of ``highlight_excess`` is added
-      as a variance beside the coverage term (0 at the default ``highlight_excess`` of 1).
+    * Either way the highlight term :func:`highlight_term` of ``highlight_excess`` and the
+      under-prediction term :func:`under_term` of ``cv_log_under`` are added as variances
+      beside the coverage term (0 at their defaults).
 
     Parameters
     ----------
@@ -498,6 +537,9 @@ def final_log_rmse(predicted: float, uncovered: float, misfit: BasisMisfit, *,
     highlight_excess : float, optional
         The reconstruction's ``highlight_excess`` (dimensionless); 1, no highlight term, by
         default. ``reconstruct`` passes the scan's own.
+    cv_log_under : float, optional
+        The reconstruction's ``cv_log_under`` (``log_rmse`` units); 0, no under-prediction
+        term, by default. ``reconstruct`` passes the scan's own.
 
     Returns
     -------
@@ -506,8 +548,9 @@ def final_log_rmse(predicted: float, uncovered: float, misfit: BasisMisfit, *,
     """
     u = float(uncovered)
     coverage = coverage_scale * np.sqrt(max(u, 0.0)) if np.isfinite(u) else float("nan")
-    coverage = float(np.hypot(np.hypot(coverage, float(in_plane)),
-                              highlight_term(highlight_excess)))
+    coverage = float(np.hypot(np.hypot(np.hypot(coverage, float(in_plane)),
+                                       highlight_term(highlight_excess)),
+                              under_term(cv_log_under)))
     if misfit.flagged:
         return widen_log_rmse(float(np.hypot(flagged_factor * float(predicted),
                                              coverage)), misfit)
@@ -515,14 +558,16 @@ def final_log_rmse(predicted: float, uncovered: float, misfit: BasisMisfit, *,
 
 
 def final_parts(expected: float, mahalanobis: float, cv_sample_error: float,
-                uncovered: float, misfit: BasisMisfit, highlight_excess: float = 1.0
-                ) -> tuple[float, float, float]:
+                uncovered: float, misfit: BasisMisfit, highlight_excess: float = 1.0,
+                cv_log_under: float = 0.0) -> tuple[float, float, float]:
     """The parts of :func:`final_log_rmse`, each in ``log_rmse`` units.
 
     ``(undetermined, outside, unseen)`` with ``undetermined^2 + outside^2 + unseen^2`` equal
     to the final estimate squared: :func:`estimate_parts` scaled by the mapping's factor, and
     the coverage term (the error where no pair looks) joined with the highlight term of
-    ``highlight_excess`` (:func:`highlight_term`: the highlight no reading sees). When a
+    ``highlight_excess`` (:func:`highlight_term`: the highlight no reading sees) and the
+    under-prediction term of ``cv_log_under`` (:func:`under_term`: a peak one pair reads and
+    the others do not predict). When a
     flagged scan's estimate is the misfit floor, all three are scaled up together to meet it.
     They add up to the estimate before ``reconstruct``'s floor at the physical peak bound;
     when that floor sets the estimate (``Reconstruction.peak_excess_log_rmse``) the parts do
@@ -539,10 +584,11 @@ def final_parts(expected: float, mahalanobis: float, cv_sample_error: float,
         return float("nan"), float("nan"), float("nan")
     k = FINAL_FLAGGED_FACTOR if misfit.flagged else FINAL_PREDICTED_FACTOR
     parts = (k * undetermined, k * outside,
-             float(np.hypot(FINAL_COVERAGE_SCALE * np.sqrt(max(u, 0.0)),
-                            highlight_term(highlight_excess))))
+             float(np.hypot(np.hypot(FINAL_COVERAGE_SCALE * np.sqrt(max(u, 0.0)),
+                                     highlight_term(highlight_excess)),
+                            under_term(cv_log_under))))
     total = final_log_rmse(float(np.hypot(undetermined, outside)), u, misfit,
-                           highlight_excess=highlight_excess)
+                           highlight_excess=highlight_excess, cv_log_under=cv_log_under)
     norm = float(np.sqrt(sum(p * p for p in parts)))
     scale = total / norm if norm > 0 else 1.0
     return (float(parts[0] * scale), float(parts[1] * scale), float(parts[2] * scale))

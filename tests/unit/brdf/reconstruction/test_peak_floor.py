@@ -75,9 +75,11 @@ def test_the_joint_fit_reports_at_least_the_error_above_the_peak_bound(scan: tup
     plain = final_log_rmse(rec.predicted_log_rmse_unwidened, rec.uncovered_share, rec.misfit)
     assert excess > plain
     # The reported estimate carries the highlight term too (this lobe is read by no pair near
-    # its peak; docs/science.md 7.1.1), and is never below the floor.
+    # its peak; docs/science.md 7.1.1) and the under-prediction term of its own cv_log_under,
+    # and is never below the floor.
     mapped = final_log_rmse(rec.predicted_log_rmse_unwidened, rec.uncovered_share, rec.misfit,
-                            highlight_excess=rec.highlight_excess)
+                            highlight_excess=rec.highlight_excess,
+                            cv_log_under=rec.cv_log_under)
     assert rec.predicted_log_rmse == pytest.approx(max(mapped, excess), rel=1e-9)
     assert rec.predicted_log_rmse >= excess
     factor = UPPER_FACTOR_FLAGGED if rec.misfit.flagged else UPPER_FACTOR

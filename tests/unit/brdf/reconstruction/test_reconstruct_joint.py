@@ -164,3 +164,26 @@ def test_refine_angles_plans_midpoints_around_bad_angles_worst_first() -> None:
     assert refine_angles(angles, errs, 0.1, 1.0, None) == []
     # A gap finer than twice the minimum step is not split; the wide gap round 360 is.
     assert refine_angles([0.0, 1.5], [0.5, 0.5], 0.01, 1.0, None) == [180.75]
+
+
+def test_the_leave_one_pair_out_under_prediction_counts_only_readings_above_their_prediction(
+        ) -> None:
+    """``cv_log_under``: RMS over every reading of ``max(0, ln(1 + y c) - ln(1 + f_loo c))``.
+
+    Two readings at ``cos ti`` = 1: one ``e - 1`` against a prediction of 0 (1 log unit
+    above), one 0 against a prediction of 3 (below: counts 0); RMS over the two readings is
+    ``sqrt(1 / 2)``. The exact in-span fit above has none."""
+    from gonio.brdf.reconstruction.reconstruct import _log_under
+
+    pred = np.array([[[0.0]], [[3.0]]])
+    measured = np.array([[[np.e - 1.0]], [[0.0]]])
+    assert _log_under(pred, measured, np.ones(2)) == pytest.approx(np.sqrt(0.5))
+    assert _log_under(measured, measured, np.ones(2)) == 0.0
+    b = random_basis(5, seed=2)
+    c = 0.1 * np.random.default_rng(6).standard_normal(5)
+    cells, ph = grid_pairs(12, seed=8)
+    alpha = np.deg2rad([0.0, 50.0, 110.0, 250.0])
+    vals = _read(b, lambda phi: np.broadcast_to(c[:, None, None], (5, *phi.shape)), cells, ph,
+                 alpha)
+    rec = reconstruct(b, cells, ph, alpha, vals, channels=("Y",), eta=1e-10)
+    assert 0.0 <= rec.cv_log_under <= rec.cv_log_error + 1e-12 and rec.cv_log_under < 1e-6

@@ -137,7 +137,8 @@ def test_reconstruction_reports_the_witnesses_it_predicts_from() -> None:
         rel=1e-9)
     # The coverage witness of the final mapping is the same posterior's.
     assert rec.uncovered_share == pytest.approx(post.uncovered_share(), rel=1e-9)
-    # With the highlight term of the table's own highlight_excess (docs/science.md 7.1.1).
+    # With the highlight term of the table's own highlight_excess and the under-prediction
+    # term of its own cv_log_under (docs/science.md 7.1.1).
     read = highlight_read(rec.table, cells, ph, alpha, np.maximum(vals, 0.0))
     assert rec.highlight_excess == pytest.approx(read.excess, rel=1e-12)
     # The whole read travels with the result (finishing reports it rather than reading again).
@@ -146,7 +147,7 @@ def test_reconstruction_reports_the_witnesses_it_predicts_from() -> None:
                                                        nan_ok=True)
     assert rec.predicted_log_rmse == pytest.approx(final_log_rmse(
         rec.predicted_log_rmse_unwidened, rec.uncovered_share, rec.misfit,
-        highlight_excess=rec.highlight_excess), rel=1e-9)
+        highlight_excess=rec.highlight_excess, cv_log_under=rec.cv_log_under), rel=1e-9)
     vf = reconstruct(b, cells, ph, alpha, vals, channels=["Y"], method="vf")
     assert math.isnan(vf.mahalanobis) and math.isnan(vf.expected_log_rmse)
     assert math.isnan(vf.uncovered_share)

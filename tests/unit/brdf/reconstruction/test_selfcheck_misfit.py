@@ -25,6 +25,7 @@ from gonio.brdf.reconstruction.selfcheck import (
     FINAL_FLAGGED_FACTOR,
     FINAL_HIGHLIGHT_SCALE,
     FINAL_PREDICTED_FACTOR,
+    FINAL_UNDER_SCALE,
     MISFIT_CHI2_LIMIT,
     MISFIT_MIN_LOG,
     UPPER_FACTOR,
@@ -175,15 +176,19 @@ PUBLISHED = (0.61, 0.19, 0.6)
 
 #: The highlight term's published coefficient (docs/science.md 7.1.1).
 PUBLISHED_HIGHLIGHT = 0.025
+#: The under-prediction term's published coefficient (docs/science.md 7.1.1).
+PUBLISHED_UNDER = 0.0425
 
 
 def _final(predicted: float, uncovered: float, flagged: bool, log_misfit: float,
-           highlight_excess: float = 1.0) -> float:
+           highlight_excess: float = 1.0, cv_log_under: float = 0.0) -> float:
     """docs/science.md 7.1.1's final mapping, written out (with the highlight term
-    ``0.025 ln(excess)`` added as a variance beside the coverage term)."""
+    ``0.025 ln(excess)`` and the under-prediction term ``0.0425 cv_log_under`` added as
+    variances beside the coverage term)."""
     k, c, kf = PUBLISHED
-    cover = math.hypot(c * math.sqrt(uncovered),
-                       PUBLISHED_HIGHLIGHT * math.log(max(highlight_excess, 1.0)))
+    cover = math.sqrt((c * math.sqrt(uncovered)) ** 2
+                      + (PUBLISHED_HIGHLIGHT * math.log(max(highlight_excess, 1.0))) ** 2
+                      + (PUBLISHED_UNDER * max(cv_log_under, 0.0)) ** 2)
     if flagged:
         return max(math.hypot(kf * predicted, cover), log_misfit)
     return math.hypot(k * predicted, cover)
@@ -202,6 +207,12 @@ def test_the_final_mapping_is_the_published_one() -> None:
         _final(0.05, 0.04, False, 0.0, math.exp(2.0)))
     assert _final(0.05, 0.04, False, 0.0, math.exp(2.0)) == pytest.approx(
         math.sqrt(0.0305**2 + 0.038**2 + 0.05**2))
+    # The under-prediction term: cv_log_under 2 adds 2 * 0.0425 = 0.085 as a variance.
+    assert FINAL_UNDER_SCALE == PUBLISHED_UNDER
+    assert final_log_rmse(0.05, 0.04, quiet, cv_log_under=2.0) == pytest.approx(
+        _final(0.05, 0.04, False, 0.0, cv_log_under=2.0))
+    assert _final(0.05, 0.04, False, 0.0, cv_log_under=2.0) == pytest.approx(
+        math.sqrt(0.0305**2 + 0.038**2 + 0.085**2))
     # A layout that leaves more of the table to the prior widens the estimate.
     assert final_log_rmse(0.05, 0.4, quiet) > final_log_rmse(0.05, 0.04, quiet)
     # Flagged: 0.6 * 1.0 beats the misfit 0.12; a small estimate is floored at the misfit.
@@ -292,7 +303,7 @@ def test_a_library_material_is_not_flagged_and_its_estimate_is_not_low(
     assert rec.misfit_warning is None
     assert rec.predicted_log_rmse == pytest.approx(_final(
         rec.predicted_log_rmse_unwidened, rec.uncovered_share, False, 0.0,
-        rec.highlight_excess))
+        rec.highlight_excess, rec.cv_log_under))
     truth = metrics.log_rmse(rec.table, _truth(spec.model, name))
     assert rec.predicted_log_rmse / truth > 0.5
     assert rec.predicted_log_rmse < 0.05  # the held-out materials' typical 0.03-0.1
@@ -352,7 +363,7 @@ def test_structure_outside_the_basis_is_flagged_and_the_estimate_covers_it(
     assert rec.predicted_log_rmse >= 0.95 * excess
     assert rec.predicted_log_rmse == pytest.approx(_final(
         rec.predicted_log_rmse_unwidened, rec.uncovered_share, True, rec.misfit.log_misfit,
-        rec.highlight_excess))
+        rec.highlight_excess, rec.cv_log_under))
     truth = metrics.log_rmse(rec.table, _truth(spec.model, spec.name))
     assert rec.predicted_log_rmse > 0.5 * truth
     # A flagged scan's interval uses the flagged factor.
