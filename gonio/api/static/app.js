@@ -132,6 +132,9 @@ const ACTIONS = {
   completed: ["remove"], failed: ["remove"], aborted: ["remove"], halted: ["remove"],
 };
 
+// A job that holds the rig and has readings or a result coming: the one the lab watches.
+const ACTIVE = ["running", "suspended", "reconstructing"];
+
 const SHOW_REASON = new Set(["suspended", "failed", "aborted", "halted"]);
 
 // A count before its noun: "1 stage angle", "8 stage angles" (gonio.wording.counted).
@@ -800,9 +803,18 @@ function initForm() {
         }
         job = await send("POST", "/jobs?accept_uncalibrated=true", { plan });
       }
+      // A scan queued behind one that is measuring (or finishing) leaves that one on screen:
+      // its readings, ETA and result are what the lab is waiting for, and the new job has
+      // nothing to show until it starts. Its row is a click away.
       setNote(`Job ${job.id} queued.`, job.id);
-      selected = job.id;
       await refreshJobs();
+      const active = jobs.find((j) => j.id !== job.id && ACTIVE.includes(j.state));
+      if (active && jobs.find((j) => j.id === job.id)?.state === "queued") {
+        setNote(`Job ${job.id} queued: it starts after job ${active.id} (${active.specimen}, ${active.state}). ` +
+          `The page goes on showing job ${active.id}; click job ${job.id}'s row to see it.`, job.id);
+        if (selected !== active.id) select(active.id);
+        return;
+      }
       select(job.id);
     }, true);
   });

@@ -1,0 +1,85 @@
+"""A new lab user's first hour on the lab page, in headless Chromium: the surprises it met
+(a queued scan taking the running one off the screen, a plan's time without its
+reconstruction, a refused key's stale queue), each checked against the API's own answer."""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import pytest
+
+from tests.system.api.conftest import Daemon
+from tests.system.api.test_browser import (  # noqa: F401 (fixture)
+    browser,
+    click_when_steady,
+    open_live,
+)
+
+pytestmark = [pytest.mark.system, pytest.mark.timeout(300)]
+
+LONG = {"kind": "uniform", "specimen": "long felt", "rotations": 400,
+        "exposure": {"exposure_s": 0.005}}
+"""A scan that measures for far longer than a test looks at it (aborted at the end)."""
+
+
+def _wait_state(daemon: Daemon, job: int, states: set[str], timeout_s: float = 120) -> None:
+    with daemon.client() as c:
+        deadline = time.monotonic() + timeout_s
+        while c.get(f"/api/v1/jobs/{job}").json()["state"] not in states:
+            assert time.monotonic() < deadline, f"job {job} never reached {states}"
+            time.sleep(0.1)
+
+
+def _abort_all(daemon: Daemon) -> None:
+    with daemon.client() as c:
+        for j in c.get("/api/v1/jobs").json():
+            if j["state"] == "queued":
+                c.post(f"/api/v1/jobs/{j['id']}/cancel")
+            elif j["state"] in ("running", "paused", "suspended", "reconstructing"):
+                c.post(f"/api/v1/jobs/{j['id']}/abort")
+        deadline = time.monotonic() + 60
+        while any(j["state"] in ("queued", "running", "paused", "suspended", "reconstructing")
+                  for j in c.get("/api/v1/jobs").json()):
+            assert time.monotonic() < deadline, "jobs did not stop"
+            time.sleep(0.1)
+
+
+def test_a_scan_queued_behind_a_running_one_leaves_the_running_one_on_screen(
+        daemon: Daemon, browser: Any) -> None:  # noqa: F811 (the fixture)
+    from selenium.webdriver.common.by import By
+
+    wait = open_live(browser, daemon, 120)
+    with daemon.client() as c:
+        running = c.post("/api/v1/jobs", params={"accept_uncalibrated": "true"},
+                         json={"plan": LONG}).json()["id"]
+    try:
+        _wait_state(daemon, running, {"running"})
+        with daemon.client() as c:
+            wait.until(lambda _d: c.get(f"/api/v1/jobs/{running}").json()["done_angles"] >= 2)
+        form = browser.find_element(By.ID, "scan-form")
+        name = form.find_element(By.NAME, "specimen")
+        name.clear()
+        name.send_keys("felt B")
+        click_when_steady(wait, "#start-scan")
+        wait.until(lambda d: "queued" in d.find_element(By.ID, "dry-run-result").text)
+        with daemon.client() as c:
+            listed = c.get("/api/v1/jobs").json()
+        queued = next(j for j in listed if j["specimen"] == "felt B")
+        assert queued["state"] == "queued", queued
+        # The readings and result panels stay on the job that measures (the API's own list
+        # says which), with its readings coming in; the new job's row is only listed.
+        wait.until(lambda d: d.find_element(By.ID, "live-job").text.startswith(f"job {running} "))
+        assert browser.find_element(By.ID, "result-job").text.startswith(f"job {running}")
+        with daemon.client() as c:
+            stored = len(c.get(f"/api/v1/jobs/{running}/readings").json())
+        assert stored > 0
+        wait.until(lambda d: int(d.find_element(By.ID, "live-job").text.split("·")[1].split()[0])
+                   > 0)
+        # The running job's ETA stays in its row.
+        wait.until(lambda d: "left" in d.find_element(
+            By.CSS_SELECTOR, f'#jobs tr[data-id="{running}"] td.eta').text)
+        note = browser.find_element(By.ID, "dry-run-result").text
+        assert f"Job {queued['id']} queued" in note and f"after job {running}" in note, note
+    finally:
+        _abort_all(daemon)
