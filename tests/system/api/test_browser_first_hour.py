@@ -83,3 +83,23 @@ def test_a_scan_queued_behind_a_running_one_leaves_the_running_one_on_screen(
         assert f"Job {queued['id']} queued" in note and f"after job {running}" in note, note
     finally:
         _abort_all(daemon)
+
+
+def test_check_plan_says_its_time_is_the_measuring_and_the_reconstruction_follows(
+        daemon: Daemon, browser: Any) -> None:  # noqa: F811 (the fixture)
+    """docs/api.md: the dry run's estimated_s is motion + settle + exposure, the measuring
+    alone. The note read "about 7.6 s" for a default scan that took 28 s to its result (20 s
+    of it the reconstruction), with nothing saying a reconstruction follows."""
+    from selenium.webdriver.common.by import By
+
+    wait = open_live(browser, daemon, 60)
+    with daemon.client() as c:
+        plan = {"kind": "uniform", "specimen": "unnamed", "rotations": 8, "span_deg": 180,
+                "exposure": {"exposure_s": 0.01, "averages": 1}}
+        r = c.post("/api/v1/jobs/dry-run", json={"plan": plan}).json()
+    assert r["estimated_s"] == pytest.approx(r["motion_s"] + r["settle_s"] + r["exposure_s"])
+    click_when_steady(wait, "#dry-run")
+    wait.until(lambda d: "readings at" in d.find_element(By.ID, "dry-run-result").text)
+    note = browser.find_element(By.ID, "dry-run-result").text
+    assert "That is the measuring; the reconstruction follows and is not counted in it" in note, \
+        note
