@@ -51,13 +51,19 @@ function keyRefusedBy(err) {
     : `This daemon needs an API key (${err.message}): paste one at the top right, or open the address \`gonio serve\` printed.`;
   prompt.hidden = false;
   $("#no-jobs").hidden = true;
+  // What the queue shows was read with a key that no longer works (or from a daemon that has
+  // since restarted, perhaps on a throwaway data directory with none of these jobs): it says
+  // so, and no countdown goes on claiming time left.
+  $("#jobs-stale").hidden = jobs.length === 0 || !getKey();
   describeKey();
+  renderJobs();
 }
 
 function keyAccepted() {
   if (!keyRefused) return;
   keyRefused = false;
   $("#key-prompt").hidden = true;
+  $("#jobs-stale").hidden = true;
   describeKey();
 }
 
@@ -67,6 +73,7 @@ function useKey(key) {
   $("#key-input").value = key;
   keyRefused = false;
   $("#key-prompt").hidden = true;
+  $("#jobs-stale").hidden = true;
   describeKey();
   showError(null);
   refreshAll();
@@ -160,6 +167,7 @@ let selectedDetail = null;
 let selectedState = null;     // the selected job's state at the last list refresh
 
 function etaText() {
+  if (keyRefused) return "";
   const d = selectedDetail;
   if (!d || d.id !== selected) return "";
   if (d.state === "reconstructing") {
@@ -322,7 +330,9 @@ async function refreshJobs() {
 // ETA counts down between checkpoints and a long first basis build shows its progress even
 // though no event arrives meanwhile.
 async function pollSelected() {
-  if (selected === null) return;
+  // A refused key would be refused again every second (a 403 line a second in the daemon's
+  // log): the page asks for a key instead, and polls again once one works.
+  if (selected === null || keyRefused) return;
   const j = jobs.find((x) => x.id === selected);
   // A queued job that is loading its basis before the first reading is polled too.
   const starting = j?.state === "queued" && selectedDetail?.id === j.id && selectedDetail.activity;

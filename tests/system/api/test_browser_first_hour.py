@@ -103,3 +103,49 @@ def test_check_plan_says_its_time_is_the_measuring_and_the_reconstruction_follow
     note = browser.find_element(By.ID, "dry-run-result").text
     assert "That is the measuring; the reconstruction follows and is not counted in it" in note, \
         note
+
+
+def test_a_refused_key_stops_the_polls_and_says_the_queue_is_as_last_read(
+        daemon: Daemon, browser: Any) -> None:  # noqa: F811 (the fixture)
+    """After `gonio serve --sim --throwaway` restarted (a new key, none of the old jobs), the
+    page went on showing the old daemon's running job with "≈ 32 s left" and asked the new
+    daemon for it once a second with the refused key: a 403 line a second in its console."""
+    from selenium.webdriver.common.by import By
+
+    wait = open_live(browser, daemon, 120)
+    with daemon.client() as c:
+        running = c.post("/api/v1/jobs", params={"accept_uncalibrated": "true"},
+                         json={"plan": LONG}).json()["id"]
+    try:
+        _wait_state(daemon, running, {"running"})
+        wait.until(lambda d: "left" in d.find_element(
+            By.CSS_SELECTOR, f'#jobs tr[data-id="{running}"] td.eta').text)
+        # The key this tab will send from now on is not one of the daemon's: it refuses it,
+        # reads included (docs/api.md, Keys and access).
+        with daemon.client(key="not-a-key-of-this-daemon") as c:
+            assert c.get(f"/api/v1/jobs/{running}").status_code == 403
+        browser.execute_script("sessionStorage.setItem('gonio.apiKey', arguments[0]);"
+                               "window.__asked = [];"
+                               "const f = window.fetch;"
+                               "window.fetch = (u, i) => { window.__asked.push(String(u));"
+                               " return f(u, i); };", "not-a-key-of-this-daemon")
+        wait.until(lambda d: d.find_element(By.ID, "key-prompt").is_displayed())
+        browser.execute_script("window.__asked = [];")
+        time.sleep(4)
+        asked = browser.execute_script("return window.__asked")
+        polls = [u for u in asked if u.endswith(f"/jobs/{running}")]
+        assert polls == [], asked
+        assert browser.find_element(By.ID, "jobs-stale").is_displayed()
+        assert "as the page last read them" in browser.find_element(By.ID, "jobs-stale").text
+        eta = browser.find_element(By.CSS_SELECTOR, f'#jobs tr[data-id="{running}"] td.eta')
+        assert eta.text == "", eta.text
+        # A key that works brings the queue back, and its ETA.
+        field = browser.find_element(By.ID, "key-input")
+        field.clear()
+        field.send_keys(daemon.key)
+        click_when_steady(wait, "#key-form button[type=submit]")
+        wait.until(lambda d: not d.find_element(By.ID, "jobs-stale").is_displayed())
+        wait.until(lambda d: "left" in d.find_element(
+            By.CSS_SELECTOR, f'#jobs tr[data-id="{running}"] td.eta').text)
+    finally:
+        _abort_all(daemon)
