@@ -31,6 +31,14 @@ def _wait_state(daemon: Daemon, job: int, states: set[str], timeout_s: float = 1
             time.sleep(0.1)
 
 
+def _eta(driver: Any, job: int) -> str:
+    """The ETA cell of ``job``'s row as drawn now (read in one step: the rows are redrawn as
+    events arrive)."""
+    return str(driver.execute_script(
+        "const c = document.querySelector(`#jobs tr[data-id=\"${arguments[0]}\"] td.eta`);"
+        "return c ? c.textContent : '';", job))
+
+
 def _abort_all(daemon: Daemon) -> None:
     with daemon.client() as c:
         for j in c.get("/api/v1/jobs").json():
@@ -77,8 +85,7 @@ def test_a_scan_queued_behind_a_running_one_leaves_the_running_one_on_screen(
         wait.until(lambda d: int(d.find_element(By.ID, "live-job").text.split("·")[1].split()[0])
                    > 0)
         # The running job's ETA stays in its row.
-        wait.until(lambda d: "left" in d.find_element(
-            By.CSS_SELECTOR, f'#jobs tr[data-id="{running}"] td.eta').text)
+        wait.until(lambda d: "left" in _eta(d, running))
         note = browser.find_element(By.ID, "dry-run-result").text
         assert f"Job {queued['id']} queued" in note and f"after job {running}" in note, note
     finally:
@@ -112,14 +119,14 @@ def test_a_refused_key_stops_the_polls_and_says_the_queue_is_as_last_read(
     daemon for it once a second with the refused key: a 403 line a second in its console."""
     from selenium.webdriver.common.by import By
 
-    wait = open_live(browser, daemon, 120)
     with daemon.client() as c:
         running = c.post("/api/v1/jobs", params={"accept_uncalibrated": "true"},
                          json={"plan": LONG}).json()["id"]
     try:
         _wait_state(daemon, running, {"running"})
-        wait.until(lambda d: "left" in d.find_element(
-            By.CSS_SELECTOR, f'#jobs tr[data-id="{running}"] td.eta').text)
+        wait = open_live(browser, daemon, 120)
+        click_when_steady(wait, f'#jobs tr[data-id="{running}"] td')
+        wait.until(lambda d: "left" in _eta(d, running))
         # The key this tab will send from now on is not one of the daemon's: it refuses it,
         # reads included (docs/api.md, Keys and access).
         with daemon.client(key="not-a-key-of-this-daemon") as c:
@@ -137,15 +144,13 @@ def test_a_refused_key_stops_the_polls_and_says_the_queue_is_as_last_read(
         assert polls == [], asked
         assert browser.find_element(By.ID, "jobs-stale").is_displayed()
         assert "as the page last read them" in browser.find_element(By.ID, "jobs-stale").text
-        eta = browser.find_element(By.CSS_SELECTOR, f'#jobs tr[data-id="{running}"] td.eta')
-        assert eta.text == "", eta.text
+        assert _eta(browser, running) == "", _eta(browser, running)
         # A key that works brings the queue back, and its ETA.
         field = browser.find_element(By.ID, "key-input")
         field.clear()
         field.send_keys(daemon.key)
         click_when_steady(wait, "#key-form button[type=submit]")
         wait.until(lambda d: not d.find_element(By.ID, "jobs-stale").is_displayed())
-        wait.until(lambda d: "left" in d.find_element(
-            By.CSS_SELECTOR, f'#jobs tr[data-id="{running}"] td.eta').text)
+        wait.until(lambda d: "left" in _eta(d, running))
     finally:
         _abort_all(daemon)
