@@ -141,6 +141,8 @@ const ACTIONS = {
 
 // A job that holds the rig and has readings or a result coming: the one the lab watches.
 const ACTIVE = ["running", "suspended", "reconstructing"];
+// A job that holds the rig, measuring or not: the one whose time left the lab plans around.
+const HOLDING = [...ACTIVE, "paused"];
 
 const SHOW_REASON = new Set(["suspended", "failed", "aborted", "halted"]);
 
@@ -166,10 +168,13 @@ function planTime(s) {
 let selectedDetail = null;
 let selectedState = null;     // the selected job's state at the last list refresh
 
-function etaText() {
+// The detail of the job that holds the rig when another row is selected: its ETA stays in
+// its row (it went blank as soon as another job was clicked or queued).
+let activeDetail = null;
+
+function etaText(d = selectedDetail, id = selected) {
   if (keyRefused) return "";
-  const d = selectedDetail;
-  if (!d || d.id !== selected) return "";
+  if (!d || d.id !== id) return "";
   if (d.state === "reconstructing") {
     // Past its estimate the daemon gives no time left (null, not 0 s): it is not done.
     const planned = (d.reconstruction_s ?? 0) + (d.basis_build_s ?? 0);
@@ -199,9 +204,8 @@ function etaText() {
 }
 
 // The ETA cell's tooltip: what the reconstruction estimate rests on.
-function etaTitle() {
-  const d = selectedDetail;
-  return d && d.id === selected && d.reconstruction_estimate
+function etaTitle(d = selectedDetail, id = selected) {
+  return d && d.id === id && d.reconstruction_estimate
     ? `reconstruction estimate: ${d.reconstruction_estimate}` : "";
 }
 
@@ -263,7 +267,8 @@ function renderJobs() {
     tr.dataset.id = job.id;
     tr.dataset.state = job.state;
     if (job.id === selected) tr.classList.add("selected");
-    const cells = [job.id, job.specimen, job.kind, job.state, null, job.id === selected ? etaText() : ""];
+    const cells = [job.id, job.specimen, job.kind, job.state, null,
+      job.id === selected ? etaText() : etaText(activeDetail, job.id)];
     cells.forEach((c, i) => {
       const td = document.createElement("td");
       if (i === 4) {
@@ -290,7 +295,7 @@ function renderJobs() {
           td.append(why);
         }
       }
-      if (i === 5) { td.className = "eta"; if (job.id === selected) td.title = etaTitle(); }
+      if (i === 5) { td.className = "eta"; td.title = job.id === selected ? etaTitle() : etaTitle(activeDetail, job.id); }
       tr.append(td);
     });
     const td = document.createElement("td");
@@ -344,6 +349,17 @@ async function pollSelected() {
   const prog = document.querySelector(`#jobs tr[data-id="${selected}"] td.progress .progress-text`);
   if (prog) prog.textContent = ` ${progressOf(j).text}`;
   if (["reconstructing", "queued"].includes(selectedDetail.state)) showResult(jobs.find((x) => x.id === selected));
+}
+
+// The job holding the rig, when it is not the selected one: its detail is polled too (once
+// a second, as the selected job's), so its row keeps its ETA.
+async function pollActive() {
+  if (keyRefused) return;
+  const a = jobs.find((j) => j.id !== selected && HOLDING.includes(j.state));
+  if (!a) { activeDetail = null; return; }
+  activeDetail = await getJSON(`/jobs/${a.id}`);
+  const cell = document.querySelector(`#jobs tr[data-id="${a.id}"] td.eta`);
+  if (cell) { cell.textContent = etaText(activeDetail, a.id); cell.title = etaTitle(activeDetail, a.id); }
 }
 
 function scheduleRefresh() {
@@ -868,6 +884,7 @@ window.addEventListener("DOMContentLoaded", async () => {
   for (const id of ["#polar-ti", "#polar-pi", "#polar-log"]) $(id).addEventListener("change", () => guarded(refreshPolar, true));
   $("#compare").addEventListener("change", (e) => guarded(() => setCompare(e.target.value ? Number(e.target.value) : null), true));
   setInterval(() => guarded(pollSelected), 1000);
+  setInterval(() => guarded(pollActive), 1000);
   await refreshAll();
   restartEvents();
   // Stage position changes without events while idle; a slow poll keeps the chip honest.

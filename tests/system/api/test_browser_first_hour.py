@@ -40,17 +40,20 @@ def _eta(driver: Any, job: int) -> str:
 
 
 def _abort_all(daemon: Daemon) -> None:
+    """Cancel the queued jobs, then abort the rest, until none is left (a queued job may start
+    between the list and its cancel)."""
+    live = ("queued", "running", "paused", "suspended", "reconstructing")
     with daemon.client() as c:
-        for j in c.get("/api/v1/jobs").json():
-            if j["state"] == "queued":
-                c.post(f"/api/v1/jobs/{j['id']}/cancel")
-            elif j["state"] in ("running", "paused", "suspended", "reconstructing"):
-                c.post(f"/api/v1/jobs/{j['id']}/abort")
         deadline = time.monotonic() + 60
-        while any(j["state"] in ("queued", "running", "paused", "suspended", "reconstructing")
-                  for j in c.get("/api/v1/jobs").json()):
-            assert time.monotonic() < deadline, "jobs did not stop"
-            time.sleep(0.1)
+        while True:
+            listed = [j for j in c.get("/api/v1/jobs").json() if j["state"] in live]
+            if not listed:
+                return
+            assert time.monotonic() < deadline, f"jobs did not stop: {listed}"
+            for j in sorted(listed, key=lambda j: j["state"] != "queued"):
+                action = "cancel" if j["state"] == "queued" else "abort"
+                c.post(f"/api/v1/jobs/{j['id']}/{action}")
+            time.sleep(0.2)
 
 
 def test_a_scan_queued_behind_a_running_one_leaves_the_running_one_on_screen(
@@ -152,5 +155,32 @@ def test_a_refused_key_stops_the_polls_and_says_the_queue_is_as_last_read(
         click_when_steady(wait, "#key-form button[type=submit]")
         wait.until(lambda d: not d.find_element(By.ID, "jobs-stale").is_displayed())
         wait.until(lambda d: "left" in _eta(d, running))
+    finally:
+        _abort_all(daemon)
+
+
+def test_the_running_job_keeps_its_eta_while_another_row_is_selected(
+        daemon: Daemon, browser: Any) -> None:  # noqa: F811 (the fixture)
+    """The ETA column showed only the selected job's: a click on a queued (or finished) job
+    left the measuring one's row blank, the one time the lab plans the day around."""
+    from selenium.webdriver.common.by import By
+
+    with daemon.client() as c:
+        running = c.post("/api/v1/jobs", params={"accept_uncalibrated": "true"},
+                         json={"plan": LONG}).json()["id"]
+        waiting = c.post("/api/v1/jobs", params={"accept_uncalibrated": "true"},
+                         json={"plan": {**LONG, "specimen": "next felt"}}).json()["id"]
+    try:
+        _wait_state(daemon, running, {"running"})
+        wait = open_live(browser, daemon, 120)
+        click_when_steady(wait, f'#jobs tr[data-id="{waiting}"] td')
+        wait.until(lambda d: d.find_element(By.ID, "result-job").text.startswith(f"job {waiting}"))
+        # The daemon has a time left for the running job (its own answer), and the page
+        # shows it in that job's row although another row is selected.
+        with daemon.client() as c:
+            detail = c.get(f"/api/v1/jobs/{running}").json()
+        assert detail["state"] == "running" and detail["time_left_s"] is not None, detail
+        wait.until(lambda d: "left in all" in _eta(d, running))
+        assert _eta(browser, waiting) == ""
     finally:
         _abort_all(daemon)
