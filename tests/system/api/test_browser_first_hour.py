@@ -9,7 +9,7 @@ from typing import Any
 
 import pytest
 
-from tests.system.api.conftest import Daemon
+from tests.system.api.conftest import Daemon, export_fits_off
 from tests.system.api.test_browser import (  # noqa: F401 (fixture)
     browser,
     click_when_steady,
@@ -184,3 +184,34 @@ def test_the_running_job_keeps_its_eta_while_another_row_is_selected(
         assert _eta(browser, waiting) == ""
     finally:
         _abort_all(daemon)
+
+
+def test_the_colour_caption_of_sensor_rgb_says_what_is_uncalibrated_and_what_source_means(
+        daemon: Daemon, browser: Any) -> None:  # noqa: F811 (the fixture)
+    """A calibrated scan (values in 1/sr) on RGB sensors without a colour calibration: the
+    colour caption began "uncalibrated sensor RGB" under a headline saying "Calibrated", and
+    its table's "source" column ("table" on every row) was explained only for CIELAB."""
+    from selenium.webdriver.common.by import By
+
+    from tests.system.api.test_browser import _calibrate
+
+    _calibrate(daemon)
+    with export_fits_off(daemon), daemon.client() as c:
+        job = c.post("/api/v1/jobs", json={"plan": {
+            "kind": "uniform", "specimen": "rgb felt", "rotations": 8,
+            "exposure": {"exposure_s": 0.005}}}).json()["id"]
+        _wait_state(daemon, job, {"completed"}, 180)
+        colour = c.get(f"/api/v1/jobs/{job}/colour").json()["colour"]
+    assert colour["space"] == "uncalibrated sensor RGB", colour["space"]
+    read = sum(bool(m) for m in colour.get("measured") or [])
+    wait = open_live(browser, daemon, 120)
+    click_when_steady(wait, f'#jobs tr[data-id="{job}"] td')
+    wait.until(lambda d: "reflectance factors per channel" in
+               d.find_element(By.ID, "colour-caption").text)
+    caption = browser.find_element(By.ID, "colour-caption").text
+    assert "Uncalibrated here is the colour" in caption, caption
+    if read:
+        assert f'Source "pair": {read} of {len(colour["measured"])} geometries' in caption, caption
+    else:
+        assert 'Source "table": every geometry read from the reconstructed table' in caption, \
+            caption
