@@ -607,12 +607,25 @@ async function refreshRender() {
   if (shownResult === null) return;
   const id = shownResult, other = compareWith;
   const caption = $("#render-caption");
-  caption.textContent = "Rendering… (a few seconds the first time)";
+  // The seconds so far, counted: "a few seconds" read as stuck on a daemon that was also
+  // reconstructing a scan (39 s measured on a busy 2-core machine).
+  const started = performance.now();
+  const tick = () => {
+    if (id !== shownResult || other !== compareWith) return;
+    const s = Math.round((performance.now() - started) / 1000);
+    caption.textContent = `Rendering… ${s} s so far (a few seconds on an idle daemon; longer while it reconstructs a scan or exports)`;
+  };
+  tick();
+  const timer = setInterval(tick, 1000);
   // The picture shown is of another job (or comparison) until this one arrives: not shown.
   $("#render").hidden = true;
   $("#render-link").removeAttribute("href");
   const q = other !== null ? `?compare=${other}` : "";
-  const blob = await getBlob(`/jobs/${id}/render.png${q}`);
+  let blob;
+  try { blob = await getBlob(`/jobs/${id}/render.png${q}`); } catch (e) {
+    if (id === shownResult && other === compareWith) caption.textContent = `No rendering: ${e.message}`;
+    throw e;
+  } finally { clearInterval(timer); }
   if (id !== shownResult || other !== compareWith) return;
   const url = setImage($("#render"), "render", blob);
   $("#render-link").href = url;

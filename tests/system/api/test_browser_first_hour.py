@@ -4,6 +4,7 @@ reconstruction, a refused key's stale queue), each checked against the API's own
 
 from __future__ import annotations
 
+import re
 import time
 from typing import Any
 
@@ -215,3 +216,46 @@ def test_the_colour_caption_of_sensor_rgb_says_what_is_uncalibrated_and_what_sou
     else:
         assert 'Source "table": every geometry read from the reconstructed table' in caption, \
             caption
+
+
+def test_a_slow_rendering_and_export_count_their_seconds(daemon: Daemon, browser: Any) -> None:  # noqa: F811
+    """The rendering's caption said "a few seconds the first time" for the 39 s a rendering
+    took beside a reconstruction, and an export said "exporting…" for a minute: both count
+    the seconds so far instead. The daemon's answers are held back 4 s in the page (a
+    wrapped fetch), timed by the test's own clock."""
+    from selenium.webdriver.common.by import By
+
+    with export_fits_off(daemon), daemon.client() as c:
+        job = c.post("/api/v1/jobs", params={"accept_uncalibrated": "true"}, json={"plan": {
+            "kind": "uniform", "specimen": "slow picture", "rotations": 4,
+            "exposure": {"exposure_s": 0.005}}}).json()["id"]
+        _wait_state(daemon, job, {"completed"}, 180)
+    wait = open_live(browser, daemon, 120)
+    browser.execute_script(
+        "const f = window.fetch;"
+        "window.fetch = async (u, i) => { if (/[/]render[.]png|[/]export[?]/.test(String(u)))"
+        " await new Promise((r) => setTimeout(r, 4000)); return f(u, i); };")
+    click_when_steady(wait, f'#jobs tr[data-id="{job}"] td')
+    wait.until(lambda d: d.find_element(By.ID, "result-job").text.startswith(f"job {job}"))
+    started = time.monotonic()
+    time.sleep(2.6)
+    caption = browser.find_element(By.ID, "render-caption").text
+    elapsed = time.monotonic() - started
+    m = re.search(r"Rendering… (\d+) s so far", caption)
+    assert m, caption
+    assert 1 <= int(m.group(1)) <= round(elapsed) + 1, (caption, elapsed)
+    # Once the picture arrives the caption says what it shows.
+    wait.until(lambda d: "Click to open full size" in d.find_element(By.ID, "render-caption").text)
+    # An export, as slow, counts its seconds too, and says what it saved.
+    from selenium.webdriver.support.ui import Select
+
+    Select(browser.find_element(By.ID, "export-format")).select_by_value("table")
+    click_when_steady(wait, "#export-button")
+    started = time.monotonic()
+    time.sleep(2.6)
+    state = browser.find_element(By.ID, "export-state").text
+    elapsed = time.monotonic() - started
+    m = re.search(r"exporting… (\d+) s so far", state)
+    assert m, state
+    assert 1 <= int(m.group(1)) <= round(elapsed) + 1, (state, elapsed)
+    wait.until(lambda d: d.find_element(By.ID, "export-state").text.startswith("saved "))
