@@ -13,8 +13,10 @@ let messageFrom = null;        // "user" (a refused action) or "background" (a f
 function showError(err, from = "user") {
   const box = $("#message");
   if (!err) { box.hidden = true; box.textContent = ""; messageFrom = null; return; }
-  let text = err instanceof ApiError ? err.message : String(err);
-  if (err instanceof ApiError && (err.status === 401 || err.status === 403)) text += " (enter a valid API key at the top right)";
+  // A refused key is said once, by the key prompt above (keyRefusedBy, with what to do):
+  // this box repeated it under it in other words.
+  if (err instanceof ApiError && (err.status === 401 || err.status === 403)) { showError(null); return; }
+  const text = err instanceof ApiError ? err.message : String(err);
   box.textContent = text;
   box.hidden = false;
   messageFrom = from;
@@ -35,8 +37,12 @@ async function guarded(fn, userAction = false) {
 // ------------------------------------------------------------------ key
 let keyRefused = false;       // the daemon refused this tab's key (or wants one)
 
+// The tab's key was refused: reads with it are refused too (docs/api.md: a wrong key is
+// refused even on an open read). Without a key only changes were.
+function readsRefused() { return keyRefused && getKey() !== ""; }
+
 function describeKey() {
-  $("#key-state").textContent = keyRefused ? "key refused by this daemon"
+  $("#key-state").textContent = keyRefused ? (getKey() ? "key refused by this daemon" : "no key: a change needs one")
     : getKey() ? "key set for this tab" : "no key: read only";
   $("#key-state").className = keyRefused ? "refused" : "muted";
 }
@@ -59,8 +65,10 @@ function keyRefusedBy(err) {
   renderJobs();
 }
 
+// A read that works says a key works only when there is one: without a key an open read
+// works too, and the prompt of a refused change stays until a key is entered.
 function keyAccepted() {
-  if (!keyRefused) return;
+  if (!keyRefused || !getKey()) return;
   keyRefused = false;
   $("#key-prompt").hidden = true;
   $("#jobs-stale").hidden = true;
@@ -173,7 +181,7 @@ let selectedState = null;     // the selected job's state at the last list refre
 let activeDetail = null;
 
 function etaText(d = selectedDetail, id = selected) {
-  if (keyRefused) return "";
+  if (readsRefused()) return "";
   if (!d || d.id !== id) return "";
   if (d.state === "reconstructing") {
     // Past its estimate the daemon gives no time left (null, not 0 s): it is not done.
@@ -261,7 +269,7 @@ function renderJobs() {
   const body = $("#jobs");
   body.replaceChildren();
   // "No jobs yet" only when the list was read and is empty, never when it could not be read.
-  $("#no-jobs").hidden = jobs.length > 0 || keyRefused;
+  $("#no-jobs").hidden = jobs.length > 0 || readsRefused();
   for (const job of jobs) {
     const tr = document.createElement("tr");
     tr.dataset.id = job.id;
@@ -337,7 +345,7 @@ async function refreshJobs() {
 async function pollSelected() {
   // A refused key would be refused again every second (a 403 line a second in the daemon's
   // log): the page asks for a key instead, and polls again once one works.
-  if (selected === null || keyRefused) return;
+  if (selected === null || readsRefused()) return;
   const j = jobs.find((x) => x.id === selected);
   // A queued job that is loading its basis before the first reading is polled too.
   const starting = j?.state === "queued" && selectedDetail?.id === j.id && selectedDetail.activity;
@@ -354,7 +362,7 @@ async function pollSelected() {
 // The job holding the rig, when it is not the selected one: its detail is polled too (once
 // a second, as the selected job's), so its row keeps its ETA.
 async function pollActive() {
-  if (keyRefused) return;
+  if (readsRefused()) return;
   const a = jobs.find((j) => j.id !== selected && HOLDING.includes(j.state));
   if (!a) { activeDetail = null; return; }
   activeDetail = await getJSON(`/jobs/${a.id}`);
@@ -880,7 +888,7 @@ function restartEvents() {
   if (stopEvents) stopEvents();
   stopEvents = followEvents(onEvent, (live) => {
     const chip = $("#live-chip");
-    chip.textContent = live ? "live" : keyRefused ? "no valid key" : "reconnecting";
+    chip.textContent = live ? "live" : readsRefused() ? "no valid key" : "reconnecting";
     chip.className = live ? "chip" : "chip off";
     if (live) scheduleRefresh();
   });
