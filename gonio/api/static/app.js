@@ -13,8 +13,10 @@ let messageFrom = null;        // "user" (a refused action) or "background" (a f
 function showError(err, from = "user") {
   const box = $("#message");
   if (!err) { box.hidden = true; box.textContent = ""; messageFrom = null; return; }
-  let text = err instanceof ApiError ? err.message : String(err);
-  if (err instanceof ApiError && (err.status === 401 || err.status === 403)) text += " (enter a valid API key at the top right)";
+  // A refused key is said once, by the key prompt above (keyRefusedBy, with what to do):
+  // this box repeated it under it in other words.
+  if (err instanceof ApiError && (err.status === 401 || err.status === 403)) { showError(null); return; }
+  const text = err instanceof ApiError ? err.message : String(err);
   box.textContent = text;
   box.hidden = false;
   messageFrom = from;
@@ -35,8 +37,12 @@ async function guarded(fn, userAction = false) {
 // ------------------------------------------------------------------ key
 let keyRefused = false;       // the daemon refused this tab's key (or wants one)
 
+// The tab's key was refused: reads with it are refused too (docs/api.md: a wrong key is
+// refused even on an open read). Without a key only changes were.
+function readsRefused() { return keyRefused && getKey() !== ""; }
+
 function describeKey() {
-  $("#key-state").textContent = keyRefused ? "key refused by this daemon"
+  $("#key-state").textContent = keyRefused ? (getKey() ? "key refused by this daemon" : "no key: a change needs one")
     : getKey() ? "key set for this tab" : "no key: read only";
   $("#key-state").className = keyRefused ? "refused" : "muted";
 }
@@ -51,13 +57,21 @@ function keyRefusedBy(err) {
     : `This daemon needs an API key (${err.message}): paste one at the top right, or open the address \`gonio serve\` printed.`;
   prompt.hidden = false;
   $("#no-jobs").hidden = true;
+  // What the queue shows was read with a key that no longer works (or from a daemon that has
+  // since restarted, perhaps on a throwaway data directory with none of these jobs): it says
+  // so, and no countdown goes on claiming time left.
+  $("#jobs-stale").hidden = jobs.length === 0 || !getKey();
   describeKey();
+  renderJobs();
 }
 
+// A read that works says a key works only when there is one: without a key an open read
+// works too, and the prompt of a refused change stays until a key is entered.
 function keyAccepted() {
-  if (!keyRefused) return;
+  if (!keyRefused || !getKey()) return;
   keyRefused = false;
   $("#key-prompt").hidden = true;
+  $("#jobs-stale").hidden = true;
   describeKey();
 }
 
@@ -67,6 +81,7 @@ function useKey(key) {
   $("#key-input").value = key;
   keyRefused = false;
   $("#key-prompt").hidden = true;
+  $("#jobs-stale").hidden = true;
   describeKey();
   showError(null);
   refreshAll();
@@ -132,6 +147,11 @@ const ACTIONS = {
   completed: ["remove"], failed: ["remove"], aborted: ["remove"], halted: ["remove"],
 };
 
+// A job that holds the rig and has readings or a result coming: the one the lab watches.
+const ACTIVE = ["running", "suspended", "reconstructing"];
+// A job that holds the rig, measuring or not: the one whose time left the lab plans around.
+const HOLDING = [...ACTIVE, "paused"];
+
 const SHOW_REASON = new Set(["suspended", "failed", "aborted", "halted"]);
 
 // A count before its noun: "1 stage angle", "8 stage angles" (gonio.wording.counted).
@@ -156,9 +176,13 @@ function planTime(s) {
 let selectedDetail = null;
 let selectedState = null;     // the selected job's state at the last list refresh
 
-function etaText() {
-  const d = selectedDetail;
-  if (!d || d.id !== selected) return "";
+// The detail of the job that holds the rig when another row is selected: its ETA stays in
+// its row (it went blank as soon as another job was clicked or queued).
+let activeDetail = null;
+
+function etaText(d = selectedDetail, id = selected) {
+  if (readsRefused()) return "";
+  if (!d || d.id !== id) return "";
   if (d.state === "reconstructing") {
     // Past its estimate the daemon gives no time left (null, not 0 s): it is not done.
     const planned = (d.reconstruction_s ?? 0) + (d.basis_build_s ?? 0);
@@ -188,9 +212,8 @@ function etaText() {
 }
 
 // The ETA cell's tooltip: what the reconstruction estimate rests on.
-function etaTitle() {
-  const d = selectedDetail;
-  return d && d.id === selected && d.reconstruction_estimate
+function etaTitle(d = selectedDetail, id = selected) {
+  return d && d.id === id && d.reconstruction_estimate
     ? `reconstruction estimate: ${d.reconstruction_estimate}` : "";
 }
 
@@ -246,13 +269,14 @@ function renderJobs() {
   const body = $("#jobs");
   body.replaceChildren();
   // "No jobs yet" only when the list was read and is empty, never when it could not be read.
-  $("#no-jobs").hidden = jobs.length > 0 || keyRefused;
+  $("#no-jobs").hidden = jobs.length > 0 || readsRefused();
   for (const job of jobs) {
     const tr = document.createElement("tr");
     tr.dataset.id = job.id;
     tr.dataset.state = job.state;
     if (job.id === selected) tr.classList.add("selected");
-    const cells = [job.id, job.specimen, job.kind, job.state, null, job.id === selected ? etaText() : ""];
+    const cells = [job.id, job.specimen, job.kind, job.state, null,
+      job.id === selected ? etaText() : etaText(activeDetail, job.id)];
     cells.forEach((c, i) => {
       const td = document.createElement("td");
       if (i === 4) {
@@ -279,7 +303,7 @@ function renderJobs() {
           td.append(why);
         }
       }
-      if (i === 5) { td.className = "eta"; if (job.id === selected) td.title = etaTitle(); }
+      if (i === 5) { td.className = "eta"; td.title = job.id === selected ? etaTitle() : etaTitle(activeDetail, job.id); }
       tr.append(td);
     });
     const td = document.createElement("td");
@@ -319,7 +343,9 @@ async function refreshJobs() {
 // ETA counts down between checkpoints and a long first basis build shows its progress even
 // though no event arrives meanwhile.
 async function pollSelected() {
-  if (selected === null) return;
+  // A refused key would be refused again every second (a 403 line a second in the daemon's
+  // log): the page asks for a key instead, and polls again once one works.
+  if (selected === null || readsRefused()) return;
   const j = jobs.find((x) => x.id === selected);
   // A queued job that is loading its basis before the first reading is polled too.
   const starting = j?.state === "queued" && selectedDetail?.id === j.id && selectedDetail.activity;
@@ -331,6 +357,17 @@ async function pollSelected() {
   const prog = document.querySelector(`#jobs tr[data-id="${selected}"] td.progress .progress-text`);
   if (prog) prog.textContent = ` ${progressOf(j).text}`;
   if (["reconstructing", "queued"].includes(selectedDetail.state)) showResult(jobs.find((x) => x.id === selected));
+}
+
+// The job holding the rig, when it is not the selected one: its detail is polled too (once
+// a second, as the selected job's), so its row keeps its ETA.
+async function pollActive() {
+  if (readsRefused()) return;
+  const a = jobs.find((j) => j.id !== selected && HOLDING.includes(j.state));
+  if (!a) { activeDetail = null; return; }
+  activeDetail = await getJSON(`/jobs/${a.id}`);
+  const cell = document.querySelector(`#jobs tr[data-id="${a.id}"] td.eta`);
+  if (cell) { cell.textContent = etaText(activeDetail, a.id); cell.title = etaTitle(activeDetail, a.id); }
 }
 
 function scheduleRefresh() {
@@ -579,12 +616,25 @@ async function refreshRender() {
   if (shownResult === null) return;
   const id = shownResult, other = compareWith;
   const caption = $("#render-caption");
-  caption.textContent = "Rendering… (a few seconds the first time)";
+  // The seconds so far, counted: "a few seconds" read as stuck on a daemon that was also
+  // reconstructing a scan (39 s measured on a busy 2-core machine).
+  const started = performance.now();
+  const tick = () => {
+    if (id !== shownResult || other !== compareWith) return;
+    const s = Math.round((performance.now() - started) / 1000);
+    caption.textContent = `Rendering… ${s} s so far (a few seconds on an idle daemon; longer while it reconstructs a scan or exports)`;
+  };
+  tick();
+  const timer = setInterval(tick, 1000);
   // The picture shown is of another job (or comparison) until this one arrives: not shown.
   $("#render").hidden = true;
   $("#render-link").removeAttribute("href");
   const q = other !== null ? `?compare=${other}` : "";
-  const blob = await getBlob(`/jobs/${id}/render.png${q}`);
+  let blob;
+  try { blob = await getBlob(`/jobs/${id}/render.png${q}`); } catch (e) {
+    if (id === shownResult && other === compareWith) caption.textContent = `No rendering: ${e.message}`;
+    throw e;
+  } finally { clearInterval(timer); }
   if (id !== shownResult || other !== compareWith) return;
   const url = setImage($("#render"), "render", blob);
   $("#render-link").href = url;
@@ -776,6 +826,9 @@ function initForm() {
     // estimated_s = motion_s + settle_s + exposure_s (docs/api.md): all three are said.
     let text = `${verdict}: ${counted(r.readings, "reading")} at ${counted(r.angles_deg.length, "stage angle")}, about ${planTime(r.estimated_s)} ${from}` +
       `: moves ${planTime(r.motion_s)}, settling ${planTime(r.settle_s)}, exposures ${planTime(r.exposure_s)}.`;
+    // estimated_s is the measuring alone (docs/api.md); a scan then reconstructs, which can
+    // take longer than the measuring (20 s after an 8 s default scan on a busy 2-core machine).
+    if (r.kind !== "calibration") text += " That is the measuring; the reconstruction follows and is not counted in it (the job's ETA gives it once the scan runs).";
     if (r.max_estimated_s != null && r.kind === "adaptive") text += ` Adaptive refinement can add up to ${counted(r.max_angles - r.angles_deg.length, "angle")}: at most ${eta(r.max_estimated_s)} in all.`;
     for (const b of r.arc_branches || []) {
       text += ` If the first round finds the specimen ${b.arc_deg === 180 ? "twofold symmetric, it goes on over half a turn" : "not twofold symmetric, it goes on over a full turn"}: at most ${counted(b.angles, "angle")} (${counted(b.readings, "reading")}), ${eta(b.estimated_s)} in all${b.basis === "asymmetric" ? ", reconstructed with the basis for specimens without twofold symmetry" : ""}.`;
@@ -801,9 +854,18 @@ function initForm() {
         }
         job = await send("POST", "/jobs?accept_uncalibrated=true", { plan });
       }
+      // A scan queued behind one that is measuring (or finishing) leaves that one on screen:
+      // its readings, ETA and result are what the lab is waiting for, and the new job has
+      // nothing to show until it starts. Its row is a click away.
       setNote(`Job ${job.id} queued.`, job.id);
-      selected = job.id;
       await refreshJobs();
+      const active = jobs.find((j) => j.id !== job.id && ACTIVE.includes(j.state));
+      if (active && jobs.find((j) => j.id === job.id)?.state === "queued") {
+        setNote(`Job ${job.id} queued: it starts after job ${active.id} (${active.specimen}, ${active.state}). ` +
+          `The page goes on showing job ${active.id}; click job ${job.id}'s row to see it.`, job.id);
+        if (selected !== active.id) select(active.id);
+        return;
+      }
       select(job.id);
     }, true);
   });
@@ -827,7 +889,7 @@ function restartEvents() {
   if (stopEvents) stopEvents();
   stopEvents = followEvents(onEvent, (live) => {
     const chip = $("#live-chip");
-    chip.textContent = live ? "live" : keyRefused ? "no valid key" : "reconnecting";
+    chip.textContent = live ? "live" : readsRefused() ? "no valid key" : "reconnecting";
     chip.className = live ? "chip" : "chip off";
     if (live) scheduleRefresh();
   });
@@ -844,6 +906,7 @@ window.addEventListener("DOMContentLoaded", async () => {
   for (const id of ["#polar-ti", "#polar-pi", "#polar-log"]) $(id).addEventListener("change", () => guarded(refreshPolar, true));
   $("#compare").addEventListener("change", (e) => guarded(() => setCompare(e.target.value ? Number(e.target.value) : null), true));
   setInterval(() => guarded(pollSelected), 1000);
+  setInterval(() => guarded(pollActive), 1000);
   await refreshAll();
   restartEvents();
   // Stage position changes without events while idle; a slow poll keeps the chip honest.

@@ -212,8 +212,17 @@ async function refresh() {
       (flop !== undefined ? `; flop index ${flop.toFixed(2)}` : "") +
       (diff ? `; ΔE00 against ${standard ? `standard ${standard}` : `job ${against}`}: max ${diff.max_dE00.toFixed(2)}` : "") + source
     : `${rep.space}: reflectance factors per channel (${rep.channels.length} channels), no CIELAB. ` +
+      // "Uncalibrated" is the colour, not the values: the result's own calibration (1/sr or
+      // sensor units) is said under the headline.
+      "Uncalibrated here is the colour: no spectral bands or chart calibration tie the sensors' channels to a colour space. " +
       (noDiff ? "" : `${body.no_colour ?? "Give the sensor spectral bands or a chart colour calibration (docs/colour.md)"}.`);
   if (noDiff) caption.textContent += `${lab ? ". " : ""}${noDiff}.`;
+  // The "source" column is explained whatever the space (it was said only beside CIELAB).
+  if (!lab) {
+    caption.textContent += read
+      ? ` Source "pair": ${read} of ${measured.length} geometries read directly by a pair of the scan; "table": read from the reconstructed table.`
+      : ' Source "table": every geometry read from the reconstructed table (no pair of the scan reads one directly).';
+  }
   // What must travel with the numbers (a calibration from another exposure): said first.
   if (body.warnings?.length) caption.textContent = `Warning: ${body.warnings.join("; ")}. ${caption.textContent}`;
   // Which near-specular geometries no pair read (their rows say "table"), and what that means.

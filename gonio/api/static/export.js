@@ -41,7 +41,15 @@ async function exportShown() {
   if (id === null) return;
   const fmt = $("#export-format").value;
   const state = $("#export-state");
-  state.textContent = "exporting…";
+  // The seconds so far, counted: a fit-backed format can take a minute on a busy machine
+  // (MERL with its sidecar: 61 s measured beside a reconstruction), and a bare "exporting…"
+  // read as stuck.
+  const started = performance.now();
+  const tick = () => {
+    state.textContent = `exporting… ${Math.round((performance.now() - started) / 1000)} s so far`;
+  };
+  tick();
+  const timer = setInterval(tick, 1000);
   try {
     const { name, warnings } = await download(id, { format: fmt }, `gonio-job-${id}-${fmt}`);
     const saved = [name];
@@ -53,7 +61,7 @@ async function exportShown() {
     state.textContent = [`saved ${saved.join(" and ")}`, ...warnings.map((w) => `warning: ${w}`)].join("\n");
   } catch (e) {
     state.textContent = `export failed: ${e.message}`;
-  }
+  } finally { clearInterval(timer); }
 }
 
 window.addEventListener("DOMContentLoaded", () => {

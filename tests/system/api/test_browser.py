@@ -380,9 +380,27 @@ def test_page_without_key_shows_a_clear_error(daemon: Daemon, browser: Any) -> N
     wait = WebDriverWait(browser, 30, poll_frequency=0.2)
     wait.until(lambda d: d.find_element(By.ID, "live-chip").text == "live")
     click_when_steady(wait, "#start-scan")
-    wait.until(lambda d: d.find_element(By.ID, "message").is_displayed())
-    text = browser.find_element(By.ID, "message").text
-    assert "X-API-Key" in text and "enter a valid API key" in text, text
+    # The daemon's own refusal, said once: by the key prompt, with what to do (the message
+    # box under it repeated it in other words), and it stays until a key is entered, though
+    # the page's open reads go on working meanwhile.
+    with daemon.client(key=None) as c:
+        refusal = c.post("/api/v1/jobs", json={"plan": {"kind": "uniform"}})
+    assert refusal.status_code == 401
+    wait.until(lambda d: d.find_element(By.ID, "key-prompt").is_displayed())
+    text = browser.find_element(By.ID, "key-prompt").text
+    assert refusal.json()["detail"] in text and "paste one at the top right" in text, text
+    assert not browser.find_element(By.ID, "message").is_displayed()
+    # A job another client queues is read and listed (reads are open), and the prompt stays.
+    with export_fits_off(daemon), daemon.client() as c:
+        job = c.post("/api/v1/jobs", params={"accept_uncalibrated": "true"}, json={"plan": {
+            "kind": "uniform", "specimen": "another client's", "rotations": 2,
+            "exposure": {"exposure_s": 0.005}}}).json()["id"]
+        wait.until(lambda d: d.execute_script(
+            f"return !!document.querySelector('#jobs tr[data-id=\"{job}\"]')"))
+        assert browser.find_element(By.ID, "key-prompt").is_displayed()
+        assert not browser.find_element(By.ID, "message").is_displayed()
+        wait.until(lambda _d: c.get(f"/api/v1/jobs/{job}").json()["state"]
+                   in ("completed", "failed"))
 
 
 def test_a_suspended_job_shows_why_and_the_reason_goes_when_it_recovers(
