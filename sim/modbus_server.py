@@ -44,7 +44,7 @@ import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any, Protocol, cast
 
 import numpy as np
 from pymodbus.constants import ExcCodes
@@ -318,7 +318,9 @@ class ModbusRigServer:
         if self.holder is not None:
             devices.append(self._holder_device(self.holder))
         server = ModbusTcpServer(context=devices, address=(self.host, self.port))
-        server.context = _Gateway(server.context)
+        # Duck-typed for the two calls the request handler makes (pymodbus types the
+        # attribute as its own store classes).
+        server.context = cast(Any, _Gateway(server.context))
         cannot = OSError(f"the simulated Modbus server cannot listen on {self.host}:{self.port} "
                          "(is the port in use? choose another, or 0 for any free port)")
         try:
