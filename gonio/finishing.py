@@ -213,7 +213,6 @@ def finish_job(job_id: int, plan: AnyPlan | CheckedPlan, how: Finishing) -> dict
         summary.update(result_path=relative, calibration_path=CALIBRATION_FILE)
         return summary
 
-    from gonio.brdf.highlightread import highlight_read
     from gonio.brdf.reconstruction.reconstruct import reconstruct
 
     how.on_activity("basis")
@@ -316,10 +315,10 @@ def finish_job(job_id: int, plan: AnyPlan | CheckedPlan, how: Finishing) -> dict
         log.info("job %d: %s", job_id, bounds_message)  # the worker records the event
     # Where the table peaks far above every reading, its highlight (height, width, colour) is
     # the prior's extrapolation, not the specimen's: the result says so (science.md 7.1.1).
-    # reconstruct() read it from the same table and readings for the self-estimate: reported as
-    # it is, not computed a second time.
-    highlight = rec.highlight if rec.highlight is not None else highlight_read(
-        rec.table, grid.cells, grid.ph_lab, grid.stage_angles, np.maximum(grid.values, 0.0))
+    # reconstruct() read it from the same table and readings for the self-estimate (on either
+    # path, so it is never None here): reported as it is, not computed a second time.
+    highlight = rec.highlight
+    assert highlight is not None
     metrics.update(highlight.as_metrics())
     highlight_message = highlight.message()
     if highlight_message is not None:
