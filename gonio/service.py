@@ -114,6 +114,10 @@ __all__ = [
 
 
 T = TypeVar("T")
+UNCALIBRATED_ACCEPTED = "uncalibrated_accepted"
+"""Key of a scan's ``created`` event data (whether its user accepted that it may measure
+uncalibrated), and the type of the event a reorder with ``accept_uncalibrated`` records on each
+scan it moves ahead of a queued calibration (:meth:`GonioService.unasked_uncalibrated`)."""
 
 
 # --------------------------------------------------------------------------- service
@@ -185,6 +189,7 @@ class GonioService:
             store, self._get_rig, self.desc, self.data_dir, self.basis, self.calibration,
             provenance, gate=self.maintenance.reason, fit_exports=fit_exports,
         )
+        self.worker.start_refusal = self.unasked_uncalibrated
         self.stage = StageControl(self.desc, self._get_rig, self.worker, self.active_job,
                                   self.record_event)
         """Manual stage commands (commissioning, loading specimens)."""
@@ -412,11 +417,16 @@ class GonioService:
 
     # ------------------------------------------------------------------ jobs
     def submit(self, request: JobRequest | dict[str, Any],
-               checked: CheckedPlan | None = None) -> JobInfo:
+               checked: CheckedPlan | None = None, *,
+               accept_uncalibrated: bool = False) -> JobInfo:
         """Validate a request against the rig and queue it. Raises :class:`PlanError`.
 
         ``checked``: the request's plan as the caller already checked it on this rig
         (:meth:`check`), so it is not checked again; the worker starts the job with it.
+        ``accept_uncalibrated``: the user accepted that the scan may measure in sensor units
+        on a rig calibrated elsewhere (:meth:`uncalibrated_refusal`). Kept with the job: one
+        queued without it runs only if a calibration covers it by the time it starts
+        (:meth:`unasked_uncalibrated`).
         """
         if not isinstance(request, JobRequest):
             from pydantic import ValidationError
@@ -444,6 +454,8 @@ class GonioService:
             kind=plan.kind, specimen=plan.specimen, plan=plan.model_dump(mode="json"),
             rig=self.desc.model_dump(mode="json"), priority=request.priority,
             total_angles=len(checked.angles_deg),
+            created=(None if plan.kind == "calibration"
+                     else {UNCALIBRATED_ACCEPTED: accept_uncalibrated}),
         )
         self.worker.take_checked(row.id, checked)
         self.basis.note_arc(self.store, row.id, plan, symmetry)
@@ -474,6 +486,32 @@ class GonioService:
                 "run a calibration job, or send accept_uncalibrated=true to measure in sensor "
                 "units all the same")
 
+    def unasked_uncalibrated(self, job: JobRow, plan: AnyPlan) -> str | None:
+        """Why queued scan ``job`` must not start: it would measure uncalibrated on a rig
+        calibrated elsewhere (:meth:`_uncalibrated_why`) and its user never accepted that.
+        None when it may start.
+
+        Such a scan was queued without asking because a calibration job was to run first
+        (:meth:`uncalibrated_refusal`); that calibration was then cancelled, removed or failed.
+        Run anyway, it would measure for minutes in sensor units, which nobody asked for.
+        Jobs queued by a gonio that did not keep the acceptance (no ``uncalibrated_accepted``
+        in their ``created`` event) start as they always did.
+        """
+        why = self._uncalibrated_why(plan)
+        if why is None:
+            return None
+        created = self.store.last_event(job.id, "created")
+        if created is None or UNCALIBRATED_ACCEPTED not in created.data:
+            return None
+        if created.data[UNCALIBRATED_ACCEPTED] or \
+                self.store.has_event(job.id, UNCALIBRATED_ACCEPTED):
+            return None
+        return (f"{why}. It was queued without asking because a calibration job was to run "
+                "before it, and none has calibrated the rig since (cancelled, removed or "
+                "failed). Nothing was measured: run a calibration job and queue the scan "
+                "again, or queue it with accept_uncalibrated=true (gonio scan "
+                "--accept-uncalibrated) to measure in sensor units")
+
     def _uncalibrated_why(self, plan: AnyPlan) -> str | None:
         """Why a scan of ``plan`` would be uncalibrated on a rig calibrated elsewhere
         (:func:`gonio.calibration.uncalibrated_refusal`), whatever the queue holds; None for a
@@ -490,12 +528,13 @@ class GonioService:
             own = None
         return uncalibrated_refusal(self.calibration(), pairs, own, self.data_dir)
 
-    def _calibration_overtaken_check(self) -> Callable[[list[tuple[int, str]],
-                                                       list[tuple[int, str]]], None] | None:
-        """A check for :meth:`JobStore.reorder` that refuses a new queue order in which a
-        queued scan that would be uncalibrated (:meth:`_uncalibrated_why`) no longer runs
-        after a queued calibration it ran after before; None when no reorder can do that (no
-        calibration queued, or one under way or paused, which runs before every queued job).
+    def _calibration_overtaken(self) -> Callable[
+            [list[tuple[int, str]], list[tuple[int, str]]], tuple[list[int], int, str]] | None:
+        """For :meth:`reorder`: a function of the queue order before and after a move that
+        gives the queued scans that would be uncalibrated (:meth:`_uncalibrated_why`) and no
+        longer run after a queued calibration they ran after before, that calibration's job id
+        and the first scan's reason; None when no reorder can do that (no calibration queued,
+        or one under way or paused, which runs before every queued job).
 
         Such a scan was queued without the user's acceptance because the calibration ran
         first (:meth:`uncalibrated_refusal`); run before it, it would measure in sensor units
@@ -523,20 +562,15 @@ class GonioService:
                          len(order))
             return {job_id for job_id, _ in order[first + 1:]}
 
-        def check(before: list[tuple[int, str]], after: list[tuple[int, str]]) -> None:
-            overtaken = sorted((behind_calibration(before) - behind_calibration(after))
-                               & why.keys())
-            if overtaken:
-                cal = next(job_id for job_id, kind in after if kind == "calibration")
-                jobs = ", ".join(str(j) for j in overtaken)
-                raise Conflict(
-                    f"not reordered: job {jobs} would then run before calibration job {cal}, "
-                    f"uncalibrated ({why[overtaken[0]]}); it was queued without asking because "
-                    f"the calibration ran first. Keep it behind job {cal} (no higher priority, "
-                    f"no earlier place), let job {cal} finish first, or send "
-                    "accept_uncalibrated=true to measure it in sensor units all the same")
+        def overtaken(before: list[tuple[int, str]],
+                      after: list[tuple[int, str]]) -> tuple[list[int], int, str]:
+            jobs = sorted((behind_calibration(before) - behind_calibration(after)) & why.keys())
+            if not jobs:
+                return [], 0, ""
+            cal = next(job_id for job_id, kind in after if kind == "calibration")
+            return jobs, cal, why[jobs[0]]
 
-        return check
+        return overtaken
 
     def _check_calibration_covers(self, checked: CheckedPlan) -> None:
         """Refuse, before anything moves, a plan the calibration in effect covers only in part
@@ -723,16 +757,39 @@ class GonioService:
 
         Refused with :class:`Conflict` when a queued scan that would be uncalibrated, queued
         without asking because a queued calibration ran first, would then run before it
-        (:meth:`_calibration_overtaken_check`), unless ``accept_uncalibrated``.
+        (:meth:`_calibration_overtaken`), unless ``accept_uncalibrated``: then each scan so moved
+        keeps that acceptance (an ``uncalibrated_accepted`` event) for its start.
         """
         if request is not None:
             priority, position = request.priority, request.position
         if priority is None and position is None:
             raise Conflict("reorder needs a priority or a position")
         self._row(job_id)
-        check = None if accept_uncalibrated else self._calibration_overtaken_check()
-        return JobInfo.from_row(self.store.reorder(job_id, priority=priority, position=position,
-                                                   check=check))
+        overtaken = self._calibration_overtaken()
+        accepted: list[int] = []
+
+        def check(before: list[tuple[int, str]], after: list[tuple[int, str]]) -> None:
+            if overtaken is None:
+                return
+            jobs, cal, why = overtaken(before, after)
+            if not jobs:
+                return
+            if accept_uncalibrated:
+                accepted.extend(jobs)
+                return
+            raise Conflict(
+                f"not reordered: job {', '.join(str(j) for j in jobs)} would then run before "
+                f"calibration job {cal}, uncalibrated ({why}); it was queued without asking "
+                f"because the calibration ran first. Keep it behind job {cal} (no higher "
+                f"priority, no earlier place), let job {cal} finish first, or send "
+                "accept_uncalibrated=true to measure it in sensor units all the same")
+
+        row = self.store.reorder(job_id, priority=priority, position=position, check=check)
+        for job in accepted:
+            # What the user accepted travels with the job: its start does not refuse it
+            # (unasked_uncalibrated), whichever calibration runs or does not run before it.
+            self.store.append_event(job, UNCALIBRATED_ACCEPTED, {"by": "reorder"})
+        return JobInfo.from_row(row)
 
     def remove(self, job_id: int) -> None:
         """Delete a queued or finished job and its readings (not its result file).

@@ -470,12 +470,14 @@ class JobStore:
         rig: dict[str, Any],
         priority: int = 0,
         total_angles: int = 0,
+        created: dict[str, Any] | None = None,
     ) -> JobRow:
         """Store a new queued job (FIFO within its priority) and a ``created`` event.
 
         ``total_angles``: the stage angles its plan measures first, when known at submission
         (a queued job then reads "0 of 8", not "0 of 0"); the engine sets it again when it
-        plans them, and adaptive rounds add to it."""
+        plans them, and adaptive rounds add to it. ``created``: more of what the submission
+        decided, kept in the ``created`` event's data (e.g. ``uncalibrated_accepted``)."""
         with self._tx() as c:
             pos = c.execute("SELECT COALESCE(MAX(position), 0) + 1 FROM jobs").fetchone()[0]
             cur = c.execute(
@@ -486,7 +488,8 @@ class JobStore:
             )
             job_id = int(cur.lastrowid or 0)
             ev = self._insert_event(
-                c, job_id, "created", {"state": "queued", "kind": kind, "priority": priority}
+                c, job_id, "created",
+                {**(created or {}), "state": "queued", "kind": kind, "priority": priority},
             )
         self._notify([ev])
         return self.get_job(job_id)

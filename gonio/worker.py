@@ -116,6 +116,10 @@ class Worker:
         self.basis = basis
         self.calibration = calibration
         self.on_job_start: Callable[[JobRow], None] | None = None
+        self.start_refusal: Callable[[JobRow, AnyPlan], str | None] | None = None
+        """Why a queued job must not start although its plan still checks (the service's
+        :meth:`gonio.service.GonioService.unasked_uncalibrated`); asked once, before anything
+        moves, for a job that has measured nothing yet."""
         self.provenance = provenance or {}
         self.fit_exports = fit_exports
         self._engine: ScanEngine | None = None  # the job being measured; see "measurement"
@@ -441,6 +445,10 @@ class Worker:
                 cal.check_exposure(plan.exposure.exposure_s, f"job {job.id}")
             except CalibrationError as exc:
                 return self._fail(job, f"not started: {exc}", plan)
+            refusal = (self.start_refusal(job, plan) if self.start_refusal is not None
+                       and job.state is JobState.QUEUED else None)
+            if refusal is not None:
+                return self._fail(job, f"not started: {refusal}", plan)
         basis: Basis | None = None  # loaded before measuring when the plan needs it
         if job.state is not JobState.RECONSTRUCTING:
             refiner = None

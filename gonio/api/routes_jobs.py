@@ -71,7 +71,7 @@ def create_job(
         refusal = service.uncalibrated_refusal(request.plan, request.priority)
         if refusal is not None:
             raise Conflict(refusal)
-    info = service.submit(request)
+    info = service.submit(request, accept_uncalibrated=accept_uncalibrated)
     response.headers["Location"] = f"/api/v1/jobs/{info.id}"
     return info
 

@@ -393,7 +393,8 @@ async def _run_owned(args: argparse.Namespace, checked: Any, config: Any, sim: A
             # basis is known only later says it through the progress bar's events).
             for warning in service.dry_run(checked).warnings:
                 print(f"warning: {warning}", file=sys.stderr)
-            job = service.submit(JobRequest(plan=plan), checked=checked)
+            job = service.submit(JobRequest(plan=plan), checked=checked,
+                                 accept_uncalibrated=bool(args.accept_uncalibrated))
         bar = _progress(service, job.id, disabled=args.no_progress)
         try:
             final = await service.run_in_foreground(job.id)

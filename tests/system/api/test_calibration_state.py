@@ -8,13 +8,16 @@ in `gonio scan`'s data directory for that rig, not in the daemon's.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Iterator
 
+import httpx
 import pytest
 
 from gonio.calibration import CALIBRATION_FILE, Calibration, PairCalibration, save_calibration
 from gonio.paths import scan_data_dir
 from tests.system.api.conftest import Daemon
+from tests.system.api.test_scan_flow import ENDED, wait_state
 
 pytestmark = pytest.mark.system
 
@@ -129,3 +132,70 @@ def test_a_scan_queued_behind_a_calibration_is_not_moved_ahead_of_it_unasked(
             for job in (j["id"] for j in c.get("/api/v1/jobs", params={"state": "queued"}).json()):
                 c.post(f"/api/v1/jobs/{job}/cancel")
             c.post("/api/v1/rig/release")
+
+
+CAL_PLAN = {"kind": "calibration", "reference_albedo": 0.99, "rotations": 4}
+
+
+def _queue_behind_a_calibration(c: httpx.Client, **scan_params: str) -> tuple[int, int]:
+    """A calibration job and, behind it, a scan of PLAN (the queue held: both stay queued)."""
+    r = c.post("/api/v1/jobs", json={"plan": CAL_PLAN, "priority": 5})
+    assert r.status_code == 201, r.text
+    cal = r.json()["id"]
+    r = c.post("/api/v1/jobs", params=scan_params, json={"plan": PLAN})
+    assert r.status_code == 201, r.text
+    return cal, r.json()["id"]
+
+
+def test_a_scan_queued_behind_a_calibration_that_never_ran_is_not_measured_uncalibrated(
+    daemon: Daemon, calibrated_elsewhere: Calibration
+) -> None:
+    # Queued without asking because the calibration was to run first; the calibration is then
+    # cancelled. The scan used to run anyway, in sensor units, with nobody asked.
+    with daemon.client() as c:
+        assert c.post("/api/v1/rig/halt").status_code == 200
+        try:
+            cal, scan = _queue_behind_a_calibration(c)
+            assert c.post(f"/api/v1/jobs/{cal}/cancel").status_code == 200
+        finally:
+            c.post("/api/v1/rig/release")
+        job = wait_state(c, scan, ENDED)
+        assert job["state"] == "failed", job
+        reason = job["reason"]
+        assert reason.startswith("not started:"), reason
+        # Why (the rig's calibration elsewhere, named), how it came to be queued, what to do.
+        assert str(scan_data_dir(daemon.sim.config)) in reason, reason
+        assert "calibration job" in reason and "accept_uncalibrated=true" in reason, reason
+        # Nothing was measured.
+        assert job["done_angles"] == 0, job
+        assert c.get(f"/api/v1/jobs/{scan}/readings").json() == []
+
+
+def test_a_scan_whose_user_accepted_sensor_units_runs_when_the_calibration_does_not(
+    daemon: Daemon, calibrated_elsewhere: Calibration
+) -> None:
+    # Accepted at submission, or when moved ahead of the calibration: either way the
+    # acceptance travels with the job to its start.
+    with daemon.client() as c:
+        assert c.post("/api/v1/rig/halt").status_code == 200
+        try:
+            cal, accepted = _queue_behind_a_calibration(c, accept_uncalibrated="true")
+            r = c.post("/api/v1/jobs", json={"plan": PLAN})
+            assert r.status_code == 201, r.text  # behind the calibration: not asked
+            moved = r.json()["id"]
+            r = c.post(f"/api/v1/jobs/{moved}/reorder", params={"accept_uncalibrated": "true"},
+                       json={"priority": 10})
+            assert r.status_code == 200, r.text
+            assert c.post(f"/api/v1/jobs/{cal}/cancel").status_code == 200
+        finally:
+            c.post("/api/v1/rig/release")
+        for job in (moved, accepted):
+            # It leaves the queue and measures (its first angle is enough to tell).
+            state = wait_state(c, job, {"running", "failed", "completed"})
+            assert state["state"] != "failed", state
+            deadline = time.monotonic() + 120
+            while c.get(f"/api/v1/jobs/{job}").json()["done_angles"] == 0:
+                assert time.monotonic() < deadline, f"job {job} measured nothing"
+                time.sleep(0.1)
+            assert c.post(f"/api/v1/jobs/{job}/abort").status_code == 200
+            wait_state(c, job, ENDED)
