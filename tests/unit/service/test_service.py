@@ -285,3 +285,28 @@ def test_a_plan_checked_before_submission_is_the_one_that_runs(
     assert seen == [checked] and seen[0] is checked
     assert check_plan(plan, svc.desc) == checked
     assert len(rig.mstage.moves) >= 2
+
+
+def test_the_start_refuses_only_an_unasked_uncalibrated_scan(tmp_path: Path) -> None:
+    # Whether a scan would be uncalibrated on a rig calibrated elsewhere is the daemon's
+    # (tests/system/api/test_calibration_state.py); here, what the job keeps of its user's
+    # acceptance and what the start makes of it.
+    _, svc = _service(tmp_path)
+    svc._uncalibrated_why = lambda plan: "calibrated elsewhere"  # type: ignore[method-assign]
+    plan = UniformPlan(rotations=2, exposure=FAST)
+    unasked = svc.submit(JobRequest(plan=plan))
+    accepted = svc.submit(JobRequest(plan=plan), accept_uncalibrated=True)
+    moved = svc.submit(JobRequest(plan=plan))
+    svc.store.append_event(moved.id, "uncalibrated_accepted", {"by": "reorder"})
+    # Queued by a gonio that kept no acceptance: its created event lacks the key.
+    older = svc.store.create_job(kind="uniform", specimen="x", plan=plan.model_dump(mode="json"),
+                                 rig=svc.desc.model_dump(mode="json"))
+    rows = {j: svc.store.get_job(j) for j in (unasked.id, accepted.id, moved.id, older.id)}
+    why = svc.unasked_uncalibrated(rows[unasked.id], plan)
+    assert why is not None and why.startswith("calibrated elsewhere. It was queued without")
+    assert "accept_uncalibrated=true" in why
+    for job in (accepted.id, moved.id, older.id):
+        assert svc.unasked_uncalibrated(rows[job], plan) is None, job
+    # A scan the calibration in effect covers (no reason) starts whatever it was asked.
+    svc._uncalibrated_why = lambda plan: None  # type: ignore[method-assign]
+    assert svc.unasked_uncalibrated(rows[unasked.id], plan) is None
