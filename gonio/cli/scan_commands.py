@@ -20,7 +20,12 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from gonio.cli import UsageError, finite_float, nonnegative_float, positive_float, positive_int
-from gonio.cli.daemon_client import DaemonClient, DaemonRefused, add_daemon_options
+from gonio.cli.daemon_client import (
+    DaemonClient,
+    DaemonRefused,
+    DaemonUnreachable,
+    add_daemon_options,
+)
 from gonio.wording import counted
 
 if TYPE_CHECKING:
@@ -721,8 +726,12 @@ def _scan_through_daemon(args: argparse.Namespace, plan: Any) -> int:
             raise
         job_id = int(job["id"])
         print(f"job {job_id} queued on {client.url}", file=sys.stderr)
+        seen: dict[str, Any] = {}
         try:
-            row = _follow(client, job_id, disabled=args.no_progress)
+            row = _follow(client, job_id, disabled=args.no_progress, seen=seen)
+        except DaemonUnreachable as exc:
+            print(lost_daemon_message(client.url, job_id, seen, str(exc)), file=sys.stderr)
+            return 1
         except KeyboardInterrupt:
             print(f"stopped following; job {job_id} goes on in the daemon "
                   f"({client.url}/api/v1/jobs/{job_id})", file=sys.stderr)
@@ -747,8 +756,35 @@ def _scan_through_daemon(args: argparse.Namespace, plan: Any) -> int:
     return 0
 
 
-def _follow(client: Any, job_id: int, disabled: bool, poll_s: float = 0.5) -> dict[str, Any]:
-    """Poll the job with a progress bar until it ends; returns its last detail."""
+def lost_daemon_message(url: str, job_id: int, seen: dict[str, Any], why: str) -> str:
+    """What ``gonio scan --daemon`` says when its daemon stops answering while it follows a job.
+
+    It said only that the daemon could not be reached, so a user whose daemon was killed
+    mid-scan could not tell that the job was kept (and resumes when the daemon restarts) and
+    ran the command again, queueing a second scan of the specimen.
+
+    Parameters
+    ----------
+    url : the daemon's address
+    job_id : the job followed
+    seen : the job's detail as last answered (empty if none came)
+    why : the connection error's message
+    """
+    when = (f" (last seen {seen['state']}, {seen.get('done_angles', 0)} of "
+            f"{seen.get('total_angles') or '?'} angles)" if seen else "")
+    return (f"{why}\n"
+            f"  job {job_id}{when} is kept in the daemon's job store: a restarted daemon (gonio "
+            f"serve on the same data directory) takes it up again, a scan under way from its last "
+            f"checkpoint. Do not run "
+            f"this command again, which would queue a second scan; follow job {job_id} on the "
+            f"lab page or at {url}/api/v1/jobs/{job_id}, and fetch its result from "
+            f"{url}/api/v1/jobs/{job_id}/result once it is completed")
+
+
+def _follow(client: Any, job_id: int, disabled: bool, poll_s: float = 0.5,
+            seen: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Poll the job with a progress bar until it ends; returns its last detail (``seen``, when
+    given, holds the last detail answered, for a message if the daemon goes away)."""
     from tqdm import tqdm
 
     bar = tqdm(total=None, unit="angle", desc=f"job {job_id}", disable=disabled, file=sys.stderr)
@@ -756,6 +792,9 @@ def _follow(client: Any, job_id: int, disabled: bool, poll_s: float = 0.5) -> di
     try:
         while True:
             row: dict[str, Any] = client.request("GET", f"/api/v1/jobs/{job_id}")
+            if seen is not None:
+                seen.clear()
+                seen.update(row)
             bar.total = row.get("total_angles") or None
             bar.n = int(row.get("done_angles") or 0)
             bar.set_description_str(f"job {job_id} {row['state']}")
