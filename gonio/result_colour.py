@@ -464,13 +464,26 @@ def parse_standard(text: str, source: str, name: str) -> tuple[ColourReport, lis
         raise ColourError(f"{p}: {exc}") from None
     geos, lab = [], []
     for n, r in enumerate(rows, start=2):
+
+        def number(column: str, row: dict[str, str] = r, line: int = n) -> float:
+            # "could not convert string to float: 'abc'" named neither the column nor what
+            # to do; a standard typed into a spreadsheet has its gaps and typos in one cell.
+            cell = row.get(column) or ""
+            try:
+                return float(cell)
+            except ValueError:
+                raise ColourError(
+                    f"{p}: row {line}, column {column}: {cell!r} is not a number; correct or "
+                    "fill that cell (a number, e.g. 45 or 12.5) and read the standard "
+                    "again") from None
+
         try:
-            geos.append(Geometry(canonical_instrument(r["instrument"]),
-                                 float(r["incidence_deg"]), float(r["aspecular_deg"]),
-                                 float(r.get("azimuth_deg") or 0.0)))
-            lab.append([float(r["L"]), float(r["a"]), float(r["b"])])
-        except (ValueError, TypeError) as exc:
+            instrument = canonical_instrument(r["instrument"])
+        except (ColourError, ValueError, TypeError) as exc:
             raise ColourError(f"{p}: row {n}: {exc}") from None
+        geos.append(Geometry(instrument, number("incidence_deg"), number("aspecular_deg"),
+                             number("azimuth_deg") if r.get("azimuth_deg") else 0.0))
+        lab.append([number("L"), number("a"), number("b")])
     lab_arr = np.asarray(lab, dtype=float)
     if not np.isfinite(lab_arr).all():
         raise ColourError(f"{p}: a CIELAB value is not a finite number")
