@@ -423,6 +423,40 @@ def read_standard(path: str | os.PathLike[str]) -> tuple[ColourReport, list[str]
     return parse_standard(text, str(p), p.stem)
 
 
+#: Header cells a lab's own table uses for the colour CSV's columns (compared lower-case,
+#: without spaces): CIELAB as instruments and papers print it.
+_STANDARD_ALIASES = {"l*": "L", "a*": "a", "b*": "b"}
+
+#: An instrument geometry's name, as instruments and gonio print it: "45as15", "15as-45".
+_GEOMETRY_NAME = re.compile(r"^\s*(\d+(?:\.\d+)?)\s*as\s*([+-]?\d+(?:\.\d+)?)\s*$",
+                            re.IGNORECASE)
+
+
+def _standard_columns(header: list[str], rows: list[dict[str, str]], source: str) -> None:
+    """Read a lab's own standard's columns as the colour CSV's, in place: ``L*``, ``a*``,
+    ``b*`` as ``L``, ``a``, ``b``, and a ``geometry`` column of names such as ``45as15`` as
+    ``incidence_deg`` and ``aspecular_deg`` (when those are absent).
+
+    A standard copied from an instrument's report said "columns ['L', 'a', 'b'] are
+    missing; write the standard with 'gonio colour RESULT.h5 --csv FILE'": a lab comparing
+    with its own instrument has no gonio result to write it from.
+    """
+    for cell in header:
+        alias = _STANDARD_ALIASES.get(cell.replace(" ", "").lower())
+        if alias is not None and alias not in header:
+            for r in rows:
+                r[alias] = r.get(cell, "")
+    if "geometry" in header and not {"incidence_deg", "aspecular_deg"} & set(header):
+        for n, r in enumerate(rows, start=2):
+            m = _GEOMETRY_NAME.match(r.get("geometry", ""))
+            if m is None:
+                raise ColourError(
+                    f"{source}: row {n}, column geometry: {r.get('geometry', '')!r} is not an "
+                    "instrument geometry such as 45as15 or 15as-45 (incidence, 'as', "
+                    "aspecular angle in degrees)")
+            r["incidence_deg"], r["aspecular_deg"] = m.group(1), m.group(2)
+
+
 def parse_standard(text: str, source: str, name: str) -> tuple[ColourReport, list[str]]:
     """A standard's colour from a colour CSV's text (:func:`read_standard`'s rules).
 
@@ -446,14 +480,18 @@ def parse_standard(text: str, source: str, name: str) -> tuple[ColourReport, lis
             "b")
     if not rows:
         raise ColourError(f"{p}: no rows; a standard is a colour CSV (gonio colour --csv)")
+    _standard_columns(header, rows, p)
     # An uncalibrated result's CSV has no L, a, b: say why, not which columns are missing.
     if any((r.get("space") or CIELAB) != CIELAB for r in rows):
         raise ColourError(f"{p}: holds {rows[0].get('space')}, not CIELAB; a standard must be "
                           "colour from a spectral or chart-calibrated sensor")
     missing = [c for c in need if c not in rows[0]]
     if missing:
-        raise ColourError(f"{p}: columns {missing} are missing; write the standard with "
-                          "'gonio colour RESULT.h5 --csv FILE'")
+        raise ColourError(
+            f"{p}: columns {missing} are missing; a standard needs the columns illuminant, "
+            "observer, instrument, incidence_deg and aspecular_deg (or geometry, e.g. 45as15), "
+            "L, a and b (or L*, a*, b*), one row per geometry, e.g. 'D65,10,MA98,45,15,71.3,"
+            "17.5,-65.9'; 'gonio colour RESULT.h5 --csv FILE' writes one from a result")
     # As a person types them in a spreadsheet: "d65", "10°".
     conds = {(r["illuminant"].upper(), r["observer"].rstrip("°º")) for r in rows}
     if len(conds) != 1:
@@ -464,13 +502,26 @@ def parse_standard(text: str, source: str, name: str) -> tuple[ColourReport, lis
         raise ColourError(f"{p}: {exc}") from None
     geos, lab = [], []
     for n, r in enumerate(rows, start=2):
+
+        def number(column: str, row: dict[str, str] = r, line: int = n) -> float:
+            # "could not convert string to float: 'abc'" named neither the column nor what
+            # to do; a standard typed into a spreadsheet has its gaps and typos in one cell.
+            cell = row.get(column) or ""
+            try:
+                return float(cell)
+            except ValueError:
+                raise ColourError(
+                    f"{p}: row {line}, column {column}: {cell!r} is not a number; correct or "
+                    "fill that cell (a number, e.g. 45 or 12.5) and read the standard "
+                    "again") from None
+
         try:
-            geos.append(Geometry(canonical_instrument(r["instrument"]),
-                                 float(r["incidence_deg"]), float(r["aspecular_deg"]),
-                                 float(r.get("azimuth_deg") or 0.0)))
-            lab.append([float(r["L"]), float(r["a"]), float(r["b"])])
-        except (ValueError, TypeError) as exc:
+            instrument = canonical_instrument(r["instrument"])
+        except (ColourError, ValueError, TypeError) as exc:
             raise ColourError(f"{p}: row {n}: {exc}") from None
+        geos.append(Geometry(instrument, number("incidence_deg"), number("aspecular_deg"),
+                             number("azimuth_deg") if r.get("azimuth_deg") else 0.0))
+        lab.append([number("L"), number("a"), number("b")])
     lab_arr = np.asarray(lab, dtype=float)
     if not np.isfinite(lab_arr).all():
         raise ColourError(f"{p}: a CIELAB value is not a finite number")

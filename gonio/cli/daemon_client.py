@@ -25,6 +25,10 @@ class DaemonRefused(UsageError):
         self.status = status
 
 
+class DaemonUnreachable(UsageError):
+    """The daemon did not answer (not running, killed, wrong address)."""
+
+
 def add_daemon_options(parser: argparse.ArgumentParser) -> None:
     """``--daemon URL`` (into a mutually exclusive group the caller made) and ``--api-key``."""
     parser.add_argument("--api-key", default=None, metavar="KEY",
@@ -67,7 +71,7 @@ class DaemonClient:
 
         Raises
         ------
-        UsageError
+        DaemonUnreachable
             The daemon cannot be reached.
         DaemonRefused
             It answered 4xx/5xx; the message is its ``detail``, with what to do for a key.
@@ -77,7 +81,7 @@ class DaemonClient:
         try:
             r = self._http.request(method, path, **kwargs)
         except httpx.HTTPError as exc:
-            raise UsageError(f"cannot reach the daemon at {self.url} ({exc}); is it running "
+            raise DaemonUnreachable(f"cannot reach the daemon at {self.url} ({exc}); is it running "
                              "(gonio serve), and is the address right?") from None
         if r.status_code >= 400:
             try:

@@ -20,7 +20,12 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from gonio.cli import UsageError, finite_float, nonnegative_float, positive_float, positive_int
-from gonio.cli.daemon_client import DaemonClient, DaemonRefused, add_daemon_options
+from gonio.cli.daemon_client import (
+    DaemonClient,
+    DaemonRefused,
+    DaemonUnreachable,
+    add_daemon_options,
+)
 from gonio.wording import counted
 
 if TYPE_CHECKING:
@@ -123,10 +128,22 @@ def register(subparsers: Any) -> None:
         "unfinished (e.g. a foreground scan interrupted by Ctrl-C); rebuild ID: write a "
         "completed job's result file again from the readings the store holds (when the file "
         "is missing or damaged), with the calibration the job was finished with; a job that "
-        "failed because the disk filled while its result was written is completed so.")
-    j.add_argument("action", nargs="?", choices=["list", "show", "abort", "rebuild"],
+        "failed because the disk filled while its result was written is completed so. "
+        "With --daemon URL the jobs are a running daemon's, acted on through its API: list, "
+        "show, abort (a running job too), cancel ID (take a queued job out of the queue), "
+        "reorder ID --position N and/or --priority P (N=0: next).")
+    j.add_argument("action", nargs="?",
+                   choices=["list", "show", "abort", "rebuild", "cancel", "reorder"],
                    default="list")
     j.add_argument("job_id", nargs="?", type=int)
+    j.add_argument("--daemon", default=None, metavar="URL",
+                   help="act through the running daemon at URL (it owns its job store), e.g. "
+                        "http://127.0.0.1:8600; cancel and reorder need it")
+    add_daemon_options(j)
+    j.add_argument("--position", type=int, default=None,
+                   help="reorder: the job's new place among the queued jobs (0: next)")
+    j.add_argument("--priority", type=int, default=None,
+                   help="reorder: the job's new priority (higher runs first)")
     j.add_argument("--db", type=Path, default=None,
                    help="job store (SQLite, DATA_DIR/gonio.sqlite), e.g. the one 'gonio scan' "
                         "prints, or the data directory holding it (required; without it the "
@@ -721,8 +738,12 @@ def _scan_through_daemon(args: argparse.Namespace, plan: Any) -> int:
             raise
         job_id = int(job["id"])
         print(f"job {job_id} queued on {client.url}", file=sys.stderr)
+        seen: dict[str, Any] = {}
         try:
-            row = _follow(client, job_id, disabled=args.no_progress)
+            row = _follow(client, job_id, disabled=args.no_progress, seen=seen)
+        except DaemonUnreachable as exc:
+            print(lost_daemon_message(client.url, job_id, seen, str(exc)), file=sys.stderr)
+            return 1
         except KeyboardInterrupt:
             print(f"stopped following; job {job_id} goes on in the daemon "
                   f"({client.url}/api/v1/jobs/{job_id})", file=sys.stderr)
@@ -747,8 +768,35 @@ def _scan_through_daemon(args: argparse.Namespace, plan: Any) -> int:
     return 0
 
 
-def _follow(client: Any, job_id: int, disabled: bool, poll_s: float = 0.5) -> dict[str, Any]:
-    """Poll the job with a progress bar until it ends; returns its last detail."""
+def lost_daemon_message(url: str, job_id: int, seen: dict[str, Any], why: str) -> str:
+    """What ``gonio scan --daemon`` says when its daemon stops answering while it follows a job.
+
+    It said only that the daemon could not be reached, so a user whose daemon was killed
+    mid-scan could not tell that the job was kept (and resumes when the daemon restarts) and
+    ran the command again, queueing a second scan of the specimen.
+
+    Parameters
+    ----------
+    url : the daemon's address
+    job_id : the job followed
+    seen : the job's detail as last answered (empty if none came)
+    why : the connection error's message
+    """
+    when = (f" (last seen {seen['state']}, {seen.get('done_angles', 0)} of "
+            f"{seen.get('total_angles') or '?'} angles)" if seen else "")
+    return (f"{why}\n"
+            f"  job {job_id}{when} is kept in the daemon's job store: a restarted daemon (gonio "
+            f"serve on the same data directory) takes it up again, a scan under way from its last "
+            f"checkpoint. Do not run "
+            f"this command again, which would queue a second scan; follow job {job_id} on the "
+            f"lab page or at {url}/api/v1/jobs/{job_id}, and fetch its result from "
+            f"{url}/api/v1/jobs/{job_id}/result once it is completed")
+
+
+def _follow(client: Any, job_id: int, disabled: bool, poll_s: float = 0.5,
+            seen: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Poll the job with a progress bar until it ends; returns its last detail (``seen``, when
+    given, holds the last detail answered, for a message if the daemon goes away)."""
     from tqdm import tqdm
 
     bar = tqdm(total=None, unit="angle", desc=f"job {job_id}", disable=disabled, file=sys.stderr)
@@ -756,6 +804,9 @@ def _follow(client: Any, job_id: int, disabled: bool, poll_s: float = 0.5) -> di
     try:
         while True:
             row: dict[str, Any] = client.request("GET", f"/api/v1/jobs/{job_id}")
+            if seen is not None:
+                seen.clear()
+                seen.update(row)
             bar.total = row.get("total_angles") or None
             bar.n = int(row.get("done_angles") or 0)
             bar.set_description_str(f"job {job_id} {row['state']}")
@@ -815,6 +866,15 @@ def _progress(service: Any, job_id: int, disabled: bool) -> Any:
 def _jobs(args: argparse.Namespace) -> int:
     from gonio.store import JobStore
 
+    if args.daemon is not None:
+        return _jobs_through_daemon(args)
+    if args.action in ("cancel", "reorder"):
+        raise UsageError(
+            f"jobs {args.action} acts on a daemon's queue: give its address, e.g. 'gonio jobs "
+            f"--daemon http://127.0.0.1:8600 {args.action} "
+            f"{args.job_id if args.job_id is not None else 'ID'}"
+            + (" --position 0'" if args.action == "reorder" else "'")
+            + " (the key in $GONIO_API_KEY or --api-key)")
     if args.db is None:
         raise UsageError(_no_store_text())
     if args.db.is_dir():
@@ -857,6 +917,83 @@ def _jobs(args: argparse.Namespace) -> int:
     note = _interrupted_note(args.db, rows)
     if note is not None:
         print(note)
+    return 0
+
+
+def _jobs_through_daemon(args: argparse.Namespace) -> int:
+    """``gonio jobs --daemon URL ACTION [ID]``: a running daemon's jobs through its API.
+
+    A lab whose daemon owns the store had the page or curl alone to cancel or reorder a
+    queued scan or abort a running one: ``gonio jobs abort`` on that store is refused (two
+    programs must not run jobs from one store) and said "use its API" without saying how.
+    """
+    if args.db is not None or args.data_dir is not None:
+        raise UsageError("--db and --data-dir do not apply with --daemon: the daemon keeps its "
+                         "own job store")
+    if args.action == "rebuild":
+        raise UsageError("rebuild works on a job store, not through a daemon: stop the daemon "
+                         "and run 'gonio jobs rebuild ID --db DATA_DIR'")
+    if args.action != "reorder" and (args.position is not None or args.priority is not None):
+        raise UsageError("--position and --priority go with reorder")
+    if args.action == "list":
+        if args.job_id is not None:
+            raise UsageError(f"list takes no job id; 'gonio jobs --daemon {args.daemon} show "
+                             f"{args.job_id}' shows job {args.job_id}")
+    elif args.job_id is None:
+        raise UsageError(f"jobs {args.action} needs a job id, e.g. 'gonio jobs --daemon "
+                         f"{args.daemon} {args.action} 3'")
+    with DaemonClient(args.daemon, args.api_key) as client:
+        if args.action == "list":
+            rows = client.request("GET", "/api/v1/jobs")
+            if args.json:
+                print(json.dumps(rows))
+                return 0
+            print(f"{'id':>4}  {'state':<14} {'kind':<11} {'angles':>9}  specimen")
+            for r in rows:
+                why = r.get("waiting") or r.get("reason")
+                if isinstance(why, dict):
+                    why = why.get("reason") or why.get("message")
+                print(f"{r['id']:>4}  {r['state']:<14} {r['kind']:<11} "
+                      f"{r['done_angles']:>4}/{r['total_angles']:<4}  {r['specimen']}"
+                      + (f"  ({why})" if why else ""))
+            return 0
+        job = args.job_id
+        if args.action == "show":
+            row = client.request("GET", f"/api/v1/jobs/{job}")
+            print(json.dumps(row, indent=2) if args.json else
+                  f"job {job}: {row['kind']} '{row['specimen']}', {row['state']}, "
+                  f"{row['done_angles']}/{row['total_angles']} angles, priority "
+                  f"{row.get('priority', 0)}"
+                  + (f" ({row['reason']})" if row.get("reason") else "")
+                  + (f"\n  result: {args.daemon.rstrip('/')}/api/v1/jobs/{job}/result"
+                     if row["state"] == "completed" else ""))
+            return 0
+        if args.action == "reorder":
+            if args.position is None and args.priority is None:
+                raise UsageError("reorder needs --position N (0: next) and/or --priority P")
+            body = {k: v for k, v in (("position", args.position),
+                                      ("priority", args.priority)) if v is not None}
+            row = client.request("POST", f"/api/v1/jobs/{job}/reorder", json=body)
+        else:
+            try:
+                row = client.request("POST", f"/api/v1/jobs/{job}/{args.action}")
+            except DaemonRefused as exc:
+                if exc.status == 409 and args.action == "cancel":
+                    raise UsageError(f"{exc}; a running job is stopped with 'gonio jobs "
+                                     f"--daemon {args.daemon} abort {job}'") from None
+                raise
+    if args.json:
+        print(json.dumps(row))
+        return 0
+    state = row.get("state", "?")
+    if args.action == "cancel":
+        print(f"job {job} cancelled: taken out of the queue, it will not run (state {state})")
+    elif args.action == "abort":
+        print(f"job {job}: abort asked (state {state}; lights off and the stage stopped, its "
+              f"readings stay in the store; 'gonio jobs --daemon {args.daemon} show {job}' "
+              "says when it has ended)")
+    else:
+        print(f"job {job} reordered: priority {row.get('priority', 0)}, state {state}")
     return 0
 
 
@@ -1136,7 +1273,10 @@ def _abort_job(args: argparse.Namespace) -> int:
         # act through it instead (its API, or Ctrl-C).
         lock = claim_store(args.db)
     except LockBusy as exc:
-        raise UsageError(str(exc)) from None
+        url = exc.holder.get("url") if isinstance(exc.holder, dict) else None
+        through = (f" (through it: 'gonio jobs --daemon {str(url).rstrip('/')} abort "
+                   f"{args.job_id}')" if url else "")
+        raise UsageError(f"{exc}{through}") from None
     with lock:
         store = JobStore(args.db)
         try:

@@ -235,6 +235,10 @@ def _write(fits: Fits, fmt: str, out: str | os.PathLike[str], prov: dict[str, An
         return write_gltf(fits.principled, out, name, prov, with_mesh)
     from gonio.export.merl import write_merl
 
+    # The MERL file is the table averaged over azimuth, no fit: the fits' warnings ("the
+    # factored fit renders visibly unlike the reconstruction ... use the 'table' export")
+    # are not its; the reconstruction's are, and the sidecar adds what the average lost.
+    prov = {**prov, "warnings": list(prov.get("reconstruction_warnings") or [])}
     # R, G, B as the glTF and MaterialX fits hold them: linear sRGB from XYZ when the result
     # has colour (a spectral table has no R, G, B of its own; a chart-calibrated sensor's raw
     # channels are not sRGB, while the sidecar's colour_space says linear sRGB).
@@ -246,10 +250,10 @@ def export_warnings(fmt: str, path: str | os.PathLike[str], prov: dict[str, Any]
     daemon sends them with a download (the ``X-Gonio-Export-Warnings`` header).
 
     The model formats (``gltf`` and ``mtlx``: the principled fit; ``factored``) carry the
-    provenance's warnings; ``merl`` its sidecar's, which add the anisotropy the azimuthal
-    average lost; ``table``, the reconstruction itself, only the reconstruction's own
-    (``reconstruction_warnings``: calibration, arc, physical bounds, design gap, misfit), not
-    the fits'.
+    provenance's warnings; ``merl`` its sidecar's: the reconstruction's own (the file is the
+    table averaged over azimuth, no fit) and the anisotropy the average lost; ``table``, the
+    reconstruction itself, only the reconstruction's own (``reconstruction_warnings``:
+    calibration, arc, physical bounds, design gap, misfit), not the fits'.
 
     Parameters
     ----------

@@ -164,3 +164,49 @@ def test_stop_on_failure_hold_survives_kill_9(sim: SimRig, tmp_path: Path) -> No
             wait_for(lambda: _state(c, later) == "completed", what="the released job")
     finally:
         second.stop()
+
+
+def test_scan_through_a_daemon_killed_mid_scan_says_the_job_is_kept(
+    sim: SimRig, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # A lab user's `gonio scan --daemon` whose daemon was killed mid-scan printed only "cannot
+    # reach the daemon ... is it running?": nothing said the job was stored and would resume,
+    # and running the command again queued a second scan of the specimen. It must name the
+    # job, say a restarted daemon takes it up and not to run the command again; the restarted
+    # daemon then does take it up (the message's claim, checked on the real daemon).
+    import threading
+
+    from gonio.cli import main
+    from tests.system.daemon_proc import TEST_KEY
+
+    data = tmp_path / "data"
+    first = _serve(sim, data)
+    rc: list[int] = []
+    argv = ["scan", "--daemon", first.url, "--api-key", TEST_KEY, "--rotations", "36",
+            "--exposure", "0.02", "--light-settle", "0", "--no-progress",
+            "-o", str(tmp_path / "felt.h5")]
+    follower = threading.Thread(target=lambda: rc.append(main(argv)), daemon=True)
+    try:
+        follower.start()
+        with first.client() as c:
+            wait_for(lambda: any(j["done_angles"] >= 1 for j in c.get("/api/v1/jobs").json()),
+                     what="the first angle")
+            job = next(j["id"] for j in c.get("/api/v1/jobs").json() if j["kind"] == "uniform")
+    finally:
+        first.stop(signal.SIGKILL)
+    follower.join(timeout=60)
+    assert rc == [1]
+    err = capsys.readouterr().err
+    assert "cannot reach the daemon" in err
+    assert f"job {job} (last seen running, " in err and " of 36 angles)" in err
+    assert "Do not run this command again" in err
+    assert f"{first.url}/api/v1/jobs/{job}/result" in err
+
+    second = _serve(sim, data)
+    try:
+        with second.client() as c:
+            wait_for(lambda: c.get(f"/api/v1/jobs/{job}").json()["done_angles"] > 1
+                     and _state(c, job) == "running", what="the job taken up again")
+            assert len(c.get("/api/v1/jobs").json()) == 1  # and no second scan
+    finally:
+        second.stop(signal.SIGKILL)

@@ -233,3 +233,49 @@ def test_near_specular_geometries_read_from_the_table_are_noted() -> None:
     every = tuple(abs(g.aspecular_deg) <= NEAR_SPECULAR_DEG for g in report.geometries)
     assert near_specular_note(replace(report, measured=every)) is None
     assert near_specular_note(colour_report(_table(WL), None, instruments=["MA98"])) is None
+
+
+def test_stored_standard_names_the_cell_that_is_not_a_number(tmp_path: Path) -> None:
+    # A standard typed from an instrument's printout into a spreadsheet: a typo in one cell
+    # and a gap in another. The error said "row 3: could not convert string to float: 'abc'"
+    # (and for the gap, "... float: ''"): no column, nothing to do.
+    p = tmp_path / "std.csv"
+    head = "illuminant,observer,instrument,incidence_deg,aspecular_deg,azimuth_deg,L,a,b\n"
+    p.write_text(head + "D65,10,MA98,45,15,,50,1,2\nD65,10,MA98,45,25,0,40,1,abc\n")
+    with pytest.raises(ColourError) as err:
+        read_standard_csv(p)
+    assert "row 3, column b: 'abc' is not a number; correct or fill that cell" in str(err.value)
+    p.write_text(head + "D65,10,MA98,45,15,0,,1,2\n")
+    with pytest.raises(ColourError, match="row 2, column L: '' is not a number"):
+        read_standard_csv(p)
+    # An instrument gonio does not know names its row as well as the known ones.
+    p.write_text(head + "D65,10,MA98,45,15,0,50,1,2\nD65,10,MA99,45,25,0,40,1,2\n")
+    with pytest.raises(ColourError, match=r"std.csv: row 3: .*MA99"):
+        read_standard_csv(p)
+    # An empty azimuth cell is azimuth 0, as before.
+    p.write_text(head + "D65,10,MA98,45,15,,50,1,2\n")
+    report = read_standard_csv(p)
+    assert report.geometries[0].azimuth_deg == 0.0
+
+
+def test_stored_standard_from_a_labs_own_table(tmp_path: Path) -> None:
+    # A standard copied from a lab's instrument report heads CIELAB "L*, a*, b*" and names
+    # geometries as the instrument does ("45as15", "15as-45"); both were refused ("columns
+    # ['L', 'a', 'b'] are missing; write the standard with 'gonio colour RESULT.h5 --csv'").
+    # The numbers expected are the file's own.
+    p = tmp_path / "std.csv"
+    p.write_text("illuminant,observer,instrument,geometry,L*,a*,b*\n"
+                 "D65,10,MA98,45as15,71.3,17.5,-65.9\nD65,10,MA98,15as-45,33.0,12.9,-45.8\n")
+    report = read_standard_csv(p)
+    assert [(g.instrument, g.incidence_deg, g.aspecular_deg, g.azimuth_deg)
+            for g in report.geometries] == [("MA98", 45.0, 15.0, 0.0), ("MA98", 15.0, -45.0, 0.0)]
+    assert report.lab.tolist() == [[71.3, 17.5, -65.9], [33.0, 12.9, -45.8]]
+    # A geometry that is not one names its row; a missing column says which columns a
+    # standard needs, not only how gonio writes one.
+    p.write_text("illuminant,observer,instrument,geometry,L*,a*,b*\n"
+                 "D65,10,MA98,45/15,71.3,17.5,-65.9\n")
+    with pytest.raises(ColourError, match="row 2, column geometry: '45/15' is not an "):
+        read_standard_csv(p)
+    p.write_text("illuminant,observer,instrument,geometry,L*,a*\nD65,10,MA98,45as15,71.3,17.5\n")
+    with pytest.raises(ColourError, match=r"\['b'\] are missing; a standard needs the columns"):
+        read_standard_csv(p)

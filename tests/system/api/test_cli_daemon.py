@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import time
 from pathlib import Path
 
 import pytest
@@ -99,3 +100,42 @@ def test_scan_through_the_daemon_refuses_bad_requests(
     assert code == 2
     assert words in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_jobs_through_the_daemon_reorder_cancel_and_abort(
+    daemon: Daemon, tmp_path: Path, capsys: pytest.CaptureFixture[str], no_export_fits: None
+) -> None:
+    # A lab whose daemon owns the job store could not cancel, reorder or abort a job from the
+    # command line: 'gonio jobs' had no cancel or reorder, and its abort on the daemon's store
+    # is refused (two programs must not run jobs from one store) with "use its API".
+    # Through --daemon they act on the daemon's queue; the daemon's own answers are the check.
+    fast = {"exposure_s": 0.02, "light_settle_s": 0.0}
+    base = ["jobs", "--daemon", daemon.url, "--api-key", daemon.key]
+    with daemon.client() as c:
+        ids = [c.post("/api/v1/jobs", json={"plan": {"kind": "uniform", "rotations": r,
+                                                     "exposure": fast}}).json()["id"]
+               for r in (72, 4, 4)]
+        running, first, second = ids
+        deadline = time.monotonic() + 60
+        while c.get(f"/api/v1/jobs/{running}").json()["state"] != "running":
+            assert time.monotonic() < deadline, "the first job never started"
+            time.sleep(0.1)
+        assert main([*base, "reorder", str(second), "--priority", "5"]) == 0
+        assert c.get(f"/api/v1/jobs/{second}").json()["priority"] == 5
+        assert main([*base, "cancel", str(first)]) == 0
+        cancelled = c.get(f"/api/v1/jobs/{first}").json()
+        assert cancelled["state"] == "aborted" and "cancelled" in cancelled["reason"]
+        out = capsys.readouterr().out
+        assert f"job {second} reordered: priority 5" in out and f"job {first} cancelled" in out
+        # Cancel is for a queued job: a running one's refusal says how to stop it.
+        assert main([*base, "cancel", str(running)]) == 2
+        assert f"jobs --daemon {daemon.url} abort {running}" in capsys.readouterr().err
+        assert main([*base, "abort", str(running)]) == 0
+        deadline = time.monotonic() + 60
+        while c.get(f"/api/v1/jobs/{running}").json()["state"] != "aborted":
+            assert time.monotonic() < deadline, "the abort was not honoured"
+            time.sleep(0.1)
+        assert main([*base, "abort", str(second)]) == 0  # queued or running: ends it
+    # Without --daemon, cancel says where the queue is.
+    assert main(["jobs", "cancel", "3"]) == 2
+    assert "gonio jobs --daemon http://127.0.0.1:8600 cancel 3" in capsys.readouterr().err

@@ -311,3 +311,25 @@ def test_an_uncalibrated_scan_is_exported_saying_its_values_are_sensor_units(
     older = export_provenance({}, {}, {}, {})
     for meta in (calibrated, older):
         assert meta["colour_space"] == COLOUR_STATEMENT and not meta["warnings"]
+
+
+def test_the_merl_export_carries_the_reconstructions_warnings_not_the_fits(
+        brushed: Path, tmp_path: Path) -> None:
+    # A metallic paint's MERL export printed and stored "the factored fit renders visibly
+    # unlike the reconstruction ...; use the 'table' export": the MERL file is the table
+    # averaged over azimuth, no fit at all. It keeps the reconstruction's own warnings.
+    from gonio.export import export_warnings
+
+    fits, prov = result_fits(brushed)
+    fit_said = ("the factored fit renders visibly unlike the reconstruction (HDR-FLIP 0.277 > "
+                "0.25): this model does not represent the material well; use the 'table' "
+                "export where a renderer can take a table")
+    recon_said = "the highlight is not read: the reconstruction peaks 3.91 times above"
+    prov = {**prov, "warnings": [fit_said, recon_said], "reconstruction_warnings": [recon_said]}
+    out = write_export(fits, "merl", tmp_path / "x.binary", prov)
+    said = export_warnings("merl", out, prov)
+    assert recon_said in said and fit_said not in said
+    assert json.loads((tmp_path / "x.binary.json").read_text())["warnings"] == said
+    # The fitted formats keep the fits' warnings.
+    gltf = write_export(fits, "gltf", tmp_path / "x.gltf", prov)
+    assert fit_said in json.loads(gltf.read_text())["asset"]["extras"]["warnings"]
