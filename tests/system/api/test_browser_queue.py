@@ -1,0 +1,86 @@
+"""The lab page's queue table in headless Chromium against the real daemon on the simulated rig
+(tests/system/api/conftest.py, as tests/system/api/test_browser.py): a click on a row's button
+while events redraw the table."""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import pytest
+
+from tests.system.api.conftest import Daemon
+from tests.system.api.test_browser import (  # noqa: F401 (fixture)
+    browser,
+    open_live,
+)
+from tests.system.api.test_browser_lab_day import PLAN, _row_ids
+from tests.system.api.test_scan_flow import ENDED, wait_state
+
+pytestmark = [pytest.mark.system, pytest.mark.timeout(600)]
+
+
+def _state(daemon: Daemon, job: int) -> str:
+    with daemon.client() as c:
+        return str(c.get(f"/api/v1/jobs/{job}").json()["state"])
+
+
+def _progress(browser: Any, job: int) -> str:  # noqa: F811 (the fixture's name)
+    return str(browser.execute_script(
+        "return document.querySelector(`#jobs tr[data-id='${arguments[0]}'] td.progress`)"
+        "?.textContent ?? ''", job))
+
+
+def test_a_click_on_a_rows_button_acts_though_events_redraw_the_table_meanwhile(
+    daemon: Daemon, browser: Any, no_export_fits: None  # noqa: F811
+) -> None:
+    """Every event rebuilt the whole queue table, so a button pressed before a redraw and
+    released after it was a detached one: the click was lost (no pause, no abort question),
+    for a lab user as for the browser tests beside a busy CPU. Here the mouse is pressed on a
+    row's button, the table is redrawn (readings arrive, a job is queued), and only then is
+    the mouse released: the click acts."""
+    from selenium.webdriver.common.action_chains import ActionChains
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support import expected_conditions as ec
+
+    with daemon.client() as c:
+        job = int(c.post("/api/v1/jobs", params={"accept_uncalibrated": "true"}, json={
+            "plan": {**PLAN, "specimen": "clicked", "rotations": 400}}).json()["id"])
+    behind = None
+    try:
+        wait = open_live(browser, daemon, 120)
+        row = f"#jobs tr[data-id='{job}']"
+        wait.until(lambda d: _progress(d, job).startswith(" ") and
+                   int(_progress(d, job).split("/")[0]) >= 1)
+        # Pressed on "pause" while the job measures; released once a reading has redrawn the
+        # row's progress (an event, a list refresh, a redraw).
+        pause = browser.find_element(By.CSS_SELECTOR, f"{row} button[data-action='pause']")
+        before = _progress(browser, job)
+        ActionChains(browser).move_to_element(pause).click_and_hold().perform()
+        wait.until(lambda d: _progress(d, job) != before)
+        ActionChains(browser).release().perform()
+        deadline = time.monotonic() + 120
+        while _state(daemon, job) != "paused":
+            assert time.monotonic() < deadline, "the click on pause was lost"
+            time.sleep(0.1)
+        # Pressed on "abort" of the paused job; released once a job queued behind it has been
+        # drawn (its row added, the table redrawn): the question comes.
+        wait.until(lambda d: d.find_element(
+            By.CSS_SELECTOR, f"{row} button[data-action='abort']").is_displayed())
+        abort = browser.find_element(By.CSS_SELECTOR, f"{row} button[data-action='abort']")
+        ActionChains(browser).move_to_element(abort).click_and_hold().perform()
+        with daemon.client() as c:
+            behind = int(c.post("/api/v1/jobs", params={"accept_uncalibrated": "true"},
+                                json={"plan": {**PLAN, "specimen": "behind"}}).json()["id"])
+        wait.until(lambda d: str(behind) in _row_ids(d))
+        ActionChains(browser).release().perform()
+        question = wait.until(ec.alert_is_present())
+        assert f"Abort job {job} (clicked)?" in question.text, question.text
+        question.accept()
+        wait.until(lambda d: _state(daemon, job) == "aborted")
+    finally:
+        with daemon.client() as c:
+            if _state(daemon, job) not in ENDED:
+                c.post(f"/api/v1/jobs/{job}/abort")
+            if behind is not None:
+                wait_state(c, behind, ENDED, timeout=300)
