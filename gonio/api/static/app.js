@@ -250,6 +250,18 @@ function abortQuestion(job) {
     "To stop it for a while instead, pause it.";
 }
 
+// The daemon's refusal of a move that puts a scan before a queued calibration, asked as a
+// question: "not reordered: job 5 would then run before calibration job 4, uncalibrated (why);
+// it was queued without asking ..." becomes "Job 5 would then run before ... Move it all the
+// same?".
+function reorderQuestion(detail) {
+  const what = detail.match(/^not reordered: (.*?); it was queued/)?.[1];
+  if (!what) return `${detail}. Move it all the same?`;
+  return `${what[0].toUpperCase()}${what.slice(1)}: the scan would run before the calibration, ` +
+    "uncalibrated, so its values would be sensor units, not 1/sr (it was queued behind the " +
+    "calibration to be calibrated by it). Move it all the same? Cancel keeps the order.";
+}
+
 async function act(job, action) {
   if (action === "remove" && !window.confirm(removeQuestion(job))) return;
   if (action === "abort" && !window.confirm(abortQuestion(job))) return;
@@ -259,7 +271,14 @@ async function act(job, action) {
       const queued = jobs.filter((j) => j.state === "queued");
       const i = queued.findIndex((j) => j.id === job.id);
       const to = Math.max(0, Math.min(queued.length - 1, i + (action === "up" ? -1 : 1)));
-      await send("POST", `/jobs/${job.id}/reorder`, { position: to });
+      try { await send("POST", `/jobs/${job.id}/reorder`, { position: to }); } catch (e) {
+        // A scan queued behind a calibration (not asked then: it was to be calibrated) moved
+        // ahead of it would run uncalibrated: the daemon refuses (409) unless accepted, and
+        // the page asks, then sends the acceptance (docs/api.md, the reorder route).
+        if (!(e instanceof ApiError && e.status === 409 && e.message.includes("accept_uncalibrated"))) throw e;
+        if (!window.confirm(reorderQuestion(e.message))) return;
+        await send("POST", `/jobs/${job.id}/reorder?accept_uncalibrated=true`, { position: to });
+      }
     } else await send("POST", `/jobs/${job.id}/${action}`);
     await refreshJobs();
   }, true);
