@@ -1,5 +1,5 @@
 // The lab page: queue, live readings, scan form, job controls, results.
-import { AUTH_EVENT, ApiError, followEvents, getBlob, getJSON, getKey, send, setKey } from "./api.js";
+import { AUTH_EVENT, ApiError, followEvents, getBlob, getFile, getJSON, getKey, send, setKey } from "./api.js";
 import { plotPolar, plotRotation } from "./plots.js";
 
 const $ = (sel) => document.querySelector(sel);
@@ -567,9 +567,10 @@ async function showResult(job) {
   link.onclick = async (e) => {
     e.preventDefault();
     await guarded(async () => {
-      const file = await getBlob(`/jobs/${job.id}/result`);
+      // Named as the daemon names it: the job and its specimen (gonio-job-7-brushed-steel.h5).
+      const { blob, name } = await getFile(`/jobs/${job.id}/result`, `gonio-job-${job.id}.h5`);
       const a = document.createElement("a");
-      a.href = URL.createObjectURL(file); a.download = `gonio-job-${job.id}.h5`; a.click();
+      a.href = URL.createObjectURL(blob); a.download = name; a.click();
     });
   };
   const img = $("#preview");
