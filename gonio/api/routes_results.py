@@ -262,6 +262,7 @@ async def colour(
     from gonio.result_colour import (
         colour_warnings,
         difference_csv,
+        in_reflectance,
         near_specular_note,
         no_colour_reason,
         result_report,
@@ -309,6 +310,9 @@ async def colour(
         out["warnings"] = warnings
     if no_colour is not None:
         out["no_colour"] = no_colour
+    # Whether the values are in 1/sr (reflectance factors) or sensor units: the page says which
+    # "uncalibrated" a table without CIELAB is (the colour's, or the values' as well).
+    out["calibrated"] = in_reflectance(res.samples.calibration)
     # Which near-specular geometries no pair read; which instruments' geometries were compared
     # by angle (an MA68 standard against an MA98 report).
     notes = [n for n in (near_specular_note(report), diff and diff.note) if n]
