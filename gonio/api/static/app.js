@@ -340,19 +340,35 @@ function fillRow(tr, job) {
   fillProgress(td[4], job);
   td[5].className = "eta";
   if (job.id === selected) fillEta(td[5]); else fillEta(td[5], activeDetail, job.id);
-  // The buttons carry their action; the tbody's one listener (initQueue) finds the job by the
-  // row's id when clicked, so a row redrawn meanwhile still acts on the job it shows.
-  const actions = ACTIONS[job.state] ?? [];
-  fillCell(td[6], actions, (c) => {
-    for (const a of actions) {
-      const b = document.createElement("button");
+  fillActions(td[6], ACTIONS[job.state] ?? []);
+}
+
+// The row's buttons, each carrying its action; the tbody's one listener (initQueue) finds the
+// job by the row's id when clicked, so a row redrawn meanwhile still acts on the job it shows.
+// A button that stays (abort, from running to paused) is kept where it is, never taken out
+// and put back: a click pressed on it as the state changes still lands.
+function fillActions(td, actions) {
+  const sig = JSON.stringify(actions);
+  if (td.dataset.sig === sig) return;
+  td.dataset.sig = sig;
+  const have = new Map([...td.querySelectorAll(":scope > button[data-action]")].map((b) => [b.dataset.action, b]));
+  // The buttons that go are taken out first: the others then stand in order, none moved (a
+  // button taken out and put back, even at once, loses the click pressed on it).
+  for (const [a, b] of have) if (!actions.includes(a)) { b.remove(); have.delete(a); }
+  let at = td.firstElementChild;
+  for (const a of actions) {
+    let b = have.get(a);
+    have.delete(a);
+    if (!b) {
+      b = document.createElement("button");
       b.type = "button";
       b.textContent = { up: "▲", down: "▼" }[a] ?? a;
       b.title = a;
       b.dataset.action = a;
-      c.append(b);
     }
-  });
+    if (b !== at) td.insertBefore(b, at);
+    else at = at.nextElementSibling;
+  }
 }
 
 // The queue's rows, kept and patched in place (fillCell): a row is added for a new job,
@@ -362,16 +378,18 @@ function renderJobs() {
   // "No jobs yet" only when the list was read and is empty, never when it could not be read.
   $("#no-jobs").hidden = jobs.length > 0 || readsRefused();
   const rows = new Map([...body.querySelectorAll(":scope > tr[data-id]")].map((tr) => [tr.dataset.id, tr]));
+  // The rows of jobs gone are taken out first, so the rows after them are not moved (a row
+  // taken out and put back loses a click pressed on it); only a job that changed places is.
+  const ids = new Set(jobs.map((j) => `${j.id}`));
+  for (const [id, tr] of rows) if (!ids.has(id)) { tr.remove(); rows.delete(id); }
   let at = body.firstElementChild;
   for (const job of jobs) {
-    let tr = rows.get(String(job.id));
-    rows.delete(String(job.id));
+    let tr = rows.get(`${job.id}`);
     if (!tr) tr = document.createElement("tr");
     fillRow(tr, job);
     if (tr !== at) body.insertBefore(tr, at);
     else at = at.nextElementSibling;
   }
-  for (const tr of rows.values()) tr.remove();
 }
 
 // The queue's clicks, by delegation: a row selects its job, a button acts on it. The job is

@@ -44,6 +44,7 @@ def test_a_click_on_a_rows_button_acts_though_events_redraw_the_table_meanwhile(
     for a lab user as for the browser tests beside a busy CPU. Here the mouse is pressed on a
     row's button, the table is redrawn (readings arrive, a job is queued), and only then is
     the mouse released: the click acts."""
+    from selenium.common.exceptions import TimeoutException
     from selenium.webdriver.common.action_chains import ActionChains
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support import expected_conditions as ec
@@ -78,18 +79,25 @@ def test_a_click_on_a_rows_button_acts_though_events_redraw_the_table_meanwhile(
             landed = browser.execute_script("return window.__landed")
             assert time.monotonic() < deadline, f"the click on pause was lost: {landed}"
             time.sleep(0.1)
-        # Pressed on "abort" of the paused job; released once a job queued behind it has been
-        # drawn (its row added, the table redrawn): the question comes.
-        wait.until(lambda d: d.find_element(
-            By.CSS_SELECTOR, f"{row} button[data-action='abort']").is_displayed())
+        # Pressed on "abort" of the paused job; released once the job has been resumed
+        # elsewhere (its row's state and buttons redrawn: resume became pause, abort stays)
+        # and a job queued behind it has been drawn (a row added): the question comes.
+        wait.until(lambda d: d.find_elements(
+            By.CSS_SELECTOR, f"{row}[data-state='paused'] button[data-action='resume']"))
         abort = browser.find_element(By.CSS_SELECTOR, f"{row} button[data-action='abort']")
         ActionChains(browser).move_to_element(abort).click_and_hold().perform()
         with daemon.client() as c:
+            assert c.post(f"/api/v1/jobs/{job}/resume").status_code == 200
             behind = int(c.post("/api/v1/jobs", params={"accept_uncalibrated": "true"},
                                 json={"plan": {**PLAN, "specimen": "behind"}}).json()["id"])
-        wait.until(lambda d: str(behind) in _row_ids(d))
+        wait.until(lambda d: str(behind) in _row_ids(d) and d.find_elements(
+            By.CSS_SELECTOR, f"{row}[data-state='running'] button[data-action='pause']"))
         ActionChains(browser).release().perform()
-        question = wait.until(ec.alert_is_present())
+        try:
+            question = wait.until(ec.alert_is_present())
+        except TimeoutException:
+            landed = browser.execute_script("return window.__landed")
+            raise AssertionError(f"the click on abort was lost: {landed}") from None
         assert f"Abort job {job} (clicked)?" in question.text, question.text
         question.accept()
         wait.until(lambda d: _state(daemon, job) == "aborted")
