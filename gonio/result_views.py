@@ -27,6 +27,30 @@ if TYPE_CHECKING:  # HDF5 and the figures load with the first result served
 T = TypeVar("T")
 
 
+def download_stem(job_id: int, specimen: str | None) -> str:
+    """The start of the name of a job's downloads (its result, its exports):
+    ``gonio-job-7-brushed-steel``, the specimen's name made safe for a file name (ASCII
+    letters, digits and ``-_.``; other characters as ``-``; at most 60 of them), left out
+    when nothing of it remains.
+
+    Parameters
+    ----------
+    job_id : the job
+    specimen : its specimen name (the plan's)
+
+    Returns
+    -------
+    str
+        ``gonio-job-<id>`` or ``gonio-job-<id>-<specimen>``.
+    """
+    import re
+    import unicodedata
+
+    ascii_name = unicodedata.normalize("NFKD", specimen or "").encode("ascii", "ignore").decode()
+    safe = re.sub(r"[^A-Za-z0-9_.]+", "-", ascii_name).strip("-._")[:60].rstrip("-._")
+    return f"gonio-job-{job_id}-{safe}" if safe else f"gonio-job-{job_id}"
+
+
 def warnings_path(export: Path) -> Path:
     """Where :meth:`ResultViews.export` keeps an export's warnings: ``<file>.warnings.json``."""
     return export.with_name(export.name + ".warnings.json")
@@ -244,7 +268,8 @@ class ResultViews:
         Exports are kept under ``data_dir/exports`` and reused while the result file is
         unchanged, each with its warnings beside it (:meth:`export_warnings`; an export kept
         without them is made again). ``with_mesh`` adds the glTF's preview sphere (``gonio
-        export --with-mesh``), a file of its own (``...-gltf-mesh.gltf``).
+        export --with-mesh``), a file of its own (``...-gltf-mesh.gltf``). The file name starts
+        with the job and its specimen (:func:`download_stem`).
 
         Raises
         ------
@@ -272,7 +297,8 @@ class ResultViews:
                               "with_mesh out or ask for format=gltf")
         path = self.result_path(job_id)
         self.result(job_id)  # missing or damaged: said with the way to rebuild it
-        name = f"gonio-job-{job_id}-{fmt}{'-mesh' if with_mesh else ''}{FORMATS[fmt]}"
+        stem = download_stem(job_id, job_row(self.store, job_id).specimen)
+        name = f"{stem}-{fmt}{'-mesh' if with_mesh else ''}{FORMATS[fmt]}"
         out = self.data_dir / "exports" / name
         warned = warnings_path(out)
         if (out.is_file() and warned.is_file()

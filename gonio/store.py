@@ -514,8 +514,14 @@ class JobStore:
             args = st
         q += " ORDER BY id"
         with self._read() as db:
-            rows = db.execute(q, args).fetchall()
-        return [self._job_from(r) for r in rows]
+            rows = [self._job_from(r) for r in db.execute(q, args).fetchall()]
+        # The queued jobs keep the places they hold by id, taken in the order the worker takes
+        # them (:meth:`queue`): a job moved up (reorder) is listed ahead of those it passed.
+        slots = [k for k, r in enumerate(rows) if r.state is JobState.QUEUED]
+        queued = sorted((rows[k] for k in slots), key=lambda r: (-r.priority, r.position, r.id))
+        for k, r in zip(slots, queued, strict=True):
+            rows[k] = r
+        return rows
 
     def queue(self) -> list[JobRow]:
         """Queued jobs in the order the worker takes them: priority (high first), then position."""

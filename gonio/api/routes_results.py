@@ -18,8 +18,10 @@ from pydantic import BaseModel, Field
 from gonio.api.deps import READ, JobId, Service
 from gonio.brdf.colour.errors import ColourError
 from gonio.brdf.tables import geometry as geo
+from gonio.result_views import download_stem
 from gonio.results import OffGridAngle
 from gonio.service import NotFound
+from gonio.service_models import job_row
 
 router = APIRouter(prefix="/api/v1/jobs", tags=["results"])
 
@@ -54,7 +56,8 @@ def result_file(job_id: JobId, service: Service) -> FileResponse:
     # Read whole first (and kept for the pictures): a truncated or damaged file is refused
     # with the job and how to rebuild it, never sent as if it were good.
     path = service.checked_result_path(job_id)
-    return FileResponse(path, media_type="application/x-hdf5", filename=f"gonio-job-{job_id}.h5")
+    stem = download_stem(job_id, job_row(service.store, job_id).specimen)
+    return FileResponse(path, media_type="application/x-hdf5", filename=f"{stem}.h5")
 
 
 @router.get(
@@ -259,6 +262,7 @@ async def colour(
     from gonio.result_colour import (
         colour_warnings,
         difference_csv,
+        in_reflectance,
         near_specular_note,
         no_colour_reason,
         result_report,
@@ -306,6 +310,9 @@ async def colour(
         out["warnings"] = warnings
     if no_colour is not None:
         out["no_colour"] = no_colour
+    # Whether the values are in 1/sr (reflectance factors) or sensor units: the page says which
+    # "uncalibrated" a table without CIELAB is (the colour's, or the values' as well).
+    out["calibrated"] = in_reflectance(res.samples.calibration)
     # Which near-specular geometries no pair read; which instruments' geometries were compared
     # by angle (an MA68 standard against an MA98 report).
     notes = [n for n in (near_specular_note(report), diff and diff.note) if n]

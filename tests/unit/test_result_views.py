@@ -114,3 +114,15 @@ def test_a_spectral_results_preview_shows_its_colour_not_its_first_three_bands(
     # 400-420 nm, equal here, drew every cell white.
     red_pixels = pixels[..., 0] >= pixels[..., 1:].max(axis=-1) + 25
     assert red_pixels.mean() > 0.2, red_pixels.mean()
+
+
+def test_download_names_carry_the_job_and_its_specimen_made_safe() -> None:
+    from gonio.result_views import download_stem
+
+    assert download_stem(7, "brushed steel") == "gonio-job-7-brushed-steel"
+    assert download_stem(7, "Stoff grün / Probe 3") == "gonio-job-7-Stoff-grun-Probe-3"
+    assert download_stem(7, "../../etc/passwd") == "gonio-job-7-etc-passwd"
+    assert download_stem(7, "a\\b:c*?\"<>|") == "gonio-job-7-a-b-c"
+    assert download_stem(7, "  ") == download_stem(7, "///") == "gonio-job-7"
+    assert download_stem(7, "日本") == "gonio-job-7"
+    assert len(download_stem(7, "x" * 500)) == len("gonio-job-7-") + 60

@@ -63,6 +63,20 @@ def test_queue_order_priority_then_fifo_and_reorder() -> None:
         store.reorder(999, priority=1)
 
 
+def test_the_job_list_gives_queued_jobs_in_queue_order_in_their_places() -> None:
+    # The list said "queue order for queued ones" and gave them by id: a job moved up (the
+    # lab page's up arrow) stayed below the jobs it passed, and the page's next move was
+    # counted from that wrong order. Jobs not queued keep their places (by id).
+    store = JobStore(":memory:")
+    done, a, b, c = _job(store), _job(store), _job(store), _job(store, priority=5)
+    store.set_state(done, JobState.RUNNING)
+    store.set_state(done, JobState.ABORTED)
+    assert [j.id for j in store.list_jobs()] == [done, c, a, b]
+    store.reorder(b, position=0)
+    assert [j.id for j in store.list_jobs()] == [done, b, c, a]
+    assert [j.id for j in store.list_jobs(["queued"])] == [j.id for j in store.queue()]
+
+
 def test_illegal_state_change_is_refused_and_not_logged() -> None:
     store = JobStore(":memory:")
     jid = _job(store)

@@ -82,6 +82,14 @@ export async function getBlob(path) {
   return (await check(await request(path, { headers: headers() }))).blob();
 }
 
+// A download: its body and the file name the daemon gives it (Content-Disposition), else
+// `fallback`.
+export async function getFile(path, fallback) {
+  const resp = await check(await request(path, { headers: headers() }));
+  const name = (resp.headers.get("content-disposition") || "").match(/filename="?([^";]+)"?/)?.[1];
+  return { blob: await resp.blob(), name: name ?? fallback };
+}
+
 /**
  * Follow the server-sent event stream, resuming after the last seen seq on every reconnect.
  * EventSource cannot send the X-API-Key header, so this reads the stream with fetch.

@@ -1,5 +1,5 @@
 // The lab page: queue, live readings, scan form, job controls, results.
-import { AUTH_EVENT, ApiError, followEvents, getBlob, getJSON, getKey, send, setKey } from "./api.js";
+import { AUTH_EVENT, ApiError, followEvents, getBlob, getFile, getJSON, getKey, send, setKey } from "./api.js";
 import { plotPolar, plotRotation } from "./plots.js";
 
 const $ = (sel) => document.querySelector(sel);
@@ -250,6 +250,18 @@ function abortQuestion(job) {
     "To stop it for a while instead, pause it.";
 }
 
+// The daemon's refusal of a move that puts a scan before a queued calibration, asked as a
+// question: "not reordered: job 5 would then run before calibration job 4, uncalibrated (why);
+// it was queued without asking ..." becomes "Job 5 would then run before ... Move it all the
+// same?".
+function reorderQuestion(detail) {
+  const what = detail.match(/^not reordered: (.*?); it was queued/)?.[1];
+  if (!what) return `${detail}. Move it all the same?`;
+  return `${what[0].toUpperCase()}${what.slice(1)}: the scan would run before the calibration, ` +
+    "uncalibrated, so its values would be sensor units, not 1/sr (it was queued behind the " +
+    "calibration to be calibrated by it). Move it all the same? Cancel keeps the order.";
+}
+
 async function act(job, action) {
   if (action === "remove" && !window.confirm(removeQuestion(job))) return;
   if (action === "abort" && !window.confirm(abortQuestion(job))) return;
@@ -259,66 +271,139 @@ async function act(job, action) {
       const queued = jobs.filter((j) => j.state === "queued");
       const i = queued.findIndex((j) => j.id === job.id);
       const to = Math.max(0, Math.min(queued.length - 1, i + (action === "up" ? -1 : 1)));
-      await send("POST", `/jobs/${job.id}/reorder`, { position: to });
+      try { await send("POST", `/jobs/${job.id}/reorder`, { position: to }); } catch (e) {
+        // A scan queued behind a calibration (not asked then: it was to be calibrated) moved
+        // ahead of it would run uncalibrated: the daemon refuses (409) unless accepted, and
+        // the page asks, then sends the acceptance (docs/api.md, the reorder route).
+        if (!(e instanceof ApiError && e.status === 409 && e.message.includes("accept_uncalibrated"))) throw e;
+        if (!window.confirm(reorderQuestion(e.message))) return;
+        await send("POST", `/jobs/${job.id}/reorder?accept_uncalibrated=true`, { position: to });
+      }
     } else await send("POST", `/jobs/${job.id}/${action}`);
     await refreshJobs();
   }, true);
 }
 
-function renderJobs() {
-  const body = $("#jobs");
-  body.replaceChildren();
-  // "No jobs yet" only when the list was read and is empty, never when it could not be read.
-  $("#no-jobs").hidden = jobs.length > 0 || readsRefused();
-  for (const job of jobs) {
-    const tr = document.createElement("tr");
-    tr.dataset.id = job.id;
-    tr.dataset.state = job.state;
-    if (job.id === selected) tr.classList.add("selected");
-    const cells = [job.id, job.specimen, job.kind, job.state, null,
-      job.id === selected ? etaText() : etaText(activeDetail, job.id)];
-    cells.forEach((c, i) => {
-      const td = document.createElement("td");
-      if (i === 4) {
-        const p = progressOf(job);
-        const bar = document.createElement("progress");
-        bar.max = p.max; bar.value = p.value;
-        const label = document.createElement("span");
-        label.className = "progress-text"; label.textContent = ` ${p.text}`;
-        td.className = "progress";
-        td.append(bar, label);
-      } else td.textContent = c ?? "";
-      if (i === 3) {
-        td.className = `state-${job.state}`;
-        // Why a job stopped or waits, in the row itself (not only in a tooltip).
-        if (job.reason && SHOW_REASON.has(job.state)) {
-          const why = document.createElement("span");
-          why.className = "reason"; why.textContent = job.reason;
-          td.append(why);
-        } else if (job.state === "queued" && job.waiting) {
-          // Why it does not start (the daemon's words, as GET /jobs/{id} and gonio jobs
-          // give them): a held queue, or a paused or suspended job holding the rig.
-          const why = document.createElement("span");
-          why.className = "reason"; why.textContent = job.waiting;
-          td.append(why);
-        }
-      }
-      if (i === 5) { td.className = "eta"; td.title = job.id === selected ? etaTitle() : etaTitle(activeDetail, job.id); }
-      tr.append(td);
-    });
-    const td = document.createElement("td");
-    for (const a of ACTIONS[job.state] ?? []) {
-      const b = document.createElement("button");
+// A cell is redrawn only when what it shows changes: its signature (the text, tooltip and
+// parts it is drawn from) is kept on it. Events redraw the queue several times a second while
+// a job runs; a table rebuilt each time replaced the very button under the mouse, and a click
+// whose press and release fell on either side of a redraw reached a detached button and was
+// lost (no question, no action), for a lab user as for the browser tests beside a busy CPU.
+function fillCell(td, parts, draw) {
+  const sig = JSON.stringify(parts);
+  if (td.dataset.sig === sig) return;
+  td.dataset.sig = sig;
+  td.replaceChildren();
+  draw(td);
+}
+
+function fillEta(td, d, id) {
+  const text = etaText(d, id), title = etaTitle(d, id);
+  fillCell(td, [text, title], () => { td.textContent = text; td.title = title; });
+}
+
+function fillProgress(td, job) {
+  const p = progressOf(job);
+  td.className = "progress";
+  fillCell(td, [p.max, p.value, p.text], () => {
+    const bar = document.createElement("progress");
+    bar.max = p.max; bar.value = p.value;
+    const label = document.createElement("span");
+    label.className = "progress-text"; label.textContent = ` ${p.text}`;
+    td.append(bar, label);
+  });
+}
+
+function fillRow(tr, job) {
+  tr.dataset.id = job.id;
+  tr.dataset.state = job.state;
+  tr.classList.toggle("selected", job.id === selected);
+  while (tr.children.length < 7) tr.append(document.createElement("td"));
+  const td = [...tr.children];
+  for (const [i, text] of [[0, job.id], [1, job.specimen], [2, job.kind]]) {
+    fillCell(td[i], [text], () => { td[i].textContent = text ?? ""; });
+  }
+  // Why a job stopped or waits, in the row itself (not only in a tooltip); for a queued job
+  // why it does not start (the daemon's words, as GET /jobs/{id} and gonio jobs give them):
+  // a held queue, or a paused or suspended job holding the rig.
+  const why = job.reason && SHOW_REASON.has(job.state) ? job.reason
+    : job.state === "queued" && job.waiting ? job.waiting : null;
+  fillCell(td[3], [job.state, why], (c) => {
+    c.className = `state-${job.state}`;
+    c.textContent = job.state;
+    if (why) {
+      const span = document.createElement("span");
+      span.className = "reason"; span.textContent = why;
+      c.append(span);
+    }
+  });
+  fillProgress(td[4], job);
+  td[5].className = "eta";
+  if (job.id === selected) fillEta(td[5]); else fillEta(td[5], activeDetail, job.id);
+  fillActions(td[6], ACTIONS[job.state] ?? []);
+}
+
+// The row's buttons, each carrying its action; the tbody's one listener (initQueue) finds the
+// job by the row's id when clicked, so a row redrawn meanwhile still acts on the job it shows.
+// A button that stays (abort, from running to paused) is kept where it is, never taken out
+// and put back: a click pressed on it as the state changes still lands.
+function fillActions(td, actions) {
+  const sig = JSON.stringify(actions);
+  if (td.dataset.sig === sig) return;
+  td.dataset.sig = sig;
+  const have = new Map([...td.querySelectorAll(":scope > button[data-action]")].map((b) => [b.dataset.action, b]));
+  // The buttons that go are taken out first: the others then stand in order, none moved (a
+  // button taken out and put back, even at once, loses the click pressed on it).
+  for (const [a, b] of have) if (!actions.includes(a)) { b.remove(); have.delete(a); }
+  let at = td.firstElementChild;
+  for (const a of actions) {
+    let b = have.get(a);
+    have.delete(a);
+    if (!b) {
+      b = document.createElement("button");
+      b.type = "button";
       b.textContent = { up: "▲", down: "▼" }[a] ?? a;
       b.title = a;
       b.dataset.action = a;
-      b.addEventListener("click", (e) => { e.stopPropagation(); act(job, a); });
-      td.append(b);
     }
-    tr.append(td);
-    tr.addEventListener("click", () => select(job.id));
-    body.append(tr);
+    if (b !== at) td.insertBefore(b, at);
+    else at = at.nextElementSibling;
   }
+}
+
+// The queue's rows, kept and patched in place (fillCell): a row is added for a new job,
+// dropped for a job gone, moved when the order changes, and otherwise left as it is.
+function renderJobs() {
+  const body = $("#jobs");
+  // "No jobs yet" only when the list was read and is empty, never when it could not be read.
+  $("#no-jobs").hidden = jobs.length > 0 || readsRefused();
+  const rows = new Map([...body.querySelectorAll(":scope > tr[data-id]")].map((tr) => [tr.dataset.id, tr]));
+  // The rows of jobs gone are taken out first, so the rows after them are not moved (a row
+  // taken out and put back loses a click pressed on it); only a job that changed places is.
+  const ids = new Set(jobs.map((j) => `${j.id}`));
+  for (const [id, tr] of rows) if (!ids.has(id)) { tr.remove(); rows.delete(id); }
+  let at = body.firstElementChild;
+  for (const job of jobs) {
+    let tr = rows.get(`${job.id}`);
+    if (!tr) tr = document.createElement("tr");
+    fillRow(tr, job);
+    if (tr !== at) body.insertBefore(tr, at);
+    else at = at.nextElementSibling;
+  }
+}
+
+// The queue's clicks, by delegation: a row selects its job, a button acts on it. The job is
+// the one the row shows now (its state, its name), found by the id the row carries.
+function initQueue() {
+  $("#jobs").addEventListener("click", (e) => {
+    const tr = e.target.closest("tr[data-id]");
+    if (!tr) return;
+    const job = jobs.find((j) => `${j.id}` === tr.dataset.id);
+    if (!job) return;
+    const button = e.target.closest("button[data-action]");
+    if (button) act(job, button.dataset.action);
+    else select(job.id);
+  });
 }
 
 async function refreshJobs() {
@@ -352,10 +437,10 @@ async function pollSelected() {
   if (!j || !(starting || ["running", "suspended", "reconstructing", "paused"].includes(j.state))) return;
   selectedDetail = await getJSON(`/jobs/${selected}`);
   const cell = document.querySelector(`#jobs tr[data-id="${selected}"] td.eta`);
-  if (cell) { cell.textContent = etaText(); cell.title = etaTitle(); }
+  if (cell) fillEta(cell);
   // An adaptive job's round comes with its detail.
-  const prog = document.querySelector(`#jobs tr[data-id="${selected}"] td.progress .progress-text`);
-  if (prog) prog.textContent = ` ${progressOf(j).text}`;
+  const prog = document.querySelector(`#jobs tr[data-id="${selected}"] td.progress`);
+  if (prog) fillProgress(prog, j);
   if (["reconstructing", "queued"].includes(selectedDetail.state)) showResult(jobs.find((x) => x.id === selected));
 }
 
@@ -367,7 +452,7 @@ async function pollActive() {
   if (!a) { activeDetail = null; return; }
   activeDetail = await getJSON(`/jobs/${a.id}`);
   const cell = document.querySelector(`#jobs tr[data-id="${a.id}"] td.eta`);
-  if (cell) { cell.textContent = etaText(activeDetail, a.id); cell.title = etaTitle(activeDetail, a.id); }
+  if (cell) fillEta(cell, activeDetail, a.id);
 }
 
 function scheduleRefresh() {
@@ -500,9 +585,10 @@ async function showResult(job) {
   link.onclick = async (e) => {
     e.preventDefault();
     await guarded(async () => {
-      const file = await getBlob(`/jobs/${job.id}/result`);
+      // Named as the daemon names it: the job and its specimen (gonio-job-7-brushed-steel.h5).
+      const { blob, name } = await getFile(`/jobs/${job.id}/result`, `gonio-job-${job.id}.h5`);
       const a = document.createElement("a");
-      a.href = URL.createObjectURL(file); a.download = `gonio-job-${job.id}.h5`; a.click();
+      a.href = URL.createObjectURL(blob); a.download = name; a.click();
     });
   };
   const img = $("#preview");
@@ -898,6 +984,7 @@ function restartEvents() {
 window.addEventListener("DOMContentLoaded", async () => {
   initKey();
   initForm();
+  initQueue();
   $("#release-queue").addEventListener("click", () => guarded(async () => {
     await send("POST", "/rig/release");
     await refreshRig();

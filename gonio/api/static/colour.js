@@ -211,12 +211,8 @@ async function refresh() {
     ? `${rep.space}, ${rep.conditions.illuminant}/${rep.conditions.observer}°, ${instrument} geometries at azimuth ${azimuth}° (${rep.conversion})` +
       (flop !== undefined ? `; flop index ${flop.toFixed(2)}` : "") +
       (diff ? `; ΔE00 against ${standard ? `standard ${standard}` : `job ${against}`}: max ${diff.max_dE00.toFixed(2)}` : "") + source
-    : `${rep.space}: reflectance factors per channel (${rep.channels.length} channels), no CIELAB. ` +
-      // "Uncalibrated" is the colour, not the values: the result's own calibration (1/sr or
-      // sensor units) is said under the headline.
-      "Uncalibrated here is the colour: no spectral bands or chart calibration tie the sensors' channels to a colour space. " +
-      (noDiff ? "" : `${body.no_colour ?? "Give the sensor spectral bands or a chart colour calibration (docs/colour.md)"}.`);
-  if (noDiff) caption.textContent += `${lab ? ". " : ""}${noDiff}.`;
+    : channelCaption(rep, body, noDiff);
+  if (noDiff && lab) caption.textContent += `. ${noDiff}.`;
   // The "source" column is explained whatever the space (it was said only beside CIELAB).
   if (!lab) {
     caption.textContent += read
@@ -227,6 +223,24 @@ async function refresh() {
   if (body.warnings?.length) caption.textContent = `Warning: ${body.warnings.join("; ")}. ${caption.textContent}`;
   // Which near-specular geometries no pair read (their rows say "table"), and what that means.
   if (body.notes?.length) caption.textContent += `. Note: ${body.notes.join("; ")}.`;
+}
+
+// A table of channel values (no CIELAB): what its values are, and why there is no CIELAB
+// (and so no ΔE00) said once, in the daemon's words (no_colour, or the refused comparison's
+// reason, which holds it). "no CIELAB" was said by this caption and again by no_colour.
+function channelCaption(rep, body, noDiff) {
+  const n = rep.channels.length;
+  const why = noDiff ?? body.no_colour;
+  // In sensor units (no white reference in effect) the values are no reflectance factors.
+  if (body.calibrated === false) {
+    return `${rep.space}: values per channel in sensor units (${n} channels). ${why ?? "No CIELAB: calibrate the rig on the white reference, then scan again"}.`;
+  }
+  // "Uncalibrated" is the colour, not the values: the result's own calibration (1/sr) is
+  // said under the headline.
+  const what = `${rep.space}: reflectance factors per channel (${n} channels). Uncalibrated here is the colour`;
+  return why ? `${what}, not the values. ${why}.`
+    : `${what}: no spectral bands or chart calibration tie the sensors' channels to a colour space, so there is no CIELAB. ` +
+      "Give the sensors spectral bands or a chart colour calibration (docs/colour.md).";
 }
 
 window.addEventListener("DOMContentLoaded", () => {

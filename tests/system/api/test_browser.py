@@ -232,6 +232,15 @@ def test_start_a_scan_from_the_page_and_see_the_result(daemon: Daemon, browser: 
         "const i = document.getElementById('preview');"
         "return !i.hidden && i.complete && i.naturalWidth > 0"))
     assert browser.find_element(By.ID, "download").is_displayed()
+    # Saved under the daemon's name: the job and its specimen (gonio-job-N.h5 said neither
+    # which specimen it was).
+    browser.execute_script(
+        "window.__saved = [];"
+        "HTMLAnchorElement.prototype.click = function () { window.__saved.push(this.download); };")
+    click_when_steady(wait, "#download")
+    wait.until(lambda d: d.execute_script("return window.__saved.length"))
+    assert browser.execute_script("return window.__saved") == [
+        f"gonio-job-{job_id}-browser-sample.h5"]
 
     # A comparison: a second scan, chosen in "Compare with". Its export fits are not under
     # test (the export below is the first scan's): it finishes without them.
@@ -260,21 +269,22 @@ def test_start_a_scan_from_the_page_and_see_the_result(daemon: Daemon, browser: 
         ("saved", "export failed")))
     # (Then the file's warnings, one a line: this small test basis leaves a misfit.)
     first = browser.find_element(By.ID, "export-state").text.split("\n")[0]
-    assert first == f"saved gonio-job-{job_id}-gltf.gltf", first
+    assert first == f"saved gonio-job-{job_id}-browser-sample-gltf.gltf", first
     # The export's warnings, as `gonio export` prints them (the daemon sends them in a header,
     # test_scan_flow), one a line beside the file's name: the download cannot say them.
     Select(browser.find_element(By.ID, "export-format")).select_by_value("merl")
     click_when_steady(wait, "#export-button")
     wait.until(lambda d: d.find_element(By.ID, "export-state").text.startswith(
-        (f"saved gonio-job-{job_id}-merl", "export failed")))
+        (f"saved gonio-job-{job_id}-browser-sample-merl", "export failed")))
     state = browser.find_element(By.ID, "export-state").text.split("\n")
     with daemon.client() as c:
         sent = json.loads(c.get(f"/api/v1/jobs/{job_id}/export", params={"format": "merl"})
                           .headers["x-gonio-export-warnings"])
     assert sent, "no warning to show"  # this small test basis leaves a misfit, at least
     # With its provenance sidecar, saved beside it as gonio export writes it.
-    assert state == [f"saved gonio-job-{job_id}-merl.binary and "
-                     f"gonio-job-{job_id}-merl.binary.json", *(f"warning: {w}" for w in sent)]
+    assert state == [f"saved gonio-job-{job_id}-browser-sample-merl.binary and "
+                     f"gonio-job-{job_id}-browser-sample-merl.binary.json",
+                     *(f"warning: {w}" for w in sent)]
     # The calibration selected: it has no result and no "Compare with", so the comparison's
     # readings go too (they stayed, beside the calibration's own); back on the scan, they show.
     click_when_steady(wait, f'#jobs tr[data-id="{cal_id}"]')

@@ -211,6 +211,8 @@ def test_the_colour_caption_of_sensor_rgb_says_what_is_uncalibrated_and_what_sou
                d.find_element(By.ID, "colour-caption").text)
     caption = browser.find_element(By.ID, "colour-caption").text
     assert "Uncalibrated here is the colour" in caption, caption
+    # Why there is no CIELAB: once, in the daemon's words (the API's no_colour).
+    assert caption.lower().count("no cielab") == 1, caption
     if read:
         assert f'Source "pair": {read} of {len(colour["measured"])} geometries' in caption, caption
     else:

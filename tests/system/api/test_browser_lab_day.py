@@ -592,6 +592,13 @@ def test_an_uncalibrated_result_against_a_standard_says_why_there_is_no_delta_e(
         click_when_steady(wait, f'#jobs tr[data-id="{job}"]')
         wait.until(lambda d: _text(d, "result-job").startswith(f"job {job} ")
                    and "uncalibrated sensor RGB" in _text(d, "colour-caption"))
+        # Why there is no CIELAB is said once, in the daemon's words (the caption said "no
+        # CIELAB" and then the API's no_colour said it again); its values are sensor units,
+        # not reflectance factors.
+        caption = _text(browser, "colour-caption")
+        assert caption.lower().count("no cielab") == 1, caption
+        assert f"values per channel in sensor units (3 channels). {why}." in caption, caption
+        assert "reflectance factors" not in caption, caption
         wait.until(lambda d: "lab master" in [o.get_attribute("value") for o in
                                               d.find_elements(By.CSS_SELECTOR,
                                                               "#colour-standard option")])
@@ -600,6 +607,7 @@ def test_an_uncalibrated_result_against_a_standard_says_why_there_is_no_delta_e(
                    _text(d, "colour-caption"))
         caption = _text(browser, "colour-caption")
         assert f"No ΔE00 against standard lab master: {why}." in caption, caption
+        assert caption.lower().count("no cielab") == 1, caption
         assert "calibrate the rig on the white reference" in caption, caption
         head = [th.text for th in browser.find_elements(By.CSS_SELECTOR,
                                                         "#colour-table thead th")]

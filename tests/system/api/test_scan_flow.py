@@ -106,7 +106,7 @@ def test_full_scan_with_live_progress_and_results(daemon: Daemon) -> None:
         h5 = c.get(f"/api/v1/jobs/{job_id}/result")
         assert h5.status_code == 200
         assert h5.content.startswith(b"\x89HDF\r\n\x1a\n")
-        assert f"gonio-job-{job_id}.h5" in h5.headers["content-disposition"]
+        assert f"gonio-job-{job_id}-brushed-sample.h5" in h5.headers["content-disposition"]
         path = daemon.data_dir / "downloaded.h5"
         path.write_bytes(h5.content)
         with h5py.File(path) as f:
@@ -125,7 +125,7 @@ def test_full_scan_with_live_progress_and_results(daemon: Daemon) -> None:
         assert extras["reconstruction_error"]["predicted_log_rmse"] == pytest.approx(
             c.get(f"/api/v1/jobs/{job_id}").json()["result"]["predicted_log_rmse"])
         assert extras["fits"]["principled"]["rendered"]["value"] >= 0
-        assert f"gonio-job-{job_id}-gltf.gltf" in gl.headers["content-disposition"]
+        assert f"gonio-job-{job_id}-brushed-sample-gltf.gltf" in gl.headers["content-disposition"]
         mt = c.get(f"/api/v1/jobs/{job_id}/export", params={"format": "mtlx"})
         assert mt.status_code == 200 and b"standard_surface" in mt.content
         bad = c.get(f"/api/v1/jobs/{job_id}/export", params={"format": "obj"})
@@ -138,7 +138,8 @@ def test_full_scan_with_live_progress_and_results(daemon: Daemon) -> None:
         assert meshed.status_code == 200, meshed.text
         (prim,) = meshed.json()["meshes"][0]["primitives"]
         assert {"POSITION", "NORMAL", "TANGENT"} <= set(prim["attributes"])
-        assert f"gonio-job-{job_id}-gltf-mesh.gltf" in meshed.headers["content-disposition"]
+        assert (f"gonio-job-{job_id}-brushed-sample-gltf-mesh.gltf"
+                in meshed.headers["content-disposition"])
         wrong = c.get(f"/api/v1/jobs/{job_id}/export",
                       params={"format": "mtlx", "with_mesh": "true"})
         assert wrong.status_code == 422 and "gltf only" in wrong.json()["detail"]
@@ -157,7 +158,8 @@ def test_full_scan_with_live_progress_and_results(daemon: Daemon) -> None:
         side = c.get(f"/api/v1/jobs/{job_id}/export", params={"format": "merl",
                                                               "part": "sidecar"})
         assert side.status_code == 200, side.text
-        assert f'gonio-job-{job_id}-merl.binary.json' in side.headers["content-disposition"]
+        assert (f"gonio-job-{job_id}-brushed-sample-merl.binary.json"
+                in side.headers["content-disposition"])
         record = side.json()
         assert record["job_id"] == job_id and record["merl"]["azimuthally_averaged"] is True
         assert record["warnings"] == warned

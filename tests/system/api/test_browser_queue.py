@@ -1,0 +1,156 @@
+"""The lab page's queue table in headless Chromium against the real daemon on the simulated rig
+(tests/system/api/conftest.py, as tests/system/api/test_browser.py): a click on a row's button
+while events redraw the table; a move that needs the user's acceptance."""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import pytest
+
+from tests.system.api.conftest import Daemon
+from tests.system.api.test_browser import (  # noqa: F401 (fixture)
+    browser,
+    click_when_steady,
+    open_live,
+)
+from tests.system.api.test_browser_lab_day import (  # noqa: F401 (fixture)
+    PLAN,
+    _row_ids,
+    calibrated_elsewhere,
+)
+from tests.system.api.test_scan_flow import ENDED, wait_state
+
+pytestmark = [pytest.mark.system, pytest.mark.timeout(600)]
+
+
+def _state(daemon: Daemon, job: int) -> str:
+    with daemon.client() as c:
+        return str(c.get(f"/api/v1/jobs/{job}").json()["state"])
+
+
+def _progress(browser: Any, job: int) -> str:  # noqa: F811 (the fixture's name)
+    return str(browser.execute_script(
+        "return document.querySelector(`#jobs tr[data-id='${arguments[0]}'] td.progress`)"
+        "?.textContent ?? ''", job))
+
+
+def test_a_click_on_a_rows_button_acts_though_events_redraw_the_table_meanwhile(
+    daemon: Daemon, browser: Any, no_export_fits: None  # noqa: F811
+) -> None:
+    """Every event rebuilt the whole queue table, so a button pressed before a redraw and
+    released after it was a detached one: the click was lost (no pause, no abort question),
+    for a lab user as for the browser tests beside a busy CPU. Here the mouse is pressed on a
+    row's button, the table is redrawn (readings arrive, a job is queued), and only then is
+    the mouse released: the click acts."""
+    from selenium.common.exceptions import TimeoutException
+    from selenium.webdriver.common.action_chains import ActionChains
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support import expected_conditions as ec
+
+    with daemon.client() as c:
+        job = int(c.post("/api/v1/jobs", params={"accept_uncalibrated": "true"}, json={
+            "plan": {**PLAN, "specimen": "clicked", "rotations": 400}}).json()["id"])
+    behind = None
+    try:
+        wait = open_live(browser, daemon, 120)
+        row = f"#jobs tr[data-id='{job}']"
+        # Measuring, with its ETA shown (the row's layout as it stays while the job runs).
+        wait.until(lambda d: _progress(d, job).startswith(" ") and
+                   int(_progress(d, job).split("/")[0]) >= 1 and "in all" in str(
+                       d.execute_script("return document.querySelector(arguments[0])"
+                                        "?.textContent", f"{row} td.eta")))
+        # Where each press, release and click landed: said if a click is lost.
+        browser.execute_script(
+            "window.__landed = [];"
+            "for (const t of ['mousedown', 'mouseup', 'click']) document.addEventListener(t,"
+            " (e) => window.__landed.push(`${t} on ${e.target.tagName}.${e.target.dataset.action"
+            " ?? ''} ${e.target.isConnected ? '' : '(detached)'}`), true);")
+        # Pressed on "pause" while the job measures; released once a reading has redrawn the
+        # row's progress (an event, a list refresh, a redraw).
+        pause = browser.find_element(By.CSS_SELECTOR, f"{row} button[data-action='pause']")
+        before = _progress(browser, job)
+        ActionChains(browser).move_to_element(pause).click_and_hold().perform()
+        wait.until(lambda d: _progress(d, job) != before)
+        ActionChains(browser).release().perform()
+        deadline = time.monotonic() + 120
+        while _state(daemon, job) != "paused":
+            landed = browser.execute_script("return window.__landed")
+            assert time.monotonic() < deadline, f"the click on pause was lost: {landed}"
+            time.sleep(0.1)
+        # Pressed on "abort" of the paused job; released once the job has been resumed
+        # elsewhere (its row's state and buttons redrawn: resume became pause, abort stays)
+        # and a job queued behind it has been drawn (a row added): the question comes.
+        wait.until(lambda d: d.find_elements(
+            By.CSS_SELECTOR, f"{row}[data-state='paused'] button[data-action='resume']"))
+        abort = browser.find_element(By.CSS_SELECTOR, f"{row} button[data-action='abort']")
+        ActionChains(browser).move_to_element(abort).click_and_hold().perform()
+        with daemon.client() as c:
+            assert c.post(f"/api/v1/jobs/{job}/resume").status_code == 200
+            behind = int(c.post("/api/v1/jobs", params={"accept_uncalibrated": "true"},
+                                json={"plan": {**PLAN, "specimen": "behind"}}).json()["id"])
+        wait.until(lambda d: str(behind) in _row_ids(d) and d.find_elements(
+            By.CSS_SELECTOR, f"{row}[data-state='running'] button[data-action='pause']"))
+        ActionChains(browser).release().perform()
+        try:
+            question = wait.until(ec.alert_is_present())
+        except TimeoutException:
+            landed = browser.execute_script("return window.__landed")
+            raise AssertionError(f"the click on abort was lost: {landed}") from None
+        assert f"Abort job {job} (clicked)?" in question.text, question.text
+        question.accept()
+        wait.until(lambda d: _state(daemon, job) == "aborted")
+    finally:
+        with daemon.client() as c:
+            if _state(daemon, job) not in ENDED:
+                c.post(f"/api/v1/jobs/{job}/abort")
+            if behind is not None:
+                wait_state(c, behind, ENDED, timeout=300)
+
+
+def test_moving_a_scan_ahead_of_a_queued_calibration_asks_and_sends_the_acceptance(
+    daemon: Daemon, browser: Any, calibrated_elsewhere: None  # noqa: F811
+) -> None:
+    """A scan queued behind a calibration (on a rig calibrated elsewhere) moved up with ▲ was
+    refused with a 409 naming ``accept_uncalibrated``, a field the page could not send: the
+    row could not move. The page now asks, saying the scan would run before the calibration,
+    uncalibrated; dismissed, the order stays; accepted, it resends with the acceptance."""
+    from selenium.webdriver.support import expected_conditions as ec
+
+    cal_plan = {"kind": "calibration", "reference_albedo": 0.99, "rotations": 2,
+                "exposure": {"exposure_s": 0.005}}
+    with daemon.client() as c:
+        assert c.post("/api/v1/rig/halt").status_code == 200  # all stay queued
+        cal = int(c.post("/api/v1/jobs", json={"plan": cal_plan}).json()["id"])
+        r = c.post("/api/v1/jobs", json={"plan": {**PLAN, "specimen": "eager"}})
+        assert r.status_code == 201, r.text  # behind the calibration: not asked
+        scan = int(r.json()["id"])
+    try:
+        wait = open_live(browser, daemon, 120)
+        wait.until(lambda d: _row_ids(d)[-2:] == [str(cal), str(scan)])
+        up = f"#jobs tr[data-id='{scan}'] button[data-action='up']"
+        click_when_steady(wait, up)
+        question = wait.until(ec.alert_is_present())
+        text = question.text
+        for phrase in (f"Job {scan} would then run before calibration job {cal}, uncalibrated",
+                       "the scan would run before the calibration", "sensor units",
+                       "Move it all the same?"):
+            assert phrase in text, text
+        question.dismiss()
+        with daemon.client() as c:
+            assert c.get(f"/api/v1/jobs/{scan}").json()["queue_position"] > \
+                c.get(f"/api/v1/jobs/{cal}").json()["queue_position"]
+        assert _row_ids(browser)[-2:] == [str(cal), str(scan)]
+        click_when_steady(wait, up)
+        wait.until(ec.alert_is_present()).accept()
+        wait.until(lambda d: _row_ids(d)[-2:] == [str(scan), str(cal)])
+        with daemon.client() as c:
+            assert c.get(f"/api/v1/jobs/{scan}").json()["queue_position"] < \
+                c.get(f"/api/v1/jobs/{cal}").json()["queue_position"]
+        assert not browser.find_element("id", "message").is_displayed()
+    finally:
+        with daemon.client() as c:
+            for job in (scan, cal):
+                c.post(f"/api/v1/jobs/{job}/cancel")
+            assert c.post("/api/v1/rig/release").status_code == 200
