@@ -59,7 +59,7 @@ from gonio.plans.models import (
     parse_stored_plan,
 )
 from gonio.plans.validation import plan_pairs
-from gonio.result_views import ResultViews
+from gonio.result_views import ResultViews, download_stem
 from gonio.rigdescription import RigDescription
 from gonio.service_models import (
     Conflict,
@@ -890,6 +890,11 @@ class GonioService:
     def checked_result_path(self, job_id: int) -> Path:
         """Job ``job_id``'s result file, once read whole (see :class:`ResultViews`)."""
         return self.results.checked_result_path(job_id)
+
+    def result_file_name(self, job_id: int) -> str:
+        """The name job ``job_id``'s result file downloads under: the job and its specimen
+        (:func:`gonio.result_views.download_stem`), ``.h5``."""
+        return f"{download_stem(job_id, self._row(job_id).specimen)}.h5"
 
     def damaged_results(self) -> list[str]:
         """One line per completed job whose result file is missing or damaged."""

@@ -18,10 +18,8 @@ from pydantic import BaseModel, Field
 from gonio.api.deps import READ, JobId, Service
 from gonio.brdf.colour.errors import ColourError
 from gonio.brdf.tables import geometry as geo
-from gonio.result_views import download_stem
 from gonio.results import OffGridAngle
 from gonio.service import NotFound
-from gonio.service_models import job_row
 
 router = APIRouter(prefix="/api/v1/jobs", tags=["results"])
 
@@ -56,8 +54,8 @@ def result_file(job_id: JobId, service: Service) -> FileResponse:
     # Read whole first (and kept for the pictures): a truncated or damaged file is refused
     # with the job and how to rebuild it, never sent as if it were good.
     path = service.checked_result_path(job_id)
-    stem = download_stem(job_id, job_row(service.store, job_id).specimen)
-    return FileResponse(path, media_type="application/x-hdf5", filename=f"{stem}.h5")
+    return FileResponse(path, media_type="application/x-hdf5",
+                        filename=service.result_file_name(job_id))
 
 
 @router.get(
