@@ -738,7 +738,9 @@ def _scan_through_daemon(args: argparse.Namespace, plan: Any) -> int:
             raise
         job_id = int(job["id"])
         print(f"job {job_id} queued on {client.url}", file=sys.stderr)
-        seen: dict[str, Any] = {}
+        # What the daemon said of the job, kept for a message if it goes away: its queueing
+        # answer at first, then every poll's.
+        seen: dict[str, Any] = dict(job)
         try:
             row = _follow(client, job_id, disabled=args.no_progress, seen=seen)
         except DaemonUnreachable as exc:
