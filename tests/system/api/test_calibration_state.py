@@ -199,3 +199,26 @@ def test_a_scan_whose_user_accepted_sensor_units_runs_when_the_calibration_does_
                 time.sleep(0.1)
             assert c.post(f"/api/v1/jobs/{job}/abort").status_code == 200
             wait_state(c, job, ENDED)
+
+
+def test_a_scan_queued_behind_a_calibration_that_fails_is_not_measured_uncalibrated(
+    daemon: Daemon, calibrated_elsewhere: Calibration
+) -> None:
+    # The calibration runs and fails (the simulated stage holds the specimen, not the white
+    # reference): the scan queued behind it unasked fails before anything moves.
+    with daemon.client() as c:
+        assert c.post("/api/v1/rig/halt").status_code == 200
+        try:
+            cal, scan = _queue_behind_a_calibration(c)
+        finally:
+            c.post("/api/v1/rig/release")
+        cal_job = wait_state(c, cal, ENDED)
+        assert cal_job["state"] == "failed", cal_job
+        assert "calibration refused" in cal_job["reason"], cal_job
+        job = wait_state(c, scan, ENDED)
+        assert job["state"] == "failed", job
+        reason = job["reason"]
+        assert reason.startswith("not started:"), reason
+        assert "accept_uncalibrated=true" in reason, reason
+        assert job["done_angles"] == 0, job
+        assert c.get(f"/api/v1/jobs/{scan}/readings").json() == []
