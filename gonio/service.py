@@ -80,6 +80,7 @@ from gonio.service_models import (
 )
 from gonio.stage_control import StageControl
 from gonio.store import EventRow, JobRow, JobStore, ReadingRow
+from gonio.store import NotFound as StoreNotFound
 from gonio.timeleft import FinishingEstimate, finishing_estimate
 from gonio.worker import Worker
 
@@ -114,6 +115,9 @@ __all__ = [
 
 
 T = TypeVar("T")
+CALIBRATION_AHEAD = "calibration_ahead"
+"""Key of a scan's ``created`` event data: the calibration job that let it be queued without
+asking (:meth:`GonioService.unasked_uncalibrated` names it, and how it ended)."""
 UNCALIBRATED_ACCEPTED = "uncalibrated_accepted"
 """Key of a scan's ``created`` event data (whether its user accepted that it may measure
 uncalibrated), and the type of the event a reorder with ``accept_uncalibrated`` records on each
@@ -455,7 +459,7 @@ class GonioService:
             rig=self.desc.model_dump(mode="json"), priority=request.priority,
             total_angles=len(checked.angles_deg),
             created=(None if plan.kind == "calibration"
-                     else {UNCALIBRATED_ACCEPTED: accept_uncalibrated}),
+                     else self._acceptance_record(plan, accept_uncalibrated)),
         )
         self.worker.take_checked(row.id, checked)
         self.basis.note_arc(self.store, row.id, plan, symmetry)
@@ -506,11 +510,34 @@ class GonioService:
         if created.data[UNCALIBRATED_ACCEPTED] or \
                 self.store.has_event(job.id, UNCALIBRATED_ACCEPTED):
             return None
-        return (f"{why}. It was queued without asking because a calibration job was to run "
-                "before it, and none has calibrated the rig since (cancelled, removed or "
-                "failed). Nothing was measured: run a calibration job and queue the scan "
-                "again, or queue it with accept_uncalibrated=true (gonio scan "
-                "--accept-uncalibrated) to measure in sensor units")
+        cal = created.data.get(CALIBRATION_AHEAD)
+        if isinstance(cal, int):
+            try:
+                ended = self.store.get_job(cal).state.value
+            except StoreNotFound:
+                ended = "removed"
+            ending = {"aborted": "was cancelled", "removed": "was removed",
+                      "failed": "failed"}.get(ended, f"is {ended}")
+            how = (f"It was queued without asking because calibration job {cal} was to run "
+                   f"before it; that job {ending} and nothing has calibrated the rig since")
+        else:
+            how = ("It was queued without asking, before the rig was calibrated elsewhere, "
+                   "and no calibration in effect here covers it")
+        return (f"{why}. {how}. Nothing was measured: run a calibration job and queue the "
+                "scan again, or queue it accepting sensor units (the page asks; the API's "
+                "accept_uncalibrated=true; gonio scan --accept-uncalibrated)")
+
+    def _acceptance_record(self, plan: AnyPlan, accepted: bool) -> dict[str, Any]:
+        """What a new scan's ``created`` event keeps for :meth:`unasked_uncalibrated`: whether
+        its user accepted sensor units and, when it was queued unasked only because a
+        calibration job was to run first, that job's id."""
+        record: dict[str, Any] = {UNCALIBRATED_ACCEPTED: accepted}
+        if not accepted and self._uncalibrated_why(plan) is not None:
+            ahead = [r.id for r in self.store.list_jobs()
+                     if r.kind == "calibration" and r.state not in FINISHED_STATES]
+            if ahead:
+                record[CALIBRATION_AHEAD] = ahead[0]
+        return record
 
     def _uncalibrated_why(self, plan: AnyPlan) -> str | None:
         """Why a scan of ``plan`` would be uncalibrated on a rig calibrated elsewhere

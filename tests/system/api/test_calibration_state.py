@@ -165,7 +165,8 @@ def test_a_scan_queued_behind_a_calibration_that_never_ran_is_not_measured_uncal
         assert reason.startswith("not started:"), reason
         # Why (the rig's calibration elsewhere, named), how it came to be queued, what to do.
         assert str(scan_data_dir(daemon.sim.config)) in reason, reason
-        assert "calibration job" in reason and "accept_uncalibrated=true" in reason, reason
+        assert f"calibration job {cal} was to run before it; that job was cancelled" in reason
+        assert "accept_uncalibrated=true" in reason, reason
         # Nothing was measured.
         assert job["done_angles"] == 0, job
         assert c.get(f"/api/v1/jobs/{scan}/readings").json() == []
@@ -219,6 +220,7 @@ def test_a_scan_queued_behind_a_calibration_that_fails_is_not_measured_uncalibra
         assert job["state"] == "failed", job
         reason = job["reason"]
         assert reason.startswith("not started:"), reason
+        assert f"calibration job {cal} was to run before it; that job failed" in reason
         assert "accept_uncalibrated=true" in reason, reason
         assert job["done_angles"] == 0, job
         assert c.get(f"/api/v1/jobs/{scan}/readings").json() == []
