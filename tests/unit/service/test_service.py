@@ -303,7 +303,8 @@ def test_the_start_refuses_only_an_unasked_uncalibrated_scan(tmp_path: Path) -> 
                                  rig=svc.desc.model_dump(mode="json"))
     rows = {j: svc.store.get_job(j) for j in (unasked.id, accepted.id, moved.id, older.id)}
     why = svc.unasked_uncalibrated(rows[unasked.id], plan)
-    assert why is not None and why.startswith("calibrated elsewhere. It was queued without asking, before")
+    assert why is not None
+    assert why.startswith("calibrated elsewhere. It was queued without asking, before"), why
     assert "accept_uncalibrated=true" in why
     for job in (accepted.id, moved.id, older.id):
         assert svc.unasked_uncalibrated(rows[job], plan) is None, job
