@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import argparse
+import sys
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -43,6 +45,26 @@ def _render(args: argparse.Namespace) -> int:
         raise UsageError(f"cannot write {out}: folder {out.parent} does not exist")
     png = render_inputs(args.inputs, size=args.size, labels=args.label)
     out.write_bytes(png)
+    for warning in _reconstruction_warnings(args.inputs):
+        # What the result's colour report and exports say beside it (e.g. the highlight not
+        # read, values outside physical bounds): a picture alone looks trustworthy.
+        print(f"warning: {warning}", file=sys.stderr)
     print(f"wrote {out} ({len(png) / 1e6:.1f} MB, {len(args.inputs)} input(s), "
           f"{args.size} px per view)")
     return 0
+
+
+def _reconstruction_warnings(inputs: Sequence[str]) -> list[str]:
+    """The reconstruction's own warnings of each result file among ``inputs``
+    (:func:`gonio.result_colour.colour_warnings`: the ones every export carries), each prefixed
+    with its file's name when there are several inputs; tables (.npz) have none."""
+    from gonio.result_colour import colour_warnings
+    from gonio.results import read_result
+
+    said: list[str] = []
+    for f in inputs:
+        if Path(f).suffix.lower() not in (".h5", ".hdf5"):
+            continue
+        for w in colour_warnings(read_result(f)):
+            said.append(f"{Path(f).name}: {w}" if len(inputs) > 1 else w)
+    return said

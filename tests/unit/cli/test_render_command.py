@@ -59,3 +59,36 @@ def test_files_that_are_not_results_are_named_for_what_they_are(
         err = capsys.readouterr().err
         assert f"{other} is an HDF5 file but not a gonio result file" in err, err
         assert "None" not in err, err
+
+
+def test_a_rendered_result_says_its_reconstructions_warnings(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """gonio colour and gonio export say a result's own warnings (the highlight not read,
+    values outside physical bounds); gonio render drew the same result without a word."""
+    import numpy as np
+
+    from gonio.brdf.tables.table import from_function
+    from gonio.calibration import CalibratedScan
+    from gonio.results import write_result
+
+    samples = CalibratedScan(pairs=[("L1", "S1")], light_dirs=np.array([[0.0, 0.0, 1.0]]),
+                             sensor_dirs=np.array([[0.0, 0.0, 1.0]]),
+                             stage_angles_deg=np.array([0.0]), values=np.ones((1, 1, 1)),
+                             channels=("Y",))
+    table = from_function(lambda i, o: np.full((i.shape[0], 1), 0.2), ["Y"], "x",
+                          dtype=np.float32)
+    bounds = "the reconstruction is outside physical bounds: its maximum is above 1000"
+    warned = write_result(tmp_path / "warned.h5", job_id=3, specimen="red", kind="uniform",
+                          readings=[], samples=samples, table=table,
+                          provenance={"physical_bounds": bounds})
+    plain = write_result(tmp_path / "plain.h5", job_id=4, specimen="red", kind="uniform",
+                         readings=[], samples=samples, table=table)
+    out = tmp_path / "r.png"
+    assert cli_main(["render", str(warned), "-o", str(out), "--size", "64"]) == 0
+    assert f"warning: {bounds}" in capsys.readouterr().err
+    assert cli_main(["render", str(plain), "-o", str(out), "--size", "64"]) == 0
+    assert "warning" not in capsys.readouterr().err
+    # Several inputs: each warning names its file.
+    assert cli_main(["render", str(warned), str(plain), "-o", str(out), "--size", "64"]) == 0
+    assert f"warning: warned.h5: {bounds}" in capsys.readouterr().err
