@@ -144,6 +144,9 @@ def register(subparsers: Any) -> None:
                    help="reorder: the job's new place among the queued jobs (0: next)")
     j.add_argument("--priority", type=int, default=None,
                    help="reorder: the job's new priority (higher runs first)")
+    j.add_argument("--accept-uncalibrated", action="store_true",
+                   help="reorder: move a scan ahead of a queued calibration all the same, to "
+                        "measure in sensor units (the daemon refuses it otherwise)")
     j.add_argument("--db", type=Path, default=None,
                    help="job store (SQLite, DATA_DIR/gonio.sqlite), e.g. the one 'gonio scan' "
                         "prints, or the data directory holding it (required; without it the "
@@ -933,10 +936,12 @@ def _jobs_through_daemon(args: argparse.Namespace) -> int:
         raise UsageError("--db and --data-dir do not apply with --daemon: the daemon keeps its "
                          "own job store")
     if args.action == "rebuild":
-        raise UsageError("rebuild works on a job store, not through a daemon: stop the daemon "
-                         "and run 'gonio jobs rebuild ID --db DATA_DIR'")
-    if args.action != "reorder" and (args.position is not None or args.priority is not None):
-        raise UsageError("--position and --priority go with reorder")
+        raise UsageError("rebuild works on a job store, not through a daemon: run 'gonio jobs "
+                         "rebuild ID --db DATA_DIR' on the daemon's data directory (the daemon "
+                         "may keep running: it serves the rebuilt file)")
+    if args.action != "reorder" and (args.position is not None or args.priority is not None
+                                     or args.accept_uncalibrated):
+        raise UsageError("--position, --priority and --accept-uncalibrated go with reorder")
     if args.action == "list":
         if args.job_id is not None:
             raise UsageError(f"list takes no job id; 'gonio jobs --daemon {args.daemon} show "
@@ -975,7 +980,14 @@ def _jobs_through_daemon(args: argparse.Namespace) -> int:
                 raise UsageError("reorder needs --position N (0: next) and/or --priority P")
             body = {k: v for k, v in (("position", args.position),
                                       ("priority", args.priority)) if v is not None}
-            row = client.request("POST", f"/api/v1/jobs/{job}/reorder", json=body)
+            try:
+                row = client.request("POST", f"/api/v1/jobs/{job}/reorder", json=body,
+                                     params={"accept_uncalibrated": "true"}
+                                     if args.accept_uncalibrated else None)
+            except DaemonRefused as exc:
+                if exc.status == 409 and "accept_uncalibrated" in str(exc):
+                    raise UsageError(f"{exc} (here: --accept-uncalibrated)") from None
+                raise
         else:
             try:
                 row = client.request("POST", f"/api/v1/jobs/{job}/{args.action}")

@@ -224,3 +224,30 @@ def test_a_scan_queued_behind_a_calibration_that_fails_is_not_measured_uncalibra
         assert "accept_uncalibrated=true" in reason, reason
         assert job["done_angles"] == 0, job
         assert c.get(f"/api/v1/jobs/{scan}/readings").json() == []
+
+
+def test_gonio_jobs_reorder_ahead_of_a_calibration_asks_for_the_flag(
+    daemon: Daemon, calibrated_elsewhere: Calibration, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # The daemon's 409 named accept_uncalibrated=true, a query parameter the command had no
+    # way to send.
+    from gonio.cli import main
+
+    base = ["jobs", "--daemon", daemon.url, "--api-key", daemon.key]
+    with daemon.client() as c:
+        assert c.post("/api/v1/rig/halt").status_code == 200
+        try:
+            cal, scan = _queue_behind_a_calibration(c)
+            assert main([*base, "reorder", str(scan), "--priority", "10"]) == 2
+            err = capsys.readouterr().err
+            assert f"would then run before calibration job {cal}" in err, err
+            assert "--accept-uncalibrated" in err, err
+            assert c.get(f"/api/v1/jobs/{scan}").json()["priority"] == 0  # not moved
+            assert main([*base, "reorder", str(scan), "--priority", "10",
+                         "--accept-uncalibrated"]) == 0
+            assert f"job {scan} reordered: priority 10" in capsys.readouterr().out
+            assert c.get(f"/api/v1/jobs/{scan}").json()["priority"] == 10
+        finally:
+            for job in (j["id"] for j in c.get("/api/v1/jobs", params={"state": "queued"}).json()):
+                c.post(f"/api/v1/jobs/{job}/cancel")
+            c.post("/api/v1/rig/release")
