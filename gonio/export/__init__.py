@@ -138,13 +138,19 @@ def _rendered_value(metrics: Any) -> tuple[float, dict[str, Any]] | None:
     return float(r["value"]), r
 
 
-def fit_warnings(fits: Fits) -> list[str]:
-    """A sentence for each model whose rendering differs much from the reconstruction's, and
-    one when the factored model renders much closer than the principled material (a material
-    one principled lobe cannot show, :data:`.judge.TWO_LOBE_RATIO`)."""
+def fit_warnings(fits: Fits) -> dict[str, list[str]]:
+    """Each fitted model's warnings, by model (``"principled"``, ``"factored"``): a sentence
+    for a model whose rendering differs much from the reconstruction's, and, for the
+    principled model, one when the factored model renders much closer (a material one
+    principled lobe cannot show, :data:`.judge.TWO_LOBE_RATIO`).
+
+    They are kept apart because each export holds one model: a glTF file said "the factored
+    fit renders visibly unlike the reconstruction", which is not about the file it is in
+    (:func:`format_provenance`).
+    """
     from gonio.export.judge import TWO_LOBE_RATIO, WARN_FLIP, WARN_RELATIVE
 
-    out = []
+    out: dict[str, list[str]] = {"principled": [], "factored": []}
     for what, m in (("principled", fits.principled.metrics), ("factored", fits.factored.metrics)):
         got = _rendered_value(m)
         if got is None:
@@ -152,7 +158,7 @@ def fit_warnings(fits: Fits) -> list[str]:
         value, r = got
         limit = WARN_FLIP if r.get("flip") is not None else WARN_RELATIVE
         if value > limit:
-            out.append(
+            out[what].append(
                 f"the {what} fit renders visibly unlike the reconstruction ({r['metric']} "
                 f"{value:.3f} > {limit:g}): this model does not represent the material "
                 "well; use the 'table' export where a renderer can take a table")
@@ -160,7 +166,7 @@ def fit_warnings(fits: Fits) -> list[str]:
     if p is not None and f is not None and p[1].get("metric") == f[1].get("metric"):
         limit = WARN_FLIP if p[1].get("flip") is not None else WARN_RELATIVE
         if p[0] > limit and p[0] > TWO_LOBE_RATIO * f[0]:
-            out.append(
+            out["principled"].append(
                 f"one principled material cannot show this material: the factored model's "
                 f"rendered difference from the reconstruction is {p[0] / max(f[0], 1e-12):.1f}"
                 f"x smaller ({p[1]['metric']} {f[0]:.3f} against {p[0]:.3f}). Typically two "
@@ -172,12 +178,59 @@ def fit_warnings(fits: Fits) -> list[str]:
 
 def provenance(attrs: dict[str, Any], fits: Fits, metrics: dict[str, Any],
                result_provenance: dict[str, Any] | None = None) -> dict[str, Any]:
-    """What an exported file says about itself (:func:`.metadata.export_provenance`)."""
+    """What an exported file says about itself (:func:`.metadata.export_provenance`).
+
+    Its ``warnings`` are every model's and the reconstruction's; ``model_warnings`` keeps each
+    fitted model's apart, for :func:`format_provenance`, which gives each format its own.
+    """
     from gonio.brdf.tables.twofold import twofold_asymmetry
     from gonio.export.metadata import export_provenance
 
-    return export_provenance(attrs, metrics, result_provenance or {}, fit_summary(fits),
-                             fit_warnings(fits), twofold_asymmetry(fits.table))
+    by_model = fit_warnings(fits)
+    prov = export_provenance(attrs, metrics, result_provenance or {}, fit_summary(fits),
+                             by_model["principled"] + by_model["factored"],
+                             twofold_asymmetry(fits.table))
+    prov[MODEL_WARNINGS] = by_model
+    return prov
+
+
+MODEL_WARNINGS = "model_warnings"
+"""The provenance key (:func:`provenance`) that holds each fitted model's warnings until
+:func:`format_provenance` picks a format's; no file carries it."""
+
+
+def format_provenance(fmt: str, prov: dict[str, Any]) -> dict[str, Any]:
+    """The record one format's file carries: ``prov`` with the ``warnings`` that are about it.
+
+    * ``table``, the reconstruction itself, and ``merl``, the table averaged over azimuth (no
+      fit): the reconstruction's own (``reconstruction_warnings``: calibration, arc, physical
+      bounds, design gap, misfit); MERL's sidecar adds the anisotropy the average lost;
+    * ``gltf`` and ``mtlx``, the principled fit: its warnings, that the principled model is
+      twofold symmetric when the result is not, and the reconstruction's own;
+    * ``factored``: the factored fit's warnings and the reconstruction's own.
+
+    A record without ``model_warnings`` (written by an older gonio) keeps its ``warnings`` for
+    the fitted formats.
+    """
+    from gonio.export.metadata import symmetry_record
+
+    recon = [str(w) for w in prov.get("reconstruction_warnings") or []]
+    out = {k: v for k, v in prov.items() if k != MODEL_WARNINGS}
+    by_model = prov.get(MODEL_WARNINGS)
+    if fmt in ("table", "merl"):
+        out["warnings"] = recon
+    elif isinstance(by_model, dict):
+        model = "factored" if fmt == "factored" else "principled"
+        own = [str(w) for w in by_model.get(model) or []]
+        sym = prov.get("symmetry")
+        if model == "principled" and isinstance(sym, dict) and isinstance(
+                sym.get("twofold_asymmetry"), int | float):
+            # The principled models are twofold symmetric; the factored one and the table
+            # keep what differs at ph + 180 deg.
+            _, said = symmetry_record(float(sym["twofold_asymmetry"]))
+            own += [said] if said else []
+        out["warnings"] = own + recon
+    return out
 
 
 def write_export(fits: Fits, fmt: str, out: str | os.PathLike[str],
@@ -203,12 +256,12 @@ def write_export(fits: Fits, fmt: str, out: str | os.PathLike[str],
 
 def _write(fits: Fits, fmt: str, out: str | os.PathLike[str], prov: dict[str, Any],
            with_mesh: bool) -> Path:
+    prov = format_provenance(fmt, prov)
     name = str(prov.get("specimen") or fits.table.name)
     if prov.get("job_id") is not None:
         name = f"{name}_job{prov['job_id']}"  # unnamed scans stay apart in a scene
     if fmt == "table":
-        # The table is the reconstruction: the fits' warnings (which point to it) are not its.
-        own = {**prov, "warnings": list(prov.get("reconstruction_warnings") or [])}
+        own = dict(prov)
         if fits.srgb_table is not None and prov.get("colour_space"):
             # Its channels are the sensor's own (bands, or raw RGB), not the linear sRGB the
             # other formats hold: say what they are and how colour is made of them.
@@ -235,10 +288,6 @@ def _write(fits: Fits, fmt: str, out: str | os.PathLike[str], prov: dict[str, An
         return write_gltf(fits.principled, out, name, prov, with_mesh)
     from gonio.export.merl import write_merl
 
-    # The MERL file is the table averaged over azimuth, no fit: the fits' warnings ("the
-    # factored fit renders visibly unlike the reconstruction ... use the 'table' export")
-    # are not its; the reconstruction's are, and the sidecar adds what the average lost.
-    prov = {**prov, "warnings": list(prov.get("reconstruction_warnings") or [])}
     # R, G, B as the glTF and MaterialX fits hold them: linear sRGB from XYZ when the result
     # has colour (a spectral table has no R, G, B of its own; a chart-calibrated sensor's raw
     # channels are not sRGB, while the sidecar's colour_space says linear sRGB).
@@ -247,13 +296,9 @@ def _write(fits: Fits, fmt: str, out: str | os.PathLike[str], prov: dict[str, An
 
 def export_warnings(fmt: str, path: str | os.PathLike[str], prov: dict[str, Any]) -> list[str]:
     """The warnings that go with an exported file, as ``gonio export`` prints them and the
-    daemon sends them with a download (the ``X-Gonio-Export-Warnings`` header).
-
-    The model formats (``gltf`` and ``mtlx``: the principled fit; ``factored``) carry the
-    provenance's warnings; ``merl`` its sidecar's: the reconstruction's own (the file is the
-    table averaged over azimuth, no fit) and the anisotropy the average lost; ``table``, the
-    reconstruction itself, only the reconstruction's own (``reconstruction_warnings``:
-    calibration, arc, physical bounds, design gap, misfit), not the fits'.
+    daemon sends them with a download (the ``X-Gonio-Export-Warnings`` header): the file's
+    own (:func:`format_provenance`), for MERL its sidecar's (which add the anisotropy the
+    azimuthal average lost).
 
     Parameters
     ----------
@@ -271,9 +316,7 @@ def export_warnings(fmt: str, path: str | os.PathLike[str], prov: dict[str, Any]
 
         side = json.loads(sidecar_path(path).read_text())
         return [str(w) for w in side.get("warnings") or []]
-    if fmt == "table":
-        return [str(w) for w in prov.get("reconstruction_warnings") or []]
-    return [str(w) for w in prov.get("warnings") or []]
+    return [str(w) for w in format_provenance(fmt, prov).get("warnings") or []]
 
 
 def export_result(result_path: str | os.PathLike[str], fmt: str,

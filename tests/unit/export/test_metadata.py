@@ -247,6 +247,12 @@ def test_an_asymmetric_result_says_what_the_principled_models_lose(
     assert any("not twofold symmetric" in w for w in meta["warnings"])
     assert any("warning: the result is not twofold symmetric" in line
                for line in report("gltf", out, prov))
+    # The factored model and the table keep what differs at ph + 180 deg: the warning is not
+    # theirs.
+    factored = write_export(fits, "factored", tmp_path / "x.factored.npz", prov)
+    with np.load(factored) as z:
+        assert not any("not twofold symmetric" in w
+                       for w in json.loads(str(z["provenance"]))["warnings"])
 
 
 def test_a_calibration_at_another_exposure_is_among_the_export_warnings(
@@ -330,6 +336,34 @@ def test_the_merl_export_carries_the_reconstructions_warnings_not_the_fits(
     said = export_warnings("merl", out, prov)
     assert recon_said in said and fit_said not in said
     assert json.loads((tmp_path / "x.binary.json").read_text())["warnings"] == said
-    # The fitted formats keep the fits' warnings.
+
+
+def test_each_fitted_export_carries_its_own_models_warnings(
+        brushed: Path, tmp_path: Path) -> None:
+    # A metallic paint's glTF file (the principled fit) said "the factored fit renders
+    # visibly unlike the reconstruction ... use the 'table' export": a warning about a model
+    # the file does not hold. Each fitted format carries its own model's warnings and the
+    # reconstruction's; the file holds no other model's.
+    from gonio.export import MODEL_WARNINGS, export_warnings
+
+    fits, prov = result_fits(brushed)
+    principled_said = "the principled fit renders visibly unlike the reconstruction (x)"
+    factored_said = "the factored fit renders visibly unlike the reconstruction (y)"
+    recon_said = "the highlight is not read: the reconstruction peaks 3.91 times above"
+    prov = {**prov, "warnings": [principled_said, factored_said, recon_said],
+            "reconstruction_warnings": [recon_said],
+            MODEL_WARNINGS: {"principled": [principled_said], "factored": [factored_said]}}
     gltf = write_export(fits, "gltf", tmp_path / "x.gltf", prov)
-    assert fit_said in json.loads(gltf.read_text())["asset"]["extras"]["warnings"]
+    extras = json.loads(gltf.read_text())["asset"]["extras"]
+    assert extras["warnings"] == [principled_said, recon_said]
+    assert export_warnings("gltf", gltf, prov) == [principled_said, recon_said]
+    assert MODEL_WARNINGS not in extras
+    assert export_warnings("mtlx", tmp_path / "x.mtlx", prov) == [principled_said, recon_said]
+    factored = write_export(fits, "factored", tmp_path / "x.factored.npz", prov)
+    with np.load(factored) as z:
+        meta = json.loads(str(z["provenance"]))
+    assert meta["warnings"] == [factored_said, recon_said]
+    assert export_warnings("factored", factored, prov) == [factored_said, recon_said]
+    # A record an older gonio made has no per-model warnings: its list is kept whole.
+    older = {k: v for k, v in prov.items() if k != MODEL_WARNINGS}
+    assert export_warnings("gltf", gltf, older) == older["warnings"]
