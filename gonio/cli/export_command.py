@@ -77,6 +77,10 @@ def run(args: argparse.Namespace) -> int:
           f"{time.perf_counter() - t0:.1f} s)")
     for line in report(args.fmt, path, prov):
         print(line)
+    if args.fmt == "gltf" and not args.with_mesh:
+        # A glTF viewer opened on it shows an empty scene, which looked like a broken export.
+        print("  the file holds the material only, no mesh: a glTF viewer shows an empty scene "
+              "until it is applied to a model (--with-mesh adds a preview sphere)")
     return 0
 
 

@@ -39,7 +39,11 @@ async function download(id, query, fallback) {
 async function exportShown() {
   const id = shownJob();
   if (id === null) return;
-  const fmt = $("#export-format").value;
+  const choice = $("#export-format").value;
+  // The glTF file alone holds no mesh, and a viewer opened on it shows an empty scene; the
+  // preview sphere (with_mesh) is what a lab that wants to look at its material asks for.
+  const fmt = choice === "gltf-mesh" ? "gltf" : choice;
+  const query = choice === "gltf-mesh" ? { format: fmt, with_mesh: "true" } : { format: fmt };
   const state = $("#export-state");
   // The seconds so far, counted: a fit-backed format can take a minute on a busy machine
   // (MERL with its sidecar: 61 s measured beside a reconstruction), and a bare "exporting…"
@@ -51,7 +55,7 @@ async function exportShown() {
   tick();
   const timer = setInterval(tick, 1000);
   try {
-    const { name, warnings } = await download(id, { format: fmt }, `gonio-job-${id}-${fmt}`);
+    const { name, warnings } = await download(id, query, `gonio-job-${id}-${choice}`);
     const saved = [name];
     // MERL's layout has no room for the provenance: it comes as a JSON sidecar, saved beside
     // it as `gonio export` writes it.

@@ -270,6 +270,14 @@ def test_start_a_scan_from_the_page_and_see_the_result(daemon: Daemon, browser: 
     # (Then the file's warnings, one a line: this small test basis leaves a misfit.)
     first = browser.find_element(By.ID, "export-state").text.split("\n")[0]
     assert first == f"saved gonio-job-{job_id}-browser-sample-gltf.gltf", first
+    # The default choice is the material on a preview sphere, which any glTF viewer shows
+    # (the material alone is an empty scene there): the daemon's with_mesh file.
+    Select(browser.find_element(By.ID, "export-format")).select_by_index(0)
+    click_when_steady(wait, "#export-button")
+    wait.until(lambda d: "gltf-mesh" in d.find_element(By.ID, "export-state").text
+               or "export failed" in d.find_element(By.ID, "export-state").text)
+    first = browser.find_element(By.ID, "export-state").text.split("\n")[0]
+    assert first == f"saved gonio-job-{job_id}-browser-sample-gltf-mesh.gltf", first
     # The export's warnings, as `gonio export` prints them (the daemon sends them in a header,
     # test_scan_flow), one a line beside the file's name: the download cannot say them.
     Select(browser.find_element(By.ID, "export-format")).select_by_value("merl")

@@ -217,6 +217,14 @@ def test_gltf_with_mesh_and_the_report(result: Path, tmp_path: Path,
     text = capsys.readouterr().out
     assert "specimen brushed, measured, job 5" in text
     assert "principled fit renders" in text and "from the reconstruction" in text
+    assert "no mesh" not in text
+    # Without the sphere the file has no mesh at all, and a viewer shows an empty scene: the
+    # report says so and how to get one.
+    bare = tmp_path / "bare.gltf"
+    assert main(["export", str(result), "-f", "gltf", "-o", str(bare)]) == 0
+    assert "meshes" not in json.loads(bare.read_text())
+    said = capsys.readouterr().out
+    assert "no mesh" in said and "--with-mesh adds a preview sphere" in said
     assert main(["export", str(result), "-f", "merl", "--with-mesh",
                  "-o", str(tmp_path / "m.binary")]) == 2
     assert "--with-mesh applies to --format gltf only" in capsys.readouterr().err
