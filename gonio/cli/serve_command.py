@@ -31,6 +31,7 @@ from pathlib import Path
 from typing import Any
 
 from gonio.cli import UsageError, positive_float
+from gonio.cli.daemon_client import API_KEY_ENV
 from gonio.wording import counted
 
 DEMO_ROTATIONS = 8
@@ -298,6 +299,12 @@ def _run_sim(args: argparse.Namespace, cfg: Any, keyring: Any) -> int:
                           f"{Path(data_dir) / SESSION_KEY_FILE}; delete it for a new one)")
                 _line(f"gonio serving on {url}")
                 _line(f"open {url}{fragment} and start a scan (Ctrl-C stops)")
+                if session_key:
+                    # The key was in the page's address alone: a lab going on from a shell
+                    # (gonio scan --daemon, gonio jobs --daemon) was refused and had to pick
+                    # it out of the URL.
+                    _line(f"from a shell: export {API_KEY_ENV}={session_key}, then e.g. "
+                          f"gonio jobs --daemon {url.rstrip('/')} list")
                 # Called on the server's event loop, once it listens: the service runs.
                 service = app.state.service
                 why_not = calibration_not_needed(service)

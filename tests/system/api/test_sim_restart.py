@@ -170,3 +170,25 @@ def test_killed_sim_daemon_resumes_its_specimen_scan_without_recalibrating(
     # Same specimen, same rig: equal within the simulated sensor noise (shot noise of a few
     # hundred counts on readings of 10^3..10^5; the white reference would read 1.5-4x higher).
     np.testing.assert_allclose(a, b, rtol=0.05, atol=60.0)
+
+
+def test_the_first_start_says_how_a_shell_gives_the_session_key(tmp_path: Path) -> None:
+    """The session's key was only in the page's address: a lab going on from a shell (gonio
+    jobs --daemon, gonio scan --daemon) was refused. The start says how to give it, and the
+    line, followed as printed, is let in where the same command without it is refused."""
+    with daemon(tmp_path / "data", FAST) as d:
+        m = d.wait_for(r"from a shell: export GONIO_API_KEY=(\S+), then e\.g\. (gonio jobs "
+                       r"--daemon (\S+) list)")
+        assert m.group(1) == d.key and m.group(3) == d.url.rstrip("/")
+        d.wait_job(1, lambda j: j["state"] == "completed")
+        code = "from gonio.cli import main; raise SystemExit(main())"
+        # A write: cancelling the completed calibration job. With the key the daemon looks
+        # at the job (and refuses: it is not queued); without it, at the key.
+        cmd = [sys.executable, "-c", code, "jobs", "--daemon", m.group(3), "cancel", "1"]
+        env = {k: v for k, v in os.environ.items() if k != "GONIO_API_KEY"}
+        keyless = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=60)
+        keyed = subprocess.run(cmd, env={**env, "GONIO_API_KEY": m.group(1)},
+                               capture_output=True, text=True, timeout=60)
+    assert keyless.returncode != 0 and "give a key" in keyless.stderr, keyless.stderr
+    assert keyed.returncode != 0 and "give a key" not in keyed.stderr, keyed.stderr
+    assert "cannot cancel job 1: it is completed" in keyed.stderr, keyed.stderr
