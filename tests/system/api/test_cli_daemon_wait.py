@@ -240,3 +240,41 @@ def test_bad_usage_is_refused_naming_the_fix(
         assert "--no-wait" not in err  # it goes with --daemon alone
     with daemon.client() as c:
         assert len(c.get("/api/v1/jobs").json()) == n_jobs  # nothing queued
+
+
+def test_wait_on_a_calibration_job_copies_that_jobs_own_calibration(
+    daemon: Daemon, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # The copy beside -o is the calibration the job made, as its result records it: waited
+    # for after a later calibration, copying the daemon's calibration in effect would have
+    # written that later one under this job's name.
+    import json
+
+    scan = ["scan", "--daemon", daemon.url, "--api-key", daemon.key, "--white-reference",
+            "0.99", "--rotations", "2", "--exposure", "0.02", "--light-settle", "0",
+            "--no-progress"]
+    wait = ["jobs", "--daemon", daemon.url, "--no-progress", "wait"]
+    before = daemon.sim.place_white_reference()
+    try:
+        assert main([*scan, "--no-wait", "-o", str(tmp_path / "white.h5")]) == 0
+        first = int(capsys.readouterr().out.split()[1])
+        assert main([*wait, str(first), "-o", str(tmp_path / "white.h5")]) == 0
+        copy = tmp_path / "white.calibration.json"
+        assert capsys.readouterr().out == (
+            f"job {first} completed: the daemon now applies this calibration to its scans; "
+            f"a copy is in {copy}\n")
+        made = json.loads(copy.read_text())
+        assert made["source"] == f"job {first}: white reference" and made["pairs"]
+        # A later calibration replaces it in the daemon (gonio scan --daemon's own path).
+        assert main([*scan, "-o", str(tmp_path / "later.h5")]) == 0
+        with daemon.client() as c:
+            now = c.get("/api/v1/calibration").json()["source"]
+        assert now != made["source"] and now.startswith("job ")
+        assert json.loads((tmp_path / "later.calibration.json").read_text())["source"] == now
+        capsys.readouterr()
+        assert main([*wait, str(first), "-o", str(tmp_path / "again" / "white.h5")]) == 0
+        assert capsys.readouterr().out.startswith(
+            f"job {first} completed: the daemon applies another calibration now ({now})")
+        assert json.loads((tmp_path / "again" / "white.calibration.json").read_text()) == made
+    finally:
+        daemon.sim.place_specimen(before.brdf)
