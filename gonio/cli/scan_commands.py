@@ -43,7 +43,8 @@ def register(subparsers: Any) -> None:
     src.add_argument("--sim", action="store_true", help="start the simulated rig")
     src.add_argument("--daemon", metavar="URL",
                      help="submit the scan to a running daemon (it owns the rig) and wait for "
-                          "its result, e.g. http://127.0.0.1:8600")
+                          "its result (--no-wait: return once it is queued), e.g. "
+                          "http://127.0.0.1:8600")
     add_daemon_options(p)
     p.add_argument("--no-wait", action="store_true",
                    help="with --daemon: queue the scan and return at once, printing its job id "
@@ -147,7 +148,7 @@ def register(subparsers: Any) -> None:
     j.add_argument("job_id", nargs="?", type=int)
     j.add_argument("--daemon", default=None, metavar="URL",
                    help="act through the running daemon at URL (it owns its job store), e.g. "
-                        "http://127.0.0.1:8600; cancel and reorder need it")
+                        "http://127.0.0.1:8600; cancel, reorder and wait need it")
     add_daemon_options(j)
     j.add_argument("--position", type=int, default=None,
                    help="reorder: the job's new place among the queued jobs (0: next)")
