@@ -865,10 +865,12 @@ def follow_and_fetch(client: DaemonClient, job_id: int, out: Path | None, *, no_
               file=sys.stderr)
         return 1
     except KeyboardInterrupt:
-        print(f"stopped following; job {job_id} goes on in the daemon. "
-              + ("Do not run this command again, which would queue a second scan; f"
-                 if queued_here else "F")
-              + f"ollow it and fetch its result with: {again}", file=sys.stderr)
+        then = ("follow it and fetch its result with" if out is not None
+                else "follow it again with")
+        then = (f"Do not run this command again, which would queue a second scan; {then}"
+                if queued_here else then.capitalize())
+        print(f"stopped following; job {job_id} goes on in the daemon. {then}: {again}",
+              file=sys.stderr)
         return 130
     where = f"the daemon keeps it: {client.url}/api/v1/jobs/{job_id}/result"
     print_scan_summary(job_id, row.get("result") or {}, out,
@@ -878,13 +880,23 @@ def follow_and_fetch(client: DaemonClient, job_id: int, out: Path | None, *, no_
 
 
 def _fetch_result(client: DaemonClient, job_id: int, out: Path) -> None:
-    """Write completed job ``job_id``'s result file, as the daemon serves it, to ``out``;
-    when that fails, say that the daemon keeps it and how to fetch it elsewhere."""
+    """Write completed job ``job_id``'s result file, as the daemon serves it, to ``out``
+    (whole or not at all: a fetch cut short leaves no truncated file under that name); when
+    that fails, say that the daemon keeps it and how to fetch it elsewhere."""
+    import contextlib
+    import os
+
     result = client.request("GET", f"/api/v1/jobs/{job_id}/result")
+    part = out.with_name(f".{out.name}.part")
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
-        out.write_bytes(result.content)
-    except OSError as exc:
+        part.write_bytes(result.content)
+        os.replace(part, out)
+    except BaseException as exc:
+        with contextlib.suppress(OSError):
+            part.unlink(missing_ok=True)
+        if not isinstance(exc, OSError):
+            raise
         why = exc.strerror or str(exc)
         raise UsageError(f"job {job_id} completed, but its result could not be written to "
                          f"{out} ({why}); the daemon keeps it: fetch it elsewhere with "

@@ -187,14 +187,22 @@ def test_ctrl_c_in_scan_through_the_daemon_names_the_wait_command(
                          "--no-progress", "-o", str(out)]) == 130
             job = max(j["id"] for j in c.get("/api/v1/jobs").json())
             assert _state(c, job) == "queued"  # the job goes on
+            err = capsys.readouterr().err
+            # Ctrl-C in jobs wait: the same command again, which queues nothing.
+            assert main(["jobs", "--daemon", daemon.url, "wait", str(job), "--no-progress",
+                         "-o", str(out)]) == 130
+            waited = capsys.readouterr().err
         finally:
             for queued in (j["id"] for j in c.get("/api/v1/jobs",
                                                   params={"state": "queued"}).json()):
                 c.post(f"/api/v1/jobs/{queued}/cancel")
             c.post("/api/v1/rig/release")
-    err = capsys.readouterr().err
     assert "Do not run this command again" in err, err
-    assert f"fetch its result with: gonio jobs --daemon {daemon.url} wait {job} -o {out}" in err
+    command = f"gonio jobs --daemon {daemon.url} wait {job} -o {out}"
+    assert f"fetch its result with: {command}" in err
+    assert waited.strip().endswith(f"goes on in the daemon. Follow it and fetch its result "
+                                   f"with: {command}"), waited
+    assert not out.exists()
 
 
 @pytest.mark.timeout(60)  # without the check it would wait on a held queue for ever
