@@ -971,11 +971,13 @@ def _follow(client: Any, job_id: int, disabled: bool, poll_s: float = 0.5,
     given, holds the last detail answered, for a message if the daemon goes away)."""
     from tqdm import tqdm
 
+    # The first answer before the bar: a job the daemon does not have (gonio jobs wait 99)
+    # is refused without an empty bar above the refusal.
+    row: dict[str, Any] = client.request("GET", f"/api/v1/jobs/{job_id}")
     bar = tqdm(total=None, unit="angle", desc=f"job {job_id}", disable=disabled, file=sys.stderr)
     told: str | None = None
     try:
         while True:
-            row: dict[str, Any] = client.request("GET", f"/api/v1/jobs/{job_id}")
             if seen is not None:
                 seen.clear()
                 seen.update(row)
@@ -991,6 +993,7 @@ def _follow(client: Any, job_id: int, disabled: bool, poll_s: float = 0.5,
             if row["state"] in _FINAL:
                 return row
             time.sleep(poll_s)
+            row = client.request("GET", f"/api/v1/jobs/{job_id}")
     finally:
         bar.close()
 

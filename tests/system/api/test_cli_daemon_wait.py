@@ -244,6 +244,7 @@ def test_bad_usage_is_refused_naming_the_fix(
     assert main([a.format(url=daemon.url) for a in argv]) == 2
     err = capsys.readouterr().err
     assert words.format(url=daemon.url) in err, err
+    assert "0angle" not in err  # no empty progress bar above the refusal
     if argv == ["scan", "--sim", "--rotations", "4"]:
         assert "--no-wait" not in err  # it goes with --daemon alone
     with daemon.client() as c:
