@@ -43,8 +43,13 @@ def register(subparsers: Any) -> None:
     src.add_argument("--sim", action="store_true", help="start the simulated rig")
     src.add_argument("--daemon", metavar="URL",
                      help="submit the scan to a running daemon (it owns the rig) and wait for "
-                          "its result, e.g. http://127.0.0.1:8600")
+                          "its result (--no-wait: return once it is queued), e.g. "
+                          "http://127.0.0.1:8600")
     add_daemon_options(p)
+    p.add_argument("--no-wait", action="store_true",
+                   help="with --daemon: queue the scan and return at once, printing its job id "
+                        "and the command that follows it and fetches its result ('gonio jobs "
+                        "--daemon URL wait ID -o FILE'); -o is then optional")
     p.add_argument("--stage", choices=["dynamixel", "zaber"], default="dynamixel",
                    help="simulated stage kind (with --sim)")
     p.add_argument("--material", default=None,
@@ -118,7 +123,9 @@ def register(subparsers: Any) -> None:
     p.add_argument("--no-export-fits", action="store_true",
                    help="finish without the export fits (several seconds of CPU sooner); "
                    "'gonio export' then fits when it exports")
-    p.add_argument("-o", "--output", type=Path, required=True, help="result file (.h5)")
+    # Required but for --daemon URL --no-wait (checked in _scan, which says so).
+    p.add_argument("-o", "--output", type=Path, default=None,
+                   help="result file (.h5); required, except with --daemon URL --no-wait")
     p.set_defaults(func=_scan)
 
     j = subparsers.add_parser(
@@ -131,14 +138,17 @@ def register(subparsers: Any) -> None:
         "failed because the disk filled while its result was written is completed so. "
         "With --daemon URL the jobs are a running daemon's, acted on through its API: list, "
         "show, abort (a running job too), cancel ID (take a queued job out of the queue), "
-        "reorder ID --position N and/or --priority P (N=0: next).")
+        "reorder ID --position N and/or --priority P (N=0: next), wait ID [-o FILE] (follow "
+        "the job with a progress bar until it ends, then fetch its result to FILE and print "
+        "the summary 'gonio scan' prints; e.g. a scan queued with 'gonio scan --daemon URL "
+        "--no-wait', or one whose terminal was closed).")
     j.add_argument("action", nargs="?",
-                   choices=["list", "show", "abort", "rebuild", "cancel", "reorder"],
+                   choices=["list", "show", "abort", "rebuild", "cancel", "reorder", "wait"],
                    default="list")
     j.add_argument("job_id", nargs="?", type=int)
     j.add_argument("--daemon", default=None, metavar="URL",
                    help="act through the running daemon at URL (it owns its job store), e.g. "
-                        "http://127.0.0.1:8600; cancel and reorder need it")
+                        "http://127.0.0.1:8600; cancel, reorder and wait need it")
     add_daemon_options(j)
     j.add_argument("--position", type=int, default=None,
                    help="reorder: the job's new place among the queued jobs (0: next)")
@@ -155,6 +165,11 @@ def register(subparsers: Any) -> None:
                    help="the data directory the store's result paths are relative to (show: "
                         "result_file; rebuild: its results/ gets the file); default: the "
                         "folder of --db")
+    j.add_argument("-o", "--output", type=Path, default=None,
+                   help="wait: write the completed job's result file here (a calibration job's "
+                        "calibration beside it, as OUTPUT.calibration.json); without it the "
+                        "result stays in the daemon")
+    j.add_argument("--no-progress", action="store_true", help="wait: no progress bar")
     j.add_argument("--json", action="store_true", help="machine-readable output")
     j.set_defaults(func=_jobs)
 
@@ -215,6 +230,18 @@ def _specimen(args: argparse.Namespace) -> str:
 
 
 def _scan(args: argparse.Namespace) -> int:
+    if args.no_wait and not args.daemon:
+        raise UsageError("--no-wait goes with --daemon URL: a daemon runs the queued scan after "
+                         "this command returns; a scan this command runs itself (--rig, --sim) "
+                         "has no one else to run it, so the command waits for it")
+    if args.no_wait and args.dry_run:
+        raise UsageError("--no-wait queues the scan and returns; --dry-run queues nothing: "
+                         "give one of them")
+    if args.output is None and not args.no_wait:
+        raise UsageError(
+            "the result file is required: -o/--output FILE.h5, e.g. -o felt.h5"
+            + (" (or --no-wait: queue the scan on the daemon and return; 'gonio jobs --daemon "
+               "URL wait ID -o FILE' fetches its result later)" if args.daemon else ""))
     for name in ("exposure", "time_scale"):
         if getattr(args, name) <= 0:
             raise UsageError(f"--{name.replace('_', '-')} must be > 0")
@@ -224,7 +251,7 @@ def _scan(args: argparse.Namespace) -> int:
     if args.white_reference is None and not args.specimen and not args.dry_run:
         print(f"note: no --specimen NAME given; the job, its result and its exports call the "
               f"specimen {_specimen(args)!r}", file=sys.stderr)
-    if not args.dry_run:
+    if not args.dry_run and args.output is not None:
         _check_output(args.output)
     if args.daemon:
         return _scan_through_daemon(args, plan)
@@ -250,13 +277,18 @@ def _scan(args: argparse.Namespace) -> int:
             sim.close()
 
 
-def _check_output(out: Path) -> None:
+def _check_output(out: Path, nothing: str = "nothing was measured") -> None:
     """Refuse an ``-o`` that cannot be written before anything is measured.
 
     The result is copied to ``-o`` when the scan has finished: a folder that cannot be made or
     written found only then cost the lab the whole scan's wait for an error (the result stays
     in the data directory, but the message did not say so). A file is made and removed in the
     folder, so whatever the file system or the permissions refuse is found now.
+
+    Parameters
+    ----------
+    out : the result file ``-o`` names
+    nothing : what the refusal says was left undone (``gonio jobs wait`` measures nothing)
     """
     import os
     import tempfile
@@ -270,7 +302,7 @@ def _check_output(out: Path) -> None:
     except OSError as exc:
         why = exc.strerror or str(exc)
         raise UsageError(f"-o {out}: cannot write into {folder} ({why}); choose another "
-                         "location for the result (nothing was measured)") from None
+                         f"location for the result ({nothing})") from None
     if out.is_dir():
         raise UsageError(f"-o {out} is a folder; give the result file's name, e.g. "
                          f"{out / 'felt.h5'}")
@@ -457,7 +489,7 @@ async def _run_owned(args: argparse.Namespace, checked: Any, config: Any, sim: A
     return 0
 
 
-def scan_summary(job_id: int, summary: dict[str, Any], out: Path,
+def scan_summary(job_id: int, summary: dict[str, Any], out: Path | None,
                  kept: str) -> list[tuple[str, bool]]:
     """The end-of-scan summary of completed scan ``job_id``, the same whoever ran it.
 
@@ -473,7 +505,8 @@ def scan_summary(job_id: int, summary: dict[str, Any], out: Path,
     summary
         The job's ``result`` summary (:func:`gonio.finishing.finish_job`).
     out
-        The copy written for ``-o``.
+        The copy written for ``-o``; None when none was (``gonio jobs --daemon URL wait ID``
+        without ``-o``).
     kept
         Where the original stays, in words (``kept in PATH``, or the daemon's URL).
 
@@ -489,9 +522,9 @@ def scan_summary(job_id: int, summary: dict[str, Any], out: Path,
     err = headline_error(summary)
     err_text = f"{err['key']} {err['text']}" if err else "no error estimate"
     n = summary.get("n_samples", summary.get("readings"))
+    where = f"wrote {out} ({kept})" if out is not None else kept
     lines: list[tuple[str, bool]] = [
-        (f"job {job_id} completed: {n} samples in {units}, {err_text}; wrote {out} ({kept})",
-         False)]
+        (f"job {job_id} completed: {n} samples in {units}, {err_text}; {where}", False)]
     cal = summary.get("calibration")
     source = cal.get("source") if isinstance(cal, dict) else None
     if calibrated:
@@ -510,7 +543,8 @@ def scan_summary(job_id: int, summary: dict[str, Any], out: Path,
     return lines
 
 
-def print_scan_summary(job_id: int, summary: dict[str, Any], out: Path, kept: str) -> None:
+def print_scan_summary(job_id: int, summary: dict[str, Any], out: Path | None,
+                       kept: str) -> None:
     """Print :func:`scan_summary`: its lines to standard output, its warnings to standard
     error."""
     for line, to_stderr in scan_summary(job_id, summary, out, kept):
@@ -702,7 +736,9 @@ _FINAL = ("completed", "failed", "aborted", "halted")
 
 
 def _scan_through_daemon(args: argparse.Namespace, plan: Any) -> int:
-    """Queue ``plan`` on a daemon, follow it to its end, fetch its result file.
+    """Queue ``plan`` on a daemon, follow it to its end, fetch its result file
+    (:func:`follow_and_fetch`); with ``--no-wait``, return once it is queued, printing the
+    ``gonio jobs --daemon URL wait ID -o FILE`` that does the rest.
 
     The daemon owns the rig, its job store and its calibration: the job runs in its queue like
     any other (visible on the lab page), with the calibration in effect there. Ctrl-C stops
@@ -740,45 +776,173 @@ def _scan_through_daemon(args: argparse.Namespace, plan: Any) -> int:
                 raise UsageError(f"{exc} (here: --accept-uncalibrated)") from None
             raise
         job_id = int(job["id"])
+        if args.no_wait:
+            out = args.output or Path(_suggested_output(job_id, job.get("specimen")))
+            print(f"job {job_id} queued on {client.url}; follow it and fetch its result "
+                  f"with:\n  {wait_command(client.url, job_id, out)}")
+            return 0
         print(f"job {job_id} queued on {client.url}", file=sys.stderr)
         # What the daemon said of the job, kept for a message if it goes away: its queueing
         # answer at first, then every poll's.
-        seen: dict[str, Any] = dict(job)
-        try:
-            row = _follow(client, job_id, disabled=args.no_progress, seen=seen)
-        except DaemonUnreachable as exc:
-            print(lost_daemon_message(client.url, job_id, seen, str(exc)), file=sys.stderr)
-            return 1
-        except KeyboardInterrupt:
-            print(f"stopped following; job {job_id} goes on in the daemon "
-                  f"({client.url}/api/v1/jobs/{job_id})", file=sys.stderr)
-            return 130
+        return follow_and_fetch(client, job_id, args.output, no_progress=args.no_progress,
+                                seen=dict(job), queued_here=True)
+
+
+def _suggested_output(job_id: int, specimen: Any) -> str:
+    """The result file ``gonio scan --daemon --no-wait`` without ``-o`` suggests: the
+    specimen's name when it makes a plain file name, else the job's."""
+    import re
+
+    from gonio.export.metadata import UNNAMED
+
+    name = str(specimen or "")
+    if name and name != UNNAMED and re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9._-]*", name):
+        return f"{name}.h5"
+    return f"job-{job_id}.h5"
+
+
+def wait_command(url: str, job_id: int, out: Path | None) -> str:
+    """The command that follows daemon job ``job_id`` and fetches its result to ``out``
+    (``gonio jobs --daemon URL wait ID -o FILE``; without ``-o`` when ``out`` is None), with
+    ``out`` absolute, so it works from another terminal's folder too. It names no API key
+    (reads need none unless the daemon says so; the key stays out of shell history)."""
+    import shlex
+
+    cmd = f"gonio jobs --daemon {shlex.quote(url)} wait {job_id}"
+    return cmd if out is None else f"{cmd} -o {shlex.quote(str(Path(out).absolute()))}"
+
+
+def follow_and_fetch(client: DaemonClient, job_id: int, out: Path | None, *, no_progress: bool,
+                     seen: dict[str, Any] | None = None, queued_here: bool = False) -> int:
+    """Follow daemon job ``job_id`` to its end with a progress bar, fetch its result to
+    ``out`` and print the summary ``gonio scan`` prints; the exit status.
+
+    One path for ``gonio scan --daemon`` (after it queued the job) and ``gonio jobs --daemon
+    URL wait ID``, so a scan followed from the terminal that queued it and one picked up again
+    later end alike. Ctrl-C and a daemon that stops answering stop the following, not the job:
+    both print the ``gonio jobs --daemon URL wait ID -o FILE`` that takes it up again.
+
+    Parameters
+    ----------
+    client : the daemon's client
+    job_id : the job to follow
+    out : where its result file goes (``-o``, checked writable by the caller); None: not
+        fetched, the summary says where the daemon keeps it
+    no_progress : no progress bar
+    seen : what the daemon last said of the job (its queueing answer); None when nothing yet
+    queued_here : the command queued the job (running it again queues a second scan)
+
+    Returns
+    -------
+    int
+        0 completed (and fetched, with ``out``); 1 ended otherwise, or the daemon stopped
+        answering; 130 Ctrl-C.
+
+    Raises
+    ------
+    DaemonUnreachable
+        The daemon never answered (a wrong address, or it is down) while nothing of the job
+        had been seen.
+    DaemonRefused
+        It refused (no such job, a key needed).
+    """
+    again = wait_command(client.url, job_id, out)
+    last: dict[str, Any] = dict(seen or {})
+    try:
+        row = _follow(client, job_id, disabled=no_progress, seen=last)
         if row["state"] != "completed":
             print(f"job {job_id} {row['state']}: {row.get('reason')}", file=sys.stderr)
             return 1
-        out: Path = args.output
-        out.parent.mkdir(parents=True, exist_ok=True)
-        result = client.request("GET", f"/api/v1/jobs/{job_id}/result")
-        out.write_bytes(result.content)
-        summary = row.get("result") or {}
-        if plan.kind == "calibration":
-            cal_out = out.with_name(out.stem + ".calibration.json")
-            cal = client.request("GET", "/api/v1/calibration")
-            cal_out.write_text(json.dumps(cal, indent=2))
-            print(f"job {job_id} completed: the daemon now applies this calibration to its "
-                  f"scans; a copy is in {cal_out}")
+        if out is not None:
+            _fetch_result(client, job_id, out)
+        if row.get("kind") == "calibration":
+            _calibration_fetched(client, job_id, out)
             return 0
-    print_scan_summary(job_id, summary, out,
-                       f"the daemon keeps it: {client.url}/api/v1/jobs/{job_id}/result")
+    except DaemonUnreachable as exc:
+        if not last:
+            raise
+        print(lost_daemon_message(client.url, job_id, last, str(exc), again, queued_here),
+              file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        then = ("follow it and fetch its result with" if out is not None
+                else "follow it again with")
+        then = (f"Do not run this command again, which would queue a second scan; {then}"
+                if queued_here else then.capitalize())
+        print(f"stopped following; job {job_id} goes on in the daemon. {then}: {again}",
+              file=sys.stderr)
+        return 130
+    where = f"the daemon keeps it: {client.url}/api/v1/jobs/{job_id}/result"
+    print_scan_summary(job_id, row.get("result") or {}, out,
+                       where if out is not None else f"not fetched ({where}; "
+                       f"'{wait_command(client.url, job_id, None)} -o FILE' fetches it)")
     return 0
 
 
-def lost_daemon_message(url: str, job_id: int, seen: dict[str, Any], why: str) -> str:
-    """What ``gonio scan --daemon`` says when its daemon stops answering while it follows a job.
+def _fetch_result(client: DaemonClient, job_id: int, out: Path) -> None:
+    """Write completed job ``job_id``'s result file, as the daemon serves it, to ``out``
+    (whole or not at all: a fetch cut short leaves no truncated file under that name); when
+    that fails, say that the daemon keeps it and how to fetch it elsewhere."""
+    import contextlib
+    import os
+
+    result = client.request("GET", f"/api/v1/jobs/{job_id}/result")
+    part = out.with_name(f".{out.name}.part")
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        part.write_bytes(result.content)
+        os.replace(part, out)
+    except BaseException as exc:
+        with contextlib.suppress(OSError):
+            part.unlink(missing_ok=True)
+        if not isinstance(exc, OSError):
+            raise
+        why = exc.strerror or str(exc)
+        raise UsageError(f"job {job_id} completed, but its result could not be written to "
+                         f"{out} ({why}); the daemon keeps it: fetch it elsewhere with "
+                         f"'{wait_command(client.url, job_id, None)} -o FILE'") from None
+
+
+def _calibration_fetched(client: DaemonClient, job_id: int, out: Path | None) -> None:
+    """Print what completed calibration job ``job_id`` left, and with ``out`` (its fetched
+    result) write that job's calibration beside it as ``OUT.calibration.json``.
+
+    The copy is the calibration the job made, as its result file records it, not the one the
+    daemon applies now: a job waited for after a later calibration would otherwise copy that
+    later one under this job's name.
+    """
+    now = client.request("GET", "/api/v1/calibration")
+    source = now.get("source", "") if isinstance(now, dict) else ""
+    applies = ("the daemon now applies this calibration to its scans"
+               if source.startswith(f"job {job_id}:") else
+               f"the daemon applies another calibration now ({source or 'none'})")
+    if out is None:
+        print(f"job {job_id} completed: {applies}; '{wait_command(client.url, job_id, None)} "
+              "-o FILE' fetches its result and a copy of its calibration")
+        return
+    from gonio.results import read_provenance
+
+    made = read_provenance(out).get("new_calibration")
+    if made is None and source.startswith(f"job {job_id}:"):
+        made = json.dumps(now)  # a result without its calibration (made before it was kept)
+    if made is None:
+        print(f"job {job_id} completed: {applies}; its result does not record its calibration, "
+              f"so no copy was written beside {out}")
+        return
+    cal_out = out.with_name(out.stem + ".calibration.json")
+    cal_out.write_text(json.dumps(json.loads(made), indent=2))
+    print(f"job {job_id} completed: {applies}; a copy is in {cal_out}")
+
+
+def lost_daemon_message(url: str, job_id: int, seen: dict[str, Any], why: str, again: str,
+                        queued_here: bool = True) -> str:
+    """What ``gonio scan --daemon`` and ``gonio jobs --daemon URL wait`` say when their daemon
+    stops answering while they follow a job.
 
     It said only that the daemon could not be reached, so a user whose daemon was killed
     mid-scan could not tell that the job was kept (and resumes when the daemon restarts) and
-    ran the command again, queueing a second scan of the specimen.
+    ran the command again, queueing a second scan of the specimen. It then pointed at the
+    API's URLs; it names the command that takes the job up again.
 
     Parameters
     ----------
@@ -786,16 +950,19 @@ def lost_daemon_message(url: str, job_id: int, seen: dict[str, Any], why: str) -
     job_id : the job followed
     seen : the job's detail as last answered (empty if none came)
     why : the connection error's message
+    again : the command that follows the job and fetches its result (:func:`wait_command`)
+    queued_here : the command queued the job (``gonio scan --daemon``): running it again would
+        queue a second scan
     """
     when = (f" (last seen {seen['state']}, {seen.get('done_angles', 0)} of "
             f"{seen.get('total_angles') or '?'} angles)" if seen else "")
+    then = ("Do not run this command again, which would queue a second scan; once the daemon "
+            "answers, follow the job and fetch its result with: " if queued_here else
+            "Once the daemon answers, run this command again: ")
     return (f"{why}\n"
             f"  job {job_id}{when} is kept in the daemon's job store: a restarted daemon (gonio "
             f"serve on the same data directory) takes it up again, a scan under way from its last "
-            f"checkpoint. Do not run "
-            f"this command again, which would queue a second scan; follow job {job_id} on the "
-            f"lab page or at {url}/api/v1/jobs/{job_id}, and fetch its result from "
-            f"{url}/api/v1/jobs/{job_id}/result once it is completed")
+            f"checkpoint. {then}{again} (or follow it on the lab page at {url})")
 
 
 def _follow(client: Any, job_id: int, disabled: bool, poll_s: float = 0.5,
@@ -804,11 +971,13 @@ def _follow(client: Any, job_id: int, disabled: bool, poll_s: float = 0.5,
     given, holds the last detail answered, for a message if the daemon goes away)."""
     from tqdm import tqdm
 
+    # The first answer before the bar: a job the daemon does not have (gonio jobs wait 99)
+    # is refused without an empty bar above the refusal.
+    row: dict[str, Any] = client.request("GET", f"/api/v1/jobs/{job_id}")
     bar = tqdm(total=None, unit="angle", desc=f"job {job_id}", disable=disabled, file=sys.stderr)
     told: str | None = None
     try:
         while True:
-            row: dict[str, Any] = client.request("GET", f"/api/v1/jobs/{job_id}")
             if seen is not None:
                 seen.clear()
                 seen.update(row)
@@ -824,6 +993,7 @@ def _follow(client: Any, job_id: int, disabled: bool, poll_s: float = 0.5,
             if row["state"] in _FINAL:
                 return row
             time.sleep(poll_s)
+            row = client.request("GET", f"/api/v1/jobs/{job_id}")
     finally:
         bar.close()
 
@@ -871,8 +1041,17 @@ def _progress(service: Any, job_id: int, disabled: bool) -> Any:
 def _jobs(args: argparse.Namespace) -> int:
     from gonio.store import JobStore
 
+    if args.action != "wait" and (args.output is not None or args.no_progress):
+        raise UsageError("-o and --no-progress go with wait (gonio jobs --daemon URL wait ID "
+                         "-o FILE)")
     if args.daemon is not None:
         return _jobs_through_daemon(args)
+    if args.action == "wait":
+        raise UsageError(
+            "jobs wait follows a job a daemon runs: give its address, e.g. 'gonio jobs --daemon "
+            f"http://127.0.0.1:8600 wait {args.job_id if args.job_id is not None else 'ID'} "
+            "-o FILE' (a job of a foreground 'gonio scan' is followed by that scan; run the same "
+            "command again to resume one it left)")
     if args.action in ("cancel", "reorder"):
         raise UsageError(
             f"jobs {args.action} acts on a daemon's queue: give its address, e.g. 'gonio jobs "
@@ -965,6 +1144,15 @@ def _jobs_through_daemon(args: argparse.Namespace) -> int:
                       + (f"  ({why})" if why else ""))
             return 0
         job = args.job_id
+        assert job is not None  # refused above
+        if args.action == "wait":
+            if args.json:
+                raise UsageError(f"wait prints the scan's summary; 'gonio jobs --daemon "
+                                 f"{args.daemon} show {job} --json' gives the job as JSON")
+            if args.output is not None:
+                # Before the wait, not after an hour's scan.
+                _check_output(args.output, "nothing was fetched; the daemon keeps the job")
+            return follow_and_fetch(client, job, args.output, no_progress=args.no_progress)
         if args.action == "show":
             row = client.request("GET", f"/api/v1/jobs/{job}")
             print(json.dumps(row, indent=2) if args.json else
@@ -972,7 +1160,8 @@ def _jobs_through_daemon(args: argparse.Namespace) -> int:
                   f"{row['done_angles']}/{row['total_angles']} angles, priority "
                   f"{row.get('priority', 0)}"
                   + (f" ({row['reason']})" if row.get("reason") else "")
-                  + (f"\n  result: {args.daemon.rstrip('/')}/api/v1/jobs/{job}/result"
+                  + (f"\n  result: {args.daemon.rstrip('/')}/api/v1/jobs/{job}/result "
+                     f"(fetch it: {wait_command(client.url, job, None)} -o FILE)"
                      if row["state"] == "completed" else ""))
             return 0
         if args.action == "reorder":

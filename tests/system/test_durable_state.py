@@ -203,7 +203,9 @@ def test_scan_through_a_daemon_killed_mid_scan_says_the_job_is_kept(
     # (the queueing answer) -- a busy machine decides which.
     assert re.search(rf"job {job} \(last seen (running|queued), \d+ of 36 angles\)", err), err
     assert "Do not run this command again" in err
-    assert f"{first.url}/api/v1/jobs/{job}/result" in err
+    # The command that takes the job up again, not the API's URLs.
+    again = f"gonio jobs --daemon {first.url} wait {job} -o {tmp_path / 'felt.h5'}"
+    assert f"follow the job and fetch its result with: {again}" in err, err
 
     second = _serve(sim, data)
     try:
@@ -211,5 +213,17 @@ def test_scan_through_a_daemon_killed_mid_scan_says_the_job_is_kept(
             wait_for(lambda: c.get(f"/api/v1/jobs/{job}").json()["done_angles"] > 1
                      and _state(c, job) == "running", what="the job taken up again")
             assert len(c.get("/api/v1/jobs").json()) == 1  # and no second scan
+            # That command (on the restarted daemon's address: this one listens on another
+            # port) follows the job; aborted here, it says so.
+            words = again.replace(first.url, second.url).split()
+            waiter = threading.Thread(target=lambda: rc.append(main(
+                [*words[1:], "--no-progress"])), daemon=True)
+            waiter.start()
+            time.sleep(1.0)
+            assert waiter.is_alive()
+            assert c.post(f"/api/v1/jobs/{job}/abort").status_code == 200
+            waiter.join(timeout=60)
+        assert rc == [1, 1]
+        assert f"job {job} aborted: " in capsys.readouterr().err
     finally:
         second.stop(signal.SIGKILL)
