@@ -565,6 +565,15 @@ def test_aborting_a_job_asks_first_and_says_what_it_ends(
                 c.post(f"/api/v1/jobs/{job}/abort")
 
 
+def _settled_caption(d: Any, job: int, needle: str) -> str | bool:
+    """The colour caption once job ``job`` is shown and its caption holds ``needle``: the
+    same snapshot for the wait and the assertions after it (False until then)."""
+    if not _text(d, "result-job").startswith(f"job {job} "):
+        return False
+    caption = _text(d, "colour-caption")
+    return caption if needle in caption else False
+
+
 def test_an_uncalibrated_result_against_a_standard_says_why_there_is_no_delta_e(
     daemon: Daemon, browser: Any, finished_job: int,  # noqa: F811
 ) -> None:
@@ -590,12 +599,12 @@ def test_an_uncalibrated_result_against_a_standard_says_why_there_is_no_delta_e(
             why = c.get(f"/api/v1/jobs/{job}/colour").json()["no_colour"]
         wait = open_live(browser, daemon, 120)
         click_when_steady(wait, f'#jobs tr[data-id="{job}"]')
-        wait.until(lambda d: _text(d, "result-job").startswith(f"job {job} ")
-                   and "uncalibrated sensor RGB" in _text(d, "colour-caption"))
+        # The caption checked is the one the wait saw: the page may recompute the colour
+        # (a refresh shows "Computing colour…" for a moment) between two separate reads.
+        caption = wait.until(lambda d: _settled_caption(d, job, "uncalibrated sensor RGB"))
         # Why there is no CIELAB is said once, in the daemon's words (the caption said "no
         # CIELAB" and then the API's no_colour said it again); its values are sensor units,
         # not reflectance factors.
-        caption = _text(browser, "colour-caption")
         assert caption.lower().count("no cielab") == 1, caption
         assert f"values per channel in sensor units (3 channels). {why}." in caption, caption
         assert "reflectance factors" not in caption, caption
@@ -603,9 +612,8 @@ def test_an_uncalibrated_result_against_a_standard_says_why_there_is_no_delta_e(
                                               d.find_elements(By.CSS_SELECTOR,
                                                               "#colour-standard option")])
         Select(browser.find_element(By.ID, "colour-standard")).select_by_value("lab master")
-        wait.until(lambda d: "No ΔE00 against standard lab master" in
-                   _text(d, "colour-caption"))
-        caption = _text(browser, "colour-caption")
+        caption = wait.until(lambda d: _settled_caption(
+            d, job, "No ΔE00 against standard lab master"))
         assert f"No ΔE00 against standard lab master: {why}." in caption, caption
         assert caption.lower().count("no cielab") == 1, caption
         assert "calibrate the rig on the white reference" in caption, caption
