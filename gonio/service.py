@@ -865,15 +865,18 @@ class GonioService:
         return check_plan(plan, self.desc)
 
     def dry_run(self, plan: AnyPlan | CheckedPlan | dict[str, Any]) -> DryRun:
-        """Check and time a plan from the stage's last known position (else 0 deg, said so)."""
+        """Check and time a plan from the stage's last known position (else 0 deg, said so),
+        with its finishing as this store's last scans took (:func:`finishing_estimate`)."""
         p = plan if isinstance(plan, BaseModel | CheckedPlan) else parse_plan(plan)
         kind = p.plan if isinstance(p, CheckedPlan) else p
+        est = self._finishing_estimate()
         return dry_run(p, self.desc, self.stage_deg,
                        basis_ready=not self.basis.build_needed(),
                        basis=self.basis.symmetry() if arc_may_apply(kind) else None,
                        asymmetric_build_s=(self.basis.asymmetric_build_s()
                                            if kind.arc_mode() == "auto" else None),
-                       asymmetric_basis=self.basis.has_asymmetric)
+                       asymmetric_basis=self.basis.has_asymmetric,
+                       finishing_s=est.seconds, finishing_source=est.source)
 
     @property
     def disk_full(self) -> str | None:

@@ -56,12 +56,12 @@ def finishing_estimate(completed: Sequence[JobRow]) -> FinishingEstimate:
     if not timed:
         return FinishingEstimate(
             FINISHING_FALLBACK_S,
-            f"no scan has finished on this daemon yet: {FINISHING_FALLBACK_S:g} s, the "
+            f"no scan has finished on this job store yet: {FINISHING_FALLBACK_S:g} s, the "
             "default scan's measured finishing")
     ids = ", ".join(str(i) for i, _ in timed)
     seconds = statistics.median(s for _, s in timed)
     what = f"job {ids}'s finishing" if len(timed) == 1 else f"the median of jobs {ids}"
-    return FinishingEstimate(seconds, f"{what} on this daemon")
+    return FinishingEstimate(seconds, f"{what} on this job store")
 
 
 def time_left(eta_s: float | None, basis_build_s: float | None, finishing_s: float,

@@ -331,9 +331,11 @@ async def _run_scan(args: argparse.Namespace, plan: Any, config: Any, sim: Any =
     # once for this run by whoever needs it first.
     basis = BasisSupply()
     if args.dry_run:
+        est = _local_finishing(args, config)
         dr = dry_run(plan, desc, basis_ready=not basis.build_needed(), basis=basis.symmetry(),
                      asymmetric_build_s=(basis.asymmetric_build_s()
-                                         if plan.arc_mode() == "auto" else None))
+                                         if plan.arc_mode() == "auto" else None),
+                     finishing_s=est.seconds, finishing_source=est.source)
         more = [] if sim is not None else _calibration_warnings(args, plan, config, dr.pairs)
         if more:
             dr = dr.model_copy(update={"warnings": [*dr.warnings, *more]})
@@ -684,6 +686,20 @@ def _part_text(seconds: float) -> str:
     return f"{seconds:.1f} s" if seconds >= 1 else f"{seconds:.2g} s"
 
 
+def _local_finishing(args: argparse.Namespace, config: Any) -> Any:
+    """The finishing estimate of the job store this scan would use (its last scans), read
+    without creating anything: a dry run leaves no store behind."""
+    from gonio.daemon import STORE_FILE
+    from gonio.paths import scan_data_dir
+    from gonio.store import JobStore
+    from gonio.timeleft import finishing_estimate
+
+    db = args.db or (args.data_dir or scan_data_dir(config)) / STORE_FILE
+    if not Path(db).is_file():
+        return finishing_estimate([])
+    return finishing_estimate(JobStore(db, durable=False).list_jobs(["completed"]))
+
+
 def dry_run_summary(dr: Any, plan: Any, rig_name: str) -> str:
     """A few lines a person reads: angles, readings, duration (``--json`` has everything)."""
     n_pairs = len(dr.pairs)
@@ -700,6 +716,11 @@ def dry_run_summary(dr: Any, plan: Any, rig_name: str) -> str:
         f"  duration: about {_duration_text(dr.estimated_s)} (moves {_part_text(dr.motion_s)}, "
         f"settling {_part_text(dr.settle_s)}, exposures {_part_text(dr.exposure_s)})",
     ]
+    finishing = getattr(dr, "finishing_s", None)
+    if finishing is not None:
+        # The measuring alone read as the job's time; the reconstruction can take longer.
+        lines.append(f"  then finishing (reconstruction and export fits): about "
+                     f"{_duration_text(finishing)} ({dr.finishing_source})")
     bound = getattr(dr, "max_estimated_s", None)
     if plan.kind == "adaptive":
         where = ("where the expected error falls most" if plan.rule == "posterior"

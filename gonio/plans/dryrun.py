@@ -144,6 +144,14 @@ class DryRun(BaseModel):
         "without the default basis: the job builds it before its first reading, about this "
         "many seconds (once; not in estimated_s, included in max_estimated_s); null: the "
         "basis is ready or not needed while measuring")
+    finishing_s: float | None = Field(
+        default=None, description="seconds the job takes after its last reading (reconstruction "
+        "and export fits, as they took on this store's last scans: finishing_source), plus a "
+        "basis build when the default basis is not built yet and the job does not build it "
+        "before its first reading (basis_build_s); not in estimated_s; null for a plan that "
+        "reconstructs nothing (a calibration) or when no estimate was asked for")
+    finishing_source: str | None = Field(
+        default=None, description="what finishing_s rests on, in words")
     arc_branches: list[ArcBranch] | None = Field(
         default=None, description="plans with arc 'auto': the job when the first round's test "
         "finds the specimen twofold symmetric (180) and when it does not (360), each bounded; "
@@ -157,7 +165,8 @@ class DryRun(BaseModel):
 
 def dry_run(plan: AnyPlan | CheckedPlan, rig: RigDescription, current_deg: float | None = None,
             basis_ready: bool = True, basis: BasisSymmetry | None = None,
-            asymmetric_build_s: float | None = None, asymmetric_basis: bool = True) -> DryRun:
+            asymmetric_build_s: float | None = None, asymmetric_basis: bool = True,
+            finishing_s: float | None = None, finishing_source: str | None = None) -> DryRun:
     """Expand ``plan`` on ``rig`` and estimate its duration; raises :class:`PlanError`.
 
     The estimate is the physical time (see :class:`DryRun`): trapezoidal stage moves at the
@@ -190,6 +199,12 @@ def dry_run(plan: AnyPlan | CheckedPlan, rig: RigDescription, current_deg: float
     asymmetric_basis : bool
         Whether the full-turn branch reconstructs with that basis (False: the process has
         none, or its basis already holds odd harmonics, so the job keeps its basis).
+    finishing_s, finishing_source : float and str, optional
+        The store's finishing estimate (:func:`gonio.timeleft.finishing_estimate`: seconds
+        and what they rest on). Given, a plan that reconstructs reports ``finishing_s``: these
+        seconds plus :data:`BASIS_BUILD_S` when ``basis_ready`` is False and the job does not
+        build the basis before its first reading. The dry run's measuring estimate never
+        held the reconstruction, which can take longer than the measuring.
     """
     start = 0.0 if current_deg is None else float(current_deg)
     checked = check_plan(plan, rig, from_deg=start)
@@ -224,6 +239,14 @@ def dry_run(plan: AnyPlan | CheckedPlan, rig: RigDescription, current_deg: float
                         plan, rig, len(lights), len(pairs), angles, end).items()]
         max_total = max(b.estimated_s for b in branches)
         max_angles = max(b.angles for b in branches)
+    finish = None
+    if finishing_s is not None and plan.finishing == "reconstruction":
+        finish = finishing_s
+        if not basis_ready and build is None:
+            # A job that did not build the basis before measuring builds it at finishing.
+            finish += BASIS_BUILD_S
+            finishing_source = (f"{finishing_source}; and about {BASIS_BUILD_S:.0f} s to build "
+                                "the reconstruction basis, once on this install")
     darks = len(route) if plan.exposure.dark == "every_angle" else int(plan.exposure.dark == "once")
     return DryRun(
         kind=plan.kind,
@@ -242,6 +265,8 @@ def dry_run(plan: AnyPlan | CheckedPlan, rig: RigDescription, current_deg: float
         from_deg=start,
         from_known=current_deg is not None,
         basis_build_s=build,
+        finishing_s=finish,
+        finishing_source=finishing_source if finish is not None else None,
         arc_branches=branches,
         warnings=[w for w in (arc_warning(plan, basis),) if w is not None],
     )

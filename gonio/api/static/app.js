@@ -914,7 +914,8 @@ function initForm() {
       `: moves ${planTime(r.motion_s)}, settling ${planTime(r.settle_s)}, exposures ${planTime(r.exposure_s)}.`;
     // estimated_s is the measuring alone (docs/api.md); a scan then reconstructs, which can
     // take longer than the measuring (20 s after an 8 s default scan on a busy 2-core machine).
-    if (r.kind !== "calibration") text += " That is the measuring; the reconstruction follows and is not counted in it (the job's ETA gives it once the scan runs).";
+    if (r.finishing_s != null) text += ` That is the measuring; then about ${eta(r.finishing_s)} to reconstruct and fit the exports (${r.finishing_source}).`;
+    else if (r.kind !== "calibration") text += " That is the measuring; the reconstruction follows and is not counted in it (the job's ETA gives it once the scan runs).";
     if (r.max_estimated_s != null && r.kind === "adaptive") text += ` Adaptive refinement can add up to ${counted(r.max_angles - r.angles_deg.length, "angle")}: at most ${eta(r.max_estimated_s)} in all.`;
     for (const b of r.arc_branches || []) {
       text += ` If the first round finds the specimen ${b.arc_deg === 180 ? "twofold symmetric, it goes on over half a turn" : "not twofold symmetric, it goes on over a full turn"}: at most ${counted(b.angles, "angle")} (${counted(b.readings, "reading")}), ${eta(b.estimated_s)} in all${b.basis === "asymmetric" ? ", reconstructed with the basis for specimens without twofold symmetry" : ""}.`;

@@ -96,7 +96,7 @@ def test_a_scan_queued_behind_a_running_one_leaves_the_running_one_on_screen(
         _abort_all(daemon)
 
 
-def test_check_plan_says_its_time_is_the_measuring_and_the_reconstruction_follows(
+def test_check_plan_says_its_time_is_the_measuring_and_how_long_the_finishing_takes(
         daemon: Daemon, browser: Any) -> None:  # noqa: F811 (the fixture)
     """docs/api.md: the dry run's estimated_s is motion + settle + exposure, the measuring
     alone. The note read "about 7.6 s" for a default scan that took 28 s to its result (20 s
@@ -112,8 +112,11 @@ def test_check_plan_says_its_time_is_the_measuring_and_the_reconstruction_follow
     click_when_steady(wait, "#dry-run")
     wait.until(lambda d: "readings at" in d.find_element(By.ID, "dry-run-result").text)
     note = browser.find_element(By.ID, "dry-run-result").text
-    assert "That is the measuring; the reconstruction follows and is not counted in it" in note, \
-        note
+    # ... and then the finishing, as the daemon's dry run times it (the last scans' finishing
+    # on this store, or the default's), with what that rests on.
+    assert r["finishing_s"] is not None and r["finishing_source"], r
+    assert "That is the measuring; then about" in note, note
+    assert f"to reconstruct and fit the exports ({r['finishing_source']})." in note, note
 
 
 def test_a_refused_key_stops_the_polls_and_says_the_queue_is_as_last_read(

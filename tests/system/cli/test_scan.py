@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 from pathlib import Path
 
@@ -110,6 +111,19 @@ def test_white_reference_calibration_then_a_calibrated_scan(
                           for a, b in s.pairs])
         rel = np.abs(s.values - truth) / np.maximum(truth, 0.05 * truth.max())
         assert float(np.median(rel)) < 0.05
+        # A dry run on this data directory times the finishing as that scan took it (its
+        # stored seconds), beside the measuring; it counted the measuring alone before.
+        from gonio.store import JobStore
+
+        scans = [r for r in JobStore(tmp_path / "data" / "gonio.sqlite", durable=False)
+                 .list_jobs(["completed"]) if r.kind != "calibration"]
+        assert len(scans) == 1 and scans[0].summary is not None
+        took = float(scans[0].summary["seconds"])
+        assert main(["scan", "--rig", str(rig), *data, "--dry-run", "--json",
+                     "-o", os.devnull]) == 0
+        dr = json.loads(capsys.readouterr().out)
+        assert dr["finishing_s"] == pytest.approx(took)
+        assert dr["finishing_source"] == f"job {scans[0].id}'s finishing on this job store"
 
 
 @pytest.mark.parametrize(
@@ -179,12 +193,14 @@ def test_dry_run_prints_a_short_summary_and_json_on_request(
     assert main(argv) == 0
     text = capsys.readouterr().out
     lines = text.strip().splitlines()
-    assert len(lines) <= 8
+    assert len(lines) <= 9
     # The example rig: 2 lights x 2 sensors, all pairs; 6 angles over the default half turn,
     # 180 / 6 = 30 deg apart.
     assert "stage angles: 6 (0, 30, 60, 90, 120, 150 deg)" in text
     assert "readings: 24 (4 pairs x 6 angles), exposure 0.01 s x 1" in text
     assert "duration: about" in text
+    # Then the finishing, which the measuring's estimate does not hold.
+    assert "then finishing (reconstruction and export fits): about" in text
     assert main([*argv, "--json"]) == 0
     full = json.loads(capsys.readouterr().out)
     assert full["readings"] == 24 and len(full["positions_deg"]) == 6
