@@ -76,10 +76,12 @@ def _pair_valid(av: FloatArray, bv: FloatArray, ok: NDArray[np.bool_] | None = N
     return av[ok], bv[ok], np.asarray(wv[ok])
 
 
-def _cos_ti() -> FloatArray:
+def cell_cos_ti() -> FloatArray:
     """(18, 18, 36) ``cos theta_i`` of each cell (the metric of Löw et al. uses it)."""
     ci, _ = geo.cell_cosines(*geo.grid_angles())
     return ci
+
+
 
 
 def log_rmse(f_hat: TableLike, f_ref: TableLike) -> float:
@@ -98,7 +100,7 @@ def log_rmse(f_hat: TableLike, f_ref: TableLike) -> float:
     a, b = _valid_values(f_hat, f_ref)
     # Cells where either table is not finite are left out, as by every metric here.
     ok = np.isfinite(a) & np.isfinite(b)
-    cos_ti = _cos_ti()[geo.valid_mask()]
+    cos_ti = cell_cos_ti()[geo.valid_mask()]
     la = np.log1p(np.maximum(a, 0.0) * cos_ti)
     lb = np.log1p(np.maximum(b, 0.0) * cos_ti)
     x, y, w = _pair_valid(la, lb, ok)
@@ -151,7 +153,7 @@ def log_rmse_to_cap(f: TableLike, cap: float | ArrayLike) -> float:
         return 0.0
     _, _, cell = np.nonzero(above)
     x = np.asarray(valid[above], dtype=np.float64)
-    c = _cos_ti()[mask][cell]
+    c = cell_cos_ti()[mask][cell]
     d = np.log1p(x * c) - np.log1p(cap_v[cell] * c)
     return float(np.sqrt(np.sum(wv[cell] * d * d) / total))
 

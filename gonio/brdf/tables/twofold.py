@@ -52,5 +52,26 @@ def twofold_asymmetry(table: BRDFTable) -> float:
     0 for a twofold-symmetric table (every reconstruction made with a basis that holds only even
     harmonics along ``ph``, as the default one does); for comparison, a reconstruction's own
     error is typically 0.01 to 0.06 (docs/science.md).
+
+    The same number as ``log_rmse(half_turn_average(table), table)``, summed one channel at a
+    time: a 31-band table's whole-table temporaries took 1.6 GB and 1.8 s of every export of
+    a spectral result; one channel's take a thirty-first of the memory.
     """
-    return metrics.log_rmse(half_turn_average(table), table)
+    v = np.asarray(table.values)
+    mask = geo.valid_mask()
+    cos_ti = metrics.cell_cos_ti()[mask]  # (valid cells,)
+    weight = geo.volume_weight()[mask]
+    total = weight_sum = 0.0
+    for channel in v:
+        f = np.asarray(channel[:, mask], dtype=np.float64)  # (72, valid cells)
+        avg = 0.5 * (f + np.roll(f, -HALF_TURN_SLICES, axis=0))
+        # Cells where either is not finite are left out, as by every metric here.
+        ok = np.isfinite(f) & np.isfinite(avg)
+        d = (np.log1p(np.maximum(np.where(ok, avg, 0.0), 0.0) * cos_ti)
+             - np.log1p(np.maximum(np.where(ok, f, 0.0), 0.0) * cos_ti))
+        w = np.where(ok, weight, 0.0)
+        total += float(np.sum(w * d * d))
+        weight_sum += float(np.sum(w))
+    if weight_sum == 0.0:
+        raise metrics.MetricError("the two tables share no finite valid cell")
+    return float(np.sqrt(total / weight_sum))

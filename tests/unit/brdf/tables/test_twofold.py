@@ -44,3 +44,16 @@ def test_an_odd_harmonic_is_averaged_away(base: BRDFTable) -> None:
     # A stronger odd harmonic is further from symmetry.
     assert twofold_asymmetry(_times(base, 1.0 + 0.9 * np.cos(geo.PH_GRID))) > \
         twofold_asymmetry(odd)
+
+
+def test_summed_by_channel_it_is_the_metric_of_the_average_with_damaged_cells(
+        base: BRDFTable) -> None:
+    # Summed one channel at a time (a 31-band table's whole-table temporaries took 1.6 GB):
+    # the same number as log_rmse of the half-turn average, which leaves out the cells where
+    # either table is not finite, here a damaged stretch of one channel.
+    values = np.array(_times(base, 1.0 + 0.6 * np.cos(geo.PH_GRID)).values)
+    values[1, 3, 2:5, :, 10:20] = np.nan
+    values[2, 40, 7] = np.inf
+    odd = BRDFTable.trusted(values, base.channels, base.name)
+    assert twofold_asymmetry(odd) == pytest.approx(log_rmse(half_turn_average(odd), odd),
+                                                   rel=1e-12)
