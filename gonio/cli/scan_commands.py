@@ -577,8 +577,10 @@ def _calibration_warnings(args: argparse.Namespace, plan: Any, config: Any,
     (measuring ``pairs``) on this rig, if any."""
     from gonio.calibration import (
         Calibration,
+        ChannelMismatch,
         calibration_in_effect,
         exposure_warning,
+        sensor_channels,
         uncalibrated_warning,
     )
     from gonio.paths import scan_data_dir
@@ -591,7 +593,13 @@ def _calibration_warnings(args: argparse.Namespace, plan: Any, config: Any,
         cal = calibration_in_effect(args.data_dir or scan_data_dir(config), config)
     cal = cal if isinstance(cal, Calibration) else Calibration()
     uncal = uncalibrated_warning(cal, pairs)
-    return [w for w in (_how_to_calibrate(uncal, args),
+    try:
+        cal.check_channels(pairs, sensor_channels(config), "this plan")
+        channels = None
+    except ChannelMismatch as exc:
+        # The submission refuses it: the dry run must not say the scan would run.
+        channels = f"not calibrated: {exc}"
+    return [w for w in (_how_to_calibrate(uncal, args), channels,
                         exposure_warning(cal, plan.exposure.exposure_s)) if w is not None]
 
 
