@@ -159,12 +159,14 @@ def register(subparsers: Any) -> None:
                         "measure in sensor units (the daemon refuses it otherwise)")
     j.add_argument("--db", type=Path, default=None,
                    help="job store (SQLite, DATA_DIR/gonio.sqlite), e.g. the one 'gonio scan' "
-                        "prints, or the data directory holding it (required; without it the "
-                        "error lists the stores found in the default data directories)")
+                        "prints, or the data directory holding it (required unless "
+                        "--data-dir names it; without either the error lists the stores "
+                        "found in the default data directories)")
     j.add_argument("--data-dir", type=Path, default=None,
-                   help="the data directory the store's result paths are relative to (show: "
-                        "result_file; rebuild: its results/ gets the file); default: the "
-                        "folder of --db")
+                   help="the data directory ('gonio scan' prints it): its gonio.sqlite is "
+                        "the store when --db is not given; the store's result paths are "
+                        "relative to it (show: result_file; rebuild: its results/ gets the "
+                        "file); default: the folder of --db")
     j.add_argument("-o", "--output", type=Path, default=None,
                    help="wait: write the completed job's result file here (a calibration job's "
                         "calibration beside it, as OUTPUT.calibration.json); without it the "
@@ -1088,6 +1090,17 @@ def _jobs(args: argparse.Namespace) -> int:
             f"{args.job_id if args.job_id is not None else 'ID'}"
             + (" --position 0'" if args.action == "reorder" else "'")
             + " (the key in $GONIO_API_KEY or --api-key)")
+    if args.db is None and args.data_dir is not None:
+        # The data directory 'gonio scan' prints, given as --data-dir (as 'gonio scan' takes
+        # it): its store, as there ('gonio jobs list --data-dir DIR' was refused, "--db is
+        # required").
+        from gonio.paths import STORE_NAME
+
+        args.db = args.data_dir
+        if not (args.data_dir / STORE_NAME).is_file():
+            raise UsageError(f"--data-dir {args.data_dir} holds no job store ({STORE_NAME}): "
+                             "give the data directory 'gonio scan' or 'gonio serve' printed, "
+                             "or --db STORE")
     if args.db is None:
         raise UsageError(_no_store_text())
     if args.db.is_dir():
