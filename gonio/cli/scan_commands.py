@@ -81,18 +81,20 @@ def register(subparsers: Any) -> None:
                    help="with --arc auto: the rig's relative noise of one reading, the "
                         "symmetry test's scale (default 0.01)")
     p.add_argument("--adaptive", action="store_true", help="adaptive rotations (math.md 9)")
-    p.add_argument("--rule", choices=["posterior", "vf"], default="posterior",
-                   help="adaptive refinement rule: posterior (where the joint fit expects the "
-                        "error to fall most) or vf (V&F's PCHIP midpoints)")
+    p.add_argument("--rule", choices=["posterior", "vf"], default=None,
+                   help="with --adaptive: the refinement rule, posterior (default; where the "
+                        "joint fit expects the error to fall most) or vf (V&F's PCHIP "
+                        "midpoints)")
     p.add_argument("--min-gain", type=positive_float, default=None,
                    help="posterior rule: least drop of the self-estimated log_rmse a new "
                         "stage angle must buy (default 0.00002)")
     p.add_argument("--max-rotations", type=positive_int, default=None,
                    help="with --adaptive: most stage angles in all, the first round's included "
                         "(default 16 with the posterior rule, no cap with --rule vf)")
-    p.add_argument("--threshold", type=positive_float, default=0.1,
-                   help="vf rule: relative error e")
-    p.add_argument("--max-samples", type=positive_int, default=None, help="adaptive sample budget")
+    p.add_argument("--threshold", type=positive_float, default=None,
+                   help="with --adaptive, vf rule: relative error e (default 0.1)")
+    p.add_argument("--max-samples", type=positive_int, default=None,
+                   help="with --adaptive: the sample budget")
     p.add_argument("--exposure", type=positive_float, default=0.01, help="seconds per exposure")
     p.add_argument("--averages", type=positive_int, default=1,
                    help="exposures averaged per reading")
@@ -181,6 +183,16 @@ def _plan(args: argparse.Namespace) -> Any:
 
     ex = ExposureSettings(exposure_s=args.exposure, averages=args.averages,
                           light_settle_s=args.light_settle)
+    # Without --adaptive the adaptive options were silently dropped ('--rule vf' alone ran
+    # the default uniform scan over half a turn, though --help says vf's default is a full
+    # turn).
+    adaptive_only = [flag for flag, v in (("--rule", args.rule), ("--min-gain", args.min_gain),
+                                          ("--max-rotations", args.max_rotations),
+                                          ("--threshold", args.threshold),
+                                          ("--max-samples", args.max_samples)) if v is not None]
+    if adaptive_only and not args.adaptive:
+        raise UsageError(f"{', '.join(adaptive_only)} only apply to an adaptive scan: add "
+                         "--adaptive, or drop them for a uniform scan of --rotations angles")
     if args.white_reference is not None:
         if args.adaptive or args.calibration is not None:
             raise UsageError("--white-reference runs a calibration: it takes no --adaptive or "
@@ -209,9 +221,10 @@ def _plan(args: argparse.Namespace) -> Any:
         given = {k: v for k, v in (("initial_rotations", args.rotations),
                                    ("min_gain", args.min_gain),
                                    ("max_rotations", args.max_rotations),
+                                   ("threshold", args.threshold),
                                    ("span_deg", args.span)) if v is not None}
-        return AdaptivePlan(specimen=_specimen(args), exposure=ex, rule=args.rule,
-                            threshold=args.threshold, max_samples=args.max_samples,
+        return AdaptivePlan(specimen=_specimen(args), exposure=ex,
+                            rule=args.rule or "posterior", max_samples=args.max_samples,
                             start_deg=args.start_deg, **given, **arc)
     span = {"span_deg": args.span} if args.span is not None else {}
     return UniformPlan(specimen=_specimen(args), exposure=ex,
