@@ -12,6 +12,7 @@ checkpoint instead of starting again.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import shutil
 import sys
@@ -284,12 +285,63 @@ def _scan(args: argparse.Namespace) -> int:
 
         config = load_rig_config(args.rig)
     import asyncio
+    import signal
+
+    stopped: list[str] = []
+    args.stopped_by = stopped
+    # The loop's close resets the signals it handled to the default: give back the handlers
+    # the process had (a test runner's, when main() runs in it).
+    before = {sig: signal.getsignal(sig) for sig in (signal.SIGTERM, signal.SIGHUP)}
+
+    async def run() -> int:
+        _stop_on_terminate(stopped)
+        return await _run_scan(args, plan, config, sim)
 
     try:
-        return asyncio.run(_run_scan(args, plan, config, sim))
+        return asyncio.run(run())
+    except asyncio.CancelledError:
+        if not stopped:
+            raise
+        # Stopped by SIGTERM or SIGHUP: the job was left as Ctrl-C leaves it, and said so.
+        raise KeyboardInterrupt from None
     finally:
+        for sig, handler in before.items():
+            with contextlib.suppress(ValueError, TypeError):  # not the main thread
+                signal.signal(sig, handler)
         if sim is not None:
             sim.close()
+
+
+def _stop_on_terminate(stopped: list[str]) -> None:
+    """Make SIGTERM and SIGHUP (``kill``, ``timeout``, a closed terminal or SSH session) stop
+    the running foreground scan as Ctrl-C does: the engine stops and switches the lamps off,
+    the job is left paused at its checkpoint and the message says how to go on. They killed
+    the process where it stood: the job stayed ``running``, nothing was said, and the lamps
+    were left as they were. A second one stops the process at once.
+
+    Call from the scan's main task (``asyncio.run``'s); ``stopped`` gets the signal's name.
+    """
+    import asyncio
+    import os
+    import signal
+
+    loop = asyncio.get_running_loop()
+    task = asyncio.current_task()
+    assert task is not None
+
+    def stop(sig: signal.Signals) -> None:
+        if stopped:
+            loop.remove_signal_handler(sig)  # back to the default: the second one kills
+            os.kill(os.getpid(), sig)
+            return
+        stopped.append(sig.name)
+        print(f"{sig.name} received: stopping the scan as Ctrl-C does", file=sys.stderr,
+              flush=True)
+        task.cancel()
+
+    for sig in (signal.SIGTERM, signal.SIGHUP):
+        with contextlib.suppress(ValueError, RuntimeError):  # not the main thread: as before
+            loop.add_signal_handler(sig, stop, sig)
 
 
 def _check_output(out: Path, nothing: str = "nothing was measured") -> None:
@@ -677,7 +729,9 @@ def _left_interrupted(store: Any, job_id: int, db: Path, args: argparse.Namespac
 
     row = store.get_job(job_id)
     if row.state in (JobState.RUNNING, JobState.SUSPENDED):
-        row = store.set_state(job_id, JobState.PAUSED, reason="interrupted (Ctrl-C in gonio scan)")
+        by = (getattr(args, "stopped_by", None) or [None])[0]
+        how = f"{by} to gonio scan" if by else "Ctrl-C in gonio scan"
+        row = store.set_state(job_id, JobState.PAUSED, reason=f"interrupted ({how})")
     if row.state.value in _FINAL:
         return
     print(f"job {job_id} interrupted: {row.state.value} at its checkpoint, "

@@ -168,13 +168,14 @@ async def calibrate_in_foreground(service: Any, sim: Any,
     try:
         final = await service.run_in_foreground(job_id)
     except asyncio.CancelledError:
-        # Ctrl-C: the engine has stopped measuring. Left "running", the job would be taken up
-        # by the next daemon on this data directory with whatever is then on the stage, and
-        # listed as interrupted for ever; the same command calibrates anew.
+        # Ctrl-C (or SIGTERM, SIGHUP): the engine has stopped measuring. Left "running", the
+        # job would be taken up by the next daemon on this data directory with whatever is
+        # then on the stage, and listed as interrupted for ever; the same command calibrates
+        # anew.
         row = service.store.get_job(job_id)
         if row.state.value not in FINAL:
             service.store.set_state(job_id, JobState.ABORTED, reason=(
-                "interrupted (Ctrl-C in gonio scan) during the simulated rig's calibration"))
+                "interrupted (gonio scan stopped) during the simulated rig's calibration"))
             print(f"calibration job {job_id} interrupted and aborted ({row.done_angles} of "
                   f"{row.total_angles} angles measured); the scan had not started. The same "
                   "command again calibrates the simulated rig anew, then scans",
