@@ -46,6 +46,11 @@ class PartialCalibration(CalibrationError):
     (:meth:`Calibration.check_covers`)."""
 
 
+class ChannelMismatch(PartialCalibration):
+    """A calibration's factors have another number of channels than the rig's sensors read
+    (:meth:`Calibration.check_channels`): another sensor set's calibration."""
+
+
 class ExposureMismatch(CalibrationError):
     """A scan reads at another exposure than the calibration in effect was measured at
     (:meth:`Calibration.check_exposure`)."""
@@ -166,6 +171,41 @@ class Calibration(BaseModel):
                 "calibrated pairs"
             )
 
+    def check_channels(self, pairs: Sequence[PairSpec], channels: Mapping[str, int],
+                       what: str = "the plan") -> None:
+        """Refuse factors with another number of channels than the sensors of ``pairs`` read:
+        a calibration measured with other sensors (an RGB rig's beside 31-band
+        spectrometers that have the same names and directions). Applying it fails only when
+        the job finishes, after every reading was taken; this refuses the job before.
+
+        Parameters
+        ----------
+        pairs : the plan's pairs
+        channels : the number of channels of each sensor, by sensor name (a sensor not
+            named is not checked)
+        what : the plan, in words, for the message
+
+        Raises
+        ------
+        ChannelMismatch
+            Naming the pairs, both channel counts and what to do.
+        """
+        wanted = {(p.light, p.sensor) for p in pairs}
+        wrong = [p for p in self.pairs if (p.light, p.sensor) in wanted
+                 and p.sensor in channels and len(p.factor) != channels[p.sensor]]
+        if not wrong:
+            return
+        names = ", ".join(p.light + "/" + p.sensor for p in wrong[:4])
+        more = f" and {len(wrong) - 4} more" if len(wrong) > 4 else ""
+        first = wrong[0]
+        raise ChannelMismatch(
+            f"the calibration in effect ({self.source}) was measured with other sensors than "
+            f"{what} reads: its factors for {names}{more} have {len(first.factor)} channels, "
+            f"sensor {first.sensor} reads {channels[first.sensor]}; the scan would measure "
+            "every reading and then fail. Calibrate this rig again first: a calibration job "
+            "with the white reference on the stage (gonio scan --white-reference ALBEDO, or "
+            "the page's calibration)")
+
     def check_exposure(self, exposure_s: float, what: str = "the plan") -> None:
         """Refuse a scan at ``exposure_s`` (seconds) under factors measured at another
         exposure: counts are not rescaled between exposure times (sensors need not be linear
@@ -188,6 +228,18 @@ class Calibration(BaseModel):
             f"job with exposure {exposure_s:g} s and the white reference on the stage (gonio "
             f"scan --white-reference ALBEDO --exposure {exposure_s:g}, or the page's "
             "calibration)")
+
+
+def sensor_channels(rig: Any) -> dict[str, int]:
+    """The number of channels of each sensor of ``rig`` by name, for
+    :meth:`Calibration.check_channels`.
+
+    Parameters
+    ----------
+    rig : a :class:`gonio.rigdescription.RigDescription` or a rig config: anything with
+        ``sensors``, each with ``name`` and ``channels``
+    """
+    return {s.name: len(s.channels) for s in getattr(rig, "sensors", None) or ()}
 
 
 REFERENCE_TOLERANCE = 0.10

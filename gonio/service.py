@@ -601,14 +601,25 @@ class GonioService:
 
     def _check_calibration_covers(self, checked: CheckedPlan) -> None:
         """Refuse, before anything moves, a plan the calibration in effect covers only in part
-        (its result would mix sensor units and 1/sr). Raises :class:`PlanError` naming the
+        (its result would mix sensor units and 1/sr), or whose factors have another number of
+        channels than the sensors read (the job would fail when it finishes) unless a
+        calibration job is queued or under way. Raises :class:`PlanError` naming the
         pairs, or :class:`gonio.calibration.CalibrationError` for a damaged calibration."""
-        from gonio.calibration import PartialCalibration
+        from gonio.calibration import ChannelMismatch, PartialCalibration, sensor_channels
 
+        cal = self.calibration()
         try:
-            self.calibration().check_covers(checked.pairs, "this plan")
+            cal.check_covers(checked.pairs, "this plan")
         except PartialCalibration as exc:
             raise PlanError(str(exc)) from None
+        try:
+            cal.check_channels(checked.pairs, sensor_channels(self.desc), "this plan")
+        except ChannelMismatch as exc:
+            # A calibration job queued or under way calibrates these sensors before the scan
+            # starts (the worker checks again then), as for the exposure below.
+            if not any(row.kind == "calibration" for row in self.store.list_jobs(
+                    [JobState.QUEUED.value, *(st.value for st in ACTIVE_STATES)])):
+                raise PlanError(str(exc)) from None
 
     def _check_calibration_exposure(self, plan: AnyPlan) -> None:
         """Refuse a scan at another exposure than the calibration in effect

@@ -39,6 +39,7 @@ from gonio.basis_supply import BasisSupply
 from gonio.calibration import (
     Calibration,
     CalibrationError,
+    sensor_channels,
 )
 from gonio.diskspace import (
     FREE_MARGIN_BYTES,
@@ -442,6 +443,7 @@ class Worker:
             try:
                 cal = self.calibration()
                 cal.check_covers(checked.pairs, f"job {job.id}")
+                cal.check_channels(checked.pairs, sensor_channels(self.desc), f"job {job.id}")
                 cal.check_exposure(plan.exposure.exposure_s, f"job {job.id}")
             except CalibrationError as exc:
                 return self._fail(job, f"not started: {exc}", plan)

@@ -108,9 +108,15 @@ def report(fmt: str, path: Path, prov: dict[str, Any]) -> list[str]:
         from gonio.export.merl import sidecar_path
 
         side = sidecar_path(path)
+        from gonio.export.merl import ANISOTROPY_WARN
+
         sidecar = json.loads(side.read_text())
+        lost = float(sidecar["merl"]["anisotropy_lost"])
+        # "anisotropy lost: log RMSE 0.000" of an isotropic paint said something was lost.
+        what = (f"anisotropy lost: log RMSE {lost:.3f}" if lost > ANISOTROPY_WARN else
+                f"little lost: the result is nearly isotropic, log RMSE {lost:.3f} to its "
+                "average")
         lines.append(f"  provenance in {side.name}; MERL is isotropic: the result was averaged "
-                     f"over azimuth (anisotropy lost: log RMSE "
-                     f"{sidecar['merl']['anisotropy_lost']:.3f})")
+                     f"over azimuth ({what})")
     lines.extend(f"  warning: {w}" for w in export_warnings(fmt, path, prov))
     return lines

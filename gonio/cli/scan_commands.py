@@ -12,6 +12,7 @@ checkpoint instead of starting again.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import shutil
 import sys
@@ -81,18 +82,20 @@ def register(subparsers: Any) -> None:
                    help="with --arc auto: the rig's relative noise of one reading, the "
                         "symmetry test's scale (default 0.01)")
     p.add_argument("--adaptive", action="store_true", help="adaptive rotations (math.md 9)")
-    p.add_argument("--rule", choices=["posterior", "vf"], default="posterior",
-                   help="adaptive refinement rule: posterior (where the joint fit expects the "
-                        "error to fall most) or vf (V&F's PCHIP midpoints)")
+    p.add_argument("--rule", choices=["posterior", "vf"], default=None,
+                   help="with --adaptive: the refinement rule, posterior (default; where the "
+                        "joint fit expects the error to fall most) or vf (V&F's PCHIP "
+                        "midpoints)")
     p.add_argument("--min-gain", type=positive_float, default=None,
                    help="posterior rule: least drop of the self-estimated log_rmse a new "
                         "stage angle must buy (default 0.00002)")
     p.add_argument("--max-rotations", type=positive_int, default=None,
                    help="with --adaptive: most stage angles in all, the first round's included "
                         "(default 16 with the posterior rule, no cap with --rule vf)")
-    p.add_argument("--threshold", type=positive_float, default=0.1,
-                   help="vf rule: relative error e")
-    p.add_argument("--max-samples", type=positive_int, default=None, help="adaptive sample budget")
+    p.add_argument("--threshold", type=positive_float, default=None,
+                   help="with --adaptive, vf rule: relative error e (default 0.1)")
+    p.add_argument("--max-samples", type=positive_int, default=None,
+                   help="with --adaptive: the sample budget")
     p.add_argument("--exposure", type=positive_float, default=0.01, help="seconds per exposure")
     p.add_argument("--averages", type=positive_int, default=1,
                    help="exposures averaged per reading")
@@ -159,12 +162,14 @@ def register(subparsers: Any) -> None:
                         "measure in sensor units (the daemon refuses it otherwise)")
     j.add_argument("--db", type=Path, default=None,
                    help="job store (SQLite, DATA_DIR/gonio.sqlite), e.g. the one 'gonio scan' "
-                        "prints, or the data directory holding it (required; without it the "
-                        "error lists the stores found in the default data directories)")
+                        "prints, or the data directory holding it (required unless "
+                        "--data-dir names it; without either the error lists the stores "
+                        "found in the default data directories)")
     j.add_argument("--data-dir", type=Path, default=None,
-                   help="the data directory the store's result paths are relative to (show: "
-                        "result_file; rebuild: its results/ gets the file); default: the "
-                        "folder of --db")
+                   help="the data directory ('gonio scan' prints it): its gonio.sqlite is "
+                        "the store when --db is not given; the store's result paths are "
+                        "relative to it (show: result_file; rebuild: its results/ gets the "
+                        "file); default: the folder of --db")
     j.add_argument("-o", "--output", type=Path, default=None,
                    help="wait: write the completed job's result file here (a calibration job's "
                         "calibration beside it, as OUTPUT.calibration.json); without it the "
@@ -179,6 +184,16 @@ def _plan(args: argparse.Namespace) -> Any:
 
     ex = ExposureSettings(exposure_s=args.exposure, averages=args.averages,
                           light_settle_s=args.light_settle)
+    # Without --adaptive the adaptive options were silently dropped ('--rule vf' alone ran
+    # the default uniform scan over half a turn, though --help says vf's default is a full
+    # turn).
+    adaptive_only = [flag for flag, v in (("--rule", args.rule), ("--min-gain", args.min_gain),
+                                          ("--max-rotations", args.max_rotations),
+                                          ("--threshold", args.threshold),
+                                          ("--max-samples", args.max_samples)) if v is not None]
+    if adaptive_only and not args.adaptive:
+        raise UsageError(f"{', '.join(adaptive_only)} only apply to an adaptive scan: add "
+                         "--adaptive, or drop them for a uniform scan of --rotations angles")
     if args.white_reference is not None:
         if args.adaptive or args.calibration is not None:
             raise UsageError("--white-reference runs a calibration: it takes no --adaptive or "
@@ -207,9 +222,10 @@ def _plan(args: argparse.Namespace) -> Any:
         given = {k: v for k, v in (("initial_rotations", args.rotations),
                                    ("min_gain", args.min_gain),
                                    ("max_rotations", args.max_rotations),
+                                   ("threshold", args.threshold),
                                    ("span_deg", args.span)) if v is not None}
-        return AdaptivePlan(specimen=_specimen(args), exposure=ex, rule=args.rule,
-                            threshold=args.threshold, max_samples=args.max_samples,
+        return AdaptivePlan(specimen=_specimen(args), exposure=ex,
+                            rule=args.rule or "posterior", max_samples=args.max_samples,
                             start_deg=args.start_deg, **given, **arc)
     span = {"span_deg": args.span} if args.span is not None else {}
     return UniformPlan(specimen=_specimen(args), exposure=ex,
@@ -269,12 +285,63 @@ def _scan(args: argparse.Namespace) -> int:
 
         config = load_rig_config(args.rig)
     import asyncio
+    import signal
+
+    stopped: list[str] = []
+    args.stopped_by = stopped
+    # The loop's close resets the signals it handled to the default: give back the handlers
+    # the process had (a test runner's, when main() runs in it).
+    before = {sig: signal.getsignal(sig) for sig in (signal.SIGTERM, signal.SIGHUP)}
+
+    async def run() -> int:
+        _stop_on_terminate(stopped)
+        return await _run_scan(args, plan, config, sim)
 
     try:
-        return asyncio.run(_run_scan(args, plan, config, sim))
+        return asyncio.run(run())
+    except asyncio.CancelledError:
+        if not stopped:
+            raise
+        # Stopped by SIGTERM or SIGHUP: the job was left as Ctrl-C leaves it, and said so.
+        raise KeyboardInterrupt from None
     finally:
+        for sig, handler in before.items():
+            with contextlib.suppress(ValueError, TypeError):  # not the main thread
+                signal.signal(sig, handler)
         if sim is not None:
             sim.close()
+
+
+def _stop_on_terminate(stopped: list[str]) -> None:
+    """Make SIGTERM and SIGHUP (``kill``, ``timeout``, a closed terminal or SSH session) stop
+    the running foreground scan as Ctrl-C does: the engine stops and switches the lamps off,
+    the job is left paused at its checkpoint and the message says how to go on. They killed
+    the process where it stood: the job stayed ``running``, nothing was said, and the lamps
+    were left as they were. A second one stops the process at once.
+
+    Call from the scan's main task (``asyncio.run``'s); ``stopped`` gets the signal's name.
+    """
+    import asyncio
+    import os
+    import signal
+
+    loop = asyncio.get_running_loop()
+    task = asyncio.current_task()
+    assert task is not None
+
+    def stop(sig: signal.Signals) -> None:
+        if stopped:
+            loop.remove_signal_handler(sig)  # back to the default: the second one kills
+            os.kill(os.getpid(), sig)
+            return
+        stopped.append(sig.name)
+        print(f"{sig.name} received: stopping the scan as Ctrl-C does", file=sys.stderr,
+              flush=True)
+        task.cancel()
+
+    for sig in (signal.SIGTERM, signal.SIGHUP):
+        with contextlib.suppress(ValueError, RuntimeError):  # not the main thread: as before
+            loop.add_signal_handler(sig, stop, sig)
 
 
 def _check_output(out: Path, nothing: str = "nothing was measured") -> None:
@@ -577,8 +644,10 @@ def _calibration_warnings(args: argparse.Namespace, plan: Any, config: Any,
     (measuring ``pairs``) on this rig, if any."""
     from gonio.calibration import (
         Calibration,
+        ChannelMismatch,
         calibration_in_effect,
         exposure_warning,
+        sensor_channels,
         uncalibrated_warning,
     )
     from gonio.paths import scan_data_dir
@@ -591,7 +660,13 @@ def _calibration_warnings(args: argparse.Namespace, plan: Any, config: Any,
         cal = calibration_in_effect(args.data_dir or scan_data_dir(config), config)
     cal = cal if isinstance(cal, Calibration) else Calibration()
     uncal = uncalibrated_warning(cal, pairs)
-    return [w for w in (_how_to_calibrate(uncal, args),
+    try:
+        cal.check_channels(pairs, sensor_channels(config), "this plan")
+        channels = None
+    except ChannelMismatch as exc:
+        # The submission refuses it: the dry run must not say the scan would run.
+        channels = f"not calibrated: {exc}"
+    return [w for w in (_how_to_calibrate(uncal, args), channels,
                         exposure_warning(cal, plan.exposure.exposure_s)) if w is not None]
 
 
@@ -654,7 +729,9 @@ def _left_interrupted(store: Any, job_id: int, db: Path, args: argparse.Namespac
 
     row = store.get_job(job_id)
     if row.state in (JobState.RUNNING, JobState.SUSPENDED):
-        row = store.set_state(job_id, JobState.PAUSED, reason="interrupted (Ctrl-C in gonio scan)")
+        by = (getattr(args, "stopped_by", None) or [None])[0]
+        how = f"{by} to gonio scan" if by else "Ctrl-C in gonio scan"
+        row = store.set_state(job_id, JobState.PAUSED, reason=f"interrupted ({how})")
     if row.state.value in _FINAL:
         return
     print(f"job {job_id} interrupted: {row.state.value} at its checkpoint, "
@@ -1080,6 +1157,17 @@ def _jobs(args: argparse.Namespace) -> int:
             f"{args.job_id if args.job_id is not None else 'ID'}"
             + (" --position 0'" if args.action == "reorder" else "'")
             + " (the key in $GONIO_API_KEY or --api-key)")
+    if args.db is None and args.data_dir is not None:
+        # The data directory 'gonio scan' prints, given as --data-dir (as 'gonio scan' takes
+        # it): its store, as there ('gonio jobs list --data-dir DIR' was refused, "--db is
+        # required").
+        from gonio.paths import STORE_NAME
+
+        args.db = args.data_dir
+        if not (args.data_dir / STORE_NAME).is_file():
+            raise UsageError(f"--data-dir {args.data_dir} holds no job store ({STORE_NAME}): "
+                             "give the data directory 'gonio scan' or 'gonio serve' printed, "
+                             "or --db STORE")
     if args.db is None:
         raise UsageError(_no_store_text())
     if args.db.is_dir():

@@ -356,9 +356,13 @@ def _sim_material(data_dir: Path, requested: str | None) -> str | None:
         active = [j for j in store.active_jobs() if j.kind != "calibration"]
         store.close()
         if active and recorded != requested:
+            # It said "it stays on the stage until the job ends", but the simulated specimen
+            # is chosen once per start: every later scan of this run measured it too.
             print(f"job {active[0].id} was interrupted while measuring material "
-                  f"{recorded or 'default'!r}: it stays on the stage until the job ends "
-                  f"(--material {requested or 'default'!r} applies to the next start)",
+                  f"{recorded or 'default'!r}: it stays on the stage so the job resumes on its "
+                  f"own specimen, and every scan until this daemon stops measures it too "
+                  f"(--material {requested or 'default'!r} applies at the next start once job "
+                  f"{active[0].id} has ended)",
                   file=sys.stderr, flush=True)
             material = recorded
     data_dir.mkdir(parents=True, exist_ok=True)

@@ -158,13 +158,29 @@ async def calibrate_in_foreground(service: Any, sim: Any,
         The scan's exposure, which the calibration is measured at (counts are not rescaled
         between exposures).
     """
+    import asyncio
     import sys
 
     from gonio.jobstates import JobState
 
     job_id = start_sim_calibration(service, sim, exposure_s=exposure_s)
     print(f"calibrating the simulated rig on a white reference (job {job_id})", file=sys.stderr)
-    final = await service.run_in_foreground(job_id)
+    try:
+        final = await service.run_in_foreground(job_id)
+    except asyncio.CancelledError:
+        # Ctrl-C (or SIGTERM, SIGHUP): the engine has stopped measuring. Left "running", the
+        # job would be taken up by the next daemon on this data directory with whatever is
+        # then on the stage, and listed as interrupted for ever; the same command calibrates
+        # anew.
+        row = service.store.get_job(job_id)
+        if row.state.value not in FINAL:
+            service.store.set_state(job_id, JobState.ABORTED, reason=(
+                "interrupted (gonio scan stopped) during the simulated rig's calibration"))
+            print(f"calibration job {job_id} interrupted and aborted ({row.done_angles} of "
+                  f"{row.total_angles} angles measured); the scan had not started. The same "
+                  "command again calibrates the simulated rig anew, then scans",
+                  file=sys.stderr, flush=True)
+        raise
     if final is JobState.COMPLETED:
         return None
     return f"calibration of the simulated rig {final.value}: {service.get_job(job_id).reason}"

@@ -287,3 +287,60 @@ def test_checked_plans_of_jobs_that_never_start_are_dropped(tmp_path: Path) -> N
     assert set(worker._checked) == {ids[-2], kept, extra.id}
     assert worker._checked_plan(store.get_job(kept)) is checked
     assert kept not in worker._checked
+
+
+def _other_sensors_calibration(rig: MemRig) -> Any:
+    """A calibration of every pair of ``rig`` with 31 channels per factor (its sensors read
+    3): one measured with spectrometers that have the RGB sensors' names and directions."""
+    from gonio.calibration import Calibration, PairCalibration
+
+    return Calibration(pairs=tuple(PairCalibration(light=p.light, sensor=p.sensor,
+                                                   factor=(1e-4,) * 31) for p in rig.pairs),
+                       exposure_s=FAST.exposure_s, source="job 9: spectral white reference")
+
+
+def test_a_calibration_of_other_sensors_refuses_the_job_before_anything_moves(
+    tmp_path: Path,
+) -> None:
+    """Factors with 31 channels for sensors that read 3 made the job measure every angle and
+    fail only when it finished ("calibration of pair L1/S1 has 31 channels, the readings have
+    3"); the job is refused when it starts, naming both counts and what to do."""
+    rig = MemRig()
+    desc = RigDescription.from_rig(rig)
+    cal = _other_sensors_calibration(rig)
+
+    async def get_rig() -> MemRig:
+        return rig
+
+    store = JobStore(tmp_path / "jobs.sqlite")
+    w = Worker(store, get_rig, desc, tmp_path / "d", BasisSupply(lambda: BASIS),
+               calibration=lambda: cal)
+    job = _submit(store, desc, UniformPlan(rotations=2, exposure=FAST))
+    row = asyncio.run(w.run_once())
+    assert row is not None and row.id == job and row.state is JobState.FAILED
+    assert row.reason is not None and row.reason.startswith("not started: ")
+    assert "have 31 channels, sensor" in row.reason and "reads 3" in row.reason
+    assert "--white-reference" in row.reason
+    assert rig.mstage.moves == [] and store.reading_count(job) == 0
+
+
+def test_submission_refuses_a_calibration_of_other_sensors_unless_one_is_queued(
+    tmp_path: Path,
+) -> None:
+    """The API's and gonio scan's submission refuse such a scan (PlanError), but accept it
+    behind a queued calibration job, which calibrates these sensors before it starts."""
+    from gonio.service import PlanError
+    from gonio.sim.rig import WHITE_REFERENCE_ALBEDO
+
+    rig = MemRig()
+    svc = GonioService(JobStore(tmp_path / "jobs.sqlite"), rig, data_dir=tmp_path / "d",
+                       calibration=_other_sensors_calibration(rig))
+    scan = UniformPlan(rotations=2, exposure=FAST)
+    with pytest.raises(PlanError, match=r"31 channels, sensor .* reads 3"):
+        svc.submit(JobRequest(plan=scan))
+    assert svc.store.list_jobs() == []
+    from gonio.plans.models import CalibrationPlan
+
+    svc.submit(JobRequest(plan=CalibrationPlan(reference_albedo=WHITE_REFERENCE_ALBEDO,
+                                               exposure=FAST)))
+    assert svc.submit(JobRequest(plan=scan)).state is JobState.QUEUED

@@ -127,8 +127,12 @@ def test_an_interrupted_scan_keeps_its_simulated_material_across_restarts(
     store.close()
     # Restarted with another material while the job is unfinished: the job's stays.
     assert _sim_material(data, "paint-002") == "felt-001"
-    assert f"job {job.id} was interrupted while measuring material 'felt-001'" in \
-        capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert f"job {job.id} was interrupted while measuring material 'felt-001'" in err
+    # Not "until the job ends": the material is the whole start's.
+    assert "every scan until this daemon stops measures it too" in err, err
+    assert f"--material 'paint-002' applies at the next start once job {job.id} has ended" \
+        in err, err
     store = JobStore(data / "gonio.sqlite")
     store.set_state(job.id, JobState.ABORTED, reason="test")
     store.close()

@@ -75,6 +75,23 @@ def test_the_data_directory_serves_for_its_store(
     assert "is a folder without a job store (gonio.sqlite)" in capsys.readouterr().err
 
 
+def test_data_dir_alone_names_the_store(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # 'gonio jobs list --data-dir DIR' (the folder gonio scan prints, as gonio scan takes it)
+    # was refused: "which job store? --db is required".
+    _store_with_a_running_job(tmp_path / "gonio.sqlite")
+    assert main(["jobs", "list", "--data-dir", str(tmp_path)]) == 0
+    assert "felt" in capsys.readouterr().out
+    assert main(["jobs", "show", "1", "--data-dir", str(tmp_path)]) == 0
+    assert "job 1:" in capsys.readouterr().out
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    assert main(["jobs", "list", "--data-dir", str(empty)]) == 2
+    err = capsys.readouterr().err
+    assert f"--data-dir {empty} holds no job store (gonio.sqlite)" in err, err
+
+
 def test_list_with_a_job_id_says_show_takes_one_and_a_non_store_is_named(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

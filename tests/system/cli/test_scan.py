@@ -236,3 +236,19 @@ def test_an_adaptive_dry_run_states_its_cap_and_refuses_a_cap_below_the_start(
     with pytest.raises(SystemExit):  # argparse: a count > 0
         main([*argv, "--max-rotations", "0"])
     assert "--max-rotations" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("extra", [["--rule", "vf"], ["--min-gain", "0.001"],
+                                   ["--max-rotations", "10"], ["--threshold", "0.05"],
+                                   ["--max-samples", "200"]])
+def test_adaptive_options_without_adaptive_are_refused_not_dropped(
+    extra: list[str], capsys: pytest.CaptureFixture[str]
+) -> None:
+    """'gonio scan --rule vf' (no --adaptive) ran the default uniform scan, the option
+    silently dropped; so did the other adaptive-only options."""
+    argv = ["scan", "--rig", "deploy/rig.example.toml", "--dry-run", "-o", "/dev/null"]
+    assert main([*argv, *extra]) == 2
+    err = capsys.readouterr().err
+    assert f"{extra[0]} only apply to an adaptive scan: add --adaptive" in err, err
+    assert main([*argv, "--adaptive", *extra]) == 0
+    assert "dry run of the adaptive plan" in capsys.readouterr().out

@@ -98,3 +98,74 @@ def test_jobs_abort_ends_an_unfinished_job_and_refuses_a_finished_one(
     assert main(["jobs", "abort", str(job.id), "--db", str(db)]) == 2
     assert "only an unfinished job can be aborted" in capsys.readouterr().err
     assert main(["jobs", "abort", "99", "--db", str(db)]) == 2
+
+
+def test_ctrl_c_in_the_sim_calibration_aborts_it_and_says_so(tmp_path: Path) -> None:
+    """Ctrl-C while ``gonio scan --sim`` calibrates the simulated rig (before the scan) left
+    the calibration job ``running`` for ever and printed only "interrupted": the next daemon
+    on that data directory took it up with whatever was on the stage. It is aborted, and the
+    message says so and what the same command does."""
+    data = tmp_path / "data"
+    db = data / "gonio.sqlite"
+    # Real time and a long exposure: the calibration (4 angles x 12 pairs) lasts long enough.
+    argv = ["scan", "--no-export-fits", "--sim", "--time-scale", "1", "--exposure", "0.3",
+            "--data-dir", str(data), "--no-progress", "-o", str(tmp_path / "felt.h5")]
+    proc = subprocess.Popen([*GONIO, *argv], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env=child_env(), cwd=PROJECT_ROOT,
+                            preexec_fn=_default_sigint)
+    try:
+        wait_for(lambda: _readings(db) > 0 or proc.poll() is not None,
+                 what="the calibration's first reading")
+        assert proc.poll() is None, proc.communicate()
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130, out + err
+    store = JobStore(db, durable=False)
+    (job,) = store.list_jobs()
+    store.close()
+    assert job.kind == "calibration" and job.state is JobState.ABORTED, job
+    assert f"calibration job {job.id} interrupted and aborted" in err, err
+    assert "The same command again calibrates the simulated rig anew" in err, err
+    listed = gonio(["jobs", "list", "--db", str(db)])
+    assert " aborted " in listed.stdout, listed.stdout
+    assert "nothing goes on with job" not in listed.stdout + listed.stderr, listed
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP], ids=["SIGTERM", "SIGHUP"])
+def test_sigterm_or_sighup_stops_the_scan_as_ctrl_c_does(
+    tmp_path: Path, sig: signal.Signals
+) -> None:
+    """``kill``, ``timeout`` or a closed terminal killed gonio scan where it stood: the job
+    stayed 'running' (listed as interrupted), nothing was said and the lamps were left as they
+    were. Now the job is paused at its checkpoint and the message says how to go on."""
+    rig = tmp_path / "rig.toml"
+    data = tmp_path / "data"
+    db = data / "gonio.sqlite"
+    with start_sim_rig(SimRigOptions(time_scale=1.0, settle_s=0.0, config_path=rig)):
+        argv = ["scan", "--no-export-fits", "--accept-uncalibrated",
+                "--rig", str(rig), "--rotations", "6", "--exposure", "0.5",
+                "--data-dir", str(data), "--no-progress", "-o", str(tmp_path / "felt.h5")]
+        proc = subprocess.Popen([*GONIO, *argv], stdout=subprocess.PIPE,
+                                stderr=subprocess.PIPE, text=True, env=child_env(),
+                                cwd=PROJECT_ROOT)
+        try:
+            wait_for(lambda: _readings(db) > 0 or proc.poll() is not None,
+                     what="the scan's first reading")
+            assert proc.poll() is None, proc.communicate()
+            proc.send_signal(sig)
+            out, err = proc.communicate(timeout=120)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+    assert proc.returncode == 130, out + err
+    store = JobStore(db, durable=False)
+    (job,) = store.list_jobs()
+    store.close()
+    assert job.state is JobState.PAUSED, job
+    assert job.reason == f"interrupted ({sig.name} to gonio scan)", job
+    assert f"{sig.name} received: stopping the scan as Ctrl-C does" in err, err
+    assert f"job {job.id} interrupted: paused" in err, err
+    assert "Run the same command again to resume it" in err, err

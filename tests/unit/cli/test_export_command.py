@@ -244,3 +244,24 @@ def test_a_table_file_is_told_apart_from_a_result(tmp_path: Path,
     assert "not an HDF5 file" not in err and "damaged" not in err, err
     assert "gonio-job-2-table.npz is a .npz archive (a gonio table or samples file)" in err, err
     assert "result file" in err and not (tmp_path / "t.gltf").exists()
+
+
+@pytest.mark.parametrize(("lost", "words"), [
+    (0.0001, "(little lost: the result is nearly isotropic, log RMSE 0.000 to its average)"),
+    (0.017, "(anisotropy lost: log RMSE 0.017)"),
+])
+def test_the_merl_report_says_anisotropy_was_lost_only_when_it_was(
+    tmp_path: Path, lost: float, words: str
+) -> None:
+    """An isotropic paint's MERL export read "anisotropy lost: log RMSE 0.000"."""
+    import json
+
+    from gonio.cli.export_command import report
+    from gonio.export.merl import sidecar_path
+
+    path = tmp_path / "paint.binary"
+    path.write_bytes(b"")
+    sidecar_path(path).write_text(json.dumps({"merl": {"anisotropy_lost": lost}}))
+    lines = report("merl", path, {"specimen": "paint", "specimen_named": True,
+                                  "source": "simulated", "job_id": 1})
+    assert any(words in line for line in lines), lines
