@@ -138,8 +138,11 @@ def near_specular_note(report: ColourReport) -> str | None:
         if not m and abs(g.aspecular_deg) <= NEAR_SPECULAR_DEG))
     if not labels:
         return None
-    return (f"{', '.join(labels)} were read from the reconstructed table, not by a pair of "
-            "the scan: near the specular direction the table is least certain (on held-out "
+    # Named as the near-specular ones: the other geometries marked "table" in the source
+    # column were read from the table too, and a bare list read as if they were not.
+    return (f"the geometries within {NEAR_SPECULAR_DEG:g} degrees of the specular direction "
+            f"({', '.join(labels)}) were read from the reconstructed table, not by a pair of "
+            "the scan: there the table is least certain (on held-out "
             "simulated specimens the default design's worst there was 7.4 dE00, a colour "
             "design's 2.1 at any geometry; docs/colour.md); for an instrument's numbers, scan "
             "with pairs designed for it (gonio design --colour INSTRUMENT)")

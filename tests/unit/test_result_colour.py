@@ -224,12 +224,14 @@ def test_near_specular_geometries_read_from_the_table_are_noted() -> None:
     # MA98's near-specular geometries, from the instrument's published aspecular angles.
     assert near == ["45as-15", "45as15", "45as25", "15as-15", "15as-5"]
     note = near_specular_note(report)
-    assert note is not None and note.startswith(", ".join(near) + " were read from the")
+    assert note is not None and note.startswith(
+        f"the geometries within 25 degrees of the specular direction ({', '.join(near)}) "
+        "were read from the")
     assert "gonio design --colour" in note
     # The first two read by a pair: only the others are named.
     read = tuple(g.name in ("45as-15", "45as15") for g in report.geometries)
     note = near_specular_note(replace(report, measured=read))
-    assert note is not None and note.startswith("45as25, 15as-15, 15as-5 were read")
+    assert note is not None and "(45as25, 15as-15, 15as-5) were read" in note
     every = tuple(abs(g.aspecular_deg) <= NEAR_SPECULAR_DEG for g in report.geometries)
     assert near_specular_note(replace(report, measured=every)) is None
     assert near_specular_note(colour_report(_table(WL), None, instruments=["MA98"])) is None

@@ -163,8 +163,9 @@ def test_colour_table_beside_the_rendering(spectral_daemon: Daemon, spectral_job
     # The near-specular geometries the pair did not read (MA98's within 25 degrees of the
     # specular direction, from its published aspecular angles) are noted, and the page says so.
     (note,) = api["notes"]
-    assert note.startswith("45as-15, 45as25, 15as-15, 15as-5 were read from the reconstructed "
-                           "table"), note
+    assert note.startswith("the geometries within 25 degrees of the specular direction "
+                           "(45as-15, 45as25, 15as-15, 15as-5) were read from the "
+                           "reconstructed table"), note
     # The page opens on the newest job (the second scan), which the test reads first: no
     # click, and no other job's views computed; the first scan is the one compared with.
     wait = open_live(browser, d, 240)
@@ -188,8 +189,8 @@ def test_colour_table_beside_the_rendering(spectral_daemon: Daemon, spectral_job
     assert {c[0]: c[-1] for c in cells} == {n: "pair" if n == "45as15" else "table"
                                            for n in names}
     assert "1 of 11 geometries read directly by a pair" in caption
-    assert "Note: 45as-15, 45as25, 15as-15, 15as-5 were read from the reconstructed table" in \
-        caption, caption
+    assert ("Note: the geometries within 25 degrees of the specular direction (45as-15, "
+            "45as25, 15as-15, 15as-5) were read from the reconstructed table") in caption, caption
     # Another instrument, then a comparison: ΔE00 appears as a column.
     Select(browser.find_element(By.ID, "colour-instrument")).select_by_value("BYK-mac")
     wait.until(lambda b: "BYK-mac geometries" in b.find_element(By.ID, "colour-caption").text)

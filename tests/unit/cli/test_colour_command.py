@@ -85,8 +85,8 @@ def test_calibrated_result_prints_cielab(files: dict[str, Path],
     out = capsys.readouterr()
     # The result's one pair (normal incidence and view) reads no instrument geometry: the
     # near-specular ones are noted as read from the table.
-    assert "note: 45as-15, 45as15, 45as25, 15as-15, 15as-5 were read from the reconstructed " \
-        "table" in out.err
+    assert ("note: the geometries within 25 degrees of the specular direction (45as-15, "
+            "45as15, 45as25, 15as-15, 15as-5) were read from the reconstructed table") in out.err
     rows = list(csv.DictReader(io.StringIO(out.out)))
     assert len(rows) == 11 + 6 and rows[0]["space"] == "CIELAB"
     assert rows[0]["illuminant"] == "D65" and rows[0]["observer"] == "10"
