@@ -38,7 +38,8 @@ CORE_SETTING_FLAGS = {
 
 COMMAND_MODULES: dict[str, tuple[str, ...]] = {
     "gonio.cli.brdf_commands": ("basis", "library", "simulate-scan", "reconstruct", "demo"),
-    "gonio.cli.scan_commands": ("scan", "jobs"),
+    "gonio.cli.scan_commands": ("scan",),
+    "gonio.cli.jobs_command": ("jobs",),
     "gonio.cli.sim_command": ("sim", "sim-place"),
     "gonio.cli.serve_command": ("serve",),
     "gonio.cli.design_command": ("design",),

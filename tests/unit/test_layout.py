@@ -72,6 +72,8 @@ TESTED_IN: dict[str, tuple[str, ...]] = {
     "gonio/cli/stage_command.py": ("tests/system/cli/test_stage.py",
                                    "tests/system/api/test_stage.py"),
     "gonio/cli/serve_command.py": ("tests/system/api/test_serve_command.py",),
+    "gonio/cli/jobs_command.py": ("tests/unit/cli/test_scan_commands.py",),
+    "gonio/cli/daemon_jobs.py": ("tests/system/api/test_cli_daemon_wait.py",),
     "gonio/cli/sim_command.py": ("tests/system/test_sim_rig.py",),
     "sim/dynamixel_device.py": ("tests/unit/sim/test_dynamixel_protocol.py",),
     "sim/rig.py": ("tests/system/test_sim_rig.py",),

@@ -20,7 +20,7 @@ from typing import Any
 import httpx
 import pytest
 
-from gonio.cli import main, scan_commands
+from gonio.cli import daemon_jobs, main
 from gonio.cli.scan_commands import scan_summary
 from gonio.results import read_result
 from tests.system.api.conftest import Daemon
@@ -178,7 +178,7 @@ def test_ctrl_c_in_scan_through_the_daemon_names_the_wait_command(
     def interrupted(seconds: float) -> None:
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(scan_commands, "time", types.SimpleNamespace(sleep=interrupted))
+    monkeypatch.setattr(daemon_jobs, "time", types.SimpleNamespace(sleep=interrupted))
     out = tmp_path / "felt.h5"
     with daemon.client() as c:
         assert c.post("/api/v1/rig/halt").status_code == 200

@@ -1,5 +1,5 @@
-"""'gonio scan' and 'gonio jobs' (gonio.cli.scan_commands): the plan built from the options,
-user errors, the job list (no rig needed)."""
+"""'gonio scan' and 'gonio jobs' (gonio.cli.scan_commands, gonio.cli.jobs_command): the
+plan built from the options, user errors, the job list (no rig needed)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from gonio.cli import UsageError, build_parser, scan_commands
+from gonio.cli import UsageError, build_parser, jobs_command, scan_commands
 from gonio.cli.scan_commands import _plan
 from gonio.plans.models import AdaptivePlan, CalibrationPlan, UniformPlan
 from gonio.store import JobStore
@@ -78,7 +78,9 @@ def test_other_arcs_are_refused(capsys: pytest.CaptureFixture[str]) -> None:
 
 def _args(argv: list[str]) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog="gonio")
-    scan_commands.register(parser.add_subparsers(dest="command"))
+    sub = parser.add_subparsers(dest="command")
+    scan_commands.register(sub)
+    jobs_command.register(sub)
     return parser.parse_args(argv)
 
 
@@ -246,28 +248,28 @@ def test_the_dry_run_summary_states_each_part_of_the_duration_to_a_few_per_cent(
 
 def test_a_rebuild_says_why_its_design_comparison_is_missing_or_off() -> None:
     lost = "not available: job 3 was finished by a gonio whose job store did not keep ..."
-    assert (scan_commands.design_comparison_line({"design_comparison": lost})
+    assert (jobs_command.design_comparison_line({"design_comparison": lost})
             == f"design comparison: {lost}")
     gap = "predicted_log_rmse 0.0997 is 2.7 times the design's expected 0.0370 ..."
-    assert (scan_commands.design_comparison_line({"design_expected_log_rmse": 0.037,
+    assert (jobs_command.design_comparison_line({"design_expected_log_rmse": 0.037,
                                                   "design_gap": gap})
             == f"design comparison: {gap}")
     # Within x2 of the design, or a rig without a [design]: nothing to say.
-    assert scan_commands.design_comparison_line({"design_expected_log_rmse": 0.037}) is None
-    assert scan_commands.design_comparison_line({"predicted_log_rmse": 0.05}) is None
+    assert jobs_command.design_comparison_line({"design_expected_log_rmse": 0.037}) is None
+    assert jobs_command.design_comparison_line({"predicted_log_rmse": 0.05}) is None
 
 
 def test_a_rebuild_says_when_an_import_since_changed_the_result() -> None:
     # A table imported after the scan became the rebuilt fit's local prior and moved its
     # numbers (job 2 of a lab day: 0.0511 -> 0.0512, the factored fit's error x6), while the
     # rebuild said only that it wrote the file.
-    line = scan_commands.rebuild_change_line(
+    line = jobs_command.rebuild_change_line(
         {"local_prior": None, "predicted_log_rmse": 0.051054},
         {"local_prior": "felt", "predicted_log_rmse": 0.051166})
     assert line is not None and "it now leans on 'felt' where no pair looks" in line, line
     assert "0.0511 -> 0.0512" in line and "today's library" in line, line
-    gone = scan_commands.rebuild_change_line({"local_prior": "felt"}, {"local_prior": None})
+    gone = jobs_command.rebuild_change_line({"local_prior": "felt"}, {"local_prior": None})
     assert gone is not None and "no longer leans on a local prior (it leaned on 'felt')" in gone
-    assert scan_commands.rebuild_change_line({"local_prior": "felt"},
+    assert jobs_command.rebuild_change_line({"local_prior": "felt"},
                                              {"local_prior": "felt"}) is None
-    assert scan_commands.rebuild_change_line({}, {"local_prior": "felt"}) is None
+    assert jobs_command.rebuild_change_line({}, {"local_prior": "felt"}) is None

@@ -1,0 +1,389 @@
+"""Jobs on a running daemon from the command line: ``gonio scan --daemon URL`` queues one and
+follows it, ``gonio jobs --daemon URL ACTION`` lists, shows, aborts, cancels, reorders or waits
+for them, all through the daemon's REST API (:class:`gonio.cli.daemon_client.DaemonClient`).
+
+Following a job and fetching its result is one function, :func:`follow_and_fetch`, for both
+``gonio scan --daemon`` and ``gonio jobs --daemon URL wait ID``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from gonio.cli import UsageError
+from gonio.cli.daemon_client import (
+    DaemonClient,
+    DaemonRefused,
+    DaemonUnreachable,
+)
+from gonio.cli.scan_commands import (
+    FINAL_STATES,
+    check_output_path,
+    dry_run_summary,
+    print_scan_summary,
+    suspended_line,
+)
+
+
+def scan_through_daemon(args: argparse.Namespace, plan: Any) -> int:
+    """Queue ``plan`` on a daemon, follow it to its end, fetch its result file
+    (:func:`follow_and_fetch`); with ``--no-wait``, return once it is queued, printing the
+    ``gonio jobs --daemon URL wait ID -o FILE`` that does the rest.
+
+    The daemon owns the rig, its job store and its calibration: the job runs in its queue like
+    any other (visible on the lab page), with the calibration in effect there. Ctrl-C stops
+    following, not the job.
+    """
+    for flag, given in (("--db", args.db), ("--data-dir", args.data_dir),
+                        ("--calibration", args.calibration)):
+        if given is not None:
+            raise UsageError(
+                f"{flag} does not apply with --daemon: the daemon keeps its own data directory "
+                "and job store and applies its own calibration (calibrate it with "
+                "--white-reference ALBEDO)")
+    body = {"plan": plan.model_dump(mode="json")}
+    with DaemonClient(args.daemon, args.api_key) as client:
+        if args.dry_run:
+            from gonio.plans.dryrun import DryRun
+
+            answer = client.request("POST", "/api/v1/jobs/dry-run", json=body)
+            rig = client.request("GET", "/api/v1/rig")
+            print(json.dumps(answer, indent=2) if args.json else dry_run_summary(
+                DryRun.model_validate(answer), plan, str(rig.get("name", "rig"))))
+            return 0
+        if args.json:
+            raise UsageError("--json goes with --dry-run")
+        # The plan's warnings (the daemon records them in the job's events, which this command
+        # does not follow), said before it is queued; a daemon without them sends none.
+        checked = client.request("POST", "/api/v1/jobs/dry-run", json=body)
+        for warning in checked.get("warnings", []) if isinstance(checked, dict) else []:
+            print(f"warning: {warning}", file=sys.stderr)
+        try:
+            job = client.request("POST", "/api/v1/jobs", json=body, params={
+                "accept_uncalibrated": "true"} if args.accept_uncalibrated else None)
+        except DaemonRefused as exc:
+            if exc.status == 409 and "accept_uncalibrated" in str(exc):
+                raise UsageError(f"{exc} (here: --accept-uncalibrated)") from None
+            raise
+        job_id = int(job["id"])
+        if args.no_wait:
+            out = args.output or Path(_suggested_output(job_id, job.get("specimen")))
+            print(f"job {job_id} queued on {client.url}; follow it and fetch its result "
+                  f"with:\n  {wait_command(client.url, job_id, out)}")
+            return 0
+        print(f"job {job_id} queued on {client.url}", file=sys.stderr)
+        # What the daemon said of the job, kept for a message if it goes away: its queueing
+        # answer at first, then every poll's.
+        return follow_and_fetch(client, job_id, args.output, no_progress=args.no_progress,
+                                seen=dict(job), queued_here=True)
+
+
+def _suggested_output(job_id: int, specimen: Any) -> str:
+    """The result file ``gonio scan --daemon --no-wait`` without ``-o`` suggests: the
+    specimen's name when it makes a plain file name, else the job's."""
+    import re
+
+    from gonio.export.metadata import UNNAMED
+
+    name = str(specimen or "")
+    if name and name != UNNAMED and re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9._-]*", name):
+        return f"{name}.h5"
+    return f"job-{job_id}.h5"
+
+
+def wait_command(url: str, job_id: int, out: Path | None) -> str:
+    """The command that follows daemon job ``job_id`` and fetches its result to ``out``
+    (``gonio jobs --daemon URL wait ID -o FILE``; without ``-o`` when ``out`` is None), with
+    ``out`` absolute, so it works from another terminal's folder too. It names no API key
+    (reads need none unless the daemon says so; the key stays out of shell history)."""
+    import shlex
+
+    cmd = f"gonio jobs --daemon {shlex.quote(url)} wait {job_id}"
+    return cmd if out is None else f"{cmd} -o {shlex.quote(str(Path(out).absolute()))}"
+
+
+def follow_and_fetch(client: DaemonClient, job_id: int, out: Path | None, *, no_progress: bool,
+                     seen: dict[str, Any] | None = None, queued_here: bool = False) -> int:
+    """Follow daemon job ``job_id`` to its end with a progress bar, fetch its result to
+    ``out`` and print the summary ``gonio scan`` prints; the exit status.
+
+    One path for ``gonio scan --daemon`` (after it queued the job) and ``gonio jobs --daemon
+    URL wait ID``, so a scan followed from the terminal that queued it and one picked up again
+    later end alike. Ctrl-C and a daemon that stops answering stop the following, not the job:
+    both print the ``gonio jobs --daemon URL wait ID -o FILE`` that takes it up again.
+
+    Parameters
+    ----------
+    client : the daemon's client
+    job_id : the job to follow
+    out : where its result file goes (``-o``, checked writable by the caller); None: not
+        fetched, the summary says where the daemon keeps it
+    no_progress : no progress bar
+    seen : what the daemon last said of the job (its queueing answer); None when nothing yet
+    queued_here : the command queued the job (running it again queues a second scan)
+
+    Returns
+    -------
+    int
+        0 completed (and fetched, with ``out``); 1 ended otherwise, or the daemon stopped
+        answering; 130 Ctrl-C.
+
+    Raises
+    ------
+    DaemonUnreachable
+        The daemon never answered (a wrong address, or it is down) while nothing of the job
+        had been seen.
+    DaemonRefused
+        It refused (no such job, a key needed).
+    """
+    again = wait_command(client.url, job_id, out)
+    last: dict[str, Any] = dict(seen or {})
+    try:
+        row = _follow(client, job_id, disabled=no_progress, seen=last)
+        if row["state"] != "completed":
+            print(f"job {job_id} {row['state']}: {row.get('reason')}", file=sys.stderr)
+            return 1
+        if out is not None:
+            _fetch_result(client, job_id, out)
+        if row.get("kind") == "calibration":
+            _calibration_fetched(client, job_id, out)
+            return 0
+    except DaemonUnreachable as exc:
+        if not last:
+            raise
+        print(lost_daemon_message(client.url, job_id, last, str(exc), again, queued_here),
+              file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        then = ("follow it and fetch its result with" if out is not None
+                else "follow it again with")
+        then = (f"Do not run this command again, which would queue a second scan; {then}"
+                if queued_here else then.capitalize())
+        print(f"stopped following; job {job_id} goes on in the daemon. {then}: {again}",
+              file=sys.stderr)
+        return 130
+    where = f"the daemon keeps it: {client.url}/api/v1/jobs/{job_id}/result"
+    print_scan_summary(job_id, row.get("result") or {}, out,
+                       where if out is not None else f"not fetched ({where}; "
+                       f"'{wait_command(client.url, job_id, None)} -o FILE' fetches it)")
+    return 0
+
+
+def _fetch_result(client: DaemonClient, job_id: int, out: Path) -> None:
+    """Write completed job ``job_id``'s result file, as the daemon serves it, to ``out``
+    (whole or not at all: a fetch cut short leaves no truncated file under that name); when
+    that fails, say that the daemon keeps it and how to fetch it elsewhere."""
+    import contextlib
+    import os
+
+    result = client.request("GET", f"/api/v1/jobs/{job_id}/result")
+    part = out.with_name(f".{out.name}.part")
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        part.write_bytes(result.content)
+        os.replace(part, out)
+    except BaseException as exc:
+        with contextlib.suppress(OSError):
+            part.unlink(missing_ok=True)
+        if not isinstance(exc, OSError):
+            raise
+        why = exc.strerror or str(exc)
+        raise UsageError(f"job {job_id} completed, but its result could not be written to "
+                         f"{out} ({why}); the daemon keeps it: fetch it elsewhere with "
+                         f"'{wait_command(client.url, job_id, None)} -o FILE'") from None
+
+
+def _calibration_fetched(client: DaemonClient, job_id: int, out: Path | None) -> None:
+    """Print what completed calibration job ``job_id`` left, and with ``out`` (its fetched
+    result) write that job's calibration beside it as ``OUT.calibration.json``.
+
+    The copy is the calibration the job made, as its result file records it, not the one the
+    daemon applies now: a job waited for after a later calibration would otherwise copy that
+    later one under this job's name.
+    """
+    now = client.request("GET", "/api/v1/calibration")
+    source = now.get("source", "") if isinstance(now, dict) else ""
+    applies = ("the daemon now applies this calibration to its scans"
+               if source.startswith(f"job {job_id}:") else
+               f"the daemon applies another calibration now ({source or 'none'})")
+    if out is None:
+        print(f"job {job_id} completed: {applies}; '{wait_command(client.url, job_id, None)} "
+              "-o FILE' fetches its result and a copy of its calibration")
+        return
+    from gonio.results import read_provenance
+
+    made = read_provenance(out).get("new_calibration")
+    if made is None and source.startswith(f"job {job_id}:"):
+        made = json.dumps(now)  # a result without its calibration (made before it was kept)
+    if made is None:
+        print(f"job {job_id} completed: {applies}; its result does not record its calibration, "
+              f"so no copy was written beside {out}")
+        return
+    cal_out = out.with_name(out.stem + ".calibration.json")
+    cal_out.write_text(json.dumps(json.loads(made), indent=2))
+    print(f"job {job_id} completed: {applies}; a copy is in {cal_out}")
+
+
+def lost_daemon_message(url: str, job_id: int, seen: dict[str, Any], why: str, again: str,
+                        queued_here: bool = True) -> str:
+    """What ``gonio scan --daemon`` and ``gonio jobs --daemon URL wait`` say when their daemon
+    stops answering while they follow a job.
+
+    It said only that the daemon could not be reached, so a user whose daemon was killed
+    mid-scan could not tell that the job was kept (and resumes when the daemon restarts) and
+    ran the command again, queueing a second scan of the specimen. It then pointed at the
+    API's URLs; it names the command that takes the job up again.
+
+    Parameters
+    ----------
+    url : the daemon's address
+    job_id : the job followed
+    seen : the job's detail as last answered (empty if none came)
+    why : the connection error's message
+    again : the command that follows the job and fetches its result (:func:`wait_command`)
+    queued_here : the command queued the job (``gonio scan --daemon``): running it again would
+        queue a second scan
+    """
+    when = (f" (last seen {seen['state']}, {seen.get('done_angles', 0)} of "
+            f"{seen.get('total_angles') or '?'} angles)" if seen else "")
+    then = ("Do not run this command again, which would queue a second scan; once the daemon "
+            "answers, follow the job and fetch its result with: " if queued_here else
+            "Once the daemon answers, run this command again: ")
+    return (f"{why}\n"
+            f"  job {job_id}{when} is kept in the daemon's job store: a restarted daemon (gonio "
+            f"serve on the same data directory) takes it up again, a scan under way from its last "
+            f"checkpoint. {then}{again} (or follow it on the lab page at {url})")
+
+
+def _follow(client: Any, job_id: int, disabled: bool, poll_s: float = 0.5,
+            seen: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Poll the job with a progress bar until it ends; returns its last detail (``seen``, when
+    given, holds the last detail answered, for a message if the daemon goes away)."""
+    from tqdm import tqdm
+
+    # The first answer before the bar: a job the daemon does not have (gonio jobs wait 99)
+    # is refused without an empty bar above the refusal.
+    row: dict[str, Any] = client.request("GET", f"/api/v1/jobs/{job_id}")
+    bar = tqdm(total=None, unit="angle", desc=f"job {job_id}", disable=disabled, file=sys.stderr)
+    told: str | None = None
+    try:
+        while True:
+            if seen is not None:
+                seen.clear()
+                seen.update(row)
+            bar.total = row.get("total_angles") or None
+            bar.n = int(row.get("done_angles") or 0)
+            bar.set_description_str(f"job {job_id} {row['state']}")
+            bar.refresh()
+            reason = row.get("reason") if row["state"] == "suspended" else None
+            if reason and reason != told:
+                bar.write(suspended_line(job_id, reason, through_daemon=True),
+                          file=sys.stderr)
+            told = reason
+            if row["state"] in FINAL_STATES:
+                return row
+            time.sleep(poll_s)
+            row = client.request("GET", f"/api/v1/jobs/{job_id}")
+    finally:
+        bar.close()
+
+
+def jobs_through_daemon(args: argparse.Namespace) -> int:
+    """``gonio jobs --daemon URL ACTION [ID]``: a running daemon's jobs through its API.
+
+    A lab whose daemon owns the store had the page or curl alone to cancel or reorder a
+    queued scan or abort a running one: ``gonio jobs abort`` on that store is refused (two
+    programs must not run jobs from one store) and said "use its API" without saying how.
+    """
+    if args.db is not None or args.data_dir is not None:
+        raise UsageError("--db and --data-dir do not apply with --daemon: the daemon keeps its "
+                         "own job store")
+    if args.action == "rebuild":
+        raise UsageError("rebuild works on a job store, not through a daemon: run 'gonio jobs "
+                         "rebuild ID --db DATA_DIR' on the daemon's data directory (the daemon "
+                         "may keep running: it serves the rebuilt file)")
+    if args.action != "reorder" and (args.position is not None or args.priority is not None
+                                     or args.accept_uncalibrated):
+        raise UsageError("--position, --priority and --accept-uncalibrated go with reorder")
+    if args.action == "list":
+        if args.job_id is not None:
+            raise UsageError(f"list takes no job id; 'gonio jobs --daemon {args.daemon} show "
+                             f"{args.job_id}' shows job {args.job_id}")
+    elif args.job_id is None:
+        raise UsageError(f"jobs {args.action} needs a job id, e.g. 'gonio jobs --daemon "
+                         f"{args.daemon} {args.action} 3'")
+    with DaemonClient(args.daemon, args.api_key) as client:
+        if args.action == "list":
+            rows = client.request("GET", "/api/v1/jobs")
+            if args.json:
+                print(json.dumps(rows))
+                return 0
+            print(f"{'id':>4}  {'state':<14} {'kind':<11} {'angles':>9}  specimen")
+            for r in rows:
+                why = r.get("waiting") or r.get("reason")
+                if isinstance(why, dict):
+                    why = why.get("reason") or why.get("message")
+                print(f"{r['id']:>4}  {r['state']:<14} {r['kind']:<11} "
+                      f"{r['done_angles']:>4}/{r['total_angles']:<4}  {r['specimen']}"
+                      + (f"  ({why})" if why else ""))
+            return 0
+        job = args.job_id
+        assert job is not None  # refused above
+        if args.action == "wait":
+            if args.json:
+                raise UsageError(f"wait prints the scan's summary; 'gonio jobs --daemon "
+                                 f"{args.daemon} show {job} --json' gives the job as JSON")
+            if args.output is not None:
+                # Before the wait, not after an hour's scan.
+                check_output_path(args.output, "nothing was fetched; the daemon keeps the job")
+            return follow_and_fetch(client, job, args.output, no_progress=args.no_progress)
+        if args.action == "show":
+            row = client.request("GET", f"/api/v1/jobs/{job}")
+            print(json.dumps(row, indent=2) if args.json else
+                  f"job {job}: {row['kind']} '{row['specimen']}', {row['state']}, "
+                  f"{row['done_angles']}/{row['total_angles']} angles, priority "
+                  f"{row.get('priority', 0)}"
+                  + (f" ({row['reason']})" if row.get("reason") else "")
+                  + (f"\n  result: {args.daemon.rstrip('/')}/api/v1/jobs/{job}/result "
+                     f"(fetch it: {wait_command(client.url, job, None)} -o FILE)"
+                     if row["state"] == "completed" else ""))
+            return 0
+        if args.action == "reorder":
+            if args.position is None and args.priority is None:
+                raise UsageError("reorder needs --position N (0: next) and/or --priority P")
+            body = {k: v for k, v in (("position", args.position),
+                                      ("priority", args.priority)) if v is not None}
+            try:
+                row = client.request("POST", f"/api/v1/jobs/{job}/reorder", json=body,
+                                     params={"accept_uncalibrated": "true"}
+                                     if args.accept_uncalibrated else None)
+            except DaemonRefused as exc:
+                if exc.status == 409 and "accept_uncalibrated" in str(exc):
+                    raise UsageError(f"{exc} (here: --accept-uncalibrated)") from None
+                raise
+        else:
+            try:
+                row = client.request("POST", f"/api/v1/jobs/{job}/{args.action}")
+            except DaemonRefused as exc:
+                if exc.status == 409 and args.action == "cancel":
+                    raise UsageError(f"{exc}; a running job is stopped with 'gonio jobs "
+                                     f"--daemon {args.daemon} abort {job}'") from None
+                raise
+    if args.json:
+        print(json.dumps(row))
+        return 0
+    state = row.get("state", "?")
+    if args.action == "cancel":
+        print(f"job {job} cancelled: taken out of the queue, it will not run (state {state})")
+    elif args.action == "abort":
+        print(f"job {job}: abort asked (state {state}; lights off and the stage stopped, its "
+              f"readings stay in the store; 'gonio jobs --daemon {args.daemon} show {job}' "
+              "says when it has ended)")
+    else:
+        print(f"job {job} reordered: priority {row.get('priority', 0)}, state {state}")
+    return 0
