@@ -318,9 +318,10 @@ function fillRow(tr, job) {
   tr.dataset.id = job.id;
   tr.dataset.state = job.state;
   tr.classList.toggle("selected", job.id === selected);
-  while (tr.children.length < 7) tr.append(document.createElement("td"));
+  while (tr.children.length < 8) tr.append(document.createElement("td"));
   const td = [...tr.children];
-  for (const [i, text] of [[0, job.id], [1, job.specimen], [2, job.kind]]) {
+  td[3].className = "priority";
+  for (const [i, text] of [[0, job.id], [1, job.specimen], [2, job.kind], [3, job.priority]]) {
     fillCell(td[i], [text], () => { td[i].textContent = text ?? ""; });
   }
   // Why a job stopped or waits, in the row itself (not only in a tooltip); for a queued job
@@ -328,7 +329,7 @@ function fillRow(tr, job) {
   // a held queue, or a paused or suspended job holding the rig.
   const why = job.reason && SHOW_REASON.has(job.state) ? job.reason
     : job.state === "queued" && job.waiting ? job.waiting : null;
-  fillCell(td[3], [job.state, why], (c) => {
+  fillCell(td[4], [job.state, why], (c) => {
     c.className = `state-${job.state}`;
     c.textContent = job.state;
     if (why) {
@@ -337,10 +338,10 @@ function fillRow(tr, job) {
       c.append(span);
     }
   });
-  fillProgress(td[4], job);
-  td[5].className = "eta";
-  if (job.id === selected) fillEta(td[5]); else fillEta(td[5], activeDetail, job.id);
-  fillActions(td[6], ACTIONS[job.state] ?? []);
+  fillProgress(td[5], job);
+  td[6].className = "eta";
+  if (job.id === selected) fillEta(td[6]); else fillEta(td[6], activeDetail, job.id);
+  fillActions(td[7], ACTIONS[job.state] ?? []);
 }
 
 // The row's buttons, each carrying its action; the tbody's one listener (initQueue) finds the
@@ -871,11 +872,23 @@ function initForm() {
       input.setCustomValidity(shown && input.value === "" && !input.validity.badInput ? input.dataset.empty : "");
     }
   };
+  // The job's priority (POST /jobs's "priority", -1000..1000, higher starts sooner): anything
+  // but a whole number in range (2.5, 5000, empty) says so at the field, and nothing is sent.
+  const priority = form.elements.priority;
+  const markPriority = () => {
+    const n = Number(priority.value);
+    const ok = !priority.validity.badInput && priority.value.trim() !== "" && Number.isInteger(n)
+      && Math.abs(n) <= 1000;
+    priority.setCustomValidity(ok ? "" : priority.dataset.invalid);
+  };
   form.addEventListener("input", markEmpty);
   form.addEventListener("change", markEmpty);
+  form.addEventListener("input", markPriority);
+  form.addEventListener("change", markPriority);
   // A click on Start scan comes before the browser checks the form (Enter in a field clicks
   // it too), so a field emptied without an input event (a script's) is caught as well.
   $("#start-scan").addEventListener("click", markEmpty);
+  $("#start-scan").addEventListener("click", markPriority);
   kindSel.addEventListener("change", showKind);
   // Each rule's default first round (posterior 4, vf 8) and cap (posterior 16, vf none),
   // unless the user typed another.
@@ -929,8 +942,9 @@ function initForm() {
     e.preventDefault();
     guarded(async () => {
       const plan = readPlan();
+      const priority = Number(form.elements.priority.value);
       let job;
-      try { job = await send("POST", "/jobs", { plan }); } catch (e) {
+      try { job = await send("POST", "/jobs", { plan, priority }); } catch (e) {
         // An uncalibrated scan of a rig that was calibrated is most likely a mistake (the
         // daemon on another data directory): it runs only once the user has accepted it.
         if (!(e instanceof ApiError && e.status === 409 && e.message.includes("accept_uncalibrated"))) throw e;
@@ -938,7 +952,7 @@ function initForm() {
           setNote("Not started: the scan would be uncalibrated.", null);
           return;
         }
-        job = await send("POST", "/jobs?accept_uncalibrated=true", { plan });
+        job = await send("POST", "/jobs?accept_uncalibrated=true", { plan, priority });
       }
       // A scan queued behind one that is measuring (or finishing) leaves that one on screen:
       // its readings, ETA and result are what the lab is waiting for, and the new job has

@@ -154,3 +154,57 @@ def test_moving_a_scan_ahead_of_a_queued_calibration_asks_and_sends_the_acceptan
             for job in (scan, cal):
                 c.post(f"/api/v1/jobs/{job}/cancel")
             assert c.post("/api/v1/rig/release").status_code == 200
+
+
+def test_the_scan_form_sends_a_priority_and_refuses_one_that_is_not_a_whole_number(
+    daemon: Daemon, browser: Any  # noqa: F811
+) -> None:
+    """The API took a priority (``POST /api/v1/jobs``, -1000..1000, higher starts sooner) the
+    scan form had no field for: a lab could only move a job after queueing it. The form now
+    has one, says what higher means, sends it with the job, and the queue shows it; a number
+    that is not a whole one is refused at the field and nothing is sent."""
+    from selenium.webdriver.common.by import By
+
+    with daemon.client() as c:
+        assert c.post("/api/v1/rig/halt").status_code == 200  # the new job stays queued
+    job = None
+    try:
+        wait = open_live(browser, daemon, 120)
+        assert "Higher priority starts sooner" in browser.find_element(
+            By.ID, "priority-help").text
+        form = browser.find_element(By.ID, "scan-form")
+        field = form.find_element(By.NAME, "priority")
+        assert field.get_attribute("value") == "0"
+        specimen = form.find_element(By.NAME, "specimen")
+        specimen.clear()
+        specimen.send_keys("urgent")
+        browser.execute_script("window.__posted = []; const f = window.fetch;"
+                               "window.fetch = (u, i) => { if (i && i.method === 'POST')"
+                               " window.__posted.push(String(u)); return f(u, i); };")
+        for bad in ("2.5", "5000", ""):
+            field.clear()
+            field.send_keys(bad)
+            click_when_steady(wait, "#start-scan")
+            wait.until(lambda d: d.switch_to.active_element == field)
+            said = browser.execute_script("return arguments[0].validationMessage", field)
+            assert "whole number from -1000 to 1000" in said, (bad, said)
+            assert "higher starts sooner" in said, said
+            assert browser.execute_script("return window.__posted") == [], bad
+        field.clear()
+        field.send_keys("7")
+        assert browser.execute_script("return arguments[0].validity.valid", field) is True
+        click_when_steady(wait, "#start-scan")
+        row = "//tbody[@id='jobs']/tr[td[2][text()='urgent']]"
+        wait.until(lambda d: d.find_elements(By.XPATH, row))
+        job = int(browser.find_element(By.XPATH, row).get_attribute("data-id"))
+        with daemon.client() as c:
+            assert c.get(f"/api/v1/jobs/{job}").json()["priority"] == 7
+        wait.until(lambda d: d.find_element(
+            By.CSS_SELECTOR, f"#jobs tr[data-id='{job}'] td.priority").text == "7")
+        assert not browser.find_element(By.ID, "message").is_displayed(), \
+            browser.find_element(By.ID, "message").text
+    finally:
+        with daemon.client() as c:
+            if job is not None:
+                c.post(f"/api/v1/jobs/{job}/cancel")
+            assert c.post("/api/v1/rig/release").status_code == 200
