@@ -211,6 +211,23 @@ function etaText(d = selectedDetail, id = selected) {
   return t;
 }
 
+// A queued job's estimated start (the daemon's starts_in_s: the time left of the job holding
+// the rig plus the estimated durations of the jobs ahead), or "start unknown" when the daemon
+// has none (a held queue, a paused or suspended job holding the rig): never a made-up number.
+// "within" when an adaptive job is counted at its bound (it may start sooner). What the
+// estimate rests on, or why there is none, is the cell's tooltip.
+function startText(job) {
+  if (readsRefused() || job.state !== "queued" || job.starts_in_estimate == null) return "";
+  if (job.starts_in_s == null) return "start unknown";
+  if (job.starts_in_s < 1) return "starts now";
+  return `starts ${job.starts_in_bound ? "within" : "in"} about ${eta(job.starts_in_s)}`;
+}
+
+function fillStart(td, job) {
+  const text = startText(job), title = job.starts_in_estimate ?? "";
+  fillCell(td, [text, title], () => { td.textContent = text; td.title = title; });
+}
+
 // The ETA cell's tooltip: what the reconstruction estimate rests on.
 function etaTitle(d = selectedDetail, id = selected) {
   return d && d.id === id && d.reconstruction_estimate
@@ -340,7 +357,9 @@ function fillRow(tr, job) {
   });
   fillProgress(td[5], job);
   td[6].className = "eta";
-  if (job.id === selected) fillEta(td[6]); else fillEta(td[6], activeDetail, job.id);
+  // A queued job that is loading its basis before its first reading says so instead.
+  if (job.state === "queued" && !(job.id === selected && etaText())) fillStart(td[6], job);
+  else if (job.id === selected) fillEta(td[6]); else fillEta(td[6], activeDetail, job.id);
   fillActions(td[7], ACTIONS[job.state] ?? []);
 }
 

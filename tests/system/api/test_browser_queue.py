@@ -208,3 +208,64 @@ def test_the_scan_form_sends_a_priority_and_refuses_one_that_is_not_a_whole_numb
             if job is not None:
                 c.post(f"/api/v1/jobs/{job}/cancel")
             assert c.post("/api/v1/rig/release").status_code == 200
+
+
+def _eta_cell(browser: Any, job: int) -> tuple[str, str]:  # noqa: F811 (the fixture's name)
+    return tuple(browser.execute_script(  # type: ignore[return-value]
+        "const c = document.querySelector(`#jobs tr[data-id='${arguments[0]}'] td.eta`);"
+        "return [c?.textContent ?? '', c?.title ?? ''];", job))
+
+
+def test_queued_jobs_say_when_they_start_and_unknown_when_the_queue_is_held(
+    daemon: Daemon, browser: Any, no_export_fits: None  # noqa: F811
+) -> None:
+    """The queue showed queued jobs with no idea of when they start. Each now says "starts in
+    about ..." (GET /api/v1/jobs' starts_in_s: the running job's time left plus the estimated
+    durations of the jobs ahead), and "start unknown" once the queue is held: no number is
+    made up for a queue that does not run."""
+    with daemon.client() as c:
+        post = {"params": {"accept_uncalibrated": "true"}}
+        holding = int(c.post("/api/v1/jobs", **post, json={  # type: ignore[arg-type]
+            "plan": {**PLAN, "specimen": "holding", "rotations": 400}}).json()["id"])
+        ahead = int(c.post("/api/v1/jobs", **post, json={  # type: ignore[arg-type]
+            "plan": {**PLAN, "specimen": "ahead"}}).json()["id"])
+        behind = int(c.post("/api/v1/jobs", **post, json={  # type: ignore[arg-type]
+            "plan": {**PLAN, "specimen": "behind"}}).json()["id"])
+    try:
+        with daemon.client() as c:
+            deadline = time.monotonic() + 120
+            while c.get(f"/api/v1/jobs/{holding}").json()["time_left_s"] is None:
+                assert time.monotonic() < deadline, "the running job never had a time left"
+                time.sleep(0.2)
+            listed = {j["id"]: j for j in c.get("/api/v1/jobs").json()}
+            left = c.get(f"/api/v1/jobs/{holding}").json()["time_left_s"]
+        first, second = listed[ahead], listed[behind]
+        # Counted down between the two reads: the list's estimate is a little larger.
+        assert left <= first["starts_in_s"] <= left + 30, (left, first)
+        assert second["starts_in_s"] > first["starts_in_s"], (first, second)
+        assert not first["starts_in_bound"] and not second["starts_in_bound"]
+        assert first["starts_in_estimate"] == f"job {holding}'s time left"
+        assert second["starts_in_estimate"] == (
+            f"job {holding}'s time left plus the estimated durations of job {ahead} ahead")
+        assert listed[holding]["starts_in_s"] is None
+        assert listed[holding]["starts_in_estimate"] is None
+
+        wait = open_live(browser, daemon, 120)
+        for job in (ahead, behind):
+            wait.until(lambda d, job=job: _eta_cell(d, job)[0].startswith("starts in about "))
+        assert "time left" in _eta_cell(browser, behind)[1]
+        with daemon.client() as c:
+            assert c.post("/api/v1/rig/halt").status_code == 200
+        for job in (ahead, behind):
+            wait.until(lambda d, job=job: _eta_cell(d, job)[0] == "start unknown")
+        assert _eta_cell(browser, ahead)[1].startswith("not known: the queue is held")
+        with daemon.client() as c:
+            for j in c.get("/api/v1/jobs", params={"state": "queued"}).json():
+                assert j["starts_in_s"] is None, j
+    finally:
+        with daemon.client() as c:
+            for job in (ahead, behind):
+                c.post(f"/api/v1/jobs/{job}/cancel")
+            if _state(daemon, holding) not in {*ENDED, "halted"}:
+                c.post(f"/api/v1/jobs/{holding}/abort")
+            assert c.post("/api/v1/rig/release").status_code == 200
