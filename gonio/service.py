@@ -674,6 +674,8 @@ class GonioService:
             for row in self.store.active_jobs():
                 d = self.get_job(row.id)
                 left = d.eta_s if row.kind == "calibration" else d.time_left_s
+                if row.kind == "calibration" and row.state is JobState.RECONSTRUCTING:
+                    left = 0.0  # its factors take a moment: it has no finishing estimate
                 if row.kind != "calibration":
                     build_due = False  # its time left holds the build, when one is due
                 if left is None:
@@ -1006,6 +1008,12 @@ class GonioService:
         """The name job ``job_id``'s result file downloads under: the job and its specimen
         (:func:`gonio.result_views.download_stem`), ``.h5``."""
         return f"{download_stem(job_id, self._row(job_id).specimen)}.h5"
+
+    def colour_csv_name(self, job_id: int) -> str:
+        """The name job ``job_id``'s colour CSV downloads under: the job and its specimen, as
+        its result file and exports (:func:`gonio.result_views.download_stem`), then
+        ``-colour.csv``."""
+        return f"{download_stem(job_id, self._row(job_id).specimen)}-colour.csv"
 
     def damaged_results(self) -> list[str]:
         """One line per completed job whose result file is missing or damaged."""
