@@ -335,18 +335,29 @@ function fillRow(tr, job) {
   tr.dataset.id = job.id;
   tr.dataset.state = job.state;
   tr.classList.toggle("selected", job.id === selected);
-  while (tr.children.length < 8) tr.append(document.createElement("td"));
+  while (tr.children.length < 7) tr.append(document.createElement("td"));
   const td = [...tr.children];
-  td[3].className = "priority";
-  for (const [i, text] of [[0, job.id], [1, job.specimen], [2, job.kind], [3, job.priority]]) {
+  for (const [i, text] of [[0, job.id], [1, job.specimen]]) {
     fillCell(td[i], [text], () => { td[i].textContent = text ?? ""; });
   }
+  // The priority under the kind (a column of its own pushed the row's buttons out of a narrow
+  // window): for queued jobs, whose order it decides, and for any job whose priority is not 0.
+  const priority = job.state === "queued" || job.priority !== 0 ? `priority ${job.priority}` : null;
+  td[2].className = "kind";
+  fillCell(td[2], [job.kind, priority], (c) => {
+    c.textContent = job.kind;
+    if (priority) {
+      const span = document.createElement("span");
+      span.className = "priority muted"; span.textContent = priority;
+      c.append(span);
+    }
+  });
   // Why a job stopped or waits, in the row itself (not only in a tooltip); for a queued job
   // why it does not start (the daemon's words, as GET /jobs/{id} and gonio jobs give them):
   // a held queue, or a paused or suspended job holding the rig.
   const why = job.reason && SHOW_REASON.has(job.state) ? job.reason
     : job.state === "queued" && job.waiting ? job.waiting : null;
-  fillCell(td[4], [job.state, why], (c) => {
+  fillCell(td[3], [job.state, why], (c) => {
     c.className = `state-${job.state}`;
     c.textContent = job.state;
     if (why) {
@@ -355,12 +366,12 @@ function fillRow(tr, job) {
       c.append(span);
     }
   });
-  fillProgress(td[5], job);
-  td[6].className = "eta";
+  fillProgress(td[4], job);
+  td[5].className = "eta";
   // A queued job that is loading its basis before its first reading says so instead.
-  if (job.state === "queued" && !(job.id === selected && etaText())) fillStart(td[6], job);
-  else if (job.id === selected) fillEta(td[6]); else fillEta(td[6], activeDetail, job.id);
-  fillActions(td[7], ACTIONS[job.state] ?? []);
+  if (job.state === "queued" && !(job.id === selected && etaText())) fillStart(td[5], job);
+  else if (job.id === selected) fillEta(td[5]); else fillEta(td[5], activeDetail, job.id);
+  fillActions(td[6], ACTIONS[job.state] ?? []);
 }
 
 // The row's buttons, each carrying its action; the tbody's one listener (initQueue) finds the

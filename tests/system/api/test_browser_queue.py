@@ -200,7 +200,8 @@ def test_the_scan_form_sends_a_priority_and_refuses_one_that_is_not_a_whole_numb
         with daemon.client() as c:
             assert c.get(f"/api/v1/jobs/{job}").json()["priority"] == 7
         wait.until(lambda d: d.find_element(
-            By.CSS_SELECTOR, f"#jobs tr[data-id='{job}'] td.priority").text == "7")
+            By.CSS_SELECTOR, f"#jobs tr[data-id='{job}'] td.kind .priority").text
+            == "priority 7")
         assert not browser.find_element(By.ID, "message").is_displayed(), \
             browser.find_element(By.ID, "message").text
     finally:
