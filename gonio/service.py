@@ -206,6 +206,7 @@ class GonioService:
                                   self.record_event)
         """Manual stage commands (commissioning, loading specimens)."""
         store.add_listener(self._track_stage)
+        store.add_listener(self._track_completions)
 
     # ------------------------------------------------------------------ lifecycle
     async def start(self) -> None:
@@ -265,6 +266,7 @@ class GonioService:
         self._say_what_stays_active()
         self.events.close()
         self.store.remove_listener(self._track_stage)
+        self.store.remove_listener(self._track_completions)
         for lock in reversed(self.owned):
             lock.release()
         self.owned.clear()
@@ -980,6 +982,13 @@ class GonioService:
             ev.data.get("position_deg") if ev.type == "stage" else None)
         if isinstance(pos, int | float):
             self.stage_deg = float(pos)
+
+    def _track_completions(self, ev: EventRow) -> None:
+        # A job completed: the finishing estimate is read again at the next ask, not up to
+        # 5 s later (the job list asks for it whenever jobs are queued, so a cached estimate
+        # from before the completion was served to the next job's time left).
+        if ev.type == "state" and ev.data.get("state") == JobState.COMPLETED.value:
+            self._finishing_cache = None
 
     def add_event_listener(self, fn: Callable[[Event], None]) -> Callable[[EventRow], None]:
         """Call ``fn(event)`` right after each event is stored (:meth:`EventHub.add_listener`)."""
