@@ -81,7 +81,13 @@ from gonio.service_models import (
 from gonio.stage_control import StageControl
 from gonio.store import EventRow, JobRow, JobStore, ReadingRow
 from gonio.store import NotFound as StoreNotFound
-from gonio.timeleft import FinishingEstimate, finishing_estimate
+from gonio.timeleft import (
+    FinishingEstimate,
+    QueuedRun,
+    StartEstimate,
+    finishing_estimate,
+    start_estimates,
+)
 from gonio.worker import Worker
 
 if TYPE_CHECKING:  # the design numerics load on the first design, not with the service
@@ -162,6 +168,8 @@ class GonioService:
         self.data_dir = Path(data_dir).absolute()
         self.desc = RigDescription.from_rig(self._rig)
         self._max_angles_of: dict[int, int | None] = {}  # adaptive jobs' bound (_max_angles)
+        # Queued jobs' dry-run measuring time and whether it is a bound (_measuring_estimate).
+        self._measuring_of: dict[int, tuple[float, bool] | None] = {}
         self._finishing_cache: tuple[float, FinishingEstimate] | None = None
         self._connected = False
         self._connect_error: str | None = None
@@ -198,6 +206,7 @@ class GonioService:
                                   self.record_event)
         """Manual stage commands (commissioning, loading specimens)."""
         store.add_listener(self._track_stage)
+        store.add_listener(self._track_completions)
 
     # ------------------------------------------------------------------ lifecycle
     async def start(self) -> None:
@@ -257,6 +266,7 @@ class GonioService:
         self._say_what_stays_active()
         self.events.close()
         self.store.remove_listener(self._track_stage)
+        self.store.remove_listener(self._track_completions)
         for lock in reversed(self.owned):
             lock.release()
         self.owned.clear()
@@ -644,9 +654,85 @@ class GonioService:
     def list_jobs(self, state: str | None = None) -> list[JobInfo]:
         rows = [r for r in self.store.list_jobs([state] if state else None)
                 if not self.worker.being_removed(r.id)]
-        wait = (self._queue_wait() if any(r.state is JobState.QUEUED for r in rows)
-                else None)
-        return [JobInfo.from_row(r, self._max_angles(r), wait) for r in rows]
+        queued = any(r.state is JobState.QUEUED for r in rows)
+        wait = self._queue_wait() if queued else None
+        starts = self._start_estimates(wait) if queued else {}
+        return [JobInfo.from_row(r, self._max_angles(r), wait, start=starts.get(r.id))
+                for r in rows]
+
+    def _start_estimates(self, wait: str | None) -> dict[int, StartEstimate]:
+        """Each queued job's estimated start (:func:`gonio.timeleft.start_estimates`), by id.
+
+        ``wait``: :meth:`_queue_wait` now. The rig is free after the job holding it: its
+        ``time_left_s`` (a calibration's ``eta_s``, which has no reconstruction), an adaptive
+        one's bounded by its ``eta_max_s``. Not known while the queue waits (``wait``: a hold,
+        the maintenance lock, a paused or suspended job), while the disk is full, or while the
+        job holding the rig has no estimate. Each queued job lasts its dry run's measuring
+        (:meth:`_measuring_estimate`) plus, for a scan, the finishing estimate; the first scan
+        also waits for a basis build when one is due and no job under way does it first.
+        """
+        queued = [r for r in self.store.queue() if not self.worker.being_removed(r.id)]
+        if not queued:
+            return {}
+        free_s: float | None = 0.0
+        bound = False
+        source = ""
+        build_due = self.basis.build_needed()
+        full = self.disk_full
+        if wait is not None:
+            free_s, source = None, wait
+        elif full is not None:
+            free_s, source = None, f"no job starts while {full}"
+        else:
+            for row in self.store.active_jobs():
+                d = self.get_job(row.id)
+                left = d.eta_s if row.kind == "calibration" else d.time_left_s
+                if row.kind == "calibration" and row.state is JobState.RECONSTRUCTING:
+                    left = 0.0  # its factors take a moment: it has no finishing estimate
+                if row.kind != "calibration":
+                    build_due = False  # its time left holds the build, when one is due
+                if left is None:
+                    what = ("its finishing has run past its estimate"
+                            if row.state is JobState.RECONSTRUCTING
+                            else "it has no time estimate yet")
+                    free_s, source = None, f"job {row.id} holds the rig and {what}"
+                    break
+                if d.eta_max_s is not None and d.eta_s is not None and d.eta_max_s > d.eta_s:
+                    left += d.eta_max_s - d.eta_s
+                    bound = True
+                free_s = (free_s or 0.0) + left
+                source = f"job {row.id}'s time left"
+        finishing = self._finishing_estimate().seconds
+        runs: list[QueuedRun] = []
+        for row in queued:
+            measuring = self._measuring_estimate(row)
+            if measuring is None:
+                runs.append(QueuedRun(row.id, None))
+                continue
+            seconds, is_bound = measuring
+            if row.kind != "calibration":
+                seconds += finishing
+                if build_due:
+                    seconds += BASIS_BUILD_S
+                    build_due = False
+            runs.append(QueuedRun(row.id, seconds, is_bound))
+        return {run.job_id: est for run, est in
+                zip(runs, start_estimates(free_s, bound, source, runs), strict=True)}
+
+    def _measuring_estimate(self, row: JobRow) -> tuple[float, bool] | None:
+        """A queued job's measuring time by its dry run (from 0 deg), seconds, and whether it
+        is a bound (an adaptive or auto-arc plan's ``max_estimated_s``), once per job; None
+        for a plan the dry run cannot time on this rig."""
+        if row.id not in self._measuring_of:
+            try:
+                r = dry_run(parse_stored_plan(row.plan), self.desc)
+            except PlanError:
+                self._measuring_of[row.id] = None
+            else:
+                self._measuring_of[row.id] = ((r.max_estimated_s, True)
+                                              if r.max_estimated_s is not None
+                                              else (r.estimated_s, False))
+        return self._measuring_of[row.id]
 
     def _queue_wait(self) -> str | None:
         """:func:`gonio.jobstates.queue_wait` of this daemon now: its queue hold (or the
@@ -706,11 +792,13 @@ class GonioService:
                 build = (build or 0.0) + asym
             if row.state is JobState.RECONSTRUCTING and self.worker.current_job == job_id:
                 finishing_for = self.worker.finishing_seconds()
+        wait = self._queue_wait() if queued else None
         return JobDetail.from_row(
-            row, self._max_angles(row), self._queue_wait() if queued else None,
+            row, self._max_angles(row), wait,
             queue_position=self.store.queue_position(job_id) if queued else None,
             progress=self.worker.progress(job_id), activity=activity, finishing=est,
-            basis_build_s=build, finishing_for_s=finishing_for)
+            basis_build_s=build, finishing_for_s=finishing_for,
+            start=self._start_estimates(wait).get(job_id) if queued else None)
 
     def _asymmetric_build_due(self, row: JobRow) -> float | None:
         """Seconds ``row``'s finishing will wait for the basis for specimens without twofold
@@ -909,6 +997,13 @@ class GonioService:
         if isinstance(pos, int | float):
             self.stage_deg = float(pos)
 
+    def _track_completions(self, ev: EventRow) -> None:
+        # A job completed: the finishing estimate is read again at the next ask, not up to
+        # 5 s later (the job list asks for it whenever jobs are queued, so a cached estimate
+        # from before the completion was served to the next job's time left).
+        if ev.type == "state" and ev.data.get("state") == JobState.COMPLETED.value:
+            self._finishing_cache = None
+
     def add_event_listener(self, fn: Callable[[Event], None]) -> Callable[[EventRow], None]:
         """Call ``fn(event)`` right after each event is stored (:meth:`EventHub.add_listener`)."""
         return self.events.add_listener(fn)
@@ -936,6 +1031,12 @@ class GonioService:
         """The name job ``job_id``'s result file downloads under: the job and its specimen
         (:func:`gonio.result_views.download_stem`), ``.h5``."""
         return f"{download_stem(job_id, self._row(job_id).specimen)}.h5"
+
+    def colour_csv_name(self, job_id: int) -> str:
+        """The name job ``job_id``'s colour CSV downloads under: the job and its specimen, as
+        its result file and exports (:func:`gonio.result_views.download_stem`), then
+        ``-colour.csv``."""
+        return f"{download_stem(job_id, self._row(job_id).specimen)}-colour.csv"
 
     def damaged_results(self) -> list[str]:
         """One line per completed job whose result file is missing or damaged."""

@@ -17,7 +17,7 @@ from gonio.jobstates import JobState
 from gonio.plans.models import Plan
 from gonio.store import EventRow, JobRow, JobStore
 from gonio.store import NotFound as StoreNotFound
-from gonio.timeleft import FinishingEstimate, time_left
+from gonio.timeleft import FinishingEstimate, StartEstimate, time_left
 
 if TYPE_CHECKING:
     from gonio.engine import Progress
@@ -88,16 +88,39 @@ class JobInfo(BaseModel):
         "held by a halt, a failed job or the maintenance lock, or a paused or suspended job "
         "holds the rig) and what lets it start; null when it starts once the rig is free "
         "(the queue_position says when). The lab page and gonio jobs list say the same")
+    starts_in_s: float | None = Field(
+        default=None, description="queued jobs: estimated seconds until the job starts, an "
+        "estimate: the time left of the job holding the rig (its time_left_s; a calibration's "
+        "eta_s) plus, for each queued job ahead, its dry run's estimated_s (an adaptive or "
+        "auto-arc plan's max_estimated_s) and the reconstruction_s estimate (scans), and one "
+        "basis build when one is due. Null when it is not known (starts_in_estimate says why: "
+        "the queue is held or waits for a paused or suspended job, the job holding the rig or "
+        "one ahead has no estimate yet) and for jobs that are not queued")
+    starts_in_bound: bool = Field(
+        default=False, description="true: starts_in_s counts an adaptive job (holding the "
+        "rig or ahead) with every refinement round in full, an upper bound: the job may "
+        "start sooner")
+    starts_in_estimate: str | None = Field(
+        default=None, description="queued jobs: what starts_in_s rests on, in words, or why "
+        "it is not known; null for jobs that are not queued")
 
     @classmethod
     def from_row(cls, row: JobRow, max_angles: int | None = None,
-                 waiting: str | None = None) -> JobInfo:
+                 waiting: str | None = None, *,
+                 start: StartEstimate | None = None) -> JobInfo:
+        """One line of the job list from the stored row; ``waiting`` and ``start`` (the
+        service's :func:`gonio.timeleft.start_estimates`) are kept for queued jobs only."""
+        queued = row.state is JobState.QUEUED
+        starts = start if queued and start is not None else None
         return cls(
             id=row.id, state=row.state, kind=row.kind, specimen=row.specimen,
             priority=row.priority, created=row.created, started=row.started,
             finished=row.finished, done_angles=row.done_angles, total_angles=row.total_angles,
             max_angles=max_angles, reason=row.reason,
-            waiting=waiting if row.state is JobState.QUEUED else None,
+            waiting=waiting if queued else None,
+            starts_in_s=starts.seconds if starts is not None else None,
+            starts_in_bound=starts.bound if starts is not None else False,
+            starts_in_estimate=starts.source if starts is not None else None,
         )
 
 
@@ -145,7 +168,8 @@ class JobDetail(JobInfo):
                  activity: tuple[str, float | None] | None = None,
                  finishing: FinishingEstimate | None = None,
                  basis_build_s: float | None = None,
-                 finishing_for_s: float | None = None) -> JobDetail:
+                 finishing_for_s: float | None = None,
+                 start: StartEstimate | None = None) -> JobDetail:
         """One job's status from its stored row and what is known of it live: the one
         assembly of ``GET /api/v1/jobs/{id}`` (:meth:`gonio.service.GonioService.get_job`)
         and ``gonio jobs show`` (which has no live parts when no daemon runs the store).
@@ -162,6 +186,7 @@ class JobDetail(JobInfo):
             None leaves the time fields of an active job null.
         basis_build_s : the basis build the job's finishing waits for, seconds, or None.
         finishing_for_s : while the job reconstructs, how long it has finished so far.
+        start : a queued job's estimated start (as :meth:`JobInfo.from_row`), or None.
         """
         eta = eta_max = None
         if progress is not None:
@@ -170,7 +195,7 @@ class JobDetail(JobInfo):
             if progress.eta_max_s is not None:
                 eta_max = max(progress.eta_max_s - (progress.eta_s or 0.0) + (eta or 0.0),
                               eta or 0.0)
-        base = JobInfo.from_row(row, max_angles, waiting).model_dump()
+        base = JobInfo.from_row(row, max_angles, waiting, start=start).model_dump()
         times: dict[str, Any] = {}
         measuring = row.state in (JobState.RUNNING, JobState.PAUSED, JobState.SUSPENDED)
         if (finishing is not None and row.kind != "calibration"

@@ -89,3 +89,73 @@ def time_left(eta_s: float | None, basis_build_s: float | None, finishing_s: flo
     if eta_s is None:
         return None
     return eta_s + (basis_build_s or 0.0) + finishing_s
+
+
+@dataclass(frozen=True)
+class QueuedRun:
+    """A queued job's estimated duration, start to end, for :func:`start_estimates`."""
+
+    job_id: int
+    seconds: float | None
+    """Measuring (the dry run's), then finishing; None when it has no estimate."""
+    bound: bool = False
+    """True when ``seconds`` is an upper bound (an adaptive plan, every round in full)."""
+
+
+@dataclass(frozen=True)
+class StartEstimate:
+    """When a queued job is estimated to start, and in words what that rests on (or why it
+    is not known)."""
+
+    seconds: float | None
+    bound: bool
+    source: str
+
+
+def _jobs(ids: Sequence[int]) -> str:
+    return f"job {ids[0]}" if len(ids) == 1 else "jobs " + ", ".join(str(i) for i in ids)
+
+
+def start_estimates(rig_free_s: float | None, rig_free_bound: bool, rig_free_source: str,
+                    queue: Sequence[QueuedRun]) -> list[StartEstimate]:
+    """Estimated start of each queued job: the time until the rig is free plus the estimated
+    durations of the queued jobs ahead of it.
+
+    Parameters
+    ----------
+    rig_free_s : seconds until the job holding the rig has ended (0 when none does); None
+        when that is not known (a job suspended or paused, a held queue, a job without an
+        estimate yet): then no queued job's start is known.
+    rig_free_bound : True when ``rig_free_s`` is an upper bound (an adaptive job, every round
+        in full).
+    rig_free_source : what ``rig_free_s`` rests on, in words, or why it is not known.
+    queue : the queued jobs in the order the queue takes them.
+
+    Returns
+    -------
+    One :class:`StartEstimate` per queued job, in ``queue``'s order. A job behind one without
+    an estimate has none either (None, never a guess); its ``source`` names that job.
+    """
+    out: list[StartEstimate] = []
+    t, bound = rig_free_s, rig_free_bound
+    why = rig_free_source if rig_free_s is None else ""
+    ahead: list[int] = []
+    for run in queue:
+        if t is None:
+            out.append(StartEstimate(None, False, f"not known: {why}"))
+        else:
+            parts = [rig_free_source] if rig_free_s else []
+            if ahead:
+                parts.append(f"the estimated durations of {_jobs(ahead)} ahead")
+            words = " plus ".join(parts) if parts else "nothing holds the rig or is ahead"
+            if bound:
+                words += ("; an upper bound: an adaptive job is counted with every refinement "
+                          "round in full, and may stop sooner")
+            out.append(StartEstimate(t, bound, words))
+            if run.seconds is None:
+                t, why = None, f"job {run.job_id} ahead of it has no duration estimate"
+            else:
+                t += run.seconds
+                bound = bound or run.bound
+        ahead.append(run.job_id)
+    return out

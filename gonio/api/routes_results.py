@@ -301,8 +301,8 @@ async def colour(
         text = (difference_csv(diff, warnings) if diff is not None
                 else report.csv(warnings))
         return Response(text, media_type="text/csv",
-                        headers={"Content-Disposition":
-                                 f'attachment; filename="gonio-job-{job_id}-colour.csv"'})
+                        headers={"Content-Disposition": "attachment; filename="
+                                 f'"{service.colour_csv_name(job_id)}"'})
     out: dict[str, Any] = {"job_id": job_id, "colour": report.as_dict()}
     if warnings:
         out["warnings"] = warnings

@@ -172,7 +172,7 @@ def _show_job(args: argparse.Namespace, store: Any) -> int:
     from gonio.rigdescription import RigDescription
     from gonio.service_models import JobDetail
     from gonio.store import NotFound
-    from gonio.timeleft import finishing_estimate
+    from gonio.timeleft import QueuedRun, finishing_estimate, start_estimates
 
     if args.job_id is None:
         raise UsageError("jobs show needs a job id, e.g. 'gonio jobs show 3 --db jobs.sqlite'")
@@ -199,12 +199,17 @@ def _show_job(args: argparse.Namespace, store: Any) -> int:
     active = row.state in ACTIVE_STATES
     # Why a queued job waits needs the active jobs only, not the whole list again (every
     # job's plan and rig decoded, this one's a second time).
+    waiting = (_queue_wait(store, args.db, [row, *store.list_jobs(ACTIVE_STATES)])
+               if queued else None)
+    # A queue that waits gives no start, in the daemon's words; when it runs, the estimate
+    # rests on the running job's live time left, the daemon's alone (null here).
+    start = (start_estimates(None, False, waiting, [QueuedRun(row.id, None)])[0]
+             if waiting is not None else None)
     detail = JobDetail.from_row(
-        row, max_angles,
-        _queue_wait(store, args.db, [row, *store.list_jobs(ACTIVE_STATES)]) if queued else None,
+        row, max_angles, waiting,
         queue_position=store.queue_position(row.id) if queued else None,
         finishing=(finishing_estimate(store.list_jobs(["completed"]))
-                   if active and row.kind != "calibration" else None))
+                   if active and row.kind != "calibration" else None), start=start)
     # A paused job waits for the user whether or not a process holds the store.
     interrupted = holder is None and row.state.value in ("running", "suspended",
                                                          "reconstructing")

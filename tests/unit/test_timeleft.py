@@ -8,7 +8,13 @@ import pytest
 
 from gonio.jobstates import JobState
 from gonio.store import JobRow
-from gonio.timeleft import FINISHING_FALLBACK_S, finishing_estimate, time_left
+from gonio.timeleft import (
+    FINISHING_FALLBACK_S,
+    QueuedRun,
+    finishing_estimate,
+    start_estimates,
+    time_left,
+)
 
 
 def _row(job_id: int, kind: str = "uniform", summary: dict[str, Any] | None = None) -> JobRow:
@@ -53,3 +59,40 @@ def test_time_left_adds_what_follows_measuring(eta: float | None, build: float |
                                               finishing: float, elapsed: float | None,
                                               expected: float | None) -> None:
     assert time_left(eta, build, finishing, elapsed) == expected
+
+
+def test_each_queued_job_starts_after_the_rig_is_free_and_the_jobs_ahead() -> None:
+    runs = [QueuedRun(4, 30.0), QueuedRun(5, 45.0), QueuedRun(6, 10.0)]
+    starts = start_estimates(100.0, False, "job 3's time left", runs)
+    assert [s.seconds for s in starts] == [100.0, 130.0, 175.0]
+    assert not any(s.bound for s in starts)
+    assert starts[0].source == "job 3's time left"
+    assert starts[2].source == "job 3's time left plus the estimated durations of jobs 4, 5 ahead"
+
+
+def test_a_free_rig_starts_the_first_queued_job_now() -> None:
+    starts = start_estimates(0.0, False, "", [QueuedRun(1, 20.0), QueuedRun(2, 5.0)])
+    assert [s.seconds for s in starts] == [0.0, 20.0]
+    assert starts[1].source == "the estimated durations of job 1 ahead"
+
+
+def test_an_unknown_rig_free_time_leaves_every_start_unknown_and_says_why() -> None:
+    starts = start_estimates(None, False, "waits for job 3 (suspended until its device "
+                             "answers)", [QueuedRun(4, 30.0), QueuedRun(5, 45.0)])
+    assert [s.seconds for s in starts] == [None, None]
+    assert all(s.source.startswith("not known: waits for job 3 (suspended") for s in starts)
+
+
+def test_a_job_without_an_estimate_leaves_the_jobs_behind_it_unknown() -> None:
+    starts = start_estimates(10.0, False, "job 1's time left",
+                             [QueuedRun(2, None), QueuedRun(3, 45.0), QueuedRun(4, 5.0)])
+    assert [s.seconds for s in starts] == [10.0, None, None]
+    assert starts[2].source == "not known: job 2 ahead of it has no duration estimate"
+
+
+def test_an_adaptive_job_ahead_makes_the_later_starts_bounds() -> None:
+    starts = start_estimates(10.0, False, "job 1's time left",
+                             [QueuedRun(2, 60.0, bound=True), QueuedRun(3, 5.0)])
+    assert [s.bound for s in starts] == [False, True]
+    assert "upper bound" in starts[1].source and "upper bound" not in starts[0].source
+    assert start_estimates(10.0, True, "job 1's time left", [QueuedRun(2, 5.0)])[0].bound

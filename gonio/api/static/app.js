@@ -211,6 +211,23 @@ function etaText(d = selectedDetail, id = selected) {
   return t;
 }
 
+// A queued job's estimated start (the daemon's starts_in_s: the time left of the job holding
+// the rig plus the estimated durations of the jobs ahead), or "start unknown" when the daemon
+// has none (a held queue, a paused or suspended job holding the rig): never a made-up number.
+// "within" when an adaptive job is counted at its bound (it may start sooner). What the
+// estimate rests on, or why there is none, is the cell's tooltip.
+function startText(job) {
+  if (readsRefused() || job.state !== "queued" || job.starts_in_estimate == null) return "";
+  if (job.starts_in_s == null) return "start unknown";
+  if (job.starts_in_s < 1) return "starts now";
+  return `starts ${job.starts_in_bound ? "within" : "in"} about ${eta(job.starts_in_s)}`;
+}
+
+function fillStart(td, job) {
+  const text = startText(job), title = job.starts_in_estimate ?? "";
+  fillCell(td, [text, title], () => { td.textContent = text; td.title = title; });
+}
+
 // The ETA cell's tooltip: what the reconstruction estimate rests on.
 function etaTitle(d = selectedDetail, id = selected) {
   return d && d.id === id && d.reconstruction_estimate
@@ -320,9 +337,21 @@ function fillRow(tr, job) {
   tr.classList.toggle("selected", job.id === selected);
   while (tr.children.length < 7) tr.append(document.createElement("td"));
   const td = [...tr.children];
-  for (const [i, text] of [[0, job.id], [1, job.specimen], [2, job.kind]]) {
+  for (const [i, text] of [[0, job.id], [1, job.specimen]]) {
     fillCell(td[i], [text], () => { td[i].textContent = text ?? ""; });
   }
+  // The priority under the kind (a column of its own pushed the row's buttons out of a narrow
+  // window): for queued jobs, whose order it decides, and for any job whose priority is not 0.
+  const priority = job.state === "queued" || job.priority !== 0 ? `priority ${job.priority}` : null;
+  td[2].className = "kind";
+  fillCell(td[2], [job.kind, priority], (c) => {
+    c.textContent = job.kind;
+    if (priority) {
+      const span = document.createElement("span");
+      span.className = "priority muted"; span.textContent = priority;
+      c.append(span);
+    }
+  });
   // Why a job stopped or waits, in the row itself (not only in a tooltip); for a queued job
   // why it does not start (the daemon's words, as GET /jobs/{id} and gonio jobs give them):
   // a held queue, or a paused or suspended job holding the rig.
@@ -339,7 +368,9 @@ function fillRow(tr, job) {
   });
   fillProgress(td[4], job);
   td[5].className = "eta";
-  if (job.id === selected) fillEta(td[5]); else fillEta(td[5], activeDetail, job.id);
+  // A queued job that is loading its basis before its first reading says so instead.
+  if (job.state === "queued" && !(job.id === selected && etaText())) fillStart(td[5], job);
+  else if (job.id === selected) fillEta(td[5]); else fillEta(td[5], activeDetail, job.id);
   fillActions(td[6], ACTIONS[job.state] ?? []);
 }
 
@@ -871,11 +902,23 @@ function initForm() {
       input.setCustomValidity(shown && input.value === "" && !input.validity.badInput ? input.dataset.empty : "");
     }
   };
+  // The job's priority (POST /jobs's "priority", -1000..1000, higher starts sooner): anything
+  // but a whole number in range (2.5, 5000, empty) says so at the field, and nothing is sent.
+  const priority = form.elements.priority;
+  const markPriority = () => {
+    const n = Number(priority.value);
+    const ok = !priority.validity.badInput && priority.value.trim() !== "" && Number.isInteger(n)
+      && Math.abs(n) <= 1000;
+    priority.setCustomValidity(ok ? "" : priority.dataset.invalid);
+  };
   form.addEventListener("input", markEmpty);
   form.addEventListener("change", markEmpty);
+  form.addEventListener("input", markPriority);
+  form.addEventListener("change", markPriority);
   // A click on Start scan comes before the browser checks the form (Enter in a field clicks
   // it too), so a field emptied without an input event (a script's) is caught as well.
   $("#start-scan").addEventListener("click", markEmpty);
+  $("#start-scan").addEventListener("click", markPriority);
   kindSel.addEventListener("change", showKind);
   // Each rule's default first round (posterior 4, vf 8) and cap (posterior 16, vf none),
   // unless the user typed another.
@@ -930,8 +973,9 @@ function initForm() {
     e.preventDefault();
     guarded(async () => {
       const plan = readPlan();
+      const priority = Number(form.elements.priority.value);
       let job;
-      try { job = await send("POST", "/jobs", { plan }); } catch (e) {
+      try { job = await send("POST", "/jobs", { plan, priority }); } catch (e) {
         // An uncalibrated scan of a rig that was calibrated is most likely a mistake (the
         // daemon on another data directory): it runs only once the user has accepted it.
         if (!(e instanceof ApiError && e.status === 409 && e.message.includes("accept_uncalibrated"))) throw e;
@@ -939,7 +983,7 @@ function initForm() {
           setNote("Not started: the scan would be uncalibrated.", null);
           return;
         }
-        job = await send("POST", "/jobs?accept_uncalibrated=true", { plan });
+        job = await send("POST", "/jobs?accept_uncalibrated=true", { plan, priority });
       }
       // A scan queued behind one that is measuring (or finishing) leaves that one on screen:
       // its readings, ETA and result are what the lab is waiting for, and the new job has

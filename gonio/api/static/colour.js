@@ -13,7 +13,7 @@
 // The instrument menu starts on the rig's design instrument (GET /api/v1/rig/config, its
 // [design] colour_instrument, written by `gonio design --colour`) when the rig has one, until
 // the user picks another.
-import { getBlob, getJSON, send, sendText } from "./api.js";
+import { getBlob, getFile, getJSON, send, sendText } from "./api.js";
 
 const $ = (sel) => document.querySelector(sel);
 let shown = null;
@@ -108,10 +108,13 @@ async function downloadCsv() {
     const standard = $("#colour-standard").value;
     // Channel values (no CIELAB) cannot be compared: their table alone.
     if (standard && shownSpace === "CIELAB") q.set("against", standard);
-    const file = await getBlob(`/jobs/${id}/colour?${q}`);
+    // Named as the daemon names it, after the job and its specimen as the result and the
+    // exports are ("gonio-job-7-blue-panel-colour.csv"), with the instrument shown.
+    const instrument = $("#colour-instrument").value;
+    const { blob, name } = await getFile(`/jobs/${id}/colour?${q}`, `gonio-job-${id}-colour.csv`);
     const a = document.createElement("a");
-    a.href = URL.createObjectURL(file);
-    a.download = `gonio-job-${id}-colour-${$("#colour-instrument").value}.csv`;
+    a.href = URL.createObjectURL(blob);
+    a.download = name.replace(/\.csv$/, `-${instrument}.csv`);
     a.click();
     state.textContent = `saved ${a.download}`;
   } catch (e) {

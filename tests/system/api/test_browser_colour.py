@@ -282,10 +282,11 @@ def test_a_result_saved_as_a_standard_is_compared_with_by_name_on_the_page(
     shown = [float(tr.find_elements(By.TAG_NAME, "td")[-1].text)
              for tr in browser.find_elements(By.CSS_SELECTOR, "#colour-table tbody tr")]
     assert shown == pytest.approx([r["dE00"] for r in by_job["rows"]], abs=0.011)
-    # The table shown, downloaded as gonio colour --csv writes it (the API has had it).
+    # The table shown, downloaded as gonio colour --csv writes it (the API has had it),
+    # named after the job and its specimen as the result and the exports are.
     click_when_steady(wait, "#colour-csv")
     wait.until(lambda b: b.find_element(By.ID, "colour-standard-state").text
-               == f"saved gonio-job-{ids[1]}-colour-MA98.csv")
+               == f"saved gonio-job-{ids[1]}-blue-panel-batch-2-colour-MA98.csv")
     assert not _severe(browser)
 
 

@@ -154,3 +154,119 @@ def test_moving_a_scan_ahead_of_a_queued_calibration_asks_and_sends_the_acceptan
             for job in (scan, cal):
                 c.post(f"/api/v1/jobs/{job}/cancel")
             assert c.post("/api/v1/rig/release").status_code == 200
+
+
+def test_the_scan_form_sends_a_priority_and_refuses_one_that_is_not_a_whole_number(
+    daemon: Daemon, browser: Any  # noqa: F811
+) -> None:
+    """The API took a priority (``POST /api/v1/jobs``, -1000..1000, higher starts sooner) the
+    scan form had no field for: a lab could only move a job after queueing it. The form now
+    has one, says what higher means, sends it with the job, and the queue shows it; a number
+    that is not a whole one is refused at the field and nothing is sent."""
+    from selenium.webdriver.common.by import By
+
+    with daemon.client() as c:
+        assert c.post("/api/v1/rig/halt").status_code == 200  # the new job stays queued
+    job = None
+    try:
+        wait = open_live(browser, daemon, 120)
+        assert "Higher priority starts sooner" in browser.find_element(
+            By.ID, "priority-help").text
+        form = browser.find_element(By.ID, "scan-form")
+        field = form.find_element(By.NAME, "priority")
+        assert field.get_attribute("value") == "0"
+        specimen = form.find_element(By.NAME, "specimen")
+        specimen.clear()
+        specimen.send_keys("urgent")
+        browser.execute_script("window.__posted = []; const f = window.fetch;"
+                               "window.fetch = (u, i) => { if (i && i.method === 'POST')"
+                               " window.__posted.push(String(u)); return f(u, i); };")
+        for bad in ("2.5", "5000", ""):
+            field.clear()
+            field.send_keys(bad)
+            click_when_steady(wait, "#start-scan")
+            wait.until(lambda d: d.switch_to.active_element == field)
+            said = browser.execute_script("return arguments[0].validationMessage", field)
+            assert "whole number from -1000 to 1000" in said, (bad, said)
+            assert "higher starts sooner" in said, said
+            assert browser.execute_script("return window.__posted") == [], bad
+        field.clear()
+        field.send_keys("7")
+        assert browser.execute_script("return arguments[0].validity.valid", field) is True
+        click_when_steady(wait, "#start-scan")
+        row = "//tbody[@id='jobs']/tr[td[2][text()='urgent']]"
+        wait.until(lambda d: d.find_elements(By.XPATH, row))
+        job = int(browser.find_element(By.XPATH, row).get_attribute("data-id"))
+        with daemon.client() as c:
+            assert c.get(f"/api/v1/jobs/{job}").json()["priority"] == 7
+        wait.until(lambda d: d.find_element(
+            By.CSS_SELECTOR, f"#jobs tr[data-id='{job}'] td.kind .priority").text
+            == "priority 7")
+        assert not browser.find_element(By.ID, "message").is_displayed(), \
+            browser.find_element(By.ID, "message").text
+    finally:
+        with daemon.client() as c:
+            if job is not None:
+                c.post(f"/api/v1/jobs/{job}/cancel")
+            assert c.post("/api/v1/rig/release").status_code == 200
+
+
+def _eta_cell(browser: Any, job: int) -> tuple[str, str]:  # noqa: F811 (the fixture's name)
+    return tuple(browser.execute_script(  # type: ignore[return-value]
+        "const c = document.querySelector(`#jobs tr[data-id='${arguments[0]}'] td.eta`);"
+        "return [c?.textContent ?? '', c?.title ?? ''];", job))
+
+
+def test_queued_jobs_say_when_they_start_and_unknown_when_the_queue_is_held(
+    daemon: Daemon, browser: Any, no_export_fits: None  # noqa: F811
+) -> None:
+    """The queue showed queued jobs with no idea of when they start. Each now says "starts in
+    about ..." (GET /api/v1/jobs' starts_in_s: the running job's time left plus the estimated
+    durations of the jobs ahead), and "start unknown" once the queue is held: no number is
+    made up for a queue that does not run."""
+    with daemon.client() as c:
+        post = {"params": {"accept_uncalibrated": "true"}}
+        holding = int(c.post("/api/v1/jobs", **post, json={  # type: ignore[arg-type]
+            "plan": {**PLAN, "specimen": "holding", "rotations": 400}}).json()["id"])
+        ahead = int(c.post("/api/v1/jobs", **post, json={  # type: ignore[arg-type]
+            "plan": {**PLAN, "specimen": "ahead"}}).json()["id"])
+        behind = int(c.post("/api/v1/jobs", **post, json={  # type: ignore[arg-type]
+            "plan": {**PLAN, "specimen": "behind"}}).json()["id"])
+    try:
+        with daemon.client() as c:
+            deadline = time.monotonic() + 120
+            while c.get(f"/api/v1/jobs/{holding}").json()["time_left_s"] is None:
+                assert time.monotonic() < deadline, "the running job never had a time left"
+                time.sleep(0.2)
+            listed = {j["id"]: j for j in c.get("/api/v1/jobs").json()}
+            left = c.get(f"/api/v1/jobs/{holding}").json()["time_left_s"]
+        first, second = listed[ahead], listed[behind]
+        # Counted down between the two reads: the list's estimate is a little larger.
+        assert left <= first["starts_in_s"] <= left + 30, (left, first)
+        assert second["starts_in_s"] > first["starts_in_s"], (first, second)
+        assert not first["starts_in_bound"] and not second["starts_in_bound"]
+        assert first["starts_in_estimate"] == f"job {holding}'s time left"
+        assert second["starts_in_estimate"] == (
+            f"job {holding}'s time left plus the estimated durations of job {ahead} ahead")
+        assert listed[holding]["starts_in_s"] is None
+        assert listed[holding]["starts_in_estimate"] is None
+
+        wait = open_live(browser, daemon, 120)
+        for job in (ahead, behind):
+            wait.until(lambda d, job=job: _eta_cell(d, job)[0].startswith("starts in about "))
+        assert "time left" in _eta_cell(browser, behind)[1]
+        with daemon.client() as c:
+            assert c.post("/api/v1/rig/halt").status_code == 200
+        for job in (ahead, behind):
+            wait.until(lambda d, job=job: _eta_cell(d, job)[0] == "start unknown")
+        assert _eta_cell(browser, ahead)[1].startswith("not known: the queue is held")
+        with daemon.client() as c:
+            for j in c.get("/api/v1/jobs", params={"state": "queued"}).json():
+                assert j["starts_in_s"] is None, j
+    finally:
+        with daemon.client() as c:
+            for job in (ahead, behind):
+                c.post(f"/api/v1/jobs/{job}/cancel")
+            if _state(daemon, holding) not in {*ENDED, "halted"}:
+                c.post(f"/api/v1/jobs/{holding}/abort")
+            assert c.post("/api/v1/rig/release").status_code == 200

@@ -141,6 +141,9 @@ def test_colour_route(daemon: Daemon, no_export_fits: None) -> None:
         assert body["conditions"] is None and "illuminant" not in body["provenance"]
         text = c.get(f"/api/v1/jobs/{job_id}/colour", params={"format": "csv"})
         assert text.status_code == 200 and text.headers["content-type"].startswith("text/csv")
+        # Named after the job and its specimen, as the result file and the exports are.
+        assert text.headers["content-disposition"] == (
+            f'attachment; filename="gonio-job-{job_id}-panel-colour.csv"')
         rows = list(csv.DictReader(io.StringIO(text.text)))
         assert rows[0]["space"] == "uncalibrated sensor RGB" and len(rows) == 17
         assert {(r["illuminant"], r["observer"]) for r in rows} == {("", "")}

@@ -311,3 +311,41 @@ def test_the_start_refuses_only_an_unasked_uncalibrated_scan(tmp_path: Path) -> 
     # A scan the calibration in effect covers (no reason) starts whatever it was asked.
     svc._uncalibrated_why = lambda plan: None  # type: ignore[method-assign]
     assert svc.unasked_uncalibrated(rows[unasked.id], plan) is None
+
+
+def test_queued_jobs_say_when_they_start_or_that_it_is_not_known(tmp_path: Path) -> None:
+    """Each queued job's starts_in_s: the rig is free (nothing runs: the worker is not
+    started), so the first starts now and each later one after the dry-run durations of those
+    ahead (a scan's with the finishing estimate, the first scan's with a due basis build);
+    a held queue makes every start unknown, said, never a number."""
+    from gonio.plans.dryrun import BASIS_BUILD_S
+
+    _rig, svc = _service(tmp_path)
+    cal_plan = CalibrationPlan(rotations=2, reference_albedo=0.99, exposure=FAST)
+    scan_plan = UniformPlan(rotations=3, exposure=FAST)
+    cal = svc.submit(JobRequest(plan=cal_plan)).id
+    first = svc.submit(JobRequest(plan=scan_plan)).id
+    second = svc.submit(JobRequest(plan=scan_plan)).id
+    jobs = {j.id: j for j in svc.list_jobs()}
+    finishing = svc._finishing_estimate().seconds
+    build = BASIS_BUILD_S if svc.basis.build_needed() else 0.0
+    cal_s = svc.dry_run(cal_plan).estimated_s
+    scan_s = svc.dry_run(scan_plan).estimated_s
+    assert jobs[cal].starts_in_s == 0.0
+    assert jobs[first].starts_in_s == pytest.approx(cal_s)
+    assert jobs[second].starts_in_s == pytest.approx(cal_s + scan_s + finishing + build)
+    assert not any(j.starts_in_bound for j in jobs.values())
+    assert jobs[second].starts_in_estimate == (
+        f"the estimated durations of jobs {cal}, {first} ahead")
+    # The job's own view says the same.
+    assert svc.get_job(second).starts_in_s == jobs[second].starts_in_s
+    svc.halt()
+    for job in svc.list_jobs():
+        assert job.starts_in_s is None
+        assert job.starts_in_estimate is not None
+        assert job.starts_in_estimate.startswith("not known: the queue is held (emergency halt)")
+    svc.release_queue()
+    svc.cancel(cal)
+    ended = svc.get_job(cal)
+    assert ended.starts_in_s is None and ended.starts_in_estimate is None
+    assert svc.list_jobs()[1].starts_in_s == 0.0
