@@ -143,6 +143,9 @@ async function refresh() {
   await refreshStandards();
   // The standard chosen is gone from the folder: the menu fell back to none; ask again.
   if ($("#colour-standard").value !== standard) { shown = null; return refresh(); }
+  // Another refresh (another job chosen) started meanwhile and may have finished: this one
+  // must not write "Computing colour…" over its caption and then leave it standing.
+  if (key !== shown) return;
   box.hidden = false;
   const caption = $("#colour-caption");
   caption.textContent = "Computing colour…";
