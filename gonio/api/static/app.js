@@ -437,11 +437,29 @@ function initQueue() {
   });
 }
 
+// Refreshes overlap (every job event asks for one): an older answer arriving after a newer
+// one drew the queue as it was before (an adaptive job's bar went back from 3 to 2 angles).
+// Only the latest refresh asked for draws; a caller of an older one waits for the latest,
+// so what it reads of `jobs` afterwards is never older than what it asked for.
+let jobsAsked = 0;
+let latestLoad = null;
+
 async function refreshJobs() {
-  jobs = await getJSON("/jobs");
+  let load = loadJobs(++jobsAsked);
+  latestLoad = load;
+  await load;
+  while (latestLoad !== load) { load = latestLoad; await load; }
+}
+
+async function loadJobs(asked) {
+  const listed = await getJSON("/jobs");
+  if (asked !== jobsAsked) return;
+  jobs = listed;
   keyAccepted();
   if (selected !== null && jobs.some((j) => j.id === selected)) {
-    selectedDetail = await getJSON(`/jobs/${selected}`);
+    const detail = await getJSON(`/jobs/${selected}`);
+    if (asked !== jobsAsked) return;
+    selectedDetail = detail;
   }
   clearStaleNotes();
   // The selected job changed state (e.g. completed): its rotation plot changes kind.
@@ -469,9 +487,11 @@ async function pollSelected() {
   selectedDetail = await getJSON(`/jobs/${selected}`);
   const cell = document.querySelector(`#jobs tr[data-id="${selected}"] td.eta`);
   if (cell) fillEta(cell);
-  // An adaptive job's round comes with its detail.
+  // An adaptive job's round comes with its detail; its angles from the list as it is now
+  // (a refresh during the wait may have drawn more than the row read before it).
   const prog = document.querySelector(`#jobs tr[data-id="${selected}"] td.progress`);
-  if (prog) fillProgress(prog, j);
+  const row = jobs.find((x) => x.id === selected) ?? j;
+  if (prog) fillProgress(prog, row);
   if (["reconstructing", "queued"].includes(selectedDetail.state)) showResult(jobs.find((x) => x.id === selected));
 }
 

@@ -235,8 +235,10 @@ def test_a_plan_the_calibration_covers_in_part_is_refused_at_submission(tmp_path
 
     rig = MemRig()
     pairs = list(rig.pairs)
+    # Three channels, as the MemRig sensors read (a calibration of other sensors is refused
+    # before the check under test).
     cal = Calibration(pairs=(PairCalibration(light=pairs[0].light, sensor=pairs[0].sensor,
-                                             factor=(1e-4,)),), source="test")
+                                             factor=(1e-4,) * 3),), source="test")
     svc = GonioService(JobStore(tmp_path / "jobs.sqlite"), rig, data_dir=tmp_path / "d",
                        calibration=cal)
     with pytest.raises(PlanError, match="no factors for") as e:
