@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import signal
 import subprocess
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -33,6 +34,24 @@ def _readings(db: Path) -> int:
         store.close()
 
 
+def _signalled_mid_scan(argv: list[str], db: Path, sig: signal.Signals,
+                        preexec: Callable[[], None] | None = None) -> tuple[int, str, str]:
+    """Run ``gonio ARGV`` as a child, send it ``sig`` once its first reading (of any job) is
+    stored, and return its exit status, stdout and stderr (killed if it outlives the test)."""
+    proc = subprocess.Popen([*GONIO, *argv], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env=child_env(), cwd=PROJECT_ROOT, preexec_fn=preexec)
+    try:
+        wait_for(lambda: _readings(db) > 0 or proc.poll() is not None,
+                 what="the scan's first reading")
+        assert proc.poll() is None, proc.communicate()
+        proc.send_signal(sig)
+        out, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    return proc.returncode, out, err
+
+
 def test_ctrl_c_leaves_the_job_paused_and_the_same_command_resumes_it(tmp_path: Path) -> None:
     rig = tmp_path / "rig.toml"
     data = tmp_path / "data"
@@ -48,19 +67,9 @@ def test_ctrl_c_leaves_the_job_paused_and_the_same_command_resumes_it(tmp_path: 
         # SIGINT as a terminal's foreground job has it: a suite started in the background by a
         # non-interactive shell ignores SIGINT, and a child inherits that, so without the
         # reset the Ctrl-C below would be ignored and the scan would measure to its end.
-        proc = subprocess.Popen([*GONIO, *argv], stdout=subprocess.PIPE,
-                                stderr=subprocess.PIPE, text=True, env=child_env(),
-                                cwd=PROJECT_ROOT, preexec_fn=_default_sigint)
-        try:
-            wait_for(lambda: _readings(db) > 0 or proc.poll() is not None,
-                     what="the scan's first reading")
-            assert proc.poll() is None, proc.communicate()
-            proc.send_signal(signal.SIGINT)  # what Ctrl-C in the terminal sends
-            out, err = proc.communicate(timeout=120)
-        finally:
-            if proc.poll() is None:
-                proc.kill()
-        assert proc.returncode == 130, out + err
+        # SIGINT: what Ctrl-C in the terminal sends.
+        code, out, err = _signalled_mid_scan(argv, db, signal.SIGINT, _default_sigint)
+        assert code == 130, out + err
         store = JobStore(db, durable=False)
         (job,) = store.list_jobs()
         store.close()
@@ -110,19 +119,9 @@ def test_ctrl_c_in_the_sim_calibration_aborts_it_and_says_so(tmp_path: Path) -> 
     # Real time and a long exposure: the calibration (4 angles x 12 pairs) lasts long enough.
     argv = ["scan", "--no-export-fits", "--sim", "--time-scale", "1", "--exposure", "0.3",
             "--data-dir", str(data), "--no-progress", "-o", str(tmp_path / "felt.h5")]
-    proc = subprocess.Popen([*GONIO, *argv], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, env=child_env(), cwd=PROJECT_ROOT,
-                            preexec_fn=_default_sigint)
-    try:
-        wait_for(lambda: _readings(db) > 0 or proc.poll() is not None,
-                 what="the calibration's first reading")
-        assert proc.poll() is None, proc.communicate()
-        proc.send_signal(signal.SIGINT)
-        out, err = proc.communicate(timeout=120)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-    assert proc.returncode == 130, out + err
+    # The first reading stored is the calibration's.
+    code, out, err = _signalled_mid_scan(argv, db, signal.SIGINT, _default_sigint)
+    assert code == 130, out + err
     store = JobStore(db, durable=False)
     (job,) = store.list_jobs()
     store.close()
@@ -148,19 +147,8 @@ def test_sigterm_or_sighup_stops_the_scan_as_ctrl_c_does(
         argv = ["scan", "--no-export-fits", "--accept-uncalibrated",
                 "--rig", str(rig), "--rotations", "6", "--exposure", "0.5",
                 "--data-dir", str(data), "--no-progress", "-o", str(tmp_path / "felt.h5")]
-        proc = subprocess.Popen([*GONIO, *argv], stdout=subprocess.PIPE,
-                                stderr=subprocess.PIPE, text=True, env=child_env(),
-                                cwd=PROJECT_ROOT)
-        try:
-            wait_for(lambda: _readings(db) > 0 or proc.poll() is not None,
-                     what="the scan's first reading")
-            assert proc.poll() is None, proc.communicate()
-            proc.send_signal(sig)
-            out, err = proc.communicate(timeout=120)
-        finally:
-            if proc.poll() is None:
-                proc.kill()
-    assert proc.returncode == 130, out + err
+        code, out, err = _signalled_mid_scan(argv, db, sig)
+    assert code == 130, out + err
     store = JobStore(db, durable=False)
     (job,) = store.list_jobs()
     store.close()
