@@ -21,7 +21,7 @@ from gonio.cli.daemon_client import (
     DaemonRefused,
     DaemonUnreachable,
 )
-from gonio.cli.scan_commands import (
+from gonio.cli.scan_report import (
     FINAL_STATES,
     check_output_path,
     dry_run_summary,

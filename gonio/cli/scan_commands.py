@@ -25,9 +25,13 @@ from gonio.wording import counted
 
 if TYPE_CHECKING:
     from gonio.basis_supply import BasisSupply
-
-
-FINAL_STATES = ("completed", "failed", "aborted", "halted")
+from gonio.cli.scan_report import (
+    FINAL_STATES,
+    check_output_path,
+    dry_run_summary,
+    print_scan_summary,
+    suspended_line,
+)
 
 
 def register(subparsers: Any) -> None:
@@ -296,37 +300,6 @@ def _stop_on_terminate(stopped: list[str]) -> None:
             loop.add_signal_handler(sig, stop, sig)
 
 
-def check_output_path(out: Path, nothing: str = "nothing was measured") -> None:
-    """Refuse an ``-o`` that cannot be written before anything is measured.
-
-    The result is copied to ``-o`` when the scan has finished: a folder that cannot be made or
-    written found only then cost the lab the whole scan's wait for an error (the result stays
-    in the data directory, but the message did not say so). A file is made and removed in the
-    folder, so whatever the file system or the permissions refuse is found now.
-
-    Parameters
-    ----------
-    out : the result file ``-o`` names
-    nothing : what the refusal says was left undone (``gonio jobs wait`` measures nothing)
-    """
-    import os
-    import tempfile
-
-    folder = out.parent
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-        fd, probe = tempfile.mkstemp(prefix=".gonio-probe-", dir=folder)
-        os.close(fd)
-        os.unlink(probe)
-    except OSError as exc:
-        why = exc.strerror or str(exc)
-        raise UsageError(f"-o {out}: cannot write into {folder} ({why}); choose another "
-                         f"location for the result ({nothing})") from None
-    if out.is_dir():
-        raise UsageError(f"-o {out} is a folder; give the result file's name, e.g. "
-                         f"{out / 'felt.h5'}")
-
-
 def _copy_result(src: Path, out: Path, job_id: int) -> None:
     """Copy a completed job's result to ``-o``; when that fails, say where the result is."""
     try:
@@ -510,86 +483,6 @@ async def _run_owned(args: argparse.Namespace, checked: Any, config: Any, sim: A
     return 0
 
 
-def scan_summary(job_id: int, summary: dict[str, Any], out: Path | None,
-                 kept: str) -> list[tuple[str, bool]]:
-    """The end-of-scan summary of completed scan ``job_id``, the same whoever ran it.
-
-    Both ``gonio scan`` and ``gonio scan --daemon`` print it, from the job's stored summary
-    alone: the headline (samples, their units, the headline error), where the result is (``out``
-    and ``kept``, where the data directory or the daemon keeps its own copy), the calibration
-    the values carry, what the headline error means and the result's warnings.
-
-    Parameters
-    ----------
-    job_id
-        The job's id.
-    summary
-        The job's ``result`` summary (:func:`gonio.finishing.finish_job`).
-    out
-        The copy written for ``-o``; None when none was (``gonio jobs --daemon URL wait ID``
-        without ``-o``).
-    kept
-        Where the original stays, in words (``kept in PATH``, or the daemon's URL).
-
-    Returns
-    -------
-    list of (line, to_stderr)
-        Lines for standard output, and warnings (``True``) for standard error.
-    """
-    from gonio.figures import headline_error, local_prior_text
-
-    calibrated = bool(summary.get("calibrated"))
-    units = "1/sr" if calibrated else "sensor units (uncalibrated)"
-    err = headline_error(summary)
-    err_text = f"{err['key']} {err['text']}" if err else "no error estimate"
-    n = summary.get("n_samples", summary.get("readings"))
-    where = f"wrote {out} ({kept})" if out is not None else kept
-    lines: list[tuple[str, bool]] = [
-        (f"job {job_id} completed: {n} samples in {units}, {err_text}; {where}", False)]
-    cal = summary.get("calibration")
-    source = cal.get("source") if isinstance(cal, dict) else None
-    if calibrated:
-        lines.append((f"  calibration: {source or 'recorded in the result'}", False))
-    else:
-        lines.append(("  calibration: none in effect (values are sensor units, not BRDF; "
-                      "calibrate with --white-reference ALBEDO)", False))
-    if err:
-        lines.append((f"  {err['key']}: {err['meaning']}", False))
-    if (prior := local_prior_text(summary)) is not None:
-        lines.append((f"  {prior}", False))
-    lines.extend(_arc_lines(summary))
-    for key in ("basis_misfit", "highlight_not_read"):
-        if summary.get(key):
-            lines.append((f"warning: {summary[key]}", True))
-    return lines
-
-
-def print_scan_summary(job_id: int, summary: dict[str, Any], out: Path | None,
-                       kept: str) -> None:
-    """Print :func:`scan_summary`: its lines to standard output, its warnings to standard
-    error."""
-    for line, to_stderr in scan_summary(job_id, summary, out, kept):
-        print(line, file=sys.stderr if to_stderr else sys.stdout)
-
-
-def _arc_lines(summary: dict[str, Any]) -> list[tuple[str, bool]]:
-    """The arc an auto-arc scan chose and its test, or a forced half turn's warning; the
-    basis the test's verdict chose (``(line, to_stderr)`` pairs)."""
-    lines: list[tuple[str, bool]] = []
-    if summary.get("arc_asymmetric"):
-        lines.append((f"warning: {summary['arc_asymmetric']}", True))
-    elif isinstance(summary.get("arc_test_p_value"), int | float):
-        verdict = "twofold symmetric" if summary.get("arc_symmetric") else "NOT twofold symmetric"
-        lines.append((f"  arc: {summary.get('arc_deg', 0):g} deg; the first round read the "
-                      f"specimen {verdict} (chi-square "
-                      f"{summary.get('arc_test_statistic', float('nan')):.1f} on "
-                      f"{summary.get('arc_test_dof')} degrees of freedom, "
-                      f"p = {summary['arc_test_p_value']:.3g})", False))
-    if summary.get("basis_switch"):
-        lines.append((f"  basis: {summary['basis_switch']}", False))
-    return lines
-
-
 def _calibration_warnings(args: argparse.Namespace, plan: Any, config: Any,
                           pairs: Any) -> list[str]:
     """The dry run's ``uncalibrated: ...`` and ``exposure: ...`` warnings for ``plan``
@@ -692,29 +585,6 @@ def _left_interrupted(store: Any, job_id: int, db: Path, args: argparse.Namespac
           file=sys.stderr, flush=True)
 
 
-def _angles_text(angles: list[float], most: int = 8) -> str:
-    shown = [f"{a:g}" for a in angles]
-    if len(shown) > most:
-        shown = [*shown[: most - 2], "...", shown[-1]]
-    return ", ".join(shown) + " deg"
-
-
-def _duration_text(seconds: float) -> str:
-    if seconds < 90:
-        return f"{seconds:.0f} s"
-    if seconds < 5400:
-        return f"{seconds / 60:.1f} min"
-    return f"{seconds / 3600:.1f} h"
-
-
-def _part_text(seconds: float) -> str:
-    """A part of a duration (moves, settling, exposures) to within a few per cent: a quarter
-    of a second's exposures read "0.2 s" at one decimal (round half to even)."""
-    if seconds >= 10:
-        return f"{seconds:.0f} s"
-    return f"{seconds:.1f} s" if seconds >= 1 else f"{seconds:.2g} s"
-
-
 def _local_finishing(args: argparse.Namespace, config: Any) -> Any:
     """The finishing estimate of the job store this scan would use (its last scans), read
     without creating anything: a dry run leaves no store behind."""
@@ -727,69 +597,6 @@ def _local_finishing(args: argparse.Namespace, config: Any) -> Any:
     if not Path(db).is_file():
         return finishing_estimate([])
     return finishing_estimate(JobStore(db, durable=False).list_jobs(["completed"]))
-
-
-def dry_run_summary(dr: Any, plan: Any, rig_name: str) -> str:
-    """A few lines a person reads: angles, readings, duration (``--json`` has everything)."""
-    n_pairs = len(dr.pairs)
-    angles = list(dr.angles_deg)
-    ex = plan.exposure
-    first = " in the first round" if plan.kind == "adaptive" else ""
-    lines = [
-        f"dry run of the {plan.kind} plan on rig {rig_name!r}; nothing moves",
-        f"  stage angles: {len(angles)}{first} ({_angles_text(angles)})",
-        f"  pairs: {n_pairs} ({len(dr.lights)} lights)",
-        f"  readings: {dr.readings}{first} ({counted(n_pairs, 'pair')} x "
-        f"{counted(len(angles), 'angle')}), "
-        f"exposure {ex.exposure_s:g} s x {ex.averages}",
-        f"  duration: about {_duration_text(dr.estimated_s)} (moves {_part_text(dr.motion_s)}, "
-        f"settling {_part_text(dr.settle_s)}, exposures {_part_text(dr.exposure_s)})",
-    ]
-    finishing = getattr(dr, "finishing_s", None)
-    if finishing is not None:
-        # The measuring alone read as the job's time; the reconstruction can take longer.
-        lines.append(f"  then finishing (reconstruction and export fits): about "
-                     f"{_duration_text(finishing)} ({dr.finishing_source})")
-    bound = getattr(dr, "max_estimated_s", None)
-    if plan.kind == "adaptive":
-        where = ("where the expected error falls most" if plan.rule == "posterior"
-                 else "where the readings change fastest")
-        most = getattr(dr, "max_angles", None)
-        lines.append(f"  later rounds add angles {where}; "
-                     + (f"at most {counted(most, 'angle')} and {_duration_text(bound)} in all"
-                        if bound is not None and most is not None
-                        else "no --max-samples, so no bound on the total"))
-    for b in getattr(dr, "arc_branches", None) or ():
-        arc_deg, angles, secs = b.arc_deg, b.angles, b.estimated_s
-        what = ("twofold symmetric: on over half a turn" if arc_deg == 180.0
-                else "not twofold symmetric: on over a full turn")
-        lines.append(f"  if the first round finds the specimen {what}, at most "
-                     f"{counted(angles, 'angle')} ({counted(angles * n_pairs, 'reading')}) and "
-                     f"{_duration_text(secs)} in all"
-                     + ("; reconstructed with the basis for specimens without twofold "
-                        "symmetry" if getattr(b, "basis", "default") == "asymmetric" else ""))
-        if getattr(b, "basis_build_s", None) is not None:
-            lines.append(f"    then about {_duration_text(b.basis_build_s)} more: that basis is "
-                         "not built on this install yet, so the job builds it before "
-                         "reconstructing (once; later jobs reuse it)")
-    build = getattr(dr, "basis_build_s", None)
-    if build is not None:
-        lines.append(f"  first, about {_duration_text(build)} more: the reconstruction basis is "
-                     "not built on this install yet; the adaptive rule needs it, so the job "
-                     "builds it before its first reading (once; later jobs reuse it)")
-    lines += [f"  warning: {w}" for w in getattr(dr, "warnings", [])]
-    lines.append("  (--json prints the whole plan: every position in visiting order)")
-    return "\n".join(lines)
-
-
-def suspended_line(job_id: int, reason: str, through_daemon: bool = False) -> str:
-    """What a terminal shows when a job suspends: the bar alone said 'suspended' and no why,
-    and then nothing while the job waited for the device (a scan that seemed to hang)."""
-    then = ("the daemon retries and goes on once it answers (Ctrl-C stops following, not the "
-            "job)" if through_daemon else
-            "the scan retries and goes on once it answers; Ctrl-C leaves the job paused, and "
-            "the same command resumes it")
-    return f"job {job_id} suspended: {reason}\n  {then}"
 
 
 def _progress(service: Any, job_id: int, disabled: bool) -> Any:

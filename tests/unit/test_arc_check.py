@@ -88,7 +88,7 @@ def test_no_warning_for_a_full_turn_an_even_basis_no_basis_or_a_calibration(
 
 
 def test_the_cli_dry_run_summary_shows_the_warning(desc: RigDescription) -> None:
-    from gonio.cli.scan_commands import dry_run_summary
+    from gonio.cli.scan_report import dry_run_summary
 
     text = dry_run_summary(dry_run(HALF, desc, basis=BasisSymmetry.of(ODD)), HALF, "rig")
     (line,) = [ln for ln in text.splitlines() if "warning" in ln]

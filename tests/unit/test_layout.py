@@ -73,6 +73,8 @@ TESTED_IN: dict[str, tuple[str, ...]] = {
                                    "tests/system/api/test_stage.py"),
     "gonio/cli/serve_command.py": ("tests/system/api/test_serve_command.py",),
     "gonio/cli/jobs_command.py": ("tests/unit/cli/test_scan_commands.py",),
+    "gonio/cli/scan_report.py": ("tests/system/api/test_cli_daemon.py",
+                                 "tests/unit/test_arc_check.py"),
     "gonio/cli/daemon_jobs.py": ("tests/system/api/test_cli_daemon_wait.py",),
     "gonio/cli/sim_command.py": ("tests/system/test_sim_rig.py",),
     "sim/dynamixel_device.py": ("tests/unit/sim/test_dynamixel_protocol.py",),

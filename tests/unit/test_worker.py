@@ -216,7 +216,7 @@ def test_the_dry_run_says_when_the_first_adaptive_job_builds_the_basis(
 
 
 def test_the_cli_dry_run_summary_names_the_build() -> None:
-    from gonio.cli.scan_commands import dry_run_summary
+    from gonio.cli.scan_report import dry_run_summary
 
     desc = RigDescription.from_rig(MemRig())
     text = dry_run_summary(dry_run(PLAN, desc, basis_ready=False), PLAN, "mem")

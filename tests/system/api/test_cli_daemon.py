@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from gonio.cli import main
-from gonio.cli.scan_commands import scan_summary
+from gonio.cli.scan_report import scan_summary
 from gonio.results import read_result
 from tests.system.api.conftest import Daemon
 

@@ -21,7 +21,7 @@ import httpx
 import pytest
 
 from gonio.cli import daemon_jobs, main
-from gonio.cli.scan_commands import scan_summary
+from gonio.cli.scan_report import scan_summary
 from gonio.results import read_result
 from tests.system.api.conftest import Daemon
 

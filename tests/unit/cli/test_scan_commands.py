@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from gonio.cli import UsageError, build_parser, jobs_command, scan_commands
+from gonio.cli import UsageError, build_parser, jobs_command, scan_commands, scan_report
 from gonio.cli.scan_commands import _plan
 from gonio.plans.models import AdaptivePlan, CalibrationPlan, UniformPlan
 from gonio.store import JobStore
@@ -203,7 +203,7 @@ def test_the_dry_run_summary_states_both_branches_of_an_auto_arc_plan() -> None:
     from gonio.sim.memrig import MemRig
 
     plan = _parse("--arc", "auto")
-    text = scan_commands.dry_run_summary(
+    text = scan_report.dry_run_summary(
         dry_run(plan, RigDescription.from_rig(MemRig())), plan, "mem")  # type: ignore[arg-type]
     # MemRig: 3 pairs in planes within 12 deg of each other (two opposites,
     # gonio.plans.arc.opposites_needed); 8 over half a turn plus 2 opposites, or 16 over the
@@ -215,7 +215,7 @@ def test_the_dry_run_summary_states_both_branches_of_an_auto_arc_plan() -> None:
     assert "16 angles (48 readings) and" in text
     assert "reconstructed with the basis for specimens without twofold symmetry" in text
     assert "more: that basis" not in text  # built (None): nothing to wait for
-    built_later = scan_commands.dry_run_summary(
+    built_later = scan_report.dry_run_summary(
         dry_run(plan, RigDescription.from_rig(MemRig()), asymmetric_build_s=240.0),  # type: ignore[arg-type]
         plan, "mem")  # type: ignore[arg-type]
     assert "then about 4.0 min more: that basis is not built on this install yet" in built_later
@@ -233,7 +233,7 @@ def test_the_dry_run_summary_states_each_part_of_the_duration_to_a_few_per_cent(
                  ("--rotations", "6", "--exposure", "0.01"), ("--rotations", "24",)):
         plan = _parse(*argv)
         dr = dry_run(plan, desc)  # type: ignore[arg-type]
-        text = scan_commands.dry_run_summary(dr, plan, "mem")
+        text = scan_report.dry_run_summary(dr, plan, "mem")
         m = re.search(r"moves ([\d.]+) s, settling ([\d.]+) s, exposures ([\d.]+) s", text)
         assert m is not None, text
         # Each part as printed is within 5 % of the dry run's own (0.25 s printed as "0.2 s"
