@@ -273,7 +273,8 @@ def _stop_on_terminate(stopped: list[str]) -> None:
     the running foreground scan as Ctrl-C does: the engine stops and switches the lamps off,
     the job is left paused at its checkpoint and the message says how to go on. They killed
     the process where it stood: the job stayed ``running``, nothing was said, and the lamps
-    were left as they were. A second one stops the process at once.
+    were left as they were. A second SIGTERM stops the process at once; a second SIGHUP is
+    ignored, and a signal ignored when the scan starts (``nohup``) stays ignored.
 
     Call from the scan's main task (``asyncio.run``'s); ``stopped`` gets the signal's name.
     """
@@ -287,15 +288,27 @@ def _stop_on_terminate(stopped: list[str]) -> None:
 
     def stop(sig: signal.Signals) -> None:
         if stopped:
+            if sig is signal.SIGHUP:
+                return  # a hangup says nothing more the second time; it never kills
             loop.remove_signal_handler(sig)  # back to the default: the second one kills
             os.kill(os.getpid(), sig)
             return
         stopped.append(sig.name)
-        print(f"{sig.name} received: stopping the scan as Ctrl-C does", file=sys.stderr,
-              flush=True)
-        task.cancel()
+        task.cancel()  # first: the message below can fail on a terminal that is gone
+        try:
+            print(f"{sig.name} received: stopping the scan as Ctrl-C does", file=sys.stderr,
+                  flush=True)
+        except OSError:
+            # The terminal is gone (a closed SSH session: EIO). Every later message would
+            # fail the same way and cut the stop short: they go nowhere instead.
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, 1)
+            os.dup2(devnull, 2)
+            os.close(devnull)
 
     for sig in (signal.SIGTERM, signal.SIGHUP):
+        if signal.getsignal(sig) is signal.SIG_IGN:
+            continue  # nohup (or a parent) asked that it be ignored: it stays so
         with contextlib.suppress(ValueError, RuntimeError):  # not the main thread: as before
             loop.add_signal_handler(sig, stop, sig)
 

@@ -157,3 +157,29 @@ def test_sigterm_or_sighup_stops_the_scan_as_ctrl_c_does(
     assert f"{sig.name} received: stopping the scan as Ctrl-C does" in err, err
     assert f"job {job.id} interrupted: paused" in err, err
     assert "Run the same command again to resume it" in err, err
+
+
+def _ignore_sighup() -> None:
+    signal.signal(signal.SIGHUP, signal.SIG_IGN)  # what nohup does before it runs a command
+
+
+def test_a_scan_under_nohup_survives_a_hangup(tmp_path: Path) -> None:
+    """``nohup gonio scan ...`` outlived the SSH session that started it; the handler that
+    makes SIGHUP stop a scan replaced nohup's SIG_IGN, so logging out stopped the scan. A
+    signal ignored when the scan starts stays ignored: the scan measures to its end."""
+    rig = tmp_path / "rig.toml"
+    data = tmp_path / "data"
+    db = data / "gonio.sqlite"
+    out_file = tmp_path / "felt.h5"
+    with start_sim_rig(SimRigOptions(time_scale=1.0, settle_s=0.0, config_path=rig)):
+        argv = ["scan", "--no-export-fits", "--accept-uncalibrated",
+                "--rig", str(rig), "--rotations", "4", "--exposure", "0.3",
+                "--data-dir", str(data), "--no-progress", "-o", str(out_file)]
+        code, out, err = _signalled_mid_scan(argv, db, signal.SIGHUP, _ignore_sighup)
+    assert code == 0, out + err
+    assert "SIGHUP received" not in err, err
+    store = JobStore(db, durable=False)
+    (job,) = store.list_jobs()
+    store.close()
+    assert job.state is JobState.COMPLETED and job.done_angles == 4, job
+    assert out_file.is_file()
