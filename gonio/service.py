@@ -685,6 +685,8 @@ class GonioService:
             free_s, source = None, f"no job starts while {full}"
         else:
             for row in self.store.active_jobs():
+                if self.worker.being_removed(row.id):
+                    continue  # removed (answered 204) while its engine stops: not listed
                 d = self.get_job(row.id)
                 left = d.eta_s if row.kind == "calibration" else d.time_left_s
                 if row.kind == "calibration" and row.state is JobState.RECONSTRUCTING:
@@ -726,7 +728,12 @@ class GonioService:
         if row.id not in self._measuring_of:
             try:
                 r = dry_run(parse_stored_plan(row.plan), self.desc)
-            except PlanError:
+            except Exception:
+                # A stored plan this gonio cannot time (an older one, another rig): its start
+                # is unknown, and every job list must still answer; logged once, as the
+                # answer is kept.
+                log.warning("job %d: its plan cannot be timed for a start estimate", row.id,
+                            exc_info=True)
                 self._measuring_of[row.id] = None
             else:
                 self._measuring_of[row.id] = ((r.max_estimated_s, True)
@@ -757,10 +764,11 @@ class GonioService:
         """:func:`gonio.timeleft.finishing_estimate` of this store, read at most every few
         seconds (a polling page asks once a second)."""
         now = time.monotonic()
-        if self._finishing_cache is None or now - self._finishing_cache[0] > 5.0:
-            est = finishing_estimate(self.store.list_jobs([JobState.COMPLETED.value]))
-            self._finishing_cache = (now, est)
-        return self._finishing_cache[1]
+        cached = self._finishing_cache  # once: a completion may clear it from another thread
+        if cached is None or now - cached[0] > 5.0:
+            cached = (now, finishing_estimate(self.store.list_jobs([JobState.COMPLETED.value])))
+            self._finishing_cache = cached
+        return cached[1]
 
     def _row(self, job_id: int) -> JobRow:
         if self.worker.being_removed(job_id):

@@ -351,3 +351,24 @@ def test_queued_jobs_say_when_they_start_or_that_it_is_not_known(tmp_path: Path)
     ended = svc.get_job(cal)
     assert ended.starts_in_s is None and ended.starts_in_estimate is None
     assert svc.list_jobs()[1].starts_in_s == 0.0
+
+
+def test_a_queued_plan_that_cannot_be_timed_leaves_the_job_list_answering(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A stored plan whose dry run raises something other than PlanError (an older plan, a
+    bug) failed every GET /api/v1/jobs while it was queued: its start is unknown instead, and
+    so are those of the jobs behind it; the job itself and the list still answer."""
+    import gonio.service as service_module
+
+    _rig, svc = _service(tmp_path)
+    plan = UniformPlan(rotations=3, exposure=FAST)
+    first = svc.submit(JobRequest(plan=plan)).id
+    second = svc.submit(JobRequest(plan=plan)).id
+
+    def broken(*args: object, **kwargs: object) -> None:
+        raise ValueError("a plan this gonio cannot time")
+
+    monkeypatch.setattr(service_module, "dry_run", broken)
+    jobs = {j.id: j for j in svc.list_jobs()}
+    assert jobs[first].starts_in_s == 0.0  # nothing ahead of it
+    assert jobs[second].starts_in_s is None and jobs[second].starts_in_estimate
