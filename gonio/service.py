@@ -474,7 +474,7 @@ class GonioService:
         self.worker.take_checked(row.id, checked)
         self.basis.note_arc(self.store, row.id, plan, symmetry)
         self.worker.wake()
-        return JobInfo.from_row(row)
+        return self._info(row)
 
     def uncalibrated_refusal(self, plan: AnyPlan, priority: int = 0) -> str | None:
         """Why a scan of ``plan`` needs the user's acceptance before it is queued
@@ -923,7 +923,17 @@ class GonioService:
             # What the user accepted travels with the job: its start does not refuse it
             # (unasked_uncalibrated), whichever calibration runs or does not run before it.
             self.store.append_event(job, UNCALIBRATED_ACCEPTED, {"by": "reorder"})
-        return JobInfo.from_row(row)
+        return self._info(row)
+
+    def _info(self, row: JobRow) -> JobInfo:
+        """One job's row as :meth:`list_jobs` gives it, its start estimate included when it
+        is queued (a submission's and a reorder's answer said ``starts_in_estimate: null``,
+        which means "not queued")."""
+        if row.state is not JobState.QUEUED:
+            return JobInfo.from_row(row, self._max_angles(row))
+        wait = self._queue_wait()
+        return JobInfo.from_row(row, self._max_angles(row), wait,
+                                start=self._start_estimates(wait).get(row.id))
 
     def remove(self, job_id: int) -> None:
         """Delete a queued or finished job and its readings (not its result file).

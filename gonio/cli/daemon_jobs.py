@@ -160,6 +160,11 @@ def follow_and_fetch(client: DaemonClient, job_id: int, out: Path | None, *, no_
               file=sys.stderr)
         return 1
     except KeyboardInterrupt:
+        if last.get("state") == "completed" and out is not None:
+            # Stopped while its result was fetched: the job is done, nothing goes on.
+            print(f"stopped fetching; job {job_id} is completed and the daemon keeps its "
+                  f"result: fetch it with {again}", file=sys.stderr)
+            return 130
         then = ("follow it and fetch its result with" if out is not None
                 else "follow it again with")
         then = (f"Do not run this command again, which would queue a second scan; {then}"

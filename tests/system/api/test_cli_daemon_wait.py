@@ -135,6 +135,19 @@ def test_wait_on_a_completed_job_fetches_it_at_once(
             f"'gonio jobs --daemon {daemon.url} wait {job} -o FILE' fetches it)")
     assert first == scan_summary(job, detail["result"], None, kept)[0][0]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["linen.h5"]
+    # Ctrl-C while the result is fetched: the job is done and nothing "goes on in the
+    # daemon" (it said so); the file is not written, and the same command fetches it.
+    def cut(*args: object) -> None:
+        raise KeyboardInterrupt
+
+    again = tmp_path / "again.h5"
+    with pytest.MonkeyPatch.context() as m:
+        m.setattr(daemon_jobs, "_fetch_result", cut)
+        assert main([*base, "-o", str(again)]) == 130
+    err = capsys.readouterr().err
+    assert f"stopped fetching; job {job} is completed" in err and "goes on" not in err, err
+    assert f"wait {job} -o {again}" in err, err
+    assert not again.exists()
 
 
 def test_wait_on_a_cancelled_job_says_so_and_exits_1(

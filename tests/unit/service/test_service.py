@@ -360,15 +360,28 @@ def test_a_queued_plan_that_cannot_be_timed_leaves_the_job_list_answering(
     so are those of the jobs behind it; the job itself and the list still answer."""
     import gonio.service as service_module
 
-    _rig, svc = _service(tmp_path)
-    plan = UniformPlan(rotations=3, exposure=FAST)
-    first = svc.submit(JobRequest(plan=plan)).id
-    second = svc.submit(JobRequest(plan=plan)).id
-
     def broken(*args: object, **kwargs: object) -> None:
         raise ValueError("a plan this gonio cannot time")
 
+    _rig, svc = _service(tmp_path)
     monkeypatch.setattr(service_module, "dry_run", broken)
+    plan = UniformPlan(rotations=3, exposure=FAST)
+    first = svc.submit(JobRequest(plan=plan)).id
+    second = svc.submit(JobRequest(plan=plan)).id
     jobs = {j.id: j for j in svc.list_jobs()}
     assert jobs[first].starts_in_s == 0.0  # nothing ahead of it
     assert jobs[second].starts_in_s is None and jobs[second].starts_in_estimate
+
+
+def test_a_submission_and_a_reorder_answer_with_the_jobs_start(tmp_path: Path) -> None:
+    """POST /jobs and the reorder answered starts_in_estimate null, which the schema defines
+    as "not queued", for a job that was queued: they answer as the job list does."""
+    _rig, svc = _service(tmp_path)
+    plan = UniformPlan(rotations=3, exposure=FAST)
+    first = svc.submit(JobRequest(plan=plan))
+    second = svc.submit(JobRequest(plan=plan))
+    listed = {j.id: j for j in svc.list_jobs()}
+    assert first.starts_in_estimate is not None and first.starts_in_s == 0.0
+    assert second.starts_in_s == listed[second.id].starts_in_s is not None
+    moved = svc.reorder(second.id, position=0)
+    assert moved.starts_in_s == 0.0 and moved.starts_in_estimate is not None
