@@ -609,7 +609,11 @@ def _local_finishing(args: argparse.Namespace, config: Any) -> Any:
     db = args.db or (args.data_dir or scan_data_dir(config)) / STORE_FILE
     if not Path(db).is_file():
         return finishing_estimate([])
-    return finishing_estimate(JobStore(db, durable=False).list_jobs(["completed"]))
+    store = JobStore(db, durable=False)
+    try:
+        return finishing_estimate(store.list_jobs(["completed"]))
+    finally:
+        store.close()
 
 
 def _progress(service: Any, job_id: int, disabled: bool) -> Any:

@@ -13,7 +13,7 @@ import pytest
 from gonio.cli import main
 from gonio.jobstates import JobState
 from gonio.sim.rig import SimRigOptions, start_sim_rig
-from gonio.store import JobStore
+from gonio.store import JobRow, JobStore
 from tests.system.daemon_proc import GONIO, PROJECT_ROOT, child_env, gonio, wait_for
 
 pytestmark = [pytest.mark.system, pytest.mark.timeout(900)]
@@ -30,6 +30,16 @@ def _readings(db: Path) -> int:
     try:
         jobs = store.list_jobs()
         return len(store.readings(jobs[0].id)) if jobs else 0
+    finally:
+        store.close()
+
+
+def _only_job(db: Path) -> JobRow:
+    """The one job the store at ``db`` holds (the tests below run one scan each)."""
+    store = JobStore(db, durable=False)
+    try:
+        (job,) = store.list_jobs()
+        return job
     finally:
         store.close()
 
@@ -70,9 +80,7 @@ def test_ctrl_c_leaves_the_job_paused_and_the_same_command_resumes_it(tmp_path: 
         # SIGINT: what Ctrl-C in the terminal sends.
         code, out, err = _signalled_mid_scan(argv, db, signal.SIGINT, _default_sigint)
         assert code == 130, out + err
-        store = JobStore(db, durable=False)
-        (job,) = store.list_jobs()
-        store.close()
+        job = _only_job(db)
         assert job.state is JobState.PAUSED, job
         assert job.done_angles < job.total_angles
         # The message says what happened and both ways on, with the real job and store.
@@ -122,9 +130,7 @@ def test_ctrl_c_in_the_sim_calibration_aborts_it_and_says_so(tmp_path: Path) -> 
     # The first reading stored is the calibration's.
     code, out, err = _signalled_mid_scan(argv, db, signal.SIGINT, _default_sigint)
     assert code == 130, out + err
-    store = JobStore(db, durable=False)
-    (job,) = store.list_jobs()
-    store.close()
+    job = _only_job(db)
     assert job.kind == "calibration" and job.state is JobState.ABORTED, job
     assert f"calibration job {job.id} interrupted and aborted" in err, err
     assert "The same command again calibrates the simulated rig anew" in err, err
@@ -149,9 +155,7 @@ def test_sigterm_or_sighup_stops_the_scan_as_ctrl_c_does(
                 "--data-dir", str(data), "--no-progress", "-o", str(tmp_path / "felt.h5")]
         code, out, err = _signalled_mid_scan(argv, db, sig)
     assert code == 130, out + err
-    store = JobStore(db, durable=False)
-    (job,) = store.list_jobs()
-    store.close()
+    job = _only_job(db)
     assert job.state is JobState.PAUSED, job
     assert job.reason == f"interrupted ({sig.name} to gonio scan)", job
     assert f"{sig.name} received: stopping the scan as Ctrl-C does" in err, err
@@ -178,8 +182,6 @@ def test_a_scan_under_nohup_survives_a_hangup(tmp_path: Path) -> None:
         code, out, err = _signalled_mid_scan(argv, db, signal.SIGHUP, _ignore_sighup)
     assert code == 0, out + err
     assert "SIGHUP received" not in err, err
-    store = JobStore(db, durable=False)
-    (job,) = store.list_jobs()
-    store.close()
+    job = _only_job(db)
     assert job.state is JobState.COMPLETED and job.done_angles == 4, job
     assert out_file.is_file()
