@@ -20,6 +20,7 @@ import errno
 import importlib
 import math
 import os
+import signal
 import sqlite3
 import sys
 from collections.abc import Callable, Iterable, Sequence
@@ -56,6 +57,16 @@ aliases) its ``register`` adds (tests/unit/test_start_imports.py holds them to i
 
 class UsageError(Exception):
     """A user error the CLI reports as one line on stderr with exit code 2."""
+
+
+class StoppedBySignal(KeyboardInterrupt):
+    """A command stopped by SIGTERM or SIGHUP as Ctrl-C stops it: reported "interrupted", with
+    the exit status a shell gives a process the signal ends (128 + its number: 143 for
+    SIGTERM, 129 for SIGHUP), so ``timeout`` and service managers see which stop it was."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signum)
+        self.signum = int(signum)
 
 
 def _number(kind: type[float] | type[int], test: Callable[[float], bool], what: str
@@ -162,9 +173,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         message = exc.advise(CORE_SETTING_FLAGS) if isinstance(exc, AdvisedError) else exc
         print(f"gonio {args.command}: error: {message}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:
         print("interrupted", file=sys.stderr)
-        return 130
+        # 128 + the signal's number, as a shell reports a process the signal ended.
+        return 128 + (exc.signum if isinstance(exc, StoppedBySignal) else signal.SIGINT)
     except sqlite3.Error as exc:
         # The job store cannot be opened or written (read-only or full disk, a foreign file).
         print(f"gonio {args.command}: error: job store: {exc}", file=sys.stderr)

@@ -23,6 +23,7 @@ from gonio.cli.daemon_client import (
 )
 from gonio.cli.scan_report import (
     FINAL_STATES,
+    calibration_copy_path,
     check_output_path,
     dry_run_summary,
     print_scan_summary,
@@ -229,7 +230,7 @@ def _calibration_fetched(client: DaemonClient, job_id: int, out: Path | None) ->
         print(f"job {job_id} completed: {applies}; its result does not record its calibration, "
               f"so no copy was written beside {out}")
         return
-    cal_out = out.with_name(out.stem + ".calibration.json")
+    cal_out = calibration_copy_path(out)
     cal_out.write_text(json.dumps(json.loads(made), indent=2))
     print(f"job {job_id} completed: {applies}; a copy is in {cal_out}")
 
@@ -345,7 +346,10 @@ def jobs_through_daemon(args: argparse.Namespace) -> int:
                                  f"{args.daemon} show {job} --json' gives the job as JSON")
             if args.output is not None:
                 # Before the wait, not after an hour's scan.
-                check_output_path(args.output, "nothing was fetched; the daemon keeps the job")
+                kind = (None if args.overwrite
+                        else client.request("GET", f"/api/v1/jobs/{job}").get("kind"))
+                check_output_path(args.output, "nothing was fetched; the daemon keeps the job",
+                                  overwrite=args.overwrite, calibration=kind == "calibration")
             return follow_and_fetch(client, job, args.output, no_progress=args.no_progress)
         if args.action == "show":
             row = client.request("GET", f"/api/v1/jobs/{job}")

@@ -59,6 +59,8 @@ def register(subparsers: Any) -> None:
                    help="wait: write the completed job's result file here (a calibration job's "
                         "calibration beside it, as OUTPUT.calibration.json); without it the "
                         "result stays in the daemon")
+    j.add_argument("--overwrite", action="store_true",
+                   help="wait: replace an existing -o file (without it, refused before the wait)")
     j.add_argument("--no-progress", action="store_true", help="wait: no progress bar")
     j.add_argument("--json", action="store_true", help="machine-readable output")
     j.set_defaults(func=_jobs)
@@ -67,9 +69,10 @@ def register(subparsers: Any) -> None:
 def _jobs(args: argparse.Namespace) -> int:
     from gonio.store import JobStore
 
-    if args.action != "wait" and (args.output is not None or args.no_progress):
-        raise UsageError("-o and --no-progress go with wait (gonio jobs --daemon URL wait ID "
-                         "-o FILE)")
+    if args.action != "wait" and (args.output is not None or args.no_progress
+                                  or args.overwrite):
+        raise UsageError("-o, --overwrite and --no-progress go with wait (gonio jobs --daemon "
+                         "URL wait ID -o FILE)")
     if args.daemon is not None:
         from gonio.cli.daemon_jobs import jobs_through_daemon
 

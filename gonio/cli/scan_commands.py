@@ -19,7 +19,14 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from gonio.cli import UsageError, finite_float, nonnegative_float, positive_float, positive_int
+from gonio.cli import (
+    StoppedBySignal,
+    UsageError,
+    finite_float,
+    nonnegative_float,
+    positive_float,
+    positive_int,
+)
 from gonio.cli.daemon_client import add_daemon_options
 from gonio.wording import counted
 
@@ -27,6 +34,7 @@ if TYPE_CHECKING:
     from gonio.basis_supply import BasisSupply
 from gonio.cli.scan_report import (
     FINAL_STATES,
+    calibration_copy_path,
     check_output_path,
     dry_run_summary,
     print_scan_summary,
@@ -130,6 +138,10 @@ def register(subparsers: Any) -> None:
     # Required but for --daemon URL --no-wait (checked in _scan, which says so).
     p.add_argument("-o", "--output", type=Path, default=None,
                    help="result file (.h5); required, except with --daemon URL --no-wait")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace an existing -o file (and a calibration's OUTPUT."
+                        "calibration.json); without it an existing file is refused before "
+                        "anything moves")
     p.set_defaults(func=_scan)
 
 
@@ -222,7 +234,8 @@ def _scan(args: argparse.Namespace) -> int:
         print(f"note: no --specimen NAME given; the job, its result and its exports call the "
               f"specimen {_specimen(args)!r}", file=sys.stderr)
     if not args.dry_run and args.output is not None:
-        check_output_path(args.output)
+        check_output_path(args.output, overwrite=args.overwrite,
+                          calibration=args.white_reference is not None)
     if args.daemon:
         from gonio.cli.daemon_jobs import scan_through_daemon
 
@@ -245,12 +258,16 @@ def _scan(args: argparse.Namespace) -> int:
 
     stopped: list[str] = []
     args.stopped_by = stopped
+    # Set once the job has completed: a signal then no longer stops anything but lets the
+    # result's copy to -o finish (it is a moment's work, and stopping it would lose it).
+    finished: list[bool] = []
+    args.scan_finished = finished
     # The loop's close resets the signals it handled to the default: give back the handlers
     # the process had (a test runner's, when main() runs in it).
     before = {sig: signal.getsignal(sig) for sig in (signal.SIGTERM, signal.SIGHUP)}
 
     async def run() -> int:
-        _stop_on_terminate(stopped)
+        _stop_on_terminate(stopped, finished)
         return await _run_scan(args, plan, config, sim)
 
     try:
@@ -259,7 +276,7 @@ def _scan(args: argparse.Namespace) -> int:
         if not stopped:
             raise
         # Stopped by SIGTERM or SIGHUP: the job was left as Ctrl-C leaves it, and said so.
-        raise KeyboardInterrupt from None
+        raise StoppedBySignal(signal.Signals[stopped[0]]) from None
     finally:
         for sig, handler in before.items():
             with contextlib.suppress(ValueError, TypeError):  # not the main thread
@@ -268,13 +285,17 @@ def _scan(args: argparse.Namespace) -> int:
             sim.close()
 
 
-def _stop_on_terminate(stopped: list[str]) -> None:
+def _stop_on_terminate(stopped: list[str], finished: list[bool] | None = None) -> None:
     """Make SIGTERM and SIGHUP (``kill``, ``timeout``, a closed terminal or SSH session) stop
     the running foreground scan as Ctrl-C does: the engine stops and switches the lamps off,
     the job is left paused at its checkpoint and the message says how to go on. They killed
     the process where it stood: the job stayed ``running``, nothing was said, and the lamps
     were left as they were. A second SIGTERM stops the process at once; a second SIGHUP is
     ignored, and a signal ignored when the scan starts (``nohup``) stays ignored.
+
+    Once the job has completed (``finished`` non-empty) there is no scan left to stop: the
+    signal is noted and the command ends as it would have, copying the result to ``-o`` and
+    printing its summary. (It was reported "interrupted", exit 130, and the copy skipped.)
 
     Call from the scan's main task (``asyncio.run``'s); ``stopped`` gets the signal's name.
     """
@@ -294,10 +315,13 @@ def _stop_on_terminate(stopped: list[str]) -> None:
             os.kill(os.getpid(), sig)
             return
         stopped.append(sig.name)
-        task.cancel()  # first: the message below can fail on a terminal that is gone
+        done = bool(finished)
+        if not done:
+            task.cancel()  # first: the message below can fail on a terminal that is gone
         try:
-            print(f"{sig.name} received: stopping the scan as Ctrl-C does", file=sys.stderr,
-                  flush=True)
+            print(f"{sig.name} received: " + (
+                "the scan has already completed; writing its result and stopping" if done
+                else "stopping the scan as Ctrl-C does"), file=sys.stderr, flush=True)
         except OSError:
             # The terminal is gone (a closed SSH session: EIO). Every later message would
             # fail the same way and cut the stop short: they go nowhere instead.
@@ -457,6 +481,10 @@ async def _run_owned(args: argparse.Namespace, checked: Any, config: Any, sim: A
         bar = _progress(service, job.id, disabled=args.no_progress)
         try:
             final = await service.run_in_foreground(job.id)
+            if final is JobState.COMPLETED:
+                finished = getattr(args, "scan_finished", None)
+                if finished is not None:
+                    finished.append(True)
         except asyncio.CancelledError:
             # Ctrl-C (asyncio.run cancels this task, then raises KeyboardInterrupt): the
             # engine has stopped measuring; leave the job paused at its checkpoint, not
@@ -481,7 +509,7 @@ async def _run_owned(args: argparse.Namespace, checked: Any, config: Any, sim: A
     if plan.kind == "calibration":
         from gonio.calibration import CALIBRATION_FILE
 
-        cal_out = out.with_name(out.stem + ".calibration.json")
+        cal_out = calibration_copy_path(out)
         shutil.copyfile(data_dir / CALIBRATION_FILE, cal_out)
         n_pairs = len(checked.pairs)
         # In effect from now on for this data directory's scans (the latest calibration job

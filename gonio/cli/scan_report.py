@@ -17,18 +17,25 @@ FINAL_STATES = ("completed", "failed", "aborted", "halted")
 """The states a job does not leave: following it ends there."""
 
 
-def check_output_path(out: Path, nothing: str = "nothing was measured") -> None:
-    """Refuse an ``-o`` that cannot be written before anything is measured.
+def check_output_path(out: Path, nothing: str = "nothing was measured", *,
+                      overwrite: bool = False, calibration: bool = False) -> None:
+    """Refuse an ``-o`` that cannot be written, or would replace a file, before anything is
+    measured.
 
     The result is copied to ``-o`` when the scan has finished: a folder that cannot be made or
     written found only then cost the lab the whole scan's wait for an error (the result stays
     in the data directory, but the message did not say so). A file is made and removed in the
-    folder, so whatever the file system or the permissions refuse is found now.
+    folder, so whatever the file system or the permissions refuse is found now. An existing
+    file there (yesterday's ``felt.h5``, a command run again from the shell's history) was
+    replaced without a word: it is refused unless ``overwrite`` (``--overwrite``) says to.
 
     Parameters
     ----------
     out : the result file ``-o`` names
     nothing : what the refusal says was left undone (``gonio jobs wait`` measures nothing)
+    overwrite : replacing existing files is what the user asked for
+    calibration : the job is a calibration, whose calibration file is written beside ``out``
+        (:func:`calibration_copy_path`); it is checked too
     """
     import os
     import tempfile
@@ -46,6 +53,24 @@ def check_output_path(out: Path, nothing: str = "nothing was measured") -> None:
     if out.is_dir():
         raise UsageError(f"-o {out} is a folder; give the result file's name, e.g. "
                          f"{out / 'felt.h5'}")
+    if overwrite:
+        return
+    # Only regular files: -o /dev/null (a dry run's, or a scan whose copy is not wanted)
+    # replaces nothing.
+    taken = [p for p in ([out, calibration_copy_path(out)] if calibration else [out])
+             if p.is_file()]
+    if taken:
+        names = " and ".join(str(p) for p in taken)
+        raise UsageError(f"{names} already exist{'s' if len(taken) == 1 else ''}; give "
+                         f"another -o, move {'it' if len(taken) == 1 else 'them'} away, or "
+                         f"add --overwrite to replace {'it' if len(taken) == 1 else 'them'} "
+                         f"({nothing})")
+
+
+def calibration_copy_path(out: Path) -> Path:
+    """Where a calibration job's calibration is copied beside its result ``out``
+    (``white.h5``: ``white.calibration.json``)."""
+    return out.with_name(out.stem + ".calibration.json")
 
 
 def scan_summary(job_id: int, summary: dict[str, Any], out: Path | None,

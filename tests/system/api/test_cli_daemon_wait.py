@@ -229,6 +229,15 @@ def test_wait_checks_the_output_before_it_waits(
                  "-o", str(blocker / "felt.h5")]) == 2
     err = capsys.readouterr().err
     assert f"cannot write into {blocker}" in err and "nothing was fetched" in err, err
+    # An existing result file is refused too (it was replaced when the job ended), still
+    # before the wait, and left as it was.
+    old = tmp_path / "felt.h5"
+    old.write_bytes(b"yesterday's result")
+    assert main(["jobs", "--daemon", daemon.url, "wait", str(job), "-o", str(old)]) == 2
+    err = capsys.readouterr().err
+    assert f"{old} already exists" in err and "--overwrite" in err, err
+    assert "nothing was fetched" in err, err
+    assert old.read_bytes() == b"yesterday's result"
 
 
 @pytest.mark.parametrize(
@@ -239,7 +248,7 @@ def test_wait_checks_the_output_before_it_waits(
         (["jobs", "wait", "3"], "give its address, e.g. 'gonio jobs --daemon "
          "http://127.0.0.1:8600 wait 3 -o FILE'"),
         (["jobs", "--daemon", "{url}", "show", "1", "-o", "x.h5"],
-         "-o and --no-progress go with wait"),
+         "-o, --overwrite and --no-progress go with wait"),
         (["jobs", "--daemon", "{url}", "wait", "1", "--json"], "show 1 --json"),
         (["jobs", "--daemon", "{url}", "wait", "999999"], "refused"),
         (["scan", "--sim", "--no-wait", "-o", "x.h5"], "--no-wait goes with --daemon URL"),

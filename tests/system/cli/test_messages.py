@@ -142,3 +142,39 @@ def test_an_output_that_cannot_be_written_is_refused_before_the_scan(
         assert main([*argv, "-o", str(folder)]) == 2
         assert f"-o {folder} is a folder" in capsys.readouterr().err
     assert list(folder.iterdir()) == []  # the probe left nothing behind
+
+
+def test_an_existing_output_is_refused_unless_overwrite_says_to_replace_it(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # `gonio scan -o felt.h5` run again (the shell's history, a second specimen with the same
+    # name) replaced yesterday's result without a word once the new scan ended.
+    from gonio.sim.rig import SimRigOptions, start_sim_rig
+
+    old = tmp_path / "felt.h5"
+    old.write_bytes(b"yesterday's result")
+    white = tmp_path / "white.h5"
+    white_cal = tmp_path / "white.calibration.json"
+    white_cal.write_text('{"yesterday": true}')
+    rig, data = tmp_path / "rig.toml", tmp_path / "data"
+    with start_sim_rig(SimRigOptions(time_scale=10.0, settle_s=0.0, config_path=rig)):
+        argv = ["scan", "--no-export-fits", "--rig", str(rig), "--rotations", "2",
+                "--accept-uncalibrated", "--no-progress", "--data-dir", str(data)]
+        assert main([*argv, "-o", str(old)]) == 2
+        err = capsys.readouterr().err
+        assert f"{old} already exists" in err and "--overwrite" in err, err
+        assert "nothing was measured" in err, err
+        assert not data.exists()  # no job store, no job
+        assert old.read_bytes() == b"yesterday's result"
+        # A calibration writes its calibration beside the result: that file is checked too.
+        assert main([*argv, "--white-reference", "0.99", "-o", str(white)]) == 2
+        err = capsys.readouterr().err
+        assert f"{white_cal} already exists" in err, err
+        assert not data.exists() and not white.exists()
+        assert white_cal.read_text() == '{"yesterday": true}'
+        # A dry run writes nothing, so it is not refused.
+        assert main([*argv, "--dry-run", "-o", str(old)]) == 0
+        capsys.readouterr()
+        # --overwrite: the scan runs and its result replaces the old file.
+        assert main([*argv, "--overwrite", "-o", str(old)]) == 0
+    assert old.read_bytes()[:8] == b"\x89HDF\r\n\x1a\n"  # the HDF5 signature

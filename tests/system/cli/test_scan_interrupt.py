@@ -154,13 +154,63 @@ def test_sigterm_or_sighup_stops_the_scan_as_ctrl_c_does(
                 "--rig", str(rig), "--rotations", "6", "--exposure", "0.5",
                 "--data-dir", str(data), "--no-progress", "-o", str(tmp_path / "felt.h5")]
         code, out, err = _signalled_mid_scan(argv, db, sig)
-    assert code == 130, out + err
+    # What a shell reports for a process the signal ended (128 + its number), not Ctrl-C's.
+    assert code == 128 + sig.value, out + err
     job = _only_job(db)
     assert job.state is JobState.PAUSED, job
     assert job.reason == f"interrupted ({sig.name} to gonio scan)", job
     assert f"{sig.name} received: stopping the scan as Ctrl-C does" in err, err
     assert f"job {job.id} interrupted: paused" in err, err
     assert "Run the same command again to resume it" in err, err
+
+
+def _sigterm_to_self(finished: list[bool]) -> tuple[list[str], bool]:
+    """Install gonio scan's stop handlers with ``finished`` as the scan's completion flag,
+    send this process SIGTERM, and return the stop record and whether the scan's task was
+    cancelled (the process's own SIGTERM handler is given back afterwards)."""
+    import asyncio
+    import os
+
+    from gonio.cli.scan_commands import _stop_on_terminate
+
+    stopped: list[str] = []
+    before = signal.getsignal(signal.SIGTERM)
+
+    async def scan() -> bool:
+        _stop_on_terminate(stopped, finished)
+        # The loop's handler, or the signal below would end the test run itself.
+        assert signal.getsignal(signal.SIGTERM) not in (before, signal.SIG_DFL), before
+        os.kill(os.getpid(), signal.SIGTERM)
+        try:
+            for _ in range(500):
+                if stopped:
+                    break
+                await asyncio.sleep(0.01)
+            await asyncio.sleep(0.1)  # where the rest of the scan (the copy) would run
+        except asyncio.CancelledError:
+            return True
+        return False
+
+    try:
+        cancelled = asyncio.run(scan())
+    finally:
+        signal.signal(signal.SIGTERM, before)
+    return stopped, cancelled
+
+
+def test_a_signal_after_the_job_completed_lets_the_command_write_its_result(
+    capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A SIGTERM that landed after the job had completed (while the service stopped) was
+    reported "interrupted" and skipped the copy to -o: there was no scan left to stop. It is
+    noted and the command ends as it would have; before completion it still stops the scan."""
+    stopped, cancelled = _sigterm_to_self([True])
+    assert stopped == ["SIGTERM"] and not cancelled
+    err = capsys.readouterr().err
+    assert "SIGTERM received: the scan has already completed; writing its result" in err, err
+    stopped, cancelled = _sigterm_to_self([])
+    assert stopped == ["SIGTERM"] and cancelled
+    assert "stopping the scan as Ctrl-C does" in capsys.readouterr().err
 
 
 def _ignore_sighup() -> None:
