@@ -15,6 +15,8 @@ from __future__ import annotations
 import itertools
 import os
 import tomllib
+import types
+import typing
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,6 +28,7 @@ from pydantic import (
     ConfigDict,
     Field,
     ValidationError,
+    ValidationInfo,
     field_validator,
     model_validator,
 )
@@ -79,10 +82,41 @@ def register_width(data_type: DataType) -> int:
     return _WIDTH[data_type]
 
 
+def _takes_numbers(annotation: Any) -> bool:
+    """Whether a field's type is a number (bool, int, float), optionally ``| None`` or a
+    list/tuple of numbers: the values TOML writes without quotes."""
+    if annotation in (bool, int, float):
+        return True
+    args = [a for a in typing.get_args(annotation) if a is not type(None)]
+    origin = typing.get_origin(annotation)
+    if origin is Annotated:
+        return _takes_numbers(args[0])
+    if origin in (list, tuple, types.UnionType, typing.Union):
+        return bool(args) and all(a is Ellipsis or _takes_numbers(a) for a in args)
+    return False
+
+
+def _has_text(value: Any) -> bool:
+    return isinstance(value, str) or (
+        isinstance(value, list | tuple) and any(_has_text(v) for v in value))
+
+
 class _Strict(BaseModel):
-    """Base of all config sections: unknown keys are errors (they are almost always typos)."""
+    """Base of all config sections: unknown keys are errors (they are almost always typos),
+    and so is a number written as text (``theta_deg = "45"``), which pydantic would read as
+    the number: a quoted value is a hand edit or a generator's bug, and its file would not
+    say what the rig has."""
 
     model_config = ConfigDict(extra="forbid", frozen=True, populate_by_name=True)
+
+    @field_validator("*", mode="before")
+    @classmethod
+    def _numbers_are_not_text(cls, value: Any, info: ValidationInfo) -> Any:
+        field = cls.model_fields.get(info.field_name or "")
+        if field is not None and _has_text(value) and _takes_numbers(field.annotation):
+            raise ValueError(f"expected a number, got the text {value!r}: write it without "
+                             "quotes")
+        return value
 
 
 # --------------------------------------------------------------------------- stage

@@ -70,6 +70,31 @@ def test_wrong_type_shows_the_given_value(example: dict) -> None:
     assert "lights[0].theta_deg" in msg and "'thirty'" in msg
 
 
+def test_a_number_written_as_text_is_refused_where_it_was_read_as_the_number(
+    example: dict
+) -> None:
+    # theta_deg = "45" was taken as 45 without a word (pydantic's lax mode), so a file a
+    # script wrote wrongly passed as a rig the lab had checked.
+    quoted = copy.deepcopy(example)
+    quoted["lights"][0]["theta_deg"] = "45"
+    msg = _error(quoted)
+    assert "lights[0].theta_deg: expected a number, got the text '45'" in msg, msg
+    assert "without quotes" in msg, msg
+    # An integer key, and a number inside a list of numbers, likewise.
+    key, value = next((k, v) for k, v in example["stage"].items() if type(v) is int)
+    quoted = copy.deepcopy(example)
+    quoted["stage"][key] = str(value)
+    assert f"stage.{key}: expected a number, got the text '{value}'" in _error(quoted)
+    quoted = copy.deepcopy(example)
+    quoted["sensors"][0]["gain_stages"] = ["0.1", "0.01"]
+    msg = _error(quoted)
+    assert "gain_stages" in msg and "expected a number" in msg, msg
+    # Unquoted numbers (int where a float goes, too) still read as before.
+    fixed = copy.deepcopy(example)
+    fixed["lights"][0]["theta_deg"] = 45
+    assert parse_rig_config(fixed, "rig.toml").lights[0].theta_deg == 45.0
+
+
 def test_an_out_of_range_time_says_its_unit(example: dict) -> None:
     # 200 typed as milliseconds loaded, and every reading waited over three minutes.
     example["stage"]["settle_s"] = 200
