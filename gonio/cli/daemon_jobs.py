@@ -353,14 +353,18 @@ def jobs_through_daemon(args: argparse.Namespace) -> int:
             return follow_and_fetch(client, job, args.output, no_progress=args.no_progress)
         if args.action == "show":
             row = client.request("GET", f"/api/v1/jobs/{job}")
-            print(json.dumps(row, indent=2) if args.json else
-                  f"job {job}: {row['kind']} '{row['specimen']}', {row['state']}, "
-                  f"{row['done_angles']}/{row['total_angles']} angles, priority "
-                  f"{row.get('priority', 0)}"
-                  + (f" ({row['reason']})" if row.get("reason") else "")
-                  + (f"\n  result: {args.daemon.rstrip('/')}/api/v1/jobs/{job}/result "
-                     f"(fetch it: {wait_command(client.url, job, None)} -o FILE)"
-                     if row["state"] == "completed" else ""))
+            if args.json:
+                print(json.dumps(row, indent=2))
+                return 0
+            from gonio.cli.jobs_command import detail_lines
+
+            # The lines `gonio jobs show` prints from a store, with where the result is.
+            if row["state"] == "completed":
+                row = {**row, "result_file": (
+                    f"{args.daemon.rstrip('/')}/api/v1/jobs/{job}/result (fetch it: "
+                    f"{wait_command(client.url, job, None)} -o FILE)")}
+            for line in detail_lines(row):
+                print(line)
             return 0
         if args.action == "reorder":
             if args.position is None and args.priority is None:

@@ -230,7 +230,7 @@ def _print_detail(args: argparse.Namespace, row: Any, d: dict[str, Any],
     if args.json:
         print(json.dumps(d, indent=2))
         return 0
-    for line in _detail_lines(d):
+    for line in detail_lines(d):
         print(line)
     if interrupted:
         print(_interrupted_text(args.db, [row]))
@@ -272,7 +272,7 @@ def _daemon_detail(holder: dict[str, Any] | None, job_id: int) -> dict[str, Any]
     return got if isinstance(got, dict) else None
 
 
-def _detail_lines(d: dict[str, Any]) -> list[str]:
+def detail_lines(d: dict[str, Any]) -> list[str]:
     """A job's detail (``GET /api/v1/jobs/{id}``'s fields) as lines for a terminal."""
     def when(t: float | None) -> str:
         return time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(t)) if t else "-"
@@ -303,7 +303,27 @@ def _detail_lines(d: dict[str, Any]) -> list[str]:
         lines.append(f"  time left in all: about {d['time_left_s']:.0f} s")
     if d.get("result_file"):
         lines.append(f"  result: {d['result_file']}")
+    lines.extend(_result_lines(d))
     lines.append("  (--json: every field, as GET /api/v1/jobs/ID)")
+    return lines
+
+
+def _result_lines(d: dict[str, Any]) -> list[str]:
+    """What a completed scan measured, as ``gonio scan`` said it at the end: its samples and
+    headline error (``predicted_log_rmse``, marked when outside physical bounds), the
+    calibration and the result's warnings. Only ``--json`` had them."""
+    from gonio.cli.scan_report import result_headline, scan_summary
+
+    summary = d.get("result")
+    if d.get("state") != "completed" or d.get("kind") == "calibration" or not summary:
+        return []
+    lines = [f"  measured: {result_headline(summary)}"]
+    # The end-of-scan summary's other lines (calibration, local prior, arc, warnings), but
+    # the paragraph on what the error means: the scan said it, and the page and --json do.
+    meaning = {f"  {key}:" for key in ("predicted_log_rmse", "predicted_error")}
+    for line, _warning in scan_summary(d["id"], summary, None, "")[1:]:
+        if not any(line.startswith(m) for m in meaning):
+            lines.append(line if line.startswith("  ") else f"  {line}")
     return lines
 
 

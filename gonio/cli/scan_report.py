@@ -102,13 +102,10 @@ def scan_summary(job_id: int, summary: dict[str, Any], out: Path | None,
     from gonio.figures import headline_error, local_prior_text
 
     calibrated = bool(summary.get("calibrated"))
-    units = "1/sr" if calibrated else "sensor units (uncalibrated)"
     err = headline_error(summary)
-    err_text = f"{err['key']} {err['text']}" if err else "no error estimate"
-    n = summary.get("n_samples", summary.get("readings"))
     where = f"wrote {out} ({kept})" if out is not None else kept
     lines: list[tuple[str, bool]] = [
-        (f"job {job_id} completed: {n} samples in {units}, {err_text}; {where}", False)]
+        (f"job {job_id} completed: {result_headline(summary)}; {where}", False)]
     cal = summary.get("calibration")
     source = cal.get("source") if isinstance(cal, dict) else None
     if calibrated:
@@ -125,6 +122,18 @@ def scan_summary(job_id: int, summary: dict[str, Any], out: Path | None,
         if summary.get(key):
             lines.append((f"warning: {summary[key]}", True))
     return lines
+
+
+def result_headline(summary: dict[str, Any]) -> str:
+    """A completed scan's result in a few words: its samples, their units and the headline
+    error (``80 samples in 1/sr, predicted_log_rmse 0.051``), from the job's stored summary."""
+    from gonio.figures import headline_error
+
+    units = "1/sr" if summary.get("calibrated") else "sensor units (uncalibrated)"
+    err = headline_error(summary)
+    err_text = f"{err['key']} {err['text']}" if err else "no error estimate"
+    n = summary.get("n_samples", summary.get("readings"))
+    return f"{n} samples in {units}, {err_text}"
 
 
 def print_scan_summary(job_id: int, summary: dict[str, Any], out: Path | None,

@@ -148,6 +148,14 @@ def test_wait_on_a_completed_job_fetches_it_at_once(
     assert f"stopped fetching; job {job} is completed" in err and "goes on" not in err, err
     assert f"wait {job} -o {again}" in err, err
     assert not again.exists()
+    # `jobs --daemon URL show` says what the job measured, as `jobs show` on a store does (it
+    # printed one line of state), and where to fetch the result.
+    assert main(["jobs", "--daemon", daemon.url, "show", str(job)]) == 0
+    shown = capsys.readouterr().out
+    assert (f"  measured: {detail['result']['n_samples']} samples in "
+            in shown), shown
+    assert f"predicted_log_rmse {detail['result']['predicted_log_rmse']:.3f}" in shown, shown
+    assert f"{daemon.url}/api/v1/jobs/{job}/result (fetch it: " in shown, shown
 
 
 def test_wait_on_a_cancelled_job_says_so_and_exits_1(

@@ -181,6 +181,16 @@ def test_scan_leaves_only_its_output_and_the_store_keeps_a_real_result_path(
     assert row["result_path"] == "results/job-2.h5"
     assert Path(row["result_file"]) == data / "results" / "job-2.h5"
     assert read_result(row["result_file"]).samples.values.shape == (12, 3, 3)
+    # Without --json the lines say what the scan measured (only --json had it): the rig's 12
+    # pairs x 3 angles, in 1/sr (calibrated above), and the headline error as stored.
+    assert main(["jobs", "--db", str(data / "gonio.sqlite"), "show", "2"]) == 0
+    text = capsys.readouterr().out
+    assert (f"  measured: 36 samples in 1/sr, predicted_log_rmse "
+            f"{row['result']['predicted_log_rmse']:.3f}") in text, text
+    assert "  calibration: job 1" in text, text
+    # A calibration job shows none of it (it has no reconstruction).
+    assert main(["jobs", "--db", str(data / "gonio.sqlite"), "show", "1"]) == 0
+    assert "measured:" not in capsys.readouterr().out
 
 
 def test_dry_run_prints_a_short_summary_and_json_on_request(
