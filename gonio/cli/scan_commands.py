@@ -369,7 +369,9 @@ async def _run_scan(args: argparse.Namespace, plan: Any, config: Any, sim: Any =
         if more:
             dr = dr.model_copy(update={"warnings": [*dr.warnings, *more]})
         print(dr.model_dump_json(indent=2) if args.json
-              else dry_run_summary(dr, plan, config.rig.name))
+              else dry_run_summary(dr, plan, config.rig.name,
+                                   sim_calibration_s=_sim_calibration_s(args, plan, config,
+                                                                        desc, sim)))
         return 0
     if args.json:
         raise UsageError("--json goes with --dry-run")
@@ -522,6 +524,28 @@ async def _run_owned(args: argparse.Namespace, checked: Any, config: Any, sim: A
         return 0
     print_scan_summary(job.id, summary, out, f"kept in {service.result_path(job.id)}")
     return 0
+
+
+def _sim_calibration_s(args: argparse.Namespace, plan: Any, config: Any, desc: Any,
+                       sim: Any) -> float | None:
+    """How long the calibration ``gonio scan --sim`` runs before this plan takes, measuring
+    the simulated white reference (as :func:`_run_owned` decides it: no calibration of every
+    pair at the plan's exposure in effect in the data directory, and no ``--calibration``),
+    or None when it runs none. The dry run said nothing of it, so the first scan took longer
+    than it said."""
+    from gonio.calibration import Calibration, calibration_in_effect, exposure_warning
+    from gonio.cli.sim_session import covers_rig, sim_calibration_plan
+    from gonio.paths import scan_data_dir
+    from gonio.plans.dryrun import dry_run
+
+    if sim is None or args.calibration is not None or plan.kind == "calibration":
+        return None
+    cal = calibration_in_effect(args.data_dir or scan_data_dir(config), config)
+    exposure_s = plan.exposure.exposure_s
+    if (isinstance(cal, Calibration) and covers_rig(cal, desc.pairs, config)
+            and not exposure_warning(cal, exposure_s)):
+        return None
+    return float(dry_run(sim_calibration_plan(None, exposure_s), desc).estimated_s)
 
 
 def _calibration_warnings(args: argparse.Namespace, plan: Any, config: Any,

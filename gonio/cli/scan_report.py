@@ -170,6 +170,9 @@ def _angles_text(angles: list[float], most: int = 8) -> str:
 
 
 def _duration_text(seconds: float) -> str:
+    if seconds < 1:
+        # A one-angle plan's quarter second read "about 0 s".
+        return f"{seconds:.1g} s"
     if seconds < 90:
         return f"{seconds:.0f} s"
     if seconds < 5400:
@@ -185,8 +188,10 @@ def _part_text(seconds: float) -> str:
     return f"{seconds:.1f} s" if seconds >= 1 else f"{seconds:.2g} s"
 
 
-def dry_run_summary(dr: Any, plan: Any, rig_name: str) -> str:
-    """A few lines a person reads: angles, readings, duration (``--json`` has everything)."""
+def dry_run_summary(dr: Any, plan: Any, rig_name: str, *,
+                    sim_calibration_s: float | None = None) -> str:
+    """A few lines a person reads: angles, readings, duration (``--json`` has everything);
+    ``sim_calibration_s``, the calibration ``gonio scan --sim`` runs first, if it does."""
     n_pairs = len(dr.pairs)
     angles = list(dr.angles_deg)
     ex = plan.exposure
@@ -201,6 +206,11 @@ def dry_run_summary(dr: Any, plan: Any, rig_name: str) -> str:
         f"  duration: about {_duration_text(dr.estimated_s)} (moves {_part_text(dr.motion_s)}, "
         f"settling {_part_text(dr.settle_s)}, exposures {_part_text(dr.exposure_s)})",
     ]
+    if sim_calibration_s is not None:
+        lines.append(f"  before it, about {_duration_text(sim_calibration_s)}: the simulated "
+                     "rig is calibrated on a white reference (no calibration of this rig at "
+                     "this exposure is in effect in its data directory; later scans there "
+                     "reuse it)")
     finishing = getattr(dr, "finishing_s", None)
     if finishing is not None:
         # The measuring alone read as the job's time; the reconstruction can take longer.

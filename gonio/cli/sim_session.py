@@ -73,10 +73,16 @@ def calibration_covers_rig(service: Any) -> bool:
     with the RGB calibration ran to its end and failed there ("calibration of pair L1/S1 has 3
     channels, the readings have 31").
     """
-    cal = service.calibration()
-    if not cal.pairs or not cal.covers(service.desc.pairs):
+    return covers_rig(service.calibration(), service.desc.pairs, service.rig_config)
+
+
+def covers_rig(cal: Any, pairs: Any, rig_config: Any) -> bool:
+    """Whether calibration ``cal`` has factors for every one of ``pairs``, one per channel of
+    the pair's sensor in ``rig_config`` (:func:`calibration_covers_rig` of a service; a dry
+    run asks it of the calibration it reads from the data directory)."""
+    if not cal.pairs or not cal.covers(pairs):
         return False
-    sensors = getattr(service.rig_config, "sensors", None) or ()
+    sensors = getattr(rig_config, "sensors", None) or ()
     channels = {s.name: len(s.channels) for s in sensors}
     return all(len(p.factor) == channels.get(p.sensor, len(p.factor)) for p in cal.pairs)
 

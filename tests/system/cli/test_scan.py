@@ -227,6 +227,35 @@ def test_a_dry_run_of_one_angle_says_one_angle(capsys: pytest.CaptureFixture[str
     assert "readings: 4 (4 pairs x 1 angle), exposure" in text, text
 
 
+def test_a_sim_dry_run_states_the_calibration_the_scan_runs_first(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``gonio scan --sim --dry-run`` said nothing of the white-reference calibration the scan
+    runs first on a data directory with none, and a one-angle plan read "about 0 s"."""
+    import json
+    import re
+
+    data = tmp_path / "data"
+    dry = ["scan", "--sim", "--dry-run", "--data-dir", str(data), "-o", "/dev/null"]
+    assert main([*dry, "--rotations", "1"]) == 0
+    text = capsys.readouterr().out
+    assert "before it, about" in text and "calibrated on a white reference" in text, text
+    assert main([*dry, "--rotations", "1", "--json"]) == 0
+    seconds = json.loads(capsys.readouterr().out)["estimated_s"]
+    shown = re.search(r"duration: about ([0-9.]+) s", text)
+    assert shown is not None and 0 < seconds < 1, text
+    assert abs(float(shown.group(1)) - seconds) <= 0.05, (text, seconds)
+    # The scan calibrates the rig; a dry run of the next one has nothing to run first, unless
+    # it reads at another exposure (the calibration serves its own exposure only).
+    assert main(["scan", "--sim", "--rotations", "2", "--no-export-fits", "--no-progress",
+                 "--data-dir", str(data), "-o", str(tmp_path / "felt.h5")]) == 0
+    assert "calibrating the simulated rig" in capsys.readouterr().err
+    assert main([*dry, "--rotations", "2"]) == 0
+    assert "before it" not in capsys.readouterr().out
+    assert main([*dry, "--rotations", "2", "--exposure", "0.02"]) == 0
+    assert "calibrated on a white reference" in capsys.readouterr().out
+
+
 def test_an_adaptive_dry_run_states_its_cap_and_refuses_a_cap_below_the_start(
     capsys: pytest.CaptureFixture[str]
 ) -> None:
