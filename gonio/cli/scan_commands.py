@@ -371,7 +371,8 @@ async def _run_scan(args: argparse.Namespace, plan: Any, config: Any, sim: Any =
         print(dr.model_dump_json(indent=2) if args.json
               else dry_run_summary(dr, plan, config.rig.name,
                                    sim_calibration_s=_sim_calibration_s(args, plan, config,
-                                                                        desc, sim)))
+                                                                        desc, sim),
+                                   time_scale=args.time_scale if sim is not None else 1.0))
         return 0
     if args.json:
         raise UsageError("--json goes with --dry-run")

@@ -189,9 +189,10 @@ def _part_text(seconds: float) -> str:
 
 
 def dry_run_summary(dr: Any, plan: Any, rig_name: str, *,
-                    sim_calibration_s: float | None = None) -> str:
+                    sim_calibration_s: float | None = None, time_scale: float = 1.0) -> str:
     """A few lines a person reads: angles, readings, duration (``--json`` has everything);
-    ``sim_calibration_s``, the calibration ``gonio scan --sim`` runs first, if it does."""
+    ``sim_calibration_s``, the calibration ``gonio scan --sim`` runs first, if it does;
+    ``time_scale``, the simulated rig's seconds per wall second (``--time-scale``)."""
     n_pairs = len(dr.pairs)
     angles = list(dr.angles_deg)
     ex = plan.exposure
@@ -206,6 +207,14 @@ def dry_run_summary(dr: Any, plan: Any, rig_name: str, *,
         f"  duration: about {_duration_text(dr.estimated_s)} (moves {_part_text(dr.motion_s)}, "
         f"settling {_part_text(dr.settle_s)}, exposures {_part_text(dr.exposure_s)})",
     ]
+    if time_scale != 1.0:
+        # The durations are the rig's: a simulated rig at --time-scale moves and exposes
+        # faster (or slower), and the number read as wall time. The lamp settling is the
+        # engine's own wait, in wall time.
+        wall = (dr.motion_s + dr.exposure_s) / time_scale + dr.settle_s
+        lines.append(f"  (a real rig's time; the simulated rig at --time-scale {time_scale:g} "
+                     f"moves and exposes that much faster: about {_duration_text(wall)} of "
+                     "wall time)")
     if sim_calibration_s is not None:
         lines.append(f"  before it, about {_duration_text(sim_calibration_s)}: the simulated "
                      "rig is calibrated on a white reference (no calibration of this rig at "

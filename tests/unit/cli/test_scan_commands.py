@@ -246,6 +246,28 @@ def test_the_dry_run_summary_states_each_part_of_the_duration_to_a_few_per_cent(
             assert shown == pytest.approx(true, rel=0.05, abs=1e-9), (argv, text)
 
 
+def test_a_time_scaled_dry_run_says_its_durations_are_a_real_rigs_and_the_wall_time(
+) -> None:
+    """At ``--time-scale 10`` the dry run stated the rig's seconds as if they were the wall
+    clock's. The simulated rig scales moves and exposures; the lamps' settling is the engine's
+    own wait."""
+    import re
+
+    from gonio.plans.dryrun import dry_run
+    from gonio.rigdescription import RigDescription
+    from gonio.sim.memrig import MemRig
+
+    plan = _parse("--rotations", "24", "--exposure", "0.05")
+    dr = dry_run(plan, RigDescription.from_rig(MemRig()))  # type: ignore[arg-type]
+    assert "a real rig's time" not in scan_report.dry_run_summary(dr, plan, "mem")
+    text = scan_report.dry_run_summary(dr, plan, "mem", time_scale=10.0)
+    m = re.search(r"at --time-scale 10 moves and exposes that much faster: about ([\d.]+) s "
+                  r"of wall time", text)
+    assert m is not None, text
+    wall = (dr.motion_s + dr.exposure_s) / 10.0 + dr.settle_s
+    assert abs(float(m.group(1)) - wall) <= 0.5, (text, wall)  # shown in whole seconds
+
+
 def test_a_rebuild_says_why_its_design_comparison_is_missing_or_off() -> None:
     lost = "not available: job 3 was finished by a gonio whose job store did not keep ..."
     assert (jobs_command.design_comparison_line({"design_comparison": lost})
