@@ -698,7 +698,12 @@ def figure_png(rows: Sequence[tuple[str, Any]], views: Sequence[View] = DEFAULT_
     fs, fs_small = max(12, size // 28), max(11, size // 36)
     font = ImageFont.load_default(size=fs)
     small = ImageFont.load_default(size=fs_small)
-    left, top, gap, foot = 7 * fs + 10, 3 * fs, 6, 3 * fs
+    # The label column is as wide as the longest word of any label needs (up to 14 font
+    # sizes): "reconstruction" was cut after 13 characters ("reconstructio" / "n").
+    words = [w for label, _b in rows for w in label.split()]
+    widest = max((font.getlength(w) for w in words), default=0.0)
+    left = int(max(7 * fs, min(widest, 14 * fs))) + 10
+    top, gap, foot = 3 * fs, 6, 3 * fs
     w = left + len(views) * (size + gap)
     h = top + len(rows) * (size + gap) + foot
     canvas = Image.new("RGB", (w, h), (255, 255, 255))
@@ -713,7 +718,7 @@ def figure_png(rows: Sequence[tuple[str, Any]], views: Sequence[View] = DEFAULT_
                          (left + j * (size + gap), top + i * (size + gap)))
     for i, (label, _b) in enumerate(rows):
         y = top + i * (size + gap) + size // 2 - fs
-        draw.text((6, y), _wrap(label, 13), fill=ink, font=font)
+        draw.text((6, y), label_lines(label, font.getlength, left - 10), fill=ink, font=font)
     y = top + len(rows) * (size + gap) + 4
     draw.text((left, y), "sRGB; exposure per column (shared by the rows): the brightest pixel "
               "of the column is white, so no highlight is clipped.", fill=ink, font=small)
@@ -724,19 +729,38 @@ def figure_png(rows: Sequence[tuple[str, Any]], views: Sequence[View] = DEFAULT_
     return buf.getvalue()
 
 
-def _wrap(text: str, width: int) -> str:
-    """Lines of at most ``width`` characters (long words are cut)."""
+def label_lines(text: str, length: Callable[[str], float], width: float) -> str:
+    """``text`` broken between words into lines no longer than ``width`` as ``length``
+    measures them (a font's ``getlength``, pixels); a word too long for a line alone is cut
+    where it must be.
+
+    Parameters
+    ----------
+    text : the label
+    length : the drawn length of a string, pixels
+    width : the longest line allowed, pixels
+
+    Returns
+    -------
+    str : the lines, joined by newlines
+    """
     words: list[str] = []
     for word in text.split():
-        words.extend(word[i : i + width] for i in range(0, len(word), width))
+        while length(word) > width and len(word) > 1:
+            cut = max(1, max(i for i in range(1, len(word) + 1)
+                             if i == 1 or length(word[:i]) <= width))
+            words.append(word[:cut])
+            word = word[cut:]
+        words.append(word)
     lines: list[str] = []
     line = ""
     for word in words:
-        if line and len(line) + 1 + len(word) > width:
+        trial = f"{line} {word}".strip()
+        if line and length(trial) > width:
             lines.append(line)
             line = word
         else:
-            line = f"{line} {word}".strip()
+            line = trial
     if line:
         lines.append(line)
     return "\n".join(lines)

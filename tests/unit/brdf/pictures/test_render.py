@@ -165,3 +165,31 @@ def test_figure_has_full_size_views_and_one_row_per_material() -> None:
         R.figure_png([("paper", bm.Lambert(0.7))], size=10)
     with pytest.raises(R.RenderError, match="at least one material"):
         R.figure_png([], size=96)
+
+
+def test_labels_break_between_words_and_cut_only_a_word_too_long_for_a_line() -> None:
+    def chars(t: str) -> float:  # a monospace font of 10 pixels per character
+        return 10.0 * len(t)
+
+    # "reconstruction" (14 characters) in a 140-pixel column stays whole; it was cut after
+    # 13 characters whatever the column's width.
+    assert R.label_lines("reconstruction (job 3)", chars, 140) == "reconstruction\n(job 3)"
+    assert R.label_lines("truth", chars, 140) == "truth"
+    assert R.label_lines("a b c", chars, 30) == "a b\nc"
+    # A word wider than the column is cut at the column's width.
+    assert R.label_lines("abcdefgh", chars, 30) == "abc\ndef\ngh"
+
+
+def test_the_label_column_widens_for_the_longest_word() -> None:
+    from io import BytesIO
+
+    from PIL import Image, ImageFont
+
+    short = R.figure_png([("paper", bm.Lambert(0.7))], size=96)
+    name = "mi-blend-brushed-Al"  # a material's name: one word, wider than the column
+    long = R.figure_png([(name, bm.Lambert(0.7))], size=96)
+    w_short = Image.open(BytesIO(short)).size[0]
+    w_long = Image.open(BytesIO(long)).size[0]
+    # The column grew by what the word needs beyond it (the figure's 12-pixel font at 96).
+    need = ImageFont.load_default(size=12).getlength(name)
+    assert w_long - w_short == pytest.approx(need - 7 * 12, abs=1.0), (w_long, w_short, need)
