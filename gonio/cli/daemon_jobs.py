@@ -27,6 +27,7 @@ from gonio.cli.scan_report import (
     check_output_path,
     dry_run_summary,
     print_scan_summary,
+    start_text,
     suspended_line,
 )
 
@@ -334,9 +335,10 @@ def jobs_through_daemon(args: argparse.Namespace) -> int:
                 why = r.get("waiting") or r.get("reason")
                 if isinstance(why, dict):
                     why = why.get("reason") or why.get("message")
+                said = "; ".join(w for w in (why, start_text(r)) if w)
                 print(f"{r['id']:>4}  {r['state']:<14} {r['kind']:<11} "
                       f"{r['done_angles']:>4}/{r['total_angles']:<4}  {r['specimen']}"
-                      + (f"  ({why})" if why else ""))
+                      + (f"  ({said})" if said else ""))
             return 0
         job = args.job_id
         assert job is not None  # refused above

@@ -124,6 +124,19 @@ def scan_summary(job_id: int, summary: dict[str, Any], out: Path | None,
     return lines
 
 
+def start_text(job: dict[str, Any]) -> str | None:
+    """When a queued job (``GET /api/v1/jobs``'s row) is estimated to start, in a few words
+    (``starts in about 4.5 min``; ``within`` when the estimate is an upper bound), or None
+    for a job not queued or whose start is not known (its ``waiting`` says why)."""
+    seconds = job.get("starts_in_s")
+    if job.get("state") != "queued" or not isinstance(seconds, int | float):
+        return None
+    if seconds < 1:
+        return "starts next"
+    how = "within" if job.get("starts_in_bound") else "in about"
+    return f"starts {how} {_duration_text(float(seconds))}"
+
+
 def result_headline(summary: dict[str, Any]) -> str:
     """A completed scan's result in a few words: its samples, their units and the headline
     error (``80 samples in 1/sr, predicted_log_rmse 0.051``), from the job's stored summary."""

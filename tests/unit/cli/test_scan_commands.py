@@ -295,3 +295,16 @@ def test_a_rebuild_says_when_an_import_since_changed_the_result() -> None:
     assert jobs_command.rebuild_change_line({"local_prior": "felt"},
                                              {"local_prior": "felt"}) is None
     assert jobs_command.rebuild_change_line({}, {"local_prior": "felt"}) is None
+
+
+def test_the_daemon_job_list_states_a_queued_jobs_estimated_start() -> None:
+    """``gonio jobs --daemon URL list`` said why a queued job waits but not when it starts,
+    which the API's rows carry (starts_in_s, starts_in_bound)."""
+    row = {"state": "queued", "starts_in_s": 270.0, "starts_in_bound": False}
+    assert scan_report.start_text(row) == "starts in about 4.5 min"
+    assert scan_report.start_text({**row, "starts_in_bound": True}) == "starts within 4.5 min"
+    assert scan_report.start_text({**row, "starts_in_s": 42.0}) == "starts in about 42 s"
+    assert scan_report.start_text({**row, "starts_in_s": 0.0}) == "starts next"
+    # Not known (the row's waiting says why), or not queued: nothing.
+    assert scan_report.start_text({**row, "starts_in_s": None}) is None
+    assert scan_report.start_text({**row, "state": "running"}) is None
