@@ -461,6 +461,8 @@ async def _run_owned(args: argparse.Namespace, checked: Any, config: Any, sim: A
         else:
             from gonio.calibration import exposure_warning
 
+            for line in _other_unfinished(store, db):
+                print(line, file=sys.stderr)
             exposure_s = plan.exposure.exposure_s
             if (sim is not None and override is None and plan.kind != "calibration"
                     and (not calibration_covers_rig(service)
@@ -630,6 +632,21 @@ def _read_calibration(path: Path) -> Any:
                          "expected the JSON written by a calibration job "
                          "(OUTPUT.calibration.json of 'gonio scan --white-reference ALBEDO')"
                          ) from None
+
+
+def _other_unfinished(store: Any, db: Path) -> list[str]:
+    """Notes on the unfinished jobs of this job store that this scan does not resume (another
+    plan or specimen: e.g. ``-o`` named differently after a Ctrl-C, which names the specimen),
+    so a paused scan is not forgotten: this one starts as a new job."""
+    lines = []
+    for row in store.active_jobs():
+        lines.append(
+            f"note: job {row.id} ('{row.specimen}', {row.state.value}, {row.done_angles} of "
+            f"{row.total_angles} angles) is another unfinished job in this job store; this "
+            "command's plan or specimen differs, so it starts a new job. The command that "
+            f"started job {row.id}, run again, resumes it; 'gonio jobs abort {row.id} --db "
+            f"{db}' ends it")
+    return lines
 
 
 def _left_interrupted(store: Any, job_id: int, db: Path, args: argparse.Namespace) -> None:

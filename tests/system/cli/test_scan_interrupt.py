@@ -164,6 +164,30 @@ def test_sigterm_or_sighup_stops_the_scan_as_ctrl_c_does(
     assert "Run the same command again to resume it" in err, err
 
 
+def test_a_scan_that_does_not_resume_the_paused_one_names_it(tmp_path: Path) -> None:
+    """After Ctrl-C (here SIGTERM) a second command with another -o (which names the
+    specimen) is another plan: it started a new job and said nothing of the paused one, which
+    stayed paused in the store unmentioned."""
+    rig = tmp_path / "rig.toml"
+    data = tmp_path / "data"
+    db = data / "gonio.sqlite"
+    with start_sim_rig(SimRigOptions(time_scale=1.0, settle_s=0.0, config_path=rig)):
+        argv = ["scan", "--no-export-fits", "--accept-uncalibrated",
+                "--rig", str(rig), "--rotations", "6", "--exposure", "0.5",
+                "--data-dir", str(data), "--no-progress"]
+        code, out, err = _signalled_mid_scan([*argv, "-o", str(tmp_path / "felt.h5")], db,
+                                             signal.SIGTERM)
+        assert code == 128 + signal.SIGTERM, out + err
+        paused = _only_job(db)
+        assert paused.state is JobState.PAUSED
+        other = gonio([*argv, "--rotations", "2", "--exposure", "0.01",
+                       "-o", str(tmp_path / "linen.h5")])
+    assert other.returncode == 0, other.stdout + other.stderr
+    assert (f"note: job {paused.id} ('felt', paused, {paused.done_angles} of 6 angles) is "
+            "another unfinished job in this job store") in other.stderr, other.stderr
+    assert f"'gonio jobs abort {paused.id} --db {db}' ends it" in other.stderr, other.stderr
+
+
 def _sigterm_to_self(finished: list[bool]) -> tuple[list[str], bool]:
     """Install gonio scan's stop handlers with ``finished`` as the scan's completion flag,
     send this process SIGTERM, and return the stop record and whether the scan's task was
