@@ -94,6 +94,6 @@ def test_gonio_scan_through_the_daemon_says_it_before_queueing(
                if ln.startswith("warning:") and "over half a turn" in ln]
     says_what_and_what_to_do(line)
     assert err.index(line) < err.index("queued on")
-    assert main([*argv, "--span", "360"]) == 0
+    assert main([*argv, "--span", "360", "--overwrite"]) == 0  # the same -o again
     assert [ln for ln in capsys.readouterr().err.splitlines()
             if ln.startswith("warning:") and "over half a turn" in ln] == []

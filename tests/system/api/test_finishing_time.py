@@ -85,7 +85,11 @@ def test_the_measuring_eta_stands_still_while_paused_and_goes_on_after_resume(
             paused_eta = d["eta_s"]
             assert paused_eta is not None and paused_eta > 5
             time.sleep(5.0)
-            assert c.get(f"/api/v1/jobs/{job}").json()["eta_s"] == paused_eta  # frozen
+            # Frozen: 5 s of counting down would show. (Not to the bit: on a loaded machine the
+            # engine may take the pause a moment after the store records it, and the frozen
+            # value then moves by milliseconds: 36.550 -> 36.554 in one full run.)
+            assert c.get(f"/api/v1/jobs/{job}").json()["eta_s"] == pytest.approx(
+                paused_eta, abs=0.5)
             assert c.post(f"/api/v1/jobs/{job}/resume").status_code == 200
             resumed = c.get(f"/api/v1/jobs/{job}").json()
             assert resumed["state"] == "running" and resumed["done_angles"] == d["done_angles"]
