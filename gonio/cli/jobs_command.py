@@ -28,7 +28,8 @@ def register(subparsers: Any) -> None:
         "With --daemon URL the jobs are a running daemon's, acted on through its API: list, "
         "show, abort (a running job too), cancel ID (take a queued job out of the queue), "
         "reorder ID --position N and/or --priority P (N=0: next), wait ID [-o FILE] (follow "
-        "the job with a progress bar until it ends, then fetch its result to FILE and print "
+        "the job with a progress bar until it ends, saying while it is queued what it waits "
+        "for and when it may start, then fetch its result to FILE and print "
         "the summary 'gonio scan' prints; e.g. a scan queued with 'gonio scan --daemon URL "
         "--no-wait', or one whose terminal was closed).")
     j.add_argument("action", nargs="?",
