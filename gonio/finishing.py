@@ -909,7 +909,7 @@ def _not_rebuilt(store: JobStore, job: Any) -> str:
         full = (job.reason or "").startswith(_DISK_FULL)
         ev = store.last_event(job.id, "state")
         finishing = ev is not None and ev.data.get("from") == JobState.RECONSTRUCTING.value
-        when = ("while it was being finished, yet" if finishing
+        when = ("while it was being finished, its plan not wholly measured" if finishing
                 else "while it was measuring, when the disk filled" if full
                 else "while it was measuring")
         return (f"job {job.id} failed {when} ({job.done_angles} of {job.total_angles} angles "
