@@ -722,10 +722,14 @@ def rebuild_result(store: JobStore, data_dir: Path, job_id: int,
     (:func:`_older_rig_config`). The job's summary is replaced by the new one; a calibration
     job's factors do not replace the calibration in effect.
 
-    A job that failed because the disk filled while its result was written (``failed``, its
-    reason "disk full: ...", after ``reconstructing``) has every reading: it is finished here
-    and becomes ``completed``, with the events its finishing would have recorded. A calibration
-    job so failed puts its calibration in effect unless a later one is.
+    A job that failed while it was being finished (``failed`` straight from
+    ``reconstructing``: the disk filled while its result was written, or reconstruction, fits,
+    colour or the result writing raised, e.g. a bug fixed since or a basis file that did not
+    read) with every angle of its plan measured holds every reading: it is finished here and
+    becomes ``completed``, with the events its finishing would have recorded. A calibration
+    job so failed puts its calibration in effect unless a later one is. If its finishing fails
+    again, the job stays ``failed`` with the new reason (a ``rebuild_failed`` event; its
+    readings are untouched) and :class:`RebuildError` says why.
 
     Blocking (reconstruction and fits take seconds).
 
@@ -733,7 +737,7 @@ def rebuild_result(store: JobStore, data_dir: Path, job_id: int,
     ----------
     store : the job store holding the job and its readings
     data_dir : the data directory the result goes to (``results/job-<id>.h5``)
-    job_id : a completed job, or one failed by a full disk while finishing
+    job_id : a completed job, or one that failed while finishing with every reading stored
     basis : the reconstruction basis (specimen jobs)
 
     Returns
@@ -743,8 +747,9 @@ def rebuild_result(store: JobStore, data_dir: Path, job_id: int,
     Raises
     ------
     RebuildError
-        The job is not completed (nor failed by a full disk while finishing), its plan or rig
-        snapshot no longer parses, or its readings are missing or incomplete.
+        The job is not completed (nor failed while finishing with every reading stored), its
+        plan or rig snapshot no longer parses, its readings are missing or incomplete, or the
+        finishing of a failed job failed again (its new reason).
     """
     from gonio.jobstates import JobState
     from gonio.plans.models import parse_stored_plan
@@ -806,8 +811,22 @@ def rebuild_result(store: JobStore, data_dir: Path, job_id: int,
     try:
         summary = finish_job(job_id, plan, how)
     except CalibrationError as exc:
+        if completing:
+            _failed_again(store, job, f"calibration refused (gonio jobs rebuild): {exc}")
         raise RebuildError(f"cannot rebuild job {job_id}: {exc}; restore the store from a "
                            "backup, or measure it again") from None
+    except Exception as exc:
+        if not completing:
+            raise  # a completed job stays as it was: the error is the command's
+        # Failed again (the cause is not fixed yet): the job keeps failing, with the new
+        # reason the API and the page show; its readings are untouched.
+        reason = f"reconstruction failed again (gonio jobs rebuild): {exc}"
+        _failed_again(store, job, reason)
+        raise RebuildError(
+            f"cannot rebuild job {job_id}: its finishing failed again ({reason}); it stays "
+            f"failed with that reason, its {n} readings untouched: remove the cause (e.g. "
+            f"a basis or library file that does not read, or update gonio) and run gonio "
+            f"jobs rebuild {job_id} again") from exc
     store.set_result(job_id, summary.get("result_path"), summary)
     store.append_event(job_id, "rebuilt", {"result_path": summary.get("result_path")})
     if completing:
@@ -857,28 +876,51 @@ def _older_rig_config(data_dir: Path, job: Any) -> dict[str, Any]:
 
 
 def _failed_finishing(store: JobStore, job: Any) -> bool:
-    """Whether ``job`` failed for want of disk space while it was being finished (all its
-    readings are stored; only its result or calibration file could not be written)."""
+    """Whether ``job`` failed while it was being finished with every reading of its plan
+    stored: ``failed`` straight from ``reconstructing`` (a full disk, or an exception in
+    reconstruction, fits, colour or the result writing), every planned angle measured. A
+    rebuild that failed again records no state change (``rebuild_failed``), so it still is."""
     from gonio.jobstates import JobState
 
-    if job.state is not JobState.FAILED or not (job.reason or "").startswith(_DISK_FULL):
+    if job.state is not JobState.FAILED or not _all_measured(job):
         return False
     ev = store.last_event(job.id, "state")
     return ev is not None and ev.data.get("from") == JobState.RECONSTRUCTING.value
+
+
+def _all_measured(job: Any) -> bool:
+    """Every stage angle the job's plan laid out (all its rounds: the store's ``steps``,
+    counted in ``total_angles``) has its readings committed."""
+    return bool(job.total_angles) and job.done_angles >= job.total_angles
+
+
+def _failed_again(store: JobStore, job: Any, reason: str) -> None:
+    """Record that the rebuild of ``job`` (failed while finishing) failed again: the new
+    reason replaces the old one, with a ``rebuild_failed`` event (no state change: the job
+    was and stays ``failed``, and a later rebuild may still complete it)."""
+    store.set_failure_reason(job.id, reason, {"previous": job.reason})
 
 
 def _not_rebuilt(store: JobStore, job: Any) -> str:
     """Why ``job`` (not completed) has no result to rebuild, and what to do."""
     from gonio.jobstates import JobState
 
-    if job.state is JobState.FAILED and (job.reason or "").startswith(_DISK_FULL):
-        return (f"job {job.id} failed while it was measuring, when the disk filled "
-                f"({job.done_angles} of {job.total_angles} angles measured): its readings stay "
-                "in the job store but are not a whole scan, so there is no result to write; "
-                "measure it again (submit the same plan) once the disk has room")
+    if job.state is JobState.FAILED:
+        full = (job.reason or "").startswith(_DISK_FULL)
+        ev = store.last_event(job.id, "state")
+        finishing = ev is not None and ev.data.get("from") == JobState.RECONSTRUCTING.value
+        when = ("while it was being finished, its plan not wholly measured" if finishing
+                else "while it was measuring, when the disk filled" if full
+                else "while it was measuring")
+        return (f"job {job.id} failed {when} ({job.done_angles} of {job.total_angles} angles "
+                f"of its plan measured, {store.reading_count(job.id)} readings stored; "
+                f"reason: {job.reason or 'none recorded'}): its readings stay in the job "
+                "store but are not a whole scan, so there is no result to write; measure it "
+                "again (submit the same plan as a new scan)"
+                + (" once the disk has room" if full else ""))
     return (f"job {job.id} is {job.state.value}: only a completed job's result is rebuilt, or "
-            "one whose result could not be written for a full disk (a job still to finish "
-            "writes its own)")
+            "that of one that failed while it was being finished with every reading stored "
+            "(a job still to finish writes its own)")
 
 
 def _no_later_calibration(store: JobStore, data_dir: Path, job: Any) -> bool:

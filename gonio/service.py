@@ -27,7 +27,7 @@ import logging
 import math
 import threading
 import time
-from collections.abc import AsyncIterator, Callable, Coroutine
+from collections.abc import AsyncIterator, Callable, Coroutine, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
@@ -615,21 +615,37 @@ class GonioService:
         channels than the sensors read (the job would fail when it finishes) unless a
         calibration job is queued or under way. Raises :class:`PlanError` naming the
         pairs, or :class:`gonio.calibration.CalibrationError` for a damaged calibration."""
-        from gonio.calibration import ChannelMismatch, PartialCalibration, sensor_channels
+        from gonio.calibration import PartialCalibration
 
         cal = self.calibration()
         try:
             cal.check_covers(checked.pairs, "this plan")
         except PartialCalibration as exc:
             raise PlanError(str(exc)) from None
+        why = self.channel_refusal(checked.pairs, cal)
+        if why is not None:
+            raise PlanError(why)
+
+    def channel_refusal(self, pairs: Sequence[hal.PairSpec],
+                        cal: Calibration | None = None) -> str | None:
+        """Why a scan measuring ``pairs`` is refused at submission because the calibration in
+        effect (``cal``, default :meth:`calibration`) was measured with other sensors (its
+        factors have another number of channels than the sensors read,
+        :meth:`gonio.calibration.Calibration.check_channels`), or None: no mismatch, or a
+        calibration job queued or under way calibrates these sensors before the scan starts
+        (the worker checks again then), as for the exposure. The one decision behind both
+        :meth:`submit`'s refusal and the dry run's warning (the page's Check plan,
+        ``gonio scan --daemon URL --dry-run``)."""
+        from gonio.calibration import ChannelMismatch, sensor_channels
+
         try:
-            cal.check_channels(checked.pairs, sensor_channels(self.desc), "this plan")
+            (cal if cal is not None else self.calibration()).check_channels(
+                pairs, sensor_channels(self.desc), "this plan")
         except ChannelMismatch as exc:
-            # A calibration job queued or under way calibrates these sensors before the scan
-            # starts (the worker checks again then), as for the exposure below.
             if not any(row.kind == "calibration" for row in self.store.list_jobs(
                     [JobState.QUEUED.value, *(st.value for st in ACTIVE_STATES)])):
-                raise PlanError(str(exc)) from None
+                return str(exc)
+        return None
 
     def _check_calibration_exposure(self, plan: AnyPlan) -> None:
         """Refuse a scan at another exposure than the calibration in effect

@@ -588,6 +588,24 @@ class JobStore:
         self._notify([ev])
         return self.get_job(job_id)
 
+    def set_failure_reason(self, job_id: int, reason: str, data: dict[str, Any]) -> None:
+        """Replace the reason of a ``failed`` job, with a ``rebuild_failed`` event (``reason``
+        and ``data``): ``gonio jobs rebuild`` finished it again and that failed too. Not a
+        state change (the job stays failed), so it is not in the transition table.
+
+        Raises
+        ------
+        NotFound
+            No failed job with this id.
+        """
+        with self._tx() as c:
+            cur = c.execute("UPDATE jobs SET reason = ? WHERE id = ? AND state = 'failed'",
+                            (reason, job_id))
+            if cur.rowcount != 1:
+                raise NotFound(f"no failed job with id {job_id}")
+            ev = self._insert_event(c, job_id, "rebuild_failed", {**data, "reason": reason})
+        self._notify([ev])
+
     def set_result(self, job_id: int, result_path: str | None, summary: dict[str, Any]) -> None:
         """Store job ``job_id``'s result path and summary, paths in the data directory's own
         relative form (:func:`relative_result_path`), as every open expects them."""

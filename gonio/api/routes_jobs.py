@@ -86,7 +86,11 @@ def dry_run(request: DryRunRequest, service: Service) -> DryRun:
     result = service.dry_run(request.plan)
     if request.plan.kind != "calibration":
         cal = service.calibration()
+        # A calibration of other sensors: the refusal submission would answer (the same
+        # decision, GonioService.channel_refusal), said before anything is submitted.
+        channels = service.channel_refusal(result.pairs, cal)
         more = [w for w in (uncalibrated_warning(cal, result.pairs),
+                            None if channels is None else f"not calibrated: {channels}",
                             exposure_warning(cal, request.plan.exposure.exposure_s))
                 if w is not None]
         if more:

@@ -27,6 +27,7 @@ from gonio.cli.scan_report import (
     check_output_path,
     dry_run_summary,
     print_scan_summary,
+    queued_line,
     start_text,
     suspended_line,
 )
@@ -278,6 +279,7 @@ def _follow(client: Any, job_id: int, disabled: bool, poll_s: float = 0.5,
     row: dict[str, Any] = client.request("GET", f"/api/v1/jobs/{job_id}")
     bar = tqdm(total=None, unit="angle", desc=f"job {job_id}", disable=disabled, file=sys.stderr)
     told: str | None = None
+    queued_told: tuple[Any, ...] | None = None
     try:
         while True:
             if seen is not None:
@@ -292,6 +294,12 @@ def _follow(client: Any, job_id: int, disabled: bool, poll_s: float = 0.5,
                 bar.write(suspended_line(job_id, reason, through_daemon=True),
                           file=sys.stderr)
             told = reason
+            if row["state"] == "queued":
+                # Why it waits, said once and again when that changes (the bar sits at 0).
+                key, line = queued_line(job_id, row, client.request("GET", "/api/v1/jobs"))
+                if key != queued_told:
+                    bar.write(line, file=sys.stderr)
+                queued_told = key
             if row["state"] in FINAL_STATES:
                 return row
             time.sleep(poll_s)

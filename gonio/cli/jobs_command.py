@@ -23,11 +23,13 @@ def register(subparsers: Any) -> None:
         "unfinished (e.g. a foreground scan interrupted by Ctrl-C); rebuild ID: write a "
         "completed job's result file again from the readings the store holds (when the file "
         "is missing or damaged), with the calibration the job was finished with; a job that "
-        "failed because the disk filled while its result was written is completed so. "
+        "failed while it was being finished (a full disk, an error in reconstruction or the "
+        "result writing) with every reading stored is finished again and completed so. "
         "With --daemon URL the jobs are a running daemon's, acted on through its API: list, "
         "show, abort (a running job too), cancel ID (take a queued job out of the queue), "
         "reorder ID --position N and/or --priority P (N=0: next), wait ID [-o FILE] (follow "
-        "the job with a progress bar until it ends, then fetch its result to FILE and print "
+        "the job with a progress bar until it ends, saying while it is queued what it waits "
+        "for and when it may start, then fetch its result to FILE and print "
         "the summary 'gonio scan' prints; e.g. a scan queued with 'gonio scan --daemon URL "
         "--no-wait', or one whose terminal was closed).")
     j.add_argument("action", nargs="?",

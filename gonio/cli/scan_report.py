@@ -278,3 +278,55 @@ def suspended_line(job_id: int, reason: str, through_daemon: bool = False) -> st
             "the scan retries and goes on once it answers; Ctrl-C leaves the job paused, and "
             "the same command resumes it")
     return f"job {job_id} suspended: {reason}\n  {then}"
+
+
+_HOLDING = ("running", "paused", "suspended", "reconstructing")
+"""States in which a job holds the rig (:data:`gonio.jobstates.ACTIVE_STATES`)."""
+
+
+def queued_line(job_id: int, row: dict[str, Any], jobs: list[dict[str, Any]]
+                ) -> tuple[tuple[Any, ...], str]:
+    """What a terminal following a queued daemon job says of why it waits: the queue held or
+    a paused or suspended job (the API's ``waiting``), the job holding the rig, the queued
+    jobs ahead of it (``queue_position``), and when it may start (``starts_in_s``,
+    ``starts_in_bound``, ``starts_in_estimate``: the job list's start estimate). ``gonio jobs
+    --daemon URL wait`` on a queued job showed a bar at 0 and nothing else.
+
+    Parameters
+    ----------
+    job_id : the queued job
+    row : its detail (``GET /api/v1/jobs/{id}``)
+    jobs : the daemon's job list (``GET /api/v1/jobs``), for the job holding the rig
+
+    Returns
+    -------
+    key : what the job waits for; the line is said again only when this changes (the time
+        left counts down at every poll)
+    text : the line
+    """
+    holders = tuple((int(j["id"]), str(j["state"])) for j in jobs
+                    if j.get("state") in _HOLDING and j.get("id") != job_id)
+    ahead = row.get("queue_position")
+    waiting = row.get("waiting")
+    parts: list[str] = []
+    if waiting:
+        parts.append(str(waiting))  # it names a paused or suspended holder itself
+    elif holders:
+        parts.append("waits for " + " and ".join(f"job {i} ({s})" for i, s in holders)
+                     + " to end")
+    if isinstance(ahead, int) and ahead > 0:
+        parts.append(f"{counted(ahead, 'queued job')} ahead of it")
+    elif not parts:
+        parts.append("next in the queue, the rig is free")
+    seconds, source = row.get("starts_in_s"), row.get("starts_in_estimate")
+    start = start_text(row)  # the words gonio jobs --daemon URL list uses
+    if start is not None:
+        when = start + (f" ({source})" if source else "")
+    elif waiting:
+        when = "its start is not known until then"  # the estimate's reason is ``waiting``
+    else:
+        why = str(source or "").removeprefix("not known: ")
+        when = "start not known" + (f": {why}" if why else "")
+    key = (waiting, holders, ahead, isinstance(seconds, int | float),
+           None if isinstance(seconds, int | float) or waiting else source)
+    return key, f"job {job_id} queued: {'; '.join(parts)}; {when}"

@@ -12,6 +12,7 @@ import shutil
 import sqlite3
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -100,7 +101,6 @@ def test_a_forced_half_turn_with_opposite_readings_that_differ_is_warned() -> No
     today; a rebuild of readings from elsewhere may): symmetric readings are recorded quietly,
     a 5 % lean (ten times the noise of a difference) is warned of with what to do."""
     from types import SimpleNamespace
-    from typing import Any
 
     from gonio.finishing import _arc_test, _record_arc_test
 
@@ -283,3 +283,135 @@ def test_a_scan_leaning_on_its_own_imported_export_says_so(
     assert said in colour_warnings(res)  # what the colour and every export carry
     assert "local_prior_own" not in read_result(
         tmp_path / "d" / "results" / f"job-{other}.h5").provenance
+
+
+def _until_ended(svc: GonioService, job: int, *, on_progress: Any = None) -> None:
+    """Start ``svc``, wait for job ``job`` to end (``on_progress`` sees its progress
+    events), stop it."""
+
+    async def go() -> None:
+        await svc.start()
+        async for ev in svc.subscribe(0, job_id=job):
+            if ev.type == "progress" and on_progress is not None:
+                on_progress(ev.data)
+            if ev.type == "state" and ev.data["state"] in ("completed", "failed", "aborted"):
+                break
+        await svc.stop()
+
+    asyncio.run(go())
+
+
+def test_a_job_failed_while_finishing_is_rebuilt_and_completed(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Every reading stored, then finishing raised (here: the basis did not read, once): the
+    rebuild finishes it again. A rebuild whose finishing fails again leaves it failed with the
+    new reason and its readings; one that works completes it with a result file that reads.
+    The CLI says what it did."""
+    from gonio.brdf.reconstruction.basis import BasisError
+    from gonio.cli import main
+    from tests.unit.brdf.reconstruction.test_basis import small_basis
+
+    _calibrated(tmp_path).store.close()
+    data = tmp_path / "d"
+    basis = small_basis()
+    calls: list[int] = []
+
+    def unreadable_once() -> Any:
+        # The daemon's basis supply: the first load fails as an unreadable basis file does.
+        calls.append(1)
+        if len(calls) == 1:
+            raise BasisError("basis file basis-k16.npz does not read (truncated)")
+        return basis
+
+    svc = GonioService(JobStore(data / "gonio.sqlite"), MemRig(), data_dir=data,
+                       basis=BasisSupply(unreadable_once), fit_exports=False)
+    job = svc.submit(JobRequest(plan=UniformPlan(rotations=4, exposure=FAST))).id
+    _until_ended(svc, job)
+    store = svc.store
+    failed = store.get_job(job)
+    assert failed.state.value == "failed", failed.reason
+    assert "basis-k16.npz does not read" in (failed.reason or "")
+    assert len(calls) == 1  # it failed in finishing, not before measuring
+    steps = store.steps(job)
+    n = store.reading_count(job)
+    assert steps and all(s.done for s in steps) and n > 0
+    assert not (data / "results" / f"job-{job}.h5").exists()
+
+    def never() -> Any:
+        raise BasisError("basis file basis-k16.npz does not read (still truncated)")
+
+    # Finishing fails again: still failed, with the new reason; the readings as they were.
+    with pytest.raises(RebuildError, match=f"cannot rebuild job {job}: its finishing failed "
+                       "again .*still truncated.*run gonio jobs rebuild"):
+        rebuild_result(store, data, job, BasisSupply(never))
+    again = store.get_job(job)
+    assert again.state.value == "failed"
+    assert again.reason is not None and "still truncated" in again.reason
+    assert store.reading_count(job) == n
+    ev = store.last_event(job, "rebuild_failed")
+    assert ev is not None and ev.data["previous"] == failed.reason
+
+    # The cause gone: `gonio jobs rebuild` completes it (its basis supply is the default one;
+    # here it serves the small basis).
+    monkeypatch.setattr("gonio.basis_supply.BasisSupply",
+                        lambda: BasisSupply(lambda: basis))
+    capsys.readouterr()
+    code = main(["jobs", "rebuild", str(job), "--db", str(data / "gonio.sqlite")])
+    out = capsys.readouterr()
+    assert code == 0, out.err
+    path = data / "results" / f"job-{job}.h5"
+    assert f"job {job}: wrote {path} from {n} stored readings" in out.out, out.out
+    assert "it was failed and is completed now" in out.out, out.out
+    done = JobStore(data / "gonio.sqlite").get_job(job)
+    assert done.state.value == "completed"
+    assert done.reason is not None and "completed by gonio jobs rebuild" in done.reason
+    assert "still truncated" in done.reason  # why it had failed
+    result = read_result(path)
+    assert result.table is not None and np.isfinite(result.table.values).any()
+    assert "gonio jobs rebuild" in result.provenance["rebuilt"]
+
+
+def test_a_job_failed_while_measuring_is_refused_with_its_counts(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A stage fault part way through: the readings are not a whole scan. The refusal says
+    how many of the plan's angles were measured and that a new scan is the way."""
+    from gonio import hal
+    from gonio.cli import main
+    from tests.unit.engine.test_engine import QUICK_FAULTS
+
+    _calibrated(tmp_path).store.close()
+    data = tmp_path / "d"
+    rig = MemRig()
+    svc = GonioService(JobStore(data / "gonio.sqlite"), rig, data_dir=data,
+                       basis=BasisSupply(_no_basis))
+    job = svc.submit(JobRequest(plan=UniformPlan(rotations=6, exposure=FAST,
+                                                 faults=QUICK_FAULTS))).id
+
+    def fault_after_two(progress: dict[str, Any]) -> None:
+        if progress["done"] == 2:
+            rig.mstage.fault_next_moves = [
+                hal.StageFault("stage", "encoder broken", code="encoder", recoverable=False)]
+
+    _until_ended(svc, job, on_progress=fault_after_two)
+    store = svc.store
+    assert store.get_job(job).state.value == "failed"
+    # The counts, from the store's own tables: angles with readings, angles planned.
+    measured = len({r.angle_index for r in store.readings(job)})
+    planned = len(store.steps(job))
+    n = store.reading_count(job)
+    assert 2 <= measured < planned
+    with pytest.raises(RebuildError, match=f"job {job} failed while it was measuring "
+                       rf"\({measured} of {planned} angles of its plan measured, {n} readings "
+                       r"stored; reason: .*encoder broken.*measure it again \(submit the same "
+                       "plan as a new scan\\)"):
+        rebuild_result(store, data, job, BasisSupply(_no_basis))
+    capsys.readouterr()
+    code = main(["jobs", "rebuild", str(job), "--db", str(data / "gonio.sqlite")])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert f"gonio jobs: error: job {job} failed while it was measuring ({measured} of " \
+           f"{planned} angles of its plan measured, {n} readings stored" in err, err
+    assert "Traceback" not in err
+    assert store.get_job(job).state.value == "failed" and store.reading_count(job) == n

@@ -9,6 +9,8 @@ job and fetches its result as ``gonio scan --daemon`` does (one function does bo
 
 from __future__ import annotations
 
+import itertools
+import re
 import shlex
 import threading
 import time
@@ -317,3 +319,59 @@ def test_wait_on_a_calibration_job_copies_that_jobs_own_calibration(
         assert json.loads((tmp_path / "again" / "white.calibration.json").read_text()) == made
     finally:
         daemon.sim.place_specimen(before.brdf)
+
+
+def test_wait_on_a_queued_job_says_what_it_waits_for_once_and_when_that_changes(
+    daemon: Daemon, no_export_fits: None
+) -> None:
+    """It showed a bar at 0 and nothing else while the job was queued: held by a halt, behind
+    another job. A ``gonio jobs --daemon URL wait`` child (its own process, as a lab runs it)
+    says why the job waits, once, and again when that changes."""
+    import subprocess
+
+    from tests.system.daemon_proc import GONIO, PROJECT_ROOT, child_env
+
+    with daemon.client() as c:
+        assert c.post("/api/v1/rig/halt").status_code == 200
+        released = False
+        try:
+            first = _submit(c, 12, "wool")  # ahead of the followed job
+            job = _submit(c, 4, "felt")
+            waiting = c.get(f"/api/v1/jobs/{job}").json()["waiting"]
+            assert waiting and "the queue is held" in waiting  # the API's own words
+            child = subprocess.Popen(
+                [*GONIO, "jobs", "--daemon", daemon.url, "wait", str(job), "--no-progress"],
+                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=child_env(),
+                cwd=PROJECT_ROOT)
+            lines: list[str] = []
+            assert child.stderr is not None
+            reader = threading.Thread(target=lambda: lines.extend(child.stderr or ()),
+                                      daemon=True)
+            reader.start()
+            held = (f"job {job} queued: {waiting}; 1 queued job ahead of it; its start is not "
+                    "known until then")
+            _until(lambda: any(line.rstrip("\n") == held for line in lines),
+                   f"the line saying job {job} is held ({lines})")
+            # Several polls while nothing changes: said once all the same.
+            _until(lambda: c.get(f"/api/v1/jobs/{job}").json()["state"] == "queued", "a poll")
+            time.sleep(3)
+            assert c.post("/api/v1/rig/release").status_code == 200
+            released = True
+            out, _ = child.communicate(timeout=200)
+            reader.join(timeout=30)
+        finally:
+            if not released:
+                c.post("/api/v1/rig/release")
+        assert child.returncode == 0, "".join(lines)
+        assert c.get(f"/api/v1/jobs/{job}").json()["state"] == "completed"
+    said = [line.rstrip("\n") for line in lines if line.startswith(f"job {job} queued: ")]
+    assert said.count(held) == 1, said
+    assert all(a != b for a, b in itertools.pairwise(said)), said  # not every poll
+    # Released: it waited for the job ahead of it, which held the rig, with a start estimate
+    # (or why there is none yet: a job just started has no time estimate).
+    behind = [line for line in said if f"waits for job {first} (" in line]
+    assert behind, said
+    assert all(re.search(r"; (starts (in about|within) \S+ \S+ \(.+\)|starts next( \(.+\))?"
+                         r"|start not known: .+)$", line) for line in behind), behind
+    assert said.index(held) < said.index(behind[0])
+    assert "queued:" not in out  # said on standard error, beside the bar, not in the summary

@@ -308,3 +308,37 @@ def test_the_daemon_job_list_states_a_queued_jobs_estimated_start() -> None:
     # Not known (the row's waiting says why), or not queued: nothing.
     assert scan_report.start_text({**row, "starts_in_s": None}) is None
     assert scan_report.start_text({**row, "state": "running"}) is None
+
+
+def test_a_queued_job_followed_says_what_it_waits_for() -> None:
+    """``gonio jobs --daemon URL wait`` on a queued job: the holder, the jobs ahead and the
+    start, from the API's rows; said again only when what it waits for changes (the
+    estimate counts down at every poll). The real daemon's lines:
+    tests/system/api/test_cli_daemon_wait.py."""
+    row = {"state": "queued", "waiting": None, "queue_position": 2, "starts_in_s": 42.0,
+           "starts_in_bound": False,
+           "starts_in_estimate": "job 5's time left plus the estimated durations of jobs 6 "
+                                 "and 8 ahead"}
+    jobs = [{"id": 4, "state": "completed"}, {"id": 5, "state": "running"},
+            {"id": 6, "state": "queued"}, {"id": 7, "state": "queued"}]
+    key, text = scan_report.queued_line(7, row, jobs)
+    assert text == ("job 7 queued: waits for job 5 (running) to end; 2 queued jobs ahead of "
+                    "it; starts in about 42 s (job 5's time left plus the estimated durations "
+                    "of jobs 6 and 8 ahead)")
+    # Ten seconds later: the same wait, not said again.
+    assert scan_report.queued_line(7, {**row, "starts_in_s": 32.0}, jobs)[0] == key
+    # The job ahead paused: the API's waiting says so, and the start is not known.
+    paused = {**row, "waiting": "waits for job 5 (paused): resume or abort it",
+              "queue_position": 0, "starts_in_s": None,
+              "starts_in_estimate": "not known: waits for job 5 (paused): resume or abort it"}
+    jobs[1] = {"id": 5, "state": "paused"}
+    key2, text = scan_report.queued_line(7, paused, jobs)
+    assert key2 != key
+    assert text == ("job 7 queued: waits for job 5 (paused): resume or abort it; its start is "
+                    "not known until then")
+    # Nothing holds the rig and nothing is ahead, but no start estimate (a full disk).
+    free = {**row, "queue_position": 0, "starts_in_s": None,
+            "starts_in_estimate": "not known: no job starts while disk full: ..."}
+    assert scan_report.queued_line(7, free, jobs[:1])[1] == (
+        "job 7 queued: next in the queue, the rig is free; start not known: no job starts "
+        "while disk full: ...")
