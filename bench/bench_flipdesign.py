@@ -416,14 +416,17 @@ def evaluate(mats: list[bu.Material], mixes: list[float], label: str,
              seeds: tuple[int, ...] = (0,), retro: tuple[tuple[int, float], ...] = (),
              presets_on: bool = True, save: str | None = None, limits: bool = False,
              retro_add: tuple[float, ...] = (),
-             settings: tuple[tuple[float | None, int | None], ...] = ((None, None),)) -> None:
+             settings: tuple[tuple[float | None, int | None], ...] = ((None, None),),
+             design_setting: tuple[float, int] | None = None) -> None:
     """Per material and in the mean: log_rmse / HDR-FLIP of every mix (each design seed) and
     every preset (not with several seeds: those compare designs, not presets).
 
     ``settings`` holds the bases' ``(measured_weight, n_components)`` (None: the default's);
     with more than one, or any given, every mix row and the basis ceiling are repeated per
     setting, named by it (the basis-settings study, module notes). The retro rows and the
-    presets read the first setting's basis."""
+    presets read the first setting's basis. ``design_setting`` (a diagnostic): every setting
+    reads the pairs designed on that setting's basis instead of its own, so the rows differ
+    by the fit's basis alone."""
     importance = render_importance()
     presets = ({p: get_preset(p).cells() for p in preset_names()}
                if seeds == (0,) and presets_on else {})
@@ -436,13 +439,18 @@ def evaluate(mats: list[bu.Material], mixes: list[float], label: str,
     for m in mats:
         seed = 100 + int(hashlib.sha256(m.name.encode()).hexdigest()[:6], 16) % 1000
         bases = []
+        db = (None if design_setting is None else
+              default_basis(design_setting[1], exclude=m.exclude,
+                            measured_weight=design_setting[0]))
         for w, k in settings:
             bs = default_basis(k, exclude=m.exclude, measured_weight=w)
             tag = f" {setting_name(w, k)}" if named else ""
+            if db is not None:
+                tag += f" (pairs of {setting_name(*design_setting)})"
             bases.append((tag, bs))
             for a in mixes:
                 for ds in seeds:
-                    cells, ph = design(bs, a, importance, ds)
+                    cells, ph = design(bs if db is None else db, a, importance, ds)
                     row = f"gonio a={a:g}" + (f" seed {ds}" if ds else "") + tag
                     rows.setdefault(row, {})[m.name] = bu.run_scan(bs, m, cells, ph, 8, seed,
                                                                    "joint")
@@ -552,6 +560,9 @@ def main(argv: list[str] | None = None) -> int:
                     help="basis-settings study: K of the default basis (default: "
                          "DEFAULT_COMPONENTS); K = 96 builds the 128-component synthetic "
                          "basis once")
+    ap.add_argument("--design-setting", type=float, nargs=2, default=None, metavar=("W", "K"),
+                    help="basis-settings study, a diagnostic: every setting reads the pairs "
+                         "designed on the basis of weight W and K components")
     ap.add_argument("--save", default=None, help="write the unrounded scores to this JSON file")
     args = ap.parse_args(argv)
     print(f"$ {' '.join(['python', *sys.argv])}")
@@ -581,7 +592,8 @@ def main(argv: list[str] | None = None) -> int:
         evaluate(mats, mixes, label, tuple(args.seeds),
                  tuple((k, td) for k in args.retro for td in args.retro_td),
                  not args.no_presets, args.save, args.limits, tuple(args.retro_add),
-                 settings)
+                 settings, None if args.design_setting is None
+                 else (args.design_setting[0], int(args.design_setting[1])))
     return 0
 
 
