@@ -565,16 +565,17 @@ def main(argv: list[str] | None = None) -> int:
                          "designed on the basis of weight W and K components")
     ap.add_argument("--save", default=None, help="write the unrounded scores to this JSON file")
     args = ap.parse_args(argv)
+    study = args.measured_weight is not None or args.components is not None
+    if any(w < 0 for w in args.measured_weight or []):
+        ap.error("--measured-weight: give weights >= 0 (how many synthetic materials one "
+                 "measured material counts as)")
+    if any(not 1 <= k <= 128 for k in args.components or []):
+        ap.error("--components: give K between 1 and 128 (the synthetic basis is built with "
+                 "K + 32 components)")
     print(f"$ {' '.join(['python', *sys.argv])}")
     imp = render_importance()
     print(f"render importance: {imp.sum():.0f} pixel lookups on {(imp > 0).sum()} nodes, "
           f"{imp[geo.valid_mask()].sum() / imp.sum():.1%} on valid cells")
-    study = args.measured_weight is not None or args.components is not None
-    if study and any(w < 0 for w in args.measured_weight or []):
-        ap.error("--measured-weight: give weights >= 0 (how many synthetic materials one "
-                 "measured material counts as)")
-    if study and any(not 1 <= k <= 128 for k in args.components or []):
-        ap.error("--components: give K between 1 and 128")
     # The study compares bases at the given design mix only; otherwise 0 is always a row.
     mixes = sorted(set(args.mix)) if study else sorted(set([0.0, *args.mix]))
     settings: tuple[tuple[float | None, int | None], ...] = tuple(
