@@ -6,6 +6,8 @@ Run from the project root (needs mitsuba and flip-evaluator: ``pip install 'goni
     nice -n 5 .venv/bin/python bench/bench_flipdesign.py test --mix A
     nice -n 5 .venv/bin/python bench/bench_flipdesign.py choose --mix A --seeds 0 1 2
     nice -n 5 .venv/bin/python bench/bench_flipdesign.py fresh --mix A
+    nice -n 10 .venv/bin/python bench/bench_flipdesign.py choose --mix 0.5 --no-presets \
+        --limits --measured-weight 1 3 --components 64
 
 The expected-error design (:mod:`gonio.brdf.design.posterior`) weighs the grid's cells as
 ``log_rmse`` does (by their volume). The standard renderings
@@ -24,6 +26,8 @@ Sets (the discipline of docs/science.md 7.2.2):
   anisotropic specimens; run once with the chosen ``a`` against ``a = 0`` and every preset.
 * **second fresh set** (``fresh2``): :data:`FRESH2_FLIP`, eight more twofold-symmetric mitsuba
   specimens written and committed (2026-11-27, the retro-pair study) before any run on them.
+* **third fresh set** (``fresh3``): :data:`FRESH3_FLIP`, seven more (the basis-settings
+  study of 2026-11-28, below), written and committed before any run of that study.
 * **fresh** (``fresh``): :data:`FRESH_FLIP`, ten twofold-symmetric mitsuba specimens written
   and committed (2026-11-27) before any run on them, after the choice of ``a``: narrow and
   wide brushed metals, glossy isotropic metal, clear-coated (layered) paints, paper, satin and
@@ -34,6 +38,25 @@ Sets (the discipline of docs/science.md 7.2.2):
 ``--retro K --retro-td T`` adds the retro-pair study's designs (:func:`retro_design`): ``K``
 forced near-retro specular pairs at ``td = T`` degrees, the rest by the shipped objective
 (docs/notes/2026-11-27-retro-pair.md); a bench option, not the product's design.
+
+``--measured-weight W ... --components K ...`` (the basis-settings study of 2026-11-28,
+docs/notes/2026-11-28-basis-flip.md) runs every ``(W, K)`` as its own rows: each material's
+basis is ``default_basis(K, exclude=..., measured_weight=W)`` (its leave-one-out basis as
+always), the design is made on that basis (``--mix`` as given: 0 is not added in this mode;
+the design cache is keyed by the basis' own components, so a new basis designs again) and, with
+``--limits``, its basis ceiling is a row of its own. The presets read the first setting's basis.
+K = 96 needs the synthetic basis of 128 components (built once and cached,
+``synthetic_basis(128)``, about a minute once the library is tabulated).
+
+The rule of that study, written and committed before any of its runs: on the **choice** set,
+among the settings ``(W, K)`` whose mean ``log_rmse`` stays within 3 % of today's default
+(``W = 1``, ``K = 64``, ``cell_mix = 0.5``) on both kinds (measured and mitsuba), pick the one
+with the lowest mean HDR-FLIP over the 11; adopt it only if it lowers that mean by at least
+0.01 against the default. The basis ceiling rows are recorded for every setting. The chosen
+setting and the default are then run **once** on the **test** set; if the chosen one wins
+there too (lower mean HDR-FLIP over the 11, mean ``log_rmse`` within 3 % on both kinds), it
+is run once on :data:`FRESH3_FLIP` (written and committed before that run) as the final
+check.
 
 ``--seeds`` averages each ``a`` over several designs (the greedy started from the k-th best
 first pair, :func:`~gonio.brdf.design.posterior.posterior_design`'s ``seed``): whether the
@@ -75,7 +98,12 @@ from gonio.brdf.design.posterior import (
 )
 from gonio.brdf.design.presets import get_preset, preset_names
 from gonio.brdf.pictures.appearance import render_importance
-from gonio.brdf.reconstruction.basis import Basis, default_basis
+from gonio.brdf.reconstruction.basis import (
+    DEFAULT_COMPONENTS,
+    MEASURED_WEIGHT,
+    Basis,
+    default_basis,
+)
 from gonio.brdf.tables import geometry as geo
 
 #: Specimens for the choice set only: bench_unseen's kinds of mitsuba BSDF with other
@@ -161,6 +189,36 @@ FRESH2_FLIP: list[tuple[str, dict[str, Any], float]] = [
     ("f2-plastic-dark-glossy", {"type": "roughplastic", "distribution": "ggx", "alpha": 0.08,
                                 "diffuse_reflectance": {"type": "rgb",
                                                         "value": [0.05, 0.05, 0.08]}}, 0.0),
+]
+
+
+#: A third fresh set (the basis-settings study, docs/notes/2026-11-28-basis-flip.md): written
+#: and committed before any run of that study, to be run once, only if a setting wins on the
+#: choice and test sets; seven twofold-symmetric specimens (no facet tilt or normal map) with
+#: other metals, parameters and holder angles than every set above.
+FRESH3_FLIP: list[tuple[str, dict[str, Any], float]] = [
+    ("f3-conductor-Ir", {"type": "roughconductor", "material": "Ir", "distribution": "ggx",
+                         "alpha_u": 0.10, "alpha_v": 0.30}, 19.0),
+    ("f3-conductor-Nb-iso", {"type": "roughconductor", "material": "Nb",
+                             "distribution": "beckmann", "alpha": 0.06}, 0.0),
+    ("f3-principled-steel", {"type": "principled", "metallic": 1.0, "roughness": 0.35,
+                             "anisotropic": 0.6,
+                             "base_color": {"type": "rgb", "value": [0.55, 0.56, 0.58]}}, 204.0),
+    ("f3-coated-green", {"type": "principled", "metallic": 0.0, "roughness": 0.4,
+                         "clearcoat": 0.8, "clearcoat_gloss": 0.7, "specular": 0.5,
+                         "base_color": {"type": "rgb", "value": [0.1, 0.45, 0.15]}}, 96.0),
+    ("f3-plastic-white", {"type": "roughplastic", "distribution": "ggx", "alpha": 0.3,
+                          "diffuse_reflectance": {"type": "rgb", "value": [0.8, 0.8, 0.8]}},
+     0.0),
+    ("f3-blend-brushed-Be", {"type": "blendbsdf", "weight": 0.6,
+                             "bsdf_0": {"type": "diffuse",
+                                        "reflectance": {"type": "rgb",
+                                                        "value": [0.2, 0.15, 0.1]}},
+                             "bsdf_1": {"type": "roughconductor", "material": "Be",
+                                        "alpha_u": 0.25, "alpha_v": 0.06}}, 301.0),
+    ("f3-satin-pink", {"type": "principled", "metallic": 0.0, "roughness": 0.7, "sheen": 0.5,
+                       "anisotropic": 0.3, "specular": 0.6,
+                       "base_color": {"type": "rgb", "value": [0.7, 0.3, 0.4]}}, 131.0),
 ]
 
 
@@ -324,6 +382,13 @@ def _flip_recording(table: Any, m: bu.Material) -> float:
     return float(res.mean)
 
 
+def setting_name(w: float | None, k: int | None) -> str:
+    """Row-name part of a basis setting: ``w=W K=K`` (the defaults filled in)."""
+    w = MEASURED_WEIGHT if w is None else w
+    k = DEFAULT_COMPONENTS if k is None else k
+    return f"w={w:g} K={k}"
+
+
 def print_mean_rows(rows: dict[str, dict[str, bu.Score]], mats: list[bu.Material],
                     order: list[str]) -> None:
     """The markdown rows of mean ``log_rmse`` / HDR-FLIP per kind of material and over all,
@@ -350,9 +415,18 @@ def best_preset_wins(rows: dict[str, dict[str, bu.Score]], mats: list[bu.Materia
 def evaluate(mats: list[bu.Material], mixes: list[float], label: str,
              seeds: tuple[int, ...] = (0,), retro: tuple[tuple[int, float], ...] = (),
              presets_on: bool = True, save: str | None = None, limits: bool = False,
-             retro_add: tuple[float, ...] = ()) -> None:
+             retro_add: tuple[float, ...] = (),
+             settings: tuple[tuple[float | None, int | None], ...] = ((None, None),),
+             design_setting: tuple[float, int] | None = None) -> None:
     """Per material and in the mean: log_rmse / HDR-FLIP of every mix (each design seed) and
-    every preset (not with several seeds: those compare designs, not presets)."""
+    every preset (not with several seeds: those compare designs, not presets).
+
+    ``settings`` holds the bases' ``(measured_weight, n_components)`` (None: the default's);
+    with more than one, or any given, every mix row and the basis ceiling are repeated per
+    setting, named by it (the basis-settings study, module notes). The retro rows and the
+    presets read the first setting's basis. ``design_setting`` (a diagnostic): every setting
+    reads the pairs designed on that setting's basis instead of its own, so the rows differ
+    by the fit's basis alone."""
     importance = render_importance()
     presets = ({p: get_preset(p).cells() for p in preset_names()}
                if seeds == (0,) and presets_on else {})
@@ -361,15 +435,27 @@ def evaluate(mats: list[bu.Material], mixes: list[float], label: str,
     flip_before = bu.flip_of
     bu.flip_of = _flip_recording  # type: ignore[assignment]
     t0 = time.perf_counter()
+    named = settings != ((None, None),)
     for m in mats:
-        b = default_basis(exclude=m.exclude)
         seed = 100 + int(hashlib.sha256(m.name.encode()).hexdigest()[:6], 16) % 1000
-        for a in mixes:
-            for ds in seeds:
-                cells, ph = design(b, a, importance, ds)
-                row = f"gonio a={a:g}" + (f" seed {ds}" if ds else "")
-                rows.setdefault(row, {})[m.name] = bu.run_scan(b, m, cells, ph, 8, seed, "joint")
-                views.setdefault(row, {})[m.name] = LAST_VIEWS["views"]
+        bases = []
+        db = (None if design_setting is None else
+              default_basis(design_setting[1], exclude=m.exclude,
+                            measured_weight=design_setting[0]))
+        for w, k in settings:
+            bs = default_basis(k, exclude=m.exclude, measured_weight=w)
+            tag = f" {setting_name(w, k)}" if named else ""
+            if db is not None:
+                tag += f" (pairs of {setting_name(*design_setting)})"
+            bases.append((tag, bs))
+            for a in mixes:
+                for ds in seeds:
+                    cells, ph = design(bs if db is None else db, a, importance, ds)
+                    row = f"gonio a={a:g}" + (f" seed {ds}" if ds else "") + tag
+                    rows.setdefault(row, {})[m.name] = bu.run_scan(bs, m, cells, ph, 8, seed,
+                                                                   "joint")
+                    views.setdefault(row, {})[m.name] = LAST_VIEWS["views"]
+        b = bases[0][1]
         for k, td in retro:
             row = f"retro {k} td={td:g}"
             try:
@@ -397,8 +483,9 @@ def evaluate(mats: list[bu.Material], mixes: list[float], label: str,
         for p, (pc, pph) in presets.items():
             rows.setdefault(p, {})[m.name] = bu.run_scan(b, m, pc, pph, 8, seed, "joint")
             views.setdefault(p, {})[m.name] = LAST_VIEWS["views"]
-        if limits:  # what no design reaches: the basis' best fit, the truth on the grid
-            for row, table in (("basis ceiling", bu.ceiling(b, m.truth)), ("grid limit", m.truth)):
+        if limits:  # what no design reaches: each basis' best fit, the truth on the grid
+            for row, table in ([(f"basis ceiling{tag}", bu.ceiling(bs, m.truth))
+                                for tag, bs in bases] + [("grid limit", m.truth)]):
                 rows.setdefault(row, {})[m.name] = bu.score(table, m.truth, m=m)
                 views.setdefault(row, {})[m.name] = LAST_VIEWS["views"]
         print(f"  {m.name} ({time.perf_counter() - t0:.0f} s)", flush=True)
@@ -441,7 +528,7 @@ def evaluate(mats: list[bu.Material], mixes: list[float], label: str,
     print("\nwins against the best preset per material (log_rmse; HDR-FLIP), of "
           f"{len(mats)}:")
     for r in order:
-        if r in presets or r in ("basis ceiling", "grid limit"):
+        if r in presets or r.startswith("basis ceiling") or r == "grid limit":
             continue
         wl, wf = best_preset_wins(rows, mats, r, list(presets))
         print(f"  {r}: log_rmse {wl}, HDR-FLIP {wf}")
@@ -449,7 +536,7 @@ def evaluate(mats: list[bu.Material], mixes: list[float], label: str,
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("stage", choices=["choose", "test", "fresh", "fresh2"])
+    ap.add_argument("stage", choices=["choose", "test", "fresh", "fresh2", "fresh3"])
     ap.add_argument("--mix", type=float, nargs="+", default=[0.0, 0.25, 0.5, 0.75, 1.0],
                     help="cell_mix values to compare (test: the chosen one; 0 is added)")
     ap.add_argument("--only", nargs="*", default=None, help="material names (exploring)")
@@ -466,24 +553,48 @@ def main(argv: list[str] | None = None) -> int:
                     help="diagnostic rows: the default's ten pairs plus (0, TD, 0) as an 11th")
     ap.add_argument("--limits", action="store_true",
                     help="add the basis ceiling and the grid limit rows (no scan)")
+    ap.add_argument("--measured-weight", type=float, nargs="+", default=None,
+                    help="basis-settings study: the default basis' measured weight(s) W "
+                         "(default: MEASURED_WEIGHT); every (W, K) is its own rows")
+    ap.add_argument("--components", type=int, nargs="+", default=None,
+                    help="basis-settings study: K of the default basis (default: "
+                         "DEFAULT_COMPONENTS); K = 96 builds the 128-component synthetic "
+                         "basis once")
+    ap.add_argument("--design-setting", type=float, nargs=2, default=None, metavar=("W", "K"),
+                    help="basis-settings study, a diagnostic: every setting reads the pairs "
+                         "designed on the basis of weight W and K components")
     ap.add_argument("--save", default=None, help="write the unrounded scores to this JSON file")
     args = ap.parse_args(argv)
+    study = args.measured_weight is not None or args.components is not None
+    if any(w < 0 for w in args.measured_weight or []):
+        ap.error("--measured-weight: give weights >= 0 (how many synthetic materials one "
+                 "measured material counts as)")
+    if any(not 1 <= k <= 128 for k in args.components or []):
+        ap.error("--components: give K between 1 and 128 (the synthetic basis is built with "
+                 "K + 32 components)")
     print(f"$ {' '.join(['python', *sys.argv])}")
     imp = render_importance()
     print(f"render importance: {imp.sum():.0f} pixel lookups on {(imp > 0).sum()} nodes, "
           f"{imp[geo.valid_mask()].sum() / imp.sum():.1%} on valid cells")
-    mixes = sorted(set([0.0, *args.mix]))
+    # The study compares bases at the given design mix only; otherwise 0 is always a row.
+    mixes = sorted(set(args.mix)) if study else sorted(set([0.0, *args.mix]))
+    settings: tuple[tuple[float | None, int | None], ...] = tuple(
+        (w, k) for w in (args.measured_weight or [None]) for k in (args.components or [None])
+    ) if study else ((None, None),)
     # Built only for the stage asked for: a set's truth tables are made when it first runs.
     make = {"choose": lambda: ("choice set", material_sets()[0]),
             "test": lambda: ("test set", material_sets()[1]),
             "fresh": lambda: ("fresh set", bu.aniso_materials(FRESH_FLIP)),
-            "fresh2": lambda: ("second fresh set", bu.aniso_materials(FRESH2_FLIP))}
+            "fresh2": lambda: ("second fresh set", bu.aniso_materials(FRESH2_FLIP)),
+            "fresh3": lambda: ("third fresh set", bu.aniso_materials(FRESH3_FLIP))}
     for label, mats in [make[args.stage]()]:
         if args.only:
             mats = [m for m in mats if m.name in args.only]
         evaluate(mats, mixes, label, tuple(args.seeds),
                  tuple((k, td) for k in args.retro for td in args.retro_td),
-                 not args.no_presets, args.save, args.limits, tuple(args.retro_add))
+                 not args.no_presets, args.save, args.limits, tuple(args.retro_add),
+                 settings, None if args.design_setting is None
+                 else (args.design_setting[0], int(args.design_setting[1])))
     return 0
 
 

@@ -111,3 +111,42 @@ def test_wins_and_means_count_each_materials_best_preset_per_metric(
     assert out == ["| **mean measured (1)** | **0.0100 / 0.300** | **0.0200 / 0.200** |",
                    "| **mean aniso (1)** | **0.0200 / 0.100** | **0.0200 / 0.400** |",
                    "| **mean all (2)** | **0.0150 / 0.200** | **0.0200 / 0.300** |"]
+
+
+def test_each_basis_setting_designs_again_and_is_named_by_its_values(
+        benches: tuple[ModuleType, ModuleType]) -> None:
+    """The basis-settings study (docs/notes/2026-11-28-basis-flip.md): a basis of another K,
+    or of the same K with other components (another measured weight), has its own design key,
+    so no setting reads another's cached pairs; the row names say the weight and K, the
+    module's defaults filled in."""
+    from dataclasses import replace as dc_replace
+
+    from gonio.brdf.reconstruction.basis import DEFAULT_COMPONENTS, MEASURED_WEIGHT
+
+    bf, _ = benches
+    b = small_basis()
+    rig = RigConstraints()
+    imp = np.ones((18, 18, 36))
+    key = bf.design_key(b, 0.5, imp, 0, rig)
+    assert key != bf.design_key(b.truncated(b.K - 1), 0.5, imp, 0, rig)
+    reweighted = dc_replace(b, Q=b.Q * np.linspace(1.0, 1.5, b.K))  # same K, other components
+    assert key != bf.design_key(reweighted, 0.5, imp, 0, rig)
+    assert bf.setting_name(3.0, 96) == "w=3 K=96"
+    assert bf.setting_name(None, None) == f"w={MEASURED_WEIGHT:g} K={DEFAULT_COMPONENTS}"
+
+
+@pytest.mark.parametrize(("argv", "says"), [
+    (["choose", "--measured-weight", "1", "-1"], "--measured-weight: give weights >= 0"),
+    (["choose", "--components", "0"], "--components: give K between 1 and 128"),
+    (["choose", "--components", "200"], "--components: give K between 1 and 128"),
+])
+def test_a_bad_basis_setting_is_refused_before_anything_runs(
+        benches: tuple[ModuleType, ModuleType], capsys: pytest.CaptureFixture[str],
+        argv: list[str], says: str) -> None:
+    bf, _ = benches
+    with pytest.raises(SystemExit) as exc:
+        bf.main(argv)
+    assert exc.value.code == 2
+    err = capsys.readouterr()
+    assert says in err.err
+    assert "render importance" not in err.out  # refused before the map is counted
