@@ -93,30 +93,51 @@ def _takes_numbers(annotation: Any) -> bool:
         return _takes_numbers(args[0])
     if origin in (list, tuple, types.UnionType, typing.Union):
         return bool(args) and all(a is Ellipsis or _takes_numbers(a) for a in args)
+    if origin is dict and len(args) == 2:
+        return _takes_numbers(args[1])  # e.g. [calibration] dark = {S1 = [0.1, ...]}
     return False
 
 
-def _has_text(value: Any) -> bool:
-    return isinstance(value, str) or (
-        isinstance(value, list | tuple) and any(_has_text(v) for v in value))
+def _first_text(value: Any, where: str = "") -> tuple[str, str] | None:
+    """The first string inside ``value`` (a scalar, list or table) and where it sits within
+    it (``""``, ``"[1]"``, ``"S1[0]"``), or None when it holds none."""
+    if isinstance(value, str):
+        return where, value
+    items = (value.items() if isinstance(value, dict)
+             else enumerate(value) if isinstance(value, list | tuple) else ())
+    for key, item in items:
+        sub = f"{where}.{key}" if isinstance(key, str) else f"{where}[{key}]"
+        found = _first_text(item, sub)
+        if found is not None:
+            return found
+    return None
 
 
-class _Strict(BaseModel):
-    """Base of all config sections: unknown keys are errors (they are almost always typos),
-    and so is a number written as text (``theta_deg = "45"``), which pydantic would read as
-    the number: a quoted value is a hand edit or a generator's bug, and its file would not
-    say what the rig has."""
-
-    model_config = ConfigDict(extra="forbid", frozen=True, populate_by_name=True)
+class NumbersNotText(BaseModel):
+    """A config section where a number (or true/false) written as text is an error
+    (``theta_deg = "45"``, ``port = "8600"``), which pydantic would read as the value: a
+    quoted value is a hand edit or a generator's bug, and the file would not say what it
+    seems to. The rig config's sections and the daemon config's share it."""
 
     @field_validator("*", mode="before")
     @classmethod
     def _numbers_are_not_text(cls, value: Any, info: ValidationInfo) -> Any:
         field = cls.model_fields.get(info.field_name or "")
-        if field is not None and _has_text(value) and _takes_numbers(field.annotation):
-            raise ValueError(f"expected a number, got the text {value!r}: write it without "
+        found = _first_text(value)
+        if field is not None and found is not None and _takes_numbers(field.annotation):
+            where, text = found
+            what = "true or false" if field.annotation is bool else "a number"
+            at = f" at {where.lstrip('.')}" if where else ""
+            raise ValueError(f"expected {what}{at}, got the text {text!r}: write it without "
                              "quotes")
         return value
+
+
+class _Strict(NumbersNotText):
+    """Base of all config sections: unknown keys are errors (they are almost always typos),
+    and so is a number written as text (:class:`NumbersNotText`)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, populate_by_name=True)
 
 
 # --------------------------------------------------------------------------- stage

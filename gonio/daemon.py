@@ -36,10 +36,10 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import ConfigDict, Field, ValidationError
 
 from gonio.apikeys import KEYS_ENV, ApiKeyring, KeyringError, parse_keys_env, parse_keys_file
-from gonio.config import DAEMON_TABLES, read_toml
+from gonio.config import DAEMON_TABLES, NumbersNotText, read_toml
 from gonio.paths import STORE_NAME
 from gonio.wording import counted
 
@@ -56,7 +56,7 @@ class DaemonConfigError(ValueError):
     """The daemon configuration or keys file is invalid; the message says where and what to do."""
 
 
-class _Section(BaseModel):
+class _Section(NumbersNotText):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
 

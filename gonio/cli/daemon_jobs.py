@@ -103,11 +103,16 @@ def wait_command(url: str, job_id: int, out: Path | None) -> str:
     """The command that follows daemon job ``job_id`` and fetches its result to ``out``
     (``gonio jobs --daemon URL wait ID -o FILE``; without ``-o`` when ``out`` is None), with
     ``out`` absolute, so it works from another terminal's folder too. It names no API key
-    (reads need none unless the daemon says so; the key stays out of shell history)."""
+    (reads need none unless the daemon says so; the key stays out of shell history), and
+    ``--overwrite`` when ``out`` exists (the command would be refused without it)."""
     import shlex
 
     cmd = f"gonio jobs --daemon {shlex.quote(url)} wait {job_id}"
-    return cmd if out is None else f"{cmd} -o {shlex.quote(str(Path(out).absolute()))}"
+    if out is None:
+        return cmd
+    # A file there already (the user said --overwrite) would refuse the command otherwise.
+    again = " --overwrite" if Path(out).is_file() else ""
+    return f"{cmd} -o {shlex.quote(str(Path(out).absolute()))}{again}"
 
 
 def follow_and_fetch(client: DaemonClient, job_id: int, out: Path | None, *, no_progress: bool,

@@ -643,9 +643,10 @@ def _other_unfinished(store: Any, db: Path) -> list[str]:
         lines.append(
             f"note: job {row.id} ('{row.specimen}', {row.state.value}, {row.done_angles} of "
             f"{row.total_angles} angles) is another unfinished job in this job store; this "
-            "command's plan or specimen differs, so it starts a new job. The command that "
-            f"started job {row.id}, run again, resumes it; 'gonio jobs abort {row.id} --db "
-            f"{db}' ends it")
+            "scan does not resume it (its plan, specimen or rig differs) and starts a new "
+            f"job. Job {row.id} goes on when the command that started it runs again with the "
+            "same plan and rig config (a daemon's job: when a daemon runs this data "
+            f"directory again); 'gonio jobs abort {row.id} --db {db}' ends it")
     return lines
 
 

@@ -27,7 +27,9 @@ def check_output_path(out: Path, nothing: str = "nothing was measured", *,
     in the data directory, but the message did not say so). A file is made and removed in the
     folder, so whatever the file system or the permissions refuse is found now. An existing
     file there (yesterday's ``felt.h5``, a command run again from the shell's history) was
-    replaced without a word: it is refused unless ``overwrite`` (``--overwrite``) says to.
+    replaced without a word: it is refused unless ``overwrite`` (``--overwrite``) says to. A
+    file that appears there while the scan runs is still replaced at its end (the check is
+    made once, before anything moves).
 
     Parameters
     ----------
@@ -53,18 +55,27 @@ def check_output_path(out: Path, nothing: str = "nothing was measured", *,
     if out.is_dir():
         raise UsageError(f"-o {out} is a folder; give the result file's name, e.g. "
                          f"{out / 'felt.h5'}")
+    # A device, a FIFO or a link to nothing: the result is written beside it and renamed
+    # onto it (jobs wait), which would replace /dev/null itself for root, or copied into it
+    # (gonio scan), which a FIFO refuses only when the scan has ended. A dry run writes no -o.
+    if out.is_symlink() and not out.exists():
+        raise UsageError(f"-o {out} is a link to a missing file ({os.readlink(out)}); give "
+                         f"the result file's own name ({nothing})")
+    if out.exists() and not out.is_file():
+        raise UsageError(f"-o {out} is not a regular file (a device or a pipe); give a result "
+                         f"file's name, e.g. felt.h5 ({nothing})")
     if overwrite:
         return
-    # Only regular files: -o /dev/null (a dry run's, or a scan whose copy is not wanted)
-    # replaces nothing.
     taken = [p for p in ([out, calibration_copy_path(out)] if calibration else [out])
              if p.is_file()]
     if taken:
         names = " and ".join(str(p) for p in taken)
+        # -o also names the specimen when --specimen does not: another -o alone would start
+        # a new job where the same command resumes one.
         raise UsageError(f"{names} already exist{'s' if len(taken) == 1 else ''}; give "
-                         f"another -o, move {'it' if len(taken) == 1 else 'them'} away, or "
-                         f"add --overwrite to replace {'it' if len(taken) == 1 else 'them'} "
-                         f"({nothing})")
+                         f"another -o (with --specimen NAME to keep the specimen's name), move "
+                         f"{'it' if len(taken) == 1 else 'them'} away, or add --overwrite to "
+                         f"replace {'it' if len(taken) == 1 else 'them'} ({nothing})")
 
 
 def calibration_copy_path(out: Path) -> Path:
@@ -183,6 +194,8 @@ def _angles_text(angles: list[float], most: int = 8) -> str:
 
 
 def _duration_text(seconds: float) -> str:
+    if seconds < 0.05:
+        return "0 s"  # nothing to wait for, or less than a twentieth of a second
     if seconds < 1:
         # A one-angle plan's quarter second read "about 0 s".
         return f"{seconds:.1g} s"

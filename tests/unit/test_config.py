@@ -89,6 +89,12 @@ def test_a_number_written_as_text_is_refused_where_it_was_read_as_the_number(
     quoted["sensors"][0]["gain_stages"] = ["0.1", "0.01"]
     msg = _error(quoted)
     assert "gain_stages" in msg and "expected a number" in msg, msg
+    # Inside a table of lists ([calibration] dark = {S1 = [...]}), and true/false as text.
+    quoted = copy.deepcopy(example)
+    sensor = next(iter(quoted["calibration"]["dark"]))
+    quoted["calibration"]["dark"][sensor] = ["120", "118", "131"]
+    msg = _error(quoted)
+    assert f"calibration.dark: expected a number at {sensor}[0], got the text '120'" in msg, msg
     # Unquoted numbers (int where a float goes, too) still read as before.
     fixed = copy.deepcopy(example)
     fixed["lights"][0]["theta_deg"] = 45

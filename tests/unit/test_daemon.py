@@ -248,3 +248,18 @@ def test_a_rig_config_given_as_the_daemon_config_says_so() -> None:
     assert text.startswith("rig.example.toml: a rig config") and "not a daemon config" in text
     assert "--rig" in text and "rig_config" in text, text
     assert "unknown key" not in text and len(text.splitlines()) == 1, text
+
+
+def test_a_number_or_a_switch_written_as_text_is_refused_in_the_daemon_config() -> None:
+    """``port = "8600"`` was read as 8600 without a word, as in the rig config (whose sections
+    refuse it since 2026-11-28); ``export_fits = "false"`` likewise as False."""
+    from gonio.daemon import DaemonConfigError, _validate
+
+    with pytest.raises(DaemonConfigError) as info:
+        _validate({"server": {"port": "8600"}}, "daemon.toml")
+    assert "server.port" in str(info.value), info.value
+    assert "expected a number, got the text '8600'" in str(info.value), info.value
+    with pytest.raises(DaemonConfigError) as info:
+        _validate({"results": {"export_fits": "false"}}, "daemon.toml")
+    assert "expected true or false, got the text 'false'" in str(info.value), info.value
+    assert _validate({"server": {"port": 8600}}, "daemon.toml").server.port == 8600

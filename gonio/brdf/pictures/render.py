@@ -702,7 +702,7 @@ def figure_png(rows: Sequence[tuple[str, Any]], views: Sequence[View] = DEFAULT_
     # sizes): "reconstruction" was cut after 13 characters ("reconstructio" / "n").
     words = [w for label, _b in rows for w in label.split()]
     widest = max((font.getlength(w) for w in words), default=0.0)
-    left = int(max(7 * fs, min(widest, 14 * fs))) + 10
+    left = math.ceil(max(7 * fs, min(widest, 14 * fs))) + 10
     top, gap, foot = 3 * fs, 6, 3 * fs
     w = left + len(views) * (size + gap)
     h = top + len(rows) * (size + gap) + foot

@@ -172,6 +172,19 @@ def test_an_existing_output_is_refused_unless_overwrite_says_to_replace_it(
         assert f"{white_cal} already exists" in err, err
         assert not data.exists() and not white.exists()
         assert white_cal.read_text() == '{"yesterday": true}'
+        # A pipe, or a link to a missing file: the result would be renamed onto it (or a
+        # FIFO refuse the copy only when the scan has ended).
+        import os
+
+        fifo = tmp_path / "pipe.h5"
+        os.mkfifo(fifo)
+        assert main([*argv, "-o", str(fifo)]) == 2
+        assert f"-o {fifo} is not a regular file" in capsys.readouterr().err
+        dangling = tmp_path / "link.h5"
+        dangling.symlink_to(tmp_path / "nowhere.h5")
+        assert main([*argv, "-o", str(dangling)]) == 2
+        assert f"-o {dangling} is a link to a missing file" in capsys.readouterr().err
+        assert not data.exists() and fifo.exists() and dangling.is_symlink()
         # A dry run writes nothing, so it is not refused.
         assert main([*argv, "--dry-run", "-o", str(old)]) == 0
         capsys.readouterr()

@@ -237,6 +237,45 @@ def test_a_signal_after_the_job_completed_lets_the_command_write_its_result(
     assert "stopping the scan as Ctrl-C does" in capsys.readouterr().err
 
 
+def test_a_sigterm_while_the_completed_scan_shuts_down_still_writes_the_result(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The whole command: a SIGTERM that lands while the service stops after the job has
+    completed (here sent from inside that stop) is noted, the result is still copied to -o and
+    the command ends 0; it was "interrupted", exit 130, and no copy."""
+    import os
+
+    from gonio.service import GonioService
+
+    real_stop = GonioService.stop
+    sent: list[bool] = []
+
+    async def stop_with_a_signal(self: GonioService) -> None:
+        if not sent:
+            handler = signal.getsignal(signal.SIGTERM)
+            # gonio scan's loop handler, or the signal would end the test run itself.
+            assert handler not in (signal.SIG_DFL, signal.SIG_IGN), handler
+            sent.append(True)
+            os.kill(os.getpid(), signal.SIGTERM)
+        await real_stop(self)
+
+    monkeypatch.setattr(GonioService, "stop", stop_with_a_signal)
+    before = signal.getsignal(signal.SIGTERM)
+    rig, data, out = tmp_path / "rig.toml", tmp_path / "data", tmp_path / "felt.h5"
+    try:
+        with start_sim_rig(SimRigOptions(time_scale=10.0, settle_s=0.0, config_path=rig)):
+            code = main(["scan", "--no-export-fits", "--accept-uncalibrated", "--rig", str(rig),
+                         "--rotations", "2", "--data-dir", str(data), "--no-progress",
+                         "-o", str(out)])
+    finally:
+        signal.signal(signal.SIGTERM, before)
+    err = capsys.readouterr().err
+    assert sent and code == 0, err
+    assert "SIGTERM received: the scan has already completed; writing its result" in err, err
+    assert out.read_bytes()[:8] == b"\x89HDF\r\n\x1a\n"  # the result, copied
+    assert _only_job(data / "gonio.sqlite").state is JobState.COMPLETED
+
+
 def _ignore_sighup() -> None:
     signal.signal(signal.SIGHUP, signal.SIG_IGN)  # what nohup does before it runs a command
 

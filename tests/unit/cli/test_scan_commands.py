@@ -342,3 +342,16 @@ def test_a_queued_job_followed_says_what_it_waits_for() -> None:
     assert scan_report.queued_line(7, free, jobs[:1])[1] == (
         "job 7 queued: next in the queue, the rig is free; start not known: no job starts "
         "while disk full: ...")
+
+
+def test_the_printed_wait_command_says_overwrite_when_its_file_exists(tmp_path: Path) -> None:
+    """``gonio scan --daemon ... --overwrite -o felt.h5`` stopped while following printed
+    ``... wait ID -o felt.h5``, which the existing file then refused."""
+    from gonio.cli.daemon_jobs import wait_command
+
+    out = tmp_path / "felt.h5"
+    assert wait_command("http://h:1", 3, out) == f"gonio jobs --daemon http://h:1 wait 3 -o {out}"
+    out.write_bytes(b"yesterday's")
+    assert wait_command("http://h:1", 3, out).endswith(f"-o {out} --overwrite")
+    assert scan_report._duration_text(0.0) == "0 s"
+    assert scan_report._duration_text(0.19) == "0.2 s"
