@@ -148,6 +148,9 @@ def _describe(err: Mapping[str, Any]) -> str:
         return f"unknown key {loc!r}; the keys are described in deploy/daemon.example.toml"
     if err["type"] == "missing":
         return f"{loc}: required key is missing"
+    if err["type"] == "value_error":
+        # A validator's own sentence (it names the value): without pydantic's prefix.
+        return f"{loc}: {str(err['msg']).removeprefix('Value error, ')}"
     return f"{loc}: {err['msg']} (got {err.get('input')!r})"
 
 
