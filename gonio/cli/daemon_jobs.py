@@ -364,7 +364,8 @@ def jobs_through_daemon(args: argparse.Namespace) -> int:
                 kind = (None if args.overwrite
                         else client.request("GET", f"/api/v1/jobs/{job}").get("kind"))
                 check_output_path(args.output, "nothing was fetched; the daemon keeps the job",
-                                  overwrite=args.overwrite, calibration=kind == "calibration")
+                                  overwrite=args.overwrite, calibration=kind == "calibration",
+                                  names_specimen=False)
             return follow_and_fetch(client, job, args.output, no_progress=args.no_progress)
         if args.action == "show":
             row = client.request("GET", f"/api/v1/jobs/{job}")

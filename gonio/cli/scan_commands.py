@@ -219,7 +219,7 @@ def _scan(args: argparse.Namespace) -> int:
     if args.no_wait and args.dry_run:
         raise UsageError("--no-wait queues the scan and returns; --dry-run queues nothing: "
                          "give one of them")
-    if args.output is None and not args.no_wait:
+    if args.output is None and not args.no_wait and not args.dry_run:
         raise UsageError(
             "the result file is required: -o/--output FILE.h5, e.g. -o felt.h5"
             + (" (or --no-wait: queue the scan on the daemon and return; 'gonio jobs --daemon "

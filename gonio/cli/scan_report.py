@@ -18,7 +18,8 @@ FINAL_STATES = ("completed", "failed", "aborted", "halted")
 
 
 def check_output_path(out: Path, nothing: str = "nothing was measured", *,
-                      overwrite: bool = False, calibration: bool = False) -> None:
+                      overwrite: bool = False, calibration: bool = False,
+                      names_specimen: bool = True) -> None:
     """Refuse an ``-o`` that cannot be written, or would replace a file, before anything is
     measured.
 
@@ -38,6 +39,8 @@ def check_output_path(out: Path, nothing: str = "nothing was measured", *,
     overwrite : replacing existing files is what the user asked for
     calibration : the job is a calibration, whose calibration file is written beside ``out``
         (:func:`calibration_copy_path`); it is checked too
+    names_specimen : ``-o`` names the specimen when ``--specimen`` does not (``gonio scan``;
+        not ``gonio jobs wait``): the refusal says how to keep the name
     """
     import os
     import tempfile
@@ -70,10 +73,11 @@ def check_output_path(out: Path, nothing: str = "nothing was measured", *,
              if p.is_file()]
     if taken:
         names = " and ".join(str(p) for p in taken)
+        keep = " (with --specimen NAME to keep the specimen's name)" if names_specimen else ""
         # -o also names the specimen when --specimen does not: another -o alone would start
         # a new job where the same command resumes one.
         raise UsageError(f"{names} already exist{'s' if len(taken) == 1 else ''}; give "
-                         f"another -o (with --specimen NAME to keep the specimen's name), move "
+                         f"another -o{keep}, move "
                          f"{'it' if len(taken) == 1 else 'them'} away, or add --overwrite to "
                          f"replace {'it' if len(taken) == 1 else 'them'} ({nothing})")
 

@@ -246,7 +246,11 @@ def test_wait_checks_the_output_before_it_waits(
     assert main(["jobs", "--daemon", daemon.url, "wait", str(job), "-o", str(old)]) == 2
     err = capsys.readouterr().err
     assert f"{old} already exists" in err and "--overwrite" in err, err
-    assert "nothing was fetched" in err, err
+    assert "nothing was fetched" in err and "--specimen" not in err, err  # wait names none
+    # A dry run through the daemon writes no result: it needs no -o (it was refused without).
+    assert main(["scan", "--daemon", daemon.url, "--api-key", daemon.key, "--specimen", "felt",
+                 "--dry-run"]) == 0
+    assert "nothing moves" in capsys.readouterr().out
     assert old.read_bytes() == b"yesterday's result"
 
 
