@@ -150,3 +150,90 @@ def test_a_bad_basis_setting_is_refused_before_anything_runs(
     err = capsys.readouterr()
     assert says in err.err
     assert "render importance" not in err.out  # refused before the map is counted
+
+
+def test_an_eps_setting_is_named_by_it_and_a_bad_eps_is_refused(
+        benches: tuple[ModuleType, ModuleType], capsys: pytest.CaptureFixture[str]) -> None:
+    """The eps study (docs/notes/2026-11-28-eps-flip.md): the row name says the remap
+    constant; a constant outside (0, 1) is refused before any work, saying what to give."""
+    bf, _ = benches
+    assert bf.setting_name(1.0, 64, 1e-4) == "w=1 K=64 eps=0.0001"
+    assert bf.setting_name(None, None, None) == bf.setting_name(None, None)
+    for bad in ("0", "1", "1.5"):
+        with pytest.raises(SystemExit) as exc:
+            bf.main(["choose", "--eps", "1e-3", bad])
+        assert exc.value.code == 2
+        err = capsys.readouterr()
+        assert "--eps: give remap constants between 0 and 1" in err.err
+        assert "render importance" not in err.out  # refused before the map is counted
+
+
+def test_an_eps_basis_is_remapped_with_its_eps_cached_by_it_and_designs_again(
+        benches: tuple[ModuleType, ModuleType], tmp_path: Path,
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """:func:`eps_default_basis` on a small synthetic library (the default library replaced):
+    the synthetic part is centred by the row means of V&F's remap with the asked ``eps``
+    (computed here from the formula, not by the code under test), the shipped measured
+    tables but the excluded one are folded in, each ``eps`` and each exclusion has its own
+    cache file, and bases of two ``eps`` have different design keys."""
+    from gonio.brdf.materials import library, measured
+    from gonio.brdf.reconstruction.basis import EPS
+    from gonio.brdf.tables import geometry
+    from tests.unit.brdf.reconstruction.test_basis import small_library
+
+    bf, bu = benches
+    lib = small_library()[1:]
+    monkeypatch.setattr(library, "default_library", lambda **_: list(lib))
+    monkeypatch.setattr(bu, "CACHE", tmp_path / "bench")
+    monkeypatch.setenv("GONIO_LIBRARY_DIR", str(tmp_path / "no-user-tables"))
+    k = 8
+    b4 = bf.eps_default_basis(1e-4, k, exclude=("acrylic_felt_green",))
+    assert b4.eps == 1e-4 and k == b4.K
+    names = set(b4.materials)
+    shipped = {t.name for t in measured.measured_tables()}
+    assert "rgl-acrylic_felt_green" not in names
+    assert shipped - {"rgl-acrylic_felt_green"} <= names
+    assert {t.name for t in lib} <= names
+
+    # The synthetic part: mu is the row mean of ln((A w + eps) / (f_med w + eps)), eps = 1e-4.
+    base = bf.eps_synthetic(1e-4, k + 32)
+    valid = geometry.valid_mask().ravel()
+    A = np.concatenate([t.columns()[:, valid] for t in lib]).T.astype(float)
+    f_med = np.median(A, axis=1, keepdims=True)
+
+    def row_mean(eps: float) -> np.ndarray:
+        w = np.maximum(geometry.remap_weight(eps).ravel()[valid], eps)[:, None]
+        return np.asarray(np.log((A * w + eps) / (f_med * w + eps)).mean(axis=1))
+
+    assert np.allclose(base.mu[valid], row_mean(1e-4), atol=1e-4)
+    assert not np.allclose(base.mu[valid], row_mean(EPS), atol=1e-4)
+
+    # Cached per eps and per exclusion: a second call reads the file, others build their own.
+    files = sorted(p.name for p in (tmp_path / "bench").rglob("*.npz"))
+    assert len(files) == 2 and all("eps0.0001" in f for f in files)
+    again = bf.eps_default_basis(1e-4, k, exclude=("acrylic_felt_green",))
+    assert np.array_equal(again.Q, b4.Q)
+    assert len(list((tmp_path / "bench").rglob("*.npz"))) == 2
+    b5 = bf.eps_default_basis(1e-5, k, exclude=("acrylic_felt_green",))
+    bf.eps_default_basis(1e-4, k, exclude=("chm_orange",))
+    assert len(list((tmp_path / "bench").rglob("*.npz"))) == 5
+    assert b5.eps == 1e-5
+
+    rig = RigConstraints()
+    imp = np.ones((18, 18, 36))
+    assert bf.design_key(b4, 0.5, imp, 0, rig) != bf.design_key(b5, 0.5, imp, 0, rig)
+
+
+def test_today_s_eps_is_the_default_basis_itself(
+        benches: tuple[ModuleType, ModuleType], monkeypatch: pytest.MonkeyPatch) -> None:
+    """``eps`` None or the product's EPS reads ``default_basis`` (today's basis, its shipped
+    synthetic part included), with the same K, exclusion and weight."""
+    from gonio.brdf.reconstruction.basis import EPS
+
+    bf, _ = benches
+    calls: list[tuple[object, ...]] = []
+    monkeypatch.setattr(bf, "default_basis", lambda k, exclude=(), measured_weight=None:
+                        calls.append((k, tuple(exclude), measured_weight)) or "default")
+    assert bf.eps_default_basis(EPS, 64, ("chm_orange",), 2.0) == "default"
+    assert bf.eps_default_basis(None, None) == "default"
+    assert calls == [(64, ("chm_orange",), 2.0), (None, (), None)]
