@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 import shutil
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from typing import Any
 
 import pytest
@@ -86,6 +86,21 @@ def open_live(browser: Any, daemon: Daemon, timeout_s: float, poll_s: float = 0.
     browser.get(f"{daemon.url}/#key={daemon.key}")
     wait.until(lambda d: d.find_element(By.ID, "live-chip").text == "live")
     return wait
+
+
+def check_plan(browser: Any, wait: Any, values: Sequence[tuple[str, object]]) -> str:
+    """Fill the scan form's fields (``(name, value)`` pairs), press Check plan and return the
+    dry run's note once it is shown."""
+    from selenium.webdriver.common.by import By
+
+    form = browser.find_element(By.ID, "scan-form")
+    for name, value in values:
+        field = form.find_element(By.NAME, name)
+        field.clear()
+        field.send_keys(str(value))
+    click_when_steady(wait, "#dry-run")
+    wait.until(lambda d: "readings at" in d.find_element(By.ID, "dry-run-result").text)
+    return str(browser.find_element(By.ID, "dry-run-result").text)
 
 
 def click_when_steady(wait: Any, css: str) -> None:

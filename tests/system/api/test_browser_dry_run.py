@@ -12,7 +12,12 @@ from typing import Any
 import pytest
 
 from tests.system.api.conftest import Daemon
-from tests.system.api.test_browser import browser, click_when_steady, open_live  # noqa: F401
+from tests.system.api.test_browser import (  # noqa: F401
+    browser,
+    check_plan,
+    click_when_steady,
+    open_live,
+)
 
 pytestmark = pytest.mark.system
 
@@ -39,14 +44,8 @@ def test_check_plan_adds_up_and_names_the_specimen_angle(
     wait = open_live(browser, daemon, 60)
     # 450 - 360 = 90 degrees.
     wait.until(lambda d: d.find_element(By.ID, "stage-chip").text.startswith("specimen at 90.0°"))
-    form = browser.find_element(By.ID, "scan-form")
-    for name, value in (("rotations", ROTATIONS), ("exposure_s", EXPOSURE_S), ("averages", 1)):
-        field = form.find_element(By.NAME, name)
-        field.clear()
-        field.send_keys(str(value))
-    click_when_steady(wait, "#dry-run")
-    wait.until(lambda d: "readings at" in d.find_element(By.ID, "dry-run-result").text)
-    note = browser.find_element(By.ID, "dry-run-result").text
+    note = check_plan(browser, wait, (("rotations", ROTATIONS), ("exposure_s", EXPOSURE_S),
+                                      ("averages", 1)))
 
     # The angle the chip gives, and the stage's own position beside it.
     assert "from the specimen at 90.0° (stage position 450.0°)" in note, note

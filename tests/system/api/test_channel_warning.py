@@ -17,7 +17,7 @@ import pytest
 from gonio.calibration import CALIBRATION_FILE, Calibration, PairCalibration, save_calibration
 from gonio.cli import main
 from tests.system.api.conftest import Daemon
-from tests.system.api.test_browser import browser, click_when_steady, open_live  # noqa: F401
+from tests.system.api.test_browser import browser, check_plan, open_live  # noqa: F401
 
 pytestmark = pytest.mark.system
 
@@ -103,14 +103,7 @@ def test_check_plan_on_the_page_says_start_would_be_refused(
     from selenium.webdriver.common.by import By
 
     wait = open_live(browser, daemon, 60)
-    form = browser.find_element(By.ID, "scan-form")
-    for name, value in (("rotations", 4), ("exposure_s", 0.01)):
-        field = form.find_element(By.NAME, name)
-        field.clear()
-        field.send_keys(str(value))
-    click_when_steady(wait, "#dry-run")
-    wait.until(lambda d: "readings at" in d.find_element(By.ID, "dry-run-result").text)
-    note = browser.find_element(By.ID, "dry-run-result").text
+    note = check_plan(browser, wait, (("rotations", 4), ("exposure_s", 0.01)))
     assert note.startswith("Start would be refused: read the warning below"), note
     items = [li.text for li in browser.find_elements(By.CSS_SELECTOR, "#dry-run-warnings li")]
     said = [w for w in items if "other sensors" in w]

@@ -62,6 +62,14 @@ def _signalled_mid_scan(argv: list[str], db: Path, sig: signal.Signals,
     return proc.returncode, out, err
 
 
+def _slow_scan(rig: Path, data: Path, *more: str) -> list[str]:
+    """``gonio scan`` argv of a scan slow enough to be signalled mid-way on a busy machine
+    (six angles of 0.5 s exposures at real time) on the simulated rig ``rig``, its store in
+    ``data``; ``more`` are added (``-o``, ``--accept-uncalibrated``)."""
+    return ["scan", "--no-export-fits", *more, "--rig", str(rig), "--rotations", "6",
+            "--exposure", "0.5", "--data-dir", str(data), "--no-progress"]
+
+
 def test_ctrl_c_leaves_the_job_paused_and_the_same_command_resumes_it(tmp_path: Path) -> None:
     rig = tmp_path / "rig.toml"
     data = tmp_path / "data"
@@ -71,9 +79,7 @@ def test_ctrl_c_leaves_the_job_paused_and_the_same_command_resumes_it(tmp_path: 
     # process slowed by a busy machine still signals while the scan measures (with 4 angles
     # of 0.3 s, one run on a loaded machine saw the scan complete, exit 0, not 130).
     with start_sim_rig(SimRigOptions(time_scale=1.0, settle_s=0.0, config_path=rig)):
-        argv = ["scan", "--no-export-fits",
-                "--rig", str(rig), "--rotations", "6", "--exposure", "0.5",
-                "--data-dir", str(data), "--no-progress", "-o", str(tmp_path / "felt.h5")]
+        argv = _slow_scan(rig, data, "-o", str(tmp_path / "felt.h5"))
         # SIGINT as a terminal's foreground job has it: a suite started in the background by a
         # non-interactive shell ignores SIGINT, and a child inherits that, so without the
         # reset the Ctrl-C below would be ignored and the scan would measure to its end.
@@ -150,9 +156,7 @@ def test_sigterm_or_sighup_stops_the_scan_as_ctrl_c_does(
     data = tmp_path / "data"
     db = data / "gonio.sqlite"
     with start_sim_rig(SimRigOptions(time_scale=1.0, settle_s=0.0, config_path=rig)):
-        argv = ["scan", "--no-export-fits", "--accept-uncalibrated",
-                "--rig", str(rig), "--rotations", "6", "--exposure", "0.5",
-                "--data-dir", str(data), "--no-progress", "-o", str(tmp_path / "felt.h5")]
+        argv = _slow_scan(rig, data, "--accept-uncalibrated", "-o", str(tmp_path / "felt.h5"))
         code, out, err = _signalled_mid_scan(argv, db, sig)
     # What a shell reports for a process the signal ended (128 + its number), not Ctrl-C's.
     assert code == 128 + sig.value, out + err
@@ -172,9 +176,7 @@ def test_a_scan_that_does_not_resume_the_paused_one_names_it(tmp_path: Path) -> 
     data = tmp_path / "data"
     db = data / "gonio.sqlite"
     with start_sim_rig(SimRigOptions(time_scale=1.0, settle_s=0.0, config_path=rig)):
-        argv = ["scan", "--no-export-fits", "--accept-uncalibrated",
-                "--rig", str(rig), "--rotations", "6", "--exposure", "0.5",
-                "--data-dir", str(data), "--no-progress"]
+        argv = _slow_scan(rig, data, "--accept-uncalibrated")
         code, out, err = _signalled_mid_scan([*argv, "-o", str(tmp_path / "felt.h5")], db,
                                              signal.SIGTERM)
         assert code == 128 + signal.SIGTERM, out + err
