@@ -792,6 +792,15 @@ def rebuild_result(store: JobStore, data_dir: Path, job_id: int,
         raise RebuildError(f"cannot rebuild job {job_id}: it was calibrated, and this store "
                            "(from an older gonio) does not record with which factors; measure "
                            "it again")
+    elif completing and "calibration" not in inputs and plan.finishing != "calibration":
+        # It failed before its finishing recorded the calibration it applies (a calibration
+        # that did not read, a rig changed under a resumed job, an older gonio): finished
+        # with none, a calibrated scan would come back "completed" in sensor units.
+        raise RebuildError(
+            f"cannot rebuild job {job_id}: it failed before its finishing recorded which "
+            f"calibration its readings take ({job.reason or 'no reason recorded'}), so the "
+            "rebuild cannot tell; its readings stay in the job store: measure it again "
+            "(submit the same plan as a new scan)")
     applied = cal if cal is not None else Calibration()
     truth = inputs.get("true_material")
     how = Finishing(
@@ -813,8 +822,9 @@ def rebuild_result(store: JobStore, data_dir: Path, job_id: int,
     except CalibrationError as exc:
         if completing:
             _failed_again(store, job, f"calibration refused (gonio jobs rebuild): {exc}")
-        raise RebuildError(f"cannot rebuild job {job_id}: {exc}; restore the store from a "
-                           "backup, or measure it again") from None
+        raise RebuildError(f"cannot rebuild job {job_id}: {exc}; "
+                           + ("it stays failed with that reason; " if completing else "")
+                           + "restore the store from a backup, or measure it again") from None
     except Exception as exc:
         if not completing:
             raise  # a completed job stays as it was: the error is the command's
@@ -827,6 +837,11 @@ def rebuild_result(store: JobStore, data_dir: Path, job_id: int,
             f"failed with that reason, its {n} readings untouched: remove the cause (e.g. "
             f"a basis or library file that does not read, or update gonio) and run gonio "
             f"jobs rebuild {job_id} again") from exc
+    if completing and store.get_job(job_id).state is not JobState.FAILED:
+        # Another rebuild finished it meanwhile (the store's lock keeps a daemon out, not a
+        # second rebuild of a store nobody runs): its result stands.
+        raise RebuildError(f"job {job_id} was rebuilt by another command meanwhile; it is "
+                           f"{store.get_job(job_id).state.value} now")
     store.set_result(job_id, summary.get("result_path"), summary)
     store.append_event(job_id, "rebuilt", {"result_path": summary.get("result_path")})
     if completing:
@@ -875,6 +890,13 @@ def _older_rig_config(data_dir: Path, job: Any) -> dict[str, Any]:
             "would be compared with is unknown"}
 
 
+def completes_failed(store: JobStore, job_id: int) -> bool:
+    """Whether :func:`rebuild_result` would finish failed job ``job_id`` and make it
+    ``completed`` (it failed while finishing with every reading stored), changing its state;
+    ``gonio jobs rebuild`` then holds the store's lock."""
+    return _failed_finishing(store, store.get_job(job_id))
+
+
 def _failed_finishing(store: JobStore, job: Any) -> bool:
     """Whether ``job`` failed while it was being finished with every reading of its plan
     stored: ``failed`` straight from ``reconstructing`` (a full disk, or an exception in
@@ -909,6 +931,11 @@ def _not_rebuilt(store: JobStore, job: Any) -> str:
         full = (job.reason or "").startswith(_DISK_FULL)
         ev = store.last_event(job.id, "state")
         finishing = ev is not None and ev.data.get("from") == JobState.RECONSTRUCTING.value
+        if ev is not None and ev.data.get("from") == JobState.QUEUED.value:
+            why = job.reason or "no reason recorded"
+            return (f"job {job.id} failed before it started ({why}): nothing was measured, so "
+                    "there is no result to write; submit the plan again once the cause is "
+                    "fixed")
         when = ("while it was being finished, its plan not wholly measured" if finishing
                 else "while it was measuring, when the disk filled" if full
                 else "while it was measuring")

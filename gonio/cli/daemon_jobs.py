@@ -325,8 +325,9 @@ def jobs_through_daemon(args: argparse.Namespace) -> int:
                          "own job store")
     if args.action == "rebuild":
         raise UsageError("rebuild works on a job store, not through a daemon: run 'gonio jobs "
-                         "rebuild ID --db DATA_DIR' on the daemon's data directory (the daemon "
-                         "may keep running: it serves the rebuilt file)")
+                         "rebuild ID --db DATA_DIR' on the daemon's data directory (a "
+                         "completed job's, with the daemon running: it serves the rebuilt file; "
+                         "a failed job's, with the daemon stopped)")
     if args.action != "reorder" and (args.position is not None or args.priority is not None
                                      or args.accept_uncalibrated):
         raise UsageError("--position, --priority and --accept-uncalibrated go with reorder")

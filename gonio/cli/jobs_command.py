@@ -377,7 +377,7 @@ def _interrupted_text(db: Path, active: list[Any]) -> str:
 def _rebuild(args: argparse.Namespace, store: Any) -> int:
     """``gonio jobs rebuild ID``: :func:`gonio.finishing.rebuild_result`, reported."""
     from gonio.basis_supply import BasisSupply
-    from gonio.finishing import rebuild_result
+    from gonio.finishing import completes_failed, rebuild_result
     from gonio.store import NotFound
 
     if args.job_id is None:
@@ -394,7 +394,22 @@ def _rebuild(args: argparse.Namespace, store: Any) -> int:
         print(f"rebuilding job {args.job_id}'s result from the job store's readings",
               file=sys.stderr)
     old = store.get_job(args.job_id).summary or {}
-    summary = rebuild_result(store, data_dir, args.job_id, BasisSupply())
+    lock = None
+    if before.value == "failed" and completes_failed(store, args.job_id):
+        # Completing a failed job changes its state (and a calibration job's, the calibration
+        # in effect): not under a daemon or scan that runs this store.
+        from gonio.locks import LockBusy, claim_store
+
+        try:
+            lock = claim_store(args.db)
+        except LockBusy as exc:
+            raise UsageError(f"{exc}; a failed job is rebuilt only in a job store no daemon or "
+                             "scan runs: stop it, rebuild, then start it again") from None
+    try:
+        summary = rebuild_result(store, data_dir, args.job_id, BasisSupply())
+    finally:
+        if lock is not None:
+            lock.release()
     after = store.get_job(args.job_id).state
     print(f"job {args.job_id}: wrote {data_dir / summary['result_path']} from "
           f"{summary['readings']} stored readings"

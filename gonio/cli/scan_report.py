@@ -334,7 +334,9 @@ def queued_line(job_id: int, row: dict[str, Any], jobs: list[dict[str, Any]]
     if isinstance(ahead, int) and ahead > 0:
         parts.append(f"{counted(ahead, 'queued job')} ahead of it")
     elif not parts:
-        parts.append("next in the queue, the rig is free")
+        # An answer without queue_position (an older daemon) does not say it is next.
+        parts.append("next in the queue, the rig is free" if ahead == 0
+                     else "the rig is free; its place in the queue is not known")
     seconds, source = row.get("starts_in_s"), row.get("starts_in_estimate")
     start = start_text(row)  # the words gonio jobs --daemon URL list uses
     if start is not None:
@@ -344,6 +346,8 @@ def queued_line(job_id: int, row: dict[str, Any], jobs: list[dict[str, Any]]
     else:
         why = str(source or "").removeprefix("not known: ")
         when = "start not known" + (f": {why}" if why else "")
-    key = (waiting, holders, ahead, isinstance(seconds, int | float),
+    # The holders say nothing while ``waiting`` does (its text names the cause): a job that
+    # ends under a held queue printed the same line again.
+    key = (waiting, None if waiting else holders, ahead, isinstance(seconds, int | float),
            None if isinstance(seconds, int | float) or waiting else source)
     return key, f"job {job_id} queued: {'; '.join(parts)}; {when}"

@@ -353,10 +353,28 @@ def test_a_job_failed_while_finishing_is_rebuilt_and_completed(
     assert ev is not None and ev.data["previous"] == failed.reason
 
     # The cause gone: `gonio jobs rebuild` completes it (its basis supply is the default one;
-    # here it serves the small basis).
+    # here it serves the small basis). Not while a daemon or scan holds the store: it would
+    # change a job's state under them.
     monkeypatch.setattr("gonio.basis_supply.BasisSupply",
                         lambda: BasisSupply(lambda: basis))
+    import subprocess
+    import sys
+
     capsys.readouterr()
+    # Another process holds the store's lock, as a daemon does (the lock is per process).
+    holder = subprocess.Popen(
+        [sys.executable, "-c", "import sys; from gonio.locks import claim_store; "
+         f"lock = claim_store({str(data / 'gonio.sqlite')!r}, 'a daemon of this test'); "
+         "print('held', flush=True); sys.stdin.read()"],
+        stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout is not None and holder.stdout.readline().strip() == "held"
+        assert main(["jobs", "rebuild", str(job), "--db", str(data / "gonio.sqlite")]) == 2
+    finally:
+        holder.communicate(timeout=60)
+    err = capsys.readouterr().err
+    assert "a failed job is rebuilt only in a job store no daemon or scan runs" in err, err
+    assert store.get_job(job).state.value == "failed"
     code = main(["jobs", "rebuild", str(job), "--db", str(data / "gonio.sqlite")])
     out = capsys.readouterr()
     assert code == 0, out.err
@@ -415,3 +433,41 @@ def test_a_job_failed_while_measuring_is_refused_with_its_counts(
            f"{planned} angles of its plan measured, {n} readings stored" in err, err
     assert "Traceback" not in err
     assert store.get_job(job).state.value == "failed" and store.reading_count(job) == n
+
+
+def test_a_failed_job_whose_finishing_recorded_no_calibration_is_not_completed_uncalibrated(
+    tmp_path: Path,
+) -> None:
+    """A job that failed before its finishing recorded the calibration it applies (a
+    calibration that did not read; a store of a gonio that kept no finishing inputs) would
+    have been finished with none: a calibrated scan "completed" in sensor units. Refused."""
+    import sqlite3
+
+    _calibrated(tmp_path).store.close()
+    data = tmp_path / "d"
+
+    def unreadable() -> Any:
+        raise RuntimeError("basis does not read")
+
+    svc = GonioService(JobStore(data / "gonio.sqlite"), MemRig(), data_dir=data,
+                       basis=BasisSupply(unreadable), fit_exports=False)
+    job = svc.submit(JobRequest(plan=UniformPlan(rotations=4, exposure=FAST))).id
+    _until_ended(svc, job)
+    assert svc.store.get_job(job).state.value == "failed"
+    assert svc.store.finishing_inputs(job)  # recorded before the basis failed
+    svc.store.close()
+    # As a store that never recorded them (the failure came first, or an older gonio).
+    with sqlite3.connect(data / "gonio.sqlite") as db:
+        db.execute("DELETE FROM finishing WHERE job_id = ?", (job,))
+    store = JobStore(data / "gonio.sqlite")
+    with pytest.raises(RebuildError, match=f"cannot rebuild job {job}: it failed before its "
+                       "finishing recorded which calibration its readings take"):
+        rebuild_result(store, data, job, BasisSupply(small_basis_supply))
+    assert store.get_job(job).state.value == "failed"
+    assert not (data / "results" / f"job-{job}.h5").exists()
+
+
+def small_basis_supply() -> Any:
+    from tests.unit.brdf.reconstruction.test_basis import small_basis
+
+    return small_basis()

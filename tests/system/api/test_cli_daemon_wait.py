@@ -361,8 +361,13 @@ def test_wait_on_a_queued_job_says_what_it_waits_for_once_and_when_that_changes(
             time.sleep(3)
             assert c.post("/api/v1/rig/release").status_code == 200
             released = True
-            out, _ = child.communicate(timeout=200)
+            # Not communicate(): it would read standard error too, beside the reader thread,
+            # and a line could be split between the two (one run saw a line end in the next
+            # one's words). Standard output (the summary) is small: read once the child ends.
+            child.wait(timeout=200)
             reader.join(timeout=30)
+            assert child.stdout is not None
+            out = child.stdout.read()
         finally:
             if not released:
                 c.post("/api/v1/rig/release")

@@ -355,3 +355,18 @@ def test_the_printed_wait_command_says_overwrite_when_its_file_exists(tmp_path: 
     assert wait_command("http://h:1", 3, out).endswith(f"-o {out} --overwrite")
     assert scan_report._duration_text(0.0) == "0 s"
     assert scan_report._duration_text(0.19) == "0.2 s"
+
+
+def test_the_queued_line_neither_repeats_under_a_hold_nor_guesses_its_place() -> None:
+    """Under a held queue a reconstructing job that ends changed the line's key, so the same
+    line was printed again; an answer without queue_position read "next in the queue"."""
+    row = {"state": "queued", "waiting": "the queue is held (emergency halt)",
+           "queue_position": 1, "starts_in_s": None, "starts_in_estimate": "not known: held"}
+    busy = [{"id": 6, "state": "reconstructing"}]
+    k1, t1 = scan_report.queued_line(7, row, busy)
+    k2, t2 = scan_report.queued_line(7, row, [{"id": 6, "state": "completed"}])
+    assert (k1, t1) == (k2, t2), (t1, t2)
+    free = {"state": "queued", "starts_in_s": 0.0, "starts_in_estimate": "nothing holds"}
+    assert "its place in the queue is not known" in scan_report.queued_line(7, free, [])[1]
+    assert "next in the queue" in scan_report.queued_line(
+        7, {**free, "queue_position": 0}, [])[1]
