@@ -415,7 +415,7 @@ async def _run_owned(args: argparse.Namespace, checked: Any, config: Any, sim: A
     ``checked`` is the plan checked on the rig (:class:`gonio.plans.checked.CheckedPlan`)."""
     import asyncio
 
-    from gonio.cli.sim_session import attach_sim, calibrate_in_foreground, calibration_covers_rig
+    from gonio.cli.sim_session import attach_sim, calibrate_in_foreground, sim_calibration_needed
     from gonio.jobstates import JobState
     from gonio.service import GonioService, JobRequest
     from gonio.store import JobStore
@@ -459,14 +459,12 @@ async def _run_owned(args: argparse.Namespace, checked: Any, config: Any, sim: A
                 # comes in the foreground.
                 store.set_state(job.id, JobState.RUNNING)
         else:
-            from gonio.calibration import exposure_warning
-
             for line in _other_unfinished(store, db):
                 print(line, file=sys.stderr)
             exposure_s = plan.exposure.exposure_s
             if (sim is not None and override is None and plan.kind != "calibration"
-                    and (not calibration_covers_rig(service)
-                         or exposure_warning(service.calibration(), exposure_s))):
+                    and sim_calibration_needed(service.calibration(), service.desc.pairs,
+                                               service.rig_config, exposure_s)):
                 # The simulated rig's calibration is measured at the scan's exposure (one
                 # at another exposure would leave the scan off by the ratio).
                 why = await calibrate_in_foreground(service, sim, exposure_s)
@@ -536,8 +534,8 @@ def _sim_calibration_s(args: argparse.Namespace, plan: Any, config: Any, desc: A
     pair at the plan's exposure in effect in the data directory, and no ``--calibration``),
     or None when it runs none. The dry run said nothing of it, so the first scan took longer
     than it said."""
-    from gonio.calibration import Calibration, calibration_in_effect, exposure_warning
-    from gonio.cli.sim_session import covers_rig, sim_calibration_plan
+    from gonio.calibration import Calibration, calibration_in_effect
+    from gonio.cli.sim_session import sim_calibration_needed, sim_calibration_plan
     from gonio.paths import scan_data_dir
     from gonio.plans.dryrun import dry_run
 
@@ -545,8 +543,8 @@ def _sim_calibration_s(args: argparse.Namespace, plan: Any, config: Any, desc: A
         return None
     cal = calibration_in_effect(args.data_dir or scan_data_dir(config), config)
     exposure_s = plan.exposure.exposure_s
-    if (isinstance(cal, Calibration) and covers_rig(cal, desc.pairs, config)
-            and not exposure_warning(cal, exposure_s)):
+    if isinstance(cal, Calibration) and not sim_calibration_needed(cal, desc.pairs, config,
+                                                                   exposure_s):
         return None
     return float(dry_run(sim_calibration_plan(None, exposure_s), desc).estimated_s)
 

@@ -76,6 +76,16 @@ def calibration_covers_rig(service: Any) -> bool:
     return covers_rig(service.calibration(), service.desc.pairs, service.rig_config)
 
 
+def sim_calibration_needed(cal: Any, pairs: Any, rig_config: Any, exposure_s: float) -> bool:
+    """Whether ``gonio scan --sim`` calibrates the simulated rig before a scan at
+    ``exposure_s``: calibration ``cal`` does not cover every pair (:func:`covers_rig`) or was
+    measured at another exposure (a calibration serves its own exposure only). The scan and
+    its dry run both ask it."""
+    from gonio.calibration import exposure_warning
+
+    return not covers_rig(cal, pairs, rig_config) or bool(exposure_warning(cal, exposure_s))
+
+
 def covers_rig(cal: Any, pairs: Any, rig_config: Any) -> bool:
     """Whether calibration ``cal`` has factors for every one of ``pairs``, one per channel of
     the pair's sensor in ``rig_config`` (:func:`calibration_covers_rig` of a service; a dry
