@@ -726,10 +726,13 @@ def rebuild_result(store: JobStore, data_dir: Path, job_id: int,
     ``reconstructing``: the disk filled while its result was written, or reconstruction, fits,
     colour or the result writing raised, e.g. a bug fixed since or a basis file that did not
     read) with every angle of its plan measured holds every reading: it is finished here and
-    becomes ``completed``, with the events its finishing would have recorded. A calibration
-    job so failed puts its calibration in effect unless a later one is. If its finishing fails
-    again, the job stays ``failed`` with the new reason (a ``rebuild_failed`` event; its
-    readings are untouched) and :class:`RebuildError` says why.
+    becomes ``completed``, with the events its finishing would have recorded. So does one
+    aborted while it was being finished (``aborted`` straight from ``reconstructing``: the
+    lab stopped a finishing it thought stuck, then wants the result after all). A calibration
+    job so completed puts its calibration in effect unless a later one is. If the finishing of
+    a failed job fails again, the job stays ``failed`` with the new reason (a
+    ``rebuild_failed`` event; its readings are untouched) and :class:`RebuildError` says why;
+    an aborted one stays ``aborted`` as it was.
 
     Blocking (reconstruction and fits take seconds).
 
@@ -737,7 +740,8 @@ def rebuild_result(store: JobStore, data_dir: Path, job_id: int,
     ----------
     store : the job store holding the job and its readings
     data_dir : the data directory the result goes to (``results/job-<id>.h5``)
-    job_id : a completed job, or one that failed while finishing with every reading stored
+    job_id : a completed job, or one that failed or was aborted while finishing with every
+        reading stored
     basis : the reconstruction basis (specimen jobs)
 
     Returns
@@ -747,7 +751,7 @@ def rebuild_result(store: JobStore, data_dir: Path, job_id: int,
     Raises
     ------
     RebuildError
-        The job is not completed (nor failed while finishing with every reading stored), its
+        The job is not completed (nor stopped while finishing with every reading stored), its
         plan or rig snapshot no longer parses, its readings are missing or incomplete, or the
         finishing of a failed job failed again (its new reason).
     """
@@ -755,7 +759,7 @@ def rebuild_result(store: JobStore, data_dir: Path, job_id: int,
     from gonio.plans.models import parse_stored_plan
 
     job = store.get_job(job_id)
-    completing = _failed_finishing(store, job)
+    completing = _stopped_while_finishing(store, job)
     if job.state is not JobState.COMPLETED and not completing:
         raise RebuildError(_not_rebuilt(store, job))
     try:
@@ -823,21 +827,23 @@ def rebuild_result(store: JobStore, data_dir: Path, job_id: int,
         if completing:
             _failed_again(store, job, f"calibration refused (gonio jobs rebuild): {exc}")
         raise RebuildError(f"cannot rebuild job {job_id}: {exc}; "
-                           + ("it stays failed with that reason; " if completing else "")
+                           + (f"it stays {job.state.value}{_WITH_REASON[job.state.value]}; "
+                              if completing else "")
                            + "restore the store from a backup, or measure it again") from None
     except Exception as exc:
         if not completing:
             raise  # a completed job stays as it was: the error is the command's
         # Failed again (the cause is not fixed yet): the job keeps failing, with the new
         # reason the API and the page show; its readings are untouched.
-        reason = f"reconstruction failed again (gonio jobs rebuild): {exc}"
+        again = "failed again" if job.state is JobState.FAILED else "failed"
+        reason = f"reconstruction {again} (gonio jobs rebuild): {exc}"
         _failed_again(store, job, reason)
         raise RebuildError(
-            f"cannot rebuild job {job_id}: its finishing failed again ({reason}); it stays "
-            f"failed with that reason, its {n} readings untouched: remove the cause (e.g. "
-            f"a basis or library file that does not read, or update gonio) and run gonio "
-            f"jobs rebuild {job_id} again") from exc
-    if completing and store.get_job(job_id).state is not JobState.FAILED:
+            f"cannot rebuild job {job_id}: its finishing {again} ({reason}); it stays "
+            f"{job.state.value}{_WITH_REASON[job.state.value]}, its {n} readings untouched: "
+            f"remove the cause (e.g. a basis or library file that does not read, or update "
+            f"gonio) and run gonio jobs rebuild {job_id} again") from exc
+    if completing and store.get_job(job_id).state is not job.state:
         # Another rebuild finished it meanwhile (the store's lock keeps a daemon out, not a
         # second rebuild of a store nobody runs): its result stands.
         raise RebuildError(f"job {job_id} was rebuilt by another command meanwhile; it is "
@@ -849,9 +855,10 @@ def rebuild_result(store: JobStore, data_dir: Path, job_id: int,
         for key in ("physical_bounds", "arc_asymmetric", "design_gap"):
             if summary.get(key):
                 store.append_event(job_id, key, {"message": summary[key]})
+        had = "failed" if job.state is JobState.FAILED else "been aborted while finishing"
         store.set_state(job_id, JobState.COMPLETED,
                         reason="completed by gonio jobs rebuild from its stored readings "
-                        f"(it had failed: {job.reason})")
+                        f"(it had {had}: {job.reason})")
     return summary
 
 
@@ -890,21 +897,36 @@ def _older_rig_config(data_dir: Path, job: Any) -> dict[str, Any]:
             "would be compared with is unknown"}
 
 
-def completes_failed(store: JobStore, job_id: int) -> bool:
-    """Whether :func:`rebuild_result` would finish failed job ``job_id`` and make it
-    ``completed`` (it failed while finishing with every reading stored), changing its state;
+def completes_unfinished(store: JobStore, job_id: int) -> bool:
+    """Whether :func:`rebuild_result` would finish job ``job_id`` and make it ``completed``
+    (it failed or was aborted while finishing with every reading stored), changing its state;
     ``gonio jobs rebuild`` then holds the store's lock."""
-    return _failed_finishing(store, store.get_job(job_id))
+    return _stopped_while_finishing(store, store.get_job(job_id))
 
 
-def _failed_finishing(store: JobStore, job: Any) -> bool:
-    """Whether ``job`` failed while it was being finished with every reading of its plan
-    stored: ``failed`` straight from ``reconstructing`` (a full disk, or an exception in
-    reconstruction, fits, colour or the result writing), every planned angle measured. A
-    rebuild that failed again records no state change (``rebuild_failed``), so it still is."""
+#: How a rebuild that fails leaves a job it would have completed: a failed one takes the new
+#: reason (``rebuild_failed``), an aborted one keeps its own (the lab's abort stands).
+_WITH_REASON = {"failed": " with that reason", "aborted": " with its reason"}
+
+
+def rebuild_hint(job_id: int, store_path: str) -> str:
+    """What a job stopped while it was being finished (failed or aborted there) says about
+    its readings: all are stored, and the command that finishes it (:func:`rebuild_result`).
+    ``store_path`` is the job store's SQLite file (``:memory:`` names none)."""
+    db = "" if store_path == ":memory:" else f" --db {store_path}"
+    return (f"every reading is stored: 'gonio jobs rebuild {job_id}{db}' finishes it once the "
+            "daemon or scan running this store has stopped")
+
+
+def _stopped_while_finishing(store: JobStore, job: Any) -> bool:
+    """Whether ``job`` failed or was aborted while it was being finished with every reading
+    of its plan stored: ``failed`` or ``aborted`` straight from ``reconstructing`` (a full
+    disk, an exception in reconstruction, fits, colour or the result writing, or an abort),
+    every planned angle measured. A rebuild that failed again records no state change
+    (``rebuild_failed``), so it still is."""
     from gonio.jobstates import JobState
 
-    if job.state is not JobState.FAILED or not _all_measured(job):
+    if job.state not in (JobState.FAILED, JobState.ABORTED) or not _all_measured(job):
         return False
     ev = store.last_event(job.id, "state")
     return ev is not None and ev.data.get("from") == JobState.RECONSTRUCTING.value
@@ -919,35 +941,40 @@ def _all_measured(job: Any) -> bool:
 def _failed_again(store: JobStore, job: Any, reason: str) -> None:
     """Record that the rebuild of ``job`` (failed while finishing) failed again: the new
     reason replaces the old one, with a ``rebuild_failed`` event (no state change: the job
-    was and stays ``failed``, and a later rebuild may still complete it)."""
-    store.set_failure_reason(job.id, reason, {"previous": job.reason})
+    was and stays ``failed``, and a later rebuild may still complete it). An aborted job is
+    left as it was: its reason is the lab's abort, and the command says why it failed."""
+    from gonio.jobstates import JobState
+
+    if job.state is JobState.FAILED:
+        store.set_failure_reason(job.id, reason, {"previous": job.reason})
 
 
 def _not_rebuilt(store: JobStore, job: Any) -> str:
     """Why ``job`` (not completed) has no result to rebuild, and what to do."""
     from gonio.jobstates import JobState
 
-    if job.state is JobState.FAILED:
-        full = (job.reason or "").startswith(_DISK_FULL)
+    if job.state in (JobState.FAILED, JobState.ABORTED):
+        failed = job.state is JobState.FAILED
+        full = failed and (job.reason or "").startswith(_DISK_FULL)
         ev = store.last_event(job.id, "state")
         finishing = ev is not None and ev.data.get("from") == JobState.RECONSTRUCTING.value
         if ev is not None and ev.data.get("from") == JobState.QUEUED.value:
             why = job.reason or "no reason recorded"
-            return (f"job {job.id} failed before it started ({why}): nothing was measured, so "
-                    "there is no result to write; submit the plan again once the cause is "
-                    "fixed")
+            return (f"job {job.id} {'failed' if failed else 'was aborted'} before it started "
+                    f"({why}): nothing was measured, so there is no result to write; submit "
+                    "the plan again" + (" once the cause is fixed" if failed else ""))
         when = ("while it was being finished, its plan not wholly measured" if finishing
                 else "while it was measuring, when the disk filled" if full
                 else "while it was measuring")
-        return (f"job {job.id} failed {when} ({job.done_angles} of {job.total_angles} angles "
-                f"of its plan measured, {store.reading_count(job.id)} readings stored; "
-                f"reason: {job.reason or 'none recorded'}): its readings stay in the job "
-                "store but are not a whole scan, so there is no result to write; measure it "
-                "again (submit the same plan as a new scan)"
-                + (" once the disk has room" if full else ""))
+        return (f"job {job.id} {'failed' if failed else 'was aborted'} {when} "
+                f"({job.done_angles} of {job.total_angles} angles of its plan measured, "
+                f"{store.reading_count(job.id)} readings stored; reason: "
+                f"{job.reason or 'none recorded'}): its readings stay in the job store but are "
+                "not a whole scan, so there is no result to write; measure it again (submit "
+                "the same plan as a new scan)" + (" once the disk has room" if full else ""))
     return (f"job {job.id} is {job.state.value}: only a completed job's result is rebuilt, or "
-            "that of one that failed while it was being finished with every reading stored "
-            "(a job still to finish writes its own)")
+            "that of one that failed or was aborted while it was being finished with every "
+            "reading stored (a job still to finish writes its own)")
 
 
 def _no_later_calibration(store: JobStore, data_dir: Path, job: Any) -> bool:

@@ -61,11 +61,11 @@ TRANSITIONS: dict[JobState, frozenset[JobState]] = {
     # Reconstruction touches no hardware, so a halt is not meaningful here, but an abort is.
     REC: frozenset({DONE, FAIL, AB}),
     DONE: frozenset(),
-    # Only a job failed while it was being finished (from reconstructing), all its readings
-    # stored: gonio jobs rebuild writes the result and completes it
-    # (gonio.finishing.rebuild_result).
+    # Only a job failed or aborted while it was being finished (from reconstructing), all its
+    # readings stored: gonio jobs rebuild writes the result and completes it
+    # (gonio.finishing.rebuild_result). Nothing is measured again.
     FAIL: frozenset({DONE}),
-    AB: frozenset(),
+    AB: frozenset({DONE}),
     HALT: frozenset(),
 }
 
@@ -73,8 +73,8 @@ ACTIVE_STATES: frozenset[JobState] = frozenset({RUN, P, S, REC})
 """States in which a job owns the rig (or its data is being turned into a result)."""
 
 FINISHED_STATES: frozenset[JobState] = frozenset({DONE, FAIL, AB, HALT})
-"""Terminal states: no job runs again from them (a job failed while finishing, every reading
-stored, is completed by ``gonio jobs rebuild``, which measures nothing)."""
+"""Terminal states: no job runs again from them (a job failed or aborted while finishing,
+every reading stored, is completed by ``gonio jobs rebuild``, which measures nothing)."""
 
 # User actions and the states they are accepted in. The engine performs the actual transition
 # (a pause takes effect at the next checkpoint), so these say only when a request is legal.

@@ -39,6 +39,7 @@ from gonio.calibration import Calibration, calibration_in_effect, uncalibrated_r
 from gonio.diskspace import DiskFull, disk_full_message, is_disk_full, low_space
 from gonio.engine_loop import EngineLoop
 from gonio.event_hub import EventHub
+from gonio.finishing import rebuild_hint
 from gonio.jobstates import (
     ACTIVE_STATES,
     FINISHED_STATES,
@@ -880,7 +881,11 @@ class GonioService:
                                      reason="aborted before it started")
             elif row.state is JobState.RECONSTRUCTING:
                 if not self.worker.abort_reconstruction(job_id):
-                    self.store.set_state(job_id, JobState.ABORTED, reason="aborted by request")
+                    # Its finishing is not running here (it would be resumed): every
+                    # reading is stored, so a rebuild can still finish it.
+                    self.store.set_state(job_id, JobState.ABORTED, reason="aborted by request "
+                                         "while it was being finished; "
+                                         + rebuild_hint(job_id, self.store.path))
             else:
                 # Active in the store but not running here (e.g. paused before a restart).
                 self.store.set_state(job_id, JobState.ABORTED, reason="aborted by request")

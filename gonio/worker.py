@@ -50,7 +50,7 @@ from gonio.diskspace import (
 )
 from gonio.engine import Progress, ScanEngine
 from gonio.engine_loop import running_in
-from gonio.finishing import Finishing, FinishingStopped, finish_job
+from gonio.finishing import Finishing, FinishingStopped, finish_job, rebuild_hint
 from gonio.jobstates import FINISHED_STATES, QUEUE_HOLD, IllegalTransition, JobState
 from gonio.plans.checked import CheckedPlan, check_plan
 from gonio.plans.dryrun import BasisSymmetry, arc_may_apply
@@ -340,13 +340,15 @@ class Worker:
             self._on_space.append(then)
         self.wake()
 
-    def _disk_full_failure(self, job: JobRow, reason: str, exc: BaseException) -> None:
-        """Fail ``job`` with ``reason`` now, or once the store has room to record it."""
+    def _disk_full_failure(self, job: JobRow, reason: str, exc: BaseException,
+                           then: str = "") -> None:
+        """Fail ``job`` with ``reason`` now, or once the store has room to record it;
+        ``then`` (the job's own next step, e.g. how to finish it) follows in its reason."""
         log.error("job %s: %s (%s)", job.id, reason, exc)
 
         def fail() -> None:
             if self.store.get_job(job.id).state not in FINISHED_STATES:
-                self._fail(job, reason)
+                self._fail(job, f"{reason}; {then}" if then else reason)
 
         try:
             fail()
@@ -513,20 +515,25 @@ class Worker:
             raise
         except FinishingStopped as exc:
             log.info("%s", exc)
-            self.store.set_state(job.id, JobState.ABORTED, reason="aborted by request")
+            # Every reading is stored: the lab may want the result after all.
+            self.store.set_state(job.id, JobState.ABORTED, reason="aborted by request while "
+                                 f"it was being finished; {rebuild_hint(job.id, self.store.path)}")
             return JobState.ABORTED
         except Exception as exc:  # a failed reconstruction fails the job, never the worker
             if is_disk_full(exc):
                 what = (f"the calibration of job {job.id}" if plan.finishing == "calibration"
                         else f"the result file of job {job.id}")
-                self._disk_full_failure(job, disk_full_message(what, self.data_dir), exc)
+                self._disk_full_failure(job, disk_full_message(what, self.data_dir), exc,
+                                        then="once there is room, "
+                                        + rebuild_hint(job.id, self.store.path))
                 return JobState.FAILED
             if isinstance(exc, CalibrationError) and plan.finishing == "calibration":
                 # The reference's readings are unusable (not a white diffuser...): say why.
                 log.error("job %s: calibration refused: %s", job.id, exc)
                 return self._fail(job, f"calibration refused: {exc}", plan)
             log.exception("job %s: finishing failed", job.id)
-            return self._fail(job, f"reconstruction failed: {exc}", plan)
+            return self._fail(job, f"reconstruction failed: {exc}; once the cause is mended, "
+                              f"{rebuild_hint(job.id, self.store.path)}", plan)
         self.store.set_result(job.id, summary.get("result_path"), summary)
         if summary.get("physical_bounds"):
             # Completed, but not plainly: the event log and its listeners (the CLI) say why.

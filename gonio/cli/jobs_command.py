@@ -24,7 +24,8 @@ def register(subparsers: Any) -> None:
         "completed job's result file again from the readings the store holds (when the file "
         "is missing or damaged), with the calibration the job was finished with; a job that "
         "failed while it was being finished (a full disk, an error in reconstruction or the "
-        "result writing) with every reading stored is finished again and completed so. "
+        "result writing) or was aborted then, with every reading stored, is finished again "
+        "and completed so. "
         "With --daemon URL the jobs are a running daemon's, acted on through its API: list, "
         "show, abort (a running job too), cancel ID (take a queued job out of the queue), "
         "reorder ID --position N and/or --priority P (N=0: next), wait ID [-o FILE] (follow "
@@ -377,7 +378,7 @@ def _interrupted_text(db: Path, active: list[Any]) -> str:
 def _rebuild(args: argparse.Namespace, store: Any) -> int:
     """``gonio jobs rebuild ID``: :func:`gonio.finishing.rebuild_result`, reported."""
     from gonio.basis_supply import BasisSupply
-    from gonio.finishing import completes_failed, rebuild_result
+    from gonio.finishing import completes_unfinished, rebuild_result
     from gonio.store import NotFound
 
     if args.job_id is None:
@@ -388,23 +389,24 @@ def _rebuild(args: argparse.Namespace, store: Any) -> int:
         before = store.get_job(args.job_id).state
     except NotFound as exc:
         raise UsageError(str(exc)) from None
-    if before.value in ("completed", "failed"):
+    if before.value in ("completed", "failed", "aborted"):
         # Only these may be rebuilt (rebuild_result refuses the others, saying why): the line
         # said "rebuilding" before the refusal of a paused job.
         print(f"rebuilding job {args.job_id}'s result from the job store's readings",
               file=sys.stderr)
     old = store.get_job(args.job_id).summary or {}
     lock = None
-    if before.value == "failed" and completes_failed(store, args.job_id):
-        # Completing a failed job changes its state (and a calibration job's, the calibration
-        # in effect): not under a daemon or scan that runs this store.
+    if before.value != "completed" and completes_unfinished(store, args.job_id):
+        # Completing a failed or aborted job changes its state (and a calibration job's, the
+        # calibration in effect): not under a daemon or scan that runs this store.
         from gonio.locks import LockBusy, claim_store
 
         try:
             lock = claim_store(args.db)
         except LockBusy as exc:
-            raise UsageError(f"{exc}; a failed job is rebuilt only in a job store no daemon or "
-                             "scan runs: stop it, rebuild, then start it again") from None
+            raise UsageError(f"{exc}; a {before.value} job is rebuilt only in a job store no "
+                             "daemon or scan runs: stop it, rebuild, then start it again"
+                             ) from None
     try:
         summary = rebuild_result(store, data_dir, args.job_id, BasisSupply())
     finally:

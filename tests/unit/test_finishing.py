@@ -332,6 +332,11 @@ def test_a_job_failed_while_finishing_is_rebuilt_and_completed(
     failed = store.get_job(job)
     assert failed.state.value == "failed", failed.reason
     assert "basis-k16.npz does not read" in (failed.reason or "")
+    # The reason says the readings are whole and how to finish the job once mended.
+    assert (failed.reason or "").endswith(
+        f"once the cause is mended, every reading is stored: 'gonio jobs rebuild {job} --db "
+        f"{data / 'gonio.sqlite'}' finishes it once the daemon or scan running this store has "
+        "stopped"), failed.reason
     assert len(calls) == 1  # it failed in finishing, not before measuring
     steps = store.steps(job)
     n = store.reading_count(job)
@@ -388,6 +393,107 @@ def test_a_job_failed_while_finishing_is_rebuilt_and_completed(
     result = read_result(path)
     assert result.table is not None and np.isfinite(result.table.values).any()
     assert "gonio jobs rebuild" in result.provenance["rebuilt"]
+
+
+def test_a_job_aborted_while_finishing_is_rebuilt_and_completed(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The lab aborted a scan while it was being finished (every reading stored), then wants
+    its result after all: the job's reason says how, and `gonio jobs rebuild` completes it.
+    A rebuild whose finishing fails leaves it aborted with the lab's reason."""
+    import threading
+
+    from gonio.brdf.reconstruction.basis import BasisError
+    from gonio.cli import main
+    from tests.unit.brdf.reconstruction.test_basis import small_basis
+
+    _calibrated(tmp_path).store.close()
+    data = tmp_path / "d"
+    db = data / "gonio.sqlite"
+    basis = small_basis()
+    entered, gate = threading.Event(), threading.Event()
+
+    def held() -> Any:
+        # Finishing waits here until the test has asked for the abort: then it stops.
+        entered.set()
+        assert gate.wait(120), "the test never opened the gate"
+        return basis
+
+    svc = GonioService(JobStore(db), MemRig(), data_dir=data, basis=BasisSupply(held),
+                       fit_exports=False)
+    job = svc.submit(JobRequest(plan=UniformPlan(rotations=4, exposure=FAST))).id
+
+    async def go() -> None:
+        await svc.start()
+        async for ev in svc.subscribe(0, job_id=job):
+            if ev.type == "state" and ev.data["state"] == "reconstructing":
+                assert await asyncio.to_thread(entered.wait, 120)
+                svc.abort(job)
+                gate.set()
+            if ev.type == "state" and ev.data["state"] in ("completed", "failed", "aborted"):
+                break
+        await svc.stop()
+
+    asyncio.run(go())
+    store = svc.store
+    aborted = store.get_job(job)
+    assert aborted.state.value == "aborted", aborted.reason
+    assert aborted.reason == (f"aborted by request while it was being finished; every reading "
+                              f"is stored: 'gonio jobs rebuild {job} --db {db}' finishes it once "
+                              "the daemon or scan running this store has stopped")
+    n = store.reading_count(job)
+    assert n > 0 and not (data / "results" / f"job-{job}.h5").exists()
+
+    def never() -> Any:
+        raise BasisError("basis file basis-k16.npz does not read (truncated)")
+
+    with pytest.raises(RebuildError, match=f"cannot rebuild job {job}: its finishing failed "
+                       r"\(reconstruction failed \(gonio jobs rebuild\): .*truncated\)\); it "
+                       "stays aborted with its reason"):
+        rebuild_result(store, data, job, BasisSupply(never))
+    assert store.get_job(job).state.value == "aborted"
+    assert store.get_job(job).reason == aborted.reason and store.reading_count(job) == n
+
+    monkeypatch.setattr("gonio.basis_supply.BasisSupply",
+                        lambda: BasisSupply(lambda: basis))
+    capsys.readouterr()
+    code = main(["jobs", "rebuild", str(job), "--db", str(db)])
+    out = capsys.readouterr()
+    assert code == 0, out.err
+    assert "it was aborted and is completed now" in out.out, out.out
+    done = JobStore(db).get_job(job)
+    assert done.state.value == "completed"
+    assert done.reason == ("completed by gonio jobs rebuild from its stored readings (it had "
+                           f"been aborted while finishing: {aborted.reason})")
+    result = read_result(data / "results" / f"job-{job}.h5")
+    assert result.table is not None and np.isfinite(result.table.values).any()
+
+
+def test_a_job_aborted_while_measuring_is_refused_with_its_counts(tmp_path: Path) -> None:
+    """Aborted part way through its angles: not a whole scan, so no result to write."""
+    _calibrated(tmp_path).store.close()
+    data = tmp_path / "d"
+    svc = GonioService(JobStore(data / "gonio.sqlite"), MemRig(), data_dir=data,
+                       basis=BasisSupply(_no_basis))
+    job = svc.submit(JobRequest(plan=UniformPlan(rotations=6, exposure=FAST))).id
+
+    def abort_after_two(progress: dict[str, Any]) -> None:
+        if progress["done"] == 2:
+            svc.abort(job)
+
+    _until_ended(svc, job, on_progress=abort_after_two)
+    store = svc.store
+    row = store.get_job(job)
+    assert row.state.value == "aborted"
+    measured = len({r.angle_index for r in store.readings(job)})
+    planned = len(store.steps(job))
+    assert 2 <= measured < planned
+    with pytest.raises(RebuildError, match=f"job {job} was aborted while it was measuring "
+                       rf"\({measured} of {planned} angles of its plan measured, "
+                       rf"{store.reading_count(job)} readings stored; reason: aborted by "
+                       r"request\).*measure it again"):
+        rebuild_result(store, data, job, BasisSupply(_no_basis))
+    assert store.get_job(job).state.value == "aborted"
 
 
 def test_a_job_failed_while_measuring_is_refused_with_its_counts(
