@@ -459,8 +459,8 @@ class GonioService:
         checked = check_plan(checked if checked is not None and checked.plan == plan else plan,
                              self.desc)
         if plan.finishing != "calibration":
-            self._check_calibration_covers(checked)
-            self._check_calibration_exposure(plan)
+            self._check_calibration_covers(checked, request.priority)
+            self._check_calibration_exposure(plan, request.priority)
         full = self.disk_full
         if full is not None:
             # Queued now, it would measure for minutes and then fail writing its result.
@@ -488,9 +488,7 @@ class GonioService:
         why = self._uncalibrated_why(plan)
         if why is None:
             return None
-        if any(r.kind == "calibration" and r.state not in FINISHED_STATES
-               and (r.state != JobState.QUEUED or r.priority >= priority)
-               for r in self.store.list_jobs()):
+        if self.calibration_ahead(priority)[0]:
             # A calibration job will run before this scan (`gonio serve --sim` queues one at
             # start), so the scan is finished with its calibration. Its refusal stopped `gonio
             # serve --sim --demo-scan` whenever a `gonio sim` rig of the same geometry had been
@@ -610,12 +608,13 @@ class GonioService:
 
         return overtaken
 
-    def _check_calibration_covers(self, checked: CheckedPlan) -> None:
+    def _check_calibration_covers(self, checked: CheckedPlan, priority: int = 0) -> None:
         """Refuse, before anything moves, a plan the calibration in effect covers only in part
         (its result would mix sensor units and 1/sr), or whose factors have another number of
         channels than the sensors read (the job would fail when it finishes) unless a
-        calibration job is queued or under way. Raises :class:`PlanError` naming the
-        pairs, or :class:`gonio.calibration.CalibrationError` for a damaged calibration."""
+        calibration job runs before it (:meth:`calibration_ahead`; the scan queued at
+        ``priority``). Raises :class:`PlanError` naming the pairs, or
+        :class:`gonio.calibration.CalibrationError` for a damaged calibration."""
         from gonio.calibration import PartialCalibration
 
         cal = self.calibration()
@@ -623,18 +622,47 @@ class GonioService:
             cal.check_covers(checked.pairs, "this plan")
         except PartialCalibration as exc:
             raise PlanError(str(exc)) from None
-        why = self.channel_refusal(checked.pairs, cal)
+        why = self.channel_refusal(checked.pairs, cal, priority)
         if why is not None:
             raise PlanError(why)
 
+    def calibration_ahead(self, priority: int = 0,
+                          exposure_s: float | None = None) -> tuple[bool, str]:
+        """Whether a calibration job runs before a scan queued now at ``priority`` (one under
+        way or paused, or one queued at that priority or above: the queue takes the higher
+        priority first, and the earlier job among equals), at ``exposure_s`` when given; and,
+        when none does but one is queued behind, the words that say so and what to do (else
+        "")."""
+        behind: list[JobRow] = []
+        for row in self.store.list_jobs([JobState.QUEUED.value,
+                                         *(st.value for st in ACTIVE_STATES)]):
+            if row.kind != "calibration":
+                continue
+            if exposure_s is not None:
+                at = (row.plan.get("exposure") or {}).get("exposure_s")
+                if not (isinstance(at, int | float)
+                        and math.isclose(at, exposure_s, rel_tol=1e-6)):
+                    continue
+            if row.state is not JobState.QUEUED or row.priority >= priority:
+                return True, ""
+            behind.append(row)
+        if not behind:
+            return False, ""
+        cal = behind[0]
+        return False, (f" (calibration job {cal.id} is queued at priority {cal.priority}, below "
+                       f"this scan's {priority}: it would run after the scan; queue the scan "
+                       f"at priority {cal.priority} or lower, or raise the calibration's "
+                       "priority first)")
+
     def channel_refusal(self, pairs: Sequence[hal.PairSpec],
-                        cal: Calibration | None = None) -> str | None:
+                        cal: Calibration | None = None, priority: int = 0) -> str | None:
         """Why a scan measuring ``pairs`` is refused at submission because the calibration in
         effect (``cal``, default :meth:`calibration`) was measured with other sensors (its
         factors have another number of channels than the sensors read,
         :meth:`gonio.calibration.Calibration.check_channels`), or None: no mismatch, or a
-        calibration job queued or under way calibrates these sensors before the scan starts
-        (the worker checks again then), as for the exposure. The one decision behind both
+        calibration job calibrates these sensors before the scan, queued at ``priority``,
+        starts (:meth:`calibration_ahead`; the worker checks again then), as for the
+        exposure. The one decision behind both
         :meth:`submit`'s refusal and the dry run's warning (the page's Check plan,
         ``gonio scan --daemon URL --dry-run``)."""
         from gonio.calibration import ChannelMismatch, sensor_channels
@@ -643,30 +671,26 @@ class GonioService:
             (cal if cal is not None else self.calibration()).check_channels(
                 pairs, sensor_channels(self.desc), "this plan")
         except ChannelMismatch as exc:
-            if not any(row.kind == "calibration" for row in self.store.list_jobs(
-                    [JobState.QUEUED.value, *(st.value for st in ACTIVE_STATES)])):
-                return str(exc)
+            ahead, behind = self.calibration_ahead(priority)
+            if not ahead:
+                return f"{exc}{behind}"
         return None
 
-    def _check_calibration_exposure(self, plan: AnyPlan) -> None:
+    def _check_calibration_exposure(self, plan: AnyPlan, priority: int = 0) -> None:
         """Refuse a scan at another exposure than the calibration in effect
         (:meth:`gonio.calibration.Calibration.check_exposure`): raises :class:`PlanError`
-        naming both exposures. A calibration job at the plan's exposure queued or under way
-        lets it be queued behind it: the worker checks again when the scan starts."""
+        naming both exposures. A calibration job at the plan's exposure that runs before the
+        scan, queued at ``priority`` (:meth:`calibration_ahead`), lets it be queued behind it:
+        the worker checks again when the scan starts."""
         from gonio.calibration import ExposureMismatch
 
         exposure_s = plan.exposure.exposure_s
         try:
             self.calibration().check_exposure(exposure_s, "this plan")
         except ExposureMismatch as exc:
-            for row in self.store.list_jobs([JobState.QUEUED.value,
-                                             *(st.value for st in ACTIVE_STATES)]):
-                if row.kind != "calibration":
-                    continue
-                at = (row.plan.get("exposure") or {}).get("exposure_s")
-                if isinstance(at, int | float) and math.isclose(at, exposure_s, rel_tol=1e-6):
-                    return
-            raise PlanError(str(exc)) from None
+            ahead, behind = self.calibration_ahead(priority, exposure_s)
+            if not ahead:
+                raise PlanError(f"{exc}{behind}") from None
 
     def list_jobs(self, state: str | None = None) -> list[JobInfo]:
         rows = [r for r in self.store.list_jobs([state] if state else None)

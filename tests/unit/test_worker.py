@@ -289,14 +289,20 @@ def test_checked_plans_of_jobs_that_never_start_are_dropped(tmp_path: Path) -> N
     assert kept not in worker._checked
 
 
-def _other_sensors_calibration(rig: MemRig) -> Any:
-    """A calibration of every pair of ``rig`` with 31 channels per factor (its sensors read
-    3): one measured with spectrometers that have the RGB sensors' names and directions."""
+def _calibration_with(rig: MemRig, channels: int) -> Any:
+    """A calibration of every pair of ``rig`` at FAST's exposure, ``channels`` per factor."""
     from gonio.calibration import Calibration, PairCalibration
 
     return Calibration(pairs=tuple(PairCalibration(light=p.light, sensor=p.sensor,
-                                                   factor=(1e-4,) * 31) for p in rig.pairs),
+                                                   factor=(1e-4,) * channels)
+                                   for p in rig.pairs),
                        exposure_s=FAST.exposure_s, source="job 9: spectral white reference")
+
+
+def _other_sensors_calibration(rig: MemRig) -> Any:
+    """A calibration of every pair of ``rig`` with 31 channels per factor (its sensors read
+    3): one measured with spectrometers that have the RGB sensors' names and directions."""
+    return _calibration_with(rig, 31)
 
 
 def test_a_calibration_of_other_sensors_refuses_the_job_before_anything_moves(
@@ -344,3 +350,44 @@ def test_submission_refuses_a_calibration_of_other_sensors_unless_one_is_queued(
     svc.submit(JobRequest(plan=CalibrationPlan(reference_albedo=WHITE_REFERENCE_ALBEDO,
                                                exposure=FAST)))
     assert svc.submit(JobRequest(plan=scan)).state is JobState.QUEUED
+
+
+def test_a_calibration_queued_below_the_scans_priority_does_not_let_it_through(
+    tmp_path: Path,
+) -> None:
+    """The queue takes the higher priority first: a calibration queued at priority 0 runs
+    after a scan submitted at 5, so it calibrates nothing for that scan. Such a scan was
+    accepted and then failed "not started" at its first move; it is refused at submission,
+    naming the calibration job and what to do. The same for a calibration at the scan's
+    exposure; at the calibration's priority or below, both are accepted."""
+    from gonio.plans.models import CalibrationPlan
+    from gonio.service import PlanError
+    from gonio.sim.rig import WHITE_REFERENCE_ALBEDO
+
+    rig = MemRig()
+    svc = GonioService(JobStore(tmp_path / "jobs.sqlite"), rig, data_dir=tmp_path / "d",
+                       calibration=_other_sensors_calibration(rig))
+    svc.submit(JobRequest(plan=CalibrationPlan(reference_albedo=WHITE_REFERENCE_ALBEDO,
+                                               exposure=FAST)))
+    scan = UniformPlan(rotations=2, exposure=FAST)
+    with pytest.raises(PlanError, match=r"31 channels, sensor .* reads 3.* \(calibration job 1 "
+                       r"is queued at priority 0, below this scan's 5: it would run after the "
+                       r"scan; queue the scan at priority 0 or lower, or raise the "
+                       r"calibration's priority first\)"):
+        svc.submit(JobRequest(plan=scan, priority=5))
+    assert [j.id for j in svc.store.list_jobs()] == [1]
+    assert svc.submit(JobRequest(plan=scan, priority=0)).state is JobState.QUEUED
+
+    # The exposure: the calibration in effect was measured at FAST's 2 ms; a calibration job
+    # at 4 ms, queued at priority -1, runs after a 4 ms scan at 0.
+    other = tmp_path / "other"
+    svc2 = GonioService(JobStore(other / "jobs.sqlite"), rig, data_dir=other / "d",
+                        calibration=_calibration_with(rig, 3))
+    slow = ExposureSettings(exposure_s=0.004, light_settle_s=0.0)
+    svc2.submit(JobRequest(plan=CalibrationPlan(reference_albedo=WHITE_REFERENCE_ALBEDO,
+                                                exposure=slow), priority=-1))
+    with pytest.raises(PlanError, match=r"0\.004 s.*\(calibration job 1 is queued at priority "
+                       r"-1, below this scan's 0"):
+        svc2.submit(JobRequest(plan=UniformPlan(rotations=2, exposure=slow)))
+    assert svc2.submit(JobRequest(plan=UniformPlan(rotations=2, exposure=slow),
+                                  priority=-1)).state is JobState.QUEUED
