@@ -348,20 +348,28 @@ def _queue_wait(store: Any, db: Path, rows: list[Any]) -> str | None:
 def _interrupted_note(db: Path, rows: list[Any]) -> str | None:
     """What the list's 'running' (or suspended, reconstructing) means when no process runs
     jobs from the store: the job was interrupted (a daemon stopped, SIGTERM or kill -9; a
-    gonio scan killed) and waits for the next one; None when nothing is active or a process
-    holds the store."""
+    gonio scan killed) and waits for the next one. When a daemon runs the store and jobs are
+    queued: where to ask it when they start (the store alone cannot say: the time left of the
+    job under way is the daemon's). None when there is nothing to say."""
     from gonio.locks import LockBusy, claim_store
 
     active = [r for r in rows if r.state.value in ("running", "suspended", "reconstructing")]
-    if not active:
+    queued = any(r.state.value == "queued" for r in rows)
+    if not active and not queued:
         return None
     try:
         claim_store(db).release()
-    except LockBusy:
-        return None  # a daemon or a gonio scan runs them: the states are live
+    except LockBusy as exc:
+        # A daemon or a gonio scan runs them: the states are live.
+        url = exc.holder.get("url") if isinstance(exc.holder, dict) else None
+        if not queued or not isinstance(url, str) or not url:
+            return None
+        url = url.rstrip("/")
+        return (f"note: the daemon at {url} runs this store; 'gonio jobs --daemon {url} list' "
+                "adds when each queued job may start")
     except OSError:
         return None  # cannot tell (no write access to the store's directory)
-    return _interrupted_text(db, active)
+    return _interrupted_text(db, active) if active else None
 
 
 def _interrupted_text(db: Path, active: list[Any]) -> str:

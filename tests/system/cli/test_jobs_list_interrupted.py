@@ -112,3 +112,40 @@ def test_list_with_a_job_id_says_show_takes_one_and_a_non_store_is_named(
     err = capsys.readouterr().err
     assert f"{rig} is not a usable gonio job store" in err, err
     assert "DATA_DIR/gonio.sqlite, the one 'gonio scan' and the daemon print" in err, err
+
+
+HOLD_AS_DAEMON = """
+import sys, time
+from gonio.locks import advertise_url, claim_store
+advertise_url("http://127.0.0.1:8321/")
+claim_store(sys.argv[1])
+print("held", flush=True)
+time.sleep(60)
+"""
+
+
+def test_queued_jobs_of_a_store_a_daemon_runs_point_to_its_start_estimates(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The store alone cannot say when a queued job starts (the time left of the job under
+    way is the daemon's): the list names the daemon's command that can, at the address the
+    daemon's lock records; a store nobody runs gets no such note."""
+    db = tmp_path / "gonio.sqlite"
+    store = JobStore(db)
+    try:
+        store.create_job(kind="uniform", specimen="felt", plan={"kind": "uniform"}, rig={})
+    finally:
+        store.close()
+    assert main(["jobs", "list", "--db", str(db)]) == 0
+    assert "note:" not in capsys.readouterr().out
+    holder = subprocess.Popen([sys.executable, "-c", HOLD_AS_DAEMON, str(db)],
+                              stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout is not None and holder.stdout.readline().strip() == "held"
+        assert main(["jobs", "list", "--db", str(db)]) == 0
+        out = capsys.readouterr().out
+    finally:
+        holder.kill()
+        holder.wait()
+    assert ("note: the daemon at http://127.0.0.1:8321 runs this store; 'gonio jobs --daemon "
+            "http://127.0.0.1:8321 list' adds when each queued job may start") in out, out
