@@ -23,6 +23,7 @@ from gonio.cli.daemon_client import (
 )
 from gonio.cli.scan_report import (
     FINAL_STATES,
+    appeared_text,
     calibration_copy_path,
     check_output_path,
     dry_run_summary,
@@ -30,6 +31,7 @@ from gonio.cli.scan_report import (
     queued_line,
     start_text,
     suspended_line,
+    write_output,
 )
 
 
@@ -83,7 +85,7 @@ def scan_through_daemon(args: argparse.Namespace, plan: Any) -> int:
         # What the daemon said of the job, kept for a message if it goes away: its queueing
         # answer at first, then every poll's.
         return follow_and_fetch(client, job_id, args.output, no_progress=args.no_progress,
-                                seen=dict(job), queued_here=True)
+                                overwrite=args.overwrite, seen=dict(job), queued_here=True)
 
 
 def _suggested_output(job_id: int, specimen: Any) -> str:
@@ -116,6 +118,7 @@ def wait_command(url: str, job_id: int, out: Path | None) -> str:
 
 
 def follow_and_fetch(client: DaemonClient, job_id: int, out: Path | None, *, no_progress: bool,
+                     overwrite: bool = False,
                      seen: dict[str, Any] | None = None, queued_here: bool = False) -> int:
     """Follow daemon job ``job_id`` to its end with a progress bar, fetch its result to
     ``out`` and print the summary ``gonio scan`` prints; the exit status.
@@ -132,6 +135,8 @@ def follow_and_fetch(client: DaemonClient, job_id: int, out: Path | None, *, no_
     out : where its result file goes (``-o``, checked writable by the caller); None: not
         fetched, the summary says where the daemon keeps it
     no_progress : no progress bar
+    overwrite : ``--overwrite``: a file that appeared at ``out`` while the job ran (and its
+        calibration copy's) is replaced; without it, refused (:func:`write_output`)
     seen : what the daemon last said of the job (its queueing answer); None when nothing yet
     queued_here : the command queued the job (running it again queues a second scan)
 
@@ -157,9 +162,9 @@ def follow_and_fetch(client: DaemonClient, job_id: int, out: Path | None, *, no_
             print(f"job {job_id} {row['state']}: {row.get('reason')}", file=sys.stderr)
             return 1
         if out is not None:
-            _fetch_result(client, job_id, out)
+            _fetch_result(client, job_id, out, overwrite=overwrite)
         if row.get("kind") == "calibration":
-            _calibration_fetched(client, job_id, out)
+            _calibration_fetched(client, job_id, out, overwrite=overwrite)
             return 0
     except DaemonUnreachable as exc:
         if not last:
@@ -187,31 +192,30 @@ def follow_and_fetch(client: DaemonClient, job_id: int, out: Path | None, *, no_
     return 0
 
 
-def _fetch_result(client: DaemonClient, job_id: int, out: Path) -> None:
+def _fetch_result(client: DaemonClient, job_id: int, out: Path, *,
+                  overwrite: bool = False) -> None:
     """Write completed job ``job_id``'s result file, as the daemon serves it, to ``out``
-    (whole or not at all: a fetch cut short leaves no truncated file under that name); when
-    that fails, say that the daemon keeps it and how to fetch it elsewhere."""
-    import contextlib
-    import os
-
+    (:func:`write_output`: whole or not at all, so a fetch cut short leaves no truncated file
+    under that name; a file that appeared there since the start's check is replaced only with
+    ``overwrite``); when that fails, say that the daemon keeps it and how to fetch it
+    elsewhere."""
     result = client.request("GET", f"/api/v1/jobs/{job_id}/result")
-    part = out.with_name(f".{out.name}.part")
     try:
-        out.parent.mkdir(parents=True, exist_ok=True)
-        part.write_bytes(result.content)
-        os.replace(part, out)
-    except BaseException as exc:
-        with contextlib.suppress(OSError):
-            part.unlink(missing_ok=True)
-        if not isinstance(exc, OSError):
-            raise
+        write_output(out, result.content, overwrite=overwrite)
+    except FileExistsError:
+        # The command names --overwrite: the file is there now.
+        raise UsageError(appeared_text(out, job_id, "the daemon keeps the result: fetch it "
+                                       "with " + wait_command(client.url, job_id, out)
+                                       + ", or to another -o")) from None
+    except OSError as exc:
         why = exc.strerror or str(exc)
         raise UsageError(f"job {job_id} completed, but its result could not be written to "
                          f"{out} ({why}); the daemon keeps it: fetch it elsewhere with "
                          f"'{wait_command(client.url, job_id, None)} -o FILE'") from None
 
 
-def _calibration_fetched(client: DaemonClient, job_id: int, out: Path | None) -> None:
+def _calibration_fetched(client: DaemonClient, job_id: int, out: Path | None, *,
+                         overwrite: bool = False) -> None:
     """Print what completed calibration job ``job_id`` left, and with ``out`` (its fetched
     result) write that job's calibration beside it as ``OUT.calibration.json``.
 
@@ -238,7 +242,12 @@ def _calibration_fetched(client: DaemonClient, job_id: int, out: Path | None) ->
               f"so no copy was written beside {out}")
         return
     cal_out = calibration_copy_path(out)
-    cal_out.write_text(json.dumps(json.loads(made), indent=2))
+    try:
+        write_output(cal_out, json.dumps(json.loads(made), indent=2).encode(),
+                     overwrite=overwrite)
+    except FileExistsError:
+        raise UsageError(appeared_text(cal_out, job_id, f"its result is in {out}, which "
+                                       "records the calibration too")) from None
     print(f"job {job_id} completed: {applies}; a copy is in {cal_out}")
 
 
@@ -367,7 +376,8 @@ def jobs_through_daemon(args: argparse.Namespace) -> int:
                 check_output_path(args.output, "nothing was fetched; the daemon keeps the job",
                                   overwrite=args.overwrite, calibration=kind == "calibration",
                                   names_specimen=False)
-            return follow_and_fetch(client, job, args.output, no_progress=args.no_progress)
+            return follow_and_fetch(client, job, args.output, no_progress=args.no_progress,
+                                    overwrite=args.overwrite)
         if args.action == "show":
             row = client.request("GET", f"/api/v1/jobs/{job}")
             if args.json:

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import shutil
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -34,11 +33,13 @@ if TYPE_CHECKING:
     from gonio.basis_supply import BasisSupply
 from gonio.cli.scan_report import (
     FINAL_STATES,
+    appeared_text,
     calibration_copy_path,
     check_output_path,
     dry_run_summary,
     print_scan_summary,
     suspended_line,
+    write_output,
 )
 
 
@@ -337,14 +338,20 @@ def _stop_on_terminate(stopped: list[str], finished: list[bool] | None = None) -
             loop.add_signal_handler(sig, stop, sig)
 
 
-def _copy_result(src: Path, out: Path, job_id: int) -> None:
-    """Copy a completed job's result to ``-o``; when that fails, say where the result is."""
+def _copy_result(src: Path, out: Path, job_id: int, *, overwrite: bool,
+                 what: str = "its result") -> None:
+    """Copy a completed job's file ``src`` (its result, or a calibration's calibration) to
+    ``out`` (:func:`write_output`: a file that appeared there meanwhile is replaced only with
+    ``overwrite``); when that fails, say where the file is."""
     try:
-        out.parent.mkdir(parents=True, exist_ok=True)
-        shutil.copyfile(src, out)
+        write_output(out, src.read_bytes(), overwrite=overwrite)
+    except FileExistsError:
+        raise UsageError(appeared_text(out, job_id, f"it is kept in {src}: copy it from there, "
+                                       "or give the scan --overwrite to replace such a file"
+                                       )) from None
     except OSError as exc:
         why = exc.strerror or str(exc)
-        raise UsageError(f"job {job_id} completed, but its result could not be copied to "
+        raise UsageError(f"job {job_id} completed, but {what} could not be copied to "
                          f"{out} ({why}); it is kept in {src}: copy it from there") from None
 
 
@@ -507,13 +514,14 @@ async def _run_owned(args: argparse.Namespace, checked: Any, config: Any, sim: A
         return 1
     assert row.result_path is not None
     # A copy: the data directory keeps its result (what 'gonio jobs show' reports stays true).
-    _copy_result(service.result_path(job.id), out, job.id)
+    _copy_result(service.result_path(job.id), out, job.id, overwrite=args.overwrite)
     summary = row.result or {}
     if plan.kind == "calibration":
         from gonio.calibration import CALIBRATION_FILE
 
         cal_out = calibration_copy_path(out)
-        shutil.copyfile(data_dir / CALIBRATION_FILE, cal_out)
+        _copy_result(data_dir / CALIBRATION_FILE, cal_out, job.id, overwrite=args.overwrite,
+                     what="its calibration")
         n_pairs = len(checked.pairs)
         # In effect from now on for this data directory's scans (the latest calibration job
         # here, as the daemon applies it): it said "apply it with --calibration", which a

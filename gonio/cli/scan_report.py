@@ -28,9 +28,7 @@ def check_output_path(out: Path, nothing: str = "nothing was measured", *,
     in the data directory, but the message did not say so). A file is made and removed in the
     folder, so whatever the file system or the permissions refuse is found now. An existing
     file there (yesterday's ``felt.h5``, a command run again from the shell's history) was
-    replaced without a word: it is refused unless ``overwrite`` (``--overwrite``) says to. A
-    file that appears there while the scan runs is still replaced at its end (the check is
-    made once, before anything moves).
+    replaced without a word: it is refused unless ``overwrite`` (``--overwrite``) says to.
 
     Parameters
     ----------
@@ -41,6 +39,9 @@ def check_output_path(out: Path, nothing: str = "nothing was measured", *,
         (:func:`calibration_copy_path`); it is checked too
     names_specimen : ``-o`` names the specimen when ``--specimen`` does not (``gonio scan``;
         not ``gonio jobs wait``): the refusal says how to keep the name
+
+    A file that appears at ``out`` while the scan runs (a second scan given the same ``-o``
+    that ended first) is not replaced either: :func:`write_output` refuses it then.
     """
     import os
     import tempfile
@@ -80,6 +81,54 @@ def check_output_path(out: Path, nothing: str = "nothing was measured", *,
                          f"another -o{keep}, move "
                          f"{'it' if len(taken) == 1 else 'them'} away, or add --overwrite to "
                          f"replace {'it' if len(taken) == 1 else 'them'} ({nothing})")
+
+
+def write_output(out: Path, data: bytes, *, overwrite: bool) -> None:
+    """Write ``data`` to ``out`` whole or not at all (a file beside it, then moved onto it).
+
+    Without ``overwrite`` a file at ``out`` is never replaced, including one that appeared
+    after :func:`check_output_path` passed (two scans given the same ``-o``: the one that
+    ended second replaced the first one's result without a word). The move is a hard link,
+    which the file system refuses when the name is taken, so no other program can slip in
+    between the check and the move; where hard links are not supported (FAT, some network
+    file systems) the name is checked just before the move instead.
+
+    Raises
+    ------
+    FileExistsError
+        ``out`` exists and ``overwrite`` is false; nothing was written.
+    OSError
+        The folder or the file cannot be written.
+    """
+    import contextlib
+    import errno
+    import os
+
+    part = out.with_name(f".{out.name}.part")
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        part.write_bytes(data)
+        if overwrite:
+            os.replace(part, out)
+            return
+        try:
+            os.link(part, out)
+        except FileExistsError:
+            raise
+        except OSError:
+            if out.exists() or out.is_symlink():
+                raise FileExistsError(errno.EEXIST, os.strerror(errno.EEXIST), str(out)) from None
+            os.replace(part, out)
+    finally:
+        with contextlib.suppress(OSError):
+            part.unlink(missing_ok=True)
+
+
+def appeared_text(out: Path, job_id: int, kept: str) -> str:
+    """Why a completed job's file was not written to ``out``: the file there appeared while
+    the job ran (the start's check found none), and where the job's own copy is (``kept``)."""
+    return (f"job {job_id} completed, but {out} appeared while it was measured (another scan "
+            f"or program wrote it) and was not replaced; {kept}")
 
 
 def calibration_copy_path(out: Path) -> Path:

@@ -139,7 +139,7 @@ def test_wait_on_a_completed_job_fetches_it_at_once(
     assert sorted(p.name for p in tmp_path.iterdir()) == ["linen.h5"]
     # Ctrl-C while the result is fetched: the job is done and nothing "goes on in the
     # daemon" (it said so); the file is not written, and the same command fetches it.
-    def cut(*args: object) -> None:
+    def cut(*args: object, **kwargs: object) -> None:
         raise KeyboardInterrupt
 
     again = tmp_path / "again.h5"
@@ -150,6 +150,21 @@ def test_wait_on_a_completed_job_fetches_it_at_once(
     assert f"stopped fetching; job {job} is completed" in err and "goes on" not in err, err
     assert f"wait {job} -o {again}" in err, err
     assert not again.exists()
+    # A file that appears at -o while the job is followed (checked free at the start) is not
+    # replaced: the daemon keeps the result, and the command that fetches it says --overwrite.
+    checked = daemon_jobs.check_output_path
+
+    def then_appears(path: Path, *args: Any, **kwargs: Any) -> None:
+        checked(path, *args, **kwargs)
+        path.write_bytes(b"another scan's result")
+
+    with pytest.MonkeyPatch.context() as m:
+        m.setattr(daemon_jobs, "check_output_path", then_appears)
+        assert main([*base, "-o", str(again)]) == 2
+    err = capsys.readouterr().err
+    assert again.read_bytes() == b"another scan's result"
+    assert f"job {job} completed, but {again} appeared while it was measured" in err, err
+    assert f"wait {job} -o {again} --overwrite, or to another -o" in err, err
     # `jobs --daemon URL show` says what the job measured, as `jobs show` on a store does (it
     # printed one line of state), and where to fetch the result.
     assert main(["jobs", "--daemon", daemon.url, "show", str(job)]) == 0

@@ -4,7 +4,9 @@ writes it."""
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -190,4 +192,25 @@ def test_an_existing_output_is_refused_unless_overwrite_says_to_replace_it(
         capsys.readouterr()
         # --overwrite: the scan runs and its result replaces the old file.
         assert main([*argv, "--overwrite", "-o", str(old)]) == 0
+        # A file that appears at -o while the scan runs (a second scan given the same -o
+        # ended first) is not replaced either: the result stays in the data directory.
+        from gonio.cli import scan_commands
+
+        later = tmp_path / "linen.h5"
+        checked = scan_commands.check_output_path
+
+        def then_appears(out: Path, *args: Any, **kwargs: Any) -> None:
+            checked(out, *args, **kwargs)
+            later.write_bytes(b"the other scan's result")
+
+        capsys.readouterr()
+        with pytest.MonkeyPatch.context() as m:
+            m.setattr(scan_commands, "check_output_path", then_appears)
+            assert main([*argv, "--specimen", "linen", "-o", str(later)]) == 2
+        err = capsys.readouterr().err
+        assert later.read_bytes() == b"the other scan's result"
+        kept = re.search(r"it is kept in (\S+\.h5): copy it from there", err)
+        assert f"completed, but {later} appeared while it was measured" in err, err
+        assert kept is not None and Path(kept.group(1)).is_file(), err
+        assert "--overwrite" in err and not list(tmp_path.glob(".linen.h5.part"))
     assert old.read_bytes()[:8] == b"\x89HDF\r\n\x1a\n"  # the HDF5 signature

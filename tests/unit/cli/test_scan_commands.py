@@ -370,3 +370,43 @@ def test_the_queued_line_neither_repeats_under_a_hold_nor_guesses_its_place() ->
     assert "its place in the queue is not known" in scan_report.queued_line(7, free, [])[1]
     assert "next in the queue" in scan_report.queued_line(
         7, {**free, "queue_position": 0}, [])[1]
+
+
+def test_write_output_never_replaces_a_file_unless_asked(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A result is written whole under its name, or not at all; a file already there (one
+    that appeared after the start's check) is kept unless overwrite is given, also on a file
+    system without hard links; no part file is left either way."""
+    import errno
+    import os
+
+    from gonio.cli.scan_report import write_output
+
+    out = tmp_path / "sub" / "felt.h5"
+    write_output(out, b"first", overwrite=False)
+    assert out.read_bytes() == b"first"
+    with pytest.raises(FileExistsError):
+        write_output(out, b"second", overwrite=False)
+    assert out.read_bytes() == b"first"
+    write_output(out, b"third", overwrite=True)
+    assert out.read_bytes() == b"third"
+    # A link to nothing is a taken name too (the move would replace the link).
+    dangling = tmp_path / "sub" / "link.h5"
+    dangling.symlink_to(tmp_path / "nowhere.h5")
+    with pytest.raises(FileExistsError):
+        write_output(dangling, b"x", overwrite=False)
+    assert dangling.is_symlink() and not (tmp_path / "nowhere.h5").exists()
+
+    def no_links(src: object, dst: object) -> None:
+        raise OSError(errno.EPERM, "hard links not supported here")
+
+    monkeypatch.setattr(os, "link", no_links)
+    with pytest.raises(FileExistsError):
+        write_output(out, b"fourth", overwrite=False)
+    assert out.read_bytes() == b"third"
+    other = tmp_path / "sub" / "linen.h5"
+    write_output(other, b"fifth", overwrite=False)
+    assert other.read_bytes() == b"fifth"
+    assert sorted(p.name for p in (tmp_path / "sub").iterdir()) == ["felt.h5", "linen.h5",
+                                                                   "link.h5"]
