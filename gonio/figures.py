@@ -15,6 +15,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from gonio.arc_wording import arc_sentence
 from gonio.brdf.models import analytic as bm
 from gonio.brdf.pictures import render
 from gonio.brdf.tables.table import BRDFTable
@@ -207,14 +208,7 @@ def headline_error(metrics: dict[str, Any]) -> dict[str, Any] | None:
         out["arc_asymmetric"] = asym
     elif out is not None and isinstance(metrics.get("arc_symmetric"), bool) and \
             isinstance(metrics.get("arc_test_p_value"), int | float):
-        # An auto-arc scan: which arc its first round chose, and on what evidence.
-        arc = "half a turn" if metrics["arc_symmetric"] else "a full turn"
-        verdict = "twofold symmetric" if metrics["arc_symmetric"] else "not twofold symmetric"
-        out["arc"] = (f"Scanned over {arc}: the first round's readings at opposite stage "
-                      f"angles say the specimen is {verdict} (chi-square "
-                      f"{metrics.get('arc_test_statistic', float('nan')):.1f} on "
-                      f"{metrics.get('arc_test_dof')} degrees of freedom, p = "
-                      f"{metrics['arc_test_p_value']:.3g}).")
+        out["arc"] = arc_sentence(metrics)
         out["meaning"] = f"{out['meaning']} {out['arc']}"
     uncovered = metrics.get("uncovered_share")
     if out is not None and out["key"] == "predicted_log_rmse" and \

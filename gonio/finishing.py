@@ -539,9 +539,12 @@ def _record_arc_test(job_id: int, plan: AnyPlan, test: dict[str, Any] | None,
     """The twofold symmetry test of the scan (:func:`_arc_test`) in its result
     (docs/science.md 7.4).
 
-    ``metrics`` gain ``arc_symmetric``, ``arc_deg`` (the arc chosen; a fixed plan's own) and
-    the test's ``arc_test_statistic``, ``arc_test_dof``, ``arc_test_p_value``;
-    ``provenance["arc_test"]`` the whole test. A plan forced over half a turn that the test
+    ``metrics`` gain ``arc_symmetric``, ``arc_deg`` (the arc scanned: the one the test chose,
+    or a fixed plan's own), ``arc_mode`` (the plan's: ``auto`` or ``fixed``, so what is said
+    of the arc does not claim the test chose a fixed plan's) and the test's
+    ``arc_test_statistic``, ``arc_test_dof``, ``arc_test_p_value``; ``provenance["arc_test"]``
+    the whole test (for a fixed plan with ``arc_deg`` the plan's, ``arc_chosen_by`` ``"plan"``
+    and ``arc_the_test_would_choose``). A plan forced over half a turn that the test
     calls asymmetric gets ``metrics["arc_asymmetric"]`` (the worker records it as an event,
     the page's headline shows it).
     """
@@ -555,11 +558,16 @@ def _record_arc_test(job_id: int, plan: AnyPlan, test: dict[str, Any] | None,
             metrics["arc_asymmetric"] = warning
             provenance["arc_asymmetric"] = warning
             log.info("job %d: %s", job_id, warning)  # the worker records the event
+    mode = plan.arc_mode()
     metrics.update(arc_symmetric=bool(test["symmetric"]), arc_deg=float(test["arc_deg"]),
-                   arc_test_statistic=test.get("statistic"), arc_test_dof=test.get("dof"),
-                   arc_test_p_value=test.get("p_value"))
-    if plan.arc_mode() == "fixed":
-        metrics["arc_deg"] = plan.first_span_deg()  # forced: the test chose nothing
+                   arc_mode=mode, arc_test_statistic=test.get("statistic"),
+                   arc_test_dof=test.get("dof"), arc_test_p_value=test.get("p_value"))
+    if mode == "fixed":
+        # Forced: the test chose nothing. Its own arc_deg (what it would have chosen) said
+        # 180 in the file of a scan over a full turn.
+        metrics["arc_deg"] = plan.first_span_deg()
+        test = {**test, "arc_deg": plan.first_span_deg(), "arc_chosen_by": "plan",
+                "arc_the_test_would_choose": float(test["arc_deg"])}
     provenance["arc_test"] = json.dumps(test)
 
 

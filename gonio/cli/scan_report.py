@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from gonio.arc_wording import arc_summary_line
 from gonio.cli import UsageError
 from gonio.wording import counted
 
@@ -222,18 +223,13 @@ def print_scan_summary(job_id: int, summary: dict[str, Any], out: Path | None,
 
 
 def _arc_lines(summary: dict[str, Any]) -> list[tuple[str, bool]]:
-    """The arc an auto-arc scan chose and its test, or a forced half turn's warning; the
-    basis the test's verdict chose (``(line, to_stderr)`` pairs)."""
+    """The arc scanned (an auto-arc scan's choice, or the plan's) and its test, or a forced
+    half turn's warning; the basis the test's verdict chose (``(line, to_stderr)`` pairs)."""
     lines: list[tuple[str, bool]] = []
     if summary.get("arc_asymmetric"):
         lines.append((f"warning: {summary['arc_asymmetric']}", True))
     elif isinstance(summary.get("arc_test_p_value"), int | float):
-        verdict = "twofold symmetric" if summary.get("arc_symmetric") else "NOT twofold symmetric"
-        lines.append((f"  arc: {summary.get('arc_deg', 0):g} deg; the first round read the "
-                      f"specimen {verdict} (chi-square "
-                      f"{summary.get('arc_test_statistic', float('nan')):.1f} on "
-                      f"{summary.get('arc_test_dof')} degrees of freedom, "
-                      f"p = {summary['arc_test_p_value']:.3g})", False))
+        lines.append((arc_summary_line(summary), False))
     if summary.get("basis_switch"):
         lines.append((f"  basis: {summary['basis_switch']}", False))
     return lines

@@ -162,3 +162,34 @@ def test_a_forced_half_turn_never_switches(tmp_path: Path, lean: float) -> None:
     _, row = _run(tmp_path, lean, UniformPlan(rotations=4, exposure=FAST), _never)
     assert row.summary is not None and "reconstruction_basis" not in row.summary
     assert row.summary["K"] == EVEN.K
+
+
+def test_a_full_turn_fixed_by_its_plan_is_not_said_to_be_the_tests_choice(
+        tmp_path: Path) -> None:
+    """A symmetric specimen scanned over a full turn because the plan fixed it: the test, run
+    at finishing, would have chosen half a turn. The result said "Scanned over half a turn:
+    the first round's readings ... say the specimen is twofold symmetric" on the page and in
+    the terminal, and its file's test said arc_deg 180. Now every place says the arc scanned
+    and that the plan chose it."""
+    from gonio.cli.scan_report import scan_summary
+    from gonio.figures import headline_error
+
+    _, row = _run(tmp_path, 0.0, FULL, _never)
+    summary = row.summary
+    assert summary is not None
+    assert summary["arc_symmetric"] is True and summary["arc_deg"] == 360.0
+    assert summary["arc_mode"] == "fixed"
+    result = read_result(tmp_path / "d" / summary["result_path"])
+    test = json.loads(result.provenance["arc_test"])
+    assert test["arc_deg"] == 360.0 and test["arc_chosen_by"] == "plan"
+    assert test["arc_the_test_would_choose"] == 180.0
+    headline = headline_error(result.metrics)
+    assert headline is not None
+    assert headline["arc"].startswith("Scanned over a full turn, as its plan fixed it; its "
+                                      "readings at opposite stage angles say the specimen is "
+                                      "twofold symmetric (chi-square "), headline["arc"]
+    assert "half a turn" not in headline["meaning"] and "first round" not in headline["meaning"]
+    lines = [text for text, _ in scan_summary(row.id, summary, None, "kept")]
+    (arc,) = [t for t in lines if t.startswith("  arc: ")]
+    assert arc.startswith("  arc: 360 deg (the plan's); its readings at opposite stage angles "
+                          "read the specimen twofold symmetric (chi-square "), arc

@@ -678,6 +678,7 @@ const METRIC_MEANING = {
   seconds: "reconstruction time, s",
   arc_deg: "the arc the stage angles covered, degrees (an auto-arc scan: the one its test chose)",
   arc_symmetric: "the readings at opposite stage angles agree within the noise (twofold symmetric)",
+  arc_mode: "who chose the arc: auto (the first round's twofold symmetry test) or fixed (the plan; the test only reports)",
   arc_test_statistic: "twofold symmetry test: chi-square of the log differences at opposite angles",
   arc_test_dof: "twofold symmetry test: its degrees of freedom (readings compared)",
   arc_test_p_value: "twofold symmetry test: probability of so large a statistic for a symmetric specimen",
