@@ -13,12 +13,20 @@ it saves.
 
 A process whose heap is not bounded (``gonio scan``, ``gonio export``, a test calling the fits
 directly) runs them where it is: there the fresh interpreter would cost and save nothing.
+
+The fresh interpreter ends with the daemon. A daemon killed while its fits ran (``kill -9``,
+the kernel's out-of-memory killer) left it behind for good, a few hundred MB blocked writing
+its answer to a pipe nobody reads: it now looks at its parent every
+:data:`PARENT_CHECK_S` seconds and exits once that parent is gone.
 """
 
 from __future__ import annotations
 
 import logging
 import multiprocessing
+import os
+import threading
+import time
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
@@ -29,6 +37,23 @@ from gonio.heap import heap_bounded
 log = logging.getLogger("gonio.export")
 
 T = TypeVar("T")
+
+#: How often the fits' process looks whether the daemon that started it is still there, s.
+PARENT_CHECK_S = 0.5
+
+
+def _exit_with_parent(parent_pid: int) -> None:
+    """In the fits' process (the pool's initializer): a daemon thread that ends this process
+    when its parent ``parent_pid`` is gone (the process is then re-parented, so its parent id
+    changes). Nothing is written: the daemon that would read the answer no longer exists, and
+    its next start finishes the job again from the stored readings."""
+
+    def watch() -> None:
+        while os.getppid() == parent_pid:
+            time.sleep(PARENT_CHECK_S)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="gonio-parent-watch", daemon=True).start()
 
 
 def run_fits(fn: Callable[..., T], *args: Any) -> T:
@@ -52,8 +77,9 @@ def run_fits(fn: Callable[..., T], *args: Any) -> T:
     try:
         # spawn, not fork: a fork of this threaded daemon would copy its bounded heap
         # settings and whatever locks its other threads held at that moment.
-        with ProcessPoolExecutor(max_workers=1,
-                                 mp_context=multiprocessing.get_context("spawn")) as pool:
+        with ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn"),
+                                 initializer=_exit_with_parent,
+                                 initargs=(os.getpid(),)) as pool:
             return pool.submit(fn, *args).result()
     except (BrokenProcessPool, OSError) as exc:
         log.warning("the export fits' own process failed (%s); fitting in the daemon, at "
