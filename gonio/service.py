@@ -725,9 +725,15 @@ class GonioService:
         elif full is not None:
             free_s, source = None, f"no job starts while {full}"
         else:
+            listed = {r.id for r in queued}
             for row in self.store.active_jobs():
                 if self.worker.being_removed(row.id):
                     continue  # removed (answered 204) while its engine stops: not listed
+                if row.id in listed:
+                    # Taken by the worker between the two reads: it is answered as queued
+                    # here, so it is not also the job it waits for ("starts in about 37 s
+                    # (job 4's time left)" for job 4 itself, which started at once).
+                    continue
                 d = self.get_job(row.id)
                 left = d.eta_s if row.kind == "calibration" else d.time_left_s
                 if row.kind == "calibration" and row.state is JobState.RECONSTRUCTING:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import asyncio
 import json
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -385,3 +386,25 @@ def test_a_submission_and_a_reorder_answer_with_the_jobs_start(tmp_path: Path) -
     assert second.starts_in_s == listed[second.id].starts_in_s is not None
     moved = svc.reorder(second.id, position=0)
     assert moved.starts_in_s == 0.0 and moved.starts_in_estimate is not None
+
+
+def test_a_job_taken_while_the_queue_is_read_does_not_wait_for_itself(tmp_path: Path) -> None:
+    """The worker took job 1 between the service's two reads of the store (the queue, then the
+    jobs holding the rig): its start estimate was its own time left, "starts in about 37 s
+    (job 1's time left)", for a job that had just started. It is answered as queued with the
+    rig free (the other read decides nothing about a job the first read listed)."""
+    _rig, svc = _service(tmp_path)
+    job = svc.submit(JobRequest(plan=UniformPlan(rotations=2, exposure=FAST))).id
+    real_queue = svc.store.queue
+
+    def queue_then_taken() -> Any:
+        rows = real_queue()
+        if svc.store.get_job(job).state is JobState.QUEUED:
+            svc.store.set_state(job, JobState.RUNNING)  # as the worker does, just after
+        return rows
+
+    svc.store.queue = queue_then_taken  # type: ignore[method-assign]
+    (info,) = svc.list_jobs()
+    assert info.state is JobState.QUEUED  # the list's own read, before the worker took it
+    assert info.starts_in_s == 0.0, info
+    assert f"job {job}" not in (info.starts_in_estimate or ""), info.starts_in_estimate
