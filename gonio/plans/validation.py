@@ -17,6 +17,12 @@ from gonio.wording import counted
 
 def plan_pairs(plan: AnyPlan, rig: RigDescription) -> list[PairSpec]:
     """The pairs a plan measures, checked against the rig. Raises :class:`PlanError`."""
+    if plan.pairs is not None and not plan.pairs and rig.pairs:
+        # An empty list is not "every pair" (null is): it was blamed on the rig config.
+        raise PlanError(
+            "the plan's pairs list is empty, so it measures nothing; leave pairs out (or null) "
+            f"to measure all {len(rig.pairs)} of the rig's pairs, or list the ones to measure"
+        )
     pairs = list(rig.pairs) if plan.pairs is None else list(plan.pairs)
     if not pairs:
         raise PlanError(

@@ -26,7 +26,9 @@ def _limited(desc: RigDescription, lo: float, hi: float) -> RigDescription:
     [
         (UniformPlan(rotations=0), "at least one stage angle"),
         (UniformPlan(rotations=100000), "at most 3600 stage angles"),
-        (UniformPlan(pairs=[]), "no pairs"),
+        # An empty list, not null (every pair): said as the plan's, not the rig config's.
+        (UniformPlan(pairs=[]), r"the plan's pairs list is empty, so it measures nothing; "
+         r"leave pairs out \(or null\) to measure all \d+ of the rig's pairs"),
         (UniformPlan(pairs=[PairSpec(light="L2", sensor="S2")]), "not one of the rig's pairs"),
         (UniformPlan(pairs=[PairSpec(light="L1", sensor="S1")] * 2), "listed twice"),
         (UniformPlan(exposure=ExposureSettings(exposure_s=20.0)),
