@@ -49,6 +49,9 @@ def register(sub: Any) -> None:
     p.add_argument("--csv", type=Path, default=None, metavar="FILE",
                    help="also write the numbers as CSV (the colour table, or with --against "
                    "the differences); '-' writes CSV to standard output instead of the table")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace the --csv file if it exists (without it an existing file is "
+                   "refused, e.g. a stored standard's CSV)")
     p.add_argument("--json", action="store_true", help="print everything as JSON")
     p.add_argument("--illuminant", default="D65", choices=list(ILLUMINANTS),
                    help="CIE illuminant (default D65)")
@@ -253,6 +256,11 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"result file {args.result} does not exist")
     if args.csv is not None and str(args.csv) != "-" and not args.csv.parent.is_dir():
         raise UsageError(f"--csv {args.csv}: folder {args.csv.parent} does not exist")
+    if args.csv is not None and str(args.csv) != "-" and args.csv.exists() \
+            and not args.overwrite:
+        # A colour CSV is often a lab's master (a stored standard): replaced without a word.
+        raise UsageError(f"--csv {args.csv} already exists; give another name, move it away, "
+                         "or add --overwrite to replace it (nothing was written)")
     if args.data_dir is not None and not args.data_dir.is_dir():
         raise UsageError(f"--data-dir {args.data_dir} is not a folder: give the data directory "
                          "whose standards/ folder holds the stored standards")

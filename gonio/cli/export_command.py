@@ -1,6 +1,7 @@
-"""``gonio export RESULT.h5 --format FORMAT -o FILE [--with-mesh]``: a result in a renderer's
-format, with a report of what the file is (specimen, simulated or measured, the fitted model's
-rendered difference from the reconstruction, warnings; docs/export.md)."""
+"""``gonio export RESULT.h5 --format FORMAT -o FILE [--with-mesh] [--overwrite]``: a result in
+a renderer's format, with a report of what the file is (specimen, simulated or measured, the
+fitted model's rendered difference from the reconstruction, warnings; docs/export.md). An
+existing output file is replaced only with ``--overwrite``."""
 
 from __future__ import annotations
 
@@ -30,6 +31,9 @@ def register(sub: Any) -> None:
     p.add_argument("-o", "--output", type=Path, default=None,
                    help="file to write (default: the result's name with the format's suffix, "
                    "RESULT.factored.npz / RESULT.table.npz for the two .npz formats)")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace the output file (and a merl export's .json sidecar) if it "
+                   "exists; without it an existing file is refused")
     p.add_argument("--with-mesh", action="store_true",
                    help="gltf: add a preview sphere (normals, UVs, tangents) so any viewer "
                    "shows the material; without it the file is a material library")
@@ -70,6 +74,17 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"folder {out.parent} does not exist; create it or choose another -o")
     if args.with_mesh and args.fmt != "gltf":
         raise UsageError("--with-mesh applies to --format gltf only")
+    if not args.overwrite:
+        # -o naming another scan's result replaced it with a 16 kB glTF without a word.
+        from gonio.export.merl import sidecar_path
+
+        taken = [p for p in ([out, sidecar_path(out)] if args.fmt == "merl" else [out])
+                 if p.exists()]
+        if taken:
+            names = " and ".join(str(p) for p in taken)
+            raise UsageError(f"{names} already exist{'s' if len(taken) == 1 else ''}; give "
+                             "another -o, move it away, or add --overwrite to replace it "
+                             "(nothing was written)")
     t0 = time.perf_counter()
     fits, prov = result_fits(result)
     path = write_export(fits, args.fmt, out, prov, with_mesh=args.with_mesh)

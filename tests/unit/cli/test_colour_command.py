@@ -418,3 +418,17 @@ def test_a_stored_standard_keeps_its_warnings_and_its_space(
     capsys.readouterr()
     assert main(["colour", str(plain), "--against", str(unc_csv)]) == 2
     assert "holds uncalibrated sensor RGB, not CIELAB" in capsys.readouterr().err
+
+
+def test_an_existing_csv_is_kept_unless_overwrite_says_to_replace_it(
+    files: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """`gonio colour --csv` replaced an existing CSV (a lab's master) without a word."""
+    master = tmp_path / "master.csv"
+    master.write_text("the lab's master\n")
+    assert main(["colour", str(files["cal"]), "--csv", str(master)]) == 2
+    err = capsys.readouterr().err
+    assert f"--csv {master} already exists" in err and "--overwrite" in err, err
+    assert master.read_text() == "the lab's master\n"
+    assert main(["colour", str(files["cal"]), "--csv", str(master), "--overwrite"]) == 0
+    assert len(list(csv.DictReader(master.open()))) > 0

@@ -265,3 +265,23 @@ def test_the_merl_report_says_anisotropy_was_lost_only_when_it_was(
     lines = report("merl", path, {"specimen": "paint", "specimen_named": True,
                                   "source": "simulated", "job_id": 1})
     assert any(words in line for line in lines), lines
+
+
+def test_an_existing_output_is_kept_unless_overwrite_says_to_replace_it(
+    result: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """`gonio export -o` naming another scan's result replaced it with a glTF file without a
+    word; a merl export's sidecar counts too."""
+    other = tmp_path / "other-scan.h5"
+    other.write_bytes(b"another scan's result")
+    assert main(["export", str(result), "-f", "gltf", "-o", str(other)]) == 2
+    err = capsys.readouterr().err
+    assert f"{other} already exists" in err and "--overwrite" in err, err
+    assert other.read_bytes() == b"another scan's result"
+    merl = tmp_path / "felt.binary"
+    (tmp_path / "felt.binary.json").write_text("{}")
+    assert main(["export", str(result), "-f", "merl", "-o", str(merl)]) == 2
+    assert f"{tmp_path / 'felt.binary.json'} already exists" in capsys.readouterr().err
+    assert not merl.exists()
+    assert main(["export", str(result), "-f", "gltf", "-o", str(other), "--overwrite"]) == 0
+    assert other.read_bytes()[:1] == b"{"  # the glTF JSON
