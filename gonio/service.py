@@ -132,6 +132,19 @@ scan it moves ahead of a queued calibration (:meth:`GonioService.unasked_uncalib
 
 
 # --------------------------------------------------------------------------- service
+#: How long ``resume`` waits for the engine to take the request before it answers, s.
+RESUME_ANSWER_WAIT_S = 5.0
+
+
+def _on_an_event_loop() -> bool:
+    """The caller runs inside an event loop (it must not block it)."""
+    try:
+        asyncio.get_running_loop()
+    except RuntimeError:
+        return False
+    return True
+
+
 class GonioService:
     """Jobs, control and events over one rig.
 
@@ -890,9 +903,28 @@ class GonioService:
         return JobInfo.from_row(self._row(job_id))
 
     def resume(self, job_id: int) -> JobInfo:
+        """Resume a paused job; the answer is the job once its engine has taken the request
+        (normally ``running``; still ``paused`` if it has not within
+        :data:`RESUME_ANSWER_WAIT_S`). The answer read ``paused`` every time: the engine
+        resumes on its own loop a moment after the request, and a script reading the answer
+        concluded the resume had failed. Called on an event loop (a test's), it answers at
+        once: waiting there could hold up the very loop that resumes the job.
+
+        Raises
+        ------
+        Conflict
+            No engine holds the job (the worker has not taken it up yet): nothing would
+            resume it.
+        """
         row = self._row(job_id)
         check_action("resume", row.state, job_id)
-        self.worker.resume_measurement(job_id)
+        if not self.worker.resume_measurement(job_id):
+            raise Conflict(f"job {job_id} is paused but the worker has not taken it up yet "
+                           "(the daemon is starting); try the resume again in a moment")
+        if not _on_an_event_loop():
+            deadline = time.monotonic() + RESUME_ANSWER_WAIT_S
+            while self._row(job_id).state is JobState.PAUSED and time.monotonic() < deadline:
+                time.sleep(0.02)
         return JobInfo.from_row(self._row(job_id))
 
     # Abort, cancel, remove and halt decide under the worker's lock (Worker.changes): a job

@@ -207,7 +207,12 @@ def test_controls_pause_resume_cancel_reorder_remove(daemon: Daemon,
         assert c.get(f"/api/v1/jobs/{first}").json()["done_angles"] == done_at_pause
         # A paused job cannot be paused again, and a running one cannot be resumed.
         assert c.post(f"/api/v1/jobs/{first}/pause").status_code in (409,)
-        assert c.post(f"/api/v1/jobs/{first}/resume").status_code == 200
+        resumed = c.post(f"/api/v1/jobs/{first}/resume")
+        assert resumed.status_code == 200
+        # The answer is the job once its engine took the request (it read "paused", and a
+        # script checking it concluded the resume had failed); within the answer's wait it
+        # is running, or done already, never still paused.
+        assert resumed.json()["state"] in ("running", "reconstructing", "completed"), resumed.text
         wait_state(c, first, {"running", "completed"})
 
         # Cancel works only while queued; remove only when queued or finished.
