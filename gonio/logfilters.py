@@ -93,12 +93,23 @@ PYMODBUS_REPEAT = "Repeating...."
 
 
 class PymodbusFrameFilter(logging.Filter):
-    """ERROR records of pymodbus become one-line WARNINGs without the raw frame dump, and its
+    """ERROR records of pymodbus become one-line WARNINGs without the raw frame dump; its
     "Repeating...." records (which say only that the line before happened again) are
-    dropped."""
+    dropped, and so is a line the same as the last one passed within :data:`REPEAT_WINDOW_S`
+    (a silent sensor printed "No response received after 0 retries ..." at every poll, 13
+    times in one outage: the driver's own fault line says it once)."""
+
+    #: A line the same as the last one passed is dropped for this long, s.
+    REPEAT_WINDOW_S = 60.0
+
+    def __init__(self) -> None:
+        super().__init__()
+        self._last: tuple[str, float] | None = None
 
     def filter(self, record: logging.LogRecord) -> bool:
         if record.getMessage().strip() == PYMODBUS_REPEAT:
+            return False
+        if record.levelno >= logging.WARNING and not self._first_in_window(record):
             return False
         if record.levelno >= logging.ERROR:
             text = record.getMessage().split("\n>>>>>", 1)[0].strip()
@@ -113,6 +124,16 @@ class PymodbusFrameFilter(logging.Filter):
             record.args = None
             record.levelno = logging.WARNING
             record.levelname = logging.getLevelName(logging.WARNING)
+        return True
+
+    def _first_in_window(self, record: logging.LogRecord) -> bool:
+        """False when ``record`` says what the last record passed said, within the window."""
+        text = record.getMessage().split("\n>>>>>", 1)[0].strip()
+        last = self._last
+        if last is not None and last[0] == text and record.created - last[1] < \
+                self.REPEAT_WINDOW_S:
+            return False
+        self._last = (text, record.created)
         return True
 
 

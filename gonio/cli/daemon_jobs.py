@@ -29,6 +29,7 @@ from gonio.cli.scan_report import (
     dry_run_summary,
     print_scan_summary,
     queued_line,
+    resumed_line,
     start_text,
     suspended_line,
     write_output,
@@ -307,6 +308,8 @@ def _follow(client: Any, job_id: int, disabled: bool, poll_s: float = 0.5,
             if reason and reason != told:
                 bar.write(suspended_line(job_id, reason, through_daemon=True),
                           file=sys.stderr)
+            elif told and row["state"] == "running":
+                bar.write(resumed_line(job_id), file=sys.stderr)
             told = reason
             if row["state"] == "queued":
                 # Why it waits, said once and again when that changes (the bar sits at 0).

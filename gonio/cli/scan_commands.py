@@ -38,6 +38,7 @@ from gonio.cli.scan_report import (
     check_output_path,
     dry_run_summary,
     print_scan_summary,
+    resumed_line,
     suspended_line,
     write_output,
 )
@@ -711,6 +712,8 @@ def _progress(service: Any, job_id: int, disabled: bool) -> Any:
             bar.set_description_str(f"job {job_id} {ev.data['state']}")
             if ev.data["state"] == "suspended" and ev.data.get("reason"):
                 bar.write(suspended_line(job_id, ev.data["reason"]), file=sys.stderr)
+            elif ev.data["state"] == "running" and ev.data.get("from") == "suspended":
+                bar.write(resumed_line(job_id), file=sys.stderr)
         elif ev.type in ("arc_warning", "physical_bounds", "design_gap", "arc_asymmetric"):
             bar.write(f"warning: {ev.data['message']}", file=sys.stderr)
         elif ev.type == "arc_test":

@@ -342,6 +342,12 @@ def suspended_line(job_id: int, reason: str, through_daemon: bool = False) -> st
     return f"job {job_id} suspended: {reason}\n  {then}"
 
 
+def resumed_line(job_id: int) -> str:
+    """What a terminal shows when a suspended job goes on (the device answers again): after
+    the suspended line, nothing said the fault had cleared."""
+    return f"job {job_id} resumed: the device answers again; measuring goes on"
+
+
 _HOLDING = ("running", "paused", "suspended", "reconstructing")
 """States in which a job holds the rig (:data:`gonio.jobstates.ACTIVE_STATES`)."""
 

@@ -99,6 +99,29 @@ def test_a_pymodbus_server_traceback_becomes_its_last_line() -> None:
                                 "(pymodbus; the driver reports the fault)")
 
 
+def test_the_same_pymodbus_error_again_within_the_window_is_dropped() -> None:
+    """A silent sensor: pymodbus said "No response received after 0 retries ..." at every
+    poll, 13 times in one outage. Once per window; a different line, or the same one after
+    the window, passes."""
+    filt = PymodbusFrameFilter()
+
+    def rec(msg: str, at: float) -> logging.LogRecord:
+        r = logging.LogRecord(PYMODBUS_LOGGER, logging.ERROR, "p.py", 1, msg, None, None)
+        r.created = at
+        return r
+
+    silent = "No response received after 0 retries, continue with next request"
+    assert filt.filter(rec(silent, 1000.0))
+    assert not filt.filter(rec(silent, 1001.0))
+    assert not filt.filter(rec(silent, 1000.0 + filt.REPEAT_WINDOW_S - 1))
+    assert filt.filter(rec("Connection lost", 1002.0))
+    assert filt.filter(rec(silent, 1003.0))  # not the last line passed: said again
+    assert filt.filter(rec(silent, 1003.0 + filt.REPEAT_WINDOW_S + 1))
+    # Debug records are left alone (frames at debug level differ anyway).
+    debug = logging.LogRecord(PYMODBUS_LOGGER, logging.DEBUG, "p.py", 1, silent, None, None)
+    assert filt.filter(debug) and filt.filter(debug)
+
+
 @pytest.mark.parametrize("level", [logging.DEBUG, logging.WARNING, logging.ERROR])
 def test_pymodbus_repeat_lines_are_dropped(level: int) -> None:
     # pymodbus logs "Repeating...." at the level of the line it repeats: it adds nothing.

@@ -60,3 +60,27 @@ def test_a_suspended_scan_prints_the_reason(tmp_path: Path) -> None:
     # pymodbus' own lines add nothing to that reason ("Failed to connect [Errno 111] ...",
     # then "Repeating...." at every retry).
     assert "Failed to connect" not in out and "Repeating" not in out, out
+
+
+def test_a_scan_whose_device_answers_again_says_it_goes_on(tmp_path: Path) -> None:
+    """After the suspended line nothing said the fault had cleared, and pymodbus' line on the
+    silent sensor came again at every poll (13 times in one outage)."""
+    rig = tmp_path / "rig.toml"
+    err = tmp_path / "stderr.txt"
+    with start_sim_rig(SimRigOptions(config_path=rig, time_scale=10.0, settle_s=0.0)) as sim:
+        sim.apply_fault("silence:S2:4")  # wall seconds: the scan suspends, then goes on
+        with err.open("w") as f:
+            proc = subprocess.run(
+                [*GONIO, "scan", "--rig", str(rig), "--rotations", "2", "--no-export-fits",
+                 "--accept-uncalibrated", "--data-dir", str(tmp_path / "data"),
+                 "--no-progress", "-o", str(tmp_path / "x.h5")],
+                stdout=subprocess.DEVNULL, stderr=f, env=child_env(), cwd=PROJECT_ROOT,
+                timeout=240)
+    out = err.read_text()
+    assert proc.returncode == 0, out
+    suspended = out.find("job 1 suspended: S2")
+    resumed = out.find("job 1 resumed: the device answers again; measuring goes on")
+    assert 0 <= suspended < resumed, out
+    pymodbus = [ln for ln in out.splitlines() if ln.endswith("(pymodbus; the driver reports "
+                                                           "the fault)")]
+    assert len(pymodbus) == len(set(pymodbus)), out
