@@ -24,6 +24,7 @@ unless ``--data-dir`` names one; ``--throwaway`` uses a temporary folder deleted
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import tempfile
 import threading
@@ -231,6 +232,55 @@ def _configure_logging(level: str) -> None:
         logging.getLogger(noisy).setLevel(max(logging.WARNING, logging.getLogger().level))
 
 
+#: The name of the file in a ``gonio serve --sim`` temporary folder that names its process.
+SESSION_PID_FILE = "gonio-serve.pid"
+#: The prefix of those folders in the system's temporary directory.
+SESSION_PREFIX = "gonio-serve-"
+
+
+def _remove_stale_sessions(tmp_root: Path | None = None) -> list[Path]:
+    """Remove the temporary folders of ``gonio serve --sim`` sessions whose process is gone.
+
+    A session removes its folder (the simulated rig's config; with ``--throwaway`` its whole
+    data directory) when it stops, but not when it is killed (``kill -9``, the machine's
+    out-of-memory killer): they piled up in the temporary directory. Each folder names its
+    process in :data:`SESSION_PID_FILE`; one whose process no longer exists is removed at the
+    next start. A folder without that file (an older gonio's, or not yet written) is left.
+
+    Returns
+    -------
+    list of Path : the folders removed
+    """
+    import contextlib
+    import shutil
+
+    root = Path(tmp_root) if tmp_root is not None else Path(tempfile.gettempdir())
+    removed = []
+    for folder in root.glob(f"{SESSION_PREFIX}*"):
+        marker = folder / SESSION_PID_FILE
+        try:
+            pid = int(marker.read_text().strip())
+        except (OSError, ValueError):
+            continue
+        if pid == os.getpid() or _process_alive(pid):
+            continue
+        with contextlib.suppress(OSError):
+            shutil.rmtree(folder)
+            removed.append(folder)
+    return removed
+
+
+def _process_alive(pid: int) -> bool:
+    """Whether process ``pid`` exists (another user's counts: it is not ours to remove)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
 def _run_sim(args: argparse.Namespace, cfg: Any, keyring: Any) -> int:
     from gonio.apikeys import ApiKeyring
     from gonio.cli.sim_session import (
@@ -248,7 +298,10 @@ def _run_sim(args: argparse.Namespace, cfg: Any, keyring: Any) -> int:
     # A newcomer's sim session gets its own key unless keys are configured: one kept in the
     # data directory, so a page left open keeps working across restarts (session_key).
     session_key = None
-    with tempfile.TemporaryDirectory(prefix="gonio-serve-") as tmp:
+    _remove_stale_sessions()
+    with tempfile.TemporaryDirectory(prefix=SESSION_PREFIX) as tmp:
+        # Names this process, so a later start removes the folder if this one is killed.
+        (Path(tmp) / SESSION_PID_FILE).write_text(str(os.getpid()))
         if args.throwaway:
             cfg = cfg.with_overrides(paths__data_dir=str(Path(tmp) / "data"))
         elif cfg.paths.data_dir is None:

@@ -127,9 +127,13 @@ def _calibrated_and_submitted(d: Daemon) -> int:
 
 
 def test_killed_sim_daemon_resumes_its_specimen_scan_without_recalibrating(
-    tmp_path: Path,
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     data = tmp_path / "data"
+    # The daemons' temporary folders (the simulated rig's config), where the test sees them.
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    monkeypatch.setenv("TMPDIR", str(tmp))
     # 1. First run: calibrate, start a scan, kill -9 in the middle of it.
     with daemon(data, SLOW) as first:
         assert f"data directory {data} (kept across restarts)" in first.output()
@@ -140,11 +144,17 @@ def test_killed_sim_daemon_resumes_its_specimen_scan_without_recalibrating(
         first.proc.wait(timeout=30)
     # Each angle takes about half a second here, so the kill lands mid-scan.
     assert at_kill["state"] == "running" and at_kill["done_angles"] < 8, at_kill
+    # Its temporary folder stayed behind, naming the process that was killed.
+    (left,) = tmp.glob("gonio-serve-*")
+    assert (left / "gonio-serve.pid").read_text() == str(first.proc.pid)
 
     # 2. Restart on the same data directory: the scan resumes on its specimen, no new
     #    calibration job is queued.
     with daemon(data) as second:
         second.wait_for(r"calibration: in effect")
+        # The next start removed it (the killed session's); its own folder is there instead.
+        assert not left.exists()
+        assert [p.name for p in tmp.glob("gonio-serve-*/gonio-serve.pid")] == ["gonio-serve.pid"]
         # The same API key as before the kill: a page left open (the key in its tab) keeps
         # working; it was a new key each start. Kept owner-only in the data directory.
         assert second.key == first.key
