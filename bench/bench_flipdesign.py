@@ -10,6 +10,8 @@ Run from the project root (needs mitsuba and flip-evaluator: ``pip install 'goni
         --limits --measured-weight 1 3 --components 64
     nice -n 10 .venv/bin/python bench/bench_flipdesign.py choose --mix 0.5 --no-presets \
         --limits --eps 1e-3 1e-4 1e-5
+    nice -n 10 .venv/bin/python bench/bench_flipdesign.py choose --limits \
+        --render-basis 0.5 0.9 0.99
 
 The expected-error design (:mod:`gonio.brdf.design.posterior`) weighs the grid's cells as
 ``log_rmse`` does (by their volume). The standard renderings
@@ -82,6 +84,37 @@ HDR-FLIP over the 11, mean ``log_rmse`` within 3 % on both kinds), it is run onc
 :data:`FRESH3_FLIP` (committed 2026-11-28, never run) as the final check. Adopting would
 mean a new shipped synthetic basis and every pinned value; if that cannot be done and
 checked within the study, a winner is reported as a candidate and the default stays.
+
+``--render-basis A ...`` (the render-weighted basis study of 2026-11-28,
+docs/notes/2026-11-28-render-weighted-basis.md) learns the basis with each grid cell weighed
+by what the standard renderings see: a weighted PCA of the remapped, centred training matrix,
+row ``i`` weighed by ``d_i = (1 - A) + A c_i / mean(c)`` (``c`` the pixel counts of
+:func:`~gonio.brdf.pictures.appearance.render_importance`, the map ``cell_mix`` reads; the mean
+over the valid cells, so ``d`` averages 1 and ``A = 0`` is today's unweighted PCA). The
+rows are scaled by ``sqrt(d)`` before the randomized SVD and the components by
+``1 / sqrt(d)`` after (:func:`render_synthetic`, ``K + 32`` components, cached), and the
+shipped measured tables are folded in the same weighted way, leaving out the material under
+test (:func:`render_default_basis`, weight 1, K = 64). Per material and strength ``A`` it
+prints: the scan with pairs designed on that basis (``rw=A``, ``cell_mix`` 0.5); the scan
+with today's pairs (designed on today's basis) fitted on that basis (``rw=A, today's
+pairs``); with ``--limits``, that basis' ceiling by the same weighted least squares
+(``ceiling rw=A``), and today's basis projected by that weighted least squares (``ceiling
+today's basis, projection A``). Today's rows (``today``: default basis, default design,
+unweighted ceiling) and the grid limit are always printed.
+
+The rule of that study, written and committed before any of its runs: strengths
+``A = 0.5, 0.9, 0.99`` (0.99 gives the cells no rendering looks at a hundredth of the
+weight of the average cell), ``W = 1``, ``K = 64``, ``cell_mix = 0.5``, on the **choice**
+set. The candidates are every ``(A, pairs)`` scan row, ``pairs`` either its own design or
+today's. Eligible: mean ``log_rmse`` no more than 2 % above today's on both kinds (measured
+and mitsuba). Choice: the lowest mean HDR-FLIP over the 11 among the eligible. Adoption
+candidate only if that mean is more than 0.01 below today's. Then the choice and today's run
+**once** on :data:`FRESH3_FLIP` (committed 2026-11-28, never run before this study); it
+passes only if there too its mean HDR-FLIP over the 7 is lower than today's and its mean
+``log_rmse`` no more than 2 % above. The test set is not run by this study. The ceiling rows
+are recorded for every ``A`` and are not part of the rule. Adopting (if it passed) would
+mean a weighted ``build_basis``/``fold_in`` in the product, a new shipped synthetic basis and
+every pinned value; the study only reports it.
 
 ``--seeds`` averages each ``a`` over several designs (the greedy started from the k-th best
 first pair, :func:`~gonio.brdf.design.posterior.posterior_design`'s ``seed``): whether the
