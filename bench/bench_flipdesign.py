@@ -588,9 +588,11 @@ class _RowScaled:
         """``b`` in scaled coordinates (``Q``, ``mu`` times ``s``): what ``fold_in`` reads."""
         return replace(b, Q=b.Q * self.s[:, None], mu=b.mu * self.s)
 
-    def unscaled(self, b: Basis, strength: float) -> Basis:
-        """``b`` learned in scaled coordinates, taken back (``Q``, ``mu`` over ``s``)."""
-        return replace(b, Q=b.Q / self.s[:, None], mu=b.mu / self.s,
+    def unscaled(self, b: Basis, strength: float, *, mu_scaled: bool = True) -> Basis:
+        """``b`` learned in scaled coordinates, taken back: ``Q`` over ``s``, and ``mu`` when
+        it was learned scaled (``fold_in`` of a :meth:`scaled` base; ``build_basis`` takes
+        its row means before the SVD, unscaled: ``mu_scaled=False``)."""
+        return replace(b, Q=b.Q / self.s[:, None], mu=b.mu / self.s if mu_scaled else b.mu,
                        provenance={**b.provenance, "render_strength": float(strength)})
 
 
@@ -620,7 +622,7 @@ def render_synthetic(strength: float, n_components: int) -> Basis:
     t0 = time.perf_counter()
     with scale:
         b = build_basis(tables, n_components)
-    b = scale.unscaled(b, strength)
+    b = scale.unscaled(b, strength, mu_scaled=False)
     print(f"  render-weighted synthetic basis A={strength:g} K={n_components}: "
           f"{time.perf_counter() - t0:.1f} s", flush=True)
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -239,6 +239,18 @@ def test_today_s_eps_is_the_default_basis_itself(
     assert calls == [(64, ("chm_orange",), 2.0), (None, (), None)]
 
 
+def _remapped_mean(tables: tuple[object, ...], eps: float = 1e-3) -> np.ndarray:
+    """Row means of V&F's remap ``ln((A w + eps) / (f_med w + eps))`` over the tables' columns
+    at the valid cells (from the formula, not the code under test)."""
+    from gonio.brdf.tables import geometry
+
+    valid = geometry.valid_mask().ravel()
+    A = np.concatenate([t.columns()[:, valid] for t in tables]).T.astype(float)  # type: ignore[attr-defined]
+    f_med = np.median(A, axis=1, keepdims=True)
+    w = np.maximum(geometry.remap_weight(eps).ravel()[valid], eps)[:, None]
+    return np.asarray(np.log((A * w + eps) / (f_med * w + eps)).mean(axis=1))
+
+
 def test_the_render_weighted_basis_is_the_weighted_pca_of_the_remapped_matrix(
         benches: tuple[ModuleType, ModuleType]) -> None:
     """Learned inside ``_RowScaled(d)``, the basis' components are those of the exact SVD of
@@ -257,7 +269,7 @@ def test_the_render_weighted_basis_is_the_weighted_pca_of_the_remapped_matrix(
     d[valid] = np.random.default_rng(5).uniform(0.05, 20.0, int(valid.sum()))
     scale = bf._RowScaled(d)
     with scale:
-        b = scale.unscaled(build_basis(lib, k), 0.5)
+        b = scale.unscaled(build_basis(lib, k), 0.5, mu_scaled=False)
     s = np.sqrt(d[valid])[:, None]
     U, S, _ = np.linalg.svd(s * _remapped_training(lib), full_matrices=False)
     assert np.allclose(b.S, S[:k], rtol=1e-3)
@@ -266,6 +278,8 @@ def test_the_render_weighted_basis_is_the_weighted_pca_of_the_remapped_matrix(
     assert np.linalg.norm(sq - proj) < 1e-3 * np.linalg.norm(sq)
     plain = build_basis(lib, k)
     assert not np.allclose(plain.S, b.S, rtol=1e-2)
+    # The row means do not depend on row weights: the centring is V&F's, from the formula.
+    assert np.allclose(b.mu[valid], _remapped_mean(lib), atol=1e-5)
     assert b.provenance["render_strength"] == 0.5
     # The patch is gone after the block: the same build is the plain one again.
     assert np.allclose(build_basis(lib, k).S, plain.S)
@@ -288,7 +302,7 @@ def test_a_weighted_fold_in_keeps_the_weighted_components_orthogonal(
     d[valid] = np.random.default_rng(6).uniform(0.05, 20.0, int(valid.sum()))
     scale = bf._RowScaled(d)
     with scale:
-        base = scale.unscaled(build_basis(lib[1:7], k + 4), 0.5)
+        base = scale.unscaled(build_basis(lib[1:7], k + 4), 0.5, mu_scaled=False)
     with scale:
         b = scale.unscaled(fold_in(scale.scaled(base), [lib[0]], 2.0, k), 0.5)
     sq = np.sqrt(d[valid])[:, None] * b.Q[valid]
@@ -296,6 +310,8 @@ def test_a_weighted_fold_in_keeps_the_weighted_components_orthogonal(
     assert np.allclose(gram, np.diag(b.S ** 2), atol=1e-8 * b.S[0] ** 2)
     plain = fold_in(base, [lib[0]], 2.0, k)
     assert np.allclose(b.mu, plain.mu, atol=1e-10)
+    # ... and are the plain build's: the synthetic part's are the formula's.
+    assert np.allclose(base.mu[valid], _remapped_mean(lib[1:7]), atol=1e-5)
     assert not np.allclose(plain.S, b.S, rtol=1e-2)
     flat = bf._RowScaled(np.full(geometry.N_ROWS, 4.0))
     with flat:
