@@ -10,6 +10,8 @@ Run from the project root (needs mitsuba and flip-evaluator: ``pip install 'goni
         --limits --measured-weight 1 3 --components 64
     nice -n 10 .venv/bin/python bench/bench_flipdesign.py choose --mix 0.5 --no-presets \
         --limits --eps 1e-3 1e-4 1e-5
+    nice -n 10 .venv/bin/python bench/bench_flipdesign.py choose --limits \
+        --render-basis 0.5 0.9 0.99
 
 The expected-error design (:mod:`gonio.brdf.design.posterior`) weighs the grid's cells as
 ``log_rmse`` does (by their volume). The standard renderings
@@ -83,6 +85,37 @@ HDR-FLIP over the 11, mean ``log_rmse`` within 3 % on both kinds), it is run onc
 mean a new shipped synthetic basis and every pinned value; if that cannot be done and
 checked within the study, a winner is reported as a candidate and the default stays.
 
+``--render-basis A ...`` (the render-weighted basis study of 2026-11-28,
+docs/notes/2026-11-28-render-weighted-basis.md) learns the basis with each grid cell weighed
+by what the standard renderings see: a weighted PCA of the remapped, centred training matrix,
+row ``i`` weighed by ``d_i = (1 - A) + A c_i / mean(c)`` (``c`` the pixel counts of
+:func:`~gonio.brdf.pictures.appearance.render_importance`, the map ``cell_mix`` reads; the mean
+over the valid cells, so ``d`` averages 1 and ``A = 0`` is today's unweighted PCA). The
+rows are scaled by ``sqrt(d)`` before the randomized SVD and the components by
+``1 / sqrt(d)`` after (:func:`render_synthetic`, ``K + 32`` components, cached), and the
+shipped measured tables are folded in the same weighted way, leaving out the material under
+test (:func:`render_default_basis`, weight 1, K = 64). Per material and strength ``A`` it
+prints: the scan with pairs designed on that basis (``rw=A``, ``cell_mix`` 0.5); the scan
+with today's pairs (designed on today's basis) fitted on that basis (``rw=A, today's
+pairs``); with ``--limits``, that basis' ceiling by the same weighted least squares
+(``ceiling rw=A``), and today's basis projected by that weighted least squares (``ceiling
+today's basis, projection A``). Today's rows (``today``: default basis, default design,
+unweighted ceiling) and the grid limit are always printed.
+
+The rule of that study, written and committed before any of its runs: strengths
+``A = 0.5, 0.9, 0.99`` (0.99 gives the cells no rendering looks at a hundredth of the
+weight of the average cell), ``W = 1``, ``K = 64``, ``cell_mix = 0.5``, on the **choice**
+set. The candidates are every ``(A, pairs)`` scan row, ``pairs`` either its own design or
+today's. Eligible: mean ``log_rmse`` no more than 2 % above today's on both kinds (measured
+and mitsuba). Choice: the lowest mean HDR-FLIP over the 11 among the eligible. Adoption
+candidate only if that mean is more than 0.01 below today's. Then the choice and today's run
+**once** on :data:`FRESH3_FLIP` (committed 2026-11-28, never run before this study); it
+passes only if there too its mean HDR-FLIP over the 7 is lower than today's and its mean
+``log_rmse`` no more than 2 % above. The test set is not run by this study. The ceiling rows
+are recorded for every ``A`` and are not part of the rule. Adopting (if it passed) would
+mean a weighted ``build_basis``/``fold_in`` in the product, a new shipped synthetic basis and
+every pinned value; the study only reports it.
+
 ``--seeds`` averages each ``a`` over several designs (the greedy started from the k-th best
 first pair, :func:`~gonio.brdf.design.posterior.posterior_design`'s ``seed``): whether the
 weighting helps on average over designs of nearly equal expected error, or one design.
@@ -133,8 +166,12 @@ from gonio.brdf.reconstruction.basis import (
     build_basis,
     default_basis,
     fold_in,
+    remap,
+    row_weight,
 )
+from gonio.brdf.reconstruction.tabulate import expand_table
 from gonio.brdf.tables import geometry as geo
+from gonio.brdf.tables.table import BRDFTable
 
 #: Specimens for the choice set only: bench_unseen's kinds of mitsuba BSDF with other
 #: parameters and holder angles (name, mitsuba dict, holder angle in degrees).
@@ -491,6 +528,218 @@ def eps_default_basis(eps: float | None, k: int | None, exclude: tuple[str, ...]
     return basis
 
 
+def render_row_weight(strength: float) -> np.ndarray:
+    """(N_ROWS,) weight ``d = (1 - A) + A c / mean(c)`` of every grid row (the render-weighted
+    basis study, module notes): ``c`` the standard renderings' pixel counts
+    (:func:`~gonio.brdf.pictures.appearance.render_importance`, ``ph`` summed), the mean taken
+    over the valid rows, so ``d`` averages 1 there; invalid rows get 1 (they hold no data).
+
+    Raises
+    ------
+    ValueError
+        For ``A`` outside ``[0, 1)`` (at 1 the cells no rendering looks at would get no
+        weight, and a weighted PCA could not place them).
+    """
+    if not 0 <= strength < 1:
+        raise ValueError(f"a render-basis strength must be in [0, 1), got {strength:g}")
+    c = np.asarray(render_importance(), dtype=float).ravel()
+    valid = geo.valid_mask().ravel()
+    d = np.ones(geo.N_ROWS)
+    d[valid] = (1.0 - strength) + strength * c[valid] / c[valid].mean()
+    return d
+
+
+class _RowScaled:
+    """Within the block, :mod:`~gonio.brdf.reconstruction.basis` learns with its valid rows
+    scaled by ``s = sqrt(d)``: ``build_basis``' randomized SVD sees ``s Y`` (the centred,
+    remapped matrix, scaled in place, so its coefficients are the weighted least-squares
+    ones) and ``fold_in``'s remap returns ``s X``. Both are linear in the rows, so a basis
+    learned inside is the weighted PCA's in scaled coordinates (``Q``, ``mu`` times ``s``);
+    :func:`_unscaled` takes it back. A bench prototype of a row weight the product's
+    builders do not have (wiring it would be an argument of ``build_basis`` and ``fold_in``).
+    """
+
+    def __init__(self, d: np.ndarray) -> None:
+        self.s = np.sqrt(np.asarray(d, dtype=float))
+        self.rows = np.flatnonzero(geo.valid_mask().ravel())
+
+    def __enter__(self) -> _RowScaled:
+        from gonio.brdf.reconstruction import basis as basis_mod
+
+        self.mod = basis_mod
+        self.svd, self.remap = basis_mod._randomized_svd, basis_mod.remap
+        s_rows = self.s[self.rows]
+
+        def svd(Y: np.ndarray, *a: Any) -> Any:
+            Y *= s_rows[:, None].astype(np.float32)
+            return self.svd(Y, *a)
+
+        def remap(values: Any, f_med: Any, w: Any, eps: float = EPS) -> np.ndarray:
+            x = self.remap(values, f_med, w, eps)
+            return x * s_rows if x.shape[-1] == s_rows.size else x
+
+        basis_mod._randomized_svd, basis_mod.remap = svd, remap  # type: ignore[assignment]
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.mod._randomized_svd, self.mod.remap = self.svd, self.remap  # type: ignore[assignment]
+
+    def scaled(self, b: Basis) -> Basis:
+        """``b`` in scaled coordinates (``Q``, ``mu`` times ``s``): what ``fold_in`` reads."""
+        return replace(b, Q=b.Q * self.s[:, None], mu=b.mu * self.s)
+
+    def unscaled(self, b: Basis, strength: float, *, mu_scaled: bool = True) -> Basis:
+        """``b`` learned in scaled coordinates, taken back: ``Q`` over ``s``, and ``mu`` when
+        it was learned scaled (``fold_in`` of a :meth:`scaled` base; ``build_basis`` takes
+        its row means before the SVD, unscaled: ``mu_scaled=False``)."""
+        return replace(b, Q=b.Q / self.s[:, None], mu=b.mu / self.s if mu_scaled else b.mu,
+                       provenance={**b.provenance, "render_strength": float(strength)})
+
+
+def _render_code() -> str:
+    """Digest of the study's own source (a change builds its bases again)."""
+    src = "".join(inspect.getsource(f) for f in (render_row_weight, _RowScaled,
+                                                  render_synthetic, render_default_basis))
+    return hashlib.sha256(src.encode()).hexdigest()[:12]
+
+
+def render_synthetic(strength: float, n_components: int) -> Basis:
+    """The synthetic library's basis learned with the rows weighed by
+    :func:`render_row_weight` (``build_basis(default_library(), K)`` otherwise); built once per
+    ``(A, K)`` and cached in the bench's cache, keyed by them, the library and the study's
+    source."""
+    from gonio.brdf.materials import library
+
+    path = (bu.CACHE / "render-basis" / f"synthetic-K{n_components}-A{strength:g}-"
+            f"{library.library_key()[:16]}-{_render_code()}.npz")
+    if path.is_file():
+        try:
+            return Basis.load(path)
+        except BasisError:
+            pass
+    tables = library.default_library()
+    scale = _RowScaled(render_row_weight(strength))
+    t0 = time.perf_counter()
+    with scale:
+        b = build_basis(tables, n_components)
+    b = scale.unscaled(b, strength, mu_scaled=False)
+    print(f"  render-weighted synthetic basis A={strength:g} K={n_components}: "
+          f"{time.perf_counter() - t0:.1f} s", flush=True)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    b.save(path)
+    return b
+
+
+def render_default_basis(strength: float, exclude: tuple[str, ...] = ()) -> Basis:
+    """The default basis (K = 64, weight 1), its synthetic part and the fold-in of the
+    shipped measured tables but ``exclude`` weighted by :func:`render_row_weight`; cached."""
+    from gonio.brdf.materials import measured
+
+    k = DEFAULT_COMPONENTS
+    key = hashlib.sha256("\n".join([
+        measured.measured_digest(), measured.user_library_digest(), repr(MEASURED_WEIGHT),
+        ",".join(sorted(exclude)), _render_code()]).encode()).hexdigest()[:16]
+    base = render_synthetic(strength, k + _FOLD_EXTRA)
+    path = bu.CACHE / "render-basis" / f"default-K{k}-A{strength:g}-{key}.npz"
+    if path.is_file():
+        try:
+            return Basis.load(path)
+        except BasisError:
+            pass
+    scale = _RowScaled(render_row_weight(strength))
+    with scale:
+        b = fold_in(scale.scaled(base), measured.measured_tables(exclude)
+                    + measured.user_tables(), MEASURED_WEIGHT, k)
+    b = scale.unscaled(b, strength)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    b.save(path)
+    return b
+
+
+def weighted_ceiling(b: Basis, truth: Any, d: np.ndarray) -> Any:
+    """``bu.ceiling`` with the rows weighed by ``d``: the least-squares fit of every slice of
+    ``truth`` on ``b`` minimising ``sum_i d_i (remapped error)_i^2``."""
+    rows = np.flatnonzero(b.valid)
+    x = np.asarray(truth.values, dtype=float).reshape(3, geo.N_PH, geo.N_ROWS)[:, :, rows]
+    w = row_weight(b.eps)[rows]
+    y = np.nan_to_num(remap(x, b.f_med[rows], w, b.eps), nan=0.0) - b.mu[rows]
+    s = np.sqrt(d[rows])
+    coef = np.linalg.lstsq(b.Q[rows] * s[:, None], (y.reshape(-1, rows.size) * s).T,
+                           rcond=None)[0]
+    coef = coef.T.reshape(3, geo.N_PH, b.K).transpose(0, 2, 1)
+    return BRDFTable.trusted(expand_table(b, coef), ("R", "G", "B"), "ceiling")
+
+
+def evaluate_render_basis(mats: list[bu.Material], strengths: list[float], label: str,
+                          limits: bool, save: str | None) -> None:
+    """The render-weighted basis study (module notes): per material, today's scan and, per
+    strength ``A``, the scan on the render-weighted basis with its own pairs and with today's;
+    with ``limits`` the ceilings. Prints ``log_rmse`` / HDR-FLIP per material and the means,
+    and how many of each row's pairs lie at ``td`` 15-45 degrees (where the renderings look)."""
+    importance = render_importance()
+    weights = {a: render_row_weight(a) for a in strengths}
+    rows: dict[str, dict[str, bu.Score]] = {}
+    in_band: dict[str, list[int]] = {}
+    flip_before = bu.flip_of
+    bu.flip_of = _flip_recording  # type: ignore[assignment]
+    t0 = time.perf_counter()
+
+    def band(cells: np.ndarray) -> int:
+        td = np.rad2deg(np.asarray(cells)[:, 1])
+        return int(np.sum((td >= 15 - 1e-6) & (td <= 45 + 1e-6)))
+
+    for m in mats:
+        seed = 100 + int(hashlib.sha256(m.name.encode()).hexdigest()[:6], 16) % 1000
+        b0 = default_basis(exclude=m.exclude)
+        c0, ph0 = design(b0, 0.5, importance)
+        rows.setdefault("today", {})[m.name] = bu.run_scan(b0, m, c0, ph0, 8, seed, "joint")
+        in_band.setdefault("today", []).append(band(c0))
+        ceilings = [("ceiling today", bu.ceiling(b0, m.truth))] if limits else []
+        for a in strengths:
+            ba = render_default_basis(a, tuple(m.exclude))
+            ca, pha = design(ba, 0.5, importance)
+            rows.setdefault(f"rw={a:g}", {})[m.name] = bu.run_scan(ba, m, ca, pha, 8, seed,
+                                                                   "joint")
+            in_band.setdefault(f"rw={a:g}", []).append(band(ca))
+            rows.setdefault(f"rw={a:g}, today's pairs", {})[m.name] = bu.run_scan(
+                ba, m, c0, ph0, 8, seed, "joint")
+            in_band.setdefault(f"rw={a:g}, today's pairs", []).append(band(c0))
+            if limits:
+                ceilings += [(f"ceiling rw={a:g}", weighted_ceiling(ba, m.truth, weights[a])),
+                             (f"ceiling today's basis, projection {a:g}",
+                              weighted_ceiling(b0, m.truth, weights[a]))]
+        if limits:
+            ceilings.append(("grid limit", m.truth))
+        for row, table in ceilings:
+            rows.setdefault(row, {})[m.name] = bu.score(table, m.truth, m=m)
+        print(f"  {m.name} ({time.perf_counter() - t0:.0f} s)", flush=True)
+    bu.flip_of = flip_before  # type: ignore[assignment]
+    order = list(rows)
+    if save:
+        Path(save).write_text(json.dumps(
+            {r: {m: {"kind": next(x.kind for x in mats if x.name == m),
+                     "log_rmse": s.log_rmse, "flip": s.flip} for m, s in per.items()}
+             for r, per in rows.items()}, indent=1))
+        print(f"unrounded scores written to {save}")
+    print(f"\n{label}: log_rmse / HDR-FLIP per material (lower is better)")
+    print("| material | " + " | ".join(order) + " |")
+    print("|---" * (1 + len(order)) + "|")
+    for m in mats:
+        print(f"| {m.name} | " + " | ".join(
+            f"{rows[r][m.name].log_rmse:.4f} / {rows[r][m.name].flip:.3f}" for r in order) + " |")
+    print_mean_rows(rows, mats, order)
+    print("\nunrounded means (log_rmse measured, mitsuba; HDR-FLIP all):")
+    for r in order:
+        ms = [rows[r][m.name] for m in mats if m.kind == "measured"]
+        an = [rows[r][m.name] for m in mats if m.kind == "aniso"]
+        print(f"  {r}: {np.mean([s.log_rmse for s in ms]) if ms else float('nan'):.5f}, "
+              f"{np.mean([s.log_rmse for s in an]) if an else float('nan'):.5f}; "
+              f"{np.mean([rows[r][m.name].flip for m in mats]):.4f}")
+    print("\nmean pairs at td 15-45 deg (of 10):")
+    for r, counts in in_band.items():
+        print(f"  {r}: {np.mean(counts):.1f}")
+
+
 def print_mean_rows(rows: dict[str, dict[str, bu.Score]], mats: list[bu.Material],
                     order: list[str]) -> None:
     """The markdown rows of mean ``log_rmse`` / HDR-FLIP per kind of material and over all,
@@ -672,6 +921,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--design-setting", type=float, nargs=2, default=None, metavar=("W", "K"),
                     help="basis-settings study, a diagnostic: every setting reads the pairs "
                          "designed on the basis of weight W and K components")
+    ap.add_argument("--render-basis", type=float, nargs="+", default=None, metavar="A",
+                    help="render-weighted basis study: the strengths A in [0, 1) of the "
+                         "basis' row weight (1 - A) + A c / mean(c); runs that study only")
     ap.add_argument("--save", default=None, help="write the unrounded scores to this JSON file")
     args = ap.parse_args(argv)
     study = (args.measured_weight is not None or args.components is not None
@@ -701,9 +953,16 @@ def main(argv: list[str] | None = None) -> int:
             "fresh": lambda: ("fresh set", bu.aniso_materials(FRESH_FLIP)),
             "fresh2": lambda: ("second fresh set", bu.aniso_materials(FRESH2_FLIP)),
             "fresh3": lambda: ("third fresh set", bu.aniso_materials(FRESH3_FLIP))}
+    if any(not 0 <= a < 1 for a in args.render_basis or []):
+        ap.error("--render-basis: give strengths A with 0 <= A < 1 (at 1 the cells no "
+                 "rendering looks at would get no weight)")
     for label, mats in [make[args.stage]()]:
         if args.only:
             mats = [m for m in mats if m.name in args.only]
+        if args.render_basis is not None:
+            evaluate_render_basis(mats, sorted(set(args.render_basis)), label, args.limits,
+                                  args.save)
+            continue
         evaluate(mats, mixes, label, tuple(args.seeds),
                  tuple((k, td) for k in args.retro for td in args.retro_td),
                  not args.no_presets, args.save, args.limits, tuple(args.retro_add),

@@ -237,3 +237,121 @@ def test_today_s_eps_is_the_default_basis_itself(
     assert bf.eps_default_basis(EPS, 64, ("chm_orange",), 2.0) == "default"
     assert bf.eps_default_basis(None, None) == "default"
     assert calls == [(64, ("chm_orange",), 2.0), (None, (), None)]
+
+
+def _remapped_mean(tables: tuple[object, ...], eps: float = 1e-3) -> np.ndarray:
+    """Row means of V&F's remap ``ln((A w + eps) / (f_med w + eps))`` over the tables' columns
+    at the valid cells (from the formula, not the code under test)."""
+    from gonio.brdf.tables import geometry
+
+    valid = geometry.valid_mask().ravel()
+    A = np.concatenate([t.columns()[:, valid] for t in tables]).T.astype(float)  # type: ignore[attr-defined]
+    f_med = np.median(A, axis=1, keepdims=True)
+    w = np.maximum(geometry.remap_weight(eps).ravel()[valid], eps)[:, None]
+    return np.asarray(np.log((A * w + eps) / (f_med * w + eps)).mean(axis=1))
+
+
+def test_the_render_weighted_basis_is_the_weighted_pca_of_the_remapped_matrix(
+        benches: tuple[ModuleType, ModuleType]) -> None:
+    """Learned inside ``_RowScaled(d)``, the basis' components are those of the exact SVD of
+    ``sqrt(d) Y`` (``Y`` the remapped, centred training matrix, computed here from V&F's
+    formula), taken back by ``1 / sqrt(d)``: the singular values agree and ``sqrt(d) Q``
+    spans the same space; they differ from the unweighted basis'."""
+    from gonio.brdf.reconstruction.basis import build_basis
+    from gonio.brdf.tables import geometry
+    from tests.unit.brdf.reconstruction.test_basis import _remapped_training, small_library
+
+    bf, _ = benches
+    lib = small_library()[1:7]
+    k = 6
+    valid = geometry.valid_mask().ravel()
+    d = np.ones(geometry.N_ROWS)
+    d[valid] = np.random.default_rng(5).uniform(0.05, 20.0, int(valid.sum()))
+    scale = bf._RowScaled(d)
+    with scale:
+        b = scale.unscaled(build_basis(lib, k), 0.5, mu_scaled=False)
+    s = np.sqrt(d[valid])[:, None]
+    U, S, _ = np.linalg.svd(s * _remapped_training(lib), full_matrices=False)
+    assert np.allclose(b.S, S[:k], rtol=1e-3)
+    sq = s * b.Q[valid]
+    proj = U[:, :k] @ (U[:, :k].T @ sq)
+    assert np.linalg.norm(sq - proj) < 1e-3 * np.linalg.norm(sq)
+    plain = build_basis(lib, k)
+    assert not np.allclose(plain.S, b.S, rtol=1e-2)
+    # The row means do not depend on row weights: the centring is V&F's, from the formula.
+    assert np.allclose(b.mu[valid], _remapped_mean(lib), atol=1e-5)
+    assert b.provenance["render_strength"] == 0.5
+    # The patch is gone after the block: the same build is the plain one again.
+    assert np.allclose(build_basis(lib, k).S, plain.S)
+
+
+def test_a_weighted_fold_in_keeps_the_weighted_components_orthogonal(
+        benches: tuple[ModuleType, ModuleType]) -> None:
+    """``fold_in`` inside ``_RowScaled(d)``: ``sqrt(d) Q`` has orthogonal columns of norms
+    ``S`` (a weighted PCA's), the row mean is the plain fold-in's (a per-row mean does not
+    depend on row weights), and a constant weight gives the plain fold-in's basis."""
+    from gonio.brdf.reconstruction.basis import build_basis, fold_in
+    from gonio.brdf.tables import geometry
+    from tests.unit.brdf.reconstruction.test_basis import small_library
+
+    bf, _ = benches
+    lib = small_library()
+    k = 6
+    valid = geometry.valid_mask().ravel()
+    d = np.ones(geometry.N_ROWS)
+    d[valid] = np.random.default_rng(6).uniform(0.05, 20.0, int(valid.sum()))
+    scale = bf._RowScaled(d)
+    with scale:
+        base = scale.unscaled(build_basis(lib[1:7], k + 4), 0.5, mu_scaled=False)
+    with scale:
+        b = scale.unscaled(fold_in(scale.scaled(base), [lib[0]], 2.0, k), 0.5)
+    sq = np.sqrt(d[valid])[:, None] * b.Q[valid]
+    gram = sq.T @ sq
+    assert np.allclose(gram, np.diag(b.S ** 2), atol=1e-8 * b.S[0] ** 2)
+    plain = fold_in(base, [lib[0]], 2.0, k)
+    assert np.allclose(b.mu, plain.mu, atol=1e-10)
+    # ... and are the plain build's: the synthetic part's are the formula's.
+    assert np.allclose(base.mu[valid], _remapped_mean(lib[1:7]), atol=1e-5)
+    assert not np.allclose(plain.S, b.S, rtol=1e-2)
+    flat = bf._RowScaled(np.full(geometry.N_ROWS, 4.0))
+    with flat:
+        same = flat.unscaled(fold_in(flat.scaled(plain), [], 2.0, k), 0.0)
+    assert np.allclose(same.Q, plain.Q, atol=1e-12)
+
+
+def test_the_weighted_ceiling_with_equal_weights_is_the_plain_one_and_bad_strengths_fail(
+        benches: tuple[ModuleType, ModuleType]) -> None:
+    """``weighted_ceiling`` with a constant weight is bench_unseen's least-squares ceiling;
+    a heavier weight on a set of cells fits them closer; a strength outside [0, 1) is a
+    ValueError naming the range."""
+    from gonio.brdf.tables import geometry
+    from tests.unit.brdf.reconstruction.test_basis import small_library
+
+    bf, bu = benches
+    b = small_basis(8)
+    truth = small_library()[0]
+    plain = bu.ceiling(b, truth)
+    same = bf.weighted_ceiling(b, truth, np.full(geometry.N_ROWS, 3.0))
+    assert np.allclose(same.values, plain.values, rtol=1e-8, equal_nan=True)
+    d = np.ones(geometry.N_ROWS)
+    heavy = np.zeros(geometry.N_ROWS, dtype=bool)
+    heavy[geometry.valid_mask().ravel()] = True
+    heavy[: geometry.N_ROWS // 2] = False
+    d[heavy] = 1e4
+    t = np.asarray(truth.values).reshape(3, geometry.N_PH, geometry.N_ROWS)
+
+    def err(table: object) -> float:
+        v = np.asarray(table.values).reshape(3, geometry.N_PH, geometry.N_ROWS)  # type: ignore[attr-defined]
+        return float(np.mean((np.log1p(v[:, :, heavy]) - np.log1p(t[:, :, heavy])) ** 2))
+
+    assert err(bf.weighted_ceiling(b, truth, d)) < err(plain)
+    with pytest.raises(ValueError, match=r"\[0, 1\)"):
+        bf.render_row_weight(1.0)
+    # d = (1 - A) + A c / mean(c): averages 1 on the valid cells; an unseen cell gets 1 - A.
+    from gonio.brdf.pictures.appearance import render_importance
+
+    valid = geometry.valid_mask().ravel()
+    w = bf.render_row_weight(0.9)
+    unseen = valid & (np.asarray(render_importance()).ravel() == 0)
+    assert w[valid].mean() == pytest.approx(1.0) and np.allclose(w[unseen], 0.1)
+    assert np.array_equal(bf.render_row_weight(0.0), np.ones(geometry.N_ROWS))
