@@ -917,13 +917,44 @@ def completes_unfinished(store: JobStore, job_id: int) -> bool:
 _WITH_REASON = {"failed": " with that reason", "aborted": " with its reason"}
 
 
-def rebuild_hint(job_id: int, store_path: str) -> str:
+def rebuild_command(job_id: int, store_path: str | Path,
+                    data_dir: str | Path | None = None) -> str:
+    """The ``gonio jobs rebuild`` command for job ``job_id`` of the store ``store_path`` (its
+    SQLite file), ready to paste: absolute, quoted paths (a macOS data folder has a space in
+    it), and ``--data-dir`` when the results go elsewhere than the store's own folder (a
+    ``gonio scan --db`` elsewhere), which the command would otherwise take."""
+    import shlex
+
+    db = Path(store_path).resolve()
+    cmd = f"gonio jobs rebuild {job_id} --db {shlex.quote(str(db))}"
+    if data_dir is not None and Path(data_dir).resolve() != db.parent:
+        cmd += f" --data-dir {shlex.quote(str(Path(data_dir).resolve()))}"
+    return cmd
+
+
+def rebuild_hint(store: JobStore, job_id: int, data_dir: str | Path | None = None
+                 ) -> str | None:
     """What a job stopped while it was being finished (failed or aborted there) says about
-    its readings: all are stored, and the command that finishes it (:func:`rebuild_result`).
-    ``store_path`` is the job store's SQLite file (``:memory:`` names none)."""
-    db = "" if store_path == ":memory:" else f" --db {store_path}"
-    return (f"every reading is stored: 'gonio jobs rebuild {job_id}{db}' finishes it once the "
-            "daemon or scan running this store has stopped")
+    its readings: all are stored, and the command that finishes it (:func:`rebuild_result`);
+    None when that rebuild would be refused because its finishing had not yet recorded the
+    calibration its readings take (:func:`rebuild_result`'s own condition), or the store is in
+    memory (nothing outlives the process)."""
+    if store.path == ":memory:" or not _calibration_recorded(store, job_id):
+        return None
+    return (f"every reading is stored: '{rebuild_command(job_id, store.path, data_dir)}' "
+            "finishes it once the daemon or scan running this store has stopped")
+
+
+def _calibration_recorded(store: JobStore, job_id: int) -> bool:
+    """Whether a rebuild of job ``job_id`` knows the calibration its readings take: a
+    calibration job needs none, a completed job's summary records it, and a job stopped in
+    its finishing has it once the finishing kept its inputs."""
+    job = store.get_job(job_id)
+    if _plan_kind(job.plan) == "calibration":
+        return True
+    if isinstance((job.summary or {}).get("calibration"), dict):
+        return True
+    return "calibration" in (store.finishing_inputs(job_id) or {})
 
 
 def _stopped_while_finishing(store: JobStore, job: Any) -> bool:

@@ -84,8 +84,10 @@ class ResultViews:
 
     def rebuild_hint(self, job_id: int) -> str:
         """What to do about a job whose result file is missing or damaged."""
-        return (f"rebuild it from the readings the job store holds: gonio jobs rebuild "
-                f"{job_id} --db {self.store.path}")
+        from gonio.finishing import rebuild_command
+
+        return ("rebuild it from the readings the job store holds: "
+                + rebuild_command(job_id, self.store.path, self.data_dir))
 
     def checked_result_path(self, job_id: int) -> Path:
         """Job ``job_id``'s result file, once it has been read whole (and kept in the cache),

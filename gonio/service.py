@@ -920,7 +920,9 @@ class GonioService:
         check_action("resume", row.state, job_id)
         if not self.worker.resume_measurement(job_id):
             raise Conflict(f"job {job_id} is paused but the worker has not taken it up yet "
-                           "(the daemon is starting); try the resume again in a moment")
+                           "(the daemon is starting or loading its basis, or no job starts "
+                           "while the maintenance lock or a full disk holds the queue: "
+                           "GET /api/v1/rig says which); try the resume again once it has")
         if not _on_an_event_loop():
             deadline = time.monotonic() + RESUME_ANSWER_WAIT_S
             while self._row(job_id).state is JobState.PAUSED and time.monotonic() < deadline:
@@ -945,9 +947,10 @@ class GonioService:
                 if not self.worker.abort_reconstruction(job_id):
                     # Its finishing is not running here (it would be resumed): every
                     # reading is stored, so a rebuild can still finish it.
+                    hint = rebuild_hint(self.store, job_id, self.data_dir)
                     self.store.set_state(job_id, JobState.ABORTED, reason="aborted by request "
-                                         "while it was being finished; "
-                                         + rebuild_hint(job_id, self.store.path))
+                                         "while it was being finished"
+                                         + (f"; {hint}" if hint else ""))
             else:
                 # Active in the store but not running here (e.g. paused before a restart).
                 self.store.set_state(job_id, JobState.ABORTED, reason="aborted by request")

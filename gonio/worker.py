@@ -516,24 +516,26 @@ class Worker:
         except FinishingStopped as exc:
             log.info("%s", exc)
             # Every reading is stored: the lab may want the result after all.
+            hint = rebuild_hint(self.store, job.id, self.data_dir)
             self.store.set_state(job.id, JobState.ABORTED, reason="aborted by request while "
-                                 f"it was being finished; {rebuild_hint(job.id, self.store.path)}")
+                                 "it was being finished" + (f"; {hint}" if hint else ""))
             return JobState.ABORTED
         except Exception as exc:  # a failed reconstruction fails the job, never the worker
             if is_disk_full(exc):
                 what = (f"the calibration of job {job.id}" if plan.finishing == "calibration"
                         else f"the result file of job {job.id}")
+                hint = rebuild_hint(self.store, job.id, self.data_dir)
                 self._disk_full_failure(job, disk_full_message(what, self.data_dir), exc,
-                                        then="once there is room, "
-                                        + rebuild_hint(job.id, self.store.path))
+                                        then=f"once there is room, {hint}" if hint else "")
                 return JobState.FAILED
             if isinstance(exc, CalibrationError) and plan.finishing == "calibration":
                 # The reference's readings are unusable (not a white diffuser...): say why.
                 log.error("job %s: calibration refused: %s", job.id, exc)
                 return self._fail(job, f"calibration refused: {exc}", plan)
             log.exception("job %s: finishing failed", job.id)
-            return self._fail(job, f"reconstruction failed: {exc}; once the cause is mended, "
-                              f"{rebuild_hint(job.id, self.store.path)}", plan)
+            hint = rebuild_hint(self.store, job.id, self.data_dir)
+            return self._fail(job, f"reconstruction failed: {exc}"
+                              + (f"; once the cause is mended, {hint}" if hint else ""), plan)
         self.store.set_result(job.id, summary.get("result_path"), summary)
         if summary.get("physical_bounds"):
             # Completed, but not plainly: the event log and its listeners (the CLI) say why.

@@ -104,11 +104,19 @@ def write_output(out: Path, data: bytes, *, overwrite: bool) -> None:
     import contextlib
     import errno
     import os
+    import tempfile
 
-    part = out.with_name(f".{out.name}.part")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    # A name of its own: two scans ending together with the same -o must not write one part.
+    fd, name = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".part", dir=out.parent)
+    part = Path(name)
     try:
-        out.parent.mkdir(parents=True, exist_ok=True)
-        part.write_bytes(data)
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+        # mkstemp makes it owner-only; a result is as readable as any file made here.
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(part, 0o666 & ~umask)
         if overwrite:
             os.replace(part, out)
             return

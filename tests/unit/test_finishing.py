@@ -577,3 +577,19 @@ def small_basis_supply() -> Any:
     from tests.unit.brdf.reconstruction.test_basis import small_basis
 
     return small_basis()
+
+
+def test_the_rebuild_command_pastes_as_it_is_printed(tmp_path: Path) -> None:
+    """Absolute, quoted paths (a macOS data folder has a space), and --data-dir when the
+    results go elsewhere than the store's folder (the command would take that folder)."""
+    import shlex
+
+    from gonio.finishing import rebuild_command
+
+    folder = tmp_path / "Application Support" / "gonio"
+    db = folder / "gonio.sqlite"
+    same = rebuild_command(3, db, folder)
+    assert same == f"gonio jobs rebuild 3 --db {shlex.quote(str(db))}"
+    assert shlex.split(same)[-1] == str(db)  # one argument, space and all
+    other = tmp_path / "lab data"
+    assert rebuild_command(3, db, other) == (f"{same} --data-dir {shlex.quote(str(other))}")

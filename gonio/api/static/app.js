@@ -262,6 +262,12 @@ function removeQuestion(job) {
 // What aborting a job means, asked before it is done (POST /jobs/{id}/abort): it stops for
 // good and writes no result; its readings stay in the job store, but it cannot be resumed.
 function abortQuestion(job) {
+  // Being finished, every reading is stored: `gonio jobs rebuild` can still finish it later.
+  if (job.state === "reconstructing") {
+    return `Abort job ${job.id} (${job.specimen})? Its finishing stops and writes no result; ` +
+      "every reading stays in the job store, and `gonio jobs rebuild` can finish it later " +
+      "(with the daemon stopped; the job's reason gives the command).";
+  }
   return `Abort job ${job.id} (${job.specimen})? It stops for good and writes no result: the ` +
     "readings measured so far stay in the job store, but the job cannot be resumed or finished. " +
     "To stop it for a while instead, pause it.";

@@ -212,5 +212,5 @@ def test_an_existing_output_is_refused_unless_overwrite_says_to_replace_it(
         kept = re.search(r"it is kept in (\S+\.h5): copy it from there", err)
         assert f"completed, but {later} appeared while it was measured" in err, err
         assert kept is not None and Path(kept.group(1)).is_file(), err
-        assert "--overwrite" in err and not list(tmp_path.glob(".linen.h5.part"))
+        assert "--overwrite" in err and not list(tmp_path.glob(".linen.h5*.part"))
     assert old.read_bytes()[:8] == b"\x89HDF\r\n\x1a\n"  # the HDF5 signature

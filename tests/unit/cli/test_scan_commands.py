@@ -386,6 +386,9 @@ def test_write_output_never_replaces_a_file_unless_asked(
     out = tmp_path / "sub" / "felt.h5"
     write_output(out, b"first", overwrite=False)
     assert out.read_bytes() == b"first"
+    umask = os.umask(0)
+    os.umask(umask)
+    assert out.stat().st_mode & 0o777 == 0o666 & ~umask  # not the temporary file's 0600
     with pytest.raises(FileExistsError):
         write_output(out, b"second", overwrite=False)
     assert out.read_bytes() == b"first"

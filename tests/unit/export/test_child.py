@@ -105,6 +105,11 @@ def test_the_fits_process_ends_when_the_daemon_is_killed(tmp_path: Path) -> None
         daemon.send_signal(signal.SIGKILL)
         daemon.wait()
     deadline = time.monotonic() + 60
-    while not _ended(child_pid):
-        assert time.monotonic() < deadline, f"the fits' process {child_pid} outlived its daemon"
-        time.sleep(0.2)
+    try:
+        while not _ended(child_pid):
+            assert time.monotonic() < deadline, \
+                f"the fits' process {child_pid} outlived its daemon"
+            time.sleep(0.2)
+    finally:
+        if not _ended(child_pid):  # failed: leave no ten-minute sleeper behind
+            os.kill(child_pid, signal.SIGKILL)
