@@ -721,13 +721,7 @@ def evaluate_render_basis(mats: list[bu.Material], strengths: list[float], label
                      "log_rmse": s.log_rmse, "flip": s.flip} for m, s in per.items()}
              for r, per in rows.items()}, indent=1))
         print(f"unrounded scores written to {save}")
-    print(f"\n{label}: log_rmse / HDR-FLIP per material (lower is better)")
-    print("| material | " + " | ".join(order) + " |")
-    print("|---" * (1 + len(order)) + "|")
-    for m in mats:
-        print(f"| {m.name} | " + " | ".join(
-            f"{rows[r][m.name].log_rmse:.4f} / {rows[r][m.name].flip:.3f}" for r in order) + " |")
-    print_mean_rows(rows, mats, order)
+    print_material_table(label, rows, mats, order)
     print("\nunrounded means (log_rmse measured, mitsuba; HDR-FLIP all):")
     for r in order:
         ms = [rows[r][m.name] for m in mats if m.kind == "measured"]
@@ -738,6 +732,17 @@ def evaluate_render_basis(mats: list[bu.Material], strengths: list[float], label
     print("\nmean pairs at td 15-45 deg (of 10):")
     for r, counts in in_band.items():
         print(f"  {r}: {np.mean(counts):.1f}")
+
+
+def print_material_table(label: str, rows: dict[str, Any], mats: Any, order: list[str]) -> None:
+    """The per-material table (``log_rmse / HDR-FLIP`` per row) and its mean rows."""
+    print(f"\n{label}: log_rmse / HDR-FLIP per material (lower is better)")
+    print("| material | " + " | ".join(order) + " |")
+    print("|---" * (1 + len(order)) + "|")
+    for m in mats:
+        print(f"| {m.name} | " + " | ".join(
+            f"{rows[r][m.name].log_rmse:.4f} / {rows[r][m.name].flip:.3f}" for r in order) + " |")
+    print_mean_rows(rows, mats, order)
 
 
 def print_mean_rows(rows: dict[str, dict[str, bu.Score]], mats: list[bu.Material],
@@ -852,13 +857,7 @@ def evaluate(mats: list[bu.Material], mixes: list[float], label: str,
                      "views": views.get(r, {}).get(m, [])} for m, s in per.items()}
              for r, per in rows.items()}, indent=1))
         print(f"unrounded scores written to {save}")
-    print(f"\n{label}: log_rmse / HDR-FLIP per material (lower is better)")
-    print("| material | " + " | ".join(order) + " |")
-    print("|---" * (1 + len(order)) + "|")
-    for m in mats:
-        print(f"| {m.name} | " + " | ".join(
-            f"{rows[r][m.name].log_rmse:.4f} / {rows[r][m.name].flip:.3f}" for r in order) + " |")
-    print_mean_rows(rows, mats, order)
+    print_material_table(label, rows, mats, order)
     print("\nmean HDR-FLIP per standard view (lights 20, 55, 55, 70 deg from the view):")
     for kind in ("measured", "aniso"):
         ks = [m for m in mats if m.kind == kind]
