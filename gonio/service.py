@@ -35,7 +35,13 @@ from pydantic import BaseModel
 
 from gonio import hal
 from gonio.basis_supply import BasisSupply
-from gonio.calibration import Calibration, calibration_in_effect, uncalibrated_refusal
+from gonio.calibration import (
+    Calibration,
+    calibration_in_effect,
+    exposure_warning,
+    uncalibrated_refusal,
+    uncalibrated_warning,
+)
 from gonio.diskspace import DiskFull, disk_full_message, is_disk_full, low_space
 from gonio.engine_loop import EngineLoop
 from gonio.event_hub import EventHub
@@ -1080,6 +1086,35 @@ class GonioService:
                                            if kind.arc_mode() == "auto" else None),
                        asymmetric_basis=self.basis.has_asymmetric,
                        finishing_s=est.seconds, finishing_source=est.source)
+
+    def calibration_warnings(self, pairs: Sequence[hal.PairSpec], exposure_s: float,
+                             priority: int = 0) -> list[str]:
+        """What the calibration in effect means for a scan of ``pairs`` at ``exposure_s``
+        queued now at ``priority``, for the dry runs (the page's Check plan, ``gonio scan
+        --daemon URL --dry-run``): a partial calibration and one of other sensors (the
+        refusals :meth:`submit` would answer, prefixed ``not calibrated:``), no calibration
+        at all (values in sensor units) and one at another exposure (refused).
+
+        A calibration job that runs before the scan (:meth:`calibration_ahead`: under way,
+        paused, or queued at ``priority`` or above; for the exposure, one at the plan's
+        exposure) settles the missing and the other-exposure calibration: those are not
+        said then (the worker checks again when the scan starts), as :meth:`submit` does not
+        refuse them; one queued below ``priority`` is named with what to do. A partial
+        calibration is refused whatever is queued, so it is always said."""
+        cal = self.calibration()
+        channels = self.channel_refusal(pairs, cal, priority)
+        missing = uncalibrated_warning(cal, pairs)
+        if missing is not None and not cal.pairs:
+            ahead, behind = self.calibration_ahead(priority)
+            missing = None if ahead else f"{missing}{behind}"
+        exposure = exposure_warning(cal, exposure_s)
+        if exposure is not None:
+            ahead, behind = self.calibration_ahead(priority, exposure_s)
+            exposure = None if ahead else f"{exposure}{behind}"
+        return [w for w in (missing,
+                            None if channels is None else f"not calibrated: {channels}",
+                            exposure)
+                if w is not None]
 
     @property
     def disk_full(self) -> str | None:

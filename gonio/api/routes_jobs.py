@@ -8,7 +8,7 @@ from fastapi import APIRouter, Query, Response, status
 from pydantic import BaseModel, Field
 
 from gonio.api.deps import COMPUTE, READ, WRITE, JobId, Service
-from gonio.calibration import counts, exposure_warning, uncalibrated_warning
+from gonio.calibration import counts
 from gonio.fields import FINITE
 from gonio.jobstates import JobState
 from gonio.plans.dryrun import DryRun
@@ -25,6 +25,10 @@ class DryRunRequest(BaseModel):
     model_config = FINITE
 
     plan: Plan
+    priority: int = Field(
+        default=0, ge=-1000, le=1000,
+        description="the priority the scan would be queued at (as POST /api/v1/jobs's): it "
+        "decides whether a queued calibration job runs before it")
 
 
 class Reading(BaseModel):
@@ -85,14 +89,10 @@ def create_job(
 def dry_run(request: DryRunRequest, service: Service) -> DryRun:
     result = service.dry_run(request.plan)
     if request.plan.kind != "calibration":
-        cal = service.calibration()
-        # A calibration of other sensors: the refusal submission would answer (the same
-        # decision, GonioService.channel_refusal), said before anything is submitted.
-        channels = service.channel_refusal(result.pairs, cal)
-        more = [w for w in (uncalibrated_warning(cal, result.pairs),
-                            None if channels is None else f"not calibrated: {channels}",
-                            exposure_warning(cal, request.plan.exposure.exposure_s))
-                if w is not None]
+        # The calibration's refusals and warnings, judged as submission at this priority
+        # judges them (GonioService.calibration_warnings: one decision).
+        more = service.calibration_warnings(result.pairs, request.plan.exposure.exposure_s,
+                                            request.priority)
         if more:
             result = result.model_copy(update={"warnings": [*result.warnings, *more]})
     return result

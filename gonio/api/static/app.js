@@ -968,7 +968,9 @@ function initForm() {
     // The form's own limits first, at the field, as Start scan's submit checks them.
     markEmpty();
     if (!form.reportValidity()) { setNote("", null); return; }
-    const r = await send("POST", "/jobs/dry-run", { plan: readPlan() });
+    // At the form's priority: it decides whether a queued calibration job runs first.
+    const r = await send("POST", "/jobs/dry-run",
+      { plan: readPlan(), priority: Number(form.elements.priority.value) });
     // The specimen's angle, as the stage chip gives it; the stage's own position beside it
     // when it is turns away (517.5° is the specimen at 157.5°).
     const specimenDeg = ((r.from_deg % 360) + 360) % 360;

@@ -134,3 +134,26 @@ def test_an_empty_stage_angles_field_says_what_to_enter(
     # Once a number is typed the field is valid again.
     field.send_keys("8")
     assert browser.execute_script("return arguments[0].validity.valid", field) is True
+
+
+def test_check_plan_is_judged_at_the_forms_priority(
+        daemon: Daemon, browser: Any,  # noqa: F811 (the fixture)
+) -> None:
+    """Whether a queued calibration job runs before the scan depends on the priority the scan
+    is queued at (docs/api.md); Check plan sent none, so the daemon judged every plan at 0
+    while Start scan sent the form's."""
+    import json
+
+    from selenium.webdriver.common.by import By
+
+    wait = open_live(browser, daemon, 60)
+    field = browser.find_element(By.ID, "scan-form").find_element(By.NAME, "priority")
+    field.clear()
+    field.send_keys("7")
+    browser.execute_script("window.__bodies = []; const f = window.fetch;"
+                           "window.fetch = (u, i) => { if (String(u).includes('dry-run'))"
+                           " window.__bodies.push(i.body); return f(u, i); };")
+    click_when_steady(wait, "#dry-run")
+    wait.until(lambda d: "readings at" in d.find_element(By.ID, "dry-run-result").text)
+    (body,) = browser.execute_script("return window.__bodies")
+    assert json.loads(body)["priority"] == 7, body

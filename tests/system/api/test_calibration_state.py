@@ -56,6 +56,32 @@ def test_check_plan_says_an_uncalibrated_scan_is_in_sensor_units(daemon: Daemon)
         assert not any("uncalibrated" in w for w in r.json()["warnings"])
 
 
+def test_check_plan_behind_a_queued_calibration_does_not_say_uncalibrated(
+        daemon: Daemon) -> None:
+    """`gonio serve --sim` queues a calibration job at start: a plan checked meanwhile is
+    calibrated by it and was told "uncalibrated: ... run a calibration job first". At a
+    priority above the calibration's it would run first, uncalibrated: that is said, naming
+    the calibration job."""
+    with daemon.client() as c:
+        assert c.get("/api/v1/calibration").json()["source"] == "none"
+        assert c.post("/api/v1/rig/halt").status_code == 200  # the queue holds
+        try:
+            r = c.post("/api/v1/jobs", json={"plan": CAL_PLAN})
+            assert r.status_code == 201, r.text
+            cal = r.json()["id"]
+            r = c.post("/api/v1/jobs/dry-run", json={"plan": PLAN})
+            assert r.status_code == 200, r.text
+            assert not [w for w in r.json()["warnings"] if "uncalibrated" in w], r.json()
+            r = c.post("/api/v1/jobs/dry-run", json={"plan": PLAN, "priority": 1})
+            assert r.status_code == 200, r.text
+            (w,) = [w for w in r.json()["warnings"] if w.startswith("uncalibrated")]
+            assert f"calibration job {cal} is queued at priority 0, below this scan's 1" in w, w
+        finally:
+            for job in (j["id"] for j in c.get("/api/v1/jobs", params={"state": "queued"}).json()):
+                c.post(f"/api/v1/jobs/{job}/cancel")
+            c.post("/api/v1/rig/release")
+
+
 def test_uncalibrated_scan_of_a_calibrated_rig_needs_acceptance(
     daemon: Daemon, calibrated_elsewhere: Calibration
 ) -> None:

@@ -124,3 +124,42 @@ def test_a_scan_queued_behind_a_calibration_at_its_exposure_is_taken_and_checked
             detail["reason"])
         assert "measured at 0.01 s" in detail["reason"], detail["reason"]
         assert detail["done_angles"] == 0
+
+
+def test_check_plan_judges_a_queued_calibration_at_the_scans_priority(
+        daemon: Daemon, calibrated: None) -> None:
+    """A calibration job at 0.02 s queued at priority 0 runs before a scan at 0.02 s queued at
+    0 (the earlier job among equals) but after one at 5 (the queue takes the higher priority
+    first): submission accepts the first and refuses the second, so the dry run warns of the
+    exposure for the second only, naming the calibration job and its priority. It judged
+    every plan at priority 0, and warned "such a scan is refused" of a scan that would run
+    behind its calibration."""
+    scan = {"kind": "uniform", "rotations": 2, "exposure": {"exposure_s": 0.02}}
+    with daemon.client() as c:
+        assert c.post("/api/v1/rig/halt").status_code == 200
+        cal = None
+        try:
+            r = c.post("/api/v1/jobs", json={"plan": {
+                "kind": "calibration", "rotations": 2, "reference_albedo": 0.99,
+                "exposure": {"exposure_s": 0.02}}})
+            assert r.status_code == 201, r.text
+            cal = r.json()["id"]
+            r = c.post("/api/v1/jobs/dry-run", json={"plan": scan})
+            assert r.status_code == 200, r.text
+            assert not [w for w in r.json()["warnings"] if w.startswith("exposure:")], r.json()
+            r = c.post("/api/v1/jobs/dry-run", json={"plan": scan, "priority": 5})
+            assert r.status_code == 200, r.text
+            (w,) = [w for w in r.json()["warnings"] if w.startswith("exposure:")]
+            assert f"calibration job {cal} is queued at priority 0, below this scan's 5" in w, w
+            # Submission at 5 refuses with the same words.
+            r = c.post("/api/v1/jobs", json={"plan": scan, "priority": 5})
+            assert r.status_code == 422, r.text
+            assert f"calibration job {cal} is queued at priority 0" in r.json()["detail"]
+            # A priority outside the queue's range is refused as submission refuses it.
+            r = c.post("/api/v1/jobs/dry-run", json={"plan": scan, "priority": 5000})
+            assert r.status_code == 422, r.text
+            assert "priority" in r.text, r.text
+        finally:
+            if cal is not None:
+                c.post(f"/api/v1/jobs/{cal}/cancel")
+            assert c.post("/api/v1/rig/release").status_code == 200
