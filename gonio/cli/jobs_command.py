@@ -478,11 +478,18 @@ def _abort_job(args: argparse.Namespace) -> int:
         through = (f" (through it: 'gonio jobs --daemon {str(url).rstrip('/')} abort "
                    f"{args.job_id}')" if url else "")
         raise UsageError(f"{exc}{through}") from None
+    from gonio.finishing import rebuild_hint
+
     with lock:
         store = JobStore(args.db)
         try:
+            before = store.get_job(args.job_id).state
             row = store.set_state(args.job_id, JobState.ABORTED, reason="aborted by request "
                                   "(gonio jobs abort)")
+            # A job left being finished (its daemon or scan died then) has every reading:
+            # its result can still be made, which the abort must not hide.
+            hint = (rebuild_hint(store, row.id, args.data_dir)
+                    if before is JobState.RECONSTRUCTING else None)
         except NotFound as exc:
             raise UsageError(str(exc)) from None
         except IllegalTransition:
@@ -493,4 +500,6 @@ def _abort_job(args: argparse.Namespace) -> int:
             store.close()
     print(f"job {row.id} aborted ({row.done_angles} of {row.total_angles} angles had been "
           "measured; its readings stay in the store)")
+    if hint is not None:
+        print(f"it was being finished: {hint}")
     return 0

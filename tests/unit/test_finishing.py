@@ -593,3 +593,47 @@ def test_the_rebuild_command_pastes_as_it_is_printed(tmp_path: Path) -> None:
     assert shlex.split(same)[-1] == str(db)  # one argument, space and all
     other = tmp_path / "lab data"
     assert rebuild_command(3, db, other) == (f"{same} --data-dir {shlex.quote(str(other))}")
+
+
+def test_gonio_jobs_abort_of_a_job_left_being_finished_says_how_to_finish_it(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A daemon killed while it finished a scan leaves the job `reconstructing` with every
+    reading stored and its finishing's inputs recorded. `gonio jobs abort` of it said only
+    that the readings stay in the store; it now gives the command that makes its result, as
+    the daemon's own abort of a job being finished does (its reason, above)."""
+    from gonio.brdf.reconstruction.basis import BasisError
+    from gonio.cli import main
+
+    _calibrated(tmp_path).store.close()
+    data = tmp_path / "d"
+    db = data / "gonio.sqlite"
+
+    def unreadable() -> Any:
+        raise BasisError("basis file basis-k16.npz does not read (truncated)")
+
+    # A finishing that stops after recording its inputs (as a kill -9 there would) ...
+    svc = GonioService(JobStore(db), MemRig(), data_dir=data,
+                       basis=BasisSupply(unreadable), fit_exports=False)
+    job = svc.submit(JobRequest(plan=UniformPlan(rotations=4, exposure=FAST))).id
+    _until_ended(svc, job)
+    assert svc.store.get_job(job).state.value == "failed"
+    assert "calibration" in (svc.store.finishing_inputs(job) or {})
+    svc.store.close()
+    # ... and the state such a kill leaves, which no transition of a live gonio makes.
+    with sqlite3.connect(db) as con:
+        con.execute("UPDATE jobs SET state = 'reconstructing', reason = NULL WHERE id = ?",
+                    (job,))
+    capsys.readouterr()
+    assert main(["jobs", "abort", str(job), "--db", str(db)]) == 0
+    out = capsys.readouterr().out
+    assert f"job {job} aborted (4 of 4 angles had been measured" in out, out
+    assert f"it was being finished: every reading is stored: 'gonio jobs rebuild {job} --db " \
+           f"{db}'" in out, out
+    # A job aborted while measuring has no such line (nothing to finish).
+    svc = GonioService(JobStore(db), MemRig(), data_dir=data, fit_exports=False)
+    other = svc.submit(JobRequest(plan=UniformPlan(rotations=4, exposure=FAST))).id
+    svc.store.close()
+    assert main(["jobs", "abort", str(other), "--db", str(db)]) == 0
+    out = capsys.readouterr().out
+    assert f"job {other} aborted (0 of 4" in out and "being finished" not in out, out
