@@ -399,3 +399,24 @@ def test_wait_on_a_queued_job_says_what_it_waits_for_once_and_when_that_changes(
                          r"|start not known: .+)$", line) for line in behind), behind
     assert said.index(held) < said.index(behind[0])
     assert "queued:" not in out  # said on standard error, beside the bar, not in the summary
+
+
+def test_wait_says_when_a_suspended_job_goes_on(
+    daemon: Daemon, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A job suspended on a silent sensor, followed through the daemon: the terminal says why
+    it waits and that the daemon retries, then that it goes on when the sensor answers again
+    (after the suspended line nothing said the fault had cleared)."""
+    with daemon.client() as c:
+        job = _submit(c, 4)
+        daemon.sim.apply_fault("silence:S2:4")  # wall seconds: the job suspends, then goes on
+        code = main(["jobs", "--daemon", daemon.url, "wait", str(job), "--no-progress",
+                     "-o", str(tmp_path / "felt.h5")])
+    err = capsys.readouterr().err
+    assert code == 0, err
+    suspended = err.find(f"job {job} suspended: S2")
+    retries = err.find("the daemon retries and goes on once it answers (Ctrl-C stops "
+                       "following, not the job)")
+    resumed = err.find(f"job {job} resumed: the device answers again; measuring goes on")
+    assert 0 <= suspended < retries < resumed, err
+    assert (tmp_path / "felt.h5").is_file()
