@@ -25,7 +25,7 @@ import pytest
 from gonio.cli import daemon_jobs, main
 from gonio.cli.scan_report import scan_summary
 from gonio.results import read_result
-from tests.system.api.conftest import Daemon
+from tests.system.api.conftest import Daemon, export_fits_off
 
 pytestmark = pytest.mark.timeout(240)
 
@@ -407,7 +407,7 @@ def test_wait_says_when_a_suspended_job_goes_on(
     """A job suspended on a silent sensor, followed through the daemon: the terminal says why
     it waits and that the daemon retries, then that it goes on when the sensor answers again
     (after the suspended line nothing said the fault had cleared)."""
-    with daemon.client() as c:
+    with export_fits_off(daemon), daemon.client() as c:
         job = _submit(c, 4)
         daemon.sim.apply_fault("silence:S2:4")  # wall seconds: the job suspends, then goes on
         code = main(["jobs", "--daemon", daemon.url, "wait", str(job), "--no-progress",
