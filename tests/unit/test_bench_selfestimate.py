@@ -108,3 +108,30 @@ def test_the_under_prediction_candidate_and_its_blind_set_are_as_written_down(
     older = {n for s in (bench.FRESH, bench.FRESH_INPLANE, bench.FRESH_CONFIRM,
                          bench.FRESH_WIDE) for n, *_ in s}
     assert not {n for n, *_ in bench.FRESH_COAT} & older
+
+
+def test_the_coverage_shrink_candidate_is_as_written_down(bench: ModuleType) -> None:
+    """The coverage shrink (science.md 7.1.1.1): for a designed layout the coverage term
+    ``0.19 sqrt(uncovered)`` times ``min(1, cv/c)`` or ``min(1, sqrt(cv/c))``; a preset's and a
+    scan with ``cv >= c`` keep the shipped estimate ``sqrt((0.61 p)^2 + 0.19^2 u)``."""
+    import math
+
+    designed = sorted(bench.DESIGNED_PLANS)[0]
+    assert "MA98 r=8" not in bench.DESIGNED_PLANS
+    row = {"unwidened": 0.05, "uncovered": 0.04, "peak_excess": 0.0, "misfit_chi2": 0.5,
+           "misfit_log": 0.0, "misfit_persistent_pairs": 0, "n": 10, "r": 8,
+           "highlight_excess": 1.0, "cv_log_under": 0.0, "cv_log_error": 0.0525,
+           "plan": designed}
+    model = 0.61 * 0.05
+    plain = math.hypot(model, 0.19 * 0.2)
+    # cv / c = 1/4: the term halves (square root) or falls to a quarter (linear).
+    assert bench.cov_candidate(row, "cov-sqrt", 0.21) == pytest.approx(
+        math.hypot(model, 0.19 * 0.2 * 0.5))
+    assert bench.cov_candidate(row, "cov-linear", 0.21) == pytest.approx(
+        math.hypot(model, 0.19 * 0.2 * 0.25))
+    assert bench.cov_candidate({**row, "cv_log_error": 0.3}, "cov-sqrt", 0.21) == (
+        pytest.approx(plain))
+    assert bench.cov_candidate({**row, "plan": "MA98 r=8"}, "cov-sqrt", 0.21) == (
+        pytest.approx(plain))
+    with pytest.raises(ValueError, match="unknown form"):
+        bench.cov_candidate(row, "cov-cube", 0.21)
