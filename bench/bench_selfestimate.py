@@ -164,7 +164,7 @@ at 0.4 gave 92; nothing of either has been computed on any other set.
 
 **The coverage shrink (2026-11-28; rule written down and committed before any candidate was
 computed outside the calibration set and before any scan of fresh-cov).** The over-prediction
-study above (its ``"outside-cap"`` was adopted by its rule on branch selfhigh but not merged:
+study above (its ``"outside-cap"`` was adopted by its rule but its wiring not merged:
 it moved no held-out count) found, read after its decision, that the held-out
 over-predictions are mostly the coverage term's: 56 of the 100 test and fresh scans more than
 2x high and 24 of fresh-high's 33 have it as their largest part; easy rough plastics at the
