@@ -1472,23 +1472,7 @@ def high_study(rows: list[dict[str, Any]]) -> bool | None:
         return high_candidate(r, form, p)
 
     def compare(names: tuple[str, ...]) -> tuple[tuple[int, ...], tuple[int, ...]]:
-        print("\n| set | plan | shipped: within x2 / low / high / above upper / scans | "
-              "candidate |")
-        print("|---|---|---|---|")
-        tot = [[0] * 5, [0] * 5]
-        for which in names:
-            for label in [pl[0] for pl in PLANS] + ["every plan"]:
-                sel = [r for r in by[which] if label in ("every plan", r["plan"])]
-                if not sel:
-                    continue
-                a, b = _three(sel, lambda r: r["widened"]), _three(sel, cand)
-                print(f"| {which} | {label} | {' / '.join(map(str, a))} | "
-                      f"{' / '.join(map(str, b))} |")
-                if label == "every plan":
-                    for k in range(5):
-                        tot[0][k] += a[k]
-                        tot[1][k] += b[k]
-        return tuple(tot[0]), tuple(tot[1])
+        return _compare_sets(by, names, cand)
 
     print("\ncalibration:")
     compare(("cal",))
@@ -1554,7 +1538,7 @@ def cov_candidate(row: dict[str, Any], form: str, c: float) -> float:
                peak_floor(row))
 
 
-def _cov_compare(by: dict[str, list[dict[str, Any]]], names: tuple[str, ...],
+def _compare_sets(by: dict[str, list[dict[str, Any]]], names: tuple[str, ...],
                  cand: Callable[[dict[str, Any]], float]
                  ) -> tuple[tuple[int, ...], tuple[int, ...]]:
     """Print shipped against candidate per set and plan (:func:`_three`); return the totals
@@ -1615,21 +1599,21 @@ def cov_study(rows: list[dict[str, Any]],
         return cov_candidate(r, form, c)
 
     print("\ncalibration:")
-    _cov_compare(by, ("cal",), cand)
+    _compare_sets(by, ("cal",), cand)
     print("\nchoice:")
-    a, b = _cov_compare(by, ("choice",), cand)
+    a, b = _compare_sets(by, ("choice",), cand)
     ok = b[1] <= a[1] and b[0] > a[0]
     adopted = adopted and ok
     print(f"\nchoice rule: {'passed' if ok else 'FAILED'} (shipped {a[0]} within x2 / "
           f"{a[1]} low, candidate {b[0]} / {b[1]})")
     print("\ntest and fresh (printed once):")
-    a, b = _cov_compare(by, ("test", "fresh", "fresh-inplane", "fresh-confirm"), cand)
+    a, b = _compare_sets(by, ("test", "fresh", "fresh-inplane", "fresh-confirm"), cand)
     ok = b[1] <= a[1]
     adopted = adopted and ok
     print(f"\ntest and fresh rule: {'passed' if ok else 'FAILED'} (shipped {a[0]} within x2 / "
           f"{a[1]} low, candidate {b[0]} / {b[1]})")
     print("\nfresh-wide, fresh-coat and fresh-high:")
-    a, b = _cov_compare(by, ("fresh-wide", "fresh-coat", "fresh-high"), cand)
+    a, b = _compare_sets(by, ("fresh-wide", "fresh-coat", "fresh-high"), cand)
     ok = b[1] <= a[1]
     adopted = adopted and ok
     print(f"\nfresh-wide, fresh-coat and fresh-high rule: {'passed' if ok else 'FAILED'} "
@@ -1645,7 +1629,7 @@ def cov_study(rows: list[dict[str, Any]],
         rows.extend(blind)
         by["fresh-cov"] = blind
     print("\nfresh-cov (blind, last):")
-    a, b = _cov_compare(by, ("fresh-cov",), cand)
+    a, b = _compare_sets(by, ("fresh-cov",), cand)
     ok = b[4] > 0 and b[1] <= a[1]
     adopted = adopted and ok
     print(f"\nfresh-cov rule: {'passed' if ok else 'FAILED'} (shipped {a[0]} within x2 / "
