@@ -710,6 +710,39 @@ class GonioService:
             ahead, behind = self.calibration_ahead(priority, exposure_s)
             if not ahead:
                 raise PlanError(f"{exc}{behind}") from None
+            return
+        why = self.exposure_ahead_refusal(priority, exposure_s)
+        if why is not None:
+            raise PlanError(why)
+
+    def exposure_ahead_refusal(self, priority: int, exposure_s: float) -> str | None:
+        """Why a scan at ``exposure_s`` queued now at ``priority`` would be refused when it
+        starts, although the calibration in effect now lets it be queued: every calibration
+        job that runs before it (:meth:`calibration_ahead`) measures at another exposure, so
+        the calibration in effect when it starts is at another exposure (the worker refuses
+        that, :meth:`gonio.calibration.Calibration.check_exposure`). None when none runs
+        before it, one of them measures at ``exposure_s``, or one's exposure is not recorded
+        (the worker judges it at the start).
+
+        A scan queued behind ``gonio serve --sim``'s calibration job at another exposure was
+        accepted, waited, and failed "not started" once that calibration was in effect."""
+        ahead: list[tuple[int, float]] = []
+        for row in self.store.list_jobs([JobState.QUEUED.value,
+                                         *(st.value for st in ACTIVE_STATES)]):
+            if row.kind != "calibration" or (row.state is JobState.QUEUED
+                                             and row.priority < priority):
+                continue
+            at = (row.plan.get("exposure") or {}).get("exposure_s")
+            if not isinstance(at, int | float) or math.isclose(at, exposure_s, rel_tol=1e-6):
+                return None
+            ahead.append((row.id, float(at)))
+        if not ahead:
+            return None
+        job, at = ahead[0]
+        return (f"this plan reads at exposure {exposure_s:g} s and calibration job {job}, "
+                f"which runs before it, measures at {at:g} s: counts are not rescaled between "
+                "exposures, so the scan would be refused when it starts; scan at "
+                f"{at:g} s, or queue a calibration at {exposure_s:g} s first")
 
     def list_jobs(self, state: str | None = None) -> list[JobInfo]:
         rows = [r for r in self.store.list_jobs([state] if state else None)
@@ -1111,6 +1144,10 @@ class GonioService:
         if exposure is not None:
             ahead, behind = self.calibration_ahead(priority, exposure_s)
             exposure = None if ahead else f"{exposure}{behind}"
+        else:
+            # The calibration in effect when the scan starts: one queued before it.
+            ahead_refusal = self.exposure_ahead_refusal(priority, exposure_s)
+            exposure = None if ahead_refusal is None else f"exposure: {ahead_refusal}"
         return [w for w in (missing,
                             None if channels is None else f"not calibrated: {channels}",
                             exposure)

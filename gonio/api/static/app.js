@@ -978,7 +978,9 @@ function initForm() {
       : `from the specimen at ${specimenDeg.toFixed(1)}°` +
         (Math.abs(specimenDeg - r.from_deg) > 1e-6 ? ` (stage position ${r.from_deg.toFixed(1)}°)` : "");
     // A plan the calibration covers only in part does not run: Start is refused (422).
-    const refused = (r.warnings || []).some((w) => w.startsWith("not calibrated:"));
+    // So is one whose calibration (in effect, or queued before it) is at another exposure.
+    const refused = (r.warnings || []).some((w) => w.startsWith("not calibrated:") ||
+      w.startsWith("exposure:"));
     const verdict = refused ? "Start would be refused: read the warning below"
       : (r.warnings || []).length ? "Runs, but read the warnings below" : "OK";
     // estimated_s = motion_s + settle_s + exposure_s (docs/api.md): all three are said.

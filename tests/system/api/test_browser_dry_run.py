@@ -153,3 +153,33 @@ def test_check_plan_is_judged_at_the_forms_priority(
                                ("averages", 1), ("priority", 7)])
     (body,) = browser.execute_script("return window.__bodies")
     assert json.loads(body)["priority"] == 7, body
+
+
+def test_check_plan_says_start_would_be_refused_for_a_calibration_at_another_exposure(
+        daemon: Daemon, browser: Any,  # noqa: F811 (the fixture)
+) -> None:
+    """A scan at another exposure than its calibration is refused at submission (422), but
+    Check plan's verdict read "Runs, but read the warnings below" beside that warning. Here
+    the calibration is a job queued before the scan (the queue held), at 0.02 s."""
+    from selenium.webdriver.common.by import By
+
+    with daemon.client() as c:
+        assert c.post("/api/v1/rig/halt").status_code == 200
+        try:
+            r = c.post("/api/v1/jobs", json={"plan": {
+                "kind": "calibration", "rotations": 2, "reference_albedo": 0.99,
+                "exposure": {"exposure_s": 0.02}}})
+            assert r.status_code == 201, r.text
+            wait = open_live(browser, daemon, 60)
+            text = check_plan(browser, wait, [("rotations", ROTATIONS),
+                                              ("exposure_s", EXPOSURE_S), ("averages", 1),
+                                              ("priority", 0)])
+            assert text.startswith("Start would be refused"), text
+            wait.until(lambda d: d.find_element(By.ID, "dry-run-warnings").is_displayed())
+            warnings = browser.find_element(By.ID, "dry-run-warnings").text
+            assert f"calibration job {r.json()['id']}, which runs before it, measures at " \
+                   "0.02 s" in warnings, warnings
+        finally:
+            for job in (j["id"] for j in c.get("/api/v1/jobs", params={"state": "queued"}).json()):
+                c.post(f"/api/v1/jobs/{job}/cancel")
+            assert c.post("/api/v1/rig/release").status_code == 200

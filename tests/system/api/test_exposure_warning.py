@@ -163,3 +163,47 @@ def test_check_plan_judges_a_queued_calibration_at_the_scans_priority(
             if cal is not None:
                 c.post(f"/api/v1/jobs/{cal}/cancel")
             assert c.post("/api/v1/rig/release").status_code == 200
+
+
+def test_a_scan_behind_a_calibration_at_another_exposure_is_refused_at_once(
+        daemon: Daemon, calibrated: None) -> None:
+    """The calibration in effect is at 0.01 s; a calibration job at 0.02 s is queued before a
+    scan at 0.01 s. When the scan starts the calibration in effect is that job's, at 0.02 s,
+    and the worker refuses it (counts are not rescaled between exposures). It was accepted,
+    waited its turn and failed "not started"; it is refused at submission now, naming the
+    calibration job, and Check plan says so."""
+    scan = {"kind": "uniform", "rotations": 2, "exposure": {"exposure_s": 0.01}}
+    with daemon.client() as c:
+        before = len(c.get("/api/v1/jobs").json())
+        assert c.post("/api/v1/rig/halt").status_code == 200
+        try:
+            r = c.post("/api/v1/jobs", json={"plan": {
+                "kind": "calibration", "rotations": 2, "reference_albedo": 0.99,
+                "exposure": {"exposure_s": 0.02}}})
+            assert r.status_code == 201, r.text
+            cal = r.json()["id"]
+            expected = (f"this plan reads at exposure 0.01 s and calibration job {cal}, which "
+                        "runs before it, measures at 0.02 s")
+            r = c.post("/api/v1/jobs/dry-run", json={"plan": scan})
+            assert r.status_code == 200, r.text
+            (w,) = [w for w in r.json()["warnings"] if w.startswith("exposure:")]
+            assert expected in w and "queue a calibration at 0.01 s first" in w, w
+            r = c.post("/api/v1/jobs", json={"plan": scan})
+            assert r.status_code == 422, r.text
+            assert expected in r.json()["detail"], r.json()
+            # Queued above the calibration's priority it runs first, under the calibration in
+            # effect now (0.01 s): accepted, and Check plan at that priority says nothing.
+            r = c.post("/api/v1/jobs/dry-run", json={"plan": scan, "priority": 5})
+            assert not [w for w in r.json()["warnings"] if w.startswith("exposure:")], r.json()
+            r = c.post("/api/v1/jobs", json={"plan": scan, "priority": 5})
+            assert r.status_code == 201, r.text
+            # At the queued calibration's exposure: queued behind it.
+            r = c.post("/api/v1/jobs", json={"plan": {**scan, "exposure": {
+                "exposure_s": 0.02}}})
+            assert r.status_code == 201, r.text
+        finally:
+            for job in (j["id"] for j in c.get("/api/v1/jobs", params={"state": "queued"}).json()):
+                c.post(f"/api/v1/jobs/{job}/cancel")
+            assert c.post("/api/v1/rig/release").status_code == 200
+        # The refused scan was not queued: the calibration and the two accepted scans were.
+        assert len(c.get("/api/v1/jobs").json()) == before + 3
