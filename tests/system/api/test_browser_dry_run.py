@@ -163,13 +163,12 @@ def test_check_plan_says_start_would_be_refused_for_a_calibration_at_another_exp
     the calibration is a job queued before the scan (the queue held), at 0.02 s."""
     from selenium.webdriver.common.by import By
 
+    from tests.system.api.test_exposure_warning import queue_calibration
+
     with daemon.client() as c:
         assert c.post("/api/v1/rig/halt").status_code == 200
         try:
-            r = c.post("/api/v1/jobs", json={"plan": {
-                "kind": "calibration", "rotations": 2, "reference_albedo": 0.99,
-                "exposure": {"exposure_s": 0.02}}})
-            assert r.status_code == 201, r.text
+            cal = queue_calibration(c, 0.02)
             wait = open_live(browser, daemon, 60)
             text = check_plan(browser, wait, [("rotations", ROTATIONS),
                                               ("exposure_s", EXPOSURE_S), ("averages", 1),
@@ -177,7 +176,7 @@ def test_check_plan_says_start_would_be_refused_for_a_calibration_at_another_exp
             assert text.startswith("Start would be refused"), text
             wait.until(lambda d: d.find_element(By.ID, "dry-run-warnings").is_displayed())
             warnings = browser.find_element(By.ID, "dry-run-warnings").text
-            assert f"calibration job {r.json()['id']}, which runs before it, measures at " \
+            assert f"calibration job {cal}, which runs before it, measures at " \
                    "0.02 s" in warnings, warnings
         finally:
             for job in (j["id"] for j in c.get("/api/v1/jobs", params={"state": "queued"}).json()):

@@ -9,12 +9,22 @@ from __future__ import annotations
 import csv
 import io
 
+import httpx
 import pytest
 
 from tests.system.api.conftest import Daemon, export_fits_off
 from tests.system.daemon_proc import wait_for
 
 pytestmark = pytest.mark.system
+
+
+def queue_calibration(c: httpx.Client, exposure_s: float) -> int:
+    """Queue a calibration job at ``exposure_s`` (the caller holds the queue); its id."""
+    r = c.post("/api/v1/jobs", json={"plan": {
+        "kind": "calibration", "rotations": 2, "reference_albedo": 0.99,
+        "exposure": {"exposure_s": exposure_s}}})
+    assert r.status_code == 201, r.text
+    return int(r.json()["id"])
 
 
 @pytest.fixture(scope="module")
@@ -139,11 +149,7 @@ def test_check_plan_judges_a_queued_calibration_at_the_scans_priority(
         assert c.post("/api/v1/rig/halt").status_code == 200
         cal = None
         try:
-            r = c.post("/api/v1/jobs", json={"plan": {
-                "kind": "calibration", "rotations": 2, "reference_albedo": 0.99,
-                "exposure": {"exposure_s": 0.02}}})
-            assert r.status_code == 201, r.text
-            cal = r.json()["id"]
+            cal = queue_calibration(c, 0.02)
             r = c.post("/api/v1/jobs/dry-run", json={"plan": scan})
             assert r.status_code == 200, r.text
             assert not [w for w in r.json()["warnings"] if w.startswith("exposure:")], r.json()
@@ -177,11 +183,7 @@ def test_a_scan_behind_a_calibration_at_another_exposure_is_refused_at_once(
         before = len(c.get("/api/v1/jobs").json())
         assert c.post("/api/v1/rig/halt").status_code == 200
         try:
-            r = c.post("/api/v1/jobs", json={"plan": {
-                "kind": "calibration", "rotations": 2, "reference_albedo": 0.99,
-                "exposure": {"exposure_s": 0.02}}})
-            assert r.status_code == 201, r.text
-            cal = r.json()["id"]
+            cal = queue_calibration(c, 0.02)
             expected = (f"this plan reads at exposure 0.01 s and calibration job {cal}, which "
                         "runs before it, measures at 0.02 s")
             r = c.post("/api/v1/jobs/dry-run", json={"plan": scan})
