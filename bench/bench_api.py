@@ -48,9 +48,12 @@ GONIO = [sys.executable, "-c", "from gonio.cli import main; raise SystemExit(mai
 
 
 def start_daemon(port: int, key: str, data_dir: str, rig_toml: str | None = None,
-                 config: str | None = None) -> subprocess.Popen[bytes]:
+                 config: str | None = None,
+                 material: str | None = None) -> subprocess.Popen[bytes]:
     env = {**os.environ, "GONIO_API_KEYS": f"bench:{key}"}
     rig = ["--sim"] if rig_toml is None else ["--rig", rig_toml]
+    if material is not None:  # the simulated rig's specimen (--sim only)
+        rig += ["--material", material]
     cmd = [*GONIO, "serve", *rig, "--port", str(port), "--data-dir", data_dir]
     if config is not None:
         cmd += ["--config", config]

@@ -366,6 +366,10 @@ def finish_job(job_id: int, plan: AnyPlan | CheckedPlan, how: Finishing) -> dict
         principled=fits.principled if fits else None, colour=colour,
     )
     summary.update(result_path=relative, **metrics)
+    # The file's `seconds` cannot hold its own writing; the summary's does, since the status's
+    # finishing estimate (gonio.timeleft) promises the result file too: a 31-band result's
+    # write is over a second (bench/bench_first_scan.py --material metallic-blue-paint).
+    summary["seconds"] = time.perf_counter() - t0
     return summary
 
 

@@ -93,6 +93,7 @@ from gonio.timeleft import (
     QueuedRun,
     StartEstimate,
     finishing_estimate,
+    most_channels,
     start_estimates,
 )
 from gonio.worker import Worker
@@ -865,7 +866,8 @@ class GonioService:
         now = time.monotonic()
         cached = self._finishing_cache  # once: a completion may clear it from another thread
         if cached is None or now - cached[0] > 5.0:
-            cached = (now, finishing_estimate(self.store.list_jobs([JobState.COMPLETED.value])))
+            completed = self.store.list_jobs([JobState.COMPLETED.value])
+            cached = (now, finishing_estimate(completed, most_channels(self.desc)))
             self._finishing_cache = cached
         return cached[1]
 

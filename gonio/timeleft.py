@@ -12,14 +12,22 @@ lab page's default scan as measured in docs/library.md.
 from __future__ import annotations
 
 import statistics
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 from gonio.store import JobRow
 
 FINISHING_FALLBACK_S = 7.5
-"""Finishing time of the lab page's default scan on the simulated rig, seconds: 7.1-7.4 s
-measured with ``bench/bench_first_scan.py`` (docs/library.md), the upper end rounded up."""
+"""Finishing time of the lab page's default scan on the simulated rig (3 channels), seconds:
+7.1-7.4 s measured with ``bench/bench_first_scan.py`` (docs/library.md), the upper end rounded
+up."""
+
+FALLBACK_S_PER_CHANNEL = 0.1
+"""Seconds the fallback adds for each sensor channel beyond three: the reconstruction, the
+colour and the result file grow with the channels. The same scan on the simulated 31-band
+spectrometers finished in 9.5-9.9 s against 6.2-7.1 s on the RGB rig (``bench/bench_first_scan.py
+--runs 3 --keep-cache [--material metallic-blue-paint]``, docs/library.md): about 0.1 s a band."""
 
 RECENT_SCANS = 3
 """How many of the last completed scans the estimate takes the median of: one slow finishing
@@ -34,18 +42,21 @@ class FinishingEstimate:
     source: str
 
 
-def finishing_estimate(completed: Sequence[JobRow]) -> FinishingEstimate:
+def finishing_estimate(completed: Sequence[JobRow], channels: int = 3) -> FinishingEstimate:
     """The finishing time to expect, from the completed jobs of the store (any order).
 
     Parameters
     ----------
     completed : the store's completed jobs; calibration jobs and summaries without a
         measured ``seconds`` are skipped (a calibration does not reconstruct).
+    channels : the most channels of the rig's sensors (:func:`most_channels`); used only
+        when no scan has finished yet.
 
     Returns
     -------
-    The median ``seconds`` of the newest :data:`RECENT_SCANS` completed scans, or
-    :data:`FINISHING_FALLBACK_S` when there is none.
+    The median ``seconds`` of the newest :data:`RECENT_SCANS` completed scans, or, when there
+    is none, :data:`FINISHING_FALLBACK_S` plus :data:`FALLBACK_S_PER_CHANNEL` for each channel
+    beyond three.
     """
     timed = sorted(
         (row.id, float(row.summary["seconds"])) for row in completed
@@ -54,14 +65,36 @@ def finishing_estimate(completed: Sequence[JobRow]) -> FinishingEstimate:
         and row.summary["seconds"] >= 0
     )[-RECENT_SCANS:]
     if not timed:
+        extra = max(0, channels - 3)
+        seconds = FINISHING_FALLBACK_S + FALLBACK_S_PER_CHANNEL * extra
+        more = (f" and {FALLBACK_S_PER_CHANNEL:g} s for each of {extra} channels beyond three"
+                if extra else "")
         return FinishingEstimate(
-            FINISHING_FALLBACK_S,
-            f"no scan has finished on this job store yet: {FINISHING_FALLBACK_S:g} s, the "
-            "default scan's measured finishing")
+            seconds,
+            f"no scan has finished on this job store yet: {seconds:g} s, the default scan's "
+            f"measured finishing{more}")
     ids = ", ".join(str(i) for i, _ in timed)
     seconds = statistics.median(s for _, s in timed)
     what = f"job {ids}'s finishing" if len(timed) == 1 else f"the median of jobs {ids}"
     return FinishingEstimate(seconds, f"{what} on this job store")
+
+
+def most_channels(rig: Any) -> int:
+    """The most channels any sensor of ``rig`` has (3 when none says).
+
+    Parameters
+    ----------
+    rig : a :class:`gonio.rigdescription.RigDescription` or a rig config (``sensors``, each
+        with ``channels``), or a job's stored rig (a dict of the same); what does not read
+        so (a rig stored by older code) counts as no sensor.
+    """
+    if isinstance(rig, Mapping):
+        sensors = rig.get("sensors")
+        lists = [s.get("channels") for s in sensors if isinstance(s, Mapping)] \
+            if isinstance(sensors, list) else []
+    else:
+        lists = [s.channels for s in getattr(rig, "sensors", None) or ()]
+    return max((len(c) for c in lists if isinstance(c, list | tuple)), default=3)
 
 
 def time_left(eta_s: float | None, basis_build_s: float | None, finishing_s: float,

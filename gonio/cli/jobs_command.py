@@ -178,7 +178,7 @@ def _show_job(args: argparse.Namespace, store: Any) -> int:
     from gonio.rigdescription import RigDescription
     from gonio.service_models import JobDetail
     from gonio.store import NotFound
-    from gonio.timeleft import QueuedRun, finishing_estimate, start_estimates
+    from gonio.timeleft import QueuedRun, finishing_estimate, most_channels, start_estimates
 
     if args.job_id is None:
         raise UsageError("jobs show needs a job id, e.g. 'gonio jobs show 3 --db jobs.sqlite'")
@@ -214,7 +214,8 @@ def _show_job(args: argparse.Namespace, store: Any) -> int:
     detail = JobDetail.from_row(
         row, max_angles, waiting,
         queue_position=store.queue_position(row.id) if queued else None,
-        finishing=(finishing_estimate(store.list_jobs(["completed"]))
+        finishing=(finishing_estimate(store.list_jobs(["completed"]),
+                                      most_channels(row.rig))
                    if active and row.kind != "calibration" else None), start=start)
     # A paused job waits for the user whether or not a process holds the store.
     interrupted = holder is None and row.state.value in ("running", "suspended",

@@ -682,14 +682,14 @@ def _local_finishing(args: argparse.Namespace, config: Any) -> Any:
     from gonio.daemon import STORE_FILE
     from gonio.paths import scan_data_dir
     from gonio.store import JobStore
-    from gonio.timeleft import finishing_estimate
+    from gonio.timeleft import finishing_estimate, most_channels
 
     db = args.db or (args.data_dir or scan_data_dir(config)) / STORE_FILE
     if not Path(db).is_file():
-        return finishing_estimate([])
+        return finishing_estimate([], most_channels(config))
     store = JobStore(db, durable=False)
     try:
-        return finishing_estimate(store.list_jobs(["completed"]))
+        return finishing_estimate(store.list_jobs(["completed"]), most_channels(config))
     finally:
         store.close()
 

@@ -637,3 +637,35 @@ def test_gonio_jobs_abort_of_a_job_left_being_finished_says_how_to_finish_it(
     assert main(["jobs", "abort", str(other), "--db", str(db)]) == 0
     out = capsys.readouterr().out
     assert f"job {other} aborted (0 of 4" in out and "being finished" not in out, out
+
+
+def test_the_recorded_finishing_time_includes_writing_the_result_file(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The status's finishing estimate (gonio.timeleft) is the summaries' ``seconds`` and
+    promises the result file too: the summary's time covers the write, which the file's own
+    ``seconds`` metric cannot (it is written before the write ends). A write slowed by 0.5 s,
+    as a slow disk or a 31-band result's larger file, shows in the summary and not the file."""
+    import gonio.results
+    from tests.unit.brdf.reconstruction.test_basis import small_basis
+
+    real_write = gonio.results.write_result
+
+    def slow_write(*args: Any, **kwargs: Any) -> Any:
+        out = real_write(*args, **kwargs)
+        time.sleep(0.5)
+        return out
+
+    monkeypatch.setattr(gonio.results, "write_result", slow_write)
+    _calibrated(tmp_path).store.close()
+    data = tmp_path / "d"
+    basis = small_basis()
+    svc = GonioService(JobStore(data / "gonio.sqlite"), MemRig(), data_dir=data,
+                       basis=BasisSupply(lambda: basis), fit_exports=False)
+    job = svc.submit(JobRequest(plan=UniformPlan(rotations=4, exposure=FAST))).id
+    _until_ended(svc, job)
+    row = svc.store.get_job(job)
+    assert row.state.value == "completed", row.reason
+    assert row.summary is not None
+    in_file = float(read_result(data / "results" / f"job-{job}.h5").metrics["seconds"])
+    assert float(row.summary["seconds"]) >= in_file + 0.5

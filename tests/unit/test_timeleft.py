@@ -12,6 +12,7 @@ from gonio.timeleft import (
     FINISHING_FALLBACK_S,
     QueuedRun,
     finishing_estimate,
+    most_channels,
     start_estimates,
     time_left,
 )
@@ -28,6 +29,32 @@ def test_no_finished_scan_gives_the_measured_default_and_says_so() -> None:
     est = finishing_estimate([_row(1, "calibration", {"seconds": 0.4}), _row(2, summary=None)])
     assert est.seconds == FINISHING_FALLBACK_S
     assert "no scan has finished" in est.source
+
+
+def test_before_any_scan_a_spectral_rig_expects_a_longer_finishing() -> None:
+    """31 bands finished in 9.5-9.9 s where the RGB rig's scan took 6.2-7.1 s (measured,
+    timeleft.FALLBACK_S_PER_CHANNEL): 7.5 s + 28 x 0.1 s = 10.3 s, and the source says so;
+    three channels or fewer keep the measured default."""
+    est = finishing_estimate([], channels=31)
+    assert est.seconds == pytest.approx(10.3)
+    assert est.source == ("no scan has finished on this job store yet: 10.3 s, the default "
+                          "scan's measured finishing and 0.1 s for each of 28 channels beyond "
+                          "three")
+    assert finishing_estimate([], channels=1).seconds == FINISHING_FALLBACK_S
+    # Once a scan has finished, its own time counts, whatever the channels.
+    assert finishing_estimate([_row(3, summary={"seconds": 4.0})], channels=31).seconds == 4.0
+
+
+def test_most_channels_reads_the_widest_sensor() -> None:
+    from types import SimpleNamespace
+
+    rig = SimpleNamespace(sensors=[SimpleNamespace(channels=("R", "G", "B")),
+                                   SimpleNamespace(channels=tuple(f"b{i}" for i in range(31)))])
+    assert most_channels(rig) == 31
+    assert most_channels(SimpleNamespace(sensors=[])) == 3
+    # A job's stored rig (JSON); one older code stored in another shape counts as none.
+    assert most_channels({"sensors": [{"channels": ["R", "G", "B", "NIR"]}]}) == 4
+    assert most_channels({}) == most_channels({"sensors": "x"}) == 3
 
 
 def test_one_scan_gives_its_own_finishing() -> None:

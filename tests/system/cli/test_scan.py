@@ -255,6 +255,20 @@ def test_a_sim_dry_run_states_the_calibration_the_scan_runs_first(
     assert "calibrated on a white reference" in capsys.readouterr().out
 
 
+def test_a_dry_run_on_a_spectral_rig_times_its_longer_first_finishing(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Before any scan, the dry run timed a 31-band rig's finishing as the RGB rig's 7.5 s
+    (it took 9.5-9.9 s); it now adds 0.1 s a channel beyond three: 7.5 + 28 x 0.1 s."""
+    import json
+
+    assert main(["scan", "--sim", "--material", "metallic-blue-paint", "--dry-run", "--json",
+                 "--data-dir", str(tmp_path / "data"), "-o", os.devnull]) == 0
+    dr = json.loads(capsys.readouterr().out)
+    assert dr["finishing_s"] == pytest.approx(10.3), dr
+    assert "28 channels beyond three" in dr["finishing_source"], dr
+
+
 def test_an_adaptive_dry_run_states_its_cap_and_refuses_a_cap_below_the_start(
     capsys: pytest.CaptureFixture[str]
 ) -> None:
