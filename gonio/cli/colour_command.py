@@ -235,7 +235,12 @@ def _diff_table(diff: Any) -> str:
     for row, g in zip(diff.rows(), diff.geometries, strict=True):
         lines.append(f"{g.instrument:<10}  {g.name:<8}  {g.azimuth_deg:>7g}  {row['dL']:8.2f} "
                      f"{row['da']:8.2f} {row['db']:8.2f} {row['dE00']:8.2f}")
-    lines.append(f"max dE00 {diff.de00.max():.2f}, mean {diff.de00.mean():.2f}")
+    per = diff.by_instrument()
+    lines.append(f"max dE00 {diff.de00.max():.2f}, mean {diff.mean_de00:.2f} over the "
+                 f"{diff.distinct_geometries} distinct geometries")
+    if len(per) > 1:  # shared angles are in both instruments' rows; each set has its own mean
+        lines.extend(f"  {name}: max {p['max_dE00']:.2f}, mean {p['mean_dE00']:.2f} over its "
+                     f"{p['geometries']} geometries" for name, p in per.items())
     return "\n".join(lines)
 
 

@@ -455,6 +455,30 @@ class ColourDifference:
                 f"azimuth: {which}; a geometry is the same light and sensor direction "
                 f"whichever instrument names it")
 
+    @property
+    def mean_de00(self) -> float:
+        """Mean CIEDE2000 over the distinct geometries compared: each set of angles once.
+
+        The default report holds MA98's and BYK-mac's geometries, six of them the same light
+        and sensor directions; a mean over the rows would count those twice."""
+        by_key = {_angles(g): float(d) for g, d in zip(self.geometries, self.de00, strict=True)}
+        return float(np.mean(list(by_key.values())))
+
+    @property
+    def distinct_geometries(self) -> int:
+        """How many distinct sets of angles the rows compare (:attr:`mean_de00`'s count)."""
+        return len({_angles(g) for g in self.geometries})
+
+    def by_instrument(self) -> dict[str, dict[str, float | int]]:
+        """Per instrument of the sample's rows: ``max_dE00``, ``mean_dE00`` and the number of
+        ``geometries`` (what a lab quotes for one instrument's set of angles)."""
+        out: dict[str, dict[str, float | int]] = {}
+        for name in dict.fromkeys(g.instrument for g in self.geometries):
+            de = self.de00[[g.instrument == name for g in self.geometries]]
+            out[name] = {"max_dE00": float(de.max()), "mean_dE00": float(de.mean()),
+                         "geometries": int(de.size)}
+        return out
+
     def rows(self) -> list[dict[str, Any]]:
         out = []
         theirs = self.standard_instruments or tuple(g.instrument for g in self.geometries)
@@ -472,7 +496,8 @@ class ColourDifference:
     def as_dict(self) -> dict[str, Any]:
         out = {"sample": self.sample_name, "standard": self.standard_name,
                "conditions": self.conditions.as_dict(), "rows": self.rows(),
-               "max_dE00": float(self.de00.max()), "mean_dE00": float(self.de00.mean())}
+               "max_dE00": float(self.de00.max()), "mean_dE00": self.mean_de00,
+               "instruments": self.by_instrument()}
         if self.note is not None:
             out["note"] = self.note
         return out

@@ -172,6 +172,14 @@ def test_against_a_result_and_a_stored_csv(files: dict[str, Path], tmp_path: Pat
     expected = colour.delta_E(_expected_lab(RGB * 0.9), _expected_lab(RGB), method="CIE 2000")
     assert diff["max_dE00"] == pytest.approx(expected, abs=1e-3)
     assert diff["sample"] == "batch 2" and diff["standard"] == "panel"
+    # The table's summary: the mean over MA98's 11 geometries (BYK-mac's 6 are among them,
+    # counted once), then each instrument's own.
+    assert main(["colour", str(files["cal2"]), "--against", str(files["cal"])]) == 0
+    text = capsys.readouterr().out
+    assert f"max dE00 {expected.max():.2f}, mean {expected.mean():.2f} over the 11 distinct " \
+        "geometries" in text, text
+    assert "  MA98: max" in text and "over its 11 geometries" in text, text
+    assert "  BYK-mac: max" in text and "over its 6 geometries" in text, text
     std = tmp_path / "std.csv"
     assert main(["colour", str(files["cal"]), "--csv", str(std)]) == 0
     capsys.readouterr()

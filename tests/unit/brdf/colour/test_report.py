@@ -246,6 +246,33 @@ def test_compare_across_instruments_meets_at_the_same_angles() -> None:
     assert all(r["standard_instrument"] == "MA98" for r in same.as_dict()["rows"])
 
 
+def test_the_mean_difference_counts_a_geometry_two_instruments_share_once() -> None:
+    """The default report holds MA98's 11 in-plane geometries and BYK-mac's 6, all six of
+    them MA98's too: the mean over the rows counted those twice. The mean is over the 11
+    distinct geometries, and each instrument gets its own maximum and mean (CIEDE2000 from
+    colour-science on the CIELAB of the MA98-only and BYK-mac-only reports)."""
+    def reports(instruments: list[str]) -> tuple[np.ndarray, np.ndarray]:
+        a = colour_report(spectral_table(RED, gloss=0.3), BANDS, instruments=instruments)
+        b = colour_report(spectral_table(RED * 0.8, gloss=0.1), BANDS, instruments=instruments)
+        assert a.lab is not None and b.lab is not None
+        return a.lab, b.lab
+    ma98 = colour.delta_E(*reports(["MA98"]), method="CIE 2000")
+    byk = colour.delta_E(*reports(["BYK-mac"]), method="CIE 2000")
+    d = compare(colour_report(spectral_table(RED, gloss=0.3), BANDS),
+                colour_report(spectral_table(RED * 0.8, gloss=0.1), BANDS))
+    assert d.de00.size == ma98.size + byk.size == 17  # every instrument's rows, as before
+    assert d.distinct_geometries == ma98.size == 11
+    assert d.mean_de00 == pytest.approx(float(np.mean(ma98)))
+    assert d.mean_de00 != pytest.approx(float(np.mean(np.concatenate([ma98, byk]))))
+    summary = d.as_dict()
+    assert summary["mean_dE00"] == pytest.approx(float(np.mean(ma98)))
+    assert summary["instruments"] == {
+        "MA98": {"max_dE00": pytest.approx(float(ma98.max())),
+                 "mean_dE00": pytest.approx(float(ma98.mean())), "geometries": 11},
+        "BYK-mac": {"max_dE00": pytest.approx(float(byk.max())),
+                    "mean_dE00": pytest.approx(float(byk.mean())), "geometries": 6}}
+
+
 def test_compare_with_no_shared_geometry_says_what_each_holds() -> None:
     sample = colour_report(spectral_table(RED), BANDS, instruments=["MA98"])
     turned = colour_report(spectral_table(RED), BANDS, instruments=["MA68"], azimuths_deg=[30])
