@@ -460,8 +460,12 @@ class ColourDifference:
         """Mean CIEDE2000 over the distinct geometries compared: each set of angles once.
 
         The default report holds MA98's and BYK-mac's geometries, six of them the same light
-        and sensor directions; a mean over the rows would count those twice."""
-        by_key = {_angles(g): float(d) for g, d in zip(self.geometries, self.de00, strict=True)}
+        and sensor directions; a mean over the rows would count those twice. Where two rows
+        of the same angles differ (a standard CSV whose instruments read apart), the first
+        row's, in the sample report's order, counts."""
+        by_key: dict[tuple[float, float, float], float] = {}
+        for g, d in zip(self.geometries, self.de00, strict=True):
+            by_key.setdefault(_angles(g), float(d))
         return float(np.mean(list(by_key.values())))
 
     @property
