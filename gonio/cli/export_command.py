@@ -1,7 +1,8 @@
 """``gonio export RESULT.h5 --format FORMAT -o FILE [--with-mesh] [--overwrite]``: a result in
 a renderer's format, with a report of what the file is (specimen, simulated or measured, the
 fitted model's rendered difference from the reconstruction, warnings; docs/export.md). An
-existing output file is replaced only with ``--overwrite``."""
+existing output file is replaced only with ``--overwrite``; an output that is a folder, or whose
+suffix is another format's, is refused before anything is fitted."""
 
 from __future__ import annotations
 
