@@ -33,7 +33,7 @@ def write_atomically(path: str | os.PathLike[str], data: bytes | str, *,
     ------
     OSError
         The file could not be written (``errno.ENOSPC`` on a full disk); ``path`` is as it was
-        and no temporary file is left.
+        and no temporary file is left. Its ``filename`` is ``path``, not the temporary's.
     """
     out = Path(path)
     # One temporary name per writer: two writers of the same file never share one.
@@ -45,9 +45,13 @@ def write_atomically(path: str | os.PathLike[str], data: bytes | str, *,
             fh.flush()
             os.fsync(fh.fileno())
         os.replace(tmp, out)
-    except BaseException:
+    except BaseException as exc:
         with contextlib.suppress(OSError):
             tmp.unlink()
+        if isinstance(exc, OSError) and exc.filename in (str(tmp), tmp):
+            # The caller named ``out``; an error naming the temporary ("x.gltf.3f2a9c.part:
+            # Permission denied") names a file nobody asked for.
+            exc.filename, exc.filename2 = str(out), None
         raise
     if sync_dir:
         with contextlib.suppress(OSError):  # not every file system lets a folder be synced

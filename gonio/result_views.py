@@ -16,9 +16,9 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
-from gonio.jobstates import JobState
+from gonio.jobstates import FINISHED_STATES, JobState
 from gonio.service_models import NotFound, job_row
-from gonio.store import JobStore
+from gonio.store import JobRow, JobStore
 
 if TYPE_CHECKING:  # HDF5 and the figures load with the first result served
     from gonio.result_cache import ResultCache
@@ -56,6 +56,15 @@ def warnings_path(export: Path) -> Path:
     return export.with_name(export.name + ".warnings.json")
 
 
+def _no_result(row: JobRow) -> str:
+    """Why job ``row`` has no result: still on its way, or ended without one (an aborted job
+    was said to have "no result yet", which promises one)."""
+    if row.state in FINISHED_STATES:
+        why = f": {row.reason}" if row.reason else ""
+        return f"job {row.id} ended {row.state.value}{why}, without a result"
+    return f"job {row.id} has no result yet (it is {row.state.value})"
+
+
 class ResultViews:
     """The results of one job store's jobs, read for serving.
 
@@ -79,7 +88,7 @@ class ResultViews:
         directory (an absolute one, from a foreign store, is taken as it is)."""
         row = job_row(self.store, job_id)
         if not row.result_path:
-            raise NotFound(f"job {job_id} has no result yet (it is {row.state.value})")
+            raise NotFound(_no_result(row))
         return self.data_dir / row.result_path
 
     def rebuild_hint(self, job_id: int) -> str:
@@ -123,7 +132,7 @@ class ResultViews:
     def metrics(self, job_id: int) -> dict[str, Any]:
         row = job_row(self.store, job_id)
         if row.summary is None:
-            raise NotFound(f"job {job_id} has no result yet (it is {row.state.value})")
+            raise NotFound(_no_result(row))
         from gonio.figures import headline_error
 
         out = dict(row.summary)

@@ -1,7 +1,8 @@
 """``gonio export RESULT.h5 --format FORMAT -o FILE [--with-mesh] [--overwrite]``: a result in
 a renderer's format, with a report of what the file is (specimen, simulated or measured, the
 fitted model's rendered difference from the reconstruction, warnings; docs/export.md). An
-existing output file is replaced only with ``--overwrite``."""
+existing output file is replaced only with ``--overwrite``; an output that is a folder, or whose
+suffix is another format's, is refused before anything is fitted."""
 
 from __future__ import annotations
 
@@ -54,6 +55,21 @@ def default_output(result: Path, fmt: str) -> Path:
     return result.with_suffix(suffix)
 
 
+def _check_suffix(out: Path, fmt: str) -> None:
+    """Refuse an ``-o`` whose suffix is another format's (``-f gltf -o felt.mtlx`` wrote glTF
+    JSON that a MaterialX reader then fails on); a suffix of no gonio format is the lab's own.
+    """
+    from gonio.export import FORMATS
+
+    suffix = out.suffix.lower()
+    if suffix and suffix != FORMATS[fmt] and suffix in FORMATS.values():
+        theirs = ", ".join(f for f, s in FORMATS.items() if s == suffix)
+        raise UsageError(f"-o {out} has the suffix of the {theirs} format, but --format is "
+                         f"{fmt}, whose files end in {FORMATS[fmt]}: name it "
+                         f"{out.with_suffix(FORMATS[fmt]).name} or choose the format its name "
+                         "says (nothing was written)")
+
+
 def run(args: argparse.Namespace) -> int:
     from gonio.export import result_fits, write_export
 
@@ -72,6 +88,12 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"-o {out} is the result file itself; choose another output name")
     if not out.parent.is_dir():
         raise UsageError(f"folder {out.parent} does not exist; create it or choose another -o")
+    if out.is_dir():
+        # Refused as "already exists ... --overwrite", which then failed after the fit naming
+        # a temporary file.
+        raise UsageError(f"-o {out} is a folder; give a file name in it, e.g. -o "
+                         f"{default_output(out / result.name, args.fmt)}")
+    _check_suffix(out, args.fmt)
     if args.with_mesh and args.fmt != "gltf":
         raise UsageError("--with-mesh applies to --format gltf only")
     if not args.overwrite:

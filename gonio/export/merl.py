@@ -52,6 +52,7 @@ from gonio.brdf.pictures.render import TableLookup
 from gonio.brdf.tables import geometry as geo
 from gonio.brdf.tables import metrics as tmetrics
 from gonio.brdf.tables.table import BRDFTable
+from gonio.export.metadata import TWOFOLD_WARN
 
 #: Stored for bins whose light or view is below the horizon (or that hold no value).
 BELOW_HORIZON = -1.0
@@ -98,10 +99,17 @@ def sidecar_path(path: str | os.PathLike[str]) -> Path:
 def merl_sidecar(table: BRDFTable, provenance: Mapping[str, Any]) -> dict[str, Any]:
     """The sidecar's content: ``provenance`` plus what the MERL file is and what it lost."""
     lost = anisotropy_lost(table)
+    asym = (provenance.get("symmetry") or {}).get("twofold_asymmetry")
+    # The glTF and MaterialX principled models are twofold symmetric: for a result that is
+    # not, they lose what differs at a half turn too, and only the table and factored keep it.
+    keep = ("use the 'table' or 'factored' export to keep it (the result is not twofold "
+            f"symmetric, log RMSE {asym:.3f} to its half-turn average, which the gltf and mtlx "
+            "principled models cannot show either)"
+            if isinstance(asym, int | float) and asym > TWOFOLD_WARN else
+            "use the gltf, mtlx or table export to keep it")
     note = (f"the reconstruction is anisotropic (log RMSE {lost:.3f} to its azimuthal "
             "average); this MERL file holds only the azimuthal average, so a brushed or "
-            "woven look is gone: use the gltf, mtlx or table export to keep it"
-            if lost > ANISOTROPY_WARN else None)
+            f"woven look is gone: {keep}" if lost > ANISOTROPY_WARN else None)
     out = json.loads(json.dumps(dict(provenance), default=str))
     out["merl"] = {
         "layout": "MERL .binary (Matusik et al. 2003): int32 dims 90 90 180, then float64 R, G, "

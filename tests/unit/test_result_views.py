@@ -39,6 +39,24 @@ def test_jobs_without_a_result_say_what_state_they_are_in(views: ResultViews) ->
         views.metrics(queued.id)
 
 
+def test_a_job_that_ended_without_a_result_is_not_said_to_have_none_yet(
+    views: ResultViews,
+) -> None:
+    """GET /jobs/3/export of an aborted job said "job 3 has no result yet (it is aborted)":
+    "yet" promises one. A finished job without a result says how it ended, and why."""
+    for state, reason in ((JobState.ABORTED, None), (JobState.FAILED, "stage fault: E12")):
+        job = views.store.create_job(kind="uniform", specimen="s", plan={}, rig={})
+        views.store.set_state(job.id, state.value, reason=reason)
+        for ask in (views.result, views.metrics):
+            with pytest.raises(NotFound) as info:
+                ask(job.id)
+            said = str(info.value)
+            assert "yet" not in said and f"job {job.id} ended {state.value}" in said, said
+            assert reason is None or reason in said, said
+    with pytest.raises(NotFound, match="ended aborted"):  # what the export route says
+        views.export(job.id - 1, "gltf")
+
+
 def test_result_paths_are_relative_to_the_data_directory(views: ResultViews) -> None:
     job = _completed(views.store, "results/job-1.h5", {})
     assert views.result_path(job) == views.data_dir / "results" / "job-1.h5"

@@ -285,3 +285,42 @@ def test_an_existing_output_is_kept_unless_overwrite_says_to_replace_it(
     assert not merl.exists()
     assert main(["export", str(result), "-f", "gltf", "-o", str(other), "--overwrite"]) == 0
     assert other.read_bytes()[:1] == b"{"  # the glTF JSON
+
+
+def test_an_output_that_is_a_folder_is_refused_saying_so(
+    result: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """`-o FOLDER` was refused as "already exists ... add --overwrite", and with --overwrite
+    failed after the fit naming a temporary "FOLDER.305855233730.part: Is a directory"."""
+    folder = tmp_path / "exports"
+    folder.mkdir()
+    for extra in ([], ["--overwrite"]):
+        assert main(["export", str(result), "-f", "gltf", "-o", str(folder), *extra]) == 2
+        err = capsys.readouterr().err
+        assert f"{folder} is a folder" in err and ".part" not in err, err
+    assert list(folder.iterdir()) == [] and sorted(p.name for p in tmp_path.iterdir()) == [
+        "exports"]
+
+
+@pytest.mark.parametrize(("fmt", "name"), [("gltf", "felt.mtlx"), ("merl", "felt.gltf"),
+                                           ("mtlx", "felt.binary"), ("table", "felt.gltf")])
+def test_an_output_with_another_formats_suffix_is_refused(
+    result: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], fmt: str, name: str
+) -> None:
+    """`-f gltf -o felt.mtlx` wrote glTF JSON into a file named .mtlx without a word, which a
+    MaterialX reader then fails on; the suffixes are those of docs/file-formats.md."""
+    want = {"gltf": ".gltf", "merl": ".binary", "mtlx": ".mtlx", "table": ".npz"}[fmt]
+    assert main(["export", str(result), "-f", fmt, "-o", str(tmp_path / name)]) == 2
+    err = capsys.readouterr().err
+    assert name in err and want in err, err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_an_output_of_another_suffix_or_none_is_written(
+    result: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Only the suffix of another gonio format is refused: a name of the lab's own is kept."""
+    for name in ("felt", "felt.json"):
+        assert main(["export", str(result), "-f", "gltf", "-o", str(tmp_path / name)]) == 0
+        assert json.loads((tmp_path / name).read_text())["asset"]["version"] == "2.0"
+    capsys.readouterr()

@@ -75,3 +75,20 @@ def test_bad_files_and_tables_are_refused(tmp_path: Path) -> None:
     mono = bm.tabulate(bm.Lambert(0.5, channels=("Y",)), np.float64)
     with pytest.raises(merl.MerlError, match="three channels"):
         merl.write_merl(mono, tmp_path / "y.binary")
+
+
+def test_the_sidecar_of_a_result_without_twofold_symmetry_does_not_send_it_to_gltf() -> None:
+    """A full-turn scan of a tilted facet (twofold asymmetry 0.136) was told "use the gltf,
+    mtlx or table export to keep it" in its MERL sidecar, while its glTF and MaterialX
+    exports warned that they show only the half-turn average: only the table and the
+    factored model keep what differs at a half turn (docs/export.md, ``symmetry``)."""
+    from gonio.brdf.materials import library
+
+    table = bm.tabulate(library.get_material("brushed-metal-003"))  # anisotropic
+    told = {}
+    for asym in (0.0, 0.136):
+        side = merl.merl_sidecar(table, {"symmetry": {"twofold_asymmetry": asym}})
+        told[asym] = " ".join(side["warnings"])
+    assert "use the gltf, mtlx or table export" in told[0.0]
+    assert "use the gltf, mtlx or table export" not in told[0.136], told[0.136]
+    assert "'table' or 'factored' export" in told[0.136] and "not twofold" in told[0.136]
