@@ -146,8 +146,9 @@ class JobDetail(JobInfo):
     reconstruction_s: float | None = Field(
         default=None, description="active jobs: estimated seconds of finishing (basis load, "
         "reconstruction, export fits, the result file), the median measured 'seconds' of the "
-        "last 3 completed scans of this daemon, or before any 7.5 s (the default scan's, "
-        "measured) plus 0.1 s a sensor channel beyond three; see reconstruction_estimate")
+        "last 3 completed scans of this daemon with the rig's sensor channels, or before any "
+        "7.5 s (the default scan's, measured) plus 0.1 s a sensor channel beyond three; see "
+        "reconstruction_estimate")
     reconstruction_estimate: str | None = Field(
         default=None, description="what reconstruction_s rests on, in words")
     time_left_s: float | None = Field(

@@ -49,34 +49,40 @@ def finishing_estimate(completed: Sequence[JobRow], channels: int = 3) -> Finish
     ----------
     completed : the store's completed jobs; calibration jobs and summaries without a
         measured ``seconds`` are skipped (a calibration does not reconstruct).
-    channels : the most channels of the rig's sensors (:func:`most_channels`); used only
-        when no scan has finished yet.
+    channels : the most channels of the rig's sensors (:func:`most_channels`): only scans
+        whose stored rig had as many count (a 31-band scan finishes about 3 s later than an
+        RGB one; one store can hold both when a lab swaps sensors), and with none, the
+        fallback grows with them.
 
     Returns
     -------
-    The median ``seconds`` of the newest :data:`RECENT_SCANS` completed scans, or, when there
-    is none, :data:`FINISHING_FALLBACK_S` plus :data:`FALLBACK_S_PER_CHANNEL` for each channel
-    beyond three.
+    The median ``seconds`` of the newest :data:`RECENT_SCANS` completed scans with that many
+    channels, or, when there is none, :data:`FINISHING_FALLBACK_S` plus
+    :data:`FALLBACK_S_PER_CHANNEL` for each channel beyond three.
     """
-    timed = sorted(
-        (row.id, float(row.summary["seconds"])) for row in completed
-        if row.kind != "calibration" and row.summary
-        and isinstance(row.summary.get("seconds"), int | float)
-        and row.summary["seconds"] >= 0
-    )[-RECENT_SCANS:]
+    scans = [(row.id, float(row.summary["seconds"]), most_channels(row.rig))
+             for row in completed
+             if row.kind != "calibration" and row.summary
+             and isinstance(row.summary.get("seconds"), int | float)
+             and row.summary["seconds"] >= 0]
+    alike = [(i, s) for i, s, c in scans if c == channels]
+    timed = sorted(alike)[-RECENT_SCANS:]
+    other = (f"; scans read with other than {channels} channels are not counted"
+             if len(alike) < len(scans) else "")
     if not timed:
         extra = max(0, channels - 3)
         seconds = FINISHING_FALLBACK_S + FALLBACK_S_PER_CHANNEL * extra
         more = (f" and {FALLBACK_S_PER_CHANNEL:g} s for each of {extra} channels beyond three"
                 if extra else "")
+        which = f"scan with {channels} channels" if other else "scan"
         return FinishingEstimate(
             seconds,
-            f"no scan has finished on this job store yet: {seconds:g} s, the default scan's "
-            f"measured finishing{more}")
+            f"no {which} has finished on this job store yet: {seconds:g} s, the default "
+            f"scan's measured finishing{more}")
     ids = ", ".join(str(i) for i, _ in timed)
     seconds = statistics.median(s for _, s in timed)
     what = f"job {ids}'s finishing" if len(timed) == 1 else f"the median of jobs {ids}"
-    return FinishingEstimate(seconds, f"{what} on this job store")
+    return FinishingEstimate(seconds, f"{what} on this job store{other}")
 
 
 def most_channels(rig: Any) -> int:

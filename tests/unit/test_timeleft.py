@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Any
 
 import pytest
@@ -41,8 +42,26 @@ def test_before_any_scan_a_spectral_rig_expects_a_longer_finishing() -> None:
                           "scan's measured finishing and 0.1 s for each of 28 channels beyond "
                           "three")
     assert finishing_estimate([], channels=1).seconds == FINISHING_FALLBACK_S
-    # Once a scan has finished, its own time counts, whatever the channels.
-    assert finishing_estimate([_row(3, summary={"seconds": 4.0})], channels=31).seconds == 4.0
+
+
+
+def test_only_scans_read_with_as_many_channels_count() -> None:
+    """One store can hold RGB and 31-band scans (a lab swaps sensors; `gonio scan --sim` and
+    `--material metallic-blue-paint` share a data directory): each rig's estimate takes the
+    scans with its own channel count, and says the others were left out."""
+    def scan(job_id: int, seconds: float, channels: int) -> JobRow:
+        return replace(_row(job_id, summary={"seconds": seconds}),
+                       rig={"sensors": [{"channels": [f"c{i}" for i in range(channels)]}]})
+    rows = [scan(1, 10.0, 31), scan(2, 6.0, 3), scan(3, 9.0, 31), scan(4, 7.0, 3)]
+    spectral = finishing_estimate(rows, channels=31)
+    assert spectral.seconds == pytest.approx(9.5)  # jobs 1 and 3: (10 + 9) / 2
+    assert spectral.source == ("the median of jobs 1, 3 on this job store; scans read with "
+                               "other than 31 channels are not counted")
+    assert finishing_estimate(rows, channels=3).seconds == pytest.approx(6.5)  # jobs 2, 4
+    # None with the rig's channels: the fallback, which does not claim no scan finished.
+    none = finishing_estimate(rows[1:2], channels=31)
+    assert none.seconds == pytest.approx(10.3)
+    assert none.source.startswith("no scan with 31 channels has finished on this job store")
 
 
 def test_most_channels_reads_the_widest_sensor() -> None:

@@ -269,6 +269,37 @@ def test_a_dry_run_on_a_spectral_rig_times_its_longer_first_finishing(
     assert "28 channels beyond three" in dr["finishing_source"], dr
 
 
+def test_a_store_holding_rgb_and_spectral_scans_times_each_rig_by_its_own(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The RGB simulated rig and the 31-band one share a data directory by default; each dry
+    run's finishing now rests on the scans read with its own channels (the stored rigs'),
+    not on the median of both kinds."""
+    import json
+
+    from gonio.store import JobStore
+
+    data = ["--data-dir", str(tmp_path / "data")]
+    spectral = ["--material", "metallic-blue-paint"]
+    for extra, out in (([], "rgb.h5"), (spectral, "spectral.h5")):
+        assert main(["scan", "--sim", *extra, "--rotations", "2", "--no-export-fits",
+                     "--no-progress", *data, "-o", str(tmp_path / out)]) == 0
+    capsys.readouterr()
+    scans = [r for r in JobStore(tmp_path / "data" / "gonio.sqlite", durable=False)
+             .list_jobs(["completed"]) if r.kind != "calibration"]
+    assert len(scans) == 2 and all(r.summary is not None for r in scans)
+    rgb, band = sorted(scans, key=lambda r: r.id)  # scanned in that order
+    for extra, job, channels in (([], rgb, 3), (spectral, band, 31)):
+        assert main(["scan", "--sim", *extra, "--dry-run", "--json", *data,
+                     "-o", os.devnull]) == 0
+        dr = json.loads(capsys.readouterr().out)
+        assert job.summary is not None
+        assert dr["finishing_s"] == pytest.approx(float(job.summary["seconds"])), dr
+        assert dr["finishing_source"] == (
+            f"job {job.id}'s finishing on this job store; scans read with other than "
+            f"{channels} channels are not counted"), dr
+
+
 def test_an_adaptive_dry_run_states_its_cap_and_refuses_a_cap_below_the_start(
     capsys: pytest.CaptureFixture[str]
 ) -> None:
