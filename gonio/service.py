@@ -152,6 +152,18 @@ def _on_an_event_loop() -> bool:
     return True
 
 
+def _plan_exposure(row: JobRow) -> float | None:
+    """The exposure a job's stored plan reads at, seconds, or None when it records none."""
+    at = (row.plan.get("exposure") or {}).get("exposure_s")
+    return float(at) if isinstance(at, int | float) else None
+
+
+def _measures_at(row: JobRow, exposure_s: float) -> bool:
+    """Whether job ``row``'s plan reads at ``exposure_s`` (an unrecorded exposure does not)."""
+    at = _plan_exposure(row)
+    return at is not None and math.isclose(at, exposure_s, rel_tol=1e-6)
+
+
 class GonioService:
     """Jobs, control and events over one rig.
 
@@ -646,28 +658,32 @@ class GonioService:
         if why is not None:
             raise PlanError(why)
 
-    def calibration_ahead(self, priority: int = 0,
-                          exposure_s: float | None = None) -> tuple[bool, str]:
-        """Whether a calibration job runs before a scan queued now at ``priority`` (one under
-        way or paused, or one queued at that priority or above: the queue takes the higher
-        priority first, and the earlier job among equals), at ``exposure_s`` when given; and,
-        when none does but one is queued behind, the words that say so and what to do (else
-        "")."""
+    def _calibration_jobs(self, priority: int) -> tuple[list[JobRow], list[JobRow]]:
+        """The unfinished calibration jobs in the store's order, split: those that run before
+        a scan queued now at ``priority`` (under way or paused, or queued at that priority or
+        above: the queue takes the higher priority first, the earlier job among equals), and
+        those queued behind it. The one reading of the queue :meth:`calibration_ahead` and
+        :meth:`exposure_ahead_refusal` judge."""
+        before: list[JobRow] = []
         behind: list[JobRow] = []
         for row in self.store.list_jobs([JobState.QUEUED.value,
                                          *(st.value for st in ACTIVE_STATES)]):
-            if row.kind != "calibration":
-                continue
-            if exposure_s is not None:
-                at = (row.plan.get("exposure") or {}).get("exposure_s")
-                if not (isinstance(at, int | float)
-                        and math.isclose(at, exposure_s, rel_tol=1e-6)):
-                    continue
-            if row.state is not JobState.QUEUED or row.priority >= priority:
-                return True, ""
-            behind.append(row)
-        if not behind:
-            return False, ""
+            if row.kind == "calibration":
+                runs_first = row.state is not JobState.QUEUED or row.priority >= priority
+                (before if runs_first else behind).append(row)
+        return before, behind
+
+    def calibration_ahead(self, priority: int = 0,
+                          exposure_s: float | None = None) -> tuple[bool, str]:
+        """Whether a calibration job runs before a scan queued now at ``priority``
+        (:meth:`_calibration_jobs`), at ``exposure_s`` when given; and, when none does but one
+        is queued behind, the words that say so and what to do (else "")."""
+        before, behind = self._calibration_jobs(priority)
+        if exposure_s is not None:
+            before = [r for r in before if _measures_at(r, exposure_s)]
+            behind = [r for r in behind if _measures_at(r, exposure_s)]
+        if before or not behind:
+            return bool(before), ""
         cal = behind[0]
         return False, (f" (calibration job {cal.id} is queued at priority {cal.priority}, below "
                        f"this scan's {priority}: it would run after the scan; queue the scan "
@@ -727,19 +743,11 @@ class GonioService:
 
         A scan queued behind ``gonio serve --sim``'s calibration job at another exposure was
         accepted, waited, and failed "not started" once that calibration was in effect."""
-        ahead: list[tuple[int, float]] = []
-        for row in self.store.list_jobs([JobState.QUEUED.value,
-                                         *(st.value for st in ACTIVE_STATES)]):
-            if row.kind != "calibration" or (row.state is JobState.QUEUED
-                                             and row.priority < priority):
-                continue
-            at = (row.plan.get("exposure") or {}).get("exposure_s")
-            if not isinstance(at, int | float) or math.isclose(at, exposure_s, rel_tol=1e-6):
-                return None
-            ahead.append((row.id, float(at)))
-        if not ahead:
+        before, _ = self._calibration_jobs(priority)
+        if not before or any(_plan_exposure(r) is None or _measures_at(r, exposure_s)
+                             for r in before):
             return None
-        job, at = ahead[0]
+        job, at = before[0].id, _plan_exposure(before[0])
         return (f"this plan reads at exposure {exposure_s:g} s and calibration job {job}, "
                 f"which runs before it, measures at {at:g} s: counts are not rescaled between "
                 "exposures, so the scan would be refused when it starts; scan at "
