@@ -31,6 +31,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 
 from gonio.atomicfile import write_atomically
 from gonio.hal import PairSpec
+from gonio.paths import CALIBRATION_NAME
 from gonio.wording import counted
 
 if TYPE_CHECKING:
@@ -402,8 +403,9 @@ def _first_error(exc: ValidationError) -> str:
     return f"{loc}: {msg}" if loc else msg
 
 
-CALIBRATION_FILE = "calibration.json"
-"""Name of the latest calibration job's factors inside a data directory."""
+CALIBRATION_FILE = CALIBRATION_NAME
+"""Name of the latest calibration job's factors inside a data directory (named in
+:mod:`gonio.paths`, which looks for it when it picks a rig's data directory)."""
 
 
 MIN_REFERENCE_FRACTION = 1e-5

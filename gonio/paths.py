@@ -4,7 +4,7 @@
 ``~/.local/share/gonio``). Inside it:
 
 * ``scans/<rig>-<geometry hash>/``: the data directory of ``gonio scan`` for one rig geometry
-  (job store ``gonio.sqlite``, ``results/job-<id>.h5``, ``calibration.json``);
+  and sensor set (job store ``gonio.sqlite``, ``results/job-<id>.h5``, ``calibration.json``);
 * ``serve-sim/``: the data directory of ``gonio serve --sim``;
 * ``library/``: the user library of imported tables, unless ``$GONIO_LIBRARY_DIR`` names
   another (``gonio.brdf.materials.measured.user_library_dir``).
@@ -32,25 +32,75 @@ def user_data_root() -> Path:
     return Path(env) if env else Path(platformdirs.user_data_dir("gonio"))
 
 
-def geometry_key(rig_config: Any) -> str:
-    """Short stable hash of a rig's measured pairs and device directions.
-
-    A calibration is only valid for the geometry it was measured on, so ``gonio scan`` keeps
-    one data directory per geometry: moving a device or changing the pairs starts a fresh one.
-    """
-    pairs = [
+def _pair_geometry(rig_config: Any) -> list[list[Any]]:
+    """Each measured pair's names and its light's and sensor's directions (degrees)."""
+    return [
         [p.light, p.sensor,
          rig_config.light(p.light).theta_deg, rig_config.light(p.light).phi_deg,
          rig_config.sensor(p.sensor).theta_deg, rig_config.sensor(p.sensor).phi_deg]
         for p in rig_config.pair_list()
     ]
-    return hashlib.sha256(json.dumps(pairs).encode()).hexdigest()[:8]
+
+
+def geometry_key(rig_config: Any) -> str:
+    """Short stable hash of a rig's measured pairs, device directions and sensor channels.
+
+    A calibration is only valid for the geometry and the sensors it was measured with, so
+    ``gonio scan`` keeps one data directory per rig: moving a device, changing the pairs or
+    reading with other sensors (31-band spectrometers where RGB photodiodes were, as the
+    simulated rig does for a spectral material) starts a fresh one, and switching back finds
+    the old calibration instead of measuring it again.
+    """
+    sensors = sorted({p.sensor for p in rig_config.pair_list()})
+    channels = [[name, list(rig_config.sensor(name).channels)] for name in sensors]
+    doc = {"pairs": _pair_geometry(rig_config), "channels": channels}
+    return hashlib.sha256(json.dumps(doc).encode()).hexdigest()[:8]
+
+
+def legacy_geometry_key(rig_config: Any) -> str:
+    """The key of gonio before 2026-11-29: pairs and directions only, one data directory for
+    every sensor set of a geometry (:func:`scan_data_dir` still finds it)."""
+    return hashlib.sha256(json.dumps(_pair_geometry(rig_config)).encode()).hexdigest()[:8]
+
+
+def _rig_dir_name(rig_config: Any) -> str:
+    return re.sub(r"[^A-Za-z0-9_.-]+", "-", rig_config.rig.name).strip("-.") or "rig"
 
 
 def scan_data_dir(rig_config: Any) -> Path:
-    """Default data directory of ``gonio scan`` on ``rig_config`` (not created)."""
-    name = re.sub(r"[^A-Za-z0-9_.-]+", "-", rig_config.rig.name).strip("-.") or "rig"
-    return user_data_root() / "scans" / f"{name}-{geometry_key(rig_config)}"
+    """Default data directory of ``gonio scan`` on ``rig_config`` (not created).
+
+    ``scans/<rig>-<geometry_key>``. Until that folder exists, a folder of the legacy key
+    (:func:`legacy_geometry_key`) whose calibration fits the rig's sensors is used instead,
+    so a rig calibrated before the key held the sensors' channels keeps its calibration and
+    its jobs; a legacy folder calibrated for other sensors is left to them.
+    """
+    scans = user_data_root() / "scans"
+    name = _rig_dir_name(rig_config)
+    own = scans / f"{name}-{geometry_key(rig_config)}"
+    if own.is_dir():
+        return own
+    legacy = scans / f"{name}-{legacy_geometry_key(rig_config)}"
+    if legacy.is_dir() and _calibration_fits_sensors(legacy, rig_config):
+        return legacy
+    return own
+
+
+CALIBRATION_NAME = "calibration.json"
+"""A data directory's calibration file (``gonio.calibration.CALIBRATION_FILE``)."""
+
+
+def _calibration_fits_sensors(data_dir: Path, rig_config: Any) -> bool:
+    """Whether ``data_dir``'s calibration has as many channels per pair as the rig's sensors
+    read (True without one, or with one this cannot read: the folder holds this geometry's
+    jobs, and reading a calibration is :mod:`gonio.calibration`'s to judge)."""
+    try:
+        pairs = json.loads((data_dir / CALIBRATION_NAME).read_text()).get("pairs") or []
+        counts = {str(p["sensor"]): len(p["factor"]) for p in pairs}
+    except (OSError, ValueError, AttributeError, KeyError, TypeError):
+        return True
+    wanted = {s.name: len(s.channels) for s in getattr(rig_config, "sensors", None) or ()}
+    return all(wanted.get(sensor, n) == n for sensor, n in counts.items())
 
 
 STORE_NAME = "gonio.sqlite"

@@ -10,20 +10,33 @@ from types import SimpleNamespace
 import platformdirs
 import pytest
 
-from gonio.paths import DATA_ENV, geometry_key, scan_data_dir, sim_daemon_data_dir, user_data_root
+from gonio.paths import (
+    DATA_ENV,
+    geometry_key,
+    legacy_geometry_key,
+    scan_data_dir,
+    sim_daemon_data_dir,
+    user_data_root,
+)
 
 
 class Rig:
-    """The part of a rig configuration geometry_key reads: named directions and pairs."""
+    """The part of a rig configuration geometry_key reads: named directions, each sensor's
+    channels, and pairs."""
 
     def __init__(self, name: str, dirs: dict[str, tuple[float, float]],
-                 pairs: list[tuple[str, str]]) -> None:
+                 pairs: list[tuple[str, str]], channels: tuple[str, ...] = ("R", "G", "B")
+                 ) -> None:
         self.rig = SimpleNamespace(name=name)
         self.dirs = dirs
         self.pairs = pairs
+        self.channels = list(channels)
+        self.sensors = [SimpleNamespace(name=s, channels=self.channels)
+                        for s in sorted({b for _, b in pairs})]
 
     def light(self, n: str) -> SimpleNamespace:
-        return SimpleNamespace(theta_deg=self.dirs[n][0], phi_deg=self.dirs[n][1])
+        return SimpleNamespace(theta_deg=self.dirs[n][0], phi_deg=self.dirs[n][1],
+                               channels=self.channels)
 
     sensor = light
 
@@ -32,6 +45,8 @@ class Rig:
 
 
 RIG = Rig("Lab rig #2", {"L": (45.0, 0.0), "S": (30.0, 180.0)}, [("L", "S")])
+BANDS = tuple(f"{nm}nm" for nm in range(400, 710, 10))
+SPECTRAL = Rig("Lab rig #2", RIG.dirs, RIG.pairs, BANDS)
 
 
 def test_the_root_is_the_environment_folder_when_set(monkeypatch: pytest.MonkeyPatch,
@@ -47,11 +62,70 @@ def test_the_root_is_the_platform_folder_otherwise(monkeypatch: pytest.MonkeyPat
     assert user_data_root() == Path(platformdirs.user_data_dir("gonio"))
 
 
-def test_geometry_key_is_a_hash_of_the_pairs_and_their_directions() -> None:
-    # The key as defined: the first 8 hex digits of sha256 over the JSON list of
-    # [light, sensor, light theta, light phi, sensor theta, sensor phi] per pair
-    expected = hashlib.sha256(json.dumps([["L", "S", 45.0, 0.0, 30.0, 180.0]]).encode())
+def test_geometry_key_is_a_hash_of_the_pairs_their_directions_and_channels() -> None:
+    # The key as defined: the first 8 hex digits of sha256 over the JSON of {"pairs": per
+    # pair [light, sensor, light theta, light phi, sensor theta, sensor phi], "channels": per
+    # sensor of a pair, by name, [sensor, its channels]}
+    doc = {"pairs": [["L", "S", 45.0, 0.0, 30.0, 180.0]], "channels": [["S", ["R", "G", "B"]]]}
+    expected = hashlib.sha256(json.dumps(doc).encode())
     assert geometry_key(RIG) == expected.hexdigest()[:8]
+    # gonio before 2026-11-29 hashed the pairs' list alone
+    legacy = hashlib.sha256(json.dumps([["L", "S", 45.0, 0.0, 30.0, 180.0]]).encode())
+    assert legacy_geometry_key(RIG) == legacy.hexdigest()[:8]
+    assert legacy_geometry_key(SPECTRAL) == legacy_geometry_key(RIG)
+
+
+def test_other_sensors_start_their_own_directory(monkeypatch: pytest.MonkeyPatch,
+                                                 tmp_path: Path) -> None:
+    # An RGB and a 31-band sensor set on one geometry shared a folder: each switch found the
+    # other's calibration and measured its own again (gonio scan --sim with a spectral
+    # material and without).
+    monkeypatch.setenv(DATA_ENV, str(tmp_path))
+    assert geometry_key(SPECTRAL) != geometry_key(RIG)
+    assert scan_data_dir(SPECTRAL) != scan_data_dir(RIG)
+
+
+def _legacy_folder(root: Path, n_channels: int | None) -> Path:
+    """A data directory of the legacy key, with a calibration of ``n_channels`` per pair (none
+    when None), as gonio before 2026-11-29 wrote it."""
+    folder = root / "scans" / f"Lab-rig-2-{legacy_geometry_key(RIG)}"
+    folder.mkdir(parents=True)
+    if n_channels is not None:
+        (folder / "calibration.json").write_text(json.dumps(
+            {"pairs": [{"light": "L", "sensor": "S", "factor": [5.3e-06] * n_channels}]}))
+    return folder
+
+
+def test_a_legacy_folder_calibrated_for_these_sensors_is_kept(
+        monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    monkeypatch.setenv(DATA_ENV, str(tmp_path))
+    legacy = _legacy_folder(tmp_path, 3)
+    assert scan_data_dir(RIG) == legacy  # the RGB rig keeps its calibration and its jobs
+    assert scan_data_dir(SPECTRAL).name == f"Lab-rig-2-{geometry_key(SPECTRAL)}"
+
+
+def test_a_legacy_folder_calibrated_for_other_sensors_is_left_to_them(
+        monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    monkeypatch.setenv(DATA_ENV, str(tmp_path))
+    legacy = _legacy_folder(tmp_path, len(BANDS))
+    assert scan_data_dir(SPECTRAL) == legacy
+    assert scan_data_dir(RIG).name == f"Lab-rig-2-{geometry_key(RIG)}"
+
+
+def test_a_legacy_folder_without_calibration_is_kept(monkeypatch: pytest.MonkeyPatch,
+                                                     tmp_path: Path) -> None:
+    monkeypatch.setenv(DATA_ENV, str(tmp_path))
+    legacy = _legacy_folder(tmp_path, None)
+    assert scan_data_dir(RIG) == legacy
+
+
+def test_the_own_folder_wins_once_it_exists(monkeypatch: pytest.MonkeyPatch,
+                                            tmp_path: Path) -> None:
+    monkeypatch.setenv(DATA_ENV, str(tmp_path))
+    _legacy_folder(tmp_path, 3)
+    own = tmp_path / "scans" / f"Lab-rig-2-{geometry_key(RIG)}"
+    own.mkdir()
+    assert scan_data_dir(RIG) == own
 
 
 def test_moving_a_device_starts_a_fresh_directory() -> None:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 from pathlib import Path
 
 import numpy as np
@@ -272,9 +273,10 @@ def test_a_dry_run_on_a_spectral_rig_times_its_longer_first_finishing(
 def test_a_store_holding_rgb_and_spectral_scans_times_each_rig_by_its_own(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    """The RGB simulated rig and the 31-band one share a data directory by default; each dry
-    run's finishing now rests on the scans read with its own channels (the stored rigs'),
-    not on the median of both kinds."""
+    """The RGB simulated rig and the 31-band one can share a data directory (one named with
+    --data-dir; by default each has its own since 2026-11-29); each dry run's finishing rests
+    on the scans read with its own channels (the stored rigs'), not on the median of both
+    kinds."""
     import json
 
     from gonio.store import JobStore
@@ -298,6 +300,29 @@ def test_a_store_holding_rgb_and_spectral_scans_times_each_rig_by_its_own(
         assert dr["finishing_source"] == (
             f"job {job.id}'s finishing on this job store; scans read with other than "
             f"{channels} channels are not counted"), dr
+
+
+def test_switching_between_rgb_and_spectral_sensors_keeps_each_calibration(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Without --data-dir, the RGB and the 31-band simulated rig shared one data directory (the
+    geometry's), so every switch found the other's calibration and measured its own again;
+    each sensor set now has its own directory, and coming back finds the calibration."""
+    from gonio.paths import DATA_ENV
+
+    monkeypatch.setenv(DATA_ENV, str(tmp_path / "gonio-data"))
+    spectral = ["--material", "metallic-blue-paint"]
+    folders = []
+    for extra, out, calibrates in (([], "rgb1.h5", True), (spectral, "band.h5", True),
+                                   ([], "rgb2.h5", False)):
+        assert main(["scan", "--sim", *extra, "--rotations", "2", "--no-export-fits",
+                     "--no-progress", "-o", str(tmp_path / out)]) == 0
+        err = capsys.readouterr().err
+        assert ("calibrating the simulated rig" in err) is calibrates, (out, err)
+        folder = re.search(r"data directory (\S+) ", err)
+        assert folder is not None, err
+        folders.append(folder.group(1))
+    assert folders[0] == folders[2] != folders[1], folders
 
 
 def test_an_adaptive_dry_run_states_its_cap_and_refuses_a_cap_below_the_start(
