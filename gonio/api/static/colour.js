@@ -216,7 +216,9 @@ async function refresh() {
   caption.textContent = lab
     ? `${rep.space}, ${rep.conditions.illuminant}/${rep.conditions.observer}°, ${instrument} geometries at azimuth ${azimuth}° (${rep.conversion})` +
       (flop !== undefined ? `; flop index ${flop.toFixed(2)}` : "") +
-      (diff ? `; ΔE00 against ${standard ? `standard ${standard}` : `job ${against}`}: max ${diff.max_dE00.toFixed(2)}` : "") + source
+      // Max and mean, as a lab quotes an instrument's difference (the page shows one
+      // instrument, so the mean is over its geometries, each once).
+      (diff ? `; ΔE00 against ${standard ? `standard ${standard}` : `job ${against}`}: max ${diff.max_dE00.toFixed(2)}, mean ${diff.mean_dE00.toFixed(2)}` : "") + source
     : channelCaption(rep, body, noDiff);
   if (noDiff && lab) caption.textContent += `. ${noDiff}.`;
   // The "source" column is explained whatever the space (it was said only beside CIELAB).

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import csv
 import io
+import re
 import secrets
 from collections.abc import Iterator
 from contextlib import ExitStack
@@ -201,6 +202,20 @@ def test_colour_table_beside_the_rendering(spectral_daemon: Daemon, spectral_job
     wait.until(lambda b: f"against job {ids[0]}" in b.find_element(By.ID, "colour-caption").text)
     head = [th.text for th in browser.find_elements(By.CSS_SELECTOR, "#colour-table thead th")]
     assert head[-2:] == ["source", "ΔE00"]
+    # The caption quotes the instrument's maximum and mean ΔE00 (it gave the maximum alone),
+    # both of the API's per-geometry values: the BYK-mac's six geometries, each once.
+    with d.client() as c:
+        rows = c.get(f"/api/v1/jobs/{ids[1]}/colour", params={
+            "instrument": "BYK-mac", "against": str(ids[0])}).json()["difference"]["rows"]
+    per_geometry = {(r["incidence_deg"], r["aspecular_deg"], r["azimuth_deg"]): r["dE00"]
+                    for r in rows}
+    assert len(per_geometry) == 6, rows
+    shown = re.search(r"max ([0-9.]+), mean ([0-9.]+)",
+                      browser.find_element(By.ID, "colour-caption").text)
+    assert shown is not None, browser.find_element(By.ID, "colour-caption").text
+    assert float(shown.group(1)) == pytest.approx(max(per_geometry.values()), abs=0.006)
+    assert float(shown.group(2)) == pytest.approx(
+        sum(per_geometry.values()) / len(per_geometry), abs=0.006)
     assert not _severe(browser)
 
 
