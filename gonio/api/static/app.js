@@ -463,9 +463,10 @@ async function loadJobs(asked) {
   jobs = listed;
   keyAccepted();
   if (selected !== null && jobs.some((j) => j.id === selected)) {
-    const detail = await getJSON(`/jobs/${selected}`);
+    const id = selected;
+    const detail = await getJSON(`/jobs/${id}`);
     if (asked !== jobsAsked) return;
-    selectedDetail = detail;
+    if (selected === id) selectedDetail = detail;  // not another row's, clicked meanwhile
   }
   clearStaleNotes();
   // The selected job changed state (e.g. completed): its rotation plot changes kind.
@@ -490,7 +491,12 @@ async function pollSelected() {
   // A queued job that is loading its basis before the first reading is polled too.
   const starting = j?.state === "queued" && selectedDetail?.id === j.id && selectedDetail.activity;
   if (!j || !(starting || ["running", "suspended", "reconstructing", "paused"].includes(j.state))) return;
-  selectedDetail = await getJSON(`/jobs/${selected}`);
+  const id = selected;
+  const detail = await getJSON(`/jobs/${id}`);
+  // Another row clicked meanwhile: this detail is not the selected job's (taken as its, the
+  // newly selected row's ETA went blank until the next poll).
+  if (selected !== id) return;
+  selectedDetail = detail;
   const cell = document.querySelector(`#jobs tr[data-id="${selected}"] td.eta`);
   if (cell) fillEta(cell);
   // An adaptive job's round comes with its detail; its angles from the list as it is now
@@ -507,7 +513,10 @@ async function pollActive() {
   if (readsRefused()) return;
   const a = jobs.find((j) => j.id !== selected && HOLDING.includes(j.state));
   if (!a) { activeDetail = null; return; }
-  activeDetail = await getJSON(`/jobs/${a.id}`);
+  const detail = await getJSON(`/jobs/${a.id}`);
+  // Its row clicked meanwhile: it is the selected job now, polled as such.
+  if (selected === a.id) return;
+  activeDetail = detail;
   const cell = document.querySelector(`#jobs tr[data-id="${a.id}"] td.eta`);
   if (cell) fillEta(cell, activeDetail, a.id);
 }
@@ -849,7 +858,14 @@ async function setCompare(id) {
 }
 
 function select(id) {
-  if (selected !== id) selectedDetail = null;
+  if (selected !== id) {
+    // The job holding the rig has its detail already (its row's ETA): clicking its row kept
+    // the ETA blank until the next poll, up to a second; the job left keeps its own the same
+    // way while it holds the rig.
+    const left = selectedDetail;
+    selectedDetail = activeDetail?.id === id ? activeDetail : null;
+    if (left && left.id !== id && HOLDING.includes(left.state)) activeDetail = left;
+  }
   selected = id;
   renderJobs();
   guarded(refreshReadings);

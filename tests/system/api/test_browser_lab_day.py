@@ -506,6 +506,64 @@ def test_a_paused_jobs_eta_is_the_time_once_it_runs_again_not_time_left(
             wait_state(c, job, ENDED, timeout=120)
 
 
+
+_WATCH_ETA = """
+const row = document.querySelector(`#jobs tr[data-id='${arguments[0]}']`);
+const cell = row.querySelector('td.eta');
+window.etaSeen = [cell.textContent];
+new MutationObserver(() => window.etaSeen.push(cell.textContent))
+  .observe(cell, {childList: true, characterData: true, subtree: true});
+"""
+
+
+def test_clicking_between_rows_keeps_the_running_jobs_eta(
+    daemon: Daemon, browser: Any, no_export_fits: None  # noqa: F811
+) -> None:
+    """Clicking the running job's row blanked its ETA until the next poll (up to a second:
+    the page dropped the detail it already had for the job holding the rig), and clicking
+    away blanked it the same way. Every text the cell shows from each click on is an ETA."""
+    import time
+
+    with daemon.client() as c:
+        running = int(c.post("/api/v1/jobs", params={"accept_uncalibrated": "true"}, json={
+            "plan": {**PLAN, "specimen": "long eta", "rotations": 400}}).json()["id"])
+        queued = int(c.post("/api/v1/jobs", params={"accept_uncalibrated": "true"}, json={
+            "plan": {**PLAN, "specimen": "behind it"}}).json()["id"])
+        deadline = time.monotonic() + 120
+        while c.get(f"/api/v1/jobs/{running}").json()["done_angles"] < 3:  # it has an ETA
+            assert time.monotonic() < deadline, "the long scan did not measure"
+            time.sleep(0.05)
+    try:
+        wait = open_live(browser, daemon, 120)
+
+        def eta_of(job: int) -> str:
+            return str(browser.execute_script(
+                "return document.querySelector(`#jobs tr[data-id='${arguments[0]}'] td.eta`)"
+                "?.textContent ?? ''", job))
+
+        def click(job: int) -> None:
+            browser.execute_script(
+                "document.querySelector(`#jobs tr[data-id='${arguments[0]}']`).click()", job)
+
+        for target in (queued, running, queued):
+            # The running job's row has its ETA (polled as the selected or the active job)...
+            wait.until(lambda d: "left in all" in eta_of(running))
+            browser.execute_script(_WATCH_ETA, running)
+            click(target)
+            wait.until(lambda d, t=target: d.execute_script(
+                "return document.querySelector(`#jobs tr.selected`)?.dataset.id") == str(t))
+            time.sleep(1.5)  # past the next poll of both details
+            # ... and keeps it through the click: no empty moment.
+            seen = browser.execute_script("return window.etaSeen")
+            assert all("left in all" in t for t in seen), (target, seen)
+    finally:
+        with daemon.client() as c:
+            for job in (queued, running):
+                c.post(f"/api/v1/jobs/{job}/abort")
+            for job in (queued, running):
+                wait_state(c, job, ENDED, timeout=120)
+
+
 def test_a_halted_queue_says_so_on_the_queued_row_and_is_released_from_the_page(
     daemon: Daemon, browser: Any, no_export_fits: None  # noqa: F811
 ) -> None:
