@@ -1660,6 +1660,36 @@ def _compare_sets(by: dict[str, list[dict[str, Any]]], names: tuple[str, ...],
     return tuple(tot[0]), tuple(tot[1])
 
 
+def _interval_line(by: dict[str, list[dict[str, Any]]],
+                   cand: Callable[[dict[str, Any]], float]) -> None:
+    """Print the candidate's calibration p98 of true / estimate (scans not flagged) and
+    whether the interval keeps ``UPPER_FACTOR`` (the studies' interval step)."""
+    q = [r["truth"] / cand(r) for r in by["cal"] if not r["reason"]]
+    p98, factor = upper_factor_from(q)
+    print(f"\nthe interval: the candidate's calibration p98 of true / estimate (not flagged) "
+          f"{p98:.4f} -> {factor:g} against UPPER_FACTOR {UPPER_FACTOR:g}: "
+          f"{'keep UPPER_FACTOR' if factor <= UPPER_FACTOR else f'take {factor:g}'}")
+
+
+def _blind_rule(rows: list[dict[str, Any]], by: dict[str, list[dict[str, Any]]], which: str,
+                cand: Callable[[dict[str, Any]], float],
+                scan_blind: Callable[[], list[dict[str, Any]]] | None) -> bool:
+    """A study's last step: scan the blind set ``which`` if the rows have none of it (after the
+    choice; appended to ``rows``), print it, and return whether the candidate leaves no more
+    of its scans more than 2x low than the shipped estimate."""
+    if not by[which] and scan_blind is not None:
+        print(f"\nscanning {which} (blind) after the choice:", flush=True)
+        blind = scan_blind()
+        rows.extend(blind)
+        by[which] = blind
+    print(f"\n{which} (blind, last):")
+    a, b = _compare_sets(by, (which,), cand)
+    ok = b[4] > 0 and b[1] <= a[1]
+    print(f"\n{which} rule: {'passed' if ok else 'FAILED'} (shipped {a[0]} within x2 / "
+          f"{a[1]} low, candidate {b[0]} / {b[1]})")
+    return ok
+
+
 def cov_study(rows: list[dict[str, Any]],
               scan_blind: Callable[[], list[dict[str, Any]]] | None = None) -> bool | None:
     """The coverage shrink, its rule committed before any candidate was computed outside the
@@ -1716,22 +1746,8 @@ def cov_study(rows: list[dict[str, Any]],
     adopted = adopted and ok
     print(f"\nfresh-wide, fresh-coat and fresh-high rule: {'passed' if ok else 'FAILED'} "
           f"(shipped {a[0]} within x2 / {a[1]} low, candidate {b[0]} / {b[1]})")
-    q = [r["truth"] / cand(r) for r in by["cal"] if not r["reason"]]
-    p98, factor = upper_factor_from(q)
-    print(f"\nthe interval: the candidate's calibration p98 of true / estimate (not flagged) "
-          f"{p98:.4f} -> {factor:g} against UPPER_FACTOR {UPPER_FACTOR:g}: "
-          f"{'keep UPPER_FACTOR' if factor <= UPPER_FACTOR else f'take {factor:g}'}")
-    if not by["fresh-cov"] and scan_blind is not None:
-        print("\nscanning fresh-cov (blind) after the choice:", flush=True)
-        blind = scan_blind()
-        rows.extend(blind)
-        by["fresh-cov"] = blind
-    print("\nfresh-cov (blind, last):")
-    a, b = _compare_sets(by, ("fresh-cov",), cand)
-    ok = b[4] > 0 and b[1] <= a[1]
-    adopted = adopted and ok
-    print(f"\nfresh-cov rule: {'passed' if ok else 'FAILED'} (shipped {a[0]} within x2 / "
-          f"{a[1]} low, candidate {b[0]} / {b[1]})")
+    _interval_line(by, cand)
+    adopted = _blind_rule(rows, by, "fresh-cov", cand, scan_blind) and adopted
     print(f"\ncoverage shrink: {'ADOPT' if adopted else 'not adopted'} ({form}, c = {c:g})")
     return adopted
 
@@ -1850,7 +1866,6 @@ def mirror_study(rows: list[dict[str, Any]],
 
     print("\nfit set:")
     _compare_sets(by, MIRROR_FIT_SETS, cand)
-    within = [0, 0, 0]  # shipped within x2, candidate within x2, scans: every set before blind
     for names in MIRROR_CHECKS:
         print(f"\ncheck {', '.join(names)}:")
         a, b = _compare_sets(by, names, cand)
@@ -1861,28 +1876,13 @@ def mirror_study(rows: list[dict[str, Any]],
     before = [r for w in SETS if w != "fresh-mirror" for r in by[w]]
     sw = _counts(before, lambda r: r["widened"])
     cw = _counts(before, cand)
-    within[:] = [sw[0], cw[0], sw[2]]
-    ok = (within[0] - within[1]) <= MIRROR_WITHIN_SLACK * within[2]
+    ok = (sw[0] - cw[0]) <= MIRROR_WITHIN_SLACK * sw[2]
     adopted = adopted and ok
     print(f"\nevery set before the blind one: shipped {sw[0]} within x2 / {sw[1]} low, "
           f"candidate {cw[0]} / {cw[1]} of {sw[2]}; within-x2 rule (a fall of at most "
           f"{MIRROR_WITHIN_SLACK:.0%}): {'passed' if ok else 'FAILED'}")
-    q = [r["truth"] / cand(r) for r in by["cal"] if not r["reason"]]
-    p98, factor = upper_factor_from(q)
-    print(f"\nthe interval: the candidate's calibration p98 of true / estimate (not flagged) "
-          f"{p98:.4f} -> {factor:g} against UPPER_FACTOR {UPPER_FACTOR:g}: "
-          f"{'keep UPPER_FACTOR' if factor <= UPPER_FACTOR else f'take {factor:g}'}")
-    if not by["fresh-mirror"] and scan_blind is not None:
-        print("\nscanning fresh-mirror (blind) after the choice:", flush=True)
-        blind = scan_blind()
-        rows.extend(blind)
-        by["fresh-mirror"] = blind
-    print("\nfresh-mirror (blind, last):")
-    a, b = _compare_sets(by, ("fresh-mirror",), cand)
-    ok = b[4] > 0 and b[1] <= a[1]
-    adopted = adopted and ok
-    print(f"\nfresh-mirror rule: {'passed' if ok else 'FAILED'} (shipped {a[0]} within x2 / "
-          f"{a[1]} low, candidate {b[0]} / {b[1]})")
+    _interval_line(by, cand)
+    adopted = _blind_rule(rows, by, "fresh-mirror", cand, scan_blind) and adopted
     print(f"\nmirror gap: {'ADOPT' if adopted else 'not adopted'} ({form}, m = {m:g})")
     return adopted
 
