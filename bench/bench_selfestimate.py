@@ -692,38 +692,43 @@ FRESH_COV: tuple[tuple[str, dict[str, Any], float, float, float], ...] = (
 #: smooth plastics (white, blue, black), high-gloss clear coats over beige and red bases,
 #: smooth Mo and TiN, a rough green plastic, a grey diffuse, a brushed Mo at holder 41 deg, a
 #: matte lilac principled material and a glossy cream plastic / gold blend.
+def _rgb(r: float, g: float, b: float) -> dict[str, Any]:
+    """A mitsuba RGB colour of linear sRGB values."""
+    return {"type": "rgb", "value": [r, g, b]}
+
+
+def _plastic(alpha: float, colour: dict[str, Any], **more: Any) -> dict[str, Any]:
+    """A mitsuba rough plastic of roughness ``alpha`` over a diffuse ``colour``."""
+    return {"type": "roughplastic", **more, "alpha": alpha, "diffuse_reflectance": colour}
+
+
+def _clearcoat(roughness: float, coat: float, gloss: float,
+               colour: dict[str, Any]) -> dict[str, Any]:
+    """A mitsuba principled base of ``roughness`` under a clear coat of weight ``coat``."""
+    return {"type": "principled", "roughness": roughness, "clearcoat": coat,
+            "clearcoat_gloss": gloss, "base_color": colour}
+
+
 FRESH_MIRROR: tuple[tuple[str, dict[str, Any], float, float, float], ...] = (
-    ("fm-white-plastic-r015", {"type": "roughplastic", "alpha": 0.015, "diffuse_reflectance": {
-        "type": "rgb", "value": [0.85, 0.85, 0.82]}}, 0.0, 0.0, 0.0),
-    ("fm-blue-plastic-r03", {"type": "roughplastic", "alpha": 0.03, "diffuse_reflectance": {
-        "type": "rgb", "value": [0.1, 0.2, 0.6]}}, 0.0, 0.0, 0.0),
-    ("fm-black-plastic-r02", {"type": "roughplastic", "distribution": "beckmann",
-                              "alpha": 0.02, "diffuse_reflectance": {
-                                  "type": "rgb", "value": [0.03, 0.03, 0.03]}}, 0.0, 0.0, 0.0),
-    ("fm-clearcoat-beige-gloss", {"type": "principled", "roughness": 0.4, "clearcoat": 1.0,
-                                  "clearcoat_gloss": 0.95, "base_color": {
-                                      "type": "rgb", "value": [0.8, 0.7, 0.55]}},
+    ("fm-white-plastic-r015", _plastic(0.015, _rgb(0.85, 0.85, 0.82)), 0.0, 0.0, 0.0),
+    ("fm-blue-plastic-r03", _plastic(0.03, _rgb(0.1, 0.2, 0.6)), 0.0, 0.0, 0.0),
+    ("fm-black-plastic-r02", _plastic(0.02, _rgb(0.03, 0.03, 0.03), distribution="beckmann"),
      0.0, 0.0, 0.0),
-    ("fm-clearcoat-red-gloss", {"type": "principled", "roughness": 0.3, "clearcoat": 0.9,
-                                "clearcoat_gloss": 0.9, "base_color": {
-                                    "type": "rgb", "value": [0.6, 0.08, 0.06]}},
+    ("fm-clearcoat-beige-gloss", _clearcoat(0.4, 1.0, 0.95, _rgb(0.8, 0.7, 0.55)),
      0.0, 0.0, 0.0),
+    ("fm-clearcoat-red-gloss", _clearcoat(0.3, 0.9, 0.9, _rgb(0.6, 0.08, 0.06)), 0.0, 0.0, 0.0),
     ("fm-mo-r03", {"type": "roughconductor", "material": "Mo", "alpha": 0.03}, 0.0, 0.0, 0.0),
     ("fm-tin-r06", {"type": "roughconductor", "material": "TiN", "alpha": 0.06},
      0.0, 0.0, 0.0),
-    ("fm-green-plastic-r25", {"type": "roughplastic", "alpha": 0.25, "diffuse_reflectance": {
-        "type": "rgb", "value": [0.15, 0.5, 0.2]}}, 0.0, 0.0, 0.0),
-    ("fm-diffuse-grey", {"type": "diffuse", "reflectance": {
-        "type": "rgb", "value": [0.45, 0.45, 0.45]}}, 0.0, 0.0, 0.0),
+    ("fm-green-plastic-r25", _plastic(0.25, _rgb(0.15, 0.5, 0.2)), 0.0, 0.0, 0.0),
+    ("fm-diffuse-grey", {"type": "diffuse", "reflectance": _rgb(0.45, 0.45, 0.45)},
+     0.0, 0.0, 0.0),
     ("fm-mo-u20-v45", {"type": "roughconductor", "material": "Mo", "distribution": "ggx",
                        "alpha_u": 0.20, "alpha_v": 0.45}, 41.0, 0.0, 0.0),
     ("fm-principled-matte-lilac", {"type": "principled", "roughness": 0.8, "specular": 0.3,
-                                   "base_color": {"type": "rgb", "value": [0.6, 0.5, 0.75]}},
-     0.0, 0.0, 0.0),
+                                   "base_color": _rgb(0.6, 0.5, 0.75)}, 0.0, 0.0, 0.0),
     ("fm-blend-cream-au", {"type": "blendbsdf", "weight": 0.3,
-                           "bsdf_0": {"type": "roughplastic", "alpha": 0.04,
-                                      "diffuse_reflectance": {
-                                          "type": "rgb", "value": [0.9, 0.85, 0.7]}},
+                           "bsdf_0": _plastic(0.04, _rgb(0.9, 0.85, 0.7)),
                            "bsdf_1": {"type": "roughconductor", "material": "Au",
                                       "alpha": 0.10}}, 0.0, 0.0, 0.0),
 )
