@@ -279,7 +279,8 @@ class ResultViews:
         Exports are kept under ``data_dir/exports`` and reused while the result file is
         unchanged, each with its warnings beside it (:meth:`export_warnings`; an export kept
         without them is made again). ``with_mesh`` adds the glTF's preview sphere (``gonio
-        export --with-mesh``), a file of its own (``...-gltf-mesh.gltf``). The file name starts
+        export --with-mesh``; ``gltf`` and ``glb``), a file of its own (``...-gltf-mesh.gltf``,
+        ``...-glb-mesh.glb``). The file name starts
         with the job and its specimen (:func:`download_stem`).
 
         Raises
@@ -287,13 +288,14 @@ class ResultViews:
         NotFound
             The job has no result yet, or its result has no BRDF (a calibration job).
         ExportError
-            ``with_mesh`` for a format other than glTF.
+            ``with_mesh`` for a format other than glTF (``gltf``, ``glb``).
         """
         import json
 
         from gonio.atomicfile import write_atomically
         from gonio.export import (
             FORMATS,
+            MESH_FORMATS,
             ExportError,
             check_format,
             export_warnings,
@@ -303,9 +305,10 @@ class ResultViews:
         from gonio.export.child import run_fits
 
         check_format(fmt)
-        if with_mesh and fmt != "gltf":
-            raise ExportError(f"with_mesh applies to format gltf only, not {fmt!r}; leave "
-                              "with_mesh out or ask for format=gltf")
+        if with_mesh and fmt not in MESH_FORMATS:
+            raise ExportError(f"with_mesh applies to format {' or '.join(MESH_FORMATS)} only, "
+                              f"not {fmt!r}; leave with_mesh out or ask for format=gltf or "
+                              "format=glb")
         path = self.result_path(job_id)
         self.result(job_id)  # missing or damaged: said with the way to rebuild it
         stem = download_stem(job_id, job_row(self.store, job_id).specimen)

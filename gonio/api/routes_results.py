@@ -170,7 +170,7 @@ async def slice_(
     )
 
 
-ExportFormat = Literal["factored", "mtlx", "gltf", "merl", "table"]
+ExportFormat = Literal["factored", "mtlx", "gltf", "glb", "merl", "table"]
 # The export's warnings, as `gonio export` prints them (a JSON list of sentences).
 EXPORT_WARNINGS_HEADER = "X-Gonio-Export-Warnings"
 
@@ -185,18 +185,20 @@ EXPORT_WARNINGS_HEADER = "X-Gonio-Export-Warnings"
                                        "result's anisotropy): a JSON list of sentences, "
                                        "ASCII (non-ASCII as \\u escapes); [] when none",
                                        "schema": {"type": "string"}}}},
-               422: {"description": "with_mesh asked for a format other than gltf, or part="
+               422: {"description": "with_mesh asked for a format other than gltf or glb, or part="
                                     "sidecar for a format other than merl"},
                507: {"description": "no room on the data directory's disk for the export"}},
     response_class=FileResponse,
-    summary="The result as a renderer format: factored, mtlx, gltf, merl or table "
+    summary="The result as a renderer format: factored, mtlx, gltf, glb, merl or table "
             "(docs/file-formats.md)",
 )
 async def export(
     job_id: JobId,
     service: Service,
-    format: Annotated[ExportFormat, Query(description="factored | mtlx | gltf | merl | table")],
-    with_mesh: bool = Query(False, description="gltf only: add a preview sphere with "
+    format: Annotated[ExportFormat, Query(
+        description="factored | mtlx | gltf | glb | merl | table (glb: the glTF document in "
+        "the binary container, model/gltf-binary)")],
+    with_mesh: bool = Query(False, description="gltf and glb only: add a preview sphere with "
                             "tangents, so that any glTF viewer shows the material "
                             "(gonio export --with-mesh)"),
     part: Annotated[Literal["file", "sidecar"], Query(

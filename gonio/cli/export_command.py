@@ -16,19 +16,21 @@ from gonio.cli import UsageError
 _FORMATS_HELP = (
     "factored: the factored fit of paper 000 (.npz); mtlx: MaterialX standard_surface and "
     "open_pbr_surface; "
-    "gltf: glTF 2.0 material with KHR_materials_anisotropy; merl: MERL .binary, azimuthally "
+    "gltf: glTF 2.0 material with KHR_materials_anisotropy (.gltf, JSON); glb: the same in "
+    "glTF's binary container (.glb, as Blender, three.js and model-viewer open it); merl: "
+    "MERL .binary, azimuthally "
     "averaged, with a .json sidecar; table: gonio's BRDF table (.npz). Formats: docs/export.md"
 )
 
 
 def register(sub: Any) -> None:
     p = sub.add_parser(
-        "export", help="write a result's BRDF as factored/MaterialX/glTF/MERL/table",
+        "export", help="write a result's BRDF as factored/MaterialX/glTF/GLB/MERL/table",
         description="Export a job's HDF5 result for renderers and other tools. " + _FORMATS_HELP,
     )
     p.add_argument("result", type=Path, help="a gonio result file (HDF5)")
     p.add_argument("--format", "-f", required=True, dest="fmt",
-                   choices=["factored", "mtlx", "gltf", "merl", "table"])
+                   choices=["factored", "mtlx", "gltf", "glb", "merl", "table"])
     p.add_argument("-o", "--output", type=Path, default=None,
                    help="file to write (default: the result's name with the format's suffix, "
                    "RESULT.factored.npz / RESULT.table.npz for the two .npz formats)")
@@ -36,7 +38,7 @@ def register(sub: Any) -> None:
                    help="replace the output file (and a merl export's .json sidecar) if it "
                    "exists; without it an existing file is refused")
     p.add_argument("--with-mesh", action="store_true",
-                   help="gltf: add a preview sphere (normals, UVs, tangents) so any viewer "
+                   help="gltf, glb: add a preview sphere (normals, UVs, tangents) so any viewer "
                    "shows the material; without it the file is a material library")
     p.set_defaults(func=run)
 
@@ -57,7 +59,8 @@ def default_output(result: Path, fmt: str) -> Path:
 
 def _check_suffix(out: Path, fmt: str) -> None:
     """Refuse an ``-o`` whose suffix is another format's (``-f gltf -o felt.mtlx`` wrote glTF
-    JSON that a MaterialX reader then fails on); a suffix of no gonio format is the lab's own.
+    JSON that a MaterialX reader then fails on, ``-f gltf -o felt.glb`` JSON that a viewer reading
+    a ``.glb`` by its binary header refuses); a suffix of no gonio format is the lab's own.
     """
     from gonio.export import FORMATS
 
@@ -67,11 +70,11 @@ def _check_suffix(out: Path, fmt: str) -> None:
         raise UsageError(f"-o {out} has the suffix of the {theirs} format, but --format is "
                          f"{fmt}, whose files end in {FORMATS[fmt]}: name it "
                          f"{out.with_suffix(FORMATS[fmt]).name} or choose the format its name "
-                         "says (nothing was written)")
+                         f"says, --format {theirs.replace(', ', ' or ')} (nothing was written)")
 
 
 def run(args: argparse.Namespace) -> int:
-    from gonio.export import result_fits, write_export
+    from gonio.export import MESH_FORMATS, result_fits, write_export
 
     result: Path = args.result
     if not result.is_file():
@@ -94,8 +97,8 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"-o {out} is a folder; give a file name in it, e.g. -o "
                          f"{default_output(out / result.name, args.fmt)}")
     _check_suffix(out, args.fmt)
-    if args.with_mesh and args.fmt != "gltf":
-        raise UsageError("--with-mesh applies to --format gltf only")
+    if args.with_mesh and args.fmt not in MESH_FORMATS:
+        raise UsageError(f"--with-mesh applies to --format {' or '.join(MESH_FORMATS)} only")
     if not args.overwrite:
         # -o naming another scan's result replaced it with a 16 kB glTF without a word.
         from gonio.export.merl import sidecar_path
@@ -114,7 +117,7 @@ def run(args: argparse.Namespace) -> int:
           f"{time.perf_counter() - t0:.1f} s)")
     for line in report(args.fmt, path, prov):
         print(line)
-    if args.fmt == "gltf" and not args.with_mesh:
+    if args.fmt in MESH_FORMATS and not args.with_mesh:
         # A glTF viewer opened on it shows an empty scene, which looked like a broken export.
         print("  the file holds the material only, no mesh: a glTF viewer shows an empty scene "
               "until it is applied to a model (--with-mesh adds a preview sphere)")
@@ -136,7 +139,8 @@ def report(fmt: str, path: Path, prov: dict[str, Any]) -> list[str]:
     if err is not None:
         lines.append(f"  reconstruction: predicted log_rmse {err:.3f} (expected cosine-weighted "
                      "log error against the true BRDF)")
-    model = {"mtlx": "principled", "gltf": "principled", "factored": "factored"}.get(fmt)
+    model = {"mtlx": "principled", "gltf": "principled", "glb": "principled",
+             "factored": "factored"}.get(fmt)
     rendered = ((prov.get("fits") or {}).get(model) or {}).get("rendered") if model else None
     if isinstance(rendered, dict) and rendered.get("value") is not None:
         lines.append(f"  {model} fit renders {rendered['metric']} {rendered['value']:.3f} "

@@ -6,6 +6,7 @@ format     suffix     what
 factored   ``.npz``   the factored fit of paper 000 (:mod:`gonio.brdf.models.factored`)
 mtlx       ``.mtlx``  MaterialX ``standard_surface`` and ``open_pbr_surface`` (:mod:`.mtlx`)
 gltf       ``.gltf``  glTF 2.0 material with ``KHR_materials_anisotropy`` (:mod:`.gltf`)
+glb        ``.glb``   the same glTF document in the binary GLB container (:func:`.gltf.write_glb`)
 merl       ``.binary`` MERL layout, azimuthally averaged, with a ``.json`` sidecar (:mod:`.merl`)
 table      ``.npz``   gonio's own BRDF table (:class:`gonio.brdf.tables.table.BRDFTable`)
 ========== ========== ===================================================================
@@ -29,13 +30,16 @@ from gonio.brdf.models.principled import Principled, fit_principled
 from gonio.brdf.tables.table import BRDFTable
 
 FORMATS: dict[str, str] = {
-    "factored": ".npz", "mtlx": ".mtlx", "gltf": ".gltf", "merl": ".binary", "table": ".npz",
+    "factored": ".npz", "mtlx": ".mtlx", "gltf": ".gltf", "glb": ".glb", "merl": ".binary",
+    "table": ".npz",
 }
 MEDIA_TYPES: dict[str, str] = {
     "factored": "application/octet-stream", "mtlx": "application/xml",
-    "gltf": "model/gltf+json", "merl": "application/octet-stream",
+    "gltf": "model/gltf+json", "glb": "model/gltf-binary", "merl": "application/octet-stream",
     "table": "application/octet-stream",
 }
+#: The formats that can carry the preview sphere (``with_mesh``; :func:`.gltf.preview_sphere`).
+MESH_FORMATS: tuple[str, ...] = ("gltf", "glb")
 #: Iterations of the factored fit when it runs at export or reconstruction time.
 FIT_ITERATIONS = 10
 
@@ -205,7 +209,7 @@ def format_provenance(fmt: str, prov: dict[str, Any]) -> dict[str, Any]:
     * ``table``, the reconstruction itself, and ``merl``, the table averaged over azimuth (no
       fit): the reconstruction's own (``reconstruction_warnings``: calibration, arc, physical
       bounds, design gap, misfit); MERL's sidecar adds the anisotropy the average lost;
-    * ``gltf`` and ``mtlx``, the principled fit: its warnings, that the principled model is
+    * ``gltf``, ``glb`` and ``mtlx``, the principled fit: its warnings, that the principled model is
       twofold symmetric when the result is not, and the reconstruction's own;
     * ``factored``: the factored fit's warnings and the reconstruction's own.
 
@@ -237,7 +241,8 @@ def write_export(fits: Fits, fmt: str, out: str | os.PathLike[str],
                  prov: dict[str, Any], *, with_mesh: bool = False) -> Path:
     """Write one format from fits already in hand; returns the path.
 
-    ``with_mesh`` adds the glTF's preview sphere (:func:`.gltf.preview_sphere`).
+    ``with_mesh`` adds the glTF's preview sphere (:func:`.gltf.preview_sphere`; ``gltf`` and
+    ``glb``).
     """
     from gonio.export.gltf import GltfError
     from gonio.export.merl import MerlError
@@ -282,10 +287,12 @@ def _write(fits: Fits, fmt: str, out: str | os.PathLike[str], prov: dict[str, An
         # F82 tint: a tint fitted to a reconstruction (judge.fit_f82) moved every simulated
         # metal scan's export farther from the truth (docs/export.md, "OpenPBR Surface")
         return write_mtlx(fits.principled, out, name, prov)
-    if fmt == "gltf":
-        from gonio.export.gltf import write_gltf
+    if fmt in ("gltf", "glb"):
+        from gonio.export.gltf import write_glb, write_gltf
 
-        return write_gltf(fits.principled, out, name, prov, with_mesh)
+        # One document either way: JSON with the buffer embedded, or the binary container.
+        writer = write_glb if fmt == "glb" else write_gltf
+        return writer(fits.principled, out, name, prov, with_mesh)
     from gonio.export.merl import write_merl
 
     # R, G, B as the glTF and MaterialX fits hold them: linear sRGB from XYZ when the result
@@ -323,7 +330,8 @@ def export_result(result_path: str | os.PathLike[str], fmt: str,
                   out: str | os.PathLike[str], *, with_mesh: bool = False) -> Path:
     """Export a job's result file to ``out`` in format ``fmt``; returns the path.
 
-    ``with_mesh``: the glTF gets a preview sphere (ignored by the other formats).
+    ``with_mesh``: the glTF (``gltf``, ``glb``) gets a preview sphere (ignored by the other
+    formats).
 
     Raises
     ------

@@ -28,8 +28,16 @@ The provenance (:mod:`gonio.export.metadata`) goes into ``asset.extras`` and the
 into a scene. ``with_mesh=True`` (``gonio export --with-mesh``) adds a preview mesh so that any
 viewer shows the material: a UV sphere of radius 1 (:func:`preview_sphere`; Y up, the front
 facing +Z) with normals, ``TEXCOORD_0`` and tangents, the tangent along the lines of latitude
-(``+X`` at the front, ``u`` increasing with it), in one scene with one node; the binary data is
-a base64 ``data:`` URI, so the file stays one self-contained ``.gltf``.
+(``+X`` at the front, ``u`` increasing with it), in one scene with one node; in a ``.gltf``
+the binary data is a base64 ``data:`` URI, so the file stays one self-contained ``.gltf``.
+
+:func:`write_glb` writes the same document in the binary container of glTF 2.0 ("GLB File
+Format Specification"), which viewers that open ``.glb`` files (three.js, Blender, model-viewer)
+read by its header: a 12-byte header (``uint32`` magic ``glTF``, version 2, the total length),
+then chunks of ``uint32`` length, ``uint32`` type and data, each starting and ending on a 4-byte
+boundary: the JSON chunk (``JSON``, padded with spaces) and, with the preview mesh, the binary
+buffer (``BIN\\0``, padded with zeros), which ``buffers[0]`` names by having no ``uri``; its
+``byteLength`` is the data's, without the padding. Little-endian throughout.
 """
 
 from __future__ import annotations
@@ -38,6 +46,7 @@ import base64
 import json
 import math
 import os
+import struct
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -53,6 +62,9 @@ from gonio.brdf.models.principled import Principled
 SPHERE_RINGS, SPHERE_SEGMENTS = 32, 64
 _FLOAT, _USHORT = 5126, 5123  # glTF componentType codes
 _ARRAY_BUFFER, _ELEMENT_ARRAY_BUFFER = 34962, 34963
+#: GLB: the header's magic and version, and the two chunk types (glTF 2.0, "Binary glTF Layout").
+GLB_MAGIC, GLB_VERSION = b"glTF", 2
+GLB_JSON, GLB_BIN = b"JSON", b"BIN\x00"
 
 
 class GltfError(ValueError):
@@ -171,8 +183,10 @@ def preview_sphere(rings: int = SPHERE_RINGS, segments: int = SPHERE_SEGMENTS) -
     }
 
 
-def _add_preview_mesh(doc: dict[str, Any]) -> None:
-    """Add :func:`preview_sphere` as buffer, views, accessors, mesh, node and scene."""
+def _add_preview_mesh(doc: dict[str, Any]) -> bytes:
+    """Add :func:`preview_sphere` as buffer, views, accessors, mesh, node and scene; returns
+    the buffer's bytes, which ``buffers[0]`` does not hold yet (no ``uri``): the caller embeds
+    them (:func:`gltf_document`) or puts them in a GLB's binary chunk (:func:`glb_container`)."""
     sphere = preview_sphere()
     blob = bytearray()
     views: list[dict[str, Any]] = []
@@ -192,8 +206,7 @@ def _add_preview_mesh(doc: dict[str, Any]) -> None:
         if key == "position":  # required for POSITION
             acc.update(min=arr.min(axis=0).tolist(), max=arr.max(axis=0).tolist())
         accessors.append(acc)
-    doc["buffers"] = [{"byteLength": len(blob), "uri": "data:application/octet-stream;base64,"
-                       + base64.b64encode(bytes(blob)).decode("ascii")}]
+    doc["buffers"] = [{"byteLength": len(blob)}]
     doc["bufferViews"] = views
     doc["accessors"] = accessors
     doc["meshes"] = [{
@@ -207,11 +220,13 @@ def _add_preview_mesh(doc: dict[str, Any]) -> None:
     doc["nodes"] = [{"name": "preview", "mesh": 0}]
     doc["scenes"] = [{"nodes": [0]}]
     doc["scene"] = 0
+    return bytes(blob)
 
 
-def gltf_document(p: Principled, name: str, provenance: Mapping[str, Any],
-                  with_mesh: bool = False) -> dict[str, Any]:
-    """A whole glTF 2.0 JSON document holding one material (and the preview mesh)."""
+def _document(p: Principled, name: str, provenance: Mapping[str, Any],
+              with_mesh: bool) -> tuple[dict[str, Any], bytes]:
+    """The glTF 2.0 document of one material (and the preview mesh) and its binary buffer
+    (empty without the mesh; ``buffers[0]`` then has no ``uri`` yet)."""
     material, used = gltf_material(p, name, provenance)
     doc: dict[str, Any] = {
         "asset": {"version": "2.0", "generator": f"gonio {__version__}",
@@ -220,9 +235,50 @@ def gltf_document(p: Principled, name: str, provenance: Mapping[str, Any],
     }
     if used:
         doc["extensionsUsed"] = used
+    blob = _add_preview_mesh(doc) if with_mesh else b""
+    return doc, blob
+
+
+def gltf_document(p: Principled, name: str, provenance: Mapping[str, Any],
+                  with_mesh: bool = False) -> dict[str, Any]:
+    """A whole glTF 2.0 JSON document holding one material (and the preview mesh, its buffer
+    embedded as a base64 ``data:`` URI)."""
+    doc, blob = _document(p, name, provenance, with_mesh)
     if with_mesh:
-        _add_preview_mesh(doc)
+        doc["buffers"][0]["uri"] = ("data:application/octet-stream;base64,"
+                                    + base64.b64encode(blob).decode("ascii"))
     return doc
+
+
+def glb_container(doc: Mapping[str, Any], blob: bytes = b"") -> bytes:
+    """``doc`` and its binary buffer ``blob`` in the GLB 2.0 container (module docstring).
+
+    Parameters
+    ----------
+    doc : mapping
+        The glTF JSON document; with a ``blob`` its ``buffers[0]`` must have no ``uri`` and
+        ``byteLength = len(blob)``.
+    blob : bytes
+        The binary buffer, or empty for no binary chunk (the specification: omitted when
+        empty).
+    """
+    if blob and (doc["buffers"][0].get("uri") is not None
+                 or doc["buffers"][0]["byteLength"] != len(blob)):
+        raise GltfError("a GLB's binary chunk is buffers[0]: it must have no uri and its "
+                        "byteLength must be the chunk's")
+    # Compact JSON: ASCII (json.dumps escapes the rest), so valid UTF-8 as the chunk must be.
+    text = json.dumps(doc, separators=(",", ":")).encode("ascii")
+    chunks = [(GLB_JSON, text + b" " * (-len(text) % 4))]
+    if blob:
+        chunks.append((GLB_BIN, blob + b"\x00" * (-len(blob) % 4)))
+    body = b"".join(struct.pack("<I", len(data)) + kind + data for kind, data in chunks)
+    return GLB_MAGIC + struct.pack("<II", GLB_VERSION, 12 + len(body)) + body
+
+
+def _clean(provenance: Mapping[str, Any]) -> dict[str, Any]:
+    """The provenance as JSON holds it (values JSON has not, such as paths, as text)."""
+    clean: dict[str, Any] = json.loads(json.dumps(dict(provenance), default=str))
+    return clean
 
 
 def write_gltf(
@@ -230,6 +286,15 @@ def write_gltf(
     with_mesh: bool = False,
 ) -> Path:
     """Write the ``.gltf`` JSON (atomically); returns the path."""
-    doc = gltf_document(p, name, json.loads(json.dumps(dict(provenance), default=str)),
-                        with_mesh)
+    doc = gltf_document(p, name, _clean(provenance), with_mesh)
     return write_atomically(path, json.dumps(doc, indent=2))
+
+
+def write_glb(
+    p: Principled, path: str | os.PathLike[str], name: str, provenance: Mapping[str, Any],
+    with_mesh: bool = False,
+) -> Path:
+    """Write the same document as :func:`write_gltf` as a binary ``.glb`` (atomically);
+    returns the path."""
+    doc, blob = _document(p, name, _clean(provenance), with_mesh)
+    return write_atomically(path, glb_container(doc, blob))

@@ -86,7 +86,7 @@ def test_metrics_add_the_headline_error_with_its_meaning(views: ResultViews) -> 
 
 def test_a_mesh_is_asked_of_gltf_only_before_any_file_is_touched(views: ResultViews) -> None:
     job = _completed(views.store, "r.h5", {})
-    with pytest.raises(ExportError, match="gltf only"):
+    with pytest.raises(ExportError, match="gltf or glb only"):
         views.export(job, "mtlx", with_mesh=True)
     with pytest.raises(ExportError, match="unknown export format 'obj'"):
         views.export(job, "obj")

@@ -42,8 +42,10 @@ async function exportShown() {
   const choice = $("#export-format").value;
   // The glTF file alone holds no mesh, and a viewer opened on it shows an empty scene; the
   // preview sphere (with_mesh) is what a lab that wants to look at its material asks for.
-  const fmt = choice === "gltf-mesh" ? "gltf" : choice;
-  const query = choice === "gltf-mesh" ? { format: fmt, with_mesh: "true" } : { format: fmt };
+  // "gltf-mesh" and "glb-mesh" are the format with the sphere.
+  const withMesh = choice.endsWith("-mesh");
+  const fmt = withMesh ? choice.slice(0, -"-mesh".length) : choice;
+  const query = withMesh ? { format: fmt, with_mesh: "true" } : { format: fmt };
   const state = $("#export-state");
   // The seconds so far, counted: a fit-backed format can take a minute on a busy machine
   // (MERL with its sidecar: 61 s measured beside a reconstruction), and a bare "exporting…"

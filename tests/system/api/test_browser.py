@@ -293,6 +293,13 @@ def test_start_a_scan_from_the_page_and_see_the_result(daemon: Daemon, browser: 
                or "export failed" in d.find_element(By.ID, "export-state").text)
     first = browser.find_element(By.ID, "export-state").text.split("\n")[0]
     assert first == f"saved gonio-job-{job_id}-browser-sample-gltf-mesh.gltf", first
+    # The binary glTF on its sphere, for viewers that open .glb files (Blender, model-viewer).
+    Select(browser.find_element(By.ID, "export-format")).select_by_value("glb-mesh")
+    click_when_steady(wait, "#export-button")
+    wait.until(lambda d: "glb-mesh" in d.find_element(By.ID, "export-state").text
+               or "export failed" in d.find_element(By.ID, "export-state").text)
+    first = browser.find_element(By.ID, "export-state").text.split("\n")[0]
+    assert first == f"saved gonio-job-{job_id}-browser-sample-glb-mesh.glb", first
     # The export's warnings, as `gonio export` prints them (the daemon sends them in a header,
     # test_scan_flow), one a line beside the file's name: the download cannot say them.
     Select(browser.find_element(By.ID, "export-format")).select_by_value("merl")

@@ -142,7 +142,20 @@ def test_full_scan_with_live_progress_and_results(daemon: Daemon) -> None:
                 in meshed.headers["content-disposition"])
         wrong = c.get(f"/api/v1/jobs/{job_id}/export",
                       params={"format": "mtlx", "with_mesh": "true"})
-        assert wrong.status_code == 422 and "gltf only" in wrong.json()["detail"]
+        assert wrong.status_code == 422 and "gltf or glb only" in wrong.json()["detail"]
+        # The binary glTF (GLB 2.0 container): its media type, its name, the header's magic
+        # and the same material as the .gltf.
+        glb = c.get(f"/api/v1/jobs/{job_id}/export",
+                    params={"format": "glb", "with_mesh": "true"})
+        assert glb.status_code == 200, glb.text
+        assert glb.headers["content-type"] == "model/gltf-binary"
+        assert (f"gonio-job-{job_id}-brushed-sample-glb-mesh.glb"
+                in glb.headers["content-disposition"])
+        assert glb.content[:4] == b"glTF" and int.from_bytes(glb.content[8:12], "little") == len(
+            glb.content)
+        size = int.from_bytes(glb.content[12:16], "little")
+        assert glb.content[16:20] == b"JSON"
+        assert json.loads(glb.content[20:20 + size])["materials"] == doc["materials"]
         # A download says what `gonio export` prints as warnings, in a header: the MERL file
         # of this anisotropic specimen holds only its azimuthal average, asked for once and
         # again from the kept file.

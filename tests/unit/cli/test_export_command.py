@@ -49,7 +49,7 @@ def test_fits_are_stored_in_the_result(result: Path) -> None:
     assert 0 <= res.principled.metrics["rendered"]["value"] < 1
 
 
-@pytest.mark.parametrize("fmt", ["factored", "mtlx", "gltf", "merl", "table"])
+@pytest.mark.parametrize("fmt", ["factored", "mtlx", "gltf", "glb", "merl", "table"])
 def test_every_format(result: Path, tmp_path: Path, fmt: str,
                       capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / f"x.{fmt}"
@@ -62,6 +62,13 @@ def test_every_format(result: Path, tmp_path: Path, fmt: str,
         assert f.D.shape == (18, 72) and prov["job_id"] == 5 and prov["specimen"] == "brushed"
     elif fmt == "gltf":
         assert json.loads(out.read_text())["asset"]["extras"]["job_id"] == 5
+    elif fmt == "glb":
+        # glTF 2.0's binary container: magic "glTF", version 2, then the JSON chunk
+        data = out.read_bytes()
+        assert data[:4] == b"glTF" and int.from_bytes(data[4:8], "little") == 2
+        size = int.from_bytes(data[12:16], "little")
+        assert data[16:20] == b"JSON"
+        assert json.loads(data[20:20 + size])["asset"]["extras"]["job_id"] == 5
     elif fmt == "mtlx":
         assert "&quot;job_id&quot;: 5" in out.read_text()
     elif fmt == "table":
@@ -227,8 +234,43 @@ def test_gltf_with_mesh_and_the_report(result: Path, tmp_path: Path,
     assert "no mesh" in said and "--with-mesh adds a preview sphere" in said
     assert main(["export", str(result), "-f", "merl", "--with-mesh",
                  "-o", str(tmp_path / "m.binary")]) == 2
-    assert "--with-mesh applies to --format gltf only" in capsys.readouterr().err
+    assert "--with-mesh applies to --format gltf or glb only" in capsys.readouterr().err
     assert not (tmp_path / "m.binary").exists()
+
+
+def test_glb_with_mesh_and_without(result: Path, tmp_path: Path,
+                                   capsys: pytest.CaptureFixture[str]) -> None:
+    """`-f glb --with-mesh` writes the binary container with its BIN chunk (the sphere);
+    without the mesh the report says, as for the .gltf, that a viewer shows an empty scene."""
+    out = tmp_path / "m.glb"
+    assert main(["export", str(result), "-f", "glb", "--with-mesh", "-o", str(out)]) == 0
+    data = out.read_bytes()
+    assert data[:4] == b"glTF" and int.from_bytes(data[8:12], "little") == len(data)
+    size = int.from_bytes(data[12:16], "little")
+    assert data[20 + size + 4:20 + size + 8] == b"BIN\x00"
+    assert "no mesh" not in capsys.readouterr().out
+    bare = tmp_path / "bare.glb"
+    assert main(["export", str(result), "-f", "glb", "-o", str(bare)]) == 0
+    assert len(bare.read_bytes()) == 20 + int.from_bytes(bare.read_bytes()[12:16], "little")
+    said = capsys.readouterr().out
+    assert "no mesh" in said and "--with-mesh adds a preview sphere" in said
+
+
+@pytest.mark.parametrize(("fmt", "name", "other"), [("gltf", "felt.glb", "glb"),
+                                                    ("glb", "felt.gltf", "gltf")])
+def test_gltf_and_glb_suffixes_are_not_mixed(
+    result: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], fmt: str, name: str,
+    other: str,
+) -> None:
+    """`-f gltf -o felt.glb` wrote glTF JSON into a .glb, which viewers that open a .glb by
+    its binary header (three.js, Blender, model-viewer) refuse: refused, with the right name
+    and the format that name asks for, before anything is written (and the other way)."""
+    assert main(["export", str(result), "-f", fmt, "-o", str(tmp_path / name)]) == 2
+    err = capsys.readouterr().err
+    assert f"has the suffix of the {other} format, but --format is {fmt}" in err, err
+    assert f"name it felt.{fmt}" in err and f"--format {other}" in err, err
+    assert "nothing was written" in err
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_a_table_file_is_told_apart_from_a_result(tmp_path: Path,

@@ -6,6 +6,7 @@ import base64
 import json
 import math
 import shutil
+import struct
 import subprocess
 from pathlib import Path
 
@@ -154,3 +155,93 @@ def test_gltf_with_mesh_passes_the_khronos_validator(tmp_path: Path) -> None:
         warnings = [m for m in report["issues"]["messages"] if m["severity"] == 1]
         assert report["issues"]["numWarnings"] == 0, warnings
         assert report["info"]["drawCallCount"] == 1  # the sphere is in the scene
+
+
+def _glb_chunks(data: bytes) -> tuple[dict, list[tuple[bytes, bytes]]]:
+    """The header and chunks of a GLB, read by the layout of the glTF 2.0 specification
+    ("Binary glTF Layout"), not by gonio's writer: a 12-byte header of three little-endian
+    uint32 (magic 0x46546C67 "glTF", version, total length), then chunks of uint32
+    chunkLength, uint32 chunkType and chunkLength bytes of data."""
+    magic, version, length = struct.unpack_from("<III", data, 0)
+    header = {"magic": magic, "version": version, "length": length}
+    chunks, at = [], 12
+    while at < len(data):
+        size, kind = struct.unpack_from("<I4s", data, at)
+        chunks.append((kind, data[at + 8:at + 8 + size]))
+        assert at % 4 == 0 and size % 4 == 0, (at, size)  # chunks start and end aligned
+        at += 8 + size
+    assert at == len(data), "the last chunk runs past the end of the file"
+    return header, chunks
+
+
+@pytest.mark.parametrize("with_mesh", [False, True])
+def test_glb_has_the_specifications_layout(tmp_path: Path, with_mesh: bool) -> None:
+    """The .glb is the .gltf's document in the binary container: header magic, version 2 and
+    the file's length; the JSON chunk first (padded with spaces), then with the mesh one BIN
+    chunk (padded with zeros) holding buffer 0, which has no uri and the data's length."""
+    path = gltf.write_glb(BRUSHED, tmp_path / "m.glb", "m", PROV, with_mesh=with_mesh)
+    data = path.read_bytes()
+    header, chunks = _glb_chunks(data)
+    assert header == {"magic": 0x46546C67, "version": 2, "length": len(data)}
+    assert data[:4] == b"glTF"
+    assert [kind for kind, _ in chunks] == [b"JSON", b"BIN\x00"][:1 + with_mesh]
+    text = chunks[0][1]
+    # Padded with spaces only, fewer than four, after the JSON's closing brace.
+    assert text.rstrip(b" ").endswith(b"}") and len(text) - len(text.rstrip(b" ")) < 4
+    doc = json.loads(text.decode("utf-8"))
+    same = json.loads(gltf.write_gltf(BRUSHED, tmp_path / "m.gltf", "m", PROV,
+                                      with_mesh=with_mesh).read_text())
+    assert doc["materials"] == same["materials"] and doc["asset"] == same["asset"]
+    assert doc["extensionsUsed"] == ["KHR_materials_anisotropy"]
+    if not with_mesh:
+        assert "buffers" not in doc and "meshes" not in doc
+        return
+    (buffer,) = doc["buffers"]
+    assert "uri" not in buffer
+    binary = chunks[1][1]
+    assert buffer["byteLength"] <= len(binary) < buffer["byteLength"] + 4
+    assert set(binary[buffer["byteLength"]:]) <= {0}
+    for acc in doc["accessors"]:
+        view = doc["bufferViews"][acc["bufferView"]]
+        size = {5126: 4, 5123: 2}[acc["componentType"]] * acc["count"] * {
+            "SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}[acc["type"]]
+        assert size <= view["byteLength"]
+        assert view["byteOffset"] + view["byteLength"] <= buffer["byteLength"]
+    # The accessors read the same numbers as the .gltf's base64 buffer.
+    embedded = base64.b64decode(same["buffers"][0]["uri"].split(",", 1)[1])
+    assert binary[:buffer["byteLength"]] == embedded
+    assert doc["bufferViews"] == same["bufferViews"] and doc["accessors"] == same["accessors"]
+
+
+def test_glb_pads_by_the_specification() -> None:
+    """Hand-counted: ``{"asset":{"version":"2.0"},"buffers":[{"byteLength":5}]}`` is 56 bytes
+    (no padding) and a 5-byte buffer is padded to 8 with three zeros: 12 + (8 + 56) + (8 + 8) =
+    92 bytes; ``{"asset":{"version":"2.0"}}`` alone is 27, padded to 28 with one space: 48."""
+    doc = {"asset": {"version": "2.0"}, "buffers": [{"byteLength": 5}]}
+    data = gltf.glb_container(doc, b"\x01\x02\x03\x04\x05")
+    header, chunks = _glb_chunks(data)
+    assert header["length"] == len(data) == 92
+    assert chunks[0] == (b"JSON", b'{"asset":{"version":"2.0"},"buffers":[{"byteLength":5}]}')
+    assert chunks[1] == (b"BIN\x00", b"\x01\x02\x03\x04\x05\x00\x00\x00")
+    bare = gltf.glb_container({"asset": {"version": "2.0"}})
+    assert bare == (b"glTF" + struct.pack("<II", 2, 48) + struct.pack("<I", 28) + b"JSON"
+                    + b'{"asset":{"version":"2.0"}} ')
+    with pytest.raises(gltf.GltfError, match="no uri"):
+        gltf.glb_container({"buffers": [{"byteLength": 5, "uri": "x.bin"}]}, b"12345")
+
+
+@pytest.mark.parametrize("with_mesh", [False, True])
+def test_glb_passes_the_khronos_validator(tmp_path: Path, with_mesh: bool) -> None:
+    """Read as a .glb (by its suffix, as a viewer picks the container): no error, and with
+    the mesh no warning and the sphere drawn. The JSON of a .gltf named .glb (what
+    ``-f gltf -o x.glb`` wrote) is an error to it."""
+    for p in (BRUSHED, PLASTIC, COATED):
+        path = gltf.write_glb(p, tmp_path / "m.glb", "m", PROV, with_mesh=with_mesh)
+        report = _validate(path)
+        errors = [m for m in report["issues"]["messages"] if m["severity"] == 0]
+        assert report["issues"]["numErrors"] == 0, errors
+        warnings = [m for m in report["issues"]["messages"] if m["severity"] == 1]
+        assert report["issues"]["numWarnings"] == 0, warnings
+        assert report["info"]["drawCallCount"] == (1 if with_mesh else 0)
+    wrong = gltf.write_gltf(BRUSHED, tmp_path / "json.glb", "m", PROV, with_mesh=with_mesh)
+    assert _validate(wrong)["issues"]["numErrors"] > 0

@@ -219,3 +219,22 @@ def test_three_js_reads_a_specular_strength_above_glass(browser: Any, server: tu
     for who in (0, 1):  # the highlight above the centre's diffuse (the same cos there: 1)
         spec = {k: seen[k]["peak"][who] - (1.0 - f) * 0.5 / np.pi for k, f in f0s.items()}
         assert spec["strong"] / spec["glass"] == pytest.approx(10.0, rel=0.05), (who, spec)
+
+
+def test_three_js_loads_the_glb_as_the_gltf(browser: Any, server: tuple[str, Path]) -> None:
+    """The binary .glb goes through three.js's GLTFLoader (which reads the container by its
+    header) to the same picture as the .gltf of the same material: the same sphere, tangents
+    and anisotropic highlight, pixel for pixel."""
+    base, models = server
+    p = _material(25.0)
+    gltf.write_glb(p, models / "d25.glb", "brushed", {"specimen": "test"}, with_mesh=True)
+    gltf.write_gltf(p, models / "d25-json.gltf", "brushed", {"specimen": "test"},
+                    with_mesh=True)
+    flash = render.PointLight(0.0, 0.0)
+    binary, tangents = three_render(browser, base, "d25.glb", flash)
+    text, _ = three_render(browser, base, "d25-json.gltf", flash)
+    assert tangents, "three.js did not load the .glb's TANGENT attribute"
+    assert np.isfinite(binary).all() and binary.max() > 0, "three.js rendered nothing"
+    assert np.array_equal(binary, text)
+    theirs = highlight(binary)
+    assert angle_between(theirs.direction_deg, 25.0) < ANGLE_TOL_DEG, theirs
