@@ -103,10 +103,10 @@ def merl_sidecar(table: BRDFTable, provenance: Mapping[str, Any]) -> dict[str, A
     # The glTF and MaterialX principled models are twofold symmetric: for a result that is
     # not, they lose what differs at a half turn too, and only the table and factored keep it.
     keep = ("use the 'table' or 'factored' export to keep it (the result is not twofold "
-            f"symmetric, log RMSE {asym:.3f} to its half-turn average, which the gltf and mtlx "
+            f"symmetric, log RMSE {asym:.3f} to its half-turn average, which the glTF and mtlx "
             "principled models cannot show either)"
             if isinstance(asym, int | float) and asym > TWOFOLD_WARN else
-            "use the gltf, mtlx or table export to keep it")
+            "use the gltf, glb, mtlx or table export to keep it")
     note = (f"the reconstruction is anisotropic (log RMSE {lost:.3f} to its azimuthal "
             "average); this MERL file holds only the azimuthal average, so a brushed or "
             f"woven look is gone: {keep}" if lost > ANISOTROPY_WARN else None)

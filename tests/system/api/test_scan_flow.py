@@ -164,7 +164,7 @@ def test_full_scan_with_live_progress_and_results(daemon: Daemon) -> None:
             merl = c.get(f"/api/v1/jobs/{job_id}/export", params={"format": "merl"})
             assert merl.status_code == 200, merl.text
             warned = json.loads(merl.headers["x-gonio-export-warnings"])
-            assert any("azimuthal average" in w and "gltf, mtlx or table" in w
+            assert any("azimuthal average" in w and "gltf, glb, mtlx or table" in w
                        for w in warned), warned
         # Its provenance sidecar, which stayed on the daemon's disk, is downloadable, named
         # as gonio export names it beside the file; only MERL has one.

@@ -89,6 +89,6 @@ def test_the_sidecar_of_a_result_without_twofold_symmetry_does_not_send_it_to_gl
     for asym in (0.0, 0.136):
         side = merl.merl_sidecar(table, {"symmetry": {"twofold_asymmetry": asym}})
         told[asym] = " ".join(side["warnings"])
-    assert "use the gltf, mtlx or table export" in told[0.0]
-    assert "use the gltf, mtlx or table export" not in told[0.136], told[0.136]
+    assert "use the gltf, glb, mtlx or table export" in told[0.0]
+    assert "use the gltf, glb, mtlx or table export" not in told[0.136], told[0.136]
     assert "'table' or 'factored' export" in told[0.136] and "not twofold" in told[0.136]
