@@ -861,13 +861,17 @@ function select(id) {
   if (selected !== id) {
     // The job holding the rig has its detail already (its row's ETA): clicking its row kept
     // the ETA blank until the next poll, up to a second; the job left keeps its own the same
-    // way while it holds the rig.
+    // way while it holds the rig. Only a detail in the state the list shows: one polled
+    // before a pause would show a paused job's time as running out.
+    const current = (d) => d && jobs.find((j) => j.id === d.id)?.state === d.state;
     const left = selectedDetail;
-    selectedDetail = activeDetail?.id === id ? activeDetail : null;
-    if (left && left.id !== id && HOLDING.includes(left.state)) activeDetail = left;
+    selectedDetail = activeDetail?.id === id && current(activeDetail) ? activeDetail : null;
+    if (left && left.id !== id && HOLDING.includes(left.state) && current(left)) activeDetail = left;
   }
   selected = id;
   renderJobs();
+  // Its detail now, not at the next tick of the poll (a row without one shows no ETA).
+  guarded(pollSelected);
   guarded(refreshReadings);
   refreshCompareChoices();
   guarded(() => showResult(jobs.find((j) => j.id === id)));
