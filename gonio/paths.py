@@ -71,9 +71,11 @@ def scan_data_dir(rig_config: Any) -> Path:
     """Default data directory of ``gonio scan`` on ``rig_config`` (not created).
 
     ``scans/<rig>-<geometry_key>``. Until that folder exists, a folder of the legacy key
-    (:func:`legacy_geometry_key`) whose calibration fits the rig's sensors is used instead,
+    (:func:`legacy_geometry_key`) holding a calibration for the rig's sensors is used instead,
     so a rig calibrated before the key held the sensors' channels keeps its calibration and
-    its jobs; a legacy folder calibrated for other sensors is left to them.
+    its jobs. A legacy folder calibrated for other sensors is left to them, and one without a
+    calibration to no one: were it taken by every sensor set, the first set to calibrate there
+    would move the others out of it, from under a daemon started on it.
     """
     scans = user_data_root() / "scans"
     name = _rig_dir_name(rig_config)
@@ -91,16 +93,18 @@ CALIBRATION_NAME = "calibration.json"
 
 
 def _calibration_fits_sensors(data_dir: Path, rig_config: Any) -> bool:
-    """Whether ``data_dir``'s calibration has as many channels per pair as the rig's sensors
-    read (True without one, or with one this cannot read: the folder holds this geometry's
-    jobs, and reading a calibration is :mod:`gonio.calibration`'s to judge)."""
+    """Whether ``data_dir`` holds a calibration of the rig's sensors: factors for at least
+    one pair, each naming one of the rig's sensors with as many channels as it reads (the
+    file records counts, not channel names). False without one or with one that cannot be
+    read, so that the answer cannot change until a calibration of these sensors is written
+    there, which only a rig that chose the folder does."""
+    wanted = {s.name: len(s.channels) for s in getattr(rig_config, "sensors", None) or ()}
     try:
         pairs = json.loads((data_dir / CALIBRATION_NAME).read_text()).get("pairs") or []
-        counts = {str(p["sensor"]): len(p["factor"]) for p in pairs}
+        counts = [(str(p["sensor"]), len(p["factor"])) for p in pairs]
     except (OSError, ValueError, AttributeError, KeyError, TypeError):
-        return True
-    wanted = {s.name: len(s.channels) for s in getattr(rig_config, "sensors", None) or ()}
-    return all(wanted.get(sensor, n) == n for sensor, n in counts.items())
+        return False
+    return bool(counts) and all(wanted.get(sensor) == n for sensor, n in counts)
 
 
 STORE_NAME = "gonio.sqlite"

@@ -112,11 +112,29 @@ def test_a_legacy_folder_calibrated_for_other_sensors_is_left_to_them(
     assert scan_data_dir(RIG).name == f"Lab-rig-2-{geometry_key(RIG)}"
 
 
-def test_a_legacy_folder_without_calibration_is_kept(monkeypatch: pytest.MonkeyPatch,
-                                                     tmp_path: Path) -> None:
+def test_a_legacy_folder_without_calibration_is_no_ones(monkeypatch: pytest.MonkeyPatch,
+                                                        tmp_path: Path) -> None:
+    """Taken by both sensor sets, the first to calibrate in it moved the other out of it
+    (from under a daemon started there): it is neither's, and each set's folder is stable
+    whatever the other writes."""
     monkeypatch.setenv(DATA_ENV, str(tmp_path))
     legacy = _legacy_folder(tmp_path, None)
-    assert scan_data_dir(RIG) == legacy
+    before = scan_data_dir(RIG), scan_data_dir(SPECTRAL)
+    assert legacy not in before
+    (legacy / "calibration.json").write_text(json.dumps(
+        {"pairs": [{"light": "L", "sensor": "S", "factor": [5.3e-06] * len(BANDS)}]}))
+    assert scan_data_dir(RIG) == before[0]  # the RGB rig's folder did not move
+
+
+def test_a_legacy_calibration_of_unknown_sensors_or_unreadable_is_not_taken(
+        monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    monkeypatch.setenv(DATA_ENV, str(tmp_path))
+    legacy = _legacy_folder(tmp_path, None)
+    own = tmp_path / "scans" / f"Lab-rig-2-{geometry_key(RIG)}"
+    for text in (json.dumps({"pairs": [{"light": "L", "sensor": "X", "factor": [1e-6] * 3}]}),
+                 json.dumps({"pairs": []}), json.dumps([1, 2]), "{not json"):
+        (legacy / "calibration.json").write_text(text)
+        assert scan_data_dir(RIG) == own, text
 
 
 def test_the_own_folder_wins_once_it_exists(monkeypatch: pytest.MonkeyPatch,
