@@ -146,14 +146,19 @@ def test_preview_sphere_has_unit_normals_and_tangents_along_u(tmp_path: Path) ->
     assert (np.sum(face * (p0 + p1 + p2), axis=1) > 0).all()
 
 
+def _assert_valid(report: dict) -> None:
+    """The Khronos validator's report has no error and no warning (listed if it has)."""
+    errors = [m for m in report["issues"]["messages"] if m["severity"] == 0]
+    assert report["issues"]["numErrors"] == 0, errors
+    warnings = [m for m in report["issues"]["messages"] if m["severity"] == 1]
+    assert report["issues"]["numWarnings"] == 0, warnings
+
+
 def test_gltf_with_mesh_passes_the_khronos_validator(tmp_path: Path) -> None:
     for p in (BRUSHED, PLASTIC):
         path = gltf.write_gltf(p, tmp_path / "m.gltf", "m", PROV, with_mesh=True)
         report = _validate(path)
-        errors = [m for m in report["issues"]["messages"] if m["severity"] == 0]
-        assert report["issues"]["numErrors"] == 0, errors
-        warnings = [m for m in report["issues"]["messages"] if m["severity"] == 1]
-        assert report["issues"]["numWarnings"] == 0, warnings
+        _assert_valid(report)
         assert report["info"]["drawCallCount"] == 1  # the sphere is in the scene
 
 
@@ -238,10 +243,7 @@ def test_glb_passes_the_khronos_validator(tmp_path: Path, with_mesh: bool) -> No
     for p in (BRUSHED, PLASTIC, COATED):
         path = gltf.write_glb(p, tmp_path / "m.glb", "m", PROV, with_mesh=with_mesh)
         report = _validate(path)
-        errors = [m for m in report["issues"]["messages"] if m["severity"] == 0]
-        assert report["issues"]["numErrors"] == 0, errors
-        warnings = [m for m in report["issues"]["messages"] if m["severity"] == 1]
-        assert report["issues"]["numWarnings"] == 0, warnings
+        _assert_valid(report)
         assert report["info"]["drawCallCount"] == (1 if with_mesh else 0)
     wrong = gltf.write_gltf(BRUSHED, tmp_path / "json.glb", "m", PROV, with_mesh=with_mesh)
     assert _validate(wrong)["issues"]["numErrors"] > 0
