@@ -1892,6 +1892,36 @@ def mirror_study(rows: list[dict[str, Any]],
     return adopted
 
 
+def mirror_gap_table(rows: list[dict[str, Any]]) -> None:
+    """The shipped estimate by the layout's mirror gap: what the note a result with a gap
+    carries quotes (:data:`gonio.brdf.mirrorgap.MIRROR_GAP_LIMIT_DEG`; science.md 7.1.1.1).
+    Every set, the blind ones included: a statement of what was measured, not a choice."""
+    print("\n#### The shipped estimate by mirror gap (every set)\n")
+    print("| plan | mirror gap (deg) | scans | within x2 | more than 2x low | worst low "
+          "(true / estimate) | true above the upper end |")
+    print("|---|---|---|---|---|---|---|")
+    groups: dict[tuple[str, float], list[dict[str, Any]]] = {}
+    for r in rows:
+        groups.setdefault((r["plan"], round(mirror_gap_deg(r), 2)), []).append(r)
+    for with_gap in (False, True):
+        sel = [r for (_, g), rs in groups.items() if (g > MIRROR_STEP_DEG) == with_gap
+               for r in rs]
+        for (plan, g), rs in sorted(groups.items()):
+            if (g > MIRROR_STEP_DEG) == with_gap:
+                _mirror_gap_row(plan, f"{g:g}", rs)
+        _mirror_gap_row(f"**every layout with a gap {'above' if with_gap else 'of at most'} "
+                        f"{MIRROR_STEP_DEG:g} deg**", "", sel)
+
+
+def _mirror_gap_row(label: str, gap: str, rs: list[dict[str, Any]]) -> None:
+    if not rs:
+        return
+    w, lo, n = _counts(rs, lambda r: r["widened"])
+    worst = max(r["truth"] / r["widened"] for r in rs)
+    above = sum(r["truth"] > r["upper"] for r in rs if np.isfinite(r.get("upper", np.nan)))
+    print(f"| {label} | {gap} | {n} | {w} | {lo} | {worst:.2f} | {above} |")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     ap.add_argument("--rows", type=Path, default=None,
@@ -1939,6 +1969,7 @@ def main(argv: list[str] | None = None) -> int:
     n_rows = len(rows)
     cov_study(rows, scan_blind)
     mirror_study(rows, lambda: scan_blind("fresh-mirror"))
+    mirror_gap_table(rows)
     if args.rows is not None and len(rows) > n_rows:
         args.rows.write_text(json.dumps(rows))
     print(f"total {time.perf_counter() - t0:.0f} s")

@@ -252,6 +252,13 @@ def headline_error(metrics: dict[str, Any]) -> dict[str, Any] | None:
         out["text"] += " (HIGHLIGHT NOT READ)"
         out["meaning"] = f"Warning: {unread}. {out['meaning']}"
         out["highlight_not_read"] = unread
+    gap = metrics.get("mirror_gap")
+    if out is not None and out["key"] == "predicted_log_rmse" and isinstance(gap, str):
+        # A fact of the layout, not of this scan (gonio.brdf.mirrorgap): said beside the
+        # estimate it limits, without marking the headline, since most specimens have no
+        # highlight that narrow.
+        out["meaning"] = f"{out['meaning']} Note: {gap}."
+        out["mirror_gap"] = gap
     return out
 
 

@@ -35,6 +35,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from gonio.basis_supply import BasisSupply
+from gonio.brdf.mirrorgap import cells_gap_deg, gap_note
 from gonio.calibration import (
     CALIBRATION_FILE,
     Calibration,
@@ -325,6 +326,14 @@ def finish_job(job_id: int, plan: AnyPlan | CheckedPlan, how: Finishing) -> dict
         metrics["highlight_not_read"] = highlight_message
         provenance["highlight_not_read"] = highlight_message
         log.info("job %d: %s", job_id, highlight_message)
+    # A layout whose pairs all stand off the mirror direction cannot read a highlight narrower
+    # than that gap, and its self-estimate cannot see one either (gonio.brdf.mirrorgap): the
+    # result states the gap, a fact of the layout, beside the estimate.
+    gap = cells_gap_deg(grid.cells)
+    metrics["mirror_gap_deg"] = gap
+    if (gap_message := gap_note(gap)) is not None:
+        metrics["mirror_gap"] = gap_message
+        provenance["mirror_gap"] = gap_message
     _compare_with_design(rec, readings, plan, samples, len(pairs), bool(cal.pairs),
                          how.provenance, metrics, provenance)
     if "design_gap" in metrics:

@@ -253,6 +253,15 @@ def _highlight_warning(table: Any, cells: Any, ph_lab: Any, alpha: Any, values: 
                           np.maximum(np.asarray(values, dtype=float), 0.0)).message()
 
 
+def _mirror_gap_note(cells: Any) -> str | None:
+    """What the layout's distance from the mirror direction means for the estimate
+    (:mod:`gonio.brdf.mirrorgap`), as finishing records it for a scan; None when a pair reads
+    the mirror direction."""
+    from gonio.brdf.mirrorgap import cells_gap_deg, gap_note
+
+    return gap_note(cells_gap_deg(cells))
+
+
 def _load_basis(path: str | None, progress: bool = True) -> Any:
     from gonio.brdf.reconstruction.basis import Basis, default_basis
 
@@ -287,6 +296,8 @@ def _cmd_reconstruct(args: argparse.Namespace) -> int:
     if (unread := _highlight_warning(rec.table, samples.cells, samples.ph_lab,
                                      samples.stage_angles, samples.values)) is not None:
         print(f"  warning: {unread}")
+    if (gap := _mirror_gap_note(samples.cells)) is not None:
+        print(f"  note: {gap}")
     print(f"  sample error {100 * rec.rel_sample_error:.2f} %, "
           f"self-estimated MAPE {100 * rec.predicted_error:.1f} % "
           f"(V&F estimate {100 * rec.estimated_error:.2f} %), "
@@ -382,6 +393,8 @@ def _cmd_demo(args: argparse.Namespace) -> int:
         print(f"  warning: {rec.misfit_warning}")
     if (unread := _highlight_warning(rec.table, cells, ph, alpha, vals)) is not None:
         print(f"  warning: {unread}")
+    if (gap := _mirror_gap_note(cells)) is not None:
+        print(f"  note: {gap}")
     print(f"  self-estimated MAPE {100 * rec.predicted_error:.1f} % "
           f"(V&F estimate {100 * rec.estimated_error:.2f} %)")
     print(f"  reconstruction {rec.settings['seconds']:.3f} s, total "

@@ -335,6 +335,8 @@ def dry_run_summary(dr: Any, plan: Any, rig_name: str, *,
         lines.append(f"  first, about {_duration_text(build)} more: the reconstruction basis is "
                      "not built on this install yet; the adaptive rule needs it, so the job "
                      "builds it before its first reading (once; later jobs reuse it)")
+    if (gap := getattr(dr, "mirror_gap", None)) is not None:
+        lines.append(f"  note: {gap}")
     lines += [f"  warning: {w}" for w in getattr(dr, "warnings", [])]
     lines.append("  (--json prints the whole plan: every position in visiting order)")
     return "\n".join(lines)

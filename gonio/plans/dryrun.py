@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 from pydantic import BaseModel, Field
 
+from gonio.brdf.mirrorgap import gap_note, mirror_gap_deg
 from gonio.brdf.reconstruction.samples import HALF_TURN_DEG
 from gonio.hal import PairSpec
 from gonio.plans.arc import FULL_TURN_DEG, branch_bounds
@@ -156,6 +157,15 @@ class DryRun(BaseModel):
         default=None, description="plans with arc 'auto': the job when the first round's test "
         "finds the specimen twofold symmetric (180) and when it does not (360), each bounded; "
         "max_estimated_s and max_angles are the larger. null for a fixed arc")
+    mirror_gap_deg: float | None = Field(
+        default=None, description="plans that reconstruct: the least tilt of a pair's half "
+        "vector from the specimen normal, degrees (the layout's mirror gap; turning the stage "
+        "keeps it, docs/science.md 7.1.1.1); null for a plan that reconstructs nothing")
+    mirror_gap: str | None = Field(
+        default=None, description="when mirror_gap_deg is above 1: what it means for a glossy "
+        "specimen (a highlight narrower than the gap is neither measured nor in the result's "
+        "predicted_log_rmse), in words; the result records the same. A fact of the rig's "
+        "layout, not a warning: most specimens have no highlight that narrow")
     warnings: list[str] = Field(
         default_factory=list, description="what may make the result poorer than the plan "
         "suggests, and what to do; the plan runs as it is. E.g. a half-turn plan (span_deg "
@@ -247,6 +257,9 @@ def dry_run(plan: AnyPlan | CheckedPlan, rig: RigDescription, current_deg: float
             finish += BASIS_BUILD_S
             finishing_source = (f"{finishing_source}; and about {BASIS_BUILD_S:.0f} s to build "
                                 "the reconstruction basis, once on this install")
+    gap = None
+    if plan.finishing == "reconstruction":
+        gap = mirror_gap_deg(*rig.pair_directions(pairs))
     darks = len(route) if plan.exposure.dark == "every_angle" else int(plan.exposure.dark == "once")
     return DryRun(
         kind=plan.kind,
@@ -268,5 +281,7 @@ def dry_run(plan: AnyPlan | CheckedPlan, rig: RigDescription, current_deg: float
         finishing_s=finish,
         finishing_source=finishing_source if finish is not None else None,
         arc_branches=branches,
+        mirror_gap_deg=gap,
+        mirror_gap=gap_note(gap) if gap is not None else None,
         warnings=[w for w in (arc_warning(plan, basis),) if w is not None],
     )

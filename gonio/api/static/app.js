@@ -717,6 +717,8 @@ const METRIC_MEANING = {
   highlight_peak_ph_deg: "where the table peaks: half vector azimuth ph (specimen frame), degrees",
   highlight_peak_td_deg: "where the table peaks: difference angle td, degrees",
   highlight_not_read: "why the highlight's height, width and colour are the prior's extrapolation: no reading comes near the table's peak",
+  mirror_gap_deg: "the least tilt of a pair's half vector from the specimen normal, degrees: no stage angle reads nearer the mirror direction (above 1: a narrower highlight is neither measured nor in predicted_log_rmse)",
+  mirror_gap: "what the layout's distance from the mirror direction means for a glossy specimen",
   factored_rel_mse: "relative error of the factored BRDF export fitted to this table (volume-weighted mean squared)",
   factored_psnr: "the factored export's fit as a PSNR, dB",
   principled_roughness: "roughness of the principled (glTF / MaterialX) material fitted to this table",
@@ -1016,6 +1018,8 @@ function initForm() {
       if (b.basis_build_s != null) text += ` Then about ${eta(b.basis_build_s)} more: that basis is not built on this install yet, so the job builds it before reconstructing (once).`;
     }
     if (r.basis_build_s != null) text += ` First, about ${eta(r.basis_build_s)} more: the reconstruction basis is not built on this install yet and the adaptive rule needs it, so the job builds it before its first reading (once).`;
+    // A fact of the rig's layout (docs/api.md mirror_gap), not a warning: the verdict stays.
+    if (r.mirror_gap) text += ` Note: ${r.mirror_gap}.`;
     setNote(text, null, r.warnings || []);
   }, true));
   // A checked plan's estimate no longer holds once the form changes.
