@@ -1,10 +1,12 @@
 """Dry runs over HTTP: the cap on stage angles is a clear 422, adaptive plans get a bound,
-and the estimate says where the stage starts; plot endpoints refuse what they cannot draw."""
+the estimate says where the stage starts, and the layout's distance from the mirror direction
+is given before the scan and in its result; plot endpoints refuse what they cannot draw."""
 
 from __future__ import annotations
 
 import time
 
+import numpy as np
 import pytest
 
 from gonio.plans.models import MAX_ROTATIONS
@@ -36,6 +38,21 @@ def test_dry_run_cap_bound_and_start(daemon: Daemon, no_export_fits: None) -> No
         last = c.get(f"/api/v1/jobs/{job}/readings").json()[-1]["actual_deg"]
         d = c.post("/api/v1/jobs/dry-run", json={"plan": {"kind": "uniform"}}).json()
         assert d["from_known"] is True and d["from_deg"] == pytest.approx(last)
+        # The layout's mirror gap, before the scan and in the result: the least tilt of a
+        # pair's half vector (l + s) / |l + s| from the normal (z).
+        gap = min(float(np.degrees(np.arccos((p.wi + p.wo)[2] / np.linalg.norm(p.wi + p.wo))))
+                  for p in daemon.sim.config.pair_directions())
+        assert gap > 1.0  # the default simulated rig has no pair at the mirror direction
+        assert d["mirror_gap_deg"] == pytest.approx(gap, abs=1e-6)
+        assert f"within {gap:.1f} degrees of the mirror direction" in d["mirror_gap"]
+        assert not any("mirror" in w for w in d["warnings"])  # a note, not a warning
+        m = c.get(f"/api/v1/jobs/{job}/metrics").json()
+        assert m["mirror_gap_deg"] == pytest.approx(gap, abs=1e-6)
+        assert m["mirror_gap"] == d["mirror_gap"]
+        assert m["headline_error"]["meaning"].endswith(f"Note: {d['mirror_gap']}.")
+        cal = c.post("/api/v1/jobs/dry-run", json={"plan": {
+            "kind": "calibration", "reference_albedo": 0.99, "rotations": 2}}).json()
+        assert cal["mirror_gap_deg"] is None and cal["mirror_gap"] is None
 
 
 def test_plot_endpoints_need_a_reconstruction(daemon: Daemon) -> None:
