@@ -61,7 +61,7 @@ from gonio.brdf.models import analytic as bm
 from gonio.brdf.models.factored import fit_metrics
 from gonio.brdf.tables import geometry as geo
 from gonio.brdf.tables.table import BRDFTable
-from gonio.export import fit_all, provenance, write_export
+from gonio.export import FORMATS, fit_all, provenance, write_export
 
 #: 000 Table 1: average relMSE, MAPE (%), PSNR (dB) over wavelengths, on renderings.
 PAPER_TABLE1: list[tuple[str, float, float, float]] = [
@@ -143,7 +143,7 @@ def export_times(table: BRDFTable, out: Path) -> None:
     fits = fit_all(table)
     prov = provenance({"job_id": 0, "specimen": table.name}, fits, {})
     print("export times (fits in hand), one material:")
-    for fmt in ("factored", "mtlx", "gltf", "merl", "table"):
+    for fmt in FORMATS:  # every format the daemon writes, glb included
         t0 = time.perf_counter()
         p = write_export(fits, fmt, out / f"x-{fmt}", prov)
         print(f"  {fmt:9s} {time.perf_counter() - t0:6.2f} s  {p.stat().st_size:>12,} bytes")
