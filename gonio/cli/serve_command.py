@@ -509,6 +509,9 @@ def _demo_scan(url: str, key: str | None, result: dict[str, int], stop: Any) -> 
                 for part in ("coverage", "interval"):
                     if err and err.get(part):
                         _line(f"  {err[part]}")
+                if err and err.get("mirror_gap"):
+                    # The rig's layout limits what the estimate can see (docs/api.md).
+                    _line(f"  Note: {err['mirror_gap']}.")
                 code = 0
     except Exception as exc:  # reported, and the exit code says it failed
         _line(f"demo scan failed: {exc}", err=True)

@@ -71,6 +71,12 @@ def test_sim_demo_scan_keeps_its_data_and_prints_the_result_file(
     demo = read_result(result)  # --no-export-fits: reconstructed, fits left to the exports
     assert demo.table is not None and demo.factored is None and demo.principled is None
     assert "api/v1/jobs" not in out.split("demo scan completed")[1]  # no dead URL
+    # The simulated rig's layout has no pair at the mirror direction: the summary says what
+    # that hides, with the gap the result records.
+    gap = float(demo.metrics["mirror_gap_deg"])
+    assert gap > 1.0
+    assert f"  Note: no pair reads within {gap:.1f} degrees of the mirror" in \
+        out.split("demo scan completed")[1]
     # Progress names the specimen's angle (0-360), not the multi-turn stage position.
     angles = [float(a) for a in re.findall(r"specimen at (\S+) deg", out)]
     assert len(angles) == 8 and all(0 <= a < 360 for a in angles), out
