@@ -46,6 +46,7 @@ from gonio.brdf.design.presets import get_preset, preset_names
 from gonio.brdf.design.product import design_product_rig
 from gonio.brdf.design.renderweight import DEFAULT_CELL_MIX, cell_weighting
 from gonio.brdf.design.roughness import RoughnessBound, bound_angles, roughness_bound
+from gonio.brdf.mirrorgap import cells_gap_deg, gap_note
 from gonio.brdf.reconstruction.samples import DEFAULT_SPAN_DEG, SPANS_DEG
 from gonio.cli import CORE_SETTING_FLAGS, UsageError
 from gonio.sampling_design import colour_targets
@@ -360,6 +361,13 @@ def print_design(
     for line in explain_condition(design, rotations, span_deg):
         print(line, file=out)
     print(f"closest two devices: {design.min_distance_deg:.1f} deg", file=out)
+    # What the layout can never read, whatever the stage angles (gonio.brdf.mirrorgap): a
+    # scan's result states the same, after the fact.
+    gap = cells_gap_deg(design.cells)
+    print(f"mirror gap: {gap:.1f} deg (the least th: no stage angle reads nearer the mirror "
+          "direction)", file=out)
+    if (note := gap_note(gap)) is not None:
+        print(f"  glossy specimens: {note}", file=out)
     if design.search is not None:
         s = design.search
         print(f"search: {s.neighbourhoods} neighbourhoods, {s.evaluations} candidates, "
