@@ -43,6 +43,7 @@ from gonio.brdf.design.presets import Preset
 from gonio.brdf.design.product import design_product_rig
 from gonio.brdf.design.renderweight import cell_weighting
 from gonio.brdf.design.roughness import bound_angles, roughness_bound
+from gonio.brdf.mirrorgap import cells_gap_deg, gap_note
 from gonio.fields import FINITE, Count, Text
 from gonio.plans.models import DEFAULT_SPAN_DEG, SpanDeg
 
@@ -265,6 +266,15 @@ class DesignResult(BaseModel):
                          "product rig, a colour design or a condition-number design (asked "
                          "for, or the fallback)")
     min_device_distance_deg: float = Field(description="closest two devices, degrees")
+    mirror_gap_deg: float = Field(
+        description="the least tilt of a pair's half vector from the specimen normal (the "
+                    "least theta_h_deg), degrees: no stage angle reads nearer the mirror "
+                    "direction (docs/design.md, the mirror gap)")
+    mirror_gap: str | None = Field(
+        None, description="above 1 degree, what the gap hides for a glossy specimen (a "
+                          "narrower highlight is neither measured nor in a scan's "
+                          "predicted_log_rmse), in words; a scan's dry run and result say "
+                          "the same")
     lights: list[Device]
     sensors: list[Device]
     pairs: list[DesignPair]
@@ -323,6 +333,7 @@ def describe(design: PairDesign, rotations: int,
     ]
     search, greedy = design.search, design.greedy
     expected = design.expected_log_rmse
+    gap = cells_gap_deg(design.cells)
     return DesignResult(
         name=design.name,
         n_pairs=design.n_pairs,
@@ -333,6 +344,8 @@ def describe(design: PairDesign, rotations: int,
         colour_pairs=design.colour_pairs,
         render_mix=float(design.cell_mix),
         min_device_distance_deg=float(design.min_distance_deg),
+        mirror_gap_deg=gap,
+        mirror_gap=gap_note(gap),
         lights=lights,
         sensors=sensors,
         pairs=pairs,

@@ -77,6 +77,9 @@ def test_a_preset_is_described_with_hand_worked_cells() -> None:
         (0.0, 0.0), (30.0, 0.0), (65.0, 0.0), (20.0, 180.0), (30.0, 180.0)]
     assert result.roughness.rotations == 8 and result.roughness.span_deg == 180.0
     assert result.condition_number is not None and result.condition_number >= 1.0
+    # Its mirror gap: the least of those theta_h, the 30 deg sensor on the far side's 7.5.
+    assert result.mirror_gap_deg == pytest.approx(min(w[0] for w in want), abs=1e-9)
+    assert result.mirror_gap is not None and "within 7.5 degrees" in result.mirror_gap
 
 
 def test_a_designed_rig_keeps_to_the_requested_limits() -> None:

@@ -206,6 +206,10 @@ def test_presets_list_and_evaluate(daemon: Daemon, basis: Any) -> None:
         assert d["roughness"]["rotations"] == 16
         # Light 1 of MA98 is at 45 deg in the plane of incidence.
         assert d["lights"][0]["theta_deg"] == pytest.approx(45.0)
+        # Its nearest pair to the mirror: the 20 deg sensor under the 15 deg light, (20 - 15)
+        # / 2 in the plane of incidence.
+        assert d["mirror_gap_deg"] == pytest.approx(2.5, abs=1e-9)
+        assert "within 2.5 degrees of the mirror direction" in d["mirror_gap"]
         kappa = d["condition_number"]
         assert kappa is None or kappa == pytest.approx(_kappa(basis, d["pairs"]), rel=1e-3)
         assert math.isfinite(d["roughness"]["n_effective"])
