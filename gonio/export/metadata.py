@@ -14,8 +14,10 @@ layout has no room). Keys (docs/export.md lists them with examples):
     ``"simulated"`` (a simulated rig; ``simulated_material`` then holds the material's recipe)
     or ``"measured"``.
 ``reconstruction_error``
-    The headline self-estimate ``predicted_log_rmse`` with its meaning and unit, and the upper
-    end of its interval ``predicted_log_rmse_upper`` when the result stores it.
+    The headline self-estimate ``predicted_log_rmse`` with its meaning and unit, the upper
+    end of its interval ``predicted_log_rmse_upper`` when the result stores it, and the
+    layout's ``mirror_gap_deg`` (with ``mirror_gap``, what it hides, above 1 degree;
+    :mod:`gonio.brdf.mirrorgap`) when the result stores it.
 ``rig``, ``plan``, ``calibration``
     The rig's name and the pairs measured, the plan (design, rotations, arc), the calibration's
     reference, albedo and date.
@@ -223,6 +225,13 @@ def export_provenance(attrs: Mapping[str, Any], metrics: Mapping[str, Any],
         # The upper end of the estimate's interval (docs/science.md 7.1.1); results made
         # before it was stored have none.
         rec_error["predicted_log_rmse_upper"] = float(upper)
+    gap = metrics.get("mirror_gap_deg")
+    if isinstance(gap, int | float):
+        # What the estimate cannot see: a highlight narrower than the layout's distance from
+        # the mirror direction (docs/science.md 7.1.1.1); results made before have none.
+        rec_error["mirror_gap_deg"] = float(gap)
+        if isinstance(metrics.get("mirror_gap"), str):
+            rec_error["mirror_gap"] = str(metrics["mirror_gap"])
     if not isinstance(v, int | float):
         rec_error["note"] = "this result has no predicted_log_rmse (an older result, or no " \
                             "pair could be left out)"

@@ -219,6 +219,18 @@ def test_the_record_carries_the_upper_end_of_the_estimate_when_stored() -> None:
         assert "predicted_log_rmse_upper" not in rec_error
 
 
+def test_the_record_carries_the_layouts_mirror_gap_when_stored() -> None:
+    note = "no pair reads within 7.5 degrees of the mirror direction ..."
+    gapped = export_provenance({}, {"predicted_log_rmse": 0.04, "mirror_gap_deg": 7.5,
+                                    "mirror_gap": note}, {}, {})["reconstruction_error"]
+    assert gapped["mirror_gap_deg"] == 7.5 and gapped["mirror_gap"] == note
+    on_mirror = export_provenance({}, {"predicted_log_rmse": 0.04, "mirror_gap_deg": 0.0},
+                                  {}, {})["reconstruction_error"]
+    assert on_mirror["mirror_gap_deg"] == 0.0 and "mirror_gap" not in on_mirror
+    older = export_provenance({}, {"predicted_log_rmse": 0.04}, {}, {})["reconstruction_error"]
+    assert "mirror_gap_deg" not in older and "mirror_gap" not in older
+
+
 def test_specimen_names() -> None:
     assert specimen_name(None) == ("unnamed", False)
     assert specimen_name("  ") == ("unnamed", False)
