@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from gonio.arc_wording import arc_sentence
+from gonio.brdf.mirrorgap import gap_clause
 from gonio.brdf.models import analytic as bm
 from gonio.brdf.pictures import render
 from gonio.brdf.tables.table import BRDFTable
@@ -252,13 +253,17 @@ def headline_error(metrics: dict[str, Any]) -> dict[str, Any] | None:
         out["text"] += " (HIGHLIGHT NOT READ)"
         out["meaning"] = f"Warning: {unread}. {out['meaning']}"
         out["highlight_not_read"] = unread
-    gap = metrics.get("mirror_gap")
-    if out is not None and out["key"] == "predicted_log_rmse" and isinstance(gap, str):
+    mirror = metrics.get("mirror_gap")
+    if out is not None and out["key"] == "predicted_log_rmse" and isinstance(mirror, str):
         # A fact of the layout, not of this scan (gonio.brdf.mirrorgap): said beside the
         # estimate it limits, without marking the headline, since most specimens have no
-        # highlight that narrow.
-        out["meaning"] = f"{out['meaning']} Note: {gap}."
-        out["mirror_gap"] = gap
+        # highlight that narrow. With the highlight-not-read warning above it, which already
+        # says to read a pair near the mirror direction, the gap alone.
+        tilt = metrics.get("mirror_gap_deg")
+        said = (gap_clause(float(tilt)) if isinstance(unread, str)
+                and isinstance(tilt, int | float) else mirror)
+        out["meaning"] = f"{out['meaning']} Note: {said}."
+        out["mirror_gap"] = mirror
     return out
 
 

@@ -228,7 +228,7 @@ def export_provenance(attrs: Mapping[str, Any], metrics: Mapping[str, Any],
     gap = metrics.get("mirror_gap_deg")
     if isinstance(gap, int | float):
         # What the estimate cannot see: a highlight narrower than the layout's distance from
-        # the mirror direction (docs/science.md 7.1.1.1); results made before have none.
+        # the mirror direction (docs/science.md 7.1.1.2); results made before have none.
         rec_error["mirror_gap_deg"] = float(gap)
         if isinstance(metrics.get("mirror_gap"), str):
             rec_error["mirror_gap"] = str(metrics["mirror_gap"])

@@ -160,7 +160,7 @@ class DryRun(BaseModel):
     mirror_gap_deg: float | None = Field(
         default=None, description="plans that reconstruct: the least tilt of a pair's half "
         "vector from the specimen normal, degrees (the layout's mirror gap; turning the stage "
-        "keeps it, docs/science.md 7.1.1.1); null for a plan that reconstructs nothing")
+        "keeps it, docs/science.md 7.1.1.2); null for a plan that reconstructs nothing")
     mirror_gap: str | None = Field(
         default=None, description="when mirror_gap_deg is above 1: what it means for a glossy "
         "specimen (a highlight narrower than the gap is neither measured nor in the result's "

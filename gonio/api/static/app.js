@@ -717,7 +717,7 @@ const METRIC_MEANING = {
   highlight_peak_ph_deg: "where the table peaks: half vector azimuth ph (specimen frame), degrees",
   highlight_peak_td_deg: "where the table peaks: difference angle td, degrees",
   highlight_not_read: "why the highlight's height, width and colour are the prior's extrapolation: no reading comes near the table's peak",
-  mirror_gap_deg: "the least tilt of a pair's half vector from the specimen normal, degrees: no stage angle reads nearer the mirror direction (above 1: a narrower highlight is neither measured nor in predicted_log_rmse)",
+  mirror_gap_deg: "the least tilt of a pair's half vector from the specimen normal, degrees (for a pair in the plane of incidence, half its sensor's angle from the light's mirror direction): no stage angle reads nearer the mirror direction; above 1, a narrower highlight is neither measured nor in predicted_log_rmse",
   mirror_gap: "what the layout's distance from the mirror direction means for a glossy specimen",
   factored_rel_mse: "relative error of the factored BRDF export fitted to this table (volume-weighted mean squared)",
   factored_psnr: "the factored export's fit as a PSNR, dB",

@@ -209,7 +209,7 @@ def test_presets_list_and_evaluate(daemon: Daemon, basis: Any) -> None:
         # Its nearest pair to the mirror: the 20 deg sensor under the 15 deg light, (20 - 15)
         # / 2 in the plane of incidence.
         assert d["mirror_gap_deg"] == pytest.approx(2.5, abs=1e-9)
-        assert "within 2.5 degrees of the mirror direction" in d["mirror_gap"]
+        assert "within 2.5 degrees of the specimen normal" in d["mirror_gap"]
         kappa = d["condition_number"]
         assert kappa is None or kappa == pytest.approx(_kappa(basis, d["pairs"]), rel=1e-3)
         assert math.isfinite(d["roughness"]["n_effective"])

@@ -75,7 +75,7 @@ def test_sim_demo_scan_keeps_its_data_and_prints_the_result_file(
     # that hides, with the gap the result records.
     gap = float(demo.metrics["mirror_gap_deg"])
     assert gap > 1.0
-    assert f"  Note: no pair reads within {gap:.1f} degrees of the mirror" in \
+    assert f"  Note: no pair's half vector comes within {gap:.1f} degrees of the" in \
         out.split("demo scan completed")[1]
     # Progress names the specimen's angle (0-360), not the multi-turn stage position.
     angles = [float(a) for a in re.findall(r"specimen at (\S+) deg", out)]

@@ -16,7 +16,13 @@ import numpy as np
 import pytest
 
 from gonio.brdf.design.presets import get_preset
-from gonio.brdf.mirrorgap import MIRROR_GAP_LIMIT_DEG, cells_gap_deg, gap_note, mirror_gap_deg
+from gonio.brdf.mirrorgap import (
+    MIRROR_GAP_LIMIT_DEG,
+    cells_gap_deg,
+    gap_clause,
+    gap_note,
+    mirror_gap_deg,
+)
 from gonio.figures import headline_error
 from gonio.hal import PairSpec
 from gonio.plans.dryrun import dry_run
@@ -69,10 +75,16 @@ def test_bad_layouts_are_refused_saying_what_was_wrong() -> None:
         mirror_gap_deg(np.zeros((0, 3)), np.zeros((0, 3)))
     with pytest.raises(ValueError, match=r"got \(2, 3\) and \(1, 3\)"):
         mirror_gap_deg([_unit(10, 0), _unit(20, 0)], [_unit(10, 180)])
-    with pytest.raises(ValueError, match="opposite directions"):
+    with pytest.raises(ValueError, match="above the specimen"):
         mirror_gap_deg([[0.0, 0.0, 1.0]], [[0.0, 0.0, -1.0]])
+    with pytest.raises(ValueError, match="finite unit vectors"):
+        mirror_gap_deg([[0.0, 0.0, 2.0]], [_unit(30, 180)])  # not unit: no silent wrong gap
+    with pytest.raises(ValueError, match="finite unit vectors"):
+        mirror_gap_deg([[np.nan, 0.0, 1.0]], [_unit(30, 180)])
     with pytest.raises(ValueError, match=r"\(n, 3\)"):
         cells_gap_deg(np.zeros((4,)))
+    with pytest.raises(ValueError, match="finite"):
+        cells_gap_deg([[np.nan, 0.1, 0.2]])
 
 
 def test_the_note_is_said_above_the_limit_only() -> None:
@@ -81,7 +93,10 @@ def test_the_note_is_said_above_the_limit_only() -> None:
     assert gap_note(float("nan")) is None
     note = gap_note(7.0)
     assert note is not None
-    assert "within 7.0 degrees of the mirror direction" in note
+    # The half vector's tilt, and the in-plane sensor's angle from the mirror direction
+    # (twice it) that the industrial geometries are named by.
+    assert "half vector comes within 7.0 degrees of the specimen normal" in note
+    assert "its sensor 14 degrees off the light's mirror direction" in note
     assert "predicted_log_rmse" in note and "add a pair at the mirror direction" in note
 
 
@@ -95,6 +110,13 @@ def test_the_headline_states_the_gap_without_marking_the_number() -> None:
     assert noted["text"] == plain["text"] == "0.050"
     assert noted["meaning"] == f"{plain['meaning']} Note: {note}."
     assert noted["mirror_gap"] == note
+    # With the highlight-not-read warning, which already says to read a pair near the mirror
+    # direction, the meaning gives the gap alone; the metric keeps the whole note.
+    both = headline_error({"predicted_log_rmse": 0.05, "mirror_gap_deg": 7.5,
+                           "mirror_gap": note, "highlight_not_read": "the highlight is not read"})
+    assert both is not None and both["mirror_gap"] == note
+    assert both["meaning"].endswith(f"Note: {gap_clause(7.5)}.")
+    assert note not in both["meaning"]
 
 
 def _rig(sensors: list[tuple[float, float]]) -> RigDescription:
@@ -119,6 +141,11 @@ def test_the_dry_run_gives_the_layouts_gap_before_the_scan() -> None:
     on_mirror = dry_run(plan, _rig([(30.0, 180.0), (50.0, 180.0)]))
     assert on_mirror.mirror_gap_deg == pytest.approx(0.0, abs=1e-9)
     assert on_mirror.mirror_gap is None
+    # A plan that measures some of the rig's pairs: the gap of those it measures.
+    subset = UniformPlan(rotations=4, span_deg=180, exposure=FAST,
+                         pairs=[PairSpec(light="L", sensor="S1")])
+    assert dry_run(subset, _rig([(30.0, 180.0), (50.0, 180.0)])).mirror_gap_deg == \
+        pytest.approx(10.0, abs=1e-9)  # (50 - 30) / 2: the mirror pair is not measured
     calibration = dry_run(CalibrationPlan(reference_albedo=0.99, rotations=2, exposure=FAST),
                           _rig([(40.0, 180.0)]))
     assert calibration.mirror_gap_deg is None and calibration.mirror_gap is None

@@ -132,17 +132,27 @@ def test_simulate_then_reconstruct(
     # The upper end of the estimate's interval, both printed to 3 decimals.
     assert len(made) == 1
     _check_upper_end(text, made[0], digits=3)
+    assert "half vector comes within" not in text  # LAB_ROWS' first pair is on the mirror
     t = BRDFTable.load(out)
     assert t.name == "rec" and t.values.shape == (3, *geo.TABLE_SHAPE)
     assert png.read_bytes()[:4] == b"\x89PNG"
 
 
-def test_simulate_with_a_preset(files: dict[str, Path]) -> None:
+def test_simulate_with_a_preset(files: dict[str, Path],
+                                capsys: pytest.CaptureFixture[str]) -> None:
     pytest.importorskip("gonio.brdf.design.presets")
     out = files["dir"] / "p.npz"
     assert main(["simulate-scan", "--table", str(files["table"]), "--design-preset", "MA68",
                  "-r", "8", "-o", str(out)]) == 0
     assert Samples.load(out).values.shape[1] == 8
+    capsys.readouterr()
+    # Reconstructed, MA68's layout is said to stand off the mirror direction: its nearest
+    # sensor is at aspecular 15 deg, a half vector tilted 7.5 deg (ASTM E2194).
+    assert main(["reconstruct", str(out), "--basis", str(files["basis"]), "-k", "8",
+                 "-o", str(files["dir"] / "p-rec.npz")]) == 0
+    assert ("note: no pair's half vector comes within 7.5 degrees of the specimen normal "
+            "(for a pair in the plane of incidence: its sensor 15 degrees off") in \
+        capsys.readouterr().out
 
 
 @pytest.mark.parametrize(

@@ -95,7 +95,8 @@ def test_design_preset(basis_file: Path, capsys: pytest.CaptureFixture[str]) -> 
     # Its nearest pair to the mirror: the 20 deg sensor under the 15 deg light, a half vector
     # tilted by (20 - 15) / 2 deg in the plane of incidence.
     assert "mirror gap: 2.5 deg" in text
-    assert "glossy specimens: no pair reads within 2.5 degrees of the mirror direction" in text
+    assert ("glossy specimens: no pair's half vector comes within 2.5 degrees of the specimen "
+            "normal (for a pair in the plane of incidence: its sensor 5 degrees off") in text
     # A preset is compared with optimized designs by the same two numbers.
     assert "objective:" not in text and "expected log_rmse" in text
     # The scans' default arc, or a full turn when asked; any other arc is refused.

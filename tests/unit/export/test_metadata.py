@@ -220,7 +220,7 @@ def test_the_record_carries_the_upper_end_of_the_estimate_when_stored() -> None:
 
 
 def test_the_record_carries_the_layouts_mirror_gap_when_stored() -> None:
-    note = "no pair reads within 7.5 degrees of the mirror direction ..."
+    note = "no pair's half vector comes within 7.5 degrees of the specimen normal ..."
     gapped = export_provenance({}, {"predicted_log_rmse": 0.04, "mirror_gap_deg": 7.5,
                                     "mirror_gap": note}, {}, {})["reconstruction_error"]
     assert gapped["mirror_gap_deg"] == 7.5 and gapped["mirror_gap"] == note
