@@ -76,14 +76,34 @@ def _chart(browser: Any, canvas_id: str) -> Any:
         " curve: !!d.isCurve})) : null;", canvas_id)
 
 
+def load_page(browser: Any, url: str) -> None:
+    """Load ``url`` as a new document: the page's scripts start again from nothing, whatever
+    the tab showed before (the tests of a module share one browser).
+
+    ``browser.get`` alone does not do that when the tab is already on the page: the page moves
+    the #key fragment out of the address, so a second get of ``{url}/#key=...`` differs from
+    the address shown only in its fragment, and Chromium treats it as a same-document
+    navigation (a hashchange, no reload). The next test then inherited the previous one's
+    selected job, polled details, open panels and filled fields. A detour through
+    ``about:blank`` unloads the page whatever the current address is, and the get that
+    follows is a new navigation, never served from the back/forward cache. (``refresh()``
+    after the get would reload too, but only after the old page had already taken the
+    fragment's key, and it reloads the address without the key, so the #key path would not
+    be the one tested.) The tab's sessionStorage stays, as it does across a reload.
+    """
+    browser.get("about:blank")
+    browser.get(url)
+
+
 def open_live(browser: Any, daemon: Daemon, timeout_s: float, poll_s: float = 0.2) -> Any:
-    """Open the page with the daemon's key in the #fragment (as `gonio serve --sim` prints
-    it) and wait until its event stream is live; returns the WebDriverWait used."""
+    """Open a freshly loaded page (:func:`load_page`) with the daemon's key in the #fragment
+    (as `gonio serve --sim` prints it) and wait until its event stream is live; returns the
+    WebDriverWait used."""
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support.ui import WebDriverWait
 
     wait = WebDriverWait(browser, timeout_s, poll_frequency=poll_s)
-    browser.get(f"{daemon.url}/#key={daemon.key}")
+    load_page(browser, f"{daemon.url}/#key={daemon.key}")
     wait.until(lambda d: d.find_element(By.ID, "live-chip").text == "live")
     return wait
 
@@ -147,7 +167,7 @@ def test_start_a_scan_from_the_page_and_see_the_result(daemon: Daemon, browser: 
     cal_id = _calibrate(daemon)
     # The key arrives in the #fragment, as `gonio serve --sim` prints it; the page moves it to
     # sessionStorage and clears it from the address bar.
-    browser.get(f"{daemon.url}/#key={daemon.key}")
+    load_page(browser, f"{daemon.url}/#key={daemon.key}")
     wait.until(lambda d: d.find_element(By.ID, "live-chip").text == "live")
     assert "#key" not in browser.current_url
     assert browser.execute_script("return sessionStorage.getItem('gonio.apiKey')") == daemon.key
@@ -410,11 +430,27 @@ def test_an_adaptive_plan_from_the_page_sets_its_rule(daemon: Daemon, browser: A
     assert [e["message"] for e in _severe(browser) if "dry-run" not in e["message"]] == []
 
 
+def test_open_live_gives_each_test_a_freshly_loaded_page(daemon: Daemon, browser: Any) -> None:
+    """The tests of a module share one browser: each must get a page whose scripts started
+    anew, not the previous test's page with its selection and polled details (a get of the
+    same address with only a #fragment differing does not reload it)."""
+    open_live(browser, daemon, 60)
+    # What a test leaves behind: script state and a document that has been running a while.
+    browser.execute_script("window.__leftover = 1")
+    loaded = browser.execute_script("return performance.timeOrigin")
+    open_live(browser, daemon, 60)
+    assert browser.execute_script("return typeof window.__leftover") == "undefined"
+    assert browser.execute_script("return performance.timeOrigin") > loaded
+    # The key still came from the address and left it, as on a first load.
+    assert "#key" not in browser.current_url
+    assert browser.execute_script("return sessionStorage.getItem('gonio.apiKey')") == daemon.key
+
+
 def test_page_without_key_shows_a_clear_error(daemon: Daemon, browser: Any) -> None:
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support.ui import WebDriverWait
 
-    browser.get(f"{daemon.url}/")
+    load_page(browser, f"{daemon.url}/")
     browser.execute_script("sessionStorage.clear()")
     browser.refresh()
     wait = WebDriverWait(browser, 30, poll_frequency=0.2)
