@@ -34,7 +34,13 @@ def browser() -> Iterator[Any]:
     opts.binary_location = CHROMIUM  # type: ignore[assignment]
     for flag in ("--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
                  "--disable-component-update", "--disable-sync", "--no-first-run",
-                 "--disable-dev-shm-usage", "--window-size=1280,1600"):
+                 "--disable-dev-shm-usage", "--window-size=1280,1600",
+                 # A page left (load_page leaves one each time) is discarded, not kept in the
+                 # back/forward cache: there it kept its event stream open (the page's fetch
+                 # of /events), and six such pages took all six of Chromium's connections
+                 # to the daemon, so the seventh load waited up to a minute for one to free.
+                 # No test goes back or forward.
+                 "--disable-features=BackForwardCache"):
         opts.add_argument(flag)
     # An explicit driver path: selenium must not try to download one.
     driver = webdriver.Chrome(service=Service(executable_path=CHROMEDRIVER), options=opts)
@@ -85,8 +91,9 @@ def load_page(browser: Any, url: str) -> None:
     the address shown only in its fragment, and Chromium treats it as a same-document
     navigation (a hashchange, no reload). The next test then inherited the previous one's
     selected job, polled details, open panels and filled fields. A detour through
-    ``about:blank`` unloads the page whatever the current address is, and the get that
-    follows is a new navigation, never served from the back/forward cache. (``refresh()``
+    ``about:blank`` unloads the page whatever the current address is (the browser fixture
+    keeps no back/forward cache, so the page left is discarded with its event stream), and the
+    get that follows is a new navigation. (``refresh()``
     after the get would reload too, but only after the old page had already taken the
     fragment's key, and it reloads the address without the key, so the #key path would not
     be the one tested.) The tab's sessionStorage stays, as it does across a reload.
