@@ -361,6 +361,15 @@ def test_an_adaptive_plan_from_the_page_sets_its_rule(daemon: Daemon, browser: A
 
     wait = open_live(browser, daemon, 180)
     form = browser.find_element(By.ID, "scan-form")
+
+    def fill(name: str, value: str) -> None:
+        field = form.find_element(By.NAME, name)
+        field.clear()
+        field.send_keys(value)
+
+    # At the exposure of the module's calibration (the first test's): at the form's default,
+    # another exposure, Check plan says Start would be refused.
+    fill("exposure_s", "0.005")
     Select(form.find_element(By.NAME, "kind")).select_by_value("adaptive")
     rule = Select(form.find_element(By.NAME, "rule"))
     # Defaults shown: the posterior rule and the calibrated min gain, with what they mean.
@@ -389,11 +398,6 @@ def test_an_adaptive_plan_from_the_page_sets_its_rule(daemon: Daemon, browser: A
     click_when_steady(wait, "#dry-run")
     wait.until(lambda d: d.find_element(By.ID, "dry-run-result").text.startswith("OK"))
     assert "can add up to 12 angles" in browser.find_element(By.ID, "dry-run-result").text
-
-    def fill(name: str, value: str) -> None:
-        field = form.find_element(By.NAME, name)
-        field.clear()
-        field.send_keys(value)
 
     # A bad value reaches the server, which says what is wrong and what to do.
     fill("min_gain", "-1")
