@@ -170,6 +170,7 @@ def test_start_a_scan_from_the_page_and_see_the_result(daemon: Daemon, browser: 
     from selenium.webdriver.support import expected_conditions as ec
     from selenium.webdriver.support.ui import Select, WebDriverWait
 
+    browser.get_log("browser")  # drop what tests before this one left (a keyless page's 401)
     wait = WebDriverWait(browser, 180, poll_frequency=0.2)
     cal_id = _calibrate(daemon)
     # The key arrives in the #fragment, as `gonio serve --sim` prints it; the page moves it to
@@ -359,6 +360,8 @@ def test_an_adaptive_plan_from_the_page_sets_its_rule(daemon: Daemon, browser: A
     from selenium.webdriver.support import expected_conditions as ec
     from selenium.webdriver.support.ui import Select
 
+    # Its own calibration (at 0.005 s): uncalibrated, Check plan says Start would be refused.
+    _calibrate(daemon)
     wait = open_live(browser, daemon, 180)
     form = browser.find_element(By.ID, "scan-form")
 
@@ -367,8 +370,8 @@ def test_an_adaptive_plan_from_the_page_sets_its_rule(daemon: Daemon, browser: A
         field.clear()
         field.send_keys(value)
 
-    # At the exposure of the module's calibration (the first test's): at the form's default,
-    # another exposure, Check plan says Start would be refused.
+    # At the calibration's exposure: at the form's default, another exposure, Check plan
+    # says Start would be refused.
     fill("exposure_s", "0.005")
     Select(form.find_element(By.NAME, "kind")).select_by_value("adaptive")
     rule = Select(form.find_element(By.NAME, "rule"))
