@@ -360,6 +360,7 @@ def test_an_adaptive_plan_from_the_page_sets_its_rule(daemon: Daemon, browser: A
     from selenium.webdriver.support import expected_conditions as ec
     from selenium.webdriver.support.ui import Select
 
+    browser.get_log("browser")  # drop what tests before this one left (a keyless page's 401)
     # Its own calibration (at 0.005 s): uncalibrated, Check plan says Start would be refused.
     _calibrate(daemon)
     wait = open_live(browser, daemon, 180)
