@@ -34,7 +34,13 @@ def browser() -> Iterator[Any]:
     opts.binary_location = CHROMIUM  # type: ignore[assignment]
     for flag in ("--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
                  "--disable-component-update", "--disable-sync", "--no-first-run",
-                 "--disable-dev-shm-usage", "--window-size=1280,1600"):
+                 "--disable-dev-shm-usage", "--window-size=1280,1600",
+                 # A page left (load_page leaves one each time) is discarded, not kept in the
+                 # back/forward cache: there it kept its event stream open (the page's fetch
+                 # of /events), and six such pages took all six of Chromium's connections
+                 # to the daemon, so the seventh load waited up to a minute for one to free.
+                 # No test goes back or forward.
+                 "--disable-features=BackForwardCache"):
         opts.add_argument(flag)
     # An explicit driver path: selenium must not try to download one.
     driver = webdriver.Chrome(service=Service(executable_path=CHROMEDRIVER), options=opts)
@@ -76,14 +82,35 @@ def _chart(browser: Any, canvas_id: str) -> Any:
         " curve: !!d.isCurve})) : null;", canvas_id)
 
 
+def load_page(browser: Any, url: str) -> None:
+    """Load ``url`` as a new document: the page's scripts start again from nothing, whatever
+    the tab showed before (the tests of a module share one browser).
+
+    ``browser.get`` alone does not do that when the tab is already on the page: the page moves
+    the #key fragment out of the address, so a second get of ``{url}/#key=...`` differs from
+    the address shown only in its fragment, and Chromium treats it as a same-document
+    navigation (a hashchange, no reload). The next test then inherited the previous one's
+    selected job, polled details, open panels and filled fields. A detour through
+    ``about:blank`` unloads the page whatever the current address is (the browser fixture
+    keeps no back/forward cache, so the page left is discarded with its event stream), and the
+    get that follows is a new navigation. (``refresh()``
+    after the get would reload too, but only after the old page had already taken the
+    fragment's key, and it reloads the address without the key, so the #key path would not
+    be the one tested.) The tab's sessionStorage stays, as it does across a reload.
+    """
+    browser.get("about:blank")
+    browser.get(url)
+
+
 def open_live(browser: Any, daemon: Daemon, timeout_s: float, poll_s: float = 0.2) -> Any:
-    """Open the page with the daemon's key in the #fragment (as `gonio serve --sim` prints
-    it) and wait until its event stream is live; returns the WebDriverWait used."""
+    """Open a freshly loaded page (:func:`load_page`) with the daemon's key in the #fragment
+    (as `gonio serve --sim` prints it) and wait until its event stream is live; returns the
+    WebDriverWait used."""
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support.ui import WebDriverWait
 
     wait = WebDriverWait(browser, timeout_s, poll_frequency=poll_s)
-    browser.get(f"{daemon.url}/#key={daemon.key}")
+    load_page(browser, f"{daemon.url}/#key={daemon.key}")
     wait.until(lambda d: d.find_element(By.ID, "live-chip").text == "live")
     return wait
 
@@ -143,11 +170,12 @@ def test_start_a_scan_from_the_page_and_see_the_result(daemon: Daemon, browser: 
     from selenium.webdriver.support import expected_conditions as ec
     from selenium.webdriver.support.ui import Select, WebDriverWait
 
+    browser.get_log("browser")  # drop what tests before this one left (a keyless page's 401)
     wait = WebDriverWait(browser, 180, poll_frequency=0.2)
     cal_id = _calibrate(daemon)
     # The key arrives in the #fragment, as `gonio serve --sim` prints it; the page moves it to
     # sessionStorage and clears it from the address bar.
-    browser.get(f"{daemon.url}/#key={daemon.key}")
+    load_page(browser, f"{daemon.url}/#key={daemon.key}")
     wait.until(lambda d: d.find_element(By.ID, "live-chip").text == "live")
     assert "#key" not in browser.current_url
     assert browser.execute_script("return sessionStorage.getItem('gonio.apiKey')") == daemon.key
@@ -332,8 +360,20 @@ def test_an_adaptive_plan_from_the_page_sets_its_rule(daemon: Daemon, browser: A
     from selenium.webdriver.support import expected_conditions as ec
     from selenium.webdriver.support.ui import Select
 
+    browser.get_log("browser")  # drop what tests before this one left (a keyless page's 401)
+    # Its own calibration (at 0.005 s): uncalibrated, Check plan says Start would be refused.
+    _calibrate(daemon)
     wait = open_live(browser, daemon, 180)
     form = browser.find_element(By.ID, "scan-form")
+
+    def fill(name: str, value: str) -> None:
+        field = form.find_element(By.NAME, name)
+        field.clear()
+        field.send_keys(value)
+
+    # At the calibration's exposure: at the form's default, another exposure, Check plan
+    # says Start would be refused.
+    fill("exposure_s", "0.005")
     Select(form.find_element(By.NAME, "kind")).select_by_value("adaptive")
     rule = Select(form.find_element(By.NAME, "rule"))
     # Defaults shown: the posterior rule and the calibrated min gain, with what they mean.
@@ -362,11 +402,6 @@ def test_an_adaptive_plan_from_the_page_sets_its_rule(daemon: Daemon, browser: A
     click_when_steady(wait, "#dry-run")
     wait.until(lambda d: d.find_element(By.ID, "dry-run-result").text.startswith("OK"))
     assert "can add up to 12 angles" in browser.find_element(By.ID, "dry-run-result").text
-
-    def fill(name: str, value: str) -> None:
-        field = form.find_element(By.NAME, name)
-        field.clear()
-        field.send_keys(value)
 
     # A bad value reaches the server, which says what is wrong and what to do.
     fill("min_gain", "-1")
@@ -410,11 +445,27 @@ def test_an_adaptive_plan_from_the_page_sets_its_rule(daemon: Daemon, browser: A
     assert [e["message"] for e in _severe(browser) if "dry-run" not in e["message"]] == []
 
 
+def test_open_live_gives_each_test_a_freshly_loaded_page(daemon: Daemon, browser: Any) -> None:
+    """The tests of a module share one browser: each must get a page whose scripts started
+    anew, not the previous test's page with its selection and polled details (a get of the
+    same address with only a #fragment differing does not reload it)."""
+    open_live(browser, daemon, 60)
+    # What a test leaves behind: script state and a document that has been running a while.
+    browser.execute_script("window.__leftover = 1")
+    loaded = browser.execute_script("return performance.timeOrigin")
+    open_live(browser, daemon, 60)
+    assert browser.execute_script("return typeof window.__leftover") == "undefined"
+    assert browser.execute_script("return performance.timeOrigin") > loaded
+    # The key still came from the address and left it, as on a first load.
+    assert "#key" not in browser.current_url
+    assert browser.execute_script("return sessionStorage.getItem('gonio.apiKey')") == daemon.key
+
+
 def test_page_without_key_shows_a_clear_error(daemon: Daemon, browser: Any) -> None:
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support.ui import WebDriverWait
 
-    browser.get(f"{daemon.url}/")
+    load_page(browser, f"{daemon.url}/")
     browser.execute_script("sessionStorage.clear()")
     browser.refresh()
     wait = WebDriverWait(browser, 30, poll_frequency=0.2)

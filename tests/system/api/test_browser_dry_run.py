@@ -120,7 +120,6 @@ def test_an_empty_stage_angles_field_says_what_to_enter(
     wait = open_live(browser, daemon, 60)
     field = browser.find_element(By.ID, "scan-form").find_element(By.NAME, "rotations")
     field.clear()
-    # (Its own list: the page may still hold an earlier test's fetch hook.)
     browser.execute_script("window.__posted = []; const f = window.fetch;"
                            "window.fetch = (u, i) => { if (i && i.method === 'POST')"
                            " window.__posted.push(String(u)); return f(u, i); };")
@@ -148,7 +147,7 @@ def test_check_plan_is_judged_at_the_forms_priority(
     browser.execute_script("window.__bodies = []; const f = window.fetch;"
                            "window.fetch = (u, i) => { if (String(u).includes('dry-run'))"
                            " window.__bodies.push(i.body); return f(u, i); };")
-    # Every field set (an earlier test of this page may have left one out of its limits).
+    # Every field set: the plan checked does not hang on the form's defaults.
     check_plan(browser, wait, [("rotations", ROTATIONS), ("exposure_s", EXPOSURE_S),
                                ("averages", 1), ("priority", 7)])
     (body,) = browser.execute_script("return window.__bodies")

@@ -73,6 +73,11 @@ def test_a_scan_queued_behind_a_running_one_leaves_the_running_one_on_screen(
         name = form.find_element(By.NAME, "specimen")
         name.clear()
         name.send_keys("felt B")
+        # At the running scan's exposure: a calibration this module's colour test may have
+        # made runs at it, and Start is refused at another (the form's default 0.01 s).
+        exposure = form.find_element(By.NAME, "exposure_s")
+        exposure.clear()
+        exposure.send_keys("0.005")  # LONG's
         click_when_steady(wait, "#start-scan")
         wait.until(lambda d: "queued" in d.find_element(By.ID, "dry-run-result").text)
         with daemon.client() as c:
@@ -237,13 +242,22 @@ def test_a_slow_rendering_and_export_count_their_seconds(daemon: Daemon, browser
             "kind": "uniform", "specimen": "slow picture", "rotations": 4,
             "exposure": {"exposure_s": 0.005}}}).json()["id"]
         _wait_state(daemon, job, {"completed"}, 180)
-    wait = open_live(browser, daemon, 120)
-    browser.execute_script(
+    # The wrapper goes in before the page's own scripts run: the page opens on the newest
+    # job, this one, and asks for its rendering while it loads, before a wrapper installed
+    # after the load could catch that request.
+    hold_back = browser.execute_cdp_cmd("Page.addScriptToEvaluateOnNewDocument", {"source": (
         "const f = window.fetch;"
         "window.fetch = async (u, i) => { if (/[/]render[.]png|[/]export[?]/.test(String(u)))"
-        " await new Promise((r) => setTimeout(r, 4000)); return f(u, i); };")
+        " await new Promise((r) => setTimeout(r, 4000)); return f(u, i); };")})
+    try:
+        wait = open_live(browser, daemon, 120)
+    finally:  # the pages of later tests load without it
+        browser.execute_cdp_cmd("Page.removeScriptToEvaluateOnNewDocument", hold_back)
     click_when_steady(wait, f'#jobs tr[data-id="{job}"] td')
     wait.until(lambda d: d.find_element(By.ID, "result-job").text.startswith(f"job {job}"))
+    # The rendering is asked for once the job's metrics and preview are in (app.js
+    # showResult); its seconds count from then.
+    wait.until(lambda d: "s so far" in d.find_element(By.ID, "render-caption").text)
     started = time.monotonic()
     time.sleep(2.6)
     caption = browser.find_element(By.ID, "render-caption").text

@@ -16,6 +16,7 @@ from tests.system.api.test_browser import (  # noqa: F401 (fixture)
     _severe,
     browser,
     click_when_steady,
+    load_page,
     open_live,
 )
 from tests.system.api.test_scan_flow import ENDED, wait_state
@@ -58,7 +59,7 @@ def test_a_stale_key_gets_a_prompt_and_the_new_address_in_the_same_tab_recovers(
     wait = WebDriverWait(browser, 300, poll_frequency=0.2)
     job = finished_job  # the queue is not empty
     # The tab still holds the key of a daemon that has restarted since (a new key each start).
-    browser.get(f"{daemon.url}/#key={'0' * 48}")
+    load_page(browser, f"{daemon.url}/#key={'0' * 48}")
     wait.until(lambda d: d.find_element(By.ID, "key-prompt").is_displayed())
     prompt = browser.find_element(By.ID, "key-prompt").text
     assert "does not accept the API key of this tab" in prompt, prompt
