@@ -1081,6 +1081,20 @@ function restartEvents() {
   });
 }
 
+// A page the browser keeps in its back/forward cache after the lab navigates away keeps its
+// fetch of /events open, and a browser opens only six connections to one host: after six
+// such pages in one tab the seventh load waited about a minute for one to free. Close the
+// stream on leaving; a page shown again from that cache opens it anew and reads the state.
+window.addEventListener("pagehide", () => {
+  if (stopEvents) stopEvents();
+  stopEvents = null;
+});
+window.addEventListener("pageshow", (e) => {
+  if (!e.persisted) return;
+  restartEvents();
+  refreshAll();
+});
+
 window.addEventListener("DOMContentLoaded", async () => {
   initKey();
   initForm();

@@ -25,26 +25,34 @@ if CHROMIUM is None or CHROMEDRIVER is None:
     )
 
 
-@pytest.fixture(scope="module")
-def browser() -> Iterator[Any]:
+def start_chromium(back_forward_cache: bool = False) -> Any:
+    """Headless Chromium under chromedriver, as every browser test drives it.
+
+    ``back_forward_cache`` False (the tests' browser): a page left (:func:`load_page` leaves
+    one each time) is discarded, not kept in the back/forward cache, so no test depends on
+    how the page behaves there; no test goes back or forward. True: as a lab's browser keeps
+    it (test_browser_bfcache.py)."""
     from selenium.webdriver.chrome.options import Options
     from selenium.webdriver.chrome.service import Service
 
     opts = Options()
     opts.binary_location = CHROMIUM  # type: ignore[assignment]
-    for flag in ("--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
-                 "--disable-component-update", "--disable-sync", "--no-first-run",
-                 "--disable-dev-shm-usage", "--window-size=1280,1600",
-                 # A page left (load_page leaves one each time) is discarded, not kept in the
-                 # back/forward cache: there it kept its event stream open (the page's fetch
-                 # of /events), and six such pages took all six of Chromium's connections
-                 # to the daemon, so the seventh load waited up to a minute for one to free.
-                 # No test goes back or forward.
-                 "--disable-features=BackForwardCache"):
+    flags = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
+             "--disable-component-update", "--disable-sync", "--no-first-run",
+             "--disable-dev-shm-usage", "--window-size=1280,1600"]
+    if not back_forward_cache:
+        flags.append("--disable-features=BackForwardCache")
+    for flag in flags:
         opts.add_argument(flag)
     # An explicit driver path: selenium must not try to download one.
     driver = webdriver.Chrome(service=Service(executable_path=CHROMEDRIVER), options=opts)
     driver.set_page_load_timeout(30)
+    return driver
+
+
+@pytest.fixture(scope="module")
+def browser() -> Iterator[Any]:
+    driver = start_chromium()
     try:
         yield driver
     finally:
@@ -91,8 +99,8 @@ def load_page(browser: Any, url: str) -> None:
     the address shown only in its fragment, and Chromium treats it as a same-document
     navigation (a hashchange, no reload). The next test then inherited the previous one's
     selected job, polled details, open panels and filled fields. A detour through
-    ``about:blank`` unloads the page whatever the current address is (the browser fixture
-    keeps no back/forward cache, so the page left is discarded with its event stream), and the
+    ``about:blank`` unloads the page whatever the current address is (the page left closes its
+    event stream; the browser fixture keeps no back/forward cache, so it is discarded), and the
     get that follows is a new navigation. (``refresh()``
     after the get would reload too, but only after the old page had already taken the
     fragment's key, and it reloads the address without the key, so the #key path would not
