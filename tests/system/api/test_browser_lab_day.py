@@ -268,6 +268,52 @@ def test_the_eta_covers_reconstruction_with_a_measured_estimate_and_keeps_abort_
         browser.set_window_size(1280, 1600)
 
 
+def test_a_running_jobs_buttons_stay_in_the_queues_box_beside_a_long_specimen_name(
+    daemon: Daemon, browser: Any, no_export_fits: None,  # noqa: F811
+) -> None:
+    """A specimen name does not wrap (nor do other cells' words), so a long one made the jobs
+    table wider than the queue's box, which scrolls sideways: the running job's Pause and Abort
+    buttons sat past its right edge, out of view until the lab scrolled the table (a helper
+    saw it with a completed adaptive job's row at a 1024 px window). The buttons' column stays
+    in the box's view."""
+    browser.set_window_size(1024, 1600)
+    try:
+        wait = open_live(browser, daemon, 300)
+        long_name = "brushed-aluminium-panel-A7-lot-2026-11-29-holder-3-second-mounting"
+        with daemon.client() as c:
+            plan = {**PLAN, "specimen": long_name, "rotations": 12,
+                    "exposure": {"exposure_s": 0.05, "averages": 20}}
+            job = c.post("/api/v1/jobs", params={"accept_uncalibrated": "true"},
+                         json={"plan": plan}).json()["id"]
+            try:
+                def abort_box(d: Any) -> Any:
+                    return d.execute_script("""
+                        const row = document.querySelector(`#jobs tr[data-id='${arguments[0]}']`);
+                        const abort = row?.querySelector('button[data-action="abort"]');
+                        if (!abort) return null;
+                        const q = document.getElementById('queue');
+                        const b = abort.getBoundingClientRect();
+                        const hit = document.elementFromPoint((b.left + b.right) / 2,
+                                                              (b.top + b.bottom) / 2);
+                        return {wider: q.scrollWidth > q.clientWidth, right: b.right,
+                                box: q.getBoundingClientRect().right,
+                                on_top: hit === abort || abort.contains(hit)};""", job)
+
+                seen = wait.until(abort_box)
+                # The name does widen the table past the box (else this checks nothing) ...
+                assert seen["wider"], seen
+                # ... and the button is still inside the box's view.
+                assert seen["right"] <= seen["box"] + 0.5, seen
+                assert seen["on_top"], seen  # nothing drawn over it: a click reaches it
+            finally:
+                c.post(f"/api/v1/jobs/{job}/abort")
+                wait_state(c, job, ENDED, timeout=120)
+                # Its wide row would stay in the queue of the module's later tests.
+                assert c.delete(f"/api/v1/jobs/{job}").status_code == 204
+    finally:
+        browser.set_window_size(1280, 1600)
+
+
 def test_an_adaptive_jobs_progress_only_fills_and_says_its_round(
     daemon: Daemon, browser: Any, no_export_fits: None  # noqa: F811
 ) -> None:
