@@ -59,6 +59,12 @@ def test_check_plan_adds_up_and_names_the_specimen_angle(
     # docs/api.md: estimated_s = motion_s + settle_s + exposure_s; shown to 0.1 s.
     assert moves > 0 and settling > 0, note
     assert moves + settling + exposures == pytest.approx(total, abs=0.16), note
+    # The rig's layout stands off the mirror direction: the note says so, from the API's own
+    # sentence (test_time_api checks its number).
+    with daemon.client() as c:
+        gap = c.post("/api/v1/jobs/dry-run", json={"plan": {
+            "kind": "uniform", "rotations": ROTATIONS}}).json()["mirror_gap"]
+    assert gap and f"Note: {gap}." in note, note
 
 
 def test_check_plan_of_one_angle_says_one_stage_angle(
