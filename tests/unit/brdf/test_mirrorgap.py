@@ -24,15 +24,15 @@ from gonio.brdf.mirrorgap import (
     mirror_gap_deg,
 )
 from gonio.figures import headline_error
-from gonio.hal import PairSpec
+from gonio.hal import LabDirection, PairSpec
 from gonio.plans.dryrun import dry_run
 from gonio.plans.models import CalibrationPlan, ExposureSettings, UniformPlan
 from gonio.rigdescription import LightInfo, RigDescription, SensorInfo
 
 
 def _unit(theta_deg: float, phi_deg: float) -> list[float]:
-    t, p = math.radians(theta_deg), math.radians(phi_deg)
-    return [math.sin(t) * math.cos(p), math.sin(t) * math.sin(p), math.cos(t)]
+    """The lab direction at polar ``theta_deg``, azimuth ``phi_deg`` (the rig config's)."""
+    return list(LabDirection(theta_deg, phi_deg).vector())
 
 
 @pytest.mark.parametrize(("ti", "to", "expected"), [
