@@ -215,8 +215,8 @@ estimates of 0.02-0.07, with every witness of the readings small (``cv_log_error
 Rotating the specimen about its normal keeps every pair's ``th_h``, so no stage angle closes
 that gap: a highlight narrower than it is unseen by construction, whatever the readings say,
 and the estimate should carry it. The witness is the layout's **mirror gap** ``g``, the least
-``th_h`` over its pairs in degrees (:func:`mirror_gap_deg`; a property of the layout, not of
-the readings).
+``th_h`` over its pairs in degrees (:func:`gonio.brdf.mirrorgap.cells_gap_deg`; a property
+of the layout, not of the readings).
 
 * **Two forms, one parameter ``m`` each** (``log_rmse`` units), added as a variance beside the
   coverage, highlight and under terms (``final_log_rmse(..., in_plane=term)``), under the
@@ -868,7 +868,7 @@ def scans(witnesses: bool = False, eta: float | None = None,
                 "pair_log_max": float(np.nanmax(pair_err)),
                 "rho": float(rec.settings.get("prior_rho", float("nan"))),
                 "out_of_plane": out_of_plane_share(cells),
-                "mirror_gap": layout_gap_deg(cells),
+                "mirror_gap": cells_gap_deg(cells),
                 "peak_excess": rec.peak_excess_log_rmse,
                 # The highlight-not-read statistic as finishing computes it (science.md 7.1.1).
                 "highlight_excess": highlight_read(rec.table, cells, ph, alpha,
@@ -1769,13 +1769,6 @@ MIRROR_STEP_DEG = 1.0
 MIRROR_FULL_DEG = 7.5
 
 
-def layout_gap_deg(cells: Any) -> float:
-    """A layout's mirror gap: the least ``th_h`` over its pairs (degrees). Rotating the specimen
-    about its normal keeps each pair's ``th_h``, so no stage angle reads nearer the mirror
-    direction than this (:func:`gonio.brdf.mirrorgap.cells_gap_deg`, what results record)."""
-    return cells_gap_deg(cells)
-
-
 _GAPS: dict[tuple[str, tuple[str, ...]], float] = {}
 
 
@@ -1795,7 +1788,7 @@ def mirror_gap_deg(row: dict[str, Any]) -> float:
             cells, _ = bu.design(default_basis(exclude=list(exclude)), 10)
         else:
             cells, _ = get_preset(design).cells()
-        _GAPS[key] = layout_gap_deg(cells)
+        _GAPS[key] = cells_gap_deg(cells)
     return _GAPS[key]
 
 
