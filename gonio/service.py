@@ -659,28 +659,32 @@ class GonioService:
             raise PlanError(why)
 
     def _calibration_jobs(self, priority: int) -> tuple[list[JobRow], list[JobRow]]:
-        """The unfinished calibration jobs in the store's order, split: those that run before
-        a scan queued now at ``priority`` (under way or paused, or queued at that priority or
-        above: the queue takes the higher priority first, the earlier job among equals), and
-        those queued behind it. The one reading of the queue :meth:`calibration_ahead` and
-        :meth:`exposure_ahead_refusal` judge."""
+        """The unfinished calibration jobs in the order they run, split: those that run before
+        a scan queued now at ``priority`` (under way or paused, then those queued at that
+        priority or above in the queue's order: the higher priority first, then the queue's
+        position, so a scan queued now runs after them) and those queued behind it. The one
+        reading of the queue :meth:`calibration_ahead` and :meth:`exposure_ahead_refusal`
+        judge; the last of ``before`` is the calibration in effect when the scan starts."""
+        active = [row for row in self.store.list_jobs([st.value for st in ACTIVE_STATES])
+                  if row.kind == "calibration"]
         before: list[JobRow] = []
         behind: list[JobRow] = []
-        for row in self.store.list_jobs([JobState.QUEUED.value,
-                                         *(st.value for st in ACTIVE_STATES)]):
+        for row in self.store.queue():
             if row.kind == "calibration":
-                runs_first = row.state is not JobState.QUEUED or row.priority >= priority
-                (before if runs_first else behind).append(row)
-        return before, behind
+                (before if row.priority >= priority else behind).append(row)
+        return active + before, behind
 
     def calibration_ahead(self, priority: int = 0,
                           exposure_s: float | None = None) -> tuple[bool, str]:
         """Whether a calibration job runs before a scan queued now at ``priority``
-        (:meth:`_calibration_jobs`), at ``exposure_s`` when given; and, when none does but one
-        is queued behind, the words that say so and what to do (else "")."""
+        (:meth:`_calibration_jobs`), with ``exposure_s`` given: whether the last of them, the
+        calibration in effect when the scan starts, measures at it; and, when none does but
+        one is queued behind, the words that say so and what to do (else "")."""
         before, behind = self._calibration_jobs(priority)
         if exposure_s is not None:
-            before = [r for r in before if _measures_at(r, exposure_s)]
+            # The exposure in effect when the scan starts is the last calibration's to run
+            # before it: one at the plan's exposure followed by one at another does not do.
+            before = [r for r in before[-1:] if _measures_at(r, exposure_s)]
             behind = [r for r in behind if _measures_at(r, exposure_s)]
         if before or not behind:
             return bool(before), ""
@@ -726,7 +730,9 @@ class GonioService:
         except ExposureMismatch as exc:
             ahead, behind = self.calibration_ahead(priority, exposure_s)
             if not ahead:
-                raise PlanError(f"{exc}{behind}") from None
+                # The calibration that will be in effect, when one runs first, is named.
+                why = self.exposure_ahead_refusal(priority, exposure_s)
+                raise PlanError(why if why is not None else f"{exc}{behind}") from None
             return
         why = self.exposure_ahead_refusal(priority, exposure_s)
         if why is not None:
@@ -734,22 +740,27 @@ class GonioService:
 
     def exposure_ahead_refusal(self, priority: int, exposure_s: float) -> str | None:
         """Why a scan at ``exposure_s`` queued now at ``priority`` would be refused when it
-        starts, although the calibration in effect now lets it be queued: every calibration
-        job that runs before it (:meth:`calibration_ahead`) measures at another exposure, so
-        the calibration in effect when it starts is at another exposure (the worker refuses
-        that, :meth:`gonio.calibration.Calibration.check_exposure`). None when none runs
-        before it, one of them measures at ``exposure_s``, or one's exposure is not recorded
-        (the worker judges it at the start).
+        starts: the last calibration job to run before it (:meth:`_calibration_jobs`), the
+        one in effect when it starts, measures at another exposure (the worker refuses that,
+        :meth:`gonio.calibration.Calibration.check_exposure`). None when none runs before
+        it, the last one measures at ``exposure_s``, or its exposure is not recorded (the
+        worker judges it at the start).
 
         A scan queued behind ``gonio serve --sim``'s calibration job at another exposure was
-        accepted, waited, and failed "not started" once that calibration was in effect."""
+        accepted, waited, and failed "not started" once that calibration was in effect; one
+        queued behind two calibrations, at its exposure and then at another, was accepted
+        because the first measured at its exposure."""
         before, _ = self._calibration_jobs(priority)
-        if not before or any(_plan_exposure(r) is None or _measures_at(r, exposure_s)
-                             for r in before):
+        if not before:
             return None
-        job, at = before[0].id, _plan_exposure(before[0])
-        return (f"this plan reads at exposure {exposure_s:g} s and calibration job {job}, "
-                f"which runs before it, measures at {at:g} s: counts are not rescaled between "
+        last = before[-1]
+        at = _plan_exposure(last)
+        if at is None or _measures_at(last, exposure_s):
+            return None
+        which = ("which runs before it" if len(before) == 1 else
+                 f"the last of the {len(before)} calibration jobs that run before it")
+        return (f"this plan reads at exposure {exposure_s:g} s and calibration job {last.id}, "
+                f"{which}, measures at {at:g} s: counts are not rescaled between "
                 "exposures, so the scan would be refused when it starts; scan at "
                 f"{at:g} s, or queue a calibration at {exposure_s:g} s first")
 
@@ -1139,8 +1150,8 @@ class GonioService:
         at all (values in sensor units) and one at another exposure (refused).
 
         A calibration job that runs before the scan (:meth:`calibration_ahead`: under way,
-        paused, or queued at ``priority`` or above; for the exposure, one at the plan's
-        exposure) settles the missing and the other-exposure calibration: those are not
+        paused, or queued at ``priority`` or above; for the exposure, the last of them at the
+        plan's exposure) settles the missing and the other-exposure calibration: those are not
         said then (the worker checks again when the scan starts), as :meth:`submit` does not
         refuse them; one queued below ``priority`` is named with what to do. A partial
         calibration is refused whatever is queued, so it is always said."""
@@ -1153,7 +1164,9 @@ class GonioService:
         exposure = exposure_warning(cal, exposure_s)
         if exposure is not None:
             ahead, behind = self.calibration_ahead(priority, exposure_s)
-            exposure = None if ahead else f"{exposure}{behind}"
+            ahead_refusal = None if ahead else self.exposure_ahead_refusal(priority, exposure_s)
+            exposure = (None if ahead else f"{exposure}{behind}" if ahead_refusal is None
+                        else f"exposure: {ahead_refusal}")
         else:
             # The calibration in effect when the scan starts: one queued before it.
             ahead_refusal = self.exposure_ahead_refusal(priority, exposure_s)

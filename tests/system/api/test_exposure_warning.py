@@ -209,3 +209,56 @@ def test_a_scan_behind_a_calibration_at_another_exposure_is_refused_at_once(
             assert c.post("/api/v1/rig/release").status_code == 200
         # The refused scan was not queued: the calibration and the two accepted scans were.
         assert len(c.get("/api/v1/jobs").json()) == before + 3
+
+
+def test_the_last_calibration_ahead_decides_the_exposure(daemon: Daemon, calibrated: None) -> None:
+    """Two calibration jobs queued before a scan, at 0.01 s and then at 0.02 s: the one in
+    effect when the scan starts is the second, so a scan at 0.01 s would be refused when it
+    starts. It was accepted because one calibration ahead (the first) measured at 0.01 s.
+    Submission now refuses it naming the last calibration, Check plan says the same, a scan
+    at the last one's exposure is accepted, and moving the 0.01 s calibration behind the other
+    (the queue's order) makes the 0.01 s scan acceptable again."""
+    scan = {"kind": "uniform", "rotations": 2, "exposure": {"exposure_s": 0.01}}
+    with daemon.client() as c:
+        before = len(c.get("/api/v1/jobs").json())
+        assert c.post("/api/v1/rig/halt").status_code == 200
+        try:
+            first = queue_calibration(c, 0.01)
+            last = queue_calibration(c, 0.02)
+            expected = (f"this plan reads at exposure 0.01 s and calibration job {last}, the "
+                        "last of the 2 calibration jobs that run before it, measures at 0.02 s")
+            r = c.post("/api/v1/jobs/dry-run", json={"plan": scan})
+            assert r.status_code == 200, r.text
+            (w,) = [w for w in r.json()["warnings"] if w.startswith("exposure:")]
+            assert expected in w, w
+            r = c.post("/api/v1/jobs", json={"plan": scan})
+            assert r.status_code == 422, r.text
+            assert expected in r.json()["detail"], r.json()
+            # At an exposure neither the calibration in effect (0.01 s) nor the last one ahead
+            # measures at, the refusal names the one that will be in effect, not the one now.
+            other = {**scan, "exposure": {"exposure_s": 0.5}}
+            r = c.post("/api/v1/jobs", json={"plan": other})
+            assert r.status_code == 422, r.text
+            assert f"calibration job {last}, the last of the 2" in r.json()["detail"], r.json()
+            r = c.post("/api/v1/jobs/dry-run", json={"plan": other})
+            (w,) = [w for w in r.json()["warnings"] if w.startswith("exposure:")]
+            assert f"calibration job {last}, the last of the 2" in w, w
+            # At the last calibration's exposure: accepted.
+            r = c.post("/api/v1/jobs", json={"plan": {**scan, "exposure": {
+                "exposure_s": 0.02}}})
+            assert r.status_code == 201, r.text
+            # The 0.01 s calibration moved to run after the 0.02 s one: 0.01 s is in effect.
+            r = c.post(f"/api/v1/jobs/{first}/reorder", json={"position": 1})
+            assert r.status_code == 200, r.text
+            order = [j["id"] for j in c.get("/api/v1/jobs", params={"state": "queued"}).json()]
+            assert order.index(last) < order.index(first), order
+            r = c.post("/api/v1/jobs/dry-run", json={"plan": scan})
+            assert not [w for w in r.json()["warnings"] if w.startswith("exposure:")], r.json()
+            r = c.post("/api/v1/jobs", json={"plan": scan})
+            assert r.status_code == 201, r.text
+        finally:
+            for job in (j["id"] for j in c.get("/api/v1/jobs", params={"state": "queued"}).json()):
+                c.post(f"/api/v1/jobs/{job}/cancel")
+            assert c.post("/api/v1/rig/release").status_code == 200
+        # Two calibrations and two accepted scans were queued; the refused ones were not.
+        assert len(c.get("/api/v1/jobs").json()) == before + 4
