@@ -23,6 +23,7 @@ from gonio.cli.daemon_client import (
 )
 from gonio.cli.scan_report import (
     FINAL_STATES,
+    HOLDING_STATES,
     appeared_text,
     calibration_copy_path,
     check_output_path,
@@ -283,6 +284,15 @@ def lost_daemon_message(url: str, job_id: int, seen: dict[str, Any], why: str, a
             f"checkpoint. {then}{again} (or follow it on the lab page at {url})")
 
 
+def holding_jobs(client: Any) -> list[dict[str, Any]]:
+    """The daemon's jobs that hold the rig (:data:`HOLDING_STATES`), one filtered job list
+    per state: what :func:`queued_line` needs, without the whole job list, which a store of
+    many thousands of jobs answers slowly (each queued job's start estimate included), every
+    half second while a job waits."""
+    return [job for state in HOLDING_STATES
+            for job in client.request("GET", "/api/v1/jobs", params={"state": state})]
+
+
 def _follow(client: Any, job_id: int, disabled: bool, poll_s: float = 0.5,
             seen: dict[str, Any] | None = None) -> dict[str, Any]:
     """Poll the job with a progress bar until it ends; returns its last detail (``seen``, when
@@ -313,7 +323,7 @@ def _follow(client: Any, job_id: int, disabled: bool, poll_s: float = 0.5,
             told = reason
             if row["state"] == "queued":
                 # Why it waits, said once and again when that changes (the bar sits at 0).
-                key, line = queued_line(job_id, row, client.request("GET", "/api/v1/jobs"))
+                key, line = queued_line(job_id, row, holding_jobs(client))
                 if key != queued_told:
                     bar.write(line, file=sys.stderr)
                 queued_told = key

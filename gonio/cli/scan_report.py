@@ -358,7 +358,7 @@ def resumed_line(job_id: int) -> str:
     return f"job {job_id} resumed: the device answers again; measuring goes on"
 
 
-_HOLDING = ("running", "paused", "suspended", "reconstructing")
+HOLDING_STATES = ("running", "paused", "suspended", "reconstructing")
 """States in which a job holds the rig (:data:`gonio.jobstates.ACTIVE_STATES`)."""
 
 
@@ -374,7 +374,8 @@ def queued_line(job_id: int, row: dict[str, Any], jobs: list[dict[str, Any]]
     ----------
     job_id : the queued job
     row : its detail (``GET /api/v1/jobs/{id}``)
-    jobs : the daemon's job list (``GET /api/v1/jobs``), for the job holding the rig
+    jobs : the daemon's jobs (``GET /api/v1/jobs``; those holding the rig suffice), for
+        the job holding the rig
 
     Returns
     -------
@@ -383,7 +384,7 @@ def queued_line(job_id: int, row: dict[str, Any], jobs: list[dict[str, Any]]
     text : the line
     """
     holders = tuple((int(j["id"]), str(j["state"])) for j in jobs
-                    if j.get("state") in _HOLDING and j.get("id") != job_id)
+                    if j.get("state") in HOLDING_STATES and j.get("id") != job_id)
     ahead = row.get("queue_position")
     waiting = row.get("waiting")
     parts: list[str] = []

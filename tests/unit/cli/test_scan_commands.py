@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -413,3 +414,37 @@ def test_write_output_never_replaces_a_file_unless_asked(
     assert other.read_bytes() == b"fifth"
     assert sorted(p.name for p in (tmp_path / "sub").iterdir()) == ["felt.h5", "linen.h5",
                                                                    "link.h5"]
+
+
+def test_a_queued_job_followed_asks_only_for_the_jobs_holding_the_rig(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """``gonio jobs --daemon URL wait`` on a queued job asked for the daemon's whole job list
+    at every half-second poll, for the one line naming the job holding the rig: slow on a
+    store of thousands of jobs. It now asks for the jobs in each rig-holding state (the API's
+    ``?state=`` filter); the line still names the holder. A scripted client below the HTTP
+    boundary records the requests; the real daemon's lines: test_cli_daemon_wait.py."""
+    from gonio.cli.daemon_jobs import _follow
+
+    store = [{"id": 4, "state": "completed"}, {"id": 5, "state": "running"},
+             *({"id": i, "state": "queued"} for i in range(6, 3000))]
+    details = iter([{"state": "queued", "waiting": None, "queue_position": 0,
+                     "starts_in_s": None, "starts_in_estimate": None},
+                    {"state": "queued", "waiting": None, "queue_position": 0,
+                     "starts_in_s": None, "starts_in_estimate": None},
+                    {"state": "completed", "done_angles": 2, "total_angles": 2}])
+    asked: list[tuple[str, dict[str, Any]]] = []
+
+    class Scripted:
+        def request(self, method: str, path: str, **kwargs: Any) -> Any:
+            asked.append((path, kwargs.get("params") or {}))
+            if path == "/api/v1/jobs/7":
+                return next(details)
+            assert path == "/api/v1/jobs", path
+            state = (kwargs.get("params") or {}).get("state")
+            return [j for j in store if state is None or j["state"] == state]
+
+    assert _follow(Scripted(), 7, disabled=True, poll_s=0.0)["state"] == "completed"
+    lists = [params for path, params in asked if path == "/api/v1/jobs"]
+    assert lists and all(p.get("state") in ("running", "paused", "suspended", "reconstructing")
+                         for p in lists), lists
+    assert "job 7 queued: waits for job 5 (running) to end" in capsys.readouterr().err
