@@ -1038,7 +1038,9 @@ class GonioService:
         Refused with :class:`Conflict` when a queued scan that would be uncalibrated, queued
         without asking because a queued calibration ran first, would then run before it
         (:meth:`_calibration_overtaken`), unless ``accept_uncalibrated``: then each scan so moved
-        keeps that acceptance (an ``uncalibrated_accepted`` event) for its start.
+        keeps that acceptance (an ``uncalibrated_accepted`` event) for its start. Refused too
+        when a queued scan would then start under a calibration at another exposure than its
+        own, which the worker refuses at the start (:meth:`_exposure_overtaken`).
         """
         if request is not None:
             priority, position = request.priority, request.position
@@ -1046,9 +1048,14 @@ class GonioService:
             raise Conflict("reorder needs a priority or a position")
         self._row(job_id)
         overtaken = self._calibration_overtaken()
+        exposure_overtaken = self._exposure_overtaken()
         accepted: list[int] = []
 
         def check(before: list[tuple[int, str]], after: list[tuple[int, str]]) -> None:
+            if exposure_overtaken is not None:
+                why = exposure_overtaken(before, after)
+                if why is not None:
+                    raise Conflict(f"not reordered: {why}")
             if overtaken is None:
                 return
             jobs, cal, why = overtaken(before, after)
@@ -1070,6 +1077,60 @@ class GonioService:
             # (unasked_uncalibrated), whichever calibration runs or does not run before it.
             self.store.append_event(job, UNCALIBRATED_ACCEPTED, {"by": "reorder"})
         return self._info(row)
+
+    def _exposure_overtaken(self) -> Callable[
+            [list[tuple[int, str]], list[tuple[int, str]]], str | None] | None:
+        """For :meth:`reorder`: a function of the queue order before and after a move that
+        says which queued scan would then start under a calibration at another exposure than
+        its own (the last calibration job to run before it, else the calibration in effect)
+        though it did not before, and what to do; None when it says nothing. None when no
+        calibration job is queued (a move cannot change which calibration a scan starts
+        under).
+
+        The worker refuses such a scan when it starts (counts are not rescaled between
+        exposures): a calibration at 0.02 s moved ahead of a scan at 0.01 s made that scan
+        fail "not started" long after the move that decided it.
+        """
+        rows = {r.id: r for r in self.store.list_jobs(
+            [JobState.QUEUED.value, *(st.value for st in ACTIVE_STATES)])}
+        if not any(r.kind == "calibration" and r.state is JobState.QUEUED
+                   for r in rows.values()):
+            return None
+        active = [r for r in rows.values()
+                  if r.kind == "calibration" and r.state is not JobState.QUEUED]
+        # The exposure a queued job starts under when no queued calibration runs before it:
+        # a calibration under way's, else the one in effect (None: not recorded, accepted).
+        start: tuple[float | None, int | None] = (
+            (_plan_exposure(active[-1]), active[-1].id) if active
+            else (self.calibration().exposure_s if self.calibration().pairs else None, None))
+
+        def refused(order: list[tuple[int, str]]) -> dict[int, tuple[float, float, int | None]]:
+            at, by = start
+            out: dict[int, tuple[float, float, int | None]] = {}
+            for job_id, kind in order:
+                exposure = _plan_exposure(rows[job_id]) if job_id in rows else None
+                if kind == "calibration":
+                    at, by = exposure, job_id
+                elif exposure is not None and at is not None and \
+                        not math.isclose(exposure, at, rel_tol=1e-6):
+                    out[job_id] = (exposure, at, by)
+            return out
+
+        def overtaken(before: list[tuple[int, str]], after: list[tuple[int, str]]) -> str | None:
+            was = refused(before)
+            now = {k: v for k, v in refused(after).items() if k not in was}
+            if not now:
+                return None
+            job = min(now)
+            exposure, at, by = now[job]
+            under = (f"calibration job {by}, which would run before it, measures at {at:g} s"
+                     if by is not None else f"the calibration in effect was measured at {at:g} s")
+            return (f"job {job} reads at exposure {exposure:g} s and {under}: counts are not "
+                    "rescaled between exposures, so it would be refused when it starts. Keep "
+                    f"job {job} where it runs under a calibration at {exposure:g} s, or queue a "
+                    f"calibration at {exposure:g} s before it")
+
+        return overtaken
 
     def _info(self, row: JobRow) -> JobInfo:
         """One job's row as :meth:`list_jobs` gives it, its start estimate included when it

@@ -247,7 +247,13 @@ def test_the_last_calibration_ahead_decides_the_exposure(daemon: Daemon, calibra
             r = c.post("/api/v1/jobs", json={"plan": {**scan, "exposure": {
                 "exposure_s": 0.02}}})
             assert r.status_code == 201, r.text
-            # The 0.01 s calibration moved to run after the 0.02 s one: 0.01 s is in effect.
+            at_last = r.json()["id"]
+            # The 0.01 s calibration moved to run after the 0.02 s one would leave that scan
+            # under 0.01 s: refused while it is queued; once it is cancelled, done.
+            r = c.post(f"/api/v1/jobs/{first}/reorder", json={"position": 1})
+            assert r.status_code == 409, r.text
+            assert f"job {at_last} reads at exposure 0.02 s" in r.json()["detail"], r.json()
+            assert c.post(f"/api/v1/jobs/{at_last}/cancel").status_code == 200
             r = c.post(f"/api/v1/jobs/{first}/reorder", json={"position": 1})
             assert r.status_code == 200, r.text
             order = [j["id"] for j in c.get("/api/v1/jobs", params={"state": "queued"}).json()]
@@ -262,3 +268,56 @@ def test_the_last_calibration_ahead_decides_the_exposure(daemon: Daemon, calibra
             assert c.post("/api/v1/rig/release").status_code == 200
         # Two calibrations and two accepted scans were queued; the refused ones were not.
         assert len(c.get("/api/v1/jobs").json()) == before + 4
+
+
+def test_a_reorder_that_would_start_a_scan_under_another_exposure_is_refused(
+        daemon: Daemon, calibrated: None) -> None:
+    """A scan at 0.01 s queued under the calibration in effect (0.01 s), and a calibration job
+    at 0.02 s queued behind it: moving the calibration ahead of the scan made the scan start
+    under 0.02 s factors, which the worker refuses ("not started", long after the move). The
+    move is refused (409) naming the scan and both exposures, and changes nothing; so is
+    moving a 0.02 s scan from behind the calibration ahead of it; a move that keeps every
+    scan under its own exposure is done."""
+    with daemon.client() as c:
+        assert c.post("/api/v1/rig/halt").status_code == 200
+        try:
+            r = c.post("/api/v1/jobs", json={"plan": {
+                "kind": "uniform", "rotations": 2, "exposure": {"exposure_s": 0.01}}})
+            assert r.status_code == 201, r.text
+            scan = r.json()["id"]
+            cal = queue_calibration(c, 0.02)
+            r = c.post("/api/v1/jobs", json={"plan": {
+                "kind": "uniform", "rotations": 2, "exposure": {"exposure_s": 0.02}}})
+            assert r.status_code == 201, r.text
+            later = r.json()["id"]
+
+            def order() -> list[int]:
+                return [j["id"] for j in c.get("/api/v1/jobs", params={"state": "queued"}).json()
+                        if j["id"] in (scan, cal, later)]
+
+            assert order() == [scan, cal, later]
+            r = c.post(f"/api/v1/jobs/{cal}/reorder", json={"position": 0})
+            assert r.status_code == 409, r.text
+            detail = r.json()["detail"]
+            assert f"job {scan} reads at exposure 0.01 s and calibration job {cal}" in detail
+            assert "measures at 0.02 s" in detail and "refused when it starts" in detail, detail
+            r = c.post(f"/api/v1/jobs/{cal}/reorder", json={"priority": 5})
+            assert r.status_code == 409, r.text
+            assert order() == [scan, cal, later]
+            # The 0.02 s scan moved ahead of the calibration would start under 0.01 s.
+            r = c.post(f"/api/v1/jobs/{later}/reorder", json={"position": 0})
+            assert r.status_code == 409, r.text
+            assert (f"job {later} reads at exposure 0.02 s and the calibration in effect was "
+                    "measured at 0.01 s") in r.json()["detail"], r.json()
+            assert order() == [scan, cal, later]
+            # The 0.01 s scan moved to the end would start under 0.02 s: refused; moved
+            # nowhere new (position 0, where it is) it is done.
+            r = c.post(f"/api/v1/jobs/{scan}/reorder", json={"position": 2})
+            assert r.status_code == 409, r.text
+            r = c.post(f"/api/v1/jobs/{scan}/reorder", json={"position": 0})
+            assert r.status_code == 200, r.text
+            assert order() == [scan, cal, later]
+        finally:
+            for job in (j["id"] for j in c.get("/api/v1/jobs", params={"state": "queued"}).json()):
+                c.post(f"/api/v1/jobs/{job}/cancel")
+            assert c.post("/api/v1/rig/release").status_code == 200
