@@ -5,6 +5,7 @@ Run from the project root (docs/science.md 7.1.1.3)::
     nice -n 10 .venv/bin/python bench/bench_ma98metal.py ROWS [MATERIAL ...]
     nice -n 10 .venv/bin/python bench/bench_ma98metal.py lobe-rows OUT
     nice -n 10 .venv/bin/python bench/bench_ma98metal.py ROWS lobe-study OUT
+    nice -n 10 .venv/bin/python bench/bench_ma98metal.py lobe-truth MATERIAL ...
 
 ``ROWS`` is a rows file of ``bench_selfestimate.py --rows``. Prints, from the rows alone, the
 truth against the shipped estimate per plan for the metals by roughness and for the
@@ -245,6 +246,25 @@ def lobe_rows(out: Path) -> None:
             print(f"  {m.name}", flush=True)
 
 
+def lobe_truth(names: list[str]) -> None:
+    """For ``names`` read with MA98 (bench_selfestimate's seeds): :func:`unread_lobe` of the
+    reconstruction beside that of the truth (the lobe the specimen really has there)."""
+    bu.CHOOSE["objective"] = "posterior"
+    bu.SPAN["scan"] = bu.SPAN["design"] = DEFAULT_SPAN_DEG
+    print("| material | log_rmse | unread lobe, reconstruction | unread lobe, truth |")
+    print("|---|---|---|---|")
+    for i, (m, _kind, _which) in enumerate(bs.materials()):
+        if m.name not in names:
+            continue
+        cells, ph = get_preset("MA98").cells()
+        alpha = uniform_stage_angles(8, span=np.deg2rad(DEFAULT_SPAN_DEG))
+        vals = bu.read(m, cells, ph, alpha, 100 + i)
+        rec = reconstruct(default_basis(exclude=m.exclude), cells, ph, alpha, vals)
+        c = np.asarray(cells)
+        print(f"| {m.name} | {metrics.log_rmse(rec.table, m.truth):.3f} | "
+              f"{unread_lobe(rec.table, c):.3f} | {unread_lobe(m.truth, c):.3f} |", flush=True)
+
+
 def _count(sel: list[dict[str, Any]], est: Any) -> tuple[int, int, int]:
     q = np.array([r["truth"] / est(r) for r in sel])
     return int(np.sum((q >= 0.5) & (q <= 2))), int(np.sum(q > 2)), int(np.sum(q < 0.5))
@@ -292,6 +312,9 @@ def main(argv: list[str] | None = None) -> int:
     if not args:
         print(__doc__)
         return 2
+    if args[0] == "lobe-truth":
+        lobe_truth(args[1:])
+        return 0
     if args[0] == "lobe-rows":
         lobe_rows(Path(args[1]))
         return 0
