@@ -53,7 +53,10 @@ def test_no_endpoint_answers_5xx_and_state_stays_consistent(daemon: Daemon,
         def check(case: schemathesis.Case, keyed: bool) -> None:
             nonlocal calls
             headers = {"X-API-Key": daemon.key} if keyed else {}
-            response = case.call(base_url=daemon.url, headers=headers, timeout=20)
+            # Generous: an export of a result without stored fits fits them on demand, which
+            # took more than 20 s once on an oversubscribed machine (a timeout is not an answer
+            # this test judges; no 5xx and the schema are).
+            response = case.call(base_url=daemon.url, headers=headers, timeout=120)
             calls += 1
             try:
                 case.validate_response(response, checks=CHECKS)
