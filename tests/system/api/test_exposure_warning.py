@@ -8,6 +8,9 @@ from __future__ import annotations
 
 import csv
 import io
+from collections.abc import Iterator
+from contextlib import contextmanager
+from typing import Any
 
 import httpx
 import pytest
@@ -25,6 +28,32 @@ def queue_calibration(c: httpx.Client, exposure_s: float) -> int:
         "exposure": {"exposure_s": exposure_s}}})
     assert r.status_code == 201, r.text
     return int(r.json()["id"])
+
+
+@contextmanager
+def held_queue(c: httpx.Client) -> Iterator[None]:
+    """The queue held while the body queues jobs (none starts); then every queued job is
+    cancelled and the queue released, whatever the body asserted."""
+    assert c.post("/api/v1/rig/halt").status_code == 200
+    try:
+        yield
+    finally:
+        for job in (j["id"] for j in c.get("/api/v1/jobs", params={"state": "queued"}).json()):
+            c.post(f"/api/v1/jobs/{job}/cancel")
+        assert c.post("/api/v1/rig/release").status_code == 200
+
+
+def refused_alike(c: httpx.Client, plan: dict[str, Any], expected: str) -> str:
+    """Check plan warns of ``plan``'s exposure with ``expected`` in its words and submission
+    refuses it (422) with the same words (one decision makes both); the warning."""
+    r = c.post("/api/v1/jobs/dry-run", json={"plan": plan})
+    assert r.status_code == 200, r.text
+    (w,) = [w for w in r.json()["warnings"] if w.startswith("exposure:")]
+    assert expected in w, w
+    r = c.post("/api/v1/jobs", json={"plan": plan})
+    assert r.status_code == 422, r.text
+    assert expected in r.json()["detail"], r.json()
+    return str(w)
 
 
 @pytest.fixture(scope="module")
@@ -181,18 +210,11 @@ def test_a_scan_behind_a_calibration_at_another_exposure_is_refused_at_once(
     scan = {"kind": "uniform", "rotations": 2, "exposure": {"exposure_s": 0.01}}
     with daemon.client() as c:
         before = len(c.get("/api/v1/jobs").json())
-        assert c.post("/api/v1/rig/halt").status_code == 200
-        try:
+        with held_queue(c):
             cal = queue_calibration(c, 0.02)
-            expected = (f"this plan reads at exposure 0.01 s and calibration job {cal}, which "
-                        "runs before it, measures at 0.02 s")
-            r = c.post("/api/v1/jobs/dry-run", json={"plan": scan})
-            assert r.status_code == 200, r.text
-            (w,) = [w for w in r.json()["warnings"] if w.startswith("exposure:")]
-            assert expected in w and "queue a calibration at 0.01 s first" in w, w
-            r = c.post("/api/v1/jobs", json={"plan": scan})
-            assert r.status_code == 422, r.text
-            assert expected in r.json()["detail"], r.json()
+            w = refused_alike(c, scan, f"this plan reads at exposure 0.01 s and calibration "
+                                       f"job {cal}, which runs before it, measures at 0.02 s")
+            assert "queue a calibration at 0.01 s first" in w, w
             # Queued above the calibration's priority it runs first, under the calibration in
             # effect now (0.01 s): accepted, and Check plan at that priority says nothing.
             r = c.post("/api/v1/jobs/dry-run", json={"plan": scan, "priority": 5})
@@ -203,10 +225,6 @@ def test_a_scan_behind_a_calibration_at_another_exposure_is_refused_at_once(
             r = c.post("/api/v1/jobs", json={"plan": {**scan, "exposure": {
                 "exposure_s": 0.02}}})
             assert r.status_code == 201, r.text
-        finally:
-            for job in (j["id"] for j in c.get("/api/v1/jobs", params={"state": "queued"}).json()):
-                c.post(f"/api/v1/jobs/{job}/cancel")
-            assert c.post("/api/v1/rig/release").status_code == 200
         # The refused scan was not queued: the calibration and the two accepted scans were.
         assert len(c.get("/api/v1/jobs").json()) == before + 3
 
@@ -221,28 +239,16 @@ def test_the_last_calibration_ahead_decides_the_exposure(daemon: Daemon, calibra
     scan = {"kind": "uniform", "rotations": 2, "exposure": {"exposure_s": 0.01}}
     with daemon.client() as c:
         before = len(c.get("/api/v1/jobs").json())
-        assert c.post("/api/v1/rig/halt").status_code == 200
-        try:
+        with held_queue(c):
             first = queue_calibration(c, 0.01)
             last = queue_calibration(c, 0.02)
-            expected = (f"this plan reads at exposure 0.01 s and calibration job {last}, the "
-                        "last of the 2 calibration jobs that run before it, measures at 0.02 s")
-            r = c.post("/api/v1/jobs/dry-run", json={"plan": scan})
-            assert r.status_code == 200, r.text
-            (w,) = [w for w in r.json()["warnings"] if w.startswith("exposure:")]
-            assert expected in w, w
-            r = c.post("/api/v1/jobs", json={"plan": scan})
-            assert r.status_code == 422, r.text
-            assert expected in r.json()["detail"], r.json()
+            refused_alike(c, scan, f"this plan reads at exposure 0.01 s and calibration job "
+                                   f"{last}, the last of the 2 calibration jobs that run before "
+                                   "it, measures at 0.02 s")
             # At an exposure neither the calibration in effect (0.01 s) nor the last one ahead
             # measures at, the refusal names the one that will be in effect, not the one now.
-            other = {**scan, "exposure": {"exposure_s": 0.5}}
-            r = c.post("/api/v1/jobs", json={"plan": other})
-            assert r.status_code == 422, r.text
-            assert f"calibration job {last}, the last of the 2" in r.json()["detail"], r.json()
-            r = c.post("/api/v1/jobs/dry-run", json={"plan": other})
-            (w,) = [w for w in r.json()["warnings"] if w.startswith("exposure:")]
-            assert f"calibration job {last}, the last of the 2" in w, w
+            refused_alike(c, {**scan, "exposure": {"exposure_s": 0.5}},
+                          f"calibration job {last}, the last of the 2")
             # At the last calibration's exposure: accepted.
             r = c.post("/api/v1/jobs", json={"plan": {**scan, "exposure": {
                 "exposure_s": 0.02}}})
@@ -262,10 +268,6 @@ def test_the_last_calibration_ahead_decides_the_exposure(daemon: Daemon, calibra
             assert not [w for w in r.json()["warnings"] if w.startswith("exposure:")], r.json()
             r = c.post("/api/v1/jobs", json={"plan": scan})
             assert r.status_code == 201, r.text
-        finally:
-            for job in (j["id"] for j in c.get("/api/v1/jobs", params={"state": "queued"}).json()):
-                c.post(f"/api/v1/jobs/{job}/cancel")
-            assert c.post("/api/v1/rig/release").status_code == 200
         # Two calibrations and two accepted scans were queued; the refused ones were not.
         assert len(c.get("/api/v1/jobs").json()) == before + 4
 
@@ -278,46 +280,40 @@ def test_a_reorder_that_would_start_a_scan_under_another_exposure_is_refused(
     move is refused (409) naming the scan and both exposures, and changes nothing; so is
     moving a 0.02 s scan from behind the calibration ahead of it; a move that keeps every
     scan under its own exposure is done."""
-    with daemon.client() as c:
-        assert c.post("/api/v1/rig/halt").status_code == 200
-        try:
-            r = c.post("/api/v1/jobs", json={"plan": {
-                "kind": "uniform", "rotations": 2, "exposure": {"exposure_s": 0.01}}})
-            assert r.status_code == 201, r.text
-            scan = r.json()["id"]
-            cal = queue_calibration(c, 0.02)
-            r = c.post("/api/v1/jobs", json={"plan": {
-                "kind": "uniform", "rotations": 2, "exposure": {"exposure_s": 0.02}}})
-            assert r.status_code == 201, r.text
-            later = r.json()["id"]
+    with daemon.client() as c, held_queue(c):
+        r = c.post("/api/v1/jobs", json={"plan": {
+            "kind": "uniform", "rotations": 2, "exposure": {"exposure_s": 0.01}}})
+        assert r.status_code == 201, r.text
+        scan = r.json()["id"]
+        cal = queue_calibration(c, 0.02)
+        r = c.post("/api/v1/jobs", json={"plan": {
+            "kind": "uniform", "rotations": 2, "exposure": {"exposure_s": 0.02}}})
+        assert r.status_code == 201, r.text
+        later = r.json()["id"]
 
-            def order() -> list[int]:
-                return [j["id"] for j in c.get("/api/v1/jobs", params={"state": "queued"}).json()
-                        if j["id"] in (scan, cal, later)]
+        def order() -> list[int]:
+            return [j["id"] for j in c.get("/api/v1/jobs", params={"state": "queued"}).json()
+                    if j["id"] in (scan, cal, later)]
 
-            assert order() == [scan, cal, later]
-            r = c.post(f"/api/v1/jobs/{cal}/reorder", json={"position": 0})
-            assert r.status_code == 409, r.text
-            detail = r.json()["detail"]
-            assert f"job {scan} reads at exposure 0.01 s and calibration job {cal}" in detail
-            assert "measures at 0.02 s" in detail and "refused when it starts" in detail, detail
-            r = c.post(f"/api/v1/jobs/{cal}/reorder", json={"priority": 5})
-            assert r.status_code == 409, r.text
-            assert order() == [scan, cal, later]
-            # The 0.02 s scan moved ahead of the calibration would start under 0.01 s.
-            r = c.post(f"/api/v1/jobs/{later}/reorder", json={"position": 0})
-            assert r.status_code == 409, r.text
-            assert (f"job {later} reads at exposure 0.02 s and the calibration in effect was "
-                    "measured at 0.01 s") in r.json()["detail"], r.json()
-            assert order() == [scan, cal, later]
-            # The 0.01 s scan moved to the end would start under 0.02 s: refused; moved
-            # nowhere new (position 0, where it is) it is done.
-            r = c.post(f"/api/v1/jobs/{scan}/reorder", json={"position": 2})
-            assert r.status_code == 409, r.text
-            r = c.post(f"/api/v1/jobs/{scan}/reorder", json={"position": 0})
-            assert r.status_code == 200, r.text
-            assert order() == [scan, cal, later]
-        finally:
-            for job in (j["id"] for j in c.get("/api/v1/jobs", params={"state": "queued"}).json()):
-                c.post(f"/api/v1/jobs/{job}/cancel")
-            assert c.post("/api/v1/rig/release").status_code == 200
+        assert order() == [scan, cal, later]
+        r = c.post(f"/api/v1/jobs/{cal}/reorder", json={"position": 0})
+        assert r.status_code == 409, r.text
+        detail = r.json()["detail"]
+        assert f"job {scan} reads at exposure 0.01 s and calibration job {cal}" in detail
+        assert "measures at 0.02 s" in detail and "refused when it starts" in detail, detail
+        r = c.post(f"/api/v1/jobs/{cal}/reorder", json={"priority": 5})
+        assert r.status_code == 409, r.text
+        assert order() == [scan, cal, later]
+        # The 0.02 s scan moved ahead of the calibration would start under 0.01 s.
+        r = c.post(f"/api/v1/jobs/{later}/reorder", json={"position": 0})
+        assert r.status_code == 409, r.text
+        assert (f"job {later} reads at exposure 0.02 s and the calibration in effect was "
+                "measured at 0.01 s") in r.json()["detail"], r.json()
+        assert order() == [scan, cal, later]
+        # The 0.01 s scan moved to the end would start under 0.02 s: refused; moved
+        # nowhere new (position 0, where it is) it is done.
+        r = c.post(f"/api/v1/jobs/{scan}/reorder", json={"position": 2})
+        assert r.status_code == 409, r.text
+        r = c.post(f"/api/v1/jobs/{scan}/reorder", json={"position": 0})
+        assert r.status_code == 200, r.text
+        assert order() == [scan, cal, later]
