@@ -1100,9 +1100,20 @@ class GonioService:
                   if r.kind == "calibration" and r.state is not JobState.QUEUED]
         # The exposure a queued job starts under when no queued calibration runs before it:
         # a calibration under way's, else the one in effect (None: not recorded, accepted).
-        start: tuple[float | None, int | None] = (
-            (_plan_exposure(active[-1]), active[-1].id) if active
-            else (self.calibration().exposure_s if self.calibration().pairs else None, None))
+        start: tuple[float | None, int | None] = (None, None)
+        if active:
+            start = (_plan_exposure(active[-1]), active[-1].id)
+        else:
+            from gonio.calibration import CalibrationError
+
+            try:
+                cal = self.calibration()
+            except CalibrationError:
+                # A damaged calibration file must not block moving the calibration job that
+                # replaces it; the worker says what is wrong when a scan starts.
+                cal = None
+            if cal is not None and cal.pairs:
+                start = (cal.exposure_s, None)
 
         def refused(order: list[tuple[int, str]]) -> dict[int, tuple[float, float, int | None]]:
             at, by = start

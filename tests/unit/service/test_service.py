@@ -408,3 +408,27 @@ def test_a_job_taken_while_the_queue_is_read_does_not_wait_for_itself(tmp_path: 
     assert info.state is JobState.QUEUED  # the list's own read, before the worker took it
     assert info.starts_in_s == 0.0, info
     assert f"job {job}" not in (info.starts_in_estimate or ""), info.starts_in_estimate
+
+
+def test_a_damaged_calibration_file_does_not_block_moving_the_calibration_that_replaces_it(
+        tmp_path: Path) -> None:
+    """The reorder judges which calibration each queued scan would start under, reading the
+    calibration in effect; a damaged calibration file (which the worker refuses with its
+    reason when a scan starts) must not refuse the move that puts a new calibration job
+    first: it answered the file's error instead."""
+    from gonio.calibration import CALIBRATION_FILE, CalibrationError
+
+    _rig, svc = _service(tmp_path)
+    svc.halt()  # nothing starts: the jobs stay queued
+    plan = UniformPlan(rotations=3, exposure=FAST)
+    scan = svc.submit(JobRequest(plan=plan))
+    cal = svc.submit(JobRequest(plan=CalibrationPlan(rotations=2, reference_albedo=0.99,
+                                                     exposure=FAST)))
+    damaged = tmp_path / "d" / CALIBRATION_FILE
+    damaged.parent.mkdir(parents=True, exist_ok=True)
+    damaged.write_text("{ not json")
+    with pytest.raises(CalibrationError):
+        svc.calibration()  # the file is damaged, as this test means it to be
+    moved = svc.reorder(cal.id, position=0)
+    assert moved.id == cal.id
+    assert [r.id for r in svc.store.queue()] == [cal.id, scan.id]
