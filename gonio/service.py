@@ -66,6 +66,7 @@ from gonio.plans.models import (
     parse_stored_plan,
 )
 from gonio.plans.validation import plan_pairs
+from gonio.queue_exposure import StartCalibration, exposure_clashes
 from gonio.result_views import ResultViews, download_stem
 from gonio.rigdescription import RigDescription
 from gonio.service_models import (
@@ -770,7 +771,9 @@ class GonioService:
         queued = any(r.state is JobState.QUEUED for r in rows)
         wait = self._queue_wait() if queued else None
         starts = self._start_estimates(wait) if queued else {}
-        return [JobInfo.from_row(r, self._max_angles(r), wait, start=starts.get(r.id))
+        refusals = self.start_refusals() if queued else {}
+        return [JobInfo.from_row(r, self._max_angles(r), wait, start=starts.get(r.id),
+                                 start_refusal=refusals.get(r.id))
                 for r in rows]
 
     def _start_estimates(self, wait: str | None) -> dict[int, StartEstimate]:
@@ -926,7 +929,8 @@ class GonioService:
             queue_position=self.store.queue_position(job_id) if queued else None,
             progress=self.worker.progress(job_id), activity=activity, finishing=est,
             basis_build_s=build, finishing_for_s=finishing_for,
-            start=self._start_estimates(wait).get(job_id) if queued else None)
+            start=self._start_estimates(wait).get(job_id) if queued else None,
+            start_refusal=self.start_refusals().get(job_id) if queued else None)
 
     def _asymmetric_build_due(self, row: JobRow) -> float | None:
         """Seconds ``row``'s finishing will wait for the basis for specimens without twofold
@@ -1078,68 +1082,73 @@ class GonioService:
             self.store.append_event(job, UNCALIBRATED_ACCEPTED, {"by": "reorder"})
         return self._info(row)
 
+    def _exposure_start(self, rows: Sequence[JobRow]) -> StartCalibration:
+        """The calibration a queued job starts under when no queued calibration job runs
+        before it (:class:`gonio.queue_exposure.StartCalibration`): a calibration job under
+        way or paused (among ``rows``, the unfinished jobs), else the calibration in effect."""
+        from gonio.calibration import CalibrationError
+
+        active = [r for r in rows if r.kind == "calibration" and r.state is not JobState.QUEUED]
+        if active:
+            return StartCalibration(_plan_exposure(active[-1]), active[-1].id)
+        try:
+            cal = self.calibration()
+        except CalibrationError:
+            # A damaged calibration file must not block moving the calibration job that
+            # replaces it; the worker says what is wrong when a scan starts.
+            return StartCalibration(None)
+        return StartCalibration(cal.exposure_s if cal.pairs else None)
+
+    def start_refusals(self) -> dict[int, str]:
+        """The queued scans the worker would refuse when they start, as the queue stands, by
+        id, with what their row says (the job list's ``start_refusal``): those that would
+        start under a calibration at another exposure
+        (:func:`gonio.queue_exposure.exposure_clashes`).
+
+        Submission and :meth:`reorder` refuse what would cause it, but a calibration job
+        cancelled, failed or queued at a higher priority, or a calibration file replaced,
+        leaves a queued scan to fail "not started" at its turn, perhaps overnight; its row
+        now says so while it waits."""
+        rows = self.store.list_jobs([JobState.QUEUED.value, *(st.value for st in ACTIVE_STATES)])
+        queue = [r for r in rows if r.state is JobState.QUEUED]
+        if not any(r.kind != "calibration" for r in queue):
+            return {}
+        queue.sort(key=lambda r: (-r.priority, r.position, r.id))
+        clashes = exposure_clashes([(r.id, r.kind) for r in queue],
+                                   {r.id: _plan_exposure(r) for r in queue},
+                                   self._exposure_start(rows))
+        return {job_id: clash.status() for job_id, clash in clashes.items()}
+
     def _exposure_overtaken(self) -> Callable[
             [list[tuple[int, str]], list[tuple[int, str]]], str | None] | None:
         """For :meth:`reorder`: a function of the queue order before and after a move that
         says which queued scan would then start under a calibration at another exposure than
-        its own (the last calibration job to run before it, else the calibration in effect)
-        though it did not before, and what to do; None when it says nothing. None when no
-        calibration job is queued (a move cannot change which calibration a scan starts
-        under).
+        its own (:func:`gonio.queue_exposure.exposure_clashes`) though it did not before, and
+        what to do; None when it says nothing. None when no calibration job is queued (a move
+        cannot change which calibration a scan starts under).
 
         The worker refuses such a scan when it starts (counts are not rescaled between
         exposures): a calibration at 0.02 s moved ahead of a scan at 0.01 s made that scan
         fail "not started" long after the move that decided it.
         """
-        rows = {r.id: r for r in self.store.list_jobs(
-            [JobState.QUEUED.value, *(st.value for st in ACTIVE_STATES)])}
-        if not any(r.kind == "calibration" and r.state is JobState.QUEUED
-                   for r in rows.values()):
+        rows = self.store.list_jobs([JobState.QUEUED.value, *(st.value for st in ACTIVE_STATES)])
+        if not any(r.kind == "calibration" and r.state is JobState.QUEUED for r in rows):
             return None
-        active = [r for r in rows.values()
-                  if r.kind == "calibration" and r.state is not JobState.QUEUED]
-        # The exposure a queued job starts under when no queued calibration runs before it:
-        # a calibration under way's, else the one in effect (None: not recorded, accepted).
-        start: tuple[float | None, int | None] = (None, None)
-        if active:
-            start = (_plan_exposure(active[-1]), active[-1].id)
-        else:
-            from gonio.calibration import CalibrationError
-
-            try:
-                cal = self.calibration()
-            except CalibrationError:
-                # A damaged calibration file must not block moving the calibration job that
-                # replaces it; the worker says what is wrong when a scan starts.
-                cal = None
-            if cal is not None and cal.pairs:
-                start = (cal.exposure_s, None)
-
-        def refused(order: list[tuple[int, str]]) -> dict[int, tuple[float, float, int | None]]:
-            at, by = start
-            out: dict[int, tuple[float, float, int | None]] = {}
-            for job_id, kind in order:
-                exposure = _plan_exposure(rows[job_id]) if job_id in rows else None
-                if kind == "calibration":
-                    at, by = exposure, job_id
-                elif exposure is not None and at is not None and \
-                        not math.isclose(exposure, at, rel_tol=1e-6):
-                    out[job_id] = (exposure, at, by)
-            return out
+        exposures = {r.id: _plan_exposure(r) for r in rows}
+        start = self._exposure_start(rows)
 
         def overtaken(before: list[tuple[int, str]], after: list[tuple[int, str]]) -> str | None:
-            was = refused(before)
-            now = {k: v for k, v in refused(after).items() if k not in was}
+            was = exposure_clashes(before, exposures, start)
+            now = {k: v for k, v in exposure_clashes(after, exposures, start).items()
+                   if k not in was}
             if not now:
                 return None
-            job = min(now)
-            exposure, at, by = now[job]
-            under = (f"calibration job {by}, which would run before it, measures at {at:g} s"
-                     if by is not None else f"the calibration in effect was measured at {at:g} s")
-            return (f"job {job} reads at exposure {exposure:g} s and {under}: counts are not "
-                    "rescaled between exposures, so it would be refused when it starts. Keep "
-                    f"job {job} where it runs under a calibration at {exposure:g} s, or queue a "
-                    f"calibration at {exposure:g} s before it")
+            clash = now[min(now)]
+            return (f"job {clash.job_id} reads at exposure {clash.exposure_s:g} s and "
+                    f"{clash.under()}: counts are not rescaled between exposures, so it would "
+                    f"be refused when it starts. Keep job {clash.job_id} where it runs under a "
+                    f"calibration at {clash.exposure_s:g} s, or queue a calibration at "
+                    f"{clash.exposure_s:g} s before it")
 
         return overtaken
 
@@ -1151,7 +1160,8 @@ class GonioService:
             return JobInfo.from_row(row, self._max_angles(row))
         wait = self._queue_wait()
         return JobInfo.from_row(row, self._max_angles(row), wait,
-                                start=self._start_estimates(wait).get(row.id))
+                                start=self._start_estimates(wait).get(row.id),
+                                start_refusal=self.start_refusals().get(row.id))
 
     def remove(self, job_id: int) -> None:
         """Delete a queued or finished job and its readings (not its result file).

@@ -103,13 +103,23 @@ class JobInfo(BaseModel):
     starts_in_estimate: str | None = Field(
         default=None, description="queued jobs: what starts_in_s rests on, in words, or why "
         "it is not known; null for jobs that are not queued")
+    start_refusal: str | None = Field(
+        default=None, description="queued scans: why the worker will refuse it when it "
+        "starts, as the queue stands now, and what to do: it would start under a calibration "
+        "at another exposure than its own (the last calibration job to run before it, one "
+        "under way, else the calibration in effect). Submission and reorder refuse what "
+        "causes it; a calibration job cancelled, failed or queued at a higher priority, or a "
+        "calibration file replaced, can still cause it. Null when nothing known refuses it "
+        "(the worker judges again at the start) and for jobs that are not queued")
 
     @classmethod
     def from_row(cls, row: JobRow, max_angles: int | None = None,
                  waiting: str | None = None, *,
-                 start: StartEstimate | None = None) -> JobInfo:
-        """One line of the job list from the stored row; ``waiting`` and ``start`` (the
-        service's :func:`gonio.timeleft.start_estimates`) are kept for queued jobs only."""
+                 start: StartEstimate | None = None,
+                 start_refusal: str | None = None) -> JobInfo:
+        """One line of the job list from the stored row; ``waiting``, ``start`` (the
+        service's :func:`gonio.timeleft.start_estimates`) and ``start_refusal`` (the
+        service's ``start_refusals``) are kept for queued jobs only."""
         queued = row.state is JobState.QUEUED
         starts = start if queued and start is not None else None
         return cls(
@@ -121,6 +131,7 @@ class JobInfo(BaseModel):
             starts_in_s=starts.seconds if starts is not None else None,
             starts_in_bound=starts.bound if starts is not None else False,
             starts_in_estimate=starts.source if starts is not None else None,
+            start_refusal=start_refusal if queued else None,
         )
 
 
@@ -170,7 +181,8 @@ class JobDetail(JobInfo):
                  finishing: FinishingEstimate | None = None,
                  basis_build_s: float | None = None,
                  finishing_for_s: float | None = None,
-                 start: StartEstimate | None = None) -> JobDetail:
+                 start: StartEstimate | None = None,
+                 start_refusal: str | None = None) -> JobDetail:
         """One job's status from its stored row and what is known of it live: the one
         assembly of ``GET /api/v1/jobs/{id}`` (:meth:`gonio.service.GonioService.get_job`)
         and ``gonio jobs show`` (which has no live parts when no daemon runs the store).
@@ -187,7 +199,8 @@ class JobDetail(JobInfo):
             None leaves the time fields of an active job null.
         basis_build_s : the basis build the job's finishing waits for, seconds, or None.
         finishing_for_s : while the job reconstructs, how long it has finished so far.
-        start : a queued job's estimated start (as :meth:`JobInfo.from_row`), or None.
+        start, start_refusal : a queued job's estimated start and why its start would be
+            refused (as :meth:`JobInfo.from_row`), or None.
         """
         eta = eta_max = None
         if progress is not None:
@@ -196,7 +209,8 @@ class JobDetail(JobInfo):
             if progress.eta_max_s is not None:
                 eta_max = max(progress.eta_max_s - (progress.eta_s or 0.0) + (eta or 0.0),
                               eta or 0.0)
-        base = JobInfo.from_row(row, max_angles, waiting, start=start).model_dump()
+        base = JobInfo.from_row(row, max_angles, waiting, start=start,
+                                start_refusal=start_refusal).model_dump()
         times: dict[str, Any] = {}
         measuring = row.state in (JobState.RUNNING, JobState.PAUSED, JobState.SUSPENDED)
         if (finishing is not None and row.kind != "calibration"

@@ -371,7 +371,7 @@ def jobs_through_daemon(args: argparse.Namespace) -> int:
                 why = r.get("waiting") or r.get("reason")
                 if isinstance(why, dict):
                     why = why.get("reason") or why.get("message")
-                said = "; ".join(w for w in (why, start_text(r)) if w)
+                said = "; ".join(w for w in (why, start_text(r), r.get("start_refusal")) if w)
                 print(f"{r['id']:>4}  {r['state']:<14} {r['kind']:<11} "
                       f"{r['done_angles']:>4}/{r['total_angles']:<4}  {r['specimen']}"
                       + (f"  ({said})" if said else ""))

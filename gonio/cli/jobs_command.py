@@ -292,6 +292,8 @@ def detail_lines(d: dict[str, Any]) -> list[str]:
         lines.append(f"  queue position: {d['queue_position']} (0 = next)")
     if d.get("waiting"):
         lines.append(f"  waiting: {d['waiting']}")
+    if d.get("start_refusal"):
+        lines.append(f"  {d['start_refusal']}")
     if d.get("reason"):
         lines.append(f"  reason: {d['reason']}")
     if d.get("activity"):

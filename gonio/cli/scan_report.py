@@ -410,6 +410,8 @@ def queued_line(job_id: int, row: dict[str, Any], jobs: list[dict[str, Any]]
         when = "start not known" + (f": {why}" if why else "")
     # The holders say nothing while ``waiting`` does (its text names the cause): a job that
     # ends under a held queue printed the same line again.
+    refusal = row.get("start_refusal")  # said at the end: what waiting will come to
     key = (waiting, None if waiting else holders, ahead, isinstance(seconds, int | float),
-           None if isinstance(seconds, int | float) or waiting else source)
-    return key, f"job {job_id} queued: {'; '.join(parts)}; {when}"
+           None if isinstance(seconds, int | float) or waiting else source, refusal)
+    return key, (f"job {job_id} queued: {'; '.join(parts)}; {when}"
+                 + (f"; {refusal}" if refusal else ""))

@@ -363,12 +363,16 @@ function fillRow(tr, job) {
   // a held queue, or a paused or suspended job holding the rig.
   const why = job.reason && SHOW_REASON.has(job.state) ? job.reason
     : job.state === "queued" && job.waiting ? job.waiting : null;
-  fillCell(td[3], [job.state, why], (c) => {
+  // A queued scan the worker will refuse at its start (the calibration it would start under
+  // is at another exposure): said in its row while it waits, not only when it fails.
+  const refusal = job.state === "queued" ? job.start_refusal ?? null : null;
+  fillCell(td[3], [job.state, why, refusal], (c) => {
     c.className = `state-${job.state}`;
     c.textContent = job.state;
-    if (why) {
+    for (const [text, cls] of [[why, "reason"], [refusal, "reason start-refusal"]]) {
+      if (!text) continue;
       const span = document.createElement("span");
-      span.className = "reason"; span.textContent = why;
+      span.className = cls; span.textContent = text;
       c.append(span);
     }
   });

@@ -187,3 +187,42 @@ def test_check_plan_says_start_would_be_refused_for_a_calibration_at_another_exp
             for job in (j["id"] for j in c.get("/api/v1/jobs", params={"state": "queued"}).json()):
                 c.post(f"/api/v1/jobs/{job}/cancel")
             assert c.post("/api/v1/rig/release").status_code == 200
+
+
+def test_a_queued_scan_that_will_be_refused_at_its_start_says_so_in_its_row(
+        daemon: Daemon, browser: Any,  # noqa: F811 (the fixture)
+) -> None:
+    """A calibration job at another exposure queued at a higher priority than a waiting scan
+    runs first, and the worker then refuses the scan at its turn ("not started"); the queue
+    showed the scan as plainly queued. Its row now says it will be refused, in the warning
+    colour, with both exposures (the job list's start_refusal, docs/api.md)."""
+    from selenium.webdriver.common.by import By
+
+    from tests.system.api.test_exposure_warning import held_queue
+
+    with daemon.client() as c, held_queue(c):
+        r = c.post("/api/v1/jobs", json={"plan": {
+            "kind": "uniform", "rotations": 2, "exposure": {"exposure_s": EXPOSURE_S}}})
+        assert r.status_code == 201, r.text
+        scan = r.json()["id"]
+        r = c.post("/api/v1/jobs", json={"priority": 5, "plan": {
+            "kind": "calibration", "rotations": 2, "reference_albedo": 0.99,
+            "exposure": {"exposure_s": 0.02}}})
+        assert r.status_code == 201, r.text
+        cal = r.json()["id"]
+        wait = open_live(browser, daemon, 60)
+        cell = f'#jobs tr[data-id="{scan}"] .start-refusal'
+        wait.until(lambda d: d.find_elements(By.CSS_SELECTOR, cell))
+        said = browser.find_element(By.CSS_SELECTOR, cell)
+        assert said.text.startswith(
+            f"will be refused when it starts: it reads at exposure {EXPOSURE_S:g} s and "
+            f"calibration job {cal}, the last to run before it, measures at 0.02 s"), said.text
+        assert said.is_displayed()
+        # The warning colour of the page's stylesheet (--warn), not the plain reason's.
+        colour = browser.execute_script(
+            "return getComputedStyle(arguments[0]).color", said)
+        plain = browser.execute_script(
+            "const s = document.createElement('span'); s.className = 'reason';"
+            "document.querySelector('#jobs td').append(s);"
+            "const c = getComputedStyle(s).color; s.remove(); return c")
+        assert colour != plain, (colour, plain)

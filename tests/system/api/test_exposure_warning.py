@@ -317,3 +317,45 @@ def test_a_reorder_that_would_start_a_scan_under_another_exposure_is_refused(
         r = c.post(f"/api/v1/jobs/{scan}/reorder", json={"position": 0})
         assert r.status_code == 200, r.text
         assert order() == [scan, cal, later]
+
+
+def test_a_queued_scan_its_calibration_was_cancelled_from_says_it_will_be_refused(
+        daemon: Daemon, calibrated: None) -> None:
+    """A scan at 0.02 s queued behind a calibration job at 0.02 s (the one in effect is at
+    0.01 s): accepted. The calibration cancelled, the scan would start under 0.01 s and the
+    worker would refuse it at its turn ("not started"), which nothing said while it waited.
+    Its row in the job list and its detail now say so (start_refusal), naming both exposures
+    and what to do; a scan that will start fine says nothing, and queueing a calibration at
+    0.02 s before it again clears it."""
+    with daemon.client() as c, held_queue(c):
+        cal = queue_calibration(c, 0.02)
+        r = c.post("/api/v1/jobs", json={"plan": {
+            "kind": "uniform", "rotations": 2, "exposure": {"exposure_s": 0.02}}})
+        assert r.status_code == 201, r.text
+        scan = r.json()["id"]
+        assert r.json()["start_refusal"] is None
+        r = c.post("/api/v1/jobs", json={"plan": {
+            "kind": "uniform", "rotations": 2, "exposure": {"exposure_s": 0.01}}, "priority": 5})
+        assert r.status_code == 201, r.text
+        fine = r.json()["id"]
+
+        def refusals() -> dict[int, str | None]:
+            return {j["id"]: j["start_refusal"] for j in c.get("/api/v1/jobs").json()
+                    if j["id"] in (scan, fine)}
+
+        assert refusals() == {scan: None, fine: None}
+        assert c.post(f"/api/v1/jobs/{cal}/cancel").status_code == 200
+        said = refusals()
+        assert said[fine] is None, said
+        expected = ("will be refused when it starts: it reads at exposure 0.02 s and the "
+                    "calibration in effect was measured at 0.01 s")
+        assert said[scan] is not None and said[scan].startswith(expected), said
+        assert c.get(f"/api/v1/jobs/{scan}").json()["start_refusal"] == said[scan]
+        # A calibration at 0.02 s queued at the scan's priority runs after it (the earlier
+        # job among equals): still said. Moved ahead of it (after the 0.01 s scan, at 5):
+        # nothing to say.
+        again = queue_calibration(c, 0.02)
+        assert refusals()[scan] == said[scan]
+        r = c.post(f"/api/v1/jobs/{again}/reorder", json={"position": 1})
+        assert r.status_code == 200, r.text
+        assert refusals() == {scan: None, fine: None}

@@ -448,3 +448,22 @@ def test_a_queued_job_followed_asks_only_for_the_jobs_holding_the_rig(
     assert lists and all(p.get("state") in ("running", "paused", "suspended", "reconstructing")
                          for p in lists), lists
     assert "job 7 queued: waits for job 5 (running) to end" in capsys.readouterr().err
+
+
+def test_a_queued_job_that_will_be_refused_says_so_in_the_terminal() -> None:
+    """The job list's start_refusal (a scan the worker will refuse at its start) is said by
+    ``gonio jobs --daemon URL wait`` at the end of its queued line (and again when it comes
+    or goes) and by ``show``; it was said nowhere until the job failed."""
+    from gonio.cli.jobs_command import detail_lines
+
+    refusal = ("will be refused when it starts: it reads at exposure 0.02 s and the "
+               "calibration in effect was measured at 0.01 s")
+    row = {"state": "queued", "waiting": None, "queue_position": 0, "starts_in_s": 0.0,
+           "starts_in_bound": False, "starts_in_estimate": "the rig is free"}
+    key, text = scan_report.queued_line(7, {**row, "start_refusal": refusal}, [])
+    assert text.endswith(f"; {refusal}"), text
+    assert scan_report.queued_line(7, row, [])[0] != key
+    detail = {**row, "start_refusal": refusal, "id": 7, "kind": "uniform", "specimen": "felt",
+              "done_angles": 0, "total_angles": 8, "priority": 0, "created": 0.0,
+              "started": None, "finished": None}
+    assert f"  {refusal}" in detail_lines(detail)
