@@ -25,9 +25,12 @@ Modelled behaviour (from the ROBOTIS e-manual for the X series):
 from __future__ import annotations
 
 import contextlib
+import json
 import math
+import os
 import threading
 from dataclasses import dataclass
+from pathlib import Path
 
 from gonio.sim import dynamixel_protocol as dxl
 from gonio.sim.faults import FaultPlan
@@ -121,6 +124,12 @@ class XSeriesServo:
         Reported by PING and at address 0 (1020 = XM430-W350).
     faults : FaultPlan or None
         Mechanical faults (stall, overload) consumed when a move starts.
+    eeprom_file : path or None
+        Where the writable EEPROM items (Homing Offset, Operating Mode, limits...) are kept
+        across simulator restarts, as a real servo keeps them across power cycles (JSON, by
+        item name; written at every EEPROM write, read at construction). None: factory values
+        at each start. A restarted ``gonio serve --sim`` that forgot the Homing Offset read the
+        stage turned by the old zero, so a resumed scan mixed two zeros.
     """
 
     def __init__(
@@ -131,6 +140,7 @@ class XSeriesServo:
         counts_per_degree: float = COUNTS_PER_TURN / 360.0,
         model_number: int = 1020,
         faults: FaultPlan | None = None,
+        eeprom_file: str | os.PathLike[str] | None = None,
     ) -> None:
         if counts_per_degree <= 0:
             raise ValueError(f"counts_per_degree must be > 0, got {counts_per_degree}")
@@ -141,6 +151,8 @@ class XSeriesServo:
         self._values = {it.address: it.default for it in ITEMS}
         self._values[BY_NAME["Model Number"].address] = model_number
         self._values[BY_NAME["ID"].address] = dxl_id
+        self._eeprom_file = Path(eeprom_file) if eeprom_file is not None else None
+        self._load_eeprom()
         self._turn_offset = 0
         self._power_up()
 
@@ -165,6 +177,29 @@ class XSeriesServo:
 
     def _encoder(self) -> int:
         return self._raw_counts() - self._turn_offset
+
+    def _load_eeprom(self) -> None:
+        """The kept EEPROM items, when a file holds them; an unreadable file, or an item out
+        of its range, leaves the factory values (a servo that lost its EEPROM)."""
+        if self._eeprom_file is None or not self._eeprom_file.exists():
+            return
+        try:
+            kept = json.loads(self._eeprom_file.read_text())
+            values = {BY_NAME[name]: int(v) for name, v in kept.items()
+                      if name in BY_NAME and BY_NAME[name].eeprom and BY_NAME[name].writable}
+        except (OSError, ValueError, TypeError, AttributeError):
+            return
+        for it, value in values.items():
+            if (value in it.allowed) if it.allowed else it.lo <= value <= it.hi:
+                self._values[it.address] = value
+
+    def _save_eeprom(self) -> None:
+        if self._eeprom_file is None:
+            return
+        kept = {it.name: self._values[it.address] for it in ITEMS if it.eeprom and it.writable}
+        tmp = self._eeprom_file.with_name(self._eeprom_file.name + ".tmp")
+        tmp.write_text(json.dumps(kept, indent=1))
+        os.replace(tmp, self._eeprom_file)  # whole or not at all, as the servo's own write
 
     def _power_up(self) -> None:
         # The absolute encoder knows only the angle within one motor turn after power-up.
@@ -208,6 +243,8 @@ class XSeriesServo:
             updates = self._validate(address, data)
             for it, value in updates:
                 self._apply(it, value)
+            if any(it.eeprom for it, _ in updates):
+                self._save_eeprom()
 
     def _validate(self, address: int, data: bytes) -> list[tuple[Item, int]]:
         if not data:
@@ -404,8 +441,10 @@ def start_dynamixel_sim(
     counts_per_degree: float = COUNTS_PER_TURN / 360.0,
     model_number: int = 1020,
     faults: FaultPlan | None = None,
+    eeprom_file: str | os.PathLike[str] | None = None,
 ) -> DynamixelSimHandle:
-    """Start a simulated X-series servo on a new pseudo-terminal.
+    """Start a simulated X-series servo on a new pseudo-terminal (``eeprom_file``: as
+    :class:`XSeriesServo`'s, where its EEPROM is kept across restarts).
 
     Returns
     -------
@@ -419,6 +458,6 @@ def start_dynamixel_sim(
     plan = faults if faults is not None else FaultPlan()
     servo = XSeriesServo(
         motion, dxl_id=dxl_id, counts_per_degree=counts_per_degree,
-        model_number=model_number, faults=plan,
+        model_number=model_number, faults=plan, eeprom_file=eeprom_file,
     )
     return DynamixelSimHandle(servo, plan)

@@ -194,6 +194,11 @@ class SimRigOptions:
     seed : int
         Seeds the sensor noise.
     speed_dps, accel_dps2, settle_s : stage physics
+    stage_eeprom : path or None
+        Where the simulated Dynamixel keeps its EEPROM (the Homing Offset: the stage's zero)
+        across restarts, as a real servo does (:class:`gonio.sim.dynamixel_device.XSeriesServo`);
+        None: factory values at each start. ``gonio serve --sim`` keeps it in its data
+        directory.
     lamp_watchdog_s : float or None
         Communication watchdog timeout the rig config asks the lamp controllers for, wall
         seconds (None: the config maps no watchdog, the lamps stay as the last request left
@@ -224,6 +229,7 @@ class SimRigOptions:
     name: str = "sim"
     config_path: str | os.PathLike[str] | None = None
     modbus_port: int = 0
+    stage_eeprom: str | os.PathLike[str] | None = None
 
     def check(self) -> None:
         """``ValueError`` with a clear message for an impossible option."""
@@ -349,7 +355,8 @@ class SimRig:
             from gonio.sim.dynamixel_device import start_dynamixel_sim
 
             self.stage_handle = start_dynamixel_sim(
-                self.motion, dxl_id=1, counts_per_degree=4096 / 360.0, faults=self.stage_faults
+                self.motion, dxl_id=1, counts_per_degree=4096 / 360.0, faults=self.stage_faults,
+                eeprom_file=self.options.stage_eeprom,
             )
             self._stage_port = str(self.stage_handle.port)
         else:

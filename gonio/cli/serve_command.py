@@ -323,6 +323,9 @@ def _run_sim(args: argparse.Namespace, cfg: Any, keyring: Any) -> int:
             sim = start_sim_rig(SimRigOptions(
                 stage=args.stage, material=material, time_scale=args.time_scale,
                 config_path=Path(tmp) / "rig.toml", modbus_port=args.modbus_port,
+                # The stage's zero (its Homing Offset) outlives a restart, as on a real servo:
+                # a scan resumed after one reads with the zero it started with.
+                stage_eeprom=Path(data_dir) / SIM_STAGE_EEPROM,
             ))
         except (ValueError, OSError) as exc:
             owned.release()
@@ -385,6 +388,10 @@ def _run_sim(args: argparse.Namespace, cfg: Any, keyring: Any) -> int:
 
 SIM_STATE_FILE = "sim-specimen.json"
 """In a ``serve --sim`` data directory: the simulated specimen's material (``--material``)."""
+
+SIM_STAGE_EEPROM = "sim-stage-eeprom.json"
+"""In a ``serve --sim`` data directory: the simulated Dynamixel's EEPROM (its Homing Offset,
+the stage's zero), kept across restarts as a real servo keeps it across power cycles."""
 
 
 def _sim_material(data_dir: Path, requested: str | None) -> str | None:

@@ -121,6 +121,12 @@ def daemon(data_dir: Path, time_scale: str = FAST, *extra: str) -> Iterator[Daem
 def _calibrated_and_submitted(d: Daemon) -> int:
     d.wait_for(r"calibrating the simulated rig: job 1")
     d.wait_job(1, lambda j: j["state"] == "completed")
+    # The lab's zero is not the servo's: the stage homed a quarter turn from where it
+    # starts. A restart forgot it (the simulated servo's Homing Offset was not kept, where a
+    # real servo's EEPROM keeps it), and the resumed angles read the specimen 90 degrees off.
+    for command in ({"action": "move", "angle_deg": 90.0}, {"action": "home"}):
+        r = d.client.post("/api/v1/rig/stage", json=command)
+        assert r.status_code == 200, r.text
     r = d.client.post("/api/v1/jobs", json={"plan": PLAN})
     assert r.status_code == 201, r.text
     return int(r.json()["id"])
@@ -148,8 +154,8 @@ def test_killed_sim_daemon_resumes_its_specimen_scan_without_recalibrating(
     (left,) = tmp.glob("gonio-serve-*")
     assert (left / "gonio-serve.pid").read_text() == str(first.proc.pid)
 
-    # 2. Restart on the same data directory: the scan resumes on its specimen, no new
-    #    calibration job is queued.
+    # 2. Restart on the same data directory: the scan resumes on its specimen, with the
+    #    zero it started with, and no new calibration job is queued.
     with daemon(data) as second:
         second.wait_for(r"calibration: in effect")
         # The next start removed it (the killed session's); its own folder is there instead.

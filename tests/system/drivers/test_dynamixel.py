@@ -350,3 +350,65 @@ def test_no_reply_returns_nothing_once_the_packet_timeout_has_passed() -> None:
         assert ph.readPort(11) == b""
         assert len(reads) == 1
         assert ph.isPacketTimeout()  # it gave up only when the SDK's timeout had passed
+
+
+def test_the_zero_outlives_a_restart_of_the_simulated_servo(tmp_path: Any) -> None:
+    """The Homing Offset is EEPROM: a real servo keeps the zero ``home()`` set across a power
+    cycle, and the simulator, given a file to keep its EEPROM in, keeps it across a restart
+    (``gonio serve --sim`` restarted mid-scan forgot it, and the resumed scan read the stage
+    turned by the old zero). Its LED is RAM (docs/stages.md): not homed after the restart.
+    Expected angles from the spec's Present Position = encoder + Homing Offset."""
+    eeprom = tmp_path / "eeprom.json"
+
+    def servo() -> tuple[DynamixelSimHandle, DynamixelStage, StageMotion]:
+        motion = StageMotion(speed_dps=30.0, accel_dps2=60.0, settle_s=0.0,
+                             time_scale=TIME_SCALE)
+        sim = start_dynamixel_sim(motion, counts_per_degree=CPD, eeprom_file=eeprom)
+        stage = DynamixelStage("rot", sim.port, counts_per_degree=CPD,
+                               limits=TravelLimits(-720.0, 720.0), speed_dps=30.0,
+                               accel_dps2=60.0, reply_timeout_s=SIM_REPLY_TIMEOUT_S)
+        return sim, stage, motion
+
+    sim, stage, motion = servo()
+    try:
+        async def home_at_33() -> None:
+            await stage.connect()
+            await stage.move_to(33.0)
+            await stage.home()
+
+        run(home_at_33)
+        assert motion.position_deg() == pytest.approx(33.0, abs=1 / CPD)
+    finally:
+        asyncio.run(stage.close())
+        sim.close()
+    assert eeprom.exists()
+
+    # Restarted: the simulated stage starts at its physical 0, which is -33 degrees from
+    # the zero set above.
+    sim, stage, motion = servo()
+    try:
+        async def read() -> tuple[float, bool]:
+            await stage.connect()
+            return await stage.position(), (await stage.status()).homed
+
+        at, homed = run(read)
+        assert motion.position_deg() == pytest.approx(0.0, abs=1 / CPD)
+        assert at == pytest.approx(-33.0, abs=2 / CPD)
+        assert not homed
+    finally:
+        asyncio.run(stage.close())
+        sim.close()
+
+    # An unreadable file is a servo that lost its EEPROM: factory values (no offset).
+    eeprom.write_text("{ damaged")
+    sim, stage, motion = servo()
+    try:
+        assert run(lambda: _connect_and_read(stage)) == pytest.approx(0.0, abs=2 / CPD)
+    finally:
+        asyncio.run(stage.close())
+        sim.close()
+
+
+async def _connect_and_read(stage: DynamixelStage) -> float:
+    await stage.connect()
+    return await stage.position()
