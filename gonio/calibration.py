@@ -204,8 +204,8 @@ class Calibration(BaseModel):
             f"{what} reads: its factors for {names}{more} have {len(first.factor)} channels, "
             f"sensor {first.sensor} reads {channels[first.sensor]}; the scan would measure "
             "every reading and then fail. Calibrate this rig again first: a calibration job "
-            "with the white reference on the stage (gonio scan --white-reference ALBEDO, or "
-            "the page's calibration)")
+            "with the white reference on the stage (gonio scan [--daemon URL] "
+            "--white-reference ALBEDO, or the page's calibration)")
 
     def check_exposure(self, exposure_s: float, what: str = "the plan") -> None:
         """Refuse a scan at ``exposure_s`` (seconds) under factors measured at another
@@ -227,8 +227,8 @@ class Calibration(BaseModel):
             f"values would be off by about {exposure_s / self.exposure_s:.3g} times. Scan at "
             f"{self.exposure_s:g} s, or calibrate at {exposure_s:g} s first: a calibration "
             f"job with exposure {exposure_s:g} s and the white reference on the stage (gonio "
-            f"scan --white-reference ALBEDO --exposure {exposure_s:g}, or the page's "
-            "calibration)")
+            f"scan [--daemon URL] --white-reference ALBEDO --exposure {exposure_s:g}, or the "
+            "page's calibration)")
 
 
 def sensor_channels(rig: Any) -> dict[str, int]:

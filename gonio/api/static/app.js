@@ -53,7 +53,7 @@ function keyRefusedBy(err) {
   keyRefused = true;
   const prompt = $("#key-prompt");
   prompt.textContent = getKey()
-    ? `This daemon does not accept the API key of this tab (${err.message}). A restarted \`gonio serve --sim\` prints a new key: open the new address it printed (the page takes the key from it) or paste the key at the top right.`
+    ? `This daemon does not accept the API key of this tab (${err.message}). Open the address the daemon printed at its start (the page takes the key from it) or paste the key at the top right: \`gonio serve --sim\` keeps its key across restarts on one data directory, but another data directory, \`--throwaway\` or a deleted \`sim-session.key\` gives a new one.`
     : `This daemon needs an API key (${err.message}): paste one at the top right, or open the address \`gonio serve\` printed.`;
   prompt.hidden = false;
   $("#no-jobs").hidden = true;
