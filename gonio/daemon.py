@@ -403,7 +403,8 @@ def job_event_line(type_: str, data: Mapping[str, Any], row: Any,
         found = data.get("state")
         # What happens next depends on the state: a paused job waits for the user, and the
         # queue behind it waits too.
-        then = {"paused": f"stays paused until resumed (the page's resume, or POST "
+        then = {"paused": f"stays paused until resumed (the page's resume, gonio jobs "
+                          f"--daemon URL resume {row.id}, or POST "
                           f"/api/v1/jobs/{row.id}/resume); queued jobs wait behind it",
                 "reconstructing": "its reconstruction starts again from the stored readings",
                 }.get(str(found), "resumes from its checkpoint")

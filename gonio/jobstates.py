@@ -155,7 +155,8 @@ def queue_wait(active: Iterable[tuple[int, str]], held: str | None,
     """
     if held is not None:
         return (f"the queue is held ({held}): queued jobs start once it is released "
-                "(release on the lab page, or POST /api/v1/rig/release)")
+                "(release on the lab page, gonio jobs --daemon URL release, or POST "
+                "/api/v1/rig/release)")
     if maintenance is not None:
         return (f"{maintenance}: queued jobs start once it is lifted "
                 "(DELETE /api/v1/maintenance)")

@@ -78,7 +78,8 @@ def calibration(service: Service) -> Calibration:
 def halt(service: Service) -> RigOverview | dict[str, str]:
     # Not refused by the maintenance lock: stopping the rig must always be possible.
     service.halt()
-    return {"status": "halted; release the queue with POST /api/v1/rig/release"}
+    return {"status": "halted; release the queue with POST /api/v1/rig/release (gonio jobs "
+                      "--daemon URL release)"}
 
 
 @router.get("/rig/stage", dependencies=READ, responses={503: {"description": "stage fault"}},

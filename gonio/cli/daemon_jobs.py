@@ -335,6 +335,22 @@ def _follow(client: Any, job_id: int, disabled: bool, poll_s: float = 0.5,
         bar.close()
 
 
+def _queue_action(args: argparse.Namespace) -> int:
+    """``gonio jobs --daemon URL halt|release``: the emergency halt (the running job stops at
+    once, the queue is held) and its release, as the page's buttons and ``POST
+    /api/v1/rig/halt|release``."""
+    with DaemonClient(args.daemon, args.api_key) as client:
+        answer = client.request("POST", f"/api/v1/rig/{args.action}")
+    if args.json:
+        print(json.dumps(answer))
+    elif args.action == "halt":
+        print(f"halted: the running job stopped where it stood and the queue is held; "
+              f"'gonio jobs --daemon {args.daemon} release' lets queued jobs start again")
+    else:
+        print("released: queued jobs start again")
+    return 0
+
+
 def jobs_through_daemon(args: argparse.Namespace) -> int:
     """``gonio jobs --daemon URL ACTION [ID]``: a running daemon's jobs through its API.
 
@@ -353,6 +369,11 @@ def jobs_through_daemon(args: argparse.Namespace) -> int:
     if args.action != "reorder" and (args.position is not None or args.priority is not None
                                      or args.accept_uncalibrated):
         raise UsageError("--position, --priority and --accept-uncalibrated go with reorder")
+    if args.action in ("halt", "release"):
+        if args.job_id is not None:
+            raise UsageError(f"{args.action} acts on the whole queue and takes no job id "
+                             f"('gonio jobs --daemon {args.daemon} {args.action}')")
+        return _queue_action(args)
     if args.action == "list":
         if args.job_id is not None:
             raise UsageError(f"list takes no job id; 'gonio jobs --daemon {args.daemon} show "
@@ -419,6 +440,11 @@ def jobs_through_daemon(args: argparse.Namespace) -> int:
                 if exc.status == 409 and "accept_uncalibrated" in str(exc):
                     raise UsageError(f"{exc} (here: --accept-uncalibrated)") from None
                 raise
+        elif args.action == "remove":
+            client.request("DELETE", f"/api/v1/jobs/{job}")
+            print(f"job {job} removed with its readings (a result file it wrote stays in the "
+                  "daemon's data directory)")
+            return 0
         else:
             try:
                 row = client.request("POST", f"/api/v1/jobs/{job}/{args.action}")
@@ -433,6 +459,11 @@ def jobs_through_daemon(args: argparse.Namespace) -> int:
     state = row.get("state", "?")
     if args.action == "cancel":
         print(f"job {job} cancelled: taken out of the queue, it will not run (state {state})")
+    elif args.action == "pause":
+        print(f"job {job}: pause asked (state {state}; it stops at the end of the angle under "
+              f"way, lights off; 'gonio jobs --daemon {args.daemon} resume {job}' goes on)")
+    elif args.action == "resume":
+        print(f"job {job} resumed (state {state})")
     elif args.action == "abort":
         print(f"job {job}: abort asked (state {state}; lights off and the stage stopped, its "
               f"readings stay in the store; 'gonio jobs --daemon {args.daemon} show {job}' "

@@ -32,9 +32,13 @@ def register(subparsers: Any) -> None:
         "the job with a progress bar until it ends, saying while it is queued what it waits "
         "for and when it may start, then fetch its result to FILE and print "
         "the summary 'gonio scan' prints; e.g. a scan queued with 'gonio scan --daemon URL "
-        "--no-wait', or one whose terminal was closed).")
+        "--no-wait', or one whose terminal was closed), pause ID and resume ID (at the end of "
+        "the angle under way), remove ID (a queued or finished job and its readings), halt "
+        "(the emergency halt: the running job stops at once, the queue is held) and release "
+        "(queued jobs start again).")
     j.add_argument("action", nargs="?",
-                   choices=["list", "show", "abort", "rebuild", "cancel", "reorder", "wait"],
+                   choices=["list", "show", "abort", "rebuild", "cancel", "reorder", "wait",
+                            "pause", "resume", "remove", "halt", "release"],
                    default="list")
     j.add_argument("job_id", nargs="?", type=int)
     j.add_argument("--daemon", default=None, metavar="URL",
@@ -86,11 +90,12 @@ def _jobs(args: argparse.Namespace) -> int:
             f"http://127.0.0.1:8600 wait {args.job_id if args.job_id is not None else 'ID'} "
             "-o FILE' (a job of a foreground 'gonio scan' is followed by that scan; run the same "
             "command again to resume one it left)")
-    if args.action in ("cancel", "reorder"):
+    if args.action in ("cancel", "reorder", "pause", "resume", "remove", "halt", "release"):
         raise UsageError(
             f"jobs {args.action} acts on a daemon's queue: give its address, e.g. 'gonio jobs "
-            f"--daemon http://127.0.0.1:8600 {args.action} "
-            f"{args.job_id if args.job_id is not None else 'ID'}"
+            f"--daemon http://127.0.0.1:8600 {args.action}"
+            + ("" if args.action in ("halt", "release")
+               else f" {args.job_id if args.job_id is not None else 'ID'}")
             + (" --position 0'" if args.action == "reorder" else "'")
             + " (the key in $GONIO_API_KEY or --api-key)")
     if args.db is None and args.data_dir is not None:

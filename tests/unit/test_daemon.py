@@ -188,7 +188,8 @@ def _row(**kw: object) -> SimpleNamespace:
     # A paused job is not resumed at start: it waits for the user, and the queue with it.
     ("recovered", {"state": "paused"}, _row(), logging.INFO,
      "job 7 (uniform, 'red tile') found paused at start (3 of 8 angles): stays paused until "
-     "resumed (the page's resume, or POST /api/v1/jobs/7/resume); queued jobs wait behind it"),
+     "resumed (the page's resume, gonio jobs --daemon URL resume 7, or POST "
+     "/api/v1/jobs/7/resume); queued jobs wait behind it"),
     ("recovered", {"state": "running"}, _row(), logging.INFO,
      "job 7 (uniform, 'red tile') found running at start (3 of 8 angles): resumes from its "
      "checkpoint"),

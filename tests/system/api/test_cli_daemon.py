@@ -6,6 +6,7 @@ import json
 import time
 from pathlib import Path
 
+import httpx
 import pytest
 
 from gonio.cli import main
@@ -139,3 +140,54 @@ def test_jobs_through_the_daemon_reorder_cancel_and_abort(
     # Without --daemon, cancel says where the queue is.
     assert main(["jobs", "cancel", "3"]) == 2
     assert "gonio jobs --daemon http://127.0.0.1:8600 cancel 3" in capsys.readouterr().err
+
+
+def test_jobs_through_the_daemon_pause_resume_remove_halt_and_release(
+    daemon: Daemon, capsys: pytest.CaptureFixture[str], no_export_fits: None
+) -> None:
+    """gonio's own words told a shell user to resume a paused job or release a held queue
+    ("the page's resume, or POST /api/v1/jobs/5/resume"; "release on the lab page, or POST
+    /api/v1/rig/release"), and 'gonio jobs' had no such action ("invalid choice: 'pause'").
+    Through --daemon it now pauses, resumes, removes, halts and releases; the daemon's own
+    answers (GET /api/v1/jobs/ID, GET /api/v1/rig) are the check."""
+    fast = {"exposure_s": 0.02, "light_settle_s": 0.0}
+    base = ["jobs", "--daemon", daemon.url, "--api-key", daemon.key]
+
+    def state(c: httpx.Client, job: int) -> str:
+        return str(c.get(f"/api/v1/jobs/{job}").json()["state"])
+
+    def until(c: httpx.Client, job: int, wanted: str) -> None:
+        deadline = time.monotonic() + 120
+        while state(c, job) != wanted:
+            assert time.monotonic() < deadline, f"job {job} never became {wanted}"
+            time.sleep(0.1)
+
+    with daemon.client() as c:
+        running, queued = (c.post("/api/v1/jobs", json={"plan": {
+            "kind": "uniform", "rotations": r, "exposure": fast}}).json()["id"] for r in (72, 4))
+        until(c, running, "running")
+        assert main([*base, "pause", str(running)]) == 0
+        until(c, running, "paused")
+        assert f"job {running}: pause asked" in capsys.readouterr().out
+        assert main([*base, "resume", str(running)]) == 0
+        until(c, running, "running")
+        assert f"job {running} resumed" in capsys.readouterr().out
+        # The emergency halt holds the queue: the queued job says so, and release lifts it.
+        assert main([*base, "halt"]) == 0
+        until(c, running, "halted")
+        assert f"'gonio jobs --daemon {daemon.url} release'" in capsys.readouterr().out
+        waiting = c.get(f"/api/v1/jobs/{queued}").json()["waiting"]
+        assert "gonio jobs --daemon URL release" in waiting, waiting
+        # A queued job removed is gone from the daemon (404), its readings with it.
+        assert main([*base, "remove", str(queued)]) == 0
+        assert c.get(f"/api/v1/jobs/{queued}").status_code == 404
+        assert f"job {queued} removed" in capsys.readouterr().out
+        assert main([*base, "release"]) == 0
+        assert c.get("/api/v1/rig").json()["queue_held"] is None, \
+            c.get("/api/v1/rig").json()["queue_held"]
+        # halt and release act on the queue: a job id is refused, naming the command.
+        assert main([*base, "release", "3"]) == 2
+        assert f"'gonio jobs --daemon {daemon.url} release'" in capsys.readouterr().err
+    # Without --daemon, they say where the daemon's queue is.
+    assert main(["jobs", "halt"]) == 2
+    assert "gonio jobs --daemon http://127.0.0.1:8600 halt'" in capsys.readouterr().err
