@@ -266,6 +266,7 @@ async def colour(
         near_specular_note,
         no_colour_reason,
         result_report,
+        shared_table_note,
     )
 
     azimuths = azimuth or [0.0]
@@ -280,6 +281,7 @@ async def colour(
     # rather than left to a missing ΔE00.
     no_colour = no_colour_reason(res)
     diff = None
+    shared: str | None = None
     standard: int | str | None = against
     if against is not None and no_colour is not None:
         what = f"job {against}" if against.isascii() and against.isdigit() else repr(against)
@@ -292,8 +294,10 @@ async def colour(
         std_no_colour = no_colour_reason(std)
         if std_no_colour is not None:
             raise ColourError(f"no ΔE00 against job {standard}: {std_no_colour}")
-        diff = compare(report, await asyncio.to_thread(
-            result_report, std, cond, instruments, azimuths))
+        std_report = await asyncio.to_thread(result_report, std, cond, instruments, azimuths)
+        diff = compare(report, std_report)
+        # Another scan's result: near-specular values both read from tables.
+        shared = shared_table_note(report, std_report)
         warnings += colour_warnings(std, f"standard (job {standard})")
     elif against is not None:
         std_report, said = await asyncio.to_thread(service.colour_standard, against)
@@ -315,7 +319,7 @@ async def colour(
     out["calibrated"] = in_reflectance(res.samples.calibration)
     # Which near-specular geometries no pair read; which instruments' geometries were compared
     # by angle (an MA68 standard against an MA98 report).
-    notes = [n for n in (near_specular_note(report), diff and diff.note) if n]
+    notes = [n for n in (near_specular_note(report), diff and diff.note, shared) if n]
     if notes:
         out["notes"] = notes
     if diff is not None:

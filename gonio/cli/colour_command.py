@@ -254,6 +254,7 @@ def run(args: argparse.Namespace) -> int:
         near_specular_note,
         no_colour_reason,
         result_report,
+        shared_table_note,
     )
     from gonio.results import read_result
 
@@ -277,6 +278,7 @@ def run(args: argparse.Namespace) -> int:
     warnings = colour_warnings(res)
     no_colour = no_colour_reason(res, args.result.name)
     diff = None
+    shared: str | None = None
     if args.against is not None:
         if no_colour is not None:
             raise UsageError(f"no dE00 against {args.against}: {no_colour}")
@@ -285,10 +287,13 @@ def run(args: argparse.Namespace) -> int:
                                       instruments, azimuths)
         diff = compare(report, std)
         warnings += std_warnings
+        if Path(args.against).is_file() and Path(args.against).suffix.lower() != ".csv":
+            # Another scan's result: near-specular values both read from tables.
+            shared = shared_table_note(report, std)
     for warning in warnings:
         print(f"warning: {warning}", file=sys.stderr)
     # Which near-specular geometries no pair read (the CSV's source column says it per row).
-    notes = [n for n in (near_specular_note(report), diff and diff.note) if n]
+    notes = [n for n in (near_specular_note(report), diff and diff.note, shared) if n]
     for note in notes:
         print(f"note: {note}", file=sys.stderr)
     text_csv = difference_csv(diff, warnings) if diff is not None else report.csv(warnings)

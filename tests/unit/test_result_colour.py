@@ -281,3 +281,31 @@ def test_stored_standard_from_a_labs_own_table(tmp_path: Path) -> None:
     p.write_text("illuminant,observer,instrument,geometry,L*,a*\nD65,10,MA98,45as15,71.3,17.5\n")
     with pytest.raises(ColourError, match=r"\['b'\] are missing; a standard needs the columns"):
         read_standard_csv(p)
+
+
+def test_a_difference_of_two_scans_says_where_both_sides_are_the_table() -> None:
+    """Two scans of one layout compared: at near-specular geometries no pair read, both
+    values come from reconstructed tables (the same prior), so their dE00 cannot show an
+    error they share; a review saw 0.38 dE00 between two scans each about 12 from the truth.
+    The note names exactly the near-specular geometries neither side read."""
+    from dataclasses import replace
+
+    from gonio.brdf.colour.report import colour_report
+    from gonio.result_colour import NEAR_SPECULAR_DEG, shared_table_note
+
+    bands = SpectralBands(WL, (40.0, 40.0, 40.0))
+    report = colour_report(_table(WL), bands, instruments=["MA98"])
+    near = [g.name for g in report.geometries if abs(g.aspecular_deg) <= NEAR_SPECULAR_DEG]
+    assert near == ["45as-15", "45as15", "45as25", "15as-15", "15as-5"]  # MA98's, published
+    note = shared_table_note(report, report)
+    assert note is not None and note.startswith(f"at {', '.join(near)} both sides' colour")
+    # A geometry read by a pair on either side is left out; all read on one side: nothing.
+    mine = tuple(g.name == "45as-15" for g in report.geometries)
+    theirs = tuple(g.name == "15as-5" for g in report.geometries)
+    note = shared_table_note(replace(report, measured=mine), replace(report, measured=theirs))
+    assert note is not None and note.startswith("at 45as15, 45as25, 15as-15 both sides'")
+    every = tuple(abs(g.aspecular_deg) <= NEAR_SPECULAR_DEG for g in report.geometries)
+    assert shared_table_note(report, replace(report, measured=every)) is None
+    # Without colour (no CIELAB) there is no dE00 to qualify.
+    assert shared_table_note(colour_report(_table(WL), None, instruments=["MA98"]),
+                             report) is None
