@@ -421,7 +421,9 @@ def job_event_line(type_: str, data: Mapping[str, Any], row: Any,
         level = logging.WARNING if state == "suspended" else logging.INFO
         return level, f"{job} {state} ({angles}){reason}"
     if state == "reconstructing":
-        return logging.INFO, f"{job} measured {angles}; reconstructing"
+        # A calibration reconstructs nothing: it factors its readings into the calibration.
+        then = "computing the calibration" if row.kind == "calibration" else "reconstructing"
+        return logging.INFO, f"{job} measured {angles}; {then}"
     if state == "completed":
         if row.kind == "calibration":
             cal = service.calibration()

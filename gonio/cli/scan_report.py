@@ -319,8 +319,8 @@ def dry_run_summary(dr: Any, plan: Any, rig_name: str, *,
                         else "no --max-samples, so no bound on the total"))
     for b in getattr(dr, "arc_branches", None) or ():
         arc_deg, angles, secs = b.arc_deg, b.angles, b.estimated_s
-        what = ("twofold symmetric: on over half a turn" if arc_deg == 180.0
-                else "not twofold symmetric: on over a full turn")
+        what = ("twofold symmetric: it goes on over half a turn" if arc_deg == 180.0
+                else "not twofold symmetric: it goes on over a full turn")
         lines.append(f"  if the first round finds the specimen {what}, at most "
                      f"{counted(angles, 'angle')} ({counted(angles * n_pairs, 'reading')}) and "
                      f"{_duration_text(secs)} in all"

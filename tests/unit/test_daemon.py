@@ -175,6 +175,11 @@ def _row(**kw: object) -> SimpleNamespace:
      "job 7 (uniform, 'red tile') suspended (3 of 8 angles): stage: overload"),
     ("state", {"state": "reconstructing"}, _row(done_angles=8), logging.INFO,
      "job 7 (uniform, 'red tile') measured 8 of 8 angles; reconstructing"),
+    # A calibration reconstructs nothing (it said "reconstructing" too).
+    ("state", {"state": "reconstructing"},
+     _row(kind="calibration", specimen="white reference", done_angles=4, total_angles=4),
+     logging.INFO, "job 7 (calibration, 'white reference') measured 4 of 4 angles; computing "
+     "the calibration"),
     ("state", {"state": "completed"},
      _row(summary={"calibrated": True, "predicted_log_rmse": 0.2}, result_path="r/job-7.h5"),
      logging.INFO, "job 7 (uniform, 'red tile') completed, in 1/sr: predicted_log_rmse 0.200; "

@@ -209,8 +209,9 @@ def test_the_dry_run_summary_states_both_branches_of_an_auto_arc_plan() -> None:
     # MemRig: 3 pairs in planes within 12 deg of each other (two opposites,
     # gonio.plans.arc.opposites_needed); 8 over half a turn plus 2 opposites, or 16 over the
     # full turn.
-    assert "twofold symmetric: on over half a turn, at most 10 angles (30 readings)" in text
-    assert "not twofold symmetric: on over a full turn, at most 16 angles (48 readings)" in text
+    assert "twofold symmetric: it goes on over half a turn, at most 10 angles (30 readings)" in text
+    assert ("not twofold symmetric: it goes on over a full turn, at most 16 angles "
+            "(48 readings)") in text
     # The full turn is reconstructed with the basis for specimens without twofold symmetry,
     # and its build (not done yet on this install) is stated with its time.
     assert "16 angles (48 readings) and" in text
