@@ -3,7 +3,7 @@
 Run from the project root (docs/science.md 7.1.1.3, last paragraph)::
 
     GONIO_CACHE_DIR=<cache> nice -n 10 .venv/bin/python bench/bench_libmetal.py \
-        [--rank-flank] [--all-families] [NAME ...]
+        [--rank-flank] [--all-families] [--twins] [NAME ...]
 
 For rough isotropic mitsuba conductors (default :data:`SPECIMENS`: the four rough metals the
 MA98 self-estimate misses, and tungsten and copper oxide, which it does not), the truth table
@@ -15,7 +15,9 @@ mean of ``ln(f_library / f_truth)`` on the lobe's flank (``theta_h`` 10-30 deg) 
 ``theta_d``. A library whose closest metals match below 50 deg and are too high beyond 60 deg
 carries the grazing lobe that MA98's reconstructions carry (science.md 7.1.1.3's hypothesis).
 ``--rank-flank`` ranks instead by how far the flank's level is off below 50 deg (the first
-band's bias, in absolute value), ``--all-families`` ranks every member of the default library.
+band's bias, in absolute value), ``--all-families`` ranks every member of the default library;
+``--twins`` prints instead the library recipe's own GGX at the specimen's alpha and metal
+(:data:`TWINS`).
 """
 
 from __future__ import annotations
@@ -51,6 +53,14 @@ SPECIMENS: tuple[tuple[str, str], ...] = (
     ("f5-w-r20", "FRESH_CONFIRM"),
     ("fh-cuo-r35", "FRESH_HIGH"),
 )
+
+
+#: Specimens whose metal the library's recipe also knows: (library metal, mitsuba's alpha), for
+#: ``--twins``: the library's own GGX recipe at the specimen's alpha and optical constants.
+TWINS: dict[str, tuple[str, float]] = {
+    "al-r0.25-t20-untilted": ("aluminium", 0.25),
+    "cu-r0.30-t30-untilted": ("copper", 0.30),
+}
 
 
 def _log_values(values: Any) -> tuple[np.ndarray, np.ndarray]:
@@ -143,8 +153,28 @@ def _rank_key(rank: str, f_lib: Any, truth: Any) -> float:
     return abs(band_bias(f_lib, truth)[0])  # "flank": the flank's level where MA98 reads
 
 
+def twins() -> int:
+    """Print :func:`band_bias` of the library recipe's isotropic GGX twin of each of
+    :data:`TWINS` (both masking forms the metal family draws) against mitsuba's truth."""
+    print("| specimen | twin | log_rmse theta_d < 50 | "
+          + " | ".join(f"theta_d {lo:g}-{hi:g}" for lo, hi in TD_BANDS_DEG) + " |")
+    print("|---" * (3 + len(TD_BANDS_DEG)) + "|")
+    where = dict(SPECIMENS)
+    for name, (metal, alpha) in TWINS.items():
+        truth = specimen(name, where[name])
+        eta, k = library._METALS[metal]
+        for masking in ("correlated", "separable"):
+            model = bm.GGX(alpha, alpha, bm.ConductorFresnel(eta, k), masking, name="twin")
+            f = bm.expand_valid(bm.tabulate_valid(model))
+            print(f"| {name} | GGX {alpha:.2f} {metal}, {masking} | {read_error(f, truth):.3f} | "
+                  + " | ".join(f"{x:+.2f}" for x in band_bias(f, truth)) + " |", flush=True)
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     args = sys.argv[1:] if argv is None else argv
+    if "--twins" in args:
+        return twins()
     rank = "flank" if "--rank-flank" in args else "read"
     pool = "all" if "--all-families" in args else "metal"
     names = [a for a in args if not a.startswith("--")]
