@@ -159,6 +159,24 @@ def test_cli_jobs_list(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> No
     assert args.func(args) == 0
     out = capsys.readouterr().out
     assert "queued" in out and "felt" in out
+    # Nothing runs the store (its daemon stopped or killed): the queued job says it waits
+    # for one; it showed no reason, as if about to start (a newcomer's review, after kill -9).
+    assert "(no daemon runs this store now: queued jobs start when 'gonio serve' runs" in out
+    # With another process holding the store's lock (as a daemon does), that is not said.
+    import subprocess
+    import sys
+
+    holder = subprocess.Popen(
+        [sys.executable, "-c", "import sys, time; from gonio.locks import claim_store; "
+         "lock = claim_store(sys.argv[1]); print('held', flush=True); time.sleep(120)",
+         str(tmp_path / "j.sqlite")], stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout is not None and holder.stdout.readline().strip() == "held"
+        assert args.func(args) == 0
+        assert "no daemon runs this store" not in capsys.readouterr().out
+    finally:
+        holder.kill()
+        holder.wait(timeout=30)
 
 
 @pytest.mark.parametrize("action", [[], ["list"], ["show", "3"], ["abort", "3"],
