@@ -37,10 +37,21 @@ def _arc_words(arc_deg: float) -> str:
     return "a full turn" if arc_deg >= 360.0 else f"{arc_deg:g} degrees"
 
 
+def p_value_text(p: float) -> str:
+    """A test's p-value as a reader should see it: ``p = 0.031``, or ``p > 0.999`` and
+    ``p < 0.001`` at the ends (a chi-square far below its degrees of freedom printed
+    ``p = 1``, which no finite sample gives)."""
+    if p > 0.999:
+        return "p > 0.999"
+    if p < 0.001:
+        return "p < 0.001"
+    return f"p = {p:.3g}"
+
+
 def _evidence(metrics: Mapping[str, Any]) -> str:
     return (f"chi-square {metrics.get('arc_test_statistic', float('nan')):.1f} on "
             f"{metrics.get('arc_test_dof')} degrees of freedom, "
-            f"p = {metrics['arc_test_p_value']:.3g}")
+            f"{p_value_text(metrics['arc_test_p_value'])}")
 
 
 def arc_sentence(metrics: Mapping[str, Any]) -> str:

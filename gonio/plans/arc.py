@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from gonio.arc_wording import p_value_text
 from gonio.brdf.reconstruction.samples import HALF_TURN_DEG, NoiseModel
 from gonio.plans.models import AdaptivePlan, AnyPlan
 from gonio.plans.route import order_for_travel
@@ -203,7 +204,7 @@ def describe(test: dict[str, Any]) -> str:
                else "NOT twofold symmetric")
     arc = "half a turn" if test["arc_deg"] == HALF_TURN_DEG else "a full turn"
     return (f"the specimen reads {verdict} (chi-square {test['statistic']:.1f} on "
-            f"{test['dof']} degrees of freedom, p = {test['p_value']:.3g}, level "
+            f"{test['dof']} degrees of freedom, {p_value_text(test['p_value'])}, level "
             f"{test['false_alarm']:g}, noise {100 * test['noise']:g} %; "
             f"{test['asymmetric_pairs']} pair(s) differ at opposite angles): scanned over {arc}")
 
@@ -215,8 +216,9 @@ def half_turn_warning(test: dict[str, Any]) -> str | None:
         return None
     return (f"the plan was forced over half a turn (span_deg 180), but its readings at opposite "
             f"stage angles differ beyond the noise (chi-square {test['statistic']:.1f} on "
-            f"{test['dof']} degrees of freedom, p = {test['p_value']:.3g}): the specimen is not "
-            "twofold symmetric, and the other half turn rests on the assumption that it is; "
+            f"{test['dof']} degrees of freedom, {p_value_text(test['p_value'])}): the specimen "
+            "is not twofold symmetric, and the other half turn rests on the assumption that it "
+            "is; "
             "scan it again with arc 'auto' or span_deg 360 (gonio scan --arc auto or --span 360)")
 
 
