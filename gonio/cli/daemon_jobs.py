@@ -335,6 +335,22 @@ def _follow(client: Any, job_id: int, disabled: bool, poll_s: float = 0.5,
         bar.close()
 
 
+def _queue_place(args: argparse.Namespace, job: int) -> str | None:
+    """Job ``job``'s place in the daemon's queue in words ("next", "3rd"), or None when it is
+    not queued or the daemon does not say."""
+    with DaemonClient(args.daemon, args.api_key) as client:
+        at = client.request("GET", f"/api/v1/jobs/{job}").get("queue_position")
+    if not isinstance(at, int):
+        return None
+    return "next" if at == 0 else ordinal(at + 1)
+
+
+def ordinal(n: int) -> str:
+    """``n`` as an English ordinal: 1st, 2nd, 3rd, 4th, 11th, 12th, 13th, 21st, 112th."""
+    suffix = "th" if 10 <= n % 100 <= 20 else {1: "st", 2: "nd", 3: "rd"}.get(n % 10, "th")
+    return f"{n}{suffix}"
+
+
 def _queue_action(args: argparse.Namespace) -> int:
     """``gonio jobs --daemon URL halt|release``: the emergency halt (the running job stops at
     once, the queue is held) and its release, as the page's buttons and ``POST
@@ -469,5 +485,8 @@ def jobs_through_daemon(args: argparse.Namespace) -> int:
               f"readings stay in the store; 'gonio jobs --daemon {args.daemon} show {job}' "
               "says when it has ended)")
     else:
-        print(f"job {job} reordered: priority {row.get('priority', 0)}, state {state}")
+        # The reorder's answer is the job list's row, which has no place in the queue: asked.
+        place = _queue_place(args, job)
+        print(f"job {job} reordered: priority {row.get('priority', 0)}, state {state}"
+              + (f", {place} in the queue" if place else ""))
     return 0

@@ -128,6 +128,8 @@ def test_jobs_through_the_daemon_reorder_cancel_and_abort(
         assert cancelled["state"] == "aborted" and "cancelled" in cancelled["reason"]
         out = capsys.readouterr().out
         assert f"job {second} reordered: priority 5" in out and f"job {first} cancelled" in out
+        # Where it now stands (it said the priority alone): ahead of the job it passed.
+        assert f"job {second} reordered: priority 5, state queued, next in the queue" in out, out
         # Cancel is for a queued job: a running one's refusal says how to stop it.
         assert main([*base, "cancel", str(running)]) == 2
         assert f"jobs --daemon {daemon.url} abort {running}" in capsys.readouterr().err

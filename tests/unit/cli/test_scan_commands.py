@@ -486,3 +486,13 @@ def test_a_queued_job_that_will_be_refused_says_so_in_the_terminal() -> None:
               "done_angles": 0, "total_angles": 8, "priority": 0, "created": 0.0,
               "started": None, "finished": None}
     assert f"  {refusal}" in detail_lines(detail)
+
+
+def test_ordinals_follow_english_usage() -> None:
+    """``gonio jobs --daemon URL reorder`` says where the job now stands ("3rd in the
+    queue"); the teens take "th" (11th, 12th, 13th), as style guides write them."""
+    from gonio.cli.daemon_jobs import ordinal
+
+    assert [ordinal(n) for n in (1, 2, 3, 4, 11, 12, 13, 21, 22, 23, 101, 111, 112)] == [
+        "1st", "2nd", "3rd", "4th", "11th", "12th", "13th", "21st", "22nd", "23rd", "101st",
+        "111th", "112th"]
