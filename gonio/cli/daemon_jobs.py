@@ -302,6 +302,12 @@ def _follow(client: Any, job_id: int, disabled: bool, poll_s: float = 0.5,
     # The first answer before the bar: a job the daemon does not have (gonio jobs wait 99)
     # is refused without an empty bar above the refusal.
     row: dict[str, Any] = client.request("GET", f"/api/v1/jobs/{job_id}")
+    if row["state"] in FINAL_STATES:
+        # Ended already: no bar (it printed a full bar at millions of angles per second,
+        # after the summary, for a job that ended long ago).
+        if seen is not None:
+            seen.update(row)
+        return row
     bar = tqdm(total=None, unit="angle", desc=f"job {job_id}", disable=disabled, file=sys.stderr)
     told: str | None = None
     queued_told: tuple[Any, ...] | None = None

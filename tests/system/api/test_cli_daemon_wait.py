@@ -137,6 +137,12 @@ def test_wait_on_a_completed_job_fetches_it_at_once(
             f"'gonio jobs --daemon {daemon.url} wait {job} -o FILE' fetches it)")
     assert first == scan_summary(job, detail["result"], None, kept)[0][0]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["linen.h5"]
+    # With the progress bar on: a job that has ended gets none (it drew a full bar at
+    # millions of angles per second, after the summary).
+    assert main(["jobs", "--daemon", daemon.url, "wait", str(job)]) == 0
+    said = capsys.readouterr()
+    assert said.out.startswith(f"job {job} completed: ")
+    assert "angle/s" not in said.err and "%|" not in said.err, said.err
     # Ctrl-C while the result is fetched: the job is done and nothing "goes on in the
     # daemon" (it said so); the file is not written, and the same command fetches it.
     def cut(*args: object, **kwargs: object) -> None:
