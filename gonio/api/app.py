@@ -120,12 +120,28 @@ async def _validation_error(_request: Request, exc: Exception) -> JSONResponse:
     detail = [
         {
             "loc": [_loc_item(p) for p in err.get("loc", ())],
-            "msg": str(err.get("msg", "invalid value")),
+            "msg": _validation_message(err),
             "type": str(err.get("type", "value_error")),
         }
         for err in exc.errors()
     ]
     return SafeJSONResponse({"detail": detail}, status_code=422)
+
+
+def _validation_message(err: Any) -> str:
+    """A validation error's message; a body that is not JSON, or not a JSON object, says
+    what was wrong and what to send (it said "JSON decode error", or "Input should be a
+    valid dictionary" for a body sent without its JSON content type)."""
+    msg = str(err.get("msg", "invalid value"))
+    kind, loc = err.get("type"), tuple(err.get("loc", ()))
+    if kind == "json_invalid":
+        why = str((err.get("ctx") or {}).get("error", "")).strip()
+        return (f"the request body is not valid JSON{f' ({why})' if why else ''}: send a JSON "
+                "object with the header Content-Type: application/json")
+    if loc == ("body",) and kind in ("model_attributes_type", "dict_type"):
+        return (f"{msg}: the request body must be a JSON object, sent with the header "
+                "Content-Type: application/json")
+    return msg
 
 
 async def _http_error(_request: Request, exc: Exception) -> JSONResponse:

@@ -210,3 +210,26 @@ def test_events_of_a_job_that_does_not_exist_are_404(daemon: Daemon) -> None:
         r = c.get("/api/v1/events?job_id=999999")
     assert r.status_code == 404, r.text
     assert "999999" in r.json()["detail"]
+
+
+def test_a_body_that_is_not_json_says_so_and_what_to_send(daemon: Daemon) -> None:
+    """A body with a stray comma answered "JSON decode error" and nothing more; one sent
+    without its JSON content type (curl -d, a form post) "Input should be a valid
+    dictionary". Both now say what was wrong and what to send; nothing is queued."""
+    before = _jobs(daemon)
+    status, answer = _post(daemon, "/api/v1/jobs", '{"plan": {"kind": "uniform",}}')
+    assert status == 422, answer
+    assert isinstance(answer, dict)
+    (err,) = answer["detail"]
+    assert err["type"] == "json_invalid"
+    # The parser's own reason (Python's json module words a trailing comma so).
+    assert err["msg"].startswith("the request body is not valid JSON (Expecting"), err
+    assert "Content-Type: application/json" in err["msg"], err
+    with daemon.client() as c:
+        r = c.post("/api/v1/jobs", content=b'{"plan": {"kind": "uniform"}}',
+                   headers={"content-type": "application/x-www-form-urlencoded"})
+    assert r.status_code == 422, r.text
+    msgs = [d["msg"] for d in r.json()["detail"]]
+    assert any("must be a JSON object, sent with the header Content-Type: application/json"
+               in m for m in msgs), msgs
+    assert _jobs(daemon) == before
