@@ -24,6 +24,7 @@ from __future__ import annotations
 import argparse
 import csv
 import json
+import sys
 import time
 from collections.abc import Mapping
 from pathlib import Path
@@ -268,11 +269,38 @@ def _load_basis(path: str | None, progress: bool = True) -> Any:
     return Basis.load(path) if path is not None else default_basis(progress=progress)
 
 
-def _cmd_reconstruct(args: argparse.Namespace) -> int:
-    from gonio.brdf.reconstruction.reconstruct import reconstruct
+def _scan_samples(path: str) -> Any:
+    """The samples ``gonio reconstruct`` fits: a samples file (.npz), or a scan's result file
+    (.h5), whose calibrated readings (its ``/samples``) are turned into the same samples
+    (:meth:`gonio.calibration.CalibratedScan.to_samples`), so a lab can reconstruct a scan
+    again with another method, basis or prior. A result file was refused as "not a gonio
+    samples file", pointing at a Python function."""
     from gonio.brdf.reconstruction.samples import Samples
 
-    samples = Samples.load(args.samples)
+    p = Path(path)
+    if p.suffix.lower() not in (".h5", ".hdf5"):
+        return Samples.load(p)
+    from gonio.results import ResultFileError, read_result
+
+    try:
+        res = read_result(p)
+    except ResultFileError as exc:
+        raise UsageError(str(exc)) from None
+    if res.attrs.get("kind") == "calibration":
+        raise UsageError(f"{p} is a calibration job's result: its readings are of the white "
+                         "reference; give a scan's result file")
+    if np.asarray(res.samples.values).size == 0:
+        raise UsageError(f"{p} holds no readings to reconstruct from")
+    if not res.samples.calibration.get("pairs"):
+        print(f"warning: {p.name} was measured without a calibration: its values, and the "
+              "table reconstructed from them, are in sensor units, not 1/sr", file=sys.stderr)
+    return res.samples.to_samples({"from_result": p.name, "job_id": res.attrs.get("job_id")})
+
+
+def _cmd_reconstruct(args: argparse.Namespace) -> int:
+    from gonio.brdf.reconstruction.reconstruct import reconstruct
+
+    samples = _scan_samples(args.samples)
     basis = _load_basis(args.basis)
     name = args.name or Path(args.output).stem
     rec = reconstruct(
@@ -537,8 +565,11 @@ def register(subparsers: Any) -> None:
     s.add_argument("-o", "--output", required=True, help="samples file to write (.npz)")
     s.set_defaults(func=_cmd_simulate_scan)
 
-    r = subparsers.add_parser("reconstruct", help="reconstruct a full BRDF from a samples file")
-    r.add_argument("samples", help="samples .npz (from a scan or simulate-scan)")
+    r = subparsers.add_parser("reconstruct", help="reconstruct a full BRDF from a samples file "
+                              "or a scan's result")
+    r.add_argument("samples", help="samples .npz (from simulate-scan), or a scan's result .h5 "
+                   "(its calibrated readings: reconstruct it again with another --method, "
+                   "--basis or prior)")
     r.add_argument("--basis", help="basis file (default: the cached default basis)")
     r.add_argument("--components", "-k", type=int, help="use only the first K components")
     r.add_argument("--method", choices=("joint", "vf"), default="joint",

@@ -10,7 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from gonio.brdf.tables import geometry as geo
 from gonio.brdf.tables.geometry import lab_to_specimen
+from gonio.brdf.tables.table import BRDFTable
 from gonio.cli import main
 from gonio.results import read_result
 from gonio.sim.rig import default_material
@@ -192,6 +194,18 @@ def test_scan_leaves_only_its_output_and_the_store_keeps_a_real_result_path(
     # A calibration job shows none of it (it has no reconstruction).
     assert main(["jobs", "--db", str(data / "gonio.sqlite"), "show", "1"]) == 0
     assert "measured:" not in capsys.readouterr().out
+    # The result reconstructed again from the command line, by V&F's path (it was refused
+    # as "not a gonio samples file"): the rig's 12 pairs at the scan's 3 angles.
+    again = tmp_path / "felt-vf.npz"
+    assert main(["reconstruct", str(outdir / "felt.h5"), "--method", "vf", "-o",
+                 str(again)]) == 0
+    said = capsys.readouterr()
+    assert "n=12 r=3 method=vf" in said.out, said.out
+    assert "sensor units" not in said.err  # calibrated above
+    assert BRDFTable.load(again).values.shape[1:] == geo.TABLE_SHAPE
+    # The calibration job's result holds the white reference's readings: refused, saying so.
+    assert main(["reconstruct", str(outdir / "white.h5"), "-o", str(tmp_path / "w.npz")]) == 2
+    assert "is a calibration job's result" in capsys.readouterr().err
 
 
 def test_dry_run_prints_a_short_summary_and_json_on_request(
