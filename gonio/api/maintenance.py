@@ -26,5 +26,5 @@ async def refuse_while_locked(request: Request) -> None:
             status.HTTP_423_LOCKED,
             f"the rig is locked for maintenance{who}{why}; changes are refused until the lock "
             "is released (DELETE /api/v1/maintenance, or remove the lock file "
-            f"{LOCK_FILE_NAME} in the daemon's data directory)",
+            f"{lock.path})",
         )

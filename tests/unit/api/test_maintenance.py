@@ -37,4 +37,6 @@ def test_a_change_under_the_lock_is_423_saying_who_why_and_how(
     assert exc.value.status_code == 423
     assert str(exc.value.detail).startswith(says)
     assert "DELETE /api/v1/maintenance" in exc.value.detail
-    assert f"remove the lock file {LOCK_FILE_NAME}" in exc.value.detail
+    # The file by its path (it said "in the daemon's data directory", which the user had to
+    # find out first).
+    assert f"remove the lock file {tmp_path / LOCK_FILE_NAME})" in exc.value.detail
