@@ -6,6 +6,9 @@
 * ``scans/<rig>-<geometry hash>/``: the data directory of ``gonio scan`` for one rig geometry
   and sensor set (job store ``gonio.sqlite``, ``results/job-<id>.h5``, ``calibration.json``);
 * ``serve-sim/``: the data directory of ``gonio serve --sim``;
+* ``scan-sim/<rig>-<geometry hash>/``: the data directory of ``gonio scan --sim``, apart from
+  ``scans/`` so its own calibrations do not replace those of a ``gonio sim`` rig of the same
+  geometry (``gonio scan --rig`` on the README's simulated rig);
 * ``library/``: the user library of imported tables, unless ``$GONIO_LIBRARY_DIR`` names
   another (``gonio.brdf.materials.measured.user_library_dir``).
 
@@ -114,8 +117,8 @@ STORE_NAME = "gonio.sqlite"
 def store_places() -> list[str]:
     """Where :func:`default_stores` looks for job stores, as patterns to tell a user."""
     root = user_data_root()
-    return [str(root / "scans" / "*" / STORE_NAME), str(root / "serve-sim" / STORE_NAME),
-            str(Path(STORE_NAME))]
+    return [str(root / "scans" / "*" / STORE_NAME), str(root / "scan-sim" / "*" / STORE_NAME),
+            str(root / "serve-sim" / STORE_NAME), str(Path(STORE_NAME))]
 
 
 def default_stores() -> list[Path]:
@@ -123,8 +126,17 @@ def default_stores() -> list[Path]:
     ``gonio serve --sim``'s) and ``./gonio.sqlite``, those that exist."""
     root = user_data_root()
     found = sorted((root / "scans").glob(f"*/{STORE_NAME}"))
+    found += sorted((root / "scan-sim").glob(f"*/{STORE_NAME}"))
     found += [p for p in (root / "serve-sim" / STORE_NAME, Path(STORE_NAME)) if p.is_file()]
     return [p for p in found if p.is_file()]
+
+
+def sim_scan_data_dir(rig_config: Any) -> Path:
+    """Default data directory of ``gonio scan --sim`` on its simulated rig ``rig_config`` (not
+    created): ``scan-sim/<rig>-<geometry_key>``. Not ``scans/``, which a ``gonio sim`` rig of
+    the same geometry (the README's) uses: a ``gonio scan --sim`` at another exposure
+    calibrated there and replaced that rig's calibration, and listed its unfinished jobs."""
+    return user_data_root() / "scan-sim" / f"{_rig_dir_name(rig_config)}-{geometry_key(rig_config)}"
 
 
 def sim_daemon_data_dir() -> Path:

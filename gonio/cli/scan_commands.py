@@ -1,7 +1,8 @@
 """``gonio scan``: one job in the foreground, or submitted to a running daemon.
 
 ``gonio scan`` keeps its job in a data directory with the daemon's layout (``--data-dir``,
-default one per rig geometry under the user data folder, :func:`gonio.paths.scan_data_dir`):
+default one per rig geometry under the user data folder, :func:`gonio.paths.scan_data_dir`;
+``--sim`` has its own, :func:`gonio.paths.sim_scan_data_dir`):
 the job store ``gonio.sqlite`` (``--db`` overrides), ``results/job-<id>.h5`` and the latest
 ``calibration.json``. The only file written beside ``-o OUT.h5`` is ``OUT.h5`` itself (and, for
 ``--white-reference``, ``OUT.calibration.json``). If the store holds an unfinished job with the
@@ -390,9 +391,7 @@ async def _run_scan(args: argparse.Namespace, plan: Any, config: Any, sim: Any =
     # (the dry run below and the submission do not make it again).
     checked = check_plan(plan, desc)
     from gonio.daemon import STORE_FILE
-    from gonio.paths import scan_data_dir
-
-    data_dir = args.data_dir or scan_data_dir(config)
+    data_dir = args.data_dir or own_data_dir(args, config)
     data_dir.mkdir(parents=True, exist_ok=True)
     db = args.db or data_dir / STORE_FILE
     # Own the data directory, the job store and the rig for the whole run, or refuse naming who
@@ -545,12 +544,11 @@ def _sim_calibration_s(args: argparse.Namespace, plan: Any, config: Any, desc: A
     than it said."""
     from gonio.calibration import Calibration, calibration_in_effect
     from gonio.cli.sim_session import sim_calibration_needed, sim_calibration_plan
-    from gonio.paths import scan_data_dir
     from gonio.plans.dryrun import dry_run
 
     if sim is None or args.calibration is not None or plan.kind == "calibration":
         return None
-    cal = calibration_in_effect(args.data_dir or scan_data_dir(config), config)
+    cal = calibration_in_effect(args.data_dir or own_data_dir(args, config), config)
     exposure_s = plan.exposure.exposure_s
     if isinstance(cal, Calibration) and not sim_calibration_needed(cal, desc.pairs, config,
                                                                    exposure_s):
@@ -570,14 +568,13 @@ def _calibration_warnings(args: argparse.Namespace, plan: Any, config: Any,
         sensor_channels,
         uncalibrated_warning,
     )
-    from gonio.paths import scan_data_dir
 
     if plan.kind == "calibration":
         return []
     if args.calibration is not None and args.calibration.is_file():
         cal = _read_calibration(args.calibration)
     else:
-        cal = calibration_in_effect(args.data_dir or scan_data_dir(config), config)
+        cal = calibration_in_effect(args.data_dir or own_data_dir(args, config), config)
     cal = cal if isinstance(cal, Calibration) else Calibration()
     uncal = uncalibrated_warning(cal, pairs)
     try:
@@ -606,12 +603,11 @@ def _check_calibration(args: argparse.Namespace, pairs: Any, config: Any, cal: A
     directory holds a calibration, or one of other pairs is in effect) unless
     ``--accept-uncalibrated``."""
     from gonio.calibration import CALIBRATION_FILE, uncalibrated_refusal, uncalibrated_warning
-    from gonio.paths import scan_data_dir
 
     warning = _how_to_calibrate(uncalibrated_warning(cal, pairs), args)
     if warning is None or cal.pairs:
         return  # covered, or partly: the submission refuses it, saying which pairs
-    own: Path | None = scan_data_dir(config)
+    own: Path | None = own_data_dir(args, config)
     why = uncalibrated_refusal(cal, pairs, own, data_dir)
     if why is not None and not args.accept_uncalibrated:
         assert own is not None  # a refusal names the rig's own calibration
@@ -676,15 +672,23 @@ def _left_interrupted(store: Any, job_id: int, db: Path, args: argparse.Namespac
           file=sys.stderr, flush=True)
 
 
+def own_data_dir(args: argparse.Namespace, config: Any) -> Path:
+    """The data directory ``gonio scan`` uses without ``--data-dir``: ``--sim``'s own
+    (:func:`gonio.paths.sim_scan_data_dir`), else the rig's (:func:`gonio.paths.scan_data_dir`,
+    which ``gonio serve --rig`` shares)."""
+    from gonio.paths import scan_data_dir, sim_scan_data_dir
+
+    return sim_scan_data_dir(config) if getattr(args, "sim", False) else scan_data_dir(config)
+
+
 def _local_finishing(args: argparse.Namespace, config: Any) -> Any:
     """The finishing estimate of the job store this scan would use (its last scans), read
     without creating anything: a dry run leaves no store behind."""
     from gonio.daemon import STORE_FILE
-    from gonio.paths import scan_data_dir
     from gonio.store import JobStore
     from gonio.timeleft import finishing_estimate, most_channels
 
-    db = args.db or (args.data_dir or scan_data_dir(config)) / STORE_FILE
+    db = args.db or (args.data_dir or own_data_dir(args, config)) / STORE_FILE
     if not Path(db).is_file():
         return finishing_estimate([], most_channels(config))
     store = JobStore(db, durable=False)

@@ -374,3 +374,37 @@ def test_adaptive_options_without_adaptive_are_refused_not_dropped(
     assert f"{extra[0]} only apply to an adaptive scan: add --adaptive" in err, err
     assert main([*argv, "--adaptive", *extra]) == 0
     assert "dry run of the adaptive plan" in capsys.readouterr().out
+
+
+def test_scan_sim_keeps_its_own_data_directory_apart_from_a_sim_rigs(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """`gonio sim` (the README's simulated rig) and `gonio scan --sim` simulate the same
+    geometry, and both used `scans/sim-<hash>`: a `gonio scan --sim --exposure 0.02`
+    calibrated there and replaced the rig's morning calibration at 0.01 s, after which the
+    rig's scans at 0.01 s were refused. `gonio scan --sim` now keeps its own data directory
+    (`scan-sim/` in the user data folder); the rig's calibration stays as it was."""
+    from gonio.calibration import calibration_in_effect
+    from gonio.paths import scan_data_dir
+    from gonio.sim.rig import SimRigOptions, start_sim_rig
+
+    rig = tmp_path / "rig.toml"
+    with start_sim_rig(SimRigOptions(time_scale=10.0, settle_s=0.0, config_path=rig)) as sim:
+        sim.place_white_reference(0.99)
+        assert main(["scan", "--no-export-fits", "--rig", str(rig), "--white-reference",
+                     "0.99", "--rotations", "2", "--no-progress",
+                     "-o", str(tmp_path / "white.h5")]) == 0
+        own = scan_data_dir(sim.config)
+    before = calibration_in_effect(own, sim.config)
+    assert before.exposure_s == pytest.approx(0.01)
+    capsys.readouterr()
+    assert main(["scan", "--sim", "--exposure", "0.02", "--rotations", "2", "--time-scale",
+                 "10", "--no-export-fits", "--no-progress", "-o", str(tmp_path / "s.h5")]) == 0
+    err = capsys.readouterr().err
+    root = Path(os.environ["GONIO_DATA_DIR"])
+    said = re.search(r"data directory (\S+) ", err)
+    assert said is not None, err
+    assert Path(said.group(1)).parent == root / "scan-sim", err
+    # The rig's calibration is the one it had: at 0.01 s, from its own job.
+    after = calibration_in_effect(own, sim.config)
+    assert after.exposure_s == pytest.approx(0.01) and after.source == before.source
