@@ -109,6 +109,12 @@ class DeviceError(Exception):
         self.number = number
 
 
+KEPT_EEPROM = ("Operating Mode", "Homing Offset", "Max Position Limit", "Min Position Limit",
+               "Drive Mode")
+"""The EEPROM items a simulated servo keeps across restarts (``eeprom_file``): what the driver
+writes (the mode, the zero) and what a lab may set (limits, direction)."""
+
+
 class XSeriesServo:
     """Control table and behaviour of one X-series servo driving a rotation stage.
 
@@ -178,28 +184,45 @@ class XSeriesServo:
     def _encoder(self) -> int:
         return self._raw_counts() - self._turn_offset
 
+    def _identity(self) -> dict[str, float]:
+        """What the kept EEPROM belongs to: this model, geared as it is (a file of another
+        servo or gear ratio would move the zero by a wrong number of counts)."""
+        return {"model": self._get("Model Number"), "counts_per_degree": self.cpd}
+
     def _load_eeprom(self) -> None:
-        """The kept EEPROM items, when a file holds them; an unreadable file, or an item out
-        of its range, leaves the factory values (a servo that lost its EEPROM)."""
+        """The kept EEPROM items, when a file holds them for this servo (:meth:`_identity`);
+        an unreadable file, one of another servo or gear, or an item out of its range leaves
+        the factory values (a servo that lost its EEPROM). Only :data:`KEPT_EEPROM` is read:
+        the bus ID and baud rate stay the constructor's, which the rig config names."""
         if self._eeprom_file is None or not self._eeprom_file.exists():
             return
         try:
             kept = json.loads(self._eeprom_file.read_text())
-            values = {BY_NAME[name]: int(v) for name, v in kept.items()
-                      if name in BY_NAME and BY_NAME[name].eeprom and BY_NAME[name].writable}
-        except (OSError, ValueError, TypeError, AttributeError):
+            if kept.get("servo") != self._identity():
+                return
+            values = {BY_NAME[name]: int(v) for name, v in kept["items"].items()
+                      if name in KEPT_EEPROM}
+        except (OSError, ValueError, TypeError, AttributeError, KeyError):
             return
         for it, value in values.items():
             if (value in it.allowed) if it.allowed else it.lo <= value <= it.hi:
                 self._values[it.address] = value
 
     def _save_eeprom(self) -> None:
+        """Keep :data:`KEPT_EEPROM` in the file. A write that fails (a full disk, a removed
+        folder) keeps the value in the servo's memory and the servo answering, as a flash
+        write that failed would: the next restart then starts from the last file kept."""
         if self._eeprom_file is None:
             return
-        kept = {it.name: self._values[it.address] for it in ITEMS if it.eeprom and it.writable}
+        kept = {"servo": self._identity(),
+                "items": {name: self._get(name) for name in KEPT_EEPROM}}
         tmp = self._eeprom_file.with_name(self._eeprom_file.name + ".tmp")
-        tmp.write_text(json.dumps(kept, indent=1))
-        os.replace(tmp, self._eeprom_file)  # whole or not at all, as the servo's own write
+        try:
+            tmp.write_text(json.dumps(kept, indent=1))
+            os.replace(tmp, self._eeprom_file)  # whole or not at all
+        except OSError:
+            with contextlib.suppress(OSError):
+                tmp.unlink()
 
     def _power_up(self) -> None:
         # The absolute encoder knows only the angle within one motor turn after power-up.

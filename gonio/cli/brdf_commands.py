@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import dataclasses
 import json
 import sys
 import time
@@ -294,7 +295,15 @@ def _scan_samples(path: str) -> Any:
     if not res.samples.calibration.get("pairs"):
         print(f"warning: {p.name} was measured without a calibration: its values, and the "
               "table reconstructed from them, are in sensor units, not 1/sr", file=sys.stderr)
-    return res.samples.to_samples({"from_result": p.name, "job_id": res.attrs.get("job_id")})
+    samples = res.samples.to_samples({"from_result": p.name, "job_id": res.attrs.get("job_id")})
+    # Dark-subtracted readings of dark or grazing pairs can fall just below 0; the job's own
+    # finishing clamps them to 0 before it fits (gonio.finishing), and so does this.
+    negative = int(np.count_nonzero(samples.values < 0.0))
+    if negative:
+        samples = dataclasses.replace(samples, values=np.maximum(samples.values, 0.0))
+        print(f"note: {negative} of {samples.values.size} readings below 0 (dark-subtraction "
+              "noise) taken as 0, as the job's own reconstruction did", file=sys.stderr)
+    return samples
 
 
 def _cmd_reconstruct(args: argparse.Namespace) -> int:
@@ -569,7 +578,8 @@ def register(subparsers: Any) -> None:
                               "or a scan's result")
     r.add_argument("samples", help="samples .npz (from simulate-scan), or a scan's result .h5 "
                    "(its calibrated readings: reconstruct it again with another --method, "
-                   "--basis or prior)")
+                   "--basis or prior; the default basis is the twofold-symmetric one, which a "
+                   "job whose symmetry test called its specimen asymmetric did not use)")
     r.add_argument("--basis", help="basis file (default: the cached default basis)")
     r.add_argument("--components", "-k", type=int, help="use only the first K components")
     r.add_argument("--method", choices=("joint", "vf"), default="joint",

@@ -351,24 +351,12 @@ def _queue_wait(store: Any, db: Path, rows: list[Any]) -> str | None:
     maintenance = MaintenanceLock(db.resolve().parent / LOCK_FILE_NAME).reason()
     said = queue_wait(((r.id, r.state) for r in rows if r.state in ACTIVE_STATES),
                       hold[0] if hold is not None else None, maintenance)
-    if said is not None or not _unowned(db):
+    if said is not None or _store_holder(db) is not None:
         return said
     # Nothing runs jobs from the store (a daemon stopped or killed): the queued ones showed
     # no reason at all, as if they were about to start.
-    return ("no daemon runs this store now: queued jobs start when 'gonio serve' runs this "
-            "data directory (after the jobs it takes up again)")
-
-
-def _unowned(db: Path) -> bool:
-    """Whether no daemon or ``gonio scan`` runs jobs from the store ``db`` now (its lock is
-    free); False when one does or it cannot be told (no write access to its folder)."""
-    from gonio.locks import LockBusy, claim_store
-
-    try:
-        claim_store(db).release()
-    except (LockBusy, OSError):
-        return False
-    return True
+    return ("no daemon runs this store now: queued jobs start when a daemon ('gonio serve') "
+            "runs it again (after the jobs it takes up again)")
 
 
 def _interrupted_note(db: Path, rows: list[Any]) -> str | None:

@@ -203,6 +203,21 @@ def test_scan_leaves_only_its_output_and_the_store_keeps_a_real_result_path(
     assert "n=12 r=3 method=vf" in said.out, said.out
     assert "sensor units" not in said.err  # calibrated above
     assert BRDFTable.load(again).values.shape[1:] == geo.TABLE_SHAPE
+    # A dark pair's dark-subtracted reading just below 0 (noise): taken as 0, as the job's own
+    # finishing does; reconstruct refused the whole file ("samples contain negative BRDF
+    # values") with nothing the user could clamp.
+    import shutil
+
+    import h5py
+
+    noisy = Path(shutil.copyfile(outdir / "felt.h5", tmp_path / "noisy.h5"))
+    with h5py.File(noisy, "a") as f:
+        values = f["samples"]["values"][...]
+        values[0, 0, 0] = -1e-4
+        f["samples"]["values"][...] = values
+    assert main(["reconstruct", str(noisy), "--method", "vf", "-o",
+                 str(tmp_path / "noisy.npz")]) == 0
+    assert f"note: 1 of {values.size} readings below 0" in capsys.readouterr().err
     # The calibration job's result holds the white reference's readings: refused, saying so.
     assert main(["reconstruct", str(outdir / "white.h5"), "-o", str(tmp_path / "w.npz")]) == 2
     assert "is a calibration job's result" in capsys.readouterr().err

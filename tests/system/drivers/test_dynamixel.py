@@ -409,6 +409,50 @@ def test_the_zero_outlives_a_restart_of_the_simulated_servo(tmp_path: Any) -> No
         sim.close()
 
 
+def test_the_kept_zero_is_only_that_servos_and_a_failed_save_keeps_it_answering(
+        tmp_path: Any) -> None:
+    """The EEPROM file holds the servo's model and gearing: one kept for another gear ratio
+    would move the zero by the wrong number of counts, so it is left (factory values). A save
+    that fails (its folder removed: a full disk the same) left the simulator's serial thread
+    dead, the stage silent for the rest of the session; the value stays in the servo's
+    memory and it answers on."""
+    eeprom = tmp_path / "eeprom.json"
+
+    def homed_at(cpd: float, where: Any, angle: float) -> float:
+        motion = StageMotion(speed_dps=30.0, accel_dps2=60.0, settle_s=0.0,
+                             time_scale=TIME_SCALE)
+        sim = start_dynamixel_sim(motion, counts_per_degree=cpd, eeprom_file=where)
+        stage = DynamixelStage("rot", sim.port, counts_per_degree=cpd,
+                               limits=TravelLimits(-720.0, 720.0), speed_dps=30.0,
+                               accel_dps2=60.0, reply_timeout_s=SIM_REPLY_TIMEOUT_S)
+        try:
+            async def go() -> float:
+                await stage.connect()
+                at = await stage.position()
+                await stage.move_to(at + angle)
+                await stage.home()
+                # It answers after the EEPROM write, at its new zero.
+                assert await stage.position() == pytest.approx(0.0, abs=2 / cpd)
+                return at
+
+            return float(run(go))
+        finally:
+            asyncio.run(stage.close())
+            sim.close()
+
+    homed_at(CPD, eeprom, 33.0)  # kept for gear 2
+    # The same file given to a servo geared 1: not its EEPROM, so it starts at factory zero.
+    assert homed_at(4096 / 360, eeprom, 0.0) == pytest.approx(0.0, abs=2 * 360 / 4096)
+    # The gear-2 servo still finds its own zero (the gear-1 servo's home rewrote the file
+    # for gear 1, so first keep gear 2's again).
+    homed_at(CPD, eeprom, 33.0)
+    assert homed_at(CPD, eeprom, 0.0) == pytest.approx(-33.0, abs=2 / CPD)
+    # A file that cannot be written: home works and the servo answers after it.
+    gone = tmp_path / "removed" / "eeprom.json"
+    assert homed_at(CPD, gone, 10.0) == pytest.approx(0.0, abs=2 / CPD)
+    assert not gone.exists()
+
+
 async def _connect_and_read(stage: DynamixelStage) -> float:
     await stage.connect()
     return await stage.position()

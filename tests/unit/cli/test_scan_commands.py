@@ -161,14 +161,15 @@ def test_cli_jobs_list(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> No
     assert "queued" in out and "felt" in out
     # Nothing runs the store (its daemon stopped or killed): the queued job says it waits
     # for one; it showed no reason, as if about to start (a newcomer's review, after kill -9).
-    assert "(no daemon runs this store now: queued jobs start when 'gonio serve' runs" in out
+    assert "(no daemon runs this store now: queued jobs start when a daemon ('gonio serve') " \
+        "runs it again" in out, out
     # With another process holding the store's lock (as a daemon does), that is not said.
     import subprocess
     import sys
 
     holder = subprocess.Popen(
         [sys.executable, "-c", "import sys, time; from gonio.locks import claim_store; "
-         "lock = claim_store(sys.argv[1]); print('held', flush=True); time.sleep(120)",
+         "lock = claim_store(sys.argv[1]); print('held', flush=True); time.sleep(30)",
          str(tmp_path / "j.sqlite")], stdout=subprocess.PIPE, text=True)
     try:
         assert holder.stdout is not None and holder.stdout.readline().strip() == "held"
