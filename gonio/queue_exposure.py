@@ -59,7 +59,8 @@ class ExposureClash:
 
     def status(self) -> str:
         """What a queued scan's row says (the job list's ``start_refusal``)."""
-        return (f"will be refused when it starts: it reads at exposure {self.exposure_s:g} s "
+        return (f"would be refused when it starts, as the queue stands: it reads at exposure "
+                f"{self.exposure_s:g} s "
                 f"and {self.under()} (counts are not rescaled between exposures). Cancel it "
                 f"and queue it again at {self.under_s:g} s, or queue a calibration at "
                 f"{self.exposure_s:g} s before it")

@@ -161,7 +161,7 @@ def shared_table_note(sample: ColourReport, standard: ColourReport) -> str | Non
     each about 12 from the true material at 15as-5, and nothing said why the difference
     could not show it.
     """
-    if not sample.calibrated:
+    if not (sample.calibrated and standard.calibrated):
         return None
     theirs = standard.measured or (False,) * len(standard.geometries)
     read = {g.name for g, m in zip(standard.geometries, theirs, strict=True) if m}
@@ -174,9 +174,10 @@ def shared_table_note(sample: ColourReport, standard: ColourReport) -> str | Non
     if not both:
         return None
     return (f"at {', '.join(both)} both sides' colour was read from their reconstructed "
-            "tables, where no pair read, from the same prior: an error they share does not "
-            "show in their dE00 there, so a small difference says the two scans agree, not "
-            "that either is right (an instrument's reading of the standard would)")
+            "tables, where no pair read: there both are the reconstruction's guess, so an "
+            "error they share does not show in their dE00, and a small difference says the "
+            "two scans agree, not that either is right (an instrument's reading of the "
+            "standard would)")
 
 
 def scan_readings(samples: Any) -> ScanReadings | None:

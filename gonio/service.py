@@ -181,6 +181,9 @@ class GonioService:
         --calibration``); default: :meth:`calibration`'s rule
     fit_exports : store the export fits in every scan's result (``[results] export_fits``;
         False: scans finish seconds sooner and each export fits when it is made)
+    own_data_dir : the rig's own data directory, whose calibration a scan here would be
+        uncalibrated against (:meth:`uncalibrated_refusal`); default: ``gonio scan``'s for the
+        rig config (:func:`gonio.paths.scan_data_dir`); ``gonio scan --sim`` gives its own
     """
 
     def __init__(
@@ -192,8 +195,10 @@ class GonioService:
         data_dir: str | Path = "gonio-data",
         calibration: Calibration | None = None,
         fit_exports: bool = True,
+        own_data_dir: Path | None = None,
     ):
         self.store = store
+        self._own_data_dir = own_data_dir
         self._calibration = calibration
         self._rig: hal.Rig = rig if isinstance(rig, hal.Rig) else rig()
         self.rig_config = rig_config
@@ -592,7 +597,8 @@ class GonioService:
         except ValueError:
             return None
         try:
-            own: Path | None = scan_data_dir(self.rig_config)
+            own: Path | None = (self._own_data_dir if self._own_data_dir is not None
+                                else scan_data_dir(self.rig_config))
         except AttributeError:  # a rig without a rig config (tests, notebooks)
             own = None
         return uncalibrated_refusal(self.calibration(), pairs, own, self.data_dir)
@@ -685,7 +691,10 @@ class GonioService:
         if exposure_s is not None:
             # The exposure in effect when the scan starts is the last calibration's to run
             # before it: one at the plan's exposure followed by one at another does not do.
-            before = [r for r in before[-1:] if _measures_at(r, exposure_s)]
+            # One whose exposure is not recorded is left to the worker, as the queue's walk
+            # (gonio.queue_exposure) leaves it.
+            before = [r for r in before[-1:]
+                      if _plan_exposure(r) is None or _measures_at(r, exposure_s)]
             behind = [r for r in behind if _measures_at(r, exposure_s)]
         if before or not behind:
             return bool(before), ""
@@ -1090,7 +1099,8 @@ class GonioService:
 
         active = [r for r in rows if r.kind == "calibration" and r.state is not JobState.QUEUED]
         if active:
-            return StartCalibration(_plan_exposure(active[-1]), active[-1].id)
+            # The worker goes on with the first of them (by id) before it takes the queue.
+            return StartCalibration(_plan_exposure(active[0]), active[0].id)
         try:
             cal = self.calibration()
         except CalibrationError:

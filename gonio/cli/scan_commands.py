@@ -443,7 +443,8 @@ async def _run_owned(args: argparse.Namespace, checked: Any, config: Any, sim: A
         check_plausible(override, sensor_full_scale(config),
                         f"calibration file {args.calibration}")
     service = GonioService(store, rig, rig_config=config, basis=basis, data_dir=data_dir,
-                           calibration=override, fit_exports=not args.no_export_fits)
+                           calibration=override, fit_exports=not args.no_export_fits,
+                           own_data_dir=own_data_dir(args, config))
     try:
         if sim is not None:
             attach_sim(service, sim)

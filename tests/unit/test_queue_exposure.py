@@ -37,7 +37,8 @@ def test_what_is_not_recorded_is_not_judged() -> None:
 
 def test_the_words_name_both_exposures_and_what_to_do() -> None:
     queued = ExposureClash(3, 0.01, 0.02, 2).status()
-    assert queued.startswith("will be refused when it starts: it reads at exposure 0.01 s and "
+    assert queued.startswith("would be refused when it starts, as the queue stands: it reads "
+                             "at exposure 0.01 s and "
                              "calibration job 2, the last to run before it, measures at 0.02 s")
     assert "queue it again at 0.02 s, or queue a calibration at 0.01 s before it" in queued
     assert "the calibration in effect was measured at 0.01 s" in \

@@ -215,7 +215,8 @@ def test_a_queued_scan_that_will_be_refused_at_its_start_says_so_in_its_row(
         wait.until(lambda d: d.find_elements(By.CSS_SELECTOR, cell))
         said = browser.find_element(By.CSS_SELECTOR, cell)
         assert said.text.startswith(
-            f"will be refused when it starts: it reads at exposure {EXPOSURE_S:g} s and "
+            "would be refused when it starts, as the queue stands: it reads at exposure "
+            f"{EXPOSURE_S:g} s and "
             f"calibration job {cal}, the last to run before it, measures at 0.02 s"), said.text
         assert said.is_displayed()
         # The warning colour of the page's stylesheet (--warn), not the plain reason's.

@@ -347,7 +347,8 @@ def test_a_queued_scan_its_calibration_was_cancelled_from_says_it_will_be_refuse
         assert c.post(f"/api/v1/jobs/{cal}/cancel").status_code == 200
         said = refusals()
         assert said[fine] is None, said
-        expected = ("will be refused when it starts: it reads at exposure 0.02 s and the "
+        expected = ("would be refused when it starts, as the queue stands: it reads at "
+                    "exposure 0.02 s and the "
                     "calibration in effect was measured at 0.01 s")
         assert said[scan] is not None and said[scan].startswith(expected), said
         assert c.get(f"/api/v1/jobs/{scan}").json()["start_refusal"] == said[scan]

@@ -476,7 +476,8 @@ def test_a_queued_job_that_will_be_refused_says_so_in_the_terminal() -> None:
     or goes) and by ``show``; it was said nowhere until the job failed."""
     from gonio.cli.jobs_command import detail_lines
 
-    refusal = ("will be refused when it starts: it reads at exposure 0.02 s and the "
+    refusal = ("would be refused when it starts, as the queue stands: it reads at exposure "
+               "0.02 s and the "
                "calibration in effect was measured at 0.01 s")
     row = {"state": "queued", "waiting": None, "queue_position": 0, "starts_in_s": 0.0,
            "starts_in_bound": False, "starts_in_estimate": "the rig is free"}

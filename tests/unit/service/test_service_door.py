@@ -135,3 +135,26 @@ def test_a_scan_behind_a_queued_calibration_needs_no_acceptance(
     assert svc.uncalibrated_refusal(plan, priority=5) is None
     assert svc.uncalibrated_refusal(plan, priority=0) is None
     assert svc.uncalibrated_refusal(plan, priority=6) is not None  # it would run first
+
+
+def test_the_rig_data_directory_a_scan_is_judged_against_can_be_given(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """`gonio scan --sim` keeps its own data directory (scan-sim/): its service must judge an
+    uncalibrated scan against that folder, not against `scans/`, which a `gonio sim` rig of
+    the same geometry calibrates (the cross-talk the separate folder removed came back
+    through this refusal)."""
+    import gonio.service
+
+    rigs = tmp_path / "scans-rig"
+    rigs.mkdir()
+    (rigs / "calibration.json").write_text("{}")  # the gonio sim rig's folder, calibrated
+    monkeypatch.setattr(gonio.service, "scan_data_dir", lambda cfg: rigs)
+    plan = UniformPlan(rotations=3, exposure=FAST)
+    default = _service(tmp_path)
+    assert default.uncalibrated_refusal(plan) is not None  # judged against the rig's folder
+    own = tmp_path / "scan-sim"
+    own.mkdir()
+    svc = GonioService(JobStore(tmp_path / "own.sqlite"), MemRig(), data_dir=own,
+                       own_data_dir=own)
+    assert svc.uncalibrated_refusal(plan) is None  # its own folder: nothing calibrated elsewhere
