@@ -352,6 +352,18 @@ def test_no_reply_returns_nothing_once_the_packet_timeout_has_passed() -> None:
         assert ph.isPacketTimeout()  # it gave up only when the SDK's timeout had passed
 
 
+def _kept_servo(cpd: float, eeprom: Any) -> tuple[DynamixelSimHandle, DynamixelStage,
+                                                   StageMotion]:
+    """A simulated servo geared ``cpd`` keeping its EEPROM in ``eeprom``, the driver on it
+    (not connected), and its motion."""
+    motion = StageMotion(speed_dps=30.0, accel_dps2=60.0, settle_s=0.0, time_scale=TIME_SCALE)
+    sim = start_dynamixel_sim(motion, counts_per_degree=cpd, eeprom_file=eeprom)
+    stage = DynamixelStage("rot", sim.port, counts_per_degree=cpd,
+                           limits=TravelLimits(-720.0, 720.0), speed_dps=30.0, accel_dps2=60.0,
+                           reply_timeout_s=SIM_REPLY_TIMEOUT_S)
+    return sim, stage, motion
+
+
 def test_the_zero_outlives_a_restart_of_the_simulated_servo(tmp_path: Any) -> None:
     """The Homing Offset is EEPROM: a real servo keeps the zero ``home()`` set across a power
     cycle, and the simulator, given a file to keep its EEPROM in, keeps it across a restart
@@ -361,13 +373,7 @@ def test_the_zero_outlives_a_restart_of_the_simulated_servo(tmp_path: Any) -> No
     eeprom = tmp_path / "eeprom.json"
 
     def servo() -> tuple[DynamixelSimHandle, DynamixelStage, StageMotion]:
-        motion = StageMotion(speed_dps=30.0, accel_dps2=60.0, settle_s=0.0,
-                             time_scale=TIME_SCALE)
-        sim = start_dynamixel_sim(motion, counts_per_degree=CPD, eeprom_file=eeprom)
-        stage = DynamixelStage("rot", sim.port, counts_per_degree=CPD,
-                               limits=TravelLimits(-720.0, 720.0), speed_dps=30.0,
-                               accel_dps2=60.0, reply_timeout_s=SIM_REPLY_TIMEOUT_S)
-        return sim, stage, motion
+        return _kept_servo(CPD, eeprom)
 
     sim, stage, motion = servo()
     try:
@@ -419,12 +425,7 @@ def test_the_kept_zero_is_only_that_servos_and_a_failed_save_keeps_it_answering(
     eeprom = tmp_path / "eeprom.json"
 
     def homed_at(cpd: float, where: Any, angle: float) -> float:
-        motion = StageMotion(speed_dps=30.0, accel_dps2=60.0, settle_s=0.0,
-                             time_scale=TIME_SCALE)
-        sim = start_dynamixel_sim(motion, counts_per_degree=cpd, eeprom_file=where)
-        stage = DynamixelStage("rot", sim.port, counts_per_degree=cpd,
-                               limits=TravelLimits(-720.0, 720.0), speed_dps=30.0,
-                               accel_dps2=60.0, reply_timeout_s=SIM_REPLY_TIMEOUT_S)
+        sim, stage, _motion = _kept_servo(cpd, where)
         try:
             async def go() -> float:
                 await stage.connect()
