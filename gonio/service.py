@@ -672,8 +672,7 @@ class GonioService:
         position, so a scan queued now runs after them) and those queued behind it. The one
         reading of the queue :meth:`calibration_ahead` and :meth:`exposure_ahead_refusal`
         judge; the last of ``before`` is the calibration in effect when the scan starts."""
-        active = [row for row in self.store.list_jobs([st.value for st in ACTIVE_STATES])
-                  if row.kind == "calibration"]
+        active = [row for row in self.store.active_jobs() if row.kind == "calibration"]
         before: list[JobRow] = []
         behind: list[JobRow] = []
         for row in self.store.queue():
@@ -1119,14 +1118,12 @@ class GonioService:
         cancelled, failed or queued at a higher priority, or a calibration file replaced,
         leaves a queued scan to fail "not started" at its turn, perhaps overnight; its row
         now says so while it waits."""
-        rows = self.store.list_jobs([JobState.QUEUED.value, *(st.value for st in ACTIVE_STATES)])
-        queue = [r for r in rows if r.state is JobState.QUEUED]
+        queue = self.store.queue()  # in the order the worker takes them
         if not any(r.kind != "calibration" for r in queue):
             return {}
-        queue.sort(key=lambda r: (-r.priority, r.position, r.id))
         clashes = exposure_clashes([(r.id, r.kind) for r in queue],
                                    {r.id: _plan_exposure(r) for r in queue},
-                                   self._exposure_start(rows))
+                                   self._exposure_start(self.store.active_jobs()))
         return {job_id: clash.status() for job_id, clash in clashes.items()}
 
     def _exposure_overtaken(self) -> Callable[
