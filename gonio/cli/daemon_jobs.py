@@ -464,6 +464,10 @@ def jobs_through_daemon(args: argparse.Namespace) -> int:
                 raise
         elif args.action == "remove":
             client.request("DELETE", f"/api/v1/jobs/{job}")
+            if args.json:
+                # The API answers 204 with no body; a script still gets one JSON object.
+                print(json.dumps({"id": job, "removed": True}))
+                return 0
             print(f"job {job} removed with its readings (a result file it wrote stays in the "
                   "daemon's data directory)")
             return 0

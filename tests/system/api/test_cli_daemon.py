@@ -184,6 +184,12 @@ def test_jobs_through_the_daemon_pause_resume_remove_halt_and_release(
         assert main([*base, "remove", str(queued)]) == 0
         assert c.get(f"/api/v1/jobs/{queued}").status_code == 404
         assert f"job {queued} removed" in capsys.readouterr().out
+        # With --json the answer is JSON too (the API's 204 has no body of its own).
+        extra = c.post("/api/v1/jobs", json={"plan": {"kind": "uniform", "rotations": 4,
+                                                      "exposure": fast}}).json()["id"]
+        assert main([*base, "remove", str(extra), "--json"]) == 0
+        assert json.loads(capsys.readouterr().out) == {"id": extra, "removed": True}
+        assert c.get(f"/api/v1/jobs/{extra}").status_code == 404
         assert main([*base, "release"]) == 0
         assert c.get("/api/v1/rig").json()["queue_held"] is None, \
             c.get("/api/v1/rig").json()["queue_held"]
