@@ -44,6 +44,25 @@ def test_against_takes_a_stored_standard_by_name_and_names_an_unknown_or_unreada
         assert rows_name.keys() == rows_job.keys() and rows_name
         for k, de in rows_job.items():
             assert rows_name[k] == pytest.approx(de, abs=0.01), k
+        # Against another scan, the near-specular geometries neither scan's pairs read are
+        # named (both values are the reconstruction's guess); a stored standard was
+        # measured, so nothing is said against it. Which geometries: from each side's own
+        # "measured" flags and angles, as docs/colour.md defines near-specular.
+        from gonio.result_colour import NEAR_SPECULAR_DEG
+
+        def unread_near(job: int) -> set[str]:
+            col = c.get(f"/api/v1/jobs/{job}/colour").json()["colour"]
+            return {f"{r['incidence_deg']:g}as{r['aspecular_deg']:g}"
+                    for r, m in zip(col["rows"], col["measured"], strict=True)
+                    if not m and abs(r["aspecular_deg"]) <= NEAR_SPECULAR_DEG}
+
+        both = unread_near(first) & unread_near(second)
+        assert both, "the blue panel's scans leave near-specular geometries to the table"
+        shared = [n for n in by_job.json().get("notes", []) if "both sides' colour" in n]
+        assert len(shared) == 1, by_job.json().get("notes")
+        named = set(shared[0].split(" both sides'")[0].removeprefix("at ").split(", "))
+        assert named == both, (named, both)
+        assert not any("both sides' colour" in n for n in by_name.json().get("notes", []))
         # A panel against its own stored colour: no difference (".csv" may be given).
         own = c.get(f"/api/v1/jobs/{first}/colour", params={"against": "blue master.csv"})
         assert own.status_code == 200, own.text
