@@ -357,6 +357,19 @@ def ordinal(n: int) -> str:
     return f"{n}{suffix}"
 
 
+def _say_start_refusals(client: DaemonClient) -> None:
+    """Print, after a job left the queue, each queued scan the worker would now refuse when
+    it starts (the job list's ``start_refusal``).
+
+    A calibration job cancelled or removed can leave a scan queued behind it to start under
+    a calibration at another exposure; the rows said so from then on, but the command that
+    caused it said only "cancelled", and the scan failed "not started" overnight.
+    """
+    for row in client.request("GET", "/api/v1/jobs"):
+        if isinstance(row, dict) and row.get("start_refusal"):
+            print(f"note: job {row['id']} {row['start_refusal']}", file=sys.stderr)
+
+
 def _queue_action(args: argparse.Namespace) -> int:
     """``gonio jobs --daemon URL halt|release``: the emergency halt (the running job stops at
     once, the queue is held) and its release, as the page's buttons and ``POST
@@ -470,6 +483,7 @@ def jobs_through_daemon(args: argparse.Namespace) -> int:
                 return 0
             print(f"job {job} removed with its readings (a result file it wrote stays in the "
                   "daemon's data directory)")
+            _say_start_refusals(client)
             return 0
         else:
             try:
@@ -485,6 +499,8 @@ def jobs_through_daemon(args: argparse.Namespace) -> int:
     state = row.get("state", "?")
     if args.action == "cancel":
         print(f"job {job} cancelled: taken out of the queue, it will not run (state {state})")
+        with DaemonClient(args.daemon, args.api_key) as client:
+            _say_start_refusals(client)
     elif args.action == "pause":
         print(f"job {job}: pause asked (state {state}; it stops at the end of the angle under "
               f"way, lights off; 'gonio jobs --daemon {args.daemon} resume {job}' goes on)")

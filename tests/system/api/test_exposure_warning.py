@@ -360,3 +360,39 @@ def test_a_queued_scan_its_calibration_was_cancelled_from_says_it_will_be_refuse
         r = c.post(f"/api/v1/jobs/{again}/reorder", json={"position": 1})
         assert r.status_code == 200, r.text
         assert refusals() == {scan: None, fine: None}
+
+
+def test_gonio_jobs_cancel_and_remove_say_which_queued_scan_would_now_be_refused(
+        daemon: Daemon, calibrated: None, capsys: pytest.CaptureFixture[str]) -> None:
+    """``gonio jobs --daemon URL cancel`` of the calibration a queued scan at another exposure
+    waited for said only "cancelled": the scan's row said it would be refused, but the
+    command that decided it did not. cancel (and remove) now name the scan and both
+    exposures; cancelling a job that leaves every scan fine says nothing more."""
+    from gonio.cli import main
+
+    base = ["jobs", "--daemon", daemon.url, "--api-key", daemon.key]
+    with daemon.client() as c, held_queue(c):
+        cal = queue_calibration(c, 0.02)
+        r = c.post("/api/v1/jobs", json={"plan": {
+            "kind": "uniform", "rotations": 2, "exposure": {"exposure_s": 0.02}}})
+        assert r.status_code == 201, r.text
+        scan = r.json()["id"]
+        r = c.post("/api/v1/jobs", json={"plan": {
+            "kind": "uniform", "rotations": 2, "exposure": {"exposure_s": 0.01}},
+            "priority": 5})  # ahead of the 0.02 s calibration, under today's 0.01 s one
+        assert r.status_code == 201, r.text
+        other = r.json()["id"]
+        capsys.readouterr()
+        # The 0.01 s scan cancelled: the 0.02 s one still starts under its calibration.
+        assert main([*base, "cancel", str(other)]) == 0
+        out = capsys.readouterr()
+        assert f"job {other} cancelled" in out.out and "refused" not in out.err, out
+        assert main([*base, "cancel", str(cal)]) == 0
+        out = capsys.readouterr()
+        assert f"job {cal} cancelled" in out.out, out
+        assert (f"note: job {scan} would be refused when it starts, as the queue stands: it "
+                "reads at exposure 0.02 s") in out.err, out.err
+        assert "0.01 s" in out.err, out.err
+        # remove says it too, of the cancelled calibration's queue.
+        assert main([*base, "remove", str(cal)]) == 0
+        assert f"note: job {scan} would be refused" in capsys.readouterr().err
