@@ -591,6 +591,10 @@ class DynamixelStage(_Stage):
                 "model_number": self.model_number,
                 "temperature_c": temperature,
             },
+            # After a power-up the encoder knows the angle within one motor turn: at gear 1
+            # that is the stage's angle, and the zero in EEPROM still holds; geared, whole
+            # motor turns (360 / gear stage degrees) are lost.
+            zero_lost_at_power_up=abs(self.cpd * 360.0 - COUNTS_PER_TURN) > 1e-6,
         )
 
     async def clear_faults(self) -> None:

@@ -55,7 +55,7 @@ import threading
 import time
 from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -76,6 +76,13 @@ from gonio.rigdescription import RigDescription
 from gonio.store import JobStore, ReadingRow, StepRow
 
 log = logging.getLogger("gonio.engine")
+
+_T = TypeVar("_T")
+
+STAGE_REFERENCE_EVENT = "stage_reference"
+"""Event type: whether the stage was homed as the job started, and where it stood
+(``{"homed": bool, "position_deg": float}``); :meth:`ScanEngine._check_stage_reference`
+compares later readings of the stage with it."""
 
 
 class SensorSaturated(hal.DeviceFault):
@@ -203,6 +210,7 @@ class ScanEngine:
         # The job's steps and readings as the store holds them, kept here as they are
         # written (read from the store once, when the job starts or resumes).
         self._steps: list[StepRow] = []
+        self._homed_at_start: bool | None = None  # from the stage_reference event
         self._readings: dict[int, list[ReadingRow]] = {}
 
     # ------------------------------------------------------------------ control (any time)
@@ -413,10 +421,15 @@ class ScanEngine:
         for r in self.store.readings(self.job_id) if self._steps else ():
             self._readings.setdefault(r.angle_index, []).append(r)
         if not self._steps:
+            await self._note_stage_reference()
             here = await self._stage_position()
             route = order_for_travel(self.checked.angles_deg, here, self.desc,
                                      self.plan.backlash_deg)
             self._add_steps(0, 0, route)
+        else:
+            # Resumed (after a restart of the daemon, perhaps of the rig): the stage's zero
+            # must be the one the job started with.
+            self._check_stage_reference(await self._stage_read(self.rig.stage.status))
         if self._steps and self.plan.arc_mode() == "auto":
             # A resumed auto-arc job continues on the arc it chose (its arc_test event).
             chosen = self.store.last_event(self.job_id, ARC_TEST_EVENT)
@@ -459,17 +472,54 @@ class ScanEngine:
 
     async def _stage_position(self) -> float:
         """The stage position for planning a route, with the same fault handling as an angle."""
+        return await self._stage_read(self.rig.stage.position)
+
+    async def _stage_read(self, read: Callable[[], Awaitable[_T]]) -> _T:
+        """``read()`` of the stage, with the same fault handling as an angle."""
         retries = 0
         trouble: Trouble | None = None
         while True:
             await self._gate()
             try:
-                return await self.rig.stage.position()
+                return await read()
             except hal.DeviceFault as fault:
                 retries += 1
                 if trouble is None:
                     trouble = self.suspender.trouble(fault)
                 await self._suspend(fault, retries, trouble)
+
+    # ------------------------------------------------------------------ the stage's zero
+    async def _note_stage_reference(self) -> None:
+        """Record, as the job starts, whether the stage was homed (a ``stage_reference``
+        event), so that a later loss of its zero can be told from a zero never set."""
+        st = await self._stage_read(self.rig.stage.status)
+        self._homed_at_start = st.homed
+        self.store.append_event(self.job_id, STAGE_REFERENCE_EVENT, {
+            "homed": st.homed, "position_deg": st.position_deg})
+
+    def _check_stage_reference(self, st: hal.StageStatus) -> None:
+        """Fail the job when the stage, homed as the job started, reads not homed on a stage
+        whose zero a power cycle moves (:class:`gonio.hal.StageStatus`).
+
+        A geared servo powered off under a paused or suspended job (or with the daemon)
+        came back with whole motor turns forgotten, and the job went on reading at stage
+        angles off by ``360 / gear`` degrees, labelled as the planned ones: nothing said so.
+        The angles measured before stay in the store; the stage must be homed again (at the
+        lab's own reference mark), which only the lab can do, so the job cannot go on.
+        """
+        if self._homed_at_start is None:
+            ref = self.store.last_event(self.job_id, STAGE_REFERENCE_EVENT)
+            self._homed_at_start = bool(ref.data.get("homed")) if ref is not None else False
+        if not self._homed_at_start or st.homed or not st.zero_lost_at_power_up:
+            return
+        done = sum(1 for s in self._steps if s.done)
+        raise JobFailed(
+            "the stage lost its zero during the job: it was homed when the job started and "
+            "now reads not homed, so it was powered off or reset, and this stage's positions "
+            "after a power-up may be off by whole motor turns (a geared servo) or entirely "
+            f"(a stepper). The {done} angles measured before are kept in the job store, at "
+            "the angles they were measured at. Set the stage's zero again at the specimen's "
+            "reference mark ('gonio stage home', or the page's stage panel), then scan again")
 
     def _load_dark(self) -> None:
         if self.plan.exposure.dark == "once":
@@ -873,6 +923,10 @@ class ScanEngine:
             await self._gate_in_suspension()
             try:
                 await (self._recover(fault) if recover is None else recover())
+                # A device back after an outage may have been powered off: the stage's
+                # zero must still be the job's (a JobFailed ends the job from here).
+                if self._rig is not None:
+                    self._check_stage_reference(await self.rig.stage.status())
                 break
             except hal.DeviceFault as again:
                 retries += 1

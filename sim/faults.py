@@ -20,7 +20,8 @@ from dataclasses import dataclass, field, fields
 FAULT_HELP = (
     "silence:NAME[:SECONDS] (a lamp or sensor stops answering), lamp-drift:NAME:FACTOR "
     "(a lamp's output is scaled by FACTOR), saturate:NAME (a sensor reads full scale), "
-    "stage-silent, stage-overload, stage-stall"
+    "stage-silent, stage-overload, stage-stall, stage-power-cycle[:SECONDS] (the Dynamixel "
+    "off for SECONDS, 1 by default, then powered up: a geared one forgets whole motor turns)"
 )
 """The faults a simulated rig injects from text (``gonio sim --fault``, ``SimRig.apply_fault``)."""
 

@@ -82,6 +82,10 @@ class MemStage(hal.Stage):
         self.sticky_fault = False  # clear_faults does not help
         self.moves: list[float] = []
         self.stopped = 0
+        # What status() says of the zero (hal.StageStatus): set by a test to play a stage
+        # powered off and on (homed False; a geared or stepper stage loses its zero).
+        self.homed = True
+        self.zero_lost_at_power_up = False
 
     async def connect(self) -> None:
         self.log.add(self.name, "connect")
@@ -116,7 +120,8 @@ class MemStage(hal.Stage):
         self.log.add(self.name, "stop")
 
     async def status(self) -> hal.StageStatus:
-        return hal.StageStatus(self.pos, False, True, tuple(self.faults))
+        return hal.StageStatus(self.pos, False, self.homed, tuple(self.faults),
+                               zero_lost_at_power_up=self.zero_lost_at_power_up)
 
     async def clear_faults(self) -> None:
         self.log.add(self.name, "clear_faults")

@@ -194,6 +194,9 @@ class SimRigOptions:
     seed : int
         Seeds the sensor noise.
     speed_dps, accel_dps2, settle_s : stage physics
+    stage_gear : float
+        Motor turns per stage turn of the simulated Dynamixel (1: direct drive); a geared
+        servo loses whole motor turns (``360 / gear`` stage degrees) at a power cycle.
     stage_eeprom : path or None
         Where the simulated Dynamixel keeps its EEPROM (the Homing Offset: the stage's zero)
         across restarts, as a real servo does (:class:`gonio.sim.dynamixel_device.XSeriesServo`);
@@ -230,6 +233,7 @@ class SimRigOptions:
     config_path: str | os.PathLike[str] | None = None
     modbus_port: int = 0
     stage_eeprom: str | os.PathLike[str] | None = None
+    stage_gear: float = 1.0
 
     def check(self) -> None:
         """``ValueError`` with a clear message for an impossible option."""
@@ -239,6 +243,9 @@ class SimRigOptions:
             raise ValueError(f"zaber transport {self.zaber_transport!r}: use 'pty' or 'tcp'")
         if not self.time_scale > 0:
             raise ValueError(f"time scale must be > 0, got {self.time_scale}")
+        if not (math.isfinite(self.stage_gear) and self.stage_gear > 0):
+            raise ValueError(f"stage gear must be a positive number of motor turns per stage "
+                             f"turn, got {self.stage_gear}")
         if not 0 <= self.modbus_port <= 65535:
             raise ValueError(f"Modbus port {self.modbus_port}: use 1 to 65535, or 0 for any "
                              "free port")
@@ -355,7 +362,8 @@ class SimRig:
             from gonio.sim.dynamixel_device import start_dynamixel_sim
 
             self.stage_handle = start_dynamixel_sim(
-                self.motion, dxl_id=1, counts_per_degree=4096 / 360.0, faults=self.stage_faults,
+                self.motion, dxl_id=1, counts_per_degree=4096 / 360.0 * self.options.stage_gear,
+                faults=self.stage_faults,
                 eeprom_file=self.options.stage_eeprom,
             )
             self._stage_port = str(self.stage_handle.port)
@@ -418,6 +426,7 @@ class SimRig:
                 # take longer than the SDK's 35 ms (SIM_REPLY_TIMEOUT_S).
                 dynamixel=DynamixelSettings(reply_timeout_s=SIM_REPLY_TIMEOUT_S),
                 counts_per_rev=4096,
+                gear_ratio=o.stage_gear,
                 speed_dps=o.speed_dps,
                 accel_dps2=o.accel_dps2,
                 approach="none",
@@ -479,6 +488,25 @@ class SimRig:
         )
 
     # ------------------------------------------------------------------ faults
+    def _power_cycle_stage(self, off_s: float) -> None:
+        """The Dynamixel loses power for ``off_s`` wall seconds: it answers nothing, then
+        powers up as after a reboot (torque and LED off, whole motor turns forgotten; its
+        EEPROM, the Homing Offset with it, kept)."""
+        if self.options.stage != "dynamixel":
+            raise ValueError("stage-power-cycle is simulated for the dynamixel stage only")
+        if not (math.isfinite(off_s) and 0 <= off_s <= 3600):
+            raise ValueError(f"stage-power-cycle: off for 0 to 3600 s, got {off_s}")
+        handle = self.stage_handle
+        self.stage_faults.set(silent=True)
+
+        def power_up() -> None:
+            handle.servo.reboot()
+            self.stage_faults.set(silent=False)
+
+        timer = threading.Timer(off_s, power_up)
+        timer.daemon = True
+        timer.start()
+
     def apply_fault(self, spec: str) -> None:
         """Inject a fault given as text (see ``FAULT_HELP``), e.g. ``"silence:S2:1.5"``.
 
@@ -503,6 +531,8 @@ class SimRig:
                 self.stage_faults.set(overload_next_move=True)
             elif kind == "stage-stall" and not args:
                 self.stage_faults.set(stall_next_move=True)
+            elif kind == "stage-power-cycle" and len(args) <= 1:
+                self._power_cycle_stage(float(args[0]) if args else 1.0)
             else:
                 raise ValueError(f"fault {spec!r} is not understood; faults are: {FAULT_HELP}")
         except KeyError as exc:

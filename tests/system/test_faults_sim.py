@@ -142,3 +142,67 @@ def test_the_wait_has_a_ceiling() -> None:
     assert state is JobState.FAILED
     reason = store.get_job(1).reason or ""
     assert "S4:" in reason and "wait_for_device_s 1.5" in reason, reason
+
+
+async def _scan_homed(sim, plan: UniformPlan, cycle_after: int):  # type: ignore[no-untyped-def]
+    """Home the stage where it stands (0 deg), scan, and power-cycle the servo once
+    ``cycle_after`` angles are committed; the store, the driver's position after the scan
+    and the state."""
+    from gonio.drivers.factory import build_rig
+    from gonio.engine import ScanEngine
+    from gonio.rigdescription import RigDescription
+    from gonio.store import JobStore
+
+    rig = build_rig(sim.config)
+    desc = RigDescription.from_rig(rig)
+    store = JobStore(":memory:")
+    armed = threading.Event()
+
+    def listener(ev) -> None:  # type: ignore[no-untyped-def]
+        if ev.type == "progress" and ev.data.get("done") == cycle_after and not armed.is_set():
+            armed.set()
+            sim.apply_fault("stage-power-cycle:1")
+    store.add_listener(listener)
+    job = store.create_job(kind=plan.kind, specimen="sim", plan=plan.model_dump(mode="json"),
+                           rig=desc.model_dump(mode="json"))
+    async with rig:
+        await rig.stage.home()
+        state = await ScanEngine(rig, store, job.id, plan, desc).run()
+        position = await rig.stage.position()
+    assert armed.is_set()
+    return store, position, state
+
+
+@pytest.mark.parametrize("gear", [1.0, 3.0])
+def test_a_servo_powered_off_mid_scan_loses_its_zero_only_when_geared(gear: float) -> None:
+    """A Dynamixel homed before the job is powered off for a second after two angles
+    (100 and 145 deg) and comes back. Direct drive (gear 1): its one-turn encoder and the
+    zero in EEPROM hold, the job waits for it and completes at the right angles. Geared
+    3:1: the encoder keeps 145 * 3 = 435 deg of motor only modulo one turn, so the stage
+    reads 145 - 360 / 3 = 25 deg (or 190 - 120 = 70); the job went on reading at angles
+    120 deg off, labelled as planned. Now it fails saying why, the two angles read kept."""
+    policy = FaultPolicy(max_retries=2, retry_delay_s=0.1, resume_settle_s=0.0,
+                         wait_for_device_s=120)
+    plan = UniformPlan(rotations=4, start_deg=100, exposure=FAST, faults=policy)
+    with start_sim_rig(SimRigOptions(stage="dynamixel", stage_gear=gear, time_scale=10.0,
+                                     seed=12)) as sim:
+        store, position, state = asyncio.run(_scan_homed(sim, plan, cycle_after=2))
+        truth = sim.motion.position_deg()
+    readings = store.readings(1)
+    assert all(abs(r.actual_deg - r.commanded_deg) < 0.2 for r in readings)
+    reason = store.get_job(1).reason or ""
+    if gear == 1.0:
+        assert state is JobState.RUNNING, reason  # measured to the end
+        assert {r.angle_index for r in readings} == {0, 1, 2, 3}
+        assert position == pytest.approx(truth, abs=0.2)
+        return
+    assert state is JobState.FAILED
+    assert reason.startswith("the stage lost its zero during the job"), reason
+    assert "The 2 angles measured before are kept in the job store" in reason, reason
+    assert {r.angle_index for r in readings} == {0, 1}
+    # The premise, from the gearing alone: the servo (at 145 deg, or at 190 when the next
+    # move was under way as the power went) now reads one motor turn short.
+    assert min(abs(truth - 145.0), abs(truth - 190.0)) < 0.2, truth
+    assert position == pytest.approx(truth - 360.0 / gear, abs=0.2)
+    ref = store.last_event(1, "stage_reference")
+    assert ref is not None and ref.data["homed"] is True

@@ -236,6 +236,40 @@ def test_restart_resumes_from_checkpoint() -> None:
     assert len(rows) == 15 and len({(r.angle_index, r.light, r.sensor) for r in rows}) == 15
 
 
+@pytest.mark.parametrize(("homed_at_start", "loses_zero", "fails"), [
+    (True, True, True), (True, False, False), (False, True, False)])
+def test_a_job_resumed_on_a_stage_that_lost_its_zero_fails_saying_so(
+        homed_at_start: bool, loses_zero: bool, fails: bool) -> None:
+    """The daemon (and the rig with it) restarted mid-job: a stage homed when the job began
+    that now reads not homed, on a stage whose zero a power cycle moves, would read at other
+    angles than the job's; the resumed job fails, its angles kept. A direct-drive servo (its
+    zero survives) or a job that began unhomed (no zero to lose) goes on."""
+    plan = UniformPlan(rotations=5, exposure=ExposureSettings(exposure_s=0.01, light_settle_s=0))
+    rig, store, eng = _setup(plan)
+    rig.mstage.homed = homed_at_start
+
+    async def first() -> None:
+        task = asyncio.create_task(eng.run())
+        await _until(lambda: store.get_job(1).done_angles >= 2)
+        task.cancel()
+        with pytest.raises(asyncio.CancelledError):
+            await task
+
+    asyncio.run(first())
+    done = store.get_job(1).done_angles
+    rig.mstage.homed, rig.mstage.zero_lost_at_power_up = False, loses_zero  # powered off, on
+    state = asyncio.run(ScanEngine(rig, store, 1, plan, RigDescription.from_rig(rig)).run())
+    if not fails:
+        assert state is JobState.RUNNING and store.get_job(1).done_angles == 5
+        return
+    assert state is JobState.FAILED
+    reason = store.get_job(1).reason or ""
+    assert reason.startswith("the stage lost its zero during the job"), reason
+    assert f"The {done} angles measured before are kept in the job store" in reason, reason
+    assert store.get_job(1).done_angles == done
+    assert len(store.readings(1)) == 3 * done
+
+
 def test_adaptive_adds_rounds_until_converged() -> None:
     plan = AdaptivePlan(rule="vf", initial_rotations=8, threshold=0.01, exposure=FAST,
                         max_rounds=3)
