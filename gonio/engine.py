@@ -512,7 +512,8 @@ class ScanEngine:
             self._homed_at_start = bool(ref.data.get("homed")) if ref is not None else False
         if not self._homed_at_start or st.homed or not st.zero_lost_at_power_up:
             return
-        done = sum(1 for s in self._steps if s.done)
+        # From the store: on a resume the steps are not read yet while the rig connects.
+        done = self.store.get_job(self.job_id).done_angles
         raise JobFailed(
             "the stage lost its zero during the job: it was homed when the job started and "
             "now reads not homed, so it was powered off or reset, and this stage's positions "
