@@ -38,6 +38,10 @@ function summaryLines(d) {
     lines.push(`roughness bound at ${arc}: α' = ${Number(r.alpha_min).toPrecision(3)} ` +
       `(${Math.round(r.n_effective)} effective samples within ${r.cap_deg}° of the normal)`);
   }
+  if (d.colour_pairs) {
+    lines.push(`colour: pairs 1-${d.colour_pairs} sit at the instrument's near-specular ` +
+      "geometries; the colour report reads those from the scan (docs/colour.md)");
+  }
   const notes = [];
   if (d.fallback) notes.push(`note: ${d.fallback}`);
   if (d.mirror_gap) notes.push(`glossy specimens: ${d.mirror_gap}`);
@@ -119,7 +123,12 @@ async function designPairs(ev) {
   const body = {
     pairs: numberOrNull(f.pairs), rotations: numberOrNull(f.rotations),
     span_deg: Number(f.span_deg.value), max_elevation_deg: numberOrNull(f.max_elevation_deg),
+    min_separation_deg: numberOrNull(f.min_separation_deg),
+    // The API's list, from the field's ';'-separated regions (the daemon says what is wrong
+    // with one it cannot read).
+    exclusions: f.exclusions.value.split(";").map((x) => x.trim()).filter((x) => x),
   };
+  if (f.colour_instrument.value) body.colour_instrument = f.colour_instrument.value;
   const limit = numberOrNull(f.time_limit_s);
   if (limit !== null) body.time_limit_s = limit;
   await running(`designing ${body.pairs} pairs`, () => send("POST", "/design", body));

@@ -90,14 +90,24 @@ def test_the_page_designs_pairs_and_evaluates_a_preset_with_its_rig_fragment(
     assert f"more than this daemon allows ({DESIGN_LIMIT_S:g} s)" in state(), state()
     assert browser.find_element(By.ID, "design-result").is_displayed() is False
 
-    # Three pairs no higher than 70 deg, in the daemon's own time limit.
+    # A region to keep clear that does not read: the daemon's words.
     fill("time_limit_s", "")
+    fill("exclusions", "cone:0,0")
+    click_when_steady(wait, "#design-run")
+    wait.until(lambda d: "failed" in state())
+    assert "cone:0,0" in state(), state()
+
+    # Three pairs no higher than 70 deg, none within 20 deg of the normal (a camera there),
+    # in the daemon's own time limit.
+    fill("exclusions", "cone:0,0,20")
     click_when_steady(wait, "#design-run")
     wait.until(lambda d: "done" in state() or "failed" in state())
     assert "done" in state(), state()
     rows = _rows(browser)
     assert len(rows) == 3, rows
     _check_geometry(rows, 70.0)
+    # Outside the cone: every device more than 20 deg from the normal.
+    assert all(float(r[i]) > 20.0 - 0.05 for r in rows for i in (2, 5)), rows
     summary = browser.find_element(By.ID, "design-summary").text
     assert summary.startswith("optimized, 3 pairs"), summary
     assert "a best case, not a prediction for a new specimen" in summary, summary
@@ -108,6 +118,17 @@ def test_the_page_designs_pairs_and_evaluates_a_preset_with_its_rig_fragment(
     assert {d["name"] for d in fragment["sensors"]} == {r[4] for r in rows}, fragment
     merge = browser.find_element(By.ID, "design-merge").text
     assert "gonio rig apply-design gonio-design-optimized-3-pairs.toml rig.toml" in merge, merge
+
+    # Designed for colour at MA68: the summary says which pairs sit at its near-specular
+    # geometries.
+    fill("exclusions", "")
+    Select(form.find_element(By.NAME, "colour_instrument")).select_by_value("MA68")
+    click_when_steady(wait, "#design-run")
+    wait.until(lambda d: "done" in state() or "failed" in state())
+    assert "done" in state(), state()
+    summary = browser.find_element(By.ID, "design-summary").text
+    assert "colour: pairs 1-" in summary and "near-specular" in summary, summary
+    Select(form.find_element(By.NAME, "colour_instrument")).select_by_value("")
 
     # MA98, evaluated at the form's stage angles: its 19 pairs (V&F Table 1).
     Select(browser.find_element(By.ID, "design-preset")).select_by_value("MA98")
