@@ -16,7 +16,8 @@ function showError(err, from = "user") {
   // A refused key is said once, by the key prompt above (keyRefusedBy, with what to do):
   // this box repeated it under it in other words.
   if (err instanceof ApiError && (err.status === 401 || err.status === 403)) { showError(null); return; }
-  const text = err instanceof ApiError ? err.message : String(err);
+  // An Error's own words ("Error: " before them read as a crash to a lab).
+  const text = err instanceof Error ? err.message : String(err);
   box.textContent = text;
   box.hidden = false;
   messageFrom = from;
@@ -137,6 +138,30 @@ async function refreshRig() {
   banner.textContent = m.locked ? `Locked for maintenance${m.by ? ` by ${m.by}` : ""}${m.reason ? `: ${m.reason}` : ""}. Changes are refused.` : "";
 }
 
+function showScanAngle(deg, job) {
+  const chip = $("#stage-chip");
+  if (chip.className !== "chip") return;  // a fault or a lost rig says more than an angle
+  const specimen = ((deg % 360) + 360) % 360;
+  chip.textContent = `specimen at ${specimen.toFixed(1)}° (job ${job}'s last angle)`;
+  chip.title = `stage position ${deg.toFixed(2)}° when job ${job} measured its last angle`;
+}
+
+// The calibration the daemon applies to scans (GET /calibration), said under the form: the
+// lab learnt which one (its source and exposure) only when a scan was refused for it.
+async function refreshCalibration() {
+  const c = await getJSON("/calibration");
+  const line = $("#calibration-line");
+  if (!c.pairs?.length) {
+    line.textContent = "No calibration in effect: scans come out in sensor units, not 1/sr. " +
+      "Run a calibration job (Kind: calibration) with the white reference on the stage first.";
+    return;
+  }
+  const when = c.created ? `, measured ${c.created.replace("T", " ").replace(/\.\d+/, "").replace("+00:00", " UTC")}` : "";
+  const at = c.exposure_s != null ? ` at exposure ${c.exposure_s} s` : "";
+  line.textContent = `Calibration in effect: ${c.source}${at}${when}, ${counted(c.pairs.length, "pair")}. ` +
+    "A scan reads at its exposure; at another one it is refused (counts are not rescaled).";
+}
+
 // ------------------------------------------------------------------ queue
 const ACTIONS = {
   queued: ["cancel", "up", "down"],
@@ -197,7 +222,9 @@ function etaText(d = selectedDetail, id = selected) {
   // The whole job's time: measuring, then (when due) the basis build, then reconstruction,
   // each said, so the time is not read as done when measuring ends. Reconstruction's is an
   // estimate from the last scans' measured finishing (its source in the cell's tooltip).
-  if (d.time_left_s == null) return eta(d.eta_s) ? `${eta(d.eta_s)} measuring, then reconstruction` : "";
+  // A calibration computes its factors when measured, in a moment: no reconstruction follows.
+  const after = d.kind === "calibration" ? "computing the calibration" : "reconstruction";
+  if (d.time_left_s == null) return eta(d.eta_s) ? `${eta(d.eta_s)} measuring, then ${after}` : "";
   const parts = [`measuring ${eta(d.eta_s)}`];
   if (d.basis_build_s != null) parts.push(`basis build ≈ ${eta(d.basis_build_s)}`);
   parts.push(`reconstruction ≈ ${eta(d.reconstruction_s)}`);
@@ -339,13 +366,17 @@ function fillProgress(td, job) {
 
 function fillRow(tr, job) {
   tr.dataset.id = job.id;
+  // Reachable from the keyboard (Tab, then Enter opens it), as a click on the row is.
+  tr.tabIndex = 0;
+  tr.setAttribute("aria-label", `job ${job.id}, ${job.specimen}, ${job.state}: open`);
   tr.dataset.state = job.state;
   tr.classList.toggle("selected", job.id === selected);
   while (tr.children.length < 7) tr.append(document.createElement("td"));
   const td = [...tr.children];
   for (const [i, text] of [[0, job.id], [1, job.specimen]]) {
-    fillCell(td[i], [text], () => { td[i].textContent = text ?? ""; });
+    fillCell(td[i], [text], () => { td[i].textContent = text ?? ""; td[i].title = i === 1 ? text ?? "" : ""; });
   }
+  td[1].className = "specimen";
   // The priority under the kind (a column of its own pushed the row's buttons out of a narrow
   // window): for queued jobs, whose order it decides, and for any job whose priority is not 0.
   const priority = job.state === "queued" || job.priority !== 0 ? `priority ${job.priority}` : null;
@@ -380,6 +411,9 @@ function fillRow(tr, job) {
   td[5].className = "eta";
   // A queued job that is loading its basis before its first reading says so instead.
   if (job.state === "queued" && !(job.id === selected && etaText())) fillStart(td[5], job);
+  // A detail polled while the job held the rig is stale once the list says it has ended:
+  // finished rows went on reading "reconstructing ... taking longer than estimated".
+  else if (!HOLDING.includes(job.state)) fillEta(td[5], null, job.id);
   else if (job.id === selected) fillEta(td[5]); else fillEta(td[5], activeDetail, job.id);
   fillActions(td[6], ACTIONS[job.state] ?? []);
 }
@@ -445,6 +479,13 @@ function initQueue() {
     if (button) act(job, button.dataset.action);
     else select(job.id);
   });
+  $("#jobs").addEventListener("keydown", (e) => {
+    if ((e.key !== "Enter" && e.key !== " ") || !e.target.matches("tr[data-id]")) return;
+    const job = jobs.find((j) => `${j.id}` === e.target.dataset.id);
+    if (!job) return;
+    e.preventDefault();
+    select(job.id);
+  });
 }
 
 // Refreshes overlap (every job event asks for one): an older answer arriving after a newer
@@ -464,13 +505,24 @@ async function refreshJobs() {
 async function loadJobs(asked) {
   const listed = await getJSON("/jobs");
   if (asked !== jobsAsked) return;
+  const calibrations = (list) => list.filter((j) => j.kind === "calibration" && j.state === "completed").map((j) => j.id).join(",");
+  const recalibrated = calibrations(listed) !== calibrations(jobs);
   jobs = listed;
   keyAccepted();
+  if (recalibrated) guarded(refreshCalibration);
   if (selected !== null && jobs.some((j) => j.id === selected)) {
     const id = selected;
     const detail = await getJSON(`/jobs/${id}`);
     if (asked !== jobsAsked) return;
     if (selected === id) selectedDetail = detail;  // not another row's, clicked meanwhile
+  }
+  // A job removed (from this page, another tab or `gonio jobs remove`) leaves the panels:
+  // they went on showing its readings and result and offering its exports, and every
+  // control then answered "no job with id N".
+  if (selected !== null && !jobs.some((j) => j.id === selected)) forgetSelected(selected);
+  if (compareWith !== null && !jobs.some((j) => j.id === compareWith)) {
+    $("#compare").value = "";
+    await setCompare(null);
   }
   clearStaleNotes();
   // The selected job changed state (e.g. completed): its rotation plot changes kind.
@@ -818,6 +870,14 @@ function meanCurve(channels) {
 
 async function refreshPolar() {
   if (shownResult === null) return;
+  // Said in the panel's words: the daemon's refusal named its query parameter
+  // ("theta_i: Input should be less than or equal to 85").
+  for (const [sel, what, lo, hi] of [["#polar-ti", "incidence θi", 0, 85], ["#polar-pi", "azimuth φi", -360, 360]]) {
+    const v = $(sel).value;
+    if (v.trim() === "" || !Number.isFinite(Number(v)) || Number(v) < lo || Number(v) > hi) {
+      throw new Error(`Polar plots: enter the ${what} as a number from ${lo} to ${hi} degrees.`);
+    }
+  }
   const id = shownResult, other = compareWith;
   const [mine, theirs] = await Promise.all([polarCurves(id), other !== null ? polarCurves(other) : null]);
   if (id !== shownResult) return;
@@ -863,6 +923,22 @@ async function setCompare(id) {
   await Promise.all([refreshRender(), refreshPolar()]);
 }
 
+// The panels of a job that is gone, emptied and saying so; the queue then selects another.
+function forgetSelected(id) {
+  selected = null; selectedDetail = null; selectedState = null; shownResult = null;
+  $("#result-job").textContent = "";
+  $("#result-body").hidden = true;
+  $("#compare-fit").hidden = true;
+  const state = $("#result-state");
+  state.textContent = `Job ${id} was removed: its readings and result are no longer served.`;
+  state.hidden = false;
+  state.className = "muted";
+  $("#live-job").textContent = "";
+  $("#live-rule").textContent = "";
+  plotRotation($("#readings-plot"), [], "");
+  $("#readings-caption").textContent = `Job ${id} was removed.`;
+}
+
 function select(id) {
   if (selected !== id) {
     // The job holding the rig has its detail already (its row's ETA): clicking its row kept
@@ -892,7 +968,10 @@ function readPlan() {
     // Left empty: "unnamed", the name exports give a scan without one (gonio scan does the
     // same; a calibration: "white reference", as gonio serve --sim names its own); the
     // field's old prefilled "specimen" was listed as such and exported as unnamed.
-    specimen: String(f.get("specimen") ?? "").trim() || (kind === "calibration" ? "white reference" : "unnamed"),
+    // A calibration reads the white reference, not the specimen: the field (hidden for
+    // it) would have listed it under the last scan's name while the daemon called it
+    // "white reference".
+    specimen: kind === "calibration" ? "white reference" : String(f.get("specimen") ?? "").trim() || "unnamed",
     exposure: { exposure_s: Number(f.get("exposure_s")), averages: Number(f.get("averages")) },
   };
   if (kind === "adaptive") {
@@ -1063,11 +1142,14 @@ function initForm() {
 
 // ------------------------------------------------------------------ start
 async function refreshAll() {
-  await guarded(async () => { await refreshRig(); await refreshJobs(); });
+  await guarded(async () => { await refreshRig(); await refreshJobs(); await refreshCalibration(); });
 }
 
 function onEvent(ev) {
   scheduleRefresh();
+  // Each angle measured says where the specimen stood: the chip follows the scan between
+  // the rig's slow polls (it read "specimen at 22.9° moving" while the stage went to 155°).
+  if (ev.type === "progress" && typeof ev.data?.actual_deg === "number") showScanAngle(ev.data.actual_deg, ev.job_id);
   if (ev.job_id !== null && ev.job_id === selected) scheduleReadings();
   if (["maintenance", "rig", "queue_held", "queue_released"].includes(ev.type)) guarded(refreshRig);
 }
@@ -1112,6 +1194,14 @@ window.addEventListener("DOMContentLoaded", async () => {
   $("#compare").addEventListener("change", (e) => guarded(() => setCompare(e.target.value ? Number(e.target.value) : null), true));
   setInterval(() => guarded(pollSelected), 1000);
   setInterval(() => guarded(pollActive), 1000);
+  // Reconstruction sends no events, so a queued job's "starts in about 7 s" stood still
+  // while the job ahead finished: the list is read again while one holds the rig and a
+  // queued job has an estimated start.
+  setInterval(() => {
+    if (readsRefused()) return;
+    const waiting = jobs.some((j) => j.state === "queued" && j.starts_in_s != null);
+    if (waiting && jobs.some((j) => HOLDING.includes(j.state))) scheduleRefresh();
+  }, 2000);
   await refreshAll();
   restartEvents();
   // Stage position changes without events while idle; a slow poll keeps the chip honest.

@@ -198,22 +198,25 @@ def test_start_a_scan_from_the_page_and_see_the_result(daemon: Daemon, browser: 
     form = browser.find_element(By.ID, "scan-form")
     # Only the chosen plan kind's fields show.
     kind = Select(form.find_element(By.NAME, "kind"))
+    # (A calibration reads the white reference: no specimen name; it carried the last
+    # scan's into the queue while the daemon called the job "white reference".)
     shown = {
-        "uniform": {"rotations", "span_deg"},
-        "adaptive": {"initial_rotations", "rule", "min_gain", "max_rotations", "span_deg"},
+        "uniform": {"specimen", "rotations", "span_deg"},
+        "adaptive": {"specimen", "initial_rotations", "rule", "min_gain", "max_rotations",
+                     "span_deg"},
         "calibration": {"rotations", "reference_albedo"},
     }
     for value, visible in shown.items():
         kind.select_by_value(value)
-        for name in ("rotations", "initial_rotations", "rule", "min_gain", "threshold",
-                     "max_rotations", "reference_albedo", "span_deg"):
+        for name in ("specimen", "rotations", "initial_rotations", "rule", "min_gain",
+                     "threshold", "max_rotations", "reference_albedo", "span_deg"):
             assert form.find_element(By.NAME, name).is_displayed() == (name in visible), \
                 (value, name)
 
+    kind.select_by_value("uniform")
     specimen = form.find_element(By.NAME, "specimen")
     specimen.clear()
     specimen.send_keys("browser sample")
-    kind.select_by_value("uniform")
     for name, value in (("rotations", "6"), ("exposure_s", "0.005")):
         field = form.find_element(By.NAME, name)
         field.clear()
