@@ -79,6 +79,10 @@ log = logging.getLogger("gonio.engine")
 
 _T = TypeVar("_T")
 
+PAUSE_ASKED_EVENT = "pause_asked"
+"""Event type: a pause was asked of the job (``{"immediate": bool}``); a job resumed after a
+restart with one later than its last state change comes back paused."""
+
 STAGE_REFERENCE_EVENT = "stage_reference"
 """Event type: whether the stage was homed as the job started, and where it stood
 (``{"homed": bool, "position_deg": float}``); :meth:`ScanEngine._check_stage_reference`
@@ -354,6 +358,11 @@ class ScanEngine:
             self._set_state(JobState.RUNNING)
         elif self.state is JobState.PAUSED:
             self._pause = True  # restored after a restart: wait for an explicit resume
+        elif self._pause_pending():
+            # A pause asked and answered before the daemon stopped, its checkpoint not yet
+            # reached: the job comes back paused, not measuring.
+            self._pause = True
+            self._set_state(JobState.PAUSED, note="paused as asked before the restart")
         elif self.state is JobState.SUSPENDED:
             self._set_state(JobState.RUNNING, note="resumed after restart")
         try:
@@ -386,6 +395,17 @@ class ScanEngine:
             raise
         await self._cleanup()
         return self.state
+
+    def _pause_pending(self) -> bool:
+        """A resumed running or suspended job whose last ``pause_asked`` event comes after
+        its last state change: the pause was asked, answered, and not yet reached."""
+        if self.state not in (JobState.RUNNING, JobState.SUSPENDED):
+            return False
+        asked = self.store.last_event(self.job_id, PAUSE_ASKED_EVENT)
+        if asked is None:
+            return False
+        changed = self.store.last_event(self.job_id, "state")
+        return changed is None or asked.seq > changed.seq
 
     async def _connect_rig(self) -> None:
         """Connect the rig (when the engine was given ``connect``), with the same fault

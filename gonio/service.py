@@ -43,6 +43,7 @@ from gonio.calibration import (
     uncalibrated_warning,
 )
 from gonio.diskspace import DiskFull, disk_full_message, is_disk_full, low_space
+from gonio.engine import PAUSE_ASKED_EVENT
 from gonio.engine_loop import EngineLoop
 from gonio.event_hub import EventHub
 from gonio.finishing import rebuild_hint
@@ -972,6 +973,10 @@ class GonioService:
             raise Conflict(
                 f"job {job_id} is not being measured right now; it cannot be paused"
             )
+        # Kept, so that a restart before the checkpoint does not forget it: the job came
+        # back running, though "pause asked" was answered (the lab may reach for the
+        # specimen); the engine of the resumed job reads it (PAUSE_ASKED_EVENT).
+        self.store.append_event(job_id, PAUSE_ASKED_EVENT, {"immediate": immediate})
         return JobInfo.from_row(self._row(job_id))
 
     def resume(self, job_id: int) -> JobInfo:

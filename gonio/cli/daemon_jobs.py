@@ -379,7 +379,8 @@ def _queue_action(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(answer))
     elif args.action == "halt":
-        print(f"halted: the running job stopped where it stood and the queue is held; "
+        print(f"halted: a job under way stopped where it stood (there may have been none) "
+              f"and the queue is held; "
               f"'gonio jobs --daemon {args.daemon} release' lets queued jobs start again")
     else:
         print("released: queued jobs start again")
@@ -503,7 +504,9 @@ def jobs_through_daemon(args: argparse.Namespace) -> int:
             _say_start_refusals(client)
     elif args.action == "pause":
         print(f"job {job}: pause asked (state {state}; it stops at the end of the angle under "
-              f"way, lights off; 'gonio jobs --daemon {args.daemon} resume {job}' goes on)")
+              f"way, lights off, and stays paused across a restart of the daemon; asked "
+              f"during its last angle, it has nothing left to measure and goes on to finish; "
+              f"'gonio jobs --daemon {args.daemon} resume {job}' goes on)")
     elif args.action == "resume":
         print(f"job {job} resumed (state {state})")
     elif args.action == "abort":

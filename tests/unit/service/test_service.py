@@ -117,6 +117,52 @@ def test_pause_resume_abort_through_the_service(tmp_path: Path) -> None:
     assert not rig.any_light_on()
 
 
+def test_a_pause_asked_before_a_restart_holds_after_it(tmp_path: Path) -> None:
+    """"pause asked" was answered, then the daemon stopped before the angle under way ended:
+    the restarted daemon resumed the job measuring, though the lab may have reached for the
+    specimen. The pause is kept (a pause_asked event): the job comes back paused, reads
+    nothing until resumed, then completes."""
+    slow = MemRig(speed_dps=20.0)  # an angle's move of 18 deg takes about a second
+    svc = GonioService(JobStore(tmp_path / "jobs.sqlite"), slow, data_dir=tmp_path / "d")
+    plan = UniformPlan(rotations=10, exposure=ExposureSettings(exposure_s=0.01,
+                                                               light_settle_s=0))
+
+    async def first() -> int:
+        await svc.start()
+        info = svc.submit(JobRequest(plan=plan))
+        async for ev in svc.subscribe(0, job_id=info.id):
+            if ev.type == "progress":
+                break
+        svc.pause(info.id)
+        await svc.stop()  # before the next checkpoint: the job stays active
+        return info.id
+
+    job = asyncio.run(first())
+    assert svc.get_job(job).state is JobState.RUNNING
+    done = svc.get_job(job).done_angles
+    assert done < 10
+    again = GonioService(JobStore(tmp_path / "jobs.sqlite"), MemRig(speed_dps=3600.0),
+                         data_dir=tmp_path / "d")
+
+    async def second() -> None:
+        await again.start()
+        async with asyncio.timeout(60):  # a job that never pauses fails here, not hangs
+            async for ev in again.subscribe(0, job_id=job):
+                if ev.type == "state" and ev.data["state"] == "paused":
+                    break
+        await asyncio.sleep(0.5)  # time for angles, were it measuring
+        assert again.get_job(job).state is JobState.PAUSED
+        assert again.get_job(job).done_angles == done
+        again.resume(job)
+        async for ev in again.subscribe(0, job_id=job):
+            if ev.type == "state" and ev.data["state"] in ("completed", "failed"):
+                break
+        await again.stop()
+
+    asyncio.run(second())
+    assert again.get_job(job).state is JobState.COMPLETED, again.get_job(job).reason
+
+
 def test_status_snapshot_and_readings_while_measuring(tmp_path: Path) -> None:
     rig, svc = _service(tmp_path)
     plan = UniformPlan(rotations=20, exposure=ExposureSettings(exposure_s=0.01, light_settle_s=0))
