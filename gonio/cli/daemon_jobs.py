@@ -63,8 +63,10 @@ def scan_through_daemon(args: argparse.Namespace, plan: Any) -> int:
             print(json.dumps(answer, indent=2) if args.json else dry_run_summary(
                 DryRun.model_validate(answer), plan, str(rig.get("name", "rig"))))
             return 0
-        if args.json:
-            raise UsageError("--json goes with --dry-run")
+        if args.json and not args.no_wait:
+            raise UsageError("--json goes with --dry-run or --no-wait (a followed scan prints "
+                             "its summary; 'gonio jobs --daemon URL show ID --json' gives the "
+                             "job as JSON)")
         # The plan's warnings (the daemon records them in the job's events, which this command
         # does not follow), said before it is queued; a daemon without them sends none.
         checked = client.request("POST", "/api/v1/jobs/dry-run", json=body)
@@ -78,6 +80,11 @@ def scan_through_daemon(args: argparse.Namespace, plan: Any) -> int:
                 raise UsageError(f"{exc} (here: --accept-uncalibrated)") from None
             raise
         job_id = int(job["id"])
+        if args.no_wait and args.json:
+            # A script queueing jobs gets the daemon's answer (the job's row: its id, state,
+            # queue place), not a sentence to parse for the id.
+            print(json.dumps(job))
+            return 0
         if args.no_wait:
             out = args.output or Path(_suggested_output(job_id, job.get("specimen")))
             print(f"job {job_id} queued on {client.url}; follow it and fetch its result "

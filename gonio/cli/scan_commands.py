@@ -133,7 +133,8 @@ def register(subparsers: Any) -> None:
                    help="job store (SQLite; default DATA_DIR/gonio.sqlite)")
     p.add_argument("--dry-run", action="store_true",
                    help="print the plan's angles, readings and duration; nothing moves")
-    p.add_argument("--json", action="store_true", help="with --dry-run: the full plan as JSON")
+    p.add_argument("--json", action="store_true", help="with --dry-run: the full plan as "
+                   "JSON; with --daemon --no-wait: the queued job as JSON")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--no-export-fits", action="store_true",
                    help="finish without the export fits (several seconds of CPU sooner); "

@@ -103,6 +103,25 @@ def test_scan_through_the_daemon_refuses_bad_requests(
     assert not out.exists()
 
 
+def test_scan_through_the_daemon_no_wait_json_gives_the_job(
+    daemon: Daemon, tmp_path: Path, capsys: pytest.CaptureFixture[str], no_export_fits: None
+) -> None:
+    """A script queueing jobs had to parse "job 13 queued on ..." for the id ('--json goes
+    with --dry-run'); with --no-wait --json it gets the daemon's answer, the job's row."""
+    code = main(["scan", "--daemon", daemon.url, "--api-key", daemon.key, "--no-wait",
+                 "--json", "--rotations", "2", "--specimen", "scripted"])
+    assert code == 0
+    row = json.loads(capsys.readouterr().out)
+    with daemon.client() as c:
+        shown = c.get(f"/api/v1/jobs/{row['id']}").json()
+    assert shown["specimen"] == row["specimen"] == "scripted", (shown, row)
+    # Followed (no --no-wait), the scan prints its summary: --json is refused, saying why.
+    code = main(["scan", "--daemon", daemon.url, "--api-key", daemon.key, "--json",
+                 "--rotations", "2", "-o", str(tmp_path / "x.h5")])
+    assert code == 2
+    assert "--json goes with --dry-run or --no-wait" in capsys.readouterr().err
+
+
 def test_jobs_through_the_daemon_reorder_cancel_and_abort(
     daemon: Daemon, tmp_path: Path, capsys: pytest.CaptureFixture[str], no_export_fits: None
 ) -> None:
