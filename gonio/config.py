@@ -135,9 +135,12 @@ class NumbersNotText(BaseModel):
 
 class _Strict(NumbersNotText):
     """Base of all config sections: unknown keys are errors (they are almost always typos),
-    and so is a number written as text (:class:`NumbersNotText`)."""
+    and so is a number written as text (:class:`NumbersNotText`), and an infinite or
+    not-a-number value (TOML has ``inf`` and ``nan``: ``speed_dps = inf`` passed "> 0" and was
+    refused later by the driver without the file's name; ``move_timeout_s = inf`` was taken)."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True, populate_by_name=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, populate_by_name=True,
+                              allow_inf_nan=False)
 
 
 # --------------------------------------------------------------------------- stage

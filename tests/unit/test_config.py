@@ -263,3 +263,17 @@ def test_a_daemon_config_given_as_the_rig_config_says_so() -> None:
     assert text.startswith("daemon.example.toml: a daemon config") and "not a rig config" in text
     assert "--config" in text and "rig_config" in text, text
     assert "unknown key" not in text and len(text.splitlines()) == 1, text
+
+
+
+@pytest.mark.parametrize("key", ["speed_dps", "accel_dps2", "move_timeout_s"])
+@pytest.mark.parametrize("bad", ["inf", "nan"])
+def test_an_infinite_or_nan_number_is_refused_naming_the_file_and_key(
+        example: dict, key: str, bad: str) -> None:
+    """TOML writes inf and nan: 'speed_dps = inf' passed its '> 0' and was refused later by
+    the driver without the file's name ('stage: accel_dps2 must be > 0, got inf'), and
+    'move_timeout_s = inf' was taken, a move that never times out."""
+    data = copy.deepcopy(example)
+    data["stage"][key] = tomllib.loads(f"x = {bad}")["x"]  # the TOML literal, as written
+    said = _error(data)
+    assert "rig.toml" in said and f"stage.{key}" in said, said
