@@ -129,6 +129,13 @@ def test_simulate_then_reconstruct(
                  "--preview", str(png), "-o", str(out)]) == 0
     text = capsys.readouterr().out
     assert "K=8 n=8 r=12" in text and "predicted log_rmse" in text
+    # Its reliability in the figures the result's own words give (it said "3 of 5").
+    import re
+
+    from gonio.export.metadata import LOG_RMSE_MEANING
+
+    figure = re.search(r"\d+ of \d+", text)
+    assert figure is not None and figure.group() in LOG_RMSE_MEANING, text
     # The upper end of the estimate's interval, both printed to 3 decimals.
     assert len(made) == 1
     _check_upper_end(text, made[0], digits=3)
