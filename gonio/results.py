@@ -75,6 +75,18 @@ class ResultFileError(ValueError):
     """A result file is missing, not a gonio result, or of an unknown version."""
 
 
+DAMAGED = " is an HDF5 file but damaged"
+"""The words of :class:`ResultFileError` for an HDF5 file that cannot be read whole (cut
+short in a copy or by a full disk), after the file's name: a caller that knows the job adds
+how to write it again (the daemon names the job's rebuild command), the command line what
+to do (:data:`DAMAGED_ADVICE`)."""
+
+DAMAGED_ADVICE = (
+    "if it is a copy, copy it again from the daemon's data directory (results/job-N.h5) or "
+    "the page's 'Download HDF5 result'; if that one is damaged too, 'gonio jobs rebuild N "
+    "--db DATA_DIR' writes it again from the job's stored readings")
+
+
 class OffGridAngle(ValueError):
     """A query of a result at an angle that is not on the result's 5 degree grid; the message
     says which angles are."""
@@ -387,7 +399,7 @@ def _unopenable(p: Path, exc: OSError) -> str:
     except OSError:
         return f"{p} cannot be read ({exc})"
     if signed:
-        return f"{p} is an HDF5 file but damaged ({exc})"
+        return f"{p}{DAMAGED} ({exc})"
     if head.startswith(b"PK\x03\x04"):
         return (f"{p} is a .npz archive (a gonio table or samples file), not a scan's result "
                 f"file; {_WHAT_A_RESULT_IS}")

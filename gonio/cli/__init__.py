@@ -132,6 +132,16 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
     return parser
 
 
+def _with_advice(message: object) -> str:
+    """An error's words, with what to do about a damaged result file, whichever command read
+    it (export, colour and reconstruct wrap the reader's error): as the daemon's answer for
+    the same file says it."""
+    from gonio.results import DAMAGED, DAMAGED_ADVICE
+
+    text = str(message)
+    return f"{text}; {DAMAGED_ADVICE}" if DAMAGED in text else text
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     # Before the parser loads NumPy: BLAS on one thread (why: gonio.brdf.reconstruction.blas).
     from gonio.brdf.reconstruction.blas import prefer_one_thread
@@ -153,7 +163,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         sys.stdout.flush()  # a closed pipe shows up here, inside the handlers below
         return code
     except UsageError as exc:
-        print(f"gonio {args.command}: error: {exc}", file=sys.stderr)
+        print(f"gonio {args.command}: error: {_with_advice(exc)}", file=sys.stderr)
         return 2
     except BrokenPipeError:
         # The reader went away (``gonio jobs show 2 | head``): not an error of ours, and
@@ -171,7 +181,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         # written for the user; anything else is a bug and keeps its traceback. Core errors
         # that advise a setting name it as the core does; here it is the flag.
         message = exc.advise(CORE_SETTING_FLAGS) if isinstance(exc, AdvisedError) else exc
-        print(f"gonio {args.command}: error: {message}", file=sys.stderr)
+        print(f"gonio {args.command}: error: {_with_advice(message)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt as exc:
         print("interrupted", file=sys.stderr)

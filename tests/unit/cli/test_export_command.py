@@ -288,6 +288,26 @@ def test_a_table_file_is_told_apart_from_a_result(tmp_path: Path,
     assert "result file" in err and not (tmp_path / "t.gltf").exists()
 
 
+def test_a_damaged_result_file_says_what_to_do(result: Path, tmp_path: Path,
+                                               capsys: pytest.CaptureFixture[str]) -> None:
+    """A result cut short (a copy, a full disk) was reported as "damaged" with nothing to do;
+    the daemon's answer for the same file names the rebuild. Now the command line says to
+    copy it again or rebuild it from the stored readings."""
+    cut = tmp_path / "cut.h5"
+    cut.write_bytes(result.read_bytes()[:4096])
+    assert main(["export", str(cut), "-f", "gltf", "-o", str(tmp_path / "t.gltf")]) == 2
+    err = capsys.readouterr().err
+    assert "cut.h5 is an HDF5 file but damaged" in err, err
+    assert "copy it again" in err and "gonio jobs rebuild N --db DATA_DIR" in err, err
+    assert not (tmp_path / "t.gltf").exists()
+    # The same words from reconstruct and colour, which read the file their own ways.
+    for argv in (["reconstruct", str(cut), "-o", str(tmp_path / "r.npz")],
+                 ["colour", str(cut)]):
+        assert main(argv) == 2
+        err = capsys.readouterr().err
+        assert "is an HDF5 file but damaged" in err and "copy it again" in err, (argv, err)
+
+
 @pytest.mark.parametrize(("lost", "words"), [
     (0.0001, "(little lost: the result is nearly isotropic, log RMSE 0.000 to its average)"),
     (0.017, "(anisotropy lost: log RMSE 0.017)"),
