@@ -64,6 +64,7 @@ from gonio.brdf.models.principled import Principled
 from gonio.brdf.tables.table import BRDFTable
 from gonio.calibration import CalibratedScan
 from gonio.store import ReadingRow
+from gonio.wording import DAMAGED
 
 FORMAT_NAME = "gonio-result"
 FORMAT_VERSION = 1
@@ -75,16 +76,6 @@ class ResultFileError(ValueError):
     """A result file is missing, not a gonio result, or of an unknown version."""
 
 
-DAMAGED = " is an HDF5 file but damaged"
-"""The words of :class:`ResultFileError` for an HDF5 file that cannot be read whole (cut
-short in a copy or by a full disk), after the file's name: a caller that knows the job adds
-how to write it again (the daemon names the job's rebuild command), the command line what
-to do (:data:`DAMAGED_ADVICE`)."""
-
-DAMAGED_ADVICE = (
-    "if it is a copy, copy it again from the daemon's data directory (results/job-N.h5) or "
-    "the page's 'Download HDF5 result'; if that one is damaged too, 'gonio jobs rebuild N "
-    "--db DATA_DIR' writes it again from the job's stored readings")
 
 
 class OffGridAngle(ValueError):

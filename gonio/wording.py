@@ -25,3 +25,16 @@ def counted(n: int, noun: str, plural: str | None = None) -> str:
         ``"1 stage angle"``, ``"0 stage angles"``, ``"12 pairs"``.
     """
     return f"{n} {noun if n == 1 else plural or noun + 's'}"
+
+
+DAMAGED = " is an HDF5 file but damaged"
+"""The words of :class:`gonio.results.ResultFileError` for an HDF5 file that cannot be read
+whole (cut short in a copy or by a full disk), after the file's name: a caller that knows
+the job adds how to write it again (the daemon names the job's rebuild command), the command
+line what to do (:data:`DAMAGED_ADVICE`). Here, not in gonio.results, so that the command
+line's error handler reads them without loading h5py and numpy."""
+
+DAMAGED_ADVICE = (
+    "if it is a copy, copy it again from the daemon's data directory (results/job-N.h5) or "
+    "the page's 'Download HDF5 result'; if that one is damaged too, 'gonio jobs rebuild N "
+    "--db DATA_DIR' writes it again from the job's stored readings")

@@ -136,7 +136,7 @@ def _with_advice(message: object) -> str:
     """An error's words, with what to do about a damaged result file, whichever command read
     it (export, colour and reconstruct wrap the reader's error): as the daemon's answer for
     the same file says it."""
-    from gonio.results import DAMAGED, DAMAGED_ADVICE
+    from gonio.wording import DAMAGED, DAMAGED_ADVICE
 
     text = str(message)
     return f"{text}; {DAMAGED_ADVICE}" if DAMAGED in text else text
