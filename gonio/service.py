@@ -803,6 +803,9 @@ class GonioService:
         bound = False
         source = ""
         build_due = self.basis.build_needed()
+        # An auto-arc scan whose test may call its specimen asymmetric waits, then, for that
+        # basis to be built (once): a bound counts it ("starts within 17 s" started after 65).
+        asym_due = self.basis.asymmetric_build_needed()
         full = self.disk_full
         if wait is not None:
             free_s, source = None, wait
@@ -833,6 +836,10 @@ class GonioService:
                 if d.eta_max_s is not None and d.eta_s is not None and d.eta_max_s > d.eta_s:
                     left += d.eta_max_s - d.eta_s
                     bound = True
+                if (branch := self._asymmetric_branch_s(row)) is not None:
+                    left += branch
+                    bound = True
+                    asym_due = False
                 free_s = (free_s or 0.0) + left
                 source = f"job {row.id}'s time left"
         finishing = self._finishing_estimate().seconds
@@ -848,6 +855,9 @@ class GonioService:
                 if build_due:
                     seconds += BASIS_BUILD_S
                     build_due = False
+                if asym_due and row.plan.get("arc") == "auto":
+                    seconds += self.basis.asymmetric_build_s() or 0.0
+                    asym_due = False
             runs.append(QueuedRun(row.id, seconds, is_bound))
         return {run.job_id: est for run, est in
                 zip(runs, start_estimates(free_s, bound, source, runs), strict=True)}
@@ -940,6 +950,19 @@ class GonioService:
             basis_build_s=build, finishing_for_s=finishing_for,
             start=self._start_estimates(wait).get(job_id) if queued else None,
             start_refusal=self.start_refusals().get(job_id) if queued else None)
+
+    def _asymmetric_branch_s(self, row: JobRow) -> float | None:
+        """For a queue bound: seconds an auto-arc job holding the rig may still wait for the
+        asymmetric basis, when its test has not spoken yet and that basis is not built
+        (after the test, its time left holds the build, :meth:`_asymmetric_build_due`);
+        None otherwise."""
+        from gonio.plans.arc import ARC_TEST_EVENT
+
+        if (row.kind == "calibration" or row.plan.get("arc") != "auto"
+                or not self.basis.asymmetric_build_needed()
+                or self.store.last_event(row.id, ARC_TEST_EVENT) is not None):
+            return None
+        return self.basis.asymmetric_build_s() or 0.0
 
     def _asymmetric_build_due(self, row: JobRow) -> float | None:
         """Seconds ``row``'s finishing will wait for the basis for specimens without twofold
