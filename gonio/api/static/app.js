@@ -1185,6 +1185,13 @@ window.addEventListener("DOMContentLoaded", async () => {
   initKey();
   initForm();
   initQueue();
+  // The page had "release queue" after a halt but no halt: a lab reaching for a stage that
+  // moved wrongly had to find the CLI. No question first: it is an emergency stop.
+  $("#halt-rig").addEventListener("click", () => guarded(async () => {
+    await send("POST", "/rig/halt");
+    await refreshRig();
+    await refreshJobs();
+  }, true));
   $("#release-queue").addEventListener("click", () => guarded(async () => {
     await send("POST", "/rig/release");
     await refreshRig();

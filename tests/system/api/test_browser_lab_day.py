@@ -4,6 +4,7 @@ simulated rig (tests/system/api/conftest.py), as tests/system/api/test_browser.p
 
 from __future__ import annotations
 
+import time
 from collections.abc import Iterator
 from typing import Any
 
@@ -620,13 +621,18 @@ def test_a_halted_queue_says_so_on_the_queued_row_and_is_released_from_the_page(
 ) -> None:
     """After an emergency halt the queue is held: a queued job's row said only "queued", and
     nothing on the page could release it (the stage chip said "queue held", the API alone
-    released). The row now says why (the API's ``waiting``), and "release queue" lets it run."""
+    released). The row now says why (the API's ``waiting``), and "release queue" lets it run.
+    The halt itself is the page's too (it had none: the CLI or the API alone halted)."""
 
     from selenium.webdriver.common.by import By
 
     wait = open_live(browser, daemon, 120)
+    click_when_steady(wait, "#halt-rig")
     with daemon.client() as c:
-        assert c.post("/api/v1/rig/halt").status_code == 200
+        deadline = time.monotonic() + 60
+        while "emergency halt" not in str(c.get("/api/v1/rig").json()["queue_held"]):
+            assert time.monotonic() < deadline, "the page's halt did not hold the queue"
+            time.sleep(0.1)
         job = int(c.post("/api/v1/jobs", params={"accept_uncalibrated": "true"},
                          json={"plan": {**PLAN, "specimen": "after halt"}}).json()["id"])
     try:
