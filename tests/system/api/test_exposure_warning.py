@@ -43,6 +43,15 @@ def held_queue(c: httpx.Client) -> Iterator[None]:
         assert c.post("/api/v1/rig/release").status_code == 200
 
 
+def queue_scan(c: httpx.Client, exposure_s: float, priority: int = 0) -> dict[str, Any]:
+    """Queue a two-angle scan at ``exposure_s`` (the caller holds the queue); its row."""
+    r = c.post("/api/v1/jobs", json={"plan": {
+        "kind": "uniform", "rotations": 2, "exposure": {"exposure_s": exposure_s}},
+        "priority": priority})
+    assert r.status_code == 201, r.text
+    return dict(r.json())
+
+
 def refused_alike(c: httpx.Client, plan: dict[str, Any], expected: str) -> str:
     """Check plan warns of ``plan``'s exposure with ``expected`` in its words and submission
     refuses it (422) with the same words (one decision makes both); the warning."""
@@ -329,15 +338,10 @@ def test_a_queued_scan_its_calibration_was_cancelled_from_says_it_will_be_refuse
     0.02 s before it again clears it."""
     with daemon.client() as c, held_queue(c):
         cal = queue_calibration(c, 0.02)
-        r = c.post("/api/v1/jobs", json={"plan": {
-            "kind": "uniform", "rotations": 2, "exposure": {"exposure_s": 0.02}}})
-        assert r.status_code == 201, r.text
-        scan = r.json()["id"]
-        assert r.json()["start_refusal"] is None
-        r = c.post("/api/v1/jobs", json={"plan": {
-            "kind": "uniform", "rotations": 2, "exposure": {"exposure_s": 0.01}}, "priority": 5})
-        assert r.status_code == 201, r.text
-        fine = r.json()["id"]
+        row = queue_scan(c, 0.02)
+        scan = row["id"]
+        assert row["start_refusal"] is None
+        fine = queue_scan(c, 0.01, priority=5)["id"]
 
         def refusals() -> dict[int, str | None]:
             return {j["id"]: j["start_refusal"] for j in c.get("/api/v1/jobs").json()
@@ -373,15 +377,9 @@ def test_gonio_jobs_cancel_and_remove_say_which_queued_scan_would_now_be_refused
     base = ["jobs", "--daemon", daemon.url, "--api-key", daemon.key]
     with daemon.client() as c, held_queue(c):
         cal = queue_calibration(c, 0.02)
-        r = c.post("/api/v1/jobs", json={"plan": {
-            "kind": "uniform", "rotations": 2, "exposure": {"exposure_s": 0.02}}})
-        assert r.status_code == 201, r.text
-        scan = r.json()["id"]
-        r = c.post("/api/v1/jobs", json={"plan": {
-            "kind": "uniform", "rotations": 2, "exposure": {"exposure_s": 0.01}},
-            "priority": 5})  # ahead of the 0.02 s calibration, under today's 0.01 s one
-        assert r.status_code == 201, r.text
-        other = r.json()["id"]
+        scan = queue_scan(c, 0.02)["id"]
+        # Ahead of the 0.02 s calibration, under today's 0.01 s one.
+        other = queue_scan(c, 0.01, priority=5)["id"]
         capsys.readouterr()
         # The 0.01 s scan cancelled: the 0.02 s one still starts under its calibration.
         assert main([*base, "cancel", str(other)]) == 0

@@ -89,17 +89,24 @@ def test_actions_refused_with_clear_errors(tmp_path: Path) -> None:
     assert svc.list_jobs() == []
 
 
+async def _paused_after_an_angle(svc: GonioService, plan: UniformPlan) -> int:
+    """Start ``svc``, queue ``plan``, ask a pause once its first angle is measured; its id."""
+    await svc.start()
+    info = svc.submit(JobRequest(plan=plan))
+    async for ev in svc.subscribe(0, job_id=info.id):
+        if ev.type == "progress":
+            break
+    svc.pause(info.id)
+    return info.id
+
+
 def test_pause_resume_abort_through_the_service(tmp_path: Path) -> None:
     rig, svc = _service(tmp_path)
     plan = UniformPlan(rotations=20, exposure=ExposureSettings(exposure_s=0.01, light_settle_s=0))
 
     async def go() -> None:
-        await svc.start()
-        info = svc.submit(JobRequest(plan=plan))
-        async for ev in svc.subscribe(0, job_id=info.id):
-            if ev.type == "progress":
-                break
-        svc.pause(info.id)
+        info_id = await _paused_after_an_angle(svc, plan)
+        info = svc.get_job(info_id)
         async for ev in svc.subscribe(svc.seq - 1, job_id=info.id):
             if ev.data.get("state") == "paused":
                 break
@@ -128,14 +135,9 @@ def test_a_pause_asked_before_a_restart_holds_after_it(tmp_path: Path) -> None:
                                                                light_settle_s=0))
 
     async def first() -> int:
-        await svc.start()
-        info = svc.submit(JobRequest(plan=plan))
-        async for ev in svc.subscribe(0, job_id=info.id):
-            if ev.type == "progress":
-                break
-        svc.pause(info.id)
+        job = await _paused_after_an_angle(svc, plan)
         await svc.stop()  # before the next checkpoint: the job stays active
-        return info.id
+        return job
 
     job = asyncio.run(first())
     assert svc.get_job(job).state is JobState.RUNNING
