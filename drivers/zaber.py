@@ -454,8 +454,9 @@ class ZaberStage(_Stage):
             homed=not any(f in NO_REFERENCE_FLAGS for f in flags),
             faults=tuple(f for f in flags if f in FAULT_FLAGS),
             detail={"warnings": flags},
-            # A stepper's position is a count since power-up: a power cycle forgets it.
-            zero_lost_at_power_up=True,
+            # Its zero is its home sensor: homing again (the driver does it before a move
+            # when the device asks, WR/WH) finds the same zero after a power cycle.
+            zero_lost_at_power_up=False,
         )
 
     async def clear_faults(self) -> None:

@@ -404,6 +404,10 @@ class ScanEngine:
         asked = self.store.last_event(self.job_id, PAUSE_ASKED_EVENT)
         if asked is None:
             return False
+        job = self.store.get_job(self.job_id)
+        if (self.plan.kind != "adaptive" and self.plan.arc_mode() != "auto"
+                and job.total_angles and job.done_angles >= job.total_angles):
+            return False  # nothing left to measure: it goes on to finish, as said
         changed = self.store.last_event(self.job_id, "state")
         return changed is None or asked.seq > changed.seq
 
@@ -532,15 +536,18 @@ class ScanEngine:
             self._homed_at_start = bool(ref.data.get("homed")) if ref is not None else False
         if not self._homed_at_start or st.homed or not st.zero_lost_at_power_up:
             return
+        from gonio.wording import counted
+
         # From the store: on a resume the steps are not read yet while the rig connects.
         done = self.store.get_job(self.job_id).done_angles
         raise JobFailed(
             "the stage lost its zero during the job: it was homed when the job started and "
             "now reads not homed, so it was powered off or reset, and this stage's positions "
-            "after a power-up may be off by whole motor turns (a geared servo) or entirely "
-            f"(a stepper). The {done} angles measured before are kept in the job store, at "
-            "the angles they were measured at. Set the stage's zero again at the specimen's "
-            "reference mark ('gonio stage home', or the page's stage panel), then scan again")
+            "after a power-up may be off by whole motor turns (a geared servo). The readings "
+            f"of the {counted(done, 'angle')} measured before stay in the job store, at the "
+            "angles they were measured at. Move the stage to the specimen's reference mark "
+            "and set its zero there ('gonio stage --daemon URL move DEG', then 'home'; or "
+            "'--rig rig.toml' without a daemon), then scan again")
 
     def _load_dark(self) -> None:
         if self.plan.exposure.dark == "once":

@@ -105,10 +105,11 @@ class StageStatus:
 
     ``homed``: a zero was set since the stage last powered up. ``zero_lost_at_power_up``:
     a power cycle can move the zero itself, so a stage that was homed and reads not homed
-    again may now stand at other angles than its positions say (a stepper forgets its
-    position; a geared servo's absolute encoder keeps only the angle within one motor turn,
-    whole turns of ``360 / gear`` stage degrees are lost). False for a direct-drive servo,
-    whose zero (kept in its EEPROM) and one-turn encoder survive a power cycle.
+    again may now stand at other angles than its positions say (a geared servo's absolute
+    encoder keeps only the angle within one motor turn: whole turns of ``360 / gear`` stage
+    degrees are lost). False for a direct-drive servo, whose zero (kept in its EEPROM) and
+    one-turn encoder survive a power cycle, and for a stage homed on a sensor (a Zaber: homing
+    again finds the same zero).
     """
 
     position_deg: float

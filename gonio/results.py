@@ -76,8 +76,6 @@ class ResultFileError(ValueError):
     """A result file is missing, not a gonio result, or of an unknown version."""
 
 
-
-
 class OffGridAngle(ValueError):
     """A query of a result at an angle that is not on the result's 5 degree grid; the message
     says which angles are."""

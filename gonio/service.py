@@ -840,6 +840,8 @@ class GonioService:
                     left += branch
                     bound = True
                     asym_due = False
+                elif self._asymmetric_build_due(row) is not None:
+                    asym_due = False  # its time left holds the build (its test said so)
                 free_s = (free_s or 0.0) + left
                 source = f"job {row.id}'s time left"
         finishing = self._finishing_estimate().seconds

@@ -372,7 +372,11 @@ def _say_start_refusals(client: DaemonClient) -> None:
     a calibration at another exposure; the rows said so from then on, but the command that
     caused it said only "cancelled", and the scan failed "not started" overnight.
     """
-    for row in client.request("GET", "/api/v1/jobs"):
+    try:
+        rows = client.request("GET", "/api/v1/jobs")
+    except UsageError:  # refused or unreachable (DaemonRefused, DaemonUnreachable)
+        return  # the action itself was done; the daemon's rows say the rest
+    for row in rows if isinstance(rows, list) else []:
         if isinstance(row, dict) and row.get("start_refusal"):
             print(f"note: job {row['id']} {row['start_refusal']}", file=sys.stderr)
 

@@ -198,7 +198,8 @@ def test_a_servo_powered_off_mid_scan_loses_its_zero_only_when_geared(gear: floa
         return
     assert state is JobState.FAILED
     assert reason.startswith("the stage lost its zero during the job"), reason
-    assert "The 2 angles measured before are kept in the job store" in reason, reason
+    assert "The readings of the 2 angles measured before stay in the job store" in reason, \
+        reason
     assert {r.angle_index for r in readings} == {0, 1}
     # The premise, from the gearing alone: the servo (at 145 deg, or at 190 when the next
     # move was under way as the power went) now reads one motor turn short.

@@ -368,7 +368,7 @@ function fillRow(tr, job) {
   tr.dataset.id = job.id;
   // Reachable from the keyboard (Tab, then Enter opens it), as a click on the row is.
   tr.tabIndex = 0;
-  tr.setAttribute("aria-label", `job ${job.id}, ${job.specimen}, ${job.state}: open`);
+  tr.setAttribute("aria-label", `job ${job.id}, ${job.specimen ?? "unnamed"}, ${job.state}: open`);
   tr.dataset.state = job.state;
   tr.classList.toggle("selected", job.id === selected);
   while (tr.children.length < 7) tr.append(document.createElement("td"));
@@ -413,7 +413,7 @@ function fillRow(tr, job) {
   if (job.state === "queued" && !(job.id === selected && etaText())) fillStart(td[5], job);
   // A detail polled while the job held the rig is stale once the list says it has ended:
   // finished rows went on reading "reconstructing ... taking longer than estimated".
-  else if (!HOLDING.includes(job.state)) fillEta(td[5], null, job.id);
+  else if (job.state !== "queued" && !HOLDING.includes(job.state)) fillEta(td[5], null, job.id);
   else if (job.id === selected) fillEta(td[5]); else fillEta(td[5], activeDetail, job.id);
   fillActions(td[6], ACTIONS[job.state] ?? []);
 }

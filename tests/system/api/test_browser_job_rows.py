@@ -85,7 +85,7 @@ def test_rows_panels_and_calibration_line_tell_the_truth(
         ti.send_keys("95")
         browser.execute_script(
             "document.getElementById('polar-ti').dispatchEvent(new Event('change'))")
-        wait.until(lambda d: d.find_element(By.ID, "message").is_displayed())
+        wait.until(lambda d: text("#message").startswith("Polar plots"))
         said = text("#message")
         assert said.startswith("Polar plots: enter the incidence θi as a number from 0 to 85"), \
             said

@@ -265,9 +265,23 @@ def test_a_job_resumed_on_a_stage_that_lost_its_zero_fails_saying_so(
     assert state is JobState.FAILED
     reason = store.get_job(1).reason or ""
     assert reason.startswith("the stage lost its zero during the job"), reason
-    assert f"The {done} angles measured before are kept in the job store" in reason, reason
+    assert f"The readings of the {done} angles measured before stay in the job store" in reason, \
+        reason
     assert store.get_job(1).done_angles == done
     assert len(store.readings(1)) == 3 * done
+
+
+def test_a_pause_asked_during_the_last_angle_does_not_hold_a_measured_job() -> None:
+    """A pause asked (and kept, a pause_asked event) in a uniform job's last angle, the
+    daemon stopped before it began finishing: nothing is left to measure, so the job goes on
+    to finish, as the pause's answer says, instead of coming back paused with no angle."""
+    plan = UniformPlan(rotations=3, exposure=FAST)
+    rig, store, eng = _setup(plan)
+    assert asyncio.run(eng.run()) is JobState.RUNNING  # measured; finishing is next
+    store.append_event(1, "pause_asked", {"immediate": False})
+    again = ScanEngine(rig, store, 1, plan, RigDescription.from_rig(rig))
+    assert asyncio.run(asyncio.wait_for(again.run(), 30)) is JobState.RUNNING
+    assert store.get_job(1).done_angles == 3
 
 
 def test_adaptive_adds_rounds_until_converged() -> None:
