@@ -546,8 +546,8 @@ class ScanEngine:
             "after a power-up may be off by whole motor turns (a geared servo). The readings "
             f"of the {counted(done, 'angle')} measured before stay in the job store, at the "
             "angles they were measured at. Move the stage to the specimen's reference mark "
-            "and set its zero there ('gonio stage --daemon URL move DEG', then 'home'; or "
-            "'--rig rig.toml' without a daemon), then scan again")
+            "and set its zero there (the lab page's Stage panel, or 'gonio stage --daemon URL "
+            "move DEG', then 'home'; '--rig rig.toml' without a daemon), then scan again")
 
     def _load_dark(self) -> None:
         if self.plan.exposure.dark == "once":
