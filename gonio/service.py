@@ -836,7 +836,7 @@ class GonioService:
                 if d.eta_max_s is not None and d.eta_s is not None and d.eta_max_s > d.eta_s:
                     left += d.eta_max_s - d.eta_s
                     bound = True
-                if (branch := self._asymmetric_branch_s(row)) is not None:
+                if asym_due and (branch := self._asymmetric_branch_s(row)) is not None:
                     left += branch
                     bound = True
                     asym_due = False
@@ -954,14 +954,13 @@ class GonioService:
             start_refusal=self.start_refusals().get(job_id) if queued else None)
 
     def _asymmetric_branch_s(self, row: JobRow) -> float | None:
-        """For a queue bound: seconds an auto-arc job holding the rig may still wait for the
-        asymmetric basis, when its test has not spoken yet and that basis is not built
-        (after the test, its time left holds the build, :meth:`_asymmetric_build_due`);
-        None otherwise."""
+        """For a queue bound, when the asymmetric basis is not built (the caller knows):
+        seconds an auto-arc job holding the rig may still wait for it, its test not having
+        spoken yet (after the test, its time left holds the build,
+        :meth:`_asymmetric_build_due`); None otherwise."""
         from gonio.plans.arc import ARC_TEST_EVENT
 
         if (row.kind == "calibration" or row.plan.get("arc") != "auto"
-                or not self.basis.asymmetric_build_needed()
                 or self.store.last_event(row.id, ARC_TEST_EVENT) is not None):
             return None
         return self.basis.asymmetric_build_s() or 0.0

@@ -28,6 +28,10 @@ export class ApiError extends Error {
 // met it, so the page can ask for a key at once instead of showing an empty queue.
 export const AUTH_EVENT = "gonio:auth";
 
+// Each GET /rig answer the page reads (app.js, every 5 s and on rig events), announced with
+// the answer as its detail, so that other panels (the stage panel) need no poll of their own.
+export const RIG_EVENT = "gonio:rig";
+
 async function check(resp) {
   if (resp.ok) return resp;
   let detail = resp.statusText;

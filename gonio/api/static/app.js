@@ -1,5 +1,5 @@
 // The lab page: queue, live readings, scan form, job controls, results.
-import { AUTH_EVENT, ApiError, followEvents, getBlob, getFile, getJSON, getKey, send, setKey } from "./api.js";
+import { AUTH_EVENT, ApiError, RIG_EVENT, followEvents, getBlob, getFile, getJSON, getKey, send, setKey } from "./api.js";
 import { plotPolar, plotRotation } from "./plots.js";
 
 const $ = (sel) => document.querySelector(sel);
@@ -111,8 +111,15 @@ function initKey() {
 }
 
 // ------------------------------------------------------------------ rig and maintenance
+// A stage angle as the specimen's, 0-360°: plans and plots use it; the stage's own position
+// can be several turns away (528.75° is the specimen at 168.75°).
+const specimenAngle = (deg) => ((deg % 360) + 360) % 360;
+
 async function refreshRig() {
   const rig = await getJSON("/rig");
+  // Announced to the page's other modules (the stage panel): one poll serves them all, as
+  // each /rig reads every device of the rig.
+  window.dispatchEvent(new CustomEvent(RIG_EVENT, { detail: rig }));
   $("#rig-name").textContent = `rig: ${rig.name ?? "?"}`;
   const stage = (rig.devices ?? []).find((d) => d.name === "stage");
   const bad = (rig.devices ?? []).filter((d) => !d.ok).map((d) => d.name);
@@ -122,7 +129,7 @@ async function refreshRig() {
     const pos = stage?.detail?.position_deg;
     // The specimen's angle (0-360°, what plans and plots use); the stage's own position can
     // be several turns away (528.75° is the specimen at 168.75°): it is in the tooltip.
-    const specimen = typeof pos === "number" ? ((pos % 360) + 360) % 360 : null;
+    const specimen = typeof pos === "number" ? specimenAngle(pos) : null;
     chip.title = typeof pos === "number" ? `stage position ${pos.toFixed(2)}° (specimen angle = position mod 360)` : "";
     chip.textContent = bad.length ? `fault: ${bad.join(", ")}`
       : `specimen at ${specimen !== null ? specimen.toFixed(1) + "°" : "?"}${stage?.detail?.moving ? " moving" : ""}`;
@@ -141,7 +148,7 @@ async function refreshRig() {
 function showScanAngle(deg, job) {
   const chip = $("#stage-chip");
   if (chip.className !== "chip") return;  // a fault or a lost rig says more than an angle
-  const specimen = ((deg % 360) + 360) % 360;
+  const specimen = specimenAngle(deg);
   chip.textContent = `specimen at ${specimen.toFixed(1)}° (job ${job}'s last angle)`;
   chip.title = `stage position ${deg.toFixed(2)}° when job ${job} measured its last angle`;
 }
@@ -591,7 +598,7 @@ async function readingsSeries(id) {
     const label = `${r.light}/${r.sensor}`;
     const v = r.values.reduce((a, b) => a + b, 0) / Math.max(r.values.length, 1);
     if (!series.has(label)) series.set(label, []);
-    series.get(label).push([((r.specimen_deg % 360) + 360) % 360, v]);
+    series.get(label).push([specimenAngle(r.specimen_deg), v]);
   }
   return { rows, pairs: [...series].map(([label, pts]) => ({ label, points: pts.sort((a, b) => a[0] - b[0]) })) };
 }
@@ -1078,7 +1085,7 @@ function initForm() {
       { plan: readPlan(), priority: Number(form.elements.priority.value) });
     // The specimen's angle, as the stage chip gives it; the stage's own position beside it
     // when it is turns away (517.5° is the specimen at 157.5°).
-    const specimenDeg = ((r.from_deg % 360) + 360) % 360;
+    const specimenDeg = specimenAngle(r.from_deg);
     const from = !r.from_known ? "assuming the stage at 0° (position not known yet)"
       : `from the specimen at ${specimenDeg.toFixed(1)}°` +
         (Math.abs(specimenDeg - r.from_deg) > 1e-6 ? ` (stage position ${r.from_deg.toFixed(1)}°)` : "");

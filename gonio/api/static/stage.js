@@ -2,7 +2,7 @@
 // clear_faults), as `gonio stage --daemon URL` does. A lab loading a specimen or setting the
 // zero at the holder's mark had the command line alone. The daemon refuses a command while
 // a job is active (409, its words shown here); stop is always accepted.
-import { getJSON, send } from "./api.js";
+import { RIG_EVENT, send } from "./api.js";
 
 const $ = (sel) => document.querySelector(sel);
 
@@ -12,22 +12,21 @@ function describe(st) {
     `${st.homed ? "homed" : "not homed (no zero set since the stage powered up)"}${faults}`;
 }
 
-// Read from GET /rig, which never connects the rig (GET /rig/stage would, at page load):
+// From the page's own GET /rig answers (app.js announces each one: one poll for the header's
+// chip and this panel), which never connect the rig (GET /rig/stage would, at page load):
 // before the first scan or command the panel says so.
-async function show() {
-  try {
-    const rig = await getJSON("/rig");
-    const stage = (rig.devices ?? []).find((d) => d.name === "stage");
-    const d = stage?.detail;
-    $("#stage-state").textContent = !rig.connected
-      ? "not connected yet: the first scan or command connects it"
-      : typeof d?.position_deg === "number"
-        ? describe({ position_deg: d.position_deg, moving: d.moving, homed: d.homed, faults: d.faults ?? [] })
-        : `position unknown${d?.error ? `: ${d.error}` : ""}`;
-  } catch (e) {
-    $("#stage-state").textContent = `position unknown: ${e.message}`;
-  }
+function show(rig) {
+  const stage = (rig.devices ?? []).find((d) => d.name === "stage");
+  const d = stage?.detail;
+  $("#stage-state").textContent = !rig.connected
+    ? "not connected yet: the first scan or command connects it"
+    : typeof d?.position_deg === "number"
+      ? describe({ position_deg: d.position_deg, moving: d.moving, homed: d.homed, faults: d.faults ?? [] })
+      : `position unknown${d?.error ? `: ${d.error}` : ""}`;
 }
+
+// Listened for at once (not at DOMContentLoaded): app.js reads /rig as the page loads.
+window.addEventListener(RIG_EVENT, (e) => show(e.detail));
 
 async function command(body, what) {
   const said = $("#stage-said");
@@ -61,7 +60,4 @@ window.addEventListener("DOMContentLoaded", () => {
   });
   $("#stage-stop").addEventListener("click", () => command({ action: "stop" }, "stopping"));
   $("#stage-clear").addEventListener("click", () => command({ action: "clear_faults" }, "clearing faults"));
-  show();
-  // Slowly, as the header's chip: the stage moves during scans without a word to the panel.
-  setInterval(show, 5000);
 });
