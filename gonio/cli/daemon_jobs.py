@@ -492,6 +492,7 @@ def jobs_through_daemon(args: argparse.Namespace) -> int:
             if args.json:
                 # The API answers 204 with no body; a script still gets one JSON object.
                 print(json.dumps({"id": job, "removed": True}))
+                _say_start_refusals(client)  # on stderr: stdout stays one JSON object
                 return 0
             print(f"job {job} removed with its readings (a result file it wrote stays in the "
                   "daemon's data directory)")
@@ -507,6 +508,9 @@ def jobs_through_daemon(args: argparse.Namespace) -> int:
                 raise
     if args.json:
         print(json.dumps(row))
+        if args.action == "cancel":
+            with DaemonClient(args.daemon, args.api_key) as client:
+                _say_start_refusals(client)  # on stderr: stdout stays one JSON object
         return 0
     state = row.get("state", "?")
     if args.action == "cancel":

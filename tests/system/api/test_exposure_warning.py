@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import csv
 import io
+import json
 from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import Any
@@ -391,6 +392,17 @@ def test_gonio_jobs_cancel_and_remove_say_which_queued_scan_would_now_be_refused
         assert (f"note: job {scan} would be refused when it starts, as the queue stands: it "
                 "reads at exposure 0.02 s") in out.err, out.err
         assert "0.01 s" in out.err, out.err
-        # remove says it too, of the cancelled calibration's queue.
-        assert main([*base, "remove", str(cal)]) == 0
-        assert f"note: job {scan} would be refused" in capsys.readouterr().err
+        # remove says it too, of the cancelled calibration's queue; with --json as well, on
+        # stderr, stdout holding the one JSON answer a script parses.
+        assert main([*base, "remove", str(cal), "--json"]) == 0
+        out = capsys.readouterr()
+        assert json.loads(out.out) == {"id": cal, "removed": True}, out.out
+        assert f"note: job {scan} would be refused" in out.err, out.err
+        # cancel --json alike: a new 0.02 s calibration makes the scan fine, cancelling it
+        # makes it refused again.
+        cal = queue_calibration(c, 0.02)
+        capsys.readouterr()
+        assert main([*base, "cancel", str(cal), "--json"]) == 0
+        out = capsys.readouterr()
+        assert json.loads(out.out)["reason"] == "cancelled before it started", out.out
+        assert f"note: job {scan} would be refused" in out.err, out.err
