@@ -1,6 +1,6 @@
 // The lab page: queue, live readings, scan form, job controls, results.
 import { AUTH_EVENT, ApiError, RIG_EVENT, followEvents, getBlob, getFile, getJSON, getKey, send, setKey } from "./api.js";
-import { plotPolar, plotRotation } from "./plots.js";
+import { clearPlot, plotPolar, plotRotation } from "./plots.js";
 
 const $ = (sel) => document.querySelector(sel);
 let selected = null;          // id of the job shown in the live/result panels
@@ -540,7 +540,7 @@ async function loadJobs(asked) {
   if (selected === null && jobs.length) {
     const active = jobs.find((j) => ["running", "paused", "suspended", "reconstructing"].includes(j.state));
     select((active ?? jobs[jobs.length - 1]).id);
-  } else if (selected !== null) showResult(jobs.find((j) => j.id === selected));
+  } else if (selected !== null) guarded(() => showResult(jobs.find((j) => j.id === selected)));
 }
 
 // While the selected job measures or reconstructs, its detail is polled once a second: the
@@ -567,7 +567,7 @@ async function pollSelected() {
   const prog = document.querySelector(`#jobs tr[data-id="${selected}"] td.progress`);
   const row = jobs.find((x) => x.id === selected) ?? j;
   if (prog) fillProgress(prog, row);
-  if (["reconstructing", "queued"].includes(selectedDetail.state)) showResult(jobs.find((x) => x.id === selected));
+  if (["reconstructing", "queued"].includes(selectedDetail.state)) await showResult(jobs.find((x) => x.id === selected));
 }
 
 // The job holding the rig, when it is not the selected one: its detail is polled too (once
@@ -706,6 +706,19 @@ async function showResult(job) {
   if (shownResult === job.id) return;
   shownResult = job.id;
   $("#result-body").hidden = false;
+  try {
+    await loadResult(job);
+  } catch (e) {
+    // Loaded again at the next refresh: a load that failed (the daemon stopped meanwhile)
+    // left the panel saying "no rendering: the daemon does not answer" under a live chip,
+    // with the previous job's polar curves, until the row was clicked again.
+    if (shownResult === job.id) shownResult = null;
+    throw e;
+  }
+}
+
+async function loadResult(job) {
+  clearPolar();  // the previous job's curves must not stand under this job's heading
   const metrics = await getJSON(`/jobs/${job.id}/metrics`);
   shownUncalibrated = !metrics.calibrated;
   showMetrics(metrics);
@@ -873,6 +886,11 @@ function meanCurve(channels) {
     const vs = arrays.map((a) => a[i]);
     return vs.some((v) => v === null) ? null : vs.reduce((a, b) => a + b, 0) / vs.length;
   });
+}
+
+// The polar charts emptied, saying so, while another job's curves load.
+function clearPolar() {
+  for (const sel of ["#polar-in", "#polar-cross"]) clearPlot($(sel), "loading the curves…");
 }
 
 async function refreshPolar() {

@@ -26,6 +26,23 @@ export function pairStyle(k) {
            dash: DASHES[k % DASHES.length] };
 }
 
+/**
+ * Empty a chart's curves and put `note` in its title, keeping its size and axes: while
+ * another job's curves load, the previous job's must not stand under the new heading.
+ * @param {HTMLCanvasElement} canvas
+ * @param {string} note
+ */
+export function clearPlot(canvas, note) {
+  const chart = Chart.getChart(canvas);
+  if (!chart) return;
+  chart.data.datasets = [];
+  if (chart.options.plugins?.title) {
+    chart.options.plugins.title.display = true;
+    chart.options.plugins.title.text = note;
+  }
+  chart.update("none");
+}
+
 function fresh(canvas, config) {
   Chart.getChart(canvas)?.destroy();
   return new Chart(canvas, config);

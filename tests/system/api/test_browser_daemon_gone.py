@@ -82,3 +82,59 @@ def test_the_page_says_the_daemon_does_not_answer_until_it_is_back(
         wait.until(lambda d: "readings at 8 stage angles"
                    in d.find_element(By.ID, "dry-run-result").text)
         assert _message(browser) == ""
+
+
+def _polar_labels(d: Any) -> list[str]:
+    labels = d.execute_script(
+        "const c = Chart.getChart(document.getElementById('polar-in'));"
+        "return c ? c.data.datasets.map(s => s.label) : null;")
+    return list(labels or [])
+
+
+def test_a_result_that_failed_to_load_while_the_daemon_was_away_loads_when_it_is_back(
+        tmp_path: Path, sim: Any, basis: Any, browser: Any,  # noqa: F811 (the fixture)
+) -> None:
+    """A row clicked while the daemon was stopped kept the panel broken once it was back: the
+    heading named the clicked job, the polar charts still showed the previous job's curves,
+    and the rendering said "the daemon does not answer" under a live chip, until the row was
+    clicked again (the page took the failed job's result as shown)."""
+    import time
+
+    from selenium.webdriver.common.by import By
+
+    from tests.system.api.conftest import export_fits_off
+
+    key = secrets.token_hex(24)
+    data_dir = tmp_path / "data"
+    first = _app(data_dir, sim, key, basis)
+    with live_server(first) as url:
+        daemon = Daemon(url, key, first, sim, data_dir)
+        with export_fits_off(daemon), daemon.client() as c:
+            ids = [c.post("/api/v1/jobs", params={"accept_uncalibrated": "true"}, json={
+                "plan": {"kind": "uniform", "specimen": name, "rotations": 4,
+                         "exposure": {"exposure_s": 0.005}}}).json()["id"] for name in "AB"]
+            deadline = time.monotonic() + 180
+            while any(c.get(f"/api/v1/jobs/{i}").json()["state"] != "completed" for i in ids):
+                assert time.monotonic() < deadline, "the two scans did not complete"
+                time.sleep(0.3)
+        a, b = ids
+        wait = open_live(browser, daemon, 90, poll_s=0.1)
+        click_when_steady(wait, f'#jobs tr[data-id="{a}"]')
+        wait.until(lambda d: f"job {a} reconstruction" in _polar_labels(d))
+    port = int(url.rsplit(":", 1)[1])
+
+    # Stopped: B's row clicked, its result cannot load. A's curves are not left under B's
+    # heading.
+    wait.until(_message)
+    click_when_steady(wait, f'#jobs tr[data-id="{b}"]')
+    wait.until(lambda d: f"job {b}" in d.find_element(By.ID, "result-job").text)
+    wait.until(lambda d: f"job {a} reconstruction" not in _polar_labels(d))
+
+    # Back: B's result loads by itself, no click needed.
+    second = _app(data_dir, sim, key, basis)
+    with live_server(second, port=port):
+        wait.until(lambda d: d.find_element(By.ID, "live-chip").text == "live")
+        wait.until(lambda d: f"job {b} reconstruction" in _polar_labels(d))
+        wait.until(lambda d: "No rendering" not in d.find_element(By.ID, "render-caption").text
+                   and d.find_element(By.ID, "render").is_displayed())
+        assert f"job {a} reconstruction" not in _polar_labels(browser)
