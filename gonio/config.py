@@ -972,9 +972,10 @@ def load_rig_config(path: str | os.PathLike[str]) -> RigConfig:
     return parse_rig_config(data, Path(path).name)
 
 
-def dump_rig_config(cfg: RigConfig, path: str | os.PathLike[str]) -> Path:
-    """Write ``cfg`` as TOML (unset optional keys are left out); returns the path."""
+def dump_rig_config(cfg: RigConfig, path: str | os.PathLike[str], header: str = "") -> Path:
+    """Write ``cfg`` as TOML (unset optional keys are left out), after ``header`` (comment
+    lines, each starting with ``#``, or nothing); returns the path."""
     p = Path(path)
     data = cfg.model_dump(mode="json", exclude_none=True)
-    p.write_text(tomli_w.dumps(data), encoding="utf-8")
+    p.write_text(header + tomli_w.dumps(data), encoding="utf-8")
     return p

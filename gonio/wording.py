@@ -38,3 +38,11 @@ DAMAGED_ADVICE = (
     "if it is a copy, copy it again from the daemon's data directory (results/job-N.h5) or "
     "the page's 'Download HDF5 result'; if that one is damaged too, 'gonio jobs rebuild N "
     "--db DATA_DIR' writes it again from the job's stored readings")
+
+
+SIM_CONFIG_HEADER = ("# Written by gonio sim for the simulated rig it runs; the next gonio sim "
+                     "with this -o replaces it.\n")
+"""The first line of a rig config the simulator writes: ``gonio sim -o`` replaces such a file
+(or one with the simulator's specimen recipe beside it, which ``gonio rig apply-design`` keeps
+while it drops comments) without asking, and refuses any other (a lab's own rig config) unless
+told ``--overwrite``."""

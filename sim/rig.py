@@ -47,6 +47,7 @@ from gonio.sim.faults import FAULT_HELP, FaultPlan
 from gonio.sim.modbus_server import ModbusRigServer, SimHolderSpec, SimLampSpec, SimSensorSpec
 from gonio.sim.motion import StageMotion
 from gonio.sim.specimen import BRDFLike, NoiseModel, Specimen
+from gonio.wording import SIM_CONFIG_HEADER
 
 __all__ = [
     "DEFAULT_LIGHTS",
@@ -349,7 +350,8 @@ class SimRig:
             self._start_modbus()
             self.config = self._build_config(channels)
             if options.config_path is not None:
-                self.config_path = dump_rig_config(self.config, options.config_path)
+                self.config_path = dump_rig_config(self.config, options.config_path,
+                                                   header=SIM_CONFIG_HEADER)
             for spec in options.faults:
                 self.apply_fault(spec)
         except BaseException:

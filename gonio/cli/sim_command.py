@@ -87,8 +87,11 @@ def register(subparsers: Any) -> None:
         "--output",
         type=Path,
         default=None,
-        help="where to write the rig config (default: a temporary file)",
+        help="where to write the rig config (default: a temporary file); a file there is "
+        "replaced only when an earlier gonio sim wrote it, or with --overwrite",
     )
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace the file -o names even if gonio sim did not write it")
     p.add_argument(
         "--duration",
         type=float,
@@ -159,11 +162,37 @@ def parse_noise(text: str) -> Any:
     return dataclasses.replace(base, **changes)
 
 
+def _refuse_foreign_config(out: Path) -> None:
+    """Refuse to replace a file at ``out`` that no ``gonio sim`` wrote. The README's simulated
+    session writes ``-o rig.toml``, the name a lab gives its own hand-edited config: that file
+    was replaced without a word or a backup."""
+    from gonio.wording import SIM_CONFIG_HEADER
+
+    if out.is_dir():
+        raise UsageError(f"-o {out} is a folder; name the rig config file to write")
+    if not out.exists():
+        return
+    try:
+        with out.open(encoding="utf-8", errors="replace") as f:
+            first = f.readline()
+    except OSError as exc:
+        raise UsageError(f"-o {out} cannot be read ({exc.strerror or exc}); name another "
+                         "file") from None
+    from gonio.cli.sim_session import sim_specimen_path
+
+    if first != SIM_CONFIG_HEADER and not sim_specimen_path(out).is_file():
+        raise UsageError(f"{out} exists and was not written by gonio sim (a lab's own rig "
+                         "config?): nothing was replaced; give -o another file, or "
+                         "--overwrite to replace it")
+
+
 def run(args: argparse.Namespace) -> int:
     from gonio.sim.rig import SimRigOptions, start_sim_rig
 
     if args.duration is not None and args.duration < 0:
         raise UsageError(f"--duration must be >= 0, got {args.duration}")
+    if args.output is not None and not args.overwrite:
+        _refuse_foreign_config(args.output)
     with tempfile.TemporaryDirectory(prefix="gonio-sim-") as tmp:
         out = args.output if args.output is not None else Path(tmp) / "rig.toml"
         geometry: dict[str, Any] = {}

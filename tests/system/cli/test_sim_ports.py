@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 
 from gonio.cli import main
+from tests.system.daemon_proc import PROJECT_ROOT
 
 pytestmark = pytest.mark.system
 
@@ -44,3 +45,33 @@ def test_a_modbus_port_in_use_is_refused_in_one_line(
     assert "Traceback" not in err
     assert main(["sim", "--modbus-port", "70000", "--duration", "0"]) == 2
     assert "use 1 to 65535" in capsys.readouterr().err
+
+
+def test_gonio_sim_replaces_its_own_config_but_not_a_labs(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The README's simulated session writes ``gonio sim -o rig.toml``, the name a lab gives
+    its own rig config: that file was replaced without a word or a backup. Now a file an
+    earlier ``gonio sim`` wrote is replaced (restarting the simulator), any other is kept and
+    the refusal says how to replace it."""
+    rig = tmp_path / "rig.toml"
+    assert main(["sim", "--duration", "0", "-o", str(rig)]) == 0
+    assert main(["sim", "--duration", "0", "-o", str(rig)]) == 0  # its own: replaced
+    assert tomllib.loads(rig.read_text())["lights"]
+    # Rewritten by `gonio rig apply-design` (which keeps no comments), it is still the
+    # simulator's (its specimen recipe beside it), as apply-design's own note says.
+    header, body = rig.read_text().split("\n", 1)
+    assert header.startswith("# Written by gonio sim") and not body.startswith("#")
+    rig.write_text(body)
+    assert main(["sim", "--duration", "0", "-o", str(rig)]) == 0
+    labs = tmp_path / "lab-rig.toml"
+    text = (PROJECT_ROOT / "deploy" / "rig.example.toml").read_text()
+    labs.write_text(text)
+    capsys.readouterr()
+    assert main(["sim", "--duration", "0", "-o", str(labs)]) == 2
+    err = capsys.readouterr().err
+    assert f"{labs} exists and was not written by gonio sim" in err, err
+    assert "--overwrite" in err and "Traceback" not in err, err
+    assert labs.read_text() == text
+    assert main(["sim", "--duration", "0", "-o", str(labs), "--overwrite"]) == 0
+    assert labs.read_text() != text
