@@ -33,6 +33,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from gonio.basis_supply import BasisSupply
 from gonio.brdf.mirrorgap import cells_gap_deg, gap_note
@@ -223,7 +224,9 @@ def finish_job(job_id: int, plan: AnyPlan | CheckedPlan, how: Finishing) -> dict
         how.on_activity("reconstructing")
     # The twofold symmetry test first (an auto-arc scan's own, or one made here on the readings):
     # a specimen it calls asymmetric is reconstructed with a basis that can hold it.
-    test = _arc_test(how.store, job_id, plan, samples)
+    test = _arc_test(how.store, job_id, plan, samples.stage_angles_deg,
+                     lambda: calibrated_samples(readings, pairs, light_dirs, sensor_dirs,
+                                                channels, Calibration()).values)
     basis, switch = _basis_for_test(how, job_id, plan, basis, test)
     # A half-turn scan with a basis whose prior varies over a full turn: the result is valid
     # but the other half turn rests on the prior; the job's events (once: the worker's start
@@ -414,25 +417,29 @@ def _compare_with_design(rec: Any, readings: list[Any], plan: AnyPlan, samples: 
         provenance["design_gap"] = gap.message()
 
 
-def _arc_test(store: JobStore, job_id: int, plan: AnyPlan, samples: Any
-              ) -> dict[str, Any] | None:
+def _arc_test(store: JobStore, job_id: int, plan: AnyPlan, angles_deg: Any,
+              counts: Callable[[], NDArray[np.float64]]) -> dict[str, Any] | None:
     """The scan's twofold symmetry test (docs/science.md 7.4), or None when it has none.
 
     An auto-arc plan's test is its ``arc_test`` event (what the scan chose, on its first
     round's readings). A plan of a fixed arc whose readings include opposite stage angles
-    (8 uniform angles over a full turn hold 4 such pairs) is tested here, on its calibrated
-    readings (:func:`gonio.plans.arc.arc_test`, the same test and level).
+    (8 uniform angles over a full turn hold 4 such pairs) is tested here, on the same
+    ``raw - dark`` counts the auto-arc round tests (:func:`gonio.plans.arc.arc_test`, the same
+    test and level): ``counts()`` gives them as ``(n_pairs, r, C)`` in the order of
+    ``angles_deg`` (degrees). Not the calibrated values: a spectral calibration lifts a dim
+    band to its neighbours' level without lowering its shot noise, and the test then took
+    that noise for asymmetry.
     """
     from gonio.plans.arc import ARC_TEST_EVENT, arc_test
 
     if plan.arc_mode() == "auto":
         ev = store.last_event(job_id, ARC_TEST_EVENT)
         return None if ev is None else ev.data
-    angles = np.asarray(samples.stage_angles_deg, float)
+    angles = np.asarray(angles_deg, float)
     gap = np.abs((angles[:, None] - angles[None, :]) % 360.0 - 180.0)
     if not (gap <= 0.5).any():  # no readings 180 deg apart: nothing to test
         return None
-    return arc_test([float(x) for x in angles], samples.values,
+    return arc_test([float(x) for x in angles], counts(),
                     float(getattr(plan, "arc_noise", 0.01)))
 
 

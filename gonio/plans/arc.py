@@ -19,8 +19,11 @@ read the opposites of the remaining first-round angles and continue over a full 
 
 The readings the engine holds are ``raw - dark`` counts, uncalibrated: the test works on
 the differences of their logarithms, which a pair's (or a channel's) sensitivity does not
-change, so each pair and channel is scaled by its largest reading and the absolute noise is a
-fraction of that (:data:`ABSOLUTE_FRACTION`).
+change, so each pair is scaled by its largest reading over its channels and the absolute
+noise is a fraction of that (:data:`ABSOLUTE_FRACTION`). A finished scan of a fixed arc is
+tested on the same counts, not on its calibrated values (:mod:`gonio.finishing`): shot noise
+is a matter of counts, and a spectral calibration lifts a dim band's values to its neighbours'
+without lowering its noise.
 """
 
 from __future__ import annotations
@@ -41,12 +44,16 @@ from gonio.rigdescription import RigDescription
 
 FULL_TURN_DEG = 360.0
 ABSOLUTE_FRACTION = 0.01
-"""Absolute noise of a reading as a fraction of its pair's largest reading (per channel) in
-the test round. Photon shot noise grows as the reading falls (relative ``1 / sqrt(counts)``):
-on the simulated sensors, 1 % at a peak of 5000 counts is 3 % at a tenth of it, which a
-relative 1 % alone would take for asymmetry (measured: a retro-reflective library material
-called asymmetric at p = 0.0008 with 0.2 %; p = 0.86 with 1 %, docs/science.md 7.4). Readings
-below about a tenth of the peak (predicted log deviation above 0.1) are left out."""
+"""Absolute noise of a reading as a fraction of its pair's largest reading in the test round
+(the largest over the pair's channels: a channel whose sensor is less sensitive has fewer
+counts and more relative noise). Photon shot noise grows as the reading falls (relative
+``1 / sqrt(counts)``): on the simulated sensors, 1 % at a peak of 5000 counts is 3 % at a
+tenth of it, which a relative 1 % alone would take for asymmetry (measured: a
+retro-reflective library material called asymmetric at p = 0.0008 with 0.2 %; p = 0.86 with
+1 %, docs/science.md 7.4). Readings below about a tenth of the peak (predicted log deviation
+above 0.1) are left out. (Until 2026-11-29 each channel was scaled by its own largest
+reading: the dim bands of a 31-band sensor, at 1.6 % shot noise, then called an isotropic
+paint asymmetric on 2 of 5 full-turn scans.)"""
 FALSE_ALARM = 0.01
 """Probability that the test calls a twofold-symmetric specimen asymmetric (under the noise
 model): 1 in 100 such specimens is scanned over a full turn it did not need."""
@@ -149,7 +156,8 @@ def arc_test(angles_deg: Sequence[float], values: ArrayLike, relative: float,
     Parameters
     ----------
     angles_deg : (r,) stage (specimen) angles, degrees; some must be 180 deg apart
-    values : (n_pairs, r, C) readings (``raw - dark`` counts or 1/sr; NaN where missing)
+    values : (n_pairs, r, C) readings, ``raw - dark`` counts (NaN where missing); values
+        scaled per pair and channel (calibrated) weigh a dim channel's noise wrongly
     relative : relative noise of one reading (the plan's ``arc_noise``)
     false_alarm : the test's level (:data:`FALSE_ALARM`)
 
@@ -169,9 +177,10 @@ def arc_test(angles_deg: Sequence[float], values: ArrayLike, relative: float,
     v = np.asarray(values, dtype=float)
     if v.ndim == 2:
         v = v[:, :, None]
-    # Each pair and channel scaled by its largest reading (log differences do not change).
+    # Each pair scaled by its largest reading over angles and channels (log differences do not
+    # change): the absolute noise is a fraction of the sensor's counts, whatever the channel.
     positive = np.where(np.isfinite(v) & (v > 0), v, 0.0)
-    peak = positive.max(axis=1, keepdims=True) if v.size else np.ones((0, 1, 1))
+    peak = positive.max(axis=(1, 2), keepdims=True) if v.size else np.ones((0, 1, 1))
     peak = np.where(peak > 0, peak, 1.0)
     noise = NoiseModel(relative=float(relative), absolute=ABSOLUTE_FRACTION)
     base: dict[str, Any] = {"noise": float(relative), "false_alarm": float(false_alarm)}

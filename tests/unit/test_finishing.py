@@ -106,7 +106,8 @@ def test_a_forced_half_turn_with_opposite_readings_that_differ_is_warned() -> No
 
     def record(plan: UniformPlan, samples: Any, metrics: dict[str, Any],
                provenance: dict[str, Any]) -> None:
-        _record_arc_test(1, plan, _arc_test(store, 1, plan, samples), metrics, provenance)
+        _record_arc_test(1, plan, _arc_test(store, 1, plan, samples.stage_angles_deg,
+                                            lambda: samples.values), metrics, provenance)
 
     angles = np.array([0.0, 45.0, 90.0, 135.0, 180.0, 270.0])
     a = np.deg2rad(angles)[None, :, None]
