@@ -308,8 +308,9 @@ def read_result(path: str | os.PathLike[str]) -> ResultFile:
     except (OSError, KeyError, ValueError, TypeError, IndexError) as exc:
         if isinstance(exc, ResultFileError):
             raise
-        # A truncated or overwritten file can open and still fail on a dataset or attribute.
-        raise ResultFileError(f"{p} is damaged ({type(exc).__name__}: {exc})") from None
+        # A truncated or overwritten file can open and still fail on a dataset or attribute:
+        # the words of a damaged HDF5 file, so the command line adds what to do about it.
+        raise ResultFileError(f"{p}{DAMAGED} ({type(exc).__name__}: {exc})") from None
 
 
 def read_provenance(path: str | os.PathLike[str]) -> dict[str, Any]:

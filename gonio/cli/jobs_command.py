@@ -426,9 +426,10 @@ def _rebuild(args: argparse.Namespace, store: Any) -> int:
         try:
             lock = claim_store(args.db)
         except LockBusy as exc:
-            raise UsageError(f"{exc}; a {before.value} job is rebuilt only in a job store no "
-                             "daemon or scan runs: stop it, rebuild, then start it again"
-                             ) from None
+            article = "an" if before.value[:1] in "aeiou" else "a"
+            raise UsageError(f"{exc}; {article} {before.value} job is rebuilt only in a job "
+                             "store no daemon or scan runs: stop it, rebuild, then start it "
+                             "again") from None
     try:
         summary = rebuild_result(store, data_dir, args.job_id, BasisSupply())
     finally:

@@ -10,6 +10,7 @@ daemon, a scan) owns the rig; with ``--daemon URL`` it asks that daemon to do it
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from typing import Any
 
@@ -40,6 +41,11 @@ def _check_args(args: argparse.Namespace) -> None:
         raise UsageError("'move' needs a target angle in degrees, e.g. gonio stage move 90")
     if args.action != "move" and args.angle_deg is not None:
         raise UsageError(f"'{args.action}' takes no angle")
+    if args.action == "move" and not math.isfinite(args.angle_deg):
+        # Through a daemon a NaN reached the JSON encoder ("Out of range float values are
+        # not JSON compliant"); no stage has such a target.
+        raise UsageError(f"'move' needs a finite angle in degrees, got {args.angle_deg}; "
+                         "e.g. gonio stage move 90")
 
 
 def describe(position_deg: float, moving: bool, homed: bool, faults: list[str] | tuple[str, ...]

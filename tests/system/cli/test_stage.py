@@ -66,6 +66,7 @@ def test_a_fresh_stage_homed_at_power_up_position_says_homed(
         (["move"], "needs a target angle"),
         (["move", "1e6"], "outside the travel limits"),
         (["home", "5"], "takes no angle"),
+        (["move", "nan"], "'move' needs a finite angle in degrees, got nan"),
     ],
 )
 def test_bad_stage_commands_are_refused_before_connecting(
@@ -76,6 +77,16 @@ def test_bad_stage_commands_are_refused_before_connecting(
     cfg.write_text(Path("deploy/rig.example.toml").read_text())
     assert main(["stage", "--rig", str(cfg), *argv]) == 2
     assert words in capsys.readouterr().err
+
+
+def test_a_nan_target_through_a_daemon_is_refused_in_words(
+    capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Through a daemon a NaN reached the JSON encoder: "Out of range float values are not
+    JSON compliant". Refused before any request (nothing listens on port 9)."""
+    assert main(["stage", "--daemon", "http://127.0.0.1:9", "move", "nan"]) == 2
+    err = capsys.readouterr().err
+    assert "needs a finite angle" in err and "JSON" not in err, err
 
 
 def test_missing_rig_config_is_a_clear_error(

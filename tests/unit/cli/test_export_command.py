@@ -306,6 +306,15 @@ def test_a_damaged_result_file_says_what_to_do(result: Path, tmp_path: Path,
         assert main(argv) == 2
         err = capsys.readouterr().err
         assert "is an HDF5 file but damaged" in err and "copy it again" in err, (argv, err)
+    # Damaged in its body (a block of zeros where the table's data was): it opens, and its
+    # table cannot be read. The same words and advice.
+    body = tmp_path / "body.h5"
+    data = bytearray(result.read_bytes())
+    data[len(data) // 2: len(data) // 2 + 65536] = bytes(65536)
+    body.write_bytes(bytes(data))
+    assert main(["export", str(body), "-f", "mtlx", "-o", str(tmp_path / "b.mtlx")]) == 2
+    err = capsys.readouterr().err
+    assert "body.h5 is an HDF5 file but damaged" in err and "copy it again" in err, err
 
 
 @pytest.mark.parametrize(("lost", "words"), [
