@@ -415,12 +415,22 @@ and its factors would multiply noise into 1/sr."""
 
 
 def sensor_full_scale(rig_config: Any) -> dict[str, NDArray[np.float64]]:
-    """Each sensor's full scale per channel in sensor units (``saturation_raw`` times the
-    value register's scale), from a :class:`gonio.config.RigConfig`; empty without one."""
+    """Each sensor's full scale per channel in sensor units of its nominal range: the largest
+    value it can read, ``saturation_raw`` times the value register's scale, times ``gain /
+    g`` for its lowest gain stage ``g`` (auto-ranging reads a brighter light there and scales
+    it back, :func:`counts`); from a :class:`gonio.config.RigConfig`, empty without one.
+
+    Without the stages a white reference read at a long exposure, saturating at ``gain`` and
+    read again a stage lower, made a calibration that was refused as one no reference on the
+    rig could have produced.
+    """
     out: dict[str, NDArray[np.float64]] = {}
     for s in getattr(rig_config, "sensors", None) or ():
         scales = [abs(float(r.scale)) for r in s.registers.values]
-        out[str(s.name)] = float(s.saturation_raw) * np.asarray(scales, dtype=float)
+        gain = float(getattr(s, "gain", 1.0))
+        lowest = min([gain, *(float(g) for g in getattr(s, "gain_stages", None) or ())])
+        out[str(s.name)] = (float(s.saturation_raw) * gain / lowest
+                            * np.asarray(scales, dtype=float))
     return out
 
 

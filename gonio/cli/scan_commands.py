@@ -289,6 +289,37 @@ def _scan(args: argparse.Namespace) -> int:
             sim.close()
 
 
+def _same_sim_material(data_dir: Path, job: Any, material: str | None, db: Path) -> None:
+    """Record the simulated material of this ``gonio scan --sim`` run in ``data_dir``; refuse
+    to resume ``job`` (the interrupted job this scan would resume, or None) when it was
+    measuring another one.
+
+    The plan and rig alone decided a resume, so ``--material pile-000`` after an interrupted
+    scan of the default material finished that job on the new specimen: 18 angles of one
+    material and 14 of another in one result, which named only the second as its truth.
+    """
+    import json
+
+    from gonio.cli.serve_command import SIM_STATE_FILE
+
+    state = data_dir / SIM_STATE_FILE
+    if job is not None and state.is_file():
+        try:
+            recorded = json.loads(state.read_text()).get("material")
+        except (ValueError, AttributeError, OSError):
+            recorded = material  # unreadable: as before this record existed
+        if recorded != material:
+            was = "the default material" if recorded is None else f"material {recorded!r}"
+            now = "the default material" if material is None else f"material {material!r}"
+            again = "without --material" if recorded is None else f"with --material {recorded}"
+            raise UsageError(
+                f"job {job.id} was measuring {was} when it was interrupted ({job.done_angles} "
+                f"of {job.total_angles} angles): its readings cannot be joined with {now}'s, "
+                f"so nothing was measured. Run the same command {again} to finish it, or end "
+                f"it first ('gonio jobs abort {job.id} --db {db}') and scan {now} again")
+    state.write_text(json.dumps({"material": material}))
+
+
 def _stop_on_terminate(stopped: list[str], finished: list[bool] | None = None) -> None:
     """Make SIGTERM and SIGHUP (``kill``, ``timeout``, a closed terminal or SSH session) stop
     the running foreground scan as Ctrl-C does: the engine stops and switches the lamps off,
@@ -459,6 +490,8 @@ async def _run_owned(args: argparse.Namespace, checked: Any, config: Any, sim: A
                 service.specimen_truth = lambda: truth
         # Resume an interrupted job only when it is this scan: the same plan on the same rig.
         job = service.unfinished_job(plan)
+        if sim is not None:
+            _same_sim_material(data_dir, job, getattr(args, "material", None), db)
         if job is not None:
             print(f"resuming job {job.id} from its checkpoint ({job.done_angles} of "
                   f"{job.total_angles} angles done)", file=sys.stderr)

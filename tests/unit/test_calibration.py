@@ -251,6 +251,28 @@ def test_a_factor_is_plausible_when_its_reference_reading_is_within_the_sensor_r
     check_plausible(Calibration.model_validate(_cal((1e-30,))), {}, "here")
 
 
+def test_the_full_scale_counts_the_lowest_gain_stage() -> None:
+    """A white reference read at a long exposure saturates at the sensor's gain and is read
+    again a stage lower (auto-ranging scales it back to the nominal range): its calibration
+    implies a reading above the nominal range's full scale, and was refused as one no
+    reference on the rig could have produced (``gonio scan --sim --exposure 0.2``). The full
+    scale is the nominal range's times gain over the lowest stage's gain."""
+    from gonio.calibration import sensor_full_scale
+    from gonio.config import load_rig_config
+
+    cfg = load_rig_config(Path(__file__).resolve().parents[2] / "deploy" / "rig.example.toml")
+    staged = [s for s in cfg.sensors if s.gain_stages]
+    assert staged, "the example rig has a sensor with gain stages"
+    for sensor in cfg.sensors:
+        nominal = sensor.saturation_raw * np.array([abs(r.scale) for r in sensor.registers.values])
+        # gain 1.0 with stages [0.1, 0.01] (the example's): 100 times the nominal range.
+        ratio = sensor.gain / min([sensor.gain, *sensor.gain_stages])
+        assert sensor_full_scale(cfg)[sensor.name] == pytest.approx(nominal * ratio)
+    assert sensor_full_scale(cfg)[staged[0].name] == pytest.approx(
+        staged[0].saturation_raw * 100.0
+        * np.array([abs(r.scale) for r in staged[0].registers.values]))
+
+
 def test_check_covers_names_the_missing_pairs_and_accepts_no_calibration() -> None:
     from gonio.calibration import PartialCalibration
 

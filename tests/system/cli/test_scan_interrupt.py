@@ -308,3 +308,53 @@ def test_a_scan_under_nohup_survives_a_hangup(tmp_path: Path) -> None:
     job = _only_job(db)
     assert job.state is JobState.COMPLETED and job.done_angles == 4, job
     assert out_file.is_file()
+
+
+def test_a_sim_scan_resumes_only_on_the_material_it_was_measuring(tmp_path: Path) -> None:
+    """``gonio scan --sim --material pile-000`` after an interrupted scan of the default
+    material resumed that job on the new specimen: one result of two materials, naming only
+    the second as its truth. It is refused now, nothing measured, the job kept as it was."""
+    data = tmp_path / "data"
+    db = data / "gonio.sqlite"
+    argv = ["scan", "--sim", "--no-export-fits", "--rotations", "8", "--exposure", "0.2",
+            "--data-dir", str(data), "--no-progress", "-o", str(tmp_path / "a.h5")]
+
+    def scan_readings() -> int:  # the scan's, not the calibration's that runs first
+        if not db.is_file():
+            return 0
+        store = JobStore(db, durable=False)
+        try:
+            return sum(len(store.readings(j.id)) for j in store.list_jobs()
+                       if j.kind != "calibration")
+        finally:
+            store.close()
+
+    proc = subprocess.Popen([*GONIO, *argv], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env=child_env(), cwd=PROJECT_ROOT,
+                            preexec_fn=_default_sigint)
+    try:
+        wait_for(lambda: scan_readings() > 0 or proc.poll() is not None,
+                 what="the scan's first reading")
+        assert proc.poll() is None, proc.communicate()
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130, out + err
+    store = JobStore(db, durable=False)
+    (job,) = [j for j in store.list_jobs() if j.kind != "calibration"]
+    store.close()
+    assert job.state is JobState.PAUSED, job
+    kept = scan_readings()
+
+    other = gonio([*argv, "--material", "pile-000"], timeout=300)
+    assert other.returncode == 2, other.stdout + other.stderr
+    assert (f"job {job.id} was measuring the default material when it was interrupted"
+            in other.stderr), other.stderr
+    assert "Run the same command without --material to finish it" in other.stderr
+    assert f"gonio jobs abort {job.id} --db {db}" in other.stderr
+    store = JobStore(db, durable=False)
+    assert store.get_job(job.id).state is JobState.PAUSED
+    store.close()
+    assert scan_readings() == kept
