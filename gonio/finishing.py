@@ -172,7 +172,14 @@ def finish_job(job_id: int, plan: AnyPlan | CheckedPlan, how: Finishing) -> dict
         # readings as it was made (gonio jobs rebuild), whatever is in effect by then.
         "calibration": cal.model_dump(mode="json"),
     }
-    truth = how.true_material() if how.true_material is not None else None
+    kept = how.store.finishing_inputs(job_id) or {}
+    if "true_material" in kept:
+        # A finishing resumed after a restart records the specimen its readings came from,
+        # kept when it first began: a simulated rig started again on another material
+        # (``gonio serve --sim --material``) holds that one now.
+        truth = kept["true_material"]
+    else:
+        truth = how.true_material() if how.true_material is not None else None
     if how.keep_inputs:
         # Before anything is written: a rebuild (even of a job whose result write failed)
         # then has the rig config and truth this finishing used.

@@ -413,7 +413,11 @@ def _sim_material(data_dir: Path, requested: str | None) -> str | None:
         except (ValueError, AttributeError):
             recorded = requested
         store = JobStore(data_dir / STORE_FILE, durable=False)
-        active = [j for j in store.active_jobs() if j.kind != "calibration"]
+        # A job interrupted while reconstructing measures nothing more, and its finishing
+        # records the truth it kept when it began (gonio.finishing): it holds no specimen.
+        active = [j for j in store.active_jobs() if j.kind != "calibration"
+                  and not (j.state.value == "reconstructing"
+                           and "true_material" in (store.finishing_inputs(j.id) or {}))]
         store.close()
         if active and recorded != requested:
             # It said "it stays on the stage until the job ends", but the simulated specimen

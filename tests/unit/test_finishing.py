@@ -670,3 +670,35 @@ def test_the_recorded_finishing_time_includes_writing_the_result_file(
     assert row.summary is not None
     in_file = float(read_result(data / "results" / f"job-{job}.h5").metrics["seconds"])
     assert float(row.summary["seconds"]) >= in_file + 0.5
+
+
+def test_a_resumed_finishing_records_the_truth_it_kept_when_it_began(tmp_path: Path) -> None:
+    """A daemon stopped while it reconstructed a simulated scan and started again on another
+    material (``gonio serve --sim --material``) would have recorded the new material as the
+    truth of readings made on the old one. Finishing keeps the truth when it first begins;
+    resumed, it records that one, whatever the rig holds now."""
+    from tests.unit.brdf.reconstruction.test_basis import small_basis
+
+    _calibrated(tmp_path).store.close()
+    data = tmp_path / "d"
+    basis = small_basis()
+    svc = GonioService(JobStore(data / "gonio.sqlite"), MemRig(), data_dir=data,
+                       basis=BasisSupply(lambda: basis), fit_exports=False)
+    svc.specimen_truth = lambda: {"name": "put on the stage after the restart"}
+
+    async def go() -> None:
+        await svc.start()
+        job = svc.submit(JobRequest(plan=UniformPlan(rotations=4, exposure=FAST)))
+        # What the first, interrupted finishing kept (gonio.finishing, before anything is
+        # written).
+        svc.store.set_finishing_inputs(job.id, {"true_material": {"name": "measured"}})
+        async for ev in svc.subscribe(0, job_id=job.id):
+            if ev.type == "state" and ev.data["state"] in ("completed", "failed"):
+                break
+        await svc.stop()
+
+    asyncio.run(go())
+    assert svc.store.get_job(2).state.value == "completed", svc.store.get_job(2).reason
+    res = read_result(data / "results" / "job-2.h5")
+    assert json.loads(res.provenance["true_material"]) == {"name": "measured"}
+    assert svc.store.finishing_inputs(2)["true_material"] == {"name": "measured"}

@@ -143,3 +143,15 @@ def test_an_interrupted_scan_keeps_its_simulated_material_across_restarts(
     store.set_state(job.id, JobState.ABORTED, reason="test")
     store.close()
     assert _sim_material(data, "paint-002") == "paint-002"  # nothing to resume: as asked
+    # A job interrupted while reconstructing (every angle measured, its truth kept when its
+    # finishing began) holds no specimen: the session measured the old material for hours.
+    assert _sim_material(data, "felt-001") == "felt-001"
+    store = JobStore(data / "gonio.sqlite")
+    done = store.create_job(kind="uniform", specimen="felt", plan={"kind": "uniform"}, rig={})
+    store.set_state(done.id, JobState.RUNNING)
+    store.set_state(done.id, JobState.RECONSTRUCTING)
+    store.set_finishing_inputs(done.id, {"true_material": {"name": "felt-001"}})
+    store.close()
+    capsys.readouterr()
+    assert _sim_material(data, "paint-002") == "paint-002"
+    assert "was interrupted" not in capsys.readouterr().err
