@@ -35,7 +35,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from gonio.brdf.reconstruction.samples import DEFAULT_SPAN_DEG, SPANS_DEG
-from gonio.cli import UsageError
+from gonio.cli import UsageError, refuse_to_replace
 
 FloatArray = NDArray[np.float64]
 LAB_KEYS = ("theta_i", "phi_i", "theta_v", "phi_v")
@@ -308,6 +308,9 @@ def _scan_samples(path: str) -> Any:
 
 def _cmd_reconstruct(args: argparse.Namespace) -> int:
     from gonio.brdf.reconstruction.reconstruct import reconstruct
+
+    refuse_to_replace(args.output, args.overwrite, "nothing was reconstructed")
+    refuse_to_replace(args.preview, args.overwrite, "nothing was reconstructed")
 
     samples = _scan_samples(args.samples)
     basis = _load_basis(args.basis)
@@ -599,7 +602,10 @@ def register(subparsers: Any) -> None:
                         "(scan, default) or keep the library's prior (none)")
     r.add_argument("--name", help="material name stored in the table (default: file stem)")
     r.add_argument("--preview", help="also write a PNG preview here")
-    r.add_argument("-o", "--output", required=True, help="table file to write (.npz)")
+    r.add_argument("-o", "--output", required=True,
+                   help="table file to write (.npz; an existing file only with --overwrite)")
+    r.add_argument("--overwrite", action="store_true",
+                   help="replace the files -o and --preview name")
     r.set_defaults(func=_cmd_reconstruct)
 
     d = subparsers.add_parser(

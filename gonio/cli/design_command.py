@@ -48,7 +48,7 @@ from gonio.brdf.design.renderweight import DEFAULT_CELL_MIX, cell_weighting
 from gonio.brdf.design.roughness import RoughnessBound, bound_angles, roughness_bound
 from gonio.brdf.mirrorgap import cells_gap_deg, gap_note
 from gonio.brdf.reconstruction.samples import DEFAULT_SPAN_DEG, SPANS_DEG
-from gonio.cli import CORE_SETTING_FLAGS, UsageError
+from gonio.cli import CORE_SETTING_FLAGS, UsageError, refuse_to_replace
 from gonio.sampling_design import colour_targets
 from gonio.wording import counted
 
@@ -128,7 +128,9 @@ def register(subparsers: Any) -> None:
     p.add_argument("--basis", type=Path, default=None, metavar="FILE",
                    help="basis .npz (default: the default basis, built and cached on first use)")
     p.add_argument("-o", "--output", type=Path, default=None, metavar="FILE",
-                   help="write the geometry as a rig-config TOML fragment")
+                   help="write the geometry as a rig-config TOML fragment (an existing file "
+                   "only with --overwrite)")
+    p.add_argument("--overwrite", action="store_true", help="replace the file -o names")
     p.set_defaults(func=run)
 
 
@@ -401,6 +403,7 @@ ASSUMPTIONS = (
 
 def run(args: argparse.Namespace) -> int:
     _check_args(args)
+    refuse_to_replace(args.output, args.overwrite, "nothing was designed")
     _constraints(args)  # refuse bad limits and --exclude text before the (slow) basis load
     basis = _load_basis(args.basis)
     expected = None

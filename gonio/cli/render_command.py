@@ -8,7 +8,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from gonio.cli import UsageError
+from gonio.cli import UsageError, refuse_to_replace
 
 
 def register(subparsers: Any) -> None:
@@ -22,7 +22,9 @@ def register(subparsers: Any) -> None:
         "are shown row by row for comparison.",
     )
     p.add_argument("inputs", nargs="+", metavar="FILE", help="result .h5 or table .npz files")
-    p.add_argument("-o", "--output", required=True, help="PNG file to write")
+    p.add_argument("-o", "--output", required=True,
+                   help="PNG file to write (an existing file only with --overwrite)")
+    p.add_argument("--overwrite", action="store_true", help="replace the file -o names")
     p.add_argument("--size", type=int, default=512, help="pixels per view (default 512)")
     p.add_argument("--label", action="append", default=None,
                    help="row label for each input, in order (repeat the option)")
@@ -44,6 +46,8 @@ def _render(args: argparse.Namespace) -> int:
     if not out.parent.is_dir():
         raise UsageError(f"cannot write {out}: folder {out.parent} does not exist")
     png = render_inputs(args.inputs, size=args.size, labels=args.label)
+    # After the inputs are read (what is wrong with them is said first), before the write.
+    refuse_to_replace(out, args.overwrite, "the rendering was not written")
     out.write_bytes(png)
     for warning in _reconstruction_warnings(args.inputs):
         # What the result's colour report and exports say beside it (e.g. the highlight not

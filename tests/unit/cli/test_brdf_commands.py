@@ -143,6 +143,16 @@ def test_simulate_then_reconstruct(
     t = BRDFTable.load(out)
     assert t.name == "rec" and t.values.shape == (3, *geo.TABLE_SHAPE)
     assert png.read_bytes()[:4] == b"\x89PNG"
+    # Run again onto the same files: refused before any work (the table was replaced without
+    # a word), kept as they were; --overwrite replaces them.
+    kept = out.read_bytes()
+    assert main(["reconstruct", str(samples), "--basis", str(files["basis"]), "-k", "8",
+                 "--preview", str(png), "-o", str(out)]) == 2
+    assert f"{out} exists: nothing was reconstructed" in capsys.readouterr().err
+    assert out.read_bytes() == kept and len(made) == 1
+    assert main(["reconstruct", str(samples), "--basis", str(files["basis"]), "-k", "8",
+                 "--preview", str(png), "-o", str(out), "--overwrite"]) == 0
+    assert len(made) == 2
 
 
 def test_simulate_with_a_preset(files: dict[str, Path],

@@ -54,6 +54,17 @@ def test_design_pairs_writes_a_rig_fragment(basis_file: Path, tmp_path: Path,
     printed = float(text.split("condition number:")[1].split()[0].rstrip(","))
     assert kappa == pytest.approx(printed, rel=1e-3)
     assert all(d["theta_deg"] <= 80.0 + 1e-6 for d in frag["lights"] + frag["sensors"])
+    # The same -o again: the fragment (the lab's mounting plan) is kept, refused before the
+    # search; --overwrite replaces it.
+    kept = out.read_text()
+    capsys.readouterr()
+    assert main(["design", "--pairs", "3", "--basis", str(basis_file), *FAST,
+                 "-o", str(out)]) == 2
+    assert f"{out} exists: nothing was designed" in capsys.readouterr().err
+    assert out.read_text() == kept
+    assert main(["design", "--pairs", "3", "--basis", str(basis_file), *FAST,
+                 "-o", str(out), "--overwrite"]) == 0
+    assert len(tomllib.loads(out.read_text())["pairs"]) == 3
 
 
 def test_twenty_pairs_with_default_limits(basis_file: Path, tmp_path: Path,

@@ -29,6 +29,14 @@ def test_cli_render_table_and_bad_inputs(tmp_path: Path, capsys: pytest.CaptureF
     bad = tmp_path / "bad.npz"
     bad.write_bytes(b"not a table")
     assert cli_main(["render", str(bad), "-o", str(out)]) == 2
+    # An existing picture is not replaced without --overwrite (it was, without a word).
+    before = out.read_bytes()
+    capsys.readouterr()
+    assert cli_main(["render", str(src), "-o", str(out), "--size", "96"]) == 2
+    assert f"{out} exists: the rendering was not written" in capsys.readouterr().err
+    assert out.read_bytes() == before
+    assert cli_main(["render", str(src), "-o", str(out), "--size", "96", "--overwrite"]) == 0
+    assert out.read_bytes() != before
 
 
 def test_files_that_are_not_results_are_named_for_what_they_are(
@@ -87,8 +95,9 @@ def test_a_rendered_result_says_its_reconstructions_warnings(
     out = tmp_path / "r.png"
     assert cli_main(["render", str(warned), "-o", str(out), "--size", "64"]) == 0
     assert f"warning: {bounds}" in capsys.readouterr().err
-    assert cli_main(["render", str(plain), "-o", str(out), "--size", "64"]) == 0
+    assert cli_main(["render", str(plain), "-o", str(out), "--size", "64", "--overwrite"]) == 0
     assert "warning" not in capsys.readouterr().err
     # Several inputs: each warning names its file.
-    assert cli_main(["render", str(warned), str(plain), "-o", str(out), "--size", "64"]) == 0
+    assert cli_main(["render", str(warned), str(plain), "-o", str(out), "--size", "64",
+                     "--overwrite"]) == 0
     assert f"warning: warned.h5: {bounds}" in capsys.readouterr().err
