@@ -291,6 +291,10 @@ class StageState(BaseModel):
     moving: bool
     homed: bool
     faults: list[str] = Field(default_factory=list)
+    note: str | None = Field(
+        default=None,
+        description="what became of the command when it did not end as asked (a move or "
+                    "home cut short by a stop command); None otherwise")
 
 
 class DeviceError(RuntimeError):

@@ -72,6 +72,9 @@ class StageControl:
         self._queue = queue
         self._active_job = active_job
         self._record_event = record_event
+        # Stop commands sent so far: a move or home that a stop cut short ends as asked, not
+        # as a fault (the driver reports a stage stopped short of its target as a stall).
+        self._stops = 0
 
     async def command(self, request: StageRequest) -> StageState:
         """Run one manual stage command and return the stage state after it.
@@ -103,28 +106,41 @@ class StageControl:
         if not was_held:
             # Only for the command's duration: not a decision to outlive a crash.
             self._queue.hold(manual, durable=False)
+        stops = self._stops
+        if request.action == "stop":
+            self._stops += 1
+        note = None
         try:
             rig = await self._get_rig()
             stage = rig.stage
-            if request.action == "move":
-                assert request.angle_deg is not None
-                await stage.move_to(request.angle_deg)
-            elif request.action == "home":
-                await stage.home()
-            elif request.action == "stop":
-                await stage.stop()
-            else:
-                await stage.clear_faults()
+            try:
+                if request.action == "move":
+                    assert request.angle_deg is not None
+                    await stage.move_to(request.angle_deg)
+                elif request.action == "home":
+                    await stage.home()
+                elif request.action == "stop":
+                    await stage.stop()
+                else:
+                    await stage.clear_faults()
+            except hal.DeviceFault:
+                if request.action not in ("move", "home") or self._stops == stops:
+                    raise
+                note = "stopped by a stop command before it ended"
             st = await hal.status_at_rest(stage)
         except hal.DeviceFault as exc:
             raise DeviceError(f"stage {request.action} failed: {exc}") from exc
         finally:
             if not was_held and self._queue.held == manual:  # not a halt that came meanwhile
                 self._queue.release()
+        if note is not None:
+            target = "" if request.angle_deg is None else f", short of {request.angle_deg:g} deg"
+            note = f"{note}: at {st.position_deg:.3f} deg{target}"
         self._record_event("stage", {"action": request.action, "angle_deg": request.angle_deg,
-                                     "position_deg": st.position_deg})
+                                     "position_deg": st.position_deg,
+                                     **({"note": note} if note else {})})
         return StageState(position_deg=st.position_deg, moving=st.moving, homed=st.homed,
-                          faults=list(st.faults))
+                          faults=list(st.faults), note=note)
 
     async def status(self) -> StageState:
         """Where the stage is, whether it moves, is homed, has faults (connects if needed).

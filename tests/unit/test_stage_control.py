@@ -15,7 +15,7 @@ import pytest
 from gonio.basis_supply import BasisSupply
 from gonio.motion import StageMoveError
 from gonio.rigdescription import RigDescription
-from gonio.service_models import Conflict, JobInfo, StageRequest
+from gonio.service_models import Conflict, JobInfo, StageRequest, StageState
 from gonio.sim.memrig import MemRig
 from gonio.stage_control import StageControl
 from gonio.store import JobStore
@@ -101,3 +101,45 @@ def test_a_move_outside_the_travel_limits_says_them(tmp_path: Path) -> None:
     with pytest.raises(StageMoveError, match="needs angle_deg"):
         asyncio.run(control.command(StageRequest(action="move")))
     assert rig.mstage.moves == [] and store.events_after(0) == []
+
+
+def test_a_move_cut_short_by_stop_ends_as_asked_not_as_a_fault(tmp_path: Path) -> None:
+    """Stop pressed during a manual move: the driver reports a stage stopped short of its
+    target as a stall ("check for a mechanical obstruction"), and the move answered 503,
+    "moving to -350 refused". A stop asked meanwhile makes it an answer, saying where the
+    stage stopped; a stall with no stop asked is still a fault."""
+    from gonio import hal
+    from gonio.service_models import DeviceError
+
+    control, worker, _, rig = _control(tmp_path)
+    stage = rig.mstage
+    stopped = asyncio.Event()
+
+    async def move_to(angle_deg: float, timeout_s: float | None = None) -> float:
+        # As a servo does: it turns until stopped, then stands short of its target.
+        stage.pos = 12.5
+        await stopped.wait()
+        raise hal.StageFault("stage", f"stage stopped at {stage.pos} deg, short of the target "
+                             f"{angle_deg} deg; check for a mechanical obstruction")
+
+    async def stop() -> None:
+        stopped.set()
+
+    stage.move_to = move_to  # type: ignore[method-assign]
+    stage.stop = stop  # type: ignore[method-assign]
+
+    async def go() -> tuple[StageState, StageState]:
+        move = asyncio.create_task(control.command(StageRequest(action="move", angle_deg=-350)))
+        await asyncio.sleep(0.05)
+        halt = await control.command(StageRequest(action="stop"))
+        return await move, halt
+
+    moved, _ = asyncio.run(go())
+    assert moved.note == ("stopped by a stop command before it ended: at 12.500 deg, short of "
+                          "-350 deg")
+    assert moved.position_deg == 12.5
+    assert worker.held is None
+    # A stall nobody asked for is a fault, as before.
+    stopped.set()
+    with pytest.raises(DeviceError, match="check for a mechanical obstruction"):
+        asyncio.run(control.command(StageRequest(action="move", angle_deg=40.0)))

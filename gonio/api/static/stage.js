@@ -34,7 +34,8 @@ async function command(body, what) {
   try {
     const st = await send("POST", "/rig/stage", body);
     $("#stage-state").textContent = describe(st);
-    said.textContent = `${what}: done`;
+    // A move cut short by Stop ends as asked, saying where (the driver's stall is not a fault).
+    said.textContent = st.note ? `${what}: ${st.note}` : `${what}: done`;
   } catch (e) {
     said.textContent = `${what} refused: ${e.message}`;
   }
