@@ -16,6 +16,12 @@ function headers(extra = {}) {
   return h;
 }
 
+// The time of day as HH:MM (24 h, the lab's clock), before a status line that stays until
+// the next action: it tells a line from an hour ago from one about now.
+export function clock(d = new Date()) {
+  return `${String(d.getHours()).padStart(2, "0")}:${String(d.getMinutes()).padStart(2, "0")}`;
+}
+
 export class ApiError extends Error {
   constructor(status, detail) {
     super(typeof detail === "string" ? detail : JSON.stringify(detail));

@@ -137,6 +137,9 @@ async function refresh() {
   const standard = $("#colour-standard").value;
   const key = `${id}/${instrument}/${azimuth}/${against}/${standard}`;
   if (key === shown) return;  // every job-list event comes here: nothing more to ask then
+  // Another job: the standards line spoke of the last one ("Saved standard blue std: job 12"
+  // stood under job 13's colour).
+  if (shown === null || !shown.startsWith(`${id}/`)) $("#colour-standard-state").textContent = "";
   shown = key;
   // The stored standards, read when the table changes (and when the menu is opened), not at
   // every event; a standard another client stored shows up then.

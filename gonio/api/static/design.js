@@ -2,7 +2,7 @@
 // GET /api/v1/design/presets[/{name}] (an industrial geometry evaluated the same way), shown
 // as the lab mounts them, with the rig-config fragment to download. It shares no state with
 // the rest of the page; a refused key raises the page's key prompt through api.js.
-import { getJSON, send } from "./api.js";
+import { clock, getJSON, send } from "./api.js";
 
 const $ = (sel) => document.querySelector(sel);
 
@@ -106,7 +106,10 @@ async function running(what, fn) {
     show(d);
     setState(`${what}: done in ${Math.round((performance.now() - started) / 1000)} s`);
   } catch (e) {
-    setState(`${what} failed: ${e.message}`, true);
+    // Its time, and whose the pairs below are: the failure stood above an older design as if
+    // it were about it, long after the form had changed.
+    const older = $("#design-result").hidden ? "" : " (the pairs below are the last design that worked)";
+    setState(`${clock()} ${what} failed: ${e.message}${older}`, true);
   } finally {
     clearInterval(timer);
     for (const b of buttons) b.disabled = false;

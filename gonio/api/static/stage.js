@@ -2,7 +2,7 @@
 // clear_faults), as `gonio stage --daemon URL` does. A lab loading a specimen or setting the
 // zero at the holder's mark had the command line alone. The daemon refuses a command while
 // a job is active (409, its words shown here); stop is always accepted.
-import { RIG_EVENT, send } from "./api.js";
+import { RIG_EVENT, clock, send } from "./api.js";
 
 const $ = (sel) => document.querySelector(sel);
 
@@ -30,6 +30,9 @@ window.addEventListener(RIG_EVENT, (e) => show(e.detail));
 
 async function command(body, what) {
   const said = $("#stage-said");
+  // Its time first: the line stays until the next command, across jobs and restarts, and
+  // "refused: job 13 is running" read as today's state long after job 13 had ended.
+  what = `${clock()} ${what}`;
   said.textContent = `${what}…`;
   try {
     const st = await send("POST", "/rig/stage", body);

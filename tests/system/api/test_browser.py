@@ -361,6 +361,11 @@ def test_start_a_scan_from_the_page_and_see_the_result(daemon: Daemon, browser: 
     assert not browser.find_element(By.ID, "compare-plot").is_displayed()
     click_when_steady(wait, row)
     wait.until(lambda d: d.find_element(By.ID, "compare-plot").is_displayed())
+    # The export line spoke of this job's files: another job's result shown, it is emptied
+    # (job 12's panel said "saved gonio-job-9-...").
+    click_when_steady(wait, f'#jobs tr[data-id="{other}"]')
+    wait.until(lambda d: d.find_element(By.ID, "result-job").text == f"job {other} (completed)")
+    assert browser.find_element(By.ID, "export-state").text == ""
     assert _severe(browser) == []
 
 

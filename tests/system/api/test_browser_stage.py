@@ -5,6 +5,7 @@ GET /api/v1/rig/stage, not the page's code."""
 
 from __future__ import annotations
 
+import re
 import time
 from typing import Any
 
@@ -27,7 +28,14 @@ def test_the_page_moves_the_stage_sets_its_zero_and_says_a_refusal(
     from selenium.webdriver.common.by import By
 
     wait = open_live(browser, daemon, 120)
-    said = lambda: str(browser.find_element(By.ID, "stage-said").text)  # noqa: E731
+    def said() -> str:
+        # Each line starts with the time of the command (HH:MM): it stays until the next.
+        text = str(browser.find_element(By.ID, "stage-said").text)
+        if not text:
+            return text
+        assert re.match(r"\d\d:\d\d ", text), text
+        return text[6:]
+
     shown = lambda: str(browser.find_element(By.ID, "stage-state").text)  # noqa: E731
     field = browser.find_element(By.CSS_SELECTOR, "#stage-form [name=angle_deg]")
     with daemon.client() as c:
