@@ -1155,8 +1155,12 @@ function initForm() {
       await refreshJobs();
       const active = jobs.find((j) => j.id !== job.id && ACTIVE.includes(j.state));
       if (active && jobs.find((j) => j.id === job.id)?.state === "queued") {
-        setNote(`Job ${job.id} queued: it starts after job ${active.id} (${active.specimen}, ${active.state}). ` +
-          `The page goes on showing job ${active.id}; click job ${job.id}'s row to see it.`, job.id);
+        // Nothing here that turns false as the queue moves ("it starts after job 4" stood while
+        // two jobs of higher priority went first and one was paused): its row says when it
+        // starts and what it waits for, and keeps saying it.
+        setNote(`Job ${job.id} queued: its row says when it starts and what it waits for. ` +
+          `The page goes on showing job ${active.id} (${active.specimen}), which held the rig ` +
+          `when job ${job.id} was queued; click job ${job.id}'s row to see it.`, job.id);
         if (selected !== active.id) select(active.id);
         return;
       }

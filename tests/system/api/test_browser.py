@@ -354,6 +354,16 @@ def test_start_a_scan_from_the_page_and_see_the_result(daemon: Daemon, browser: 
     assert state == [f"saved gonio-job-{job_id}-browser-sample-merl.binary and "
                      f"gonio-job-{job_id}-browser-sample-merl.binary.json",
                      *(f"warning: {w}" for w in sent)]
+    # A 600 px window: the export row wraps inside it (its menu's longest option pushed the
+    # page 80 px wider than the window, the Export button off screen).
+    browser.set_window_size(600, 900)
+    try:
+        wait.until(lambda d: d.execute_script(
+            "const b = document.getElementById('export-button').getBoundingClientRect();"
+            "return document.documentElement.scrollWidth <= window.innerWidth"
+            " && b.right <= window.innerWidth"))
+    finally:
+        browser.set_window_size(1280, 1600)
     # The calibration selected: it has no result and no "Compare with", so the comparison's
     # readings go too (they stayed, beside the calibration's own); back on the scan, they show.
     click_when_steady(wait, f'#jobs tr[data-id="{cal_id}"]')
