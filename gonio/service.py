@@ -57,6 +57,7 @@ from gonio.jobstates import (
 )
 from gonio.maintenance import LOCK_FILE_NAME, MaintenanceLock
 from gonio.paths import scan_data_dir
+from gonio.plans.arc import may_switch_basis
 from gonio.plans.checked import CheckedPlan, check_plan
 from gonio.plans.dryrun import BASIS_BUILD_S, DryRun, arc_may_apply, dry_run
 from gonio.plans.models import (
@@ -857,8 +858,9 @@ class GonioService:
                 if build_due:
                     seconds += BASIS_BUILD_S
                     build_due = False
-                if asym_due and row.plan.get("arc") == "auto":
+                if asym_due and may_switch_basis(row.plan):
                     seconds += self.basis.asymmetric_build_s() or 0.0
+                    is_bound = True
                     asym_due = False
             runs.append(QueuedRun(row.id, seconds, is_bound))
         return {run.job_id: est for run, est in
@@ -960,8 +962,14 @@ class GonioService:
         :meth:`_asymmetric_build_due`); None otherwise."""
         from gonio.plans.arc import ARC_TEST_EVENT
 
-        if (row.kind == "calibration" or row.plan.get("arc") != "auto"
-                or self.store.last_event(row.id, ARC_TEST_EVENT) is not None):
+        if row.kind == "calibration" or not may_switch_basis(row.plan):
+            return None
+        if row.plan.get("arc") != "auto":
+            # A fixed full turn is tested when it finishes: until the build is under way
+            # (then its time left holds it, :meth:`_asymmetric_build_due`), it may come.
+            return None if self._asymmetric_build_due(row) is not None else (
+                self.basis.asymmetric_build_s() or 0.0)
+        if self.store.last_event(row.id, ARC_TEST_EVENT) is not None:
             return None
         return self.basis.asymmetric_build_s() or 0.0
 
@@ -971,7 +979,13 @@ class GonioService:
         is not built yet (:meth:`BasisSupply.asymmetric_build_s`); None otherwise."""
         from gonio.plans.arc import ARC_TEST_EVENT
 
-        if row.plan.get("arc") != "auto" or not self.basis.asymmetric_build_needed():
+        if not self.basis.asymmetric_build_needed():
+            return None
+        if (self.worker.current_job == row.id and self.worker.activity == "asymmetric_basis"):
+            # Finishing waits for it now (a fixed full turn's test is made there, with no
+            # event before it): its time is the build's, not the reconstruction's estimate.
+            return self.basis.asymmetric_build_s()
+        if row.plan.get("arc") != "auto":
             return None
         ev = self.store.last_event(row.id, ARC_TEST_EVENT)
         if ev is None or ev.data.get("statistic") is None or ev.data.get("symmetric", True):
@@ -1255,7 +1269,7 @@ class GonioService:
                        basis_ready=not self.basis.build_needed(),
                        basis=self.basis.symmetry() if arc_may_apply(kind) else None,
                        asymmetric_build_s=(self.basis.asymmetric_build_s()
-                                           if kind.arc_mode() == "auto" else None),
+                                           if may_switch_basis(kind) else None),
                        asymmetric_basis=self.basis.has_asymmetric,
                        finishing_s=est.seconds, finishing_source=est.source)
 

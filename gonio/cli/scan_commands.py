@@ -392,6 +392,7 @@ def _copy_result(src: Path, out: Path, job_id: int, *, overwrite: bool,
 async def _run_scan(args: argparse.Namespace, plan: Any, config: Any, sim: Any = None) -> int:
     from gonio.basis_supply import BasisSupply
     from gonio.drivers.factory import build_rig
+    from gonio.plans.arc import may_switch_basis
     from gonio.plans.dryrun import dry_run
     from gonio.rigdescription import RigDescription
 
@@ -404,7 +405,7 @@ async def _run_scan(args: argparse.Namespace, plan: Any, config: Any, sim: Any =
         est = _local_finishing(args, config)
         dr = dry_run(plan, desc, basis_ready=not basis.build_needed(), basis=basis.symmetry(),
                      asymmetric_build_s=(basis.asymmetric_build_s()
-                                         if plan.arc_mode() == "auto" else None),
+                                         if may_switch_basis(plan) else None),
                      finishing_s=est.seconds, finishing_source=est.source)
         more = [] if sim is not None else _calibration_warnings(args, plan, config, dr.pairs)
         if more:

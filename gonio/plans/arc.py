@@ -62,6 +62,23 @@ ARC_TEST_EVENT = "arc_test"
 job continues on the arc it chose)."""
 
 
+def may_switch_basis(plan: AnyPlan | dict[str, Any]) -> bool:
+    """Whether a scan's twofold symmetry test may ask for the basis for specimens without
+    twofold symmetry (``default_basis(asymmetric=True)``, minutes to build once): an auto-arc
+    plan (its first round's test) or a reconstructing plan over a fixed full turn (finishing
+    tests the opposite stage angles it reads, :mod:`gonio.finishing`). ``plan`` is a plan or
+    a stored plan's JSON. Time estimates count the build for such a scan as a bound; only
+    auto-arc plans were counted, and a full-turn scan of an asymmetric-looking specimen said
+    "13 s left" through a two-minute build."""
+    if isinstance(plan, dict):
+        if plan.get("kind") not in ("uniform", "adaptive"):
+            return False
+        return plan.get("arc") == "auto" or float(plan.get("span_deg", 180.0)) >= FULL_TURN_DEG
+    if plan.finishing != "reconstruction":
+        return False
+    return plan.arc_mode() == "auto" or plan.first_span_deg() >= FULL_TURN_DEG
+
+
 SPREAD_DEG = 60.0
 """How far apart (modulo 180 deg) the planes of two of the plan's pairs must lie for one
 opposite stage angle to test the specimen (:func:`opposites_needed`). A pair whose light and

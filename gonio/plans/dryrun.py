@@ -257,6 +257,15 @@ def dry_run(plan: AnyPlan | CheckedPlan, rig: RigDescription, current_deg: float
             finish += BASIS_BUILD_S
             finishing_source = (f"{finishing_source}; and about {BASIS_BUILD_S:.0f} s to build "
                                 "the reconstruction basis, once on this install")
+        if branches is None and asymmetric_build_s is not None and asymmetric_basis and (
+                basis is None or basis.half_turn_periodic):
+            # A fixed full turn is tested as it finishes (its readings at opposite angles): a
+            # specimen called asymmetric waits there for that basis. A bound, like a branch.
+            finish += asymmetric_build_s
+            finishing_source = (f"{finishing_source}; and up to {asymmetric_build_s:.0f} s to "
+                                "build the basis for specimens without twofold symmetry, once "
+                                "on this install, if the readings at opposite stage angles "
+                                "call the specimen so")
     gap = None
     if plan.finishing == "reconstruction":
         gap = mirror_gap_deg(*rig.pair_directions(pairs))

@@ -430,6 +430,36 @@ def test_an_auto_arc_scan_ahead_bounds_the_start_with_the_asymmetric_basis_build
         auto_s + finishing + build + 240.0 + plain_s + finishing)
 
 
+def test_a_full_turn_scan_ahead_bounds_the_start_with_the_asymmetric_basis_build(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A fixed full turn is tested for twofold symmetry when it finishes, and a specimen it
+    calls asymmetric waits for that basis there: "13 s left" stood through a two-minute
+    build, and the scans behind it were timed without it. Its finishing (dry run) and the
+    starts behind it count the build as a bound, once; a half turn does not."""
+    from gonio.plans.dryrun import BASIS_BUILD_S
+    _rig, svc = _service(tmp_path)
+    monkeypatch.setattr(svc.basis, "asymmetric_build_needed", lambda: True)
+    monkeypatch.setattr(svc.basis, "asymmetric_build_s", lambda: 240.0)
+    full = UniformPlan(rotations=4, span_deg=360.0, exposure=FAST)
+    half = UniformPlan(rotations=4, exposure=FAST)
+    finishing = svc._finishing_estimate().seconds
+    assert finishing is not None
+    build = BASIS_BUILD_S if svc.basis.build_needed() else 0.0
+    assert svc.dry_run(full).finishing_s == pytest.approx(finishing + build + 240.0)
+    assert "without twofold symmetry" in (svc.dry_run(full).finishing_source or "")
+    assert svc.dry_run(half).finishing_s == pytest.approx(finishing + build)
+    first = svc.submit(JobRequest(plan=full)).id
+    second = svc.submit(JobRequest(plan=half)).id
+    third = svc.submit(JobRequest(plan=full)).id
+    jobs = {j.id: j for j in svc.list_jobs()}
+    full_s, half_s = svc.dry_run(full).estimated_s, svc.dry_run(half).estimated_s
+    assert jobs[second].starts_in_s == pytest.approx(full_s + finishing + build + 240.0)
+    assert jobs[second].starts_in_bound
+    assert jobs[third].starts_in_s == pytest.approx(
+        full_s + finishing + build + 240.0 + half_s + finishing)
+    assert jobs[first].starts_in_s == 0.0
+
+
 def test_a_queued_plan_that_cannot_be_timed_leaves_the_job_list_answering(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """A stored plan whose dry run raises something other than PlanError (an older plan, a
