@@ -306,6 +306,15 @@ def _scan_samples(path: str) -> Any:
     return samples
 
 
+def _is_hdf5(path: Path) -> bool:
+    """Whether ``path`` is a file that starts with the HDF5 signature."""
+    try:
+        with path.open("rb") as f:
+            return f.read(8) == b"\x89HDF\r\n\x1a\n"
+    except OSError:
+        return False
+
+
 def _cmd_reconstruct(args: argparse.Namespace) -> int:
     from gonio.brdf.reconstruction.reconstruct import reconstruct
 
@@ -460,9 +469,11 @@ def _cmd_library_import(args: argparse.Namespace) -> int:
 
     shipped = set(measured_names())
     for f in args.files:
-        if Path(f).suffix.lower() == ".h5":
+        if Path(f).suffix.lower() == ".h5" and _is_hdf5(Path(f)):
             # A scan's result holds its reconstruction, but the library takes tables: the
             # step between is an export the lab would not guess from "unknown kind of file".
+            # (Only an HDF5 file: a missing or text file named .h5 was called a result, and
+            # the export the advice named then failed; the import says what it is.)
             table = Path(f).with_suffix(".table.npz")
             raise UsageError(
                 f"{f} is a scan's result file; the library takes BRDF tables: export its "

@@ -135,9 +135,13 @@ def _jobs(args: argparse.Namespace) -> int:
     rows = store.list_jobs()
     waiting = _queue_wait(store, args.db, rows)
     if args.json:
+        # The API's names (GET /api/v1/jobs, 'gonio jobs --daemon URL list --json') for what
+        # a store holds: "done"/"total" here broke a script moved from one to the other.
         print(json.dumps([{"id": r.id, "state": r.state.value, "kind": r.kind,
-                           "specimen": r.specimen, "done": r.done_angles,
-                           "total": r.total_angles, "reason": r.reason,
+                           "specimen": r.specimen, "priority": r.priority,
+                           "created": r.created, "started": r.started, "finished": r.finished,
+                           "done_angles": r.done_angles, "total_angles": r.total_angles,
+                           "reason": r.reason,
                            "waiting": waiting if r.state.value == "queued" else None}
                           for r in rows]))
         return 0

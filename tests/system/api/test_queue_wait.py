@@ -45,6 +45,11 @@ def test_a_queued_job_under_a_halt_says_why_it_waits_in_the_api_and_gonio_jobs(
             assert main(["jobs", "list", "--db", db, "--json"]) == 0
             rows = {r["id"]: r for r in json.loads(capsys.readouterr().out)}
             assert rows[job]["waiting"] == waiting
+            # The API's names and values for what a store holds ("done"/"total" there broke a
+            # script moved between 'gonio jobs --db' and '--daemon').
+            assert {"done_angles", "total_angles", "priority"} <= set(rows[job])
+            for key, value in rows[job].items():
+                assert key in listed[job] and listed[job][key] == value, (key, listed[job])
         finally:
             assert c.post("/api/v1/rig/release").status_code == 200
         # Released: nothing holds it any more, and it runs.

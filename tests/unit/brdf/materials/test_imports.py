@@ -157,13 +157,24 @@ def test_import_refuses_bad_files_and_writes_nothing(tmp_path: Path, libdir: Pat
     assert "unknown kind of file" in capsys.readouterr().err
     # A scan's result is not refused as an "unknown kind of file" (.h5): the message gives
     # the export that makes a table of it.
+    import h5py
+
     result = tmp_path / "felt.h5"
-    result.write_bytes(b"")
+    with h5py.File(result, "w") as f:
+        f.attrs["format"] = "gonio-result"
     assert main(["library", "import", str(good), str(result)]) == 2
     err = capsys.readouterr().err
     assert f"'gonio export {result} --format table' writes {tmp_path / 'felt.table.npz'}" \
         in err, err
     assert "unknown kind of file" not in err, err
+    # A text file, or no file, named .h5 is no result: said for what it is (the export the
+    # advice named then failed).
+    text = tmp_path / "notes.h5"
+    text.write_text("hello")
+    assert main(["library", "import", str(text)]) == 2
+    assert "unknown kind of file" in capsys.readouterr().err
+    assert main(["library", "import", str(tmp_path / "gone.h5")]) == 2
+    assert "no such file" in capsys.readouterr().err
     assert measured.user_table_files() == []
     with pytest.raises(TableImportError, match="no such file"):
         read_any(tmp_path / "missing.bsdf")
