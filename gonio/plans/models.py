@@ -355,6 +355,17 @@ class CalibrationPlan(_PlanBase):
     rotations: Count = Field(default=4, description="angles averaged to even out the reference")
     start_deg: StartDeg = 0.0
 
+    @model_validator(mode="before")
+    @classmethod
+    def _named_after_its_reference(cls, data: Any) -> Any:
+        # The job list shows ``specimen``: a calibration queued with reference_name
+        # "spectralon" and no specimen was listed as "specimen".
+        if isinstance(data, dict) and "specimen" not in data:
+            name = data.get("reference_name")
+            return {**data, "specimen": name if isinstance(name, str) and name.strip()
+                    else "white reference"}
+        return data
+
 
 Plan = Annotated[UniformPlan | AdaptivePlan | CalibrationPlan, Field(discriminator="kind")]
 

@@ -115,3 +115,19 @@ def test_a_plan_stored_before_the_arc_existed_keeps_its_full_turn(tmp_path: Path
     again.close()
     assert [p.first_span_deg() for p in plans] == [360.0, 360.0]
     assert [parse_plan(d).first_span_deg() for d in olds] == [180.0, 180.0]
+
+
+def test_a_calibration_is_listed_under_its_reference_name() -> None:
+    """A calibration queued with reference_name "spectralon" and no specimen was listed as
+    "specimen" in the job list; a specimen given is kept, and none given at all names the
+    white reference."""
+    from gonio.plans.models import parse_plan
+
+    named = parse_plan({"kind": "calibration", "reference_albedo": 0.99,
+                        "reference_name": "spectralon"})
+    assert named.specimen == "spectralon"
+    assert parse_plan({"kind": "calibration", "reference_albedo": 0.99}).specimen == \
+        "white reference"
+    assert parse_plan({"kind": "calibration", "reference_albedo": 0.99,
+                       "reference_name": "spectralon", "specimen": "tile 3"}).specimen == \
+        "tile 3"
