@@ -258,9 +258,12 @@ def design_pairs(
                 "objective='posterior' needs a gonio Basis (its medians and prior); "
                 "pass objective='kappa' for other row sources"
             )
-        log.warning("design of %d pairs: %s", n, fallback)
     design = _kappa_design(basis, n, constraints, h=h, starts=starts, descents=descents,
                            seed=seed, method=method, time_limit_s=time_limit_s)
+    if fallback is not None:
+        # Said once the fallback has made the design: said before it, "the condition-number
+        # search made the design" stood above that search's own failure.
+        log.warning("design of %d pairs: %s", n, fallback)
     return replace(with_expected_error(basis, design, rotations, span_deg), fallback=fallback,
                    fallback_error=fallback_error)
 
