@@ -23,7 +23,7 @@ import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -414,39 +414,51 @@ scale (:func:`check_plausible`): a reference that read less than this was not li
 and its factors would multiply noise into 1/sr."""
 
 
-def sensor_full_scale(rig_config: Any) -> dict[str, NDArray[np.float64]]:
-    """Each sensor's full scale per channel in sensor units of its nominal range: the largest
-    value it can read, ``saturation_raw`` times the value register's scale, times ``gain /
-    g`` for its lowest gain stage ``g`` (auto-ranging reads a brighter light there and scales
-    it back, :func:`counts`); from a :class:`gonio.config.RigConfig`, empty without one.
+class SensorRange(NamedTuple):
+    """What a sensor can read, per channel, in sensor units of its nominal range: ``nominal``
+    its full scale at ``gain`` (``saturation_raw`` times the value register's scale) and
+    ``highest`` the largest value it reads at all, ``nominal`` times ``gain / g`` for its
+    lowest gain stage ``g`` (auto-ranging reads a brighter light there and scales it back,
+    :func:`counts`)."""
 
-    Without the stages a white reference read at a long exposure, saturating at ``gain`` and
-    read again a stage lower, made a calibration that was refused as one no reference on the
-    rig could have produced.
+    nominal: NDArray[np.float64]
+    highest: NDArray[np.float64]
+
+
+def sensor_full_scale(rig_config: Any) -> dict[str, SensorRange]:
+    """Each sensor's range (:class:`SensorRange`) from a :class:`gonio.config.RigConfig`; empty
+    without one.
+
+    Its gain stages count at the top only: a white reference read at a long exposure,
+    saturating at ``gain`` and read again a stage lower, made a calibration that was refused
+    as one no reference on the rig could have produced; the least plausible reading stays a
+    fraction of the nominal range (:func:`check_plausible`).
     """
-    out: dict[str, NDArray[np.float64]] = {}
+    out: dict[str, SensorRange] = {}
     for s in getattr(rig_config, "sensors", None) or ():
         scales = [abs(float(r.scale)) for r in s.registers.values]
+        nominal = float(s.saturation_raw) * np.asarray(scales, dtype=float)
         gain = float(getattr(s, "gain", 1.0))
         lowest = min([gain, *(float(g) for g in getattr(s, "gain_stages", None) or ())])
-        out[str(s.name)] = (float(s.saturation_raw) * gain / lowest
-                            * np.asarray(scales, dtype=float))
+        out[str(s.name)] = SensorRange(nominal, nominal * (gain / lowest))
     return out
 
 
-def check_plausible(cal: Calibration, full_scale: Mapping[str, NDArray[np.float64]],
+def check_plausible(cal: Calibration,
+                    full_scale: Mapping[str, SensorRange | NDArray[np.float64]],
                     where: str) -> None:
     """Refuse factors that no white reference on this rig can have produced.
 
     A factor ``k`` says the reference read ``(albedo / pi) / k`` (dark-subtracted, sensor
-    units). That reading must lie between :data:`MIN_REFERENCE_FRACTION` of the sensor's full
-    scale and the full scale itself (a reading above it saturates). Sensors not in
-    ``full_scale`` are not checked.
+    units). That reading must lie between :data:`MIN_REFERENCE_FRACTION` of the sensor's
+    nominal full scale and the largest value it reads (above that it saturates in its lowest
+    gain stage). Sensors not in ``full_scale`` are not checked.
 
     Parameters
     ----------
     cal : the calibration
-    full_scale : sensor name -> (C,) full scale in sensor units (:func:`sensor_full_scale`)
+    full_scale : sensor name -> its :class:`SensorRange` (:func:`sensor_full_scale`), or a
+        (C,) full scale in sensor units for a sensor without gain stages
     where : the file or setting it came from, for the message
 
     Raises
@@ -456,11 +468,15 @@ def check_plausible(cal: Calibration, full_scale: Mapping[str, NDArray[np.float6
     """
     albedo = cal.reference_albedo if cal.reference_albedo is not None else 1.0
     for p in cal.pairs:
-        top = full_scale.get(p.sensor)
-        if top is None or len(top) != len(p.factor):
+        span = full_scale.get(p.sensor)
+        if span is None:
+            continue
+        nominal, top = (span if isinstance(span, SensorRange)
+                        else (np.asarray(span, float), np.asarray(span, float)))
+        if len(top) != len(p.factor):
             continue
         implied = (albedo / math.pi) / np.asarray(p.factor, dtype=float)
-        low = MIN_REFERENCE_FRACTION * top
+        low = MIN_REFERENCE_FRACTION * nominal
         if np.any(implied > top) or np.any(implied < low):
             raise CalibrationError(
                 f"{where}: the factors of pair {p.light}/{p.sensor} {list(p.factor)} mean the "

@@ -255,22 +255,42 @@ def test_the_full_scale_counts_the_lowest_gain_stage() -> None:
     """A white reference read at a long exposure saturates at the sensor's gain and is read
     again a stage lower (auto-ranging scales it back to the nominal range): its calibration
     implies a reading above the nominal range's full scale, and was refused as one no
-    reference on the rig could have produced (``gonio scan --sim --exposure 0.2``). The full
-    scale is the nominal range's times gain over the lowest stage's gain."""
-    from gonio.calibration import sensor_full_scale
+    reference on the rig could have produced (``gonio scan --sim --exposure 0.2``). The top is
+    the nominal range's times gain over the lowest stage's gain; the least plausible reading
+    stays a fraction of the nominal range (raised with the top, a dim reference that loaded
+    yesterday was refused)."""
+    from gonio.calibration import (
+        MIN_REFERENCE_FRACTION,
+        SensorRange,
+        check_plausible,
+        sensor_full_scale,
+    )
     from gonio.config import load_rig_config
 
     cfg = load_rig_config(Path(__file__).resolve().parents[2] / "deploy" / "rig.example.toml")
-    staged = [s for s in cfg.sensors if s.gain_stages]
-    assert staged, "the example rig has a sensor with gain stages"
-    for sensor in cfg.sensors:
-        nominal = sensor.saturation_raw * np.array([abs(r.scale) for r in sensor.registers.values])
-        # gain 1.0 with stages [0.1, 0.01] (the example's): 100 times the nominal range.
-        ratio = sensor.gain / min([sensor.gain, *sensor.gain_stages])
-        assert sensor_full_scale(cfg)[sensor.name] == pytest.approx(nominal * ratio)
-    assert sensor_full_scale(cfg)[staged[0].name] == pytest.approx(
-        staged[0].saturation_raw * 100.0
-        * np.array([abs(r.scale) for r in staged[0].registers.values]))
+    s1 = next(s for s in cfg.sensors if s.name == "S1")
+    assert (s1.gain, s1.gain_stages) == (1.0, [0.1, 0.01])  # the example's, read above
+    nominal = s1.saturation_raw * np.array([abs(r.scale) for r in s1.registers.values])
+    got = sensor_full_scale(cfg)["S1"]
+    assert isinstance(got, SensorRange)
+    np.testing.assert_allclose(got.nominal, nominal)
+    np.testing.assert_allclose(got.highest, 100.0 * nominal)  # gain 1 over stage 0.01
+    albedo = 0.9
+
+    def cal(reading: float) -> Calibration:
+        # The factor a white reference reading ``reading`` (all channels) implies.
+        k = albedo / math.pi / reading
+        return Calibration.model_validate({
+            "reference_albedo": albedo, "pairs": [
+                {"light": "L1", "sensor": "S1", "factor": [k] * len(nominal)}]})
+
+    full = sensor_full_scale(cfg)
+    top, floor = float(got.highest[0]), MIN_REFERENCE_FRACTION * float(nominal[0])
+    for fine in (2.0 * float(nominal[0]), top * 0.999, floor * 1.01):
+        check_plausible(cal(fine), full, "here")
+    for wrong in (top * 1.01, floor * 0.99):
+        with pytest.raises(CalibrationError, match="here: the factors of pair"):
+            check_plausible(cal(wrong), full, "here")
 
 
 def test_check_covers_names_the_missing_pairs_and_accepts_no_calibration() -> None:
