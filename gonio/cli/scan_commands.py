@@ -289,35 +289,60 @@ def _scan(args: argparse.Namespace) -> int:
             sim.close()
 
 
+SIM_SCAN_MATERIALS = "sim-scan-materials.json"
+"""In a ``gonio scan --sim`` data directory: the simulated material each job measured, by
+job id (``null`` for the default), so an interrupted job resumes only on its own."""
+
+
+def _sim_materials(data_dir: Path) -> dict[str, Any]:
+    import json
+
+    try:
+        data = json.loads((data_dir / SIM_SCAN_MATERIALS).read_text())
+    except (OSError, ValueError):
+        return {}
+    return data if isinstance(data, dict) else {}
+
+
 def _same_sim_material(data_dir: Path, job: Any, material: str | None, db: Path) -> None:
-    """Record the simulated material of this ``gonio scan --sim`` run in ``data_dir``; refuse
-    to resume ``job`` (the interrupted job this scan would resume, or None) when it was
-    measuring another one.
+    """Refuse to resume ``job`` (the interrupted job this ``gonio scan --sim`` would resume,
+    or None) when it was measuring another simulated material than ``material``.
 
     The plan and rig alone decided a resume, so ``--material pile-000`` after an interrupted
     scan of the default material finished that job on the new specimen: 18 angles of one
-    material and 14 of another in one result, which named only the second as its truth.
+    material and 14 of another in one result, which named only the second as its truth. A
+    job interrupted while reconstructing measures nothing more (its finishing records the
+    truth it kept, :mod:`gonio.finishing`): it resumes whatever the material.
     """
+    from gonio.jobstates import JobState
+
+    if job is None or job.state is JobState.RECONSTRUCTING:
+        return
+    recorded = _sim_materials(data_dir)
+    if str(job.id) not in recorded:
+        return  # recorded by no earlier run (an older gonio): as before
+    was_material = recorded[str(job.id)]
+    if was_material == material:
+        return
+    was = "the default material" if was_material is None else f"material {was_material!r}"
+    now = "the default material" if material is None else f"material {material!r}"
+    again = "without --material" if was_material is None else f"with --material {was_material}"
+    raise UsageError(
+        f"job {job.id} was measuring {was} when it was interrupted ({job.done_angles} of "
+        f"{job.total_angles} angles): its readings cannot be joined with {now}'s, so nothing "
+        f"was measured. Run the same command {again} to finish it, or end it first ('gonio "
+        f"jobs abort {job.id} --db {db}') and scan {now} again")
+
+
+def _record_sim_material(data_dir: Path, job_id: int, material: str | None) -> None:
+    """Note that job ``job_id`` measures ``material`` (:data:`SIM_SCAN_MATERIALS`)."""
     import json
 
-    from gonio.cli.serve_command import SIM_STATE_FILE
+    from gonio.atomicfile import write_atomically
 
-    state = data_dir / SIM_STATE_FILE
-    if job is not None and state.is_file():
-        try:
-            recorded = json.loads(state.read_text()).get("material")
-        except (ValueError, AttributeError, OSError):
-            recorded = material  # unreadable: as before this record existed
-        if recorded != material:
-            was = "the default material" if recorded is None else f"material {recorded!r}"
-            now = "the default material" if material is None else f"material {material!r}"
-            again = "without --material" if recorded is None else f"with --material {recorded}"
-            raise UsageError(
-                f"job {job.id} was measuring {was} when it was interrupted ({job.done_angles} "
-                f"of {job.total_angles} angles): its readings cannot be joined with {now}'s, "
-                f"so nothing was measured. Run the same command {again} to finish it, or end "
-                f"it first ('gonio jobs abort {job.id} --db {db}') and scan {now} again")
-    state.write_text(json.dumps({"material": material}))
+    recorded = _sim_materials(data_dir)
+    recorded[str(job_id)] = material
+    write_atomically(data_dir / SIM_SCAN_MATERIALS, json.dumps(recorded).encode())
 
 
 def _stop_on_terminate(stopped: list[str], finished: list[bool] | None = None) -> None:
@@ -493,6 +518,8 @@ async def _run_owned(args: argparse.Namespace, checked: Any, config: Any, sim: A
         job = service.unfinished_job(plan)
         if sim is not None:
             _same_sim_material(data_dir, job, getattr(args, "material", None), db)
+            if job is not None and job.state is not JobState.RECONSTRUCTING:
+                _record_sim_material(data_dir, job.id, getattr(args, "material", None))
         if job is not None:
             print(f"resuming job {job.id} from its checkpoint ({job.done_angles} of "
                   f"{job.total_angles} angles done)", file=sys.stderr)
@@ -524,6 +551,8 @@ async def _run_owned(args: argparse.Namespace, checked: Any, config: Any, sim: A
                 print(f"warning: {warning}", file=sys.stderr)
             job = service.submit(JobRequest(plan=plan), checked=checked,
                                  accept_uncalibrated=bool(args.accept_uncalibrated))
+        if sim is not None and plan.kind != "calibration":
+            _record_sim_material(data_dir, job.id, getattr(args, "material", None))
         bar = _progress(service, job.id, disabled=args.no_progress)
         try:
             final = await service.run_in_foreground(job.id)

@@ -498,3 +498,31 @@ def test_ordinals_follow_english_usage() -> None:
     assert [ordinal(n) for n in (1, 2, 3, 4, 11, 12, 13, 21, 22, 23, 101, 111, 112)] == [
         "1st", "2nd", "3rd", "4th", "11th", "12th", "13th", "21st", "22nd", "23rd", "101st",
         "111th", "112th"]
+
+
+def test_a_sim_job_resumes_on_its_own_material_whatever_ran_since(tmp_path: Path) -> None:
+    """The material is kept per job: a scan of another plan on another material run since
+    (a new job) does not make the interrupted one's material the other's, which the refusal
+    then advised, joining two materials in one result. A job interrupted while
+    reconstructing measures nothing more: it resumes whatever the material."""
+    from types import SimpleNamespace
+
+    from gonio.cli import UsageError
+    from gonio.cli.scan_commands import _record_sim_material, _same_sim_material
+    from gonio.jobstates import JobState
+
+    db = tmp_path / "gonio.sqlite"
+    _record_sim_material(tmp_path, 1, None)  # P1, the default material, interrupted
+    _record_sim_material(tmp_path, 2, "pile-000")  # P2 since, another material
+    p1 = SimpleNamespace(id=1, state=JobState.PAUSED, done_angles=18, total_angles=32)
+    _same_sim_material(tmp_path, p1, None, db)  # its own: resumes
+    with pytest.raises(UsageError, match="job 1 was measuring the default material") as e:
+        _same_sim_material(tmp_path, p1, "pile-000", db)
+    assert "Run the same command without --material to finish it" in str(e.value)
+    assert f"gonio jobs abort 1 --db {db}" in str(e.value)
+    finishing = SimpleNamespace(id=1, state=JobState.RECONSTRUCTING, done_angles=32,
+                                total_angles=32)
+    _same_sim_material(tmp_path, finishing, "pile-000", db)
+    # A job no run recorded (an older gonio's): as before, it resumes.
+    _same_sim_material(tmp_path, SimpleNamespace(id=7, state=JobState.PAUSED, done_angles=1,
+                                                 total_angles=8), "pile-000", db)
