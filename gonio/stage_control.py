@@ -106,13 +106,15 @@ class StageControl:
         if not was_held:
             # Only for the command's duration: not a decision to outlive a crash.
             self._queue.hold(manual, durable=False)
-        stops = self._stops
         if request.action == "stop":
             self._stops += 1
         note = None
         try:
             rig = await self._get_rig()
             stage = rig.stage
+            # Counted from here, as the command goes to the stage: a stop sent while the rig
+            # was still connecting came before the move and does not excuse its stall.
+            stops = self._stops
             try:
                 if request.action == "move":
                     assert request.angle_deg is not None

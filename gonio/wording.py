@@ -42,7 +42,7 @@ DAMAGED_ADVICE = (
 
 SIM_CONFIG_HEADER = ("# Written by gonio sim for the simulated rig it runs; the next gonio sim "
                      "with this -o replaces it.\n")
-"""The first line of a rig config the simulator writes: ``gonio sim -o`` replaces such a file
-(or one with the simulator's specimen recipe beside it, which ``gonio rig apply-design`` keeps
-while it drops comments) without asking, and refuses any other (a lab's own rig config) unless
-told ``--overwrite``."""
+"""The first line of a rig config the simulator writes (``gonio rig apply-design`` keeps it):
+``gonio sim -o`` replaces such a file without asking, and refuses any other (a lab's own rig
+config) unless told ``--overwrite``. Not the simulator's specimen recipe beside it: that file
+outlives the config it was written for (a lab copying its own config over the name)."""

@@ -74,7 +74,13 @@ def _apply_design(args: argparse.Namespace) -> int:
     in_place = out.resolve() == args.rig.resolve()  # also "-o ./rig.toml" or an absolute path
     if in_place:
         shutil.copyfile(args.rig, args.rig.with_name(args.rig.name + ".bak"))
-    out.write_text(tomli_w.dumps(merged), encoding="utf-8")
+    # A config gonio sim wrote keeps its first line, which lets a later 'gonio sim -o' on it
+    # replace it (any other file it refuses without --overwrite).
+    from gonio.wording import SIM_CONFIG_HEADER
+
+    with args.rig.open(encoding="utf-8", errors="replace") as f:
+        header = SIM_CONFIG_HEADER if f.readline() == SIM_CONFIG_HEADER else ""
+    out.write_text(header + tomli_w.dumps(merged), encoding="utf-8")
     for note in notes:
         print(f"note: {note}")
     n = len(design.pair_names())

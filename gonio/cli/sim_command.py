@@ -178,9 +178,7 @@ def _refuse_foreign_config(out: Path) -> None:
     except OSError as exc:
         raise UsageError(f"-o {out} cannot be read ({exc.strerror or exc}); name another "
                          "file") from None
-    from gonio.cli.sim_session import sim_specimen_path
-
-    if first != SIM_CONFIG_HEADER and not sim_specimen_path(out).is_file():
+    if first != SIM_CONFIG_HEADER:
         raise UsageError(f"{out} exists and was not written by gonio sim (a lab's own rig "
                          "config?): nothing was replaced; give -o another file, or "
                          "--overwrite to replace it")

@@ -100,8 +100,17 @@ def _through_daemon(args: argparse.Namespace) -> str:
             if args.action == "move":
                 body["angle_deg"] = float(args.angle_deg)
             st = client.request("POST", "/api/v1/rig/stage", json=body)
-    return describe(float(st["position_deg"]), bool(st["moving"]), bool(st["homed"]),
+    text = describe(float(st["position_deg"]), bool(st["moving"]), bool(st["homed"]),
                     list(st.get("faults", [])))
+    if st.get("note"):
+        # A move or home cut short by a stop from elsewhere (the page's Stop): not where it
+        # was asked to go, so not a success for a script.
+        raise StoppedShort(f"{args.action} {st['note']}; {text}")
+    return text
+
+
+class StoppedShort(Exception):
+    """A stage command through a daemon that a stop command cut short (the answer's note)."""
 
 
 def run(args: argparse.Namespace) -> int:
@@ -121,6 +130,9 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(text) from None
     except DeviceFault as exc:
         print(f"gonio stage: stage fault: {exc}", file=sys.stderr)
+        return 1
+    except StoppedShort as exc:
+        print(f"gonio stage: {exc}", file=sys.stderr)
         return 1
     except DaemonRefused as exc:
         if exc.status == 503:  # the daemon's stage reported a fault: as the local path

@@ -58,12 +58,21 @@ def test_gonio_sim_replaces_its_own_config_but_not_a_labs(
     assert main(["sim", "--duration", "0", "-o", str(rig)]) == 0
     assert main(["sim", "--duration", "0", "-o", str(rig)]) == 0  # its own: replaced
     assert tomllib.loads(rig.read_text())["lights"]
-    # Rewritten by `gonio rig apply-design` (which keeps no comments), it is still the
-    # simulator's (its specimen recipe beside it), as apply-design's own note says.
-    header, body = rig.read_text().split("\n", 1)
-    assert header.startswith("# Written by gonio sim") and not body.startswith("#")
-    rig.write_text(body)
-    assert main(["sim", "--duration", "0", "-o", str(rig)]) == 0
+    # Rewritten by `gonio rig apply-design`, it is still the simulator's (apply-design keeps
+    # its first line), as apply-design's own note says: 'gonio sim --geometry ... -o' on it.
+    geometry = tmp_path / "geometry.toml"
+    assert main(["design", "--preset", "MA68", "--no-expected-error", "-o",
+                 str(geometry)]) == 0
+    assert main(["rig", "apply-design", str(geometry), str(rig)]) == 0
+    assert rig.read_text().startswith("# Written by gonio sim")
+    assert main(["sim", "--duration", "0", "--geometry", str(geometry), "-o", str(rig)]) == 0
+    # A lab's own config copied over the name (the simulator's specimen recipe still beside
+    # it) is the lab's: refused.
+    (tmp_path / "rig.sim-specimen.json").write_text("{}")
+    rig.write_text((PROJECT_ROOT / "deploy" / "rig.example.toml").read_text())
+    capsys.readouterr()
+    assert main(["sim", "--duration", "0", "-o", str(rig)]) == 2
+    assert "was not written by gonio sim" in capsys.readouterr().err
     labs = tmp_path / "lab-rig.toml"
     text = (PROJECT_ROOT / "deploy" / "rig.example.toml").read_text()
     labs.write_text(text)

@@ -94,3 +94,34 @@ def test_missing_rig_config_is_a_clear_error(
 ) -> None:
     assert main(["stage", "--rig", str(tmp_path / "nope.toml"), "status"]) == 2
     assert "nope.toml" in capsys.readouterr().err
+
+
+def test_a_move_a_stop_cut_short_is_no_success_through_a_daemon(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The daemon answers a move that a stop (the page's Stop) cut short with where it
+    stopped, in ``note``: printed as a plain position, exit 0, a script took the stage to be
+    at its target. The daemon's answer stands in for its HTTP reply here."""
+    import gonio.cli.stage_command as stage_command
+
+    class Answer:
+        def __init__(self, *args: object, **kwargs: object) -> None:
+            pass
+
+        def __enter__(self) -> Answer:
+            return self
+
+        def __exit__(self, *exc: object) -> None:
+            pass
+
+        def request(self, method: str, path: str, **kwargs: object) -> dict[str, object]:
+            return {"position_deg": 12.5, "moving": False, "homed": True, "faults": [],
+                    "note": "stopped by a stop command before it ended: at 12.500 deg, "
+                            "short of 90 deg"}
+
+    monkeypatch.setattr(stage_command, "DaemonClient", Answer)
+    assert main(["stage", "--daemon", "http://127.0.0.1:9", "move", "90"]) == 1
+    err = capsys.readouterr().err
+    assert "move stopped by a stop command before it ended: at 12.500 deg, short of 90 deg" \
+        in err, err
+    assert "stage at 12.500 deg" in err, err
