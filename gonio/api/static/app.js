@@ -709,10 +709,11 @@ async function showResult(job) {
   try {
     await loadResult(job);
   } catch (e) {
-    // Loaded again at the next refresh: a load that failed (the daemon stopped meanwhile)
-    // left the panel saying "no rendering: the daemon does not answer" under a live chip,
-    // with the previous job's polar curves, until the row was clicked again.
-    if (shownResult === job.id) shownResult = null;
+    // Loaded again at the next refresh when the daemon did not answer (stopped meanwhile):
+    // the panel said "no rendering: the daemon does not answer" under a live chip, with the
+    // previous job's polar curves, until the row was clicked again. An answer that refused
+    // (a damaged result file) is not asked again at every refresh.
+    if (shownResult === job.id && e instanceof ApiError && e.status === 0) shownResult = null;
     throw e;
   }
 }
@@ -720,6 +721,8 @@ async function showResult(job) {
 async function loadResult(job) {
   clearPolar();  // the previous job's curves must not stand under this job's heading
   const metrics = await getJSON(`/jobs/${job.id}/metrics`);
+  // Another job shown while this one's answer came: its panel is not this one's to fill.
+  if (shownResult !== job.id) return;
   shownUncalibrated = !metrics.calibrated;
   showMetrics(metrics);
   const link = $("#download");
@@ -734,7 +737,9 @@ async function loadResult(job) {
     });
   };
   const img = $("#preview");
-  setImage(img, "preview", await getBlob(`/jobs/${job.id}/preview.png`));
+  const preview = await getBlob(`/jobs/${job.id}/preview.png`);
+  if (shownResult !== job.id) return;
+  setImage(img, "preview", preview);
   $("#preview-caption").textContent = `${job.specimen}: the reconstructed table itself, log scale; the colour bar gives the brightest channel's value in the material's typical tint; ` +
     "columns φh = 0, 45, 90, 135°; rows φd = 90, 0°; in each panel θh runs down, θd right; hatched cells are below the horizon." + (shownUncalibrated ? UNCALIBRATED_NOTE : "");
   await Promise.all([refreshRender(), refreshPolar()]);

@@ -9,13 +9,20 @@ function shownJob() {
   return m ? Number(m[1]) : null;
 }
 
-// The job the status line speaks of: another job shown, the line is emptied (it said
-// "saved gonio-job-9-....npz" under job 12's result).
+// The status line and the job it speaks of: shown under that job's result only (it said
+// "saved gonio-job-9-....npz" under job 12's), and again when that job is shown again.
 let stateJob = null;
+let stateText = "";
+
+function say(id, text) {
+  stateJob = id;
+  stateText = text;
+  sync();
+}
 
 function sync() {
   $("#export").hidden = shownJob() === null;
-  if (shownJob() !== stateJob) { $("#export-state").textContent = ""; stateJob = null; }
+  $("#export-state").textContent = shownJob() === stateJob ? stateText : "";
 }
 
 // One download: the response saved under the name the daemon gives; returns that name and
@@ -51,16 +58,11 @@ async function exportShown() {
   const withMesh = choice.endsWith("-mesh");
   const fmt = withMesh ? choice.slice(0, -"-mesh".length) : choice;
   const query = withMesh ? { format: fmt, with_mesh: "true" } : { format: fmt };
-  const state = $("#export-state");
-  stateJob = id;
   // The seconds so far, counted: a fit-backed format can take a minute on a busy machine
   // (MERL with its sidecar: 61 s measured beside a reconstruction), and a bare "exporting…"
   // read as stuck.
   const started = performance.now();
-  const tick = () => {
-    if (stateJob !== id) return;  // another job shown meanwhile: its line is not this one's
-    state.textContent = `exporting… ${Math.round((performance.now() - started) / 1000)} s so far`;
-  };
+  const tick = () => say(id, `exporting… ${Math.round((performance.now() - started) / 1000)} s so far`);
   tick();
   const timer = setInterval(tick, 1000);
   try {
@@ -71,11 +73,9 @@ async function exportShown() {
     if (fmt === "merl") {
       saved.push((await download(id, { format: fmt, part: "sidecar" }, `${name}.json`)).name);
     }
-    // Saved whichever job is shown now; said only under its own job's result.
-    const job = shownJob() === id ? "" : ` (job ${id})`;
-    if (stateJob === id) state.textContent = [`saved ${saved.join(" and ")}${job}`, ...warnings.map((w) => `warning: ${w}`)].join("\n");
+    say(id, [`saved ${saved.join(" and ")}`, ...warnings.map((w) => `warning: ${w}`)].join("\n"));
   } catch (e) {
-    if (stateJob === id) state.textContent = `export failed: ${e.message}`;
+    say(id, `export failed: ${e.message}`);
   } finally { clearInterval(timer); }
 }
 
