@@ -59,23 +59,23 @@ class UsageError(Exception):
     """A user error the CLI reports as one line on stderr with exit code 2."""
 
 
-def refuse_to_replace(out: str | os.PathLike[str] | None, overwrite: bool, undone: str
-                      ) -> None:
+def refuse_to_replace(out: str | os.PathLike[str] | None, overwrite: bool, undone: str,
+                      flag: str = "-o") -> None:
     """Refuse an ``-o`` that names an existing file unless ``overwrite`` (``--overwrite``),
     before the command's work: a design fragment (a minute's search, the lab's mounting plan),
     a reconstructed table or a rendering was replaced without a word, where ``scan``,
     ``export`` and ``colour`` refuse. ``undone`` says what was not done ("nothing was
-    designed")."""
+    designed"); ``flag`` is the option that named the file."""
     from pathlib import Path
 
     if out is None:
         return
     path = Path(out)
     if path.is_dir():
-        raise UsageError(f"-o {path} is a folder; name the file to write ({undone})")
+        raise UsageError(f"{flag} {path} is a folder; name the file to write ({undone})")
     if path.exists() and not overwrite:
-        raise UsageError(f"{path} exists: {undone}; give -o another file, or --overwrite to "
-                         "replace it")
+        raise UsageError(f"{path} exists: {undone}; give {flag} another file, or --overwrite "
+                         "to replace it")
 
 
 class StoppedBySignal(KeyboardInterrupt):

@@ -319,7 +319,7 @@ def _cmd_reconstruct(args: argparse.Namespace) -> int:
     from gonio.brdf.reconstruction.reconstruct import reconstruct
 
     refuse_to_replace(args.output, args.overwrite, "nothing was reconstructed")
-    refuse_to_replace(args.preview, args.overwrite, "nothing was reconstructed")
+    refuse_to_replace(args.preview, args.overwrite, "nothing was reconstructed", "--preview")
 
     samples = _scan_samples(args.samples)
     basis = _load_basis(args.basis)

@@ -141,6 +141,8 @@ def _jobs(args: argparse.Namespace) -> int:
                            "specimen": r.specimen, "priority": r.priority,
                            "created": r.created, "started": r.started, "finished": r.finished,
                            "done_angles": r.done_angles, "total_angles": r.total_angles,
+                           # The names before 2026-11-29, kept for scripts written then.
+                           "done": r.done_angles, "total": r.total_angles,
                            "reason": r.reason,
                            "waiting": waiting if r.state.value == "queued" else None}
                           for r in rows]))

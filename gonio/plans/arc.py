@@ -70,13 +70,22 @@ def may_switch_basis(plan: AnyPlan | dict[str, Any]) -> bool:
     a stored plan's JSON. Time estimates count the build for such a scan as a bound; only
     auto-arc plans were counted, and a full-turn scan of an asymmetric-looking specimen said
     "13 s left" through a two-minute build."""
+    # A uniform plan of an odd number of angles over a full turn holds no opposite angles,
+    # so it is never tested; an adaptive one's midpoints add them.
     if isinstance(plan, dict):
-        if plan.get("kind") not in ("uniform", "adaptive"):
+        kind = plan.get("kind")
+        if kind not in ("uniform", "adaptive"):
             return False
-        return plan.get("arc") == "auto" or float(plan.get("span_deg", 180.0)) >= FULL_TURN_DEG
+        if plan.get("arc") == "auto":
+            return True
+        odd = kind == "uniform" and int(plan.get("rotations", 0)) % 2 == 1
+        return float(plan.get("span_deg", 180.0)) >= FULL_TURN_DEG and not odd
     if plan.finishing != "reconstruction":
         return False
-    return plan.arc_mode() == "auto" or plan.first_span_deg() >= FULL_TURN_DEG
+    if plan.arc_mode() == "auto":
+        return True
+    odd = plan.kind == "uniform" and int(getattr(plan, "rotations", 0)) % 2 == 1
+    return plan.first_span_deg() >= FULL_TURN_DEG and not odd
 
 
 SPREAD_DEG = 60.0

@@ -153,6 +153,10 @@ def test_simulate_then_reconstruct(
     assert main(["reconstruct", str(samples), "--basis", str(files["basis"]), "-k", "8",
                  "--preview", str(png), "-o", str(out), "--overwrite"]) == 0
     assert len(made) == 2
+    # A new table beside yesterday's preview: the refusal names the option that named it.
+    assert main(["reconstruct", str(samples), "--basis", str(files["basis"]), "-k", "8",
+                 "--preview", str(png), "-o", str(d / "new.npz")]) == 2
+    assert "give --preview another file" in capsys.readouterr().err
 
 
 def test_simulate_with_a_preset(files: dict[str, Path],

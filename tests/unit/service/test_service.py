@@ -448,6 +448,9 @@ def test_a_full_turn_scan_ahead_bounds_the_start_with_the_asymmetric_basis_build
     assert svc.dry_run(full).finishing_s == pytest.approx(finishing + build + 240.0)
     assert "without twofold symmetry" in (svc.dry_run(full).finishing_source or "")
     assert svc.dry_run(half).finishing_s == pytest.approx(finishing + build)
+    # Five angles over a full turn hold no opposite ones: never tested, nothing to wait for.
+    odd = UniformPlan(rotations=5, span_deg=360.0, exposure=FAST)
+    assert svc.dry_run(odd).finishing_s == pytest.approx(finishing + build)
     first = svc.submit(JobRequest(plan=full)).id
     second = svc.submit(JobRequest(plan=half)).id
     third = svc.submit(JobRequest(plan=full)).id
