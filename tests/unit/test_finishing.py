@@ -702,3 +702,51 @@ def test_a_resumed_finishing_records_the_truth_it_kept_when_it_began(tmp_path: P
     res = read_result(data / "results" / "job-2.h5")
     assert json.loads(res.provenance["true_material"]) == {"name": "measured"}
     assert svc.store.finishing_inputs(2)["true_material"] == {"name": "measured"}
+
+
+def test_a_fixed_full_turn_is_tested_on_its_raw_counts(tmp_path: Path,
+                                                       monkeypatch: pytest.MonkeyPatch) -> None:
+    """The twofold test weighs each reading's shot noise, a matter of counts: finishing tested
+    a fixed full turn on its calibrated values, where a spectral calibration lifts a dim band
+    to its neighbours' level without lowering its noise (an isotropic paint called asymmetric
+    on 2 of 5 scans). What it tests is ``raw - dark`` of the stored readings, per pair and
+    stage angle, not the result's calibrated samples."""
+    import gonio.plans.arc as arc_module
+    from tests.unit.brdf.reconstruction.test_basis import small_basis
+
+    seen: list[tuple[list[float], np.ndarray]] = []
+    real = arc_module.arc_test
+
+    def spy(angles: list[float], values: Any, relative: float, **kw: Any) -> dict[str, Any]:
+        seen.append((list(angles), np.asarray(values, dtype=float).copy()))
+        return real(angles, values, relative, **kw)
+
+    monkeypatch.setattr(arc_module, "arc_test", spy)
+    _calibrated(tmp_path).store.close()
+    data = tmp_path / "d"
+    basis = small_basis()
+    svc = GonioService(JobStore(data / "gonio.sqlite"), MemRig(), data_dir=data,
+                       basis=BasisSupply(lambda: basis), fit_exports=False)
+
+    async def go() -> None:
+        await svc.start()
+        svc.submit(JobRequest(plan=UniformPlan(rotations=4, span_deg=360.0, exposure=FAST)))
+        async for ev in svc.subscribe(0, job_id=2):
+            if ev.type == "state" and ev.data["state"] in ("completed", "failed"):
+                break
+        await svc.stop()
+
+    asyncio.run(go())
+    assert svc.store.get_job(2).state.value == "completed", svc.store.get_job(2).reason
+    (angles, values), = seen
+    res = read_result(data / "results" / "job-2.h5")
+    assert res.samples.calibration  # the result is in 1/sr: its values are not the counts
+    pairs = [(str(a), str(b)) for a, b in res.samples.pairs]
+    expected = np.full(values.shape, np.nan)
+    for r in svc.store.readings(2):
+        q = pairs.index((r.light, r.sensor))
+        j = int(np.argmin(np.abs((np.asarray(angles) - r.commanded_deg % 360.0 + 180) % 360
+                                 - 180)))
+        expected[q, j] = (np.asarray(r.raw, float) - np.asarray(r.dark, float)) / r.range_scale
+    np.testing.assert_allclose(values, expected)
+    assert not np.allclose(values, res.samples.values)
