@@ -11,6 +11,7 @@ import json
 import shutil
 import sqlite3
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -48,6 +49,37 @@ def _calibrated(tmp_path: Path) -> GonioService:
 
     asyncio.run(go())
     assert svc.get_job(1).state.value == "completed", svc.get_job(1).reason
+    return svc
+
+
+def _scanned(tmp_path: Path, plan: UniformPlan,
+             truth: Callable[[], dict[str, Any] | None] | None = None,
+             on_submit: Callable[[GonioService, int], None] | None = None) -> GonioService:
+    """A service on an in-memory rig with the small test basis, after a calibration (job 1)
+    and a completed scan of ``plan`` (job 2); ``truth`` is the rig's specimen truth,
+    ``on_submit(service, job)`` runs right after the scan is queued."""
+    from tests.unit.brdf.reconstruction.test_basis import small_basis
+
+    _calibrated(tmp_path).store.close()
+    data = tmp_path / "d"
+    basis = small_basis()
+    svc = GonioService(JobStore(data / "gonio.sqlite"), MemRig(), data_dir=data,
+                       basis=BasisSupply(lambda: basis), fit_exports=False)
+    if truth is not None:
+        svc.specimen_truth = truth
+
+    async def go() -> None:
+        await svc.start()
+        job = svc.submit(JobRequest(plan=plan)).id
+        if on_submit is not None:
+            on_submit(svc, job)
+        async for ev in svc.subscribe(0, job_id=job):
+            if ev.type == "state" and ev.data["state"] in ("completed", "failed"):
+                break
+        await svc.stop()
+
+    asyncio.run(go())
+    assert svc.store.get_job(2).state.value == "completed", svc.store.get_job(2).reason
     return svc
 
 
@@ -179,22 +211,9 @@ def test_a_job_of_an_older_gonio_rebuilt_without_its_result_file_says_why_it_is_
     compared with no design, so its rebuild says nothing of it."""
     from tests.unit.brdf.reconstruction.test_basis import small_basis
 
-    _calibrated(tmp_path).store.close()
-    data = tmp_path / "d"
     basis = small_basis()
-    svc = GonioService(JobStore(data / "gonio.sqlite"), MemRig(), data_dir=data,
-                       basis=BasisSupply(lambda: basis), fit_exports=False)
-
-    async def go() -> None:
-        await svc.start()
-        svc.submit(JobRequest(plan=UniformPlan(rotations=4, exposure=FAST)))
-        async for ev in svc.subscribe(0, job_id=2):
-            if ev.type == "state" and ev.data["state"] in ("completed", "failed"):
-                break
-        await svc.stop()
-
-    asyncio.run(go())
-    assert svc.store.get_job(2).state.value == "completed", svc.store.get_job(2).reason
+    svc = _scanned(tmp_path, UniformPlan(rotations=4, exposure=FAST))
+    data = tmp_path / "d"
     svc.store.close()
     with sqlite3.connect(data / "gonio.sqlite") as con:
         con.execute("DROP TABLE finishing")
@@ -677,29 +696,15 @@ def test_a_resumed_finishing_records_the_truth_it_kept_when_it_began(tmp_path: P
     material (``gonio serve --sim --material``) would have recorded the new material as the
     truth of readings made on the old one. Finishing keeps the truth when it first begins;
     resumed, it records that one, whatever the rig holds now."""
-    from tests.unit.brdf.reconstruction.test_basis import small_basis
-
-    _calibrated(tmp_path).store.close()
-    data = tmp_path / "d"
-    basis = small_basis()
-    svc = GonioService(JobStore(data / "gonio.sqlite"), MemRig(), data_dir=data,
-                       basis=BasisSupply(lambda: basis), fit_exports=False)
-    svc.specimen_truth = lambda: {"name": "put on the stage after the restart"}
-
-    async def go() -> None:
-        await svc.start()
-        job = svc.submit(JobRequest(plan=UniformPlan(rotations=4, exposure=FAST)))
+    def kept(svc: GonioService, job: int) -> None:
         # What the first, interrupted finishing kept (gonio.finishing, before anything is
         # written).
-        svc.store.set_finishing_inputs(job.id, {"true_material": {"name": "measured"}})
-        async for ev in svc.subscribe(0, job_id=job.id):
-            if ev.type == "state" and ev.data["state"] in ("completed", "failed"):
-                break
-        await svc.stop()
+        svc.store.set_finishing_inputs(job, {"true_material": {"name": "measured"}})
 
-    asyncio.run(go())
-    assert svc.store.get_job(2).state.value == "completed", svc.store.get_job(2).reason
-    res = read_result(data / "results" / "job-2.h5")
+    svc = _scanned(tmp_path, UniformPlan(rotations=4, exposure=FAST),
+                   truth=lambda: {"name": "put on the stage after the restart"},
+                   on_submit=kept)
+    res = read_result(tmp_path / "d" / "results" / "job-2.h5")
     assert json.loads(res.provenance["true_material"]) == {"name": "measured"}
     assert svc.store.finishing_inputs(2)["true_material"] == {"name": "measured"}
 
@@ -712,7 +717,6 @@ def test_a_fixed_full_turn_is_tested_on_its_raw_counts(tmp_path: Path,
     on 2 of 5 scans). What it tests is ``raw - dark`` of the stored readings, per pair and
     stage angle, not the result's calibrated samples."""
     import gonio.plans.arc as arc_module
-    from tests.unit.brdf.reconstruction.test_basis import small_basis
 
     seen: list[tuple[list[float], np.ndarray]] = []
     real = arc_module.arc_test
@@ -722,24 +726,9 @@ def test_a_fixed_full_turn_is_tested_on_its_raw_counts(tmp_path: Path,
         return real(angles, values, relative, **kw)
 
     monkeypatch.setattr(arc_module, "arc_test", spy)
-    _calibrated(tmp_path).store.close()
-    data = tmp_path / "d"
-    basis = small_basis()
-    svc = GonioService(JobStore(data / "gonio.sqlite"), MemRig(), data_dir=data,
-                       basis=BasisSupply(lambda: basis), fit_exports=False)
-
-    async def go() -> None:
-        await svc.start()
-        svc.submit(JobRequest(plan=UniformPlan(rotations=4, span_deg=360.0, exposure=FAST)))
-        async for ev in svc.subscribe(0, job_id=2):
-            if ev.type == "state" and ev.data["state"] in ("completed", "failed"):
-                break
-        await svc.stop()
-
-    asyncio.run(go())
-    assert svc.store.get_job(2).state.value == "completed", svc.store.get_job(2).reason
+    svc = _scanned(tmp_path, UniformPlan(rotations=4, span_deg=360.0, exposure=FAST))
     (angles, values), = seen
-    res = read_result(data / "results" / "job-2.h5")
+    res = read_result(tmp_path / "d" / "results" / "job-2.h5")
     assert res.samples.calibration  # the result is in 1/sr: its values are not the counts
     pairs = [(str(a), str(b)) for a, b in res.samples.pairs]
     expected = np.full(values.shape, np.nan)
