@@ -19,6 +19,7 @@ from gonio.arc_wording import arc_sentence
 from gonio.brdf.mirrorgap import gap_clause
 from gonio.brdf.models import analytic as bm
 from gonio.brdf.pictures import render
+from gonio.brdf.tables.npzfile import ZIP_MAGIC, starts_with
 from gonio.brdf.tables.table import BRDFTable
 from gonio.results import ResultFile, read_result
 
@@ -82,15 +83,6 @@ def true_material(res: ResultFile) -> Any | None:
         return None
 
 
-def _is_zip(p: Path) -> bool:
-    """Whether ``p`` is a zip archive (NumPy's .npz), whatever its name."""
-    try:
-        with p.open("rb") as f:
-            return f.read(4) == b"PK\x03\x04"
-    except OSError:
-        return False
-
-
 def load_input(path: str | os.PathLike[str] | ResultFile, label: str | None = None,
                with_truth: bool = True) -> list[tuple[str, Any]]:
     """Figure rows for one input: a result file (``.h5``), a BRDF table (``.npz``), or a
@@ -103,7 +95,8 @@ def load_input(path: str | os.PathLike[str] | ResultFile, label: str | None = No
         res, where = path, f"job {path.attrs.get('job_id')}'s result"
     else:
         p = Path(path)
-        if p.suffix.lower() == ".npz" or _is_zip(p):  # a table saved under another name
+        # A table saved under another name is a table too.
+        if p.suffix.lower() == ".npz" or starts_with(p, ZIP_MAGIC):
             table = BRDFTable.load(p)
             return [(label or f"{p.name}: {table.name}", table)]
         res, where = read_result(p), str(p)

@@ -61,6 +61,7 @@ from gonio import __version__
 from gonio.atomicfile import write_atomically
 from gonio.brdf.models.factored import FactoredBRDF
 from gonio.brdf.models.principled import Principled
+from gonio.brdf.tables.npzfile import HDF5_MAGIC
 from gonio.brdf.tables.table import BRDFTable
 from gonio.calibration import CalibratedScan
 from gonio.store import ReadingRow
@@ -371,7 +372,6 @@ def check_result_file(path: str | os.PathLike[str]) -> None:
 _WHAT_A_RESULT_IS = ("a result is the HDF5 file 'gonio scan -o' writes, the page's "
                      "'Download HDF5 result', or DATA_DIR/results/job-N.h5")
 #: The HDF5 signature, at 0 or at a power of two from 512 on (a user block before it).
-_HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
 
 
 def _unopenable(p: Path, exc: OSError) -> str:
@@ -380,12 +380,12 @@ def _unopenable(p: Path, exc: OSError) -> str:
     try:
         with p.open("rb") as f:
             head = f.read(8)
-            signed = head == _HDF5_SIGNATURE
+            signed = head == HDF5_MAGIC
             for at in (512, 1024, 2048, 4096):
                 if signed:
                     break
                 f.seek(at)
-                signed = f.read(8) == _HDF5_SIGNATURE
+                signed = f.read(8) == HDF5_MAGIC
     except OSError:
         return f"{p} cannot be read ({exc})"
     if signed:

@@ -306,15 +306,6 @@ def _scan_samples(path: str) -> Any:
     return samples
 
 
-def _is_hdf5(path: Path) -> bool:
-    """Whether ``path`` is a file that starts with the HDF5 signature."""
-    try:
-        with path.open("rb") as f:
-            return f.read(8) == b"\x89HDF\r\n\x1a\n"
-    except OSError:
-        return False
-
-
 def _cmd_reconstruct(args: argparse.Namespace) -> int:
     from gonio.brdf.reconstruction.reconstruct import reconstruct
 
@@ -465,11 +456,12 @@ def _cmd_library_import(args: argparse.Namespace) -> int:
         user_library_dir,
         user_table_files,
     )
+    from gonio.brdf.tables.npzfile import HDF5_MAGIC, starts_with
     from gonio.brdf.tables.table import BRDFTable
 
     shipped = set(measured_names())
     for f in args.files:
-        if Path(f).suffix.lower() == ".h5" and _is_hdf5(Path(f)):
+        if Path(f).suffix.lower() == ".h5" and starts_with(f, HDF5_MAGIC):
             # A scan's result holds its reconstruction, but the library takes tables: the
             # step between is an export the lab would not guess from "unknown kind of file".
             # (Only an HDF5 file: a missing or text file named .h5 was called a result, and

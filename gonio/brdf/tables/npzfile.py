@@ -94,7 +94,7 @@ def read_npz(
         raise error(f"{p}: is a directory, not a {kind} file") from None
     except OSError as exc:
         raise error(f"{p}: cannot read the {kind} file: {exc.strerror}") from None
-    if not head.startswith(_ZIP_MAGIC):
+    if not head.startswith(ZIP_MAGIC):
         # Checked before numpy sees it: for anything but a zip archive numpy's own message
         # suggests allow_pickle=True, which is bad advice for a file of unknown origin.
         hint = f"; {how_to_make}" if how_to_make else ""
@@ -125,14 +125,27 @@ def read_npz(
     return data, {**provenance, "file": str(p)}
 
 
-_ZIP_MAGIC = b"PK\x03\x04"
+ZIP_MAGIC = b"PK\x03\x04"
+"""The first bytes of a zip archive (NumPy's .npz)."""
+HDF5_MAGIC = b"\x89HDF\r\n\x1a\n"
+"""The first bytes of an HDF5 file (a gonio result file)."""
+
+
+def starts_with(path: str | os.PathLike[str], magic: bytes) -> bool:
+    """Whether the file at ``path`` begins with ``magic`` (False when it cannot be read): what
+    a file is, whatever its name says."""
+    try:
+        with open(path, "rb") as fh:
+            return fh.read(len(magic)) == magic
+    except OSError:
+        return False
 
 
 def _what_it_is(head: bytes) -> str:
     """A guess at a file's type from its first bytes, for error messages."""
     if not head:
         return "the file is empty"
-    if head.startswith(b"\x89HDF\r\n\x1a\n"):
+    if head.startswith(HDF5_MAGIC):
         return "it is an HDF5 file (a gonio result file? read it with gonio.results.read_result)"
     if head.startswith(b"\x93NUMPY"):
         return "it is a single .npy array"
